@@ -1,0 +1,190 @@
+# acquisitiond — top-level build.  GNU make, C17, out-of-tree objects, programs in $(BUILD)/.
+#
+# Conventions (so a new file needs no Makefile edit):
+#   <folder>/*_main.c        a program's entry point: build/<name with _ → ->   (see PROGRAMS)
+#   <folder>/*.c (others)    the folder's static library build/lib<folder>.a
+#   tests/unit/test_*.c      a cmocka unit test, linked with every library
+#   tests/integration/test_* an executable script (sh/py), run by tests/run-integration.sh
+#   tests/bench/bench_*.c    a benchmark program, run by `make bench`
+#   tests/fuzz/fuzz_*.c      a libFuzzer target (LLVMFuzzerTestOneInput): `make fuzz` builds it with clang;
+#                            `make check` replays its corpus tests/fuzz/corpus/<name>/ through a plain driver.
+#   <folder>/module.mk       optional extra rules of a folder (generated sources, data files).
+
+SHELL      := /bin/bash
+PREFIX     ?= /usr/local
+DESTDIR    ?=
+SANITIZE   ?=
+CC         ?= cc
+ifeq ($(origin CC),default)
+CC := cc
+endif
+
+ifeq ($(SANITIZE),)
+BUILD      ?= build
+else
+BUILD      ?= build/san
+endif
+
+VERSION    := $(shell git describe --always --dirty 2>/dev/null || echo 0.1)
+
+PKGS       := libusb-1.0 libmodbus libserialport sqlite3 yaml-0.1 lapacke openblas libsystemd libpng jansson cairo
+PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
+PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
+
+WARN       := -Wall -Wextra -Werror -Wshadow -Wmissing-prototypes -Wstrict-prototypes -Wcast-qual \
+              -Wsign-compare -Wpointer-arith -Wformat=2 -Wno-format-nonliteral -Wno-format-truncation -Wundef -Wvla
+CFLAGS     ?= -O2 -g
+ALL_CFLAGS := -std=c17 -D_GNU_SOURCE $(WARN) $(CFLAGS) -I. $(PKG_CFLAGS) -DACQ_VERSION='"$(VERSION)"' -MMD -MP
+LDLIBS     := $(PKG_LIBS) -lm -lpthread
+
+ifneq ($(SANITIZE),)
+ALL_CFLAGS += -fsanitize=$(SANITIZE) -fno-omit-frame-pointer -fno-sanitize-recover=all
+LDFLAGS    += -fsanitize=$(SANITIZE)
+endif
+
+# Folders that form libraries, in link order (users before providers).
+LIBDIRS    := daemon sim proto recon drivers config
+
+# Debian packages the build, the tests and the demo need (the `deps` step installs the missing ones).
+DEB_PKGS   := build-essential pkg-config libusb-1.0-0-dev libmodbus-dev libserialport-dev libsqlite3-dev \
+              libyaml-dev liblapacke-dev libopenblas-dev libsystemd-dev libcmocka-dev libpng-dev \
+              libjansson-dev libcairo2-dev umockdev mbpoll python3-pymodbus python3-numpy sqlite3 socat \
+              systemd clang
+
+.DEFAULT_GOAL := all
+.PHONY: all deps check check-unit check-integration check-fuzz demo bench fuzz install uninstall clean \
+        test-programs distclean
+
+-include $(wildcard */module.mk)
+
+define lib_srcs
+$(filter-out %_main.c,$(wildcard $(1)/*.c) $(EXTRA_SRCS_$(1)))
+endef
+define lib_objs
+$(patsubst %.c,$(BUILD)/obj/%.o,$(call lib_srcs,$(1)))
+endef
+
+LIBS       := $(foreach d,$(LIBDIRS),$(if $(strip $(call lib_srcs,$(d))),$(BUILD)/lib$(d).a))
+MAIN_SRCS  := $(foreach d,$(LIBDIRS),$(wildcard $(d)/*_main.c))
+PROGRAMS   := $(foreach s,$(MAIN_SRCS),$(BUILD)/$(subst _,-,$(patsubst %_main.c,%,$(notdir $(s)))))
+UNIT_SRCS  := $(wildcard tests/unit/test_*.c)
+UNIT_TESTS := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(UNIT_SRCS))
+BENCH_SRCS := $(wildcard tests/bench/bench_*.c)
+BENCHES    := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(BENCH_SRCS))
+FUZZ_SRCS  := $(wildcard tests/fuzz/fuzz_*.c)
+FUZZ_REPLAY:= $(patsubst tests/fuzz/%.c,$(BUILD)/fuzz-replay/%,$(FUZZ_SRCS))
+FUZZERS    := $(patsubst tests/fuzz/%.c,$(BUILD)/fuzz/%,$(FUZZ_SRCS))
+ALL_OBJS   := $(foreach d,$(LIBDIRS),$(call lib_objs,$(d))) $(patsubst %.c,$(BUILD)/obj/%.o,$(MAIN_SRCS))
+
+all: $(PROGRAMS)
+
+test-programs: $(PROGRAMS) $(UNIT_TESTS) $(FUZZ_REPLAY) $(EXTRA_TEST_PROGRAMS)
+
+# ---- compile and link -----------------------------------------------------------------------------
+$(BUILD)/obj/%.o: %.c $(BUILD)/.cflags
+	@mkdir -p $(dir $@)
+	$(CC) $(ALL_CFLAGS) -c $< -o $@
+
+# Rebuild everything when the flags change (e.g. SANITIZE or CFLAGS on the command line).
+$(BUILD)/.cflags: FORCE
+	@mkdir -p $(BUILD)
+	@echo '$(CC) $(ALL_CFLAGS) $(LDFLAGS)' | cmp -s - $@ || echo '$(CC) $(ALL_CFLAGS) $(LDFLAGS)' > $@
+FORCE:
+
+define lib_rule
+$(BUILD)/lib$(1).a: $(call lib_objs,$(1))
+	@rm -f $$@
+	$(AR) rcs $$@ $$^
+endef
+$(foreach d,$(LIBDIRS),$(eval $(call lib_rule,$(d))))
+
+define prog_rule
+$(BUILD)/$(subst _,-,$(patsubst %_main.c,%,$(notdir $(1)))): $(patsubst %.c,$(BUILD)/obj/%.o,$(1)) $(LIBS)
+	$(CC) $(LDFLAGS) -o $$@ $$^ $(LDLIBS)
+endef
+$(foreach s,$(MAIN_SRCS),$(eval $(call prog_rule,$(s))))
+
+$(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(LIBS)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
+
+$(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(LIBS)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+
+$(BUILD)/fuzz-replay/%: $(BUILD)/obj/tests/fuzz/%.o $(BUILD)/obj/tests/fuzz/replay_driver.o $(LIBS)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+
+# libFuzzer builds (clang), separate objects.
+FUZZ_CFLAGS := -std=c17 -D_GNU_SOURCE -g -O1 -I. $(PKG_CFLAGS) -DACQ_VERSION='"fuzz"' \
+               -fsanitize=fuzzer,address,undefined
+$(BUILD)/fuzz/%: tests/fuzz/%.c $(foreach d,$(LIBDIRS),$(call lib_srcs,$(d)))
+	@mkdir -p $(dir $@)
+	clang $(FUZZ_CFLAGS) -o $@ $< $(foreach d,$(LIBDIRS),$(call lib_srcs,$(d))) $(LDLIBS)
+
+-include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)
+
+# ---- dependencies -----------------------------------------------------------------------------------
+deps:
+	@missing=$$(for p in $(DEB_PKGS); do dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q 'ok installed' || echo $$p; done); \
+	if [ -z "$$missing" ]; then exit 0; fi; \
+	if [ "$$(id -u)" = 0 ]; then \
+	  echo "deps: installing:" $$missing; \
+	  DEBIAN_FRONTEND=noninteractive apt-get install -y -q $$missing >/dev/null || \
+	  { apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q $$missing >/dev/null; }; \
+	else \
+	  echo "deps: missing Debian packages. Run as root:"; \
+	  echo "  apt-get install -y" $$missing; exit 1; \
+	fi
+
+# ---- tests ------------------------------------------------------------------------------------------
+# ACQ_SEED: the random seed for every test (printed; set it to replay a run).
+ACQ_SEED ?= $(shell od -An -N4 -tu4 /dev/urandom | tr -d ' ')
+export ACQ_SEED
+TEST_ENV := ACQ_BUILD=$(abspath $(BUILD)) ACQ_SRC=$(CURDIR) ACQ_SEED=$(ACQ_SEED) OPENBLAS_NUM_THREADS=1 \
+            ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+
+check: deps
+	@$(MAKE) --no-print-directory test-programs
+	@echo "check: seed ACQ_SEED=$(ACQ_SEED) (make check ACQ_SEED=$(ACQ_SEED) replays it)"
+	@$(TEST_ENV) tests/run-tests.sh
+
+check-unit: test-programs
+	@$(TEST_ENV) tests/run-tests.sh unit
+
+check-integration: test-programs
+	@$(TEST_ENV) tests/run-tests.sh integration
+
+check-fuzz: test-programs
+	@$(TEST_ENV) tests/run-tests.sh fuzz
+
+fuzz: $(FUZZERS)
+	@$(TEST_ENV) tests/fuzz/run-fuzzers.sh $(FUZZERS)
+
+bench: deps
+	@$(MAKE) --no-print-directory all $(BENCHES)
+	@$(TEST_ENV) tests/bench/run.sh
+
+demo: deps
+	@$(MAKE) --no-print-directory all
+	@ACQ_BUILD=$(abspath $(BUILD)) ACQ_SRC=$(CURDIR) tests/demo.sh
+
+# ---- install ----------------------------------------------------------------------------------------
+install: all
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/acquisitiond/config \
+	           $(DESTDIR)/etc/acquisitiond $(DESTDIR)$(PREFIX)/lib/systemd/system \
+	           $(DESTDIR)$(PREFIX)/lib/udev/rules.d
+	install -m 755 $(PROGRAMS) $(DESTDIR)$(PREFIX)/bin/
+	install -m 644 config/*.yaml $(DESTDIR)$(PREFIX)/share/acquisitiond/config/
+	install -m 644 config/bench-real.yaml $(DESTDIR)/etc/acquisitiond/acquisitiond.yaml.example
+	sed 's|@BINDIR@|$(PREFIX)/bin|g' systemd/acquisitiond.service > $(DESTDIR)$(PREFIX)/lib/systemd/system/acquisitiond.service
+	install -m 644 systemd/*.rules $(DESTDIR)$(PREFIX)/lib/udev/rules.d/
+
+uninstall:
+	rm -f $(addprefix $(DESTDIR)$(PREFIX)/bin/,$(notdir $(PROGRAMS)))
+	rm -rf $(DESTDIR)$(PREFIX)/share/acquisitiond
+	rm -f $(DESTDIR)$(PREFIX)/lib/systemd/system/acquisitiond.service
+
+clean:
+	rm -rf build

@@ -1,0 +1,43 @@
+/* laser: the supercontinuum source on a serial line (libserialport), a line protocol from config.
+ * The handle switches emission off on close and on every error path it sees. Libraries do not log. */
+#ifndef LASER_H
+#define LASER_H
+
+#include <stdbool.h>
+
+#include "config/acq_err.h"
+#include "config/yconf.h"
+
+struct laser;
+struct laser_cfg;
+
+struct laser_status {
+	bool emission;
+	double power_pct;    /* 0..100 */
+	bool interlock_ok;   /* true when the interlock is closed (emission allowed) */
+	bool fault;
+	int fault_code;
+};
+
+struct laser_identity {
+	char model[64], serial[64], firmware[64];
+};
+
+/* Parse the `laser` section. Allocates *out. 0 or -1 with file:line:col. */
+int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err *err);
+/* Free a parsed configuration. */
+void laser_cfg_free(struct laser_cfg *cfg);
+/* Open the serial line and identify the laser. 0 or -1. */
+int laser_open(const struct laser_cfg *cfg, struct laser **out, struct acq_err *err);
+/* Emission off (best effort), close, free. NULL is fine. */
+void laser_close(struct laser *l);
+/* Switch emission on or off. On failure emission is switched off (best effort). 0 or -1. */
+int laser_set_emission(struct laser *l, bool on, struct acq_err *err);
+/* Set output power in percent. 0 or -1. */
+int laser_set_power(struct laser *l, double pct, struct acq_err *err);
+/* Query emission, power, interlock, fault. 0 or -1. */
+int laser_status(struct laser *l, struct laser_status *st, struct acq_err *err);
+/* Identity read at open. */
+const struct laser_identity *laser_identity(const struct laser *l);
+
+#endif

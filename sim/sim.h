@@ -1,0 +1,62 @@
+/* sim: the simulated bench's shared world and the seam between its services (arm controllers over Modbus,
+ * laser on a pty, spectrometer, fault injection). One process, one poll loop (sim/acq_sim_main.c).
+ *
+ * Time: bench time runs `scale` times faster than the monotonic clock; every model (motion, settling,
+ * integration) works in bench seconds, so reported times stay in bench time. */
+#ifndef SIM_H
+#define SIM_H
+
+#include <poll.h>
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "config/acq_err.h"
+#include "config/bench.h"
+
+enum sim_arm_id { SIM_ARM_LASER = 0, SIM_ARM_DETECTOR = 1 };
+
+/* Faults, set by the control socket or the seeded schedule, consumed by the services. */
+struct sim_faults {
+	bool modbus_timeout[2];     /* controller stops answering (per arm) */
+	bool drop_connection[2];    /* controller closes its client connections once */
+	bool alarm_mid_move[2];     /* next move raises an alarm half way */
+	bool stall[2];              /* next move stops short and stays busy */
+	bool spectro_disconnect;    /* spectrometer vanishes during the next read */
+	int saturation_burst;       /* next N spectra are saturated */
+	bool laser_interlock_open;  /* interlock open: emission forced off */
+	bool laser_fault;           /* laser reports a fault, emission forced off */
+};
+
+struct sim_world {
+	double scale;               /* bench seconds per monotonic second */
+	double t0_mono;             /* monotonic seconds at bench time 0 */
+	struct bench_geom geom;
+	/* actual positions (degrees), written by the arm services, read by the spectrometer model */
+	double laser_theta_deg;
+	double detector_theta_deg, detector_phi_deg;
+	bool collision;             /* arms in contact: both controllers in alarm */
+	/* laser state, written by the laser service */
+	bool laser_emission;
+	double laser_power_pct;
+	struct sim_faults faults;
+	uint64_t seed;
+};
+
+/* A service of the simulator: owns file descriptors and advances its model with bench time. */
+struct sim_service {
+	const char *name;
+	void *self;
+	/* Fill up to max pollfds; return how many. */
+	int (*pollfds)(void *self, struct pollfd *fds, int max);
+	/* Handle the revents of the fds this service filled (same order and count). */
+	void (*handle)(void *self, const struct pollfd *fds, int n, double now);
+	/* Advance the model to bench time now (called every loop turn). */
+	void (*tick)(void *self, double now);
+	/* Free everything. */
+	void (*destroy)(void *self);
+};
+
+/* Bench seconds now. */
+double sim_now(const struct sim_world *w);
+
+#endif

@@ -1,0 +1,128 @@
+/* Unit tests for config/yconf.c and config/bench.c: located errors, unknown keys, typed getters. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+#include <cmocka.h>
+
+#include "config/bench.h"
+#include "config/yconf.h"
+
+static struct yc_doc *load(const char *text, struct acq_err *err)
+{
+	struct yc_doc *doc = NULL;
+	int rc = yc_load_string("t.yaml", text, strlen(text), &doc, err);
+	return rc == 0 ? doc : NULL;
+}
+
+static void test_getters_and_positions(void **state)
+{
+	(void)state;
+	struct acq_err err = { 0 };
+	struct yc_doc *doc = load("a: 1.5\nb: 0x58\nc: yes\nname: hello\nmode: rtu\n", &err);
+	assert_non_null(doc);
+	struct yc_node *root = yc_root(doc);
+	double a = 0;
+	long long b = 0;
+	bool c = false;
+	const char *name = NULL;
+	int mode = -1;
+	static const char *const modes[] = { "tcp", "rtu", NULL };
+	assert_int_equal(yc_double(root, "a", true, 0, 10, &a, &err), 0);
+	assert_true(a == 1.5);
+	assert_int_equal(yc_int(root, "b", true, 0, 65535, &b, &err), 0);
+	assert_int_equal(b, 0x58);
+	assert_int_equal(yc_bool(root, "c", true, &c, &err), 0);
+	assert_true(c);
+	assert_int_equal(yc_string(root, "name", true, &name, &err), 0);
+	assert_string_equal(name, "hello");
+	assert_int_equal(yc_enum(root, "mode", true, modes, &mode, &err), 0);
+	assert_int_equal(mode, 1);
+	assert_int_equal(yc_check_unknown(root, "root", &err), 0);
+	yc_free(doc);
+}
+
+static void test_errors_name_line_and_column(void **state)
+{
+	(void)state;
+	struct acq_err err = { 0 };
+	struct yc_doc *doc = load("a: 1\nspeed: fast\n", &err);
+	assert_non_null(doc);
+	double v;
+	assert_int_equal(yc_double(yc_root(doc), "speed", true, 0, 10, &v, &err), -1);
+	assert_int_equal(err.code, ACQ_E_CONFIG);
+	assert_non_null(strstr(err.msg, "t.yaml:2:8"));
+	assert_non_null(strstr(err.msg, "finite number"));
+	/* out of range */
+	assert_int_equal(yc_double(yc_root(doc), "a", true, 2, 10, &v, &err), -1);
+	assert_non_null(strstr(err.msg, "t.yaml:1:4"));
+	/* missing required */
+	assert_int_equal(yc_double(yc_root(doc), "zzz", true, 0, 1, &v, &err), -1);
+	assert_non_null(strstr(err.msg, "missing required key 'zzz'"));
+	yc_free(doc);
+}
+
+static void test_unknown_key_lists_expected(void **state)
+{
+	(void)state;
+	struct acq_err err = { 0 };
+	struct yc_doc *doc = load("alpha: 1\nbetta: 2\n", &err);
+	double v;
+	assert_int_equal(yc_double(yc_root(doc), "alpha", false, 0, 9, &v, &err), 0);
+	assert_int_equal(yc_double(yc_root(doc), "beta", false, 0, 9, &v, &err), 0);
+	assert_int_equal(yc_check_unknown(yc_root(doc), "section", &err), -1);
+	assert_non_null(strstr(err.msg, "t.yaml:2:1: unknown key 'betta'"));
+	assert_non_null(strstr(err.msg, "alpha, beta"));
+	yc_free(doc);
+}
+
+static void test_syntax_duplicates_aliases(void **state)
+{
+	(void)state;
+	struct acq_err err = { 0 };
+	assert_null(load("a: [1, 2\n", &err));
+	assert_non_null(strstr(err.msg, "YAML syntax error"));
+	assert_null(load("a: 1\na: 2\n", &err));
+	assert_non_null(strstr(err.msg, "duplicate key 'a'"));
+	assert_null(load("a: &x 1\nb: *x\n", &err));
+	assert_non_null(strstr(err.msg, "aliases"));
+	assert_null(load("--- 1\n--- 2\n", &err));
+	assert_non_null(strstr(err.msg, "one YAML document"));
+	struct yc_doc *doc = load("", &err);
+	assert_non_null(doc);
+	assert_null(yc_root(doc));
+	yc_free(doc);
+}
+
+static void test_bench_parse(void **state)
+{
+	(void)state;
+	struct acq_err err = { 0 };
+	struct bench_geom g;
+	bench_defaults(&g);
+	struct yc_doc *doc = load("laser_radius_mm: 500\nlaser_theta: {speed_dps: 4, accel_dps2: 8}\n", &err);
+	assert_int_equal(bench_parse(yc_root(doc), &g, &err), 0);
+	assert_true(g.laser_radius_mm == 500 && g.laser_theta.speed_dps == 4 && g.laser_theta.accel_dps2 == 8);
+	yc_free(doc);
+	doc = load("laser_theta: {min_deg: 10, max_deg: 5}\n", &err);
+	assert_int_equal(bench_parse(yc_root(doc), &g, &err), -1);
+	assert_non_null(strstr(err.msg, "min_deg"));
+	yc_free(doc);
+	doc = load("laser_theta: {sped_dps: 4}\n", &err);
+	assert_int_equal(bench_parse(yc_root(doc), &g, &err), -1);
+	assert_non_null(strstr(err.msg, "unknown key 'sped_dps'"));
+	yc_free(doc);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_getters_and_positions),
+		cmocka_unit_test(test_errors_name_line_and_column),
+		cmocka_unit_test(test_unknown_key_lists_expected),
+		cmocka_unit_test(test_syntax_duplicates_aliases),
+		cmocka_unit_test(test_bench_parse),
+	};
+	return cmocka_run_group_tests_name("yconf", tests, NULL, NULL);
+}
