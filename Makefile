@@ -34,7 +34,11 @@ PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 WARN       := -Wall -Wextra -Werror -Wshadow -Wmissing-prototypes -Wstrict-prototypes -Wcast-qual \
               -Wsign-compare -Wpointer-arith -Wformat=2 -Wno-format-nonliteral -Wno-format-truncation -Wundef -Wvla
 CFLAGS     ?= -O2 -g
-ALL_CFLAGS := -std=c17 -D_GNU_SOURCE $(WARN) $(CFLAGS) -I. $(PKG_CFLAGS) -DACQ_VERSION='"$(VERSION)"' -MMD -MP
+ALL_CFLAGS := -std=c17 -D_GNU_SOURCE $(WARN) $(CFLAGS) -I. -I$(BUILD)/gen $(PKG_CFLAGS) -MMD -MP
+V ?= 0
+ifeq ($(V),0)
+Q := @
+endif
 LDLIBS     := $(PKG_LIBS) -lm -lpthread
 
 ifneq ($(SANITIZE),)
@@ -81,9 +85,15 @@ all: $(PROGRAMS)
 test-programs: $(PROGRAMS) $(UNIT_TESTS) $(FUZZ_REPLAY) $(EXTRA_TEST_PROGRAMS)
 
 # ---- compile and link -----------------------------------------------------------------------------
-$(BUILD)/obj/%.o: %.c $(BUILD)/.cflags
+$(BUILD)/obj/%.o: %.c $(BUILD)/.cflags | $(BUILD)/gen/acq_version.h
 	@mkdir -p $(dir $@)
-	$(CC) $(ALL_CFLAGS) -c $< -o $@
+	@$(if $(Q),echo "  CC      $<")
+	$(Q)$(CC) $(ALL_CFLAGS) -c $< -o $@
+
+# The version string lives in a generated header, rewritten only when it changes (#include "acq_version.h").
+$(BUILD)/gen/acq_version.h: FORCE
+	@mkdir -p $(dir $@)
+	@echo '#define ACQ_VERSION "$(VERSION)"' | cmp -s - $@ || echo '#define ACQ_VERSION "$(VERSION)"' > $@
 
 # Rebuild everything when the flags change (e.g. SANITIZE or CFLAGS on the command line).
 $(BUILD)/.cflags: FORCE
@@ -94,32 +104,33 @@ FORCE:
 define lib_rule
 $(BUILD)/lib$(1).a: $(call lib_objs,$(1))
 	@rm -f $$@
-	$(AR) rcs $$@ $$^
+	$(Q)$(AR) rcs $$@ $$^
 endef
 $(foreach d,$(LIBDIRS),$(eval $(call lib_rule,$(d))))
 
 define prog_rule
 $(BUILD)/$(subst _,-,$(patsubst %_main.c,%,$(notdir $(1)))): $(patsubst %.c,$(BUILD)/obj/%.o,$(1)) $(LIBS)
-	$(CC) $(LDFLAGS) -o $$@ $$^ $(LDLIBS)
+	@$(if $(Q),echo "  LD      $$@")
+	$(Q)$(CC) $(LDFLAGS) -o $$@ $$^ $(LDLIBS)
 endef
 $(foreach s,$(MAIN_SRCS),$(eval $(call prog_rule,$(s))))
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(LIBS)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
+	$(Q)$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
 
 $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(LIBS)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+	$(Q)$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
 $(BUILD)/fuzz-replay/%: $(BUILD)/obj/tests/fuzz/%.o $(BUILD)/obj/tests/fuzz/replay_driver.o $(LIBS)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+	$(Q)$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
 # libFuzzer builds (clang), separate objects.
-FUZZ_CFLAGS := -std=c17 -D_GNU_SOURCE -g -O1 -I. $(PKG_CFLAGS) -DACQ_VERSION='"fuzz"' \
+FUZZ_CFLAGS := -std=c17 -D_GNU_SOURCE -g -O1 -I. -I$(BUILD)/gen $(PKG_CFLAGS) \
                -fsanitize=fuzzer,address,undefined
-$(BUILD)/fuzz/%: tests/fuzz/%.c $(foreach d,$(LIBDIRS),$(call lib_srcs,$(d)))
+$(BUILD)/fuzz/%: tests/fuzz/%.c $(foreach d,$(LIBDIRS),$(call lib_srcs,$(d))) $(BUILD)/gen/acq_version.h
 	@mkdir -p $(dir $@)
 	clang $(FUZZ_CFLAGS) -o $@ $< $(foreach d,$(LIBDIRS),$(call lib_srcs,$(d))) $(LDLIBS)
 

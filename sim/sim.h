@@ -8,10 +8,12 @@
 
 #include <poll.h>
 #include <stdbool.h>
+#include <stddef.h>
 #include <stdint.h>
 
 #include "config/acq_err.h"
 #include "config/bench.h"
+#include "config/yconf.h"
 
 enum sim_arm_id { SIM_ARM_LASER = 0, SIM_ARM_DETECTOR = 1 };
 
@@ -52,11 +54,28 @@ struct sim_service {
 	void (*handle)(void *self, const struct pollfd *fds, int n, double now);
 	/* Advance the model to bench time now (called every loop turn). */
 	void (*tick)(void *self, double now);
+	/* Write this service's endpoints as JSON members, e.g. "laser_arm": {"port": 40123}; may be NULL. */
+	void (*describe)(void *self, char *buf, size_t len);
 	/* Free everything. */
 	void (*destroy)(void *self);
 };
 
 /* Bench seconds now. */
 double sim_now(const struct sim_world *w);
+
+/* Service constructors (each in its own file). node: the device's config mapping; simcfg: the `sim:`
+ * mapping (may be NULL). NULL with err on failure. */
+struct sim_service *sim_arm_new(struct sim_world *w, enum sim_arm_id arm, struct yc_node *node,
+				struct yc_node *maps, struct yc_node *simcfg, struct acq_err *err);
+struct sim_service *sim_laser_new(struct sim_world *w, struct yc_node *node, struct yc_node *simcfg,
+				  struct acq_err *err);
+struct sim_service *sim_spectro_new(struct sim_world *w, struct yc_node *node, struct yc_node *simcfg,
+				    struct acq_err *err);
+/* Control socket for fault injection and the seeded fault schedule. */
+struct sim_service *sim_control_new(struct sim_world *w, struct yc_node *simcfg, const char *socket_path,
+				    struct acq_err *err);
+
+/* `acq-sim truth ...`: ground-truth export (MERL table, DHR CSV, evaluation at directions). Exit status. */
+int sim_truth_main(int argc, char **argv);
 
 #endif

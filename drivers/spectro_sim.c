@@ -1,0 +1,20 @@
+/* spectro_sim: PLACEHOLDER — the "sim" spectrometer backend is not implemented yet; every call says so. */
+#include "drivers/spectro_backend.h"
+
+static int nyi_parse(struct yc_node *node, void **state, struct acq_err *err)
+{
+	(void)node;
+	*state = NULL;
+	return acq_errf(err, ACQ_E_UNSUPPORTED, "spectrometer backend 'sim': not implemented yet");
+}
+
+static void nyi_free(void *state)
+{
+	(void)state;
+}
+
+const struct spectro_backend spectro_sim_backend = {
+	.name = "sim",
+	.cfg_parse = nyi_parse,
+	.cfg_free = nyi_free,
+};
