@@ -116,22 +116,25 @@ static int socket_from_ports(const char *file, char *out, size_t len, struct acq
 	return rc;
 }
 
-/* Read from the socket into the buffer without blocking. -1 on EOF/error (gone). */
-static int pump(struct sim_dev *d, struct acq_err *err)
+/* Read from the socket into the buffer without blocking; on end of file or error mark the device gone (what
+ * was received before is still parsed by the caller). */
+static void pump(struct sim_dev *d)
 {
-	while (d->nbuf < BUF_MAX) {
+	while (!d->gone && d->nbuf < BUF_MAX) {
 		ssize_t n = recv(d->fd, d->buf + d->nbuf, BUF_MAX - d->nbuf, MSG_DONTWAIT);
 		if (n > 0) {
 			d->nbuf += (size_t)n;
 			continue;
 		}
 		if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR))
-			return 0;
+			return;
 		d->gone = true;
-		return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer 'sim': connection %s (device gone)",
-				n == 0 ? "closed by acq-sim" : strerror(errno));
 	}
-	return 0;
+}
+
+static int gone_error(struct acq_err *err)
+{
+	return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer 'sim': connection closed by acq-sim (device gone)");
 }
 
 /* A complete message at the head of the buffer? 1 (type, seq, payload, len set), 0 not yet, -1 malformed. */
@@ -215,6 +218,8 @@ static int wait_msg(struct sim_dev *d, unsigned want, double deadline, const uns
 				return acq_errf(err, ACQ_E_PROTO, "spectrometer 'sim': expected message 0x%02x, got 0x%02x", want, type);
 			return 0;
 		}
+		if (d->gone)
+			return gone_error(err);
 		double left = deadline - mono();
 		if (left <= 0)
 			return acq_errf(err, ACQ_E_TIMEOUT, "spectrometer 'sim': no answer within %.0f ms", d->cfg->open_ms);
@@ -222,8 +227,8 @@ static int wait_msg(struct sim_dev *d, unsigned want, double deadline, const uns
 		int pr = poll(&pfd, 1, (int)ceil(left * 1000));
 		if (pr < 0 && errno != EINTR)
 			return acq_errf(err, ACQ_E_IO, "spectrometer 'sim': poll: %s", strerror(errno));
-		if (pr > 0 && pump(d, err))
-			return -1;
+		if (pr > 0)
+			pump(d);
 	}
 }
 
@@ -435,10 +440,7 @@ static int dev_fetch(void *dev, struct spectro_frame *frame, double now, struct 
 	struct sim_dev *d = dev;
 	if (!d->pending)
 		return acq_errf(err, ACQ_E_STATE, "spectrometer 'sim': no measurement running");
-	if (!d->gone && pump(d, err)) {
-		d->pending = false;
-		return -1;
-	}
+	pump(d);
 	for (;;) {
 		unsigned type;
 		uint32_t seq, len;
@@ -468,10 +470,15 @@ static int dev_fetch(void *dev, struct spectro_frame *frame, double now, struct 
 	}
 	if (d->gone) {
 		d->pending = false;
-		return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer 'sim': device gone during the measurement");
+		return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer 'sim': connection closed by acq-sim during the "
+				"measurement (device gone; close and open it again)");
 	}
 	if (now > d->deadline) {
 		d->pending = false;
+		struct acq_err ignored = { 0 };
+		if (send_msg(d, SSP_STOP, NULL, 0, &ignored)) {
+			/* best effort: the device may be stuck; the late answer is dropped by its sequence number */
+		}
 		return acq_errf(err, ACQ_E_TIMEOUT, "spectrometer 'sim': no spectrum within %.3f s (integration %g ms x %u)",
 				d->deadline - d->started, d->meas.integration_ms, d->meas.averages);
 	}
