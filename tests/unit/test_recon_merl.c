@@ -204,16 +204,24 @@ static void test_write_read_roundtrip(void **state)
 		double x[3] = { th, td, pd }, cx[3] = { cth, ctd, cpd };
 		for (int c = 0; c < 3; c++) {
 			assert_true(fabs(got[c] - ctr[c]) <= 1e-12 * fabs(ctr[c]));
-			double bound = 1e-9;
-			for (int k = 0; k < 3; k++) {
-				double e = 1e-6, xp[3] = { x[0], x[1], x[2] }, xm[3] = { x[0], x[1], x[2] }, fp[3], fm[3];
-				xp[k] += e;
-				xm[k] -= e;
-				f_angles(xp[0], xp[1], xp[2], fp);
-				f_angles(xm[0], xm[1], xm[2], fm);
-				bound += fabs(fp[c] - fm[c]) / (2 * e) * fabs(cx[k] - x[k]);
+			/* mean value theorem along the segment x → centre in angle space: |f(c) − f(x)| ≤
+			 * max_t Σ_k |∂_k f(x + t(c − x))|·|c_k − x_k|, t sampled at 0, ¼, ½, ¾, 1 */
+			double bound = 0;
+			for (int ti = 0; ti <= 4; ti++) {
+				double tt = ti / 4.0, m[3], sum = 0;
+				for (int k = 0; k < 3; k++)
+					m[k] = x[k] + tt * (cx[k] - x[k]);
+				for (int k = 0; k < 3; k++) {
+					double e = 1e-6, xp[3] = { m[0], m[1], m[2] }, xm[3] = { m[0], m[1], m[2] }, fp[3], fm[3];
+					xp[k] += e;
+					xm[k] -= e;
+					f_angles(xp[0], xp[1], xp[2], fp);
+					f_angles(xm[0], xm[1], xm[2], fm);
+					sum += fabs(fp[c] - fm[c]) / (2 * e) * fabs(cx[k] - x[k]);
+				}
+				bound = fmax(bound, sum);
 			}
-			bound *= 1.5;
+			bound = bound * 1.5 + 1e-9;
 			if (!(fabs(got[c] - ref[c]) <= bound))
 				fail_msg("seed %u sample %d ch %d: lookup %.6g direct %.6g bound %.3g", seed, s, c, got[c],
 					 ref[c], bound);

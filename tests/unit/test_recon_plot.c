@@ -13,6 +13,14 @@
 
 #include "recon/plot.h"
 
+/* fontconfig (behind cairo's text) keeps process-lifetime caches that LeakSanitizer reports; they are not
+ * ours. This hook is read by LSan only in sanitizer builds. */
+const char *__lsan_default_suppressions(void);
+const char *__lsan_default_suppressions(void)
+{
+	return "leak:libfontconfig.so\n";
+}
+
 static unsigned seed;
 static char dir[512];
 
