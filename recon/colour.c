@@ -46,6 +46,15 @@ void colour_opts_default(struct colour_opts *o)
 	o->srgb_encode = false;
 }
 
+void colour_opts_brdf(struct colour_opts *o)
+{
+	colour_opts_default(o);
+	o->norm = COLOUR_NORM_ABSOLUTE;
+	o->gamut = COLOUR_GAMUT_CLAMP;
+	o->range = COLOUR_RANGE_KEEP;
+	o->srgb_encode = false;
+}
+
 static int positive(double v)
 {
 	return isfinite(v) && v > 0;

@@ -75,6 +75,10 @@ struct colour_stats {
 /* Fill o with the defaults listed in struct colour_opts. */
 void colour_opts_default(struct colour_opts *o);
 
+/* Options for RGB BRDF values in sr⁻¹ (MERL tables, the render callback): the defaults, then ABSOLUTE,
+ * CLAMP, KEEP, linear. Only out-of-gamut negatives are changed (to 0), so values stay a physical BRDF. */
+void colour_opts_brdf(struct colour_opts *o);
+
 /* Check o (enum ranges, positive finite white/max_albedo/target/exposure/reinhard_white); 0 or -1. */
 int colour_opts_check(const struct colour_opts *o, struct acq_err *err);
 

@@ -470,3 +470,10 @@ int merl_lookup(const struct merl_table *t, const double wi[3], const double wo[
 	}
 	return nodata;
 }
+
+int merl_table_fn(void *ctx, const double wi[3], const double wo[3], double rgb[3])
+{
+	if (merl_lookup(ctx, wi, wo, rgb) != 0)
+		rgb[0] = rgb[1] = rgb[2] = 0;
+	return 0;
+}

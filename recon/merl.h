@@ -84,4 +84,8 @@ void merl_free(struct merl_table *t);
  * 1 for a "no data" cell (rgb negative), -1 if a direction is not finite or has z ≤ 0 (rgb = 0). */
 int merl_lookup(const struct merl_table *t, const double wi[3], const double wo[3], double rgb[3]);
 
+/* merl_rgb_fn over a table (ctx = const struct merl_table *): the reference lookup, with "no data" cells
+ * and invalid directions given as 0 (so a MERL file can be rendered); thread-safe; always returns 0. */
+int merl_table_fn(void *ctx, const double wi[3], const double wo[3], double rgb[3]);
+
 #endif

@@ -123,6 +123,17 @@ static void test_white_reflector_is_white(void **state)
 	o.norm = COLOUR_NORM_ABSOLUTE;
 	assert_int_equal(colour_spectrum_rgb(&o, wl, s, n, rgb, NULL, &err), 0);
 	assert_near(colour_luminance(rgb), 1 / M_PI, 1e-4);
+	/* The BRDF preset (for MERL and render callbacks) keeps sr⁻¹ and values above 1. */
+	colour_opts_brdf(&o);
+	for (size_t k = 0; k < n; k++)
+		s[k] = 3.0;
+	assert_int_equal(colour_spectrum_rgb(&o, wl, s, n, rgb, NULL, &err), 0);
+	for (int c = 0; c < 3; c++)
+		assert_near(rgb[c], 3.0, 3e-4);
+	for (size_t k = 0; k < n; k++)
+		s[k] = 1 / M_PI;
+	colour_opts_default(&o);
+	o.norm = COLOUR_NORM_ABSOLUTE;
 	/* MAX_ALBEDO: albedo 0.5 is the largest, mapped to 0.8 → a flat albedo-0.5 BRDF gives 0.8. */
 	o.norm = COLOUR_NORM_MAX_ALBEDO;
 	o.max_albedo = 0.5;

@@ -133,6 +133,20 @@ static void test_curves_at_data_locations(void **state)
 	}
 	printf("curve pixels found at %d of %d probes\n", hits, probes);
 	assert_int_equal(hits, probes);
+	/* The mapping sends the axis range to the plot frame's edges, and the frame is drawn there (black
+	 * 1 px lines just inside px_left/px_top/px_right/px_bottom): curves are located relative to the axes. */
+	assert_true(fabs(plot_x_to_px(&f, f.x_min) - f.px_left) < 1e-9);
+	assert_true(fabs(plot_x_to_px(&f, f.x_max) - f.px_right) < 1e-9);
+	assert_true(fabs(plot_y_to_px(&f, f.y_min) - f.px_bottom) < 1e-9);
+	assert_true(fabs(plot_y_to_px(&f, f.y_max) - f.px_top) < 1e-9);
+	{
+		const double black[3] = { 0, 0, 0 };
+		int midx = (int)((f.px_left + f.px_right) / 4), midy = (int)((f.px_top + f.px_bottom) / 2);
+		assert_true(close_to(g.px + 3 * ((size_t)f.px_top * g.im.width + (size_t)midx), black, 60));
+		assert_true(close_to(g.px + 3 * ((size_t)(f.px_bottom - 1) * g.im.width + (size_t)midx), black, 60));
+		assert_true(close_to(g.px + 3 * ((size_t)midy * g.im.width + (size_t)f.px_left), black, 60));
+		assert_true(close_to(g.px + 3 * ((size_t)midy * g.im.width + (size_t)(f.px_right - 1)), black, 60));
+	}
 	/* background far from everything is white; the frame's bottom-left corner is black */
 	assert_true(close_to(g.px + 3 * 2, (double[3]){ 1, 1, 1 }, 0));
 	int fx = (int)f.px_left, fy = (int)f.px_bottom - 1;
