@@ -402,23 +402,27 @@ int merl_read(const char *path, struct merl_table *t, struct acq_err *err)
 			 MERL_FILE_SIZE);
 		goto out;
 	}
-	size_t total = 3 * (size_t)MERL_N_CELLS;
-	buf = malloc(total * 8);
+	size_t total = 3 * (size_t)MERL_N_CELLS, chunk = 65536;
+	buf = malloc(chunk * 8);
 	t->data = malloc(total * sizeof(double));
 	if (!buf || !t->data) {
 		acq_errf(err, ACQ_E_NOMEM, "merl: out of memory reading %s", path);
 		goto out;
 	}
-	if (fread(buf, 8, total, f) != total) {
-		acq_errf(err, ACQ_E_PROTO, "merl: %s: truncated body", path);
-		goto out;
-	}
-	for (size_t i = 0; i < total; i++) {
-		t->data[i] = get_le64(buf + 8 * i);
-		if (!isfinite(t->data[i])) {
-			acq_errf(err, ACQ_E_PROTO, "merl: %s: non-finite value at channel %zu cell %zu", path,
-				 i / MERL_N_CELLS, i % MERL_N_CELLS);
+	for (size_t off = 0; off < total; off += chunk) {
+		size_t n = total - off < chunk ? total - off : chunk;
+		if (fread(buf, 8, n, f) != n) {
+			acq_errf(err, ACQ_E_PROTO, "merl: %s: truncated body", path);
 			goto out;
+		}
+		for (size_t i = 0; i < n; i++) {
+			double v = get_le64(buf + 8 * i);
+			if (!isfinite(v)) {
+				acq_errf(err, ACQ_E_PROTO, "merl: %s: non-finite value at channel %zu cell %zu", path,
+					 (off + i) / MERL_N_CELLS, (off + i) % MERL_N_CELLS);
+				goto out;
+			}
+			t->data[off + i] = v;
 		}
 	}
 	rc = 0;

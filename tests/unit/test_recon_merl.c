@@ -348,6 +348,27 @@ static void test_read_rejects_bad_files(void **state)
 	assert_int_equal(merl_read(p, &t, &err), -1);
 	assert_non_null(strstr(err.msg, "size"));
 	assert_null(t.data);
+	/* right size, one NaN in the body (random position), then one byte too many */
+	size_t len = (size_t)MERL_FILE_SIZE;
+	unsigned char *buf = calloc(1, len + 1);
+	assert_non_null(buf);
+	memcpy(buf, hdr, sizeof(hdr));
+	size_t at = (size_t)(urand() * 3 * MERL_N_CELLS);
+	double nan = NAN;
+	memcpy(buf + 12 + 8 * at, &nan, 8);
+	write_bytes(p, buf, len);
+	assert_int_equal(merl_read(p, &t, &err), -1);
+	assert_int_equal(err.code, ACQ_E_PROTO);
+	assert_non_null(strstr(err.msg, "non-finite"));
+	assert_null(t.data);
+	memset(buf + 12 + 8 * at, 0, 8);
+	write_bytes(p, buf, len);
+	assert_int_equal(merl_read(p, &t, &err), 0); /* all zeros: a valid (black) table */
+	merl_free(&t);
+	write_bytes(p, buf, len + 1);
+	assert_int_equal(merl_read(p, &t, &err), -1);
+	assert_non_null(strstr(err.msg, "size"));
+	free(buf);
 	unlink(p);
 }
 
