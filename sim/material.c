@@ -266,31 +266,43 @@ int mat_nwl(const struct mat *m)
 	return m->nwl;
 }
 
-void mat_eval(const struct mat *m, const double wi[3], const double wo[3], double *out)
+void mat_terms(const struct mat *m, const double wi[3], const double wo[3], double *diff, double *spec, double *c)
 {
 	double mi = wi[2], mo = wo[2];
-	if (!(mi > 0) || !(mo > 0)) {
-		memset(out, 0, sizeof(double) * (size_t)m->nwl);
+	*diff = *spec = *c = 0;
+	if (!(mi > 0) || !(mo > 0))
 		return;
-	}
-	double diff = 0;
 	if (m->id == MAT_WHITE)
-		diff = 1.0 / M_PI;
+		*diff = 1.0 / M_PI;
 	else if (m->id == MAT_GREEN_PAINT)
-		diff = (1.0 - etab_at(m, mi)) * (1.0 - etab_at(m, mo)) / (M_PI * (1.0 - m->eavg));
-	double spec = 0, c = 0;
+		*diff = (1.0 - etab_at(m, mi)) * (1.0 - etab_at(m, mo)) / (M_PI * (1.0 - m->eavg));
 	if (m->alpha > 0) {
 		double h[3] = { wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2] };
 		double hl = sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
 		if (hl > 1e-12) {
 			for (int i = 0; i < 3; i++)
 				h[i] /= hl;
-			c = wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2];
+			double cc = wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2];
 			double g2 = 1.0 / (1.0 + ggx_lambda(m->alpha, mi) + ggx_lambda(m->alpha, mo));
-			if (c > 0)
-				spec = ggx_d(m->alpha, h[2]) * g2 / (4.0 * mi * mo);
+			if (cc > 0) {
+				*spec = ggx_d(m->alpha, h[2]) * g2 / (4.0 * mi * mo);
+				*c = cc;
+			}
 		}
 	}
+}
+
+void mat_fresnel(const struct mat *m, double c, double *out)
+{
+	for (int l = 0; l < m->nwl; l++)
+		out[l] = m->id == MAT_METAL ? fresnel(c, m->n[l], m->k[l]) :
+			 m->id == MAT_GREEN_PAINT ? fresnel(c, PAINT_N, 0.0) : 0.0;
+}
+
+void mat_eval(const struct mat *m, const double wi[3], const double wo[3], double *out)
+{
+	double diff, spec, c;
+	mat_terms(m, wi, wo, &diff, &spec, &c);
 	if (m->id == MAT_METAL) {
 		for (int l = 0; l < m->nwl; l++)
 			out[l] = spec > 0 ? spec * fresnel(c, m->n[l], m->k[l]) : 0.0;

@@ -50,6 +50,11 @@ void mat_free(struct mat *m);
 int mat_nwl(const struct mat *m);
 /* f(wi, wo, wl_k) in 1/sr for every wavelength k into out[nwl]; 0 below the horizon. */
 void mat_eval(const struct mat *m, const double wi[3], const double wo[3], double *out);
+/* The decomposition f(wl) = diff * rho_d(wl) + spec * F(wl, c) used by mat_eval (diff, spec in 1/sr, c the
+ * cosine between wi and the half vector), so spectral reductions (RGB) can be folded before evaluation. */
+void mat_terms(const struct mat *m, const double wi[3], const double wo[3], double *diff, double *spec, double *c);
+/* The Fresnel factor F(wl_k, c) of mat_terms for every wavelength into out[nwl] (0 for white). */
+void mat_fresnel(const struct mat *m, double c, double *out);
 /* Diffuse albedo rho_d(wl) (white: rho; metal: 0) at wavelength wl, for documentation and tests. */
 double mat_rho_d(enum mat_id id, double wl);
 /* DHR at incidence zenith theta_i (radians, [0, pi/2]) for every wavelength, with an error bound per

@@ -10,6 +10,8 @@
 #include <unistd.h>
 
 #include "config/bench.h"
+#include "recon/colour.h"
+#include "recon/merl.h"
 #include "sim/material.h"
 #include "sim/sim.h"
 #include "sim/sim_rng.h"
@@ -26,7 +28,7 @@ static void usage(FILE *f)
 		"    --eval QUERIES.csv [-o OUT.csv]      f at the rows' theta_i,phi_i,theta_o,phi_o (degrees), 1/sr\n"
 		"    --grid NIxNOxNP -o SAMPLES.csv       noisy samples: NI incidences, NO observation zeniths in (0, 80),\n"
 		"          [--noise REL] [--noise-floor ABS] [--seed N] [--keep-blind]   NP azimuths; sigma_<nm> columns\n"
-		"    --merl OUT.binary                    MERL table (needs the recon MERL writer)\n"
+		"    --merl OUT.binary                    MERL table, linear sRGB in 1/sr (D65, Bradford; recon/colour.h)\n"
 		"  --wavelengths A:B:STEP   spectral sampling in nm within 450..1100 (default 450:1100:1)\n"
 		"  --level N                DHR quadrature level 0..5 (default 2)\n");
 }
@@ -328,11 +330,77 @@ static int do_grid(struct mat *m, const char *material, const char *spec, const 
 	return 0;
 }
 
-static int do_merl(struct mat *m, const char *out)
+/* MERL export: the spectral BRDF reduced to linear sRGB in sr^-1 by recon/colour.h (colour_opts_brdf: D65,
+ * Bradford, absolute, negatives clamped, range kept). The reduction is linear, so it is folded in before the
+ * evaluation: f(l) = diff rho(l) + spec F(l, c) gives rgb = diff (W rho) + spec (W F(., c)), with W F(., c)
+ * tabulated over c in [0, 1] (MERL_FT + 1 nodes, linear interpolation: relative error < 1e-6). */
+#define MERL_FT 4096
+
+struct merl_ctx {
+	const struct mat *m;
+	double wrho[3];
+	double *ftab; /* 3 x (MERL_FT + 1) */
+	struct colour_opts o;
+	struct colour_stats st;
+};
+
+static int merl_cb(void *ctx, const double wi[3], const double wo[3], double rgb[3])
 {
-	(void)m;
-	fprintf(stderr, "acq-sim truth: --merl %s: not available yet (the MERL writer recon/merl.h has not landed)\n", out);
-	return 1;
+	struct merl_ctx *x = ctx;
+	double diff, spec, c, lin[3];
+	mat_terms(x->m, wi, wo, &diff, &spec, &c);
+	double u = fmin(fmax(c, 0.0), 1.0) * MERL_FT;
+	int j = (int)u;
+	if (j >= MERL_FT)
+		j = MERL_FT - 1;
+	double t = u - j;
+	for (int k = 0; k < 3; k++) {
+		const double *f = x->ftab + k * (MERL_FT + 1);
+		lin[k] = diff * x->wrho[k] + spec * (f[j] + t * (f[j + 1] - f[j]));
+	}
+	colour_finish(&x->o, lin, rgb, &x->st);
+	return 0;
+}
+
+static int do_merl(struct mat *m, enum mat_id id, const char *out, const double *wl, int nwl)
+{
+	struct merl_ctx x = { .m = m };
+	struct acq_err err = { 0 };
+	colour_opts_brdf(&x.o);
+	double *W = malloc(sizeof(double) * 3 * (size_t)nwl), *sp = malloc(sizeof(double) * (size_t)nwl);
+	x.ftab = malloc(sizeof(double) * 3 * (MERL_FT + 1));
+	int rc = 1;
+	if (!W || !sp || !x.ftab) {
+		fprintf(stderr, "acq-sim truth: out of memory\n");
+		goto done;
+	}
+	if (colour_weights(&x.o, wl, (size_t)nwl, W, &err)) {
+		fprintf(stderr, "acq-sim truth: --merl: %s\n", err.msg);
+		goto done;
+	}
+	for (int l = 0; l < nwl; l++)
+		sp[l] = mat_rho_d(id, wl[l]);
+	colour_apply_weights(W, (size_t)nwl, sp, x.wrho);
+	for (int j = 0; j <= MERL_FT; j++) {
+		double rgb[3];
+		mat_fresnel(m, (double)j / MERL_FT, sp);
+		colour_apply_weights(W, (size_t)nwl, sp, rgb);
+		for (int k = 0; k < 3; k++)
+			x.ftab[k * (MERL_FT + 1) + j] = rgb[k];
+	}
+	if (merl_write(out, merl_cb, &x, &err)) {
+		fprintf(stderr, "acq-sim truth: --merl: %s\n", err.msg);
+		goto done;
+	}
+	fprintf(stderr, "acq-sim truth: MERL table written to %s; colour decisions: ", out);
+	colour_opts_write_json(stderr, &x.o, &x.st, NULL);
+	fputc('\n', stderr);
+	rc = 0;
+done:
+	free(W);
+	free(sp);
+	free(x.ftab);
+	return rc;
 }
 
 int sim_truth_main(int argc, char **argv)
@@ -362,9 +430,12 @@ int sim_truth_main(int argc, char **argv)
 		fprintf(stderr, "acq-sim truth: unknown material '%s' (expected green-paint, white, metal)\n", material);
 		return 2;
 	}
-	optind = 2;
-	int c, nact = 0;
-	while ((c = getopt_long(argc, argv, "o:h", opts, NULL)) != -1) {
+	/* options after MATERIAL: parse argv + 1 from its index 1; optind = 0 re-initialises getopt (so the
+	 * function can run more than once in a process) */
+	optind = 0;
+	int c, nact = 0, oargc = argc - 1;
+	char **oargv = argv + 1;
+	while ((c = getopt_long(oargc, oargv, "o:h", opts, NULL)) != -1) {
 		char *end = NULL;
 		switch (c) {
 		case 'd': dhr = optarg; nact++; break;
@@ -405,8 +476,8 @@ int sim_truth_main(int argc, char **argv)
 		default: usage(stderr); return 2;
 		}
 	}
-	if (optind < argc) {
-		fprintf(stderr, "acq-sim truth: unexpected argument '%s'\n", argv[optind]);
+	if (optind < oargc) {
+		fprintf(stderr, "acq-sim truth: unexpected argument '%s'\n", oargv[optind]);
 		return 2;
 	}
 	if (nact != 1) {
@@ -437,7 +508,7 @@ int sim_truth_main(int argc, char **argv)
 	} else if (grid) {
 		rc = do_grid(m, mat_name(id), grid, out, rel, floor_, seed, keep_blind, wl, nwl);
 	} else {
-		rc = do_merl(m, merl);
+		rc = do_merl(m, (enum mat_id)id, merl, wl, nwl);
 	}
 	mat_free(m);
 	free(wl);

@@ -113,6 +113,20 @@ try:
              "-o", "-", "--wavelengths", "450:1100:25")
     check(r2.stdout == open(out).read(), "grid: same seed, same samples")
 
+    # --- MERL (values are checked against the truth in tests/unit/test_sim_truth_merl.c)
+    mp = os.path.join(tmp, "w.binary")
+    r = run("white", "--merl", mp, "--wavelengths", "450:1100:5")
+    check(r.returncode == 0 and os.path.getsize(mp) == 34992012, f"--merl writes a 34,992,012-byte table ({r.returncode})")
+    hdr = np.fromfile(mp, dtype="<i4", count=3)
+    body = np.fromfile(mp, dtype="<f8", offset=12)
+    scale = np.repeat([1 / 1500, 1.15 / 1500, 1.66 / 1500], 1458000)
+    val = body * scale
+    good = body >= 0
+    check(list(hdr) == [90, 90, 180] and good.mean() > 0.5, "MERL header 90 90 180, most cells have data")
+    check(abs(np.median(val[good][:1458000 // 2]) - 0.98 / math.pi) < 0.03,
+          f"white MERL red channel ~ rho/pi ({np.median(val[good][:729000]):.4f})")
+    os.unlink(mp)
+
     # --- errors
     bad = os.path.join(tmp, "bad.csv")
     with open(bad, "w") as f:
