@@ -5,7 +5,9 @@
  *   backend: sim
  *   socket: PATH                 the acq-sim spectrometer socket, or
  *   ports_file: PATH             acq-sim's --ports-file (JSON); the socket is read from "spectrometer.socket"
- *                                at open time (exactly one of socket / ports_file)
+ *                                at open time. At most one of socket / ports_file; with neither, the ports
+ *                                file named by the environment variable ACQ_SIM_PORTS is used at open time
+ *                                (so `acquisitiond --sim PORTS.json` can point every sim backend at one run)
  *   timeout_margin_ms: 2000      added to integration x averages (+ read-out) for the fetch deadline
  *   open_timeout_ms: 2000        how long open waits for the banner and the identity
  *   nonlinearity_correction: true  linearise counts with the device's coefficients (frame.nonlin_applied)
@@ -64,8 +66,8 @@ static int parse(struct yc_node *node, void **state, struct acq_err *err)
 	    yc_double(node, "open_timeout_ms", false, 1, 3.6e6, &c->open_ms, err) ||
 	    yc_bool(node, "nonlinearity_correction", false, &c->linearise, err))
 		goto fail;
-	if (!sock == !ports) {
-		yc_errf(err, node, "spectrometer backend 'sim': give exactly one of `socket: PATH` or `ports_file: PATH`");
+	if (sock && ports) {
+		yc_errf(err, node, "spectrometer backend 'sim': give one of `socket: PATH` or `ports_file: PATH`, not both");
 		goto fail;
 	}
 	if (sock && strlen(sock) >= sizeof c->socket) {
@@ -307,10 +309,16 @@ static int dev_open(const void *state, void **dev, struct spectro_info *info, st
 	const struct sim_cfg *c = state;
 	*dev = NULL;
 	char path[108];
-	if (c->socket[0])
+	const char *env = getenv("ACQ_SIM_PORTS");
+	if (c->socket[0]) {
 		snprintf(path, sizeof path, "%s", c->socket);
-	else if (socket_from_ports(c->ports_file, path, sizeof path, err))
-		return -1;
+	} else if (c->ports_file[0] || (env && env[0])) {
+		if (socket_from_ports(c->ports_file[0] ? c->ports_file : env, path, sizeof path, err))
+			return -1;
+	} else {
+		return acq_errf(err, ACQ_E_CONFIG, "spectrometer backend 'sim': no socket: set devices.spectrometer.socket "
+				"or .ports_file, or the environment variable ACQ_SIM_PORTS (acq-sim's --ports-file)");
+	}
 	struct sim_dev *d = calloc(1, sizeof *d);
 	if (!d || !(d->buf = malloc(BUF_MAX))) {
 		free(d);

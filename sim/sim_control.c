@@ -25,7 +25,7 @@
  *
  * Schedule (config):  sim.faults: { seed: N (default --seed), schedule: [ {at: S, fault: NAME, arm: laser|
  * detector, duration: S, count: N, offline_s: S}, ... ], random: {rate_per_min: R, faults: [NAME, ...],
- * duration: S} }. `at` is bench seconds; `duration` clears an on/off fault after S seconds; random faults
+ * duration: S (default 5)} }. `at` is bench seconds; `duration` clears an on/off fault after S seconds; random faults
  * arrive as a Poisson process of R per bench minute, kind and arm drawn from the seeded generator. */
 #include <errno.h>
 #include <math.h>
@@ -545,6 +545,7 @@ struct sim_service *sim_control_new(struct sim_world *w, struct yc_node *simcfg,
 	c->w = w;
 	c->lfd = -1;
 	c->next_random = -1;
+	c->rand_duration = 5.0;
 	for (int i = 0; i < MAX_CLIENTS; i++)
 		c->cl[i].fd = -1;
 	sim_rng_seed(&c->rng, w->seed ^ 0xfa17ull);

@@ -195,7 +195,9 @@ unsigned phys_signal(const struct phys *p, const struct sim_world *w, double *ra
 		occ |= PHYS_OCC_DETECTOR_IN_BEAM;
 	if (gamma < g->laser_body_halfwidth_deg + g->fov_halfwidth_deg)
 		occ |= PHYS_OCC_LASER_HIDES_VIEW;
-	double power = w->laser_emission ? w->laser_power_pct / 100.0 : 0.0;
+	/* an open interlock or a laser fault stops emission whatever the laser service reports */
+	bool emits = w->laser_emission && !w->faults.laser_interlock_open && !w->faults.laser_fault;
+	double power = emits ? w->laser_power_pct / 100.0 : 0.0;
 	if (!(power > 0) || occ) {
 		memset(rate, 0, sizeof(double) * (size_t)npix);
 		return occ;
@@ -255,6 +257,8 @@ int phys_measure(const struct phys *p, const struct sim_world *w, double integra
 	double b = c->nonlinearity, rn2 = c->read_noise_counts * c->read_noise_counts;
 	for (int i = 0; i < npix; i++) {
 		double e = c->bias_counts + dark + rate[i] * integration_ms * gain_boost;
+		if (gain_boost > 1 && i >= PHYS_NDARK)
+			e += 1.1 * PHYS_FULL_SCALE; /* a burst of stray light saturates every illuminated pixel */
 		double sd = sqrt(fmax(0.0, e - c->bias_counts) / c->electrons_per_count + rn2);
 		double sum = 0, sum2 = 0;
 		bool sat = false;

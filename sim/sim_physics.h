@@ -8,7 +8,7 @@
  * K = beam_counts_per_ms (the direct beam at 100 % power), s the supercontinuum's relative spectrum, QE a
  * silicon-like response, Omega_det = 2 pi (1 - cos fov_halfwidth). So the absolute relation of
  * brdf-reconstruction.md holds: f = (S - D) / ((S_beam - D_beam) Omega_det cos(theta_o)).
- * Zero signal when the laser does not emit, and in the blind zones (wi, wo at an angle below
+ * Zero signal when the laser does not emit (or its interlock is open, or it is in fault), and in the blind zones (wi, wo at an angle below
  * detector_body + beam half-widths: the detector body blocks the beam; below laser_body + fov half-widths:
  * the laser arm hides the spot). The 4 first pixels are optically black (dark only).
  * One scan: e = bias + dark(T) t + signal t, noise N(0, (e - bias)/electrons_per_count + read_noise^2),
@@ -75,8 +75,8 @@ double phys_dark_cps(const struct phys_cfg *c, double t);
 /* Signal rate above dark (counts per ms) per pixel into rate[npix] for the world's actual state;
  * returns the PHYS_OCC_* bits of the geometry. */
 unsigned phys_signal(const struct phys *p, const struct sim_world *w, double *rate);
-/* Simulate one measurement of averages scans of integration_ms each into f; gain_boost multiplies the
- * signal (a saturation burst). 0 or -1 with err on bad arguments. */
+/* Simulate one measurement of averages scans of integration_ms each into f; gain_boost > 1 multiplies the
+ * signal and saturates every pixel but the black ones (a saturation burst). 0 or -1 with err. */
 int phys_measure(const struct phys *p, const struct sim_world *w, double integration_ms, unsigned averages,
 		 double gain_boost, struct sim_rng *rng, struct phys_frame *f, struct acq_err *err);
 

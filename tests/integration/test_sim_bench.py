@@ -174,6 +174,10 @@ try:
     check(m["nsat"] > 1000, f"scheduled saturation burst saturates the first spectrum ({m['nsat']} pixels)")
     m = sp.measure(1, 1)
     check(m["nsat"] == 0, "burst consumed: the next spectrum is not saturated")
+    locked = mean(sp.measure(20, 4)["counts"][4:])
+    check(ctl("fault laser-interlock off") == "ok faults=none", "fault laser-interlock off")
+    lit = mean(sp.measure(20, 4)["counts"][4:])
+    check(abs(locked - 1500) < 5 and lit > 3000, f"interlock open: no light ({locked:.0f}); closed: light ({lit:.0f})")
 
     paint = sp.measure(20, 4)
     check(ctl("sample white") == "ok sample=white", "sample command")

@@ -288,6 +288,16 @@ static void test_occlusion(void **state)
 	r->w.laser_power_pct = 100;
 	pthread_mutex_unlock(&r->mu);
 	assert_true(mean_counts(f, 4, 2048) > 1500 + 200);
+	/* laser on but its interlock open: no light */
+	set_world(r, SIM_SAMPLE_WHITE, true, 20, 40, 150);
+	pthread_mutex_lock(&r->mu);
+	r->w.faults.laser_interlock_open = true;
+	pthread_mutex_unlock(&r->mu);
+	must_measure(r, 50, 4, f);
+	assert_true(fabs(mean_counts(f, 4, 2048) - mean_counts(d, 4, 2048)) < 3.0);
+	pthread_mutex_lock(&r->mu);
+	r->w.faults.laser_interlock_open = false;
+	pthread_mutex_unlock(&r->mu);
 	free(f);
 	free(d);
 }
@@ -353,6 +363,24 @@ static void test_disconnect_busy_reopen(void **state)
 	assert_int_equal(spectro_start(r->sp, &m, mono(), &err), -1);
 	spectro_close(r->sp);
 	r->sp = NULL;
+	/* reopen through a ports file (the form acq-sim --ports-file writes) */
+	char pf[160], text[256];
+	snprintf(pf, sizeof pf, "%s/ports.json", r->dir);
+	FILE *fp = fopen(pf, "w");
+	assert_non_null(fp);
+	fprintf(fp, "{\"pid\": 1, \"spectrometer\": {\"socket\": \"%s\", \"pixels\": 2048}}\n", r->sock);
+	fclose(fp);
+	snprintf(text, sizeof text, "backend: sim\nports_file: %s\n", pf);
+	struct yc_doc *cd = load(text);
+	struct spectro_cfg *cfg2 = NULL;
+	assert_int_equal(spectro_cfg_parse(yc_root(cd), &cfg2, &err), 0);
+	yc_free(cd);
+	assert_int_equal(spectro_open(cfg2, &r->sp, &err), 0);
+	assert_int_equal(spectro_info(r->sp)->npix, 2048);
+	must_measure(r, 1, 1, f);
+	spectro_close(r->sp);
+	spectro_cfg_free(cfg2);
+	unlink(pf);
 	assert_int_equal(spectro_open(r->cfg, &r->sp, &err), 0);
 	must_measure(r, 1, 1, f);
 	/* stop, then a new measurement gets its own frame (not the stopped one's) */
@@ -502,9 +530,22 @@ static void test_bad_config(void **state)
 	(void)state;
 	struct acq_err err = { 0 };
 	struct spectro_cfg *cfg = NULL;
-	struct yc_doc *d = load("backend: sim\n");
+	struct yc_doc *d = load("backend: sim\nsocket: /a\nports_file: /b\n");
 	assert_int_equal(spectro_cfg_parse(yc_root(d), &cfg, &err), -1);
-	assert_non_null(strstr(err.msg, "exactly one of"));
+	assert_non_null(strstr(err.msg, "not both"));
+	yc_free(d);
+	/* neither: the ports file of ACQ_SIM_PORTS at open time, else a clear error */
+	d = load("backend: sim\n");
+	assert_int_equal(spectro_cfg_parse(yc_root(d), &cfg, &err), 0);
+	struct spectro *sp0 = NULL;
+	unsetenv("ACQ_SIM_PORTS");
+	assert_int_equal(spectro_open(cfg, &sp0, &err), -1);
+	assert_non_null(strstr(err.msg, "ACQ_SIM_PORTS"));
+	setenv("ACQ_SIM_PORTS", "/nonexistent/ports.json", 1);
+	assert_int_equal(spectro_open(cfg, &sp0, &err), -1);
+	assert_non_null(strstr(err.msg, "/nonexistent/ports.json"));
+	unsetenv("ACQ_SIM_PORTS");
+	spectro_cfg_free(cfg);
 	yc_free(d);
 	d = load("backend: sim\nsocket: /x\ntimeout_margin_ms: -5\n");
 	assert_int_equal(spectro_cfg_parse(yc_root(d), &cfg, &err), -1);
