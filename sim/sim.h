@@ -64,7 +64,7 @@ struct sim_service {
 	void (*tick)(void *self, double now);
 	/* Write this service's endpoints as JSON members, e.g. "laser_arm": {"port": 40123}; may be NULL. */
 	void (*describe)(void *self, char *buf, size_t len);
-	/* Free everything. */
+	/* Free everything, the struct sim_service itself included (embed it in self). */
 	void (*destroy)(void *self);
 };
 

@@ -72,6 +72,7 @@ struct client {
 };
 
 struct control {
+	struct sim_service svc;  /* what the constructor returns; freed with the rest by ctl_destroy */
 	struct sim_world *w;
 	char path[108];
 	int lfd;
@@ -534,11 +535,8 @@ static int parse_faults(struct control *c, struct yc_node *fn, struct acq_err *e
 struct sim_service *sim_control_new(struct sim_world *w, struct yc_node *simcfg, const char *socket_path,
 				    struct acq_err *err)
 {
-	struct sim_service *svc = calloc(1, sizeof *svc);
 	struct control *c = calloc(1, sizeof *c);
-	if (!svc || !c) {
-		free(svc);
-		free(c);
+	if (!c) {
 		acq_errf(err, ACQ_E_NOMEM, "control: out of memory");
 		return NULL;
 	}
@@ -560,11 +558,10 @@ struct sim_service *sim_control_new(struct sim_world *w, struct yc_node *simcfg,
 		acq_err_prefix(err, "control socket: ");
 		goto fail;
 	}
-	*svc = (struct sim_service){ .name = "control", .self = c, .pollfds = ctl_pollfds, .handle = ctl_handle,
+	c->svc = (struct sim_service){ .name = "control", .self = c, .pollfds = ctl_pollfds, .handle = ctl_handle,
 				     .tick = ctl_tick, .describe = ctl_describe, .destroy = ctl_destroy };
-	return svc;
+	return &c->svc;
 fail:
 	ctl_destroy(c);
-	free(svc);
 	return NULL;
 }

@@ -23,6 +23,7 @@
 #define IN_MAX 256
 
 struct spectro_svc {
+	struct sim_service svc;  /* what the constructor returns; freed with the rest by svc_destroy */
 	struct sim_world *w;
 	struct phys *phys;
 	struct sim_rng rng;
@@ -401,11 +402,10 @@ struct sim_service *sim_spectro_new(struct sim_world *w, struct yc_node *node, s
 		if (yc_enum(simcfg, "sample", false, samples, &sample, err) || (sp && phys_parse(sp, &pc, err)))
 			return NULL;
 	}
-	struct sim_service *svc = calloc(1, sizeof *svc);
 	struct spectro_svc *s = calloc(1, sizeof *s);
 	if (s)
 		s->lfd = s->cfd = -1;
-	if (!svc || !s || !(s->msg = malloc(SSP_HDR + SSP_SPECTRUM_LEN(PHYS_MAX_PIXELS)))) {
+	if (!s || !(s->msg = malloc(SSP_HDR + SSP_SPECTRUM_LEN(PHYS_MAX_PIXELS)))) {
 		acq_errf(err, ACQ_E_NOMEM, "simulated spectrometer: out of memory");
 		goto fail;
 	}
@@ -423,12 +423,11 @@ struct sim_service *sim_spectro_new(struct sim_world *w, struct yc_node *node, s
 	sim_rng_seed(&s->rng, w->seed ^ 0x5bec7c0ull);
 	w->sample = sample;
 	w->sensor_temp_c = pc.temperature_c;
-	*svc = (struct sim_service){ .name = "spectrometer", .self = s, .pollfds = svc_pollfds, .handle = svc_handle,
+	s->svc = (struct sim_service){ .name = "spectrometer", .self = s, .pollfds = svc_pollfds, .handle = svc_handle,
 				     .tick = svc_tick, .describe = svc_describe, .destroy = svc_destroy };
-	return svc;
+	return &s->svc;
 fail:
 	if (s)
 		svc_destroy(s);
-	free(svc);
 	return NULL;
 }

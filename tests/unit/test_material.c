@@ -74,16 +74,17 @@ static void test_albedo_at_random_incidences(void **state)
 	sim_rng_seed(&r, seed() + 1);
 	for (int id = 0; id < MAT__COUNT; id++) {
 		struct acq_err err = { 0 };
-		struct mat *m = mat_new(id, NWL, wls, &err);
+		static const double w4[4] = { 450, 600, 850, 1100 }; /* 4 wavelengths keep 10^4 quadratures quick */
+		struct mat *m = mat_new(id, 4, w4, &err);
 		assert_non_null(m);
 		double amax = 0;
-		int n = id == MAT_METAL ? 2000 : 10000; /* the metal's Fresnel is per wavelength: fewer, same checks */
+		int n = 10000;
 		for (int t = 0; t < n; t++) {
 			double wi[3];
 			random_dir(&r, wi);
-			double dhr[NWL], sig[NWL];
+			double dhr[4], sig[4];
 			assert_int_equal(mat_dhr(m, acos(wi[2]), 0, dhr, sig, &err), 0);
-			for (int l = 0; l < NWL; l++) {
+			for (int l = 0; l < 4; l++) {
 				assert_true(dhr[l] >= 0);
 				assert_true(dhr[l] - sig[l] <= 1.0);
 				if (dhr[l] > amax)
@@ -135,7 +136,7 @@ static void test_quadrature_ggx_normalisation(void **state)
 	mat_free(m);
 }
 
-/* DHR error bound: against a quadrature 8x finer in each direction, |Q - Q_ref| <= sigma; the paint's
+/* DHR error bound: against a quadrature 4x finer in each direction, |Q - Q_ref| <= sigma; the paint's
  * DHR = E + rho_d (1 - E) (energy-aware diffuse) is below 1 at grazing. */
 static void test_dhr_against_finer(void **state)
 {
@@ -149,7 +150,7 @@ static void test_dhr_against_finer(void **state)
 		for (size_t t = 0; t < sizeof ths / sizeof ths[0]; t++) {
 			double th = ths[t] * M_PI / 180, dhr[NWL], sig[NWL], ref[NWL], rsig[NWL];
 			assert_int_equal(mat_dhr(m, th, 2, dhr, sig, &err), 0);
-			assert_int_equal(mat_dhr(m, th, 5, ref, rsig, &err), 0);
+			assert_int_equal(mat_dhr(m, th, 4, ref, rsig, &err), 0);
 			double e_th = 0;
 			for (int l = 0; l < NWL; l++)
 				e_th = fmax(e_th, fabs(dhr[l] - ref[l]));
@@ -167,7 +168,7 @@ static void test_dhr_against_finer(void **state)
 				assert_true(dhr[l] <= 1.0);
 			}
 		}
-		printf("%s: DHR level 2 vs level 5: max |error| %.3g, max stated bound %.3g\n", mat_name(id), worst, worst_sig);
+		printf("%s: DHR level 2 vs level 4: max |error| %.3g, max stated bound %.3g\n", mat_name(id), worst, worst_sig);
 		assert_true(worst < 5e-4);
 		mat_free(m);
 	}

@@ -28,8 +28,7 @@ static struct sim_service *make(struct sim_world *w, const char *yaml, struct yc
 static void done(struct sim_service *s, struct yc_doc *doc, char *dir)
 {
 	if (s) {
-		s->destroy(s->self);
-		free(s);
+		s->destroy(s->self); /* frees the service too */
 	}
 	yc_free(doc);
 	rmdir(dir);

@@ -110,8 +110,7 @@ static int rig_teardown(void **state)
 	spectro_cfg_free(r->cfg);
 	r->stop = 1;
 	pthread_join(r->th, NULL);
-	r->svc->destroy(r->svc->self);
-	free(r->svc);
+	r->svc->destroy(r->svc->self); /* frees the service too */
 	yc_free(r->devdoc);
 	yc_free(r->simdoc);
 	rmdir(r->dir);
