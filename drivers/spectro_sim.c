@@ -246,9 +246,9 @@ static void getstr(char *dst, size_t len, const unsigned char *src)
 			dst[i] = '?';
 }
 
-static int parse_identity(struct sim_dev *d, const unsigned char *p, uint32_t len, struct acq_err *err)
+int ssp_parse_identity(const unsigned char *p, uint32_t len, struct spectro_info *in, double *temperature,
+		       struct acq_err *err)
 {
-	struct spectro_info *in = &d->info;
 	if (len != SSP_IDENTITY_LEN)
 		return acq_errf(err, ACQ_E_PROTO, "spectrometer 'sim': identity of %u bytes, expected %d", len, SSP_IDENTITY_LEN);
 	memset(in, 0, sizeof *in);
@@ -276,7 +276,7 @@ static int parse_identity(struct sim_dev *d, const unsigned char *p, uint32_t le
 		in->nonlin_coef[i] = ssp_getd(p + 192 + 8 * i);
 	in->nonlin_low = ssp_getd(p + 256);
 	in->nonlin_high = ssp_getd(p + 264);
-	d->temperature = ssp_getd(p + 272);
+	*temperature = ssp_getd(p + 272);
 	for (int i = 0; i < 5; i++)
 		if (!isfinite(in->wl_coef[i]))
 			return acq_errf(err, ACQ_E_PROTO, "spectrometer 'sim': wavelength coefficient %d not finite", i);
@@ -345,7 +345,7 @@ static int dev_open(const void *state, void **dev, struct spectro_info *info, st
 	}
 	consume(d, len);
 	if (send_msg(d, SSP_IDENTIFY, NULL, 0, err) || wait_msg(d, SSP_IDENTITY, deadline, &p, &len, err) ||
-	    parse_identity(d, p, len, err))
+	    ssp_parse_identity(p, len, &d->info, &d->temperature, err))
 		goto fail;
 	consume(d, len);
 	*info = d->info;
@@ -389,20 +389,20 @@ static double poly(const double *c, int n, double x)
 	return v;
 }
 
-static int fill_frame(struct sim_dev *d, const unsigned char *p, uint32_t len, struct spectro_frame *f, struct acq_err *err)
+int ssp_parse_spectrum(const unsigned char *p, uint32_t len, const struct spectro_info *in, bool linearise,
+		       struct spectro_frame *f, struct acq_err *err)
 {
 	if (len < SSP_SPECTRUM_FIXED)
 		return acq_errf(err, ACQ_E_PROTO, "spectrometer 'sim': spectrum of %u bytes (< %d)", len, SSP_SPECTRUM_FIXED);
 	uint32_t npix = ssp_get32(p + 28), nsat = ssp_get32(p + 32);
-	if ((int)npix != d->info.npix || npix > SPECTRO_MAX_PIXELS)
-		return acq_errf(err, ACQ_E_PROTO, "spectrometer 'sim': spectrum of %u pixels, the device has %d", npix, d->info.npix);
+	if ((int)npix != in->npix || npix > SPECTRO_MAX_PIXELS)
+		return acq_errf(err, ACQ_E_PROTO, "spectrometer 'sim': spectrum of %u pixels, the device has %d", npix, in->npix);
 	if (len != SSP_SPECTRUM_LEN(npix))
 		return acq_errf(err, ACQ_E_PROTO, "spectrometer 'sim': spectrum of %u bytes, expected %u for %u pixels", len,
 				SSP_SPECTRUM_LEN(npix), npix);
 	const unsigned char *pc = p + SSP_SPECTRUM_FIXED, *ps = pc + 8 * npix, *pf = ps + 4 * npix;
 	int count = 0;
-	const struct spectro_info *in = &d->info;
-	bool lin = d->cfg->linearise && in->nonlin_enabled;
+	bool lin = linearise && in->nonlin_enabled;
 	for (uint32_t i = 0; i < npix; i++) {
 		double x = ssp_getd(pc + 8 * i);
 		double s = ssp_getf(ps + 4 * i);
@@ -432,14 +432,15 @@ static int fill_frame(struct sim_dev *d, const unsigned char *p, uint32_t len, s
 	f->nsaturated = count;
 	f->device_time_s = ssp_getd(p);
 	f->temperature_c = ssp_getd(p + 8);
-	d->temperature = f->temperature_c;
 	f->nonlin_applied = lin;
 	f->dark_pixel_corrected = false;
 	double dl = 0;
 	for (int i = 0; i < in->ndark_pixels; i++)
 		dl += f->counts[in->dark_pixels[i]];
 	f->dark_pixel_level = in->ndark_pixels ? dl / in->ndark_pixels : NAN;
-	f->meas = d->meas;
+	if (!isfinite(f->device_time_s) || !isfinite(f->temperature_c) || f->temperature_c < -100 || f->temperature_c > 200)
+		return acq_errf(err, ACQ_E_PROTO, "spectrometer 'sim': device time %g s / temperature %g C out of range",
+				f->device_time_s, f->temperature_c);
 	return 0;
 }
 
@@ -466,8 +467,13 @@ static int dev_fetch(void *dev, struct spectro_frame *frame, double now, struct 
 			continue;
 		}
 		int rc;
-		if (type == SSP_SPECTRUM)
-			rc = fill_frame(d, p, len, frame, err) ? -1 : 1;
+		if (type == SSP_SPECTRUM) {
+			rc = ssp_parse_spectrum(p, len, &d->info, d->cfg->linearise, frame, err) ? -1 : 1;
+			if (rc == 1) {
+				frame->meas = d->meas;
+				d->temperature = frame->temperature_c;
+			}
+		}
 		else if (type == SSP_ERROR)
 			rc = error_reply(p, len, err);
 		else

@@ -24,8 +24,11 @@
 #ifndef SPECTRO_SIM_PROTO_H
 #define SPECTRO_SIM_PROTO_H
 
+#include <stdbool.h>
 #include <stdint.h>
 #include <string.h>
+
+#include "drivers/spectro.h"
 
 #define SSP_MAGIC 0x4D495341u
 #define SSP_VERSION 1
@@ -107,5 +110,14 @@ static inline void ssp_header(unsigned char *p, unsigned type, uint32_t seq, uin
 	ssp_put32(p + 8, seq);
 	ssp_put32(p + 12, len);
 }
+
+/* Decode an IDENTITY payload into info and the sensor temperature; validates every field. 0 or -1 with err
+ * (drivers/spectro_sim.c). */
+int ssp_parse_identity(const unsigned char *p, uint32_t len, struct spectro_info *info, double *temperature,
+		       struct acq_err *err);
+/* Decode a SPECTRUM payload for the device described by info into f (linearised when linearise and the
+ * device has nonlinearity coefficients); f->meas is left to the caller. 0 or -1 with err. */
+int ssp_parse_spectrum(const unsigned char *p, uint32_t len, const struct spectro_info *info, bool linearise,
+		       struct spectro_frame *f, struct acq_err *err);
 
 #endif
