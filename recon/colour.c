@@ -152,9 +152,19 @@ static const char *name_of(const char *const *names, unsigned count, unsigned v)
 }
 #define NAME(arr, v) name_of(arr, (unsigned)(sizeof(arr) / sizeof(arr[0])), (unsigned)(v))
 
+/* A JSON number, or null for a non-finite value (JSON has no NaN/Inf). */
+static const char *jnum(char buf[32], double v)
+{
+	if (isfinite(v))
+		snprintf(buf, 32, "%.17g", v);
+	else
+		snprintf(buf, 32, "null");
+	return buf;
+}
+
 int colour_opts_json(const struct colour_opts *o, const struct colour_stats *stats, char *buf, size_t len)
 {
-	char st[256] = "";
+	char st[256] = "", n1[32], n2[32], n3[32], n4[32], n5[32];
 	if (stats)
 		snprintf(st, sizeof(st),
 			 ",\"stats\":{\"colours\":%zu,\"out_of_gamut\":%zu,\"clipped\":%zu,\"nonfinite\":%zu}",
@@ -163,13 +173,13 @@ int colour_opts_json(const struct colour_opts *o, const struct colour_stats *sta
 			"{\"observer\":\"CIE 1931 2deg, 1 nm, 360-830 nm\",\"spectrum\":\"piecewise linear, "
 			"1 nm bin means\",\"illuminant\":\"%s\",\"gap\":\"%s\",\"adaptation\":\"%s\","
 			"\"xyz_to_rgb\":\"linear sRGB (IEC 61966-2-1, D65)\",\"normalisation\":\"%s\","
-			"\"white\":%.17g,\"max_albedo\":%.17g,\"target\":%.17g,\"exposure\":%.17g,"
-			"\"out_of_gamut\":\"%s\",\"dynamic_range\":\"%s\",\"reinhard_white\":%.17g,"
+			"\"white\":%s,\"max_albedo\":%s,\"target\":%s,\"exposure\":%s,"
+			"\"out_of_gamut\":\"%s\",\"dynamic_range\":\"%s\",\"reinhard_white\":%s,"
 			"\"encoding\":\"%s\"%s}",
 			NAME(illum_names, o->illum), NAME(gap_names, o->gap), NAME(adapt_names, o->adapt),
-			NAME(norm_names, o->norm), o->white, o->max_albedo, o->target, o->exposure,
-			NAME(gamut_names, o->gamut), NAME(range_names, o->range), o->reinhard_white,
-			o->srgb_encode ? "sRGB transfer curve" : "linear", st);
+			NAME(norm_names, o->norm), jnum(n1, o->white), jnum(n2, o->max_albedo), jnum(n3, o->target),
+			jnum(n4, o->exposure), NAME(gamut_names, o->gamut), NAME(range_names, o->range),
+			jnum(n5, o->reinhard_white), o->srgb_encode ? "sRGB transfer curve" : "linear", st);
 }
 
 int colour_opts_write_json(FILE *f, const struct colour_opts *o, const struct colour_stats *stats,

@@ -299,6 +299,11 @@ static void test_options_and_metadata(void **state)
 	assert_non_null(strstr(buf, "\"gap\":\"extend\""));
 	assert_non_null(strstr(buf, "\"out_of_gamut\":3"));
 	assert_true(buf[0] == '{' && buf[len - 1] == '}');
+	o.exposure = NAN; /* JSON has no NaN: written as null */
+	len = colour_opts_json(&o, NULL, buf, sizeof(buf));
+	assert_non_null(strstr(buf, "\"exposure\":null"));
+	assert_null(strstr(buf, ":nan"));
+	assert_null(strstr(buf, ":-nan"));
 	/* bad grids and bad options are errors, not crashes */
 	double wl[3] = { 500, 500, 510 }, W[9];
 	colour_opts_default(&o);
