@@ -313,6 +313,10 @@ static void test_callback_errors_propagate(void **state)
 	o.threads = 0;
 	assert_int_equal(merl_write_ex(p, analytic_pure, &b, &o, &err), -1);
 	assert_int_equal(err.code, ACQ_E_INVAL);
+	o.threads = 1;
+	o.clamp_min = -1; /* would let negative values pass for "no data" */
+	assert_int_equal(merl_write_ex(p, analytic_pure, &b, &o, &err), -1);
+	assert_int_equal(err.code, ACQ_E_INVAL);
 	struct analytic c = base;
 	assert_int_equal(merl_write("/nonexistent-dir/x.binary", analytic_cb, &c, &err), -1);
 	assert_int_equal(err.code, ACQ_E_IO);
