@@ -122,21 +122,14 @@ static const double gw[8] = { 0.1012285362903763, 0.2223810344533745, 0.31370664
 			       0.3626837833783620, 0.3626837833783620, 0.3137066458778873,
 			       0.2223810344533745, 0.1012285362903763 };
 
-/* One phi_h line of the half-vector quadrature (weight wphi), theta_h from 0 to the horizon cut-off. */
-static double spec_line(const struct mat *m, double mu_i, double si, double ph, double wphi, int panels, int flags,
-			double *out)
+/* Gauss-Legendre over s in [a, b] (np panels of 8 nodes) on the phi_h line of cosine cph (weight wphi). */
+static double s_segment(const struct mat *m, double mu_i, double si, double cph, double wphi, double a, double b,
+			int np, int flags, double *out)
 {
-	double alpha = m->alpha, cph = cos(ph), sph = sin(ph), smax = M_PI / 2, total = 0;
-	if (!(flags & 1)) {
-		/* mu_o > 0 exactly for theta_h < atan2(sin(theta_i) cos(phi_h), mu_i) / 2 + pi/4: integrate up to
-		 * there, so the integrand is smooth on the interval (it vanishes at the end, through G2) */
-		double thmax = 0.5 * atan2(si * cph, mu_i) + M_PI / 4;
-		smax = thmax >= M_PI / 2 ? M_PI / 2 : atan(tan(thmax) / alpha);
-	}
-	double hs = smax / panels;
-	for (int p = 0; p < panels; p++)
+	double alpha = m->alpha, hs = (b - a) / np, total = 0;
+	for (int p = 0; p < np; p++)
 		for (int q = 0; q < 8; q++) {
-			double s = hs * (p + 0.5 + 0.5 * gx[q]);
+			double s = a + hs * (p + 0.5 + 0.5 * gx[q]);
 			double cs = cos(s), ss = sin(s);
 			double th = atan(alpha * tan(s));
 			double jac = alpha / (cs * cs + alpha * alpha * ss * ss);
@@ -159,7 +152,32 @@ static double spec_line(const struct mat *m, double mu_i, double si, double ph, 
 				total += base * fresnel(c, PAINT_N, 0.0);
 			}
 		}
-	(void)sph;
+	return total;
+}
+
+/* One phi_h line of the half-vector quadrature (weight wphi), theta_h from 0 to the horizon cut-off. */
+static double spec_line(const struct mat *m, double mu_i, double si, double ph, double wphi, int panels, int flags,
+			double *out)
+{
+	double alpha = m->alpha, cph = cos(ph), smax = M_PI / 2, total = 0;
+	if (!(flags & 1)) {
+		/* mu_o > 0 exactly for theta_h < atan2(sin(theta_i) cos(phi_h), mu_i) / 2 + pi/4: integrate up to
+		 * there, so the integrand is smooth on the interval (it vanishes at the end, through G2) */
+		double thmax = 0.5 * atan2(si * cph, mu_i) + M_PI / 4;
+		smax = thmax >= M_PI / 2 ? M_PI / 2 : atan(tan(thmax) / alpha);
+	}
+	/* At grazing incidence (mu_i < alpha) the integrand also changes on the scale theta_h ~ mu_i near 0
+	 * (where wi.h turns from mu_i to sin(theta_h)) and near the cut-off (where G2 turns at mu_o ~ mu_i):
+	 * [0, smax/2] is graded geometrically towards 0 and [smax/2, smax] towards smax, down to that scale. */
+	int ng = 0;
+	while (!(flags & 1) && ng < 30 && smax * ldexp(1.0, -ng) * alpha > mu_i)
+		ng++;
+	for (int g = 1; g <= ng + 1; g++) {
+		double a = g == ng + 1 ? 0.0 : smax * ldexp(1.0, -(g + 1)), b = smax * ldexp(1.0, -g);
+		int np = g == 1 ? panels / 2 : (panels + 3) / 4;
+		total += s_segment(m, mu_i, si, cph, wphi, a, b, np, flags, out);
+		total += s_segment(m, mu_i, si, cph, wphi, smax - b, smax - a, np, flags, out);
+	}
 	return total;
 }
 
@@ -167,7 +185,7 @@ static double spec_line(const struct mat *m, double mu_i, double si, double ph, 
  * If out (nwl values) is NULL, the Fresnel term is the paint's (achromatic) and the scalar result returned;
  * otherwise per-wavelength conductor Fresnel is accumulated into out. flags: 1 = F = 1 and G = 1 and no
  * horizon cut (the GGX normalisation int D cos(theta_h) dwh = 1, a check of the quadrature).
- * phi_h: trapezoid rule on [0, pi] (the integrand is even in phi_h, smooth and periodic). */
+ * phi_h: see the substitution below and material.h. */
 static double spec_quad(const struct mat *m, double mu_i, int level, int flags, double *out)
 {
 	if (out)
@@ -175,12 +193,18 @@ static double spec_quad(const struct mat *m, double mu_i, int level, int flags, 
 	if (!(m->alpha > 0) || !(mu_i > 1e-9))
 		return 0.0;
 	double si = sqrt(fmax(0.0, 1.0 - mu_i * mu_i));
-	int panels = 2 << level, nphi = 16 << level;
-	double hphi = M_PI / nphi, total = 0.0;
-	for (int j = 0; j <= nphi; j++) {
-		double w = (j == 0 || j == nphi ? 1.0 : 2.0) * hphi; /* x2: the mirror half [pi, 2 pi] */
-		total += spec_line(m, mu_i, si, j * hphi, w, panels, flags, out);
-	}
+	int panels = 2 << level;
+	/* phi_h = pi/2 + (pi/2) sinh(k t) / sinh(k), t in [-1, 1]: nodes cluster at pi/2 where, at grazing
+	 * incidence, the cut-off theta_max(phi_h) turns from ~pi/2 to ~0 within |cos phi_h| < mu_i / sin(theta_i) */
+	double k = asinh(fmax(1.0, (M_PI / 2) * si / mu_i));
+	double sk = sinh(k), total = 0.0, ht = 2.0 / panels;
+	for (int p = 0; p < panels; p++)
+		for (int q = 0; q < 8; q++) {
+			double t = -1.0 + ht * (p + 0.5 + 0.5 * gx[q]);
+			double ph = M_PI / 2 + (M_PI / 2) * sinh(k * t) / sk;
+			double w = 0.5 * ht * gw[q] * (M_PI / 2) * k * cosh(k * t) / sk * 2.0; /* x2: mirror half */
+			total += spec_line(m, mu_i, si, ph, w, panels, flags, out);
+		}
 	return total;
 }
 
