@@ -377,7 +377,12 @@ static int dev_fetch(void *dev, struct spectro_frame *f, double now, struct acq_
 		return run_failed(d);
 	}
 	if (m.type != AVS_TYPE_DEV || (m.cmd != AVS_CMD_DATA_SINGLE && m.cmd != AVS_CMD_DATA_AVG)) {
-		if (avs_expect_reply(&m, AVS_CMD_START, err) == 0)
+		if (m.type == AVS_TYPE_DEV && m.cmd == AVS_CMD_ERROR && m.plen == 1) {
+			acq_errf(err, ACQ_E_DEVICE, "avaspec: device error during the measurement: %s (reason %d)",
+				 avs_reason_name(m.payload[0]), m.payload[0]);
+			if (err)
+				err->detail = m.payload[0] + 1;
+		} else if (avs_expect_reply(&m, AVS_CMD_START, err) == 0)
 			acq_errf(err, ACQ_E_PROTO, "avaspec: unexpected second start reply during a measurement");
 		else if (m.cmd != AVS_CMD_ERROR)
 			acq_errf(err, ACQ_E_PROTO, "avaspec: unexpected message type 0x%02x command 0x%02x during a "

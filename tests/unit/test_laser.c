@@ -348,6 +348,26 @@ static void test_config_errors(void **state)
 	close(m);
 }
 
+/* The example configurations' laser sections parse (config/bench-real.yaml, config/bench-sim.yaml). */
+static void test_example_configs(void **state)
+{
+	(void)state;
+	static const char *const files[] = { "config/bench-real.yaml", "config/bench-sim.yaml" };
+	const char *src = getenv("ACQ_SRC") ? getenv("ACQ_SRC") : ".";
+	for (int i = 0; i < 2; i++) {
+		char path[4096];
+		snprintf(path, sizeof path, "%s/%s", src, files[i]);
+		struct yc_doc *doc = NULL;
+		struct laser_cfg *cfg = NULL;
+		struct acq_err err = { 0 };
+		if (yc_load_file(path, &doc, &err) ||
+		    laser_cfg_parse(yc_get(yc_get(yc_root(doc), "devices"), "laser"), &cfg, &err))
+			fail_msg("%s", err.msg);
+		laser_cfg_free(cfg);
+		yc_free(doc);
+	}
+}
+
 int main(void)
 {
 	sh = mmap(NULL, sizeof *sh, PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
@@ -360,6 +380,7 @@ int main(void)
 		cmocka_unit_test(test_malformed_status_switches_emission_off),
 		cmocka_unit_test(test_dead_line_times_out),
 		cmocka_unit_test(test_config_errors),
+		cmocka_unit_test(test_example_configs),
 	};
 	int rc = cmocka_run_group_tests(tests, NULL, NULL);
 	munmap(sh, sizeof *sh);
