@@ -13,6 +13,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <termios.h>
 #include <time.h>
@@ -73,6 +74,7 @@ static void serve_sim(struct served *sv)
 	sv->pid = fork();
 	assert_true(sv->pid >= 0);
 	if (sv->pid == 0) {
+		prctl(PR_SET_PDEATHSIG, SIGKILL);
 		for (;;) {
 			struct pollfd fds[4];
 			int n = svc->pollfds(svc->self, fds, 4);
@@ -163,7 +165,8 @@ static void test_sim_interlock_and_fault(void **state)
 
 /* ---- scripted peers ----------------------------------------------------------------------------------- */
 
-static int open_pty(char *path, size_t len)
+/* A raw pty; its slave stays open (in *keep) so the master never reads EIO before the driver opens it. */
+static int open_pty(char *path, size_t len, int *keep)
 {
 	int m = posix_openpt(O_RDWR | O_NOCTTY);
 	assert_true(m >= 0);
@@ -175,7 +178,7 @@ static int open_pty(char *path, size_t len)
 	assert_int_equal(tcgetattr(s, &t), 0);
 	cfmakeraw(&t);
 	assert_int_equal(tcsetattr(s, TCSANOW, &t), 0);
-	close(s);
+	*keep = s;
 	return m;
 }
 
@@ -188,13 +191,15 @@ static pid_t script_peer(int master, const char *const *script)
 	assert_true(pid >= 0);
 	if (pid)
 		return pid;
+	prctl(PR_SET_PDEATHSIG, SIGKILL); /* never outlive a failed test */
 	char line[160];
 	size_t len = 0;
 	int k = 0;
 	for (;;) {
 		char c;
 		if (read(master, &c, 1) != 1)
-			_exit(0);
+			for (;;)
+				pause(); /* the parent kills us; exiting here would run the sanitizers' exit checks */
 		if (c != '\n') {
 			if (len < sizeof line - 1)
 				line[len++] = c;
@@ -206,14 +211,15 @@ static pid_t script_peer(int master, const char *const *script)
 			snprintf(sh->lines[sh->nlines++], sizeof sh->lines[0], "%s", line);
 		const char *r = !strcmp(line, "EMISSION OFF") ? "OK\n" : script[k] ? script[k++] : NULL;
 		if (r && write(master, r, strlen(r)) < 0)
-			_exit(1);
+			for (;;)
+				pause();
 	}
 }
 
 static void expect_open_error(const char *const *script, int code, const char *needle)
 {
 	char path[128];
-	int m = open_pty(path, sizeof path);
+	int keep, m = open_pty(path, sizeof path, &keep);
 	pid_t pid = script_peer(m, script);
 	struct laser_cfg *cfg = make_cfg(path, 200);
 	struct laser *l = NULL;
@@ -225,6 +231,7 @@ static void expect_open_error(const char *const *script, int code, const char *n
 	assert_non_null(strstr(err.msg, needle));
 	stop_child(pid);
 	close(m);
+	close(keep);
 	laser_cfg_free(cfg);
 }
 
@@ -259,7 +266,7 @@ static void test_malformed_status_switches_emission_off(void **state)
 	};
 	for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
 		char path[128];
-		int m = open_pty(path, sizeof path);
+		int keep, m = open_pty(path, sizeof path, &keep);
 		const char *script[] = { "ID M S F\n", "OK\n", bad[i][0], bad[i][1], NULL };
 		pid_t pid = script_peer(m, script);
 		struct laser_cfg *cfg = make_cfg(path, 200);
@@ -278,6 +285,7 @@ static void test_malformed_status_switches_emission_off(void **state)
 		laser_close(l);
 		stop_child(pid);
 		close(m);
+		close(keep);
 		laser_cfg_free(cfg);
 	}
 }
@@ -286,7 +294,7 @@ static void test_dead_line_times_out(void **state)
 {
 	(void)state;
 	char path[128];
-	int m = open_pty(path, sizeof path); /* nobody answers */
+	int keep, m = open_pty(path, sizeof path, &keep); /* nobody answers */
 	struct laser_cfg *cfg = make_cfg(path, 150);
 	struct laser *l = NULL;
 	struct acq_err err = { 0 };
@@ -298,8 +306,15 @@ static void test_dead_line_times_out(void **state)
 	assert_non_null(strstr(err.msg, "no reply to 'ID?' within 150 ms"));
 	/* the ID? wait plus the best-effort EMISSION OFF wait */
 	assert_true(dt >= 0.14 && dt < 1.0);
-	/* a silent peer after a good start: a command times out, emission off attempted */
-	static const char *const script[] = { "ID M S F\n", "OK\n", NULL };
+	/* a silent peer after a good start: a command times out, emission off attempted. First drop the
+	 * commands the dead line never read, so the peer does not answer them. */
+	int fl = fcntl(m, F_GETFL);
+	fcntl(m, F_SETFL, fl | O_NONBLOCK);
+	char junk[256];
+	while (read(m, junk, sizeof junk) > 0)
+		;
+	fcntl(m, F_SETFL, fl);
+	static const char *const script[] = { "ID M S F\n", NULL };
 	pid_t pid = script_peer(m, script);
 	assert_int_equal(laser_open(cfg, &l, &err), 0);
 	assert_int_equal(laser_set_power(l, 10, &err), -1);
@@ -308,6 +323,7 @@ static void test_dead_line_times_out(void **state)
 	laser_close(l);
 	stop_child(pid);
 	close(m);
+	close(keep);
 	laser_cfg_free(cfg);
 }
 
@@ -336,7 +352,7 @@ static void test_config_errors(void **state)
 	yc_free(doc); /* the configuration copies what it keeps */
 	/* libserialport itself refuses a pseudo-terminal, with a clear error (hence the termios transport) */
 	char path[128], text3[256];
-	int m = open_pty(path, sizeof path);
+	int keep, m = open_pty(path, sizeof path, &keep);
 	snprintf(text3, sizeof text3, "device: %s\ntransport: serialport\ntimeout_ms: 50\n", path);
 	assert_int_equal(yc_load_string("laser.yaml", text3, strlen(text3), &doc, &err), 0);
 	assert_int_equal(laser_cfg_parse(yc_root(doc), &cfg, &err), 0);
@@ -346,6 +362,7 @@ static void test_config_errors(void **state)
 	assert_non_null(strstr(err.msg, path));
 	laser_cfg_free(cfg);
 	close(m);
+	close(keep);
 }
 
 /* The example configurations' laser sections parse (config/bench-real.yaml, config/bench-sim.yaml). */
