@@ -10,6 +10,7 @@
  *   dark_pixels: [2, 3, 4, 5]    (optically black pixels; empty = no dark-pixel correction)
  *   nonlinearity: true           (apply the device's nonlinearity polynomial when the device enables it)
  *   max_stale_messages: 64       (reset after an interrupted run: messages discarded before the stop reply)
+ *   averaged_data: sum           (0xB1 pixel values are the sum of the scans | mean: already averaged)
  *
  * Session: open sends stop (0x0F) and discards stale data until the stop reply (0x8F), so a run left by a
  * killed process never leaks into ours; then identity (0x13) and device configuration (0x01). start() sends
@@ -43,6 +44,7 @@ struct avs_config {
 	int ndark;
 	bool nonlinearity;
 	int max_stale;
+	bool avg_is_sum;
 };
 
 enum avs_state { AVS_IDLE, AVS_RUNNING };
@@ -103,6 +105,8 @@ static int cfg_parse(struct yc_node *node, void **state, struct acq_err *err)
 	long long stale = 64;
 	double margin = 2000, readout = 10;
 	bool nonlin = true;
+	int avg_mode = 0;
+	static const char *const avg_modes[] = { "sum", "mean", NULL };
 	const char *serial = NULL;
 	c->product_ids[0] = 0x0667;
 	c->npids = 1;
@@ -120,7 +124,8 @@ static int cfg_parse(struct yc_node *node, void **state, struct acq_err *err)
 	    parse_int_list(node, "dark_pixels", c->dark_pixels, AVS_MAX_DARK, &c->ndark, 0, SPECTRO_MAX_PIXELS - 1,
 			   err) ||
 	    yc_bool(node, "nonlinearity", false, &nonlin, err) ||
-	    yc_int(node, "max_stale_messages", false, 0, 100000, &stale, err))
+	    yc_int(node, "max_stale_messages", false, 0, 100000, &stale, err) ||
+	    yc_enum(node, "averaged_data", false, avg_modes, &avg_mode, err))
 		goto fail;
 	if (c->npids == 0) {
 		yc_errf(err, yc_get(node, "product_ids"), "product_ids: at least one product id");
@@ -141,6 +146,7 @@ static int cfg_parse(struct yc_node *node, void **state, struct acq_err *err)
 	c->ack_type = (int)ack;
 	c->nonlinearity = nonlin;
 	c->max_stale = (int)stale;
+	c->avg_is_sum = avg_mode == 0;
 	*state = c;
 	return 0;
 fail:
@@ -228,16 +234,21 @@ static int expect_empty(const struct avs_msg *m, const char *what, struct acq_er
 static int reset_run(struct avs_dev *d, struct acq_err *err)
 {
 	d->rxn = 0;
+	/* The device answers once the exposure under way is read out: wait for one exposure more than a reply. */
+	int wait_ms = d->cfg->reply_timeout_ms;
+	if (d->state == AVS_RUNNING || d->dirty) {
+		double extra = d->meas.integration_ms + d->cfg->readout_ms;
+		wait_ms = extra + wait_ms > 3600e3 ? (int)3600e3 : wait_ms + (int)extra;
+	}
 	if (send_cmd(d, AVS_TYPE_HOST, AVS_CMD_STOP, NULL, 0, err))
 		return -1;
 	for (int stale = 0;; stale++) {
 		struct avs_msg m;
-		int rc = recv_msg(d, d->cfg->reply_timeout_ms, &m, err);
+		int rc = recv_msg(d, wait_ms, &m, err);
 		if (rc < 0)
 			return acq_err_prefix(err, "resetting: ");
 		if (rc == 0)
-			return acq_errf(err, ACQ_E_TIMEOUT, "avaspec: no reply to stop (0x0F) within %d ms",
-					d->cfg->reply_timeout_ms);
+			return acq_errf(err, ACQ_E_TIMEOUT, "avaspec: no reply to stop (0x0F) within %d ms", wait_ms);
 		if (m.type == AVS_TYPE_DEV && (m.cmd == AVS_CMD_DATA_SINGLE || m.cmd == AVS_CMD_DATA_AVG)) {
 			if (stale >= d->cfg->max_stale)
 				return acq_errf(err, ACQ_E_DEVICE, "avaspec: device still sends data after %d stale "
@@ -337,9 +348,14 @@ static int dev_start(void *dev, const struct spectro_meas *sm, double now, struc
 	uint8_t pkt[AVS_MEASCFG_LEN];
 	avs_meascfg_pack(&mc, pkt);
 	struct avs_msg m;
-	d->dirty = true; /* until the start is acknowledged, a failure leaves the device state unknown */
-	if (transact(d, AVS_CMD_PREPARE, pkt, sizeof pkt, &m, err) || expect_empty(&m, "prepare", err))
+	/* Until the start is acknowledged a failure leaves the device state unknown (dirty), except a plain
+	 * refusal of the prepare: then nothing was started. */
+	d->dirty = true;
+	if (transact(d, AVS_CMD_PREPARE, pkt, sizeof pkt, &m, err) || expect_empty(&m, "prepare", err)) {
+		if (err && err->code == ACQ_E_DEVICE)
+			d->dirty = false;
 		return -1;
+	}
 	const uint8_t count[2] = { 0x00, 0x01 }; /* int16 big-endian: one measurement */
 	if (transact(d, AVS_CMD_START, count, sizeof count, &m, err) || expect_empty(&m, "start", err))
 		return -1;
@@ -391,7 +407,7 @@ static int dev_fetch(void *dev, struct spectro_frame *f, double now, struct acq_
 	}
 	int npix = d->dc.npix;
 	f->npix = npix;
-	if (avs_decode_data(&m, npix, d->meas.averages, f->counts, f->saturated, &f->nsaturated,
+	if (avs_decode_data(&m, npix, d->meas.averages, d->cfg->avg_is_sum, f->counts, f->saturated, &f->nsaturated,
 			    &f->device_time_s, err))
 		return run_failed(d);
 	if (send_cmd(d, (uint8_t)d->cfg->ack_type, AVS_CMD_ACK, NULL, 0, err))

@@ -226,7 +226,7 @@ int avs_meascfg_check(const struct avs_meascfg *m, struct acq_err *err)
 	return 0;
 }
 
-int avs_decode_data(const struct avs_msg *msg, int npix, unsigned averages, double *counts,
+int avs_decode_data(const struct avs_msg *msg, int npix, unsigned averages, bool avg_is_sum, double *counts,
 		    unsigned char *saturated, int *nsaturated, double *time_s, struct acq_err *err)
 {
 	const uint8_t *p = msg->payload;
@@ -267,10 +267,11 @@ int avs_decode_data(const struct avs_msg *msg, int npix, unsigned averages, doub
 		}
 		*time_s = be32(p) * 1e-5;
 		for (size_t i = 0; i < np; i++) {
-			double v = (double)be32(p + off + 4 * i) / averages;
+			double v = (double)be32(p + off + 4 * i) / (avg_is_sum ? averages : 1);
 			if (v > 65535.0)
 				return acq_errf(err, ACQ_E_PROTO, "avaspec: averaged pixel %zu is %g counts, above the "
-						"16-bit full scale (sum of %u scans expected)", i, v, averages);
+						"16-bit full scale (%s of %u scans expected)", i, v,
+						avg_is_sum ? "sum" : "mean", averages);
 			counts[i] = v;
 			saturated[i] = v >= SPECTRO_SATURATED;
 			*nsaturated += saturated[i];

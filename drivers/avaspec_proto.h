@@ -13,7 +13,8 @@
  *    for every payload field). Everything else in the record is ignored.
  *  - data 0xB0: uint32 time stamp (10 µs ticks), then npix × uint16 counts.
  *    data 0xB1: uint32 time stamp, optionally one uint16 averages field, then npix × uint32 = the SUM of the
- *    averaged scans (told apart by length; anything else is an error).
+ *    averaged scans by default, or their mean (config averaged_data: mean); told apart by length, anything
+ *    else is an error.
  *  - the data acknowledgement 0xC0 is sent with the configured type byte (default 0x20) and no payload. */
 #ifndef AVASPEC_PROTO_H
 #define AVASPEC_PROTO_H
@@ -129,8 +130,9 @@ int avs_meascfg_check(const struct avs_meascfg *m, struct acq_err *err);
 
 /* Decode a data message (0xB0 or 0xB1) for npix pixels into raw per-scan mean counts (double[npix]),
  * the per-pixel saturation flags (a scan mean ≥ SPECTRO_SATURATED) and the time stamp in seconds.
- * averages is what was asked for. Exact lengths only. 0 or -1 (ACQ_E_PROTO). */
-int avs_decode_data(const struct avs_msg *msg, int npix, unsigned averages, double *counts,
+ * averages is what was asked for; avg_is_sum says whether 0xB1 values are sums (else means).
+ * Exact lengths only; a mean above 16-bit full scale is an error. 0 or -1 (ACQ_E_PROTO). */
+int avs_decode_data(const struct avs_msg *msg, int npix, unsigned averages, bool avg_is_sum, double *counts,
 		    unsigned char *saturated, int *nsaturated, double *time_s, struct acq_err *err);
 
 /* Dark-pixel correction: mean of the listed pixels subtracted from every pixel; returns the level via *level.

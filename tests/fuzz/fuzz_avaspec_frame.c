@@ -99,7 +99,7 @@ static void one_frame(const uint8_t *p, size_t n)
 	for (int i = 0; i < 4; i++)
 		for (unsigned avg = 1; avg <= 4; avg *= 4)
 			if (guesses[i] >= 1 && guesses[i] <= SPECTRO_MAX_PIXELS &&
-			    avs_decode_data(&m, guesses[i], avg, counts, sat, &nsat, &t, &err) == 0)
+			    avs_decode_data(&m, guesses[i], avg, avg == 1, counts, sat, &nsat, &t, &err) == 0)
 				for (int k = 0; k < guesses[i]; k++)
 					if (!isfinite(counts[k]))
 						abort();

@@ -159,6 +159,7 @@ struct fake {
 	size_t outn[64];
 	int nout;
 	int closed;
+	int last_read_timeout;
 };
 
 static struct fake *fk;
@@ -198,7 +199,8 @@ static int f_write(void *ctx, const uint8_t *buf, size_t n, int timeout_ms, stru
 
 static int f_read(void *ctx, uint8_t *buf, size_t cap, int timeout_ms, struct acq_err *err)
 {
-	(void)ctx; (void)timeout_ms;
+	(void)ctx;
+	fk->last_read_timeout = timeout_ms;
 	if (fk->pos >= fk->nin)
 		return 0; /* nothing yet */
 	struct chunk *c = &fk->in[fk->pos++];
@@ -445,6 +447,43 @@ static void test_seam_open_failures(void **state)
 	session_close(&s);
 }
 
+static void test_seam_close_running_mean_data_long_stop(void **state)
+{
+	(void)state;
+	static struct spectro_frame f;
+	struct session s;
+	push_open_replies("S1");
+	assert_int_equal(session_open(&s, "backend: avaspec-usb\naveraged_data: mean\nreply_timeout_ms: 700\n"), 0);
+	/* averaged data already divided by the device */
+	push_frame(AVS_CMD_PREPARE + AVS_REPLY, NULL, 0);
+	push_frame(AVS_CMD_START + AVS_REPLY, NULL, 0);
+	uint8_t pl[4 + 4 * NPIX] = { 0 };
+	for (int i = 0; i < NPIX; i++)
+		pl[4 + 4 * i + 3] = (uint8_t)(i + 1);
+	push_frame(AVS_CMD_DATA_AVG, pl, sizeof pl);
+	struct spectro_meas m = { .integration_ms = 5000, .averages = 3 };
+	assert_int_equal(spectro_avaspec_backend.start(s.dev, &m, 0, &s.err), 0);
+	assert_int_equal(spectro_avaspec_backend.fetch(s.dev, &f, 0, &s.err), 1);
+	assert_true(f.counts[9] == 10);
+	/* stop during a 5 s exposure waits for the exposure to end plus the reply time */
+	push_frame(AVS_CMD_PREPARE + AVS_REPLY, NULL, 0);
+	push_frame(AVS_CMD_START + AVS_REPLY, NULL, 0);
+	assert_int_equal(spectro_avaspec_backend.start(s.dev, &m, 1, &s.err), 0);
+	push_frame(AVS_CMD_STOP + AVS_REPLY, NULL, 0);
+	assert_int_equal(spectro_avaspec_backend.stop(s.dev, &s.err), 0);
+	assert_int_equal(fk->last_read_timeout, 5000 + 10 + 700);
+	/* close during a run sends stop */
+	push_frame(AVS_CMD_PREPARE + AVS_REPLY, NULL, 0);
+	push_frame(AVS_CMD_START + AVS_REPLY, NULL, 0);
+	assert_int_equal(spectro_avaspec_backend.start(s.dev, &m, 2, &s.err), 0);
+	int nout = fk->nout;
+	spectro_avaspec_backend.close(s.dev);
+	s.dev = NULL;
+	assert_int_equal(fk->nout, nout + 1);
+	assert_int_equal(fk->out[nout][4], AVS_CMD_STOP);
+	session_close(&s);
+}
+
 static void test_config_keys(void **state)
 {
 	(void)state;
@@ -490,6 +529,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(test_seam_timeout_scales_and_reset_follows, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_seam_errors_during_run, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_seam_open_failures, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_seam_close_running_mean_data_long_stop, setup, teardown),
 		cmocka_unit_test(test_config_keys),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
