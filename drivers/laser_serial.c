@@ -7,6 +7,7 @@
  *   ID?             → ID <model> <serial> <firmware>          (three tokens without spaces)
  *   EMISSION ON     → OK | ERR <code> <text>                   (refused while interlock open or in fault)
  *   EMISSION OFF    → OK                                       (always accepted)
+ *   EMISSION?       → EMISSION <0|1>                           (answered by the simulator; the driver uses STATUS?)
  *   POWER <pct>     → OK | ERR <code> <text>                   (pct in [0, 100], decimal)
  *   POWER?          → POWER <pct>                              e.g. "POWER 42.0"
  *   STATUS?         → STATUS emission=<0|1> interlock=<0|1> fault=<code>
@@ -14,8 +15,12 @@
  *   any error       → ERR <code> <text>: 1 unknown command, 2 bad argument, 3 interlock open,
  *                     4 fault active, 5 line too long
  *
- * Every command waits at most timeout_ms for its complete reply line. Anything else (another reply, a
- * missing field, a number out of range, an overlong line) is an ACQ_E_PROTO error naming the line.
+ * Every command waits at most timeout_ms for its complete reply line (calls block: laser_status() sends two
+ * commands, so up to 2 × timeout_ms). Unread input is discarded before each command, so a late reply to a
+ * timed-out command is not taken for the next one (unless it arrives after that command was sent: the
+ * protocol has no sequence numbers). Anything else (another reply, a missing field, a number out of range, an
+ * overlong line, a non-printable byte) is an ACQ_E_PROTO error quoting the line; "ERR n text" is
+ * ACQ_E_DEVICE with detail = n.
  * Safety: open switches emission off; every failed call switches it off (best effort) before returning;
  * close switches it off.
  *
