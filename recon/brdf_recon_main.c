@@ -10,8 +10,13 @@
 #include <unistd.h>
 
 #include "acq_version.h"
+#include "recon/colour.h"
 #include "recon/csvio.h"
+#include "recon/merl.h"
+#include "recon/plot.h"
 #include "recon/recon.h"
+#include "recon/render.h"
+#include "recon/rgbeval.h"
 
 static const char *prog = "brdf-recon";
 
@@ -352,10 +357,6 @@ static int cmd_dhr(int argc, char **argv)
 	if (optind != argc - 1)
 		return usage_err("dhr", "one MODEL expected");
 	struct acq_err err = { 0 };
-	if (plot) {
-		acq_errf(&err, ACQ_E_UNSUPPORTED, "dhr --plot: the plotting module (recon/plot.*) is not in this build");
-		return fail(&err);
-	}
 	struct recon_model *m;
 	if (recon_model_load(argv[optind], &m, &err))
 		return fail(&err);
@@ -449,6 +450,36 @@ static int cmd_dhr(int argc, char **argv)
 					used ? 100.0 * (double)within2 / (double)used : 0.0);
 		}
 	}
+	if (ok && plot) {
+		struct plot_curve curves[64], refc;
+		char labels[64][32];
+		double *refwl = NULL, *refy = NULL, *refs = NULL;
+		for (size_t t = 0; t < nth; t++) {
+			snprintf(labels[t], sizeof labels[t], "\u03b8i = %g\u00b0", th[t]);
+			curves[t] = (struct plot_curve){ labels[t], m->wl, dhr + t * L, sig + t * L, L };
+		}
+		if (ref && nref) {
+			refwl = malloc(nref * sizeof *refwl);
+			refy = malloc(nref * sizeof *refy);
+			refs = malloc(nref * sizeof *refs);
+			if (refwl && refy && refs) {
+				for (size_t i = 0; i < nref; i++) {
+					refwl[i] = ref[3 * i];
+					refy[i] = ref[3 * i + 1];
+					refs[i] = ref[3 * i + 2];
+				}
+				refc = (struct plot_curve){ "reference", refwl, refy, refs, nref };
+			}
+		}
+		struct plot_dhr_opts po;
+		plot_dhr_opts_default(&po);
+		po.title = "Directional-hemispherical reflectance (bands: \u00b12\u03c3)";
+		if (plot_dhr_png(plot, curves, nth, refwl && refy && refs ? &refc : NULL, &po, NULL, &err))
+			ok = 0;
+		free(refwl);
+		free(refy);
+		free(refs);
+	}
 	free(ref);
 	free(dhr);
 	free(sig);
@@ -534,16 +565,125 @@ static int cmd_info(int argc, char **argv)
 	return 0;
 }
 
-static int cmd_unavailable(const char *cmd, int argc, char **argv)
+/* Colour options shared by merl and render: --colour key=value (colour_opts_set keys). */
+static int colour_arg(struct colour_opts *co, const char *arg, struct acq_err *err)
 {
-	if (argc >= 2 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h"))) {
-		printf("usage: brdf-recon %s MODEL -o OUT\n(not available in this build: the colour, MERL and render "
-		       "modules are not linked yet)\n", cmd);
-		return 0;
+	char key[64];
+	const char *eq = strchr(arg, '=');
+	if (!eq || (size_t)(eq - arg) >= sizeof key)
+		return acq_errf(err, ACQ_E_INVAL, "--colour needs key=value, got '%s'", arg);
+	memcpy(key, arg, (size_t)(eq - arg));
+	key[eq - arg] = '\0';
+	return colour_opts_set(co, key, eq + 1, err);
+}
+
+/* Write the colour decisions and the reduction figures next to an output (path + ".colour.json"). */
+static int write_decisions(const char *out, const struct colour_opts *co, const struct recon_rgb *R, int full,
+			   struct acq_err *err)
+{
+	char p[4096];
+	snprintf(p, sizeof p, "%s.colour.json", out);
+	struct out o;
+	if (out_open(&o, p, err))
+		return -1;
+	size_t nc, r;
+	recon_rgb_sizes(R, &nc, &r);
+	fprintf(o.f, "{\"colour\": ");
+	int ok = colour_opts_write_json(o.f, co, NULL, err) == 0;
+	fprintf(o.f, ", \"spectral_path\": \"%s\", \"channels\": %zu, \"rank\": %zu, "
+		"\"reduction_max_rel_error\": %.3g}\n", full ? "full" : "reduced", nc, r, recon_rgb_reduction_error(R));
+	return out_close(&o, ok, err);
+}
+
+static const char merl_help[] =
+	"usage: brdf-recon merl MODEL -o FILE.binary [--colour key=value]... [--threads N] [--full-spectrum]\n"
+	"Write the model as a MERL isotropic RGB table (90 x 90 x 180 cells, 34,992,012 bytes). Only cells whose\n"
+	"two directions are above the horizon are evaluated (the others hold -1, \"no data\"). Spectra go through\n"
+	"the colour chain (default: D65, CIE 1931 2 deg, Bradford, absolute sr^-1, clamp, keep, linear); the\n"
+	"model is reduced to what RGB needs (visible channels on a 5 nm grid, low-rank weights; the error of the\n"
+	"reduction is measured and printed). --full-spectrum evaluates every channel instead (slow).\n"
+	"The decisions are written to FILE.binary.colour.json. Colour keys: illum gap adapt norm white max_albedo\n"
+	"target exposure gamut range reinhard_white srgb_encode.\n";
+
+static const char render_help[] =
+	"usage: brdf-recon render MODEL -o OUT.png [--size N] [--exposure X] [--colour key=value]... [--threads N]\n"
+	"Preview of the model on a sphere under two lights and a gradient sky (tone-mapped sRGB PNG).\n";
+
+static int cmd_output(const char *cmd, int argc, char **argv)
+{
+	static const struct option lo[] = {
+		{ "output", required_argument, 0, 'o' }, { "colour", required_argument, 0, 'c' },
+		{ "threads", required_argument, 0, 't' }, { "full-spectrum", no_argument, 0, 'f' },
+		{ "size", required_argument, 0, 's' }, { "exposure", required_argument, 0, 'e' },
+		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+	int is_merl = !strcmp(cmd, "merl");
+	const char *outp = NULL;
+	struct acq_err err = { 0 };
+	struct colour_opts co;
+	colour_opts_brdf(&co);
+	uint64_t threads = 2, size = 256;
+	double exposure = 1;
+	int full = 0, c;
+	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
+		switch (c) {
+		case 'o': outp = optarg; break;
+		case 'c':
+			if (colour_arg(&co, optarg, &err))
+				return fail(&err);
+			break;
+		case 't':
+			if (parse_u64(optarg, &threads) || threads < 1 || threads > 16)
+				return usage_err(cmd, "--threads needs 1..16");
+			break;
+		case 'f': full = 1; break;
+		case 's':
+			if (is_merl || parse_u64(optarg, &size) || size < 8 || size > 4096)
+				return usage_err(cmd, "--size needs 8..4096 (render only)");
+			break;
+		case 'e':
+			if (is_merl || parse_double(optarg, &exposure) || !(exposure > 0))
+				return usage_err(cmd, "--exposure needs a positive number (render only)");
+			break;
+		case 'h': fputs(is_merl ? merl_help : render_help, stdout); return 0;
+		default: return usage_err(cmd, "bad option");
+		}
 	}
-	fprintf(stderr, "%s %s: not available in this build (the colour/MERL/render modules have not landed)\n",
-		prog, cmd);
-	return 1;
+	if (optind != argc - 1 || !outp)
+		return usage_err(cmd, "MODEL and -o OUT expected");
+	struct recon_model *m;
+	if (recon_model_load(argv[optind], &m, &err))
+		return fail(&err);
+	struct recon_rgb *R = NULL;
+	int ok = recon_rgb_new(m, &co, &R, &err) == 0;
+	if (ok) {
+		size_t nc, r;
+		recon_rgb_sizes(R, &nc, &r);
+		fprintf(stderr, "%s: %s path, %zu of %zu channels, spectral rank %zu, reduction error %.2g (relative)\n",
+			cmd, full ? "full-spectrum" : "reduced", nc, m->nwl, r, recon_rgb_reduction_error(R));
+	}
+	merl_rgb_fn fn = full ? recon_rgb_full_fn : recon_rgb_fn;
+	if (ok && is_merl) {
+		struct merl_write_opts mo;
+		merl_write_opts_default(&mo);
+		mo.threads = (int)threads;
+		ok = merl_write_ex(outp, fn, R, &mo, &err) == 0;
+	} else if (ok) {
+		struct render_opts ro;
+		render_opts_default(&ro);
+		ro.width = ro.height = (int)size;
+		ro.exposure = exposure;
+		ro.threads = (int)threads;
+		struct colour_stats st = { 0 };
+		ok = render_sphere(&ro, fn, R, outp, NULL, &st, &err) == 0;
+	}
+	if (ok)
+		ok = write_decisions(outp, &co, R, full, &err) == 0;
+	recon_rgb_free(R);
+	recon_model_free(m);
+	if (!ok)
+		return fail(&err);
+	fprintf(stderr, "%s: wrote %s\n", cmd, outp);
+	return 0;
 }
 
 static const char main_help[] =
@@ -587,7 +727,7 @@ int main(int argc, char **argv)
 	if (!strcmp(cmd, "info"))
 		return cmd_info(argc, argv);
 	if (!strcmp(cmd, "merl") || !strcmp(cmd, "render"))
-		return cmd_unavailable(cmd, argc, argv);
+		return cmd_output(cmd, argc, argv);
 	fprintf(stderr, "%s: unknown command '%s'\n%s", prog, cmd, main_help);
 	return 2;
 }

@@ -36,6 +36,14 @@ double rbf_kernel(int kernel, double shape, const double a[6], const double b[6]
 /* Kernel matrix K[q*n + j] = rbf_kernel(q-th query, j-th centre) for m queries and n centres (row-major). */
 void rbf_kmatrix(int kernel, double shape, size_t m, const double *q, size_t n, const double *ctr,
 		 const double *tctr, double *K);
+/* Structure-of-arrays copy of n canonical centres for rbf_krow: soa[c*n + j] = ctr[6*j + c]. */
+void rbf_soa(size_t n, const double *ctr, double *soa);
+/* One kernel row krow[j] = rbf_kernel(q, centre j, τ centre j) from the SoA centres (same bits as
+ * rbf_kernel; the Wendland loop is written to vectorise). */
+void rbf_krow(int kernel, double shape, const double q[6], size_t n, const double *soa, double *krow);
+/* Kernel matrix K[q*n + j] for m queries from SoA centres (rbf_krow per query). */
+void rbf_kmatrix_soa(int kernel, double shape, size_t m, const double *q, size_t n, const double *soa,
+		     double *K);
 /* Name of a kernel ("wendland", "exp", "gauss", "paper"), or NULL. */
 const char *rbf_kernel_name(int kernel);
 /* Kernel from its name, or -1. */

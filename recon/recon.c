@@ -60,6 +60,7 @@ void recon_model_free(struct recon_model *m)
 	free(m->ang);
 	free(m->ctr);
 	free(m->tctr);
+	free(m->soa);
 	free(m->lam);
 	free(m->w);
 	free(m->g);
@@ -73,15 +74,18 @@ int recon_model_derive(struct recon_model *m, struct acq_err *err)
 {
 	free(m->ctr);
 	free(m->tctr);
+	free(m->soa);
 	m->ctr = malloc(m->n * 6 * sizeof *m->ctr);
 	m->tctr = malloc(m->n * 6 * sizeof *m->tctr);
-	if (!m->ctr || !m->tctr)
+	m->soa = malloc(m->n * 6 * sizeof *m->soa);
+	if (!m->ctr || !m->tctr || !m->soa)
 		return acq_errf(err, ACQ_E_NOMEM, "model: out of memory for %zu centres", m->n);
 	for (size_t k = 0; k < m->n; k++) {
 		const double *a = m->ang + 4 * k;
 		rbf_canon(a[0], a[1], a[2], a[3], m->ctr + 6 * k);
 		rbf_tau(m->ctr + 6 * k, m->tctr + 6 * k);
 	}
+	rbf_soa(m->n, m->ctr, m->soa);
 	return 0;
 }
 
@@ -142,7 +146,7 @@ void recon_eval_canon(const struct recon_model *m, size_t nq, const double *c6, 
 	size_t n = m->n, L = m->nwl;
 	for (size_t q0 = 0; q0 < nq; q0 += RECON_EVAL_BLOCK) {
 		size_t b = nq - q0 < RECON_EVAL_BLOCK ? nq - q0 : RECON_EVAL_BLOCK;
-		rbf_kmatrix(m->kernel, m->shape, b, c6 + 6 * q0, n, m->ctr, m->tctr, work);
+		rbf_kmatrix_soa(m->kernel, m->shape, b, c6 + 6 * q0, n, m->soa, work);
 		double *o = out + q0 * L;
 		/* o (b × L, row-major) = K (b × n) · Wᵀ, W stored channel-major (L × n) */
 		cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)b, (int)L, (int)n, 1.0, work, (int)n,
@@ -923,7 +927,7 @@ int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int 
 			acq_errf(err, ACQ_E_INVAL, "dhr: quadrature");
 			goto out;
 		}
-		rbf_kmatrix(m->kernel, m->shape, Q, c6 + t * Q * 6, n, m->ctr, m->tctr, Kq + t * Q * n);
+		rbf_kmatrix_soa(m->kernel, m->shape, Q, c6 + t * Q * 6, n, m->soa, Kq + t * Q * n);
 		for (size_t q = 0; q < Q; q++) {
 			const double *c = c6 + (t * Q + q) * 6;
 			for (size_t l = 0; l < L; l++)

@@ -43,6 +43,7 @@ struct recon_model {
 	double *mu;          /* [nwl] mean of the transformed data (the constant term of the interpolant) */
 	double *ang;         /* [n*4] merged sample directions, radians */
 	double *ctr, *tctr;  /* [n*6] canonical points and their τ images (derived from ang) */
+	double *soa;         /* [6*n] the canonical points as structure of arrays (derived, rbf_krow) */
 	double *lam;         /* [n] relative noise pattern r_k of the smoothing term (mean 1) */
 	double *w;           /* [nwl*n] weights */
 	double *g;           /* [nwl*n] transformed data (with imputed values), for Monte Carlo */
