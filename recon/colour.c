@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "config/yconf.h"
 #include "recon/cie_tables.h"
 
 /* XYZ → linear sRGB (D65 white), from the CIE README (primaries and white of IEC 61966-2-1). */
@@ -22,12 +23,12 @@ static const double bradford[3][3] = {
 	{ 0.0389, -0.0685, 1.0296 },
 };
 
-static const char *const illum_names[] = { "D65", "E" };
-static const char *const gap_names[] = { "extend", "zero" };
-static const char *const adapt_names[] = { "bradford", "none" };
-static const char *const norm_names[] = { "white", "absolute", "max_albedo" };
-static const char *const gamut_names[] = { "clamp", "desaturate" };
-static const char *const range_names[] = { "keep", "clip", "reinhard" };
+static const char *const illum_names[] = { "D65", "E", NULL };
+static const char *const gap_names[] = { "extend", "zero", NULL };
+static const char *const adapt_names[] = { "bradford", "none", NULL };
+static const char *const norm_names[] = { "white", "absolute", "max_albedo", NULL };
+static const char *const gamut_names[] = { "clamp", "desaturate", NULL };
+static const char *const range_names[] = { "keep", "clip", "reinhard", NULL };
 
 void colour_opts_default(struct colour_opts *o)
 {
@@ -111,7 +112,7 @@ int colour_opts_set(struct colour_opts *o, const char *key, const char *value, s
 		return acq_errf(err, ACQ_E_INVAL, "colour: option key or value missing");
 #define ENUMOPT(name, arr, field, type)                                                        \
 	if (strcmp(key, name) == 0) {                                                          \
-		if (pick(arr, (int)(sizeof(arr) / sizeof(arr[0])), key, value, &v, err) != 0) \
+		if (pick(arr, (int)(sizeof(arr) / sizeof(arr[0])) - 1, key, value, &v, err) != 0) \
 			return -1;                                                             \
 		o->field = (type)v;                                                            \
 		return 0;                                                                      \
@@ -146,15 +147,55 @@ int colour_opts_set(struct colour_opts *o, const char *key, const char *value, s
 	return acq_errf(err, ACQ_E_INVAL, "colour: unknown option \"%s\"", key);
 }
 
+int colour_opts_from_yaml(struct yc_node *map, struct colour_opts *o, struct acq_err *err)
+{
+	if (!map)
+		return 0;
+	if (yc_expect_map(map, "colour", err) != 0)
+		return -1;
+	int v;
+#define YENUM(key, arr, field, type)                                  \
+	v = (int)o->field;                                           \
+	if (yc_enum(map, key, false, arr, &v, err) != 0)             \
+		return -1;                                           \
+	o->field = (type)v;
+	YENUM("illum", illum_names, illum, enum colour_illum)
+	YENUM("gap", gap_names, gap, enum colour_gap)
+	YENUM("adapt", adapt_names, adapt, enum colour_adapt)
+	YENUM("norm", norm_names, norm, enum colour_norm)
+	YENUM("gamut", gamut_names, gamut, enum colour_gamut)
+	YENUM("range", range_names, range, enum colour_range)
+#undef YENUM
+	const double big = 1e300, tiny = 1e-300;
+	if (yc_double(map, "white", false, tiny, big, &o->white, err) != 0 ||
+	    yc_double(map, "max_albedo", false, tiny, big, &o->max_albedo, err) != 0 ||
+	    yc_double(map, "target", false, tiny, big, &o->target, err) != 0 ||
+	    yc_double(map, "exposure", false, tiny, big, &o->exposure, err) != 0 ||
+	    yc_double(map, "reinhard_white", false, tiny, big, &o->reinhard_white, err) != 0 ||
+	    yc_bool(map, "srgb_encode", false, &o->srgb_encode, err) != 0 || yc_check_unknown(map, "colour", err) != 0)
+		return -1;
+	return colour_opts_check(o, err);
+}
+
 static const char *name_of(const char *const *names, unsigned count, unsigned v)
 {
 	return v < count ? names[v] : "invalid";
 }
-#define NAME(arr, v) name_of(arr, (unsigned)(sizeof(arr) / sizeof(arr[0])), (unsigned)(v))
+#define NAME(arr, v) name_of(arr, (unsigned)(sizeof(arr) / sizeof(arr[0]) - 1), (unsigned)(v))
+
+/* A JSON number, or null for a non-finite value (JSON has no NaN/Inf). */
+static const char *jnum(char buf[32], double v)
+{
+	if (isfinite(v))
+		snprintf(buf, 32, "%.17g", v);
+	else
+		snprintf(buf, 32, "null");
+	return buf;
+}
 
 int colour_opts_json(const struct colour_opts *o, const struct colour_stats *stats, char *buf, size_t len)
 {
-	char st[256] = "";
+	char st[256] = "", n1[32], n2[32], n3[32], n4[32], n5[32];
 	if (stats)
 		snprintf(st, sizeof(st),
 			 ",\"stats\":{\"colours\":%zu,\"out_of_gamut\":%zu,\"clipped\":%zu,\"nonfinite\":%zu}",
@@ -163,13 +204,13 @@ int colour_opts_json(const struct colour_opts *o, const struct colour_stats *sta
 			"{\"observer\":\"CIE 1931 2deg, 1 nm, 360-830 nm\",\"spectrum\":\"piecewise linear, "
 			"1 nm bin means\",\"illuminant\":\"%s\",\"gap\":\"%s\",\"adaptation\":\"%s\","
 			"\"xyz_to_rgb\":\"linear sRGB (IEC 61966-2-1, D65)\",\"normalisation\":\"%s\","
-			"\"white\":%.17g,\"max_albedo\":%.17g,\"target\":%.17g,\"exposure\":%.17g,"
-			"\"out_of_gamut\":\"%s\",\"dynamic_range\":\"%s\",\"reinhard_white\":%.17g,"
+			"\"white\":%s,\"max_albedo\":%s,\"target\":%s,\"exposure\":%s,"
+			"\"out_of_gamut\":\"%s\",\"dynamic_range\":\"%s\",\"reinhard_white\":%s,"
 			"\"encoding\":\"%s\"%s}",
 			NAME(illum_names, o->illum), NAME(gap_names, o->gap), NAME(adapt_names, o->adapt),
-			NAME(norm_names, o->norm), o->white, o->max_albedo, o->target, o->exposure,
-			NAME(gamut_names, o->gamut), NAME(range_names, o->range), o->reinhard_white,
-			o->srgb_encode ? "sRGB transfer curve" : "linear", st);
+			NAME(norm_names, o->norm), jnum(n1, o->white), jnum(n2, o->max_albedo), jnum(n3, o->target),
+			jnum(n4, o->exposure), NAME(gamut_names, o->gamut), NAME(range_names, o->range),
+			jnum(n5, o->reinhard_white), o->srgb_encode ? "sRGB transfer curve" : "linear", st);
 }
 
 int colour_opts_write_json(FILE *f, const struct colour_opts *o, const struct colour_stats *stats,

@@ -87,6 +87,13 @@ int colour_opts_check(const struct colour_opts *o, struct acq_err *err);
  * range(keep|clip|reinhard) reinhard_white srgb_encode(true|false); 0, or -1 with err (ACQ_E_INVAL). */
 int colour_opts_set(struct colour_opts *o, const char *key, const char *value, struct acq_err *err);
 
+struct yc_node;
+
+/* Read the keys of colour_opts_set from a YAML mapping (config/yconf.h) over the values already in o
+ * (enum values spelled as in the JSON: D65 E, extend zero, ...); unknown keys and bad values are errors
+ * with file:line:col. map NULL → 0, o unchanged. 0 or -1. */
+int colour_opts_from_yaml(struct yc_node *map, struct colour_opts *o, struct acq_err *err);
+
 /* Write the decisions of o (and stats if non-NULL) as one JSON object (no trailing newline); returns
  * the length snprintf would need, like snprintf (buf may be NULL when len is 0). */
 int colour_opts_json(const struct colour_opts *o, const struct colour_stats *stats, char *buf, size_t len);

@@ -266,8 +266,9 @@ int merl_write_ex(const char *path, merl_rgb_fn fn, void *ctx, const struct merl
 		o = &def;
 	if (!path || !*path || !fn)
 		return acq_errf(err, ACQ_E_INVAL, "merl: no output path or no callback");
-	if (o->threads < 1 || o->threads > 16 || !isfinite(o->clamp_min))
-		return acq_errf(err, ACQ_E_INVAL, "merl: threads must be 1..16 (got %d), clamp_min finite", o->threads);
+	if (o->threads < 1 || o->threads > 16 || !isfinite(o->clamp_min) || o->clamp_min < 0)
+		return acq_errf(err, ACQ_E_INVAL, "merl: threads must be 1..16 (got %d) and clamp_min finite, >= 0 (got %g)",
+				o->threads, o->clamp_min);
 	double *data = malloc(3 * (size_t)MERL_N_CELLS * sizeof(*data));
 	if (!data)
 		return acq_errf(err, ACQ_E_NOMEM, "merl: out of memory for the table (%lld bytes)", MERL_FILE_SIZE);

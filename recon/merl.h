@@ -29,14 +29,16 @@
 /* Reader scales: BRDF = stored · scale[c]. */
 extern const double merl_scale[3];
 
-/* RGB BRDF callback: fill rgb (sr⁻¹, finite, ≥ 0 expected) for unit vectors wi, wo in the local frame
- * (z = normal, both z > 0); return 0, or non-zero to abort the write (reported as an error). */
+/* RGB BRDF callback: fill rgb (linear sRGB BRDF in sr⁻¹, finite, ≥ 0 expected; from a spectral model use
+ * colour_opts_brdf() + colour_weights()) for unit vectors wi, wo in the local frame (z = normal, both
+ * z > 0); return 0, or non-zero to abort the write (reported as an error). */
 typedef int (*merl_rgb_fn)(void *ctx, const double wi[3], const double wo[3], double rgb[3]);
 
 /* Options of merl_write_ex. */
 struct merl_write_opts {
 	int threads;      /* evaluation threads, 1..16; > 1 only if the callback is thread-safe; default 1 */
-	double clamp_min; /* values below this are written as this (default 0: a negative BRDF becomes 0) */
+	double clamp_min; /* ≥ 0; values below it are written as it (default 0: a negative BRDF becomes 0,
+			   * never a negative value that readers would take for "no data") */
 };
 
 /* Fill o with the defaults (1 thread, clamp_min 0). */

@@ -9,6 +9,7 @@
 #include <string.h>
 #include <cmocka.h>
 
+#include "config/yconf.h"
 #include "recon/cie_tables.h"
 #include "recon/colour.h"
 
@@ -299,6 +300,11 @@ static void test_options_and_metadata(void **state)
 	assert_non_null(strstr(buf, "\"gap\":\"extend\""));
 	assert_non_null(strstr(buf, "\"out_of_gamut\":3"));
 	assert_true(buf[0] == '{' && buf[len - 1] == '}');
+	o.exposure = NAN; /* JSON has no NaN: written as null */
+	len = colour_opts_json(&o, NULL, buf, sizeof(buf));
+	assert_non_null(strstr(buf, "\"exposure\":null"));
+	assert_null(strstr(buf, ":nan"));
+	assert_null(strstr(buf, ":-nan"));
 	/* bad grids and bad options are errors, not crashes */
 	double wl[3] = { 500, 500, 510 }, W[9];
 	colour_opts_default(&o);
@@ -315,6 +321,43 @@ static void test_options_and_metadata(void **state)
 	assert_int_equal(colour_weights(&o, wl, 3, W, &err), -1);
 }
 
+static void test_yaml_options(void **state)
+{
+	(void)state;
+	static const char text[] = "colour:\n  illum: E\n  gap: zero\n  norm: max_albedo\n  max_albedo: 0.6\n"
+				   "  range: reinhard\n  srgb_encode: true\n";
+	struct acq_err err = { 0 };
+	struct yc_doc *doc = NULL;
+	assert_int_equal(yc_load_string("c.yaml", text, strlen(text), &doc, &err), 0);
+	struct colour_opts o;
+	colour_opts_default(&o);
+	assert_int_equal(colour_opts_from_yaml(yc_get(yc_root(doc), "colour"), &o, &err), 0);
+	assert_int_equal(o.illum, COLOUR_ILLUM_E);
+	assert_int_equal(o.gap, COLOUR_GAP_ZERO);
+	assert_int_equal(o.norm, COLOUR_NORM_MAX_ALBEDO);
+	assert_near(o.max_albedo, 0.6, 0);
+	assert_int_equal(o.range, COLOUR_RANGE_REINHARD);
+	assert_true(o.srgb_encode);
+	assert_int_equal(o.adapt, COLOUR_ADAPT_BRADFORD); /* untouched default */
+	yc_free(doc);
+	static const char bad[] = "colour:\n  illum: D65\n  gamut: squash\n";
+	assert_int_equal(yc_load_string("b.yaml", bad, strlen(bad), &doc, &err), 0);
+	assert_int_equal(colour_opts_from_yaml(yc_get(yc_root(doc), "colour"), &o, &err), -1);
+	assert_non_null(strstr(err.msg, "b.yaml:3:"));
+	assert_non_null(strstr(err.msg, "squash"));
+	yc_free(doc);
+	static const char unknown[] = "colour:\n  illuminant: D65\n";
+	assert_int_equal(yc_load_string("u.yaml", unknown, strlen(unknown), &doc, &err), 0);
+	assert_int_equal(colour_opts_from_yaml(yc_get(yc_root(doc), "colour"), &o, &err), -1);
+	assert_non_null(strstr(err.msg, "illuminant"));
+	yc_free(doc);
+	static const char neg[] = "colour:\n  exposure: -2\n";
+	assert_int_equal(yc_load_string("n.yaml", neg, strlen(neg), &doc, &err), 0);
+	assert_int_equal(colour_opts_from_yaml(yc_get(yc_root(doc), "colour"), &o, &err), -1);
+	assert_non_null(strstr(err.msg, "n.yaml:2:"));
+	yc_free(doc);
+}
+
 int main(void)
 {
 	const char *s = getenv("ACQ_SEED");
@@ -328,6 +371,7 @@ int main(void)
 		cmocka_unit_test(test_out_of_gamut),
 		cmocka_unit_test(test_dynamic_range),
 		cmocka_unit_test(test_options_and_metadata),
+		cmocka_unit_test(test_yaml_options),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

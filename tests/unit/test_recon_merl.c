@@ -282,6 +282,41 @@ static int count_entries(void)
 	return n;
 }
 
+static int negative_cb(void *ctx, const double wi[3], const double wo[3], double rgb[3])
+{
+	(void)ctx;
+	(void)wo;
+	rgb[0] = -0.5;
+	rgb[1] = wi[2] - 0.5; /* negative for θi > 60° */
+	rgb[2] = 1e-3;
+	return 0;
+}
+
+/* Negative callback values are written as clamp_min (0), never as negatives ("no data"). */
+static void test_negative_values_are_clamped(void **state)
+{
+	(void)state;
+	char p[600];
+	snprintf(p, sizeof(p), "%s/neg.binary", dir);
+	struct acq_err err = { 0 };
+	assert_int_equal(merl_write(p, negative_cb, NULL, &err), 0);
+	struct merl_table t;
+	assert_int_equal(merl_read(p, &t, &err), 0);
+	long bad = 0;
+	for (int i = 0; i < MERL_N_CELLS; i++) {
+		double wi[3], wo[3];
+		int has = merl_cell_dirs(i / (180 * 90), (i / 180) % 90, i % 180, wi, wo) == 1;
+		double r = t.data[i], g = t.data[MERL_N_CELLS + i], b = t.data[2 * MERL_N_CELLS + i];
+		if (has)
+			bad += !(r == 0 && g == fmax(0, wi[2] - 0.5) / merl_scale[1] && fabs(b * merl_scale[2] - 1e-3) < 1e-15);
+		else
+			bad += !(r == MERL_NO_DATA && g == MERL_NO_DATA && b == MERL_NO_DATA);
+	}
+	assert_int_equal(bad, 0);
+	merl_free(&t);
+	unlink(p);
+}
+
 static void test_callback_errors_propagate(void **state)
 {
 	(void)state;
@@ -311,6 +346,10 @@ static void test_callback_errors_propagate(void **state)
 	struct merl_write_opts o;
 	merl_write_opts_default(&o);
 	o.threads = 0;
+	assert_int_equal(merl_write_ex(p, analytic_pure, &b, &o, &err), -1);
+	assert_int_equal(err.code, ACQ_E_INVAL);
+	o.threads = 1;
+	o.clamp_min = -1; /* would let negative values pass for "no data" */
 	assert_int_equal(merl_write_ex(p, analytic_pure, &b, &o, &err), -1);
 	assert_int_equal(err.code, ACQ_E_INVAL);
 	struct analytic c = base;
@@ -386,6 +425,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_cell_convention_matches_reference_index),
 		cmocka_unit_test(test_write_read_roundtrip),
+		cmocka_unit_test(test_negative_values_are_clamped),
 		cmocka_unit_test(test_callback_errors_propagate),
 		cmocka_unit_test(test_read_rejects_bad_files),
 	};
