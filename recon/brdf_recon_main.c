@@ -596,18 +596,22 @@ static int write_decisions(const char *out, const struct colour_opts *co, const 
 }
 
 static const char merl_help[] =
-	"usage: brdf-recon merl MODEL -o FILE.binary [--colour key=value]... [--threads N] [--full-spectrum]\n"
+	"usage: brdf-recon merl MODEL -o FILE.binary [--colour key=value]... [--threads N] [--direct|--full-spectrum]\n"
 	"Write the model as a MERL isotropic RGB table (90 x 90 x 180 cells, 34,992,012 bytes). Only cells whose\n"
 	"two directions are above the horizon are evaluated (the others hold -1, \"no data\"). Spectra go through\n"
 	"the colour chain (default: D65, CIE 1931 2 deg, Bradford, absolute sr^-1, clamp, keep, linear); the\n"
-	"model is reduced to what RGB needs (visible channels on a 5 nm grid, low-rank weights; the error of the\n"
-	"reduction is measured and printed). --full-spectrum evaluates every channel instead (slow).\n"
+	"model is reduced to what RGB needs (visible channels binned to 5 nm, low-rank weights; the error of the\n"
+	"reduction is measured and printed) and evaluated in batches. --direct: one callback per cell (same\n"
+	"values, slower); --full-spectrum: every model channel per cell (reference path, slowest).\n"
 	"The decisions are written to FILE.binary.colour.json. Colour keys: illum gap adapt norm white max_albedo\n"
 	"target exposure gamut range reinhard_white srgb_encode.\n";
 
 static const char render_help[] =
 	"usage: brdf-recon render MODEL -o OUT.png [--size N] [--exposure X] [--colour key=value]... [--threads N]\n"
-	"Preview of the model on a sphere under two lights and a gradient sky (tone-mapped sRGB PNG).\n";
+	"                         [--direct | --full-spectrum]\n"
+	"Preview of the model on a sphere under two lights and a gradient sky (tone-mapped sRGB PNG). By default\n"
+	"the model is tabulated as a MERL table in memory (batched) and rendered through its nearest-cell lookup;\n"
+	"--direct evaluates the reduced model per ray, --full-spectrum every channel per ray.\n";
 
 static int cmd_output(const char *cmd, int argc, char **argv)
 {
@@ -615,7 +619,8 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 		{ "output", required_argument, 0, 'o' }, { "colour", required_argument, 0, 'c' },
 		{ "threads", required_argument, 0, 't' }, { "full-spectrum", no_argument, 0, 'f' },
 		{ "size", required_argument, 0, 's' }, { "exposure", required_argument, 0, 'e' },
-		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+		{ "direct", no_argument, 0, 'd' }, { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+	int direct = 0;
 	int is_merl = !strcmp(cmd, "merl");
 	const char *outp = NULL;
 	struct acq_err err = { 0 };
@@ -636,6 +641,7 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 				return usage_err(cmd, "--threads needs 1..16");
 			break;
 		case 'f': full = 1; break;
+		case 'd': direct = 1; break;
 		case 's':
 			if (is_merl || parse_u64(optarg, &size) || size < 8 || size > 4096)
 				return usage_err(cmd, "--size needs 8..4096 (render only)");
@@ -661,21 +667,31 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 		fprintf(stderr, "%s: %s path, %zu of %zu channels, spectral rank %zu, reduction error %.2g (relative)\n",
 			cmd, full ? "full-spectrum" : "reduced", nc, m->nwl, r, recon_rgb_reduction_error(R));
 	}
-	merl_rgb_fn fn = full ? recon_rgb_full_fn : recon_rgb_fn;
+	/* default: the table is computed in batches (GEMMs) and both outputs read it: the MERL writer through
+	 * the reference lookup (which returns each cell's own value at the cell centres it asks for), the
+	 * renderer through the same nearest-cell lookup. --full-spectrum / --direct: per-direction callbacks. */
+	struct merl_table table = { NULL };
+	struct colour_stats st = { 0 };
+	if (ok && !full && !direct) {
+		ok = recon_rgb_merl_table(R, &table, 0, &st, progress, NULL, &err) == 0;
+		progress_end();
+	}
+	merl_rgb_fn fn = full ? recon_rgb_full_fn : direct ? recon_rgb_fn : merl_table_fn;
+	void *ctx = (full || direct) ? (void *)R : (void *)&table;
 	if (ok && is_merl) {
 		struct merl_write_opts mo;
 		merl_write_opts_default(&mo);
 		mo.threads = (int)threads;
-		ok = merl_write_ex(outp, fn, R, &mo, &err) == 0;
+		ok = merl_write_ex(outp, fn, ctx, &mo, &err) == 0;
 	} else if (ok) {
 		struct render_opts ro;
 		render_opts_default(&ro);
 		ro.width = ro.height = (int)size;
 		ro.exposure = exposure;
 		ro.threads = (int)threads;
-		struct colour_stats st = { 0 };
-		ok = render_sphere(&ro, fn, R, outp, NULL, &st, &err) == 0;
+		ok = render_sphere(&ro, fn, ctx, outp, NULL, &st, &err) == 0;
 	}
+	merl_free(&table);
 	if (ok)
 		ok = write_decisions(outp, &co, R, full, &err) == 0;
 	recon_rgb_free(R);
