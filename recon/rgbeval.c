@@ -15,8 +15,10 @@
  *     offset are the averages over the bin's model channels (the average of g rather than of f: the
  *     difference is second order in the spread of g within 5 nm, far below the noise, while averaging
  *     keeps the noise of single 1 nm channels out of the colour). The colour chain reads the binned
- *     spectrum as piecewise linear between bin centres. The energy factor uses the largest albedo bound of
- *     the bin. The error is measured at construction against the full path.
+ *     spectrum as piecewise linear between bin centres: relative error ≈ h²/8 · f''/f = 25/(8σ²) for a
+ *     spectral feature of width σ nm (0.15 % for σ = 45 nm; measured 0.14-0.4 % on the synthetic materials,
+ *     far below the measurement noise and the MERL lookup's own cell error). The energy factor uses the
+ *     largest albedo bound of the bin. The error is measured at construction against the full path.
  *  2. The transformed interpolant at the kept channels is μ_l + Σ_j K(x, x_j) W_jl; the n × nc weight matrix
  *     is replaced by its SVD with the trailing components dropped as long as a bound on their total
  *     contribution to g stays below 1e-3 (0.1 % relative in f for the log transform, far below the noise):

@@ -55,11 +55,12 @@ static inline double rt_truth(const double a[4], double wl, double scale)
 	return scale * (rho / M_PI + ks * (ni + 2) / (2 * M_PI) * lobe);
 }
 
-/* The paper's 10 × 10 × 10 sampling (θi 0..75°, θo 5..80°, φo every 36°, φi = 0) with relative noise. */
-static inline void rt_samples(struct recon_samples *s, size_t nwl, double noise, double scale)
+/* A ni × no × np sampling (θi 0..75°, θo 5..80°, φo every 360/np °, φi = 0) with relative noise. */
+static inline void rt_samples_grid(struct recon_samples *s, int ni, int no, int np, size_t nwl, double noise,
+				   double scale)
 {
 	memset(s, 0, sizeof *s);
-	s->n = 1000;
+	s->n = (size_t)(ni * no * np);
 	s->nwl = nwl;
 	s->wl = malloc(nwl * sizeof *s->wl);
 	s->ang = malloc(s->n * 4 * sizeof *s->ang);
@@ -69,14 +70,14 @@ static inline void rt_samples(struct recon_samples *s, size_t nwl, double noise,
 	for (size_t l = 0; l < nwl; l++)
 		s->wl[l] = nwl > 1 ? 450 + 650.0 * (double)l / (double)(nwl - 1) : 550;
 	size_t k = 0;
-	for (int i = 0; i < 10; i++)
-		for (int o = 0; o < 10; o++)
-			for (int p = 0; p < 10; p++, k++) {
+	for (int i = 0; i < ni; i++)
+		for (int o = 0; o < no; o++)
+			for (int p = 0; p < np; p++, k++) {
 				double *a = s->ang + 4 * k;
-				a[0] = (75.0 * i / 9) * M_PI / 180;
+				a[0] = (75.0 * i / (ni - 1)) * M_PI / 180;
 				a[1] = 0;
-				a[2] = (5 + 75.0 * o / 9) * M_PI / 180;
-				a[3] = (36.0 * p) * M_PI / 180;
+				a[2] = (5 + 75.0 * o / (no - 1)) * M_PI / 180;
+				a[3] = (360.0 * p / np) * M_PI / 180;
 				for (int c = 0; c < 4; c++)
 					s->deg[4 * k + c] = a[c] * 180 / M_PI;
 				for (size_t l = 0; l < nwl; l++) {
@@ -86,6 +87,12 @@ static inline void rt_samples(struct recon_samples *s, size_t nwl, double noise,
 					s->sig[k * nwl + l] = sg;
 				}
 			}
+}
+
+/* The paper's 10 × 10 × 10 sampling. */
+static inline void rt_samples(struct recon_samples *s, size_t nwl, double noise, double scale)
+{
+	rt_samples_grid(s, 10, 10, 10, nwl, noise, scale);
 }
 
 /* A random direction pair, cosθ uniform in [0.05, 1]. */
