@@ -602,6 +602,10 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 		}
 	}
 	size_t imputed = 0;
+	int phi_i_varies = 0; /* recorded: the model treats the material as isotropic regardless */
+	for (size_t k = 1; k < n0; k++)
+		if (fabs(remainder(s->ang[4 * k + 1] - s->ang[1], 2 * M_PI)) > 1e-9 && s->ang[4 * k] > 0 && s->ang[0] > 0)
+			phi_i_varies = 1;
 	for (size_t l = 0; l < L; l++) {
 		size_t have = 0;
 		for (size_t j = 0; j < n; j++) {
@@ -839,9 +843,10 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	snprintf(m->meta, sizeof m->meta,
 		 "software=acquisitiond %s\ncreated=%s\nsource=%s\nrows=%zu\nrows_dropped_empty=%zu\n"
 		 "rows_merged=%zu\nvalues_imputed=%zu\nuncertainties=%s\nloo_rms_transformed=%.6g\n"
-		 "rcond=%.6g\nalbedo_margin=%.6g\n",
+		 "rcond=%.6g\nalbedo_margin=%.6g\nsymmetry=isotropic%s\n",
 		 ACQ_VERSION, when, o.source ? o.source : "-", n0, dropped, merged, imputed,
-		 have_sig ? "given" : "leave-one-out", m->loo_rms, m->rcond, m->alb_margin);
+		 have_sig ? "given" : "leave-one-out", m->loo_rms, m->rcond, m->alb_margin,
+		 phi_i_varies ? " (phi_i varies in the data: azimuths taken relative to phi_i)" : "");
 	for (char *p = m->meta; *p; p++) /* keep metadata printable */
 		if ((unsigned char)*p < 0x20 && *p != '\n')
 			*p = '?';
