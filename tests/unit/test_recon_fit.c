@@ -232,6 +232,43 @@ static void test_lambertian_dhr_exact(void **state)
 	csvio_samples_free(&s);
 }
 
+/* The Monte-Carlo σ of the DHR matches the spread of the DHR over independent noisy data sets (same truth,
+ * same fixed shape and smoothing, so the reconstruction map is the one the Monte Carlo assumes). With 12
+ * data sets the sample standard deviation is known to ±20 % (1σ); the accepted ratio is [0.5, 2]. */
+static void test_dhr_uncertainty_calibrated(void **state)
+{
+	(void)state;
+	enum { NSET = 12 };
+	double th = 8 * M_PI / 180, vals[NSET], sig_mc = 0;
+	for (int k = 0; k < NSET; k++) {
+		struct recon_samples s;
+		rt_samples(&s, 1, 0.02, 1.0);
+		struct recon_model *m;
+		struct acq_err err = { 0 };
+		struct recon_fit_opts o;
+		recon_fit_opts_default(&o);
+		o.shape = 1.8;
+		o.smoothing = 1e-3;
+		assert_int_equal(recon_fit(&s, &o, &m, &err), 0);
+		double d, sg;
+		assert_int_equal(recon_dhr(m, 1, &th, k == 0 ? 64 : 0, 11, &d, &sg, NULL, NULL, &err), 0);
+		vals[k] = d;
+		if (k == 0)
+			sig_mc = sg;
+		recon_model_free(m);
+		csvio_samples_free(&s);
+	}
+	double mean = 0, var = 0;
+	for (int k = 0; k < NSET; k++)
+		mean += vals[k] / NSET;
+	for (int k = 0; k < NSET; k++)
+		var += (vals[k] - mean) * (vals[k] - mean) / (NSET - 1);
+	double sd = sqrt(var);
+	printf("DHR(8°) over %d data sets: %.5f ± %.5f (spread); Monte Carlo σ %.5f; ratio %.2f\n", NSET, mean, sd,
+	       sig_mc, sig_mc / sd);
+	assert_true(sig_mc > 0.5 * sd && sig_mc < 2.0 * sd);
+}
+
 /* An unsolvable request gives a clear error, never a model. */
 static void test_unsolvable_clear_error(void **state)
 {
@@ -317,6 +354,7 @@ int main(void)
 		cmocka_unit_test(test_energy_scaling_of_unphysical_input),
 		cmocka_unit_test(test_nonnegative_dark_noisy),
 		cmocka_unit_test(test_lambertian_dhr_exact),
+		cmocka_unit_test(test_dhr_uncertainty_calibrated),
 		cmocka_unit_test(test_unsolvable_clear_error),
 		cmocka_unit_test(test_merge_reciprocal_and_mirror),
 	};
