@@ -14,8 +14,8 @@
 
 #define RECON_MAX_N 8000
 #define MERGE_TOL 1e-9
-/* Albedo table: nodes every 3°, quadrature Gauss-Legendre 20 in cosθo × 24 azimuth midpoints on [0, π]. */
-#define TAB_N 31
+/* Albedo table: nodes every 5°, quadrature Gauss-Legendre 20 in cosθo × 24 azimuth midpoints on [0, π]. */
+#define TAB_N 19
 #define TAB_NMU 20
 #define TAB_NPHI 24
 /* DHR quadrature: Gauss-Legendre 32 × 48 azimuth midpoints (error discussed at recon_albedo). */
@@ -294,7 +294,7 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
  * The energy table. a(θ, λ) of the unscaled interpolant is computed at TAB_N nodes; on each interval
  * [θ_t, θ_t+1] the bound is max(a_t, a_t+1) + h²/8 · |a''| (the interpolation error of a C² function, with
  * a'' from second differences, doubled), times (1 + 2δ) where δ is the largest relative difference between
- * the table rule and a doubled rule at three incidences (0°, 45°, 87°). The evaluated function is then
+ * the table rule and a doubled rule at three incidences (0°, 45°, 85°). The evaluated function is then
  * s·f̂ with s = 1/max(1, A(θi), A(θo)), whose albedo at θi is ≤ a(θi)/max(1, A(θi)) ≤ 1 whenever A bounds a.
  * `brdf-recon check` verifies it with an independent rule.
  */
@@ -320,7 +320,7 @@ static int build_albedo_table(struct recon_model *m, struct acq_err *err, recon_
 	}
 	/* quadrature error estimate against a doubled rule */
 	double delta = 0;
-	static const size_t probe[3] = { 0, 15, 29 };
+	static const size_t probe[3] = { 0, 9, 17 }; /* 0°, 45°, 85° */
 	for (int p = 0; p < 3; p++) {
 		size_t t = probe[p];
 		if (albedo_rule(m, m->tab_theta[t], 2 * TAB_NMU, 2 * TAB_NPHI, 0, 0, fine, err))

@@ -114,6 +114,19 @@ def main():
     for tdeg in (8, 30, 60):
         res["recon_dhr_maxrel_%d" % tdeg] = float(rel[a[:, 0] == tdeg].max())
 
+    # the other kernels and the sqrt transform on the same data (accuracy, or the fit's error)
+    for name, extra in (("exp", ["--kernel", "exp"]), ("gauss", ["--kernel", "gauss"]),
+                        ("paper", ["--kernel", "paper"]), ("sqrt", ["--transform", "sqrt"])):
+        mk = os.path.join(d, "m_%s.model" % name)
+        p = subprocess.run([B, "fit", s, "-o", mk, *extra], capture_output=True, text=True)
+        if p.returncode != 0:
+            print("    %s: fit failed: %s" % (name, p.stderr.strip()))
+            res["variant_%s_failed" % name] = 1
+            continue
+        ek = os.path.join(d, "e_%s.csv" % name)
+        subprocess.run([B, "eval", mk, h, "-o", ek], check=True, capture_output=True)
+        res["variant_%s_logrmse" % name] = logrmse(np.genfromtxt(ek, delimiter=",", skip_header=1)[:, 4:], t, ang)
+
     # the baseline, single-threaded BLAS as for brdf-recon (OPENBLAS_NUM_THREADS=1 under make bench)
     S = np.genfromtxt(s, delimiter=",", skip_header=2)
     X = feat(np.radians(S[:, :4]))
