@@ -652,7 +652,19 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 			imp[l * n + j] = 1;
 			imputed++;
 		}
-	/* 3. transform, offsets, transformed uncertainties (delta method), mean */
+	/*
+	 * 3. Non-negativity by construction: the interpolant is built on g = T(f) and mapped back through a
+	 * non-negative T⁻¹, so f̂ ≥ 0 everywhere, not only at the samples (non-negative weights would also do,
+	 * but would need an NNLS per channel instead of one factorisation for all).
+	 *   log:  g = ln(max(f, 0) + ε), f̂ = max(0, e^g − ε). Multiplicative: suits the orders of magnitude
+	 *         between diffuse and specular values. Bias: the interpolant averages in log space, i.e. a
+	 *         geometric mean (low by ≈ σ_g²/2 relative where it smooths noise); ε (1 % of the median
+	 *         value, or the median σ if larger) keeps noisy near-zero values from pulling g to −∞ and
+	 *         lifts values ≪ ε towards ε before the map back removes it again.
+	 *   sqrt: g = √max(f, 0), f̂ = g². Additive near 0; bias +σ_g² (the square of the noise).
+	 * Negative measurements are clamped to 0 before the transform (noise around a dark value). Transformed
+	 * uncertainties come from the delta method, σ_g = σ·|dg/df|.
+	 */
 	int any_sig = 0;
 	for (size_t l = 0; l < L; l++) {
 		size_t cnt = 0, cs = 0;
