@@ -148,7 +148,7 @@ static bool move_point(const struct bench_geom *g, const struct plan_pos *p, str
 	struct plan_pos bp = *p;
 	const struct bench_axis *dt = &g->detector_theta;
 	for (int ring = 0; ring < 40; ring++) {
-		double rho = (thr + 1e-3 + ring * 0.5) * DEG;
+		double rho = (thr + 2 * PLAN_EDGE_DEG + ring * 0.5) * DEG;
 		if (rho / DEG - thr > 30.0)
 			break;
 		for (int k = 0; k < 720; k++) {

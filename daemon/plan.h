@@ -128,6 +128,10 @@ void plan_result_free(struct plan_result *res);
 
 /* ---- geometry and kinematics (also used by the executor and the simulator) ---- */
 
+/* Points within this of a blind-zone edge count as blind, and path checks need this much clearance to
+ * prove a segment safe (so every visible point is reachable by the same test). */
+#define PLAN_EDGE_DEG 1e-3
+
 /* ψ at p, degrees. */
 double plan_psi_deg(const struct bench_geom *g, const struct plan_pos *p);
 /* The ψ below which the arms collide: laser_body + detector_body + safety margin. */

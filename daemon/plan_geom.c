@@ -7,24 +7,12 @@
 
 #define DEG (M_PI / 180.0)
 
-static void unit_dir(double theta_deg, double phi_deg, double v[3])
-{
-	double st = sin(theta_deg * DEG), ct = cos(theta_deg * DEG);
-	v[0] = st * cos(phi_deg * DEG);
-	v[1] = st * sin(phi_deg * DEG);
-	v[2] = ct;
-}
-
 double plan_psi_deg(const struct bench_geom *g, const struct plan_pos *p)
 {
-	double a[3], b[3];
-	unit_dir(p->laser_theta, g->laser_phi_deg, a);
-	unit_dir(p->det_theta, p->det_phi, b);
-	/* atan2 of |a×b| and a·b is accurate for small and large angles alike */
-	double c[3] = { a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0] };
-	double s = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-	double d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-	return atan2(s, d) / DEG;
+	/* spherical law of cosines; ωi sits at azimuth laser_phi (a negative θL flips it through the normal) */
+	double c = cos(p->laser_theta * DEG) * cos(p->det_theta * DEG) +
+		   sin(p->laser_theta * DEG) * sin(p->det_theta * DEG) * cos((p->det_phi - g->laser_phi_deg) * DEG);
+	return acos(c > 1 ? 1 : c < -1 ? -1 : c) / DEG;
 }
 
 double plan_collision_deg(const struct bench_geom *g)
@@ -40,7 +28,7 @@ static bool in_axis(const struct bench_axis *a, double x)
 unsigned plan_blind(const struct bench_geom *g, const struct plan_pos *p)
 {
 	unsigned r = 0;
-	double m = g->safety_margin_deg;
+	double m = g->safety_margin_deg + PLAN_EDGE_DEG; /* a point on the edge counts as blind */
 	if (!(isfinite(p->laser_theta) && isfinite(p->det_theta) && isfinite(p->det_phi)))
 		return PLAN_R_LIMITS;
 	if (!in_axis(&g->laser_theta, p->laser_theta) || !in_axis(&g->detector_theta, p->det_theta) ||
@@ -52,7 +40,7 @@ unsigned plan_blind(const struct bench_geom *g, const struct plan_pos *p)
 		r |= PLAN_R_BEAM;
 	if (g->laser_radius_mm < g->detector_radius_mm && psi < g->laser_body_halfwidth_deg + g->fov_halfwidth_deg + m)
 		r |= PLAN_R_VIEW;
-	if (psi < plan_collision_deg(g))
+	if (psi < plan_collision_deg(g) + PLAN_EDGE_DEG)
 		r |= PLAN_R_COLLISION;
 	return r;
 }
@@ -124,33 +112,47 @@ static struct plan_pos seg_at(const struct bench_geom *g, const struct plan_pos 
 	return r;
 }
 
-/* Σ|Δaxis| between two configurations bounds how much ψ can change between them: ωi turns by exactly
- * |ΔθL|, ωo by at most |ΔθD| + sin θD |ΔφD| ≤ |ΔθD| + |ΔφD|, and ψ is 1-Lipschitz in each direction. Each
- * axis is monotonic within a segment, so over a time interval the displacement of every intermediate
- * instant from the interval's midpoint is bounded by the displacement of the interval's ends. */
 static double l1(const struct plan_pos *a, const struct plan_pos *b)
 {
 	return fabs(a->laser_theta - b->laser_theta) + fabs(a->det_theta - b->det_theta) + fabs(a->det_phi - b->det_phi);
 }
 
-/* Bisection on time: an interval is proved safe when ψ(mid) minus the Lipschitz bound stays above the
- * threshold; it is unsafe when some sampled ψ is below it, or (conservatively) when the interval shrinks
- * below 1e-6° of travel without a proof. */
-static bool interval_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q, double R,
-			  double t0, double t1, const struct plan_pos *x0, const struct plan_pos *x1, int depth)
+static double peak_speed(const struct bench_axis *a, double d)
 {
-	double tm = 0.5 * (t0 + t1);
-	struct plan_pos xm = seg_at(g, p, q, tm);
-	double psi = plan_psi_deg(g, &xm);
-	if (psi < R)
-		return false;
-	double bound = fmax(l1(x0, &xm), l1(&xm, x1));
-	if (psi - bound >= R)
-		return true;
-	if (bound < 1e-6 || depth > 60)
-		return false;
-	return interval_safe(g, p, q, R, t0, tm, x0, &xm, depth + 1) &&
-	       interval_safe(g, p, q, R, tm, t1, &xm, x1, depth + 1);
+	d = fabs(d);
+	return d >= a->speed_dps * a->speed_dps / a->accel_dps2 ? a->speed_dps : sqrt(a->accel_dps2 * d);
+}
+
+/* Why the advance below is sound: ωi turns at exactly |dθL/dt|; ωo moves at most at |dθD/dt| +
+ * |sin θD|·|dφD/dt| (the path's length element is √(dθ² + sin²θ dφ²)); ψ is 1-Lipschitz in each direction.
+ * Within a segment every axis is monotonic, so θD stays between its ends and |sin θD| ≤ sin(max |θD| of
+ * the ends) (or 1 past 90°); no axis exceeds its peak speed of this segment's trapezoid.
+ *
+ * Safe advance along time: at an instant where ψ exceeds the threshold by gap, ψ cannot fall below it for
+ * gap / rate seconds, rate bounding dψ/dt (the axes' peak speeds in this segment, the azimuth's weighted by
+ * the largest |sin θD| on the way). A gap under PLAN_EDGE_DEG counts as unsafe: a conservative answer, never a
+ * false "safe". */
+static bool advance_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q, double R)
+{
+	double T = plan_seg_time(g, p, q);
+	double tmax = fmax(fabs(p->det_theta), fabs(q->det_theta));
+	double smax = tmax >= 90.0 ? 1.0 : sin(tmax * DEG);
+	double rate = peak_speed(&g->laser_theta, q->laser_theta - p->laser_theta) +
+		      peak_speed(&g->detector_theta, q->det_theta - p->det_theta) +
+		      smax * peak_speed(&g->detector_phi, q->det_phi - p->det_phi);
+	if (!(rate > 0))
+		return plan_psi_deg(g, p) >= R;
+	double t = 0;
+	for (long it = 0; it < 10000000; it++) {
+		struct plan_pos x = seg_at(g, p, q, t);
+		double gap = plan_psi_deg(g, &x) - R;
+		if (gap < PLAN_EDGE_DEG)
+			return false;
+		t += gap / rate;
+		if (t >= T)
+			return true;
+	}
+	return false;
 }
 
 bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q)
@@ -165,7 +167,7 @@ bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const s
 		return false;
 	if (T <= 0)
 		return true;
-	return interval_safe(g, p, q, R, 0, T, p, q, 0);
+	return advance_safe(g, p, q, R);
 }
 
 /* A candidate path: up to PLAN_MAX_WP configurations after a (the last is b). */
