@@ -20,6 +20,7 @@
  * is settled. The laser alone also needs T(θL range): the bound is dwell + max(MST, that). */
 #include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -237,22 +238,28 @@ static int cmp_dkey(const void *x, const void *y)
 	return (a->i > b->i) - (a->i < b->i);
 }
 
-/* Mark later requests of an already requested configuration (same θL, same ωo to ~1e-7) duplicates. */
-static int mark_duplicates(struct plan_req *r, size_t n, struct acq_err *err)
+/* Mark later requests of an already requested configuration (same θL, same ωo to ~1e-7) duplicates.
+ * measured: compare where points are measured (pos) among kept and moved ones, else as requested. */
+static int mark_duplicates(struct plan_req *r, size_t n, bool measured, struct acq_err *err)
 {
 	struct dkey *k = malloc((n ? n : 1) * sizeof *k);
 	if (!k)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	size_t m = 0;
 	for (size_t i = 0; i < n; i++) {
+		if (measured && r[i].status != PLAN_KEPT && r[i].status != PLAN_MOVED)
+			continue;
+		const struct plan_pos *p = measured ? &r[i].pos : &r[i].req;
 		double v[3];
-		dir_of(r[i].req.det_theta, r[i].req.det_phi, v);
-		k[i].q[0] = llround(r[i].req.laser_theta * 1e7);
+		dir_of(p->det_theta, p->det_phi, v);
+		k[m].q[0] = llround(p->laser_theta * 1e7);
 		for (int j = 0; j < 3; j++)
-			k[i].q[j + 1] = llround(v[j] * 1e7);
-		k[i].i = i;
+			k[m].q[j + 1] = llround(v[j] * 1e7);
+		k[m].i = i;
+		m++;
 	}
-	qsort(k, n, sizeof *k, cmp_dkey);
-	for (size_t i = 1; i < n; i++) {
+	qsort(k, m, sizeof *k, cmp_dkey);
+	for (size_t i = 1; i < m; i++) {
 		if (!memcmp(k[i].q, k[i - 1].q, sizeof k[i].q)) {
 			size_t first = k[i - 1].i;
 			if (r[first].status == PLAN_DUPLICATE)
@@ -595,8 +602,13 @@ static double raster_time(const struct planner *P)
 			pb.det_phi = b->reps[j];
 			c = have ? plan_move(P->g, &cur, &pb, wps, &nw) : 0;
 		}
-		if (c < 0)
+		if (c < 0) {
+#ifdef PLAN_DEBUG
+			fprintf(stderr, "raster: skip %zu (%g %g %g) from (%g %g %g)\n", i, pb.laser_theta, pb.det_theta,
+				pb.det_phi, cur.laser_theta, cur.det_theta, cur.det_phi);
+#endif
 			continue;
+		}
 		t += c + P->dwell;
 		cur = pb;
 		have = true;
@@ -738,7 +750,7 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		goto fail;
 	for (size_t i = 0; i < R->n_req; i++)
 		R->req[i].status = PLAN_KEPT;
-	if (mark_duplicates(R->req, R->n_req, err))
+	if (mark_duplicates(R->req, R->n_req, false, err))
 		goto fail;
 	for (size_t i = 0; i < R->n_req; i++)
 		if (R->req[i].status != PLAN_DUPLICATE)
@@ -751,6 +763,9 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		for (size_t i = n0; i < R->n_req; i++)
 			classify_req(g, &R->req[i], PLAN_BLIND_DROP);
 	}
+	/* a moved point may land on another point, a reciprocal partner may be a grid point: measure once */
+	if (mark_duplicates(R->req, R->n_req, true, err))
+		goto fail;
 	R->point_dwell_s = (double)s->averages * (s->integ_ms / 1000.0 + g->readout_s);
 	P.dwell = R->point_dwell_s;
 
@@ -806,6 +821,9 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		for (size_t i = 0; i < P.nm; i++)
 			nk += keep[c][i] != 0;
 		t += (double)nk * P.dwell;
+#ifdef PLAN_DEBUG
+		fprintf(stderr, "candidate %d: %zu of %zu points, %.3f s\n", c, nk, P.nm, t);
+#endif
 		/* prefer the order that keeps the most points, then the fastest */
 		size_t bk = 0;
 		if (bi >= 0)

@@ -170,9 +170,10 @@ bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const s
 	return advance_safe(g, p, q, R);
 }
 
-/* A candidate path: up to PLAN_MAX_WP configurations after a (the last is b). */
+/* A candidate path: up to BASIC_WP configurations after a (the last is b). */
+#define BASIC_WP 4
 struct cand {
-	struct plan_pos p[PLAN_MAX_WP];
+	struct plan_pos p[BASIC_WP];
 	size_t n;
 	double t;
 };
@@ -233,10 +234,10 @@ static int cmp_cand(const void *x, const void *y)
  * just outside the collision cone of either end's laser direction, or at the detector's limits or zenith.
  * Going round the other way in azimuth is a different axis position of b (a wrap choice), made by the
  * caller, which tries each equivalent azimuth of the destination. */
-double plan_move(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
-		 struct plan_wp wps[PLAN_MAX_WP], size_t *n)
+static double move_basic(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
+			 struct plan_wp wps[BASIC_WP], size_t *n)
 {
-	enum { CAP = 64 };
+	enum { CAP = 128 };
 	struct cand c[CAP];
 	size_t nc = 0;
 	*n = 0;
@@ -280,6 +281,21 @@ double plan_move(const struct bench_geom *g, const struct plan_pos *a, const str
 		add_cand(c, &nc, CAP, v2, 4);
 		add_cand(c, &nc, CAP, v3, 4);
 	}
+	/* azimuth escapes: swing the detector clear of the laser's plane, move the laser, come back */
+	const struct bench_axis *dp = &g->detector_phi;
+	for (int side = 0; side < 4; side++) {
+		double p0 = g->laser_phi_deg + (side < 2 ? 90.0 : 180.0) * (side % 2 ? -1 : 1);
+		for (int k = -3; k <= 3; k++) {
+			double p = p0 + 360.0 * k;
+			if (p < dp->min_deg || p > dp->max_deg)
+				continue;
+			double la = a->laser_theta, lb = b->laser_theta, da = a->det_theta, db = b->det_theta;
+			struct plan_pos w1[3] = { { la, da, p }, { lb, da, p }, *b };
+			struct plan_pos w2[3] = { { la, da, p }, { lb, db, p }, *b };
+			add_cand(c, &nc, CAP, w1, 3);
+			add_cand(c, &nc, CAP, w2, 3);
+		}
+	}
 	for (size_t k = 0; k < nc; k++) {
 		double t = 0;
 		const struct plan_pos *prev = a;
@@ -309,4 +325,72 @@ double plan_move(const struct bench_geom *g, const struct plan_pos *a, const str
 		return c[k].t;
 	}
 	return -1;
+}
+
+/* When no single template works (e.g. both arms high, near each other, on both sides of the laser's
+ * plane), go through a parking configuration: the detector at zenith z in the plane perpendicular to the
+ * laser's (azimuth laser_phi ± 90°), where cos ψ = cos θL cos z, so ψ ≥ z for every laser position: the
+ * laser can then move freely. Each leg to and from the park is itself a template move. */
+double plan_move(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
+		 struct plan_wp wps[PLAN_MAX_WP], size_t *n)
+{
+	double t = move_basic(g, a, b, wps, n);
+	if (t >= 0)
+		return t;
+	const struct bench_axis *dt = &g->detector_theta, *dp = &g->detector_phi;
+	double R = plan_collision_deg(g);
+	double zs[] = { 45, 60, 30, 75, 90, R + 1.0 };
+	double best = -1;
+	struct plan_wp w1[BASIC_WP], w3[BASIC_WP];
+	size_t n1, n3;
+	for (size_t iz = 0; iz < sizeof zs / sizeof zs[0]; iz++) {
+		double z = zs[iz];
+		if (z <= R || z < dt->min_deg || z > dt->max_deg)
+			continue;
+		for (int side = -1; side <= 1; side += 2) {
+			for (int k = -3; k <= 3; k++) {
+				double p = g->laser_phi_deg + 90.0 * side + 360.0 * k;
+				if (p < dp->min_deg || p > dp->max_deg)
+					continue;
+				struct plan_pos pa = { a->laser_theta, z, p }, pb = { b->laser_theta, z, p };
+				double t1 = move_basic(g, a, &pa, w1, &n1);
+				if (t1 < 0 || !plan_seg_safe(g, &pa, &pb))
+					continue;
+				double t3 = move_basic(g, &pb, b, w3, &n3);
+				if (t3 < 0)
+					continue;
+				struct plan_wp tmp[PLAN_MAX_WP];
+				size_t m = 0;
+				for (size_t i = 0; i < n1; i++)
+					tmp[m++] = w1[i];
+				if (pb.laser_theta != pa.laser_theta) {
+					tmp[m].pos = pb;
+					tmp[m++].duration_s = plan_seg_time(g, &pa, &pb);
+				}
+				for (size_t i = 0; i < n3; i++)
+					tmp[m++] = w3[i];
+				/* settling happens once, at the end: count it over the whole move */
+				double segs = 0;
+				bool mv[3] = { false, false, false };
+				const struct plan_pos *prev = a;
+				for (size_t i = 0; i < m; i++) {
+					segs += tmp[i].duration_s;
+					mv[0] |= tmp[i].pos.laser_theta != prev->laser_theta;
+					mv[1] |= tmp[i].pos.det_theta != prev->det_theta;
+					mv[2] |= tmp[i].pos.det_phi != prev->det_phi;
+					prev = &tmp[i].pos;
+				}
+				double settle = fmax(mv[0] ? g->laser_theta.settle_s : 0,
+						     fmax(mv[1] ? g->detector_theta.settle_s : 0,
+							  mv[2] ? g->detector_phi.settle_s : 0));
+				double tt = segs + settle;
+				if (best >= 0 && tt >= best)
+					continue;
+				best = tt;
+				memcpy(wps, tmp, m * sizeof *tmp);
+				*n = m;
+			}
+		}
+	}
+	return best;
 }

@@ -148,6 +148,13 @@ int plan_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err
 	long long averages = 1, recip = 0;
 	int policy = 0;
 	static const char *const policies[] = { "drop", "move", NULL };
+	/* a misspelt key is reported as such, before any "missing key" it causes */
+	static const char *const keys[] = { "name", "incidence", "observation", "integration", "averages",
+					    "reciprocal_pairs", "blind_points", NULL };
+	for (size_t i = 0; keys[i]; i++)
+		yc_get(root, keys[i]);
+	if (yc_check_unknown(root, "plan", err))
+		goto fail;
 	if (yc_string(root, "name", false, &name, err))
 		goto fail;
 	snprintf(s->name, sizeof s->name, "%s", name);
