@@ -2,7 +2,8 @@
  *
  * Nothing touches hardware: the plan is classified, ordered and timed against the `bench:` section of a
  * configuration file. Without --config the bench file is found, in this order, at $ACQ_BENCH_CONFIG,
- * $ACQ_SRC/config/bench-sim.yaml, <dir of the executable>/../config/bench-sim.yaml (a build tree),
+ * $ACQ_SRC/config/bench-sim.yaml, <dir of the executable>/../config/bench-sim.yaml or ../../config/...
+ * (a build tree: build/acqctl, build/san/acqctl),
  * <dir of the executable>/../share/acquisitiond/config/bench-sim.yaml (an installed tree) and
  * /etc/acquisitiond/acquisitiond.yaml. Exit status: 0 done, 1 error (message on stderr), 2 usage. */
 #include <jansson.h>
@@ -60,7 +61,11 @@ static const char *find_bench(char *buf, size_t len)
 		char *slash = strrchr(exe, '/');
 		if (slash) {
 			*slash = '\0';
+			/* build/acqctl, build/san/acqctl: the source tree is one or two levels up */
 			snprintf(buf, len, "%s/../config/bench-sim.yaml", exe);
+			if (readable(buf))
+				return buf;
+			snprintf(buf, len, "%s/../../config/bench-sim.yaml", exe);
 			if (readable(buf))
 				return buf;
 			snprintf(buf, len, "%s/../share/acquisitiond/config/bench-sim.yaml", exe);

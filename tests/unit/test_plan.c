@@ -120,7 +120,7 @@ static double move_axis(const struct bench_axis *ax, double x0, double x1, doubl
 	return x0 + (x1 >= x0 ? 1 : -1) * trap_s(&t, time);
 }
 
-/* Sample one segment densely (≤ 0.01° of any axis between samples); return the smallest ψ seen and check
+/* Sample one segment densely (≤ 0.05° of any axis between samples); return the smallest ψ seen and check
  * the limits and the duration. */
 static double check_segment(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q,
 			    double claimed_s)
@@ -131,7 +131,7 @@ static double check_segment(const struct bench_geom *g, const struct plan_pos *p
 	double T = fmax(trap_T(&tl), fmax(trap_T(&td), trap_T(&tp)));
 	assert_true(fabs(T - claimed_s) < 1e-6);
 	double vmax = fmax(g->laser_theta.speed_dps, fmax(g->detector_theta.speed_dps, g->detector_phi.speed_dps));
-	double dt = 0.01 / vmax;
+	double dt = 0.05 / vmax;
 	size_t n = (size_t)ceil(T / dt) + 1;
 	double worst = 1e9;
 	for (size_t i = 0; i <= n; i++) {
