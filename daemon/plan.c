@@ -300,25 +300,58 @@ static void classify_req(const struct bench_geom *g, struct plan_req *r, enum pl
 
 /* ---- ordering ---------------------------------------------------------------------------------------- */
 
-/* Time of the fastest safe move between two measured points over their azimuth choices (-1: none). */
+/* Straight-move time plus settling: a lower bound of any move between the two configurations. */
+static double straight_lb(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b)
+{
+	double s = 0;
+	if (a->laser_theta != b->laser_theta)
+		s = fmax(s, g->laser_theta.settle_s);
+	if (a->det_theta != b->det_theta)
+		s = fmax(s, g->detector_theta.settle_s);
+	if (a->det_phi != b->det_phi)
+		s = fmax(s, g->detector_phi.settle_s);
+	return plan_seg_time(g, a, b) + s;
+}
+
+/* Time of the fastest safe move between two measured points over their azimuth choices (-1: none).
+ * Choices are tried by increasing lower bound and the search stops when no remaining one can win. */
 static double mcost(const struct planner *P, const struct mpt *a, const struct mpt *b)
 {
+	struct {
+		double lb;
+		struct plan_pos pa, pb;
+	} c[MAX_REPS * MAX_REPS];
+	int nc = 0;
+	for (int i = 0; i < a->nreps; i++)
+		for (int j = 0; j < b->nreps; j++) {
+			c[nc].pa = a->pos;
+			c[nc].pb = b->pos;
+			c[nc].pa.det_phi = a->reps[i];
+			c[nc].pb.det_phi = b->reps[j];
+			c[nc].lb = straight_lb(P->g, &c[nc].pa, &c[nc].pb);
+			/* insertion sort by lower bound */
+			for (int k = nc; k > 0 && c[k].lb < c[k - 1].lb; k--) {
+				__typeof__(c[0]) t = c[k];
+				c[k] = c[k - 1];
+				c[k - 1] = t;
+			}
+			nc++;
+		}
 	double best = -1;
 	struct plan_wp w[PLAN_MAX_WP];
 	size_t nw;
-	for (int i = 0; i < a->nreps; i++)
-		for (int j = 0; j < b->nreps; j++) {
-			struct plan_pos pa = a->pos, pb = b->pos;
-			pa.det_phi = a->reps[i];
-			pb.det_phi = b->reps[j];
-			double t = plan_move(P->g, &pa, &pb, w, &nw);
-			if (t >= 0 && (best < 0 || t < best))
-				best = t;
-		}
+	for (int k = 0; k < nc; k++) {
+		if (best >= 0 && c[k].lb >= best)
+			break;
+		double t = plan_move(P->g, &c[k].pa, &c[k].pb, w, &nw);
+		if (t >= 0 && (best < 0 || t < best))
+			best = t;
+	}
 	return best;
 }
 
 #define INF_COST 1e12
+#define OR_K 10
 
 static double pcost(const double *C, size_t n, size_t a, size_t b)
 {
@@ -354,9 +387,32 @@ static void order_group(const double *C, size_t n, const double *s, size_t *p)
 		cur = bi;
 	}
 	free(used);
-	size_t *tmp = malloc(n * sizeof *tmp);
-	if (!tmp)
+	size_t kn = n - 1 < OR_K ? n - 1 : OR_K;
+	size_t *tmp = malloc(n * sizeof *tmp), *pos = malloc(n * sizeof *pos);
+	size_t *nbr = malloc((n * kn + 1) * sizeof *nbr);
+	if (!tmp || !pos || !nbr) {
+		free(tmp);
+		free(pos);
+		free(nbr);
 		return;
+	}
+	/* the kn nearest neighbours of every node, by insertion into a short sorted list */
+	for (size_t u = 0; u < n; u++) {
+		size_t *nb = &nbr[u * kn], m = 0;
+		for (size_t v = 0; v < n; v++) {
+			if (v == u)
+				continue;
+			double c = pcost(C, n, u, v);
+			if (m == kn && c >= pcost(C, n, u, nb[m - 1]))
+				continue;
+			size_t k = m < kn ? m++ : kn - 1;
+			while (k > 0 && pcost(C, n, u, nb[k - 1]) > c) {
+				nb[k] = nb[k - 1];
+				k--;
+			}
+			nb[k] = v;
+		}
+	}
 #define E(i, j) ((i) == SIZE_MAX ? s[(j)] : pcost(C, n, (i), (j)))
 	bool improved = true;
 	for (int pass = 0; improved && pass < 200; pass++) {
@@ -379,30 +435,45 @@ static void order_group(const double *C, size_t n, const double *s, size_t *p)
 				}
 			}
 		}
-		/* Or-opt: move p[i..i+L) elsewhere, possibly reversed */
+		/* Or-opt: move p[i..i+L) elsewhere, possibly reversed. Insertion places are tried next to the
+		 * K nearest neighbours of the segment's ends (and at both ends of the path): O(n·K) per pass. */
+		for (size_t x = 0; x < n; x++)
+			pos[p[x]] = x;
 		for (size_t L = 1; L <= 3 && L < n; L++) {
 			for (size_t i = 0; i + L <= n; i++) {
 				size_t a = i ? p[i - 1] : SIZE_MAX, f = p[i], l = p[i + L - 1];
 				bool has_next = i + L < n;
 				size_t nx = has_next ? p[i + L] : 0;
+				size_t nr = n - L;
 				double removed = E(a, f) + (has_next ? pcost(C, n, l, nx) : 0) -
 						 (has_next ? E(a, nx) : 0);
-				/* rest = the path without the segment; try inserting between rest[k-1] and rest[k] */
-				size_t nr = 0;
-				for (size_t x = 0; x < n; x++)
-					if (x < i || x >= i + L)
-						tmp[nr++] = p[x];
+#define REST(k) (p[(k) < i ? (k) : (k) + L])
+				size_t cand[4 * OR_K + 2], ncand = 0;
+				cand[ncand++] = 0;
+				cand[ncand++] = nr;
+				for (int e = 0; e < 2; e++) {
+					const size_t *nb = &nbr[(e ? l : f) * kn];
+					for (size_t q = 0; q < kn; q++) {
+						size_t pj = pos[nb[q]];
+						if (pj >= i && pj < i + L)
+							continue;
+						size_t r = pj < i ? pj : pj - L;
+						cand[ncand++] = r;
+						cand[ncand++] = r + 1;
+					}
+				}
 				double bestg = 1e-9;
 				size_t bk = SIZE_MAX;
 				bool brev = false;
-				for (size_t k = 0; k <= nr; k++) {
-					if (k == i)
+				for (size_t ci = 0; ci < ncand; ci++) {
+					size_t k = cand[ci];
+					if (k == i || k > nr)
 						continue; /* the same place */
-					size_t pa = k ? tmp[k - 1] : SIZE_MAX;
+					size_t pa = k ? REST(k - 1) : SIZE_MAX;
 					for (int rev = 0; rev < 2; rev++) {
 						size_t s1 = rev ? l : f, s2 = rev ? f : l;
-						double add = E(pa, s1) + (k < nr ? pcost(C, n, s2, tmp[k]) : 0) -
-							     (k < nr ? E(pa, tmp[k]) : 0);
+						double add = E(pa, s1) + (k < nr ? pcost(C, n, s2, REST(k)) : 0) -
+							     (k < nr ? E(pa, REST(k)) : 0);
 						double gain = removed - add;
 						if (gain > bestg) {
 							bestg = gain;
@@ -411,24 +482,33 @@ static void order_group(const double *C, size_t n, const double *s, size_t *p)
 						}
 					}
 				}
+#undef REST
 				if (bk == SIZE_MAX)
 					continue;
 				size_t seg[3];
 				for (size_t x = 0; x < L; x++)
 					seg[x] = p[i + (brev ? L - 1 - x : x)];
 				size_t w = 0;
+				for (size_t x = 0; x < n; x++)
+					if (x < i || x >= i + L)
+						tmp[w++] = p[x];
+				w = 0;
 				for (size_t x = 0; x < bk; x++)
 					p[w++] = tmp[x];
 				for (size_t x = 0; x < L; x++)
 					p[w++] = seg[x];
 				for (size_t x = bk; x < nr; x++)
 					p[w++] = tmp[x];
+				for (size_t x = 0; x < n; x++)
+					pos[p[x]] = x;
 				improved = true;
 			}
 		}
 	}
 #undef E
 	free(tmp);
+	free(pos);
+	free(nbr);
 }
 
 static int cmp_double(const void *x, const void *y)

@@ -155,6 +155,28 @@ static bool advance_safe(const struct bench_geom *g, const struct plan_pos *p, c
 	return false;
 }
 
+/* With the laser still, a segment stays inside the box θD ∈ [t1, t2], φD ∈ [p1, p2] (monotonic axes).
+ * For fixed θD, ψ grows with the azimuth separation Δ from the laser's plane (θL, θD in [0, 90]); for fixed
+ * Δ, ψ along the meridian is unimodal with its minimum at tan θ* = tan θL cos Δ. So the box's smallest ψ
+ * is at (clamp(θ*), smallest Δ): an exact, cheap proof for most moves inside an incidence group. */
+static double box_min_psi(const struct bench_geom *g, double tl, double t1, double t2, double p1, double p2)
+{
+	double lo = fmin(p1, p2), hi = fmax(p1, p2), d;
+	double k = ceil((lo - g->laser_phi_deg) / 360.0);
+	if (g->laser_phi_deg + 360.0 * k <= hi)
+		d = 0; /* the box spans the laser's azimuth */
+	else {
+		double a = fmod(fabs(lo - g->laser_phi_deg), 360.0), b = fmod(fabs(hi - g->laser_phi_deg), 360.0);
+		a = fmin(a, 360.0 - a);
+		b = fmin(b, 360.0 - b);
+		d = fmin(a, b);
+	}
+	double ts = atan(tan(tl * DEG) * cos(d * DEG)) / DEG;
+	double th = ts < fmin(t1, t2) ? fmin(t1, t2) : ts > fmax(t1, t2) ? fmax(t1, t2) : ts;
+	struct plan_pos x = { tl, th, g->laser_phi_deg + d };
+	return plan_psi_deg(g, &x);
+}
+
 bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q)
 {
 	double R = plan_collision_deg(g);
@@ -166,6 +188,10 @@ bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const s
 	if (plan_psi_deg(g, p) < R || plan_psi_deg(g, q) < R)
 		return false;
 	if (T <= 0)
+		return true;
+	if (p->laser_theta == q->laser_theta && p->laser_theta >= 0 && p->laser_theta < 90 &&
+	    p->det_theta >= 0 && p->det_theta <= 90 && q->det_theta >= 0 && q->det_theta <= 90 &&
+	    box_min_psi(g, p->laser_theta, p->det_theta, q->det_theta, p->det_phi, q->det_phi) >= R + PLAN_EDGE_DEG)
 		return true;
 	return advance_safe(g, p, q, R);
 }
