@@ -826,6 +826,26 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		acq_errf(err, ACQ_E_INVAL, "plan '%s': empty or invalid plan", s->name);
 		goto fail;
 	}
+	{
+		/* a spec built by code gets the checks a file gets */
+		size_t per = s->fib_count ? s->fib_count : s->n_obs_theta * s->n_obs_phi;
+		if (per > PLAN_MAX_PER_INCIDENCE || (double)per * (double)s->n_incidence > PLAN_MAX_POINTS) {
+			acq_errf(err, ACQ_E_RANGE, "plan '%s': too many points (%zu per incidence, max %d; %d in all)",
+				 s->name, per, PLAN_MAX_PER_INCIDENCE, PLAN_MAX_POINTS);
+			goto fail;
+		}
+		bool finite = true;
+		for (size_t i = 0; i < s->n_incidence; i++)
+			finite &= isfinite(s->incidence[i]);
+		for (size_t i = 0; !s->fib_count && i < s->n_obs_theta; i++)
+			finite &= isfinite(s->obs_theta[i]);
+		for (size_t i = 0; !s->fib_count && i < s->n_obs_phi; i++)
+			finite &= isfinite(s->obs_phi[i]);
+		if (!finite || (s->fib_count && !(s->fib_max_theta_deg > 0 && s->fib_max_theta_deg <= 90))) {
+			acq_errf(err, ACQ_E_INVAL, "plan '%s': non-finite or out-of-range angle", s->name);
+			goto fail;
+		}
+	}
 	if (expand(s, &R->req, &R->n_req, err))
 		goto fail;
 	for (size_t i = 0; i < R->n_req; i++)

@@ -28,6 +28,10 @@
 enum plan_blind_policy { PLAN_BLIND_DROP, PLAN_BLIND_MOVE };
 enum plan_integ_mode { PLAN_INTEG_AUTO, PLAN_INTEG_FIXED };
 
+/* Size limits of a plan (requested points, before blind-zone handling). */
+#define PLAN_MAX_POINTS 50000
+#define PLAN_MAX_PER_INCIDENCE 5000
+
 /* A parsed plan file (plan_load / plan_parse), or one built by code (arrays malloc'ed; plan_spec_free). */
 struct plan_spec {
 	char name[64];

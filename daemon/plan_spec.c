@@ -18,7 +18,6 @@
 #include "daemon/plan.h"
 
 #define PLAN_MAX_VALUES 100000
-#define PLAN_MAX_POINTS 2000000
 
 void plan_spec_free(struct plan_spec *s)
 {
@@ -207,8 +206,14 @@ int plan_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err
 	s->reciprocal_pairs = (size_t)recip;
 	s->blind_policy = policy == 1 ? PLAN_BLIND_MOVE : PLAN_BLIND_DROP;
 	size_t per = s->fib_count ? s->fib_count : s->n_obs_theta * s->n_obs_phi;
+	if (per > PLAN_MAX_PER_INCIDENCE) {
+		yc_errf(err, obs, "observation: %zu directions per incidence is more than %d", per,
+			PLAN_MAX_PER_INCIDENCE);
+		goto fail;
+	}
 	if ((double)per * (double)s->n_incidence > PLAN_MAX_POINTS) {
-		yc_errf(err, root, "plan: %zu × %zu points is more than %d", s->n_incidence, per, PLAN_MAX_POINTS);
+		yc_errf(err, inc, "plan: %zu incidences × %zu directions is more than %d points", s->n_incidence, per,
+			PLAN_MAX_POINTS);
 		goto fail;
 	}
 	if (yc_check_unknown(root, "plan", err))

@@ -527,6 +527,9 @@ static void test_bad_plan_files(void **state)
 		  "either" },
 		{ "incidence: {theta_deg: 0}\nobservation: {theta_deg: [], phi_deg: 0}\n", "b.yaml:2:", "empty" },
 		{ "- 1\n- 2\n", "b.yaml:1:1", "mapping" },
+		{ "incidence: {theta_deg: 0}\nobservation: {fibonacci: {count: 6000}}\n", "b.yaml:2:", "more than" },
+		{ "incidence: {theta_deg: {from: 0, to: 80, count: 90}}\nobservation: {fibonacci: {count: 1000}}\n",
+		  "b.yaml:1:", "more than" },
 		{ "incidence: {theta_deg: 0}\nobservation: {theta_deg: 5, phi_deg: {from: 0, to: 90, step: -5}}\n",
 		  "b.yaml:2:", "step" },
 		{ "incidence: {theta_deg: {from: 0, to: 1e6, step: 0.001}}\nobservation: {theta_deg: 5, phi_deg: 0}\n",
@@ -547,6 +550,37 @@ static void test_bad_plan_files(void **state)
 	assert_int_equal(plan_load("/nonexistent/plan.yaml", &s, &err), -1);
 	assert_null(s);
 	assert_non_null(strstr(err.msg, "/nonexistent/plan.yaml"));
+}
+
+/* A spec built by code with a non-finite angle or too many points is refused, not planned. */
+static void test_bad_specs(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	bench_defaults(&g);
+	struct plan_spec s = { .name = "x", .n_incidence = 1, .n_obs_theta = 1, .n_obs_phi = 1, .averages = 1,
+			       .integ_ms = 10 };
+	double inc = 10, th = NAN, ph = 0;
+	s.incidence = &inc;
+	s.obs_theta = &th;
+	s.obs_phi = &ph;
+	struct plan_result *r = (struct plan_result *)1;
+	struct acq_err err = { 0 };
+	assert_int_equal(plan_make(&s, &g, &r, &err), -1);
+	assert_null(r);
+	assert_int_equal(err.code, ACQ_E_INVAL);
+	th = 30;
+	s.n_obs_phi = PLAN_MAX_PER_INCIDENCE + 1; /* never read: refused on size */
+	assert_int_equal(plan_make(&s, &g, &r, &err), -1);
+	assert_int_equal(err.code, ACQ_E_RANGE);
+	s.n_obs_phi = 1;
+	s.averages = 0;
+	assert_int_equal(plan_make(&s, &g, &r, &err), -1);
+	s.averages = 1;
+	assert_int_equal(plan_make(&s, &g, &r, &err), 0);
+	assert_int_equal(r->n_steps, 1);
+	assert_true(r->duration_s == r->point_dwell_s && r->lower_bound_s == r->duration_s);
+	plan_result_free(r);
 }
 
 /* The trapezoid helpers agree with the independent model. */
@@ -573,6 +607,7 @@ int main(void)
 		cmocka_unit_test(test_trapezoid),
 		cmocka_unit_test(test_plan_file_forms),
 		cmocka_unit_test(test_bad_plan_files),
+		cmocka_unit_test(test_bad_specs),
 		cmocka_unit_test(test_detours),
 		cmocka_unit_test(test_paper_plan),
 		cmocka_unit_test(test_random_plans),
