@@ -152,7 +152,7 @@ double plan_seg_time(const struct bench_geom *g, const struct plan_pos *p, const
 bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
 /* Fastest collision-free move a → b found: up to PLAN_MAX_WP segments into wps (the last ends at b), their
  * count in *n and the move's time (segments + settle) returned; -1 when no candidate path is safe. */
-#define PLAN_MAX_WP 9
+#define PLAN_MAX_WP 13
 double plan_move(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
 		 struct plan_wp wps[PLAN_MAX_WP], size_t *n);
 /* Readable name of one reason bit, or of the lowest bit set. */

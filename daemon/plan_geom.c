@@ -353,6 +353,98 @@ static double move_basic(const struct bench_geom *g, const struct plan_pos *a, c
 	return -1;
 }
 
+/* The settle-inclusive time of a waypoint list starting at a. */
+static double list_time(const struct bench_geom *g, const struct plan_pos *a, const struct plan_wp *w, size_t n)
+{
+	double segs = 0;
+	bool mv[3] = { false, false, false };
+	const struct plan_pos *prev = a;
+	for (size_t i = 0; i < n; i++) {
+		segs += w[i].duration_s;
+		mv[0] |= w[i].pos.laser_theta != prev->laser_theta;
+		mv[1] |= w[i].pos.det_theta != prev->det_theta;
+		mv[2] |= w[i].pos.det_phi != prev->det_phi;
+		prev = &w[i].pos;
+	}
+	return segs + fmax(mv[0] ? g->laser_theta.settle_s : 0,
+			   fmax(mv[1] ? g->detector_theta.settle_s : 0, mv[2] ? g->detector_phi.settle_s : 0));
+}
+
+/* p's observation direction pushed away from the laser's direction by delta degrees along the great
+ * circle through both, its zenith clamped to the detector's limits (false when the azimuth leaves its
+ * limits or nothing moves); the azimuth stays near p's. */
+static bool push_away(const struct bench_geom *g, const struct plan_pos *p, double delta, struct plan_pos *out)
+{
+	double wi[3] = { sin(p->laser_theta * DEG) * cos(g->laser_phi_deg * DEG),
+			 sin(p->laser_theta * DEG) * sin(g->laser_phi_deg * DEG), cos(p->laser_theta * DEG) };
+	double v[3] = { sin(p->det_theta * DEG) * cos(p->det_phi * DEG), sin(p->det_theta * DEG) * sin(p->det_phi * DEG),
+			cos(p->det_theta * DEG) };
+	double c = wi[0] * v[0] + wi[1] * v[1] + wi[2] * v[2], t[3], l = 0;
+	for (int k = 0; k < 3; k++) {
+		t[k] = v[k] * c - wi[k];
+		l += t[k] * t[k];
+	}
+	l = sqrt(l);
+	if (l < 1e-9)
+		return false;
+	double w[3];
+	for (int k = 0; k < 3; k++)
+		w[k] = cos(delta * DEG) * v[k] + sin(delta * DEG) * t[k] / l;
+	double r = sqrt(w[0] * w[0] + w[1] * w[1]);
+	double th = atan2(r, w[2]) / DEG, ph = r < 1e-12 ? p->det_phi : atan2(w[1], w[0]) / DEG;
+	ph = p->det_phi + remainder(ph - p->det_phi, 360.0);
+	/* against a zenith limit, slide along it instead */
+	th = clampd(th, g->detector_theta.min_deg, g->detector_theta.max_deg);
+	*out = (struct plan_pos){ p->laser_theta, th, ph };
+	return in_axis(&g->detector_phi, ph) && l1(p, out) > 1e-9;
+}
+
+/* Template moves, else through approach points: configurations pushed straight away from the laser's
+ * cone, reached (or left) by a single segment, so a point tucked against the cone's edge is approached
+ * from outside rather than along the edge. Up to MID_WP waypoints. */
+#define MID_WP (BASIC_WP + 2)
+static double move_mid(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
+		       struct plan_wp wps[MID_WP], size_t *n)
+{
+	double t = move_basic(g, a, b, wps, n);
+	if (t >= 0)
+		return t;
+	static const double deltas[] = { 5, 10, 20, 40 };
+	double best = -1;
+	struct plan_wp w[BASIC_WP], tmp[MID_WP];
+	size_t nw;
+	for (size_t i = 0; i < sizeof deltas / sizeof deltas[0]; i++) {
+		for (size_t j = 0; j <= sizeof deltas / sizeof deltas[0]; j++) {
+			/* leave a through ca (j == 0: straight from a), reach b through cb (i) */
+			struct plan_pos ca = *a, cb;
+			if (!push_away(g, b, deltas[i], &cb) || !plan_seg_safe(g, &cb, b))
+				continue;
+			if (j > 0 && (!push_away(g, a, deltas[j - 1], &ca) || !plan_seg_safe(g, a, &ca)))
+				continue;
+			if (move_basic(g, &ca, &cb, w, &nw) < 0)
+				continue;
+			size_t m = 0;
+			if (j > 0) {
+				tmp[m].pos = ca;
+				tmp[m++].duration_s = plan_seg_time(g, a, &ca);
+			}
+			for (size_t k = 0; k < nw; k++)
+				tmp[m++] = w[k];
+			tmp[m].pos = *b;
+			tmp[m++].duration_s = plan_seg_time(g, &cb, b);
+			double tt = list_time(g, a, tmp, m);
+			if (best < 0 || tt < best) {
+				best = tt;
+				memcpy(wps, tmp, m * sizeof *tmp);
+				*n = m;
+			}
+		}
+		if (best >= 0)
+			break; /* the smallest detour that works */
+	}
+	return best;
+}
+
 /* When no single template works (e.g. both arms high, near each other, on both sides of the laser's
  * plane), go through a parking configuration: the detector at zenith z in the plane perpendicular to the
  * laser's (azimuth laser_phi ± 90°), where cos ψ = cos θL cos z, so ψ ≥ z for every laser position: the
@@ -360,14 +452,14 @@ static double move_basic(const struct bench_geom *g, const struct plan_pos *a, c
 double plan_move(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
 		 struct plan_wp wps[PLAN_MAX_WP], size_t *n)
 {
-	double t = move_basic(g, a, b, wps, n);
+	double t = move_mid(g, a, b, wps, n);
 	if (t >= 0)
 		return t;
 	const struct bench_axis *dt = &g->detector_theta, *dp = &g->detector_phi;
 	double R = plan_collision_deg(g);
 	double zs[] = { 45, 60, 30, 75, 90, R + 1.0 };
 	double best = -1;
-	struct plan_wp w1[BASIC_WP], w3[BASIC_WP];
+	struct plan_wp w1[MID_WP], w3[MID_WP];
 	size_t n1, n3;
 	for (size_t iz = 0; iz < sizeof zs / sizeof zs[0]; iz++) {
 		double z = zs[iz];
@@ -379,10 +471,10 @@ double plan_move(const struct bench_geom *g, const struct plan_pos *a, const str
 				if (p < dp->min_deg || p > dp->max_deg)
 					continue;
 				struct plan_pos pa = { a->laser_theta, z, p }, pb = { b->laser_theta, z, p };
-				double t1 = move_basic(g, a, &pa, w1, &n1);
+				double t1 = move_mid(g, a, &pa, w1, &n1);
 				if (t1 < 0 || !plan_seg_safe(g, &pa, &pb))
 					continue;
-				double t3 = move_basic(g, &pb, b, w3, &n3);
+				double t3 = move_mid(g, &pb, b, w3, &n3);
 				if (t3 < 0)
 					continue;
 				struct plan_wp tmp[PLAN_MAX_WP];

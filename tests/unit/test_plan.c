@@ -320,6 +320,11 @@ static void check_result(const struct bench_geom *g, const struct plan_spec *s, 
 			assert_int_equal(seen[i], 0);
 			if (q->reason & PLAN_R_UNREACHABLE) {
 				nu++;
+				printf("unreachable: request %zu (%g %g %g), ψ %g, collision %g; laser_phi %g, laser θ "
+				       "[%g, %g], detector θ [%g, %g], φ [%g, %g]\n",
+				       i, q->pos.laser_theta, q->pos.det_theta, q->pos.det_phi, psi, R, g->laser_phi_deg,
+				       g->laser_theta.min_deg, g->laser_theta.max_deg, g->detector_theta.min_deg,
+				       g->detector_theta.max_deg, g->detector_phi.min_deg, g->detector_phi.max_deg);
 				break;
 			}
 			assert_false(clear);
