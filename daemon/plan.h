@@ -7,9 +7,10 @@
  *   (a) ψ < detector_body + beam + m and detector_radius < laser_radius   (detector arm occludes the beam)
  *   (b) ψ < laser_body + fov + m and laser_radius < detector_radius       (laser arm hides the view)
  *   (c) ψ < laser_body + detector_body + m                                (the arms collide)
- * or when an axis is outside its limits. Only (c) and the limits constrain motion: every waypoint segment of
- * a planned move keeps ψ ≥ laser_body + detector_body + m at every instant, with all axes of the segment
- * starting together, each on its own trapezoidal profile (speed, acceleration = deceleration).
+ * or when an axis is outside its limits. Motion: every waypoint segment of a planned move stays within the
+ * limits and keeps ψ at or above the largest of the applicable half-angles (a), (b), (c) at every instant
+ * (usually (c): the arms never cross), with all axes of the segment starting together, each on its own
+ * trapezoidal profile (speed, acceleration = deceleration).
  *
  * Times. A move costs the sum of its segments' durations (a segment lasts as long as its slowest axis) plus
  * the largest settling time among the axes that moved; each point then dwells averages × (integration +
@@ -148,7 +149,11 @@ double plan_axis_time(const struct bench_axis *a, double d);
 double plan_axis_pos(const struct bench_axis *a, double x0, double x1, double t);
 /* Duration of one segment from p to q (all axes together). */
 double plan_seg_time(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
-/* True when the segment p → q keeps ψ ≥ plan_collision_deg at every instant (sound: never a false yes). */
+/* The ψ paths keep clear of: the largest blind-zone or collision half-angle that applies (margin included),
+ * so no arm passes through the other, and no arm crosses the beam or the view while moving either. */
+double plan_clearance_deg(const struct bench_geom *g);
+/* True when the segment p → q keeps ψ ≥ plan_clearance_deg + PLAN_EDGE_DEG at every instant (sound: never
+ * a false yes). */
 bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
 /* Fastest collision-free move a → b found: up to PLAN_MAX_WP segments into wps (the last ends at b), their
  * count in *n and the move's time (segments + settle) returned; -1 when no candidate path is safe. */

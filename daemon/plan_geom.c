@@ -20,6 +20,16 @@ double plan_collision_deg(const struct bench_geom *g)
 	return g->laser_body_halfwidth_deg + g->detector_body_halfwidth_deg + g->safety_margin_deg;
 }
 
+double plan_clearance_deg(const struct bench_geom *g)
+{
+	double m = g->safety_margin_deg, t = plan_collision_deg(g);
+	if (g->detector_radius_mm < g->laser_radius_mm)
+		t = fmax(t, g->detector_body_halfwidth_deg + g->beam_halfwidth_deg + m);
+	if (g->laser_radius_mm < g->detector_radius_mm)
+		t = fmax(t, g->laser_body_halfwidth_deg + g->fov_halfwidth_deg + m);
+	return t;
+}
+
 static bool in_axis(const struct bench_axis *a, double x)
 {
 	return x >= a->min_deg - 1e-9 && x <= a->max_deg + 1e-9;
@@ -179,7 +189,7 @@ static double box_min_psi(const struct bench_geom *g, double tl, double t1, doub
 
 bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q)
 {
-	double R = plan_collision_deg(g);
+	double R = plan_clearance_deg(g);
 	double T = plan_seg_time(g, p, q);
 	if (!in_axis(&g->laser_theta, p->laser_theta) || !in_axis(&g->laser_theta, q->laser_theta) ||
 	    !in_axis(&g->detector_theta, p->det_theta) || !in_axis(&g->detector_theta, q->det_theta) ||
@@ -268,7 +278,7 @@ static double move_basic(const struct bench_geom *g, const struct plan_pos *a, c
 	size_t nc = 0;
 	*n = 0;
 	if (l1(a, b) == 0) {
-		return (plan_psi_deg(g, a) >= plan_collision_deg(g)) ? 0 : -1;
+		return (plan_psi_deg(g, a) >= plan_clearance_deg(g)) ? 0 : -1;
 	}
 	/* The straight move is never slower than any other path (each axis still covers its distance, and
 	 * the trapezoid time is subadditive), so when it is safe it is the answer. */
@@ -283,7 +293,7 @@ static double move_basic(const struct bench_geom *g, const struct plan_pos *a, c
 	struct plan_pos dfirst[2] = { { a->laser_theta, b->det_theta, b->det_phi }, *b };
 	add_cand(c, &nc, CAP, lfirst, 2);
 	add_cand(c, &nc, CAP, dfirst, 2);
-	double R = plan_collision_deg(g), e = 0.5;
+	double R = plan_clearance_deg(g), e = 0.5;
 	double zs[16];
 	size_t nz = 0;
 	const struct bench_axis *dt = &g->detector_theta;
@@ -456,7 +466,7 @@ double plan_move(const struct bench_geom *g, const struct plan_pos *a, const str
 	if (t >= 0)
 		return t;
 	const struct bench_axis *dt = &g->detector_theta, *dp = &g->detector_phi;
-	double R = plan_collision_deg(g);
+	double R = plan_clearance_deg(g);
 	double zs[] = { 45, 60, 30, 75, 90, R + 1.0 };
 	double best = -1;
 	struct plan_wp w1[MID_WP], w3[MID_WP];

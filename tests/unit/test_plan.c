@@ -259,9 +259,9 @@ static void check_result(const struct bench_geom *g, const struct plan_spec *s, 
 			for (size_t k = 0; k < st->n_wp; k++) {
 				const struct plan_wp *w = &r->wps[st->first_wp + k];
 				double worst = check_segment(g, &prev, &w->pos, w->duration_s);
-				if (worst < R - 1e-9)
+				if (worst < B - 1e-9)
 					fail_msg("step %zu segment %zu: ψ = %.6f < %.6f between (%g %g %g) and (%g %g %g)", i,
-						 k, worst, R, prev.laser_theta, prev.det_theta, prev.det_phi,
+						 k, worst, B, prev.laser_theta, prev.det_theta, prev.det_phi,
 						 w->pos.laser_theta, w->pos.det_theta, w->pos.det_phi);
 				mv[0] |= w->pos.laser_theta != prev.laser_theta;
 				mv[1] |= w->pos.det_theta != prev.det_theta;
