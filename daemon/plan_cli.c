@@ -8,6 +8,7 @@
  * /etc/acquisitiond/acquisitiond.yaml. Exit status: 0 done, 1 error (message on stderr), 2 usage. */
 #include <jansson.h>
 #include <limits.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -121,6 +122,15 @@ static json_t *to_json(const struct plan_spec *s, const struct plan_result *r, c
 	json_object_set_new(o, "motion_s", json_real(r->motion_s));
 	json_object_set_new(o, "point_dwell_s", json_real(r->point_dwell_s));
 	json_object_set_new(o, "detours", json_integer((json_int_t)r->n_detours));
+	json_object_set_new(o, "blind_points", json_string(s->blind_policy == PLAN_BLIND_MOVE ? "move" : "drop"));
+	json_object_set_new(o, "averages", json_integer(s->averages));
+	json_object_set_new(o, "integration_ms", json_real(s->integ_ms));
+	json_object_set_new(o, "integration_mode", json_string(s->integ_mode == PLAN_INTEG_AUTO ? "auto" : "fixed"));
+	size_t nrec = 0;
+	for (size_t i = 0; i < r->n_req; i++)
+		nrec += r->req[i].role == PLAN_ROLE_RECIPROCAL &&
+			(r->req[i].status == PLAN_KEPT || r->req[i].status == PLAN_MOVED);
+	json_object_set_new(o, "reciprocal_measured", json_integer((json_int_t)nrec));
 	json_object_set_new(o, "travel_deg", json_pack("{s:f,s:f,s:f}", "laser_theta", r->travel_deg[0],
 						      "detector_theta", r->travel_deg[1], "detector_phi",
 						      r->travel_deg[2]));
@@ -188,8 +198,11 @@ static void print_text(const struct plan_spec *s, const struct plan_result *r, c
 	       r->dwell_s, r->point_dwell_s, r->motion_s, r->n_detours);
 	printf("  travel: laser zenith %.1f deg, detector zenith %.1f deg, detector azimuth %.1f deg\n",
 	       r->travel_deg[0], r->travel_deg[1], r->travel_deg[2]);
+	size_t listed = 0, limit = points ? SIZE_MAX : 20;
 	for (size_t i = 0; i < r->n_req; i++) {
 		const struct plan_req *q = &r->req[i];
+		if ((q->status == PLAN_DROPPED || q->status == PLAN_MOVED) && listed++ >= limit)
+			continue;
 		if (q->status == PLAN_DROPPED)
 			printf("  dropped #%zu (%g, %g, %g): %s%s\n", i, q->req.laser_theta, q->req.det_theta,
 			       q->req.det_phi, plan_reason_name(q->reason),
@@ -199,6 +212,8 @@ static void print_text(const struct plan_spec *s, const struct plan_result *r, c
 			       q->req.laser_theta, q->req.det_theta, q->req.det_phi, q->pos.laser_theta,
 			       q->pos.det_theta, q->pos.det_phi, q->moved_deg, plan_reason_name(q->reason));
 	}
+	if (listed > limit)
+		printf("  ... and %zu more dropped or moved points (--points or --json lists them all)\n", listed - limit);
 	if (points) {
 		for (size_t i = 0; i < r->n_steps; i++) {
 			const struct plan_step *p = &r->steps[i];
