@@ -131,6 +131,12 @@ int plan_make(const struct plan_spec *spec, const struct bench_geom *g, struct p
 /* Free a result (NULL is fine). */
 void plan_result_free(struct plan_result *res);
 
+struct json_t;
+/* The result as a JSON object (jansson; caller json_decref's it): counts, kept/dropped/moved, duration_s,
+ * raster_s, lower_bound_s, motion summary, dropped and moved points, and with steps the sweep order with
+ * waypoints. NULL when out of memory. */
+struct json_t *plan_to_json(const struct plan_spec *spec, const struct plan_result *res, bool steps);
+
 /* ---- geometry and kinematics (also used by the executor and the simulator) ---- */
 
 /* Points within this of a blind-zone edge count as blind, and path checks need this much clearance to
