@@ -18,6 +18,8 @@
 #define TAB_N 19
 #define TAB_NMU 20
 #define TAB_NPHI 24
+#define TAB_TOL 1e-3      /* node rule refined until a doubled rule agrees to this (relative) */
+#define TAB_NMU_MAX 160   /* finest node rule: 160 × 192 */
 /* DHR quadrature: Gauss-Legendre 32 × 48 azimuth midpoints (error discussed at recon_albedo). */
 #define DHR_NMU 32
 #define DHR_NPHI 48
@@ -294,7 +296,8 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
  * The energy table. a(θ, λ) of the unscaled interpolant is computed at TAB_N nodes; on each interval
  * [θ_t, θ_t+1] the bound is max(a_t, a_t+1) + h²/8 · |a''| (the interpolation error of a C² function, with
  * a'' from second differences, doubled), times (1 + 2δ) where δ is the largest relative difference between
- * the table rule and a doubled rule at three incidences (0°, 45°, 85°). The evaluated function is then
+ * a node's rule and a doubled rule; each node's rule is doubled (from 20 × 24 up to 160 × 192) until the two
+ * agree to TAB_TOL, because the map back e^g can make lobes far narrower than the kernel. The evaluated function is then
  * s·f̂ with s = 1/max(1, A(θi), A(θo)), whose albedo at θi is ≤ a(θi)/max(1, A(θi)) ≤ 1 whenever A bounds a.
  * `brdf-recon check` verifies it with an independent rule.
  */
@@ -311,25 +314,34 @@ static int build_albedo_table(struct recon_model *m, struct acq_err *err, recon_
 		return acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
 	}
 	double h = (M_PI / 2) / (double)(T - 1);
+	/* every node against a doubled rule, refined until they agree to TAB_TOL (narrow lobes of e^g can
+	 * be far narrower than the kernel); the finer value is kept and the last difference is the margin */
+	double delta = 0;
 	for (size_t t = 0; t < T; t++) {
 		m->tab_theta[t] = h * (double)t;
 		if (pf)
 			pf(pctx, "albedo table", (double)t / (double)T);
-		if (albedo_rule(m, m->tab_theta[t], TAB_NMU, TAB_NPHI, 0, 0, a + t * L, err))
+		int nmu = TAB_NMU, nphi = TAB_NPHI;
+		if (albedo_rule(m, m->tab_theta[t], nmu, nphi, 0, 0, a + t * L, err))
 			goto fail;
-	}
-	/* quadrature error estimate against a doubled rule */
-	double delta = 0;
-	static const size_t probe[3] = { 0, 9, 17 }; /* 0°, 45°, 85° */
-	for (int p = 0; p < 3; p++) {
-		size_t t = probe[p];
-		if (albedo_rule(m, m->tab_theta[t], 2 * TAB_NMU, 2 * TAB_NPHI, 0, 0, fine, err))
-			goto fail;
-		for (size_t l = 0; l < L; l++) {
-			double ref = fabs(fine[l]) > 1e-300 ? fabs(fine[l]) : 1e-300;
-			double d = fabs(fine[l] - a[t * L + l]) / ref;
-			if (d > delta)
-				delta = d;
+		for (;;) {
+			if (albedo_rule(m, m->tab_theta[t], 2 * nmu, 2 * nphi, 0, 0, fine, err))
+				goto fail;
+			double dt = 0;
+			for (size_t l = 0; l < L; l++) {
+				double ref = fabs(fine[l]) > 1e-300 ? fabs(fine[l]) : 1e-300;
+				double d = fabs(fine[l] - a[t * L + l]) / ref;
+				if (d > dt)
+					dt = d;
+			}
+			memcpy(a + t * L, fine, L * sizeof *fine);
+			nmu *= 2;
+			nphi *= 2;
+			if (dt <= TAB_TOL || 2 * nmu > TAB_NMU_MAX) {
+				if (dt > delta)
+					delta = dt;
+				break;
+			}
 		}
 	}
 	m->alb_margin = 2.0 * delta + 1e-9;
