@@ -531,6 +531,12 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	size_t n = 0, dropped = 0, merged = 0;
 	for (size_t k = 0; k < n0; k++) {
 		const double *a = s->ang + 4 * k;
+		if (!(a[0] >= 0 && a[0] <= M_PI / 2 + 1e-12 && a[2] >= 0 && a[2] <= M_PI / 2 + 1e-12) ||
+		    !isfinite(a[1]) || !isfinite(a[3])) {
+			acq_errf(err, ACQ_E_RANGE, "fit: sample %zu: angles (%g, %g, %g, %g)° outside θ ∈ [0, 90]°, finite φ",
+				 k + 1, a[0] * 180 / M_PI, a[1] * 180 / M_PI, a[2] * 180 / M_PI, a[3] * 180 / M_PI);
+			goto out;
+		}
 		int any = 0;
 		for (size_t l = 0; l < L && !any; l++)
 			any = isfinite(s->val[k * L + l]);
