@@ -499,7 +499,7 @@ static void test_single_wavelength(void **state)
 {
 	(void)state;
 	struct recon_samples s;
-	xs_random(&s, 120, 1, 0.1, 1.0, 0.02);
+	xs_random(&s, 40, 1, 0.1, 1.0, 0.02);
 	struct recon_fit_opts o;
 	recon_fit_opts_default(&o);
 	struct recon_model *m = fit_checked(&s, &o, "onewl");
@@ -510,13 +510,14 @@ static void test_single_wavelength(void **state)
 }
 
 /* Thirteen decades in one data set: a diffuse floor of 1e-8 sr⁻¹ and a specular spike up to 1e5 sr⁻¹ (far
- * beyond energy conservation), both transforms. Finite, ≥ 0, reciprocal, albedo ≤ 1 (the energy factor
+ * beyond energy conservation, its neighbours 2-3° away at the floor: a lobe narrower than the energy table's
+ * first quadrature rule resolves), both transforms. Finite, ≥ 0, reciprocal, albedo ≤ 1 (the energy factor
  * scales the spike down), and the largest value stays within the data's range. */
 static void test_dynamic_range(void **state)
 {
 	(void)state;
 	struct recon_samples s;
-	xs_random(&s, 150, 4, 0.1, 1.0, 0.0);
+	xs_random(&s, 80, 4, 0.1, 1.0, 0.0);
 	double vmax = 0;
 	for (size_t k = 0; k < s.n; k++) {
 		const double *a = s.ang + 4 * k;
@@ -539,6 +540,15 @@ static void test_dynamic_range(void **state)
 	s.ang[5] = 0;
 	s.ang[6] = 35 * DEG;
 	s.ang[7] = M_PI;
+	for (size_t k = 2; k < 10; k++) { /* the spike's neighbours, 2-3° away, at the floor: a narrow lobe */
+		double *a = s.ang + 4 * k, d = (double)(k - 2) * M_PI / 4;
+		a[0] = 35 * DEG;
+		a[1] = 0;
+		a[2] = (35 + 2 * cos(d)) * DEG;
+		a[3] = M_PI + 3 * sin(d) * DEG;
+		for (size_t l = 0; l < s.nwl; l++)
+			s.val[k * s.nwl + l] = 1e-8;
+	}
 	for (int t = 0; t < RECON_T__COUNT; t++) {
 		struct recon_fit_opts o;
 		recon_fit_opts_default(&o);
@@ -552,6 +562,15 @@ static void test_dynamic_range(void **state)
 		assert_int_equal(recon_eval(m, 200, q, f, &err), 0);
 		for (size_t i = 0; i < 200 * s.nwl; i++)
 			assert_true(f[i] <= 1e5 * 1.01);
+		double alb[4]; /* at and around the spike's incidence, with a rule that resolves the lobe */
+		for (int u = 0; u < 5; u++) {
+			assert_int_equal(recon_albedo(m, (33 + u) * DEG, 200, 720, 1, alb, &err), 0);
+			for (size_t l = 0; l < s.nwl; l++) {
+				if (!(alb[l] <= 1 + 1e-9))
+					printf("  albedo at the spike (%d°, %g nm): %.6g\n", 33 + u, s.wl[l], alb[l]);
+				assert_true(alb[l] <= 1 + 1e-9);
+			}
+		}
 		if (t == RECON_T_LOG)
 			assert_merl_finite(m, "range");
 		free(f);
@@ -676,17 +695,21 @@ static void test_nearly_singular(void **state)
 	csvio_samples_free(&s);
 }
 
-/* 5000 samples, 2 wavelengths: 2500 directions each measured twice (once reciprocally, with its own noise),
- * so the merge runs over 5000 rows and one 2500 × 2500 system is factorised (shape and η fixed). Properties
- * hold and the files are finite. Time printed. */
+/* 5000 samples, 2 wavelengths: 1000 directions each measured five times (three times as (ωi, ωo), twice
+ * reciprocally, each with its own noise), so the merge runs over 5000 rows and one 1000 × 1000 system is
+ * factorised (shape and η fixed; a 5000-centre fit takes minutes under ASan). Properties hold and the files
+ * are finite. Time printed. */
 static void test_5000_samples(void **state)
 {
 	(void)state;
 	struct recon_samples s;
 	xs_random(&s, 5000, 2, 0.05, 1.0, 0.02);
-	for (size_t k = 2500; k < 5000; k++) {
-		const double *a = s.ang + 4 * (k - 2500);
-		xs_row(&s, k, a[2], a[3], a[0], a[1], 1.0, 0.02);
+	for (size_t k = 1000; k < 5000; k++) {
+		const double *a = s.ang + 4 * (k % 1000);
+		if (k < 3000)
+			xs_row(&s, k, a[0], a[1], a[2], a[3], 1.0, 0.02);
+		else
+			xs_row(&s, k, a[2], a[3], a[0], a[1], 1.0, 0.02);
 	}
 	struct recon_fit_opts o;
 	opts_fixed(&o, 0.5, 1e-3);
@@ -701,7 +724,7 @@ static void test_5000_samples(void **state)
 	assert_int_equal(rc, 0);
 	printf("5000 samples: n=%zu, fit %.2f s, rcond %.3g\n", m->n, (double)(t1.tv_sec - t0.tv_sec) +
 	       1e-9 * (double)(t1.tv_nsec - t0.tv_nsec), m->rcond);
-	assert_int_equal(m->n, 2500);
+	assert_int_equal(m->n, 1000);
 	assert_properties(m, 200);
 	assert_files_finite(m, "n5000");
 	recon_model_free(m);
