@@ -392,12 +392,12 @@ static void test_azimuth_wrap(void **state)
 	csvio_samples_free(&s);
 }
 
-/* Coincident rows (exact repeats with different values) merge; nearly coincident pairs (1e-9, 1e-7, 1e-5,
- * 1e-3 rad apart in θo) either merge, fit, or fail with a named numerical error, never a non-finite model. */
+/* Coincident rows (exact repeats with different values) merge; nearly coincident pairs (1e-9, 1e-7 and 1e-5
+ * rad apart in θo) either merge, fit, or fail with a named numerical error, never a non-finite model. */
 static void test_coincident_and_near(void **state)
 {
 	(void)state;
-	static const double sep[] = { 0, 1e-12, 1e-9, 1e-7, 1e-5, 1e-3 };
+	static const double sep[] = { 0, 1e-9, 1e-7, 1e-5 };
 	for (size_t c = 0; c < sizeof sep / sizeof *sep; c++) {
 		struct recon_samples s;
 		xs_random(&s, 80, 2, 0.2, 1.0, 0.02);
@@ -422,7 +422,7 @@ static void test_coincident_and_near(void **state)
 				continue;
 			}
 			printf("n=%zu rcond=%.3g eta=%g\n", m->n, m->rcond, m->eta);
-			if (sep[c] <= 1e-12)
+			if (sep[c] == 0)
 				assert_int_equal(m->n, 70); /* merged */
 			assert_properties(m, 150);
 			char tag[64];
@@ -564,7 +564,7 @@ static void test_dynamic_range(void **state)
 			assert_true(f[i] <= 1e5 * 1.01);
 		double alb[4]; /* at and around the spike's incidence, with a rule that resolves the lobe */
 		for (int u = 0; u < 5; u++) {
-			assert_int_equal(recon_albedo(m, (33 + u) * DEG, 200, 720, 1, alb, &err), 0);
+			assert_int_equal(recon_albedo(m, (33 + u) * DEG, 120, 360, 1, alb, &err), 0);
 			for (size_t l = 0; l < s.nwl; l++) {
 				if (!(alb[l] <= 1 + 1e-9))
 					printf("  albedo at the spike (%d°, %g nm): %.6g\n", 33 + u, s.wl[l], alb[l]);
