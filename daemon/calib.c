@@ -14,7 +14,7 @@ void calib_cfg_defaults(struct calib_cfg *c)
 	c->rho_ref.wl[0] = 550.0;
 	c->rho_ref.val[0] = 0.99;
 	c->rho_ref.u[0] = 0.005;
-	c->ref_theta_i_deg = NAN;
+	c->ref_theta_o_deg = NAN;
 	c->omega_det_sr = 1e-3;
 	c->u_omega_rel = 0.02;
 	c->angle_rel_per_deg = 0.0;
@@ -81,7 +81,7 @@ int calib_cfg_parse(struct yc_node *node, struct calib_cfg *c, struct acq_err *e
 		struct yc_node *table = yc_get(ref, "table");
 		if (yc_double(ref, "reflectance", false, 0, 1.5, &rho, err) ||
 		    yc_double(ref, "u_reflectance", false, 0, 1, &u, err) ||
-		    yc_double(ref, "theta_i_deg", false, 0, 89, &q.ref_theta_i_deg, err))
+		    yc_double(ref, "theta_o_deg", false, 0, 89, &q.ref_theta_o_deg, err))
 			return -1;
 		if (table) {
 			if (parse_table(table, &q.rho_ref, err))
@@ -162,12 +162,12 @@ int calib_pixels(const struct calib_cfg *c, const double *wl, const struct exp_r
 	if (!isfinite(g->theta_i) || !isfinite(g->theta_o) || fabs(g->theta_i) >= 90 || fabs(g->theta_o) >= 90)
 		return acq_errf(err, ACQ_E_RANGE, "calibration: geometry θi %g°, θo %g° outside the hemisphere",
 				g->theta_i, g->theta_o);
-	double ci = cos(g->theta_i * DEG), co = cos(g->theta_o * DEG);
+	double co = cos(g->theta_o * DEG);
 	double geo, geo_rel_sens; /* cosine factor and its relative sensitivity per radian */
 	if (c->method == CALIB_RELATIVE) {
-		if (isfinite(c->ref_theta_i_deg)) {
-			geo = cos(c->ref_theta_i_deg * DEG) / ci;
-			geo_rel_sens = fabs(tan(g->theta_i * DEG));
+		if (isfinite(c->ref_theta_o_deg)) {
+			geo = cos(c->ref_theta_o_deg * DEG) / co;
+			geo_rel_sens = fabs(tan(g->theta_o * DEG));
 		} else {
 			geo = 1.0;
 			geo_rel_sens = 0.0;

@@ -2,8 +2,11 @@
  * relative (white reference) or absolute (direct beam) method, resampled from detector pixels to a grid.
  *
  * Methods (brdf-reconstruction.md, "From raw counts to BRDF"); R are net rates (S − D)/t in counts/ms:
- *   relative: f = R_s / R_ref · ρ_ref(λ)/π · cos θi_ref / cos θi   (the cosine ratio is 1 when the reference
- *             was seen under the sample's own geometry, ref_theta_i_deg = NaN)
+ *   relative: f = R_s / R_ref · ρ_ref(λ)/π · cos θo_ref / cos θo   (the cosine ratio is 1 when the reference
+ *             was seen under the sample's own geometry, ref_theta_o_deg = NaN)
+ * Bench model behind the cosines: the detector's field of view contains the whole illuminated spot, so the
+ * collected signal is P · f · cos θo · Ω_det whatever θi (the spot grows as 1/cos θi while the irradiance
+ * falls as cos θi); a Lambertian reference seen at θo_ref gives P · ρ_ref/π · cos θo_ref · Ω_det.
  *   absolute: f = R_s / (R_beam · Ω_det · cos θo)
  * Uncertainty budget, each a standard uncertainty in sr⁻¹:
  *   noise  the sample's scan noise (per-pixel std / √averages, over t)
@@ -38,7 +41,7 @@ struct calib_table {
 struct calib_cfg {
 	enum calib_method method;
 	struct calib_table rho_ref;  /* relative: the reference's reflectance ρ_ref(λ) and u(ρ_ref) */
-	double ref_theta_i_deg;      /* relative: incidence at which the reference was measured; NaN = same as sample */
+	double ref_theta_o_deg;      /* relative: viewing zenith of the reference measurement; NaN = same as sample */
 	double omega_det_sr;         /* absolute: detector solid angle */
 	double u_omega_rel;          /* absolute: relative standard uncertainty of Ω_det */
 	double angle_rel_per_deg;    /* configured |∂f/∂θ| / f, per degree */

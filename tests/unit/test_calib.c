@@ -84,7 +84,8 @@ static void test_relative_zscores(void **state)
 	struct calib_cfg c;
 	calib_cfg_defaults(&c);
 	c.rho_ref.val[0] = 0.95;
-	c.rho_ref.u[0] = 0.001; /* comparable to the noise of one bin, so both terms are tested */
+	c.rho_ref.u[0] = 0.001;
+	c.ref_theta_o_deg = 45; /* the reference seen at θo = 45°, the sample at 30° (bench model: ∝ cos θo) */ /* comparable to the noise of one bin, so both terms are tested */
 	static double rs[NPIX], rr[NPIX];
 	static struct exp_rate es, eref;
 	static struct calib_spectrum sp;
@@ -92,13 +93,12 @@ static void test_relative_zscores(void **state)
 	struct zstat z = { 0 };
 	const int draws = 100;
 	const double K = 2500; /* counts/ms of the reference at the lamp's peak */
-	const struct calib_geom g = { 30, 45 };
+	const struct calib_geom g = { 50, 30 };
 	for (int d = 0; d < draws; d++) {
 		double rho = c.rho_ref.val[0] + c.rho_ref.u[0] * synth_gauss(&r);
 		for (int p = 0; p < NPIX; p++) {
-			double ci = cos(g.theta_i * M_PI / 180);
-			rr[p] = K * lamp(wl[p]) * rho / M_PI * ci;
-			rs[p] = K * lamp(wl[p]) * f_true(wl[p]) * ci;
+			rr[p] = K * lamp(wl[p]) * rho / M_PI * cos(45 * M_PI / 180);
+			rs[p] = K * lamp(wl[p]) * f_true(wl[p]) * cos(g.theta_o * M_PI / 180);
 		}
 		measure(&r, rs, 40, 30, &es);
 		measure(&r, rr, 10, 30, &eref);
