@@ -1,0 +1,492 @@
+/* commands: what each protocol command does in the daemon (dispatch from server.c; see proto_cmds[]). */
+#include "daemon/app.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <linux/openat2.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/syscall.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "acq_version.h"
+#include "daemon/devices.h"
+#include "daemon/job.h"
+#include "daemon/log.h"
+#include "daemon/loop.h"
+#include "daemon/store.h"
+#include "daemon/sweep.h"
+
+double app_wallclock(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+void app_emit(void *ctx, const char *event, json_t *data)
+{
+	struct app *app = ctx;
+	if (app->srv)
+		server_broadcast(app->srv, event, data);
+	else
+		json_decref(data);
+}
+
+void app_device_notify(void *ctx, enum conf_dev dev, bool up, const char *why)
+{
+	struct app *app = ctx;
+	log_msg(up ? LOG_INFO : LOG_WARNING, "%s: %s", conf_dev_name(dev), up ? "available" : why);
+	if (app->store)
+		store_event(app->store, 0, up ? "recovered" : "fault", conf_dev_name(dev), why, app_wallclock(), NULL);
+	app_emit(app, "device", json_pack("{s:s,s:b,s:s}", "name", conf_dev_name(dev), "available", up, "message", why));
+	if (up && app->sweep)
+		sweep_device_back(app->sweep, dev);
+}
+
+void app_status_line(struct app *app, char *buf, size_t cap)
+{
+	struct sweep_progress p;
+	sweep_get_progress(app->sweep, &p);
+	int avail = app->dev ? devices_available(app->dev) : 0;
+	if (p.state == SWEEP_IDLE)
+		snprintf(buf, cap, "idle; devices %d/%d available%s", avail, CONF_DEV__COUNT,
+			 app->recon_job ? "; reconstruction running" : "");
+	else if (isfinite(p.eta_s))
+		snprintf(buf, cap, "sweep %lld %s: %d/%d points, ETA %.0f s", (long long)p.sweep_id,
+			 sweep_state_name(p.state), p.points_done, p.points_total, p.eta_s);
+	else
+		snprintf(buf, cap, "sweep %lld %s: %d/%d points", (long long)p.sweep_id, sweep_state_name(p.state),
+			 p.points_done, p.points_total);
+}
+
+/* ---- helpers ---- */
+
+static void reply_err(struct app *app, const struct srv_peer *peer, json_t *id, const struct acq_err *err)
+{
+	server_reply_error(app->srv, peer->serial, id, proto_code_of(err), err->msg);
+}
+
+static double num_arg(json_t *req, const char *key, double dflt)
+{
+	json_t *v = json_object_get(req, key);
+	return v ? json_number_value(v) : dflt;
+}
+
+static json_t *progress_json(struct app *app)
+{
+	struct sweep_progress p;
+	sweep_get_progress(app->sweep, &p);
+	json_t *o = json_pack("{s:s,s:I,s:i,s:i,s:s}", "state", sweep_state_name(p.state), "id", (json_int_t)p.sweep_id,
+			      "done", p.points_done, "total", p.points_total, "message", p.message);
+	json_object_set_new(o, "eta_s", isfinite(p.eta_s) ? json_real(p.eta_s) : json_null());
+	return o;
+}
+
+/* ---- manual device operations: replies arrive later ---- */
+struct pending {
+	struct app *app;
+	uint64_t serial;
+	json_t *id;
+};
+
+static void pending_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
+{
+	struct pending *p = ctx;
+	if (rc)
+		server_reply_error(p->app->srv, p->serial, p->id, proto_code_of(err), err->msg);
+	else
+		server_reply(p->app->srv, p->serial, p->id, result);
+	json_decref(p->id);
+	free(p);
+}
+
+static struct pending *pending_new(struct app *app, const struct srv_peer *peer, json_t *id)
+{
+	struct pending *p = calloc(1, sizeof *p);
+	if (p)
+		*p = (struct pending){ app, peer->serial, json_incref(id) };
+	return p;
+}
+
+static void cmd_move(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep)) {
+		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: pause is not enough, abort it before moving by hand");
+		return reply_err(app, peer, req->id, &err);
+	}
+	double t[3] = { num_arg(req->root, "laser_theta", NAN), num_arg(req->root, "detector_theta", NAN),
+			num_arg(req->root, "detector_phi", NAN) };
+	struct pending *p = pending_new(app, peer, req->id);
+	if (!p) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return reply_err(app, peer, req->id, &err);
+	}
+	if (devices_move(app->dev, t, pending_done, p, &err)) {
+		json_decref(p->id);
+		free(p);
+		reply_err(app, peer, req->id, &err);
+	}
+}
+
+static void cmd_measure(struct app *app, const struct srv_peer *peer, struct proto_req *req, const char *kind)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep)) {
+		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: abort it before measuring by hand");
+		return reply_err(app, peer, req->id, &err);
+	}
+	double it = num_arg(req->root, "integration_ms", 100);
+	int avg = (int)num_arg(req->root, "averages", app->conf->sweep.averages);
+	struct pending *p = pending_new(app, peer, req->id);
+	if (!p) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return reply_err(app, peer, req->id, &err);
+	}
+	if (devices_measure(app->dev, kind, it, avg, pending_done, p, &err)) {
+		json_decref(p->id);
+		free(p);
+		reply_err(app, peer, req->id, &err);
+	}
+}
+
+/* ---- sweeps ---- */
+static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	const char *sub = req->cmd + strlen("sweep.");
+	json_t *data = NULL;
+	int rc = 0;
+	if (!strcmp(sub, "list")) {
+		data = store_sweep_list(app->store, (int)num_arg(req->root, "limit", 100), &err);
+		if (data)
+			data = json_pack("{s:o}", "sweeps", data);
+		rc = data ? 0 : -1;
+	} else if (!strcmp(sub, "show")) {
+		json_t *pts = json_object_get(req->root, "points");
+		data = store_sweep_show(app->store, (int64_t)num_arg(req->root, "sweep", 0), json_is_true(pts), &err);
+		if (data)
+			data = json_pack("{s:o}", "sweep", data);
+		rc = data ? 0 : -1;
+	} else if (!strcmp(sub, "start")) {
+		int64_t id = 0;
+		json_t *name = json_object_get(req->root, "name");
+		if (devices_busy(app->dev))
+			rc = acq_errf(&err, ACQ_E_STATE, "a manual move or measurement is running");
+		else
+			rc = sweep_start(app->sweep, json_string_value(json_object_get(req->root, "plan")),
+					 name ? json_string_value(name) : NULL, &id, &err);
+		if (!rc)
+			data = json_pack("{s:I}", "sweep", (json_int_t)id);
+	} else if (!strcmp(sub, "pause")) {
+		rc = sweep_pause(app->sweep, &err);
+	} else if (!strcmp(sub, "resume")) {
+		rc = sweep_resume(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &err);
+	} else if (!strcmp(sub, "abort")) {
+		rc = sweep_abort(app->sweep, &err);
+	}
+	if (rc)
+		return reply_err(app, peer, req->id, &err);
+	if (!data)
+		data = json_pack("{s:o}", "progress", progress_json(app));
+	server_reply(app->srv, peer->serial, req->id, data);
+}
+
+/* ---- reconstruction ---- */
+static void recon_done(struct job *j, int status, const char *output, size_t len, void *arg)
+{
+	(void)j;
+	(void)len;
+	struct app *app = arg;
+	const char *state = status == 0 ? "succeeded" : "failed";
+	struct acq_err err = { 0 };
+	if (store_recon_end(app->store, app->recon_run, state, status, output, app_wallclock(), &err))
+		log_msg(LOG_ERR, "recording the end of reconstruction run %lld: %s", (long long)app->recon_run, err.msg);
+	log_msg(status ? LOG_WARNING : LOG_INFO, "reconstruction of sweep %lld (run %lld) %s, status %d",
+		(long long)app->recon_sweep, (long long)app->recon_run, state, status);
+	app_emit(app, "recon", json_pack("{s:I,s:I,s:s,s:i}", "run", (json_int_t)app->recon_run, "sweep",
+					 (json_int_t)app->recon_sweep, "state", state, "exit_status", status));
+	app->recon_job = NULL;
+}
+
+/* The reconstruction program: an absolute path, a name found next to acquisitiond, or in PATH. */
+static int recon_program(const char *prog, char *out, size_t cap)
+{
+	if (strchr(prog, '/')) {
+		snprintf(out, cap, "%s", prog);
+		return access(out, X_OK);
+	}
+	char self[4096];
+	ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+	if (n > 0) {
+		self[n] = 0;
+		char *slash = strrchr(self, '/');
+		if (slash) {
+			*slash = 0;
+			snprintf(out, cap, "%s/%s", self, prog);
+			if (!access(out, X_OK))
+				return 0;
+		}
+	}
+	const char *path = getenv("PATH");
+	char buf[4096];
+	snprintf(buf, sizeof buf, "%s", path ? path : "/usr/bin:/bin");
+	for (char *save = NULL, *dir = strtok_r(buf, ":", &save); dir; dir = strtok_r(NULL, ":", &save)) {
+		snprintf(out, cap, "%s/%s", dir, prog);
+		if (!access(out, X_OK))
+			return 0;
+	}
+	return -1;
+}
+
+static void cmd_recon_start(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	int64_t sweep = (int64_t)num_arg(req->root, "sweep", 0);
+	if (app->recon_job) {
+		acq_errf(&err, ACQ_E_STATE, "reconstruction run %lld (sweep %lld) is still running",
+			 (long long)app->recon_run, (long long)app->recon_sweep);
+		return reply_err(app, peer, req->id, &err);
+	}
+	json_t *sw = store_sweep_show(app->store, sweep, false, &err);
+	if (!sw)
+		return reply_err(app, peer, req->id, &err);
+	const char *state = json_string_value(json_object_get(sw, "state"));
+	json_int_t ncal = json_integer_value(json_object_get(sw, "calibrated"));
+	if (!state || strcmp(state, "completed") || ncal == 0) {
+		acq_errf(&err, ACQ_E_STATE, "sweep %lld is %s with %lld calibrated samples: nothing to reconstruct yet",
+			 (long long)sweep, state ? state : "?", (long long)ncal);
+		json_decref(sw);
+		return reply_err(app, peer, req->id, &err);
+	}
+	json_decref(sw);
+	char prog[4096];
+	if (recon_program(app->conf->recon.program, prog, sizeof prog)) {
+		acq_errf(&err, ACQ_E_UNSUPPORTED, "reconstruction program '%s' not found (brdf-recon not installed?)",
+			 app->conf->recon.program);
+		return reply_err(app, peer, req->id, &err);
+	}
+	char outdir[4096], sweeps[32], threads[16];
+	snprintf(outdir, sizeof outdir, "%s/sweep-%lld", app->conf->recon.output_dir, (long long)sweep);
+	snprintf(sweeps, sizeof sweeps, "%lld", (long long)sweep);
+	snprintf(threads, sizeof threads, "%d", app->conf->recon.threads);
+	mkdir(app->conf->recon.output_dir, 0750);
+	mkdir(outdir, 0750);
+	/* argv wants char *: copies of the configuration's strings. */
+	static char db[4096], extra[8][512];
+	snprintf(db, sizeof db, "%s", app->conf->d.database);
+	char *argv[32] = { prog, "run", "--db", db, "--sweep", sweeps, "--out", outdir, "--threads", threads };
+	int argc = 10;
+	for (int i = 0; i < app->conf->recon.nextra; i++) {
+		snprintf(extra[i], sizeof extra[i], "%s", app->conf->recon.extra_args[i]);
+		argv[argc++] = extra[i];
+	}
+	json_t *args = json_array();
+	for (int i = 0; i < argc; i++)
+		json_array_append_new(args, json_string(argv[i]));
+	char *argtext = json_dumps(args, JSON_COMPACT);
+	json_decref(args);
+	int64_t run = 0;
+	int rc = store_recon_begin(app->store, sweep, prog, argtext, app_wallclock(), &run, &err);
+	free(argtext);
+	if (rc)
+		return reply_err(app, peer, req->id, &err);
+	app->recon_run = run;
+	app->recon_sweep = sweep;
+	if (job_start(argv, app->conf->d.state_dir, app->conf->recon.timeout_s, recon_done, app, &app->recon_job,
+		      &err)) {
+		store_recon_end(app->store, run, "failed", 127, err.msg, app_wallclock(), NULL);
+		return reply_err(app, peer, req->id, &err);
+	}
+	log_msg(LOG_INFO, "reconstruction of sweep %lld started (run %lld, pid %d)", (long long)sweep, (long long)run,
+		(int)job_pid(app->recon_job));
+	server_reply(app->srv, peer->serial, req->id,
+		     json_pack("{s:I,s:I,s:i}", "run", (json_int_t)run, "sweep", (json_int_t)sweep, "pid",
+			       (int)job_pid(app->recon_job)));
+}
+
+static void cmd_recon_status(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	int64_t run = (int64_t)num_arg(req->root, "run", 0), sweep = (int64_t)num_arg(req->root, "sweep", 0);
+	if (!run && !sweep) {
+		if (!app->recon_run) {
+			acq_errf(&err, ACQ_E_NOTFOUND, "no reconstruction started since the daemon started; give sweep or run");
+			return reply_err(app, peer, req->id, &err);
+		}
+		run = app->recon_run;
+	}
+	json_t *r = store_recon_show(app->store, run, sweep, &err);
+	if (!r)
+		return reply_err(app, peer, req->id, &err);
+	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "run", r));
+}
+
+/* ---- export ---- */
+
+/* Open path for writing confined beneath the state directory: openat2(RESOLVE_BENEATH) refuses "..",
+ * absolute paths and symlinks that leave it, whatever the path's shape. fd or -1 with err. */
+static int open_confined(const char *state_dir, const char *path, struct acq_err *err)
+{
+	if (!path[0] || path[0] == '/' || strstr(path, ".."))
+		return acq_errf(err, ACQ_E_INVAL, "path \"%s\": expected a relative path under the state directory "
+				"without \"..\"", path);
+	int dfd = open(state_dir, O_PATH | O_DIRECTORY | O_CLOEXEC);
+	if (dfd < 0)
+		return acq_errf(err, ACQ_E_IO, "%s: %s", state_dir, strerror(errno));
+	struct open_how how = { .flags = O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NOFOLLOW, .mode = 0640,
+				.resolve = RESOLVE_BENEATH | RESOLVE_NO_MAGICLINKS };
+	int fd = (int)syscall(SYS_openat2, dfd, path, &how, sizeof how);
+	int e = errno;
+	close(dfd);
+	if (fd < 0)
+		return acq_errf(err, e == EXDEV || e == ELOOP ? ACQ_E_INVAL : ACQ_E_IO, "path \"%s\": %s%s", path,
+				strerror(e), e == EXDEV ? " (leaves the state directory)" : "");
+	return fd;
+}
+
+static void cmd_export(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	int64_t sweep = (int64_t)num_arg(req->root, "sweep", 0);
+	json_t *pathv = json_object_get(req->root, "path");
+	if (pathv && peer->role < PROTO_CONTROLLER) {
+		server_reply_error(app->srv, peer->serial, req->id, PROTO_E_FORBIDDEN,
+				   "export to a file needs a controller; observers get the CSV inline");
+		return;
+	}
+	char *buf = NULL;
+	size_t len = 0;
+	FILE *f = open_memstream(&buf, &len);
+	int nrows = 0;
+	int rc = f ? store_export_csv(app->store, sweep, f, &nrows, &err) : acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+	if (f)
+		fclose(f);
+	if (rc) {
+		free(buf);
+		return reply_err(app, peer, req->id, &err);
+	}
+	if (pathv) {
+		const char *path = json_string_value(pathv);
+		int fd = open_confined(app->conf->d.state_dir, path, &err);
+		if (fd < 0 || proto_write_all(fd, buf, len, &err)) {
+			if (fd >= 0)
+				close(fd);
+			free(buf);
+			return reply_err(app, peer, req->id, &err);
+		}
+		close(fd);
+		free(buf);
+		server_reply(app->srv, peer->serial, req->id,
+			     json_pack("{s:I,s:i,s:s,s:I}", "sweep", (json_int_t)sweep, "rows", nrows, "path", path, "bytes",
+				       (json_int_t)len));
+		return;
+	}
+	if (len > PROTO_MAX_LINE / 2) {
+		free(buf);
+		acq_errf(&err, ACQ_E_RANGE, "CSV of sweep %lld is %zu bytes: too large inline, give a path", (long long)sweep,
+			 len);
+		return reply_err(app, peer, req->id, &err);
+	}
+	server_reply(app->srv, peer->serial, req->id,
+		     json_pack("{s:I,s:i,s:s%}", "sweep", (json_int_t)sweep, "rows", nrows, "csv", buf, len));
+	free(buf);
+}
+
+/* ---- information ---- */
+static json_t *config_json(struct app *app, bool text)
+{
+	const struct conf *c = app->conf;
+	json_t *ctl = json_array(), *obs = json_array(), *notes = json_object();
+	for (int i = 0; i < c->d.ncontrollers; i++)
+		json_array_append_new(ctl, json_string(c->d.controllers[i]));
+	for (int i = 0; i < c->d.nobservers; i++)
+		json_array_append_new(obs, json_string(c->d.observers[i]));
+	for (int d = 0; d < CONF_DEV__COUNT; d++)
+		if (c->devnote[d][0])
+			json_object_set_new(notes, conf_dev_name((enum conf_dev)d), json_string(c->devnote[d]));
+	char mode[8];
+	snprintf(mode, sizeof mode, "%04o", (unsigned)c->d.socket_mode);
+	json_t *o = json_pack(
+		"{s:s,s:b,s:{s:s,s:s,s:s,s:s,s:s?,s:i,s:o,s:o,s:b,s:f},"
+		"s:{s:f,s:i,s:f,s:f,s:f,s:f,s:i,s:i,s:b,s:b},s:{s:s,s:f,s:i,s:s},s:o}",
+		"path", c->path, "sim", c->have_sim,
+		"daemon", "state_dir", c->d.state_dir, "database", c->d.database, "socket", c->d.socket_path, "socket_mode",
+		mode, "socket_group", c->d.socket_group, "tcp_port", c->d.tcp_port, "controllers", ctl, "observers", obs,
+		"auto_resume", c->d.auto_resume, "device_retry_s", c->d.device_retry_s,
+		"sweep", "move_timeout_s", c->sweep.move_timeout_s, "move_retries", c->sweep.move_retries, "extra_settle_s",
+		c->sweep.extra_settle_s, "target_peak", c->sweep.target_peak, "min_integration_ms",
+		c->sweep.min_integration_ms, "max_integration_ms", c->sweep.max_integration_ms, "averages",
+		c->sweep.averages, "dark_every", c->sweep.dark_every, "auto_resume_faults", c->sweep.auto_resume_faults,
+		"auto_recon", c->sweep.auto_recon,
+		"recon", "program", c->recon.program, "timeout_s", c->recon.timeout_s, "threads", c->recon.threads,
+		"output_dir", c->recon.output_dir,
+		"device_notes", notes);
+	if (o && text)
+		json_object_set_new(o, "text", json_string(c->text));
+	return o;
+}
+
+static json_t *status_json(struct app *app)
+{
+	int clients = 0, watchers = 0;
+	server_counts(app->srv, &clients, &watchers);
+	char line[256];
+	app_status_line(app, line, sizeof line);
+	return json_pack("{s:s,s:s,s:i,s:f,s:f,s:o,s:{s:i,s:i},s:i,s:i,s:{s:b,s:I,s:I},s:s,s:b}", "daemon", "running",
+			 "version", ACQ_VERSION, "pid", (int)getpid(), "uptime_s", loop_now(app->lp) - app->started_mono,
+			 "started_at", app->started_wall, "sweep", progress_json(app), "devices", "available",
+			 devices_available(app->dev), "total", CONF_DEV__COUNT, "clients", clients, "watchers", watchers,
+			 "recon", "running", app->recon_job != NULL, "run", (json_int_t)app->recon_run, "sweep",
+			 (json_int_t)app->recon_sweep, "summary", line, "sim", app->have_sim);
+}
+
+void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct app *app = ctx;
+	const char *cmd = req->cmd;
+	struct acq_err err = { 0 };
+	if (!strcmp(cmd, "version")) {
+		server_reply(app->srv, peer->serial, req->id,
+			     json_pack("{s:s,s:i,s:s,s:i,s:s}", "version", ACQ_VERSION, "protocol", PROTO_VERSION, "server",
+				       "acquisitiond", "schema", store_schema_version(app->store), "role",
+				       peer->role == PROTO_CONTROLLER ? "controller" : "observer"));
+	} else if (!strcmp(cmd, "status")) {
+		server_reply(app->srv, peer->serial, req->id, status_json(app));
+	} else if (!strcmp(cmd, "devices")) {
+		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_json(app->dev)));
+	} else if (!strcmp(cmd, "config")) {
+		server_reply(app->srv, peer->serial, req->id,
+			     json_pack("{s:o}", "config", config_json(app, json_is_true(json_object_get(req->root, "text")))));
+	} else if (!strcmp(cmd, "plan")) {
+		acq_errf(&err, ACQ_E_UNSUPPORTED, "plan: the planner library (daemon/plan.h) is not there yet; "
+			 "'acqctl plan FILE' runs the local dry run when it lands");
+		reply_err(app, peer, req->id, &err);
+	} else if (!strncmp(cmd, "sweep.", 6)) {
+		cmd_sweep(app, peer, req);
+	} else if (!strcmp(cmd, "move")) {
+		cmd_move(app, peer, req);
+	} else if (!strcmp(cmd, "measure")) {
+		cmd_measure(app, peer, req, "sample");
+	} else if (!strcmp(cmd, "dark") || !strcmp(cmd, "reference")) {
+		cmd_measure(app, peer, req, cmd);
+	} else if (!strcmp(cmd, "recon.start")) {
+		cmd_recon_start(app, peer, req);
+	} else if (!strcmp(cmd, "recon.status")) {
+		cmd_recon_status(app, peer, req);
+	} else if (!strcmp(cmd, "export")) {
+		cmd_export(app, peer, req);
+	} else if (!strcmp(cmd, "reload")) {
+		if (app_reload(app, &err))
+			reply_err(app, peer, req->id, &err);
+		else
+			server_reply(app->srv, peer->serial, req->id, json_pack("{s:s}", "config", app->conf->path));
+	} else {
+		server_reply_error(app->srv, peer->serial, req->id, PROTO_E_INTERNAL, "command in the table but not handled");
+	}
+}

@@ -1,0 +1,59 @@
+/* devices: the daemon's device instances (three arm axes, spectrometer, laser) — opened at start without
+ * requiring any to be present, reconnected on a timer while absent, reported by state; plus manual
+ * move/measure used by the `move`, `measure`, `dark`, `reference` commands. The sweep executor takes the
+ * handles from here and reports faults with devices_lost(). */
+#ifndef DEVICES_H
+#define DEVICES_H
+
+#include <jansson.h>
+#include <stdbool.h>
+
+#include "config/acq_err.h"
+#include "daemon/conf.h"
+
+struct loop;
+struct store;
+struct devices;
+struct axis;
+struct spectro;
+struct laser;
+
+/* Called on the loop when a device becomes available (up) or unavailable, with a reason. */
+typedef void (*devices_notify_fn)(void *ctx, enum conf_dev dev, bool up, const char *why);
+
+/* Open every configured device (failures leave it unavailable and retried every daemon.device_retry_s).
+ * The configuration must outlive the devices. 0 or -1 (only for out of memory). */
+int devices_init(struct loop *lp, struct store *st, const struct conf *c, devices_notify_fn notify, void *ctx,
+		 double (*wallclock)(void), struct devices **out, struct acq_err *err);
+/* Safe stop (laser off, arms stopped), close every device, free. NULL is fine. */
+void devices_finish(struct devices *dv);
+/* Laser emission off and every arm stopped, best effort; returns the number of failures. */
+int devices_safe_stop(struct devices *dv);
+
+/* The open axis of slot d (CONF_DEV_LASER_THETA..DETECTOR_PHI), or NULL when unavailable. */
+struct axis *devices_axis(struct devices *dv, enum conf_dev d);
+/* The open spectrometer, or NULL. */
+struct spectro *devices_spectro(struct devices *dv);
+/* The open laser, or NULL. */
+struct laser *devices_laser(struct devices *dv);
+/* Database id of the open spectrometer's identity/calibration, 0 if unknown. */
+long long devices_spectrometer_id(const struct devices *dv);
+/* A user of a handle saw it fail: close it, mark it unavailable with why, and retry on the timer. */
+void devices_lost(struct devices *dv, enum conf_dev d, const char *why);
+/* Number of devices available now. */
+int devices_available(const struct devices *dv);
+/* JSON array: {name, configured, available, state, note, identity{...}, position_deg, limits_deg}. */
+json_t *devices_json(struct devices *dv);
+/* True while a manual move or measurement runs. */
+bool devices_busy(const struct devices *dv);
+
+/* Manual move to absolute angles (NaN: leave that axis). Soft limits are checked first (ACQ_E_RANGE);
+ * a missing axis gives ACQ_E_UNSUPPORTED. done(ctx, ok, err, result) is called once from the loop. */
+typedef void (*devices_done_fn)(void *ctx, int rc, const struct acq_err *err, json_t *result);
+int devices_move(struct devices *dv, const double target[3], devices_done_fn done, void *ctx, struct acq_err *err);
+/* One spectrum of kind "sample", "dark" (laser off first) or "reference", stored in the database;
+ * result {spectrum_id, npix, peak, saturated, integration_ms, averages}. 0 (started) or -1. */
+int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages,
+		    devices_done_fn done, void *ctx, struct acq_err *err);
+
+#endif
