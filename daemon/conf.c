@@ -289,8 +289,11 @@ static int parse_sweep(struct conf_sweep *s, struct yc_node *node, struct acq_er
 	    yc_int(node, "averages", false, 1, 10000, &avg, err) ||
 	    yc_int(node, "dark_every", false, 0, 100000, &dark, err) ||
 	    yc_bool(node, "auto_resume_faults", false, &s->auto_resume_faults, err) ||
-	    yc_bool(node, "auto_recon", false, &s->auto_recon, err) ||
-	    yc_check_unknown(node, "sweep", err))
+	    yc_bool(node, "auto_recon", false, &s->auto_recon, err))
+		return -1;
+	s->acquisition = yc_get(node, "acquisition"); /* validated by the sweep executor (sweep_init) */
+	s->calibration = yc_get(node, "calibration");
+	if (yc_check_unknown(node, "sweep", err))
 		return -1;
 	if (s->min_integration_ms > s->max_integration_ms)
 		return yc_errf(err, yc_get(node, "min_integration_ms"),

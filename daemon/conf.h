@@ -47,6 +47,8 @@ struct conf_sweep {
 	int dark_every;            /* a dark every N points (0 = once per incidence angle) */
 	bool auto_resume_faults;   /* resume by itself when a faulted device comes back */
 	bool auto_recon;           /* start the reconstruction when a sweep completes */
+	struct yc_node *acquisition; /* sweep.acquisition mapping or NULL (parsed by daemon/executor.c) */
+	struct yc_node *calibration; /* sweep.calibration mapping or NULL (parsed by daemon/calib.c) */
 };
 
 struct conf_recon {

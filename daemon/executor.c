@@ -273,6 +273,8 @@ static void fault(struct ex *x, int dev, const struct acq_err *err)
 	x->stats.faults++;
 	snprintf(x->fault_msg, sizeof x->fault_msg, "%s", err && err->msg[0] ? err->msg : "device error");
 	x->fault_dev = dev;
+	if (x->ops.lost)
+		x->ops.lost(x->octx, dev, err);
 	safe_stop(x);
 	reset_acq(x);
 	if (dev == EX_DEV_SPECTRO)
@@ -546,6 +548,14 @@ int ex_start(struct ex *x, int first_step, bool resumed, double now, struct acq_
 		return acq_errf(err, ACQ_E_RANGE, "sweep: first step %d outside [0, %d]", first_step, x->nsteps);
 	x->cur = first_step;
 	x->stats.points_done = first_step;
+	if (x->st) {
+		static _Thread_local float grid[CALIB_MAX_GRID];
+		int n = calib_grid_size(&x->cfg.cal);
+		for (int k = 0; k < n; k++)
+			grid[k] = (float)(x->cfg.cal.grid_min_nm + k * x->cfg.cal.grid_step_nm);
+		if (store_sweep_set_grid(x->st, x->sweep_id, grid, n, err))
+			return -1;
+	}
 	x->state = EX_RUNNING;
 	x->point_avg_s = NAN;
 	set_db_state(x, "running");
@@ -1358,6 +1368,60 @@ double ex_step(struct ex *x, double now)
 			return x->wake;
 	}
 	return now;
+}
+
+/* ---- configuration and shutdown ---------------------------------------------------------------- */
+
+int ex_cfg_parse(struct yc_node *acq, struct yc_node *cal, struct ex_cfg *c, struct acq_err *err)
+{
+	struct ex_cfg q = *c;
+	if (acq) {
+		if (exp_policy_parse(acq, &q.pol, err))
+			return -1;
+		long long retries = q.fault_retries, attempts = q.max_point_attempts;
+		struct yc_node *pose = yc_get(acq, "reference_pose");
+		if (yc_bool(acq, "take_reference", false, &q.take_reference, err) ||
+		    yc_bool(acq, "pause_after_reference", false, &q.pause_after_reference, err) ||
+		    yc_int(acq, "fault_retries", false, 0, 1000, &retries, err) ||
+		    yc_double(acq, "fault_backoff_s", false, 0.001, 3600, &q.fault_backoff_s, err) ||
+		    yc_double(acq, "fault_backoff_max_s", false, 0.001, 86400, &q.fault_backoff_max_s, err) ||
+		    yc_double(acq, "ladder_ratio", false, 1.01, 10, &q.ladder_ratio, err) ||
+		    yc_double(acq, "poll_s", false, 1e-4, 10, &q.poll_s, err) ||
+		    yc_int(acq, "max_point_attempts", false, 1, 20, &attempts, err) ||
+		    yc_double(acq, "max_invalid_frac", false, 0, 1, &q.max_invalid_frac, err))
+			return -1;
+		if (pose) {
+			double v[3];
+			if (yc_expect_seq(pose, "sweep.acquisition.reference_pose", err))
+				return -1;
+			if (pose->n != 3)
+				return yc_errf(err, pose, "reference_pose: expected [laser_theta, detector_theta, detector_phi]");
+			for (int i = 0; i < 3; i++)
+				if (yc_node_double(pose->items[i], "reference_pose angle", -360, 720, &v[i], err))
+					return -1;
+			q.ref_pose = (struct plan_pos){ v[0], v[1], v[2] };
+		}
+		if (yc_check_unknown(acq, "sweep.acquisition", err))
+			return -1;
+		q.fault_retries = (int)retries;
+		q.max_point_attempts = (int)attempts;
+	}
+	if (cal && calib_cfg_parse(cal, &q.cal, err))
+		return -1;
+	*c = q;
+	return 0;
+}
+
+void ex_shutdown(struct ex *x, const char *why)
+{
+	if (!x || !(x->state == EX_RUNNING || x->state == EX_SUSPENDED || x->state == EX_PAUSED))
+		return;
+	safe_stop(x);
+	reset_acq(x);
+	x->state = EX_PAUSED;
+	set_db_state(x, "paused");
+	event(x, "pause", NULL, "%s: the sweep stays resumable after point %d of %d", why && *why ? why : "daemon stopping",
+	      x->cur, x->nsteps);
 }
 #else
 typedef int executor_waits_for_store_and_plan;

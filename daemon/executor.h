@@ -57,6 +57,8 @@ struct ex_ops {
 	int (*spectro_stop)(void *ctx, struct acq_err *err);
 	const struct spectro_info *(*spectro_info)(void *ctx); /* NULL while the spectrometer is absent */
 	double (*wall)(void *ctx); /* Unix seconds for the records (NULL: the system clock) */
+	/* A device operation failed with err (may be NULL): the owner may close and reconnect it. */
+	void (*lost)(void *ctx, int dev, const struct acq_err *err);
 };
 
 /* Where the executor reports: every interruption and state change (kind: start, pause, resume, fault,
@@ -109,6 +111,14 @@ struct ex *ex_new(const struct ex_cfg *cfg, const struct ex_ops *ops, void *ops_
 		  const struct plan_result *plan, struct acq_err *err);
 /* Stop motion, laser off (best effort), free. NULL is fine. */
 void ex_free(struct ex *x, double now);
+/* Parse the `sweep.acquisition` mapping (exposure policy keys plus reference_pose [θL, θD, φD],
+ * take_reference, pause_after_reference, fault_retries, fault_backoff_s, fault_backoff_max_s, ladder_ratio,
+ * poll_s, max_point_attempts, max_invalid_frac) and `sweep.calibration` (calib_cfg_parse) onto c. Either node
+ * may be NULL. 0 or -1 with file:line:col. */
+int ex_cfg_parse(struct yc_node *acq, struct yc_node *cal, struct ex_cfg *c, struct acq_err *err);
+/* Daemon shutdown with the sweep unfinished: stop, laser off, leave it 'paused' in the store with an event
+ * so it can be resumed after its last committed point. */
+void ex_shutdown(struct ex *x, const char *why);
 
 /* Start from the first pending point (first_step): 0 for a new sweep; after a crash, the step after the
  * last committed point — positions are then verified (re-homed when unknown) before the first move. */
