@@ -1420,8 +1420,15 @@ void ex_shutdown(struct ex *x, const char *why)
 	reset_acq(x);
 	x->state = EX_PAUSED;
 	set_db_state(x, "paused");
-	event(x, "pause", NULL, "%s: the sweep stays resumable after point %d of %d", why && *why ? why : "daemon stopping",
+	event(x, "stop", NULL, "%s: the sweep stays resumable after point %d of %d", why && *why ? why : "daemon stopping",
 	      x->cur, x->nsteps);
+}
+
+void ex_hold(struct ex *x, const char *why)
+{
+	if (!x || x->state != EX_RUNNING)
+		return;
+	pause_now(x, false, "still paused after a restart: %s", why && *why ? why : "paused by the operator");
 }
 #else
 typedef int executor_waits_for_store_and_plan;

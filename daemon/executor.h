@@ -119,6 +119,8 @@ int ex_cfg_parse(struct yc_node *acq, struct yc_node *cal, struct ex_cfg *c, str
 /* Daemon shutdown with the sweep unfinished: stop, laser off, leave it 'paused' in the store with an event
  * so it can be resumed after its last committed point. */
 void ex_shutdown(struct ex *x, const char *why);
+/* After ex_start(resumed): stay paused (the sweep was paused for the operator before the restart), with why. */
+void ex_hold(struct ex *x, const char *why);
 
 /* Start from the first pending point (first_step): 0 for a new sweep; after a crash, the step after the
  * last committed point — positions are then verified (re-homed when unknown) before the first move. */

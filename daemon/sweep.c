@@ -768,7 +768,7 @@ int sweep_pause(struct sweep *sw, struct acq_err *err)
 
 /* Resume interrupted sweep id from the store: re-plan its stored plan text (deterministic), check it matches
  * the stored points, discard a partial point and start after the last committed one. */
-static int recover_id(struct sweep *sw, int64_t id, struct acq_err *err)
+static int recover_id(struct sweep *sw, int64_t id, bool hold, struct acq_err *err)
 {
 	json_t *js = store_sweep_show(sw->env.store, id, false, err);
 	if (!js)
@@ -808,6 +808,19 @@ static int recover_id(struct sweep *sw, int64_t id, struct acq_err *err)
 	sw->started_wall = sw->env.wallclock();
 	if (ex_start(sw->ex, oi, true, loop_now(sw->env.loop), err))
 		goto out;
+	if (hold && !strcmp(state, "paused")) {
+		/* Paused for the operator (sample swap, fault, pause command) before the restart: stays paused. */
+		json_t *evs = json_object_get(js, "events");
+		for (size_t i = 0; i < json_array_size(evs); i++) {
+			json_t *e = json_array_get(evs, i);
+			const char *k = json_string_value(json_object_get(e, "kind"));
+			if (!k || (strcmp(k, "pause") && strcmp(k, "resume") && strcmp(k, "start") && strcmp(k, "stop")))
+				continue;
+			if (!strcmp(k, "pause"))
+				ex_hold(sw->ex, json_string_value(json_object_get(e, "message")));
+			break;
+		}
+	}
 	snapshot(sw);
 	kick(sw);
 	rc = 0;
@@ -833,7 +846,7 @@ int sweep_resume(struct sweep *sw, int64_t id, struct acq_err *err)
 		return -1;
 	if (!id)
 		return acq_errf(err, ACQ_E_NOTFOUND, "no paused or interrupted sweep to resume");
-	return recover_id(sw, id, err);
+	return recover_id(sw, id, false, err);
 }
 
 int sweep_abort(struct sweep *sw, struct acq_err *err)
@@ -856,7 +869,7 @@ int sweep_recover(struct sweep *sw, int64_t *id, struct acq_err *err)
 		return -1;
 	if (!found)
 		return 0;
-	if (recover_id(sw, found, err))
+	if (recover_id(sw, found, true, err))
 		return -1;
 	*id = found;
 	return 0;
