@@ -49,6 +49,7 @@ struct ex {
 	enum phase phase;
 	int cur;                     /* step being worked on */
 	bool in_reference;           /* the current target is the reference pose */
+	bool power_set;              /* the laser's power was set since the last laser fault */
 	bool have_ref;
 	bool first_move;             /* next move starts from the measured position (plan_move) */
 	bool pause_requested;
@@ -92,6 +93,7 @@ struct ex {
 	struct exp_avg *avg;
 
 	/* faults */
+	int point_faults;            /* faults since the current point started (reset when it commits) */
 	int fault_dev;
 	int fault_attempts;
 	double backoff, retry_at;
@@ -121,6 +123,8 @@ void ex_cfg_defaults(struct ex_cfg *c)
 	c->take_reference = true;
 	c->pause_after_reference = true;
 	c->max_point_attempts = 3;
+	c->max_point_faults = 6;
+	c->laser_power_pct = 100.0;
 	c->max_invalid_frac = 0.005;
 	c->db_path = NULL;
 }
@@ -192,9 +196,36 @@ static void clear_pending(struct ex *x)
 	x->npend = 0;
 }
 
+/* A point measured again keeps the darks it took (they stay in the cache and must reach the store). */
+static void drop_exposures(struct ex *x)
+{
+	int k = 0;
+	for (int i = 0; i < x->npend; i++) {
+		if (!strcmp(x->pend[i].kind, "dark"))
+			x->pend[k++] = x->pend[i];
+		else
+			free(x->pend[i].frame);
+	}
+	x->npend = k;
+	x->have_t0 = false;
+	x->probe_no = 0;
+	x->ntimes = 0;
+	x->e = 0;
+	x->shot_in_flight = false;
+}
+
+/* Pending spectra thrown away: their darks leave the cache too (every dark used is a stored dark). */
+static void discard_pending(struct ex *x)
+{
+	for (int i = 0; i < x->npend; i++)
+		if (!strcmp(x->pend[i].kind, "dark"))
+			exp_dark_forget(x->darks, x->pend[i].frame->meas.integration_ms);
+	clear_pending(x);
+}
+
 static void reset_acq(struct ex *x)
 {
-	clear_pending(x);
+	discard_pending(x);
 	x->have_t0 = false;
 	x->probe_no = 0;
 	x->ntimes = 0;
@@ -281,8 +312,22 @@ static void fault(struct ex *x, int dev, const struct acq_err *err)
 		exp_darks_clear(x->darks); /* a reconnected spectrometer starts afresh */
 	if (dev <= EX_DEV_DETECTOR_PHI)
 		x->known_valid = false;
+	if (dev == EX_DEV_LASER)
+		x->power_set = false;
 	event(x, "fault", dev_names[dev], "%s: %s (%s)", dev_names[dev], x->fault_msg,
 	      acq_errname(err ? err->code : ACQ_E_DEVICE));
+	if (err && (err->code == ACQ_E_RANGE || err->code == ACQ_E_INVAL || err->code == ACQ_E_UNSUPPORTED)) {
+		/* Not a device that went away: retrying cannot help. */
+		pause_now(x, true, "%s refused the operation at point %d: %s; fix the plan or the limits, then resume",
+			  dev_names[dev], x->cur, x->fault_msg);
+		return;
+	}
+	if (++x->point_faults > x->cfg.max_point_faults) {
+		pause_now(x, true, "%d faults at point %d (last on %s: %s): paused for the operator", x->point_faults - 1,
+			  x->cur, dev_names[dev], x->fault_msg);
+		x->point_faults = 0;
+		return;
+	}
 	if (!x->cfg.auto_resume_faults) {
 		pause_now(x, true, "fault on %s: %s; resume when it is fixed", dev_names[dev], x->fault_msg);
 		return;
@@ -653,26 +698,50 @@ static bool near_pos(const struct plan_pos *a, const struct plan_pos *b)
 
 /* Waypoints to the current target: the planner's own when coming from the previous planned point, else a
  * fresh collision-free path from where the arms are. */
+/* φ is periodic: bring a detector azimuth inside the axis's soft limits by whole turns when it is outside. */
+static double wrap_phi(const struct ex *x, double phi)
+{
+	if (!x->ops.limits)
+		return phi;
+	double lo = -INFINITY, hi = INFINITY;
+	x->ops.limits(x->octx, EX_DEV_DETECTOR_PHI, &lo, &hi);
+	for (int i = 0; i < 4 && phi > hi; i++)
+		phi -= 360.0;
+	for (int i = 0; i < 4 && phi < lo; i++)
+		phi += 360.0;
+	return phi;
+}
+
 static int plan_path(struct ex *x)
 {
-	const struct plan_pos *t = target_pos(x);
+	struct plan_pos t = *target_pos(x);
+	t.det_phi = wrap_phi(x, t.det_phi);
 	x->n_wps = 0;
 	x->wp = 0;
 	if (!x->first_move && !x->in_reference && x->cur > 0) {
 		const struct plan_step *s = &x->plan->steps[x->cur];
-		for (size_t i = 0; i < s->n_wp && i < PLAN_MAX_WP + 1; i++)
-			x->wps[x->n_wps++] = x->plan->wps[s->first_wp + i];
-		if (x->n_wps > 0)
+		bool inside = true;
+		for (size_t i = 0; i < s->n_wp && i < PLAN_MAX_WP + 1; i++) {
+			x->wps[x->n_wps] = x->plan->wps[s->first_wp + i];
+			double p = x->wps[x->n_wps].pos.det_phi;
+			inside = inside && wrap_phi(x, p) == p;
+			x->n_wps++;
+		}
+		if (x->n_wps > 0 && inside)
 			return 0;
+		x->n_wps = 0; /* the planner's path leaves the soft limits: find another from where the arms are */
 	}
-	if (x->known_valid && near_pos(&x->known, t))
+	if (x->known_valid && near_pos(&x->known, &t))
 		return 0;
 	size_t n = 0;
 	struct plan_wp w[PLAN_MAX_WP];
-	if (plan_move(&x->geom, &x->known, t, w, &n) < 0)
+	if (plan_move(&x->geom, &x->known, &t, w, &n) < 0)
 		return -1;
-	for (size_t i = 0; i < n; i++)
+	for (size_t i = 0; i < n; i++) {
+		if (wrap_phi(x, w[i].pos.det_phi) != w[i].pos.det_phi)
+			return -1;
 		x->wps[x->n_wps++] = w[i];
+	}
 	return 0;
 }
 
@@ -698,11 +767,12 @@ static void run_verify(struct ex *x, double now)
 {
 	struct acq_err err = { 0 };
 	set_phase_text(x, "verifying positions");
-	bool any_home = false;
 	double pos[3];
+	bool homed[3];
 	for (int a = 0; a < 3; a++) {
-		bool homed = true, alarm = false;
-		if (x->ops.position(x->octx, a, &pos[a], &homed, &alarm, &err)) {
+		bool alarm = false;
+		homed[a] = true;
+		if (x->ops.position(x->octx, a, &pos[a], &homed[a], &alarm, &err)) {
 			fault(x, a, &err);
 			return;
 		}
@@ -713,17 +783,29 @@ static void run_verify(struct ex *x, double now)
 			}
 			event(x, "info", dev_names[a], "alarm cleared on %s before moving", dev_names[a]);
 		}
-		if (!homed) {
-			if (x->ops.home_begin(x->octx, a, now, &err)) {
-				fault(x, a, &err);
-				return;
-			}
-			x->homing[a] = true;
-			any_home = true;
-			event(x, "info", dev_names[a], "%s not homed: homing", dev_names[a]);
-		}
 	}
-	if (any_home) {
+	/* Homing, when configured: one axis at a time, only when its way home is collision-free. */
+	for (int a = 0; a < 3 && x->cfg.home_unhomed; a++) {
+		if (homed[a])
+			continue;
+		struct plan_pos from = { pos[0], pos[1], pos[2] }, to = from;
+		if (a == 0)
+			to.laser_theta = x->cfg.home_deg[0];
+		else if (a == 1)
+			to.det_theta = x->cfg.home_deg[1];
+		else
+			to.det_phi = x->cfg.home_deg[2];
+		if (!plan_seg_safe(&x->geom, &from, &to)) {
+			pause_now(x, false, "%s is not homed and homing it from (%.2f, %.2f, %.2f) could collide: home it by "
+				  "hand and resume", dev_names[a], pos[0], pos[1], pos[2]);
+			return;
+		}
+		if (x->ops.home_begin(x->octx, a, now, &err)) {
+			fault(x, a, &err);
+			return;
+		}
+		x->homing[a] = true;
+		event(x, "info", dev_names[a], "%s not homed: homing", dev_names[a]);
 		x->phase = PH_HOMING;
 		set_phase_text(x, "homing");
 		x->wake = now;
@@ -889,6 +971,11 @@ static int want_laser(struct ex *x, bool on, struct acq_err *err, int *dev)
 	*dev = EX_DEV_LASER;
 	if (on == x->stats.laser_on && !on)
 		return 0;
+	if (on && !x->power_set && x->ops.laser_power) {
+		if (x->ops.laser_power(x->octx, x->cfg.laser_power_pct, err))
+			return -1;
+		x->power_set = true;
+	}
 	if (on != x->stats.laser_on) {
 		if (x->ops.laser_set(x->octx, on, err))
 			return -1;
@@ -955,6 +1042,10 @@ static void after_shot(struct ex *x, double now)
 		fault(x, EX_DEV_SPECTRO, &err);
 		return;
 	}
+	if (!(f->meas.integration_ms > 0))
+		f->meas = x->meas; /* what was asked is what was measured */
+	if (!f->meas.averages)
+		f->meas.averages = x->meas.averages;
 	if (isfinite(f->temperature_c))
 		x->temperature = f->temperature_c;
 	if (x->shot != SHOT_DARK) {
@@ -1155,7 +1246,7 @@ static void commit_point(struct ex *x, double now)
 			event(x, "info", dev_names[EX_DEV_SPECTRO],
 			      "%d of %d pixels saturated at %.3g ms: measuring the point again", bad, x->nroi, x->times[0]);
 			double t0 = x->times[0];
-			reset_acq(x);
+			drop_exposures(x);
 			x->t_last = fmax(x->cfg.pol.min_ms, t0 / x->cfg.pol.max_step);
 			x->wake = now;
 			return;
@@ -1179,7 +1270,7 @@ static void commit_point(struct ex *x, double now)
 			      "exposure %.3g ms reached %.0f counts, far below the target %.0f: measuring the point again",
 			      x->times[0], peak * x->times[0], target);
 			double t0 = x->times[0];
-			reset_acq(x);
+			drop_exposures(x);
 			x->t_last = t0;
 			x->wake = now;
 			return;
@@ -1261,6 +1352,7 @@ static void commit_point(struct ex *x, double now)
 		x->stats.spectra++;
 	}
 	clear_pending(x);
+	x->point_faults = 0;
 	x->stats.points_done++;
 	x->cur++;
 	progress(x, now);
@@ -1388,8 +1480,20 @@ int ex_cfg_parse(struct yc_node *acq, struct yc_node *cal, struct ex_cfg *c, str
 		    yc_double(acq, "ladder_ratio", false, 1.01, 10, &q.ladder_ratio, err) ||
 		    yc_double(acq, "poll_s", false, 1e-4, 10, &q.poll_s, err) ||
 		    yc_int(acq, "max_point_attempts", false, 1, 20, &attempts, err) ||
-		    yc_double(acq, "max_invalid_frac", false, 0, 1, &q.max_invalid_frac, err))
+		    yc_double(acq, "max_invalid_frac", false, 0, 1, &q.max_invalid_frac, err) ||
+		    yc_bool(acq, "home_unhomed", false, &q.home_unhomed, err) ||
+		    yc_double(acq, "laser_power_pct", false, 0, 100, &q.laser_power_pct, err))
 			return -1;
+		struct yc_node *home = yc_get(acq, "home_deg");
+		if (home) {
+			if (yc_expect_seq(home, "sweep.acquisition.home_deg", err))
+				return -1;
+			if (home->n != 3)
+				return yc_errf(err, home, "home_deg: expected [laser_theta, detector_theta, detector_phi]");
+			for (int i = 0; i < 3; i++)
+				if (yc_node_double(home->items[i], "home_deg angle", -360, 720, &q.home_deg[i], err))
+					return -1;
+		}
 		if (pose) {
 			double v[3];
 			if (yc_expect_seq(pose, "sweep.acquisition.reference_pose", err))

@@ -50,6 +50,7 @@ struct ex_ops {
 	/* Re-establish a device and check it answers (bounded; the executor schedules the backoff). */
 	int (*reconnect)(void *ctx, int dev, struct acq_err *err);
 	int (*laser_set)(void *ctx, bool on, struct acq_err *err);
+	int (*laser_power)(void *ctx, double pct, struct acq_err *err); /* NULL: power left as it is */
 	/* Laser state: emission on, interlock closed and no fault. */
 	int (*laser_state)(void *ctx, bool *emission, bool *ready, struct acq_err *err);
 	int (*spectro_start)(void *ctx, const struct spectro_meas *m, double now, struct acq_err *err);
@@ -57,6 +58,8 @@ struct ex_ops {
 	int (*spectro_stop)(void *ctx, struct acq_err *err);
 	const struct spectro_info *(*spectro_info)(void *ctx); /* NULL while the spectrometer is absent */
 	double (*wall)(void *ctx); /* Unix seconds for the records (NULL: the system clock) */
+	/* Soft limits of an axis in degrees (NULL: no limits known). */
+	void (*limits)(void *ctx, int axis, double *min_deg, double *max_deg);
 	/* A device operation failed with err (may be NULL): the owner may close and reconnect it. */
 	void (*lost)(void *ctx, int dev, const struct acq_err *err);
 };
@@ -73,6 +76,7 @@ struct ex_sink {
 struct ex_cfg {
 	struct exp_policy pol;
 	struct calib_cfg cal;
+	double laser_power_pct;      /* set before the first emission and after a laser fault */
 	bool fixed_integration;      /* the plan fixes the integration time: no probe, one exposure */
 	double fixed_ms;
 	double extra_settle_s;       /* wait after every move, on top of the controller's own settling */
@@ -84,7 +88,11 @@ struct ex_cfg {
 	struct plan_pos ref_pose;    /* where the reference (relative) or direct beam (absolute) is measured */
 	bool take_reference;         /* measure the reference at the start of the sweep */
 	bool pause_after_reference;  /* pause so the operator swaps the reference for the sample */
+	bool home_unhomed;           /* home an axis that reports not homed (one at a time, path checked); else
+				      * its feedback position is used as it is */
+	double home_deg[3];          /* where each axis ends after homing (for the collision check) */
 	int max_point_attempts;      /* acquisitions of one point spoiled by saturation before accepting it */
+	int max_point_faults;        /* faults on one point (each recovered) before pausing for the operator */
 	double max_invalid_frac;     /* saturated share of the grid range that spoils an acquisition */
 	const char *db_path;         /* the database file, to reload the reference on resume (read-only) */
 };
@@ -113,7 +121,7 @@ struct ex *ex_new(const struct ex_cfg *cfg, const struct ex_ops *ops, void *ops_
 void ex_free(struct ex *x, double now);
 /* Parse the `sweep.acquisition` mapping (exposure policy keys plus reference_pose [θL, θD, φD],
  * take_reference, pause_after_reference, fault_retries, fault_backoff_s, fault_backoff_max_s, ladder_ratio,
- * poll_s, max_point_attempts, max_invalid_frac) and `sweep.calibration` (calib_cfg_parse) onto c. Either node
+ * poll_s, max_point_attempts, max_invalid_frac, home_unhomed, home_deg, laser_power_pct) and `sweep.calibration` (calib_cfg_parse) onto c. Either node
  * may be NULL. 0 or -1 with file:line:col. */
 int ex_cfg_parse(struct yc_node *acq, struct yc_node *cal, struct ex_cfg *c, struct acq_err *err);
 /* Daemon shutdown with the sweep unfinished: stop, laser off, leave it 'paused' in the store with an event

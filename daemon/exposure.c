@@ -345,6 +345,13 @@ const struct exp_dark *exp_dark_store(struct exp_darks *d, const struct exp_avg 
 	return k;
 }
 
+void exp_dark_forget(struct exp_darks *d, double t_ms)
+{
+	int i = dark_slot(d, t_ms);
+	if (i >= 0)
+		d->used[i] = false;
+}
+
 const char *exp_dark_need_name(enum exp_dark_need n)
 {
 	switch (n) {

@@ -132,6 +132,8 @@ enum exp_dark_need exp_dark_check(const struct exp_darks *d, const struct exp_po
 const struct exp_dark *exp_dark_find(const struct exp_darks *d, double t_ms);
 /* Store (or replace) the dark at a->t_ms from an average; taken at now. Returns the stored dark. */
 const struct exp_dark *exp_dark_store(struct exp_darks *d, const struct exp_avg *a, double now);
+/* Forget the dark at t_ms (it was never stored, so it must not be used). */
+void exp_dark_forget(struct exp_darks *d, double t_ms);
 /* Short name of a dark decision ("fresh", "missing", "aged", "temperature"). */
 const char *exp_dark_need_name(enum exp_dark_need n);
 

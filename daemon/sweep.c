@@ -120,6 +120,15 @@ static int o_laser_set(void *ctx, bool on, struct acq_err *err)
 	return laser_set_emission(l, on, err);
 }
 
+static int o_laser_power(void *ctx, double pct, struct acq_err *err)
+{
+	struct sweep *sw = ctx;
+	struct laser *l = devices_laser(sw->env.devices);
+	if (!l)
+		return acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable");
+	return laser_set_power(l, pct, err);
+}
+
 static int o_laser_state(void *ctx, bool *emission, bool *ready, struct acq_err *err)
 {
 	struct sweep *sw = ctx;
@@ -200,12 +209,20 @@ static void o_lost(void *ctx, int dev, const struct acq_err *err)
 			devices_lost(sw->env.devices, (enum conf_dev)dev, err ? err->msg : "device error");
 }
 
+static void o_limits(void *ctx, int a, double *lo, double *hi)
+{
+	struct sweep *sw = ctx;
+	const struct axis_cfg *c = a >= 0 && a < 3 ? sw->env.conf->axis[a] : NULL;
+	if (c)
+		axis_cfg_limits(c, lo, hi);
+}
+
 static const struct ex_ops dev_ops = {
 	.move_begin = o_move_begin, .move_step = o_move_step, .next_poll = o_next_poll, .stop = o_stop,
 	.position = o_position, .home_begin = o_home_begin, .alarm_reset = o_alarm_reset, .reconnect = o_reconnect,
-	.laser_set = o_laser_set, .laser_state = o_laser_state, .spectro_start = o_spectro_start,
+	.laser_set = o_laser_set, .laser_power = o_laser_power, .laser_state = o_laser_state, .spectro_start = o_spectro_start,
 	.spectro_fetch = o_spectro_fetch, .spectro_stop = o_spectro_stop, .spectro_info = o_spectro_info,
-	.wall = o_wall, .lost = o_lost,
+	.wall = o_wall, .lost = o_lost, .limits = o_limits,
 };
 
 /* ---- events --------------------------------------------------------------------------------------- */
@@ -488,12 +505,18 @@ static void recon_next(struct sweep *sw)
 		sw->rstage++;
 	}
 	const char *state = sw->recon_failed ? "failed" : "succeeded";
-	char summary[512];
-	snprintf(summary, sizeof summary, "fit, merl, dhr, render: %d step(s) failed", sw->recon_failed);
+	char summary[8192] = "";
+	size_t n = 0;
+	for (int i = 0; i < RC__COUNT; i++) {
+		bool ok = !access(sw->files[i], R_OK);
+		n += (size_t)snprintf(summary + n, sizeof summary - n, "%s%s %s", i ? "; " : "", rc_kinds[i],
+				      ok ? sw->files[i] : "(not produced)");
+		if (n >= sizeof summary)
+			break;
+	}
 	store_recon_end(sw->env.store, sw->run_id, state, sw->recon_failed, summary, sw->env.wallclock(), NULL);
-	recon_event(sw, sw->recon_failed ? "info" : "complete",
-		    "reconstruction %s: model %s, MERL table %s, DHR %s (plot %s/dhr.png), preview %s", state,
-		    sw->files[RC_FIT], sw->files[RC_MERL], sw->files[RC_DHR], sw->outdir, sw->files[RC_RENDER]);
+	recon_event(sw, sw->recon_failed ? "info" : "complete", "reconstruction %s (%d of %d steps failed): %s", state,
+		    sw->recon_failed, RC__COUNT, summary);
 }
 
 /* The sweep completed: CSV into the state directory, then the reconstruction chain if wanted and present. */

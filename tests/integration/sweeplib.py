@@ -239,7 +239,11 @@ def sweep_row(bench, sid):
     return r.get("sweep", r)
 
 
-def start_sweep(bench, plan_text, name="test"):
+def start_sweep(bench, plan_text, name="test", white_first=True):
+    """Start a sweep; with white_first the white standard is put on the stage first (the executor measures
+    the reference, then pauses for the sample: drive_to_end swaps it)."""
+    if white_first:
+        bench.ctl("sample white")
     c = bench.client()
     try:
         r = c.req("sweep.start", plan=plan_text, name=name)
