@@ -50,6 +50,7 @@ struct ex {
 	int cur;                     /* step being worked on */
 	bool in_reference;           /* the current target is the reference pose */
 	bool power_set;              /* the laser's power was set since the last laser fault */
+	bool laser_unknown;          /* after a (re)start: switch the laser off whatever we believe */
 	bool have_ref;
 	bool first_move;             /* next move starts from the measured position (plan_move) */
 	bool pause_requested;
@@ -580,6 +581,7 @@ out:
 
 static void begin_segment(struct ex *x, double now)
 {
+	x->laser_unknown = true;
 	x->phase = PH_VERIFY;
 	x->first_move = true;
 	x->wake = now;
@@ -813,11 +815,12 @@ static void run_verify(struct ex *x, double now)
 	}
 	x->known = (struct plan_pos){ pos[0], pos[1], pos[2] };
 	x->known_valid = true;
-	/* Laser off before any motion. */
-	if (x->stats.laser_on && laser_off(x, &err)) {
+	/* Laser off before any motion (also when a crashed predecessor may have left it on). */
+	if ((x->stats.laser_on || x->laser_unknown) && laser_off(x, &err)) {
 		fault(x, EX_DEV_LASER, &err);
 		return;
 	}
+	x->laser_unknown = false;
 	if (plan_path(x)) {
 		pause_now(x, false, "no collision-free path from (%.2f, %.2f, %.2f) to the next point: move the arms and "
 			  "resume", pos[0], pos[1], pos[2]);
@@ -1289,6 +1292,9 @@ static void commit_point(struct ex *x, double now)
 			last = id;
 			x->stats.spectra++;
 		}
+		/* Paused in the store before the marker: a crash in between measures the reference again. */
+		if (x->cfg.pause_after_reference)
+			set_db_state(x, "paused");
 		memcpy(x->ref_rate, x->merged, sizeof *x->ref_rate);
 		x->have_ref = true;
 		x->cfg.cal.ref_theta_o_deg = fabs(x->actual.det_theta);
