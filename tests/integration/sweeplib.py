@@ -43,6 +43,33 @@ def strip_sections(text, names):
     return "".join(out)
 
 
+def scale_device_timing(text, scale):
+    """In the devices section, the drivers' settling waits and polling periods run on the daemon's (real)
+    clock while the simulator settles in bench time: divide settle_s by the time scale and poll faster."""
+    out, in_devices = [], False
+    for line in text.splitlines(keepends=True):
+        m = re.match(r"^([A-Za-z_][A-Za-z0-9_]*):", line)
+        if m:
+            in_devices = m.group(1) == "devices"
+        if in_devices and re.search(r"\bsettle_s:\s*[0-9.eE+-]+", line):
+            line = re.sub(r"\bsettle_s:\s*([0-9.eE+-]+)",
+                          lambda mm: "settle_s: %.6g, poll_s: 0.004" % (float(mm.group(1)) / scale), line)
+        out.append(line)
+    return "".join(out)
+
+
+def compose_config(path, state, sock, scale, sweep_yaml=None, daemon_extra="", log_level="info"):
+    """config/bench-sim.yaml (devices timed for the scale) + daemon section + the sweep's sections."""
+    with open(os.path.join(SRC, "config", "bench-sim.yaml")) as f:
+        base = f.read()
+    base = scale_device_timing(strip_sections(base, {"daemon", "sweep", "recon"}), scale)
+    with open(path, "w") as f:
+        f.write(base)
+        f.write("\ndaemon:\n  state_dir: %s\n  socket: {path: %s, mode: \"0600\"}\n  log_level: %s\n"
+                "  device_retry_s: 0.2\n%s" % (state, sock, log_level, daemon_extra))
+        f.write(sweep_yaml if sweep_yaml is not None else sweep_section())
+
+
 def sweep_section(path=None):
     with open(path or os.path.join(SRC, "config", "sweep-sim.yaml")) as f:
         return f.read()
@@ -51,7 +78,7 @@ def sweep_section(path=None):
 class Bench:
     """acq-sim + acquisitiond in a state directory; stop() ends both, whatever happened."""
 
-    def __init__(self, state_dir=None, scale=200.0, seed=SEED, sweep_yaml=None, daemon_extra="", sim_extra=""):
+    def __init__(self, state_dir=None, scale=200.0, seed=SEED, sweep_yaml=None, daemon_extra=""):
         for prog in (SIM, DAEMON):
             if not os.access(prog, os.X_OK):
                 raise Skip("%s not built" % prog)
@@ -64,16 +91,7 @@ class Bench:
         self.ports = os.path.join(self.dir, "sim-ports.json")
         self.conf = os.path.join(self.dir, "acquisitiond.yaml")
         self.scale, self.seed = scale, seed
-        with open(os.path.join(SRC, "config", "bench-sim.yaml")) as f:
-            base = f.read()
-        base = strip_sections(base, {"daemon", "sweep", "recon"} | ({"sim"} if sim_extra else set()))
-        with open(self.conf, "w") as f:
-            f.write(base)
-            if sim_extra:
-                f.write(sim_extra)
-            f.write("\ndaemon:\n  state_dir: %s\n  socket: {path: %s, mode: \"0600\"}\n  log_level: info\n"
-                    "  device_retry_s: 0.2\n%s" % (self.state, self.sock, daemon_extra))
-            f.write(sweep_yaml if sweep_yaml is not None else sweep_section())
+        compose_config(self.conf, self.state, self.sock, scale, sweep_yaml, daemon_extra)
         self.sim = self.daemon = None
         self.sim_log = os.path.join(self.dir, "acq-sim.log")
         self.daemon_log = os.path.join(self.dir, "acquisitiond.log")
@@ -386,3 +404,12 @@ def main(fn):
         sys.exit(1)
     say("ok")
     sys.exit(0)
+
+
+if __name__ == "__main__":
+    # python3 sweeplib.py compose OUT.yaml STATE_DIR SOCKET SCALE  (used by tests/demo.sh)
+    if len(sys.argv) == 6 and sys.argv[1] == "compose":
+        compose_config(sys.argv[2], sys.argv[3], sys.argv[4], float(sys.argv[5]))
+        sys.exit(0)
+    sys.stderr.write("usage: sweeplib.py compose OUT.yaml STATE_DIR SOCKET SCALE\n")
+    sys.exit(2)
