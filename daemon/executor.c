@@ -84,6 +84,7 @@ struct ex {
 	struct pending pend[EX_MAX_PENDING];
 	int npend;
 	int attempts;                /* acquisitions of this point spoiled by saturation */
+	int dark_retries;            /* darks in a row rejected for saturated pixels */
 	struct exp_darks *darks;
 	double temperature;
 	const struct spectro_info *info;
@@ -1084,7 +1085,25 @@ static void after_shot(struct ex *x, double now)
 		x->e = 0;
 		break;
 	}
-	case SHOT_DARK:
+	case SHOT_DARK: {
+		/* A dark with saturated pixels (stray light, a burst) is no dark: take it again. */
+		int nsat = 0;
+		for (int p = 0; p < f->npix; p++)
+			nsat += f->saturated[p] || !(f->counts[p] < x->cfg.pol.sat_frac * full_scale(x));
+		if (nsat > 0) {
+			if (++x->dark_retries > x->cfg.max_point_attempts) {
+				acq_errf(&err, ACQ_E_DEVICE, "%d darks in a row with saturated pixels (%d at %.3g ms)",
+					 x->dark_retries, nsat, t);
+				x->dark_retries = 0;
+				fault(x, EX_DEV_SPECTRO, &err);
+				return;
+			}
+			x->stats.dark_rejects++;
+			event(x, "info", dev_names[EX_DEV_SPECTRO], "dark at %.3g ms has %d saturated pixels: taken again", t,
+			      nsat);
+			break;
+		}
+		x->dark_retries = 0;
 		x->stats.darks++;
 		exp_avg_init(x->avg, f->npix, t);
 		if (exp_avg_add(x->avg, f->counts, f->stddev, f->meas.averages ? f->meas.averages : x->meas.averages,
@@ -1099,6 +1118,7 @@ static void after_shot(struct ex *x, double now)
 			return;
 		}
 		break;
+	}
 	case SHOT_EXPOSE: {
 		x->stats.exposures++;
 		const struct exp_dark *dk = exp_dark_find(x->darks, t);
@@ -1526,6 +1546,10 @@ void ex_shutdown(struct ex *x, const char *why)
 {
 	if (!x || !(x->state == EX_RUNNING || x->state == EX_SUSPENDED || x->state == EX_PAUSED))
 		return;
+	if (x->state == EX_PAUSED) { /* already paused (and why is in the log): it stays so after the restart */
+		safe_stop(x);
+		return;
+	}
 	safe_stop(x);
 	reset_acq(x);
 	x->state = EX_PAUSED;

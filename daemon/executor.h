@@ -102,6 +102,7 @@ struct ex_stats {
 	int points_done, points_total;
 	int spectra, darks, probes, exposures, merges;
 	int faults, recoveries, retries, saturated_redos; /* redos: saturated or misled (underexposed) */
+	int dark_rejects;            /* darks taken again because of saturated pixels */
 	bool laser_on;               /* what the executor last commanded */
 	int laser_on_while_moving;   /* violations seen (must stay 0) */
 };

@@ -238,7 +238,7 @@ int exp_net_rate(const struct exp_policy *p, const double *counts, const float *
 	for (int i = 0; i < npix; i++) {
 		out->t_ms[i] = t_ms;
 		bool bad = (saturated && saturated[i]) || !(counts[i] < sat) || !isfinite(counts[i]) ||
-			   !isfinite(dark->mean[i]);
+			   !isfinite(dark->mean[i]) || !(dark->mean[i] < sat);
 		if (bad) {
 			out->valid[i] = 0;
 			out->rate[i] = out->u_noise[i] = out->u_dark[i] = NAN;

@@ -47,6 +47,7 @@ struct sweep {
 	char outdir[4096], csv[4096], prog[4096];
 	char files[RC__COUNT][4096];
 	int recon_failed;
+	bool dhr_noplot;             /* dhr --plot failed: run dhr once more without the plot */
 };
 
 static const char *const rc_names[RC__COUNT] = { "fit", "merl", "dhr", "render" };
@@ -444,6 +445,11 @@ static void recon_stage_done(struct job *j, int status, const char *output, size
 		size_t n = strlen(output);
 		const char *tail = n > 300 ? output + n - 300 : output;
 		recon_event(sw, "info", "brdf-recon %s failed (status %d): %s", rc_names[st], status, tail);
+		if (st == RC_DHR && !sw->dhr_noplot) { /* perhaps only the plot is missing: the table alone */
+			sw->dhr_noplot = true;
+			recon_next(sw);
+			return;
+		}
 		sw->recon_failed++;
 		if (st == RC_FIT) { /* nothing else can run without a model */
 			store_recon_end(sw->env.store, sw->run_id, "failed", status, output, sw->env.wallclock(), NULL);
@@ -487,8 +493,10 @@ static void recon_next(struct sweep *sw)
 			argv[argc++] = sw->files[RC_FIT];
 			argv[argc++] = "-o";
 			argv[argc++] = sw->files[RC_DHR];
-			argv[argc++] = "--plot";
-			argv[argc++] = dhrpng;
+			if (!sw->dhr_noplot) {
+				argv[argc++] = "--plot";
+				argv[argc++] = dhrpng;
+			}
 			break;
 		}
 		argv[argc] = NULL;
@@ -563,6 +571,7 @@ static void on_completed(struct loop *lp, void *arg)
 	}
 	sw->rstage = RC_FIT;
 	sw->recon_failed = 0;
+	sw->dhr_noplot = false;
 	recon_next(sw);
 }
 

@@ -45,7 +45,8 @@ struct fake {
 	bool spectro_down;
 	double spectro_down_until;
 	int spectro_fail_next;    /* the next fetch fails (then down until spectro_down_until) */
-	int burst;                /* next N exposures saturate */
+	int burst;                /* next N spectra saturate */
+	int dark_burst;           /* next N darks saturate */
 	int interlock_after_shots; /* open the interlock after N more laser shots (0: never) */
 	double interlock_close_at;
 	double now;
@@ -254,18 +255,22 @@ static int f_spectro_fetch(void *ctx, struct spectro_frame *fr, double now, stru
 	double t = F.meas.integration_ms;
 	unsigned n = F.meas.averages;
 	bool lit = F.shot_laser && F.emission;
-	double boost = lit && F.burst > 0 ? 1000.0 : 1.0;
-	if (lit && F.burst > 0)
+	bool burst = F.burst > 0; /* like acq-sim: a burst saturates whatever is measured, darks included */
+	if (burst)
 		F.burst--;
+	if (!lit && F.dark_burst > 0) {
+		F.dark_burst--;
+		burst = true;
+	}
 	memset(fr, 0, sizeof *fr);
 	fr->npix = NPIX;
 	fr->meas = F.meas;
 	fr->temperature_c = 5.0;
 	for (int p = 0; p < NPIX; p++) {
-		double sig = lit ? rate_at(p) * t * boost : 0.0;
+		double sig = lit ? rate_at(p) * t : 0.0;
 		double m = 1000 + 0.05 * t + sig;
 		double sd = sqrt(64 + sig + 0.05 * t);
-		if (m + 3 * sd >= SPECTRO_SATURATED) {
+		if (burst || m + 3 * sd >= SPECTRO_SATURATED) {
 			fr->counts[p] = 65535;
 			fr->saturated[p] = 1;
 			fr->nsaturated++;
@@ -584,6 +589,9 @@ static void test_pause_resume_abort(void **state)
 	assert_int_equal(ex_state(x), EX_PAUSED);
 	assert_true(ex_current_step(x) == at + 1 || ex_current_step(x) == at); /* finishes the point in hand */
 	assert_false(F.emission);
+	ex_shutdown(x, "test"); /* a daemon stop while paused keeps the pause (and its reason) as the last word */
+	assert_int_equal(count_events("stop"), 0);
+	assert_int_equal(ex_state(x), EX_PAUSED);
 	assert_int_equal(ex_resume(x, t, &err), 0);
 	assert_int_equal(ex_state(x), EX_RUNNING);
 	for (int i = 0; i < 200; i++) {
@@ -591,6 +599,10 @@ static void test_pause_resume_abort(void **state)
 		double nx = ex_step(x, t);
 		t = nx > t ? nx : t + 1e-6;
 	}
+	ex_shutdown(x, "test stop"); /* running: stops, paused in the store with a 'stop' event */
+	assert_int_equal(count_events("stop"), 1);
+	assert_int_equal(ex_state(x), EX_PAUSED);
+	assert_false(F.emission);
 	assert_int_equal(ex_abort(x, "test abort", t, &err), 0);
 	assert_int_equal(ex_state(x), EX_ABORTED);
 	assert_false(F.emission);
@@ -666,20 +678,24 @@ static void test_faults(void **state)
 		} else if (injected == 5 && step == 10) { /* saturation burst */
 			F.burst = 3;
 			injected++;
+		} else if (injected == 6 && step == 12) { /* the next two darks saturate (stray light) */
+			exp_darks_clear(x->darks);
+			F.dark_burst = 2;
+			injected++;
 		}
 		if (!(nx < INFINITY))
 			break;
 		t = nx > t ? nx : t + 1e-6;
 	}
 	print_message("  ended %s at t=%.1f: %s\n", ex_state_name(ex_state(x)), t, ex_reason(x));
-	assert_int_equal(injected, 6);
+	assert_int_equal(injected, 7);
 	assert_int_equal(ex_state(x), EX_COMPLETED);
 	const struct ex_stats *s = ex_stats(x);
-	print_message("  faults %d, recoveries %d, retries %d, saturated redos %d\n", s->faults, s->recoveries,
-		      s->retries, s->saturated_redos);
+	print_message("  faults %d, recoveries %d, retries %d, saturated redos %d, darks rejected %d\n", s->faults,
+		      s->recoveries, s->retries, s->saturated_redos, s->dark_rejects);
 	assert_true(s->faults >= 4);
 	assert_true(s->recoveries >= 4);
-	assert_true(s->saturated_redos >= 1);
+	assert_true(s->saturated_redos >= 1 && s->dark_rejects >= 1);
 	assert_int_equal(F.laser_on_during_motion, 0);
 	assert_true(count_events("fault") >= 4 && count_events("recovered") >= 4);
 	assert_false(F.emission);
