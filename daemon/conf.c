@@ -125,9 +125,11 @@ static int map_merge(struct yc_node *dst, struct yc_node *src)
 
 static void yaml_quote(char *out, size_t cap, const char *s)
 {
-	char *j = json_dumps(json_string(s), JSON_ENCODE_ANY); /* a JSON string is a YAML double-quoted scalar */
+	json_t *js = json_string(s);
+	char *j = js ? json_dumps(js, JSON_ENCODE_ANY) : NULL; /* a JSON string is a YAML double-quoted scalar */
 	snprintf(out, cap, "%s", j ? j : "\"\"");
 	free(j);
+	json_decref(js);
 }
 
 static bool backend_is(struct yc_node *devs, const char *dev, const char *key, const char *want)
@@ -341,6 +343,7 @@ static int parse_recon(struct conf_priv *cp, struct yc_node *node, struct acq_er
 /* Run one driver parser: ACQ_E_UNSUPPORTED (driver not there yet) is a note, anything else an error. */
 static int driver_result(struct conf *c, enum conf_dev d, int rc, struct acq_err *err)
 {
+	c->devpresent[d] = true;
 	if (rc == 0)
 		return 0;
 	if (err && err->code == ACQ_E_UNSUPPORTED) {
@@ -463,13 +466,29 @@ static char *read_text(const char *path, struct acq_err *err)
 int conf_load(const char *path, const struct conf_sim *sim, struct conf **out, struct acq_err *err)
 {
 	*out = NULL;
+	char *text = read_text(path, err);
+	if (!text)
+		return -1;
+	int rc = conf_load_text(path, text, strlen(text), sim, out, err);
+	free(text);
+	return rc;
+}
+
+int conf_load_text(const char *name, const char *text, size_t len, const struct conf_sim *sim, struct conf **out,
+		   struct acq_err *err)
+{
+	*out = NULL;
 	struct conf_priv *cp = calloc(1, sizeof *cp);
 	if (!cp)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	struct conf *c = &cp->pub;
-	if (!(c->path = strdup(path)) || !(c->text = read_text(path, err)))
+	if (!(c->path = strdup(name)) || !(c->text = malloc(len + 1))) {
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
 		goto fail;
-	if (yc_load_string(path, c->text, strlen(c->text), &c->doc, err))
+	}
+	memcpy(c->text, text, len);
+	c->text[len] = 0;
+	if (yc_load_string(name, c->text, len, &c->doc, err))
 		goto fail;
 	struct yc_node *root = yc_root(c->doc);
 	if (!root) {

@@ -211,9 +211,10 @@ json_t *devices_json(struct devices *dv)
 	json_t *arr = json_array();
 	for (int d = 0; arr && d < CONF_DEV__COUNT; d++) {
 		struct dev_slot *s = &dv->slot[d];
+		bool present = s->configured || dv->c->devpresent[d];
 		json_t *o = json_pack("{s:s,s:b,s:b,s:s}", "name", conf_dev_name((enum conf_dev)d), "configured",
-				      s->configured, "available", s->available, "state",
-				      s->available ? "connected" : s->configured ? "unavailable" : "not_configured");
+				      present, "available", s->available, "state",
+				      s->available ? "connected" : present ? "unavailable" : "not_configured");
 		if (!o)
 			continue;
 		if (s->note[0])

@@ -172,7 +172,7 @@ int proto_req_parse(const char *line, size_t len, struct proto_req *req, const c
 	*code = PROTO_E_PARSE;
 	json_error_t je;
 	/* JSON_REJECT_DUPLICATES: {"cmd":"status","cmd":"move"} is ambiguous, so it is an error. */
-	req->root = json_loadb(line, len, JSON_REJECT_DUPLICATES, &je);
+	req->root = json_loadb(line, len, JSON_REJECT_DUPLICATES | JSON_DECODE_ANY, &je);
 	if (!req->root)
 		return acq_errf(err, ACQ_E_PROTO, "not JSON: %s at column %d", je.text, je.column);
 	*code = PROTO_E_INVALID;

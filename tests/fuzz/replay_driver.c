@@ -7,6 +7,7 @@
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
+#undef MAX_INPUT /* <limits.h> (via <dirent.h>, _GNU_SOURCE) defines a terminal MAX_INPUT */
 #define MAX_INPUT 65536
 
 static uint64_t rng_state;
