@@ -60,47 +60,6 @@ static void signals_finish(void)
 	close(sig_pipe[1]);
 }
 
-int app_reload(struct app *app, struct acq_err *err)
-{
-	if (sweep_busy(app->sweep))
-		return acq_errf(err, ACQ_E_STATE, "a sweep is loaded; reload after it ends or is aborted");
-	if (devices_busy(app->dev))
-		return acq_errf(err, ACQ_E_STATE, "a manual move or measurement is running");
-	sd_notify(0, "RELOADING=1");
-	struct conf *nc = NULL;
-	if (conf_load(app->conf_path, app->have_sim ? &app->sim : NULL, &nc, err)) {
-		sd_notify(0, "READY=1");
-		return acq_err_prefix(err, "reload refused, the running configuration stays: ");
-	}
-	if (strcmp(nc->d.socket_path, app->conf->d.socket_path) || strcmp(nc->d.database, app->conf->d.database) ||
-	    nc->d.tcp_port != app->conf->d.tcp_port)
-		log_msg(LOG_WARNING, "reload: socket, database and tcp_port changes take effect at the next restart");
-	/* Devices are reopened from the new configuration; socket and database stay. */
-	struct devices *nd = NULL;
-	devices_finish(app->dev);
-	app->dev = NULL;
-	if (devices_init(app->lp, app->store, nc, app_device_notify, app, app_wallclock, &nd, err)) {
-		conf_free(nc);
-		sd_notify(0, "READY=1");
-		return -1;
-	}
-	/* The paths in use stay (app-owned copies made at start). */
-	nc->d.socket_path = app->sock_path;
-	nc->d.database = app->db_path;
-	struct conf *old = app->conf;
-	app->conf = nc;
-	app->dev = nd;
-	server_set_conf(app->srv, &nc->d);
-	sweep_conf_changed(app->sweep, nc);
-	log_set_level(nc->d.log_level);
-	conf_free(old);
-	log_msg(LOG_NOTICE, "configuration reloaded from %s", nc->path);
-	app_emit(app, "config", json_pack("{s:s}", "path", nc->path));
-	sd_notify(0, "READY=1");
-	return 0;
-}
-
-static struct app *the_app;
 static bool want_stop;
 
 static void on_sigpipe(struct loop *lp, int fd, short revents, void *arg)
@@ -263,14 +222,13 @@ int main(int argc, char **argv)
 	job_init(app.lp);
 	if (server_init(app.lp, &app.conf->d, ACQ_VERSION, commands_handle, &app, &app.srv, &err))
 		goto fail;
-	if (devices_init(app.lp, app.store, app.conf, app_device_notify, &app, app_wallclock, &app.dev, &err))
+	if (devices_init(app.lp, app.store, app.conf, NULL, app_device_notify, &app, app_wallclock, &app.dev, &err))
 		goto fail;
 	struct sweep_env env = { .loop = app.lp, .store = app.store, .devices = app.dev, .conf = app.conf,
 				 .emit = app_emit, .emit_ctx = &app, .wallclock = app_wallclock,
 				 .software_version = ACQ_VERSION };
 	if (sweep_init(&env, &app.sweep, &err))
 		goto fail;
-	the_app = &app;
 	if (app.conf->d.auto_resume) {
 		int64_t id = 0;
 		int64_t pending = 0;

@@ -21,49 +21,6 @@
 #include "daemon/store.h"
 #include "daemon/sweep.h"
 
-double app_wallclock(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_REALTIME, &ts);
-	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
-
-void app_emit(void *ctx, const char *event, json_t *data)
-{
-	struct app *app = ctx;
-	if (app->srv)
-		server_broadcast(app->srv, event, data);
-	else
-		json_decref(data);
-}
-
-void app_device_notify(void *ctx, enum conf_dev dev, bool up, const char *why)
-{
-	struct app *app = ctx;
-	log_msg(up ? LOG_INFO : LOG_WARNING, "%s: %s", conf_dev_name(dev), up ? "available" : why);
-	if (app->store)
-		store_event(app->store, 0, up ? "recovered" : "fault", conf_dev_name(dev), why, app_wallclock(), NULL);
-	app_emit(app, "device", json_pack("{s:s,s:b,s:s}", "name", conf_dev_name(dev), "available", up, "message", why));
-	if (up && app->sweep)
-		sweep_device_back(app->sweep, dev);
-}
-
-void app_status_line(struct app *app, char *buf, size_t cap)
-{
-	struct sweep_progress p;
-	sweep_get_progress(app->sweep, &p);
-	int avail = app->dev ? devices_available(app->dev) : 0;
-	if (p.state == SWEEP_IDLE)
-		snprintf(buf, cap, "idle; devices %d/%d available%s", avail, CONF_DEV__COUNT,
-			 app->recon_job ? "; reconstruction running" : "");
-	else if (isfinite(p.eta_s))
-		snprintf(buf, cap, "sweep %lld %s: %d/%d points, ETA %.0f s", (long long)p.sweep_id,
-			 sweep_state_name(p.state), p.points_done, p.points_total, p.eta_s);
-	else
-		snprintf(buf, cap, "sweep %lld %s: %d/%d points", (long long)p.sweep_id, sweep_state_name(p.state),
-			 p.points_done, p.points_total);
-}
-
 /* ---- helpers ---- */
 
 static void reply_err(struct app *app, const struct srv_peer *peer, json_t *id, const struct acq_err *err)
@@ -197,62 +154,11 @@ static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto
 	server_reply(app->srv, peer->serial, req->id, data);
 }
 
-/* ---- reconstruction ---- */
-static void recon_done(struct job *j, int status, const char *output, size_t len, void *arg)
-{
-	(void)j;
-	(void)len;
-	struct app *app = arg;
-	const char *state = status == 0 ? "succeeded" : "failed";
-	struct acq_err err = { 0 };
-	if (store_recon_end(app->store, app->recon_run, state, status, output, app_wallclock(), &err))
-		log_msg(LOG_ERR, "recording the end of reconstruction run %lld: %s", (long long)app->recon_run, err.msg);
-	log_msg(status ? LOG_WARNING : LOG_INFO, "reconstruction of sweep %lld (run %lld) %s, status %d",
-		(long long)app->recon_sweep, (long long)app->recon_run, state, status);
-	app_emit(app, "recon", json_pack("{s:I,s:I,s:s,s:i}", "run", (json_int_t)app->recon_run, "sweep",
-					 (json_int_t)app->recon_sweep, "state", state, "exit_status", status));
-	app->recon_job = NULL;
-}
-
-/* The reconstruction program: an absolute path, a name found next to acquisitiond, or in PATH. */
-static int recon_program(const char *prog, char *out, size_t cap)
-{
-	if (strchr(prog, '/')) {
-		snprintf(out, cap, "%s", prog);
-		return access(out, X_OK);
-	}
-	char self[4096];
-	ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-	if (n > 0) {
-		self[n] = 0;
-		char *slash = strrchr(self, '/');
-		if (slash) {
-			*slash = 0;
-			snprintf(out, cap, "%s/%s", self, prog);
-			if (!access(out, X_OK))
-				return 0;
-		}
-	}
-	const char *path = getenv("PATH");
-	char buf[4096];
-	snprintf(buf, sizeof buf, "%s", path ? path : "/usr/bin:/bin");
-	for (char *save = NULL, *dir = strtok_r(buf, ":", &save); dir; dir = strtok_r(NULL, ":", &save)) {
-		snprintf(out, cap, "%s/%s", dir, prog);
-		if (!access(out, X_OK))
-			return 0;
-	}
-	return -1;
-}
-
+/* ---- reconstruction: the executor owns the chain (sweep_recon_start); here the checks and the reply ---- */
 static void cmd_recon_start(struct app *app, const struct srv_peer *peer, struct proto_req *req)
 {
 	struct acq_err err = { 0 };
 	int64_t sweep = (int64_t)num_arg(req->root, "sweep", 0);
-	if (app->recon_job) {
-		acq_errf(&err, ACQ_E_STATE, "reconstruction run %lld (sweep %lld) is still running",
-			 (long long)app->recon_run, (long long)app->recon_sweep);
-		return reply_err(app, peer, req->id, &err);
-	}
 	json_t *sw = store_sweep_show(app->store, sweep, false, &err);
 	if (!sw)
 		return reply_err(app, peer, req->id, &err);
@@ -265,49 +171,19 @@ static void cmd_recon_start(struct app *app, const struct srv_peer *peer, struct
 		return reply_err(app, peer, req->id, &err);
 	}
 	json_decref(sw);
-	char prog[4096];
-	if (recon_program(app->conf->recon.program, prog, sizeof prog)) {
-		acq_errf(&err, ACQ_E_UNSUPPORTED, "reconstruction program '%s' not found (brdf-recon not installed?)",
-			 app->conf->recon.program);
+	if (sweep_recon_busy(app->sweep)) {
+		acq_errf(&err, ACQ_E_STATE, "a reconstruction is already running");
 		return reply_err(app, peer, req->id, &err);
 	}
-	char outdir[4096], sweeps[32], threads[16];
-	snprintf(outdir, sizeof outdir, "%s/sweep-%lld", app->conf->recon.output_dir, (long long)sweep);
-	snprintf(sweeps, sizeof sweeps, "%lld", (long long)sweep);
-	snprintf(threads, sizeof threads, "%d", app->conf->recon.threads);
-	mkdir(app->conf->recon.output_dir, 0750);
-	mkdir(outdir, 0750);
-	/* argv wants char *: copies of the configuration's strings. */
-	static char db[4096], extra[8][512];
-	snprintf(db, sizeof db, "%s", app->conf->d.database);
-	char *argv[32] = { prog, "run", "--db", db, "--sweep", sweeps, "--out", outdir, "--threads", threads };
-	int argc = 10;
-	for (int i = 0; i < app->conf->recon.nextra; i++) {
-		snprintf(extra[i], sizeof extra[i], "%s", app->conf->recon.extra_args[i]);
-		argv[argc++] = extra[i];
-	}
-	json_t *args = json_array();
-	for (int i = 0; i < argc; i++)
-		json_array_append_new(args, json_string(argv[i]));
-	char *argtext = json_dumps(args, JSON_COMPACT);
-	json_decref(args);
 	int64_t run = 0;
-	int rc = store_recon_begin(app->store, sweep, prog, argtext, app_wallclock(), &run, &err);
-	free(argtext);
-	if (rc)
+	if (sweep_recon_start(app->sweep, sweep, &run, &err))
 		return reply_err(app, peer, req->id, &err);
-	app->recon_run = run;
+	if (run)
+		app->recon_run = run;
 	app->recon_sweep = sweep;
-	if (job_start(argv, app->conf->d.state_dir, app->conf->recon.timeout_s, recon_done, app, &app->recon_job,
-		      &err)) {
-		store_recon_end(app->store, run, "failed", 127, err.msg, app_wallclock(), NULL);
-		return reply_err(app, peer, req->id, &err);
-	}
-	log_msg(LOG_INFO, "reconstruction of sweep %lld started (run %lld, pid %d)", (long long)sweep, (long long)run,
-		(int)job_pid(app->recon_job));
+	log_msg(LOG_INFO, "reconstruction of sweep %lld started (run %lld)", (long long)sweep, (long long)run);
 	server_reply(app->srv, peer->serial, req->id,
-		     json_pack("{s:I,s:I,s:i}", "run", (json_int_t)run, "sweep", (json_int_t)sweep, "pid",
-			       (int)job_pid(app->recon_job)));
+		     json_pack("{s:I,s:I}", "run", (json_int_t)run, "sweep", (json_int_t)sweep));
 }
 
 static void cmd_recon_status(struct app *app, const struct srv_peer *peer, struct proto_req *req)
@@ -315,11 +191,12 @@ static void cmd_recon_status(struct app *app, const struct srv_peer *peer, struc
 	struct acq_err err = { 0 };
 	int64_t run = (int64_t)num_arg(req->root, "run", 0), sweep = (int64_t)num_arg(req->root, "sweep", 0);
 	if (!run && !sweep) {
-		if (!app->recon_run) {
+		if (!app->recon_run && !app->recon_sweep) {
 			acq_errf(&err, ACQ_E_NOTFOUND, "no reconstruction started since the daemon started; give sweep or run");
 			return reply_err(app, peer, req->id, &err);
 		}
 		run = app->recon_run;
+		sweep = run ? 0 : app->recon_sweep;
 	}
 	json_t *r = store_recon_show(app->store, run, sweep, &err);
 	if (!r)
@@ -442,7 +319,7 @@ static json_t *status_json(struct app *app)
 			 "version", ACQ_VERSION, "pid", (int)getpid(), "uptime_s", loop_now(app->lp) - app->started_mono,
 			 "started_at", app->started_wall, "sweep", progress_json(app), "devices", "available",
 			 devices_available(app->dev), "total", CONF_DEV__COUNT, "clients", clients, "watchers", watchers,
-			 "recon", "running", app->recon_job != NULL, "run", (json_int_t)app->recon_run, "sweep",
+			 "recon", "running", sweep_recon_busy(app->sweep), "run", (json_int_t)app->recon_run, "sweep",
 			 (json_int_t)app->recon_sweep, "summary", line, "sim", app->have_sim);
 }
 

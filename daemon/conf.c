@@ -162,7 +162,7 @@ static int apply_sim(struct conf *c, struct yc_node *devs, const struct conf_sim
 		yaml_quote(q, sizeof q, sim->spectro_socket);
 		n += (size_t)snprintf(text + n, sizeof text - n, "spectrometer: {socket: %s}\n", q);
 	}
-	if (!n || !devs)
+	if (!n || !devs || devs->type != YC_MAP) /* not a mapping: parse_devices() reports it */
 		return 0;
 	if (yc_load_string("--sim ports file", text, n, &c->simdoc, err))
 		return -1;

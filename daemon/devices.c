@@ -18,7 +18,14 @@ struct dev_slot {
 	char vendor[64], model[64], serial[64], firmware[64];
 };
 
+const struct devices_drv devices_real_drv = {
+	axis_open, axis_close, axis_cfg_limits, axis_read_status, axis_move_begin, axis_move_step, axis_stop,
+	axis_identity, spectro_open, spectro_close, spectro_info, spectro_start, spectro_fetch, spectro_stop,
+	laser_open, laser_close, laser_set_emission, laser_status, laser_identity,
+};
+
 struct devices {
+	const struct devices_drv *drv;
 	struct loop *lp;
 	struct store *st;
 	const struct conf *c;
@@ -58,22 +65,22 @@ static void try_open(struct devices *dv, enum conf_dev d)
 	int rc = -1;
 	double now = dv->wallclock();
 	if (d <= CONF_DEV_DETECTOR_PHI) {
-		rc = axis_open(dv->c->axis[d], &dv->axis[d], &err);
+		rc = dv->drv->axis_open(dv->c->axis[d], &dv->axis[d], &err);
 		struct axis_identity id = { 0 };
-		if (!rc && !axis_identity(dv->axis[d], &id, NULL))
+		if (!rc && !dv->drv->axis_identity(dv->axis[d], &id, NULL))
 			set_identity(s, id.vendor, id.model, id.serial, id.firmware);
 	} else if (d == CONF_DEV_SPECTRO) {
-		rc = spectro_open(dv->c->spectro, &dv->spectro, &err);
+		rc = dv->drv->spectro_open(dv->c->spectro, &dv->spectro, &err);
 		if (!rc) {
-			const struct spectro_info *in = spectro_info(dv->spectro);
+			const struct spectro_info *in = dv->drv->spectro_info(dv->spectro);
 			set_identity(s, "Avantes", in->model, in->serial, in->firmware);
 			if (store_spectrometer_put(dv->st, in, now, &dv->spectro_id, &err))
 				snprintf(s->note, sizeof s->note, "recording calibration: %s", err.msg);
 		}
 	} else {
-		rc = laser_open(dv->c->laser, &dv->laser, &err);
+		rc = dv->drv->laser_open(dv->c->laser, &dv->laser, &err);
 		if (!rc) {
-			const struct laser_identity *li = laser_identity(dv->laser);
+			const struct laser_identity *li = dv->drv->laser_identity(dv->laser);
 			set_identity(s, "", li->model, li->serial, li->firmware);
 		}
 	}
@@ -101,13 +108,15 @@ static void retry_cb(struct loop *lp, void *arg)
 			try_open(dv, (enum conf_dev)d);
 }
 
-int devices_init(struct loop *lp, struct store *st, const struct conf *c, devices_notify_fn notify, void *ctx,
-		 double (*wallclock)(void), struct devices **out, struct acq_err *err)
+int devices_init(struct loop *lp, struct store *st, const struct conf *c, const struct devices_drv *drv,
+		 devices_notify_fn notify, void *ctx, double (*wallclock)(void), struct devices **out,
+		 struct acq_err *err)
 {
 	struct devices *dv = calloc(1, sizeof *dv);
 	if (!dv)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	*dv = (struct devices){ .lp = lp, .st = st, .c = c, .notify = notify, .ctx = ctx, .wallclock = wallclock };
+	*dv = (struct devices){ .drv = drv ? drv : &devices_real_drv, .lp = lp, .st = st, .c = c, .notify = notify,
+				.ctx = ctx, .wallclock = wallclock };
 	for (int d = 0; d < CONF_DEV__COUNT; d++) {
 		struct dev_slot *s = &dv->slot[d];
 		s->configured = d <= CONF_DEV_DETECTOR_PHI ? c->axis[d] != NULL
@@ -128,13 +137,13 @@ int devices_safe_stop(struct devices *dv)
 	int fails = 0;
 	if (!dv)
 		return 0;
-	if (dv->laser && laser_set_emission(dv->laser, false, NULL))
+	if (dv->laser && dv->drv->laser_set_emission(dv->laser, false, NULL))
 		fails++;
 	for (int i = 0; i < 3; i++)
-		if (dv->axis[i] && axis_stop(dv->axis[i], NULL))
+		if (dv->axis[i] && dv->drv->axis_stop(dv->axis[i], NULL))
 			fails++;
 	if (dv->spectro)
-		spectro_stop(dv->spectro, NULL);
+		dv->drv->spectro_stop(dv->spectro, NULL);
 	return fails;
 }
 
@@ -145,10 +154,10 @@ void devices_finish(struct devices *dv)
 	devices_safe_stop(dv);
 	loop_timer_cancel(dv->lp, dv->retry_timer);
 	loop_timer_cancel(dv->lp, dv->op_timer);
-	laser_close(dv->laser);
+	dv->drv->laser_close(dv->laser);
 	for (int i = 0; i < 3; i++)
-		axis_close(dv->axis[i]);
-	spectro_close(dv->spectro);
+		dv->drv->axis_close(dv->axis[i]);
+	dv->drv->spectro_close(dv->spectro);
 	free(dv->frame);
 	free(dv);
 }
@@ -177,13 +186,13 @@ void devices_lost(struct devices *dv, enum conf_dev d, const char *why)
 {
 	struct dev_slot *s = &dv->slot[d];
 	if (d <= CONF_DEV_DETECTOR_PHI) {
-		axis_close(dv->axis[d]);
+		dv->drv->axis_close(dv->axis[d]);
 		dv->axis[d] = NULL;
 	} else if (d == CONF_DEV_SPECTRO) {
-		spectro_close(dv->spectro);
+		dv->drv->spectro_close(dv->spectro);
 		dv->spectro = NULL;
 	} else {
-		laser_close(dv->laser);
+		dv->drv->laser_close(dv->laser);
 		dv->laser = NULL;
 	}
 	bool was = s->available;
@@ -225,10 +234,10 @@ json_t *devices_json(struct devices *dv)
 						      s->serial, "firmware", s->firmware));
 		if (d <= CONF_DEV_DETECTOR_PHI && dv->c->axis[d]) {
 			double lo, hi;
-			axis_cfg_limits(dv->c->axis[d], &lo, &hi);
+			dv->drv->axis_cfg_limits(dv->c->axis[d], &lo, &hi);
 			json_object_set_new(o, "limits_deg", json_pack("[f,f]", lo, hi));
 			struct axis_status st;
-			if (dv->axis[d] && !axis_read_status(dv->axis[d], &st, NULL))
+			if (dv->axis[d] && !dv->drv->axis_read_status(dv->axis[d], &st, NULL))
 				json_object_set_new(o, "status",
 						    json_pack("{s:f,s:b,s:b,s:b,s:i}", "position_deg", st.position_deg,
 							      "busy", st.busy, "homed", st.homed, "alarm", st.alarm,
@@ -236,7 +245,7 @@ json_t *devices_json(struct devices *dv)
 		}
 		if (d == CONF_DEV_LASER && dv->laser) {
 			struct laser_status ls;
-			if (!laser_status(dv->laser, &ls, NULL))
+			if (!dv->drv->laser_status(dv->laser, &ls, NULL))
 				json_object_set_new(o, "status",
 						    json_pack("{s:b,s:f,s:b,s:b}", "emission", ls.emission, "power_pct",
 							      ls.power_pct, "interlock_ok", ls.interlock_ok, "fault",
@@ -274,7 +283,7 @@ static void move_step(struct loop *lp, void *arg)
 			acq_errf(&err, ACQ_E_DISCONNECTED, "%s: lost during the move", conf_dev_name((enum conf_dev)i));
 			goto fail;
 		}
-		int r = axis_move_step(dv->axis[i], now, &err);
+		int r = dv->drv->axis_move_step(dv->axis[i], now, &err);
 		if (r == AXIS_MOVE_FAILED) {
 			acq_err_prefix(&err, "%s: ", conf_dev_name((enum conf_dev)i));
 			goto fail;
@@ -293,7 +302,7 @@ static void move_step(struct loop *lp, void *arg)
 	json_t *res = json_object();
 	for (int i = 0; i < 3; i++) {
 		struct axis_status st;
-		if (dv->axis[i] && !axis_read_status(dv->axis[i], &st, NULL))
+		if (dv->axis[i] && !dv->drv->axis_read_status(dv->axis[i], &st, NULL))
 			json_object_set_new(res, conf_dev_name((enum conf_dev)i), json_real(st.position_deg));
 	}
 	op_end(dv, 0, NULL, res);
@@ -301,7 +310,7 @@ static void move_step(struct loop *lp, void *arg)
 fail:
 	for (int i = 0; i < 3; i++)
 		if (dv->op_axis[i] && dv->axis[i])
-			axis_stop(dv->axis[i], NULL);
+			dv->drv->axis_stop(dv->axis[i], NULL);
 	op_end(dv, -1, &err, NULL);
 }
 
@@ -318,7 +327,7 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 		if (!dv->c->axis[i])
 			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", name, dv->slot[i].note);
 		double lo, hi;
-		axis_cfg_limits(dv->c->axis[i], &lo, &hi);
+		dv->drv->axis_cfg_limits(dv->c->axis[i], &lo, &hi);
 		if (!(target[i] >= lo && target[i] <= hi))
 			return acq_errf(err, ACQ_E_RANGE, "%s: %g° is outside the soft limits [%g°, %g°]", name, target[i],
 					lo, hi);
@@ -332,10 +341,10 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 		dv->op_axis[i] = false;
 		if (isnan(target[i]))
 			continue;
-		if (axis_move_begin(dv->axis[i], target[i], now, err)) {
+		if (dv->drv->axis_move_begin(dv->axis[i], target[i], now, err)) {
 			for (int j = 0; j < i; j++)
 				if (dv->op_axis[j])
-					axis_stop(dv->axis[j], NULL);
+					dv->drv->axis_stop(dv->axis[j], NULL);
 			return acq_err_prefix(err, "%s: ", conf_dev_name((enum conf_dev)i));
 		}
 		dv->op_axis[i] = true;
@@ -356,7 +365,7 @@ static void measure_step(struct loop *lp, void *arg)
 		op_end(dv, -1, &err, NULL);
 		return;
 	}
-	int r = spectro_fetch(dv->spectro, dv->frame, loop_now(lp), &err);
+	int r = dv->drv->spectro_fetch(dv->spectro, dv->frame, loop_now(lp), &err);
 	if (r == 0)
 		return;
 	if (r < 0) {
@@ -404,7 +413,7 @@ int devices_measure(struct devices *dv, const char *kind, double integration_ms,
 	if (!dv->spectro)
 		return acq_errf(err, ACQ_E_UNSUPPORTED, "spectrometer: unavailable (%s)", dv->slot[CONF_DEV_SPECTRO].note);
 	if (!strcmp(kind, "dark")) {
-		if (dv->laser && laser_set_emission(dv->laser, false, err))
+		if (dv->laser && dv->drv->laser_set_emission(dv->laser, false, err))
 			return acq_err_prefix(err, "dark: switching the laser off: ");
 		if (!dv->laser && dv->slot[CONF_DEV_LASER].configured)
 			return acq_errf(err, ACQ_E_UNSUPPORTED, "dark: the laser is unavailable, cannot make sure it is off");
@@ -413,13 +422,12 @@ int devices_measure(struct devices *dv, const char *kind, double integration_ms,
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	struct spectro_meas m = { .integration_ms = integration_ms, .averages = (unsigned)averages,
 				  .saturation_detection = true };
-	if (spectro_start(dv->spectro, &m, loop_now(dv->lp), err))
+	if (dv->drv->spectro_start(dv->spectro, &m, loop_now(dv->lp), err))
 		return -1;
 	snprintf(dv->op_kind, sizeof dv->op_kind, "%s", kind);
 	dv->op_done = done;
 	dv->op_ctx = ctx;
-	int fd = spectro_pollfd(dv->spectro);
-	(void)fd; /* polled by timer: a measurement is milliseconds to seconds, 10 ms granularity is plenty */
+	/* Polled by timer: a measurement takes milliseconds to seconds, 10 ms granularity is plenty. */
 	dv->op_timer = loop_timer_add(dv->lp, 0.01, 0.01, measure_step, dv);
 	return 0;
 }

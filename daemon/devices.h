@@ -18,13 +18,50 @@ struct axis;
 struct spectro;
 struct laser;
 
+struct axis_cfg;
+struct spectro_cfg;
+struct laser_cfg;
+struct axis_status;
+struct axis_identity;
+struct spectro_info;
+struct spectro_meas;
+struct spectro_frame;
+struct laser_status;
+struct laser_identity;
+
+/* The driver entry points devices.c calls: the real drivers (devices_real_drv) unless a test substitutes
+ * fakes. The sweep executor calls the drivers directly on the handles it gets from devices_axis() etc. */
+struct devices_drv {
+	int (*axis_open)(const struct axis_cfg *cfg, struct axis **out, struct acq_err *err);
+	void (*axis_close)(struct axis *ax);
+	void (*axis_cfg_limits)(const struct axis_cfg *cfg, double *min_deg, double *max_deg);
+	int (*axis_read_status)(struct axis *ax, struct axis_status *st, struct acq_err *err);
+	int (*axis_move_begin)(struct axis *ax, double target_deg, double now, struct acq_err *err);
+	int (*axis_move_step)(struct axis *ax, double now, struct acq_err *err);
+	int (*axis_stop)(struct axis *ax, struct acq_err *err);
+	int (*axis_identity)(struct axis *ax, struct axis_identity *id, struct acq_err *err);
+	int (*spectro_open)(const struct spectro_cfg *cfg, struct spectro **out, struct acq_err *err);
+	void (*spectro_close)(struct spectro *s);
+	const struct spectro_info *(*spectro_info)(const struct spectro *s);
+	int (*spectro_start)(struct spectro *s, const struct spectro_meas *m, double now, struct acq_err *err);
+	int (*spectro_fetch)(struct spectro *s, struct spectro_frame *frame, double now, struct acq_err *err);
+	int (*spectro_stop)(struct spectro *s, struct acq_err *err);
+	int (*laser_open)(const struct laser_cfg *cfg, struct laser **out, struct acq_err *err);
+	void (*laser_close)(struct laser *l);
+	int (*laser_set_emission)(struct laser *l, bool on, struct acq_err *err);
+	int (*laser_status)(struct laser *l, struct laser_status *st, struct acq_err *err);
+	const struct laser_identity *(*laser_identity)(const struct laser *l);
+};
+extern const struct devices_drv devices_real_drv;
+
 /* Called on the loop when a device becomes available (up) or unavailable, with a reason. */
 typedef void (*devices_notify_fn)(void *ctx, enum conf_dev dev, bool up, const char *why);
 
-/* Open every configured device (failures leave it unavailable and retried every daemon.device_retry_s).
- * The configuration must outlive the devices. 0 or -1 (only for out of memory). */
-int devices_init(struct loop *lp, struct store *st, const struct conf *c, devices_notify_fn notify, void *ctx,
-		 double (*wallclock)(void), struct devices **out, struct acq_err *err);
+/* Open every configured device with drv (NULL: the real drivers); failures leave it unavailable and retried
+ * every daemon.device_retry_s. The configuration must outlive the devices. 0 or -1 (only out of memory). */
+int devices_init(struct loop *lp, struct store *st, const struct conf *c, const struct devices_drv *drv,
+		 devices_notify_fn notify, void *ctx, double (*wallclock)(void), struct devices **out,
+		 struct acq_err *err);
 /* Safe stop (laser off, arms stopped), close every device, free. NULL is fine. */
 void devices_finish(struct devices *dv);
 /* Laser emission off and every arm stopped, best effort; returns the number of failures. */

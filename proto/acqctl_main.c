@@ -189,16 +189,6 @@ static void print_human(const char *cmd, json_t *rep)
 }
 
 /* ---- watch ---- */
-static void fmt_eta(double s, char *out, size_t cap)
-{
-	if (!isfinite(s) || s < 0)
-		snprintf(out, cap, "--");
-	else if (s >= 3600)
-		snprintf(out, cap, "%dh%02dm", (int)(s / 3600), (int)fmod(s / 60, 60));
-	else
-		snprintf(out, cap, "%dm%02ds", (int)(s / 60), (int)fmod(s, 60));
-}
-
 static void show_event(json_t *ev, bool tty, bool *bar_shown)
 {
 	const char *name = json_string_value(json_object_get(ev, "event"));
@@ -209,24 +199,12 @@ static void show_event(json_t *ev, bool tty, bool *bar_shown)
 		fflush(stdout);
 		return;
 	}
-	if (name && !strcmp(name, "sweep.progress")) {
-		long long done = json_integer_value(json_object_get(ev, "done"));
-		long long total = json_integer_value(json_object_get(ev, "total"));
-		json_t *e = json_object_get(ev, "eta_s");
-		char eta[32];
-		fmt_eta(json_is_number(e) ? json_number_value(e) : NAN, eta, sizeof eta);
-		long long sweep = json_integer_value(json_object_get(ev, "sweep"));
-		if (tty) {
-			char bar[41];
-			int w = 40, fill = total > 0 ? (int)(w * done / total) : 0;
-			for (int i = 0; i < w; i++)
-				bar[i] = i < fill ? '#' : '-';
-			bar[w] = 0;
-			printf("\rsweep %lld [%s] %lld/%lld  ETA %s   ", sweep, bar, done, total, eta);
-			*bar_shown = true;
-		} else {
-			printf("sweep %lld: %lld/%lld points, ETA %s\n", sweep, done, total, eta);
-		}
+	char line[256];
+	if (proto_progress_line(ev, tty, line, sizeof line)) {
+		fputs(line, stdout);
+		if (!tty)
+			putchar('\n');
+		*bar_shown = tty;
 		fflush(stdout);
 		return;
 	}

@@ -70,10 +70,10 @@ class Daemon:
         self.proc = None
         self.log = os.path.join(self.tmp, "daemon.log")
 
-    def start(self, wait=True, args=()):
+    def start(self, wait=True, args=(), env=None):
         self.logf = open(self.log, "ab")
         self.proc = subprocess.Popen([DAEMON, "-f", "-c", self.conf] + list(args), stdout=self.logf,
-                                     stderr=subprocess.STDOUT)
+                                     stderr=subprocess.STDOUT, env=env)
         if wait:
             deadline = time.time() + 10
             while time.time() < deadline:
