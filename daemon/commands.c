@@ -21,6 +21,13 @@
 #include "daemon/store.h"
 #include "daemon/sweep.h"
 
+/* The planner library (daemon/plan.h, the planner engineer's) arrives on its own branch: `plan` and the
+ * blind-zone check of `move` use it when it is there, and say "unavailable" / skip the check before. */
+#if __has_include("daemon/plan.h")
+#include "daemon/plan.h"
+#define HAVE_PLANNER 1
+#endif
+
 /* ---- helpers ---- */
 
 static void reply_err(struct app *app, const struct srv_peer *peer, json_t *id, const struct acq_err *err)
@@ -44,11 +51,87 @@ static json_t *progress_json(struct app *app)
 	return o;
 }
 
+/* ---- plan: dry run against the running configuration's bench ---- */
+static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+#ifdef HAVE_PLANNER
+	struct plan_spec *spec = NULL;
+	struct plan_result *res = NULL;
+	if (plan_load_string("plan", json_string_value(json_object_get(req->root, "plan")), &spec, &err) ||
+	    plan_make(spec, &app->conf->bench, &res, &err)) {
+		plan_spec_free(spec);
+		return reply_err(app, peer, req->id, &err);
+	}
+	/* The points that were moved or dropped, and why (bounded so the reply stays one line). */
+	json_t *changed = json_array();
+	for (size_t i = 0; i < res->n_req && json_array_size(changed) < 200; i++) {
+		const struct plan_req *r = &res->req[i];
+		if (r->status != PLAN_MOVED && r->status != PLAN_DROPPED)
+			continue;
+		json_array_append_new(changed, json_pack("{s:[f,f,f],s:s,s:s,s:f}", "requested", r->req.laser_theta,
+							 r->req.det_theta, r->req.det_phi, "status",
+							 r->status == PLAN_MOVED ? "moved" : "dropped", "reason",
+							 plan_reason_name(r->reason), "moved_deg", r->moved_deg));
+	}
+	json_t *o = json_pack("{s:s,s:I,s:I,s:I,s:I,s:I,s:I,s:f,s:f,s:f,s:f,s:f,s:[f,f,f],s:I,s:o}", "name", spec->name,
+			      "requested", (json_int_t)res->n_req, "points", (json_int_t)res->n_steps, "kept",
+			      (json_int_t)res->n_kept, "moved", (json_int_t)res->n_moved, "dropped",
+			      (json_int_t)res->n_dropped, "duplicates", (json_int_t)res->n_duplicate, "duration_s",
+			      res->duration_s, "raster_s", res->raster_s, "lower_bound_s", res->lower_bound_s, "dwell_s",
+			      res->dwell_s, "motion_s", res->motion_s, "travel_deg", res->travel_deg[0], res->travel_deg[1],
+			      res->travel_deg[2], "detours", (json_int_t)res->n_detours, "changed", changed);
+	plan_result_free(res);
+	plan_spec_free(spec);
+	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "plan", o));
+#else
+	acq_errf(&err, ACQ_E_UNSUPPORTED, "plan: the planner library (daemon/plan.h) is not there yet; "
+		 "'acqctl plan FILE' runs the local dry run when it lands");
+	reply_err(app, peer, req->id, &err);
+#endif
+}
+
+/* With the planner: a manual move must not make the arms collide, on the way or at the target (straight
+ * segment, all axes together — what devices_move() does). Blind zones for the beam or the view are allowed
+ * (alignment needs them) and reported in the reply. 0, or -1 with ACQ_E_RANGE. */
+static int move_check(struct app *app, const double t[3], const char **warning, struct acq_err *err)
+{
+	*warning = NULL;
+#ifdef HAVE_PLANNER
+	double cur[3];
+	devices_positions(app->dev, cur);
+	for (int i = 0; i < 3; i++)
+		if (isnan(cur[i]))
+			return 0; /* an axis is unavailable: devices_move() refuses the move anyway */
+	struct plan_pos a = { cur[0], cur[1], cur[2] };
+	struct plan_pos b = { isnan(t[0]) ? cur[0] : t[0], isnan(t[1]) ? cur[1] : t[1], isnan(t[2]) ? cur[2] : t[2] };
+	unsigned blind = plan_blind(&app->conf->bench, &b);
+	if (blind & (PLAN_R_COLLISION | PLAN_R_LIMITS))
+		return acq_errf(err, ACQ_E_RANGE, "move to (%g°, %g°, %g°) refused: %s", b.laser_theta, b.det_theta,
+				b.det_phi, plan_reason_name(blind & (PLAN_R_COLLISION | PLAN_R_LIMITS)));
+	/* From a position that already violates the clearance (e.g. both arms parked at the zenith) any path
+	 * "collides" at its start: then only the target is checked, so the operator can move out. */
+	bool stuck = plan_blind(&app->conf->bench, &a) & PLAN_R_COLLISION;
+	if (!stuck && !plan_seg_safe(&app->conf->bench, &a, &b))
+		return acq_errf(err, ACQ_E_RANGE, "move from (%g°, %g°, %g°) to (%g°, %g°, %g°) refused: the arms would "
+				"collide on the way; move one arm first", a.laser_theta, a.det_theta, a.det_phi,
+				b.laser_theta, b.det_theta, b.det_phi);
+	if (blind)
+		*warning = plan_reason_name(blind);
+#else
+	(void)app;
+	(void)t;
+	(void)err;
+#endif
+	return 0;
+}
+
 /* ---- manual device operations: replies arrive later ---- */
 struct pending {
 	struct app *app;
 	uint64_t serial;
 	json_t *id;
+	const char *warning;  /* static text added to a successful reply */
 };
 
 static void pending_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
@@ -56,8 +139,11 @@ static void pending_done(void *ctx, int rc, const struct acq_err *err, json_t *r
 	struct pending *p = ctx;
 	if (rc)
 		server_reply_error(p->app->srv, p->serial, p->id, proto_code_of(err), err->msg);
-	else
+	else {
+		if (p->warning && json_is_object(result))
+			json_object_set_new(result, "warning", json_string(p->warning));
 		server_reply(p->app->srv, p->serial, p->id, result);
+	}
 	json_decref(p->id);
 	free(p);
 }
@@ -66,7 +152,7 @@ static struct pending *pending_new(struct app *app, const struct srv_peer *peer,
 {
 	struct pending *p = calloc(1, sizeof *p);
 	if (p)
-		*p = (struct pending){ app, peer->serial, json_incref(id) };
+		*p = (struct pending){ .app = app, .serial = peer->serial, .id = json_incref(id) };
 	return p;
 }
 
@@ -79,11 +165,17 @@ static void cmd_move(struct app *app, const struct srv_peer *peer, struct proto_
 	}
 	double t[3] = { num_arg(req->root, "laser_theta", NAN), num_arg(req->root, "detector_theta", NAN),
 			num_arg(req->root, "detector_phi", NAN) };
+	const char *warning;
+	if (move_check(app, t, &warning, &err))
+		return reply_err(app, peer, req->id, &err);
+	if (warning)
+		log_msg(LOG_NOTICE, "manual move into a blind zone (%s)", warning);
 	struct pending *p = pending_new(app, peer, req->id);
 	if (!p) {
 		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 		return reply_err(app, peer, req->id, &err);
 	}
+	p->warning = warning;
 	if (devices_move(app->dev, t, pending_done, p, &err)) {
 		json_decref(p->id);
 		free(p);
@@ -105,7 +197,7 @@ static void cmd_measure(struct app *app, const struct srv_peer *peer, struct pro
 		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 		return reply_err(app, peer, req->id, &err);
 	}
-	if (devices_measure(app->dev, kind, it, avg, pending_done, p, &err)) {
+	if (devices_measure(app->dev, kind, it, avg, num_arg(req->root, "power_pct", NAN), pending_done, p, &err)) {
 		json_decref(p->id);
 		free(p);
 		reply_err(app, peer, req->id, &err);
@@ -341,9 +433,7 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
 		server_reply(app->srv, peer->serial, req->id,
 			     json_pack("{s:o}", "config", config_json(app, json_is_true(json_object_get(req->root, "text")))));
 	} else if (!strcmp(cmd, "plan")) {
-		acq_errf(&err, ACQ_E_UNSUPPORTED, "plan: the planner library (daemon/plan.h) is not there yet; "
-			 "'acqctl plan FILE' runs the local dry run when it lands");
-		reply_err(app, peer, req->id, &err);
+		cmd_plan(app, peer, req);
 	} else if (!strncmp(cmd, "sweep.", 6)) {
 		cmd_sweep(app, peer, req);
 	} else if (!strcmp(cmd, "move")) {

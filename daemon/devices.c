@@ -21,7 +21,7 @@ struct dev_slot {
 const struct devices_drv devices_real_drv = {
 	axis_open, axis_close, axis_cfg_limits, axis_read_status, axis_move_begin, axis_move_step, axis_stop,
 	axis_identity, spectro_open, spectro_close, spectro_info, spectro_start, spectro_fetch, spectro_stop,
-	laser_open, laser_close, laser_set_emission, laser_status, laser_identity,
+	laser_open, laser_close, laser_set_emission, laser_set_power, laser_status, laser_identity,
 };
 
 struct devices {
@@ -45,6 +45,7 @@ struct devices {
 	double op_deadline;
 	bool op_axis[3];
 	char op_kind[16];
+	bool op_laser;           /* the laser was switched on for this measurement: off at its end */
 	struct spectro_frame *frame;
 };
 
@@ -202,6 +203,14 @@ void devices_lost(struct devices *dv, enum conf_dev d, const char *why)
 		dv->notify(dv->ctx, d, false, why);
 }
 
+void devices_positions(struct devices *dv, double pos[3])
+{
+	for (int i = 0; i < 3; i++) {
+		struct axis_status st;
+		pos[i] = dv->axis[i] && !dv->drv->axis_read_status(dv->axis[i], &st, NULL) ? st.position_deg : NAN;
+	}
+}
+
 int devices_available(const struct devices *dv)
 {
 	int n = 0;
@@ -262,6 +271,9 @@ static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t
 {
 	loop_timer_cancel(dv->lp, dv->op_timer);
 	dv->op_timer = 0;
+	if (dv->op_laser && dv->laser)
+		dv->drv->laser_set_emission(dv->laser, false, NULL);
+	dv->op_laser = false;
 	devices_done_fn done = dv->op_done;
 	dv->op_done = NULL;
 	if (done)
@@ -405,25 +417,33 @@ static void measure_step(struct loop *lp, void *arg)
 			 (int)f->meas.averages));
 }
 
-int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages,
+int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages, double power_pct,
 		    devices_done_fn done, void *ctx, struct acq_err *err)
 {
 	if (dv->op_timer)
 		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
 	if (!dv->spectro)
 		return acq_errf(err, ACQ_E_UNSUPPORTED, "spectrometer: unavailable (%s)", dv->slot[CONF_DEV_SPECTRO].note);
-	if (!strcmp(kind, "dark")) {
-		if (dv->laser && dv->drv->laser_set_emission(dv->laser, false, err))
-			return acq_err_prefix(err, "dark: switching the laser off: ");
-		if (!dv->laser && dv->slot[CONF_DEV_LASER].configured)
-			return acq_errf(err, ACQ_E_UNSUPPORTED, "dark: the laser is unavailable, cannot make sure it is off");
-	}
+	/* A dark needs the laser off (and known to be off); a sample or reference needs the beam, switched on for
+	 * the measurement only. */
+	bool dark = !strcmp(kind, "dark");
+	if (!dv->laser && (!dark || dv->slot[CONF_DEV_LASER].configured || dv->c->devpresent[CONF_DEV_LASER]))
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: the laser is unavailable (%s)", kind,
+				dv->slot[CONF_DEV_LASER].note);
+	if (!dark && dv->laser && !isnan(power_pct) && dv->drv->laser_set_power(dv->laser, power_pct, err))
+		return acq_err_prefix(err, "%s: setting the laser power: ", kind);
+	if (dv->laser && dv->drv->laser_set_emission(dv->laser, !dark, err))
+		return acq_err_prefix(err, "%s: switching the laser %s: ", kind, dark ? "off" : "on");
 	if (!dv->frame && !(dv->frame = malloc(sizeof *dv->frame)))
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	struct spectro_meas m = { .integration_ms = integration_ms, .averages = (unsigned)averages,
 				  .saturation_detection = true };
-	if (dv->drv->spectro_start(dv->spectro, &m, loop_now(dv->lp), err))
+	if (dv->drv->spectro_start(dv->spectro, &m, loop_now(dv->lp), err)) {
+		if (!dark && dv->laser)
+			dv->drv->laser_set_emission(dv->laser, false, NULL);
 		return -1;
+	}
+	dv->op_laser = !dark && dv->laser;
 	snprintf(dv->op_kind, sizeof dv->op_kind, "%s", kind);
 	dv->op_done = done;
 	dv->op_ctx = ctx;

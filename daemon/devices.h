@@ -49,6 +49,7 @@ struct devices_drv {
 	int (*laser_open)(const struct laser_cfg *cfg, struct laser **out, struct acq_err *err);
 	void (*laser_close)(struct laser *l);
 	int (*laser_set_emission)(struct laser *l, bool on, struct acq_err *err);
+	int (*laser_set_power)(struct laser *l, double pct, struct acq_err *err);
 	int (*laser_status)(struct laser *l, struct laser_status *st, struct acq_err *err);
 	const struct laser_identity *(*laser_identity)(const struct laser *l);
 };
@@ -77,6 +78,8 @@ struct laser *devices_laser(struct devices *dv);
 long long devices_spectrometer_id(const struct devices *dv);
 /* A user of a handle saw it fail: close it, mark it unavailable with why, and retry on the timer. */
 void devices_lost(struct devices *dv, enum conf_dev d, const char *why);
+/* Current axis positions (degrees) into pos[3] (laser θ, detector θ, detector φ); NaN where unknown. */
+void devices_positions(struct devices *dv, double pos[3]);
 /* Number of devices available now. */
 int devices_available(const struct devices *dv);
 /* JSON array: {name, configured, available, state, note, identity{...}, position_deg, limits_deg}. */
@@ -88,9 +91,10 @@ bool devices_busy(const struct devices *dv);
  * a missing axis gives ACQ_E_UNSUPPORTED. done(ctx, ok, err, result) is called once from the loop. */
 typedef void (*devices_done_fn)(void *ctx, int rc, const struct acq_err *err, json_t *result);
 int devices_move(struct devices *dv, const double target[3], devices_done_fn done, void *ctx, struct acq_err *err);
-/* One spectrum of kind "sample", "dark" (laser off first) or "reference", stored in the database;
- * result {spectrum_id, npix, peak, saturated, integration_ms, averages}. 0 (started) or -1. */
-int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages,
+/* One spectrum of kind "sample", "dark" (laser off first) or "reference" (laser on for the measurement
+ * only, at power_pct unless NaN), stored in the database; result {spectrum_id, kind, npix, peak, saturated,
+ * integration_ms, averages}. 0 (started) or -1. */
+int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages, double power_pct,
 		    devices_done_fn done, void *ctx, struct acq_err *err);
 
 #endif

@@ -75,7 +75,8 @@ def main():
         for x in r["devices"]:
             check(x["available"] is False and x["note"], "device %r must be unavailable with a reason" % x)
         check(r["devices"][0]["state"] == "not_configured", "arms not configured")
-        check("not implemented" in r["devices"][3]["note"], "spectrometer note %r" % r["devices"][3])
+        check(r["devices"][3]["configured"] is True and r["devices"][3]["state"] == "unavailable",
+              "spectrometer: configured but unavailable %r" % r["devices"][3])
         r = c.req("config")
         check(r["config"]["daemon"]["socket"] == d.sock and "text" not in r["config"], "config %r" % r)
         r = c.req("config", text=True)

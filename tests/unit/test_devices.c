@@ -170,6 +170,14 @@ static int f_laser_set_emission(struct laser *l, bool on, struct acq_err *err)
 	l->emission = on;
 	return 0;
 }
+static double fake_power;
+static int f_laser_set_power(struct laser *l, double pct, struct acq_err *err)
+{
+	(void)l;
+	(void)err;
+	fake_power = pct;
+	return 0;
+}
 static int f_laser_status(struct laser *l, struct laser_status *st, struct acq_err *err)
 {
 	(void)err;
@@ -183,7 +191,7 @@ static const struct laser_identity *f_laser_identity(const struct laser *l)
 static const struct devices_drv fake_drv = {
 	f_axis_open, f_axis_close, f_axis_cfg_limits, f_axis_read_status, f_axis_move_begin, f_axis_move_step,
 	f_axis_stop, f_axis_identity, f_spectro_open, f_spectro_close, f_spectro_info, f_spectro_start,
-	f_spectro_fetch, f_spectro_stop, f_laser_open, f_laser_close, f_laser_set_emission, f_laser_status,
+	f_spectro_fetch, f_spectro_stop, f_laser_open, f_laser_close, f_laser_set_emission, f_laser_set_power, f_laser_status,
 	f_laser_identity,
 };
 
@@ -358,13 +366,13 @@ static void test_measure_and_dark(void **state)
 	assert_int_equal(devices_init(fx->lp, fx->st, fx->c, &fake_drv, notify, NULL, wall, &fx->dv, &err), 0);
 	assert_int_equal(devices_available(fx->dv), 4);
 	/* Without the laser a dark cannot be guaranteed dark. */
-	assert_int_equal(devices_measure(fx->dv, "dark", 10, 1, done, NULL, &err), -1);
+	assert_int_equal(devices_measure(fx->dv, "dark", 10, 1, NAN, done, NULL, &err), -1);
 	assert_int_equal(err.code, ACQ_E_UNSUPPORTED);
 	fail_open[CONF_DEV_LASER] = false;
 	advance(fx, 1.2, 3);
 	assert_non_null(devices_laser(fx->dv));
 	fake_laser.emission = true;
-	assert_int_equal(devices_measure(fx->dv, "dark", 12.5, 3, done, NULL, &err), 0);
+	assert_int_equal(devices_measure(fx->dv, "dark", 12.5, 3, 50, done, NULL, &err), 0);
 	assert_false(fake_laser.emission);
 	advance(fx, 0.1, 10);
 	assert_int_equal(done_calls, 1);
@@ -374,8 +382,12 @@ static void test_measure_and_dark(void **state)
 	assert_int_equal(json_integer_value(json_object_get(done_result, "saturated")), 1);
 	assert_true(json_real_value(json_object_get(done_result, "peak")) == 1500);
 	assert_int_equal(store_spectrum_count(fx->st, 0, &err), 1);
-	assert_int_equal(devices_measure(fx->dv, "sample", 12.5, 3, done, NULL, &err), 0);
+	assert_true(fake_power == 0); /* a dark does not touch the power */
+	assert_int_equal(devices_measure(fx->dv, "sample", 12.5, 3, 40, done, NULL, &err), 0);
+	assert_true(fake_laser.emission); /* on for the sample */
+	assert_true(fake_power == 40);
 	advance(fx, 0.1, 10);
+	assert_false(fake_laser.emission); /* and off again */
 	assert_int_equal(done_calls, 2);
 	assert_int_equal(store_spectrum_count(fx->st, 0, &err), 2);
 }
