@@ -148,10 +148,17 @@ int devices_safe_stop(struct devices *dv)
 	return fails;
 }
 
+static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t *result);
+
 void devices_finish(struct devices *dv)
 {
 	if (!dv)
 		return;
+	if (dv->op_timer) { /* a manual operation is cut short: its requester gets an answer */
+		struct acq_err err = { 0 };
+		acq_errf(&err, ACQ_E_STATE, "the daemon is stopping or reloading: operation interrupted");
+		op_end(dv, -1, &err, NULL);
+	}
 	devices_safe_stop(dv);
 	loop_timer_cancel(dv->lp, dv->retry_timer);
 	loop_timer_cancel(dv->lp, dv->op_timer);
