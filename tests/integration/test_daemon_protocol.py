@@ -20,6 +20,15 @@ def err_code(rep):
     return rep["error"]["code"]
 
 
+def wait_event(w, name, limit=50):
+    """The next event called name on watcher w (other events, e.g. device states, are skipped)."""
+    for _ in range(limit):
+        ev = w.read()
+        if ev.get("event") == name:
+            return ev
+    raise AssertionError("no %s event in %d events" % (name, limit))
+
+
 def seed_sweep(db, completed=True, calibrated=True):
     """Insert a sweep with two points and calibrated samples, as the executor would."""
     con = sqlite3.connect(db, timeout=5)
@@ -82,14 +91,28 @@ def main():
         r = c.req("config", text=True)
         check("laser_radius_mm: 400" in r["config"]["text"], "config text")
 
-        # --- commands whose piece is missing answer "unavailable"
-        for cmd, args in (("plan", {"plan": "incidence: [0]"}), ("sweep.start", {"plan": "x: 1"}),
-                          ("sweep.pause", {}), ("sweep.resume", {}), ("sweep.abort", {}),
-                          ("measure", {}), ("dark", {"integration_ms": 5}), ("reference", {"averages": 2}),
+        # --- commands whose device or piece is missing answer "unavailable" (no devices here)
+        for cmd, args in (("measure", {}), ("dark", {"integration_ms": 5}), ("reference", {"averages": 2}),
                           ("move", {"laser_theta": 10.0})):
             r = c.req(cmd, **args)
             check(err_code(r) == "unavailable", "%s: %r" % (cmd, r))
             check(r["error"]["message"], "%s: empty message" % cmd)
+        # The planner and the executor: "unavailable" until their pieces are there, then real answers.
+        plan_text = "name: t\nincidence:\n  theta_deg: [0, 30]\nobservation:\n  theta_deg: [20, 50]\n" \
+                    "  phi_deg: [90, 180]\nintegration: {mode: fixed, ms: 5}\naverages: 1\nblind_points: move\n"
+        r = c.req("plan", plan=plan_text)
+        if r["ok"]:
+            check(r["plan"]["requested"] == 8 and r["plan"]["points"] > 0 and r["plan"]["duration_s"] > 0,
+                  "plan dry run %r" % r)
+            check(err_code(c.req("plan", plan="incidence: 3")) == "invalid", "bad plan")
+        else:
+            check(err_code(r) == "unavailable", "plan %r" % r)
+        executor = err_code(c.req("sweep.pause")) != "unavailable"
+        for cmd, args, codes in (("sweep.start", {"plan": "x: 1"}, ("invalid", "unavailable")), ("sweep.pause", {}, ("state",)),
+                                 ("sweep.resume", {}, ("state", "not_found")), ("sweep.abort", {}, ("state",))):
+            r = c.req(cmd, **args)
+            want = codes if executor else ("unavailable",)
+            check(err_code(r) in want, "%s: %r (executor %s)" % (cmd, r, executor))
 
         # --- validation errors; the connection lives on
         check(err_code(c.req("move")) == "invalid", "move without targets")
@@ -144,8 +167,8 @@ def main():
         check(w.req("watch", _id="w")["watching"] is True, "watch")
         r = c.req("reload")
         check(r["ok"], "reload %r" % r)
-        ev = w.read()
-        check(ev["event"] == "config" and ev["path"] == d.conf, "config event %r" % ev)
+        ev = wait_event(w, "config")
+        check(ev["path"] == d.conf, "config event %r" % ev)
         check(err_code(c.req("recon.start", sweep=running)) == "state", "recon on unfinished sweep")
         check(err_code(c.req("recon.start", sweep=999)) == "not_found", "recon on missing sweep")
         check(err_code(c.req("recon.status")) == "not_found", "recon.status before any run")
@@ -178,8 +201,7 @@ def main():
         with open(d.conf, "w") as f:
             f.write(good)
         d.proc.send_signal(signal.SIGHUP)
-        ev = w.read()
-        check(ev["event"] == "config", "SIGHUP reload event")
+        check(wait_event(w, "config")["path"] == d.conf, "SIGHUP reload event")
 
         # --- roles (needs another uid: only as root)
         if is_root:
@@ -228,7 +250,8 @@ def main():
         with open(plan, "w") as f:
             f.write("incidence_deg: [0, 30]\n")
         p = acqctl(d.sock, "sweep", "start", plan)
-        check(p.returncode == 1 and "unavailable" in p.stderr, "acqctl sweep start %r" % (p.stderr,))
+        check(p.returncode == 1 and ("unavailable" in p.stderr or "invalid" in p.stderr),
+              "acqctl sweep start %r" % (p.stderr,))
         p = acqctl(d.sock, "move", "laser_theta=abc")
         check(p.returncode == 1, "acqctl bad value")
         p = acqctl(d.sock, "move", "laser_theta=5")
