@@ -75,11 +75,9 @@ int app_reload(struct app *app, struct acq_err *err)
 	if (strcmp(nc->d.socket_path, app->conf->d.socket_path) || strcmp(nc->d.database, app->conf->d.database) ||
 	    nc->d.tcp_port != app->conf->d.tcp_port)
 		log_msg(LOG_WARNING, "reload: socket, database and tcp_port changes take effect at the next restart");
-	/* Devices are reopened from the new configuration; socket and database stay. */
-	struct devices *nd = NULL;
-	devices_finish(app->dev);
-	app->dev = NULL;
-	if (devices_init(app->lp, app->store, nc, NULL, app_device_notify, app, app_wallclock, &nd, err)) {
+	/* Devices are reopened from the new configuration (same object: the executor keeps its pointer);
+	 * socket and database stay. */
+	if (devices_reconfigure(app->dev, nc, err)) {
 		conf_free(nc);
 		sd_notify(0, "READY=1");
 		return -1;
@@ -89,7 +87,6 @@ int app_reload(struct app *app, struct acq_err *err)
 	nc->d.database = app->db_path;
 	struct conf *old = app->conf;
 	app->conf = nc;
-	app->dev = nd;
 	server_set_conf(app->srv, &nc->d);
 	sweep_conf_changed(app->sweep, nc);
 	log_set_level(nc->d.log_level);

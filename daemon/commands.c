@@ -15,7 +15,6 @@
 
 #include "acq_version.h"
 #include "daemon/devices.h"
-#include "daemon/job.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"

@@ -8,7 +8,6 @@
 #include <string.h>
 #include <syslog.h>
 
-#include "daemon/log.h"
 #include "drivers/axis.h"
 #include "drivers/laser.h"
 #include "drivers/spectro.h"

@@ -109,6 +109,43 @@ static void retry_cb(struct loop *lp, void *arg)
 			try_open(dv, (enum conf_dev)d);
 }
 
+static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t *result);
+
+/* Open every configured device of dv->c (those that fail stay unavailable) and arm the retry timer. */
+static void open_all(struct devices *dv)
+{
+	const struct conf *c = dv->c;
+	for (int d = 0; d < CONF_DEV__COUNT; d++) {
+		struct dev_slot *s = &dv->slot[d];
+		memset(s, 0, sizeof *s);
+		s->configured = d <= CONF_DEV_DETECTOR_PHI ? c->axis[d] != NULL
+				: d == CONF_DEV_SPECTRO    ? c->spectro != NULL
+							   : c->laser != NULL;
+		if (!s->configured)
+			snprintf(s->note, sizeof s->note, "%s", c->devnote[d][0] ? c->devnote[d] : "not configured");
+		else
+			try_open(dv, (enum conf_dev)d);
+	}
+	dv->retry_timer = loop_timer_add(dv->lp, c->d.device_retry_s, c->d.device_retry_s, retry_cb, dv);
+}
+
+/* Safe stop and close every handle (the object stays: the executor keeps its pointer). */
+static void close_all(struct devices *dv)
+{
+	devices_safe_stop(dv);
+	loop_timer_cancel(dv->lp, dv->retry_timer);
+	dv->retry_timer = 0;
+	dv->drv->laser_close(dv->laser);
+	dv->laser = NULL;
+	for (int i = 0; i < 3; i++) {
+		dv->drv->axis_close(dv->axis[i]);
+		dv->axis[i] = NULL;
+	}
+	dv->drv->spectro_close(dv->spectro);
+	dv->spectro = NULL;
+	dv->spectro_id = 0;
+}
+
 int devices_init(struct loop *lp, struct store *st, const struct conf *c, const struct devices_drv *drv,
 		 devices_notify_fn notify, void *ctx, double (*wallclock)(void), struct devices **out,
 		 struct acq_err *err)
@@ -118,18 +155,18 @@ int devices_init(struct loop *lp, struct store *st, const struct conf *c, const 
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	*dv = (struct devices){ .drv = drv ? drv : &devices_real_drv, .lp = lp, .st = st, .c = c, .notify = notify,
 				.ctx = ctx, .wallclock = wallclock };
-	for (int d = 0; d < CONF_DEV__COUNT; d++) {
-		struct dev_slot *s = &dv->slot[d];
-		s->configured = d <= CONF_DEV_DETECTOR_PHI ? c->axis[d] != NULL
-				: d == CONF_DEV_SPECTRO    ? c->spectro != NULL
-							   : c->laser != NULL;
-		if (!s->configured)
-			snprintf(s->note, sizeof s->note, "%s", c->devnote[d][0] ? c->devnote[d] : "not configured");
-		else
-			try_open(dv, (enum conf_dev)d);
-	}
-	dv->retry_timer = loop_timer_add(lp, c->d.device_retry_s, c->d.device_retry_s, retry_cb, dv);
+	open_all(dv);
 	*out = dv;
+	return 0;
+}
+
+int devices_reconfigure(struct devices *dv, const struct conf *c, struct acq_err *err)
+{
+	if (dv->op_timer)
+		return acq_errf(err, ACQ_E_STATE, "a manual move or measurement is running");
+	close_all(dv);
+	dv->c = c;
+	open_all(dv);
 	return 0;
 }
 
@@ -148,24 +185,16 @@ int devices_safe_stop(struct devices *dv)
 	return fails;
 }
 
-static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t *result);
-
 void devices_finish(struct devices *dv)
 {
 	if (!dv)
 		return;
 	if (dv->op_timer) { /* a manual operation is cut short: its requester gets an answer */
 		struct acq_err err = { 0 };
-		acq_errf(&err, ACQ_E_STATE, "the daemon is stopping or reloading: operation interrupted");
+		acq_errf(&err, ACQ_E_STATE, "the daemon is stopping: operation interrupted");
 		op_end(dv, -1, &err, NULL);
 	}
-	devices_safe_stop(dv);
-	loop_timer_cancel(dv->lp, dv->retry_timer);
-	loop_timer_cancel(dv->lp, dv->op_timer);
-	dv->drv->laser_close(dv->laser);
-	for (int i = 0; i < 3; i++)
-		dv->drv->axis_close(dv->axis[i]);
-	dv->drv->spectro_close(dv->spectro);
+	close_all(dv);
 	free(dv->frame);
 	free(dv);
 }

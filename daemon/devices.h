@@ -63,6 +63,9 @@ typedef void (*devices_notify_fn)(void *ctx, enum conf_dev dev, bool up, const c
 int devices_init(struct loop *lp, struct store *st, const struct conf *c, const struct devices_drv *drv,
 		 devices_notify_fn notify, void *ctx, double (*wallclock)(void), struct devices **out,
 		 struct acq_err *err);
+/* After a reload: safe stop, close every device, reopen from c (which must outlive the devices). The object
+ * (and the pointer the executor holds) stays. 0, or -1 with ACQ_E_STATE while a manual operation runs. */
+int devices_reconfigure(struct devices *dv, const struct conf *c, struct acq_err *err);
 /* Safe stop (laser off, arms stopped), close every device, free. NULL is fine. */
 void devices_finish(struct devices *dv);
 /* Laser emission off and every arm stopped, best effort; returns the number of failures. */

@@ -191,8 +191,8 @@ int proto_req_parse(const char *line, size_t len, struct proto_req *req, const c
 	json_t *cmd = json_object_get(req->root, "cmd");
 	if (!cmd)
 		return acq_errf(err, ACQ_E_PROTO, "missing \"cmd\"");
-	if (!json_is_string(cmd))
-		return acq_errf(err, ACQ_E_PROTO, "\"cmd\": expected a string");
+	if (!json_is_string(cmd) || strlen(json_string_value(cmd)) != json_string_length(cmd))
+		return acq_errf(err, ACQ_E_PROTO, "\"cmd\": expected a string (without NUL characters)");
 	req->cmd = json_string_value(cmd);
 	if (!(req->def = proto_cmd_find(req->cmd))) {
 		*code = PROTO_E_UNKNOWN;

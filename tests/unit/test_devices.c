@@ -312,6 +312,15 @@ static void test_open_and_identities(void **state)
 	assert_string_equal(json_string_value(json_object_get(json_object_get(a0, "identity"), "model")), "AX-0");
 	assert_true(json_is_array(json_object_get(a0, "limits_deg")));
 	json_decref(j);
+	/* A reload reopens everything on the same object (the executor keeps its pointer); the laser goes off. */
+	struct devices *before = fx->dv;
+	fake_laser.emission = true;
+	assert_int_equal(devices_reconfigure(fx->dv, fx->c, &err), 0);
+	assert_ptr_equal(fx->dv, before);
+	assert_false(fake_laser.emission);
+	assert_int_equal(ups, 10);
+	assert_int_equal(devices_available(fx->dv), 5);
+	fake_laser.emission = true;
 	/* Finish: laser off, every arm stopped. */
 	assert_true(fake_laser.emission);
 	devices_finish(fx->dv);

@@ -73,6 +73,9 @@ static void test_validation(void **state)
 	assert_string_equal(parse_code("{\"cmd\":\"status\",\"id\":[1]}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"status\",\"cmd\":\"move\"}", NULL), PROTO_E_PARSE);
 	assert_string_equal(parse_code("{\"cmd\":\"frobnicate\"}", NULL), PROTO_E_UNKNOWN);
+	/* jansson refuses \\u0000 unless asked (JSON_ALLOW_NUL): a NUL never reaches a command. */
+	assert_string_equal(parse_code("{\"cmd\":\"status\\u0000x\"}", NULL), PROTO_E_PARSE);
+	assert_string_equal(parse_code("{\"cmd\":\"export\",\"sweep\":1,\"path\":\"a\\u0000b\"}", NULL), PROTO_E_PARSE);
 	assert_string_equal(parse_code("{\"cmd\":\"status\",\"extra\":1}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":\"10\"}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":1e9}", NULL), PROTO_E_INVALID);
