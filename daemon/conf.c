@@ -73,6 +73,14 @@ int conf_sim_read(const char *path, struct conf_sim *sim, struct acq_err *err)
 	    sim_str(root, "spectrometer", "socket", sim->spectro_socket, sizeof sim->spectro_socket, path, err) ||
 	    sim_str(root, "control", "socket", sim->control_socket, sizeof sim->control_socket, path, err))
 		goto out;
+	sim->time_scale = 1;
+	json_t *ts = json_object_get(root, "time_scale");
+	if (ts && (!json_is_number(ts) || !(json_number_value(ts) >= 0.01 && json_number_value(ts) <= 100000))) {
+		acq_errf(err, ACQ_E_CONFIG, "%s: \"time_scale\": expected a number in [0.01, 100000]", path);
+		goto out;
+	}
+	if (ts)
+		sim->time_scale = json_number_value(ts);
 	rc = 0;
 out:
 	json_decref(root);

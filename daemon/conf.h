@@ -65,6 +65,7 @@ struct conf_sim {
 	char laser_device[256];
 	char spectro_socket[256];
 	char control_socket[256];
+	double time_scale;                       /* bench seconds per real second (1 when absent) */
 };
 
 struct conf {

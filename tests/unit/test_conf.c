@@ -115,6 +115,7 @@ static void test_sim_overrides(void **state)
 	assert_string_equal(sim.laser_device, "/dev/pts/7");
 	assert_string_equal(sim.spectro_socket, "/tmp/s.sock");
 	assert_string_equal(sim.control_socket, "/tmp/c.sock");
+	assert_true(sim.time_scale == 1);
 	struct conf *c;
 	assert_int_equal(load("devices:\n  laser_arm: {link: {host: 10.0.0.5, port: 502}}\n  spectrometer: {backend: sim}\n",
 			      &sim, &c, &err), 0);
@@ -126,6 +127,16 @@ static void test_sim_overrides(void **state)
 	fclose(f);
 	assert_int_equal(conf_sim_read(pj, &sim, &err), -1);
 	assert_non_null(strstr(err.msg, "laser_arm"));
+	f = fopen(pj, "w");
+	fputs("{\"time_scale\": 25, \"laser_arm\": {\"port\": 9}}", f);
+	fclose(f);
+	assert_int_equal(conf_sim_read(pj, &sim, &err), 0);
+	assert_true(sim.time_scale == 25 && sim.laser_arm_port == 9 && sim.detector_arm_port == 0);
+	f = fopen(pj, "w");
+	fputs("{\"time_scale\": 0}", f);
+	fclose(f);
+	assert_int_equal(conf_sim_read(pj, &sim, &err), -1);
+	assert_non_null(strstr(err.msg, "time_scale"));
 	f = fopen(pj, "w");
 	fputs("{\"laser_arm\": ", f);
 	fclose(f);

@@ -258,7 +258,7 @@ static int setup(void **state)
 	memset(fail_open, 0, sizeof fail_open);
 	fake_laser.emission = true;
 	ups = downs = done_calls = 0;
-	struct loop_clock clk = { fake_clock, NULL };
+	struct loop_clock clk = { .now = fake_clock };
 	fx->lp = loop_new(&clk, NULL);
 	char text[256], db[128];
 	snprintf(text, sizeof text, "daemon: {state_dir: %s, device_retry_s: 1}\nsweep: {move_timeout_s: 5}\n", fx->dir);
