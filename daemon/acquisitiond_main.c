@@ -273,9 +273,7 @@ out:
 	/* Reverse order of start-up. The sweep first (it records where it stopped), then the devices (laser off,
 	 * arms stopped), the clients, the children, the database. */
 	sweep_finish(app.sweep);
-	if (app.dev && devices_safe_stop(app.dev))
-		log_msg(LOG_WARNING, "some devices did not confirm the safe stop");
-	devices_finish(app.dev);
+	devices_finish(app.dev); /* laser off and arms stopped first; a failure is logged per device */
 	server_finish(app.srv);
 	job_finish();
 	if (sig_pipe[0] >= 0)

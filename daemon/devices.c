@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
 #include "drivers/axis.h"
@@ -175,11 +176,16 @@ int devices_safe_stop(struct devices *dv)
 	int fails = 0;
 	if (!dv)
 		return 0;
-	if (dv->laser && dv->drv->laser_set_emission(dv->laser, false, NULL))
+	struct acq_err err = { 0 };
+	if (dv->laser && dv->drv->laser_set_emission(dv->laser, false, &err)) {
+		log_msg(LOG_ERR, "safe stop: laser emission off not confirmed: %s", err.msg);
 		fails++;
+	}
 	for (int i = 0; i < 3; i++)
-		if (dv->axis[i] && dv->drv->axis_stop(dv->axis[i], NULL))
+		if (dv->axis[i] && dv->drv->axis_stop(dv->axis[i], &err)) {
+			log_msg(LOG_ERR, "safe stop: %s: stop not confirmed: %s", conf_dev_name((enum conf_dev)i), err.msg);
 			fails++;
+		}
 	if (dv->spectro)
 		dv->drv->spectro_stop(dv->spectro, NULL);
 	return fails;
