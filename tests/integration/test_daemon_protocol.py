@@ -1,10 +1,13 @@
 #!/usr/bin/python3
 """Integration: acquisitiond without devices — banner, every command and its error replies, ids echoed,
-watch streams, reload (SIGHUP and command), recon job end to end with a stand-in program, export (inline, to
-a confined path, escapes refused), observer/refused roles (as root), acqctl exit codes and output, SIGTERM."""
+watch streams, reload (SIGHUP and command; a broken file keeps the running configuration), planner and
+executor commands (unavailable until their pieces land, real answers after), recon.start/status, export
+(inline, to a confined path, escapes refused), observer/refused roles (as root), loopback TCP (observers
+only), acqctl exit codes and output (human, --json, watch), a second daemon refused, SIGTERM."""
 import json
 import os
 import signal
+import socket
 import sqlite3
 import struct
 import subprocess
@@ -272,6 +275,32 @@ def main():
         wp.terminate()
         out, _ = wp.communicate(timeout=5)
         check("watching: true" in out and "config {\"path\"" in out, "acqctl watch output %r" % out)
+
+        # --- loopback TCP: observers only (no peer credentials), acqctl -s tcp:PORT
+        probe = socket.socket()
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+        probe.close()
+        text = open(d.conf).read().replace("  device_retry_s: 0.5\n", "  device_retry_s: 0.5\n  tcp_port: %d\n" % port)
+        open(d.conf, "w").write(text)
+        check(d.stop() == 0, "stop before the TCP restart")
+        d.start()
+        c.close()
+        c = d.client()
+        t = socket.create_connection(("127.0.0.1", port), timeout=10)
+        tf = t.makefile("rwb")
+        check(json.loads(tf.readline())["protocol"] == 1, "TCP banner")
+        for line, want in ((b'{"cmd":"version","id":1}', "observer"), (b'{"cmd":"sweep.abort","id":2}', "forbidden")):
+            tf.write(line + b"\n")
+            tf.flush()
+            rep = json.loads(tf.readline())
+            got = rep.get("role") if rep["ok"] else rep["error"]["code"]
+            check(got == want, "TCP %s: %r" % (line, rep))
+        t.close()
+        p = subprocess.run([ACQCTL, "-s", "tcp:%d" % port, "--json", "status"], capture_output=True, text=True)
+        check(p.returncode == 0 and json.loads(p.stdout)["ok"], "acqctl over TCP %r" % p.stderr)
+        p = subprocess.run([ACQCTL, "-s", "tcp:%d" % port, "reload"], capture_output=True, text=True)
+        check(p.returncode == 1 and "forbidden" in p.stderr, "acqctl reload over TCP %r" % p.stderr)
 
         # --- a second daemon on the same socket refuses to start
         d2 = Daemon(tmp=None)
