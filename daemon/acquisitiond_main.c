@@ -60,47 +60,6 @@ static void signals_finish(void)
 	close(sig_pipe[1]);
 }
 
-int app_reload(struct app *app, struct acq_err *err)
-{
-	if (sweep_busy(app->sweep))
-		return acq_errf(err, ACQ_E_STATE, "a sweep is loaded; reload after it ends or is aborted");
-	if (devices_busy(app->dev))
-		return acq_errf(err, ACQ_E_STATE, "a manual move or measurement is running");
-	sd_notify(0, "RELOADING=1");
-	struct conf *nc = NULL;
-	if (conf_load(app->conf_path, app->have_sim ? &app->sim : NULL, &nc, err)) {
-		sd_notify(0, "READY=1");
-		return acq_err_prefix(err, "reload refused, the running configuration stays: ");
-	}
-	if (strcmp(nc->d.socket_path, app->conf->d.socket_path) || strcmp(nc->d.database, app->conf->d.database) ||
-	    nc->d.tcp_port != app->conf->d.tcp_port)
-		log_msg(LOG_WARNING, "reload: socket, database and tcp_port changes take effect at the next restart");
-	/* Devices are reopened from the new configuration; socket and database stay. */
-	struct devices *nd = NULL;
-	devices_finish(app->dev);
-	app->dev = NULL;
-	if (devices_init(app->lp, app->store, nc, app_device_notify, app, app_wallclock, &nd, err)) {
-		conf_free(nc);
-		sd_notify(0, "READY=1");
-		return -1;
-	}
-	/* The paths in use stay (app-owned copies made at start). */
-	nc->d.socket_path = app->sock_path;
-	nc->d.database = app->db_path;
-	struct conf *old = app->conf;
-	app->conf = nc;
-	app->dev = nd;
-	server_set_conf(app->srv, &nc->d);
-	sweep_conf_changed(app->sweep, nc);
-	log_set_level(nc->d.log_level);
-	conf_free(old);
-	log_msg(LOG_NOTICE, "configuration reloaded from %s", nc->path);
-	app_emit(app, "config", json_pack("{s:s}", "path", nc->path));
-	sd_notify(0, "READY=1");
-	return 0;
-}
-
-static struct app *the_app;
 static bool want_stop;
 
 static void on_sigpipe(struct loop *lp, int fd, short revents, void *arg)
@@ -252,7 +211,16 @@ int main(int argc, char **argv)
 		log_msg(LOG_ERR, "%s: %s", app.conf->d.state_dir, strerror(errno));
 		goto out_conf;
 	}
-	if (!(app.lp = loop_new(NULL, &err)))
+	/* The simulated bench may run faster than real time: the loop's clock follows it (device state machines
+	 * and the executor's timers are in bench seconds); database times stay wall-clock. */
+	static struct loop_scaled_clock scaled;
+	struct loop_clock clk = { loop_monotonic, NULL, 1 };
+	if (app.have_sim && app.sim.time_scale != 1) {
+		scaled.rate = app.sim.time_scale;
+		clk = (struct loop_clock){ loop_scaled_now, &scaled, app.sim.time_scale };
+		log_msg(LOG_NOTICE, "simulated bench time runs %g times faster than real time", app.sim.time_scale);
+	}
+	if (!(app.lp = loop_new(&clk, &err)))
 		goto fail;
 	app.started_mono = loop_now(app.lp);
 	app.started_wall = app_wallclock();
@@ -263,14 +231,13 @@ int main(int argc, char **argv)
 	job_init(app.lp);
 	if (server_init(app.lp, &app.conf->d, ACQ_VERSION, commands_handle, &app, &app.srv, &err))
 		goto fail;
-	if (devices_init(app.lp, app.store, app.conf, app_device_notify, &app, app_wallclock, &app.dev, &err))
+	if (devices_init(app.lp, app.store, app.conf, NULL, app_device_notify, &app, app_wallclock, &app.dev, &err))
 		goto fail;
 	struct sweep_env env = { .loop = app.lp, .store = app.store, .devices = app.dev, .conf = app.conf,
 				 .emit = app_emit, .emit_ctx = &app, .wallclock = app_wallclock,
 				 .software_version = ACQ_VERSION };
 	if (sweep_init(&env, &app.sweep, &err))
 		goto fail;
-	the_app = &app;
 	if (app.conf->d.auto_resume) {
 		int64_t id = 0;
 		int64_t pending = 0;
@@ -306,9 +273,7 @@ out:
 	/* Reverse order of start-up. The sweep first (it records where it stopped), then the devices (laser off,
 	 * arms stopped), the clients, the children, the database. */
 	sweep_finish(app.sweep);
-	if (app.dev && devices_safe_stop(app.dev))
-		log_msg(LOG_WARNING, "some devices did not confirm the safe stop");
-	devices_finish(app.dev);
+	devices_finish(app.dev); /* laser off and arms stopped first; a failure is logged per device */
 	server_finish(app.srv);
 	job_finish();
 	if (sig_pipe[0] >= 0)

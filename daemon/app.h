@@ -14,7 +14,6 @@ struct loop;
 struct store;
 struct devices;
 struct sweep;
-struct job;
 
 struct app {
 	struct loop *lp;
@@ -27,10 +26,8 @@ struct app {
 	struct sweep *sweep;
 	struct server *srv;
 	double started_wall, started_mono;
-	/* reconstruction child */
-	struct job *recon_job;
+	/* last reconstruction started by recon.start (the executor runs it) */
 	int64_t recon_run, recon_sweep;
-	char recon_status[128];
 	bool stopping;
 	char sock_path[256], db_path[4096];  /* in use until exit, whatever a reload says */
 };

@@ -15,54 +15,17 @@
 
 #include "acq_version.h"
 #include "daemon/devices.h"
-#include "daemon/job.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
 #include "daemon/sweep.h"
 
-double app_wallclock(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_REALTIME, &ts);
-	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
-
-void app_emit(void *ctx, const char *event, json_t *data)
-{
-	struct app *app = ctx;
-	if (app->srv)
-		server_broadcast(app->srv, event, data);
-	else
-		json_decref(data);
-}
-
-void app_device_notify(void *ctx, enum conf_dev dev, bool up, const char *why)
-{
-	struct app *app = ctx;
-	log_msg(up ? LOG_INFO : LOG_WARNING, "%s: %s", conf_dev_name(dev), up ? "available" : why);
-	if (app->store)
-		store_event(app->store, 0, up ? "recovered" : "fault", conf_dev_name(dev), why, app_wallclock(), NULL);
-	app_emit(app, "device", json_pack("{s:s,s:b,s:s}", "name", conf_dev_name(dev), "available", up, "message", why));
-	if (up && app->sweep)
-		sweep_device_back(app->sweep, dev);
-}
-
-void app_status_line(struct app *app, char *buf, size_t cap)
-{
-	struct sweep_progress p;
-	sweep_get_progress(app->sweep, &p);
-	int avail = app->dev ? devices_available(app->dev) : 0;
-	if (p.state == SWEEP_IDLE)
-		snprintf(buf, cap, "idle; devices %d/%d available%s", avail, CONF_DEV__COUNT,
-			 app->recon_job ? "; reconstruction running" : "");
-	else if (isfinite(p.eta_s))
-		snprintf(buf, cap, "sweep %lld %s: %d/%d points, ETA %.0f s", (long long)p.sweep_id,
-			 sweep_state_name(p.state), p.points_done, p.points_total, p.eta_s);
-	else
-		snprintf(buf, cap, "sweep %lld %s: %d/%d points", (long long)p.sweep_id, sweep_state_name(p.state),
-			 p.points_done, p.points_total);
-}
+/* The planner library (daemon/plan.h, the planner engineer's) arrives on its own branch: `plan` and the
+ * blind-zone check of `move` use it when it is there, and say "unavailable" / skip the check before. */
+#if __has_include("daemon/plan.h")
+#include "daemon/plan.h"
+#define HAVE_PLANNER 1
+#endif
 
 /* ---- helpers ---- */
 
@@ -87,11 +50,87 @@ static json_t *progress_json(struct app *app)
 	return o;
 }
 
+/* ---- plan: dry run against the running configuration's bench ---- */
+static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+#ifdef HAVE_PLANNER
+	struct plan_spec *spec = NULL;
+	struct plan_result *res = NULL;
+	if (plan_load_string("plan", json_string_value(json_object_get(req->root, "plan")), &spec, &err) ||
+	    plan_make(spec, &app->conf->bench, &res, &err)) {
+		plan_spec_free(spec);
+		return reply_err(app, peer, req->id, &err);
+	}
+	/* The points that were moved or dropped, and why (bounded so the reply stays one line). */
+	json_t *changed = json_array();
+	for (size_t i = 0; i < res->n_req && json_array_size(changed) < 200; i++) {
+		const struct plan_req *r = &res->req[i];
+		if (r->status != PLAN_MOVED && r->status != PLAN_DROPPED)
+			continue;
+		json_array_append_new(changed, json_pack("{s:[f,f,f],s:s,s:s,s:f}", "requested", r->req.laser_theta,
+							 r->req.det_theta, r->req.det_phi, "status",
+							 r->status == PLAN_MOVED ? "moved" : "dropped", "reason",
+							 plan_reason_name(r->reason), "moved_deg", r->moved_deg));
+	}
+	json_t *o = json_pack("{s:s,s:I,s:I,s:I,s:I,s:I,s:I,s:f,s:f,s:f,s:f,s:f,s:[f,f,f],s:I,s:o}", "name", spec->name,
+			      "requested", (json_int_t)res->n_req, "points", (json_int_t)res->n_steps, "kept",
+			      (json_int_t)res->n_kept, "moved", (json_int_t)res->n_moved, "dropped",
+			      (json_int_t)res->n_dropped, "duplicates", (json_int_t)res->n_duplicate, "duration_s",
+			      res->duration_s, "raster_s", res->raster_s, "lower_bound_s", res->lower_bound_s, "dwell_s",
+			      res->dwell_s, "motion_s", res->motion_s, "travel_deg", res->travel_deg[0], res->travel_deg[1],
+			      res->travel_deg[2], "detours", (json_int_t)res->n_detours, "changed", changed);
+	plan_result_free(res);
+	plan_spec_free(spec);
+	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "plan", o));
+#else
+	acq_errf(&err, ACQ_E_UNSUPPORTED, "plan: the planner library (daemon/plan.h) is not there yet; "
+		 "'acqctl plan FILE' runs the local dry run when it lands");
+	reply_err(app, peer, req->id, &err);
+#endif
+}
+
+/* With the planner: a manual move must not make the arms collide, on the way or at the target (straight
+ * segment, all axes together — what devices_move() does). Blind zones for the beam or the view are allowed
+ * (alignment needs them) and reported in the reply. 0, or -1 with ACQ_E_RANGE. */
+static int move_check(struct app *app, const double t[3], const char **warning, struct acq_err *err)
+{
+	*warning = NULL;
+#ifdef HAVE_PLANNER
+	double cur[3];
+	devices_positions(app->dev, cur);
+	for (int i = 0; i < 3; i++)
+		if (isnan(cur[i]))
+			return 0; /* an axis is unavailable: devices_move() refuses the move anyway */
+	struct plan_pos a = { cur[0], cur[1], cur[2] };
+	struct plan_pos b = { isnan(t[0]) ? cur[0] : t[0], isnan(t[1]) ? cur[1] : t[1], isnan(t[2]) ? cur[2] : t[2] };
+	unsigned blind = plan_blind(&app->conf->bench, &b);
+	if (blind & (PLAN_R_COLLISION | PLAN_R_LIMITS))
+		return acq_errf(err, ACQ_E_RANGE, "move to (%g°, %g°, %g°) refused: %s", b.laser_theta, b.det_theta,
+				b.det_phi, plan_reason_name(blind & (PLAN_R_COLLISION | PLAN_R_LIMITS)));
+	/* From a position that already violates the clearance (e.g. both arms parked at the zenith) any path
+	 * "collides" at its start: then only the target is checked, so the operator can move out. */
+	bool stuck = plan_blind(&app->conf->bench, &a) & PLAN_R_COLLISION;
+	if (!stuck && !plan_seg_safe(&app->conf->bench, &a, &b))
+		return acq_errf(err, ACQ_E_RANGE, "move from (%g°, %g°, %g°) to (%g°, %g°, %g°) refused: the arms would "
+				"collide on the way; move one arm first", a.laser_theta, a.det_theta, a.det_phi,
+				b.laser_theta, b.det_theta, b.det_phi);
+	if (blind)
+		*warning = plan_reason_name(blind);
+#else
+	(void)app;
+	(void)t;
+	(void)err;
+#endif
+	return 0;
+}
+
 /* ---- manual device operations: replies arrive later ---- */
 struct pending {
 	struct app *app;
 	uint64_t serial;
 	json_t *id;
+	const char *warning;  /* static text added to a successful reply */
 };
 
 static void pending_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
@@ -99,8 +138,11 @@ static void pending_done(void *ctx, int rc, const struct acq_err *err, json_t *r
 	struct pending *p = ctx;
 	if (rc)
 		server_reply_error(p->app->srv, p->serial, p->id, proto_code_of(err), err->msg);
-	else
+	else {
+		if (p->warning && json_is_object(result))
+			json_object_set_new(result, "warning", json_string(p->warning));
 		server_reply(p->app->srv, p->serial, p->id, result);
+	}
 	json_decref(p->id);
 	free(p);
 }
@@ -109,7 +151,7 @@ static struct pending *pending_new(struct app *app, const struct srv_peer *peer,
 {
 	struct pending *p = calloc(1, sizeof *p);
 	if (p)
-		*p = (struct pending){ app, peer->serial, json_incref(id) };
+		*p = (struct pending){ .app = app, .serial = peer->serial, .id = json_incref(id) };
 	return p;
 }
 
@@ -122,11 +164,17 @@ static void cmd_move(struct app *app, const struct srv_peer *peer, struct proto_
 	}
 	double t[3] = { num_arg(req->root, "laser_theta", NAN), num_arg(req->root, "detector_theta", NAN),
 			num_arg(req->root, "detector_phi", NAN) };
+	const char *warning;
+	if (move_check(app, t, &warning, &err))
+		return reply_err(app, peer, req->id, &err);
+	if (warning)
+		log_msg(LOG_NOTICE, "manual move into a blind zone (%s)", warning);
 	struct pending *p = pending_new(app, peer, req->id);
 	if (!p) {
 		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 		return reply_err(app, peer, req->id, &err);
 	}
+	p->warning = warning;
 	if (devices_move(app->dev, t, pending_done, p, &err)) {
 		json_decref(p->id);
 		free(p);
@@ -148,7 +196,7 @@ static void cmd_measure(struct app *app, const struct srv_peer *peer, struct pro
 		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 		return reply_err(app, peer, req->id, &err);
 	}
-	if (devices_measure(app->dev, kind, it, avg, pending_done, p, &err)) {
+	if (devices_measure(app->dev, kind, it, avg, num_arg(req->root, "power_pct", NAN), pending_done, p, &err)) {
 		json_decref(p->id);
 		free(p);
 		reply_err(app, peer, req->id, &err);
@@ -197,62 +245,11 @@ static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto
 	server_reply(app->srv, peer->serial, req->id, data);
 }
 
-/* ---- reconstruction ---- */
-static void recon_done(struct job *j, int status, const char *output, size_t len, void *arg)
-{
-	(void)j;
-	(void)len;
-	struct app *app = arg;
-	const char *state = status == 0 ? "succeeded" : "failed";
-	struct acq_err err = { 0 };
-	if (store_recon_end(app->store, app->recon_run, state, status, output, app_wallclock(), &err))
-		log_msg(LOG_ERR, "recording the end of reconstruction run %lld: %s", (long long)app->recon_run, err.msg);
-	log_msg(status ? LOG_WARNING : LOG_INFO, "reconstruction of sweep %lld (run %lld) %s, status %d",
-		(long long)app->recon_sweep, (long long)app->recon_run, state, status);
-	app_emit(app, "recon", json_pack("{s:I,s:I,s:s,s:i}", "run", (json_int_t)app->recon_run, "sweep",
-					 (json_int_t)app->recon_sweep, "state", state, "exit_status", status));
-	app->recon_job = NULL;
-}
-
-/* The reconstruction program: an absolute path, a name found next to acquisitiond, or in PATH. */
-static int recon_program(const char *prog, char *out, size_t cap)
-{
-	if (strchr(prog, '/')) {
-		snprintf(out, cap, "%s", prog);
-		return access(out, X_OK);
-	}
-	char self[4096];
-	ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-	if (n > 0) {
-		self[n] = 0;
-		char *slash = strrchr(self, '/');
-		if (slash) {
-			*slash = 0;
-			snprintf(out, cap, "%s/%s", self, prog);
-			if (!access(out, X_OK))
-				return 0;
-		}
-	}
-	const char *path = getenv("PATH");
-	char buf[4096];
-	snprintf(buf, sizeof buf, "%s", path ? path : "/usr/bin:/bin");
-	for (char *save = NULL, *dir = strtok_r(buf, ":", &save); dir; dir = strtok_r(NULL, ":", &save)) {
-		snprintf(out, cap, "%s/%s", dir, prog);
-		if (!access(out, X_OK))
-			return 0;
-	}
-	return -1;
-}
-
+/* ---- reconstruction: the executor owns the chain (sweep_recon_start); here the checks and the reply ---- */
 static void cmd_recon_start(struct app *app, const struct srv_peer *peer, struct proto_req *req)
 {
 	struct acq_err err = { 0 };
 	int64_t sweep = (int64_t)num_arg(req->root, "sweep", 0);
-	if (app->recon_job) {
-		acq_errf(&err, ACQ_E_STATE, "reconstruction run %lld (sweep %lld) is still running",
-			 (long long)app->recon_run, (long long)app->recon_sweep);
-		return reply_err(app, peer, req->id, &err);
-	}
 	json_t *sw = store_sweep_show(app->store, sweep, false, &err);
 	if (!sw)
 		return reply_err(app, peer, req->id, &err);
@@ -265,49 +262,19 @@ static void cmd_recon_start(struct app *app, const struct srv_peer *peer, struct
 		return reply_err(app, peer, req->id, &err);
 	}
 	json_decref(sw);
-	char prog[4096];
-	if (recon_program(app->conf->recon.program, prog, sizeof prog)) {
-		acq_errf(&err, ACQ_E_UNSUPPORTED, "reconstruction program '%s' not found (brdf-recon not installed?)",
-			 app->conf->recon.program);
+	if (sweep_recon_busy(app->sweep)) {
+		acq_errf(&err, ACQ_E_STATE, "a reconstruction is already running");
 		return reply_err(app, peer, req->id, &err);
 	}
-	char outdir[4096], sweeps[32], threads[16];
-	snprintf(outdir, sizeof outdir, "%s/sweep-%lld", app->conf->recon.output_dir, (long long)sweep);
-	snprintf(sweeps, sizeof sweeps, "%lld", (long long)sweep);
-	snprintf(threads, sizeof threads, "%d", app->conf->recon.threads);
-	mkdir(app->conf->recon.output_dir, 0750);
-	mkdir(outdir, 0750);
-	/* argv wants char *: copies of the configuration's strings. */
-	static char db[4096], extra[8][512];
-	snprintf(db, sizeof db, "%s", app->conf->d.database);
-	char *argv[32] = { prog, "run", "--db", db, "--sweep", sweeps, "--out", outdir, "--threads", threads };
-	int argc = 10;
-	for (int i = 0; i < app->conf->recon.nextra; i++) {
-		snprintf(extra[i], sizeof extra[i], "%s", app->conf->recon.extra_args[i]);
-		argv[argc++] = extra[i];
-	}
-	json_t *args = json_array();
-	for (int i = 0; i < argc; i++)
-		json_array_append_new(args, json_string(argv[i]));
-	char *argtext = json_dumps(args, JSON_COMPACT);
-	json_decref(args);
 	int64_t run = 0;
-	int rc = store_recon_begin(app->store, sweep, prog, argtext, app_wallclock(), &run, &err);
-	free(argtext);
-	if (rc)
+	if (sweep_recon_start(app->sweep, sweep, &run, &err))
 		return reply_err(app, peer, req->id, &err);
-	app->recon_run = run;
+	if (run)
+		app->recon_run = run;
 	app->recon_sweep = sweep;
-	if (job_start(argv, app->conf->d.state_dir, app->conf->recon.timeout_s, recon_done, app, &app->recon_job,
-		      &err)) {
-		store_recon_end(app->store, run, "failed", 127, err.msg, app_wallclock(), NULL);
-		return reply_err(app, peer, req->id, &err);
-	}
-	log_msg(LOG_INFO, "reconstruction of sweep %lld started (run %lld, pid %d)", (long long)sweep, (long long)run,
-		(int)job_pid(app->recon_job));
+	log_msg(LOG_INFO, "reconstruction of sweep %lld started (run %lld)", (long long)sweep, (long long)run);
 	server_reply(app->srv, peer->serial, req->id,
-		     json_pack("{s:I,s:I,s:i}", "run", (json_int_t)run, "sweep", (json_int_t)sweep, "pid",
-			       (int)job_pid(app->recon_job)));
+		     json_pack("{s:I,s:I}", "run", (json_int_t)run, "sweep", (json_int_t)sweep));
 }
 
 static void cmd_recon_status(struct app *app, const struct srv_peer *peer, struct proto_req *req)
@@ -315,11 +282,12 @@ static void cmd_recon_status(struct app *app, const struct srv_peer *peer, struc
 	struct acq_err err = { 0 };
 	int64_t run = (int64_t)num_arg(req->root, "run", 0), sweep = (int64_t)num_arg(req->root, "sweep", 0);
 	if (!run && !sweep) {
-		if (!app->recon_run) {
+		if (!app->recon_run && !app->recon_sweep) {
 			acq_errf(&err, ACQ_E_NOTFOUND, "no reconstruction started since the daemon started; give sweep or run");
 			return reply_err(app, peer, req->id, &err);
 		}
 		run = app->recon_run;
+		sweep = run ? 0 : app->recon_sweep;
 	}
 	json_t *r = store_recon_show(app->store, run, sweep, &err);
 	if (!r)
@@ -442,7 +410,7 @@ static json_t *status_json(struct app *app)
 			 "version", ACQ_VERSION, "pid", (int)getpid(), "uptime_s", loop_now(app->lp) - app->started_mono,
 			 "started_at", app->started_wall, "sweep", progress_json(app), "devices", "available",
 			 devices_available(app->dev), "total", CONF_DEV__COUNT, "clients", clients, "watchers", watchers,
-			 "recon", "running", app->recon_job != NULL, "run", (json_int_t)app->recon_run, "sweep",
+			 "recon", "running", sweep_recon_busy(app->sweep), "run", (json_int_t)app->recon_run, "sweep",
 			 (json_int_t)app->recon_sweep, "summary", line, "sim", app->have_sim);
 }
 
@@ -464,9 +432,7 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
 		server_reply(app->srv, peer->serial, req->id,
 			     json_pack("{s:o}", "config", config_json(app, json_is_true(json_object_get(req->root, "text")))));
 	} else if (!strcmp(cmd, "plan")) {
-		acq_errf(&err, ACQ_E_UNSUPPORTED, "plan: the planner library (daemon/plan.h) is not there yet; "
-			 "'acqctl plan FILE' runs the local dry run when it lands");
-		reply_err(app, peer, req->id, &err);
+		cmd_plan(app, peer, req);
 	} else if (!strncmp(cmd, "sweep.", 6)) {
 		cmd_sweep(app, peer, req);
 	} else if (!strcmp(cmd, "move")) {

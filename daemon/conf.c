@@ -8,7 +8,6 @@
 #include <string.h>
 #include <syslog.h>
 
-#include "daemon/log.h"
 #include "drivers/axis.h"
 #include "drivers/laser.h"
 #include "drivers/spectro.h"
@@ -74,6 +73,14 @@ int conf_sim_read(const char *path, struct conf_sim *sim, struct acq_err *err)
 	    sim_str(root, "spectrometer", "socket", sim->spectro_socket, sizeof sim->spectro_socket, path, err) ||
 	    sim_str(root, "control", "socket", sim->control_socket, sizeof sim->control_socket, path, err))
 		goto out;
+	sim->time_scale = 1;
+	json_t *ts = json_object_get(root, "time_scale");
+	if (ts && (!json_is_number(ts) || !(json_number_value(ts) >= 0.01 && json_number_value(ts) <= 100000))) {
+		acq_errf(err, ACQ_E_CONFIG, "%s: \"time_scale\": expected a number in [0.01, 100000]", path);
+		goto out;
+	}
+	if (ts)
+		sim->time_scale = json_number_value(ts);
 	rc = 0;
 out:
 	json_decref(root);
@@ -125,9 +132,11 @@ static int map_merge(struct yc_node *dst, struct yc_node *src)
 
 static void yaml_quote(char *out, size_t cap, const char *s)
 {
-	char *j = json_dumps(json_string(s), JSON_ENCODE_ANY); /* a JSON string is a YAML double-quoted scalar */
+	json_t *js = json_string(s);
+	char *j = js ? json_dumps(js, JSON_ENCODE_ANY) : NULL; /* a JSON string is a YAML double-quoted scalar */
 	snprintf(out, cap, "%s", j ? j : "\"\"");
 	free(j);
+	json_decref(js);
 }
 
 static bool backend_is(struct yc_node *devs, const char *dev, const char *key, const char *want)
@@ -160,7 +169,7 @@ static int apply_sim(struct conf *c, struct yc_node *devs, const struct conf_sim
 		yaml_quote(q, sizeof q, sim->spectro_socket);
 		n += (size_t)snprintf(text + n, sizeof text - n, "spectrometer: {socket: %s}\n", q);
 	}
-	if (!n || !devs)
+	if (!n || !devs || devs->type != YC_MAP) /* not a mapping: parse_devices() reports it */
 		return 0;
 	if (yc_load_string("--sim ports file", text, n, &c->simdoc, err))
 		return -1;
@@ -344,6 +353,7 @@ static int parse_recon(struct conf_priv *cp, struct yc_node *node, struct acq_er
 /* Run one driver parser: ACQ_E_UNSUPPORTED (driver not there yet) is a note, anything else an error. */
 static int driver_result(struct conf *c, enum conf_dev d, int rc, struct acq_err *err)
 {
+	c->devpresent[d] = true;
 	if (rc == 0)
 		return 0;
 	if (err && err->code == ACQ_E_UNSUPPORTED) {
@@ -354,6 +364,14 @@ static int driver_result(struct conf *c, enum conf_dev d, int rc, struct acq_err
 	return -1;
 }
 
+#if __has_include("drivers/axis_modbus.h")
+#include "drivers/axis_modbus.h"
+#define CONF_HAVE_ARM_PARSE 1
+#endif
+
+/* One arm: its axes go to the slots named by axes[] ("theta", "phi"). With the Modbus driver present, the
+ * driver parses the whole arm (link, arm-level timeouts, axes, unknown keys); before it lands, each axis
+ * through axis_cfg_parse() (which says "not implemented") and the arm's keys are checked here. */
 static int parse_arm(struct conf *c, struct yc_node *devs, struct yc_node *maps, const char *arm,
 		     const char *const *axes, const enum conf_dev *slots, int naxes, struct acq_err *err)
 {
@@ -367,15 +385,48 @@ static int parse_arm(struct conf *c, struct yc_node *devs, struct yc_node *maps,
 	snprintf(what, sizeof what, "devices.%s", arm);
 	if (yc_expect_map(node, what, err))
 		return -1;
-	struct yc_node *link = yc_get(node, "link"), *ax = yc_get(node, "axes");
-	if (!ax) {
+	struct yc_node *ax = yc_get(node, "axes");
+	if (!ax || (ax->type == YC_MAP && ax->n == 0)) {
 		for (int i = 0; i < naxes; i++)
 			snprintf(c->devnote[slots[i]], sizeof c->devnote[0], "devices.%s.axes: not configured", arm);
-		return yc_check_unknown(node, what, err);
+		/* Nothing to drive on this arm: its other keys are not checked (an empty arm is a placeholder). */
+		for (size_t i = 0; i < node->n; i++)
+			node->used[i] = true;
+		return 0;
 	}
 	snprintf(what, sizeof what, "devices.%s.axes", arm);
 	if (yc_expect_map(ax, what, err))
 		return -1;
+	for (size_t k = 0; k < ax->n; k++) {
+		int i = 0;
+		while (i < naxes && strcmp(ax->keys[k]->value, axes[i]))
+			i++;
+		if (i == naxes) {
+			ax->used[k] = false;
+			return yc_check_unknown(ax, what, err);
+		}
+	}
+#ifdef CONF_HAVE_ARM_PARSE
+	struct axis_cfg *got[4] = { 0 };
+	int n = 0;
+	if (axis_arm_parse(node, maps, arm, got, 4, &n, err))
+		return -1;
+	for (int k = 0; k < n; k++) {
+		const char *full = axis_cfg_name(got[k]), *dot = full ? strchr(full, '.') : NULL;
+		int i = 0;
+		while (dot && i < naxes && strcmp(dot + 1, axes[i]))
+			i++;
+		if (!dot || i == naxes) { /* cannot happen: the names were checked above */
+			for (int j = 0; j < n; j++)
+				axis_cfg_free(got[j]);
+			return yc_errf(err, ax, "%s: unexpected axis '%s'", what, full ? full : "?");
+		}
+		c->axis[slots[i]] = got[k];
+		c->devpresent[slots[i]] = true;
+	}
+	return 0;
+#else
+	struct yc_node *link = yc_get(node, "link");
 	for (int i = 0; i < naxes; i++) {
 		struct yc_node *a = yc_get(ax, axes[i]);
 		if (!a) {
@@ -389,13 +440,13 @@ static int parse_arm(struct conf *c, struct yc_node *devs, struct yc_node *maps,
 	}
 	if (yc_check_unknown(ax, what, err))
 		return -1;
+	/* While the axis driver is missing nobody reads the arm's link and timeouts: they are its keys. */
+	for (size_t i = 0; i < node->n; i++)
+		if (!strcmp(node->keys[i]->value, "link") || strstr(node->keys[i]->value, "timeout"))
+			node->used[i] = true;
 	snprintf(what, sizeof what, "devices.%s", arm);
-	/* While the axis driver is missing nobody reads `link`; it is not an unknown key for that. */
-	if (link)
-		for (size_t i = 0; i < node->n; i++)
-			if (!strcmp(node->keys[i]->value, "link"))
-				node->used[i] = true;
 	return yc_check_unknown(node, what, err);
+#endif
 }
 
 static int parse_devices(struct conf *c, struct yc_node *devs, struct acq_err *err)
@@ -466,13 +517,29 @@ static char *read_text(const char *path, struct acq_err *err)
 int conf_load(const char *path, const struct conf_sim *sim, struct conf **out, struct acq_err *err)
 {
 	*out = NULL;
+	char *text = read_text(path, err);
+	if (!text)
+		return -1;
+	int rc = conf_load_text(path, text, strlen(text), sim, out, err);
+	free(text);
+	return rc;
+}
+
+int conf_load_text(const char *name, const char *text, size_t len, const struct conf_sim *sim, struct conf **out,
+		   struct acq_err *err)
+{
+	*out = NULL;
 	struct conf_priv *cp = calloc(1, sizeof *cp);
 	if (!cp)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	struct conf *c = &cp->pub;
-	if (!(c->path = strdup(path)) || !(c->text = read_text(path, err)))
+	if (!(c->path = strdup(name)) || !(c->text = malloc(len + 1))) {
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
 		goto fail;
-	if (yc_load_string(path, c->text, strlen(c->text), &c->doc, err))
+	}
+	memcpy(c->text, text, len);
+	c->text[len] = 0;
+	if (yc_load_string(name, c->text, len, &c->doc, err))
 		goto fail;
 	struct yc_node *root = yc_root(c->doc);
 	if (!root) {

@@ -4,6 +4,7 @@
 #define CONF_H
 
 #include <stdbool.h>
+#include <stddef.h>
 #include <sys/types.h>
 
 #include "config/acq_err.h"
@@ -66,6 +67,7 @@ struct conf_sim {
 	char laser_device[256];
 	char spectro_socket[256];
 	char control_socket[256];
+	double time_scale;                       /* bench seconds per real second (1 when absent) */
 };
 
 struct conf {
@@ -78,6 +80,8 @@ struct conf {
 	struct laser_cfg *laser;
 	/* Why a device has no parsed configuration (its driver says "not implemented"); "" when parsed. */
 	char devnote[CONF_DEV__COUNT][256];
+	/* The device has a section in the file (its driver may still be missing: then it has a devnote). */
+	bool devpresent[CONF_DEV__COUNT];
 	struct conf_daemon d;
 	struct conf_sweep sweep;
 	struct conf_recon recon;
@@ -90,6 +94,9 @@ int conf_sim_read(const char *path, struct conf_sim *sim, struct acq_err *err);
 /* Load and validate path (sim may be NULL). Driver parsers answering ACQ_E_UNSUPPORTED leave the device
  * unconfigured with a note; every other error fails the load. *out allocated; 0 or -1 with err. */
 int conf_load(const char *path, const struct conf_sim *sim, struct conf **out, struct acq_err *err);
+/* The same from text in memory; name is used in messages and as the path. */
+int conf_load_text(const char *name, const char *text, size_t len, const struct conf_sim *sim, struct conf **out,
+		   struct acq_err *err);
 /* Free a configuration. NULL is fine. */
 void conf_free(struct conf *c);
 /* Stable device name of a slot ("laser.theta", "detector.theta", "detector.phi", "spectrometer", "laser"). */

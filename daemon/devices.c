@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
 #include "drivers/axis.h"
@@ -18,7 +19,14 @@ struct dev_slot {
 	char vendor[64], model[64], serial[64], firmware[64];
 };
 
+const struct devices_drv devices_real_drv = {
+	axis_open, axis_close, axis_cfg_limits, axis_read_status, axis_move_begin, axis_move_step, axis_stop,
+	axis_identity, spectro_open, spectro_close, spectro_info, spectro_start, spectro_fetch, spectro_stop,
+	laser_open, laser_close, laser_set_emission, laser_set_power, laser_status, laser_identity,
+};
+
 struct devices {
+	const struct devices_drv *drv;
 	struct loop *lp;
 	struct store *st;
 	const struct conf *c;
@@ -38,6 +46,7 @@ struct devices {
 	double op_deadline;
 	bool op_axis[3];
 	char op_kind[16];
+	bool op_laser;           /* the laser was switched on for this measurement: off at its end */
 	struct spectro_frame *frame;
 };
 
@@ -58,22 +67,22 @@ static void try_open(struct devices *dv, enum conf_dev d)
 	int rc = -1;
 	double now = dv->wallclock();
 	if (d <= CONF_DEV_DETECTOR_PHI) {
-		rc = axis_open(dv->c->axis[d], &dv->axis[d], &err);
+		rc = dv->drv->axis_open(dv->c->axis[d], &dv->axis[d], &err);
 		struct axis_identity id = { 0 };
-		if (!rc && !axis_identity(dv->axis[d], &id, NULL))
+		if (!rc && !dv->drv->axis_identity(dv->axis[d], &id, NULL))
 			set_identity(s, id.vendor, id.model, id.serial, id.firmware);
 	} else if (d == CONF_DEV_SPECTRO) {
-		rc = spectro_open(dv->c->spectro, &dv->spectro, &err);
+		rc = dv->drv->spectro_open(dv->c->spectro, &dv->spectro, &err);
 		if (!rc) {
-			const struct spectro_info *in = spectro_info(dv->spectro);
+			const struct spectro_info *in = dv->drv->spectro_info(dv->spectro);
 			set_identity(s, "Avantes", in->model, in->serial, in->firmware);
 			if (store_spectrometer_put(dv->st, in, now, &dv->spectro_id, &err))
 				snprintf(s->note, sizeof s->note, "recording calibration: %s", err.msg);
 		}
 	} else {
-		rc = laser_open(dv->c->laser, &dv->laser, &err);
+		rc = dv->drv->laser_open(dv->c->laser, &dv->laser, &err);
 		if (!rc) {
-			const struct laser_identity *li = laser_identity(dv->laser);
+			const struct laser_identity *li = dv->drv->laser_identity(dv->laser);
 			set_identity(s, "", li->model, li->serial, li->firmware);
 		}
 	}
@@ -101,15 +110,15 @@ static void retry_cb(struct loop *lp, void *arg)
 			try_open(dv, (enum conf_dev)d);
 }
 
-int devices_init(struct loop *lp, struct store *st, const struct conf *c, devices_notify_fn notify, void *ctx,
-		 double (*wallclock)(void), struct devices **out, struct acq_err *err)
+static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t *result);
+
+/* Open every configured device of dv->c (those that fail stay unavailable) and arm the retry timer. */
+static void open_all(struct devices *dv)
 {
-	struct devices *dv = calloc(1, sizeof *dv);
-	if (!dv)
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	*dv = (struct devices){ .lp = lp, .st = st, .c = c, .notify = notify, .ctx = ctx, .wallclock = wallclock };
+	const struct conf *c = dv->c;
 	for (int d = 0; d < CONF_DEV__COUNT; d++) {
 		struct dev_slot *s = &dv->slot[d];
+		memset(s, 0, sizeof *s);
 		s->configured = d <= CONF_DEV_DETECTOR_PHI ? c->axis[d] != NULL
 				: d == CONF_DEV_SPECTRO    ? c->spectro != NULL
 							   : c->laser != NULL;
@@ -118,8 +127,47 @@ int devices_init(struct loop *lp, struct store *st, const struct conf *c, device
 		else
 			try_open(dv, (enum conf_dev)d);
 	}
-	dv->retry_timer = loop_timer_add(lp, c->d.device_retry_s, c->d.device_retry_s, retry_cb, dv);
+	dv->retry_timer = loop_timer_add(dv->lp, c->d.device_retry_s, c->d.device_retry_s, retry_cb, dv);
+}
+
+/* Safe stop and close every handle (the object stays: the executor keeps its pointer). */
+static void close_all(struct devices *dv)
+{
+	devices_safe_stop(dv);
+	loop_timer_cancel(dv->lp, dv->retry_timer);
+	dv->retry_timer = 0;
+	dv->drv->laser_close(dv->laser);
+	dv->laser = NULL;
+	for (int i = 0; i < 3; i++) {
+		dv->drv->axis_close(dv->axis[i]);
+		dv->axis[i] = NULL;
+	}
+	dv->drv->spectro_close(dv->spectro);
+	dv->spectro = NULL;
+	dv->spectro_id = 0;
+}
+
+int devices_init(struct loop *lp, struct store *st, const struct conf *c, const struct devices_drv *drv,
+		 devices_notify_fn notify, void *ctx, double (*wallclock)(void), struct devices **out,
+		 struct acq_err *err)
+{
+	struct devices *dv = calloc(1, sizeof *dv);
+	if (!dv)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	*dv = (struct devices){ .drv = drv ? drv : &devices_real_drv, .lp = lp, .st = st, .c = c, .notify = notify,
+				.ctx = ctx, .wallclock = wallclock };
+	open_all(dv);
 	*out = dv;
+	return 0;
+}
+
+int devices_reconfigure(struct devices *dv, const struct conf *c, struct acq_err *err)
+{
+	if (dv->op_timer)
+		return acq_errf(err, ACQ_E_STATE, "a manual move or measurement is running");
+	close_all(dv);
+	dv->c = c;
+	open_all(dv);
 	return 0;
 }
 
@@ -128,13 +176,18 @@ int devices_safe_stop(struct devices *dv)
 	int fails = 0;
 	if (!dv)
 		return 0;
-	if (dv->laser && laser_set_emission(dv->laser, false, NULL))
+	struct acq_err err = { 0 };
+	if (dv->laser && dv->drv->laser_set_emission(dv->laser, false, &err)) {
+		log_msg(LOG_ERR, "safe stop: laser emission off not confirmed: %s", err.msg);
 		fails++;
+	}
 	for (int i = 0; i < 3; i++)
-		if (dv->axis[i] && axis_stop(dv->axis[i], NULL))
+		if (dv->axis[i] && dv->drv->axis_stop(dv->axis[i], &err)) {
+			log_msg(LOG_ERR, "safe stop: %s: stop not confirmed: %s", conf_dev_name((enum conf_dev)i), err.msg);
 			fails++;
+		}
 	if (dv->spectro)
-		spectro_stop(dv->spectro, NULL);
+		dv->drv->spectro_stop(dv->spectro, NULL);
 	return fails;
 }
 
@@ -142,13 +195,12 @@ void devices_finish(struct devices *dv)
 {
 	if (!dv)
 		return;
-	devices_safe_stop(dv);
-	loop_timer_cancel(dv->lp, dv->retry_timer);
-	loop_timer_cancel(dv->lp, dv->op_timer);
-	laser_close(dv->laser);
-	for (int i = 0; i < 3; i++)
-		axis_close(dv->axis[i]);
-	spectro_close(dv->spectro);
+	if (dv->op_timer) { /* a manual operation is cut short: its requester gets an answer */
+		struct acq_err err = { 0 };
+		acq_errf(&err, ACQ_E_STATE, "the daemon is stopping: operation interrupted");
+		op_end(dv, -1, &err, NULL);
+	}
+	close_all(dv);
 	free(dv->frame);
 	free(dv);
 }
@@ -177,13 +229,13 @@ void devices_lost(struct devices *dv, enum conf_dev d, const char *why)
 {
 	struct dev_slot *s = &dv->slot[d];
 	if (d <= CONF_DEV_DETECTOR_PHI) {
-		axis_close(dv->axis[d]);
+		dv->drv->axis_close(dv->axis[d]);
 		dv->axis[d] = NULL;
 	} else if (d == CONF_DEV_SPECTRO) {
-		spectro_close(dv->spectro);
+		dv->drv->spectro_close(dv->spectro);
 		dv->spectro = NULL;
 	} else {
-		laser_close(dv->laser);
+		dv->drv->laser_close(dv->laser);
 		dv->laser = NULL;
 	}
 	bool was = s->available;
@@ -191,6 +243,14 @@ void devices_lost(struct devices *dv, enum conf_dev d, const char *why)
 	snprintf(s->note, sizeof s->note, "%s", why);
 	if (was && dv->notify)
 		dv->notify(dv->ctx, d, false, why);
+}
+
+void devices_positions(struct devices *dv, double pos[3])
+{
+	for (int i = 0; i < 3; i++) {
+		struct axis_status st;
+		pos[i] = dv->axis[i] && !dv->drv->axis_read_status(dv->axis[i], &st, NULL) ? st.position_deg : NAN;
+	}
 }
 
 int devices_available(const struct devices *dv)
@@ -211,9 +271,10 @@ json_t *devices_json(struct devices *dv)
 	json_t *arr = json_array();
 	for (int d = 0; arr && d < CONF_DEV__COUNT; d++) {
 		struct dev_slot *s = &dv->slot[d];
+		bool present = s->configured || dv->c->devpresent[d];
 		json_t *o = json_pack("{s:s,s:b,s:b,s:s}", "name", conf_dev_name((enum conf_dev)d), "configured",
-				      s->configured, "available", s->available, "state",
-				      s->available ? "connected" : s->configured ? "unavailable" : "not_configured");
+				      present, "available", s->available, "state",
+				      s->available ? "connected" : present ? "unavailable" : "not_configured");
 		if (!o)
 			continue;
 		if (s->note[0])
@@ -224,10 +285,10 @@ json_t *devices_json(struct devices *dv)
 						      s->serial, "firmware", s->firmware));
 		if (d <= CONF_DEV_DETECTOR_PHI && dv->c->axis[d]) {
 			double lo, hi;
-			axis_cfg_limits(dv->c->axis[d], &lo, &hi);
+			dv->drv->axis_cfg_limits(dv->c->axis[d], &lo, &hi);
 			json_object_set_new(o, "limits_deg", json_pack("[f,f]", lo, hi));
 			struct axis_status st;
-			if (dv->axis[d] && !axis_read_status(dv->axis[d], &st, NULL))
+			if (dv->axis[d] && !dv->drv->axis_read_status(dv->axis[d], &st, NULL))
 				json_object_set_new(o, "status",
 						    json_pack("{s:f,s:b,s:b,s:b,s:i}", "position_deg", st.position_deg,
 							      "busy", st.busy, "homed", st.homed, "alarm", st.alarm,
@@ -235,7 +296,7 @@ json_t *devices_json(struct devices *dv)
 		}
 		if (d == CONF_DEV_LASER && dv->laser) {
 			struct laser_status ls;
-			if (!laser_status(dv->laser, &ls, NULL))
+			if (!dv->drv->laser_status(dv->laser, &ls, NULL))
 				json_object_set_new(o, "status",
 						    json_pack("{s:b,s:f,s:b,s:b}", "emission", ls.emission, "power_pct",
 							      ls.power_pct, "interlock_ok", ls.interlock_ok, "fault",
@@ -252,6 +313,9 @@ static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t
 {
 	loop_timer_cancel(dv->lp, dv->op_timer);
 	dv->op_timer = 0;
+	if (dv->op_laser && dv->laser)
+		dv->drv->laser_set_emission(dv->laser, false, NULL);
+	dv->op_laser = false;
 	devices_done_fn done = dv->op_done;
 	dv->op_done = NULL;
 	if (done)
@@ -273,7 +337,7 @@ static void move_step(struct loop *lp, void *arg)
 			acq_errf(&err, ACQ_E_DISCONNECTED, "%s: lost during the move", conf_dev_name((enum conf_dev)i));
 			goto fail;
 		}
-		int r = axis_move_step(dv->axis[i], now, &err);
+		int r = dv->drv->axis_move_step(dv->axis[i], now, &err);
 		if (r == AXIS_MOVE_FAILED) {
 			acq_err_prefix(&err, "%s: ", conf_dev_name((enum conf_dev)i));
 			goto fail;
@@ -292,7 +356,7 @@ static void move_step(struct loop *lp, void *arg)
 	json_t *res = json_object();
 	for (int i = 0; i < 3; i++) {
 		struct axis_status st;
-		if (dv->axis[i] && !axis_read_status(dv->axis[i], &st, NULL))
+		if (dv->axis[i] && !dv->drv->axis_read_status(dv->axis[i], &st, NULL))
 			json_object_set_new(res, conf_dev_name((enum conf_dev)i), json_real(st.position_deg));
 	}
 	op_end(dv, 0, NULL, res);
@@ -300,7 +364,7 @@ static void move_step(struct loop *lp, void *arg)
 fail:
 	for (int i = 0; i < 3; i++)
 		if (dv->op_axis[i] && dv->axis[i])
-			axis_stop(dv->axis[i], NULL);
+			dv->drv->axis_stop(dv->axis[i], NULL);
 	op_end(dv, -1, &err, NULL);
 }
 
@@ -317,7 +381,7 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 		if (!dv->c->axis[i])
 			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", name, dv->slot[i].note);
 		double lo, hi;
-		axis_cfg_limits(dv->c->axis[i], &lo, &hi);
+		dv->drv->axis_cfg_limits(dv->c->axis[i], &lo, &hi);
 		if (!(target[i] >= lo && target[i] <= hi))
 			return acq_errf(err, ACQ_E_RANGE, "%s: %g° is outside the soft limits [%g°, %g°]", name, target[i],
 					lo, hi);
@@ -331,10 +395,10 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 		dv->op_axis[i] = false;
 		if (isnan(target[i]))
 			continue;
-		if (axis_move_begin(dv->axis[i], target[i], now, err)) {
+		if (dv->drv->axis_move_begin(dv->axis[i], target[i], now, err)) {
 			for (int j = 0; j < i; j++)
 				if (dv->op_axis[j])
-					axis_stop(dv->axis[j], NULL);
+					dv->drv->axis_stop(dv->axis[j], NULL);
 			return acq_err_prefix(err, "%s: ", conf_dev_name((enum conf_dev)i));
 		}
 		dv->op_axis[i] = true;
@@ -355,7 +419,7 @@ static void measure_step(struct loop *lp, void *arg)
 		op_end(dv, -1, &err, NULL);
 		return;
 	}
-	int r = spectro_fetch(dv->spectro, dv->frame, loop_now(lp), &err);
+	int r = dv->drv->spectro_fetch(dv->spectro, dv->frame, loop_now(lp), &err);
 	if (r == 0)
 		return;
 	if (r < 0) {
@@ -395,30 +459,37 @@ static void measure_step(struct loop *lp, void *arg)
 			 (int)f->meas.averages));
 }
 
-int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages,
+int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages, double power_pct,
 		    devices_done_fn done, void *ctx, struct acq_err *err)
 {
 	if (dv->op_timer)
 		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
 	if (!dv->spectro)
 		return acq_errf(err, ACQ_E_UNSUPPORTED, "spectrometer: unavailable (%s)", dv->slot[CONF_DEV_SPECTRO].note);
-	if (!strcmp(kind, "dark")) {
-		if (dv->laser && laser_set_emission(dv->laser, false, err))
-			return acq_err_prefix(err, "dark: switching the laser off: ");
-		if (!dv->laser && dv->slot[CONF_DEV_LASER].configured)
-			return acq_errf(err, ACQ_E_UNSUPPORTED, "dark: the laser is unavailable, cannot make sure it is off");
-	}
+	/* A dark needs the laser off (and known to be off); a sample or reference needs the beam, switched on for
+	 * the measurement only. */
+	bool dark = !strcmp(kind, "dark");
+	if (!dv->laser && (!dark || dv->slot[CONF_DEV_LASER].configured || dv->c->devpresent[CONF_DEV_LASER]))
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: the laser is unavailable (%s)", kind,
+				dv->slot[CONF_DEV_LASER].note);
+	if (!dark && dv->laser && !isnan(power_pct) && dv->drv->laser_set_power(dv->laser, power_pct, err))
+		return acq_err_prefix(err, "%s: setting the laser power: ", kind);
+	if (dv->laser && dv->drv->laser_set_emission(dv->laser, !dark, err))
+		return acq_err_prefix(err, "%s: switching the laser %s: ", kind, dark ? "off" : "on");
 	if (!dv->frame && !(dv->frame = malloc(sizeof *dv->frame)))
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	struct spectro_meas m = { .integration_ms = integration_ms, .averages = (unsigned)averages,
 				  .saturation_detection = true };
-	if (spectro_start(dv->spectro, &m, loop_now(dv->lp), err))
+	if (dv->drv->spectro_start(dv->spectro, &m, loop_now(dv->lp), err)) {
+		if (!dark && dv->laser)
+			dv->drv->laser_set_emission(dv->laser, false, NULL);
 		return -1;
+	}
+	dv->op_laser = !dark && dv->laser;
 	snprintf(dv->op_kind, sizeof dv->op_kind, "%s", kind);
 	dv->op_done = done;
 	dv->op_ctx = ctx;
-	int fd = spectro_pollfd(dv->spectro);
-	(void)fd; /* polled by timer: a measurement is milliseconds to seconds, 10 ms granularity is plenty */
+	/* Polled by timer: a measurement takes milliseconds to seconds, 10 ms granularity is plenty. */
 	dv->op_timer = loop_timer_add(dv->lp, 0.01, 0.01, measure_step, dv);
 	return 0;
 }

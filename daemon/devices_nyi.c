@@ -117,6 +117,12 @@ __attribute__((weak)) const struct laser_identity *laser_identity(const struct l
 	static const struct laser_identity none;
 	return &none;
 }
+__attribute__((weak)) int laser_set_power(struct laser *l, double pct, struct acq_err *err)
+{
+	(void)l;
+	(void)pct;
+	return acq_errf(err, ACQ_E_UNSUPPORTED, NYI_LASER);
+}
 __attribute__((weak)) int laser_status(struct laser *l, struct laser_status *st, struct acq_err *err)
 {
 	(void)l;

@@ -43,6 +43,15 @@ double loop_monotonic(void *ctx)
 	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
+double loop_scaled_now(void *ctx)
+{
+	struct loop_scaled_clock *sc = ctx;
+	double real = loop_monotonic(NULL);
+	if (sc->t0 == 0)
+		sc->t0 = real;
+	return sc->t0 + (real - sc->t0) * (sc->rate > 0 ? sc->rate : 1);
+}
+
 struct loop *loop_new(const struct loop_clock *clk, struct acq_err *err)
 {
 	struct loop *lp = calloc(1, sizeof *lp);
@@ -54,6 +63,8 @@ struct loop *loop_new(const struct loop_clock *clk, struct acq_err *err)
 		lp->clk = *clk;
 	else
 		lp->clk.now = loop_monotonic;
+	if (!(lp->clk.rate > 0))
+		lp->clk.rate = 1;
 	lp->next_id = 1;
 	return lp;
 }
@@ -204,7 +215,9 @@ int loop_run_once(struct loop *lp, double max_wait_s)
 		wait = 0; /* timers may have changed fd interest; poll without waiting once */
 	if (max_wait_s >= 0 && (wait < 0 || max_wait_s < wait))
 		wait = max_wait_s;
-	int timeout_ms = wait < 0 ? -1 : (int)ceil(wait * 1000.0);
+	/* Clock seconds to real milliseconds (a scaled clock waits less); at most a minute per poll. */
+	double real_ms = wait < 0 ? -1 : ceil(wait / lp->clk.rate * 1000.0);
+	int timeout_ms = real_ms < 0 ? -1 : real_ms > 60000 ? 60000 : (int)real_ms;
 	if (lp->nfds > lp->cappfds) {
 		struct pollfd *p = realloc(lp->pfds, lp->nfds * sizeof *p);
 		if (!p)

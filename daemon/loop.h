@@ -10,11 +10,21 @@
 
 struct loop;
 
-/* The loop's clock: now() returns monotonic seconds. NULL clock in loop_new() means CLOCK_MONOTONIC. */
+/* The loop's clock: now() returns monotonic seconds. NULL clock in loop_new() means CLOCK_MONOTONIC.
+ * rate: clock seconds per real second while poll(2) waits (0 or 1: real time; 10: a simulated bench
+ * running ten times faster). A fake clock that tests step by hand is used with loop_run_once(lp, 0). */
 struct loop_clock {
 	double (*now)(void *ctx);
 	void *ctx;
+	double rate;
 };
+
+/* A monotonic clock running rate times faster than real time from now on (for --sim time scales). */
+struct loop_scaled_clock {
+	double t0, rate;
+};
+/* now() of a struct loop_scaled_clock (ctx); t0 = 0 initialises it on first use. */
+double loop_scaled_now(void *ctx);
 
 typedef void (*loop_fd_cb)(struct loop *lp, int fd, short revents, void *arg);
 typedef void (*loop_timer_cb)(struct loop *lp, void *arg);

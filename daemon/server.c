@@ -29,6 +29,7 @@ struct client {
 	char *out;
 	size_t outlen, outcap;
 	bool watch, closing;
+	bool backlog;           /* complete lines left for the next turn */
 	struct client *next;
 	struct server *srv;
 };
@@ -44,6 +45,7 @@ struct server {
 	struct client *clients;
 	int nclients;
 	uint64_t next_serial;
+	uint64_t drain_timer;
 };
 
 static void client_close(struct client *c)
@@ -75,7 +77,7 @@ static void update_events(struct client *c)
 	short ev = 0;
 	if (c->outlen || c->closing)
 		ev |= POLLOUT; /* a closing client is closed from its next (writable) event */
-	if (!c->closing && c->outlen < OUT_PAUSE_READ)
+	if (!c->closing && !c->backlog && c->outlen < OUT_PAUSE_READ)
 		ev |= POLLIN;
 	loop_fd_events(c->srv->lp, c->fd, ev);
 }
@@ -128,7 +130,9 @@ static void client_send(struct client *c, char *line)
 	memcpy(c->out + c->outlen, line, n);
 	c->outlen += n;
 	free(line);
-	flush_out(c);
+	/* Replies to a burst of requests leave in one write, from the loop (POLLOUT), unless they pile up. */
+	if (c->outlen >= 65536)
+		flush_out(c);
 	update_events(c);
 }
 
@@ -160,6 +164,68 @@ static void handle_line(struct client *c, const char *line, size_t len)
 	proto_req_free(&req);
 }
 
+#define LINES_PER_TURN 128  /* lines handled per client per loop turn, so a flood cannot starve others */
+
+static void drain_cb(struct loop *lp, void *arg);
+
+/* Handle up to LINES_PER_TURN complete lines of client serial; true if more are buffered. The handler may
+ * reply to this client or close others, so the client is looked up again after each line. */
+static bool process_lines(struct server *srv, uint64_t serial)
+{
+	struct client *c;
+	char *line;
+	size_t len;
+	int k;
+	for (int n = 0; n < LINES_PER_TURN; n++) {
+		if (!(c = client_by_serial(srv, serial)) || c->closing || !(k = proto_lines_next(&c->in, &line, &len)))
+			return false;
+		if (k == PROTO_LINE_TOO_LONG) {
+			char msg[96];
+			snprintf(msg, sizeof msg, "line longer than %d bytes: ignored up to its newline", PROTO_MAX_LINE);
+			send_error(c, NULL, PROTO_E_TOO_LONG, msg);
+		} else if (len) {
+			handle_line(c, line, len);
+		}
+	}
+	c = client_by_serial(srv, serial);
+	if (!c || c->closing)
+		return false;
+	c->backlog = true;
+	if (!srv->drain_timer)
+		srv->drain_timer = loop_timer_add(srv->lp, 0, 0, drain_cb, srv);
+	return true;
+}
+
+static void finish_turn(struct client *c)
+{
+	if (c->closing && !c->outlen) {
+		client_close(c);
+		return;
+	}
+	update_events(c);
+}
+
+/* Next turn for clients with buffered lines (after every other ready fd had its turn). */
+static void drain_cb(struct loop *lp, void *arg)
+{
+	(void)lp;
+	struct server *srv = arg;
+	srv->drain_timer = 0;
+	uint64_t serials[MAX_CLIENTS];
+	int n = 0;
+	for (struct client *c = srv->clients; c && n < MAX_CLIENTS; c = c->next)
+		if (c->backlog) {
+			c->backlog = false;
+			serials[n++] = c->peer.serial;
+		}
+	for (int i = 0; i < n; i++) {
+		process_lines(srv, serials[i]);
+		struct client *c = client_by_serial(srv, serials[i]);
+		if (c)
+			finish_turn(c);
+	}
+}
+
 static void on_client(struct loop *lp, int fd, short revents, void *arg)
 {
 	(void)lp;
@@ -168,41 +234,21 @@ static void on_client(struct loop *lp, int fd, short revents, void *arg)
 	uint64_t serial = c->peer.serial;
 	if (revents & POLLOUT)
 		flush_out(c);
-	if ((revents & (POLLIN | POLLHUP | POLLERR)) && !c->closing) {
+	/* With lines still buffered, read nothing more until they are handled (bounded memory). */
+	if ((revents & (POLLIN | POLLHUP | POLLERR)) && !c->closing && !c->backlog) {
 		char buf[65536];
 		ssize_t n = recv(fd, buf, sizeof buf, MSG_DONTWAIT);
 		if (n < 0 && (errno == EINTR || errno == EAGAIN))
 			return;
-		if (n <= 0) {
+		if (n <= 0 || proto_lines_feed(&c->in, buf, (size_t)n)) {
 			client_close(c);
 			return;
 		}
-		if (proto_lines_feed(&c->in, buf, (size_t)n)) {
-			client_close(c);
-			return;
-		}
-		char *line;
-		size_t len;
-		int k;
-		/* The handler may reply to this client (or close others); look the client up again after each. */
-		while ((c = client_by_serial(srv, serial)) && !c->closing && (k = proto_lines_next(&c->in, &line, &len))) {
-			if (k == PROTO_LINE_TOO_LONG) {
-				char msg[96];
-				snprintf(msg, sizeof msg, "line longer than %d bytes: ignored up to its newline",
-					 PROTO_MAX_LINE);
-				send_error(c, NULL, PROTO_E_TOO_LONG, msg);
-			} else if (len) {
-				handle_line(c, line, len);
-			}
-		}
-		if (!c)
+		process_lines(srv, serial);
+		if (!(c = client_by_serial(srv, serial)))
 			return;
 	}
-	if (c->closing && !c->outlen) {
-		client_close(c);
-		return;
-	}
-	update_events(c);
+	finish_turn(c);
 }
 
 static bool name_in_groups(const char *grname, const struct passwd *pw)
@@ -374,6 +420,7 @@ void server_finish(struct server *srv)
 {
 	if (!srv)
 		return;
+	loop_timer_cancel(srv->lp, srv->drain_timer);
 	while (srv->clients) {
 		flush_out(srv->clients);
 		client_close(srv->clients);

@@ -189,16 +189,6 @@ static void print_human(const char *cmd, json_t *rep)
 }
 
 /* ---- watch ---- */
-static void fmt_eta(double s, char *out, size_t cap)
-{
-	if (!isfinite(s) || s < 0)
-		snprintf(out, cap, "--");
-	else if (s >= 3600)
-		snprintf(out, cap, "%dh%02dm", (int)(s / 3600), (int)fmod(s / 60, 60));
-	else
-		snprintf(out, cap, "%dm%02ds", (int)(s / 60), (int)fmod(s, 60));
-}
-
 static void show_event(json_t *ev, bool tty, bool *bar_shown)
 {
 	const char *name = json_string_value(json_object_get(ev, "event"));
@@ -209,24 +199,12 @@ static void show_event(json_t *ev, bool tty, bool *bar_shown)
 		fflush(stdout);
 		return;
 	}
-	if (name && !strcmp(name, "sweep.progress")) {
-		long long done = json_integer_value(json_object_get(ev, "done"));
-		long long total = json_integer_value(json_object_get(ev, "total"));
-		json_t *e = json_object_get(ev, "eta_s");
-		char eta[32];
-		fmt_eta(json_is_number(e) ? json_number_value(e) : NAN, eta, sizeof eta);
-		long long sweep = json_integer_value(json_object_get(ev, "sweep"));
-		if (tty) {
-			char bar[41];
-			int w = 40, fill = total > 0 ? (int)(w * done / total) : 0;
-			for (int i = 0; i < w; i++)
-				bar[i] = i < fill ? '#' : '-';
-			bar[w] = 0;
-			printf("\rsweep %lld [%s] %lld/%lld  ETA %s   ", sweep, bar, done, total, eta);
-			*bar_shown = true;
-		} else {
-			printf("sweep %lld: %lld/%lld points, ETA %s\n", sweep, done, total, eta);
-		}
+	char line[256];
+	if (proto_progress_line(ev, tty, line, sizeof line)) {
+		fputs(line, stdout);
+		if (!tty)
+			putchar('\n');
+		*bar_shown = tty;
 		fflush(stdout);
 		return;
 	}
@@ -234,9 +212,11 @@ static void show_event(json_t *ev, bool tty, bool *bar_shown)
 		putchar('\n');
 		*bar_shown = false;
 	}
-	json_object_del(ev, "event");
+	char ename[64];
+	snprintf(ename, sizeof ename, "%s", name ? name : "?");
+	json_object_del(ev, "event"); /* frees name */
 	char *s = json_dumps(ev, JSON_COMPACT);
-	printf("%s %s\n", name ? name : "?", s ? s : "");
+	printf("%s %s\n", ename, s ? s : "");
 	free(s);
 	fflush(stdout);
 }
@@ -292,11 +272,16 @@ int main(int argc, char **argv)
 		return EXIT_NOCONN;
 	}
 	json_t *req = json_pack("{s:s,s:i}", "cmd", cmd, "id", 1);
+	char *line = NULL;
+	json_t *banner = NULL;
+	struct proto_lines pl;
+	proto_lines_init(&pl);
+	int rc = EXIT_REFUSED;
 	/* Positional shortcuts. */
 	if ((!strcmp(cmd, "plan") || !strcmp(cmd, "sweep.start")) && ai < argc && !strchr(argv[ai], '=')) {
 		char *text = read_file(argv[ai++]);
 		if (!text)
-			return EXIT_REFUSED;
+			goto out;
 		json_object_set_new(req, "plan", json_string(text));
 		free(text);
 		if (!strcmp(cmd, "plan"))
@@ -307,24 +292,24 @@ int main(int argc, char **argv)
 		char kv[64];
 		snprintf(kv, sizeof kv, "sweep=%s", argv[ai++]);
 		if (set_arg(req, def, kv))
-			return EXIT_REFUSED;
+			goto out;
 	}
 	for (; ai < argc; ai++)
 		if (set_arg(req, def, argv[ai]))
-			return EXIT_REFUSED;
-	char *line = json_dumps(req, JSON_COMPACT);
-	json_decref(req);
-	struct proto_lines pl;
-	proto_lines_init(&pl);
-	int rc = EXIT_REFUSED;
-	json_t *banner = proto_client_read(fd, &pl, opt_timeout_ms, &err);
+			goto out;
+	line = json_dumps(req, JSON_COMPACT);
+	banner = proto_client_read(fd, &pl, opt_timeout_ms, &err);
 	if (!banner || json_integer_value(json_object_get(banner, "protocol")) != PROTO_VERSION) {
 		fprintf(stderr, "acqctl: %s: %s\n", sock, banner ? "unsupported protocol version" : err.msg);
 		rc = EXIT_NOCONN;
 		goto out;
 	}
+	if (!line) {
+		fprintf(stderr, "acqctl: out of memory\n");
+		goto out;
+	}
 	size_t n = strlen(line);
-	line[n] = '\n'; /* json_dumps' NUL becomes the newline; the buffer has room for it */
+	line[n] = '\n'; /* json_dumps' NUL becomes the newline (the request is sent by length) */
 	if (proto_write_all(fd, line, n + 1, &err)) {
 		fprintf(stderr, "acqctl: %s\n", err.msg);
 		rc = EXIT_NOCONN;
@@ -364,6 +349,7 @@ int main(int argc, char **argv)
 	}
 	json_decref(rep);
 out:
+	json_decref(req);
 	json_decref(banner);
 	free(line);
 	proto_lines_free(&pl);

@@ -110,12 +110,14 @@ const struct proto_cmd proto_cmds[] = {
 	{ "move", PROTO_CONTROLLER, "move arms to absolute angles (degrees), checked against soft limits",
 	  { N("laser_theta", false, -360, 360), N("detector_theta", false, -360, 360),
 	    N("detector_phi", false, -720, 720) }, 3 },
-	{ "measure", PROTO_CONTROLLER, "take one sample spectrum",
-	  { N("integration_ms", false, 0.002, 600000), I("averages", false, 1, 10000) }, 2 },
+	{ "measure", PROTO_CONTROLLER, "take one sample spectrum (laser on for it, at power_pct if given)",
+	  { N("integration_ms", false, 0.002, 600000), I("averages", false, 1, 10000), N("power_pct", false, 0, 100) },
+	  3 },
 	{ "dark", PROTO_CONTROLLER, "take one dark spectrum (laser off)",
 	  { N("integration_ms", false, 0.002, 600000), I("averages", false, 1, 10000) }, 2 },
-	{ "reference", PROTO_CONTROLLER, "take one reference (white standard) spectrum",
-	  { N("integration_ms", false, 0.002, 600000), I("averages", false, 1, 10000) }, 2 },
+	{ "reference", PROTO_CONTROLLER, "take one reference (white standard) spectrum (laser on, power_pct)",
+	  { N("integration_ms", false, 0.002, 600000), I("averages", false, 1, 10000), N("power_pct", false, 0, 100) },
+	  3 },
 	{ "recon.start", PROTO_CONTROLLER, "start the reconstruction of a sweep in a child process",
 	  { I("sweep", true, 1, ID_MAX) }, 1 },
 	{ "recon.status", PROTO_OBSERVER, "state of a reconstruction run (latest of a sweep, or by run id)",
@@ -172,7 +174,7 @@ int proto_req_parse(const char *line, size_t len, struct proto_req *req, const c
 	*code = PROTO_E_PARSE;
 	json_error_t je;
 	/* JSON_REJECT_DUPLICATES: {"cmd":"status","cmd":"move"} is ambiguous, so it is an error. */
-	req->root = json_loadb(line, len, JSON_REJECT_DUPLICATES, &je);
+	req->root = json_loadb(line, len, JSON_REJECT_DUPLICATES | JSON_DECODE_ANY, &je);
 	if (!req->root)
 		return acq_errf(err, ACQ_E_PROTO, "not JSON: %s at column %d", je.text, je.column);
 	*code = PROTO_E_INVALID;
@@ -189,8 +191,8 @@ int proto_req_parse(const char *line, size_t len, struct proto_req *req, const c
 	json_t *cmd = json_object_get(req->root, "cmd");
 	if (!cmd)
 		return acq_errf(err, ACQ_E_PROTO, "missing \"cmd\"");
-	if (!json_is_string(cmd))
-		return acq_errf(err, ACQ_E_PROTO, "\"cmd\": expected a string");
+	if (!json_is_string(cmd) || strlen(json_string_value(cmd)) != json_string_length(cmd))
+		return acq_errf(err, ACQ_E_PROTO, "\"cmd\": expected a string (without NUL characters)");
 	req->cmd = json_string_value(cmd);
 	if (!(req->def = proto_cmd_find(req->cmd))) {
 		*code = PROTO_E_UNKNOWN;

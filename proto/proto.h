@@ -94,6 +94,10 @@ char *proto_banner(const char *version);
 /* The wire code for an error record's class (ACQ_E_RANGE → "range", ...). */
 const char *proto_code_of(const struct acq_err *err);
 
+/* Render a "sweep.progress" event {sweep, done, total, eta_s}: on a terminal "\rsweep N [###---] P% d/t  ETA
+ * 4m05s" (redrawn in place), else "sweep N: d/t points, ETA 4m05s". 1 if ev was one, else 0 (buf untouched). */
+int proto_progress_line(json_t *ev, bool tty, char *buf, size_t cap);
+
 /* ---- client side (acqctl, tests) ---- */
 /* Connect to a Unix socket path, or "tcp:PORT" on 127.0.0.1. fd or -1 with err. */
 int proto_client_connect(const char *where, struct acq_err *err);

@@ -29,7 +29,7 @@ static void test_timer_order_and_period(void **state)
 	(void)state;
 	fake_now = 100;
 	ntrace = 0;
-	struct loop_clock clk = { fake_clock, NULL };
+	struct loop_clock clk = { .now = fake_clock };
 	struct loop *lp = loop_new(&clk, NULL);
 	assert_non_null(lp);
 	assert_true(loop_next_timeout(lp) < 0);
@@ -66,7 +66,7 @@ static void test_cancel_inside_callback(void **state)
 {
 	(void)state;
 	fake_now = 0;
-	struct loop_clock clk = { fake_clock, NULL };
+	struct loop_clock clk = { .now = fake_clock };
 	struct loop *lp = loop_new(&clk, NULL);
 	self_count = 0;
 	self_id = loop_timer_add(lp, 0.1, 0.1, cancel_self, NULL);
@@ -117,12 +117,31 @@ static void test_fd_callbacks(void **state)
 	loop_free(lp);
 }
 
+static void test_scaled_clock(void **state)
+{
+	(void)state;
+	struct loop_scaled_clock sc = { 0, 20 };
+	struct loop_clock clk = { .now = loop_scaled_now, .ctx = &sc, .rate = 20 };
+	struct loop *lp = loop_new(&clk, NULL);
+	ntrace = 0;
+	double real0 = loop_monotonic(NULL), t0 = loop_now(lp);
+	loop_timer_add(lp, 2.0, 0, mark, "s"); /* two bench seconds = 0.1 s of real time at 20× */
+	while (!ntrace && loop_monotonic(NULL) - real0 < 5)
+		loop_run_once(lp, -1);
+	double real = loop_monotonic(NULL) - real0;
+	assert_int_equal(ntrace, 1);
+	assert_true(loop_now(lp) - t0 >= 2.0);
+	assert_true(real >= 0.09 && real < 1.0);
+	loop_free(lp);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_timer_order_and_period),
 		cmocka_unit_test(test_cancel_inside_callback),
 		cmocka_unit_test(test_fd_callbacks),
+		cmocka_unit_test(test_scaled_clock),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

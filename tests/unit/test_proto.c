@@ -73,6 +73,9 @@ static void test_validation(void **state)
 	assert_string_equal(parse_code("{\"cmd\":\"status\",\"id\":[1]}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"status\",\"cmd\":\"move\"}", NULL), PROTO_E_PARSE);
 	assert_string_equal(parse_code("{\"cmd\":\"frobnicate\"}", NULL), PROTO_E_UNKNOWN);
+	/* jansson refuses \\u0000 unless asked (JSON_ALLOW_NUL): a NUL never reaches a command. */
+	assert_string_equal(parse_code("{\"cmd\":\"status\\u0000x\"}", NULL), PROTO_E_PARSE);
+	assert_string_equal(parse_code("{\"cmd\":\"export\",\"sweep\":1,\"path\":\"a\\u0000b\"}", NULL), PROTO_E_PARSE);
 	assert_string_equal(parse_code("{\"cmd\":\"status\",\"extra\":1}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":\"10\"}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":1e9}", NULL), PROTO_E_INVALID);
@@ -126,12 +129,38 @@ static void test_formatting(void **state)
 	assert_string_equal(proto_code_of(&e), "not_found");
 }
 
+static void test_progress_line(void **state)
+{
+	(void)state;
+	char buf[256] = "untouched";
+	json_t *other = json_pack("{s:s}", "event", "device");
+	assert_int_equal(proto_progress_line(other, true, buf, sizeof buf), 0);
+	assert_string_equal(buf, "untouched");
+	json_decref(other);
+	json_t *ev = json_pack("{s:s,s:i,s:i,s:i,s:f}", "event", "sweep.progress", "sweep", 4, "done", 25, "total", 100,
+			       "eta_s", 245.0);
+	assert_int_equal(proto_progress_line(ev, false, buf, sizeof buf), 1);
+	assert_string_equal(buf, "sweep 4: 25/100 points, ETA 4m05s");
+	assert_int_equal(proto_progress_line(ev, true, buf, sizeof buf), 1);
+	assert_string_equal(buf, "\rsweep 4 [##########------------------------------]  25% 25/100  ETA 4m05s   ");
+	json_object_set_new(ev, "eta_s", json_null());
+	json_object_set_new(ev, "done", json_integer(1000));
+	json_object_set_new(ev, "eta_s", json_real(7322));
+	assert_int_equal(proto_progress_line(ev, false, buf, sizeof buf), 1);
+	assert_string_equal(buf, "sweep 4: 100/100 points, ETA 2h02m");
+	json_object_set_new(ev, "eta_s", json_null());
+	assert_int_equal(proto_progress_line(ev, false, buf, sizeof buf), 1);
+	assert_string_equal(buf, "sweep 4: 100/100 points, ETA --");
+	json_decref(ev);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_framing),
 		cmocka_unit_test(test_validation),
 		cmocka_unit_test(test_formatting),
+		cmocka_unit_test(test_progress_line),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
