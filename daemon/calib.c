@@ -181,7 +181,9 @@ int calib_pixels(const struct calib_cfg *c, const double *wl, const struct exp_r
 	double sig_rad = c->sigma_pos_deg * DEG;
 	o->npix = s->npix;
 	for (int i = 0; i < s->npix; i++) {
-		if (!s->valid[i] || !r->valid[i] || !(r->rate[i] > 0) || !isfinite(s->rate[i])) {
+		/* A reference (or beam) not clearly above its noise has no light to compare with: unusable. */
+		double ur_i = hypot(r->u_noise[i], r->u_dark[i]);
+		if (!s->valid[i] || !r->valid[i] || !(r->rate[i] > 0) || !(r->rate[i] > 3 * ur_i) || !isfinite(s->rate[i])) {
 			px_invalid(o, i);
 			continue;
 		}

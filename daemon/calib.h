@@ -17,7 +17,8 @@
  * Binning: a grid value is the plain mean of the valid pixels in [λ − step/2, λ + step/2); components that
  * are independent per pixel (noise, dark, reference noise) add in quadrature (/n), components common to all
  * pixels of a bin (ρ_ref or Ω_det scale, angle) add linearly. A bin with no pixel interpolates linearly between
- * its two neighbours. Saturated (invalid) pixels are never used; a bin with only invalid pixels is NaN. */
+ * its two neighbours. Saturated (invalid) pixels are never used, nor pixels where the reference is not above
+ * three times its own noise (no light to compare with); a bin with only such pixels is NaN. */
 #ifndef CALIB_H
 #define CALIB_H
 

@@ -370,8 +370,12 @@ static bool want_wl(struct ex *x)
 	for (int p = 0; p < x->info->npix; p++) {
 		x->wl[p] = spectro_wavelength(x->info, p);
 		x->roi[p] = x->wl[p] >= lo && x->wl[p] < hi;
-		x->nroi += x->roi[p];
 	}
+	for (int i = 0; i < x->info->ndark_pixels && i < 8; i++)
+		if (x->info->dark_pixels[i] >= 0 && x->info->dark_pixels[i] < x->info->npix)
+			x->roi[x->info->dark_pixels[i]] = 0;
+	for (int p = 0; p < x->info->npix; p++)
+		x->nroi += x->roi[p];
 	return true;
 }
 
@@ -464,6 +468,8 @@ int ex_current_step(const struct ex *x)
 {
 	return x->cur;
 }
+
+static void mask_black(const struct ex *x, struct exp_rate *r);
 
 /* ---- reference reload (crash-resume) ------------------------------------------------------------ */
 
@@ -565,8 +571,10 @@ static int load_reference(struct ex *x, struct acq_err *err)
 		const struct exp_rate *list[EX_MAX_TIMES];
 		for (int i = 0; i < n; i++)
 			list[i] = x->rates[i];
-		if (exp_merge(list, n, x->ref_rate, err) == 0)
+		if (exp_merge(list, n, x->ref_rate, err) == 0) {
+			mask_black(x, x->ref_rate);
 			found = 1;
+		}
 	}
 	goto out;
 dberr:
@@ -1012,8 +1020,8 @@ static void start_shot(struct ex *x, enum shot_kind k, double t, double now)
 		return;
 	}
 	x->shot_in_flight = true;
-	double dur = t * 1e-3 * x->meas.averages;
-	x->wake = now + fmin(x->cfg.poll_s, fmax(dur, 1e-4));
+	/* First look when the exposures should be over, then every poll_s (the fetch deadline is the driver's). */
+	x->wake = now + fmax(t * 1e-3 * x->meas.averages, 1e-4);
 }
 
 static int keep_frame(struct ex *x, const char *kind, double taken_at)
@@ -1026,6 +1034,19 @@ static int keep_frame(struct ex *x, const char *kind, double taken_at)
 	memcpy(f, x->frame, sizeof *f);
 	x->pend[x->npend++] = (struct pending){ kind, f, taken_at };
 	return 0;
+}
+
+/* The sensor's optically black pixels carry no light: never used as data. */
+static void mask_black(const struct ex *x, struct exp_rate *r)
+{
+	for (int i = 0; x->info && i < x->info->ndark_pixels && i < 8; i++) {
+		int p = x->info->dark_pixels[i];
+		if (p >= 0 && p < r->npix && r->valid[p]) {
+			r->valid[p] = 0;
+			r->rate[p] = r->u_noise[p] = r->u_dark[p] = NAN;
+			r->ninvalid++;
+		}
+	}
 }
 
 static double full_scale(const struct ex *x)
@@ -1258,6 +1279,7 @@ static void commit_point(struct ex *x, double now)
 		return;
 	}
 	x->stats.merges++;
+	mask_black(x, x->merged);
 	int bad = 0;
 	for (int p = 0; p < x->merged->npix; p++)
 		bad += x->roi[p] && !x->merged->valid[p];
@@ -1444,9 +1466,9 @@ static void run_suspended(struct ex *x, double now)
 	}
 	if (rc == 0) {
 		x->stats.recoveries++;
+		x->state = EX_RUNNING;
 		event(x, "recovered", dev_names[dev], "%s answers again after %d attempt%s: point %d restarts", dev_names[dev],
 		      x->fault_attempts, x->fault_attempts == 1 ? "" : "s", x->cur);
-		x->state = EX_RUNNING;
 		begin_segment(x, now);
 		return;
 	}

@@ -14,7 +14,7 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "integration"))
 import sweeplib as L  # noqa: E402
 
-SCALE = float(os.environ.get("DEMO_TIME_SCALE", "60"))
+SCALE = float(os.environ.get("DEMO_TIME_SCALE", "35"))
 PLAN = os.path.join(L.SRC, "config", "plan-paper-10x10x10.yaml")
 ACQCTL = os.path.join(L.BUILD, "acqctl")
 

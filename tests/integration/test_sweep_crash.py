@@ -27,7 +27,7 @@ KILLS = 20
 
 def run():
     rng = random.Random(L.SEED)
-    b = L.Bench(scale=30)
+    b = L.Bench(scale=20)
     try:
         b.start_sim()
         b.start_daemon()
@@ -37,7 +37,7 @@ def run():
         done_at_kill = []
         while kills < KILLS:
             # run for a random while (the operator's sample swap included), then SIGKILL
-            deadline = time.time() + rng.uniform(0.05, 0.4)
+            deadline = time.time() + rng.uniform(0.05, 0.3)
             while time.time() < deadline:
                 row = L.sweep_row(b, sid)
                 if row["state"] in ("completed", "aborted", "failed"):

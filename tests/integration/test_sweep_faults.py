@@ -24,10 +24,11 @@ averages: 4
 blind_points: drop
 """
 
-# (control command, command that ends it or None, real seconds it stays on)
+SCALE = 40.0
+# (control command, command that ends it or None, bench seconds it stays on at least)
 FAULTS = [
-    ("fault modbus-timeout laser on", "fault modbus-timeout laser off", 0.6),
-    ("fault modbus-timeout detector on", "fault modbus-timeout detector off", 0.6),
+    ("fault modbus-timeout laser on", "fault modbus-timeout laser off", 4),
+    ("fault modbus-timeout detector on", "fault modbus-timeout detector off", 4),
     ("fault drop-connection laser", None, 0),
     ("fault drop-connection detector", None, 0),
     ("fault alarm-mid-move laser", None, 0),
@@ -36,8 +37,8 @@ FAULTS = [
     ("fault stall laser", None, 0),
     ("fault spectro-disconnect 20", None, 0),
     ("fault saturation-burst 3", None, 0),
-    ("fault laser-interlock on", "fault laser-interlock off", 0.6),
-    ("fault laser-fault on", "fault laser-fault off", 0.6),
+    ("fault laser-interlock on", "fault laser-interlock off", 4),
+    ("fault laser-fault on", "fault laser-fault off", 4),
 ]
 
 
@@ -72,7 +73,7 @@ class LaserWatch(threading.Thread):
 
 
 def run():
-    b = L.Bench(scale=150)
+    b = L.Bench(scale=SCALE)
     watch = None
     try:
         b.start_sim()
@@ -99,9 +100,9 @@ def run():
                 injected.append((cmd, done))
                 last_done = done
                 if off:
-                    clear_cmd, clear_at = off, time.time() + dur
+                    clear_cmd, clear_at = off, time.time() + dur / SCALE
 
-        row = L.drive_to_end(b, sid, timeout=150, on_tick=tick)
+        row = L.drive_to_end(b, sid, timeout=150, on_tick=tick, poll=0.03)
         watch.stop = True
         watch.join(5)
         L.say("injected %d faults at points %s; sweep %s after %.1f s" % (
