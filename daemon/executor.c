@@ -1403,6 +1403,14 @@ static void commit_point(struct ex *x, double now)
 	x->point_faults = 0;
 	x->stats.points_done++;
 	x->cur++;
+	/* Dark schedule (sweep.dark_every): every N points, or whenever the incidence changes. */
+	if (x->cur < x->nsteps) {
+		bool refresh = x->cfg.dark_every > 0
+				       ? x->stats.points_done % x->cfg.dark_every == 0
+				       : fabs(x->plan->steps[x->cur].pos.laser_theta - x->plan->steps[x->cur - 1].pos.laser_theta) > 1e-6;
+		if (refresh)
+			exp_darks_clear(x->darks);
+	}
 	progress(x, now);
 	if (x->cur >= x->nsteps) {
 		finish_sweep(x);

@@ -656,6 +656,7 @@ static int load_cfg(const struct conf *c, struct ex_cfg *cfg, struct acq_err *er
 		cfg->pol.probe_ms = cfg->pol.max_ms;
 	cfg->pol.averages = (unsigned)c->sweep.averages;
 	cfg->extra_settle_s = c->sweep.extra_settle_s;
+	cfg->dark_every = c->sweep.dark_every;
 	cfg->auto_resume_faults = c->sweep.auto_resume_faults;
 	if (ex_cfg_parse(c->sweep.acquisition, c->sweep.calibration, cfg, err))
 		return -1;
