@@ -24,6 +24,11 @@ double app_wallclock(void)
 void app_emit(void *ctx, const char *event, json_t *data)
 {
 	struct app *app = ctx;
+	if (!strncmp(event, "sweep.", 6) && app->sweep) { /* systemd's STATUS= follows the sweep at once */
+		char line[256];
+		app_status_line(app, line, sizeof line);
+		sd_notifyf(0, "STATUS=%s", line);
+	}
 	if (app->srv)
 		server_broadcast(app->srv, event, data);
 	else

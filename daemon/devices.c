@@ -39,6 +39,7 @@ struct devices {
 	struct laser *laser;
 	int64_t spectro_id;
 	uint64_t retry_timer;
+	int retry_next;          /* the slot the next retry starts from */
 	/* manual operation in progress */
 	uint64_t op_timer;
 	devices_done_fn op_done;
@@ -101,13 +102,22 @@ static void try_open(struct devices *dv, enum conf_dev d)
 		dv->notify(dv->ctx, d, true, "connected");
 }
 
+/* One absent device per tick, in turn: an open is a bounded transaction (up to the link's response
+ * timeout), so trying them all at once could hold the loop for several timeouts in a row. */
 static void retry_cb(struct loop *lp, void *arg)
 {
 	(void)lp;
 	struct devices *dv = arg;
-	for (int d = 0; d < CONF_DEV__COUNT; d++)
-		if (dv->slot[d].configured && !dv->slot[d].available && !dv->op_timer)
+	if (dv->op_timer)
+		return;
+	for (int k = 0; k < CONF_DEV__COUNT; k++) {
+		int d = (dv->retry_next + k) % CONF_DEV__COUNT;
+		if (dv->slot[d].configured && !dv->slot[d].available) {
+			dv->retry_next = (d + 1) % CONF_DEV__COUNT;
 			try_open(dv, (enum conf_dev)d);
+			return;
+		}
+	}
 }
 
 static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t *result);

@@ -59,7 +59,7 @@ extern const struct devices_drv devices_real_drv;
 typedef void (*devices_notify_fn)(void *ctx, enum conf_dev dev, bool up, const char *why);
 
 /* Open every configured device with drv (NULL: the real drivers); failures leave it unavailable and retried
- * every daemon.device_retry_s. The configuration must outlive the devices. 0 or -1 (only out of memory). */
+ * (one absent device per daemon.device_retry_s, in turn). The configuration must outlive the devices. 0 or -1 (only out of memory). */
 int devices_init(struct loop *lp, struct store *st, const struct conf *c, const struct devices_drv *drv,
 		 devices_notify_fn notify, void *ctx, double (*wallclock)(void), struct devices **out,
 		 struct acq_err *err);

@@ -82,7 +82,19 @@ static int check_existing(const char *path, struct acq_err *err)
 {
 	sqlite3 *db = NULL;
 	int rc = -1, ok;
-	if (sqlite3_open_v2(path, &db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
+	/* Without a -wal beside it, inspect the file as immutable: SQLite then creates no -wal/-shm even when a
+	 * corrupt header claims WAL mode. With a -wal (ours after a crash), a plain read-only open reads it. */
+	char uri[4200], wal[4200];
+	snprintf(wal, sizeof wal, "%s-wal", path);
+	struct stat sb;
+	bool immutable = stat(wal, &sb) != 0;
+	char *enc = sqlite3_mprintf("%s", path);
+	snprintf(uri, sizeof uri, "file:%s%s", enc ? enc : path, immutable ? "?immutable=1" : "");
+	sqlite3_free(enc);
+	/* A path with URI metacharacters is opened as a plain name (no immutable flag then). */
+	bool plain = strpbrk(path, "?#%") != NULL;
+	if (sqlite3_open_v2(plain ? path : uri, &db, SQLITE_OPEN_READONLY | (plain ? 0 : SQLITE_OPEN_URI), NULL) !=
+	    SQLITE_OK) {
 		acq_errf(err, ACQ_E_IO, "%s: cannot open: %s", path, db ? sqlite3_errmsg(db) : "out of memory");
 		goto out;
 	}

@@ -80,16 +80,48 @@ def main():
         laser = [d for d in c.req("devices")["devices"] if d["name"] == "laser"][0]
         check(laser["status"]["emission"] is False, "laser off after the measurement: %r" % laser)
         c.close()
+
+        # SIGKILL while spectra are being written: every spectrum whose reply arrived is in the database.
+        k = Client(sock)
+        ids = []
+        t_end = time.time() + 1.0
+        while time.time() < t_end:
+            r = k.req("dark", integration_ms=2.0)
+            check(r["ok"], "dark %r" % r)
+            ids.append(r["spectrum_id"])
+        k.send_raw(b'{"cmd":"dark","integration_ms":2}\n')  # in flight when the daemon dies
+        daemon.send_signal(signal.SIGKILL)
+        daemon.wait(10)
+        k.close()
+        con = sqlite3.connect(os.path.join(state, "acquisition.db"))
+        check(con.execute("PRAGMA integrity_check").fetchone()[0] == "ok", "integrity after SIGKILL")
+        have = {i for (i,) in con.execute("SELECT id FROM spectra")}
+        missing = [i for i in ids if i not in have]
+        check(not missing, "acknowledged spectra lost after SIGKILL: %r" % missing)
+        con.close()
+        killed_n = len(ids)
+        daemon = subprocess.Popen([os.path.join(BUILD, "acquisitiond"), "-f", "-c", conf, "--sim", ports],
+                                  stdout=log, stderr=subprocess.STDOUT)
+        c = None
+        t_end = time.time() + 10
+        while time.time() < t_end and c is None:
+            try:
+                c = Client(sock)
+            except OSError:
+                time.sleep(0.05)
+        check(c is not None and c.req("version")["ok"], "restart after SIGKILL (stale socket replaced)")
+        c.close()
         daemon.send_signal(signal.SIGTERM)
         check(daemon.wait(15) == 0, "daemon exit")
         con = sqlite3.connect(os.path.join(state, "acquisition.db"))
         kinds = [k for (k,) in con.execute("SELECT kind FROM spectra ORDER BY id")]
-        check(kinds == ["dark", "sample"], "stored spectra %r" % kinds)
+        check(kinds[:2] == ["dark", "sample"] and len(kinds) >= 2 + killed_n, "stored spectra %r" % kinds[:4])
         check(con.execute("SELECT count(*) FROM spectrometers").fetchone()[0] == 1, "calibration recorded")
         check(con.execute("SELECT count(*) FROM devices").fetchone()[0] >= 3, "identities recorded")
         con.close()
         print("ok: simulated bench (time scale 10) driven through --sim: move %.2f s real, dark %.0f, sample %.0f "
-              "counts" % (move_s, dark["peak"], sample["peak"]))
+              "counts; %d acknowledged spectra all kept across SIGKILL" % (move_s, dark["peak"], sample["peak"],
+                                                                         killed_n))
     finally:
         for p in (daemon, sim):
             if p and p.poll() is None:
