@@ -527,52 +527,85 @@ static void recon_next(struct sweep *sw)
 		    sw->recon_failed, RC__COUNT, summary);
 }
 
-/* The sweep completed: CSV into the state directory, then the reconstruction chain if wanted and present. */
-static void on_completed(struct loop *lp, void *arg)
+/* The completion chain of sweep id: its calibrated samples as CSV into the state directory, then the
+ * reconstruction stages if wanted (automatic: sweep.auto_recon) and brdf-recon is present. 0 or -1. */
+static int run_chain(struct sweep *sw, int64_t id, bool automatic, int64_t *run_id, struct acq_err *err)
 {
-	(void)lp;
-	struct sweep *sw = arg;
-	sw->done_timer = 0;
 	const struct conf *c = sw->env.conf;
-	struct acq_err err = { 0 };
-	snprintf(sw->outdir, sizeof sw->outdir, "%s/sweep-%lld", c->recon.output_dir, (long long)sw->done_id);
+	if (run_id)
+		*run_id = 0;
+	if (sw->job)
+		return acq_errf(err, ACQ_E_STATE, "a reconstruction is still running");
+	sw->done_id = id;
+	snprintf(sw->outdir, sizeof sw->outdir, "%s/sweep-%lld", c->recon.output_dir, (long long)id);
 	mkdir(c->recon.output_dir, 0750);
 	mkdir(sw->outdir, 0750);
 	snprintf(sw->csv, sizeof sw->csv, "%s/samples.csv", sw->outdir);
 	int rows = 0;
-	if (export_csv(sw, sw->done_id, sw->csv, &rows, &err)) {
-		recon_event(sw, "info", "exporting the calibrated samples failed: %s; no reconstruction ran", err.msg);
-		return;
+	if (export_csv(sw, id, sw->csv, &rows, err)) {
+		recon_event(sw, "info", "exporting the calibrated samples failed: %s; no reconstruction ran", err->msg);
+		return -1;
 	}
 	recon_event(sw, "info", "%d calibrated samples exported to %s", rows, sw->csv);
-	if (!c->sweep.auto_recon) {
+	if (automatic && !c->sweep.auto_recon) {
 		recon_event(sw, "info", "sweep.auto_recon is off: no reconstruction ran; the samples are in %s", sw->csv);
-		return;
+		return 0;
 	}
 	if (find_program(c->recon.program, sw->prog, sizeof sw->prog)) {
 		recon_event(sw, "info", "no reconstruction ran: '%s' not found (brdf-recon not installed?); the calibrated "
 			    "samples are recorded in the database and in %s", c->recon.program, sw->csv);
-		return;
-	}
-	if (sw->job) {
-		recon_event(sw, "info", "a reconstruction is still running: none started for sweep %lld",
-			    (long long)sw->done_id);
-		return;
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "reconstruction program '%s' not found", c->recon.program);
 	}
 	snprintf(sw->files[RC_FIT], sizeof sw->files[0], "%s/model.brdf", sw->outdir);
 	snprintf(sw->files[RC_MERL], sizeof sw->files[0], "%s/merl.binary", sw->outdir);
 	snprintf(sw->files[RC_DHR], sizeof sw->files[0], "%s/dhr.csv", sw->outdir);
 	snprintf(sw->files[RC_RENDER], sizeof sw->files[0], "%s/preview.png", sw->outdir);
+	for (int i = 0; i < RC__COUNT; i++)
+		unlink(sw->files[i]); /* a rerun must not report the previous run's files */
 	char args[8192];
 	snprintf(args, sizeof args, "[\"fit %s\", \"merl\", \"dhr --plot\", \"render\"]", sw->csv);
-	if (store_recon_begin(sw->env.store, sw->done_id, sw->prog, args, sw->env.wallclock(), &sw->run_id, &err)) {
-		recon_event(sw, "info", "recording the reconstruction failed: %s; none ran", err.msg);
-		return;
+	if (store_recon_begin(sw->env.store, id, sw->prog, args, sw->env.wallclock(), &sw->run_id, err)) {
+		recon_event(sw, "info", "recording the reconstruction failed: %s; none ran", err->msg);
+		return -1;
 	}
+	if (run_id)
+		*run_id = sw->run_id;
 	sw->rstage = RC_FIT;
 	sw->recon_failed = 0;
 	sw->dhr_noplot = false;
 	recon_next(sw);
+	return 0;
+}
+
+/* The sweep completed (timer, so it runs outside the executor's step). */
+static void on_completed(struct loop *lp, void *arg)
+{
+	(void)lp;
+	struct sweep *sw = arg;
+	sw->done_timer = 0;
+	struct acq_err err = { 0 };
+	if (run_chain(sw, sw->done_id, true, NULL, &err) && err.code != ACQ_E_UNSUPPORTED)
+		log_msg(LOG_WARNING, "sweep %lld: completion: %s", (long long)sw->done_id, err.msg);
+}
+
+int sweep_recon_start(struct sweep *sw, int64_t sweep_id, int64_t *run_id, struct acq_err *err)
+{
+	*run_id = 0;
+	if (sw->ex)
+		return acq_errf(err, ACQ_E_STATE, "sweep %lld is %s: reconstruct when no sweep runs", (long long)sw->id,
+				ex_state_name(ex_state(sw->ex)));
+	if (sw->job)
+		return acq_errf(err, ACQ_E_STATE, "a reconstruction is still running");
+	json_t *js = store_sweep_show(sw->env.store, sweep_id, false, err);
+	if (!js)
+		return -1;
+	json_decref(js);
+	return run_chain(sw, sweep_id, false, run_id, err);
+}
+
+bool sweep_recon_busy(const struct sweep *sw)
+{
+	return sw->job != NULL;
 }
 
 /* ---- the executor on the loop --------------------------------------------------------------------- */
