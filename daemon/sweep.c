@@ -722,6 +722,9 @@ void sweep_finish(struct sweep *sw)
 		loop_timer_cancel(sw->env.loop, sw->done_timer);
 	if (sw->ex)
 		ex_shutdown(sw->ex, "daemon stopping");
+	if (sw->job) /* the body's job_finish() kills it without calling back */
+		store_recon_end(sw->env.store, sw->run_id, "cancelled", 128 + 15, "daemon stopping", sw->env.wallclock(),
+				NULL);
 	release(sw);
 	free(sw);
 }

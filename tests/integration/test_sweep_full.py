@@ -4,6 +4,7 @@ planned point measured once, calibrated values against the simulator's ground tr
 the measured angles) in z-scores over every sample and wavelength, CSV export and the recorded events."""
 import os
 import sys
+import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import sweeplib as L  # noqa: E402
@@ -18,6 +19,22 @@ integration: {mode: auto, target_peak: 0.8, estimate_ms: 20, max_ms: 2000}
 averages: 4
 blind_points: drop
 """
+
+
+def wait_recon(b, sid, nruns, timeout=240):
+    """Wait until the sweep has nruns finished reconstruction runs; (state, seconds, output kinds) of the last."""
+    t0 = time.time()
+    while time.time() - t0 < timeout:
+        db = b.db()
+        runs = db.execute("SELECT id, state, finished_at - started_at FROM recon_runs WHERE sweep_id = ? ORDER BY id",
+                          (sid,)).fetchall()
+        kinds = [k for (k,) in db.execute("SELECT kind FROM recon_outputs WHERE run_id = ?", (runs[-1][0],))] \
+            if runs else []
+        db.close()
+        if len(runs) >= nruns and runs[nruns - 1][1] != "running":
+            return runs[nruns - 1][1], runs[nruns - 1][2], kinds
+        time.sleep(0.5)
+    raise AssertionError("reconstruction run %d not finished in %d s" % (nruns, timeout))
 
 
 def run():
@@ -55,6 +72,24 @@ def run():
             assert k in kinds, "no '%s' event in %s" % (k, sorted(set(kinds)))
         st = b.sim_status()
         assert st.get("emission") in ("0", "off", "false"), "laser left on after completion: %s" % st
+        # the reconstruction chain on completion, then recon.start runs it again
+        if os.access(os.path.join(L.BUILD, "brdf-recon"), os.X_OK):
+            first = wait_recon(b, sid, 1)
+            assert first[0] == "succeeded", "reconstruction run: %s" % (first,)
+            c = b.client()
+            r = c.req("recon.start", sweep=sid)
+            c.close()
+            assert r.get("ok"), "recon.start: %s" % r
+            second = wait_recon(b, sid, 2)
+            L.say("reconstruction: first run %s (%.1f s), recon.start run %s; outputs %s" % (
+                first[0], first[1], second[0], sorted(second[2])))
+            assert second[0] == "succeeded" and {"model", "merl", "dhr", "preview"} <= set(second[2])
+        else:
+            db = b.db()
+            msgs = [m for (m,) in db.execute("SELECT message FROM events WHERE sweep_id = ? AND device = 'recon'",
+                                             (sid,))]
+            db.close()
+            assert any("no reconstruction ran" in m for m in msgs), "no plain word about the missing brdf-recon"
     finally:
         b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
 
