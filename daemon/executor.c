@@ -602,6 +602,13 @@ int ex_start(struct ex *x, int first_step, bool resumed, double now, struct acq_
 		return acq_errf(err, ACQ_E_STATE, "sweep %lld is %s", (long long)x->sweep_id, ex_state_name(x->state));
 	if (first_step < 0 || first_step > x->nsteps)
 		return acq_errf(err, ACQ_E_RANGE, "sweep: first step %d outside [0, %d]", first_step, x->nsteps);
+	if (x->cfg.take_reference && x->cfg.cal.method == CALIB_RELATIVE) {
+		unsigned why = plan_blind(&x->geom, &x->cfg.ref_pose);
+		if (why)
+			return acq_errf(err, ACQ_E_CONFIG, "sweep.acquisition.reference_pose (%g, %g, %g): %s",
+					x->cfg.ref_pose.laser_theta, x->cfg.ref_pose.det_theta, x->cfg.ref_pose.det_phi,
+					plan_reason_name(why));
+	}
 	x->cur = first_step;
 	x->stats.points_done = first_step;
 	if (x->st) {
@@ -1348,6 +1355,10 @@ static void commit_point(struct ex *x, double now)
 		if (x->cfg.pause_after_reference) {
 			pause_now(x, false, "%s measured: place the sample on the stage, then resume",
 				  x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "reference");
+			return;
+		}
+		if (x->pause_requested) {
+			pause_now(x, false, "paused by the operator after the reference");
 			return;
 		}
 		begin_segment(x, now);
