@@ -730,13 +730,30 @@ static double wrap_phi(const struct ex *x, double phi)
 	return phi;
 }
 
+/* The turn of φ (within the soft limits) nearest to where the detector is. */
+static double nearest_phi(const struct ex *x, double phi, double from)
+{
+	double lo = -INFINITY, hi = INFINITY, best = wrap_phi(x, phi);
+	if (x->ops.limits)
+		x->ops.limits(x->octx, EX_DEV_DETECTOR_PHI, &lo, &hi);
+	for (int k = -2; k <= 2; k++) {
+		double c = phi + 360.0 * k;
+		if (c >= lo && c <= hi && fabs(c - from) < fabs(best - from))
+			best = c;
+	}
+	return best;
+}
+
+/* Waypoints to the current target: the planner's own when the arms are where the planner left them (the
+ * previous step) and its path stays inside the soft limits; else a fresh collision-free path from where the
+ * arms are, to the turn of φ nearest to the detector. */
 static int plan_path(struct ex *x)
 {
 	struct plan_pos t = *target_pos(x);
-	t.det_phi = wrap_phi(x, t.det_phi);
 	x->n_wps = 0;
 	x->wp = 0;
-	if (!x->first_move && !x->in_reference && x->cur > 0) {
+	if (!x->first_move && !x->in_reference && x->cur > 0 && x->known_valid &&
+	    near_pos(&x->known, &x->plan->steps[x->cur - 1].pos)) {
 		const struct plan_step *s = &x->plan->steps[x->cur];
 		bool inside = true;
 		for (size_t i = 0; i < s->n_wp && i < PLAN_MAX_WP + 1; i++) {
@@ -747,8 +764,12 @@ static int plan_path(struct ex *x)
 		}
 		if (x->n_wps > 0 && inside)
 			return 0;
-		x->n_wps = 0; /* the planner's path leaves the soft limits: find another from where the arms are */
+		x->n_wps = 0;
 	}
+	if (x->known_valid)
+		t.det_phi = nearest_phi(x, t.det_phi, x->known.det_phi);
+	else
+		t.det_phi = wrap_phi(x, t.det_phi);
 	if (x->known_valid && near_pos(&x->known, &t))
 		return 0;
 	size_t n = 0;

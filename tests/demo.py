@@ -89,6 +89,11 @@ def main():
     except KeyboardInterrupt:
         print("\nmake demo: interrupted; stopping everything", file=sys.stderr)
         return 130
+    except (OSError, EOFError) as e:
+        # Ctrl-C reaches the daemon too (same process group): it may be gone before we see the interrupt
+        print("\nmake demo: acquisitiond is gone (%s); stopping everything; logs: %s" % (e, b.daemon_log),
+              file=sys.stderr)
+        return 130 if b.daemon and b.daemon.poll() is not None else 1
     finally:
         if watch and watch.poll() is None:
             watch.terminate()

@@ -52,6 +52,8 @@ struct fake {
 	double now;
 	/* audit */
 	int laser_on_during_motion, laser_on_during_dark;
+	int collisions;           /* arms closer than their bodies allow (ψ < laser_body + detector_body) */
+	int out_of_limits;        /* move targets outside the axes' soft limits */
 	int shots, darks;
 };
 
@@ -85,6 +87,10 @@ static int f_move_begin(void *ctx, int a, double target, double now, struct acq_
 	(void)ctx;
 	if (F.axis_down[a])
 		return acq_errf(err, ACQ_E_TIMEOUT, "axis %d: no answer", a);
+	if (a == 2 && (target < -179 || target > 359)) {
+		F.out_of_limits++;
+		return acq_errf(err, ACQ_E_RANGE, "detector.phi: target %g outside [-179, 359]", target);
+	}
 	if (F.emission)
 		F.laser_on_during_motion++;
 	F.start[a] = F.pos[a];
@@ -93,6 +99,15 @@ static int f_move_begin(void *ctx, int a, double target, double now, struct acq_
 	F.t1[a] = now + fabs(target - F.pos[a]) / 200.0 + 0.01;
 	F.moving[a] = true;
 	return 0;
+}
+
+static struct bench_geom geom;
+
+static void check_collision(void)
+{
+	struct plan_pos p = { F.pos[0], F.pos[1], F.pos[2] };
+	if (plan_psi_deg(&geom, &p) < geom.laser_body_halfwidth_deg + geom.detector_body_halfwidth_deg)
+		F.collisions++;
 }
 
 static int f_move_step(void *ctx, int a, double now, struct acq_err *err)
@@ -119,6 +134,7 @@ static int f_move_step(void *ctx, int a, double now, struct acq_err *err)
 		return AXIS_MOVE_DONE;
 	}
 	F.pos[a] = F.start[a] + (F.target[a] - F.start[a]) * (now - F.t0[a]) / (F.t1[a] - F.t0[a]);
+	check_collision();
 	return AXIS_MOVE_RUNNING;
 }
 
@@ -301,6 +317,13 @@ static const struct spectro_info *f_info(void *ctx)
 	return F.spectro_down ? NULL : &F.info;
 }
 
+static void f_limits(void *ctx, int a, double *lo, double *hi)
+{
+	(void)ctx;
+	*lo = a == 2 ? -179 : -5;
+	*hi = a == 2 ? 359 : 90;
+}
+
 static double f_wall(void *ctx)
 {
 	(void)ctx;
@@ -312,6 +335,7 @@ static const struct ex_ops fake_ops = {
 	.position = f_position, .home_begin = f_home_begin, .alarm_reset = f_alarm_reset, .reconnect = f_reconnect,
 	.laser_set = f_laser_set, .laser_state = f_laser_state, .spectro_start = f_spectro_start,
 	.spectro_fetch = f_spectro_fetch, .spectro_stop = f_spectro_stop, .spectro_info = f_info, .wall = f_wall,
+	.limits = f_limits,
 };
 
 /* ---- sink ---------------------------------------------------------------------------------------- */
@@ -342,11 +366,10 @@ static const struct ex_sink sink = { .event = sink_event };
 
 static char dir[256], dbpath[300];
 static struct plan_result *plan;
-static struct bench_geom geom;
 
 static const char *plan_text = "name: small\n"
 			       "incidence:\n  theta_deg: [0, 30, 50]\n"
-			       "observation:\n  theta_deg: [10, 40, 65]\n  phi_deg: [0, 90, 180]\n"
+			       "observation:\n  theta_deg: [10, 40, 65]\n  phi_deg: [0, 90, 180, 270]\n"
 			       "integration: {mode: auto, target_peak: 0.8, estimate_ms: 10, max_ms: 2000}\n"
 			       "averages: 4\nblind_points: drop\n";
 
@@ -555,6 +578,8 @@ static void test_full_sweep(void **state)
 	assert_int_equal(s->points_done, (int)plan->n_steps);
 	assert_int_equal(F.laser_on_during_motion, 0);
 	assert_int_equal(s->laser_on_while_moving, 0);
+	assert_int_equal(F.collisions, 0);
+	assert_int_equal(F.out_of_limits, 0);
 	assert_false(F.emission); /* off when completed */
 	assert_true(s->darks < s->points_done);     /* darks are reused across points */
 	assert_true(s->probes < 2 * s->points_done); /* the previous time seeds the next probe */
