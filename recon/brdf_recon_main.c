@@ -130,7 +130,9 @@ static const char fit_help[] =
 	"                          the paper's literal construction, not guaranteed positive definite)\n"
 	"  --transform T           log (default: interpolate ln(f+eps)) or sqrt\n"
 	"  --shape X|auto          kernel shape parameter (default auto: Rippa leave-one-out over a grid)\n"
-	"  --smoothing X|auto      eta in (K + eta*diag(r)) w = g, r from the uncertainties (default auto)\n"
+	"  --smoothing X|auto|sigma  eta in (K + eta*diag(r)) w = g, r from the uncertainties: a number, auto\n"
+	"                          (default: leave-one-out), or sigma (Lambda = the transformed variances over\n"
+	"                          the prior variance of the data; needs sigma_<nm> columns)\n"
 	"  --max-cond X            largest accepted condition number (default 1e12)\n"
 	"  --db FILE --sweep ID    read a sweep from the daemon's database instead of a CSV file\n";
 
@@ -168,8 +170,10 @@ static int cmd_fit(int argc, char **argv)
 		case 'm':
 			if (!strcmp(optarg, "auto"))
 				o.smoothing = -1;
+			else if (!strcmp(optarg, "sigma"))
+				o.smoothing = RECON_SMOOTHING_SIGMA;
 			else if (parse_double(optarg, &o.smoothing) || o.smoothing < 0)
-				return usage_err("fit", "--smoothing needs a number >= 0 or auto");
+				return usage_err("fit", "--smoothing needs a number >= 0, auto or sigma");
 			break;
 		case 'c':
 			if (parse_double(optarg, &o.max_cond) || !(o.max_cond >= 1))

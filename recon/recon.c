@@ -756,7 +756,29 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	if (o.shape > 0)
 		shapes[0] = o.shape;
 	static const double eta_grid[] = { 1e-8, 1e-5, 1e-3, 1e-2, 1e-1 };
-	if (o.smoothing >= 0) {
+	/*
+	 * --smoothing sigma: Λ straight from the measurement uncertainties, as in a Gaussian-process model
+	 * g = s(x) + noise with prior variance α·K: (αK + diag(σ_g²)) w' = g, i.e. η·r_k = σ_g,k²/α with
+	 * α = var(g) / mean diag K (the data's spread attributed to the prior). Only the shape is searched.
+	 */
+	int sigma_mode = o.smoothing == RECON_SMOOTHING_SIGMA;
+	double varG = 0;
+	if (sigma_mode) {
+		if (!any_sig) {
+			acq_errf(err, ACQ_E_INVAL, "fit: --smoothing sigma needs sigma_<nm> columns");
+			goto out;
+		}
+		for (size_t l = 0; l < L; l++) {
+			double v = 0;
+			for (size_t j = 0; j < n; j++)
+				v += fc.G[l * n + j] * fc.G[l * n + j];
+			varG += v / (double)n / (double)L;
+		}
+		if (!(varG > 0))
+			varG = 1;
+		neta = 1;
+		etas[0] = 0; /* set per shape below */
+	} else if (o.smoothing >= 0) {
 		etas[0] = o.smoothing;
 		neta = 1;
 	} else {
@@ -768,6 +790,12 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	double worst_rcond = INFINITY;
 	for (int a = 0; a < nsh; a++) {
 		build_K(&fc, o.kernel, shapes[a], m->ctr, m->tctr);
+		if (sigma_mode) {
+			double dsum = 0;
+			for (size_t k = 0; k < n; k++)
+				dsum += fc.K[k * n + k];
+			etas[0] = fmax(rmean * (dsum / (double)n) / varG, 1e-12);
+		}
 		for (int b = 0; b < neta; b++) {
 			if (o.progress)
 				o.progress(o.progress_ctx, "shape search", (double)(a * neta + b) / (double)(nsh * neta));

@@ -18,6 +18,8 @@ enum recon_transform {
 	RECON_T__COUNT
 };
 
+#define RECON_SMOOTHING_SIGMA (-2.0)
+
 /* Progress report of a long step: stage name and fraction done in [0, 1]. */
 typedef void (*recon_progress_fn)(void *ctx, const char *stage, double frac);
 
@@ -25,7 +27,8 @@ struct recon_fit_opts {
 	int kernel;          /* enum rbf_kernel (default RBF_K_WENDLAND) */
 	int transform;       /* enum recon_transform (default RECON_T_LOG) */
 	double shape;        /* > 0: fixed shape parameter; 0: chosen by Rippa's leave-one-out over a grid */
-	double smoothing;    /* >= 0: fixed η in (K + η·diag(r)) w = g; < 0: chosen by leave-one-out */
+	double smoothing;    /* >= 0: fixed η in (K + η·diag(r)) w = g; RECON_SMOOTHING_SIGMA: Λ from the
+			      * uncertainties alone; other < 0: chosen by leave-one-out */
 	double max_cond;     /* largest accepted 1-norm condition number of K + Λ (default 1e12) */
 	recon_progress_fn progress;
 	void *progress_ctx;
