@@ -1173,15 +1173,3 @@ out:
 	free(alb);
 	return rc;
 }
-
-/* ---- database seam ------------------------------------------------------------------------------------ */
-
-int recon_load_db(const char *db_path, long long sweep_id, struct recon_samples *s, struct acq_err *err)
-{
-	(void)db_path;
-	(void)sweep_id;
-	memset(s, 0, sizeof *s);
-	return acq_errf(err, ACQ_E_UNSUPPORTED,
-			"reading sweeps from the database is not available yet (the store's schema of calibrated "
-			"samples has not landed); export the sweep as CSV and use brdf-recon fit SAMPLES.csv");
-}

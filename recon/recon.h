@@ -121,7 +121,8 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 /* Derive ctr/tctr from ang (used by fit and load); returns -1 on allocation failure. */
 int recon_model_derive(struct recon_model *m, struct acq_err *err);
 
-/* Load calibrated samples of one sweep from the daemon's SQLite database. */
+/* Load the calibrated samples of one sweep from the daemon's SQLite database (schema version 1, opened
+ * read-only; dbload.c): planned angles, float32 BRDF and sigma blobs over the sweep's wavelength grid. */
 int recon_load_db(const char *db_path, long long sweep_id, struct recon_samples *s, struct acq_err *err);
 
 /* Name of a transform ("log", "sqrt") or NULL; and back (−1 if unknown). */
