@@ -591,7 +591,7 @@ static int colour_arg(struct colour_opts *co, const char *arg, struct acq_err *e
 
 /* Write the colour decisions and the reduction figures next to an output (path + ".colour.json"). */
 static int write_decisions(const char *out, const struct colour_opts *co, const struct recon_rgb *R, int full,
-			   struct acq_err *err)
+			   double bin_nm, struct acq_err *err)
 {
 	char p[4096];
 	snprintf(p, sizeof p, "%s.colour.json", out);
@@ -602,25 +602,28 @@ static int write_decisions(const char *out, const struct colour_opts *co, const 
 	recon_rgb_sizes(R, &nc, &r);
 	fprintf(o.f, "{\"colour\": ");
 	int ok = colour_opts_write_json(o.f, co, NULL, err) == 0;
-	fprintf(o.f, ", \"spectral_path\": \"%s\", \"channels\": %zu, \"rank\": %zu, "
-		"\"reduction_max_rel_error\": %.3g}\n", full ? "full" : "reduced", nc, r, recon_rgb_reduction_error(R));
+	fprintf(o.f, ", \"spectral_path\": \"%s\", \"bin_nm\": %g, \"channels\": %zu, \"rank\": %zu, "
+		"\"reduction_max_rel_error\": %.3g}\n", full ? "full" : "reduced", bin_nm, nc, r,
+		recon_rgb_reduction_error(R));
 	return out_close(&o, ok, err);
 }
 
 static const char merl_help[] =
-	"usage: brdf-recon merl MODEL -o FILE.binary [--colour key=value]... [--threads N] [--direct|--full-spectrum]\n"
+	"usage: brdf-recon merl MODEL -o FILE.binary [--colour key=value]... [--threads N] [--bin-nm X]\n"
+	"                        [--direct|--full-spectrum]\n"
 	"Write the model as a MERL isotropic RGB table (90 x 90 x 180 cells, 34,992,012 bytes). Only cells whose\n"
 	"two directions are above the horizon are evaluated (the others hold -1, \"no data\"). Spectra go through\n"
 	"the colour chain (default: D65, CIE 1931 2 deg, Bradford, absolute sr^-1, clamp, keep, linear); the\n"
-	"model is reduced to what RGB needs (visible channels binned to 5 nm, low-rank weights; the error of the\n"
-	"reduction is measured and printed) and evaluated in batches. --direct: one callback per cell (same\n"
-	"values, slower); --full-spectrum: every model channel per cell (reference path, slowest).\n"
+	"model is reduced to what RGB needs (visible channels averaged in --bin-nm bins, default 5 nm, error\n"
+	"about bin^2/8 f''/f; low-rank weights), the error of the reduction measured and printed, and evaluated\n"
+	"in batches. --direct: one callback per cell (same values, slower); --full-spectrum: every model\n"
+	"channel per cell (reference path, slowest).\n"
 	"The decisions are written to FILE.binary.colour.json. Colour keys: illum gap adapt norm white max_albedo\n"
 	"target exposure gamut range reinhard_white srgb_encode.\n";
 
 static const char render_help[] =
 	"usage: brdf-recon render MODEL -o OUT.png [--size N] [--exposure X] [--colour key=value]... [--threads N]\n"
-	"                         [--direct | --full-spectrum]\n"
+	"                         [--bin-nm X] [--direct | --full-spectrum]\n"
 	"Preview of the model on a sphere under two lights and a gradient sky (tone-mapped sRGB PNG). By default\n"
 	"the model is tabulated as a MERL table in memory (batched) and rendered through its nearest-cell lookup;\n"
 	"--direct evaluates the reduced model per ray, --full-spectrum every channel per ray.\n";
@@ -631,8 +634,10 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 		{ "output", required_argument, 0, 'o' }, { "colour", required_argument, 0, 'c' },
 		{ "threads", required_argument, 0, 't' }, { "full-spectrum", no_argument, 0, 'f' },
 		{ "size", required_argument, 0, 's' }, { "exposure", required_argument, 0, 'e' },
-		{ "direct", no_argument, 0, 'd' }, { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+		{ "direct", no_argument, 0, 'd' }, { "bin-nm", required_argument, 0, 'b' },
+		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
 	int direct = 0;
+	double bin_nm = 5;
 	int is_merl = !strcmp(cmd, "merl");
 	const char *outp = NULL;
 	struct acq_err err = { 0 };
@@ -654,6 +659,10 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 			break;
 		case 'f': full = 1; break;
 		case 'd': direct = 1; break;
+		case 'b':
+			if (parse_double(optarg, &bin_nm) || !(bin_nm >= 0.5 && bin_nm <= 50))
+				return usage_err(cmd, "--bin-nm needs 0.5..50");
+			break;
 		case 's':
 			if (is_merl || parse_u64(optarg, &size) || size < 8 || size > 4096)
 				return usage_err(cmd, "--size needs 8..4096 (render only)");
@@ -672,12 +681,13 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 	if (recon_model_load(argv[optind], &m, &err))
 		return fail(&err);
 	struct recon_rgb *R = NULL;
-	int ok = recon_rgb_new(m, &co, &R, &err) == 0;
+	int ok = recon_rgb_new(m, &co, bin_nm, &R, &err) == 0;
 	if (ok) {
 		size_t nc, r;
 		recon_rgb_sizes(R, &nc, &r);
-		fprintf(stderr, "%s: %s path, %zu of %zu channels, spectral rank %zu, reduction error %.2g (relative)\n",
-			cmd, full ? "full-spectrum" : "reduced", nc, m->nwl, r, recon_rgb_reduction_error(R));
+		fprintf(stderr, "%s: %s path, %zu of %zu channels (%g nm bins), spectral rank %zu, reduction error %.2g "
+			"(relative)\n", cmd, full ? "full-spectrum" : "reduced", nc, m->nwl, bin_nm, r,
+			recon_rgb_reduction_error(R));
 	}
 	/* default: the table is computed in batches (GEMMs) and both outputs read it: the MERL writer through
 	 * the reference lookup (which returns each cell's own value at the cell centres it asks for), the
@@ -705,7 +715,7 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 	}
 	merl_free(&table);
 	if (ok)
-		ok = write_decisions(outp, &co, R, full, &err) == 0;
+		ok = write_decisions(outp, &co, R, full, bin_nm, &err) == 0;
 	recon_rgb_free(R);
 	recon_model_free(m);
 	if (!ok)

@@ -167,12 +167,16 @@ int recon_rgb_full_fn(void *ctx, const double wi[3], const double wo[3], double 
 	return 0;
 }
 
-int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, struct recon_rgb **out,
+int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, double bin_nm, struct recon_rgb **out,
 		  struct acq_err *err)
 {
 	*out = NULL;
 	if (colour_opts_check(co, err))
 		return -1;
+	if (bin_nm == 0)
+		bin_nm = RGB_STEP_NM;
+	if (!(bin_nm >= 0.5 && bin_nm <= 50))
+		return acq_errf(err, ACQ_E_INVAL, "rgb: spectral bin %g nm outside [0.5, 50]", bin_nm);
 	size_t n = m->n, L = m->nwl;
 	struct recon_rgb *R = calloc(1, sizeof *R);
 	double *wsub = NULL, *S = NULL, *U = NULL, *VT = NULL, *wl = NULL, *scratch = NULL;
@@ -205,7 +209,7 @@ int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, str
 	}
 	size_t nc = 0;
 	for (size_t l = first; l <= last; l++)
-		if (nc == 0 || m->wl[l] - m->wl[R->chan[nc - 1]] >= RGB_STEP_NM - 1e-9)
+		if (nc == 0 || m->wl[l] - m->wl[R->chan[nc - 1]] >= bin_nm - 1e-9)
 			R->chan[nc++] = l;
 	R->chan[nc] = last + 1;
 	R->nc = nc;

@@ -12,9 +12,10 @@
 
 struct recon_rgb;
 
-/* Build the reduced evaluator of model m under colour options co (copied). The reduction error is measured
- * against the full-spectrum path at 256 random pairs (recon_rgb_reduction_error). */
-int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, struct recon_rgb **out,
+/* Build the reduced evaluator of model m under colour options co (copied), binning the visible channels to
+ * bin_nm (0 = the default 5 nm; 0.5..50). The reduction error is measured against the full-spectrum path at
+ * 256 random pairs (recon_rgb_reduction_error). */
+int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, double bin_nm, struct recon_rgb **out,
 		  struct acq_err *err);
 /* Release (NULL is fine). */
 void recon_rgb_free(struct recon_rgb *r);

@@ -99,6 +99,9 @@ def main():
     res["recon_merl_s"], res["recon_merl_rss_mib"] = timed([B, "merl", m, "-o", os.path.join(d, "m.binary"),
                                                             "--threads", "1"])
     res["recon_merl_cpu_s"] = CPU["merl"]
+    res["recon_merl10nm_s"], _ = timed([B, "merl", m, "-o", os.path.join(d, "m10.binary"), "--threads", "1",
+                                        "--bin-nm", "10"])
+    res["recon_merl10nm_cpu_s"] = CPU["merl"]
     e = os.path.join(d, "e.csv")
     res["recon_eval2000_s"], _ = timed([B, "eval", m, h, "-o", e])
     ev = np.genfromtxt(e, delimiter=",", skip_header=1)[:, 4:]
@@ -160,6 +163,8 @@ def main():
 
     res["speedup_fit_plus_merl"] = res["scipy_fit3_merl_s"] / (res["recon_fit_s"] + res["recon_merl_s"])
     res["speedup_fit_plus_merl_cpu"] = res["scipy_fit3_merl_cpu_s"] / (res["recon_fit_cpu_s"] + res["recon_merl_cpu_s"])
+    res["speedup_fit_plus_merl10nm_cpu"] = res["scipy_fit3_merl_cpu_s"] / (res["recon_fit_cpu_s"] +
+                                                                          res["recon_merl10nm_cpu_s"])
     res["speedup_fit_651"] = res["scipy_fit_s"] / res["recon_fit_s"]
     res["accuracy_ratio_logrmse_vs_scipy_default"] = res["scipy_logrmse"] / res["recon_logrmse"]
     res["accuracy_ratio_logrmse_vs_scipy_best"] = min(res["scipy_logrmse"], res["scipy_s1e-3_logrmse"]) / res["recon_logrmse"]

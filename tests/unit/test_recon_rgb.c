@@ -31,7 +31,7 @@ static int setup(void **state)
 	}
 	struct colour_opts co;
 	colour_opts_brdf(&co);
-	return recon_rgb_new(M, &co, &R, &err);
+	return recon_rgb_new(M, &co, 0, &R, &err);
 }
 
 static int teardown(void **state)
