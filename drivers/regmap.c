@@ -286,7 +286,15 @@ int regmap_parse(struct yc_node *maps, const char *name, const struct yc_node *r
 		return yc_errf(err, ref, "register map '%s': no `register_maps` section", name);
 	if (yc_expect_map(maps, "register_maps", err))
 		return -1;
-	struct yc_node *node = yc_get(maps, name);
+	/* Look the name up by hand: yc_get() would remember the name pointer, which belongs to another
+	 * document (the axis's) that may be freed before this one. */
+	struct yc_node *node = NULL;
+	for (size_t i = 0; i < maps->n; i++)
+		if (maps->keys[i]->value && !strcmp(maps->keys[i]->value, name)) {
+			node = maps->items[i];
+			maps->used[i] = true;
+			break;
+		}
 	if (!node)
 		return yc_errf(err, ref, "register map '%s' is not defined in register_maps", name);
 	struct regmap *m = calloc(1, sizeof *m);

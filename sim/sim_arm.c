@@ -15,6 +15,7 @@
 #include <string.h>
 #include <sys/socket.h>
 #include <netinet/in.h>
+#include <termios.h>
 #include <unistd.h>
 
 #include "drivers/axis_modbus.h"
@@ -39,6 +40,7 @@ struct sim_axis {
 	double *world_pos;
 	int alarm;                     /* alarm code, 0 = none */
 	bool homed, homing, stalled, lim_pos, lim_neg;
+	int moves;                     /* moves started (for tests: proves when nothing was sent) */
 	uint16_t cmd_prev[RM__NCMDS];
 };
 
@@ -125,6 +127,8 @@ static void update_regs(struct sim_axis *a)
 	put_field(a, RM_FIRMWARE, 102, true);
 }
 
+static void axis_tick(struct sim_axis *a, double now);
+
 static void raise_alarm(struct sim_axis *a, int code)
 {
 	a->alarm = code;
@@ -136,6 +140,7 @@ static void raise_alarm(struct sim_axis *a, int code)
 static void start_move(struct sim_arm *s, struct sim_axis *a, double now)
 {
 	const struct regmap *m = a->map;
+	a->moves++;
 	if (a->alarm || a->stalled)
 		return; /* a controller in alarm ignores operations */
 	if (m->f[RM_OP_TYPE].present && get_field(a, RM_OP_TYPE, true) != m->f[RM_OP_TYPE].value) {
@@ -150,7 +155,9 @@ static void start_move(struct sim_arm *s, struct sim_axis *a, double now)
 	double v = m->f[RM_SPEED].present ? get_field(a, RM_SPEED, false) : 0;
 	double acc = m->f[RM_ACCEL].present ? get_field(a, RM_ACCEL, false) : 0;
 	double dec = m->f[RM_DECEL].present ? get_field(a, RM_DECEL, false) : 0;
-	simmot_advance(&a->mot, now);
+	axis_tick(a, now);
+	if (a->alarm)
+		return;
 	simmot_start(&a->mot, target, now, v, acc, dec);
 	a->homing = false;
 	if (target > a->mot.k.min_deg)
@@ -174,7 +181,7 @@ static void do_cmd(struct sim_arm *s, struct sim_axis *a, int id, double now)
 		start_move(s, a, now);
 		break;
 	case RM_CMD_STOP:
-		simmot_advance(&a->mot, now);
+		axis_tick(a, now);
 		simmot_stop(&a->mot, now);
 		a->stalled = false;
 		a->homing = false;
@@ -186,7 +193,9 @@ static void do_cmd(struct sim_arm *s, struct sim_axis *a, int id, double now)
 	case RM_CMD_HOME:
 		if (a->alarm || a->stalled)
 			break;
-		simmot_advance(&a->mot, now);
+		axis_tick(a, now);
+		if (a->alarm)
+			break;
 		simmot_start(&a->mot, 0.0, now, a->mot.k.speed_dps / 2, 0, 0);
 		a->mot.add_noise = false;
 		a->homing = true;
@@ -278,7 +287,7 @@ static void serve(struct sim_arm *s, uint8_t *req, int len, double now)
 			modbus_reply_exception(s->ctx, req, MODBUS_EXCEPTION_GATEWAY_TARGET);
 		return; /* RTU: nobody on the bus with that address */
 	}
-	simmot_advance(&a->mot, now);
+	axis_tick(a, now);
 	update_regs(a);
 	const uint8_t *pdu = req + hl;
 	int ex = len >= hl + 5 ? check_request(a, pdu) : MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
@@ -296,8 +305,8 @@ static void serve(struct sim_arm *s, uint8_t *req, int len, double now)
 	update_regs(a);
 }
 
-/* ---- RTU: libmodbus filters frames by its own slave id; we serve several units, so frames it filtered
- * (modbus_receive returns 0) are framed and CRC-checked here. */
+/* ---- RTU: libmodbus's server filters frames by its one slave id, but a bus carries several units; so the
+ * simulator frames requests itself (length from the function code, CRC) and answers with modbus_reply(). */
 static uint16_t crc16(const uint8_t *p, int n)
 {
 	uint16_t crc = 0xFFFF;
@@ -323,24 +332,44 @@ int simarm_rtu_frame_len(const uint8_t *req, int avail)
 	}
 }
 
+/* Read one frame; the first byte is there (poll said so), the others must follow within 50 ms each. */
+static int rtu_read_frame(int fd, uint8_t *buf, int cap)
+{
+	int n = 0, need = 2;
+	while (n < need) {
+		if (n > 0) {
+			struct pollfd pfd = { .fd = fd, .events = POLLIN };
+			if (poll(&pfd, 1, 50) <= 0)
+				return -1; /* a torn frame: the bus drops it */
+		}
+		ssize_t r = read(fd, buf + n, (size_t)(need - n));
+		if (r <= 0)
+			return r == 0 || errno != EINTR ? -1 : (int)0;
+		n += (int)r;
+		if (n >= 2) {
+			int l = simarm_rtu_frame_len(buf, n);
+			if (l < 0 && (n >= 7 || (buf[1] != 15 && buf[1] != 16)))
+				return -1;
+			need = l < 0 ? 7 : l;
+			if (need > cap)
+				return -1;
+		}
+	}
+	return n;
+}
+
 static void handle_rtu(struct sim_arm *s, double now)
 {
 	uint8_t req[MODBUS_RTU_MAX_ADU_LENGTH];
-	memset(req, 0, sizeof req);
-	int rc = modbus_receive(s->ctx, req);
-	if (rc > 0) {
-		serve(s, req, rc, now);
+	int fd = modbus_get_socket(s->ctx);
+	int len = rtu_read_frame(fd, req, (int)sizeof req);
+	if (len < 4) {
+		tcflush(fd, TCIFLUSH);
 		return;
 	}
-	if (rc < 0)
-		return; /* bad CRC, timeout inside a frame: the bus drops it */
-	int len = simarm_rtu_frame_len(req, MODBUS_RTU_MAX_ADU_LENGTH);
-	if (len < 4 || len > MODBUS_RTU_MAX_ADU_LENGTH)
-		return;
 	uint16_t crc = crc16(req, len - 2);
 	if (req[len - 2] != (crc & 0xFF) || req[len - 1] != (crc >> 8))
 		return;
-	modbus_set_slave(s->ctx, req[0]);
 	serve(s, req, len, now);
 }
 
@@ -619,6 +648,12 @@ int simarm_alarm(struct sim_service *svc, int axis)
 {
 	struct sim_arm *s = svc->self;
 	return axis >= 0 && axis < s->nax ? s->ax[axis].alarm : -1;
+}
+
+int simarm_moves(struct sim_service *svc, int axis)
+{
+	struct sim_arm *s = svc->self;
+	return axis >= 0 && axis < s->nax ? s->ax[axis].moves : -1;
 }
 
 int simarm_port(struct sim_service *svc)

@@ -11,6 +11,8 @@
 struct simmot *simarm_motion(struct sim_service *svc, int axis);
 /* Alarm code of axis i (0 none, -1 no such axis). */
 int simarm_alarm(struct sim_service *svc, int axis);
+/* Moves axis i was commanded (triggers that started or were refused), -1 if no such axis. */
+int simarm_moves(struct sim_service *svc, int axis);
 /* TCP port the arm listens on (0 for RTU). */
 int simarm_port(struct sim_service *svc);
 /* Length of the RTU request frame starting at req (function codes 1–6, 15, 16), -1 if unknown. */

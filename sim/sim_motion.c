@@ -162,6 +162,10 @@ int simmot_advance(struct simmot *m, double now)
 		p = m->p1;
 		if (m->add_noise && m->k.noise_deg > 0)
 			p += m->k.noise_deg * gauss(&m->rng);
+		if (m->add_noise && m->bias_moves > 0) {
+			m->bias_moves--;
+			p += m->bias_deg;
+		}
 		m->moving = false;
 		ev = SIMMOT_DONE;
 	}

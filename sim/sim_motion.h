@@ -31,6 +31,8 @@ struct simmot {
 	double halt_frac;      /* fraction of the distance where a scheduled halt happens */
 	int halt_kind;         /* enum simmot_halt */
 	bool add_noise;        /* noise added when the profile ends (not for stops) */
+	int bias_moves;        /* test hook: the next bias_moves moves end bias_deg past their target */
+	double bias_deg;
 	uint64_t rng;
 };
 

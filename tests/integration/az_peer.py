@@ -9,7 +9,7 @@ Map (0-based, upper word first, 100 steps per degree), written from the AZ manua
 regmap.c: block 0x58..0x67 (op data, op type, position, speed, accel, decel, current, trigger), input
 command 0x7D (ZHOME 0x10, STOP 0x20, ALM-RST 0x80, level bits), status 0x7F (bit 4 home end, 5 ready,
 7 alarm, 8 busy, 9 +limit, 10 -limit, 13 move, 14 in-pos), alarm 0x80..81, command position 0xC6,
-feedback position 0xCC. Motion is at the commanded speed (no ramps), hard limits at ±90° raise alarm 0x66.
+feedback position 0xCC, serial 0x300 (uint32), firmware 0x302. Motion is at the commanded speed (no ramps), hard limits at ±90° raise alarm 0x66.
 Test-only registers: 0x400 positioning noise in millidegrees (Gaussian), 0x401 = N: the next N moves land
 0.5° past the target (to exercise the driver's retries), 0x402 counts move triggers.
 """
@@ -39,7 +39,8 @@ def u32(v):
 
 
 class Axis(BaseModbusDataBlock):
-    VALID = set(range(0x58, 0x68)) | {0x7D, 0x7F, 0x80, 0x81, 0xC6, 0xC7, 0xCC, 0xCD, 0x400, 0x401, 0x402}
+    VALID = set(range(0x58, 0x68)) | {0x7D, 0x7F, 0x80, 0x81, 0xC6, 0xC7, 0xCC, 0xCD, 0x300, 0x301, 0x302, 0x400, 0x401,
+             0x402}
 
     def __init__(self, rng):
         self.address = 0
@@ -105,6 +106,8 @@ class Axis(BaseModbusDataBlock):
         self.values[0x80], self.values[0x81] = u32(self.alarm)
         self.values[0xC6], self.values[0xC7] = u32((self.target if self.moving else self.pos) * STEPS)
         self.values[0xCC], self.values[0xCD] = u32(self.pos * STEPS)
+        self.values[0x300], self.values[0x301] = u32(4242)
+        self.values[0x302] = 7
         return [self.values[a] for a in range(address, address + count)]
 
     def setValues(self, address, values):
