@@ -23,14 +23,14 @@
 #include "sim/sim.h"
 #include "sim/sim_arm.h"
 
-static double ah_mono(void)
+static inline double ah_mono(void)
 {
 	struct timespec ts;
 	clock_gettime(CLOCK_MONOTONIC, &ts);
 	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
-static void ah_sleep(double s)
+static inline void ah_sleep(double s)
 {
 	if (s <= 0)
 		return;
@@ -38,13 +38,13 @@ static void ah_sleep(double s)
 	nanosleep(&ts, NULL);
 }
 
-static unsigned long long ah_seed(void)
+static inline unsigned long long ah_seed(void)
 {
 	const char *s = getenv("ACQ_SEED");
 	return s ? strtoull(s, NULL, 10) : 1;
 }
 
-static const char *ah_src(void)
+static inline const char *ah_src(void)
 {
 	const char *s = getenv("ACQ_SRC");
 	return s ? s : ".";
@@ -63,12 +63,12 @@ struct armhost {
 	bool running;
 };
 
-static double ah_now(const struct armhost *h)
+static inline double ah_now(const struct armhost *h)
 {
 	return (ah_mono() - h->w.t0_mono) * h->w.scale;
 }
 
-static void *ah_loop(void *p)
+static inline void *ah_loop(void *p)
 {
 	struct armhost *h = p;
 	while (!h->stop) {
@@ -96,7 +96,7 @@ static void *ah_loop(void *p)
 
 /* Start the arms described by yaml (bench + devices; register maps from maps_from when not NULL) at time
  * scale. 0 or -1 with err. */
-static int ah_start(struct armhost *h, const char *yaml, struct yc_node *maps_from, double scale,
+static inline int ah_start(struct armhost *h, const char *yaml, struct yc_node *maps_from, double scale,
 		    struct acq_err *err)
 {
 	memset(h, 0, sizeof *h);
@@ -130,7 +130,7 @@ static int ah_start(struct armhost *h, const char *yaml, struct yc_node *maps_fr
 	return 0;
 }
 
-static void ah_stop(struct armhost *h)
+static inline void ah_stop(struct armhost *h)
 {
 	if (h->running) {
 		h->stop = 1;
@@ -145,12 +145,12 @@ static void ah_stop(struct armhost *h)
 	pthread_mutex_destroy(&h->mu);
 }
 
-static void ah_lock(struct armhost *h) { pthread_mutex_lock(&h->mu); }
-static void ah_unlock(struct armhost *h) { pthread_mutex_unlock(&h->mu); }
+static inline void ah_lock(struct armhost *h) { pthread_mutex_lock(&h->mu); }
+static inline void ah_unlock(struct armhost *h) { pthread_mutex_unlock(&h->mu); }
 
 /* ---- child processes ---------------------------------------------------------------------------------- */
 
-static pid_t ah_spawn(char *const argv[], const char *log)
+static inline pid_t ah_spawn(char *const argv[], const char *log)
 {
 	pid_t pid = fork();
 	if (pid == 0) {
@@ -166,7 +166,7 @@ static pid_t ah_spawn(char *const argv[], const char *log)
 	return pid;
 }
 
-static void ah_kill(pid_t *pid)
+static inline void ah_kill(pid_t *pid)
 {
 	if (*pid > 0) {
 		kill(*pid, SIGTERM);
@@ -184,7 +184,7 @@ static void ah_kill(pid_t *pid)
 	}
 }
 
-static bool ah_wait_file(const char *path, double timeout_s)
+static inline bool ah_wait_file(const char *path, double timeout_s)
 {
 	double t = ah_mono() + timeout_s;
 	struct stat sb;
@@ -202,7 +202,7 @@ struct ah_pty {
 	char a[256], b[256];
 };
 
-static int ah_pty_start(struct ah_pty *p, const char *dir)
+static inline int ah_pty_start(struct ah_pty *p, const char *dir)
 {
 	snprintf(p->a, sizeof p->a, "%s/ttyA", dir);
 	snprintf(p->b, sizeof p->b, "%s/ttyB", dir);
@@ -221,7 +221,7 @@ static int ah_pty_start(struct ah_pty *p, const char *dir)
 	return 0;
 }
 
-static char *ah_mkdtemp(void)
+static inline char *ah_mkdtemp(void)
 {
 	static char tmpl[64];
 	const char *t = getenv("TMPDIR");
@@ -229,7 +229,7 @@ static char *ah_mkdtemp(void)
 	return mkdtemp(tmpl);
 }
 
-static void ah_rmrf(const char *dir)
+static inline void ah_rmrf(const char *dir)
 {
 	char cmd[512];
 	if (dir && strstr(dir, "motion.")) {
@@ -242,7 +242,7 @@ static void ah_rmrf(const char *dir)
 /* ---- driving the axis -------------------------------------------------------------------------------- */
 
 /* Step a begun move until done or failed, sleeping in real time between polls; clock(): bench seconds. */
-static int ah_wait_move(struct axis *ax, double (*clock)(void *), void *cl, double scale, struct acq_err *err)
+static inline int ah_wait_move(struct axis *ax, double (*clock)(void *), void *cl, double scale, struct acq_err *err)
 {
 	for (;;) {
 		double now = clock(cl);
