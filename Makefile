@@ -56,6 +56,7 @@ DEB_PKGS   := build-essential pkg-config libusb-1.0-0-dev libmodbus-dev libseria
               systemd clang
 
 .DEFAULT_GOAL := all
+.SECONDARY:
 .PHONY: all deps check check-unit check-integration check-fuzz demo bench fuzz install uninstall clean \
         test-programs distclean
 
@@ -151,7 +152,9 @@ deps:
 
 # ---- tests ------------------------------------------------------------------------------------------
 # ACQ_SEED: the random seed for every test (printed; set it to replay a run).
-ACQ_SEED ?= $(shell od -An -N4 -tu4 /dev/urandom | tr -d ' ')
+ifeq ($(origin ACQ_SEED),undefined)
+ACQ_SEED := $(shell od -An -N4 -tu4 /dev/urandom | tr -d ' ')
+endif
 export ACQ_SEED
 TEST_ENV := ACQ_BUILD=$(abspath $(BUILD)) ACQ_SRC=$(CURDIR) ACQ_SEED=$(ACQ_SEED) OPENBLAS_NUM_THREADS=1 \
             ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
