@@ -7,7 +7,7 @@
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
-#define MAX_INPUT 65536
+#define REPLAY_MAX_INPUT 65536
 
 static uint64_t rng_state;
 
@@ -44,7 +44,7 @@ int main(int argc, char **argv)
 {
 	unsigned long long seed = 1;
 	long mutations = 0, ran = 0;
-	static uint8_t inputs[256][MAX_INPUT];
+	static uint8_t inputs[256][REPLAY_MAX_INPUT];
 	static size_t lens[256];
 	int ninputs = 0;
 
@@ -60,7 +60,7 @@ int main(int argc, char **argv)
 			snprintf(path, sizeof path, "%s/%s", argv[i], e->d_name);
 			FILE *f = fopen(path, "rb");
 			if (!f) continue;
-			lens[ninputs] = fread(inputs[ninputs], 1, MAX_INPUT, f);
+			lens[ninputs] = fread(inputs[ninputs], 1, REPLAY_MAX_INPUT, f);
 			fclose(f);
 			LLVMFuzzerTestOneInput(inputs[ninputs], lens[ninputs]);
 			ninputs++; ran++;
@@ -68,11 +68,11 @@ int main(int argc, char **argv)
 		closedir(d);
 	}
 	rng_state = seed ? seed : 1;
-	static uint8_t buf[MAX_INPUT];
+	static uint8_t buf[REPLAY_MAX_INPUT];
 	for (long m = 0; m < mutations && ninputs > 0; m++) {
 		int k = (int)(rng_next() % (uint64_t)ninputs);
 		memcpy(buf, inputs[k], lens[k]);
-		size_t len = mutate(buf, lens[k], MAX_INPUT);
+		size_t len = mutate(buf, lens[k], REPLAY_MAX_INPUT);
 		/* exact-size heap copy so ASan sees any overread */
 		uint8_t *copy = malloc(len ? len : 1);
 		memcpy(copy, buf, len);
