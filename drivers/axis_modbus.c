@@ -26,7 +26,7 @@ struct axis_cfg {
 	int backlash_dir;          /* +1: final approach in the positive direction, -1: negative */
 	int retries;
 	double speed, accel, decel;
-	double settle_s, margin_s, timeout_factor, poll_s, home_timeout_s;
+	double settle_s, margin_s, timeout_factor, poll_s, home_timeout_s, start_grace_s;
 	double response_timeout_s, byte_timeout_s;
 };
 
@@ -51,6 +51,8 @@ struct axis {
 	int retries_left;
 	double deadline, next_poll;
 	int clear_cmd;         /* level command to clear at the next step, -1 if none */
+	bool seen_busy;        /* the controller reported busy since the current leg was sent */
+	double leg_start;      /* when the current leg was sent */
 	struct acq_err fail;   /* why the state machine failed */
 };
 
@@ -130,6 +132,7 @@ static int cfg_parse(struct yc_node *node, struct yc_node *link, struct yc_node 
 	c->timeout_factor = 1.5;
 	c->poll_s = 0.05;
 	c->home_timeout_s = 120;
+	c->start_grace_s = 0.2;
 	if (yc_expect_map(node, name, err) || parse_link(link, &c->link, err))
 		goto fail;
 	if (resp_ms > 0 && !yc_get(link, "response_timeout_ms"))
@@ -150,7 +153,8 @@ static int cfg_parse(struct yc_node *node, struct yc_node *link, struct yc_node 
 	    yc_double(node, "timeout_margin_s", false, 0, 3600, &c->margin_s, err) ||
 	    yc_double(node, "timeout_factor", false, 1, 100, &c->timeout_factor, err) ||
 	    yc_double(node, "poll_s", false, 1e-3, 10, &c->poll_s, err) ||
-	    yc_double(node, "home_timeout_s", false, 0.1, 36000, &c->home_timeout_s, err))
+	    yc_double(node, "home_timeout_s", false, 0.1, 36000, &c->home_timeout_s, err) ||
+	    yc_double(node, "start_grace_s", false, 0, 60, &c->start_grace_s, err))
 		goto fail;
 	if (c->soft_min >= c->soft_max) {
 		yc_errf(err, node, "%s: soft_min_deg (%g) must be below soft_max_deg (%g)", name, c->soft_min,
@@ -243,6 +247,20 @@ void axis_cfg_limits(const struct axis_cfg *cfg, double *min_deg, double *max_de
 }
 
 const struct axis_link_cfg *axis_cfg_link(const struct axis_cfg *cfg) { return &cfg->link; }
+
+int axis_cfg_set_endpoint(struct axis_cfg *cfg, int port, const char *device, struct acq_err *err)
+{
+	if (cfg->link.type == AXIS_LINK_TCP) {
+		if (port <= 0 || port > 65535)
+			return acq_errf(err, ACQ_E_INVAL, "%s: TCP port %d outside [1, 65535]", cfg->name, port);
+		cfg->link.port = port;
+		return 0;
+	}
+	if (!device || !device[0] || strlen(device) >= sizeof cfg->link.device)
+		return acq_errf(err, ACQ_E_INVAL, "%s: bad serial device path", cfg->name);
+	snprintf(cfg->link.device, sizeof cfg->link.device, "%s", device);
+	return 0;
+}
 int axis_cfg_unit(const struct axis_cfg *cfg) { return cfg->unit; }
 const struct regmap *axis_cfg_map(const struct axis_cfg *cfg) { return cfg->map; }
 const char *axis_cfg_name(const struct axis_cfg *cfg) { return cfg->name; }
@@ -606,6 +624,8 @@ static int start_leg(struct axis *ax, double from, double now, bool allow_pre, s
 	if (send_move(ax, leg, err))
 		return -1;
 	ax->leg = leg;
+	ax->leg_start = now;
+	ax->seen_busy = false;
 	double t = axis_trapezoid_s(leg - from, c->speed, c->accel, c->decel);
 	ax->deadline = now + t * c->timeout_factor + c->margin_s;
 	ax->next_poll = now + c->poll_s;
@@ -655,10 +675,6 @@ int axis_move_step(struct axis *ax, double now, struct acq_err *err)
 	}
 	if (now < ax->next_poll)
 		return AXIS_MOVE_RUNNING;
-	if (ax->state == ST_SETTLE) {
-		ax->state = ST_DONE;
-		return AXIS_MOVE_DONE;
-	}
 	struct axis_status st;
 	if (clear_pending(ax, err) || axis_read_status(ax, &st, err))
 		return fail_move(ax, err);
@@ -668,12 +684,19 @@ int axis_move_step(struct axis *ax, double now, struct acq_err *err)
 		err->detail = st.alarm_code;
 		return fail_move(ax, err);
 	}
-	if (st.busy) {
+	if (st.busy)
+		ax->seen_busy = true;
+	if (st.busy || (!ax->seen_busy && now < ax->leg_start + c->start_grace_s &&
+			fabs(st.position_deg - ax->leg) > c->deadband)) {
+		/* moving, or not yet seen moving (a controller may take a moment to raise busy) */
 		if (now > ax->deadline) {
 			struct acq_err e2;
+			bool lp = false, ln = false, stall = false;
+			axis_read_bits(ax, &lp, &ln, &stall, &e2);
 			axis_stop(ax, &e2);
-			acq_errf(err, ACQ_E_TIMEOUT, "%s: %s did not complete in time (at %.4f°, target %.4f°); stopped",
-				 c->name, ax->state == ST_HOME ? "homing" : "move", st.position_deg, ax->leg);
+			acq_errf(err, ACQ_E_TIMEOUT, "%s: %s did not complete in time (at %.4f°, target %.4f°%s); stopped",
+				 c->name, ax->state == ST_HOME ? "homing" : "move", st.position_deg, ax->leg,
+				 stall ? ", the controller reports a stall" : "");
 			return fail_move(ax, err);
 		}
 		ax->next_poll = now + c->poll_s;
@@ -695,12 +718,13 @@ int axis_move_step(struct axis *ax, double now, struct acq_err *err)
 	}
 	double e = st.position_deg - ax->target;
 	if (fabs(e) <= c->deadband) {
-		ax->state = ST_SETTLE;
-		ax->next_poll = now + c->settle_s;
-		if (c->settle_s <= 0) {
+		/* in position: settle, then confirm it stayed there (a second read after settle_s) */
+		if (ax->state == ST_SETTLE || c->settle_s <= 0) {
 			ax->state = ST_DONE;
 			return AXIS_MOVE_DONE;
 		}
+		ax->state = ST_SETTLE;
+		ax->next_poll = now + c->settle_s;
 		return AXIS_MOVE_RUNNING;
 	}
 	if (ax->retries_left > 0) {
@@ -741,6 +765,9 @@ int axis_home_begin(struct axis *ax, double now, struct acq_err *err)
 	if (clear_pending(ax, err) || send_cmd(ax, RM_CMD_HOME, false, err))
 		return -1;
 	ax->state = ST_HOME;
+	ax->leg = 0;
+	ax->leg_start = now;
+	ax->seen_busy = false;
 	ax->deadline = now + ax->cfg->home_timeout_s;
 	ax->next_poll = now + ax->cfg->poll_s;
 	return 0;

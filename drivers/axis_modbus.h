@@ -31,6 +31,9 @@ const struct axis_link_cfg *axis_cfg_link(const struct axis_cfg *cfg);
 int axis_cfg_unit(const struct axis_cfg *cfg);
 const struct regmap *axis_cfg_map(const struct axis_cfg *cfg);
 const char *axis_cfg_name(const struct axis_cfg *cfg);
+/* Point a parsed axis at another endpoint (the port or device acq-sim wrote in its ports file): port for a
+ * TCP link, device for RTU. 0 or -1 (ACQ_E_INVAL). */
+int axis_cfg_set_endpoint(struct axis_cfg *cfg, int port, const char *device, struct acq_err *err);
 /* Open an axis that shares peer's link (same bus or connection; links must match). 0 or -1. */
 int axis_open_shared(const struct axis_cfg *cfg, struct axis *peer, struct axis **out, struct acq_err *err);
 /* Duration (s) of a trapezoidal move over dist degrees with max speed and accel/decel (triangle if short). */

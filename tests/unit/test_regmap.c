@@ -106,6 +106,11 @@ static void test_shipped_real_config(void **state)
 	assert_int_equal(axis_arm_parse(yc_get(dev, "detector_arm"), maps_of(doc), "detector_arm", cfg, 2, &n, &err), 0);
 	assert_int_equal(n, 2);
 	assert_int_equal(axis_cfg_link(cfg[0])->port, 502);
+	/* the daemon points a TCP axis at the port acq-sim chose */
+	assert_int_equal(axis_cfg_set_endpoint(cfg[0], 40123, NULL, &err), 0);
+	assert_int_equal(axis_cfg_link(cfg[0])->port, 40123);
+	assert_int_equal(axis_cfg_set_endpoint(cfg[0], 0, NULL, &err), -1);
+	assert_int_equal(err.code, ACQ_E_INVAL);
 	assert_string_equal(axis_cfg_map(cfg[0])->name, "leadshine_like");
 	for (int i = 0; i < n; i++)
 		axis_cfg_free(cfg[i]);
