@@ -28,7 +28,11 @@
 #define MAX_CLIENTS 16
 #define NREG 65536
 
+struct sim_arm;
+
 struct sim_axis {
+	struct sim_arm *arm;
+	double t_last;                 /* bench time the model was last advanced to */
 	struct axis_cfg *cfg;
 	const struct regmap *map;
 	int unit;
@@ -441,9 +445,24 @@ static void arm_handle(void *self, const struct pollfd *fds, int n, double now)
 	}
 }
 
-static void axis_tick(struct sim_axis *a, double now)
+static bool colliding(const struct sim_world *w)
 {
-	int ev = simmot_advance(&a->mot, now);
+	double sep = simmot_arm_separation(w->laser_theta_deg, w->geom.laser_phi_deg, w->detector_theta_deg,
+					   w->detector_phi_deg);
+	return sep < w->geom.laser_body_halfwidth_deg + w->geom.detector_body_halfwidth_deg;
+}
+
+/* Contact: every axis of this arm stops with the collision alarm (the other arm sees world->collision). */
+static void collide(struct sim_arm *s)
+{
+	for (int i = 0; i < s->nax; i++)
+		raise_alarm(&s->ax[i], 0xE0);
+	s->w->collision = true;
+	s->was_colliding = true;
+}
+
+static void axis_event(struct sim_axis *a, int ev)
+{
 	switch (ev) {
 	case SIMMOT_DONE:
 		if (a->homing) {
@@ -458,8 +477,30 @@ static void axis_tick(struct sim_axis *a, double now)
 	case SIMMOT_STALL: a->stalled = true; break;
 	default: break;
 	}
+}
+
+/* Advance an axis to bench time now in steps of at most 0.05° of travel, so that contact with the other
+ * arm is caught where it happens, not one (possibly long, on a loaded machine) loop turn later. */
+static void axis_tick(struct sim_axis *a, double now)
+{
+	struct sim_arm *s = a->arm;
+	double t = a->t_last < now ? a->t_last : now;
+	while (a->mot.moving) {
+		double v = a->mot.vmax > 0 ? a->mot.vmax : a->mot.k.speed_dps;
+		t = t + 0.05 / v < now ? t + 0.05 / v : now;
+		axis_event(a, simmot_advance(&a->mot, t));
+		if (a->world_pos)
+			*a->world_pos = a->mot.load;
+		if (!s->was_colliding && colliding(s->w)) {
+			collide(s);
+			break;
+		}
+		if (t >= now)
+			break;
+	}
 	if (a->world_pos)
 		*a->world_pos = a->mot.load;
+	a->t_last = now;
 }
 
 static void arm_tick(void *self, double now)
@@ -474,9 +515,7 @@ static void arm_tick(void *self, double now)
 	}
 	for (int i = 0; i < s->nax; i++)
 		axis_tick(&s->ax[i], now);
-	double sep = simmot_arm_separation(w->laser_theta_deg, w->geom.laser_phi_deg, w->detector_theta_deg,
-					   w->detector_phi_deg);
-	bool coll = sep < w->geom.laser_body_halfwidth_deg + w->geom.detector_body_halfwidth_deg;
+	bool coll = colliding(w);
 	w->collision = coll;
 	if (coll && !s->was_colliding)
 		for (int i = 0; i < s->nax; i++)
@@ -522,6 +561,7 @@ static int setup_axis(struct sim_arm *s, struct sim_axis *a, struct axis_cfg *cf
 	struct sim_world *w = s->w;
 	const char *name = axis_cfg_name(cfg);
 	const struct bench_axis *k;
+	a->arm = s;
 	a->cfg = cfg;
 	a->map = axis_cfg_map(cfg);
 	a->unit = axis_cfg_unit(cfg);

@@ -669,7 +669,7 @@ static void test_sim_collision(void **state)
 	double th = pp->host.w.detector_theta_deg;
 	double sep = simmot_arm_separation(pp->host.w.laser_theta_deg, 0, th, pp->host.w.detector_phi_deg);
 	ah_unlock(&pp->host);
-	assert_true(sep < 11.0 && sep > 10.0); /* stopped as soon as it touched */
+	assert_true(sep < 11.0 && sep > 10.9); /* stopped within one 0.05° step of contact */
 	/* after a reset the arm can move away, and the collision clears */
 	EXPECT(axis_alarm_reset(ax, &err), 0);
 	EXPECT(move_to(pp, ax, 30, &err), AXIS_MOVE_DONE);

@@ -305,7 +305,7 @@ static void test_collision_by_laser_arm(void **state)
 	assert_int_equal(det_alarm, 0xE0); /* both controllers stop and raise the alarm */
 	assert_int_equal(det_phi_alarm, 0xE0);
 	printf("collision: laser stopped at %.3f°, separation %.3f° (limit 11°)\n", th, sep);
-	assert_true(sep < 11.0 && sep > 10.0);
+	assert_true(sep < 11.0 && sep > 10.9); /* stopped within one 0.05° step of contact */
 	/* a move while in alarm is ignored; after ALM-RST (level bit, cleared by us) the arm moves away */
 	az_move(laser, 0);
 	ah_sleep(0.05);
