@@ -534,6 +534,28 @@ int axis_open_shared(const struct axis_cfg *cfg, struct axis *peer, struct axis 
 	return open_common(cfg, peer->link, out, err);
 }
 
+int axis_arm_open(struct axis_cfg *const *cfg, int n, struct axis **out, struct acq_err *err)
+{
+	for (int i = 0; i < n; i++) {
+		int rc = -1;
+		out[i] = NULL;
+		for (int j = 0; j < i && rc != 0; j++) {
+			const struct axis_link_cfg *a = &cfg[i]->link, *b = &cfg[j]->link;
+			if (a->type == b->type && !strcmp(a->host, b->host) && a->port == b->port &&
+			    !strcmp(a->device, b->device))
+				rc = axis_open_shared(cfg[i], out[j], &out[i], err) ? -2 : 0;
+		}
+		if (rc == -1)
+			rc = axis_open(cfg[i], &out[i], err);
+		if (rc != 0) {
+			while (i-- > 0)
+				axis_close(out[i]);
+			return -1;
+		}
+	}
+	return 0;
+}
+
 void axis_close(struct axis *ax)
 {
 	if (!ax)

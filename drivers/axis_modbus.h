@@ -36,6 +36,9 @@ const char *axis_cfg_name(const struct axis_cfg *cfg);
 int axis_cfg_set_endpoint(struct axis_cfg *cfg, int port, const char *device, struct acq_err *err);
 /* Open an axis that shares peer's link (same bus or connection; links must match). 0 or -1. */
 int axis_open_shared(const struct axis_cfg *cfg, struct axis *peer, struct axis **out, struct acq_err *err);
+/* Open the n axes of an arm (from axis_arm_parse), sharing one link between axes whose links match (an
+ * RS-485 bus carries every unit; one TCP connection per controller or gateway). 0, or -1 with none open. */
+int axis_arm_open(struct axis_cfg *const *cfg, int n, struct axis **out, struct acq_err *err);
 /* Duration (s) of a trapezoidal move over dist degrees with max speed and accel/decel (triangle if short). */
 double axis_trapezoid_s(double dist, double speed, double accel, double decel);
 /* Suggested delay before reconnect attempt number attempt (0, 1, ...): 0.1 s doubling, capped at 5 s. */
