@@ -63,6 +63,7 @@ struct sim_arm {
 	int port;
 	bool was_colliding;
 	double now;
+	double rtu_quiet_until;
 	struct sim_service svc;
 };
 
@@ -364,7 +365,7 @@ static int rtu_read_frame(int fd, uint8_t *buf, int cap)
 
 static void handle_rtu(struct sim_arm *s, double now)
 {
-	uint8_t req[MODBUS_RTU_MAX_ADU_LENGTH];
+	uint8_t req[MODBUS_RTU_MAX_ADU_LENGTH] = { 0 };
 	int fd = modbus_get_socket(s->ctx);
 	int len = rtu_read_frame(fd, req, (int)sizeof req);
 	if (len < 4) {
@@ -387,7 +388,7 @@ static void close_client(struct sim_arm *s, int i)
 
 static void handle_tcp_client(struct sim_arm *s, int i, double now)
 {
-	uint8_t req[MODBUS_TCP_MAX_ADU_LENGTH];
+	uint8_t req[MODBUS_TCP_MAX_ADU_LENGTH] = { 0 };
 	modbus_set_socket(s->ctx, s->clients[i]);
 	int rc = modbus_receive(s->ctx, req);
 	if (rc > 0)
@@ -405,7 +406,9 @@ static int arm_pollfds(void *self, struct pollfd *fds, int max)
 	if (max < 1)
 		return 0;
 	if (s->link_type == AXIS_LINK_RTU) {
-		fds[n++] = (struct pollfd){ .fd = modbus_get_socket(s->ctx), .events = POLLIN };
+		/* a hung-up tty (the pty pair's other end gone) is polled again only after a bench second */
+		if (s->now >= s->rtu_quiet_until)
+			fds[n++] = (struct pollfd){ .fd = modbus_get_socket(s->ctx), .events = POLLIN };
 		return n;
 	}
 	fds[n++] = (struct pollfd){ .fd = s->listen_fd, .events = POLLIN };
@@ -420,7 +423,9 @@ static void arm_handle(void *self, const struct pollfd *fds, int n, double now)
 	if (n < 1)
 		return;
 	if (s->link_type == AXIS_LINK_RTU) {
-		if (fds[0].revents & POLLIN)
+		if (fds[0].revents & (POLLHUP | POLLERR | POLLNVAL))
+			s->rtu_quiet_until = now + 1.0;
+		else if (fds[0].revents & POLLIN)
 			handle_rtu(s, now);
 		return;
 	}
