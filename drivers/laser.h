@@ -1,4 +1,4 @@
-/* laser: the supercontinuum source on a serial line (libserialport), a line protocol from config.
+/* laser: the supercontinuum source on a serial line (libserialport); line protocol in drivers/laser_serial.c.
  * The handle switches emission off on close and on every error path it sees. Libraries do not log. */
 #ifndef LASER_H
 #define LASER_H
@@ -27,6 +27,8 @@ struct laser_identity {
 int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err *err);
 /* Free a parsed configuration. */
 void laser_cfg_free(struct laser_cfg *cfg);
+/* Set or replace the serial device path (e.g. the pty from acq-sim's ports file). 0 or -1. */
+int laser_cfg_set_device(struct laser_cfg *cfg, const char *device, struct acq_err *err);
 /* Open the serial line and identify the laser. 0 or -1. */
 int laser_open(const struct laser_cfg *cfg, struct laser **out, struct acq_err *err);
 /* Emission off (best effort), close, free. NULL is fine. */

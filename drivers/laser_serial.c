@@ -1,0 +1,511 @@
+/* laser_serial: the supercontinuum laser over a serial line (libserialport), ASCII line protocol below.
+ *
+ * Line protocol (ours; the simulator in sim/sim_laser.c speaks it, a real laser gets a small adapter or a
+ * protocol of the same shape). ASCII, one command per line ending in "\n" (the laser accepts "\r\n"), one
+ * reply line per command ending in "\n" ("\r" before it ignored), at most LASER_LINE_MAX bytes:
+ *
+ *   ID?             → ID <model> <serial> <firmware>          (three tokens without spaces)
+ *   EMISSION ON     → OK | ERR <code> <text>                   (refused while interlock open or in fault)
+ *   EMISSION OFF    → OK                                       (always accepted)
+ *   EMISSION?       → EMISSION <0|1>                           (answered by the simulator; the driver uses STATUS?)
+ *   POWER <pct>     → OK | ERR <code> <text>                   (pct in [0, 100], decimal)
+ *   POWER?          → POWER <pct>                              e.g. "POWER 42.0"
+ *   STATUS?         → STATUS emission=<0|1> interlock=<0|1> fault=<code>
+ *                     interlock=1 means closed (emission allowed); fault 0 = none
+ *   any error       → ERR <code> <text>: 1 unknown command, 2 bad argument, 3 interlock open,
+ *                     4 fault active, 5 line too long
+ *
+ * Every command waits at most timeout_ms for its complete reply line (calls block: laser_status() sends two
+ * commands, so up to 2 × timeout_ms). Unread input is discarded before each command, so a late reply to a
+ * timed-out command is not taken for the next one (unless it arrives after that command was sent: the
+ * protocol has no sequence numbers). Anything else (another reply, a missing field, a number out of range, an
+ * overlong line, a non-printable byte) is an ACQ_E_PROTO error quoting the line; "ERR n text" is
+ * ACQ_E_DEVICE with detail = n.
+ * Safety: open switches emission off; every failed call switches it off (best effort) before returning;
+ * close switches it off.
+ *
+ * Config (devices.laser):
+ *   device: /dev/ttyUSB0   baud: 115200   data_bits: 8   parity: none|odd|even   stop_bits: 1|2
+ *   flow_control: none|xonxoff|rtscts      timeout_ms: 500     max_power_pct: 100
+ *   transport: auto|serialport|termios
+ * With acq-sim, the device is the pty written in its ports file ("laser": {"device": "/dev/pts/N"}):
+ * laser_cfg_set_device() puts it in.
+ *
+ * Transport: real serial ports go through libserialport. libserialport 0.1.1 refuses pseudo-terminals
+ * (sp_get_port_by_name wants a /sys/class/tty entry, sp_open needs the TIOCMGET modem-line ioctl a pty does not
+ * have; upstream treats PTYs as out of scope, sigrokproject/libserialport PR #4), so a device that resolves to
+ * /dev/pts/N uses the same line protocol over plain termios + poll ("auto", the default). "serialport" or
+ * "termios" force one. */
+#include "drivers/laser.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <libserialport.h>
+#include <limits.h>
+#include <math.h>
+#include <poll.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <termios.h>
+#include <time.h>
+#include <unistd.h>
+
+#define LASER_LINE_MAX 128
+
+struct laser_cfg {
+	char *device;
+	int baud, data_bits, parity, stop_bits, flow;
+	int timeout_ms;
+	double max_power_pct;
+	int transport;          /* enum laser_transport */
+};
+
+enum laser_transport { LASER_T_AUTO, LASER_T_SERIALPORT, LASER_T_TERMIOS };
+
+struct laser;
+
+/* The byte link under the line protocol: libserialport or termios (see the file comment). */
+struct laser_io {
+	const char *name;
+	int (*open)(struct laser *l, struct acq_err *err);
+	/* Write all n bytes within timeout_ms. 0 or -1. */
+	int (*write)(struct laser *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err);
+	/* Read one byte: 1, 0 (nothing within timeout_ms), -1. */
+	int (*read)(struct laser *l, char *c, int timeout_ms, struct acq_err *err);
+	/* Discard unread input. */
+	void (*flush)(struct laser *l);
+	void (*close)(struct laser *l);
+};
+
+struct laser {
+	const struct laser_cfg *cfg;
+	const struct laser_io *io;
+	struct sp_port *port;   /* serialport transport */
+	int fd;                 /* termios transport */
+	struct laser_identity id;
+	char line[LASER_LINE_MAX + 1];
+};
+
+/* ---- configuration ------------------------------------------------------------------------------------ */
+
+int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err *err)
+{
+	*out = NULL;
+	if (yc_expect_map(node, "laser", err))
+		return -1;
+	static const char *const parities[] = { "none", "odd", "even", NULL };
+	static const char *const flows[] = { "none", "xonxoff", "rtscts", NULL };
+	static const char *const transports[] = { "auto", "serialport", "termios", NULL };
+	int transport = 0;
+	const char *device = NULL;
+	long long baud = 115200, bits = 8, stop = 1, timeout = 500;
+	int parity = 0, flow = 0;
+	double maxp = 100;
+	if (yc_string(node, "device", false, &device, err) || yc_int(node, "baud", false, 50, 4000000, &baud, err) ||
+	    yc_int(node, "data_bits", false, 5, 8, &bits, err) || yc_enum(node, "parity", false, parities, &parity, err) ||
+	    yc_int(node, "stop_bits", false, 1, 2, &stop, err) ||
+	    yc_enum(node, "flow_control", false, flows, &flow, err) ||
+	    yc_int(node, "timeout_ms", false, 1, 60000, &timeout, err) ||
+	    yc_double(node, "max_power_pct", false, 0, 100, &maxp, err) ||
+	    yc_enum(node, "transport", false, transports, &transport, err) || yc_check_unknown(node, "laser", err))
+		return -1;
+	struct laser_cfg *c = calloc(1, sizeof *c);
+	if (!c || (device && !(c->device = strdup(device)))) {
+		free(c);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	c->baud = (int)baud;
+	c->data_bits = (int)bits;
+	c->parity = parity;
+	c->stop_bits = (int)stop;
+	c->flow = flow;
+	c->timeout_ms = (int)timeout;
+	c->max_power_pct = maxp;
+	c->transport = transport;
+	*out = c;
+	return 0;
+}
+
+int laser_cfg_set_device(struct laser_cfg *cfg, const char *device, struct acq_err *err)
+{
+	char *d = strdup(device);
+	if (!d)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	free(cfg->device);
+	cfg->device = d;
+	return 0;
+}
+
+void laser_cfg_free(struct laser_cfg *cfg)
+{
+	if (!cfg)
+		return;
+	free(cfg->device);
+	free(cfg);
+}
+
+/* ---- line exchange -------------------------------------------------------------------------------------- */
+
+static double mono_ms(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+static int sp_errf(struct acq_err *err, const char *dev, const char *what)
+{
+	char *m = sp_last_error_message();
+	acq_errf(err, ACQ_E_IO, "laser %s: %s: %s", dev, what, m ? m : "error");
+	sp_free_error_message(m);
+	return -1;
+}
+
+/* Send cmd and read one reply line into l->line (without the newline). 0 or -1. */
+static int exchange(struct laser *l, const char *cmd, struct acq_err *err)
+{
+	const char *dev = l->cfg->device;
+	char out[LASER_LINE_MAX + 2];
+	int n = snprintf(out, sizeof out, "%s\n", cmd);
+	if (n < 0 || (size_t)n >= sizeof out)
+		return acq_errf(err, ACQ_E_INVAL, "laser %s: command too long", dev);
+	/* Whatever arrived unasked (a late reply to a timed-out command) must not be taken for this reply. */
+	l->io->flush(l);
+	if (l->io->write(l, out, (size_t)n, l->cfg->timeout_ms, err))
+		return acq_err_prefix(err, "'%s': ", cmd);
+	double deadline = mono_ms() + l->cfg->timeout_ms;
+	size_t len = 0;
+	for (;;) {
+		double left = deadline - mono_ms();
+		if (left < 1) {
+			l->line[len] = '\0';
+			return acq_errf(err, ACQ_E_TIMEOUT, "laser %s: no reply to '%s' within %d ms%s%s%s", dev, cmd,
+					l->cfg->timeout_ms, len ? " (partial: '" : "", len ? l->line : "", len ? "')" : "");
+		}
+		char c;
+		int r = l->io->read(l, &c, (int)left, err);
+		if (r < 0)
+			return acq_err_prefix(err, "'%s': ", cmd);
+		if (r == 0)
+			continue;
+		if (c == '\n')
+			break;
+		if (c == '\r')
+			continue;
+		if (len >= LASER_LINE_MAX)
+			return acq_errf(err, ACQ_E_PROTO, "laser %s: reply to '%s' longer than %d bytes", dev, cmd,
+					LASER_LINE_MAX);
+		if ((unsigned char)c < 0x20 || (unsigned char)c > 0x7e)
+			return acq_errf(err, ACQ_E_PROTO, "laser %s: reply to '%s' has a non-printable byte 0x%02x", dev,
+					cmd, (unsigned char)c);
+		l->line[len++] = c;
+	}
+	l->line[len] = '\0';
+	if (!strncmp(l->line, "ERR", 3) && (l->line[3] == ' ' || !l->line[3])) {
+		char *end;
+		long code = strtol(l->line + 3, &end, 10);
+		acq_errf(err, ACQ_E_DEVICE, "laser %s: '%s' refused: %s", dev, cmd, l->line);
+		if (err && end != l->line + 3)
+			err->detail = (int)code;
+		return -1;
+	}
+	return 0;
+}
+
+static int expect_ok(struct laser *l, const char *cmd, struct acq_err *err)
+{
+	if (exchange(l, cmd, err))
+		return -1;
+	if (strcmp(l->line, "OK"))
+		return acq_errf(err, ACQ_E_PROTO, "laser %s: '%s': expected 'OK', got '%s'", l->cfg->device, cmd, l->line);
+	return 0;
+}
+
+/* Best-effort emission off after an error; err keeps the first error. */
+static int fail_safe(struct laser *l)
+{
+	struct acq_err ignored;
+	(void)expect_ok(l, "EMISSION OFF", &ignored);
+	return -1;
+}
+
+static int parse_number(const char *s, double lo, double hi, double *out)
+{
+	char *end;
+	errno = 0;
+	double v = strtod(s, &end);
+	if (end == s || *end || errno || !isfinite(v) || v < lo || v > hi)
+		return -1;
+	*out = v;
+	return 0;
+}
+
+/* ---- transports --------------------------------------------------------------------------------------- */
+
+static int sp_open_port(struct laser *l, struct acq_err *err)
+{
+	const struct laser_cfg *cfg = l->cfg;
+	static const enum sp_parity par[] = { SP_PARITY_NONE, SP_PARITY_ODD, SP_PARITY_EVEN };
+	static const enum sp_flowcontrol flow[] = { SP_FLOWCONTROL_NONE, SP_FLOWCONTROL_XONXOFF, SP_FLOWCONTROL_RTSCTS };
+	if (sp_get_port_by_name(cfg->device, &l->port) != SP_OK) {
+		l->port = NULL;
+		return acq_errf(err, ACQ_E_NOTFOUND, "laser %s: not a serial port libserialport knows", cfg->device);
+	}
+	if (sp_open(l->port, SP_MODE_READ_WRITE) != SP_OK) {
+		sp_errf(err, cfg->device, "open");
+		sp_free_port(l->port);
+		l->port = NULL;
+		return -1;
+	}
+	if (sp_set_baudrate(l->port, cfg->baud) != SP_OK || sp_set_bits(l->port, cfg->data_bits) != SP_OK ||
+	    sp_set_parity(l->port, par[cfg->parity]) != SP_OK || sp_set_stopbits(l->port, cfg->stop_bits) != SP_OK ||
+	    sp_set_flowcontrol(l->port, flow[cfg->flow]) != SP_OK)
+		return sp_errf(err, cfg->device, "configuring the line");
+	return 0;
+}
+
+static int sp_write_all(struct laser *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
+{
+	int w = sp_blocking_write(l->port, buf, n, (unsigned)timeout_ms);
+	if (w < 0)
+		return sp_errf(err, l->cfg->device, "write");
+	if ((size_t)w != n)
+		return acq_errf(err, ACQ_E_TIMEOUT, "laser %s: not sent within %d ms", l->cfg->device, timeout_ms);
+	return 0;
+}
+
+static int sp_read_byte(struct laser *l, char *c, int timeout_ms, struct acq_err *err)
+{
+	int r = sp_blocking_read(l->port, c, 1, (unsigned)(timeout_ms > 0 ? timeout_ms : 1));
+	if (r < 0)
+		return sp_errf(err, l->cfg->device, "read");
+	return r;
+}
+
+static void sp_flush_in(struct laser *l)
+{
+	sp_flush(l->port, SP_BUF_INPUT);
+}
+
+static void sp_close_port(struct laser *l)
+{
+	if (l->port) {
+		sp_close(l->port);
+		sp_free_port(l->port);
+		l->port = NULL;
+	}
+}
+
+static const struct laser_io io_serialport = {
+	"libserialport", sp_open_port, sp_write_all, sp_read_byte, sp_flush_in, sp_close_port,
+};
+
+static int tio_open(struct laser *l, struct acq_err *err)
+{
+	const struct laser_cfg *cfg = l->cfg;
+	static const struct { int baud; speed_t sp; } speeds[] = {
+		{ 1200, B1200 }, { 2400, B2400 }, { 4800, B4800 }, { 9600, B9600 }, { 19200, B19200 },
+		{ 38400, B38400 }, { 57600, B57600 }, { 115200, B115200 }, { 230400, B230400 },
+		{ 460800, B460800 }, { 921600, B921600 },
+	};
+	speed_t sp = 0;
+	for (size_t i = 0; i < sizeof speeds / sizeof speeds[0]; i++)
+		if (speeds[i].baud == cfg->baud)
+			sp = speeds[i].sp;
+	if (!sp)
+		return acq_errf(err, ACQ_E_CONFIG, "laser %s: baud %d is not a standard termios rate", cfg->device,
+				cfg->baud);
+	l->fd = open(cfg->device, O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
+	if (l->fd < 0)
+		return acq_errf(err, errno == ENOENT ? ACQ_E_NOTFOUND : ACQ_E_IO, "laser %s: open: %s", cfg->device,
+				strerror(errno));
+	struct termios t;
+	if (tcgetattr(l->fd, &t))
+		return acq_errf(err, ACQ_E_IO, "laser %s: not a terminal: %s", cfg->device, strerror(errno));
+	cfmakeraw(&t);
+	t.c_cflag &= ~(tcflag_t)(CSIZE | PARENB | PARODD | CSTOPB | CRTSCTS);
+	static const tcflag_t bits[] = { CS5, CS6, CS7, CS8 };
+	t.c_cflag |= bits[cfg->data_bits - 5] | CLOCAL | CREAD;
+	if (cfg->parity)
+		t.c_cflag |= PARENB | (cfg->parity == 1 ? PARODD : 0);
+	if (cfg->stop_bits == 2)
+		t.c_cflag |= CSTOPB;
+	if (cfg->flow == 2)
+		t.c_cflag |= CRTSCTS;
+	if (cfg->flow == 1)
+		t.c_iflag |= IXON | IXOFF;
+	cfsetispeed(&t, sp);
+	cfsetospeed(&t, sp);
+	if (tcsetattr(l->fd, TCSANOW, &t))
+		return acq_errf(err, ACQ_E_IO, "laser %s: configuring the line: %s", cfg->device, strerror(errno));
+	return 0;
+}
+
+static int tio_write(struct laser *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
+{
+	double deadline = mono_ms() + timeout_ms;
+	while (n) {
+		ssize_t w = write(l->fd, buf, n);
+		if (w > 0) {
+			buf += w;
+			n -= (size_t)w;
+			continue;
+		}
+		if (w < 0 && errno != EAGAIN && errno != EINTR)
+			return acq_errf(err, errno == EIO ? ACQ_E_DISCONNECTED : ACQ_E_IO, "laser %s: write: %s",
+					l->cfg->device, strerror(errno));
+		double left = deadline - mono_ms();
+		if (left < 1)
+			return acq_errf(err, ACQ_E_TIMEOUT, "laser %s: not sent within %d ms", l->cfg->device, timeout_ms);
+		struct pollfd p = { .fd = l->fd, .events = POLLOUT };
+		poll(&p, 1, (int)left);
+	}
+	return 0;
+}
+
+static int tio_read(struct laser *l, char *c, int timeout_ms, struct acq_err *err)
+{
+	struct pollfd p = { .fd = l->fd, .events = POLLIN };
+	int r = poll(&p, 1, timeout_ms > 0 ? timeout_ms : 1);
+	if (r < 0)
+		return errno == EINTR ? 0 : acq_errf(err, ACQ_E_IO, "laser %s: poll: %s", l->cfg->device, strerror(errno));
+	if (r == 0)
+		return 0;
+	ssize_t n = read(l->fd, c, 1);
+	if (n == 1)
+		return 1;
+	if (n < 0 && (errno == EAGAIN || errno == EINTR))
+		return 0;
+	if (n == 0 || errno == EIO)
+		return acq_errf(err, ACQ_E_DISCONNECTED, "laser %s: the line was hung up", l->cfg->device);
+	return acq_errf(err, ACQ_E_IO, "laser %s: read: %s", l->cfg->device, strerror(errno));
+}
+
+static void tio_flush(struct laser *l)
+{
+	tcflush(l->fd, TCIFLUSH);
+}
+
+static void tio_close(struct laser *l)
+{
+	if (l->fd >= 0)
+		close(l->fd);
+	l->fd = -1;
+}
+
+static const struct laser_io io_termios = { "termios", tio_open, tio_write, tio_read, tio_flush, tio_close };
+
+static const struct laser_io *pick_io(const struct laser_cfg *cfg)
+{
+	if (cfg->transport == LASER_T_SERIALPORT)
+		return &io_serialport;
+	if (cfg->transport == LASER_T_TERMIOS)
+		return &io_termios;
+	char real[PATH_MAX];
+	if (realpath(cfg->device, real) && !strncmp(real, "/dev/pts/", 9))
+		return &io_termios;
+	return &io_serialport;
+}
+
+/* ---- API ------------------------------------------------------------------------------------------------- */
+
+int laser_open(const struct laser_cfg *cfg, struct laser **out, struct acq_err *err)
+{
+	*out = NULL;
+	if (!cfg->device)
+		return acq_errf(err, ACQ_E_CONFIG, "laser: no serial device configured (devices.laser.device)");
+	struct laser *l = calloc(1, sizeof *l);
+	if (!l)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	l->cfg = cfg;
+	l->fd = -1;
+	l->io = pick_io(cfg);
+	bool opened = false;
+	if (l->io->open(l, err))
+		goto fail;
+	opened = true;
+	if (exchange(l, "ID?", err))
+		goto fail;
+	char model[64], serial[64], fw[64], extra;
+	if (strncmp(l->line, "ID ", 3) ||
+	    sscanf(l->line, "ID %63s %63s %63s %c", model, serial, fw, &extra) != 3) {
+		acq_errf(err, ACQ_E_PROTO, "laser %s: 'ID?': expected 'ID <model> <serial> <firmware>', got '%s'",
+			 cfg->device, l->line);
+		goto fail;
+	}
+	snprintf(l->id.model, sizeof l->id.model, "%s", model);
+	snprintf(l->id.serial, sizeof l->id.serial, "%s", serial);
+	snprintf(l->id.firmware, sizeof l->id.firmware, "%s", fw);
+	if (expect_ok(l, "EMISSION OFF", err))
+		goto fail;
+	*out = l;
+	return 0;
+fail:
+	if (opened)
+		fail_safe(l);
+	l->io->close(l);
+	free(l);
+	return -1;
+}
+
+void laser_close(struct laser *l)
+{
+	if (!l)
+		return;
+	fail_safe(l);
+	l->io->close(l);
+	free(l);
+}
+
+int laser_set_emission(struct laser *l, bool on, struct acq_err *err)
+{
+	if (expect_ok(l, on ? "EMISSION ON" : "EMISSION OFF", err))
+		return fail_safe(l);
+	return 0;
+}
+
+int laser_set_power(struct laser *l, double pct, struct acq_err *err)
+{
+	if (!isfinite(pct) || pct < 0 || pct > l->cfg->max_power_pct) {
+		acq_errf(err, ACQ_E_RANGE, "laser %s: power %g%% outside [0, %g]", l->cfg->device, pct,
+			 l->cfg->max_power_pct);
+		return fail_safe(l);
+	}
+	char cmd[64];
+	snprintf(cmd, sizeof cmd, "POWER %.2f", pct);
+	if (expect_ok(l, cmd, err))
+		return fail_safe(l);
+	return 0;
+}
+
+int laser_status(struct laser *l, struct laser_status *st, struct acq_err *err)
+{
+	memset(st, 0, sizeof *st);
+	if (exchange(l, "STATUS?", err))
+		return fail_safe(l);
+	int em = -1, il = -1, fault = -1, pos = 0;
+	if (sscanf(l->line, "STATUS emission=%d interlock=%d fault=%d%n", &em, &il, &fault, &pos) != 3 ||
+	    l->line[pos] || (em != 0 && em != 1) || (il != 0 && il != 1) || fault < 0) {
+		acq_errf(err, ACQ_E_PROTO, "laser %s: 'STATUS?': expected 'STATUS emission=0|1 interlock=0|1 "
+			 "fault=N', got '%s'", l->cfg->device, l->line);
+		return fail_safe(l);
+	}
+	st->emission = em;
+	st->interlock_ok = il;
+	st->fault = fault != 0;
+	st->fault_code = fault;
+	if (exchange(l, "POWER?", err))
+		return fail_safe(l);
+	if (strncmp(l->line, "POWER ", 6) || parse_number(l->line + 6, 0, 100, &st->power_pct)) {
+		acq_errf(err, ACQ_E_PROTO, "laser %s: 'POWER?': expected 'POWER <0..100>', got '%s'", l->cfg->device,
+			 l->line);
+		return fail_safe(l);
+	}
+	return 0;
+}
+
+const struct laser_identity *laser_identity(const struct laser *l)
+{
+	return &l->id;
+}
