@@ -22,6 +22,7 @@ struct axis_cfg {
 	int unit;
 	struct regmap *map;
 	double soft_min, soft_max;
+	double wrap;               /* > 0: targets are modulo wrap degrees (azimuth): the nearest equivalent */
 	double deadband, backlash;
 	int backlash_dir;          /* +1: final approach in the positive direction, -1: negative */
 	int retries;
@@ -154,11 +155,16 @@ static int cfg_parse(struct yc_node *node, struct yc_node *link, struct yc_node 
 	    yc_double(node, "timeout_factor", false, 1, 100, &c->timeout_factor, err) ||
 	    yc_double(node, "poll_s", false, 1e-3, 10, &c->poll_s, err) ||
 	    yc_double(node, "home_timeout_s", false, 0.1, 36000, &c->home_timeout_s, err) ||
-	    yc_double(node, "start_grace_s", false, 0, 60, &c->start_grace_s, err))
+	    yc_double(node, "start_grace_s", false, 0, 60, &c->start_grace_s, err) ||
+	    yc_double(node, "wrap_deg", false, 0, 720, &c->wrap, err))
 		goto fail;
 	if (c->soft_min >= c->soft_max) {
 		yc_errf(err, node, "%s: soft_min_deg (%g) must be below soft_max_deg (%g)", name, c->soft_min,
 			c->soft_max);
+		goto fail;
+	}
+	if (c->wrap != 0 && c->wrap < 1) {
+		yc_errf(err, yc_get(node, "wrap_deg"), "%s: wrap_deg must be 0 (off) or at least 1", name);
 		goto fail;
 	}
 	if (c->decel == 0)
@@ -655,14 +661,34 @@ static int start_leg(struct axis *ax, double from, double now, bool allow_pre, s
 	return 0;
 }
 
+/* The target to command: target itself, or with wrap_deg the equivalent angle (target + k·wrap) inside the
+ * soft limits nearest to the current position. NAN when none lies inside the limits. */
+static double resolve_target(const struct axis_cfg *c, double target, double from)
+{
+	if (c->wrap <= 0)
+		return target >= c->soft_min && target <= c->soft_max ? target : NAN;
+	double best = NAN;
+	double k0 = floor((c->soft_min - target) / c->wrap);
+	for (double k = k0; target + k * c->wrap <= c->soft_max; k += 1) {
+		double t = target + k * c->wrap;
+		if (t >= c->soft_min && (isnan(best) || fabs(t - from) < fabs(best - from)))
+			best = t;
+	}
+	return best;
+}
+
 int axis_move_begin(struct axis *ax, double target_deg, double now, struct acq_err *err)
 {
 	const struct axis_cfg *c = ax->cfg;
-	if (!isfinite(target_deg))
-		return acq_errf(err, ACQ_E_RANGE, "%s: target is not a finite number", c->name);
-	if (target_deg < c->soft_min || target_deg > c->soft_max)
+	if (!isfinite(target_deg) || fabs(target_deg) > 1e6)
+		return acq_errf(err, ACQ_E_RANGE, "%s: target is not a finite angle", c->name);
+	/* without wrap the soft limits are checked before anything is sent */
+	if (c->wrap <= 0 && isnan(resolve_target(c, target_deg, 0)))
 		return acq_errf(err, ACQ_E_RANGE, "%s: target %g° outside the soft limits [%g°, %g°]", c->name,
 				target_deg, c->soft_min, c->soft_max);
+	if (c->wrap > 0 && isnan(resolve_target(c, target_deg, target_deg)))
+		return acq_errf(err, ACQ_E_RANGE, "%s: no angle equivalent to %g° (modulo %g°) inside the soft "
+				"limits [%g°, %g°]", c->name, target_deg, c->wrap, c->soft_min, c->soft_max);
 	if (ax->state == ST_MOVE || ax->state == ST_HOME)
 		return acq_errf(err, ACQ_E_STATE, "%s: a move is already running", c->name);
 	struct axis_status st;
@@ -671,7 +697,7 @@ int axis_move_begin(struct axis *ax, double target_deg, double now, struct acq_e
 	if (st.alarm)
 		return acq_errf(err, ACQ_E_DEVICE, "%s: controller in alarm (code 0x%x): reset it first", c->name,
 				(unsigned)st.alarm_code);
-	ax->target = target_deg;
+	ax->target = resolve_target(c, target_deg, st.position_deg);
 	ax->retries_left = c->retries;
 	if (start_leg(ax, st.position_deg, now, true, err)) {
 		ax->state = ST_FAILED;
@@ -679,6 +705,11 @@ int axis_move_begin(struct axis *ax, double target_deg, double now, struct acq_e
 		return -1;
 	}
 	return 0;
+}
+
+double axis_target(const struct axis *ax)
+{
+	return ax->target;
 }
 
 int axis_move_step(struct axis *ax, double now, struct acq_err *err)

@@ -45,6 +45,8 @@ double axis_trapezoid_s(double dist, double speed, double accel, double decel);
 double axis_backoff_s(int attempt);
 /* Limit and stall bits of the status word (false when the map does not define them). 0 or -1. */
 int axis_read_bits(struct axis *ax, bool *limit_pos, bool *limit_neg, bool *stall, struct acq_err *err);
+/* The angle the current or last move commanded (differs from the request only with wrap_deg). */
+double axis_target(const struct axis *ax);
 /* Retries the current or last move used. */
 int axis_move_retries_used(const struct axis *ax);
 

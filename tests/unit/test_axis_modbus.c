@@ -725,6 +725,44 @@ static void test_sim_backlash_compensation(void **state)
 	yc_free(doc);
 }
 
+/* wrap_deg: the azimuth takes the equivalent angle nearest to where it is, inside the soft limits. */
+static void test_sim_wrap(void **state)
+{
+	struct peer *pp = new_peer(state);
+	pp->kind = PEER_SIM;
+	struct acq_err err = { 0 };
+	struct yc_doc *maps = pp->maps_doc = load_file("config/bench-sim.yaml");
+	assert_non_null(maps);
+	const char *sim_yaml = "bench:\n  detector_phi: {noise_deg: 0, backlash_deg: 0}\n"
+			       "devices:\n  detector_arm:\n    link: {type: tcp, port: 0}\n    axes:\n"
+			       "      phi: {unit: 2, map: oriental_az, soft_min_deg: -179, soft_max_deg: 359}\n";
+	pp->host_started = true;
+	assert_int_equal(ah_start(&pp->host, sim_yaml, maps_of(maps), SIM_SCALE, &err), 0);
+	char yaml[1024];
+	snprintf(yaml, sizeof yaml,
+		 "link: {type: tcp, port: %d}\naxes:\n  phi: {unit: 2, map: oriental_az, soft_min_deg: -179, "
+		 "soft_max_deg: 359, wrap_deg: 360, speed_dps: 30, accel_dps2: 90, poll_s: 0.02}\n",
+		 simarm_port(pp->host.svc[0]));
+	assert_int_equal(yc_load_string("d.yaml", yaml, strlen(yaml), &pp->doc, &err), 0);
+	EXPECT(axis_arm_parse(yc_root(pp->doc), maps_of(maps), "detector_arm", pp->cfg, 2, &pp->ncfg, &err), 0);
+	struct axis *ax = open_axis(pp, 0);
+	struct axis_status st;
+	/* from 180: -20 is commanded as 340 (160° away instead of 200°) */
+	EXPECT(move_to(pp, ax, -20, &err), AXIS_MOVE_DONE);
+	assert_true(axis_target(ax) == 340);
+	EXPECT(axis_read_status(ax, &st, &err), 0);
+	assert_true(fabs(st.position_deg - 340) <= 0.01);
+	/* from 340: 10 would be 370, outside the soft limits: it goes the long way to 10 */
+	EXPECT(move_to(pp, ax, 10, &err), AXIS_MOVE_DONE);
+	assert_true(axis_target(ax) == 10);
+	/* 725 ≡ 5 */
+	EXPECT(move_to(pp, ax, 725, &err), AXIS_MOVE_DONE);
+	assert_true(axis_target(ax) == 5);
+	EXPECT(axis_read_status(ax, &st, &err), 0);
+	assert_true(fabs(st.position_deg - 5) <= 0.01);
+	axis_close(ax);
+}
+
 /* The Leadshine-like map (single writes, pulse-style trigger register) against the same simulator. */
 static void test_leadshine_map_on_sim(void **state)
 {
@@ -926,6 +964,7 @@ int main(void)
 		cmocka_unit_test_teardown(test_sim_timeout_fault, peer_teardown),
 		cmocka_unit_test_teardown(test_sim_collision, peer_teardown),
 		cmocka_unit_test_teardown(test_sim_backlash_compensation, peer_teardown),
+		cmocka_unit_test_teardown(test_sim_wrap, peer_teardown),
 		cmocka_unit_test_teardown(test_leadshine_map_on_sim, peer_teardown),
 		cmocka_unit_test(test_dead_links),
 		cmocka_unit_test(test_bad_replies),

@@ -324,6 +324,8 @@ static void test_malformed_axis_config(void **state)
 		{ "link: {type: tcp, port: 502}\naxes: {theta: {unit: 1, map: oriental_az, speeed_dps: 3}}\n",
 		  "t.yaml:2:43", "speeed_dps" },
 		{ "link: {type: tcp, port: 502}\naxes: {}\n", "t.yaml:2:7", "empty" },
+		{ "link: {type: tcp, port: 502}\naxes: {phi: {unit: 1, map: oriental_az, wrap_deg: 0.001}}\n",
+		  "t.yaml:2:51", "wrap_deg" },
 		{ "axes: {theta: {unit: 1, map: oriental_az}}\n", "t.yaml:1:1", "link" },
 		{ "link: {type: tcp, port: 502}\nresponse_timeout_ms: -5\naxes: {theta: {unit: 1, map: oriental_az}}\n",
 		  "t.yaml:2:22", "response_timeout_ms" },
