@@ -557,6 +557,114 @@ static void test_bad_plan_files(void **state)
 	assert_non_null(strstr(err.msg, "/nonexistent/plan.yaml"));
 }
 
+/* The lower bound holds for every order, not just the planner's: on tiny plans, enumerate all orders of the
+ * measured points (each with its best azimuth choices, by dynamic programming over plan_move times) and
+ * check bound ≤ best order ≤ planned (up to 6 points: 720 orders). */
+static double order_cost(const struct bench_geom *g, struct plan_pos *pts, size_t n, const size_t *perm)
+{
+	double best[4], nb[4];
+	double reps[8][4];
+	int nr[8];
+	for (size_t i = 0; i < n; i++) {
+		nr[i] = 0;
+		for (int k = -2; k <= 2; k++) {
+			double x = pts[perm[i]].det_phi + 360.0 * k;
+			if (in_lim(&g->detector_phi, x) && nr[i] < 4)
+				reps[i][nr[i]++] = x;
+		}
+	}
+	for (int j = 0; j < nr[0]; j++)
+		best[j] = 0;
+	for (size_t i = 1; i < n; i++) {
+		for (int j = 0; j < nr[i]; j++) {
+			nb[j] = INFINITY;
+			for (int k = 0; k < nr[i - 1]; k++) {
+				struct plan_pos a = pts[perm[i - 1]], b = pts[perm[i]];
+				a.det_phi = reps[i - 1][k];
+				b.det_phi = reps[i][j];
+				struct plan_wp w[PLAN_MAX_WP];
+				size_t nw;
+				double t = plan_move(g, &a, &b, w, &nw);
+				if (t >= 0 && best[k] + t < nb[j])
+					nb[j] = best[k] + t;
+			}
+		}
+		memcpy(best, nb, sizeof best);
+	}
+	double m = INFINITY;
+	for (int j = 0; j < nr[n - 1]; j++)
+		m = fmin(m, best[j]);
+	return m;
+}
+
+static bool next_perm(size_t *p, size_t n)
+{
+	size_t i = n - 1;
+	while (i > 0 && p[i - 1] >= p[i])
+		i--;
+	if (i == 0)
+		return false;
+	size_t j = n - 1;
+	while (p[j] <= p[i - 1])
+		j--;
+	size_t t = p[i - 1];
+	p[i - 1] = p[j];
+	p[j] = t;
+	for (size_t a = i, b = n - 1; a < b; a++, b--) {
+		t = p[a];
+		p[a] = p[b];
+		p[b] = t;
+	}
+	return true;
+}
+
+static void test_bound_vs_exhaustive(void **state)
+{
+	(void)state;
+	unsigned long seed = seed_from_env();
+	rng_state = 0xD1B54A32D192ED03ull ^ ((uint64_t)seed * 0x9E3779B97F4A7C15ull);
+	if (!rng_state)
+		rng_state = 1;
+	int checked = 0;
+	for (int it = 0; it < 40 && checked < 12; it++) {
+		struct bench_geom g;
+		random_bench(&g);
+		struct plan_spec *s = random_plan();
+		/* shrink it (the arrays only get shorter) */
+		s->n_incidence = s->n_incidence < 2 ? s->n_incidence : 2;
+		s->n_obs_theta = s->n_obs_theta < 2 ? s->n_obs_theta : 2;
+		s->n_obs_phi = s->n_obs_phi < 3 ? s->n_obs_phi : 3;
+		s->fib_count = s->fib_count < 3 ? s->fib_count : 3;
+		s->reciprocal_pairs = s->reciprocal_pairs < 1 ? s->reciprocal_pairs : 1;
+		struct plan_result *r = NULL;
+		struct acq_err err = { 0 };
+		if (plan_make(s, &g, &r, &err))
+			fail_msg("%s", err.msg);
+		size_t n = r->n_steps;
+		if (n >= 2 && n <= 6) {
+			struct plan_pos pts[8];
+			size_t perm[8];
+			for (size_t i = 0; i < n; i++) {
+				pts[i] = r->steps[i].pos;
+				perm[i] = i;
+			}
+			double best = INFINITY;
+			do
+				best = fmin(best, order_cost(&g, pts, n, perm));
+			while (next_perm(perm, n));
+			double opt = best + (double)n * r->point_dwell_s;
+			if (!(r->lower_bound_s <= opt + 1e-9 && opt <= r->duration_s + 1e-9))
+				fail_msg("seed %lu it %d: bound %.4f, best order %.4f, planned %.4f", seed, it, r->lower_bound_s,
+					 opt, r->duration_s);
+			checked++;
+		}
+		plan_result_free(r);
+		plan_spec_free(s);
+	}
+	printf("test_bound_vs_exhaustive: %d tiny plans enumerated\n", checked);
+	assert_true(checked > 0);
+}
+
 /* A spec built by code with a non-finite angle or too many points is refused, not planned. */
 static void test_bad_specs(void **state)
 {
@@ -616,6 +724,7 @@ int main(void)
 		cmocka_unit_test(test_detours),
 		cmocka_unit_test(test_paper_plan),
 		cmocka_unit_test(test_random_plans),
+		cmocka_unit_test(test_bound_vs_exhaustive),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
