@@ -313,6 +313,20 @@ static void check_result(const struct bench_geom *g, const struct plan_spec *s, 
 			assert_true(psi_of(g, q->pos.laser_theta, q->pos.det_theta, q->pos.det_phi) >= B - 1e-9);
 			if (lim)
 				assert_true(q->moved_deg >= B - psi - 1e-6);
+			/* nearest: when the point straight out of the cap (on the great circle from ωi through ωo,
+			 * just past its edge) is within the limits, the move is no longer than that */
+			struct v3 wi = sph(q->req.laser_theta, g->laser_phi_deg);
+			double c = wi.x * wo.x + wi.y * wo.y + wi.z * wo.z;
+			struct v3 t = { wo.x * c - wi.x, wo.y * c - wi.y, wo.z * c - wi.z };
+			double tl = sqrt(t.x * t.x + t.y * t.y + t.z * t.z);
+			if (lim && tl > 1e-6) {
+				double d = RAD(B - psi + 0.005);
+				struct v3 e = { cos(d) * wo.x + sin(d) * t.x / tl, cos(d) * wo.y + sin(d) * t.y / tl,
+						cos(d) * wo.z + sin(d) * t.z / tl };
+				double th = DEGR(atan2(sqrt(e.x * e.x + e.y * e.y), e.z)), ph = DEGR(atan2(e.y, e.x));
+				if (in_lim(&g->detector_theta, th) && phi_ok(g, ph) && th > 0.01)
+					assert_true(q->moved_deg <= B - psi + 0.01);
+			}
 			break;
 		}
 		case PLAN_DROPPED:
