@@ -11,6 +11,7 @@
 #include <cmocka.h>
 
 #include "config/bench.h"
+#include "config/yconf.h"
 #include "daemon/plan.h"
 
 /* ---- the independent model ------------------------------------------------------------------------- */
@@ -710,6 +711,36 @@ static void test_bad_specs(void **state)
 	plan_result_free(r);
 }
 
+/* The example bench's section parses completely (every key known), the margin included; a bad value is
+ * located. */
+static void test_bench_section(void **state)
+{
+	(void)state;
+	const char *src = getenv("ACQ_SRC");
+	char path[4096];
+	snprintf(path, sizeof path, "%s/config/bench-sim.yaml", src ? src : ".");
+	struct yc_doc *doc = NULL;
+	struct acq_err err = { 0 };
+	if (yc_load_file(path, &doc, &err))
+		fail_msg("%s", err.msg);
+	struct bench_geom g;
+	bench_defaults(&g);
+	g.safety_margin_deg = -1; /* must come from the file */
+	struct yc_node *b = yc_get(yc_root(doc), "bench");
+	assert_non_null(b);
+	if (bench_parse(b, &g, &err))
+		fail_msg("%s", err.msg);
+	assert_true(g.safety_margin_deg >= 0);
+	assert_true(g.laser_radius_mm > g.detector_radius_mm); /* the documented layout */
+	assert_true(g.detector_phi.max_deg - g.detector_phi.min_deg > 360); /* wrap-around is possible */
+	yc_free(doc);
+	const char *bad = "bench:\n  safety_margin_deg: -2\n";
+	assert_int_equal(yc_load_string("b.yaml", bad, strlen(bad), &doc, &err), 0);
+	assert_int_equal(bench_parse(yc_get(yc_root(doc), "bench"), &g, &err), -1);
+	assert_non_null(strstr(err.msg, "b.yaml:2:22"));
+	yc_free(doc);
+}
+
 /* The trapezoid helpers agree with the independent model. */
 static void test_trapezoid(void **state)
 {
@@ -732,6 +763,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_trapezoid),
+		cmocka_unit_test(test_bench_section),
 		cmocka_unit_test(test_plan_file_forms),
 		cmocka_unit_test(test_bad_plan_files),
 		cmocka_unit_test(test_bad_specs),
