@@ -914,8 +914,10 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 	for (size_t i = 0; i < R->n_req; i++)
 		if (R->req[i].status != PLAN_DUPLICATE)
 			classify_req(g, &R->req[i], s->blind_policy);
-		else
+		else {
 			R->req[i].pos = canon(R->req[i].req);
+			R->req[i].psi_deg = plan_psi_deg(g, &R->req[i].pos);
+		}
 	if (s->reciprocal_pairs) {
 		size_t n0 = R->n_req;
 		add_reciprocals(s, g, R->req, &R->n_req);
