@@ -488,6 +488,18 @@ static void test_paper_plan(void **state)
 	/* the ordering must be worth something */
 	assert_true(r->duration_s < 0.8 * r->raster_s);
 	assert_true(r->duration_s < 1.15 * r->lower_bound_s);
+	/* deterministic: a restarted daemon re-plans the same sweep and resumes after its last point */
+	struct plan_result *r2 = NULL;
+	if (plan_make(s, &g, &r2, &err))
+		fail_msg("%s", err.msg);
+	assert_int_equal(r2->n_steps, r->n_steps);
+	assert_int_equal(r2->n_wps, r->n_wps);
+	for (size_t i = 0; i < r->n_steps; i++) {
+		assert_int_equal(r2->steps[i].req, r->steps[i].req);
+		assert_true(r2->steps[i].pos.det_phi == r->steps[i].pos.det_phi);
+	}
+	assert_true(r2->duration_s == r->duration_s);
+	plan_result_free(r2);
 	plan_result_free(r);
 	plan_spec_free(s);
 }
