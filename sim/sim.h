@@ -17,6 +17,10 @@
 
 enum sim_arm_id { SIM_ARM_LASER = 0, SIM_ARM_DETECTOR = 1 };
 
+/* What sits on the sample stage (config `sim.sample`, control command `sample`). NONE: empty holder, the
+ * detector can see the direct beam (absolute calibration). */
+enum sim_sample { SIM_SAMPLE_GREEN_PAINT = 0, SIM_SAMPLE_WHITE, SIM_SAMPLE_METAL, SIM_SAMPLE_NONE, SIM_SAMPLE__COUNT };
+
 /* Faults, set by the control socket or the seeded schedule, consumed by the services. */
 struct sim_faults {
 	bool modbus_timeout[2];     /* controller stops answering (per arm) */
@@ -42,6 +46,10 @@ struct sim_world {
 	double laser_power_pct;
 	struct sim_faults faults;
 	uint64_t seed;
+	/* spectrometer side (sim/sim_spectro.c, sim/sim_control.c) */
+	int sample;                 /* enum sim_sample */
+	double sensor_temp_c;       /* spectrometer sensor temperature (TEC set point by default) */
+	double spectro_offline_until; /* bench time until which the spectrometer refuses connections */
 };
 
 /* A service of the simulator: owns file descriptors and advances its model with bench time. */
@@ -56,9 +64,12 @@ struct sim_service {
 	void (*tick)(void *self, double now);
 	/* Write this service's endpoints as JSON members, e.g. "laser_arm": {"port": 40123}; may be NULL. */
 	void (*describe)(void *self, char *buf, size_t len);
-	/* Free everything. */
+	/* Free everything, the struct sim_service itself included (embed it in self). */
 	void (*destroy)(void *self);
 };
+
+/* Listen on a Unix stream socket at path (a stale socket file is replaced), non-blocking. fd or -1 with err. */
+int sim_listen_unix(const char *path, struct acq_err *err);
 
 /* Bench seconds now. */
 double sim_now(const struct sim_world *w);

@@ -1,0 +1,148 @@
+#!/usr/bin/python3
+"""Integration test of `acq-sim truth`: DHR CSV layout and values (white = its reflectance, paint and metal
+<= 1, sigma a small non-negative bound), --eval in the CSV interchange format (reciprocity, Lambertian value,
+non-negativity), --grid noisy samples whose sigma columns describe their noise (z-scores against --eval),
+and clear errors."""
+import csv
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+BUILD = os.environ.get("ACQ_BUILD", "build")
+SEED = int(os.environ.get("ACQ_SEED", "1"))
+SIM = os.path.join(BUILD, "acq-sim")
+print(f"ACQ_SEED={SEED}")
+if not os.access(SIM, os.X_OK):
+    print(f"skip: {SIM} not built")
+    sys.exit(77)
+tmp = tempfile.mkdtemp(prefix="acq-truth-test.")
+
+
+def check(cond, what):
+    if not cond:
+        print("FAIL:", what)
+        shutil.rmtree(tmp, ignore_errors=True)
+        sys.exit(1)
+    print("ok:", what)
+
+
+def run(*args):
+    return subprocess.run([SIM, "truth", *args], capture_output=True, text=True, timeout=60)
+
+
+def read_csv(path):
+    with open(path) as f:
+        rows = [r for r in csv.reader(line for line in f if not line.startswith("#"))]
+    return rows[0], rows[1:]
+
+
+try:
+    rng = np.random.default_rng(SEED)
+    # --- DHR
+    for mat in ("white", "green-paint", "metal"):
+        out = os.path.join(tmp, f"{mat}.dhr.csv")
+        r = run(mat, "--dhr", out, "--theta-i", "8,30,60,85", "--wavelengths", "450:1100:5")
+        check(r.returncode == 0, f"{mat}: --dhr runs ({r.stderr.strip()})")
+        head, rows = read_csv(out)
+        check(head == ["theta_i", "wavelength_nm", "dhr", "sigma"], f"{mat}: DHR columns")
+        a = np.array(rows, dtype=float)
+        check(a.shape == (4 * 131, 4), f"{mat}: 4 incidences x 131 wavelengths")
+        check(np.all(a[:, 2] >= 0) and np.all(a[:, 2] <= 1) and np.all(a[:, 3] >= 0) and np.all(a[:, 3] < 1e-3),
+              f"{mat}: 0 <= DHR <= 1, 0 <= sigma < 1e-3 (max sigma {a[:, 3].max():.2g})")
+        if mat == "white":
+            check(np.all((a[:, 2] > 0.96) & (a[:, 2] < 0.995)) and np.ptp(a[a[:, 1] == 600, 2]) < 1e-12,
+                  "white: DHR ~0.97-0.99, independent of incidence (Lambertian)")
+        if mat == "green-paint":
+            d8 = {w: v for t, w, v, s in a if t == 8}
+            check(d8[530] > 3 * d8[650] and d8[530] > 0.3, f"green paint is green at 8 deg: 530 nm {d8[530]:.3f}, 650 nm {d8[650]:.3f}")
+        if mat == "metal":
+            d8 = {w: v for t, w, v, s in a if t == 8}
+            check(d8[450] < 0.5 and d8[900] > 0.9, f"gold-like metal: 450 nm {d8[450]:.3f}, 900 nm {d8[900]:.3f}")
+
+    # --- eval: reciprocity, Lambertian value, non-negativity
+    q = os.path.join(tmp, "q.csv")
+    n = 200
+    ang = np.column_stack([rng.uniform(0, 89, n), rng.uniform(0, 360, n), rng.uniform(0, 89, n), rng.uniform(0, 360, n)])
+    with open(q, "w") as f:
+        f.write("# random queries\ntheta_i,phi_i,theta_o,phi_o,comment\n")
+        for t in ang:
+            f.write(f"{t[0]},{t[1]},{t[2]},{t[3]},x\n")
+        for t in ang:
+            f.write(f"{t[2]},{t[3]},{t[0]},{t[1]},\n")
+    for mat in ("green-paint", "metal", "white"):
+        out = os.path.join(tmp, f"{mat}.eval.csv")
+        r = run(mat, "--eval", q, "-o", out, "--wavelengths", "450:1100:50")
+        check(r.returncode == 0, f"{mat}: --eval runs ({r.stderr.strip()})")
+        head, rows = read_csv(out)
+        check(head[:4] == ["theta_i", "phi_i", "theta_o", "phi_o"] and head[4] == "450" and head[-1] == "1100",
+              f"{mat}: eval output in the interchange layout")
+        v = np.array(rows, dtype=float)[:, 4:]
+        rel = np.abs(v[:n] - v[n:]) / np.maximum(1e-300, np.maximum(v[:n], v[n:]))
+        check(np.all(v >= 0) and rel.max() < 1e-8, f"{mat}: non-negative and reciprocal (max rel {rel.max():.2g})")
+        if mat == "white":
+            check(np.allclose(v * math.pi, v[0] * math.pi, rtol=0, atol=1e-12) and 0.96 < v[0, 3] * math.pi < 0.995,
+                  "white: f = rho/pi everywhere")
+
+    # --- grid samples with noise and sigma columns
+    out = os.path.join(tmp, "grid.csv")
+    r = run("green-paint", "--grid", "6x5x8", "--noise", "0.02", "--noise-floor", "1e-4", "--seed", str(SEED),
+            "-o", out, "--wavelengths", "450:1100:25")
+    check(r.returncode == 0, f"--grid runs ({r.stderr.strip()})")
+    head, rows = read_csv(out)
+    nw = 27
+    check(len(head) == 4 + 2 * nw and head[4 + nw] == "sigma_450", "grid: value and sigma_<nm> columns")
+    g = np.array(rows, dtype=float)
+    check(0 < len(g) <= 6 * 5 * 8, f"grid: {len(g)} samples (blind zones dropped)")
+    gq = os.path.join(tmp, "gq.csv")
+    with open(gq, "w") as f:
+        f.write("theta_i,phi_i,theta_o,phi_o\n")
+        for row in g:
+            f.write(f"{row[0]!r},{row[1]!r},{row[2]!r},{row[3]!r}\n")
+    ge = os.path.join(tmp, "ge.csv")
+    check(run("green-paint", "--eval", gq, "-o", ge, "--wavelengths", "450:1100:25").returncode == 0, "eval of the grid")
+    truth = np.array(read_csv(ge)[1], dtype=float)[:, 4:]
+    z = (g[:, 4:4 + nw] - truth) / g[:, 4 + nw:]
+    print(f"grid noise z-scores: mean {z.mean():.3f}, sd {z.std():.3f} over {z.size}")
+    check(abs(z.mean()) < 0.1 and 0.85 < z.std() < 1.15, "grid noise matches its sigma columns")
+    r2 = run("green-paint", "--grid", "6x5x8", "--noise", "0.02", "--noise-floor", "1e-4", "--seed", str(SEED),
+             "-o", "-", "--wavelengths", "450:1100:25")
+    check(r2.stdout == open(out).read(), "grid: same seed, same samples")
+
+    # --- MERL (values are checked against the truth in tests/unit/test_sim_truth_merl.c)
+    mp = os.path.join(tmp, "w.binary")
+    r = run("white", "--merl", mp, "--wavelengths", "450:1100:5")
+    check(r.returncode == 0 and os.path.getsize(mp) == 34992012, f"--merl writes a 34,992,012-byte table ({r.returncode})")
+    hdr = np.fromfile(mp, dtype="<i4", count=3)
+    body = np.fromfile(mp, dtype="<f8", offset=12)
+    scale = np.repeat([1 / 1500, 1.15 / 1500, 1.66 / 1500], 1458000)
+    val = body * scale
+    good = body >= 0
+    check(list(hdr) == [90, 90, 180] and good.mean() > 0.5, "MERL header 90 90 180, most cells have data")
+    check(abs(np.median(val[good][:1458000 // 2]) - 0.98 / math.pi) < 0.03,
+          f"white MERL red channel ~ rho/pi ({np.median(val[good][:729000]):.4f})")
+    os.unlink(mp)
+
+    # --- errors
+    bad = os.path.join(tmp, "bad.csv")
+    with open(bad, "w") as f:
+        f.write("theta_i,phi_i,theta_o,phi_o\n10,0,20,0\n10,0,inf,0\n")
+    for args, code, want in [
+        (["velvet", "--dhr", "x"], 2, "unknown material"),
+        (["white", "--eval", bad, "-o", os.path.join(tmp, "o.csv")], 1, "bad.csv:3: column 3"),
+        (["white", "--dhr", "-", "--wavelengths", "400:500:1"], 2, "--wavelengths"),
+        (["white", "--dhr", "-", "--theta-i", "8,95"], 2, "--theta-i"),
+        (["white", "--grid", "10x10"], 2, "needs -o"),
+        (["white", "--grid", "10x10", "-o", "-"], 2, "NIxNOxNP"),
+        (["white"], 2, "exactly one of"),
+    ]:
+        r = run(*args)
+        check(r.returncode == code and want in r.stderr, f"{args} -> exit {r.returncode}: {r.stderr.strip()}")
+    check(not os.path.exists(os.path.join(tmp, "o.csv")), "no half-written output after an error")
+    print("all passed")
+finally:
+    shutil.rmtree(tmp, ignore_errors=True)
