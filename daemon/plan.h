@@ -158,9 +158,11 @@ double plan_seg_time(const struct bench_geom *g, const struct plan_pos *p, const
 /* The ψ paths keep clear of: the largest blind-zone or collision half-angle that applies (margin included),
  * so no arm passes through the other, and no arm crosses the beam or the view while moving either. */
 double plan_clearance_deg(const struct bench_geom *g);
-/* True when the segment p → q keeps ψ ≥ plan_clearance_deg + PLAN_EDGE_DEG at every instant (sound: never
- * a false yes). */
+/* True when the segment p → q (within the axis limits) keeps ψ ≥ plan_collision_deg + PLAN_EDGE_DEG at every
+ * instant: the arms never collide (sound: never a false yes). For manual moves. */
 bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
+/* The same with plan_clearance_deg: no collision and no arm across the beam or the view; planned paths. */
+bool plan_seg_clear(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
 /* Fastest collision-free move a → b found: up to PLAN_MAX_WP segments into wps (the last ends at b), their
  * count in *n and the move's time (segments + settle) returned; -1 when no candidate path is safe. */
 #define PLAN_MAX_WP 13

@@ -460,6 +460,32 @@ static void test_detours(void **state)
 	}
 }
 
+/* Manual moves (plan_seg_safe) only avoid collisions; planned paths (plan_seg_clear) also keep off the beam
+ * and the view: on a bench whose beam cone is wider than the arms' collision cone the two differ. */
+static void test_safe_vs_clear(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	bench_defaults(&g);
+	g.beam_halfwidth_deg = 15; /* detector arm (5) + beam (15) + margin (1) = 21 > collision 12 */
+	assert_true(plan_clearance_deg(&g) > plan_collision_deg(&g) + 5);
+	/* detector swings past the laser at ψ ≈ 16° (θD − θL at the laser's azimuth) */
+	struct plan_pos a = { 30, 46, 40 }, b = { 30, 46, -40 };
+	double worst = check_segment(&g, &a, &b, plan_seg_time(&g, &a, &b));
+	assert_true(worst > plan_collision_deg(&g) && worst < plan_clearance_deg(&g));
+	assert_true(plan_seg_safe(&g, &a, &b));
+	assert_false(plan_seg_clear(&g, &a, &b));
+	/* and the planned move around it stays clear */
+	struct plan_wp w[PLAN_MAX_WP];
+	size_t n = 0;
+	assert_true(plan_move(&g, &a, &b, w, &n) > 0);
+	struct plan_pos prev = a;
+	for (size_t k = 0; k < n; k++) {
+		assert_true(check_segment(&g, &prev, &w[k].pos, w[k].duration_s) >= plan_clearance_deg(&g) - 1e-9);
+		prev = w[k].pos;
+	}
+}
+
 /* The paper's plan: 1000 requests, θo = 0 merged, blind points around retro-reflection dropped. */
 static void test_paper_plan(void **state)
 {
@@ -780,6 +806,7 @@ int main(void)
 		cmocka_unit_test(test_bad_plan_files),
 		cmocka_unit_test(test_bad_specs),
 		cmocka_unit_test(test_detours),
+		cmocka_unit_test(test_safe_vs_clear),
 		cmocka_unit_test(test_paper_plan),
 		cmocka_unit_test(test_random_plans),
 		cmocka_unit_test(test_bound_vs_exhaustive),
