@@ -21,6 +21,7 @@ void bench_defaults(struct bench_geom *g)
 	g->detector_theta = default_detector_theta;
 	g->detector_phi = default_detector_phi;
 	g->readout_s = 0.01;
+	g->safety_margin_deg = 1.0;
 }
 
 static int parse_axis(struct yc_node *map, const char *key, struct bench_axis *a, struct acq_err *err)
@@ -56,6 +57,7 @@ int bench_parse(struct yc_node *node, struct bench_geom *out, struct acq_err *er
 	    yc_double(node, "beam_halfwidth_deg", false, 0, 45, &g->beam_halfwidth_deg, err) ||
 	    yc_double(node, "fov_halfwidth_deg", false, 0, 45, &g->fov_halfwidth_deg, err) ||
 	    yc_double(node, "readout_s", false, 0, 60, &g->readout_s, err) ||
+	    yc_double(node, "safety_margin_deg", false, 0, 30, &g->safety_margin_deg, err) ||
 	    parse_axis(node, "laser_theta", &g->laser_theta, err) ||
 	    parse_axis(node, "detector_theta", &g->detector_theta, err) ||
 	    parse_axis(node, "detector_phi", &g->detector_phi, err))

@@ -30,6 +30,7 @@ struct bench_geom {
 	double fov_halfwidth_deg;      /* detector field of view */
 	struct bench_axis laser_theta, detector_theta, detector_phi;
 	double readout_s;              /* spectrometer read-out overhead per exposure */
+	double safety_margin_deg;      /* planner: added to every blind-zone and collision half-angle */
 };
 
 /* Fill g with the example bench's values (config/bench-sim.yaml documents the same numbers). */

@@ -20,12 +20,7 @@
 #include "daemon/store.h"
 #include "daemon/sweep.h"
 
-/* The planner library (daemon/plan.h, the planner engineer's) arrives on its own branch: `plan` and the
- * blind-zone check of `move` use it when it is there, and say "unavailable" / skip the check before. */
-#if __has_include("daemon/plan.h")
 #include "daemon/plan.h"
-#define HAVE_PLANNER 1
-#endif
 
 /* ---- helpers ---- */
 
@@ -54,7 +49,6 @@ static json_t *progress_json(struct app *app)
 static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_req *req)
 {
 	struct acq_err err = { 0 };
-#ifdef HAVE_PLANNER
 	struct plan_spec *spec = NULL;
 	struct plan_result *res = NULL;
 	if (plan_load_string("plan", json_string_value(json_object_get(req->root, "plan")), &spec, &err) ||
@@ -83,20 +77,14 @@ static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_
 	plan_result_free(res);
 	plan_spec_free(spec);
 	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "plan", o));
-#else
-	acq_errf(&err, ACQ_E_UNSUPPORTED, "plan: the planner library (daemon/plan.h) is not there yet; "
-		 "'acqctl plan FILE' runs the local dry run when it lands");
-	reply_err(app, peer, req->id, &err);
-#endif
 }
 
-/* With the planner: a manual move must not make the arms collide, on the way or at the target (straight
+/* A manual move must not make the arms collide, on the way or at the target (straight
  * segment, all axes together — what devices_move() does). Blind zones for the beam or the view are allowed
  * (alignment needs them) and reported in the reply. 0, or -1 with ACQ_E_RANGE. */
 static int move_check(struct app *app, const double t[3], const char **warning, struct acq_err *err)
 {
 	*warning = NULL;
-#ifdef HAVE_PLANNER
 	double cur[3];
 	devices_positions(app->dev, cur);
 	for (int i = 0; i < 3; i++)
@@ -117,11 +105,6 @@ static int move_check(struct app *app, const double t[3], const char **warning, 
 				b.laser_theta, b.det_theta, b.det_phi);
 	if (blind)
 		*warning = plan_reason_name(blind);
-#else
-	(void)app;
-	(void)t;
-	(void)err;
-#endif
 	return 0;
 }
 

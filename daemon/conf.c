@@ -364,14 +364,10 @@ static int driver_result(struct conf *c, enum conf_dev d, int rc, struct acq_err
 	return -1;
 }
 
-#if __has_include("drivers/axis_modbus.h")
 #include "drivers/axis_modbus.h"
-#define CONF_HAVE_ARM_PARSE 1
-#endif
 
-/* One arm: its axes go to the slots named by axes[] ("theta", "phi"). With the Modbus driver present, the
- * driver parses the whole arm (link, arm-level timeouts, axes, unknown keys); before it lands, each axis
- * through axis_cfg_parse() (which says "not implemented") and the arm's keys are checked here. */
+/* One arm: its axes go to the slots named by axes[] ("theta", "phi"); the Modbus driver parses the whole
+ * arm (link, arm-level timeouts, axes, unknown keys). */
 static int parse_arm(struct conf *c, struct yc_node *devs, struct yc_node *maps, const char *arm,
 		     const char *const *axes, const enum conf_dev *slots, int naxes, struct acq_err *err)
 {
@@ -406,7 +402,6 @@ static int parse_arm(struct conf *c, struct yc_node *devs, struct yc_node *maps,
 			return yc_check_unknown(ax, what, err);
 		}
 	}
-#ifdef CONF_HAVE_ARM_PARSE
 	struct axis_cfg *got[4] = { 0 };
 	int n = 0;
 	if (axis_arm_parse(node, maps, arm, got, 4, &n, err))
@@ -425,28 +420,6 @@ static int parse_arm(struct conf *c, struct yc_node *devs, struct yc_node *maps,
 		c->devpresent[slots[i]] = true;
 	}
 	return 0;
-#else
-	struct yc_node *link = yc_get(node, "link");
-	for (int i = 0; i < naxes; i++) {
-		struct yc_node *a = yc_get(ax, axes[i]);
-		if (!a) {
-			snprintf(c->devnote[slots[i]], sizeof c->devnote[0], "devices.%s.axes.%s: not configured", arm,
-				 axes[i]);
-			continue;
-		}
-		if (driver_result(c, slots[i],
-				  axis_cfg_parse(a, link, maps, conf_dev_name(slots[i]), &c->axis[slots[i]], err), err))
-			return -1;
-	}
-	if (yc_check_unknown(ax, what, err))
-		return -1;
-	/* While the axis driver is missing nobody reads the arm's link and timeouts: they are its keys. */
-	for (size_t i = 0; i < node->n; i++)
-		if (!strcmp(node->keys[i]->value, "link") || strstr(node->keys[i]->value, "timeout"))
-			node->used[i] = true;
-	snprintf(what, sizeof what, "devices.%s", arm);
-	return yc_check_unknown(node, what, err);
-#endif
 }
 
 static int parse_devices(struct conf *c, struct yc_node *devs, struct acq_err *err)

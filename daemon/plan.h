@@ -1,0 +1,178 @@
+/* plan: the sampling planner — plan files, blind zones, collision-safe moves, ordering, time estimates.
+ *
+ * Conventions. Angles in degrees. A bench configuration is three axis positions (struct plan_pos): the laser
+ * zenith θL (incident direction ωi = (θL, laser_phi); a negative θL is the other side, azimuth + 180°), the
+ * detector zenith θD and azimuth φD (ωo = (θD, φD)). ψ is the great-circle angle between ωi and ωo.
+ * With m = bench_geom.safety_margin_deg, a configuration is blind when
+ *   (a) ψ < detector_body + beam + m and detector_radius < laser_radius   (detector arm occludes the beam)
+ *   (b) ψ < laser_body + fov + m and laser_radius < detector_radius       (laser arm hides the view)
+ *   (c) ψ < laser_body + detector_body + m                                (the arms collide)
+ * or when an axis is outside its limits. Motion: every waypoint segment of a planned move stays within the
+ * limits and keeps ψ at or above the largest of the applicable half-angles (a), (b), (c) at every instant
+ * (usually (c): the arms never cross), with all axes of the segment starting together, each on its own
+ * trapezoidal profile (speed, acceleration = deceleration).
+ *
+ * Times. A move costs the sum of its segments' durations (a segment lasts as long as its slowest axis) plus
+ * the largest settling time among the axes that moved; each point then dwells averages × (integration +
+ * read-out). The sweep duration is the dwell of every point plus the moves between consecutive points (the
+ * sweep starts with the arms at the first point). */
+#ifndef PLAN_H
+#define PLAN_H
+
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "config/acq_err.h"
+#include "config/bench.h"
+#include "config/yconf.h"
+
+enum plan_blind_policy { PLAN_BLIND_DROP, PLAN_BLIND_MOVE };
+enum plan_integ_mode { PLAN_INTEG_AUTO, PLAN_INTEG_FIXED };
+
+/* Size limits of a plan (requested points, before blind-zone handling). */
+#define PLAN_MAX_POINTS 50000
+#define PLAN_MAX_PER_INCIDENCE 5000
+
+/* A parsed plan file (plan_load / plan_parse), or one built by code (arrays malloc'ed; plan_spec_free). */
+struct plan_spec {
+	char name[64];
+	double *incidence;          /* laser zeniths θL, n_incidence of them */
+	size_t n_incidence;
+	double *obs_theta, *obs_phi; /* grid mode: observation zeniths × azimuths per incidence */
+	size_t n_obs_theta, n_obs_phi;
+	size_t fib_count;           /* > 0: Fibonacci mode, fib_count near-uniform directions per incidence */
+	double fib_max_theta_deg;   /* Fibonacci: the set covers the cap θ ≤ this (default 85) */
+	enum plan_integ_mode integ_mode;
+	double integ_ms;            /* fixed: the integration time; auto: the estimate used for timing */
+	double target_peak;         /* auto: target peak as a fraction of full scale */
+	double max_integ_ms;        /* auto: upper bound on the integration time */
+	int averages;
+	size_t reciprocal_pairs;    /* number of reciprocal partners to add (0: none) */
+	enum plan_blind_policy blind_policy;
+};
+
+/* One bench configuration: axis positions in degrees. */
+struct plan_pos {
+	double laser_theta, det_theta, det_phi;
+};
+
+/* Why a requested point was dropped or moved (bit set). */
+enum plan_reason {
+	PLAN_R_BEAM = 1,       /* (a) the detector arm occludes the beam */
+	PLAN_R_VIEW = 2,       /* (b) the laser arm hides the detector's view */
+	PLAN_R_COLLISION = 4,  /* (c) the arms would collide */
+	PLAN_R_LIMITS = 8,     /* an axis limit */
+	PLAN_R_UNREACHABLE = 16, /* no collision-free move reaches it (dropped) */
+	PLAN_R_NO_NEARBY = 32  /* policy move, but no visible point within the search radius (dropped) */
+};
+
+enum plan_status { PLAN_KEPT, PLAN_MOVED, PLAN_DROPPED, PLAN_DUPLICATE };
+enum plan_role { PLAN_ROLE_GRID, PLAN_ROLE_RECIPROCAL };
+
+/* A requested point and what became of it. */
+struct plan_req {
+	struct plan_pos req;        /* as requested (det_phi as written) */
+	struct plan_pos pos;        /* where it is measured (moved or kept; det_phi in [0, 360)) */
+	enum plan_status status;
+	unsigned reason;            /* enum plan_reason bits when dropped or moved */
+	double moved_deg;           /* great-circle distance of the move of ωo (status MOVED) */
+	enum plan_role role;
+	size_t partner;             /* reciprocal role: index of the grid point it mirrors */
+	size_t same_as;             /* duplicate: index of the first request of the same configuration */
+	double psi_deg;             /* ψ at pos */
+};
+
+/* One segment of a move: all axes go from the previous position to pos together. */
+struct plan_wp {
+	struct plan_pos pos;
+	double duration_s;
+};
+
+/* One measurement in sweep order: reach pos through wps[first_wp .. first_wp+n_wp) (the last is pos). */
+struct plan_step {
+	size_t req;                 /* index into plan_result.req */
+	struct plan_pos pos;        /* axis positions (det_phi is the chosen axis position, wrap included) */
+	size_t first_wp, n_wp;
+	double move_s, settle_s, dwell_s;
+	double t_start_s;           /* when the move to this point starts (0 for the first) */
+	bool detour;                /* the move is not a single straight segment */
+};
+
+struct plan_result {
+	struct plan_req *req;
+	size_t n_req;
+	struct plan_step *steps;
+	size_t n_steps;
+	struct plan_wp *wps;
+	size_t n_wps;
+	size_t n_kept, n_moved, n_dropped, n_duplicate; /* kept counts unmoved measured points */
+	double duration_s;          /* planned sweep */
+	double raster_s;            /* the same points in request order (nested loops), safe moves, no wrap choice */
+	double lower_bound_s;       /* no order and no path through these axis positions is faster (see plan.c) */
+	double dwell_s, motion_s;   /* the planned duration split into dwell and motion (settle included) */
+	double travel_deg[3];       /* planned axis travel: laser θ, detector θ, detector φ */
+	size_t n_detours;
+	size_t n_groups;            /* distinct incidences */
+	double point_dwell_s;       /* averages × (integration + read-out) */
+};
+
+/* Load and validate a plan file; errors name file:line:col. 0, or -1 with err (*out NULL). */
+int plan_load(const char *path, struct plan_spec **out, struct acq_err *err);
+/* Parse a plan from YAML text (name is the file name in messages). 0 or -1 with err. */
+int plan_load_string(const char *name, const char *text, struct plan_spec **out, struct acq_err *err);
+/* Parse the root mapping of a plan document into a new spec. 0 or -1 with err. */
+int plan_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err);
+/* Free a spec (NULL is fine). */
+void plan_spec_free(struct plan_spec *spec);
+
+/* Plan spec against bench g: classify, order, build safe moves, estimate. 0, or -1 with err. */
+int plan_make(const struct plan_spec *spec, const struct bench_geom *g, struct plan_result **out,
+	      struct acq_err *err);
+/* Free a result (NULL is fine). */
+void plan_result_free(struct plan_result *res);
+
+struct json_t;
+/* The result as a JSON object (jansson; caller json_decref's it): counts, kept/dropped/moved, duration_s,
+ * raster_s, lower_bound_s, motion summary, dropped and moved points, and with steps the sweep order with
+ * waypoints. NULL when out of memory. */
+struct json_t *plan_to_json(const struct plan_spec *spec, const struct plan_result *res, bool steps);
+
+/* ---- geometry and kinematics (also for the executor and the daemon's manual moves; the simulator keeps its
+ * own implementation of the same definitions: libsim links after libdaemon, and two codes check each other) */
+
+/* Points within this of a blind-zone edge count as blind, and path checks need this much clearance to
+ * prove a segment safe (so every visible point is reachable by the same test). */
+#define PLAN_EDGE_DEG 1e-3
+
+/* ψ at p, degrees. */
+double plan_psi_deg(const struct bench_geom *g, const struct plan_pos *p);
+/* The ψ below which the arms collide: laser_body + detector_body + safety margin. */
+double plan_collision_deg(const struct bench_geom *g);
+/* enum plan_reason bits that make p unusable as a measurement point (0: visible and reachable). */
+unsigned plan_blind(const struct bench_geom *g, const struct plan_pos *p);
+/* Duration of a rest-to-rest trapezoidal move of distance |d| on axis a. */
+double plan_axis_time(const struct bench_axis *a, double d);
+/* Position at time t (clamped to [0, duration]) of a trapezoidal move from x0 to x1 on axis a. */
+double plan_axis_pos(const struct bench_axis *a, double x0, double x1, double t);
+/* Duration of one segment from p to q (all axes together). */
+double plan_seg_time(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
+/* The ψ paths keep clear of: the largest blind-zone or collision half-angle that applies (margin included),
+ * so no arm passes through the other, and no arm crosses the beam or the view while moving either. */
+double plan_clearance_deg(const struct bench_geom *g);
+/* True when the segment p → q (within the axis limits) keeps ψ ≥ plan_collision_deg + PLAN_EDGE_DEG at every
+ * instant: the arms never collide (sound: never a false yes). For manual moves. */
+bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
+/* The same with plan_clearance_deg: no collision and no arm across the beam or the view; planned paths. */
+bool plan_seg_clear(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
+/* Fastest clear move a → b found (every segment passes plan_seg_clear; templates: straight, one arm then the
+ * other, detector zenith detours, azimuth escapes, approach points, a parking pose): up to PLAN_MAX_WP
+ * segments into wps (the last ends at b), their count in *n, and the move's time (segments + settle)
+ * returned; -1 when no candidate path is clear. Executing: run each segment with all its axes started
+ * together, wait in position, then the next; settle once at the end. */
+#define PLAN_MAX_WP 13
+double plan_move(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
+		 struct plan_wp wps[PLAN_MAX_WP], size_t *n);
+/* Readable name of the most telling reason bit set (limit, collision, beam, view, unreachable, none nearby). */
+const char *plan_reason_name(unsigned reason);
+
+#endif

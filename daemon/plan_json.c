@@ -1,0 +1,93 @@
+/* plan_json: a plan result as JSON (jansson), the shape of `acqctl plan --json` and of the daemon's reply. */
+#include <jansson.h>
+#include <stdint.h>
+
+#include "daemon/plan.h"
+
+static const char *status_name(enum plan_status s)
+{
+	switch (s) {
+	case PLAN_KEPT: return "kept";
+	case PLAN_MOVED: return "moved";
+	case PLAN_DROPPED: return "dropped";
+	case PLAN_DUPLICATE: return "duplicate";
+	}
+	return "?";
+}
+
+static json_t *pos_json(const struct plan_pos *p)
+{
+	return json_pack("{s:f,s:f,s:f}", "theta_i", p->laser_theta, "theta_o", p->det_theta, "phi_o", p->det_phi);
+}
+
+json_t *plan_to_json(const struct plan_spec *s, const struct plan_result *r, bool points)
+{
+	json_t *o = json_object();
+	if (!o)
+		return NULL;
+	json_object_set_new(o, "plan", json_string(s->name));
+	json_object_set_new(o, "requested", json_integer((json_int_t)r->n_req));
+	json_object_set_new(o, "kept", json_integer((json_int_t)r->n_kept));
+	json_object_set_new(o, "moved", json_integer((json_int_t)r->n_moved));
+	json_object_set_new(o, "dropped", json_integer((json_int_t)r->n_dropped));
+	json_object_set_new(o, "duplicates", json_integer((json_int_t)r->n_duplicate));
+	json_object_set_new(o, "measured", json_integer((json_int_t)r->n_steps));
+	json_object_set_new(o, "incidences", json_integer((json_int_t)r->n_groups));
+	json_object_set_new(o, "duration_s", json_real(r->duration_s));
+	json_object_set_new(o, "raster_s", json_real(r->raster_s));
+	json_object_set_new(o, "lower_bound_s", json_real(r->lower_bound_s));
+	json_object_set_new(o, "dwell_s", json_real(r->dwell_s));
+	json_object_set_new(o, "motion_s", json_real(r->motion_s));
+	json_object_set_new(o, "point_dwell_s", json_real(r->point_dwell_s));
+	json_object_set_new(o, "detours", json_integer((json_int_t)r->n_detours));
+	json_object_set_new(o, "blind_points", json_string(s->blind_policy == PLAN_BLIND_MOVE ? "move" : "drop"));
+	json_object_set_new(o, "averages", json_integer(s->averages));
+	json_object_set_new(o, "integration_ms", json_real(s->integ_ms));
+	json_object_set_new(o, "integration_mode", json_string(s->integ_mode == PLAN_INTEG_AUTO ? "auto" : "fixed"));
+	size_t nrec = 0;
+	for (size_t i = 0; i < r->n_req; i++)
+		nrec += r->req[i].role == PLAN_ROLE_RECIPROCAL &&
+			(r->req[i].status == PLAN_KEPT || r->req[i].status == PLAN_MOVED);
+	json_object_set_new(o, "reciprocal_measured", json_integer((json_int_t)nrec));
+	json_object_set_new(o, "travel_deg", json_pack("{s:f,s:f,s:f}", "laser_theta", r->travel_deg[0],
+						      "detector_theta", r->travel_deg[1], "detector_phi",
+						      r->travel_deg[2]));
+	json_t *dl = json_array(), *mv = json_array();
+	for (size_t i = 0; i < r->n_req; i++) {
+		const struct plan_req *q = &r->req[i];
+		if (q->status == PLAN_DROPPED)
+			json_array_append_new(dl, json_pack("{s:I,s:o,s:s,s:s}", "index", (json_int_t)i, "requested",
+							    pos_json(&q->req), "reason", plan_reason_name(q->reason),
+							    "role", q->role == PLAN_ROLE_GRID ? "grid" : "reciprocal"));
+		else if (q->status == PLAN_MOVED)
+			json_array_append_new(mv, json_pack("{s:I,s:o,s:o,s:f,s:s}", "index", (json_int_t)i,
+							    "requested", pos_json(&q->req), "to", pos_json(&q->pos),
+							    "by_deg", q->moved_deg, "reason",
+							    plan_reason_name(q->reason)));
+	}
+	json_object_set_new(o, "dropped_points", dl);
+	json_object_set_new(o, "moved_points", mv);
+	if (points) {
+		json_t *st = json_array();
+		for (size_t i = 0; i < r->n_steps; i++) {
+			const struct plan_step *p = &r->steps[i];
+			json_t *w = json_array();
+			for (size_t k = 0; k < p->n_wp; k++) {
+				json_t *x = pos_json(&r->wps[p->first_wp + k].pos);
+				json_object_set_new(x, "duration_s", json_real(r->wps[p->first_wp + k].duration_s));
+				json_array_append_new(w, x);
+			}
+			json_t *x = pos_json(&p->pos);
+			json_object_set_new(x, "request", json_integer((json_int_t)p->req));
+			json_object_set_new(x, "status", json_string(status_name(r->req[p->req].status)));
+			json_object_set_new(x, "t_start_s", json_real(p->t_start_s));
+			json_object_set_new(x, "move_s", json_real(p->move_s));
+			json_object_set_new(x, "settle_s", json_real(p->settle_s));
+			json_object_set_new(x, "waypoints", w);
+			json_array_append_new(st, x);
+		}
+		json_object_set_new(o, "steps", st);
+	}
+	return o;
+}
+

@@ -1,0 +1,771 @@
+/* brdf-recon: command-line front end of the reconstruction library (fit, eval, dhr, check, info, merl,
+ * render). Only this file prints. */
+#include <errno.h>
+#include <getopt.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "acq_version.h"
+#include "recon/colour.h"
+#include "recon/csvio.h"
+#include "recon/merl.h"
+#include "recon/plot.h"
+#include "recon/recon.h"
+#include "recon/render.h"
+#include "recon/rgbeval.h"
+
+static const char *prog = "brdf-recon";
+
+/* fontconfig (behind cairo's text in dhr --plot) keeps process-lifetime caches that LeakSanitizer reports;
+ * they are not ours. This hook is read by LSan only in sanitizer builds. */
+const char *__lsan_default_suppressions(void);
+const char *__lsan_default_suppressions(void)
+{
+	return "leak:libfontconfig.so\n";
+}
+
+static void progress(void *ctx, const char *stage, double frac)
+{
+	(void)ctx;
+	if (!isatty(2))
+		return;
+	fprintf(stderr, "\r  %-14s %3d%%%s", stage, (int)(100 * frac + 0.5), frac >= 1.0 ? "\n" : "");
+	fflush(stderr);
+}
+
+static void progress_end(void)
+{
+	if (isatty(2))
+		fprintf(stderr, "\r%40s\r", "");
+}
+
+static int fail(const struct acq_err *e)
+{
+	progress_end();
+	fprintf(stderr, "%s: %s\n", prog, e->msg[0] ? e->msg : "error");
+	return 1;
+}
+
+static int usage_err(const char *cmd, const char *msg)
+{
+	fprintf(stderr, "%s %s: %s (see %s %s --help)\n", prog, cmd, msg, prog, cmd);
+	return 2;
+}
+
+static int parse_double(const char *s, double *out)
+{
+	char *end;
+	errno = 0;
+	double v = strtod(s, &end);
+	if (end == s || *end || errno || !isfinite(v))
+		return -1;
+	*out = v;
+	return 0;
+}
+
+static int parse_u64(const char *s, uint64_t *out)
+{
+	char *end;
+	errno = 0;
+	if (!*s || *s == '-')
+		return -1;
+	unsigned long long v = strtoull(s, &end, 10);
+	if (*end || errno)
+		return -1;
+	*out = v;
+	return 0;
+}
+
+/* Open the output: stdout for NULL or "-", else a temporary file renamed on success. */
+struct out {
+	FILE *f;
+	const char *path;
+	char tmp[4096];
+};
+
+static int out_open(struct out *o, const char *path, struct acq_err *err)
+{
+	o->path = path;
+	if (!path || !strcmp(path, "-")) {
+		o->f = stdout;
+		o->path = NULL;
+		return 0;
+	}
+	snprintf(o->tmp, sizeof o->tmp, "%s.tmp.%ld", path, (long)getpid());
+	o->f = fopen(o->tmp, "w");
+	if (!o->f)
+		return acq_errf(err, ACQ_E_IO, "%s: %s", o->tmp, strerror(errno));
+	return 0;
+}
+
+static int out_close(struct out *o, int ok, struct acq_err *err)
+{
+	if (!o->path) {
+		fflush(stdout);
+		return ok ? 0 : -1;
+	}
+	int bad = fclose(o->f) != 0;
+	if (!ok || bad) {
+		unlink(o->tmp);
+		return ok ? acq_errf(err, ACQ_E_IO, "%s: write failed", o->path) : -1;
+	}
+	if (rename(o->tmp, o->path)) {
+		unlink(o->tmp);
+		return acq_errf(err, ACQ_E_IO, "%s: %s", o->path, strerror(errno));
+	}
+	return 0;
+}
+
+/* ---- fit ---- */
+static const char fit_help[] =
+	"usage: brdf-recon fit SAMPLES.csv -o MODEL [options]\n"
+	"       brdf-recon fit --db FILE --sweep ID -o MODEL [options]\n"
+	"Fit a reconstruction to sparse spectral BRDF samples (CSV interchange format, design.md).\n"
+	"  -o, --output MODEL      model file to write (required)\n"
+	"  --kernel K              wendland (default, positive definite), exp, gauss, paper (Gaussian of d_Rec,\n"
+	"                          the paper's literal construction, not guaranteed positive definite)\n"
+	"  --transform T           log (default: interpolate ln(f+eps)) or sqrt\n"
+	"  --shape X|auto          kernel shape parameter (default auto: Rippa leave-one-out over a grid)\n"
+	"  --smoothing X|auto|sigma  eta in (K + eta*diag(r)) w = g, r from the uncertainties: a number, auto\n"
+	"                          (default: leave-one-out), or sigma (Lambda = the transformed variances over\n"
+	"                          the prior variance of the data; needs sigma_<nm> columns)\n"
+	"  --max-cond X            largest accepted condition number (default 1e12)\n"
+	"  --db FILE --sweep ID    read a sweep from the daemon's database instead of a CSV file\n";
+
+static int cmd_fit(int argc, char **argv)
+{
+	static const struct option lo[] = {
+		{ "output", required_argument, 0, 'o' }, { "kernel", required_argument, 0, 'k' },
+		{ "transform", required_argument, 0, 't' }, { "shape", required_argument, 0, 's' },
+		{ "smoothing", required_argument, 0, 'm' }, { "max-cond", required_argument, 0, 'c' },
+		{ "db", required_argument, 0, 'd' }, { "sweep", required_argument, 0, 'w' },
+		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+	struct recon_fit_opts o;
+	recon_fit_opts_default(&o);
+	o.progress = progress;
+	const char *outp = NULL, *db = NULL;
+	uint64_t sweep = 0;
+	int have_sweep = 0, c;
+	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
+		switch (c) {
+		case 'o': outp = optarg; break;
+		case 'k':
+			if ((o.kernel = rbf_kernel_from_name(optarg)) < 0)
+				return usage_err("fit", "unknown kernel");
+			break;
+		case 't':
+			if ((o.transform = recon_transform_from_name(optarg)) < 0)
+				return usage_err("fit", "unknown transform");
+			break;
+		case 's':
+			if (!strcmp(optarg, "auto"))
+				o.shape = 0;
+			else if (parse_double(optarg, &o.shape) || !(o.shape > 0))
+				return usage_err("fit", "--shape needs a positive number or auto");
+			break;
+		case 'm':
+			if (!strcmp(optarg, "auto"))
+				o.smoothing = -1;
+			else if (!strcmp(optarg, "sigma"))
+				o.smoothing = RECON_SMOOTHING_SIGMA;
+			else if (parse_double(optarg, &o.smoothing) || o.smoothing < 0)
+				return usage_err("fit", "--smoothing needs a number >= 0, auto or sigma");
+			break;
+		case 'c':
+			if (parse_double(optarg, &o.max_cond) || !(o.max_cond >= 1))
+				return usage_err("fit", "--max-cond needs a number >= 1");
+			break;
+		case 'd': db = optarg; break;
+		case 'w':
+			if (parse_u64(optarg, &sweep))
+				return usage_err("fit", "--sweep needs an id");
+			have_sweep = 1;
+			break;
+		case 'h': fputs(fit_help, stdout); return 0;
+		default: return usage_err("fit", "bad option");
+		}
+	}
+	if (!outp)
+		return usage_err("fit", "-o MODEL is required");
+	struct acq_err err = { 0 };
+	struct recon_samples s;
+	if (db) {
+		if (!have_sweep || optind != argc)
+			return usage_err("fit", "--db needs --sweep ID and no CSV file");
+		if (recon_load_db(db, (long long)sweep, &s, &err))
+			return fail(&err);
+		o.source = db;
+	} else {
+		if (optind != argc - 1)
+			return usage_err("fit", "one SAMPLES.csv expected");
+		o.source = argv[optind];
+		if (csvio_read_samples(argv[optind], &s, &err))
+			return fail(&err);
+	}
+	struct recon_model *m = NULL;
+	int rc = recon_fit(&s, &o, &m, &err);
+	csvio_samples_free(&s);
+	if (rc)
+		return fail(&err);
+	progress_end();
+	if (recon_model_save(m, outp, &err)) {
+		recon_model_free(m);
+		return fail(&err);
+	}
+	fprintf(stderr, "fit: %zu directions, %zu wavelengths, kernel %s shape %.3g, transform %s, smoothing %.3g, "
+		"leave-one-out RMS %.4g, rcond %.3g -> %s\n", m->n, m->nwl, rbf_kernel_name(m->kernel), m->shape,
+		recon_transform_name(m->transform), m->eta, m->loo_rms, m->rcond, outp);
+	recon_model_free(m);
+	return 0;
+}
+
+/* ---- eval ---- */
+static const char eval_help[] =
+	"usage: brdf-recon eval MODEL QUERIES.csv [-o OUT.csv]\n"
+	"Evaluate the model at the directions of QUERIES.csv (columns theta_i,phi_i,theta_o,phi_o in degrees;\n"
+	"other columns ignored). Writes CSV (stdout by default): the four angle columns, then one column per\n"
+	"model wavelength (sr^-1).\n";
+
+static int write_header_wl(FILE *f, const struct recon_model *m)
+{
+	for (size_t l = 0; l < m->nwl; l++)
+		fprintf(f, ",%.10g", m->wl[l]);
+	return fputc('\n', f) == EOF ? -1 : 0;
+}
+
+static int cmd_eval(int argc, char **argv)
+{
+	static const struct option lo[] = { { "output", required_argument, 0, 'o' },
+					    { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+	const char *outp = NULL;
+	int c;
+	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
+		if (c == 'o')
+			outp = optarg;
+		else if (c == 'h') {
+			fputs(eval_help, stdout);
+			return 0;
+		} else
+			return usage_err("eval", "bad option");
+	}
+	if (optind != argc - 2)
+		return usage_err("eval", "MODEL and QUERIES.csv expected");
+	struct acq_err err = { 0 };
+	struct recon_model *m;
+	if (recon_model_load(argv[optind], &m, &err))
+		return fail(&err);
+	struct recon_samples q;
+	if (csvio_read_queries(argv[optind + 1], &q, &err)) {
+		recon_model_free(m);
+		return fail(&err);
+	}
+	size_t L = m->nwl, B = 4096;
+	double *vals = malloc(B * L * sizeof *vals);
+	struct out o;
+	int ok = vals && !out_open(&o, outp, &err);
+	if (!vals)
+		acq_errf(&err, ACQ_E_NOMEM, "eval: out of memory");
+	if (ok) {
+		fputs("theta_i,phi_i,theta_o,phi_o", o.f);
+		write_header_wl(o.f, m);
+		for (size_t q0 = 0; ok && q0 < q.n; q0 += B) {
+			size_t b = q.n - q0 < B ? q.n - q0 : B;
+			progress(NULL, "eval", (double)q0 / (double)q.n);
+			if (recon_eval(m, b, q.ang + 4 * q0, vals, &err)) {
+				ok = 0;
+				break;
+			}
+			char buf[64];
+			for (size_t i = 0; ok && i < b; i++) {
+				for (int a = 0; a < 4; a++)
+					fprintf(o.f, a ? ",%.10g" : "%.10g", q.deg[(q0 + i) * 4 + a]);
+				for (size_t l = 0; l < L; l++) {
+					if (csvio_fmt(buf, sizeof buf, vals[i * L + l])) {
+						acq_errf(&err, ACQ_E_NUMERIC, "eval: non-finite value at query %zu", q0 + i + 1);
+						ok = 0;
+						break;
+					}
+					fprintf(o.f, ",%s", buf);
+				}
+				fputc('\n', o.f);
+			}
+		}
+		if (out_close(&o, ok, &err))
+			ok = 0;
+	}
+	progress_end();
+	free(vals);
+	csvio_samples_free(&q);
+	recon_model_free(m);
+	return ok ? 0 : fail(&err);
+}
+
+/* ---- dhr ---- */
+static const char dhr_help[] =
+	"usage: brdf-recon dhr MODEL [--theta-i 8,30,60] [--draws N] [--seed S] [-o OUT.csv]\n"
+	"                      [--reference REF.csv [--reference-theta 8] [--z-out Z.csv]] [--plot OUT.png]\n"
+	"Directional-hemispherical reflectance DHR(theta_i, lambda) of the model with its standard uncertainty\n"
+	"(Monte Carlo over the data uncertainties through the one factorisation, seeded). Quadrature:\n"
+	"Gauss-Legendre 32 in cos(theta_o) x 48 azimuth midpoints (exact for a Lambertian).\n"
+	"Output CSV (stdout by default): theta_i,wavelength_nm,dhr,sigma.\n"
+	"  --reference REF.csv   compare with a measured DHR (columns wavelength_nm,dhr,sigma) at\n"
+	"                        --reference-theta (default 8 degrees, must be among --theta-i): prints a\n"
+	"                        summary and writes per-wavelength z-scores to --z-out (or stderr)\n";
+
+static int cmd_dhr(int argc, char **argv)
+{
+	static const struct option lo[] = {
+		{ "output", required_argument, 0, 'o' }, { "theta-i", required_argument, 0, 't' },
+		{ "draws", required_argument, 0, 'n' }, { "seed", required_argument, 0, 's' },
+		{ "reference", required_argument, 0, 'r' }, { "reference-theta", required_argument, 0, 'R' },
+		{ "z-out", required_argument, 0, 'z' }, { "plot", required_argument, 0, 'p' },
+		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+	const char *outp = NULL, *refp = NULL, *zout = NULL, *plot = NULL;
+	double th[64] = { 8, 30, 60 }, ref_th = 8;
+	size_t nth = 3;
+	uint64_t draws = 64, seed = 1;
+	int c;
+	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
+		switch (c) {
+		case 'o': outp = optarg; break;
+		case 't': {
+			nth = 0;
+			char *save = NULL, *dup = strdup(optarg);
+			for (char *tok = strtok_r(dup, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
+				if (nth == 64 || parse_double(tok, &th[nth]) || th[nth] < 0 || th[nth] > 90) {
+					free(dup);
+					return usage_err("dhr", "--theta-i needs up to 64 angles in [0, 90]");
+				}
+				nth++;
+			}
+			free(dup);
+			if (!nth)
+				return usage_err("dhr", "--theta-i is empty");
+			break;
+		}
+		case 'n':
+			if (parse_u64(optarg, &draws) || draws > 100000)
+				return usage_err("dhr", "--draws needs 0..100000");
+			break;
+		case 's':
+			if (parse_u64(optarg, &seed))
+				return usage_err("dhr", "--seed needs an unsigned integer");
+			break;
+		case 'r': refp = optarg; break;
+		case 'R':
+			if (parse_double(optarg, &ref_th))
+				return usage_err("dhr", "--reference-theta needs a number");
+			break;
+		case 'z': zout = optarg; break;
+		case 'p': plot = optarg; break;
+		case 'h': fputs(dhr_help, stdout); return 0;
+		default: return usage_err("dhr", "bad option");
+		}
+	}
+	if (optind != argc - 1)
+		return usage_err("dhr", "one MODEL expected");
+	struct acq_err err = { 0 };
+	struct recon_model *m;
+	if (recon_model_load(argv[optind], &m, &err))
+		return fail(&err);
+	size_t L = m->nwl;
+	double thr[64];
+	for (size_t t = 0; t < nth; t++)
+		thr[t] = th[t] * M_PI / 180.0;
+	double *dhr = malloc(nth * L * sizeof *dhr), *sig = malloc(nth * L * sizeof *sig);
+	double *ref = NULL;
+	size_t nref = 0;
+	int ok = dhr && sig;
+	if (!ok)
+		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
+	if (ok && recon_dhr(m, nth, thr, (int)draws, seed, dhr, sig, progress, NULL, &err))
+		ok = 0;
+	progress_end();
+	struct out o;
+	if (ok && !out_open(&o, outp, &err)) {
+		char a[64], b[64];
+		fputs("theta_i,wavelength_nm,dhr,sigma\n", o.f);
+		for (size_t t = 0; ok && t < nth; t++)
+			for (size_t l = 0; l < L; l++) {
+				if (csvio_fmt(a, sizeof a, dhr[t * L + l]) || csvio_fmt(b, sizeof b, sig[t * L + l])) {
+					acq_errf(&err, ACQ_E_NUMERIC, "dhr: non-finite value");
+					ok = 0;
+					break;
+				}
+				fprintf(o.f, "%.10g,%.10g,%s,%s\n", th[t], m->wl[l], a, b);
+			}
+		if (out_close(&o, ok, &err))
+			ok = 0;
+	} else if (ok) {
+		ok = 0;
+	}
+	if (ok && refp) {
+		static const char *const names[3] = { "wavelength_nm", "dhr", "sigma" };
+		size_t t;
+		for (t = 0; t < nth; t++)
+			if (fabs(th[t] - ref_th) < 1e-9)
+				break;
+		if (t == nth) {
+			acq_errf(&err, ACQ_E_INVAL, "dhr: --reference-theta %g is not among --theta-i", ref_th);
+			ok = 0;
+		} else if (csvio_read_columns(refp, names, 3, &nref, &ref, &err)) {
+			ok = 0;
+		} else {
+			FILE *zf = stderr;
+			struct out zo;
+			if (zout) {
+				if (out_open(&zo, zout, &err))
+					ok = 0;
+				else
+					zf = zo.f;
+			}
+			size_t used = 0, within2 = 0;
+			double sumz2 = 0, maxz = 0, maxz_wl = 0;
+			if (ok)
+				fprintf(zf, "wavelength_nm,dhr_model,sigma_model,dhr_ref,sigma_ref,z\n");
+			for (size_t i = 0; ok && i < nref; i++) {
+				double wl = ref[3 * i], rv = ref[3 * i + 1], rs = ref[3 * i + 2];
+				if (wl < m->wl[0] || wl > m->wl[L - 1])
+					continue;
+				size_t j = 0;
+				while (j + 1 < L && m->wl[j + 1] < wl)
+					j++;
+				double u = (L > 1 && m->wl[j + 1] > m->wl[j]) ? (wl - m->wl[j]) / (m->wl[j + 1] - m->wl[j]) : 0;
+				if (j + 1 >= L)
+					u = 0;
+				size_t j2 = j + 1 < L ? j + 1 : j;
+				double md = (1 - u) * dhr[t * L + j] + u * dhr[t * L + j2];
+				double ms = (1 - u) * sig[t * L + j] + u * sig[t * L + j2];
+				double den = sqrt(ms * ms + rs * rs);
+				if (!(den > 0))
+					continue;
+				double z = (md - rv) / den;
+				fprintf(zf, "%.10g,%.10g,%.10g,%.10g,%.10g,%.6g\n", wl, md, ms, rv, rs, z);
+				used++;
+				sumz2 += z * z;
+				within2 += fabs(z) <= 2;
+				if (fabs(z) > maxz) {
+					maxz = fabs(z);
+					maxz_wl = wl;
+				}
+			}
+			if (zout && out_close(&zo, ok, &err))
+				ok = 0;
+			if (ok)
+				fprintf(stderr, "reference %s at theta_i=%g: %zu wavelengths compared, RMS z %.3g, max |z| %.3g "
+					"at %g nm, %.1f%% within |z| <= 2\n", refp, ref_th, used,
+					used ? sqrt(sumz2 / (double)used) : 0.0, maxz, maxz_wl,
+					used ? 100.0 * (double)within2 / (double)used : 0.0);
+		}
+	}
+	if (ok && plot) {
+		struct plot_curve curves[64], refc;
+		char labels[64][32];
+		double *refwl = NULL, *refy = NULL, *refs = NULL;
+		for (size_t t = 0; t < nth; t++) {
+			snprintf(labels[t], sizeof labels[t], "\u03b8i = %g\u00b0", th[t]);
+			curves[t] = (struct plot_curve){ labels[t], m->wl, dhr + t * L, sig + t * L, L };
+		}
+		if (ref && nref) {
+			refwl = malloc(nref * sizeof *refwl);
+			refy = malloc(nref * sizeof *refy);
+			refs = malloc(nref * sizeof *refs);
+			if (refwl && refy && refs) {
+				for (size_t i = 0; i < nref; i++) {
+					refwl[i] = ref[3 * i];
+					refy[i] = ref[3 * i + 1];
+					refs[i] = ref[3 * i + 2];
+				}
+				refc = (struct plot_curve){ "reference", refwl, refy, refs, nref };
+			}
+		}
+		struct plot_dhr_opts po;
+		plot_dhr_opts_default(&po);
+		po.title = "Directional-hemispherical reflectance (bands: \u00b12\u03c3)";
+		if (plot_dhr_png(plot, curves, nth, refwl && refy && refs ? &refc : NULL, &po, NULL, &err))
+			ok = 0;
+		free(refwl);
+		free(refy);
+		free(refs);
+	}
+	free(ref);
+	free(dhr);
+	free(sig);
+	recon_model_free(m);
+	return ok ? 0 : fail(&err);
+}
+
+/* ---- check ---- */
+static const char check_help[] =
+	"usage: brdf-recon check MODEL [--pairs N] [--thetas N] [--seed S]\n"
+	"Verify the three physical properties of the evaluated model: non-negativity and reciprocity at N random\n"
+	"direction pairs (default 100000), energy conservation (albedo <= 1 at every wavelength) at N random\n"
+	"incidences plus 0 and 90 degrees (default 16) with an independent finer quadrature (Gauss-Legendre 48\n"
+	"in cos^2(theta_o) x 96 azimuths). Prints the worst violation of each; exit 1 if any property fails.\n";
+
+static int cmd_check(int argc, char **argv)
+{
+	static const struct option lo[] = {
+		{ "pairs", required_argument, 0, 'p' }, { "thetas", required_argument, 0, 't' },
+		{ "seed", required_argument, 0, 's' }, { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+	uint64_t pairs = 100000, thetas = 16, seed = 1;
+	int c;
+	while ((c = getopt_long(argc, argv, "h", lo, NULL)) != -1) {
+		switch (c) {
+		case 'p':
+			if (parse_u64(optarg, &pairs) || pairs > 100000000)
+				return usage_err("check", "--pairs needs a count");
+			break;
+		case 't':
+			if (parse_u64(optarg, &thetas) || thetas > 100000)
+				return usage_err("check", "--thetas needs a count");
+			break;
+		case 's':
+			if (parse_u64(optarg, &seed))
+				return usage_err("check", "--seed needs an unsigned integer");
+			break;
+		case 'h': fputs(check_help, stdout); return 0;
+		default: return usage_err("check", "bad option");
+		}
+	}
+	if (optind != argc - 1)
+		return usage_err("check", "one MODEL expected");
+	struct acq_err err = { 0 };
+	struct recon_model *m;
+	if (recon_model_load(argv[optind], &m, &err))
+		return fail(&err);
+	struct recon_check_report r;
+	int rc = recon_check(m, pairs, thetas, seed, &r, progress, NULL, &err);
+	progress_end();
+	recon_model_free(m);
+	if (rc)
+		return fail(&err);
+	int nonneg = r.min_value >= 0 && r.nonfinite == 0, recip = r.max_recip_abs == 0.0,
+	    energy = r.max_albedo <= 1.0;
+	printf("check: %zu random pairs, %zu incidences (seed %llu)\n", r.npairs, r.nalb, (unsigned long long)seed);
+	printf("non-negativity:  %s  min f = %.6g sr^-1, non-finite values: %zu\n", nonneg ? "ok  " : "FAIL",
+	       r.min_value, r.nonfinite);
+	printf("reciprocity:     %s  max |f(wi,wo) - f(wo,wi)| = %.3g (relative %.3g)\n", recip ? "ok  " : "FAIL",
+	       r.max_recip_abs, r.max_recip_rel);
+	printf("energy:          %s  max albedo = %.6f at theta_i = %.2f deg, %g nm (violation %.3g)\n",
+	       energy ? "ok  " : "FAIL", r.max_albedo, r.max_albedo_theta * 180 / M_PI, r.max_albedo_wl,
+	       r.max_albedo > 1 ? r.max_albedo - 1 : 0.0);
+	return nonneg && recip && energy ? 0 : 1;
+}
+
+/* ---- info ---- */
+static int cmd_info(int argc, char **argv)
+{
+	if (argc == 2 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h"))) {
+		puts("usage: brdf-recon info MODEL\nPrint a model's parameters and metadata.");
+		return 0;
+	}
+	if (argc != 2)
+		return usage_err("info", "one MODEL expected");
+	struct acq_err err = { 0 };
+	struct recon_model *m;
+	if (recon_model_load(argv[1], &m, &err))
+		return fail(&err);
+	printf("directions=%zu\nwavelengths=%zu (%g..%g nm)\nkernel=%s\nshape=%.6g\ntransform=%s\nsmoothing=%.6g\n%s",
+	       m->n, m->nwl, m->wl[0], m->wl[m->nwl - 1], rbf_kernel_name(m->kernel), m->shape,
+	       recon_transform_name(m->transform), m->eta, m->meta);
+	recon_model_free(m);
+	return 0;
+}
+
+/* Colour options shared by merl and render: --colour key=value (colour_opts_set keys). */
+static int colour_arg(struct colour_opts *co, const char *arg, struct acq_err *err)
+{
+	char key[64];
+	const char *eq = strchr(arg, '=');
+	if (!eq || (size_t)(eq - arg) >= sizeof key)
+		return acq_errf(err, ACQ_E_INVAL, "--colour needs key=value, got '%s'", arg);
+	memcpy(key, arg, (size_t)(eq - arg));
+	key[eq - arg] = '\0';
+	return colour_opts_set(co, key, eq + 1, err);
+}
+
+/* Write the colour decisions and the reduction figures next to an output (path + ".colour.json"). */
+static int write_decisions(const char *out, const struct colour_opts *co, const struct recon_rgb *R, int full,
+			   double bin_nm, struct acq_err *err)
+{
+	char p[4096];
+	snprintf(p, sizeof p, "%s.colour.json", out);
+	struct out o;
+	if (out_open(&o, p, err))
+		return -1;
+	size_t nc, r;
+	recon_rgb_sizes(R, &nc, &r);
+	fprintf(o.f, "{\"colour\": ");
+	int ok = colour_opts_write_json(o.f, co, NULL, err) == 0;
+	fprintf(o.f, ", \"spectral_path\": \"%s\", \"bin_nm\": %g, \"channels\": %zu, \"rank\": %zu, "
+		"\"reduction_max_rel_error\": %.3g}\n", full ? "full" : "reduced", bin_nm, nc, r,
+		recon_rgb_reduction_error(R));
+	return out_close(&o, ok, err);
+}
+
+static const char merl_help[] =
+	"usage: brdf-recon merl MODEL -o FILE.binary [--colour key=value]... [--threads N] [--bin-nm X]\n"
+	"                        [--direct|--full-spectrum]\n"
+	"Write the model as a MERL isotropic RGB table (90 x 90 x 180 cells, 34,992,012 bytes). Only cells whose\n"
+	"two directions are above the horizon are evaluated (the others hold -1, \"no data\"). Spectra go through\n"
+	"the colour chain (default: D65, CIE 1931 2 deg, Bradford, absolute sr^-1, clamp, keep, linear); the\n"
+	"model is reduced to what RGB needs (visible channels averaged in --bin-nm bins, default 5 nm, error\n"
+	"about bin^2/8 f''/f; low-rank weights), the error of the reduction measured and printed, and evaluated\n"
+	"in batches. --direct: one callback per cell (same values, slower); --full-spectrum: every model\n"
+	"channel per cell (reference path, slowest).\n"
+	"The decisions are written to FILE.binary.colour.json. Colour keys: illum gap adapt norm white max_albedo\n"
+	"target exposure gamut range reinhard_white srgb_encode.\n";
+
+static const char render_help[] =
+	"usage: brdf-recon render MODEL -o OUT.png [--size N] [--exposure X] [--colour key=value]... [--threads N]\n"
+	"                         [--bin-nm X] [--direct | --full-spectrum]\n"
+	"Preview of the model on a sphere under two lights and a gradient sky (tone-mapped sRGB PNG). By default\n"
+	"the model is tabulated as a MERL table in memory (batched) and rendered through its nearest-cell lookup;\n"
+	"--direct evaluates the reduced model per ray, --full-spectrum every channel per ray.\n";
+
+static int cmd_output(const char *cmd, int argc, char **argv)
+{
+	static const struct option lo[] = {
+		{ "output", required_argument, 0, 'o' }, { "colour", required_argument, 0, 'c' },
+		{ "threads", required_argument, 0, 't' }, { "full-spectrum", no_argument, 0, 'f' },
+		{ "size", required_argument, 0, 's' }, { "exposure", required_argument, 0, 'e' },
+		{ "direct", no_argument, 0, 'd' }, { "bin-nm", required_argument, 0, 'b' },
+		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+	int direct = 0;
+	double bin_nm = 5;
+	int is_merl = !strcmp(cmd, "merl");
+	const char *outp = NULL;
+	struct acq_err err = { 0 };
+	struct colour_opts co;
+	colour_opts_brdf(&co);
+	uint64_t threads = 2, size = 256;
+	double exposure = 1;
+	int full = 0, c;
+	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
+		switch (c) {
+		case 'o': outp = optarg; break;
+		case 'c':
+			if (colour_arg(&co, optarg, &err))
+				return fail(&err);
+			break;
+		case 't':
+			if (parse_u64(optarg, &threads) || threads < 1 || threads > 16)
+				return usage_err(cmd, "--threads needs 1..16");
+			break;
+		case 'f': full = 1; break;
+		case 'd': direct = 1; break;
+		case 'b':
+			if (parse_double(optarg, &bin_nm) || !(bin_nm >= 0.5 && bin_nm <= 50))
+				return usage_err(cmd, "--bin-nm needs 0.5..50");
+			break;
+		case 's':
+			if (is_merl || parse_u64(optarg, &size) || size < 8 || size > 4096)
+				return usage_err(cmd, "--size needs 8..4096 (render only)");
+			break;
+		case 'e':
+			if (is_merl || parse_double(optarg, &exposure) || !(exposure > 0))
+				return usage_err(cmd, "--exposure needs a positive number (render only)");
+			break;
+		case 'h': fputs(is_merl ? merl_help : render_help, stdout); return 0;
+		default: return usage_err(cmd, "bad option");
+		}
+	}
+	if (optind != argc - 1 || !outp)
+		return usage_err(cmd, "MODEL and -o OUT expected");
+	struct recon_model *m;
+	if (recon_model_load(argv[optind], &m, &err))
+		return fail(&err);
+	struct recon_rgb *R = NULL;
+	int ok = recon_rgb_new(m, &co, bin_nm, &R, &err) == 0;
+	if (ok) {
+		size_t nc, r;
+		recon_rgb_sizes(R, &nc, &r);
+		fprintf(stderr, "%s: %s path, %zu of %zu channels (%g nm bins), spectral rank %zu, reduction error %.2g "
+			"(relative)\n", cmd, full ? "full-spectrum" : "reduced", nc, m->nwl, bin_nm, r,
+			recon_rgb_reduction_error(R));
+	}
+	/* default: the table is computed in batches (GEMMs) and both outputs read it: the MERL writer through
+	 * the reference lookup (which returns each cell's own value at the cell centres it asks for), the
+	 * renderer through the same nearest-cell lookup. --full-spectrum / --direct: per-direction callbacks. */
+	struct merl_table table = { NULL };
+	struct colour_stats st = { 0 };
+	if (ok && !full && !direct) {
+		ok = recon_rgb_merl_table(R, &table, 0, &st, progress, NULL, &err) == 0;
+		progress_end();
+	}
+	merl_rgb_fn fn = full ? recon_rgb_full_fn : direct ? recon_rgb_fn : merl_table_fn;
+	void *ctx = (full || direct) ? (void *)R : (void *)&table;
+	if (ok && is_merl) {
+		struct merl_write_opts mo;
+		merl_write_opts_default(&mo);
+		mo.threads = (int)threads;
+		ok = merl_write_ex(outp, fn, ctx, &mo, &err) == 0;
+	} else if (ok) {
+		struct render_opts ro;
+		render_opts_default(&ro);
+		ro.width = ro.height = (int)size;
+		ro.exposure = exposure;
+		ro.threads = (int)threads;
+		ok = render_sphere(&ro, fn, ctx, outp, NULL, &st, &err) == 0;
+	}
+	merl_free(&table);
+	if (ok)
+		ok = write_decisions(outp, &co, R, full, bin_nm, &err) == 0;
+	recon_rgb_free(R);
+	recon_model_free(m);
+	if (!ok)
+		return fail(&err);
+	fprintf(stderr, "%s: wrote %s\n", cmd, outp);
+	return 0;
+}
+
+static const char main_help[] =
+	"usage: brdf-recon COMMAND [options]   (brdf-recon COMMAND --help for each)\n"
+	"Reconstruct a complete spectral BRDF from sparse samples with radial basis functions on the product of\n"
+	"two hemispheres: non-negative, reciprocal and energy conserving by construction.\n"
+	"commands:\n"
+	"  fit     SAMPLES.csv -o MODEL     fit a model (or --db FILE --sweep ID)\n"
+	"  eval    MODEL QUERIES.csv        evaluate at given directions (CSV)\n"
+	"  dhr     MODEL                    DHR(theta_i, lambda) with uncertainty; compare with a reference\n"
+	"  check   MODEL                    verify non-negativity, reciprocity, energy conservation\n"
+	"  info    MODEL                    print parameters and metadata\n"
+	"  merl    MODEL -o FILE.binary     MERL table (RGB)\n"
+	"  render  MODEL -o OUT.png         preview render of a sphere\n";
+
+int main(int argc, char **argv)
+{
+	if (argc < 2) {
+		fputs(main_help, stderr);
+		return 2;
+	}
+	const char *cmd = argv[1];
+	if (!strcmp(cmd, "--help") || !strcmp(cmd, "-h") || !strcmp(cmd, "help")) {
+		fputs(main_help, stdout);
+		return 0;
+	}
+	if (!strcmp(cmd, "--version")) {
+		printf("brdf-recon %s\n", ACQ_VERSION);
+		return 0;
+	}
+	argc--;
+	argv++;
+	if (!strcmp(cmd, "fit"))
+		return cmd_fit(argc, argv);
+	if (!strcmp(cmd, "eval"))
+		return cmd_eval(argc, argv);
+	if (!strcmp(cmd, "dhr"))
+		return cmd_dhr(argc, argv);
+	if (!strcmp(cmd, "check"))
+		return cmd_check(argc, argv);
+	if (!strcmp(cmd, "info"))
+		return cmd_info(argc, argv);
+	if (!strcmp(cmd, "merl") || !strcmp(cmd, "render"))
+		return cmd_output(cmd, argc, argv);
+	fprintf(stderr, "%s: unknown command '%s'\n%s", prog, cmd, main_help);
+	return 2;
+}

@@ -1,0 +1,555 @@
+/* csvio: reader of the CSV interchange format (samples and queries) with located errors. */
+#include "recon/csvio.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+#define CSV_MAX_COLS 100000
+#define CSV_FIELD_MAX 128
+
+struct field {
+	const char *p;
+	size_t len;
+};
+
+/* Columns of the header: role and, for wavelength/sigma columns, the wavelength index. */
+enum col_role { COL_TI, COL_PI, COL_TO, COL_PO, COL_VAL, COL_SIG, COL_IGNORE };
+
+struct col {
+	int role;
+	size_t wl; /* index into the sorted wavelength list */
+	double nm;
+};
+
+struct lines {
+	const char *text;
+	size_t len, pos;
+	long lineno;
+};
+
+/* Next line (without its \n and a trailing \r); returns 0 at end of text. */
+static int next_line(struct lines *L, const char **p, size_t *n)
+{
+	if (L->pos >= L->len)
+		return 0;
+	const char *s = L->text + L->pos;
+	const char *e = memchr(s, '\n', L->len - L->pos);
+	size_t k = e ? (size_t)(e - s) : L->len - L->pos;
+	L->pos += k + (e ? 1 : 0);
+	L->lineno++;
+	if (k > 0 && s[k - 1] == '\r')
+		k--;
+	*p = s;
+	*n = k;
+	return 1;
+}
+
+static void trim(struct field *f)
+{
+	while (f->len && (f->p[0] == ' ' || f->p[0] == '\t')) {
+		f->p++;
+		f->len--;
+	}
+	while (f->len && (f->p[f->len - 1] == ' ' || f->p[f->len - 1] == '\t'))
+		f->len--;
+}
+
+/* Split a line on commas into fields (at most max); returns the count, or -1 if there are more. */
+static long split(const char *p, size_t n, struct field *fs, size_t max)
+{
+	size_t k = 0, start = 0;
+	for (size_t i = 0; i <= n; i++) {
+		if (i == n || p[i] == ',') {
+			if (k >= max)
+				return -1;
+			fs[k].p = p + start;
+			fs[k].len = i - start;
+			trim(&fs[k]);
+			k++;
+			start = i + 1;
+		}
+	}
+	return (long)k;
+}
+
+static int blank(const char *p, size_t n)
+{
+	for (size_t i = 0; i < n; i++)
+		if (!isspace((unsigned char)p[i]))
+			return 0;
+	return 1;
+}
+
+static int field_is(const struct field *f, const char *s)
+{
+	return f->len == strlen(s) && !memcmp(f->p, s, f->len);
+}
+
+/* Parse a finite number; 1 = "missing" (empty or nan), 0 = number, -1 = not a finite number. */
+static int parse_num(const struct field *f, double *out)
+{
+	if (f->len == 0 || (f->len == 3 && !strncasecmp(f->p, "nan", 3))) {
+		*out = NAN;
+		return 1;
+	}
+	char buf[CSV_FIELD_MAX];
+	if (f->len >= sizeof buf)
+		return -1;
+	memcpy(buf, f->p, f->len);
+	buf[f->len] = '\0';
+	for (size_t i = 0; i < f->len; i++) /* digits, sign, point, exponent only: no hex, inf, nan(...) */
+		if (!strchr("0123456789+-.eE", buf[i]))
+			return -1;
+	char *end = NULL;
+	errno = 0;
+	double v = strtod(buf, &end);
+	if (end != buf + f->len || errno == ERANGE || !isfinite(v))
+		return -1;
+	*out = v;
+	return 0;
+}
+
+static void show(const struct field *f, char *buf, size_t size)
+{
+	size_t k = f->len < size - 4 ? f->len : size - 4;
+	size_t j = 0;
+	for (size_t i = 0; i < k; i++)
+		buf[j++] = isprint((unsigned char)f->p[i]) ? f->p[i] : '?';
+	if (k < f->len) {
+		buf[j++] = '.';
+		buf[j++] = '.';
+		buf[j++] = '.';
+	}
+	buf[j] = '\0';
+}
+
+void csvio_samples_free(struct recon_samples *s)
+{
+	if (!s)
+		return;
+	free(s->wl);
+	free(s->ang);
+	free(s->val);
+	free(s->sig);
+	free(s->deg);
+	memset(s, 0, sizeof *s);
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return x < y ? -1 : x > y;
+}
+
+/* Shared parser: want_values = 0 reads only the angle columns (queries). */
+static int parse(const char *name, const char *text, size_t len, int want_values, struct recon_samples *s,
+		 struct acq_err *err)
+{
+	memset(s, 0, sizeof *s);
+	struct lines L = { text, len, 0, 0 };
+	struct field *fs = NULL;
+	struct col *cols = NULL;
+	double *wls = NULL;
+	size_t cap = 0;
+	int rc = -1;
+	const char *p;
+	size_t n;
+	char shown[48];
+
+	if (!text)
+		return acq_errf(err, ACQ_E_INVAL, "%s: no text", name);
+	if (len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3))
+		L.pos = 3;
+	/* header: skip comments and blank lines */
+	for (;;) {
+		if (!next_line(&L, &p, &n)) {
+			acq_errf(err, ACQ_E_INVAL, "%s: no header line (theta_i,phi_i,theta_o,phi_o,...)", name);
+			goto out;
+		}
+		if (n && p[0] == '#')
+			continue;
+		if (blank(p, n))
+			continue;
+		break;
+	}
+	long header_line = L.lineno;
+	size_t maxf = 1;
+	for (size_t i = 0; i < n; i++)
+		maxf += p[i] == ',';
+	if (maxf > CSV_MAX_COLS) {
+		acq_errf(err, ACQ_E_INVAL, "%s:%ld: too many columns (%zu, limit %d)", name, L.lineno, maxf,
+			 CSV_MAX_COLS);
+		goto out;
+	}
+	fs = malloc(maxf * sizeof *fs);
+	cols = malloc(maxf * sizeof *cols);
+	wls = malloc(maxf * sizeof *wls);
+	if (!fs || !cols || !wls) {
+		acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", name);
+		goto out;
+	}
+	long nf = split(p, n, fs, maxf);
+	size_t ncols = (size_t)nf;
+	int seen[4] = { 0, 0, 0, 0 };
+	static const char *const angle_names[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
+	size_t nwl = 0, nsig = 0;
+	for (size_t c = 0; c < ncols; c++) {
+		cols[c].role = COL_IGNORE;
+		int a;
+		for (a = 0; a < 4; a++)
+			if (field_is(&fs[c], angle_names[a]))
+				break;
+		if (a < 4) {
+			if (seen[a]) {
+				acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: duplicate column %s", name, L.lineno,
+					 c + 1, angle_names[a]);
+				goto out;
+			}
+			seen[a] = 1;
+			cols[c].role = a;
+			continue;
+		}
+		if (!want_values)
+			continue;
+		struct field g = fs[c];
+		int is_sig = 0;
+		if (g.len > 6 && !memcmp(g.p, "sigma_", 6)) {
+			g.p += 6;
+			g.len -= 6;
+			is_sig = 1;
+		}
+		double nm;
+		if (parse_num(&g, &nm) != 0 || !(nm > 0) || nm > 1e6) {
+			show(&fs[c], shown, sizeof shown);
+			acq_errf(err, ACQ_E_INVAL,
+				 "%s:%ld: column %zu: header '%s' is neither an angle column, a wavelength in nm, "
+				 "nor sigma_<nm>", name, L.lineno, c + 1, shown);
+			goto out;
+		}
+		cols[c].role = is_sig ? COL_SIG : COL_VAL;
+		cols[c].nm = nm;
+		if (!is_sig)
+			wls[nwl++] = nm;
+		else
+			nsig++;
+	}
+	for (int a = 0; a < 4; a++)
+		if (!seen[a]) {
+			acq_errf(err, ACQ_E_INVAL, "%s:%ld: missing column %s", name, header_line, angle_names[a]);
+			goto out;
+		}
+	if (want_values && nwl == 0) {
+		acq_errf(err, ACQ_E_INVAL, "%s:%ld: no wavelength column", name, header_line);
+		goto out;
+	}
+	qsort(wls, nwl, sizeof *wls, cmp_double);
+	for (size_t k = 1; k < nwl; k++)
+		if (wls[k] == wls[k - 1]) {
+			acq_errf(err, ACQ_E_INVAL, "%s:%ld: wavelength %g nm appears twice", name, header_line, wls[k]);
+			goto out;
+		}
+	int sig_seen_any = 0;
+	unsigned char *sig_seen = want_values ? calloc(nwl ? nwl : 1, 1) : NULL;
+	if (want_values && !sig_seen) {
+		acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", name);
+		goto out;
+	}
+	for (size_t c = 0; c < ncols; c++) {
+		if (cols[c].role != COL_VAL && cols[c].role != COL_SIG)
+			continue;
+		double *hit = bsearch(&cols[c].nm, wls, nwl, sizeof *wls, cmp_double);
+		if (!hit) {
+			free(sig_seen);
+			acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: sigma_%g has no wavelength column %g", name,
+				 header_line, c + 1, cols[c].nm, cols[c].nm);
+			goto out;
+		}
+		cols[c].wl = (size_t)(hit - wls);
+		if (cols[c].role == COL_SIG) {
+			if (sig_seen[cols[c].wl]) {
+				free(sig_seen);
+				acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: duplicate sigma_%g", name, header_line,
+					 c + 1, cols[c].nm);
+				goto out;
+			}
+			sig_seen[cols[c].wl] = 1;
+			sig_seen_any = 1;
+		}
+	}
+	free(sig_seen);
+	(void)nsig;
+
+	/* rows */
+	s->nwl = nwl;
+	s->wl = malloc((nwl ? nwl : 1) * sizeof *s->wl);
+	if (!s->wl) {
+		acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", name);
+		goto out;
+	}
+	memcpy(s->wl, wls, nwl * sizeof *wls);
+	while (next_line(&L, &p, &n)) {
+		if (blank(p, n) || (n && p[0] == '#'))
+			continue;
+		long k = split(p, n, fs, maxf);
+		if (k != (long)ncols) {
+			acq_errf(err, ACQ_E_INVAL, "%s:%ld: expected %zu fields, found %s%ld", name, L.lineno, ncols,
+				 k < 0 ? "more than " : "", k < 0 ? (long)maxf : k);
+			goto out;
+		}
+		if (s->n == cap) {
+			size_t nc = cap ? 2 * cap : 64;
+			double *a = realloc(s->ang, nc * 4 * sizeof *a);
+			if (a)
+				s->ang = a;
+			double *d = realloc(s->deg, nc * 4 * sizeof *d);
+			if (d)
+				s->deg = d;
+			double *v = want_values ? realloc(s->val, nc * (nwl ? nwl : 1) * sizeof *v) : NULL;
+			if (v)
+				s->val = v;
+			double *g = want_values && sig_seen_any ? realloc(s->sig, nc * nwl * sizeof *g) : NULL;
+			if (g)
+				s->sig = g;
+			if (!a || !d || (want_values && !v) || (want_values && sig_seen_any && !g)) {
+				acq_errf(err, ACQ_E_NOMEM, "%s:%ld: out of memory", name, L.lineno);
+				goto out;
+			}
+			cap = nc;
+		}
+		size_t r = s->n;
+		for (size_t w = 0; want_values && w < nwl; w++) {
+			s->val[r * nwl + w] = NAN;
+			if (s->sig)
+				s->sig[r * nwl + w] = NAN;
+		}
+		for (size_t c = 0; c < ncols; c++) {
+			if (cols[c].role == COL_IGNORE)
+				continue;
+			double v;
+			int pr = parse_num(&fs[c], &v);
+			if (pr < 0) {
+				show(&fs[c], shown, sizeof shown);
+				acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: '%s' is not a finite number", name,
+					 L.lineno, c + 1, shown);
+				goto out;
+			}
+			if (cols[c].role <= COL_PO) {
+				if (pr == 1) {
+					acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: angle %s is missing", name,
+						 L.lineno, c + 1, angle_names[cols[c].role]);
+					goto out;
+				}
+				int is_theta = cols[c].role == COL_TI || cols[c].role == COL_TO;
+				if (is_theta && (v < 0 || v > 90)) {
+					acq_errf(err, ACQ_E_RANGE, "%s:%ld: column %zu: zenith %s = %g outside [0, 90] degrees",
+						 name, L.lineno, c + 1, angle_names[cols[c].role], v);
+					goto out;
+				}
+				if (!is_theta && fabs(v) > 1e6) {
+					acq_errf(err, ACQ_E_RANGE, "%s:%ld: column %zu: azimuth %g is absurd", name, L.lineno,
+						 c + 1, v);
+					goto out;
+				}
+				s->deg[r * 4 + cols[c].role] = v;
+				s->ang[r * 4 + cols[c].role] = v * (M_PI / 180.0);
+			} else if (cols[c].role == COL_VAL) {
+				s->val[r * nwl + cols[c].wl] = v;
+			} else {
+				if (pr == 0 && v < 0) {
+					acq_errf(err, ACQ_E_RANGE, "%s:%ld: column %zu: negative uncertainty %g", name,
+						 L.lineno, c + 1, v);
+					goto out;
+				}
+				s->sig[r * nwl + cols[c].wl] = v;
+			}
+		}
+		s->n++;
+	}
+	if (s->n == 0) {
+		acq_errf(err, ACQ_E_INVAL, "%s: no data rows after the header (line %ld)", name, header_line);
+		goto out;
+	}
+	rc = 0;
+out:
+	free(fs);
+	free(cols);
+	free(wls);
+	if (rc)
+		csvio_samples_free(s);
+	return rc;
+}
+
+int csvio_parse_samples(const char *name, const char *text, size_t len, struct recon_samples *s,
+			struct acq_err *err)
+{
+	return parse(name, text, len, 1, s, err);
+}
+
+int csvio_parse_queries(const char *name, const char *text, size_t len, struct recon_samples *s,
+			struct acq_err *err)
+{
+	return parse(name, text, len, 0, s, err);
+}
+
+int csvio_slurp(const char *path, char **out, size_t *len, struct acq_err *err)
+{
+	*out = NULL;
+	*len = 0;
+	FILE *f = fopen(path, "rb");
+	if (!f)
+		return acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
+	size_t cap = 1 << 16, n = 0;
+	char *buf = malloc(cap + 1);
+	for (;;) {
+		if (!buf) {
+			fclose(f);
+			return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", path);
+		}
+		size_t k = fread(buf + n, 1, cap - n, f);
+		n += k;
+		if (n < cap)
+			break;
+		if (cap >= ((size_t)1 << 30)) {
+			free(buf);
+			fclose(f);
+			return acq_errf(err, ACQ_E_RANGE, "%s: file larger than 1 GiB", path);
+		}
+		cap *= 2;
+		char *nb = realloc(buf, cap + 1);
+		if (!nb)
+			free(buf);
+		buf = nb;
+	}
+	if (ferror(f)) {
+		free(buf);
+		fclose(f);
+		return acq_errf(err, ACQ_E_IO, "%s: read error", path);
+	}
+	fclose(f);
+	buf[n] = '\0';
+	*out = buf;
+	*len = n;
+	return 0;
+}
+
+int csvio_read_samples(const char *path, struct recon_samples *s, struct acq_err *err)
+{
+	char *text;
+	size_t len;
+	memset(s, 0, sizeof *s);
+	if (csvio_slurp(path, &text, &len, err))
+		return -1;
+	int rc = csvio_parse_samples(path, text, len, s, err);
+	free(text);
+	return rc;
+}
+
+int csvio_read_queries(const char *path, struct recon_samples *s, struct acq_err *err)
+{
+	char *text;
+	size_t len;
+	memset(s, 0, sizeof *s);
+	if (csvio_slurp(path, &text, &len, err))
+		return -1;
+	int rc = csvio_parse_queries(path, text, len, s, err);
+	free(text);
+	return rc;
+}
+
+int csvio_fmt(char *buf, size_t size, double v)
+{
+	if (!isfinite(v))
+		return -1;
+	snprintf(buf, size, "%.10g", v);
+	return 0;
+}
+
+int csvio_read_columns(const char *path, const char *const *names, size_t k, size_t *rows, double **data,
+		       struct acq_err *err)
+{
+	char *text;
+	size_t len;
+	*rows = 0;
+	*data = NULL;
+	if (k == 0 || k > 16)
+		return acq_errf(err, ACQ_E_INVAL, "%s: bad column request", path);
+	if (csvio_slurp(path, &text, &len, err))
+		return -1;
+	struct lines L = { text, len, 0, 0 };
+	const char *p;
+	size_t n, cap = 0, nr = 0;
+	long pos[16];
+	struct field fs[64];
+	double *d = NULL;
+	int rc = -1;
+	for (;;) {
+		if (!next_line(&L, &p, &n)) {
+			acq_errf(err, ACQ_E_INVAL, "%s: no header line", path);
+			goto out;
+		}
+		if ((n && p[0] == '#') || blank(p, n))
+			continue;
+		break;
+	}
+	long nf = split(p, n, fs, 64);
+	if (nf < 0) {
+		acq_errf(err, ACQ_E_INVAL, "%s:%ld: too many columns", path, L.lineno);
+		goto out;
+	}
+	for (size_t c = 0; c < k; c++) {
+		pos[c] = -1;
+		for (long f = 0; f < nf; f++)
+			if (field_is(&fs[f], names[c]))
+				pos[c] = f;
+		if (pos[c] < 0) {
+			acq_errf(err, ACQ_E_INVAL, "%s:%ld: missing column %s", path, L.lineno, names[c]);
+			goto out;
+		}
+	}
+	while (next_line(&L, &p, &n)) {
+		if ((n && p[0] == '#') || blank(p, n))
+			continue;
+		long got = split(p, n, fs, 64);
+		if (got != nf) {
+			acq_errf(err, ACQ_E_INVAL, "%s:%ld: expected %ld fields, found %ld", path, L.lineno, nf, got);
+			goto out;
+		}
+		if (nr == cap) {
+			cap = cap ? 2 * cap : 64;
+			double *nd = realloc(d, cap * k * sizeof *nd);
+			if (!nd) {
+				acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", path);
+				goto out;
+			}
+			d = nd;
+		}
+		for (size_t c = 0; c < k; c++) {
+			double v;
+			if (parse_num(&fs[pos[c]], &v) != 0) {
+				char shown[48];
+				show(&fs[pos[c]], shown, sizeof shown);
+				acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %ld: '%s' is not a finite number", path, L.lineno,
+					 pos[c] + 1, shown);
+				goto out;
+			}
+			d[nr * k + c] = v;
+		}
+		nr++;
+	}
+	if (nr == 0) {
+		acq_errf(err, ACQ_E_INVAL, "%s: no data rows", path);
+		goto out;
+	}
+	*rows = nr;
+	*data = d;
+	d = NULL;
+	rc = 0;
+out:
+	free(d);
+	free(text);
+	return rc;
+}

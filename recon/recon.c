@@ -1,0 +1,1175 @@
+/* recon: fitting (transform, merge, leave-one-out search, one Cholesky for all channels), evaluation with
+ * the energy factor, albedo tables, DHR with Monte-Carlo uncertainty, and the property checker. */
+#include "recon/recon.h"
+
+#include <cblas.h>
+#include <lapacke.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "acq_version.h"
+
+#define RECON_MAX_N 8000
+#define MERGE_TOL 1e-9
+/* Albedo table: nodes every 5°, quadrature Gauss-Legendre 20 in cosθo × 24 azimuth midpoints on [0, π]. */
+#define TAB_N 19
+#define TAB_NMU 20
+#define TAB_NPHI 24
+/* DHR quadrature: Gauss-Legendre 32 × 48 azimuth midpoints (error discussed at recon_albedo). */
+#define DHR_NMU 32
+#define DHR_NPHI 48
+/* Largest transformed value mapped back (e^69 ≈ 1e30 sr⁻¹): keeps every output finite. */
+#define G_MAX 69.0
+
+void recon_fit_opts_default(struct recon_fit_opts *o)
+{
+	memset(o, 0, sizeof *o);
+	o->kernel = RBF_K_WENDLAND;
+	o->transform = RECON_T_LOG;
+	o->shape = 0;
+	o->smoothing = -1;
+	o->max_cond = 1e12;
+}
+
+const char *recon_transform_name(int t)
+{
+	return t == RECON_T_LOG ? "log" : t == RECON_T_SQRT ? "sqrt" : NULL;
+}
+
+int recon_transform_from_name(const char *name)
+{
+	if (!name)
+		return -1;
+	if (!strcmp(name, "log"))
+		return RECON_T_LOG;
+	if (!strcmp(name, "sqrt"))
+		return RECON_T_SQRT;
+	return -1;
+}
+
+void recon_model_free(struct recon_model *m)
+{
+	if (!m)
+		return;
+	free(m->wl);
+	free(m->eps);
+	free(m->mu);
+	free(m->ang);
+	free(m->ctr);
+	free(m->tctr);
+	free(m->soa);
+	free(m->lam);
+	free(m->w);
+	free(m->g);
+	free(m->gsig);
+	free(m->tab_theta);
+	free(m->tab_alb);
+	free(m);
+}
+
+int recon_model_derive(struct recon_model *m, struct acq_err *err)
+{
+	free(m->ctr);
+	free(m->tctr);
+	free(m->soa);
+	m->ctr = malloc(m->n * 6 * sizeof *m->ctr);
+	m->tctr = malloc(m->n * 6 * sizeof *m->tctr);
+	m->soa = malloc(m->n * 6 * sizeof *m->soa);
+	if (!m->ctr || !m->tctr || !m->soa)
+		return acq_errf(err, ACQ_E_NOMEM, "model: out of memory for %zu centres", m->n);
+	for (size_t k = 0; k < m->n; k++) {
+		const double *a = m->ang + 4 * k;
+		rbf_canon(a[0], a[1], a[2], a[3], m->ctr + 6 * k);
+		rbf_tau(m->ctr + 6 * k, m->tctr + 6 * k);
+	}
+	rbf_soa(m->n, m->ctr, m->soa);
+	return 0;
+}
+
+/* ---- evaluation ------------------------------------------------------------------------------------ */
+
+size_t recon_eval_work_size(const struct recon_model *m)
+{
+	return (size_t)RECON_EVAL_BLOCK * m->n;
+}
+
+/* Map a transformed value back to a BRDF value: non-negative and finite by construction. */
+static inline double untransform(int transform, double g, double eps)
+{
+	if (!(g == g))
+		g = -G_MAX; /* unreachable with finite weights; never let NaN through */
+	if (transform == RECON_T_SQRT) {
+		if (g > 1e15)
+			g = 1e15;
+		if (g < -1e15)
+			g = -1e15;
+		return g * g;
+	}
+	if (g > G_MAX)
+		g = G_MAX;
+	double f = exp(g) - eps;
+	return f > 0 ? f : 0.0;
+}
+
+/* Upper bound of the unscaled albedo near θ (interval lookup in the table). */
+static double albedo_bound(const struct recon_model *m, double theta, size_t l)
+{
+	if (m->ntab < 2)
+		return 0.0;
+	double h = (M_PI / 2) / (double)(m->ntab - 1);
+	double x = theta / h;
+	size_t j = x <= 0 ? 0 : (size_t)x;
+	if (j > m->ntab - 2)
+		j = m->ntab - 2;
+	return m->tab_alb[j * m->nwl + l];
+}
+
+double recon_energy_scale(const struct recon_model *m, double ti, double to, size_t l)
+{
+	double a = albedo_bound(m, ti, l), b = albedo_bound(m, to, l);
+	double mx = a > b ? a : b;
+	return mx > 1.0 ? 1.0 / mx : 1.0;
+}
+
+static double theta_of(const double *v)
+{
+	double z = v[2];
+	return z >= 1.0 ? 0.0 : z <= 0.0 ? M_PI / 2 : acos(z);
+}
+
+void recon_eval_canon(const struct recon_model *m, size_t nq, const double *c6, int scaled, double *out,
+		      double *work)
+{
+	size_t n = m->n, L = m->nwl;
+	for (size_t q0 = 0; q0 < nq; q0 += RECON_EVAL_BLOCK) {
+		size_t b = nq - q0 < RECON_EVAL_BLOCK ? nq - q0 : RECON_EVAL_BLOCK;
+		rbf_kmatrix_soa(m->kernel, m->shape, b, c6 + 6 * q0, n, m->soa, work);
+		double *o = out + q0 * L;
+		/* o (b × L, row-major) = K (b × n) · Wᵀ, W stored channel-major (L × n) */
+		cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)b, (int)L, (int)n, 1.0, work, (int)n,
+			    m->w, (int)n, 0.0, o, (int)L);
+		for (size_t q = 0; q < b; q++) {
+			const double *c = c6 + 6 * (q0 + q);
+			double ti = theta_of(c), to = theta_of(c + 3);
+			for (size_t l = 0; l < L; l++) {
+				double f = untransform(m->transform, o[q * L + l] + m->mu[l], m->eps[l]);
+				if (scaled)
+					f *= recon_energy_scale(m, ti, to, l);
+				o[q * L + l] = f;
+			}
+		}
+	}
+}
+
+int recon_eval(const struct recon_model *m, size_t nq, const double *ang, double *out, struct acq_err *err)
+{
+	double *c6 = malloc((nq ? nq : 1) * 6 * sizeof *c6);
+	double *work = malloc(recon_eval_work_size(m) * sizeof *work);
+	if (!c6 || !work) {
+		free(c6);
+		free(work);
+		return acq_errf(err, ACQ_E_NOMEM, "eval: out of memory for %zu queries", nq);
+	}
+	for (size_t q = 0; q < nq; q++) {
+		const double *a = ang + 4 * q;
+		for (int k = 0; k < 4; k++)
+			if (!isfinite(a[k])) {
+				free(c6);
+				free(work);
+				return acq_errf(err, ACQ_E_INVAL, "eval: query %zu has a non-finite angle", q + 1);
+			}
+		double ti = fmin(fmax(a[0], 0.0), M_PI / 2), to = fmin(fmax(a[2], 0.0), M_PI / 2);
+		rbf_canon(ti, a[1], to, a[3], c6 + 6 * q);
+	}
+	recon_eval_canon(m, nq, c6, 1, out, work);
+	free(c6);
+	free(work);
+	return 0;
+}
+
+static void dir_angles(const double v[3], double *th, double *ph)
+{
+	double x = v[0], y = v[1], z = v[2];
+	double r = sqrt(x * x + y * y + z * z);
+	if (!(r > 0) || !isfinite(r)) {
+		*th = 0;
+		*ph = 0;
+		return;
+	}
+	double zz = z / r;
+	*th = zz >= 1 ? 0 : zz <= 0 ? M_PI / 2 : acos(zz);
+	*ph = atan2(y, x);
+}
+
+int recon_eval_dirs(const struct recon_model *m, const double wi[3], const double wo[3], double *out,
+		    struct acq_err *err)
+{
+	double a[4];
+	dir_angles(wi, &a[0], &a[1]);
+	dir_angles(wo, &a[2], &a[3]);
+	return recon_eval(m, 1, a, out, err);
+}
+
+/* ---- quadrature -------------------------------------------------------------------------------------- */
+
+/*
+ * Hemisphere quadrature of the albedo a(θi) = ∫ f cosθo dωo = ∫₀¹ ∫₀^{2π} f μ dφ dμ (μ = cosθo).
+ * μ: Gauss-Legendre with nmu nodes, exact for polynomials of degree 2·nmu − 1 in μ (so exact for a
+ * Lambertian, and for cosⁿ lobes about the normal with n < 2·nmu − 1). φ: the integrand is 2π-periodic and
+ * even in Δφ (isotropy and mirror), so nphi midpoints on [0, π] are the trapezoid rule with 2·nphi points on
+ * the circle, whose error decays faster than any power for smooth integrands (exact for trigonometric
+ * polynomials of degree < 2·nphi). The error is therefore set by the narrowest lobe of the interpolant:
+ * about (lobe width / node spacing) must stay above ~2; the DHR rule (32 × 48: 2.8° in φ, ~3° in θ near the
+ * horizon) resolves lobes down to ~6°, far narrower than a 10 × 10 × 10 angular sampling can reconstruct.
+ * The albedo table estimates its own error against a doubled rule and adds it as a margin.
+ */
+static int hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double *c6, double *wt)
+{
+	double x[256], w[256];
+	if (rbf_gauss_legendre01(nmu, x, w))
+		return -1;
+	size_t k = 0;
+	for (int i = 0; i < nmu; i++) {
+		double mu, wmu;
+		if (square_rule) { /* independent rule: Gauss-Legendre in t = μ², dt = 2μ dμ */
+			mu = sqrt(x[i]);
+			wmu = 0.5 * w[i];
+		} else {
+			mu = x[i];
+			wmu = w[i] * mu;
+		}
+		double to = acos(mu);
+		for (int j = 0; j < nphi; j++) {
+			double d = (j + 0.5) * M_PI / nphi;
+			rbf_canon(theta_i, 0.0, to, d, c6 + 6 * k);
+			wt[k] = wmu * 2.0 * M_PI / nphi;
+			k++;
+		}
+	}
+	return 0;
+}
+
+static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int nphi, int square_rule,
+		       int scaled, double *out, struct acq_err *err)
+{
+	size_t Q = (size_t)nmu * (size_t)nphi, L = m->nwl;
+	double *c6 = malloc(Q * 6 * sizeof *c6), *wt = malloc(Q * sizeof *wt);
+	double *vals = malloc(Q * L * sizeof *vals), *work = malloc(recon_eval_work_size(m) * sizeof *work);
+	int rc = -1;
+	if (!c6 || !wt || !vals || !work) {
+		acq_errf(err, ACQ_E_NOMEM, "albedo: out of memory");
+		goto out;
+	}
+	if (hemi_nodes(theta_i, nmu, nphi, square_rule, c6, wt)) {
+		acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", nmu, nphi);
+		goto out;
+	}
+	recon_eval_canon(m, Q, c6, scaled, vals, work);
+	for (size_t l = 0; l < L; l++)
+		out[l] = 0;
+	for (size_t q = 0; q < Q; q++)
+		for (size_t l = 0; l < L; l++)
+			out[l] += wt[q] * vals[q * L + l];
+	rc = 0;
+out:
+	free(c6);
+	free(wt);
+	free(vals);
+	free(work);
+	return rc;
+}
+
+int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi, int scaled, double *out,
+		 struct acq_err *err)
+{
+	if (!(theta_i >= 0 && theta_i <= M_PI / 2) || nmu < 1 || nphi < 1 || nmu > 256 || nphi > 4096)
+		return acq_errf(err, ACQ_E_INVAL, "albedo: bad incidence or quadrature size");
+	return albedo_rule(m, theta_i, nmu, nphi, 0, scaled, out, err);
+}
+
+/*
+ * The energy table. a(θ, λ) of the unscaled interpolant is computed at TAB_N nodes; on each interval
+ * [θ_t, θ_t+1] the bound is max(a_t, a_t+1) + h²/8 · |a''| (the interpolation error of a C² function, with
+ * a'' from second differences, doubled), times (1 + 2δ) where δ is the largest relative difference between
+ * the table rule and a doubled rule at three incidences (0°, 45°, 85°). The evaluated function is then
+ * s·f̂ with s = 1/max(1, A(θi), A(θo)), whose albedo at θi is ≤ a(θi)/max(1, A(θi)) ≤ 1 whenever A bounds a.
+ * `brdf-recon check` verifies it with an independent rule.
+ */
+static int build_albedo_table(struct recon_model *m, struct acq_err *err, recon_progress_fn pf, void *pctx)
+{
+	size_t T = TAB_N, L = m->nwl;
+	double *a = malloc(T * L * sizeof *a), *fine = malloc(L * sizeof *fine);
+	m->tab_theta = malloc(T * sizeof *m->tab_theta);
+	m->tab_alb = malloc((T - 1) * L * sizeof *m->tab_alb);
+	m->ntab = T;
+	if (!a || !fine || !m->tab_theta || !m->tab_alb) {
+		free(a);
+		free(fine);
+		return acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
+	}
+	double h = (M_PI / 2) / (double)(T - 1);
+	for (size_t t = 0; t < T; t++) {
+		m->tab_theta[t] = h * (double)t;
+		if (pf)
+			pf(pctx, "albedo table", (double)t / (double)T);
+		if (albedo_rule(m, m->tab_theta[t], TAB_NMU, TAB_NPHI, 0, 0, a + t * L, err))
+			goto fail;
+	}
+	/* quadrature error estimate against a doubled rule */
+	double delta = 0;
+	static const size_t probe[3] = { 0, 9, 17 }; /* 0°, 45°, 85° */
+	for (int p = 0; p < 3; p++) {
+		size_t t = probe[p];
+		if (albedo_rule(m, m->tab_theta[t], 2 * TAB_NMU, 2 * TAB_NPHI, 0, 0, fine, err))
+			goto fail;
+		for (size_t l = 0; l < L; l++) {
+			double ref = fabs(fine[l]) > 1e-300 ? fabs(fine[l]) : 1e-300;
+			double d = fabs(fine[l] - a[t * L + l]) / ref;
+			if (d > delta)
+				delta = d;
+		}
+	}
+	m->alb_margin = 2.0 * delta + 1e-9;
+	for (size_t t = 0; t + 1 < T; t++)
+		for (size_t l = 0; l < L; l++) {
+			double lo = a[t * L + l], hi = a[(t + 1) * L + l];
+			double mx = lo > hi ? lo : hi, curv = 0;
+			for (size_t u = (t ? t - 1 : 0); u + 2 < T && u <= t + 1; u++) {
+				double c = fabs(a[u * L + l] - 2 * a[(u + 1) * L + l] + a[(u + 2) * L + l]) / (h * h);
+				if (c > curv)
+					curv = c;
+			}
+			m->tab_alb[t * L + l] = (mx + 2.0 * h * h / 8.0 * curv) * (1.0 + m->alb_margin);
+		}
+	free(a);
+	free(fine);
+	return 0;
+fail:
+	free(a);
+	free(fine);
+	return -1;
+}
+
+/* ---- fitting ------------------------------------------------------------------------------------------ */
+
+/* Median by quickselect (Hoare partition), O(n); reorders v. */
+static double median(double *v, size_t n)
+{
+	if (n == 0)
+		return NAN;
+	size_t k = n / 2;
+	size_t lo = 0, hi = n - 1;
+	while (lo < hi) {
+		double pivot = v[lo + (hi - lo) / 2];
+		size_t i = lo, j = hi;
+		while (i <= j) {
+			while (v[i] < pivot)
+				i++;
+			while (v[j] > pivot)
+				j--;
+			if (i <= j) {
+				double t = v[i];
+				v[i] = v[j];
+				v[j] = t;
+				i++;
+				if (j == 0)
+					break;
+				j--;
+			}
+		}
+		if (k <= j)
+			hi = j;
+		else if (k >= i)
+			lo = i;
+		else
+			break;
+	}
+	double m = v[k];
+	if (n % 2 == 0) { /* the lower middle is the largest of v[0..k) */
+		double lm = v[0];
+		for (size_t i = 1; i < k; i++)
+			if (v[i] > lm)
+				lm = v[i];
+		m = 0.5 * (m + lm);
+	}
+	return m;
+}
+
+static double cdist6(const double *a, const double *b)
+{
+	double s = 0;
+	for (int i = 0; i < 6; i++)
+		s += (a[i] - b[i]) * (a[i] - b[i]);
+	return s;
+}
+
+/* Shape grids (chordal units for wendland/gauss, radians for exp/paper). */
+static int shape_grid(int kernel, double *g)
+{
+	static const double wend[] = { 1.2, 1.8, 2.6, 4.0 };
+	static const double expo[] = { 0.5, 1.0, 2.0, 4.0 };
+	static const double gaus[] = { 0.4, 0.6, 0.9, 1.4 };
+	const double *src = kernel == RBF_K_WENDLAND ? wend : kernel == RBF_K_EXP ? expo : gaus;
+	memcpy(g, src, 4 * sizeof *g);
+	return 4;
+}
+
+struct fitctx {
+	size_t n, L;
+	double *K;     /* n×n kernel matrix for the current shape */
+	double *A;     /* work copy */
+	double *lam;
+	double *G;     /* L×n centred transformed data (channel-major) */
+	double max_cond;
+};
+
+/* Factor A = K + η diag(lam) into fc->A (lower Cholesky); 0 ok, 1 not PD, 2 too ill-conditioned. */
+static int factor(struct fitctx *fc, double eta, double *rcond)
+{
+	size_t n = fc->n;
+	memcpy(fc->A, fc->K, n * n * sizeof *fc->A);
+	for (size_t k = 0; k < n; k++)
+		fc->A[k * n + k] += eta * fc->lam[k];
+	double anorm = LAPACKE_dlansy(LAPACK_COL_MAJOR, '1', 'L', (lapack_int)n, fc->A, (lapack_int)n);
+	if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)n, fc->A, (lapack_int)n) != 0)
+		return 1;
+	double rc = 0;
+	if (LAPACKE_dpocon(LAPACK_COL_MAJOR, 'L', (lapack_int)n, fc->A, (lapack_int)n, anorm, &rc) != 0)
+		return 1;
+	*rcond = rc;
+	if (!(rc > 0) || 1.0 / rc > fc->max_cond)
+		return 2;
+	return 0;
+}
+
+/* Rippa: every leave-one-out residual from one factorisation, e_k = (A⁻¹g)_k / (A⁻¹)_kk, over the channels
+ * chan[0..nc). fc->A holds the factor on entry and is destroyed. Returns the mean squared residual. */
+static double rippa(struct fitctx *fc, const size_t *chan, size_t nc, double *rhs, double *res_rms)
+{
+	size_t n = fc->n;
+	for (size_t c = 0; c < nc; c++)
+		memcpy(rhs + c * n, fc->G + chan[c] * n, n * sizeof *rhs);
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)nc, fc->A, (lapack_int)n, rhs,
+			   (lapack_int)n) != 0)
+		return INFINITY;
+	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, fc->A, (lapack_int)n) != 0)
+		return INFINITY;
+	double s = 0;
+	for (size_t c = 0; c < nc; c++) {
+		double sc = 0;
+		for (size_t k = 0; k < n; k++) {
+			double e = rhs[c * n + k] / fc->A[k * n + k];
+			sc += e * e;
+		}
+		if (res_rms)
+			res_rms[c] = sqrt(sc / (double)n);
+		s += sc;
+	}
+	return s / (double)(n * nc);
+}
+
+static void build_K(struct fitctx *fc, int kernel, double shape, const double *ctr, const double *tctr)
+{
+	size_t n = fc->n;
+	for (size_t j = 0; j < n; j++)
+		for (size_t i = j; i < n; i++) {
+			double v = rbf_kernel(kernel, shape, ctr + 6 * i, ctr + 6 * j, tctr + 6 * j);
+			fc->K[j * n + i] = v;
+			fc->K[i * n + j] = v;
+		}
+}
+
+int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, struct recon_model **out,
+	      struct acq_err *err)
+{
+	struct recon_fit_opts o;
+	if (opts)
+		o = *opts;
+	else
+		recon_fit_opts_default(&o);
+	*out = NULL;
+	if (!s || s->n == 0 || s->nwl == 0 || !s->ang || !s->val || !s->wl)
+		return acq_errf(err, ACQ_E_INVAL, "fit: no samples");
+	if (!rbf_kernel_name(o.kernel))
+		return acq_errf(err, ACQ_E_INVAL, "fit: unknown kernel %d", o.kernel);
+	if (!recon_transform_name(o.transform))
+		return acq_errf(err, ACQ_E_INVAL, "fit: unknown transform %d", o.transform);
+	if (!(o.shape >= 0) || !isfinite(o.shape) || !isfinite(o.smoothing) || !(o.max_cond >= 1))
+		return acq_errf(err, ACQ_E_INVAL, "fit: shape, smoothing and condition limit must be finite");
+
+	size_t L = s->nwl, n0 = s->n;
+	int rc = -1;
+	struct recon_model *m = calloc(1, sizeof *m);
+	size_t *rep = malloc(n0 * sizeof *rep), *idx = malloc(n0 * sizeof *idx);
+	double *c6 = malloc(n0 * 6 * sizeof *c6);
+	double *tmp = malloc((n0 > L ? n0 : L) * sizeof *tmp);
+	struct fitctx fc = { 0 };
+	double *rhs = NULL, *val = NULL, *sig = NULL, *wsum = NULL;
+	if (!m || !rep || !idx || !c6 || !tmp) {
+		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
+		goto out;
+	}
+	m->kernel = o.kernel;
+	m->transform = o.transform;
+
+	/* 1. canonical points; rows without any value are dropped; repeated and reciprocal rows merged */
+	size_t n = 0, dropped = 0, merged = 0;
+	for (size_t k = 0; k < n0; k++) {
+		const double *a = s->ang + 4 * k;
+		int any = 0;
+		for (size_t l = 0; l < L && !any; l++)
+			any = isfinite(s->val[k * L + l]);
+		if (!any) {
+			dropped++;
+			rep[k] = SIZE_MAX;
+			continue;
+		}
+		double cc[6];
+		rbf_canon(a[0], a[1], a[2], a[3], cc);
+		size_t j;
+		for (j = 0; j < n; j++)
+			if (cdist6(cc, c6 + 6 * j) < MERGE_TOL * MERGE_TOL)
+				break;
+		if (j == n) {
+			memcpy(c6 + 6 * n, cc, sizeof cc);
+			idx[n] = k;
+			n++;
+		} else {
+			merged++;
+		}
+		rep[k] = j;
+	}
+	if (n == 0) {
+		acq_errf(err, ACQ_E_INVAL, "fit: every row is empty (no measured value)");
+		goto out;
+	}
+	if (n > RECON_MAX_N) {
+		acq_errf(err, ACQ_E_RANGE, "fit: %zu distinct directions, limit %d", n, RECON_MAX_N);
+		goto out;
+	}
+	m->n = n;
+	m->nwl = L;
+	m->wl = malloc(L * sizeof *m->wl);
+	m->eps = calloc(L, sizeof *m->eps);
+	m->mu = calloc(L, sizeof *m->mu);
+	m->ang = malloc(n * 4 * sizeof *m->ang);
+	m->lam = malloc(n * sizeof *m->lam);
+	m->w = malloc(n * L * sizeof *m->w);
+	m->g = malloc(n * L * sizeof *m->g);
+	m->gsig = malloc(n * L * sizeof *m->gsig);
+	val = calloc(n * L, sizeof *val);  /* merged values, channel-major */
+	sig = calloc(n * L, sizeof *sig);  /* merged sigma (NAN = none) */
+	wsum = calloc(n * L, sizeof *wsum);
+	if (!m->wl || !m->eps || !m->mu || !m->ang || !m->lam || !m->w || !m->g || !m->gsig || !val || !sig ||
+	    !wsum) {
+		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory (%zu directions × %zu wavelengths)", n, L);
+		goto out;
+	}
+	memcpy(m->wl, s->wl, L * sizeof *m->wl);
+	for (size_t l = 0; l < L; l++)
+		if (!isfinite(m->wl[l]) || !(m->wl[l] > 0) || (l && !(m->wl[l] > m->wl[l - 1]))) {
+			acq_errf(err, ACQ_E_INVAL, "fit: wavelengths must be positive and increasing");
+			goto out;
+		}
+	for (size_t j = 0; j < n; j++)
+		memcpy(m->ang + 4 * j, s->ang + 4 * idx[j], 4 * sizeof(double));
+	/* merge: inverse-variance weights when every merged value has a positive sigma, else equal weights */
+	int have_sig = s->sig != NULL;
+	for (size_t k = 0; k < n0; k++) {
+		if (rep[k] == SIZE_MAX)
+			continue;
+		size_t j = rep[k];
+		for (size_t l = 0; l < L; l++) {
+			double v = s->val[k * L + l];
+			if (!isfinite(v))
+				continue;
+			double sg = have_sig ? s->sig[k * L + l] : NAN;
+			double wgt = isfinite(sg) && sg > 0 ? 1.0 / (sg * sg) : 1.0;
+			if (!(isfinite(sg) && sg > 0))
+				sg = NAN;
+			size_t at = l * n + j;
+			if (wsum[at] == 0) {
+				val[at] = v * wgt;
+				sig[at] = isfinite(sg) ? wgt : NAN; /* accumulates Σ 1/σ² while merging */
+			} else {
+				val[at] += v * wgt;
+				sig[at] = (isfinite(sig[at]) && isfinite(sg)) ? sig[at] + wgt : NAN;
+			}
+			wsum[at] += wgt;
+		}
+	}
+	size_t imputed = 0;
+	int phi_i_varies = 0; /* recorded: the model treats the material as isotropic regardless */
+	for (size_t k = 1; k < n0; k++)
+		if (fabs(remainder(s->ang[4 * k + 1] - s->ang[1], 2 * M_PI)) > 1e-9 && s->ang[4 * k] > 0 && s->ang[0] > 0)
+			phi_i_varies = 1;
+	for (size_t l = 0; l < L; l++) {
+		size_t have = 0;
+		for (size_t j = 0; j < n; j++) {
+			size_t at = l * n + j;
+			if (wsum[at] > 0) {
+				val[at] /= wsum[at];
+				sig[at] = isfinite(sig[at]) ? 1.0 / sqrt(sig[at]) : NAN;
+				have++;
+			} else {
+				val[at] = NAN;
+				sig[at] = NAN;
+			}
+		}
+		if (!have) {
+			acq_errf(err, ACQ_E_INVAL, "fit: wavelength %g nm has no measured value", m->wl[l]);
+			goto out;
+		}
+	}
+	/* 2. missing values: nearest measured direction of the same channel (reciprocal metric), flagged */
+	unsigned char *imp = calloc(n * L, 1);
+	if (!imp) {
+		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
+		goto out;
+	}
+	for (size_t l = 0; l < L; l++)
+		for (size_t j = 0; j < n; j++) {
+			if (isfinite(val[l * n + j]))
+				continue;
+			double best = INFINITY;
+			size_t bj = j;
+			double tj[6];
+			rbf_tau(c6 + 6 * j, tj);
+			for (size_t i = 0; i < n; i++) {
+				if (!isfinite(val[l * n + i]) || imp[l * n + i])
+					continue;
+				double d = fmin(cdist6(c6 + 6 * j, c6 + 6 * i), cdist6(tj, c6 + 6 * i));
+				if (d < best) {
+					best = d;
+					bj = i;
+				}
+			}
+			val[l * n + j] = val[l * n + bj];
+			sig[l * n + j] = NAN;
+			imp[l * n + j] = 1;
+			imputed++;
+		}
+	/*
+	 * 3. Non-negativity by construction: the interpolant is built on g = T(f) and mapped back through a
+	 * non-negative T⁻¹, so f̂ ≥ 0 everywhere, not only at the samples (non-negative weights would also do,
+	 * but would need an NNLS per channel instead of one factorisation for all).
+	 *   log:  g = ln(max(f, 0) + ε), f̂ = max(0, e^g − ε). Multiplicative: suits the orders of magnitude
+	 *         between diffuse and specular values. Bias: the interpolant averages in log space, i.e. a
+	 *         geometric mean (low by ≈ σ_g²/2 relative where it smooths noise); ε (1 % of the median
+	 *         value, or the median σ if larger) keeps noisy near-zero values from pulling g to −∞ and
+	 *         lifts values ≪ ε towards ε before the map back removes it again.
+	 *   sqrt: g = √max(f, 0), f̂ = g². Additive near 0; bias +σ_g² (the square of the noise).
+	 * Negative measurements are clamped to 0 before the transform (noise around a dark value). Transformed
+	 * uncertainties come from the delta method, σ_g = σ·|dg/df|.
+	 */
+	int any_sig = 0;
+	for (size_t l = 0; l < L; l++) {
+		size_t cnt = 0, cs = 0;
+		for (size_t j = 0; j < n; j++)
+			tmp[cnt++] = fabs(val[l * n + j]);
+		double med = median(tmp, cnt);
+		for (size_t j = 0; j < n; j++)
+			if (isfinite(sig[l * n + j]))
+				tmp[cs++] = sig[l * n + j];
+		double meds = cs ? median(tmp, cs) : 0;
+		if (cs)
+			any_sig = 1;
+		double eps = 0;
+		if (o.transform == RECON_T_LOG) {
+			/* ε: 1 % of the typical value, at least the typical noise, never 0 */
+			eps = fmax(0.01 * med, meds);
+			if (!(eps > 1e-12))
+				eps = 1e-12;
+		}
+		m->eps[l] = eps;
+		double sum = 0;
+		for (size_t j = 0; j < n; j++) {
+			double v = val[l * n + j], sg = sig[l * n + j], pv = v > 0 ? v : 0;
+			double g, gs;
+			if (o.transform == RECON_T_LOG) {
+				g = log(pv + eps);
+				gs = isfinite(sg) ? sg / (pv + eps) : NAN;
+			} else {
+				g = sqrt(pv);
+				gs = isfinite(sg) ? sg / (2.0 * sqrt(pv + sg) + 1e-300) : NAN;
+			}
+			m->g[l * n + j] = g;
+			m->gsig[l * n + j] = gs;
+			sum += g;
+		}
+		m->mu[l] = sum / (double)n;
+	}
+	/* imputed entries: the largest transformed uncertainty of their channel (or NAN, set after LOO) */
+	for (size_t l = 0; l < L; l++) {
+		double mx = 0;
+		for (size_t j = 0; j < n; j++)
+			if (isfinite(m->gsig[l * n + j]) && m->gsig[l * n + j] > mx)
+				mx = m->gsig[l * n + j];
+		for (size_t j = 0; j < n; j++)
+			if (imp[l * n + j])
+				m->gsig[l * n + j] = any_sig && mx > 0 ? mx : NAN;
+	}
+	free(imp);
+	/* 4. relative noise pattern r_k: median over channels of σ_g², normalised to mean 1 */
+	double rsum = 0;
+	for (size_t j = 0; j < n; j++) {
+		size_t cnt = 0;
+		for (size_t l = 0; l < L; l++)
+			if (isfinite(m->gsig[l * n + j]))
+				tmp[cnt++] = m->gsig[l * n + j] * m->gsig[l * n + j];
+		m->lam[j] = cnt ? median(tmp, cnt) : 1.0;
+		rsum += m->lam[j];
+	}
+	double rmean = rsum / (double)n;
+	for (size_t j = 0; j < n; j++) {
+		m->lam[j] = rmean > 0 ? m->lam[j] / rmean : 1.0;
+		if (!(m->lam[j] > 1e-6))
+			m->lam[j] = 1e-6;
+	}
+	if (recon_model_derive(m, err))
+		goto out;
+
+	/* 5. shape and smoothing by Rippa's leave-one-out over a small grid (≤ 16 channels scored) */
+	fc.n = n;
+	fc.L = L;
+	fc.lam = m->lam;
+	fc.max_cond = o.max_cond;
+	fc.K = malloc(n * n * sizeof *fc.K);
+	fc.A = malloc(n * n * sizeof *fc.A);
+	fc.G = malloc(n * L * sizeof *fc.G);
+	rhs = malloc(n * (L > 16 ? L : 16) * sizeof *rhs);
+	if (!fc.K || !fc.A || !fc.G || !rhs) {
+		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory for the %zu × %zu system", n, n);
+		goto out;
+	}
+	for (size_t l = 0; l < L; l++)
+		for (size_t j = 0; j < n; j++)
+			fc.G[l * n + j] = m->g[l * n + j] - m->mu[l];
+	size_t chan[16], nc = L < 16 ? L : 16;
+	for (size_t c = 0; c < nc; c++)
+		chan[c] = nc > 1 ? c * (L - 1) / (nc - 1) : 0;
+	double shapes[8], etas[8];
+	int nsh = o.shape > 0 ? 1 : shape_grid(o.kernel, shapes), neta;
+	if (o.shape > 0)
+		shapes[0] = o.shape;
+	static const double eta_grid[] = { 1e-8, 1e-5, 1e-3, 1e-2, 1e-1 };
+	/*
+	 * --smoothing sigma: Λ straight from the measurement uncertainties, as in a Gaussian-process model
+	 * g = s(x) + noise with prior variance α·K: (αK + diag(σ_g²)) w' = g, i.e. η·r_k = σ_g,k²/α with
+	 * α = var(g) / mean diag K (the data's spread attributed to the prior). Only the shape is searched.
+	 */
+	int sigma_mode = o.smoothing == RECON_SMOOTHING_SIGMA;
+	double varG = 0;
+	if (sigma_mode) {
+		if (!any_sig) {
+			acq_errf(err, ACQ_E_INVAL, "fit: --smoothing sigma needs sigma_<nm> columns");
+			goto out;
+		}
+		for (size_t l = 0; l < L; l++) {
+			double v = 0;
+			for (size_t j = 0; j < n; j++)
+				v += fc.G[l * n + j] * fc.G[l * n + j];
+			varG += v / (double)n / (double)L;
+		}
+		if (!(varG > 0))
+			varG = 1;
+		neta = 1;
+		etas[0] = 0; /* set per shape below */
+	} else if (o.smoothing >= 0) {
+		etas[0] = o.smoothing;
+		neta = 1;
+	} else {
+		neta = 5;
+		memcpy(etas, eta_grid, sizeof eta_grid);
+	}
+	double best = INFINITY, bshape = shapes[0], beta = etas[0];
+	int nfail_pd = 0, nfail_cond = 0;
+	double worst_rcond = INFINITY;
+	for (int a = 0; a < nsh; a++) {
+		build_K(&fc, o.kernel, shapes[a], m->ctr, m->tctr);
+		if (sigma_mode) {
+			double dsum = 0;
+			for (size_t k = 0; k < n; k++)
+				dsum += fc.K[k * n + k];
+			etas[0] = fmax(rmean * (dsum / (double)n) / varG, 1e-12);
+		}
+		for (int b = 0; b < neta; b++) {
+			if (o.progress)
+				o.progress(o.progress_ctx, "shape search", (double)(a * neta + b) / (double)(nsh * neta));
+			double rcond = 0;
+			int f = factor(&fc, etas[b], &rcond);
+			if (f == 1) {
+				nfail_pd++;
+				continue;
+			}
+			if (f == 2) {
+				nfail_cond++;
+				if (rcond < worst_rcond)
+					worst_rcond = rcond;
+				continue;
+			}
+			double score = (nsh * neta > 1) ? rippa(&fc, chan, nc, rhs, NULL) : 0;
+			if (score < best || (best == INFINITY && nsh * neta == 1)) {
+				best = score;
+				bshape = shapes[a];
+				beta = etas[b];
+			}
+		}
+	}
+	if (best == INFINITY) {
+		if (nfail_pd)
+			acq_errf(err, ACQ_E_NUMERIC,
+				 "fit: the system K + Λ is not positive definite for kernel '%s' on these %zu directions "
+				 "(%d of %d settings failed Cholesky)%s", rbf_kernel_name(o.kernel), n, nfail_pd,
+				 nsh * neta, o.kernel == RBF_K_PAPER ? "; the paper's kernel is not PD on the sphere: use "
+				 "--kernel wendland" : "; increase --smoothing");
+		else
+			acq_errf(err, ACQ_E_NUMERIC,
+				 "fit: K + Λ too ill-conditioned (condition ≈ %.3g > limit %.3g) for every setting tried; "
+				 "increase --smoothing or reduce --shape", 1.0 / worst_rcond, o.max_cond);
+		goto out;
+	}
+	m->shape = bshape;
+	m->eta = beta;
+	/* 6. the one factorisation; every channel is a right-hand side */
+	if (o.progress)
+		o.progress(o.progress_ctx, "solve", 0.0);
+	build_K(&fc, o.kernel, bshape, m->ctr, m->tctr);
+	if (factor(&fc, beta, &m->rcond) != 0) {
+		acq_errf(err, ACQ_E_NUMERIC, "fit: final factorisation failed");
+		goto out;
+	}
+	memcpy(m->w, fc.G, n * L * sizeof *m->w);
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)L, fc.A, (lapack_int)n, m->w,
+			   (lapack_int)n) != 0) {
+		acq_errf(err, ACQ_E_NUMERIC, "fit: solve failed");
+		goto out;
+	}
+	for (size_t i = 0; i < n * L; i++)
+		if (!isfinite(m->w[i])) {
+			acq_errf(err, ACQ_E_NUMERIC, "fit: non-finite weights");
+			goto out;
+		}
+	/* leave-one-out residuals of every channel (for the record, and as the noise level without sigmas) */
+	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, fc.A, (lapack_int)n) != 0) {
+		acq_errf(err, ACQ_E_NUMERIC, "fit: inverse failed");
+		goto out;
+	}
+	double tot = 0;
+	for (size_t l = 0; l < L; l++) {
+		double sc = 0;
+		for (size_t k = 0; k < n; k++) {
+			double e = m->w[l * n + k] / fc.A[k * n + k];
+			sc += e * e;
+		}
+		tot += sc;
+		double rms = n > 1 ? sqrt(sc / (double)n) : 0.0;
+		for (size_t k = 0; k < n; k++)
+			if (!isfinite(m->gsig[l * n + k]))
+				m->gsig[l * n + k] = rms;
+	}
+	m->loo_rms = sqrt(tot / (double)(n * L));
+	/* 7. energy table of the unscaled interpolant */
+	if (build_albedo_table(m, err, o.progress, o.progress_ctx))
+		goto out;
+	char when[32];
+	time_t now = time(NULL);
+	struct tm tmv;
+	gmtime_r(&now, &tmv);
+	strftime(when, sizeof when, "%Y-%m-%dT%H:%M:%SZ", &tmv);
+	snprintf(m->meta, sizeof m->meta,
+		 "software=acquisitiond %s\ncreated=%s\nsource=%s\nrows=%zu\nrows_dropped_empty=%zu\n"
+		 "rows_merged=%zu\nvalues_imputed=%zu\nuncertainties=%s\nloo_rms_transformed=%.6g\n"
+		 "rcond=%.6g\nalbedo_margin=%.6g\nsymmetry=isotropic%s\n",
+		 ACQ_VERSION, when, o.source ? o.source : "-", n0, dropped, merged, imputed,
+		 have_sig ? "given" : "leave-one-out", m->loo_rms, m->rcond, m->alb_margin,
+		 phi_i_varies ? " (phi_i varies in the data: azimuths taken relative to phi_i)" : "");
+	for (char *p = m->meta; *p; p++) /* keep metadata printable */
+		if ((unsigned char)*p < 0x20 && *p != '\n')
+			*p = '?';
+	if (o.progress)
+		o.progress(o.progress_ctx, "done", 1.0);
+	*out = m;
+	m = NULL;
+	rc = 0;
+out:
+	recon_model_free(m);
+	free(rep);
+	free(idx);
+	free(c6);
+	free(tmp);
+	free(fc.K);
+	free(fc.A);
+	free(fc.G);
+	free(rhs);
+	free(val);
+	free(sig);
+	free(wsum);
+	return rc;
+}
+
+/* ---- random numbers (xoshiro256**, seeded by splitmix64) ------------------------------------------------ */
+
+struct rng {
+	uint64_t s[4];
+};
+
+static uint64_t splitmix(uint64_t *x)
+{
+	uint64_t z = (*x += 0x9E3779B97F4A7C15ull);
+	z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+	z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+	return z ^ (z >> 31);
+}
+
+static void rng_seed(struct rng *r, uint64_t seed)
+{
+	for (int i = 0; i < 4; i++)
+		r->s[i] = splitmix(&seed);
+}
+
+static inline uint64_t rotl(uint64_t x, int k)
+{
+	return (x << k) | (x >> (64 - k));
+}
+
+static uint64_t rng_u64(struct rng *r)
+{
+	uint64_t *s = r->s, res = rotl(s[1] * 5, 7) * 9, t = s[1] << 17;
+	s[2] ^= s[0];
+	s[3] ^= s[1];
+	s[1] ^= s[2];
+	s[0] ^= s[3];
+	s[2] ^= t;
+	s[3] = rotl(s[3], 45);
+	return res;
+}
+
+static double rng_unif(struct rng *r)
+{
+	return (double)(rng_u64(r) >> 11) * 0x1.0p-53;
+}
+
+static double rng_normal(struct rng *r)
+{
+	double u = rng_unif(r), v = rng_unif(r);
+	if (u < 1e-300)
+		u = 1e-300;
+	return sqrt(-2.0 * log(u)) * cos(2.0 * M_PI * v);
+}
+
+/* ---- DHR --------------------------------------------------------------------------------------------- */
+
+/*
+ * DHR(θi, λ) = albedo of the final (energy-scaled) model, with the DHR quadrature above.
+ * Uncertainty: the reconstruction is not linear in the data (the transform that guarantees f ≥ 0), so the
+ * exact formula Var = Σ c_k² σ_k² does not apply. Monte Carlo instead: each draw perturbs the transformed
+ * data by its standard uncertainty (g + σ_g z, z ~ N(0, 1) independent; σ_g from the given sigmas by the
+ * delta method, or the channel's leave-one-out RMS when the file has none), re-centres, solves with the ONE
+ * Cholesky factor of K + Λ (refactored once from the stored model), and integrates. The energy factor of
+ * the nominal model is kept fixed across draws. The reported value is the nominal model's DHR; sigma is the
+ * standard deviation over the draws.
+ */
+int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
+	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err)
+{
+	size_t n = m->n, L = m->nwl, Q = (size_t)DHR_NMU * DHR_NPHI;
+	if (nth == 0 || nth > 64)
+		return acq_errf(err, ACQ_E_INVAL, "dhr: between 1 and 64 incidences");
+	for (size_t t = 0; t < nth; t++)
+		if (!(theta[t] >= 0 && theta[t] <= M_PI / 2))
+			return acq_errf(err, ACQ_E_RANGE, "dhr: incidence %g° outside [0, 90]", theta[t] * 180 / M_PI);
+	if (ndraws < 0 || ndraws > 100000)
+		return acq_errf(err, ACQ_E_INVAL, "dhr: draws must be in [0, 100000]");
+	if ((double)nth * (double)Q * (double)n * 8.0 > 2e9)
+		return acq_errf(err, ACQ_E_RANGE, "dhr: %zu incidences × %zu centres need too much memory", nth, n);
+	int rc = -1;
+	double *Kq = malloc(nth * Q * n * sizeof *Kq), *wt = malloc(Q * sizeof *wt);
+	double *c6 = malloc(nth * Q * 6 * sizeof *c6), *scale = malloc(nth * Q * L * sizeof *scale);
+	double *A = malloc(n * n * sizeof *A), *Wd = malloc(n * L * sizeof *Wd), *Y = malloc(Q * L * sizeof *Y);
+	double *mean = calloc(nth * L, sizeof *mean), *m2 = calloc(nth * L, sizeof *m2);
+	double *mud = malloc(L * sizeof *mud);
+	if (!Kq || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud) {
+		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
+		goto out;
+	}
+	for (size_t t = 0; t < nth; t++) {
+		if (hemi_nodes(theta[t], DHR_NMU, DHR_NPHI, 0, c6 + t * Q * 6, wt)) {
+			acq_errf(err, ACQ_E_INVAL, "dhr: quadrature");
+			goto out;
+		}
+		rbf_kmatrix_soa(m->kernel, m->shape, Q, c6 + t * Q * 6, n, m->soa, Kq + t * Q * n);
+		for (size_t q = 0; q < Q; q++) {
+			const double *c = c6 + (t * Q + q) * 6;
+			for (size_t l = 0; l < L; l++)
+				scale[(t * Q + q) * L + l] = recon_energy_scale(m, theta_of(c), theta_of(c + 3), l) * wt[q];
+		}
+	}
+	/* draw 0 is the nominal model; draws 1..ndraws are perturbed */
+	struct rng r;
+	rng_seed(&r, seed);
+	int factored = 0;
+	for (int d = 0; d <= ndraws; d++) {
+		if (progress)
+			progress(pctx, "dhr", (double)d / (double)(ndraws + 1));
+		if (d == 0) {
+			memcpy(Wd, m->w, n * L * sizeof *Wd);
+			memcpy(mud, m->mu, L * sizeof *mud);
+		} else {
+			if (!factored) {
+				for (size_t j = 0; j < n; j++)
+					for (size_t i = j; i < n; i++) {
+						double v = rbf_kernel(m->kernel, m->shape, m->ctr + 6 * i, m->ctr + 6 * j,
+								      m->tctr + 6 * j);
+						A[j * n + i] = A[i * n + j] = v;
+					}
+				for (size_t k = 0; k < n; k++)
+					A[k * n + k] += m->eta * m->lam[k];
+				if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)n, A, (lapack_int)n) != 0) {
+					acq_errf(err, ACQ_E_NUMERIC, "dhr: refactorisation of the model's system failed");
+					goto out;
+				}
+				factored = 1;
+			}
+			for (size_t l = 0; l < L; l++) {
+				double sum = 0;
+				for (size_t k = 0; k < n; k++) {
+					double v = m->g[l * n + k] + m->gsig[l * n + k] * rng_normal(&r);
+					Wd[l * n + k] = v;
+					sum += v;
+				}
+				mud[l] = sum / (double)n;
+				for (size_t k = 0; k < n; k++)
+					Wd[l * n + k] -= mud[l];
+			}
+			if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)L, A, (lapack_int)n, Wd,
+					   (lapack_int)n) != 0) {
+				acq_errf(err, ACQ_E_NUMERIC, "dhr: solve failed");
+				goto out;
+			}
+		}
+		for (size_t t = 0; t < nth; t++) {
+			cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Q, (int)L, (int)n, 1.0, Kq + t * Q * n,
+				    (int)n, Wd, (int)n, 0.0, Y, (int)L);
+			for (size_t l = 0; l < L; l++) {
+				double acc = 0;
+				for (size_t q = 0; q < Q; q++)
+					acc += scale[(t * Q + q) * L + l] * untransform(m->transform, Y[q * L + l] + mud[l],
+											m->eps[l]);
+				if (d == 0) {
+					dhr[t * L + l] = acc;
+				} else { /* Welford */
+					double delta = acc - mean[t * L + l];
+					mean[t * L + l] += delta / d;
+					m2[t * L + l] += delta * (acc - mean[t * L + l]);
+				}
+			}
+		}
+	}
+	for (size_t i = 0; i < nth * L; i++) {
+		sig[i] = ndraws > 1 ? sqrt(m2[i] / (ndraws - 1)) : 0.0;
+		if (!isfinite(sig[i]) || !isfinite(dhr[i])) {
+			acq_errf(err, ACQ_E_NUMERIC, "dhr: non-finite result");
+			goto out;
+		}
+	}
+	rc = 0;
+out:
+	free(Kq);
+	free(wt);
+	free(c6);
+	free(scale);
+	free(A);
+	free(Wd);
+	free(Y);
+	free(mean);
+	free(m2);
+	free(mud);
+	return rc;
+}
+
+/* ---- check ------------------------------------------------------------------------------------------- */
+
+int recon_check(const struct recon_model *m, size_t npairs, size_t nalb, uint64_t seed,
+		struct recon_check_report *rep, recon_progress_fn progress, void *pctx, struct acq_err *err)
+{
+	memset(rep, 0, sizeof *rep);
+	size_t L = m->nwl, B = 1024;
+	double *ang = malloc(B * 4 * sizeof *ang), *swp = malloc(B * 4 * sizeof *swp);
+	double *f1 = malloc(B * L * sizeof *f1), *f2 = malloc(B * L * sizeof *f2), *alb = malloc(L * sizeof *alb);
+	int rc = -1;
+	if (!ang || !swp || !f1 || !f2 || !alb) {
+		acq_errf(err, ACQ_E_NOMEM, "check: out of memory");
+		goto out;
+	}
+	struct rng r;
+	rng_seed(&r, seed);
+	rep->min_value = INFINITY;
+	rep->max_albedo = -INFINITY;
+	for (size_t p0 = 0; p0 < npairs; p0 += B) {
+		size_t b = npairs - p0 < B ? npairs - p0 : B;
+		if (progress)
+			progress(pctx, "pairs", (double)p0 / (double)npairs);
+		for (size_t i = 0; i < b; i++) {
+			/* uniform on the hemisphere: cosθ uniform; φ uniform on [0, 2π) for both directions */
+			double *a = ang + 4 * i;
+			a[0] = acos(rng_unif(&r));
+			a[1] = 2 * M_PI * rng_unif(&r);
+			a[2] = acos(rng_unif(&r));
+			a[3] = 2 * M_PI * rng_unif(&r);
+			double *s = swp + 4 * i;
+			s[0] = a[2];
+			s[1] = a[3];
+			s[2] = a[0];
+			s[3] = a[1];
+		}
+		if (recon_eval(m, b, ang, f1, err) || recon_eval(m, b, swp, f2, err))
+			goto out;
+		for (size_t i = 0; i < b * L; i++) {
+			if (!isfinite(f1[i]) || !isfinite(f2[i])) {
+				rep->nonfinite++;
+				continue;
+			}
+			if (f1[i] < rep->min_value)
+				rep->min_value = f1[i];
+			if (f2[i] < rep->min_value)
+				rep->min_value = f2[i];
+			double d = fabs(f1[i] - f2[i]), mx = fmax(fabs(f1[i]), fabs(f2[i]));
+			if (d > rep->max_recip_abs)
+				rep->max_recip_abs = d;
+			if (mx > 1e-300 && d / mx > rep->max_recip_rel)
+				rep->max_recip_rel = d / mx;
+		}
+		rep->npairs += b;
+	}
+	for (size_t t = 0; t < nalb + 2; t++) {
+		if (progress)
+			progress(pctx, "albedo", (double)t / (double)(nalb + 2));
+		double th = t == 0 ? 0.0 : t == 1 ? M_PI / 2 : asin(rng_unif(&r)) ; /* sinθ uniform: more grazing */
+		if (albedo_rule(m, th, 48, 96, 1, 1, alb, err))
+			goto out;
+		for (size_t l = 0; l < L; l++) {
+			if (!isfinite(alb[l])) {
+				rep->nonfinite++;
+				continue;
+			}
+			if (alb[l] > rep->max_albedo) {
+				rep->max_albedo = alb[l];
+				rep->max_albedo_theta = th;
+				rep->max_albedo_wl = m->wl[l];
+			}
+		}
+		rep->nalb++;
+	}
+	rc = 0;
+out:
+	free(ang);
+	free(swp);
+	free(f1);
+	free(f2);
+	free(alb);
+	return rc;
+}

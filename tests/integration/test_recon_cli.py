@@ -1,0 +1,123 @@
+#!/usr/bin/python3
+"""Integration test of build/brdf-recon on a synthetic ground truth (recon_synth.py: Lambertian + GGX lobe, the
+paper's 10x10x10 sampling, 2 % noise): fit, eval accuracy on held-out directions, dhr against the true DHR
+(z-scores via --reference), check of the three properties, info, merl, render, dhr --plot, and clear errors
+for a corrupt model and a bad CSV (line and column named)."""
+import os
+import shutil
+import struct
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+BUILD = os.environ.get("ACQ_BUILD", "build")
+SRC = os.environ.get("ACQ_SRC", ".")
+SEED = int(os.environ.get("ACQ_SEED", "1")) % (2**31)
+B = os.path.join(BUILD, "brdf-recon")
+print("ACQ_SEED=%d" % SEED)
+
+
+def run(*args, ok=True):
+    p = subprocess.run([B, *args], capture_output=True, text=True)
+    print("$ brdf-recon", " ".join(args), "->", p.returncode)
+    if p.stderr:
+        print(p.stderr.strip()[:2000])
+    if ok and p.returncode != 0:
+        sys.exit("FAIL: command failed")
+    return p
+
+
+def main():
+    if not os.access(B, os.X_OK):
+        print("brdf-recon not built")
+        return 77
+    d = tempfile.mkdtemp(prefix="recon_cli_")
+    sys.path.insert(0, os.path.join(SRC, "tests", "integration"))
+    import recon_synth as rs
+    s, h, th, dhr = (os.path.join(d, x) for x in ("s.csv", "h.csv", "th.npy", "dhr.csv"))
+    subprocess.run([sys.executable, os.path.join(SRC, "tests/integration/recon_synth.py"), "--samples", s,
+                    "--heldout", h, "--truth-held", th, "--nheld", "400", "--nwl", "6", "--seed", str(SEED),
+                    "--dhr", dhr], check=True)
+    m = os.path.join(d, "m.model")
+    run("fit", s, "-o", m)
+    assert "usage" in run("fit", "--help").stdout
+    # eval: layout and accuracy
+    e = os.path.join(d, "e.csv")
+    run("eval", m, h, "-o", e)
+    with open(e) as fh:
+        header = fh.readline().strip().split(",")
+    assert header[:4] == ["theta_i", "phi_i", "theta_o", "phi_o"] and len(header) == 10, header
+    ev = np.genfromtxt(e, delimiter=",", skip_header=1)
+    t = np.load(th)
+    ang = np.load(th + ".ang.npy")
+    assert np.all(np.isfinite(ev)) and np.all(ev[:, 4:] >= 0)
+    assert np.allclose(np.radians(ev[:, :4]), ang, atol=1e-6)
+    c = (np.cos(ang[:, 0]) * np.cos(ang[:, 2]))[:, None]
+    lr = np.sqrt(np.mean((np.log1p(ev[:, 4:] * c) - np.log1p(t * c)) ** 2))
+    print("held-out log-RMSE %.5f (tolerance 0.01)" % lr)
+    assert lr < 0.01
+    # dhr with the true DHR at 8 degrees as the reference (sigma 1 %)
+    tr = np.genfromtxt(dhr, delimiter=",", skip_header=1)
+    ref = os.path.join(d, "ref.csv")
+    with open(ref, "w") as fh:
+        fh.write("wavelength_nm,dhr,sigma\n")
+        for row in tr[tr[:, 0] == 8]:
+            fh.write("%.10g,%.10g,%.10g\n" % (row[1], row[2], 0.01 * row[2]))
+    out, z = os.path.join(d, "d.csv"), os.path.join(d, "z.csv")
+    p = run("dhr", m, "--theta-i", "8,30,60", "--draws", "16", "--seed", str(SEED), "--reference", ref,
+            "--z-out", z, "-o", out, "--plot", os.path.join(d, "dhr.png"))
+    assert "reference" in p.stderr
+    dd = np.genfromtxt(out, delimiter=",", skip_header=1)
+    assert dd.shape == (18, 4) and np.all(np.isfinite(dd)) and np.all(dd[:, 3] > 0)
+    zz = np.genfromtxt(z, delimiter=",", skip_header=1)
+    print("z-scores at 8 degrees:", np.round(zz[:, 5], 2))
+    assert zz.shape[0] == 6 and np.all(np.abs(zz[:, 5]) < 3)
+    rel = np.abs(dd[:, 2] - tr[:, 2]) / tr[:, 2]
+    print("DHR relative errors:", np.round(rel, 4))
+    assert np.all(rel[:6] < 0.01) and np.all(rel < 0.10)
+    assert os.path.getsize(os.path.join(d, "dhr.png")) > 1000
+    # check: the three properties
+    p = run("check", m, "--pairs", "20000", "--thetas", "8", "--seed", str(SEED))
+    print(p.stdout)
+    assert p.stdout.count("ok  ") == 3
+    assert "directions=" in run("info", m).stdout
+    # merl: size, header, no-data cells, finite non-negative values
+    mb = os.path.join(d, "t.binary")
+    run("merl", m, "-o", mb)
+    assert os.path.getsize(mb) == 34992012
+    with open(mb, "rb") as fh:
+        assert struct.unpack("<3i", fh.read(12)) == (90, 90, 180)
+        v = np.frombuffer(fh.read(), dtype="<f8")
+    assert np.all(np.isfinite(v))
+    nodata = np.count_nonzero(v < 0)
+    print("MERL: %d no-data values, %d data values" % (nodata, v.size - nodata))
+    assert nodata == 3 * (1458000 - 1096216) and np.all(v[v >= 0] >= 0) and v.max() > 0
+    assert os.path.exists(mb + ".colour.json")
+    rp = os.path.join(d, "r.png")
+    run("render", m, "-o", rp, "--size", "64")
+    assert open(rp, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
+    # errors: corrupt model, bad CSV, missing db schema
+    raw = bytearray(open(m, "rb").read())
+    raw[len(raw) // 2] ^= 0x10
+    bad = os.path.join(d, "bad.model")
+    open(bad, "wb").write(raw)
+    p = run("eval", bad, h, ok=False)
+    assert p.returncode == 1 and "checksum" in p.stderr
+    bc = os.path.join(d, "bad.csv")
+    open(bc, "w").write("theta_i,phi_i,theta_o,phi_o,500\n1,2,3,4,0.1\n1,2,3,4,oops\n")
+    p = run("fit", bc, "-o", os.path.join(d, "x.model"), ok=False)
+    assert p.returncode == 1 and ":3:" in p.stderr and "column 5" in p.stderr
+    assert not os.path.exists(os.path.join(d, "x.model"))
+    p = run("fit", "--db", os.path.join(d, "none.db"), "--sweep", "1", "-o", os.path.join(d, "y.model"), ok=False)
+    assert p.returncode == 1
+    p = run("fit", s, ok=False)
+    assert p.returncode == 2
+    print("all ok")
+    shutil.rmtree(d, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,186 @@
+/* Unit tests of recon/rmodel.c: the model file round trip (bit-identical evaluation) and the rejection of
+ * truncated, corrupted, hand-edited and foreign files with clear messages. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <cmocka.h>
+#include <unistd.h>
+
+#include "recon_test_util.h"
+
+static struct recon_model *M;
+static char path[64];
+
+static int setup(void **state)
+{
+	(void)state;
+	struct recon_samples s;
+	rt_samples(&s, 3, 0.02, 1.0);
+	struct recon_fit_opts o;
+	recon_fit_opts_default(&o);
+	o.shape = 1.8;
+	o.smoothing = 1e-3;
+	o.source = "unit test";
+	struct acq_err err = { 0 };
+	int rc = recon_fit(&s, &o, &M, &err);
+	csvio_samples_free(&s);
+	snprintf(path, sizeof path, "/tmp/recon_model_%ld.bin", (long)getpid());
+	return rc;
+}
+
+static int teardown(void **state)
+{
+	(void)state;
+	recon_model_free(M);
+	unlink(path);
+	return 0;
+}
+
+static unsigned char *slurp(const char *p, size_t *len)
+{
+	char *b;
+	struct acq_err err = { 0 };
+	if (csvio_slurp(p, &b, len, &err))
+		return NULL;
+	return (unsigned char *)b;
+}
+
+static void test_round_trip(void **state)
+{
+	(void)state;
+	struct acq_err err = { 0 };
+	assert_int_equal(recon_model_save(M, path, &err), 0);
+	struct recon_model *m2;
+	assert_int_equal(recon_model_load(path, &m2, &err), 0);
+	assert_int_equal(m2->n, M->n);
+	assert_int_equal(m2->nwl, M->nwl);
+	assert_int_equal(m2->kernel, M->kernel);
+	assert_true(m2->shape == M->shape && m2->eta == M->eta);
+	assert_string_equal(m2->meta, M->meta);
+	assert_non_null(strstr(m2->meta, "source=unit test"));
+	const int nq = 300;
+	double ang[4 * 300], f1[3 * 300], f2[3 * 300];
+	for (int q = 0; q < nq; q++)
+		rt_random_pair(ang + 4 * q);
+	assert_int_equal(recon_eval(M, nq, ang, f1, &err), 0);
+	assert_int_equal(recon_eval(m2, nq, ang, f2, &err), 0);
+	assert_memory_equal(f1, f2, sizeof f1);
+	recon_model_free(m2);
+}
+
+static void expect_reject(const unsigned char *b, size_t len, const char *what)
+{
+	struct recon_model *m = (struct recon_model *)&m;
+	struct acq_err err = { 0 };
+	int rc = recon_model_load_mem("bad", b, len, &m, &err);
+	if (rc != -1 || !strstr(err.msg, what))
+		printf("expected '%s', got rc %d: %s\n", what, rc, err.msg);
+	assert_int_equal(rc, -1);
+	assert_null(m);
+	assert_non_null(strstr(err.msg, what));
+}
+
+static uint64_t fnv(const unsigned char *p, size_t n)
+{
+	uint64_t h = 0xcbf29ce484222325ull;
+	for (size_t i = 0; i < n; i++) {
+		h ^= p[i];
+		h *= 0x100000001b3ull;
+	}
+	return h;
+}
+
+/* Re-seal a patched buffer with a valid checksum, to reach the semantic checks. */
+static void reseal(unsigned char *b, size_t len)
+{
+	uint64_t h = fnv(b, len - 8);
+	memcpy(b + len - 8, &h, 8);
+}
+
+static void test_rejects_corrupt_files(void **state)
+{
+	(void)state;
+	struct acq_err err = { 0 };
+	assert_int_equal(recon_model_save(M, path, &err), 0);
+	size_t len;
+	unsigned char *b = slurp(path, &len), *c = malloc(len);
+	assert_non_null(b);
+	/* truncations at many lengths */
+	size_t cuts[] = { 0, 3, 8, 20, 60, 100, len / 2, len - 9, len - 1 };
+	for (size_t i = 0; i < sizeof cuts / sizeof cuts[0]; i++) {
+		struct recon_model *m;
+		assert_int_equal(recon_model_load_mem("cut", b, cuts[i], &m, &err), -1);
+		assert_null(m);
+	}
+	/* one flipped bit anywhere in the body: checksum */
+	for (int i = 0; i < 20; i++) {
+		memcpy(c, b, len);
+		size_t at = 96 + (size_t)(rt_unif() * (double)(len - 96 - 8));
+		c[at] ^= (unsigned char)(1u << (int)(rt_unif() * 8));
+		expect_reject(c, len, "checksum");
+	}
+	/* bad magic, version, kernel, sizes */
+	memcpy(c, b, len);
+	c[0] = 'X';
+	expect_reject(c, len, "bad magic");
+	memcpy(c, b, len);
+	c[8] = 2;
+	expect_reject(c, len, "version 2");
+	memcpy(c, b, len);
+	c[12] = 9;
+	expect_reject(c, len, "unknown kernel");
+	memcpy(c, b, len);
+	c[24 + 7] = 0x7f; /* n huge */
+	expect_reject(c, len, "sizes out of range");
+	/* trailing garbage */
+	unsigned char *d = malloc(len + 5);
+	memcpy(d, b, len);
+	memset(d + len, 0, 5);
+	expect_reject(d, len + 5, "size mismatch");
+	free(d);
+	/* a well-sealed file with a NaN weight, or decreasing wavelengths */
+	size_t off_w = 96 + 3 * M->nwl * 8 + 5 * M->n * 8;
+	memcpy(c, b, len);
+	double nan = NAN;
+	memcpy(c + off_w, &nan, 8);
+	reseal(c, len);
+	expect_reject(c, len, "invalid weights");
+	memcpy(c, b, len);
+	double big = 1e9;
+	memcpy(c + 96, &big, 8);
+	reseal(c, len);
+	expect_reject(c, len, "invalid wavelengths");
+	/* not a file */
+	struct recon_model *m;
+	assert_int_equal(recon_model_load("/nonexistent/model", &m, &err), -1);
+	assert_int_equal(err.code, ACQ_E_IO);
+	free(b);
+	free(c);
+}
+
+static void test_save_refuses_nonfinite(void **state)
+{
+	(void)state;
+	struct acq_err err = { 0 };
+	unlink(path);
+	double keep = M->w[5];
+	M->w[5] = INFINITY;
+	assert_int_equal(recon_model_save(M, path, &err), -1);
+	assert_int_equal(err.code, ACQ_E_NUMERIC);
+	assert_true(access(path, F_OK) != 0); /* nothing written */
+	M->w[5] = keep;
+	assert_int_equal(recon_model_save(M, "/nonexistent/dir/m.bin", &err), -1);
+	assert_int_equal(err.code, ACQ_E_IO);
+}
+
+int main(void)
+{
+	rt_seed();
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_round_trip),
+		cmocka_unit_test(test_rejects_corrupt_files),
+		cmocka_unit_test(test_save_refuses_nonfinite),
+	};
+	return cmocka_run_group_tests_name("recon_model", tests, setup, teardown);
+}
