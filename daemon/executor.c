@@ -1,5 +1,4 @@
 /* executor: the sweep state machine (moves, acquisition policy, calibration, commits, faults, pause/abort). */
-#if __has_include("daemon/store.h") && __has_include("daemon/plan.h") /* until core and planner land */
 #include "daemon/executor.h"
 
 #include <math.h>
@@ -1626,6 +1625,3 @@ void ex_hold(struct ex *x, const char *why)
 		return;
 	pause_now(x, false, "still paused after a restart: %s", why && *why ? why : "paused by the operator");
 }
-#else
-typedef int executor_waits_for_store_and_plan;
-#endif
