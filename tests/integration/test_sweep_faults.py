@@ -115,7 +115,8 @@ def run():
         db.close()
         faults = [e for e in ev if e[0] == "fault"]
         recovered = [e for e in ev if e[0] == "recovered"]
-        redo = [e for e in ev if e[0] == "info" and "measuring the point again" in e[2]]
+        redo = [e for e in ev if e[0] == "info" and ("measuring the point again" in e[2] or "taken again" in e[2]
+                                                     or "stay unmeasured" in e[2])]
         L.say("events: %d faults, %d recoveries, %d re-measured points; laser samples %d, violations %d" % (
             len(faults), len(recovered), len(redo), watch.samples, len(watch.violations)))
         for dev in ("laser.theta", "detector.theta", "spectrometer", "laser"):
