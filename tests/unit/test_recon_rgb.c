@@ -113,6 +113,16 @@ static void test_merl_half_table_exact(void **state)
 	printf("no-data values %zu, worst relative difference %.3g\n", nodata, worst);
 	assert_int_equal(nodata, 3 * (size_t)(MERL_N_CELLS - 1096216));
 	assert_true(worst < 1e-10);
+	/* two workers give the same table bit for bit, and the same tone statistics */
+	struct merl_table two = { NULL };
+	struct colour_stats s1 = { 0 }, s2 = { 0 };
+	merl_free(&half);
+	assert_int_equal(recon_rgb_merl_table_ex(R, &half, 0, 1, &s1, NULL, NULL, &err), 0);
+	assert_int_equal(recon_rgb_merl_table_ex(R, &two, 0, 2, &s2, NULL, NULL, &err), 0);
+	assert_memory_equal(half.data, two.data, 3 * (size_t)MERL_N_CELLS * sizeof *two.data);
+	assert_true(s1.n == s2.n && s1.n > 0 && s1.clipped == s2.clipped && s1.out_of_gamut == s2.out_of_gamut);
+	assert_int_equal(recon_rgb_merl_table_ex(R, &two, 0, 0, NULL, NULL, NULL, &err), -1);
+	merl_free(&two);
 	merl_free(&half);
 	merl_free(&all);
 }
