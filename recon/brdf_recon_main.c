@@ -714,7 +714,8 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 		struct merl_write_opts mo;
 		merl_write_opts_default(&mo);
 		mo.threads = (int)threads;
-		ok = merl_write_ex(outp, fn, ctx, &mo, &err) == 0;
+		/* the table is already in the writer's cells and units: written as it is (no per-cell lookup) */
+		ok = (table.data ? merl_write_table(outp, &table, &err) : merl_write_ex(outp, fn, ctx, &mo, &err)) == 0;
 	} else if (ok) {
 		struct render_opts ro;
 		render_opts_default(&ro);
