@@ -311,7 +311,9 @@ static const char dhr_help[] =
 	"Directional-hemispherical reflectance DHR(theta_i, lambda) of the model with its standard uncertainty\n"
 	"(Monte Carlo over the data uncertainties through the one factorisation, seeded). Quadrature:\n"
 	"Gauss-Legendre 32 in cos(theta_o) x 48 azimuth midpoints (exact for a Lambertian).\n"
-	"Output CSV (stdout by default): theta_i,wavelength_nm,dhr,sigma.\n"
+	"Output CSV (stdout by default): theta_i,wavelength_nm,dhr,sigma,sigma_noise,sigma_model: sigma =\n"
+	"  sqrt(sigma_noise^2 + sigma_model^2), the Monte-Carlo spread from the data's uncertainties and the\n"
+	"  interpolation error (GP posterior variance, amplitude from the leave-one-out residuals).\n"
 	"  --reference REF.csv   compare with a measured DHR (columns wavelength_nm,dhr,sigma) at\n"
 	"                        --reference-theta (default 8 degrees, must be among --theta-i): prints a\n"
 	"                        summary and writes per-wavelength z-scores to --z-out (or stderr)\n";
@@ -382,21 +384,27 @@ static int cmd_dhr(int argc, char **argv)
 	int ok = dhr && sig;
 	if (!ok)
 		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
-	if (ok && recon_dhr(m, nth, thr, (int)draws, seed, dhr, sig, progress, NULL, &err))
+	double *sgn = malloc(nth * L * sizeof *sgn), *sgm = malloc(nth * L * sizeof *sgm);
+	if (ok && (!sgn || !sgm)) {
+		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
+		ok = 0;
+	}
+	if (ok && recon_dhr_ex(m, nth, thr, (int)draws, seed, dhr, sig, sgn, sgm, progress, NULL, &err))
 		ok = 0;
 	progress_end();
 	struct out o;
 	if (ok && !out_open(&o, outp, &err)) {
-		char a[64], b[64];
-		fputs("theta_i,wavelength_nm,dhr,sigma\n", o.f);
+		char a[64], b[64], sn_[64], sm_[64];
+		fputs("theta_i,wavelength_nm,dhr,sigma,sigma_noise,sigma_model\n", o.f);
 		for (size_t t = 0; ok && t < nth; t++)
 			for (size_t l = 0; l < L; l++) {
-				if (csvio_fmt(a, sizeof a, dhr[t * L + l]) || csvio_fmt(b, sizeof b, sig[t * L + l])) {
+				if (csvio_fmt(a, sizeof a, dhr[t * L + l]) || csvio_fmt(b, sizeof b, sig[t * L + l]) ||
+				    csvio_fmt(sn_, sizeof sn_, sgn[t * L + l]) || csvio_fmt(sm_, sizeof sm_, sgm[t * L + l])) {
 					acq_errf(&err, ACQ_E_NUMERIC, "dhr: non-finite value");
 					ok = 0;
 					break;
 				}
-				fprintf(o.f, "%.10g,%.10g,%s,%s\n", th[t], m->wl[l], a, b);
+				fprintf(o.f, "%.10g,%.10g,%s,%s,%s,%s\n", th[t], m->wl[l], a, b, sn_, sm_);
 			}
 		if (out_close(&o, ok, &err))
 			ok = 0;
@@ -495,6 +503,8 @@ static int cmd_dhr(int argc, char **argv)
 	free(ref);
 	free(dhr);
 	free(sig);
+	free(sgn);
+	free(sgm);
 	recon_model_free(m);
 	return ok ? 0 : fail(&err);
 }
@@ -695,7 +705,7 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 	struct merl_table table = { NULL };
 	struct colour_stats st = { 0 };
 	if (ok && !full && !direct) {
-		ok = recon_rgb_merl_table(R, &table, 0, &st, progress, NULL, &err) == 0;
+		ok = recon_rgb_merl_table_ex(R, &table, 0, (int)threads, &st, progress, NULL, &err) == 0;
 		progress_end();
 	}
 	merl_rgb_fn fn = full ? recon_rgb_full_fn : direct ? recon_rgb_fn : merl_table_fn;
@@ -704,7 +714,8 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 		struct merl_write_opts mo;
 		merl_write_opts_default(&mo);
 		mo.threads = (int)threads;
-		ok = merl_write_ex(outp, fn, ctx, &mo, &err) == 0;
+		/* the table is already in the writer's cells and units: written as it is (no per-cell lookup) */
+		ok = (table.data ? merl_write_table(outp, &table, &err) : merl_write_ex(outp, fn, ctx, &mo, &err)) == 0;
 	} else if (ok) {
 		struct render_opts ro;
 		render_opts_default(&ro);

@@ -91,9 +91,16 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
 		 struct acq_err *err);
 
 /* DHR(θi, λ) of the final model at nth incidences (radians) into dhr[t*nwl + l], with standard uncertainty
- * sig[...] from ndraws Monte-Carlo redraws of the data through the one stored factorisation (seeded). */
+ * sig[...]: ndraws Monte-Carlo redraws of the data through the one stored factorisation (seeded), combined
+ * with the interpolation-error term (recon_dhr_ex). */
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err);
+/* recon_dhr, sig = sqrt(sig_noise² + sig_model²) split into its parts (each may be NULL): sig_noise the
+ * Monte-Carlo spread from the data's uncertainties, sig_model the interpolation error (posterior variance of
+ * the DHR under the GP reading of the interpolant, amplitude from the leave-one-out residuals; recon.c). */
+int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
+		 double *dhr, double *sig, double *sig_noise, double *sig_model, recon_progress_fn progress,
+		 void *pctx, struct acq_err *err);
 
 /* Result of recon_check: worst violations of the three properties. */
 struct recon_check_report {

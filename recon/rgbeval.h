@@ -34,6 +34,10 @@ int recon_rgb_batch(const struct recon_rgb *r, size_t nq, const double *wi, cons
  * the others MERL_NO_DATA. Write it with merl_write_ex(path, merl_table_fn, t, ...). */
 int recon_rgb_merl_table(const struct recon_rgb *r, struct merl_table *t, int all_cells, struct colour_stats *stats,
 			 recon_progress_fn progress, void *pctx, struct acq_err *err);
+/* recon_rgb_merl_table with threads (1..16) workers over the θh rows (pthreads; the table is bit-identical
+ * for any count; the progress callback is called with a lock held). */
+int recon_rgb_merl_table_ex(const struct recon_rgb *r, struct merl_table *t, int all_cells, int threads,
+			    struct colour_stats *stats, recon_progress_fn progress, void *pctx, struct acq_err *err);
 /* Largest relative difference (linear RGB, relative to the largest component) between the reduced and
  * the full path found at construction. */
 double recon_rgb_reduction_error(const struct recon_rgb *r);
