@@ -59,22 +59,19 @@ def scale_device_timing(text, scale):
 
 
 def compose_config(path, state, sock, scale, sweep_yaml=None, daemon_extra="", log_level="info"):
-    """config/bench-sim.yaml (devices timed for the scale) + daemon section + the sweep's sections."""
+    """config/bench-sim.yaml (devices timed for the scale) + a test daemon section; its own sweep section
+    unless sweep_yaml replaces it."""
     with open(os.path.join(SRC, "config", "bench-sim.yaml")) as f:
         base = f.read()
-    base = strip_sections(base, {"daemon", "sweep", "recon"})
+    base = strip_sections(base, {"daemon", "recon"} | ({"sweep"} if sweep_yaml is not None else set()))
     if os.environ.get("ACQ_SCALE_DEVICE_TIMING") == "1":  # a daemon whose loop runs on real time
         base = scale_device_timing(base, scale)
     with open(path, "w") as f:
         f.write(base)
         f.write("\ndaemon:\n  state_dir: %s\n  socket: {path: %s, mode: \"0600\"}\n  log_level: %s\n"
                 "  device_retry_s: 0.2\n%s" % (state, sock, log_level, daemon_extra))
-        f.write(sweep_yaml if sweep_yaml is not None else sweep_section())
-
-
-def sweep_section(path=None):
-    with open(path or os.path.join(SRC, "config", "sweep-sim.yaml")) as f:
-        return f.read()
+        if sweep_yaml is not None:
+            f.write(sweep_yaml)
 
 
 class Bench:
