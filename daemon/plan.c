@@ -352,68 +352,18 @@ static double mcost(const struct planner *P, const struct mpt *a, const struct m
 
 #define INF_COST 1e12
 #define OR_K 10
+#define NCAND 5 /* candidate orders */
 
 static double pcost(const double *C, size_t n, size_t a, size_t b)
 {
 	return C[a * n + b];
 }
 
-/* Nearest neighbour from the start row, then 2-opt and Or-opt (segments of 1–3, either orientation) until
- * no move improves. C is symmetric; the start row s is not part of it. */
-static void order_group(const double *C, size_t n, const double *s, size_t *p)
-{
-	if (n == 0)
-		return;
-	char *used = calloc(n, 1);
-	size_t cur = 0;
-	for (size_t i = 0; i < n; i++) {
-		size_t bi = 0;
-		double bc = INFINITY;
-		for (size_t j = 0; j < n; j++) {
-			if (used && used[j])
-				continue;
-			double c = i == 0 ? s[j] : pcost(C, n, cur, j);
-			if (c < bc) {
-				bc = c;
-				bi = j;
-			}
-		}
-		if (!used) { /* out of memory: identity order */
-			p[i] = i;
-			continue;
-		}
-		used[bi] = 1;
-		p[i] = bi;
-		cur = bi;
-	}
-	free(used);
-	size_t kn = n - 1 < OR_K ? n - 1 : OR_K;
-	size_t *tmp = malloc(n * sizeof *tmp), *pos = malloc(n * sizeof *pos);
-	size_t *nbr = malloc((n * kn + 1) * sizeof *nbr);
-	if (!tmp || !pos || !nbr) {
-		free(tmp);
-		free(pos);
-		free(nbr);
-		return;
-	}
-	/* the kn nearest neighbours of every node, by insertion into a short sorted list */
-	for (size_t u = 0; u < n; u++) {
-		size_t *nb = &nbr[u * kn], m = 0;
-		for (size_t v = 0; v < n; v++) {
-			if (v == u)
-				continue;
-			double c = pcost(C, n, u, v);
-			if (m == kn && c >= pcost(C, n, u, nb[m - 1]))
-				continue;
-			size_t k = m < kn ? m++ : kn - 1;
-			while (k > 0 && pcost(C, n, u, nb[k - 1]) > c) {
-				nb[k] = nb[k - 1];
-				k--;
-			}
-			nb[k] = v;
-		}
-	}
 #define E(i, j) ((i) == SIZE_MAX ? s[(j)] : pcost(C, n, (i), (j)))
+/* 2-opt and Or-opt until no move improves (or 200 passes). */
+static void local_search(const double *C, size_t n, const double *s, size_t *p, size_t *tmp, size_t *pos,
+			 const size_t *nbr, size_t kn)
+{
 	bool improved = true;
 	for (int pass = 0; improved && pass < 200; pass++) {
 		improved = false;
@@ -505,7 +455,116 @@ static void order_group(const double *C, size_t n, const double *s, size_t *p)
 			}
 		}
 	}
+}
+
+static double open_len(const double *C, size_t n, const double *s, const size_t *p)
+{
+	double t = s[p[0]];
+	for (size_t i = 1; i < n; i++)
+		t += pcost(C, n, p[i - 1], p[i]);
+	return t;
+}
 #undef E
+
+/* Nearest neighbour from the start row, then 2-opt and Or-opt (segments of 1–3, either orientation) until
+ * no move improves. C is symmetric; the start row s is not part of it. */
+static void order_group(const double *C, size_t n, const double *s, size_t *p, bool ils)
+{
+	if (n == 0)
+		return;
+	char *used = calloc(n, 1);
+	size_t cur = 0;
+	for (size_t i = 0; i < n; i++) {
+		size_t bi = 0;
+		double bc = INFINITY;
+		for (size_t j = 0; j < n; j++) {
+			if (used && used[j])
+				continue;
+			double c = i == 0 ? s[j] : pcost(C, n, cur, j);
+			if (c < bc) {
+				bc = c;
+				bi = j;
+			}
+		}
+		if (!used) { /* out of memory: identity order */
+			p[i] = i;
+			continue;
+		}
+		used[bi] = 1;
+		p[i] = bi;
+		cur = bi;
+	}
+	free(used);
+	size_t kn = n - 1 < OR_K ? n - 1 : OR_K;
+	size_t *tmp = malloc(n * sizeof *tmp), *pos = malloc(n * sizeof *pos);
+	size_t *nbr = malloc((n * kn + 1) * sizeof *nbr);
+	if (!tmp || !pos || !nbr) {
+		free(tmp);
+		free(pos);
+		free(nbr);
+		return;
+	}
+	/* the kn nearest neighbours of every node, by insertion into a short sorted list */
+	for (size_t u = 0; u < n; u++) {
+		size_t *nb = &nbr[u * kn], m = 0;
+		for (size_t v = 0; v < n; v++) {
+			if (v == u)
+				continue;
+			double c = pcost(C, n, u, v);
+			if (m == kn && c >= pcost(C, n, u, nb[m - 1]))
+				continue;
+			size_t k = m < kn ? m++ : kn - 1;
+			while (k > 0 && pcost(C, n, u, nb[k - 1]) > c) {
+				nb[k] = nb[k - 1];
+				k--;
+			}
+			nb[k] = v;
+		}
+	}
+	local_search(C, n, s, p, tmp, pos, nbr, kn);
+	/* Iterated local search: a double-bridge kick (three cut points, segments B and C swapped), local
+	 * search again, keep it if shorter. The random generator is local and seeded by n: deterministic. */
+	size_t *q = malloc(n * sizeof *q);
+	if (q && ils && n >= 8) {
+		double best = open_len(C, n, s, p);
+		uint64_t rng = 0x9E3779B97F4A7C15ull ^ (uint64_t)n;
+		int kicks = n <= 300 ? 60 : n <= 1000 ? 15 : 4;
+		for (int k = 0; k < kicks; k++) {
+			size_t cut[3];
+			for (int c = 0; c < 3; c++) {
+				rng ^= rng << 13;
+				rng ^= rng >> 7;
+				rng ^= rng << 17;
+				cut[c] = 1 + (size_t)(rng % (n - 1));
+			}
+			/* sort the cuts */
+			for (int a = 0; a < 3; a++)
+				for (int b = a + 1; b < 3; b++)
+					if (cut[b] < cut[a]) {
+						size_t t = cut[a];
+						cut[a] = cut[b];
+						cut[b] = t;
+					}
+			if (cut[0] == cut[1] || cut[1] == cut[2])
+				continue;
+			size_t w = 0;
+			for (size_t x = 0; x < cut[0]; x++)
+				q[w++] = p[x];
+			for (size_t x = cut[1]; x < cut[2]; x++)
+				q[w++] = p[x];
+			for (size_t x = cut[0]; x < cut[1]; x++)
+				q[w++] = p[x];
+			for (size_t x = cut[2]; x < n; x++)
+				q[w++] = p[x];
+			local_search(C, n, s, q, tmp, pos, nbr, kn);
+			double len = open_len(C, n, s, q);
+			if (len < best - 1e-9) {
+				best = len;
+				memcpy(p, q, n * sizeof *p);
+			}
+		}
+	}
+	free(q);
 	free(tmp);
 	free(pos);
 	free(nbr);
@@ -564,7 +623,7 @@ static int build_groups(struct planner *P, struct acq_err *err)
 }
 
 /* An order over all measured points: groups in the given direction, each ordered from the previous end. */
-static int order_all(struct planner *P, bool descending, size_t *order, struct acq_err *err)
+static int order_all(struct planner *P, bool descending, bool ils, size_t *order, struct acq_err *err)
 {
 	size_t w = 0, last = SIZE_MAX;
 	for (size_t gi = 0; gi < P->ngrp; gi++) {
@@ -580,7 +639,7 @@ static int order_all(struct planner *P, bool descending, size_t *order, struct a
 			double c = last == SIZE_MAX ? 0 : mcost(P, &P->m[last], &P->m[G->idx[j]]);
 			s[j] = c < 0 ? INF_COST : c;
 		}
-		order_group(G->C, G->n, s, p);
+		order_group(G->C, G->n, s, p, ils);
 		for (size_t j = 0; j < G->n; j++)
 			order[w++] = G->idx[p[j]];
 		last = G->idx[p[G->n - 1]];
@@ -816,9 +875,9 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 	*out = NULL;
 	struct planner P = { .g = g };
 	struct plan_result *R = calloc(1, sizeof *R);
-	size_t *order[3] = { NULL, NULL, NULL };
-	int *rep[3] = { NULL, NULL, NULL };
-	char *keep[3] = { NULL, NULL, NULL };
+	size_t *order[NCAND] = { NULL };
+	int *rep[NCAND] = { NULL };
+	char *keep[NCAND] = { NULL };
 	if (!R)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	if (s->averages < 1 || !(s->integ_ms > 0) || (!s->fib_count && (!s->n_obs_theta || !s->n_obs_phi)) ||
@@ -855,8 +914,10 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 	for (size_t i = 0; i < R->n_req; i++)
 		if (R->req[i].status != PLAN_DUPLICATE)
 			classify_req(g, &R->req[i], s->blind_policy);
-		else
+		else {
 			R->req[i].pos = canon(R->req[i].req);
+			R->req[i].psi_deg = plan_psi_deg(g, &R->req[i].pos);
+		}
 	if (s->reciprocal_pairs) {
 		size_t n0 = R->n_req;
 		add_reciprocals(s, g, R->req, &R->n_req);
@@ -894,10 +955,11 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		goto fail;
 	R->n_groups = P.ngrp;
 
-	/* candidates: ascending incidences, descending, request order */
+	/* candidates: ascending incidences, descending (each with plain local search, and with kicks: the
+	 * kicks shorten each group but move its end, so neither always wins), request order */
 	double best = INFINITY;
 	int bi = -1;
-	for (int c = 0; c < 3; c++) {
+	for (int c = 0; c < NCAND; c++) {
 		order[c] = malloc((P.nm ? P.nm : 1) * sizeof *order[c]);
 		rep[c] = calloc(P.nm ? P.nm : 1, sizeof *rep[c]);
 		keep[c] = calloc(P.nm ? P.nm : 1, 1);
@@ -905,8 +967,8 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 			acq_errf(err, ACQ_E_NOMEM, "out of memory");
 			goto fail;
 		}
-		if (c < 2) {
-			if (order_all(&P, c == 1, order[c], err))
+		if (c < NCAND - 1) {
+			if (order_all(&P, c & 1, c >= 2, order[c], err))
 				goto fail;
 		} else {
 			for (size_t i = 0; i < P.nm; i++)
@@ -1007,7 +1069,7 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		case PLAN_DUPLICATE: R->n_duplicate++; break;
 		}
 	}
-	for (int c = 0; c < 3; c++) {
+	for (int c = 0; c < NCAND; c++) {
 		free(order[c]);
 		free(rep[c]);
 		free(keep[c]);
@@ -1016,7 +1078,7 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 	*out = R;
 	return 0;
 fail:
-	for (int c = 0; c < 3; c++) {
+	for (int c = 0; c < NCAND; c++) {
 		free(order[c]);
 		free(rep[c]);
 		free(keep[c]);

@@ -108,7 +108,7 @@ struct plan_result {
 	size_t n_kept, n_moved, n_dropped, n_duplicate; /* kept counts unmoved measured points */
 	double duration_s;          /* planned sweep */
 	double raster_s;            /* the same points in request order (nested loops), safe moves, no wrap choice */
-	double lower_bound_s;       /* no order and no path can be faster (see plan.c) */
+	double lower_bound_s;       /* no order and no path through these axis positions is faster (see plan.c) */
 	double dwell_s, motion_s;   /* the planned duration split into dwell and motion (settle included) */
 	double travel_deg[3];       /* planned axis travel: laser θ, detector θ, detector φ */
 	size_t n_detours;
@@ -137,7 +137,8 @@ struct json_t;
  * waypoints. NULL when out of memory. */
 struct json_t *plan_to_json(const struct plan_spec *spec, const struct plan_result *res, bool steps);
 
-/* ---- geometry and kinematics (also used by the executor and the simulator) ---- */
+/* ---- geometry and kinematics (also for the executor and the daemon's manual moves; the simulator keeps its
+ * own implementation of the same definitions: libsim links after libdaemon, and two codes check each other) */
 
 /* Points within this of a blind-zone edge count as blind, and path checks need this much clearance to
  * prove a segment safe (so every visible point is reachable by the same test). */
@@ -158,15 +159,20 @@ double plan_seg_time(const struct bench_geom *g, const struct plan_pos *p, const
 /* The ψ paths keep clear of: the largest blind-zone or collision half-angle that applies (margin included),
  * so no arm passes through the other, and no arm crosses the beam or the view while moving either. */
 double plan_clearance_deg(const struct bench_geom *g);
-/* True when the segment p → q keeps ψ ≥ plan_clearance_deg + PLAN_EDGE_DEG at every instant (sound: never
- * a false yes). */
+/* True when the segment p → q (within the axis limits) keeps ψ ≥ plan_collision_deg + PLAN_EDGE_DEG at every
+ * instant: the arms never collide (sound: never a false yes). For manual moves. */
 bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
-/* Fastest collision-free move a → b found: up to PLAN_MAX_WP segments into wps (the last ends at b), their
- * count in *n and the move's time (segments + settle) returned; -1 when no candidate path is safe. */
+/* The same with plan_clearance_deg: no collision and no arm across the beam or the view; planned paths. */
+bool plan_seg_clear(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
+/* Fastest clear move a → b found (every segment passes plan_seg_clear; templates: straight, one arm then the
+ * other, detector zenith detours, azimuth escapes, approach points, a parking pose): up to PLAN_MAX_WP
+ * segments into wps (the last ends at b), their count in *n, and the move's time (segments + settle)
+ * returned; -1 when no candidate path is clear. Executing: run each segment with all its axes started
+ * together, wait in position, then the next; settle once at the end. */
 #define PLAN_MAX_WP 13
 double plan_move(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
 		 struct plan_wp wps[PLAN_MAX_WP], size_t *n);
-/* Readable name of one reason bit, or of the lowest bit set. */
+/* Readable name of the most telling reason bit set (limit, collision, beam, view, unreachable, none nearby). */
 const char *plan_reason_name(unsigned reason);
 
 #endif

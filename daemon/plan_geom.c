@@ -187,9 +187,8 @@ static double box_min_psi(const struct bench_geom *g, double tl, double t1, doub
 	return plan_psi_deg(g, &x);
 }
 
-bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q)
+static bool seg_check(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q, double R)
 {
-	double R = plan_clearance_deg(g);
 	double T = plan_seg_time(g, p, q);
 	if (!in_axis(&g->laser_theta, p->laser_theta) || !in_axis(&g->laser_theta, q->laser_theta) ||
 	    !in_axis(&g->detector_theta, p->det_theta) || !in_axis(&g->detector_theta, q->det_theta) ||
@@ -204,6 +203,16 @@ bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const s
 	    box_min_psi(g, p->laser_theta, p->det_theta, q->det_theta, p->det_phi, q->det_phi) >= R + PLAN_EDGE_DEG)
 		return true;
 	return advance_safe(g, p, q, R);
+}
+
+bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q)
+{
+	return seg_check(g, p, q, plan_collision_deg(g));
+}
+
+bool plan_seg_clear(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q)
+{
+	return seg_check(g, p, q, plan_clearance_deg(g));
 }
 
 /* A candidate path: up to BASIC_WP configurations after a (the last is b). */
@@ -282,7 +291,7 @@ static double move_basic(const struct bench_geom *g, const struct plan_pos *a, c
 	}
 	/* The straight move is never slower than any other path (each axis still covers its distance, and
 	 * the trapezoid time is subadditive), so when it is safe it is the answer. */
-	if (plan_seg_safe(g, a, b)) {
+	if (plan_seg_clear(g, a, b)) {
 		wps[0].pos = *b;
 		wps[0].duration_s = plan_seg_time(g, a, b);
 		*n = 1;
@@ -346,7 +355,7 @@ static double move_basic(const struct bench_geom *g, const struct plan_pos *a, c
 		const struct plan_pos *prev = a;
 		bool ok = true;
 		for (size_t i = 0; i < c[k].n && ok; i++) {
-			ok = plan_seg_safe(g, prev, &c[k].p[i]);
+			ok = plan_seg_clear(g, prev, &c[k].p[i]);
 			prev = &c[k].p[i];
 		}
 		if (!ok)
@@ -427,9 +436,9 @@ static double move_mid(const struct bench_geom *g, const struct plan_pos *a, con
 		for (size_t j = 0; j <= sizeof deltas / sizeof deltas[0]; j++) {
 			/* leave a through ca (j == 0: straight from a), reach b through cb (i) */
 			struct plan_pos ca = *a, cb;
-			if (!push_away(g, b, deltas[i], &cb) || !plan_seg_safe(g, &cb, b))
+			if (!push_away(g, b, deltas[i], &cb) || !plan_seg_clear(g, &cb, b))
 				continue;
-			if (j > 0 && (!push_away(g, a, deltas[j - 1], &ca) || !plan_seg_safe(g, a, &ca)))
+			if (j > 0 && (!push_away(g, a, deltas[j - 1], &ca) || !plan_seg_clear(g, a, &ca)))
 				continue;
 			if (move_basic(g, &ca, &cb, w, &nw) < 0)
 				continue;
@@ -482,7 +491,7 @@ double plan_move(const struct bench_geom *g, const struct plan_pos *a, const str
 					continue;
 				struct plan_pos pa = { a->laser_theta, z, p }, pb = { b->laser_theta, z, p };
 				double t1 = move_mid(g, a, &pa, w1, &n1);
-				if (t1 < 0 || !plan_seg_safe(g, &pa, &pb))
+				if (t1 < 0 || !plan_seg_clear(g, &pa, &pb))
 					continue;
 				double t3 = move_mid(g, &pb, b, w3, &n3);
 				if (t3 < 0)

@@ -130,7 +130,9 @@ static const char fit_help[] =
 	"                          the paper's literal construction, not guaranteed positive definite)\n"
 	"  --transform T           log (default: interpolate ln(f+eps)) or sqrt\n"
 	"  --shape X|auto          kernel shape parameter (default auto: Rippa leave-one-out over a grid)\n"
-	"  --smoothing X|auto      eta in (K + eta*diag(r)) w = g, r from the uncertainties (default auto)\n"
+	"  --smoothing X|auto|sigma  eta in (K + eta*diag(r)) w = g, r from the uncertainties: a number, auto\n"
+	"                          (default: leave-one-out), or sigma (Lambda = the transformed variances over\n"
+	"                          the prior variance of the data; needs sigma_<nm> columns)\n"
 	"  --max-cond X            largest accepted condition number (default 1e12)\n"
 	"  --db FILE --sweep ID    read a sweep from the daemon's database instead of a CSV file\n";
 
@@ -168,8 +170,10 @@ static int cmd_fit(int argc, char **argv)
 		case 'm':
 			if (!strcmp(optarg, "auto"))
 				o.smoothing = -1;
+			else if (!strcmp(optarg, "sigma"))
+				o.smoothing = RECON_SMOOTHING_SIGMA;
 			else if (parse_double(optarg, &o.smoothing) || o.smoothing < 0)
-				return usage_err("fit", "--smoothing needs a number >= 0 or auto");
+				return usage_err("fit", "--smoothing needs a number >= 0, auto or sigma");
 			break;
 		case 'c':
 			if (parse_double(optarg, &o.max_cond) || !(o.max_cond >= 1))
@@ -307,7 +311,9 @@ static const char dhr_help[] =
 	"Directional-hemispherical reflectance DHR(theta_i, lambda) of the model with its standard uncertainty\n"
 	"(Monte Carlo over the data uncertainties through the one factorisation, seeded). Quadrature:\n"
 	"Gauss-Legendre 32 in cos(theta_o) x 48 azimuth midpoints (exact for a Lambertian).\n"
-	"Output CSV (stdout by default): theta_i,wavelength_nm,dhr,sigma.\n"
+	"Output CSV (stdout by default): theta_i,wavelength_nm,dhr,sigma,sigma_noise,sigma_model: sigma =\n"
+	"  sqrt(sigma_noise^2 + sigma_model^2), the Monte-Carlo spread from the data's uncertainties and the\n"
+	"  interpolation error (GP posterior variance, amplitude from the leave-one-out residuals).\n"
 	"  --reference REF.csv   compare with a measured DHR (columns wavelength_nm,dhr,sigma) at\n"
 	"                        --reference-theta (default 8 degrees, must be among --theta-i): prints a\n"
 	"                        summary and writes per-wavelength z-scores to --z-out (or stderr)\n";
@@ -378,21 +384,27 @@ static int cmd_dhr(int argc, char **argv)
 	int ok = dhr && sig;
 	if (!ok)
 		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
-	if (ok && recon_dhr(m, nth, thr, (int)draws, seed, dhr, sig, progress, NULL, &err))
+	double *sgn = malloc(nth * L * sizeof *sgn), *sgm = malloc(nth * L * sizeof *sgm);
+	if (ok && (!sgn || !sgm)) {
+		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
+		ok = 0;
+	}
+	if (ok && recon_dhr_ex(m, nth, thr, (int)draws, seed, dhr, sig, sgn, sgm, progress, NULL, &err))
 		ok = 0;
 	progress_end();
 	struct out o;
 	if (ok && !out_open(&o, outp, &err)) {
-		char a[64], b[64];
-		fputs("theta_i,wavelength_nm,dhr,sigma\n", o.f);
+		char a[64], b[64], sn_[64], sm_[64];
+		fputs("theta_i,wavelength_nm,dhr,sigma,sigma_noise,sigma_model\n", o.f);
 		for (size_t t = 0; ok && t < nth; t++)
 			for (size_t l = 0; l < L; l++) {
-				if (csvio_fmt(a, sizeof a, dhr[t * L + l]) || csvio_fmt(b, sizeof b, sig[t * L + l])) {
+				if (csvio_fmt(a, sizeof a, dhr[t * L + l]) || csvio_fmt(b, sizeof b, sig[t * L + l]) ||
+				    csvio_fmt(sn_, sizeof sn_, sgn[t * L + l]) || csvio_fmt(sm_, sizeof sm_, sgm[t * L + l])) {
 					acq_errf(&err, ACQ_E_NUMERIC, "dhr: non-finite value");
 					ok = 0;
 					break;
 				}
-				fprintf(o.f, "%.10g,%.10g,%s,%s\n", th[t], m->wl[l], a, b);
+				fprintf(o.f, "%.10g,%.10g,%s,%s,%s,%s\n", th[t], m->wl[l], a, b, sn_, sm_);
 			}
 		if (out_close(&o, ok, &err))
 			ok = 0;
@@ -491,6 +503,8 @@ static int cmd_dhr(int argc, char **argv)
 	free(ref);
 	free(dhr);
 	free(sig);
+	free(sgn);
+	free(sgm);
 	recon_model_free(m);
 	return ok ? 0 : fail(&err);
 }
@@ -587,7 +601,7 @@ static int colour_arg(struct colour_opts *co, const char *arg, struct acq_err *e
 
 /* Write the colour decisions and the reduction figures next to an output (path + ".colour.json"). */
 static int write_decisions(const char *out, const struct colour_opts *co, const struct recon_rgb *R, int full,
-			   struct acq_err *err)
+			   double bin_nm, struct acq_err *err)
 {
 	char p[4096];
 	snprintf(p, sizeof p, "%s.colour.json", out);
@@ -598,25 +612,28 @@ static int write_decisions(const char *out, const struct colour_opts *co, const 
 	recon_rgb_sizes(R, &nc, &r);
 	fprintf(o.f, "{\"colour\": ");
 	int ok = colour_opts_write_json(o.f, co, NULL, err) == 0;
-	fprintf(o.f, ", \"spectral_path\": \"%s\", \"channels\": %zu, \"rank\": %zu, "
-		"\"reduction_max_rel_error\": %.3g}\n", full ? "full" : "reduced", nc, r, recon_rgb_reduction_error(R));
+	fprintf(o.f, ", \"spectral_path\": \"%s\", \"bin_nm\": %g, \"channels\": %zu, \"rank\": %zu, "
+		"\"reduction_max_rel_error\": %.3g}\n", full ? "full" : "reduced", bin_nm, nc, r,
+		recon_rgb_reduction_error(R));
 	return out_close(&o, ok, err);
 }
 
 static const char merl_help[] =
-	"usage: brdf-recon merl MODEL -o FILE.binary [--colour key=value]... [--threads N] [--direct|--full-spectrum]\n"
+	"usage: brdf-recon merl MODEL -o FILE.binary [--colour key=value]... [--threads N] [--bin-nm X]\n"
+	"                        [--direct|--full-spectrum]\n"
 	"Write the model as a MERL isotropic RGB table (90 x 90 x 180 cells, 34,992,012 bytes). Only cells whose\n"
 	"two directions are above the horizon are evaluated (the others hold -1, \"no data\"). Spectra go through\n"
 	"the colour chain (default: D65, CIE 1931 2 deg, Bradford, absolute sr^-1, clamp, keep, linear); the\n"
-	"model is reduced to what RGB needs (visible channels binned to 5 nm, low-rank weights; the error of the\n"
-	"reduction is measured and printed) and evaluated in batches. --direct: one callback per cell (same\n"
-	"values, slower); --full-spectrum: every model channel per cell (reference path, slowest).\n"
+	"model is reduced to what RGB needs (visible channels averaged in --bin-nm bins, default 5 nm, error\n"
+	"about bin^2/8 f''/f; low-rank weights), the error of the reduction measured and printed, and evaluated\n"
+	"in batches. --direct: one callback per cell (same values, slower); --full-spectrum: every model\n"
+	"channel per cell (reference path, slowest).\n"
 	"The decisions are written to FILE.binary.colour.json. Colour keys: illum gap adapt norm white max_albedo\n"
 	"target exposure gamut range reinhard_white srgb_encode.\n";
 
 static const char render_help[] =
 	"usage: brdf-recon render MODEL -o OUT.png [--size N] [--exposure X] [--colour key=value]... [--threads N]\n"
-	"                         [--direct | --full-spectrum]\n"
+	"                         [--bin-nm X] [--direct | --full-spectrum]\n"
 	"Preview of the model on a sphere under two lights and a gradient sky (tone-mapped sRGB PNG). By default\n"
 	"the model is tabulated as a MERL table in memory (batched) and rendered through its nearest-cell lookup;\n"
 	"--direct evaluates the reduced model per ray, --full-spectrum every channel per ray.\n";
@@ -627,8 +644,10 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 		{ "output", required_argument, 0, 'o' }, { "colour", required_argument, 0, 'c' },
 		{ "threads", required_argument, 0, 't' }, { "full-spectrum", no_argument, 0, 'f' },
 		{ "size", required_argument, 0, 's' }, { "exposure", required_argument, 0, 'e' },
-		{ "direct", no_argument, 0, 'd' }, { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+		{ "direct", no_argument, 0, 'd' }, { "bin-nm", required_argument, 0, 'b' },
+		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
 	int direct = 0;
+	double bin_nm = 5;
 	int is_merl = !strcmp(cmd, "merl");
 	const char *outp = NULL;
 	struct acq_err err = { 0 };
@@ -650,6 +669,10 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 			break;
 		case 'f': full = 1; break;
 		case 'd': direct = 1; break;
+		case 'b':
+			if (parse_double(optarg, &bin_nm) || !(bin_nm >= 0.5 && bin_nm <= 50))
+				return usage_err(cmd, "--bin-nm needs 0.5..50");
+			break;
 		case 's':
 			if (is_merl || parse_u64(optarg, &size) || size < 8 || size > 4096)
 				return usage_err(cmd, "--size needs 8..4096 (render only)");
@@ -668,12 +691,13 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 	if (recon_model_load(argv[optind], &m, &err))
 		return fail(&err);
 	struct recon_rgb *R = NULL;
-	int ok = recon_rgb_new(m, &co, &R, &err) == 0;
+	int ok = recon_rgb_new(m, &co, bin_nm, &R, &err) == 0;
 	if (ok) {
 		size_t nc, r;
 		recon_rgb_sizes(R, &nc, &r);
-		fprintf(stderr, "%s: %s path, %zu of %zu channels, spectral rank %zu, reduction error %.2g (relative)\n",
-			cmd, full ? "full-spectrum" : "reduced", nc, m->nwl, r, recon_rgb_reduction_error(R));
+		fprintf(stderr, "%s: %s path, %zu of %zu channels (%g nm bins), spectral rank %zu, reduction error %.2g "
+			"(relative)\n", cmd, full ? "full-spectrum" : "reduced", nc, m->nwl, bin_nm, r,
+			recon_rgb_reduction_error(R));
 	}
 	/* default: the table is computed in batches (GEMMs) and both outputs read it: the MERL writer through
 	 * the reference lookup (which returns each cell's own value at the cell centres it asks for), the
@@ -681,7 +705,7 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 	struct merl_table table = { NULL };
 	struct colour_stats st = { 0 };
 	if (ok && !full && !direct) {
-		ok = recon_rgb_merl_table(R, &table, 0, &st, progress, NULL, &err) == 0;
+		ok = recon_rgb_merl_table_ex(R, &table, 0, (int)threads, &st, progress, NULL, &err) == 0;
 		progress_end();
 	}
 	merl_rgb_fn fn = full ? recon_rgb_full_fn : direct ? recon_rgb_fn : merl_table_fn;
@@ -690,7 +714,8 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 		struct merl_write_opts mo;
 		merl_write_opts_default(&mo);
 		mo.threads = (int)threads;
-		ok = merl_write_ex(outp, fn, ctx, &mo, &err) == 0;
+		/* the table is already in the writer's cells and units: written as it is (no per-cell lookup) */
+		ok = (table.data ? merl_write_table(outp, &table, &err) : merl_write_ex(outp, fn, ctx, &mo, &err)) == 0;
 	} else if (ok) {
 		struct render_opts ro;
 		render_opts_default(&ro);
@@ -701,7 +726,7 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 	}
 	merl_free(&table);
 	if (ok)
-		ok = write_decisions(outp, &co, R, full, &err) == 0;
+		ok = write_decisions(outp, &co, R, full, bin_nm, &err) == 0;
 	recon_rgb_free(R);
 	recon_model_free(m);
 	if (!ok)

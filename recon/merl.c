@@ -257,65 +257,12 @@ static int write_all(int fd, const double *data, const char *tmp, struct acq_err
 	return 0;
 }
 
-int merl_write_ex(const char *path, merl_rgb_fn fn, void *ctx, const struct merl_write_opts *o,
-		  struct acq_err *err)
+/* Write data (3 × MERL_N_CELLS stored values) to path atomically: temporary file in the same folder, fsync,
+ * rename; nothing is left at path on failure. */
+static int write_atomic(const char *path, const double *data, struct acq_err *err)
 {
-	struct merl_write_opts def;
-	merl_write_opts_default(&def);
-	if (!o)
-		o = &def;
-	if (!path || !*path || !fn)
-		return acq_errf(err, ACQ_E_INVAL, "merl: no output path or no callback");
-	if (o->threads < 1 || o->threads > 16 || !isfinite(o->clamp_min) || o->clamp_min < 0)
-		return acq_errf(err, ACQ_E_INVAL, "merl: threads must be 1..16 (got %d) and clamp_min finite, >= 0 (got %g)",
-				o->threads, o->clamp_min);
-	double *data = malloc(3 * (size_t)MERL_N_CELLS * sizeof(*data));
-	if (!data)
-		return acq_errf(err, ACQ_E_NOMEM, "merl: out of memory for the table (%lld bytes)", MERL_FILE_SIZE);
-
 	int rc = -1, fd = -1;
 	char *tmp = NULL;
-	atomic_int stop = 0;
-	struct job jobs[16];
-	pthread_t tid[16];
-	int started = 0;
-	for (int t = 0; t < o->threads; t++)
-		jobs[t] = (struct job){ .fn = fn, .ctx = ctx, .data = data, .clamp_min = o->clamp_min, .thread = t,
-					.nthreads = o->threads, .stop = &stop };
-	for (int t = 1; t < o->threads; t++) {
-		if (pthread_create(&tid[t], NULL, eval_rows, &jobs[t]) != 0) {
-			atomic_store(&stop, 1);
-			acq_errf(err, ACQ_E_NOMEM, "merl: cannot start evaluation thread %d", t);
-			break;
-		}
-		started = t;
-	}
-	if (!atomic_load(&stop))
-		eval_rows(&jobs[0]);
-	for (int t = 1; t <= started; t++)
-		pthread_join(tid[t], NULL);
-	if (started + 1 < o->threads && o->threads > 1)
-		goto out; /* thread start failure, err already filled */
-	for (int t = 0; t < o->threads; t++) {
-		struct job *j = &jobs[t];
-		if (!j->failed)
-			continue;
-		double wi[3], wo[3];
-		merl_cell_dirs(j->cell[0], j->cell[1], j->cell[2], wi, wo);
-		if (j->failed == 1)
-			acq_errf(err, ACQ_E_NUMERIC,
-				 "merl: BRDF callback failed (%d) at cell (%d, %d, %d), wi (%.4f, %.4f, %.4f) wo (%.4f, %.4f, "
-				 "%.4f)",
-				 j->fail_rc, j->cell[0], j->cell[1], j->cell[2], wi[0], wi[1], wi[2], wo[0], wo[1], wo[2]);
-		else
-			acq_errf(err, ACQ_E_NUMERIC,
-				 "merl: BRDF callback returned a non-finite or too large value (%g, %g, %g) at cell (%d, %d, "
-				 "%d), wi (%.4f, %.4f, %.4f) wo (%.4f, %.4f, %.4f)",
-				 j->bad[0], j->bad[1], j->bad[2], j->cell[0], j->cell[1], j->cell[2], wi[0], wi[1], wi[2],
-				 wo[0], wo[1], wo[2]);
-		goto out;
-	}
-
 	size_t pl = strlen(path);
 	tmp = malloc(pl + 16);
 	if (!tmp) {
@@ -357,6 +304,84 @@ out:
 		unlink(tmp);
 		free(tmp);
 	}
+	return rc;
+}
+
+int merl_write_table(const char *path, const struct merl_table *t, struct acq_err *err)
+{
+	if (!path || !*path || !t || !t->data)
+		return acq_errf(err, ACQ_E_INVAL, "merl: no output path or no table");
+	for (size_t i = 0; i < 3 * (size_t)MERL_N_CELLS; i++) {
+		double v = t->data[i];
+		if (!isfinite(v) || (v < 0 && v != MERL_NO_DATA))
+			return acq_errf(err, ACQ_E_NUMERIC, "merl: table value %g at cell %zu of channel %zu is not finite, "
+					"not >= 0 and not MERL_NO_DATA", v, i % MERL_N_CELLS, i / MERL_N_CELLS);
+	}
+	return write_atomic(path, t->data, err);
+}
+
+int merl_write_ex(const char *path, merl_rgb_fn fn, void *ctx, const struct merl_write_opts *o,
+		  struct acq_err *err)
+{
+	struct merl_write_opts def;
+	merl_write_opts_default(&def);
+	if (!o)
+		o = &def;
+	if (!path || !*path || !fn)
+		return acq_errf(err, ACQ_E_INVAL, "merl: no output path or no callback");
+	if (o->threads < 1 || o->threads > 16 || !isfinite(o->clamp_min) || o->clamp_min < 0)
+		return acq_errf(err, ACQ_E_INVAL, "merl: threads must be 1..16 (got %d) and clamp_min finite, >= 0 (got %g)",
+				o->threads, o->clamp_min);
+	double *data = malloc(3 * (size_t)MERL_N_CELLS * sizeof(*data));
+	if (!data)
+		return acq_errf(err, ACQ_E_NOMEM, "merl: out of memory for the table (%lld bytes)", MERL_FILE_SIZE);
+
+	int rc = -1;
+	atomic_int stop = 0;
+	struct job jobs[16];
+	pthread_t tid[16];
+	int started = 0;
+	for (int t = 0; t < o->threads; t++)
+		jobs[t] = (struct job){ .fn = fn, .ctx = ctx, .data = data, .clamp_min = o->clamp_min, .thread = t,
+					.nthreads = o->threads, .stop = &stop };
+	for (int t = 1; t < o->threads; t++) {
+		if (pthread_create(&tid[t], NULL, eval_rows, &jobs[t]) != 0) {
+			atomic_store(&stop, 1);
+			acq_errf(err, ACQ_E_NOMEM, "merl: cannot start evaluation thread %d", t);
+			break;
+		}
+		started = t;
+	}
+	if (!atomic_load(&stop))
+		eval_rows(&jobs[0]);
+	for (int t = 1; t <= started; t++)
+		pthread_join(tid[t], NULL);
+	if (started + 1 < o->threads && o->threads > 1)
+		goto out; /* thread start failure, err already filled */
+	for (int t = 0; t < o->threads; t++) {
+		struct job *j = &jobs[t];
+		if (!j->failed)
+			continue;
+		double wi[3], wo[3];
+		merl_cell_dirs(j->cell[0], j->cell[1], j->cell[2], wi, wo);
+		if (j->failed == 1)
+			acq_errf(err, ACQ_E_NUMERIC,
+				 "merl: BRDF callback failed (%d) at cell (%d, %d, %d), wi (%.4f, %.4f, %.4f) wo (%.4f, %.4f, "
+				 "%.4f)",
+				 j->fail_rc, j->cell[0], j->cell[1], j->cell[2], wi[0], wi[1], wi[2], wo[0], wo[1], wo[2]);
+		else
+			acq_errf(err, ACQ_E_NUMERIC,
+				 "merl: BRDF callback returned a non-finite or too large value (%g, %g, %g) at cell (%d, %d, "
+				 "%d), wi (%.4f, %.4f, %.4f) wo (%.4f, %.4f, %.4f)",
+				 j->bad[0], j->bad[1], j->bad[2], j->cell[0], j->cell[1], j->cell[2], wi[0], wi[1], wi[2],
+				 wo[0], wo[1], wo[2]);
+		goto out;
+	}
+
+	if (write_atomic(path, data, err) != 0)
+		goto out;
+	rc = 0;
+out:
 	free(data);
 	return rc;
 }

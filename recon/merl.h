@@ -34,6 +34,8 @@ extern const double merl_scale[3];
  * z > 0); return 0, or non-zero to abort the write (reported as an error). */
 typedef int (*merl_rgb_fn)(void *ctx, const double wi[3], const double wo[3], double rgb[3]);
 
+struct merl_table;
+
 /* Options of merl_write_ex. */
 struct merl_write_opts {
 	int threads;      /* evaluation threads, 1..16; > 1 only if the callback is thread-safe; default 1 */
@@ -52,6 +54,12 @@ int merl_write(const char *path, merl_rgb_fn fn, void *ctx, struct acq_err *err)
 /* merl_write with options (NULL = defaults). */
 int merl_write_ex(const char *path, merl_rgb_fn fn, void *ctx, const struct merl_write_opts *o,
 		  struct acq_err *err);
+
+/* Write a table already in stored units (e.g. recon_rgb_merl_table) to path atomically, as merl_write_ex
+ * would write it through merl_table_fn (the same values, without the per-cell lookups: at most one rounding
+ * apart). Every value must be finite and ≥ 0 or MERL_NO_DATA (ACQ_E_NUMERIC names the cell otherwise); the
+ * no-data cells are the producer's (recon_rgb_merl_table marks exactly the cells below the horizon). */
+int merl_write_table(const char *path, const struct merl_table *t, struct acq_err *err);
 
 /* Directions of cell (ith, itd, ipd) under the writer convention; returns 1 if both are above the horizon
  * (the cell has data), 0 if not, -1 for indices out of range. */

@@ -170,7 +170,7 @@ void rbf_soa(size_t n, const double *ctr, double *soa)
 }
 
 /* Branch-free Wendland for the vector loop: identical values to wendland() (0 beyond the support). */
-static inline double wendland_bf(double t)
+static inline __attribute__((always_inline)) double wendland_bf(double t)
 {
 	t = t < 1.0 ? t : 1.0;
 	double u = 1.0 - t, u2 = u * u;
@@ -180,30 +180,58 @@ static inline double wendland_bf(double t)
 /*
  * The hot loop of every evaluation (MERL cells, render pixels, quadrature nodes): centres in structure-of-
  * arrays form, the τ image read from the same arrays (τ(ci, co) = (mirror co, mirror ci)), no branches, so
- * the compiler vectorises it (recon/module.mk builds this file with -O3 -fno-math-errno -fno-trapping-math). The arithmetic is
+ * the compiler vectorises it (recon/module.mk builds this file with -O3 -fno-math-errno -fno-trapping-math;
+ * an AVX2 copy is chosen at run time where the CPU has it). The arithmetic is
  * the same, in the same order, as chord() in rbf_kernel, so both paths give the same bits.
  */
-__attribute__((target_clones("avx2", "default")))
-void rbf_krow(int kernel, double shape, const double q[6], size_t n, const double *soa, double *krow_)
+/* The Wendland row, inlined into a baseline and an AVX2 copy (chosen at run time by rbf_krow). */
+static inline __attribute__((always_inline)) void krow_wendland(double shape, const double q[6], size_t n,
+								const double *soa, double *krow_)
 {
 	const double *restrict cx = soa, *restrict cy = soa + n, *restrict cz = soa + 2 * n,
 		     *restrict ox = soa + 3 * n, *restrict oy = soa + 4 * n, *restrict oz = soa + 5 * n;
 	double *restrict krow = krow_;
 	const double q0 = q[0], q1 = q[1], q2 = q[2], q3 = q[3], q4 = q[4], q5 = q[5], inv = 1.0 / shape;
+	for (size_t j = 0; j < n; j++) {
+		double a = q0 - cx[j], b = q1 - cy[j], c = q2 - cz[j];
+		double r1 = sqrt(a * a + b * b + c * c);
+		double d = q3 - ox[j], e = q4 - oy[j], f = q5 - oz[j];
+		double r2 = sqrt(d * d + e * e + f * f);
+		double g = q0 - ox[j], h = q1 - -oy[j], i = q2 - oz[j];
+		double t1 = sqrt(g * g + h * h + i * i);
+		double k = q3 - cx[j], l = q4 - -cy[j], o = q5 - cz[j];
+		double t2 = sqrt(k * k + l * l + o * o);
+		krow[j] = wendland_bf(r1 * inv) * wendland_bf(r2 * inv) + wendland_bf(t1 * inv) * wendland_bf(t2 * inv);
+	}
+}
+
+#if defined(__x86_64__)
+__attribute__((target("avx2"))) static void krow_wendland_avx2(double shape, const double q[6], size_t n,
+								 const double *soa, double *krow)
+{
+	krow_wendland(shape, q, n, soa, krow);
+}
+#endif
+
+static void krow_wendland_base(double shape, const double q[6], size_t n, const double *soa, double *krow)
+{
+	krow_wendland(shape, q, n, soa, krow);
+}
+
+void rbf_krow(int kernel, double shape, const double q[6], size_t n, const double *soa, double *krow)
+{
 	if (kernel == RBF_K_WENDLAND) {
-		for (size_t j = 0; j < n; j++) {
-			double a = q0 - cx[j], b = q1 - cy[j], c = q2 - cz[j];
-			double r1 = sqrt(a * a + b * b + c * c);
-			double d = q3 - ox[j], e = q4 - oy[j], f = q5 - oz[j];
-			double r2 = sqrt(d * d + e * e + f * f);
-			double g = q0 - ox[j], h = q1 - -oy[j], i = q2 - oz[j];
-			double t1 = sqrt(g * g + h * h + i * i);
-			double k = q3 - cx[j], l = q4 - -cy[j], o = q5 - cz[j];
-			double t2 = sqrt(k * k + l * l + o * o);
-			krow[j] = wendland_bf(r1 * inv) * wendland_bf(r2 * inv) + wendland_bf(t1 * inv) * wendland_bf(t2 * inv);
+#if defined(__x86_64__)
+		if (__builtin_cpu_supports("avx2")) {
+			krow_wendland_avx2(shape, q, n, soa, krow);
+			return;
 		}
+#endif
+		krow_wendland_base(shape, q, n, soa, krow);
 		return;
 	}
+	const double *cx = soa, *cy = soa + n, *cz = soa + 2 * n, *ox = soa + 3 * n, *oy = soa + 4 * n,
+		     *oz = soa + 5 * n;
 	for (size_t j = 0; j < n; j++) {
 		double b[6] = { cx[j], cy[j], cz[j], ox[j], oy[j], oz[j] }, tb[6];
 		rbf_tau(b, tb);

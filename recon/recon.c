@@ -774,7 +774,29 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	if (o.shape > 0)
 		shapes[0] = o.shape;
 	static const double eta_grid[] = { 1e-8, 1e-5, 1e-3, 1e-2, 1e-1 };
-	if (o.smoothing >= 0) {
+	/*
+	 * --smoothing sigma: Λ straight from the measurement uncertainties, as in a Gaussian-process model
+	 * g = s(x) + noise with prior variance α·K: (αK + diag(σ_g²)) w' = g, i.e. η·r_k = σ_g,k²/α with
+	 * α = var(g) / mean diag K (the data's spread attributed to the prior). Only the shape is searched.
+	 */
+	int sigma_mode = o.smoothing == RECON_SMOOTHING_SIGMA;
+	double varG = 0;
+	if (sigma_mode) {
+		if (!any_sig) {
+			acq_errf(err, ACQ_E_INVAL, "fit: --smoothing sigma needs sigma_<nm> columns");
+			goto out;
+		}
+		for (size_t l = 0; l < L; l++) {
+			double v = 0;
+			for (size_t j = 0; j < n; j++)
+				v += fc.G[l * n + j] * fc.G[l * n + j];
+			varG += v / (double)n / (double)L;
+		}
+		if (!(varG > 0))
+			varG = 1;
+		neta = 1;
+		etas[0] = 0; /* set per shape below */
+	} else if (o.smoothing >= 0) {
 		etas[0] = o.smoothing;
 		neta = 1;
 	} else {
@@ -786,6 +808,12 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	double worst_rcond = INFINITY;
 	for (int a = 0; a < nsh; a++) {
 		build_K(&fc, o.kernel, shapes[a], m->ctr, m->tctr);
+		if (sigma_mode) {
+			double dsum = 0;
+			for (size_t k = 0; k < n; k++)
+				dsum += fc.K[k * n + k];
+			etas[0] = fmax(rmean * (dsum / (double)n) / varG, 1e-12);
+		}
 		for (int b = 0; b < neta; b++) {
 			if (o.progress)
 				o.progress(o.progress_ctx, "shape search", (double)(a * neta + b) / (double)(nsh * neta));
@@ -953,18 +981,79 @@ static double rng_normal(struct rng *r)
 
 /* ---- DHR --------------------------------------------------------------------------------------------- */
 
+/* d f̂ / d g at g (the derivative of untransform; 0 where the clamp at 0 is active). */
+static inline double untransform_deriv(int transform, double g, double eps)
+{
+	if (!(g == g))
+		return 0.0;
+	if (transform == RECON_T_SQRT)
+		return 2.0 * fmin(fmax(g, -1e15), 1e15);
+	if (g > G_MAX)
+		g = G_MAX;
+	double e = exp(g);
+	return e - eps > 0 ? e : 0.0;
+}
+
 /*
  * DHR(θi, λ) = albedo of the final (energy-scaled) model, with the DHR quadrature above.
- * Uncertainty: the reconstruction is not linear in the data (the transform that guarantees f ≥ 0), so the
- * exact formula Var = Σ c_k² σ_k² does not apply. Monte Carlo instead: each draw perturbs the transformed
- * data by its standard uncertainty (g + σ_g z, z ~ N(0, 1) independent; σ_g from the given sigmas by the
- * delta method, or the channel's leave-one-out RMS when the file has none), re-centres, solves with the ONE
- * Cholesky factor of K + Λ (refactored once from the stored model), and integrates. The energy factor of
- * the nominal model is kept fixed across draws. The reported value is the nominal model's DHR; sigma is the
- * standard deviation over the draws.
+ * Uncertainty, two independent parts, σ² = σ_noise² + σ_model²:
+ *  - σ_noise, the measurement noise: the reconstruction is not linear in the data (the transform that
+ *    guarantees f ≥ 0), so the exact formula Var = Σ c_k² σ_k² does not apply. Monte Carlo instead: each
+ *    draw perturbs the transformed data by its standard uncertainty (g + σ_g z, z ~ N(0, 1) independent;
+ *    σ_g from the given sigmas by the delta method, or the channel's leave-one-out RMS when the file has
+ *    none), re-centres, solves with the ONE Cholesky factor of K + Λ (refactored once from the stored
+ *    model), and integrates. The energy factor of the nominal model is kept fixed across draws.
+ *  - σ_model, the interpolation error between the samples (deterministic for a given sampling plan, e.g.
+ *    a lobe narrower than the azimuth step; the noise draws cannot see it). The smoothed RBF interpolant is
+ *    the posterior mean of the Gaussian-process reading g − μ ~ GP(0, α_λ K), noise α_λ η Λ, so the error
+ *    of the linear functional DHR ≈ Σ_q c_q g(x_q) (c_q = quadrature weight × energy factor × df̂/dg at
+ *    the nominal model: the delta method through the transform) has the posterior ("kriging") variance
+ *      σ_model² = α_λ (cᵀ K_QQ c − bᵀ A⁻¹ b),  b = K_nQ c,  A = K + Λ,
+ *    the same A and factor as the fit. The amplitude α_λ is not a free constant: it is estimated from
+ *    Rippa's leave-one-out residuals of the channel, which the GP predicts to have variance α_λ/(A⁻¹)_kk:
+ *      α_λ = mean_k e_k² (A⁻¹)_kk = mean_k (A⁻¹(g − μ))_k² / (A⁻¹)_kk
+ *    (the cross-validation estimate of the scale: it calibrates the error bars on the errors the model
+ *    actually makes when a sample is held out). Measured in tests/bench/bench_dhr_honesty.py.
+ * The reported value is the nominal model's DHR; sigma is the root sum of squares of the two parts.
  */
+/* σ_model² of the DHR at one incidence (see recon_dhr_ex): vmod[l] = α_l (c_lᵀ K_QQ c_l − b_lᵀ A⁻¹ b_l) with
+ * c = C[q*L + l] (Q nodes c6), b = K_nQ c (Kq[q*n + k]), A the Cholesky factor; scratch KQQ[Q*Q], soaQ[6Q],
+ * U[Q*L], Bt[L*n], X[L*n]. */
+static int model_variance(const struct recon_model *m, size_t Q, const double *c6, const double *Kq, const double *A,
+			  const double *alpha, const double *C, double *KQQ, double *soaQ, double *U, double *Bt,
+			  double *X, double *vmod, struct acq_err *err)
+{
+	size_t n = m->n, L = m->nwl;
+	rbf_soa(Q, c6, soaQ);
+	rbf_kmatrix_soa(m->kernel, m->shape, Q, c6, Q, soaQ, KQQ);
+	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)Q, (int)L, (int)Q, 1.0, KQQ, (int)Q, C, (int)L, 0.0,
+		    U, (int)L);
+	cblas_dgemm(CblasRowMajor, CblasTrans, CblasNoTrans, (int)L, (int)n, (int)Q, 1.0, C, (int)L, Kq, (int)n, 0.0,
+		    Bt, (int)n);
+	memcpy(X, Bt, L * n * sizeof *X);
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)L, A, (lapack_int)n, X, (lapack_int)n) != 0)
+		return acq_errf(err, ACQ_E_NUMERIC, "dhr: solve failed");
+	for (size_t l = 0; l < L; l++) {
+		double ckc = 0, bab = 0;
+		for (size_t q = 0; q < Q; q++)
+			ckc += C[q * L + l] * U[q * L + l];
+		for (size_t k = 0; k < n; k++)
+			bab += Bt[l * n + k] * X[l * n + k];
+		double v = alpha[l] * (ckc - bab);
+		vmod[l] = v > 0 && isfinite(v) ? v : 0.0;
+	}
+	return 0;
+}
+
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err)
+{
+	return recon_dhr_ex(m, nth, theta, ndraws, seed, dhr, sig, NULL, NULL, progress, pctx, err);
+}
+
+int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
+		 double *dhr, double *sig, double *sig_noise, double *sig_model, recon_progress_fn progress,
+		 void *pctx, struct acq_err *err)
 {
 	size_t n = m->n, L = m->nwl, Q = (size_t)DHR_NMU * DHR_NPHI;
 	if (nth == 0 || nth > 64)
@@ -982,7 +1071,12 @@ int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int 
 	double *A = malloc(n * n * sizeof *A), *Wd = malloc(n * L * sizeof *Wd), *Y = malloc(Q * L * sizeof *Y);
 	double *mean = calloc(nth * L, sizeof *mean), *m2 = calloc(nth * L, sizeof *m2);
 	double *mud = malloc(L * sizeof *mud);
-	if (!Kq || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud) {
+	double *C = malloc(Q * L * sizeof *C), *KQQ = malloc(Q * Q * sizeof *KQQ), *soaQ = malloc(6 * Q * sizeof *soaQ);
+	double *U = malloc(Q * L * sizeof *U), *Bt = malloc(L * n * sizeof *Bt), *X = malloc(L * n * sizeof *X);
+	double *Ainv = malloc(n * n * sizeof *Ainv), *alpha = calloc(L, sizeof *alpha);
+	double *vmod = calloc(nth * L, sizeof *vmod);
+	if (!Kq || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud || !C || !KQQ || !soaQ || !U ||
+	    !Bt || !X || !Ainv || !alpha || !vmod) {
 		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
 		goto out;
 	}
@@ -998,10 +1092,32 @@ int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int 
 				scale[(t * Q + q) * L + l] = recon_energy_scale(m, theta_of(c), theta_of(c + 3), l) * wt[q];
 		}
 	}
+	/* the one factorisation of K + Λ, and the leave-one-out amplitude α_λ of every channel */
+	for (size_t j = 0; j < n; j++)
+		for (size_t i = j; i < n; i++) {
+			double v = rbf_kernel(m->kernel, m->shape, m->ctr + 6 * i, m->ctr + 6 * j, m->tctr + 6 * j);
+			A[j * n + i] = A[i * n + j] = v;
+		}
+	for (size_t k = 0; k < n; k++)
+		A[k * n + k] += m->eta * m->lam[k];
+	if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)n, A, (lapack_int)n) != 0) {
+		acq_errf(err, ACQ_E_NUMERIC, "dhr: refactorisation of the model's system failed");
+		goto out;
+	}
+	memcpy(Ainv, A, n * n * sizeof *Ainv);
+	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, Ainv, (lapack_int)n) != 0) {
+		acq_errf(err, ACQ_E_NUMERIC, "dhr: inverse of the model's system failed");
+		goto out;
+	}
+	for (size_t l = 0; l < L; l++) {
+		double acc = 0;
+		for (size_t k = 0; k < n; k++)
+			acc += m->w[l * n + k] * m->w[l * n + k] / Ainv[k * n + k];
+		alpha[l] = acc / (double)n;
+	}
 	/* draw 0 is the nominal model; draws 1..ndraws are perturbed */
 	struct rng r;
 	rng_seed(&r, seed);
-	int factored = 0;
 	for (int d = 0; d <= ndraws; d++) {
 		if (progress)
 			progress(pctx, "dhr", (double)d / (double)(ndraws + 1));
@@ -1009,21 +1125,6 @@ int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int 
 			memcpy(Wd, m->w, n * L * sizeof *Wd);
 			memcpy(mud, m->mu, L * sizeof *mud);
 		} else {
-			if (!factored) {
-				for (size_t j = 0; j < n; j++)
-					for (size_t i = j; i < n; i++) {
-						double v = rbf_kernel(m->kernel, m->shape, m->ctr + 6 * i, m->ctr + 6 * j,
-								      m->tctr + 6 * j);
-						A[j * n + i] = A[i * n + j] = v;
-					}
-				for (size_t k = 0; k < n; k++)
-					A[k * n + k] += m->eta * m->lam[k];
-				if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)n, A, (lapack_int)n) != 0) {
-					acq_errf(err, ACQ_E_NUMERIC, "dhr: refactorisation of the model's system failed");
-					goto out;
-				}
-				factored = 1;
-			}
 			for (size_t l = 0; l < L; l++) {
 				double sum = 0;
 				for (size_t k = 0; k < n; k++) {
@@ -1051,16 +1152,27 @@ int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int 
 											m->eps[l]);
 				if (d == 0) {
 					dhr[t * L + l] = acc;
+					for (size_t q = 0; q < Q; q++)
+						C[q * L + l] = scale[(t * Q + q) * L + l] *
+							       untransform_deriv(m->transform, Y[q * L + l] + mud[l], m->eps[l]);
 				} else { /* Welford */
 					double delta = acc - mean[t * L + l];
 					mean[t * L + l] += delta / d;
 					m2[t * L + l] += delta * (acc - mean[t * L + l]);
 				}
 			}
+			if (d == 0 && model_variance(m, Q, c6 + t * Q * 6, Kq + t * Q * n, A, alpha, C, KQQ, soaQ, U, Bt, X,
+						     vmod + t * L, err))
+				goto out;
 		}
 	}
 	for (size_t i = 0; i < nth * L; i++) {
-		sig[i] = ndraws > 1 ? sqrt(m2[i] / (ndraws - 1)) : 0.0;
+		double sn = ndraws > 1 ? sqrt(m2[i] / (ndraws - 1)) : 0.0, sm = sqrt(vmod[i]);
+		sig[i] = sqrt(sn * sn + sm * sm);
+		if (sig_noise)
+			sig_noise[i] = sn;
+		if (sig_model)
+			sig_model[i] = sm;
 		if (!isfinite(sig[i]) || !isfinite(dhr[i])) {
 			acq_errf(err, ACQ_E_NUMERIC, "dhr: non-finite result");
 			goto out;
@@ -1078,6 +1190,15 @@ out:
 	free(mean);
 	free(m2);
 	free(mud);
+	free(C);
+	free(KQQ);
+	free(soaQ);
+	free(U);
+	free(Bt);
+	free(X);
+	free(Ainv);
+	free(alpha);
+	free(vmod);
 	return rc;
 }
 
@@ -1162,16 +1283,4 @@ out:
 	free(f2);
 	free(alb);
 	return rc;
-}
-
-/* ---- database seam ------------------------------------------------------------------------------------ */
-
-int recon_load_db(const char *db_path, long long sweep_id, struct recon_samples *s, struct acq_err *err)
-{
-	(void)db_path;
-	(void)sweep_id;
-	memset(s, 0, sizeof *s);
-	return acq_errf(err, ACQ_E_UNSUPPORTED,
-			"reading sweeps from the database is not available yet (the store's schema of calibrated "
-			"samples has not landed); export the sweep as CSV and use brdf-recon fit SAMPLES.csv");
 }

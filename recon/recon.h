@@ -18,6 +18,8 @@ enum recon_transform {
 	RECON_T__COUNT
 };
 
+#define RECON_SMOOTHING_SIGMA (-2.0)
+
 /* Progress report of a long step: stage name and fraction done in [0, 1]. */
 typedef void (*recon_progress_fn)(void *ctx, const char *stage, double frac);
 
@@ -25,7 +27,8 @@ struct recon_fit_opts {
 	int kernel;          /* enum rbf_kernel (default RBF_K_WENDLAND) */
 	int transform;       /* enum recon_transform (default RECON_T_LOG) */
 	double shape;        /* > 0: fixed shape parameter; 0: chosen by Rippa's leave-one-out over a grid */
-	double smoothing;    /* >= 0: fixed η in (K + η·diag(r)) w = g; < 0: chosen by leave-one-out */
+	double smoothing;    /* >= 0: fixed η in (K + η·diag(r)) w = g; RECON_SMOOTHING_SIGMA: Λ from the
+			      * uncertainties alone; other < 0: chosen by leave-one-out */
 	double max_cond;     /* largest accepted 1-norm condition number of K + Λ (default 1e12) */
 	recon_progress_fn progress;
 	void *progress_ctx;
@@ -88,9 +91,16 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
 		 struct acq_err *err);
 
 /* DHR(θi, λ) of the final model at nth incidences (radians) into dhr[t*nwl + l], with standard uncertainty
- * sig[...] from ndraws Monte-Carlo redraws of the data through the one stored factorisation (seeded). */
+ * sig[...]: ndraws Monte-Carlo redraws of the data through the one stored factorisation (seeded), combined
+ * with the interpolation-error term (recon_dhr_ex). */
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err);
+/* recon_dhr, sig = sqrt(sig_noise² + sig_model²) split into its parts (each may be NULL): sig_noise the
+ * Monte-Carlo spread from the data's uncertainties, sig_model the interpolation error (posterior variance of
+ * the DHR under the GP reading of the interpolant, amplitude from the leave-one-out residuals; recon.c). */
+int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
+		 double *dhr, double *sig, double *sig_noise, double *sig_model, recon_progress_fn progress,
+		 void *pctx, struct acq_err *err);
 
 /* Result of recon_check: worst violations of the three properties. */
 struct recon_check_report {
@@ -118,7 +128,8 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 /* Derive ctr/tctr from ang (used by fit and load); returns -1 on allocation failure. */
 int recon_model_derive(struct recon_model *m, struct acq_err *err);
 
-/* Load calibrated samples of one sweep from the daemon's SQLite database. */
+/* Load the calibrated samples of one sweep from the daemon's SQLite database (schema version 1, opened
+ * read-only; dbload.c): planned angles, float32 BRDF and sigma blobs over the sweep's wavelength grid. */
 int recon_load_db(const char *db_path, long long sweep_id, struct recon_samples *s, struct acq_err *err);
 
 /* Name of a transform ("log", "sqrt") or NULL; and back (−1 if unknown). */

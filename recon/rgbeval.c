@@ -4,6 +4,7 @@
 #include <cblas.h>
 #include <lapacke.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -167,12 +168,16 @@ int recon_rgb_full_fn(void *ctx, const double wi[3], const double wo[3], double 
 	return 0;
 }
 
-int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, struct recon_rgb **out,
+int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, double bin_nm, struct recon_rgb **out,
 		  struct acq_err *err)
 {
 	*out = NULL;
 	if (colour_opts_check(co, err))
 		return -1;
+	if (bin_nm == 0)
+		bin_nm = RGB_STEP_NM;
+	if (!(bin_nm >= 0.5 && bin_nm <= 50))
+		return acq_errf(err, ACQ_E_INVAL, "rgb: spectral bin %g nm outside [0.5, 50]", bin_nm);
 	size_t n = m->n, L = m->nwl;
 	struct recon_rgb *R = calloc(1, sizeof *R);
 	double *wsub = NULL, *S = NULL, *U = NULL, *VT = NULL, *wl = NULL, *scratch = NULL;
@@ -205,7 +210,7 @@ int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, str
 	}
 	size_t nc = 0;
 	for (size_t l = first; l <= last; l++)
-		if (nc == 0 || m->wl[l] - m->wl[R->chan[nc - 1]] >= RGB_STEP_NM - 1e-9)
+		if (nc == 0 || m->wl[l] - m->wl[R->chan[nc - 1]] >= bin_nm - 1e-9)
 			R->chan[nc++] = l;
 	R->chan[nc] = last + 1;
 	R->nc = nc;
@@ -406,18 +411,144 @@ int recon_rgb_batch(const struct recon_rgb *R, size_t nq, const double *wi, cons
 	return 0;
 }
 
+/* One θh row of the MERL table (all its θd, φd cells): a job of the table's workers. Cells below the horizon
+ * get MERL_NO_DATA; with !all_cells the half iφd ≥ 90 is left for the mirror copy. The row is evaluated in
+ * one recon_rgb_batch call, so the result does not depend on the number of threads. */
+struct merl_job {
+	const struct recon_rgb *R;
+	struct merl_table *t;
+	int all_cells;
+	pthread_mutex_t mu;
+	int next_row, rows_done, failed;
+	struct colour_stats stats;
+	struct acq_err err;
+	recon_progress_fn progress;
+	void *pctx;
+};
+
+static int merl_row(const struct recon_rgb *R, struct merl_table *t, int all_cells, int ith, double *wi, double *wo,
+		    double *rgb, size_t *idx, struct colour_stats *stats, struct acq_err *err)
+{
+	size_t nb = 0;
+	for (int itd = 0; itd < MERL_N_THETA_D; itd++)
+		for (int ipd = 0; ipd < MERL_N_PHI_D; ipd++) {
+			size_t flat = (size_t)ipd + (size_t)MERL_N_PHI_D * ((size_t)itd + (size_t)MERL_N_THETA_D * (size_t)ith);
+			int has = merl_cell_dirs(ith, itd, ipd, wi + 3 * nb, wo + 3 * nb) == 1;
+			if (!has) {
+				for (int c = 0; c < 3; c++)
+					t->data[(size_t)c * MERL_N_CELLS + flat] = MERL_NO_DATA;
+			} else if (all_cells || ipd < MERL_N_PHI_D / 2) {
+				idx[nb++] = flat;
+			} /* else: filled from its mirror cell afterwards */
+		}
+	if (!nb)
+		return 0;
+	if (recon_rgb_batch(R, nb, wi, wo, rgb, stats, err))
+		return -1;
+	for (size_t q = 0; q < nb; q++)
+		for (int c = 0; c < 3; c++) {
+			double v = rgb[3 * q + c] / merl_scale[c];
+			if (!isfinite(v) || v < 0)
+				return acq_errf(err, ACQ_E_NUMERIC, "merl table: bad value at cell %zu", idx[q]);
+			t->data[(size_t)c * MERL_N_CELLS + idx[q]] = v;
+		}
+	return 0;
+}
+
+#define MERL_ROW_CELLS ((size_t)MERL_N_THETA_D * MERL_N_PHI_D)
+
+static void *merl_worker(void *arg)
+{
+	struct merl_job *J = arg;
+	double *wi = malloc(MERL_ROW_CELLS * 3 * sizeof *wi), *wo = malloc(MERL_ROW_CELLS * 3 * sizeof *wo);
+	double *rgb = malloc(MERL_ROW_CELLS * 3 * sizeof *rgb);
+	size_t *idx = malloc(MERL_ROW_CELLS * sizeof *idx);
+	struct colour_stats st = { 0 };
+	struct acq_err e = { 0 };
+	int bad = !wi || !wo || !rgb || !idx;
+	if (bad)
+		acq_errf(&e, ACQ_E_NOMEM, "merl table: out of memory");
+	for (;;) {
+		pthread_mutex_lock(&J->mu);
+		if (bad && !J->failed) {
+			J->failed = 1;
+			J->err = e;
+		}
+		int row = J->failed ? MERL_N_THETA_H : J->next_row++;
+		pthread_mutex_unlock(&J->mu);
+		if (row >= MERL_N_THETA_H)
+			break;
+		bad = merl_row(J->R, J->t, J->all_cells, row, wi, wo, rgb, idx, &st, &e) != 0;
+		pthread_mutex_lock(&J->mu);
+		J->rows_done++;
+		if (!bad && J->progress && J->rows_done % 8 == 0) /* progress callbacks are serialised */
+			J->progress(J->pctx, "merl", (double)J->rows_done / MERL_N_THETA_H);
+		if (bad && !J->failed) {
+			J->failed = 1;
+			J->err = e;
+		}
+		pthread_mutex_unlock(&J->mu);
+	}
+	pthread_mutex_lock(&J->mu);
+	J->stats.n += st.n;
+	J->stats.out_of_gamut += st.out_of_gamut;
+	J->stats.clipped += st.clipped;
+	J->stats.nonfinite += st.nonfinite;
+	pthread_mutex_unlock(&J->mu);
+	free(wi);
+	free(wo);
+	free(rgb);
+	free(idx);
+	return NULL;
+}
+
 int recon_rgb_merl_table(const struct recon_rgb *R, struct merl_table *t, int all_cells, struct colour_stats *stats,
 			 recon_progress_fn progress, void *pctx, struct acq_err *err)
 {
-	const size_t blk = 8192;
+	return recon_rgb_merl_table_ex(R, t, all_cells, 1, stats, progress, pctx, err);
+}
+
+int recon_rgb_merl_table_ex(const struct recon_rgb *R, struct merl_table *t, int all_cells, int threads,
+			    struct colour_stats *stats, recon_progress_fn progress, void *pctx, struct acq_err *err)
+{
+	if (threads < 1 || threads > 16)
+		return acq_errf(err, ACQ_E_INVAL, "merl table: threads must be in 1..16");
 	t->data = malloc(3 * (size_t)MERL_N_CELLS * sizeof *t->data);
-	double *wi = malloc(blk * 3 * sizeof *wi), *wo = malloc(blk * 3 * sizeof *wo);
-	double *rgb = malloc(blk * 3 * sizeof *rgb);
-	size_t *idx = malloc(blk * sizeof *idx);
+	if (!t->data)
+		return acq_errf(err, ACQ_E_NOMEM, "merl table: out of memory");
 	int rc = -1;
-	if (!t->data || !wi || !wo || !rgb || !idx) {
-		acq_errf(err, ACQ_E_NOMEM, "merl table: out of memory");
+	struct merl_job J;
+	memset(&J, 0, sizeof J);
+	J.R = R;
+	J.t = t;
+	J.all_cells = all_cells;
+	J.progress = progress;
+	J.pctx = pctx;
+	pthread_mutex_init(&J.mu, NULL);
+	/*
+	 * Rows of θh are independent jobs taken in turn by the workers (the calling thread is one of them);
+	 * each row is one batch whatever the number of threads, so the table is bit-identical for any count.
+	 */
+	pthread_t tid[16];
+	int started = 0;
+	for (int i = 1; i < threads; i++) {
+		if (pthread_create(&tid[started], NULL, merl_worker, &J) != 0)
+			break; /* fewer threads: still correct */
+		started++;
+	}
+	merl_worker(&J);
+	for (int i = 0; i < started; i++)
+		pthread_join(tid[i], NULL);
+	pthread_mutex_destroy(&J.mu);
+	if (J.failed) {
+		*err = J.err;
 		goto out;
+	}
+	if (stats) {
+		stats->n += J.stats.n;
+		stats->out_of_gamut += J.stats.out_of_gamut;
+		stats->clipped += J.stats.clipped;
+		stats->nonfinite += J.stats.nonfinite;
 	}
 	/*
 	 * Only half of the φd cells are evaluated: for a BRDF that is isotropic (mirror φ → −φ) and reciprocal,
@@ -425,38 +556,6 @@ int recon_rgb_merl_table(const struct recon_rgb *R, struct merl_table *t, int al
 	 * exactly φd and π − φd. The model has both symmetries by construction, so the copy is exact (to
 	 * rounding); test_recon_rgb checks it against evaluating every cell.
 	 */
-	size_t nb = 0;
-	for (size_t flat = 0; flat <= MERL_N_CELLS; flat++) {
-		if (flat < MERL_N_CELLS) {
-			int ipd = (int)(flat % MERL_N_PHI_D), itd = (int)(flat / MERL_N_PHI_D % MERL_N_THETA_D),
-			    ith = (int)(flat / ((size_t)MERL_N_PHI_D * MERL_N_THETA_D));
-			int has = merl_cell_dirs(ith, itd, ipd, wi + 3 * nb, wo + 3 * nb) == 1;
-			if (!has) {
-				for (int c = 0; c < 3; c++)
-					t->data[(size_t)c * MERL_N_CELLS + flat] = MERL_NO_DATA;
-			} else if (!all_cells && ipd >= MERL_N_PHI_D / 2) {
-				/* filled from its mirror cell below */
-			} else {
-				idx[nb++] = flat;
-			}
-		}
-		if (nb == blk || (flat == MERL_N_CELLS && nb)) {
-			if (progress)
-				progress(pctx, "merl", (double)flat / (double)MERL_N_CELLS);
-			if (recon_rgb_batch(R, nb, wi, wo, rgb, stats, err))
-				goto out;
-			for (size_t q = 0; q < nb; q++)
-				for (int c = 0; c < 3; c++) {
-					double v = rgb[3 * q + c] / merl_scale[c];
-					if (!isfinite(v) || v < 0) {
-						acq_errf(err, ACQ_E_NUMERIC, "merl table: bad value at cell %zu", idx[q]);
-						goto out;
-					}
-					t->data[(size_t)c * MERL_N_CELLS + idx[q]] = v;
-				}
-			nb = 0;
-		}
-	}
 	if (!all_cells)
 		for (size_t flat = 0; flat < MERL_N_CELLS; flat++) {
 			size_t ipd = flat % MERL_N_PHI_D;
@@ -481,9 +580,5 @@ out:
 		free(t->data);
 		t->data = NULL;
 	}
-	free(wi);
-	free(wo);
-	free(rgb);
-	free(idx);
 	return rc;
 }

@@ -12,9 +12,10 @@
 
 struct recon_rgb;
 
-/* Build the reduced evaluator of model m under colour options co (copied). The reduction error is measured
- * against the full-spectrum path at 256 random pairs (recon_rgb_reduction_error). */
-int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, struct recon_rgb **out,
+/* Build the reduced evaluator of model m under colour options co (copied), binning the visible channels to
+ * bin_nm (0 = the default 5 nm; 0.5..50). The reduction error is measured against the full-spectrum path at
+ * 256 random pairs (recon_rgb_reduction_error). */
+int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, double bin_nm, struct recon_rgb **out,
 		  struct acq_err *err);
 /* Release (NULL is fine). */
 void recon_rgb_free(struct recon_rgb *r);
@@ -33,6 +34,10 @@ int recon_rgb_batch(const struct recon_rgb *r, size_t nq, const double *wi, cons
  * the others MERL_NO_DATA. Write it with merl_write_ex(path, merl_table_fn, t, ...). */
 int recon_rgb_merl_table(const struct recon_rgb *r, struct merl_table *t, int all_cells, struct colour_stats *stats,
 			 recon_progress_fn progress, void *pctx, struct acq_err *err);
+/* recon_rgb_merl_table with threads (1..16) workers over the θh rows (pthreads; the table is bit-identical
+ * for any count; the progress callback is called with a lock held). */
+int recon_rgb_merl_table_ex(const struct recon_rgb *r, struct merl_table *t, int all_cells, int threads,
+			    struct colour_stats *stats, recon_progress_fn progress, void *pctx, struct acq_err *err);
 /* Largest relative difference (linear RGB, relative to the largest component) between the reduced and
  * the full path found at construction. */
 double recon_rgb_reduction_error(const struct recon_rgb *r);

@@ -9,7 +9,8 @@ scipy.interpolate.RBFInterpolator on the same samples, measured in one run:
     the 651 channels (held-out accuracy) and, for its MERL-equivalent, to 3 channels (its map is linear, so
     spectra are reduced to RGB first) evaluated at the 1,096,216 existing MERL cells.
 Times are wall clock and CPU (the machine is shared: CPU time is the steadier figure); both tools run
-single-threaded (OPENBLAS_NUM_THREADS=1 under make bench, brdf-recon merl --threads 1).
+single-threaded (OPENBLAS_NUM_THREADS=1 under make bench, brdf-recon merl --threads 1); brdf-recon merl is also
+timed with --threads 2 (the table's θh rows on both cores: speedup_fit_plus_merl_2t is a wall-clock ratio).
 Writes $ACQ_BENCH_OUT/bench_recon.csv (metric,value) and prints the ratios."""
 import math
 import os
@@ -99,6 +100,11 @@ def main():
     res["recon_merl_s"], res["recon_merl_rss_mib"] = timed([B, "merl", m, "-o", os.path.join(d, "m.binary"),
                                                             "--threads", "1"])
     res["recon_merl_cpu_s"] = CPU["merl"]
+    res["recon_merl_2t_s"], _ = timed([B, "merl", m, "-o", os.path.join(d, "m2t.binary"), "--threads", "2"])
+    res["recon_merl_2t_cpu_s"] = CPU["merl"]
+    res["recon_merl10nm_s"], _ = timed([B, "merl", m, "-o", os.path.join(d, "m10.binary"), "--threads", "1",
+                                        "--bin-nm", "10"])
+    res["recon_merl10nm_cpu_s"] = CPU["merl"]
     e = os.path.join(d, "e.csv")
     res["recon_eval2000_s"], _ = timed([B, "eval", m, h, "-o", e])
     ev = np.genfromtxt(e, delimiter=",", skip_header=1)[:, 4:]
@@ -160,6 +166,9 @@ def main():
 
     res["speedup_fit_plus_merl"] = res["scipy_fit3_merl_s"] / (res["recon_fit_s"] + res["recon_merl_s"])
     res["speedup_fit_plus_merl_cpu"] = res["scipy_fit3_merl_cpu_s"] / (res["recon_fit_cpu_s"] + res["recon_merl_cpu_s"])
+    res["speedup_fit_plus_merl10nm_cpu"] = res["scipy_fit3_merl_cpu_s"] / (res["recon_fit_cpu_s"] +
+                                                                          res["recon_merl10nm_cpu_s"])
+    res["speedup_fit_plus_merl_2t"] = res["scipy_fit3_merl_s"] / (res["recon_fit_s"] + res["recon_merl_2t_s"])
     res["speedup_fit_651"] = res["scipy_fit_s"] / res["recon_fit_s"]
     res["accuracy_ratio_logrmse_vs_scipy_default"] = res["scipy_logrmse"] / res["recon_logrmse"]
     res["accuracy_ratio_logrmse_vs_scipy_best"] = min(res["scipy_logrmse"], res["scipy_s1e-3_logrmse"]) / res["recon_logrmse"]

@@ -3,8 +3,9 @@
 reference, metal): noisy 10x10x10 samples -> fit -> check (three properties) -> DHR against the truth's DHR.
 Skips (77) while `acq-sim truth` is not implemented in this build.
 
-Tolerances (relative DHR error), measured with acq-sim's truths at 1 % noise: white <= 0.2 % at every
-incidence; green paint 1.5 % at 8 deg, 4 % at 30, 10 % at 60; metal 5 / 8 / 9.5 %. The 8 deg figure is the
+Tolerances (relative DHR error), measured with acq-sim's truths at 1 % noise on this 25 nm grid (seeds 1-4,
+the errors are systematic, not noise): white <= 0.2 % at every incidence; green paint 1.5 % at 8 deg, 4 % at
+30, 10 % at 60; metal 6.6 / 8.2 / 10 %. The 8 deg figure is the
 paper's comparison (spectrophotometer geometry). The larger errors at 30-60 deg, and for the metal, come
 from the sampling: a 36 deg azimuth step is wider than a specular lobe. Thresholds leave a margin for other
 seeds; a model that lost the lobe or the colour would fail them."""
@@ -51,7 +52,7 @@ def main():
         a = np.genfromtxt(o, delimiter=",", skip_header=1)
         b = np.array([[float(x) for x in line.split(",")] for line in open(t)
                       if line[:1].isdigit()])
-        assert a.shape == b.shape and np.allclose(a[:, :2], b[:, :2]), mat
+        assert a.shape[0] == b.shape[0] and a.shape[1] == 6 and np.allclose(a[:, :2], b[:, :2]), mat
         rel = np.abs(a[:, 2] - b[:, 2]) / b[:, 2]
         worst = [float(rel[a[:, 0] == th].max()) for th in (8, 30, 60)]
         print("%s: worst relative DHR error at 8/30/60 deg: %s (tolerances %s)" %

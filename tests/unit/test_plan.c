@@ -11,6 +11,7 @@
 #include <cmocka.h>
 
 #include "config/bench.h"
+#include "config/yconf.h"
 #include "daemon/plan.h"
 
 /* ---- the independent model ------------------------------------------------------------------------- */
@@ -313,6 +314,20 @@ static void check_result(const struct bench_geom *g, const struct plan_spec *s, 
 			assert_true(psi_of(g, q->pos.laser_theta, q->pos.det_theta, q->pos.det_phi) >= B - 1e-9);
 			if (lim)
 				assert_true(q->moved_deg >= B - psi - 1e-6);
+			/* nearest: when the point straight out of the cap (on the great circle from ωi through ωo,
+			 * just past its edge) is within the limits, the move is no longer than that */
+			struct v3 wi = sph(q->req.laser_theta, g->laser_phi_deg);
+			double c = wi.x * wo.x + wi.y * wo.y + wi.z * wo.z;
+			struct v3 t = { wo.x * c - wi.x, wo.y * c - wi.y, wo.z * c - wi.z };
+			double tl = sqrt(t.x * t.x + t.y * t.y + t.z * t.z);
+			if (lim && tl > 1e-6) {
+				double d = RAD(B - psi + 0.005);
+				struct v3 e = { cos(d) * wo.x + sin(d) * t.x / tl, cos(d) * wo.y + sin(d) * t.y / tl,
+						cos(d) * wo.z + sin(d) * t.z / tl };
+				double th = DEGR(atan2(sqrt(e.x * e.x + e.y * e.y), e.z)), ph = DEGR(atan2(e.y, e.x));
+				if (in_lim(&g->detector_theta, th) && phi_ok(g, ph) && th > 0.01)
+					assert_true(q->moved_deg <= B - psi + 0.01);
+			}
 			break;
 		}
 		case PLAN_DROPPED:
@@ -445,6 +460,32 @@ static void test_detours(void **state)
 	}
 }
 
+/* Manual moves (plan_seg_safe) only avoid collisions; planned paths (plan_seg_clear) also keep off the beam
+ * and the view: on a bench whose beam cone is wider than the arms' collision cone the two differ. */
+static void test_safe_vs_clear(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	bench_defaults(&g);
+	g.beam_halfwidth_deg = 15; /* detector arm (5) + beam (15) + margin (1) = 21 > collision 12 */
+	assert_true(plan_clearance_deg(&g) > plan_collision_deg(&g) + 5);
+	/* detector swings past the laser at ψ ≈ 16° (θD − θL at the laser's azimuth) */
+	struct plan_pos a = { 30, 46, 40 }, b = { 30, 46, -40 };
+	double worst = check_segment(&g, &a, &b, plan_seg_time(&g, &a, &b));
+	assert_true(worst > plan_collision_deg(&g) && worst < plan_clearance_deg(&g));
+	assert_true(plan_seg_safe(&g, &a, &b));
+	assert_false(plan_seg_clear(&g, &a, &b));
+	/* and the planned move around it stays clear */
+	struct plan_wp w[PLAN_MAX_WP];
+	size_t n = 0;
+	assert_true(plan_move(&g, &a, &b, w, &n) > 0);
+	struct plan_pos prev = a;
+	for (size_t k = 0; k < n; k++) {
+		assert_true(check_segment(&g, &prev, &w[k].pos, w[k].duration_s) >= plan_clearance_deg(&g) - 1e-9);
+		prev = w[k].pos;
+	}
+}
+
 /* The paper's plan: 1000 requests, θo = 0 merged, blind points around retro-reflection dropped. */
 static void test_paper_plan(void **state)
 {
@@ -473,6 +514,18 @@ static void test_paper_plan(void **state)
 	/* the ordering must be worth something */
 	assert_true(r->duration_s < 0.8 * r->raster_s);
 	assert_true(r->duration_s < 1.15 * r->lower_bound_s);
+	/* deterministic: a restarted daemon re-plans the same sweep and resumes after its last point */
+	struct plan_result *r2 = NULL;
+	if (plan_make(s, &g, &r2, &err))
+		fail_msg("%s", err.msg);
+	assert_int_equal(r2->n_steps, r->n_steps);
+	assert_int_equal(r2->n_wps, r->n_wps);
+	for (size_t i = 0; i < r->n_steps; i++) {
+		assert_int_equal(r2->steps[i].req, r->steps[i].req);
+		assert_true(r2->steps[i].pos.det_phi == r->steps[i].pos.det_phi);
+	}
+	assert_true(r2->duration_s == r->duration_s);
+	plan_result_free(r2);
 	plan_result_free(r);
 	plan_spec_free(s);
 }
@@ -557,6 +610,114 @@ static void test_bad_plan_files(void **state)
 	assert_non_null(strstr(err.msg, "/nonexistent/plan.yaml"));
 }
 
+/* The lower bound holds for every order, not just the planner's: on tiny plans, enumerate all orders of the
+ * measured points (each with its best azimuth choices, by dynamic programming over plan_move times) and
+ * check bound ≤ best order ≤ planned (up to 6 points: 720 orders). */
+static double order_cost(const struct bench_geom *g, struct plan_pos *pts, size_t n, const size_t *perm)
+{
+	double best[4], nb[4];
+	double reps[8][4];
+	int nr[8];
+	for (size_t i = 0; i < n; i++) {
+		nr[i] = 0;
+		for (int k = -2; k <= 2; k++) {
+			double x = pts[perm[i]].det_phi + 360.0 * k;
+			if (in_lim(&g->detector_phi, x) && nr[i] < 4)
+				reps[i][nr[i]++] = x;
+		}
+	}
+	for (int j = 0; j < nr[0]; j++)
+		best[j] = 0;
+	for (size_t i = 1; i < n; i++) {
+		for (int j = 0; j < nr[i]; j++) {
+			nb[j] = INFINITY;
+			for (int k = 0; k < nr[i - 1]; k++) {
+				struct plan_pos a = pts[perm[i - 1]], b = pts[perm[i]];
+				a.det_phi = reps[i - 1][k];
+				b.det_phi = reps[i][j];
+				struct plan_wp w[PLAN_MAX_WP];
+				size_t nw;
+				double t = plan_move(g, &a, &b, w, &nw);
+				if (t >= 0 && best[k] + t < nb[j])
+					nb[j] = best[k] + t;
+			}
+		}
+		memcpy(best, nb, sizeof best);
+	}
+	double m = INFINITY;
+	for (int j = 0; j < nr[n - 1]; j++)
+		m = fmin(m, best[j]);
+	return m;
+}
+
+static bool next_perm(size_t *p, size_t n)
+{
+	size_t i = n - 1;
+	while (i > 0 && p[i - 1] >= p[i])
+		i--;
+	if (i == 0)
+		return false;
+	size_t j = n - 1;
+	while (p[j] <= p[i - 1])
+		j--;
+	size_t t = p[i - 1];
+	p[i - 1] = p[j];
+	p[j] = t;
+	for (size_t a = i, b = n - 1; a < b; a++, b--) {
+		t = p[a];
+		p[a] = p[b];
+		p[b] = t;
+	}
+	return true;
+}
+
+static void test_bound_vs_exhaustive(void **state)
+{
+	(void)state;
+	unsigned long seed = seed_from_env();
+	rng_state = 0xD1B54A32D192ED03ull ^ ((uint64_t)seed * 0x9E3779B97F4A7C15ull);
+	if (!rng_state)
+		rng_state = 1;
+	int checked = 0;
+	for (int it = 0; it < 40 && checked < 12; it++) {
+		struct bench_geom g;
+		random_bench(&g);
+		struct plan_spec *s = random_plan();
+		/* shrink it (the arrays only get shorter) */
+		s->n_incidence = s->n_incidence < 2 ? s->n_incidence : 2;
+		s->n_obs_theta = s->n_obs_theta < 2 ? s->n_obs_theta : 2;
+		s->n_obs_phi = s->n_obs_phi < 3 ? s->n_obs_phi : 3;
+		s->fib_count = s->fib_count < 3 ? s->fib_count : 3;
+		s->reciprocal_pairs = s->reciprocal_pairs < 1 ? s->reciprocal_pairs : 1;
+		struct plan_result *r = NULL;
+		struct acq_err err = { 0 };
+		if (plan_make(s, &g, &r, &err))
+			fail_msg("%s", err.msg);
+		size_t n = r->n_steps;
+		if (n >= 2 && n <= 6) {
+			struct plan_pos pts[8];
+			size_t perm[8];
+			for (size_t i = 0; i < n; i++) {
+				pts[i] = r->steps[i].pos;
+				perm[i] = i;
+			}
+			double best = INFINITY;
+			do
+				best = fmin(best, order_cost(&g, pts, n, perm));
+			while (next_perm(perm, n));
+			double opt = best + (double)n * r->point_dwell_s;
+			if (!(r->lower_bound_s <= opt + 1e-9 && opt <= r->duration_s + 1e-9))
+				fail_msg("seed %lu it %d: bound %.4f, best order %.4f, planned %.4f", seed, it, r->lower_bound_s,
+					 opt, r->duration_s);
+			checked++;
+		}
+		plan_result_free(r);
+		plan_spec_free(s);
+	}
+	printf("test_bound_vs_exhaustive: %d tiny plans enumerated\n", checked);
+	assert_true(checked > 0);
+}
+
 /* A spec built by code with a non-finite angle or too many points is refused, not planned. */
 static void test_bad_specs(void **state)
 {
@@ -588,6 +749,36 @@ static void test_bad_specs(void **state)
 	plan_result_free(r);
 }
 
+/* The example bench's section parses completely (every key known), the margin included; a bad value is
+ * located. */
+static void test_bench_section(void **state)
+{
+	(void)state;
+	const char *src = getenv("ACQ_SRC");
+	char path[4096];
+	snprintf(path, sizeof path, "%s/config/bench-sim.yaml", src ? src : ".");
+	struct yc_doc *doc = NULL;
+	struct acq_err err = { 0 };
+	if (yc_load_file(path, &doc, &err))
+		fail_msg("%s", err.msg);
+	struct bench_geom g;
+	bench_defaults(&g);
+	g.safety_margin_deg = -1; /* must come from the file */
+	struct yc_node *b = yc_get(yc_root(doc), "bench");
+	assert_non_null(b);
+	if (bench_parse(b, &g, &err))
+		fail_msg("%s", err.msg);
+	assert_true(g.safety_margin_deg >= 0);
+	assert_true(g.laser_radius_mm > g.detector_radius_mm); /* the documented layout */
+	assert_true(g.detector_phi.max_deg - g.detector_phi.min_deg > 360); /* wrap-around is possible */
+	yc_free(doc);
+	const char *bad = "bench:\n  safety_margin_deg: -2\n";
+	assert_int_equal(yc_load_string("b.yaml", bad, strlen(bad), &doc, &err), 0);
+	assert_int_equal(bench_parse(yc_get(yc_root(doc), "bench"), &g, &err), -1);
+	assert_non_null(strstr(err.msg, "b.yaml:2:22"));
+	yc_free(doc);
+}
+
 /* The trapezoid helpers agree with the independent model. */
 static void test_trapezoid(void **state)
 {
@@ -610,12 +801,15 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_trapezoid),
+		cmocka_unit_test(test_bench_section),
 		cmocka_unit_test(test_plan_file_forms),
 		cmocka_unit_test(test_bad_plan_files),
 		cmocka_unit_test(test_bad_specs),
 		cmocka_unit_test(test_detours),
+		cmocka_unit_test(test_safe_vs_clear),
 		cmocka_unit_test(test_paper_plan),
 		cmocka_unit_test(test_random_plans),
+		cmocka_unit_test(test_bound_vs_exhaustive),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

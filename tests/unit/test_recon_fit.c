@@ -232,7 +232,7 @@ static void test_lambertian_dhr_exact(void **state)
 	csvio_samples_free(&s);
 }
 
-/* The Monte-Carlo σ of the DHR matches the spread of the DHR over independent noisy data sets (same truth,
+/* The Monte-Carlo (noise) part of the DHR's σ matches the spread of the DHR over independent noisy data sets (same truth,
  * same fixed shape and smoothing, so the reconstruction map is the one the Monte Carlo assumes). With 12
  * data sets the sample standard deviation is known to ±20 % (1σ); the accepted ratio is [0.5, 2]. */
 static void test_dhr_uncertainty_calibrated(void **state)
@@ -251,7 +251,8 @@ static void test_dhr_uncertainty_calibrated(void **state)
 		o.smoothing = 1e-3;
 		assert_int_equal(recon_fit(&s, &o, &m, &err), 0);
 		double d, sg;
-		assert_int_equal(recon_dhr(m, 1, &th, k == 0 ? 64 : 0, 11, &d, &sg, NULL, NULL, &err), 0);
+		double sgt;
+		assert_int_equal(recon_dhr_ex(m, 1, &th, k == 0 ? 64 : 0, 11, &d, &sgt, &sg, NULL, NULL, NULL, &err), 0);
 		vals[k] = d;
 		if (k == 0)
 			sig_mc = sg;
@@ -317,6 +318,32 @@ static void test_unsolvable_clear_error(void **state)
 	csvio_samples_free(&s);
 }
 
+/* --smoothing sigma: Λ from the uncertainties alone; accurate on the synthetic data; refused without sigmas. */
+static void test_smoothing_from_sigma(void **state)
+{
+	(void)state;
+	struct recon_model *m;
+	struct acq_err err = { 0 };
+	struct recon_fit_opts o;
+	recon_fit_opts_default(&o);
+	o.smoothing = RECON_SMOOTHING_SIGMA;
+	o.shape = 2.6;
+	assert_int_equal(recon_fit(&S, &o, &m, &err), 0);
+	/* 2 % relative noise → σ_g ≈ 0.02; the data's log spread is O(0.3): η ≈ 4e-4·diagK/var ~ 1e-3 */
+	printf("eta from sigma: %g\n", m->eta);
+	assert_true(m->eta > 1e-5 && m->eta < 1e-1);
+	double a[4] = { 0.5, 0.0, 0.5, M_PI }, f[NWL];
+	assert_int_equal(recon_eval(m, 1, a, f, &err), 0);
+	double t = rt_truth(a, M->wl[0], 1.0);
+	assert_true(fabs(f[0] - t) < 0.1 * t); /* the specular peak at 28.6° */
+	recon_model_free(m);
+	double *keep = S.sig;
+	S.sig = NULL;
+	assert_int_equal(recon_fit(&S, &o, &m, &err), -1);
+	assert_non_null(strstr(err.msg, "needs sigma"));
+	S.sig = keep;
+}
+
 /* Repeated, mirrored and reciprocal measurements of one configuration are merged into one centre. */
 static void test_merge_reciprocal_and_mirror(void **state)
 {
@@ -356,6 +383,7 @@ int main(void)
 		cmocka_unit_test(test_lambertian_dhr_exact),
 		cmocka_unit_test(test_dhr_uncertainty_calibrated),
 		cmocka_unit_test(test_unsolvable_clear_error),
+		cmocka_unit_test(test_smoothing_from_sigma),
 		cmocka_unit_test(test_merge_reciprocal_and_mirror),
 	};
 	return cmocka_run_group_tests_name("recon_fit", tests, setup, teardown);

@@ -1,6 +1,7 @@
 /* Unit tests of recon/rgbeval.c: the reduced RGB evaluator against the full-spectrum path, the batch path
  * against the per-pair callback, and the half-table MERL (mirror cells copied) against evaluating every cell. */
 #include <setjmp.h>
+#include <unistd.h>
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -31,7 +32,7 @@ static int setup(void **state)
 	}
 	struct colour_opts co;
 	colour_opts_brdf(&co);
-	return recon_rgb_new(M, &co, &R, &err);
+	return recon_rgb_new(M, &co, 0, &R, &err);
 }
 
 static int teardown(void **state)
@@ -113,6 +114,43 @@ static void test_merl_half_table_exact(void **state)
 	printf("no-data values %zu, worst relative difference %.3g\n", nodata, worst);
 	assert_int_equal(nodata, 3 * (size_t)(MERL_N_CELLS - 1096216));
 	assert_true(worst < 1e-10);
+	/* two workers give the same table bit for bit, and the same tone statistics */
+	struct merl_table two = { NULL };
+	struct colour_stats s1 = { 0 }, s2 = { 0 };
+	merl_free(&half);
+	assert_int_equal(recon_rgb_merl_table_ex(R, &half, 0, 1, &s1, NULL, NULL, &err), 0);
+	assert_int_equal(recon_rgb_merl_table_ex(R, &two, 0, 2, &s2, NULL, NULL, &err), 0);
+	assert_memory_equal(half.data, two.data, 3 * (size_t)MERL_N_CELLS * sizeof *two.data);
+	assert_true(s1.n == s2.n && s1.n > 0 && s1.clipped == s2.clipped && s1.out_of_gamut == s2.out_of_gamut);
+	assert_int_equal(recon_rgb_merl_table_ex(R, &two, 0, 0, NULL, NULL, NULL, &err), -1);
+	/* writing the table as it is gives the file the writer makes through the reference lookup, to rounding */
+	char pa[] = "/tmp/test_recon_rgb_a_XXXXXX", pb[] = "/tmp/test_recon_rgb_b_XXXXXX";
+	int fa = mkstemp(pa), fb = mkstemp(pb);
+	assert_true(fa >= 0 && fb >= 0);
+	close(fa);
+	close(fb);
+	assert_int_equal(merl_write_table(pa, &half, &err), 0);
+	assert_int_equal(merl_write_ex(pb, merl_table_fn, &half, NULL, &err), 0);
+	struct merl_table ra = { NULL }, rb = { NULL };
+	assert_int_equal(merl_read(pa, &ra, &err), 0);
+	assert_int_equal(merl_read(pb, &rb, &err), 0);
+	double wdiff = 0;
+	for (size_t i = 0; i < 3 * (size_t)MERL_N_CELLS; i++) {
+		assert_true((ra.data[i] == MERL_NO_DATA) == (rb.data[i] == MERL_NO_DATA));
+		assert_true(ra.data[i] == half.data[i]);
+		if (rb.data[i] != MERL_NO_DATA)
+			wdiff = fmax(wdiff, fabs(ra.data[i] - rb.data[i]) / fmax(fabs(rb.data[i]), 1e-300));
+	}
+	printf("direct table write vs lookup write: worst relative difference %.3g\n", wdiff);
+	assert_true(wdiff <= 4e-16);
+	merl_free(&ra);
+	merl_free(&rb);
+	half.data[12345] = NAN; /* a bad value is refused, nothing left at the path */
+	unlink(pa);
+	assert_int_equal(merl_write_table(pa, &half, &err), -1);
+	assert_int_equal(access(pa, F_OK), -1);
+	unlink(pb);
+	merl_free(&two);
 	merl_free(&half);
 	merl_free(&all);
 }

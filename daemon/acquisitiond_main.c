@@ -1,0 +1,289 @@
+/* acquisitiond: the daemon's entry point — options, start-up in order, the event loop, signals through a
+ * self-pipe, reload on SIGHUP, graceful stop in reverse order (laser off, arms stopped, database closed). */
+#include <errno.h>
+#include <fcntl.h>
+#include <getopt.h>
+#include <math.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <systemd/sd-daemon.h>
+
+#include "acq_version.h"
+#include "daemon/app.h"
+#include "daemon/conf.h"
+#include "daemon/devices.h"
+#include "daemon/job.h"
+#include "daemon/log.h"
+#include "daemon/loop.h"
+#include "daemon/server.h"
+#include "daemon/store.h"
+#include "daemon/sweep.h"
+
+static int sig_pipe[2] = { -1, -1 };
+
+/* Signal handlers only write the signal number to the self-pipe; the loop does the work. */
+static void on_signal(int sig)
+{
+	int e = errno;
+	unsigned char b = (unsigned char)sig;
+	ssize_t w = write(sig_pipe[1], &b, 1);
+	(void)w;
+	errno = e;
+}
+
+static int signals_init(struct acq_err *err)
+{
+	if (pipe2(sig_pipe, O_CLOEXEC | O_NONBLOCK) < 0)
+		return acq_errf(err, ACQ_E_IO, "pipe: %s", strerror(errno));
+	struct sigaction sa = { .sa_handler = on_signal, .sa_flags = SA_RESTART };
+	sigemptyset(&sa.sa_mask);
+	int sigs[] = { SIGTERM, SIGINT, SIGHUP, SIGCHLD };
+	for (size_t i = 0; i < sizeof sigs / sizeof sigs[0]; i++)
+		if (sigaction(sigs[i], &sa, NULL) < 0)
+			return acq_errf(err, ACQ_E_IO, "sigaction: %s", strerror(errno));
+	signal(SIGPIPE, SIG_IGN);
+	return 0;
+}
+
+static void signals_finish(void)
+{
+	signal(SIGTERM, SIG_DFL);
+	signal(SIGINT, SIG_DFL);
+	signal(SIGHUP, SIG_DFL);
+	signal(SIGCHLD, SIG_DFL);
+	close(sig_pipe[0]);
+	close(sig_pipe[1]);
+}
+
+static bool want_stop;
+
+static void on_sigpipe(struct loop *lp, int fd, short revents, void *arg)
+{
+	(void)revents;
+	struct app *app = arg;
+	unsigned char b[64];
+	ssize_t n;
+	while ((n = read(fd, b, sizeof b)) > 0)
+		for (ssize_t i = 0; i < n; i++) {
+			switch (b[i]) {
+			case SIGTERM:
+			case SIGINT:
+				log_msg(LOG_NOTICE, "signal %d: stopping", b[i]);
+				want_stop = true;
+				loop_stop(lp);
+				break;
+			case SIGHUP: {
+				struct acq_err err = { 0 };
+				if (app_reload(app, &err))
+					log_msg(LOG_WARNING, "SIGHUP: %s", err.msg);
+				break;
+			}
+			case SIGCHLD:
+				job_reap();
+				break;
+			}
+		}
+}
+
+static char last_status[256];
+
+static void status_tick(struct loop *lp, void *arg)
+{
+	(void)lp;
+	struct app *app = arg;
+	char line[256];
+	app_status_line(app, line, sizeof line);
+	if (strcmp(line, last_status)) {
+		snprintf(last_status, sizeof last_status, "%s", line);
+		sd_notifyf(0, "STATUS=%s", line);
+	}
+}
+
+static void watchdog_tick(struct loop *lp, void *arg)
+{
+	(void)lp;
+	(void)arg;
+	sd_notify(0, "WATCHDOG=1");
+}
+
+static void usage(FILE *f)
+{
+	fprintf(f, "usage: acquisitiond -c FILE [-f] [--sim PORTS.json]\n"
+		   "       acquisitiond --check-config FILE [--sim PORTS.json]\n"
+		   "  -c, --config FILE     configuration (bench, devices, daemon, sweep, recon)\n"
+		   "  -f, --foreground      log to stderr even when started by systemd (it never forks)\n"
+		   "      --sim PORTS.json  use the simulator's endpoints (acq-sim's ports file)\n"
+		   "      --check-config F  validate F and exit 0 (valid) or 1\n"
+		   "  -V, --version         print the version\n");
+}
+
+static int check_config(const char *path, const struct conf_sim *sim)
+{
+	struct conf *c = NULL;
+	struct acq_err err = { 0 };
+	if (conf_load(path, sim, &c, &err)) {
+		fprintf(stderr, "%s\n", err.msg);
+		return 1;
+	}
+	for (int d = 0; d < CONF_DEV__COUNT; d++)
+		if (c->devnote[d][0])
+			printf("note: %s: %s\n", conf_dev_name((enum conf_dev)d), c->devnote[d]);
+	printf("%s: ok\n", path);
+	conf_free(c);
+	return 0;
+}
+
+static int mkdir_p(const char *path, mode_t mode)
+{
+	char buf[4096];
+	snprintf(buf, sizeof buf, "%s", path);
+	for (char *p = buf + 1; *p; p++)
+		if (*p == '/') {
+			*p = 0;
+			if (mkdir(buf, mode) < 0 && errno != EEXIST)
+				return -1;
+			*p = '/';
+		}
+	return mkdir(buf, mode) < 0 && errno != EEXIST ? -1 : 0;
+}
+
+int main(int argc, char **argv)
+{
+	static const struct option opts[] = { { "config", required_argument, NULL, 'c' },
+					      { "foreground", no_argument, NULL, 'f' },
+					      { "sim", required_argument, NULL, 's' },
+					      { "check-config", required_argument, NULL, 'k' },
+					      { "version", no_argument, NULL, 'V' },
+					      { "help", no_argument, NULL, 'h' },
+					      { NULL, 0, NULL, 0 } };
+	const char *conf_path = NULL, *sim_path = NULL, *check = NULL;
+	bool foreground = false;
+	int o;
+	while ((o = getopt_long(argc, argv, "c:fVh", opts, NULL)) != -1) {
+		switch (o) {
+		case 'c': conf_path = optarg; break;
+		case 'f': foreground = true; break;
+		case 's': sim_path = optarg; break;
+		case 'k': check = optarg; break;
+		case 'V': printf("acquisitiond %s (protocol %d, schema %d)\n", ACQ_VERSION, PROTO_VERSION,
+				 STORE_SCHEMA_VERSION); return 0;
+		case 'h': usage(stdout); return 0;
+		default: usage(stderr); return 2;
+		}
+	}
+	if (optind < argc || (!conf_path && !check)) {
+		usage(stderr);
+		return 2;
+	}
+	struct app app = { .conf_path = conf_path };
+	struct acq_err err = { 0 };
+	if (sim_path) {
+		if (conf_sim_read(sim_path, &app.sim, &err)) {
+			fprintf(stderr, "acquisitiond: %s\n", err.msg);
+			return 1;
+		}
+		app.have_sim = true;
+	}
+	if (check)
+		return check_config(check, sim_path ? &app.sim : NULL);
+
+	int rc = 1;
+	bool journal = !foreground && getenv("JOURNAL_STREAM") && getenv("INVOCATION_ID");
+	log_init(LOG_INFO, journal);
+	if (conf_load(conf_path, app.have_sim ? &app.sim : NULL, &app.conf, &err)) {
+		log_msg(LOG_ERR, "%s", err.msg);
+		return 1;
+	}
+	log_set_level(app.conf->d.log_level);
+	snprintf(app.sock_path, sizeof app.sock_path, "%s", app.conf->d.socket_path);
+	snprintf(app.db_path, sizeof app.db_path, "%s", app.conf->d.database);
+	app.conf->d.socket_path = app.sock_path;
+	app.conf->d.database = app.db_path;
+	for (int d = 0; d < CONF_DEV__COUNT; d++)
+		if (app.conf->devnote[d][0])
+			log_msg(LOG_NOTICE, "%s: %s", conf_dev_name((enum conf_dev)d), app.conf->devnote[d]);
+	if (mkdir_p(app.conf->d.state_dir, 0750) < 0) {
+		log_msg(LOG_ERR, "%s: %s", app.conf->d.state_dir, strerror(errno));
+		goto out_conf;
+	}
+	/* The simulated bench may run faster than real time: the loop's clock follows it (device state machines
+	 * and the executor's timers are in bench seconds); database times stay wall-clock. */
+	static struct loop_scaled_clock scaled;
+	struct loop_clock clk = { loop_monotonic, NULL, 1 };
+	if (app.have_sim && app.sim.time_scale != 1) {
+		scaled.rate = app.sim.time_scale;
+		clk = (struct loop_clock){ loop_scaled_now, &scaled, app.sim.time_scale };
+		log_msg(LOG_NOTICE, "simulated bench time runs %g times faster than real time", app.sim.time_scale);
+	}
+	if (!(app.lp = loop_new(&clk, &err)))
+		goto fail;
+	app.started_mono = loop_now(app.lp);
+	app.started_wall = app_wallclock();
+	if (store_open(app.conf->d.database, &app.store, &err))
+		goto fail;
+	if (signals_init(&err) || loop_fd_add(app.lp, sig_pipe[0], POLLIN, on_sigpipe, &app, &err))
+		goto fail;
+	job_init(app.lp);
+	if (server_init(app.lp, &app.conf->d, ACQ_VERSION, commands_handle, &app, &app.srv, &err))
+		goto fail;
+	if (devices_init(app.lp, app.store, app.conf, NULL, app_device_notify, &app, app_wallclock, &app.dev, &err))
+		goto fail;
+	struct sweep_env env = { .loop = app.lp, .store = app.store, .devices = app.dev, .conf = app.conf,
+				 .emit = app_emit, .emit_ctx = &app, .wallclock = app_wallclock,
+				 .software_version = ACQ_VERSION };
+	if (sweep_init(&env, &app.sweep, &err))
+		goto fail;
+	if (app.conf->d.auto_resume) {
+		int64_t id = 0;
+		int64_t pending = 0;
+		store_sweep_interrupted(app.store, &pending, NULL);
+		if (pending && sweep_recover(app.sweep, &id, &err))
+			log_msg(LOG_WARNING, "interrupted sweep %lld not resumed: %s", (long long)pending, err.msg);
+		else if (id)
+			log_msg(LOG_NOTICE, "resuming interrupted sweep %lld", (long long)id);
+	}
+	uint64_t wd_usec = 0;
+	if (sd_watchdog_enabled(0, &wd_usec) > 0 && wd_usec)
+		loop_timer_add(app.lp, (double)wd_usec / 2e6, (double)wd_usec / 2e6, watchdog_tick, NULL);
+	else if (app.conf->d.watchdog_s > 0)
+		loop_timer_add(app.lp, app.conf->d.watchdog_s / 2, app.conf->d.watchdog_s / 2, watchdog_tick, NULL);
+	loop_timer_add(app.lp, 1.0, 1.0, status_tick, &app);
+	status_tick(app.lp, &app);
+	log_msg(LOG_NOTICE, "acquisitiond %s ready: socket %s, database %s, %d/%d devices available%s", ACQ_VERSION,
+		app.conf->d.socket_path, app.conf->d.database, devices_available(app.dev), CONF_DEV__COUNT,
+		app.have_sim ? " (simulated bench)" : "");
+	sd_notifyf(0, "READY=1\nMAINPID=%d\nSTATUS=%s", (int)getpid(), last_status);
+	while (!want_stop)
+		if (loop_run(app.lp) < 0) {
+			log_msg(LOG_ERR, "poll: %s", strerror(errno));
+			break;
+		}
+	sd_notify(0, "STOPPING=1\nSTATUS=stopping: laser off, arms stopped, closing the database");
+	rc = 0;
+	goto out;
+fail:
+	log_msg(LOG_ERR, "%s", err.msg);
+	rc = 1;
+out:
+	/* Reverse order of start-up. The sweep first (it records where it stopped), then the devices (laser off,
+	 * arms stopped), the clients, the children, the database. */
+	sweep_finish(app.sweep);
+	devices_finish(app.dev); /* laser off and arms stopped first; a failure is logged per device */
+	server_finish(app.srv);
+	job_finish();
+	if (sig_pipe[0] >= 0)
+		signals_finish();
+	store_close(app.store);
+	loop_free(app.lp);
+	if (!rc)
+		log_msg(LOG_NOTICE, "stopped");
+out_conf:
+	conf_free(app.conf);
+	log_finish();
+	return rc;
+}

@@ -1,0 +1,48 @@
+/* app: the daemon's one context — every module's instance, wired by acquisitiond_main.c and used by the
+ * command handlers (commands.c). Only the daemon's body sees it; the sweep executor gets sweep_env. */
+#ifndef APP_H
+#define APP_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "daemon/conf.h"
+#include "daemon/server.h"
+#include "proto/proto.h"
+
+struct loop;
+struct store;
+struct devices;
+struct sweep;
+
+struct app {
+	struct loop *lp;
+	struct conf *conf;
+	const char *conf_path;
+	struct conf_sim sim;
+	bool have_sim;
+	struct store *store;
+	struct devices *dev;
+	struct sweep *sweep;
+	struct server *srv;
+	double started_wall, started_mono;
+	/* last reconstruction started by recon.start (the executor runs it) */
+	int64_t recon_run, recon_sweep;
+	bool stopping;
+	char sock_path[256], db_path[4096];  /* in use until exit, whatever a reload says */
+};
+
+/* Handle one authorised request (server_req_fn). */
+void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *req);
+/* Reload the configuration file: refused while a sweep or a manual operation runs. 0 or -1. */
+int app_reload(struct app *app, struct acq_err *err);
+/* Unix time now, seconds. */
+double app_wallclock(void);
+/* Emit an event to watchers (data consumed) — the sweep executor's env->emit. */
+void app_emit(void *ctx, const char *event, json_t *data);
+/* A device changed availability (devices_notify_fn). */
+void app_device_notify(void *ctx, enum conf_dev dev, bool up, const char *why);
+/* One-line status for systemd's STATUS= and logs. */
+void app_status_line(struct app *app, char *buf, size_t cap);
+
+#endif

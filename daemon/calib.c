@@ -1,0 +1,338 @@
+/* calib: counts → BRDF with an uncertainty budget, relative or absolute method, binned to a wavelength grid. */
+#include "daemon/calib.h"
+
+#include <math.h>
+#include <string.h>
+
+#define DEG (M_PI / 180.0)
+
+void calib_cfg_defaults(struct calib_cfg *c)
+{
+	memset(c, 0, sizeof *c);
+	c->method = CALIB_RELATIVE;
+	c->rho_ref.n = 1;
+	c->rho_ref.wl[0] = 550.0;
+	c->rho_ref.val[0] = 0.99;
+	c->rho_ref.u[0] = 0.005;
+	c->ref_theta_o_deg = NAN;
+	c->omega_det_sr = 1e-3;
+	c->u_omega_rel = 0.02;
+	c->angle_rel_per_deg = 0.0;
+	c->sigma_pos_deg = 0.005;
+	c->grid_min_nm = 450.0;
+	c->grid_max_nm = 1100.0;
+	c->grid_step_nm = 1.0;
+}
+
+const char *calib_method_name(enum calib_method m)
+{
+	return m == CALIB_ABSOLUTE ? "absolute" : "relative";
+}
+
+int calib_grid_size(const struct calib_cfg *c)
+{
+	if (!(c->grid_step_nm > 0) || !(c->grid_max_nm >= c->grid_min_nm))
+		return 0;
+	double n = floor((c->grid_max_nm - c->grid_min_nm) / c->grid_step_nm + 1e-9) + 1;
+	return n > CALIB_MAX_GRID ? 0 : (int)n;
+}
+
+static int parse_table(struct yc_node *seq, struct calib_table *t, struct acq_err *err)
+{
+	if (yc_expect_seq(seq, "calibration.reference.table", err))
+		return -1;
+	if (seq->n < 1 || seq->n > CALIB_MAX_TABLE)
+		return yc_errf(err, seq, "reference table: expected 1 to %d rows [nm, reflectance, u]", CALIB_MAX_TABLE);
+	struct calib_table tmp = { .n = (int)seq->n };
+	for (size_t i = 0; i < seq->n; i++) {
+		struct yc_node *row = seq->items[i];
+		if (yc_expect_seq(row, "reference table row", err))
+			return -1;
+		if (row->n != 3)
+			return yc_errf(err, row, "reference table row: expected [nm, reflectance, u]");
+		if (yc_node_double(row->items[0], "wavelength", 100, 3000, &tmp.wl[i], err) ||
+		    yc_node_double(row->items[1], "reflectance", 0, 1.5, &tmp.val[i], err) ||
+		    yc_node_double(row->items[2], "uncertainty", 0, 1, &tmp.u[i], err))
+			return -1;
+		if (i > 0 && !(tmp.wl[i] > tmp.wl[i - 1]))
+			return yc_errf(err, row, "reference table: wavelengths must increase");
+	}
+	*t = tmp;
+	return 0;
+}
+
+int calib_cfg_parse(struct yc_node *node, struct calib_cfg *c, struct acq_err *err)
+{
+	if (!node)
+		return 0;
+	if (yc_expect_map(node, "calibration", err))
+		return -1;
+	struct calib_cfg q = *c;
+	static const char *const methods[] = { "relative", "absolute", NULL };
+	int m = (int)q.method;
+	if (yc_enum(node, "method", false, methods, &m, err))
+		return -1;
+	q.method = (enum calib_method)m;
+	struct yc_node *ref = yc_get(node, "reference");
+	if (ref) {
+		if (yc_expect_map(ref, "calibration.reference", err))
+			return -1;
+		double rho = q.rho_ref.val[0], u = q.rho_ref.u[0];
+		struct yc_node *table = yc_get(ref, "table");
+		if (yc_double(ref, "reflectance", false, 0, 1.5, &rho, err) ||
+		    yc_double(ref, "u_reflectance", false, 0, 1, &u, err) ||
+		    yc_double(ref, "theta_o_deg", false, 0, 89, &q.ref_theta_o_deg, err))
+			return -1;
+		if (table) {
+			if (parse_table(table, &q.rho_ref, err))
+				return -1;
+		} else {
+			q.rho_ref.n = 1;
+			q.rho_ref.wl[0] = 550;
+			q.rho_ref.val[0] = rho;
+			q.rho_ref.u[0] = u;
+		}
+		if (yc_check_unknown(ref, "calibration.reference", err))
+			return -1;
+	}
+	struct yc_node *grid = yc_get(node, "grid");
+	if (grid) {
+		if (yc_expect_map(grid, "calibration.grid", err) ||
+		    yc_double(grid, "min_nm", false, 100, 3000, &q.grid_min_nm, err) ||
+		    yc_double(grid, "max_nm", false, 100, 3000, &q.grid_max_nm, err) ||
+		    yc_double(grid, "step_nm", false, 0.01, 1000, &q.grid_step_nm, err) ||
+		    yc_check_unknown(grid, "calibration.grid", err))
+			return -1;
+	}
+	if (yc_double(node, "omega_det_sr", false, 1e-12, 6.3, &q.omega_det_sr, err) ||
+	    yc_double(node, "u_omega_rel", false, 0, 1, &q.u_omega_rel, err) ||
+	    yc_double(node, "angle_rel_per_deg", false, 0, 10, &q.angle_rel_per_deg, err) ||
+	    yc_double(node, "sigma_pos_deg", false, 0, 10, &q.sigma_pos_deg, err))
+		return -1;
+	if (calib_grid_size(&q) == 0)
+		return yc_errf(err, grid ? grid : node, "calibration grid: need min_nm <= max_nm and at most %d points",
+			       CALIB_MAX_GRID);
+	if (yc_check_unknown(node, "calibration", err))
+		return -1;
+	*c = q;
+	return 0;
+}
+
+void calib_table_eval(const struct calib_table *t, double wl, double *val, double *u)
+{
+	if (t->n <= 0) {
+		*val = NAN;
+		*u = NAN;
+		return;
+	}
+	if (t->n == 1 || wl <= t->wl[0]) {
+		*val = t->val[0];
+		*u = t->u[0];
+		return;
+	}
+	if (wl >= t->wl[t->n - 1]) {
+		*val = t->val[t->n - 1];
+		*u = t->u[t->n - 1];
+		return;
+	}
+	int lo = 0, hi = t->n - 1;
+	while (hi - lo > 1) {
+		int mid = (lo + hi) / 2;
+		if (t->wl[mid] <= wl)
+			lo = mid;
+		else
+			hi = mid;
+	}
+	double w = (wl - t->wl[lo]) / (t->wl[hi] - t->wl[lo]);
+	*val = t->val[lo] + w * (t->val[hi] - t->val[lo]);
+	*u = t->u[lo] + w * (t->u[hi] - t->u[lo]); /* the table's uncertainty is one correlated curve */
+}
+
+static void px_invalid(struct calib_px *o, int i)
+{
+	o->valid[i] = 0;
+	o->f[i] = o->u_noise[i] = o->u_dark[i] = o->u_refn[i] = o->u_refs[i] = o->u_angle[i] = NAN;
+}
+
+int calib_pixels(const struct calib_cfg *c, const double *wl, const struct exp_rate *s, const struct exp_rate *r,
+		 const struct calib_geom *g, struct calib_px *o, struct acq_err *err)
+{
+	if (s->npix <= 0 || s->npix > SPECTRO_MAX_PIXELS || r->npix != s->npix)
+		return acq_errf(err, ACQ_E_INVAL, "calibration: sample has %d pixels, reference %d", s->npix, r->npix);
+	if (!isfinite(g->theta_i) || !isfinite(g->theta_o) || fabs(g->theta_i) >= 90 || fabs(g->theta_o) >= 90)
+		return acq_errf(err, ACQ_E_RANGE, "calibration: geometry θi %g°, θo %g° outside the hemisphere",
+				g->theta_i, g->theta_o);
+	double co = cos(g->theta_o * DEG);
+	double geo, geo_rel_sens; /* cosine factor and its relative sensitivity per radian */
+	if (c->method == CALIB_RELATIVE) {
+		if (isfinite(c->ref_theta_o_deg)) {
+			geo = cos(c->ref_theta_o_deg * DEG) / co;
+			geo_rel_sens = fabs(tan(g->theta_o * DEG));
+		} else {
+			geo = 1.0;
+			geo_rel_sens = 0.0;
+		}
+	} else {
+		if (!(c->omega_det_sr > 0))
+			return acq_errf(err, ACQ_E_INVAL, "calibration: absolute method needs Ω_det > 0");
+		geo = 1.0 / (c->omega_det_sr * co);
+		geo_rel_sens = fabs(tan(g->theta_o * DEG));
+	}
+	double sig_rad = c->sigma_pos_deg * DEG;
+	o->npix = s->npix;
+	for (int i = 0; i < s->npix; i++) {
+		/* A reference (or beam) not clearly above its noise has no light to compare with: unusable. */
+		double ur_i = hypot(r->u_noise[i], r->u_dark[i]);
+		if (!s->valid[i] || !r->valid[i] || !(r->rate[i] > 0) || !(r->rate[i] > 3 * ur_i) || !isfinite(s->rate[i])) {
+			px_invalid(o, i);
+			continue;
+		}
+		double scale, u_scale_rel;
+		if (c->method == CALIB_RELATIVE) {
+			double rho, urho;
+			calib_table_eval(&c->rho_ref, wl[i], &rho, &urho);
+			scale = rho / M_PI * geo;
+			u_scale_rel = rho > 0 ? urho / rho : 0.0;
+		} else {
+			scale = geo;
+			u_scale_rel = c->u_omega_rel;
+		}
+		double k = scale / r->rate[i]; /* ∂f/∂R_s */
+		double f = s->rate[i] * k;
+		o->valid[i] = 1;
+		o->f[i] = f;
+		o->u_noise[i] = fabs(k) * s->u_noise[i];
+		o->u_dark[i] = fabs(k) * s->u_dark[i];
+		double ur = hypot(r->u_noise[i], r->u_dark[i]);
+		o->u_refn[i] = fabs(f) * ur / r->rate[i];
+		o->u_refs[i] = fabs(f) * u_scale_rel;
+		o->u_angle[i] = fabs(f) * hypot(c->angle_rel_per_deg * c->sigma_pos_deg, geo_rel_sens * sig_rad);
+	}
+	return 0;
+}
+
+void calib_combine(struct calib_spectrum *s)
+{
+	for (int k = 0; k < s->n; k++) {
+		double a = s->u_noise[k], b = s->u_dark[k], r = s->u_ref[k], g = s->u_angle[k];
+		s->u[k] = isfinite(s->f[k]) ? sqrt(a * a + b * b + r * r + g * g) : NAN;
+	}
+}
+
+static void bin_nan(struct calib_spectrum *o, int k)
+{
+	o->f[k] = o->u[k] = o->u_noise[k] = o->u_dark[k] = o->u_ref[k] = o->u_angle[k] = NAN;
+	o->npix[k] = 0;
+}
+
+/* Accumulators of one bin while binning. */
+struct bin_acc {
+	double sf, sn, sd, srn, srs, sa;
+	int m, inbin;
+};
+
+int calib_resample(const struct calib_cfg *c, const double *wl, const struct calib_px *px,
+		   struct calib_spectrum *o, struct acq_err *err)
+{
+	int n = calib_grid_size(c);
+	if (n <= 0)
+		return acq_errf(err, ACQ_E_INVAL, "calibration: empty or too large wavelength grid");
+	if (px->npix <= 0 || px->npix > SPECTRO_MAX_PIXELS)
+		return acq_errf(err, ACQ_E_INVAL, "calibration: %d pixels", px->npix);
+	static _Thread_local struct bin_acc acc[CALIB_MAX_GRID];
+	memset(acc, 0, sizeof(struct bin_acc) * (size_t)n);
+	o->n = n;
+	o->method = c->method;
+	double h = c->grid_step_nm / 2, lo = c->grid_min_nm - h;
+	/* One pass over the pixels: bin k holds [λk − step/2, λk + step/2). */
+	for (int i = 0; i < px->npix; i++) {
+		double x = (wl[i] - lo) / c->grid_step_nm;
+		if (!(x >= 0) || x >= n)
+			continue;
+		struct bin_acc *a = &acc[(int)x];
+		a->inbin++;
+		if (!px->valid[i])
+			continue;
+		a->m++;
+		a->sf += px->f[i];
+		a->sn += px->u_noise[i] * px->u_noise[i];
+		a->sd += px->u_dark[i] * px->u_dark[i];
+		a->srn += px->u_refn[i] * px->u_refn[i];
+		a->srs += px->u_refs[i];
+		a->sa += px->u_angle[i];
+	}
+	for (int k = 0; k < n; k++) {
+		double lam = c->grid_min_nm + k * c->grid_step_nm;
+		const struct bin_acc *a = &acc[k];
+		o->wl[k] = lam;
+		if (a->m > 0) {
+			int m = a->m;
+			o->f[k] = a->sf / m;
+			o->u_noise[k] = sqrt(a->sn) / m;
+			o->u_dark[k] = sqrt(a->sd) / m;
+			o->u_ref[k] = hypot(sqrt(a->srn) / m, a->srs / m);
+			o->u_angle[k] = a->sa / m;
+			o->npix[k] = m;
+			continue;
+		}
+		bin_nan(o, k);
+		if (a->inbin > 0)
+			continue; /* only invalid (saturated) pixels here: not measured */
+		/* Pixels coarser than the grid: linear interpolation between the nearest pixels either side. */
+		int below = -1, above = -1;
+		for (int i = 0; i < px->npix; i++) {
+			if (wl[i] < lam) {
+				if (below < 0 || wl[i] > wl[below])
+					below = i;
+			} else if (above < 0 || wl[i] < wl[above]) {
+				above = i;
+			}
+		}
+		if (below < 0 || above < 0 || !px->valid[below] || !px->valid[above] || !(wl[above] > wl[below]))
+			continue;
+		double w2 = (lam - wl[below]) / (wl[above] - wl[below]), w1 = 1 - w2;
+		int p = below, q = above;
+		o->f[k] = w1 * px->f[p] + w2 * px->f[q];
+		o->u_noise[k] = hypot(w1 * px->u_noise[p], w2 * px->u_noise[q]);
+		o->u_dark[k] = hypot(w1 * px->u_dark[p], w2 * px->u_dark[q]);
+		o->u_ref[k] = hypot(hypot(w1 * px->u_refn[p], w2 * px->u_refn[q]), w1 * px->u_refs[p] + w2 * px->u_refs[q]);
+		o->u_angle[k] = w1 * px->u_angle[p] + w2 * px->u_angle[q];
+	}
+	calib_combine(o);
+	return 0;
+}
+
+int calib_spectrum(const struct calib_cfg *c, const double *wl, const struct exp_rate *sample,
+		   const struct exp_rate *ref, const struct calib_geom *g, struct calib_spectrum *out,
+		   struct acq_err *err)
+{
+	static _Thread_local struct calib_px px;
+	if (calib_pixels(c, wl, sample, ref, g, &px, err))
+		return -1;
+	return calib_resample(c, wl, &px, out, err);
+}
+
+int calib_angle_from_neighbours(const struct calib_spectrum *prev, double a_prev, struct calib_spectrum *here,
+				double a_here, const struct calib_spectrum *next, double a_next, double sigma_deg,
+				struct acq_err *err)
+{
+	if (prev && (prev->n != here->n || !(fabs(a_here - a_prev) > 1e-9)))
+		prev = NULL;
+	if (next && (next->n != here->n || !(fabs(a_next - a_here) > 1e-9)))
+		next = NULL;
+	if (!prev && !next)
+		return acq_errf(err, ACQ_E_INVAL, "angular term: no usable neighbour");
+	for (int k = 0; k < here->n; k++) {
+		double slope = NAN;
+		if (prev && next && isfinite(prev->f[k]) && isfinite(next->f[k]))
+			slope = (next->f[k] - prev->f[k]) / (a_next - a_prev);
+		else if (next && isfinite(next->f[k]) && isfinite(here->f[k]))
+			slope = (next->f[k] - here->f[k]) / (a_next - a_here);
+		else if (prev && isfinite(prev->f[k]) && isfinite(here->f[k]))
+			slope = (here->f[k] - prev->f[k]) / (a_here - a_prev);
+		if (isfinite(slope))
+			here->u_angle[k] = fabs(slope) * sigma_deg;
+	}
+	calib_combine(here);
+	return 0;
+}

@@ -1,0 +1,441 @@
+/* commands: what each protocol command does in the daemon (dispatch from server.c; see proto_cmds[]). */
+#include "daemon/app.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <linux/openat2.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/syscall.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "acq_version.h"
+#include "daemon/devices.h"
+#include "daemon/log.h"
+#include "daemon/loop.h"
+#include "daemon/store.h"
+#include "daemon/sweep.h"
+
+#include "daemon/plan.h"
+
+/* ---- helpers ---- */
+
+static void reply_err(struct app *app, const struct srv_peer *peer, json_t *id, const struct acq_err *err)
+{
+	server_reply_error(app->srv, peer->serial, id, proto_code_of(err), err->msg);
+}
+
+static double num_arg(json_t *req, const char *key, double dflt)
+{
+	json_t *v = json_object_get(req, key);
+	return v ? json_number_value(v) : dflt;
+}
+
+static json_t *progress_json(struct app *app)
+{
+	struct sweep_progress p;
+	sweep_get_progress(app->sweep, &p);
+	json_t *o = json_pack("{s:s,s:I,s:i,s:i,s:s}", "state", sweep_state_name(p.state), "id", (json_int_t)p.sweep_id,
+			      "done", p.points_done, "total", p.points_total, "message", p.message);
+	json_object_set_new(o, "eta_s", isfinite(p.eta_s) ? json_real(p.eta_s) : json_null());
+	return o;
+}
+
+/* ---- plan: dry run against the running configuration's bench ---- */
+static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	struct plan_spec *spec = NULL;
+	struct plan_result *res = NULL;
+	if (plan_load_string("plan", json_string_value(json_object_get(req->root, "plan")), &spec, &err) ||
+	    plan_make(spec, &app->conf->bench, &res, &err)) {
+		plan_spec_free(spec);
+		return reply_err(app, peer, req->id, &err);
+	}
+	/* The points that were moved or dropped, and why (bounded so the reply stays one line). */
+	json_t *changed = json_array();
+	for (size_t i = 0; i < res->n_req && json_array_size(changed) < 200; i++) {
+		const struct plan_req *r = &res->req[i];
+		if (r->status != PLAN_MOVED && r->status != PLAN_DROPPED)
+			continue;
+		json_array_append_new(changed, json_pack("{s:[f,f,f],s:s,s:s,s:f}", "requested", r->req.laser_theta,
+							 r->req.det_theta, r->req.det_phi, "status",
+							 r->status == PLAN_MOVED ? "moved" : "dropped", "reason",
+							 plan_reason_name(r->reason), "moved_deg", r->moved_deg));
+	}
+	json_t *o = json_pack("{s:s,s:I,s:I,s:I,s:I,s:I,s:I,s:f,s:f,s:f,s:f,s:f,s:[f,f,f],s:I,s:o}", "name", spec->name,
+			      "requested", (json_int_t)res->n_req, "points", (json_int_t)res->n_steps, "kept",
+			      (json_int_t)res->n_kept, "moved", (json_int_t)res->n_moved, "dropped",
+			      (json_int_t)res->n_dropped, "duplicates", (json_int_t)res->n_duplicate, "duration_s",
+			      res->duration_s, "raster_s", res->raster_s, "lower_bound_s", res->lower_bound_s, "dwell_s",
+			      res->dwell_s, "motion_s", res->motion_s, "travel_deg", res->travel_deg[0], res->travel_deg[1],
+			      res->travel_deg[2], "detours", (json_int_t)res->n_detours, "changed", changed);
+	plan_result_free(res);
+	plan_spec_free(spec);
+	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "plan", o));
+}
+
+/* A manual move must not make the arms collide, on the way or at the target (straight
+ * segment, all axes together — what devices_move() does). Blind zones for the beam or the view are allowed
+ * (alignment needs them) and reported in the reply. 0, or -1 with ACQ_E_RANGE. */
+static int move_check(struct app *app, const double t[3], const char **warning, struct acq_err *err)
+{
+	*warning = NULL;
+	double cur[3];
+	devices_positions(app->dev, cur);
+	for (int i = 0; i < 3; i++)
+		if (isnan(cur[i]))
+			return 0; /* an axis is unavailable: devices_move() refuses the move anyway */
+	struct plan_pos a = { cur[0], cur[1], cur[2] };
+	struct plan_pos b = { isnan(t[0]) ? cur[0] : t[0], isnan(t[1]) ? cur[1] : t[1], isnan(t[2]) ? cur[2] : t[2] };
+	unsigned blind = plan_blind(&app->conf->bench, &b);
+	if (blind & (PLAN_R_COLLISION | PLAN_R_LIMITS))
+		return acq_errf(err, ACQ_E_RANGE, "move to (%g°, %g°, %g°) refused: %s", b.laser_theta, b.det_theta,
+				b.det_phi, plan_reason_name(blind & (PLAN_R_COLLISION | PLAN_R_LIMITS)));
+	/* From a position that already violates the clearance (e.g. both arms parked at the zenith) any path
+	 * "collides" at its start: then only the target is checked, so the operator can move out. */
+	bool stuck = plan_blind(&app->conf->bench, &a) & PLAN_R_COLLISION;
+	if (!stuck && !plan_seg_safe(&app->conf->bench, &a, &b))
+		return acq_errf(err, ACQ_E_RANGE, "move from (%g°, %g°, %g°) to (%g°, %g°, %g°) refused: the arms would "
+				"collide on the way; move one arm first", a.laser_theta, a.det_theta, a.det_phi,
+				b.laser_theta, b.det_theta, b.det_phi);
+	if (blind)
+		*warning = plan_reason_name(blind);
+	return 0;
+}
+
+/* ---- manual device operations: replies arrive later ---- */
+struct pending {
+	struct app *app;
+	uint64_t serial;
+	json_t *id;
+	const char *warning;  /* static text added to a successful reply */
+};
+
+static void pending_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
+{
+	struct pending *p = ctx;
+	if (rc)
+		server_reply_error(p->app->srv, p->serial, p->id, proto_code_of(err), err->msg);
+	else {
+		if (p->warning && json_is_object(result))
+			json_object_set_new(result, "warning", json_string(p->warning));
+		server_reply(p->app->srv, p->serial, p->id, result);
+	}
+	json_decref(p->id);
+	free(p);
+}
+
+static struct pending *pending_new(struct app *app, const struct srv_peer *peer, json_t *id)
+{
+	struct pending *p = calloc(1, sizeof *p);
+	if (p)
+		*p = (struct pending){ .app = app, .serial = peer->serial, .id = json_incref(id) };
+	return p;
+}
+
+static void cmd_move(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep)) {
+		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: pause is not enough, abort it before moving by hand");
+		return reply_err(app, peer, req->id, &err);
+	}
+	double t[3] = { num_arg(req->root, "laser_theta", NAN), num_arg(req->root, "detector_theta", NAN),
+			num_arg(req->root, "detector_phi", NAN) };
+	const char *warning;
+	if (move_check(app, t, &warning, &err))
+		return reply_err(app, peer, req->id, &err);
+	if (warning)
+		log_msg(LOG_NOTICE, "manual move into a blind zone (%s)", warning);
+	struct pending *p = pending_new(app, peer, req->id);
+	if (!p) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return reply_err(app, peer, req->id, &err);
+	}
+	p->warning = warning;
+	if (devices_move(app->dev, t, pending_done, p, &err)) {
+		json_decref(p->id);
+		free(p);
+		reply_err(app, peer, req->id, &err);
+	}
+}
+
+static void cmd_measure(struct app *app, const struct srv_peer *peer, struct proto_req *req, const char *kind)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep)) {
+		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: abort it before measuring by hand");
+		return reply_err(app, peer, req->id, &err);
+	}
+	double it = num_arg(req->root, "integration_ms", 100);
+	int avg = (int)num_arg(req->root, "averages", app->conf->sweep.averages);
+	struct pending *p = pending_new(app, peer, req->id);
+	if (!p) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return reply_err(app, peer, req->id, &err);
+	}
+	if (devices_measure(app->dev, kind, it, avg, num_arg(req->root, "power_pct", NAN), pending_done, p, &err)) {
+		json_decref(p->id);
+		free(p);
+		reply_err(app, peer, req->id, &err);
+	}
+}
+
+/* ---- sweeps ---- */
+static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	const char *sub = req->cmd + strlen("sweep.");
+	json_t *data = NULL;
+	int rc = 0;
+	if (!strcmp(sub, "list")) {
+		data = store_sweep_list(app->store, (int)num_arg(req->root, "limit", 100), &err);
+		if (data)
+			data = json_pack("{s:o}", "sweeps", data);
+		rc = data ? 0 : -1;
+	} else if (!strcmp(sub, "show")) {
+		json_t *pts = json_object_get(req->root, "points");
+		data = store_sweep_show(app->store, (int64_t)num_arg(req->root, "sweep", 0), json_is_true(pts), &err);
+		if (data)
+			data = json_pack("{s:o}", "sweep", data);
+		rc = data ? 0 : -1;
+	} else if (!strcmp(sub, "start")) {
+		int64_t id = 0;
+		json_t *name = json_object_get(req->root, "name");
+		if (devices_busy(app->dev))
+			rc = acq_errf(&err, ACQ_E_STATE, "a manual move or measurement is running");
+		else
+			rc = sweep_start(app->sweep, json_string_value(json_object_get(req->root, "plan")),
+					 name ? json_string_value(name) : NULL, &id, &err);
+		if (!rc)
+			data = json_pack("{s:I}", "sweep", (json_int_t)id);
+	} else if (!strcmp(sub, "pause")) {
+		rc = sweep_pause(app->sweep, &err);
+	} else if (!strcmp(sub, "resume")) {
+		rc = sweep_resume(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &err);
+	} else if (!strcmp(sub, "abort")) {
+		rc = sweep_abort(app->sweep, &err);
+	}
+	if (rc)
+		return reply_err(app, peer, req->id, &err);
+	if (!data)
+		data = json_pack("{s:o}", "progress", progress_json(app));
+	server_reply(app->srv, peer->serial, req->id, data);
+}
+
+/* ---- reconstruction: the executor owns the chain (sweep_recon_start); here the checks and the reply ---- */
+static void cmd_recon_start(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	int64_t sweep = (int64_t)num_arg(req->root, "sweep", 0);
+	json_t *sw = store_sweep_show(app->store, sweep, false, &err);
+	if (!sw)
+		return reply_err(app, peer, req->id, &err);
+	const char *state = json_string_value(json_object_get(sw, "state"));
+	json_int_t ncal = json_integer_value(json_object_get(sw, "calibrated"));
+	if (!state || strcmp(state, "completed") || ncal == 0) {
+		acq_errf(&err, ACQ_E_STATE, "sweep %lld is %s with %lld calibrated samples: nothing to reconstruct yet",
+			 (long long)sweep, state ? state : "?", (long long)ncal);
+		json_decref(sw);
+		return reply_err(app, peer, req->id, &err);
+	}
+	json_decref(sw);
+	if (sweep_recon_busy(app->sweep)) {
+		acq_errf(&err, ACQ_E_STATE, "a reconstruction is already running");
+		return reply_err(app, peer, req->id, &err);
+	}
+	int64_t run = 0;
+	if (sweep_recon_start(app->sweep, sweep, &run, &err))
+		return reply_err(app, peer, req->id, &err);
+	if (run)
+		app->recon_run = run;
+	app->recon_sweep = sweep;
+	log_msg(LOG_INFO, "reconstruction of sweep %lld started (run %lld)", (long long)sweep, (long long)run);
+	server_reply(app->srv, peer->serial, req->id,
+		     json_pack("{s:I,s:I}", "run", (json_int_t)run, "sweep", (json_int_t)sweep));
+}
+
+static void cmd_recon_status(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	int64_t run = (int64_t)num_arg(req->root, "run", 0), sweep = (int64_t)num_arg(req->root, "sweep", 0);
+	if (!run && !sweep) {
+		if (!app->recon_run && !app->recon_sweep) {
+			acq_errf(&err, ACQ_E_NOTFOUND, "no reconstruction started since the daemon started; give sweep or run");
+			return reply_err(app, peer, req->id, &err);
+		}
+		run = app->recon_run;
+		sweep = run ? 0 : app->recon_sweep;
+	}
+	json_t *r = store_recon_show(app->store, run, sweep, &err);
+	if (!r)
+		return reply_err(app, peer, req->id, &err);
+	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "run", r));
+}
+
+/* ---- export ---- */
+
+/* Open path for writing confined beneath the state directory: openat2(RESOLVE_BENEATH) refuses "..",
+ * absolute paths and symlinks that leave it, whatever the path's shape. fd or -1 with err. */
+static int open_confined(const char *state_dir, const char *path, struct acq_err *err)
+{
+	if (!path[0] || path[0] == '/' || strstr(path, ".."))
+		return acq_errf(err, ACQ_E_INVAL, "path \"%s\": expected a relative path under the state directory "
+				"without \"..\"", path);
+	int dfd = open(state_dir, O_PATH | O_DIRECTORY | O_CLOEXEC);
+	if (dfd < 0)
+		return acq_errf(err, ACQ_E_IO, "%s: %s", state_dir, strerror(errno));
+	struct open_how how = { .flags = O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NOFOLLOW, .mode = 0640,
+				.resolve = RESOLVE_BENEATH | RESOLVE_NO_MAGICLINKS };
+	int fd = (int)syscall(SYS_openat2, dfd, path, &how, sizeof how);
+	int e = errno;
+	close(dfd);
+	if (fd < 0)
+		return acq_errf(err, e == EXDEV || e == ELOOP ? ACQ_E_INVAL : ACQ_E_IO, "path \"%s\": %s%s", path,
+				strerror(e), e == EXDEV ? " (leaves the state directory)" : "");
+	return fd;
+}
+
+static void cmd_export(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	int64_t sweep = (int64_t)num_arg(req->root, "sweep", 0);
+	json_t *pathv = json_object_get(req->root, "path");
+	if (pathv && peer->role < PROTO_CONTROLLER) {
+		server_reply_error(app->srv, peer->serial, req->id, PROTO_E_FORBIDDEN,
+				   "export to a file needs a controller; observers get the CSV inline");
+		return;
+	}
+	char *buf = NULL;
+	size_t len = 0;
+	FILE *f = open_memstream(&buf, &len);
+	int nrows = 0;
+	int rc = f ? store_export_csv(app->store, sweep, f, &nrows, &err) : acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+	if (f)
+		fclose(f);
+	if (rc) {
+		free(buf);
+		return reply_err(app, peer, req->id, &err);
+	}
+	if (pathv) {
+		const char *path = json_string_value(pathv);
+		int fd = open_confined(app->conf->d.state_dir, path, &err);
+		if (fd < 0 || proto_write_all(fd, buf, len, &err)) {
+			if (fd >= 0)
+				close(fd);
+			free(buf);
+			return reply_err(app, peer, req->id, &err);
+		}
+		close(fd);
+		free(buf);
+		server_reply(app->srv, peer->serial, req->id,
+			     json_pack("{s:I,s:i,s:s,s:I}", "sweep", (json_int_t)sweep, "rows", nrows, "path", path, "bytes",
+				       (json_int_t)len));
+		return;
+	}
+	if (len > PROTO_MAX_LINE / 2) {
+		free(buf);
+		acq_errf(&err, ACQ_E_RANGE, "CSV of sweep %lld is %zu bytes: too large inline, give a path", (long long)sweep,
+			 len);
+		return reply_err(app, peer, req->id, &err);
+	}
+	server_reply(app->srv, peer->serial, req->id,
+		     json_pack("{s:I,s:i,s:s%}", "sweep", (json_int_t)sweep, "rows", nrows, "csv", buf, len));
+	free(buf);
+}
+
+/* ---- information ---- */
+static json_t *config_json(struct app *app, bool text)
+{
+	const struct conf *c = app->conf;
+	json_t *ctl = json_array(), *obs = json_array(), *notes = json_object();
+	for (int i = 0; i < c->d.ncontrollers; i++)
+		json_array_append_new(ctl, json_string(c->d.controllers[i]));
+	for (int i = 0; i < c->d.nobservers; i++)
+		json_array_append_new(obs, json_string(c->d.observers[i]));
+	for (int d = 0; d < CONF_DEV__COUNT; d++)
+		if (c->devnote[d][0])
+			json_object_set_new(notes, conf_dev_name((enum conf_dev)d), json_string(c->devnote[d]));
+	char mode[8];
+	snprintf(mode, sizeof mode, "%04o", (unsigned)c->d.socket_mode);
+	json_t *o = json_pack(
+		"{s:s,s:b,s:{s:s,s:s,s:s,s:s,s:s?,s:i,s:o,s:o,s:b,s:f},"
+		"s:{s:f,s:i,s:f,s:f,s:f,s:f,s:i,s:i,s:b,s:b},s:{s:s,s:f,s:i,s:s},s:o}",
+		"path", c->path, "sim", c->have_sim,
+		"daemon", "state_dir", c->d.state_dir, "database", c->d.database, "socket", c->d.socket_path, "socket_mode",
+		mode, "socket_group", c->d.socket_group, "tcp_port", c->d.tcp_port, "controllers", ctl, "observers", obs,
+		"auto_resume", c->d.auto_resume, "device_retry_s", c->d.device_retry_s,
+		"sweep", "move_timeout_s", c->sweep.move_timeout_s, "move_retries", c->sweep.move_retries, "extra_settle_s",
+		c->sweep.extra_settle_s, "target_peak", c->sweep.target_peak, "min_integration_ms",
+		c->sweep.min_integration_ms, "max_integration_ms", c->sweep.max_integration_ms, "averages",
+		c->sweep.averages, "dark_every", c->sweep.dark_every, "auto_resume_faults", c->sweep.auto_resume_faults,
+		"auto_recon", c->sweep.auto_recon,
+		"recon", "program", c->recon.program, "timeout_s", c->recon.timeout_s, "threads", c->recon.threads,
+		"output_dir", c->recon.output_dir,
+		"device_notes", notes);
+	if (o && text)
+		json_object_set_new(o, "text", json_string(c->text));
+	return o;
+}
+
+static json_t *status_json(struct app *app)
+{
+	int clients = 0, watchers = 0;
+	server_counts(app->srv, &clients, &watchers);
+	char line[256];
+	app_status_line(app, line, sizeof line);
+	return json_pack("{s:s,s:s,s:i,s:f,s:f,s:o,s:{s:i,s:i},s:i,s:i,s:{s:b,s:I,s:I},s:s,s:b}", "daemon", "running",
+			 "version", ACQ_VERSION, "pid", (int)getpid(), "uptime_s", loop_now(app->lp) - app->started_mono,
+			 "started_at", app->started_wall, "sweep", progress_json(app), "devices", "available",
+			 devices_available(app->dev), "total", CONF_DEV__COUNT, "clients", clients, "watchers", watchers,
+			 "recon", "running", sweep_recon_busy(app->sweep), "run", (json_int_t)app->recon_run, "sweep",
+			 (json_int_t)app->recon_sweep, "summary", line, "sim", app->have_sim);
+}
+
+void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct app *app = ctx;
+	const char *cmd = req->cmd;
+	struct acq_err err = { 0 };
+	if (!strcmp(cmd, "version")) {
+		server_reply(app->srv, peer->serial, req->id,
+			     json_pack("{s:s,s:i,s:s,s:i,s:s}", "version", ACQ_VERSION, "protocol", PROTO_VERSION, "server",
+				       "acquisitiond", "schema", store_schema_version(app->store), "role",
+				       peer->role == PROTO_CONTROLLER ? "controller" : "observer"));
+	} else if (!strcmp(cmd, "status")) {
+		server_reply(app->srv, peer->serial, req->id, status_json(app));
+	} else if (!strcmp(cmd, "devices")) {
+		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_json(app->dev)));
+	} else if (!strcmp(cmd, "config")) {
+		server_reply(app->srv, peer->serial, req->id,
+			     json_pack("{s:o}", "config", config_json(app, json_is_true(json_object_get(req->root, "text")))));
+	} else if (!strcmp(cmd, "plan")) {
+		cmd_plan(app, peer, req);
+	} else if (!strncmp(cmd, "sweep.", 6)) {
+		cmd_sweep(app, peer, req);
+	} else if (!strcmp(cmd, "move")) {
+		cmd_move(app, peer, req);
+	} else if (!strcmp(cmd, "measure")) {
+		cmd_measure(app, peer, req, "sample");
+	} else if (!strcmp(cmd, "dark") || !strcmp(cmd, "reference")) {
+		cmd_measure(app, peer, req, cmd);
+	} else if (!strcmp(cmd, "recon.start")) {
+		cmd_recon_start(app, peer, req);
+	} else if (!strcmp(cmd, "recon.status")) {
+		cmd_recon_status(app, peer, req);
+	} else if (!strcmp(cmd, "export")) {
+		cmd_export(app, peer, req);
+	} else if (!strcmp(cmd, "reload")) {
+		if (app_reload(app, &err))
+			reply_err(app, peer, req->id, &err);
+		else
+			server_reply(app->srv, peer->serial, req->id, json_pack("{s:s}", "config", app->conf->path));
+	} else {
+		server_reply_error(app->srv, peer->serial, req->id, PROTO_E_INTERNAL, "command in the table but not handled");
+	}
+}

@@ -1,0 +1,140 @@
+/* exposure: the acquisition policy of one spectrum: auto-exposure from a probe, multi-exposure merge across
+ * saturation, dark management (one dark per integration time, refreshed by age or sensor temperature drift),
+ * averaging with the per-pixel standard deviation kept, and net count rates with their uncertainty.
+ *
+ * Pure functions over spectro_frame data: no device access, no logging, no clock of its own (callers pass
+ * `now`). Counts are normalised by integration time: a "rate" is net counts per millisecond. */
+#ifndef EXPOSURE_H
+#define EXPOSURE_H
+
+#include <stdbool.h>
+
+#include "config/acq_err.h"
+#include "config/yconf.h"
+#include "drivers/spectro.h"
+
+struct exp_policy {
+	double target_frac;      /* auto-exposure: the peak (raw counts) aims at this fraction of full scale */
+	double sat_frac;         /* raw counts ≥ sat_frac · full scale count as saturated (nonlinear region) */
+	double min_ms, max_ms;   /* integration time limits (device limits ∩ configured) */
+	double probe_ms;         /* first probe integration time */
+	double max_step;         /* largest factor by which one probe may lengthen the time */
+	int max_probes;          /* probes before taking the best estimate */
+	int max_exposures;       /* exposures merged per spectrum (1 = never merge) */
+	double hdr_ratio;        /* factor between successive exposures of a merge */
+	double low_counts;       /* net counts wanted for the weak end of the spectrum */
+	double low_quantile;     /* the weak end: this quantile of the positive net rates */
+	unsigned averages;       /* scans averaged per sample exposure */
+	unsigned dark_averages;  /* scans averaged per dark */
+	double dark_max_age_s;   /* a dark older than this is refreshed */
+	double dark_max_dtemp_c; /* a dark is refreshed when the sensor temperature moved more than this */
+};
+
+/* Net count rate of one spectrum on detector pixels (from one exposure or a merge). */
+struct exp_rate {
+	int npix;
+	double rate[SPECTRO_MAX_PIXELS];    /* (S − D)/t, counts per ms; NaN where !valid */
+	double u_noise[SPECTRO_MAX_PIXELS]; /* standard uncertainty from the sample's scan noise, counts/ms */
+	double u_dark[SPECTRO_MAX_PIXELS];  /* standard uncertainty from the dark's noise, counts/ms */
+	double t_ms[SPECTRO_MAX_PIXELS];    /* integration time the pixel's value comes from */
+	unsigned char valid[SPECTRO_MAX_PIXELS]; /* 0: saturated in every exposure (never used) */
+	int ninvalid;
+};
+
+/* Running mean and variance of counts over scans or averaged frames (Chan's parallel update). */
+struct exp_avg {
+	int npix;
+	unsigned n;                          /* scans accumulated */
+	double mean[SPECTRO_MAX_PIXELS];
+	double m2[SPECTRO_MAX_PIXELS];       /* sum of squared deviations */
+	unsigned char saturated[SPECTRO_MAX_PIXELS];
+	double t_ms;
+	double temperature_c;
+};
+
+/* One stored dark. */
+struct exp_dark {
+	double t_ms;
+	double taken_at;         /* caller's clock, seconds */
+	double temperature_c;    /* NaN if unknown */
+	unsigned averages;
+	int npix;
+	double mean[SPECTRO_MAX_PIXELS];
+	float stddev[SPECTRO_MAX_PIXELS];
+};
+
+#define EXP_DARK_SLOTS 16
+
+/* Darks by integration time; the oldest is evicted when full. */
+struct exp_darks {
+	struct exp_dark slot[EXP_DARK_SLOTS];
+	bool used[EXP_DARK_SLOTS];
+};
+
+enum exp_dark_need {
+	EXP_DARK_FRESH = 0,  /* a usable dark exists */
+	EXP_DARK_MISSING,    /* none at this integration time */
+	EXP_DARK_AGED,       /* older than dark_max_age_s */
+	EXP_DARK_TEMP,       /* the sensor temperature drifted more than dark_max_dtemp_c */
+};
+
+/* Outcome of exp_probe_next(). */
+enum exp_probe_result {
+	EXP_PROBE_DONE = 0,  /* *next_ms is the integration time to use */
+	EXP_PROBE_AGAIN = 1, /* probe again at *next_ms */
+};
+
+/* Fill p with the defaults (80 % of full scale, up to 3 exposures, 10 averages, darks every 600 s / 1 °C). */
+void exp_policy_defaults(struct exp_policy *p);
+/* Parse an `acquisition:` mapping onto p (absent keys keep their values). 0 or -1 with file:line:col. */
+int exp_policy_parse(struct yc_node *node, struct exp_policy *p, struct acq_err *err);
+/* Check a policy's consistency (limits ordered, fractions in range). 0 or -1. */
+int exp_policy_check(const struct exp_policy *p, struct acq_err *err);
+
+/* Auto-exposure step: from a probe frame taken at probe->meas.integration_ms (dark: counts at that time or
+ * NULL), choose the time that puts the highest pixel at target_frac of full_scale, clamped to the limits.
+ * probe_no counts probes already taken (1 for the first). Returns enum exp_probe_result, or -1 on bad input. */
+int exp_probe_next(const struct exp_policy *p, const struct spectro_frame *probe, const double *dark,
+		   double full_scale, int probe_no, double *next_ms, struct acq_err *err);
+
+/* Integration times of a multi-exposure set starting at base_ms (times[0] = base_ms, then × hdr_ratio) so the
+ * weak end (low_quantile of the positive net rates in rate, over pixels where roi is nonzero or roi NULL)
+ * reaches low_counts; at most max_exposures and max_ms. Returns the number of times (≥ 1). */
+int exp_plan_times(const struct exp_policy *p, const struct exp_rate *base, const unsigned char *roi,
+		   double base_ms, double *times, int max);
+
+/* Start an average of npix pixels at integration time t_ms. */
+void exp_avg_init(struct exp_avg *a, int npix, double t_ms);
+/* Add a frame that is itself a mean of n scans with per-pixel std (n = 1, std NULL for a single scan).
+ * 0, or -1 if npix or integration time do not match. */
+int exp_avg_add(struct exp_avg *a, const double *counts, const float *stddev, unsigned n,
+		const unsigned char *saturated, double t_ms, struct acq_err *err);
+/* Per-pixel sample standard deviation of the scans (0 when n < 2). */
+double exp_avg_std(const struct exp_avg *a, int p);
+
+/* Net rate of one exposure: sample mean/std over ns scans minus the dark, over t. A pixel is invalid when
+ * flagged saturated or its raw mean is ≥ sat_frac · full_scale. 0 or -1 on mismatched inputs. */
+int exp_net_rate(const struct exp_policy *p, const double *counts, const float *stddev, unsigned ns,
+		 const unsigned char *saturated, int npix, double t_ms, const struct exp_dark *dark,
+		 double full_scale, struct exp_rate *out, struct acq_err *err);
+
+/* Merge n exposures of the same spectrum: each pixel takes the longest exposure in which it is valid
+ * (highest signal-to-noise), so saturated pixels come from shorter exposures scaled by their own time.
+ * Pixels saturated everywhere stay invalid. 0 or -1. */
+int exp_merge(const struct exp_rate *const *in, int n, struct exp_rate *out, struct acq_err *err);
+
+/* Empty the dark store. */
+void exp_darks_clear(struct exp_darks *d);
+/* Whether a dark at t_ms can be used at time now with sensor temperature temp_c (NaN: unknown). */
+enum exp_dark_need exp_dark_check(const struct exp_darks *d, const struct exp_policy *p, double t_ms,
+				  double now, double temp_c);
+/* The stored dark at t_ms, or NULL. */
+const struct exp_dark *exp_dark_find(const struct exp_darks *d, double t_ms);
+/* Store (or replace) the dark at a->t_ms from an average; taken at now. Returns the stored dark. */
+const struct exp_dark *exp_dark_store(struct exp_darks *d, const struct exp_avg *a, double now);
+/* Forget the dark at t_ms (it was never stored, so it must not be used). */
+void exp_dark_forget(struct exp_darks *d, double t_ms);
+/* Short name of a dark decision ("fresh", "missing", "aged", "temperature"). */
+const char *exp_dark_need_name(enum exp_dark_need n);
+
+#endif

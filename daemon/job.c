@@ -1,0 +1,238 @@
+/* job: child processes with captured output, reaped without blocking the loop (see job.h). */
+#include "daemon/job.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdbool.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "daemon/loop.h"
+
+struct job {
+	pid_t pid;
+	int fd;                 /* read end of the output pipe, -1 once drained */
+	bool exited;
+	int status;
+	char *out;              /* the last JOB_OUTPUT_MAX bytes */
+	size_t len;
+	uint64_t timer;
+	bool killed;
+	job_done_fn done;
+	void *arg;
+	struct job *next;
+};
+
+static struct loop *job_loop;
+static struct job *job_list;
+
+void job_init(struct loop *lp)
+{
+	job_loop = lp;
+	job_list = NULL;
+}
+
+static void job_free(struct job *j)
+{
+	for (struct job **p = &job_list; *p; p = &(*p)->next)
+		if (*p == j) {
+			*p = j->next;
+			break;
+		}
+	if (j->fd >= 0) {
+		loop_fd_del(job_loop, j->fd);
+		close(j->fd);
+	}
+	loop_timer_cancel(job_loop, j->timer);
+	free(j->out);
+	free(j);
+}
+
+static void maybe_done(struct job *j)
+{
+	if (!j->exited || j->fd >= 0)
+		return;
+	j->out[j->len] = 0;
+	if (j->done)
+		j->done(j, j->status, j->out, j->len, j->arg);
+	job_free(j);
+}
+
+static void on_output(struct loop *lp, int fd, short revents, void *arg)
+{
+	(void)lp;
+	(void)revents;
+	struct job *j = arg;
+	char buf[8192];
+	ssize_t n = read(fd, buf, sizeof buf);
+	if (n < 0 && (errno == EINTR || errno == EAGAIN))
+		return;
+	if (n <= 0) {
+		loop_fd_del(job_loop, fd);
+		close(fd);
+		j->fd = -1;
+		maybe_done(j);
+		return;
+	}
+	size_t k = (size_t)n;
+	_Static_assert(sizeof buf < JOB_OUTPUT_MAX, "one read fits in the kept output");
+	if (j->len + k > JOB_OUTPUT_MAX) {
+		size_t drop = j->len + k - JOB_OUTPUT_MAX;
+		memmove(j->out, j->out + drop, j->len - drop);
+		j->len -= drop;
+	}
+	memcpy(j->out + j->len, buf, k);
+	j->len += k;
+}
+
+static void on_timeout(struct loop *lp, void *arg)
+{
+	(void)lp;
+	struct job *j = arg;
+	j->timer = 0;
+	if (j->exited)
+		return;
+	/* First SIGTERM, then SIGKILL two seconds later if it is still there. */
+	kill(j->pid, j->killed ? SIGKILL : SIGTERM);
+	if (!j->killed) {
+		j->killed = true;
+		j->timer = loop_timer_add(job_loop, 2.0, 0, on_timeout, j);
+	}
+}
+
+int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
+	      struct job **out, struct acq_err *err)
+{
+	if (!job_loop || !argv || !argv[0])
+		return acq_errf(err, ACQ_E_INVAL, "job: not initialised or no program");
+	struct job *j = calloc(1, sizeof *j);
+	if (!j || !(j->out = malloc(JOB_OUTPUT_MAX + 1))) {
+		free(j);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	int p[2];
+	if (pipe2(p, O_CLOEXEC) < 0) {
+		free(j->out);
+		free(j);
+		return acq_errf(err, ACQ_E_IO, "pipe: %s", strerror(errno));
+	}
+	pid_t pid = fork();
+	if (pid < 0) {
+		close(p[0]);
+		close(p[1]);
+		free(j->out);
+		free(j);
+		return acq_errf(err, ACQ_E_IO, "fork: %s", strerror(errno));
+	}
+	if (pid == 0) {
+		/* Child: only async-signal-safe calls until exec. */
+		sigset_t all;
+		sigemptyset(&all);
+		sigprocmask(SIG_SETMASK, &all, NULL);
+		signal(SIGPIPE, SIG_DFL);
+		signal(SIGTERM, SIG_DFL);
+		signal(SIGINT, SIG_DFL);
+		signal(SIGHUP, SIG_DFL);
+		int nul = open("/dev/null", O_RDONLY);
+		if (nul >= 0)
+			dup2(nul, 0);
+		dup2(p[1], 1);
+		dup2(p[1], 2);
+		if (cwd && chdir(cwd) < 0)
+			_exit(126);
+		execvp(argv[0], argv);
+		static const char msg[] = "job: exec failed\n";
+		ssize_t w = write(2, msg, sizeof msg - 1);
+		(void)w;
+		_exit(127);
+	}
+	close(p[1]);
+	fcntl(p[0], F_SETFL, O_NONBLOCK);
+	j->pid = pid;
+	j->fd = p[0];
+	j->done = done;
+	j->arg = arg;
+	j->next = job_list;
+	job_list = j;
+	if (loop_fd_add(job_loop, j->fd, POLLIN, on_output, j, err)) {
+		kill(pid, SIGKILL);
+		waitpid(pid, NULL, 0);
+		j->done = NULL;
+		job_free(j);
+		return -1;
+	}
+	if (timeout_s > 0)
+		j->timer = loop_timer_add(job_loop, timeout_s, 0, on_timeout, j);
+	if (out)
+		*out = j;
+	return 0;
+}
+
+void job_cancel(struct job *j)
+{
+	if (j && !j->exited) {
+		kill(j->pid, SIGTERM);
+		loop_timer_cancel(job_loop, j->timer);
+		j->killed = true;
+		j->timer = loop_timer_add(job_loop, 2.0, 0, on_timeout, j);
+	}
+}
+
+pid_t job_pid(const struct job *j)
+{
+	return j->pid;
+}
+
+int job_count(void)
+{
+	int n = 0;
+	for (struct job *j = job_list; j; j = j->next)
+		n += !j->exited;
+	return n;
+}
+
+void job_reap(void)
+{
+	for (struct job *j = job_list, *next; j; j = next) {
+		next = j->next;
+		if (j->exited)
+			continue;
+		int st;
+		pid_t r = waitpid(j->pid, &st, WNOHANG);
+		if (r != j->pid)
+			continue;
+		j->exited = true;
+		j->status = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + (WIFSIGNALED(st) ? WTERMSIG(st) : 0);
+		loop_timer_cancel(job_loop, j->timer);
+		j->timer = 0;
+		maybe_done(j);
+	}
+}
+
+void job_finish(void)
+{
+	for (struct job *j = job_list; j; j = j->next)
+		if (!j->exited)
+			kill(j->pid, SIGTERM);
+	for (int i = 0; i < 200 && job_count(); i++) {
+		for (struct job *j = job_list; j; j = j->next)
+			if (!j->exited && waitpid(j->pid, NULL, WNOHANG) == j->pid)
+				j->exited = true;
+		if (job_count())
+			usleep(10000);
+	}
+	for (struct job *j = job_list; j; j = j->next)
+		if (!j->exited) {
+			kill(j->pid, SIGKILL);
+			waitpid(j->pid, NULL, 0);
+			j->exited = true;
+		}
+	while (job_list) {
+		job_list->done = NULL;
+		job_free(job_list);
+	}
+}

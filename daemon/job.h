@@ -1,0 +1,37 @@
+/* job: slow work in child processes (the reconstruction) — spawn with stdout+stderr captured through a pipe
+ * watched by the loop, reap on SIGCHLD, enforce a timeout; the loop never waits for a child. */
+#ifndef JOB_H
+#define JOB_H
+
+#include <stddef.h>
+#include <sys/types.h>
+
+#include "config/acq_err.h"
+
+struct loop;
+struct job;
+
+#define JOB_OUTPUT_MAX (64 * 1024)  /* captured output kept (the last bytes when longer) */
+
+/* Called once from the loop when the child has exited and its output is drained. status: exit code, or
+ * 128 + signal number. output is NUL-terminated (len bytes), valid during the call only. */
+typedef void (*job_done_fn)(struct job *j, int status, const char *output, size_t len, void *arg);
+
+/* Start the job module on loop lp. */
+void job_init(struct loop *lp);
+/* Kill (SIGTERM, then SIGKILL after 2 s) and reap every running job; their callbacks are not called. */
+void job_finish(void);
+/* Spawn argv (argv[0] searched in PATH when it has no '/') in directory cwd (NULL: unchanged), stdin from
+ * /dev/null, killed after timeout_s (0: never). 0 or -1 (exec failure is reported as status 127). */
+int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
+	      struct job **out, struct acq_err *err);
+/* Ask a job to stop (SIGTERM); its callback still fires when it is gone. */
+void job_cancel(struct job *j);
+/* Process id of a running job. */
+pid_t job_pid(const struct job *j);
+/* Reap exited children (call when SIGCHLD was seen; harmless otherwise). */
+void job_reap(void);
+/* Number of running jobs. */
+int job_count(void);
+
+#endif

@@ -1,0 +1,114 @@
+-- schema.sql: the acquisitiond database, schema version 1 (PRAGMA user_version = 1,
+-- PRAGMA application_id = 0x42524446 "BRDF"). Reference copy: daemon/store.c holds the migrations that
+-- create it, and tests/integration/test_store.py checks that a fresh database has exactly this schema.
+-- Conventions: times are Unix seconds (REAL, UTC); angles are degrees; every *_blob column holds
+-- little-endian IEEE-754 float32 values (4 bytes each), one per pixel or per wavelength of the sweep's grid.
+
+-- One spectrometer identity and its wavelength calibration λ(p) = c0 + c1 p + ... + c4 p⁴ (nm).
+CREATE TABLE spectrometers (
+  id INTEGER PRIMARY KEY,
+  model TEXT NOT NULL, serial TEXT NOT NULL, firmware TEXT NOT NULL,
+  npix INTEGER NOT NULL CHECK (npix > 0),
+  c0 REAL NOT NULL, c1 REAL NOT NULL, c2 REAL NOT NULL, c3 REAL NOT NULL, c4 REAL NOT NULL,
+  nonlinearity TEXT,                      -- JSON {"low":..,"high":..,"coef":[..]} or NULL when disabled
+  first_seen REAL NOT NULL,
+  UNIQUE (model, serial, firmware, npix, c0, c1, c2, c3, c4)
+);
+
+-- Identity of the other devices (arm controllers, laser) as seen at connection.
+CREATE TABLE devices (
+  id INTEGER PRIMARY KEY,
+  name TEXT NOT NULL,                     -- slot: laser.theta, detector.theta, detector.phi, laser
+  vendor TEXT NOT NULL, model TEXT NOT NULL, serial TEXT NOT NULL, firmware TEXT NOT NULL,
+  first_seen REAL NOT NULL, last_seen REAL NOT NULL,
+  UNIQUE (name, vendor, model, serial, firmware)
+);
+
+-- A sweep: its plan and configuration as they were, its state and provenance.
+CREATE TABLE sweeps (
+  id INTEGER PRIMARY KEY,
+  name TEXT NOT NULL,
+  plan_text TEXT NOT NULL,                -- the plan YAML as submitted
+  config_snapshot TEXT NOT NULL,          -- the daemon's configuration file at start
+  state TEXT NOT NULL CHECK (state IN ('planned', 'running', 'paused', 'completed', 'aborted', 'failed')),
+  created_at REAL NOT NULL, started_at REAL, finished_at REAL,
+  software_version TEXT NOT NULL,
+  calibration_method TEXT,                -- how counts became BRDF values (e.g. "reference-white-v1")
+  spectrometer_id INTEGER REFERENCES spectrometers(id),
+  points_total INTEGER NOT NULL DEFAULT 0,
+  wavelength_grid BLOB                    -- float32 nm: the grid of calibrated samples (NULL until calibrated)
+);
+
+-- The devices a sweep used (provenance).
+CREATE TABLE sweep_devices (
+  sweep_id INTEGER NOT NULL REFERENCES sweeps(id),
+  device_id INTEGER NOT NULL REFERENCES devices(id),
+  PRIMARY KEY (sweep_id, device_id)
+);
+
+-- The planned points of a sweep, in execution order, and what was reached.
+CREATE TABLE points (
+  id INTEGER PRIMARY KEY,
+  sweep_id INTEGER NOT NULL REFERENCES sweeps(id),
+  order_index INTEGER NOT NULL,
+  theta_i REAL NOT NULL, phi_i REAL NOT NULL, theta_o REAL NOT NULL, phi_o REAL NOT NULL,  -- planned
+  laser_theta REAL, detector_theta REAL, detector_phi REAL,                               -- actual
+  state TEXT NOT NULL DEFAULT 'pending' CHECK (state IN ('pending', 'done', 'skipped', 'failed')),
+  done_at REAL,
+  UNIQUE (sweep_id, order_index)
+);
+
+-- Every spectrum taken (sweep_id/point_id NULL for manual `measure`, `dark`, `reference`).
+CREATE TABLE spectra (
+  id INTEGER PRIMARY KEY,
+  sweep_id INTEGER REFERENCES sweeps(id),
+  point_id INTEGER REFERENCES points(id),
+  kind TEXT NOT NULL CHECK (kind IN ('sample', 'dark', 'reference', 'beam')),
+  spectrometer_id INTEGER REFERENCES spectrometers(id),
+  integration_ms REAL NOT NULL, averages INTEGER NOT NULL,
+  npix INTEGER NOT NULL CHECK (npix > 0),
+  counts BLOB NOT NULL CHECK (length(counts) = 4 * npix),
+  stddev BLOB CHECK (stddev IS NULL OR length(stddev) = 4 * npix),
+  saturated_count INTEGER NOT NULL DEFAULT 0,
+  saturation_mask BLOB,                   -- one byte per pixel (1 = saturated), NULL when none saturated
+  temperature_c REAL,
+  taken_at REAL NOT NULL
+);
+CREATE INDEX spectra_by_point ON spectra (sweep_id, point_id);
+
+-- Calibrated samples: per point, BRDF (sr⁻¹) and its standard uncertainty over the sweep's wavelength_grid.
+CREATE TABLE calibrated (
+  point_id INTEGER PRIMARY KEY REFERENCES points(id),
+  sweep_id INTEGER NOT NULL REFERENCES sweeps(id),
+  brdf BLOB NOT NULL,
+  sigma BLOB NOT NULL CHECK (length(sigma) = length(brdf))
+);
+
+-- Reconstruction runs (child processes) and what they produced.
+CREATE TABLE recon_runs (
+  id INTEGER PRIMARY KEY,
+  sweep_id INTEGER NOT NULL REFERENCES sweeps(id),
+  state TEXT NOT NULL CHECK (state IN ('running', 'succeeded', 'failed', 'cancelled')),
+  program TEXT NOT NULL, args TEXT NOT NULL,   -- args: JSON array
+  started_at REAL NOT NULL, finished_at REAL,
+  exit_status INTEGER,                         -- exit code, or 128 + signal
+  output TEXT                                  -- captured stdout+stderr (bounded)
+);
+CREATE TABLE recon_outputs (
+  id INTEGER PRIMARY KEY,
+  run_id INTEGER NOT NULL REFERENCES recon_runs(id),
+  kind TEXT NOT NULL CHECK (kind IN ('model', 'merl', 'dhr', 'preview', 'report', 'other')),
+  path TEXT NOT NULL,                          -- relative to the state directory
+  created_at REAL NOT NULL
+);
+
+-- Event log: pauses, faults, resumes, starts, completions, operator actions.
+CREATE TABLE events (
+  id INTEGER PRIMARY KEY,
+  at REAL NOT NULL,
+  sweep_id INTEGER REFERENCES sweeps(id),
+  kind TEXT NOT NULL,                          -- start, pause, resume, fault, recovered, abort, complete, info
+  device TEXT,
+  message TEXT NOT NULL
+);
+CREATE INDEX events_by_sweep ON events (sweep_id, at);

@@ -1,0 +1,122 @@
+/* store: the SQLite database of sweeps, points, spectra, calibrations, reconstruction runs and events
+ * (schema: daemon/schema.sql). WAL mode, one transaction per spectrum, versioned schema with migrations;
+ * a foreign or corrupt file is refused and never written. Never logs: -1 + struct acq_err. */
+#ifndef STORE_H
+#define STORE_H
+
+#include <jansson.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "config/acq_err.h"
+
+#define STORE_APPLICATION_ID 0x42524446  /* "BRDF" */
+#define STORE_SCHEMA_VERSION 1
+
+struct store;
+struct spectro_info;
+
+struct store_sweep_new {
+	const char *name;
+	const char *plan_text;
+	const char *config_snapshot;
+	const char *software_version;
+	const char *calibration_method;  /* may be NULL */
+	int64_t spectrometer_id;         /* 0 = unknown */
+	double created_at;               /* Unix seconds */
+};
+
+struct store_point_new {
+	int order_index;
+	double theta_i, phi_i, theta_o, phi_o;
+};
+
+struct store_spectrum {
+	int64_t sweep_id, point_id;      /* 0 = none (manual measurement) */
+	const char *kind;                /* "sample", "dark", "reference", "beam" */
+	int64_t spectrometer_id;         /* 0 = unknown */
+	double integration_ms;
+	int averages;
+	int npix;
+	const float *counts;             /* npix values */
+	const float *stddev;             /* npix values or NULL */
+	int saturated_count;
+	const unsigned char *saturated;  /* npix flags or NULL */
+	double temperature_c;            /* NaN = unknown */
+	double taken_at;
+	/* When set, the same transaction marks point_id done with these actual angles (NaN = unknown). */
+	bool completes_point;
+	double laser_theta, detector_theta, detector_phi;
+};
+
+/* Open (creating if absent or empty) the database at path; migrate an older schema. Refuses, without
+ * writing a byte, a file that is not SQLite, is corrupt, belongs to another application, or has a newer
+ * schema. 0 or -1. */
+int store_open(const char *path, struct store **out, struct acq_err *err);
+/* Checkpoint and close. NULL is fine. */
+void store_close(struct store *st);
+/* The underlying schema version of an open store. */
+int store_schema_version(struct store *st);
+
+/* Create a sweep in state 'planned' with its points (one transaction). 0 or -1. */
+int store_sweep_create(struct store *st, const struct store_sweep_new *sw, const struct store_point_new *pts,
+		       int npts, int64_t *id, struct acq_err *err);
+/* Set a sweep's state (planned/running/paused/completed/aborted/failed) and the matching time. 0 or -1. */
+int store_sweep_set_state(struct store *st, int64_t id, const char *state, double at, struct acq_err *err);
+/* The most recent sweep left 'running' or 'paused' (interrupted by a crash), 0 if none. 0 or -1. */
+int store_sweep_interrupted(struct store *st, int64_t *id, struct acq_err *err);
+/* Order index of the first point of sweep id not yet done/skipped/failed (-1 when all are). 0 or -1. */
+int store_sweep_next_point(struct store *st, int64_t id, int *order_index, int64_t *point_id,
+			   struct acq_err *err);
+/* Mark a point skipped or failed (with a reason in the event log). 0 or -1. */
+int store_point_set_state(struct store *st, int64_t point_id, const char *state, double at, struct acq_err *err);
+/* Delete the spectra of a point not yet done (a partial point before a resume: nothing twice). 0 or -1. */
+int store_point_discard_partial(struct store *st, int64_t point_id, struct acq_err *err);
+
+/* Insert one spectrum in its own transaction (committed on return). *id may be NULL. 0 or -1. */
+int store_spectrum_add(struct store *st, const struct store_spectrum *sp, int64_t *id, struct acq_err *err);
+/* Number of spectra (of sweep_id, or all when sweep_id is 0). -1 on error. */
+int64_t store_spectrum_count(struct store *st, int64_t sweep_id, struct acq_err *err);
+
+/* Record a spectrometer identity and wavelength calibration (existing row reused). 0 or -1. */
+int store_spectrometer_put(struct store *st, const struct spectro_info *info, double at, int64_t *id,
+			   struct acq_err *err);
+/* Record a device identity (existing row reused, last_seen updated). 0 or -1. */
+int store_device_put(struct store *st, const char *name, const char *vendor, const char *model,
+		     const char *serial, const char *firmware, double at, int64_t *id, struct acq_err *err);
+/* Link a device to a sweep (provenance). 0 or -1. */
+int store_sweep_device(struct store *st, int64_t sweep_id, int64_t device_id, struct acq_err *err);
+
+/* Set the wavelength grid (nm, n values) of a sweep's calibrated samples. 0 or -1. */
+int store_sweep_set_grid(struct store *st, int64_t sweep_id, const float *nm, int n, struct acq_err *err);
+/* Store (replace) the calibrated BRDF and sigma (n values each, over the grid) of a point. 0 or -1. */
+int store_calibrated_put(struct store *st, int64_t sweep_id, int64_t point_id, const float *brdf,
+			 const float *sigma, int n, struct acq_err *err);
+
+/* Start a reconstruction run record (args: JSON array text). 0 or -1. */
+int store_recon_begin(struct store *st, int64_t sweep_id, const char *program, const char *args, double at,
+		      int64_t *run_id, struct acq_err *err);
+/* Finish a run: state succeeded/failed/cancelled, exit status, captured output. 0 or -1. */
+int store_recon_end(struct store *st, int64_t run_id, const char *state, int exit_status, const char *output,
+		    double at, struct acq_err *err);
+/* Record one output file of a run (path relative to the state directory). 0 or -1. */
+int store_recon_output(struct store *st, int64_t run_id, const char *kind, const char *path, double at,
+		       struct acq_err *err);
+/* JSON object of a run (id, sweep_id, state, times, exit_status, outputs) or the latest of a sweep
+ * (run_id 0). NULL with ACQ_E_NOTFOUND if none. */
+json_t *store_recon_show(struct store *st, int64_t run_id, int64_t sweep_id, struct acq_err *err);
+
+/* Append to the event log (sweep_id 0 = none, device may be NULL). 0 or -1. */
+int store_event(struct store *st, int64_t sweep_id, const char *kind, const char *device, const char *message,
+		double at, struct acq_err *err);
+
+/* JSON array of sweeps (id, name, state, times, points_total, points_done), newest first, at most limit. */
+json_t *store_sweep_list(struct store *st, int limit, struct acq_err *err);
+/* JSON object of one sweep (with plan text, counts, events); NULL with ACQ_E_NOTFOUND if absent. */
+json_t *store_sweep_show(struct store *st, int64_t id, bool with_points, struct acq_err *err);
+/* Write a sweep's calibrated samples in the CSV interchange format (design.md). Rows written in *nrows.
+ * ACQ_E_NOTFOUND for no sweep, ACQ_E_STATE if it has no calibrated samples. 0 or -1. */
+int store_export_csv(struct store *st, int64_t sweep_id, FILE *out, int *nrows, struct acq_err *err);
+
+#endif

@@ -1,0 +1,93 @@
+/* sweep: the seam between the daemon's body and the sweep executor (daemon/sweep.c, owned by the sweep
+ * engineer). The executor walks a plan on the daemon's loop — timers and device state machines, never a
+ * blocking call — commits each spectrum through store.h and reports progress through env->emit.
+ *
+ * Contract with the body:
+ *  - The body calls sweep_init() after the store, devices and server exist, and sweep_finish() before
+ *    them at shutdown (the executor leaves an unfinished sweep 'paused' in the store, with an event).
+ *  - Commands arrive through sweep_start/pause/resume/abort; errors are struct acq_err with ACQ_E_STATE
+ *    (not now), ACQ_E_NOTFOUND, ACQ_E_INVAL (bad plan, message names line:col), ACQ_E_UNSUPPORTED (missing
+ *    piece), ACQ_E_DEVICE/ACQ_E_DISCONNECTED (device fault) — the body maps them to wire codes.
+ *  - Events the executor emits (env->emit(ctx, name, data), data consumed): "sweep.progress"
+ *    {sweep, state, done, total, eta_s, point}, "sweep.state" {sweep, state, reason}, "sweep.fault"
+ *    {sweep, device, message}; the body forwards them to watchers and to systemd's STATUS=.
+ *  - sweep_busy() true blocks configuration reloads and manual moves/measurements.
+ *  - Device faults: the executor calls devices_lost() (devices.h); the body reconnects and calls
+ *    sweep_device_back() when a device is available again (auto-resume if configured). */
+#ifndef SWEEP_H
+#define SWEEP_H
+
+#include <jansson.h>
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "config/acq_err.h"
+#include "daemon/conf.h"
+
+struct loop;
+struct store;
+struct devices;
+struct sweep;
+
+enum sweep_state {
+	SWEEP_IDLE = 0,    /* no sweep loaded */
+	SWEEP_RUNNING,     /* moving / measuring */
+	SWEEP_PAUSED,      /* paused by the operator */
+	SWEEP_FAULTED,     /* suspended by a device fault (resumes by itself when the device is back, if allowed) */
+	SWEEP_STOPPING,    /* abort or completion in progress (arms stopping, laser going off) */
+};
+
+struct sweep_progress {
+	enum sweep_state state;
+	int64_t sweep_id;          /* 0 when idle */
+	int points_done, points_total;
+	double eta_s;              /* estimated seconds left, NaN if unknown */
+	double started_at;         /* Unix seconds, 0 if idle */
+	char message[256];         /* what it is doing or why it is suspended */
+};
+
+struct sweep_env {
+	struct loop *loop;         /* time: loop_now(); schedule with loop_timer_add() */
+	struct store *store;
+	struct devices *devices;
+	const struct conf *conf;   /* replaced by sweep_conf_changed() after a reload */
+	void (*emit)(void *ctx, const char *event, json_t *data);
+	void *emit_ctx;
+	double (*wallclock)(void); /* Unix seconds for the database */
+	const char *software_version;
+};
+
+/* Create the executor (copies env). 0 or -1. */
+int sweep_init(const struct sweep_env *env, struct sweep **out, struct acq_err *err);
+/* Stop timers, leave an unfinished sweep resumable (state 'paused' + event), free. NULL is fine. */
+void sweep_finish(struct sweep *sw);
+/* Plan (YAML text) → stored sweep → running. *id is the new sweep's id. 0 or -1. */
+int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64_t *id, struct acq_err *err);
+/* Pause after the current spectrum is committed. 0 or -1 (ACQ_E_STATE when nothing runs). */
+int sweep_pause(struct sweep *sw, struct acq_err *err);
+/* Resume the paused sweep, or the interrupted sweep id from the store (id 0: the current one). 0 or -1. */
+int sweep_resume(struct sweep *sw, int64_t id, struct acq_err *err);
+/* Abort: laser off, arms stopped, sweep 'aborted'. 0 or -1. */
+int sweep_abort(struct sweep *sw, struct acq_err *err);
+/* At start-up with daemon.auto_resume: resume an interrupted sweep after its last committed point.
+ * *id is the sweep resumed (0: none). 0 or -1. */
+int sweep_recover(struct sweep *sw, int64_t *id, struct acq_err *err);
+/* `recon.start`: run the completion chain again for a finished sweep (export of its calibrated samples,
+ * then the reconstruction stages in child processes through job.h). *run_id: its recon_runs row (0 if not
+ * known yet). ACQ_E_STATE while a sweep or a reconstruction runs, ACQ_E_NOTFOUND for no such sweep,
+ * ACQ_E_UNSUPPORTED when brdf-recon is absent. 0 or -1. (A weak default in sweep_seam.c says unsupported.) */
+int sweep_recon_start(struct sweep *sw, int64_t sweep_id, int64_t *run_id, struct acq_err *err);
+/* True while a reconstruction child of the executor runs. (Weak default: false.) */
+bool sweep_recon_busy(const struct sweep *sw);
+/* A device came back (called by the body after a reconnect). */
+void sweep_device_back(struct sweep *sw, enum conf_dev dev);
+/* The configuration was reloaded (only while !sweep_busy()). */
+void sweep_conf_changed(struct sweep *sw, const struct conf *c);
+/* Current progress (never fails). */
+void sweep_get_progress(const struct sweep *sw, struct sweep_progress *p);
+/* True while a sweep is loaded (running, paused, faulted or stopping). */
+bool sweep_busy(const struct sweep *sw);
+/* "idle", "running", "paused", "faulted", "stopping". */
+const char *sweep_state_name(enum sweep_state s);
+
+#endif

@@ -1,0 +1,23 @@
+/* sim_arm: test access to a simulated arm controller (sim_arm_new() is declared in sim/sim.h). */
+#ifndef SIM_ARM_H
+#define SIM_ARM_H
+
+#include <stdint.h>
+
+#include "sim/sim.h"
+#include "sim/sim_motion.h"
+
+/* The motion model of axis i (0: theta, 1: phi) of an arm service, NULL if none. */
+struct simmot *simarm_motion(struct sim_service *svc, int axis);
+/* Alarm code of axis i (0 none, -1 no such axis). */
+int simarm_alarm(struct sim_service *svc, int axis);
+/* Moves axis i was commanded (triggers that started or were refused), -1 if no such axis. */
+int simarm_moves(struct sim_service *svc, int axis);
+/* TCP clients connected now. */
+int simarm_clients(struct sim_service *svc);
+/* TCP port the arm listens on (0 for RTU). */
+int simarm_port(struct sim_service *svc);
+/* Length of the RTU request frame starting at req (function codes 1–6, 15, 16), -1 if unknown. */
+int simarm_rtu_frame_len(const uint8_t *req, int avail);
+
+#endif

@@ -1,0 +1,117 @@
+"""acqtest: helpers for the daemon's integration tests — temporary state, a daemon process, raw clients."""
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+BUILD = os.environ.get("ACQ_BUILD") or os.path.abspath("build")
+SRC = os.environ.get("ACQ_SRC") or os.path.abspath(".")
+DAEMON = os.path.join(BUILD, "acquisitiond")
+ACQCTL = os.path.join(BUILD, "acqctl")
+
+
+def check(cond, what):
+    if not cond:
+        raise AssertionError(what)
+
+
+class Client:
+    """A raw protocol client: reads the banner, sends lines, reads JSON lines."""
+
+    def __init__(self, path, timeout=10):
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.sock.settimeout(timeout)
+        self.sock.connect(path)
+        self.buf = b""
+        self.banner = self.read()
+
+    def read(self):
+        while b"\n" not in self.buf:
+            chunk = self.sock.recv(1 << 16)
+            if not chunk:
+                raise EOFError("connection closed")
+            self.buf += chunk
+        line, self.buf = self.buf.split(b"\n", 1)
+        return json.loads(line)
+
+    def send_raw(self, data):
+        self.sock.sendall(data)
+
+    def req(self, cmd, **args):
+        msg = {"cmd": cmd, "id": args.pop("_id", 1)}
+        msg.update(args)
+        self.sock.sendall((json.dumps(msg) + "\n").encode())
+        return self.read()
+
+    def close(self):
+        self.sock.close()
+
+
+class Daemon:
+    """acquisitiond on a temporary state directory and socket; stopped (SIGTERM, then SIGKILL) by stop()."""
+
+    def __init__(self, extra_daemon="", devices=None, sections="", tmp=None):
+        self.tmp = tmp or tempfile.mkdtemp(prefix="acqd.")
+        os.chmod(self.tmp, 0o755)
+        self.state = os.path.join(self.tmp, "state")
+        self.sock = os.path.join(self.tmp, "acq.sock")
+        self.conf = os.path.join(self.tmp, "acq.yaml")
+        if devices is None:
+            devices = "devices:\n  spectrometer: {backend: sim}\n  laser: {}\n"
+        with open(self.conf, "w") as f:
+            f.write("bench:\n  laser_radius_mm: 400\n" + devices + "sim: {}\n" +
+                    "daemon:\n  state_dir: %s\n  socket: {path: %s, mode: \"0666\"}\n  log_level: debug\n"
+                    "  device_retry_s: 0.5\n" % (self.state, self.sock) + extra_daemon + sections)
+        self.proc = None
+        self.log = os.path.join(self.tmp, "daemon.log")
+
+    def start(self, wait=True, args=(), env=None):
+        self.logf = open(self.log, "ab")
+        self.proc = subprocess.Popen([DAEMON, "-f", "-c", self.conf] + list(args), stdout=self.logf,
+                                     stderr=subprocess.STDOUT, env=env)
+        if wait:
+            deadline = time.time() + 10
+            while time.time() < deadline:
+                if self.proc.poll() is not None:
+                    raise AssertionError("daemon exited %d:\n%s" % (self.proc.returncode, self.logtext()))
+                try:
+                    Client(self.sock, 1).close()
+                    return self
+                except OSError:
+                    time.sleep(0.02)
+            raise AssertionError("daemon did not start:\n" + self.logtext())
+        return self
+
+    def logtext(self):
+        try:
+            return open(self.log, errors="replace").read()
+        except OSError:
+            return ""
+
+    def client(self):
+        return Client(self.sock)
+
+    def stop(self, sig=signal.SIGTERM, timeout=10):
+        if self.proc and self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        rc = self.proc.returncode if self.proc else None
+        return rc
+
+    def cleanup(self):
+        self.stop(signal.SIGKILL)
+        shutil.rmtree(self.tmp, ignore_errors=True)
+
+
+def acqctl(sock, *args, timeout=20, env=None):
+    return subprocess.run([ACQCTL, "-s", sock] + list(args), capture_output=True, text=True, timeout=timeout,
+                          env=env)

@@ -1,0 +1,83 @@
+#!/usr/bin/python3
+"""Crash-resume: acquisitiond is killed with SIGKILL at 20 random moments of a sweep on the simulated bench and
+restarted each time (daemon.auto_resume); the sweep must end complete with zero lost or duplicated points, no
+spectra left on unfinished points, and PRAGMA integrity_check ok."""
+import os
+import random
+import signal
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import sweeplib as L  # noqa: E402
+
+PLAN = """name: it-crash
+incidence:
+  theta_deg: [15, 40, 60]
+observation:
+  theta_deg: [25, 55, 75]
+  phi_deg: [0, 60, 120, 180, 240, 300]
+integration: {mode: auto, target_peak: 0.8, estimate_ms: 20, max_ms: 2000}
+averages: 4
+blind_points: drop
+"""
+
+KILLS = 20
+
+
+def run():
+    rng = random.Random(L.SEED)
+    b = L.Bench(scale=20)
+    try:
+        b.start_sim()
+        b.start_daemon()
+        sid = L.start_sweep(b, PLAN, "it-crash")
+        total = L.sweep_row(b, sid)["points_total"]
+        kills, t0 = 0, time.time()
+        done_at_kill = []
+        while kills < KILLS:
+            # run for a random while (the operator's sample swap included), then SIGKILL
+            deadline = time.time() + rng.uniform(0.05, 0.3)
+            while time.time() < deadline:
+                row = L.sweep_row(b, sid)
+                if row["state"] in ("completed", "aborted", "failed"):
+                    break
+                if row["state"] == "paused":
+                    ev = [e for e in row.get("events", []) if e.get("kind") in ("pause", "resume", "start", "stop")]
+                    if ev and ev[0]["kind"] == "pause" and "place the sample" in (ev[0].get("message") or ""):
+                        b.ctl("sample green-paint")
+                        c = b.client()
+                        c.req("sweep.resume")
+                        c.close()
+                time.sleep(0.02)
+            if L.sweep_row(b, sid)["state"] in ("completed", "aborted", "failed"):
+                break
+            b.kill_daemon(signal.SIGKILL)
+            kills += 1
+            db = b.db()
+            done_at_kill.append(db.execute("SELECT count(*) FROM points WHERE sweep_id = ? AND state = 'done'",
+                                           (sid,)).fetchone()[0])
+            db.close()
+            b.start_daemon(wait_devices=False)
+        L.say("%d kills at %s points done (of %d)" % (kills, done_at_kill, total))
+        row = L.drive_to_end(b, sid, timeout=180)
+        L.say("sweep %s after %.1f s" % (row["state"], time.time() - t0))
+        assert row["state"] == "completed", "sweep ended %s" % row["state"]
+        assert kills == KILLS, "the sweep completed after only %d kills: make it longer" % kills
+        n, cal = L.check_points(b, sid)
+        db = b.db()
+        resumes = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'resume'", (sid,)).fetchone()[0]
+        refs = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'reference'", (sid,)).fetchone()[0]
+        db.close()
+        L.say("points %d, calibrated %d, resume events %d, reference measurements %d" % (n, cal, resumes, refs))
+        assert resumes >= kills, "fewer resumes (%d) than kills (%d)" % (resumes, kills)
+        zs, nan = L.zscores(b, sid)
+        import numpy as np
+        z = np.array(zs)
+        L.say("z-scores after the crashes: %d values, mean %.3f, std %.3f" % (len(z), z.mean(), z.std()))
+        assert abs(z.mean()) < 0.3 and 0.6 < z.std() < 1.6, "calibration spoiled by the restarts"
+    finally:
+        b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
+
+
+L.main(run)

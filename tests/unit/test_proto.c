@@ -1,0 +1,166 @@
+/* Unit tests for proto/proto.c: framing with the line bound, request validation codes, reply formats. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <cmocka.h>
+
+#include "proto/proto.h"
+
+static void test_framing(void **state)
+{
+	(void)state;
+	struct proto_lines pl;
+	proto_lines_init(&pl);
+	char *line;
+	size_t len;
+	assert_int_equal(proto_lines_feed(&pl, "{\"a\":1}\r\n{\"b\"", 13), 0);
+	assert_int_equal(proto_lines_next(&pl, &line, &len), PROTO_LINE_OK);
+	assert_string_equal(line, "{\"a\":1}");
+	assert_int_equal(len, 7);
+	assert_int_equal(proto_lines_next(&pl, &line, &len), PROTO_LINE_NONE);
+	assert_int_equal(proto_lines_feed(&pl, ":2}\n", 4), 0);
+	assert_int_equal(proto_lines_next(&pl, &line, &len), PROTO_LINE_OK);
+	assert_string_equal(line, "{\"b\":2}");
+	/* An oversized line is reported once, as soon as it passes the bound, and the next line is intact. */
+	char *big = malloc(PROTO_MAX_LINE + 10);
+	memset(big, 'x', PROTO_MAX_LINE + 10);
+	assert_int_equal(proto_lines_feed(&pl, big, PROTO_MAX_LINE + 10), 0);
+	assert_int_equal(proto_lines_next(&pl, &line, &len), PROTO_LINE_TOO_LONG);
+	assert_int_equal(proto_lines_next(&pl, &line, &len), PROTO_LINE_NONE);
+	assert_int_equal(proto_lines_feed(&pl, big, 1000), 0);
+	assert_int_equal(proto_lines_next(&pl, &line, &len), PROTO_LINE_NONE);
+	assert_int_equal(proto_lines_feed(&pl, "tail\nok\n", 8), 0);
+	assert_int_equal(proto_lines_next(&pl, &line, &len), PROTO_LINE_OK);
+	assert_string_equal(line, "ok");
+	/* Exactly at the bound is accepted. */
+	big[PROTO_MAX_LINE] = '\n';
+	assert_int_equal(proto_lines_feed(&pl, big, PROTO_MAX_LINE + 1), 0);
+	assert_int_equal(proto_lines_next(&pl, &line, &len), PROTO_LINE_OK);
+	assert_int_equal(len, PROTO_MAX_LINE);
+	free(big);
+	proto_lines_free(&pl);
+}
+
+static const char *parse_code(const char *text, json_t **id_out)
+{
+	struct proto_req req;
+	const char *code = NULL;
+	struct acq_err err = { 0 };
+	int rc = proto_req_parse(text, strlen(text), &req, &code, &err);
+	if (id_out)
+		*id_out = req.id ? json_incref(req.id) : NULL;
+	proto_req_free(&req);
+	if (rc == 0)
+		assert_null(code);
+	else
+		assert_true(err.msg[0] != 0);
+	return rc == 0 ? "ok" : code;
+}
+
+static void test_validation(void **state)
+{
+	(void)state;
+	assert_string_equal(parse_code("{\"cmd\":\"status\"}", NULL), "ok");
+	assert_string_equal(parse_code("{\"cmd\":\"status\",\"id\":\"x\"}", NULL), "ok");
+	assert_string_equal(parse_code("not json", NULL), PROTO_E_PARSE);
+	assert_string_equal(parse_code("", NULL), PROTO_E_PARSE);
+	assert_string_equal(parse_code("[1,2]", NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"id\":1}", NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":5}", NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"status\",\"id\":[1]}", NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"status\",\"cmd\":\"move\"}", NULL), PROTO_E_PARSE);
+	assert_string_equal(parse_code("{\"cmd\":\"frobnicate\"}", NULL), PROTO_E_UNKNOWN);
+	/* jansson refuses \\u0000 unless asked (JSON_ALLOW_NUL): a NUL never reaches a command. */
+	assert_string_equal(parse_code("{\"cmd\":\"status\\u0000x\"}", NULL), PROTO_E_PARSE);
+	assert_string_equal(parse_code("{\"cmd\":\"export\",\"sweep\":1,\"path\":\"a\\u0000b\"}", NULL), PROTO_E_PARSE);
+	assert_string_equal(parse_code("{\"cmd\":\"status\",\"extra\":1}", NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":\"10\"}", NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":1e9}", NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":10}", NULL), "ok");
+	assert_string_equal(parse_code("{\"cmd\":\"sweep.show\"}", NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"sweep.show\",\"sweep\":1.5}", NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"sweep.show\",\"sweep\":3,\"points\":true}", NULL), "ok");
+	assert_string_equal(parse_code("{\"cmd\":\"config\",\"text\":\"yes\"}", NULL), PROTO_E_INVALID);
+	/* The id survives a validation error so the reply can carry it. */
+	json_t *id = NULL;
+	assert_string_equal(parse_code("{\"cmd\":\"nope\",\"id\":42}", &id), PROTO_E_UNKNOWN);
+	assert_non_null(id);
+	assert_int_equal(json_integer_value(id), 42);
+	json_decref(id);
+}
+
+static void test_formatting(void **state)
+{
+	(void)state;
+	json_t *id = json_integer(7);
+	char *l = proto_reply_ok(id, json_pack("{s:i}", "x", 3));
+	assert_non_null(l);
+	assert_int_equal(l[strlen(l) - 1], '\n');
+	json_t *v = json_loads(l, 0, NULL);
+	assert_true(json_is_true(json_object_get(v, "ok")));
+	assert_int_equal(json_integer_value(json_object_get(v, "id")), 7);
+	assert_int_equal(json_integer_value(json_object_get(v, "x")), 3);
+	json_decref(v);
+	free(l);
+	l = proto_reply_err(NULL, PROTO_E_RANGE, "too far \"out\"\n");
+	v = json_loads(l, 0, NULL);
+	assert_non_null(v);
+	assert_true(json_is_null(json_object_get(v, "id")));
+	assert_true(json_is_false(json_object_get(v, "ok")));
+	assert_string_equal(json_string_value(json_object_get(json_object_get(v, "error"), "code")), "range");
+	assert_true(strchr(l, '\n') == l + strlen(l) - 1); /* the message's newline is escaped: one line */
+	json_decref(v);
+	free(l);
+	l = proto_banner("1.2");
+	v = json_loads(l, 0, NULL);
+	assert_int_equal(json_integer_value(json_object_get(v, "protocol")), PROTO_VERSION);
+	assert_string_equal(json_string_value(json_object_get(v, "version")), "1.2");
+	json_decref(v);
+	free(l);
+	json_decref(id);
+	struct acq_err e = { .code = ACQ_E_RANGE };
+	assert_string_equal(proto_code_of(&e), "range");
+	e.code = ACQ_E_UNSUPPORTED;
+	assert_string_equal(proto_code_of(&e), "unavailable");
+	e.code = ACQ_E_NOTFOUND;
+	assert_string_equal(proto_code_of(&e), "not_found");
+}
+
+static void test_progress_line(void **state)
+{
+	(void)state;
+	char buf[256] = "untouched";
+	json_t *other = json_pack("{s:s}", "event", "device");
+	assert_int_equal(proto_progress_line(other, true, buf, sizeof buf), 0);
+	assert_string_equal(buf, "untouched");
+	json_decref(other);
+	json_t *ev = json_pack("{s:s,s:i,s:i,s:i,s:f}", "event", "sweep.progress", "sweep", 4, "done", 25, "total", 100,
+			       "eta_s", 245.0);
+	assert_int_equal(proto_progress_line(ev, false, buf, sizeof buf), 1);
+	assert_string_equal(buf, "sweep 4: 25/100 points, ETA 4m05s");
+	assert_int_equal(proto_progress_line(ev, true, buf, sizeof buf), 1);
+	assert_string_equal(buf, "\rsweep 4 [##########------------------------------]  25% 25/100  ETA 4m05s   ");
+	json_object_set_new(ev, "eta_s", json_null());
+	json_object_set_new(ev, "done", json_integer(1000));
+	json_object_set_new(ev, "eta_s", json_real(7322));
+	assert_int_equal(proto_progress_line(ev, false, buf, sizeof buf), 1);
+	assert_string_equal(buf, "sweep 4: 100/100 points, ETA 2h02m");
+	json_object_set_new(ev, "eta_s", json_null());
+	assert_int_equal(proto_progress_line(ev, false, buf, sizeof buf), 1);
+	assert_string_equal(buf, "sweep 4: 100/100 points, ETA --");
+	json_decref(ev);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_framing),
+		cmocka_unit_test(test_validation),
+		cmocka_unit_test(test_formatting),
+		cmocka_unit_test(test_progress_line),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}

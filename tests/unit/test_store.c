@@ -1,0 +1,239 @@
+/* Unit tests for daemon/store.c: schema and ids, sweeps/points/spectra, point completion in the spectrum's
+ * transaction, partial-point discard, JSON views, CSV export, and refusal of foreign/corrupt/newer files. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sqlite3.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <cmocka.h>
+
+#include "daemon/store.h"
+
+static char dir[256];
+
+static int setup(void **state)
+{
+	(void)state;
+	snprintf(dir, sizeof dir, "/tmp/test_store.XXXXXX");
+	return mkdtemp(dir) ? 0 : -1;
+}
+
+static int teardown(void **state)
+{
+	(void)state;
+	char cmd[300];
+	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+	return system(cmd) == 0 ? 0 : -1;
+}
+
+static void path_of(char *out, size_t cap, const char *name)
+{
+	snprintf(out, cap, "%s/%s", dir, name);
+}
+
+static int64_t mk_sweep(struct store *st, int npts)
+{
+	struct store_point_new pts[16];
+	for (int i = 0; i < npts; i++)
+		pts[i] = (struct store_point_new){ i, 10.0 * i, 0, 20.0 + i, 180 };
+	struct store_sweep_new sw = { .name = "t", .plan_text = "plan: 1", .config_snapshot = "bench: {}",
+				      .software_version = "test", .created_at = 1000 };
+	int64_t id = 0;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_sweep_create(st, &sw, pts, npts, &id, &err), 0);
+	assert_true(id > 0);
+	return id;
+}
+
+static void test_sweep_points_spectra(void **state)
+{
+	(void)state;
+	char p[300];
+	path_of(p, sizeof p, "a.db");
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_open(p, &st, &err), 0);
+	assert_int_equal(store_schema_version(st), STORE_SCHEMA_VERSION);
+	int64_t sw = mk_sweep(st, 3);
+	assert_int_equal(store_sweep_set_state(st, sw, "running", 1001, &err), 0);
+	assert_int_equal(store_sweep_set_state(st, sw, "bogus", 1001, &err), -1);
+	assert_int_equal(store_sweep_set_state(st, 999, "paused", 1001, &err), -1);
+	assert_int_equal(err.code, ACQ_E_NOTFOUND);
+	int order;
+	int64_t pt;
+	assert_int_equal(store_sweep_next_point(st, sw, &order, &pt, &err), 0);
+	assert_int_equal(order, 0);
+	float counts[8] = { 1, 2, 3, 4, 5, 6, 7, 8 }, sd[8] = { 0 };
+	unsigned char sat[8] = { 0, 0, 0, 0, 0, 0, 1, 1 };
+	struct store_spectrum sp = { .sweep_id = sw, .point_id = pt, .kind = "dark", .integration_ms = 10, .averages = 2,
+				     .npix = 8, .counts = counts, .stddev = sd, .temperature_c = NAN, .taken_at = 1002 };
+	assert_int_equal(store_spectrum_add(st, &sp, NULL, &err), 0);
+	sp.kind = "sample";
+	sp.saturated = sat;
+	sp.saturated_count = 2;
+	sp.completes_point = true;
+	sp.laser_theta = 0.01;
+	sp.detector_theta = 20.02;
+	sp.detector_phi = NAN;
+	assert_int_equal(store_spectrum_add(st, &sp, NULL, &err), 0);
+	/* The point is done: completing it again fails and rolls the spectrum back. */
+	assert_int_equal(store_spectrum_add(st, &sp, NULL, &err), -1);
+	assert_int_equal(err.code, ACQ_E_STATE);
+	assert_int_equal(store_spectrum_count(st, sw, &err), 2);
+	sp.kind = "nonsense";
+	assert_int_equal(store_spectrum_add(st, &sp, NULL, &err), -1);
+	assert_int_equal(store_sweep_next_point(st, sw, &order, &pt, &err), 0);
+	assert_int_equal(order, 1);
+	/* A partial point (a dark without its sample) is discarded before a resume. */
+	sp = (struct store_spectrum){ .sweep_id = sw, .point_id = pt, .kind = "dark", .integration_ms = 10,
+				      .averages = 1, .npix = 8, .counts = counts, .temperature_c = 25, .taken_at = 1003 };
+	assert_int_equal(store_spectrum_add(st, &sp, NULL, &err), 0);
+	assert_int_equal(store_spectrum_count(st, sw, &err), 3);
+	assert_int_equal(store_point_discard_partial(st, pt, &err), 0);
+	assert_int_equal(store_spectrum_count(st, sw, &err), 2);
+	int64_t interrupted = 0;
+	assert_int_equal(store_sweep_interrupted(st, &interrupted, &err), 0);
+	assert_int_equal(interrupted, sw);
+	json_t *list = store_sweep_list(st, 10, &err);
+	assert_int_equal(json_array_size(list), 1);
+	json_t *s0 = json_array_get(list, 0);
+	assert_string_equal(json_string_value(json_object_get(s0, "state")), "running");
+	assert_int_equal(json_integer_value(json_object_get(s0, "points_done")), 1);
+	assert_int_equal(json_integer_value(json_object_get(s0, "points_total")), 3);
+	json_decref(list);
+	json_t *show = store_sweep_show(st, sw, true, &err);
+	assert_non_null(show);
+	assert_int_equal(json_array_size(json_object_get(show, "points")), 3);
+	assert_int_equal(json_integer_value(json_object_get(show, "spectra")), 2);
+	json_decref(show);
+	assert_null(store_sweep_show(st, 12345, false, &err));
+	assert_int_equal(err.code, ACQ_E_NOTFOUND);
+	assert_int_equal(store_event(st, sw, "pause", "laser", "interlock open", 1004, &err), 0);
+	store_close(st);
+}
+
+static void test_export_csv(void **state)
+{
+	(void)state;
+	char p[300];
+	path_of(p, sizeof p, "b.db");
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_open(p, &st, &err), 0);
+	int64_t sw = mk_sweep(st, 2);
+	FILE *f = tmpfile();
+	int rows = -1;
+	assert_int_equal(store_export_csv(st, sw, f, &rows, &err), -1);
+	assert_int_equal(err.code, ACQ_E_STATE);
+	float grid[3] = { 450, 450.5f, 451 };
+	assert_int_equal(store_sweep_set_grid(st, sw, grid, 3, &err), 0);
+	float bad[2] = { 500, 400 };
+	assert_int_equal(store_sweep_set_grid(st, sw, bad, 2, &err), -1);
+	int order;
+	int64_t pt;
+	assert_int_equal(store_sweep_next_point(st, sw, &order, &pt, &err), 0);
+	float b[3] = { 0.1f, NAN, 0.3f }, s[3] = { 0.01f, 0.02f, 0.03f };
+	assert_int_equal(store_calibrated_put(st, sw, pt, b, s, 3, &err), 0);
+	assert_int_equal(store_export_csv(st, sw, f, &rows, &err), 0);
+	assert_int_equal(rows, 1);
+	rewind(f);
+	char line[512];
+	assert_non_null(fgets(line, sizeof line, f));
+	assert_int_equal(line[0], '#');
+	assert_non_null(fgets(line, sizeof line, f));
+	assert_string_equal(line, "theta_i,phi_i,theta_o,phi_o,450,450.5,451,sigma_450,sigma_450.5,sigma_451\n");
+	assert_non_null(fgets(line, sizeof line, f));
+	assert_string_equal(line, "0,0,20,180,0.100000001,,0.300000012,0.00999999978,0.0199999996,0.0299999993\n");
+	fclose(f);
+	f = tmpfile();
+	assert_int_equal(store_export_csv(st, 777, f, &rows, &err), -1);
+	assert_int_equal(err.code, ACQ_E_NOTFOUND);
+	fclose(f);
+	store_close(st);
+}
+
+static char *slurp(const char *p, size_t *n)
+{
+	FILE *f = fopen(p, "rb");
+	assert_non_null(f);
+	char *buf = malloc(1 << 20);
+	*n = fread(buf, 1, 1 << 20, f);
+	fclose(f);
+	return buf;
+}
+
+static void assert_refused_unchanged(const char *p, int code)
+{
+	size_t n0, n1;
+	char *before = slurp(p, &n0);
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_open(p, &st, &err), -1);
+	assert_null(st);
+	assert_int_equal(err.code, code);
+	assert_non_null(strstr(err.msg, p));
+	char *after = slurp(p, &n1);
+	assert_int_equal(n0, n1);
+	assert_memory_equal(before, after, n0);
+	char side[320];
+	snprintf(side, sizeof side, "%s-wal", p);
+	assert_int_equal(access(side, F_OK), -1);
+	free(before);
+	free(after);
+}
+
+static void test_foreign_and_corrupt_refused(void **state)
+{
+	(void)state;
+	char p[300];
+	/* Another application's SQLite database. */
+	path_of(p, sizeof p, "foreign.db");
+	sqlite3 *db;
+	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
+	assert_int_equal(sqlite3_exec(db, "CREATE TABLE t(x); INSERT INTO t VALUES (1);", NULL, NULL, NULL), SQLITE_OK);
+	sqlite3_close(db);
+	assert_refused_unchanged(p, ACQ_E_INVAL);
+	/* Not SQLite at all. */
+	path_of(p, sizeof p, "garbage.db");
+	FILE *f = fopen(p, "wb");
+	for (int i = 0; i < 5000; i++)
+		fputc((i * 7919) & 0xff, f);
+	fclose(f);
+	assert_refused_unchanged(p, ACQ_E_IO);
+	/* Ours, from a newer acquisitiond. */
+	path_of(p, sizeof p, "newer.db");
+	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
+	char sql[128];
+	snprintf(sql, sizeof sql, "PRAGMA application_id=%d; PRAGMA user_version=%d; CREATE TABLE z(x);",
+		 STORE_APPLICATION_ID, STORE_SCHEMA_VERSION + 1);
+	assert_int_equal(sqlite3_exec(db, sql, NULL, NULL, NULL), SQLITE_OK);
+	sqlite3_close(db);
+	assert_refused_unchanged(p, ACQ_E_UNSUPPORTED);
+	/* An empty file is initialised; reopening our own database works. */
+	path_of(p, sizeof p, "empty.db");
+	f = fopen(p, "wb");
+	fclose(f);
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_open(p, &st, &err), 0);
+	store_close(st);
+	assert_int_equal(store_open(p, &st, &err), 0);
+	assert_int_equal(store_schema_version(st), STORE_SCHEMA_VERSION);
+	store_close(st);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_sweep_points_spectra),
+		cmocka_unit_test(test_export_csv),
+		cmocka_unit_test(test_foreign_and_corrupt_refused),
+	};
+	return cmocka_run_group_tests(tests, setup, teardown);
+}
