@@ -75,7 +75,7 @@ int sweep_recover(struct sweep *sw, int64_t *id, struct acq_err *err);
 /* `recon.start`: run the completion chain again for a finished sweep (export of its calibrated samples,
  * then the reconstruction stages in child processes through job.h). *run_id: its recon_runs row (0 if not
  * known yet). ACQ_E_STATE while a sweep or a reconstruction runs, ACQ_E_NOTFOUND for no such sweep,
- * ACQ_E_UNSUPPORTED when brdf-recon is absent. 0 or -1. (A weak default in sweep_seam.c says unsupported.) */
+ * ACQ_E_UNSUPPORTED when brdf-recon is absent. 0 or -1. */
 int sweep_recon_start(struct sweep *sw, int64_t sweep_id, int64_t *run_id, struct acq_err *err);
 /* True while a reconstruction child of the executor runs. (Weak default: false.) */
 bool sweep_recon_busy(const struct sweep *sw);
