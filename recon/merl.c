@@ -105,15 +105,27 @@ int merl_index(double theta_h, double theta_d, double phi_d, int *ith, int *itd,
 	return c + MERL_N_PHI_D * b + MERL_N_PHI_D * MERL_N_THETA_D * a;
 }
 
-int merl_dirs_from_angles(double theta_h, double theta_d, double phi_d, double wi[3], double wo[3])
+int merl_dirs_from_trig(const double th_sc[2], const double td_sc[2], const double pd_sc[2], double wi[3],
+			double wo[3])
 {
-	double d[3] = { sin(theta_d) * cos(phi_d), sin(theta_d) * sin(phi_d), cos(theta_d) };
-	double h[3] = { sin(theta_h), 0, cos(theta_h) }; /* φh = 0 */
-	rot_y(d, theta_h, wi);                           /* then Rz(φh = 0): identity */
+	double d[3] = { td_sc[0] * pd_sc[1], td_sc[0] * pd_sc[0], td_sc[1] };
+	double h[3] = { th_sc[0], 0, th_sc[1] }; /* φh = 0 */
+	/* rot_y(d, θh): then Rz(φh = 0), the identity */
+	double c = th_sc[1], sn = th_sc[0];
+	wi[0] = d[0] * c + d[2] * sn;
+	wi[1] = d[1];
+	wi[2] = -d[0] * sn + d[2] * c;
 	double k = 2 * (wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2]);
 	for (int i = 0; i < 3; i++)
 		wo[i] = k * h[i] - wi[i];
 	return wi[2] > 0 && wo[2] > 0;
+}
+
+int merl_dirs_from_angles(double theta_h, double theta_d, double phi_d, double wi[3], double wo[3])
+{
+	double th[2] = { sin(theta_h), cos(theta_h) }, td[2] = { sin(theta_d), cos(theta_d) },
+	       pd[2] = { sin(phi_d), cos(phi_d) };
+	return merl_dirs_from_trig(th, td, pd, wi, wo);
 }
 
 void merl_cell_angles(int ith, int itd, int ipd, double *theta_h, double *theta_d, double *phi_d)

@@ -68,6 +68,10 @@ int merl_cell_dirs(int ith, int itd, int ipd, double wi[3], double wo[3]);
 /* Angles (θh, θd, φd) a cell stands for under the writer convention (indices assumed in range). */
 void merl_cell_angles(int ith, int itd, int ipd, double *theta_h, double *theta_d, double *phi_d);
 
+/* merl_dirs_from_angles from {sin, cos} of θh, θd and φd (callers that sweep a row compute them once per
+ * angle); the same arithmetic, so the same bits. */
+int merl_dirs_from_trig(const double th_sc[2], const double td_sc[2], const double pd_sc[2], double wi[3],
+			double wo[3]);
 /* Inverse Rusinkiewicz map with φh = 0: (wi, wo) from (θh, θd, φd); 1 if both have z > 0, else 0. */
 int merl_dirs_from_angles(double theta_h, double theta_d, double phi_d, double wi[3], double wo[3]);
 

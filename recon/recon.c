@@ -457,6 +457,23 @@ static int factor(struct fitctx *fc, double eta, double *rcond)
 	return 0;
 }
 
+/* The diagonal of A⁻¹ from the lower Cholesky factor L of A (column-major, destroyed): A⁻¹ = L⁻ᵀL⁻¹, so
+ * (A⁻¹)_kk = Σ_{i≥k} (L⁻¹)_ik², the squared norm of column k of L⁻¹ (dtrtri, n³/3 flops; dpotri would also
+ * form the rest of A⁻¹, another n³/3, that no caller reads). (A⁻¹)_kk is left in A[k·n + k]; 0 ok. */
+static int diag_inv_chol(double *A, size_t n)
+{
+	if (LAPACKE_dtrtri(LAPACK_COL_MAJOR, 'L', 'N', (lapack_int)n, A, (lapack_int)n) != 0)
+		return -1;
+	for (size_t k = 0; k < n; k++) {
+		const double *col = A + k * n;
+		double s = 0;
+		for (size_t i = k; i < n; i++)
+			s += col[i] * col[i];
+		A[k * n + k] = s; /* column k is not read again */
+	}
+	return 0;
+}
+
 /* Rippa: every leave-one-out residual from one factorisation, e_k = (A⁻¹g)_k / (A⁻¹)_kk, over the channels
  * chan[0..nc). fc->A holds the factor on entry and is destroyed. Returns the mean squared residual. */
 static double rippa(struct fitctx *fc, const size_t *chan, size_t nc, double *rhs, double *res_rms)
@@ -467,7 +484,7 @@ static double rippa(struct fitctx *fc, const size_t *chan, size_t nc, double *rh
 	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)nc, fc->A, (lapack_int)n, rhs,
 			   (lapack_int)n) != 0)
 		return INFINITY;
-	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, fc->A, (lapack_int)n) != 0)
+	if (diag_inv_chol(fc->A, n) != 0)
 		return INFINITY;
 	double s = 0;
 	for (size_t c = 0; c < nc; c++) {
@@ -872,7 +889,7 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 			goto out;
 		}
 	/* leave-one-out residuals of every channel (for the record, and as the noise level without sigmas) */
-	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, fc.A, (lapack_int)n) != 0) {
+	if (diag_inv_chol(fc.A, n) != 0) {
 		acq_errf(err, ACQ_E_NUMERIC, "fit: inverse failed");
 		goto out;
 	}

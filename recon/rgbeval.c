@@ -27,6 +27,37 @@
  * Per direction pair the cost is n kernel values + n·r + r·nc + nc exponentials + 3·nc, instead of n·L.
  */
 
+/*
+ * exp of the map-back, vectorised: glibc's libmvec AVX2 variant (_ZGVdN4v_exp, 4 doubles; glibc documents a
+ * maximum error of 1 ulp for it, libm-test-ulps "exp_vlen4_avx2", against ≤ 1 ulp for the scalar exp; lanes
+ * needing special handling (overflow, underflow, NaN) go through the scalar routine). Elementwise: each value
+ * gets the same bits whatever its position in the array, so the per-pair path (reduced_lin) and the batch
+ * path agree, and reciprocity (the same arithmetic on the same canonical point) stays bit-exact. Without AVX2
+ * the scalar exp. n is padded by the callers to a multiple of 4 (RGB_PAD4).
+ */
+#define RGB_PAD4(n) (((n) + 3) & ~(size_t)3)
+#if defined(__x86_64__)
+#include <immintrin.h>
+__attribute__((target("avx2"))) extern __m256d _ZGVdN4v_exp(__m256d x);
+__attribute__((target("avx2"))) static void vexp_avx2(double *x, size_t n)
+{
+	for (size_t i = 0; i < n; i += 4)
+		_mm256_storeu_pd(x + i, _ZGVdN4v_exp(_mm256_loadu_pd(x + i)));
+}
+#endif
+
+static void vexp(double *x, size_t n)
+{
+#if defined(__x86_64__)
+	if (__builtin_cpu_supports("avx2")) {
+		vexp_avx2(x, RGB_PAD4(n));
+		return;
+	}
+#endif
+	for (size_t i = 0; i < n; i++)
+		x[i] = exp(x[i]);
+}
+
 #define RGB_STEP_NM 5.0
 #define RGB_G_TOL 1e-3
 
@@ -39,7 +70,8 @@ struct recon_rgb {
 	double *tab;    /* [(ntab-1)*nc] largest albedo bound over the bin */
 	double *P;      /* [r*n] row-major: (U_r diag(S_r))ᵀ, one contiguous row per singular vector */
 	double *V;      /* [r*nc] row-major: rows of Vᵀ */
-	double *Wb;     /* [nc*n] binned weights, channel-major (batch path when the rank is not reduced) */
+	double *WbT;    /* [n*nc] binned weights, centre-major (batch path when the rank is not reduced; this layout
+			 * makes the GEMM K·WbT a plain NoTrans product: less packing than channel-major) */
 	double *Wrgb;   /* [3*nc] colour weights (stages 1-4) at the kept wavelengths */
 	double *Wfull;  /* [3*L] colour weights at every model wavelength (reference path) */
 	double red_err;
@@ -55,7 +87,7 @@ void recon_rgb_free(struct recon_rgb *r)
 	free(r->tab);
 	free(r->P);
 	free(r->V);
-	free(r->Wb);
+	free(r->WbT);
 	free(r->Wrgb);
 	free(r->Wfull);
 	free(r);
@@ -80,7 +112,7 @@ static void dir_to_angles(const double v[3], double *th, double *ph)
 	*ph = atan2(v[1], v[0]);
 }
 
-/* Linear RGB (colour stages 1-4) of the reduced model at one pair; scratch holds n + r + nc doubles. */
+/* Linear RGB (colour stages 1-4) of the reduced model at one pair; scratch holds n + r + RGB_PAD4(nc) doubles. */
 static void reduced_lin(const struct recon_rgb *R, const double wi[3], const double wo[3], double lin[3],
 			double *scratch)
 {
@@ -109,13 +141,19 @@ static void reduced_lin(const struct recon_rgb *R, const double wi[3], const dou
 	if (jo > m->ntab - 2)
 		jo = m->ntab - 2;
 	lin[0] = lin[1] = lin[2] = 0;
+	if (m->transform != RECON_T_SQRT) {
+		for (size_t l = 0; l < nc; l++)
+			g[l] = g[l] > 69 ? 69 : g[l];
+		for (size_t l = nc; l < RGB_PAD4(nc); l++)
+			g[l] = 0;
+		vexp(g, nc);
+	}
 	for (size_t l = 0; l < nc; l++) {
 		double f;
 		if (m->transform == RECON_T_SQRT) {
 			f = g[l] * g[l];
 		} else {
-			double x = g[l] > 69 ? 69 : g[l];
-			f = exp(x) - R->eps[l];
+			f = g[l] - R->eps[l];
 			if (!(f > 0))
 				f = 0;
 		}
@@ -132,7 +170,7 @@ int recon_rgb_fn(void *ctx, const double wi[3], const double wo[3], double rgb[3
 {
 	const struct recon_rgb *R = ctx;
 	double stack[4096], *scratch = stack;
-	size_t need = R->m->n + R->r + R->nc;
+	size_t need = R->m->n + R->r + RGB_PAD4(R->nc);
 	if (need > sizeof stack / sizeof stack[0] && !(scratch = malloc(need * sizeof *scratch)))
 		return -1;
 	double lin[3];
@@ -258,12 +296,14 @@ int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, dou
 			wsub[c * n + j] = acc / (double)(hi - lo);
 		}
 	}
-	R->Wb = malloc(n * nc * sizeof *R->Wb);
-	if (!R->Wb) {
+	R->WbT = malloc(n * nc * sizeof *R->WbT);
+	if (!R->WbT) {
 		acq_errf(err, ACQ_E_NOMEM, "rgb: out of memory");
 		goto out;
 	}
-	memcpy(R->Wb, wsub, n * nc * sizeof *wsub);
+	for (size_t c = 0; c < nc; c++)
+		for (size_t j = 0; j < n; j++)
+			R->WbT[j * nc + c] = wsub[c * n + j];
 	if (LAPACKE_dgesdd(LAPACK_COL_MAJOR, 'S', (lapack_int)n, (lapack_int)nc, wsub, (lapack_int)n, S, U,
 			   (lapack_int)n, VT, (lapack_int)k) != 0) {
 		acq_errf(err, ACQ_E_NUMERIC, "rgb: SVD of the weights failed");
@@ -291,7 +331,7 @@ int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, dou
 		for (size_t l = 0; l < nc; l++)
 			R->V[c * nc + l] = VT[l * k + c];
 	/* 3. measure the reduction against the full path at random pairs (fixed seed: reproducible) */
-	scratch = malloc((n + r + nc) * sizeof *scratch);
+	scratch = malloc((n + r + RGB_PAD4(nc)) * sizeof *scratch);
 	if (!scratch) {
 		acq_errf(err, ACQ_E_NOMEM, "rgb: out of memory");
 		goto out;
@@ -333,7 +373,8 @@ out:
 	return rc;
 }
 
-/* Transformed values → linear RGB → colour chain, for one pair whose binned g is given. */
+/* Transformed values → linear RGB → colour chain, for one pair; e holds the binned exp(min(μ + g, 69)) (log
+ * transform, vexp) or μ + g (sqrt transform). */
 static void finish_pair(const struct recon_rgb *R, const double *c6, const double *g, double rgb[3],
 			struct colour_stats *stats)
 {
@@ -348,11 +389,11 @@ static void finish_pair(const struct recon_rgb *R, const double *c6, const doubl
 		jo = m->ntab - 2;
 	double lin[3] = { 0, 0, 0 };
 	for (size_t l = 0; l < nc; l++) {
-		double x = g[l] + R->mu[l], f;
+		double x = g[l], f;
 		if (m->transform == RECON_T_SQRT) {
 			f = x * x;
 		} else {
-			f = exp(x > 69 ? 69 : x) - R->eps[l];
+			f = x - R->eps[l];
 			if (!(f > 0))
 				f = 0;
 		}
@@ -375,7 +416,7 @@ int recon_rgb_batch(const struct recon_rgb *R, size_t nq, const double *wi, cons
 	size_t n = m->n, nc = R->nc, r = R->r;
 	int reduced = r < nc;
 	double *c6 = malloc(BATCH * 6 * sizeof *c6), *K = malloc(BATCH * n * sizeof *K);
-	double *Z = malloc(BATCH * r * sizeof *Z), *G = malloc(BATCH * nc * sizeof *G);
+	double *Z = malloc(BATCH * r * sizeof *Z), *G = malloc(RGB_PAD4(BATCH * nc) * sizeof *G);
 	if (!c6 || !K || !Z || !G) {
 		free(c6);
 		free(K);
@@ -398,8 +439,21 @@ int recon_rgb_batch(const struct recon_rgb *R, size_t nq, const double *wi, cons
 			cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)b, (int)nc, (int)r, 1.0, Z, (int)r, R->V,
 				    (int)nc, 0.0, G, (int)nc);
 		} else {
-			cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)b, (int)nc, (int)n, 1.0, K, (int)n, R->Wb,
-				    (int)n, 0.0, G, (int)nc);
+			cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)b, (int)nc, (int)n, 1.0, K, (int)n, R->WbT,
+				    (int)nc, 0.0, G, (int)nc);
+		}
+		/* μ + g (the same sum as reduced_lin's), then exp over the whole block at once */
+		for (size_t q = 0; q < b; q++) {
+			double *gq = G + q * nc;
+			for (size_t l = 0; l < nc; l++) {
+				double x = gq[l] + R->mu[l];
+				gq[l] = m->transform != RECON_T_SQRT && x > 69 ? 69 : x;
+			}
+		}
+		if (m->transform != RECON_T_SQRT) {
+			for (size_t i = b * nc; i < RGB_PAD4(b * nc); i++)
+				G[i] = 0;
+			vexp(G, b * nc);
 		}
 		for (size_t q = 0; q < b; q++)
 			finish_pair(R, c6 + 6 * q, G + q * nc, rgb + 3 * (q0 + q), stats);
@@ -430,10 +484,26 @@ static int merl_row(const struct recon_rgb *R, struct merl_table *t, int all_cel
 		    double *rgb, size_t *idx, struct colour_stats *stats, struct acq_err *err)
 {
 	size_t nb = 0;
+	/* the cells' directions as merl_cell_dirs gives them, with the sines and cosines once per angle */
+	double th_sc[2], td_sc[MERL_N_THETA_D][2], pd_sc[MERL_N_PHI_D][2];
+	for (int i = 0; i < MERL_N_PHI_D; i++) {
+		double th, td, pd;
+		merl_cell_angles(ith, i < MERL_N_THETA_D ? i : 0, i, &th, &td, &pd);
+		if (i == 0) {
+			th_sc[0] = sin(th);
+			th_sc[1] = cos(th);
+		}
+		if (i < MERL_N_THETA_D) {
+			td_sc[i][0] = sin(td);
+			td_sc[i][1] = cos(td);
+		}
+		pd_sc[i][0] = sin(pd);
+		pd_sc[i][1] = cos(pd);
+	}
 	for (int itd = 0; itd < MERL_N_THETA_D; itd++)
 		for (int ipd = 0; ipd < MERL_N_PHI_D; ipd++) {
 			size_t flat = (size_t)ipd + (size_t)MERL_N_PHI_D * ((size_t)itd + (size_t)MERL_N_THETA_D * (size_t)ith);
-			int has = merl_cell_dirs(ith, itd, ipd, wi + 3 * nb, wo + 3 * nb) == 1;
+			int has = merl_dirs_from_trig(th_sc, td_sc[itd], pd_sc[ipd], wi + 3 * nb, wo + 3 * nb) == 1;
 			if (!has) {
 				for (int c = 0; c < 3; c++)
 					t->data[(size_t)c * MERL_N_CELLS + flat] = MERL_NO_DATA;
