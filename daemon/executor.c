@@ -801,6 +801,24 @@ static int start_segment(struct ex *x, double now, int *dev, struct acq_err *err
 	return 0;
 }
 
+/* Start the first waypoint segment of the current move, or go straight to settling when there is none. */
+static void begin_waypoints(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	if (x->n_wps == 0) {
+		x->phase = PH_SETTLE;
+		x->settle_until = now;
+		x->wake = now;
+		return;
+	}
+	int dev = 0;
+	if (start_segment(x, now, &dev, &err)) {
+		fault(x, dev, &err);
+		return;
+	}
+	x->wake = now;
+}
+
 static void run_verify(struct ex *x, double now)
 {
 	struct acq_err err = { 0 };
@@ -866,18 +884,7 @@ static void run_verify(struct ex *x, double now)
 	x->phase = PH_MOVE;
 	x->point_started = now;
 	set_phase_text(x, x->in_reference ? "moving to the reference pose" : "moving");
-	if (x->n_wps == 0) {
-		x->phase = PH_SETTLE;
-		x->settle_until = now;
-		x->wake = now;
-		return;
-	}
-	int dev = 0;
-	if (start_segment(x, now, &dev, &err)) {
-		fault(x, dev, &err);
-		return;
-	}
-	x->wake = now;
+	begin_waypoints(x, now);
 }
 
 static void run_homing(struct ex *x, double now)
@@ -1463,18 +1470,7 @@ static void commit_point(struct ex *x, double now)
 		return;
 	}
 	set_phase_text(x, "moving");
-	if (x->n_wps == 0) {
-		x->phase = PH_SETTLE;
-		x->settle_until = now;
-		x->wake = now;
-		return;
-	}
-	int dev = 0;
-	if (start_segment(x, now, &dev, &err)) {
-		fault(x, dev, &err);
-		return;
-	}
-	x->wake = now;
+	begin_waypoints(x, now);
 }
 
 /* ---- faults ----------------------------------------------------------------------------------- */
