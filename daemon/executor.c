@@ -887,32 +887,43 @@ static void run_verify(struct ex *x, double now)
 	begin_waypoints(x, now);
 }
 
-static void run_homing(struct ex *x, double now)
+/* Step every axis flagged in active[] (a move or a homing): clears the flag of an axis that arrived and
+ * lowers *wake to the earliest next poll. 1 while any is still busy, 0 when all arrived, -1 after a fault
+ * (already reported through fault()). */
+static int step_axes(struct ex *x, bool active[3], double now, double *wake)
 {
 	struct acq_err err = { 0 };
-	double wake = INFINITY;
-	bool busy = false;
+	int busy = 0;
 	for (int a = 0; a < 3; a++) {
-		if (!x->homing[a])
+		if (!active[a])
 			continue;
 		double np = x->ops.next_poll(x->octx, a);
 		if (now + 1e-12 < np) {
-			wake = fmin(wake, np);
-			busy = true;
+			busy = 1;
+			*wake = fmin(*wake, np);
 			continue;
 		}
 		int r = x->ops.move_step(x->octx, a, now, &err);
 		if (r == AXIS_MOVE_FAILED) {
 			fault(x, a, &err);
-			return;
+			return -1;
 		}
 		if (r == AXIS_MOVE_DONE) {
-			x->homing[a] = false;
+			active[a] = false;
 			continue;
 		}
-		busy = true;
-		wake = fmin(wake, x->ops.next_poll(x->octx, a));
+		busy = 1;
+		*wake = fmin(*wake, x->ops.next_poll(x->octx, a));
 	}
+	return busy;
+}
+
+static void run_homing(struct ex *x, double now)
+{
+	double wake = INFINITY;
+	int busy = step_axes(x, x->homing, now, &wake);
+	if (busy < 0)
+		return;
 	if (!busy) {
 		x->phase = PH_VERIFY;
 		x->wake = now;
@@ -927,28 +938,9 @@ static void run_move(struct ex *x, double now)
 	if (x->stats.laser_on)
 		x->stats.laser_on_while_moving++;
 	double wake = INFINITY;
-	bool busy = false;
-	for (int a = 0; a < 3; a++) {
-		if (!x->moving[a])
-			continue;
-		double np = x->ops.next_poll(x->octx, a);
-		if (now + 1e-12 < np) {
-			busy = true;
-			wake = fmin(wake, np);
-			continue;
-		}
-		int r = x->ops.move_step(x->octx, a, now, &err);
-		if (r == AXIS_MOVE_FAILED) {
-			fault(x, a, &err);
-			return;
-		}
-		if (r == AXIS_MOVE_DONE) {
-			x->moving[a] = false;
-			continue;
-		}
-		busy = true;
-		wake = fmin(wake, x->ops.next_poll(x->octx, a));
-	}
+	int busy = step_axes(x, x->moving, now, &wake);
+	if (busy < 0)
+		return;
 	if (busy) {
 		x->wake = fmax(now, wake);
 		return;

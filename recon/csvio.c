@@ -127,6 +127,32 @@ static void show(const struct field *f, char *buf, size_t size)
 	buf[j] = '\0';
 }
 
+int csvio_samples_grow(struct recon_samples *s, size_t cap, bool values, bool sigmas)
+{
+	size_t width = s->nwl ? s->nwl : 1;
+	double *a = realloc(s->ang, cap * 4 * sizeof *a);
+	if (!a)
+		return -1;
+	s->ang = a;
+	double *d = realloc(s->deg, cap * 4 * sizeof *d);
+	if (!d)
+		return -1;
+	s->deg = d;
+	if (values) {
+		double *v = realloc(s->val, cap * width * sizeof *v);
+		if (!v)
+			return -1;
+		s->val = v;
+	}
+	if (sigmas) {
+		double *g = realloc(s->sig, cap * width * sizeof *g);
+		if (!g)
+			return -1;
+		s->sig = g;
+	}
+	return 0;
+}
+
 void csvio_samples_free(struct recon_samples *s)
 {
 	if (!s)
@@ -302,19 +328,7 @@ static int parse(const char *name, const char *text, size_t len, int want_values
 		}
 		if (s->n == cap) {
 			size_t nc = cap ? 2 * cap : 64;
-			double *a = realloc(s->ang, nc * 4 * sizeof *a);
-			if (a)
-				s->ang = a;
-			double *d = realloc(s->deg, nc * 4 * sizeof *d);
-			if (d)
-				s->deg = d;
-			double *v = want_values ? realloc(s->val, nc * (nwl ? nwl : 1) * sizeof *v) : NULL;
-			if (v)
-				s->val = v;
-			double *g = want_values && sig_seen_any ? realloc(s->sig, nc * nwl * sizeof *g) : NULL;
-			if (g)
-				s->sig = g;
-			if (!a || !d || (want_values && !v) || (want_values && sig_seen_any && !g)) {
+			if (csvio_samples_grow(s, nc, want_values, want_values && sig_seen_any)) {
 				acq_errf(err, ACQ_E_NOMEM, "%s:%ld: out of memory", name, L.lineno);
 				goto out;
 			}

@@ -3,6 +3,7 @@
 #ifndef RECON_CSVIO_H
 #define RECON_CSVIO_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdio.h>
 
@@ -19,6 +20,8 @@ struct recon_samples {
 	double *deg;   /* [n*4] the angles as written in the file (degrees), echoed by eval */
 };
 
+/* Grow s's row arrays to cap rows (values/sigmas: also val/sig, nwl wide); s stays valid on failure. 0 or -1. */
+int csvio_samples_grow(struct recon_samples *s, size_t cap, bool values, bool sigmas);
 /* Parse CSV text of samples (name is used in messages); fills *s (free with csvio_samples_free). */
 int csvio_parse_samples(const char *name, const char *text, size_t len, struct recon_samples *s,
 			struct acq_err *err);

@@ -118,19 +118,7 @@ int recon_load_db(const char *db_path, long long sweep_id, struct recon_samples 
 		long long pid = sqlite3_column_int64(st, 0);
 		if (s->n == cap) {
 			size_t nc = cap ? 2 * cap : 256;
-			double *a = realloc(s->ang, nc * 4 * sizeof *a);
-			if (a)
-				s->ang = a;
-			double *dg = realloc(s->deg, nc * 4 * sizeof *dg);
-			if (dg)
-				s->deg = dg;
-			double *v = realloc(s->val, nc * L * sizeof *v);
-			if (v)
-				s->val = v;
-			double *g = realloc(s->sig, nc * L * sizeof *g);
-			if (g)
-				s->sig = g;
-			if (!a || !dg || !v || !g) {
+			if (csvio_samples_grow(s, nc, true, true)) {
 				acq_errf(err, ACQ_E_NOMEM, "out of memory");
 				goto out;
 			}
