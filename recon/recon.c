@@ -16,13 +16,15 @@
 #define MERGE_TOL 1e-9
 /* Albedo table: nodes every 5°, quadrature Gauss-Legendre 20 in cosθo × 24 azimuth midpoints on [0, π]. */
 #define TAB_N 19
-#define TAB_NMU 20
-#define TAB_NPHI 24
+#define TAB_NMU 10
+#define TAB_NPHI 12
 #define TAB_TOL 1e-3      /* node rule refined until a doubled rule agrees to this (relative) */
 #define TAB_NMU_MAX 160   /* finest node rule: 160 × 192 */
+#define ALB_NMU_MAX 256   /* finest rule of recon_albedo, the DHR and the checker (Gauss-Legendre limit) */
 /* DHR quadrature: Gauss-Legendre 32 × 48 azimuth midpoints (error discussed at recon_albedo). */
 #define DHR_NMU 32
 #define DHR_NPHI 48
+#define DHR_FLOOR 0.1     /* refined to 1e-3 relative, or 1e-4 absolute below a DHR of 0.1 */
 /* Largest transformed value mapped back (e^69 ≈ 1e30 sr⁻¹): keeps every output finite. */
 #define G_MAX 69.0
 
@@ -142,27 +144,38 @@ static double theta_of(const double *v)
 	return z >= 1.0 ? 0.0 : z <= 0.0 ? M_PI / 2 : acos(z);
 }
 
+/*
+ * One block of b ≤ RECON_EVAL_BLOCK queries for nch channels: chan[k] names the model channel of output
+ * column k (chan NULL: every channel in order) and wsub holds those channels' weights, channel-major
+ * (nch × n; m->w itself when chan is NULL). out is b × nch, row-major.
+ */
+static void eval_block(const struct recon_model *m, size_t b, const double *c6, int scaled, size_t nch,
+		       const size_t *chan, const double *wsub, double *out, double *work)
+{
+	size_t n = m->n;
+	rbf_kmatrix_soa(m->kernel, m->shape, b, c6, n, m->soa, work);
+	/* out (b × nch) = K (b × n) · Wᵀ */
+	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)b, (int)nch, (int)n, 1.0, work, (int)n, wsub,
+		    (int)n, 0.0, out, (int)nch);
+	for (size_t q = 0; q < b; q++) {
+		const double *c = c6 + 6 * q;
+		double ti = theta_of(c), to = theta_of(c + 3);
+		for (size_t k = 0; k < nch; k++) {
+			size_t l = chan ? chan[k] : k;
+			double f = untransform(m->transform, out[q * nch + k] + m->mu[l], m->eps[l]);
+			if (scaled)
+				f *= recon_energy_scale(m, ti, to, l);
+			out[q * nch + k] = f;
+		}
+	}
+}
+
 void recon_eval_canon(const struct recon_model *m, size_t nq, const double *c6, int scaled, double *out,
 		      double *work)
 {
-	size_t n = m->n, L = m->nwl;
 	for (size_t q0 = 0; q0 < nq; q0 += RECON_EVAL_BLOCK) {
 		size_t b = nq - q0 < RECON_EVAL_BLOCK ? nq - q0 : RECON_EVAL_BLOCK;
-		rbf_kmatrix_soa(m->kernel, m->shape, b, c6 + 6 * q0, n, m->soa, work);
-		double *o = out + q0 * L;
-		/* o (b × L, row-major) = K (b × n) · Wᵀ, W stored channel-major (L × n) */
-		cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)b, (int)L, (int)n, 1.0, work, (int)n,
-			    m->w, (int)n, 0.0, o, (int)L);
-		for (size_t q = 0; q < b; q++) {
-			const double *c = c6 + 6 * (q0 + q);
-			double ti = theta_of(c), to = theta_of(c + 3);
-			for (size_t l = 0; l < L; l++) {
-				double f = untransform(m->transform, o[q * L + l] + m->mu[l], m->eps[l]);
-				if (scaled)
-					f *= recon_energy_scale(m, ti, to, l);
-				o[q * L + l] = f;
-			}
-		}
+		eval_block(m, b, c6 + 6 * q0, scaled, m->nwl, NULL, m->w, out + q0 * m->nwl, work);
 	}
 }
 
@@ -254,114 +267,195 @@ static int hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double
 	return 0;
 }
 
-static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int nphi, int square_rule,
-		       int scaled, double *out, struct acq_err *err)
+/* Workspace of albedo_adaptive, sized for the finest rule it may reach. */
+struct albedo_ws {
+	size_t qmax, L;
+	double *c6, *wt, *work, *vals, *wsub, *fine;
+	size_t *chan;
+};
+
+static void albedo_ws_free(struct albedo_ws *ws)
 {
-	size_t Q = (size_t)nmu * (size_t)nphi, L = m->nwl;
-	double *c6 = malloc(Q * 6 * sizeof *c6), *wt = malloc(Q * sizeof *wt);
-	double *vals = malloc(Q * L * sizeof *vals), *work = malloc(recon_eval_work_size(m) * sizeof *work);
-	int rc = -1;
-	if (!c6 || !wt || !vals || !work) {
-		acq_errf(err, ACQ_E_NOMEM, "albedo: out of memory");
-		goto out;
+	free(ws->c6);
+	free(ws->wt);
+	free(ws->work);
+	free(ws->vals);
+	free(ws->wsub);
+	free(ws->fine);
+	free(ws->chan);
+	memset(ws, 0, sizeof *ws);
+}
+
+static int albedo_ws_init(struct albedo_ws *ws, const struct recon_model *m, size_t qmax, struct acq_err *err)
+{
+	size_t n = m->n, L = m->nwl;
+	memset(ws, 0, sizeof *ws);
+	ws->qmax = qmax;
+	ws->L = L;
+	ws->c6 = malloc(qmax * 6 * sizeof *ws->c6);
+	ws->wt = malloc(qmax * sizeof *ws->wt);
+	ws->work = malloc(recon_eval_work_size(m) * sizeof *ws->work);
+	ws->vals = malloc((size_t)RECON_EVAL_BLOCK * L * sizeof *ws->vals);
+	ws->wsub = malloc(L * n * sizeof *ws->wsub);
+	ws->fine = malloc(L * sizeof *ws->fine);
+	ws->chan = malloc(L * sizeof *ws->chan);
+	if (!ws->c6 || !ws->wt || !ws->work || !ws->vals || !ws->wsub || !ws->fine || !ws->chan) {
+		albedo_ws_free(ws);
+		return acq_errf(err, ACQ_E_NOMEM, "albedo: out of memory");
 	}
-	if (hemi_nodes(theta_i, nmu, nphi, square_rule, c6, wt)) {
-		acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", nmu, nphi);
-		goto out;
+	return 0;
+}
+
+/* acc[k] = albedo of channel chan[k] (k < nch) by the rule nmu × nphi; the weights of those channels are
+ * already packed in ws->wsub. Evaluated block by block: memory does not grow with the rule. */
+static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int nphi, int square_rule,
+		       int scaled, size_t nch, struct albedo_ws *ws, double *acc, struct acq_err *err)
+{
+	size_t Q = (size_t)nmu * (size_t)nphi;
+	if (Q > ws->qmax || hemi_nodes(theta_i, nmu, nphi, square_rule, ws->c6, ws->wt))
+		return acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", nmu, nphi);
+	for (size_t k = 0; k < nch; k++)
+		acc[k] = 0;
+	for (size_t q0 = 0; q0 < Q; q0 += RECON_EVAL_BLOCK) {
+		size_t b = Q - q0 < RECON_EVAL_BLOCK ? Q - q0 : RECON_EVAL_BLOCK;
+		eval_block(m, b, ws->c6 + 6 * q0, scaled, nch, ws->chan, ws->wsub, ws->vals, ws->work);
+		for (size_t q = 0; q < b; q++)
+			for (size_t k = 0; k < nch; k++)
+				acc[k] += ws->wt[q0 + q] * ws->vals[q * nch + k];
 	}
-	recon_eval_canon(m, Q, c6, scaled, vals, work);
-	for (size_t l = 0; l < L; l++)
-		out[l] = 0;
-	for (size_t q = 0; q < Q; q++)
-		for (size_t l = 0; l < L; l++)
-			out[l] += wt[q] * vals[q * L + l];
-	rc = 0;
-out:
-	free(c6);
-	free(wt);
-	free(vals);
-	free(work);
-	return rc;
+	return 0;
+}
+
+/*
+ * Albedo of every channel at θi, starting with the rule nmu × nphi and doubling both while a channel
+ * disagrees with the doubled rule by more than tol · max(|value|, floor) (relative above floor, absolute
+ * below: floor 1 when only the comparison with 1 matters) and the doubled nmu stays ≤ nmu_max. Only
+ * the channels still disagreeing are evaluated again, so one narrow lobe does not make every channel pay
+ * for the finest rule. out[l] is the finest value; diff[l] (may be NULL) the last |fine − coarse|, or 0
+ * when no doubling fits under nmu_max.
+ */
+static int albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, int nphi, int nmu_max,
+			   int square_rule, int scaled, double tol, double floor, struct albedo_ws *ws, double *out,
+			   double *diff, struct acq_err *err)
+{
+	size_t n = m->n, L = m->nwl, nch = L;
+	for (size_t l = 0; l < L; l++) {
+		ws->chan[l] = l;
+		if (diff)
+			diff[l] = 0;
+	}
+	memcpy(ws->wsub, m->w, L * n * sizeof *ws->wsub);
+	if (albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, out, err))
+		return -1;
+	while (nch > 0 && 2 * nmu <= nmu_max) {
+		nmu *= 2;
+		nphi *= 2;
+		if (albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, ws->fine, err))
+			return -1;
+		size_t keep = 0;
+		for (size_t k = 0; k < nch; k++) {
+			size_t l = ws->chan[k];
+			double d = fabs(ws->fine[k] - out[l]), ref = fmax(fabs(ws->fine[k]), floor);
+			out[l] = ws->fine[k];
+			if (diff)
+				diff[l] = d;
+			if (!(d <= tol * ref)) {
+				if (keep != k) {
+					ws->chan[keep] = l;
+					memmove(ws->wsub + keep * n, ws->wsub + k * n, n * sizeof *ws->wsub);
+				}
+				keep++;
+			}
+		}
+		nch = keep;
+	}
+	return 0;
 }
 
 int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi, int scaled, double *out,
 		 struct acq_err *err)
 {
-	if (!(theta_i >= 0 && theta_i <= M_PI / 2) || nmu < 1 || nphi < 1 || nmu > 256 || nphi > 4096)
+	if (!(theta_i >= 0 && theta_i <= M_PI / 2) || nmu < 1 || nphi < 1 || nmu > ALB_NMU_MAX || nphi > 4096)
 		return acq_errf(err, ACQ_E_INVAL, "albedo: bad incidence or quadrature size");
-	return albedo_rule(m, theta_i, nmu, nphi, 0, scaled, out, err);
+	int top = nmu, tphi = nphi;
+	while (2 * top <= ALB_NMU_MAX) {
+		top *= 2;
+		tphi *= 2;
+	}
+	struct albedo_ws ws;
+	if (albedo_ws_init(&ws, m, (size_t)top * (size_t)tphi, err))
+		return -1;
+	int rc = albedo_adaptive(m, theta_i, nmu, nphi, ALB_NMU_MAX, 0, scaled, TAB_TOL, 1e-300, &ws, out, NULL, err);
+	albedo_ws_free(&ws);
+	return rc;
 }
 
 /*
- * The energy table. a(θ, λ) of the unscaled interpolant is computed at TAB_N nodes; on each interval
- * [θ_t, θ_t+1] the bound is max(a_t, a_t+1) + h²/8 · |a''| (the interpolation error of a C² function, with
- * a'' from second differences, doubled), times (1 + 2δ) where δ is the largest relative difference between
- * a node's rule and a doubled rule; each node's rule is doubled (from 20 × 24 up to 160 × 192) until the two
- * agree to TAB_TOL, because the map back e^g can make lobes far narrower than the kernel. The evaluated function is then
- * s·f̂ with s = 1/max(1, A(θi), A(θo)), whose albedo at θi is ≤ a(θi)/max(1, A(θi)) ≤ 1 whenever A bounds a.
- * `brdf-recon check` verifies it with an independent rule.
+ * The energy table. a(θ, λ) of the unscaled interpolant is computed at TAB_N nodes, each node's channels by
+ * a rule doubled (from 20 × 24 up to 160 × 192) until two rules agree to TAB_TOL in albedo units (relative
+ * above an albedo of 1: the table is only ever compared with 1), because the map back e^g can make lobes
+ * far narrower than the kernel; only the channels still disagreeing are refined. With d the last
+ * difference, on each interval [θ_t, θ_t+1] the bound is max(a_t + 2d_t, a_t+1 + 2d_t+1) + h²/8 · |a''|
+ * (the interpolation error of a C² function, with a'' from second differences, doubled). The evaluated
+ * function is then s·f̂ with s = 1/max(1, A(θi), A(θo)), whose albedo at θi is ≤ a(θi)/max(1, A(θi)) ≤ 1
+ * whenever A bounds a. `brdf-recon check` verifies it with an independent rule.
  */
 static int build_albedo_table(struct recon_model *m, struct acq_err *err, recon_progress_fn pf, void *pctx)
 {
 	size_t T = TAB_N, L = m->nwl;
-	double *a = malloc(T * L * sizeof *a), *fine = malloc(L * sizeof *fine);
+	double *a = malloc(T * L * sizeof *a), *diff = malloc(L * sizeof *diff);
 	m->tab_theta = malloc(T * sizeof *m->tab_theta);
 	m->tab_alb = malloc((T - 1) * L * sizeof *m->tab_alb);
 	m->ntab = T;
-	if (!a || !fine || !m->tab_theta || !m->tab_alb) {
+	struct albedo_ws ws;
+	if (!a || !diff || !m->tab_theta || !m->tab_alb ||
+	    albedo_ws_init(&ws, m, (size_t)TAB_NMU_MAX * TAB_NPHI * (TAB_NMU_MAX / TAB_NMU), err)) {
 		free(a);
-		free(fine);
+		free(diff);
 		return acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
 	}
 	double h = (M_PI / 2) / (double)(T - 1);
-	/* every node against a doubled rule, refined until they agree to TAB_TOL (narrow lobes of e^g can
-	 * be far narrower than the kernel); the finer value is kept and the last difference is the margin */
-	double delta = 0;
+	double *marg = malloc(T * L * sizeof *marg);
+	if (!marg) {
+		acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
+		goto fail;
+	}
+	m->alb_margin = 0;
 	for (size_t t = 0; t < T; t++) {
 		m->tab_theta[t] = h * (double)t;
 		if (pf)
 			pf(pctx, "albedo table", (double)t / (double)T);
-		int nmu = TAB_NMU, nphi = TAB_NPHI;
-		if (albedo_rule(m, m->tab_theta[t], nmu, nphi, 0, 0, a + t * L, err))
+		if (albedo_adaptive(m, m->tab_theta[t], TAB_NMU, TAB_NPHI, TAB_NMU_MAX, 0, 0, TAB_TOL, 1.0, &ws, a + t * L,
+				    diff, err)) {
+			free(marg);
 			goto fail;
-		for (;;) {
-			if (albedo_rule(m, m->tab_theta[t], 2 * nmu, 2 * nphi, 0, 0, fine, err))
-				goto fail;
-			double dt = 0;
-			for (size_t l = 0; l < L; l++) {
-				double ref = fabs(fine[l]) > 1e-300 ? fabs(fine[l]) : 1e-300;
-				double d = fabs(fine[l] - a[t * L + l]) / ref;
-				if (d > dt)
-					dt = d;
-			}
-			memcpy(a + t * L, fine, L * sizeof *fine);
-			nmu *= 2;
-			nphi *= 2;
-			if (dt <= TAB_TOL || 2 * nmu > TAB_NMU_MAX) {
-				if (dt > delta)
-					delta = dt;
-				break;
-			}
+		}
+		for (size_t l = 0; l < L; l++) {
+			marg[t * L + l] = 2.0 * diff[l] + 1e-9 * fabs(a[t * L + l]);
+			if (marg[t * L + l] > m->alb_margin)
+				m->alb_margin = marg[t * L + l];
 		}
 	}
-	m->alb_margin = 2.0 * delta + 1e-9;
 	for (size_t t = 0; t + 1 < T; t++)
 		for (size_t l = 0; l < L; l++) {
-			double lo = a[t * L + l], hi = a[(t + 1) * L + l];
+			double lo = a[t * L + l] + marg[t * L + l], hi = a[(t + 1) * L + l] + marg[(t + 1) * L + l];
 			double mx = lo > hi ? lo : hi, curv = 0;
 			for (size_t u = (t ? t - 1 : 0); u + 2 < T && u <= t + 1; u++) {
 				double c = fabs(a[u * L + l] - 2 * a[(u + 1) * L + l] + a[(u + 2) * L + l]) / (h * h);
 				if (c > curv)
 					curv = c;
 			}
-			m->tab_alb[t * L + l] = (mx + 2.0 * h * h / 8.0 * curv) * (1.0 + m->alb_margin);
+			m->tab_alb[t * L + l] = mx + 2.0 * h * h / 8.0 * curv;
 		}
+	free(marg);
 	free(a);
-	free(fine);
+	free(diff);
+	albedo_ws_free(&ws);
 	return 0;
 fail:
 	free(a);
-	free(fine);
+	free(diff);
+	albedo_ws_free(&ws);
 	return -1;
 }
 
@@ -1065,12 +1159,12 @@ static int model_variance(const struct recon_model *m, size_t Q, const double *c
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err)
 {
-	return recon_dhr_ex(m, nth, theta, ndraws, seed, dhr, sig, NULL, NULL, progress, pctx, err);
+	return recon_dhr_ex(m, nth, theta, ndraws, seed, dhr, sig, NULL, NULL, NULL, progress, pctx, err);
 }
 
 int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
-		 double *dhr, double *sig, double *sig_noise, double *sig_model, recon_progress_fn progress,
-		 void *pctx, struct acq_err *err)
+		 double *dhr, double *sig, double *sig_noise, double *sig_model, double *sig_quad,
+		 recon_progress_fn progress, void *pctx, struct acq_err *err)
 {
 	size_t n = m->n, L = m->nwl, Q = (size_t)DHR_NMU * DHR_NPHI;
 	if (nth == 0 || nth > 64)
@@ -1091,9 +1185,10 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 	double *C = malloc(Q * L * sizeof *C), *KQQ = malloc(Q * Q * sizeof *KQQ), *soaQ = malloc(6 * Q * sizeof *soaQ);
 	double *U = malloc(Q * L * sizeof *U), *Bt = malloc(L * n * sizeof *Bt), *X = malloc(L * n * sizeof *X);
 	double *Ainv = malloc(n * n * sizeof *Ainv), *alpha = calloc(L, sizeof *alpha);
-	double *vmod = calloc(nth * L, sizeof *vmod);
+	double *vmod = calloc(nth * L, sizeof *vmod), *squad = calloc(nth * L, sizeof *squad);
+	struct albedo_ws ws = { 0 };
 	if (!Kq || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud || !C || !KQQ || !soaQ || !U ||
-	    !Bt || !X || !Ainv || !alpha || !vmod) {
+	    !Bt || !X || !Ainv || !alpha || !vmod || !squad) {
 		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
 		goto out;
 	}
@@ -1183,13 +1278,32 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 				goto out;
 		}
 	}
+	/* the nominal DHR by the adaptive rule (the fixed rule above serves the spread and the model variance):
+	 * a lobe narrower than the 32 × 48 rule resolves is refined, per channel, up to 256 × 384. The exact
+	 * albedo of the scaled model is ≤ 1 by construction, so an estimate above 1 is quadrature error: it is
+	 * clipped (which only moves it towards the exact value) and, with the last refinement step, kept as
+	 * the quadrature term of σ. */
+	if (albedo_ws_init(&ws, m, (size_t)ALB_NMU_MAX * DHR_NPHI * (ALB_NMU_MAX / DHR_NMU), err))
+		goto out;
+	for (size_t t = 0; t < nth; t++) {
+		if (albedo_adaptive(m, theta[t], DHR_NMU, DHR_NPHI, ALB_NMU_MAX, 0, 1, TAB_TOL, DHR_FLOOR, &ws,
+				    dhr + t * L, squad + t * L, err))
+			goto out;
+		for (size_t l = 0; l < L; l++)
+			if (dhr[t * L + l] > 1.0) {
+				squad[t * L + l] += dhr[t * L + l] - 1.0;
+				dhr[t * L + l] = 1.0;
+			}
+	}
 	for (size_t i = 0; i < nth * L; i++) {
 		double sn = ndraws > 1 ? sqrt(m2[i] / (ndraws - 1)) : 0.0, sm = sqrt(vmod[i]);
-		sig[i] = sqrt(sn * sn + sm * sm);
+		sig[i] = sqrt(sn * sn + sm * sm + squad[i] * squad[i]);
 		if (sig_noise)
 			sig_noise[i] = sn;
 		if (sig_model)
 			sig_model[i] = sm;
+		if (sig_quad)
+			sig_quad[i] = squad[i];
 		if (!isfinite(sig[i]) || !isfinite(dhr[i])) {
 			acq_errf(err, ACQ_E_NUMERIC, "dhr: non-finite result");
 			goto out;
@@ -1216,6 +1330,8 @@ out:
 	free(Ainv);
 	free(alpha);
 	free(vmod);
+	free(squad);
+	albedo_ws_free(&ws);
 	return rc;
 }
 
@@ -1229,10 +1345,14 @@ int recon_check(const struct recon_model *m, size_t npairs, size_t nalb, uint64_
 	double *ang = malloc(B * 4 * sizeof *ang), *swp = malloc(B * 4 * sizeof *swp);
 	double *f1 = malloc(B * L * sizeof *f1), *f2 = malloc(B * L * sizeof *f2), *alb = malloc(L * sizeof *alb);
 	int rc = -1;
+	struct albedo_ws ws = { 0 };
 	if (!ang || !swp || !f1 || !f2 || !alb) {
 		acq_errf(err, ACQ_E_NOMEM, "check: out of memory");
 		goto out;
 	}
+	/* the independent rule (Gauss-Legendre in cos²θo), 48 × 96 refined up to 192 × 384 */
+	if (albedo_ws_init(&ws, m, (size_t)192 * 384, err))
+		goto out;
 	struct rng r;
 	rng_seed(&r, seed);
 	rep->min_value = INFINITY;
@@ -1277,7 +1397,7 @@ int recon_check(const struct recon_model *m, size_t npairs, size_t nalb, uint64_
 		if (progress)
 			progress(pctx, "albedo", (double)t / (double)(nalb + 2));
 		double th = t == 0 ? 0.0 : t == 1 ? M_PI / 2 : asin(rng_unif(&r)) ; /* sinθ uniform: more grazing */
-		if (albedo_rule(m, th, 48, 96, 1, 1, alb, err))
+		if (albedo_adaptive(m, th, 48, 96, ALB_NMU_MAX, 1, 1, TAB_TOL, 1e-300, &ws, alb, NULL, err))
 			goto out;
 		for (size_t l = 0; l < L; l++) {
 			if (!isfinite(alb[l])) {
@@ -1299,5 +1419,6 @@ out:
 	free(f1);
 	free(f2);
 	free(alb);
+	albedo_ws_free(&ws);
 	return rc;
 }

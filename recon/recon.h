@@ -54,7 +54,7 @@ struct recon_model {
 	size_t ntab;         /* albedo table: A(θ, λ) ≥ albedo of the unscaled interpolant on [θ_t, θ_t+1] */
 	double *tab_theta;   /* [ntab] uniform nodes over [0, π/2] */
 	double *tab_alb;     /* [(ntab-1)*nwl] upper bound of the albedo on each interval, row-major */
-	double alb_margin;   /* relative quadrature-error margin included in tab_alb */
+	double alb_margin;   /* largest quadrature-error margin included in tab_alb (albedo units) */
 	double loo_rms;      /* leave-one-out RMS residual in the transformed space (all channels) */
 	double rcond;        /* reciprocal condition number estimate of K + Λ (dpocon) */
 	char meta[2048];     /* key=value lines: source, sizes, merges, imputations, version, time */
@@ -95,12 +95,13 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
  * with the interpolation-error term (recon_dhr_ex). */
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err);
-/* recon_dhr, sig = sqrt(sig_noise² + sig_model²) split into its parts (each may be NULL): sig_noise the
- * Monte-Carlo spread from the data's uncertainties, sig_model the interpolation error (posterior variance of
- * the DHR under the GP reading of the interpolant, amplitude from the leave-one-out residuals; recon.c). */
+/* recon_dhr, sig = sqrt(sig_noise² + sig_model² + sig_quad²) split into its parts (each may be NULL):
+ * sig_noise the Monte-Carlo spread from the data's uncertainties, sig_model the interpolation error
+ * (posterior variance of the DHR under the GP reading of the interpolant, amplitude from the leave-one-out
+ * residuals), sig_quad the quadrature error (last refinement step plus any overshoot above 1; recon.c). */
 int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
-		 double *dhr, double *sig, double *sig_noise, double *sig_model, recon_progress_fn progress,
-		 void *pctx, struct acq_err *err);
+		 double *dhr, double *sig, double *sig_noise, double *sig_model, double *sig_quad,
+		 recon_progress_fn progress, void *pctx, struct acq_err *err);
 
 /* Result of recon_check: worst violations of the three properties. */
 struct recon_check_report {

@@ -70,8 +70,9 @@ def main():
             "--z-out", z, "-o", out, "--plot", os.path.join(d, "dhr.png"))
     assert "reference" in p.stderr
     dd = np.genfromtxt(out, delimiter=",", skip_header=1)
-    assert dd.shape == (18, 6) and np.all(np.isfinite(dd)) and np.all(dd[:, 3] > 0)
-    assert np.allclose(dd[:, 3] ** 2, dd[:, 4] ** 2 + dd[:, 5] ** 2, rtol=1e-6)
+    assert dd.shape == (18, 7) and np.all(np.isfinite(dd)) and np.all(dd[:, 3] > 0)
+    assert np.allclose(dd[:, 3] ** 2, dd[:, 4] ** 2 + dd[:, 5] ** 2 + dd[:, 6] ** 2, rtol=1e-6)
+    assert np.all(dd[:, 6] >= 0) and np.all(dd[:, 6] <= 2e-3 * dd[:, 2])  # smooth lobe: rule converged
     zz = np.genfromtxt(z, delimiter=",", skip_header=1)
     print("z-scores at 8 degrees:", np.round(zz[:, 5], 2))
     assert zz.shape[0] == 6 and np.all(np.abs(zz[:, 5]) < 3)

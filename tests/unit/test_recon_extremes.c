@@ -174,6 +174,8 @@ static void assert_properties(const struct recon_model *m, int npairs)
 	assert_true(dhr && sig);
 	assert_int_equal(recon_dhr(m, 4, th, 8, rt_state, dhr, sig, NULL, NULL, &err), 0);
 	for (size_t i = 0; i < 4 * L; i++) {
+		if (!(dhr[i] <= 1 + 1e-12))
+			printf("  dhr(%.2f°, %g nm) = %.17g > 1\n", th[i / L] / DEG, m->wl[i % L], dhr[i]);
 		assert_true(isfinite(dhr[i]) && dhr[i] >= 0 && dhr[i] <= 1 + 1e-12);
 		assert_true(isfinite(sig[i]) && sig[i] >= 0);
 	}
@@ -572,6 +574,18 @@ static void test_dynamic_range(void **state)
 					printf("  albedo at the spike (%d°, %g nm): %.6g\n", 33 + u, s.wl[l], alb[l]);
 				assert_true(alb[l] <= 1 + 1e-9);
 			}
+		}
+		/* the DHR at the spike: its adaptive rule (from 32 × 48) must agree with a rule started 4 × 5 finer
+		 * to its own quadrature term plus 2e-3, and stay ≤ 1 (the fixed 32 × 48 rule alone misses the lobe) */
+		double th35 = 35 * DEG, d35[4], s35[4], q35[4], f35[4];
+		assert_int_equal(recon_dhr_ex(m, 1, &th35, 0, 1, d35, s35, NULL, NULL, q35, NULL, NULL, &err), 0);
+		assert_int_equal(recon_albedo(m, th35, 128, 240, 1, f35, &err), 0);
+		for (size_t l = 0; l < s.nwl; l++) {
+			double ref = fmin(f35[l], 1.0);
+			printf("  dhr at the spike (%g nm): %.6g ± %.2g (quadrature), fine rule %.6g\n", s.wl[l], d35[l],
+			       q35[l], f35[l]);
+			assert_true(d35[l] >= 0 && d35[l] <= 1.0);
+			assert_true(fabs(d35[l] - ref) <= 2e-3 * ref + q35[l]);
 		}
 		if (t == RECON_T_LOG)
 			assert_merl_finite(m, "range");

@@ -252,7 +252,7 @@ static void test_dhr_uncertainty_calibrated(void **state)
 		assert_int_equal(recon_fit(&s, &o, &m, &err), 0);
 		double d, sg;
 		double sgt;
-		assert_int_equal(recon_dhr_ex(m, 1, &th, k == 0 ? 64 : 0, 11, &d, &sgt, &sg, NULL, NULL, NULL, &err), 0);
+		assert_int_equal(recon_dhr_ex(m, 1, &th, k == 0 ? 64 : 0, 11, &d, &sgt, &sg, NULL, NULL, NULL, NULL, &err), 0);
 		vals[k] = d;
 		if (k == 0)
 			sig_mc = sg;
