@@ -15,11 +15,14 @@
 #define RECON_MAX_N 8000
 #define MERGE_TOL 1e-9
 /* Albedo table: nodes every 5°, quadrature Gauss-Legendre 20 in cosθo × 24 azimuth midpoints on [0, π]. */
-#define TAB_N 19
+#define TAB_N 10
 #define TAB_NMU 10
 #define TAB_NPHI 12
 #define TAB_TOL 1e-3      /* node rule refined until a doubled rule agrees to this (relative) */
 #define TAB_NMU_MAX 160   /* finest node rule: 160 × 192 */
+#define TAB_CURV_TOL 0.01 /* largest second difference over an interval (albedo units) before bisecting */
+#define TAB_DEPTH 7       /* finest interval 10°/2⁷ ≈ 0.08° */
+#define TAB_BUDGET 1000000 /* quadrature points; past them no bisection, node rules only up to 40 × 48 */
 #define ALB_NMU_MAX 256   /* finest rule of recon_albedo, the DHR and the checker (Gauss-Legendre limit) */
 /* DHR quadrature: Gauss-Legendre 32 × 48 azimuth midpoints (error discussed at recon_albedo). */
 #define DHR_NMU 32
@@ -118,17 +121,27 @@ static inline double untransform(int transform, double g, double eps)
 	return f > 0 ? f : 0.0;
 }
 
+size_t recon_tab_interval(const struct recon_model *m, double theta)
+{
+	size_t lo = 0, hi = m->ntab - 1; /* tab_theta[lo] ≤ θ < tab_theta[hi], or the end interval */
+	if (m->ntab < 2 || !(theta > m->tab_theta[0]))
+		return 0;
+	while (hi - lo > 1) {
+		size_t mid = lo + (hi - lo) / 2;
+		if (theta < m->tab_theta[mid])
+			hi = mid;
+		else
+			lo = mid;
+	}
+	return lo;
+}
+
 /* Upper bound of the unscaled albedo near θ (interval lookup in the table). */
 static double albedo_bound(const struct recon_model *m, double theta, size_t l)
 {
 	if (m->ntab < 2)
 		return 0.0;
-	double h = (M_PI / 2) / (double)(m->ntab - 1);
-	double x = theta / h;
-	size_t j = x <= 0 ? 0 : (size_t)x;
-	if (j > m->ntab - 2)
-		j = m->ntab - 2;
-	return m->tab_alb[j * m->nwl + l];
+	return m->tab_alb[recon_tab_interval(m, theta) * m->nwl + l];
 }
 
 double recon_energy_scale(const struct recon_model *m, double ti, double to, size_t l)
@@ -159,12 +172,19 @@ static void eval_block(const struct recon_model *m, size_t b, const double *c6, 
 		    (int)n, 0.0, out, (int)nch);
 	for (size_t q = 0; q < b; q++) {
 		const double *c = c6 + 6 * q;
-		double ti = theta_of(c), to = theta_of(c + 3);
+		const double *ai = m->tab_alb, *ao = m->tab_alb;
+		if (scaled && m->ntab >= 2) {
+			ai += recon_tab_interval(m, theta_of(c)) * m->nwl;
+			ao += recon_tab_interval(m, theta_of(c + 3)) * m->nwl;
+		}
 		for (size_t k = 0; k < nch; k++) {
 			size_t l = chan ? chan[k] : k;
 			double f = untransform(m->transform, out[q * nch + k] + m->mu[l], m->eps[l]);
-			if (scaled)
-				f *= recon_energy_scale(m, ti, to, l);
+			if (scaled && m->ntab >= 2) {
+				double mx = ai[l] > ao[l] ? ai[l] : ao[l];
+				if (mx > 1.0)
+					f *= 1.0 / mx;
+			}
 			out[q * nch + k] = f;
 		}
 	}
@@ -270,6 +290,7 @@ static int hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double
 /* Workspace of albedo_adaptive, sized for the finest rule it may reach. */
 struct albedo_ws {
 	size_t qmax, L;
+	size_t points;      /* quadrature points evaluated so far (any channels) */
 	double *c6, *wt, *work, *vals, *wsub, *fine;
 	size_t *chan;
 };
@@ -316,6 +337,7 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 		return acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", nmu, nphi);
 	for (size_t k = 0; k < nch; k++)
 		acc[k] = 0;
+	ws->points += Q;
 	for (size_t q0 = 0; q0 < Q; q0 += RECON_EVAL_BLOCK) {
 		size_t b = Q - q0 < RECON_EVAL_BLOCK ? Q - q0 : RECON_EVAL_BLOCK;
 		eval_block(m, b, ws->c6 + 6 * q0, scaled, nch, ws->chan, ws->wsub, ws->vals, ws->work);
@@ -391,72 +413,139 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
 }
 
 /*
- * The energy table. a(θ, λ) of the unscaled interpolant is computed at TAB_N nodes, each node's channels by
- * a rule doubled (from 20 × 24 up to 160 × 192) until two rules agree to TAB_TOL in albedo units (relative
- * above an albedo of 1: the table is only ever compared with 1), because the map back e^g can make lobes
- * far narrower than the kernel; only the channels still disagreeing are refined. With d the last
- * difference, on each interval [θ_t, θ_t+1] the bound is max(a_t + 2d_t, a_t+1 + 2d_t+1) + h²/8 · |a''|
- * (the interpolation error of a C² function, with a'' from second differences, doubled). The evaluated
- * function is then s·f̂ with s = 1/max(1, A(θi), A(θo)), whose albedo at θi is ≤ a(θi)/max(1, A(θi)) ≤ 1
- * whenever A bounds a. `brdf-recon check` verifies it with an independent rule.
+ * The energy table: A(θ, λ) ≥ the albedo a(θ, λ) of the unscaled interpolant on each interval of θ.
+ * Each node's channels come from albedo_adaptive (from 10 × 12, doubled up to 160 × 192 until two rules
+ * agree to TAB_TOL in albedo units, relative above 1: the table is only ever compared with 1), because the
+ * map back e^g can make lobes far narrower than the kernel; d is the last difference between rules. The
+ * nodes start every 10°; each interval [θ_lo, θ_hi] is probed at its midpoint and, while some channel's
+ * second difference Δ = |a_lo − 2a_mid + a_hi| exceeds TAB_CURV_TOL · max(1, a) (a feature narrower than
+ * the interval: a spike in θi), bisected, down to 10°/2^TAB_DEPTH. Both halves then get the bound
+ * max(a + 2d over the three nodes) + Δ (the interpolation error h²/8·|a''| of a C² function, with a''
+ * from Δ, doubled). The evaluated function is s·f̂ with s = 1/max(1, A(θi), A(θo)), whose albedo at θi is
+ * ≤ a(θi)/max(1, A(θi)) ≤ 1 whenever A bounds a. `brdf-recon check` verifies it with an independent rule.
+ * The work is bounded: past TAB_BUDGET quadrature points (a wild interpolant, whose lobes no rule
+ * resolves) nodes stop at 40 × 48 and intervals are no longer bisected; the bounds keep their margins.
  */
+struct albtab {
+	const struct recon_model *m;
+	struct albedo_ws ws;
+	double *diff;
+	size_t n, cap, L;   /* nodes so far */
+	double *th, *a, *bound; /* [cap], [cap*L] node albedo + margin, [cap*L] bound of the interval ending here */
+	double margin;
+};
+
+static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err *err)
+{
+	int top = T->ws.points < TAB_BUDGET ? TAB_NMU_MAX : 4 * TAB_NMU;
+	if (albedo_adaptive(T->m, theta, TAB_NMU, TAB_NPHI, top, 0, 0, TAB_TOL, 1.0, &T->ws, a, T->diff, err))
+		return -1;
+	for (size_t l = 0; l < T->L; l++) {
+		double mg = 2.0 * T->diff[l] + 1e-9 * fabs(a[l]);
+		if (mg > T->margin)
+			T->margin = mg;
+		a[l] += mg;
+	}
+	return 0;
+}
+
+static int albtab_push(struct albtab *T, double theta, const double *a, const double *bound, struct acq_err *err)
+{
+	if (T->n == T->cap) {
+		size_t cap = T->cap ? 2 * T->cap : 64;
+		double *th = realloc(T->th, cap * sizeof *th);
+		if (th)
+			T->th = th;
+		double *na = realloc(T->a, cap * T->L * sizeof *na);
+		if (na)
+			T->a = na;
+		double *nb = realloc(T->bound, cap * T->L * sizeof *nb);
+		if (nb)
+			T->bound = nb;
+		if (!th || !na || !nb)
+			return acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
+		T->cap = cap;
+	}
+	T->th[T->n] = theta;
+	memcpy(T->a + T->n * T->L, a, T->L * sizeof *a);
+	if (bound)
+		memcpy(T->bound + T->n * T->L, bound, T->L * sizeof *bound);
+	T->n++;
+	return 0;
+}
+
+/* The interval from the last node pushed (θ_lo, its values) to (θ_hi, ahi): probe, bisect or push. */
+static int albtab_interval(struct albtab *T, double thi, const double *ahi, int depth, struct acq_err *err)
+{
+	size_t L = T->L;
+	double tlo = T->th[T->n - 1], tmid = 0.5 * (tlo + thi);
+	double *amid = malloc(2 * L * sizeof *amid), *bnd = amid + L;
+	if (!amid)
+		return acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
+	int rc = -1, split = 0;
+	if (albtab_node(T, tmid, amid, err))
+		goto out;
+	const double *alo = T->a + (T->n - 1) * L;
+	for (size_t l = 0; l < L; l++) {
+		double d2 = fabs(alo[l] - 2.0 * amid[l] + ahi[l]);
+		double mx = fmax(alo[l], fmax(amid[l], ahi[l]));
+		if (d2 > TAB_CURV_TOL * fmax(mx, 1.0) && depth < TAB_DEPTH && T->ws.points < TAB_BUDGET)
+			split = 1;
+		bnd[l] = mx + d2;
+	}
+	if (split) {
+		if (albtab_interval(T, tmid, amid, depth + 1, err) || albtab_interval(T, thi, ahi, depth + 1, err))
+			goto out;
+	} else if (albtab_push(T, tmid, amid, bnd, err) || albtab_push(T, thi, ahi, bnd, err)) {
+		goto out;
+	}
+	rc = 0;
+out:
+	free(amid);
+	return rc;
+}
+
 static int build_albedo_table(struct recon_model *m, struct acq_err *err, recon_progress_fn pf, void *pctx)
 {
-	size_t T = TAB_N, L = m->nwl;
-	double *a = malloc(T * L * sizeof *a), *diff = malloc(L * sizeof *diff);
-	m->tab_theta = malloc(T * sizeof *m->tab_theta);
-	m->tab_alb = malloc((T - 1) * L * sizeof *m->tab_alb);
-	m->ntab = T;
-	struct albedo_ws ws;
-	if (!a || !diff || !m->tab_theta || !m->tab_alb ||
-	    albedo_ws_init(&ws, m, (size_t)TAB_NMU_MAX * TAB_NPHI * (TAB_NMU_MAX / TAB_NMU), err)) {
-		free(a);
-		free(diff);
-		return acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
-	}
-	double h = (M_PI / 2) / (double)(T - 1);
-	double *marg = malloc(T * L * sizeof *marg);
-	if (!marg) {
+	size_t L = m->nwl;
+	struct albtab T = { .m = m, .L = L };
+	double *ahi = malloc(L * sizeof *ahi);
+	T.diff = malloc(L * sizeof *T.diff);
+	int rc = -1;
+	if (!ahi || !T.diff ||
+	    albedo_ws_init(&T.ws, m, (size_t)TAB_NMU_MAX * TAB_NPHI * (TAB_NMU_MAX / TAB_NMU), err)) {
 		acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
-		goto fail;
+		goto out;
 	}
-	m->alb_margin = 0;
-	for (size_t t = 0; t < T; t++) {
-		m->tab_theta[t] = h * (double)t;
+	double h = (M_PI / 2) / (double)(TAB_N - 1);
+	if (albtab_node(&T, 0.0, ahi, err) || albtab_push(&T, 0.0, ahi, NULL, err))
+		goto out;
+	for (size_t t = 1; t < TAB_N; t++) {
 		if (pf)
-			pf(pctx, "albedo table", (double)t / (double)T);
-		if (albedo_adaptive(m, m->tab_theta[t], TAB_NMU, TAB_NPHI, TAB_NMU_MAX, 0, 0, TAB_TOL, 1.0, &ws, a + t * L,
-				    diff, err)) {
-			free(marg);
-			goto fail;
-		}
-		for (size_t l = 0; l < L; l++) {
-			marg[t * L + l] = 2.0 * diff[l] + 1e-9 * fabs(a[t * L + l]);
-			if (marg[t * L + l] > m->alb_margin)
-				m->alb_margin = marg[t * L + l];
-		}
+			pf(pctx, "albedo table", (double)t / (double)TAB_N);
+		double th = t + 1 == TAB_N ? M_PI / 2 : h * (double)t;
+		if (albtab_node(&T, th, ahi, err) || albtab_interval(&T, th, ahi, 0, err))
+			goto out;
 	}
-	for (size_t t = 0; t + 1 < T; t++)
-		for (size_t l = 0; l < L; l++) {
-			double lo = a[t * L + l] + marg[t * L + l], hi = a[(t + 1) * L + l] + marg[(t + 1) * L + l];
-			double mx = lo > hi ? lo : hi, curv = 0;
-			for (size_t u = (t ? t - 1 : 0); u + 2 < T && u <= t + 1; u++) {
-				double c = fabs(a[u * L + l] - 2 * a[(u + 1) * L + l] + a[(u + 2) * L + l]) / (h * h);
-				if (c > curv)
-					curv = c;
-			}
-			m->tab_alb[t * L + l] = mx + 2.0 * h * h / 8.0 * curv;
-		}
-	free(marg);
-	free(a);
-	free(diff);
-	albedo_ws_free(&ws);
-	return 0;
-fail:
-	free(a);
-	free(diff);
-	albedo_ws_free(&ws);
-	return -1;
+	m->ntab = T.n;
+	m->alb_margin = T.margin;
+	m->tab_theta = malloc(T.n * sizeof *m->tab_theta);
+	m->tab_alb = malloc((T.n - 1) * L * sizeof *m->tab_alb);
+	if (!m->tab_theta || !m->tab_alb) {
+		acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
+		goto out;
+	}
+	memcpy(m->tab_theta, T.th, T.n * sizeof *T.th);
+	memcpy(m->tab_alb, T.bound + L, (T.n - 1) * L * sizeof *T.bound); /* interval t ends at node t + 1 */
+	rc = 0;
+out:
+	free(ahi);
+	free(T.diff);
+	free(T.th);
+	free(T.a);
+	free(T.bound);
+	albedo_ws_free(&T.ws);
+	return rc;
 }
 
 /* ---- fitting ------------------------------------------------------------------------------------------ */

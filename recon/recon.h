@@ -52,7 +52,7 @@ struct recon_model {
 	double *g;           /* [nwl*n] transformed data (with imputed values), for Monte Carlo */
 	double *gsig;        /* [nwl*n] standard uncertainty of g (delta method, or LOO RMS without sigmas) */
 	size_t ntab;         /* albedo table: A(θ, λ) ≥ albedo of the unscaled interpolant on [θ_t, θ_t+1] */
-	double *tab_theta;   /* [ntab] uniform nodes over [0, π/2] */
+	double *tab_theta;   /* [ntab] increasing nodes from 0 to π/2 (10° apart, bisected where needed) */
 	double *tab_alb;     /* [(ntab-1)*nwl] upper bound of the albedo on each interval, row-major */
 	double alb_margin;   /* largest quadrature-error margin included in tab_alb (albedo units) */
 	double loo_rms;      /* leave-one-out RMS residual in the transformed space (all channels) */
@@ -82,11 +82,14 @@ void recon_eval_canon(const struct recon_model *m, size_t nq, const double *c6, 
 size_t recon_eval_work_size(const struct recon_model *m);
 #define RECON_EVAL_BLOCK 256
 
+/* Index t of the albedo-table interval [tab_theta[t], tab_theta[t+1]) holding θ (the last one for π/2). */
+size_t recon_tab_interval(const struct recon_model *m, double theta);
 /* Energy factor s(θi, θo, λ) = 1 / max(1, A(θi, λ), A(θo, λ)) of channel l. */
 double recon_energy_scale(const struct recon_model *m, double ti, double to, size_t l);
 
 /* Albedo a(θi, λ) = ∫ f cosθo dωo of the model (scaled or not) with a Gauss-Legendre(nmu, in cosθo) ×
- * midpoint(nphi, azimuth over [0, π], doubled by the mirror) rule; out[nwl]. */
+ * midpoint(nphi, azimuth over [0, π], doubled by the mirror) rule, doubled per channel until two rules
+ * agree to 1e-3 (relative) or nmu would pass 256; out[nwl]. */
 int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi, int scaled, double *out,
 		 struct acq_err *err);
 

@@ -134,12 +134,7 @@ static void reduced_lin(const struct recon_rgb *R, const double wi[3], const dou
 			g[l] += z[c] * v[l];
 	}
 	double cti = acos(fmin(1, fmax(0, c6[2]))), cto = acos(fmin(1, fmax(0, c6[5])));
-	double h = (M_PI / 2) / (double)(m->ntab - 1);
-	size_t ji = (size_t)(cti / h), jo = (size_t)(cto / h);
-	if (ji > m->ntab - 2)
-		ji = m->ntab - 2;
-	if (jo > m->ntab - 2)
-		jo = m->ntab - 2;
+	size_t ji = recon_tab_interval(m, cti), jo = recon_tab_interval(m, cto);
 	lin[0] = lin[1] = lin[2] = 0;
 	if (m->transform != RECON_T_SQRT) {
 		for (size_t l = 0; l < nc; l++)
@@ -381,12 +376,7 @@ static void finish_pair(const struct recon_rgb *R, const double *c6, const doubl
 	const struct recon_model *m = R->m;
 	size_t nc = R->nc;
 	double cti = acos(fmin(1, fmax(0, c6[2]))), cto = acos(fmin(1, fmax(0, c6[5])));
-	double h = (M_PI / 2) / (double)(m->ntab - 1);
-	size_t ji = (size_t)(cti / h), jo = (size_t)(cto / h);
-	if (ji > m->ntab - 2)
-		ji = m->ntab - 2;
-	if (jo > m->ntab - 2)
-		jo = m->ntab - 2;
+	size_t ji = recon_tab_interval(m, cti), jo = recon_tab_interval(m, cto);
 	double lin[3] = { 0, 0, 0 };
 	for (size_t l = 0; l < nc; l++) {
 		double x = g[l], f;

@@ -27,7 +27,7 @@
  *   ang[n·4]                                   f64 θi, φi, θo, φo radians (θ ∈ [0, π/2])
  *   lam[n]                                     f64 > 0, smoothing pattern
  *   w[nwl·n] g[nwl·n] gsig[nwl·n]              f64 channel-major: weights, data, uncertainties (≥ 0)
- *   tab_theta[ntab]                            f64 uniform over [0, π/2]
+ *   tab_theta[ntab]                            f64 increasing, 0 to π/2
  *   tab_alb[(ntab−1)·nwl]                      f64 ≥ 0, albedo upper bounds
  *   meta_len    u32      ≤ 65535, then meta_len bytes of UTF-8 "key=value\n" text (no NUL)
  *   checksum    u64      FNV-1a 64 of every preceding byte
@@ -259,9 +259,10 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 	for (size_t i = 0; !bad && i < n * L; i++)
 		if (m->gsig[i] < 0)
 			bad = "uncertainties";
-	double h2 = (M_PI / 2) / (double)(ntab - 1);
-	for (size_t t = 0; !bad && t < ntab; t++)
-		if (!isfinite(m->tab_theta[t]) || fabs(m->tab_theta[t] - h2 * (double)t) > 1e-9)
+	if (!bad && (m->tab_theta[0] != 0.0 || !(fabs(m->tab_theta[ntab - 1] - M_PI / 2) <= 1e-12)))
+		bad = "albedo table nodes";
+	for (size_t t = 1; !bad && t < ntab; t++)
+		if (!(m->tab_theta[t] > m->tab_theta[t - 1])) /* also catches NaN */
 			bad = "albedo table nodes";
 	for (size_t i = 0; !bad && i < (ntab - 1) * L; i++)
 		if (!isfinite(m->tab_alb[i]) || m->tab_alb[i] < 0)
