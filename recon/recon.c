@@ -14,7 +14,7 @@
 
 #define RECON_MAX_N 8000
 #define MERGE_TOL 1e-9
-/* Albedo table: nodes every 5°, quadrature Gauss-Legendre 20 in cosθo × 24 azimuth midpoints on [0, π]. */
+/* Albedo table: nodes every 10°, bisected; node rules from Gauss-Legendre 10 in cosθo × 12 azimuth midpoints. */
 #define TAB_N 10
 #define TAB_NMU 10
 #define TAB_NPHI 12
@@ -22,12 +22,12 @@
 #define TAB_NMU_MAX 160   /* finest node rule: 160 × 192 */
 #define TAB_CURV_TOL 0.01 /* largest second difference over an interval (albedo units) before bisecting */
 #define TAB_DEPTH 7       /* finest interval 10°/2⁷ ≈ 0.08° */
-#define TAB_BUDGET 1000000 /* quadrature points; past them no bisection, node rules only up to 40 × 48 */
+#define TAB_MAX_NODES 96  /* node budget of the bisection (breadth first) */
 #define ALB_NMU_MAX 256   /* finest rule of recon_albedo, the DHR and the checker (Gauss-Legendre limit) */
 /* DHR quadrature: Gauss-Legendre 32 × 48 azimuth midpoints (error discussed at recon_albedo). */
 #define DHR_NMU 32
 #define DHR_NPHI 48
-#define DHR_FLOOR 0.1     /* refined to 1e-3 relative, or 1e-4 absolute below a DHR of 0.1 */
+#define DHR_FLOOR 1e-300  /* refined to 1e-3 relative: an absolute floor let two rules agree on a missed lobe */
 /* Largest transformed value mapped back (e^69 ≈ 1e30 sr⁻¹): keeps every output finite. */
 #define G_MAX 69.0
 
@@ -290,7 +290,6 @@ static int hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double
 /* Workspace of albedo_adaptive, sized for the finest rule it may reach. */
 struct albedo_ws {
 	size_t qmax, L;
-	size_t points;      /* quadrature points evaluated so far (any channels) */
 	double *c6, *wt, *work, *vals, *wsub, *fine;
 	size_t *chan;
 };
@@ -337,7 +336,6 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 		return acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", nmu, nphi);
 	for (size_t k = 0; k < nch; k++)
 		acc[k] = 0;
-	ws->points += Q;
 	for (size_t q0 = 0; q0 < Q; q0 += RECON_EVAL_BLOCK) {
 		size_t b = Q - q0 < RECON_EVAL_BLOCK ? Q - q0 : RECON_EVAL_BLOCK;
 		eval_block(m, b, ws->c6 + 6 * q0, scaled, nch, ws->chan, ws->wsub, ws->vals, ws->work);
@@ -346,6 +344,41 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 				acc[k] += ws->wt[q0 + q] * ws->vals[q * nch + k];
 	}
 	return 0;
+}
+
+/*
+ * The starting rule for this model: the narrowest lobe of e^g. Near a peak of height H the C² Wendland
+ * kernel of length ℓ gives g ≈ H(1 − 10 d²/ℓ²), so e^g is a Gaussian of width ℓ/√(20H): nodes are spaced
+ * by that width (H = the largest range of g over the centres, log transform; the sqrt transform squares,
+ * far milder). Two rules that both step over a lobe agree with each other, so refinement alone cannot
+ * find it: the start must resolve it. nmu, nphi are raised to it (at most nmu_max/2 so one doubling fits);
+ * *qmax is the size of the finest rule the ladder can reach.
+ */
+static void lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *nphi, size_t *qmax)
+{
+	double H = 0;
+	if (m->transform != RECON_T_SQRT)
+		for (size_t l = 0; l < m->nwl; l++) {
+			const double *g = m->g + l * m->n;
+			double lo = g[0], hi = g[0];
+			for (size_t k = 1; k < m->n; k++) {
+				lo = fmin(lo, g[k]);
+				hi = fmax(hi, g[k]);
+			}
+			H = fmax(H, hi - lo);
+		}
+	double s = m->shape / sqrt(20.0 * (H + 1.0)); /* radians */
+	double a = ceil((M_PI / 2) / s), b = ceil(M_PI / s);
+	if (a > *nmu)
+		*nmu = a < nmu_max / 2 ? (int)a : nmu_max / 2;
+	if (b > *nphi)
+		*nphi = b < 4 * nmu_max ? (int)b : 4 * nmu_max;
+	int tm = *nmu, tp = *nphi;
+	while (2 * tm <= nmu_max) {
+		tm *= 2;
+		tp *= 2;
+	}
+	*qmax = (size_t)tm * (size_t)tp;
 }
 
 /*
@@ -423,22 +456,22 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
  * max(a + 2d over the three nodes) + Δ (the interpolation error h²/8·|a''| of a C² function, with a''
  * from Δ, doubled). The evaluated function is s·f̂ with s = 1/max(1, A(θi), A(θo)), whose albedo at θi is
  * ≤ a(θi)/max(1, A(θi)) ≤ 1 whenever A bounds a. `brdf-recon check` verifies it with an independent rule.
- * The work is bounded: past TAB_BUDGET quadrature points (a wild interpolant, whose lobes no rule
- * resolves) nodes stop at 40 × 48 and intervals are no longer bisected; the bounds keep their margins.
+ * The work is bounded: intervals are bisected level by level (all of one level before the next) up to
+ * TAB_MAX_NODES nodes; an interval left open keeps the bound of the probe that opened it.
  */
 struct albtab {
 	const struct recon_model *m;
 	struct albedo_ws ws;
+	int nmu, nphi;      /* starting rule (lobe_rule) */
 	double *diff;
-	size_t n, cap, L;   /* nodes so far */
-	double *th, *a, *bound; /* [cap], [cap*L] node albedo + margin, [cap*L] bound of the interval ending here */
+	size_t L;
 	double margin;
 };
 
+/* a[L] = the node's albedo plus its quadrature margin 2d. */
 static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err *err)
 {
-	int top = T->ws.points < TAB_BUDGET ? TAB_NMU_MAX : 4 * TAB_NMU;
-	if (albedo_adaptive(T->m, theta, TAB_NMU, TAB_NPHI, top, 0, 0, TAB_TOL, 1.0, &T->ws, a, T->diff, err))
+	if (albedo_adaptive(T->m, theta, T->nmu, T->nphi, TAB_NMU_MAX, 0, 0, TAB_TOL, 1.0, &T->ws, a, T->diff, err))
 		return -1;
 	for (size_t l = 0; l < T->L; l++) {
 		double mg = 2.0 * T->diff[l] + 1e-9 * fabs(a[l]);
@@ -449,101 +482,123 @@ static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err
 	return 0;
 }
 
-static int albtab_push(struct albtab *T, double theta, const double *a, const double *bound, struct acq_err *err)
+/* Nodes th[n] with rows a[n·L]; interval i (node i to i+1) has done[i] and bound row b[i·L]. */
+struct albgrid {
+	size_t n;
+	double *th, *a, *b;
+	unsigned char *done;
+};
+
+static void albgrid_free(struct albgrid *g)
 {
-	if (T->n == T->cap) {
-		size_t cap = T->cap ? 2 * T->cap : 64;
-		double *th = realloc(T->th, cap * sizeof *th);
-		if (th)
-			T->th = th;
-		double *na = realloc(T->a, cap * T->L * sizeof *na);
-		if (na)
-			T->a = na;
-		double *nb = realloc(T->bound, cap * T->L * sizeof *nb);
-		if (nb)
-			T->bound = nb;
-		if (!th || !na || !nb)
-			return acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
-		T->cap = cap;
-	}
-	T->th[T->n] = theta;
-	memcpy(T->a + T->n * T->L, a, T->L * sizeof *a);
-	if (bound)
-		memcpy(T->bound + T->n * T->L, bound, T->L * sizeof *bound);
-	T->n++;
-	return 0;
+	free(g->th);
+	free(g->a);
+	free(g->b);
+	free(g->done);
+	memset(g, 0, sizeof *g);
 }
 
-/* The interval from the last node pushed (θ_lo, its values) to (θ_hi, ahi): probe, bisect or push. */
-static int albtab_interval(struct albtab *T, double thi, const double *ahi, int depth, struct acq_err *err)
+static int albgrid_alloc(struct albgrid *g, size_t cap, size_t L)
 {
-	size_t L = T->L;
-	double tlo = T->th[T->n - 1], tmid = 0.5 * (tlo + thi);
-	double *amid = malloc(2 * L * sizeof *amid), *bnd = amid + L;
-	if (!amid)
-		return acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
-	int rc = -1, split = 0;
-	if (albtab_node(T, tmid, amid, err))
-		goto out;
-	const double *alo = T->a + (T->n - 1) * L;
-	for (size_t l = 0; l < L; l++) {
-		double d2 = fabs(alo[l] - 2.0 * amid[l] + ahi[l]);
-		double mx = fmax(alo[l], fmax(amid[l], ahi[l]));
-		if (d2 > TAB_CURV_TOL * fmax(mx, 1.0) && depth < TAB_DEPTH && T->ws.points < TAB_BUDGET)
-			split = 1;
-		bnd[l] = mx + d2;
-	}
-	if (split) {
-		if (albtab_interval(T, tmid, amid, depth + 1, err) || albtab_interval(T, thi, ahi, depth + 1, err))
-			goto out;
-	} else if (albtab_push(T, tmid, amid, bnd, err) || albtab_push(T, thi, ahi, bnd, err)) {
-		goto out;
-	}
-	rc = 0;
-out:
-	free(amid);
-	return rc;
+	memset(g, 0, sizeof *g);
+	g->th = malloc(cap * sizeof *g->th);
+	g->a = malloc(cap * L * sizeof *g->a);
+	g->b = calloc(cap * L, sizeof *g->b);
+	g->done = calloc(cap, 1);
+	return g->th && g->a && g->b && g->done ? 0 : -1;
+}
+
+static void albgrid_push(struct albgrid *g, size_t L, double th, const double *a, const double *b, int done)
+{
+	g->th[g->n] = th;
+	memcpy(g->a + g->n * L, a, L * sizeof *a);
+	if (b)
+		memcpy(g->b + g->n * L, b, L * sizeof *b);
+	g->done[g->n] = (unsigned char)done;
+	g->n++;
 }
 
 static int build_albedo_table(struct recon_model *m, struct acq_err *err, recon_progress_fn pf, void *pctx)
 {
 	size_t L = m->nwl;
 	struct albtab T = { .m = m, .L = L };
-	double *ahi = malloc(L * sizeof *ahi);
+	struct albgrid g = { 0 }, ng = { 0 };
+	double *amid = malloc(2 * L * sizeof *amid), *bnd = amid ? amid + L : NULL;
 	T.diff = malloc(L * sizeof *T.diff);
 	int rc = -1;
-	if (!ahi || !T.diff ||
-	    albedo_ws_init(&T.ws, m, (size_t)TAB_NMU_MAX * TAB_NPHI * (TAB_NMU_MAX / TAB_NMU), err)) {
+	size_t qmax;
+	T.nmu = TAB_NMU;
+	T.nphi = TAB_NPHI;
+	lobe_rule(m, TAB_NMU_MAX, &T.nmu, &T.nphi, &qmax);
+	if (!amid || !T.diff || albgrid_alloc(&g, TAB_MAX_NODES, L) || albedo_ws_init(&T.ws, m, qmax, err)) {
 		acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
 		goto out;
 	}
 	double h = (M_PI / 2) / (double)(TAB_N - 1);
-	if (albtab_node(&T, 0.0, ahi, err) || albtab_push(&T, 0.0, ahi, NULL, err))
-		goto out;
-	for (size_t t = 1; t < TAB_N; t++) {
+	for (size_t t = 0; t < TAB_N; t++) {
 		if (pf)
-			pf(pctx, "albedo table", (double)t / (double)TAB_N);
+			pf(pctx, "albedo table", 0.5 * (double)t / (double)TAB_N);
 		double th = t + 1 == TAB_N ? M_PI / 2 : h * (double)t;
-		if (albtab_node(&T, th, ahi, err) || albtab_interval(&T, th, ahi, 0, err))
+		if (albtab_node(&T, th, amid, err))
 			goto out;
+		albgrid_push(&g, L, th, amid, NULL, 0);
 	}
-	m->ntab = T.n;
+	/* breadth first: every interval of one level is probed before any of the next, so the node budget
+	 * is spent evenly where the albedo bends */
+	for (int depth = 0; depth <= TAB_DEPTH; depth++) {
+		if (pf)
+			pf(pctx, "albedo table", 0.5 + 0.5 * (double)depth / (TAB_DEPTH + 1));
+		if (albgrid_alloc(&ng, TAB_MAX_NODES, L)) {
+			acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
+			goto out;
+		}
+		int again = 0;
+		for (size_t i = 0; i + 1 < g.n; i++) {
+			const double *alo = g.a + i * L, *ahi = g.a + (i + 1) * L;
+			/* the first level always probes; later ones while nodes remain (one per open interval) */
+			if (g.done[i] || (depth > 0 && ng.n + (g.n - i) + 1 > TAB_MAX_NODES)) {
+				albgrid_push(&ng, L, g.th[i], alo, g.b + i * L, g.done[i] ? 1 : 2);
+				continue;
+			}
+			double tmid = 0.5 * (g.th[i] + g.th[i + 1]);
+			if (albtab_node(&T, tmid, amid, err))
+				goto out;
+			int split = 0;
+			for (size_t l = 0; l < L; l++) {
+				double d2 = fabs(alo[l] - 2.0 * amid[l] + ahi[l]);
+				double mx = fmax(alo[l], fmax(amid[l], ahi[l]));
+				if (d2 > TAB_CURV_TOL * fmax(mx, 1.0))
+					split = 1;
+				bnd[l] = mx + d2;
+			}
+			int done = !split || depth == TAB_DEPTH;
+			albgrid_push(&ng, L, g.th[i], alo, bnd, done);
+			albgrid_push(&ng, L, tmid, amid, bnd, done);
+			again |= !done;
+		}
+		albgrid_push(&ng, L, g.th[g.n - 1], g.a + (g.n - 1) * L, NULL, 1);
+		albgrid_free(&g);
+		g = ng;
+		memset(&ng, 0, sizeof ng);
+		if (!again)
+			break;
+	}
+	m->ntab = g.n;
 	m->alb_margin = T.margin;
-	m->tab_theta = malloc(T.n * sizeof *m->tab_theta);
-	m->tab_alb = malloc((T.n - 1) * L * sizeof *m->tab_alb);
+	m->tab_theta = malloc(g.n * sizeof *m->tab_theta);
+	m->tab_alb = malloc((g.n - 1) * L * sizeof *m->tab_alb);
 	if (!m->tab_theta || !m->tab_alb) {
 		acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
 		goto out;
 	}
-	memcpy(m->tab_theta, T.th, T.n * sizeof *T.th);
-	memcpy(m->tab_alb, T.bound + L, (T.n - 1) * L * sizeof *T.bound); /* interval t ends at node t + 1 */
+	memcpy(m->tab_theta, g.th, g.n * sizeof *g.th);
+	memcpy(m->tab_alb, g.b, (g.n - 1) * L * sizeof *g.b);
 	rc = 0;
 out:
-	free(ahi);
+	free(amid);
 	free(T.diff);
-	free(T.th);
-	free(T.a);
-	free(T.bound);
+	albgrid_free(&g);
+	albgrid_free(&ng);
 	albedo_ws_free(&T.ws);
 	return rc;
 }
@@ -1372,10 +1427,13 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 	 * albedo of the scaled model is ≤ 1 by construction, so an estimate above 1 is quadrature error: it is
 	 * clipped (which only moves it towards the exact value) and, with the last refinement step, kept as
 	 * the quadrature term of σ. */
-	if (albedo_ws_init(&ws, m, (size_t)ALB_NMU_MAX * DHR_NPHI * (ALB_NMU_MAX / DHR_NMU), err))
+	int dmu = DHR_NMU, dphi = DHR_NPHI;
+	size_t dq;
+	lobe_rule(m, ALB_NMU_MAX, &dmu, &dphi, &dq);
+	if (albedo_ws_init(&ws, m, dq, err))
 		goto out;
 	for (size_t t = 0; t < nth; t++) {
-		if (albedo_adaptive(m, theta[t], DHR_NMU, DHR_NPHI, ALB_NMU_MAX, 0, 1, TAB_TOL, DHR_FLOOR, &ws,
+		if (albedo_adaptive(m, theta[t], dmu, dphi, ALB_NMU_MAX, 0, 1, TAB_TOL, DHR_FLOOR, &ws,
 				    dhr + t * L, squad + t * L, err))
 			goto out;
 		for (size_t l = 0; l < L; l++)
@@ -1440,7 +1498,10 @@ int recon_check(const struct recon_model *m, size_t npairs, size_t nalb, uint64_
 		goto out;
 	}
 	/* the independent rule (Gauss-Legendre in cos²θo), 48 × 96 refined up to 192 × 384 */
-	if (albedo_ws_init(&ws, m, (size_t)192 * 384, err))
+	int cmu = 48, cphi = 96;
+	size_t cq;
+	lobe_rule(m, ALB_NMU_MAX, &cmu, &cphi, &cq);
+	if (albedo_ws_init(&ws, m, cq, err))
 		goto out;
 	struct rng r;
 	rng_seed(&r, seed);
@@ -1486,7 +1547,7 @@ int recon_check(const struct recon_model *m, size_t npairs, size_t nalb, uint64_
 		if (progress)
 			progress(pctx, "albedo", (double)t / (double)(nalb + 2));
 		double th = t == 0 ? 0.0 : t == 1 ? M_PI / 2 : asin(rng_unif(&r)) ; /* sinθ uniform: more grazing */
-		if (albedo_adaptive(m, th, 48, 96, ALB_NMU_MAX, 1, 1, TAB_TOL, 1e-300, &ws, alb, NULL, err))
+		if (albedo_adaptive(m, th, cmu, cphi, ALB_NMU_MAX, 1, 1, TAB_TOL, 1e-300, &ws, alb, NULL, err))
 			goto out;
 		for (size_t l = 0; l < L; l++) {
 			if (!isfinite(alb[l])) {

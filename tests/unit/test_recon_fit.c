@@ -267,7 +267,10 @@ static void test_dhr_uncertainty_calibrated(void **state)
 	double sd = sqrt(var);
 	printf("DHR(8°) over %d data sets: %.5f ± %.5f (spread); Monte Carlo σ %.5f; ratio %.2f\n", NSET, mean, sd,
 	       sig_mc, sig_mc / sd);
-	assert_true(sig_mc > 0.5 * sd && sig_mc < 2.0 * sd);
+	/* sd² · 11/σ² is χ²(11) if σ is right: P(σ/sd > 3) = P(χ² < 1.22) = 1.4e-4 and P(σ/sd < 0.5) =
+	 * P(χ² > 44) = 7e-6 (scipy.stats.chi2). The bound 2 fails 0.64 % of seeds with a right σ (it did at
+	 * ACQ_SEED=2708889776: ratio 2.01). */
+	assert_true(sig_mc > 0.5 * sd && sig_mc < 3.0 * sd);
 }
 
 /* An unsolvable request gives a clear error, never a model. */
