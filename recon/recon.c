@@ -144,11 +144,16 @@ static double albedo_bound(const struct recon_model *m, double theta, size_t l)
 	return m->tab_alb[recon_tab_interval(m, theta) * m->nwl + l];
 }
 
-double recon_energy_scale(const struct recon_model *m, double ti, double to, size_t l)
+/* s = 1 / max(1, A(θi), A(θo)) from the two bounds. */
+static inline double energy_scale_of(double a, double b)
 {
-	double a = albedo_bound(m, ti, l), b = albedo_bound(m, to, l);
 	double mx = a > b ? a : b;
 	return mx > 1.0 ? 1.0 / mx : 1.0;
+}
+
+double recon_energy_scale(const struct recon_model *m, double ti, double to, size_t l)
+{
+	return energy_scale_of(albedo_bound(m, ti, l), albedo_bound(m, to, l));
 }
 
 static double theta_of(const double *v)
@@ -180,11 +185,8 @@ static void eval_block(const struct recon_model *m, size_t b, const double *c6, 
 		for (size_t k = 0; k < nch; k++) {
 			size_t l = chan ? chan[k] : k;
 			double f = untransform(m->transform, out[q * nch + k] + m->mu[l], m->eps[l]);
-			if (scaled && m->ntab >= 2) {
-				double mx = ai[l] > ao[l] ? ai[l] : ao[l];
-				if (mx > 1.0)
-					f *= 1.0 / mx;
-			}
+			if (scaled && m->ntab >= 2)
+				f *= energy_scale_of(ai[l], ao[l]);
 			out[q * nch + k] = f;
 		}
 	}
@@ -557,7 +559,7 @@ static int build_albedo_table(struct recon_model *m, struct acq_err *err, recon_
 			const double *alo = g.a + i * L, *ahi = g.a + (i + 1) * L;
 			/* the first level always probes; later ones while nodes remain (one per open interval) */
 			if (g.done[i] || (depth > 0 && ng.n + (g.n - i) + 1 > TAB_MAX_NODES)) {
-				albgrid_push(&ng, L, g.th[i], alo, g.b + i * L, g.done[i] ? 1 : 2);
+				albgrid_push(&ng, L, g.th[i], alo, g.b + i * L, 1);
 				continue;
 			}
 			double tmid = 0.5 * (g.th[i] + g.th[i + 1]);
@@ -1402,16 +1404,15 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 			cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Q, (int)L, (int)n, 1.0, Kq + t * Q * n,
 				    (int)n, Wd, (int)n, 0.0, Y, (int)L);
 			for (size_t l = 0; l < L; l++) {
-				double acc = 0;
-				for (size_t q = 0; q < Q; q++)
-					acc += scale[(t * Q + q) * L + l] * untransform(m->transform, Y[q * L + l] + mud[l],
-											m->eps[l]);
-				if (d == 0) {
-					dhr[t * L + l] = acc;
+				if (d == 0) { /* the nominal value itself comes from the adaptive rule below */
 					for (size_t q = 0; q < Q; q++)
 						C[q * L + l] = scale[(t * Q + q) * L + l] *
 							       untransform_deriv(m->transform, Y[q * L + l] + mud[l], m->eps[l]);
 				} else { /* Welford */
+					double acc = 0;
+					for (size_t q = 0; q < Q; q++)
+						acc += scale[(t * Q + q) * L + l] *
+						       untransform(m->transform, Y[q * L + l] + mud[l], m->eps[l]);
 					double delta = acc - mean[t * L + l];
 					mean[t * L + l] += delta / d;
 					m2[t * L + l] += delta * (acc - mean[t * L + l]);
