@@ -129,6 +129,10 @@ static const char fit_help[] =
 	"  --kernel K              wendland (default, positive definite), exp, gauss, paper (Gaussian of d_Rec,\n"
 	"                          the paper's literal construction, not guaranteed positive definite)\n"
 	"  --transform T           log (default: interpolate ln(f+eps)) or sqrt\n"
+	"  --trend T               auto (default), ggx or none. ggx: interpolate relative to a fitted Lambertian\n"
+	"                          + GGX lobe + coated diffuse, so a lobe narrower than the sampling keeps a\n"
+	"                          microfacet shape; none: the plain interpolant (the only choice with sqrt);\n"
+	"                          auto: whichever has the lower leave-one-out error (log transform)\n"
 	"  --shape X|auto          kernel shape parameter (default auto: Rippa leave-one-out over a grid)\n"
 	"  --smoothing X|auto|sigma  eta in (K + eta*diag(r)) w = g, r from the uncertainties: a number, auto\n"
 	"                          (default: leave-one-out), or sigma (Lambda = the transformed variances over\n"
@@ -143,7 +147,7 @@ static int cmd_fit(int argc, char **argv)
 		{ "transform", required_argument, 0, 't' }, { "shape", required_argument, 0, 's' },
 		{ "smoothing", required_argument, 0, 'm' }, { "max-cond", required_argument, 0, 'c' },
 		{ "db", required_argument, 0, 'd' }, { "sweep", required_argument, 0, 'w' },
-		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+		{ "trend", required_argument, 0, 'r' }, { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
 	struct recon_fit_opts o;
 	recon_fit_opts_default(&o);
 	o.progress = progress;
@@ -160,6 +164,12 @@ static int cmd_fit(int argc, char **argv)
 		case 't':
 			if ((o.transform = recon_transform_from_name(optarg)) < 0)
 				return usage_err("fit", "unknown transform");
+			break;
+		case 'r':
+			if (strcmp(optarg, "auto") && (o.trend = trend_from_name(optarg)) < 0)
+				return usage_err("fit", "unknown trend (auto, ggx or none)");
+			if (!strcmp(optarg, "auto"))
+				o.trend = -1;
 			break;
 		case 's':
 			if (!strcmp(optarg, "auto"))
@@ -216,9 +226,10 @@ static int cmd_fit(int argc, char **argv)
 		recon_model_free(m);
 		return fail(&err);
 	}
-	fprintf(stderr, "fit: %zu directions, %zu wavelengths, kernel %s shape %.3g, transform %s, smoothing %.3g, "
-		"leave-one-out RMS %.4g, rcond %.3g -> %s\n", m->n, m->nwl, rbf_kernel_name(m->kernel), m->shape,
-		recon_transform_name(m->transform), m->eta, m->loo_rms, m->rcond, outp);
+	fprintf(stderr, "fit: %zu directions, %zu wavelengths, kernel %s shape %.3g, transform %s, trend %s (alpha %.3g), "
+		"smoothing %.3g, leave-one-out RMS %.4g, rcond %.3g -> %s\n", m->n, m->nwl, rbf_kernel_name(m->kernel),
+		m->shape, recon_transform_name(m->transform), trend_name(m->trend), m->trend_alpha, m->eta, m->loo_rms,
+		m->rcond, outp);
 	recon_model_free(m);
 	return 0;
 }

@@ -39,6 +39,7 @@ void recon_fit_opts_default(struct recon_fit_opts *o)
 	o->shape = 0;
 	o->smoothing = -1;
 	o->max_cond = 1e12;
+	o->trend = -1; /* GGX with the log transform, none with sqrt */
 }
 
 const char *recon_transform_name(int t)
@@ -72,6 +73,7 @@ void recon_model_free(struct recon_model *m)
 	free(m->w);
 	free(m->g);
 	free(m->gsig);
+	free(m->tcoef);
 	free(m->tab_theta);
 	free(m->tab_alb);
 	free(m);
@@ -103,8 +105,10 @@ size_t recon_eval_work_size(const struct recon_model *m)
 	return (size_t)RECON_EVAL_BLOCK * m->n;
 }
 
-/* Map a transformed value back to a BRDF value: non-negative and finite by construction. */
-static inline double untransform(int transform, double g, double eps)
+/* Map a transformed value back to a BRDF value: non-negative and finite by construction. tf is the trend factor
+ * (trend_factor): with a trend T (log transform only) g is relative to it, f̂ = max(0, (T + ε)·e^g − ε);
+ * without, tf = 1 and f̂ = max(0, e^g − ε). */
+static inline double untransform(int transform, double g, double eps, double tf)
 {
 	if (!(g == g))
 		g = -G_MAX; /* unreachable with finite weights; never let NaN through */
@@ -117,8 +121,34 @@ static inline double untransform(int transform, double g, double eps)
 	}
 	if (g > G_MAX)
 		g = G_MAX;
-	double f = exp(g) - eps;
-	return f > 0 ? f : 0.0;
+	double f = exp(g) * tf - eps;
+	return f > 0 ? (f < 1e300 ? f : 1e300) : 0.0;
+}
+
+/* Trend basis at a canonical point (zeros without a trend); the trend value T of channel l; the trend factor
+ * of the map back, T + ε with a trend and 1 without. */
+static inline void trend_at(const struct recon_model *m, const double *c6, double b[TREND_NB])
+{
+	if (m->trend == RECON_TREND_GGX) {
+		trend_basis(m->trend_alpha, c6, b);
+	} else {
+		for (int j = 0; j < TREND_NB; j++)
+			b[j] = 0.0;
+	}
+}
+
+static inline double trend_val(const struct recon_model *m, const double b[TREND_NB], size_t l)
+{
+	const double *c = m->tcoef + l * TREND_NB;
+	double t = 0;
+	for (int j = 0; j < TREND_NB; j++)
+		t += c[j] * b[j];
+	return t;
+}
+
+static inline double trend_factor(const struct recon_model *m, const double b[TREND_NB], size_t l)
+{
+	return m->trend == RECON_TREND_GGX ? trend_val(m, b, l) + m->eps[l] : 1.0;
 }
 
 size_t recon_tab_interval(const struct recon_model *m, double theta)
@@ -178,13 +208,15 @@ static void eval_block(const struct recon_model *m, size_t b, const double *c6, 
 	for (size_t q = 0; q < b; q++) {
 		const double *c = c6 + 6 * q;
 		const double *ai = m->tab_alb, *ao = m->tab_alb;
+		double tb[TREND_NB];
+		trend_at(m, c, tb);
 		if (scaled && m->ntab >= 2) {
 			ai += recon_tab_interval(m, theta_of(c)) * m->nwl;
 			ao += recon_tab_interval(m, theta_of(c + 3)) * m->nwl;
 		}
 		for (size_t k = 0; k < nch; k++) {
 			size_t l = chan ? chan[k] : k;
-			double f = untransform(m->transform, out[q * nch + k] + m->mu[l], m->eps[l]);
+			double f = untransform(m->transform, out[q * nch + k] + m->mu[l], m->eps[l], trend_factor(m, tb, l));
 			if (scaled && m->ntab >= 2)
 				f *= energy_scale_of(ai[l], ao[l]);
 			out[q * nch + k] = f;
@@ -353,8 +385,10 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
  * kernel of length ℓ gives g ≈ H(1 − 10 d²/ℓ²), so e^g is a Gaussian of width ℓ/√(20H): nodes are spaced
  * by that width (H = the largest range of g over the centres, log transform; the sqrt transform squares,
  * far milder). Two rules that both step over a lobe agree with each other, so refinement alone cannot
- * find it: the start must resolve it. nmu, nphi are raised to it (at most nmu_max/2 so one doubling fits);
- * *qmax is the size of the finest rule the ladder can reach.
+ * find it: the start must resolve it. The trend's GGX lobe has a half width ≈ 2α in ωo (D falls to a quarter
+ * at tanθh = α): nodes α/2 apart when the lobe can carry 1e-4 of albedo (its albedo is ≤ c1 + c2).
+ * nmu, nphi are raised to it (at most nmu_max/2 so one doubling fits); *qmax is the size of the finest rule
+ * the ladder can reach.
  */
 static void lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *nphi, size_t *qmax)
 {
@@ -370,6 +404,13 @@ static void lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *n
 			H = fmax(H, hi - lo);
 		}
 	double s = m->shape / sqrt(20.0 * (H + 1.0)); /* radians */
+	if (m->trend == RECON_TREND_GGX) {
+		double lobe = 0;
+		for (size_t l = 0; l < m->nwl; l++)
+			lobe = fmax(lobe, m->tcoef[l * TREND_NB + 1] + m->tcoef[l * TREND_NB + 2]);
+		if (lobe >= 1e-4)
+			s = fmin(s, 0.5 * m->trend_alpha);
+	}
 	double a = ceil((M_PI / 2) / s), b = ceil(M_PI / s);
 	if (a > *nmu)
 		*nmu = a < nmu_max / 2 ? (int)a : nmu_max / 2;
@@ -715,29 +756,31 @@ static int diag_inv_chol(double *A, size_t n)
 }
 
 /* Rippa: every leave-one-out residual from one factorisation, e_k = (A⁻¹g)_k / (A⁻¹)_kk, over the channels
- * chan[0..nc). fc->A holds the factor on entry and is destroyed. Returns the mean squared residual. */
-static double rippa(struct fitctx *fc, const size_t *chan, size_t nc, double *rhs, double *res_rms)
+ * chan[0..nc) of each candidate data set Gs[0..ncand) (centred, channel-major). fc->A holds the factor on
+ * entry and is destroyed. score[g] is candidate g's mean squared residual (INFINITY if the solve failed). */
+static void rippa(struct fitctx *fc, const double *const *Gs, int ncand, const size_t *chan, size_t nc, double *rhs,
+		  double *score)
 {
 	size_t n = fc->n;
-	for (size_t c = 0; c < nc; c++)
-		memcpy(rhs + c * n, fc->G + chan[c] * n, n * sizeof *rhs);
-	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)nc, fc->A, (lapack_int)n, rhs,
-			   (lapack_int)n) != 0)
-		return INFINITY;
-	if (diag_inv_chol(fc->A, n) != 0)
-		return INFINITY;
-	double s = 0;
-	for (size_t c = 0; c < nc; c++) {
-		double sc = 0;
-		for (size_t k = 0; k < n; k++) {
-			double e = rhs[c * n + k] / fc->A[k * n + k];
-			sc += e * e;
-		}
-		if (res_rms)
-			res_rms[c] = sqrt(sc / (double)n);
-		s += sc;
+	for (int g = 0; g < ncand; g++) {
+		score[g] = INFINITY;
+		for (size_t c = 0; c < nc; c++)
+			memcpy(rhs + ((size_t)g * nc + c) * n, Gs[g] + chan[c] * n, n * sizeof *rhs);
 	}
-	return s / (double)(n * nc);
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)(nc * (size_t)ncand), fc->A,
+			   (lapack_int)n, rhs, (lapack_int)n) != 0)
+		return;
+	if (diag_inv_chol(fc->A, n) != 0)
+		return;
+	for (int g = 0; g < ncand; g++) {
+		double s = 0;
+		for (size_t c = 0; c < nc; c++)
+			for (size_t k = 0; k < n; k++) {
+				double e = rhs[((size_t)g * nc + c) * n + k] / fc->A[k * n + k];
+				s += e * e;
+			}
+		score[g] = s / (double)(n * nc);
+	}
 }
 
 static void build_K(struct fitctx *fc, int kernel, double shape, const double *ctr, const double *tctr)
@@ -766,6 +809,10 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 		return acq_errf(err, ACQ_E_INVAL, "fit: unknown kernel %d", o.kernel);
 	if (!recon_transform_name(o.transform))
 		return acq_errf(err, ACQ_E_INVAL, "fit: unknown transform %d", o.transform);
+	if (o.trend >= RECON_TREND__COUNT || o.trend < -1)
+		return acq_errf(err, ACQ_E_INVAL, "fit: unknown trend %d", o.trend);
+	if (o.trend == RECON_TREND_GGX && o.transform != RECON_T_LOG)
+		return acq_errf(err, ACQ_E_INVAL, "fit: the ggx trend needs the log transform");
 	if (!(o.shape >= 0) || !isfinite(o.shape) || !isfinite(o.smoothing) || !(o.max_cond >= 1))
 		return acq_errf(err, ACQ_E_INVAL, "fit: shape, smoothing and condition limit must be finite");
 
@@ -776,13 +823,14 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	double *c6 = malloc(n0 * 6 * sizeof *c6);
 	double *tmp = malloc((n0 > L ? n0 : L) * sizeof *tmp);
 	struct fitctx fc = { 0 };
-	double *rhs = NULL, *val = NULL, *sig = NULL, *wsum = NULL;
+	double *rhs = NULL, *val = NULL, *sig = NULL, *wsum = NULL, *tlog = NULL, *G2 = NULL;
 	if (!m || !rep || !idx || !c6 || !tmp) {
 		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
 		goto out;
 	}
 	m->kernel = o.kernel;
 	m->transform = o.transform;
+	m->trend = o.trend >= 0 ? o.trend : o.transform == RECON_T_LOG ? RECON_TREND_GGX : RECON_TREND_NONE;
 
 	/* 1. canonical points; rows without any value are dropped; repeated and reciprocal rows merged */
 	size_t n = 0, dropped = 0, merged = 0;
@@ -960,12 +1008,46 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 				eps = 1e-12;
 		}
 		m->eps[l] = eps;
-		double sum = 0;
+	}
+	/*
+	 * 3b. The trend (trend.h): with the log transform the RBF may interpolate ln(f + ε) − ln(T + ε), the data
+	 * relative to a Lambertian + GGX lobe fitted to them, so that between samples the BRDF follows a
+	 * microfacet lobe instead of the kernel's shape (a 36° azimuth step is wider than a specular lobe).
+	 * By default (auto) both readings are candidates and Rippa's leave-one-out score picks one together
+	 * with the shape and the smoothing (same factorisation, another right-hand side): a lobe that is not a
+	 * microfacet lobe (a Phong lobe about the mirror direction) keeps the plain interpolant.
+	 */
+	int ncand = 1, cand_ggx = m->trend == RECON_TREND_GGX && o.trend < 0;
+	if (cand_ggx)
+		ncand = 2; /* candidate 0: none, 1: ggx */
+	m->tcoef = calloc(L * TREND_NB, sizeof *m->tcoef);
+	if (!m->tcoef) {
+		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
+		goto out;
+	}
+	double trend_rms = 0;
+	if (m->trend == RECON_TREND_GGX) {
+		size_t tch[16], tnc = L < 16 ? L : 16;
+		for (size_t c = 0; c < tnc; c++)
+			tch[c] = tnc > 1 ? c * (L - 1) / (tnc - 1) : 0;
+		if (trend_fit(n, L, val, m->eps, c6, tch, tnc, &m->trend_alpha, m->tcoef, &trend_rms, err))
+			goto out;
+	}
+	if (m->trend == RECON_TREND_GGX && !(tlog = malloc(n * L * sizeof *tlog))) {
+		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
+		goto out;
+	}
+	for (size_t l = 0; l < L; l++) {
+		double eps = m->eps[l], sum = 0, tb[TREND_NB];
 		for (size_t j = 0; j < n; j++) {
 			double v = val[l * n + j], sg = sig[l * n + j], pv = v > 0 ? v : 0;
 			double g, gs;
 			if (o.transform == RECON_T_LOG) {
 				g = log(pv + eps);
+				if (tlog) {
+					trend_at(m, c6 + 6 * j, tb);
+					tlog[l * n + j] = log(trend_val(m, tb, l) + eps);
+				}
 				gs = isfinite(sg) ? sg / (pv + eps) : NAN;
 			} else {
 				g = sqrt(pv);
@@ -1015,14 +1097,32 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	fc.K = malloc(n * n * sizeof *fc.K);
 	fc.A = malloc(n * n * sizeof *fc.A);
 	fc.G = malloc(n * L * sizeof *fc.G);
-	rhs = malloc(n * (L > 16 ? L : 16) * sizeof *rhs);
+	rhs = malloc(n * (L > 32 ? L : 32) * sizeof *rhs);
 	if (!fc.K || !fc.A || !fc.G || !rhs) {
 		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory for the %zu × %zu system", n, n);
 		goto out;
 	}
+	/* candidate data: the plain transformed values, and (ggx) the values relative to the trend */
+	if (tlog) {
+		G2 = malloc(n * L * sizeof *G2);
+		if (!G2) {
+			acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
+			goto out;
+		}
+		for (size_t l = 0; l < L; l++) {
+			double sum = 0;
+			for (size_t j = 0; j < n; j++)
+				sum += G2[l * n + j] = m->g[l * n + j] - tlog[l * n + j];
+			for (size_t j = 0; j < n; j++)
+				G2[l * n + j] -= sum / (double)n;
+		}
+	}
 	for (size_t l = 0; l < L; l++)
 		for (size_t j = 0; j < n; j++)
 			fc.G[l * n + j] = m->g[l * n + j] - m->mu[l];
+	if (tlog && !cand_ggx) /* explicit --trend ggx: the only candidate */
+		memcpy(fc.G, G2, n * L * sizeof *fc.G);
+	const double *Gs[2] = { fc.G, G2 };
 	size_t chan[16], nc = L < 16 ? L : 16;
 	for (size_t c = 0; c < nc; c++)
 		chan[c] = nc > 1 ? c * (L - 1) / (nc - 1) : 0;
@@ -1061,6 +1161,7 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 		memcpy(etas, eta_grid, sizeof eta_grid);
 	}
 	double best = INFINITY, bshape = shapes[0], beta = etas[0];
+	int bcand = 0;
 	int nfail_pd = 0, nfail_cond = 0;
 	double worst_rcond = INFINITY;
 	for (int a = 0; a < nsh; a++) {
@@ -1086,12 +1187,16 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 					worst_rcond = rcond;
 				continue;
 			}
-			double score = (nsh * neta > 1) ? rippa(&fc, chan, nc, rhs, NULL) : 0;
-			if (score < best || (best == INFINITY && nsh * neta == 1)) {
-				best = score;
-				bshape = shapes[a];
-				beta = etas[b];
-			}
+			double score[2] = { 0, 0 };
+			if (nsh * neta * ncand > 1)
+				rippa(&fc, Gs, ncand, chan, nc, rhs, score);
+			for (int c = 0; c < ncand; c++)
+				if (score[c] < best || (best == INFINITY && nsh * neta * ncand == 1)) {
+					best = score[c];
+					bshape = shapes[a];
+					beta = etas[b];
+					bcand = c;
+				}
 		}
 	}
 	if (best == INFINITY) {
@@ -1109,6 +1214,20 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	}
 	m->shape = bshape;
 	m->eta = beta;
+	if (cand_ggx && bcand == 1)
+		memcpy(fc.G, G2, n * L * sizeof *fc.G);
+	if (tlog && (!cand_ggx || bcand == 1)) { /* the trend is kept: the model's data are relative to it */
+		for (size_t l = 0; l < L; l++) {
+			double sum = 0;
+			for (size_t j = 0; j < n; j++)
+				sum += m->g[l * n + j] -= tlog[l * n + j];
+			m->mu[l] = sum / (double)n;
+		}
+	} else if (m->trend != RECON_TREND_NONE) { /* auto chose the plain interpolant */
+		m->trend = RECON_TREND_NONE;
+		m->trend_alpha = 0;
+		memset(m->tcoef, 0, L * TREND_NB * sizeof *m->tcoef);
+	}
 	/* 6. the one factorisation; every channel is a right-hand side */
 	if (o.progress)
 		o.progress(o.progress_ctx, "solve", 0.0);
@@ -1158,9 +1277,10 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	snprintf(m->meta, sizeof m->meta,
 		 "software=acquisitiond %s\ncreated=%s\nsource=%s\nrows=%zu\nrows_dropped_empty=%zu\n"
 		 "rows_merged=%zu\nvalues_imputed=%zu\nuncertainties=%s\nloo_rms_transformed=%.6g\n"
-		 "rcond=%.6g\nalbedo_margin=%.6g\nsymmetry=isotropic%s\n",
+		 "rcond=%.6g\nalbedo_margin=%.6g\ntrend=%s\ntrend_alpha=%.6g\ntrend_rms_log=%.6g\nsymmetry=isotropic%s\n",
 		 ACQ_VERSION, when, o.source ? o.source : "-", n0, dropped, merged, imputed,
-		 have_sig ? "given" : "leave-one-out", m->loo_rms, m->rcond, m->alb_margin,
+		 have_sig ? "given" : "leave-one-out", m->loo_rms, m->rcond, m->alb_margin, trend_name(m->trend),
+		 m->trend_alpha, trend_rms,
 		 phi_i_varies ? " (phi_i varies in the data: azimuths taken relative to phi_i)" : "");
 	for (char *p = m->meta; *p; p++) /* keep metadata printable */
 		if ((unsigned char)*p < 0x20 && *p != '\n')
@@ -1180,6 +1300,8 @@ out:
 	free(fc.A);
 	free(fc.G);
 	free(rhs);
+	free(tlog);
+	free(G2);
 	free(val);
 	free(sig);
 	free(wsum);
@@ -1239,7 +1361,7 @@ static double rng_normal(struct rng *r)
 /* ---- DHR --------------------------------------------------------------------------------------------- */
 
 /* d f̂ / d g at g (the derivative of untransform; 0 where the clamp at 0 is active). */
-static inline double untransform_deriv(int transform, double g, double eps)
+static inline double untransform_deriv(int transform, double g, double eps, double tf)
 {
 	if (!(g == g))
 		return 0.0;
@@ -1247,8 +1369,8 @@ static inline double untransform_deriv(int transform, double g, double eps)
 		return 2.0 * fmin(fmax(g, -1e15), 1e15);
 	if (g > G_MAX)
 		g = G_MAX;
-	double e = exp(g);
-	return e - eps > 0 ? e : 0.0;
+	double e = exp(g) * tf;
+	return e - eps > 0 ? (e < 1e300 ? e : 1e300) : 0.0;
 }
 
 /*
@@ -1332,9 +1454,10 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 	double *U = malloc(Q * L * sizeof *U), *Bt = malloc(L * n * sizeof *Bt), *X = malloc(L * n * sizeof *X);
 	double *Ainv = malloc(n * n * sizeof *Ainv), *alpha = calloc(L, sizeof *alpha);
 	double *vmod = calloc(nth * L, sizeof *vmod), *squad = calloc(nth * L, sizeof *squad);
+	double *tb = malloc(nth * Q * TREND_NB * sizeof *tb);
 	struct albedo_ws ws = { 0 };
 	if (!Kq || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud || !C || !KQQ || !soaQ || !U ||
-	    !Bt || !X || !Ainv || !alpha || !vmod || !squad) {
+	    !Bt || !X || !Ainv || !alpha || !vmod || !squad || !tb) {
 		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
 		goto out;
 	}
@@ -1346,6 +1469,7 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 		rbf_kmatrix_soa(m->kernel, m->shape, Q, c6 + t * Q * 6, n, m->soa, Kq + t * Q * n);
 		for (size_t q = 0; q < Q; q++) {
 			const double *c = c6 + (t * Q + q) * 6;
+			trend_at(m, c, tb + (t * Q + q) * TREND_NB);
 			for (size_t l = 0; l < L; l++)
 				scale[(t * Q + q) * L + l] = recon_energy_scale(m, theta_of(c), theta_of(c + 3), l) * wt[q];
 		}
@@ -1407,12 +1531,14 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 				if (d == 0) { /* the nominal value itself comes from the adaptive rule below */
 					for (size_t q = 0; q < Q; q++)
 						C[q * L + l] = scale[(t * Q + q) * L + l] *
-							       untransform_deriv(m->transform, Y[q * L + l] + mud[l], m->eps[l]);
+							       untransform_deriv(m->transform, Y[q * L + l] + mud[l], m->eps[l],
+										 trend_factor(m, tb + (t * Q + q) * TREND_NB, l));
 				} else { /* Welford */
 					double acc = 0;
 					for (size_t q = 0; q < Q; q++)
 						acc += scale[(t * Q + q) * L + l] *
-						       untransform(m->transform, Y[q * L + l] + mud[l], m->eps[l]);
+						       untransform(m->transform, Y[q * L + l] + mud[l], m->eps[l],
+								   trend_factor(m, tb + (t * Q + q) * TREND_NB, l));
 					double delta = acc - mean[t * L + l];
 					mean[t * L + l] += delta / d;
 					m2[t * L + l] += delta * (acc - mean[t * L + l]);
@@ -1479,6 +1605,7 @@ out:
 	free(alpha);
 	free(vmod);
 	free(squad);
+	free(tb);
 	albedo_ws_free(&ws);
 	return rc;
 }

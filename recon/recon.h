@@ -10,6 +10,7 @@
 #include "config/acq_err.h"
 #include "recon/csvio.h"
 #include "recon/rbf.h"
+#include "recon/trend.h"
 
 /* Transform interpolated instead of f, so that the map back is non-negative. */
 enum recon_transform {
@@ -30,6 +31,7 @@ struct recon_fit_opts {
 	double smoothing;    /* >= 0: fixed η in (K + η·diag(r)) w = g; RECON_SMOOTHING_SIGMA: Λ from the
 			      * uncertainties alone; other < 0: chosen by leave-one-out */
 	double max_cond;     /* largest accepted 1-norm condition number of K + Λ (default 1e12) */
+	int trend;           /* enum recon_trend: mean function (default GGX with the log transform, else none) */
 	recon_progress_fn progress;
 	void *progress_ctx;
 	const char *source;  /* recorded in the model's metadata (may be NULL) */
@@ -51,6 +53,9 @@ struct recon_model {
 	double *w;           /* [nwl*n] weights */
 	double *g;           /* [nwl*n] transformed data (with imputed values), for Monte Carlo */
 	double *gsig;        /* [nwl*n] standard uncertainty of g (delta method, or LOO RMS without sigmas) */
+	int trend;           /* enum recon_trend; g, w and mu are relative to it: g = ln(f + ε) − ln(T + ε) */
+	double trend_alpha;  /* GGX roughness of the trend */
+	double *tcoef;       /* [nwl*TREND_NB] non-negative trend coefficients (all 0 without a trend) */
 	size_t ntab;         /* albedo table: A(θ, λ) ≥ albedo of the unscaled interpolant on [θ_t, θ_t+1] */
 	double *tab_theta;   /* [ntab] increasing nodes from 0 to π/2 (10° apart, bisected where needed) */
 	double *tab_alb;     /* [(ntab-1)*nwl] upper bound of the albedo on each interval, row-major */

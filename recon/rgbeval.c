@@ -13,7 +13,7 @@
  * reduced to three channels before evaluation. What an RGB output needs is still much less than the model:
  *  1. Only wavelengths where the colour weights are non-zero (the CIE observer ends at 830 nm: of 450-1100 nm
  *     only 450-830 count), binned to 5 nm: each bin is one channel whose transformed weights, mean and
- *     offset are the averages over the bin's model channels (the average of g rather than of f: the
+ *     offset (and trend coefficients) are the averages over the bin's model channels (the average of g rather than of f: the
  *     difference is second order in the spread of g within 5 nm, far below the noise, while averaging
  *     keeps the noise of single 1 nm channels out of the colour). The colour chain reads the binned
  *     spectrum as piecewise linear between bin centres: relative error ≈ h²/8 · f''/f = 25/(8σ²) for a
@@ -67,6 +67,7 @@ struct recon_rgb {
 	size_t nc, r;
 	size_t *chan;   /* [nc+1] first model channel of each 5 nm bin (chan[nc] = end) */
 	double *mu, *eps; /* [nc] bin averages of the transformed mean and offset */
+	double *tc;     /* [nc*TREND_NB] bin averages of the trend coefficients */
 	double *tab;    /* [(ntab-1)*nc] largest albedo bound over the bin */
 	double *P;      /* [r*n] row-major: (U_r diag(S_r))ᵀ, one contiguous row per singular vector */
 	double *V;      /* [r*nc] row-major: rows of Vᵀ */
@@ -84,6 +85,7 @@ void recon_rgb_free(struct recon_rgb *r)
 	free(r->chan);
 	free(r->mu);
 	free(r->eps);
+	free(r->tc);
 	free(r->tab);
 	free(r->P);
 	free(r->V);
@@ -102,6 +104,29 @@ void recon_rgb_sizes(const struct recon_rgb *r, size_t *channels, size_t *rank)
 double recon_rgb_reduction_error(const struct recon_rgb *r)
 {
 	return r->red_err;
+}
+
+/* Trend basis at a canonical point (zeros without a trend) and the trend value of bin l (1 − ε without a trend,
+ * so that the map back (T + ε)·e^g − ε is e^g − ε). */
+static void bin_trend_basis(const struct recon_model *m, const double *c6, double tb[TREND_NB])
+{
+	if (m->trend == RECON_TREND_GGX) {
+		trend_basis(m->trend_alpha, c6, tb);
+	} else {
+		for (int j = 0; j < TREND_NB; j++)
+			tb[j] = 0.0;
+	}
+}
+
+static inline double bin_trend(const struct recon_rgb *R, const double tb[TREND_NB], size_t l)
+{
+	if (R->m->trend != RECON_TREND_GGX)
+		return 1.0 - R->eps[l]; /* factor 1: f = e^g − ε */
+	const double *c = R->tc + l * TREND_NB;
+	double t = 0;
+	for (int j = 0; j < TREND_NB; j++)
+		t += c[j] * tb[j];
+	return t;
 }
 
 static void dir_to_angles(const double v[3], double *th, double *ph)
@@ -143,12 +168,14 @@ static void reduced_lin(const struct recon_rgb *R, const double wi[3], const dou
 			g[l] = 0;
 		vexp(g, nc);
 	}
+	double tb[TREND_NB];
+	bin_trend_basis(m, c6, tb);
 	for (size_t l = 0; l < nc; l++) {
 		double f;
 		if (m->transform == RECON_T_SQRT) {
 			f = g[l] * g[l];
 		} else {
-			f = g[l] - R->eps[l];
+			f = g[l] * (bin_trend(R, tb, l) + R->eps[l]) - R->eps[l];
 			if (!(f > 0))
 				f = 0;
 		}
@@ -249,9 +276,10 @@ int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, dou
 	R->nc = nc;
 	R->mu = calloc(nc, sizeof *R->mu);
 	R->eps = calloc(nc, sizeof *R->eps);
+	R->tc = calloc(nc * TREND_NB, sizeof *R->tc);
 	R->tab = calloc((m->ntab - 1) * nc, sizeof *R->tab);
 	R->Wrgb = malloc(3 * nc * sizeof *R->Wrgb);
-	if (!R->mu || !R->eps || !R->tab || !R->Wrgb) {
+	if (!R->mu || !R->eps || !R->tc || !R->tab || !R->Wrgb) {
 		acq_errf(err, ACQ_E_NOMEM, "rgb: out of memory");
 		goto out;
 	}
@@ -262,6 +290,8 @@ int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, dou
 			sw += m->wl[l];
 			R->mu[c] += m->mu[l];
 			R->eps[c] += m->eps[l];
+			for (int j = 0; j < TREND_NB; j++)
+				R->tc[c * TREND_NB + j] += m->tcoef[l * TREND_NB + j];
 			for (size_t t = 0; t + 1 < m->ntab; t++)
 				if (m->tab_alb[t * L + l] > R->tab[t * nc + c])
 					R->tab[t * nc + c] = m->tab_alb[t * L + l];
@@ -269,6 +299,8 @@ int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, dou
 		wl[c] = sw / (double)(hi - lo);
 		R->mu[c] /= (double)(hi - lo);
 		R->eps[c] /= (double)(hi - lo);
+		for (int j = 0; j < TREND_NB; j++)
+			R->tc[c * TREND_NB + j] /= (double)(hi - lo);
 	}
 	if (colour_weights(co, wl, nc, R->Wrgb, err))
 		goto out;
@@ -377,13 +409,14 @@ static void finish_pair(const struct recon_rgb *R, const double *c6, const doubl
 	size_t nc = R->nc;
 	double cti = acos(fmin(1, fmax(0, c6[2]))), cto = acos(fmin(1, fmax(0, c6[5])));
 	size_t ji = recon_tab_interval(m, cti), jo = recon_tab_interval(m, cto);
-	double lin[3] = { 0, 0, 0 };
+	double lin[3] = { 0, 0, 0 }, tb[TREND_NB];
+	bin_trend_basis(m, c6, tb);
 	for (size_t l = 0; l < nc; l++) {
 		double x = g[l], f;
 		if (m->transform == RECON_T_SQRT) {
 			f = x * x;
 		} else {
-			f = x - R->eps[l];
+			f = x * (bin_trend(R, tb, l) + R->eps[l]) - R->eps[l];
 			if (!(f > 0))
 				f = 0;
 		}

@@ -11,11 +11,11 @@
 #include "recon/csvio.h"
 
 /*
- * Model file, version 1. All integers unsigned little-endian, all reals IEEE-754 binary64 little-endian,
+ * Model file, version 2 (version 1 files, without the trend block, are still read: trend none). All integers unsigned little-endian, all reals IEEE-754 binary64 little-endian,
  * no padding:
  *
  *   magic       8 bytes  "BRDFRBF\n"
- *   version     u32      1
+ *   version     u32      2
  *   kernel      u32      0 wendland, 1 exp, 2 gauss, 3 paper          (rbf.h)
  *   transform   u32      0 log, 1 sqrt                                 (recon.h)
  *   flags       u32      0 (reserved; bit 0 would mark an anisotropic model)
@@ -29,6 +29,9 @@
  *   w[nwl·n] g[nwl·n] gsig[nwl·n]              f64 channel-major: weights, data, uncertainties (≥ 0)
  *   tab_theta[ntab]                            f64 increasing, 0 to π/2
  *   tab_alb[(ntab−1)·nwl]                      f64 ≥ 0, albedo upper bounds
+ *   trend       u32      0 none, 1 ggx                                 (trend.h; version 2 only)
+ *   trend_alpha f64      GGX roughness in [0.005, 1] (ggx), 0 (none)
+ *   tcoef[nwl·4]                               f64 ≥ 0, trend coefficients (TREND_NB; all 0 for none)
  *   meta_len    u32      ≤ 65535, then meta_len bytes of UTF-8 "key=value\n" text (no NUL)
  *   checksum    u64      FNV-1a 64 of every preceding byte
  *
@@ -36,7 +39,7 @@
  * recomputed from ang with rbf_canon (bit-identical to the fit).
  */
 #define MAGIC "BRDFRBF\n"
-#define VERSION 1u
+#define VERSION 2u
 
 static int little_endian(void)
 {
@@ -105,8 +108,10 @@ int recon_model_save(const struct recon_model *m, const char *path, struct acq_e
 		{ "tab_theta", m->tab_theta, m->ntab }, { "tab_alb", m->tab_alb, (m->ntab - 1) * L },
 	};
 	double hdr[5] = { m->shape, m->eta, m->alb_margin, m->loo_rms, m->rcond };
-	if (!all_finite(hdr, 5))
+	if (!all_finite(hdr, 5) || !isfinite(m->trend_alpha) || !m->tcoef)
 		return acq_errf(err, ACQ_E_NUMERIC, "model: non-finite parameter, not written");
+	if (!all_finite(m->tcoef, L * TREND_NB))
+		return acq_errf(err, ACQ_E_NUMERIC, "model: non-finite value in tcoef, not written");
 	for (size_t a = 0; a < sizeof arr / sizeof arr[0]; a++)
 		if (!all_finite(arr[a].p, arr[a].k))
 			return acq_errf(err, ACQ_E_NUMERIC, "model: non-finite value in %s, not written", arr[a].name);
@@ -127,6 +132,9 @@ int recon_model_save(const struct recon_model *m, const char *path, struct acq_e
 	put(&w, hdr, sizeof hdr);
 	for (size_t a = 0; a < sizeof arr / sizeof arr[0]; a++)
 		put(&w, arr[a].p, arr[a].k * sizeof(double));
+	put_u32(&w, (uint32_t)m->trend);
+	put(&w, &m->trend_alpha, sizeof m->trend_alpha);
+	put(&w, m->tcoef, L * TREND_NB * sizeof(double));
 	size_t ml = strnlen(m->meta, sizeof m->meta);
 	put_u32(&w, (uint32_t)ml);
 	put(&w, m->meta, ml);
@@ -186,7 +194,7 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 	if (get(&r, &version, 4) || get(&r, &kernel, 4) || get(&r, &transform, 4) || get(&r, &flags, 4) ||
 	    get(&r, &n, 8) || get(&r, &L, 8) || get(&r, &ntab, 8) || get(&r, hdr, sizeof hdr))
 		return acq_errf(err, ACQ_E_INVAL, "%s: truncated header", name);
-	if (version != VERSION)
+	if (version != VERSION && version != 1)
 		return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: model format version %u, this program reads %u", name,
 				version, VERSION);
 	if (kernel >= RBF_K__COUNT)
@@ -199,7 +207,9 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 		return acq_errf(err, ACQ_E_INVAL, "%s: sizes out of range (n=%llu, nwl=%llu, ntab=%llu)", name,
 				(unsigned long long)n, (unsigned long long)L, (unsigned long long)ntab);
 	uint64_t reals = 3 * L + 5 * n + 3 * n * L + ntab + (ntab - 1) * L;
-	uint64_t fixed = 8 + 16 + 24 + 40 + reals * 8 + 4;
+	if (version >= 2)
+		reals += 1 + TREND_NB * L;
+	uint64_t fixed = 8 + 16 + 24 + 40 + reals * 8 + 4 + (version >= 2 ? 4 : 0);
 	if (len < fixed + 8)
 		return acq_errf(err, ACQ_E_INVAL, "%s: truncated (%zu bytes, header implies at least %llu)", name, len,
 				(unsigned long long)(fixed + 8));
@@ -226,6 +236,17 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 		recon_model_free(m);
 		return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory or truncated", name);
 	}
+	uint32_t trend = RECON_TREND_NONE;
+	if (version >= 2) {
+		if (get(&r, &trend, 4) || get(&r, &m->trend_alpha, 8) || !(m->tcoef = get_arr(&r, L * TREND_NB))) {
+			recon_model_free(m);
+			return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory or truncated", name);
+		}
+	} else if (!(m->tcoef = calloc(L * TREND_NB, sizeof *m->tcoef))) {
+		recon_model_free(m);
+		return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", name);
+	}
+	m->trend = (int)trend;
 	uint32_t ml;
 	if (get(&r, &ml, 4) || ml >= sizeof m->meta || get(&r, m->meta, ml)) {
 		recon_model_free(m);
@@ -267,6 +288,16 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 	for (size_t i = 0; !bad && i < (ntab - 1) * L; i++)
 		if (!isfinite(m->tab_alb[i]) || m->tab_alb[i] < 0)
 			bad = "albedo table";
+	if (!bad && (trend >= RECON_TREND__COUNT || (trend != RECON_TREND_NONE && m->transform != RECON_T_LOG)))
+		bad = "trend (unknown, or not with the log transform)";
+	if (!bad && !isfinite(m->trend_alpha))
+		bad = "trend roughness";
+	if (!bad && trend == RECON_TREND_GGX &&
+	    !(m->trend_alpha >= TREND_ALPHA_MIN * 0.999 && m->trend_alpha <= TREND_ALPHA_MAX * 1.001))
+		bad = "trend roughness";
+	for (size_t i = 0; !bad && i < L * TREND_NB; i++)
+		if (!isfinite(m->tcoef[i]) || m->tcoef[i] < 0 || (trend == RECON_TREND_NONE && m->tcoef[i] != 0))
+			bad = "trend coefficients";
 	for (size_t i = 0; !bad && i < ml; i++)
 		if (m->meta[i] == '\0')
 			bad = "metadata (embedded NUL)";

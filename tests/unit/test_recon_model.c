@@ -9,7 +9,7 @@
 
 #include "recon_test_util.h"
 
-static struct recon_model *M;
+static struct recon_model *M, *MG; /* without trend; with the GGX trend */
 static char path[64];
 
 static int setup(void **state)
@@ -22,8 +22,12 @@ static int setup(void **state)
 	o.shape = 1.8;
 	o.smoothing = 1e-3;
 	o.source = "unit test";
+	o.trend = RECON_TREND_NONE;
 	struct acq_err err = { 0 };
 	int rc = recon_fit(&s, &o, &M, &err);
+	o.trend = RECON_TREND_GGX;
+	if (!rc)
+		rc = recon_fit(&s, &o, &MG, &err);
 	csvio_samples_free(&s);
 	snprintf(path, sizeof path, "/tmp/recon_model_%ld.bin", (long)getpid());
 	return rc;
@@ -33,6 +37,7 @@ static int teardown(void **state)
 {
 	(void)state;
 	recon_model_free(M);
+	recon_model_free(MG);
 	unlink(path);
 	return 0;
 }
@@ -125,8 +130,8 @@ static void test_rejects_corrupt_files(void **state)
 	c[0] = 'X';
 	expect_reject(c, len, "bad magic");
 	memcpy(c, b, len);
-	c[8] = 2;
-	expect_reject(c, len, "version 2");
+	c[8] = 3;
+	expect_reject(c, len, "version 3");
 	memcpy(c, b, len);
 	c[12] = 9;
 	expect_reject(c, len, "unknown kernel");
@@ -159,6 +164,92 @@ static void test_rejects_corrupt_files(void **state)
 	free(c);
 }
 
+/* Evaluations of two models at the same random pairs are bit-identical. */
+static void assert_same_model(const struct recon_model *a, const struct recon_model *b)
+{
+	enum { NQ = 200 };
+	double ang[4 * NQ], f1[3 * NQ], f2[3 * NQ];
+	struct acq_err err = { 0 };
+	assert_int_equal(a->nwl, 3);
+	for (int q = 0; q < NQ; q++)
+		rt_random_pair(ang + 4 * q);
+	assert_int_equal(recon_eval(a, NQ, ang, f1, &err), 0);
+	assert_int_equal(recon_eval(b, NQ, ang, f2, &err), 0);
+	assert_memory_equal(f1, f2, sizeof f1);
+}
+
+/* Offset of the trend block (version 2) in a saved file of model m of length len. */
+static size_t trend_block_at(const struct recon_model *m, size_t len)
+{
+	return len - 8 - strnlen(m->meta, sizeof m->meta) - 4 - (4 + 8 + m->nwl * TREND_NB * 8);
+}
+
+static void test_trend_block(void **state)
+{
+	(void)state;
+	struct acq_err err = { 0 };
+	assert_int_equal(M->trend, RECON_TREND_NONE);
+	assert_int_equal(MG->trend, RECON_TREND_GGX);
+	/* the GGX model round-trips bit for bit */
+	assert_int_equal(recon_model_save(MG, path, &err), 0);
+	struct recon_model *m2;
+	assert_int_equal(recon_model_load(path, &m2, &err), 0);
+	assert_int_equal(m2->trend, RECON_TREND_GGX);
+	assert_true(m2->trend_alpha == MG->trend_alpha);
+	assert_same_model(MG, m2);
+	recon_model_free(m2);
+	size_t len;
+	unsigned char *b = slurp(path, &len), *c = malloc(len);
+	assert_non_null(b);
+	size_t at = trend_block_at(MG, len);
+	uint32_t v;
+	memcpy(&v, b + at, 4);
+	assert_int_equal(v, RECON_TREND_GGX);
+	/* unknown trend, roughness out of range, a negative coefficient: named */
+	memcpy(c, b, len);
+	v = 7;
+	memcpy(c + at, &v, 4);
+	reseal(c, len);
+	expect_reject(c, len, "invalid trend");
+	memcpy(c, b, len);
+	double x = 3.0;
+	memcpy(c + at + 4, &x, 8);
+	reseal(c, len);
+	expect_reject(c, len, "invalid trend roughness");
+	memcpy(c, b, len);
+	x = -0.5;
+	memcpy(c + at + 12 + 8, &x, 8);
+	reseal(c, len);
+	expect_reject(c, len, "invalid trend coefficients");
+	free(b);
+	free(c);
+	/* a version-1 file (no trend block) is still read, as a model without trend */
+	assert_int_equal(recon_model_save(M, path, &err), 0);
+	b = slurp(path, &len);
+	assert_non_null(b);
+	at = trend_block_at(M, len);
+	size_t blk = 4 + 8 + M->nwl * TREND_NB * 8, len1 = len - blk;
+	unsigned char *d = malloc(len1);
+	memcpy(d, b, at);
+	memcpy(d + at, b + at + blk, len - at - blk);
+	v = 1;
+	memcpy(d + 8, &v, 4);
+	reseal(d, len1);
+	assert_int_equal(recon_model_load_mem("v1", d, len1, &m2, &err), 0);
+	assert_int_equal(m2->trend, RECON_TREND_NONE);
+	assert_same_model(M, m2);
+	recon_model_free(m2);
+	/* a model without trend must not carry coefficients */
+	memcpy(c = malloc(len), b, len);
+	x = 0.25;
+	memcpy(c + at + 12, &x, 8);
+	reseal(c, len);
+	expect_reject(c, len, "invalid trend coefficients");
+	free(b);
+	free(c);
+	free(d);
+}
+
 static void test_save_refuses_nonfinite(void **state)
 {
 	(void)state;
@@ -180,6 +271,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_round_trip),
 		cmocka_unit_test(test_rejects_corrupt_files),
+		cmocka_unit_test(test_trend_block),
 		cmocka_unit_test(test_save_refuses_nonfinite),
 	};
 	return cmocka_run_group_tests_name("recon_model", tests, setup, teardown);

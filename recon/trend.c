@@ -1,0 +1,227 @@
+/* trend: Lambertian + isotropic GGX mean function of the reconstruction (see trend.h). */
+#include "recon/trend.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define MU_MIN 1e-9
+#define NGRID 40      /* log-spaced roughness grid, then a golden-section refinement */
+#define NGOLDEN 24
+
+const char *trend_name(int t)
+{
+	return t == RECON_TREND_NONE ? "none" : t == RECON_TREND_GGX ? "ggx" : NULL;
+}
+
+int trend_from_name(const char *name)
+{
+	for (int t = 0; t < RECON_TREND__COUNT; t++)
+		if (name && !strcmp(name, trend_name(t)))
+			return t;
+	return -1;
+}
+
+/* Smith Λ of GGX for a direction of cosine mu: ½(√(1 + α² tan²θ) − 1). */
+static double smith_lambda(double alpha, double mu)
+{
+	double t2 = (1.0 - mu * mu) / (mu * mu);
+	return 0.5 * (sqrt(1.0 + alpha * alpha * t2) - 1.0);
+}
+
+/*
+ * b0 = 1/π (Lambertian), b1 = D(h)·G2/(4μiμo) with D the GGX distribution α²/(π((α²−1)cos²θh + 1)²) and
+ * G2 = 1/(1 + Λ(μi) + Λ(μo)) (height-correlated Smith), b2 = b1·(1 − cosθd)⁵ (Schlick's Fresnel shape).
+ * b3 = 28/(23π)·(1 − (1 − μi/2)⁵)(1 − (1 − μo/2)⁵), the diffuse shape of a coated substrate (Ashikhmin and
+ * Shirley 2000: the light the Fresnel coat reflects is missing from the diffuse term, more so at grazing).
+ * b1 .. b3 are symmetric in ωi ↔ ωo and invariant under rotation about the normal and the mirror, like
+ * the model. Their albedo is ≤ 1 (the single-scattering microfacet lobe loses energy, never gains it).
+ */
+void trend_basis(double alpha, const double c6[6], double b[TREND_NB])
+{
+	double mi = c6[2] > MU_MIN ? c6[2] : MU_MIN, mo = c6[5] > MU_MIN ? c6[5] : MU_MIN;
+	double hx = c6[0] + c6[3], hy = c6[1] + c6[4], hz = c6[2] + c6[5];
+	double hn = sqrt(hx * hx + hy * hy + hz * hz);
+	double ch = hn > 1e-12 ? hz / hn : 0.0;
+	double dot = c6[0] * c6[3] + c6[1] * c6[4] + c6[2] * c6[5];
+	double cd = sqrt(fmax(0.0, 0.5 * (1.0 + dot))); /* cos θd = ωi·h */
+	double a2 = alpha * alpha, t = ch * ch * (a2 - 1.0) + 1.0;
+	double d = a2 / (M_PI * t * t);
+	double g2 = 1.0 / (1.0 + (smith_lambda(alpha, mi) + smith_lambda(alpha, mo))); /* symmetric bit for bit */
+	double s = d * g2 / (4.0 * (mi * mo));
+	double f = 1.0 - (cd < 1.0 ? cd : 1.0), f2 = f * f;
+	b[0] = 1.0 / M_PI;
+	b[1] = s;
+	b[2] = s * f2 * f2 * f;
+	double qi = 1.0 - 0.5 * mi, qo = 1.0 - 0.5 * mo, qi2 = qi * qi, qo2 = qo * qo;
+	b[3] = 28.0 / (23.0 * M_PI) * ((1.0 - qi2 * qi2 * qi) * (1.0 - qo2 * qo2 * qo));
+}
+
+/* Non-negative least squares in TREND_NB unknowns: min cᵀMc − 2cᵀr, c ≥ 0, by the best feasible stationary point
+ * over the supports (the optimum is the unconstrained optimum on its own support, and it is feasible). */
+static void nnls(const double *M, const double *r, double *c)
+{
+	enum { N = TREND_NB };
+	double best = 0.0; /* objective of c = 0 */
+	for (int j = 0; j < N; j++)
+		c[j] = 0.0;
+	for (int set = 1; set < (1 << N); set++) {
+		int idx[N], k = 0;
+		for (int j = 0; j < N; j++)
+			if (set & (1 << j))
+				idx[k++] = j;
+		double A[N * N], y[N];
+		for (int i = 0; i < k; i++) {
+			y[i] = r[idx[i]];
+			for (int j = 0; j < k; j++)
+				A[i * N + j] = M[idx[i] * N + idx[j]];
+		}
+		/* Cholesky of the k × k block; a (nearly) singular block is skipped */
+		int ok = 1;
+		for (int i = 0; i < k && ok; i++) {
+			for (int j = 0; j <= i; j++) {
+				double s = A[i * N + j];
+				for (int p = 0; p < j; p++)
+					s -= A[i * N + p] * A[j * N + p];
+				if (i == j) {
+					if (!(s > 1e-12 * M[idx[i] * N + idx[i]]) || !(s > 0)) {
+						ok = 0;
+						break;
+					}
+					A[i * N + i] = sqrt(s);
+				} else {
+					A[i * N + j] = s / A[j * N + j];
+				}
+			}
+		}
+		if (!ok)
+			continue;
+		double z[N], x[N];
+		for (int i = 0; i < k; i++) {
+			double s = y[i];
+			for (int p = 0; p < i; p++)
+				s -= A[i * N + p] * z[p];
+			z[i] = s / A[i * N + i];
+		}
+		for (int i = k - 1; i >= 0; i--) {
+			double s = z[i];
+			for (int p = i + 1; p < k; p++)
+				s -= A[p * N + i] * x[p];
+			x[i] = s / A[i * N + i];
+		}
+		int feas = 1;
+		double obj = 0;
+		for (int i = 0; i < k; i++) {
+			if (!(x[i] >= 0) || !isfinite(x[i]))
+				feas = 0;
+			obj -= x[i] * y[i]; /* at the stationary point cᵀMc = cᵀr, so the objective is −cᵀr */
+		}
+		if (feas && obj < best) {
+			best = obj;
+			for (int j = 0; j < N; j++)
+				c[j] = 0.0;
+			for (int i = 0; i < k; i++)
+				c[idx[i]] = x[i];
+		}
+	}
+}
+
+/* Coefficients of one channel at fixed roughness (basis B[k*TREND_NB]); returns the sum of squared log residuals. */
+static double fit_channel(size_t n, const double *v, double eps, const double *B, double *c)
+{
+	enum { N = TREND_NB };
+	double M[N * N] = { 0 }, r[N] = { 0 };
+	for (size_t k = 0; k < n; k++) {
+		double f = v[k] > 0 ? v[k] : 0.0, w = 1.0 / ((f + eps) * (f + eps));
+		const double *b = B + N * k;
+		for (int i = 0; i < N; i++) {
+			r[i] += w * b[i] * f;
+			for (int j = 0; j <= i; j++)
+				M[i * N + j] += w * b[i] * b[j];
+		}
+	}
+	for (int i = 0; i < N; i++)
+		for (int j = i + 1; j < N; j++)
+			M[i * N + j] = M[j * N + i];
+	nnls(M, r, c);
+	double ss = 0;
+	for (size_t k = 0; k < n; k++) {
+		const double *b = B + N * k;
+		double f = v[k] > 0 ? v[k] : 0.0, t = 0;
+		for (int j = 0; j < N; j++)
+			t += c[j] * b[j];
+		double e = log(f + eps) - log(t + eps);
+		ss += e * e;
+	}
+	return ss;
+}
+
+/* Score of a roughness: mean squared log residual over the scored channels. */
+static double score(size_t n, const double *val, const double *eps, const double *c6, const size_t *chan,
+		    size_t nc, double alpha, double *B)
+{
+	for (size_t k = 0; k < n; k++)
+		trend_basis(alpha, c6 + 6 * k, B + TREND_NB * k);
+	double ss = 0, c[TREND_NB];
+	for (size_t i = 0; i < nc; i++)
+		ss += fit_channel(n, val + chan[i] * n, eps[chan[i]], B, c);
+	return ss / (double)(n * nc);
+}
+
+int trend_fit(size_t n, size_t L, const double *val, const double *eps, const double *c6, const size_t *chan,
+	      size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err)
+{
+	if (n == 0 || L == 0 || nc == 0)
+		return acq_errf(err, ACQ_E_INVAL, "trend: no data");
+	double *B = malloc(n * TREND_NB * sizeof *B);
+	if (!B)
+		return acq_errf(err, ACQ_E_NOMEM, "trend: out of memory");
+	/* log-spaced grid, then golden section on log α around the best grid point */
+	double la = log(TREND_ALPHA_MIN), lb = log(TREND_ALPHA_MAX), h = (lb - la) / (NGRID - 1);
+	double bs = INFINITY;
+	int bi = 0;
+	for (int i = 0; i < NGRID; i++) {
+		double s = score(n, val, eps, c6, chan, nc, exp(la + h * i), B);
+		if (s < bs) {
+			bs = s;
+			bi = i;
+		}
+	}
+	double lo = la + h * (bi > 0 ? bi - 1 : 0), hi = la + h * (bi < NGRID - 1 ? bi + 1 : NGRID - 1);
+	const double gr = 0.5 * (sqrt(5.0) - 1.0);
+	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo);
+	double s1 = score(n, val, eps, c6, chan, nc, exp(x1), B), s2 = score(n, val, eps, c6, chan, nc, exp(x2), B);
+	for (int it = 0; it < NGOLDEN; it++) {
+		if (s1 < s2) {
+			hi = x2;
+			x2 = x1;
+			s2 = s1;
+			x1 = hi - gr * (hi - lo);
+			s1 = score(n, val, eps, c6, chan, nc, exp(x1), B);
+		} else {
+			lo = x1;
+			x1 = x2;
+			s1 = s2;
+			x2 = lo + gr * (hi - lo);
+			s2 = score(n, val, eps, c6, chan, nc, exp(x2), B);
+		}
+	}
+	double best = la + h * bi;
+	if (s1 < bs) {
+		best = x1;
+		bs = s1;
+	}
+	if (s2 < bs) {
+		best = x2;
+		bs = s2;
+	}
+	*alpha = exp(best);
+	for (size_t k = 0; k < n; k++)
+		trend_basis(*alpha, c6 + 6 * k, B + TREND_NB * k);
+	for (size_t l = 0; l < L; l++)
+		fit_channel(n, val + l * n, eps[l], B, coef + l * TREND_NB);
+	if (rms)
+		*rms = sqrt(bs);
+	free(B);
+	return 0;
+}

@@ -1,0 +1,42 @@
+/* trend: the physically based mean function of the reconstruction. A Lambertian term and one isotropic GGX
+ * microfacet lobe (Smith height-correlated masking, with and without a Schlick Fresnel factor), a coated-diffuse
+ * term (Ashikhmin-Shirley), shared
+ * roughness, non-negative coefficients per wavelength. The RBF interpolates the data relative to it, so
+ * between samples (a lobe narrower than the sampling) the BRDF follows a microfacet lobe fitted to the
+ * samples around the specular direction instead of the kernel's shape. */
+#ifndef RECON_TREND_H
+#define RECON_TREND_H
+
+#include <stddef.h>
+
+#include "config/acq_err.h"
+
+enum recon_trend {
+	RECON_TREND_NONE = 0, /* constant: the plain RBF interpolant of the transformed data */
+	RECON_TREND_GGX = 1,  /* c0/π + c1·D·G2/(4μiμo) + c2·D·G2/(4μiμo)·(1 − ωi·h)⁵ + c3·AS diffuse */
+	RECON_TREND__COUNT
+};
+
+#define TREND_NB 4            /* basis functions (coefficients per wavelength) */
+#define TREND_ALPHA_MIN 0.005 /* roughness range searched by the fit */
+#define TREND_ALPHA_MAX 1.0
+
+/* Basis values b[TREND_NB] of the GGX trend at a canonical point c6 (ωi = c6[0..2], ωo = c6[3..5], unit, z up);
+ * finite and ≥ 0 for every direction on or above the horizon (μ clamped to 1e-9). */
+void trend_basis(double alpha, const double c6[6], double b[TREND_NB]);
+
+/*
+ * Fit the trend to n merged samples: linear values val[l*n + k] (channel-major, L channels), transform offsets
+ * eps[l] (the log transform's ε), canonical points c6[k*6]. Roughness by a search over
+ * [TREND_ALPHA_MIN, TREND_ALPHA_MAX] scored on the channels chan[0..nc) by the RMS of ln(f + ε) − ln(T + ε);
+ * per channel, non-negative least squares with relative weights 1/(f + ε)² (the log residual to first order).
+ * Writes *alpha and coef[l*TREND_NB + j] for every channel; *rms (may be NULL) the score at the optimum.
+ */
+int trend_fit(size_t n, size_t L, const double *val, const double *eps, const double *c6, const size_t *chan,
+	      size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err);
+
+/* Name of a trend ("none", "ggx") or NULL; and back (−1 if unknown). */
+const char *trend_name(int t);
+int trend_from_name(const char *name);
+
+#endif
