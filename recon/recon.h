@@ -103,7 +103,7 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
  * with the interpolation-error term (recon_dhr_ex). */
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err);
-/* recon_dhr, sig = sqrt(sig_noise² + sig_model² + sig_quad²) split into its parts (each may be NULL):
+/* recon_dhr, sig = sqrt(max(sig_noise, sig_model)² + sig_quad²) split into its parts (each may be NULL):
  * sig_noise the Monte-Carlo spread from the data's uncertainties, sig_model the interpolation error
  * (posterior variance of the DHR under the GP reading of the interpolant, amplitude from the leave-one-out
  * residuals), sig_quad the quadrature error (last refinement step plus any overshoot above 1; recon.c). */

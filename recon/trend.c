@@ -156,15 +156,34 @@ static double fit_channel(size_t n, const double *v, double eps, const double *B
 	return ss;
 }
 
-/* Score of a roughness: mean squared log residual over the scored channels. */
+/*
+ * Score of a roughness: mean squared log residual over the scored channels. A roughness whose lobe core
+ * (tanθh ≤ α, where D ≥ D(0)/4) holds fewer than TREND_MIN_INLOBE samples is inadmissible unless the fitted
+ * lobe vanishes: one bright sample fits any narrower lobe equally well (the coefficient scales with α²), so
+ * its width, and the lobe's albedo, would be a guess.
+ */
+#define TREND_MIN_INLOBE 3
 static double score(size_t n, const double *val, const double *eps, const double *c6, const size_t *chan,
 		    size_t nc, double alpha, double *B)
 {
 	for (size_t k = 0; k < n; k++)
 		trend_basis(alpha, c6 + 6 * k, B + TREND_NB * k);
 	double ss = 0, c[TREND_NB];
-	for (size_t i = 0; i < nc; i++)
+	int lobe = 0;
+	for (size_t i = 0; i < nc; i++) {
 		ss += fit_channel(n, val + chan[i] * n, eps[chan[i]], B, c);
+		if (c[1] > 0 || c[2] > 0)
+			lobe = 1;
+	}
+	size_t core = 0;
+	for (size_t k = 0; k < n && lobe && core < TREND_MIN_INLOBE; k++) {
+		const double *p = c6 + 6 * k;
+		double hx = p[0] + p[3], hy = p[1] + p[4], hz = p[2] + p[5], h2 = hx * hx + hy * hy + hz * hz;
+		if (hz > 0 && hz * hz * (1.0 + alpha * alpha) >= h2) /* cos²θh ≥ 1/(1 + α²) */
+			core++;
+	}
+	if (lobe && core < TREND_MIN_INLOBE)
+		return INFINITY;
 	return ss / (double)(n * nc);
 }
 
@@ -215,13 +234,25 @@ int trend_fit(size_t n, size_t L, const double *val, const double *eps, const do
 		best = x2;
 		bs = s2;
 	}
-	*alpha = exp(best);
-	for (size_t k = 0; k < n; k++)
+	/* no admissible roughness: the data show no lobe of measurable width; the diffuse terms only (the
+	 * roughness is then irrelevant and recorded as the largest) */
+	int nolobe = !isfinite(bs);
+	*alpha = nolobe ? TREND_ALPHA_MAX : exp(best);
+	for (size_t k = 0; k < n; k++) {
 		trend_basis(*alpha, c6 + 6 * k, B + TREND_NB * k);
-	for (size_t l = 0; l < L; l++)
-		fit_channel(n, val + l * n, eps[l], B, coef + l * TREND_NB);
+		if (nolobe)
+			B[TREND_NB * k + 1] = B[TREND_NB * k + 2] = 0.0;
+	}
+	double ss = 0;
+	for (size_t l = 0, i = 0; l < L; l++) {
+		double e = fit_channel(n, val + l * n, eps[l], B, coef + l * TREND_NB);
+		if (i < nc && chan[i] == l) {
+			ss += e;
+			i++;
+		}
+	}
 	if (rms)
-		*rms = sqrt(bs);
+		*rms = sqrt(ss / (double)(n * nc));
 	free(B);
 	return 0;
 }

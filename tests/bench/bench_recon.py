@@ -122,7 +122,8 @@ def main():
 
     # the other kernels and the sqrt transform on the same data (accuracy, or the fit's error)
     for name, extra in (("exp", ["--kernel", "exp"]), ("gauss", ["--kernel", "gauss"]),
-                        ("paper", ["--kernel", "paper"]), ("sqrt", ["--transform", "sqrt"])):
+                        ("paper", ["--kernel", "paper"]), ("sqrt", ["--transform", "sqrt"]),
+                        ("notrend", ["--trend", "none"])):
         mk = os.path.join(d, "m_%s.model" % name)
         p = subprocess.run([B, "fit", s, "-o", mk, *extra], capture_output=True, text=True)
         if p.returncode != 0:

@@ -4,11 +4,13 @@ reference, metal): noisy 10x10x10 samples -> fit -> check (three properties) -> 
 Skips (77) while `acq-sim truth` is not implemented in this build.
 
 Tolerances (relative DHR error), measured with acq-sim's truths at 1 % noise on this 25 nm grid (seeds 1-4,
-the errors are systematic, not noise): white <= 0.2 % at every incidence; green paint 1.5 % at 8 deg, 4 % at
-30, 10 % at 60; metal 6.6 / 8.2 / 10 %. The 8 deg figure is the
-paper's comparison (spectrophotometer geometry). The larger errors at 30-60 deg, and for the metal, come
-from the sampling: a 36 deg azimuth step is wider than a specular lobe. Thresholds leave a margin for other
-seeds; a model that lost the lobe or the colour would fail them."""
+the errors are systematic, not noise). With the GGX trend (session 3): white <= 0.19 % at every incidence,
+green paint <= 0.24 / 0.24 / 0.37 % at 8 / 30 / 60 deg, metal <= 0.21 / 0.30 / 0.54 %. Without it (the plain
+interpolant, before session 3): paint 1.5 / 4 / 10 %, metal 6.6 / 8.2 / 10 %: a 36 deg azimuth step is wider
+than a specular lobe, and only the trend gives the lobe its out-of-plane shape. The thresholds (1 / 1 / 1.5 %
+paint, 1 / 1.5 / 2 % metal) leave a margin of ~3x for other seeds and fail if the trend is lost (or the
+model loses the lobe or the colour). The 8 deg figure is the paper's comparison (spectrophotometer
+geometry)."""
 import os
 import subprocess
 import sys
@@ -21,7 +23,7 @@ BUILD = os.environ.get("ACQ_BUILD", "build")
 SEED = int(os.environ.get("ACQ_SEED", "1")) % 100000
 SIM = os.environ.get("ACQ_SIM_BIN", os.path.join(BUILD, "acq-sim"))
 B = os.path.join(BUILD, "brdf-recon")
-TOL = {"white": (0.01, 0.01, 0.01), "green-paint": (0.03, 0.08, 0.15), "metal": (0.08, 0.13, 0.15)}
+TOL = {"white": (0.01, 0.01, 0.01), "green-paint": (0.01, 0.01, 0.015), "metal": (0.01, 0.015, 0.02)}
 
 
 def run(args):
@@ -44,7 +46,10 @@ def main():
         s, t, m, o = (os.path.join(d, "%s.%s" % (mat, x)) for x in ("csv", "dhr.csv", "model", "out.csv"))
         run([SIM, "truth", mat, "--grid", "10x10x10", "-o", s, "--wavelengths", "450:1100:25", "--seed", str(SEED)])
         run([SIM, "truth", mat, "--dhr", t, "--theta-i", "8,30,60", "--wavelengths", "450:1100:25"])
-        print(run([B, "fit", s, "-o", m]).stderr.strip())
+        fit = run([B, "fit", s, "-o", m]).stderr.strip()
+        print(fit)
+        if mat != "white":  # microfacet lobes: the leave-one-out choice keeps the trend
+            assert "trend ggx" in fit, mat
         c = subprocess.run([B, "check", m, "--pairs", "5000", "--thetas", "4"], capture_output=True, text=True)
         print(c.stdout.strip())
         assert c.returncode == 0 and c.stdout.count("ok  ") == 3, mat

@@ -297,8 +297,8 @@ static struct recon_model *fit_checked(const struct recon_samples *s, const stru
 		printf("%s: fit failed (%s): %s\n", tag, acq_errname(err.code), err.msg);
 		fail();
 	}
-	printf("%s: n=%zu nwl=%zu shape=%g eta=%g rcond=%.3g loo=%.3g\n", tag, m->n, m->nwl, m->shape, m->eta,
-	       m->rcond, m->loo_rms);
+	printf("%s: n=%zu nwl=%zu shape=%g eta=%g rcond=%.3g loo=%.3g trend=%s alpha=%.3g ntab=%zu\n", tag, m->n, m->nwl,
+	       m->shape, m->eta, m->rcond, m->loo_rms, trend_name(m->trend), m->trend_alpha, m->ntab);
 	assert_properties(m, 300);
 	assert_files_finite(m, tag);
 	return m;

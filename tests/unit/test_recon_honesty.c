@@ -1,12 +1,13 @@
 /* Unit test of the DHR uncertainty's honesty (recon_dhr_ex) on the synthetic truth (Lambertian + cos²⁰ Phong
  * lobe, the paper's 10 × 10 × 10 sampling, 2 % noise), over NSEED independent noisy data sets (default fit,
- * as a user gets it). z = (DHR − truth)/σ; its RMS over seeds and wavelengths (the spread about 0: the error
- * includes a deterministic interpolation bias, so the spread about the mean would hide it) must be in
- * [0.45, 1.6] at 8° (measured 0.51-0.73 over ACQ_SEED 1-4: σ is on the conservative side there, the LOO
- * residuals that set σ_model include the noise), and the band must reject σ three times too large or small. At 30° the error is
- * dominated by the bias of the 36° azimuth step (the lobe's half-width is 15°): the noise-only σ gives an
- * RMS z of ≈ 5, the interpolation-error term must bring it below 0.6× that (measured 2.5-2.7, ratio 0.49-0.50: not yet
- * fully honest there; recon/reconstruction.md). */
+ * as a user gets it: on this lobe the leave-one-out choice drops the GGX trend, see test_recon_trend).
+ * z = (DHR − truth)/σ; its RMS over seeds and wavelengths (the spread about 0: the error includes a
+ * deterministic interpolation bias, so the spread about the mean would hide it) must be in [0.45, 1.6] at 8°
+ * (measured 0.67-0.97 over ACQ_SEED 1-4 with σ = max(σ_noise, σ_model); 0.51-0.73 when the two were added,
+ * which counted the noise twice), and the band must reject σ three times too large or small. At 30° the
+ * error is dominated by the bias of the 36° azimuth step on a lobe that is not a microfacet lobe (half-width
+ * 15°): the noise-only σ gives an RMS z of ≈ 5, the interpolation-error term must bring it below 0.7× that
+ * (measured 2.9-3.1, ratio 0.56-0.58: not honest there; recon/reconstruction.md). */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -71,8 +72,8 @@ static void test_dhr_zscores_calibrated(void **state)
 			err[at + i] = d[i] - truth[i];
 			assert_true(sig[at + i] > 0);
 			assert_true(sq[i] >= 0 && sq[i] <= 2e-3 * d[i]); /* smooth truth: the rule converges at once */
-			assert_true(fabs(sig[at + i] * sig[at + i] - sn[at + i] * sn[at + i] - sm[at + i] * sm[at + i] -
-					 sq[i] * sq[i]) <= 1e-9 * sig[at + i] * sig[at + i]);
+			double sb = fmax(sn[at + i], sm[at + i]); /* σ² = max(σ_noise, σ_model)² + σ_quad² */
+			assert_true(fabs(sig[at + i] * sig[at + i] - sb * sb - sq[i] * sq[i]) <= 1e-9 * sig[at + i] * sig[at + i]);
 		}
 		recon_model_free(m);
 		csvio_samples_free(&smp);
@@ -88,7 +89,7 @@ static void test_dhr_zscores_calibrated(void **state)
 	assert_false(zrms(err, sig, 0, 1.0 / 3.0) <= 1.6); /* ... and three times too small */
 	double z30 = zrms(err, sig, 1, 1.0), z30n = zrms(err, sn, 1, 1.0);
 	assert_true(z30n > 2.0);        /* the bias is there, and the noise-only σ does not cover it */
-	assert_true(z30 < 0.6 * z30n);  /* the interpolation-error term removes a good part of it */
+	assert_true(z30 < 0.7 * z30n);  /* the interpolation-error term removes a good part of it */
 }
 
 int main(void)

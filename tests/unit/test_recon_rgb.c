@@ -1,5 +1,6 @@
 /* Unit tests of recon/rgbeval.c: the reduced RGB evaluator against the full-spectrum path, the batch path
- * against the per-pair callback, and the half-table MERL (mirror cells copied) against evaluating every cell. */
+ * against the per-pair callback, and the half-table MERL (mirror cells copied) against evaluating every cell;
+ * twice: a model without trend and one with the GGX trend (binned trend coefficients). */
 #include <setjmp.h>
 #include <unistd.h>
 #include <stdarg.h>
@@ -12,6 +13,7 @@
 
 static struct recon_model *M;
 static struct recon_rgb *R;
+static int TREND; /* the group's trend */
 
 static int setup(void **state)
 {
@@ -22,6 +24,7 @@ static int setup(void **state)
 	struct recon_fit_opts o;
 	recon_fit_opts_default(&o);
 	o.shape = 2.0;
+	o.trend = TREND;
 	o.smoothing = 1e-4;
 	struct acq_err err = { 0 };
 	int rc = recon_fit(&s, &o, &M, &err);
@@ -162,5 +165,8 @@ int main(void)
 		cmocka_unit_test(test_reduced_matches_full_and_batch),
 		cmocka_unit_test(test_merl_half_table_exact),
 	};
-	return cmocka_run_group_tests_name("recon_rgb", tests, setup, teardown);
+	TREND = RECON_TREND_NONE;
+	int rc = cmocka_run_group_tests_name("recon_rgb (no trend)", tests, setup, teardown);
+	TREND = RECON_TREND_GGX;
+	return rc + cmocka_run_group_tests_name("recon_rgb (ggx trend)", tests, setup, teardown);
 }
