@@ -23,6 +23,7 @@
 #define TAB_CURV_TOL 0.01 /* largest second difference over an interval (albedo units) before bisecting */
 #define TAB_DEPTH 7       /* finest interval 10°/2⁷ ≈ 0.08° */
 #define TAB_MAX_NODES 96  /* node budget of the bisection (breadth first) */
+#define TAB_BELOW 0.9     /* a node's channel is also done once fine + 4·|fine − coarse| ≤ this: clearly below 1 */
 #define ALB_NMU_MAX 256   /* finest rule of recon_albedo, the DHR and the checker (Gauss-Legendre limit) */
 /* DHR quadrature: Gauss-Legendre 32 × 48 azimuth midpoints (error discussed at recon_albedo). */
 #define DHR_NMU 32
@@ -30,6 +31,9 @@
 #define DHR_FLOOR 1e-300  /* refined to 1e-3 relative: an absolute floor let two rules agree on a missed lobe */
 /* Largest transformed value mapped back (e^69 ≈ 1e30 sr⁻¹): keeps every output finite. */
 #define G_MAX 69.0
+#ifndef TREND_RULE_SPACING
+#define TREND_RULE_SPACING 0.5
+#endif
 
 void recon_fit_opts_default(struct recon_fit_opts *o)
 {
@@ -409,7 +413,7 @@ static void lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *n
 		for (size_t l = 0; l < m->nwl; l++)
 			lobe = fmax(lobe, m->tcoef[l * TREND_NB + 1] + m->tcoef[l * TREND_NB + 2]);
 		if (lobe >= 1e-4)
-			s = fmin(s, 0.5 * m->trend_alpha);
+			s = fmin(s, TREND_RULE_SPACING * m->trend_alpha);
 	}
 	double a = ceil((M_PI / 2) / s), b = ceil(M_PI / s);
 	if (a > *nmu)
@@ -429,11 +433,14 @@ static void lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *n
  * disagrees with the doubled rule by more than tol · max(|value|, floor) (relative above floor, absolute
  * below: floor 1 when only the comparison with 1 matters) and the doubled nmu stays ≤ nmu_max. Only
  * the channels still disagreeing are evaluated again, so one narrow lobe does not make every channel pay
- * for the finest rule. out[l] is the finest value; diff[l] (may be NULL) the last |fine − coarse|, or 0
- * when no doubling fits under nmu_max.
+ * for the finest rule. A channel is also done once fine + 4·|fine − coarse| ≤ below (the energy table only
+ * compares its bound, fine + 2·|fine − coarse|, with 1: a value clearly below needs no more digits; −∞ turns
+ * this off). out[l] is the finest value; diff[l] (may be NULL) the last |fine − coarse|, or 0 when no
+ * doubling fits under nmu_max.
  */
 static int albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, int nphi, int nmu_max,
-			   int square_rule, int scaled, double tol, double floor, struct albedo_ws *ws, double *out,
+			   int square_rule, int scaled, double tol, double floor, double below, struct albedo_ws *ws,
+			   double *out,
 			   double *diff, struct acq_err *err)
 {
 	size_t n = m->n, L = m->nwl, nch = L;
@@ -457,7 +464,7 @@ static int albedo_adaptive(const struct recon_model *m, double theta_i, int nmu,
 			out[l] = ws->fine[k];
 			if (diff)
 				diff[l] = d;
-			if (!(d <= tol * ref)) {
+			if (!(d <= tol * ref) && !(ws->fine[k] + 4.0 * d <= below)) {
 				if (keep != k) {
 					ws->chan[keep] = l;
 					memmove(ws->wsub + keep * n, ws->wsub + k * n, n * sizeof *ws->wsub);
@@ -483,7 +490,8 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
 	struct albedo_ws ws;
 	if (albedo_ws_init(&ws, m, (size_t)top * (size_t)tphi, err))
 		return -1;
-	int rc = albedo_adaptive(m, theta_i, nmu, nphi, ALB_NMU_MAX, 0, scaled, TAB_TOL, 1e-300, &ws, out, NULL, err);
+	int rc = albedo_adaptive(m, theta_i, nmu, nphi, ALB_NMU_MAX, 0, scaled, TAB_TOL, 1e-300, -HUGE_VAL, &ws, out, NULL,
+				 err);
 	albedo_ws_free(&ws);
 	return rc;
 }
@@ -514,7 +522,8 @@ struct albtab {
 /* a[L] = the node's albedo plus its quadrature margin 2d. */
 static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err *err)
 {
-	if (albedo_adaptive(T->m, theta, T->nmu, T->nphi, TAB_NMU_MAX, 0, 0, TAB_TOL, 1.0, &T->ws, a, T->diff, err))
+	if (albedo_adaptive(T->m, theta, T->nmu, T->nphi, TAB_NMU_MAX, 0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->ws, a, T->diff,
+			    err))
 		return -1;
 	for (size_t l = 0; l < T->L; l++) {
 		double mg = 2.0 * T->diff[l] + 1e-9 * fabs(a[l]);
@@ -1566,7 +1575,7 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 	if (albedo_ws_init(&ws, m, dq, err))
 		goto out;
 	for (size_t t = 0; t < nth; t++) {
-		if (albedo_adaptive(m, theta[t], dmu, dphi, ALB_NMU_MAX, 0, 1, TAB_TOL, DHR_FLOOR, &ws,
+		if (albedo_adaptive(m, theta[t], dmu, dphi, ALB_NMU_MAX, 0, 1, TAB_TOL, DHR_FLOOR, -HUGE_VAL, &ws,
 				    dhr + t * L, squad + t * L, err))
 			goto out;
 		for (size_t l = 0; l < L; l++)
@@ -1682,7 +1691,7 @@ int recon_check(const struct recon_model *m, size_t npairs, size_t nalb, uint64_
 		if (progress)
 			progress(pctx, "albedo", (double)t / (double)(nalb + 2));
 		double th = t == 0 ? 0.0 : t == 1 ? M_PI / 2 : asin(rng_unif(&r)) ; /* sinθ uniform: more grazing */
-		if (albedo_adaptive(m, th, cmu, cphi, ALB_NMU_MAX, 1, 1, TAB_TOL, 1e-300, &ws, alb, NULL, err))
+		if (albedo_adaptive(m, th, cmu, cphi, ALB_NMU_MAX, 1, 1, TAB_TOL, 1e-300, -HUGE_VAL, &ws, alb, NULL, err))
 			goto out;
 		for (size_t l = 0; l < L; l++) {
 			if (!isfinite(alb[l])) {
