@@ -44,6 +44,10 @@ void rbf_krow(int kernel, double shape, const double q[6], size_t n, const doubl
 /* Kernel matrix K[q*n + j] for m queries from SoA centres (rbf_krow per query). */
 void rbf_kmatrix_soa(int kernel, double shape, size_t m, const double *q, size_t n, const double *soa,
 		     double *K);
+/* Single-precision copy of the centres in structure-of-arrays form (6n floats). */
+void rbf_soa_f32(size_t n, const double *ctr, float *soa);
+/* The Wendland kernel matrix K[i*n + j] in single precision (m queries q[6m] against soa from rbf_soa_f32). */
+void rbf_kmatrix_wendland_f32(double shape, size_t m, const double *q, size_t n, const float *soa, float *K);
 /* Name of a kernel ("wendland", "exp", "gauss", "paper"), or NULL. */
 const char *rbf_kernel_name(int kernel);
 /* Kernel from its name, or -1. */

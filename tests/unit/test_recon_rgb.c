@@ -35,7 +35,9 @@ static int setup(void **state)
 	}
 	struct colour_opts co;
 	colour_opts_brdf(&co);
-	return recon_rgb_new(M, &co, 0, &R, &err);
+	if (recon_rgb_new(M, &co, 0, &R, &err))
+		return -1;
+	return recon_rgb_set_f32(R, 0); /* the exact checks below compare double paths; single: its own test */
 }
 
 static int teardown(void **state)
@@ -158,12 +160,77 @@ static void test_merl_half_table_exact(void **state)
 	merl_free(&all);
 }
 
+/* The single-precision batch GEMM. A nearly interpolating fit of noise-free data (η = 1e-8, shape 4: large
+ * cancelling weights) measures ≈ 2e-3 in ln f, above the 1e-4 limit: single precision is refused and the batch
+ * path stays in double. A default fit of noisy data (the usual case) measures ≈ 1.6e-5: there the whole MERL
+ * table changes by no more than that error allows (|Δ ln f| ≤ e gives |Δf|/f ≤ e^e − 1; the colour chain is
+ * linear in f before clamping; 2× for the sampling of the measurement, which sees 2048 of 1.1 M cells). */
+static void test_single_precision_table(void **state)
+{
+	(void)state;
+	struct recon_samples s;
+	struct recon_fit_opts o;
+	struct recon_model *m = NULL;
+	struct recon_rgb *r = NULL;
+	struct acq_err err = { 0 };
+	struct colour_opts co;
+	colour_opts_brdf(&co);
+	rt_samples_grid(&s, 5, 5, 6, 261, 0.0, 1.0);
+	recon_fit_opts_default(&o);
+	o.shape = 4;
+	o.smoothing = 1e-8;
+	o.trend = TREND;
+	assert_int_equal(recon_fit(&s, &o, &m, &err), 0);
+	csvio_samples_free(&s);
+	assert_int_equal(recon_rgb_new(m, &co, 0, &r, &err), 0);
+	double e = recon_rgb_f32_error(r);
+	printf("nearly interpolating fit: single-precision error in ln f %.3g\n", e);
+	assert_true(e > 1e-4);
+	assert_int_equal(recon_rgb_f32(r), 0);
+	assert_int_equal(recon_rgb_set_f32(r, 1), -1);
+	recon_rgb_free(r);
+	recon_model_free(m);
+
+	rt_samples_grid(&s, 10, 10, 10, 131, 0.02, 1.0);
+	recon_fit_opts_default(&o);
+	o.trend = TREND;
+	assert_int_equal(recon_fit(&s, &o, &m, &err), 0);
+	csvio_samples_free(&s);
+	assert_int_equal(recon_rgb_new(m, &co, 0, &r, &err), 0);
+	e = recon_rgb_f32_error(r);
+	printf("noisy default fit: single-precision error in ln f %.3g\n", e);
+	assert_true(e > 0 && e <= 1e-4);
+	assert_int_equal(recon_rgb_f32(r), 1); /* the default when within the limit */
+	struct merl_table d = { NULL }, f = { NULL };
+	assert_int_equal(recon_rgb_merl_table(r, &f, 0, NULL, NULL, NULL, &err), 0);
+	assert_int_equal(recon_rgb_set_f32(r, 0), 0);
+	assert_int_equal(recon_rgb_merl_table(r, &d, 0, NULL, NULL, NULL, &err), 0);
+	double worst = 0;
+	size_t differ = 0;
+	for (size_t i = 0; i < 3 * (size_t)MERL_N_CELLS; i++) {
+		assert_true((d.data[i] == MERL_NO_DATA) == (f.data[i] == MERL_NO_DATA));
+		if (d.data[i] == MERL_NO_DATA || !(d.data[i] > 1e-9))
+			continue;
+		double rel = fabs(f.data[i] - d.data[i]) / d.data[i];
+		differ += rel > 0;
+		worst = fmax(worst, rel);
+	}
+	printf("single vs double table: worst relative difference %.3g (%zu values differ)\n", worst, differ);
+	assert_true(differ > 0); /* the two paths are really different */
+	assert_true(worst <= 2.0 * expm1(e) + 1e-12);
+	merl_free(&d);
+	merl_free(&f);
+	recon_rgb_free(r);
+	recon_model_free(m);
+}
+
 int main(void)
 {
 	rt_seed();
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_reduced_matches_full_and_batch),
 		cmocka_unit_test(test_merl_half_table_exact),
+		cmocka_unit_test(test_single_precision_table),
 	};
 	TREND = RECON_TREND_NONE;
 	int rc = cmocka_run_group_tests_name("recon_rgb (no trend)", tests, setup, teardown);
