@@ -24,6 +24,7 @@
 #define TAB_DEPTH 7       /* finest interval 10°/2⁷ ≈ 0.08° */
 #define TAB_MAX_NODES 96  /* node budget of the bisection (breadth first) */
 #define TAB_BELOW 0.9     /* a node's channel is also done once fine + 4·|fine − coarse| ≤ this: clearly below 1 */
+#define TAB_BELOW_DIFF 0.02 /* ... and |fine − coarse| ≤ this (keeps the bisection's noise allowance small) */
 #define ALB_NMU_MAX 256   /* finest rule of recon_albedo, the DHR and the checker (Gauss-Legendre limit) */
 /* DHR quadrature: Gauss-Legendre 32 × 48 azimuth midpoints (error discussed at recon_albedo). */
 #define DHR_NMU 32
@@ -390,7 +391,7 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
  * by that width (H = the largest range of g over the centres, log transform; the sqrt transform squares,
  * far milder). Two rules that both step over a lobe agree with each other, so refinement alone cannot
  * find it: the start must resolve it. The trend's GGX lobe has a half width ≈ 2α in ωo (D falls to a quarter
- * at tanθh = α): nodes α/2 apart when the lobe can carry 1e-4 of albedo (its albedo is ≤ c1 + c2).
+ * at tanθh = α): nodes α/2 apart when the lobe can carry 1e-4 of albedo (its albedo is ≤ the sum of its coefficients).
  * nmu, nphi are raised to it (at most nmu_max/2 so one doubling fits); *qmax is the size of the finest rule
  * the ladder can reach.
  */
@@ -410,8 +411,12 @@ static void lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *n
 	double s = m->shape / sqrt(20.0 * (H + 1.0)); /* radians */
 	if (m->trend == RECON_TREND_GGX) {
 		double lobe = 0;
-		for (size_t l = 0; l < m->nwl; l++)
-			lobe = fmax(lobe, m->tcoef[l * TREND_NB + 1] + m->tcoef[l * TREND_NB + 2]);
+		for (size_t l = 0; l < m->nwl; l++) {
+			double sum = 0; /* the lobe terms' albedo is ≤ the sum of their coefficients */
+			for (int j = TREND_LOBE; j < TREND_NB; j++)
+				sum += m->tcoef[l * TREND_NB + j];
+			lobe = fmax(lobe, sum);
+		}
 		if (lobe >= 1e-4)
 			s = fmin(s, TREND_RULE_SPACING * m->trend_alpha);
 	}
@@ -433,7 +438,8 @@ static void lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *n
  * disagrees with the doubled rule by more than tol · max(|value|, floor) (relative above floor, absolute
  * below: floor 1 when only the comparison with 1 matters) and the doubled nmu stays ≤ nmu_max. Only
  * the channels still disagreeing are evaluated again, so one narrow lobe does not make every channel pay
- * for the finest rule. A channel is also done once fine + 4·|fine − coarse| ≤ below (the energy table only
+ * for the finest rule. A channel is also done once fine + 4·|fine − coarse| ≤ below with |fine − coarse| ≤
+ * TAB_BELOW_DIFF (the energy table only
  * compares its bound, fine + 2·|fine − coarse|, with 1: a value clearly below needs no more digits; −∞ turns
  * this off). out[l] is the finest value; diff[l] (may be NULL) the last |fine − coarse|, or 0 when no
  * doubling fits under nmu_max.
@@ -464,7 +470,7 @@ static int albedo_adaptive(const struct recon_model *m, double theta_i, int nmu,
 			out[l] = ws->fine[k];
 			if (diff)
 				diff[l] = d;
-			if (!(d <= tol * ref) && !(ws->fine[k] + 4.0 * d <= below)) {
+			if (!(d <= tol * ref) && !(ws->fine[k] + 4.0 * d <= below && d <= TAB_BELOW_DIFF)) {
 				if (keep != k) {
 					ws->chan[keep] = l;
 					memmove(ws->wsub + keep * n, ws->wsub + k * n, n * sizeof *ws->wsub);
@@ -502,8 +508,9 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
  * agree to TAB_TOL in albedo units, relative above 1: the table is only ever compared with 1), because the
  * map back e^g can make lobes far narrower than the kernel; d is the last difference between rules. The
  * nodes start every 10°; each interval [θ_lo, θ_hi] is probed at its midpoint and, while some channel's
- * second difference Δ = |a_lo − 2a_mid + a_hi| exceeds TAB_CURV_TOL · max(1, a) (a feature narrower than
- * the interval: a spike in θi), bisected, down to 10°/2^TAB_DEPTH. Both halves then get the bound
+ * second difference Δ = |a_lo − 2a_mid + a_hi| exceeds TAB_CURV_TOL · max(1, a) (plus, where the interval
+ * is clearly below 1, what the nodes' quadrature uncertainty can make of it, 3(d_lo + 2d_mid + d_hi)) (a
+ * feature narrower than the interval: a spike in θi), bisected, down to 10°/2^TAB_DEPTH. Both halves then get the bound
  * max(a + 2d over the three nodes) + Δ (the interpolation error h²/8·|a''| of a C² function, with a''
  * from Δ, doubled). The evaluated function is s·f̂ with s = 1/max(1, A(θi), A(θo)), whose albedo at θi is
  * ≤ a(θi)/max(1, A(θi)) ≤ 1 whenever A bounds a. `brdf-recon check` verifies it with an independent rule.
@@ -534,10 +541,11 @@ static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err
 	return 0;
 }
 
-/* Nodes th[n] with rows a[n·L]; interval i (node i to i+1) has done[i] and bound row b[i·L]. */
+/* Nodes th[n] with rows a[n·L] and their last quadrature differences dq[n·L]; interval i (node i to i+1) has
+ * done[i] and bound row b[i·L]. */
 struct albgrid {
 	size_t n;
-	double *th, *a, *b;
+	double *th, *a, *dq, *b;
 	unsigned char *done;
 };
 
@@ -545,6 +553,7 @@ static void albgrid_free(struct albgrid *g)
 {
 	free(g->th);
 	free(g->a);
+	free(g->dq);
 	free(g->b);
 	free(g->done);
 	memset(g, 0, sizeof *g);
@@ -555,15 +564,18 @@ static int albgrid_alloc(struct albgrid *g, size_t cap, size_t L)
 	memset(g, 0, sizeof *g);
 	g->th = malloc(cap * sizeof *g->th);
 	g->a = malloc(cap * L * sizeof *g->a);
+	g->dq = malloc(cap * L * sizeof *g->dq);
 	g->b = calloc(cap * L, sizeof *g->b);
 	g->done = calloc(cap, 1);
-	return g->th && g->a && g->b && g->done ? 0 : -1;
+	return g->th && g->a && g->dq && g->b && g->done ? 0 : -1;
 }
 
-static void albgrid_push(struct albgrid *g, size_t L, double th, const double *a, const double *b, int done)
+static void albgrid_push(struct albgrid *g, size_t L, double th, const double *a, const double *dq, const double *b,
+			 int done)
 {
 	g->th[g->n] = th;
 	memcpy(g->a + g->n * L, a, L * sizeof *a);
+	memcpy(g->dq + g->n * L, dq, L * sizeof *dq);
 	if (b)
 		memcpy(g->b + g->n * L, b, L * sizeof *b);
 	g->done[g->n] = (unsigned char)done;
@@ -593,7 +605,7 @@ static int build_albedo_table(struct recon_model *m, struct acq_err *err, recon_
 		double th = t + 1 == TAB_N ? M_PI / 2 : h * (double)t;
 		if (albtab_node(&T, th, amid, err))
 			goto out;
-		albgrid_push(&g, L, th, amid, NULL, 0);
+		albgrid_push(&g, L, th, amid, T.diff, NULL, 0);
 	}
 	/* breadth first: every interval of one level is probed before any of the next, so the node budget
 	 * is spent evenly where the albedo bends */
@@ -609,26 +621,33 @@ static int build_albedo_table(struct recon_model *m, struct acq_err *err, recon_
 			const double *alo = g.a + i * L, *ahi = g.a + (i + 1) * L;
 			/* the first level always probes; later ones while nodes remain (one per open interval) */
 			if (g.done[i] || (depth > 0 && ng.n + (g.n - i) + 1 > TAB_MAX_NODES)) {
-				albgrid_push(&ng, L, g.th[i], alo, g.b + i * L, 1);
+				albgrid_push(&ng, L, g.th[i], alo, g.dq + i * L, g.b + i * L, 1);
 				continue;
 			}
 			double tmid = 0.5 * (g.th[i] + g.th[i + 1]);
 			if (albtab_node(&T, tmid, amid, err))
 				goto out;
 			int split = 0;
+			const double *dlo = g.dq + i * L, *dhi = g.dq + (i + 1) * L;
 			for (size_t l = 0; l < L; l++) {
 				double d2 = fabs(alo[l] - 2.0 * amid[l] + ahi[l]);
 				double mx = fmax(alo[l], fmax(amid[l], ahi[l]));
-				if (d2 > TAB_CURV_TOL * fmax(mx, 1.0))
+				/* a bend beyond what the nodes' quadrature uncertainty (each a = fine + 2d, fine within
+				 * ≈ d of the exact value) can make of the second difference, where the interval is clearly
+				 * below 1; near 1 every bend counts (a loose bound there scales the BRDF down for nothing) */
+				double qn = 3.0 * (dlo[l] + 2.0 * T.diff[l] + dhi[l]);
+				if (!(mx + d2 + qn <= TAB_BELOW))
+					qn = 0;
+				if (d2 > TAB_CURV_TOL * fmax(mx, 1.0) + qn)
 					split = 1;
 				bnd[l] = mx + d2;
 			}
 			int done = !split || depth == TAB_DEPTH;
-			albgrid_push(&ng, L, g.th[i], alo, bnd, done);
-			albgrid_push(&ng, L, tmid, amid, bnd, done);
+			albgrid_push(&ng, L, g.th[i], alo, dlo, bnd, done);
+			albgrid_push(&ng, L, tmid, amid, T.diff, bnd, done);
 			again |= !done;
 		}
-		albgrid_push(&ng, L, g.th[g.n - 1], g.a + (g.n - 1) * L, NULL, 1);
+		albgrid_push(&ng, L, g.th[g.n - 1], g.a + (g.n - 1) * L, g.dq + (g.n - 1) * L, NULL, 1);
 		albgrid_free(&g);
 		g = ng;
 		memset(&ng, 0, sizeof ng);

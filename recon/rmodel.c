@@ -31,7 +31,7 @@
  *   tab_alb[(ntab−1)·nwl]                      f64 ≥ 0, albedo upper bounds
  *   trend       u32      0 none, 1 ggx                                 (trend.h; version 2 only)
  *   trend_alpha f64      GGX roughness in [0.005, 1] (ggx), 0 (none)
- *   tcoef[nwl·4]                               f64 ≥ 0, trend coefficients (TREND_NB; all 0 for none)
+ *   tcoef[nwl·5]                               f64 ≥ 0, trend coefficients (TREND_NB; all 0 for none)
  *   meta_len    u32      ≤ 65535, then meta_len bytes of UTF-8 "key=value\n" text (no NUL)
  *   checksum    u64      FNV-1a 64 of every preceding byte
  *

@@ -1,6 +1,6 @@
 /* trend: the physically based mean function of the reconstruction. A Lambertian term and one isotropic GGX
- * microfacet lobe (Smith height-correlated masking, with and without a Schlick Fresnel factor), a coated-diffuse
- * term (Ashikhmin-Shirley), shared
+ * microfacet lobe (Smith height-correlated masking) with a Fresnel factor made of (1 − cosθd)^k, k = 0, 2, 5, and a
+ * coated-diffuse term (Ashikhmin-Shirley), shared
  * roughness, non-negative coefficients per wavelength. The RBF interpolates the data relative to it, so
  * between samples (a lobe narrower than the sampling) the BRDF follows a microfacet lobe fitted to the
  * samples around the specular direction instead of the kernel's shape. */
@@ -13,11 +13,12 @@
 
 enum recon_trend {
 	RECON_TREND_NONE = 0, /* constant: the plain RBF interpolant of the transformed data */
-	RECON_TREND_GGX = 1,  /* c0/π + c1·D·G2/(4μiμo) + c2·D·G2/(4μiμo)·(1 − ωi·h)⁵ + c3·AS diffuse */
+	RECON_TREND_GGX = 1,  /* c0/π + c1·AS diffuse + D·G2/(4μiμo)·(c2 + c3(1 − ωi·h)² + c4(1 − ωi·h)⁵) */
 	RECON_TREND__COUNT
 };
 
-#define TREND_NB 4            /* basis functions (coefficients per wavelength) */
+#define TREND_NB 5            /* basis functions (coefficients per wavelength) */
+#define TREND_LOBE 2          /* the lobe terms are b[TREND_LOBE .. TREND_NB) */
 #define TREND_ALPHA_MIN 0.005 /* roughness range searched by the fit */
 #define TREND_ALPHA_MAX 1.0
 
