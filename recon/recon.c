@@ -24,7 +24,7 @@
 #define TAB_DEPTH 7       /* finest interval 10°/2⁷ ≈ 0.08° */
 #define TAB_MAX_NODES 96  /* node budget of the bisection (breadth first) */
 #define TAB_BELOW 0.9     /* a node's channel is also done once fine + 4·|fine − coarse| ≤ this: clearly below 1 */
-#define TAB_BELOW_DIFF 0.02 /* ... and |fine − coarse| ≤ this (keeps the bisection's noise allowance small) */
+#define TAB_BELOW_DIFF 0.005 /* ... and |fine − coarse| ≤ this (keeps the bisection's noise allowance small) */
 #define ALB_NMU_MAX 256   /* finest rule of recon_albedo, the DHR and the checker (Gauss-Legendre limit) */
 /* DHR quadrature: Gauss-Legendre 32 × 48 azimuth midpoints (error discussed at recon_albedo). */
 #define DHR_NMU 32
