@@ -134,21 +134,12 @@ static inline double untransform(int transform, double g, double eps, double tf)
  * of the map back, T + ε with a trend and 1 without. */
 static inline void trend_at(const struct recon_model *m, const double *c6, double b[TREND_NB])
 {
-	if (m->trend == RECON_TREND_GGX) {
-		trend_basis(m->trend_alpha, c6, b);
-	} else {
-		for (int j = 0; j < TREND_NB; j++)
-			b[j] = 0.0;
-	}
+	trend_eval_basis(m->trend, m->trend_alpha, c6, b);
 }
 
 static inline double trend_val(const struct recon_model *m, const double b[TREND_NB], size_t l)
 {
-	const double *c = m->tcoef + l * TREND_NB;
-	double t = 0;
-	for (int j = 0; j < TREND_NB; j++)
-		t += c[j] * b[j];
-	return t;
+	return trend_dot(m->tcoef + l * TREND_NB, b);
 }
 
 static inline double trend_factor(const struct recon_model *m, const double b[TREND_NB], size_t l)

@@ -210,27 +210,13 @@ out:
 	return rc;
 }
 
-/* Trend basis at a canonical point (zeros without a trend) and the trend value of bin l (1 − ε without a trend,
- * so that the map back (T + ε)·e^g − ε is e^g − ε). */
-static void bin_trend_basis(const struct recon_model *m, const double *c6, double tb[TREND_NB])
-{
-	if (m->trend == RECON_TREND_GGX) {
-		trend_basis(m->trend_alpha, c6, tb);
-	} else {
-		for (int j = 0; j < TREND_NB; j++)
-			tb[j] = 0.0;
-	}
-}
-
+/* The trend value of bin l at basis values tb (1 − ε without a trend, so that the map back (T + ε)·e^g − ε is
+ * e^g − ε). */
 static inline double bin_trend(const struct recon_rgb *R, const double tb[TREND_NB], size_t l)
 {
 	if (R->m->trend != RECON_TREND_GGX)
 		return 1.0 - R->eps[l]; /* factor 1: f = e^g − ε */
-	const double *c = R->tc + l * TREND_NB;
-	double t = 0;
-	for (int j = 0; j < TREND_NB; j++)
-		t += c[j] * tb[j];
-	return t;
+	return trend_dot(R->tc + l * TREND_NB, tb);
 }
 
 static void dir_to_angles(const double v[3], double *th, double *ph)
@@ -273,7 +259,7 @@ static void reduced_lin(const struct recon_rgb *R, const double wi[3], const dou
 		vexp(g, nc);
 	}
 	double tb[TREND_NB];
-	bin_trend_basis(m, c6, tb);
+	trend_eval_basis(m->trend, m->trend_alpha, c6, tb);
 	for (size_t l = 0; l < nc; l++) {
 		double f;
 		if (m->transform == RECON_T_SQRT) {
@@ -521,7 +507,7 @@ static void finish_pair(const struct recon_rgb *R, const double *c6, const doubl
 	double cti = acos(fmin(1, fmax(0, c6[2]))), cto = acos(fmin(1, fmax(0, c6[5])));
 	size_t ji = recon_tab_interval(m, cti), jo = recon_tab_interval(m, cto);
 	double lin[3] = { 0, 0, 0 }, tb[TREND_NB];
-	bin_trend_basis(m, c6, tb);
+	trend_eval_basis(m->trend, m->trend_alpha, c6, tb);
 	for (size_t l = 0; l < nc; l++) {
 		double x = g[l], f;
 		if (m->transform == RECON_T_SQRT) {

@@ -22,6 +22,17 @@ enum recon_trend {
 #define TREND_ALPHA_MIN 0.005 /* roughness range searched by the fit */
 #define TREND_ALPHA_MAX 1.0
 
+/* Basis values of trend t at c6: trend_basis for RECON_TREND_GGX, zeros for none. */
+static inline void trend_eval_basis(int t, double alpha, const double c6[6], double b[TREND_NB]);
+/* The trend value Σ_j coef[j]·b[j] of one channel's coefficients at basis values b. */
+static inline double trend_dot(const double *coef, const double b[TREND_NB])
+{
+	double t = 0;
+	for (int j = 0; j < TREND_NB; j++)
+		t += coef[j] * b[j];
+	return t;
+}
+
 /* Basis values b[TREND_NB] of the GGX trend at a canonical point c6 (ωi = c6[0..2], ωo = c6[3..5], unit, z up);
  * finite and ≥ 0 for every direction on or above the horizon (μ clamped to 1e-9). */
 void trend_basis(double alpha, const double c6[6], double b[TREND_NB]);
@@ -35,6 +46,16 @@ void trend_basis(double alpha, const double c6[6], double b[TREND_NB]);
  */
 int trend_fit(size_t n, size_t L, const double *val, const double *eps, const double *c6, const size_t *chan,
 	      size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err);
+
+static inline void trend_eval_basis(int t, double alpha, const double c6[6], double b[TREND_NB])
+{
+	if (t == RECON_TREND_GGX) {
+		trend_basis(alpha, c6, b);
+	} else {
+		for (int j = 0; j < TREND_NB; j++)
+			b[j] = 0.0;
+	}
+}
 
 /* Name of a trend ("none", "ggx") or NULL; and back (−1 if unknown). */
 const char *trend_name(int t);
