@@ -842,7 +842,7 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	double *c6 = malloc(n0 * 6 * sizeof *c6);
 	double *tmp = malloc((n0 > L ? n0 : L) * sizeof *tmp);
 	struct fitctx fc = { 0 };
-	double *rhs = NULL, *val = NULL, *sig = NULL, *wsum = NULL, *tlog = NULL, *G2 = NULL;
+	double *rhs = NULL, *val = NULL, *sig = NULL, *wsum = NULL, *tlog = NULL, *tbas = NULL, *G2 = NULL;
 	if (!m || !rep || !idx || !c6 || !tmp) {
 		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
 		goto out;
@@ -1044,29 +1044,32 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
 		goto out;
 	}
+	/* the channels scored by the trend's roughness search and by the leave-one-out search */
+	size_t chan[16], nc = L < 16 ? L : 16;
+	for (size_t c = 0; c < nc; c++)
+		chan[c] = nc > 1 ? c * (L - 1) / (nc - 1) : 0;
 	double trend_rms = 0;
 	if (m->trend == RECON_TREND_GGX) {
-		size_t tch[16], tnc = L < 16 ? L : 16;
-		for (size_t c = 0; c < tnc; c++)
-			tch[c] = tnc > 1 ? c * (L - 1) / (tnc - 1) : 0;
-		if (trend_fit(n, L, val, m->eps, c6, tch, tnc, &m->trend_alpha, m->tcoef, &trend_rms, err))
+		if (trend_fit(n, L, val, m->eps, c6, chan, nc, &m->trend_alpha, m->tcoef, &trend_rms, err))
 			goto out;
-	}
-	if (m->trend == RECON_TREND_GGX && !(tlog = malloc(n * L * sizeof *tlog))) {
-		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
-		goto out;
+		tlog = malloc(n * L * sizeof *tlog);
+		tbas = malloc(n * TREND_NB * sizeof *tbas);
+		if (!tlog || !tbas) {
+			acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
+			goto out;
+		}
+		for (size_t j = 0; j < n; j++) /* the basis once per sample, not once per channel */
+			trend_at(m, c6 + 6 * j, tbas + j * TREND_NB);
 	}
 	for (size_t l = 0; l < L; l++) {
-		double eps = m->eps[l], sum = 0, tb[TREND_NB];
+		double eps = m->eps[l], sum = 0;
 		for (size_t j = 0; j < n; j++) {
 			double v = val[l * n + j], sg = sig[l * n + j], pv = v > 0 ? v : 0;
 			double g, gs;
 			if (o.transform == RECON_T_LOG) {
 				g = log(pv + eps);
-				if (tlog) {
-					trend_at(m, c6 + 6 * j, tb);
-					tlog[l * n + j] = log(trend_val(m, tb, l) + eps);
-				}
+				if (tlog)
+					tlog[l * n + j] = log(trend_val(m, tbas + j * TREND_NB, l) + eps);
 				gs = isfinite(sg) ? sg / (pv + eps) : NAN;
 			} else {
 				g = sqrt(pv);
@@ -1142,9 +1145,6 @@ int recon_fit(const struct recon_samples *s, const struct recon_fit_opts *opts, 
 	if (tlog && !cand_ggx) /* explicit --trend ggx: the only candidate */
 		memcpy(fc.G, G2, n * L * sizeof *fc.G);
 	const double *Gs[2] = { fc.G, G2 };
-	size_t chan[16], nc = L < 16 ? L : 16;
-	for (size_t c = 0; c < nc; c++)
-		chan[c] = nc > 1 ? c * (L - 1) / (nc - 1) : 0;
 	double shapes[8], etas[8];
 	int nsh = o.shape > 0 ? 1 : shape_grid(o.kernel, shapes), neta;
 	if (o.shape > 0)
@@ -1320,6 +1320,7 @@ out:
 	free(fc.G);
 	free(rhs);
 	free(tlog);
+	free(tbas);
 	free(G2);
 	free(val);
 	free(sig);

@@ -123,6 +123,15 @@ double recon_rgb_reduction_error(const struct recon_rgb *r)
 	return r->red_err;
 }
 
+/* Uniform in [0, 1) from a xorshift64 state (the fixed-seed pairs of the construction-time measurements). */
+static double xs_unif(uint64_t *x)
+{
+	*x ^= *x << 13;
+	*x ^= *x >> 7;
+	*x ^= *x << 17;
+	return (double)(*x >> 11) * 0x1.0p-53;
+}
+
 double recon_rgb_f32_error(const struct recon_rgb *r)
 {
 	return r->f32_err;
@@ -183,12 +192,8 @@ static int measure_f32(struct recon_rgb *R, struct acq_err *err)
 	uint64_t x = 0x2545F4914F6CDD1Dull;
 	for (size_t q = 0; q < b; q++) {
 		double u[4];
-		for (int i = 0; i < 4; i++) {
-			x ^= x << 13;
-			x ^= x >> 7;
-			x ^= x << 17;
-			u[i] = (double)(x >> 11) * 0x1.0p-53;
-		}
+		for (int i = 0; i < 4; i++)
+			u[i] = xs_unif(&x);
 		rbf_canon(acos(u[0]), 2 * M_PI * u[1], acos(u[2]), 2 * M_PI * u[3], c6 + 6 * q);
 	}
 	gemm_kw(R, 0, b, c6, K, Gd, Kf, Gf);
@@ -459,12 +464,8 @@ int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, dou
 	uint64_t x = 0x9E3779B97F4A7C15ull;
 	for (int t = 0; t < 256; t++) {
 		double u[4];
-		for (int i = 0; i < 4; i++) {
-			x ^= x << 13;
-			x ^= x >> 7;
-			x ^= x << 17;
-			u[i] = (double)(x >> 11) * 0x1.0p-53;
-		}
+		for (int i = 0; i < 4; i++)
+			u[i] = xs_unif(&x);
 		double ci = 0.05 + 0.95 * u[0], co_ = 0.05 + 0.95 * u[2];
 		double si = sqrt(1 - ci * ci), so = sqrt(1 - co_ * co_);
 		double wi[3] = { si, 0, ci }, wo[3] = { so * cos(2 * M_PI * u[3]), so * sin(2 * M_PI * u[3]), co_ };
