@@ -17,9 +17,21 @@
 
 enum sim_arm_id { SIM_ARM_LASER = 0, SIM_ARM_DETECTOR = 1 };
 
-/* What sits on the sample stage (config `sim.sample`, control command `sample`). NONE: empty holder, the
+/* What sits on the sample stage (config `sim.sample`, control command `sample`): a material of sim/material.h
+ * (the values are its enum mat_id; sim_physics.c checks the correspondence), or NONE: empty holder, the
  * detector can see the direct beam (absolute calibration). */
-enum sim_sample { SIM_SAMPLE_GREEN_PAINT = 0, SIM_SAMPLE_WHITE, SIM_SAMPLE_METAL, SIM_SAMPLE_NONE, SIM_SAMPLE__COUNT };
+enum sim_sample {
+	SIM_SAMPLE_GREEN_PAINT = 0,
+	SIM_SAMPLE_WHITE,
+	SIM_SAMPLE_METAL,
+	SIM_SAMPLE_CLEAR_COAT,
+	SIM_SAMPLE_ROUGH_BACKSCATTER,
+	SIM_SAMPLE_CLOTH_SHEEN,
+	SIM_SAMPLE_SHARP_LOBE,
+	SIM_SAMPLE_NARROW_LINES,
+	SIM_SAMPLE_NONE,
+	SIM_SAMPLE__COUNT
+};
 
 /* Faults, set by the control socket or the seeded schedule, consumed by the services. */
 struct sim_faults {

@@ -16,23 +16,18 @@ struct phys {
 	double *fbuf;
 };
 
-static const char *const sample_names[SIM_SAMPLE__COUNT] = { "green-paint", "white", "metal", "none" };
+_Static_assert((int)SIM_SAMPLE_NONE == (int)MAT__COUNT, "enum sim_sample lists the materials, then none");
 
 int phys_sample_from_name(const char *name)
 {
-	if (!name)
-		return -1;
-	if (!strcmp(name, "paint"))
-		return SIM_SAMPLE_GREEN_PAINT;
-	for (int i = 0; i < SIM_SAMPLE__COUNT; i++)
-		if (!strcmp(name, sample_names[i]))
-			return i;
-	return -1;
+	if (name && !strcmp(name, "none"))
+		return SIM_SAMPLE_NONE;
+	return mat_from_name(name);
 }
 
 const char *phys_sample_name(int sample)
 {
-	return sample >= 0 && sample < SIM_SAMPLE__COUNT ? sample_names[sample] : "?";
+	return sample == SIM_SAMPLE_NONE ? "none" : mat_name((enum mat_id)sample);
 }
 
 /* Calibration: pixel PHYS_NDARK at 450 nm, the last pixel at 1100 nm, slight grating curvature. */

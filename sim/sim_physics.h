@@ -80,7 +80,7 @@ unsigned phys_signal(const struct phys *p, const struct sim_world *w, double *ra
 int phys_measure(const struct phys *p, const struct sim_world *w, double integration_ms, unsigned averages,
 		 double gain_boost, struct sim_rng *rng, struct phys_frame *f, struct acq_err *err);
 
-/* Sample name ("green-paint", "white", "metal", "none") ↔ enum sim_sample; -1 when unknown. */
+/* Sample name (a material name of sim/material.h, or "none") ↔ enum sim_sample; -1 when unknown. */
 int phys_sample_from_name(const char *name);
 const char *phys_sample_name(int sample);
 

@@ -397,7 +397,10 @@ struct sim_service *sim_spectro_new(struct sim_world *w, struct yc_node *node, s
 	if (node && yc_string(node, "socket", false, &path, err))
 		return NULL;
 	if (simcfg) {
-		static const char *const samples[] = { "green-paint", "white", "metal", "none", NULL };
+		const char *samples[SIM_SAMPLE__COUNT + 1];
+		for (int i = 0; i < SIM_SAMPLE__COUNT; i++)
+			samples[i] = phys_sample_name(i);
+		samples[SIM_SAMPLE__COUNT] = NULL;
 		struct yc_node *sp = yc_get(simcfg, "spectrometer");
 		if (yc_enum(simcfg, "sample", false, samples, &sample, err) || (sp && phys_parse(sp, &pc, err)))
 			return NULL;

@@ -22,7 +22,8 @@ static void usage(FILE *f)
 {
 	fprintf(f,
 		"usage: acq-sim truth MATERIAL ACTION [options]\n"
-		"  MATERIAL: green-paint (or paint) | white | metal\n"
+		"  MATERIAL: green-paint (or paint) | white | metal | clear-coat | rough-backscatter | cloth-sheen |\n"
+		"            sharp-lobe | narrow-lines (sim/material.h)\n"
 		"  actions (exactly one):\n"
 		"    --dhr OUT.csv [--theta-i 8,30,60]    columns theta_i,wavelength_nm,dhr,sigma (sigma: quadrature bound)\n"
 		"    --eval QUERIES.csv [-o OUT.csv]      f at the rows' theta_i,phi_i,theta_o,phi_o (degrees), 1/sr\n"
@@ -332,14 +333,15 @@ static int do_grid(struct mat *m, const char *material, const char *spec, const 
 
 /* MERL export: the spectral BRDF reduced to linear sRGB in sr^-1 by recon/colour.h (colour_opts_brdf: D65,
  * Bradford, absolute, negatives clamped, range kept). The reduction is linear, so it is folded in before the
- * evaluation: f(l) = diff rho(l) + spec F(l, c) gives rgb = diff (W rho) + spec (W F(., c)), with W F(., c)
- * tabulated over c in [0, 1] (MERL_FT + 1 nodes, linear interpolation: relative error < 1e-6). */
+ * evaluation: f(l) = sum_k w_k S_k(l, c_k) (mat_terms) gives rgb = sum_k w_k (W S_k(., c_k)), with W S_k
+ * computed once for the fixed spectra and tabulated over c in [0, 1] for the Fresnel factors (MERL_FT + 1
+ * nodes, linear interpolation: relative error < 1e-6). */
 #define MERL_FT 4096
 
 struct merl_ctx {
 	const struct mat *m;
-	double wrho[3];
-	double *ftab; /* 3 x (MERL_FT + 1) */
+	double *ftab[MAT_S__COUNT]; /* 3 x (MERL_FT + 1) per Fresnel spectrum, 3 for a fixed one */
+	bool varies[MAT_S__COUNT];
 	struct colour_opts o;
 	struct colour_stats st;
 };
@@ -347,30 +349,45 @@ struct merl_ctx {
 static int merl_cb(void *ctx, const double wi[3], const double wo[3], double rgb[3])
 {
 	struct merl_ctx *x = ctx;
-	double diff, spec, c, lin[3];
-	mat_terms(x->m, wi, wo, &diff, &spec, &c);
-	double u = fmin(fmax(c, 0.0), 1.0) * MERL_FT;
-	int j = (int)u;
-	if (j >= MERL_FT)
-		j = MERL_FT - 1;
-	double t = u - j;
-	for (int k = 0; k < 3; k++) {
-		const double *f = x->ftab + k * (MERL_FT + 1);
-		lin[k] = diff * x->wrho[k] + spec * (f[j] + t * (f[j + 1] - f[j]));
+	struct mat_term t[MAT_MAX_TERMS];
+	double lin[3] = { 0, 0, 0 };
+	int nt = mat_terms(x->m, wi, wo, t);
+	for (int j = 0; j < nt; j++) {
+		if (!(t[j].w > 0))
+			continue;
+		const double *f = x->ftab[t[j].spec];
+		if (!x->varies[t[j].spec]) {
+			for (int k = 0; k < 3; k++)
+				lin[k] += t[j].w * f[k];
+			continue;
+		}
+		double u = fmin(fmax(t[j].c, 0.0), 1.0) * MERL_FT;
+		int i = (int)u;
+		if (i >= MERL_FT)
+			i = MERL_FT - 1;
+		double a = u - i;
+		for (int k = 0; k < 3; k++) {
+			const double *fk = f + k * (MERL_FT + 1);
+			lin[k] += t[j].w * (fk[i] + a * (fk[i + 1] - fk[i]));
+		}
 	}
 	colour_finish(&x->o, lin, rgb, &x->st);
 	return 0;
 }
 
-static int do_merl(struct mat *m, enum mat_id id, const char *out, const double *wl, int nwl)
+static int do_merl(struct mat *m, const char *out, const double *wl, int nwl)
 {
 	struct merl_ctx x = { .m = m };
 	struct acq_err err = { 0 };
 	colour_opts_brdf(&x.o);
 	double *W = malloc(sizeof(double) * 3 * (size_t)nwl), *sp = malloc(sizeof(double) * (size_t)nwl);
-	x.ftab = malloc(sizeof(double) * 3 * (MERL_FT + 1));
-	int rc = 1;
-	if (!W || !sp || !x.ftab) {
+	int rc = 1, oom = !W || !sp;
+	for (int s = 0; s < MAT_S__COUNT; s++) {
+		x.varies[s] = s == MAT_S_DIEL || s == MAT_S_COND;
+		x.ftab[s] = malloc(sizeof(double) * 3 * (x.varies[s] ? MERL_FT + 1 : 1));
+		oom |= !x.ftab[s];
+	}
+	if (oom) {
 		fprintf(stderr, "acq-sim truth: out of memory\n");
 		goto done;
 	}
@@ -378,15 +395,15 @@ static int do_merl(struct mat *m, enum mat_id id, const char *out, const double 
 		fprintf(stderr, "acq-sim truth: --merl: %s\n", err.msg);
 		goto done;
 	}
-	for (int l = 0; l < nwl; l++)
-		sp[l] = mat_rho_d(id, wl[l]);
-	colour_apply_weights(W, (size_t)nwl, sp, x.wrho);
-	for (int j = 0; j <= MERL_FT; j++) {
-		double rgb[3];
-		mat_fresnel(m, (double)j / MERL_FT, sp);
-		colour_apply_weights(W, (size_t)nwl, sp, rgb);
-		for (int k = 0; k < 3; k++)
-			x.ftab[k * (MERL_FT + 1) + j] = rgb[k];
+	for (int s = 0; s < MAT_S__COUNT; s++) {
+		int nc = x.varies[s] ? MERL_FT + 1 : 1;
+		for (int j = 0; j < nc; j++) {
+			double rgb[3];
+			mat_spectrum(m, (enum mat_spec)s, (double)j / MERL_FT, sp);
+			colour_apply_weights(W, (size_t)nwl, sp, rgb);
+			for (int k = 0; k < 3; k++)
+				x.ftab[s][k * nc + j] = rgb[k];
+		}
 	}
 	if (merl_write(out, merl_cb, &x, &err)) {
 		fprintf(stderr, "acq-sim truth: --merl: %s\n", err.msg);
@@ -399,7 +416,8 @@ static int do_merl(struct mat *m, enum mat_id id, const char *out, const double 
 done:
 	free(W);
 	free(sp);
-	free(x.ftab);
+	for (int s = 0; s < MAT_S__COUNT; s++)
+		free(x.ftab[s]);
 	return rc;
 }
 
@@ -427,7 +445,7 @@ int sim_truth_main(int argc, char **argv)
 	const char *material = argv[1];
 	int id = mat_from_name(material);
 	if (id < 0) {
-		fprintf(stderr, "acq-sim truth: unknown material '%s' (expected green-paint, white, metal)\n", material);
+		fprintf(stderr, "acq-sim truth: unknown material '%s' (expected %s)\n", material, mat_names_list());
 		return 2;
 	}
 	/* options after MATERIAL: parse argv + 1 from its index 1; optind = 0 re-initialises getopt (so the
@@ -508,7 +526,7 @@ int sim_truth_main(int argc, char **argv)
 	} else if (grid) {
 		rc = do_grid(m, mat_name(id), grid, out, rel, floor_, seed, keep_blind, wl, nwl);
 	} else {
-		rc = do_merl(m, (enum mat_id)id, merl, wl, nwl);
+		rc = do_merl(m, merl, wl, nwl);
 	}
 	mat_free(m);
 	free(wl);

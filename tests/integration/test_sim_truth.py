@@ -1,6 +1,6 @@
 #!/usr/bin/python3
-"""Integration test of `acq-sim truth`: DHR CSV layout and values (white = its reflectance, paint and metal
-<= 1, sigma a small non-negative bound), --eval in the CSV interchange format (reciprocity, Lambertian value,
+"""Integration test of `acq-sim truth`: DHR CSV layout and values for every material (white = its reflectance,
+the others <= 1, sigma a small non-negative bound), --eval in the CSV interchange format (reciprocity, Lambertian value,
 non-negativity), --grid noisy samples whose sigma columns describe their noise (z-scores against --eval),
 and clear errors."""
 import csv
@@ -21,6 +21,8 @@ if not os.access(SIM, os.X_OK):
     print(f"skip: {SIM} not built")
     sys.exit(77)
 tmp = tempfile.mkdtemp(prefix="acq-truth-test.")
+# every simulator material (sim/material.h): the trend-family ones, then the truths outside that family
+ALL = ("white", "green-paint", "metal", "clear-coat", "rough-backscatter", "cloth-sheen", "sharp-lobe", "narrow-lines")
 
 
 def check(cond, what):
@@ -44,7 +46,7 @@ def read_csv(path):
 try:
     rng = np.random.default_rng(SEED)
     # --- DHR
-    for mat in ("white", "green-paint", "metal"):
+    for mat in ALL:
         out = os.path.join(tmp, f"{mat}.dhr.csv")
         r = run(mat, "--dhr", out, "--theta-i", "8,30,60,85", "--wavelengths", "450:1100:5")
         check(r.returncode == 0, f"{mat}: --dhr runs ({r.stderr.strip()})")
@@ -63,6 +65,14 @@ try:
         if mat == "metal":
             d8 = {w: v for t, w, v, s in a if t == 8}
             check(d8[450] < 0.5 and d8[900] > 0.9, f"gold-like metal: 450 nm {d8[450]:.3f}, 900 nm {d8[900]:.3f}")
+        if mat == "narrow-lines":
+            d8 = {w: v for t, w, v, s in a if t == 8}
+            check(d8[535] < 0.6 * d8[525] and d8[640] < 0.6 * d8[630],
+                  f"narrow lines at 537 and 641 nm: {d8[535]:.3f} vs {d8[525]:.3f}, {d8[640]:.3f} vs {d8[630]:.3f}")
+        if mat == "cloth-sheen":
+            d = {(t, w): v for t, w, v, s in a}
+            check(d[(85, 600)] > 2 * d[(8, 600)], f"cloth: sheen raises the DHR at grazing ({d[(85, 600)]:.3f} at 85 deg, "
+                  f"{d[(8, 600)]:.3f} at 8 deg)")
 
     # --- eval: reciprocity, Lambertian value, non-negativity
     q = os.path.join(tmp, "q.csv")
@@ -74,7 +84,7 @@ try:
             f.write(f"{t[0]},{t[1]},{t[2]},{t[3]},x\n")
         for t in ang:
             f.write(f"{t[2]},{t[3]},{t[0]},{t[1]},\n")
-    for mat in ("green-paint", "metal", "white"):
+    for mat in ALL:
         out = os.path.join(tmp, f"{mat}.eval.csv")
         r = run(mat, "--eval", q, "-o", out, "--wavelengths", "450:1100:50")
         check(r.returncode == 0, f"{mat}: --eval runs ({r.stderr.strip()})")

@@ -75,6 +75,10 @@ static void test_merl_matches_truth(void **state)
 	printf("ACQ_SEED=%llu\n", (unsigned long long)seed);
 	check_material("green-paint", seed);
 	check_material("metal", seed + 1);
+	check_material("clear-coat", seed + 2);
+	check_material("cloth-sheen", seed + 3);
+	check_material("rough-backscatter", seed + 4);
+	check_material("sharp-lobe", seed + 5);
 }
 
 int main(void)
