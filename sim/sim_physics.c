@@ -14,6 +14,8 @@ struct phys {
 	double resp[PHYS_MAX_PIXELS];   /* s(l) QE(l), 0 on the black pixels */
 	struct mat *mat[MAT__COUNT];
 	double *fbuf;
+	double ref_fac[PHYS_MAX_PIXELS]; /* (rho_cert + d) / rho_cert of the white standard */
+	double t;                        /* bench time of the next measurement (source drift) */
 };
 
 _Static_assert((int)SIM_SAMPLE_NONE == (int)MAT__COUNT, "enum sim_sample lists the materials, then none");
@@ -56,6 +58,7 @@ void phys_defaults(struct phys_cfg *c)
 	c->read_noise_counts = 8.0;
 	c->electrons_per_count = 2.0;
 	c->nonlinearity = 0.05;
+	refdrift_defaults(&c->cal);
 }
 
 int phys_parse(struct yc_node *node, struct phys_cfg *out, struct acq_err *err)
@@ -147,6 +150,12 @@ struct phys *phys_new(const struct phys_cfg *c, struct acq_err *err)
 			phys_free(p);
 			return NULL;
 		}
+	if (refdrift_reference(&c->cal, c->npix, p->wl, p->ref_fac, err)) {
+		phys_free(p);
+		return NULL;
+	}
+	for (int i = 0; i < c->npix; i++)
+		p->ref_fac[i] = 1.0 + p->ref_fac[i] / mat_rho_d(MAT_WHITE, p->wl[i]);
 	return p;
 }
 
@@ -163,6 +172,22 @@ void phys_free(struct phys *p)
 const struct phys_cfg *phys_config(const struct phys *p)
 {
 	return &p->cfg;
+}
+
+void phys_set_time(struct phys *p, double t)
+{
+	p->t = t;
+}
+
+double phys_reference_factor(const struct phys *p, int pixel)
+{
+	return pixel >= 0 && pixel < p->cfg.npix ? p->ref_fac[pixel] : 1.0;
+}
+
+/* The source's drift factor at the current bench time for pixel i. */
+static double drift(const struct phys *p, int i)
+{
+	return refdrift_source(&p->cfg.cal, p->t, p->wl[i]);
 }
 
 static double deg(double d)
@@ -208,7 +233,7 @@ unsigned phys_signal(const struct phys *p, const struct sim_world *w, double *ra
 		else
 			frac = fmin(1.0, fmax(0.0, (fov + beam - delta) / (2.0 * beam)));
 		for (int i = 0; i < npix; i++)
-			rate[i] = k * p->resp[i] * frac;
+			rate[i] = k * p->resp[i] * frac * drift(p, i);
 		return occ;
 	}
 	double omega = 2.0 * M_PI * (1.0 - cos(deg(g->fov_halfwidth_deg)));
@@ -216,7 +241,7 @@ unsigned phys_signal(const struct phys *p, const struct sim_world *w, double *ra
 	mat_eval(p->mat[m], wi, wo, p->fbuf);
 	double geo = k * omega * fmax(0.0, wo[2]);
 	for (int i = 0; i < npix; i++)
-		rate[i] = geo * p->resp[i] * p->fbuf[i];
+		rate[i] = geo * p->resp[i] * p->fbuf[i] * drift(p, i) * (m == MAT_WHITE ? p->ref_fac[i] : 1.0);
 	return occ;
 }
 

@@ -283,6 +283,7 @@ static void finish_exposure(struct spectro_svc *s, double now)
 		boost = 1000.0;
 	}
 	s->pending = false;
+	phys_set_time(s->phys, now);
 	if (phys_measure(s->phys, w, s->integration_ms, s->averages, boost, &s->rng, &s->frame, &err)) {
 		queue_error(s, SSP_E_BADREQ, SSP_MEASURE, s->seq, err.msg);
 		return;
@@ -402,7 +403,8 @@ struct sim_service *sim_spectro_new(struct sim_world *w, struct yc_node *node, s
 			samples[i] = phys_sample_name(i);
 		samples[SIM_SAMPLE__COUNT] = NULL;
 		struct yc_node *sp = yc_get(simcfg, "spectrometer");
-		if (yc_enum(simcfg, "sample", false, samples, &sample, err) || (sp && phys_parse(sp, &pc, err)))
+		if (yc_enum(simcfg, "sample", false, samples, &sample, err) || (sp && phys_parse(sp, &pc, err)) ||
+		    refdrift_parse(simcfg, &pc.cal, err))
 			return NULL;
 	}
 	struct spectro_svc *s = calloc(1, sizeof *s);

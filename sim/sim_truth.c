@@ -14,6 +14,7 @@
 #include "recon/merl.h"
 #include "sim/material.h"
 #include "sim/sim.h"
+#include "sim/sim_refdrift.h"
 #include "sim/sim_rng.h"
 
 #define MAX_WL 100000
@@ -29,6 +30,11 @@ static void usage(FILE *f)
 		"    --eval QUERIES.csv [-o OUT.csv]      f at the rows' theta_i,phi_i,theta_o,phi_o (degrees), 1/sr\n"
 		"    --grid NIxNOxNP -o SAMPLES.csv       noisy samples: NI incidences, NO observation zeniths in (0, 80),\n"
 		"          [--noise REL] [--noise-floor ABS] [--seed N] [--keep-blind]   NP azimuths; sigma_<nm> columns\n"
+		"          [--reference U[,CORR_NM[,SEED]]]  calibrated against a white standard whose reflectance differs\n"
+		"                                            from its certificate by a smooth deviation of std U\n"
+		"          [--drift AMP[,PERIOD_S[,SEED]]] [--point-time S]  source drift (rms AMP) between the reference\n"
+		"                                            (bench time 0) and sample k (time k S, default 20 s)\n"
+		"          (both as acq-sim's sim.reference_standard / sim.source_drift: sim/sim_refdrift.h; off by default)\n"
 		"    --merl OUT.binary                    MERL table, linear sRGB in 1/sr (D65, Bradford; recon/colour.h)\n"
 		"  --wavelengths A:B:STEP   spectral sampling in nm within 450..1100 (default 450:1100:1)\n"
 		"  --level N                DHR quadrature level 0..5 (default 2)\n");
@@ -257,8 +263,32 @@ static double angle_deg(const double a[3], const double b[3])
 	return atan2(sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]), c) * 180.0 / M_PI;
 }
 
+/* "A[,B[,C]]" into a (required), b, c (kept when absent); c an integer. 0 or -1. */
+static int parse_triple(const char *s, double *a, double *b, uint64_t *c)
+{
+	char *end;
+	*a = strtod(s, &end);
+	if (end == s || !isfinite(*a))
+		return -1;
+	if (*end == ',') {
+		const char *q = end + 1;
+		*b = strtod(q, &end);
+		if (end == q || !isfinite(*b))
+			return -1;
+		if (*end == ',') {
+			q = end + 1;
+			errno = 0;
+			*c = strtoull(q, &end, 10);
+			if (end == q || errno || *q == '-')
+				return -1;
+		}
+	}
+	return *end ? -1 : 0;
+}
+
 static int do_grid(struct mat *m, const char *material, const char *spec, const char *out, double rel, double floor_,
-		   unsigned long long seed, bool keep_blind, const double *wl, int nwl)
+		   unsigned long long seed, bool keep_blind, const struct refdrift_cfg *cal, double point_s,
+		   const double *wl, int nwl)
 {
 	int ni, no, np;
 	char tail;
@@ -276,21 +306,34 @@ static int do_grid(struct mat *m, const char *material, const char *spec, const 
 		return 1;
 	}
 	double *f = malloc(sizeof(double) * (size_t)nwl), *v = malloc(sizeof(double) * (size_t)nwl),
-	       *s = malloc(sizeof(double) * (size_t)nwl);
-	if (!f || !v || !s) {
-		fprintf(stderr, "acq-sim truth: out of memory\n");
+	       *s = malloc(sizeof(double) * (size_t)nwl), *rf = malloc(sizeof(double) * (size_t)nwl);
+	struct acq_err err = { 0 };
+	if (!f || !v || !s || !rf || refdrift_reference(cal, nwl, wl, rf, &err)) {
+		fprintf(stderr, "acq-sim truth: %s\n", f && v && s && rf ? err.msg : "out of memory");
 		free(f);
 		free(v);
 		free(s);
+		free(rf);
 		if (fo != stdout)
 			fclose(fo);
 		return 1;
+	}
+	/* relative calibration against the standard: f_cal = f rho_cert / rho_true (rf: rho_true - rho_cert) */
+	for (int l = 0; l < nwl; l++) {
+		double rc = mat_rho_d(MAT_WHITE, wl[l]);
+		rf[l] = rc / (rc + rf[l]);
 	}
 	struct sim_rng r;
 	sim_rng_seed(&r, seed);
 	fprintf(fo, "# acq-sim truth %s: grid %s, theta in (0, 80) deg at cell centres, phi_i = %g deg; noise: value x (1 + %g N)"
 		    " + %g N, seed %llu; blind zones (< %g deg between wi and wo) %s\n",
 		material, spec, g.laser_phi_deg, rel, floor_, seed, blind, keep_blind ? "kept" : "dropped");
+	if (cal->ref_u > 0 || cal->drift_amp > 0)
+		fprintf(fo, "# systematic errors (not in the sigma columns; sim/sim_refdrift.h): reference standard u %g "
+		    "(correlation %g nm, seed %llu); source drift rms %g (tilt %g, period %g s, seed %llu), sample k at "
+		    "bench time k x %g s after the reference\n", cal->ref_u, cal->ref_corr_nm,
+		(unsigned long long)cal->ref_seed, cal->drift_amp, cal->drift_tilt, cal->drift_period_s,
+		(unsigned long long)cal->drift_seed, point_s);
 	fprintf(fo, "theta_i,phi_i,theta_o,phi_o");
 	header_wl(fo, wl, nwl, "");
 	header_wl(fo, wl, nwl, "sigma_");
@@ -308,7 +351,9 @@ static int do_grid(struct mat *m, const char *material, const char *spec, const 
 					continue;
 				}
 				mat_eval(m, wi, wo, f);
+				double t = (rows + 1) * point_s;
 				for (int l = 0; l < nwl; l++) {
+					f[l] *= rf[l] * refdrift_source(cal, t, wl[l]);
 					s[l] = sqrt(rel * rel * f[l] * f[l] + floor_ * floor_);
 					v[l] = f[l] * (1.0 + rel * sim_rng_gauss(&r)) + floor_ * sim_rng_gauss(&r);
 				}
@@ -323,6 +368,7 @@ static int do_grid(struct mat *m, const char *material, const char *spec, const 
 	free(f);
 	free(v);
 	free(s);
+	free(rf);
 	fprintf(stderr, "acq-sim truth: %d samples written, %d in blind zones dropped\n", rows, dropped);
 	if (fo != stdout && fclose(fo)) {
 		fprintf(stderr, "acq-sim truth: %s: %s\n", out, strerror(errno));
@@ -429,6 +475,9 @@ int sim_truth_main(int argc, char **argv)
 	unsigned long long seed = 1;
 	bool keep_blind = false;
 	long level = 2;
+	struct refdrift_cfg cal;
+	refdrift_defaults(&cal);
+	double point_s = 20;
 	static const struct option opts[] = {
 		{ "dhr", required_argument, NULL, 'd' },      { "eval", required_argument, NULL, 'e' },
 		{ "grid", required_argument, NULL, 'g' },     { "merl", required_argument, NULL, 'm' },
@@ -436,6 +485,8 @@ int sim_truth_main(int argc, char **argv)
 		{ "noise", required_argument, NULL, 'n' },    { "noise-floor", required_argument, NULL, 'f' },
 		{ "seed", required_argument, NULL, 's' },     { "keep-blind", no_argument, NULL, 'k' },
 		{ "level", required_argument, NULL, 'L' },    { "output", required_argument, NULL, 'o' },
+		{ "reference", required_argument, NULL, 'R' }, { "drift", required_argument, NULL, 'D' },
+		{ "point-time", required_argument, NULL, 'P' },
 		{ "help", no_argument, NULL, 'h' },           { NULL, 0, NULL, 0 },
 	};
 	if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
@@ -490,6 +541,29 @@ int sim_truth_main(int argc, char **argv)
 				return 2;
 			}
 			break;
+		case 'R':
+			if (parse_triple(optarg, &cal.ref_u, &cal.ref_corr_nm, &cal.ref_seed) || !(cal.ref_u >= 0 && cal.ref_u <= 0.1) ||
+			    !(cal.ref_corr_nm >= 5 && cal.ref_corr_nm <= 10000)) {
+				fprintf(stderr, "acq-sim truth: --reference: expected U[,CORR_NM[,SEED]] with U in [0, 0.1], "
+						"CORR_NM in [5, 10000], got '%s'\n", optarg);
+				return 2;
+			}
+			break;
+		case 'D':
+			if (parse_triple(optarg, &cal.drift_amp, &cal.drift_period_s, &cal.drift_seed) ||
+			    !(cal.drift_amp >= 0 && cal.drift_amp <= 0.05) || !(cal.drift_period_s >= 1 && cal.drift_period_s <= 1e7)) {
+				fprintf(stderr, "acq-sim truth: --drift: expected AMP[,PERIOD_S[,SEED]] with AMP in [0, 0.05], "
+						"PERIOD_S in [1, 1e7], got '%s'\n", optarg);
+				return 2;
+			}
+			break;
+		case 'P':
+			point_s = strtod(optarg, &end);
+			if (end == optarg || *end || !(point_s >= 0 && point_s <= 1e6)) {
+				fprintf(stderr, "acq-sim truth: --point-time: expected seconds in [0, 1e6], got '%s'\n", optarg);
+				return 2;
+			}
+			break;
 		case 'h': usage(stdout); return 0;
 		default: usage(stderr); return 2;
 		}
@@ -524,7 +598,7 @@ int sim_truth_main(int argc, char **argv)
 	} else if (eval) {
 		rc = do_eval(m, eval, out ? out : "-", wl, nwl);
 	} else if (grid) {
-		rc = do_grid(m, mat_name(id), grid, out, rel, floor_, seed, keep_blind, wl, nwl);
+		rc = do_grid(m, mat_name(id), grid, out, rel, floor_, seed, keep_blind, &cal, point_s, wl, nwl);
 	} else {
 		rc = do_merl(m, merl, wl, nwl);
 	}

@@ -123,6 +123,25 @@ try:
              "-o", "-", "--wavelengths", "450:1100:25")
     check(r2.stdout == open(out).read(), "grid: same seed, same samples")
 
+    # --- systematic errors: a white standard off its certificate (one smooth factor common to all samples) and
+    # source drift (a factor that changes slowly from sample to sample); noise off to see them alone
+    def grid(*extra):
+        r = run("green-paint", "--grid", "4x4x6", "--noise", "0", "--wavelengths", "450:1100:10", "-o", "-", *extra)
+        check(r.returncode == 0, f"--grid {' '.join(extra)} runs ({r.stderr.strip()})")
+        lines = [ln for ln in r.stdout.splitlines() if not ln.startswith("#")]
+        return np.array([ln.split(",") for ln in lines[1:]], dtype=float)[:, 4:4 + 66], r.stdout
+    g0, _ = grid()
+    g1, t1 = grid("--reference", "0.002,100,3")
+    rr = g1 / g0
+    check(np.ptp(rr, axis=0).max() < 1e-6 and 1e-4 < np.abs(rr[0] - 1).max() < 0.012 and
+          np.abs(np.diff(rr[0])).max() < 0.1 * np.abs(rr[0] - 1).max() + 1e-4 and "reference standard u 0.002" in t1,
+          f"--reference: one smooth factor for all samples (largest |factor - 1| {np.abs(rr[0] - 1).max():.2g})")
+    g2, _ = grid("--drift", "0.01,600,2", "--point-time", "30")
+    rd = g2 / g0
+    check(np.ptp(rd[:, 20]) > 1e-3 and np.abs(np.diff(rd[:, 20])).max() < 0.01 and np.abs(rd - 1).max() < 0.06,
+          f"--drift: a slow factor varying over the samples (range {np.ptp(rd[:, 20]):.2g} at 650 nm)")
+    check(run("white", "--grid", "2x2x2", "-o", "-", "--reference", "0.5").returncode == 2, "--reference range checked")
+
     # --- MERL (values are checked against the truth in tests/unit/test_sim_truth_merl.c)
     mp = os.path.join(tmp, "w.binary")
     r = run("white", "--merl", mp, "--wavelengths", "450:1100:5")
