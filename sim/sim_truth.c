@@ -16,6 +16,7 @@
 #include "sim/sim.h"
 #include "sim/sim_refdrift.h"
 #include "sim/sim_rng.h"
+#include "sim/sim_sphere.h"
 
 #define MAX_WL 100000
 
@@ -36,6 +37,9 @@ static void usage(FILE *f)
 		"                                            (bench time 0) and sample k (time k S, default 20 s)\n"
 		"          (both as acq-sim's sim.reference_standard / sim.source_drift: sim/sim_refdrift.h; off by default)\n"
 		"    --merl OUT.binary                    MERL table, linear sRGB in 1/sr (D65, Bradford; recon/colour.h)\n"
+		"    --spectrophotometer [-o OUT.csv] [--seed N]   a simulated d/8 integrating-sphere measurement of the DHR\n"
+		"                                         at 8 deg with its own noise and stated uncertainty (sim/sim_sphere.h):\n"
+		"                                         columns wavelength_nm,dhr,sigma (brdf-recon dhr --reference)\n"
 		"  --wavelengths A:B:STEP   spectral sampling in nm within 450..1100 (default 450:1100:1)\n"
 		"  --level N                DHR quadrature level 0..5 (default 2)\n");
 }
@@ -75,6 +79,41 @@ static void header_wl(FILE *f, const double *wl, int n, const char *prefix)
 {
 	for (int i = 0; i < n; i++)
 		fprintf(f, ",%s%.10g", prefix, wl[i]);
+}
+
+static int do_sphere(struct mat *m, const char *out, unsigned long long seed, const double *wl, int nwl)
+{
+	double *v = malloc(sizeof(double) * (size_t)nwl), *s = malloc(sizeof(double) * (size_t)nwl);
+	struct acq_err err = { 0 };
+	int rc = 1;
+	FILE *f = NULL;
+	if (!v || !s) {
+		fprintf(stderr, "acq-sim truth: out of memory\n");
+		goto done;
+	}
+	if (sphere_measure(m, nwl, wl, seed, v, s, &err)) {
+		fprintf(stderr, "acq-sim truth: %s\n", err.msg);
+		goto done;
+	}
+	if (!(f = strcmp(out, "-") ? fopen(out, "w") : stdout)) {
+		fprintf(stderr, "acq-sim truth: %s: %s\n", out, strerror(errno));
+		goto done;
+	}
+	fprintf(f, "wavelength_nm,dhr,sigma\n");
+	for (int l = 0; l < nwl; l++)
+		fprintf(f, "%.10g,%.10g,%.4g\n", wl[l], v[l], s[l]);
+	rc = 0;
+	fprintf(stderr, "acq-sim truth: spectrophotometer (d/8 sphere, seed %llu): DHR at %g deg, stated sigma = "
+			"calibration %.1f %% (correlated over %g nm) + noise (sim/sim_sphere.h)\n",
+		seed, SPHERE_THETA_DEG, 100 * SPHERE_U_CAL, SPHERE_CORR_NM);
+done:
+	if (f && f != stdout && fclose(f)) {
+		fprintf(stderr, "acq-sim truth: %s: %s\n", out, strerror(errno));
+		rc = 1;
+	}
+	free(v);
+	free(s);
+	return rc;
 }
 
 static int do_dhr(struct mat *m, const char *material, const char *out, const char *thetas, int level, const double *wl,
@@ -473,7 +512,7 @@ int sim_truth_main(int argc, char **argv)
 		   *wls = "450:1100:1";
 	double rel = 0.01, floor_ = 0;
 	unsigned long long seed = 1;
-	bool keep_blind = false;
+	bool keep_blind = false, sphere = false;
 	long level = 2;
 	struct refdrift_cfg cal;
 	refdrift_defaults(&cal);
@@ -486,7 +525,7 @@ int sim_truth_main(int argc, char **argv)
 		{ "seed", required_argument, NULL, 's' },     { "keep-blind", no_argument, NULL, 'k' },
 		{ "level", required_argument, NULL, 'L' },    { "output", required_argument, NULL, 'o' },
 		{ "reference", required_argument, NULL, 'R' }, { "drift", required_argument, NULL, 'D' },
-		{ "point-time", required_argument, NULL, 'P' },
+		{ "point-time", required_argument, NULL, 'P' }, { "spectrophotometer", no_argument, NULL, 'S' },
 		{ "help", no_argument, NULL, 'h' },           { NULL, 0, NULL, 0 },
 	};
 	if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
@@ -515,6 +554,7 @@ int sim_truth_main(int argc, char **argv)
 		case 'w': wls = optarg; break;
 		case 'o': out = optarg; break;
 		case 'k': keep_blind = true; break;
+		case 'S': sphere = true; nact++; break;
 		case 'n':
 		case 'f': {
 			double v = strtod(optarg, &end);
@@ -573,7 +613,7 @@ int sim_truth_main(int argc, char **argv)
 		return 2;
 	}
 	if (nact != 1) {
-		fprintf(stderr, "acq-sim truth: give exactly one of --dhr, --eval, --grid, --merl\n");
+		fprintf(stderr, "acq-sim truth: give exactly one of --dhr, --eval, --grid, --merl, --spectrophotometer\n");
 		return 2;
 	}
 	if (grid && !out) {
@@ -597,6 +637,8 @@ int sim_truth_main(int argc, char **argv)
 		rc = do_dhr(m, mat_name(id), dhr, thetas, (int)level, wl, nwl);
 	} else if (eval) {
 		rc = do_eval(m, eval, out ? out : "-", wl, nwl);
+	} else if (sphere) {
+		rc = do_sphere(m, out ? out : "-", seed, wl, nwl);
 	} else if (grid) {
 		rc = do_grid(m, mat_name(id), grid, out, rel, floor_, seed, keep_blind, &cal, point_s, wl, nwl);
 	} else {
