@@ -98,7 +98,5 @@ struct sim_service *sim_spectro_new(struct sim_world *w, struct yc_node *node, s
 struct sim_service *sim_control_new(struct sim_world *w, struct yc_node *simcfg, const char *socket_path,
 				    struct acq_err *err);
 
-/* `acq-sim truth ...`: ground-truth export (MERL table, DHR CSV, evaluation at directions). Exit status. */
-int sim_truth_main(int argc, char **argv);
 
 #endif
