@@ -89,7 +89,7 @@ static void truth_usage(FILE *f)
 	fprintf(f,
 		"usage: acq-sim truth MATERIAL ACTION [options]\n"
 		"  MATERIAL: green-paint (or paint) | white | metal | clear-coat | rough-backscatter | cloth-sheen |\n"
-		"            sharp-lobe | narrow-lines (sim/material.h)\n"
+		"            sharp-lobe | narrow-lines | merl:FILE (a MERL binary table, upsampled to spectra: sim/material.h)\n"
 		"  actions (exactly one):\n"
 		"    --dhr OUT.csv [--theta-i 8,30,60]    columns theta_i,wavelength_nm,dhr,sigma (sigma: quadrature bound)\n"
 		"    --eval QUERIES.csv [-o OUT.csv]      f at the rows' theta_i,phi_i,theta_o,phi_o (degrees), 1/sr\n"
@@ -179,10 +179,15 @@ static int truth_main(int argc, char **argv)
 		truth_usage(argc < 2 ? stderr : stdout);
 		return argc < 2 ? 2 : 0;
 	}
-	const char *material = argv[1];
+	const char *material = argv[1], *merl_file = NULL;
 	int id = mat_from_name(material);
-	if (id < 0) {
-		fprintf(stderr, "acq-sim truth: unknown material '%s' (expected %s)\n", material, mat_names_list());
+	if (!strncmp(material, "merl:", 5) && material[5]) {
+		id = MAT_MERL;
+		merl_file = material + 5;
+	}
+	if (id < 0 || (id == MAT_MERL && !merl_file)) {
+		fprintf(stderr, "acq-sim truth: unknown material '%s' (expected %s, or merl:FILE)\n", material,
+			mat_names_list());
 		return 2;
 	}
 	/* options after MATERIAL: parse argv + 1 from its index 1; optind = 0 re-initialises getopt */
@@ -276,7 +281,7 @@ static int truth_main(int argc, char **argv)
 		free(wl);
 		return 2;
 	}
-	struct mat *m = mat_new((enum mat_id)id, nwl, wl, &err);
+	struct mat *m = merl_file ? mat_new_merl(merl_file, nwl, wl, &err) : mat_new((enum mat_id)id, nwl, wl, &err);
 	int rc = 1;
 	FILE *f = NULL;
 	const char *path = dhr ? dhr : out ? out : "-";

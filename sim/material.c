@@ -6,6 +6,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "recon/colour.h"
+#include "recon/merl.h"
 #include "sim/mat_lobes.h"
 
 #define PAINT_ALPHA 0.12
@@ -32,10 +34,12 @@ struct mat {
 	struct lobe_hv base;       /* clear coat: the base seen through the coat */
 	struct lobe_etab et;       /* albedo table of the main lobe (paint, clear coat, cloth) */
 	double on_a, on_b;         /* Oren-Nayar A, B */
+	struct merl_table merl;    /* MERL: the table */
+	double *basis[3];          /* MERL: the spectral basis B_r, B_g, B_b per wavelength */
 };
 
 static const char *const names[MAT__COUNT] = { "green-paint", "white", "metal", "clear-coat", "rough-backscatter",
-					       "cloth-sheen", "sharp-lobe", "narrow-lines" };
+					       "cloth-sheen", "sharp-lobe", "narrow-lines", "merl" };
 
 int mat_from_name(const char *name)
 {
@@ -56,7 +60,8 @@ const char *mat_name(enum mat_id id)
 
 const char *mat_names_list(void)
 {
-	return "green-paint, white, metal, clear-coat, rough-backscatter, cloth-sheen, sharp-lobe, narrow-lines";
+	return "green-paint, white, metal, clear-coat, rough-backscatter, cloth-sheen, sharp-lobe, narrow-lines, "
+	       "merl (from a MERL file)";
 }
 
 enum mat_id mat_id_of(const struct mat *m)
@@ -151,7 +156,8 @@ static void conductor_index(enum mat_id id, double wl, double *n, double *k)
 	*k = tk[i] + t * (tk[i + 1] - tk[i]);
 }
 
-struct mat *mat_new(enum mat_id id, int nwl, const double *wl, struct acq_err *err)
+/* The common part of a new material: validation and the per-wavelength arrays. */
+static struct mat *mat_alloc(enum mat_id id, int nwl, const double *wl, struct acq_err *err)
 {
 	if ((int)id < 0 || id >= MAT__COUNT) {
 		acq_errf(err, ACQ_E_INVAL, "material: unknown material id %d", (int)id);
@@ -177,6 +183,101 @@ struct mat *mat_new(enum mat_id id, int nwl, const double *wl, struct acq_err *e
 	m->id = id;
 	m->nwl = nwl;
 	memcpy(m->wl, wl, sz);
+	return m;
+}
+
+/* The MERL upsampling basis before its correction: a partition of unity of Gaussians (material.h). */
+static void merl_g(double wl, double g[3])
+{
+	static const double c[3] = { 640.0, 540.0, 450.0 };
+	double sum = 0;
+	for (int k = 0; k < 3; k++) {
+		double x = (wl - c[k]) / 20.0;
+		g[k] = (k == 0 && wl > c[0]) || (k == 2 && wl < c[2]) ? 1.0 : exp(-0.5 * x * x);
+		sum += g[k];
+	}
+	for (int k = 0; k < 3; k++)
+		g[k] /= sum;
+}
+
+/* B = G M^-1 at the material's wavelengths (material.h); checks B >= 0 on the 1 nm grid. */
+static int merl_basis(struct mat *m, struct acq_err *err)
+{
+	enum { NF = 651 };
+	double wl[NF], M[3][3] = { { 0 } }, Mi[3][3];
+	for (int i = 0; i < NF; i++)
+		wl[i] = MAT_WL_MIN + i;
+	struct colour_opts o;
+	colour_opts_brdf(&o);
+	double *W = malloc(sizeof(double) * 3 * NF);
+	if (!W)
+		return acq_errf(err, ACQ_E_NOMEM, "material: out of memory");
+	if (colour_weights(&o, wl, NF, W, err)) {
+		free(W);
+		return -1;
+	}
+	for (int k = 0; k < 3; k++) {
+		double col[NF], rgb[3];
+		for (int i = 0; i < NF; i++) {
+			double g[3];
+			merl_g(wl[i], g);
+			col[i] = g[k];
+		}
+		colour_apply_weights(W, NF, col, rgb);
+		for (int j = 0; j < 3; j++)
+			M[j][k] = rgb[j];
+	}
+	free(W);
+	double det = M[0][0] * (M[1][1] * M[2][2] - M[1][2] * M[2][1]) - M[0][1] * (M[1][0] * M[2][2] - M[1][2] * M[2][0]) +
+		     M[0][2] * (M[1][0] * M[2][1] - M[1][1] * M[2][0]);
+	if (!(fabs(det) > 1e-12))
+		return acq_errf(err, ACQ_E_NUMERIC, "material: MERL basis: singular colour matrix");
+	for (int i = 0; i < 3; i++)
+		for (int j = 0; j < 3; j++) {
+			int i1 = (j + 1) % 3, i2 = (j + 2) % 3, j1 = (i + 1) % 3, j2 = (i + 2) % 3;
+			Mi[i][j] = (M[i1][j1] * M[i2][j2] - M[i1][j2] * M[i2][j1]) / det;
+		}
+	for (int i = 0; i < NF + m->nwl; i++) {
+		double x = i < NF ? wl[i] : m->wl[i - NF], g[3];
+		merl_g(x, g);
+		for (int k = 0; k < 3; k++) {
+			double b = g[0] * Mi[0][k] + g[1] * Mi[1][k] + g[2] * Mi[2][k];
+			if (i < NF && b < 0)
+				return acq_errf(err, ACQ_E_NUMERIC, "material: MERL basis negative (%g) at %g nm", b, x);
+			if (i >= NF)
+				m->basis[k][i - NF] = fmax(0.0, b);
+		}
+	}
+	return 0;
+}
+
+struct mat *mat_new_merl(const char *path, int nwl, const double *wl, struct acq_err *err)
+{
+	struct mat *m = mat_alloc(MAT_MERL, nwl, wl, err);
+	if (!m)
+		return NULL;
+	for (int k = 0; k < 3; k++)
+		if (!(m->basis[k] = calloc((size_t)nwl, sizeof(double)))) {
+			mat_free(m);
+			acq_errf(err, ACQ_E_NOMEM, "material: out of memory");
+			return NULL;
+		}
+	if (merl_read(path, &m->merl, err) || merl_basis(m, err)) {
+		mat_free(m);
+		return NULL;
+	}
+	return m;
+}
+
+struct mat *mat_new(enum mat_id id, int nwl, const double *wl, struct acq_err *err)
+{
+	if (id == MAT_MERL) {
+		acq_errf(err, ACQ_E_INVAL, "material: merl is read from a MERL file (merl:FILE, sim.merl_file)");
+		return NULL;
+	}
+	struct mat *m = mat_alloc(id, nwl, wl, err);
+	if (!m)
+		return NULL;
 	for (int l = 0; l < nwl; l++) {
 		m->rho[l] = mat_rho_d(id, wl[l]);
 		m->fix2[l] = fix2_at(id, wl[l]);
@@ -243,6 +344,9 @@ void mat_free(struct mat *m)
 	free(m->fix2);
 	free(m->n);
 	free(m->k);
+	for (int k = 0; k < 3; k++)
+		free(m->basis[k]);
+	merl_free(&m->merl);
 	free(m);
 }
 
@@ -290,6 +394,13 @@ static double phong(double wrwo)
 	return wrwo > 0 ? (PHONG_N + 2.0) / (2.0 * M_PI) * pow(wrwo, PHONG_N) : 0.0;
 }
 
+/* The table's linear sRGB at (wi, wo): its reference lookup, "no data" cells and directions below the horizon 0. */
+static void merl_rgb(const struct mat *m, const double wi[3], const double wo[3], double rgb[3])
+{
+	if (merl_lookup(&m->merl, wi, wo, rgb) != 0)
+		rgb[0] = rgb[1] = rgb[2] = 0;
+}
+
 int mat_terms(const struct mat *m, const double wi[3], const double wo[3], struct mat_term *t)
 {
 	double mi = wi[2], mo = wo[2], ch = 0, c = 0;
@@ -297,6 +408,13 @@ int mat_terms(const struct mat *m, const double wi[3], const double wo[3], struc
 	t[1] = (struct mat_term){ 0, MAT_S_FIX2, 0 };
 	bool up = mi > 0 && mo > 0;
 	switch (m->id) {
+	case MAT_MERL: {
+		double rgb[3];
+		merl_rgb(m, wi, wo, rgb);
+		for (int k = 0; k < 3; k++)
+			t[k] = (struct mat_term){ up ? rgb[k] : 0, MAT_S_BASIS_R + k, 0 };
+		return 3;
+	}
 	case MAT_WHITE:
 	case MAT_NARROW_LINES:
 		t[0].w = up ? 1.0 / M_PI : 0;
@@ -338,9 +456,10 @@ void mat_spectrum(const struct mat *m, enum mat_spec s, double c, double *out)
 {
 	double fd = s == MAT_S_DIEL ? lobe_fresnel(c, DIEL_N, 0.0) : 0.0;
 	bool has_cond = m->id == MAT_METAL || m->id == MAT_CLEAR_COAT;
+	const double *b = s >= MAT_S_BASIS_R && s <= MAT_S_BASIS_B ? m->basis[s - MAT_S_BASIS_R] : NULL;
 	for (int l = 0; l < m->nwl; l++)
 		out[l] = s == MAT_S_RHO ? m->rho[l] : s == MAT_S_FIX2 ? m->fix2[l] : s == MAT_S_DIEL ? fd :
-			 s == MAT_S_COND && has_cond ? lobe_fresnel(c, m->n[l], m->k[l]) : 0.0;
+			 s == MAT_S_COND && has_cond ? lobe_fresnel(c, m->n[l], m->k[l]) : b ? b[l] : 0.0;
 }
 
 void mat_eval(const struct mat *m, const double wi[3], const double wo[3], double *out)
@@ -365,6 +484,14 @@ void mat_eval(const struct mat *m, const double wi[3], const double wo[3], doubl
 			double f = w * lobe_fresnel(t[j].c, DIEL_N, 0.0);
 			for (int l = 0; l < m->nwl; l++)
 				out[l] += f;
+			break;
+		}
+		case MAT_S_BASIS_R:
+		case MAT_S_BASIS_G:
+		case MAT_S_BASIS_B: {
+			const double *b = m->basis[t[j].spec - MAT_S_BASIS_R];
+			for (int l = 0; l < m->nwl; l++)
+				out[l] += w * b[l];
 			break;
 		}
 		default:
@@ -441,6 +568,44 @@ static int conductor_part(const struct lobe_hv *L, double mu_i, int level, int n
 	return 0;
 }
 
+/* The MERL material's channel albedos at mu_i by the midpoint rule on (90 x 360) 2^level cells of
+ * (theta_o, phi_o) (the table is piecewise constant: no higher-order rule helps). */
+static void merl_channels(const struct mat *m, double mu_i, int level, double a[3])
+{
+	int nt = 90 << level, np = 360 << level;
+	double wi[3] = { sqrt(fmax(0.0, 1.0 - mu_i * mu_i)), 0, mu_i }, ht = M_PI / 2 / nt, hp = 2 * M_PI / np;
+	a[0] = a[1] = a[2] = 0;
+	for (int i = 0; i < nt; i++) {
+		double to = (i + 0.5) * ht, w = sin(to) * cos(to) * ht * hp, row[3] = { 0, 0, 0 };
+		for (int j = 0; j < np; j++) {
+			double wo[3], rgb[3];
+			mat_dir(to, (j + 0.5) * hp, wo);
+			merl_rgb(m, wi, wo, rgb);
+			for (int k = 0; k < 3; k++)
+				row[k] += rgb[k];
+		}
+		for (int k = 0; k < 3; k++)
+			a[k] += w * row[k];
+	}
+}
+
+static int merl_dhr(const struct mat *m, double mu_i, int level, double *dhr, double *sigma)
+{
+	double a0[3], a1[3];
+	merl_channels(m, mu_i, level, a0);
+	merl_channels(m, mu_i, level + 1, a1);
+	for (int l = 0; l < m->nwl; l++) {
+		double v = 0, e = 0;
+		for (int k = 0; k < 3; k++) {
+			v += m->basis[k][l] * a1[k];
+			e += m->basis[k][l] * fabs(a1[k] - a0[k]);
+		}
+		dhr[l] = v;
+		sigma[l] = 4.0 * e + 1e-15;
+	}
+	return 0;
+}
+
 int mat_dhr(const struct mat *m, double theta_i, int level, double *dhr, double *sigma, struct acq_err *err)
 {
 	if (!(theta_i >= 0 && theta_i <= M_PI / 2 + 1e-12))
@@ -453,6 +618,8 @@ int mat_dhr(const struct mat *m, double theta_i, int level, double *dhr, double 
 	memset(sigma, 0, sizeof(double) * (size_t)nwl);
 	if (!(mu_i > 1e-9))
 		return 0;
+	if (m->id == MAT_MERL)
+		return merl_dhr(m, mu_i, level, dhr, sigma);
 	if (m->id == MAT_METAL || m->id == MAT_CLEAR_COAT) {
 		/* the conductor lobe (metal; the coat's base through T(mu_i) T(mu_o)) */
 		if (conductor_part(m->id == MAT_METAL ? &m->lobe : &m->base, mu_i, level, nwl, dhr, sigma, err))

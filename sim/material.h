@@ -34,6 +34,20 @@
  *  - narrow-lines: Lambertian with narrow absorption lines (holmium-oxide-like: 468, 485, 537, 641 nm and two
  *    NIR bands at 890, 1015 nm; Gaussian widths 2.5-6 nm, depths 0.30-0.55) on a 0.90-0.93 white base.
  *
+ * A material from a MERL file (issue 17; `acq-sim truth merl:FILE`, `sim.merl_file` with `sim.sample: merl`):
+ *  f(wi, wo, l) = sum_k rgb_k(wi, wo) B_k(l), rgb the table's linear sRGB BRDF at the cell of (wi, wo) (the
+ *  reference lookup of recon/merl.h; "no data" cells 0), B_k a smooth spectral basis made so that
+ *    (a) the upsampling is exact: W B = I for the RGB weights W of recon/colour.h (colour_opts_brdf, computed
+ *        on 450:1100:1 nm, the spectrum extended flat below 450 nm), so the spectrum's RGB is the table's;
+ *    (b) it preserves energy: B_k >= 0 and sum_k B_k = 1 at every wavelength, so f(l) is a convex combination
+ *        of r, g, b and the spectral albedo lies between the smallest and largest channel albedo (<= 1 when the
+ *        table's channels are);
+ *  B = G M^-1 with G_k(l) = g_k(l) / sum_j g_j(l), g Gaussians of width 20 nm centred at 640 (red; 1 above),
+ *  540 (green), 450 nm (blue; 1 below), M = W G (so sum_k B_k = 1 follows from W 1 = (1, 1, 1), the D65
+ *  white point, to 1e-7); min B = 0.007 at these centres (a search of the centres for B >= 0; mat_new_merl checks it).
+ *  Reciprocal as the table (the lookup folds phi_d mod pi). DHR: midpoint rule in (theta_o, phi_o) over
+ *  (90 x 360) 2^level cells (the table is piecewise constant), bound 4 |Q(level+1) - Q(level)|.
+ *
  * DHR quadrature (mat_dhr): Lambertian parts exactly; Kelemen-coupled diffuse by the exact segment rule of the E
  * table; half-vector lobes by lobe_hv_albedo, the Phong lobe and the backscatter peak by lobe_cone_albedo about
  * their centres; the Oren-Nayar term analytically:
@@ -56,15 +70,17 @@ enum mat_id {
 	MAT_CLOTH_SHEEN,
 	MAT_SHARP_LOBE,
 	MAT_NARROW_LINES,
+	MAT_MERL,                  /* loaded from a MERL file (mat_new_merl) */
 	MAT__COUNT
 };
 
 #define MAT_WL_MIN 450.0
 #define MAT_WL_MAX 1100.0
-#define MAT_MAX_TERMS 2
+#define MAT_MAX_TERMS 3
 
 /* Spectral factors of a term (mat_terms): fixed spectra, or Fresnel factors that depend on a cosine. */
-enum mat_spec { MAT_S_RHO = 0, MAT_S_FIX2, MAT_S_DIEL, MAT_S_COND, MAT_S__COUNT };
+enum mat_spec { MAT_S_RHO = 0, MAT_S_FIX2, MAT_S_DIEL, MAT_S_COND, MAT_S_BASIS_R, MAT_S_BASIS_G, MAT_S_BASIS_B,
+		MAT_S__COUNT };
 
 /* One term of f(wi, wo, l) = sum_k w_k S_k(l, c_k) (w in 1/sr). */
 struct mat_term {
@@ -83,6 +99,8 @@ const char *mat_name(enum mat_id id);
 const char *mat_names_list(void);
 /* Instantiate material id at nwl wavelengths (nm, copied); NULL with err on failure. */
 struct mat *mat_new(enum mat_id id, int nwl, const double *wl, struct acq_err *err);
+/* A material from the MERL file at path (see above), instantiated at nwl wavelengths; NULL with err. */
+struct mat *mat_new_merl(const char *path, int nwl, const double *wl, struct acq_err *err);
 /* Free a material; NULL is fine. */
 void mat_free(struct mat *m);
 /* The material's id. */

@@ -29,6 +29,7 @@ enum sim_sample {
 	SIM_SAMPLE_CLOTH_SHEEN,
 	SIM_SAMPLE_SHARP_LOBE,
 	SIM_SAMPLE_NARROW_LINES,
+	SIM_SAMPLE_MERL,            /* the material of sim.merl_file */
 	SIM_SAMPLE_NONE,
 	SIM_SAMPLE__COUNT
 };

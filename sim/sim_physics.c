@@ -145,11 +145,18 @@ struct phys *phys_new(const struct phys_cfg *c, struct acq_err *err)
 		p->wl[i] = phys_wavelength(c, i);
 		p->resp[i] = i < PHYS_NDARK ? 0.0 : laser_spectrum(p->wl[i]) * detector_qe(p->wl[i]);
 	}
-	for (int m = 0; m < MAT__COUNT; m++)
-		if (!(p->mat[m] = mat_new((enum mat_id)m, c->npix, p->wl, err))) {
+	for (int m = 0; m < MAT__COUNT; m++) {
+		if (m == MAT_MERL && !c->merl_file[0])
+			continue;
+		p->mat[m] = m == MAT_MERL ? mat_new_merl(c->merl_file, c->npix, p->wl, err) :
+					    mat_new((enum mat_id)m, c->npix, p->wl, err);
+		if (!p->mat[m]) {
+			if (m == MAT_MERL)
+				acq_err_prefix(err, "sim.merl_file: ");
 			phys_free(p);
 			return NULL;
 		}
+	}
 	if (refdrift_reference(&c->cal, c->npix, p->wl, p->ref_fac, err)) {
 		phys_free(p);
 		return NULL;
@@ -238,6 +245,10 @@ unsigned phys_signal(const struct phys *p, const struct sim_world *w, double *ra
 	}
 	double omega = 2.0 * M_PI * (1.0 - cos(deg(g->fov_halfwidth_deg)));
 	int m = w->sample >= 0 && w->sample < MAT__COUNT ? w->sample : MAT_WHITE;
+	if (!p->mat[m]) { /* the MERL material without a file: nothing on the stage reflects */
+		memset(rate, 0, sizeof(double) * (size_t)npix);
+		return occ;
+	}
 	mat_eval(p->mat[m], wi, wo, p->fbuf);
 	double geo = k * omega * fmax(0.0, wo[2]);
 	for (int i = 0; i < npix; i++)

@@ -47,6 +47,8 @@ struct phys_cfg {
 	double bias_counts, read_noise_counts, electrons_per_count;
 	double nonlinearity;        /* b: relative compression at full scale */
 	struct refdrift_cfg cal;    /* the reference standard's deviation and the source drift (sim_refdrift.h) */
+	char merl_file[1024];       /* sim.merl_file: the MERL material's table ("": none; sample merl then
+				     * reflects nothing) */
 };
 
 struct phys_frame {

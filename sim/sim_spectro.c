@@ -403,9 +403,18 @@ struct sim_service *sim_spectro_new(struct sim_world *w, struct yc_node *node, s
 			samples[i] = phys_sample_name(i);
 		samples[SIM_SAMPLE__COUNT] = NULL;
 		struct yc_node *sp = yc_get(simcfg, "spectrometer");
+		const char *merl = NULL;
 		if (yc_enum(simcfg, "sample", false, samples, &sample, err) || (sp && phys_parse(sp, &pc, err)) ||
-		    refdrift_parse(simcfg, &pc.cal, err))
+		    refdrift_parse(simcfg, &pc.cal, err) || yc_string(simcfg, "merl_file", false, &merl, err))
 			return NULL;
+		if (merl && snprintf(pc.merl_file, sizeof pc.merl_file, "%s", merl) >= (int)sizeof pc.merl_file) {
+			acq_errf(err, ACQ_E_CONFIG, "sim.merl_file: path longer than %zu bytes", sizeof pc.merl_file - 1);
+			return NULL;
+		}
+		if (sample == SIM_SAMPLE_MERL && !merl) {
+			acq_errf(err, ACQ_E_CONFIG, "sim.sample: merl needs sim.merl_file (a MERL binary table)");
+			return NULL;
+		}
 	}
 	struct spectro_svc *s = calloc(1, sizeof *s);
 	if (s)

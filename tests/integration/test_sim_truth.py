@@ -186,6 +186,14 @@ try:
     check(list(hdr) == [90, 90, 180] and good.mean() > 0.5, "MERL header 90 90 180, most cells have data")
     check(abs(np.median(val[good][:1458000 // 2]) - 0.98 / math.pi) < 0.03,
           f"white MERL red channel ~ rho/pi ({np.median(val[good][:729000]):.4f})")
+    # the table back as a material (merl:FILE, RGB upsampled to spectra, sim/material.h): a white stays white
+    r = run("merl:" + mp, "--dhr", "-", "--theta-i", "30", "--wavelengths", "450:1100:50", "--level", "0")
+    check(r.returncode == 0, f"merl:FILE --dhr runs ({r.stderr.strip()})")
+    md = np.array([ln.split(",") for ln in r.stdout.splitlines() if ln[0].isdigit()], dtype=float)
+    check(len(md) == 14 and np.all(np.abs(md[:, 2] - 0.985) < 0.02),
+          f"white MERL table read back as a material: DHR {md[:, 2].min():.4f}..{md[:, 2].max():.4f}")
+    r = run("merl:/nonexistent.binary", "--dhr", "-")
+    check(r.returncode == 1 and "/nonexistent.binary" in r.stderr, f"merl: missing file: {r.stderr.strip()}")
     os.unlink(mp)
 
     # --- errors

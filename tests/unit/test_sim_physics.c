@@ -186,6 +186,13 @@ static void test_every_sample(void **state)
 	assert_int_equal(phys_sample_from_name("velvet"), -1);
 	for (int s = 0; s < SIM_SAMPLE_NONE; s++) {
 		assert_int_equal(phys_sample_from_name(phys_sample_name(s)), s);
+		if (s == SIM_SAMPLE_MERL) { /* no sim.merl_file: nothing reflects */
+			x->w.sample = s;
+			phys_signal(x->p, &x->w, x->rate);
+			for (int i = 0; i < c->npix; i++)
+				assert_true(x->rate[i] == 0.0);
+			continue;
+		}
 		x->w.sample = s;
 		phys_signal(x->p, &x->w, x->rate);
 		struct mat *m = mat_new((enum mat_id)s, c->npix, wl, &err);
