@@ -162,7 +162,7 @@ def main():
     print("  %-18s %10s %10s %12s %8s %10s" % ("material", "recon", "scipy", "scipy s1e-3", "ratio", "fit CPU max"))
     for mat, a, cpu, _ in accuracy:
         best = min(a["scipy"], a["scipy_s1e-3"])
-        print("  %-18s %10.5f %10.5f %12.5f %8.2f %9.2fs" % (mat, a["recon"], a["scipy"], a["scipy_s1e-3"],
+        print("  %-18s %10.5f %10.5f %12.5f %8.3g %9.2fs" % (mat, a["recon"], a["scipy"], a["scipy_s1e-3"],
                                                            a["recon"] / best, cpu))
     worst = max(accuracy, key=lambda x: x[2])
     print("\nworst fit time: %.2f s CPU (%.2f s wall) on %s (goal <= 3 s CPU)" % (worst[2], worst[3], worst[0]))
