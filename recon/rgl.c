@@ -3,8 +3,6 @@
 
 #include <errno.h>
 #include <math.h>
-#include <pthread.h>
-#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -13,6 +11,7 @@
 #include "acq_version.h"
 #include "recon/cie_tables.h"
 #include "recon/pngio.h"
+#include "recon/pool.h"
 #include "recon/warp2d.h"
 
 #define NDF_FLOOR 1e-3   /* D += 1e-3·max D: positive everywhere, so spectra = f·4σ/D stays finite */
@@ -134,20 +133,11 @@ struct job {
 	const double *theta;   /* [nth] */
 	float *vndf, *lum, *spec;
 	size_t *zero;          /* [nth] */
-	atomic_size_t next;
-	atomic_int failed;
-	pthread_mutex_t lock;
-	struct acq_err err;
+	struct scratch {
+		double *dens, *ang, *val;
+		size_t *idx;
+	} ws[POOL_MAX_THREADS];
 };
-
-static void set_err(struct job *j, const struct acq_err *e)
-{
-	pthread_mutex_lock(&j->lock);
-	if (!atomic_load(&j->failed))
-		j->err = *e;
-	atomic_store(&j->failed, 1);
-	pthread_mutex_unlock(&j->lock);
-}
 
 /* One incidence node k: its VNDF table, the warp, the model at the warped nodes, spectra and luminance. */
 static int do_node(struct job *j, size_t k, double *dens, double *ang, double *val, size_t *idx, struct acq_err *e)
@@ -225,30 +215,11 @@ static int do_node(struct job *j, size_t k, double *dens, double *ang, double *v
 	return 0;
 }
 
-static void *worker(void *arg)
+static int node_job(void *ctx, int worker, size_t k, struct acq_err *e)
 {
-	struct job *j = arg;
-	size_t N = j->res * j->res;
-	double *dens = malloc(N * sizeof *dens), *ang = malloc(N * 4 * sizeof *ang);
-	double *val = malloc(N * (j->m->nwl + 1) * sizeof *val);
-	size_t *idx = malloc(N * sizeof *idx);
-	struct acq_err e = { 0 };
-	if (!dens || !ang || !val || !idx) {
-		acq_errf(&e, ACQ_E_NOMEM, "rgl: out of memory");
-		set_err(j, &e);
-	}
-	while (!atomic_load(&j->failed)) {
-		size_t k = atomic_fetch_add(&j->next, 1);
-		if (k >= j->nth)
-			break;
-		if (do_node(j, k, dens, ang, val, idx, &e))
-			set_err(j, &e);
-	}
-	free(dens);
-	free(ang);
-	free(val);
-	free(idx);
-	return NULL;
+	struct job *j = ctx;
+	struct scratch *w = &j->ws[worker];
+	return do_node(j, k, w->dens, w->ang, w->val, w->idx, e);
 }
 
 /* CIE 1931 ȳ at wl nm (linear between the 1 nm nodes, 0 outside 360..830). */
@@ -386,8 +357,6 @@ int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char 
 	char *desc = describe(m, o, wl, L);
 	unsigned char *file = NULL;
 	struct job j = { 0 };
-	pthread_t th[16];
-	int nthreads = 0, lock_ok = 0;
 	if (!ch || !yw || !theta || !D1 || !S1 || !rho || !ndf || !sig || !rang || !rval || !fndf || !fsig || !fth ||
 	    !fwl || !vndf || !lum || !spec || !zero || !desc) {
 		acq_errf(err, ACQ_E_NOMEM, "rgl: out of memory (%zu incidences x %zu wavelengths x %zu nodes)", nth, L, N);
@@ -468,26 +437,19 @@ int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char 
 	}
 	j = (struct job){ .m = m, .nwl = L, .res = R, .nd = nd, .nth = nth, .ch = ch, .yw = yw, .wl = wl, .ndf = ndf,
 			  .sig = sig, .theta = theta, .vndf = vndf, .lum = lum, .spec = spec, .zero = zero };
-	atomic_init(&j.next, 0);
-	atomic_init(&j.failed, 0);
-	if (pthread_mutex_init(&j.lock, NULL)) {
-		acq_errf(err, ACQ_E_NOMEM, "rgl: cannot create a lock");
+	for (int t = 0; t < o->threads; t++) {
+		struct scratch *w = &j.ws[t];
+		w->dens = malloc(N * sizeof *w->dens);
+		w->ang = malloc(N * 4 * sizeof *w->ang);
+		w->val = malloc(N * (ML + 1) * sizeof *w->val);
+		w->idx = malloc(N * sizeof *w->idx);
+		if (!w->dens || !w->ang || !w->val || !w->idx) {
+			acq_errf(err, ACQ_E_NOMEM, "rgl: out of memory");
+			goto out;
+		}
+	}
+	if (pool_run(o->threads, nth, node_job, &j, NULL, err))
 		goto out;
-	}
-	lock_ok = 1;
-	for (int t = 1; t < o->threads; t++) {
-		if (pthread_create(&th[nthreads], NULL, worker, &j))
-			break;
-		nthreads++;
-	}
-	worker(&j);
-	for (int t = 0; t < nthreads; t++)
-		pthread_join(th[t], NULL);
-	if (atomic_load(&j.failed)) {
-		if (err)
-			*err = j.err;
-		goto out;
-	}
 	float phi0 = 0;
 	unsigned char jac = 1;
 	struct field f[] = {
@@ -519,8 +481,12 @@ int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char 
 	}
 	rc = 0;
 out:
-	if (lock_ok)
-		pthread_mutex_destroy(&j.lock);
+	for (int t = 0; t < POOL_MAX_THREADS; t++) {
+		free(j.ws[t].dens);
+		free(j.ws[t].ang);
+		free(j.ws[t].val);
+		free(j.ws[t].idx);
+	}
 	free(ch);
 	free(yw);
 	free(theta);
