@@ -27,7 +27,7 @@ endif
 
 VERSION    := $(shell git describe --always --dirty 2>/dev/null || echo 0.1)
 
-PKGS       := libusb-1.0 libmodbus libserialport sqlite3 yaml-0.1 lapacke openblas libsystemd libpng jansson cairo
+PKGS       := libusb-1.0 libmodbus libserialport sqlite3 yaml-0.1 lapacke openblas libsystemd libpng jansson cairo OpenEXR
 PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 
@@ -53,7 +53,7 @@ LIBDIRS    := daemon sim proto recon drivers config
 DEB_PKGS   := build-essential pkg-config libusb-1.0-0-dev libmodbus-dev libserialport-dev libsqlite3-dev \
               libyaml-dev liblapacke-dev libopenblas-dev libsystemd-dev libcmocka-dev libpng-dev \
               libjansson-dev libcairo2-dev umockdev mbpoll python3-pymodbus python3-numpy sqlite3 socat \
-              systemd clang python3-matplotlib
+              systemd clang python3-matplotlib libopenexr-dev openexr
 
 .DEFAULT_GOAL := all
 .SECONDARY:
