@@ -2,6 +2,7 @@
 #
 # Conventions (so a new file needs no Makefile edit):
 #   <folder>/*_main.c        a program's entry point: build/<name with _ → ->   (see PROGRAMS)
+#   <folder>/<name>/*.c      files of that program only (command handlers), linked before the libraries
 #   <folder>/*.c (others)    the folder's static library build/lib<folder>.a
 #   tests/unit/test_*.c      a cmocka unit test, linked with every library
 #   tests/integration/test_* an executable script (sh/py), run by tests/run-integration.sh
@@ -109,8 +110,10 @@ $(BUILD)/lib$(1).a: $(call lib_objs,$(1))
 endef
 $(foreach d,$(LIBDIRS),$(eval $(call lib_rule,$(d))))
 
+# A program may have its own files beside its entry point: <folder>/<name>/*.c for <folder>/<name>_main.c
+# (e.g. recon/brdf_recon/: command handlers of brdf-recon), linked before the libraries.
 define prog_rule
-$(BUILD)/$(subst _,-,$(patsubst %_main.c,%,$(notdir $(1)))): $(patsubst %.c,$(BUILD)/obj/%.o,$(1)) $(LIBS)
+$(BUILD)/$(subst _,-,$(patsubst %_main.c,%,$(notdir $(1)))): $(patsubst %.c,$(BUILD)/obj/%.o,$(1) $(wildcard $(patsubst %_main.c,%,$(1))/*.c)) $(LIBS)
 	@$(if $(Q),echo "  LD      $$@")
 	$(Q)$(CC) $(LDFLAGS) -o $$@ $$^ $(LDLIBS)
 endef

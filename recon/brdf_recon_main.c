@@ -17,7 +17,7 @@
 #include "recon/recon.h"
 #include "recon/render.h"
 #include "recon/rgbeval.h"
-#include "recon/rgl.h"
+#include "recon/brdf_recon/cli.h"
 #include "recon/exrio.h"
 #include "recon/sky.h"
 
@@ -31,7 +31,7 @@ const char *__lsan_default_suppressions(void)
 	return "leak:libfontconfig.so\n";
 }
 
-static void progress(void *ctx, const char *stage, double frac)
+void progress(void *ctx, const char *stage, double frac)
 {
 	(void)ctx;
 	if (!isatty(2))
@@ -40,26 +40,26 @@ static void progress(void *ctx, const char *stage, double frac)
 	fflush(stderr);
 }
 
-static void progress_end(void)
+void progress_end(void)
 {
 	if (isatty(2))
 		fprintf(stderr, "\r%40s\r", "");
 }
 
-static int fail(const struct acq_err *e)
+int fail(const struct acq_err *e)
 {
 	progress_end();
 	fprintf(stderr, "%s: %s\n", prog, e->msg[0] ? e->msg : "error");
 	return 1;
 }
 
-static int usage_err(const char *cmd, const char *msg)
+int usage_err(const char *cmd, const char *msg)
 {
 	fprintf(stderr, "%s %s: %s (see %s %s --help)\n", prog, cmd, msg, prog, cmd);
 	return 2;
 }
 
-static int parse_double(const char *s, double *out)
+int parse_double(const char *s, double *out)
 {
 	char *end;
 	errno = 0;
@@ -70,7 +70,7 @@ static int parse_double(const char *s, double *out)
 	return 0;
 }
 
-static int parse_u64(const char *s, uint64_t *out)
+int parse_u64(const char *s, uint64_t *out)
 {
 	char *end;
 	errno = 0;
@@ -831,66 +831,6 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 	return 0;
 }
 
-/* ---- rgl ---- */
-static const char rgl_help[] =
-	"usage: brdf-recon rgl MODEL -o FILE.bsdf [--wavelengths FIRST:LAST:STEP|A,B,...] [--resolution N]\n"
-	"                      [--theta-i N] [--ndf N] [--threads N]\n"
-	"Write the model as a spectral RGL tabulated BRDF (Dupuy & Jakob 2018; Mitsuba 3 'measured', pbrt-v4),\n"
-	"isotropic. Tables from the model: NDF (retro-reflection fixed point) and its projected area, the VNDF\n"
-	"per incidence, the CIE Y luminance and the spectra on each incidence's warped grid.\n"
-	"  --wavelengths      nm, inside the model's range (default: the model's own channels)\n"
-	"  --resolution N     nodes per side of the warped grid (default 32)\n"
-	"  --theta-i N        incidence nodes k*90/N deg (default 30)\n"
-	"  --ndf N            nodes per side of the ndf/sigma tables (default 128)\n";
-
-static int cmd_rgl(int argc, char **argv)
-{
-	static const struct option lo[] = {
-		{ "output", required_argument, 0, 'o' }, { "wavelengths", required_argument, 0, 'w' },
-		{ "resolution", required_argument, 0, 'r' }, { "theta-i", required_argument, 0, 't' },
-		{ "ndf", required_argument, 0, 'n' }, { "threads", required_argument, 0, 'j' },
-		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
-	struct rgl_opts o;
-	rgl_opts_default(&o);
-	static double wl[RGL_MAX_WL];
-	const char *outp = NULL;
-	struct acq_err err = { 0 };
-	uint64_t v;
-	int c;
-	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
-		switch (c) {
-		case 'o': outp = optarg; break;
-		case 'w':
-			if (rgl_parse_wavelengths(optarg, wl, RGL_MAX_WL, &o.nwl, &err))
-				return fail(&err);
-			o.wl = wl;
-			break;
-		case 'r': case 't': case 'n': case 'j':
-			if (parse_u64(optarg, &v) || v > 4096)
-				return usage_err("rgl", "--resolution, --theta-i, --ndf and --threads need a count");
-			*(c == 'r' ? &o.res : c == 't' ? &o.ntheta : c == 'n' ? &o.ndf_res : &o.threads) = (int)v;
-			break;
-		case 'h': fputs(rgl_help, stdout); return 0;
-		default: return usage_err("rgl", "bad option");
-		}
-	}
-	if (optind != argc - 1 || !outp)
-		return usage_err("rgl", "MODEL and -o FILE.bsdf expected");
-	struct recon_model *m;
-	if (recon_model_load(argv[optind], &m, &err))
-		return fail(&err);
-	o.source = argv[optind];
-	struct rgl_stats st;
-	int rc = rgl_write(m, &o, outp, &st, &err);
-	recon_model_free(m);
-	if (rc)
-		return fail(&err);
-	fprintf(stderr, "rgl: %zu incidences x %zu wavelengths on a %zux%zu warped grid (ndf %zux%zu), %zu nodes below "
-		"the horizon, %zu bytes -> %s\n", st.ntheta, st.nwl, st.res, st.res, st.ndf_res, st.ndf_res, st.zero_nodes,
-		st.bytes, outp);
-	return 0;
-}
-
 static const char main_help[] =
 	"usage: brdf-recon COMMAND [options]   (brdf-recon COMMAND --help for each)\n"
 	"Reconstruct a complete spectral BRDF from sparse samples with radial basis functions on the product of\n"
@@ -903,7 +843,8 @@ static const char main_help[] =
 	"  info    MODEL                    print parameters and metadata\n"
 	"  merl    MODEL -o FILE.binary     MERL table (RGB)\n"
 	"  render  MODEL -o OUT.png         preview render of a sphere\n"
-	"  rgl     MODEL -o FILE.bsdf       spectral RGL tabulated BRDF (Mitsuba 3, pbrt-v4)\n";
+	"  rgl     MODEL -o FILE.bsdf       spectral RGL tabulated BRDF (Mitsuba 3, pbrt-v4)\n"
+	"  slices  MODEL -o OUT.png         in-plane slices and polar plots with samples and uncertainty\n";
 
 int main(int argc, char **argv)
 {
@@ -934,6 +875,8 @@ int main(int argc, char **argv)
 		return cmd_info(argc, argv);
 	if (!strcmp(cmd, "rgl"))
 		return cmd_rgl(argc, argv);
+	if (!strcmp(cmd, "slices"))
+		return cmd_slices(argc, argv);
 	if (!strcmp(cmd, "merl") || !strcmp(cmd, "render"))
 		return cmd_output(cmd, argc, argv);
 	fprintf(stderr, "%s: unknown command '%s'\n%s", prog, cmd, main_help);
