@@ -28,7 +28,7 @@ endif
 
 VERSION    := $(shell git describe --always --dirty 2>/dev/null || echo 0.1)
 
-PKGS       := libusb-1.0 libmodbus libserialport sqlite3 yaml-0.1 lapacke openblas libsystemd libpng jansson cairo OpenEXR
+PKGS       := libusb-1.0 libmodbus libserialport sqlite3 yaml-0.1 lapacke openblas libsystemd libpng jansson cairo OpenEXR hdf5
 PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 
@@ -54,7 +54,7 @@ LIBDIRS    := daemon sim proto recon drivers config
 DEB_PKGS   := build-essential pkg-config libusb-1.0-0-dev libmodbus-dev libserialport-dev libsqlite3-dev \
               libyaml-dev liblapacke-dev libopenblas-dev libsystemd-dev libcmocka-dev libpng-dev \
               libjansson-dev libcairo2-dev umockdev mbpoll python3-pymodbus python3-numpy sqlite3 socat \
-              systemd clang python3-matplotlib libopenexr-dev openexr
+              systemd clang python3-matplotlib libopenexr-dev openexr libhdf5-dev hdf5-tools python3-h5py
 
 .DEFAULT_GOAL := all
 .SECONDARY:
