@@ -15,18 +15,29 @@
 static const char *const kinds[4] = { "sample", "dark", "reference", "beam" };
 
 /* ---- small HDF5 helpers: every object gets its NeXus class or its units ---- */
-static int attr_str(hid_t obj, const char *name, const char *val)
+/* n UTF-8 strings as an attribute (attr) or a dataset of obj; a scalar when scalar is set (n = 1). Attribute
+ * scalars are fixed-length (what NeXus readers expect of NX_class and units), the rest variable-length. */
+static int put_strs(hid_t obj, const char *name, int attr, int scalar, size_t n, const char *const *vals)
 {
-	hid_t t = H5Tcopy(H5T_C_S1), s = H5Screate(H5S_SCALAR), a = -1;
+	hsize_t dim = n;
+	const char *one = n && vals[0] ? vals[0] : "";
+	int fixed = attr && scalar;
+	hid_t t = H5Tcopy(H5T_C_S1), s = scalar ? H5Screate(H5S_SCALAR) : H5Screate_simple(1, &dim, NULL), o = -1;
 	int rc = -1;
-	if (t < 0 || s < 0 || H5Tset_size(t, strlen(val) ? strlen(val) : 1) < 0 || H5Tset_cset(t, H5T_CSET_UTF8) < 0)
+	if (t < 0 || s < 0 || H5Tset_size(t, fixed ? (strlen(one) ? strlen(one) : 1) : H5T_VARIABLE) < 0 ||
+	    H5Tset_cset(t, H5T_CSET_UTF8) < 0)
 		goto out;
-	a = H5Acreate2(obj, name, t, s, H5P_DEFAULT, H5P_DEFAULT);
-	if (a >= 0 && H5Awrite(a, t, val) >= 0)
-		rc = 0;
+	const void *buf = fixed ? (const void *)one : scalar ? (const void *)&one : (const void *)vals;
+	if (attr) {
+		o = H5Acreate2(obj, name, t, s, H5P_DEFAULT, H5P_DEFAULT);
+		rc = o >= 0 && H5Awrite(o, t, buf) >= 0 ? 0 : -1;
+	} else {
+		o = H5Dcreate2(obj, name, t, s, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+		rc = o >= 0 && (n == 0 || H5Dwrite(o, t, H5S_ALL, H5S_ALL, H5P_DEFAULT, buf) >= 0) ? 0 : -1;
+	}
 out:
-	if (a >= 0)
-		H5Aclose(a);
+	if (o >= 0)
+		(attr ? H5Aclose : H5Dclose)(o);
 	if (s >= 0)
 		H5Sclose(s);
 	if (t >= 0)
@@ -34,25 +45,15 @@ out:
 	return rc;
 }
 
+static int attr_str(hid_t obj, const char *name, const char *val)
+{
+	return put_strs(obj, name, 1, 1, 1, &val);
+}
+
 /* An attribute holding n UTF-8 strings (NeXus `axes`). */
 static int attr_strs(hid_t obj, const char *name, size_t n, const char *const *vals)
 {
-	hsize_t dim = n;
-	hid_t t = H5Tcopy(H5T_C_S1), s = H5Screate_simple(1, &dim, NULL), a = -1;
-	int rc = -1;
-	if (t < 0 || s < 0 || H5Tset_size(t, H5T_VARIABLE) < 0 || H5Tset_cset(t, H5T_CSET_UTF8) < 0)
-		goto out;
-	a = H5Acreate2(obj, name, t, s, H5P_DEFAULT, H5P_DEFAULT);
-	if (a >= 0 && H5Awrite(a, t, vals) >= 0)
-		rc = 0;
-out:
-	if (a >= 0)
-		H5Aclose(a);
-	if (s >= 0)
-		H5Sclose(s);
-	if (t >= 0)
-		H5Tclose(t);
-	return rc;
+	return put_strs(obj, name, 1, 0, n, vals);
 }
 
 static int attr_int(hid_t obj, const char *name, int v)
@@ -66,6 +67,18 @@ static int attr_int(hid_t obj, const char *name, int v)
 	return rc;
 }
 
+/* A scalar UTF-8 string dataset; NULL is written as "". */
+static int dset_str(hid_t g, const char *name, const char *val)
+{
+	return put_strs(g, name, 0, 1, 1, &val);
+}
+
+/* An array of n UTF-8 strings (n may be 0). */
+static int dset_strs(hid_t g, const char *name, size_t n, const char *const *vals)
+{
+	return put_strs(g, name, 0, 0, n, vals);
+}
+
 static hid_t group(hid_t parent, const char *name, const char *nx_class)
 {
 	hid_t g = H5Gcreate2(parent, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
@@ -74,48 +87,6 @@ static hid_t group(hid_t parent, const char *name, const char *nx_class)
 		return -1;
 	}
 	return g;
-}
-
-/* A scalar UTF-8 string dataset (variable length); NULL is written as "". */
-static int dset_str(hid_t g, const char *name, const char *val)
-{
-	hid_t t = H5Tcopy(H5T_C_S1), s = H5Screate(H5S_SCALAR), d = -1;
-	int rc = -1;
-	const char *v = val ? val : "";
-	if (t < 0 || s < 0 || H5Tset_size(t, H5T_VARIABLE) < 0 || H5Tset_cset(t, H5T_CSET_UTF8) < 0)
-		goto out;
-	d = H5Dcreate2(g, name, t, s, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-	if (d >= 0 && H5Dwrite(d, t, H5S_ALL, H5S_ALL, H5P_DEFAULT, &v) >= 0)
-		rc = 0;
-out:
-	if (d >= 0)
-		H5Dclose(d);
-	if (s >= 0)
-		H5Sclose(s);
-	if (t >= 0)
-		H5Tclose(t);
-	return rc;
-}
-
-/* An array of n UTF-8 strings. */
-static int dset_strs(hid_t g, const char *name, size_t n, const char *const *vals)
-{
-	hsize_t dim = n;
-	hid_t t = H5Tcopy(H5T_C_S1), s = H5Screate_simple(1, &dim, NULL), d = -1;
-	int rc = -1;
-	if (t < 0 || s < 0 || H5Tset_size(t, H5T_VARIABLE) < 0 || H5Tset_cset(t, H5T_CSET_UTF8) < 0)
-		goto out;
-	d = H5Dcreate2(g, name, t, s, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-	if (d >= 0 && (n == 0 || H5Dwrite(d, t, H5S_ALL, H5S_ALL, H5P_DEFAULT, vals) >= 0))
-		rc = 0;
-out:
-	if (d >= 0)
-		H5Dclose(d);
-	if (s >= 0)
-		H5Sclose(s);
-	if (t >= 0)
-		H5Tclose(t);
-	return rc;
 }
 
 /* A numeric dataset of rank 1 or 2 (dims), written whole from data (NULL: created only), with units. */

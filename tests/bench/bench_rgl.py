@@ -21,6 +21,7 @@ SEED = int(os.environ.get("ACQ_SEED", "1")) % (2**31)
 B = os.path.join(BUILD, "brdf-recon")
 sys.path.insert(0, os.path.join(SRC, "tests", "integration"))
 import rglread  # noqa: E402
+from recon_tools import model_eval, synth_model, vec  # noqa: E402
 
 
 def timed(args):
@@ -35,21 +36,11 @@ def timed(args):
     return time.perf_counter() - t0, ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024.0
 
 
-def vec(t, p):
-    return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], 1)
-
-
 def agreement(d, model, bsdf, tmax_deg, rng, n=10000):
     c = math.cos(math.radians(tmax_deg))
     ang = np.stack([np.arccos(rng.uniform(c, 1, n)), rng.uniform(0, 2 * math.pi, n),
                     np.arccos(rng.uniform(c, 1, n)), rng.uniform(0, 2 * math.pi, n)], 1)
-    q, e = os.path.join(d, "q.csv"), os.path.join(d, "e.csv")
-    with open(q, "w") as fh:
-        fh.write("theta_i,phi_i,theta_o,phi_o\n")
-        for a in np.degrees(ang):
-            fh.write("%.17g,%.17g,%.17g,%.17g\n" % tuple(a))
-    subprocess.run([B, "eval", model, q, "-o", e], check=True, capture_output=True)
-    ev = np.genfromtxt(e, delimiter=",", skip_header=1)[:, 4:]
+    ev = model_eval(d, model, ang)[1]
     r = rglread.RGL(bsdf)
     f = r.eval(vec(ang[:, 0], ang[:, 1]), vec(ang[:, 2], ang[:, 3]))
     rel = np.abs(f - ev) / ev
@@ -59,11 +50,8 @@ def agreement(d, model, bsdf, tmax_deg, rng, n=10000):
 def main():
     os.makedirs(OUT, exist_ok=True)
     d = tempfile.mkdtemp(prefix="bench_rgl_")
-    s, m = os.path.join(d, "s.csv"), os.path.join(d, "m.model")
     print("bench_rgl: seed %d, data in %s" % (SEED, d))
-    subprocess.run([sys.executable, os.path.join(SRC, "tests/integration/recon_synth.py"), "--samples", s,
-                    "--nwl", "651", "--seed", str(SEED)], check=True)
-    subprocess.run([B, "fit", s, "-o", m], check=True, capture_output=True)
+    m, _ = synth_model(d, 651, SEED)
     res = {}
     rng = np.random.default_rng(SEED)
     for tag, extra in (("32", []), ("64", ["--resolution", "64"])):

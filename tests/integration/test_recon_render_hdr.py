@@ -16,24 +16,12 @@ import zlib
 
 import numpy as np
 
-BUILD = os.environ.get("ACQ_BUILD", "build")
-SRC = os.environ.get("ACQ_SRC", ".")
 SEED = int(os.environ.get("ACQ_SEED", "1")) % (2**31)
-B = os.path.join(BUILD, "brdf-recon")
-sys.path.insert(0, os.path.join(SRC, "tests", "integration"))
+sys.path.insert(0, os.path.join(os.environ.get("ACQ_SRC", "."), "tests", "integration"))
 import exrread  # noqa: E402
+from recon_tools import B, run, synth_model  # noqa: E402
 
 print("ACQ_SEED=%d" % SEED)
-
-
-def run(*args, ok=True):
-    p = subprocess.run([B, *args], capture_output=True, text=True)
-    print("$ brdf-recon", " ".join(args), "->", p.returncode)
-    if p.stderr:
-        print(p.stderr.strip()[:1500])
-    if ok and p.returncode != 0:
-        sys.exit("FAIL: command failed")
-    return p
 
 
 def png_pixels_and_chunks(path):
@@ -89,11 +77,7 @@ def main():
     if not shutil.which("exrheader"):
         sys.exit("FAIL: exrheader (Debian package openexr, in DEB_PKGS) is missing")
     d = tempfile.mkdtemp(prefix="recon_hdr_")
-    s = os.path.join(d, "s.csv")
-    subprocess.run([sys.executable, os.path.join(SRC, "tests/integration/recon_synth.py"), "--samples", s,
-                    "--nwl", "8", "--seed", str(SEED)], check=True)
-    m = os.path.join(d, "m.model")
-    run("fit", s, "-o", m)
+    m, _ = synth_model(d, 8, SEED)
     png, exr = os.path.join(d, "p.png"), os.path.join(d, "p.exr")
     run("render", m, "-o", png, "--exr", exr, "--size", "64", "--threads", "1", "--seed", str(SEED))
     hdr = subprocess.run(["exrheader", exr], capture_output=True, text=True, check=True).stdout

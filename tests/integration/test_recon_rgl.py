@@ -21,44 +21,21 @@ spectrum read linearly between channels; bad input is refused with a message."""
 import hashlib
 import math
 import os
-import subprocess
 import sys
 import tempfile
 
 import numpy as np
 
-BUILD = os.environ.get("ACQ_BUILD", "build")
-SRC = os.environ.get("ACQ_SRC", ".")
 SEED = int(os.environ.get("ACQ_SEED", "1")) % (2**31)
-B = os.path.join(BUILD, "brdf-recon")
-sys.path.insert(0, os.path.join(SRC, "tests", "integration"))
+sys.path.insert(0, os.path.join(os.environ.get("ACQ_SRC", "."), "tests", "integration"))
 import rglread  # noqa: E402
+from recon_tools import B, model_eval as _model_eval, run, synth_model, vec  # noqa: E402
 
 print("ACQ_SEED=%d" % SEED)
 
 
-def run(*args, ok=True):
-    p = subprocess.run([B, *args], capture_output=True, text=True)
-    print("$ brdf-recon", " ".join(args), "->", p.returncode)
-    if p.stderr:
-        print(p.stderr.strip()[:2000])
-    if ok and p.returncode != 0:
-        sys.exit("FAIL: command failed")
-    return p
-
-
-def vec(t, p):
-    return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], 1)
-
-
 def model_eval(d, model, ang):
-    q, e = os.path.join(d, "q.csv"), os.path.join(d, "e.csv")
-    with open(q, "w") as fh:
-        fh.write("theta_i,phi_i,theta_o,phi_o\n")
-        for a in np.degrees(ang):
-            fh.write("%.17g,%.17g,%.17g,%.17g\n" % tuple(a))
-    run("eval", model, q, "-o", e)
-    return np.genfromtxt(e, delimiter=",", skip_header=1)[:, 4:]
+    return _model_eval(d, model, ang)[1]
 
 
 def albedo_grid(theta_i):
@@ -77,11 +54,7 @@ def main():
         print("brdf-recon not built")
         return 77
     d = tempfile.mkdtemp(prefix="recon_rgl_")
-    s = os.path.join(d, "s.csv")
-    subprocess.run([sys.executable, os.path.join(SRC, "tests/integration/recon_synth.py"), "--samples", s,
-                    "--nwl", "8", "--seed", str(SEED)], check=True)
-    m = os.path.join(d, "m.model")
-    run("fit", s, "-o", m)
+    m, _ = synth_model(d, 8, SEED)
     f1, f2, f3 = (os.path.join(d, x) for x in ("a.bsdf", "b.bsdf", "c.bsdf"))
     run("rgl", m, "-o", f1)
     run("rgl", m, "-o", f2, "--threads", "2")

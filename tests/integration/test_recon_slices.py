@@ -6,27 +6,16 @@ contains the curve and is not empty, the in-plane samples are the file's (count 
 measured samples agree with the model within their error bars combined with the band (coverage printed and
 held >= 90 %); the PNGs are sRGB-tagged; bad input is refused with a message."""
 import os
-import subprocess
 import sys
 import tempfile
 
 import numpy as np
 
-BUILD = os.environ.get("ACQ_BUILD", "build")
-SRC = os.environ.get("ACQ_SRC", ".")
 SEED = int(os.environ.get("ACQ_SEED", "1")) % (2**31)
-B = os.path.join(BUILD, "brdf-recon")
+sys.path.insert(0, os.path.join(os.environ.get("ACQ_SRC", "."), "tests", "integration"))
+from recon_tools import B, model_eval, run, synth_model  # noqa: E402
+
 print("ACQ_SEED=%d" % SEED)
-
-
-def run(*args, ok=True):
-    p = subprocess.run([B, *args], capture_output=True, text=True)
-    print("$ brdf-recon", " ".join(args), "->", p.returncode)
-    if p.stderr:
-        print(p.stderr.strip()[:1500])
-    if ok and p.returncode != 0:
-        sys.exit("FAIL: command failed")
-    return p
 
 
 def read_csv(path):
@@ -37,15 +26,10 @@ def read_csv(path):
 
 
 def eval_model(d, m, ti, tos):
-    q, e = os.path.join(d, "q.csv"), os.path.join(d, "e.csv")
-    with open(q, "w") as fh:
-        fh.write("theta_i,phi_i,theta_o,phi_o\n")
-        for a, b in zip(ti, tos):
-            fh.write("%.12g,0,%.12g,%d\n" % (a, abs(b), 180 if b >= 0 else 0))
-    run("eval", m, q, "-o", e)
-    ev = np.genfromtxt(e, delimiter=",", skip_header=1)
-    wl = np.array([float(x) for x in open(e).readline().strip().split(",")[4:]])
-    return wl, ev[:, 4:]
+    """The model in the plane: signed theta_o (deg), + forward (phi_o - phi_i = 180)."""
+    tos = np.asarray(tos)
+    ang = np.radians(np.stack([ti, np.zeros(len(tos)), np.abs(tos), np.where(tos >= 0, 180.0, 0.0)], 1))
+    return model_eval(d, m, ang)
 
 
 def main():
@@ -53,11 +37,7 @@ def main():
         print("brdf-recon not built")
         return 77
     d = tempfile.mkdtemp(prefix="recon_slices_")
-    s = os.path.join(d, "s.csv")
-    subprocess.run([sys.executable, os.path.join(SRC, "tests/integration/recon_synth.py"), "--samples", s,
-                    "--nwl", "8", "--seed", str(SEED)], check=True)
-    m = os.path.join(d, "m.model")
-    run("fit", s, "-o", m)
+    m, s = synth_model(d, 8, SEED)
     out, pol, csv = (os.path.join(d, x) for x in ("sl.png", "slp.png", "sl.csv"))
     run("slices", m, "-o", out, "--samples", s, "--polar", pol, "--csv", csv, "--wavelength", "600")
     for p in (out, pol):
