@@ -185,6 +185,14 @@ static void text(cairo_t *cr, double x, double y, const char *s, double ax, doub
 	cairo_show_text(cr, s);
 }
 
+/* Curves past the palette's length are dashed, so two incidences never look alike. */
+static void set_dash(cairo_t *cr, size_t t)
+{
+	static const double dash[2] = { 7, 4 };
+	if (t >= plot_palette_size())
+		cairo_set_dash(cr, dash, 2, 0);
+}
+
 static void draw_inplane(cairo_t *cr, const struct slices_opts *o, const struct series *S, size_t nth,
 			 const struct frame *fr, const char *title)
 {
@@ -263,12 +271,14 @@ static void draw_inplane(cairo_t *cr, const struct slices_opts *o, const struct 
 			cairo_line_to(cr, px(fr, s->x[i]), py(fr, s->lo[i]));
 		cairo_close_path(cr);
 		cairo_fill(cr);
-		/* model */
+		/* model (dashed once the palette repeats) */
 		cairo_set_source_rgb(cr, c[0], c[1], c[2]);
 		cairo_set_line_width(cr, 2);
+		set_dash(cr, t);
 		for (size_t i = 0; i < s->np; i++)
 			(i ? cairo_line_to : cairo_move_to)(cr, px(fr, s->x[i]), py(fr, s->f[i]));
 		cairo_stroke(cr);
+		cairo_set_dash(cr, NULL, 0, 0);
 		/* samples with ± k σ bars */
 		cairo_set_line_width(cr, 1.2);
 		for (size_t i = 0; i < s->ns; i++) {
@@ -296,9 +306,11 @@ static void draw_inplane(cairo_t *cr, const struct slices_opts *o, const struct 
 		char b[48];
 		plot_curve_colour(t, c);
 		cairo_set_source_rgb(cr, c[0], c[1], c[2]);
+		set_dash(cr, t);
 		cairo_move_to(cr, fr->r + 10, y);
 		cairo_line_to(cr, fr->r + 34, y);
 		cairo_stroke(cr);
+		cairo_set_dash(cr, NULL, 0, 0);
 		snprintf(b, sizeof b, "\u03b8i = %.4g\u00b0 (%zu)", S[t].theta * 180 / M_PI, S[t].ns);
 		cairo_set_source_rgb(cr, 0, 0, 0);
 		text(cr, fr->r + 40, y, b, 0, 0.5);
@@ -349,9 +361,11 @@ static void draw_polar(cairo_t *cr, const struct slices_opts *o, const struct se
 	cairo_fill(cr);
 	cairo_set_source_rgb(cr, c[0], c[1], c[2]);
 	cairo_set_line_width(cr, 2);
+	set_dash(cr, idx);
 	for (size_t i = 0; i < s->np; i++)
 		(i ? cairo_line_to : cairo_move_to)(cr, PXY(s->x[i], PR(s->f[i])));
 	cairo_stroke(cr);
+	cairo_set_dash(cr, NULL, 0, 0);
 	for (size_t i = 0; i < s->ns; i++) {
 		cairo_new_sub_path(cr);
 		cairo_arc(cr, PXY(s->sx[i], PR(s->sv[i])), 3, 0, 2 * M_PI);
