@@ -22,7 +22,8 @@ struct dev_slot {
 const struct devices_drv devices_real_drv = {
 	axis_open, axis_close, axis_cfg_limits, axis_read_status, axis_move_begin, axis_move_step, axis_stop,
 	axis_identity, spectro_open, spectro_close, spectro_info, spectro_start, spectro_fetch, spectro_stop,
-	laser_open, laser_close, laser_set_emission, laser_set_power, laser_status, laser_identity,
+	laser_open, laser_close, laser_set_emission, laser_set_power, laser_status, laser_identity, axis_home_begin,
+	axis_alarm_reset,
 };
 
 struct devices {
@@ -332,6 +333,7 @@ static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t
 		done(dv->op_ctx, rc, err, result);
 	else
 		json_decref(result);
+	dv->op_kind[0] = 0;
 }
 
 static void move_step(struct loop *lp, void *arg)
@@ -417,6 +419,74 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 	dv->op_ctx = ctx;
 	dv->op_deadline = now + dv->c->sweep.move_timeout_s;
 	dv->op_timer = loop_timer_add(dv->lp, 0.05, 0.05, move_step, dv);
+	return 0;
+}
+
+int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *ctx, struct acq_err *err)
+{
+	if (dv->op_timer)
+		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
+	for (int i = 0; i < 3; i++)
+		if ((mask & (1u << i)) && !dv->axis[i])
+			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", conf_dev_name((enum conf_dev)i),
+					dv->slot[i].note[0] ? dv->slot[i].note : "not configured");
+	if (!(mask & 7u))
+		return acq_errf(err, ACQ_E_INVAL, "home: no axis selected");
+	double now = loop_now(dv->lp);
+	for (int i = 0; i < 3; i++) {
+		dv->op_axis[i] = false;
+		if (!(mask & (1u << i)))
+			continue;
+		struct axis_status st;
+		if (!dv->drv->axis_read_status(dv->axis[i], &st, NULL) && st.alarm &&
+		    dv->drv->axis_alarm_reset(dv->axis[i], err))
+			return acq_err_prefix(err, "%s: resetting its alarm: ", conf_dev_name((enum conf_dev)i));
+		if (dv->drv->axis_home_begin(dv->axis[i], now, err)) {
+			for (int j = 0; j < i; j++)
+				if (dv->op_axis[j])
+					dv->drv->axis_stop(dv->axis[j], NULL);
+			return acq_err_prefix(err, "%s: ", conf_dev_name((enum conf_dev)i));
+		}
+		dv->op_axis[i] = true;
+	}
+	dv->op_done = done;
+	dv->op_ctx = ctx;
+	dv->op_deadline = now + 4 * dv->c->sweep.move_timeout_s; /* a homing run is slower than a move */
+	dv->op_timer = loop_timer_add(dv->lp, 0.05, 0.05, move_step, dv);
+	return 0;
+}
+
+int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err)
+{
+	*stopped = dv->op_timer != 0;
+	int rc = 0;
+	for (int i = 0; i < 3; i++) /* every axis, moving or not: whatever moves stops */
+		if (dv->axis[i] && dv->drv->axis_stop(dv->axis[i], err))
+			rc = acq_err_prefix(err, "%s: ", conf_dev_name((enum conf_dev)i));
+	if (*stopped && dv->op_kind[0] && dv->spectro)
+		dv->drv->spectro_stop(dv->spectro, NULL);
+	if (*stopped) {
+		struct acq_err e = { 0 };
+		acq_errf(&e, ACQ_E_STATE, "stopped by the operator");
+		for (int i = 0; i < 3; i++)
+			dv->op_axis[i] = false;
+		op_end(dv, -1, &e, NULL); /* also switches off a laser it switched on */
+	}
+	return rc;
+}
+
+int devices_laser_off(struct devices *dv, struct acq_err *err)
+{
+	if (!dv->laser)
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "laser: unavailable (%s)",
+				dv->slot[CONF_DEV_LASER].note[0] ? dv->slot[CONF_DEV_LASER].note : "not configured");
+	if (dv->drv->laser_set_emission(dv->laser, false, err))
+		return acq_err_prefix(err, "laser: ");
+	struct laser_status ls;
+	if (dv->drv->laser_status(dv->laser, &ls, err))
+		return acq_err_prefix(err, "laser: ");
+	if (ls.emission)
+		return acq_errf(err, ACQ_E_DEVICE, "laser: emission still reported on after switching it off");
 	return 0;
 }
 
