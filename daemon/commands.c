@@ -426,12 +426,11 @@ static void cmd_recon_status(struct app *app, const struct srv_peer *peer, struc
 	struct acq_err err = { 0 };
 	int64_t run = (int64_t)num_arg(req->root, "run", 0), sweep = (int64_t)num_arg(req->root, "sweep", 0);
 	if (!run && !sweep) {
-		if (!app->recon_run && !app->recon_sweep) {
-			acq_errf(&err, ACQ_E_NOTFOUND, "no reconstruction started since the daemon started; give sweep or run");
+		/* the latest run, whoever started it (recon.start or the end of a sweep) */
+		if (!(run = store_recon_latest(app->store))) {
+			acq_errf(&err, ACQ_E_NOTFOUND, "no reconstruction has run yet; give sweep or run");
 			return reply_err(app, peer, req->id, &err);
 		}
-		run = app->recon_run;
-		sweep = run ? 0 : app->recon_sweep;
 	}
 	json_t *r = store_recon_show(app->store, run, sweep, &err);
 	if (!r)
@@ -479,12 +478,17 @@ static json_t *status_json(struct app *app)
 	server_counts(app->srv, &clients, &watchers);
 	char line[256];
 	app_status_line(app, line, sizeof line);
+	int64_t rrun = store_recon_latest(app->store), rsweep = 0;
+	if (rrun) {
+		json_t *r = store_recon_show(app->store, rrun, 0, NULL);
+		rsweep = (int64_t)json_integer_value(json_object_get(r, "sweep_id"));
+		json_decref(r);
+	}
 	return json_pack("{s:s,s:s,s:i,s:f,s:f,s:o,s:{s:i,s:i},s:i,s:i,s:{s:b,s:I,s:I},s:s,s:b}", "daemon", "running",
 			 "version", ACQ_VERSION, "pid", (int)getpid(), "uptime_s", app_wallclock() - app->started_wall,
 			 "started_at", app->started_wall, "sweep", progress_json(app), "devices", "available",
 			 devices_available(app->dev), "total", CONF_DEV__COUNT, "clients", clients, "watchers", watchers,
-			 "recon", "running", sweep_recon_busy(app->sweep), "run", (json_int_t)app->recon_run, "sweep",
-			 (json_int_t)app->recon_sweep, "summary", line, "sim", app->have_sim);
+			 "recon", "running", sweep_recon_busy(app->sweep), "run", (json_int_t)rrun, "sweep", (json_int_t)rsweep, "summary", line, "sim", app->have_sim);
 }
 
 void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *req)

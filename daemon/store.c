@@ -958,3 +958,13 @@ json_t *store_spectrum_json(struct store *st, int64_t id, struct acq_err *err)
 		acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	return o;
 }
+
+int64_t store_recon_latest(struct store *st)
+{
+	sqlite3_stmt *s = prep(st, "SELECT coalesce(max(id), 0) FROM recon_runs", NULL);
+	int64_t id = 0;
+	if (s && sqlite3_step(s) == SQLITE_ROW)
+		id = sqlite3_column_int64(s, 0);
+	sqlite3_finalize(s);
+	return id;
+}

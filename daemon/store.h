@@ -125,6 +125,8 @@ int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out,
 int store_open_reader(const char *path, struct store **out, struct acq_err *err);
 /* Number of calibrated samples of a sweep; -1 with ACQ_E_NOTFOUND if there is no such sweep. */
 int64_t store_calibrated_count(struct store *st, int64_t sweep_id, struct acq_err *err);
+/* The id of the latest reconstruction run (started by the operator or after a sweep), 0 if none. */
+int64_t store_recon_latest(struct store *st);
 /* One stored spectrum: id, kind, settings, counts (and stddev), sweep/point, and wavelength_nm from its
  * spectrometer's polynomial when known. NULL with ACQ_E_NOTFOUND if there is none. */
 json_t *store_spectrum_json(struct store *st, int64_t id, struct acq_err *err);

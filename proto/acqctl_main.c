@@ -28,6 +28,7 @@ struct opts {
 	const char *out;       /* -o FILE (export, spectrum --csv) */
 	const char *bench;     /* plan --config */
 	int timeout_ms;
+	double wait_s;         /* --wait: keep trying to connect this long */
 };
 
 static struct opts O = { .timeout_ms = 30000 };
@@ -80,10 +81,14 @@ static void usage(FILE *f)
 		   "socket: -s, else $ACQ_SOCKET, else " DEFAULT_SOCKET "\n\ncommands:\n");
 	for (const struct proto_cmd *c = proto_cmds; c->name; c++)
 		usage_cmd(f, c);
+	fprintf(f, "  wait STATE [--timeout-s S]\n      wait until the sweep is idle, running, paused or faulted "
+		   "(client side)\n");
+	fprintf(f, "\n--wait S: keep trying to connect for S seconds (a daemon starting up)\n");
 	fprintf(f, "\noptions after the command: --json, --points (plan), --config BENCH.yaml (plan, local dry run),\n"
 		   "  -o FILE (export, spectrum --csv: written by acqctl as you), --csv (spectrum)\n"
 		   "exit status: 0 ok, 1 refused by the daemon, 64 usage, 65 bad local input, 66 unreadable input,\n"
-		   "  69 no daemon answers, 70 internal error, 73 cannot write the output, 76 protocol error\n"
+		   "  69 no daemon answers, 70 internal error, 73 cannot write the output, 75 wait timed out,\n"
+		   "  76 protocol error\n"
 		   "see acqctl(1); --json replies follow the schemas of acqctl-json(5)\n");
 }
 
@@ -187,12 +192,22 @@ struct conn {
 	json_t *banner;
 };
 
+static double mono(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
 static int conn_open(struct conn *c, struct acq_err *err)
 {
 	proto_lines_init(&c->pl);
 	c->pl.max = PROTO_MAX_REPLY;
 	c->banner = NULL;
-	if ((c->fd = proto_client_connect(O.sock, err)) < 0)
+	double deadline = mono() + O.wait_s;
+	while ((c->fd = proto_client_connect(O.sock, err)) < 0 && mono() < deadline)
+		usleep(100000);
+	if (c->fd < 0)
 		return -1;
 	c->banner = proto_client_read(c->fd, &c->pl, O.timeout_ms, err);
 	if (!c->banner || json_integer_value(json_object_get(c->banner, "protocol")) != PROTO_VERSION) {
@@ -440,6 +455,48 @@ static int run_watch(void)
 	return 0;
 }
 
+/* ---- wait: until the sweep is in a state (client side, by polling status) ---- */
+static int run_wait(const char *want, double timeout_s)
+{
+	static const char *const states[] = { "idle", "running", "paused", "faulted", NULL };
+	bool known = false;
+	for (int i = 0; states[i]; i++)
+		known |= !strcmp(want, states[i]);
+	if (!known)
+		return fail(CTL_EXIT_USAGE, "usage", "wait: expected idle, running, paused or faulted, got '%s'", want);
+	struct conn c;
+	struct acq_err err = { 0 };
+	if (conn_open(&c, &err)) {
+		conn_close(&c);
+		return fail(CTL_EXIT_UNAVAILABLE, "unavailable", "cannot connect to acquisitiond: %s", err.msg);
+	}
+	double deadline = mono() + timeout_s;
+	json_t *req = json_pack("{s:s,s:i}", "cmd", "status", "id", 1);
+	int rc = -1;
+	while (rc < 0) {
+		json_t *rep = conn_call(&c, req, NULL, &err);
+		json_t *p = json_object_get(rep, "sweep");
+		if (!rep)
+			rc = fail(CTL_EXIT_UNAVAILABLE, "unavailable", "%s: %s", O.sock, err.msg);
+		else if (!strcmp(json_string_value(json_object_get(p, "state")) ?: "", want)) {
+			json_object_del(rep, "id");
+			if (O.json)
+				print_json(rep);
+			else
+				ctl_print_human(stdout, "status", rep);
+			rc = 0;
+		} else if (mono() > deadline)
+			rc = fail(75, "state", "wait: the sweep is still %s after %g s (wanted %s)",
+				  json_string_value(json_object_get(p, "state")), timeout_s, want);
+		else
+			usleep(250000);
+		json_decref(rep);
+	}
+	json_decref(req);
+	conn_close(&c);
+	return rc;
+}
+
 /* ---- plan without a daemon ---- */
 static int local_plan(const char *file)
 {
@@ -466,6 +523,7 @@ int main(int argc, char **argv)
 	/* Options anywhere; words that are not options form the command and its arguments. */
 	char *words[64];
 	int nw = 0;
+	double wait_timeout = 3600;
 	bool help = false;
 	for (int i = 1; i < argc; i++) {
 		const char *a = argv[i];
@@ -490,6 +548,15 @@ int main(int argc, char **argv)
 			O.timeout_ms = val ? (int)strtol(val, &end, 10) : 0;
 			if (!val || *end || O.timeout_ms <= 0)
 				return fail(CTL_EXIT_USAGE, "usage", "-t: expected milliseconds > 0");
+		} else if (TAKES("-w", "--wait") || TAKES("-T", "--timeout-s")) {
+			char *end;
+			double x = val ? strtod(val, &end) : -1;
+			if (!val || *end || !(x >= 0 && x <= 1e6))
+				return fail(CTL_EXIT_USAGE, "usage", "%s: expected seconds", a);
+			if (a[1] == 'w' || !strcmp(a, "--wait"))
+				O.wait_s = x;
+			else
+				wait_timeout = x;
 		} else if (TAKES("-o", "--output")) {
 			if (!(O.out = val))
 				return fail(CTL_EXIT_USAGE, "usage", "-o needs a file name");
@@ -518,6 +585,17 @@ int main(int argc, char **argv)
 			return 0;
 		}
 		wi = 1;
+	}
+	if (!strcmp(words[wi], "wait")) {
+		if (help || help_cmd) {
+			printf("usage: acqctl [options] wait idle|running|paused|faulted [--timeout-s S]\n"
+			       "      wait until the sweep is in that state (polls status); exit 75 after the timeout "
+			       "(default 3600 s)\n");
+			return 0;
+		}
+		if (nw != wi + 2)
+			return fail(CTL_EXIT_USAGE, "usage", "wait: expected one state (acqctl wait --help)");
+		return run_wait(words[wi + 1], wait_timeout);
 	}
 	/* The command: two words ("sweep start", "laser off") when they name one, else one. */
 	char cmd[64];
