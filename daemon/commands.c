@@ -19,7 +19,7 @@
 #include "daemon/store.h"
 #include "daemon/sweep.h"
 
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 
 /* ---- helpers ---- */
 

@@ -16,7 +16,7 @@
 #include <unistd.h>
 
 #include "acq_version.h"
-#include "daemon/plan_cli.h"
+#include "daemon/plan/plan_cli.h"
 #include "proto/ctl.h"
 #include "proto/proto.h"
 
