@@ -57,7 +57,7 @@ PROG_LIBDIRS_acqctl := proto daemon/plan config
 DEB_PKGS   := build-essential pkg-config libusb-1.0-0-dev libmodbus-dev libserialport-dev libsqlite3-dev \
               libyaml-dev liblapacke-dev libopenblas-dev libsystemd-dev libcmocka-dev libpng-dev \
               libjansson-dev libcairo2-dev umockdev mbpoll python3-pymodbus python3-numpy sqlite3 socat \
-              systemd clang python3-matplotlib
+              systemd clang python3-matplotlib python3-jsonschema scdoc man-db
 
 .DEFAULT_GOAL := all
 .SECONDARY:

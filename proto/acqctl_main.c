@@ -342,6 +342,9 @@ static int spectrum_csv(json_t *rep)
 	}
 	if ((O.out ? fclose(f) : fflush(f)) != 0)
 		return fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out ? O.out : "stdout", strerror(errno));
+	if (O.out)
+		printf("spectrum %lld: %zu rows written to %s\n", (long long)json_integer_value(json_object_get(s, "id")),
+		       json_array_size(wl), O.out);
 	return 0;
 }
 

@@ -399,6 +399,60 @@ static void print_spectrum(FILE *f, json_t *s)
 	fprintf(f, "  (acqctl spectrum %lld --csv prints the counts per wavelength)\n", num_i(s, "id"));
 }
 
+/* move, home, stop: the axes where they are now. */
+static void print_positions(FILE *f, const char *cmd, json_t *r)
+{
+	static const char *const axes[] = { "laser.theta", "detector.theta", "detector.phi" };
+	if (!strcmp(cmd, "stop"))
+		fprintf(f, "%s\n", json_is_true(json_object_get(r, "stopped")) ? "stopped the running operation"
+									: "nothing was running; the arms are stopped");
+	json_t *h = json_object_get(r, "homed");
+	if (json_array_size(h)) {
+		char list[160];
+		ctl_fmt_value("homed", h, list, sizeof list);
+		fprintf(f, "homed %s\n", list);
+	}
+	fprintf(f, "position");
+	for (int i = 0; i < 3; i++) {
+		char a[32];
+		ctl_fmt_angle(num(r, axes[i]), a, sizeof a);
+		fprintf(f, "  %s %s", axes[i], a);
+	}
+	fputc('\n', f);
+	if (json_is_string(json_object_get(r, "warning")))
+		fprintf(f, "warning: the target is in a blind zone (%s)\n", str(r, "warning"));
+}
+
+static void print_recon_run(FILE *f, json_t *r)
+{
+	char a[48], b[48], c[32];
+	ctl_fmt_time(num(r, "started_at"), a, sizeof a);
+	ctl_fmt_time(num(r, "finished_at"), b, sizeof b);
+	fprintf(f, "reconstruction run %lld of sweep %lld: %s", num_i(r, "id"), num_i(r, "sweep_id"), str(r, "state"));
+	if (json_is_integer(json_object_get(r, "exit_status")))
+		fprintf(f, " (exit %lld)", num_i(r, "exit_status"));
+	fprintf(f, "\n  program %s\n  started %s, finished %s", str(r, "program"), a, b);
+	if (num(r, "finished_at") >= num(r, "started_at")) {
+		ctl_fmt_dur(num(r, "finished_at") - num(r, "started_at"), c, sizeof c);
+		fprintf(f, ", took %s", c);
+	}
+	fputc('\n', f);
+	size_t i;
+	json_t *o;
+	json_array_foreach(json_object_get(r, "outputs"), i, o)
+		fprintf(f, "  %-12s %s\n", str(o, "kind"), str(o, "path"));
+	const char *tail = str(r, "output_tail");
+	if (tail[0]) {
+		fprintf(f, "  last output:\n");
+		for (const char *l = tail, *nl; *l; l = nl + 1) {
+			nl = strchr(l, '\n');
+			fprintf(f, "    %.*s\n", nl ? (int)(nl - l) : (int)strlen(l), l);
+			if (!nl)
+				break;
+		}
+	}
+}
+
 void ctl_print_human(FILE *f, const char *cmd, json_t *rep)
 {
 	json_object_del(rep, "id");
@@ -416,6 +470,10 @@ void ctl_print_human(FILE *f, const char *cmd, json_t *rep)
 		ctl_print_plan(f, json_object_get(rep, "plan"));
 	else if (!strcmp(cmd, "spectrum"))
 		print_spectrum(f, json_object_get(rep, "spectrum"));
+	else if (!strcmp(cmd, "move") || !strcmp(cmd, "home") || !strcmp(cmd, "stop"))
+		print_positions(f, cmd, rep);
+	else if (!strcmp(cmd, "recon.status"))
+		print_recon_run(f, json_object_get(rep, "run"));
 	else if ((x = json_object_get(rep, "progress")) && json_is_object(x)) {
 		if (json_object_get(rep, "sweep"))
 			fprintf(f, "sweep %lld started\n", num_i(rep, "sweep"));
