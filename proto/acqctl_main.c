@@ -244,8 +244,15 @@ static json_t *conn_call(struct conn *c, json_t *req, int *passed, struct acq_er
 	line[n] = '\n'; /* json_dumps' NUL becomes the newline (the request is sent by length) */
 	int rc = proto_write_all(c->fd, line, n + 1, err);
 	free(line);
-	if (rc)
+	if (rc) {
+		/* The daemon may have refused us and closed: its reason is still to be read. */
+		struct acq_err e2 = { 0 };
+		json_t *why = proto_client_read_fd(c->fd, &c->pl, 1000, passed, &e2);
+		if (why && json_is_false(json_object_get(why, "ok")))
+			return why;
+		json_decref(why);
 		return NULL;
+	}
 	return proto_client_read_fd(c->fd, &c->pl, O.timeout_ms, passed, err);
 }
 
