@@ -40,7 +40,8 @@ static json_t *progress_json(struct app *app)
 	sweep_get_progress(app->sweep, &p);
 	json_t *o = json_pack("{s:s,s:I,s:i,s:i,s:s}", "state", sweep_state_name(p.state), "id", (json_int_t)p.sweep_id,
 			      "done", p.points_done, "total", p.points_total, "message", p.message);
-	json_object_set_new(o, "eta_s", isfinite(p.eta_s) ? json_real(p.eta_s) : json_null());
+	/* wall-clock seconds, only while running: a paused sweep has no ETA that counts down */
+	json_object_set_new(o, "eta_s", p.state == SWEEP_RUNNING && isfinite(p.eta_s) ? json_real(p.eta_s) : json_null());
 	return o;
 }
 
@@ -55,6 +56,9 @@ static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_
 		plan_spec_free(spec);
 		return reply_err(app, peer, req->id, &err);
 	}
+	struct plan_timing tm;
+	sweep_plan_timing(app->sweep, &tm);
+	plan_time_apply(spec, &app->conf->bench, &tm, res);
 	/* The same object as the local dry run (acqctl renders both alike). */
 	json_t *o = plan_to_json(spec, res, json_is_true(json_object_get(req->root, "points")));
 	if (o)

@@ -337,10 +337,16 @@ void ctl_print_plan(FILE *f, json_t *r)
 		   "%lld incidences\n",
 		num_i(r, "requested"), num_i(r, "kept"), num_i(r, "moved"), num_i(r, "dropped"), num_i(r, "duplicates"),
 		num_i(r, "measured"), num_i(r, "incidences"));
+	if (json_is_number(json_object_get(r, "predicted_s"))) {
+		ctl_fmt_dur(num(r, "predicted_s"), a, sizeof a);
+		ctl_fmt_dur(num(r, "reference_s"), b, sizeof b);
+		ctl_fmt_dur(num(r, "darks_s"), c, sizeof c);
+		fprintf(f, "  predicted sweep time %s (bench time; reference %s, darks %s included)\n", a, b, c);
+	}
 	ctl_fmt_dur(num(r, "duration_s"), a, sizeof a);
 	ctl_fmt_dur(num(r, "raster_s"), b, sizeof b);
 	ctl_fmt_dur(num(r, "lower_bound_s"), c, sizeof c);
-	fprintf(f, "  estimated duration %s; raster order %s; lower bound %s\n", a, b, c);
+	fprintf(f, "  ordering model: estimated duration %s; raster order %s; lower bound %s\n", a, b, c);
 	ctl_fmt_dur(num(r, "dwell_s"), a, sizeof a);
 	ctl_fmt_dur(num(r, "motion_s"), b, sizeof b);
 	ctl_fmt_dur(num(r, "point_dwell_s"), c, sizeof c);

@@ -1075,6 +1075,9 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		free(keep[c]);
 	}
 	free_planner(&P);
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	plan_time_apply(s, g, &tm, R);
 	*out = R;
 	return 0;
 fail:

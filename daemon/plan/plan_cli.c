@@ -63,10 +63,45 @@ static const char *find_bench(char *buf, size_t len)
 	return NULL;
 }
 
-static int load_bench(const char *path, struct bench_geom *g, struct acq_err *err)
+/* The executor's timing from the file's sweep section when it has one (as the daemon reads it): sweep.
+ * extra_settle_s, dark_every; sweep.acquisition probe_ms, dark_averages, poll_s, take_reference,
+ * reference_pose. Absent keys keep the defaults. 0 or -1. */
+static int load_timing(struct yc_node *root, struct plan_timing *t, struct acq_err *err)
+{
+	struct yc_node *sw = yc_get(root, "sweep"), *acq = sw ? yc_get(sw, "acquisition") : NULL;
+	long long every = t->dark_every, davg = t->dark_averages;
+	double poll = 2 * t->exposure_overhead_s;
+	if (sw && (yc_double(sw, "extra_settle_s", false, 0, 60, &t->extra_settle_s, err) ||
+		   yc_int(sw, "dark_every", false, 0, 100000, &every, err)))
+		return -1;
+	if (acq && (yc_double(acq, "probe_ms", false, 1e-3, 1e6, &t->probe_ms, err) ||
+		    yc_int(acq, "dark_averages", false, 1, 100000, &davg, err) ||
+		    yc_double(acq, "poll_s", false, 1e-4, 10, &poll, err) ||
+		    yc_bool(acq, "take_reference", false, &t->reference, err)))
+		return -1;
+	struct yc_node *pose = acq ? yc_get(acq, "reference_pose") : NULL;
+	if (pose) {
+		double v[3];
+		if (yc_expect_seq(pose, "sweep.acquisition.reference_pose", err))
+			return -1;
+		if (pose->n != 3)
+			return yc_errf(err, pose, "reference_pose: expected [laser_theta, detector_theta, detector_phi]");
+		for (int i = 0; i < 3; i++)
+			if (yc_node_double(pose->items[i], "reference_pose angle", -360, 720, &v[i], err))
+				return -1;
+		t->ref_pose = (struct plan_pos){ v[0], v[1], v[2] };
+	}
+	t->dark_every = (int)every;
+	t->dark_averages = (int)davg;
+	t->exposure_overhead_s = poll / 2;
+	return 0;
+}
+
+static int load_bench(const char *path, struct bench_geom *g, struct plan_timing *t, struct acq_err *err)
 {
 	struct yc_doc *doc = NULL;
 	bench_defaults(g);
+	plan_timing_defaults(t);
 	if (yc_load_file(path, &doc, err))
 		return -1;
 	struct yc_node *root = yc_root(doc), *b = NULL;
@@ -76,7 +111,7 @@ static int load_bench(const char *path, struct bench_geom *g, struct acq_err *er
 	else if (!(b = yc_get(root, "bench")))
 		rc = yc_errf(err, root, "no 'bench:' section");
 	else
-		rc = bench_parse(b, g, err);
+		rc = bench_parse(b, g, err) || load_timing(root, t, err) ? -1 : 0;
 	yc_free(doc);
 	return rc;
 }
@@ -89,15 +124,17 @@ json_t *plan_cli_json(const char *plan_path, const char *bench_path, bool points
 		return NULL;
 	}
 	struct bench_geom g;
+	struct plan_timing tm;
 	struct plan_spec *spec = NULL;
 	struct plan_result *res = NULL;
 	json_t *o = NULL;
-	if (load_bench(bench_path, &g, err)) {
+	if (load_bench(bench_path, &g, &tm, err)) {
 		acq_err_prefix(err, "bench configuration: ");
 		goto out;
 	}
 	if (plan_load(plan_path, &spec, err) || plan_make(spec, &g, &res, err))
 		goto out;
+	plan_time_apply(spec, &g, &tm, res);
 	o = plan_to_json(spec, res, points);
 	if (!o || json_object_set_new(o, "bench_config", json_string(bench_path))) {
 		json_decref(o);

@@ -1,0 +1,75 @@
+/* plan_time: the planner's duration model of a sweep as the executor runs it (see plan.h, struct plan_timing).
+ *
+ * The ordering model (plan.c) times each step as trapezoidal moves (each axis's acceleration and velocity
+ * profile, the slowest axis wins) + settling + averages × (integration + read-out): that is what the order
+ * optimises, and it stays as it is. The executor spends more per step, and this model adds it:
+ *   - a move is seen finished by polling the controllers: on average half a poll period late, then one more
+ *     read confirms the axis stayed in position after settling (1.5 periods), plus sweep.extra_settle_s;
+ *   - auto integration: one probe exposure (at the plan's estimate, else probe_ms) before the measurement;
+ *   - every exposure (probe, measurement, dark) costs a start/poll/fetch round trip beyond integration and
+ *     read-out (exposure_overhead_s);
+ *   - darks (dark_averages exposures at the point's integration) at each new incidence, or every dark_every
+ *     points;
+ *   - the reference at the start: probe, dark and the plan's averages at ref_pose, then the move
+ *     from ref_pose to the first point (the first step has no move in the ordering model).
+ * In auto mode the integration time is the plan's estimate (integration.estimate_ms): the measurement picks
+ * its own, so the prediction is only as good as the estimate; the live ETA then corrects with the measured
+ * rate (daemon/eta.c). Not modelled: saturation redos and HDR second exposures (they depend on the sample),
+ * fault recovery, the operator's sample swap. */
+#include "daemon/plan/plan.h"
+
+#include <math.h>
+
+void plan_timing_defaults(struct plan_timing *t)
+{
+	*t = (struct plan_timing){
+		.axis_poll_s = 0.05,          /* drivers/axis_modbus.c poll_s default */
+		.extra_settle_s = 0,          /* sweep.extra_settle_s default */
+		.probe_ms = 10,               /* daemon/exposure.c probe_ms default */
+		.exposure_overhead_s = 0.005, /* executor spectrometer poll 10 ms: half a period per exposure */
+		.dark_averages = 10,          /* exposure.c dark_averages default */
+		.dark_every = 0,
+		.reference = true,
+		.ref_pose = { 0.0, 45.0, 180.0 }, /* executor.c reference_pose default */
+	};
+}
+
+void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
+		     struct plan_result *r)
+{
+	double integ = s->integ_ms / 1000.0, ro = g->readout_s, ovh = t->exposure_overhead_s;
+	bool aut = s->integ_mode == PLAN_INTEG_AUTO;
+	/* the executor probes at the plan's estimate when it gives one (sweep.c), else at probe_ms */
+	double probe_ms = s->integ_ms > 0 ? s->integ_ms : t->probe_ms;
+	double probe = aut && probe_ms > 0 ? probe_ms / 1000.0 + ro + ovh : 0;
+	double meas = (double)s->averages * (integ + ro) + ovh;
+	double dark = (double)t->dark_averages * (integ + ro) + ovh;
+	double clock = 0;
+	r->reference_s = r->darks_s = 0;
+	if (t->reference && r->n_steps > 0) {
+		double mv = plan_seg_time(g, &t->ref_pose, &r->steps[0].pos);
+		double settle = 0;
+		if (fabs(t->ref_pose.laser_theta - r->steps[0].pos.laser_theta) > 0)
+			settle = fmax(settle, g->laser_theta.settle_s);
+		if (fabs(t->ref_pose.det_theta - r->steps[0].pos.det_theta) > 0)
+			settle = fmax(settle, g->detector_theta.settle_s);
+		if (fabs(t->ref_pose.det_phi - r->steps[0].pos.det_phi) > 0)
+			settle = fmax(settle, g->detector_phi.settle_s);
+		r->reference_s = probe + dark + meas +
+				 (mv > 0 ? mv + settle + 1.5 * t->axis_poll_s + t->extra_settle_s : 0);
+		clock = r->reference_s;
+	}
+	for (size_t i = 0; i < r->n_steps; i++) {
+		struct plan_step *st = &r->steps[i];
+		bool moves = st->move_s + st->settle_s > 0;
+		bool new_dark = t->dark_every > 0 ? i % (size_t)t->dark_every == 0
+						  : i == 0 || st->pos.laser_theta != r->steps[i - 1].pos.laser_theta;
+		double d = st->move_s + st->settle_s + (moves ? 1.5 * t->axis_poll_s + t->extra_settle_s : 0) + probe + meas +
+			   (new_dark ? dark : 0);
+		r->darks_s += new_dark ? dark : 0;
+		st->predicted_start_s = clock;
+		st->predicted_s = d;
+		clock += d;
+	}
+	r->predicted_s = clock;
+}
