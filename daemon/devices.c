@@ -321,6 +321,16 @@ json_t *devices_json(struct devices *dv)
 
 /* ---- manual operations ---- */
 
+/* Name the device in a driver's message unless the driver already did (the log said "x: x: ..."). -1. */
+static int name_err(struct acq_err *err, enum conf_dev d)
+{
+	const char *name = conf_dev_name(d);
+	size_t n = strlen(name);
+	if (err && strncmp(err->msg, name, n))
+		acq_err_prefix(err, "%s: ", name);
+	return -1;
+}
+
 static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t *result)
 {
 	loop_timer_cancel(dv->lp, dv->op_timer);
@@ -352,7 +362,7 @@ static void move_step(struct loop *lp, void *arg)
 		}
 		int r = dv->drv->axis_move_step(dv->axis[i], now, &err);
 		if (r == AXIS_MOVE_FAILED) {
-			acq_err_prefix(&err, "%s: ", conf_dev_name((enum conf_dev)i));
+			name_err(&err, (enum conf_dev)i);
 			goto fail;
 		}
 		if (r == AXIS_MOVE_DONE)
@@ -412,7 +422,7 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 			for (int j = 0; j < i; j++)
 				if (dv->op_axis[j])
 					dv->drv->axis_stop(dv->axis[j], NULL);
-			return acq_err_prefix(err, "%s: ", conf_dev_name((enum conf_dev)i));
+			return name_err(err, (enum conf_dev)i);
 		}
 		dv->op_axis[i] = true;
 	}
@@ -446,7 +456,7 @@ int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *
 			for (int j = 0; j < i; j++)
 				if (dv->op_axis[j])
 					dv->drv->axis_stop(dv->axis[j], NULL);
-			return acq_err_prefix(err, "%s: ", conf_dev_name((enum conf_dev)i));
+			return name_err(err, (enum conf_dev)i);
 		}
 		dv->op_axis[i] = true;
 	}
@@ -463,7 +473,7 @@ int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err)
 	int rc = 0;
 	for (int i = 0; i < 3; i++) /* every axis, moving or not: whatever moves stops */
 		if (dv->axis[i] && dv->drv->axis_stop(dv->axis[i], err))
-			rc = acq_err_prefix(err, "%s: ", conf_dev_name((enum conf_dev)i));
+			rc = name_err(err, (enum conf_dev)i);
 	if (*stopped && dv->op_kind[0] && dv->spectro)
 		dv->drv->spectro_stop(dv->spectro, NULL);
 	if (*stopped) {

@@ -264,6 +264,13 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
 	t->dark_every = sw->cfg.dark_every;
 	t->reference = sw->cfg.take_reference;
 	t->ref_pose = sw->cfg.ref_pose;
+	double pos[3] = { NAN, NAN, NAN };
+	if (sw->env.devices)
+		devices_positions(sw->env.devices, pos);
+	if (!isnan(pos[0]) && !isnan(pos[1]) && !isnan(pos[2])) {
+		t->have_start = true;
+		t->start = (struct plan_pos){ pos[0], pos[1], pos[2] };
+	}
 }
 
 /* Plan the text against the bench; the spec's integration settings override the configuration's. */

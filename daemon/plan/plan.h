@@ -136,6 +136,8 @@ struct plan_timing {
 	bool reference;             /* a reference (the plan's averages) at the start, at ref_pose, then the move to
 				     * the first point */
 	struct plan_pos ref_pose;
+	bool have_start;            /* the arms' position when the sweep starts is known (the daemon knows it) */
+	struct plan_pos start;      /* then the move from there to ref_pose (or the first point) is counted */
 };
 
 /* Load and validate a plan file; errors name file:line:col. 0, or -1 with err (*out NULL). */

@@ -10,8 +10,9 @@
  *     read-out (exposure_overhead_s);
  *   - darks (dark_averages exposures at the point's integration) at each new incidence, or every dark_every
  *     points;
- *   - the reference at the start: probe, dark and the plan's averages at ref_pose, then the move
- *     from ref_pose to the first point (the first step has no move in the ordering model).
+ *   - the reference at the start: the move to ref_pose from where the arms are (when known: the daemon knows,
+ *     a local dry run does not), probe, dark and the plan's averages there, then the move from ref_pose to
+ *     the first point (the first step has no move in the ordering model).
  * In auto mode the integration time is the plan's estimate (integration.estimate_ms): the measurement picks
  * its own, so the prediction is only as good as the estimate; the live ETA then corrects with the measured
  * rate (daemon/eta.c). Not modelled: saturation redos and HDR second exposures (they depend on the sample),
@@ -34,6 +35,22 @@ void plan_timing_defaults(struct plan_timing *t)
 	};
 }
 
+/* A straight move between two poses as the executor sees it: trapezoids, settling, polling. */
+static double move_time(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *a,
+			const struct plan_pos *b)
+{
+	double mv = plan_seg_time(g, a, b), settle = 0;
+	if (!(mv > 0))
+		return 0;
+	if (a->laser_theta != b->laser_theta)
+		settle = fmax(settle, g->laser_theta.settle_s);
+	if (a->det_theta != b->det_theta)
+		settle = fmax(settle, g->detector_theta.settle_s);
+	if (a->det_phi != b->det_phi)
+		settle = fmax(settle, g->detector_phi.settle_s);
+	return mv + settle + 1.5 * t->axis_poll_s + t->extra_settle_s;
+}
+
 void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
 		     struct plan_result *r)
 {
@@ -46,17 +63,13 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 	double dark = (double)t->dark_averages * (integ + ro) + ovh;
 	double clock = 0;
 	r->reference_s = r->darks_s = 0;
-	if (t->reference && r->n_steps > 0) {
-		double mv = plan_seg_time(g, &t->ref_pose, &r->steps[0].pos);
-		double settle = 0;
-		if (fabs(t->ref_pose.laser_theta - r->steps[0].pos.laser_theta) > 0)
-			settle = fmax(settle, g->laser_theta.settle_s);
-		if (fabs(t->ref_pose.det_theta - r->steps[0].pos.det_theta) > 0)
-			settle = fmax(settle, g->detector_theta.settle_s);
-		if (fabs(t->ref_pose.det_phi - r->steps[0].pos.det_phi) > 0)
-			settle = fmax(settle, g->detector_phi.settle_s);
-		r->reference_s = probe + dark + meas +
-				 (mv > 0 ? mv + settle + 1.5 * t->axis_poll_s + t->extra_settle_s : 0);
+	if (r->n_steps > 0) {
+		/* from where the arms are (when known) to the reference pose, the reference, then to the first point */
+		const struct plan_pos *first = &r->steps[0].pos;
+		if (t->have_start)
+			r->reference_s += move_time(g, t, &t->start, t->reference ? &t->ref_pose : first);
+		if (t->reference)
+			r->reference_s += probe + dark + meas + move_time(g, t, &t->ref_pose, first);
 		clock = r->reference_s;
 	}
 	for (size_t i = 0; i < r->n_steps; i++) {
