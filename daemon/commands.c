@@ -317,20 +317,31 @@ static void cmd_spectrum(struct app *app, const struct srv_peer *peer, struct pr
 
 /* ---- sweeps ---- */
 
-/* The reply to sweep.abort once the executor has released the sweep (the state after the command), or after
- * 10 s of the loop's clock with the state then. */
+/* The reply to sweep.pause/resume/abort once the sweep is in the state the command leads to (paused, running,
+ * released), or after 10 s of the loop's clock with the state then: replies show the state after the command. */
 struct later {
 	struct app *app;
 	uint64_t serial;
 	json_t *id;
 	double deadline;
 	uint64_t timer;
+	enum sweep_state want;   /* SWEEP_IDLE: released */
 };
+
+static bool later_reached(const struct later *l)
+{
+	struct sweep_progress p;
+	sweep_get_progress(l->app->sweep, &p);
+	if (l->want == SWEEP_IDLE)
+		return !sweep_busy(l->app->sweep);
+	/* a fault or the end of the sweep also settles it */
+	return p.state == l->want || p.state == SWEEP_FAULTED || !sweep_busy(l->app->sweep);
+}
 
 static void later_check(struct loop *lp, void *arg)
 {
 	struct later *l = arg;
-	if (sweep_busy(l->app->sweep) && loop_now(lp) < l->deadline)
+	if (!later_reached(l) && loop_now(lp) < l->deadline)
 		return;
 	loop_timer_cancel(lp, l->timer);
 	server_reply(l->app->srv, l->serial, l->id, json_pack("{s:o}", "progress", progress_json(l->app)));
@@ -338,12 +349,12 @@ static void later_check(struct loop *lp, void *arg)
 	free(l);
 }
 
-static void reply_when_released(struct app *app, const struct srv_peer *peer, json_t *id)
+static void reply_when(struct app *app, const struct srv_peer *peer, json_t *id, enum sweep_state want)
 {
 	struct later *l = calloc(1, sizeof *l);
 	if (l) {
 		*l = (struct later){ .app = app, .serial = peer->serial, .id = json_incref(id),
-				     .deadline = loop_now(app->lp) + 10 };
+				     .deadline = loop_now(app->lp) + 10, .want = want };
 		if ((l->timer = loop_timer_add(app->lp, 0, 0.02, later_check, l)))
 			return;
 		json_decref(l->id);
@@ -379,12 +390,14 @@ static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto
 		if (!rc)
 			data = json_pack("{s:I,s:o}", "sweep", (json_int_t)id, "progress", progress_json(app));
 	} else if (!strcmp(sub, "pause")) {
-		rc = sweep_pause(app->sweep, &err);
+		if (!(rc = sweep_pause(app->sweep, &err)))
+			return reply_when(app, peer, req->id, SWEEP_PAUSED);
 	} else if (!strcmp(sub, "resume")) {
-		rc = sweep_resume(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &err);
+		if (!(rc = sweep_resume(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &err)))
+			return reply_when(app, peer, req->id, SWEEP_RUNNING);
 	} else if (!strcmp(sub, "abort")) {
 		if (!(rc = sweep_abort(app->sweep, &err)))
-			return reply_when_released(app, peer, req->id);
+			return reply_when(app, peer, req->id, SWEEP_IDLE);
 	}
 	if (rc)
 		return reply_err(app, peer, req->id, &err);

@@ -75,7 +75,7 @@ static void on_event(void *ctx, int64_t sweep_id, const char *kind, const char *
 		eta_reset(&sw->eta);
 	if (run || !strcmp(kind, "pause") || !strcmp(kind, "abort") || !strcmp(kind, "failed") ||
 	    !strcmp(kind, "complete"))
-		eta_running(&sw->eta, run, sw->last.points_done, loop_now(sw->env.loop), loop_monotonic(NULL));
+		eta_running(&sw->eta, run, loop_now(sw->env.loop), loop_monotonic(NULL));
 	const char *state = sw->ex ? ex_state_name(ex_state(sw->ex)) : "idle";
 	emit(sw, "sweep.state", json_pack("{s:I,s:s,s:s,s:s}", "sweep", (json_int_t)sweep_id, "state", state, "event",
 					  kind, "reason", message));
@@ -87,10 +87,12 @@ static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double
 	/* eta (the executor's, loop seconds) is replaced by the wall-clock estimate: the planner's remaining time
 	 * refined by the measured rate (eta.c). */
 	(void)eta;
-	double plan_left = NAN;
-	if (sw->plan && done >= 0 && (size_t)done < sw->plan->n_steps)
-		plan_left = sw->plan->duration_s - sw->plan->steps[done].t_start_s;
-	eta = eta_update(&sw->eta, done, total, plan_left, loop_now(sw->env.loop), loop_monotonic(NULL));
+	double plan_at = NAN, plan_total = NAN;
+	if (sw->plan && done >= 0) {
+		plan_total = sw->plan->predicted_s;
+		plan_at = (size_t)done < sw->plan->n_steps ? sw->plan->steps[done].predicted_start_s : plan_total;
+	}
+	eta = eta_update(&sw->eta, done, total, plan_at, plan_total, loop_now(sw->env.loop), loop_monotonic(NULL));
 	sw->last.eta_s = eta;
 	json_t *d = json_pack("{s:I,s:s,s:i,s:i,s:s}", "sweep", (json_int_t)sweep_id, "state", "running", "done", done,
 			      "total", total, "point", phase);
