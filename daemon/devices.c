@@ -391,6 +391,34 @@ fail:
 	op_end(dv, -1, &err, NULL);
 }
 
+#define HOME_TARGET INFINITY  /* begin_axes(): home this axis instead of moving it */
+
+/* Start the manual operation on the axes whose target is not NaN (HOME_TARGET: homing), watched by
+ * move_step() until they are done or timeout_s passed. 0, or -1 with every started axis stopped again. */
+static int begin_axes(struct devices *dv, const double target[3], double timeout_s, devices_done_fn done, void *ctx,
+		      struct acq_err *err)
+{
+	double now = loop_now(dv->lp);
+	for (int i = 0; i < 3; i++) {
+		dv->op_axis[i] = false;
+		if (isnan(target[i]))
+			continue;
+		if (isinf(target[i]) ? dv->drv->axis_home_begin(dv->axis[i], now, err)
+				     : dv->drv->axis_move_begin(dv->axis[i], target[i], now, err)) {
+			for (int j = 0; j < i; j++)
+				if (dv->op_axis[j])
+					dv->drv->axis_stop(dv->axis[j], NULL);
+			return name_err(err, (enum conf_dev)i);
+		}
+		dv->op_axis[i] = true;
+	}
+	dv->op_done = done;
+	dv->op_ctx = ctx;
+	dv->op_deadline = now + timeout_s;
+	dv->op_timer = loop_timer_add(dv->lp, 0.05, 0.05, move_step, dv);
+	return 0;
+}
+
 int devices_move(struct devices *dv, const double target[3], devices_done_fn done, void *ctx, struct acq_err *err)
 {
 	if (dv->op_timer)
@@ -413,24 +441,7 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 	}
 	if (!any)
 		return acq_errf(err, ACQ_E_INVAL, "move: give at least one of laser_theta, detector_theta, detector_phi");
-	double now = loop_now(dv->lp);
-	for (int i = 0; i < 3; i++) {
-		dv->op_axis[i] = false;
-		if (isnan(target[i]))
-			continue;
-		if (dv->drv->axis_move_begin(dv->axis[i], target[i], now, err)) {
-			for (int j = 0; j < i; j++)
-				if (dv->op_axis[j])
-					dv->drv->axis_stop(dv->axis[j], NULL);
-			return name_err(err, (enum conf_dev)i);
-		}
-		dv->op_axis[i] = true;
-	}
-	dv->op_done = done;
-	dv->op_ctx = ctx;
-	dv->op_deadline = now + dv->c->sweep.move_timeout_s;
-	dv->op_timer = loop_timer_add(dv->lp, 0.05, 0.05, move_step, dv);
-	return 0;
+	return begin_axes(dv, target, dv->c->sweep.move_timeout_s, done, ctx, err);
 }
 
 int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *ctx, struct acq_err *err)
@@ -443,28 +454,16 @@ int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *
 					dv->slot[i].note[0] ? dv->slot[i].note : "not configured");
 	if (!(mask & 7u))
 		return acq_errf(err, ACQ_E_INVAL, "home: no axis selected");
-	double now = loop_now(dv->lp);
+	double t[3];
 	for (int i = 0; i < 3; i++) {
-		dv->op_axis[i] = false;
-		if (!(mask & (1u << i)))
-			continue;
+		t[i] = mask & (1u << i) ? HOME_TARGET : NAN;
 		struct axis_status st;
-		if (!dv->drv->axis_read_status(dv->axis[i], &st, NULL) && st.alarm &&
+		if ((mask & (1u << i)) && !dv->drv->axis_read_status(dv->axis[i], &st, NULL) && st.alarm &&
 		    dv->drv->axis_alarm_reset(dv->axis[i], err))
 			return acq_err_prefix(err, "%s: resetting its alarm: ", conf_dev_name((enum conf_dev)i));
-		if (dv->drv->axis_home_begin(dv->axis[i], now, err)) {
-			for (int j = 0; j < i; j++)
-				if (dv->op_axis[j])
-					dv->drv->axis_stop(dv->axis[j], NULL);
-			return name_err(err, (enum conf_dev)i);
-		}
-		dv->op_axis[i] = true;
 	}
-	dv->op_done = done;
-	dv->op_ctx = ctx;
-	dv->op_deadline = now + 4 * dv->c->sweep.move_timeout_s; /* a homing run is slower than a move */
-	dv->op_timer = loop_timer_add(dv->lp, 0.05, 0.05, move_step, dv);
-	return 0;
+	/* a homing run is slower than a move */
+	return begin_axes(dv, t, 4 * dv->c->sweep.move_timeout_s, done, ctx, err);
 }
 
 int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err)

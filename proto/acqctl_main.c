@@ -662,6 +662,9 @@ int main(int argc, char **argv)
 			goto out;
 		}
 		*eq = 0;
+		for (char *k = words[wi]; *k; k++) /* one name per axis: laser.theta= is laser_theta= */
+			if (*k == '.')
+				*k = '_';
 		if (set_arg(req, def, words[wi], eq + 1, &err)) {
 			rc = fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
 			goto out;

@@ -115,6 +115,17 @@ void ctl_fmt_value(const char *key, json_t *v, char *buf, size_t cap)
 	}
 }
 
+/* Each line of text on its own line after indent. */
+static void print_lines(FILE *f, const char *indent, const char *text)
+{
+	for (const char *l = text, *nl; *l; l = nl + 1) {
+		nl = strchr(l, '\n');
+		fprintf(f, "%s%.*s\n", indent, nl ? (int)(nl - l) : (int)strlen(l), l);
+		if (!nl)
+			break;
+	}
+}
+
 /* ---- generic rendering: "key: value" with nested keys dotted, arrays of objects indexed ---- */
 static void print_tree(FILE *f, const char *prefix, const char *key, json_t *v)
 {
@@ -135,14 +146,9 @@ static void print_tree(FILE *f, const char *prefix, const char *key, json_t *v)
 	} else {
 		char val[1024];
 		ctl_fmt_value(key, v, val, sizeof val);
-		if (strchr(val, '\n')) /* multi-line text (plan text): indented below its key */ {
+		if (strchr(val, '\n')) { /* multi-line text (plan text): indented below its key */
 			fprintf(f, "%s:\n", prefix);
-			for (char *s = val, *nl; *s; s = nl + 1) {
-				nl = strchr(s, '\n');
-				fprintf(f, "    %.*s\n", nl ? (int)(nl - s) : (int)strlen(s), s);
-				if (!nl)
-					break;
-			}
+			print_lines(f, "    ", val);
 		} else {
 			fprintf(f, "%s: %s\n", prefix, val);
 		}
@@ -311,12 +317,7 @@ static void print_sweep_show(FILE *f, json_t *s)
 	const char *plan = str(s, "plan_text");
 	if (plan[0]) {
 		fprintf(f, "  plan:\n");
-		for (const char *l = plan, *nl; *l; l = nl + 1) {
-			nl = strchr(l, '\n');
-			fprintf(f, "    %.*s\n", nl ? (int)(nl - l) : (int)strlen(l), l);
-			if (!nl)
-				break;
-		}
+		print_lines(f, "    ", plan);
 	}
 }
 
@@ -450,12 +451,7 @@ static void print_recon_run(FILE *f, json_t *r)
 	const char *tail = str(r, "output_tail");
 	if (tail[0]) {
 		fprintf(f, "  last output:\n");
-		for (const char *l = tail, *nl; *l; l = nl + 1) {
-			nl = strchr(l, '\n');
-			fprintf(f, "    %.*s\n", nl ? (int)(nl - l) : (int)strlen(l), l);
-			if (!nl)
-				break;
-		}
+		print_lines(f, "    ", tail);
 	}
 }
 

@@ -152,6 +152,10 @@ void plan_spec_free(struct plan_spec *spec);
 /* Plan spec against bench g: classify, order, build safe moves, estimate. 0, or -1 with err. */
 int plan_make(const struct plan_spec *spec, const struct bench_geom *g, struct plan_result **out,
 	      struct acq_err *err);
+/* Straight-move time plus the settling of the axes that move: a lower bound of any move between a and b. */
+double plan_straight_s(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b);
+/* A pose [laser_theta, detector_theta, detector_phi] from a YAML sequence (what names it in messages). 0 or -1. */
+int plan_pose_parse(const struct yc_node *n, const char *what, struct plan_pos *out, struct acq_err *err);
 /* The executor's and drivers' default timing (see struct plan_timing). */
 void plan_timing_defaults(struct plan_timing *t);
 /* Fill the predicted_* fields of r (made from spec against g) for an executor timed by t. */

@@ -80,17 +80,8 @@ static int load_timing(struct yc_node *root, struct plan_timing *t, struct acq_e
 		    yc_bool(acq, "take_reference", false, &t->reference, err)))
 		return -1;
 	struct yc_node *pose = acq ? yc_get(acq, "reference_pose") : NULL;
-	if (pose) {
-		double v[3];
-		if (yc_expect_seq(pose, "sweep.acquisition.reference_pose", err))
-			return -1;
-		if (pose->n != 3)
-			return yc_errf(err, pose, "reference_pose: expected [laser_theta, detector_theta, detector_phi]");
-		for (int i = 0; i < 3; i++)
-			if (yc_node_double(pose->items[i], "reference_pose angle", -360, 720, &v[i], err))
-				return -1;
-		t->ref_pose = (struct plan_pos){ v[0], v[1], v[2] };
-	}
+	if (pose && plan_pose_parse(pose, "sweep.acquisition.reference_pose", &t->ref_pose, err))
+		return -1;
 	t->dark_every = (int)every;
 	t->dark_averages = (int)davg;
 	t->exposure_overhead_s = poll / 2;

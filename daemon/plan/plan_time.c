@@ -39,16 +39,22 @@ void plan_timing_defaults(struct plan_timing *t)
 static double move_time(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *a,
 			const struct plan_pos *b)
 {
-	double mv = plan_seg_time(g, a, b), settle = 0;
-	if (!(mv > 0))
-		return 0;
-	if (a->laser_theta != b->laser_theta)
-		settle = fmax(settle, g->laser_theta.settle_s);
-	if (a->det_theta != b->det_theta)
-		settle = fmax(settle, g->detector_theta.settle_s);
-	if (a->det_phi != b->det_phi)
-		settle = fmax(settle, g->detector_phi.settle_s);
-	return mv + settle + 1.5 * t->axis_poll_s + t->extra_settle_s;
+	double mv = plan_straight_s(g, a, b);
+	return mv > 0 ? mv + 1.5 * t->axis_poll_s + t->extra_settle_s : 0;
+}
+
+int plan_pose_parse(const struct yc_node *n, const char *what, struct plan_pos *out, struct acq_err *err)
+{
+	double v[3];
+	if (yc_expect_seq(n, what, err))
+		return -1;
+	if (n->n != 3)
+		return yc_errf(err, n, "%s: expected [laser_theta, detector_theta, detector_phi]", what);
+	for (int i = 0; i < 3; i++)
+		if (yc_node_double(n->items[i], what, -360, 720, &v[i], err))
+			return -1;
+	*out = (struct plan_pos){ v[0], v[1], v[2] };
+	return 0;
 }
 
 void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
