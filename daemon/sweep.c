@@ -266,6 +266,8 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
 	t->dark_every = sw->cfg.dark_every;
 	t->reference = sw->cfg.take_reference;
 	t->ref_pose = sw->cfg.ref_pose;
+	if (sw->env.conf->have_sim && sw->env.conf->sim.time_scale > 0)
+		t->time_scale = sw->env.conf->sim.time_scale;
 	double pos[3] = { NAN, NAN, NAN };
 	if (sw->env.devices)
 		devices_positions(sw->env.devices, pos);

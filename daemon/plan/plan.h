@@ -136,6 +136,9 @@ struct plan_timing {
 	bool reference;             /* a reference (the plan's averages) at the start, at ref_pose, then the move to
 				     * the first point */
 	struct plan_pos ref_pose;
+	double point_overhead_s;    /* real seconds per point the host spends beyond the bench's own time
+				     * (calibration, storage with fsync, protocol round trips) ... */
+	double time_scale;          /* ... which cost time_scale times as much bench time on a simulated bench */
 	bool have_start;            /* the arms' position when the sweep starts is known (the daemon knows it) */
 	struct plan_pos start;      /* then the move from there to ref_pose (or the first point) is counted */
 };

@@ -233,6 +233,31 @@ def main():
         last_config = len(names) - 1 - names[::-1].index("config")
         check(names.index("acqctl.disconnected") < names.index("acqctl.reconnected") < last_config, "order %r" % names)
         check(w.returncode == 0, "watch ends with 0 on SIGTERM (%r)" % w.returncode)
+        # --- watch on a terminal: the live view (redrawn in place), not JSON
+        import pty
+        mfd, sfd = pty.openpty()
+        tw = subprocess.Popen([CTL, "-s", b.sock, "watch"], stdout=sfd, stderr=sfd, stdin=subprocess.DEVNULL)
+        os.close(sfd)
+        buf = b""
+        deadline = time.time() + 10
+        while time.time() < deadline and b"last events" not in buf:
+            try:
+                buf += os.read(mfd, 65536)
+            except OSError:
+                break
+        c.json("reload", "reload")
+        t_end = time.time() + 3
+        while time.time() < t_end and b"configuration reloaded" not in buf:
+            try:
+                buf += os.read(mfd, 65536)
+            except OSError:
+                break
+        tw.terminate()
+        tw.wait(10)
+        os.close(mfd)
+        text = buf.decode(errors="replace")
+        check("\033[H\033[2J" in text and "acqctl watch" in text and "devices" in text and "spectrometer" in text
+              and "configuration reloaded" in text and not text.lstrip().startswith("{"), "TTY view %r" % text[-600:])
         # --- acq-sim ctl
         sim = os.path.join(L.BUILD, "acq-sim")
         env = dict(os.environ, ACQ_SIM_PORTS=b.ports)
