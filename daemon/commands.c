@@ -61,8 +61,10 @@ static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_
 	plan_time_apply(spec, &app->conf->bench, &tm, res);
 	/* The same object as the local dry run (acqctl renders both alike). */
 	json_t *o = plan_to_json(spec, res, json_is_true(json_object_get(req->root, "points")));
-	if (o)
+	if (o) {
 		json_object_set_new(o, "bench_config", json_string(app->conf->path));
+		json_object_set_new(o, "time_scale", json_real(tm.time_scale)); /* bench seconds per wall second */
+	}
 	plan_result_free(res);
 	plan_spec_free(spec);
 	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o,s:s}", "plan", o, "source", "daemon"));

@@ -342,7 +342,13 @@ void ctl_print_plan(FILE *f, json_t *r)
 		ctl_fmt_dur(num(r, "predicted_s"), a, sizeof a);
 		ctl_fmt_dur(num(r, "reference_s"), b, sizeof b);
 		ctl_fmt_dur(num(r, "darks_s"), c, sizeof c);
-		fprintf(f, "  predicted sweep time %s (bench time; reference %s, darks %s included)\n", a, b, c);
+		fprintf(f, "  predicted sweep time %s (reference %s, darks %s included)", a, b, c);
+		double ts = num(r, "time_scale");
+		if (ts > 0 && ts != 1) {
+			ctl_fmt_dur(num(r, "predicted_s") / ts, a, sizeof a);
+			fprintf(f, "; %s wall-clock at time scale %g", a, ts);
+		}
+		fputc('\n', f);
 	}
 	ctl_fmt_dur(num(r, "duration_s"), a, sizeof a);
 	ctl_fmt_dur(num(r, "raster_s"), b, sizeof b);
