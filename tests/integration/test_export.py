@@ -22,15 +22,15 @@ from acqtest import ACQCTL, Daemon, check  # noqa: E402
 NPTS, NWL = 866, 651
 
 
-def seed_big(db):
+def seed_big(db, npts=NPTS):
     con = sqlite3.connect(db, timeout=10)
     cur = con.cursor()
     cur.execute("INSERT INTO sweeps (name, plan_text, config_snapshot, state, created_at, software_version, "
-                "points_total) VALUES ('paper-size', 'plan: x', 'bench: {}', 'completed', 1.0, 'test', ?)", (NPTS,))
+                "points_total) VALUES ('paper-size', 'plan: x', 'bench: {}', 'completed', 1.0, 'test', ?)", (npts,))
     sid = cur.lastrowid
     grid = [450.0 + i for i in range(NWL)]
     cur.execute("UPDATE sweeps SET wavelength_grid = ? WHERE id = ?", (struct.pack("<%df" % NWL, *grid), sid))
-    for k in range(NPTS):
+    for k in range(npts):
         cur.execute("INSERT INTO points (sweep_id, order_index, theta_i, phi_i, theta_o, phi_o, state) "
                     "VALUES (?, ?, ?, 0, ?, ?, 'done')", (sid, k, (k % 10) * 8.0, (k % 7) * 9.0, (k * 36) % 360))
         pid = cur.lastrowid
@@ -72,12 +72,24 @@ def snapshot(state):
 
 def main():
     d = Daemon()
+    env = None
+    if "sanitize=address" in open(os.path.join(os.environ.get("ACQ_BUILD", "build"), ".cflags")).read():
+        # ASan keeps freed memory in quarantine (256 MB by default): peak RSS would count every allocation
+        # ever made instead of the live ones; a small quarantine keeps the bound meaningful.
+        env = dict(os.environ, ASAN_OPTIONS=os.environ.get("ASAN_OPTIONS", "") +
+                   ":quarantine_size_mb=1:thread_local_quarantine_size_kb=64")
     try:
-        d.start()
+        d.start(env=env)
         c = d.client()
         db = os.path.join(d.state, "acquisition.db")
+        small = seed_big(db, 3)
         sid = seed_big(db)
         pid = d.proc.pid
+        # the baseline: one small export already ran (the thread, its database connection, the stream)
+        r, fd = c.req_fd("export", sweep=small)
+        with os.fdopen(fd, "rb") as sf:
+            check(len(sf.read().splitlines()) == 3 + 2, "small export")
+        time.sleep(0.2)
         hwm0 = vm(pid, "VmHWM")
 
         # --- streamed to stdout, and to -o FILE (written by acqctl)
@@ -153,7 +165,7 @@ def main():
         check(not r["ok"] and r["error"]["code"] == "state", "planted link %r" % r)
         check(snapshot(d.state) == before, "a planted link led to the database")
         check(d.stop() == 0, "clean stop")
-        d.start()
+        d.start(env=env)
         check(d.client().req("sweep.show", sweep=sid)["ok"], "database opens after the exports")
         print("ok: streamed export of %d bytes, confinement of %d names" % (size, len(names)))
     finally:
