@@ -88,5 +88,7 @@ struct sim_service *sim_control_new(struct sim_world *w, struct yc_node *simcfg,
 
 /* `acq-sim truth ...`: ground-truth export (MERL table, DHR CSV, evaluation at directions). Exit status. */
 int sim_truth_main(int argc, char **argv);
+/* `acq-sim ctl ...` (argv[0] is "ctl"): one command to the control socket of a running acq-sim; exit status. */
+int simctl_main(int argc, char **argv);
 
 #endif
