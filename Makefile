@@ -59,7 +59,8 @@ DEB_PKGS   := build-essential pkg-config libusb-1.0-0-dev libmodbus-dev libseria
               libyaml-dev liblapacke-dev libopenblas-dev libsystemd-dev libcmocka-dev libpng-dev \
               libjansson-dev libcairo2-dev umockdev mbpoll python3-pymodbus python3-numpy sqlite3 socat \
               systemd clang python3-matplotlib libopenexr-dev openexr libhdf5-dev hdf5-tools python3-h5py \
-              python3-jsonschema scdoc man-db
+              python3-jsonschema scdoc man-db \
+              python3-scipy
 
 .DEFAULT_GOAL := all
 .SECONDARY:

@@ -401,28 +401,29 @@ static int cmd_dhr(int argc, char **argv)
 	if (!ok)
 		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
 	double *sgn = malloc(nth * L * sizeof *sgn), *sgm = malloc(nth * L * sizeof *sgm);
-	double *sgq = malloc(nth * L * sizeof *sgq);
-	if (ok && (!sgn || !sgm || !sgq)) {
+	double *sgq = malloc(nth * L * sizeof *sgq), *sgf = malloc(nth * L * sizeof *sgf);
+	if (ok && (!sgn || !sgm || !sgq || !sgf)) {
 		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
 		ok = 0;
 	}
-	if (ok && recon_dhr_ex(m, nth, thr, (int)draws, seed, dhr, sig, sgn, sgm, sgq, progress, NULL, &err))
+	struct recon_dhr_parts parts = { .noise = sgn, .model = sgm, .quad = sgq, .misfit = sgf };
+	if (ok && recon_dhr_parts(m, nth, thr, (int)draws, seed, dhr, sig, &parts, progress, NULL, &err))
 		ok = 0;
 	progress_end();
 	struct out o;
 	if (ok && !out_open(&o, outp, &err)) {
-		char a[64], b[64], sn_[64], sm_[64], sq_[64];
-		fputs("theta_i,wavelength_nm,dhr,sigma,sigma_noise,sigma_model,sigma_quad\n", o.f);
+		char a[64], b[64], sn_[64], sm_[64], sq_[64], sf_[64];
+		fputs("theta_i,wavelength_nm,dhr,sigma,sigma_noise,sigma_model,sigma_quad,sigma_misfit\n", o.f);
 		for (size_t t = 0; ok && t < nth; t++)
 			for (size_t l = 0; l < L; l++) {
 				if (csvio_fmt(a, sizeof a, dhr[t * L + l]) || csvio_fmt(b, sizeof b, sig[t * L + l]) ||
 				    csvio_fmt(sn_, sizeof sn_, sgn[t * L + l]) || csvio_fmt(sm_, sizeof sm_, sgm[t * L + l]) ||
-				    csvio_fmt(sq_, sizeof sq_, sgq[t * L + l])) {
+				    csvio_fmt(sq_, sizeof sq_, sgq[t * L + l]) || csvio_fmt(sf_, sizeof sf_, sgf[t * L + l])) {
 					acq_errf(&err, ACQ_E_NUMERIC, "dhr: non-finite value");
 					ok = 0;
 					break;
 				}
-				fprintf(o.f, "%.10g,%.10g,%s,%s,%s,%s,%s\n", th[t], m->wl[l], a, b, sn_, sm_, sq_);
+				fprintf(o.f, "%.10g,%.10g,%s,%s,%s,%s,%s,%s\n", th[t], m->wl[l], a, b, sn_, sm_, sq_, sf_);
 			}
 		if (out_close(&o, ok, &err))
 			ok = 0;
@@ -524,6 +525,7 @@ static int cmd_dhr(int argc, char **argv)
 	free(sgn);
 	free(sgm);
 	free(sgq);
+	free(sgf);
 	recon_model_free(m);
 	return ok ? 0 : fail(&err);
 }

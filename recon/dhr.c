@@ -12,6 +12,14 @@
 /* DHR quadrature: Gauss-Legendre 32 × 48 azimuth midpoints (error discussed at recon_albedo). */
 #define DHR_NMU 32
 #define DHR_NPHI 48
+/* Misfit counted beyond 3σ_g and 0.02 in the transformed space (2 % in f for the log transform). */
+#define MISFIT_Z 3.0
+#define MISFIT_MIN 0.02
+/* The prior on the unseen part of the hemisphere (recon/reconstruction.md): ln f has the GP amplitude
+ * PRIOR_ALPHA (prior std √(α K(x, x)) ≈ 1-1.4, a factor e) where no sample is within PRIOR_R0 (chordal, product
+ * metric: 0.35 ≈ 20°; the paper's 10 × 10 × 10 plan leaves no node of the DHR at 8-60° that far). */
+#define PRIOR_ALPHA 1.0
+#define PRIOR_R0 0.35
 #define DHR_FLOOR 1e-300  /* refined to 1e-3 relative: an absolute floor let two rules agree on a missed lobe */
 
 /*
@@ -42,11 +50,11 @@
  * a bias of the trend's Fresnel shape). The Monte-Carlo σ_noise stays as a floor, for when the GP's noise
  * model (η Λ) is smaller than the measured noise. σ_quad (quadrature) is independent and added.
  */
-/* σ_model² of the DHR at one incidence (see recon_dhr_ex): vmod[l] = α_l (c_lᵀ K_QQ c_l − b_lᵀ A⁻¹ b_l) with
- * c = C[q*L + l] (Q nodes c6), b = K_nQ c (Kq[q*n + k]), A the Cholesky factor; scratch KQQ[Q*Q], soaQ[6Q],
- * U[Q*L], Bt[L*n], X[L*n]. */
+/* σ_model² of the DHR at one incidence (see recon_dhr_ex): vmod[l] = c_lᵀ K_QQ c_l − b_lᵀ A⁻¹ b_l with
+ * c = C[q*L + l] (Q nodes c6, the amplitude √α already folded in), b = K_nQ c (Kq[q*n + k]), A the Cholesky
+ * factor; scratch KQQ[Q*Q], soaQ[6Q], U[Q*L], Bt[L*n], X[L*n]. */
 static int model_variance(const struct recon_model *m, size_t Q, const double *c6, const double *Kq, const double *A,
-			  const double *alpha, const double *C, double *KQQ, double *soaQ, double *U, double *Bt,
+			  const double *C, double *KQQ, double *soaQ, double *U, double *Bt,
 			  double *X, double *vmod, struct acq_err *err)
 {
 	size_t n = m->n, L = m->nwl;
@@ -65,10 +73,64 @@ static int model_variance(const struct recon_model *m, size_t Q, const double *c
 			ckc += C[q * L + l] * U[q * L + l];
 		for (size_t k = 0; k < n; k++)
 			bab += Bt[l * n + k] * X[l * n + k];
-		double v = alpha[l] * (ckc - bab);
+		double v = ckc - bab;
 		vmod[l] = v > 0 && isfinite(v) ? v : 0.0;
 	}
 	return 0;
+}
+
+/*
+ * Misfit: the data the smoothed model does not honour. The fit's residual at sample k is r = η·λ_k·w_k (from
+ * (K + ηΛ)w = g − μ); it counts where it exceeds both MISFIT_Z σ_g and MISFIT_MIN (a noise-level residual is the
+ * smoothing doing its job). In BRDF units Δf = f̂_k(e^r − 1) (log transform; (ĝ + r)² − ĝ² for sqrt), into
+ * df[k*L + l], 0 where the sample is honoured.
+ */
+static int misfit_df(const struct recon_model *m, double *df, struct acq_err *err)
+{
+	size_t n = m->n, L = m->nwl;
+	double *wk = malloc(recon_eval_work_size(m) * sizeof *wk);
+	if (!wk)
+		return acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
+	recon_eval_canon(m, n, m->ctr, 1, df, wk); /* df[k*L + l] = f̂ at the samples */
+	free(wk);
+	for (size_t k = 0; k < n; k++)
+		for (size_t l = 0; l < L; l++) {
+			double r = m->eta * m->lam[k] * m->w[l * n + k], sg = m->gsig[l * n + k], fh = df[k * L + l], d = 0;
+			if (fabs(r) > MISFIT_Z * sg && fabs(r) > MISFIT_MIN) {
+				if (m->transform == RECON_T_SQRT) {
+					double gh = sqrt(fh);
+					d = (gh + r) * (gh + r) - fh;
+				} else {
+					d = fh * expm1(fmin(r, G_MAX));
+				}
+			}
+			df[k * L + l] = isfinite(d) ? d : 0.0;
+		}
+	return 0;
+}
+
+/*
+ * At one incidence's Q nodes c6 (weights × energy factor in scale[q*L + l]): fold the GP amplitude into the
+ * sensitivities C, α_λ where samples are near and α_λ + PRIOR_ALPHA where none is (the prior on the unseen part
+ * of the hemisphere: a node farther than PRIOR_R0 from every sample in the product metric, reciprocal images
+ * included, is partly unseen, beyond 2·PRIOR_R0 wholly, smoothstep between); and add up the misfit of the
+ * nearest sample over the nodes within PRIOR_R0 of it (nearest-neighbour quadrature of Δf, signed) into mis[L].
+ */
+static void unseen_and_misfit(const struct recon_model *m, size_t Q, const double *c6, const double *scale,
+			      const double *alpha, const double *dfmis, double *C, double *mis)
+{
+	size_t L = m->nwl;
+	for (size_t q = 0; q < Q; q++) {
+		size_t k;
+		double d = recon_nearest_centre(m, c6 + 6 * q, &k);
+		if (d <= PRIOR_R0)
+			for (size_t l = 0; l < L; l++)
+				mis[l] += scale[q * L + l] * dfmis[k * L + l];
+		double u = (d - PRIOR_R0) / PRIOR_R0;
+		u = u <= 0 ? 0 : u >= 1 ? 1 : u * u * (3 - 2 * u);
+		for (size_t l = 0; l < L; l++)
+			C[q * L + l] *= sqrt(alpha[l] + u * PRIOR_ALPHA);
+	}
 }
 
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
@@ -81,6 +143,17 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 		 double *dhr, double *sig, double *sig_noise, double *sig_model, double *sig_quad,
 		 recon_progress_fn progress, void *pctx, struct acq_err *err)
 {
+	struct recon_dhr_parts p = { .noise = sig_noise, .model = sig_model, .quad = sig_quad };
+	return recon_dhr_parts(m, nth, theta, ndraws, seed, dhr, sig, &p, progress, pctx, err);
+}
+
+int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
+		    double *dhr, double *sig, const struct recon_dhr_parts *parts, recon_progress_fn progress, void *pctx,
+		    struct acq_err *err)
+{
+	static const struct recon_dhr_parts none;
+	if (!parts)
+		parts = &none;
 	size_t n = m->n, L = m->nwl, Q = (size_t)DHR_NMU * DHR_NPHI;
 	if (nth == 0 || nth > 64)
 		return acq_errf(err, ACQ_E_INVAL, "dhr: between 1 and 64 incidences");
@@ -100,11 +173,12 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 	double *C = malloc(Q * L * sizeof *C), *KQQ = malloc(Q * Q * sizeof *KQQ), *soaQ = malloc(6 * Q * sizeof *soaQ);
 	double *U = malloc(Q * L * sizeof *U), *Bt = malloc(L * n * sizeof *Bt), *X = malloc(L * n * sizeof *X);
 	double *Ainv = malloc(n * n * sizeof *Ainv), *alpha = calloc(L, sizeof *alpha);
+	double *dfmis = malloc(n * L * sizeof *dfmis), *misacc = calloc(nth * L, sizeof *misacc);
 	double *vmod = calloc(nth * L, sizeof *vmod), *squad = calloc(nth * L, sizeof *squad);
 	double *tb = malloc(nth * Q * TREND_NB * sizeof *tb);
 	struct albedo_ws ws = { 0 };
 	if (!Kq || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud || !C || !KQQ || !soaQ || !U ||
-	    !Bt || !X || !Ainv || !alpha || !vmod || !squad || !tb) {
+	    !Bt || !X || !Ainv || !alpha || !dfmis || !misacc || !vmod || !squad || !tb) {
 		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
 		goto out;
 	}
@@ -144,6 +218,8 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 			acc += m->w[l * n + k] * m->w[l * n + k] / Ainv[k * n + k];
 		alpha[l] = acc / (double)n;
 	}
+	if (misfit_df(m, dfmis, err))
+		goto out;
 	/* draw 0 is the nominal model; draws 1..ndraws are perturbed */
 	struct recon_rng r;
 	recon_rng_seed(&r, seed);
@@ -191,7 +267,9 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 					m2[t * L + l] += delta * (acc - mean[t * L + l]);
 				}
 			}
-			if (d == 0 && model_variance(m, Q, c6 + t * Q * 6, Kq + t * Q * n, A, alpha, C, KQQ, soaQ, U, Bt, X,
+			if (d == 0)
+				unseen_and_misfit(m, Q, c6 + t * Q * 6, scale + t * Q * L, alpha, dfmis, C, misacc + t * L);
+			if (d == 0 && model_variance(m, Q, c6 + t * Q * 6, Kq + t * Q * n, A, C, KQQ, soaQ, U, Bt, X,
 						     vmod + t * L, err))
 				goto out;
 		}
@@ -218,14 +296,16 @@ int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, i
 	}
 	for (size_t i = 0; i < nth * L; i++) {
 		double sn = ndraws > 1 ? sqrt(m2[i] / (ndraws - 1)) : 0.0, sm = sqrt(vmod[i]);
-		double sb = sn > sm ? sn : sm;
-		sig[i] = sqrt(sb * sb + squad[i] * squad[i]);
-		if (sig_noise)
-			sig_noise[i] = sn;
-		if (sig_model)
-			sig_model[i] = sm;
-		if (sig_quad)
-			sig_quad[i] = squad[i];
+		double sb = sn > sm ? sn : sm, smis = fmin(fabs(misacc[i]), 1.0);
+		sig[i] = sqrt(sb * sb + squad[i] * squad[i] + smis * smis);
+		if (parts->noise)
+			parts->noise[i] = sn;
+		if (parts->model)
+			parts->model[i] = sm;
+		if (parts->quad)
+			parts->quad[i] = squad[i];
+		if (parts->misfit)
+			parts->misfit[i] = smis;
 		if (!isfinite(sig[i]) || !isfinite(dhr[i])) {
 			acq_errf(err, ACQ_E_NUMERIC, "dhr: non-finite result");
 			goto out;
@@ -251,6 +331,8 @@ out:
 	free(X);
 	free(Ainv);
 	free(alpha);
+	free(dfmis);
+	free(misacc);
 	free(vmod);
 	free(squad);
 	free(tb);

@@ -84,6 +84,10 @@ static inline double theta_of(const double *v)
 void recon_eval_block(const struct recon_model *m, size_t b, const double *c6, int scaled, size_t nch,
 		      const size_t *chan, const double *wsub, double *out, double *work);
 
+/* Distance (chordal, product metric: |Δωi|² + |Δωo|², the reciprocal image included) from canonical point c6 to
+ * the nearest centre of the model, whose index goes to *kmin (may be NULL) (eval.c). */
+double recon_nearest_centre(const struct recon_model *m, const double *c6, size_t *kmin);
+
 /* Hemisphere nodes at θi (quad.c): nmu × nphi canonical points c6 and weights wt (cosθo included); square_rule =
  * Gauss-Legendre in cos²θo (the checker's independent rule). Returns -1 on a bad size. */
 int recon_hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double *c6, double *wt);
