@@ -24,6 +24,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "acq_version.h"
 #include "config/bench.h"
 #include "config/yconf.h"
 #include "sim/sim.h"
@@ -57,7 +58,7 @@ static void usage(FILE *f)
 {
 	fprintf(f, "usage: acq-sim -c CONFIG [--time-scale N] [--seed N] [--ports-file FILE] [--control SOCKET]\n"
 		   "               [--disable laser_arm,detector_arm,laser,spectrometer]\n"
-		   "       acq-sim truth --help\n"
+		   "       acq-sim truth --help | acq-sim ctl --help | acq-sim --version\n"
 		   "Serves the simulated bench described by CONFIG (sections bench, devices, sim).\n");
 }
 
@@ -327,6 +328,12 @@ int main(int argc, char **argv)
 {
 	if (argc > 1 && !strcmp(argv[1], "truth"))
 		return truth_main(argc - 1, argv + 1);
+	if (argc > 1 && !strcmp(argv[1], "ctl"))
+		return simctl_main(argc - 1, argv + 1);
+	if (argc > 1 && !strcmp(argv[1], "--version")) {
+		printf("acq-sim %s\n", ACQ_VERSION);
+		return 0;
+	}
 
 	const char *config = NULL, *ports_file = NULL, *control = NULL;
 	static const char *const svc_keys[] = { "laser_arm", "detector_arm", "laser", "spectrometer", NULL };

@@ -99,5 +99,7 @@ struct sim_service *sim_spectro_new(struct sim_world *w, struct yc_node *node, s
 struct sim_service *sim_control_new(struct sim_world *w, struct yc_node *simcfg, const char *socket_path,
 				    struct acq_err *err);
 
+/* `acq-sim ctl ...` (argv[0] is "ctl"): one command to the control socket of a running acq-sim; exit status. */
+int simctl_main(int argc, char **argv);
 
 #endif

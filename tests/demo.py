@@ -15,6 +15,7 @@ import sys
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "integration"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import sweeplib as L  # noqa: E402
 
 SCALE = float(os.environ.get("DEMO_TIME_SCALE", "35"))
@@ -136,6 +137,9 @@ def main():
                             ("z per wavelength", "dhr-reference-z.csv")):
             p = os.path.join(out, name)
             print("%-20s %s" % (label + ":", p if os.path.exists(p) else "(not produced: %s)" % p))
+        import demo_outputs  # issue 18: RGL .bsdf, HDR preview, slice plots
+        for label, p in demo_outputs.make(L.BUILD, out):
+            print("%-20s %s" % (label + ":", p))
         print("logs:                %s, %s" % (b.daemon_log, b.sim_log))
         return 0
     except L.Skip as e:
