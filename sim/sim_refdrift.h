@@ -14,7 +14,7 @@
  * Stated uncertainties for a budget: the reference deviation's is u (at every wavelength, fully correlated over
  * correlation_nm); the drift's, for a sample at a random time long after the reference, averaged over seeds:
  * amplitude sqrt(2 (1 + tilt^2 / 3)) (the oscillation and the offset each contribute amplitude; the tilt
- * amplitude x tilt x rms of x over 450-1100 nm, 1/sqrt(3)): 0.0076 for amplitude 0.005, tilt 0.5. A DHR averages
+ * amplitude x tilt x rms of x over 450-1100 nm, 1/sqrt(3)): 0.0074 for amplitude 0.005, tilt 0.5. A DHR averages
  * samples taken at many times, so its drift error is smaller.
  * Both are off by default (u = 0, amplitude = 0): the existing tests compare calibrated values with the
  * certificate's truth at tolerances that a 1-sigma reference error or a 0.5 % drift would eat into.
