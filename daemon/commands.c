@@ -186,6 +186,22 @@ static void cmd_measure(struct app *app, const struct srv_peer *peer, struct pro
 	}
 }
 
+/* `devices`: the report waits for fresh status reads on the devices' own threads (the loop never does). */
+static void cmd_devices(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	struct pending *p = pending_new(app, peer, req->id);
+	if (!p) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return reply_err(app, peer, req->id, &err);
+	}
+	if (devices_query(app->dev, pending_done, p, &err)) {
+		json_decref(p->id);
+		free(p);
+		reply_err(app, peer, req->id, &err);
+	}
+}
+
 /* ---- sweeps ---- */
 static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto_req *req)
 {
@@ -410,7 +426,7 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
 	} else if (!strcmp(cmd, "status")) {
 		server_reply(app->srv, peer->serial, req->id, status_json(app));
 	} else if (!strcmp(cmd, "devices")) {
-		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_json(app->dev)));
+		cmd_devices(app, peer, req);
 	} else if (!strcmp(cmd, "config")) {
 		server_reply(app->srv, peer->serial, req->id,
 			     json_pack("{s:o}", "config", config_json(app, json_is_true(json_object_get(req->root, "text")))));

@@ -26,6 +26,7 @@ static void drop_exposures(struct ex *x)
 	x->ntimes = 0;
 	x->e = 0;
 	x->shot_in_flight = false;
+	x->shot_landed = false;
 }
 
 static double quantize(const struct ex *x, double t)
@@ -128,7 +129,7 @@ int ex_load_reference(struct ex *x, struct acq_err *err)
 	sqlite3_bind_int64(s, 3, hi);
 	exp_darks_clear(x->darks);
 	int n = 0;
-	static _Thread_local float sd[SPECTRO_MAX_PIXELS];
+	float *sd = x->scratch;
 	while (sqlite3_step(s) == SQLITE_ROW && n < EX_MAX_TIMES) {
 		const char *kind = (const char *)sqlite3_column_text(s, 0);
 		double t = sqlite3_column_double(s, 1);
@@ -189,38 +190,48 @@ static const char *expose_kind(const struct ex *x)
 	return x->cfg.cal.method == CALIB_ABSOLUTE ? "beam" : "reference";
 }
 
-static int want_laser(struct ex *x, bool on, struct acq_err *err, int *dev)
+/* The laser as the next shot needs it: 0, EX_PENDING (its state is being read), or -1 with err. A command
+ * that changed it is confirmed by a read of the state before the shot. */
+static int want_laser(struct ex *x, bool on, struct acq_err *err)
 {
-	*dev = EX_DEV_LASER;
-	if (on == x->stats.laser_on && !on)
+	if (on == x->stats.laser_on && !on && !x->laser_confirm)
 		return 0;
 	if (on && !x->power_set && x->ops.laser_power) {
 		if (x->ops.laser_power(x->octx, x->cfg.laser_power_pct, err))
 			return -1;
 		x->power_set = true;
+		x->laser_confirm = true;
 	}
 	if (on != x->stats.laser_on) {
 		if (x->ops.laser_set(x->octx, on, err))
 			return -1;
 		x->stats.laser_on = on;
+		x->laser_confirm = true;
 	}
-	if (on) {
-		bool emission = false, ready = false;
-		if (x->ops.laser_state(x->octx, &emission, &ready, err))
-			return -1;
-		if (!emission || !ready)
-			return acq_errf(err, ACQ_E_DEVICE, "laser not emitting (interlock open or laser fault)");
-	}
+	bool emission = false, ready = false;
+	int rc = x->ops.laser_state(x->octx, &emission, &ready, err);
+	if (rc)
+		return rc;
+	x->laser_confirm = false;
+	if (on && (!emission || !ready))
+		return acq_errf(err, ACQ_E_DEVICE, "laser not emitting (interlock open or laser fault)");
+	if (!on && emission)
+		return acq_errf(err, ACQ_E_DEVICE, "laser still emitting after emission off");
 	return 0;
 }
 
-static void start_shot(struct ex *x, enum shot_kind k, double t, double now)
+/* Start a shot of kind k at t ms: 0 started, EX_PENDING (waiting for the laser), -1 after a fault. */
+static int start_shot(struct ex *x, enum shot_kind k, double t, double now)
 {
 	struct acq_err err = { 0 };
-	int dev = EX_DEV_LASER;
-	if (want_laser(x, k != SHOT_DARK, &err, &dev)) {
-		ex_fault(x, dev, &err);
-		return;
+	int rc = want_laser(x, k != SHOT_DARK, &err);
+	if (rc == EX_PENDING) {
+		ex_io_wait(x, now);
+		return EX_PENDING;
+	}
+	if (rc) {
+		ex_fault(x, EX_DEV_LASER, &err);
+		return -1;
 	}
 	x->shot = k;
 	x->meas.integration_ms = t;
@@ -228,11 +239,14 @@ static void start_shot(struct ex *x, enum shot_kind k, double t, double now)
 	x->meas.saturation_detection = true;
 	if (x->ops.spectro_start(x->octx, &x->meas, now, &err)) {
 		ex_fault(x, EX_DEV_SPECTRO, &err);
-		return;
+		return -1;
 	}
+	if (k == SHOT_PROBE)
+		x->probe_no++;
 	x->shot_in_flight = true;
 	/* First look when the exposures should be over, then every poll_s (the fetch deadline is the driver's). */
 	x->wake = now + fmax(t * 1e-3 * x->meas.averages, 1e-4);
+	return 0;
 }
 
 static int keep_frame(struct ex *x, const char *kind, double taken_at)
@@ -285,19 +299,6 @@ static void after_shot(struct ex *x, double now)
 		f->meas.averages = x->meas.averages;
 	if (isfinite(f->temperature_c))
 		x->temperature = f->temperature_c;
-	if (x->shot != SHOT_DARK) {
-		/* The laser must still be emitting: an interlock opened during the exposure spoils it. */
-		bool emission = false, ready = false;
-		if (x->ops.laser_state(x->octx, &emission, &ready, &err)) {
-			ex_fault(x, EX_DEV_LASER, &err);
-			return;
-		}
-		if (!emission || !ready) {
-			acq_errf(&err, ACQ_E_DEVICE, "laser stopped emitting during the exposure (interlock or fault)");
-			ex_fault(x, EX_DEV_LASER, &err);
-			return;
-		}
-	}
 	switch (x->shot) {
 	case SHOT_PROBE: {
 		x->stats.probes++;
@@ -403,6 +404,26 @@ void ex_run_acq(struct ex *x, double now)
 			return;
 		}
 		x->shot_in_flight = false;
+		x->shot_landed = true;
+	}
+	if (x->shot_landed) {
+		if (x->shot != SHOT_DARK) {
+			/* The laser must still be emitting: an interlock opened during the exposure spoils it. */
+			bool emission = false, ready = false;
+			int rc = x->ops.laser_state(x->octx, &emission, &ready, &err);
+			if (rc == EX_PENDING) {
+				ex_io_wait(x, now);
+				return;
+			}
+			if (rc == 0 && (!emission || !ready))
+				rc = acq_errf(&err, ACQ_E_DEVICE,
+					      "laser stopped emitting during the exposure (interlock or fault)");
+			if (rc) {
+				ex_fault(x, EX_DEV_LASER, &err);
+				return;
+			}
+		}
+		x->shot_landed = false;
 		after_shot(x, now);
 		return;
 	}
@@ -415,24 +436,19 @@ void ex_run_acq(struct ex *x, double now)
 		} else {
 			if (x->probe_no == 0)
 				x->t_probe = x->t_last;
-			x->probe_no++;
 			start_shot(x, SHOT_PROBE, x->t_probe, now);
 			return;
 		}
 	}
 	double t = x->times[x->e];
 	enum exp_dark_need need = exp_dark_check(x->darks, &x->cfg.pol, t, now, x->temperature);
-	if (need != EXP_DARK_FRESH) {
-		start_shot(x, SHOT_DARK, t, now);
-		return;
-	}
-	start_shot(x, SHOT_EXPOSE, t, now);
+	start_shot(x, need != EXP_DARK_FRESH ? SHOT_DARK : SHOT_EXPOSE, t, now);
 }
 
 static int put_spectrum(struct ex *x, const struct pending *p, int64_t point_id, bool completes, int64_t *id,
 			struct acq_err *err)
 {
-	static _Thread_local float counts[SPECTRO_MAX_PIXELS];
+	float *counts = x->scratch;
 	const struct spectro_frame *f = p->frame;
 	for (int i = 0; i < f->npix; i++)
 		counts[i] = (float)f->counts[i];
@@ -455,6 +471,7 @@ static int put_spectrum(struct ex *x, const struct pending *p, int64_t point_id,
 		.detector_theta = x->actual.det_theta,
 		.detector_phi = x->actual.det_phi,
 	};
+	ex_pos_angles(&x->geom, &x->actual, &sp.theta_i, &sp.phi_i, &sp.theta_o, &sp.phi_o);
 	return store_spectrum_add(x->st, &sp, id, err);
 }
 
@@ -598,7 +615,7 @@ static void commit_point(struct ex *x, double now)
 		x->stats.spectra++;
 	}
 	if (calibrated) {
-		static _Thread_local float fb[CALIB_MAX_GRID], fs[CALIB_MAX_GRID];
+		float *fb = x->scratch, *fs = x->scratch + CALIB_MAX_GRID;
 		for (int k = 0; k < x->cal->n; k++) {
 			fb[k] = (float)x->cal->f[k];
 			fs[k] = (float)x->cal->u[k];
@@ -636,17 +653,16 @@ static void commit_point(struct ex *x, double now)
 		ex_pause_now(x, false, "paused by the operator after point %d", x->cur);
 		return;
 	}
-	x->phase = PH_MOVE;
 	x->first_move = false;
 	x->point_started = now;
-	if (x->stats.laser_on && ex_laser_off(x, &err)) {
-		ex_fault(x, EX_DEV_LASER, &err);
-		return;
+	if (x->stats.laser_on) {
+		if (ex_laser_off(x, &err)) {
+			ex_fault(x, EX_DEV_LASER, &err);
+			return;
+		}
+		x->laser_confirm = true;
 	}
-	if (ex_plan_path(x)) {
-		ex_pause_now(x, false, "no collision-free path to point %d: move the arms and resume", x->cur);
-		return;
-	}
-	ex_set_phase_text(x, "moving");
-	ex_begin_waypoints(x, now);
+	x->move_from_verify = false;
+	x->phase = PH_LASER_OFF;
+	x->wake = now;
 }
