@@ -6,141 +6,19 @@
  * manager, a manual operation, a `devices` query or the executor, which is then kicked). A handle lives on its
  * thread only; the loop knows the slot is available and what it last read. A slot's generation changes when
  * its handle is closed, so completions of requests made for the old handle are recognised and dropped. */
-#include "daemon/devices.h"
+#include "daemon/devices_int.h"
 
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "daemon/executor.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
-#include "daemon/port.h"
 #include "daemon/store.h"
 #include "drivers/axis.h"
 #include "drivers/laser.h"
 #include "drivers/spectro.h"
-
-/* A result the executor has not taken within this many real seconds is stale (it was abandoned). */
-#define EX_STALE_REAL_S 1.0
-/* While an executor request runs, the executor is stepped again at the latest after this (clock seconds);
- * the completion kicks it sooner. */
-#define EX_RECHECK_S 0.5
-
-enum rop { R_OPEN, R_CLOSE, R_STATUS, R_MOVE, R_HOME, R_STOP, R_ALARM_RESET, R_LASER, R_POWER, R_MEASURE,
-	   R_SPECTRO_STOP };
-
-/* The executor's view of a slot: one move (or homing), one read, one measurement at a time; seq ties a
- * completion to the call that wants it. */
-enum xwait { XW_IDLE = 0, XW_RUNNING, XW_READY, XW_FAILED };
-struct xview {
-	unsigned seq;
-	enum xwait move;
-	unsigned move_seq;
-	struct acq_err move_err;
-	enum xwait read;
-	unsigned read_seq;
-	double read_real;              /* real time the read completed */
-	int read_rc;
-	struct acq_err read_err;
-	struct axis_status ast;
-	struct laser_status lst;
-	bool sticky;                   /* a laser command failed: the next laser read reports it */
-	struct acq_err sticky_err;
-	enum xwait meas;
-	unsigned meas_seq;
-	struct acq_err meas_err;
-	struct spectro_frame *frame;
-};
-
-struct dev_slot {
-	bool configured, available;
-	bool opening;            /* an open request is queued */
-	unsigned gen;            /* bumped when the handle is closed */
-	char note[512];          /* why unavailable / last error */
-	char vendor[64], model[64], serial[64], firmware[64];
-	struct port *port;
-	/* on the port's thread only */
-	struct axis *ax;
-	struct spectro *sp;
-	struct laser *ls;
-	/* cache, on the loop */
-	int64_t device_id;       /* its row in the store's devices table (0: not recorded) */
-	bool have_status;
-	struct axis_status ast;
-	struct laser_status lst;
-	struct spectro_info info;
-	struct xview x;
-};
-
-struct devices {
-	struct loop *lp;
-	struct store *st;
-	const struct conf *c;
-	devices_notify_fn notify;
-	void *ctx;
-	double (*wallclock)(void);
-	struct dev_slot slot[CONF_DEV__COUNT];
-	int64_t spectro_id;
-	uint64_t retry_timer;
-	void (*kick)(void *ctx);
-	void *kick_ctx;
-	/* manual operation in progress */
-	bool op_active;
-	devices_done_fn op_done;
-	void *op_ctx;
-	int op_waiting;          /* move: axes still moving */
-	int op_rc;
-	struct acq_err op_err;
-	char op_kind[16];
-	bool op_laser;           /* the laser was switched on for this measurement: off at its end */
-	double op_power;
-};
-
-enum owner { OWN_MGR, OWN_EX, OWN_OP, OWN_QUERY };
-
-struct query {
-	struct devices *dv;
-	int waiting;
-	devices_done_fn done;
-	void *ctx;
-	uint64_t timer;
-};
-
-struct req {
-	struct port_req pr;
-	struct devices *dv;
-	int d;
-	enum rop op;
-	enum owner owner;
-	unsigned gen, seq;
-	const void *cfg;         /* the device's configuration (open) */
-	double target, deadline, pct;
-	bool on;
-	struct spectro_meas meas;
-	/* results */
-	int rc;
-	struct acq_err err;
-	bool have_ast, have_lst, have_info;
-	struct axis_status ast;
-	struct laser_status lst;
-	struct spectro_info info;
-	struct axis_identity aid;
-	struct laser_identity lid;
-	struct spectro_frame *frame;
-	struct query *q;
-};
-
-static const char *dname(int d)
-{
-	return conf_dev_name((enum conf_dev)d);
-}
-
-static bool is_axis(int d)
-{
-	return d <= CONF_DEV_DETECTOR_PHI;
-}
 
 /* ---- on the port's thread ------------------------------------------------------------------------------ */
 
@@ -292,7 +170,7 @@ static void req_run(struct port_req *pr, struct port *p)
 
 static void req_done(struct port_req *pr);
 
-static struct req *req_new(struct devices *dv, int d, enum rop op, enum owner owner)
+struct req *devices_req_new(struct devices *dv, int d, enum rop op, enum owner owner)
 {
 	struct req *r = calloc(1, sizeof *r);
 	if (!r)
@@ -310,7 +188,7 @@ static struct req *req_new(struct devices *dv, int d, enum rop op, enum owner ow
 }
 
 /* Submit r to its slot's port. -1 (and r freed) when the slot has no port or memory ran out before. */
-static int submit(struct req *r)
+int devices_req_submit(struct req *r)
 {
 	if (!r)
 		return -1;
@@ -368,7 +246,6 @@ static void opened(struct devices *dv, struct req *r)
 		dv->notify(dv->ctx, (enum conf_dev)r->d, true, "connected");
 }
 
-static void ex_done(struct devices *dv, struct req *r);
 static void op_done(struct devices *dv, struct req *r);
 static void query_step(struct query *q);
 
@@ -393,7 +270,7 @@ static void req_done(struct port_req *pr)
 			s->have_status = false;
 	}
 	if (r->owner == OWN_EX && current)
-		ex_done(dv, r);
+		devices_ex_done(dv, r);
 	else if (r->owner == OWN_OP)
 		op_done(dv, r);
 	else if (r->owner == OWN_QUERY)
@@ -418,12 +295,12 @@ static void try_open(struct devices *dv, int d)
 	struct dev_slot *s = &dv->slot[d];
 	if (s->opening || s->available || !s->port)
 		return;
-	struct req *r = req_new(dv, d, R_OPEN, OWN_MGR);
+	struct req *r = devices_req_new(dv, d, R_OPEN, OWN_MGR);
 	if (!r)
 		return;
 	r->cfg = cfg_of(dv->c, d);
 	s->opening = true;
-	submit(r);
+	devices_req_submit(r);
 }
 
 /* Every absent device is tried on its own thread: an open that times out delays nothing else. */
@@ -474,7 +351,7 @@ static void close_all(struct devices *dv)
 		struct dev_slot *s = &dv->slot[d];
 		if (!s->port)
 			continue;
-		submit(req_new(dv, d, R_CLOSE, OWN_MGR));
+		devices_req_submit(devices_req_new(dv, d, R_CLOSE, OWN_MGR));
 		port_free(s->port);
 		s->port = NULL;
 		s->available = false;
@@ -516,13 +393,13 @@ void devices_safe_stop(struct devices *dv)
 		if (!s->available || !s->port)
 			continue;
 		if (d == CONF_DEV_LASER) {
-			struct req *r = req_new(dv, d, R_LASER, OWN_MGR);
+			struct req *r = devices_req_new(dv, d, R_LASER, OWN_MGR);
 			if (r)
 				r->on = false;
-			submit(r);
+			devices_req_submit(r);
 		} else {
 			port_interrupt(s->port);
-			submit(req_new(dv, d, is_axis(d) ? R_STOP : R_SPECTRO_STOP, OWN_MGR));
+			devices_req_submit(devices_req_new(dv, d, is_axis(d) ? R_STOP : R_SPECTRO_STOP, OWN_MGR));
 		}
 	}
 }
@@ -579,7 +456,7 @@ void devices_lost(struct devices *dv, enum conf_dev d, const char *why)
 	snprintf(s->note, sizeof s->note, "%s", why);
 	if (s->port) {
 		port_interrupt(s->port);
-		submit(req_new(dv, d, R_CLOSE, OWN_MGR));
+		devices_req_submit(devices_req_new(dv, d, R_CLOSE, OWN_MGR));
 	}
 	if (was && dv->notify)
 		dv->notify(dv->ctx, d, false, why);
@@ -670,10 +547,10 @@ int devices_query(struct devices *dv, devices_done_fn done, void *ctx, struct ac
 	for (int d = 0; d < CONF_DEV__COUNT; d++) {
 		if (d == CONF_DEV_SPECTRO || !dv->slot[d].available)
 			continue;
-		struct req *r = req_new(dv, d, R_STATUS, OWN_QUERY);
+		struct req *r = devices_req_new(dv, d, R_STATUS, OWN_QUERY);
 		if (r)
 			r->q = q;
-		if (submit(r) == 0)
+		if (devices_req_submit(r) == 0)
 			q->waiting++;
 	}
 	if (--q->waiting == 0 && !loop_timer_add(dv->lp, 0, 0, query_reply, q)) {
@@ -688,10 +565,10 @@ int devices_query(struct devices *dv, devices_done_fn done, void *ctx, struct ac
 static void op_finish(struct devices *dv, int rc, const struct acq_err *err, json_t *result)
 {
 	if (dv->op_laser && dv->slot[CONF_DEV_LASER].available) {
-		struct req *r = req_new(dv, CONF_DEV_LASER, R_LASER, OWN_MGR);
+		struct req *r = devices_req_new(dv, CONF_DEV_LASER, R_LASER, OWN_MGR);
 		if (r)
 			r->on = false;
-		submit(r);
+		devices_req_submit(r);
 	}
 	dv->op_laser = false;
 	dv->op_active = false;
@@ -776,12 +653,12 @@ static void op_done(struct devices *dv, struct req *r)
 			op_finish(dv, -1, &err, NULL);
 			return;
 		}
-		struct req *m = req_new(dv, CONF_DEV_SPECTRO, R_MEASURE, OWN_OP);
+		struct req *m = devices_req_new(dv, CONF_DEV_SPECTRO, R_MEASURE, OWN_OP);
 		if (m) {
 			m->meas = r->meas;
 			m->frame = malloc(sizeof *m->frame);
 		}
-		if (submit(m)) {
+		if (devices_req_submit(m)) {
 			struct acq_err err = { 0 };
 			acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 			op_finish(dv, -1, &err, NULL);
@@ -827,12 +704,12 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 	for (int i = 0; i < 3; i++) {
 		if (isnan(target[i]))
 			continue;
-		struct req *r = req_new(dv, i, R_MOVE, OWN_OP);
+		struct req *r = devices_req_new(dv, i, R_MOVE, OWN_OP);
 		if (r) {
 			r->target = target[i];
 			r->deadline = deadline;
 		}
-		if (submit(r) == 0)
+		if (devices_req_submit(r) == 0)
 			dv->op_waiting++;
 	}
 	if (!dv->op_waiting) {
@@ -866,336 +743,23 @@ int devices_measure(struct devices *dv, const char *kind, double integration_ms,
 	dv->op_laser = !dark && ls->available;
 	struct req *r;
 	if (ls->available) {
-		r = req_new(dv, CONF_DEV_LASER, R_LASER, OWN_OP);
+		r = devices_req_new(dv, CONF_DEV_LASER, R_LASER, OWN_OP);
 		if (r) {
 			r->on = !dark;
 			r->pct = dark ? NAN : power_pct;
 			r->meas = m;
 		}
 	} else { /* no laser at all: a dark straight away */
-		r = req_new(dv, CONF_DEV_SPECTRO, R_MEASURE, OWN_OP);
+		r = devices_req_new(dv, CONF_DEV_SPECTRO, R_MEASURE, OWN_OP);
 		if (r) {
 			r->meas = m;
 			r->frame = malloc(sizeof *r->frame);
 		}
 	}
-	if (submit(r)) {
+	if (devices_req_submit(r)) {
 		dv->op_active = false;
 		dv->op_laser = false;
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
 	return 0;
-}
-
-/* ---- the sweep executor's device operations (executor.h) ---------------------------------------------------
- * Commands (move, home, stop, alarm reset, laser, power, spectrometer start/stop) are queued and return at once;
- * their outcome comes through the polls (move_step, spectro_fetch) or the next read. Reads (position, laser
- * state, reconnect) return EX_PENDING until their completion has kicked the executor, then the result. */
-
-static double real_now(void)
-{
-	return loop_monotonic(NULL);
-}
-
-static void ex_done(struct devices *dv, struct req *r)
-{
-	struct xview *x = &dv->slot[r->d].x;
-	bool kick = false;
-	if ((r->op == R_MOVE || r->op == R_HOME) && x->move == XW_RUNNING && r->seq == x->move_seq) {
-		x->move = r->rc ? XW_FAILED : XW_READY;
-		x->move_err = r->err;
-		kick = true;
-	} else if (r->op == R_STATUS && x->read == XW_RUNNING && r->seq == x->read_seq) {
-		x->read = XW_READY;
-		x->read_rc = r->rc;
-		x->read_err = r->err;
-		x->ast = r->ast;
-		x->lst = r->lst;
-		x->read_real = real_now();
-		kick = true;
-	} else if (r->op == R_MEASURE && x->meas == XW_RUNNING && r->seq == x->meas_seq) {
-		x->meas = r->rc ? XW_FAILED : XW_READY;
-		x->meas_err = r->err;
-		if (!r->rc) {
-			free(x->frame);
-			x->frame = r->frame;
-			r->frame = NULL;
-		}
-		kick = true;
-	} else if ((r->op == R_LASER || r->op == R_POWER || r->op == R_ALARM_RESET) && r->rc && !x->sticky) {
-		x->sticky = true; /* reported by the next read of this device */
-		x->sticky_err = r->err;
-		kick = true;
-	}
-	if (kick && dv->kick)
-		dv->kick(dv->kick_ctx);
-}
-
-static struct dev_slot *ex_slot(struct devices *dv, int d, struct acq_err *err)
-{
-	struct dev_slot *s = &dv->slot[d];
-	if (!s->available || !s->port) {
-		acq_errf(err, ACQ_E_DISCONNECTED, "%s unavailable", dname(d));
-		return NULL;
-	}
-	return s;
-}
-
-/* Queue an executor command on slot d; its failure (if any) is reported by the next read. */
-static int ex_command(struct devices *dv, int d, enum rop op, double target, bool on, double pct,
-		      struct acq_err *err)
-{
-	struct dev_slot *s = ex_slot(dv, d, err);
-	if (!s)
-		return -1;
-	struct req *r = req_new(dv, d, op, OWN_EX);
-	if (!r)
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	r->seq = ++s->x.seq;
-	r->target = target;
-	r->on = on;
-	r->pct = pct;
-	if (op == R_MOVE || op == R_HOME) {
-		s->x.move = XW_RUNNING;
-		s->x.move_seq = r->seq;
-	}
-	return submit(r) ? acq_errf(err, ACQ_E_NOMEM, "out of memory") : 0;
-}
-
-/* A read of slot d: the result when one is in (0 or -1), else EX_PENDING (a read is queued or running). */
-static int ex_read(struct devices *dv, int d, struct acq_err *err)
-{
-	struct dev_slot *s = ex_slot(dv, d, err);
-	if (!s)
-		return -1;
-	struct xview *x = &s->x;
-	if (x->read == XW_READY && real_now() - x->read_real > EX_STALE_REAL_S)
-		x->read = XW_IDLE; /* nobody took it in time: read again */
-	if (x->read == XW_READY) {
-		x->read = XW_IDLE;
-		if (x->sticky) {
-			x->sticky = false;
-			if (err)
-				*err = x->sticky_err;
-			return -1;
-		}
-		if (x->read_rc && err)
-			*err = x->read_err;
-		return x->read_rc ? -1 : 0;
-	}
-	if (x->read == XW_IDLE) {
-		struct req *r = req_new(dv, d, R_STATUS, OWN_EX);
-		if (!r)
-			return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-		r->seq = x->read_seq = ++x->seq;
-		x->read = XW_RUNNING;
-		if (submit(r)) {
-			x->read = XW_IDLE;
-			return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-		}
-	}
-	return EX_PENDING;
-}
-
-static int o_move_begin(void *ctx, int a, double target, double now, struct acq_err *err)
-{
-	(void)now;
-	return ex_command(ctx, a, R_MOVE, target, false, NAN, err);
-}
-
-static int o_home_begin(void *ctx, int a, double now, struct acq_err *err)
-{
-	(void)now;
-	return ex_command(ctx, a, R_HOME, 0, false, NAN, err);
-}
-
-static int o_move_step(void *ctx, int a, double now, struct acq_err *err)
-{
-	(void)now;
-	struct devices *dv = ctx;
-	struct dev_slot *s = ex_slot(dv, a, err);
-	if (!s)
-		return AXIS_MOVE_FAILED;
-	switch (s->x.move) {
-	case XW_RUNNING: return AXIS_MOVE_RUNNING;
-	case XW_FAILED:
-		s->x.move = XW_IDLE;
-		if (err)
-			*err = s->x.move_err;
-		return AXIS_MOVE_FAILED;
-	default: s->x.move = XW_IDLE; return AXIS_MOVE_DONE;
-	}
-}
-
-static double o_next_poll(void *ctx, int a)
-{
-	struct devices *dv = ctx;
-	/* Running: look again a little later (the completion kicks sooner); else the result is in: now. */
-	return dv->slot[a].available && dv->slot[a].x.move == XW_RUNNING ? loop_now(dv->lp) + EX_RECHECK_S : -INFINITY;
-}
-
-static int o_stop(void *ctx, int a, struct acq_err *err)
-{
-	struct devices *dv = ctx;
-	struct dev_slot *s = ex_slot(dv, a, err);
-	if (!s)
-		return -1;
-	port_interrupt(s->port);
-	s->x.move = XW_IDLE;
-	s->x.seq++;
-	struct req *r = req_new(dv, a, R_STOP, OWN_MGR);
-	return submit(r) ? acq_errf(err, ACQ_E_NOMEM, "out of memory") : 0;
-}
-
-static int o_position(void *ctx, int a, double *deg, bool *homed, bool *alarm, struct acq_err *err)
-{
-	struct devices *dv = ctx;
-	int rc = ex_read(dv, a, err);
-	if (rc == 0) {
-		const struct axis_status *st = &dv->slot[a].x.ast;
-		*deg = st->position_deg;
-		*homed = st->homed;
-		*alarm = st->alarm;
-	}
-	return rc;
-}
-
-static int o_alarm_reset(void *ctx, int a, struct acq_err *err)
-{
-	return ex_command(ctx, a, R_ALARM_RESET, 0, false, NAN, err);
-}
-
-static int o_laser_set(void *ctx, bool on, struct acq_err *err)
-{
-	struct devices *dv = ctx;
-	if (!dv->slot[CONF_DEV_LASER].available)
-		return on ? acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable") : 0; /* absent = dark */
-	return ex_command(dv, CONF_DEV_LASER, R_LASER, 0, on, NAN, err);
-}
-
-static int o_laser_power(void *ctx, double pct, struct acq_err *err)
-{
-	return ex_command(ctx, CONF_DEV_LASER, R_POWER, 0, false, pct, err);
-}
-
-static int o_laser_state(void *ctx, bool *emission, bool *ready, struct acq_err *err)
-{
-	struct devices *dv = ctx;
-	int rc = ex_read(dv, CONF_DEV_LASER, err);
-	if (rc == 0) {
-		const struct laser_status *st = &dv->slot[CONF_DEV_LASER].x.lst;
-		*emission = st->emission;
-		*ready = st->interlock_ok && !st->fault;
-	}
-	return rc;
-}
-
-/* The device manager reconnects on its own thread; here: is the device back and answering? */
-static int o_reconnect(void *ctx, int dev, struct acq_err *err)
-{
-	struct devices *dv = ctx;
-	if (dev == EX_DEV_SPECTRO)
-		return ex_slot(dv, dev, err) && dv->slot[dev].info.npix > 0 ? 0 : -1;
-	return ex_read(dv, dev, err);
-}
-
-static int o_spectro_start(void *ctx, const struct spectro_meas *m, double now, struct acq_err *err)
-{
-	(void)now;
-	struct devices *dv = ctx;
-	struct dev_slot *s = ex_slot(dv, CONF_DEV_SPECTRO, err);
-	if (!s)
-		return -1;
-	struct req *r = req_new(dv, CONF_DEV_SPECTRO, R_MEASURE, OWN_EX);
-	if (r) {
-		r->meas = *m;
-		r->frame = malloc(sizeof *r->frame);
-		r->seq = s->x.meas_seq = ++s->x.seq;
-	}
-	s->x.meas = XW_RUNNING;
-	if (submit(r)) {
-		s->x.meas = XW_IDLE;
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	}
-	return 0;
-}
-
-static int o_spectro_fetch(void *ctx, struct spectro_frame *f, double now, struct acq_err *err)
-{
-	(void)now;
-	struct devices *dv = ctx;
-	struct dev_slot *s = ex_slot(dv, CONF_DEV_SPECTRO, err);
-	if (!s)
-		return -1;
-	switch (s->x.meas) {
-	case XW_RUNNING: return 0;
-	case XW_READY:
-		s->x.meas = XW_IDLE;
-		memcpy(f, s->x.frame, sizeof *f);
-		return 1;
-	case XW_FAILED:
-		s->x.meas = XW_IDLE;
-		if (err)
-			*err = s->x.meas_err;
-		return -1;
-	default: return acq_errf(err, ACQ_E_STATE, "spectrometer: no measurement running");
-	}
-}
-
-static int o_spectro_stop(void *ctx, struct acq_err *err)
-{
-	(void)err;
-	struct devices *dv = ctx;
-	struct dev_slot *s = &dv->slot[CONF_DEV_SPECTRO];
-	if (!s->available || !s->port || s->x.meas != XW_RUNNING)
-		return 0;
-	s->x.meas = XW_IDLE;
-	s->x.seq++;
-	port_interrupt(s->port);
-	return 0;
-}
-
-static const struct spectro_info *o_spectro_info(void *ctx)
-{
-	struct devices *dv = ctx;
-	const struct dev_slot *s = &dv->slot[CONF_DEV_SPECTRO];
-	return s->available && s->info.npix > 0 ? &s->info : NULL;
-}
-
-static double o_wall(void *ctx)
-{
-	struct devices *dv = ctx;
-	return dv->wallclock();
-}
-
-/* A link-level failure hands the device back to the manager (close, reconnect on its timer); a device that
- * answered with an error (alarm, interlock) keeps its handle. */
-static void o_lost(void *ctx, int dev, const struct acq_err *err)
-{
-	struct devices *dv = ctx;
-	int code = err ? err->code : ACQ_E_DEVICE;
-	if (code == ACQ_E_TIMEOUT || code == ACQ_E_DISCONNECTED || code == ACQ_E_IO || code == ACQ_E_PROTO)
-		if (dev != EX_DEV_SPECTRO || dv->slot[dev].available)
-			devices_lost(dv, (enum conf_dev)dev, err ? err->msg : "device error");
-}
-
-static void o_limits(void *ctx, int a, double *lo, double *hi)
-{
-	struct devices *dv = ctx;
-	const struct axis_cfg *c = a >= 0 && a < 3 ? dv->c->axis[a] : NULL;
-	if (c)
-		axis_cfg_limits(c, lo, hi);
-}
-
-static const struct ex_ops ex_dev_ops = {
-	.move_begin = o_move_begin, .move_step = o_move_step, .next_poll = o_next_poll, .stop = o_stop,
-	.position = o_position, .home_begin = o_home_begin, .alarm_reset = o_alarm_reset, .reconnect = o_reconnect,
-	.laser_set = o_laser_set, .laser_power = o_laser_power, .laser_state = o_laser_state,
-	.spectro_start = o_spectro_start, .spectro_fetch = o_spectro_fetch, .spectro_stop = o_spectro_stop,
-	.spectro_info = o_spectro_info, .wall = o_wall, .lost = o_lost, .limits = o_limits,
-};
-
-const struct ex_ops *devices_ex_ops(void)
-{
-	return &ex_dev_ops;
 }

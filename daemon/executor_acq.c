@@ -496,6 +496,47 @@ static void finish_sweep(struct ex *x)
 	      x->nsteps, calib_method_name(x->cfg.cal.method), x->stats.faults, x->stats.recoveries);
 }
 
+/* The reference (or direct beam) is in: store its spectra, keep its merged rate, then pause for the sample swap
+ * or go on to the first point. */
+static void commit_reference(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	int64_t first = 0, last = 0;
+	for (int i = 0; i < x->npend; i++) {
+		int64_t id = 0;
+		if (put_spectrum(x, &x->pend[i], 0, false, &id, &err)) {
+			ex_failed(x, "storing the reference: %s", err.msg);
+			return;
+		}
+		if (!first)
+			first = id;
+		last = id;
+		x->stats.spectra++;
+	}
+	/* Paused in the store before the marker: a crash in between measures the reference again. */
+	if (x->cfg.pause_after_reference)
+		ex_set_db_state(x, "paused");
+	memcpy(x->ref_rate, x->merged, sizeof *x->ref_rate);
+	x->have_ref = true;
+	x->cfg.cal.ref_theta_o_deg = fabs(x->actual.det_theta);
+	x->in_reference = false;
+	ex_clear_pending(x);
+	ex_event(x, "reference", NULL, "%s measured at (%.4f, %.4f, %.4f): spectra %lld-%lld",
+	      x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "white reference", x->actual.laser_theta,
+	      x->actual.det_theta, x->actual.det_phi, (long long)first, (long long)last);
+	if (x->cfg.pause_after_reference) {
+		ex_pause_now(x, false, "%s measured: place the sample on the stage, then resume",
+			  x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "reference");
+		return;
+	}
+	if (x->pause_requested) {
+		ex_pause_now(x, false, "paused by the operator after the reference");
+		return;
+	}
+	ex_begin_segment(x, now);
+	return;
+}
+
 /* The point's exposures are in: merge, check saturation, calibrate, commit, go on. */
 static void commit_point(struct ex *x, double now)
 {
@@ -551,39 +592,7 @@ static void commit_point(struct ex *x, double now)
 		}
 	}
 	if (x->in_reference) {
-		int64_t first = 0, last = 0;
-		for (int i = 0; i < x->npend; i++) {
-			int64_t id = 0;
-			if (put_spectrum(x, &x->pend[i], 0, false, &id, &err)) {
-				ex_failed(x, "storing the reference: %s", err.msg);
-				return;
-			}
-			if (!first)
-				first = id;
-			last = id;
-			x->stats.spectra++;
-		}
-		/* Paused in the store before the marker: a crash in between measures the reference again. */
-		if (x->cfg.pause_after_reference)
-			ex_set_db_state(x, "paused");
-		memcpy(x->ref_rate, x->merged, sizeof *x->ref_rate);
-		x->have_ref = true;
-		x->cfg.cal.ref_theta_o_deg = fabs(x->actual.det_theta);
-		x->in_reference = false;
-		ex_clear_pending(x);
-		ex_event(x, "reference", NULL, "%s measured at (%.4f, %.4f, %.4f): spectra %lld-%lld",
-		      x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "white reference", x->actual.laser_theta,
-		      x->actual.det_theta, x->actual.det_phi, (long long)first, (long long)last);
-		if (x->cfg.pause_after_reference) {
-			ex_pause_now(x, false, "%s measured: place the sample on the stage, then resume",
-				  x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "reference");
-			return;
-		}
-		if (x->pause_requested) {
-			ex_pause_now(x, false, "paused by the operator after the reference");
-			return;
-		}
-		ex_begin_segment(x, now);
+		commit_reference(x, now);
 		return;
 	}
 	/* Calibrate at the measured angles. */
