@@ -33,7 +33,6 @@ void ex_cfg_defaults(struct ex_cfg *c)
 	c->max_point_faults = 6;
 	c->laser_power_pct = 100.0;
 	c->max_invalid_frac = 0.005;
-	c->db_path = NULL;
 }
 
 const char *ex_state_name(enum ex_state s)

@@ -102,7 +102,6 @@ struct ex_cfg {
 	int max_point_attempts;      /* acquisitions of one point spoiled by saturation before accepting it */
 	int max_point_faults;        /* faults on one point (each recovered) before pausing for the operator */
 	double max_invalid_frac;     /* saturated share of the grid range that spoils an acquisition */
-	const char *db_path;         /* the database file, to reload the reference on resume (read-only) */
 };
 
 /* Counters for tests and status. */

@@ -3,7 +3,6 @@
 #include "daemon/executor_int.h"
 
 #include <math.h>
-#include <sqlite3.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -68,117 +67,53 @@ bool ex_want_wl(struct ex *x)
 
 /* ---- reference reload (crash-resume) ------------------------------------------------------------ */
 
-static int blob_floats(sqlite3_stmt *s, int col, int npix, double *dst_d, float *dst_f)
+/* One stored reference spectrum: darks back into the dark cache (never reused for new spectra), exposures
+ * into net rates, exactly as when they were taken. */
+static int reload_one(void *ctx, const struct store_ref_spectrum *sp)
 {
-	const void *b = sqlite3_column_blob(s, col);
-	int n = sqlite3_column_bytes(s, col);
-	if (!b || n != 4 * npix)
-		return -1;
-	const float *f = b;
-	for (int i = 0; i < npix; i++) {
-		float v;
-		memcpy(&v, f + i, sizeof v);
-		if (dst_d)
-			dst_d[i] = v;
-		if (dst_f)
-			dst_f[i] = v;
+	struct ex *x = ctx;
+	double t = sp->integration_ms;
+	unsigned av = sp->averages > 0 ? (unsigned)sp->averages : 0;
+	if (sp->npix != x->info->npix || av < 1 || x->nref >= EX_MAX_TIMES)
+		return 0;
+	if (!strcmp(sp->kind, "dark")) {
+		exp_avg_init(x->avg, sp->npix, t);
+		exp_avg_add(x->avg, sp->counts, sp->stddev, av, NULL, t, NULL);
+		x->avg->temperature_c = sp->temperature_c;
+		exp_dark_store(x->darks, x->avg, -1e300); /* old: never reused for new spectra */
+		return 0;
 	}
+	const struct exp_dark *dk = exp_dark_find(x->darks, t);
+	if (dk && !exp_net_rate(&x->cfg.pol, sp->counts, sp->stddev, av, sp->saturated, sp->npix, t, dk,
+				x->info->max_counts > 0 ? x->info->max_counts : 65535.0, x->rates[x->nref], NULL))
+		x->nref++;
 	return 0;
 }
 
-/* The reference of this sweep from the database: the spectra listed by the last "reference" event, darks
- * and exposures alike, turned into net rates and merged exactly as when they were taken. 1 loaded, 0 none. */
+/* The reference of this sweep from the store: the spectra listed by the last "reference" event, darks and
+ * exposures alike, turned into net rates and merged exactly as when they were taken. 1 loaded, 0 none. */
 int ex_load_reference(struct ex *x, struct acq_err *err)
 {
-	if (!x->cfg.db_path || !ex_want_wl(x))
+	if (!x->st || !ex_want_wl(x))
 		return 0;
-	sqlite3 *db = NULL;
-	int found = 0;
-	if (sqlite3_open_v2(x->cfg.db_path, &db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
-		acq_errf(err, ACQ_E_IO, "%s: %s", x->cfg.db_path, db ? sqlite3_errmsg(db) : "cannot open");
-		sqlite3_close(db);
+	double dt = NAN;
+	exp_darks_clear(x->darks);
+	x->nref = 0;
+	int n = store_reference_each(x->st, x->sweep_id, &dt, reload_one, x, err);
+	exp_darks_clear(x->darks);
+	if (n < 0)
 		return -1;
-	}
-	sqlite3_busy_timeout(db, 2000);
-	sqlite3_stmt *s = NULL;
-	long long lo = 0, hi = 0;
-	if (sqlite3_prepare_v2(db, "SELECT message FROM events WHERE sweep_id = ? AND kind = 'reference' "
-				   "ORDER BY id DESC LIMIT 1", -1, &s, NULL) != SQLITE_OK)
-		goto dberr;
-	sqlite3_bind_int64(s, 1, x->sweep_id);
-	if (sqlite3_step(s) == SQLITE_ROW) {
-		const char *m = (const char *)sqlite3_column_text(s, 0);
-		const char *p = m ? strstr(m, "spectra ") : NULL;
-		if (!p || sscanf(p, "spectra %lld-%lld", &lo, &hi) != 2)
-			lo = hi = 0;
-		double lt, dt, dp;
-		const char *q = m ? strstr(m, "at (") : NULL;
-		if (q && sscanf(q, "at (%lf, %lf, %lf)", &lt, &dt, &dp) == 3)
-			x->cfg.cal.ref_theta_o_deg = fabs(dt);
-	}
-	sqlite3_finalize(s);
-	s = NULL;
-	if (lo <= 0 || hi < lo)
-		goto out;
-	if (sqlite3_prepare_v2(db, "SELECT kind, integration_ms, averages, npix, counts, stddev, saturation_mask, "
-				   "temperature_c FROM spectra WHERE sweep_id = ? AND id BETWEEN ? AND ? ORDER BY id",
-			       -1, &s, NULL) != SQLITE_OK)
-		goto dberr;
-	sqlite3_bind_int64(s, 1, x->sweep_id);
-	sqlite3_bind_int64(s, 2, lo);
-	sqlite3_bind_int64(s, 3, hi);
-	exp_darks_clear(x->darks);
-	int n = 0;
-	float *sd = x->scratch;
-	while (sqlite3_step(s) == SQLITE_ROW && n < EX_MAX_TIMES) {
-		const char *kind = (const char *)sqlite3_column_text(s, 0);
-		double t = sqlite3_column_double(s, 1);
-		int av = sqlite3_column_int(s, 2), npix = sqlite3_column_int(s, 3);
-		if (!kind || npix != x->info->npix || av < 1)
-			continue;
-		exp_avg_init(x->avg, npix, t);
-		if (blob_floats(s, 4, npix, x->frame->counts, NULL))
-			continue;
-		if (sqlite3_column_type(s, 5) == SQLITE_NULL)
-			memset(sd, 0, sizeof(float) * (size_t)npix);
-		else if (blob_floats(s, 5, npix, NULL, sd))
-			continue;
-		memset(x->frame->saturated, 0, (size_t)npix);
-		if (sqlite3_column_type(s, 6) != SQLITE_NULL && sqlite3_column_bytes(s, 6) == npix)
-			memcpy(x->frame->saturated, sqlite3_column_blob(s, 6), (size_t)npix);
-		if (!strcmp(kind, "dark")) {
-			exp_avg_add(x->avg, x->frame->counts, sd, (unsigned)av, NULL, t, NULL);
-			x->avg->temperature_c = sqlite3_column_type(s, 7) == SQLITE_NULL ? NAN : sqlite3_column_double(s, 7);
-			exp_dark_store(x->darks, x->avg, -1e300); /* old: never reused for new spectra */
-		} else {
-			const struct exp_dark *dk = exp_dark_find(x->darks, t);
-			if (!dk || exp_net_rate(&x->cfg.pol, x->frame->counts, sd, (unsigned)av, x->frame->saturated, npix,
-						t, dk, x->info->max_counts > 0 ? x->info->max_counts : 65535.0,
-						x->rates[n], NULL))
-				continue;
-			n++;
-		}
-	}
-	sqlite3_finalize(s);
-	s = NULL;
-	exp_darks_clear(x->darks);
-	if (n > 0) {
-		const struct exp_rate *list[EX_MAX_TIMES];
-		for (int i = 0; i < n; i++)
-			list[i] = x->rates[i];
-		if (exp_merge(list, n, x->ref_rate, err) == 0) {
-			ex_mask_black(x, x->ref_rate);
-			found = 1;
-		}
-	}
-	goto out;
-dberr:
-	acq_errf(err, ACQ_E_IO, "%s: %s", x->cfg.db_path, sqlite3_errmsg(db));
-	found = -1;
-out:
-	sqlite3_finalize(s);
-	sqlite3_close(db);
-	return found;
+	if (isfinite(dt))
+		x->cfg.cal.ref_theta_o_deg = fabs(dt);
+	if (x->nref == 0)
+		return 0;
+	const struct exp_rate *list[EX_MAX_TIMES];
+	for (int i = 0; i < x->nref; i++)
+		list[i] = x->rates[i];
+	if (exp_merge(list, x->nref, x->ref_rate, err))
+		return 0;
+	ex_mask_black(x, x->ref_rate);
+	return 1;
 }
 
 /* ---- acquisition ------------------------------------------------------------------------------ */

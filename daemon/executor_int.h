@@ -80,6 +80,7 @@ struct ex {
 	bool have_t0;
 	double times[EX_MAX_TIMES];
 	int ntimes, e;
+	int nref;                    /* reference exposures reloaded so far (ex_load_reference) */
 	struct exp_rate *rates[EX_MAX_TIMES];
 	struct exp_rate *merged, *ref_rate;
 	struct pending pend[EX_MAX_PENDING];

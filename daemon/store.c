@@ -877,3 +877,87 @@ int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, 
 		unlink(tmp);
 	return rc;
 }
+
+/* float32 blob of npix values into dst (double and/or float). 0, or -1 when the length differs. */
+static int blob_floats(sqlite3_stmt *s, int col, int npix, double *dst_d, float *dst_f)
+{
+	const void *b = sqlite3_column_blob(s, col);
+	int n = sqlite3_column_bytes(s, col);
+	if (!b || n != 4 * npix)
+		return -1;
+	const float *f = b;
+	for (int i = 0; i < npix; i++) {
+		float v;
+		memcpy(&v, f + i, sizeof v);
+		if (dst_d)
+			dst_d[i] = v;
+		if (dst_f)
+			dst_f[i] = v;
+	}
+	return 0;
+}
+
+int store_reference_each(struct store *st, int64_t sweep_id, double *detector_theta, store_reference_fn fn,
+			 void *ctx, struct acq_err *err)
+{
+	long long lo = 0, hi = 0;
+	sqlite3_stmt *s = prep(st, "SELECT message FROM events WHERE sweep_id = ? AND kind = 'reference' "
+				   "ORDER BY id DESC LIMIT 1", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_int64(s, 1, sweep_id);
+	if (sqlite3_step(s) == SQLITE_ROW) {
+		const char *m = (const char *)sqlite3_column_text(s, 0);
+		const char *p = m ? strstr(m, "spectra ") : NULL;
+		if (!p || sscanf(p, "spectra %lld-%lld", &lo, &hi) != 2)
+			lo = hi = 0;
+		double lt, dt, dp;
+		const char *q = m ? strstr(m, "at (") : NULL;
+		if (q && sscanf(q, "at (%lf, %lf, %lf)", &lt, &dt, &dp) == 3 && detector_theta)
+			*detector_theta = dt;
+	}
+	sqlite3_finalize(s);
+	if (lo <= 0 || hi < lo)
+		return 0;
+	s = prep(st, "SELECT kind, integration_ms, averages, npix, counts, stddev, saturation_mask, temperature_c "
+		     "FROM spectra WHERE sweep_id = ? AND id BETWEEN ? AND ? ORDER BY id", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_int64(s, 1, sweep_id);
+	sqlite3_bind_int64(s, 2, lo);
+	sqlite3_bind_int64(s, 3, hi);
+	struct store_ref_spectrum *r = malloc(sizeof *r);
+	if (!r) {
+		sqlite3_finalize(s);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	int n = 0, rc;
+	while ((rc = sqlite3_step(s)) == SQLITE_ROW) {
+		const char *kind = (const char *)sqlite3_column_text(s, 0);
+		int npix = sqlite3_column_int(s, 3);
+		if (!kind || npix <= 0 || npix > SPECTRO_MAX_PIXELS || strlen(kind) >= sizeof r->kind)
+			continue;
+		snprintf(r->kind, sizeof r->kind, "%s", kind);
+		r->integration_ms = sqlite3_column_double(s, 1);
+		r->averages = sqlite3_column_int(s, 2);
+		r->npix = npix;
+		if (blob_floats(s, 4, npix, r->counts, NULL))
+			continue;
+		if (sqlite3_column_type(s, 5) == SQLITE_NULL)
+			memset(r->stddev, 0, sizeof(float) * (size_t)npix);
+		else if (blob_floats(s, 5, npix, NULL, r->stddev))
+			continue;
+		memset(r->saturated, 0, (size_t)npix);
+		if (sqlite3_column_type(s, 6) != SQLITE_NULL && sqlite3_column_bytes(s, 6) == npix)
+			memcpy(r->saturated, sqlite3_column_blob(s, 6), (size_t)npix);
+		r->temperature_c = sqlite3_column_type(s, 7) == SQLITE_NULL ? NAN : sqlite3_column_double(s, 7);
+		n++;
+		if (fn(ctx, r))
+			break;
+	}
+	sqlite3_finalize(s);
+	free(r);
+	if (rc != SQLITE_ROW && rc != SQLITE_DONE)
+		return db_err(st, err, "reading the reference");
+	return n;
+}

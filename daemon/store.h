@@ -10,6 +10,7 @@
 #include <stdio.h>
 
 #include "config/acq_err.h"
+#include "drivers/spectro.h"
 
 #define STORE_APPLICATION_ID 0x42524446  /* "BRDF" */
 #define STORE_SCHEMA_VERSION 2
@@ -115,6 +116,23 @@ int store_event(struct store *st, int64_t sweep_id, const char *kind, const char
 json_t *store_sweep_list(struct store *st, int limit, struct acq_err *err);
 /* JSON object of one sweep (with plan text, counts, events); NULL with ACQ_E_NOTFOUND if absent. */
 json_t *store_sweep_show(struct store *st, int64_t id, bool with_points, struct acq_err *err);
+/* One spectrum of a sweep's stored reference (store_reference_each). */
+struct store_ref_spectrum {
+	char kind[16];                   /* "dark", "reference" or "beam" */
+	double integration_ms;
+	int averages, npix;
+	double counts[SPECTRO_MAX_PIXELS];
+	float stddev[SPECTRO_MAX_PIXELS];          /* 0 when not stored */
+	unsigned char saturated[SPECTRO_MAX_PIXELS];
+	double temperature_c;            /* NaN = unknown */
+};
+/* Called per spectrum in id order; nonzero stops. */
+typedef int (*store_reference_fn)(void *ctx, const struct store_ref_spectrum *sp);
+/* The spectra listed by the sweep's last "reference" event (crash-resume), each to fn; *detector_theta (may
+ * be NULL) gets the detector zenith the reference was measured at when the event says. The number of spectra
+ * (0: no reference stored), or -1 with err. */
+int store_reference_each(struct store *st, int64_t sweep_id, double *detector_theta, store_reference_fn fn,
+			 void *ctx, struct acq_err *err);
 /* Write a sweep's calibrated samples in the CSV interchange format (design.md): the calibrated_samples view,
  * i.e. the sample-frame angles measured at commit. Rows written in *nrows. ACQ_E_NOTFOUND for no sweep,
  * ACQ_E_STATE if it has no calibrated samples. 0 or -1. */

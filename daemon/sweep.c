@@ -204,7 +204,6 @@ static int load_cfg(const struct conf *c, struct ex_cfg *cfg, struct acq_err *er
 	cfg->auto_resume_faults = c->sweep.auto_resume_faults;
 	if (ex_cfg_parse(c->sweep.acquisition, c->sweep.calibration, cfg, err))
 		return -1;
-	cfg->db_path = c->d.database;
 	return exp_policy_check(&cfg->pol, err);
 }
 

@@ -429,7 +429,6 @@ static void cfg_for_test(struct ex_cfg *c)
 	c->fault_backoff_s = 0.2;
 	c->fault_backoff_max_s = 1.0;
 	c->fault_retries = 4;
-	c->db_path = dbpath;
 	c->home_unhomed = true; /* the fake homes to (0, 60, 180): clear of each other */
 	c->home_deg[0] = 0;
 	c->home_deg[1] = 60;
