@@ -125,10 +125,19 @@ static void req_run(struct port_req *pr, struct port *p)
 		break;
 	case R_MOVE:
 	case R_HOME:
-		if (!s->ax)
+		if (!s->ax) {
 			r->rc = no_handle(r);
-		else
-			run_motion(r, p, s->ax);
+			break;
+		}
+		if (r->op == R_HOME && r->on) { /* manual homing: an alarm is reset first */
+			struct axis_status st;
+			if (!axis_read_status(s->ax, &st, NULL) && st.alarm && axis_alarm_reset(s->ax, &r->err)) {
+				r->rc = -1;
+				acq_err_prefix(&r->err, "resetting its alarm: ");
+				break;
+			}
+		}
+		run_motion(r, p, s->ax);
 		break;
 	case R_STOP:
 		r->rc = !s->ax ? 0 : axis_stop(s->ax, &r->err);
@@ -182,6 +191,8 @@ struct req *devices_req_new(struct devices *dv, int d, enum rop op, enum owner o
 	r->op = op;
 	r->owner = owner;
 	r->gen = dv->slot[d].gen;
+	if (owner == OWN_OP)
+		r->seq = dv->op_gen;
 	r->pct = NAN;
 	r->deadline = INFINITY;
 	return r;
@@ -248,6 +259,7 @@ static void opened(struct devices *dv, struct req *r)
 
 static void op_done(struct devices *dv, struct req *r);
 static void query_step(struct query *q);
+static void call_done(struct req *r);
 
 static void req_done(struct port_req *pr)
 {
@@ -275,6 +287,8 @@ static void req_done(struct port_req *pr)
 		op_done(dv, r);
 	else if (r->owner == OWN_QUERY)
 		query_step(r->q);
+	else if (r->owner == OWN_CALL)
+		call_done(r);
 	else if (r->owner == OWN_MGR && r->rc && (r->op == R_LASER || r->op == R_STOP))
 		log_msg(LOG_ERR, "safe stop: %s: %s not confirmed: %s", dname(r->d),
 			r->op == R_LASER ? "laser emission off" : "stop", r->err.msg);
@@ -528,7 +542,16 @@ static void query_reply(struct loop *lp, void *arg)
 {
 	(void)lp;
 	struct query *q = arg;
-	q->done(q->ctx, 0, NULL, json_pack("{s:o}", "devices", devices_json(q->dv)));
+	if (q->positions) {
+		double pos[3];
+		devices_positions(q->dv, pos);
+		json_t *o = json_object();
+		for (int i = 0; o && i < 3; i++)
+			json_object_set_new(o, dname(i), isnan(pos[i]) ? json_null() : json_real(pos[i]));
+		q->done(q->ctx, 0, NULL, o);
+	} else {
+		q->done(q->ctx, 0, NULL, json_pack("{s:o}", "devices", devices_json(q->dv)));
+	}
 	free(q);
 }
 
@@ -538,14 +561,14 @@ static void query_step(struct query *q)
 		query_reply(NULL, q);
 }
 
-int devices_query(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err)
+static int query(struct devices *dv, bool positions, devices_done_fn done, void *ctx, struct acq_err *err)
 {
 	struct query *q = calloc(1, sizeof *q);
 	if (!q)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	*q = (struct query){ .dv = dv, .done = done, .ctx = ctx, .waiting = 1 };
+	*q = (struct query){ .dv = dv, .positions = positions, .done = done, .ctx = ctx, .waiting = 1 };
 	for (int d = 0; d < CONF_DEV__COUNT; d++) {
-		if (d == CONF_DEV_SPECTRO || !dv->slot[d].available)
+		if (d == CONF_DEV_SPECTRO || !dv->slot[d].available || (positions && !is_axis(d)))
 			continue;
 		struct req *r = devices_req_new(dv, d, R_STATUS, OWN_QUERY);
 		if (r)
@@ -560,6 +583,16 @@ int devices_query(struct devices *dv, devices_done_fn done, void *ctx, struct ac
 	return 0;
 }
 
+int devices_query(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err)
+{
+	return query(dv, false, done, ctx, err);
+}
+
+int devices_read_positions(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err)
+{
+	return query(dv, true, done, ctx, err);
+}
+
 /* ---- manual operations -------------------------------------------------------------------------------------- */
 
 static void op_finish(struct devices *dv, int rc, const struct acq_err *err, json_t *result)
@@ -572,6 +605,7 @@ static void op_finish(struct devices *dv, int rc, const struct acq_err *err, jso
 	}
 	dv->op_laser = false;
 	dv->op_active = false;
+	dv->op_kind[0] = 0;
 	devices_done_fn done = dv->op_done;
 	dv->op_done = NULL;
 	if (done)
@@ -616,15 +650,23 @@ static void measure_stored(struct devices *dv, struct req *r)
 			    (int)f->meas.averages));
 }
 
+/* Name the device in a driver's message unless the driver already did. */
+static void name_err(struct acq_err *err, int d)
+{
+	size_t n = strlen(dname(d));
+	if (strncmp(err->msg, dname(d), n))
+		acq_err_prefix(err, "%s: ", dname(d));
+}
+
 static void op_done(struct devices *dv, struct req *r)
 {
-	if (!dv->op_active)
-		return;
-	if (r->op == R_MOVE) {
+	if (!dv->op_active || r->seq != dv->op_gen)
+		return; /* the operation ended (stopped) before this completion */
+	if (r->op == R_MOVE || r->op == R_HOME) {
 		if (r->rc && !dv->op_rc) {
 			dv->op_rc = -1;
 			dv->op_err = r->err;
-			acq_err_prefix(&dv->op_err, "%s: ", dname(r->d));
+			name_err(&dv->op_err, r->d);
 			for (int i = 0; i < 3; i++) /* the others stop too */
 				if (i != r->d && dv->slot[i].port)
 					port_interrupt(dv->slot[i].port);
@@ -673,6 +715,37 @@ static void op_done(struct devices *dv, struct req *r)
 	}
 }
 
+/* Start the manual operation op (R_MOVE, or R_HOME with alarm reset) on the axes whose target is not NaN, each
+ * on its thread, ended after timeout_s. 0 or -1. */
+static int begin_axes(struct devices *dv, const double target[3], enum rop op, double timeout_s, devices_done_fn done,
+		      void *ctx, struct acq_err *err)
+{
+	double deadline = loop_now(dv->lp) + timeout_s;
+	dv->op_active = true;
+	dv->op_gen++;
+	dv->op_done = done;
+	dv->op_ctx = ctx;
+	dv->op_rc = 0;
+	dv->op_waiting = 0;
+	for (int i = 0; i < 3; i++) {
+		if (isnan(target[i]))
+			continue;
+		struct req *r = devices_req_new(dv, i, op, OWN_OP);
+		if (r) {
+			r->target = target[i];
+			r->on = op == R_HOME;
+			r->deadline = deadline;
+		}
+		if (devices_req_submit(r) == 0)
+			dv->op_waiting++;
+	}
+	if (!dv->op_waiting) {
+		dv->op_active = false;
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	return 0;
+}
+
 int devices_move(struct devices *dv, const double target[3], devices_done_fn done, void *ctx, struct acq_err *err)
 {
 	if (dv->op_active)
@@ -695,28 +768,7 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 	}
 	if (!any)
 		return acq_errf(err, ACQ_E_INVAL, "move: give at least one of laser_theta, detector_theta, detector_phi");
-	double deadline = loop_now(dv->lp) + dv->c->sweep.move_timeout_s;
-	dv->op_active = true;
-	dv->op_done = done;
-	dv->op_ctx = ctx;
-	dv->op_rc = 0;
-	dv->op_waiting = 0;
-	for (int i = 0; i < 3; i++) {
-		if (isnan(target[i]))
-			continue;
-		struct req *r = devices_req_new(dv, i, R_MOVE, OWN_OP);
-		if (r) {
-			r->target = target[i];
-			r->deadline = deadline;
-		}
-		if (devices_req_submit(r) == 0)
-			dv->op_waiting++;
-	}
-	if (!dv->op_waiting) {
-		dv->op_active = false;
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	}
-	return 0;
+	return begin_axes(dv, target, R_MOVE, dv->c->sweep.move_timeout_s, done, ctx, err);
 }
 
 int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages, double power_pct,
@@ -738,6 +790,7 @@ int devices_measure(struct devices *dv, const char *kind, double integration_ms,
 		return acq_errf(err, ACQ_E_INVAL, "spectrometer: integration time must be > 0 ms and averages ≥ 1");
 	snprintf(dv->op_kind, sizeof dv->op_kind, "%s", kind);
 	dv->op_active = true;
+	dv->op_gen++;
 	dv->op_done = done;
 	dv->op_ctx = ctx;
 	dv->op_laser = !dark && ls->available;
@@ -762,4 +815,71 @@ int devices_measure(struct devices *dv, const char *kind, double integration_ms,
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
 	return 0;
+}
+
+int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *ctx, struct acq_err *err)
+{
+	if (dv->op_active)
+		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
+	for (int i = 0; i < 3; i++)
+		if ((mask & (1u << i)) && !dv->slot[i].available)
+			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", dname(i),
+					dv->slot[i].note[0] ? dv->slot[i].note : "not configured");
+	if (!(mask & 7u))
+		return acq_errf(err, ACQ_E_INVAL, "home: no axis selected");
+	double t[3];
+	for (int i = 0; i < 3; i++)
+		t[i] = mask & (1u << i) ? 0 : NAN;
+	/* a homing run is slower than a move */
+	return begin_axes(dv, t, R_HOME, 4 * dv->c->sweep.move_timeout_s, done, ctx, err);
+}
+
+int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err)
+{
+	(void)err;
+	*stopped = dv->op_active;
+	for (int i = 0; i < 3; i++) { /* every axis, moving or not: whatever moves stops */
+		if (!dv->slot[i].available || !dv->slot[i].port)
+			continue;
+		port_interrupt(dv->slot[i].port);
+		devices_req_submit(devices_req_new(dv, i, R_STOP, OWN_MGR));
+	}
+	if (*stopped) {
+		struct dev_slot *sp = &dv->slot[CONF_DEV_SPECTRO];
+		if (dv->op_kind[0] && sp->available && sp->port) {
+			port_interrupt(sp->port);
+			devices_req_submit(devices_req_new(dv, CONF_DEV_SPECTRO, R_SPECTRO_STOP, OWN_MGR));
+		}
+		struct acq_err e = { 0 };
+		acq_errf(&e, ACQ_E_STATE, "stopped by the operator");
+		op_finish(dv, -1, &e, NULL); /* also switches off a laser it switched on */
+	}
+	return 0;
+}
+
+static void call_done(struct req *r)
+{
+	struct acq_err err = r->err;
+	if (!r->rc && r->have_lst && r->lst.emission)
+		r->rc = acq_errf(&err, ACQ_E_DEVICE, "emission still reported on after switching it off");
+	if (r->rc) {
+		acq_err_prefix(&err, "laser: ");
+		r->done(r->done_ctx, -1, &err, NULL);
+	} else {
+		r->done(r->done_ctx, 0, NULL, json_pack("{s:b}", "emission", 0));
+	}
+}
+
+int devices_laser_off(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err)
+{
+	const struct dev_slot *s = &dv->slot[CONF_DEV_LASER];
+	if (!s->available)
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "laser: unavailable (%s)", s->note[0] ? s->note : "not configured");
+	struct req *r = devices_req_new(dv, CONF_DEV_LASER, R_LASER, OWN_CALL);
+	if (r) {
+		r->on = false;
+		r->done = done;
+		r->done_ctx = ctx;
+	}
+	return devices_req_submit(r) ? acq_errf(err, ACQ_E_NOMEM, "out of memory") : 0;
 }

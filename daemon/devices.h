@@ -64,6 +64,9 @@ const struct ex_ops *devices_ex_ops(void);
  * done(ctx, 0, NULL, {devices: devices_json}) from the loop. 0 or -1 (out of memory). */
 typedef void (*devices_done_fn)(void *ctx, int rc, const struct acq_err *err, json_t *result);
 int devices_query(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err);
+/* The axes' positions read afresh on their threads (after what is queued there, e.g. a stop): done(ctx, 0,
+ * NULL, {"laser.theta": deg|null, ...}). 0 or -1 (out of memory). */
+int devices_read_positions(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err);
 
 /* Manual move to absolute angles (NaN: leave that axis). Soft limits are checked first (ACQ_E_RANGE);
  * a missing axis gives ACQ_E_UNSUPPORTED. done(ctx, ok, err, result) is called once from the loop. */
@@ -71,6 +74,16 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 /* One spectrum of kind "sample", "dark" (laser off first) or "reference" (laser on for the measurement
  * only, at power_pct unless NaN), stored in the database; result {spectrum_id, kind, npix, peak, saturated,
  * integration_ms, averages}. 0 (started) or -1. */
+/* Home the axes whose mask bit (1 << axis) is set (their alarms reset first), together; done(ctx, rc, err, positions) at the end, like
+ * devices_move(). -1 with err if an operation runs or an axis is unavailable. */
+int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *ctx, struct acq_err *err);
+/* Stop every available axis (deceleration, queued first on its thread, a running move interrupted) and the
+ * running manual operation (laser off, acquisition stopped); its done() gets an ACQ_E_STATE "stopped by the
+ * operator" error. *stopped: whether one was running. 0 (a stop the device refuses is logged when it comes back). */
+int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err);
+/* Switch the laser emission off on its thread and read it back; done(ctx, 0, NULL, {emission: false}) or the
+ * error. -1 at once when the laser is unavailable. */
+int devices_laser_off(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err);
 int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages, double power_pct,
 		    devices_done_fn done, void *ctx, struct acq_err *err);
 

@@ -78,13 +78,15 @@ struct devices {
 	struct acq_err op_err;
 	char op_kind[16];
 	bool op_laser;           /* the laser was switched on for this measurement: off at its end */
+	unsigned op_gen;         /* the operation's number: completions of an ended one are dropped */
 	double op_power;
 };
 
-enum owner { OWN_MGR, OWN_EX, OWN_OP, OWN_QUERY };
+enum owner { OWN_MGR, OWN_EX, OWN_OP, OWN_QUERY, OWN_CALL };
 
 struct query {
 	struct devices *dv;
+	bool positions;          /* devices_read_positions: the axes' positions, not the whole report */
 	int waiting;
 	devices_done_fn done;
 	void *ctx;
@@ -113,6 +115,8 @@ struct req {
 	struct laser_identity lid;
 	struct spectro_frame *frame;
 	struct query *q;
+	devices_done_fn done;    /* OWN_CALL: who gets the result */
+	void *done_ctx;
 };
 
 static inline const char *dname(int d)

@@ -139,5 +139,17 @@ int store_reference_each(struct store *st, int64_t sweep_id, double *detector_th
 int store_export_csv(struct store *st, int64_t sweep_id, FILE *out, int *nrows, struct acq_err *err);
 /* The same into the file path, whole or not at all (written beside it, then renamed). 0 or -1. */
 int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, int *nrows, struct acq_err *err);
+/* store_export_csv() of the first limit rows in sweep order (limit <= 0: all). */
+int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct acq_err *err);
+/* A read-only connection to an existing database (no migration, no checkpoint at close) for a worker thread:
+ * only the export and show functions may be used on it. 0 or -1. */
+int store_open_reader(const char *path, struct store **out, struct acq_err *err);
+/* Number of calibrated samples of a sweep; -1 with ACQ_E_NOTFOUND if there is no such sweep. */
+int64_t store_calibrated_count(struct store *st, int64_t sweep_id, struct acq_err *err);
+/* The id of the latest reconstruction run (started by the operator or after a sweep), 0 if none. */
+int64_t store_recon_latest(struct store *st);
+/* One stored spectrum: id, kind, settings, counts (and stddev), sweep/point, and wavelength_nm from its
+ * spectrometer's polynomial when known. NULL with ACQ_E_NOTFOUND if there is none. */
+json_t *store_spectrum_json(struct store *st, int64_t id, struct acq_err *err);
 
 #endif

@@ -125,6 +125,11 @@ static bool laser_up(void)
 {
 	return devices_up(g_fx->dv, CONF_DEV_LASER);
 }
+static int stops_before;
+static bool laser_theta_stopped(void)
+{
+	return axis_fake_get("laser.theta")->stops > stops_before;
+}
 static bool kicked(void)
 {
 	return kicks > 0;
@@ -392,6 +397,61 @@ static void test_executor_ops_pending(void **state)
 	devices_set_kick(fx->dv, NULL, NULL);
 }
 
+/* Manual homing (an alarm reset first), stop (the running operation ends with "stopped by the operator" and the
+ * arms get a stop), laser off read back: all on the devices' threads. */
+static void test_home_stop_laser_off(void **state)
+{
+	struct fixture *fx = *state;
+	struct acq_err err = { 0 };
+	assert_int_equal(devices_init(fx->lp, fx->st, fx->c, notify, NULL, wall, &fx->dv, &err), 0);
+	assert_true(wait_for(fx, 0.01, all_up));
+	struct axis_fake *th = axis_fake_get("detector.theta");
+	th->pos = 30;
+	th->homed = false;
+	th->alarm = true;
+	assert_int_equal(devices_home(fx->dv, 0, done, NULL, &err), -1);
+	assert_int_equal(err.code, ACQ_E_INVAL);
+	done_calls = 0;
+	assert_int_equal(devices_home(fx->dv, 1u << CONF_DEV_DETECTOR_THETA, done, NULL, &err), 0);
+	assert_true(devices_busy(fx->dv));
+	assert_true(wait_for(fx, 0.01, op_done));
+	assert_int_equal(done_rc, 0);
+	assert_int_equal(th->resets, 1);
+	assert_int_equal(th->homings, 1);
+	assert_true(th->homed && th->pos == 0 && !th->alarm);
+	/* a long move stopped by the operator */
+	axis_fake_get("laser.theta")->move_s = 1e6;
+	done_calls = 0;
+	double t[3] = { 40, NAN, NAN };
+	assert_int_equal(devices_move(fx->dv, t, done, NULL, &err), 0);
+	bool stopped = false;
+	stops_before = axis_fake_get("laser.theta")->stops;
+	assert_int_equal(devices_stop(fx->dv, &stopped, &err), 0);
+	assert_true(stopped);
+	assert_int_equal(done_calls, 1);
+	assert_int_equal(done_rc, -1);
+	assert_int_equal(done_err.code, ACQ_E_STATE);
+	assert_false(devices_busy(fx->dv));
+	assert_true(wait_for(fx, 0.01, laser_theta_stopped));
+	/* a new operation is not disturbed by the stopped one's late completion */
+	axis_fake_get("laser.theta")->move_s = 0;
+	done_calls = 0;
+	double t2[3] = { 20, NAN, NAN };
+	assert_int_equal(devices_move(fx->dv, t2, done, NULL, &err), 0);
+	assert_true(wait_for(fx, 0.01, op_done));
+	assert_int_equal(done_rc, 0);
+	assert_int_equal(done_calls, 1);
+	assert_true(axis_fake_get("laser.theta")->pos == 20);
+	/* laser off: switched and read back */
+	laser_fake_state()->emission = true;
+	done_calls = 0;
+	assert_int_equal(devices_laser_off(fx->dv, done, NULL, &err), 0);
+	assert_true(wait_for(fx, 0.01, op_done));
+	assert_int_equal(done_rc, 0);
+	assert_false(laser_fake_state()->emission);
+	assert_true(json_is_false(json_object_get(done_result, "emission")));
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -400,6 +460,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(test_measure_and_dark, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_blocking_device_does_not_hold_the_loop, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_executor_ops_pending, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_home_stop_laser_off, setup, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
