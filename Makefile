@@ -2,6 +2,7 @@
 #
 # Conventions (so a new file needs no Makefile edit):
 #   <folder>/*_main.c        a program's entry point: build/<name with _ → ->   (see PROGRAMS)
+#   <folder>/<name>/*.c      files of that program only (command handlers), linked before the libraries
 #   <folder>/*.c (others)    the folder's static library build/lib<folder>.a
 #   <folder>/<sub>/*.c       a sub-folder listed in LIBDIRS: its own library build/lib<sub>.a (daemon/plan/ →
 #                            build/libplan.a, the planner that acqctl links without the daemon)
@@ -29,7 +30,7 @@ endif
 
 VERSION    := $(shell git describe --always --dirty 2>/dev/null || echo 0.1)
 
-PKGS       := libusb-1.0 libmodbus libserialport sqlite3 yaml-0.1 lapacke openblas libsystemd libpng jansson cairo
+PKGS       := libusb-1.0 libmodbus libserialport sqlite3 yaml-0.1 lapacke openblas libsystemd libpng jansson cairo OpenEXR hdf5
 PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 
@@ -57,7 +58,9 @@ PROG_LIBDIRS_acqctl := proto daemon/plan config
 DEB_PKGS   := build-essential pkg-config libusb-1.0-0-dev libmodbus-dev libserialport-dev libsqlite3-dev \
               libyaml-dev liblapacke-dev libopenblas-dev libsystemd-dev libcmocka-dev libpng-dev \
               libjansson-dev libcairo2-dev umockdev mbpoll python3-pymodbus python3-numpy sqlite3 socat \
-              systemd clang python3-matplotlib python3-jsonschema scdoc man-db
+              systemd clang python3-matplotlib libopenexr-dev openexr libhdf5-dev hdf5-tools python3-h5py \
+              python3-jsonschema scdoc man-db \
+              python3-scipy
 
 .DEFAULT_GOAL := all
 .SECONDARY:
@@ -118,8 +121,10 @@ $(foreach d,$(LIBDIRS),$(eval $(call lib_rule,$(d))))
 
 prog_name = $(subst _,-,$(patsubst %_main.c,%,$(notdir $(1))))
 prog_libs = $(if $(PROG_LIBDIRS_$(call prog_name,$(1))),$(foreach d,$(PROG_LIBDIRS_$(call prog_name,$(1))),$(call lib_of,$(d))),$(LIBS))
+# A program may have its own files beside its entry point: <folder>/<name>/*.c for <folder>/<name>_main.c
+# (e.g. recon/brdf_recon/: command handlers of brdf-recon), linked before the libraries.
 define prog_rule
-$(BUILD)/$(call prog_name,$(1)): $(patsubst %.c,$(BUILD)/obj/%.o,$(1)) $(call prog_libs,$(1))
+$(BUILD)/$(call prog_name,$(1)): $(patsubst %.c,$(BUILD)/obj/%.o,$(1) $(wildcard $(patsubst %_main.c,%,$(1))/*.c)) $(call prog_libs,$(1))
 	@$(if $(Q),echo "  LD      $$@")
 	$(Q)$(CC) $(LDFLAGS) -o $$@ $$^ $(LDLIBS)
 endef
