@@ -19,6 +19,12 @@
 
 #define PY "/usr/bin/python3"
 #define SIM_SCALE 20.0
+/* Real seconds a loaded 2-core machine may add to one move besides its profile: command delivery and the
+ * detection of its end (polling 0.02 + settle 0.05 bench s ≈ 4 ms real when idle), plus one lost frame
+ * retried (the suite's response timeout) over socat's ptys. Measured under `stress-ng --cpu 4` (load ~14):
+ * up to ~0.6 s real (arch's notes: first RTU move 13.3 bench s vs 1.83 s trapezoid). Expressed in real time
+ * because the simulator's bench clock runs SIM_SCALE× faster: 1 bench s of slack is only 50 ms of scheduling. */
+#define MOVE_LATENCY_REAL_S 2.0
 
 enum { PEER_SIM = 0, PEER_PY = 1 };
 
@@ -49,7 +55,23 @@ struct peer {
 	struct axis_cfg *cfg[2];
 	int ncfg;
 	int retries;
+	int resp_ms;              /* driver's response timeout; 0: suite_resp_ms() */
 };
+
+/* The driver's response timeout for the suite (ms): ACQ_PEER_TIMEOUT_S (default 5 s, as test_sim_arm and
+ * test_arm_mbpoll.sh use). A Python peer behind socat on a busy machine was measured to miss a 300 ms
+ * timeout during homing; a dead peer still fails, only later. Tests of the timeout itself set resp_ms. */
+static int suite_resp_ms(void)
+{
+	const char *t = getenv("ACQ_PEER_TIMEOUT_S");
+	double s = t && *t ? atof(t) : 5.0;
+	return s > 0 && s <= 60 ? (int)(s * 1000) : 5000;
+}
+
+static int peer_resp_ms(const struct peer *p)
+{
+	return p->resp_ms > 0 ? p->resp_ms : suite_resp_ms();
+}
 
 static struct yc_doc *load_file(const char *rel)
 {
@@ -89,7 +111,7 @@ static void arm_yaml(char *buf, size_t len, const struct peer *p, const char *li
 		 "devices:\n"
 		 "  detector_arm:\n"
 		 "    link: %s\n"
-		 "    response_timeout_ms: 300\n"
+		 "    response_timeout_ms: %d\n"
 		 "    byte_timeout_ms: 50\n"
 		 "    axes:\n"
 		 "      theta: {unit: 1, map: %s, soft_min_deg: -3, soft_max_deg: 100, deadband_deg: 0.02,\n"
@@ -98,7 +120,7 @@ static void arm_yaml(char *buf, size_t len, const struct peer *p, const char *li
 		 "      phi: {unit: 2, map: %s, soft_min_deg: -179, soft_max_deg: 359, deadband_deg: 0.02,\n"
 		 "            retries: %d, speed_dps: %g, accel_dps2: %g, settle_s: 0.05, poll_s: 0.02,\n"
 		 "            timeout_margin_s: 1}\n",
-		 link, map, retries, p->speed, p->accel, map, retries, p->speed, p->accel);
+		 link, peer_resp_ms(p), map, retries, p->speed, p->accel, map, retries, p->speed, p->accel);
 }
 
 static int peer_load_cfg(struct peer *p, const char *map, struct acq_err *err)
@@ -280,7 +302,16 @@ static void peer_drop(struct peer *p)
 		else
 			p->host.w.faults.drop_connection[SIM_ARM_DETECTOR] = true;
 		ah_unlock(&p->host);
-		ah_sleep(0.05);
+		/* TCP: the simulator clears the flag once it has closed the connection; wait for that */
+		double limit = ah_mono() + 10;
+		bool pending = !p->rtu;
+		while (pending && ah_mono() < limit) {
+			ah_sleep(0.002);
+			ah_lock(&p->host);
+			pending = p->host.w.faults.drop_connection[SIM_ARM_DETECTOR];
+			ah_unlock(&p->host);
+		}
+		assert_false(pending);
 	} else {
 		ah_kill(&p->py);
 	}
@@ -309,8 +340,9 @@ static struct axis *open_axis(struct peer *p, int i)
 		fail();
 	}
 	struct axis_status st;
-	for (int k = 0; k < 20 && axis_read_status(ax, &st, &err); k++)
-		ah_sleep(0.1);
+	double limit = ah_mono() + 20;
+	while (axis_read_status(ax, &st, &err) && ah_mono() < limit)
+		ah_sleep(0.01);
 	return ax;
 }
 
@@ -319,6 +351,16 @@ static int move_to(struct peer *p, struct axis *ax, double target, struct acq_er
 	if (axis_move_begin(ax, target, peer_clock(p), err))
 		return AXIS_MOVE_FAILED;
 	return ah_wait_move(ax, peer_clock, p, peer_scale(p), err);
+}
+
+/* Start (bench s) and duration of the simulator's last motion profile of axis i. */
+static void sim_last_profile(struct peer *p, int axis, double *start, double *dur)
+{
+	ah_lock(&p->host);
+	const struct simmot *m = simarm_motion(p->host.svc[0], axis);
+	*start = m->t0;
+	*dur = m->ta + m->tc + m->td;
+	ah_unlock(&p->host);
 }
 
 /* ---- the suite ----------------------------------------------------------------------------------------- */
@@ -363,11 +405,20 @@ static void s_moves(struct peer *p)
 		double dist = fabs(targets[i] - from);
 		assert_true(dt >= 0.9 * dist / p->speed);
 		if (p->kind == PEER_SIM) {
+			/* The simulator's profile (bench time, analytic, so independent of load) must be the
+			 * trapezoid the driver commanded; the driver must not report the move done before that
+			 * profile ends; what the driver adds on top (delivery, polling, settle) must stay within
+			 * MOVE_LATENCY_REAL_S of real time. */
 			double T = axis_trapezoid_s(dist, p->speed, p->accel, p->accel);
-			printf("%s: move %.2f° took %.3f s bench (trapezoid %.3f s + settle 0.05 s)\n", p->label, dist,
-			       dt, T);
-			assert_true(dt >= T);
-			assert_true(dt <= 1.2 * T + 1.0); /* settle, polling, and a loaded machine's scheduling */
+			double s0, sdur;
+			sim_last_profile(p, 0, &s0, &sdur);
+			double extra_real = (dt - sdur) / SIM_SCALE;
+			printf("%s: move %.2f° took %.3f s bench; sim profile %.3f s (trapezoid %.3f s); driver "
+			       "overhead %.1f ms real\n", p->label, dist, dt, sdur, T, extra_real * 1e3);
+			assert_true(fabs(sdur - T) <= 1e-6 * (1 + T)); /* closed forms of the same profile */
+			assert_true(s0 >= t0);                         /* the profile began after the command */
+			assert_true(t0 + dt >= s0 + sdur);            /* done only after the profile's end */
+			assert_true(extra_real <= MOVE_LATENCY_REAL_S);
 		}
 		from = targets[i];
 	}
@@ -500,7 +551,8 @@ static void s_reconnect(struct peer *p)
 	printf("%s: dead link reported in %.3f s: %s\n", p->label, dt, err.msg);
 	assert_true(err.code == ACQ_E_DISCONNECTED || err.code == ACQ_E_TIMEOUT);
 	assert_non_null(strstr(err.msg, "detector.theta"));
-	assert_true(dt < 1.5); /* one response timeout (300 ms) + byte timeout, with slack for a loaded machine */
+	/* at most one response timeout + byte timeout, with 1.2 s of slack for a loaded machine */
+	assert_true(dt < peer_resp_ms(p) / 1000.0 + 1.2);
 	/* while it is down, a reconnect attempt fails within one response timeout or succeeds at once */
 	peer_restore(p);
 	int attempt = 0;
@@ -512,7 +564,7 @@ static void s_reconnect(struct peer *p)
 			ok = true;
 			break;
 		}
-		assert_true(ah_mono() - t0 < 2.0);
+		assert_true(ah_mono() - t0 < peer_resp_ms(p) / 1000.0 + 1.7);
 		ah_sleep(axis_backoff_s(attempt++));
 	}
 	assert_true(ok);
@@ -597,7 +649,9 @@ static void test_sim_stall_times_out(void **state)
 	double expect = axis_trapezoid_s(30, 20, 60, 60) * 1.5 + 1.0; /* timeout_factor × trapezoid + margin */
 	printf("stall: failed after %.2f s bench (deadline %.2f s): %s\n", dt, expect, err.msg);
 	assert_int_equal(err.code, ACQ_E_TIMEOUT);
-	assert_true(dt >= expect && dt < expect + 3.0); /* 3 bench-s = 150 ms real of polling slack */
+	/* not before the deadline; after it, within the real-time slack of a loaded machine (see
+	 * MOVE_LATENCY_REAL_S: bench seconds are SIM_SCALE× shorter than real ones) */
+	assert_true(dt >= expect && (dt - expect) / SIM_SCALE < MOVE_LATENCY_REAL_S);
 	ah_lock(&pp->host);
 	assert_false(pp->host.w.faults.stall[SIM_ARM_DETECTOR]); /* consumed */
 	ah_unlock(&pp->host);
@@ -632,6 +686,7 @@ static void test_sim_alarm_mid_move(void **state)
 static void test_sim_timeout_fault(void **state)
 {
 	struct peer *pp = new_peer(state);
+	pp->resp_ms = 300; /* this test measures the response timeout itself */
 	start_sim(pp, false);
 	struct axis *ax = open_axis(pp, 0);
 	struct acq_err err = { 0 };
