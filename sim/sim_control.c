@@ -36,6 +36,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include "config/acq_num.h"
 #include "sim/material.h"
 #include "sim/sim.h"
 #include "sim/sim_physics.h"
@@ -162,19 +163,6 @@ static int parse_onoff(const char *s, bool *on)
 	return -1;
 }
 
-static int parse_num(const char *s, double lo, double hi, double *out)
-{
-	if (!s)
-		return -1;
-	char *end;
-	errno = 0;
-	double v = strtod(s, &end);
-	if (end == s || *end || errno || !isfinite(v) || v < lo || v > hi)
-		return -1;
-	*out = v;
-	return 0;
-}
-
 static void faults_list(const struct sim_world *w, char *buf, size_t len)
 {
 	const struct sim_faults *f = &w->faults;
@@ -242,15 +230,15 @@ static int command(struct control *c, struct client *k, char *line, double now)
 	}
 	if (!strcmp(cmd, "temperature")) {
 		double t;
-		if (argc != 2 || parse_num(argv[1], -40, 80, &t))
+		if (argc != 2 || acq_num_parse(argv[1], -40, 80, &t))
 			return reply(k, "error: temperature: expected degrees Celsius in [-40, 80]");
 		w->sensor_temp_c = t;
 		return reply(k, "ok temperature=%.2f", t);
 	}
 	if (!strcmp(cmd, "pose")) {
 		double a, b, d;
-		if (argc != 4 || parse_num(argv[1], -360, 360, &a) || parse_num(argv[2], -360, 360, &b) ||
-		    parse_num(argv[3], -720, 720, &d))
+		if (argc != 4 || acq_num_parse(argv[1], -360, 360, &a) || acq_num_parse(argv[2], -360, 360, &b) ||
+		    acq_num_parse(argv[3], -720, 720, &d))
 			return reply(k, "error: pose: expected LASER_THETA DETECTOR_THETA DETECTOR_PHI in degrees");
 		w->laser_theta_deg = a;
 		w->detector_theta_deg = b;
@@ -260,7 +248,7 @@ static int command(struct control *c, struct client *k, char *line, double now)
 	if (!strcmp(cmd, "laser")) {
 		bool on;
 		double p = w->laser_power_pct;
-		if (argc < 2 || argc > 3 || parse_onoff(argv[1], &on) || (argc == 3 && parse_num(argv[2], 0, 100, &p)))
+		if (argc < 2 || argc > 3 || parse_onoff(argv[1], &on) || (argc == 3 && acq_num_parse(argv[2], 0, 100, &p)))
 			return reply(k, "error: laser: expected on|off [POWER_PCT in 0..100]");
 		w->laser_emission = on;
 		w->laser_power_pct = p;
@@ -286,12 +274,12 @@ static int command(struct control *c, struct client *k, char *line, double now)
 		}
 		if (kind == F_SATURATION_BURST) {
 			double n;
-			if (argc != 3 || parse_num(argv[2], 0, 1e6, &n) || n != floor(n))
+			if (argc != 3 || acq_num_parse(argv[2], 0, 1e6, &n) || n != floor(n))
 				return reply(k, "error: fault saturation-burst: expected a count N >= 0");
 			e.count = (int)n;
 			e.on = n > 0;
 		} else if (kind == F_SPECTRO_DISCONNECT) {
-			if (argc > 3 || (argc == 3 && parse_num(argv[2], 0, 1e6, &e.offline_s)))
+			if (argc > 3 || (argc == 3 && acq_num_parse(argv[2], 0, 1e6, &e.offline_s)))
 				return reply(k, "error: fault spectro-disconnect: expected [OFFLINE_SECONDS >= 0]");
 		} else if (kind == F_MODBUS_TIMEOUT || kind == F_LASER_INTERLOCK || kind == F_LASER_FAULT) {
 			if (argc > next + 1 || parse_onoff(argc > next ? argv[next] : NULL, &e.on) ||
