@@ -8,6 +8,7 @@
  * client copies it where it likes, as the operator). See export.h. */
 #include "daemon/export.h"
 
+#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <poll.h>
@@ -54,12 +55,18 @@ struct export_job {
 
 static atomic_int running;
 static atomic_ullong nexus_seq; /* names the temporary files */
+static atomic_bool nexus_swept; /* the export folder's stale temporary files removed (once per start) */
+/* One NeXus file at a time: Debian's libhdf5 is built thread-safe (one global lock), but a build that is not
+ * must never see two threads; the exports queue here at no cost (the library would serialise them anyway). */
+static pthread_mutex_t nexus_lock = PTHREAD_MUTEX_INITIALIZER;
 
 /* NeXus: the file in j->tmp, then renamed over our new (O_EXCL, empty) file j->path, or opened read-only and
  * unlinked for the client. */
 static void nexus_job(struct export_job *j)
 {
+	pthread_mutex_lock(&nexus_lock);
 	j->rc = nexus_export(j->db, j->sweep, j->tmp, &j->ns, &j->err);
+	pthread_mutex_unlock(&nexus_lock);
 	struct stat sb;
 	if (!j->rc && j->path[0]) {
 		if (stat(j->tmp, &sb) || rename(j->tmp, j->path))
@@ -200,6 +207,26 @@ static int export_dir(const struct conf *c, char *dir, size_t cap, struct acq_er
 	return 0;
 }
 
+/* The hidden temporary files (.nexus-*) that a daemon stopped in the middle of a NeXus export left in the
+ * export folder dir: removed at the first NeXus export after a start (no request can name them). */
+static void sweep_stale_nexus(const char *dir)
+{
+	bool was = false;
+	if (!atomic_compare_exchange_strong(&nexus_swept, &was, true))
+		return;
+	DIR *d = opendir(dir);
+	if (!d)
+		return;
+	struct dirent *e;
+	int n = 0;
+	while ((e = readdir(d)))
+		if (!strncmp(e->d_name, ".nexus-", 7) && !unlinkat(dirfd(d), e->d_name, 0))
+			n++;
+	closedir(d);
+	if (n)
+		log_msg(LOG_NOTICE, "%s: removed %d temporary file(s) of an interrupted NeXus export", dir, n);
+}
+
 /* A new file name in <state_dir>/export (created 0750 if missing): O_EXCL, never following a link. */
 static int open_new_export(const struct conf *c, const char *name, char *path, size_t cap, struct acq_err *err)
 {
@@ -272,6 +299,7 @@ void export_handle(struct app *app, const struct srv_peer *peer, struct proto_re
 		char dir[4096];
 		if (export_dir(app->conf, dir, sizeof dir, &err))
 			goto fail_job;
+		sweep_stale_nexus(dir);
 		/* a hidden name: export names never start with '.', so no request can reach it */
 		snprintf(j->tmp, sizeof j->tmp, "%s/.nexus-%llu.nxs", dir, atomic_fetch_add(&nexus_seq, 1) + 1);
 		if (name && (j->out = open_new_export(app->conf, name, j->path, sizeof j->path, &err)) < 0)

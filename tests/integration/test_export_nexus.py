@@ -7,9 +7,10 @@ A small sweep runs to completion; then
 - the file read back with h5py (/usr/bin/python3) equals SQLite number by number (nexuscheck.py), and a
   copy with one calibrated value changed does not (the check can fail); h5dump reads it;
 - `path=NAME` writes a new file in the daemon's export folder with the same content, refuses an existing
-  name, and build/acq-nexus on the same database gives the same content too;
+  name, and build/acq-nexus on the same database gives the same content too; so do two exports at once;
 - refusals: an unknown format, --format on another command, no such sweep; a client that leaves before its
-  file is ready costs nothing; no temporary file is left in the export folder."""
+  file is ready costs nothing; no temporary file is left in the export folder, and one that an interrupted
+  export left is removed."""
 import json
 import os
 import re
@@ -77,12 +78,17 @@ def run():
         assert row["state"] == "completed", "sweep ended %s" % row["state"]
         db = b.db_path()
         out = os.path.join(b.dir, "sweep.nxs")
+        # what an interrupted export of an earlier run left (a hidden name no request can give): removed
+        os.makedirs(os.path.join(b.state, "export"), exist_ok=True)
+        stale = os.path.join(b.state, "export", ".nexus-3.nxs.tmp.12345")
+        open(stale, "wb").write(b"\x89HDF partial")
         # streamed: acqctl writes the file as the caller
         p = ctl(b, "--json", "export", str(sid), "--format", "nexus", "-o", out)
         assert p.returncode == 0, "export --format nexus: %s" % p.stderr
         rep = json.loads(p.stdout)
         size = os.path.getsize(out)
         assert rep["ok"] and rep["format"] == "nexus" and rep["bytes"] == size and rep["output"] == out, rep
+        assert not os.path.exists(stale), "a stale temporary file was left in the export folder"
         validate(rep)
         with open(out, "rb") as f:
             assert f.read(8) == b"\x89HDF\r\n\x1a\n", "not an HDF5 file"
@@ -120,6 +126,14 @@ def run():
         assert q.returncode == 0, q.stderr
         nexuscheck.same_content(out, alone)
         L.say("path= file and acq-nexus: the same %d objects" % n)
+        # two at once (the daemon runs two exports; the HDF5 writes take turns)
+        pair = [os.path.join(b.dir, "p%d.nxs" % k) for k in (1, 2)]
+        procs = [subprocess.Popen([ACQCTL, "-s", b.sock, "export", str(sid), "--format", "nexus", "-o", x],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) for x in pair]
+        for x, pr in zip(pair, procs):
+            _, err = pr.communicate(timeout=120)
+            assert pr.returncode == 0, "concurrent export: %s" % err
+            nexuscheck.same_content(out, x)
         # refusals
         p = ctl(b, "export", str(sid), "format=xml", "-o", os.path.join(b.dir, "x"))
         assert p.returncode == 1 and "expected csv or nexus" in p.stderr, p.stderr
