@@ -134,6 +134,10 @@ def run():
             _, err = pr.communicate(timeout=120)
             assert pr.returncode == 0, "concurrent export: %s" % err
             nexuscheck.same_content(out, x)
+        # --format csv is the CSV stream, as without --format
+        csv = os.path.join(b.dir, "s.csv")
+        p = ctl(b, "export", str(sid), "--format", "csv", "-o", csv)
+        assert p.returncode == 0 and len(open(csv).read().splitlines()) == got["calibrated"] + 2, p.stderr
         # refusals
         p = ctl(b, "export", str(sid), "format=xml", "-o", os.path.join(b.dir, "x"))
         assert p.returncode == 1 and "expected csv or nexus" in p.stderr, p.stderr
