@@ -1,8 +1,8 @@
 #!/usr/bin/python3
 """nexuscheck: a NeXus/HDF5 sweep file (daemon/nexus.md) read back with h5py (Debian's, /usr/bin/python3) and
 compared number by number with what SQLite holds for that sweep: NeXus classes, title, plan and configuration
-snapshots, planned and actual angles (NaN where the arms never went), point states and times, raw spectra of
-the four kinds (counts, stddev, integration time, averages, times, temperatures, point ids), calibrated f and
+snapshots, planned, actual (arm) and measured (sample-frame) angles (NaN where the arms never went), point
+states and times, raw spectra of the four kinds (counts, stddev, integration time, averages, times, temperatures, point ids), calibrated f and
 sigma on the wavelength grid, the spectrometer's calibration, the devices and this sweep's events.
 Shared by test_nexus_export (acq-nexus on a hand-made database) and test_export_nexus (acqctl export on the
 simulated bench)."""
@@ -39,7 +39,8 @@ def check_roundtrip(h5path, dbpath, sweep):
         assert s(e["plan/data"][()]) == sw[1] and s(e["configuration/data"][()]) == sw[2], "plan/configuration"
         # points: planned and actual angles, states, times
         pts = db.execute("SELECT id, theta_i, phi_i, theta_o, phi_o, laser_theta, detector_theta, detector_phi, "
-                         "state, done_at FROM points WHERE sweep_id = ? ORDER BY order_index", (sweep,)).fetchall()
+                         "state, done_at, m_theta_i, m_phi_i, m_theta_o, m_phi_o FROM points WHERE sweep_id = ? "
+                         "ORDER BY order_index", (sweep,)).fetchall()
         P = e["points"]
         assert list(P["point_id"][()]) == [r[0] for r in pts], "point ids"
         for k, nm in enumerate(["planned_theta_i", "planned_phi_i", "planned_theta_o", "planned_phi_o",
@@ -47,6 +48,10 @@ def check_roundtrip(h5path, dbpath, sweep):
             ref = np.array([np.nan if r[1 + k] is None else r[1 + k] for r in pts])
             assert np.array_equal(P[nm][()], ref, equal_nan=True), nm
             assert s(P[nm].attrs["units"]) == "deg"
+        for k, nm in enumerate(["theta_i", "phi_i", "theta_o", "phi_o"]):
+            ref = np.array([np.nan if r[10 + k] is None else r[10 + k] for r in pts])
+            assert np.array_equal(P["measured_" + nm][()], ref, equal_nan=True), "measured_" + nm
+            assert s(P["measured_" + nm].attrs["units"]) == "deg"
         assert [s(x) for x in P["state"][()]] == [r[8] for r in pts], "point states"
         assert np.array_equal(P["done_time"][()], np.array([np.nan if r[9] is None else r[9] for r in pts]),
                               equal_nan=True), "done times"

@@ -19,6 +19,8 @@ import subprocess
 import sys
 import time
 
+import numpy as np
+
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import nexuscheck  # noqa: E402
 import sweeplib as L  # noqa: E402
@@ -97,6 +99,10 @@ def run():
         assert got["points"] == rep["points"] and got["calibrated"] == rep["calibrated"] > 0, (got, rep)
         assert got["spectra"]["sample"] >= got["calibrated"] and got["spectra"]["dark"] > 0
         assert got["spectra"]["reference"] > 0 and got["events"] > 0, got
+        with h5py.File(out, "r") as f:
+            P = f["entry/points"]
+            done = np.array([nexuscheck.s(x) == "done" for x in P["state"][()]])
+            assert done.any() and np.all(np.isfinite(P["measured_theta_o"][()][done])), "measured angles of done points"
         h = subprocess.run(["h5dump", "-H", out], capture_output=True, text=True)
         assert h.returncode == 0 and 'GROUP "entry"' in h.stdout, "h5dump: %s" % h.stderr[:300]
         p = ctl(b, "export", str(sid), "--format", "nexus", "-o", out)   # the human summary; -o truncates

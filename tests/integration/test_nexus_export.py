@@ -46,6 +46,7 @@ def make_db(path, rng):
            (12, 1, 2, 0.0, 0.0, 10.0, 0.0, 0.0, 10.02, 0.01, "done", 1.7e9 + 200)]
     db.executemany("INSERT INTO points (id, sweep_id, order_index, theta_i, phi_i, theta_o, phi_o, laser_theta, "
                    "detector_theta, detector_phi, state, done_at) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", pts)
+    db.execute("UPDATE points SET m_theta_i = 30.004, m_phi_i = 0.01, m_theta_o = 44.98, m_phi_o = 179.9 WHERE id = 10")
     spectra = []
     sid = 100
     for kind, point, sd in (("reference", None, True), ("dark", None, True), ("sample", 10, True), ("dark", 10, False),
