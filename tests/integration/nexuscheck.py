@@ -3,7 +3,8 @@
 compared number by number with what SQLite holds for that sweep: NeXus classes, title, plan and configuration
 snapshots, planned, actual (arm) and measured (sample-frame) angles (NaN where the arms never went), point
 states and times, raw spectra of the four kinds (counts, stddev, integration time, averages, times,
-temperatures, point ids), calibrated f and sigma on the wavelength grid, the spectrometer's calibration, the devices and this sweep's events.
+temperatures, point ids), calibrated f and sigma on the wavelength grid, the spectrometer's calibration, the
+devices and this sweep's events.
 Shared by test_nexus_export (acq-nexus on a hand-made database) and test_export_nexus (acqctl export on the
 simulated bench)."""
 import sqlite3
