@@ -14,8 +14,9 @@ there the curvature term is that of a sqrt(t) profile fitted to the nodes (rglre
 scaled by 1.02 must fail this check (the tolerance is not vacuous). It is checked at 10^4 random pairs with
 theta_i, theta_o <= 80 deg: closer to the horizon a cell of the 32x32 grid spans the horizon (nodes below it
 hold 0, as the format says) and incidences beyond the last node (87 deg) are clamped, so there the file errs
-by more than a cell (figures printed, not asserted). The global figures (max, RMS relative error) are printed; RMS is also held
-below 3 % at this resolution (measured 1.6 %; bilinear: it falls ~2.7x per doubling of the grid).
+by more than a cell (figures printed, not asserted). The global figures (max, RMS relative error) are
+printed; RMS is also held below 3 % at this resolution (measured 1.6 %; bilinear: it falls ~2.7x per
+doubling of the grid).
 Reciprocity: |f(i,o) - f(o,i)| within the sum of both pairs' tolerances (the model is exactly reciprocal).
 Albedo: the file's albedo at 0/30/60/75 deg (Gauss-Legendre 48 in cos x 96 azimuths) <= 1 + its propagated
 tolerance, and within that tolerance of the model's (brdf-recon eval on the same quadrature).
