@@ -15,6 +15,7 @@
 
 #include "acq_version.h"
 #include "daemon/devices.h"
+#include "daemon/job.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
@@ -45,17 +46,26 @@ static json_t *progress_json(struct app *app)
 	return o;
 }
 
-/* ---- plan: dry run against the running configuration's bench ---- */
-static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+/* ---- plan: dry run against the running configuration's bench, in a child with a deadline ----
+ * The planner's cost grows fast with the points (1000 × 10 Fibonacci points took 31 s and 2000 × 10 320 MB on
+ * the loop): it runs in a forked child, at most PLAN_CHILDREN at once, killed after PLAN_DEADLINE_S (real
+ * seconds) and limited to PLAN_MEM_BYTES of address space, so no request holds the loop or its memory. */
+#define PLAN_CHILDREN 2
+#define PLAN_DEADLINE_S 10.0
+#define PLAN_MEM_BYTES ((size_t)1 << 30)
+
+static int plan_children;
+
+struct plan_job {
+	struct app *app;
+	uint64_t serial;
+	json_t *id;
+	const char *text;   /* the request's plan text: valid in the child (its copy of memory) */
+	const struct bench_geom *bench;
+};
+
+static json_t *plan_json(const struct plan_spec *spec, const struct plan_result *res)
 {
-	struct acq_err err = { 0 };
-	struct plan_spec *spec = NULL;
-	struct plan_result *res = NULL;
-	if (plan_load_string("plan", json_string_value(json_object_get(req->root, "plan")), &spec, &err) ||
-	    plan_make(spec, &app->conf->bench, &res, &err)) {
-		plan_spec_free(spec);
-		return reply_err(app, peer, req->id, &err);
-	}
 	/* The points that were moved or dropped, and why (bounded so the reply stays one line). */
 	json_t *changed = json_array();
 	for (size_t i = 0; i < res->n_req && json_array_size(changed) < 200; i++) {
@@ -67,16 +77,84 @@ static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_
 							 r->status == PLAN_MOVED ? "moved" : "dropped", "reason",
 							 plan_reason_name(r->reason), "moved_deg", r->moved_deg));
 	}
-	json_t *o = json_pack("{s:s,s:I,s:I,s:I,s:I,s:I,s:I,s:f,s:f,s:f,s:f,s:f,s:[f,f,f],s:I,s:o}", "name", spec->name,
-			      "requested", (json_int_t)res->n_req, "points", (json_int_t)res->n_steps, "kept",
-			      (json_int_t)res->n_kept, "moved", (json_int_t)res->n_moved, "dropped",
-			      (json_int_t)res->n_dropped, "duplicates", (json_int_t)res->n_duplicate, "duration_s",
-			      res->duration_s, "raster_s", res->raster_s, "lower_bound_s", res->lower_bound_s, "dwell_s",
-			      res->dwell_s, "motion_s", res->motion_s, "travel_deg", res->travel_deg[0], res->travel_deg[1],
-			      res->travel_deg[2], "detours", (json_int_t)res->n_detours, "changed", changed);
-	plan_result_free(res);
-	plan_spec_free(spec);
-	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "plan", o));
+	return json_pack("{s:s,s:I,s:I,s:I,s:I,s:I,s:I,s:f,s:f,s:f,s:f,s:f,s:[f,f,f],s:I,s:o}", "name", spec->name,
+			 "requested", (json_int_t)res->n_req, "points", (json_int_t)res->n_steps, "kept",
+			 (json_int_t)res->n_kept, "moved", (json_int_t)res->n_moved, "dropped",
+			 (json_int_t)res->n_dropped, "duplicates", (json_int_t)res->n_duplicate, "duration_s",
+			 res->duration_s, "raster_s", res->raster_s, "lower_bound_s", res->lower_bound_s, "dwell_s",
+			 res->dwell_s, "motion_s", res->motion_s, "travel_deg", res->travel_deg[0], res->travel_deg[1],
+			 res->travel_deg[2], "detours", (json_int_t)res->n_detours, "changed", changed);
+}
+
+/* In the child: plan, print {"plan": {...}} or {"code": ..., "message": ...} on fd. */
+static int plan_child(void *arg, int fd)
+{
+	struct plan_job *pj = arg;
+	struct acq_err err = { 0 };
+	struct plan_spec *spec = NULL;
+	struct plan_result *res = NULL;
+	json_t *o;
+	if (plan_load_string("plan", pj->text, &spec, &err) || plan_make(spec, pj->bench, &res, &err))
+		o = json_pack("{s:s,s:s}", "code", proto_code_of(&err), "message", err.msg);
+	else
+		o = json_pack("{s:o}", "plan", plan_json(spec, res));
+	char *line = o ? json_dumps(o, JSON_COMPACT) : NULL;
+	if (!line)
+		return 3;
+	struct acq_err werr;
+	return proto_write_all(fd, line, strlen(line), &werr) ? 4 : 0;
+}
+
+static void plan_done(struct job *j, int status, const char *output, size_t len, void *arg)
+{
+	struct plan_job *pj = arg;
+	struct app *app = pj->app;
+	plan_children--;
+	json_t *o = status == 0 ? json_loadb(output, len, 0, NULL) : NULL;
+	char msg[200];
+	if (o && json_object_get(o, "plan")) {
+		server_reply(app->srv, pj->serial, pj->id, json_incref(o));
+	} else if (o) {
+		server_reply_error(app->srv, pj->serial, pj->id, json_string_value(json_object_get(o, "code")),
+				   json_string_value(json_object_get(o, "message")));
+	} else {
+		if (job_timed_out(j))
+			snprintf(msg, sizeof msg, "plan: not planned within %.0f s, the daemon's bound: use fewer points "
+				 "or plan it offline (acqctl plan FILE without the daemon)", PLAN_DEADLINE_S);
+		else
+			snprintf(msg, sizeof msg, "plan: the planner failed (status %d; memory is bounded to %zu MiB)", status,
+				 PLAN_MEM_BYTES >> 20);
+		log_msg(LOG_NOTICE, "%s", msg);
+		server_reply_error(app->srv, pj->serial, pj->id, PROTO_E_RANGE, msg);
+	}
+	json_decref(o);
+	json_decref(pj->id);
+	free(pj);
+}
+
+static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	if (plan_children >= PLAN_CHILDREN) {
+		acq_errf(&err, ACQ_E_UNSUPPORTED, "plan: %d plans are being computed already; retry later", plan_children);
+		return server_reply_error(app->srv, peer->serial, req->id, PROTO_E_UNAVAILABLE, err.msg);
+	}
+	struct plan_job *pj = calloc(1, sizeof *pj);
+	if (!pj) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return reply_err(app, peer, req->id, &err);
+	}
+	*pj = (struct plan_job){ .app = app, .serial = peer->serial, .id = json_incref(req->id),
+				 .text = json_string_value(json_object_get(req->root, "plan")),
+				 .bench = &app->conf->bench };
+	double rate = app->have_sim && app->sim.time_scale > 0 ? app->sim.time_scale : 1; /* loop seconds per s */
+	if (job_fork(plan_child, pj, PLAN_MEM_BYTES, PLAN_DEADLINE_S * rate, plan_done, pj, NULL, &err)) {
+		json_decref(pj->id);
+		free(pj);
+		return reply_err(app, peer, req->id, &err);
+	}
+	pj->text = NULL; /* the request is freed after this call; the child has its own copy */
+	plan_children++;
 }
 
 /* A manual move must not make the arms collide, on the way or at the target (straight
@@ -412,8 +490,12 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
 	} else if (!strcmp(cmd, "devices")) {
 		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_json(app->dev)));
 	} else if (!strcmp(cmd, "config")) {
-		server_reply(app->srv, peer->serial, req->id,
-			     json_pack("{s:o}", "config", config_json(app, json_is_true(json_object_get(req->root, "text")))));
+		bool text = json_is_true(json_object_get(req->root, "text"));
+		if (text && peer->tcp) /* the file may name users, paths and devices: local users with a uid only */
+			server_reply_error(app->srv, peer->serial, req->id, PROTO_E_FORBIDDEN,
+					   "config text: not over TCP (no credentials); use the Unix socket");
+		else
+			server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "config", config_json(app, text)));
 	} else if (!strcmp(cmd, "plan")) {
 		cmd_plan(app, peer, req);
 	} else if (!strncmp(cmd, "sweep.", 6)) {

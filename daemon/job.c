@@ -8,6 +8,8 @@
 #include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -21,7 +23,7 @@ struct job {
 	char *out;              /* the last JOB_OUTPUT_MAX bytes */
 	size_t len;
 	uint64_t timer;
-	bool killed;
+	bool killed, timed_out;
 	job_done_fn done;
 	void *arg;
 	struct job *next;
@@ -96,6 +98,7 @@ static void on_timeout(struct loop *lp, void *arg)
 	j->timer = 0;
 	if (j->exited)
 		return;
+	j->timed_out = true;
 	/* First SIGTERM, then SIGKILL two seconds later if it is still there. */
 	kill(j->pid, j->killed ? SIGKILL : SIGTERM);
 	if (!j->killed) {
@@ -104,10 +107,28 @@ static void on_timeout(struct loop *lp, void *arg)
 	}
 }
 
-int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
-	      struct job **out, struct acq_err *err)
+/* In the child: default signal handling, and death with the daemon (a SIGKILLed daemon leaves no child
+ * writing its files: PR_SET_PDEATHSIG survives exec). Only async-signal-safe calls. */
+static void child_setup(pid_t parent)
 {
-	if (!job_loop || !argv || !argv[0])
+	sigset_t all;
+	sigemptyset(&all);
+	sigprocmask(SIG_SETMASK, &all, NULL);
+	signal(SIGPIPE, SIG_DFL);
+	signal(SIGTERM, SIG_DFL);
+	signal(SIGINT, SIG_DFL);
+	signal(SIGHUP, SIG_DFL);
+	signal(SIGCHLD, SIG_DFL);
+	prctl(PR_SET_PDEATHSIG, SIGKILL);
+	if (getppid() != parent) /* the daemon died before prctl */
+		_exit(137);
+}
+
+/* Fork with the output pipe; in the child, run fn (exec) or child_fn; in the parent, register the job. */
+static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, void *child_arg, size_t mem_bytes,
+		 double timeout_s, job_done_fn done, void *arg, struct job **out, struct acq_err *err)
+{
+	if (!job_loop || (!child_fn && (!argv || !argv[0])))
 		return acq_errf(err, ACQ_E_INVAL, "job: not initialised or no program");
 	struct job *j = calloc(1, sizeof *j);
 	if (!j || !(j->out = malloc(JOB_OUTPUT_MAX + 1))) {
@@ -120,6 +141,7 @@ int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn
 		free(j);
 		return acq_errf(err, ACQ_E_IO, "pipe: %s", strerror(errno));
 	}
+	pid_t parent = getpid();
 	pid_t pid = fork();
 	if (pid < 0) {
 		close(p[0]);
@@ -129,14 +151,7 @@ int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn
 		return acq_errf(err, ACQ_E_IO, "fork: %s", strerror(errno));
 	}
 	if (pid == 0) {
-		/* Child: only async-signal-safe calls until exec. */
-		sigset_t all;
-		sigemptyset(&all);
-		sigprocmask(SIG_SETMASK, &all, NULL);
-		signal(SIGPIPE, SIG_DFL);
-		signal(SIGTERM, SIG_DFL);
-		signal(SIGINT, SIG_DFL);
-		signal(SIGHUP, SIG_DFL);
+		child_setup(parent);
 		int nul = open("/dev/null", O_RDONLY);
 		if (nul >= 0)
 			dup2(nul, 0);
@@ -144,6 +159,13 @@ int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn
 		dup2(p[1], 2);
 		if (cwd && chdir(cwd) < 0)
 			_exit(126);
+		if (child_fn) {
+			if (mem_bytes) {
+				struct rlimit rl = { mem_bytes, mem_bytes };
+				setrlimit(RLIMIT_AS, &rl);
+			}
+			_exit(child_fn(child_arg, 1));
+		}
 		execvp(argv[0], argv);
 		static const char msg[] = "job: exec failed\n";
 		ssize_t w = write(2, msg, sizeof msg - 1);
@@ -172,6 +194,20 @@ int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn
 	return 0;
 }
 
+int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
+	      struct job **out, struct acq_err *err)
+{
+	return spawn(argv, cwd, NULL, NULL, 0, timeout_s, done, arg, out, err);
+}
+
+int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, job_done_fn done, void *arg,
+	     struct job **out, struct acq_err *err)
+{
+	if (!fn)
+		return acq_errf(err, ACQ_E_INVAL, "job: no function");
+	return spawn(NULL, NULL, fn, fn_arg, mem_bytes, timeout_s, done, arg, out, err);
+}
+
 void job_cancel(struct job *j)
 {
 	if (j && !j->exited) {
@@ -180,6 +216,11 @@ void job_cancel(struct job *j)
 		j->killed = true;
 		j->timer = loop_timer_add(job_loop, 2.0, 0, on_timeout, j);
 	}
+}
+
+bool job_timed_out(const struct job *j)
+{
+	return j->timed_out;
 }
 
 pid_t job_pid(const struct job *j)

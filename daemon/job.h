@@ -3,6 +3,7 @@
 #ifndef JOB_H
 #define JOB_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <sys/types.h>
 
@@ -25,6 +26,15 @@ void job_finish(void);
  * /dev/null, killed after timeout_s (0: never). 0 or -1 (exec failure is reported as status 127). */
 int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
 	      struct job **out, struct acq_err *err);
+/* In a job_fork() child: compute, write the result to fd, return the exit status (the child then _exits). */
+typedef int (*job_child_fn)(void *arg, int fd);
+/* Run fn(fn_arg, fd) in a forked child (no exec: it sees the daemon's memory as it was) with the output
+ * captured as for job_start, its address space limited to mem_bytes (0: unlimited), killed after timeout_s.
+ * Children of both kinds die with the daemon (PR_SET_PDEATHSIG). 0 or -1. */
+int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, job_done_fn done, void *arg,
+	     struct job **out, struct acq_err *err);
+/* True when the job was killed because its timeout expired (valid in its done callback). */
+bool job_timed_out(const struct job *j);
 /* Ask a job to stop (SIGTERM); its callback still fires when it is gone. */
 void job_cancel(struct job *j);
 /* Process id of a running job. */
