@@ -10,6 +10,9 @@
  *   EMISSION?       → EMISSION <0|1>                           (answered by the simulator; the driver uses STATUS?)
  *   POWER <pct>     → OK | ERR <code> <text>                   (pct in [0, 100], decimal)
  *   POWER?          → POWER <pct>                              e.g. "POWER 42.0"
+ *   KEEPALIVE <ms>  → OK        arm the laser's watchdog: emission stops if no command arrives within ms
+ *                               (0 disarms); every command, and "KEEPALIVE" alone, refreshes it
+ *   KEEPALIVE       → OK
  *   STATUS?         → STATUS emission=<0|1> interlock=<0|1> fault=<code>
  *                     interlock=1 means closed (emission allowed); fault 0 = none
  *   any error       → ERR <code> <text>: 1 unknown command, 2 bad argument, 3 interlock open,
@@ -22,11 +25,12 @@
  * overlong line, a non-printable byte) is an ACQ_E_PROTO error quoting the line; "ERR n text" is
  * ACQ_E_DEVICE with detail = n.
  * Safety: open switches emission off; every failed call switches it off (best effort) before returning;
- * close switches it off.
+ * close switches it off. Open arms the laser's keep-alive (keepalive_ms, default 1000): a daemon that dies
+ * or stalls stops refreshing it (laser_keepalive(), called by its loop) and emission stops by itself.
  *
  * Config (devices.laser):
  *   device: /dev/ttyUSB0   baud: 115200   data_bits: 8   parity: none|odd|even   stop_bits: 1|2
- *   flow_control: none|xonxoff|rtscts      timeout_ms: 500     max_power_pct: 100
+ *   flow_control: none|xonxoff|rtscts      timeout_ms: 500     max_power_pct: 100     keepalive_ms: 1000
  *   transport: auto|serialport|termios
  * With acq-sim, the device is the pty written in its ports file ("laser": {"device": "/dev/pts/N"}):
  * laser_cfg_set_device() puts it in.
@@ -57,6 +61,7 @@ struct laser_cfg {
 	char *device;
 	int baud, data_bits, parity, stop_bits, flow;
 	int timeout_ms;
+	int keepalive_ms;       /* 0: the laser's watchdog stays disarmed */
 	double max_power_pct;
 	int transport;          /* enum laser_transport */
 };
@@ -99,7 +104,7 @@ int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err
 	static const char *const transports[] = { "auto", "serialport", "termios", NULL };
 	int transport = 0;
 	const char *device = NULL;
-	long long baud = 115200, bits = 8, stop = 1, timeout = 500;
+	long long baud = 115200, bits = 8, stop = 1, timeout = 500, keepalive = 1000;
 	int parity = 0, flow = 0;
 	double maxp = 100;
 	if (yc_string(node, "device", false, &device, err) || yc_int(node, "baud", false, 50, 4000000, &baud, err) ||
@@ -107,9 +112,13 @@ int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err
 	    yc_int(node, "stop_bits", false, 1, 2, &stop, err) ||
 	    yc_enum(node, "flow_control", false, flows, &flow, err) ||
 	    yc_int(node, "timeout_ms", false, 1, 60000, &timeout, err) ||
+	    yc_int(node, "keepalive_ms", false, 0, 60000, &keepalive, err) ||
 	    yc_double(node, "max_power_pct", false, 0, 100, &maxp, err) ||
 	    yc_enum(node, "transport", false, transports, &transport, err) || yc_check_unknown(node, "laser", err))
 		return -1;
+	if (keepalive && keepalive < 500) /* the daemon refreshes it every 250 ms */
+		return yc_errf(err, yc_get(node, "keepalive_ms"), "laser.keepalive_ms: %lld: expected 0 (off) or 500 to "
+			       "60000 ms", keepalive);
 	struct laser_cfg *c = calloc(1, sizeof *c);
 	if (!c || (device && !(c->device = strdup(device)))) {
 		free(c);
@@ -121,6 +130,7 @@ int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err
 	c->stop_bits = (int)stop;
 	c->flow = flow;
 	c->timeout_ms = (int)timeout;
+	c->keepalive_ms = (int)keepalive;
 	c->max_power_pct = maxp;
 	c->transport = transport;
 	*out = c;
@@ -439,6 +449,14 @@ int laser_open(const struct laser_cfg *cfg, struct laser **out, struct acq_err *
 	snprintf(l->id.firmware, sizeof l->id.firmware, "%s", fw);
 	if (expect_ok(l, "EMISSION OFF", err))
 		goto fail;
+	if (cfg->keepalive_ms) {
+		char cmd[32];
+		snprintf(cmd, sizeof cmd, "KEEPALIVE %d", cfg->keepalive_ms);
+		if (expect_ok(l, cmd, err)) {
+			acq_err_prefix(err, "arming the keep-alive (devices.laser.keepalive_ms: 0 runs without): ");
+			goto fail;
+		}
+	}
 	*out = l;
 	return 0;
 fail:
@@ -503,6 +521,20 @@ int laser_status(struct laser *l, struct laser_status *st, struct acq_err *err)
 		return fail_safe(l);
 	}
 	return 0;
+}
+
+int laser_keepalive(struct laser *l, struct acq_err *err)
+{
+	if (!l->cfg->keepalive_ms)
+		return 0;
+	if (expect_ok(l, "KEEPALIVE", err))
+		return fail_safe(l);
+	return 0;
+}
+
+int laser_keepalive_ms(const struct laser *l)
+{
+	return l->cfg->keepalive_ms;
 }
 
 const struct laser_identity *laser_identity(const struct laser *l)
