@@ -3,6 +3,8 @@
 # Conventions (so a new file needs no Makefile edit):
 #   <folder>/*_main.c        a program's entry point: build/<name with _ → ->   (see PROGRAMS)
 #   <folder>/*.c (others)    the folder's static library build/lib<folder>.a
+#   <folder>/<sub>/*.c       a sub-folder listed in LIBDIRS: its own library build/lib<sub>.a (daemon/plan/ →
+#                            build/libplan.a, the planner that acqctl links without the daemon)
 #   tests/unit/test_*.c      a cmocka unit test, linked with every library
 #   tests/integration/test_* an executable script (sh/py), run by tests/run-integration.sh
 #   tests/bench/bench_*.c    a benchmark program, run by `make bench`
@@ -46,8 +48,10 @@ ALL_CFLAGS += -fsanitize=$(SANITIZE) -fno-omit-frame-pointer -fno-sanitize-recov
 LDFLAGS    += -fsanitize=$(SANITIZE)
 endif
 
-# Folders that form libraries, in link order (users before providers).
-LIBDIRS    := daemon sim proto recon drivers config
+# Folders that form libraries, in link order (users before providers); a sub-folder names its library.
+LIBDIRS    := daemon daemon/plan sim proto recon drivers config
+# A program that links fewer libraries than all (in link order): PROG_LIBDIRS_<program>.
+PROG_LIBDIRS_acqctl := proto daemon/plan config
 
 # Debian packages the build, the tests and the demo need (the `deps` step installs the missing ones).
 DEB_PKGS   := build-essential pkg-config libusb-1.0-0-dev libmodbus-dev libserialport-dev libsqlite3-dev \
@@ -69,7 +73,10 @@ define lib_objs
 $(patsubst %.c,$(BUILD)/obj/%.o,$(call lib_srcs,$(1)))
 endef
 
-LIBS       := $(foreach d,$(LIBDIRS),$(if $(strip $(call lib_srcs,$(d))),$(BUILD)/lib$(d).a))
+define lib_of
+$(BUILD)/lib$(notdir $(1)).a
+endef
+LIBS       := $(foreach d,$(LIBDIRS),$(if $(strip $(call lib_srcs,$(d))),$(call lib_of,$(d))))
 MAIN_SRCS  := $(foreach d,$(LIBDIRS),$(wildcard $(d)/*_main.c))
 PROGRAMS   := $(foreach s,$(MAIN_SRCS),$(BUILD)/$(subst _,-,$(patsubst %_main.c,%,$(notdir $(s)))))
 UNIT_SRCS  := $(wildcard tests/unit/test_*.c)
@@ -103,14 +110,16 @@ $(BUILD)/.cflags: FORCE
 FORCE:
 
 define lib_rule
-$(BUILD)/lib$(1).a: $(call lib_objs,$(1))
+$(call lib_of,$(1)): $(call lib_objs,$(1))
 	@rm -f $$@
 	$(Q)$(AR) rcs $$@ $$^
 endef
 $(foreach d,$(LIBDIRS),$(eval $(call lib_rule,$(d))))
 
+prog_name = $(subst _,-,$(patsubst %_main.c,%,$(notdir $(1))))
+prog_libs = $(if $(PROG_LIBDIRS_$(call prog_name,$(1))),$(foreach d,$(PROG_LIBDIRS_$(call prog_name,$(1))),$(call lib_of,$(d))),$(LIBS))
 define prog_rule
-$(BUILD)/$(subst _,-,$(patsubst %_main.c,%,$(notdir $(1)))): $(patsubst %.c,$(BUILD)/obj/%.o,$(1)) $(LIBS)
+$(BUILD)/$(call prog_name,$(1)): $(patsubst %.c,$(BUILD)/obj/%.o,$(1)) $(call prog_libs,$(1))
 	@$(if $(Q),echo "  LD      $$@")
 	$(Q)$(CC) $(LDFLAGS) -o $$@ $$^ $(LDLIBS)
 endef

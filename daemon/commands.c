@@ -21,7 +21,7 @@
 #include "daemon/store.h"
 #include "daemon/sweep.h"
 
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 
 /* ---- helpers ---- */
 

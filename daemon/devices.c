@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "daemon/executor.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
@@ -502,4 +503,182 @@ int devices_measure(struct devices *dv, const char *kind, double integration_ms,
 	/* Polled by timer: a measurement takes milliseconds to seconds, 10 ms granularity is plenty. */
 	dv->op_timer = loop_timer_add(dv->lp, 0.01, 0.01, measure_step, dv);
 	return 0;
+}
+
+/* ---- the sweep executor's device operations over these handles (executor.h) ------------------------- */
+
+static struct axis *ax_of(struct devices *dv, int a, struct acq_err *err)
+{
+	struct axis *ax = devices_axis(dv, (enum conf_dev)a);
+	if (!ax)
+		acq_errf(err, ACQ_E_DISCONNECTED, "%s unavailable", conf_dev_name((enum conf_dev)a));
+	return ax;
+}
+
+static int o_move_begin(void *ctx, int a, double target, double now, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	return ax ? axis_move_begin(ax, target, now, err) : -1;
+}
+
+static int o_move_step(void *ctx, int a, double now, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	return ax ? axis_move_step(ax, now, err) : AXIS_MOVE_FAILED;
+}
+
+static double o_next_poll(void *ctx, int a)
+{
+	struct devices *dv = ctx;
+	struct axis *ax = devices_axis(dv, (enum conf_dev)a);
+	return ax ? axis_next_poll(ax) : loop_now(dv->lp);
+}
+
+static int o_stop(void *ctx, int a, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	return ax ? axis_stop(ax, err) : -1;
+}
+
+static int o_position(void *ctx, int a, double *deg, bool *homed, bool *alarm, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	struct axis_status st;
+	if (!ax || axis_read_status(ax, &st, err))
+		return -1;
+	*deg = st.position_deg;
+	*homed = st.homed;
+	*alarm = st.alarm;
+	return 0;
+}
+
+static int o_home_begin(void *ctx, int a, double now, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	return ax ? axis_home_begin(ax, now, err) : -1;
+}
+
+static int o_alarm_reset(void *ctx, int a, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	return ax ? axis_alarm_reset(ax, err) : -1;
+}
+
+static int o_laser_set(void *ctx, bool on, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct laser *l = devices_laser(dv);
+	if (!l)
+		return on ? acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable") : 0; /* absent = dark */
+	return laser_set_emission(l, on, err);
+}
+
+static int o_laser_power(void *ctx, double pct, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct laser *l = devices_laser(dv);
+	if (!l)
+		return acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable");
+	return laser_set_power(l, pct, err);
+}
+
+static int o_laser_state(void *ctx, bool *emission, bool *ready, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct laser *l = devices_laser(dv);
+	struct laser_status st;
+	if (!l)
+		return acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable");
+	if (laser_status(l, &st, err))
+		return -1;
+	*emission = st.emission;
+	*ready = st.interlock_ok && !st.fault;
+	return 0;
+}
+
+/* The daemon's device manager reconnects on its own timer; here: is the device back and answering? */
+static int o_reconnect(void *ctx, int dev, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	if (dev <= EX_DEV_DETECTOR_PHI) {
+		bool homed, alarm;
+		double d;
+		return o_position(ctx, dev, &d, &homed, &alarm, err);
+	}
+	if (dev == EX_DEV_SPECTRO) {
+		struct spectro *s = devices_spectro(dv);
+		return s && spectro_info(s) ? 0 : acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
+	}
+	bool e, r;
+	return o_laser_state(ctx, &e, &r, err);
+}
+
+static int o_spectro_start(void *ctx, const struct spectro_meas *m, double now, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct spectro *s = devices_spectro(dv);
+	if (!s)
+		return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
+	return spectro_start(s, m, now, err);
+}
+
+static int o_spectro_fetch(void *ctx, struct spectro_frame *f, double now, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct spectro *s = devices_spectro(dv);
+	if (!s)
+		return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
+	return spectro_fetch(s, f, now, err);
+}
+
+static int o_spectro_stop(void *ctx, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct spectro *s = devices_spectro(dv);
+	return s ? spectro_stop(s, err) : 0;
+}
+
+static const struct spectro_info *o_spectro_info(void *ctx)
+{
+	struct devices *dv = ctx;
+	struct spectro *s = devices_spectro(dv);
+	return s ? spectro_info(s) : NULL;
+}
+
+static double o_wall(void *ctx)
+{
+	struct devices *dv = ctx;
+	return dv->wallclock();
+}
+
+/* A link-level failure hands the device back to the manager (close, reconnect on its timer); a device that
+ * answered with an error (alarm, interlock) keeps its handle. */
+static void o_lost(void *ctx, int dev, const struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	int code = err ? err->code : ACQ_E_DEVICE;
+	if (code == ACQ_E_TIMEOUT || code == ACQ_E_DISCONNECTED || code == ACQ_E_IO || code == ACQ_E_PROTO)
+		if (dev != EX_DEV_SPECTRO || devices_spectro(dv))
+			devices_lost(dv, (enum conf_dev)dev, err ? err->msg : "device error");
+}
+
+static void o_limits(void *ctx, int a, double *lo, double *hi)
+{
+	struct devices *dv = ctx;
+	const struct axis_cfg *c = a >= 0 && a < 3 ? dv->c->axis[a] : NULL;
+	if (c)
+		axis_cfg_limits(c, lo, hi);
+}
+
+static const struct ex_ops ex_dev_ops = {
+	.move_begin = o_move_begin, .move_step = o_move_step, .next_poll = o_next_poll, .stop = o_stop,
+	.position = o_position, .home_begin = o_home_begin, .alarm_reset = o_alarm_reset, .reconnect = o_reconnect,
+	.laser_set = o_laser_set, .laser_power = o_laser_power, .laser_state = o_laser_state, .spectro_start = o_spectro_start,
+	.spectro_fetch = o_spectro_fetch, .spectro_stop = o_spectro_stop, .spectro_info = o_spectro_info,
+	.wall = o_wall, .lost = o_lost, .limits = o_limits,
+};
+
+const struct ex_ops *devices_ex_ops(void)
+{
+	return &ex_dev_ops;
 }

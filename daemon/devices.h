@@ -90,6 +90,11 @@ json_t *devices_json(struct devices *dv);
 /* True while a manual move or measurement runs. */
 bool devices_busy(const struct devices *dv);
 
+/* The sweep executor's device operations over these handles (ctx: the struct devices): the drivers of the
+ * open devices, ACQ_E_DISCONNECTED for an absent one, link failures handed to devices_lost(). */
+struct ex_ops;
+const struct ex_ops *devices_ex_ops(void);
+
 /* Manual move to absolute angles (NaN: leave that axis). Soft limits are checked first (ACQ_E_RANGE);
  * a missing axis gives ACQ_E_UNSUPPORTED. done(ctx, ok, err, result) is called once from the loop. */
 typedef void (*devices_done_fn)(void *ctx, int rc, const struct acq_err *err, json_t *result);

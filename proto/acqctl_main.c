@@ -9,7 +9,7 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "daemon/plan_cli.h"
+#include "daemon/plan/plan_cli.h"
 #include "proto/proto.h"
 
 #define EXIT_REFUSED 1

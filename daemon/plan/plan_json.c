@@ -2,7 +2,7 @@
 #include <jansson.h>
 #include <stdint.h>
 
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 
 static const char *status_name(enum plan_status s)
 {

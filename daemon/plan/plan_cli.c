@@ -16,8 +16,8 @@
 
 #include "config/bench.h"
 #include "config/yconf.h"
-#include "daemon/plan.h"
-#include "daemon/plan_cli.h"
+#include "daemon/plan/plan.h"
+#include "daemon/plan/plan_cli.h"
 
 static int usage(void)
 {
