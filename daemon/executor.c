@@ -366,6 +366,14 @@ int ex_start(struct ex *x, int first_step, bool resumed, double now, struct acq_
 		ex_event(x, "info", NULL, "no reference will be measured: calibrated values need one (take_reference)");
 	ex_begin_segment(x, now);
 	ex_set_phase_text(x, "verifying positions");
+	/* The reference → sample swap is one durable state: resumed with the reference stored and no point
+	 * committed, nothing proves the sample was placed (a crash may have come between the reference and its
+	 * pause, or between the operator's resume and the first point), so the operator is asked again; the white
+	 * standard is never measured as the sample. */
+	if (resumed && x->have_ref && first_step == 0 && x->nsteps > 0 && x->cfg.take_reference &&
+	    x->cfg.pause_after_reference)
+		ex_pause_now(x, false, "%s measured before the restart: place the sample on the stage (if not done yet), "
+			     "then resume", x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "reference");
 	return 0;
 }
 
