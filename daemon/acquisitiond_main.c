@@ -277,6 +277,14 @@ int main(int argc, char **argv)
 	app.started_wall = app_wallclock();
 	if (store_open(app.conf->d.database, &app.store, &err))
 		goto fail;
+	{
+		/* Runs of a daemon that died: their children died with it (PR_SET_PDEATHSIG, daemon/job.c). */
+		int n = 0;
+		if (store_recon_interrupted(app.store, app_wallclock(), &n, &err))
+			goto fail;
+		if (n)
+			log_msg(LOG_WARNING, "%d reconstruction run(s) left running by a stopped daemon marked interrupted", n);
+	}
 	if (signals_init(&err) || loop_fd_add(app.lp, sig_pipe[0], POLLIN, on_sigpipe, &app, &err))
 		goto fail;
 	job_init(app.lp);

@@ -25,7 +25,8 @@ double app_wallclock(void)
 
 /* Crash injection for the kill tests: ACQ_CRASH_AT=STEP:N SIGKILLs the daemon right after the N-th
  * durable step STEP of this process (its event committed): a sweep event kind (start, reference, pause,
- * resume, fault, complete, ...) or "point" (a point committed). Unset in production: no effect. */
+ * resume, fault, complete, ...), "point" (a point committed) or "recon" (a reconstruction event: exported,
+ * a stage started, ...). Unset in production: no effect. */
 static void crash_hook(const char *event, json_t *data)
 {
 	static bool init;
@@ -41,6 +42,7 @@ static void crash_hook(const char *event, json_t *data)
 		return;
 	const char *k = !strcmp(event, "sweep.progress") ? "point"
 			: !strcmp(event, "sweep.fault") ? "fault"
+			: !strcmp(event, "recon") ? "recon"
 			: !strcmp(event, "sweep.state") ? json_string_value(json_object_get(data, "event")) : NULL;
 	if (k && !strcmp(k, step) && ++seen == want) {
 		log_msg(LOG_WARNING, "ACQ_CRASH_AT=%s:%d: SIGKILL now", step, want);

@@ -604,6 +604,21 @@ int store_recon_begin(struct store *st, int64_t sweep_id, const char *program, c
 	return 0;
 }
 
+int store_recon_interrupted(struct store *st, double at, int *n, struct acq_err *err)
+{
+	*n = 0;
+	sqlite3_stmt *s = prep(st, "UPDATE recon_runs SET state = 'failed', finished_at = ?, output = "
+				   "'interrupted: the daemon stopped (crash or kill) during the run; its child died with it' "
+				   "|| CASE WHEN output IS NULL THEN '' ELSE char(10) || output END WHERE state = 'running'", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_double(s, 1, at);
+	if (run1(st, s, err, "marking interrupted reconstruction runs"))
+		return -1;
+	*n = sqlite3_changes(st->db);
+	return 0;
+}
+
 int store_recon_end(struct store *st, int64_t run_id, const char *state, int exit_status, const char *output,
 		    double at, struct acq_err *err)
 {

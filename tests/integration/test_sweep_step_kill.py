@@ -1,10 +1,12 @@
 #!/usr/bin/python3
 """Crash windows of the sweep state machine: acquisitiond is SIGKILLed right after each named durable step
 (ACQ_CRASH_AT=STEP:N: start, reference, the pause for the sample swap, the operator's resume, a committed point,
-complete) and restarted (daemon.auto_resume) each time; the sweep must end complete with every point once,
+complete, a reconstruction stage started) and restarted (daemon.auto_resume) each time; the sweep must end complete with every point once,
 integrity ok, and a restart after the reference must ask for the sample swap again before measuring any point
 (before the fix it resumed "after point 0 (reference reloaded)" and measured the white standard as the sample).
-The random-time kills are tests/integration/test_sweep_crash.py."""
+A daemon killed while `brdf-recon fit` runs leaves no child behind (PR_SET_PDEATHSIG), the run is marked
+interrupted at the next start (not left `running`), and `recon start` is accepted again once, refused while
+that one runs. The random-time kills are tests/integration/test_sweep_crash.py."""
 import os
 import signal
 import sys
@@ -90,7 +92,15 @@ def done_points(b, sid):
 def run():
     cfg = open(os.path.join(L.SRC, "config", "bench-sim.yaml")).read()
     sweep = cfg[cfg.index("\nsweep:") + 1:]
-    sweep = sweep.replace("auto_recon: true", "auto_recon: false")
+    sweep = L.strip_sections(sweep.replace("auto_recon: true", "auto_recon: false"), {"recon", "daemon"})
+    # The reconstruction program: a stand-in that runs long enough to be killed with the daemon (the real
+    # brdf-recon fit of 10 points may end before the kill lands).
+    import tempfile
+    slow = tempfile.NamedTemporaryFile("w", suffix=".sh", delete=False, dir="/tmp")
+    slow.write("#!/bin/sh\nexec sleep 60\n")
+    slow.close()
+    os.chmod(slow.name, 0o755)
+    sweep += "recon:\n  program: %s\n  timeout_s: 120\n" % slow.name
     b = L.Bench(scale=20, sweep_yaml=sweep)
     try:
         b.start_sim()
@@ -152,8 +162,54 @@ def run():
         db.close()
         L.say("completed: %d points, %d calibrated, %d reference measurement(s)" % (n, cal, refs))
         assert refs == 1, "the reference was measured %d times (it was committed before the kills)" % refs
+
+        # 7. killed while the reconstruction's first stage runs
+        b.kill_daemon(signal.SIGTERM)
+        start_with(b, "recon:2")  # recon 1: samples exported; recon 2: brdf-recon fit started (pid N)
+        c = b.client()
+        try:
+            c.req("recon.start", sweep=sid)
+        except (EOFError, OSError):
+            pass
+        c.close()
+        wait_killed(b, "brdf-recon fit started")
+        db = b.db()
+        msg = db.execute("SELECT message FROM events WHERE sweep_id = ? AND message LIKE 'brdf-recon fit started%' "
+                         "ORDER BY id DESC LIMIT 1", (sid,)).fetchone()
+        db.close()
+        assert msg, "no 'brdf-recon fit started' event"
+        pid = int(msg[0].split("pid ")[1].rstrip(")"))
+
+        def alive(p):
+            try:
+                with open("/proc/%d/status" % p) as f:
+                    return "\tZ" not in [l for l in f if l.startswith("State:")][0]
+            except OSError:
+                return False
+        t0 = time.time()
+        while alive(pid) and time.time() - t0 < 5:
+            time.sleep(0.01)
+        L.say("brdf-recon fit (pid %d) %s %.3f s after the daemon's SIGKILL" % (
+            pid, "still ALIVE" if alive(pid) else "gone", time.time() - t0))
+        assert not alive(pid), "the reconstruction child outlived the daemon"
+        assert time.time() - t0 < 2, "the child was still there after the kill"
+        start_with(b, None)
+        db = b.db()
+        rows = db.execute("SELECT id, state, output FROM recon_runs WHERE sweep_id = ?", (sid,)).fetchall()
+        db.close()
+        L.say("after the restart: runs %s" % [(r[0], r[1], (r[2] or "")[:40]) for r in rows])
+        assert rows and all(r[1] != "running" for r in rows), "a run left running: %s" % rows
+        assert rows[-1][2].startswith("interrupted"), "the run is not marked interrupted: %s" % (rows[-1],)
+        c = b.client()
+        r1 = c.req("recon.start", sweep=sid)
+        r2 = c.req("recon.start", sweep=sid)
+        c.close()
+        L.say("recon start again: %s; while it runs: %s" % (r1.get("ok"), r2.get("error", {}).get("message")))
+        assert r1.get("ok"), "recon start refused after the restart: %s" % r1
+        assert not r2.get("ok") and "already running" in r2["error"]["message"], "second recon start: %s" % r2
     finally:
         b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
+        os.unlink(slow.name)
 
 
 L.main(run)
