@@ -116,6 +116,12 @@ static int check_existing(const char *path, struct acq_err *err)
 		goto out;
 	}
 	int64_t ver = pragma_int(db, "PRAGMA user_version", &ok);
+	/* Ours always carries a schema version: application_id and user_version are set in one transaction. */
+	if (appid == STORE_APPLICATION_ID && ver == 0) {
+		acq_errf(err, ACQ_E_INVAL, "%s: carries acquisitiond's application_id but no schema version (%lld tables): "
+			 "not a database this daemon wrote; refusing to use it, left as is", path, (long long)ntables);
+		goto out;
+	}
 	if (ver > STORE_SCHEMA_VERSION) {
 		acq_errf(err, ACQ_E_UNSUPPORTED, "%s: schema version %lld is newer than this acquisitiond's (%d)", path,
 			 (long long)ver, STORE_SCHEMA_VERSION);
