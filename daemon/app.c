@@ -84,6 +84,9 @@ void app_status_line(struct app *app, char *buf, size_t cap)
 	if (p.state == SWEEP_IDLE)
 		snprintf(buf, cap, "idle; devices %d/%d available%s", avail, CONF_DEV__COUNT,
 			 sweep_recon_busy(app->sweep) ? "; reconstruction running" : "");
+	else if (p.state == SWEEP_FAULTED && p.message[0]) /* what is wrong matters more than the ETA */
+		snprintf(buf, cap, "sweep %lld %s: %d/%d points: %s", (long long)p.sweep_id, sweep_state_name(p.state),
+			 p.points_done, p.points_total, p.message);
 	else if (isfinite(p.eta_s))
 		snprintf(buf, cap, "sweep %lld %s: %d/%d points, ETA %.0f s", (long long)p.sweep_id,
 			 sweep_state_name(p.state), p.points_done, p.points_total, p.eta_s);
