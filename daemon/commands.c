@@ -467,12 +467,40 @@ static json_t *status_json(struct app *app)
 	server_counts(app->srv, &clients, &watchers);
 	char line[256];
 	app_status_line(app, line, sizeof line);
-	return json_pack("{s:s,s:s,s:i,s:f,s:f,s:o,s:{s:i,s:i},s:i,s:i,s:{s:b,s:I,s:I},s:s,s:b}", "daemon", "running",
+	struct server_stats ss;
+	server_get_stats(app->srv, &ss);
+	json_t *srvj = json_pack("{s:I,s:I,s:I,s:I}", "refused", (json_int_t)ss.refused, "dropped_unread",
+				 (json_int_t)ss.dropped_output, "dropped_stalled", (json_int_t)ss.dropped_stalled,
+				 "timed_out", (json_int_t)ss.timed_out);
+	json_t *o = json_pack("{s:s,s:s,s:i,s:f,s:f,s:o,s:{s:i,s:i},s:i,s:i,s:{s:b,s:I,s:I},s:s,s:b}", "daemon", "running",
 			 "version", ACQ_VERSION, "pid", (int)getpid(), "uptime_s", loop_now(app->lp) - app->started_mono,
 			 "started_at", app->started_wall, "sweep", progress_json(app), "devices", "available",
 			 devices_available(app->dev), "total", CONF_DEV__COUNT, "clients", clients, "watchers", watchers,
 			 "recon", "running", sweep_recon_busy(app->sweep), "run", (json_int_t)app->recon_run, "sweep",
 			 (json_int_t)app->recon_sweep, "summary", line, "sim", app->have_sim);
+	if (o)
+		json_object_set_new(o, "server", srvj);
+	else
+		json_decref(srvj);
+	return o;
+}
+
+/* The device list asks every device for its status (serial and Modbus exchanges on the loop): clients get a
+ * copy at most DEVICES_MAX_AGE_S old, so however many ask, the devices are asked at most a few times a second
+ * and the sweep's exchanges do not queue behind the clients'. */
+#define DEVICES_MAX_AGE_S 0.25
+
+static json_t *devices_cached(struct app *app)
+{
+	static json_t *cache;
+	static double at;
+	double now = loop_monotonic(NULL);
+	if (!cache || now - at > DEVICES_MAX_AGE_S || now < at) {
+		json_decref(cache);
+		cache = devices_json(app->dev);
+		at = now;
+	}
+	return json_deep_copy(cache);
 }
 
 void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *req)
@@ -488,7 +516,7 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
 	} else if (!strcmp(cmd, "status")) {
 		server_reply(app->srv, peer->serial, req->id, status_json(app));
 	} else if (!strcmp(cmd, "devices")) {
-		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_json(app->dev)));
+		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_cached(app)));
 	} else if (!strcmp(cmd, "config")) {
 		bool text = json_is_true(json_object_get(req->root, "text"));
 		if (text && peer->tcp) /* the file may name users, paths and devices: local users with a uid only */

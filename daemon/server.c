@@ -21,6 +21,8 @@
 #define MAX_CLIENTS 256         /* hard bound of the client table (server_limits.max_clients is at most this) */
 #define MAX_REFUSING 64         /* refused connections kept open briefly so their refusal can be read */
 #define TIMEOUT_TICK_S 0.25     /* period of the timeout check (loop clock) */
+#define ACCEPT_PER_TURN 64      /* connections accepted per loop turn */
+#define LISTEN_BACKLOG 512
 
 const struct server_limits server_default_limits = {
 	.max_clients = 128,
@@ -64,6 +66,8 @@ struct server {
 	int nclients, nrefusing;
 	uint64_t next_serial;
 	uint64_t drain_timer, timeout_timer;
+	int budget;                 /* lines left to handle in this loop turn */
+	unsigned rotation;
 	struct server_limits lim;
 	double (*now)(void *ctx);   /* real monotonic time unless a test injects a clock */
 	void *now_ctx;
@@ -227,19 +231,30 @@ static void handle_line(struct client *c, const char *line, size_t len)
 	proto_req_free(&req);
 }
 
-#define LINES_PER_TURN 128  /* lines handled per client per loop turn, so a flood cannot starve others */
+/* Requests are handled in bounded turns so the sweep's timers and the devices' fds never wait behind clients:
+ * at most LINES_PER_TURN lines per loop turn for all clients together, at most LINES_PER_CLIENT of them from
+ * one client, the clients with lines left served in rotation at the next turn (drain_cb). */
+#define LINES_PER_TURN 64
+#define LINES_PER_CLIENT 8
 
 static void drain_cb(struct loop *lp, void *arg);
 
-/* Handle up to LINES_PER_TURN complete lines of client serial; true if more are buffered. The handler may
- * reply to this client or close others, so the client is looked up again after each line. */
+static void arm_drain(struct server *srv)
+{
+	if (!srv->drain_timer)
+		srv->drain_timer = loop_timer_add(srv->lp, 0, 0, drain_cb, srv);
+}
+
+/* Handle up to LINES_PER_CLIENT complete lines of client serial within the turn's budget; true if more may be
+ * buffered. The handler may reply to this client or close others, so the client is looked up again after
+ * each line. */
 static bool process_lines(struct server *srv, uint64_t serial)
 {
 	struct client *c;
 	char *line;
 	size_t len;
 	int k;
-	for (int n = 0; n < LINES_PER_TURN; n++) {
+	for (int n = 0; n < LINES_PER_CLIENT && srv->budget > 0; n++) {
 		if (!(c = client_by_serial(srv, serial)) || c->closing)
 			return false;
 		if (reading_paused(c)) {
@@ -257,6 +272,8 @@ static bool process_lines(struct server *srv, uint64_t serial)
 		}
 		c->last_in = srv_now(srv);
 		c->partial_since = 0;
+		srv->budget--;
+		arm_drain(srv); /* refills the budget at the next turn */
 		if (k == PROTO_LINE_TOO_LONG) {
 			char msg[96];
 			snprintf(msg, sizeof msg, "line longer than %d bytes: ignored up to its newline", PROTO_MAX_LINE);
@@ -269,8 +286,7 @@ static bool process_lines(struct server *srv, uint64_t serial)
 	if (!c || c->closing)
 		return false;
 	c->backlog = true;
-	if (!srv->drain_timer)
-		srv->drain_timer = loop_timer_add(srv->lp, 0, 0, drain_cb, srv);
+	arm_drain(srv);
 	return true;
 }
 
@@ -290,19 +306,31 @@ static void drain_cb(struct loop *lp, void *arg)
 	(void)lp;
 	struct server *srv = arg;
 	srv->drain_timer = 0;
-	uint64_t serials[MAX_CLIENTS];
+	srv->budget = LINES_PER_TURN;
+	uint64_t serials[MAX_CLIENTS + MAX_REFUSING];
 	int n = 0;
-	for (struct client *c = srv->clients; c && n < MAX_CLIENTS; c = c->next)
-		if (c->backlog && !reading_paused(c)) {
-			c->backlog = false;
+	for (struct client *c = srv->clients; c && n < MAX_CLIENTS + MAX_REFUSING; c = c->next)
+		if (c->backlog && !reading_paused(c))
 			serials[n++] = c->peer.serial;
-		}
-	for (int i = 0; i < n; i++) {
-		process_lines(srv, serials[i]);
-		struct client *c = client_by_serial(srv, serials[i]);
-		if (c)
+	if (!n)
+		return;
+	/* In rotation: this turn starts where the last one's budget ran out. */
+	int first = (int)(srv->rotation++ % (unsigned)n);
+	for (int j = 0; j < n && srv->budget > 0; j++) {
+		uint64_t serial = serials[(first + j) % n];
+		struct client *c = client_by_serial(srv, serial);
+		if (!c)
+			continue;
+		c->backlog = false;
+		process_lines(srv, serial);
+		if ((c = client_by_serial(srv, serial)))
 			finish_turn(c);
 	}
+	for (struct client *c = srv->clients; c; c = c->next)
+		if (c->backlog && !reading_paused(c)) {
+			arm_drain(srv);
+			break;
+		}
 }
 
 static void on_client(struct loop *lp, int fd, short revents, void *arg)
@@ -441,13 +469,26 @@ static void refuse(struct server *srv, int fd, const struct srv_peer *peer, cons
 	update_events(c);
 }
 
+static void accept_one(struct server *srv, int lfd, int fd);
+
+/* Accept what is pending (a bounded number per turn): a connection flood must not fill the listen backlog,
+ * where a controller's connection would wait or be refused by the kernel without an answer. */
 static void on_accept(struct loop *lp, int lfd, short revents, void *arg)
 {
+	(void)lp;
 	(void)revents;
 	struct server *srv = arg;
-	int fd = accept4(lfd, NULL, NULL, SOCK_CLOEXEC | SOCK_NONBLOCK);
-	if (fd < 0)
-		return;
+	for (int i = 0; i < ACCEPT_PER_TURN; i++) {
+		int fd = accept4(lfd, NULL, NULL, SOCK_CLOEXEC | SOCK_NONBLOCK);
+		if (fd < 0)
+			return;
+		accept_one(srv, lfd, fd);
+	}
+}
+
+static void accept_one(struct server *srv, int lfd, int fd)
+{
+	struct loop *lp = srv->lp;
 	struct srv_peer peer = { 0 };
 	if (lfd == srv->ufd) {
 		struct ucred cr;
@@ -590,7 +631,7 @@ static int listen_unix(struct server *srv, const struct conf_daemon *d, struct a
 	}
 	if (chmod(d->socket_path, d->socket_mode) < 0)
 		return acq_errf(err, ACQ_E_IO, "%s: chmod: %s", d->socket_path, strerror(errno));
-	if (listen(srv->ufd, 64) < 0)
+	if (listen(srv->ufd, LISTEN_BACKLOG) < 0)
 		return acq_errf(err, ACQ_E_IO, "%s: listen: %s", d->socket_path, strerror(errno));
 	return loop_fd_add(srv->lp, srv->ufd, POLLIN, on_accept, srv, err);
 }
@@ -602,7 +643,7 @@ static int listen_tcp(struct server *srv, int port, struct acq_err *err)
 	srv->tfd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
 	int one = 1;
 	if (srv->tfd < 0 || setsockopt(srv->tfd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one) < 0 ||
-	    bind(srv->tfd, (struct sockaddr *)&sa, sizeof sa) < 0 || listen(srv->tfd, 64) < 0)
+	    bind(srv->tfd, (struct sockaddr *)&sa, sizeof sa) < 0 || listen(srv->tfd, LISTEN_BACKLOG) < 0)
 		return acq_errf(err, ACQ_E_IO, "127.0.0.1:%d: %s", port, strerror(errno));
 	return loop_fd_add(srv->lp, srv->tfd, POLLIN, on_accept, srv, err);
 }
@@ -614,7 +655,7 @@ int server_init(struct loop *lp, const struct conf_daemon *d, const char *versio
 	if (!srv)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	*srv = (struct server){ .lp = lp, .d = d, .fn = fn, .ctx = ctx, .ufd = -1, .tfd = -1,
-				.lim = server_default_limits, .now = loop_monotonic };
+				.lim = server_default_limits, .now = loop_monotonic, .budget = LINES_PER_TURN };
 	snprintf(srv->version, sizeof srv->version, "%s", version);
 	if (listen_unix(srv, d, err) || (d->tcp_port && listen_tcp(srv, d->tcp_port, err))) {
 		server_finish(srv);
