@@ -105,10 +105,20 @@ static void status_tick(struct loop *lp, void *arg)
 	}
 }
 
+/* The watchdog is fed by a timer of the loop itself (no thread): a loop blocked by anything stops feeding it
+ * and systemd restarts the daemon (the sweep resumes after its last committed point). A turn that came
+ * late is logged with the measured block, so a stall shorter than WatchdogSec is visible too. */
+static double wd_period_real, wd_last_real;
+
 static void watchdog_tick(struct loop *lp, void *arg)
 {
 	(void)lp;
 	(void)arg;
+	double now = loop_monotonic(NULL);
+	if (wd_last_real > 0 && now - wd_last_real > wd_period_real + 1.0)
+		log_msg(LOG_WARNING, "watchdog: the loop was blocked for about %.1f s (fed %.1f s after the last time, "
+			"period %.1f s)", now - wd_last_real - wd_period_real, now - wd_last_real, wd_period_real);
+	wd_last_real = now;
 	sd_notify(0, "WATCHDOG=1");
 }
 
@@ -307,15 +317,17 @@ int main(int argc, char **argv)
 			log_msg(LOG_NOTICE, "resuming interrupted sweep %lld", (long long)id);
 	}
 	uint64_t wd_usec = 0;
+	double rate = app.have_sim && app.sim.time_scale > 0 ? app.sim.time_scale : 1; /* loop seconds per s */
 	if (sd_watchdog_enabled(0, &wd_usec) > 0 && wd_usec)
-		loop_timer_add(app.lp, (double)wd_usec / 2e6, (double)wd_usec / 2e6, watchdog_tick, NULL);
+		wd_period_real = (double)wd_usec / 2e6;
 	else if (app.conf->d.watchdog_s > 0)
-		loop_timer_add(app.lp, app.conf->d.watchdog_s / 2, app.conf->d.watchdog_s / 2, watchdog_tick, NULL);
+		wd_period_real = app.conf->d.watchdog_s / 2;
+	if (wd_period_real > 0) /* WATCHDOG_USEC is real time; the loop's clock may run faster (simulated bench) */
+		loop_timer_add(app.lp, wd_period_real * rate, wd_period_real * rate, watchdog_tick, NULL);
 	loop_timer_add(app.lp, 1.0, 1.0, status_tick, &app);
 	if (app.conf->laser) {
 		/* A quarter of the shortest keep-alive the driver accepts to arm: emission survives one late turn. The
 		 * period is real time, the loop's clock may run faster (simulated bench). */
-		double rate = app.have_sim && app.sim.time_scale > 0 ? app.sim.time_scale : 1;
 		loop_timer_add(app.lp, 0.25 * rate, 0.25 * rate, laser_keepalive_tick, &app);
 	}
 	status_tick(app.lp, &app);
