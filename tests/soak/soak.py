@@ -32,16 +32,7 @@ SECONDS = float(os.environ.get("SOAK_SECONDS", "1200"))
 SCALE = float(os.environ.get("SOAK_SCALE", "10"))
 OBSERVERS = ["daemon", "bin", "sys", "sync", "games", "man"]
 
-PLAN = """name: soak
-incidence:
-  theta_deg: [15, 40, 60]
-observation:
-  theta_deg: [25, 55, 75]
-  phi_deg: [0, 60, 120, 180, 240, 300]
-integration: {mode: auto, target_peak: 0.8, estimate_ms: 20, max_ms: 2000}
-averages: 4
-blind_points: drop
-"""
+PLAN = L.PLAN_3X18
 HUGE = ("name: huge\nincidence:\n  theta_deg: [0, 8, 16, 24, 32, 40, 48, 56, 64, 72]\nobservation:\n"
         "  fibonacci: {count: 1000, max_theta_deg: 85}\nintegration: {mode: fixed, ms: 20}\naverages: 1\n"
         "blind_points: move\n")
@@ -112,6 +103,22 @@ def w_noread(path, user, stop):
         time.sleep(0.01)
 
 
+def reap_closed(conns):
+    """Drop the connections the daemon closed (refused, timed out); keep reading nothing else."""
+    for s in list(conns):
+        s.setblocking(False)
+        try:
+            while True:
+                d = s.recv(1 << 16)
+                if not d:
+                    raise OSError("closed")
+        except BlockingIOError:
+            pass
+        except OSError:
+            conns.remove(s)
+            s.close()
+
+
 def w_slots(path, user, stop):
     become(user)
     conns = []
@@ -122,17 +129,7 @@ def w_slots(path, user, stop):
             except OSError:
                 break
         time.sleep(0.5)
-        for s in list(conns):  # drop the refused/closed ones
-            s.setblocking(False)
-            try:
-                if s.recv(1 << 16) == b"":
-                    conns.remove(s)
-                    s.close()
-            except BlockingIOError:
-                pass
-            except OSError:
-                conns.remove(s)
-                s.close()
+        reap_closed(conns)
 
 
 def w_huge(path, user, stop):
@@ -160,30 +157,11 @@ def w_half(path, user, stop):
             try:
                 s = connect(path)
                 s.sendall(b'{"cmd":"sta')
-                s.setblocking(False)
                 conns.append(s)
             except OSError:
                 break
         time.sleep(0.5)
-        for s in list(conns):
-            try:
-                if s.recv(1 << 16) == b"" or True:
-                    pass
-            except BlockingIOError:
-                continue
-            except OSError:
-                pass
-            # anything read means the daemon answered (the timeout) and will close: replace it later
-            try:
-                s.setblocking(False)
-                if s.recv(1) == b"":
-                    conns.remove(s)
-                    s.close()
-            except BlockingIOError:
-                pass
-            except OSError:
-                conns.remove(s)
-                s.close()
+        reap_closed(conns)
 
 
 def w_config(path, user, stop):
