@@ -29,8 +29,8 @@ for f in "$@"; do
        -artifact_prefix="$ACQ_BUILD/fuzz-work/$name-" "$work" >"$log" 2>&1; then
     echo "FAIL $name: libFuzzer found a crash (log $log):"; grep -E "ERROR|crash-|SUMMARY" "$log" | head -5; fail=1
   fi
-  execs=$(grep -o 'stat::number_of_executed_units: [0-9]*' "$log" | awk '{print $2}' | tail -1)
-  rate=$(grep -o 'stat::average_exec_per_sec: [0-9]*' "$log" | awk '{print $2}' | tail -1)
+  execs=$(grep -oE 'stat::number_of_executed_units:[[:space:]]*[0-9]+' "$log" | awk '{print $2}' | tail -1)
+  rate=$(grep -oE 'stat::average_exec_per_sec:[[:space:]]*[0-9]+' "$log" | awk '{print $2}' | tail -1)
   edges=$(grep -oE 'cov: [0-9]+' "$log" | tail -1 | awk '{print $2}')
   if [ "$save" = 1 ]; then
     "$f" -merge=1 "$saved" "$work" >"$log.merge" 2>&1 || { echo "FAIL $name: merge (log $log.merge)"; fail=1; }
