@@ -23,7 +23,8 @@ struct dev_slot {
 const struct devices_drv devices_real_drv = {
 	axis_open, axis_close, axis_cfg_limits, axis_read_status, axis_move_begin, axis_move_step, axis_stop,
 	axis_identity, spectro_open, spectro_close, spectro_info, spectro_start, spectro_fetch, spectro_stop,
-	laser_open, laser_close, laser_set_emission, laser_set_power, laser_status, laser_identity,
+	laser_open, laser_close, laser_set_emission, laser_set_power, laser_status, laser_identity, axis_home_begin,
+	axis_alarm_reset,
 };
 
 struct devices {
@@ -320,6 +321,16 @@ json_t *devices_json(struct devices *dv)
 
 /* ---- manual operations ---- */
 
+/* Name the device in a driver's message unless the driver already did (the log said "x: x: ..."). -1. */
+static int name_err(struct acq_err *err, enum conf_dev d)
+{
+	const char *name = conf_dev_name(d);
+	size_t n = strlen(name);
+	if (err && strncmp(err->msg, name, n))
+		acq_err_prefix(err, "%s: ", name);
+	return -1;
+}
+
 static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t *result)
 {
 	loop_timer_cancel(dv->lp, dv->op_timer);
@@ -333,6 +344,7 @@ static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t
 		done(dv->op_ctx, rc, err, result);
 	else
 		json_decref(result);
+	dv->op_kind[0] = 0;
 }
 
 static void move_step(struct loop *lp, void *arg)
@@ -350,7 +362,7 @@ static void move_step(struct loop *lp, void *arg)
 		}
 		int r = dv->drv->axis_move_step(dv->axis[i], now, &err);
 		if (r == AXIS_MOVE_FAILED) {
-			acq_err_prefix(&err, "%s: ", conf_dev_name((enum conf_dev)i));
+			name_err(&err, (enum conf_dev)i);
 			goto fail;
 		}
 		if (r == AXIS_MOVE_DONE)
@@ -379,6 +391,34 @@ fail:
 	op_end(dv, -1, &err, NULL);
 }
 
+#define HOME_TARGET INFINITY  /* begin_axes(): home this axis instead of moving it */
+
+/* Start the manual operation on the axes whose target is not NaN (HOME_TARGET: homing), watched by
+ * move_step() until they are done or timeout_s passed. 0, or -1 with every started axis stopped again. */
+static int begin_axes(struct devices *dv, const double target[3], double timeout_s, devices_done_fn done, void *ctx,
+		      struct acq_err *err)
+{
+	double now = loop_now(dv->lp);
+	for (int i = 0; i < 3; i++) {
+		dv->op_axis[i] = false;
+		if (isnan(target[i]))
+			continue;
+		if (isinf(target[i]) ? dv->drv->axis_home_begin(dv->axis[i], now, err)
+				     : dv->drv->axis_move_begin(dv->axis[i], target[i], now, err)) {
+			for (int j = 0; j < i; j++)
+				if (dv->op_axis[j])
+					dv->drv->axis_stop(dv->axis[j], NULL);
+			return name_err(err, (enum conf_dev)i);
+		}
+		dv->op_axis[i] = true;
+	}
+	dv->op_done = done;
+	dv->op_ctx = ctx;
+	dv->op_deadline = now + timeout_s;
+	dv->op_timer = loop_timer_add(dv->lp, 0.05, 0.05, move_step, dv);
+	return 0;
+}
+
 int devices_move(struct devices *dv, const double target[3], devices_done_fn done, void *ctx, struct acq_err *err)
 {
 	if (dv->op_timer)
@@ -401,23 +441,62 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 	}
 	if (!any)
 		return acq_errf(err, ACQ_E_INVAL, "move: give at least one of laser_theta, detector_theta, detector_phi");
-	double now = loop_now(dv->lp);
+	return begin_axes(dv, target, dv->c->sweep.move_timeout_s, done, ctx, err);
+}
+
+int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *ctx, struct acq_err *err)
+{
+	if (dv->op_timer)
+		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
+	for (int i = 0; i < 3; i++)
+		if ((mask & (1u << i)) && !dv->axis[i])
+			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", conf_dev_name((enum conf_dev)i),
+					dv->slot[i].note[0] ? dv->slot[i].note : "not configured");
+	if (!(mask & 7u))
+		return acq_errf(err, ACQ_E_INVAL, "home: no axis selected");
+	double t[3];
 	for (int i = 0; i < 3; i++) {
-		dv->op_axis[i] = false;
-		if (isnan(target[i]))
-			continue;
-		if (dv->drv->axis_move_begin(dv->axis[i], target[i], now, err)) {
-			for (int j = 0; j < i; j++)
-				if (dv->op_axis[j])
-					dv->drv->axis_stop(dv->axis[j], NULL);
-			return acq_err_prefix(err, "%s: ", conf_dev_name((enum conf_dev)i));
-		}
-		dv->op_axis[i] = true;
+		t[i] = mask & (1u << i) ? HOME_TARGET : NAN;
+		struct axis_status st;
+		if ((mask & (1u << i)) && !dv->drv->axis_read_status(dv->axis[i], &st, NULL) && st.alarm &&
+		    dv->drv->axis_alarm_reset(dv->axis[i], err))
+			return acq_err_prefix(err, "%s: resetting its alarm: ", conf_dev_name((enum conf_dev)i));
 	}
-	dv->op_done = done;
-	dv->op_ctx = ctx;
-	dv->op_deadline = now + dv->c->sweep.move_timeout_s;
-	dv->op_timer = loop_timer_add(dv->lp, 0.05, 0.05, move_step, dv);
+	/* a homing run is slower than a move */
+	return begin_axes(dv, t, 4 * dv->c->sweep.move_timeout_s, done, ctx, err);
+}
+
+int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err)
+{
+	*stopped = dv->op_timer != 0;
+	int rc = 0;
+	for (int i = 0; i < 3; i++) /* every axis, moving or not: whatever moves stops */
+		if (dv->axis[i] && dv->drv->axis_stop(dv->axis[i], err))
+			rc = name_err(err, (enum conf_dev)i);
+	if (*stopped && dv->op_kind[0] && dv->spectro)
+		dv->drv->spectro_stop(dv->spectro, NULL);
+	if (*stopped) {
+		struct acq_err e = { 0 };
+		acq_errf(&e, ACQ_E_STATE, "stopped by the operator");
+		for (int i = 0; i < 3; i++)
+			dv->op_axis[i] = false;
+		op_end(dv, -1, &e, NULL); /* also switches off a laser it switched on */
+	}
+	return rc;
+}
+
+int devices_laser_off(struct devices *dv, struct acq_err *err)
+{
+	if (!dv->laser)
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "laser: unavailable (%s)",
+				dv->slot[CONF_DEV_LASER].note[0] ? dv->slot[CONF_DEV_LASER].note : "not configured");
+	if (dv->drv->laser_set_emission(dv->laser, false, err))
+		return acq_err_prefix(err, "laser: ");
+	struct laser_status ls;
+	if (dv->drv->laser_status(dv->laser, &ls, err))
+		return acq_err_prefix(err, "laser: ");
+	if (ls.emission)
+		return acq_errf(err, ACQ_E_DEVICE, "laser: emission still reported on after switching it off");
 	return 0;
 }
 

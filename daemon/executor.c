@@ -585,17 +585,8 @@ int ex_cfg_parse(struct yc_node *acq, struct yc_node *cal, struct ex_cfg *c, str
 				if (yc_node_double(home->items[i], "home_deg angle", -360, 720, &q.home_deg[i], err))
 					return -1;
 		}
-		if (pose) {
-			double v[3];
-			if (yc_expect_seq(pose, "sweep.acquisition.reference_pose", err))
-				return -1;
-			if (pose->n != 3)
-				return yc_errf(err, pose, "reference_pose: expected [laser_theta, detector_theta, detector_phi]");
-			for (int i = 0; i < 3; i++)
-				if (yc_node_double(pose->items[i], "reference_pose angle", -360, 720, &v[i], err))
-					return -1;
-			q.ref_pose = (struct plan_pos){ v[0], v[1], v[2] };
-		}
+		if (pose && plan_pose_parse(pose, "sweep.acquisition.reference_pose", &q.ref_pose, err))
+			return -1;
 		if (yc_check_unknown(acq, "sweep.acquisition", err))
 			return -1;
 		q.fault_retries = (int)retries;

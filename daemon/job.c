@@ -20,8 +20,9 @@ struct job {
 	int fd;                 /* read end of the output pipe, -1 once drained */
 	bool exited;
 	int status;
-	char *out;              /* the last JOB_OUTPUT_MAX bytes */
-	size_t len;
+	char *out;              /* the last cap bytes (job_start), or the first (job_fork: truncated then) */
+	size_t len, cap;
+	bool keep_head, truncated;
 	uint64_t timer;
 	bool killed, timed_out;
 	job_done_fn done;
@@ -82,8 +83,11 @@ static void on_output(struct loop *lp, int fd, short revents, void *arg)
 	}
 	size_t k = (size_t)n;
 	_Static_assert(sizeof buf < JOB_OUTPUT_MAX, "one read fits in the kept output");
-	if (j->len + k > JOB_OUTPUT_MAX) {
-		size_t drop = j->len + k - JOB_OUTPUT_MAX;
+	if (j->keep_head && j->len + k > j->cap) {
+		k = j->cap - j->len;
+		j->truncated = true;
+	} else if (j->len + k > j->cap) {
+		size_t drop = j->len + k - j->cap;
 		memmove(j->out, j->out + drop, j->len - drop);
 		j->len -= drop;
 	}
@@ -131,7 +135,8 @@ static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, voi
 	if (!job_loop || (!child_fn && (!argv || !argv[0])))
 		return acq_errf(err, ACQ_E_INVAL, "job: not initialised or no program");
 	struct job *j = calloc(1, sizeof *j);
-	if (!j || !(j->out = malloc(JOB_OUTPUT_MAX + 1))) {
+	size_t cap = child_fn ? JOB_FORK_OUTPUT_MAX : JOB_OUTPUT_MAX;
+	if (!j || !(j->out = malloc(cap + 1))) {
 		free(j);
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
@@ -180,6 +185,8 @@ static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, voi
 	fcntl(p[0], F_SETFL, O_NONBLOCK);
 	j->pid = pid;
 	j->fd = p[0];
+	j->cap = cap;
+	j->keep_head = child_fn != NULL;
 	j->done = done;
 	j->arg = arg;
 	j->next = job_list;
@@ -220,6 +227,11 @@ void job_cancel(struct job *j)
 		j->killed = true;
 		j->timer = loop_timer_add(job_loop, 2.0, 0, on_timeout, j);
 	}
+}
+
+bool job_output_truncated(const struct job *j)
+{
+	return j->truncated;
 }
 
 bool job_timed_out(const struct job *j)

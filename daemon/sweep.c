@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "daemon/devices.h"
+#include "daemon/eta.h"
 #include "daemon/executor.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
@@ -29,6 +30,7 @@ struct sweep {
 	uint64_t timer;
 	double started_wall;
 	struct sweep_progress last;  /* kept after the executor is gone */
+	struct eta eta;              /* wall-clock ETA (eta.c), fed by the events and the progress below */
 	char point_text[128];
 	/* completion: export + reconstruction chain (recon_chain.c) */
 	int64_t done_id;
@@ -68,6 +70,13 @@ static void on_event(void *ctx, int64_t sweep_id, const char *kind, const char *
 						  device ? device : "", "message", message));
 		return;
 	}
+	/* The ETA counts running time only. */
+	bool run = !strcmp(kind, "start") || !strcmp(kind, "resume") || !strcmp(kind, "recovered");
+	if (!strcmp(kind, "start"))
+		eta_reset(&sw->eta);
+	if (run || !strcmp(kind, "pause") || !strcmp(kind, "abort") || !strcmp(kind, "failed") ||
+	    !strcmp(kind, "complete"))
+		eta_running(&sw->eta, run, loop_now(sw->env.loop), loop_monotonic(NULL));
 	const char *state = sw->ex ? ex_state_name(ex_state(sw->ex)) : "idle";
 	emit(sw, "sweep.state", json_pack("{s:I,s:s,s:s,s:s}", "sweep", (json_int_t)sweep_id, "state", state, "event",
 					  kind, "reason", message));
@@ -76,6 +85,15 @@ static void on_event(void *ctx, int64_t sweep_id, const char *kind, const char *
 static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double eta, const char *phase)
 {
 	struct sweep *sw = ctx;
+	/* eta (the executor's, loop seconds) is replaced by the wall-clock estimate: the planner's remaining time
+	 * refined by the measured rate (eta.c). */
+	(void)eta;
+	double plan_at = NAN, plan_total = NAN;
+	if (sw->plan && done >= 0) {
+		plan_total = sw->plan->predicted_s;
+		plan_at = (size_t)done < sw->plan->n_steps ? sw->plan->steps[done].predicted_start_s : plan_total;
+	}
+	eta = eta_update(&sw->eta, done, total, plan_at, plan_total, loop_now(sw->env.loop), loop_monotonic(NULL));
 	sw->last.eta_s = eta;
 	json_t *d = json_pack("{s:I,s:s,s:i,s:i,s:s}", "sweep", (json_int_t)sweep_id, "state", "running", "done", done,
 			      "total", total, "point", phase);
@@ -229,6 +247,7 @@ int sweep_init(const struct sweep_env *env, struct sweep **out, struct acq_err *
 	if (!sw)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	sw->env = *env;
+	eta_reset(&sw->eta);
 	if (load_cfg(env->conf, &sw->cfg, err)) {
 		free(sw);
 		return -1;
@@ -257,6 +276,27 @@ void sweep_finish(struct sweep *sw)
 	free(sw);
 }
 
+void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
+{
+	plan_timing_defaults(t);
+	t->extra_settle_s = sw->cfg.extra_settle_s;
+	t->probe_ms = sw->cfg.pol.probe_ms;
+	t->exposure_overhead_s = sw->cfg.poll_s / 2;
+	t->dark_averages = (int)sw->cfg.pol.dark_averages;
+	t->dark_every = sw->cfg.dark_every;
+	t->reference = sw->cfg.take_reference;
+	t->ref_pose = sw->cfg.ref_pose;
+	if (sw->env.conf->have_sim && sw->env.conf->sim.time_scale > 0)
+		t->time_scale = sw->env.conf->sim.time_scale;
+	double pos[3] = { NAN, NAN, NAN };
+	if (sw->env.devices)
+		devices_positions(sw->env.devices, pos);
+	if (!isnan(pos[0]) && !isnan(pos[1]) && !isnan(pos[2])) {
+		t->have_start = true;
+		t->start = (struct plan_pos){ pos[0], pos[1], pos[2] };
+	}
+}
+
 /* Plan the text against the bench; the spec's integration settings override the configuration's. */
 static int make_plan(struct sweep *sw, const char *text, const char *name, struct ex_cfg *cfg, struct acq_err *err)
 {
@@ -266,6 +306,9 @@ static int make_plan(struct sweep *sw, const char *text, const char *name, struc
 		return -1;
 	if (plan_make(sw->spec, &sw->env.conf->bench, &sw->plan, err))
 		return -1;
+	struct plan_timing tm;
+	sweep_plan_timing(sw, &tm);
+	plan_time_apply(sw->spec, &sw->env.conf->bench, &tm, sw->plan); /* the ETA's plan figure */
 	if (sw->plan->n_steps == 0)
 		return acq_errf(err, ACQ_E_INVAL, "the plan has no visible point");
 	*cfg = sw->cfg;

@@ -1,12 +1,11 @@
 /* merl: MERL binary BRDF table, written from an RGB BRDF callback and read back with the reference lookup. */
 #include "recon/merl.h"
+#include "recon/pool.h"
 
 #include <errno.h>
 #include <fcntl.h>
 #include <limits.h>
 #include <math.h>
-#include <pthread.h>
-#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -147,60 +146,53 @@ int merl_cell_dirs(int ith, int itd, int ipd, double wi[3], double wo[3])
 
 /* ---- writer -------------------------------------------------------------------------------------- */
 
-struct job {
+struct merl_rows {
 	merl_rgb_fn fn;
 	void *ctx;
 	double *data;
 	double clamp_min;
-	int thread, nthreads;
-	atomic_int *stop;
-	/* first failure of this thread */
-	int failed;     /* 0, 1 = callback error, 2 = non-finite */
-	int fail_rc;
-	int cell[3];
-	double bad[3];
 };
 
-static void *eval_rows(void *arg)
+/* One θh row of cells (a job of the pool): values scaled to the file's units; a callback failure or a
+ * non-finite value stops the write with the cell and directions in the message. */
+static int eval_row(void *arg, int worker, size_t row, struct acq_err *err)
 {
-	struct job *j = arg;
-	for (int a = j->thread; a < MERL_N_THETA_H; a += j->nthreads) {
-		if (atomic_load(j->stop))
-			return NULL;
-		for (int b = 0; b < MERL_N_THETA_D; b++) {
-			for (int c = 0; c < MERL_N_PHI_D; c++) {
-				size_t flat = (size_t)c + MERL_N_PHI_D * (size_t)b + MERL_N_PHI_D * MERL_N_THETA_D * (size_t)a;
-				double wi[3], wo[3], rgb[3] = { 0, 0, 0 };
-				if (merl_cell_dirs(a, b, c, wi, wo) != 1) {
-					for (int k = 0; k < 3; k++)
-						j->data[k * (size_t)MERL_N_CELLS + flat] = MERL_NO_DATA;
-					continue;
-				}
-				int rc = j->fn(j->ctx, wi, wo, rgb);
-				double st[3];
-				int bad = rc != 0 ? 1 : 0;
-				for (int k = 0; k < 3 && !bad; k++) {
-					double v = rgb[k] < j->clamp_min ? j->clamp_min : rgb[k];
-					st[k] = v / merl_scale[k]; /* NaN stays NaN; a huge value overflows to Inf */
-					if (!isfinite(rgb[k]) || !isfinite(st[k]))
-						bad = 2;
-				}
-				if (bad) {
-					j->failed = bad;
-					j->fail_rc = rc;
-					j->cell[0] = a;
-					j->cell[1] = b;
-					j->cell[2] = c;
-					memcpy(j->bad, rgb, sizeof(rgb));
-					atomic_store(j->stop, 1);
-					return NULL;
-				}
+	(void)worker;
+	const struct merl_rows *j = arg;
+	int a = (int)row;
+	for (int b = 0; b < MERL_N_THETA_D; b++) {
+		for (int c = 0; c < MERL_N_PHI_D; c++) {
+			size_t flat = (size_t)c + MERL_N_PHI_D * (size_t)b + MERL_N_PHI_D * MERL_N_THETA_D * (size_t)a;
+			double wi[3], wo[3], rgb[3] = { 0, 0, 0 };
+			if (merl_cell_dirs(a, b, c, wi, wo) != 1) {
 				for (int k = 0; k < 3; k++)
-					j->data[k * (size_t)MERL_N_CELLS + flat] = st[k];
+					j->data[k * (size_t)MERL_N_CELLS + flat] = MERL_NO_DATA;
+				continue;
 			}
+			int rc = j->fn(j->ctx, wi, wo, rgb);
+			double st[3];
+			int bad = rc != 0 ? 1 : 0;
+			for (int k = 0; k < 3 && !bad; k++) {
+				double v = rgb[k] < j->clamp_min ? j->clamp_min : rgb[k];
+				st[k] = v / merl_scale[k]; /* NaN stays NaN; a huge value overflows to Inf */
+				if (!isfinite(rgb[k]) || !isfinite(st[k]))
+					bad = 2;
+			}
+			if (bad == 1)
+				return acq_errf(err, ACQ_E_NUMERIC,
+						"merl: BRDF callback failed (%d) at cell (%d, %d, %d), wi (%.4f, %.4f, %.4f) wo "
+						"(%.4f, %.4f, %.4f)",
+						rc, a, b, c, wi[0], wi[1], wi[2], wo[0], wo[1], wo[2]);
+			if (bad)
+				return acq_errf(err, ACQ_E_NUMERIC,
+						"merl: BRDF callback returned a non-finite or too large value (%g, %g, %g) at cell "
+						"(%d, %d, %d), wi (%.4f, %.4f, %.4f) wo (%.4f, %.4f, %.4f)",
+						rgb[0], rgb[1], rgb[2], a, b, c, wi[0], wi[1], wi[2], wo[0], wo[1], wo[2]);
+			for (int k = 0; k < 3; k++)
+				j->data[k * (size_t)MERL_N_CELLS + flat] = st[k];
 		}
 	}
-	return NULL;
+	return 0;
 }
 
 static void put_le64(unsigned char *p, double v)
@@ -349,47 +341,9 @@ int merl_write_ex(const char *path, merl_rgb_fn fn, void *ctx, const struct merl
 		return acq_errf(err, ACQ_E_NOMEM, "merl: out of memory for the table (%lld bytes)", MERL_FILE_SIZE);
 
 	int rc = -1;
-	atomic_int stop = 0;
-	struct job jobs[16];
-	pthread_t tid[16];
-	int started = 0;
-	for (int t = 0; t < o->threads; t++)
-		jobs[t] = (struct job){ .fn = fn, .ctx = ctx, .data = data, .clamp_min = o->clamp_min, .thread = t,
-					.nthreads = o->threads, .stop = &stop };
-	for (int t = 1; t < o->threads; t++) {
-		if (pthread_create(&tid[t], NULL, eval_rows, &jobs[t]) != 0) {
-			atomic_store(&stop, 1);
-			acq_errf(err, ACQ_E_NOMEM, "merl: cannot start evaluation thread %d", t);
-			break;
-		}
-		started = t;
-	}
-	if (!atomic_load(&stop))
-		eval_rows(&jobs[0]);
-	for (int t = 1; t <= started; t++)
-		pthread_join(tid[t], NULL);
-	if (started + 1 < o->threads && o->threads > 1)
-		goto out; /* thread start failure, err already filled */
-	for (int t = 0; t < o->threads; t++) {
-		struct job *j = &jobs[t];
-		if (!j->failed)
-			continue;
-		double wi[3], wo[3];
-		merl_cell_dirs(j->cell[0], j->cell[1], j->cell[2], wi, wo);
-		if (j->failed == 1)
-			acq_errf(err, ACQ_E_NUMERIC,
-				 "merl: BRDF callback failed (%d) at cell (%d, %d, %d), wi (%.4f, %.4f, %.4f) wo (%.4f, %.4f, "
-				 "%.4f)",
-				 j->fail_rc, j->cell[0], j->cell[1], j->cell[2], wi[0], wi[1], wi[2], wo[0], wo[1], wo[2]);
-		else
-			acq_errf(err, ACQ_E_NUMERIC,
-				 "merl: BRDF callback returned a non-finite or too large value (%g, %g, %g) at cell (%d, %d, "
-				 "%d), wi (%.4f, %.4f, %.4f) wo (%.4f, %.4f, %.4f)",
-				 j->bad[0], j->bad[1], j->bad[2], j->cell[0], j->cell[1], j->cell[2], wi[0], wi[1], wi[2],
-				 wo[0], wo[1], wo[2]);
+	struct merl_rows rows = { .fn = fn, .ctx = ctx, .data = data, .clamp_min = o->clamp_min };
+	if (pool_run(o->threads, MERL_N_THETA_H, eval_row, &rows, NULL, err) != 0)
 		goto out;
-	}
-
 	if (write_atomic(path, data, err) != 0)
 		goto out;
 	rc = 0;

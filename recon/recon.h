@@ -103,10 +103,22 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
  * with the interpolation-error term (recon_dhr_ex). */
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err);
-/* recon_dhr, sig = sqrt(max(sig_noise, sig_model)² + sig_quad²) split into its parts (each may be NULL):
- * sig_noise the Monte-Carlo spread from the data's uncertainties, sig_model the interpolation error
- * (posterior variance of the DHR under the GP reading of the interpolant, amplitude from the leave-one-out
- * residuals), sig_quad the quadrature error (last refinement step plus any overshoot above 1; recon.c). */
+/* The parts of the DHR's standard uncertainty, each [nth*nwl] like the DHR (any may be NULL); recon_dhr's σ is
+ * √(max(noise, model)² + quad² + misfit²) (dhr.c, recon/reconstruction.md):
+ *  noise  the samples' uncertainties propagated by Monte Carlo through the one factorisation;
+ *  model  the interpolation error between samples (GP posterior variance, amplitude from the leave-one-out
+ *         residuals) including the prior on the unseen part of the hemisphere;
+ *  quad   the quadrature error (last refinement step plus any overshoot above 1);
+ *  misfit the data the smoothed model does not honour (nearest-neighbour quadrature of the significant
+ *         residuals of the fit). */
+struct recon_dhr_parts {
+	double *noise, *model, *quad, *misfit;
+};
+/* recon_dhr with its uncertainty split into parts (may be NULL). */
+int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
+		    double *dhr, double *sig, const struct recon_dhr_parts *parts, recon_progress_fn progress, void *pctx,
+		    struct acq_err *err);
+/* recon_dhr_parts with the noise, model and quadrature parts as separate arrays (each may be NULL). */
 int recon_dhr_ex(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 		 double *dhr, double *sig, double *sig_noise, double *sig_model, double *sig_quad,
 		 recon_progress_fn progress, void *pctx, struct acq_err *err);

@@ -1,10 +1,11 @@
 /* rgbeval: "model only what the output needs" for RGB outputs (MERL table, preview render). */
 #include "recon/rgbeval.h"
+#include "recon/pool.h"
+#include "recon/rng.h"
 
 #include <cblas.h>
 #include <lapacke.h>
 #include <math.h>
-#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -123,15 +124,6 @@ double recon_rgb_reduction_error(const struct recon_rgb *r)
 	return r->red_err;
 }
 
-/* Uniform in [0, 1) from a xorshift64 state (the fixed-seed pairs of the construction-time measurements). */
-static double xs_unif(uint64_t *x)
-{
-	*x ^= *x << 13;
-	*x ^= *x >> 7;
-	*x ^= *x << 17;
-	return (double)(*x >> 11) * 0x1.0p-53;
-}
-
 double recon_rgb_f32_error(const struct recon_rgb *r)
 {
 	return r->f32_err;
@@ -189,11 +181,12 @@ static int measure_f32(struct recon_rgb *R, struct acq_err *err)
 		acq_errf(err, ACQ_E_NOMEM, "rgb: out of memory");
 		goto out;
 	}
-	uint64_t x = 0x2545F4914F6CDD1Dull;
+	struct recon_rng x;
+	recon_rng_seed(&x, 0x2545F4914F6CDD1Dull);
 	for (size_t q = 0; q < b; q++) {
 		double u[4];
 		for (int i = 0; i < 4; i++)
-			u[i] = xs_unif(&x);
+			u[i] = recon_rng_unif(&x);
 		rbf_canon(acos(u[0]), 2 * M_PI * u[1], acos(u[2]), 2 * M_PI * u[3], c6 + 6 * q);
 	}
 	gemm_kw(R, 0, b, c6, K, Gd, Kf, Gf);
@@ -232,6 +225,36 @@ static void dir_to_angles(const double v[3], double *th, double *ph)
 	*ph = atan2(v[1], v[0]);
 }
 
+/* The one RGB accumulation: linear RGB (colour stages 1-4) of one pair at canonical point c6 from its binned
+ * values e[nc] (exp(min(μ + g, 69)) for the log transform, μ + g for sqrt): map back with the bin's trend,
+ * energy factor of the bin, colour weights. */
+static void bins_to_lin(const struct recon_rgb *R, const double *c6, const double *e, double lin[3])
+{
+	const struct recon_model *m = R->m;
+	size_t nc = R->nc;
+	double cti = acos(fmin(1, fmax(0, c6[2]))), cto = acos(fmin(1, fmax(0, c6[5])));
+	size_t ji = recon_tab_interval(m, cti), jo = recon_tab_interval(m, cto);
+	double tb[TREND_NB];
+	trend_eval_basis(m->trend, m->trend_alpha, c6, tb);
+	lin[0] = lin[1] = lin[2] = 0;
+	for (size_t l = 0; l < nc; l++) {
+		double x = e[l], f;
+		if (m->transform == RECON_T_SQRT) {
+			f = x * x;
+		} else {
+			f = x * (bin_trend(R, tb, l) + R->eps[l]) - R->eps[l];
+			if (!(f > 0))
+				f = 0;
+		}
+		double a = R->tab[ji * nc + l], b = R->tab[jo * nc + l], mx = a > b ? a : b;
+		if (mx > 1)
+			f /= mx;
+		lin[0] += R->Wrgb[l] * f;
+		lin[1] += R->Wrgb[nc + l] * f;
+		lin[2] += R->Wrgb[2 * nc + l] * f;
+	}
+}
+
 /* Linear RGB (colour stages 1-4) of the reduced model at one pair; scratch holds n + r + RGB_PAD4(nc) doubles. */
 static void reduced_lin(const struct recon_rgb *R, const double wi[3], const double wo[3], double lin[3],
 			double *scratch)
@@ -253,9 +276,6 @@ static void reduced_lin(const struct recon_rgb *R, const double wi[3], const dou
 		for (size_t l = 0; l < nc; l++)
 			g[l] += z[c] * v[l];
 	}
-	double cti = acos(fmin(1, fmax(0, c6[2]))), cto = acos(fmin(1, fmax(0, c6[5])));
-	size_t ji = recon_tab_interval(m, cti), jo = recon_tab_interval(m, cto);
-	lin[0] = lin[1] = lin[2] = 0;
 	if (m->transform != RECON_T_SQRT) {
 		for (size_t l = 0; l < nc; l++)
 			g[l] = g[l] > 69 ? 69 : g[l];
@@ -263,24 +283,7 @@ static void reduced_lin(const struct recon_rgb *R, const double wi[3], const dou
 			g[l] = 0;
 		vexp(g, nc);
 	}
-	double tb[TREND_NB];
-	trend_eval_basis(m->trend, m->trend_alpha, c6, tb);
-	for (size_t l = 0; l < nc; l++) {
-		double f;
-		if (m->transform == RECON_T_SQRT) {
-			f = g[l] * g[l];
-		} else {
-			f = g[l] * (bin_trend(R, tb, l) + R->eps[l]) - R->eps[l];
-			if (!(f > 0))
-				f = 0;
-		}
-		double a = R->tab[ji * nc + l], b = R->tab[jo * nc + l], mx = a > b ? a : b;
-		if (mx > 1)
-			f /= mx;
-		lin[0] += R->Wrgb[l] * f;
-		lin[1] += R->Wrgb[nc + l] * f;
-		lin[2] += R->Wrgb[2 * nc + l] * f;
-	}
+	bins_to_lin(R, c6, g, lin);
 }
 
 int recon_rgb_fn(void *ctx, const double wi[3], const double wo[3], double rgb[3])
@@ -461,11 +464,12 @@ int recon_rgb_new(const struct recon_model *m, const struct colour_opts *co, dou
 		acq_errf(err, ACQ_E_NOMEM, "rgb: out of memory");
 		goto out;
 	}
-	uint64_t x = 0x9E3779B97F4A7C15ull;
+	struct recon_rng x;
+	recon_rng_seed(&x, 0x9E3779B97F4A7C15ull);
 	for (int t = 0; t < 256; t++) {
 		double u[4];
 		for (int i = 0; i < 4; i++)
-			u[i] = xs_unif(&x);
+			u[i] = recon_rng_unif(&x);
 		double ci = 0.05 + 0.95 * u[0], co_ = 0.05 + 0.95 * u[2];
 		double si = sqrt(1 - ci * ci), so = sqrt(1 - co_ * co_);
 		double wi[3] = { si, 0, ci }, wo[3] = { so * cos(2 * M_PI * u[3]), so * sin(2 * M_PI * u[3]), co_ };
@@ -498,33 +502,12 @@ out:
 	return rc;
 }
 
-/* Transformed values → linear RGB → colour chain, for one pair; e holds the binned exp(min(μ + g, 69)) (log
- * transform, vexp) or μ + g (sqrt transform). */
-static void finish_pair(const struct recon_rgb *R, const double *c6, const double *g, double rgb[3],
+/* Transformed values → linear RGB → colour chain, for one pair (e as in bins_to_lin). */
+static void finish_pair(const struct recon_rgb *R, const double *c6, const double *e, double rgb[3],
 			struct colour_stats *stats)
 {
-	const struct recon_model *m = R->m;
-	size_t nc = R->nc;
-	double cti = acos(fmin(1, fmax(0, c6[2]))), cto = acos(fmin(1, fmax(0, c6[5])));
-	size_t ji = recon_tab_interval(m, cti), jo = recon_tab_interval(m, cto);
-	double lin[3] = { 0, 0, 0 }, tb[TREND_NB];
-	trend_eval_basis(m->trend, m->trend_alpha, c6, tb);
-	for (size_t l = 0; l < nc; l++) {
-		double x = g[l], f;
-		if (m->transform == RECON_T_SQRT) {
-			f = x * x;
-		} else {
-			f = x * (bin_trend(R, tb, l) + R->eps[l]) - R->eps[l];
-			if (!(f > 0))
-				f = 0;
-		}
-		double a = R->tab[ji * nc + l], b = R->tab[jo * nc + l], mx = a > b ? a : b;
-		if (mx > 1)
-			f /= mx;
-		lin[0] += R->Wrgb[l] * f;
-		lin[1] += R->Wrgb[nc + l] * f;
-		lin[2] += R->Wrgb[2 * nc + l] * f;
-	}
+	double lin[3];
+	bins_to_lin(R, c6, e, lin);
 	colour_finish(&R->co, lin, rgb, stats);
 }
 
@@ -591,19 +574,23 @@ int recon_rgb_batch(const struct recon_rgb *R, size_t nq, const double *wi, cons
 	return 0;
 }
 
-/* One θh row of the MERL table (all its θd, φd cells): a job of the table's workers. Cells below the horizon
- * get MERL_NO_DATA; with !all_cells the half iφd ≥ 90 is left for the mirror copy. The row is evaluated in
- * one recon_rgb_batch call, so the result does not depend on the number of threads. */
+/* One θh row of the MERL table (all its θd, φd cells): a job of the table's pool. Cells below the horizon get
+ * MERL_NO_DATA; with !all_cells the half iφd ≥ 90 is left for the mirror copy. The row is evaluated in one
+ * recon_rgb_batch call, so the result does not depend on the number of threads. */
+#define MERL_ROW_CELLS ((size_t)MERL_N_THETA_D * MERL_N_PHI_D)
+
+/* Scratch of one worker of the MERL table. */
+struct merl_scratch {
+	double wi[MERL_ROW_CELLS * 3], wo[MERL_ROW_CELLS * 3], rgb[MERL_ROW_CELLS * 3];
+	size_t idx[MERL_ROW_CELLS];
+	struct colour_stats stats;
+};
+
 struct merl_job {
 	const struct recon_rgb *R;
 	struct merl_table *t;
 	int all_cells;
-	pthread_mutex_t mu;
-	int next_row, rows_done, failed;
-	struct colour_stats stats;
-	struct acq_err err;
-	recon_progress_fn progress;
-	void *pctx;
+	struct merl_scratch *ws; /* [threads] */
 };
 
 static int merl_row(const struct recon_rgb *R, struct merl_table *t, int all_cells, int ith, double *wi, double *wo,
@@ -651,51 +638,11 @@ static int merl_row(const struct recon_rgb *R, struct merl_table *t, int all_cel
 	return 0;
 }
 
-#define MERL_ROW_CELLS ((size_t)MERL_N_THETA_D * MERL_N_PHI_D)
-
-static void *merl_worker(void *arg)
+static int merl_row_job(void *arg, int worker, size_t row, struct acq_err *err)
 {
 	struct merl_job *J = arg;
-	double *wi = malloc(MERL_ROW_CELLS * 3 * sizeof *wi), *wo = malloc(MERL_ROW_CELLS * 3 * sizeof *wo);
-	double *rgb = malloc(MERL_ROW_CELLS * 3 * sizeof *rgb);
-	size_t *idx = malloc(MERL_ROW_CELLS * sizeof *idx);
-	struct colour_stats st = { 0 };
-	struct acq_err e = { 0 };
-	int bad = !wi || !wo || !rgb || !idx;
-	if (bad)
-		acq_errf(&e, ACQ_E_NOMEM, "merl table: out of memory");
-	for (;;) {
-		pthread_mutex_lock(&J->mu);
-		if (bad && !J->failed) {
-			J->failed = 1;
-			J->err = e;
-		}
-		int row = J->failed ? MERL_N_THETA_H : J->next_row++;
-		pthread_mutex_unlock(&J->mu);
-		if (row >= MERL_N_THETA_H)
-			break;
-		bad = merl_row(J->R, J->t, J->all_cells, row, wi, wo, rgb, idx, &st, &e) != 0;
-		pthread_mutex_lock(&J->mu);
-		J->rows_done++;
-		if (!bad && J->progress && J->rows_done % 8 == 0) /* progress callbacks are serialised */
-			J->progress(J->pctx, "merl", (double)J->rows_done / MERL_N_THETA_H);
-		if (bad && !J->failed) {
-			J->failed = 1;
-			J->err = e;
-		}
-		pthread_mutex_unlock(&J->mu);
-	}
-	pthread_mutex_lock(&J->mu);
-	J->stats.n += st.n;
-	J->stats.out_of_gamut += st.out_of_gamut;
-	J->stats.clipped += st.clipped;
-	J->stats.nonfinite += st.nonfinite;
-	pthread_mutex_unlock(&J->mu);
-	free(wi);
-	free(wo);
-	free(rgb);
-	free(idx);
-	return NULL;
+	struct merl_scratch *w = &J->ws[worker];
+	return merl_row(J->R, J->t, J->all_cells, (int)row, w->wi, w->wo, w->rgb, w->idx, &w->stats, err);
 }
 
 int recon_rgb_merl_table(const struct recon_rgb *R, struct merl_table *t, int all_cells, struct colour_stats *stats,
@@ -710,42 +657,24 @@ int recon_rgb_merl_table_ex(const struct recon_rgb *R, struct merl_table *t, int
 	if (threads < 1 || threads > 16)
 		return acq_errf(err, ACQ_E_INVAL, "merl table: threads must be in 1..16");
 	t->data = malloc(3 * (size_t)MERL_N_CELLS * sizeof *t->data);
-	if (!t->data)
-		return acq_errf(err, ACQ_E_NOMEM, "merl table: out of memory");
+	struct merl_job J = { .R = R, .t = t, .all_cells = all_cells, .ws = calloc((size_t)threads, sizeof *J.ws) };
 	int rc = -1;
-	struct merl_job J;
-	memset(&J, 0, sizeof J);
-	J.R = R;
-	J.t = t;
-	J.all_cells = all_cells;
-	J.progress = progress;
-	J.pctx = pctx;
-	pthread_mutex_init(&J.mu, NULL);
-	/*
-	 * Rows of θh are independent jobs taken in turn by the workers (the calling thread is one of them);
-	 * each row is one batch whatever the number of threads, so the table is bit-identical for any count.
-	 */
-	pthread_t tid[16];
-	int started = 0;
-	for (int i = 1; i < threads; i++) {
-		if (pthread_create(&tid[started], NULL, merl_worker, &J) != 0)
-			break; /* fewer threads: still correct */
-		started++;
-	}
-	merl_worker(&J);
-	for (int i = 0; i < started; i++)
-		pthread_join(tid[i], NULL);
-	pthread_mutex_destroy(&J.mu);
-	if (J.failed) {
-		*err = J.err;
+	if (!t->data || !J.ws) {
+		acq_errf(err, ACQ_E_NOMEM, "merl table: out of memory");
 		goto out;
 	}
-	if (stats) {
-		stats->n += J.stats.n;
-		stats->out_of_gamut += J.stats.out_of_gamut;
-		stats->clipped += J.stats.clipped;
-		stats->nonfinite += J.stats.nonfinite;
-	}
+	/* Rows of θh are independent jobs (pool.h); each row is one batch whatever the number of threads, so the
+	 * table is bit-identical for any count. */
+	struct pool_progress pr = { .fn = progress, .ctx = pctx, .stage = "merl", .every = 8 };
+	if (pool_run(threads, MERL_N_THETA_H, merl_row_job, &J, &pr, err) != 0)
+		goto out;
+	if (stats)
+		for (int i = 0; i < threads; i++) {
+			stats->n += J.ws[i].stats.n;
+			stats->out_of_gamut += J.ws[i].stats.out_of_gamut;
+			stats->clipped += J.ws[i].stats.clipped;
+			stats->nonfinite += J.ws[i].stats.nonfinite;
+		}
 	/*
 	 * Only half of the φd cells are evaluated: for a BRDF that is isotropic (mirror φ → −φ) and reciprocal,
 	 * f(θh, θd, φd) = f(θh, θd, −φd) = f(θh, θd, π − φd), and the cell centres of iφd and 179 − iφd are
@@ -772,6 +701,7 @@ int recon_rgb_merl_table_ex(const struct recon_rgb *R, struct merl_table *t, int
 		}
 	rc = 0;
 out:
+	free(J.ws);
 	if (rc) {
 		free(t->data);
 		t->data = NULL;

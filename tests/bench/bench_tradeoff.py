@@ -182,7 +182,7 @@ def plan(name, text):
     js = os.path.join(WORK, name + ".plan.json")
     run([CTL, "plan", path, "--json", "--points"], out=js)
     with open(js) as f:
-        d = json.load(f)
+        d = json.load(f)["plan"]  # acqctl's --json reply: {"ok", "plan": {...}, "source"}
     lp = laser_phi()
     ang = []
     for s in d["steps"]:

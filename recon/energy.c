@@ -1,0 +1,190 @@
+/* energy: the albedo table A(θ, λ) that bounds the unscaled interpolant's albedo, so that the evaluated BRDF
+ * s·f̂, s = 1/max(1, A(θi), A(θo)), conserves energy. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "recon/recon_int.h"
+
+/* Albedo table: nodes every 10°, bisected; node rules from Gauss-Legendre 10 in cosθo × 12 azimuth midpoints. */
+#define TAB_N 10
+#define TAB_NMU 10
+#define TAB_NPHI 12
+#define TAB_NMU_MAX 160   /* finest node rule: 160 × 192 */
+#define TAB_CURV_TOL 0.01 /* largest second difference over an interval (albedo units) before bisecting */
+#define TAB_DEPTH 7       /* finest interval 10°/2⁷ ≈ 0.08° */
+#define TAB_MAX_NODES 96  /* node budget of the bisection (breadth first) */
+#define TAB_BELOW 0.9     /* a node's channel is also done once fine + 4·|fine − coarse| ≤ this: clearly below 1 */
+
+/*
+ * The energy table: A(θ, λ) ≥ the albedo a(θ, λ) of the unscaled interpolant on each interval of θ.
+ * Each node's channels come from recon_albedo_adaptive (from 10 × 12, doubled up to 160 × 192 until two rules
+ * agree to TAB_TOL in albedo units, relative above 1: the table is only ever compared with 1), because the
+ * map back e^g can make lobes far narrower than the kernel; d is the last difference between rules. The
+ * nodes start every 10°; each interval [θ_lo, θ_hi] is probed at its midpoint and, while some channel's
+ * second difference Δ = |a_lo − 2a_mid + a_hi| exceeds TAB_CURV_TOL · max(1, a) (plus, where the interval
+ * is clearly below 1, what the nodes' quadrature uncertainty can make of it, 3(d_lo + 2d_mid + d_hi)) (a
+ * feature narrower than the interval: a spike in θi), bisected, down to 10°/2^TAB_DEPTH. Both halves then get the bound
+ * max(a + 2d over the three nodes) + Δ (the interpolation error h²/8·|a''| of a C² function, with a''
+ * from Δ, doubled). The evaluated function is s·f̂ with s = 1/max(1, A(θi), A(θo)), whose albedo at θi is
+ * ≤ a(θi)/max(1, A(θi)) ≤ 1 whenever A bounds a. `brdf-recon check` verifies it with an independent rule.
+ * The work is bounded: intervals are bisected level by level (all of one level before the next) up to
+ * TAB_MAX_NODES nodes; an interval left open keeps the bound of the probe that opened it.
+ */
+struct albtab {
+	const struct recon_model *m;
+	struct albedo_ws ws;
+	int nmu, nphi;      /* starting rule (recon_lobe_rule) */
+	double *diff;
+	size_t L;
+	double margin;
+};
+
+/* a[L] = the node's albedo plus its quadrature margin 2d. */
+static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err *err)
+{
+	if (recon_albedo_adaptive(T->m, theta, T->nmu, T->nphi, TAB_NMU_MAX, 0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->ws, a, T->diff,
+			    err))
+		return -1;
+	for (size_t l = 0; l < T->L; l++) {
+		double mg = 2.0 * T->diff[l] + 1e-9 * fabs(a[l]);
+		if (mg > T->margin)
+			T->margin = mg;
+		a[l] += mg;
+	}
+	return 0;
+}
+
+/* Nodes th[n] with rows a[n·L] and their last quadrature differences dq[n·L]; interval i (node i to i+1) has
+ * done[i] and bound row b[i·L]. */
+struct albgrid {
+	size_t n;
+	double *th, *a, *dq, *b;
+	unsigned char *done;
+};
+
+static void albgrid_free(struct albgrid *g)
+{
+	free(g->th);
+	free(g->a);
+	free(g->dq);
+	free(g->b);
+	free(g->done);
+	memset(g, 0, sizeof *g);
+}
+
+static int albgrid_alloc(struct albgrid *g, size_t cap, size_t L)
+{
+	memset(g, 0, sizeof *g);
+	g->th = malloc(cap * sizeof *g->th);
+	g->a = malloc(cap * L * sizeof *g->a);
+	g->dq = malloc(cap * L * sizeof *g->dq);
+	g->b = calloc(cap * L, sizeof *g->b);
+	g->done = calloc(cap, 1);
+	return g->th && g->a && g->dq && g->b && g->done ? 0 : -1;
+}
+
+static void albgrid_push(struct albgrid *g, size_t L, double th, const double *a, const double *dq, const double *b,
+			 int done)
+{
+	g->th[g->n] = th;
+	memcpy(g->a + g->n * L, a, L * sizeof *a);
+	memcpy(g->dq + g->n * L, dq, L * sizeof *dq);
+	if (b)
+		memcpy(g->b + g->n * L, b, L * sizeof *b);
+	g->done[g->n] = (unsigned char)done;
+	g->n++;
+}
+
+int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progress_fn pf, void *pctx)
+{
+	size_t L = m->nwl;
+	struct albtab T = { .m = m, .L = L };
+	struct albgrid g = { 0 }, ng = { 0 };
+	double *amid = malloc(2 * L * sizeof *amid), *bnd = amid ? amid + L : NULL;
+	T.diff = malloc(L * sizeof *T.diff);
+	int rc = -1;
+	size_t qmax;
+	T.nmu = TAB_NMU;
+	T.nphi = TAB_NPHI;
+	recon_lobe_rule(m, TAB_NMU_MAX, &T.nmu, &T.nphi, &qmax);
+	if (!amid || !T.diff || albgrid_alloc(&g, TAB_MAX_NODES, L) || recon_albedo_ws_init(&T.ws, m, qmax, err)) {
+		acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
+		goto out;
+	}
+	double h = (M_PI / 2) / (double)(TAB_N - 1);
+	for (size_t t = 0; t < TAB_N; t++) {
+		if (pf)
+			pf(pctx, "albedo table", 0.5 * (double)t / (double)TAB_N);
+		double th = t + 1 == TAB_N ? M_PI / 2 : h * (double)t;
+		if (albtab_node(&T, th, amid, err))
+			goto out;
+		albgrid_push(&g, L, th, amid, T.diff, NULL, 0);
+	}
+	/* breadth first: every interval of one level is probed before any of the next, so the node budget
+	 * is spent evenly where the albedo bends */
+	for (int depth = 0; depth <= TAB_DEPTH; depth++) {
+		if (pf)
+			pf(pctx, "albedo table", 0.5 + 0.5 * (double)depth / (TAB_DEPTH + 1));
+		if (albgrid_alloc(&ng, TAB_MAX_NODES, L)) {
+			acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
+			goto out;
+		}
+		int again = 0;
+		for (size_t i = 0; i + 1 < g.n; i++) {
+			const double *alo = g.a + i * L, *ahi = g.a + (i + 1) * L;
+			/* the first level always probes; later ones while nodes remain (one per open interval) */
+			if (g.done[i] || (depth > 0 && ng.n + (g.n - i) + 1 > TAB_MAX_NODES)) {
+				albgrid_push(&ng, L, g.th[i], alo, g.dq + i * L, g.b + i * L, 1);
+				continue;
+			}
+			double tmid = 0.5 * (g.th[i] + g.th[i + 1]);
+			if (albtab_node(&T, tmid, amid, err))
+				goto out;
+			int split = 0;
+			const double *dlo = g.dq + i * L, *dhi = g.dq + (i + 1) * L;
+			for (size_t l = 0; l < L; l++) {
+				double d2 = fabs(alo[l] - 2.0 * amid[l] + ahi[l]);
+				double mx = fmax(alo[l], fmax(amid[l], ahi[l]));
+				/* a bend beyond what the nodes' quadrature uncertainty (each a = fine + 2d, fine within
+				 * ≈ d of the exact value) can make of the second difference, where the interval is clearly
+				 * below 1; near 1 every bend counts (a loose bound there scales the BRDF down for nothing) */
+				double qn = 3.0 * (dlo[l] + 2.0 * T.diff[l] + dhi[l]);
+				if (!(mx + d2 + qn <= TAB_BELOW))
+					qn = 0;
+				if (d2 > TAB_CURV_TOL * fmax(mx, 1.0) + qn)
+					split = 1;
+				bnd[l] = mx + d2;
+			}
+			int done = !split || depth == TAB_DEPTH;
+			albgrid_push(&ng, L, g.th[i], alo, dlo, bnd, done);
+			albgrid_push(&ng, L, tmid, amid, T.diff, bnd, done);
+			again |= !done;
+		}
+		albgrid_push(&ng, L, g.th[g.n - 1], g.a + (g.n - 1) * L, g.dq + (g.n - 1) * L, NULL, 1);
+		albgrid_free(&g);
+		g = ng;
+		memset(&ng, 0, sizeof ng);
+		if (!again)
+			break;
+	}
+	m->ntab = g.n;
+	m->alb_margin = T.margin;
+	m->tab_theta = malloc(g.n * sizeof *m->tab_theta);
+	m->tab_alb = malloc((g.n - 1) * L * sizeof *m->tab_alb);
+	if (!m->tab_theta || !m->tab_alb) {
+		acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
+		goto out;
+	}
+	memcpy(m->tab_theta, g.th, g.n * sizeof *g.th);
+	memcpy(m->tab_alb, g.b, (g.n - 1) * L * sizeof *g.b);
+	rc = 0;
+out:
+	free(amid);
+	free(T.diff);
+	albgrid_free(&g);
+	albgrid_free(&ng);
+	recon_albedo_ws_free(&T.ws);
+	return rc;
+}
+

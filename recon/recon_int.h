@@ -1,0 +1,115 @@
+/* recon_int: what the files of librecon's reconstruction core share (not an API): limits, the map back
+ * through the transform and the trend, the evaluation block, the hemisphere quadrature and the energy table. */
+#ifndef RECON_RECON_INT_H
+#define RECON_RECON_INT_H
+
+#include <math.h>
+#include <stddef.h>
+
+#include "recon/recon.h"
+
+/* Albedo quadrature (quad.c): node rules refined until a doubled rule agrees to TAB_TOL (relative); a channel
+ * is also done once fine + 4·|fine − coarse| ≤ below (the energy table's "clearly below 1") with
+ * |fine − coarse| ≤ TAB_BELOW_DIFF. */
+#define TAB_TOL 1e-3
+#define TAB_BELOW_DIFF 0.005
+#define ALB_NMU_MAX 256   /* finest rule of recon_albedo, the DHR and the checker (Gauss-Legendre limit) */
+/* Largest transformed value mapped back (e^69 ≈ 1e30 sr⁻¹): keeps every output finite. */
+#define G_MAX 69.0
+#ifndef TREND_RULE_SPACING
+#define TREND_RULE_SPACING 0.5
+#endif
+
+/* Map a transformed value back to a BRDF value: non-negative and finite by construction. tf is the trend factor
+ * (trend_factor): with a trend T (log transform only) g is relative to it, f̂ = max(0, (T + ε)·e^g − ε);
+ * without, tf = 1 and f̂ = max(0, e^g − ε). */
+static inline double untransform(int transform, double g, double eps, double tf)
+{
+	if (!(g == g))
+		g = -G_MAX; /* unreachable with finite weights; never let NaN through */
+	if (transform == RECON_T_SQRT) {
+		if (g > 1e15)
+			g = 1e15;
+		if (g < -1e15)
+			g = -1e15;
+		return g * g;
+	}
+	if (g > G_MAX)
+		g = G_MAX;
+	double f = exp(g) * tf - eps;
+	return f > 0 ? (f < 1e300 ? f : 1e300) : 0.0;
+}
+
+/* d f̂ / d g at g (the derivative of untransform; 0 where the clamp at 0 is active). */
+static inline double untransform_deriv(int transform, double g, double eps, double tf)
+{
+	if (!(g == g))
+		return 0.0;
+	if (transform == RECON_T_SQRT)
+		return 2.0 * fmin(fmax(g, -1e15), 1e15);
+	if (g > G_MAX)
+		g = G_MAX;
+	double e = exp(g) * tf;
+	return e - eps > 0 ? (e < 1e300 ? e : 1e300) : 0.0;
+}
+
+/* Trend basis at a canonical point (zeros without a trend); the trend value T of channel l; the trend factor
+ * of the map back, T + ε with a trend and 1 without. */
+static inline void trend_at(const struct recon_model *m, const double *c6, double b[TREND_NB])
+{
+	trend_eval_basis(m->trend, m->trend_alpha, c6, b);
+}
+
+static inline double trend_val(const struct recon_model *m, const double b[TREND_NB], size_t l)
+{
+	return trend_dot(m->tcoef + l * TREND_NB, b);
+}
+
+static inline double trend_factor(const struct recon_model *m, const double b[TREND_NB], size_t l)
+{
+	return m->trend == RECON_TREND_GGX ? trend_val(m, b, l) + m->eps[l] : 1.0;
+}
+
+static inline double theta_of(const double *v)
+{
+	double z = v[2];
+	return z >= 1.0 ? 0.0 : z <= 0.0 ? M_PI / 2 : acos(z);
+}
+
+/*
+ * One block of b ≤ RECON_EVAL_BLOCK queries for nch channels (eval.c): chan[k] names the model channel of output
+ * column k (chan NULL: every channel in order) and wsub holds those channels' weights, channel-major
+ * (nch × n; m->w itself when chan is NULL). out is b × nch, row-major.
+ */
+void recon_eval_block(const struct recon_model *m, size_t b, const double *c6, int scaled, size_t nch,
+		      const size_t *chan, const double *wsub, double *out, double *work);
+
+/* Distance (chordal, product metric: |Δωi|² + |Δωo|², the reciprocal image included) from canonical point c6 to
+ * the nearest centre of the model, whose index goes to *kmin (may be NULL) (eval.c). */
+double recon_nearest_centre(const struct recon_model *m, const double *c6, size_t *kmin);
+
+/* Hemisphere nodes at θi (quad.c): nmu × nphi canonical points c6 and weights wt (cosθo included); square_rule =
+ * Gauss-Legendre in cos²θo (the checker's independent rule). Returns -1 on a bad size. */
+int recon_hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double *c6, double *wt);
+
+/* Workspace of recon_albedo_adaptive, sized for the finest rule it may reach. */
+struct albedo_ws {
+	size_t qmax, L;
+	double *c6, *wt, *work, *vals, *wsub, *fine;
+	size_t *chan;
+};
+/* Allocate for rules of up to qmax nodes (-1 with err on failure); free (idempotent). */
+int recon_albedo_ws_init(struct albedo_ws *ws, const struct recon_model *m, size_t qmax, struct acq_err *err);
+void recon_albedo_ws_free(struct albedo_ws *ws);
+/* Raise the starting rule nmu × nphi to the narrowest lobe the model can make; *qmax the finest rule reachable. */
+void recon_lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *nphi, size_t *qmax);
+/* Albedo of every channel at θi by doubling rules (quad.c has the full contract); out[L], diff[L] may be NULL. */
+int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, int nphi, int nmu_max,
+			  int square_rule, int scaled, double tol, double floor, double below, struct albedo_ws *ws,
+			  double *out, double *diff, struct acq_err *err);
+
+/* Build m->tab_theta, m->tab_alb, m->ntab, m->alb_margin: the energy table of the unscaled interpolant
+ * (energy.c). */
+int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progress_fn pf, void *pctx);
+
+#endif

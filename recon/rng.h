@@ -1,0 +1,21 @@
+/* rng: the one random-number generator of librecon (xoshiro256**, seeded by splitmix64): Monte-Carlo draws of
+ * the DHR, the checker's random pairs, the RGB path's construction-time measurements. Reproducible per seed. */
+#ifndef RECON_RNG_H
+#define RECON_RNG_H
+
+#include <stdint.h>
+
+struct recon_rng {
+	uint64_t s[4];
+};
+
+/* Seed the state from one 64-bit value (splitmix64: any seed, 0 included, gives a good state). */
+void recon_rng_seed(struct recon_rng *r, uint64_t seed);
+/* Next 64 random bits. */
+uint64_t recon_rng_u64(struct recon_rng *r);
+/* Uniform in [0, 1) with 53 random bits. */
+double recon_rng_unif(struct recon_rng *r);
+/* Standard normal (Box-Muller, one value per call; u clamped away from 0 so the result is finite). */
+double recon_rng_normal(struct recon_rng *r);
+
+#endif
