@@ -271,10 +271,14 @@ static void handle_line(struct client *c, const char *line, size_t len)
 
 static void drain_cb(struct loop *lp, void *arg);
 
+/* The next turn: a timer just after now, so that it runs at the loop's next pass over its timers (a timer
+ * due at once would run again within the same pass, and the turns would not be bounded). */
+#define DRAIN_DELAY_S 1e-4
+
 static void arm_drain(struct server *srv)
 {
 	if (!srv->drain_timer)
-		srv->drain_timer = loop_timer_add(srv->lp, 0, 0, drain_cb, srv);
+		srv->drain_timer = loop_timer_add(srv->lp, DRAIN_DELAY_S, 0, drain_cb, srv);
 }
 
 /* Handle up to LINES_PER_CLIENT complete lines of client serial within the turn's budget; true if more may be

@@ -1,6 +1,6 @@
 /* Unit tests for daemon/server.c on an injected clock: incomplete-line and idle timeouts (watchers exempt),
  * reading paused while replies are unread, drops past the output bound and after a stall, per-user limits
- * with the refusal readable after the banner even when the client writes first. */
+ * with the refusal readable after the banner even when the client writes first, bounded loop turns. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -75,17 +75,21 @@ static int teardown(void **state)
 	return 0;
 }
 
+/* n loop turns, each 0.2 ms later on the fake clock (the server's next turn is a timer 0.1 ms ahead). */
 static void pump(struct fx *f, int n)
 {
-	for (int i = 0; i < n; i++)
+	for (int i = 0; i < n; i++) {
+		fake_now += 2e-4;
 		loop_run_once(f->lp, 0);
+	}
 }
 
-/* Advance the fake clock in steps (the timeout check runs every 0.25 s of the loop's clock). */
+/* Advance the fake clock by s in steps of 0.25 s (the period of the timeout check), without drift. */
 static void advance(struct fx *f, double s)
 {
-	for (double t = 0; t < s; t += 0.25) {
-		fake_now += 0.25;
+	double t0 = fake_now;
+	for (int k = 1; k * 0.25 <= s + 1e-9; k++) {
+		fake_now = t0 + k * 0.25;
 		pump(f, 2);
 	}
 }
@@ -296,6 +300,48 @@ static void test_refusal_readable_after_write(void **state)
 	close(c);
 }
 
+/* Many clients with many requests each: one loop turn handles at most 64 lines in all (the sweep's timers and
+ * the devices' fds wait no longer), every client is served in rotation, and everything is answered. */
+static void test_bounded_turns(void **state)
+{
+	struct fx *f = *state;
+	enum { NC = 10, NREQ = 50 };
+	int fd[NC];
+	static const char req[] = "{\"cmd\":\"version\",\"id\":1}\n";
+	char batch[NREQ * sizeof req];
+	for (int i = 0; i < NREQ; i++)
+		memcpy(batch + i * (sizeof req - 1), req, sizeof req - 1);
+	for (int c = 0; c < NC; c++)
+		fd[c] = connect_client(f);
+	for (int c = 0; c < NC; c++)
+		assert_int_equal(send(fd[c], batch, NREQ * (sizeof req - 1), 0), (ssize_t)(NREQ * (sizeof req - 1)));
+	long before = f->handled, max_turn = 0;
+	int turns = 0;
+	char *buf = malloc(1 << 20);
+	long got[NC] = { 0 };
+	bool eof;
+	while (f->handled < before + NC * NREQ && turns < 10000) {
+		long h = f->handled;
+		fake_now += 1e-3; /* the next turn's timer is due */
+		loop_run_once(f->lp, 0);
+		turns++;
+		if (f->handled - h > max_turn)
+			max_turn = f->handled - h;
+		for (int c = 0; c < NC; c++)
+			got[c] += count_lines(buf, drain(fd[c], buf, 1 << 20, &eof));
+	}
+	print_message("  %d requests in %d loop turns, at most %ld in one turn\n", NC * NREQ, turns, max_turn);
+	assert_int_equal(f->handled - before, NC * NREQ);
+	assert_true(max_turn <= 64);
+	pump(f, 5);
+	for (int c = 0; c < NC; c++) {
+		got[c] += count_lines(buf, drain(fd[c], buf, 1 << 20, &eof));
+		assert_int_equal(got[c], NREQ + 1); /* the banner and every reply */
+		close(fd[c]);
+	}
+	free(buf);
+}
+
 int main(void)
 {
 	log_init(LOG_ERR, false);
@@ -306,6 +352,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(test_stalled_reader_dropped, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_output_bound_drops_watcher, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_refusal_readable_after_write, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_bounded_turns, setup, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
