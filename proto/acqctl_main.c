@@ -710,8 +710,14 @@ int main(int argc, char **argv)
 		json_t *e = json_object_get(rep, "error");
 		char words2[64];
 		cmd_words(cmd, words2, sizeof words2);
-		fprintf(stderr, "acqctl: %s: %s (%s)\n", words2, json_string_value(json_object_get(e, "message")),
-			json_string_value(json_object_get(e, "code")));
+		/* the daemon's message names commands as the protocol does ("sweep.abort"): say them as typed */
+		const char *msg = json_string_value(json_object_get(e, "message"));
+		char said[1024];
+		snprintf(said, sizeof said, "%s", msg ? msg : "");
+		char *hit = strstr(said, cmd);
+		if (hit && strchr(cmd, '.'))
+			hit[strchr(cmd, '.') - cmd] = ' ';
+		fprintf(stderr, "acqctl: %s: %s (%s)\n", words2, said, json_string_value(json_object_get(e, "code")));
 		if (O.json)
 			print_json(rep);
 		rc = CTL_EXIT_REFUSED;

@@ -51,7 +51,8 @@ def main():
         got = as_user(65534, 65534, probe)
         check(got == [1, "observer", "forbidden", True], "observer (@nogroup): %r" % got)
         got = as_user(65534, 65534, ctl)
-        check(got[0][0] == 0 and got[1][0] == 1 and "controller" in got[1][1], "observer with acqctl: %r" % got)
+        check(got[0][0] == 0 and got[1][0] == 1 and "sweep abort needs a controller" in got[1][1],
+              "observer with acqctl (commands named as typed): %r" % got)
         got = as_user(2, 2, "from acqtest import Client\nc=Client(%r)\nprint(json.dumps(c.read()))\n" % d.sock)
         check(got.get("ok") is False and got["error"]["code"] == "forbidden" and "uid 2" in got["error"]["message"],
               "stranger: %r" % got)
