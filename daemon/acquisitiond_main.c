@@ -128,10 +128,8 @@ static void laser_keepalive_tick(struct loop *lp, void *arg)
 {
 	(void)lp;
 	struct app *app = arg;
-	struct laser *l = app->dev ? devices_laser(app->dev) : NULL;
-	struct acq_err err = { 0 };
-	if (l && laser_keepalive(l, &err))
-		log_msg(LOG_WARNING, "laser keep-alive: %s (emission switched off)", err.msg);
+	if (app->dev)
+		devices_laser_keepalive(app->dev); /* on the laser's port thread; a failure is logged there */
 }
 
 /* --laser-off (ExecStopPost=): open the configured laser, which switches emission off, and close it. */
@@ -300,7 +298,7 @@ int main(int argc, char **argv)
 	job_init(app.lp);
 	if (server_init(app.lp, &app.conf->d, ACQ_VERSION, commands_handle, &app, &app.srv, &err))
 		goto fail;
-	if (devices_init(app.lp, app.store, app.conf, NULL, app_device_notify, &app, app_wallclock, &app.dev, &err))
+	if (devices_init(app.lp, app.store, app.conf, app_device_notify, &app, app_wallclock, &app.dev, &err))
 		goto fail;
 	struct sweep_env env = { .loop = app.lp, .store = app.store, .devices = app.dev, .conf = app.conf,
 				 .emit = app_emit, .emit_ctx = &app, .wallclock = app_wallclock,

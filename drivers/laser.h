@@ -1,5 +1,7 @@
-/* laser: the supercontinuum source on a serial line (libserialport); line protocol in drivers/laser_serial.c.
- * The handle switches emission off on close and on every error path it sees. Libraries do not log. */
+/* laser: the supercontinuum source, a const table of functions behind an opaque handle (laser_backend.h): the
+ * serial line backend (libserialport; line protocol in drivers/laser_serial.c) or the fake for unit tests
+ * (drivers/laser_fake.c). The handle switches emission off on close and on every error path it sees. Libraries
+ * do not log. */
 #ifndef LASER_H
 #define LASER_H
 
@@ -42,8 +44,6 @@ int laser_status(struct laser *l, struct laser_status *st, struct acq_err *err);
 /* Refresh the laser's keep-alive (armed at open with keepalive_ms; emission stops if not refreshed within
  * it). Call at least every keepalive_ms / 2. No-op when disarmed. 0 or -1 (emission then switched off). */
 int laser_keepalive(struct laser *l, struct acq_err *err);
-/* The keep-alive period armed at open, ms (0: none). */
-int laser_keepalive_ms(const struct laser *l);
 /* Identity read at open. */
 const struct laser_identity *laser_identity(const struct laser *l);
 

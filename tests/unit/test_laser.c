@@ -21,6 +21,7 @@
 #include <cmocka.h>
 
 #include "drivers/laser.h"
+#include "drivers/laser_backend.h"
 #include "sim/sim.h"
 
 struct shared {
@@ -342,7 +343,7 @@ static void test_keepalive(void **state)
 	struct acq_err err = { 0 };
 	if (laser_open(cfg, &l, &err))
 		fail_msg("%s", err.msg);
-	assert_int_equal(laser_keepalive_ms(l), 1000);
+	assert_int_equal(laser_cfg_keepalive_ms(cfg), 1000);
 	assert_int_equal(laser_keepalive(l, &err), 0);
 	assert_true(sh->nlines >= 4);
 	assert_string_equal(sh->lines[2], "KEEPALIVE 1000");
