@@ -261,19 +261,36 @@ static void cmd_measure(struct app *app, const struct srv_peer *peer, struct pro
 }
 
 /* `devices`: the report waits for fresh status reads on the devices' own threads (the loop never does). */
+/* Fresh device reads are queued on the devices' threads in front of the sweep's own requests (and of the
+ * laser's keep-alive): one query at a time for all clients together; a request arriving while one runs gets
+ * what is known now (devices_json: no device I/O). */
+static bool devices_query_running;
+
+static void devices_query_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
+{
+	devices_query_running = false;
+	pending_done(ctx, rc, err, result);
+}
+
 static void cmd_devices(struct app *app, const struct srv_peer *peer, struct proto_req *req)
 {
+	if (devices_query_running) {
+		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_json(app->dev)));
+		return;
+	}
 	struct acq_err err = { 0 };
 	struct pending *p = pending_new(app, peer, req->id);
 	if (!p) {
 		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 		return reply_err(app, peer, req->id, &err);
 	}
-	if (devices_query(app->dev, pending_done, p, &err)) {
+	if (devices_query(app->dev, devices_query_done, p, &err)) {
 		json_decref(p->id);
 		free(p);
 		reply_err(app, peer, req->id, &err);
+		return;
 	}
+	devices_query_running = true;
 }
 
 /* home [axis]: one axis by its name (laser.theta or laser_theta, ...), or all three one after the other
