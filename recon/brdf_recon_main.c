@@ -230,6 +230,10 @@ static int cmd_fit(int argc, char **argv)
 		"smoothing %.3g, leave-one-out RMS %.4g, rcond %.3g -> %s\n", m->n, m->nwl, rbf_kernel_name(m->kernel),
 		m->shape, recon_transform_name(m->transform), trend_name(m->trend), m->trend_alpha, m->eta, m->loo_rms,
 		m->rcond, outp);
+	for (const char *p = strstr(m->meta, "warning="); p; p = strstr(p + 1, "\nwarning=")) {
+		const char *b = strchr(p, '=') + 1, *e = strchr(b, '\n');
+		fprintf(stderr, "fit: warning: %.*s\n", e ? (int)(e - b) : (int)strlen(b), b);
+	}
 	recon_model_free(m);
 	return 0;
 }

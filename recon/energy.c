@@ -14,6 +14,11 @@
 #define TAB_CURV_TOL 0.01 /* largest second difference over an interval (albedo units) before bisecting */
 #define TAB_DEPTH 7       /* finest interval 10°/2⁷ ≈ 0.08° */
 #define TAB_MAX_NODES 96  /* node budget of the bisection (breadth first) */
+/* Work budget of the table in kernel evaluations (~3 s on one core): past it no interval is bisected and each
+ * remaining node gets its starting rule and one doubling. Spiky models reach it (log-uniform random values over
+ * 12 decades: 5.3e9 evaluations, 19 s, without it); the paper-size fits of the simulator's materials need
+ * 1e8-5e8. brdf-recon check verifies the bound with an independent rule either way; the fit warns. */
+#define TAB_WORK_MAX 1e9
 #define TAB_BELOW 0.9     /* a node's channel is also done once fine + 4·|fine − coarse| ≤ this: clearly below 1 */
 
 /*
@@ -43,8 +48,10 @@ struct albtab {
 /* a[L] = the node's albedo plus its quadrature margin 2d. */
 static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err *err)
 {
-	if (recon_albedo_adaptive(T->m, theta, T->nmu, T->nphi, TAB_NMU_MAX, 0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->ws, a, T->diff,
-			    err))
+	/* past the work budget every further node gets the starting rule and one doubling (still a difference d) */
+	int nmax = T->ws.evals > TAB_WORK_MAX ? 2 * T->nmu : TAB_NMU_MAX;
+	if (recon_albedo_adaptive(T->m, theta, T->nmu, T->nphi, nmax, 0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->ws, a, T->diff,
+				  err))
 		return -1;
 	for (size_t l = 0; l < T->L; l++) {
 		double mg = 2.0 * T->diff[l] + 1e-9 * fabs(a[l]);
@@ -156,7 +163,7 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 					split = 1;
 				bnd[l] = mx + d2;
 			}
-			int done = !split || depth == TAB_DEPTH;
+			int done = !split || depth == TAB_DEPTH || T.ws.evals > TAB_WORK_MAX;
 			albgrid_push(&ng, L, g.th[i], alo, dlo, bnd, done);
 			albgrid_push(&ng, L, tmid, amid, T.diff, bnd, done);
 			again |= !done;
@@ -168,6 +175,7 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 		if (!again)
 			break;
 	}
+	m->tab_capped = T.ws.evals > TAB_WORK_MAX;
 	m->ntab = g.n;
 	m->alb_margin = T.margin;
 	m->tab_theta = malloc(g.n * sizeof *m->tab_theta);

@@ -157,3 +157,45 @@ double recon_nearest_centre(const struct recon_model *m, const double *c6, size_
 		*kmin = bk;
 	return sqrt(best);
 }
+
+/*
+ * The data the final model does not honour: at each sample, the measured value (from the stored transformed
+ * data g, relative to the trend) against the final (smoothed, energy-scaled) model. Smoothing and the energy
+ * factor may both pull the model away from a sample: a lobe narrower than the kernel allows cannot keep its
+ * peak under the albedo bound.
+ */
+long recon_misfit(const struct recon_model *m, double zlim, double rmin, double *df, struct recon_misfit_worst *worst,
+		  struct acq_err *err)
+{
+	size_t n = m->n, L = m->nwl;
+	double *wk = malloc(recon_eval_work_size(m) * sizeof *wk);
+	if (!wk)
+		return acq_errf(err, ACQ_E_NOMEM, "misfit: out of memory");
+	recon_eval_canon(m, n, m->ctr, 1, df, wk); /* df[k*L + l] = f̂ at the samples */
+	free(wk);
+	long count = 0;
+	double wr = 0;
+	for (size_t k = 0; k < n; k++) {
+		double tb[TREND_NB];
+		trend_at(m, m->ctr + 6 * k, tb);
+		for (size_t l = 0; l < L; l++) {
+			double g = m->g[l * n + k], sg = m->gsig[l * n + k], fh = df[k * L + l], tf = trend_factor(m, tb, l);
+			double ghat = m->transform == RECON_T_SQRT ? sqrt(fh) : log((fh + m->eps[l]) / tf);
+			double r = fabs(g - ghat), d = 0;
+			if (isfinite(r) && r > rmin && isfinite(sg) && r > zlim * sg) {
+				double fd = untransform(m->transform, g, m->eps[l], tf);
+				d = fd - fh;
+				count++;
+				if (worst && fabs(d) > wr) {
+					wr = fabs(d);
+					worst->k = k;
+					worst->l = l;
+					worst->data = fd;
+					worst->model = fh;
+				}
+			}
+			df[k * L + l] = isfinite(d) ? d : 0.0;
+		}
+	}
+	return count;
+}

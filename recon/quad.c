@@ -88,6 +88,7 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 	for (size_t q0 = 0; q0 < Q; q0 += RECON_EVAL_BLOCK) {
 		size_t b = Q - q0 < RECON_EVAL_BLOCK ? Q - q0 : RECON_EVAL_BLOCK;
 		recon_eval_block(m, b, ws->c6 + 6 * q0, scaled, nch, ws->chan, ws->wsub, ws->vals, ws->work);
+		ws->evals += (double)b * (double)m->n;
 		for (size_t q = 0; q < b; q++)
 			for (size_t k = 0; k < nch; k++)
 				acc[k] += ws->wt[q0 + q] * ws->vals[q * nch + k];

@@ -88,6 +88,30 @@ void recon_eval_block(const struct recon_model *m, size_t b, const double *c6, i
  * the nearest centre of the model, whose index goes to *kmin (may be NULL) (eval.c). */
 double recon_nearest_centre(const struct recon_model *m, const double *c6, size_t *kmin);
 
+/* The prior on the unseen part of the hemisphere (recon/reconstruction.md): a direction pair farther than
+ * RECON_PRIOR_R0 (chordal, product metric: 0.35 ≈ 20°) from every sample is partly unseen, beyond twice that
+ * wholly; there ln f has the GP amplitude RECON_PRIOR_ALPHA (prior std √(α K(x, x)) ≈ 1-1.4, a factor e). The
+ * paper's 10 × 10 × 10 plan leaves no node of the DHR at 8-60° that far. */
+#define RECON_PRIOR_R0 0.35
+#define RECON_PRIOR_ALPHA 1.0
+/* How unseen a point at distance d from the nearest sample is: 0 within R0, 1 beyond 2·R0, smoothstep between. */
+static inline double recon_unseen(double d)
+{
+	double u = (d - RECON_PRIOR_R0) / RECON_PRIOR_R0;
+	return u <= 0 ? 0 : u >= 1 ? 1 : u * u * (3 - 2 * u);
+}
+
+/* The worst sample of recon_misfit: index k (merged direction), channel l, measured and model values (sr⁻¹). */
+struct recon_misfit_worst {
+	size_t k, l;
+	double data, model;
+};
+/* Samples the final model does not honour: |g_k − ĝ_k| (transformed units) > max(rmin, zlim·σ_g). Fills
+ * df[k*L + l] = data − model (sr⁻¹) there and 0 elsewhere, worst (may be NULL) with the largest |data − model|; returns
+ * the count, or -1 with err (eval.c). */
+long recon_misfit(const struct recon_model *m, double zlim, double rmin, double *df, struct recon_misfit_worst *worst,
+		  struct acq_err *err);
+
 /* Hemisphere nodes at θi (quad.c): nmu × nphi canonical points c6 and weights wt (cosθo included); square_rule =
  * Gauss-Legendre in cos²θo (the checker's independent rule). Returns -1 on a bad size. */
 int recon_hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double *c6, double *wt);
@@ -95,6 +119,7 @@ int recon_hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double 
 /* Workspace of recon_albedo_adaptive, sized for the finest rule it may reach. */
 struct albedo_ws {
 	size_t qmax, L;
+	double evals; /* kernel evaluations so far (the work of recon_albedo_adaptive, for budgets) */
 	double *c6, *wt, *work, *vals, *wsub, *fine;
 	size_t *chan;
 };

@@ -64,17 +64,18 @@ static void test_dhr_zscores_calibrated(void **state)
 		struct recon_fit_opts o;
 		recon_fit_opts_default(&o);
 		assert_int_equal(recon_fit(&smp, &o, &m, &e), 0);
-		double d[NTH * NWL], sq[NTH * NWL], sf[NTH * NWL];
+		double d[NTH * NWL], sq[NTH * NWL], sf[NTH * NWL], sr[NTH * NWL];
 		size_t at = (size_t)s * NTH * NWL;
-		struct recon_dhr_parts parts = { .noise = sn + at, .model = sm + at, .quad = sq, .misfit = sf };
+		struct recon_dhr_parts parts = { .noise = sn + at, .model = sm + at, .quad = sq, .misfit = sf, .res = sr };
 		assert_int_equal(recon_dhr_parts(m, NTH, th, 32, (uint64_t)s + 1, d, sig + at, &parts, NULL, NULL, &e), 0);
 		for (int i = 0; i < NTH * NWL; i++) {
 			err[at + i] = d[i] - truth[i];
 			assert_true(sig[at + i] > 0);
 			assert_true(sq[i] >= 0 && sq[i] <= 2e-3 * d[i]); /* smooth truth: the rule converges at once */
-			double sb = fmax(sn[at + i], sm[at + i]); /* σ² = max(σ_noise, σ_model)² + σ_quad² + σ_misfit² */
-			assert_true(sf[i] >= 0 && sf[i] <= 1);
-			assert_true(fabs(sig[at + i] * sig[at + i] - sb * sb - sq[i] * sq[i] - sf[i] * sf[i]) <=
+			/* σ² = max(σ_noise, σ_model)² + σ_quad² + σ_misfit² + σ_res² */
+			double sb = fmax(sn[at + i], sm[at + i]);
+			assert_true(sf[i] >= 0 && sf[i] <= 1 && sr[i] >= 0);
+			assert_true(fabs(sig[at + i] * sig[at + i] - sb * sb - sq[i] * sq[i] - sf[i] * sf[i] - sr[i] * sr[i]) <=
 				    1e-9 * sig[at + i] * sig[at + i]);
 		}
 		recon_model_free(m);
