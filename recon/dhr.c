@@ -286,7 +286,7 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	 * the quadrature term of σ. */
 	int dmu = DHR_NMU, dphi = DHR_NPHI;
 	size_t dq;
-	recon_lobe_rule(m, ALB_NMU_MAX, &dmu, &dphi, &dq);
+	recon_lobe_rule(m, ALB_NMU_MAX, 0, &dmu, &dphi, &dq);
 	if (recon_albedo_ws_init(&ws, m, dq, err))
 		goto out;
 	for (size_t t = 0; t < nth; t++) {
