@@ -20,10 +20,11 @@
  * 1e8-5e8. brdf-recon check verifies the bound with an independent rule either way; the fit warns. */
 #define TAB_WORK_MAX 1e9
 /* The trend's GGX lobe over half vectors (recon_hv_nodes): 16 nodes in u × 16 azimuths on [0, π] to start,
- * doubled up to 128 × 128. */
+ * doubled up to 64 × 64 (the largest difference from a 256 × 2048 hemisphere rule there: 9e-4, where the horizon
+ * cuts a lobe of α = 0.03 at 85°; test_recon_trend). */
 #define TAB_HV_NU 16
 #define TAB_HV_NPHI 16
-#define TAB_HV_NU_MAX 128
+#define TAB_HV_NU_MAX 64
 #define TAB_BELOW 0.9     /* a node's channel is also done once fine + 4·|fine − coarse| ≤ this: clearly below 1 */
 
 /*
@@ -46,7 +47,7 @@ struct albtab {
 	struct albedo_ws ws, wl; /* whole (or smooth part), and the trend's lobe part (split) */
 	int nmu, nphi;      /* starting rule (recon_lobe_rule) */
 	int split;          /* the trend's GGX lobe integrated apart, over half vectors */
-	double *diff, *al, *dl;
+	double *diff, *al, *dl, *off;
 	size_t L;
 	double margin;
 };
@@ -62,12 +63,16 @@ static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err
 	if (!T->split)
 		return recon_albedo_adaptive(T->m, theta, T->nmu, T->nphi, nmax, 0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->ws, a,
 					     T->diff, err) ? -1 : albtab_margin(T, a);
-	/* split: the smooth part on the hemisphere rule, the lobe over half vectors; each refined to TAB_TOL absolute
-	 * (the "clearly below 1" stop only holds for a whole albedo, not for a part of it) */
+	/* split: the smooth part on the hemisphere rule, refined to TAB_TOL absolute (a part being below 1 says nothing
+	 * of the whole), then the lobe over half vectors, which stops once the whole is clearly below 1 */
 	if (recon_albedo_adaptive(T->m, theta, T->nmu, T->nphi, nmax, 0, 0, TAB_TOL, 1.0, -HUGE_VAL, &T->ws, a, T->diff,
-				  err) ||
-	    recon_albedo_adaptive(T->m, theta, TAB_HV_NU, TAB_HV_NPHI, work > TAB_WORK_MAX ? 2 * TAB_HV_NU : TAB_HV_NU_MAX,
-				  0, 0, TAB_TOL, 1.0, -HUGE_VAL, &T->wl, T->al, T->dl, err))
+				  err))
+		return -1;
+	for (size_t l = 0; l < T->L; l++) /* the lobe part may stop once the whole is clearly below 1 */
+		T->off[l] = a[l] + 4.0 * T->diff[l];
+	T->wl.offset = T->off;
+	if (recon_albedo_adaptive(T->m, theta, TAB_HV_NU, TAB_HV_NPHI, work > TAB_WORK_MAX ? 2 * TAB_HV_NU : TAB_HV_NU_MAX,
+				  0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->wl, T->al, T->dl, err))
 		return -1;
 	for (size_t l = 0; l < T->L; l++) {
 		a[l] += T->al[l];
@@ -142,8 +147,9 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 	T.nphi = TAB_NPHI;
 	T.split = m->trend == RECON_TREND_GGX && m->trend_alpha > 0;
 	recon_lobe_rule(m, TAB_NMU_MAX, T.split, &T.nmu, &T.nphi, &qmax);
-	T.al = malloc(2 * L * sizeof *T.al);
+	T.al = malloc(3 * L * sizeof *T.al);
 	T.dl = T.al ? T.al + L : NULL;
+	T.off = T.al ? T.al + 2 * L : NULL;
 	if (!amid || !T.diff || !T.al || albgrid_alloc(&g, TAB_MAX_NODES, L) || recon_albedo_ws_init(&T.ws, m, qmax, err) ||
 	    (T.split && recon_albedo_ws_init(&T.wl, m, (size_t)TAB_HV_NU_MAX * (TAB_HV_NU_MAX / TAB_HV_NU * TAB_HV_NPHI),
 					     err))) {

@@ -89,7 +89,7 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 	for (size_t q0 = 0; q0 < Q; q0 += RECON_EVAL_BLOCK) {
 		size_t b = Q - q0 < RECON_EVAL_BLOCK ? Q - q0 : RECON_EVAL_BLOCK;
 		recon_eval_block_part(m, b, ws->c6 + 6 * q0, scaled, ws->part, nch, ws->chan, ws->wsub, ws->vals, ws->work);
-		ws->evals += (double)b * (double)m->n;
+		ws->evals += (double)b * (double)m->n * (1.0 + (double)nch / 64.0);
 		for (size_t q = 0; q < b; q++)
 			for (size_t k = 0; k < nch; k++)
 				acc[k] += ws->wt[q0 + q] * ws->vals[q * nch + k];
@@ -152,7 +152,8 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe
  * the channels still disagreeing are evaluated again, so one narrow lobe does not make every channel pay
  * for the finest rule. A channel is also done once fine + 4·|fine − coarse| ≤ below with |fine − coarse| ≤
  * TAB_BELOW_DIFF (the energy table only
- * compares its bound, fine + 2·|fine − coarse|, with 1: a value clearly below needs no more digits; −∞ turns
+ * compares its bound, fine + 2·|fine − coarse|, with 1: a value clearly below needs no more digits; with
+ * ws->offset the rest of a split albedo is added to the comparison; −∞ turns
  * this off). out[l] is the finest value; diff[l] (may be NULL) the last |fine − coarse|, or 0 when no
  * doubling fits under nmu_max.
  */
@@ -182,7 +183,8 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 			out[l] = ws->fine[k];
 			if (diff)
 				diff[l] = d;
-			if (!(d <= tol * ref) && !(ws->fine[k] + 4.0 * d <= below && d <= TAB_BELOW_DIFF)) {
+			double off = ws->offset ? ws->offset[l] : 0.0; /* the rest of a split albedo (fine + 4d) */
+			if (!(d <= tol * ref) && !(ws->fine[k] + 4.0 * d + off <= below && d <= TAB_BELOW_DIFF)) {
 				if (keep != k) {
 					ws->chan[keep] = l;
 					memmove(ws->wsub + keep * n, ws->wsub + k * n, n * sizeof *ws->wsub);
