@@ -2,7 +2,10 @@
 #
 # Conventions (so a new file needs no Makefile edit):
 #   <folder>/*_main.c        a program's entry point: build/<name with _ → ->   (see PROGRAMS)
+#   <folder>/<name>/*.c      files of that program only (command handlers), linked before the libraries
 #   <folder>/*.c (others)    the folder's static library build/lib<folder>.a
+#   <folder>/<sub>/*.c       a sub-folder listed in LIBDIRS: its own library build/lib<sub>.a (daemon/plan/ →
+#                            build/libplan.a, the planner that acqctl links without the daemon)
 #   tests/unit/test_*.c      a cmocka unit test, linked with every library
 #   tests/integration/test_* an executable script (sh/py), run by tests/run-integration.sh
 #   tests/bench/bench_*.c    a benchmark program, run by `make bench`
@@ -27,7 +30,7 @@ endif
 
 VERSION    := $(shell git describe --always --dirty 2>/dev/null || echo 0.1)
 
-PKGS       := libusb-1.0 libmodbus libserialport sqlite3 yaml-0.1 lapacke openblas libsystemd libpng jansson cairo
+PKGS       := libusb-1.0 libmodbus libserialport sqlite3 yaml-0.1 lapacke openblas libsystemd libpng jansson cairo OpenEXR hdf5
 PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 
@@ -46,18 +49,22 @@ ALL_CFLAGS += -fsanitize=$(SANITIZE) -fno-omit-frame-pointer -fno-sanitize-recov
 LDFLAGS    += -fsanitize=$(SANITIZE)
 endif
 
-# Folders that form libraries, in link order (users before providers).
-LIBDIRS    := daemon sim proto recon drivers config
+# Folders that form libraries, in link order (users before providers); a sub-folder names its library.
+LIBDIRS    := daemon daemon/plan sim proto recon drivers config
+# A program that links fewer libraries than all (in link order): PROG_LIBDIRS_<program>.
+PROG_LIBDIRS_acqctl := proto daemon/plan config
 
 # Debian packages the build, the tests and the demo need (the `deps` step installs the missing ones).
 DEB_PKGS   := build-essential pkg-config libusb-1.0-0-dev libmodbus-dev libserialport-dev libsqlite3-dev \
               libyaml-dev liblapacke-dev libopenblas-dev libsystemd-dev libcmocka-dev libpng-dev \
               libjansson-dev libcairo2-dev umockdev mbpoll python3-pymodbus python3-numpy sqlite3 socat \
-              systemd clang python3-matplotlib
+              systemd clang python3-matplotlib libopenexr-dev openexr libhdf5-dev hdf5-tools python3-h5py \
+              python3-jsonschema scdoc man-db \
+              python3-scipy
 
 .DEFAULT_GOAL := all
 .SECONDARY:
-.PHONY: all deps check check-unit check-integration check-fuzz demo bench fuzz install uninstall clean \
+.PHONY: all deps check check-unit check-integration check-fuzz demo bench fuzz install install-files man uninstall clean \
         test-programs distclean
 
 -include $(wildcard */module.mk)
@@ -69,7 +76,10 @@ define lib_objs
 $(patsubst %.c,$(BUILD)/obj/%.o,$(call lib_srcs,$(1)))
 endef
 
-LIBS       := $(foreach d,$(LIBDIRS),$(if $(strip $(call lib_srcs,$(d))),$(BUILD)/lib$(d).a))
+define lib_of
+$(BUILD)/lib$(notdir $(1)).a
+endef
+LIBS       := $(foreach d,$(LIBDIRS),$(if $(strip $(call lib_srcs,$(d))),$(call lib_of,$(d))))
 MAIN_SRCS  := $(foreach d,$(LIBDIRS),$(wildcard $(d)/*_main.c))
 PROGRAMS   := $(foreach s,$(MAIN_SRCS),$(BUILD)/$(subst _,-,$(patsubst %_main.c,%,$(notdir $(s)))))
 UNIT_SRCS  := $(wildcard tests/unit/test_*.c)
@@ -103,14 +113,18 @@ $(BUILD)/.cflags: FORCE
 FORCE:
 
 define lib_rule
-$(BUILD)/lib$(1).a: $(call lib_objs,$(1))
+$(call lib_of,$(1)): $(call lib_objs,$(1))
 	@rm -f $$@
 	$(Q)$(AR) rcs $$@ $$^
 endef
 $(foreach d,$(LIBDIRS),$(eval $(call lib_rule,$(d))))
 
+prog_name = $(subst _,-,$(patsubst %_main.c,%,$(notdir $(1))))
+prog_libs = $(if $(PROG_LIBDIRS_$(call prog_name,$(1))),$(foreach d,$(PROG_LIBDIRS_$(call prog_name,$(1))),$(call lib_of,$(d))),$(LIBS))
+# A program may have its own files beside its entry point: <folder>/<name>/*.c for <folder>/<name>_main.c
+# (e.g. recon/brdf_recon/: command handlers of brdf-recon), linked before the libraries.
 define prog_rule
-$(BUILD)/$(subst _,-,$(patsubst %_main.c,%,$(notdir $(1)))): $(patsubst %.c,$(BUILD)/obj/%.o,$(1)) $(LIBS)
+$(BUILD)/$(call prog_name,$(1)): $(patsubst %.c,$(BUILD)/obj/%.o,$(1) $(wildcard $(patsubst %_main.c,%,$(1))/*.c)) $(call prog_libs,$(1))
 	@$(if $(Q),echo "  LD      $$@")
 	$(Q)$(CC) $(LDFLAGS) -o $$@ $$^ $(LDLIBS)
 endef
@@ -185,20 +199,61 @@ demo: deps
 	@ACQ_BUILD=$(abspath $(BUILD)) ACQ_SRC=$(CURDIR) tests/demo.sh
 
 # ---- install ----------------------------------------------------------------------------------------
-install: all
-	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/acquisitiond/config \
-	           $(DESTDIR)/etc/acquisitiond $(DESTDIR)$(PREFIX)/lib/systemd/system \
-	           $(DESTDIR)$(PREFIX)/lib/udev/rules.d
-	install -m 755 $(PROGRAMS) $(DESTDIR)$(PREFIX)/bin/
-	install -m 644 config/*.yaml $(DESTDIR)$(PREFIX)/share/acquisitiond/config/
-	install -m 644 config/bench-real.yaml $(DESTDIR)/etc/acquisitiond/acquisitiond.yaml.example
-	sed 's|@BINDIR@|$(PREFIX)/bin|g' systemd/acquisitiond.service > $(DESTDIR)$(PREFIX)/lib/systemd/system/acquisitiond.service
-	install -m 644 systemd/*.rules $(DESTDIR)$(PREFIX)/lib/udev/rules.d/
+# Man pages from scdoc sources (systemd/man/NAME.SECTION.scd -> build/man/NAME.SECTION).
+MAN_SRCS   := $(wildcard systemd/man/*.scd)
+MANS       := $(patsubst systemd/man/%.scd,$(BUILD)/man/%,$(MAN_SRCS))
+SYSCONFDIR ?= /etc
+UDEVDIR    ?= $(PREFIX)/lib/udev
+DATADIR    := $(PREFIX)/share/acquisitiond
+DOCDIR     := $(PREFIX)/share/doc/acquisitiond
+MANDIR     := $(PREFIX)/share/man
+COMPDIR    := $(PREFIX)/share/bash-completion/completions
+UNITDIR    := $(PREFIX)/lib/systemd/system
+DOCS       := README.md recon/reconstruction.md recon/output.md
+# Every file `install` writes (uninstall removes exactly these, then the folders that are ours).
+INSTALLED  := $(addprefix $(PREFIX)/bin/,$(notdir $(PROGRAMS))) \
+              $(foreach m,$(MAN_SRCS),$(MANDIR)/man$(subst .,,$(suffix $(basename $(m))))/$(notdir $(basename $(m)))) \
+              $(COMPDIR)/acqctl $(COMPDIR)/acq-sim $(PREFIX)/lib/sysusers.d/acquisitiond.conf \
+              $(PREFIX)/lib/tmpfiles.d/acquisitiond.conf $(UNITDIR)/acquisitiond.service \
+              $(UDEVDIR)/rules.d/60-avaspec.rules $(SYSCONFDIR)/acquisitiond/acquisitiond.yaml.example
 
+man: $(MANS)
+
+$(BUILD)/man/%: systemd/man/%.scd
+	@mkdir -p $(dir $@)
+	$(Q)scdoc < $< > $@.tmp && mv $@.tmp $@
+
+install: all
+	@$(MAKE) --no-print-directory install-files
+
+# The copy alone (the programs must be built): the install test runs it on a finished build.
+install-files: $(MANS)
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(DATADIR)/config $(DESTDIR)$(DOCDIR) \
+	           $(DESTDIR)$(MANDIR)/man1 $(DESTDIR)$(MANDIR)/man5 $(DESTDIR)$(MANDIR)/man8 $(DESTDIR)$(COMPDIR) \
+	           $(DESTDIR)$(PREFIX)/lib/sysusers.d $(DESTDIR)$(PREFIX)/lib/tmpfiles.d $(DESTDIR)$(UNITDIR) \
+	           $(DESTDIR)$(UDEVDIR)/rules.d $(DESTDIR)$(SYSCONFDIR)/acquisitiond
+	install -m 755 $(PROGRAMS) $(DESTDIR)$(PREFIX)/bin/
+	install -m 644 config/*.yaml $(DESTDIR)$(DATADIR)/config/
+	install -m 644 daemon/schema.sql proto/schema/acqctl-replies.schema.json $(DESTDIR)$(DATADIR)/
+	install -m 644 $(DOCS) $(DESTDIR)$(DOCDIR)/
+	for m in $(MANS); do n=$$(basename $$m); install -m 644 $$m $(DESTDIR)$(MANDIR)/man$${n##*.}/$$n; done
+	install -m 644 systemd/acqctl.bash-completion $(DESTDIR)$(COMPDIR)/acqctl
+	install -m 644 systemd/acqctl.bash-completion $(DESTDIR)$(COMPDIR)/acq-sim
+	install -m 644 systemd/acquisitiond.sysusers $(DESTDIR)$(PREFIX)/lib/sysusers.d/acquisitiond.conf
+	install -m 644 systemd/acquisitiond.tmpfiles $(DESTDIR)$(PREFIX)/lib/tmpfiles.d/acquisitiond.conf
+	install -m 644 config/bench-real.yaml $(DESTDIR)$(SYSCONFDIR)/acquisitiond/acquisitiond.yaml.example
+	sed 's|@BINDIR@|$(PREFIX)/bin|g' systemd/acquisitiond.service > $(DESTDIR)$(UNITDIR)/acquisitiond.service
+	install -m 644 systemd/*.rules $(DESTDIR)$(UDEVDIR)/rules.d/
+	@echo "installed under $(DESTDIR)$(PREFIX); then: systemd-sysusers; systemd-tmpfiles --create;" \
+	      "udevadm control --reload; cp $(SYSCONFDIR)/acquisitiond/acquisitiond.yaml.example" \
+	      "$(SYSCONFDIR)/acquisitiond/acquisitiond.yaml (edit it); systemctl enable --now acquisitiond"
+
+# Removes every installed file and our own folders; the operator's /etc/acquisitiond/acquisitiond.yaml and the
+# data in /var/lib/acquisitiond are kept.
 uninstall:
-	rm -f $(addprefix $(DESTDIR)$(PREFIX)/bin/,$(notdir $(PROGRAMS)))
-	rm -rf $(DESTDIR)$(PREFIX)/share/acquisitiond
-	rm -f $(DESTDIR)$(PREFIX)/lib/systemd/system/acquisitiond.service
+	rm -f $(addprefix $(DESTDIR),$(INSTALLED))
+	rm -rf $(DESTDIR)$(DATADIR) $(DESTDIR)$(DOCDIR)
+	-rmdir $(DESTDIR)$(SYSCONFDIR)/acquisitiond 2>/dev/null
 
 clean:
 	rm -rf build

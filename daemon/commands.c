@@ -3,24 +3,23 @@
 
 #include <errno.h>
 #include <fcntl.h>
-#include <linux/openat2.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
-#include <sys/syscall.h>
 #include <time.h>
 #include <unistd.h>
 
 #include "acq_version.h"
 #include "daemon/devices.h"
+#include "daemon/export.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
 #include "daemon/sweep.h"
 
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 
 /* ---- helpers ---- */
 
@@ -41,7 +40,8 @@ static json_t *progress_json(struct app *app)
 	sweep_get_progress(app->sweep, &p);
 	json_t *o = json_pack("{s:s,s:I,s:i,s:i,s:s}", "state", sweep_state_name(p.state), "id", (json_int_t)p.sweep_id,
 			      "done", p.points_done, "total", p.points_total, "message", p.message);
-	json_object_set_new(o, "eta_s", isfinite(p.eta_s) ? json_real(p.eta_s) : json_null());
+	/* wall-clock seconds, only while running: a paused sweep has no ETA that counts down */
+	json_object_set_new(o, "eta_s", p.state == SWEEP_RUNNING && isfinite(p.eta_s) ? json_real(p.eta_s) : json_null());
 	return o;
 }
 
@@ -56,27 +56,18 @@ static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_
 		plan_spec_free(spec);
 		return reply_err(app, peer, req->id, &err);
 	}
-	/* The points that were moved or dropped, and why (bounded so the reply stays one line). */
-	json_t *changed = json_array();
-	for (size_t i = 0; i < res->n_req && json_array_size(changed) < 200; i++) {
-		const struct plan_req *r = &res->req[i];
-		if (r->status != PLAN_MOVED && r->status != PLAN_DROPPED)
-			continue;
-		json_array_append_new(changed, json_pack("{s:[f,f,f],s:s,s:s,s:f}", "requested", r->req.laser_theta,
-							 r->req.det_theta, r->req.det_phi, "status",
-							 r->status == PLAN_MOVED ? "moved" : "dropped", "reason",
-							 plan_reason_name(r->reason), "moved_deg", r->moved_deg));
+	struct plan_timing tm;
+	sweep_plan_timing(app->sweep, &tm);
+	plan_time_apply(spec, &app->conf->bench, &tm, res);
+	/* The same object as the local dry run (acqctl renders both alike). */
+	json_t *o = plan_to_json(spec, res, json_is_true(json_object_get(req->root, "points")));
+	if (o) {
+		json_object_set_new(o, "bench_config", json_string(app->conf->path));
+		json_object_set_new(o, "time_scale", json_real(tm.time_scale)); /* bench seconds per wall second */
 	}
-	json_t *o = json_pack("{s:s,s:I,s:I,s:I,s:I,s:I,s:I,s:f,s:f,s:f,s:f,s:f,s:[f,f,f],s:I,s:o}", "name", spec->name,
-			      "requested", (json_int_t)res->n_req, "points", (json_int_t)res->n_steps, "kept",
-			      (json_int_t)res->n_kept, "moved", (json_int_t)res->n_moved, "dropped",
-			      (json_int_t)res->n_dropped, "duplicates", (json_int_t)res->n_duplicate, "duration_s",
-			      res->duration_s, "raster_s", res->raster_s, "lower_bound_s", res->lower_bound_s, "dwell_s",
-			      res->dwell_s, "motion_s", res->motion_s, "travel_deg", res->travel_deg[0], res->travel_deg[1],
-			      res->travel_deg[2], "detours", (json_int_t)res->n_detours, "changed", changed);
 	plan_result_free(res);
 	plan_spec_free(spec);
-	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "plan", o));
+	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o,s:s}", "plan", o, "source", "daemon"));
 }
 
 /* A manual move must not make the arms collide, on the way or at the target (straight
@@ -186,7 +177,193 @@ static void cmd_measure(struct app *app, const struct srv_peer *peer, struct pro
 	}
 }
 
+/* home [axis]: one axis by its name (laser.theta or laser_theta, ...), or all three one after the other
+ * (detector.phi first), each only if its way to the home position (0°) is collision-free. */
+struct homing {
+	struct app *app;
+	uint64_t serial;
+	json_t *id;
+	unsigned todo;       /* axes left, as bits */
+	json_t *homed;       /* names homed so far */
+};
+
+static void home_next(struct homing *h);
+
+static void home_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
+{
+	struct homing *h = ctx;
+	json_decref(result);
+	if (rc) {
+		server_reply_error(h->app->srv, h->serial, h->id, proto_code_of(err), err->msg);
+		json_decref(h->homed);
+		json_decref(h->id);
+		free(h);
+		return;
+	}
+	home_next(h);
+}
+
+static void home_next(struct homing *h)
+{
+	static const int order[3] = { CONF_DEV_DETECTOR_PHI, CONF_DEV_LASER_THETA, CONF_DEV_DETECTOR_THETA };
+	struct acq_err err = { 0 };
+	for (int k = 0; k < 3; k++) {
+		int a = order[k];
+		if (!(h->todo & (1u << a)))
+			continue;
+		h->todo &= ~(1u << a);
+		double t[3] = { NAN, NAN, NAN };
+		t[a] = 0;
+		const char *warning;
+		if (move_check(h->app, t, &warning, &err)) {
+			acq_err_prefix(&err, "home %s: ", conf_dev_name((enum conf_dev)a));
+			goto fail;
+		}
+		if (devices_home(h->app->dev, 1u << a, home_done, h, &err))
+			goto fail;
+		json_array_append_new(h->homed, json_string(conf_dev_name((enum conf_dev)a)));
+		return;
+	}
+	double pos[3];
+	devices_positions(h->app->dev, pos);
+	json_t *o = json_pack("{s:O}", "homed", h->homed);
+	for (int i = 0; i < 3; i++)
+		json_object_set_new(o, conf_dev_name((enum conf_dev)i), isnan(pos[i]) ? json_null() : json_real(pos[i]));
+	server_reply(h->app->srv, h->serial, h->id, o);
+	goto out;
+fail:
+	server_reply_error(h->app->srv, h->serial, h->id, proto_code_of(&err), err.msg);
+out:
+	json_decref(h->homed);
+	json_decref(h->id);
+	free(h);
+}
+
+static void cmd_home(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep) || devices_busy(app->dev)) {
+		acq_errf(&err, ACQ_E_STATE, sweep_busy(app->sweep) ? "a sweep is loaded: abort it before homing by hand"
+								   : "a manual operation is running (acqctl stop ends it)");
+		return reply_err(app, peer, req->id, &err);
+	}
+	const char *axis = json_string_value(json_object_get(req->root, "axis"));
+	unsigned mask = 0;
+	if (!axis || !strcmp(axis, "all"))
+		mask = 7;
+	for (int i = 0; i < 3 && !mask; i++) {
+		char alt[32];
+		snprintf(alt, sizeof alt, "%s", conf_dev_name((enum conf_dev)i));
+		for (char *q = alt; *q; q++)
+			if (*q == '.')
+				*q = '_';
+		if (!strcmp(axis, conf_dev_name((enum conf_dev)i)) || !strcmp(axis, alt))
+			mask = 1u << i;
+	}
+	if (!mask) {
+		acq_errf(&err, ACQ_E_INVAL, "home: unknown axis \"%s\" (laser_theta, detector_theta, detector_phi or all)",
+			 axis);
+		return reply_err(app, peer, req->id, &err);
+	}
+	struct homing *h = calloc(1, sizeof *h);
+	if (!h || !(h->homed = json_array())) {
+		free(h);
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return reply_err(app, peer, req->id, &err);
+	}
+	*h = (struct homing){ .app = app, .serial = peer->serial, .id = json_incref(req->id), .todo = mask,
+			      .homed = h->homed };
+	home_next(h);
+}
+
+/* stop: a manual move, homing or measurement (a sweep is stopped with sweep pause/abort). */
+static void cmd_stop(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep)) {
+		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: use sweep pause or sweep abort");
+		return reply_err(app, peer, req->id, &err);
+	}
+	bool stopped = false;
+	if (devices_stop(app->dev, &stopped, &err))
+		return reply_err(app, peer, req->id, &err);
+	double pos[3];
+	devices_positions(app->dev, pos);
+	json_t *o = json_pack("{s:b}", "stopped", stopped);
+	for (int i = 0; i < 3; i++)
+		json_object_set_new(o, conf_dev_name((enum conf_dev)i), isnan(pos[i]) ? json_null() : json_real(pos[i]));
+	server_reply(app->srv, peer->serial, req->id, o);
+}
+
+static void cmd_laser_off(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep))
+		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: sweep pause or sweep abort switches the laser off");
+	else if (!devices_busy(app->dev) && !devices_laser_off(app->dev, &err)) {
+		log_msg(LOG_NOTICE, "laser switched off by the operator (uid %u)", (unsigned)peer->uid);
+		return server_reply(app->srv, peer->serial, req->id, json_pack("{s:b}", "emission", 0));
+	} else if (!err.code)
+		acq_errf(&err, ACQ_E_STATE, "a manual measurement is running: acqctl stop ends it with the laser off");
+	reply_err(app, peer, req->id, &err);
+}
+
+static void cmd_spectrum(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	json_t *s = store_spectrum_json(app->store, (int64_t)num_arg(req->root, "spectrum", 0), &err);
+	if (!s)
+		return reply_err(app, peer, req->id, &err);
+	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "spectrum", s));
+}
+
 /* ---- sweeps ---- */
+
+/* The reply to sweep.pause/resume/abort once the sweep is in the state the command leads to (paused, running,
+ * released), or after 10 s of the loop's clock with the state then: replies show the state after the command. */
+struct later {
+	struct app *app;
+	uint64_t serial;
+	json_t *id;
+	double deadline;
+	uint64_t timer;
+	enum sweep_state want;   /* SWEEP_IDLE: released */
+};
+
+static bool later_reached(const struct later *l)
+{
+	struct sweep_progress p;
+	sweep_get_progress(l->app->sweep, &p);
+	if (l->want == SWEEP_IDLE)
+		return !sweep_busy(l->app->sweep);
+	/* a fault or the end of the sweep also settles it */
+	return p.state == l->want || p.state == SWEEP_FAULTED || !sweep_busy(l->app->sweep);
+}
+
+static void later_check(struct loop *lp, void *arg)
+{
+	struct later *l = arg;
+	if (!later_reached(l) && loop_now(lp) < l->deadline)
+		return;
+	loop_timer_cancel(lp, l->timer);
+	server_reply(l->app->srv, l->serial, l->id, json_pack("{s:o}", "progress", progress_json(l->app)));
+	json_decref(l->id);
+	free(l);
+}
+
+static void reply_when(struct app *app, const struct srv_peer *peer, json_t *id, enum sweep_state want)
+{
+	struct later *l = calloc(1, sizeof *l);
+	if (l) {
+		*l = (struct later){ .app = app, .serial = peer->serial, .id = json_incref(id),
+				     .deadline = loop_now(app->lp) + 10, .want = want };
+		if ((l->timer = loop_timer_add(app->lp, 0, 0.02, later_check, l)))
+			return;
+		json_decref(l->id);
+		free(l);
+	}
+	server_reply(app->srv, peer->serial, id, json_pack("{s:o}", "progress", progress_json(app)));
+}
 static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto_req *req)
 {
 	struct acq_err err = { 0 };
@@ -213,13 +390,16 @@ static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto
 			rc = sweep_start(app->sweep, json_string_value(json_object_get(req->root, "plan")),
 					 name ? json_string_value(name) : NULL, &id, &err);
 		if (!rc)
-			data = json_pack("{s:I}", "sweep", (json_int_t)id);
+			data = json_pack("{s:I,s:o}", "sweep", (json_int_t)id, "progress", progress_json(app));
 	} else if (!strcmp(sub, "pause")) {
-		rc = sweep_pause(app->sweep, &err);
+		if (!(rc = sweep_pause(app->sweep, &err)))
+			return reply_when(app, peer, req->id, SWEEP_PAUSED);
 	} else if (!strcmp(sub, "resume")) {
-		rc = sweep_resume(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &err);
+		if (!(rc = sweep_resume(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &err)))
+			return reply_when(app, peer, req->id, SWEEP_RUNNING);
 	} else if (!strcmp(sub, "abort")) {
-		rc = sweep_abort(app->sweep, &err);
+		if (!(rc = sweep_abort(app->sweep, &err)))
+			return reply_when(app, peer, req->id, SWEEP_IDLE);
 	}
 	if (rc)
 		return reply_err(app, peer, req->id, &err);
@@ -265,88 +445,16 @@ static void cmd_recon_status(struct app *app, const struct srv_peer *peer, struc
 	struct acq_err err = { 0 };
 	int64_t run = (int64_t)num_arg(req->root, "run", 0), sweep = (int64_t)num_arg(req->root, "sweep", 0);
 	if (!run && !sweep) {
-		if (!app->recon_run && !app->recon_sweep) {
-			acq_errf(&err, ACQ_E_NOTFOUND, "no reconstruction started since the daemon started; give sweep or run");
+		/* the latest run, whoever started it (recon.start or the end of a sweep) */
+		if (!(run = store_recon_latest(app->store))) {
+			acq_errf(&err, ACQ_E_NOTFOUND, "no reconstruction has run yet; give sweep or run");
 			return reply_err(app, peer, req->id, &err);
 		}
-		run = app->recon_run;
-		sweep = run ? 0 : app->recon_sweep;
 	}
 	json_t *r = store_recon_show(app->store, run, sweep, &err);
 	if (!r)
 		return reply_err(app, peer, req->id, &err);
 	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "run", r));
-}
-
-/* ---- export ---- */
-
-/* Open path for writing confined beneath the state directory: openat2(RESOLVE_BENEATH) refuses "..",
- * absolute paths and symlinks that leave it, whatever the path's shape. fd or -1 with err. */
-static int open_confined(const char *state_dir, const char *path, struct acq_err *err)
-{
-	if (!path[0] || path[0] == '/' || strstr(path, ".."))
-		return acq_errf(err, ACQ_E_INVAL, "path \"%s\": expected a relative path under the state directory "
-				"without \"..\"", path);
-	int dfd = open(state_dir, O_PATH | O_DIRECTORY | O_CLOEXEC);
-	if (dfd < 0)
-		return acq_errf(err, ACQ_E_IO, "%s: %s", state_dir, strerror(errno));
-	struct open_how how = { .flags = O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NOFOLLOW, .mode = 0640,
-				.resolve = RESOLVE_BENEATH | RESOLVE_NO_MAGICLINKS };
-	int fd = (int)syscall(SYS_openat2, dfd, path, &how, sizeof how);
-	int e = errno;
-	close(dfd);
-	if (fd < 0)
-		return acq_errf(err, e == EXDEV || e == ELOOP ? ACQ_E_INVAL : ACQ_E_IO, "path \"%s\": %s%s", path,
-				strerror(e), e == EXDEV ? " (leaves the state directory)" : "");
-	return fd;
-}
-
-static void cmd_export(struct app *app, const struct srv_peer *peer, struct proto_req *req)
-{
-	struct acq_err err = { 0 };
-	int64_t sweep = (int64_t)num_arg(req->root, "sweep", 0);
-	json_t *pathv = json_object_get(req->root, "path");
-	if (pathv && peer->role < PROTO_CONTROLLER) {
-		server_reply_error(app->srv, peer->serial, req->id, PROTO_E_FORBIDDEN,
-				   "export to a file needs a controller; observers get the CSV inline");
-		return;
-	}
-	char *buf = NULL;
-	size_t len = 0;
-	FILE *f = open_memstream(&buf, &len);
-	int nrows = 0;
-	int rc = f ? store_export_csv(app->store, sweep, f, &nrows, &err) : acq_errf(&err, ACQ_E_NOMEM, "out of memory");
-	if (f)
-		fclose(f);
-	if (rc) {
-		free(buf);
-		return reply_err(app, peer, req->id, &err);
-	}
-	if (pathv) {
-		const char *path = json_string_value(pathv);
-		int fd = open_confined(app->conf->d.state_dir, path, &err);
-		if (fd < 0 || proto_write_all(fd, buf, len, &err)) {
-			if (fd >= 0)
-				close(fd);
-			free(buf);
-			return reply_err(app, peer, req->id, &err);
-		}
-		close(fd);
-		free(buf);
-		server_reply(app->srv, peer->serial, req->id,
-			     json_pack("{s:I,s:i,s:s,s:I}", "sweep", (json_int_t)sweep, "rows", nrows, "path", path, "bytes",
-				       (json_int_t)len));
-		return;
-	}
-	if (len > PROTO_MAX_LINE / 2) {
-		free(buf);
-		acq_errf(&err, ACQ_E_RANGE, "CSV of sweep %lld is %zu bytes: too large inline, give a path", (long long)sweep,
-			 len);
-		return reply_err(app, peer, req->id, &err);
-	}
-	server_reply(app->srv, peer->serial, req->id,
-		     json_pack("{s:I,s:i,s:s%}", "sweep", (json_int_t)sweep, "rows", nrows, "csv", buf, len));
-	free(buf);
 }
 
 /* ---- information ---- */
@@ -389,12 +497,17 @@ static json_t *status_json(struct app *app)
 	server_counts(app->srv, &clients, &watchers);
 	char line[256];
 	app_status_line(app, line, sizeof line);
+	int64_t rrun = store_recon_latest(app->store), rsweep = 0;
+	if (rrun) {
+		json_t *r = store_recon_show(app->store, rrun, 0, NULL);
+		rsweep = (int64_t)json_integer_value(json_object_get(r, "sweep_id"));
+		json_decref(r);
+	}
 	return json_pack("{s:s,s:s,s:i,s:f,s:f,s:o,s:{s:i,s:i},s:i,s:i,s:{s:b,s:I,s:I},s:s,s:b}", "daemon", "running",
-			 "version", ACQ_VERSION, "pid", (int)getpid(), "uptime_s", loop_now(app->lp) - app->started_mono,
+			 "version", ACQ_VERSION, "pid", (int)getpid(), "uptime_s", app_wallclock() - app->started_wall,
 			 "started_at", app->started_wall, "sweep", progress_json(app), "devices", "available",
 			 devices_available(app->dev), "total", CONF_DEV__COUNT, "clients", clients, "watchers", watchers,
-			 "recon", "running", sweep_recon_busy(app->sweep), "run", (json_int_t)app->recon_run, "sweep",
-			 (json_int_t)app->recon_sweep, "summary", line, "sim", app->have_sim);
+			 "recon", "running", sweep_recon_busy(app->sweep), "run", (json_int_t)rrun, "sweep", (json_int_t)rsweep, "summary", line, "sim", app->have_sim);
 }
 
 void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *req)
@@ -420,6 +533,14 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
 		cmd_sweep(app, peer, req);
 	} else if (!strcmp(cmd, "move")) {
 		cmd_move(app, peer, req);
+	} else if (!strcmp(cmd, "home")) {
+		cmd_home(app, peer, req);
+	} else if (!strcmp(cmd, "stop")) {
+		cmd_stop(app, peer, req);
+	} else if (!strcmp(cmd, "laser.off")) {
+		cmd_laser_off(app, peer, req);
+	} else if (!strcmp(cmd, "spectrum")) {
+		cmd_spectrum(app, peer, req);
 	} else if (!strcmp(cmd, "measure")) {
 		cmd_measure(app, peer, req, "sample");
 	} else if (!strcmp(cmd, "dark") || !strcmp(cmd, "reference")) {
@@ -429,7 +550,7 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
 	} else if (!strcmp(cmd, "recon.status")) {
 		cmd_recon_status(app, peer, req);
 	} else if (!strcmp(cmd, "export")) {
-		cmd_export(app, peer, req);
+		export_handle(app, peer, req);
 	} else if (!strcmp(cmd, "reload")) {
 		if (app_reload(app, &err))
 			reply_err(app, peer, req->id, &err);

@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "daemon/executor.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
@@ -22,7 +23,8 @@ struct dev_slot {
 const struct devices_drv devices_real_drv = {
 	axis_open, axis_close, axis_cfg_limits, axis_read_status, axis_move_begin, axis_move_step, axis_stop,
 	axis_identity, spectro_open, spectro_close, spectro_info, spectro_start, spectro_fetch, spectro_stop,
-	laser_open, laser_close, laser_set_emission, laser_set_power, laser_status, laser_identity,
+	laser_open, laser_close, laser_set_emission, laser_set_power, laser_status, laser_identity, axis_home_begin,
+	axis_alarm_reset,
 };
 
 struct devices {
@@ -319,6 +321,16 @@ json_t *devices_json(struct devices *dv)
 
 /* ---- manual operations ---- */
 
+/* Name the device in a driver's message unless the driver already did (the log said "x: x: ..."). -1. */
+static int name_err(struct acq_err *err, enum conf_dev d)
+{
+	const char *name = conf_dev_name(d);
+	size_t n = strlen(name);
+	if (err && strncmp(err->msg, name, n))
+		acq_err_prefix(err, "%s: ", name);
+	return -1;
+}
+
 static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t *result)
 {
 	loop_timer_cancel(dv->lp, dv->op_timer);
@@ -332,6 +344,7 @@ static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t
 		done(dv->op_ctx, rc, err, result);
 	else
 		json_decref(result);
+	dv->op_kind[0] = 0;
 }
 
 static void move_step(struct loop *lp, void *arg)
@@ -349,7 +362,7 @@ static void move_step(struct loop *lp, void *arg)
 		}
 		int r = dv->drv->axis_move_step(dv->axis[i], now, &err);
 		if (r == AXIS_MOVE_FAILED) {
-			acq_err_prefix(&err, "%s: ", conf_dev_name((enum conf_dev)i));
+			name_err(&err, (enum conf_dev)i);
 			goto fail;
 		}
 		if (r == AXIS_MOVE_DONE)
@@ -378,6 +391,34 @@ fail:
 	op_end(dv, -1, &err, NULL);
 }
 
+#define HOME_TARGET INFINITY  /* begin_axes(): home this axis instead of moving it */
+
+/* Start the manual operation on the axes whose target is not NaN (HOME_TARGET: homing), watched by
+ * move_step() until they are done or timeout_s passed. 0, or -1 with every started axis stopped again. */
+static int begin_axes(struct devices *dv, const double target[3], double timeout_s, devices_done_fn done, void *ctx,
+		      struct acq_err *err)
+{
+	double now = loop_now(dv->lp);
+	for (int i = 0; i < 3; i++) {
+		dv->op_axis[i] = false;
+		if (isnan(target[i]))
+			continue;
+		if (isinf(target[i]) ? dv->drv->axis_home_begin(dv->axis[i], now, err)
+				     : dv->drv->axis_move_begin(dv->axis[i], target[i], now, err)) {
+			for (int j = 0; j < i; j++)
+				if (dv->op_axis[j])
+					dv->drv->axis_stop(dv->axis[j], NULL);
+			return name_err(err, (enum conf_dev)i);
+		}
+		dv->op_axis[i] = true;
+	}
+	dv->op_done = done;
+	dv->op_ctx = ctx;
+	dv->op_deadline = now + timeout_s;
+	dv->op_timer = loop_timer_add(dv->lp, 0.05, 0.05, move_step, dv);
+	return 0;
+}
+
 int devices_move(struct devices *dv, const double target[3], devices_done_fn done, void *ctx, struct acq_err *err)
 {
 	if (dv->op_timer)
@@ -400,23 +441,62 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 	}
 	if (!any)
 		return acq_errf(err, ACQ_E_INVAL, "move: give at least one of laser_theta, detector_theta, detector_phi");
-	double now = loop_now(dv->lp);
+	return begin_axes(dv, target, dv->c->sweep.move_timeout_s, done, ctx, err);
+}
+
+int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *ctx, struct acq_err *err)
+{
+	if (dv->op_timer)
+		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
+	for (int i = 0; i < 3; i++)
+		if ((mask & (1u << i)) && !dv->axis[i])
+			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", conf_dev_name((enum conf_dev)i),
+					dv->slot[i].note[0] ? dv->slot[i].note : "not configured");
+	if (!(mask & 7u))
+		return acq_errf(err, ACQ_E_INVAL, "home: no axis selected");
+	double t[3];
 	for (int i = 0; i < 3; i++) {
-		dv->op_axis[i] = false;
-		if (isnan(target[i]))
-			continue;
-		if (dv->drv->axis_move_begin(dv->axis[i], target[i], now, err)) {
-			for (int j = 0; j < i; j++)
-				if (dv->op_axis[j])
-					dv->drv->axis_stop(dv->axis[j], NULL);
-			return acq_err_prefix(err, "%s: ", conf_dev_name((enum conf_dev)i));
-		}
-		dv->op_axis[i] = true;
+		t[i] = mask & (1u << i) ? HOME_TARGET : NAN;
+		struct axis_status st;
+		if ((mask & (1u << i)) && !dv->drv->axis_read_status(dv->axis[i], &st, NULL) && st.alarm &&
+		    dv->drv->axis_alarm_reset(dv->axis[i], err))
+			return acq_err_prefix(err, "%s: resetting its alarm: ", conf_dev_name((enum conf_dev)i));
 	}
-	dv->op_done = done;
-	dv->op_ctx = ctx;
-	dv->op_deadline = now + dv->c->sweep.move_timeout_s;
-	dv->op_timer = loop_timer_add(dv->lp, 0.05, 0.05, move_step, dv);
+	/* a homing run is slower than a move */
+	return begin_axes(dv, t, 4 * dv->c->sweep.move_timeout_s, done, ctx, err);
+}
+
+int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err)
+{
+	*stopped = dv->op_timer != 0;
+	int rc = 0;
+	for (int i = 0; i < 3; i++) /* every axis, moving or not: whatever moves stops */
+		if (dv->axis[i] && dv->drv->axis_stop(dv->axis[i], err))
+			rc = name_err(err, (enum conf_dev)i);
+	if (*stopped && dv->op_kind[0] && dv->spectro)
+		dv->drv->spectro_stop(dv->spectro, NULL);
+	if (*stopped) {
+		struct acq_err e = { 0 };
+		acq_errf(&e, ACQ_E_STATE, "stopped by the operator");
+		for (int i = 0; i < 3; i++)
+			dv->op_axis[i] = false;
+		op_end(dv, -1, &e, NULL); /* also switches off a laser it switched on */
+	}
+	return rc;
+}
+
+int devices_laser_off(struct devices *dv, struct acq_err *err)
+{
+	if (!dv->laser)
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "laser: unavailable (%s)",
+				dv->slot[CONF_DEV_LASER].note[0] ? dv->slot[CONF_DEV_LASER].note : "not configured");
+	if (dv->drv->laser_set_emission(dv->laser, false, err))
+		return acq_err_prefix(err, "laser: ");
+	struct laser_status ls;
+	if (dv->drv->laser_status(dv->laser, &ls, err))
+		return acq_err_prefix(err, "laser: ");
+	if (ls.emission)
+		return acq_errf(err, ACQ_E_DEVICE, "laser: emission still reported on after switching it off");
 	return 0;
 }
 
@@ -502,4 +582,182 @@ int devices_measure(struct devices *dv, const char *kind, double integration_ms,
 	/* Polled by timer: a measurement takes milliseconds to seconds, 10 ms granularity is plenty. */
 	dv->op_timer = loop_timer_add(dv->lp, 0.01, 0.01, measure_step, dv);
 	return 0;
+}
+
+/* ---- the sweep executor's device operations over these handles (executor.h) ------------------------- */
+
+static struct axis *ax_of(struct devices *dv, int a, struct acq_err *err)
+{
+	struct axis *ax = devices_axis(dv, (enum conf_dev)a);
+	if (!ax)
+		acq_errf(err, ACQ_E_DISCONNECTED, "%s unavailable", conf_dev_name((enum conf_dev)a));
+	return ax;
+}
+
+static int o_move_begin(void *ctx, int a, double target, double now, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	return ax ? axis_move_begin(ax, target, now, err) : -1;
+}
+
+static int o_move_step(void *ctx, int a, double now, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	return ax ? axis_move_step(ax, now, err) : AXIS_MOVE_FAILED;
+}
+
+static double o_next_poll(void *ctx, int a)
+{
+	struct devices *dv = ctx;
+	struct axis *ax = devices_axis(dv, (enum conf_dev)a);
+	return ax ? axis_next_poll(ax) : loop_now(dv->lp);
+}
+
+static int o_stop(void *ctx, int a, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	return ax ? axis_stop(ax, err) : -1;
+}
+
+static int o_position(void *ctx, int a, double *deg, bool *homed, bool *alarm, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	struct axis_status st;
+	if (!ax || axis_read_status(ax, &st, err))
+		return -1;
+	*deg = st.position_deg;
+	*homed = st.homed;
+	*alarm = st.alarm;
+	return 0;
+}
+
+static int o_home_begin(void *ctx, int a, double now, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	return ax ? axis_home_begin(ax, now, err) : -1;
+}
+
+static int o_alarm_reset(void *ctx, int a, struct acq_err *err)
+{
+	struct axis *ax = ax_of(ctx, a, err);
+	return ax ? axis_alarm_reset(ax, err) : -1;
+}
+
+static int o_laser_set(void *ctx, bool on, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct laser *l = devices_laser(dv);
+	if (!l)
+		return on ? acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable") : 0; /* absent = dark */
+	return laser_set_emission(l, on, err);
+}
+
+static int o_laser_power(void *ctx, double pct, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct laser *l = devices_laser(dv);
+	if (!l)
+		return acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable");
+	return laser_set_power(l, pct, err);
+}
+
+static int o_laser_state(void *ctx, bool *emission, bool *ready, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct laser *l = devices_laser(dv);
+	struct laser_status st;
+	if (!l)
+		return acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable");
+	if (laser_status(l, &st, err))
+		return -1;
+	*emission = st.emission;
+	*ready = st.interlock_ok && !st.fault;
+	return 0;
+}
+
+/* The daemon's device manager reconnects on its own timer; here: is the device back and answering? */
+static int o_reconnect(void *ctx, int dev, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	if (dev <= EX_DEV_DETECTOR_PHI) {
+		bool homed, alarm;
+		double d;
+		return o_position(ctx, dev, &d, &homed, &alarm, err);
+	}
+	if (dev == EX_DEV_SPECTRO) {
+		struct spectro *s = devices_spectro(dv);
+		return s && spectro_info(s) ? 0 : acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
+	}
+	bool e, r;
+	return o_laser_state(ctx, &e, &r, err);
+}
+
+static int o_spectro_start(void *ctx, const struct spectro_meas *m, double now, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct spectro *s = devices_spectro(dv);
+	if (!s)
+		return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
+	return spectro_start(s, m, now, err);
+}
+
+static int o_spectro_fetch(void *ctx, struct spectro_frame *f, double now, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct spectro *s = devices_spectro(dv);
+	if (!s)
+		return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
+	return spectro_fetch(s, f, now, err);
+}
+
+static int o_spectro_stop(void *ctx, struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	struct spectro *s = devices_spectro(dv);
+	return s ? spectro_stop(s, err) : 0;
+}
+
+static const struct spectro_info *o_spectro_info(void *ctx)
+{
+	struct devices *dv = ctx;
+	struct spectro *s = devices_spectro(dv);
+	return s ? spectro_info(s) : NULL;
+}
+
+static double o_wall(void *ctx)
+{
+	struct devices *dv = ctx;
+	return dv->wallclock();
+}
+
+/* A link-level failure hands the device back to the manager (close, reconnect on its timer); a device that
+ * answered with an error (alarm, interlock) keeps its handle. */
+static void o_lost(void *ctx, int dev, const struct acq_err *err)
+{
+	struct devices *dv = ctx;
+	int code = err ? err->code : ACQ_E_DEVICE;
+	if (code == ACQ_E_TIMEOUT || code == ACQ_E_DISCONNECTED || code == ACQ_E_IO || code == ACQ_E_PROTO)
+		if (dev != EX_DEV_SPECTRO || devices_spectro(dv))
+			devices_lost(dv, (enum conf_dev)dev, err ? err->msg : "device error");
+}
+
+static void o_limits(void *ctx, int a, double *lo, double *hi)
+{
+	struct devices *dv = ctx;
+	const struct axis_cfg *c = a >= 0 && a < 3 ? dv->c->axis[a] : NULL;
+	if (c)
+		axis_cfg_limits(c, lo, hi);
+}
+
+static const struct ex_ops ex_dev_ops = {
+	.move_begin = o_move_begin, .move_step = o_move_step, .next_poll = o_next_poll, .stop = o_stop,
+	.position = o_position, .home_begin = o_home_begin, .alarm_reset = o_alarm_reset, .reconnect = o_reconnect,
+	.laser_set = o_laser_set, .laser_power = o_laser_power, .laser_state = o_laser_state, .spectro_start = o_spectro_start,
+	.spectro_fetch = o_spectro_fetch, .spectro_stop = o_spectro_stop, .spectro_info = o_spectro_info,
+	.wall = o_wall, .lost = o_lost, .limits = o_limits,
+};
+
+const struct ex_ops *devices_ex_ops(void)
+{
+	return &ex_dev_ops;
 }

@@ -52,6 +52,8 @@ struct devices_drv {
 	int (*laser_set_power)(struct laser *l, double pct, struct acq_err *err);
 	int (*laser_status)(struct laser *l, struct laser_status *st, struct acq_err *err);
 	const struct laser_identity *(*laser_identity)(const struct laser *l);
+	int (*axis_home_begin)(struct axis *ax, double now, struct acq_err *err);
+	int (*axis_alarm_reset)(struct axis *ax, struct acq_err *err);
 };
 extern const struct devices_drv devices_real_drv;
 
@@ -90,6 +92,11 @@ json_t *devices_json(struct devices *dv);
 /* True while a manual move or measurement runs. */
 bool devices_busy(const struct devices *dv);
 
+/* The sweep executor's device operations over these handles (ctx: the struct devices): the drivers of the
+ * open devices, ACQ_E_DISCONNECTED for an absent one, link failures handed to devices_lost(). */
+struct ex_ops;
+const struct ex_ops *devices_ex_ops(void);
+
 /* Manual move to absolute angles (NaN: leave that axis). Soft limits are checked first (ACQ_E_RANGE);
  * a missing axis gives ACQ_E_UNSUPPORTED. done(ctx, ok, err, result) is called once from the loop. */
 typedef void (*devices_done_fn)(void *ctx, int rc, const struct acq_err *err, json_t *result);
@@ -97,6 +104,14 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 /* One spectrum of kind "sample", "dark" (laser off first) or "reference" (laser on for the measurement
  * only, at power_pct unless NaN), stored in the database; result {spectrum_id, kind, npix, peak, saturated,
  * integration_ms, averages}. 0 (started) or -1. */
+/* Home the axes whose mask bit (1 << axis) is set (their alarms reset first), together; done(ctx, rc, err, positions) at the end, like
+ * devices_move(). -1 with err if an operation runs or an axis is unavailable. */
+int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *ctx, struct acq_err *err);
+/* Stop every available axis (deceleration) and the running manual operation (laser off, acquisition stopped);
+ * its done() gets an ACQ_E_STATE "stopped by the operator" error. *stopped: whether one was running. 0 or -1. */
+int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err);
+/* Switch the laser emission off (and check it reads back off). 0 or -1 (unavailable, device error). */
+int devices_laser_off(struct devices *dv, struct acq_err *err);
 int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages, double power_pct,
 		    devices_done_fn done, void *ctx, struct acq_err *err);
 

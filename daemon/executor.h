@@ -25,7 +25,7 @@
 #include "config/bench.h"
 #include "daemon/calib.h"
 #include "daemon/exposure.h"
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 #include "drivers/spectro.h"
 
 struct store;
@@ -36,8 +36,8 @@ enum ex_state { EX_IDLE = 0, EX_RUNNING, EX_PAUSED, EX_SUSPENDED, EX_COMPLETED, 
 enum ex_dev { EX_DEV_LASER_THETA = 0, EX_DEV_DETECTOR_THETA, EX_DEV_DETECTOR_PHI, EX_DEV_SPECTRO, EX_DEV_LASER,
 	      EX_DEV__COUNT };
 
-/* Device operations (the real drivers in sweep.c, a test double in the unit tests). Each returns 0 or -1
- * with err unless stated; axis is EX_DEV_LASER_THETA..EX_DEV_DETECTOR_PHI. */
+/* Device operations (the real drivers: devices_ex_ops() in devices.c; a test double in the unit tests). Each
+ * returns 0 or -1 with err unless stated; axis is EX_DEV_LASER_THETA..EX_DEV_DETECTOR_PHI. */
 struct ex_ops {
 	int (*move_begin)(void *ctx, int axis, double target_deg, double now, struct acq_err *err);
 	int (*move_step)(void *ctx, int axis, double now, struct acq_err *err); /* enum axis_move_state */

@@ -30,6 +30,9 @@ struct client {
 	size_t outlen, outcap;
 	bool watch, closing;
 	bool backlog;           /* complete lines left for the next turn */
+	bool has_fd;            /* pass_fd leaves with the byte at offset pass_at of out (SCM_RIGHTS) */
+	int pass_fd;
+	size_t pass_at;
 	struct client *next;
 	struct server *srv;
 };
@@ -59,6 +62,8 @@ static void client_close(struct client *c)
 	srv->nclients--;
 	loop_fd_del(srv->lp, c->fd);
 	close(c->fd);
+	if (c->has_fd)
+		close(c->pass_fd);
 	proto_lines_free(&c->in);
 	free(c->out);
 	free(c);
@@ -82,10 +87,35 @@ static void update_events(struct client *c)
 	loop_fd_events(c->srv->lp, c->fd, ev);
 }
 
+/* send() of the bytes before a passed descriptor, or of the rest with the descriptor attached. */
+static ssize_t send_part(struct client *c)
+{
+	if (!c->has_fd || c->pass_at > 0)
+		return send(c->fd, c->out, c->has_fd ? c->pass_at : c->outlen, MSG_NOSIGNAL | MSG_DONTWAIT);
+	union {
+		char b[CMSG_SPACE(sizeof(int))];
+		struct cmsghdr align;
+	} ctl;
+	memset(&ctl, 0, sizeof ctl);
+	struct iovec iov = { .iov_base = c->out, .iov_len = c->outlen };
+	struct msghdr mh = { .msg_iov = &iov, .msg_iovlen = 1, .msg_control = ctl.b, .msg_controllen = sizeof ctl.b };
+	struct cmsghdr *cm = CMSG_FIRSTHDR(&mh);
+	cm->cmsg_level = SOL_SOCKET;
+	cm->cmsg_type = SCM_RIGHTS;
+	cm->cmsg_len = CMSG_LEN(sizeof(int));
+	memcpy(CMSG_DATA(cm), &c->pass_fd, sizeof(int));
+	ssize_t n = sendmsg(c->fd, &mh, MSG_NOSIGNAL | MSG_DONTWAIT);
+	if (n > 0) {
+		close(c->pass_fd);
+		c->has_fd = false;
+	}
+	return n;
+}
+
 static void flush_out(struct client *c)
 {
 	while (c->outlen) {
-		ssize_t n = send(c->fd, c->out, c->outlen, MSG_NOSIGNAL | MSG_DONTWAIT);
+		ssize_t n = send_part(c);
 		if (n < 0 && errno == EINTR)
 			continue;
 		if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
@@ -97,6 +127,8 @@ static void flush_out(struct client *c)
 		}
 		memmove(c->out, c->out + n, c->outlen - (size_t)n);
 		c->outlen -= (size_t)n;
+		if (c->has_fd)
+			c->pass_at -= (size_t)n;
 	}
 }
 
@@ -451,6 +483,26 @@ void server_reply(struct server *srv, uint64_t serial, json_t *id, json_t *data)
 		return;
 	}
 	client_send(c, proto_reply_ok(id, data));
+}
+
+int server_reply_fd(struct server *srv, uint64_t serial, json_t *id, json_t *data, int fd)
+{
+	struct client *c = client_by_serial(srv, serial);
+	if (!c || c->closing || c->has_fd || c->peer.tcp) {
+		json_decref(data);
+		close(fd);
+		return -1;
+	}
+	c->has_fd = true;
+	c->pass_fd = fd;
+	c->pass_at = c->outlen;
+	client_send(c, proto_reply_ok(id, data));
+	if (!c->closing && c->has_fd && c->pass_at >= c->outlen) { /* the reply was not queued */
+		close(fd);
+		c->has_fd = false;
+		return -1;
+	}
+	return 0;
 }
 
 void server_reply_error(struct server *srv, uint64_t serial, json_t *id, const char *code, const char *msg)

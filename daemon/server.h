@@ -35,6 +35,9 @@ void server_finish(struct server *srv);
 void server_set_conf(struct server *srv, const struct conf_daemon *d);
 /* Reply ok with data's fields (data consumed, may be NULL) to connection serial (gone: dropped). */
 void server_reply(struct server *srv, uint64_t serial, json_t *id, json_t *data);
+/* Reply ok with data (consumed) and pass fd (consumed: closed here once sent) along with the reply's first byte
+ * (SCM_RIGHTS). -1, fd closed and nothing sent, for a TCP or gone client or one with a descriptor pending. */
+int server_reply_fd(struct server *srv, uint64_t serial, json_t *id, json_t *data, int fd);
 /* Reply an error {code, message} to connection serial. */
 void server_reply_error(struct server *srv, uint64_t serial, json_t *id, const char *code, const char *msg);
 /* Send an event to every watching client (data consumed). */

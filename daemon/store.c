@@ -36,6 +36,7 @@ struct store {
 	sqlite3 *db;
 	char *path;
 	sqlite3_stmt *st[ST__COUNT];
+	bool reader;  /* store_open_reader(): read-only, no statements prepared, no checkpoint at close */
 };
 
 static int db_err(struct store *st, struct acq_err *err, const char *what)
@@ -203,7 +204,8 @@ void store_close(struct store *st)
 	for (int i = 0; i < ST__COUNT; i++)
 		sqlite3_finalize(st->st[i]);
 	if (st->db) {
-		sqlite3_exec(st->db, "PRAGMA wal_checkpoint(TRUNCATE)", NULL, NULL, NULL);
+		if (!st->reader)
+			sqlite3_exec(st->db, "PRAGMA wal_checkpoint(TRUNCATE)", NULL, NULL, NULL);
 		sqlite3_close(st->db);
 	}
 	free(st->path);
@@ -767,6 +769,11 @@ static void csv_num(FILE *out, double v)
 
 int store_export_csv(struct store *st, int64_t sweep_id, FILE *out, int *nrows, struct acq_err *err)
 {
+	return store_export_csv_n(st, sweep_id, 0, out, nrows, err);
+}
+
+int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct acq_err *err)
+{
 	*nrows = 0;
 	sqlite3_stmt *s = prep(st, "SELECT wavelength_grid FROM sweeps WHERE id = ?", err);
 	if (!s)
@@ -796,10 +803,11 @@ int store_export_csv(struct store *st, int64_t sweep_id, FILE *out, int *nrows, 
 	fputc('\n', out);
 	s = prep(st, "SELECT coalesce(p.laser_theta, p.theta_i), p.phi_i, coalesce(p.detector_theta, p.theta_o), "
 		     "coalesce(p.detector_phi, p.phi_o), c.brdf, c.sigma FROM calibrated c JOIN points p ON "
-		     "p.id = c.point_id WHERE c.sweep_id = ? ORDER BY p.order_index", err);
+		     "p.id = c.point_id WHERE c.sweep_id = ? ORDER BY p.order_index LIMIT ?", err);
 	if (!s)
 		goto out;
 	sqlite3_bind_int64(s, 1, sweep_id);
+	sqlite3_bind_int64(s, 2, limit > 0 ? limit : -1);
 	int r;
 	while ((r = sqlite3_step(s)) == SQLITE_ROW) {
 		if (sqlite3_column_bytes(s, 4) != nb || sqlite3_column_bytes(s, 5) != nb) {
@@ -837,4 +845,126 @@ int store_export_csv(struct store *st, int64_t sweep_id, FILE *out, int *nrows, 
 out:
 	free(grid);
 	return rc;
+}
+
+int store_open_reader(const char *path, struct store **out, struct acq_err *err)
+{
+	*out = NULL;
+	struct store *st = calloc(1, sizeof *st);
+	if (!st || !(st->path = strdup(path))) {
+		free(st);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	if (sqlite3_open_v2(path, &st->db, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOFOLLOW, NULL) != SQLITE_OK) {
+		db_err(st, err, "open");
+		sqlite3_close(st->db);
+		free(st->path);
+		free(st);
+		return -1;
+	}
+	sqlite3_busy_timeout(st->db, 2000);
+	sqlite3_extended_result_codes(st->db, 1);
+	st->reader = true;
+	*out = st;
+	return 0;
+}
+
+int64_t store_calibrated_count(struct store *st, int64_t sweep_id, struct acq_err *err)
+{
+	sqlite3_stmt *s = prep(st, "SELECT (SELECT count(*) FROM calibrated WHERE sweep_id = ?1), "
+				   "(SELECT count(*) FROM sweeps WHERE id = ?1)", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_int64(s, 1, sweep_id);
+	int64_t n = -1;
+	if (sqlite3_step(s) == SQLITE_ROW) {
+		if (sqlite3_column_int64(s, 1) == 0)
+			acq_errf(err, ACQ_E_NOTFOUND, "no sweep %lld", (long long)sweep_id);
+		else
+			n = sqlite3_column_int64(s, 0);
+	} else {
+		db_err(st, err, "counting samples");
+	}
+	sqlite3_finalize(s);
+	return n;
+}
+
+static json_t *floats_json(const void *blob, int nbytes)
+{
+	json_t *a = json_array();
+	for (int i = 0; a && i + 4 <= nbytes; i += 4) {
+		float v;
+		memcpy(&v, (const char *)blob + i, 4);
+		json_array_append_new(a, isfinite(v) ? json_real(v) : json_null());
+	}
+	return a;
+}
+
+json_t *store_spectrum_json(struct store *st, int64_t id, struct acq_err *err)
+{
+	sqlite3_stmt *s = prep(st, "SELECT s.id, s.sweep_id, s.point_id, s.kind, s.integration_ms, s.averages, s.npix, "
+				   "s.counts, s.stddev, s.saturated_count, s.temperature_c, s.taken_at, m.model, m.serial, "
+				   "m.c0, m.c1, m.c2, m.c3, m.c4 FROM spectra s LEFT JOIN spectrometers m ON "
+				   "m.id = s.spectrometer_id WHERE s.id = ?", err);
+	if (!s)
+		return NULL;
+	sqlite3_bind_int64(s, 1, id);
+	int r = sqlite3_step(s);
+	if (r != SQLITE_ROW) {
+		if (r == SQLITE_DONE)
+			acq_errf(err, ACQ_E_NOTFOUND, "no spectrum %lld", (long long)id);
+		else
+			db_err(st, err, "reading a spectrum");
+		sqlite3_finalize(s);
+		return NULL;
+	}
+	int npix = sqlite3_column_int(s, 6);
+	json_t *counts = floats_json(sqlite3_column_blob(s, 7), sqlite3_column_bytes(s, 7));
+	double peak = 0;
+	size_t i;
+	json_t *v;
+	json_array_foreach(counts, i, v)
+		if (json_is_number(v) && json_number_value(v) > peak)
+			peak = json_number_value(v);
+	json_t *o = json_pack("{s:I,s:s,s:f,s:i,s:i,s:o,s:i,s:f,s:f}", "id", (json_int_t)sqlite3_column_int64(s, 0),
+			      "kind", (const char *)sqlite3_column_text(s, 3), "integration_ms", sqlite3_column_double(s, 4),
+			      "averages", sqlite3_column_int(s, 5), "npix", npix, "counts", counts, "saturated",
+			      sqlite3_column_int(s, 9), "taken_at", sqlite3_column_double(s, 11), "peak", peak);
+	if (o) {
+		json_object_set_new(o, "sweep", sqlite3_column_type(s, 1) == SQLITE_NULL ? json_null()
+								 : json_integer(sqlite3_column_int64(s, 1)));
+		json_object_set_new(o, "point", sqlite3_column_type(s, 2) == SQLITE_NULL ? json_null()
+								 : json_integer(sqlite3_column_int64(s, 2)));
+		json_object_set_new(o, "temperature_c", sqlite3_column_type(s, 10) == SQLITE_NULL
+								? json_null() : json_real(sqlite3_column_double(s, 10)));
+		if (sqlite3_column_type(s, 8) != SQLITE_NULL)
+			json_object_set_new(o, "stddev", floats_json(sqlite3_column_blob(s, 8), sqlite3_column_bytes(s, 8)));
+		if (sqlite3_column_type(s, 12) != SQLITE_NULL) {
+			/* The spectrometer's wavelength polynomial (AvaSpec: λ = Σ c_k · pixel^k, nm). */
+			double c[5];
+			for (int k = 0; k < 5; k++)
+				c[k] = sqlite3_column_double(s, 14 + k);
+			json_t *wl = json_array();
+			for (int p = 0; wl && p < npix; p++)
+				json_array_append_new(wl, json_real(c[0] + p * (c[1] + p * (c[2] + p * (c[3] + p * c[4])))));
+			json_object_set_new(o, "wavelength_nm", wl);
+			json_object_set_new(o, "spectrometer", json_pack("{s:s,s:s}", "model",
+									  (const char *)sqlite3_column_text(s, 12), "serial",
+									  (const char *)sqlite3_column_text(s, 13)));
+		}
+	}
+	sqlite3_finalize(s);
+	if (!o)
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	return o;
+}
+
+int64_t store_recon_latest(struct store *st)
+{
+	sqlite3_stmt *s = prep(st, "SELECT coalesce(max(id), 0) FROM recon_runs", NULL);
+	int64_t id = 0;
+	if (s && sqlite3_step(s) == SQLITE_ROW)
+		id = sqlite3_column_int64(s, 0);
+	sqlite3_finalize(s);
+	return id;
 }

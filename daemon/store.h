@@ -118,5 +118,17 @@ json_t *store_sweep_show(struct store *st, int64_t id, bool with_points, struct 
 /* Write a sweep's calibrated samples in the CSV interchange format (design.md). Rows written in *nrows.
  * ACQ_E_NOTFOUND for no sweep, ACQ_E_STATE if it has no calibrated samples. 0 or -1. */
 int store_export_csv(struct store *st, int64_t sweep_id, FILE *out, int *nrows, struct acq_err *err);
+/* store_export_csv() of the first limit rows in sweep order (limit <= 0: all). */
+int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct acq_err *err);
+/* A read-only connection to an existing database (no migration, no checkpoint at close) for a worker thread:
+ * only the export and show functions may be used on it. 0 or -1. */
+int store_open_reader(const char *path, struct store **out, struct acq_err *err);
+/* Number of calibrated samples of a sweep; -1 with ACQ_E_NOTFOUND if there is no such sweep. */
+int64_t store_calibrated_count(struct store *st, int64_t sweep_id, struct acq_err *err);
+/* The id of the latest reconstruction run (started by the operator or after a sweep), 0 if none. */
+int64_t store_recon_latest(struct store *st);
+/* One stored spectrum: id, kind, settings, counts (and stddev), sweep/point, and wavelength_nm from its
+ * spectrometer's polynomial when known. NULL with ACQ_E_NOTFOUND if there is none. */
+json_t *store_spectrum_json(struct store *st, int64_t id, struct acq_err *err);
 
 #endif

@@ -1,30 +1,24 @@
 /* sweep: the daemon's sweep executor behind sweep.h — plans, stores and runs a sweep with daemon/executor.c
- * on the loop over the real device handles, resumes interrupted sweeps, and on completion exports the
- * calibrated samples as CSV and runs the reconstruction chain (brdf-recon fit, merl, dhr --plot, render). */
+ * on the loop over the device handles, resumes interrupted sweeps, and on completion starts the
+ * reconstruction chain (recon_chain.c). */
 #include "daemon/sweep.h"
 
-#include <errno.h>
 #include <math.h>
-#include <sqlite3.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
 #include "daemon/devices.h"
+#include "daemon/eta.h"
 #include "daemon/executor.h"
-#include "daemon/job.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
+#include "daemon/recon_chain.h"
 #include "daemon/store.h"
 #include "drivers/axis.h"
 #include "drivers/laser.h"
 #include "drivers/spectro.h"
-
-enum { RC_FIT, RC_MERL, RC_DHR, RC_RENDER, RC__COUNT };
 
 struct sweep {
 	struct sweep_env env;
@@ -36,193 +30,12 @@ struct sweep {
 	uint64_t timer;
 	double started_wall;
 	struct sweep_progress last;  /* kept after the executor is gone */
+	struct eta eta;              /* wall-clock ETA (eta.c), fed by the events and the progress below */
 	char point_text[128];
-	/* completion: export + reconstruction chain */
+	/* completion: export + reconstruction chain (recon_chain.c) */
 	int64_t done_id;
 	uint64_t done_timer;
-	struct job *job;
-	int rstage;
-	int64_t run_id;
-	char outdir[4096], csv[4096], prog[4096];
-	char files[RC__COUNT][4096];
-	int recon_failed;
-	bool dhr_noplot;             /* dhr --plot failed: run dhr once more without the plot */
-};
-
-static const char *const rc_names[RC__COUNT] = { "fit", "merl", "dhr", "render" };
-static const char *const rc_kinds[RC__COUNT] = { "model", "merl", "dhr", "preview" };
-
-/* ---- device operations over the daemon's handles -------------------------------------------------- */
-
-static struct axis *ax_of(struct sweep *sw, int a, struct acq_err *err)
-{
-	struct axis *ax = devices_axis(sw->env.devices, (enum conf_dev)a);
-	if (!ax)
-		acq_errf(err, ACQ_E_DISCONNECTED, "%s unavailable", conf_dev_name((enum conf_dev)a));
-	return ax;
-}
-
-static int o_move_begin(void *ctx, int a, double target, double now, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	return ax ? axis_move_begin(ax, target, now, err) : -1;
-}
-
-static int o_move_step(void *ctx, int a, double now, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	return ax ? axis_move_step(ax, now, err) : AXIS_MOVE_FAILED;
-}
-
-static double o_next_poll(void *ctx, int a)
-{
-	struct sweep *sw = ctx;
-	struct axis *ax = devices_axis(sw->env.devices, (enum conf_dev)a);
-	return ax ? axis_next_poll(ax) : loop_now(sw->env.loop);
-}
-
-static int o_stop(void *ctx, int a, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	return ax ? axis_stop(ax, err) : -1;
-}
-
-static int o_position(void *ctx, int a, double *deg, bool *homed, bool *alarm, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	struct axis_status st;
-	if (!ax || axis_read_status(ax, &st, err))
-		return -1;
-	*deg = st.position_deg;
-	*homed = st.homed;
-	*alarm = st.alarm;
-	return 0;
-}
-
-static int o_home_begin(void *ctx, int a, double now, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	return ax ? axis_home_begin(ax, now, err) : -1;
-}
-
-static int o_alarm_reset(void *ctx, int a, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	return ax ? axis_alarm_reset(ax, err) : -1;
-}
-
-static int o_laser_set(void *ctx, bool on, struct acq_err *err)
-{
-	struct sweep *sw = ctx;
-	struct laser *l = devices_laser(sw->env.devices);
-	if (!l)
-		return on ? acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable") : 0; /* absent = dark */
-	return laser_set_emission(l, on, err);
-}
-
-static int o_laser_power(void *ctx, double pct, struct acq_err *err)
-{
-	struct sweep *sw = ctx;
-	struct laser *l = devices_laser(sw->env.devices);
-	if (!l)
-		return acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable");
-	return laser_set_power(l, pct, err);
-}
-
-static int o_laser_state(void *ctx, bool *emission, bool *ready, struct acq_err *err)
-{
-	struct sweep *sw = ctx;
-	struct laser *l = devices_laser(sw->env.devices);
-	struct laser_status st;
-	if (!l)
-		return acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable");
-	if (laser_status(l, &st, err))
-		return -1;
-	*emission = st.emission;
-	*ready = st.interlock_ok && !st.fault;
-	return 0;
-}
-
-/* The daemon's device manager reconnects on its own timer; here: is the device back and answering? */
-static int o_reconnect(void *ctx, int dev, struct acq_err *err)
-{
-	struct sweep *sw = ctx;
-	if (dev <= EX_DEV_DETECTOR_PHI) {
-		bool homed, alarm;
-		double d;
-		return o_position(ctx, dev, &d, &homed, &alarm, err);
-	}
-	if (dev == EX_DEV_SPECTRO) {
-		struct spectro *s = devices_spectro(sw->env.devices);
-		return s && spectro_info(s) ? 0 : acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
-	}
-	bool e, r;
-	return o_laser_state(ctx, &e, &r, err);
-}
-
-static int o_spectro_start(void *ctx, const struct spectro_meas *m, double now, struct acq_err *err)
-{
-	struct sweep *sw = ctx;
-	struct spectro *s = devices_spectro(sw->env.devices);
-	if (!s)
-		return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
-	return spectro_start(s, m, now, err);
-}
-
-static int o_spectro_fetch(void *ctx, struct spectro_frame *f, double now, struct acq_err *err)
-{
-	struct sweep *sw = ctx;
-	struct spectro *s = devices_spectro(sw->env.devices);
-	if (!s)
-		return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
-	return spectro_fetch(s, f, now, err);
-}
-
-static int o_spectro_stop(void *ctx, struct acq_err *err)
-{
-	struct sweep *sw = ctx;
-	struct spectro *s = devices_spectro(sw->env.devices);
-	return s ? spectro_stop(s, err) : 0;
-}
-
-static const struct spectro_info *o_spectro_info(void *ctx)
-{
-	struct sweep *sw = ctx;
-	struct spectro *s = devices_spectro(sw->env.devices);
-	return s ? spectro_info(s) : NULL;
-}
-
-static double o_wall(void *ctx)
-{
-	struct sweep *sw = ctx;
-	return sw->env.wallclock();
-}
-
-/* A link-level failure hands the device back to the manager (close, reconnect on its timer); a device that
- * answered with an error (alarm, interlock) keeps its handle. */
-static void o_lost(void *ctx, int dev, const struct acq_err *err)
-{
-	struct sweep *sw = ctx;
-	int code = err ? err->code : ACQ_E_DEVICE;
-	if (code == ACQ_E_TIMEOUT || code == ACQ_E_DISCONNECTED || code == ACQ_E_IO || code == ACQ_E_PROTO)
-		if (dev != EX_DEV_SPECTRO || devices_spectro(sw->env.devices))
-			devices_lost(sw->env.devices, (enum conf_dev)dev, err ? err->msg : "device error");
-}
-
-static void o_limits(void *ctx, int a, double *lo, double *hi)
-{
-	struct sweep *sw = ctx;
-	const struct axis_cfg *c = a >= 0 && a < 3 ? sw->env.conf->axis[a] : NULL;
-	if (c)
-		axis_cfg_limits(c, lo, hi);
-}
-
-static const struct ex_ops dev_ops = {
-	.move_begin = o_move_begin, .move_step = o_move_step, .next_poll = o_next_poll, .stop = o_stop,
-	.position = o_position, .home_begin = o_home_begin, .alarm_reset = o_alarm_reset, .reconnect = o_reconnect,
-	.laser_set = o_laser_set, .laser_power = o_laser_power, .laser_state = o_laser_state, .spectro_start = o_spectro_start,
-	.spectro_fetch = o_spectro_fetch, .spectro_stop = o_spectro_stop, .spectro_info = o_spectro_info,
-	.wall = o_wall, .lost = o_lost, .limits = o_limits,
+	struct recon_chain *chain;
 };
 
 /* ---- events --------------------------------------------------------------------------------------- */
@@ -256,6 +69,13 @@ static void on_event(void *ctx, int64_t sweep_id, const char *kind, const char *
 						  device ? device : "", "message", message));
 		return;
 	}
+	/* The ETA counts running time only. */
+	bool run = !strcmp(kind, "start") || !strcmp(kind, "resume") || !strcmp(kind, "recovered");
+	if (!strcmp(kind, "start"))
+		eta_reset(&sw->eta);
+	if (run || !strcmp(kind, "pause") || !strcmp(kind, "abort") || !strcmp(kind, "failed") ||
+	    !strcmp(kind, "complete"))
+		eta_running(&sw->eta, run, loop_now(sw->env.loop), loop_monotonic(NULL));
 	const char *state = sw->ex ? ex_state_name(ex_state(sw->ex)) : "idle";
 	emit(sw, "sweep.state", json_pack("{s:I,s:s,s:s,s:s}", "sweep", (json_int_t)sweep_id, "state", state, "event",
 					  kind, "reason", message));
@@ -264,316 +84,21 @@ static void on_event(void *ctx, int64_t sweep_id, const char *kind, const char *
 static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double eta, const char *phase)
 {
 	struct sweep *sw = ctx;
+	/* eta (the executor's, loop seconds) is replaced by the wall-clock estimate: the planner's remaining time
+	 * refined by the measured rate (eta.c). */
+	(void)eta;
+	double plan_at = NAN, plan_total = NAN;
+	if (sw->plan && done >= 0) {
+		plan_total = sw->plan->predicted_s;
+		plan_at = (size_t)done < sw->plan->n_steps ? sw->plan->steps[done].predicted_start_s : plan_total;
+	}
+	eta = eta_update(&sw->eta, done, total, plan_at, plan_total, loop_now(sw->env.loop), loop_monotonic(NULL));
 	sw->last.eta_s = eta;
 	json_t *d = json_pack("{s:I,s:s,s:i,s:i,s:s}", "sweep", (json_int_t)sweep_id, "state", "running", "done", done,
 			      "total", total, "point", phase);
 	if (d && isfinite(eta))
 		json_object_set_new(d, "eta_s", json_real(eta));
 	emit(sw, "sweep.progress", d);
-}
-
-/* ---- completion: export and reconstruction -------------------------------------------------------- */
-
-/* One row per calibrated point: sweep angles from the measured axis positions (zeniths ≥ 0, azimuths in
- * [0, 360)), the grid's values, then their sigma_<nm> columns; NaN as an empty field. */
-static int export_csv(struct sweep *sw, int64_t id, const char *path, int *nrows, struct acq_err *err)
-{
-	*nrows = 0;
-	sqlite3 *db = NULL;
-	FILE *f = NULL;
-	sqlite3_stmt *s = NULL;
-	float *grid = NULL;
-	int rc = -1;
-	if (sqlite3_open_v2(sw->env.conf->d.database, &db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
-		acq_errf(err, ACQ_E_IO, "%s: %s", sw->env.conf->d.database, db ? sqlite3_errmsg(db) : "cannot open");
-		goto out;
-	}
-	sqlite3_busy_timeout(db, 5000);
-	if (sqlite3_prepare_v2(db, "SELECT wavelength_grid FROM sweeps WHERE id = ?", -1, &s, NULL) != SQLITE_OK)
-		goto dberr;
-	sqlite3_bind_int64(s, 1, id);
-	if (sqlite3_step(s) != SQLITE_ROW || sqlite3_column_bytes(s, 0) <= 0 || sqlite3_column_bytes(s, 0) % 4) {
-		acq_errf(err, ACQ_E_STATE, "sweep %lld has no wavelength grid", (long long)id);
-		goto out;
-	}
-	int nb = sqlite3_column_bytes(s, 0), n = nb / 4;
-	grid = malloc((size_t)nb);
-	if (!grid) {
-		acq_errf(err, ACQ_E_NOMEM, "out of memory");
-		goto out;
-	}
-	memcpy(grid, sqlite3_column_blob(s, 0), (size_t)nb);
-	sqlite3_finalize(s);
-	s = NULL;
-	char tmp[4200];
-	snprintf(tmp, sizeof tmp, "%s.tmp", path);
-	if (!(f = fopen(tmp, "w"))) {
-		acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
-		goto out;
-	}
-	fprintf(f, "# acquisitiond sweep %lld: calibrated spectral BRDF samples (sr^-1) with standard uncertainty\n",
-		(long long)id);
-	fprintf(f, "# calibration: %s method; angles from the measured axis positions\n",
-		calib_method_name(sw->cfg.cal.method));
-	fputs("theta_i,phi_i,theta_o,phi_o", f);
-	for (int k = 0; k < n; k++)
-		fprintf(f, ",%g", (double)grid[k]);
-	for (int k = 0; k < n; k++)
-		fprintf(f, ",sigma_%g", (double)grid[k]);
-	fputc('\n', f);
-	if (sqlite3_prepare_v2(db, "SELECT coalesce(p.laser_theta, p.theta_i), coalesce(p.detector_theta, p.theta_o), "
-				   "coalesce(p.detector_phi, p.phi_o), c.brdf, c.sigma, p.laser_theta IS NULL FROM calibrated c "
-				   "JOIN points p ON p.id = c.point_id WHERE c.sweep_id = ? AND p.state = 'done' "
-				   "ORDER BY p.order_index", -1, &s, NULL) != SQLITE_OK)
-		goto dberr;
-	sqlite3_bind_int64(s, 1, id);
-	while (sqlite3_step(s) == SQLITE_ROW) {
-		if (sqlite3_column_bytes(s, 3) != nb || sqlite3_column_bytes(s, 4) != nb)
-			continue;
-		struct plan_pos p = { sqlite3_column_double(s, 0), sqlite3_column_double(s, 1), sqlite3_column_double(s, 2) };
-		double ti, pi, to, po;
-		ex_pos_angles(&sw->env.conf->bench, &p, &ti, &pi, &to, &po);
-		fprintf(f, "%.6f,%.6f,%.6f,%.6f", ti, pi, to, po);
-		const unsigned char *b = sqlite3_column_blob(s, 3), *u = sqlite3_column_blob(s, 4);
-		for (int pass = 0; pass < 2; pass++)
-			for (int k = 0; k < n; k++) {
-				float v;
-				memcpy(&v, (pass ? u : b) + 4 * k, 4);
-				if (isfinite(v))
-					fprintf(f, ",%.7g", (double)v);
-				else
-					fputc(',', f);
-			}
-		fputc('\n', f);
-		(*nrows)++;
-	}
-	if (fclose(f) != 0) {
-		f = NULL;
-		acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
-		goto out;
-	}
-	f = NULL;
-	if (rename(tmp, path)) {
-		acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
-		goto out;
-	}
-	rc = 0;
-	goto out;
-dberr:
-	acq_errf(err, ACQ_E_IO, "%s: %s", sw->env.conf->d.database, sqlite3_errmsg(db));
-out:
-	if (f)
-		fclose(f);
-	sqlite3_finalize(s);
-	sqlite3_close(db);
-	free(grid);
-	return rc;
-}
-
-/* brdf-recon: an absolute path, next to acquisitiond, or in PATH. 0 or -1. */
-static int find_program(const char *prog, char *out, size_t cap)
-{
-	if (strchr(prog, '/')) {
-		snprintf(out, cap, "%s", prog);
-		return access(out, X_OK);
-	}
-	char self[4096];
-	ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-	if (n > 0) {
-		self[n] = 0;
-		char *slash = strrchr(self, '/');
-		if (slash) {
-			*slash = 0;
-			snprintf(out, cap, "%s/%s", self, prog);
-			if (!access(out, X_OK))
-				return 0;
-		}
-	}
-	const char *path = getenv("PATH");
-	char buf[4096];
-	snprintf(buf, sizeof buf, "%s", path ? path : "/usr/bin:/bin");
-	for (char *save = NULL, *dir = strtok_r(buf, ":", &save); dir; dir = strtok_r(NULL, ":", &save)) {
-		snprintf(out, cap, "%s/%s", dir, prog);
-		if (!access(out, X_OK))
-			return 0;
-	}
-	return -1;
-}
-
-static void recon_next(struct sweep *sw);
-
-static void recon_event(struct sweep *sw, const char *kind, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-static void recon_event(struct sweep *sw, const char *kind, const char *fmt, ...)
-{
-	char msg[1024];
-	va_list ap;
-	va_start(ap, fmt);
-	vsnprintf(msg, sizeof msg, fmt, ap);
-	va_end(ap);
-	store_event(sw->env.store, sw->done_id, kind, "recon", msg, sw->env.wallclock(), NULL);
-	log_msg(LOG_NOTICE, "sweep %lld: %s", (long long)sw->done_id, msg);
-	emit(sw, "recon", json_pack("{s:I,s:s,s:s}", "sweep", (json_int_t)sw->done_id, "state", kind, "message", msg));
-}
-
-static const char *relpath(const struct sweep *sw, const char *path)
-{
-	size_t n = strlen(sw->env.conf->d.state_dir);
-	if (!strncmp(path, sw->env.conf->d.state_dir, n) && path[n] == '/')
-		return path + n + 1;
-	return path;
-}
-
-static void recon_stage_done(struct job *j, int status, const char *output, size_t len, void *arg)
-{
-	(void)j;
-	(void)len;
-	struct sweep *sw = arg;
-	sw->job = NULL;
-	int st = sw->rstage;
-	if (status == 0) {
-		store_recon_output(sw->env.store, sw->run_id, rc_kinds[st], relpath(sw, sw->files[st]), sw->env.wallclock(),
-				   NULL);
-		if (st == RC_DHR) {
-			char png[4200];
-			snprintf(png, sizeof png, "%s/dhr.png", sw->outdir);
-			if (!access(png, R_OK))
-				store_recon_output(sw->env.store, sw->run_id, "dhr", relpath(sw, png), sw->env.wallclock(), NULL);
-		}
-	} else {
-		/* Keep the tail of the output in the event: the run record keeps the whole. */
-		size_t n = strlen(output);
-		const char *tail = n > 300 ? output + n - 300 : output;
-		recon_event(sw, "info", "brdf-recon %s failed (status %d): %s", rc_names[st], status, tail);
-		if (st == RC_DHR && !sw->dhr_noplot) { /* perhaps only the plot is missing: the table alone */
-			sw->dhr_noplot = true;
-			recon_next(sw);
-			return;
-		}
-		sw->recon_failed++;
-		if (st == RC_FIT) { /* nothing else can run without a model */
-			store_recon_end(sw->env.store, sw->run_id, "failed", status, output, sw->env.wallclock(), NULL);
-			recon_event(sw, "info", "no reconstruction: the fit failed; the calibrated samples are in %s",
-				    sw->csv);
-			return;
-		}
-	}
-	sw->rstage++;
-	recon_next(sw);
-}
-
-static void recon_next(struct sweep *sw)
-{
-	struct acq_err err = { 0 };
-	char threads[16];
-	snprintf(threads, sizeof threads, "%d", sw->env.conf->recon.threads > 0 ? sw->env.conf->recon.threads : 1);
-	while (sw->rstage < RC__COUNT) {
-		char *argv[24];
-		int argc = 0;
-		char dhrpng[4200], cmd[16];
-		snprintf(cmd, sizeof cmd, "%s", rc_names[sw->rstage]);
-		argv[argc++] = sw->prog;
-		argv[argc++] = cmd;
-		switch (sw->rstage) {
-		case RC_FIT:
-			argv[argc++] = sw->csv;
-			argv[argc++] = "-o";
-			argv[argc++] = sw->files[RC_FIT];
-			break;
-		case RC_MERL:
-		case RC_RENDER:
-			argv[argc++] = sw->files[RC_FIT];
-			argv[argc++] = "-o";
-			argv[argc++] = sw->files[sw->rstage];
-			argv[argc++] = "--threads";
-			argv[argc++] = threads;
-			break;
-		case RC_DHR:
-			snprintf(dhrpng, sizeof dhrpng, "%s/dhr.png", sw->outdir);
-			argv[argc++] = sw->files[RC_FIT];
-			argv[argc++] = "-o";
-			argv[argc++] = sw->files[RC_DHR];
-			if (!sw->dhr_noplot) {
-				argv[argc++] = "--plot";
-				argv[argc++] = dhrpng;
-			}
-			break;
-		}
-		argv[argc] = NULL;
-		if (job_start(argv, sw->outdir, sw->env.conf->recon.timeout_s, recon_stage_done, sw, &sw->job, &err) == 0) {
-			recon_event(sw, "info", "brdf-recon %s started (pid %d)", rc_names[sw->rstage], (int)job_pid(sw->job));
-			return;
-		}
-		recon_event(sw, "info", "brdf-recon %s could not start: %s", rc_names[sw->rstage], err.msg);
-		sw->recon_failed++;
-		if (sw->rstage == RC_FIT) {
-			store_recon_end(sw->env.store, sw->run_id, "failed", 127, err.msg, sw->env.wallclock(), NULL);
-			return;
-		}
-		sw->rstage++;
-	}
-	const char *state = sw->recon_failed ? "failed" : "succeeded";
-	char summary[8192] = "";
-	size_t n = 0;
-	for (int i = 0; i < RC__COUNT; i++) {
-		bool ok = !access(sw->files[i], R_OK);
-		n += (size_t)snprintf(summary + n, sizeof summary - n, "%s%s %s", i ? "; " : "", rc_kinds[i],
-				      ok ? sw->files[i] : "(not produced)");
-		if (n >= sizeof summary)
-			break;
-	}
-	store_recon_end(sw->env.store, sw->run_id, state, sw->recon_failed, summary, sw->env.wallclock(), NULL);
-	recon_event(sw, sw->recon_failed ? "info" : "complete", "reconstruction %s (%d of %d steps failed): %s", state,
-		    sw->recon_failed, RC__COUNT, summary);
-}
-
-/* The completion chain of sweep id: its calibrated samples as CSV into the state directory, then the
- * reconstruction stages if wanted (automatic: sweep.auto_recon) and brdf-recon is present. 0 or -1. */
-static int run_chain(struct sweep *sw, int64_t id, bool automatic, int64_t *run_id, struct acq_err *err)
-{
-	const struct conf *c = sw->env.conf;
-	if (run_id)
-		*run_id = 0;
-	if (sw->job)
-		return acq_errf(err, ACQ_E_STATE, "a reconstruction is still running");
-	sw->done_id = id;
-	snprintf(sw->outdir, sizeof sw->outdir, "%s/sweep-%lld", c->recon.output_dir, (long long)id);
-	mkdir(c->recon.output_dir, 0750);
-	mkdir(sw->outdir, 0750);
-	snprintf(sw->csv, sizeof sw->csv, "%s/samples.csv", sw->outdir);
-	int rows = 0;
-	if (export_csv(sw, id, sw->csv, &rows, err)) {
-		recon_event(sw, "info", "exporting the calibrated samples failed: %s; no reconstruction ran", err->msg);
-		return -1;
-	}
-	recon_event(sw, "info", "%d calibrated samples exported to %s", rows, sw->csv);
-	if (automatic && !c->sweep.auto_recon) {
-		recon_event(sw, "info", "sweep.auto_recon is off: no reconstruction ran; the samples are in %s", sw->csv);
-		return 0;
-	}
-	if (find_program(c->recon.program, sw->prog, sizeof sw->prog)) {
-		recon_event(sw, "info", "no reconstruction ran: '%s' not found (brdf-recon not installed?); the calibrated "
-			    "samples are recorded in the database and in %s", c->recon.program, sw->csv);
-		return acq_errf(err, ACQ_E_UNSUPPORTED, "reconstruction program '%s' not found", c->recon.program);
-	}
-	snprintf(sw->files[RC_FIT], sizeof sw->files[0], "%s/model.brdf", sw->outdir);
-	snprintf(sw->files[RC_MERL], sizeof sw->files[0], "%s/merl.binary", sw->outdir);
-	snprintf(sw->files[RC_DHR], sizeof sw->files[0], "%s/dhr.csv", sw->outdir);
-	snprintf(sw->files[RC_RENDER], sizeof sw->files[0], "%s/preview.png", sw->outdir);
-	for (int i = 0; i < RC__COUNT; i++)
-		unlink(sw->files[i]); /* a rerun must not report the previous run's files */
-	char args[8192];
-	snprintf(args, sizeof args, "[\"fit %s\", \"merl\", \"dhr --plot\", \"render\"]", sw->csv);
-	if (store_recon_begin(sw->env.store, id, sw->prog, args, sw->env.wallclock(), &sw->run_id, err)) {
-		recon_event(sw, "info", "recording the reconstruction failed: %s; none ran", err->msg);
-		return -1;
-	}
-	if (run_id)
-		*run_id = sw->run_id;
-	sw->rstage = RC_FIT;
-	sw->recon_failed = 0;
-	sw->dhr_noplot = false;
-	recon_next(sw);
-	return 0;
 }
 
 /* The sweep completed (timer, so it runs outside the executor's step). */
@@ -583,7 +108,7 @@ static void on_completed(struct loop *lp, void *arg)
 	struct sweep *sw = arg;
 	sw->done_timer = 0;
 	struct acq_err err = { 0 };
-	if (run_chain(sw, sw->done_id, true, NULL, &err) && err.code != ACQ_E_UNSUPPORTED)
+	if (recon_chain_run(sw->chain, sw->done_id, true, sw->cfg.cal.method, NULL, &err) && err.code != ACQ_E_UNSUPPORTED)
 		log_msg(LOG_WARNING, "sweep %lld: completion: %s", (long long)sw->done_id, err.msg);
 }
 
@@ -593,18 +118,18 @@ int sweep_recon_start(struct sweep *sw, int64_t sweep_id, int64_t *run_id, struc
 	if (sw->ex)
 		return acq_errf(err, ACQ_E_STATE, "sweep %lld is %s: reconstruct when no sweep runs", (long long)sw->id,
 				ex_state_name(ex_state(sw->ex)));
-	if (sw->job)
+	if (recon_chain_busy(sw->chain))
 		return acq_errf(err, ACQ_E_STATE, "a reconstruction is still running");
 	json_t *js = store_sweep_show(sw->env.store, sweep_id, false, err);
 	if (!js)
 		return -1;
 	json_decref(js);
-	return run_chain(sw, sweep_id, false, run_id, err);
+	return recon_chain_run(sw->chain, sweep_id, false, sw->cfg.cal.method, run_id, err);
 }
 
 bool sweep_recon_busy(const struct sweep *sw)
 {
-	return sw->job != NULL;
+	return recon_chain_busy(sw->chain);
 }
 
 /* ---- the executor on the loop --------------------------------------------------------------------- */
@@ -702,9 +227,14 @@ int sweep_init(const struct sweep_env *env, struct sweep **out, struct acq_err *
 	if (!sw)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	sw->env = *env;
+	eta_reset(&sw->eta);
 	if (load_cfg(env->conf, &sw->cfg, err)) {
 		free(sw);
 		return -1;
+	}
+	if (!(sw->chain = recon_chain_new(&sw->env))) {
+		free(sw);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
 	sw->last.eta_s = NAN;
 	*out = sw;
@@ -721,11 +251,30 @@ void sweep_finish(struct sweep *sw)
 		loop_timer_cancel(sw->env.loop, sw->done_timer);
 	if (sw->ex)
 		ex_shutdown(sw->ex, "daemon stopping");
-	if (sw->job) /* the body's job_finish() kills it without calling back */
-		store_recon_end(sw->env.store, sw->run_id, "cancelled", 128 + 15, "daemon stopping", sw->env.wallclock(),
-				NULL);
+	recon_chain_free(sw->chain);
 	release(sw);
 	free(sw);
+}
+
+void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
+{
+	plan_timing_defaults(t);
+	t->extra_settle_s = sw->cfg.extra_settle_s;
+	t->probe_ms = sw->cfg.pol.probe_ms;
+	t->exposure_overhead_s = sw->cfg.poll_s / 2;
+	t->dark_averages = (int)sw->cfg.pol.dark_averages;
+	t->dark_every = sw->cfg.dark_every;
+	t->reference = sw->cfg.take_reference;
+	t->ref_pose = sw->cfg.ref_pose;
+	if (sw->env.conf->have_sim && sw->env.conf->sim.time_scale > 0)
+		t->time_scale = sw->env.conf->sim.time_scale;
+	double pos[3] = { NAN, NAN, NAN };
+	if (sw->env.devices)
+		devices_positions(sw->env.devices, pos);
+	if (!isnan(pos[0]) && !isnan(pos[1]) && !isnan(pos[2])) {
+		t->have_start = true;
+		t->start = (struct plan_pos){ pos[0], pos[1], pos[2] };
+	}
 }
 
 /* Plan the text against the bench; the spec's integration settings override the configuration's. */
@@ -737,6 +286,9 @@ static int make_plan(struct sweep *sw, const char *text, const char *name, struc
 		return -1;
 	if (plan_make(sw->spec, &sw->env.conf->bench, &sw->plan, err))
 		return -1;
+	struct plan_timing tm;
+	sweep_plan_timing(sw, &tm);
+	plan_time_apply(sw->spec, &sw->env.conf->bench, &tm, sw->plan); /* the ETA's plan figure */
 	if (sw->plan->n_steps == 0)
 		return acq_errf(err, ACQ_E_INVAL, "the plan has no visible point");
 	*cfg = sw->cfg;
@@ -807,7 +359,7 @@ int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64
 	if (rc)
 		goto fail;
 	struct ex_sink sk = sink_of(sw);
-	sw->ex = ex_new(&cfg, &dev_ops, sw, &sk, sw->env.store, sw->id, nw.spectrometer_id, &sw->env.conf->bench,
+	sw->ex = ex_new(&cfg, devices_ex_ops(), sw->env.devices, &sk, sw->env.store, sw->id, nw.spectrometer_id, &sw->env.conf->bench,
 			sw->plan, err);
 	if (!sw->ex)
 		goto fail;
@@ -869,7 +421,7 @@ static int recover_id(struct sweep *sw, int64_t id, bool hold, struct acq_err *e
 		goto out;
 	sw->id = id;
 	struct ex_sink sk = sink_of(sw);
-	sw->ex = ex_new(&cfg, &dev_ops, sw, &sk, sw->env.store, id, devices_spectrometer_id(sw->env.devices),
+	sw->ex = ex_new(&cfg, devices_ex_ops(), sw->env.devices, &sk, sw->env.store, id, devices_spectrometer_id(sw->env.devices),
 			&sw->env.conf->bench, sw->plan, err);
 	if (!sw->ex)
 		goto out;

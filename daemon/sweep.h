@@ -87,6 +87,9 @@ void sweep_conf_changed(struct sweep *sw, const struct conf *c);
 void sweep_get_progress(const struct sweep *sw, struct sweep_progress *p);
 /* True while a sweep is loaded (running, paused, faulted or stopping). */
 bool sweep_busy(const struct sweep *sw);
+/* The planner's timing of this daemon's executor (acquisition, sweep settings) for plan_time_apply(). */
+struct plan_timing;
+void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t);
 /* "idle", "running", "paused", "faulted", "stopping". */
 const char *sweep_state_name(enum sweep_state s);
 

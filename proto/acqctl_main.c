@@ -1,86 +1,161 @@
-/* acqctl: the command-line client of acquisitiond — one subcommand per protocol command, human output (or
- * --json), exit status 0 ok / 1 refused or failed / 2 cannot connect; `acqctl plan` runs the local dry run
- * when no daemon is reachable. */
+/* acqctl: the command-line client of acquisitiond — one subcommand per protocol command, one output per
+ * command (human, or one JSON document with --json) whether or not a daemon answers, sysexits exit codes
+ * (see ctl.h and acqctl(1)); `plan` runs the local dry run when no daemon answers; `export` copies the stream
+ * the daemon passes over the socket; `watch` is a live view on a terminal, JSON lines otherwise. */
 #include <errno.h>
-#include <getopt.h>
+#include <fcntl.h>
 #include <math.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
-#include "daemon/plan_cli.h"
+#include "acq_version.h"
+#include "daemon/plan/plan_cli.h"
+#include "proto/ctl.h"
 #include "proto/proto.h"
 
-#define EXIT_REFUSED 1
-#define EXIT_NOCONN 2
+#define DEFAULT_SOCKET "/run/acquisitiond/acquisitiond.sock"
 
-static bool opt_json;
-static int opt_timeout_ms = 30000;
+struct opts {
+	const char *sock;
+	bool json, points, csv;
+	const char *out;       /* -o FILE (export, spectrum --csv) */
+	const char *bench;     /* plan --config */
+	int timeout_ms;
+	double wait_s;         /* --wait: keep trying to connect this long */
+};
+
+static struct opts O = { .timeout_ms = 30000 };
+
+/* Shortcuts: the positional argument of a command and the key it fills ("@plan": the file's text). */
+static const struct {
+	const char *cmd, *key;
+} positional[] = {
+	{ "plan", "@plan" }, { "sweep.start", "@plan" }, { "sweep.show", "sweep" }, { "sweep.resume", "sweep" },
+	{ "recon.start", "sweep" }, { "recon.status", "sweep" }, { "export", "sweep" }, { "spectrum", "spectrum" },
+	{ "home", "axis" }, { NULL, NULL },
+};
+
+static const char *positional_key(const char *cmd)
+{
+	for (int i = 0; positional[i].cmd; i++)
+		if (!strcmp(positional[i].cmd, cmd))
+			return positional[i].key;
+	return NULL;
+}
+
+static void cmd_words(const char *name, char *buf, size_t cap)
+{
+	snprintf(buf, cap, "%s", name);
+	for (char *p = buf; *p; p++)
+		if (*p == '.')
+			*p = ' ';
+}
+
+static void usage_cmd(FILE *f, const struct proto_cmd *c)
+{
+	char name[64];
+	cmd_words(c->name, name, sizeof name);
+	const char *pk = positional_key(c->name);
+	fprintf(f, "  %-13s", name);
+	if (pk)
+		fprintf(f, " %s", pk[0] == '@' ? "FILE" : !strcmp(pk, "axis") ? "[AXIS]" : "ID");
+	for (int i = 0; i < c->nargs; i++) {
+		if (pk && !strcmp(pk + (pk[0] == '@'), c->args[i].name))
+			continue;
+		fprintf(f, " %s%s=…%s", c->args[i].required ? "" : "[", c->args[i].name, c->args[i].required ? "" : "]");
+	}
+	fprintf(f, "\n      %s%s\n", c->summary, c->role == PROTO_CONTROLLER ? " (controllers)" : "");
+}
 
 static void usage(FILE *f)
 {
-	fprintf(f, "usage: acqctl [-s SOCKET|tcp:PORT] [--json] [-t TIMEOUT_MS] COMMAND [ARGS] [key=value...]\n"
-		   "socket: -s, else $ACQ_SOCKET, else /run/acquisitiond/acquisitiond.sock\n\ncommands:\n");
-	for (const struct proto_cmd *c = proto_cmds; c->name; c++) {
-		char name[64];
-		snprintf(name, sizeof name, "%s", c->name);
-		char *dot = strchr(name, '.');
-		if (dot)
-			*dot = ' ';
-		fprintf(f, "  %-14s %-10s %s", name, c->role == PROTO_CONTROLLER ? "[control]" : "", c->summary);
-		if (c->nargs) {
-			fputs(" (", f);
-			for (int i = 0; i < c->nargs; i++)
-				fprintf(f, "%s%s%s", i ? " " : "", c->args[i].name, c->args[i].required ? "" : "?");
-			fputs(")", f);
-		}
-		fputc('\n', f);
-	}
-	fprintf(f, "\npositional shortcuts: plan FILE, sweep start FILE, sweep show ID, sweep resume ID,\n"
-		   "recon start SWEEP, export SWEEP [path=REL]; exit status 0 ok, 1 refused, 2 cannot connect\n"
-		   "watch prints progress with ETA (a bar on a terminal); plan runs locally when no daemon answers\n");
+	fprintf(f, "usage: acqctl [-s SOCKET|tcp:PORT] [--json] [-t TIMEOUT_MS] [-o FILE] COMMAND [ARGS] [key=value...]\n"
+		   "       acqctl --version | --help | help [COMMAND]\n"
+		   "socket: -s, else $ACQ_SOCKET, else " DEFAULT_SOCKET "\n\ncommands:\n");
+	for (const struct proto_cmd *c = proto_cmds; c->name; c++)
+		usage_cmd(f, c);
+	fprintf(f, "  wait STATE [--timeout-s S]\n      wait until the sweep is idle, running, paused or faulted "
+		   "(client side)\n");
+	fprintf(f, "\n--wait S: keep trying to connect for S seconds (a daemon starting up)\n");
+	fprintf(f, "\noptions after the command: --json, --points (plan), --config BENCH.yaml (plan, local dry run),\n"
+		   "  -o FILE (export, spectrum --csv: written by acqctl as you), --csv (spectrum)\n"
+		   "exit status: 0 ok, 1 refused by the daemon, 64 usage, 65 bad local input, 66 unreadable input,\n"
+		   "  69 no daemon answers, 70 internal error, 73 cannot write the output, 75 wait timed out,\n"
+		   "  76 protocol error\n"
+		   "see acqctl(1); --json replies follow the schemas of acqctl-json(5)\n");
 }
 
-static char *read_file(const char *path)
+/* ---- one output per command ---- */
+
+static void print_json(json_t *o)
+{
+	char *s = json_dumps(o, JSON_COMPACT | JSON_REAL_PRECISION(10));
+	puts(s ? s : "{\"ok\":false}");
+	free(s);
+	fflush(stdout);
+}
+
+/* An error of the client itself (no daemon, bad input): stderr, and the JSON document with --json. */
+static int fail(int rc, const char *code, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static int fail(int rc, const char *code, const char *fmt, ...)
+{
+	char msg[1024];
+	va_list ap;
+	va_start(ap, fmt);
+	vsnprintf(msg, sizeof msg, fmt, ap);
+	va_end(ap);
+	fprintf(stderr, "acqctl: %s\n", msg);
+	if (O.json) {
+		json_t *o = json_pack("{s:b,s:{s:s,s:s}}", "ok", 0, "error", "code", code, "message", msg);
+		print_json(o);
+		json_decref(o);
+	}
+	return rc;
+}
+
+static char *read_text(const char *path, struct acq_err *err)
 {
 	FILE *f = strcmp(path, "-") ? fopen(path, "rb") : stdin;
 	if (!f) {
-		fprintf(stderr, "acqctl: %s: %s\n", path, strerror(errno));
+		acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
 		return NULL;
 	}
 	size_t cap = 8192, n = 0;
 	char *buf = malloc(cap);
 	while (buf) {
 		n += fread(buf + n, 1, cap - n - 1, f);
-		if (n < cap - 1 || cap > (4u << 20))
+		if (n < cap - 1)
 			break;
-		char *nb = realloc(buf, cap *= 2);
-		if (!nb) {
+		if (cap > (2u << 20)) {
 			free(buf);
 			buf = NULL;
-		} else {
-			buf = nb;
+			acq_errf(err, ACQ_E_RANGE, "%s: larger than 2 MiB", path);
+			break;
 		}
+		char *nb = realloc(buf, cap *= 2);
+		if (!nb)
+			free(buf);
+		buf = nb;
 	}
 	if (f != stdin)
 		fclose(f);
 	if (buf)
 		buf[n] = 0;
+	else if (!err->code)
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	return buf;
 }
 
-/* key=value with the type the command table gives the key. */
-static int set_arg(json_t *req, const struct proto_cmd *def, const char *kv)
+/* key=value with the type the command table gives the key. 0, or -1 with a message in err. */
+static int set_arg(json_t *req, const struct proto_cmd *def, const char *key, const char *v, struct acq_err *err)
 {
-	const char *eq = strchr(kv, '=');
-	if (!eq) {
-		fprintf(stderr, "acqctl: %s: expected key=value\n", kv);
-		return -1;
-	}
-	char key[64];
-	snprintf(key, sizeof key, "%.*s", (int)(eq - kv), kv);
-	const char *v = eq + 1;
 	for (int i = 0; i < def->nargs; i++) {
 		if (strcmp(def->args[i].name, key))
 			continue;
@@ -90,269 +165,583 @@ static int set_arg(json_t *req, const struct proto_cmd *def, const char *kv)
 			long long x = strtoll(v, &end, 10);
 			if (*v && !*end)
 				return json_object_set_new(req, key, json_integer(x));
-			break;
+			return acq_errf(err, ACQ_E_INVAL, "%s=%s: expected an integer", key, v);
 		}
 		case PROTO_T_NUMBER: {
 			double x = strtod(v, &end);
 			if (*v && !*end && isfinite(x))
 				return json_object_set_new(req, key, json_real(x));
-			break;
+			return acq_errf(err, ACQ_E_INVAL, "%s=%s: expected a number", key, v);
 		}
 		case PROTO_T_BOOL:
 			if (!strcmp(v, "true") || !strcmp(v, "false"))
 				return json_object_set_new(req, key, json_boolean(!strcmp(v, "true")));
-			break;
+			return acq_errf(err, ACQ_E_INVAL, "%s=%s: expected true or false", key, v);
 		default:
 			return json_object_set_new(req, key, json_string(v));
 		}
-		fprintf(stderr, "acqctl: %s: bad value for %s\n", kv, key);
+	}
+	return acq_errf(err, ACQ_E_INVAL, "%s: not an argument of %s (acqctl %s --help)", key, def->name, def->name);
+}
+
+/* ---- talking to the daemon ---- */
+
+struct conn {
+	int fd;
+	struct proto_lines pl;
+	json_t *banner;
+};
+
+static double mono(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static int conn_open(struct conn *c, struct acq_err *err)
+{
+	proto_lines_init(&c->pl);
+	c->pl.max = PROTO_MAX_REPLY;
+	c->banner = NULL;
+	double deadline = mono() + O.wait_s;
+	while ((c->fd = proto_client_connect(O.sock, err)) < 0 && mono() < deadline)
+		usleep(100000);
+	if (c->fd < 0)
+		return -1;
+	c->banner = proto_client_read(c->fd, &c->pl, O.timeout_ms, err);
+	if (!c->banner || json_integer_value(json_object_get(c->banner, "protocol")) != PROTO_VERSION) {
+		/* A refusal before the banner ("too many clients", "not authorised") is a one-line error reply. */
+		json_t *e = json_object_get(c->banner, "error");
+		if (e)
+			acq_errf(err, ACQ_E_STATE, "%s", json_string_value(json_object_get(e, "message")));
+		else if (c->banner)
+			acq_errf(err, ACQ_E_PROTO, "unsupported protocol version");
 		return -1;
 	}
-	fprintf(stderr, "acqctl: %s: unknown argument for %s\n", key, def->name);
-	return -1;
+	return 0;
 }
 
-/* ---- human output ---- */
-static void print_value(const char *prefix, json_t *v);
-
-static void print_scalar(const char *prefix, json_t *v)
+static void conn_close(struct conn *c)
 {
-	char *s = json_is_string(v) ? NULL : json_dumps(v, JSON_ENCODE_ANY);
-	printf("%s: %s\n", prefix, s ? s : json_string_value(v));
-	free(s);
+	if (c->fd >= 0)
+		close(c->fd);
+	c->fd = -1;
+	proto_lines_free(&c->pl);
+	json_decref(c->banner);
+	c->banner = NULL;
 }
 
-static void print_value(const char *prefix, json_t *v)
+/* Send req (borrowed) and read its reply; passed receives a descriptor sent with it (NULL: none expected). */
+static json_t *conn_call(struct conn *c, json_t *req, int *passed, struct acq_err *err)
 {
-	const char *k;
-	json_t *x;
-	size_t i;
-	char p[256];
-	if (json_is_object(v)) {
-		json_object_foreach(v, k, x) {
-			snprintf(p, sizeof p, "%s%s%s", prefix, *prefix ? "." : "", k);
-			print_value(p, x);
-		}
-	} else if (json_is_array(v) && json_array_size(v) && json_is_object(json_array_get(v, 0))) {
-		json_array_foreach(v, i, x) {
-			snprintf(p, sizeof p, "%s[%zu]", prefix, i);
-			print_value(p, x);
-		}
-	} else {
-		print_scalar(prefix, v);
+	char *line = json_dumps(req, JSON_COMPACT);
+	if (!line) {
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
+		return NULL;
 	}
+	size_t n = strlen(line);
+	line[n] = '\n'; /* json_dumps' NUL becomes the newline (the request is sent by length) */
+	int rc = proto_write_all(c->fd, line, n + 1, err);
+	free(line);
+	if (rc) {
+		/* The daemon may have refused us and closed: its reason is still to be read. */
+		struct acq_err e2 = { 0 };
+		json_t *why = proto_client_read_fd(c->fd, &c->pl, 1000, passed, &e2);
+		if (why && json_is_false(json_object_get(why, "ok")))
+			return why;
+		json_decref(why);
+		return NULL;
+	}
+	return proto_client_read_fd(c->fd, &c->pl, O.timeout_ms, passed, err);
 }
 
-static void print_table(json_t *rows, const char *const *cols)
+/* ---- export and spectrum: the data part ---- */
+
+static int open_out(const char *path)
 {
-	for (int c = 0; cols[c]; c++)
-		printf("%-*s", c ? 16 : 6, cols[c]);
-	putchar('\n');
-	size_t i;
-	json_t *r;
-	json_array_foreach(rows, i, r) {
-		for (int c = 0; cols[c]; c++) {
-			json_t *v = json_object_get(r, cols[c]);
-			char *s = !v || json_is_null(v) ? strdup("-") : json_is_string(v) ? strdup(json_string_value(v))
-											    : json_dumps(v, JSON_ENCODE_ANY);
-			printf("%-*s", c ? 16 : 6, s ? s : "");
-			free(s);
+	if (!path)
+		return 1;
+	return open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+}
+
+/* Copy the export stream to the output; the stream must carry the reply's rows (header and comment lines
+ * aside), else the daemon stopped early. */
+static int copy_export(json_t *rep, int src)
+{
+	int out = open_out(O.out);
+	if (out < 0)
+		return fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out, strerror(errno));
+	char buf[65536];
+	long long bytes = 0, lines = 0;
+	ssize_t n;
+	int rc = 0;
+	while ((n = read(src, buf, sizeof buf)) != 0) {
+		if (n < 0 && errno == EINTR)
+			continue;
+		if (n < 0) {
+			rc = fail(CTL_EXIT_PROTOCOL, "io", "export stream: %s", strerror(errno));
+			break;
 		}
-		putchar('\n');
+		for (ssize_t i = 0; i < n; i++)
+			lines += buf[i] == '\n';
+		bytes += n;
+		struct acq_err err = { 0 };
+		if (proto_write_all(out, buf, (size_t)n, &err)) {
+			rc = fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out ? O.out : "stdout", err.msg);
+			break;
+		}
 	}
+	long long rows = json_integer_value(json_object_get(rep, "rows"));
+	long long head = json_integer_value(json_object_get(rep, "header_lines"));
+	if (!rc && lines != rows + head)
+		rc = fail(CTL_EXIT_PROTOCOL, "io", "export of sweep %lld ended after %lld of %lld rows (see the daemon's log)",
+			  (long long)json_integer_value(json_object_get(rep, "sweep")), lines - head, rows);
+	if (O.out && close(out) && !rc)
+		rc = fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out, strerror(errno));
+	if (!rc) {
+		json_object_set_new(rep, "bytes", json_integer(bytes));
+		json_object_set_new(rep, "output", O.out ? json_string(O.out) : json_null());
+		if (O.json)
+			print_json(rep);
+		else if (O.out)
+			fprintf(stdout, "sweep %lld: %lld rows, %lld bytes written to %s\n",
+				(long long)json_integer_value(json_object_get(rep, "sweep")), rows, bytes, O.out);
+	}
+	return rc;
 }
 
-static void print_human(const char *cmd, json_t *rep)
+/* A small export sent inline (over TCP, where no descriptor can be passed). */
+static int write_inline(json_t *rep)
 {
-	json_object_del(rep, "id");
-	json_object_del(rep, "ok");
-	if (!strcmp(cmd, "sweep.list")) {
-		static const char *const cols[] = { "id", "state", "name", "points_done", "points_total", NULL };
-		print_table(json_object_get(rep, "sweeps"), cols);
-	} else if (!strcmp(cmd, "devices")) {
-		static const char *const cols[] = { "name", "state", "note", NULL };
-		json_t *d = json_object_get(rep, "devices");
-		size_t i;
-		json_t *r;
-		json_array_foreach(d, i, r)
-			printf("%-16s %-15s %s\n", json_string_value(json_object_get(r, "name")),
-			       json_string_value(json_object_get(r, "state")),
-			       json_is_string(json_object_get(r, "note")) ? json_string_value(json_object_get(r, "note")) : "");
-		(void)cols;
-	} else if (!strcmp(cmd, "export") && json_is_string(json_object_get(rep, "csv"))) {
-		fputs(json_string_value(json_object_get(rep, "csv")), stdout);
-	} else if (!strcmp(cmd, "config") && json_is_string(json_object_get(json_object_get(rep, "config"), "text"))) {
-		fputs(json_string_value(json_object_get(json_object_get(rep, "config"), "text")), stdout);
-	} else {
-		print_value("", rep);
+	const char *csv = json_string_value(json_object_get(rep, "csv"));
+	int out = open_out(O.out);
+	struct acq_err err = { 0 };
+	if (out < 0 || proto_write_all(out, csv, strlen(csv), &err) || (O.out && close(out)))
+		return fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out ? O.out : "stdout", out < 0 ? strerror(errno) : err.msg);
+	json_int_t len = (json_int_t)strlen(csv);
+	json_object_del(rep, "csv");
+	json_object_set_new(rep, "bytes", json_integer(len));
+	json_object_set_new(rep, "output", O.out ? json_string(O.out) : json_null());
+	if (O.json)
+		print_json(rep);
+	return 0;
+}
+
+static int spectrum_csv(json_t *rep)
+{
+	json_t *s = json_object_get(rep, "spectrum");
+	json_t *wl = json_object_get(s, "wavelength_nm"), *ct = json_object_get(s, "counts");
+	json_t *sd = json_object_get(s, "stddev");
+	if (!json_is_array(wl) || !json_is_array(ct) || json_array_size(wl) != json_array_size(ct))
+		return fail(CTL_EXIT_PROTOCOL, "protocol", "spectrum reply without matching wavelength_nm and counts");
+	FILE *f = O.out ? fopen(O.out, "w") : stdout;
+	if (!f)
+		return fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out, strerror(errno));
+	fprintf(f, "# acquisitiond spectrum %lld (%s)\nwavelength_nm,counts%s\n",
+		(long long)json_integer_value(json_object_get(s, "id")), json_string_value(json_object_get(s, "kind")),
+		json_is_array(sd) ? ",stddev" : "");
+	for (size_t i = 0; i < json_array_size(wl); i++) {
+		fprintf(f, "%.6g,%.9g", json_number_value(json_array_get(wl, i)), json_number_value(json_array_get(ct, i)));
+		if (json_is_array(sd))
+			fprintf(f, ",%.6g", json_number_value(json_array_get(sd, i)));
+		fputc('\n', f);
 	}
+	if ((O.out ? fclose(f) : fflush(f)) != 0)
+		return fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out ? O.out : "stdout", strerror(errno));
+	if (O.out)
+		printf("spectrum %lld: %zu rows written to %s\n", (long long)json_integer_value(json_object_get(s, "id")),
+		       json_array_size(wl), O.out);
+	return 0;
 }
 
 /* ---- watch ---- */
-static void show_event(json_t *ev, bool tty, bool *bar_shown)
+
+static volatile sig_atomic_t stop_watch;
+static void on_signal(int sig)
 {
-	const char *name = json_string_value(json_object_get(ev, "event"));
-	if (opt_json) {
-		char *s = json_dumps(ev, JSON_COMPACT);
-		puts(s ? s : "{}");
-		free(s);
-		fflush(stdout);
-		return;
+	(void)sig;
+	stop_watch = 1;
+}
+
+static double wall(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static void json_line_event(const char *name, const char *msg)
+{
+	json_t *o = json_pack("{s:s,s:s,s:f}", "event", name, "message", msg, "at", wall());
+	print_json(o);
+	json_decref(o);
+}
+
+/* Follow the daemon's events until interrupted, reconnecting (every second) when it goes away. */
+static int run_watch(void)
+{
+	bool tty = !O.json && isatty(STDOUT_FILENO);
+	struct ctl_view *view = tty ? ctl_view_new(stdout, O.sock) : NULL;
+	struct sigaction sa = { .sa_handler = on_signal };
+	sigaction(SIGINT, &sa, NULL);
+	sigaction(SIGTERM, &sa, NULL);
+	bool ever = false;
+	char last_err[512] = "";
+	while (!stop_watch) {
+		struct conn c;
+		struct acq_err err = { 0 };
+		json_t *req = NULL, *st = NULL, *dv = NULL, *rep = NULL;
+		if (conn_open(&c, &err))
+			goto lost;
+		if (view) {
+			req = json_pack("{s:s,s:i}", "cmd", "status", "id", 1);
+			st = conn_call(&c, req, NULL, &err);
+			json_decref(req);
+			req = json_pack("{s:s,s:i}", "cmd", "devices", "id", 2);
+			dv = st ? conn_call(&c, req, NULL, &err) : NULL;
+			json_decref(req);
+			if (!dv)
+				goto lost;
+			ctl_view_status(view, st, dv);
+		}
+		req = json_pack("{s:s,s:i}", "cmd", "watch", "id", 3);
+		rep = conn_call(&c, req, NULL, &err);
+		json_decref(req);
+		if (!rep)
+			goto lost;
+		if (!json_is_true(json_object_get(rep, "ok"))) {
+			json_t *e = json_object_get(rep, "error");
+			int rc = fail(CTL_EXIT_REFUSED, json_string_value(json_object_get(e, "code")), "watch: %s",
+				      json_string_value(json_object_get(e, "message")));
+			json_decref(rep);
+			conn_close(&c);
+			ctl_view_free(view);
+			return rc;
+		}
+		json_decref(rep);
+		if (view)
+			ctl_view_link(view, "connected");
+		else if (ever)
+			json_line_event("acqctl.reconnected", O.sock);
+		ever = true;
+		last_err[0] = 0;
+		while (!stop_watch) {
+			if (view)
+				ctl_view_draw(view, wall());
+			json_t *ev = proto_client_read(c.fd, &c.pl, 1000, &err);
+			if (!ev && err.code == ACQ_E_TIMEOUT)
+				continue;
+			if (!ev)
+				break;
+			if (view)
+				ctl_view_event(view, ev);
+			else
+				print_json(ev);
+			json_decref(ev);
+		}
+	lost:
+		json_decref(st);
+		json_decref(dv);
+		conn_close(&c);
+		if (stop_watch)
+			break;
+		if (strcmp(last_err, err.msg)) {
+			snprintf(last_err, sizeof last_err, "%s", err.msg);
+			char text[600];
+			snprintf(text, sizeof text, "reconnecting: %s", err.msg);
+			if (view)
+				ctl_view_link(view, text);
+			else
+				json_line_event("acqctl.disconnected", err.msg);
+		}
+		if (view)
+			ctl_view_draw(view, wall());
+		sleep(1);
 	}
-	char line[256];
-	if (proto_progress_line(ev, tty, line, sizeof line)) {
-		fputs(line, stdout);
-		if (!tty)
-			putchar('\n');
-		*bar_shown = tty;
-		fflush(stdout);
-		return;
+	if (view)
+		fputc('\n', stdout);
+	ctl_view_free(view);
+	return 0;
+}
+
+/* ---- wait: until the sweep is in a state (client side, by polling status) ---- */
+static int run_wait(const char *want, double timeout_s)
+{
+	static const char *const states[] = { "idle", "running", "paused", "faulted", NULL };
+	bool known = false;
+	for (int i = 0; states[i]; i++)
+		known |= !strcmp(want, states[i]);
+	if (!known)
+		return fail(CTL_EXIT_USAGE, "usage", "wait: expected idle, running, paused or faulted, got '%s'", want);
+	struct conn c;
+	struct acq_err err = { 0 };
+	if (conn_open(&c, &err)) {
+		conn_close(&c);
+		return fail(CTL_EXIT_UNAVAILABLE, "unavailable", "cannot connect to acquisitiond: %s", err.msg);
 	}
-	if (*bar_shown) {
-		putchar('\n');
-		*bar_shown = false;
+	double deadline = mono() + timeout_s;
+	json_t *req = json_pack("{s:s,s:i}", "cmd", "status", "id", 1);
+	int rc = -1;
+	while (rc < 0) {
+		json_t *rep = conn_call(&c, req, NULL, &err);
+		json_t *p = json_object_get(rep, "sweep");
+		if (!rep)
+			rc = fail(CTL_EXIT_UNAVAILABLE, "unavailable", "%s: %s", O.sock, err.msg);
+		else if (!strcmp(json_string_value(json_object_get(p, "state")) ?: "", want)) {
+			json_object_del(rep, "id");
+			if (O.json)
+				print_json(rep);
+			else
+				ctl_print_human(stdout, "status", rep);
+			rc = 0;
+		} else if (mono() > deadline)
+			rc = fail(75, "state", "wait: the sweep is still %s after %g s (wanted %s)",
+				  json_string_value(json_object_get(p, "state")), timeout_s, want);
+		else
+			usleep(250000);
+		json_decref(rep);
 	}
-	char ename[64];
-	snprintf(ename, sizeof ename, "%s", name ? name : "?");
-	json_object_del(ev, "event"); /* frees name */
-	char *s = json_dumps(ev, JSON_COMPACT);
-	printf("%s %s\n", ename, s ? s : "");
-	free(s);
-	fflush(stdout);
+	json_decref(req);
+	conn_close(&c);
+	return rc;
+}
+
+/* ---- plan without a daemon ---- */
+static int local_plan(const char *file)
+{
+	struct acq_err err = { 0 };
+	json_t *p = plan_cli_json(file, O.bench, O.points, &err);
+	if (!p)
+		return fail(err.code == ACQ_E_NOTFOUND || err.code == ACQ_E_IO ? CTL_EXIT_NOINPUT : CTL_EXIT_REFUSED,
+			    err.code == ACQ_E_NOTFOUND || err.code == ACQ_E_IO ? "not_found" : "invalid", "plan: %s",
+			    err.msg);
+	json_t *rep = json_pack("{s:b,s:o,s:s}", "ok", 1, "plan", p, "source", "local");
+	if (O.json)
+		print_json(rep);
+	else
+		ctl_print_plan(stdout, p);
+	json_decref(rep);
+	return 0;
 }
 
 int main(int argc, char **argv)
 {
-	static const struct option opts[] = { { "socket", required_argument, NULL, 's' },
-					      { "json", no_argument, NULL, 'j' },
-					      { "timeout", required_argument, NULL, 't' },
-					      { "help", no_argument, NULL, 'h' },
-					      { NULL, 0, NULL, 0 } };
-	const char *sock = getenv("ACQ_SOCKET");
-	if (!sock || !*sock)
-		sock = "/run/acquisitiond/acquisitiond.sock";
-	/* "+": options stop at the command, so `acqctl plan FILE --json` keeps its own options. */
-	int o;
-	while ((o = getopt_long(argc, argv, "+s:jt:h", opts, NULL)) != -1) {
-		switch (o) {
-		case 's': sock = optarg; break;
-		case 'j': opt_json = true; break;
-		case 't': opt_timeout_ms = atoi(optarg); break;
-		case 'h': usage(stdout); return 0;
-		default: usage(stderr); return EXIT_REFUSED;
+	O.sock = getenv("ACQ_SOCKET");
+	if (!O.sock || !*O.sock)
+		O.sock = DEFAULT_SOCKET;
+	/* Options anywhere; words that are not options form the command and its arguments. */
+	char *words[64];
+	int nw = 0;
+	double wait_timeout = 3600;
+	bool help = false;
+	for (int i = 1; i < argc; i++) {
+		const char *a = argv[i];
+		const char *val = NULL;
+#define TAKES(s, l) ((!strcmp(a, s) || !strcmp(a, l)) && (val = i + 1 < argc ? argv[++i] : NULL, 1))
+		if (!strcmp(a, "--json") || !strcmp(a, "-j"))
+			O.json = true;
+		else if (!strcmp(a, "--help") || !strcmp(a, "-h"))
+			help = true;
+		else if (!strcmp(a, "--version") || !strcmp(a, "-V")) {
+			printf("acqctl %s (protocol %d)\n", ACQ_VERSION, PROTO_VERSION);
+			return 0;
+		} else if (!strcmp(a, "--points"))
+			O.points = true;
+		else if (!strcmp(a, "--csv"))
+			O.csv = true;
+		else if (TAKES("-s", "--socket")) {
+			if (!(O.sock = val))
+				return fail(CTL_EXIT_USAGE, "usage", "%s needs a value (acqctl --help)", a);
+		} else if (TAKES("-t", "--timeout")) {
+			char *end;
+			O.timeout_ms = val ? (int)strtol(val, &end, 10) : 0;
+			if (!val || *end || O.timeout_ms <= 0)
+				return fail(CTL_EXIT_USAGE, "usage", "-t: expected milliseconds > 0");
+		} else if (TAKES("-w", "--wait") || TAKES("-T", "--timeout-s")) {
+			char *end;
+			double x = val ? strtod(val, &end) : -1;
+			if (!val || *end || !(x >= 0 && x <= 1e6))
+				return fail(CTL_EXIT_USAGE, "usage", "%s: expected seconds", a);
+			if (a[1] == 'w' || !strcmp(a, "--wait"))
+				O.wait_s = x;
+			else
+				wait_timeout = x;
+		} else if (TAKES("-o", "--output")) {
+			if (!(O.out = val))
+				return fail(CTL_EXIT_USAGE, "usage", "-o needs a file name");
+		} else if (TAKES("-c", "--config")) {
+			if (!(O.bench = val))
+				return fail(CTL_EXIT_USAGE, "usage", "--config needs a file name");
+		} else if (a[0] == '-' && a[1] && strcmp(a, "-"))
+			return fail(CTL_EXIT_USAGE, "usage", "unknown option %s (acqctl --help)", a);
+		else if (nw < 64)
+			words[nw++] = argv[i];
+#undef TAKES
+	}
+	if (nw == 0) {
+		if (help) {
+			usage(stdout);
+			return 0;
 		}
-	}
-	if (optind >= argc) {
 		usage(stderr);
-		return EXIT_REFUSED;
+		return CTL_EXIT_USAGE;
 	}
+	int wi = 0;
+	bool help_cmd = !strcmp(words[0], "help");
+	if (help_cmd) {
+		if (nw == 1) {
+			usage(stdout);
+			return 0;
+		}
+		wi = 1;
+	}
+	if (!strcmp(words[wi], "wait")) {
+		if (help || help_cmd) {
+			printf("usage: acqctl [options] wait idle|running|paused|faulted [--timeout-s S]\n"
+			       "      wait until the sweep is in that state (polls status); exit 75 after the timeout "
+			       "(default 3600 s)\n");
+			return 0;
+		}
+		if (nw != wi + 2)
+			return fail(CTL_EXIT_USAGE, "usage", "wait: expected one state (acqctl wait --help)");
+		return run_wait(words[wi + 1], wait_timeout);
+	}
+	/* The command: two words ("sweep start", "laser off") when they name one, else one. */
 	char cmd[64];
-	int ai = optind;
-	snprintf(cmd, sizeof cmd, "%s", argv[ai++]);
-	if ((!strcmp(cmd, "sweep") || !strcmp(cmd, "recon")) && ai < argc) {
-		snprintf(cmd + strlen(cmd), sizeof cmd - strlen(cmd), ".%s", argv[ai++]);
+	const struct proto_cmd *def = NULL;
+	if (wi + 1 < nw) {
+		snprintf(cmd, sizeof cmd, "%s.%s", words[wi], words[wi + 1]);
+		if ((def = proto_cmd_find(cmd)))
+			wi += 2;
 	}
-	if (!strcmp(cmd, "help")) {
-		usage(stdout);
+	if (!def) {
+		snprintf(cmd, sizeof cmd, "%s", words[wi]);
+		if ((def = proto_cmd_find(cmd)))
+			wi++;
+	}
+	if (!def)
+		return fail(CTL_EXIT_USAGE, "usage", "unknown command '%s' (acqctl help)", words[help_cmd]);
+	if (help || help_cmd) {
+		printf("usage: acqctl [options] ");
+		usage_cmd(stdout, def);
 		return 0;
 	}
-	struct acq_err err = { 0 };
-	int fd = proto_client_connect(sock, &err);
-	if (!strcmp(cmd, "plan") && fd < 0)
-		return plan_cli_main(argc - optind, argv + optind);
-	const struct proto_cmd *def = proto_cmd_find(cmd);
-	if (!def) {
-		fprintf(stderr, "acqctl: unknown command '%s' (acqctl help)\n", cmd);
-		if (fd >= 0)
-			close(fd);
-		return EXIT_REFUSED;
+	if (!strcmp(cmd, "watch")) {
+		if (wi < nw)
+			return fail(CTL_EXIT_USAGE, "usage", "watch takes no arguments");
+		return run_watch();
 	}
-	if (fd < 0) {
-		fprintf(stderr, "acqctl: cannot connect: %s\n", err.msg);
-		return EXIT_NOCONN;
-	}
+	/* The request, checked before anything is sent. */
 	json_t *req = json_pack("{s:s,s:i}", "cmd", cmd, "id", 1);
-	char *line = NULL;
-	json_t *banner = NULL;
-	struct proto_lines pl;
-	proto_lines_init(&pl);
-	int rc = EXIT_REFUSED;
-	/* Positional shortcuts. */
-	if ((!strcmp(cmd, "plan") || !strcmp(cmd, "sweep.start")) && ai < argc && !strchr(argv[ai], '=')) {
-		char *text = read_file(argv[ai++]);
-		if (!text)
-			goto out;
-		json_object_set_new(req, "plan", json_string(text));
-		free(text);
-		if (!strcmp(cmd, "plan"))
-			while (ai < argc && argv[ai][0] == '-') /* local dry-run options do not apply to the daemon */
-				ai++;
-	} else if ((!strcmp(cmd, "sweep.show") || !strcmp(cmd, "sweep.resume") || !strcmp(cmd, "recon.start") ||
-		    !strcmp(cmd, "export")) && ai < argc && !strchr(argv[ai], '=')) {
-		char kv[64];
-		snprintf(kv, sizeof kv, "sweep=%s", argv[ai++]);
-		if (set_arg(req, def, kv))
-			goto out;
-	}
-	for (; ai < argc; ai++)
-		if (set_arg(req, def, argv[ai]))
-			goto out;
-	line = json_dumps(req, JSON_COMPACT);
-	banner = proto_client_read(fd, &pl, opt_timeout_ms, &err);
-	if (!banner || json_integer_value(json_object_get(banner, "protocol")) != PROTO_VERSION) {
-		fprintf(stderr, "acqctl: %s: %s\n", sock, banner ? "unsupported protocol version" : err.msg);
-		rc = EXIT_NOCONN;
-		goto out;
-	}
-	if (!line) {
-		fprintf(stderr, "acqctl: out of memory\n");
-		goto out;
-	}
-	size_t n = strlen(line);
-	line[n] = '\n'; /* json_dumps' NUL becomes the newline (the request is sent by length) */
-	if (proto_write_all(fd, line, n + 1, &err)) {
-		fprintf(stderr, "acqctl: %s\n", err.msg);
-		rc = EXIT_NOCONN;
-		goto out;
-	}
-	json_t *rep = proto_client_read(fd, &pl, opt_timeout_ms, &err);
-	if (!rep) {
-		fprintf(stderr, "acqctl: %s\n", err.msg);
-		rc = EXIT_NOCONN;
-		goto out;
-	}
-	bool ok = json_is_true(json_object_get(rep, "ok"));
-	if (opt_json) {
-		char *s = json_dumps(rep, JSON_COMPACT);
-		puts(s ? s : "{}");
-		free(s);
-	} else if (ok) {
-		print_human(cmd, rep);
-	} else {
-		json_t *e = json_object_get(rep, "error");
-		fprintf(stderr, "acqctl: %s: %s (%s)\n", cmd, json_string_value(json_object_get(e, "message")),
-			json_string_value(json_object_get(e, "code")));
-	}
-	rc = ok ? 0 : EXIT_REFUSED;
-	if (ok && !strcmp(cmd, "watch")) {
-		bool tty = isatty(1), bar = false;
-		fflush(stdout);
-		json_t *ev;
-		while ((ev = proto_client_read(fd, &pl, -1, &err))) {
-			show_event(ev, tty, &bar);
-			json_decref(ev);
+	struct acq_err err = { 0 };
+	const char *pk = positional_key(cmd), *plan_file = NULL;
+	int rc = CTL_EXIT_OK;
+	for (; wi < nw; wi++) {
+		char *eq = strchr(words[wi], '=');
+		if (!eq && pk) {
+			if (pk[0] == '@') {
+				plan_file = words[wi];
+				char *text = read_text(plan_file, &err);
+				if (!text) {
+					rc = fail(err.code == ACQ_E_IO ? CTL_EXIT_NOINPUT : CTL_EXIT_DATAERR, "not_found", "%s",
+						  err.msg);
+					goto out;
+				}
+				json_object_set_new(req, pk + 1, json_string(text));
+				free(text);
+			} else if (set_arg(req, def, pk, words[wi], &err)) {
+				rc = fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
+				goto out;
+			}
+			pk = NULL;
+			continue;
 		}
-		if (bar)
-			putchar('\n');
-		fprintf(stderr, "acqctl: watch ended: %s\n", err.msg);
-		rc = EXIT_NOCONN;
+		if (!eq) {
+			rc = fail(CTL_EXIT_USAGE, "usage", "%s: expected key=value (acqctl %s --help)", words[wi], words[0]);
+			goto out;
+		}
+		*eq = 0;
+		for (char *k = words[wi]; *k; k++) /* one name per axis: laser.theta= is laser_theta= */
+			if (*k == '.')
+				*k = '_';
+		if (set_arg(req, def, words[wi], eq + 1, &err)) {
+			rc = fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
+			goto out;
+		}
 	}
+	for (int i = 0; i < def->nargs; i++)
+		if (def->args[i].required && !json_object_get(req, def->args[i].name)) {
+			rc = fail(CTL_EXIT_USAGE, "usage", "%s: missing %s (acqctl %s --help)", def->name, def->args[i].name,
+				  words[0]);
+			goto out;
+		}
+	if (!strcmp(cmd, "plan") && O.points)
+		json_object_set_new(req, "points", json_true());
+	if (!strcmp(cmd, "export") && O.json && !O.out && !json_object_get(req, "path")) {
+		rc = fail(CTL_EXIT_USAGE, "usage", "export --json prints the summary: give -o FILE for the CSV");
+		goto out;
+	}
+	if (!strcmp(cmd, "plan") && O.bench) {
+		rc = local_plan(plan_file);
+		goto out;
+	}
+	struct conn c;
+	if (conn_open(&c, &err)) {
+		conn_close(&c);
+		if (!strcmp(cmd, "plan") && err.code != ACQ_E_STATE) {
+			rc = local_plan(plan_file);
+			goto out;
+		}
+		rc = fail(CTL_EXIT_UNAVAILABLE, "unavailable", "cannot connect to acquisitiond: %s (socket: -s or "
+			  "$ACQ_SOCKET)", err.msg);
+		goto out;
+	}
+	int passed = -1;
+	json_t *rep = conn_call(&c, req, !strcmp(cmd, "export") ? &passed : NULL, &err);
+	conn_close(&c);
+	if (!rep) {
+		rc = fail(err.code == ACQ_E_PROTO ? CTL_EXIT_PROTOCOL : CTL_EXIT_UNAVAILABLE,
+			  err.code == ACQ_E_PROTO ? "protocol" : "unavailable", "%s: %s", O.sock, err.msg);
+		goto out;
+	}
+	json_object_del(rep, "id");
+	if (!json_is_true(json_object_get(rep, "ok"))) {
+		json_t *e = json_object_get(rep, "error");
+		char words2[64];
+		cmd_words(cmd, words2, sizeof words2);
+		/* the daemon's message names commands as the protocol does ("sweep.abort"): say them as typed */
+		const char *msg = json_string_value(json_object_get(e, "message"));
+		char said[1024];
+		snprintf(said, sizeof said, "%s", msg ? msg : "");
+		char *hit = strstr(said, cmd);
+		if (hit && strchr(cmd, '.'))
+			hit[strchr(cmd, '.') - cmd] = ' ';
+		fprintf(stderr, "acqctl: %s: %s (%s)\n", words2, said, json_string_value(json_object_get(e, "code")));
+		if (O.json)
+			print_json(rep);
+		rc = CTL_EXIT_REFUSED;
+	} else if (!strcmp(cmd, "export") && json_is_true(json_object_get(rep, "stream"))) {
+		if (passed < 0)
+			rc = fail(CTL_EXIT_PROTOCOL, "protocol", "export: the daemon sent no stream (over TCP? use the Unix "
+				  "socket)");
+		else
+			rc = copy_export(rep, passed);
+	} else if (!strcmp(cmd, "export") && json_is_string(json_object_get(rep, "csv"))) {
+		rc = write_inline(rep);
+	} else if (!strcmp(cmd, "spectrum") && O.csv) {
+		rc = spectrum_csv(rep);
+	} else if (O.json) {
+		print_json(rep);
+	} else {
+		ctl_print_human(stdout, cmd, rep);
+	}
+	if (passed >= 0)
+		close(passed);
 	json_decref(rep);
 out:
 	json_decref(req);
-	json_decref(banner);
-	free(line);
-	proto_lines_free(&pl);
-	close(fd);
+	if (fflush(stdout) && !rc)
+		rc = CTL_EXIT_CANTCREAT;
 	return rc;
 }

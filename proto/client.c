@@ -43,12 +43,45 @@ fail:
 
 json_t *proto_client_read(int fd, struct proto_lines *pl, int timeout_ms, struct acq_err *err)
 {
+	return proto_client_read_fd(fd, pl, timeout_ms, NULL, err);
+}
+
+/* recv() that keeps a file descriptor passed along (see proto_client_read_fd). */
+static ssize_t recv_fds(int fd, char *buf, size_t cap, int *passed)
+{
+	union {
+		char b[CMSG_SPACE(4 * sizeof(int))];
+		struct cmsghdr align;
+	} ctl;
+	struct iovec iov = { .iov_base = buf, .iov_len = cap };
+	struct msghdr mh = { .msg_iov = &iov, .msg_iovlen = 1, .msg_control = ctl.b, .msg_controllen = sizeof ctl.b };
+	ssize_t n = recvmsg(fd, &mh, MSG_CMSG_CLOEXEC);
+	if (n < 0 && errno == ENOTSOCK)
+		return read(fd, buf, cap);
+	for (struct cmsghdr *c = n >= 0 ? CMSG_FIRSTHDR(&mh) : NULL; c; c = CMSG_NXTHDR(&mh, c)) {
+		if (c->cmsg_level != SOL_SOCKET || c->cmsg_type != SCM_RIGHTS)
+			continue;
+		size_t k = (c->cmsg_len - CMSG_LEN(0)) / sizeof(int);
+		for (size_t i = 0; i < k; i++) {
+			int x;
+			memcpy(&x, CMSG_DATA(c) + i * sizeof(int), sizeof x);
+			if (passed && *passed < 0)
+				*passed = x;
+			else
+				close(x);
+		}
+	}
+	return n;
+}
+
+json_t *proto_client_read_fd(int fd, struct proto_lines *pl, int timeout_ms, int *passed, struct acq_err *err)
+{
 	for (;;) {
 		char *line;
 		size_t len;
 		int k = proto_lines_next(pl, &line, &len);
 		if (k == PROTO_LINE_TOO_LONG) {
-			acq_errf(err, ACQ_E_PROTO, "reply longer than %d bytes", PROTO_MAX_LINE);
+			acq_errf(err, ACQ_E_PROTO, "reply longer than %zu bytes", pl->max ? pl->max : (size_t)PROTO_MAX_LINE);
 			return NULL;
 		}
 		if (k == PROTO_LINE_OK) {
@@ -71,7 +104,7 @@ json_t *proto_client_read(int fd, struct proto_lines *pl, int timeout_ms, struct
 		if (r < 0)
 			continue;
 		char buf[16384];
-		ssize_t n = read(fd, buf, sizeof buf);
+		ssize_t n = recv_fds(fd, buf, sizeof buf, passed);
 		if (n < 0 && (errno == EINTR || errno == EAGAIN))
 			continue;
 		if (n <= 0) {

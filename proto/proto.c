@@ -49,6 +49,7 @@ int proto_lines_next(struct proto_lines *pl, char **line, size_t *len)
 		consume(pl, pl->taken);
 		pl->taken = 0;
 	}
+	size_t max = pl->max ? pl->max : PROTO_MAX_LINE;
 	for (;;) {
 		char *nl = pl->len ? memchr(pl->buf, '\n', pl->len) : NULL;
 		if (pl->discarding) {
@@ -61,7 +62,7 @@ int proto_lines_next(struct proto_lines *pl, char **line, size_t *len)
 			continue;
 		}
 		if (!nl) {
-			if (pl->len > PROTO_MAX_LINE) {
+			if (pl->len > max) {
 				/* Answer as soon as the bound is passed; the rest of the line is dropped as it comes. */
 				pl->len = 0;
 				pl->discarding = true;
@@ -70,7 +71,7 @@ int proto_lines_next(struct proto_lines *pl, char **line, size_t *len)
 			return PROTO_LINE_NONE;
 		}
 		size_t l = (size_t)(nl - pl->buf);
-		if (l > PROTO_MAX_LINE) {
+		if (l > max) {
 			consume(pl, l + 1);
 			return PROTO_LINE_TOO_LONG;
 		}
@@ -97,8 +98,8 @@ const struct proto_cmd proto_cmds[] = {
 	{ "devices", PROTO_OBSERVER, "each device: configured, connected, state, identity", { { 0 } }, 0 },
 	{ "config", PROTO_OBSERVER, "the running configuration (daemon, sweep, recon; text with text=true)",
 	  { B("text", false) }, 1 },
-	{ "plan", PROTO_OBSERVER, "dry run of a plan (YAML text): points, blind zones, duration",
-	  { S("plan", true, 1 << 20) }, 1 },
+	{ "plan", PROTO_OBSERVER, "dry run of a plan (YAML text): points, blind zones, duration (steps with points)",
+	  { S("plan", true, 1 << 20), B("points", false) }, 2 },
 	{ "sweep.start", PROTO_CONTROLLER, "start a sweep from a plan (YAML text)",
 	  { S("plan", true, 1 << 20), S("name", false, 200) }, 2 },
 	{ "sweep.pause", PROTO_CONTROLLER, "pause the running sweep after the current spectrum", { { 0 } }, 0 },
@@ -110,6 +111,11 @@ const struct proto_cmd proto_cmds[] = {
 	{ "move", PROTO_CONTROLLER, "move arms to absolute angles (degrees), checked against soft limits",
 	  { N("laser_theta", false, -360, 360), N("detector_theta", false, -360, 360),
 	    N("detector_phi", false, -720, 720) }, 3 },
+	{ "home", PROTO_CONTROLLER, "home the arms (all axes, or the one named by axis)", { S("axis", false, 32) }, 1 },
+	{ "stop", PROTO_CONTROLLER, "stop a running manual move, homing or measurement (arms decelerate, laser off)",
+	  { { 0 } }, 0 },
+	{ "laser.off", PROTO_CONTROLLER, "switch the laser emission off now (refused while a sweep is loaded)",
+	  { { 0 } }, 0 },
 	{ "measure", PROTO_CONTROLLER, "take one sample spectrum (laser on for it, at power_pct if given)",
 	  { N("integration_ms", false, 0.002, 600000), I("averages", false, 1, 10000), N("power_pct", false, 0, 100) },
 	  3 },
@@ -122,8 +128,10 @@ const struct proto_cmd proto_cmds[] = {
 	  { I("sweep", true, 1, ID_MAX) }, 1 },
 	{ "recon.status", PROTO_OBSERVER, "state of a reconstruction run (latest of a sweep, or by run id)",
 	  { I("sweep", false, 1, ID_MAX), I("run", false, 1, ID_MAX) }, 2 },
-	{ "export", PROTO_OBSERVER, "a sweep's calibrated samples as CSV (inline, or to a file under the state dir)",
-	  { I("sweep", true, 1, ID_MAX), S("path", false, 1024) }, 2 },
+	{ "export", PROTO_OBSERVER, "a sweep's calibrated samples as CSV (a stream passed to the client, or a new "
+	  "file NAME in the daemon's export folder)", { I("sweep", true, 1, ID_MAX), S("path", false, 255) }, 2 },
+	{ "spectrum", PROTO_OBSERVER, "one stored spectrum: kind, settings, wavelengths and counts",
+	  { I("spectrum", true, 1, ID_MAX) }, 1 },
 	{ "watch", PROTO_OBSERVER, "stream events (progress with ETA, device state, faults, recon)", { { 0 } }, 0 },
 	{ "reload", PROTO_CONTROLLER, "reload the configuration file (refused while a sweep runs)", { { 0 } }, 0 },
 	{ NULL, 0, NULL, { { 0 } }, 0 },

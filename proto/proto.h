@@ -31,6 +31,7 @@ struct proto_lines {
 	size_t len, cap;
 	size_t taken;      /* bytes of the line handed out last time, dropped on the next call */
 	bool discarding;   /* inside an oversized line: drop bytes up to its newline */
+	size_t max;        /* longest line accepted; 0 = PROTO_MAX_LINE (requests). Clients raise it for replies */
 };
 
 enum proto_line_kind { PROTO_LINE_NONE = 0, PROTO_LINE_OK = 1, PROTO_LINE_TOO_LONG = 2 };
@@ -94,16 +95,17 @@ char *proto_banner(const char *version);
 /* The wire code for an error record's class (ACQ_E_RANGE → "range", ...). */
 const char *proto_code_of(const struct acq_err *err);
 
-/* Render a "sweep.progress" event {sweep, done, total, eta_s}: on a terminal "\rsweep N [###---] P% d/t  ETA
- * 4m05s" (redrawn in place), else "sweep N: d/t points, ETA 4m05s". 1 if ev was one, else 0 (buf untouched). */
-int proto_progress_line(json_t *ev, bool tty, char *buf, size_t cap);
-
 /* ---- client side (acqctl, tests) ---- */
 /* Connect to a Unix socket path, or "tcp:PORT" on 127.0.0.1. fd or -1 with err. */
 int proto_client_connect(const char *where, struct acq_err *err);
 /* Read one complete line from fd through pl (blocking, timeout_ms < 0: forever). The returned JSON value
  * is owned by the caller. NULL with err on EOF, timeout, oversize or bad JSON. */
 json_t *proto_client_read(int fd, struct proto_lines *pl, int timeout_ms, struct acq_err *err);
+/* proto_client_read() that also accepts a file descriptor passed with the data (SCM_RIGHTS, e.g. an export
+ * stream): it is stored in *passed if that is -1, else closed. */
+json_t *proto_client_read_fd(int fd, struct proto_lines *pl, int timeout_ms, int *passed, struct acq_err *err);
+/* Longest reply line acqctl accepts (a plan listing every step, a spectrum). */
+#define PROTO_MAX_REPLY (64u << 20)
 /* Write all of a line to fd. 0 or -1. */
 int proto_write_all(int fd, const char *buf, size_t len, struct acq_err *err);
 

@@ -18,6 +18,9 @@
 #include "recon/recon.h"
 #include "recon/render.h"
 #include "recon/rgbeval.h"
+#include "recon/brdf_recon/cli.h"
+#include "recon/exrio.h"
+#include "recon/sky.h"
 
 static const char *prog = "brdf-recon";
 
@@ -29,7 +32,7 @@ const char *__lsan_default_suppressions(void)
 	return "leak:libfontconfig.so\n";
 }
 
-static void progress(void *ctx, const char *stage, double frac)
+void progress(void *ctx, const char *stage, double frac)
 {
 	(void)ctx;
 	if (!isatty(2))
@@ -38,26 +41,26 @@ static void progress(void *ctx, const char *stage, double frac)
 	fflush(stderr);
 }
 
-static void progress_end(void)
+void progress_end(void)
 {
 	if (isatty(2))
 		fprintf(stderr, "\r%40s\r", "");
 }
 
-static int fail(const struct acq_err *e)
+int fail(const struct acq_err *e)
 {
 	progress_end();
 	fprintf(stderr, "%s: %s\n", prog, e->msg[0] ? e->msg : "error");
 	return 1;
 }
 
-static int usage_err(const char *cmd, const char *msg)
+int usage_err(const char *cmd, const char *msg)
 {
 	fprintf(stderr, "%s %s: %s (see %s %s --help)\n", prog, cmd, msg, prog, cmd);
 	return 2;
 }
 
-static int parse_double(const char *s, double *out)
+int parse_double(const char *s, double *out)
 {
 	char *end;
 	errno = 0;
@@ -68,7 +71,7 @@ static int parse_double(const char *s, double *out)
 	return 0;
 }
 
-static int parse_u64(const char *s, uint64_t *out)
+int parse_u64(const char *s, uint64_t *out)
 {
 	char *end;
 	errno = 0;
@@ -790,7 +793,8 @@ static int colour_arg(struct colour_opts *co, const char *arg, struct acq_err *e
 
 /* Write the colour decisions and the reduction figures next to an output (path + ".colour.json"). */
 static int write_decisions(const char *out, const struct colour_opts *co, const struct recon_rgb *R, int full,
-			   double bin_nm, struct acq_err *err)
+			   double bin_nm, const struct render_opts *ro, const struct colour_stats *tone, const char *exr,
+			   struct acq_err *err)
 {
 	char p[4096];
 	snprintf(p, sizeof p, "%s.colour.json", out);
@@ -799,8 +803,16 @@ static int write_decisions(const char *out, const struct colour_opts *co, const 
 		return -1;
 	size_t nc, r;
 	recon_rgb_sizes(R, &nc, &r);
-	fprintf(o.f, "{\"colour\": ");
-	int ok = colour_opts_write_json(o.f, co, NULL, err) == 0;
+	fprintf(o.f, "{");
+	int ok = 1;
+	if (ro) { /* a rendered image: first what the image itself is */
+		fprintf(o.f, "\"image\": ");
+		ok = render_write_json(o.f, ro, tone, out, exr, err) == 0;
+		fprintf(o.f, ", \"brdf_to_rgb\": ");
+	} else {
+		fprintf(o.f, "\"colour\": ");
+	}
+	ok = ok && colour_opts_write_json(o.f, co, NULL, err) == 0;
 	fprintf(o.f, ", \"spectral_path\": \"%s\", \"bin_nm\": %g, \"channels\": %zu, \"rank\": %zu, "
 		"\"reduction_max_rel_error\": %.3g, \"batch_precision\": \"%s\", \"single_precision_max_abs_error_ln_f\": %.3g}\n",
 		full ? "full" : "reduced", bin_nm, nc, r, recon_rgb_reduction_error(R), recon_rgb_f32(R) ? "single" : "double",
@@ -823,11 +835,17 @@ static const char merl_help[] =
 	"target exposure gamut range reinhard_white srgb_encode.\n";
 
 static const char render_help[] =
-	"usage: brdf-recon render MODEL -o OUT.png [--size N] [--exposure X] [--colour key=value]... [--threads N]\n"
-	"                         [--bin-nm X] [--direct | --full-spectrum]\n"
-	"Preview of the model on a sphere under two lights and a gradient sky (tone-mapped sRGB PNG). By default\n"
-	"the model is tabulated as a MERL table in memory (batched) and rendered through its nearest-cell lookup;\n"
-	"--direct evaluates the reduced model per ray, --full-spectrum every channel per ray.\n";
+	"usage: brdf-recon render MODEL -o OUT.png [--exr OUT.exr] [--size N] [--exposure X] [--spp N] [--seed S]\n"
+	"                         [--env MAP.exr [--env-scale X]] [--sun-elevation DEG] [--sun-azimuth DEG] [--no-sun]\n"
+	"                         [--lights] [--colour key=value]... [--threads N] [--bin-nm X] [--direct | --full-spectrum]\n"
+	"Preview of the model on a sphere: tone-mapped sRGB PNG (sRGB/gAMA/cHRM chunks) and, with --exr, the linear\n"
+	"HDR radiance as OpenEXR (float RGB, Rec. 709 chromaticities). Lighting: a smooth procedural sky with a sun\n"
+	"(default; azimuth 0 = toward the camera, 90 = right), or a lat-long EXR environment map (--env; centre\n"
+	"column looks away from the camera), sampled by importance (sky luminance, sun cone, GGX lobe, cosine;\n"
+	"--spp samples per pixel, default 64). --lights: the old two lights + 64-direction gradient sky.\n"
+	"OUT.png.colour.json records the image's colour decisions, its lighting and the BRDF-to-RGB chain.\n"
+	"By default the model is tabulated as a MERL table in memory (batched) and rendered through its nearest-cell\n"
+	"lookup; --direct evaluates the reduced model per ray, --full-spectrum every channel per ray.\n";
 
 static int cmd_output(const char *cmd, int argc, char **argv)
 {
@@ -836,8 +854,15 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 		{ "threads", required_argument, 0, 't' }, { "full-spectrum", no_argument, 0, 'f' },
 		{ "size", required_argument, 0, 's' }, { "exposure", required_argument, 0, 'e' },
 		{ "direct", no_argument, 0, 'd' }, { "bin-nm", required_argument, 0, 'b' },
-		{ "double", no_argument, 0, 'D' }, { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
-	int direct = 0, dbl = 0;
+		{ "double", no_argument, 0, 'D' }, { "help", no_argument, 0, 'h' }, { "exr", required_argument, 0, 'X' },
+		{ "spp", required_argument, 0, 'P' }, { "seed", required_argument, 0, 'S' },
+		{ "env", required_argument, 0, 'E' }, { "env-scale", required_argument, 0, 'K' },
+		{ "sun-elevation", required_argument, 0, 'A' }, { "sun-azimuth", required_argument, 0, 'Z' },
+		{ "no-sun", no_argument, 0, 'N' }, { "lights", no_argument, 0, 'L' }, { 0, 0, 0, 0 } };
+	int direct = 0, dbl = 0, no_sun = 0, old_lights = 0;
+	const char *exr = NULL, *env = NULL;
+	double env_scale = 1, sun_el = 40, sun_az = -36;
+	uint64_t spp = 64, rseed = 1;
 	double bin_nm = 5;
 	int is_merl = !strcmp(cmd, "merl");
 	const char *outp = NULL;
@@ -874,14 +899,44 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 				return usage_err(cmd, "--exposure needs a positive number (render only)");
 			break;
 		case 'h': fputs(is_merl ? merl_help : render_help, stdout); return 0;
+		case 'X': exr = optarg; break;
+		case 'E': env = optarg; break;
+		case 'N': no_sun = 1; break;
+		case 'L': old_lights = 1; break;
+		case 'P': case 'S':
+			if (parse_u64(optarg, c == 'P' ? &spp : &rseed) || (c == 'P' && (spp < 8 || spp > 4096)))
+				return usage_err(cmd, "--spp needs 8..4096, --seed an unsigned integer");
+			break;
+		case 'K': case 'A': case 'Z': {
+			double *t = c == 'K' ? &env_scale : c == 'A' ? &sun_el : &sun_az;
+			if (parse_double(optarg, t) || (c == 'K' && !(env_scale > 0)) || (c == 'A' && !(sun_el > 0 && sun_el <= 90)))
+				return usage_err(cmd, "--env-scale needs a positive number, --sun-elevation 0..90, --sun-azimuth degrees");
+			break;
+		}
 		default: return usage_err(cmd, "bad option");
 		}
 	}
 	if (optind != argc - 1 || !outp)
 		return usage_err(cmd, "MODEL and -o OUT expected");
+	if (is_merl && (exr || env || old_lights))
+		return usage_err(cmd, "--exr, --env and --lights are render options");
 	struct recon_model *m;
 	if (recon_model_load(argv[optind], &m, &err))
 		return fail(&err);
+	struct sky *sky = NULL;
+	struct sky_opts so;
+	sky_opts_default(&so);
+	double el = sun_el * M_PI / 180, az = sun_az * M_PI / 180;
+	so.sun_dir[0] = cos(el) * sin(az);
+	so.sun_dir[1] = sin(el);
+	so.sun_dir[2] = cos(el) * cos(az);
+	if (no_sun)
+		so.sun_rgb[0] = so.sun_rgb[1] = so.sun_rgb[2] = 0;
+	if (!is_merl && !old_lights && (env ? sky_envmap(env, env_scale, no_sun ? NULL : &so, &sky, &err)
+					  : sky_procedural(&so, &sky, &err))) {
+		recon_model_free(m);
+		return fail(&err);
+	}
 	struct recon_rgb *R = NULL;
 	int ok = recon_rgb_new(m, &co, bin_nm, &R, &err) == 0;
 	if (ok) {
@@ -911,17 +966,36 @@ static int cmd_output(const char *cmd, int argc, char **argv)
 		mo.threads = (int)threads;
 		/* the table is already in the writer's cells and units: written as it is (no per-cell lookup) */
 		ok = (table.data ? merl_write_table(outp, &table, &err) : merl_write_ex(outp, fn, ctx, &mo, &err)) == 0;
-	} else if (ok) {
-		struct render_opts ro;
-		render_opts_default(&ro);
+	}
+	struct render_opts ro;
+	struct colour_stats tone = { 0 };
+	render_opts_default(&ro);
+	float *lin = NULL;
+	if (ok && !is_merl) {
 		ro.width = ro.height = (int)size;
 		ro.exposure = exposure;
 		ro.threads = (int)threads;
-		ok = render_sphere(&ro, fn, ctx, outp, NULL, &st, &err) == 0;
+		ro.sky = sky;
+		ro.spp = (int)spp;
+		ro.seed = rseed;
+		ro.lobe_alpha = m->trend != RECON_TREND_NONE && m->trend_alpha >= 0.01 && m->trend_alpha <= 1 ? m->trend_alpha : 0.3;
+		lin = malloc((size_t)size * (size_t)size * 3 * sizeof *lin);
+		if (!lin)
+			ok = acq_errf(&err, ACQ_E_NOMEM, "render: out of memory") == 0;
+		ok = ok && render_sphere(&ro, fn, ctx, outp, lin, &tone, &err) == 0;
+		if (ok && exr) {
+			char note[1024];
+			snprintf(note, sizeof note, "brdf-recon render of %s: linear scene-referred radiance x exposure %g, "
+				 "Rec. 709 primaries, D65; lighting: %s", argv[optind], exposure,
+				 sky ? sky->desc : "two lights + gradient sky");
+			ok = exrio_write_rgb(exr, lin, ro.width, ro.height, note, &err) == 0;
+		}
 	}
 	merl_free(&table);
 	if (ok)
-		ok = write_decisions(outp, &co, R, full, bin_nm, &err) == 0;
+		ok = write_decisions(outp, &co, R, full, bin_nm, is_merl ? NULL : &ro, &tone, exr, &err) == 0;
+	free(lin);
+	sky_free(sky);
 	recon_rgb_free(R);
 	recon_model_free(m);
 	if (!ok)
@@ -941,7 +1015,9 @@ static const char main_help[] =
 	"  check   MODEL                    verify non-negativity, reciprocity, energy conservation\n"
 	"  info    MODEL                    print parameters and metadata\n"
 	"  merl    MODEL -o FILE.binary     MERL table (RGB)\n"
-	"  render  MODEL -o OUT.png         preview render of a sphere\n";
+	"  render  MODEL -o OUT.png         preview render of a sphere\n"
+	"  rgl     MODEL -o FILE.bsdf       spectral RGL tabulated BRDF (Mitsuba 3, pbrt-v4)\n"
+	"  slices  MODEL -o OUT.png         in-plane slices and polar plots with samples and uncertainty\n";
 
 int main(int argc, char **argv)
 {
@@ -970,6 +1046,10 @@ int main(int argc, char **argv)
 		return cmd_check(argc, argv);
 	if (!strcmp(cmd, "info"))
 		return cmd_info(argc, argv);
+	if (!strcmp(cmd, "rgl"))
+		return cmd_rgl(argc, argv);
+	if (!strcmp(cmd, "slices"))
+		return cmd_slices(argc, argv);
 	if (!strcmp(cmd, "merl") || !strcmp(cmd, "render"))
 		return cmd_output(cmd, argc, argv);
 	fprintf(stderr, "%s: unknown command '%s'\n%s", prog, cmd, main_help);

@@ -31,6 +31,11 @@ void plot_curve_colour(size_t i, double rgb[3])
 	memcpy(rgb, palette[i % PALETTE_N], 3 * sizeof(double));
 }
 
+size_t plot_palette_size(void)
+{
+	return PALETTE_N;
+}
+
 void plot_reference_colour(double rgb[3])
 {
 	memcpy(rgb, ref_line, 3 * sizeof(double));

@@ -47,6 +47,8 @@ int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurv
 /* Palette colour (sRGB components 0..1) of computed curve i; plot_reference_colour for the reference line. */
 void plot_curve_colour(size_t i, double rgb[3]);
 void plot_reference_colour(double rgb[3]);
+/* Number of distinct curve colours (plot_curve_colour repeats after it). */
+size_t plot_palette_size(void);
 
 /* Data → pixel coordinates (pixel edges: pixel (i, j) covers [i, i+1) × [j, j+1)). */
 double plot_x_to_px(const struct plot_frame *f, double x);

@@ -3,13 +3,13 @@
 
 #include <cairo.h>
 #include <math.h>
-#include <pthread.h>
-#include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "recon/pngio.h"
+#include "recon/pool.h"
+#include "recon/rng.h"
 
 static void set3(double d[3], double a, double b, double c)
 {
@@ -41,6 +41,9 @@ void render_opts_default(struct render_opts *o)
 	o->tone.srgb_encode = true;
 	set3(o->background, 0.05, 0.05, 0.05);
 	o->threads = 1;
+	o->spp = 64;
+	o->lobe_alpha = 0.3;
+	o->seed = 1;
 }
 
 int render_pixel_normal(const struct render_opts *o, int i, int j, double n[3])
@@ -81,70 +84,157 @@ struct scene {
 	double (*sky_dir)[3]; /* K unit directions (world) */
 	double (*sky_rad)[3]; /* their radiance · 4π/K */
 	double light_dir[RENDER_MAX_LIGHTS][3];
+	int n_map, n_sun, n_lobe, n_cos; /* samples per strategy (sky path) */
 	float *lin;
-	atomic_int *stop;
 };
 
-struct worker {
-	struct scene *s;
-	int thread, nthreads;
-	int failed; /* 0, 1 = callback error, 2 = non-finite */
-	int rc, px, py;
-};
-
-static void *render_rows(void *arg)
+static int bad_pixel(struct acq_err *err, int rc, int i, int j)
 {
-	struct worker *w = arg;
-	const struct scene *s = w->s;
+	if (rc != 0)
+		return acq_errf(err, ACQ_E_NUMERIC, "render: BRDF callback failed (%d) at pixel (%d, %d)", rc, i, j);
+	return acq_errf(err, ACQ_E_NUMERIC, "render: non-finite radiance at pixel (%d, %d)", i, j);
+}
+
+/* Fixed lights and the Fibonacci sky (no sky object). */
+static int shade_fixed(const struct scene *s, const double n[3], const double b1[3], const double b2[3],
+		       const double wo[3], double L[3], int *cb_rc)
+{
 	const struct render_opts *o = s->o;
-	for (int j = w->thread; j < o->height; j += w->nthreads) {
-		if (atomic_load(s->stop))
-			return NULL;
-		for (int i = 0; i < o->width; i++) {
-			float *out = s->lin + 3 * ((size_t)j * (size_t)o->width + (size_t)i);
-			double n[3], b1[3], b2[3], L[3] = { 0, 0, 0 };
-			if (!render_pixel_normal(o, i, j, n)) {
+	int nl = o->n_lights, ns = o->sky_samples;
+	for (int k = 0; k < nl + ns; k++) {
+		const double *d = k < nl ? s->light_dir[k] : s->sky_dir[k - nl];
+		const double *e = k < nl ? o->lights[k].rgb : s->sky_rad[k - nl];
+		double wi[3] = { dot(d, b1), dot(d, b2), dot(d, n) };
+		if (!(wi[2] > 0))
+			continue;
+		double f[3] = { 0, 0, 0 };
+		int rc = s->fn(s->ctx, wi, wo, f);
+		if (rc != 0 || !finite3(f)) {
+			*cb_rc = rc;
+			return -1;
+		}
+		for (int c = 0; c < 3; c++)
+			L[c] += f[c] * e[c] * wi[2];
+	}
+	return 0;
+}
+
+static double ggx_d(double a2, double ch)
+{
+	double t = ch * ch * (a2 - 1) + 1;
+	return a2 / (M_PI * t * t);
+}
+
+/* n_s·p_s(ωi) of the four strategies (map, sun, lobe, cosine) at ωi, local (wi) and world (d). */
+static void mis_pdfs(const struct scene *s, const double wi[3], const double wo[3], const double d[3], double q[4])
+{
+	const struct render_opts *o = s->o;
+	double pc = wi[2] > 0 ? wi[2] / M_PI : 0;
+	q[0] = s->n_map * sky_pdf_map(o->sky, d);
+	q[1] = s->n_sun * sky_pdf_sun(o->sky, d);
+	q[3] = s->n_cos * pc;
+	q[2] = 0;
+	if (s->n_lobe && o->lobe_alpha > 0) {
+		double h[3] = { wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2] }, l = sqrt(dot(h, h));
+		if (l > 0 && wi[2] > 0) {
+			for (int c = 0; c < 3; c++)
+				h[c] /= l;
+			double oh = dot(wo, h);
+			if (h[2] > 0 && oh > 0)
+				q[2] = s->n_lobe * ggx_d(o->lobe_alpha * o->lobe_alpha, h[2]) * h[2] / (4 * oh);
+		}
+	} else if (s->n_lobe) {
+		q[2] = s->n_lobe * pc;
+	}
+}
+
+/* Environment lighting by multiple importance sampling (render.h). */
+static int shade_sky(const struct scene *s, size_t pixel, const double n[3], const double b1[3],
+		     const double b2[3], const double wo[3], double L[3], int *cb_rc)
+{
+	const struct render_opts *o = s->o;
+	struct recon_rng r;
+	recon_rng_seed(&r, o->seed * 0x9E3779B97F4A7C15ull + pixel);
+	int total = s->n_map + s->n_sun + s->n_lobe + s->n_cos;
+	for (int k = 0; k < total; k++) {
+		double u[2] = { recon_rng_unif(&r), recon_rng_unif(&r) }, d[3], wi[3];
+		if (k < s->n_map + s->n_sun) {
+			if (k < s->n_map)
+				sky_sample_map(o->sky, u, d);
+			else
+				sky_sample_sun(o->sky, u, d);
+			wi[0] = dot(d, b1);
+			wi[1] = dot(d, b2);
+			wi[2] = dot(d, n);
+		} else {
+			if (k < s->n_map + s->n_sun + s->n_lobe && o->lobe_alpha > 0) {
+				double a = o->lobe_alpha, t2 = a * a * u[0] / fmax(1e-12, 1 - u[0]);
+				double ct = 1 / sqrt(1 + t2), st = sqrt(fmax(0, 1 - ct * ct)), p = 2 * M_PI * u[1];
+				double h[3] = { st * cos(p), st * sin(p), ct }, oh = dot(wo, h);
 				for (int c = 0; c < 3; c++)
-					out[c] = (float)(o->background[c] * o->exposure);
-				continue;
+					wi[c] = 2 * oh * h[c] - wo[c];
+			} else {
+				double rr = sqrt(u[0]), p = 2 * M_PI * u[1];
+				set3(wi, rr * cos(p), rr * sin(p), sqrt(fmax(0, 1 - u[0])));
 			}
-			basis(n, b1, b2);
-			const double view[3] = { 0, 0, 1 };
-			double wo[3] = { dot(view, b1), dot(view, b2), dot(view, n) };
-			int nl = o->n_lights, ns = o->sky_samples;
-			for (int k = 0; k < nl + ns; k++) {
-				const double *d = k < nl ? s->light_dir[k] : s->sky_dir[k - nl];
-				const double *e = k < nl ? o->lights[k].rgb : s->sky_rad[k - nl];
-				double wi[3] = { dot(d, b1), dot(d, b2), dot(d, n) };
-				if (!(wi[2] > 0))
-					continue;
-				double f[3] = { 0, 0, 0 };
-				int rc = s->fn(s->ctx, wi, wo, f);
-				if (rc != 0 || !finite3(f)) {
-					w->failed = rc != 0 ? 1 : 2;
-					w->rc = rc;
-					w->px = i;
-					w->py = j;
-					atomic_store(s->stop, 1);
-					return NULL;
-				}
-				for (int c = 0; c < 3; c++)
-					L[c] += f[c] * e[c] * wi[2];
-			}
-			for (int c = 0; c < 3; c++) {
-				double v = L[c] * o->exposure;
-				if (!isfinite(v) || fabs(v) > 3e38) {
-					w->failed = 2;
-					w->px = i;
-					w->py = j;
-					atomic_store(s->stop, 1);
-					return NULL;
-				}
-				out[c] = (float)v;
-			}
+			for (int c = 0; c < 3; c++)
+				d[c] = wi[0] * b1[c] + wi[1] * b2[c] + wi[2] * n[c];
+		}
+		if (!(wi[2] > 0))
+			continue;
+		/* power heuristic (β = 2): a sample weighs (n_s p_s)² / Σ (n_k p_k)², divided by n_s p_s; a rare lobe
+		 * or cosine sample landing in the small, bright sun adds almost nothing (no fireflies) */
+		int strat = k < s->n_map ? 0 : k < s->n_map + s->n_sun ? 1 : k < s->n_map + s->n_sun + s->n_lobe ? 2 : 3;
+		double q[4], sq = 0;
+		mis_pdfs(s, wi, wo, d, q);
+		for (int t = 0; t < 4; t++)
+			sq += q[t] * q[t];
+		if (!(q[strat] > 0) || !(sq > 0))
+			continue;
+		double den = sq / q[strat];
+		double f[3] = { 0, 0, 0 }, Le[3];
+		int rc = s->fn(s->ctx, wi, wo, f);
+		if (rc != 0 || !finite3(f)) {
+			*cb_rc = rc;
+			return -1;
+		}
+		sky_radiance(o->sky, d, Le);
+		for (int c = 0; c < 3; c++)
+			L[c] += f[c] * Le[c] * wi[2] / den;
+	}
+	return 0;
+}
+
+/* One image row (a pool job). */
+static int render_row(void *ctx, int worker, size_t job, struct acq_err *err)
+{
+	(void)worker;
+	const struct scene *s = ctx;
+	const struct render_opts *o = s->o;
+	int j = (int)job;
+	for (int i = 0; i < o->width; i++) {
+		size_t pixel = (size_t)j * (size_t)o->width + (size_t)i;
+		float *out = s->lin + 3 * pixel;
+		double n[3], b1[3], b2[3], L[3] = { 0, 0, 0 };
+		if (!render_pixel_normal(o, i, j, n)) {
+			for (int c = 0; c < 3; c++)
+				out[c] = (float)(o->background[c] * o->exposure);
+			continue;
+		}
+		basis(n, b1, b2);
+		const double view[3] = { 0, 0, 1 };
+		double wo[3] = { dot(view, b1), dot(view, b2), dot(view, n) };
+		int cb_rc = 0;
+		if ((o->sky ? shade_sky(s, pixel, n, b1, b2, wo, L, &cb_rc) : shade_fixed(s, n, b1, b2, wo, L, &cb_rc)))
+			return bad_pixel(err, cb_rc, i, j);
+		for (int c = 0; c < 3; c++) {
+			double v = L[c] * o->exposure;
+			if (!isfinite(v) || fabs(v) > 3e38)
+				return bad_pixel(err, 0, i, j);
+			out[c] = (float)v;
 		}
 	}
-	return NULL;
+	return 0;
 }
 
 static int check_opts(const struct render_opts *o, struct acq_err *err)
@@ -157,6 +247,10 @@ static int check_opts(const struct render_opts *o, struct acq_err *err)
 		return acq_errf(err, ACQ_E_INVAL, "render: %d lights (0..%d)", o->n_lights, RENDER_MAX_LIGHTS);
 	if (o->sky_samples < 0 || o->sky_samples > 4096)
 		return acq_errf(err, ACQ_E_INVAL, "render: sky_samples %d outside 0..4096", o->sky_samples);
+	if (o->sky && (o->spp < 8 || o->spp > 4096))
+		return acq_errf(err, ACQ_E_INVAL, "render: spp %d outside 8..4096", o->spp);
+	if (o->sky && !(o->lobe_alpha == 0 || (o->lobe_alpha >= 0.01 && o->lobe_alpha <= 1)))
+		return acq_errf(err, ACQ_E_INVAL, "render: lobe_alpha %g (0 or 0.01..1)", o->lobe_alpha);
 	if (o->threads < 1 || o->threads > 16)
 		return acq_errf(err, ACQ_E_INVAL, "render: threads %d outside 1..16", o->threads);
 	if (!(o->exposure > 0) || !isfinite(o->exposure))
@@ -181,8 +275,6 @@ int render_sphere(const struct render_opts *o, merl_rgb_fn fn, void *ctx, const 
 	int rc = -1;
 	size_t npx = (size_t)o->width * (size_t)o->height;
 	struct scene s = { .o = o, .fn = fn, .ctx = ctx };
-	atomic_int stop = 0;
-	s.stop = &stop;
 	float *own = NULL;
 	cairo_surface_t *surf = NULL;
 	s.lin = linear ? linear : (own = malloc(npx * 3 * sizeof(float)));
@@ -209,36 +301,15 @@ int render_sphere(const struct render_opts *o, merl_rgb_fn fn, void *ctx, const 
 		}
 	}
 
-	struct worker w[16];
-	pthread_t tid[16];
-	int started = 0;
-	for (int t = 0; t < o->threads; t++)
-		w[t] = (struct worker){ .s = &s, .thread = t, .nthreads = o->threads };
-	for (int t = 1; t < o->threads; t++) {
-		if (pthread_create(&tid[t], NULL, render_rows, &w[t]) != 0) {
-			atomic_store(&stop, 1);
-			break;
-		}
-		started = t;
+	if (o->sky) {
+		int n8 = o->spp / 8 ? o->spp / 8 : 1;
+		s.n_sun = o->sky->has_sun ? n8 : 0;
+		s.n_cos = n8;
+		s.n_lobe = 3 * n8;
+		s.n_map = o->spp - s.n_sun - s.n_cos - s.n_lobe;
 	}
-	if (!atomic_load(&stop))
-		render_rows(&w[0]);
-	for (int t = 1; t <= started; t++)
-		pthread_join(tid[t], NULL);
-	if (started + 1 < o->threads) {
-		acq_errf(err, ACQ_E_NOMEM, "render: cannot start %d threads", o->threads);
+	if (pool_run(o->threads, (size_t)o->height, render_row, &s, NULL, err))
 		goto out;
-	}
-	for (int t = 0; t < o->threads; t++) {
-		if (!w[t].failed)
-			continue;
-		if (w[t].failed == 1)
-			acq_errf(err, ACQ_E_NUMERIC, "render: BRDF callback failed (%d) at pixel (%d, %d)", w[t].rc, w[t].px,
-				 w[t].py);
-		else
-			acq_errf(err, ACQ_E_NUMERIC, "render: non-finite radiance at pixel (%d, %d)", w[t].px, w[t].py);
-		goto out;
-	}
 
 	/* Tone stages and 8-bit sRGB into a cairo image (RGB24: 0x00RRGGBB per pixel). */
 	surf = cairo_image_surface_create(CAIRO_FORMAT_RGB24, o->width, o->height);

@@ -2,26 +2,44 @@
 #include "sim/material.h"
 
 #include <math.h>
+#include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
 
-#define NE 128               /* E(mu) table segments */
+#include "recon/colour.h"
+#include "recon/merl.h"
+#include "sim/mat_lobes.h"
+
 #define PAINT_ALPHA 0.12
-#define PAINT_N 1.5
+#define DIEL_N 1.5             /* paint binder, clear coat */
 #define METAL_ALPHA 0.15
+#define COAT_ALPHA 0.05
+#define COAT_BASE_ALPHA 0.30
+#define ON_SIGMA 0.5           /* Oren-Nayar roughness (radians) */
+#define BS_AMP 1.0             /* backscatter peak height relative to rho / pi */
+#define BS_WIDTH_DEG 8.0       /* its Gaussian width in the angle between wi and wo */
+#define SHEEN_R 0.3
+#define SHEEN_EMAX 0.9         /* the sheen lobe's largest albedo */
+#define PHONG_N 250.0
+#define PHONG_KS 0.30
 
 struct mat {
 	enum mat_id id;
 	int nwl;
 	double *wl;
-	double *rho;                 /* diffuse albedo per wavelength (paint, white) */
-	double *n, *k;               /* complex index per wavelength (metal) */
-	double alpha;                /* GGX roughness (0: no specular lobe) */
-	double etab[NE + 1];         /* specular albedo at mu = j / NE (paint) */
-	double eavg;                 /* 2 int E mu dmu */
+	double *rho;               /* diffuse albedo per wavelength (MAT_S_RHO) */
+	double *fix2;              /* second fixed spectrum: sheen colour, Phong k_s (MAT_S_FIX2) */
+	double *n, *k;             /* conductor index per wavelength (metal, clear coat base) */
+	struct lobe_hv lobe;       /* the main half-vector lobe (paint, metal, coat, sheen); alpha 0: none */
+	struct lobe_hv base;       /* clear coat: the base seen through the coat */
+	struct lobe_etab et;       /* albedo table of the main lobe (paint, clear coat, cloth) */
+	double on_a, on_b;         /* Oren-Nayar A, B */
+	struct merl_table merl;    /* MERL: the table */
+	double *basis[3];          /* MERL: the spectral basis B_r, B_g, B_b per wavelength */
 };
 
-static const char *const names[MAT__COUNT] = { "green-paint", "white", "metal" };
+static const char *const names[MAT__COUNT] = { "green-paint", "white", "metal", "clear-coat", "rough-backscatter",
+					       "cloth-sheen", "sharp-lobe", "narrow-lines", "merl" };
 
 int mat_from_name(const char *name)
 {
@@ -37,7 +55,18 @@ int mat_from_name(const char *name)
 
 const char *mat_name(enum mat_id id)
 {
-	return (id >= 0 && id < MAT__COUNT) ? names[id] : "?";
+	return ((int)id >= 0 && id < MAT__COUNT) ? names[id] : "?";
+}
+
+const char *mat_names_list(void)
+{
+	return "green-paint, white, metal, clear-coat, rough-backscatter, cloth-sheen, sharp-lobe, narrow-lines, "
+	       "merl (from a MERL file)";
+}
+
+enum mat_id mat_id_of(const struct mat *m)
+{
+	return m->id;
 }
 
 void mat_dir(double theta, double phi, double out[3])
@@ -52,192 +81,85 @@ static double clamp_wl(double wl)
 	return wl < MAT_WL_MIN ? MAT_WL_MIN : wl > MAT_WL_MAX ? MAT_WL_MAX : wl;
 }
 
+static double gauss(double x, double mu, double s)
+{
+	double g = (x - mu) / s;
+	return exp(-0.5 * g * g);
+}
+
+static double logistic(double x, double mu, double s)
+{
+	return 1.0 / (1.0 + exp(-(x - mu) / s));
+}
+
+/* Holmium-oxide-like absorption lines: centre nm, Gaussian sigma nm, depth. */
+static const double lines[][3] = { { 468, 2.5, 0.35 }, { 485, 3.0, 0.30 }, { 537, 3.5, 0.55 },
+				   { 641, 4.0, 0.50 }, { 890, 5.0, 0.40 }, { 1015, 6.0, 0.45 } };
+
 double mat_rho_d(enum mat_id id, double wl)
 {
 	wl = clamp_wl(wl);
 	switch (id) {
-	case MAT_GREEN_PAINT: {
+	case MAT_GREEN_PAINT:
 		/* green pigment: reflectance peak at 530 nm, absorbing red, NIR red edge near 720 nm */
-		double g = (wl - 530.0) / 38.0;
-		return 0.05 + 0.40 * exp(-0.5 * g * g) + 0.60 / (1.0 + exp(-(wl - 720.0) / 22.0));
-	}
+		return 0.05 + 0.40 * gauss(wl, 530.0, 38.0) + 0.60 / (1.0 + exp(-(wl - 720.0) / 22.0));
 	case MAT_WHITE: {
 		double x = (wl - MAT_WL_MIN) / (MAT_WL_MAX - MAT_WL_MIN);
 		return 0.99 - 0.015 * exp(-(wl - MAT_WL_MIN) / 30.0) - 0.012 * x * x * x * x;
+	}
+	case MAT_ROUGH_BACKSCATTER: /* terracotta: iron-oxide red edge near 580 nm */
+		return 0.10 + 0.42 * logistic(wl, 585.0, 28.0) + 0.08 * logistic(wl, 850.0, 60.0);
+	case MAT_CLOTH_SHEEN: /* red dye on a fabric, bright NIR */
+		return 0.04 + 0.36 * logistic(wl, 610.0, 18.0) + 0.15 * logistic(wl, 780.0, 40.0);
+	case MAT_SHARP_LOBE: /* blue pigment under a glossy varnish */
+		return 0.05 + 0.42 * gauss(wl, 465.0, 45.0) + 0.40 * logistic(wl, 760.0, 30.0) - 0.02 * logistic(wl, 1000, 40);
+	case MAT_NARROW_LINES: {
+		double r = 0.90 + 0.03 * (wl - MAT_WL_MIN) / (MAT_WL_MAX - MAT_WL_MIN);
+		for (size_t j = 0; j < sizeof lines / sizeof lines[0]; j++)
+			r *= 1.0 - lines[j][2] * gauss(wl, lines[j][0], lines[j][1]);
+		return r;
 	}
 	default:
 		return 0.0;
 	}
 }
 
-/* Gold-like complex refractive index (smoothed from published optical constants of gold). */
-static const double au_wl[] = { 450, 500, 550, 600, 650, 700, 800, 900, 1000, 1100 };
-static const double au_n[] = { 1.47, 0.97, 0.43, 0.25, 0.17, 0.16, 0.15, 0.17, 0.22, 0.27 };
-static const double au_k[] = { 1.95, 1.87, 2.45, 3.00, 3.50, 3.95, 4.90, 5.70, 6.40, 7.10 };
-
-static void metal_index(double wl, double *n, double *k)
+/* The second fixed spectrum: the cloth's sheen colour, the sharp lobe's k_s. */
+static double fix2_at(enum mat_id id, double wl)
 {
 	wl = clamp_wl(wl);
-	int m = (int)(sizeof au_wl / sizeof au_wl[0]);
+	if (id == MAT_CLOTH_SHEEN)
+		return 0.62 + 0.10 * logistic(wl, 640.0, 60.0);
+	if (id == MAT_SHARP_LOBE)
+		return PHONG_KS;
+	return 0.0;
+}
+
+/* Complex refractive indices (smoothed from published optical constants): gold-like (metal), copper-like
+ * (clear coat base). */
+static const double ix_wl[] = { 450, 500, 550, 600, 650, 700, 800, 900, 1000, 1100 };
+static const double au_n[] = { 1.47, 0.97, 0.43, 0.25, 0.17, 0.16, 0.15, 0.17, 0.22, 0.27 };
+static const double au_k[] = { 1.95, 1.87, 2.45, 3.00, 3.50, 3.95, 4.90, 5.70, 6.40, 7.10 };
+static const double cu_n[] = { 1.24, 1.12, 1.02, 0.30, 0.21, 0.21, 0.26, 0.29, 0.32, 0.36 };
+static const double cu_k[] = { 2.40, 2.56, 2.58, 3.35, 3.67, 4.20, 5.00, 5.70, 6.40, 7.00 };
+
+static void conductor_index(enum mat_id id, double wl, double *n, double *k)
+{
+	const double *tn = id == MAT_METAL ? au_n : cu_n, *tk = id == MAT_METAL ? au_k : cu_k;
+	wl = clamp_wl(wl);
+	int m = (int)(sizeof ix_wl / sizeof ix_wl[0]);
 	int i = 0;
-	while (i < m - 2 && wl > au_wl[i + 1])
+	while (i < m - 2 && wl > ix_wl[i + 1])
 		i++;
-	double t = (wl - au_wl[i]) / (au_wl[i + 1] - au_wl[i]);
-	*n = au_n[i] + t * (au_n[i + 1] - au_n[i]);
-	*k = au_k[i] + t * (au_k[i + 1] - au_k[i]);
+	double t = (wl - ix_wl[i]) / (ix_wl[i + 1] - ix_wl[i]);
+	*n = tn[i] + t * (tn[i + 1] - tn[i]);
+	*k = tk[i] + t * (tk[i + 1] - tk[i]);
 }
 
-/* Exact unpolarised Fresnel reflectance from air onto an interface of complex index n + ik (k = 0: dielectric)
- * at incidence cosine c in (0, 1]. */
-static double fresnel(double c, double n, double k)
+/* The common part of a new material: validation and the per-wavelength arrays. */
+static struct mat *mat_alloc(enum mat_id id, int nwl, const double *wl, struct acq_err *err)
 {
-	double c2 = c * c, s2 = 1.0 - c2;
-	double t0 = n * n - k * k - s2;
-	double a2b2 = sqrt(t0 * t0 + 4.0 * n * n * k * k);
-	double a = sqrt(fmax(0.0, 0.5 * (a2b2 + t0)));
-	double t1 = a2b2 + c2, t2 = 2.0 * a * c;
-	double rs = (t1 - t2) / (t1 + t2);
-	double t3 = c2 * a2b2 + s2 * s2, t4 = t2 * s2;
-	double rp = rs * (t3 - t4) / (t3 + t4);
-	double r = 0.5 * (rs + rp);
-	return r < 0 ? 0 : r > 1 ? 1 : r;
-}
-
-static double ggx_d(double alpha, double ch)
-{
-	double a2 = alpha * alpha, t = ch * ch * (a2 - 1.0) + 1.0;
-	return a2 / (M_PI * t * t);
-}
-
-static double ggx_lambda(double alpha, double mu)
-{
-	double t2 = (1.0 - mu * mu) / (mu * mu);
-	return 0.5 * (sqrt(1.0 + alpha * alpha * t2) - 1.0);
-}
-
-static const double gx[8] = { -0.9602898564975363, -0.7966664774136267, -0.5255324099163290,
-			       -0.1834346424956498, 0.1834346424956498,  0.5255324099163290,
-			       0.7966664774136267,  0.9602898564975363 };
-static const double gw[8] = { 0.1012285362903763, 0.2223810344533745, 0.3137066458778873,
-			       0.3626837833783620, 0.3626837833783620, 0.3137066458778873,
-			       0.2223810344533745, 0.1012285362903763 };
-
-/* Gauss-Legendre over s in [a, b] (np panels of 8 nodes) on the phi_h line of cosine cph (weight wphi). */
-static double s_segment(const struct mat *m, double mu_i, double si, double cph, double wphi, double a, double b,
-			int np, int flags, double *out)
-{
-	double alpha = m->alpha, hs = (b - a) / np, total = 0;
-	for (int p = 0; p < np; p++)
-		for (int q = 0; q < 8; q++) {
-			double s = a + hs * (p + 0.5 + 0.5 * gx[q]);
-			double cs = cos(s), ss = sin(s);
-			double th = atan(alpha * tan(s));
-			double jac = alpha / (cs * cs + alpha * alpha * ss * ss);
-			double ch = cos(th), sh = sin(th);
-			double dval = ggx_d(alpha, ch) * sh * jac * 0.5 * hs * gw[q] * wphi;
-			if (flags & 1) {
-				total += dval * ch;
-				continue;
-			}
-			double c = si * sh * cph + mu_i * ch;
-			double mu_o = 2.0 * c * ch - mu_i;
-			if (c <= 0 || mu_o <= 0)
-				continue;
-			double g2 = 1.0 / (1.0 + ggx_lambda(alpha, mu_i) + ggx_lambda(alpha, mu_o));
-			double base = dval * g2 * c / mu_i;
-			if (out) {
-				for (int l = 0; l < m->nwl; l++)
-					out[l] += base * fresnel(c, m->n[l], m->k[l]);
-			} else {
-				total += base * fresnel(c, PAINT_N, 0.0);
-			}
-		}
-	return total;
-}
-
-/* One phi_h line of the half-vector quadrature (weight wphi), theta_h from 0 to the horizon cut-off. */
-static double spec_line(const struct mat *m, double mu_i, double si, double ph, double wphi, int panels, int flags,
-			double *out)
-{
-	double alpha = m->alpha, cph = cos(ph), smax = M_PI / 2, total = 0;
-	if (!(flags & 1)) {
-		/* mu_o > 0 exactly for theta_h < atan2(sin(theta_i) cos(phi_h), mu_i) / 2 + pi/4: integrate up to
-		 * there, so the integrand is smooth on the interval (it vanishes at the end, through G2) */
-		double thmax = 0.5 * atan2(si * cph, mu_i) + M_PI / 4;
-		smax = thmax >= M_PI / 2 ? M_PI / 2 : atan(tan(thmax) / alpha);
-	}
-	/* At grazing incidence (mu_i < alpha) the integrand also changes on the scale theta_h ~ mu_i near 0
-	 * (where wi.h turns from mu_i to sin(theta_h)) and near the cut-off (where G2 turns at mu_o ~ mu_i):
-	 * [0, smax/2] is graded geometrically towards 0 and [smax/2, smax] towards smax, down to that scale. */
-	int ng = 0;
-	while (!(flags & 1) && ng < 30 && smax * ldexp(1.0, -ng) * alpha > mu_i)
-		ng++;
-	for (int g = 1; g <= ng + 1; g++) {
-		double a = g == ng + 1 ? 0.0 : smax * ldexp(1.0, -(g + 1)), b = smax * ldexp(1.0, -g);
-		int np = g == 1 ? panels / 2 : (panels + 3) / 4;
-		total += s_segment(m, mu_i, si, cph, wphi, a, b, np, flags, out);
-		total += s_segment(m, mu_i, si, cph, wphi, smax - b, smax - a, np, flags, out);
-	}
-	return total;
-}
-
-/* Specular albedo at incidence cosine mu_i by the half-vector quadrature (wi in the xz plane).
- * If out (nwl values) is NULL, the Fresnel term is the paint's (achromatic) and the scalar result returned;
- * otherwise per-wavelength conductor Fresnel is accumulated into out. flags: 1 = F = 1 and G = 1 and no
- * horizon cut (the GGX normalisation int D cos(theta_h) dwh = 1, a check of the quadrature).
- * phi_h: see the substitution below and material.h. */
-static double spec_quad(const struct mat *m, double mu_i, int level, int flags, double *out)
-{
-	if (out)
-		memset(out, 0, sizeof(double) * (size_t)m->nwl);
-	if (!(m->alpha > 0) || !(mu_i > 1e-9))
-		return 0.0;
-	double si = sqrt(fmax(0.0, 1.0 - mu_i * mu_i));
-	int panels = 2 << level;
-	/* phi_h = pi/2 + (pi/2) sinh(k t) / sinh(k), t in [-1, 1]: nodes cluster at pi/2 where, at grazing
-	 * incidence, the cut-off theta_max(phi_h) turns from ~pi/2 to ~0 within |cos phi_h| < mu_i / sin(theta_i) */
-	double k = asinh(fmax(1.0, (M_PI / 2) * si / mu_i));
-	double sk = sinh(k), total = 0.0, ht = 2.0 / panels;
-	for (int p = 0; p < panels; p++)
-		for (int q = 0; q < 8; q++) {
-			double t = -1.0 + ht * (p + 0.5 + 0.5 * gx[q]);
-			double ph = M_PI / 2 + (M_PI / 2) * sinh(k * t) / sk;
-			double w = 0.5 * ht * gw[q] * (M_PI / 2) * k * cosh(k * t) / sk * 2.0; /* x2: mirror half */
-			total += spec_line(m, mu_i, si, ph, w, panels, flags, out);
-		}
-	return total;
-}
-
-static double etab_at(const struct mat *m, double mu)
-{
-	double x = mu * NE;
-	if (x <= 0)
-		return m->etab[0];
-	if (x >= NE)
-		return m->etab[NE];
-	int j = (int)x;
-	double t = x - j;
-	return m->etab[j] + t * (m->etab[j + 1] - m->etab[j]);
-}
-
-/* int_0^1 g(mu) mu dmu for g = E_table (which = 0) or 1 - E_table (which = 1): 2-point Gauss-Legendre on
- * every table segment, exact for the piecewise-quadratic integrand. */
-static double etab_moment(const struct mat *m, int which)
-{
-	const double x = 0.5773502691896257;
-	double sum = 0;
-	for (int j = 0; j < NE; j++)
-		for (int q = -1; q <= 1; q += 2) {
-			double mu = (j + 0.5 + 0.5 * q * x) / NE;
-			double e = etab_at(m, mu);
-			sum += 0.5 / NE * (which ? 1.0 - e : e) * mu;
-		}
-	return sum;
-}
-
-struct mat *mat_new(enum mat_id id, int nwl, const double *wl, struct acq_err *err)
-{
-	if (id < 0 || id >= MAT__COUNT) {
+	if ((int)id < 0 || id >= MAT__COUNT) {
 		acq_errf(err, ACQ_E_INVAL, "material: unknown material id %d", (int)id);
 		return NULL;
 	}
@@ -250,26 +172,165 @@ struct mat *mat_new(enum mat_id id, int nwl, const double *wl, struct acq_err *e
 			acq_errf(err, ACQ_E_INVAL, "material: wavelength %d is not finite", l);
 			return NULL;
 		}
+	size_t sz = sizeof(double) * (size_t)nwl;
 	struct mat *m = calloc(1, sizeof *m);
-	if (!m || !(m->wl = malloc(sizeof(double) * (size_t)nwl)) || !(m->rho = calloc((size_t)nwl, sizeof(double))) ||
-	    !(m->n = calloc((size_t)nwl, sizeof(double))) || !(m->k = calloc((size_t)nwl, sizeof(double)))) {
+	if (!m || !(m->wl = malloc(sz)) || !(m->rho = calloc(1, sz)) || !(m->fix2 = calloc(1, sz)) ||
+	    !(m->n = calloc(1, sz)) || !(m->k = calloc(1, sz))) {
 		mat_free(m);
 		acq_errf(err, ACQ_E_NOMEM, "material: out of memory");
 		return NULL;
 	}
 	m->id = id;
 	m->nwl = nwl;
-	memcpy(m->wl, wl, sizeof(double) * (size_t)nwl);
+	memcpy(m->wl, wl, sz);
+	return m;
+}
+
+/* The MERL upsampling basis before its correction: a partition of unity of Gaussians (material.h). */
+static void merl_g(double wl, double g[3])
+{
+	static const double c[3] = { 640.0, 540.0, 450.0 };
+	double sum = 0;
+	for (int k = 0; k < 3; k++) {
+		double x = (wl - c[k]) / 20.0;
+		g[k] = (k == 0 && wl > c[0]) || (k == 2 && wl < c[2]) ? 1.0 : exp(-0.5 * x * x);
+		sum += g[k];
+	}
+	for (int k = 0; k < 3; k++)
+		g[k] /= sum;
+}
+
+/* B = G M^-1 at the material's wavelengths (material.h); checks B >= 0 on the 1 nm grid. */
+static int merl_basis(struct mat *m, struct acq_err *err)
+{
+	enum { NF = 651 };
+	double wl[NF], M[3][3] = { { 0 } }, Mi[3][3];
+	for (int i = 0; i < NF; i++)
+		wl[i] = MAT_WL_MIN + i;
+	struct colour_opts o;
+	colour_opts_brdf(&o);
+	double *W = malloc(sizeof(double) * 3 * NF);
+	if (!W)
+		return acq_errf(err, ACQ_E_NOMEM, "material: out of memory");
+	if (colour_weights(&o, wl, NF, W, err)) {
+		free(W);
+		return -1;
+	}
+	for (int k = 0; k < 3; k++) {
+		double col[NF], rgb[3];
+		for (int i = 0; i < NF; i++) {
+			double g[3];
+			merl_g(wl[i], g);
+			col[i] = g[k];
+		}
+		colour_apply_weights(W, NF, col, rgb);
+		for (int j = 0; j < 3; j++)
+			M[j][k] = rgb[j];
+	}
+	free(W);
+	double det = M[0][0] * (M[1][1] * M[2][2] - M[1][2] * M[2][1]) - M[0][1] * (M[1][0] * M[2][2] - M[1][2] * M[2][0]) +
+		     M[0][2] * (M[1][0] * M[2][1] - M[1][1] * M[2][0]);
+	if (!(fabs(det) > 1e-12))
+		return acq_errf(err, ACQ_E_NUMERIC, "material: MERL basis: singular colour matrix");
+	for (int i = 0; i < 3; i++)
+		for (int j = 0; j < 3; j++) {
+			int i1 = (j + 1) % 3, i2 = (j + 2) % 3, j1 = (i + 1) % 3, j2 = (i + 2) % 3;
+			Mi[i][j] = (M[i1][j1] * M[i2][j2] - M[i1][j2] * M[i2][j1]) / det;
+		}
+	for (int i = 0; i < NF + m->nwl; i++) {
+		double x = i < NF ? wl[i] : m->wl[i - NF], g[3];
+		merl_g(x, g);
+		for (int k = 0; k < 3; k++) {
+			double b = g[0] * Mi[0][k] + g[1] * Mi[1][k] + g[2] * Mi[2][k];
+			if (i < NF && b < 0)
+				return acq_errf(err, ACQ_E_NUMERIC, "material: MERL basis negative (%g) at %g nm", b, x);
+			if (i >= NF)
+				m->basis[k][i - NF] = fmax(0.0, b);
+		}
+	}
+	return 0;
+}
+
+struct mat *mat_new_merl(const char *path, int nwl, const double *wl, struct acq_err *err)
+{
+	struct mat *m = mat_alloc(MAT_MERL, nwl, wl, err);
+	if (!m)
+		return NULL;
+	for (int k = 0; k < 3; k++)
+		if (!(m->basis[k] = calloc((size_t)nwl, sizeof(double)))) {
+			mat_free(m);
+			acq_errf(err, ACQ_E_NOMEM, "material: out of memory");
+			return NULL;
+		}
+	if (merl_read(path, &m->merl, err) || merl_basis(m, err)) {
+		mat_free(m);
+		return NULL;
+	}
+	return m;
+}
+
+struct mat *mat_new(enum mat_id id, int nwl, const double *wl, struct acq_err *err)
+{
+	if (id == MAT_MERL) {
+		acq_errf(err, ACQ_E_INVAL, "material: merl is read from a MERL file (merl:FILE, sim.merl_file)");
+		return NULL;
+	}
+	struct mat *m = mat_alloc(id, nwl, wl, err);
+	if (!m)
+		return NULL;
 	for (int l = 0; l < nwl; l++) {
 		m->rho[l] = mat_rho_d(id, wl[l]);
-		if (id == MAT_METAL)
-			metal_index(wl[l], &m->n[l], &m->k[l]);
+		m->fix2[l] = fix2_at(id, wl[l]);
+		if (id == MAT_METAL || id == MAT_CLEAR_COAT)
+			conductor_index(id, wl[l], &m->n[l], &m->k[l]);
 	}
-	m->alpha = id == MAT_GREEN_PAINT ? PAINT_ALPHA : id == MAT_METAL ? METAL_ALPHA : 0.0;
-	if (id == MAT_GREEN_PAINT) {
-		for (int j = 0; j <= NE; j++)
-			m->etab[j] = spec_quad(m, fmax((double)j / NE, 1e-3), 2, 0, NULL);
-		m->eavg = 2.0 * etab_moment(m, 0);
+	struct lobe_hv ggx = { .kind = LOBE_GGX, .scale = 1.0, .nwl = nwl };
+	switch (id) {
+	case MAT_GREEN_PAINT:
+		m->lobe = ggx;
+		m->lobe.alpha = PAINT_ALPHA;
+		m->lobe.n_diel = DIEL_N;
+		lobe_etab_fill(&m->et, &m->lobe);
+		break;
+	case MAT_METAL:
+		m->lobe = ggx;
+		m->lobe.alpha = METAL_ALPHA;
+		m->lobe.cn = m->n;
+		m->lobe.ck = m->k;
+		break;
+	case MAT_CLEAR_COAT:
+		m->lobe = ggx;
+		m->lobe.alpha = COAT_ALPHA;
+		m->lobe.n_diel = DIEL_N;
+		lobe_etab_fill(&m->et, &m->lobe);
+		for (int j = 0; j <= LOBE_NE; j++) /* the base sees the coat's transmission T = 1 - E_coat */
+			m->et.e[j] = 1.0 - m->et.e[j];
+		m->base = ggx;
+		m->base.alpha = COAT_BASE_ALPHA;
+		m->base.cn = m->n;
+		m->base.ck = m->k;
+		m->base.ttab = m->et.e;
+		break;
+	case MAT_CLOTH_SHEEN: {
+		m->lobe = (struct lobe_hv){ .kind = LOBE_CHARLIE, .alpha = SHEEN_R, .scale = 1.0, .nwl = nwl };
+		lobe_etab_fill(&m->et, &m->lobe);
+		double emax = 0;
+		for (int j = 0; j <= LOBE_NE; j++)
+			emax = fmax(emax, m->et.e[j]);
+		m->lobe.scale = SHEEN_EMAX / emax; /* the albedo is linear in the scale */
+		for (int j = 0; j <= LOBE_NE; j++)
+			m->et.e[j] *= m->lobe.scale;
+		m->et.eavg *= m->lobe.scale;
+		break;
+	}
+	case MAT_ROUGH_BACKSCATTER: {
+		double s2 = ON_SIGMA * ON_SIGMA;
+		m->on_a = 1.0 - 0.5 * s2 / (s2 + 0.33);
+		m->on_b = 0.45 * s2 / (s2 + 0.09);
+		break;
+	}
+	default:
+		break;
 	}
 	return m;
 }
@@ -280,61 +341,269 @@ void mat_free(struct mat *m)
 		return;
 	free(m->wl);
 	free(m->rho);
+	free(m->fix2);
 	free(m->n);
 	free(m->k);
+	for (int k = 0; k < 3; k++)
+		free(m->basis[k]);
+	merl_free(&m->merl);
 	free(m);
 }
 
-int mat_nwl(const struct mat *m)
+static double dot3(const double a[3], const double b[3])
 {
-	return m->nwl;
+	return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
 
-void mat_terms(const struct mat *m, const double wi[3], const double wo[3], double *diff, double *spec, double *c)
+/* Cosine between wi and the half vector, and the half vector's cosine with the normal; 0 when undefined. */
+static double half_cos(const double wi[3], const double wo[3], double *ch)
 {
-	double mi = wi[2], mo = wo[2];
-	*diff = *spec = *c = 0;
-	if (!(mi > 0) || !(mo > 0))
-		return;
-	if (m->id == MAT_WHITE)
-		*diff = 1.0 / M_PI;
-	else if (m->id == MAT_GREEN_PAINT)
-		*diff = (1.0 - etab_at(m, mi)) * (1.0 - etab_at(m, mo)) / (M_PI * (1.0 - m->eavg));
-	if (m->alpha > 0) {
-		double h[3] = { wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2] };
-		double hl = sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
-		if (hl > 1e-12) {
-			for (int i = 0; i < 3; i++)
-				h[i] /= hl;
-			double cc = wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2];
-			double g2 = 1.0 / (1.0 + ggx_lambda(m->alpha, mi) + ggx_lambda(m->alpha, mo));
-			if (cc > 0) {
-				*spec = ggx_d(m->alpha, h[2]) * g2 / (4.0 * mi * mo);
-				*c = cc;
-			}
+	double h[3] = { wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2] };
+	double hl = sqrt(dot3(h, h));
+	*ch = 0;
+	if (!(hl > 1e-12))
+		return 0;
+	*ch = h[2] / hl;
+	double c = dot3(wi, h) / hl;
+	return c > 0 ? c : 0;
+}
+
+/* Oren-Nayar (qualitative) factor A + B max(0, cos dphi) sin(alpha) tan(beta), symmetric in wi, wo. */
+static double oren_nayar(const struct mat *m, const double wi[3], const double wo[3])
+{
+	double si = sqrt(fmax(0.0, 1.0 - wi[2] * wi[2])), so = sqrt(fmax(0.0, 1.0 - wo[2] * wo[2]));
+	if (si < 1e-12 || so < 1e-12)
+		return m->on_a;
+	double cphi = (wi[0] * wo[0] + wi[1] * wo[1]) / (si * so);
+	double mmin = fmin(wi[2], wo[2]), mmax = fmax(wi[2], wo[2]);
+	double sa = sqrt(fmax(0.0, 1.0 - mmin * mmin)), tb = sqrt(fmax(0.0, 1.0 - mmax * mmax)) / mmax;
+	return m->on_a + m->on_b * fmax(0.0, cphi) * sa * tb;
+}
+
+/* The backscatter peak's shape exp(-gamma^2 / (2 w^2)), gamma the angle between wi and wo. */
+static double backscatter(const double wi[3], const double wo[3])
+{
+	double x[3] = { wi[1] * wo[2] - wi[2] * wo[1], wi[2] * wo[0] - wi[0] * wo[2], wi[0] * wo[1] - wi[1] * wo[0] };
+	double g = atan2(sqrt(dot3(x, x)), dot3(wi, wo)) / (BS_WIDTH_DEG * M_PI / 180.0);
+	return BS_AMP * exp(-0.5 * g * g);
+}
+
+/* The normalised Phong lobe (n + 2) / (2 pi) max(0, wr.wo)^n with wr.wo = 2 mu_i mu_o - wi.wo. */
+static double phong(double wrwo)
+{
+	return wrwo > 0 ? (PHONG_N + 2.0) / (2.0 * M_PI) * pow(wrwo, PHONG_N) : 0.0;
+}
+
+/* The table's linear sRGB at (wi, wo): its reference lookup, "no data" cells and directions below the horizon 0. */
+static void merl_rgb(const struct mat *m, const double wi[3], const double wo[3], double rgb[3])
+{
+	if (merl_lookup(&m->merl, wi, wo, rgb) != 0)
+		rgb[0] = rgb[1] = rgb[2] = 0;
+}
+
+int mat_terms(const struct mat *m, const double wi[3], const double wo[3], struct mat_term *t)
+{
+	double mi = wi[2], mo = wo[2], ch = 0, c = 0;
+	t[0] = (struct mat_term){ 0, MAT_S_RHO, 0 };
+	t[1] = (struct mat_term){ 0, MAT_S_FIX2, 0 };
+	bool up = mi > 0 && mo > 0;
+	switch (m->id) {
+	case MAT_MERL: {
+		double rgb[3];
+		merl_rgb(m, wi, wo, rgb);
+		for (int k = 0; k < 3; k++)
+			t[k] = (struct mat_term){ up ? rgb[k] : 0, MAT_S_BASIS_R + k, 0 };
+		return 3;
+	}
+	case MAT_WHITE:
+	case MAT_NARROW_LINES:
+		t[0].w = up ? 1.0 / M_PI : 0;
+		return 1;
+	case MAT_GREEN_PAINT:
+	case MAT_CLOTH_SHEEN:
+		if (up) {
+			t[0].w = (1.0 - lobe_etab_at(m->et.e, mi)) * (1.0 - lobe_etab_at(m->et.e, mo)) /
+				 (M_PI * (1.0 - m->et.eavg));
+			c = half_cos(wi, wo, &ch);
 		}
+		t[1] = (struct mat_term){ c > 0 ? lobe_hv_geom(&m->lobe, mi, mo, ch) : 0,
+					  m->id == MAT_CLOTH_SHEEN ? MAT_S_FIX2 : MAT_S_DIEL, c };
+		return 2;
+	case MAT_METAL:
+		if (up)
+			c = half_cos(wi, wo, &ch);
+		t[0] = (struct mat_term){ c > 0 ? lobe_hv_geom(&m->lobe, mi, mo, ch) : 0, MAT_S_COND, c };
+		return 1;
+	case MAT_CLEAR_COAT:
+		if (up)
+			c = half_cos(wi, wo, &ch);
+		t[0] = (struct mat_term){ c > 0 ? lobe_hv_geom(&m->lobe, mi, mo, ch) : 0, MAT_S_DIEL, c };
+		t[1] = (struct mat_term){ c > 0 ? lobe_hv_geom(&m->base, mi, mo, ch) : 0, MAT_S_COND, c };
+		return 2;
+	case MAT_ROUGH_BACKSCATTER:
+		t[0].w = up ? (oren_nayar(m, wi, wo) + backscatter(wi, wo)) / M_PI : 0;
+		return 1;
+	case MAT_SHARP_LOBE:
+		t[0].w = up ? 1.0 / M_PI : 0;
+		t[1].w = up ? phong(2.0 * mi * mo - dot3(wi, wo)) : 0;
+		return 2;
+	default:
+		return 0;
 	}
 }
 
-void mat_fresnel(const struct mat *m, double c, double *out)
+void mat_spectrum(const struct mat *m, enum mat_spec s, double c, double *out)
 {
+	double fd = s == MAT_S_DIEL ? lobe_fresnel(c, DIEL_N, 0.0) : 0.0;
+	bool has_cond = m->id == MAT_METAL || m->id == MAT_CLEAR_COAT;
+	const double *b = s >= MAT_S_BASIS_R && s <= MAT_S_BASIS_B ? m->basis[s - MAT_S_BASIS_R] : NULL;
 	for (int l = 0; l < m->nwl; l++)
-		out[l] = m->id == MAT_METAL ? fresnel(c, m->n[l], m->k[l]) :
-			 m->id == MAT_GREEN_PAINT ? fresnel(c, PAINT_N, 0.0) : 0.0;
+		out[l] = s == MAT_S_RHO ? m->rho[l] : s == MAT_S_FIX2 ? m->fix2[l] : s == MAT_S_DIEL ? fd :
+			 s == MAT_S_COND && has_cond ? lobe_fresnel(c, m->n[l], m->k[l]) : b ? b[l] : 0.0;
 }
 
 void mat_eval(const struct mat *m, const double wi[3], const double wo[3], double *out)
 {
-	double diff, spec, c;
-	mat_terms(m, wi, wo, &diff, &spec, &c);
-	if (m->id == MAT_METAL) {
-		for (int l = 0; l < m->nwl; l++)
-			out[l] = spec > 0 ? spec * fresnel(c, m->n[l], m->k[l]) : 0.0;
-		return;
+	struct mat_term t[MAT_MAX_TERMS];
+	int nt = mat_terms(m, wi, wo, t);
+	memset(out, 0, sizeof(double) * (size_t)m->nwl);
+	for (int j = 0; j < nt; j++) {
+		double w = t[j].w;
+		if (!(w > 0))
+			continue;
+		switch (t[j].spec) {
+		case MAT_S_RHO:
+			for (int l = 0; l < m->nwl; l++)
+				out[l] += w * m->rho[l];
+			break;
+		case MAT_S_FIX2:
+			for (int l = 0; l < m->nwl; l++)
+				out[l] += w * m->fix2[l];
+			break;
+		case MAT_S_DIEL: {
+			double f = w * lobe_fresnel(t[j].c, DIEL_N, 0.0);
+			for (int l = 0; l < m->nwl; l++)
+				out[l] += f;
+			break;
+		}
+		case MAT_S_BASIS_R:
+		case MAT_S_BASIS_G:
+		case MAT_S_BASIS_B: {
+			const double *b = m->basis[t[j].spec - MAT_S_BASIS_R];
+			for (int l = 0; l < m->nwl; l++)
+				out[l] += w * b[l];
+			break;
+		}
+		default:
+			for (int l = 0; l < m->nwl; l++)
+				out[l] += w * lobe_fresnel(t[j].c, m->n[l], m->k[l]);
+			break;
+		}
 	}
-	double fs = spec > 0 ? spec * fresnel(c, PAINT_N, 0.0) : 0.0;
-	for (int l = 0; l < m->nwl; l++)
-		out[l] = m->rho[l] * diff + fs;
+}
+
+struct cone_ctx {
+	const double *wi;
+};
+
+static double cone_backscatter(const void *ctx, const double wo[3])
+{
+	return backscatter(((const struct cone_ctx *)ctx)->wi, wo) / M_PI;
+}
+
+static double cone_phong(const void *ctx, const double wo[3])
+{
+	const double *wi = ((const struct cone_ctx *)ctx)->wi;
+	return phong(2.0 * wi[2] * wo[2] - dot3(wi, wo));
+}
+
+/* Achromatic quadrature part of the DHR at levels `level` (q[0]) and level + 1 (q[1]) for the materials whose
+ * quadrature is achromatic; the factor it multiplies is applied by the caller. */
+static void achromatic_parts(const struct mat *m, double mu_i, int level, double q[2])
+{
+	double wi[3] = { sqrt(fmax(0.0, 1.0 - mu_i * mu_i)), 0, mu_i };
+	struct cone_ctx x = { wi };
+	for (int k = 0; k < 2; k++) {
+		int lv = level + k;
+		switch (m->id) {
+		case MAT_GREEN_PAINT:
+		case MAT_CLEAR_COAT:
+		case MAT_CLOTH_SHEEN:
+			q[k] = lobe_hv_albedo(&m->lobe, mu_i, lv, 0, NULL);
+			break;
+		case MAT_ROUGH_BACKSCATTER:
+			q[k] = lobe_cone_albedo(wi, 9.0 * BS_WIDTH_DEG * M_PI / 180.0, lv, cone_backscatter, &x);
+			break;
+		case MAT_SHARP_LOBE: {
+			double wr[3] = { -wi[0], 0, mu_i };
+			/* beyond gmax the lobe is below 1e-16 of its peak */
+			q[k] = lobe_cone_albedo(wr, acos(pow(1e-16, 1.0 / PHONG_N)), lv, cone_phong, &x);
+			break;
+		}
+		default:
+			q[k] = 0;
+		}
+	}
+}
+
+/* A conductor lobe's albedo per wavelength at level + 1 into dhr, and its bound (largest relative difference
+ * against level, over the wavelengths, x4, plus 2e-7) into sigma. */
+static int conductor_part(const struct lobe_hv *L, double mu_i, int level, int nwl, double *dhr, double *sigma,
+			  struct acq_err *err)
+{
+	double *coarse = malloc(sizeof(double) * (size_t)nwl);
+	if (!coarse)
+		return acq_errf(err, ACQ_E_NOMEM, "material: out of memory");
+	lobe_hv_albedo(L, mu_i, level, 0, coarse);
+	lobe_hv_albedo(L, mu_i, level + 1, 0, dhr);
+	/* The error comes from the geometry, the Fresnel factor is smooth: use the largest relative difference
+	 * over all wavelengths for each (robust to an accidental agreement at one wavelength). */
+	double rel = 0;
+	for (int l = 0; l < nwl; l++)
+		if (dhr[l] > 0)
+			rel = fmax(rel, fabs(dhr[l] - coarse[l]) / dhr[l]);
+	for (int l = 0; l < nwl; l++)
+		sigma[l] = (4.0 * rel + 2e-7) * dhr[l] + 1e-15;
+	free(coarse);
+	return 0;
+}
+
+/* The MERL material's channel albedos at mu_i by the midpoint rule on (90 x 360) 2^level cells of
+ * (theta_o, phi_o) (the table is piecewise constant: no higher-order rule helps). */
+static void merl_channels(const struct mat *m, double mu_i, int level, double a[3])
+{
+	int nt = 90 << level, np = 360 << level;
+	double wi[3] = { sqrt(fmax(0.0, 1.0 - mu_i * mu_i)), 0, mu_i }, ht = M_PI / 2 / nt, hp = 2 * M_PI / np;
+	a[0] = a[1] = a[2] = 0;
+	for (int i = 0; i < nt; i++) {
+		double to = (i + 0.5) * ht, w = sin(to) * cos(to) * ht * hp, row[3] = { 0, 0, 0 };
+		for (int j = 0; j < np; j++) {
+			double wo[3], rgb[3];
+			mat_dir(to, (j + 0.5) * hp, wo);
+			merl_rgb(m, wi, wo, rgb);
+			for (int k = 0; k < 3; k++)
+				row[k] += rgb[k];
+		}
+		for (int k = 0; k < 3; k++)
+			a[k] += w * row[k];
+	}
+}
+
+static int merl_dhr(const struct mat *m, double mu_i, int level, double *dhr, double *sigma)
+{
+	double a0[3], a1[3];
+	merl_channels(m, mu_i, level, a0);
+	merl_channels(m, mu_i, level + 1, a1);
+	for (int l = 0; l < m->nwl; l++) {
+		double v = 0, e = 0;
+		for (int k = 0; k < 3; k++) {
+			v += m->basis[k][l] * a1[k];
+			e += m->basis[k][l] * fabs(a1[k] - a0[k]);
+		}
+		dhr[l] = v;
+		sigma[l] = 4.0 * e + 1e-15;
+	}
+	return 0;
 }
 
 int mat_dhr(const struct mat *m, double theta_i, int level, double *dhr, double *sigma, struct acq_err *err)
@@ -345,42 +614,49 @@ int mat_dhr(const struct mat *m, double theta_i, int level, double *dhr, double 
 		return acq_errf(err, ACQ_E_RANGE, "material: quadrature level %d outside [0, 6]", level);
 	double mu_i = cos(theta_i);
 	int nwl = m->nwl;
-	if (!(mu_i > 1e-9)) {
-		memset(dhr, 0, sizeof(double) * (size_t)nwl);
-		memset(sigma, 0, sizeof(double) * (size_t)nwl);
+	memset(dhr, 0, sizeof(double) * (size_t)nwl);
+	memset(sigma, 0, sizeof(double) * (size_t)nwl);
+	if (!(mu_i > 1e-9))
 		return 0;
+	if (m->id == MAT_MERL)
+		return merl_dhr(m, mu_i, level, dhr, sigma);
+	if (m->id == MAT_METAL || m->id == MAT_CLEAR_COAT) {
+		/* the conductor lobe (metal; the coat's base through T(mu_i) T(mu_o)) */
+		if (conductor_part(m->id == MAT_METAL ? &m->lobe : &m->base, mu_i, level, nwl, dhr, sigma, err))
+			return -1;
+		if (m->id == MAT_METAL)
+			return 0;
 	}
-	/* diffuse: rho (1 - E_i) * [2 int (1 - E) mu dmu / (1 - E_avg)], by the exact segment quadrature */
+	/* diffuse factor: Lambertian 1 (2 int mu dmu, exact); Kelemen-coupled (1 - E_i) 2 int (1 - E) mu dmu /
+	 * (1 - E_avg) by the exact segment rule; Oren-Nayar A + B I(theta_i) (analytic, material.h) */
 	double dfac = 0;
-	if (m->id == MAT_WHITE)
-		dfac = 2.0 * 0.5; /* 2 int_0^1 mu dmu by the same rule: exactly 1 */
-	else if (m->id == MAT_GREEN_PAINT)
-		dfac = (1.0 - etab_at(m, mu_i)) * 2.0 * etab_moment(m, 1) / (1.0 - m->eavg);
-	if (m->id == MAT_METAL) {
-		double *coarse = malloc(sizeof(double) * (size_t)nwl);
-		if (!coarse)
-			return acq_errf(err, ACQ_E_NOMEM, "material: out of memory");
-		spec_quad(m, mu_i, level, 0, coarse);
-		spec_quad(m, mu_i, level + 1, 0, dhr);
-		/* The error comes from the geometry, the Fresnel factor is smooth: use the largest relative
-		 * difference over all wavelengths for each (robust to an accidental agreement at one wavelength). */
-		double rel = 0;
-		for (int l = 0; l < nwl; l++)
-			if (dhr[l] > 0)
-				rel = fmax(rel, fabs(dhr[l] - coarse[l]) / dhr[l]);
-		for (int l = 0; l < nwl; l++)
-			sigma[l] = (4.0 * rel + 2e-7) * dhr[l] + 1e-15;
-		free(coarse);
-		return 0;
+	switch (m->id) {
+	case MAT_WHITE:
+	case MAT_NARROW_LINES:
+	case MAT_SHARP_LOBE:
+		dfac = 2.0 * 0.5;
+		break;
+	case MAT_GREEN_PAINT:
+	case MAT_CLOTH_SHEEN:
+		dfac = (1.0 - lobe_etab_at(m->et.e, mu_i)) * 2.0 * lobe_etab_moment(m->et.e, 1) / (1.0 - m->et.eavg);
+		break;
+	case MAT_ROUGH_BACKSCATTER: {
+		double ti = theta_i, st = sin(ti);
+		dfac = m->on_a + m->on_b * (2.0 / M_PI) * (st * (ti / 2 - sin(2 * ti) / 4) + tan(ti) * (1 - st * st * st) / 3);
+		break;
 	}
-	double s0 = 0, s1 = 0;
-	if (m->alpha > 0) {
-		s0 = spec_quad(m, mu_i, level, 0, NULL);
-		s1 = spec_quad(m, mu_i, level + 1, 0, NULL);
+	default:
+		break;
 	}
+	double q[2];
+	achromatic_parts(m, mu_i, level, q);
 	for (int l = 0; l < nwl; l++) {
-		dhr[l] = m->rho[l] * dfac + s1;
-		sigma[l] = 4.0 * fabs(s1 - s0) + 2e-7 * s1 + 1e-15 * (1.0 + dhr[l]);
+		/* the quadrature part's spectral factor: Fresnel (inside q) or a fixed spectrum */
+		double spec = m->id == MAT_ROUGH_BACKSCATTER ? m->rho[l] : m->id == MAT_CLOTH_SHEEN || m->id == MAT_SHARP_LOBE ?
+			      m->fix2[l] : 1.0;
+		double val = spec * q[1], bound = 4.0 * spec * fabs(q[1] - q[0]) + 2e-7 * val;
+		dhr[l] += m->rho[l] * dfac + val;
+		sigma[l] += bound + 1e-15 * (1.0 + dhr[l]);
 	}
 	return 0;
 }

@@ -17,9 +17,22 @@
 
 enum sim_arm_id { SIM_ARM_LASER = 0, SIM_ARM_DETECTOR = 1 };
 
-/* What sits on the sample stage (config `sim.sample`, control command `sample`). NONE: empty holder, the
+/* What sits on the sample stage (config `sim.sample`, control command `sample`): a material of sim/material.h
+ * (the values are its enum mat_id; sim_physics.c checks the correspondence), or NONE: empty holder, the
  * detector can see the direct beam (absolute calibration). */
-enum sim_sample { SIM_SAMPLE_GREEN_PAINT = 0, SIM_SAMPLE_WHITE, SIM_SAMPLE_METAL, SIM_SAMPLE_NONE, SIM_SAMPLE__COUNT };
+enum sim_sample {
+	SIM_SAMPLE_GREEN_PAINT = 0,
+	SIM_SAMPLE_WHITE,
+	SIM_SAMPLE_METAL,
+	SIM_SAMPLE_CLEAR_COAT,
+	SIM_SAMPLE_ROUGH_BACKSCATTER,
+	SIM_SAMPLE_CLOTH_SHEEN,
+	SIM_SAMPLE_SHARP_LOBE,
+	SIM_SAMPLE_NARROW_LINES,
+	SIM_SAMPLE_MERL,            /* the material of sim.merl_file */
+	SIM_SAMPLE_NONE,
+	SIM_SAMPLE__COUNT
+};
 
 /* Faults, set by the control socket or the seeded schedule, consumed by the services. */
 struct sim_faults {
@@ -86,7 +99,7 @@ struct sim_service *sim_spectro_new(struct sim_world *w, struct yc_node *node, s
 struct sim_service *sim_control_new(struct sim_world *w, struct yc_node *simcfg, const char *socket_path,
 				    struct acq_err *err);
 
-/* `acq-sim truth ...`: ground-truth export (MERL table, DHR CSV, evaluation at directions). Exit status. */
-int sim_truth_main(int argc, char **argv);
+/* `acq-sim ctl ...` (argv[0] is "ctl"): one command to the control socket of a running acq-sim; exit status. */
+int simctl_main(int argc, char **argv);
 
 #endif

@@ -7,7 +7,7 @@
  *   status                                 ok t=<bench s> laser_theta= detector_theta= detector_phi= emission=
  *                                          power= sample= temperature= faults=<comma list or none>
  *   time                                   ok <bench seconds>
- *   sample green-paint|white|metal|none    what is on the stage
+ *   sample MATERIAL|none                   what is on the stage (a material of sim/material.h)
  *   temperature <C>                        spectrometer sensor temperature (-40..80)
  *   pose <laser_theta> <det_theta> <det_phi>  set the arms' actual positions (degrees; for runs without the
  *                                          arm services: a running arm service overwrites them)
@@ -36,6 +36,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include "sim/material.h"
 #include "sim/sim.h"
 #include "sim/sim_physics.h"
 #include "sim/sim_rng.h"
@@ -216,7 +217,7 @@ static int command(struct control *c, struct client *k, char *line, double now)
 		return reply(k, "error: empty command (try help)");
 	const char *cmd = argv[0];
 	if (!strcmp(cmd, "help")) {
-		return reply(k, "ok commands: help | status | time | sample green-paint|white|metal|none | temperature C"
+		return reply(k, "ok commands: help | status | time | sample MATERIAL|none | temperature C"
 				" | pose LASER_THETA DET_THETA DET_PHI | laser on|off [POWER_PCT] | fault NAME [ARGS] | fault clear;"
 				" faults: modbus-timeout ARM [on|off], drop-connection ARM, alarm-mid-move ARM, stall ARM,"
 				" spectro-disconnect [OFFLINE_S], saturation-burst N, laser-interlock on|off, laser-fault on|off;"
@@ -235,7 +236,7 @@ static int command(struct control *c, struct client *k, char *line, double now)
 	if (!strcmp(cmd, "sample")) {
 		int s = argc == 2 ? phys_sample_from_name(argv[1]) : -1;
 		if (s < 0)
-			return reply(k, "error: sample: expected one of green-paint, white, metal, none");
+			return reply(k, "error: sample: expected one of %s, none", mat_names_list());
 		w->sample = s;
 		return reply(k, "ok sample=%s", phys_sample_name(s));
 	}

@@ -14,25 +14,22 @@ struct phys {
 	double resp[PHYS_MAX_PIXELS];   /* s(l) QE(l), 0 on the black pixels */
 	struct mat *mat[MAT__COUNT];
 	double *fbuf;
+	double ref_fac[PHYS_MAX_PIXELS]; /* (rho_cert + d) / rho_cert of the white standard */
+	double t;                        /* bench time of the next measurement (source drift) */
 };
 
-static const char *const sample_names[SIM_SAMPLE__COUNT] = { "green-paint", "white", "metal", "none" };
+_Static_assert((int)SIM_SAMPLE_NONE == (int)MAT__COUNT, "enum sim_sample lists the materials, then none");
 
 int phys_sample_from_name(const char *name)
 {
-	if (!name)
-		return -1;
-	if (!strcmp(name, "paint"))
-		return SIM_SAMPLE_GREEN_PAINT;
-	for (int i = 0; i < SIM_SAMPLE__COUNT; i++)
-		if (!strcmp(name, sample_names[i]))
-			return i;
-	return -1;
+	if (name && !strcmp(name, "none"))
+		return SIM_SAMPLE_NONE;
+	return mat_from_name(name);
 }
 
 const char *phys_sample_name(int sample)
 {
-	return sample >= 0 && sample < SIM_SAMPLE__COUNT ? sample_names[sample] : "?";
+	return sample == SIM_SAMPLE_NONE ? "none" : mat_name((enum mat_id)sample);
 }
 
 /* Calibration: pixel PHYS_NDARK at 450 nm, the last pixel at 1100 nm, slight grating curvature. */
@@ -61,6 +58,7 @@ void phys_defaults(struct phys_cfg *c)
 	c->read_noise_counts = 8.0;
 	c->electrons_per_count = 2.0;
 	c->nonlinearity = 0.05;
+	refdrift_defaults(&c->cal);
 }
 
 int phys_parse(struct yc_node *node, struct phys_cfg *out, struct acq_err *err)
@@ -147,11 +145,24 @@ struct phys *phys_new(const struct phys_cfg *c, struct acq_err *err)
 		p->wl[i] = phys_wavelength(c, i);
 		p->resp[i] = i < PHYS_NDARK ? 0.0 : laser_spectrum(p->wl[i]) * detector_qe(p->wl[i]);
 	}
-	for (int m = 0; m < MAT__COUNT; m++)
-		if (!(p->mat[m] = mat_new((enum mat_id)m, c->npix, p->wl, err))) {
+	for (int m = 0; m < MAT__COUNT; m++) {
+		if (m == MAT_MERL && !c->merl_file[0])
+			continue;
+		p->mat[m] = m == MAT_MERL ? mat_new_merl(c->merl_file, c->npix, p->wl, err) :
+					    mat_new((enum mat_id)m, c->npix, p->wl, err);
+		if (!p->mat[m]) {
+			if (m == MAT_MERL)
+				acq_err_prefix(err, "sim.merl_file: ");
 			phys_free(p);
 			return NULL;
 		}
+	}
+	if (refdrift_reference(&c->cal, c->npix, p->wl, p->ref_fac, err)) {
+		phys_free(p);
+		return NULL;
+	}
+	for (int i = 0; i < c->npix; i++)
+		p->ref_fac[i] = 1.0 + p->ref_fac[i] / mat_rho_d(MAT_WHITE, p->wl[i]);
 	return p;
 }
 
@@ -168,6 +179,22 @@ void phys_free(struct phys *p)
 const struct phys_cfg *phys_config(const struct phys *p)
 {
 	return &p->cfg;
+}
+
+void phys_set_time(struct phys *p, double t)
+{
+	p->t = t;
+}
+
+double phys_reference_factor(const struct phys *p, int pixel)
+{
+	return pixel >= 0 && pixel < p->cfg.npix ? p->ref_fac[pixel] : 1.0;
+}
+
+/* The source's drift factor at the current bench time for pixel i. */
+static double drift(const struct phys *p, int i)
+{
+	return refdrift_source(&p->cfg.cal, p->t, p->wl[i]);
 }
 
 static double deg(double d)
@@ -213,15 +240,19 @@ unsigned phys_signal(const struct phys *p, const struct sim_world *w, double *ra
 		else
 			frac = fmin(1.0, fmax(0.0, (fov + beam - delta) / (2.0 * beam)));
 		for (int i = 0; i < npix; i++)
-			rate[i] = k * p->resp[i] * frac;
+			rate[i] = k * p->resp[i] * frac * drift(p, i);
 		return occ;
 	}
 	double omega = 2.0 * M_PI * (1.0 - cos(deg(g->fov_halfwidth_deg)));
 	int m = w->sample >= 0 && w->sample < MAT__COUNT ? w->sample : MAT_WHITE;
+	if (!p->mat[m]) { /* the MERL material without a file: nothing on the stage reflects */
+		memset(rate, 0, sizeof(double) * (size_t)npix);
+		return occ;
+	}
 	mat_eval(p->mat[m], wi, wo, p->fbuf);
 	double geo = k * omega * fmax(0.0, wo[2]);
 	for (int i = 0; i < npix; i++)
-		rate[i] = geo * p->resp[i] * p->fbuf[i];
+		rate[i] = geo * p->resp[i] * p->fbuf[i] * drift(p, i) * (m == MAT_WHITE ? p->ref_fac[i] : 1.0);
 	return occ;
 }
 

@@ -5,7 +5,9 @@
  * Signal model (counts per ms above dark, pixel p at wavelength l):
  *   sample:  K * (P/100) * s(l) * QE(l) * f(wi, wo, l) * cos(theta_o) * Omega_det
  *   none:    K * (P/100) * s(l) * QE(l) * overlap(angle between wo and -wi; fov and beam half-widths)
- * K = beam_counts_per_ms (the direct beam at 100 % power), s the supercontinuum's relative spectrum, QE a
+ * K = beam_counts_per_ms (the direct beam at 100 % power), s the supercontinuum's relative spectrum (times the
+ * slow drift factor of sim_refdrift.h at the bench time set by phys_set_time), f of the white standard times
+ * (rho_cert + d) / rho_cert (its deviation from the certificate, sim_refdrift.h), QE a
  * silicon-like response, Omega_det = 2 pi (1 - cos fov_halfwidth). So the absolute relation of
  * brdf-reconstruction.md holds: f = (S - D) / ((S_beam - D_beam) Omega_det cos(theta_o)).
  * Zero signal when the laser does not emit (or its interlock is open, or it is in fault), and in the blind zones (wi, wo at an angle below
@@ -25,6 +27,7 @@
 #include "config/acq_err.h"
 #include "config/yconf.h"
 #include "sim/sim.h"
+#include "sim/sim_refdrift.h"
 #include "sim/sim_rng.h"
 
 #define PHYS_MAX_PIXELS 4096
@@ -43,6 +46,9 @@ struct phys_cfg {
 	double dark_cps_25c, dark_doubling_c;
 	double bias_counts, read_noise_counts, electrons_per_count;
 	double nonlinearity;        /* b: relative compression at full scale */
+	struct refdrift_cfg cal;    /* the reference standard's deviation and the source drift (sim_refdrift.h) */
+	char merl_file[1024];       /* sim.merl_file: the MERL material's table ("": none; sample merl then
+				     * reflects nothing) */
 };
 
 struct phys_frame {
@@ -58,6 +64,11 @@ struct phys;
 
 /* Default instrument (2048 pixels covering 450-1100 nm from pixel 4 on). */
 void phys_defaults(struct phys_cfg *c);
+/* Bench time (seconds) of the next measurements, for the source drift. */
+void phys_set_time(struct phys *p, double t);
+/* The white standard's true reflectance over its certificate's (sim/material.c) at pixel i (1 without a
+ * reference deviation). */
+double phys_reference_factor(const struct phys *p, int pixel);
 /* Parse the `sim.spectrometer` mapping onto c (absent keys keep their value). 0 or -1 with file:line:col. */
 int phys_parse(struct yc_node *node, struct phys_cfg *c, struct acq_err *err);
 /* Build the model (materials at the pixel wavelengths). NULL with err. */
@@ -80,7 +91,7 @@ unsigned phys_signal(const struct phys *p, const struct sim_world *w, double *ra
 int phys_measure(const struct phys *p, const struct sim_world *w, double integration_ms, unsigned averages,
 		 double gain_boost, struct sim_rng *rng, struct phys_frame *f, struct acq_err *err);
 
-/* Sample name ("green-paint", "white", "metal", "none") ↔ enum sim_sample; -1 when unknown. */
+/* Sample name (a material name of sim/material.h, or "none") ↔ enum sim_sample; -1 when unknown. */
 int phys_sample_from_name(const char *name);
 const char *phys_sample_name(int sample);
 

@@ -283,6 +283,7 @@ static void finish_exposure(struct spectro_svc *s, double now)
 		boost = 1000.0;
 	}
 	s->pending = false;
+	phys_set_time(s->phys, now);
 	if (phys_measure(s->phys, w, s->integration_ms, s->averages, boost, &s->rng, &s->frame, &err)) {
 		queue_error(s, SSP_E_BADREQ, SSP_MEASURE, s->seq, err.msg);
 		return;
@@ -397,10 +398,23 @@ struct sim_service *sim_spectro_new(struct sim_world *w, struct yc_node *node, s
 	if (node && yc_string(node, "socket", false, &path, err))
 		return NULL;
 	if (simcfg) {
-		static const char *const samples[] = { "green-paint", "white", "metal", "none", NULL };
+		const char *samples[SIM_SAMPLE__COUNT + 1];
+		for (int i = 0; i < SIM_SAMPLE__COUNT; i++)
+			samples[i] = phys_sample_name(i);
+		samples[SIM_SAMPLE__COUNT] = NULL;
 		struct yc_node *sp = yc_get(simcfg, "spectrometer");
-		if (yc_enum(simcfg, "sample", false, samples, &sample, err) || (sp && phys_parse(sp, &pc, err)))
+		const char *merl = NULL;
+		if (yc_enum(simcfg, "sample", false, samples, &sample, err) || (sp && phys_parse(sp, &pc, err)) ||
+		    refdrift_parse(simcfg, &pc.cal, err) || yc_string(simcfg, "merl_file", false, &merl, err))
 			return NULL;
+		if (merl && snprintf(pc.merl_file, sizeof pc.merl_file, "%s", merl) >= (int)sizeof pc.merl_file) {
+			acq_errf(err, ACQ_E_CONFIG, "sim.merl_file: path longer than %zu bytes", sizeof pc.merl_file - 1);
+			return NULL;
+		}
+		if (sample == SIM_SAMPLE_MERL && !merl) {
+			acq_errf(err, ACQ_E_CONFIG, "sim.sample: merl needs sim.merl_file (a MERL binary table)");
+			return NULL;
+		}
 	}
 	struct spectro_svc *s = calloc(1, sizeof *s);
 	if (s)

@@ -1,251 +1,153 @@
-/* sim_truth: `acq-sim truth`: the simulator's ground truth exported, so accuracy is measured, not assumed:
- * DHR(theta_i, lambda) with its quadrature error bound, evaluation at given directions, noisy sparse samples
- * on a plan-like grid (CSV interchange format of docs/design.md), and a MERL table. */
+/* sim_truth: the library part of `acq-sim truth` (see sim_truth.h). */
+#include "sim/sim_truth.h"
+
 #include <errno.h>
-#include <getopt.h>
 #include <math.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "config/bench.h"
-#include "recon/colour.h"
+#include "recon/csvio.h"
 #include "recon/merl.h"
-#include "sim/material.h"
-#include "sim/sim.h"
 #include "sim/sim_rng.h"
+#include "sim/sim_sphere.h"
 
-#define MAX_WL 100000
-
-static void usage(FILE *f)
-{
-	fprintf(f,
-		"usage: acq-sim truth MATERIAL ACTION [options]\n"
-		"  MATERIAL: green-paint (or paint) | white | metal\n"
-		"  actions (exactly one):\n"
-		"    --dhr OUT.csv [--theta-i 8,30,60]    columns theta_i,wavelength_nm,dhr,sigma (sigma: quadrature bound)\n"
-		"    --eval QUERIES.csv [-o OUT.csv]      f at the rows' theta_i,phi_i,theta_o,phi_o (degrees), 1/sr\n"
-		"    --grid NIxNOxNP -o SAMPLES.csv       noisy samples: NI incidences, NO observation zeniths in (0, 80),\n"
-		"          [--noise REL] [--noise-floor ABS] [--seed N] [--keep-blind]   NP azimuths; sigma_<nm> columns\n"
-		"    --merl OUT.binary                    MERL table, linear sRGB in 1/sr (D65, Bradford; recon/colour.h)\n"
-		"  --wavelengths A:B:STEP   spectral sampling in nm within 450..1100 (default 450:1100:1)\n"
-		"  --level N                DHR quadrature level 0..5 (default 2)\n");
-}
-
-static int parse_wavelengths(const char *s, double **out, int *n)
+int truth_wavelengths(const char *s, double **out, int *n, struct acq_err *err)
 {
 	char *end;
 	double a = strtod(s, &end), b = a, st = 1;
-	if (end == s)
-		return -1;
-	if (*end == ':') {
+	int bad = end == s;
+	if (!bad && *end == ':') {
 		const char *q = end + 1;
 		b = strtod(q, &end);
-		if (end == q || *end != ':')
-			return -1;
-		q = end + 1;
-		st = strtod(q, &end);
-		if (end == q)
-			return -1;
+		bad = end == q || *end != ':';
+		if (!bad) {
+			q = end + 1;
+			st = strtod(q, &end);
+			bad = end == q;
+		}
 	}
-	if (*end || !isfinite(a) || !isfinite(b) || !isfinite(st) || !(st > 0) || a < MAT_WL_MIN - 1e-9 ||
-	    b > MAT_WL_MAX + 1e-9 || b < a)
-		return -1;
-	double cnt = floor((b - a) / st + 1e-9) + 1;
-	if (cnt > MAX_WL)
-		return -1;
-	*n = (int)cnt;
-	*out = malloc(sizeof(double) * (size_t)*n);
-	if (!*out)
-		return -1;
+	if (bad || *end || !isfinite(a) || !isfinite(b) || !isfinite(st) || !(st > 0) || a < MAT_WL_MIN - 1e-9 ||
+	    b > MAT_WL_MAX + 1e-9 || b < a || floor((b - a) / st + 1e-9) + 1 > TRUTH_MAX_WL)
+		return acq_errf(err, ACQ_E_INVAL, "--wavelengths: expected A:B:STEP (or one value) within 450..1100 nm, "
+						  "at most %d wavelengths, got '%s'", TRUTH_MAX_WL, s);
+	*n = (int)(floor((b - a) / st + 1e-9) + 1);
+	if (!(*out = malloc(sizeof(double) * (size_t)*n)))
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	for (int i = 0; i < *n; i++)
 		(*out)[i] = a + st * i;
 	return 0;
 }
 
-static void header_wl(FILE *f, const double *wl, int n, const char *prefix)
+int truth_thetas(const char *list, double *th, int *n, struct acq_err *err)
 {
-	for (int i = 0; i < n; i++)
-		fprintf(f, ",%s%.10g", prefix, wl[i]);
-}
-
-static int do_dhr(struct mat *m, const char *material, const char *out, const char *thetas, int level, const double *wl,
-		  int nwl)
-{
-	double th[64];
-	int nth = 0;
 	char buf[512];
-	snprintf(buf, sizeof buf, "%s", thetas);
+	*n = 0;
+	snprintf(buf, sizeof buf, "%s", list);
 	for (char *save = NULL, *t = strtok_r(buf, ",", &save); t; t = strtok_r(NULL, ",", &save)) {
 		char *end;
 		double v = strtod(t, &end);
-		if (end == t || *end || !(v >= 0 && v <= 90) || nth >= 64) {
-			fprintf(stderr, "acq-sim truth: --theta-i: expected up to 64 comma-separated zeniths in [0, 90] degrees, got '%s'\n", t);
-			return 2;
-		}
-		th[nth++] = v;
+		if (end == t || *end || !(v >= 0 && v <= 90) || *n >= TRUTH_MAX_THETAS)
+			return acq_errf(err, ACQ_E_INVAL, "--theta-i: expected up to %d comma-separated zeniths in [0, 90] "
+							  "degrees, got '%s'", TRUTH_MAX_THETAS, t);
+		th[(*n)++] = v;
 	}
-	if (!nth) {
-		fprintf(stderr, "acq-sim truth: --theta-i: empty list\n");
-		return 2;
-	}
-	FILE *f = strcmp(out, "-") ? fopen(out, "w") : stdout;
-	if (!f) {
-		fprintf(stderr, "acq-sim truth: %s: %s\n", out, strerror(errno));
-		return 1;
-	}
-	double *d = malloc(sizeof(double) * (size_t)nwl), *s = malloc(sizeof(double) * (size_t)nwl);
-	int rc = 0;
-	if (!d || !s) {
-		fprintf(stderr, "acq-sim truth: out of memory\n");
-		rc = 1;
-		goto done;
-	}
-	fprintf(f, "# acq-sim truth %s: directional-hemispherical reflectance; sigma = quadrature error bound\n"
-		   "# quadrature: half-vector Gauss-Legendre x trapezoid, level %d vs %d (sim/material.h)\n"
-		   "theta_i,wavelength_nm,dhr,sigma\n", material, level + 1, level);
-	for (int t = 0; t < nth; t++) {
-		struct acq_err err = { 0 };
-		if (mat_dhr(m, th[t] * M_PI / 180, level, d, s, &err)) {
-			fprintf(stderr, "acq-sim truth: %s\n", err.msg);
-			rc = 1;
-			goto done;
-		}
+	return *n ? 0 : acq_errf(err, ACQ_E_INVAL, "--theta-i: empty list");
+}
+
+int truth_grid_size(const char *spec, struct truth_grid *g, struct acq_err *err)
+{
+	char tail;
+	int ni, no, np;
+	if (sscanf(spec, "%dx%dx%d%c", &ni, &no, &np, &tail) != 3 || ni < 1 || no < 1 || np < 1 || ni > 90 || no > 90 ||
+	    np > 360)
+		return acq_errf(err, ACQ_E_INVAL, "--grid: expected NIxNOxNP (e.g. 10x10x10; each 1..90, NP 1..360), got '%s'",
+				spec);
+	g->ni = ni, g->no = no, g->np = np;
+	return 0;
+}
+
+static int stream_ok(FILE *f, struct acq_err *err)
+{
+	return ferror(f) ? acq_errf(err, ACQ_E_IO, "write error: %s", strerror(errno)) : 0;
+}
+
+/* n doubles or an out-of-memory error */
+static double *alloc_d(int n, struct acq_err *err)
+{
+	double *p = malloc(sizeof(double) * (size_t)(n > 0 ? n : 1));
+	if (!p)
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	return p;
+}
+
+int truth_write_sphere(FILE *f, const struct mat *m, uint64_t seed, const double *wl, int nwl, struct acq_err *err)
+{
+	double *v = alloc_d(nwl, err), *s = v ? alloc_d(nwl, err) : NULL;
+	int rc = -1;
+	if (s && !sphere_measure(m, nwl, wl, seed, v, s, err)) {
+		fprintf(f, "wavelength_nm,dhr,sigma\n");
 		for (int l = 0; l < nwl; l++)
-			fprintf(f, "%.10g,%.10g,%.12g,%.3g\n", th[t], wl[l], d[l], s[l]);
+			fprintf(f, "%.10g,%.10g,%.4g\n", wl[l], v[l], s[l]);
+		rc = stream_ok(f, err);
 	}
-done:
-	free(d);
+	free(v);
 	free(s);
-	if (f != stdout && fclose(f) && !rc) {
-		fprintf(stderr, "acq-sim truth: %s: %s\n", out, strerror(errno));
-		rc = 1;
-	}
 	return rc;
 }
 
-/* Split a CSV line in place on commas (no quoting in the interchange format); trims blanks and CR. */
-static int split(char *line, char **fields, int max)
+int truth_write_dhr(FILE *f, const struct mat *m, const double *th, int nth, int level, const double *wl, int nwl,
+		    struct acq_err *err)
 {
-	int n = 0;
-	char *p = line;
-	for (;;) {
-		char *c = strchr(p, ',');
-		if (c)
-			*c = 0;
-		while (*p == ' ' || *p == '\t')
-			p++;
-		size_t l = strlen(p);
-		while (l && (p[l - 1] == ' ' || p[l - 1] == '\t' || p[l - 1] == '\r' || p[l - 1] == '\n'))
-			p[--l] = 0;
-		if (n >= max)
-			return -1;
-		fields[n++] = p;
-		if (!c)
-			return n;
-		p = c + 1;
-	}
-}
-
-static void eval_deg(struct mat *m, double ti, double pi_, double to, double po, double *out)
-{
-	double wi[3], wo[3];
-	mat_dir(ti * M_PI / 180, pi_ * M_PI / 180, wi);
-	mat_dir(to * M_PI / 180, po * M_PI / 180, wo);
-	mat_eval(m, wi, wo, out);
-}
-
-static int do_eval(struct mat *m, const char *in, const char *out, const double *wl, int nwl)
-{
-	FILE *fi = fopen(in, "r");
-	if (!fi) {
-		fprintf(stderr, "acq-sim truth: %s: %s\n", in, strerror(errno));
-		return 1;
-	}
-	FILE *fo = NULL;
-	char *line = NULL, **fields = NULL;
-	size_t cap = 0;
-	double *f = malloc(sizeof(double) * (size_t)nwl);
-	int rc = 1, maxf = 1 << 16, col[4] = { -1, -1, -1, -1 }, nhead = 0;
-	long lineno = 0;
-	static const char *const names[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
-	fields = malloc(sizeof(char *) * (size_t)maxf);
-	if (!f || !fields) {
-		fprintf(stderr, "acq-sim truth: out of memory\n");
+	double *d = alloc_d(nwl, err), *s = d ? alloc_d(nwl, err) : NULL;
+	int rc = -1;
+	if (!s)
 		goto done;
-	}
-	/* header: the first line that is not a # comment */
-	while (getline(&line, &cap, fi) > 0) {
-		lineno++;
-		if (line[0] == '#')
-			continue;
-		nhead = split(line, fields, maxf);
-		if (nhead < 0) {
-			fprintf(stderr, "acq-sim truth: %s:%ld: more than %d columns\n", in, lineno, maxf);
+	fprintf(f, "# acq-sim truth %s: directional-hemispherical reflectance; sigma = quadrature error bound\n"
+		   "# quadrature: sim/material.h, level %d vs %d\n"
+		   "theta_i,wavelength_nm,dhr,sigma\n", mat_name(mat_id_of(m)), level + 1, level);
+	for (int t = 0; t < nth; t++) {
+		if (mat_dhr(m, th[t] * M_PI / 180, level, d, s, err))
 			goto done;
-		}
-		for (int k = 0; k < 4; k++)
-			for (int c = 0; c < nhead; c++)
-				if (!strcmp(fields[c], names[k]))
-					col[k] = c;
-		break;
-	}
-	for (int k = 0; k < 4; k++)
-		if (col[k] < 0) {
-			fprintf(stderr, "acq-sim truth: %s:%ld: the header has no column '%s' (expected theta_i,phi_i,theta_o,phi_o)\n",
-				in, lineno, names[k]);
-			goto done;
-		}
-	fo = strcmp(out, "-") ? fopen(out, "w") : stdout;
-	if (!fo) {
-		fprintf(stderr, "acq-sim truth: %s: %s\n", out, strerror(errno));
-		goto done;
-	}
-	fprintf(fo, "theta_i,phi_i,theta_o,phi_o");
-	header_wl(fo, wl, nwl, "");
-	fputc('\n', fo);
-	while (getline(&line, &cap, fi) > 0) {
-		lineno++;
-		if (line[0] == '\n' || (line[0] == '\r' && line[1] == '\n'))
-			continue;
-		int n = split(line, fields, maxf);
-		if (n != nhead) {
-			fprintf(stderr, "acq-sim truth: %s:%ld: %d fields, the header has %d\n", in, lineno, n < 0 ? maxf : n, nhead);
-			goto done;
-		}
-		double a[4];
-		for (int k = 0; k < 4; k++) {
-			char *end;
-			a[k] = strtod(fields[col[k]], &end);
-			if (end == fields[col[k]] || *end || !isfinite(a[k])) {
-				fprintf(stderr, "acq-sim truth: %s:%ld: column %d (%s): '%s' is not a finite number\n", in, lineno,
-					col[k] + 1, names[k], fields[col[k]]);
-				goto done;
-			}
-		}
-		if (a[0] < 0 || a[0] > 90 || a[2] < 0 || a[2] > 90) {
-			fprintf(stderr, "acq-sim truth: %s:%ld: zenith angles must be in [0, 90] degrees\n", in, lineno);
-			goto done;
-		}
-		eval_deg(m, a[0], a[1], a[2], a[3], f);
-		fprintf(fo, "%.10g,%.10g,%.10g,%.10g", a[0], a[1], a[2], a[3]);
 		for (int l = 0; l < nwl; l++)
-			fprintf(fo, ",%.9g", f[l]);
-		fputc('\n', fo);
+			fprintf(f, "%.10g,%.10g,%.12g,%.3g\n", th[t], wl[l], d[l], s[l]);
 	}
-	rc = 0;
+	rc = stream_ok(f, err);
 done:
-	if (fo && fo != stdout && fclose(fo) && !rc) {
-		fprintf(stderr, "acq-sim truth: %s: %s\n", out, strerror(errno));
-		rc = 1;
+	free(d);
+	free(s);
+	return rc;
+}
+
+int truth_write_eval(FILE *f, const struct mat *m, const char *queries, const double *wl, int nwl,
+		     struct acq_err *err)
+{
+	struct recon_samples q = { 0 };
+	if (csvio_read_queries(queries, &q, err))
+		return -1;
+	double *v = alloc_d(nwl, err);
+	int rc = -1;
+	if (!v)
+		goto done;
+	fprintf(f, "theta_i,phi_i,theta_o,phi_o");
+	for (int l = 0; l < nwl; l++)
+		fprintf(f, ",%.10g", wl[l]);
+	fputc('\n', f);
+	for (size_t r = 0; r < q.n; r++) {
+		const double *a = q.ang + 4 * r, *dg = q.deg + 4 * r;
+		double wi[3], wo[3];
+		mat_dir(a[0], a[1], wi);
+		mat_dir(a[2], a[3], wo);
+		mat_eval(m, wi, wo, v);
+		fprintf(f, "%.10g,%.10g,%.10g,%.10g", dg[0], dg[1], dg[2], dg[3]);
+		for (int l = 0; l < nwl; l++)
+			fprintf(f, ",%.9g", v[l]);
+		fputc('\n', f);
 	}
-	if (rc && fo && fo != stdout)
-		unlink(out); /* no half-written result */
-	fclose(fi);
-	free(line);
-	free(fields);
-	free(f);
+	rc = stream_ok(f, err);
+done:
+	free(v);
+	csvio_samples_free(&q);
 	return rc;
 }
 
@@ -256,90 +158,89 @@ static double angle_deg(const double a[3], const double b[3])
 	return atan2(sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]), c) * 180.0 / M_PI;
 }
 
-static int do_grid(struct mat *m, const char *material, const char *spec, const char *out, double rel, double floor_,
-		   unsigned long long seed, bool keep_blind, const double *wl, int nwl)
+int truth_write_grid(FILE *fo, const struct mat *m, const struct truth_grid *g, const double *wl, int nwl, int *rows,
+		     int *dropped, struct acq_err *err)
 {
-	int ni, no, np;
-	char tail;
-	if (sscanf(spec, "%dx%dx%d%c", &ni, &no, &np, &tail) != 3 || ni < 1 || no < 1 || np < 1 || ni > 90 || no > 90 ||
-	    np > 360) {
-		fprintf(stderr, "acq-sim truth: --grid: expected NIxNOxNP (e.g. 10x10x10; each 1..90, NP 1..360), got '%s'\n", spec);
-		return 2;
-	}
-	struct bench_geom g;
-	bench_defaults(&g);
-	double blind = fmax(g.detector_body_halfwidth_deg + g.beam_halfwidth_deg, g.laser_body_halfwidth_deg + g.fov_halfwidth_deg);
-	FILE *fo = strcmp(out, "-") ? fopen(out, "w") : stdout;
-	if (!fo) {
-		fprintf(stderr, "acq-sim truth: %s: %s\n", out, strerror(errno));
-		return 1;
-	}
-	double *f = malloc(sizeof(double) * (size_t)nwl), *v = malloc(sizeof(double) * (size_t)nwl),
-	       *s = malloc(sizeof(double) * (size_t)nwl);
-	if (!f || !v || !s) {
-		fprintf(stderr, "acq-sim truth: out of memory\n");
-		free(f);
-		free(v);
-		free(s);
-		if (fo != stdout)
-			fclose(fo);
-		return 1;
+	struct bench_geom geo;
+	bench_defaults(&geo);
+	double blind = fmax(geo.detector_body_halfwidth_deg + geo.beam_halfwidth_deg,
+			    geo.laser_body_halfwidth_deg + geo.fov_halfwidth_deg);
+	const struct refdrift_cfg *cal = &g->cal;
+	double *f = alloc_d(nwl, err), *v = f ? alloc_d(nwl, err) : NULL, *s = v ? alloc_d(nwl, err) : NULL,
+	       *rf = s ? alloc_d(nwl, err) : NULL;
+	int rc = -1;
+	*rows = *dropped = 0;
+	if (!rf || refdrift_reference(cal, nwl, wl, rf, err))
+		goto done;
+	/* relative calibration against the standard: f_cal = f rho_cert / rho_true (rf: rho_true - rho_cert) */
+	for (int l = 0; l < nwl; l++) {
+		double rc_ = mat_rho_d(MAT_WHITE, wl[l]);
+		rf[l] = rc_ / (rc_ + rf[l]);
 	}
 	struct sim_rng r;
-	sim_rng_seed(&r, seed);
-	fprintf(fo, "# acq-sim truth %s: grid %s, theta in (0, 80) deg at cell centres, phi_i = %g deg; noise: value x (1 + %g N)"
-		    " + %g N, seed %llu; blind zones (< %g deg between wi and wo) %s\n",
-		material, spec, g.laser_phi_deg, rel, floor_, seed, blind, keep_blind ? "kept" : "dropped");
+	sim_rng_seed(&r, g->seed);
+	fprintf(fo, "# acq-sim truth %s: grid %dx%dx%d, theta in (0, 80) deg at cell centres, phi_i = %g deg; noise: value x "
+		    "(1 + %g N) + %g N, seed %llu; blind zones (< %g deg between wi and wo) %s\n",
+		mat_name(mat_id_of(m)), g->ni, g->no, g->np, geo.laser_phi_deg, g->rel, g->floor_,
+		(unsigned long long)g->seed, blind, g->keep_blind ? "kept" : "dropped");
+	if (cal->ref_u > 0 || cal->drift_amp > 0)
+		fprintf(fo, "# systematic errors (not in the sigma columns; sim/sim_refdrift.h): reference standard u %g "
+			    "(correlation %g nm, seed %llu); source drift rms %g (tilt %g, period %g s, seed %llu), sample k at "
+			    "bench time k x %g s after the reference\n", cal->ref_u, cal->ref_corr_nm,
+			(unsigned long long)cal->ref_seed, cal->drift_amp, cal->drift_tilt, cal->drift_period_s,
+			(unsigned long long)cal->drift_seed, g->point_s);
 	fprintf(fo, "theta_i,phi_i,theta_o,phi_o");
-	header_wl(fo, wl, nwl, "");
-	header_wl(fo, wl, nwl, "sigma_");
+	for (int l = 0; l < nwl; l++)
+		fprintf(fo, ",%.10g", wl[l]);
+	for (int l = 0; l < nwl; l++)
+		fprintf(fo, ",sigma_%.10g", wl[l]);
 	fputc('\n', fo);
-	int rows = 0, dropped = 0;
-	for (int a = 0; a < ni; a++)
-		for (int b = 0; b < no; b++)
-			for (int c = 0; c < np; c++) {
-				double ti = 80.0 * (a + 0.5) / ni, to = 80.0 * (b + 0.5) / no, po = 360.0 * c / np;
+	for (int a = 0; a < g->ni; a++)
+		for (int b = 0; b < g->no; b++)
+			for (int c = 0; c < g->np; c++) {
+				double ti = 80.0 * (a + 0.5) / g->ni, to = 80.0 * (b + 0.5) / g->no, po = 360.0 * c / g->np;
 				double wi[3], wo[3];
-				mat_dir(ti * M_PI / 180, g.laser_phi_deg * M_PI / 180, wi);
+				mat_dir(ti * M_PI / 180, geo.laser_phi_deg * M_PI / 180, wi);
 				mat_dir(to * M_PI / 180, po * M_PI / 180, wo);
-				if (!keep_blind && angle_deg(wi, wo) < blind) {
-					dropped++;
+				if (!g->keep_blind && angle_deg(wi, wo) < blind) {
+					(*dropped)++;
 					continue;
 				}
 				mat_eval(m, wi, wo, f);
+				double t = (*rows + 1) * g->point_s;
 				for (int l = 0; l < nwl; l++) {
-					s[l] = sqrt(rel * rel * f[l] * f[l] + floor_ * floor_);
-					v[l] = f[l] * (1.0 + rel * sim_rng_gauss(&r)) + floor_ * sim_rng_gauss(&r);
+					f[l] *= rf[l] * refdrift_source(cal, t, wl[l]);
+					s[l] = sqrt(g->rel * g->rel * f[l] * f[l] + g->floor_ * g->floor_);
+					v[l] = f[l] * (1.0 + g->rel * sim_rng_gauss(&r)) + g->floor_ * sim_rng_gauss(&r);
 				}
-				fprintf(fo, "%.10g,%.10g,%.10g,%.10g", ti, g.laser_phi_deg, to, po);
+				fprintf(fo, "%.10g,%.10g,%.10g,%.10g", ti, geo.laser_phi_deg, to, po);
 				for (int l = 0; l < nwl; l++)
 					fprintf(fo, ",%.9g", v[l]);
 				for (int l = 0; l < nwl; l++)
 					fprintf(fo, ",%.3g", s[l]);
 				fputc('\n', fo);
-				rows++;
+				(*rows)++;
 			}
+	rc = stream_ok(fo, err);
+done:
 	free(f);
 	free(v);
 	free(s);
-	fprintf(stderr, "acq-sim truth: %d samples written, %d in blind zones dropped\n", rows, dropped);
-	if (fo != stdout && fclose(fo)) {
-		fprintf(stderr, "acq-sim truth: %s: %s\n", out, strerror(errno));
-		return 1;
-	}
-	return 0;
+	free(rf);
+	return rc;
 }
 
 /* MERL export: the spectral BRDF reduced to linear sRGB in sr^-1 by recon/colour.h (colour_opts_brdf: D65,
  * Bradford, absolute, negatives clamped, range kept). The reduction is linear, so it is folded in before the
- * evaluation: f(l) = diff rho(l) + spec F(l, c) gives rgb = diff (W rho) + spec (W F(., c)), with W F(., c)
- * tabulated over c in [0, 1] (MERL_FT + 1 nodes, linear interpolation: relative error < 1e-6). */
+ * evaluation: f(l) = sum_k w_k S_k(l, c_k) (mat_terms) gives rgb = sum_k w_k (W S_k(., c_k)), with W S_k
+ * computed once for the fixed spectra and tabulated over c in [0, 1] for the Fresnel factors (MERL_FT + 1
+ * nodes, linear interpolation: relative error < 1e-6). */
 #define MERL_FT 4096
 
 struct merl_ctx {
 	const struct mat *m;
-	double wrho[3];
-	double *ftab; /* 3 x (MERL_FT + 1) */
+	double *ftab[MAT_S__COUNT]; /* 3 x (MERL_FT + 1) per Fresnel spectrum, 3 for a fixed one */
+	bool varies[MAT_S__COUNT];
 	struct colour_opts o;
 	struct colour_stats st;
 };
@@ -347,170 +248,69 @@ struct merl_ctx {
 static int merl_cb(void *ctx, const double wi[3], const double wo[3], double rgb[3])
 {
 	struct merl_ctx *x = ctx;
-	double diff, spec, c, lin[3];
-	mat_terms(x->m, wi, wo, &diff, &spec, &c);
-	double u = fmin(fmax(c, 0.0), 1.0) * MERL_FT;
-	int j = (int)u;
-	if (j >= MERL_FT)
-		j = MERL_FT - 1;
-	double t = u - j;
-	for (int k = 0; k < 3; k++) {
-		const double *f = x->ftab + k * (MERL_FT + 1);
-		lin[k] = diff * x->wrho[k] + spec * (f[j] + t * (f[j + 1] - f[j]));
+	struct mat_term t[MAT_MAX_TERMS];
+	double lin[3] = { 0, 0, 0 };
+	int nt = mat_terms(x->m, wi, wo, t);
+	for (int j = 0; j < nt; j++) {
+		if (!(t[j].w > 0))
+			continue;
+		const double *f = x->ftab[t[j].spec];
+		if (!x->varies[t[j].spec]) {
+			for (int k = 0; k < 3; k++)
+				lin[k] += t[j].w * f[k];
+			continue;
+		}
+		double u = fmin(fmax(t[j].c, 0.0), 1.0) * MERL_FT;
+		int i = (int)u;
+		if (i >= MERL_FT)
+			i = MERL_FT - 1;
+		double a = u - i;
+		for (int k = 0; k < 3; k++) {
+			const double *fk = f + k * (MERL_FT + 1);
+			lin[k] += t[j].w * (fk[i] + a * (fk[i + 1] - fk[i]));
+		}
 	}
 	colour_finish(&x->o, lin, rgb, &x->st);
 	return 0;
 }
 
-static int do_merl(struct mat *m, enum mat_id id, const char *out, const double *wl, int nwl)
+int truth_write_merl(const char *path, const struct mat *m, const double *wl, int nwl, struct colour_opts *o,
+		     struct colour_stats *st, struct acq_err *err)
 {
 	struct merl_ctx x = { .m = m };
-	struct acq_err err = { 0 };
 	colour_opts_brdf(&x.o);
 	double *W = malloc(sizeof(double) * 3 * (size_t)nwl), *sp = malloc(sizeof(double) * (size_t)nwl);
-	x.ftab = malloc(sizeof(double) * 3 * (MERL_FT + 1));
-	int rc = 1;
-	if (!W || !sp || !x.ftab) {
-		fprintf(stderr, "acq-sim truth: out of memory\n");
+	int rc = -1, oom = !W || !sp;
+	for (int s = 0; s < MAT_S__COUNT; s++) {
+		x.varies[s] = s == MAT_S_DIEL || s == MAT_S_COND;
+		x.ftab[s] = malloc(sizeof(double) * 3 * (x.varies[s] ? MERL_FT + 1 : 1));
+		oom |= !x.ftab[s];
+	}
+	if (oom) {
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
 		goto done;
 	}
-	if (colour_weights(&x.o, wl, (size_t)nwl, W, &err)) {
-		fprintf(stderr, "acq-sim truth: --merl: %s\n", err.msg);
+	if (colour_weights(&x.o, wl, (size_t)nwl, W, err))
 		goto done;
+	for (int s = 0; s < MAT_S__COUNT; s++) {
+		int nc = x.varies[s] ? MERL_FT + 1 : 1;
+		for (int j = 0; j < nc; j++) {
+			double rgb[3];
+			mat_spectrum(m, (enum mat_spec)s, (double)j / MERL_FT, sp);
+			colour_apply_weights(W, (size_t)nwl, sp, rgb);
+			for (int k = 0; k < 3; k++)
+				x.ftab[s][k * nc + j] = rgb[k];
+		}
 	}
-	for (int l = 0; l < nwl; l++)
-		sp[l] = mat_rho_d(id, wl[l]);
-	colour_apply_weights(W, (size_t)nwl, sp, x.wrho);
-	for (int j = 0; j <= MERL_FT; j++) {
-		double rgb[3];
-		mat_fresnel(m, (double)j / MERL_FT, sp);
-		colour_apply_weights(W, (size_t)nwl, sp, rgb);
-		for (int k = 0; k < 3; k++)
-			x.ftab[k * (MERL_FT + 1) + j] = rgb[k];
-	}
-	if (merl_write(out, merl_cb, &x, &err)) {
-		fprintf(stderr, "acq-sim truth: --merl: %s\n", err.msg);
+	if (merl_write(path, merl_cb, &x, err))
 		goto done;
-	}
-	fprintf(stderr, "acq-sim truth: MERL table written to %s; colour decisions: ", out);
-	colour_opts_write_json(stderr, &x.o, &x.st, NULL);
-	fputc('\n', stderr);
+	*o = x.o;
+	*st = x.st;
 	rc = 0;
 done:
 	free(W);
 	free(sp);
-	free(x.ftab);
-	return rc;
-}
-
-int sim_truth_main(int argc, char **argv)
-{
-	const char *dhr = NULL, *eval = NULL, *grid = NULL, *merl = NULL, *out = NULL, *thetas = "8,30,60",
-		   *wls = "450:1100:1";
-	double rel = 0.01, floor_ = 0;
-	unsigned long long seed = 1;
-	bool keep_blind = false;
-	long level = 2;
-	static const struct option opts[] = {
-		{ "dhr", required_argument, NULL, 'd' },      { "eval", required_argument, NULL, 'e' },
-		{ "grid", required_argument, NULL, 'g' },     { "merl", required_argument, NULL, 'm' },
-		{ "theta-i", required_argument, NULL, 't' },  { "wavelengths", required_argument, NULL, 'w' },
-		{ "noise", required_argument, NULL, 'n' },    { "noise-floor", required_argument, NULL, 'f' },
-		{ "seed", required_argument, NULL, 's' },     { "keep-blind", no_argument, NULL, 'k' },
-		{ "level", required_argument, NULL, 'L' },    { "output", required_argument, NULL, 'o' },
-		{ "help", no_argument, NULL, 'h' },           { NULL, 0, NULL, 0 },
-	};
-	if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
-		usage(argc < 2 ? stderr : stdout);
-		return argc < 2 ? 2 : 0;
-	}
-	const char *material = argv[1];
-	int id = mat_from_name(material);
-	if (id < 0) {
-		fprintf(stderr, "acq-sim truth: unknown material '%s' (expected green-paint, white, metal)\n", material);
-		return 2;
-	}
-	/* options after MATERIAL: parse argv + 1 from its index 1; optind = 0 re-initialises getopt (so the
-	 * function can run more than once in a process) */
-	optind = 0;
-	int c, nact = 0, oargc = argc - 1;
-	char **oargv = argv + 1;
-	while ((c = getopt_long(oargc, oargv, "o:h", opts, NULL)) != -1) {
-		char *end = NULL;
-		switch (c) {
-		case 'd': dhr = optarg; nact++; break;
-		case 'e': eval = optarg; nact++; break;
-		case 'g': grid = optarg; nact++; break;
-		case 'm': merl = optarg; nact++; break;
-		case 't': thetas = optarg; break;
-		case 'w': wls = optarg; break;
-		case 'o': out = optarg; break;
-		case 'k': keep_blind = true; break;
-		case 'n':
-		case 'f': {
-			double v = strtod(optarg, &end);
-			if (end == optarg || *end || !(v >= 0 && v <= 10)) {
-				fprintf(stderr, "acq-sim truth: --%s: expected a number in [0, 10], got '%s'\n",
-					c == 'n' ? "noise" : "noise-floor", optarg);
-				return 2;
-			}
-			*(c == 'n' ? &rel : &floor_) = v;
-			break;
-		}
-		case 's':
-			errno = 0;
-			seed = strtoull(optarg, &end, 10);
-			if (end == optarg || *end || errno || optarg[0] == '-') {
-				fprintf(stderr, "acq-sim truth: --seed: expected a non-negative integer, got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'L':
-			level = strtol(optarg, &end, 10);
-			if (end == optarg || *end || level < 0 || level > 5) {
-				fprintf(stderr, "acq-sim truth: --level: expected 0..5, got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'h': usage(stdout); return 0;
-		default: usage(stderr); return 2;
-		}
-	}
-	if (optind < oargc) {
-		fprintf(stderr, "acq-sim truth: unexpected argument '%s'\n", oargv[optind]);
-		return 2;
-	}
-	if (nact != 1) {
-		fprintf(stderr, "acq-sim truth: give exactly one of --dhr, --eval, --grid, --merl\n");
-		return 2;
-	}
-	if (grid && !out) {
-		fprintf(stderr, "acq-sim truth: --grid needs -o SAMPLES.csv (or -o - for standard output)\n");
-		return 2;
-	}
-	double *wl = NULL;
-	int nwl = 0;
-	if (parse_wavelengths(wls, &wl, &nwl)) {
-		fprintf(stderr, "acq-sim truth: --wavelengths: expected A:B:STEP (or one value) within 450..1100 nm, "
-				"at most %d wavelengths, got '%s'\n", MAX_WL, wls);
-		return 2;
-	}
-	struct acq_err err = { 0 };
-	struct mat *m = mat_new((enum mat_id)id, nwl, wl, &err);
-	int rc;
-	if (!m) {
-		fprintf(stderr, "acq-sim truth: %s\n", err.msg);
-		rc = 1;
-	} else if (dhr) {
-		rc = do_dhr(m, mat_name(id), dhr, thetas, (int)level, wl, nwl);
-	} else if (eval) {
-		rc = do_eval(m, eval, out ? out : "-", wl, nwl);
-	} else if (grid) {
-		rc = do_grid(m, mat_name(id), grid, out, rel, floor_, seed, keep_blind, wl, nwl);
-	} else {
-		rc = do_merl(m, (enum mat_id)id, merl, wl, nwl);
-	}
-	mat_free(m);
-	free(wl);
+	for (int s = 0; s < MAT_S__COUNT; s++)
+		free(x.ftab[s]);
 	return rc;
 }

@@ -1,8 +1,11 @@
 #!/usr/bin/python3
 """demo: the end-to-end run on the simulated bench (make demo, through tests/demo.sh): acq-sim and acquisitiond
-with their state in build/demo/ (fresh each run), the paper's 10 x 10 x 10 plan on the simulated green paint
-(white reference first, then the sample), progress from `acqctl watch`, the reconstruction on completion, and
-where every output is. Everything started here is stopped here, also on Ctrl-C."""
+with their state in build/demo/ (fresh each run), the paper's 10 x 10 x 10 plan on a simulated sample
+(DEMO_SAMPLE, default green-paint; any `acq-sim truth --help` material) with the white reference first,
+progress from `acqctl watch`, the reconstruction on completion, the paper's validation (its Fig. 4): the
+reconstructed DHR at 8 deg against a simulated integrating-sphere spectrophotometer measurement of the same
+sample (`acq-sim truth SAMPLE --spectrophotometer`, read by `brdf-recon dhr --reference`), and where every
+output is. Everything started here is stopped here, also on Ctrl-C."""
 import json
 import os
 import shutil
@@ -12,11 +15,60 @@ import sys
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "integration"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import sweeplib as L  # noqa: E402
 
 SCALE = float(os.environ.get("DEMO_TIME_SCALE", "35"))
 PLAN = os.path.join(L.SRC, "config", "plan-paper-10x10x10.yaml")
 ACQCTL = os.path.join(L.BUILD, "acqctl")
+RECON = os.path.join(L.BUILD, "brdf-recon")
+SAMPLE = os.environ.get("DEMO_SAMPLE", "green-paint")
+
+
+def reference_check(out, seed):
+    """The paper's Fig. 4: the reconstructed DHR at 8 deg vs a simulated spectrophotometer (d/8 sphere) measurement
+    of the sample, z = (model - reference) / sqrt(sigma_model^2 + sigma_ref^2) per wavelength. Returns a summary
+    line (or why there is none); writes spectrophotometer.csv, dhr-reference-z.csv and dhr-reference.png in out."""
+    import numpy as np
+    model = os.path.join(out, "model.brdf")
+    if not os.path.exists(model):
+        return "no model to compare"
+    ref = os.path.join(out, "spectrophotometer.csv")
+    r = subprocess.run([L.SIM, "truth", SAMPLE, "--spectrophotometer", "--seed", str(seed), "--wavelengths",
+                        "450:1100:1", "-o", ref], capture_output=True, text=True)
+    if r.returncode != 0:
+        return "acq-sim truth --spectrophotometer failed: %s" % r.stderr.strip()
+    zpath = os.path.join(out, "dhr-reference-z.csv")
+    helptext = subprocess.run([RECON, "dhr", "--help"], capture_output=True, text=True)
+    if "--reference" in helptext.stdout + helptext.stderr:
+        r = subprocess.run([RECON, "dhr", model, "--theta-i", "8", "--reference", ref, "--z-out", zpath, "-o",
+                            os.path.join(out, "dhr8.csv"), "--plot", os.path.join(out, "dhr-reference.png")],
+                           capture_output=True, text=True)
+        if r.returncode != 0:
+            return "brdf-recon dhr --reference failed: %s" % r.stderr.strip()[-500:]
+        z = np.genfromtxt(zpath, delimiter=",", names=True)["z"]
+        how = "brdf-recon dhr --reference"
+    else:
+        # a build without --reference: the same comparison here, from `brdf-recon dhr` at 8 deg
+        d8 = os.path.join(out, "dhr8.csv")
+        r = subprocess.run([RECON, "dhr", model, "--theta-i", "8", "-o", d8], capture_output=True, text=True)
+        if r.returncode != 0:
+            return "brdf-recon dhr failed: %s" % r.stderr.strip()[-500:]
+        a = np.genfromtxt(d8, delimiter=",", names=True)
+        b = np.genfromtxt(ref, delimiter=",", names=True)
+        k = (b["wavelength_nm"] >= a["wavelength_nm"].min()) & (b["wavelength_nm"] <= a["wavelength_nm"].max())
+        md = np.interp(b["wavelength_nm"][k], a["wavelength_nm"], a["dhr"])
+        ms = np.interp(b["wavelength_nm"][k], a["wavelength_nm"], a["sigma"])
+        z = (md - b["dhr"][k]) / np.sqrt(ms ** 2 + b["sigma"][k] ** 2)
+        with open(zpath, "w") as f:
+            f.write("wavelength_nm,z\n")
+            for w, v in zip(b["wavelength_nm"][k], z):
+                f.write("%g,%.6g\n" % (w, v))
+        how = "brdf-recon dhr (the build has no --reference)"
+    if len(z) == 0:
+        return "no wavelength in common with the model"
+    return ("%.1f %% of %d wavelengths within |z| < 2 (RMS z %.2f, max |z| %.2f; z with both uncertainties; %s)"
+            % (100 * np.mean(np.abs(z) < 2), len(z), float(np.sqrt(np.mean(z ** 2))), float(np.abs(z).max()), how))
 
 
 def main():
@@ -35,12 +87,12 @@ def main():
         b.start_daemon()
         with open(PLAN) as f:
             plan = f.read()
-        sid = L.start_sweep(b, plan, "demo-paper-10x10x10")
+        sid = L.start_sweep(b, plan, "demo-paper-10x10x10-%s" % SAMPLE)
         total = L.sweep_row(b, sid)["points_total"]
         print("demo: sweep %d started: %d points (the plan's visible ones), white reference first" % (sid, total),
               flush=True)
         watch = subprocess.Popen([ACQCTL, "-s", b.sock, "watch"], stdin=subprocess.DEVNULL)
-        row = L.drive_to_end(b, sid, timeout=1800)
+        row = L.drive_to_end(b, sid, timeout=1800, sample=SAMPLE)
         if watch.poll() is None:
             watch.terminate()
             watch.wait(5)
@@ -62,7 +114,7 @@ def main():
             time.sleep(0.5)
         out = os.path.join(b.state, "recon", "sweep-%d" % sid)
         try:
-            zs, nan = L.zscores(b, sid)
+            zs, nan = L.zscores(b, sid, material=SAMPLE)
             import numpy as np
             z = np.array(zs)
             acc = "calibrated samples vs the simulator's ground truth: %d values, z mean %.3f, std %.3f, " \
@@ -74,10 +126,20 @@ def main():
         print("calibrated samples:  %s" % os.path.join(out, "samples.csv"))
         print("accuracy:            %s" % acc)
         print("reconstruction:      %s" % (verdict or "no word from the reconstruction within 15 min"))
+        try:
+            agree = reference_check(out, int(os.environ.get("ACQ_SEED", "1")))
+        except (OSError, ValueError) as e:
+            agree = "comparison failed: %s" % e
+        print("spectrophotometer:   DHR at 8 deg vs the simulated d/8 sphere measurement of %s: %s" % (SAMPLE, agree))
         for label, name in (("model", "model.brdf"), ("MERL table", "merl.binary"), ("DHR table", "dhr.csv"),
-                            ("DHR plot", "dhr.png"), ("preview image", "preview.png")):
+                            ("DHR plot", "dhr.png"), ("preview image", "preview.png"),
+                            ("spectrophotometer", "spectrophotometer.csv"), ("DHR vs reference", "dhr-reference.png"),
+                            ("z per wavelength", "dhr-reference-z.csv")):
             p = os.path.join(out, name)
             print("%-20s %s" % (label + ":", p if os.path.exists(p) else "(not produced: %s)" % p))
+        import demo_outputs  # issue 18: RGL .bsdf, HDR preview, slice plots
+        for label, p in demo_outputs.make(L.BUILD, out):
+            print("%-20s %s" % (label + ":", p))
         print("logs:                %s, %s" % (b.daemon_log, b.sim_log))
         return 0
     except L.Skip as e:

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # make demo: the end-to-end run on the simulated bench — acq-sim + acquisitiond with state in build/demo/ (fresh
-# each run, outputs kept), the paper's 10 x 10 x 10 plan on the simulated green paint at a time scale that takes
-# about a minute (DEMO_TIME_SCALE, default 35), progress from `acqctl watch`, the reconstruction, and where the
+# each run, outputs kept), the paper's 10 x 10 x 10 plan on a simulated sample (DEMO_SAMPLE, default green-paint;
+# any `acq-sim truth --help` material) at a time scale that takes about a minute (DEMO_TIME_SCALE, default 35),
+# progress from `acqctl watch`, the reconstruction, its DHR at 8 deg against a simulated spectrophotometer
+# (integrating sphere) measurement with the share of wavelengths that agree (|z| < 2), and where the
 # database, the MERL table, the DHR table/plot and the previews are. Everything it starts, it stops (also on
 # Ctrl-C): tests/demo.py owns the processes; this wrapper checks what is needed and forwards signals.
 set -uo pipefail

@@ -7,7 +7,7 @@
 
 #include "config/bench.h"
 #include "config/yconf.h"
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 
 static const struct {
 	const char *name, *file, *text;

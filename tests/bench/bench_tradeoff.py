@@ -6,7 +6,7 @@ Three studies, each a CSV table and a PNG plot under $ACQ_BENCH_OUT (default bui
 
  1. Sampling density: plans from sparse to dense (grids N x N x N with the paper's ranges, N = 5, 8, 10,
     12, 15, and Fibonacci sets of equal counts: N incidences x N^2 near-uniform directions). Each plan file
-    is written to the output folder and dry-run by `acqctl plan --json --points`: planned sweep time on the
+    is written to the output folder and dry-run by `acqctl plan --json --points`: predicted sweep time on the
     simulated bench, and the positions actually measured (blind points dropped). The ground truth of
     `acq-sim truth MATERIAL --eval` at those positions gets the noise model of `acq-sim truth --grid`
     (value x (1 + REL N) + FLOOR N, sigma columns) with several seeds; `brdf-recon fit` (defaults: Wendland,
@@ -182,7 +182,7 @@ def plan(name, text):
     js = os.path.join(WORK, name + ".plan.json")
     run([CTL, "plan", path, "--json", "--points"], out=js)
     with open(js) as f:
-        d = json.load(f)
+        d = json.load(f)["plan"]  # acqctl's --json reply: {"ok", "plan": {...}, "source"}
     lp = laser_phi()
     ang = []
     for s in d["steps"]:
@@ -303,8 +303,8 @@ def study_density(truth, pool):
             name = "%s-%d" % ("fib" if fib else "grid", n)
             d, ang = plan(name, plan_yaml(name, n, fib))
             plans.append((name, n, fib, d, ang))
-            log("   plan %-8s requested %5d measured %5d  sweep %7.0f s" % (name, d["requested"], d["measured"],
-                                                                        d["duration_s"]))
+            log("   plan %-8s requested %5d measured %5d  sweep %7.0f s (predicted)" % (name, d["requested"],
+                                                                                    d["measured"], d["predicted_s"]))
     # phase A: N <= 10, NSEEDS seeds; phase B: N > 10 (800-3300 centres), one seed (fits take 10-80 s CPU).
     # Shape and smoothing by leave-one-out (the defaults) everywhere; ACQ_TRADEOFF_FIXED_SHAPE=1 fixes the
     # shape of phase B to the one chosen for grid-10 (same material, seed 0), 4x cheaper.
@@ -330,7 +330,7 @@ def study_density(truth, pool):
             if name == "grid-10" and k == 0:
                 shape10[m] = r["shape"]
             rows.append(dict(plan=name, kind="fibonacci" if fib else "grid", n=n, requested=d["requested"],
-                             measured=d["measured"], sweep_s=float(d["duration_s"]), raster_s=float(d["raster_s"]),
+                             measured=d["measured"], sweep_s=float(d["predicted_s"]), raster_s=float(d["raster_s"]),
                              material=m, seed=k, shape_mode=mode, **r))
             log("   %-8s %-11s seed %d: %4d centres, log-RMSE %.4f  DHR err %.3f %%  fit %.1f s CPU %.0f MiB" %
                 (name, m, k, r["centres"], r["logrmse"], 100 * r["dhr_err"], r["fit_cpu_s"], r["fit_rss_mib"]))
@@ -439,7 +439,7 @@ def study_snr(truth, pool):
     rows = []
     for (t, a), (d, sat, msnr, mrel) in sorted(meta.items()):
         rows.append(dict(integration_ms=t, averages=a, point_dwell_s=float(d["point_dwell_s"]),
-                         sweep_s=float(d["duration_s"]), median_snr=msnr, median_rel_noise=mrel, saturated=int(sat),
+                         sweep_s=float(d["predicted_s"]), median_snr=msnr, median_rel_noise=mrel, saturated=int(sat),
                          dhr_sig_8=math.nan, dhr_err_8=math.nan, logrmse=math.nan))
     for fu in cf.as_completed(jobs):
         t, a = jobs[fu]

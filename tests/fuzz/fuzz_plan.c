@@ -5,7 +5,7 @@
 #include <string.h>
 
 #include "config/bench.h"
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 

@@ -39,6 +39,25 @@ class Client:
         line, self.buf = self.buf.split(b"\n", 1)
         return json.loads(line)
 
+    def req_fd(self, cmd, **args):
+        """A request whose reply may carry a file descriptor (export): (reply, fd or None)."""
+        msg = {"cmd": cmd, "id": args.pop("_id", 1)}
+        msg.update(args)
+        self.sock.sendall((json.dumps(msg) + "\n").encode())
+        fd = None
+        while b"\n" not in self.buf:
+            data, fds, _, _ = socket.recv_fds(self.sock, 1 << 16, 4)
+            for x in fds:
+                if fd is None:
+                    fd = x
+                else:
+                    os.close(x)
+            if not data:
+                raise EOFError("connection closed")
+            self.buf += data
+        line, self.buf = self.buf.split(b"\n", 1)
+        return json.loads(line), fd
+
     def send_raw(self, data):
         self.sock.sendall(data)
 

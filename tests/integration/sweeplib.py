@@ -283,9 +283,9 @@ def progress(bench):
     return r
 
 
-def drive_to_end(bench, sid, timeout, swap=True, on_tick=None, poll=0.1):
+def drive_to_end(bench, sid, timeout, swap=True, on_tick=None, poll=0.1, sample="green-paint"):
     """Poll the sweep until it is completed/aborted/failed; at the pause after the white reference put the
-    sample on the stage and resume (as an operator would). Returns the final sweep row."""
+    sample (a simulator material) on the stage and resume (as an operator would). Returns the final sweep row."""
     t0 = time.time()
     swapped = False
     while True:
@@ -296,7 +296,7 @@ def drive_to_end(bench, sid, timeout, swap=True, on_tick=None, poll=0.1):
         if st == "paused" and swap:
             ev = [e for e in row.get("events", []) if e.get("kind") in ("pause", "resume", "start", "stop")]
             if ev and ev[0]["kind"] == "pause" and "place the sample" in (ev[0].get("message") or ""):
-                bench.ctl("sample green-paint")
+                bench.ctl("sample %s" % sample)
                 swapped = True
                 c = bench.client()
                 r = c.req("sweep.resume")

@@ -105,7 +105,7 @@ def main():
                     "  phi_deg: [90, 180]\nintegration: {mode: fixed, ms: 5}\naverages: 1\nblind_points: move\n"
         r = c.req("plan", plan=plan_text)
         if r["ok"]:
-            check(r["plan"]["requested"] == 8 and r["plan"]["points"] > 0 and r["plan"]["duration_s"] > 0,
+            check(r["plan"]["requested"] == 8 and r["plan"]["measured"] > 0 and r["plan"]["duration_s"] > 0,
                   "plan dry run %r" % r)
             check(err_code(c.req("plan", plan="incidence: 3")) == "invalid", "bad plan")
         else:
@@ -148,15 +148,19 @@ def main():
         check(r["sweep"]["plan_text"] == "plan: x", "show plan")
 
         # --- export
-        r = c.req("export", sweep=sid)
-        lines = r["csv"].splitlines()
+        r, fd = c.req_fd("export", sweep=sid)
+        check(r["ok"] and r["stream"] is True and r["rows"] == 2 and fd is not None, "export stream %r" % r)
+        with os.fdopen(fd, "rb") as sf:
+            lines = sf.read().decode().splitlines()
         check(lines[1] == "theta_i,phi_i,theta_o,phi_o,450,500,550,sigma_450,sigma_500,sigma_550", lines)
-        check(lines[2].startswith("0,0,30,180,0.25,0.5,0.75,0.00999999978") and r["rows"] == 2, lines)
+        check(lines[2].startswith("0,0,30,180,0.25,0.5,0.75,0.00999999978") and len(lines) == 4, lines)
         check(err_code(c.req("export", sweep=running)) == "state", "export without samples")
         check(err_code(c.req("export", sweep=12345)) == "not_found", "export missing sweep")
         r = c.req("export", sweep=sid, path="out.csv")
         check(r["ok"] and r["rows"] == 2, "export to file %r" % r)
-        check(open(os.path.join(d.state, "out.csv")).read().splitlines()[1].startswith("theta_i"), "file content")
+        check(r["path"] == os.path.join(d.state, "export", "out.csv"), "export folder %r" % r)
+        check(open(r["path"]).read().splitlines()[1].startswith("theta_i"), "file content")
+        check(err_code(c.req("export", sweep=sid, path="out.csv")) == "state", "an export never overwrites")
         outside = os.path.join(d.tmp, "outside")
         os.mkdir(outside)
         os.symlink(outside, os.path.join(d.state, "link"))
@@ -238,7 +242,7 @@ def main():
 
         # --- acqctl: exit codes, human and --json output
         p = acqctl(d.sock, "status")
-        check(p.returncode == 0 and "daemon: running" in p.stdout, "acqctl status %r" % (p.stdout,))
+        check(p.returncode == 0 and p.stdout.startswith("daemon     running"), "acqctl status %r" % (p.stdout,))
         p = acqctl(d.sock, "--json", "devices")
         check(p.returncode == 0 and len(json.loads(p.stdout)["devices"]) == 5, "acqctl --json devices")
         p = acqctl(d.sock, "devices")
@@ -246,7 +250,7 @@ def main():
         p = acqctl(d.sock, "sweep", "list")
         check(p.returncode == 0 and "completed" in p.stdout and "seeded" in p.stdout, "acqctl sweep list")
         p = acqctl(d.sock, "sweep", "show", str(sid))
-        check(p.returncode == 0 and "sweep.plan_text: plan: x" in p.stdout, "acqctl sweep show %r" % p.stdout)
+        check(p.returncode == 0 and "  plan:\n    plan: x" in p.stdout, "acqctl sweep show %r" % p.stdout)
         p = acqctl(d.sock, "export", str(sid))
         check(p.returncode == 0 and p.stdout.splitlines()[1].startswith("theta_i,"), "acqctl export")
         plan = os.path.join(d.tmp, "plan.yaml")
@@ -256,17 +260,17 @@ def main():
         check(p.returncode == 1 and ("unavailable" in p.stderr or "invalid" in p.stderr),
               "acqctl sweep start %r" % (p.stderr,))
         p = acqctl(d.sock, "move", "laser_theta=abc")
-        check(p.returncode == 1, "acqctl bad value")
+        check(p.returncode == 64, "acqctl bad value: usage error")
         p = acqctl(d.sock, "move", "laser_theta=5")
         check(p.returncode == 1 and "unavailable" in p.stderr, "acqctl move")
         p = acqctl(os.path.join(d.tmp, "nosuch.sock"), "status")
-        check(p.returncode == 2 and "cannot connect" in p.stderr, "acqctl no daemon %r" % (p.stderr,))
+        check(p.returncode == 69 and "cannot connect" in p.stderr, "acqctl no daemon %r" % (p.stderr,))
         p = acqctl(os.path.join(d.tmp, "nosuch.sock"), "plan", plan)
         check("cannot connect" not in p.stderr and "plan" in (p.stderr + p.stdout),
               "acqctl plan falls back to the local dry run: %r" % (p.stderr,))
         p = subprocess.run([ACQCTL, "help"], capture_output=True, text=True)
         check(p.returncode == 0 and "sweep start" in p.stdout and "recon status" in p.stdout, "help")
-        # acqctl watch, not a terminal: plain lines
+        # acqctl watch, not a terminal: JSON lines
         wp = subprocess.Popen([ACQCTL, "-s", d.sock, "watch"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                               text=True)
         time.sleep(0.3)
@@ -274,7 +278,8 @@ def main():
         time.sleep(0.3)
         wp.terminate()
         out, _ = wp.communicate(timeout=5)
-        check("watching: true" in out and "config {\"path\"" in out, "acqctl watch output %r" % out)
+        evs = [json.loads(x) for x in out.splitlines()]
+        check({"event": "config", "path": d.conf} in evs, "acqctl watch output %r" % out)
 
         # --- loopback TCP: observers only (no peer credentials), acqctl -s tcp:PORT
         probe = socket.socket()

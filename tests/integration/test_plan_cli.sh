@@ -14,6 +14,8 @@ for plan in plan-paper-10x10x10 plan-fibonacci; do
   /usr/bin/python3 - "$tmp/$plan.json" <<'PY' || fail "$plan: JSON check"
 import json, sys
 d = json.load(open(sys.argv[1]))
+assert d["ok"] is True and d["source"] == "local", d.keys()
+d = d["plan"]
 for k in ("kept", "dropped", "moved", "duration_s", "raster_s", "lower_bound_s", "requested", "duplicates"):
     assert k in d, k
 assert d["kept"] + d["moved"] + d["dropped"] + d["duplicates"] == d["requested"], d
@@ -28,7 +30,7 @@ print(sys.argv[1].rsplit("/", 1)[-1], "requested", d["requested"], "kept", d["ke
       "dropped", d["dropped"], "planned %.1f raster %.1f bound %.1f" % (d["duration_s"], d["raster_s"], d["lower_bound_s"]))
 PY
 done
-python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); assert d["requested"] == 1000' "$tmp/plan-paper-10x10x10.json" \
+python3 -c 'import json,sys; d=json.load(open(sys.argv[1]))["plan"]; assert d["requested"] == 1000' "$tmp/plan-paper-10x10x10.json" \
   || fail "paper plan is not 1000 requests"
 
 # text output and the default bench configuration (found through ACQ_SRC, then next to the executable)
@@ -50,6 +52,6 @@ printf 'bench:\n  laser_radius_mm: -3\n' >"$tmp/bench.yaml"
 grep -q "bench.yaml:2:" "$tmp/err" || fail "bad bench: message not located: $(cat "$tmp/err")"
 # missing file, usage
 "$acqctl" plan "$tmp/none.yaml" >"$tmp/out" 2>"$tmp/err"; rc=$?
-[ $rc -eq 1 ] && grep -q "none.yaml" "$tmp/err" || fail "missing plan: exit $rc, $(cat "$tmp/err")"
-"$acqctl" plan >"$tmp/out" 2>&1; [ $? -eq 2 ] || fail "no argument should be a usage error"
+[ $rc -eq 66 ] && grep -q "none.yaml" "$tmp/err" || fail "missing plan: exit $rc, $(cat "$tmp/err")"
+"$acqctl" plan >"$tmp/out" 2>&1; [ $? -eq 64 ] || fail "no argument should be a usage error (64)"
 echo "ok"

@@ -1,6 +1,6 @@
 #!/usr/bin/python3
-"""Integration test of `acq-sim truth`: DHR CSV layout and values (white = its reflectance, paint and metal
-<= 1, sigma a small non-negative bound), --eval in the CSV interchange format (reciprocity, Lambertian value,
+"""Integration test of `acq-sim truth`: DHR CSV layout and values for every material (white = its reflectance,
+the others <= 1, sigma a small non-negative bound), --eval in the CSV interchange format (reciprocity, Lambertian value,
 non-negativity), --grid noisy samples whose sigma columns describe their noise (z-scores against --eval),
 and clear errors."""
 import csv
@@ -21,6 +21,8 @@ if not os.access(SIM, os.X_OK):
     print(f"skip: {SIM} not built")
     sys.exit(77)
 tmp = tempfile.mkdtemp(prefix="acq-truth-test.")
+# every simulator material (sim/material.h): the trend-family ones, then the truths outside that family
+ALL = ("white", "green-paint", "metal", "clear-coat", "rough-backscatter", "cloth-sheen", "sharp-lobe", "narrow-lines")
 
 
 def check(cond, what):
@@ -44,7 +46,7 @@ def read_csv(path):
 try:
     rng = np.random.default_rng(SEED)
     # --- DHR
-    for mat in ("white", "green-paint", "metal"):
+    for mat in ALL:
         out = os.path.join(tmp, f"{mat}.dhr.csv")
         r = run(mat, "--dhr", out, "--theta-i", "8,30,60,85", "--wavelengths", "450:1100:5")
         check(r.returncode == 0, f"{mat}: --dhr runs ({r.stderr.strip()})")
@@ -63,6 +65,14 @@ try:
         if mat == "metal":
             d8 = {w: v for t, w, v, s in a if t == 8}
             check(d8[450] < 0.5 and d8[900] > 0.9, f"gold-like metal: 450 nm {d8[450]:.3f}, 900 nm {d8[900]:.3f}")
+        if mat == "narrow-lines":
+            d8 = {w: v for t, w, v, s in a if t == 8}
+            check(d8[535] < 0.6 * d8[525] and d8[640] < 0.6 * d8[630],
+                  f"narrow lines at 537 and 641 nm: {d8[535]:.3f} vs {d8[525]:.3f}, {d8[640]:.3f} vs {d8[630]:.3f}")
+        if mat == "cloth-sheen":
+            d = {(t, w): v for t, w, v, s in a}
+            check(d[(85, 600)] > 2 * d[(8, 600)], f"cloth: sheen raises the DHR at grazing ({d[(85, 600)]:.3f} at 85 deg, "
+                  f"{d[(8, 600)]:.3f} at 8 deg)")
 
     # --- eval: reciprocity, Lambertian value, non-negativity
     q = os.path.join(tmp, "q.csv")
@@ -74,7 +84,7 @@ try:
             f.write(f"{t[0]},{t[1]},{t[2]},{t[3]},x\n")
         for t in ang:
             f.write(f"{t[2]},{t[3]},{t[0]},{t[1]},\n")
-    for mat in ("green-paint", "metal", "white"):
+    for mat in ALL:
         out = os.path.join(tmp, f"{mat}.eval.csv")
         r = run(mat, "--eval", q, "-o", out, "--wavelengths", "450:1100:50")
         check(r.returncode == 0, f"{mat}: --eval runs ({r.stderr.strip()})")
@@ -113,6 +123,57 @@ try:
              "-o", "-", "--wavelengths", "450:1100:25")
     check(r2.stdout == open(out).read(), "grid: same seed, same samples")
 
+    # --- systematic errors: a white standard off its certificate (one smooth factor common to all samples) and
+    # source drift (a factor that changes slowly from sample to sample); noise off to see them alone
+    def grid(*extra):
+        r = run("green-paint", "--grid", "4x4x6", "--noise", "0", "--wavelengths", "450:1100:10", "-o", "-", *extra)
+        check(r.returncode == 0, f"--grid {' '.join(extra)} runs ({r.stderr.strip()})")
+        lines = [ln for ln in r.stdout.splitlines() if not ln.startswith("#")]
+        return np.array([ln.split(",") for ln in lines[1:]], dtype=float)[:, 4:4 + 66], r.stdout
+    g0, _ = grid()
+    g1, t1 = grid("--reference", "0.002,100,3")
+    rr = g1 / g0
+    check(np.ptp(rr, axis=0).max() < 1e-6 and 1e-4 < np.abs(rr[0] - 1).max() < 0.012 and
+          np.abs(np.diff(rr[0])).max() < 0.1 * np.abs(rr[0] - 1).max() + 1e-4 and "reference standard u 0.002" in t1,
+          f"--reference: one smooth factor for all samples (largest |factor - 1| {np.abs(rr[0] - 1).max():.2g})")
+    g2, _ = grid("--drift", "0.01,600,2", "--point-time", "30")
+    rd = g2 / g0
+    check(np.ptp(rd[:, 20]) > 1e-3 and np.abs(np.diff(rd[:, 20])).max() < 0.01 and np.abs(rd - 1).max() < 0.06,
+          f"--drift: a slow factor varying over the samples (range {np.ptp(rd[:, 20]):.2g} at 650 nm)")
+    check(run("white", "--grid", "2x2x2", "-o", "-", "--reference", "0.5").returncode == 2, "--reference range checked")
+
+    # --- the simulated spectrophotometer (d/8 sphere): the interface brdf-recon dhr --reference reads, values
+    # consistent with the truth's DHR at 8 deg within their stated sigma, seeded
+    r = run("narrow-lines", "--spectrophotometer", "--seed", "4", "--wavelengths", "450:1100:5")
+    check(r.returncode == 0 and r.stdout.splitlines()[0] == "wavelength_nm,dhr,sigma",
+          f"--spectrophotometer prints wavelength_nm,dhr,sigma ({r.stderr.strip()})")
+    sp = np.array([ln.split(",") for ln in r.stdout.splitlines()[1:]], dtype=float)
+    tp = os.path.join(tmp, "nl8.csv")
+    check(run("narrow-lines", "--dhr", tp, "--theta-i", "8", "--wavelengths", "450:1100:5").returncode == 0, "truth at 8")
+    tr8 = np.array(read_csv(tp)[1], dtype=float)
+    zz = (sp[:, 1] - tr8[:, 2]) / sp[:, 2]
+    check(sp.shape == (131, 3) and np.all(sp[:, 2] > 0) and np.abs(zz).max() < 5 and 0.5 < zz.std() < 2,
+          f"spectrophotometer vs truth: |z| max {np.abs(zz).max():.2f}, sd {zz.std():.2f}")
+    r2 = run("narrow-lines", "--spectrophotometer", "--seed", "4", "--wavelengths", "450:1100:5")
+    r3 = run("narrow-lines", "--spectrophotometer", "--seed", "5", "--wavelengths", "450:1100:5")
+    check(r2.stdout == r.stdout and r3.stdout != r.stdout, "spectrophotometer: seeded")
+    # and through brdf-recon dhr --reference (the paper's Fig. 4 check): a reconstruction of the paint from the
+    # paper's plan agrees with the instrument on most wavelengths
+    recon = os.path.join(BUILD, "brdf-recon")
+    g, mdl, ref, zf = (os.path.join(tmp, x) for x in ("p.csv", "p.model", "ref.csv", "z.csv"))
+    check(run("green-paint", "--grid", "10x10x10", "--seed", str(SEED), "--wavelengths", "450:1100:10", "-o", g)
+          .returncode == 0, "paint samples for the reference check")
+    check(run("green-paint", "--spectrophotometer", "--seed", str(SEED), "--wavelengths", "450:1100:5", "-o", ref)
+          .returncode == 0 and open(ref).readline() == "wavelength_nm,dhr,sigma\n", "spectrophotometer -o")
+    rf = subprocess.run([recon, "fit", g, "-o", mdl], capture_output=True, text=True, timeout=600)
+    check(rf.returncode == 0, f"brdf-recon fit ({rf.stderr.strip()[-200:]})")
+    rd = subprocess.run([recon, "dhr", mdl, "--theta-i", "8", "--reference", ref, "--z-out", zf, "-o", os.devnull],
+                        capture_output=True, text=True, timeout=600)
+    check(rd.returncode == 0 and "within |z| <= 2" in rd.stderr, f"brdf-recon dhr --reference reads it: {rd.stderr.strip()}")
+    zs = np.genfromtxt(zf, delimiter=",", names=True)
+    check(len(zs) > 100 and np.mean(np.abs(zs["z"]) <= 2) > 0.8,
+          f"reconstruction vs spectrophotometer: {np.mean(np.abs(zs['z']) <= 2):.1%} of wavelengths within |z| <= 2")
+
     # --- MERL (values are checked against the truth in tests/unit/test_sim_truth_merl.c)
     mp = os.path.join(tmp, "w.binary")
     r = run("white", "--merl", mp, "--wavelengths", "450:1100:5")
@@ -125,6 +186,14 @@ try:
     check(list(hdr) == [90, 90, 180] and good.mean() > 0.5, "MERL header 90 90 180, most cells have data")
     check(abs(np.median(val[good][:1458000 // 2]) - 0.98 / math.pi) < 0.03,
           f"white MERL red channel ~ rho/pi ({np.median(val[good][:729000]):.4f})")
+    # the table back as a material (merl:FILE, RGB upsampled to spectra, sim/material.h): a white stays white
+    r = run("merl:" + mp, "--dhr", "-", "--theta-i", "30", "--wavelengths", "450:1100:50", "--level", "0")
+    check(r.returncode == 0, f"merl:FILE --dhr runs ({r.stderr.strip()})")
+    md = np.array([ln.split(",") for ln in r.stdout.splitlines() if ln[0].isdigit()], dtype=float)
+    check(len(md) == 14 and np.all(np.abs(md[:, 2] - 0.985) < 0.02),
+          f"white MERL table read back as a material: DHR {md[:, 2].min():.4f}..{md[:, 2].max():.4f}")
+    r = run("merl:/nonexistent.binary", "--dhr", "-")
+    check(r.returncode == 1 and "/nonexistent.binary" in r.stderr, f"merl: missing file: {r.stderr.strip()}")
     os.unlink(mp)
 
     # --- errors

@@ -9,7 +9,8 @@ tmp=$(mktemp -d); trap 'rm -rf "$tmp"' EXIT
 unit="$tmp/acquisitiond.service"
 sed "s|@BINDIR@|$ACQ_BUILD|g" "$ACQ_SRC/systemd/acquisitiond.service" > "$unit"
 grep -q "@BINDIR@" "$unit" && { echo "FAIL: @BINDIR@ left"; exit 1; }
-out=$(systemd-analyze verify "$unit" 2>&1); rc=$?
+# --man=no: the Documentation= pages are checked installed by test_install.sh
+out=$(systemd-analyze verify --man=no "$unit" 2>&1); rc=$?
 # verify may warn about the absent user/groups on a build machine; anything else is a failure
 bad=$(grep -v -e "acquisitiond" -e '^$' <<<"$out" | grep -iv "user\|group" || true)
 if [ $rc -ne 0 ] || [ -n "$(grep -i "unknown\|invalid\|failed to parse\|ignoring" <<<"$out")" ]; then

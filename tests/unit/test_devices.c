@@ -78,6 +78,17 @@ static int f_axis_move_begin(struct axis *ax, double target, double now, struct 
 	ax->moving = true;
 	return 0;
 }
+/* Homing: a move to 0. */
+static int f_axis_home_begin(struct axis *ax, double now, struct acq_err *err)
+{
+	return f_axis_move_begin(ax, 0, now, err);
+}
+static int f_axis_alarm_reset(struct axis *ax, struct acq_err *err)
+{
+	(void)ax;
+	(void)err;
+	return 0;
+}
 /* Moves 10 degrees per step. */
 static int f_axis_move_step(struct axis *ax, double now, struct acq_err *err)
 {
@@ -192,7 +203,7 @@ static const struct devices_drv fake_drv = {
 	f_axis_open, f_axis_close, f_axis_cfg_limits, f_axis_read_status, f_axis_move_begin, f_axis_move_step,
 	f_axis_stop, f_axis_identity, f_spectro_open, f_spectro_close, f_spectro_info, f_spectro_start,
 	f_spectro_fetch, f_spectro_stop, f_laser_open, f_laser_close, f_laser_set_emission, f_laser_set_power, f_laser_status,
-	f_laser_identity,
+	f_laser_identity, f_axis_home_begin, f_axis_alarm_reset,
 };
 
 /* ---- harness ---- */

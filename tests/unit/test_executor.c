@@ -12,9 +12,9 @@
 #include <stdlib.h>
 #include <unistd.h>
 
-/* The test reaches the executor's internals (to simulate a crash) by including its source (style habit 9). */
-#include "daemon/executor.c"
-#include "daemon/plan.h"
+/* The test reaches the executor's internals (to simulate a crash) through its private header. */
+#include "daemon/executor_int.h"
+#include "daemon/plan/plan.h"
 #include "daemon/store.h"
 #include "drivers/axis.h"
 #include "tests/unit/synth.h"

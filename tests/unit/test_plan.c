@@ -12,7 +12,7 @@
 
 #include "config/bench.h"
 #include "config/yconf.h"
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 
 /* ---- the independent model ------------------------------------------------------------------------- */
 

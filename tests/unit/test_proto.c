@@ -5,8 +5,11 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <math.h>
+#include <time.h>
 #include <cmocka.h>
 
+#include "proto/ctl.h"
 #include "proto/proto.h"
 
 static void test_framing(void **state)
@@ -129,29 +132,49 @@ static void test_formatting(void **state)
 	assert_string_equal(proto_code_of(&e), "not_found");
 }
 
-static void test_progress_line(void **state)
+/* acqctl's readable values: times in local ISO 8601 (TZ fixed here), h:mm:ss, angles, units by key. */
+static void test_ctl_values(void **state)
 {
 	(void)state;
-	char buf[256] = "untouched";
-	json_t *other = json_pack("{s:s}", "event", "device");
-	assert_int_equal(proto_progress_line(other, true, buf, sizeof buf), 0);
-	assert_string_equal(buf, "untouched");
-	json_decref(other);
-	json_t *ev = json_pack("{s:s,s:i,s:i,s:i,s:f}", "event", "sweep.progress", "sweep", 4, "done", 25, "total", 100,
-			       "eta_s", 245.0);
-	assert_int_equal(proto_progress_line(ev, false, buf, sizeof buf), 1);
-	assert_string_equal(buf, "sweep 4: 25/100 points, ETA 4m05s");
-	assert_int_equal(proto_progress_line(ev, true, buf, sizeof buf), 1);
-	assert_string_equal(buf, "\rsweep 4 [##########------------------------------]  25% 25/100  ETA 4m05s   ");
-	json_object_set_new(ev, "eta_s", json_null());
-	json_object_set_new(ev, "done", json_integer(1000));
-	json_object_set_new(ev, "eta_s", json_real(7322));
-	assert_int_equal(proto_progress_line(ev, false, buf, sizeof buf), 1);
-	assert_string_equal(buf, "sweep 4: 100/100 points, ETA 2h02m");
-	json_object_set_new(ev, "eta_s", json_null());
-	assert_int_equal(proto_progress_line(ev, false, buf, sizeof buf), 1);
-	assert_string_equal(buf, "sweep 4: 100/100 points, ETA --");
-	json_decref(ev);
+	setenv("TZ", "Europe/Paris", 1);
+	tzset();
+	char buf[128];
+	ctl_fmt_time(1796140105.205776, buf, sizeof buf);
+	assert_string_equal(buf, "2026-12-01T16:48:25+01:00");
+	ctl_fmt_time(0, buf, sizeof buf);
+	assert_string_equal(buf, "-");
+	ctl_fmt_dur(7322.4, buf, sizeof buf);
+	assert_string_equal(buf, "2:02:02");
+	ctl_fmt_dur(59.5, buf, sizeof buf);
+	assert_string_equal(buf, "0:01:00");
+	ctl_fmt_dur(2.345, buf, sizeof buf);
+	assert_string_equal(buf, "2.35 s");
+	ctl_fmt_dur(NAN, buf, sizeof buf);
+	assert_string_equal(buf, "-");
+	ctl_fmt_angle(44.990000000000002, buf, sizeof buf);
+	assert_string_equal(buf, "44.99°");
+	ctl_fmt_angle(-0.001, buf, sizeof buf);
+	assert_string_equal(buf, "0.00°");
+	json_t *v = json_real(12.5);
+	ctl_fmt_value("integration_ms", v, buf, sizeof buf);
+	assert_string_equal(buf, "12.5 ms");
+	ctl_fmt_value("detector_phi", v, buf, sizeof buf);
+	assert_string_equal(buf, "12.50°");
+	ctl_fmt_value("laser.theta", v, buf, sizeof buf);
+	assert_string_equal(buf, "12.50°");
+	ctl_fmt_value("uptime_s", v, buf, sizeof buf);
+	assert_string_equal(buf, "0:00:13");
+	ctl_fmt_value("ratio", v, buf, sizeof buf);
+	assert_string_equal(buf, "12.5");
+	json_decref(v);
+	v = json_pack("[f,f]", -90.0, 90.0);
+	ctl_fmt_value("limits_deg", v, buf, sizeof buf);
+	assert_string_equal(buf, "-90.00°, 90.00°");
+	json_decref(v);
+	v = json_true();
+	ctl_fmt_value("auto_resume", v, buf, sizeof buf);
+	assert_string_equal(buf, "yes");
+	json_decref(v);
 }
 
 int main(void)
@@ -160,7 +183,7 @@ int main(void)
 		cmocka_unit_test(test_framing),
 		cmocka_unit_test(test_validation),
 		cmocka_unit_test(test_formatting),
-		cmocka_unit_test(test_progress_line),
+		cmocka_unit_test(test_ctl_values),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -9,6 +9,7 @@
 #include <string.h>
 #include <cmocka.h>
 
+#include "sim/material.h"
 #include "sim/sim_physics.h"
 
 struct fix {
@@ -162,6 +163,53 @@ static void test_ceiling(void **state)
 	assert_true(n > 1000);
 }
 
+/* Every material can be put on the stage by name (config `sim.sample`, control `sample`), and the signal is
+ * K s(l) QE(l) f cos(theta_o) Omega with f from that material's truth (ratio to the white's signal = f / f_white,
+ * relative 1e-12). */
+static void test_every_sample(void **state)
+{
+	struct fix *x = *state;
+	const struct phys_cfg *c = phys_config(x->p);
+	double wl[PHYS_MAX_PIXELS], white[PHYS_MAX_PIXELS], wi[3], wo[3];
+	for (int i = 0; i < c->npix; i++)
+		wl[i] = phys_wavelength(c, i);
+	pose(x, 30, 35, 150);
+	mat_dir(30 * M_PI / 180, x->w.geom.laser_phi_deg * M_PI / 180, wi);
+	mat_dir(35 * M_PI / 180, 150 * M_PI / 180, wo);
+	x->w.sample = SIM_SAMPLE_WHITE;
+	phys_signal(x->p, &x->w, white);
+	struct acq_err err = { 0 };
+	struct mat *mw = mat_new(MAT_WHITE, c->npix, wl, &err);
+	double *fw = malloc(sizeof(double) * (size_t)c->npix), *f = malloc(sizeof(double) * (size_t)c->npix);
+	mat_eval(mw, wi, wo, fw);
+	assert_int_equal(phys_sample_from_name("none"), SIM_SAMPLE_NONE);
+	assert_int_equal(phys_sample_from_name("velvet"), -1);
+	for (int s = 0; s < SIM_SAMPLE_NONE; s++) {
+		assert_int_equal(phys_sample_from_name(phys_sample_name(s)), s);
+		if (s == SIM_SAMPLE_MERL) { /* no sim.merl_file: nothing reflects */
+			x->w.sample = s;
+			phys_signal(x->p, &x->w, x->rate);
+			for (int i = 0; i < c->npix; i++)
+				assert_true(x->rate[i] == 0.0);
+			continue;
+		}
+		x->w.sample = s;
+		phys_signal(x->p, &x->w, x->rate);
+		struct mat *m = mat_new((enum mat_id)s, c->npix, wl, &err);
+		assert_non_null(m);
+		mat_eval(m, wi, wo, f);
+		double worst = 0;
+		for (int i = PHYS_NDARK; i < c->npix; i++)
+			worst = fmax(worst, fabs(x->rate[i] / white[i] - f[i] / fw[i]) / fmax(1e-300, f[i] / fw[i]));
+		printf("%s: signal / white signal vs f / f_white: worst relative difference %.2g\n", phys_sample_name(s), worst);
+		assert_true(worst < 1e-12);
+		mat_free(m);
+	}
+	mat_free(mw);
+	free(fw);
+	free(f);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -169,6 +217,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(test_many_averages, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_blind_zones_and_beam, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_ceiling, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_every_sample, setup, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

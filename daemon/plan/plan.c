@@ -24,7 +24,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 
 #define DEG (M_PI / 180.0)
 #define MAX_REPS 4
@@ -300,8 +300,7 @@ static void classify_req(const struct bench_geom *g, struct plan_req *r, enum pl
 
 /* ---- ordering ---------------------------------------------------------------------------------------- */
 
-/* Straight-move time plus settling: a lower bound of any move between the two configurations. */
-static double straight_lb(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b)
+double plan_straight_s(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b)
 {
 	double s = 0;
 	if (a->laser_theta != b->laser_theta)
@@ -328,7 +327,7 @@ static double mcost(const struct planner *P, const struct mpt *a, const struct m
 			c[nc].pb = b->pos;
 			c[nc].pa.det_phi = a->reps[i];
 			c[nc].pb.det_phi = b->reps[j];
-			c[nc].lb = straight_lb(P->g, &c[nc].pa, &c[nc].pb);
+			c[nc].lb = plan_straight_s(P->g, &c[nc].pa, &c[nc].pb);
 			/* insertion sort by lower bound */
 			for (int k = nc; k > 0 && c[k].lb < c[k - 1].lb; k--) {
 				__typeof__(c[0]) t = c[k];
@@ -1075,6 +1074,9 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		free(keep[c]);
 	}
 	free_planner(&P);
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	plan_time_apply(s, g, &tm, R);
 	*out = R;
 	return 0;
 fail:

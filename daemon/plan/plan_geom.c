@@ -3,7 +3,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 
 #define DEG (M_PI / 180.0)
 

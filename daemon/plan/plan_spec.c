@@ -15,7 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 
 #define PLAN_MAX_VALUES 100000
 

@@ -95,6 +95,8 @@ struct plan_step {
 	size_t first_wp, n_wp;
 	double move_s, settle_s, dwell_s;
 	double t_start_s;           /* when the move to this point starts (0 for the first) */
+	double predicted_start_s;   /* the same in the executor's timeline (plan_time.c): overheads, darks, reference */
+	double predicted_s;         /* this step's predicted duration (move to it, its darks and exposures) */
 	bool detour;                /* the move is not a single straight segment */
 };
 
@@ -114,6 +116,31 @@ struct plan_result {
 	size_t n_detours;
 	size_t n_groups;            /* distinct incidences */
 	double point_dwell_s;       /* averages × (integration + read-out) */
+	/* What the sweep will take on the bench (plan_time.c): the ordering model above plus what the executor adds
+	 * (controller polling and in-position checks, probe exposures, darks, the reference at the start). */
+	double predicted_s;
+	double reference_s;         /* of predicted_s: the reference phase and the move from it to the first point */
+	double darks_s;             /* of predicted_s: dark spectra */
+};
+
+/* The executor's costs the ordering model leaves out; plan_timing_defaults() gives the executor's and the
+ * arm driver's defaults, the daemon fills it from its configuration (sweep, acquisition, devices). */
+struct plan_timing {
+	double axis_poll_s;         /* controllers' status polling: the end of a move is seen this late on average
+				     * (half a period), plus one confirmation read after settling */
+	double extra_settle_s;      /* sweep.extra_settle_s after every move */
+	double probe_ms;            /* auto integration: one probe exposure per point */
+	double exposure_overhead_s; /* per exposure beyond integration + read-out (start, polling, storage) */
+	int dark_averages;          /* exposures per dark */
+	int dark_every;             /* a dark every N points; 0: one per incidence */
+	bool reference;             /* a reference (the plan's averages) at the start, at ref_pose, then the move to
+				     * the first point */
+	struct plan_pos ref_pose;
+	double point_overhead_s;    /* real seconds per point the host spends beyond the bench's own time
+				     * (calibration, storage with fsync, protocol round trips) ... */
+	double time_scale;          /* ... which cost time_scale times as much bench time on a simulated bench */
+	bool have_start;            /* the arms' position when the sweep starts is known (the daemon knows it) */
+	struct plan_pos start;      /* then the move from there to ref_pose (or the first point) is counted */
 };
 
 /* Load and validate a plan file; errors name file:line:col. 0, or -1 with err (*out NULL). */
@@ -128,6 +155,15 @@ void plan_spec_free(struct plan_spec *spec);
 /* Plan spec against bench g: classify, order, build safe moves, estimate. 0, or -1 with err. */
 int plan_make(const struct plan_spec *spec, const struct bench_geom *g, struct plan_result **out,
 	      struct acq_err *err);
+/* Straight-move time plus the settling of the axes that move: a lower bound of any move between a and b. */
+double plan_straight_s(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b);
+/* A pose [laser_theta, detector_theta, detector_phi] from a YAML sequence (what names it in messages). 0 or -1. */
+int plan_pose_parse(const struct yc_node *n, const char *what, struct plan_pos *out, struct acq_err *err);
+/* The executor's and drivers' default timing (see struct plan_timing). */
+void plan_timing_defaults(struct plan_timing *t);
+/* Fill the predicted_* fields of r (made from spec against g) for an executor timed by t. */
+void plan_time_apply(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
+		     struct plan_result *r);
 /* Free a result (NULL is fine). */
 void plan_result_free(struct plan_result *res);
 

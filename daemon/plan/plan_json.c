@@ -2,7 +2,7 @@
 #include <jansson.h>
 #include <stdint.h>
 
-#include "daemon/plan.h"
+#include "daemon/plan/plan.h"
 
 static const char *status_name(enum plan_status s)
 {
@@ -39,6 +39,9 @@ json_t *plan_to_json(const struct plan_spec *s, const struct plan_result *r, boo
 	json_object_set_new(o, "dwell_s", json_real(r->dwell_s));
 	json_object_set_new(o, "motion_s", json_real(r->motion_s));
 	json_object_set_new(o, "point_dwell_s", json_real(r->point_dwell_s));
+	json_object_set_new(o, "predicted_s", json_real(r->predicted_s));
+	json_object_set_new(o, "reference_s", json_real(r->reference_s));
+	json_object_set_new(o, "darks_s", json_real(r->darks_s));
 	json_object_set_new(o, "detours", json_integer((json_int_t)r->n_detours));
 	json_object_set_new(o, "blind_points", json_string(s->blind_policy == PLAN_BLIND_MOVE ? "move" : "drop"));
 	json_object_set_new(o, "averages", json_integer(s->averages));
@@ -81,6 +84,7 @@ json_t *plan_to_json(const struct plan_spec *s, const struct plan_result *r, boo
 			json_object_set_new(x, "request", json_integer((json_int_t)p->req));
 			json_object_set_new(x, "status", json_string(status_name(r->req[p->req].status)));
 			json_object_set_new(x, "t_start_s", json_real(p->t_start_s));
+			json_object_set_new(x, "predicted_start_s", json_real(p->predicted_start_s));
 			json_object_set_new(x, "move_s", json_real(p->move_s));
 			json_object_set_new(x, "settle_s", json_real(p->settle_s));
 			json_object_set_new(x, "waypoints", w);

@@ -1,0 +1,62 @@
+/* eta: remaining wall-clock time of a sweep (see eta.h). The planner's figure is in bench seconds: it is
+ * divided by the measured ratio of the loop's clock to the real one (the simulator's time scale, 1 on a real
+ * bench), then multiplied by how much longer (or shorter) than planned the measured points took, in running
+ * time only, with the weight n/(n + 5) after n measured points (the plan alone at first; a few points already
+ * correct a poor estimate, such as an auto-exposure plan's integration estimate). Without a plan: the measured
+ * time per point times the points left. */
+#include "daemon/eta.h"
+
+#include <math.h>
+
+#define ETA_PLAN_WEIGHT 5.0   /* points of measurement worth as much as the plan's own estimate */
+
+void eta_reset(struct eta *e)
+{
+	*e = (struct eta){ .t0_loop = NAN, .t0_real = NAN, .scale = 1, .last_real = NAN, .last_plan = NAN };
+}
+
+static void clocks(struct eta *e, double loop_now, double real_now)
+{
+	if (!isfinite(e->t0_real)) {
+		e->t0_loop = loop_now;
+		e->t0_real = real_now;
+	} else if (real_now - e->t0_real > 0.5) {
+		double s = (loop_now - e->t0_loop) / (real_now - e->t0_real);
+		if (s > 0 && isfinite(s))
+			e->scale = s;
+	}
+}
+
+void eta_running(struct eta *e, bool running, double loop_now, double real_now)
+{
+	clocks(e, loop_now, real_now);
+	e->last_real = running ? real_now : NAN;
+	e->skip = running;
+}
+
+double eta_update(struct eta *e, int done, int total, double plan_at_s, double plan_total_s, double loop_now,
+		  double real_now)
+{
+	clocks(e, loop_now, real_now);
+	if (isfinite(e->last_real) && !e->skip && done > e->last_done) {
+		e->run_real += real_now - e->last_real;
+		e->run_plan += isfinite(plan_at_s) && isfinite(e->last_plan) ? plan_at_s - e->last_plan : NAN;
+		e->measured += done - e->last_done;
+	}
+	e->skip = false;
+	e->last_real = real_now;
+	e->last_plan = plan_at_s;
+	e->last_done = done;
+	int left = total - done;
+	if (left <= 0)
+		return 0;
+	bool plan = isfinite(plan_at_s) && isfinite(plan_total_s) && plan_total_s >= plan_at_s;
+	if (!plan)
+		return e->measured > 0 ? e->run_real / e->measured * left : NAN;
+	double plan_left = (plan_total_s - plan_at_s) / e->scale;
+	if (e->measured <= 0 || !(e->run_plan > 0))
+		return plan_left;
+	double w = e->measured / (e->measured + ETA_PLAN_WEIGHT);
+	double ratio = e->run_real / (e->run_plan / e->scale);
+	return plan_left * ((1 - w) + w * ratio);
+}

@@ -1,0 +1,29 @@
+/* eta: a sweep's remaining time in wall-clock seconds at any time scale — the planner's prediction of the rest,
+ * scaled by how the sweep has kept to the prediction so far (paused or faulted time does not count). */
+#ifndef ETA_H
+#define ETA_H
+
+#include <stdbool.h>
+
+struct eta {
+	double t0_loop, t0_real;   /* first sample of the two clocks (the loop's may run time-scale faster) */
+	double scale;              /* loop seconds per real second, measured; 1 until known */
+	double last_real;          /* real time of the last running sample; NAN when not running */
+	double last_plan;          /* the plan's time at the last sample (bench seconds from the sweep's start) */
+	int last_done;
+	bool skip;                 /* the first interval after a (re)start carries the reference, re-checks */
+	double run_real;           /* real seconds spent running over the measured intervals */
+	double run_plan;           /* the plan's bench seconds for the same points */
+	int measured;              /* points completed in those intervals */
+};
+
+/* A new sweep (or a resumed one): nothing measured yet. */
+void eta_reset(struct eta *e);
+/* The sweep runs (true) or stops running (pause, fault: false) at these clock readings. */
+void eta_running(struct eta *e, bool running, double loop_now, double real_now);
+/* After a point: wall seconds left. plan_at_s: the plan's predicted time (bench s from the sweep's start) at
+ * which step `done` starts; plan_total_s: the plan's whole predicted time (NAN: no plan). */
+double eta_update(struct eta *e, int done, int total, double plan_at_s, double plan_total_s, double loop_now,
+		  double real_now);
+
+#endif

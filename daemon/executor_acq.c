@@ -1,0 +1,652 @@
+/* executor acquisition: per point the auto-exposure probe, darks with the laser off, exposures with the laser
+ * on, the merge, the calibration and the commit to the store; the white reference reload after a crash. */
+#include "daemon/executor_int.h"
+
+#include <math.h>
+#include <sqlite3.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "daemon/store.h"
+
+/* A point measured again keeps the darks it took (they stay in the cache and must reach the store). */
+static void drop_exposures(struct ex *x)
+{
+	int k = 0;
+	for (int i = 0; i < x->npend; i++) {
+		if (!strcmp(x->pend[i].kind, "dark"))
+			x->pend[k++] = x->pend[i];
+		else
+			free(x->pend[i].frame);
+	}
+	x->npend = k;
+	x->have_t0 = false;
+	x->probe_no = 0;
+	x->ntimes = 0;
+	x->e = 0;
+	x->shot_in_flight = false;
+}
+
+static double quantize(const struct ex *x, double t)
+{
+	const struct exp_policy *p = &x->cfg.pol;
+	if (!(t > p->min_ms))
+		return p->min_ms;
+	if (t >= p->max_ms)
+		return p->max_ms;
+	double r = x->cfg.ladder_ratio > 1.0001 ? x->cfg.ladder_ratio : M_SQRT2;
+	double k = floor(log(t / p->min_ms) / log(r) + 1e-9);
+	double q = p->min_ms * pow(r, k);
+	return q < p->min_ms ? p->min_ms : q > p->max_ms ? p->max_ms : q;
+}
+
+bool ex_want_wl(struct ex *x)
+{
+	if (x->info)
+		return true;
+	x->info = x->ops.spectro_info ? x->ops.spectro_info(x->octx) : NULL;
+	if (!x->info || x->info->npix <= 0 || x->info->npix > SPECTRO_MAX_PIXELS) {
+		x->info = NULL;
+		return false;
+	}
+	const struct calib_cfg *c = &x->cfg.cal;
+	double lo = c->grid_min_nm - c->grid_step_nm / 2, hi = c->grid_max_nm + c->grid_step_nm / 2;
+	x->nroi = 0;
+	for (int p = 0; p < x->info->npix; p++) {
+		x->wl[p] = spectro_wavelength(x->info, p);
+		x->roi[p] = x->wl[p] >= lo && x->wl[p] < hi;
+	}
+	for (int i = 0; i < x->info->ndark_pixels && i < 8; i++)
+		if (x->info->dark_pixels[i] >= 0 && x->info->dark_pixels[i] < x->info->npix)
+			x->roi[x->info->dark_pixels[i]] = 0;
+	for (int p = 0; p < x->info->npix; p++)
+		x->nroi += x->roi[p];
+	return true;
+}
+
+/* ---- reference reload (crash-resume) ------------------------------------------------------------ */
+
+static int blob_floats(sqlite3_stmt *s, int col, int npix, double *dst_d, float *dst_f)
+{
+	const void *b = sqlite3_column_blob(s, col);
+	int n = sqlite3_column_bytes(s, col);
+	if (!b || n != 4 * npix)
+		return -1;
+	const float *f = b;
+	for (int i = 0; i < npix; i++) {
+		float v;
+		memcpy(&v, f + i, sizeof v);
+		if (dst_d)
+			dst_d[i] = v;
+		if (dst_f)
+			dst_f[i] = v;
+	}
+	return 0;
+}
+
+/* The reference of this sweep from the database: the spectra listed by the last "reference" event, darks
+ * and exposures alike, turned into net rates and merged exactly as when they were taken. 1 loaded, 0 none. */
+int ex_load_reference(struct ex *x, struct acq_err *err)
+{
+	if (!x->cfg.db_path || !ex_want_wl(x))
+		return 0;
+	sqlite3 *db = NULL;
+	int found = 0;
+	if (sqlite3_open_v2(x->cfg.db_path, &db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
+		acq_errf(err, ACQ_E_IO, "%s: %s", x->cfg.db_path, db ? sqlite3_errmsg(db) : "cannot open");
+		sqlite3_close(db);
+		return -1;
+	}
+	sqlite3_busy_timeout(db, 2000);
+	sqlite3_stmt *s = NULL;
+	long long lo = 0, hi = 0;
+	if (sqlite3_prepare_v2(db, "SELECT message FROM events WHERE sweep_id = ? AND kind = 'reference' "
+				   "ORDER BY id DESC LIMIT 1", -1, &s, NULL) != SQLITE_OK)
+		goto dberr;
+	sqlite3_bind_int64(s, 1, x->sweep_id);
+	if (sqlite3_step(s) == SQLITE_ROW) {
+		const char *m = (const char *)sqlite3_column_text(s, 0);
+		const char *p = m ? strstr(m, "spectra ") : NULL;
+		if (!p || sscanf(p, "spectra %lld-%lld", &lo, &hi) != 2)
+			lo = hi = 0;
+		double lt, dt, dp;
+		const char *q = m ? strstr(m, "at (") : NULL;
+		if (q && sscanf(q, "at (%lf, %lf, %lf)", &lt, &dt, &dp) == 3)
+			x->cfg.cal.ref_theta_o_deg = fabs(dt);
+	}
+	sqlite3_finalize(s);
+	s = NULL;
+	if (lo <= 0 || hi < lo)
+		goto out;
+	if (sqlite3_prepare_v2(db, "SELECT kind, integration_ms, averages, npix, counts, stddev, saturation_mask, "
+				   "temperature_c FROM spectra WHERE sweep_id = ? AND id BETWEEN ? AND ? ORDER BY id",
+			       -1, &s, NULL) != SQLITE_OK)
+		goto dberr;
+	sqlite3_bind_int64(s, 1, x->sweep_id);
+	sqlite3_bind_int64(s, 2, lo);
+	sqlite3_bind_int64(s, 3, hi);
+	exp_darks_clear(x->darks);
+	int n = 0;
+	static _Thread_local float sd[SPECTRO_MAX_PIXELS];
+	while (sqlite3_step(s) == SQLITE_ROW && n < EX_MAX_TIMES) {
+		const char *kind = (const char *)sqlite3_column_text(s, 0);
+		double t = sqlite3_column_double(s, 1);
+		int av = sqlite3_column_int(s, 2), npix = sqlite3_column_int(s, 3);
+		if (!kind || npix != x->info->npix || av < 1)
+			continue;
+		exp_avg_init(x->avg, npix, t);
+		if (blob_floats(s, 4, npix, x->frame->counts, NULL))
+			continue;
+		if (sqlite3_column_type(s, 5) == SQLITE_NULL)
+			memset(sd, 0, sizeof(float) * (size_t)npix);
+		else if (blob_floats(s, 5, npix, NULL, sd))
+			continue;
+		memset(x->frame->saturated, 0, (size_t)npix);
+		if (sqlite3_column_type(s, 6) != SQLITE_NULL && sqlite3_column_bytes(s, 6) == npix)
+			memcpy(x->frame->saturated, sqlite3_column_blob(s, 6), (size_t)npix);
+		if (!strcmp(kind, "dark")) {
+			exp_avg_add(x->avg, x->frame->counts, sd, (unsigned)av, NULL, t, NULL);
+			x->avg->temperature_c = sqlite3_column_type(s, 7) == SQLITE_NULL ? NAN : sqlite3_column_double(s, 7);
+			exp_dark_store(x->darks, x->avg, -1e300); /* old: never reused for new spectra */
+		} else {
+			const struct exp_dark *dk = exp_dark_find(x->darks, t);
+			if (!dk || exp_net_rate(&x->cfg.pol, x->frame->counts, sd, (unsigned)av, x->frame->saturated, npix,
+						t, dk, x->info->max_counts > 0 ? x->info->max_counts : 65535.0,
+						x->rates[n], NULL))
+				continue;
+			n++;
+		}
+	}
+	sqlite3_finalize(s);
+	s = NULL;
+	exp_darks_clear(x->darks);
+	if (n > 0) {
+		const struct exp_rate *list[EX_MAX_TIMES];
+		for (int i = 0; i < n; i++)
+			list[i] = x->rates[i];
+		if (exp_merge(list, n, x->ref_rate, err) == 0) {
+			ex_mask_black(x, x->ref_rate);
+			found = 1;
+		}
+	}
+	goto out;
+dberr:
+	acq_errf(err, ACQ_E_IO, "%s: %s", x->cfg.db_path, sqlite3_errmsg(db));
+	found = -1;
+out:
+	sqlite3_finalize(s);
+	sqlite3_close(db);
+	return found;
+}
+
+/* ---- acquisition ------------------------------------------------------------------------------ */
+
+static const char *expose_kind(const struct ex *x)
+{
+	if (!x->in_reference)
+		return "sample";
+	return x->cfg.cal.method == CALIB_ABSOLUTE ? "beam" : "reference";
+}
+
+static int want_laser(struct ex *x, bool on, struct acq_err *err, int *dev)
+{
+	*dev = EX_DEV_LASER;
+	if (on == x->stats.laser_on && !on)
+		return 0;
+	if (on && !x->power_set && x->ops.laser_power) {
+		if (x->ops.laser_power(x->octx, x->cfg.laser_power_pct, err))
+			return -1;
+		x->power_set = true;
+	}
+	if (on != x->stats.laser_on) {
+		if (x->ops.laser_set(x->octx, on, err))
+			return -1;
+		x->stats.laser_on = on;
+	}
+	if (on) {
+		bool emission = false, ready = false;
+		if (x->ops.laser_state(x->octx, &emission, &ready, err))
+			return -1;
+		if (!emission || !ready)
+			return acq_errf(err, ACQ_E_DEVICE, "laser not emitting (interlock open or laser fault)");
+	}
+	return 0;
+}
+
+static void start_shot(struct ex *x, enum shot_kind k, double t, double now)
+{
+	struct acq_err err = { 0 };
+	int dev = EX_DEV_LASER;
+	if (want_laser(x, k != SHOT_DARK, &err, &dev)) {
+		ex_fault(x, dev, &err);
+		return;
+	}
+	x->shot = k;
+	x->meas.integration_ms = t;
+	x->meas.averages = k == SHOT_PROBE ? 1 : k == SHOT_DARK ? x->cfg.pol.dark_averages : x->cfg.pol.averages;
+	x->meas.saturation_detection = true;
+	if (x->ops.spectro_start(x->octx, &x->meas, now, &err)) {
+		ex_fault(x, EX_DEV_SPECTRO, &err);
+		return;
+	}
+	x->shot_in_flight = true;
+	/* First look when the exposures should be over, then every poll_s (the fetch deadline is the driver's). */
+	x->wake = now + fmax(t * 1e-3 * x->meas.averages, 1e-4);
+}
+
+static int keep_frame(struct ex *x, const char *kind, double taken_at)
+{
+	if (x->npend >= EX_MAX_PENDING)
+		return -1;
+	struct spectro_frame *f = malloc(sizeof *f);
+	if (!f)
+		return -1;
+	memcpy(f, x->frame, sizeof *f);
+	x->pend[x->npend++] = (struct pending){ kind, f, taken_at };
+	return 0;
+}
+
+/* The sensor's optically black pixels carry no light: never used as data. */
+void ex_mask_black(const struct ex *x, struct exp_rate *r)
+{
+	for (int i = 0; x->info && i < x->info->ndark_pixels && i < 8; i++) {
+		int p = x->info->dark_pixels[i];
+		if (p >= 0 && p < r->npix && r->valid[p]) {
+			r->valid[p] = 0;
+			r->rate[p] = r->u_noise[p] = r->u_dark[p] = NAN;
+			r->ninvalid++;
+		}
+	}
+}
+
+static double full_scale(const struct ex *x)
+{
+	return x->info && x->info->max_counts > 0 ? x->info->max_counts : 65535.0;
+}
+
+
+static void commit_point(struct ex *x, double now);
+
+/* The shot just finished: digest it and choose the next one. */
+static void after_shot(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	struct spectro_frame *f = x->frame;
+	double t = x->meas.integration_ms;
+	if (f->npix != x->info->npix) {
+		acq_errf(&err, ACQ_E_PROTO, "spectrometer returned %d pixels, expected %d", f->npix, x->info->npix);
+		ex_fault(x, EX_DEV_SPECTRO, &err);
+		return;
+	}
+	if (!(f->meas.integration_ms > 0))
+		f->meas = x->meas; /* what was asked is what was measured */
+	if (!f->meas.averages)
+		f->meas.averages = x->meas.averages;
+	if (isfinite(f->temperature_c))
+		x->temperature = f->temperature_c;
+	if (x->shot != SHOT_DARK) {
+		/* The laser must still be emitting: an interlock opened during the exposure spoils it. */
+		bool emission = false, ready = false;
+		if (x->ops.laser_state(x->octx, &emission, &ready, &err)) {
+			ex_fault(x, EX_DEV_LASER, &err);
+			return;
+		}
+		if (!emission || !ready) {
+			acq_errf(&err, ACQ_E_DEVICE, "laser stopped emitting during the exposure (interlock or fault)");
+			ex_fault(x, EX_DEV_LASER, &err);
+			return;
+		}
+	}
+	switch (x->shot) {
+	case SHOT_PROBE: {
+		x->stats.probes++;
+		const struct exp_dark *dk = exp_dark_find(x->darks, t);
+		double next = t;
+		int r = exp_probe_next(&x->cfg.pol, f, dk ? dk->mean : NULL, full_scale(x), x->probe_no, &next, &err);
+		if (r < 0) {
+			ex_fault(x, EX_DEV_SPECTRO, &err);
+			return;
+		}
+		if (r == EXP_PROBE_AGAIN) {
+			x->t_probe = next;
+			break;
+		}
+		x->have_t0 = true;
+		x->times[0] = quantize(x, next);
+		x->ntimes = 1;
+		x->e = 0;
+		break;
+	}
+	case SHOT_DARK: {
+		/* A dark with saturated pixels (stray light, a burst) is no dark: take it again. */
+		int nsat = 0;
+		for (int p = 0; p < f->npix; p++)
+			nsat += f->saturated[p] || !(f->counts[p] < x->cfg.pol.sat_frac * full_scale(x));
+		if (nsat > 0) {
+			if (++x->dark_retries > x->cfg.max_point_attempts) {
+				acq_errf(&err, ACQ_E_DEVICE, "%d darks in a row with saturated pixels (%d at %.3g ms)",
+					 x->dark_retries, nsat, t);
+				x->dark_retries = 0;
+				ex_fault(x, EX_DEV_SPECTRO, &err);
+				return;
+			}
+			x->stats.dark_rejects++;
+			ex_event(x, "info", ex_dev_names[EX_DEV_SPECTRO], "dark at %.3g ms has %d saturated pixels: taken again", t,
+			      nsat);
+			break;
+		}
+		x->dark_retries = 0;
+		x->stats.darks++;
+		exp_avg_init(x->avg, f->npix, t);
+		if (exp_avg_add(x->avg, f->counts, f->stddev, f->meas.averages ? f->meas.averages : x->meas.averages,
+				f->saturated, t, &err)) {
+			ex_fault(x, EX_DEV_SPECTRO, &err);
+			return;
+		}
+		x->avg->temperature_c = f->temperature_c;
+		exp_dark_store(x->darks, x->avg, now);
+		if (keep_frame(x, "dark", ex_wall_now(x))) {
+			ex_failed(x, "out of memory keeping spectra");
+			return;
+		}
+		break;
+	}
+	case SHOT_EXPOSE: {
+		x->stats.exposures++;
+		const struct exp_dark *dk = exp_dark_find(x->darks, t);
+		unsigned n = f->meas.averages ? f->meas.averages : x->meas.averages;
+		if (exp_net_rate(&x->cfg.pol, f->counts, f->stddev, n, f->saturated, f->npix, t, dk, full_scale(x),
+				 x->rates[x->e], &err)) {
+			ex_failed(x, "net rate: %s", err.msg);
+			return;
+		}
+		if (keep_frame(x, expose_kind(x), ex_wall_now(x))) {
+			ex_failed(x, "out of memory keeping spectra");
+			return;
+		}
+		if (x->e == 0 && !x->cfg.fixed_integration) {
+			double tt[EX_MAX_TIMES];
+			int m = exp_plan_times(&x->cfg.pol, x->rates[0], x->roi, x->times[0], tt, EX_MAX_TIMES);
+			x->ntimes = 1;
+			for (int k = 1; k < m; k++) {
+				double q = quantize(x, tt[k]);
+				if (q <= x->times[x->ntimes - 1] * 1.0001)
+					break;
+				x->times[x->ntimes++] = q;
+			}
+		}
+		x->e++;
+		break;
+	}
+	}
+	if (x->state != EX_RUNNING)
+		return;
+	if (x->have_t0 && x->e >= x->ntimes) {
+		commit_point(x, now);
+		return;
+	}
+	x->wake = now;
+}
+
+void ex_run_acq(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	if (x->shot_in_flight) {
+		int r = x->ops.spectro_fetch(x->octx, x->frame, now, &err);
+		if (r < 0) {
+			ex_fault(x, EX_DEV_SPECTRO, &err);
+			return;
+		}
+		if (r == 0) {
+			x->wake = now + x->cfg.poll_s;
+			return;
+		}
+		x->shot_in_flight = false;
+		after_shot(x, now);
+		return;
+	}
+	if (!x->have_t0) {
+		if (x->cfg.fixed_integration) {
+			x->have_t0 = true;
+			x->times[0] = x->cfg.fixed_ms;
+			x->ntimes = 1;
+			x->e = 0;
+		} else {
+			if (x->probe_no == 0)
+				x->t_probe = x->t_last;
+			x->probe_no++;
+			start_shot(x, SHOT_PROBE, x->t_probe, now);
+			return;
+		}
+	}
+	double t = x->times[x->e];
+	enum exp_dark_need need = exp_dark_check(x->darks, &x->cfg.pol, t, now, x->temperature);
+	if (need != EXP_DARK_FRESH) {
+		start_shot(x, SHOT_DARK, t, now);
+		return;
+	}
+	start_shot(x, SHOT_EXPOSE, t, now);
+}
+
+static int put_spectrum(struct ex *x, const struct pending *p, int64_t point_id, bool completes, int64_t *id,
+			struct acq_err *err)
+{
+	static _Thread_local float counts[SPECTRO_MAX_PIXELS];
+	const struct spectro_frame *f = p->frame;
+	for (int i = 0; i < f->npix; i++)
+		counts[i] = (float)f->counts[i];
+	struct store_spectrum sp = {
+		.sweep_id = x->sweep_id,
+		.point_id = point_id,
+		.kind = p->kind,
+		.spectrometer_id = x->spectro_id,
+		.integration_ms = f->meas.integration_ms,
+		.averages = (int)(f->meas.averages ? f->meas.averages : 1),
+		.npix = f->npix,
+		.counts = counts,
+		.stddev = f->stddev,
+		.saturated_count = f->nsaturated,
+		.saturated = f->saturated,
+		.temperature_c = f->temperature_c,
+		.taken_at = p->taken_at,
+		.completes_point = completes,
+		.laser_theta = x->actual.laser_theta,
+		.detector_theta = x->actual.det_theta,
+		.detector_phi = x->actual.det_phi,
+	};
+	return store_spectrum_add(x->st, &sp, id, err);
+}
+
+static void progress(struct ex *x, double now)
+{
+	double dt = now - x->point_started;
+	x->point_avg_s = isfinite(x->point_avg_s) ? 0.9 * x->point_avg_s + 0.1 * dt : dt;
+	double eta = x->point_avg_s * (x->nsteps - x->cur);
+	if (x->sink.progress)
+		x->sink.progress(x->sink.ctx, x->sweep_id, x->stats.points_done, x->nsteps, eta, x->phase_text);
+}
+
+static void finish_sweep(struct ex *x)
+{
+	struct acq_err err = { 0 };
+	ex_laser_off(x, &err);
+	x->state = EX_COMPLETED;
+	x->phase = PH_NONE;
+	ex_set_phase_text(x, "completed");
+	ex_set_db_state(x, "completed");
+	ex_event(x, "complete", NULL, "all %d points measured and calibrated (%s method); %d faults, %d recovered",
+	      x->nsteps, calib_method_name(x->cfg.cal.method), x->stats.faults, x->stats.recoveries);
+}
+
+/* The point's exposures are in: merge, check saturation, calibrate, commit, go on. */
+static void commit_point(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	const struct exp_rate *list[EX_MAX_TIMES];
+	for (int i = 0; i < x->ntimes; i++)
+		list[i] = x->rates[i];
+	if (exp_merge(list, x->ntimes, x->merged, &err)) {
+		ex_failed(x, "merge: %s", err.msg);
+		return;
+	}
+	x->stats.merges++;
+	ex_mask_black(x, x->merged);
+	int bad = 0;
+	for (int p = 0; p < x->merged->npix; p++)
+		bad += x->roi[p] && !x->merged->valid[p];
+	x->t_last = x->times[0];
+	if (x->nroi > 0 && bad > x->cfg.max_invalid_frac * x->nroi) {
+		if (x->times[0] > x->cfg.pol.min_ms * 1.0001 && ++x->attempts < x->cfg.max_point_attempts) {
+			/* Saturated even at the shortest exposure: something changed (or a burst); probe again. */
+			x->stats.saturated_redos++;
+			ex_event(x, "info", ex_dev_names[EX_DEV_SPECTRO],
+			      "%d of %d pixels saturated at %.3g ms: measuring the point again", bad, x->nroi, x->times[0]);
+			double t0 = x->times[0];
+			drop_exposures(x);
+			x->t_last = fmax(x->cfg.pol.min_ms, t0 / x->cfg.pol.max_step);
+			x->wake = now;
+			return;
+		}
+		ex_event(x, "info", ex_dev_names[EX_DEV_SPECTRO],
+		      "%d of %d pixels saturated at the shortest usable exposure %.3g ms: they stay unmeasured", bad,
+		      x->nroi, x->times[0]);
+	} else if (!x->cfg.fixed_integration && x->times[0] < x->cfg.pol.max_ms / 1.0001 &&
+		   x->attempts + 1 < x->cfg.max_point_attempts) {
+		/* Far below the target: the probe was misled (a transient, e.g. a saturation burst): probe again
+		 * from this exposure, which extrapolates to the right time. */
+		double peak = 0;
+		for (int p = 0; p < x->rates[0]->npix; p++)
+			if (x->roi[p] && x->rates[0]->valid[p] && x->rates[0]->rate[p] > peak)
+				peak = x->rates[0]->rate[p];
+		double target = x->cfg.pol.target_frac * full_scale(x);
+		if (peak * x->times[0] < 0.2 * target && x->nroi > 0) {
+			x->attempts++;
+			x->stats.saturated_redos++;
+			ex_event(x, "info", ex_dev_names[EX_DEV_SPECTRO],
+			      "exposure %.3g ms reached %.0f counts, far below the target %.0f: measuring the point again",
+			      x->times[0], peak * x->times[0], target);
+			double t0 = x->times[0];
+			drop_exposures(x);
+			x->t_last = t0;
+			x->wake = now;
+			return;
+		}
+	}
+	if (x->in_reference) {
+		int64_t first = 0, last = 0;
+		for (int i = 0; i < x->npend; i++) {
+			int64_t id = 0;
+			if (put_spectrum(x, &x->pend[i], 0, false, &id, &err)) {
+				ex_failed(x, "storing the reference: %s", err.msg);
+				return;
+			}
+			if (!first)
+				first = id;
+			last = id;
+			x->stats.spectra++;
+		}
+		/* Paused in the store before the marker: a crash in between measures the reference again. */
+		if (x->cfg.pause_after_reference)
+			ex_set_db_state(x, "paused");
+		memcpy(x->ref_rate, x->merged, sizeof *x->ref_rate);
+		x->have_ref = true;
+		x->cfg.cal.ref_theta_o_deg = fabs(x->actual.det_theta);
+		x->in_reference = false;
+		ex_clear_pending(x);
+		ex_event(x, "reference", NULL, "%s measured at (%.4f, %.4f, %.4f): spectra %lld-%lld",
+		      x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "white reference", x->actual.laser_theta,
+		      x->actual.det_theta, x->actual.det_phi, (long long)first, (long long)last);
+		if (x->cfg.pause_after_reference) {
+			ex_pause_now(x, false, "%s measured: place the sample on the stage, then resume",
+				  x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "reference");
+			return;
+		}
+		if (x->pause_requested) {
+			ex_pause_now(x, false, "paused by the operator after the reference");
+			return;
+		}
+		ex_begin_segment(x, now);
+		return;
+	}
+	/* Calibrate at the measured angles. */
+	double ti, pi, to, po;
+	ex_pos_angles(&x->geom, &x->actual, &ti, &pi, &to, &po);
+	struct calib_geom g = { ti, to };
+	bool calibrated = false;
+	if (x->have_ref) {
+		if (calib_spectrum(&x->cfg.cal, x->wl, x->merged, x->ref_rate, &g, x->cal, &err) == 0)
+			calibrated = true;
+		else
+			ex_event(x, "info", NULL, "point %d not calibrated: %s", x->cur, err.msg);
+	}
+	int oi = -1;
+	int64_t pid = 0;
+	if (store_sweep_next_point(x->st, x->sweep_id, &oi, &pid, &err)) {
+		ex_failed(x, "reading the next point: %s", err.msg);
+		return;
+	}
+	if (oi != x->cur || pid <= 0) {
+		ex_failed(x, "the database's next pending point is %d, the executor is at %d", oi, x->cur);
+		return;
+	}
+	for (int i = 0; i + 1 < x->npend; i++) {
+		if (put_spectrum(x, &x->pend[i], pid, false, NULL, &err)) {
+			ex_failed(x, "storing point %d: %s", x->cur, err.msg);
+			return;
+		}
+		x->stats.spectra++;
+	}
+	if (calibrated) {
+		static _Thread_local float fb[CALIB_MAX_GRID], fs[CALIB_MAX_GRID];
+		for (int k = 0; k < x->cal->n; k++) {
+			fb[k] = (float)x->cal->f[k];
+			fs[k] = (float)x->cal->u[k];
+		}
+		if (store_calibrated_put(x->st, x->sweep_id, pid, fb, fs, x->cal->n, &err)) {
+			ex_failed(x, "storing the calibrated sample of point %d: %s", x->cur, err.msg);
+			return;
+		}
+	}
+	if (x->npend > 0) {
+		if (put_spectrum(x, &x->pend[x->npend - 1], pid, true, NULL, &err)) {
+			ex_failed(x, "completing point %d: %s", x->cur, err.msg);
+			return;
+		}
+		x->stats.spectra++;
+	}
+	ex_clear_pending(x);
+	x->point_faults = 0;
+	x->stats.points_done++;
+	x->cur++;
+	/* Dark schedule (sweep.dark_every): every N points, or whenever the incidence changes. */
+	if (x->cur < x->nsteps) {
+		bool refresh = x->cfg.dark_every > 0
+				       ? x->stats.points_done % x->cfg.dark_every == 0
+				       : fabs(x->plan->steps[x->cur].pos.laser_theta - x->plan->steps[x->cur - 1].pos.laser_theta) > 1e-6;
+		if (refresh)
+			exp_darks_clear(x->darks);
+	}
+	progress(x, now);
+	if (x->cur >= x->nsteps) {
+		finish_sweep(x);
+		return;
+	}
+	if (x->pause_requested) {
+		ex_pause_now(x, false, "paused by the operator after point %d", x->cur);
+		return;
+	}
+	x->phase = PH_MOVE;
+	x->first_move = false;
+	x->point_started = now;
+	if (x->stats.laser_on && ex_laser_off(x, &err)) {
+		ex_fault(x, EX_DEV_LASER, &err);
+		return;
+	}
+	if (ex_plan_path(x)) {
+		ex_pause_now(x, false, "no collision-free path to point %d: move the arms and resume", x->cur);
+		return;
+	}
+	ex_set_phase_text(x, "moving");
+	ex_begin_waypoints(x, now);
+}

@@ -1,0 +1,152 @@
+/* executor internals: the state shared by the executor's core (executor.c), motion (executor_motion.c) and
+ * acquisition (executor_acq.c) files. Not for other modules (the unit test reaches in to simulate a crash). */
+#ifndef EXECUTOR_INT_H
+#define EXECUTOR_INT_H
+
+#include "daemon/executor.h"
+
+#define EX_MAX_PENDING 24
+#define EX_MAX_TIMES 8
+#define EX_POS_TOL_DEG 1e-3
+
+enum phase {
+	PH_NONE = 0,
+	PH_VERIFY,   /* read positions, reset alarms, home what is not homed */
+	PH_HOMING,
+	PH_MOVE,     /* waypoint segments */
+	PH_SETTLE,
+	PH_ACQ,      /* acquisition shots */
+};
+
+enum shot_kind { SHOT_PROBE, SHOT_DARK, SHOT_EXPOSE };
+
+struct pending {
+	const char *kind;            /* "dark", "sample", "reference", "beam" */
+	struct spectro_frame *frame;
+	double taken_at;
+};
+
+struct ex {
+	struct ex_cfg cfg;
+	struct ex_ops ops;
+	void *octx;
+	struct ex_sink sink;
+	struct store *st;
+	int64_t sweep_id, spectro_id;
+	struct bench_geom geom;
+	const struct plan_result *plan;
+	int nsteps;
+
+	enum ex_state state;
+	enum phase phase;
+	int cur;                     /* step being worked on */
+	bool in_reference;           /* the current target is the reference pose */
+	bool power_set;              /* the laser's power was set since the last laser fault */
+	bool laser_unknown;          /* after a (re)start: switch the laser off whatever we believe */
+	bool have_ref;
+	bool first_move;             /* next move starts from the measured position (plan_move) */
+	bool pause_requested;
+	bool paused_by_fault;
+	char reason[512];
+	char phase_text[96];
+	double wake;
+
+	/* motion */
+	struct plan_wp wps[PLAN_MAX_WP + 1];
+	int n_wps, wp;
+	bool moving[3];
+	double settle_until;
+	struct plan_pos known;       /* last commanded or measured position */
+	bool known_valid;
+	struct plan_pos actual;      /* measured after settling */
+	bool homing[3];
+
+	/* acquisition */
+	bool shot_in_flight;
+	enum shot_kind shot;
+	struct spectro_meas meas;
+	struct spectro_frame *frame; /* receive buffer */
+	int probe_no;
+	double t_probe, t_last;      /* t_last: previous point's base time, the first probe of the next */
+	bool have_t0;
+	double times[EX_MAX_TIMES];
+	int ntimes, e;
+	struct exp_rate *rates[EX_MAX_TIMES];
+	struct exp_rate *merged, *ref_rate;
+	struct pending pend[EX_MAX_PENDING];
+	int npend;
+	int attempts;                /* acquisitions of this point spoiled by saturation */
+	int dark_retries;            /* darks in a row rejected for saturated pixels */
+	struct exp_darks *darks;
+	double temperature;
+	const struct spectro_info *info;
+	double wl[SPECTRO_MAX_PIXELS];
+	unsigned char roi[SPECTRO_MAX_PIXELS];
+	int nroi;
+	struct calib_spectrum *cal;
+	struct exp_avg *avg;
+
+	/* faults */
+	int point_faults;            /* faults since the current point started (reset when it commits) */
+	int fault_dev;
+	int fault_attempts;
+	double backoff, retry_at;
+	char fault_msg[512];
+
+	/* progress */
+	double point_started, point_avg_s;
+	struct ex_stats stats;
+};
+
+/* Device names in slot order (enum ex_dev). */
+extern const char *const ex_dev_names[EX_DEV__COUNT];
+
+/* ---- core (executor.c) ---- */
+/* Unix seconds for the records (ops.wall, else the system clock). */
+double ex_wall_now(struct ex *x);
+/* Record an event in the store and tell the sink (a store failure is not fatal). */
+void ex_event(struct ex *x, const char *kind, const char *device, const char *fmt, ...)
+	__attribute__((format(printf, 4, 5)));
+/* The sweep's state in the store (best effort). */
+void ex_set_db_state(struct ex *x, const char *state);
+/* Free every pending spectrum. */
+void ex_clear_pending(struct ex *x);
+/* Discard the pending spectra (and their darks from the cache) and restart the point's acquisition. */
+void ex_reset_acq(struct ex *x);
+/* Laser off (0, or -1 with err). */
+int ex_laser_off(struct ex *x, struct acq_err *err);
+/* Best effort: stop the spectrometer and the arms, laser off. */
+void ex_safe_stop(struct ex *x);
+/* The phase in words (ex_phase). */
+void ex_set_phase_text(struct ex *x, const char *s);
+/* Stop everything and fail the sweep with the reason. */
+void ex_failed(struct ex *x, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* Stop everything and pause (by_fault: resuming retries the faulted device first). */
+void ex_pause_now(struct ex *x, bool by_fault, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+/* A device error: suspend and retry the device with backoff, or pause at once. */
+void ex_fault(struct ex *x, int dev, const struct acq_err *err);
+/* Start a segment of points: verify positions (laser state unknown) before the next move. */
+void ex_begin_segment(struct ex *x, double now);
+
+/* ---- motion (executor_motion.c) ---- */
+/* Waypoints to the current target into x->wps; 0, or -1 when no collision-free path stays inside the limits. */
+int ex_plan_path(struct ex *x);
+/* Start the first waypoint segment of the current move, or settle at once when there is none. */
+void ex_begin_waypoints(struct ex *x, double now);
+/* Phase steps: verify positions (and home), home, move along the waypoints, settle. */
+void ex_run_verify(struct ex *x, double now);
+void ex_run_homing(struct ex *x, double now);
+void ex_run_move(struct ex *x, double now);
+void ex_run_settle(struct ex *x, double now);
+
+/* ---- acquisition (executor_acq.c) ---- */
+/* The spectrometer's wavelengths and region of interest, once known; false while it is absent. */
+bool ex_want_wl(struct ex *x);
+/* Mask the sensor's optically black pixels of r (no light: never data). */
+void ex_mask_black(const struct ex *x, struct exp_rate *r);
+/* The sweep's reference from the database (crash-resume): 1 loaded, 0 none, -1 with err. */
+int ex_load_reference(struct ex *x, struct acq_err *err);
+/* Phase step: acquisition shots, then the point's commit. */
+void ex_run_acq(struct ex *x, double now);
+
+#endif

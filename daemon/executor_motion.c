@@ -1,0 +1,310 @@
+/* executor motion: verify positions and home, plan the waypoints to the next target (the planner's own or a
+ * fresh collision-free path), move segment by segment, settle and read the positions actually reached. */
+#include "daemon/executor_int.h"
+
+#include <math.h>
+#include <stdio.h>
+
+#include "drivers/axis.h"
+
+/* ---- motion ----------------------------------------------------------------------------------- */
+
+static const struct plan_pos *target_pos(const struct ex *x)
+{
+	return x->in_reference ? &x->cfg.ref_pose : &x->plan->steps[x->cur].pos;
+}
+
+static double axis_val(const struct plan_pos *p, int a)
+{
+	return a == 0 ? p->laser_theta : a == 1 ? p->det_theta : p->det_phi;
+}
+
+static bool near_pos(const struct plan_pos *a, const struct plan_pos *b)
+{
+	for (int i = 0; i < 3; i++)
+		if (fabs(axis_val(a, i) - axis_val(b, i)) > EX_POS_TOL_DEG)
+			return false;
+	return true;
+}
+
+/* Waypoints to the current target: the planner's own when coming from the previous planned point, else a
+ * fresh collision-free path from where the arms are. */
+/* φ is periodic: bring a detector azimuth inside the axis's soft limits by whole turns when it is outside. */
+static double wrap_phi(const struct ex *x, double phi)
+{
+	if (!x->ops.limits)
+		return phi;
+	double lo = -INFINITY, hi = INFINITY;
+	x->ops.limits(x->octx, EX_DEV_DETECTOR_PHI, &lo, &hi);
+	for (int i = 0; i < 4 && phi > hi; i++)
+		phi -= 360.0;
+	for (int i = 0; i < 4 && phi < lo; i++)
+		phi += 360.0;
+	return phi;
+}
+
+/* The turn of φ (within the soft limits) nearest to where the detector is. */
+static double nearest_phi(const struct ex *x, double phi, double from)
+{
+	double lo = -INFINITY, hi = INFINITY, best = wrap_phi(x, phi);
+	if (x->ops.limits)
+		x->ops.limits(x->octx, EX_DEV_DETECTOR_PHI, &lo, &hi);
+	for (int k = -2; k <= 2; k++) {
+		double c = phi + 360.0 * k;
+		if (c >= lo && c <= hi && fabs(c - from) < fabs(best - from))
+			best = c;
+	}
+	return best;
+}
+
+/* Waypoints to the current target: the planner's own when the arms are where the planner left them (the
+ * previous step) and its path stays inside the soft limits; else a fresh collision-free path from where the
+ * arms are, to the turn of φ nearest to the detector. */
+int ex_plan_path(struct ex *x)
+{
+	struct plan_pos t = *target_pos(x);
+	x->n_wps = 0;
+	x->wp = 0;
+	if (!x->first_move && !x->in_reference && x->cur > 0 && x->known_valid &&
+	    near_pos(&x->known, &x->plan->steps[x->cur - 1].pos)) {
+		const struct plan_step *s = &x->plan->steps[x->cur];
+		bool inside = true;
+		for (size_t i = 0; i < s->n_wp && i < PLAN_MAX_WP + 1; i++) {
+			x->wps[x->n_wps] = x->plan->wps[s->first_wp + i];
+			double p = x->wps[x->n_wps].pos.det_phi;
+			inside = inside && wrap_phi(x, p) == p;
+			x->n_wps++;
+		}
+		if (x->n_wps > 0 && inside)
+			return 0;
+		x->n_wps = 0;
+	}
+	if (x->known_valid)
+		t.det_phi = nearest_phi(x, t.det_phi, x->known.det_phi);
+	else
+		t.det_phi = wrap_phi(x, t.det_phi);
+	if (x->known_valid && near_pos(&x->known, &t))
+		return 0;
+	size_t n = 0;
+	struct plan_wp w[PLAN_MAX_WP];
+	if (plan_move(&x->geom, &x->known, &t, w, &n) < 0)
+		return -1;
+	for (size_t i = 0; i < n; i++) {
+		if (wrap_phi(x, w[i].pos.det_phi) != w[i].pos.det_phi)
+			return -1;
+		x->wps[x->n_wps++] = w[i];
+	}
+	return 0;
+}
+
+/* Start every axis of the current segment that has to move. 0, or -1 with the failing axis in *dev. */
+static int start_segment(struct ex *x, double now, int *dev, struct acq_err *err)
+{
+	const struct plan_pos *p = &x->wps[x->wp].pos;
+	for (int a = 0; a < 3; a++) {
+		double tgt = axis_val(p, a);
+		x->moving[a] = false;
+		if (x->known_valid && fabs(axis_val(&x->known, a) - tgt) <= 1e-9)
+			continue;
+		if (x->ops.move_begin(x->octx, a, tgt, now, err)) {
+			*dev = a;
+			return -1;
+		}
+		x->moving[a] = true;
+	}
+	return 0;
+}
+
+/* Start the first waypoint segment of the current move, or go straight to settling when there is none. */
+void ex_begin_waypoints(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	if (x->n_wps == 0) {
+		x->phase = PH_SETTLE;
+		x->settle_until = now;
+		x->wake = now;
+		return;
+	}
+	int dev = 0;
+	if (start_segment(x, now, &dev, &err)) {
+		ex_fault(x, dev, &err);
+		return;
+	}
+	x->wake = now;
+}
+
+void ex_run_verify(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	ex_set_phase_text(x, "verifying positions");
+	double pos[3];
+	bool homed[3];
+	for (int a = 0; a < 3; a++) {
+		bool alarm = false;
+		homed[a] = true;
+		if (x->ops.position(x->octx, a, &pos[a], &homed[a], &alarm, &err)) {
+			ex_fault(x, a, &err);
+			return;
+		}
+		if (alarm) {
+			if (x->ops.alarm_reset(x->octx, a, &err)) {
+				ex_fault(x, a, &err);
+				return;
+			}
+			ex_event(x, "info", ex_dev_names[a], "alarm cleared on %s before moving", ex_dev_names[a]);
+		}
+	}
+	/* Homing, when configured: one axis at a time, only when its way home is collision-free. */
+	for (int a = 0; a < 3 && x->cfg.home_unhomed; a++) {
+		if (homed[a])
+			continue;
+		struct plan_pos from = { pos[0], pos[1], pos[2] }, to = from;
+		if (a == 0)
+			to.laser_theta = x->cfg.home_deg[0];
+		else if (a == 1)
+			to.det_theta = x->cfg.home_deg[1];
+		else
+			to.det_phi = x->cfg.home_deg[2];
+		if (!plan_seg_safe(&x->geom, &from, &to)) {
+			ex_pause_now(x, false, "%s is not homed and homing it from (%.2f, %.2f, %.2f) could collide: home it by "
+				  "hand and resume", ex_dev_names[a], pos[0], pos[1], pos[2]);
+			return;
+		}
+		if (x->ops.home_begin(x->octx, a, now, &err)) {
+			ex_fault(x, a, &err);
+			return;
+		}
+		x->homing[a] = true;
+		ex_event(x, "info", ex_dev_names[a], "%s not homed: homing", ex_dev_names[a]);
+		x->phase = PH_HOMING;
+		ex_set_phase_text(x, "homing");
+		x->wake = now;
+		return;
+	}
+	x->known = (struct plan_pos){ pos[0], pos[1], pos[2] };
+	x->known_valid = true;
+	/* Laser off before any motion (also when a crashed predecessor may have left it on). */
+	if ((x->stats.laser_on || x->laser_unknown) && ex_laser_off(x, &err)) {
+		ex_fault(x, EX_DEV_LASER, &err);
+		return;
+	}
+	x->laser_unknown = false;
+	if (ex_plan_path(x)) {
+		ex_pause_now(x, false, "no collision-free path from (%.2f, %.2f, %.2f) to the next point: move the arms and "
+			  "resume", pos[0], pos[1], pos[2]);
+		return;
+	}
+	x->first_move = false;
+	x->phase = PH_MOVE;
+	x->point_started = now;
+	ex_set_phase_text(x, x->in_reference ? "moving to the reference pose" : "moving");
+	ex_begin_waypoints(x, now);
+}
+
+/* Step every axis flagged in active[] (a move or a homing): clears the flag of an axis that arrived and
+ * lowers *wake to the earliest next poll. 1 while any is still busy, 0 when all arrived, -1 after a fault
+ * (already reported through ex_fault()). */
+static int step_axes(struct ex *x, bool active[3], double now, double *wake)
+{
+	struct acq_err err = { 0 };
+	int busy = 0;
+	for (int a = 0; a < 3; a++) {
+		if (!active[a])
+			continue;
+		double np = x->ops.next_poll(x->octx, a);
+		if (now + 1e-12 < np) {
+			busy = 1;
+			*wake = fmin(*wake, np);
+			continue;
+		}
+		int r = x->ops.move_step(x->octx, a, now, &err);
+		if (r == AXIS_MOVE_FAILED) {
+			ex_fault(x, a, &err);
+			return -1;
+		}
+		if (r == AXIS_MOVE_DONE) {
+			active[a] = false;
+			continue;
+		}
+		busy = 1;
+		*wake = fmin(*wake, x->ops.next_poll(x->octx, a));
+	}
+	return busy;
+}
+
+void ex_run_homing(struct ex *x, double now)
+{
+	double wake = INFINITY;
+	int busy = step_axes(x, x->homing, now, &wake);
+	if (busy < 0)
+		return;
+	if (!busy) {
+		x->phase = PH_VERIFY;
+		x->wake = now;
+		return;
+	}
+	x->wake = fmax(now, wake);
+}
+
+void ex_run_move(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	if (x->stats.laser_on)
+		x->stats.laser_on_while_moving++;
+	double wake = INFINITY;
+	int busy = step_axes(x, x->moving, now, &wake);
+	if (busy < 0)
+		return;
+	if (busy) {
+		x->wake = fmax(now, wake);
+		return;
+	}
+	x->known = x->wps[x->wp].pos;
+	x->known_valid = true;
+	if (++x->wp < x->n_wps) {
+		int dev = 0;
+		if (start_segment(x, now, &dev, &err)) {
+			ex_fault(x, dev, &err);
+			return;
+		}
+		x->wake = now;
+		return;
+	}
+	x->phase = PH_SETTLE;
+	x->settle_until = now + x->cfg.extra_settle_s;
+	ex_set_phase_text(x, "settling");
+	x->wake = x->settle_until;
+}
+
+void ex_run_settle(struct ex *x, double now)
+{
+	if (now + 1e-12 < x->settle_until) {
+		x->wake = x->settle_until;
+		return;
+	}
+	struct acq_err err = { 0 };
+	double pos[3];
+	for (int a = 0; a < 3; a++) {
+		bool homed, alarm;
+		if (x->ops.position(x->octx, a, &pos[a], &homed, &alarm, &err)) {
+			ex_fault(x, a, &err);
+			return;
+		}
+		if (alarm) {
+			acq_errf(&err, ACQ_E_DEVICE, "%s in alarm after the move", ex_dev_names[a]);
+			ex_fault(x, a, &err);
+			return;
+		}
+	}
+	x->actual = (struct plan_pos){ pos[0], pos[1], pos[2] };
+	if (!ex_want_wl(x)) {
+		acq_errf(&err, ACQ_E_DISCONNECTED, "spectrometer information unavailable");
+		ex_fault(x, EX_DEV_SPECTRO, &err);
+		return;
+	}
+	x->phase = PH_ACQ;
+	ex_reset_acq(x);
+	x->attempts = 0;
+	ex_set_phase_text(x, x->in_reference ? "reference" : "acquiring");
+	x->wake = now;
+}

@@ -1,0 +1,667 @@
+/* nexus: NeXus/HDF5 export of a sweep through libhdf5 (streamed from the database, bounded memory). */
+#include "daemon/nexus.h"
+
+#include <hdf5.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "acq_version.h"
+#include "daemon/store_nexus.h"
+
+static const char *const kinds[4] = { "sample", "dark", "reference", "beam" };
+
+/* ---- small HDF5 helpers: every object gets its NeXus class or its units ---- */
+/* n UTF-8 strings as an attribute (attr) or a dataset of obj; a scalar when scalar is set (n = 1). Attribute
+ * scalars are fixed-length (what NeXus readers expect of NX_class and units), the rest variable-length. */
+static int put_strs(hid_t obj, const char *name, int attr, int scalar, size_t n, const char *const *vals)
+{
+	hsize_t dim = n;
+	const char *one = n && vals[0] ? vals[0] : "";
+	int fixed = attr && scalar;
+	hid_t t = H5Tcopy(H5T_C_S1), s = scalar ? H5Screate(H5S_SCALAR) : H5Screate_simple(1, &dim, NULL), o = -1;
+	int rc = -1;
+	if (t < 0 || s < 0 || H5Tset_size(t, fixed ? (strlen(one) ? strlen(one) : 1) : H5T_VARIABLE) < 0 ||
+	    H5Tset_cset(t, H5T_CSET_UTF8) < 0)
+		goto out;
+	const void *buf = fixed ? (const void *)one : scalar ? (const void *)&one : (const void *)vals;
+	if (attr) {
+		o = H5Acreate2(obj, name, t, s, H5P_DEFAULT, H5P_DEFAULT);
+		rc = o >= 0 && H5Awrite(o, t, buf) >= 0 ? 0 : -1;
+	} else {
+		o = H5Dcreate2(obj, name, t, s, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+		rc = o >= 0 && (n == 0 || H5Dwrite(o, t, H5S_ALL, H5S_ALL, H5P_DEFAULT, buf) >= 0) ? 0 : -1;
+	}
+out:
+	if (o >= 0)
+		(attr ? H5Aclose : H5Dclose)(o);
+	if (s >= 0)
+		H5Sclose(s);
+	if (t >= 0)
+		H5Tclose(t);
+	return rc;
+}
+
+static int attr_str(hid_t obj, const char *name, const char *val)
+{
+	return put_strs(obj, name, 1, 1, 1, &val);
+}
+
+/* An attribute holding n UTF-8 strings (NeXus `axes`). */
+static int attr_strs(hid_t obj, const char *name, size_t n, const char *const *vals)
+{
+	return put_strs(obj, name, 1, 0, n, vals);
+}
+
+static int attr_int(hid_t obj, const char *name, int v)
+{
+	hid_t s = H5Screate(H5S_SCALAR), a = s >= 0 ? H5Acreate2(obj, name, H5T_NATIVE_INT, s, H5P_DEFAULT, H5P_DEFAULT) : -1;
+	int rc = a >= 0 && H5Awrite(a, H5T_NATIVE_INT, &v) >= 0 ? 0 : -1;
+	if (a >= 0)
+		H5Aclose(a);
+	if (s >= 0)
+		H5Sclose(s);
+	return rc;
+}
+
+/* A scalar UTF-8 string dataset; NULL is written as "". */
+static int dset_str(hid_t g, const char *name, const char *val)
+{
+	return put_strs(g, name, 0, 1, 1, &val);
+}
+
+/* An array of n UTF-8 strings (n may be 0). */
+static int dset_strs(hid_t g, const char *name, size_t n, const char *const *vals)
+{
+	return put_strs(g, name, 0, 0, n, vals);
+}
+
+static hid_t group(hid_t parent, const char *name, const char *nx_class)
+{
+	hid_t g = H5Gcreate2(parent, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+	if (g >= 0 && attr_str(g, "NX_class", nx_class)) {
+		H5Gclose(g);
+		return -1;
+	}
+	return g;
+}
+
+/* A numeric dataset of rank 1 or 2 (dims), written whole from data (NULL: created only), with units. */
+static hid_t dset_num(hid_t g, const char *name, hid_t type, int rank, const hsize_t *dims, const void *data,
+		      const char *units)
+{
+	hid_t s = H5Screate_simple(rank, dims, NULL), p = H5Pcreate(H5P_DATASET_CREATE), d = -1;
+	if (s < 0 || p < 0)
+		goto out;
+	if (rank == 2 && dims[0] > 0 && dims[1] > 0) { /* rows written one by one: chunk by rows */
+		hsize_t ch[2] = { dims[0] < 16 ? dims[0] : 16, dims[1] };
+		H5Pset_chunk(p, 2, ch);
+	}
+	d = H5Dcreate2(g, name, type, s, H5P_DEFAULT, p, H5P_DEFAULT);
+	if (d >= 0 && ((data && dims[0] > 0 && H5Dwrite(d, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) < 0) ||
+		       (units && attr_str(d, "units", units)))) {
+		H5Dclose(d);
+		d = -1;
+	}
+out:
+	if (p >= 0)
+		H5Pclose(p);
+	if (s >= 0)
+		H5Sclose(s);
+	return d;
+}
+
+static int close_ok(hid_t d)
+{
+	return d >= 0 && H5Dclose(d) >= 0 ? 0 : -1;
+}
+
+/* Write one row of a 2-D dataset. */
+static int write_row(hid_t d, hid_t type, hsize_t row, hsize_t ncol, const void *data)
+{
+	hid_t fs = H5Dget_space(d), ms = H5Screate_simple(1, &ncol, NULL);
+	hsize_t start[2] = { row, 0 }, count[2] = { 1, ncol };
+	int rc = fs >= 0 && ms >= 0 && H5Sselect_hyperslab(fs, H5S_SELECT_SET, start, NULL, count, NULL) >= 0 &&
+			 H5Dwrite(d, type, ms, fs, H5P_DEFAULT, data) >= 0 ? 0 : -1;
+	if (ms >= 0)
+		H5Sclose(ms);
+	if (fs >= 0)
+		H5Sclose(fs);
+	return rc;
+}
+
+static void iso8601(double t, char *buf, size_t len)
+{
+	if (!isfinite(t)) {
+		snprintf(buf, len, "%s", "");
+		return;
+	}
+	time_t s = (time_t)floor(t);
+	struct tm tm;
+	gmtime_r(&s, &tm);
+	char b[32];
+	strftime(b, sizeof b, "%Y-%m-%dT%H:%M:%S", &tm);
+	snprintf(buf, len, "%s.%03dZ", b, (int)((t - floor(t)) * 1000));
+}
+
+/* ---- the sweep's parts ---- */
+struct points_ctx {
+	int64_t n, k;
+	int64_t *id;
+	int32_t *order;
+	double *planned[4], *actual[3], *done;
+	char **state;
+	int64_t *cal_row; /* per point, the calibrated row or −1 (filled later) */
+};
+
+static int take_point(void *c, const struct storenx_point *p)
+{
+	struct points_ctx *x = c;
+	if (x->k >= x->n)
+		return 1;
+	x->id[x->k] = p->id;
+	x->order[x->k] = p->order_index;
+	for (int a = 0; a < 4; a++)
+		x->planned[a][x->k] = p->planned[a];
+	for (int a = 0; a < 3; a++)
+		x->actual[a][x->k] = p->actual[a];
+	x->done[x->k] = p->done_at;
+	x->state[x->k] = strdup(p->state ? p->state : "");
+	if (!x->state[x->k])
+		return 1;
+	x->k++;
+	return 0;
+}
+
+struct spec_ctx {
+	hid_t counts, stddev;
+	int64_t n, k;
+	int npix;
+	int64_t *id, *point;
+	double *tint, *temp, *taken;
+	int32_t *avg, *sat;
+	float *nanrow;
+	int bad;
+};
+
+static int take_spectrum(void *c, const struct storenx_spectrum *s)
+{
+	struct spec_ctx *x = c;
+	if (x->k >= x->n || s->npix != x->npix) {
+		x->bad = 1;
+		return 1;
+	}
+	if (write_row(x->counts, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->npix, s->counts) ||
+	    write_row(x->stddev, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->npix, s->stddev ? s->stddev : x->nanrow))
+		return 1;
+	x->id[x->k] = s->id;
+	x->point[x->k] = s->point_id;
+	x->tint[x->k] = s->integration_ms;
+	x->temp[x->k] = s->temperature_c;
+	x->taken[x->k] = s->taken_at;
+	x->avg[x->k] = s->averages;
+	x->sat[x->k] = s->saturated_count;
+	x->k++;
+	return 0;
+}
+
+static int write_spectra(struct storenx *h, int64_t sweep, hid_t entry, int kind, int npix, int64_t *count,
+			 struct acq_err *err)
+{
+	int64_t n;
+	if (storenx_count(h, sweep, kinds[kind], &n, err))
+		return -1;
+	*count = n;
+	char name[32];
+	snprintf(name, sizeof name, "raw_%s", kinds[kind]);
+	hid_t g = group(entry, name, "NXdata");
+	if (g < 0)
+		return acq_errf(err, ACQ_E_IO, "nexus: cannot create /entry/%s", name);
+	int rc = -1;
+	struct spec_ctx x = { .counts = -1, .stddev = -1, .n = n, .npix = npix };
+	size_t m = n ? (size_t)n : 1;
+	x.id = malloc(m * sizeof *x.id);
+	x.point = malloc(m * sizeof *x.point);
+	x.tint = malloc(m * sizeof *x.tint);
+	x.temp = malloc(m * sizeof *x.temp);
+	x.taken = malloc(m * sizeof *x.taken);
+	x.avg = malloc(m * sizeof *x.avg);
+	x.sat = malloc(m * sizeof *x.sat);
+	x.nanrow = malloc((size_t)(npix > 0 ? npix : 1) * sizeof *x.nanrow);
+	if (!x.id || !x.point || !x.tint || !x.temp || !x.taken || !x.avg || !x.sat || !x.nanrow) {
+		acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+		goto out;
+	}
+	for (int i = 0; i < npix; i++)
+		x.nanrow[i] = NAN;
+	hsize_t d2[2] = { (hsize_t)n, (hsize_t)(npix > 0 ? npix : 0) }, d1 = (hsize_t)n, dp = d2[1];
+	x.counts = dset_num(g, "counts", H5T_NATIVE_FLOAT, 2, d2, NULL, "counts");
+	x.stddev = dset_num(g, "counts_errors", H5T_NATIVE_FLOAT, 2, d2, NULL, "counts");
+	if (x.counts < 0 || x.stddev < 0)
+		goto h5fail;
+	if (n && npix > 0) {
+		int r = storenx_spectra(h, sweep, kinds[kind], take_spectrum, &x, err);
+		if (r < 0)
+			goto out;
+		if (r || x.bad || x.k != n) {
+			acq_errf(err, ACQ_E_INVAL, "nexus: %s spectra: %lld rows, %lld written, pixel count not %d in all",
+				 kinds[kind], (long long)n, (long long)x.k, npix);
+			goto out;
+		}
+	} else if (n) {
+		acq_errf(err, ACQ_E_INVAL, "nexus: %lld %s spectra but the sweep names no spectrometer", (long long)n,
+			 kinds[kind]);
+		goto out;
+	}
+	int32_t *pix = malloc((size_t)(npix > 0 ? npix : 1) * sizeof *pix);
+	if (!pix) {
+		acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+		goto out;
+	}
+	for (int i = 0; i < npix; i++)
+		pix[i] = i;
+	int bad = close_ok(dset_num(g, "pixel", H5T_NATIVE_INT32, 1, &dp, pix, NULL)) ||
+		  close_ok(dset_num(g, "spectrum_id", H5T_NATIVE_INT64, 1, &d1, x.id, NULL)) ||
+		  close_ok(dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, x.point, NULL)) ||
+		  close_ok(dset_num(g, "integration_time", H5T_NATIVE_DOUBLE, 1, &d1, x.tint, "ms")) ||
+		  close_ok(dset_num(g, "averages", H5T_NATIVE_INT32, 1, &d1, x.avg, NULL)) ||
+		  close_ok(dset_num(g, "saturated_pixels", H5T_NATIVE_INT32, 1, &d1, x.sat, NULL)) ||
+		  close_ok(dset_num(g, "temperature", H5T_NATIVE_DOUBLE, 1, &d1, x.temp, "degC")) ||
+		  close_ok(dset_num(g, "time", H5T_NATIVE_DOUBLE, 1, &d1, x.taken, "s")) || attr_str(g, "signal", "counts") ||
+		  attr_strs(g, "axes", 2, (const char *const[]){ ".", "pixel" }) || attr_int(g, "pixel_indices", 1);
+	free(pix);
+	if (bad)
+		goto h5fail;
+	rc = 0;
+	goto out;
+h5fail:
+	acq_errf(err, ACQ_E_IO, "nexus: writing /entry/%s failed", name);
+out:
+	if (x.counts >= 0)
+		H5Dclose(x.counts);
+	if (x.stddev >= 0)
+		H5Dclose(x.stddev);
+	H5Gclose(g);
+	free(x.id);
+	free(x.point);
+	free(x.tint);
+	free(x.temp);
+	free(x.taken);
+	free(x.avg);
+	free(x.sat);
+	free(x.nanrow);
+	return rc;
+}
+
+struct cal_ctx {
+	hid_t brdf, sigma;
+	int64_t n, k;
+	int nwl, bad;
+	int64_t *point;
+};
+
+static int take_cal(void *c, const struct storenx_calibrated *s)
+{
+	struct cal_ctx *x = c;
+	if (x->k >= x->n || s->n != x->nwl) {
+		x->bad = 1;
+		return 1;
+	}
+	if (write_row(x->brdf, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->nwl, s->brdf) ||
+	    write_row(x->sigma, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->nwl, s->sigma))
+		return 1;
+	x->point[x->k++] = s->point_id;
+	return 0;
+}
+
+struct ev_ctx {
+	int64_t n, k;
+	double *at;
+	char **kind, **device, **msg;
+};
+
+static int take_event(void *c, const struct storenx_event *e)
+{
+	struct ev_ctx *x = c;
+	if (x->k >= x->n)
+		return 1;
+	x->at[x->k] = e->at;
+	x->kind[x->k] = strdup(e->kind ? e->kind : "");
+	x->device[x->k] = strdup(e->device ? e->device : "");
+	x->msg[x->k] = strdup(e->message ? e->message : "");
+	if (!x->kind[x->k] || !x->device[x->k] || !x->msg[x->k])
+		return 1;
+	x->k++;
+	return 0;
+}
+
+struct dev_ctx {
+	int64_t n, k;
+	char **f[5];
+};
+
+static int take_device(void *c, const struct storenx_device *d)
+{
+	struct dev_ctx *x = c;
+	if (x->k >= x->n)
+		return 1;
+	const char *v[5] = { d->name, d->vendor, d->model, d->serial, d->firmware };
+	for (int i = 0; i < 5; i++)
+		if (!(x->f[i][x->k] = strdup(v[i] ? v[i] : "")))
+			return 1;
+	x->k++;
+	return 0;
+}
+
+static void free_strs(char **v, int64_t n)
+{
+	if (!v)
+		return;
+	for (int64_t i = 0; i < n; i++)
+		free(v[i]);
+	free(v);
+}
+
+/* Everything but the raw spectra, in one function per group would be longer than it is useful: the groups
+ * below follow daemon/nexus.md in order. */
+static int write_all(struct storenx *h, int64_t sweep, hid_t file, struct nexus_stats *st, struct acq_err *err)
+{
+	struct storenx_sweep sw;
+	if (storenx_sweep_get(h, sweep, &sw, err))
+		return -1;
+	int rc = -1;
+	char t0[64], t1[64], tc[64];
+	hid_t entry = -1, g = -1, sub = -1;
+	struct points_ctx P = { 0 };
+	struct cal_ctx C = { .brdf = -1, .sigma = -1 };
+	struct ev_ctx E = { 0 };
+	struct dev_ctx D = { 0 };
+	iso8601(sw.started_at, t0, sizeof t0);
+	iso8601(sw.finished_at, t1, sizeof t1);
+	iso8601(sw.created_at, tc, sizeof tc);
+	if (attr_str(file, "NX_class", "NXroot") || attr_str(file, "creator", "acquisitiond acq-nexus " ACQ_VERSION) ||
+	    attr_str(file, "HDF5_Version", H5_VERS_INFO) || (entry = group(file, "entry", "NXentry")) < 0 ||
+	    attr_str(file, "default", "entry") || attr_str(entry, "default", "data") ||
+	    dset_str(entry, "title", sw.name) || dset_str(entry, "start_time", t0[0] ? t0 : tc) ||
+	    dset_str(entry, "end_time", t1) || dset_str(entry, "created_time", tc) || dset_str(entry, "state", sw.state) ||
+	    dset_str(entry, "program_name", sw.software_version) ||
+	    dset_str(entry, "calibration_method", sw.calibration_method)) {
+		acq_errf(err, ACQ_E_IO, "nexus: writing /entry failed");
+		goto out;
+	}
+	int64_t sid = sweep;
+	hsize_t one = 1;
+	if (close_ok(dset_num(entry, "sweep_id", H5T_NATIVE_INT64, 1, &one, &sid, NULL)))
+		goto h5fail;
+	/* sample, configuration and plan */
+	if ((g = group(entry, "sample", "NXsample")) < 0 || dset_str(g, "name", sw.name) || H5Gclose(g) < 0)
+		goto h5fail;
+	g = -1;
+	if ((g = group(entry, "configuration", "NXnote")) < 0 || dset_str(g, "type", "text/yaml") ||
+	    dset_str(g, "description", "the daemon's configuration file when the sweep started") ||
+	    dset_str(g, "data", sw.config_snapshot) || H5Gclose(g) < 0)
+		goto h5fail;
+	g = -1;
+	if ((g = group(entry, "plan", "NXnote")) < 0 || dset_str(g, "type", "text/yaml") ||
+	    dset_str(g, "description", "the sampling plan as submitted") || dset_str(g, "data", sw.plan_text) ||
+	    H5Gclose(g) < 0)
+		goto h5fail;
+	g = -1;
+	/* instrument: spectrometer (with its wavelength calibration) and the devices used */
+	if ((g = group(entry, "instrument", "NXinstrument")) < 0)
+		goto h5fail;
+	if ((sub = group(g, "spectrometer", "NXdetector")) < 0)
+		goto h5fail;
+	if (sw.has_spectrometer) {
+		hsize_t five = 5, np = (hsize_t)sw.npix;
+		double *lam = malloc((size_t)(sw.npix > 0 ? sw.npix : 1) * sizeof *lam);
+		if (!lam) {
+			acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+			goto out;
+		}
+		for (int p = 0; p < sw.npix; p++) {
+			double x = p, v = 0;
+			for (int k = 4; k >= 0; k--)
+				v = v * x + sw.sp_coef[k];
+			lam[p] = v;
+		}
+		int32_t npix = sw.npix;
+		hid_t cd = dset_num(sub, "wavelength_calibration", H5T_NATIVE_DOUBLE, 1, &five, sw.sp_coef, NULL);
+		int bad = cd < 0 || attr_str(cd, "description", "lambda(p) = c0 + c1 p + c2 p^2 + c3 p^3 + c4 p^4 (nm)") ||
+			  close_ok(cd) || close_ok(dset_num(sub, "pixel_wavelength", H5T_NATIVE_DOUBLE, 1, &np, lam, "nm")) ||
+			  close_ok(dset_num(sub, "number_of_pixels", H5T_NATIVE_INT32, 1, &one, &npix, NULL)) ||
+			  dset_str(sub, "model", sw.sp_model) || dset_str(sub, "serial_number", sw.sp_serial) ||
+			  dset_str(sub, "firmware", sw.sp_firmware) || dset_str(sub, "nonlinearity", sw.sp_nonlinearity);
+		free(lam);
+		if (bad)
+			goto h5fail;
+	}
+	H5Gclose(sub);
+	sub = -1;
+	if (storenx_count(h, sweep, "devices", &D.n, err))
+		goto out;
+	for (int i = 0; i < 5; i++)
+		if (!(D.f[i] = calloc((size_t)(D.n ? D.n : 1), sizeof(char *)))) {
+			acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+			goto out;
+		}
+	if (storenx_devices(h, sweep, take_device, &D, err) < 0)
+		goto out;
+	if ((sub = group(g, "devices", "NXcollection")) < 0 ||
+	    dset_strs(sub, "name", (size_t)D.k, (const char *const *)D.f[0]) ||
+	    dset_strs(sub, "vendor", (size_t)D.k, (const char *const *)D.f[1]) ||
+	    dset_strs(sub, "model", (size_t)D.k, (const char *const *)D.f[2]) ||
+	    dset_strs(sub, "serial_number", (size_t)D.k, (const char *const *)D.f[3]) ||
+	    dset_strs(sub, "firmware", (size_t)D.k, (const char *const *)D.f[4]))
+		goto h5fail;
+	H5Gclose(sub);
+	sub = -1;
+	H5Gclose(g);
+	g = -1;
+	/* points: planned and actual angles, state, time */
+	if (storenx_count(h, sweep, "points", &P.n, err))
+		goto out;
+	size_t pn = P.n ? (size_t)P.n : 1;
+	P.id = malloc(pn * sizeof *P.id);
+	P.order = malloc(pn * sizeof *P.order);
+	P.done = malloc(pn * sizeof *P.done);
+	P.state = calloc(pn, sizeof *P.state);
+	int okp = P.id && P.order && P.done && P.state;
+	for (int a = 0; a < 4; a++)
+		okp = okp && (P.planned[a] = malloc(pn * sizeof(double)));
+	for (int a = 0; a < 3; a++)
+		okp = okp && (P.actual[a] = malloc(pn * sizeof(double)));
+	if (!okp) {
+		acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+		goto out;
+	}
+	if (storenx_points(h, sweep, take_point, &P, err) < 0)
+		goto out;
+	{
+		hsize_t d1 = (hsize_t)P.k;
+		static const char *const pn_[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
+		static const char *const an_[3] = { "laser_theta", "detector_theta", "detector_phi" };
+		if ((g = group(entry, "points", "NXcollection")) < 0 ||
+		    close_ok(dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, P.id, NULL)) ||
+		    close_ok(dset_num(g, "order_index", H5T_NATIVE_INT32, 1, &d1, P.order, NULL)) ||
+		    close_ok(dset_num(g, "done_time", H5T_NATIVE_DOUBLE, 1, &d1, P.done, "s")) ||
+		    dset_strs(g, "state", (size_t)P.k, (const char *const *)P.state))
+			goto h5fail;
+		for (int a = 0; a < 4; a++) {
+			char nm[32];
+			snprintf(nm, sizeof nm, "planned_%s", pn_[a]);
+			if (close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P.planned[a], "deg")))
+				goto h5fail;
+		}
+		for (int a = 0; a < 3; a++) {
+			char nm[32];
+			snprintf(nm, sizeof nm, "actual_%s", an_[a]);
+			if (close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P.actual[a], "deg")))
+				goto h5fail;
+		}
+		H5Gclose(g);
+		g = -1;
+	}
+	/* raw spectra by kind */
+	for (int k = 0; k < 4; k++)
+		if (write_spectra(h, sweep, entry, k, sw.has_spectrometer ? sw.npix : 0, &st->spectra[k], err))
+			goto out;
+	/* calibrated f and σ with the planned angles of their points */
+	if (storenx_count(h, sweep, "calibrated", &C.n, err))
+		goto out;
+	C.nwl = sw.ngrid;
+	if (C.n && !sw.grid) {
+		acq_errf(err, ACQ_E_INVAL, "nexus: sweep %lld has calibrated samples but no wavelength grid", (long long)sweep);
+		goto out;
+	}
+	C.point = malloc((size_t)(C.n ? C.n : 1) * sizeof *C.point);
+	if (!C.point) {
+		acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+		goto out;
+	}
+	{
+		hsize_t d2[2] = { (hsize_t)C.n, (hsize_t)C.nwl }, dw = (hsize_t)C.nwl, d1 = (hsize_t)C.n;
+		if ((g = group(entry, "data", "NXdata")) < 0 || attr_str(g, "signal", "brdf") ||
+		    attr_strs(g, "axes", 2, (const char *const[]){ ".", "wavelength" }) || attr_int(g, "wavelength_indices", 1))
+			goto h5fail;
+		C.brdf = dset_num(g, "brdf", H5T_NATIVE_FLOAT, 2, d2, NULL, "1/sr");
+		C.sigma = dset_num(g, "brdf_errors", H5T_NATIVE_FLOAT, 2, d2, NULL, "1/sr");
+		if (C.brdf < 0 || C.sigma < 0 || attr_str(C.sigma, "description", "standard uncertainty (1 sigma)"))
+			goto h5fail;
+		if (C.n) {
+			int r = storenx_calibrated(h, sweep, take_cal, &C, err);
+			if (r < 0)
+				goto out;
+			if (r || C.bad || C.k != C.n) {
+				acq_errf(err, ACQ_E_INVAL, "nexus: calibrated rows do not all match the %d-wavelength grid", C.nwl);
+				goto out;
+			}
+		}
+		float *wl = sw.grid;
+		float dummy = 0;
+		double *ang[4] = { NULL };
+		for (int a = 0; a < 4; a++)
+			ang[a] = malloc((size_t)(C.n ? C.n : 1) * sizeof(double));
+		if (!ang[0] || !ang[1] || !ang[2] || !ang[3]) {
+			for (int a = 0; a < 4; a++)
+				free(ang[a]);
+			acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+			goto out;
+		}
+		for (int64_t i = 0; i < C.n; i++) { /* the planned angles of each calibrated point */
+			int64_t j = 0;
+			while (j < P.k && P.id[j] != C.point[i])
+				j++;
+			for (int a = 0; a < 4; a++)
+				ang[a][i] = j < P.k ? P.planned[a][j] : NAN;
+		}
+		static const char *const an[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
+		int bad = close_ok(dset_num(g, "wavelength", H5T_NATIVE_FLOAT, 1, &dw, wl ? (void *)wl : (void *)&dummy, "nm")) ||
+			  close_ok(dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, C.point, NULL));
+		for (int a = 0; a < 4 && !bad; a++)
+			bad = close_ok(dset_num(g, an[a], H5T_NATIVE_DOUBLE, 1, &d1, ang[a], "deg"));
+		for (int a = 0; a < 4; a++)
+			free(ang[a]);
+		if (bad)
+			goto h5fail;
+	}
+	/* events */
+	if (storenx_count(h, sweep, "events", &E.n, err))
+		goto out;
+	{
+		size_t en = E.n ? (size_t)E.n : 1;
+		E.at = malloc(en * sizeof *E.at);
+		E.kind = calloc(en, sizeof *E.kind);
+		E.device = calloc(en, sizeof *E.device);
+		E.msg = calloc(en, sizeof *E.msg);
+		if (!E.at || !E.kind || !E.device || !E.msg) {
+			acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+			goto out;
+		}
+		if (storenx_events(h, sweep, take_event, &E, err) < 0)
+			goto out;
+		hsize_t d1 = (hsize_t)E.k;
+		if ((sub = group(entry, "events", "NXcollection")) < 0 ||
+		    close_ok(dset_num(sub, "time", H5T_NATIVE_DOUBLE, 1, &d1, E.at, "s")) ||
+		    dset_strs(sub, "kind", (size_t)E.k, (const char *const *)E.kind) ||
+		    dset_strs(sub, "device", (size_t)E.k, (const char *const *)E.device) ||
+		    dset_strs(sub, "message", (size_t)E.k, (const char *const *)E.msg))
+			goto h5fail;
+	}
+	st->points = P.k;
+	st->calibrated = C.k;
+	st->events = E.k;
+	st->devices = D.k;
+	st->npix = sw.npix;
+	st->nwl = sw.ngrid;
+	rc = 0;
+	goto out;
+h5fail:
+	acq_errf(err, ACQ_E_IO, "nexus: writing the HDF5 file failed (libhdf5)");
+out:
+	if (C.brdf >= 0)
+		H5Dclose(C.brdf);
+	if (C.sigma >= 0)
+		H5Dclose(C.sigma);
+	if (sub >= 0)
+		H5Gclose(sub);
+	if (g >= 0)
+		H5Gclose(g);
+	if (entry >= 0)
+		H5Gclose(entry);
+	free(P.id);
+	free(P.order);
+	free(P.done);
+	free_strs(P.state, P.k);
+	for (int a = 0; a < 4; a++)
+		free(P.planned[a]);
+	for (int a = 0; a < 3; a++)
+		free(P.actual[a]);
+	free(C.point);
+	free(E.at);
+	free_strs(E.kind, E.k);
+	free_strs(E.device, E.k);
+	free_strs(E.msg, E.k);
+	for (int i = 0; i < 5; i++)
+		free_strs(D.f[i], D.k);
+	storenx_sweep_free(&sw);
+	return rc;
+}
+
+int nexus_export(const char *db_path, int64_t sweep, const char *out_path, struct nexus_stats *st,
+		 struct acq_err *err)
+{
+	struct nexus_stats dummy;
+	if (!st)
+		st = &dummy;
+	memset(st, 0, sizeof *st);
+	struct storenx *h = NULL;
+	if (storenx_open(db_path, &h, err))
+		return -1;
+	H5Eset_auto2(H5E_DEFAULT, NULL, NULL); /* libhdf5 would print its error stack: errors come back here */
+	char tmp[4200];
+	snprintf(tmp, sizeof tmp, "%s.tmp.%ld", out_path, (long)getpid());
+	int rc = -1;
+	hid_t f = H5Fcreate(tmp, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+	if (f < 0) {
+		acq_errf(err, ACQ_E_IO, "nexus: cannot create %s", tmp);
+		goto out;
+	}
+	if (write_all(h, sweep, f, st, err)) {
+		H5Fclose(f);
+		unlink(tmp);
+		goto out;
+	}
+	if (H5Fclose(f) < 0 || rename(tmp, out_path) != 0) {
+		unlink(tmp);
+		acq_errf(err, ACQ_E_IO, "nexus: cannot finish %s", out_path);
+		goto out;
+	}
+	rc = 0;
+out:
+	storenx_close(h);
+	return rc;
+}

@@ -1,0 +1,370 @@
+/* recon_chain: the completion chain of a sweep — its calibrated samples exported as CSV into the state
+ * directory, then the reconstruction stages (brdf-recon fit, merl, dhr --plot, render) one after the other in
+ * child processes (job.h), each run and output recorded in the store (recon_runs), every step an event. */
+#include "daemon/recon_chain.h"
+
+#include <errno.h>
+#include <math.h>
+#include <sqlite3.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "daemon/executor.h"
+#include "daemon/job.h"
+#include "daemon/log.h"
+#include "daemon/store.h"
+
+enum { RC_FIT, RC_MERL, RC_DHR, RC_RENDER, RC__COUNT };
+
+struct recon_chain {
+	const struct sweep_env *env; /* the sweep's (its conf follows reloads) */
+	enum calib_method method;    /* of the export's header */
+	int64_t id;                  /* the sweep being reconstructed */
+	struct job *job;
+	int rstage;
+	int64_t run_id;
+	char outdir[4096], csv[4096], prog[4096];
+	char files[RC__COUNT][4096];
+	int recon_failed;
+	bool dhr_noplot;             /* dhr --plot failed: run dhr once more without the plot */
+};
+
+static const char *const rc_names[RC__COUNT] = { "fit", "merl", "dhr", "render" };
+static const char *const rc_kinds[RC__COUNT] = { "model", "merl", "dhr", "preview" };
+
+struct recon_chain *recon_chain_new(const struct sweep_env *env)
+{
+	struct recon_chain *ch = calloc(1, sizeof *ch);
+	if (ch)
+		ch->env = env;
+	return ch;
+}
+
+void recon_chain_free(struct recon_chain *ch)
+{
+	if (!ch)
+		return;
+	if (ch->job) /* the body's job_finish() kills it without calling back */
+		store_recon_end(ch->env->store, ch->run_id, "cancelled", 128 + 15, "daemon stopping", ch->env->wallclock(),
+				NULL);
+	free(ch);
+}
+
+bool recon_chain_busy(const struct recon_chain *ch)
+{
+	return ch->job != NULL;
+}
+
+static void chain_emit(struct recon_chain *ch, const char *name, json_t *data)
+{
+	if (ch->env->emit)
+		ch->env->emit(ch->env->emit_ctx, name, data);
+	else
+		json_decref(data);
+}
+
+/* One row per calibrated point: sweep angles from the measured axis positions (zeniths ≥ 0, azimuths in
+ * [0, 360)), the grid's values, then their sigma_<nm> columns; NaN as an empty field. */
+static int export_csv(struct recon_chain *ch, int64_t id, const char *path, int *nrows, struct acq_err *err)
+{
+	*nrows = 0;
+	sqlite3 *db = NULL;
+	FILE *f = NULL;
+	sqlite3_stmt *s = NULL;
+	float *grid = NULL;
+	int rc = -1;
+	if (sqlite3_open_v2(ch->env->conf->d.database, &db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
+		acq_errf(err, ACQ_E_IO, "%s: %s", ch->env->conf->d.database, db ? sqlite3_errmsg(db) : "cannot open");
+		goto out;
+	}
+	sqlite3_busy_timeout(db, 5000);
+	if (sqlite3_prepare_v2(db, "SELECT wavelength_grid FROM sweeps WHERE id = ?", -1, &s, NULL) != SQLITE_OK)
+		goto dberr;
+	sqlite3_bind_int64(s, 1, id);
+	if (sqlite3_step(s) != SQLITE_ROW || sqlite3_column_bytes(s, 0) <= 0 || sqlite3_column_bytes(s, 0) % 4) {
+		acq_errf(err, ACQ_E_STATE, "sweep %lld has no wavelength grid", (long long)id);
+		goto out;
+	}
+	int nb = sqlite3_column_bytes(s, 0), n = nb / 4;
+	grid = malloc((size_t)nb);
+	if (!grid) {
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
+		goto out;
+	}
+	memcpy(grid, sqlite3_column_blob(s, 0), (size_t)nb);
+	sqlite3_finalize(s);
+	s = NULL;
+	char tmp[4200];
+	snprintf(tmp, sizeof tmp, "%s.tmp", path);
+	if (!(f = fopen(tmp, "w"))) {
+		acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
+		goto out;
+	}
+	fprintf(f, "# acquisitiond sweep %lld: calibrated spectral BRDF samples (sr^-1) with standard uncertainty\n",
+		(long long)id);
+	fprintf(f, "# calibration: %s method; angles from the measured axis positions\n",
+		calib_method_name(ch->method));
+	fputs("theta_i,phi_i,theta_o,phi_o", f);
+	for (int k = 0; k < n; k++)
+		fprintf(f, ",%g", (double)grid[k]);
+	for (int k = 0; k < n; k++)
+		fprintf(f, ",sigma_%g", (double)grid[k]);
+	fputc('\n', f);
+	if (sqlite3_prepare_v2(db, "SELECT coalesce(p.laser_theta, p.theta_i), coalesce(p.detector_theta, p.theta_o), "
+				   "coalesce(p.detector_phi, p.phi_o), c.brdf, c.sigma, p.laser_theta IS NULL FROM calibrated c "
+				   "JOIN points p ON p.id = c.point_id WHERE c.sweep_id = ? AND p.state = 'done' "
+				   "ORDER BY p.order_index", -1, &s, NULL) != SQLITE_OK)
+		goto dberr;
+	sqlite3_bind_int64(s, 1, id);
+	while (sqlite3_step(s) == SQLITE_ROW) {
+		if (sqlite3_column_bytes(s, 3) != nb || sqlite3_column_bytes(s, 4) != nb)
+			continue;
+		struct plan_pos p = { sqlite3_column_double(s, 0), sqlite3_column_double(s, 1), sqlite3_column_double(s, 2) };
+		double ti, pi, to, po;
+		ex_pos_angles(&ch->env->conf->bench, &p, &ti, &pi, &to, &po);
+		fprintf(f, "%.6f,%.6f,%.6f,%.6f", ti, pi, to, po);
+		const unsigned char *b = sqlite3_column_blob(s, 3), *u = sqlite3_column_blob(s, 4);
+		for (int pass = 0; pass < 2; pass++)
+			for (int k = 0; k < n; k++) {
+				float v;
+				memcpy(&v, (pass ? u : b) + 4 * k, 4);
+				if (isfinite(v))
+					fprintf(f, ",%.7g", (double)v);
+				else
+					fputc(',', f);
+			}
+		fputc('\n', f);
+		(*nrows)++;
+	}
+	if (fclose(f) != 0) {
+		f = NULL;
+		acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
+		goto out;
+	}
+	f = NULL;
+	if (rename(tmp, path)) {
+		acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
+		goto out;
+	}
+	rc = 0;
+	goto out;
+dberr:
+	acq_errf(err, ACQ_E_IO, "%s: %s", ch->env->conf->d.database, sqlite3_errmsg(db));
+out:
+	if (f)
+		fclose(f);
+	sqlite3_finalize(s);
+	sqlite3_close(db);
+	free(grid);
+	return rc;
+}
+
+/* brdf-recon: an absolute path, next to acquisitiond, or in PATH. 0 or -1. */
+static int find_program(const char *prog, char *out, size_t cap)
+{
+	if (strchr(prog, '/')) {
+		snprintf(out, cap, "%s", prog);
+		return access(out, X_OK);
+	}
+	char self[4096];
+	ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+	if (n > 0) {
+		self[n] = 0;
+		char *slash = strrchr(self, '/');
+		if (slash) {
+			*slash = 0;
+			snprintf(out, cap, "%s/%s", self, prog);
+			if (!access(out, X_OK))
+				return 0;
+		}
+	}
+	const char *path = getenv("PATH");
+	char buf[4096];
+	snprintf(buf, sizeof buf, "%s", path ? path : "/usr/bin:/bin");
+	for (char *save = NULL, *dir = strtok_r(buf, ":", &save); dir; dir = strtok_r(NULL, ":", &save)) {
+		snprintf(out, cap, "%s/%s", dir, prog);
+		if (!access(out, X_OK))
+			return 0;
+	}
+	return -1;
+}
+
+static void recon_next(struct recon_chain *ch);
+
+static void recon_event(struct recon_chain *ch, const char *kind, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static void recon_event(struct recon_chain *ch, const char *kind, const char *fmt, ...)
+{
+	char msg[1024];
+	va_list ap;
+	va_start(ap, fmt);
+	vsnprintf(msg, sizeof msg, fmt, ap);
+	va_end(ap);
+	store_event(ch->env->store, ch->id, kind, "recon", msg, ch->env->wallclock(), NULL);
+	log_msg(LOG_NOTICE, "sweep %lld: %s", (long long)ch->id, msg);
+	chain_emit(ch, "recon", json_pack("{s:I,s:s,s:s}", "sweep", (json_int_t)ch->id, "state", kind, "message", msg));
+}
+
+static const char *relpath(const struct recon_chain *ch, const char *path)
+{
+	size_t n = strlen(ch->env->conf->d.state_dir);
+	if (!strncmp(path, ch->env->conf->d.state_dir, n) && path[n] == '/')
+		return path + n + 1;
+	return path;
+}
+
+static void recon_stage_done(struct job *j, int status, const char *output, size_t len, void *arg)
+{
+	(void)j;
+	(void)len;
+	struct recon_chain *ch = arg;
+	ch->job = NULL;
+	int st = ch->rstage;
+	if (status == 0) {
+		store_recon_output(ch->env->store, ch->run_id, rc_kinds[st], relpath(ch, ch->files[st]), ch->env->wallclock(),
+				   NULL);
+		if (st == RC_DHR) {
+			char png[4200];
+			snprintf(png, sizeof png, "%s/dhr.png", ch->outdir);
+			if (!access(png, R_OK))
+				store_recon_output(ch->env->store, ch->run_id, "dhr", relpath(ch, png), ch->env->wallclock(), NULL);
+		}
+	} else {
+		/* Keep the tail of the output in the event: the run record keeps the whole. */
+		size_t n = strlen(output);
+		const char *tail = n > 300 ? output + n - 300 : output;
+		recon_event(ch, "info", "brdf-recon %s failed (status %d): %s", rc_names[st], status, tail);
+		if (st == RC_DHR && !ch->dhr_noplot) { /* perhaps only the plot is missing: the table alone */
+			ch->dhr_noplot = true;
+			recon_next(ch);
+			return;
+		}
+		ch->recon_failed++;
+		if (st == RC_FIT) { /* nothing else can run without a model */
+			store_recon_end(ch->env->store, ch->run_id, "failed", status, output, ch->env->wallclock(), NULL);
+			recon_event(ch, "info", "no reconstruction: the fit failed; the calibrated samples are in %s",
+				    ch->csv);
+			return;
+		}
+	}
+	ch->rstage++;
+	recon_next(ch);
+}
+
+static void recon_next(struct recon_chain *ch)
+{
+	struct acq_err err = { 0 };
+	char threads[16];
+	snprintf(threads, sizeof threads, "%d", ch->env->conf->recon.threads > 0 ? ch->env->conf->recon.threads : 1);
+	while (ch->rstage < RC__COUNT) {
+		char *argv[24];
+		int argc = 0;
+		char dhrpng[4200], cmd[16];
+		snprintf(cmd, sizeof cmd, "%s", rc_names[ch->rstage]);
+		argv[argc++] = ch->prog;
+		argv[argc++] = cmd;
+		switch (ch->rstage) {
+		case RC_FIT:
+			argv[argc++] = ch->csv;
+			argv[argc++] = "-o";
+			argv[argc++] = ch->files[RC_FIT];
+			break;
+		case RC_MERL:
+		case RC_RENDER:
+			argv[argc++] = ch->files[RC_FIT];
+			argv[argc++] = "-o";
+			argv[argc++] = ch->files[ch->rstage];
+			argv[argc++] = "--threads";
+			argv[argc++] = threads;
+			break;
+		case RC_DHR:
+			snprintf(dhrpng, sizeof dhrpng, "%s/dhr.png", ch->outdir);
+			argv[argc++] = ch->files[RC_FIT];
+			argv[argc++] = "-o";
+			argv[argc++] = ch->files[RC_DHR];
+			if (!ch->dhr_noplot) {
+				argv[argc++] = "--plot";
+				argv[argc++] = dhrpng;
+			}
+			break;
+		}
+		argv[argc] = NULL;
+		if (job_start(argv, ch->outdir, ch->env->conf->recon.timeout_s, recon_stage_done, ch, &ch->job, &err) == 0) {
+			recon_event(ch, "info", "brdf-recon %s started (pid %d)", rc_names[ch->rstage], (int)job_pid(ch->job));
+			return;
+		}
+		recon_event(ch, "info", "brdf-recon %s could not start: %s", rc_names[ch->rstage], err.msg);
+		ch->recon_failed++;
+		if (ch->rstage == RC_FIT) {
+			store_recon_end(ch->env->store, ch->run_id, "failed", 127, err.msg, ch->env->wallclock(), NULL);
+			return;
+		}
+		ch->rstage++;
+	}
+	const char *state = ch->recon_failed ? "failed" : "succeeded";
+	char summary[8192] = "";
+	size_t n = 0;
+	for (int i = 0; i < RC__COUNT; i++) {
+		bool ok = !access(ch->files[i], R_OK);
+		n += (size_t)snprintf(summary + n, sizeof summary - n, "%s%s %s", i ? "; " : "", rc_kinds[i],
+				      ok ? ch->files[i] : "(not produced)");
+		if (n >= sizeof summary)
+			break;
+	}
+	store_recon_end(ch->env->store, ch->run_id, state, ch->recon_failed, summary, ch->env->wallclock(), NULL);
+	recon_event(ch, ch->recon_failed ? "info" : "complete", "reconstruction %s (%d of %d steps failed): %s", state,
+		    ch->recon_failed, RC__COUNT, summary);
+}
+
+int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, enum calib_method method, int64_t *run_id,
+		    struct acq_err *err)
+{
+	const struct conf *c = ch->env->conf;
+	if (run_id)
+		*run_id = 0;
+	if (ch->job)
+		return acq_errf(err, ACQ_E_STATE, "a reconstruction is still running");
+	ch->id = id;
+	ch->method = method;
+	snprintf(ch->outdir, sizeof ch->outdir, "%s/sweep-%lld", c->recon.output_dir, (long long)id);
+	mkdir(c->recon.output_dir, 0750);
+	mkdir(ch->outdir, 0750);
+	snprintf(ch->csv, sizeof ch->csv, "%s/samples.csv", ch->outdir);
+	int rows = 0;
+	if (export_csv(ch, id, ch->csv, &rows, err)) {
+		recon_event(ch, "info", "exporting the calibrated samples failed: %s; no reconstruction ran", err->msg);
+		return -1;
+	}
+	recon_event(ch, "info", "%d calibrated samples exported to %s", rows, ch->csv);
+	if (automatic && !c->sweep.auto_recon) {
+		recon_event(ch, "info", "sweep.auto_recon is off: no reconstruction ran; the samples are in %s", ch->csv);
+		return 0;
+	}
+	if (find_program(c->recon.program, ch->prog, sizeof ch->prog)) {
+		recon_event(ch, "info", "no reconstruction ran: '%s' not found (brdf-recon not installed?); the calibrated "
+			    "samples are recorded in the database and in %s", c->recon.program, ch->csv);
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "reconstruction program '%s' not found", c->recon.program);
+	}
+	snprintf(ch->files[RC_FIT], sizeof ch->files[0], "%s/model.brdf", ch->outdir);
+	snprintf(ch->files[RC_MERL], sizeof ch->files[0], "%s/merl.binary", ch->outdir);
+	snprintf(ch->files[RC_DHR], sizeof ch->files[0], "%s/dhr.csv", ch->outdir);
+	snprintf(ch->files[RC_RENDER], sizeof ch->files[0], "%s/preview.png", ch->outdir);
+	for (int i = 0; i < RC__COUNT; i++)
+		unlink(ch->files[i]); /* a rerun must not report the previous run's files */
+	char args[8192];
+	snprintf(args, sizeof args, "[\"fit %s\", \"merl\", \"dhr --plot\", \"render\"]", ch->csv);
+	if (store_recon_begin(ch->env->store, id, ch->prog, args, ch->env->wallclock(), &ch->run_id, err)) {
+		recon_event(ch, "info", "recording the reconstruction failed: %s; none ran", err->msg);
+		return -1;
+	}
+	if (run_id)
+		*run_id = ch->run_id;
+	ch->rstage = RC_FIT;
+	ch->recon_failed = 0;
+	ch->dhr_noplot = false;
+	recon_next(ch);
+	return 0;
+}

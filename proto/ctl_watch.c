@@ -1,0 +1,195 @@
+/* ctl_watch: the live terminal view of `acqctl watch` — progress bar, ETA as a wall-clock time, current point,
+ * device states and the last events, redrawn in place (see ctl.h). */
+#include "proto/ctl.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#define VIEW_EVENTS 8
+#define VIEW_DEVICES 8
+
+struct ctl_view {
+	FILE *f;
+	char where[128];
+	char link[160];
+	char daemon[160];
+	long long sweep, done, total;
+	char state[32];
+	char point[160];
+	double eta_s, eta_at;  /* seconds left, and the wall time they were reported */
+	struct {
+		char name[32], state[40];
+	} dev[VIEW_DEVICES];
+	int ndev;
+	char events[VIEW_EVENTS][200];
+	int nev, evhead;
+};
+
+struct ctl_view *ctl_view_new(FILE *f, const char *where)
+{
+	struct ctl_view *v = calloc(1, sizeof *v);
+	if (!v)
+		return NULL;
+	v->f = f;
+	snprintf(v->where, sizeof v->where, "%s", where);
+	snprintf(v->state, sizeof v->state, "idle");
+	v->eta_s = NAN;
+	return v;
+}
+
+void ctl_view_free(struct ctl_view *v)
+{
+	free(v);
+}
+
+static const char *s_of(json_t *o, const char *k)
+{
+	const char *s = json_string_value(json_object_get(o, k));
+	return s ? s : "";
+}
+
+static double wall_now(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static void set_dev(struct ctl_view *v, const char *name, const char *state)
+{
+	for (int i = 0; i < v->ndev; i++)
+		if (!strcmp(v->dev[i].name, name)) {
+			snprintf(v->dev[i].state, sizeof v->dev[i].state, "%s", state);
+			return;
+		}
+	if (v->ndev < VIEW_DEVICES) {
+		snprintf(v->dev[v->ndev].name, sizeof v->dev[0].name, "%s", name);
+		snprintf(v->dev[v->ndev++].state, sizeof v->dev[0].state, "%s", state);
+	}
+}
+
+static void set_progress(struct ctl_view *v, json_t *p, const char *idkey)
+{
+	json_t *x;
+	if ((x = json_object_get(p, idkey)) && json_is_integer(x))
+		v->sweep = json_integer_value(x);
+	if ((x = json_object_get(p, "done")) && json_is_integer(x))
+		v->done = json_integer_value(x);
+	if ((x = json_object_get(p, "total")) && json_is_integer(x))
+		v->total = json_integer_value(x);
+	if (json_is_string(json_object_get(p, "state")))
+		snprintf(v->state, sizeof v->state, "%s", s_of(p, "state"));
+	x = json_object_get(p, "eta_s");
+	v->eta_s = json_is_number(x) ? json_number_value(x) : NAN;
+	v->eta_at = wall_now();
+}
+
+void ctl_view_status(struct ctl_view *v, json_t *status, json_t *devices)
+{
+	if (status) {
+		snprintf(v->daemon, sizeof v->daemon, "acquisitiond %s, pid %lld%s", s_of(status, "version"),
+			 (long long)json_integer_value(json_object_get(status, "pid")),
+			 json_is_true(json_object_get(status, "sim")) ? " (simulated bench)" : "");
+		json_t *p = json_object_get(status, "sweep");
+		set_progress(v, p, "id");
+		snprintf(v->point, sizeof v->point, "%s", s_of(p, "message"));
+	}
+	size_t i;
+	json_t *d;
+	json_array_foreach(json_object_get(devices, "devices"), i, d)
+		set_dev(v, s_of(d, "name"), s_of(d, "state"));
+}
+
+static void add_event(struct ctl_view *v, const char *text)
+{
+	char t[48];
+	ctl_fmt_time(wall_now(), t, sizeof t);
+	/* the time of day only: the date is in the header */
+	const char *tod = strchr(t, 'T');
+	snprintf(v->events[v->evhead], sizeof v->events[0], "%.8s  %s", tod ? tod + 1 : t, text);
+	v->evhead = (v->evhead + 1) % VIEW_EVENTS;
+	if (v->nev < VIEW_EVENTS)
+		v->nev++;
+}
+
+void ctl_view_event(struct ctl_view *v, json_t *ev)
+{
+	const char *name = s_of(ev, "event");
+	char text[200];
+	if (!strcmp(name, "sweep.progress")) {
+		set_progress(v, ev, "sweep");
+		snprintf(v->point, sizeof v->point, "%s", s_of(ev, "point"));
+		return;
+	}
+	if (!strcmp(name, "sweep.state")) {
+		v->sweep = json_integer_value(json_object_get(ev, "sweep"));
+		snprintf(v->state, sizeof v->state, "%s", s_of(ev, "state"));
+		if (strcmp(v->state, "running"))
+			v->eta_s = NAN;
+		snprintf(text, sizeof text, "sweep %lld %s: %s", v->sweep, s_of(ev, "event"), s_of(ev, "reason"));
+	} else if (!strcmp(name, "sweep.fault")) {
+		snprintf(text, sizeof text, "sweep %lld fault on %s: %s",
+			 (long long)json_integer_value(json_object_get(ev, "sweep")), s_of(ev, "device"), s_of(ev, "message"));
+	} else if (!strcmp(name, "device")) {
+		bool up = json_is_true(json_object_get(ev, "available"));
+		set_dev(v, s_of(ev, "name"), up ? "connected" : "unavailable");
+		snprintf(text, sizeof text, "%s %s%s%s", s_of(ev, "name"), up ? "connected" : "unavailable",
+			 s_of(ev, "message")[0] ? ": " : "", s_of(ev, "message"));
+	} else if (!strcmp(name, "recon")) {
+		snprintf(text, sizeof text, "reconstruction of sweep %lld %s: %s",
+			 (long long)json_integer_value(json_object_get(ev, "sweep")), s_of(ev, "state"), s_of(ev, "message"));
+	} else if (!strcmp(name, "config")) {
+		snprintf(text, sizeof text, "configuration reloaded from %s", s_of(ev, "path"));
+	} else {
+		char *s = json_dumps(ev, JSON_COMPACT);
+		snprintf(text, sizeof text, "%s", s ? s : name);
+		free(s);
+	}
+	add_event(v, text);
+}
+
+void ctl_view_link(struct ctl_view *v, const char *text)
+{
+	snprintf(v->link, sizeof v->link, "%s", text);
+}
+
+void ctl_view_draw(struct ctl_view *v, double now)
+{
+	FILE *f = v->f;
+	char t[48], eta[32], at[48];
+	ctl_fmt_time(now, t, sizeof t);
+	fputs("\033[H\033[2J", f); /* home, clear */
+	fprintf(f, "acqctl watch — %s — %s\n", v->where, t);
+	fprintf(f, "%s  [%s]\n\n", v->daemon[0] ? v->daemon : "acquisitiond", v->link);
+	if (v->sweep) {
+		int w = 40, fill = v->total > 0 ? (int)(w * v->done / v->total) : 0;
+		char bar[41];
+		for (int i = 0; i < w; i++)
+			bar[i] = i < fill ? '#' : '-';
+		bar[w] = 0;
+		fprintf(f, "sweep %lld  %-8s [%s] %3d %%  %lld/%lld\n", v->sweep, v->state, bar,
+			v->total > 0 ? (int)(100 * v->done / v->total) : 0, v->done, v->total);
+		/* The ETA counts down between events while running; paused or faulted it is not shown. */
+		if (!strcmp(v->state, "running") && isfinite(v->eta_s)) {
+			double left = v->eta_s - (now - v->eta_at);
+			ctl_fmt_dur(left > 0 ? left : 0, eta, sizeof eta);
+			ctl_fmt_time(v->eta_at + v->eta_s, at, sizeof at);
+			fprintf(f, "ETA   %s (ends about %s)\n", eta, at);
+		} else {
+			fprintf(f, "ETA   -\n");
+		}
+		fprintf(f, "now   %s\n", v->point);
+	} else {
+		fprintf(f, "no sweep loaded\n\n\n");
+	}
+	fprintf(f, "\ndevices\n");
+	for (int i = 0; i < v->ndev; i++)
+		fprintf(f, "  %-16s %s\n", v->dev[i].name, v->dev[i].state);
+	fprintf(f, "\nlast events\n");
+	for (int i = 0; i < v->nev; i++)
+		fprintf(f, "  %s\n", v->events[(v->evhead - v->nev + i + VIEW_EVENTS) % VIEW_EVENTS]);
+	fprintf(f, "\n(Ctrl-C to quit)\n");
+	fflush(f);
+}

@@ -1,0 +1,637 @@
+/* slices: in-plane slices and polar plots of a reconstruction with its uncertainty and the measured samples. */
+#include "recon/slices.h"
+
+#include <cairo.h>
+#include <lapacke.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "recon/plot.h"
+#include "recon/pngio.h"
+#include "recon/rbf.h"
+
+void slices_opts_default(struct slices_opts *o)
+{
+	memset(o, 0, sizeof *o);
+	o->wl_lo = o->wl_hi = NAN;
+	o->band_k = 2;
+	o->phi_tol_deg = 2;
+	o->width = 1000;
+	o->height = 640;
+	o->npts = 90;
+}
+
+int slices_weights(const struct recon_model *m, double lo, double hi, double *wsel, struct acq_err *err)
+{
+	size_t L = m->nwl;
+	if (!(lo <= hi) || !(lo >= m->wl[0] - 1e-9) || !(hi <= m->wl[L - 1] + 1e-9))
+		return acq_errf(err, ACQ_E_RANGE, "slices: wavelengths %g..%g nm outside the model's %g..%g nm (or reversed)",
+				lo, hi, m->wl[0], m->wl[L - 1]);
+	memset(wsel, 0, L * sizeof *wsel);
+	if (lo == hi || L == 1) {
+		size_t a = 0;
+		while (a + 2 < L && m->wl[a + 1] <= lo)
+			a++;
+		if (L == 1) {
+			wsel[0] = 1;
+			return 0;
+		}
+		double t = (lo - m->wl[a]) / (m->wl[a + 1] - m->wl[a]);
+		t = t < 0 ? 0 : t > 1 ? 1 : t;
+		wsel[a] = 1 - t;
+		wsel[a + 1] += t;
+		return 0;
+	}
+	double sum = 0;
+	for (size_t l = 0; l < L; l++) {
+		if (m->wl[l] < lo - 1e-9 || m->wl[l] > hi + 1e-9)
+			continue;
+		double a = l ? fmax(lo, 0.5 * (m->wl[l - 1] + m->wl[l])) : lo;
+		double b = l + 1 < L ? fmin(hi, 0.5 * (m->wl[l] + m->wl[l + 1])) : hi;
+		wsel[l] = b > a ? b - a : 0;
+		sum += wsel[l];
+	}
+	if (!(sum > 0)) { /* a band narrower than the channel spacing: its nearest channel */
+		size_t best = 0;
+		for (size_t l = 1; l < L; l++)
+			if (fabs(m->wl[l] - 0.5 * (lo + hi)) < fabs(m->wl[best] - 0.5 * (lo + hi)))
+				best = l;
+		wsel[best] = sum = 1;
+	}
+	for (size_t l = 0; l < L; l++)
+		wsel[l] /= sum;
+	return 0;
+}
+
+int slices_band(const struct recon_model *m, size_t nq, const double *ang, const double *wsel, double k, double *f,
+		double *lo, double *hi, struct acq_err *err)
+{
+	size_t n = m->n, L = m->nwl;
+	int rc = -1;
+	double *F = malloc(nq * L * sizeof *F), *A = malloc(n * n * sizeof *A), *Ai = malloc(n * n * sizeof *Ai);
+	double *c6 = malloc(nq * 6 * sizeof *c6), *Kq = malloc(nq * n * sizeof *Kq), *X = malloc(nq * n * sizeof *X);
+	double *alpha = calloc(L, sizeof *alpha);
+	if (!F || !A || !Ai || !c6 || !Kq || !X || !alpha) {
+		acq_errf(err, ACQ_E_NOMEM, "slices: out of memory (%zu samples)", n);
+		goto out;
+	}
+	if (recon_eval(m, nq, ang, F, err))
+		goto out;
+	/* A = K + ηΛ of the model (its Cholesky factor) and diag(A⁻¹) for the leave-one-out amplitude α_λ */
+	for (size_t j = 0; j < n; j++)
+		for (size_t i = j; i < n; i++)
+			A[j * n + i] = A[i * n + j] = rbf_kernel(m->kernel, m->shape, m->ctr + 6 * i, m->ctr + 6 * j,
+								 m->tctr + 6 * j);
+	for (size_t q = 0; q < n; q++)
+		A[q * n + q] += m->eta * m->lam[q];
+	if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)n, A, (lapack_int)n) != 0) {
+		acq_errf(err, ACQ_E_NUMERIC, "slices: the model's system is not positive definite");
+		goto out;
+	}
+	memcpy(Ai, A, n * n * sizeof *Ai);
+	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, Ai, (lapack_int)n) != 0) {
+		acq_errf(err, ACQ_E_NUMERIC, "slices: inverse of the model's system failed");
+		goto out;
+	}
+	for (size_t l = 0; l < L; l++) {
+		double acc = 0;
+		for (size_t q = 0; q < n; q++)
+			acc += m->w[l * n + q] * m->w[l * n + q] / Ai[q * n + q];
+		alpha[l] = acc / (double)n;
+	}
+	for (size_t q = 0; q < nq; q++)
+		rbf_canon(ang[4 * q], ang[4 * q + 1], ang[4 * q + 2], ang[4 * q + 3], c6 + 6 * q);
+	rbf_kmatrix_soa(m->kernel, m->shape, nq, c6, n, m->soa, Kq);
+	memcpy(X, Kq, nq * n * sizeof *X);
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)nq, A, (lapack_int)n, X, (lapack_int)n)) {
+		acq_errf(err, ACQ_E_NUMERIC, "slices: solve failed");
+		goto out;
+	}
+	for (size_t q = 0; q < nq; q++) {
+		double tc[6], v = 0;
+		rbf_tau(c6 + 6 * q, tc);
+		for (size_t j = 0; j < n; j++)
+			v += Kq[q * n + j] * X[q * n + j];
+		v = rbf_kernel(m->kernel, m->shape, c6 + 6 * q, c6 + 6 * q, tc) - v;
+		v = v > 0 ? v : 0;
+		f[q] = lo[q] = hi[q] = 0;
+		for (size_t l = 0; l < L; l++) {
+			if (wsel[l] == 0)
+				continue;
+			double s = recon_energy_scale(m, ang[4 * q], ang[4 * q + 2], l), fl = F[q * L + l];
+			double sg = k * sqrt(alpha[l] * v), fh = s > 0 ? fl / s : 0, l_lo, l_hi;
+			if (m->transform == RECON_T_SQRT) {
+				double r = sqrt(fh);
+				l_hi = s * (r + sg) * (r + sg);
+				l_lo = r > sg ? s * (r - sg) * (r - sg) : 0;
+			} else {
+				double e = m->eps[l];
+				l_hi = s * ((fh + e) * exp(fmin(sg, 50)) - e);
+				l_lo = fmax(0, s * ((fh + e) * exp(-sg) - e));
+			}
+			f[q] += wsel[l] * fl;
+			lo[q] += wsel[l] * l_lo;
+			hi[q] += wsel[l] * l_hi;
+		}
+		if (!isfinite(f[q]) || !isfinite(lo[q]) || !isfinite(hi[q])) {
+			acq_errf(err, ACQ_E_NUMERIC, "slices: non-finite value or band at query %zu", q);
+			goto out;
+		}
+	}
+	rc = 0;
+out:
+	free(F);
+	free(A);
+	free(Ai);
+	free(c6);
+	free(Kq);
+	free(X);
+	free(alpha);
+	return rc;
+}
+
+/* ---- figures ---- */
+struct series {
+	double theta;            /* incidence, radians */
+	size_t np;               /* 2·npts + 1 model points, θo signed from −90° to 90° */
+	double *x, *f, *lo, *hi; /* x: signed θo in degrees */
+	size_t ns;
+	double *sx, *sv, *ss;    /* in-plane samples: signed θo (deg), value, σ (NaN: none) */
+};
+
+struct frame {
+	double l, t, r, b;       /* plot area, pixels */
+	double x0, x1, y0, y1;   /* x range (deg), y range (log10) */
+};
+
+static double px(const struct frame *fr, double x)
+{
+	return fr->l + (x - fr->x0) / (fr->x1 - fr->x0) * (fr->r - fr->l);
+}
+
+static double py(const struct frame *fr, double v)
+{
+	double y = log10(fmax(v, pow(10, fr->y0 - 1)));
+	return fr->b - (y - fr->y0) / (fr->y1 - fr->y0) * (fr->b - fr->t);
+}
+
+static void text(cairo_t *cr, double x, double y, const char *s, double ax, double ay)
+{
+	cairo_text_extents_t e;
+	cairo_text_extents(cr, s, &e);
+	cairo_move_to(cr, x - ax * e.width - e.x_bearing, y - ay * e.height - e.y_bearing);
+	cairo_show_text(cr, s);
+}
+
+/* Curves past the palette's length are dashed, so two incidences never look alike. */
+static void set_dash(cairo_t *cr, size_t t)
+{
+	static const double dash[2] = { 7, 4 };
+	if (t >= plot_palette_size())
+		cairo_set_dash(cr, dash, 2, 0);
+}
+
+static void draw_inplane(cairo_t *cr, const struct slices_opts *o, const struct series *S, size_t nth,
+			 const struct frame *fr, const char *title)
+{
+	cairo_set_source_rgb(cr, 1, 1, 1);
+	cairo_paint(cr);
+	cairo_select_font_face(cr, "sans-serif", CAIRO_FONT_SLANT_NORMAL, CAIRO_FONT_WEIGHT_NORMAL);
+	cairo_set_font_size(cr, 13);
+	cairo_set_line_width(cr, 1);
+	/* grid: decades and every 15° */
+	int minor = fr->y1 - fr->y0 <= 2.5;
+	for (int d = (int)floor(fr->y0); d <= (int)ceil(fr->y1); d++) {
+		for (int mlt = 2; minor && mlt <= 5; mlt += 3) {
+			double lv = d + log10(mlt);
+			if (lv < fr->y0 || lv > fr->y1)
+				continue;
+			double y = py(fr, pow(10, lv));
+			char b[32];
+			cairo_set_source_rgb(cr, 0.94, 0.94, 0.94);
+			cairo_move_to(cr, fr->l, y);
+			cairo_line_to(cr, fr->r, y);
+			cairo_stroke(cr);
+			snprintf(b, sizeof b, "%ge%d", (double)mlt, d);
+			cairo_set_source_rgb(cr, 0.3, 0.3, 0.3);
+			text(cr, fr->l - 6, y, b, 1, 0.5);
+		}
+		if (d < fr->y0 - 1e-9 || d > fr->y1 + 1e-9)
+			continue;
+		double y = py(fr, pow(10, d));
+		cairo_set_source_rgb(cr, 0.88, 0.88, 0.88);
+		cairo_move_to(cr, fr->l, y);
+		cairo_line_to(cr, fr->r, y);
+		cairo_stroke(cr);
+		char b[32];
+		snprintf(b, sizeof b, "1e%d", d);
+		cairo_set_source_rgb(cr, 0, 0, 0);
+		text(cr, fr->l - 6, y, b, 1, 0.5);
+	}
+	for (int a = -90; a <= 90; a += 15) {
+		double x = px(fr, a);
+		cairo_set_source_rgb(cr, 0.88, 0.88, 0.88);
+		cairo_move_to(cr, x, fr->t);
+		cairo_line_to(cr, x, fr->b);
+		cairo_stroke(cr);
+		char b[16];
+		snprintf(b, sizeof b, "%d", a);
+		cairo_set_source_rgb(cr, 0, 0, 0);
+		text(cr, x, fr->b + 6, b, 0.5, 0);
+	}
+	cairo_set_source_rgb(cr, 0, 0, 0);
+	cairo_rectangle(cr, fr->l, fr->t, fr->r - fr->l, fr->b - fr->t);
+	cairo_stroke(cr);
+	text(cr, 0.5 * (fr->l + fr->r), fr->b + 26, "\u03b8o (\u00b0): \u2212 backward (\u03c6o \u2212 \u03c6i = 0\u00b0), "
+	     "+ forward (\u03c6o \u2212 \u03c6i = 180\u00b0)", 0.5, 0);
+	cairo_save(cr);
+	cairo_translate(cr, 18, 0.5 * (fr->t + fr->b));
+	cairo_rotate(cr, -M_PI / 2);
+	text(cr, 0, 0, "f (sr\u207b\u00b9), log scale", 0.5, 0.5);
+	cairo_restore(cr);
+	if (title) {
+		cairo_set_font_size(cr, 15);
+		text(cr, 0.5 * (fr->l + fr->r), 12, title, 0.5, 0);
+		cairo_set_font_size(cr, 13);
+	}
+	cairo_rectangle(cr, fr->l, fr->t, fr->r - fr->l, fr->b - fr->t);
+	cairo_save(cr);
+	cairo_clip(cr);
+	for (size_t t = 0; t < nth; t++) {
+		const struct series *s = &S[t];
+		double c[3];
+		plot_curve_colour(t, c);
+		/* band */
+		cairo_set_source_rgba(cr, c[0], c[1], c[2], 0.22);
+		for (size_t i = 0; i < s->np; i++)
+			(i ? cairo_line_to : cairo_move_to)(cr, px(fr, s->x[i]), py(fr, s->hi[i]));
+		for (size_t i = s->np; i-- > 0;)
+			cairo_line_to(cr, px(fr, s->x[i]), py(fr, s->lo[i]));
+		cairo_close_path(cr);
+		cairo_fill(cr);
+		/* model (dashed once the palette repeats) */
+		cairo_set_source_rgb(cr, c[0], c[1], c[2]);
+		cairo_set_line_width(cr, 2);
+		set_dash(cr, t);
+		for (size_t i = 0; i < s->np; i++)
+			(i ? cairo_line_to : cairo_move_to)(cr, px(fr, s->x[i]), py(fr, s->f[i]));
+		cairo_stroke(cr);
+		cairo_set_dash(cr, NULL, 0, 0);
+		/* samples with ± k σ bars */
+		cairo_set_line_width(cr, 1.2);
+		for (size_t i = 0; i < s->ns; i++) {
+			double x = px(fr, s->sx[i]), y = py(fr, s->sv[i]);
+			if (isfinite(s->ss[i]) && s->ss[i] > 0) {
+				double a = py(fr, s->sv[i] + o->band_k * s->ss[i]), b = py(fr, s->sv[i] - o->band_k * s->ss[i]);
+				cairo_move_to(cr, x, a);
+				cairo_line_to(cr, x, b);
+				cairo_move_to(cr, x - 3, a);
+				cairo_line_to(cr, x + 3, a);
+				cairo_move_to(cr, x - 3, b);
+				cairo_line_to(cr, x + 3, b);
+				cairo_stroke(cr);
+			}
+			cairo_new_sub_path(cr);
+			cairo_arc(cr, x, y, 3.2, 0, 2 * M_PI);
+			cairo_fill(cr);
+		}
+	}
+	cairo_restore(cr);
+	/* legend */
+	cairo_set_line_width(cr, 2);
+	for (size_t t = 0; t < nth; t++) {
+		double c[3], y = fr->t + 14 + 18 * (double)t;
+		char b[48];
+		plot_curve_colour(t, c);
+		cairo_set_source_rgb(cr, c[0], c[1], c[2]);
+		set_dash(cr, t);
+		cairo_move_to(cr, fr->r + 10, y);
+		cairo_line_to(cr, fr->r + 34, y);
+		cairo_stroke(cr);
+		cairo_set_dash(cr, NULL, 0, 0);
+		snprintf(b, sizeof b, "\u03b8i = %.4g\u00b0 (%zu)", S[t].theta * 180 / M_PI, S[t].ns);
+		cairo_set_source_rgb(cr, 0, 0, 0);
+		text(cr, fr->r + 40, y, b, 0, 0.5);
+	}
+	char b[96];
+	snprintf(b, sizeof b, "band, bars: \u00b1%g\u03c3", o->band_k);
+	text(cr, fr->r + 10, fr->t + 14 + 18 * (double)nth + 8, b, 0, 0.5);
+	text(cr, fr->r + 10, fr->t + 14 + 18 * (double)nth + 26, "(n) = in-plane samples", 0, 0.5);
+}
+
+/* One polar panel: angle θo from the normal (up), forward to the right; radius log-scaled on [y0, y1]. */
+static void draw_polar(cairo_t *cr, const struct slices_opts *o, const struct series *s, size_t idx, double cx,
+		       double cy, double R, double y0, double y1)
+{
+	(void)o;
+	double c[3];
+	plot_curve_colour(idx, c);
+	cairo_new_path(cr);
+#define PR(v) (R * fmin(1, fmax(0, (log10(fmax((v), 1e-300)) - y0) / (y1 - y0))))
+#define PXY(a, r) cx + (r) * sin((a) * M_PI / 180), cy - (r) * cos((a) * M_PI / 180)
+	cairo_set_line_width(cr, 1);
+	cairo_set_source_rgb(cr, 0.85, 0.85, 0.85);
+	for (int d = (int)ceil(y0); d <= (int)floor(y1); d++) {
+		cairo_new_sub_path(cr);
+		cairo_arc(cr, cx, cy, PR(pow(10, d)), M_PI, 2 * M_PI);
+		cairo_stroke(cr);
+	}
+	for (int a = -90; a <= 90; a += 30) {
+		cairo_move_to(cr, cx, cy);
+		cairo_line_to(cr, PXY(a, R));
+		cairo_stroke(cr);
+	}
+	/* incident direction (on the backward side) and its mirror */
+	double ti = s->theta * 180 / M_PI;
+	cairo_set_source_rgb(cr, 0.3, 0.3, 0.3);
+	double dash[2] = { 4, 3 };
+	cairo_set_dash(cr, dash, 2, 0);
+	cairo_move_to(cr, cx, cy);
+	cairo_line_to(cr, PXY(-ti, R));
+	cairo_stroke(cr);
+	cairo_set_dash(cr, NULL, 0, 0);
+	cairo_set_source_rgba(cr, c[0], c[1], c[2], 0.22);
+	for (size_t i = 0; i < s->np; i++)
+		(i ? cairo_line_to : cairo_move_to)(cr, PXY(s->x[i], PR(s->hi[i])));
+	for (size_t i = s->np; i-- > 0;)
+		cairo_line_to(cr, PXY(s->x[i], PR(s->lo[i])));
+	cairo_close_path(cr);
+	cairo_fill(cr);
+	cairo_set_source_rgb(cr, c[0], c[1], c[2]);
+	cairo_set_line_width(cr, 2);
+	set_dash(cr, idx);
+	for (size_t i = 0; i < s->np; i++)
+		(i ? cairo_line_to : cairo_move_to)(cr, PXY(s->x[i], PR(s->f[i])));
+	cairo_stroke(cr);
+	cairo_set_dash(cr, NULL, 0, 0);
+	for (size_t i = 0; i < s->ns; i++) {
+		cairo_new_sub_path(cr);
+		cairo_arc(cr, PXY(s->sx[i], PR(s->sv[i])), 3, 0, 2 * M_PI);
+		cairo_fill(cr);
+	}
+	cairo_set_source_rgb(cr, 0, 0, 0);
+	char b[48];
+	snprintf(b, sizeof b, "\u03b8i = %.4g\u00b0", ti);
+	text(cr, cx, cy + 8, b, 0.5, 0);
+#undef PR
+#undef PXY
+}
+
+static int write_png(cairo_surface_t *sf, const char *path, struct acq_err *err)
+{
+	return pngio_write_surface(sf, path, err);
+}
+
+static int cmp_d(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return x < y ? -1 : x > y;
+}
+
+int slices_plot(const struct recon_model *m, const struct recon_samples *s, const double *theta, size_t nth,
+		const struct slices_opts *o, const char *png, const char *polar_png, const char *csv,
+		struct slices_result *res, struct acq_err *err)
+{
+	if (o->width < 64 || o->width > 8192 || o->height < 64 || o->height > 8192 || o->npts < 4 || o->npts > 4096 ||
+	    !(o->band_k > 0) || !(o->phi_tol_deg > 0 && o->phi_tol_deg < 45))
+		return acq_errf(err, ACQ_E_INVAL, "slices: size, points, band_k or phi tolerance out of range");
+	size_t L = m->nwl;
+	double *wsel = malloc(L * sizeof *wsel);
+	if (!wsel)
+		return acq_errf(err, ACQ_E_NOMEM, "slices: out of memory");
+	if (slices_weights(m, o->wl_lo, o->wl_hi, wsel, err)) {
+		free(wsel);
+		return -1;
+	}
+	double th[SLICES_MAX_THETA];
+	double stol = sin(o->phi_tol_deg * M_PI / 180);
+	if (nth > SLICES_MAX_THETA) {
+		free(wsel);
+		return acq_errf(err, ACQ_E_RANGE, "slices: %zu incidences (at most %d)", nth, SLICES_MAX_THETA);
+	}
+	memcpy(th, theta, nth * sizeof *th);
+	if (!nth) { /* the measured incidences: distinct θi (0.05° apart) of in-plane samples */
+		if (!s || !s->n) {
+			free(wsel);
+			return acq_errf(err, ACQ_E_INVAL, "slices: no incidences given and no samples to take them from");
+		}
+		double *all = malloc(s->n * sizeof *all);
+		size_t na = 0;
+		if (!all) {
+			free(wsel);
+			return acq_errf(err, ACQ_E_NOMEM, "slices: out of memory");
+		}
+		for (size_t i = 0; i < s->n; i++)
+			if (fabs(sin(s->ang[4 * i + 3] - s->ang[4 * i + 1])) <= stol)
+				all[na++] = s->ang[4 * i];
+		qsort(all, na, sizeof *all, cmp_d);
+		for (size_t i = 0; i < na; i++)
+			if (!nth || all[i] - th[nth - 1] > 0.05 * M_PI / 180) {
+				if (nth == SLICES_MAX_THETA) {
+					free(all);
+					free(wsel);
+					return acq_errf(err, ACQ_E_RANGE, "slices: more than %d measured incidences (give --theta-i)",
+							SLICES_MAX_THETA);
+				}
+				th[nth++] = all[i];
+			}
+		free(all);
+		if (!nth) {
+			free(wsel);
+			return acq_errf(err, ACQ_E_INVAL, "slices: no sample lies in the plane (|sin(phi_o - phi_i)| <= "
+					"sin %g deg)", o->phi_tol_deg);
+		}
+	}
+	int rc = -1;
+	size_t np = 2 * (size_t)o->npts + 1;
+	struct series S[SLICES_MAX_THETA];
+	memset(S, 0, sizeof S);
+	double *ang = malloc(np * 4 * sizeof *ang);
+	FILE *cf = NULL;
+	cairo_surface_t *sf = NULL;
+	cairo_t *cr = NULL;
+	double vmin = HUGE_VAL, vmax = 0;
+	size_t nsamp = 0;
+	if (!ang) {
+		acq_errf(err, ACQ_E_NOMEM, "slices: out of memory");
+		goto out;
+	}
+	for (size_t t = 0; t < nth; t++) {
+		struct series *q = &S[t];
+		q->theta = th[t];
+		q->np = np;
+		q->x = malloc(np * sizeof *q->x);
+		q->f = malloc(np * sizeof *q->f);
+		q->lo = malloc(np * sizeof *q->lo);
+		q->hi = malloc(np * sizeof *q->hi);
+		size_t cap = s ? s->n : 0;
+		q->sx = malloc((cap ? cap : 1) * sizeof *q->sx);
+		q->sv = malloc((cap ? cap : 1) * sizeof *q->sv);
+		q->ss = malloc((cap ? cap : 1) * sizeof *q->ss);
+		if (!q->x || !q->f || !q->lo || !q->hi || !q->sx || !q->sv || !q->ss) {
+			acq_errf(err, ACQ_E_NOMEM, "slices: out of memory");
+			goto out;
+		}
+		for (size_t i = 0; i < np; i++) {
+			double a = -90 + 180.0 * (double)i / (double)(np - 1); /* signed θo, degrees; ±90 kept just inside */
+			a = fmax(-89.5, fmin(89.5, a));
+			q->x[i] = a;
+			ang[4 * i] = th[t];
+			ang[4 * i + 1] = 0;
+			ang[4 * i + 2] = fabs(a) * M_PI / 180;
+			ang[4 * i + 3] = a >= 0 ? M_PI : 0;
+		}
+		if (slices_band(m, np, ang, wsel, o->band_k, q->f, q->lo, q->hi, err))
+			goto out;
+		for (size_t i = 0; i < np; i++) {
+			if (q->f[i] > 0)
+				vmin = fmin(vmin, q->f[i]);
+			vmax = fmax(vmax, q->hi[i]);
+		}
+		/* in-plane samples at this incidence, reduced by the same weights (sample spectra read linearly) */
+		for (size_t i = 0; s && i < s->n; i++) {
+			const double *a = s->ang + 4 * i;
+			double dphi = a[3] - a[1];
+			if (fabs(a[0] - th[t]) > 0.05 * M_PI / 180 || fabs(sin(dphi)) > stol)
+				continue;
+			double v = 0, sg = 0, wsum = 0;
+			int bad = 0;
+			for (size_t l = 0; l < L && !bad; l++) {
+				if (wsel[l] == 0)
+					continue;
+				size_t b = 0;
+				while (b + 2 < s->nwl && s->wl[b + 1] <= m->wl[l])
+					b++;
+				double tt = s->nwl > 1 ? (m->wl[l] - s->wl[b]) / (s->wl[b + 1] - s->wl[b]) : 0;
+				tt = tt < 0 ? 0 : tt > 1 ? 1 : tt;
+				size_t b1 = s->nwl > 1 ? b + 1 : b;
+				double x0 = s->val[i * s->nwl + b], x1 = s->val[i * s->nwl + b1];
+				if (!isfinite(x0) || !isfinite(x1)) {
+					bad = 1;
+					break;
+				}
+				v += wsel[l] * ((1 - tt) * x0 + tt * x1);
+				if (s->sig) {
+					double s0 = s->sig[i * s->nwl + b], s1 = s->sig[i * s->nwl + b1];
+					sg += wsel[l] * ((1 - tt) * s0 + tt * s1);
+				}
+				wsum += wsel[l];
+			}
+			if (bad || !(wsum > 0))
+				continue;
+			q->sx[q->ns] = (cos(dphi) < 0 ? 1 : -1) * a[2] * 180 / M_PI;
+			q->sv[q->ns] = v;
+			q->ss[q->ns] = s->sig && isfinite(sg) ? sg : NAN;
+			if (v > 0)
+				vmin = fmin(vmin, v);
+			vmax = fmax(vmax, v + (isfinite(q->ss[q->ns]) ? o->band_k * q->ss[q->ns] : 0));
+			q->ns++;
+			nsamp++;
+		}
+	}
+	if (!(vmax > 0)) {
+		acq_errf(err, ACQ_E_NUMERIC, "slices: the model is 0 on every slice at this wavelength selection");
+		goto out;
+	}
+	if (!(vmin < HUGE_VAL))
+		vmin = vmax * 1e-6;
+	struct frame fr = { 80, 40, o->width - 200.0, o->height - 60.0, -90, 90, 0, 0 };
+	fr.y1 = ceil(log10(vmax) * 4) / 4;
+	fr.y0 = fmax(floor(log10(vmin) * 4) / 4, fr.y1 - 6);
+	if (fr.y1 - fr.y0 < 1)
+		fr.y0 = fr.y1 - 1;
+	char title[160];
+	if (o->wl_lo == o->wl_hi)
+		snprintf(title, sizeof title, "In-plane BRDF at \u03bb = %g nm (model, \u00b1%g\u03c3 band; samples \u00b1%g\u03c3)",
+			 o->wl_lo, o->band_k, o->band_k);
+	else
+		snprintf(title, sizeof title, "In-plane BRDF, %g\u2013%g nm band mean (model, \u00b1%g\u03c3 band; samples "
+			 "\u00b1%g\u03c3)", o->wl_lo, o->wl_hi, o->band_k, o->band_k);
+	sf = cairo_image_surface_create(CAIRO_FORMAT_RGB24, o->width, o->height);
+	cr = cairo_create(sf);
+	draw_inplane(cr, o, S, nth, &fr, title);
+	cairo_destroy(cr);
+	cr = NULL;
+	if (write_png(sf, png, err))
+		goto out;
+	cairo_surface_destroy(sf);
+	sf = NULL;
+	if (polar_png) {
+		int cols = nth < 4 ? (int)nth : 4, rows = (int)((nth + 3) / 4), pw = 300, ph = 190;
+		sf = cairo_image_surface_create(CAIRO_FORMAT_RGB24, cols * pw, rows * ph + 30);
+		cr = cairo_create(sf);
+		cairo_set_source_rgb(cr, 1, 1, 1);
+		cairo_paint(cr);
+		cairo_select_font_face(cr, "sans-serif", CAIRO_FONT_SLANT_NORMAL, CAIRO_FONT_WEIGHT_NORMAL);
+		cairo_set_font_size(cr, 12);
+		cairo_set_source_rgb(cr, 0, 0, 0);
+		/* radius: log f from a little below the smallest value, so the diffuse part is not squeezed */
+		double py0 = fmax(fr.y0, log10(vmin) - 0.25);
+		char pt[160];
+		snprintf(pt, sizeof pt, "polar: radius log10 f from %.3g to %.3g (rings at decades); dashed: incidence", py0,
+			 fr.y1);
+		text(cr, cols * pw / 2.0, 8, pt, 0.5, 0);
+		for (size_t t = 0; t < nth; t++)
+			draw_polar(cr, o, &S[t], t, pw * (double)(t % 4) + pw / 2.0, 30 + ph * (double)(t / 4) + ph - 32, 130,
+				   py0, fr.y1);
+		cairo_destroy(cr);
+		cr = NULL;
+		if (write_png(sf, polar_png, err))
+			goto out;
+	}
+	if (csv) {
+		cf = fopen(csv, "w");
+		if (!cf) {
+			acq_errf(err, ACQ_E_IO, "slices: cannot create %s", csv);
+			goto out;
+		}
+		fprintf(cf, "kind,theta_i,theta_o_signed,value,lo,hi\n");
+		for (size_t t = 0; t < nth; t++) {
+			for (size_t i = 0; i < S[t].np; i++)
+				fprintf(cf, "model,%.10g,%.10g,%.10g,%.10g,%.10g\n", S[t].theta * 180 / M_PI, S[t].x[i], S[t].f[i],
+					S[t].lo[i], S[t].hi[i]);
+			for (size_t i = 0; i < S[t].ns; i++) {
+				double sg = isfinite(S[t].ss[i]) ? o->band_k * S[t].ss[i] : 0;
+				fprintf(cf, "sample,%.10g,%.10g,%.10g,%.10g,%.10g\n", S[t].theta * 180 / M_PI, S[t].sx[i], S[t].sv[i],
+					S[t].sv[i] - sg, S[t].sv[i] + sg);
+			}
+		}
+		int bad = ferror(cf);
+		bad |= fclose(cf) != 0;
+		cf = NULL;
+		if (bad) {
+			acq_errf(err, ACQ_E_IO, "slices: writing %s failed", csv);
+			goto out;
+		}
+	}
+	if (res) {
+		memset(res, 0, sizeof *res);
+		res->nth = nth;
+		memcpy(res->theta, th, nth * sizeof *th);
+		res->nsamples = nsamp;
+		for (size_t l = 0; l < L; l++)
+			res->nchannels += wsel[l] != 0;
+	}
+	rc = 0;
+out:
+	if (cf)
+		fclose(cf);
+	if (cr)
+		cairo_destroy(cr);
+	if (sf)
+		cairo_surface_destroy(sf);
+	for (size_t t = 0; t < SLICES_MAX_THETA; t++) {
+		free(S[t].x);
+		free(S[t].f);
+		free(S[t].lo);
+		free(S[t].hi);
+		free(S[t].sx);
+		free(S[t].sv);
+		free(S[t].ss);
+	}
+	free(ang);
+	free(wsel);
+	return rc;
+}

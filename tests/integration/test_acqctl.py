@@ -1,0 +1,287 @@
+#!/usr/bin/python3
+"""Integration: acqctl as the operator uses it, on the simulated bench.
+- every command's --json output validates against its schema in proto/schema/acqctl-replies.schema.json
+  (and every refusal against the error schema), human output is produced for each;
+- exit codes: 0 ok, 1 refused, 64 usage, 66 unreadable input, 69 no daemon; --help and --version never connect
+  (checked with a socket path that would hang: a listener that never answers);
+- home, stop (of a running move: the move's requester gets the refusal), laser off (the simulator's truth says
+  emission off), spectrum ID (--json, --csv, -o);
+- replies show the state after the command (sweep abort -> idle, move -> the new positions);
+- `acqctl watch` (not a terminal) prints JSON lines and reconnects when the daemon restarts;
+- `acq-sim ctl` drives the simulator (sample, fault, truth) with its exit codes; --version of the four programs."""
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import sweeplib as L  # noqa: E402
+
+try:
+    import jsonschema
+except ImportError:  # Debian python3-jsonschema is for /usr/bin/python3 (make deps installs it)
+    jsonschema = None
+
+CTL = os.path.join(L.BUILD, "acqctl")
+SCHEMA = json.load(open(os.path.join(L.SRC, "proto", "schema", "acqctl-replies.schema.json")))
+PLAN = "name: t-acqctl\nincidence:\n  theta_deg: [20]\nobservation:\n  theta_deg: [40]\n" \
+       "  phi_deg: [0, 180]\nintegration: {mode: fixed, ms: 5}\naverages: 1\nblind_points: drop\n"
+
+
+def check(cond, what):
+    if not cond:
+        raise AssertionError(what)
+
+
+def validate(doc, name):
+    if jsonschema is None:
+        raise L.Skip("python3-jsonschema missing (make deps installs it)")
+    sch = dict(SCHEMA)
+    sch["$ref"] = "#/$defs/" + name
+    try:
+        jsonschema.validate(doc, sch)
+    except jsonschema.ValidationError as e:
+        raise AssertionError("%s: %s does not match its schema: %s" % (name, json.dumps(doc)[:300], e.message))
+
+
+class Ctl:
+    def __init__(self, sock, env=None):
+        self.sock, self.env = sock, env
+
+    def run(self, *args, timeout=60):
+        return subprocess.run([CTL, "-s", self.sock] + list(args), capture_output=True, text=True, timeout=timeout,
+                              env=self.env)
+
+    def json(self, name, *args, rc=0):
+        """acqctl --json ARGS: exit status rc, one JSON document on stdout, valid against $defs[name]."""
+        p = self.run("--json", *args)
+        check(p.returncode == rc, "acqctl %s: exit %d, wanted %d: %s" % (" ".join(args), p.returncode, rc, p.stderr))
+        lines = p.stdout.splitlines()
+        check(len(lines) == 1, "acqctl --json %s: %d lines of output" % (" ".join(args), len(lines)))
+        doc = json.loads(lines[0])
+        validate(doc, name if rc == 0 else "error")
+        return doc
+
+    def human(self, *args, rc=0):
+        p = self.run(*args)
+        check(p.returncode == rc and (p.stdout if rc == 0 else p.stderr),
+              "acqctl %s: exit %d (wanted %d), out %r err %r" % (" ".join(args), p.returncode, rc, p.stdout, p.stderr))
+        return p.stdout if rc == 0 else p.stderr
+
+
+def hanging_socket(path):
+    """A listener that accepts and never says anything: a client that connects waits forever."""
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    s.bind(path)
+    s.listen(8)
+    return s
+
+
+def offline_checks(tmp):
+    hang = os.path.join(tmp, "hang.sock")
+    hs = hanging_socket(hang)
+    try:
+        for args in (["--help"], ["sweep", "start", "--help"], ["help", "export"], ["--version"], ["export", "-h"],
+                     ["wait", "--help"]):
+            t0 = time.time()
+            p = subprocess.run([CTL, "-s", hang] + args, capture_output=True, text=True, timeout=10)
+            check(p.returncode == 0 and p.stdout and time.time() - t0 < 5, "acqctl %s connected or failed: %d %r"
+                  % (" ".join(args), p.returncode, p.stderr))
+        check(subprocess.run([CTL, "--version"], capture_output=True, text=True).stdout.startswith("acqctl "),
+              "acqctl --version")
+        for prog in ("acquisitiond", "acq-sim", "brdf-recon"):
+            p = subprocess.run([os.path.join(L.BUILD, prog), "--version"], capture_output=True, text=True, timeout=10)
+            check(p.returncode == 0 and p.stdout.startswith(prog + " "), "%s --version: %d %r" % (prog, p.returncode,
+                                                                                              p.stdout + p.stderr))
+        # usage errors: 64, before anything is sent (the hanging socket would time the call out)
+        for args in (["bogus"], ["move", "laser_theta=abc"], ["move", "nope=1"], ["sweep", "show"], ["--frob"],
+                     ["export", "1", "2"], ["wait", "sideways"], []):
+            p = subprocess.run([CTL, "-s", hang] + args, capture_output=True, text=True, timeout=10)
+            check(p.returncode == 64, "acqctl %s: exit %d, wanted 64 (%r)" % (" ".join(args), p.returncode, p.stderr))
+        p = subprocess.run([CTL, "-s", hang, "--json", "bogus"], capture_output=True, text=True, timeout=10)
+        validate(json.loads(p.stdout), "error")
+        p = subprocess.run([CTL, "-s", hang, "sweep", "start", os.path.join(tmp, "none.yaml")], capture_output=True,
+                           text=True, timeout=10)
+        check(p.returncode == 66 and "none.yaml" in p.stderr, "unreadable plan: %d %r" % (p.returncode, p.stderr))
+    finally:
+        hs.close()
+    nosock = os.path.join(tmp, "nosuch.sock")
+    c = Ctl(nosock)
+    d = c.json("error", "status", rc=69)
+    check(d["error"]["code"] == "unavailable", "no daemon: %r" % d)
+    check("cannot connect" in c.human("status", rc=69), "no daemon, human")
+    # plan: one output whether or not a daemon answers (local dry run)
+    plan = os.path.join(tmp, "p.yaml")
+    open(plan, "w").write(PLAN)
+    d = c.json("plan", "plan", plan, "--config", os.path.join(L.SRC, "config", "bench-sim.yaml"))
+    check(d["source"] == "local", "local plan %r" % d)
+    return plan, d
+
+
+def main():
+    b = L.Bench(scale=5.0)  # slow enough for a move to be stopped midway
+    tmp = b.dir
+    try:
+        plan, local = offline_checks(tmp)
+        b.start_sim()
+        b.start_daemon()
+        c = Ctl(b.sock)
+        # --- information commands: schema and human output
+        for name, args in (("version", ["version"]), ("status", ["status"]), ("devices", ["devices"]),
+                           ("config", ["config"]), ("sweep.list", ["sweep", "list"])):
+            c.json(name, *args)
+            c.human(*args)
+        out = c.human("status")
+        check(out.startswith("daemon     running") and "(simulated bench)" in out, "status human %r" % out)
+        out = c.human("devices")
+        check("°" in out and "Oriental Motor" in out and "Avantes" in out, "devices human %r" % out)
+        # plan: the daemon's answer has the local one's shape and figures
+        d = c.json("plan", "plan", plan)
+        check(d["source"] == "daemon", "daemon plan %r" % d["source"])
+        for k in ("requested", "kept", "dropped", "measured", "duration_s"):
+            check(d["plan"][k] == local["plan"][k], "plan %s: daemon %r, local %r" % (k, d["plan"][k], local["plan"][k]))
+        d = c.json("plan", "plan", plan, "--points")
+        check(len(d["plan"]["steps"]) == d["plan"]["measured"], "--points reaches the daemon")
+        # --- manual commands on the simulated bench
+        d = c.json("home", "home", "detector_phi")
+        check(d["homed"] == ["detector.phi"] and abs(d["detector.phi"]) < 0.05, "home %r" % d)
+        d = c.json("move", "move", "laser_theta=20", "detector_theta=40", "detector_phi=90")
+        check(abs(d["laser.theta"] - 20) < 0.05 and abs(d["detector.phi"] - 90) < 0.05, "move shows the after %r" % d)
+        d = c.json("stop", "stop")
+        check(d["stopped"] is False, "stop with nothing running %r" % d)
+        # stop a long move: its requester gets "stopped by the operator", the arm stops short of the target
+        res = {}
+        t = threading.Thread(target=lambda: res.update(p=c.run("--json", "move", "detector_phi=350")))
+        t.start()
+        time.sleep(0.3)
+        d = c.json("stop", "stop")
+        t.join(30)
+        check(d["stopped"] is True and 90 < d["detector.phi"] < 349, "stop mid-move %r" % d)
+        mv = json.loads(res["p"].stdout)
+        check(res["p"].returncode == 1 and "stopped by the operator" in mv["error"]["message"], "stopped move %r" % mv)
+        validate(mv, "error")
+        # laser off: the simulator's truth agrees
+        b.ctl("laser on 50")
+        d = c.json("laser.off", "laser", "off")
+        check(b.sim_status()["emission"] == "0", "laser off: the simulator still emits")
+        # a measurement, then its spectrum
+        m = c.json("measure", "measure", "integration_ms=20", "averages=1")
+        sid = m["spectrum_id"]
+        check(b.sim_status()["emission"] == "0", "the laser is off after a measurement")
+        d = c.json("spectrum", "spectrum", str(sid))
+        s = d["spectrum"]
+        check(s["id"] == sid and s["npix"] == len(s["counts"]) == len(s["wavelength_nm"]) and s["kind"] == "sample",
+              "spectrum %r" % {k: s[k] for k in ("id", "npix", "kind")})
+        check(abs(max(x for x in s["counts"] if x is not None) - m["peak"]) < 1e-3 * m["peak"], "the same spectrum")
+        out = c.human("spectrum", str(sid), "--csv")
+        rows = out.splitlines()
+        check(rows[1].startswith("wavelength_nm,counts") and len(rows) == 2 + s["npix"], "spectrum CSV %r" % rows[:2])
+        wl0 = float(rows[2].split(",")[0])
+        check(400 < wl0 < 1200, "wavelength column in nm: %r" % rows[2])
+        csvf = os.path.join(tmp, "spec.csv")
+        check("rows written to" in c.human("spectrum", str(sid), "--csv", "-o", csvf), "spectrum -o summary")
+        check(open(csvf).read() == out, "spectrum -o FILE")
+        d = c.json("error", "spectrum", "999999", rc=1)
+        check(d["error"]["code"] == "not_found", "missing spectrum %r" % d)
+        c.human("move", "detector_theta=500", rc=1)  # refused by the daemon: 1
+        # --- a sweep: replies show the state after the command
+        b.ctl("sample white")
+        d = c.json("sweep.start", "sweep", "start", plan)
+        check(d["progress"]["state"] == "running" and d["progress"]["id"] == d["sweep"], "start %r" % d)
+        p = c.run("wait", "paused", "--timeout-s", "60")  # the reference is measured, then it pauses
+        check(p.returncode == 0 and "paused" in p.stdout, "wait paused: %d %r" % (p.returncode, p.stderr))
+        d = c.json("sweep.resume", "sweep", "resume")
+        check(d["progress"]["state"] == "running" and "paused" not in d["progress"]["message"], "resume %r" % d)
+        d = c.json("sweep.pause", "sweep", "pause")
+        check(d["progress"]["state"] == "paused", "pause shows after %r" % d)
+        p = c.run("wait", "running", "--timeout-s", "1")
+        check(p.returncode == 75, "wait times out with 75: %d" % p.returncode)
+        d = c.json("sweep.abort", "sweep", "abort")
+        check(d["progress"]["state"] == "idle" and "aborted" in d["progress"]["message"], "abort shows after %r" % d)
+        d = c.json("error", "sweep", "abort", rc=1)
+        check(d["error"]["code"] == "state", "second abort %r" % d)
+        d = c.json("sweep.list", "sweep", "list")
+        check(d["sweeps"][0]["state"] == "aborted", "aborted in the list %r" % d["sweeps"][0])
+        out = c.human("sweep", "list")
+        check("aborted" in out and "T" in out.splitlines()[1], "sweep list with dates %r" % out)
+        c.json("sweep.show", "sweep", "show", str(d["sweeps"][0]["id"]))
+        d = c.json("error", "recon", "status", "1", rc=1)  # positional form, no run for this sweep
+        check(d["error"]["code"] == "not_found", "recon status 1 %r" % d)
+        # --- watch: JSON lines, reconnects across a daemon restart
+        w = subprocess.Popen([CTL, "-s", b.sock, "watch"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(0.5)
+        c.json("reload", "reload")
+        time.sleep(0.3)
+        b.kill_daemon(signal.SIGTERM)
+        time.sleep(1.5)
+        b.start_daemon()
+        time.sleep(2.5)
+        c.json("reload", "reload")
+        time.sleep(0.5)
+        w.terminate()
+        out, err = w.communicate(timeout=10)
+        evs = [json.loads(x) for x in out.splitlines()]
+        for e in evs:
+            validate(e, "watch")
+        names = [e["event"] for e in evs]
+        check(names.count("config") == 2 and "acqctl.disconnected" in names and "acqctl.reconnected" in names,
+              "watch across a restart: %r" % names)
+        last_config = len(names) - 1 - names[::-1].index("config")
+        check(names.index("acqctl.disconnected") < names.index("acqctl.reconnected") < last_config, "order %r" % names)
+        check(w.returncode == 0, "watch ends with 0 on SIGTERM (%r)" % w.returncode)
+        # --- watch on a terminal: the live view (redrawn in place), not JSON
+        import pty
+        mfd, sfd = pty.openpty()
+        tw = subprocess.Popen([CTL, "-s", b.sock, "watch"], stdout=sfd, stderr=sfd, stdin=subprocess.DEVNULL)
+        os.close(sfd)
+        buf = b""
+        deadline = time.time() + 10
+        while time.time() < deadline and b"last events" not in buf:
+            try:
+                buf += os.read(mfd, 65536)
+            except OSError:
+                break
+        c.json("reload", "reload")
+        t_end = time.time() + 3
+        while time.time() < t_end and b"configuration reloaded" not in buf:
+            try:
+                buf += os.read(mfd, 65536)
+            except OSError:
+                break
+        tw.terminate()
+        tw.wait(10)
+        os.close(mfd)
+        text = buf.decode(errors="replace")
+        check("\033[H\033[2J" in text and "acqctl watch" in text and "devices" in text and "spectrometer" in text
+              and "configuration reloaded" in text and not text.lstrip().startswith("{"), "TTY view %r" % text[-600:])
+        # --- acq-sim ctl
+        sim = os.path.join(L.BUILD, "acq-sim")
+        env = dict(os.environ, ACQ_SIM_PORTS=b.ports)
+        p = subprocess.run([sim, "ctl", "reference"], capture_output=True, text=True, env=env)
+        check(p.returncode == 0 and b.sim_status()["sample"] == "white", "acq-sim ctl reference %r" % p.stderr)
+        p = subprocess.run([sim, "ctl", "--json", "sample", "metal"], capture_output=True, text=True, env=env)
+        check(p.returncode == 0 and json.loads(p.stdout) == {"ok": True, "sample": "metal"}, "ctl sample %r" % p.stdout)
+        p = subprocess.run([sim, "ctl", "--control", b.ctl_path, "--json", "truth"], capture_output=True, text=True)
+        t = json.loads(p.stdout)
+        check(p.returncode == 0 and t["sample"] == "metal" and "laser_theta" in t, "ctl truth %r" % t)
+        p = subprocess.run([sim, "ctl", "fault", "bogus"], capture_output=True, text=True, env=env)
+        check(p.returncode == 1 and "unknown fault" in p.stderr, "ctl refused %r" % p.stderr)
+        p = subprocess.run([sim, "ctl", "fault", "saturation-burst", "2"], capture_output=True, text=True, env=env)
+        check(p.returncode == 0, "ctl fault %r" % p.stderr)
+        check("saturation-burst" in b.sim_status()["faults"], "fault active %r" % b.sim_status())
+        p = subprocess.run([sim, "ctl", "--control", os.path.join(tmp, "none.sock"), "status"], capture_output=True,
+                           text=True)
+        check(p.returncode == 69, "ctl without a simulator: %d" % p.returncode)
+        p = subprocess.run([sim, "ctl"], capture_output=True, text=True)
+        check(p.returncode == 64, "ctl usage: %d" % p.returncode)
+        print("ok: acqctl commands, schemas, exit codes, watch reconnection, acq-sim ctl")
+    finally:
+        b.cleanup()
+
+
+if __name__ == "__main__":
+    L.main(main)

@@ -1,0 +1,82 @@
+#!/usr/bin/python3
+"""Golden test of acqctl's human output: a stand-in daemon answers with the recorded replies of
+tests/golden/acqctl/replies.json, acqctl renders them (TZ=Europe/Paris, C.UTF-8), and the output must equal
+tests/golden/acqctl/<command>.txt byte for byte (stable formatting: local ISO 8601 times with offset, h:mm:ss,
+angles rounded with their unit, aligned tables). ACQ_GOLDEN_UPDATE=1 rewrites the .txt files (review the diff)."""
+import json
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+
+BUILD = os.environ.get("ACQ_BUILD") or os.path.abspath("build")
+SRC = os.environ.get("ACQ_SRC") or os.path.abspath(".")
+GOLD = os.path.join(SRC, "tests", "golden", "acqctl")
+CASES = [("version", ["version"]), ("status", ["status"]), ("devices", ["devices"]), ("sweep.list", ["sweep", "list"]),
+         ("sweep.show", ["sweep", "show", "2"]), ("plan", ["plan", "PLANFILE"]),
+         ("move", ["move", "laser_theta=20", "detector_theta=40", "detector_phi=90"]),
+         ("sweep.abort", ["sweep", "abort"]), ("spectrum", ["spectrum", "7"]), ("spectrum", ["spectrum", "7", "--csv"]),
+         ("recon.status", ["recon", "status", "2"])]
+
+
+def serve(lsock, replies, seen):
+    while True:
+        try:
+            conn, _ = lsock.accept()
+        except OSError:
+            return
+        with conn:
+            conn.sendall(b'{"version":"1.2.3","protocol":1,"server":"acquisitiond","max_line":65536}\n')
+            buf = b""
+            while b"\n" not in buf:
+                chunk = conn.recv(65536)
+                if not chunk:
+                    break
+                buf += chunk
+            if b"\n" not in buf:
+                continue
+            req = json.loads(buf.split(b"\n", 1)[0])
+            seen.append(req)
+            rep = dict(replies[req["cmd"]], id=req["id"])
+            conn.sendall((json.dumps(rep) + "\n").encode())
+
+
+def main():
+    replies = json.load(open(os.path.join(GOLD, "replies.json")))
+    tmp = tempfile.mkdtemp(prefix="acqgold.")
+    path = os.path.join(tmp, "d.sock")
+    lsock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    lsock.bind(path)
+    lsock.listen(4)
+    seen = []
+    threading.Thread(target=serve, args=(lsock, replies, seen), daemon=True).start()
+    plan = os.path.join(tmp, "plan.yaml")
+    open(plan, "w").write("name: quick\n")
+    env = dict(os.environ, TZ="Europe/Paris", LC_ALL="C.UTF-8")
+    update = os.environ.get("ACQ_GOLDEN_UPDATE") == "1"
+    bad = []
+    for name, args in CASES:
+        args = [plan if a == "PLANFILE" else a for a in args]
+        p = subprocess.run([os.path.join(BUILD, "acqctl"), "-s", path] + args, capture_output=True, text=True,
+                           env=env, timeout=20)
+        if p.returncode != 0:
+            bad.append("%s: exit %d: %s" % (" ".join(args), p.returncode, p.stderr))
+            continue
+        gold = os.path.join(GOLD, "_".join(a for a in args if a != plan).replace("=", "-") + ".txt")
+        if update:
+            open(gold, "w").write(p.stdout)
+            continue
+        want = open(gold).read() if os.path.exists(gold) else None
+        if p.stdout != want:
+            bad.append("%s differs from %s:\n--- got\n%s--- want\n%s" % (" ".join(args), gold, p.stdout, want))
+    lsock.close()
+    if bad:
+        print("FAIL:\n" + "\n".join(bad))
+        sys.exit(1)
+    print("ok: %d golden outputs%s" % (len(CASES), " rewritten" if update else ""))
+
+
+if __name__ == "__main__":
+    main()
