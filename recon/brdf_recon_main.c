@@ -593,7 +593,7 @@ static int cmd_dhr(int argc, char **argv)
 		if (ok && zout && out_close(&zo, ok, &err))
 			ok = 0;
 		if (ok)
-			fprintf(stderr, "reference %s at theta_i=%g: %zu wavelengths compared, agreement %.1f%% within |z| < 2 "
+			fprintf(stderr, "reference %s at theta_i=%g: %zu wavelengths compared, agreement %.1f%% within |z| <= 2 "
 				"(z with both uncertainties), RMS z %.3g, max |z| %.3g at %g nm, chi2/n %.3g with the "
 				"correlated components (certificate, drift) as one common factor\n", refp, ref_th, ag.n,
 				ag.n ? 100.0 * (double)ag.within2 / (double)ag.n : 0.0, ag.rms_z, ag.max_z, ag.max_z_wl,

@@ -65,7 +65,7 @@ void recon_agreement(size_t n, const double *wl, const double *md, const double 
 			continue;
 		a->n++;
 		sz2 += zi * zi;
-		a->within2 += fabs(zi) < 2;
+		a->within2 += fabs(zi) <= 2;
 		if (fabs(zi) > a->max_z) {
 			a->max_z = fabs(zi);
 			a->max_z_wl = wl[i];

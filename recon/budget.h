@@ -30,7 +30,7 @@ int recon_budget(size_t nth, size_t L, const double *wl, const double *dhr, cons
 /* Agreement of a DHR curve (model: value md, total σ ms, its correlated part mc — cert and drift, fully correlated
  * across wavelengths — at each reference wavelength) with a reference (rv ± rs, independent per wavelength). */
 struct recon_agreement {
-	size_t n, within2;   /* wavelengths compared; |z| < 2 among them, z = (md − rv)/√(ms² + rs²) */
+	size_t n, within2;   /* wavelengths compared; |z| <= 2 among them, z = (md − rv)/√(ms² + rs²) */
 	double rms_z, max_z, max_z_wl;
 	double chi2_n;       /* χ²/n with the correlated part as one common factor (Sherman-Morrison) */
 };
