@@ -231,7 +231,7 @@ int main(int argc, char **argv)
 	job_init(app.lp);
 	if (server_init(app.lp, &app.conf->d, ACQ_VERSION, commands_handle, &app, &app.srv, &err))
 		goto fail;
-	if (devices_init(app.lp, app.store, app.conf, NULL, app_device_notify, &app, app_wallclock, &app.dev, &err))
+	if (devices_init(app.lp, app.store, app.conf, app_device_notify, &app, app_wallclock, &app.dev, &err))
 		goto fail;
 	struct sweep_env env = { .loop = app.lp, .store = app.store, .devices = app.dev, .conf = app.conf,
 				 .emit = app_emit, .emit_ctx = &app, .wallclock = app_wallclock,

@@ -2,6 +2,7 @@
 #include "daemon/calib.h"
 
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #define DEG (M_PI / 180.0)
@@ -239,8 +240,9 @@ int calib_resample(const struct calib_cfg *c, const double *wl, const struct cal
 		return acq_errf(err, ACQ_E_INVAL, "calibration: empty or too large wavelength grid");
 	if (px->npix <= 0 || px->npix > SPECTRO_MAX_PIXELS)
 		return acq_errf(err, ACQ_E_INVAL, "calibration: %d pixels", px->npix);
-	static _Thread_local struct bin_acc acc[CALIB_MAX_GRID];
-	memset(acc, 0, sizeof(struct bin_acc) * (size_t)n);
+	struct bin_acc *acc = calloc((size_t)n, sizeof *acc);
+	if (!acc)
+		return acq_errf(err, ACQ_E_NOMEM, "calibration: out of memory");
 	o->n = n;
 	o->method = c->method;
 	double h = c->grid_step_nm / 2, lo = c->grid_min_nm - h;
@@ -298,6 +300,7 @@ int calib_resample(const struct calib_cfg *c, const double *wl, const struct cal
 		o->u_ref[k] = hypot(hypot(w1 * px->u_refn[p], w2 * px->u_refn[q]), w1 * px->u_refs[p] + w2 * px->u_refs[q]);
 		o->u_angle[k] = w1 * px->u_angle[p] + w2 * px->u_angle[q];
 	}
+	free(acc);
 	calib_combine(o);
 	return 0;
 }
@@ -306,33 +309,10 @@ int calib_spectrum(const struct calib_cfg *c, const double *wl, const struct exp
 		   const struct exp_rate *ref, const struct calib_geom *g, struct calib_spectrum *out,
 		   struct acq_err *err)
 {
-	static _Thread_local struct calib_px px;
-	if (calib_pixels(c, wl, sample, ref, g, &px, err))
-		return -1;
-	return calib_resample(c, wl, &px, out, err);
-}
-
-int calib_angle_from_neighbours(const struct calib_spectrum *prev, double a_prev, struct calib_spectrum *here,
-				double a_here, const struct calib_spectrum *next, double a_next, double sigma_deg,
-				struct acq_err *err)
-{
-	if (prev && (prev->n != here->n || !(fabs(a_here - a_prev) > 1e-9)))
-		prev = NULL;
-	if (next && (next->n != here->n || !(fabs(a_next - a_here) > 1e-9)))
-		next = NULL;
-	if (!prev && !next)
-		return acq_errf(err, ACQ_E_INVAL, "angular term: no usable neighbour");
-	for (int k = 0; k < here->n; k++) {
-		double slope = NAN;
-		if (prev && next && isfinite(prev->f[k]) && isfinite(next->f[k]))
-			slope = (next->f[k] - prev->f[k]) / (a_next - a_prev);
-		else if (next && isfinite(next->f[k]) && isfinite(here->f[k]))
-			slope = (next->f[k] - here->f[k]) / (a_next - a_here);
-		else if (prev && isfinite(prev->f[k]) && isfinite(here->f[k]))
-			slope = (here->f[k] - prev->f[k]) / (a_here - a_prev);
-		if (isfinite(slope))
-			here->u_angle[k] = fabs(slope) * sigma_deg;
-	}
-	calib_combine(here);
-	return 0;
+	struct calib_px *px = malloc(sizeof *px);
+	if (!px)
+		return acq_errf(err, ACQ_E_NOMEM, "calibration: out of memory");
+	int rc = calib_pixels(c, wl, sample, ref, g, px, err) ? -1 : calib_resample(c, wl, px, out, err);
+	free(px);
+	return rc;
 }

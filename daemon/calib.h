@@ -12,8 +12,8 @@
  *   noise  the sample's scan noise (per-pixel std / √averages, over t)
  *   dark   the dark's noise, same form
  *   ref    the reference's (or beam's) own noise and dark, combined with u(ρ_ref) (or u(Ω_det))
- *   angle  positioning: |∂f/∂θ| · σ_pos, with |∂f/∂θ| = angle_rel_per_deg · f (configured) or from
- *          neighbouring points (calib_angle_from_neighbours), plus the cosine factor's own sensitivity.
+ *   angle  positioning: |∂f/∂θ| · σ_pos, with |∂f/∂θ| = angle_rel_per_deg · f (configured), plus the cosine
+ *          factor's own sensitivity.
  * Binning: a grid value is the plain mean of the valid pixels in [λ − step/2, λ + step/2); components that
  * are independent per pixel (noise, dark, reference noise) add in quadrature (/n), components common to all
  * pixels of a bin (ρ_ref or Ω_det scale, angle) add linearly. A bin with no pixel interpolates linearly between
@@ -100,11 +100,6 @@ int calib_resample(const struct calib_cfg *c, const double *wl, const struct cal
 int calib_spectrum(const struct calib_cfg *c, const double *wl, const struct exp_rate *sample,
 		   const struct exp_rate *ref, const struct calib_geom *g, struct calib_spectrum *out,
 		   struct acq_err *err);
-/* Replace the angular term of `here` by |∂f/∂a| · sigma_deg, the slope from its neighbours along one angle
- * (prev/next may be NULL; central difference when both exist), and recombine u. 0 or -1 if no neighbour. */
-int calib_angle_from_neighbours(const struct calib_spectrum *prev, double a_prev, struct calib_spectrum *here,
-				double a_here, const struct calib_spectrum *next, double a_next, double sigma_deg,
-				struct acq_err *err);
 /* Recompute the combined u from the four components. */
 void calib_combine(struct calib_spectrum *s);
 

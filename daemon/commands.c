@@ -105,6 +105,7 @@ struct pending {
 	uint64_t serial;
 	json_t *id;
 	const char *warning;  /* static text added to a successful reply */
+	int stopped;          /* >= 0: `stopped` added to a successful reply (stop) */
 };
 
 static void pending_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
@@ -115,6 +116,8 @@ static void pending_done(void *ctx, int rc, const struct acq_err *err, json_t *r
 	else {
 		if (p->warning && json_is_object(result))
 			json_object_set_new(result, "warning", json_string(p->warning));
+		if (p->stopped >= 0 && json_is_object(result))
+			json_object_set_new(result, "stopped", json_boolean(p->stopped));
 		server_reply(p->app->srv, p->serial, p->id, result);
 	}
 	json_decref(p->id);
@@ -125,7 +128,7 @@ static struct pending *pending_new(struct app *app, const struct srv_peer *peer,
 {
 	struct pending *p = calloc(1, sizeof *p);
 	if (p)
-		*p = (struct pending){ .app = app, .serial = peer->serial, .id = json_incref(id) };
+		*p = (struct pending){ .app = app, .serial = peer->serial, .id = json_incref(id), .stopped = -1 };
 	return p;
 }
 
@@ -171,6 +174,22 @@ static void cmd_measure(struct app *app, const struct srv_peer *peer, struct pro
 		return reply_err(app, peer, req->id, &err);
 	}
 	if (devices_measure(app->dev, kind, it, avg, num_arg(req->root, "power_pct", NAN), pending_done, p, &err)) {
+		json_decref(p->id);
+		free(p);
+		reply_err(app, peer, req->id, &err);
+	}
+}
+
+/* `devices`: the report waits for fresh status reads on the devices' own threads (the loop never does). */
+static void cmd_devices(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	struct pending *p = pending_new(app, peer, req->id);
+	if (!p) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return reply_err(app, peer, req->id, &err);
+	}
+	if (devices_query(app->dev, pending_done, p, &err)) {
 		json_decref(p->id);
 		free(p);
 		reply_err(app, peer, req->id, &err);
@@ -287,12 +306,19 @@ static void cmd_stop(struct app *app, const struct srv_peer *peer, struct proto_
 	bool stopped = false;
 	if (devices_stop(app->dev, &stopped, &err))
 		return reply_err(app, peer, req->id, &err);
-	double pos[3];
-	devices_positions(app->dev, pos);
-	json_t *o = json_pack("{s:b}", "stopped", stopped);
-	for (int i = 0; i < 3; i++)
-		json_object_set_new(o, conf_dev_name((enum conf_dev)i), isnan(pos[i]) ? json_null() : json_real(pos[i]));
-	server_reply(app->srv, peer->serial, req->id, o);
+	/* the positions read after the stops on each axis's thread: where the arms stopped */
+	struct pending *p = pending_new(app, peer, req->id);
+	if (p)
+		p->stopped = stopped ? 1 : 0;
+	if (!p || devices_read_positions(app->dev, pending_done, p, &err)) {
+		if (p) {
+			json_decref(p->id);
+			free(p);
+		} else {
+			acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		}
+		reply_err(app, peer, req->id, &err);
+	}
 }
 
 static void cmd_laser_off(struct app *app, const struct srv_peer *peer, struct proto_req *req)
@@ -300,11 +326,21 @@ static void cmd_laser_off(struct app *app, const struct srv_peer *peer, struct p
 	struct acq_err err = { 0 };
 	if (sweep_busy(app->sweep))
 		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: sweep pause or sweep abort switches the laser off");
-	else if (!devices_busy(app->dev) && !devices_laser_off(app->dev, &err)) {
-		log_msg(LOG_NOTICE, "laser switched off by the operator (uid %u)", (unsigned)peer->uid);
-		return server_reply(app->srv, peer->serial, req->id, json_pack("{s:b}", "emission", 0));
-	} else if (!err.code)
+	else if (devices_busy(app->dev))
 		acq_errf(&err, ACQ_E_STATE, "a manual measurement is running: acqctl stop ends it with the laser off");
+	else {
+		/* the laser's own thread switches it off and reads it back; the reply {emission: false} comes then */
+		struct pending *p = pending_new(app, peer, req->id);
+		if (!p)
+			acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		else if (devices_laser_off(app->dev, pending_done, p, &err)) {
+			json_decref(p->id);
+			free(p);
+		} else {
+			log_msg(LOG_NOTICE, "laser off requested by the operator (uid %u)", (unsigned)peer->uid);
+			return;
+		}
+	}
 	reply_err(app, peer, req->id, &err);
 }
 
@@ -523,7 +559,7 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
 	} else if (!strcmp(cmd, "status")) {
 		server_reply(app->srv, peer->serial, req->id, status_json(app));
 	} else if (!strcmp(cmd, "devices")) {
-		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_json(app->dev)));
+		cmd_devices(app, peer, req);
 	} else if (!strcmp(cmd, "config")) {
 		server_reply(app->srv, peer->serial, req->id,
 			     json_pack("{s:o}", "config", config_json(app, json_is_true(json_object_get(req->root, "text")))));

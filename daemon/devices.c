@@ -1,12 +1,18 @@
-/* devices: opening, reconnecting and reporting the bench's devices; manual move and measure (devices.h). */
-#include "daemon/devices.h"
+/* devices: the bench's devices, each behind its own I/O thread (port.h): opening, reconnecting, status reports
+ * from a cache, manual move and measure, and the sweep executor's device operations (devices.h).
+ *
+ * The loop never calls a driver. Every device call is a request run on the device's port thread; its
+ * completion comes back to the loop, updates the slot's cache and continues whoever asked (the device
+ * manager, a manual operation, a `devices` query or the executor, which is then kicked). A handle lives on its
+ * thread only; the loop knows the slot is available and what it last read. A slot's generation changes when
+ * its handle is closed, so completions of requests made for the old handle are recognised and dropped. */
+#include "daemon/devices_int.h"
 
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "daemon/executor.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
@@ -14,44 +20,198 @@
 #include "drivers/laser.h"
 #include "drivers/spectro.h"
 
-struct dev_slot {
-	bool configured, available;
-	char note[512];          /* why unavailable / last error */
-	char vendor[64], model[64], serial[64], firmware[64];
-};
+/* ---- on the port's thread ------------------------------------------------------------------------------ */
 
-const struct devices_drv devices_real_drv = {
-	axis_open, axis_close, axis_cfg_limits, axis_read_status, axis_move_begin, axis_move_step, axis_stop,
-	axis_identity, spectro_open, spectro_close, spectro_info, spectro_start, spectro_fetch, spectro_stop,
-	laser_open, laser_close, laser_set_emission, laser_set_power, laser_status, laser_identity, axis_home_begin,
-	axis_alarm_reset,
-};
+static int no_handle(struct req *r)
+{
+	return acq_errf(&r->err, ACQ_E_DISCONNECTED, "%s unavailable", dname(r->d));
+}
 
-struct devices {
-	const struct devices_drv *drv;
-	struct loop *lp;
-	struct store *st;
-	const struct conf *c;
-	devices_notify_fn notify;
-	void *ctx;
-	double (*wallclock)(void);
-	struct dev_slot slot[CONF_DEV__COUNT];
-	struct axis *axis[3];
-	struct spectro *spectro;
-	struct laser *laser;
-	int64_t spectro_id;
-	uint64_t retry_timer;
-	int retry_next;          /* the slot the next retry starts from */
-	/* manual operation in progress */
-	uint64_t op_timer;
-	devices_done_fn op_done;
-	void *op_ctx;
-	double op_deadline;
-	bool op_axis[3];
-	char op_kind[16];
-	bool op_laser;           /* the laser was switched on for this measurement: off at its end */
-	struct spectro_frame *frame;
-};
+/* A move or homing from start to end on the thread: step at the driver's poll times; an interrupt stops it. */
+static void run_motion(struct req *r, struct port *p, struct axis *ax)
+{
+	double now = port_now(p);
+	r->rc = r->op == R_HOME ? axis_home_begin(ax, now, &r->err) : axis_move_begin(ax, r->target, now, &r->err);
+	while (r->rc == 0) {
+		now = port_now(p);
+		int s = axis_move_step(ax, now, &r->err);
+		if (s == AXIS_MOVE_DONE)
+			break;
+		if (s == AXIS_MOVE_FAILED) {
+			r->rc = -1;
+			break;
+		}
+		if (port_interrupted(p) || now > r->deadline) {
+			struct acq_err e2;
+			axis_stop(ax, &e2);
+			if (port_interrupted(p))
+				r->rc = acq_errf(&r->err, ACQ_E_STATE, "%s: move stopped by request", dname(r->d));
+			else
+				r->rc = acq_errf(&r->err, ACQ_E_TIMEOUT, "move not finished after %g s",
+						 r->dv->c->sweep.move_timeout_s);
+			break;
+		}
+		double wait = axis_next_poll(ax) - now;
+		port_wait(p, wait > 0.5 ? 0.5 : wait, -1);
+	}
+	r->have_ast = axis_read_status(ax, &r->ast, NULL) == 0;
+}
+
+static void run_measure(struct req *r, struct port *p, struct spectro *sp)
+{
+	r->rc = spectro_start(sp, &r->meas, port_now(p), &r->err);
+	while (r->rc == 0) {
+		int f = spectro_fetch(sp, r->frame, port_now(p), &r->err);
+		if (f == 1)
+			break;
+		if (f < 0) {
+			r->rc = -1;
+			break;
+		}
+		if (port_interrupted(p)) {
+			spectro_stop(sp, NULL);
+			r->rc = acq_errf(&r->err, ACQ_E_STATE, "spectrometer: measurement stopped by request");
+			break;
+		}
+		port_wait_real(p, 0.005, spectro_pollfd(sp));
+	}
+}
+
+static void req_run(struct port_req *pr, struct port *p)
+{
+	struct req *r = (struct req *)pr;
+	struct dev_slot *s = &r->dv->slot[r->d];
+	r->rc = 0;
+	switch (r->op) {
+	case R_OPEN:
+		if (is_axis(r->d)) {
+			if (!s->ax)
+				r->rc = axis_open(r->cfg, &s->ax, &r->err);
+			if (!r->rc) {
+				axis_identity(s->ax, &r->aid, NULL);
+				r->have_ast = axis_read_status(s->ax, &r->ast, NULL) == 0;
+			}
+		} else if (r->d == CONF_DEV_SPECTRO) {
+			if (!s->sp)
+				r->rc = spectro_open(r->cfg, &s->sp, &r->err);
+			if (!r->rc) {
+				r->info = *spectro_info(s->sp);
+				r->have_info = true;
+			}
+		} else {
+			if (!s->ls)
+				r->rc = laser_open(r->cfg, &s->ls, &r->err);
+			if (!r->rc) {
+				r->lid = *laser_identity(s->ls);
+				r->have_lst = laser_status(s->ls, &r->lst, NULL) == 0;
+			}
+		}
+		break;
+	case R_CLOSE:
+		axis_close(s->ax);
+		spectro_close(s->sp);
+		laser_close(s->ls);
+		s->ax = NULL;
+		s->sp = NULL;
+		s->ls = NULL;
+		break;
+	case R_STATUS:
+		if (is_axis(r->d))
+			r->rc = !s->ax ? no_handle(r) : axis_read_status(s->ax, &r->ast, &r->err);
+		else
+			r->rc = !s->ls ? no_handle(r) : laser_status(s->ls, &r->lst, &r->err);
+		r->have_ast = !r->rc && is_axis(r->d);
+		r->have_lst = !r->rc && !is_axis(r->d);
+		break;
+	case R_MOVE:
+	case R_HOME:
+		if (!s->ax) {
+			r->rc = no_handle(r);
+			break;
+		}
+		if (r->op == R_HOME && r->on) { /* manual homing: an alarm is reset first */
+			struct axis_status st;
+			if (!axis_read_status(s->ax, &st, NULL) && st.alarm && axis_alarm_reset(s->ax, &r->err)) {
+				r->rc = -1;
+				acq_err_prefix(&r->err, "resetting its alarm: ");
+				break;
+			}
+		}
+		run_motion(r, p, s->ax);
+		break;
+	case R_STOP:
+		r->rc = !s->ax ? 0 : axis_stop(s->ax, &r->err);
+		break;
+	case R_ALARM_RESET:
+		r->rc = !s->ax ? no_handle(r) : axis_alarm_reset(s->ax, &r->err);
+		break;
+	case R_LASER:
+		if (!s->ls) {
+			r->rc = r->on ? no_handle(r) : 0;
+			break;
+		}
+		if (r->on && !isnan(r->pct))
+			r->rc = laser_set_power(s->ls, r->pct, &r->err);
+		if (!r->rc)
+			r->rc = laser_set_emission(s->ls, r->on, &r->err);
+		r->have_lst = laser_status(s->ls, &r->lst, r->rc ? NULL : &r->err) == 0;
+		if (!r->rc && !r->have_lst)
+			r->rc = -1;
+		break;
+	case R_POWER:
+		r->rc = !s->ls ? no_handle(r) : laser_set_power(s->ls, r->pct, &r->err);
+		break;
+	case R_MEASURE:
+		if (!s->sp)
+			r->rc = no_handle(r);
+		else if (!r->frame)
+			r->rc = acq_errf(&r->err, ACQ_E_NOMEM, "out of memory");
+		else
+			run_measure(r, p, s->sp);
+		break;
+	case R_SPECTRO_STOP:
+		r->rc = !s->sp ? 0 : spectro_stop(s->sp, &r->err);
+		break;
+	}
+}
+
+/* ---- on the loop: requests and completions -------------------------------------------------------------- */
+
+static void req_done(struct port_req *pr);
+
+struct req *devices_req_new(struct devices *dv, int d, enum rop op, enum owner owner)
+{
+	struct req *r = calloc(1, sizeof *r);
+	if (!r)
+		return NULL;
+	r->pr.run = req_run;
+	r->pr.done = req_done;
+	r->dv = dv;
+	r->d = d;
+	r->op = op;
+	r->owner = owner;
+	r->gen = dv->slot[d].gen;
+	if (owner == OWN_OP)
+		r->seq = dv->op_gen;
+	r->pct = NAN;
+	r->deadline = INFINITY;
+	return r;
+}
+
+/* Submit r to its slot's port. -1 (and r freed) when the slot has no port or memory ran out before. */
+int devices_req_submit(struct req *r)
+{
+	if (!r)
+		return -1;
+	struct dev_slot *s = &r->dv->slot[r->d];
+	if (!s->port) {
+		free(r->frame);
+		free(r);
+		return -1;
+	}
+	port_submit(s->port, &r->pr);
+	return 0;
+}
 
 static void set_identity(struct dev_slot *s, const char *vendor, const char *model, const char *serial,
 			 const char *fw)
@@ -62,112 +222,167 @@ static void set_identity(struct dev_slot *s, const char *vendor, const char *mod
 	snprintf(s->firmware, sizeof s->firmware, "%s", fw);
 }
 
-/* Try to open slot d; on success record its identity in the store. */
-static void try_open(struct devices *dv, enum conf_dev d)
+static void opened(struct devices *dv, struct req *r)
 {
-	struct dev_slot *s = &dv->slot[d];
-	struct acq_err err = { 0 };
-	int rc = -1;
-	double now = dv->wallclock();
-	if (d <= CONF_DEV_DETECTOR_PHI) {
-		rc = dv->drv->axis_open(dv->c->axis[d], &dv->axis[d], &err);
-		struct axis_identity id = { 0 };
-		if (!rc && !dv->drv->axis_identity(dv->axis[d], &id, NULL))
-			set_identity(s, id.vendor, id.model, id.serial, id.firmware);
-	} else if (d == CONF_DEV_SPECTRO) {
-		rc = dv->drv->spectro_open(dv->c->spectro, &dv->spectro, &err);
-		if (!rc) {
-			const struct spectro_info *in = dv->drv->spectro_info(dv->spectro);
-			set_identity(s, "Avantes", in->model, in->serial, in->firmware);
-			if (store_spectrometer_put(dv->st, in, now, &dv->spectro_id, &err))
-				snprintf(s->note, sizeof s->note, "recording calibration: %s", err.msg);
-		}
-	} else {
-		rc = dv->drv->laser_open(dv->c->laser, &dv->laser, &err);
-		if (!rc) {
-			const struct laser_identity *li = dv->drv->laser_identity(dv->laser);
-			set_identity(s, "", li->model, li->serial, li->firmware);
-		}
-	}
-	if (rc) {
-		bool changed = strcmp(s->note, err.msg) != 0;
-		snprintf(s->note, sizeof s->note, "%s", err.msg);
+	struct dev_slot *s = &dv->slot[r->d];
+	s->opening = false;
+	if (r->gen != s->gen)
+		return; /* closed since (reload): the close queued after it ends that handle */
+	if (r->rc) {
+		bool changed = strcmp(s->note, r->err.msg) != 0;
+		snprintf(s->note, sizeof s->note, "%s", r->err.msg);
 		if (changed && dv->notify)
-			dv->notify(dv->ctx, d, false, s->note);
+			dv->notify(dv->ctx, (enum conf_dev)r->d, false, s->note);
 		return;
+	}
+	double now = dv->wallclock();
+	struct acq_err err = { 0 };
+	if (is_axis(r->d)) {
+		set_identity(s, r->aid.vendor, r->aid.model, r->aid.serial, r->aid.firmware);
+	} else if (r->d == CONF_DEV_SPECTRO) {
+		s->info = r->info;
+		set_identity(s, "Avantes", r->info.model, r->info.serial, r->info.firmware);
+		if (store_spectrometer_put(dv->st, &r->info, now, &dv->spectro_id, &err))
+			snprintf(s->note, sizeof s->note, "recording calibration: %s", err.msg);
+	} else {
+		set_identity(s, "", r->lid.model, r->lid.serial, r->lid.firmware);
 	}
 	s->available = true;
 	s->note[0] = 0;
-	if (d != CONF_DEV_SPECTRO)
-		store_device_put(dv->st, conf_dev_name(d), s->vendor, s->model, s->serial, s->firmware, now, NULL, NULL);
+	memset(&s->x, 0, sizeof s->x);
+	if (r->d != CONF_DEV_SPECTRO)
+		store_device_put(dv->st, dname(r->d), s->vendor, s->model, s->serial, s->firmware, now, &s->device_id,
+				 NULL);
 	if (dv->notify)
-		dv->notify(dv->ctx, d, true, "connected");
+		dv->notify(dv->ctx, (enum conf_dev)r->d, true, "connected");
 }
 
-/* One absent device per tick, in turn: an open is a bounded transaction (up to the link's response
- * timeout), so trying them all at once could hold the loop for several timeouts in a row. */
+static void op_done(struct devices *dv, struct req *r);
+static void query_step(struct query *q);
+static void call_done(struct req *r);
+
+static void req_done(struct port_req *pr)
+{
+	struct req *r = (struct req *)pr;
+	struct devices *dv = r->dv;
+	struct dev_slot *s = &dv->slot[r->d];
+	bool current = r->gen == s->gen;
+	if (r->op == R_OPEN)
+		opened(dv, r);
+	if (current) {
+		if (r->have_ast) {
+			s->ast = r->ast;
+			s->have_status = true;
+		}
+		if (r->have_lst) {
+			s->lst = r->lst;
+			s->have_status = true;
+		}
+		if (r->op == R_STATUS && r->rc)
+			s->have_status = false;
+	}
+	if (r->owner == OWN_EX && current)
+		devices_ex_done(dv, r);
+	else if (r->owner == OWN_OP)
+		op_done(dv, r);
+	else if (r->owner == OWN_QUERY)
+		query_step(r->q);
+	else if (r->owner == OWN_CALL)
+		call_done(r);
+	else if (r->owner == OWN_MGR && r->rc && (r->op == R_LASER || r->op == R_STOP))
+		log_msg(LOG_ERR, "safe stop: %s: %s not confirmed: %s", dname(r->d),
+			r->op == R_LASER ? "laser emission off" : "stop", r->err.msg);
+	free(r->frame);
+	free(r);
+}
+
+/* ---- the device manager ------------------------------------------------------------------------------------ */
+
+static const void *cfg_of(const struct conf *c, int d)
+{
+	return is_axis(d) ? (const void *)c->axis[d] : d == CONF_DEV_SPECTRO ? (const void *)c->spectro
+									      : (const void *)c->laser;
+}
+
+static void try_open(struct devices *dv, int d)
+{
+	struct dev_slot *s = &dv->slot[d];
+	if (s->opening || s->available || !s->port)
+		return;
+	struct req *r = devices_req_new(dv, d, R_OPEN, OWN_MGR);
+	if (!r)
+		return;
+	r->cfg = cfg_of(dv->c, d);
+	s->opening = true;
+	devices_req_submit(r);
+}
+
+/* Every absent device is tried on its own thread: an open that times out delays nothing else. */
 static void retry_cb(struct loop *lp, void *arg)
 {
 	(void)lp;
 	struct devices *dv = arg;
-	if (dv->op_timer)
-		return;
-	for (int k = 0; k < CONF_DEV__COUNT; k++) {
-		int d = (dv->retry_next + k) % CONF_DEV__COUNT;
-		if (dv->slot[d].configured && !dv->slot[d].available) {
-			dv->retry_next = (d + 1) % CONF_DEV__COUNT;
-			try_open(dv, (enum conf_dev)d);
-			return;
-		}
-	}
+	for (int d = 0; d < CONF_DEV__COUNT; d++)
+		if (dv->slot[d].configured && !dv->slot[d].available)
+			try_open(dv, d);
 }
 
-static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t *result);
-
-/* Open every configured device of dv->c (those that fail stay unavailable) and arm the retry timer. */
 static void open_all(struct devices *dv)
 {
 	const struct conf *c = dv->c;
 	for (int d = 0; d < CONF_DEV__COUNT; d++) {
 		struct dev_slot *s = &dv->slot[d];
+		unsigned gen = s->gen;
 		memset(s, 0, sizeof *s);
-		s->configured = d <= CONF_DEV_DETECTOR_PHI ? c->axis[d] != NULL
-				: d == CONF_DEV_SPECTRO    ? c->spectro != NULL
-							   : c->laser != NULL;
-		if (!s->configured)
+		s->gen = gen + 1;
+		s->configured = cfg_of(c, d) != NULL;
+		if (!s->configured) {
 			snprintf(s->note, sizeof s->note, "%s", c->devnote[d][0] ? c->devnote[d] : "not configured");
-		else
-			try_open(dv, (enum conf_dev)d);
+			continue;
+		}
+		struct acq_err err = { 0 };
+		if (port_new(dv->lp, dname(d), &s->port, &err)) {
+			snprintf(s->note, sizeof s->note, "%s", err.msg);
+			continue;
+		}
+		try_open(dv, d);
 	}
+	/* The first attempts run side by side; wait for them, so that what starts next (a sweep resumed at
+	 * start-up) finds the devices that answer open. */
+	for (int d = 0; d < CONF_DEV__COUNT; d++)
+		if (dv->slot[d].port)
+			port_flush(dv->slot[d].port);
 	dv->retry_timer = loop_timer_add(dv->lp, c->d.device_retry_s, c->d.device_retry_s, retry_cb, dv);
 }
 
-/* Safe stop and close every handle (the object stays: the executor keeps its pointer). */
+/* Safe stop, close every handle and end every port (each runs what is queued first). */
 static void close_all(struct devices *dv)
 {
 	devices_safe_stop(dv);
 	loop_timer_cancel(dv->lp, dv->retry_timer);
 	dv->retry_timer = 0;
-	dv->drv->laser_close(dv->laser);
-	dv->laser = NULL;
-	for (int i = 0; i < 3; i++) {
-		dv->drv->axis_close(dv->axis[i]);
-		dv->axis[i] = NULL;
+	for (int d = 0; d < CONF_DEV__COUNT; d++) {
+		struct dev_slot *s = &dv->slot[d];
+		if (!s->port)
+			continue;
+		devices_req_submit(devices_req_new(dv, d, R_CLOSE, OWN_MGR));
+		port_free(s->port);
+		s->port = NULL;
+		s->available = false;
+		s->gen++;
+		free(s->x.frame);
+		s->x.frame = NULL;
 	}
-	dv->drv->spectro_close(dv->spectro);
-	dv->spectro = NULL;
 	dv->spectro_id = 0;
 }
 
-int devices_init(struct loop *lp, struct store *st, const struct conf *c, const struct devices_drv *drv,
-		 devices_notify_fn notify, void *ctx, double (*wallclock)(void), struct devices **out,
-		 struct acq_err *err)
+int devices_init(struct loop *lp, struct store *st, const struct conf *c, devices_notify_fn notify, void *ctx,
+		 double (*wallclock)(void), struct devices **out, struct acq_err *err)
 {
 	struct devices *dv = calloc(1, sizeof *dv);
 	if (!dv)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	*dv = (struct devices){ .drv = drv ? drv : &devices_real_drv, .lp = lp, .st = st, .c = c, .notify = notify,
-				.ctx = ctx, .wallclock = wallclock };
+	*dv = (struct devices){ .lp = lp, .st = st, .c = c, .notify = notify, .ctx = ctx, .wallclock = wallclock };
 	open_all(dv);
 	*out = dv;
 	return 0;
@@ -175,7 +390,7 @@ int devices_init(struct loop *lp, struct store *st, const struct conf *c, const 
 
 int devices_reconfigure(struct devices *dv, const struct conf *c, struct acq_err *err)
 {
-	if (dv->op_timer)
+	if (dv->op_active)
 		return acq_errf(err, ACQ_E_STATE, "a manual move or measurement is running");
 	close_all(dv);
 	dv->c = c;
@@ -183,53 +398,51 @@ int devices_reconfigure(struct devices *dv, const struct conf *c, struct acq_err
 	return 0;
 }
 
-int devices_safe_stop(struct devices *dv)
+void devices_safe_stop(struct devices *dv)
 {
-	int fails = 0;
 	if (!dv)
-		return 0;
-	struct acq_err err = { 0 };
-	if (dv->laser && dv->drv->laser_set_emission(dv->laser, false, &err)) {
-		log_msg(LOG_ERR, "safe stop: laser emission off not confirmed: %s", err.msg);
-		fails++;
-	}
-	for (int i = 0; i < 3; i++)
-		if (dv->axis[i] && dv->drv->axis_stop(dv->axis[i], &err)) {
-			log_msg(LOG_ERR, "safe stop: %s: stop not confirmed: %s", conf_dev_name((enum conf_dev)i), err.msg);
-			fails++;
+		return;
+	for (int d = 0; d < CONF_DEV__COUNT; d++) {
+		struct dev_slot *s = &dv->slot[d];
+		if (!s->available || !s->port)
+			continue;
+		if (d == CONF_DEV_LASER) {
+			struct req *r = devices_req_new(dv, d, R_LASER, OWN_MGR);
+			if (r)
+				r->on = false;
+			devices_req_submit(r);
+		} else {
+			port_interrupt(s->port);
+			devices_req_submit(devices_req_new(dv, d, is_axis(d) ? R_STOP : R_SPECTRO_STOP, OWN_MGR));
 		}
-	if (dv->spectro)
-		dv->drv->spectro_stop(dv->spectro, NULL);
-	return fails;
+	}
 }
 
 void devices_finish(struct devices *dv)
 {
 	if (!dv)
 		return;
-	if (dv->op_timer) { /* a manual operation is cut short: its requester gets an answer */
+	if (dv->op_active) { /* a manual operation is cut short: its requester gets an answer */
+		devices_done_fn done = dv->op_done;
+		dv->op_done = NULL;
+		dv->op_active = false;
 		struct acq_err err = { 0 };
 		acq_errf(&err, ACQ_E_STATE, "the daemon is stopping: operation interrupted");
-		op_end(dv, -1, &err, NULL);
+		if (done)
+			done(dv->op_ctx, -1, &err, NULL);
 	}
 	close_all(dv);
-	free(dv->frame);
 	free(dv);
 }
 
-struct axis *devices_axis(struct devices *dv, enum conf_dev d)
+bool devices_up(const struct devices *dv, enum conf_dev d)
 {
-	return d <= CONF_DEV_DETECTOR_PHI ? dv->axis[d] : NULL;
+	return dv->slot[d].available;
 }
 
-struct spectro *devices_spectro(struct devices *dv)
+int64_t devices_device_id(const struct devices *dv, enum conf_dev d)
 {
-	return dv->spectro;
-}
-
-struct laser *devices_laser(struct devices *dv)
-{
-	return dv->laser;
+	return dv->slot[d].available ? dv->slot[d].device_id : 0;
 }
 
 long long devices_spectrometer_id(const struct devices *dv)
@@ -237,22 +450,28 @@ long long devices_spectrometer_id(const struct devices *dv)
 	return dv->spectro_id;
 }
 
+void devices_set_kick(struct devices *dv, void (*kick)(void *ctx), void *ctx)
+{
+	dv->kick = kick;
+	dv->kick_ctx = ctx;
+}
+
 void devices_lost(struct devices *dv, enum conf_dev d, const char *why)
 {
 	struct dev_slot *s = &dv->slot[d];
-	if (d <= CONF_DEV_DETECTOR_PHI) {
-		dv->drv->axis_close(dv->axis[d]);
-		dv->axis[d] = NULL;
-	} else if (d == CONF_DEV_SPECTRO) {
-		dv->drv->spectro_close(dv->spectro);
-		dv->spectro = NULL;
-	} else {
-		dv->drv->laser_close(dv->laser);
-		dv->laser = NULL;
-	}
+	if (!s->available)
+		return; /* already closed (or being opened again) */
 	bool was = s->available;
 	s->available = false;
+	s->have_status = false;
+	s->gen++; /* what is still running for the old handle is dropped when it completes */
+	free(s->x.frame);
+	memset(&s->x, 0, sizeof s->x);
 	snprintf(s->note, sizeof s->note, "%s", why);
+	if (s->port) {
+		port_interrupt(s->port);
+		devices_req_submit(devices_req_new(dv, d, R_CLOSE, OWN_MGR));
+	}
 	if (was && dv->notify)
 		dv->notify(dv->ctx, d, false, why);
 }
@@ -260,8 +479,8 @@ void devices_lost(struct devices *dv, enum conf_dev d, const char *why)
 void devices_positions(struct devices *dv, double pos[3])
 {
 	for (int i = 0; i < 3; i++) {
-		struct axis_status st;
-		pos[i] = dv->axis[i] && !dv->drv->axis_read_status(dv->axis[i], &st, NULL) ? st.position_deg : NAN;
+		const struct dev_slot *s = &dv->slot[i];
+		pos[i] = s->available && s->have_status ? s->ast.position_deg : NAN;
 	}
 }
 
@@ -275,7 +494,7 @@ int devices_available(const struct devices *dv)
 
 bool devices_busy(const struct devices *dv)
 {
-	return dv->op_timer != 0;
+	return dv->op_active;
 }
 
 json_t *devices_json(struct devices *dv)
@@ -284,8 +503,8 @@ json_t *devices_json(struct devices *dv)
 	for (int d = 0; arr && d < CONF_DEV__COUNT; d++) {
 		struct dev_slot *s = &dv->slot[d];
 		bool present = s->configured || dv->c->devpresent[d];
-		json_t *o = json_pack("{s:s,s:b,s:b,s:s}", "name", conf_dev_name((enum conf_dev)d), "configured",
-				      present, "available", s->available, "state",
+		json_t *o = json_pack("{s:s,s:b,s:b,s:s}", "name", dname(d), "configured", present, "available",
+				      s->available, "state",
 				      s->available ? "connected" : present ? "unavailable" : "not_configured");
 		if (!o)
 			continue;
@@ -295,234 +514,116 @@ json_t *devices_json(struct devices *dv)
 			json_object_set_new(o, "identity",
 					    json_pack("{s:s,s:s,s:s,s:s}", "vendor", s->vendor, "model", s->model, "serial",
 						      s->serial, "firmware", s->firmware));
-		if (d <= CONF_DEV_DETECTOR_PHI && dv->c->axis[d]) {
+		if (is_axis(d) && dv->c->axis[d]) {
 			double lo, hi;
-			dv->drv->axis_cfg_limits(dv->c->axis[d], &lo, &hi);
+			axis_cfg_limits(dv->c->axis[d], &lo, &hi);
 			json_object_set_new(o, "limits_deg", json_pack("[f,f]", lo, hi));
-			struct axis_status st;
-			if (dv->axis[d] && !dv->drv->axis_read_status(dv->axis[d], &st, NULL))
+			const struct axis_status *st = &s->ast;
+			if (s->available && s->have_status)
 				json_object_set_new(o, "status",
-						    json_pack("{s:f,s:b,s:b,s:b,s:i}", "position_deg", st.position_deg,
-							      "busy", st.busy, "homed", st.homed, "alarm", st.alarm,
-							      "alarm_code", st.alarm_code));
+						    json_pack("{s:f,s:b,s:b,s:b,s:i}", "position_deg", st->position_deg,
+							      "busy", st->busy, "homed", st->homed, "alarm", st->alarm,
+							      "alarm_code", st->alarm_code));
 		}
-		if (d == CONF_DEV_LASER && dv->laser) {
-			struct laser_status ls;
-			if (!dv->drv->laser_status(dv->laser, &ls, NULL))
-				json_object_set_new(o, "status",
-						    json_pack("{s:b,s:f,s:b,s:b}", "emission", ls.emission, "power_pct",
-							      ls.power_pct, "interlock_ok", ls.interlock_ok, "fault",
-							      ls.fault));
+		if (d == CONF_DEV_LASER && s->available && s->have_status) {
+			const struct laser_status *ls = &s->lst;
+			json_object_set_new(o, "status", json_pack("{s:b,s:f,s:b,s:b}", "emission", ls->emission, "power_pct",
+								   ls->power_pct, "interlock_ok", ls->interlock_ok, "fault",
+								   ls->fault));
 		}
 		json_array_append_new(arr, o);
 	}
 	return arr;
 }
 
-/* ---- manual operations ---- */
+/* ---- `devices`: fresh status from every available axis and the laser, then the report ---------------------- */
 
-/* Name the device in a driver's message unless the driver already did (the log said "x: x: ..."). -1. */
-static int name_err(struct acq_err *err, enum conf_dev d)
+static void query_reply(struct loop *lp, void *arg)
 {
-	const char *name = conf_dev_name(d);
-	size_t n = strlen(name);
-	if (err && strncmp(err->msg, name, n))
-		acq_err_prefix(err, "%s: ", name);
-	return -1;
+	(void)lp;
+	struct query *q = arg;
+	if (q->positions) {
+		double pos[3];
+		devices_positions(q->dv, pos);
+		json_t *o = json_object();
+		for (int i = 0; o && i < 3; i++)
+			json_object_set_new(o, dname(i), isnan(pos[i]) ? json_null() : json_real(pos[i]));
+		q->done(q->ctx, 0, NULL, o);
+	} else {
+		q->done(q->ctx, 0, NULL, json_pack("{s:o}", "devices", devices_json(q->dv)));
+	}
+	free(q);
 }
 
-static void op_end(struct devices *dv, int rc, const struct acq_err *err, json_t *result)
+static void query_step(struct query *q)
 {
-	loop_timer_cancel(dv->lp, dv->op_timer);
-	dv->op_timer = 0;
-	if (dv->op_laser && dv->laser)
-		dv->drv->laser_set_emission(dv->laser, false, NULL);
+	if (--q->waiting == 0)
+		query_reply(NULL, q);
+}
+
+static int query(struct devices *dv, bool positions, devices_done_fn done, void *ctx, struct acq_err *err)
+{
+	struct query *q = calloc(1, sizeof *q);
+	if (!q)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	*q = (struct query){ .dv = dv, .positions = positions, .done = done, .ctx = ctx, .waiting = 1 };
+	for (int d = 0; d < CONF_DEV__COUNT; d++) {
+		if (d == CONF_DEV_SPECTRO || !dv->slot[d].available || (positions && !is_axis(d)))
+			continue;
+		struct req *r = devices_req_new(dv, d, R_STATUS, OWN_QUERY);
+		if (r)
+			r->q = q;
+		if (devices_req_submit(r) == 0)
+			q->waiting++;
+	}
+	if (--q->waiting == 0 && !loop_timer_add(dv->lp, 0, 0, query_reply, q)) {
+		free(q);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	return 0;
+}
+
+int devices_query(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err)
+{
+	return query(dv, false, done, ctx, err);
+}
+
+int devices_read_positions(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err)
+{
+	return query(dv, true, done, ctx, err);
+}
+
+/* ---- manual operations -------------------------------------------------------------------------------------- */
+
+static void op_finish(struct devices *dv, int rc, const struct acq_err *err, json_t *result)
+{
+	if (dv->op_laser && dv->slot[CONF_DEV_LASER].available) {
+		struct req *r = devices_req_new(dv, CONF_DEV_LASER, R_LASER, OWN_MGR);
+		if (r)
+			r->on = false;
+		devices_req_submit(r);
+	}
 	dv->op_laser = false;
+	dv->op_active = false;
+	dv->op_kind[0] = 0;
 	devices_done_fn done = dv->op_done;
 	dv->op_done = NULL;
 	if (done)
 		done(dv->op_ctx, rc, err, result);
 	else
 		json_decref(result);
-	dv->op_kind[0] = 0;
 }
 
-static void move_step(struct loop *lp, void *arg)
+static void measure_stored(struct devices *dv, struct req *r)
 {
-	struct devices *dv = arg;
-	double now = loop_now(lp);
 	struct acq_err err = { 0 };
-	bool running = false;
-	for (int i = 0; i < 3; i++) {
-		if (!dv->op_axis[i])
-			continue;
-		if (!dv->axis[i]) {
-			acq_errf(&err, ACQ_E_DISCONNECTED, "%s: lost during the move", conf_dev_name((enum conf_dev)i));
-			goto fail;
-		}
-		int r = dv->drv->axis_move_step(dv->axis[i], now, &err);
-		if (r == AXIS_MOVE_FAILED) {
-			name_err(&err, (enum conf_dev)i);
-			goto fail;
-		}
-		if (r == AXIS_MOVE_DONE)
-			dv->op_axis[i] = false;
-		else
-			running = true;
-	}
-	if (running && now > dv->op_deadline) {
-		acq_errf(&err, ACQ_E_TIMEOUT, "move not finished after %g s", dv->c->sweep.move_timeout_s);
-		goto fail;
-	}
-	if (running)
-		return;
-	json_t *res = json_object();
-	for (int i = 0; i < 3; i++) {
-		struct axis_status st;
-		if (dv->axis[i] && !dv->drv->axis_read_status(dv->axis[i], &st, NULL))
-			json_object_set_new(res, conf_dev_name((enum conf_dev)i), json_real(st.position_deg));
-	}
-	op_end(dv, 0, NULL, res);
-	return;
-fail:
-	for (int i = 0; i < 3; i++)
-		if (dv->op_axis[i] && dv->axis[i])
-			dv->drv->axis_stop(dv->axis[i], NULL);
-	op_end(dv, -1, &err, NULL);
-}
-
-#define HOME_TARGET INFINITY  /* begin_axes(): home this axis instead of moving it */
-
-/* Start the manual operation on the axes whose target is not NaN (HOME_TARGET: homing), watched by
- * move_step() until they are done or timeout_s passed. 0, or -1 with every started axis stopped again. */
-static int begin_axes(struct devices *dv, const double target[3], double timeout_s, devices_done_fn done, void *ctx,
-		      struct acq_err *err)
-{
-	double now = loop_now(dv->lp);
-	for (int i = 0; i < 3; i++) {
-		dv->op_axis[i] = false;
-		if (isnan(target[i]))
-			continue;
-		if (isinf(target[i]) ? dv->drv->axis_home_begin(dv->axis[i], now, err)
-				     : dv->drv->axis_move_begin(dv->axis[i], target[i], now, err)) {
-			for (int j = 0; j < i; j++)
-				if (dv->op_axis[j])
-					dv->drv->axis_stop(dv->axis[j], NULL);
-			return name_err(err, (enum conf_dev)i);
-		}
-		dv->op_axis[i] = true;
-	}
-	dv->op_done = done;
-	dv->op_ctx = ctx;
-	dv->op_deadline = now + timeout_s;
-	dv->op_timer = loop_timer_add(dv->lp, 0.05, 0.05, move_step, dv);
-	return 0;
-}
-
-int devices_move(struct devices *dv, const double target[3], devices_done_fn done, void *ctx, struct acq_err *err)
-{
-	if (dv->op_timer)
-		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
-	bool any = false;
-	for (int i = 0; i < 3; i++) {
-		if (isnan(target[i]))
-			continue;
-		any = true;
-		const char *name = conf_dev_name((enum conf_dev)i);
-		if (!dv->c->axis[i])
-			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", name, dv->slot[i].note);
-		double lo, hi;
-		dv->drv->axis_cfg_limits(dv->c->axis[i], &lo, &hi);
-		if (!(target[i] >= lo && target[i] <= hi))
-			return acq_errf(err, ACQ_E_RANGE, "%s: %g° is outside the soft limits [%g°, %g°]", name, target[i],
-					lo, hi);
-		if (!dv->axis[i])
-			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", name, dv->slot[i].note);
-	}
-	if (!any)
-		return acq_errf(err, ACQ_E_INVAL, "move: give at least one of laser_theta, detector_theta, detector_phi");
-	return begin_axes(dv, target, dv->c->sweep.move_timeout_s, done, ctx, err);
-}
-
-int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *ctx, struct acq_err *err)
-{
-	if (dv->op_timer)
-		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
-	for (int i = 0; i < 3; i++)
-		if ((mask & (1u << i)) && !dv->axis[i])
-			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", conf_dev_name((enum conf_dev)i),
-					dv->slot[i].note[0] ? dv->slot[i].note : "not configured");
-	if (!(mask & 7u))
-		return acq_errf(err, ACQ_E_INVAL, "home: no axis selected");
-	double t[3];
-	for (int i = 0; i < 3; i++) {
-		t[i] = mask & (1u << i) ? HOME_TARGET : NAN;
-		struct axis_status st;
-		if ((mask & (1u << i)) && !dv->drv->axis_read_status(dv->axis[i], &st, NULL) && st.alarm &&
-		    dv->drv->axis_alarm_reset(dv->axis[i], err))
-			return acq_err_prefix(err, "%s: resetting its alarm: ", conf_dev_name((enum conf_dev)i));
-	}
-	/* a homing run is slower than a move */
-	return begin_axes(dv, t, 4 * dv->c->sweep.move_timeout_s, done, ctx, err);
-}
-
-int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err)
-{
-	*stopped = dv->op_timer != 0;
-	int rc = 0;
-	for (int i = 0; i < 3; i++) /* every axis, moving or not: whatever moves stops */
-		if (dv->axis[i] && dv->drv->axis_stop(dv->axis[i], err))
-			rc = name_err(err, (enum conf_dev)i);
-	if (*stopped && dv->op_kind[0] && dv->spectro)
-		dv->drv->spectro_stop(dv->spectro, NULL);
-	if (*stopped) {
-		struct acq_err e = { 0 };
-		acq_errf(&e, ACQ_E_STATE, "stopped by the operator");
-		for (int i = 0; i < 3; i++)
-			dv->op_axis[i] = false;
-		op_end(dv, -1, &e, NULL); /* also switches off a laser it switched on */
-	}
-	return rc;
-}
-
-int devices_laser_off(struct devices *dv, struct acq_err *err)
-{
-	if (!dv->laser)
-		return acq_errf(err, ACQ_E_UNSUPPORTED, "laser: unavailable (%s)",
-				dv->slot[CONF_DEV_LASER].note[0] ? dv->slot[CONF_DEV_LASER].note : "not configured");
-	if (dv->drv->laser_set_emission(dv->laser, false, err))
-		return acq_err_prefix(err, "laser: ");
-	struct laser_status ls;
-	if (dv->drv->laser_status(dv->laser, &ls, err))
-		return acq_err_prefix(err, "laser: ");
-	if (ls.emission)
-		return acq_errf(err, ACQ_E_DEVICE, "laser: emission still reported on after switching it off");
-	return 0;
-}
-
-static void measure_step(struct loop *lp, void *arg)
-{
-	struct devices *dv = arg;
-	struct acq_err err = { 0 };
-	if (!dv->spectro) {
-		acq_errf(&err, ACQ_E_DISCONNECTED, "spectrometer lost during the measurement");
-		op_end(dv, -1, &err, NULL);
-		return;
-	}
-	int r = dv->drv->spectro_fetch(dv->spectro, dv->frame, loop_now(lp), &err);
-	if (r == 0)
-		return;
-	if (r < 0) {
-		op_end(dv, -1, &err, NULL);
-		return;
-	}
-	struct spectro_frame *f = dv->frame;
+	struct spectro_frame *f = r->frame;
 	int n = f->npix > 0 && f->npix <= SPECTRO_MAX_PIXELS ? f->npix : 0;
 	float *counts = malloc((size_t)(n ? n : 1) * sizeof *counts);
 	if (!counts || !n) {
 		free(counts);
 		acq_errf(&err, n ? ACQ_E_NOMEM : ACQ_E_DEVICE, n ? "out of memory" : "spectrometer returned no pixels");
-		op_end(dv, -1, &err, NULL);
+		op_finish(dv, -1, &err, NULL);
 		return;
 	}
 	double peak = 0;
@@ -540,224 +641,245 @@ static void measure_step(struct loop *lp, void *arg)
 	int rc = store_spectrum_add(dv->st, &sp, &id, &err);
 	free(counts);
 	if (rc) {
-		op_end(dv, -1, &err, NULL);
+		op_finish(dv, -1, &err, NULL);
 		return;
 	}
-	op_end(dv, 0, NULL,
-	       json_pack("{s:I,s:s,s:i,s:f,s:i,s:f,s:i}", "spectrum_id", (json_int_t)id, "kind", dv->op_kind, "npix", n,
-			 "peak", peak, "saturated", f->nsaturated, "integration_ms", f->meas.integration_ms, "averages",
-			 (int)f->meas.averages));
+	op_finish(dv, 0, NULL,
+		  json_pack("{s:I,s:s,s:i,s:f,s:i,s:f,s:i}", "spectrum_id", (json_int_t)id, "kind", dv->op_kind, "npix", n,
+			    "peak", peak, "saturated", f->nsaturated, "integration_ms", f->meas.integration_ms, "averages",
+			    (int)f->meas.averages));
+}
+
+/* Name the device in a driver's message unless the driver already did. */
+static void name_err(struct acq_err *err, int d)
+{
+	size_t n = strlen(dname(d));
+	if (strncmp(err->msg, dname(d), n))
+		acq_err_prefix(err, "%s: ", dname(d));
+}
+
+static void op_done(struct devices *dv, struct req *r)
+{
+	if (!dv->op_active || r->seq != dv->op_gen)
+		return; /* the operation ended (stopped) before this completion */
+	if (r->op == R_MOVE || r->op == R_HOME) {
+		if (r->rc && !dv->op_rc) {
+			dv->op_rc = -1;
+			dv->op_err = r->err;
+			name_err(&dv->op_err, r->d);
+			for (int i = 0; i < 3; i++) /* the others stop too */
+				if (i != r->d && dv->slot[i].port)
+					port_interrupt(dv->slot[i].port);
+		}
+		if (--dv->op_waiting > 0)
+			return;
+		if (dv->op_rc) {
+			op_finish(dv, -1, &dv->op_err, NULL);
+			return;
+		}
+		json_t *res = json_object();
+		for (int i = 0; i < 3; i++)
+			if (dv->slot[i].available && dv->slot[i].have_status)
+				json_object_set_new(res, dname(i), json_real(dv->slot[i].ast.position_deg));
+		op_finish(dv, 0, NULL, res);
+		return;
+	}
+	if (r->op == R_LASER) { /* the laser is as the measurement needs it: measure */
+		if (r->rc || (r->on && !(r->lst.emission && r->lst.interlock_ok && !r->lst.fault)) ||
+		    (!r->on && r->lst.emission)) {
+			struct acq_err err = r->err;
+			if (!r->rc)
+				acq_errf(&err, ACQ_E_DEVICE, "laser %s", r->on ? "not emitting (interlock open or fault)"
+									   : "still emitting");
+			acq_err_prefix(&err, "%s: switching the laser %s: ", dv->op_kind, r->on ? "on" : "off");
+			op_finish(dv, -1, &err, NULL);
+			return;
+		}
+		struct req *m = devices_req_new(dv, CONF_DEV_SPECTRO, R_MEASURE, OWN_OP);
+		if (m) {
+			m->meas = r->meas;
+			m->frame = malloc(sizeof *m->frame);
+		}
+		if (devices_req_submit(m)) {
+			struct acq_err err = { 0 };
+			acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+			op_finish(dv, -1, &err, NULL);
+		}
+		return;
+	}
+	if (r->op == R_MEASURE) {
+		if (r->rc)
+			op_finish(dv, -1, &r->err, NULL);
+		else
+			measure_stored(dv, r);
+	}
+}
+
+/* Start the manual operation op (R_MOVE, or R_HOME with alarm reset) on the axes whose target is not NaN, each
+ * on its thread, ended after timeout_s. 0 or -1. */
+static int begin_axes(struct devices *dv, const double target[3], enum rop op, double timeout_s, devices_done_fn done,
+		      void *ctx, struct acq_err *err)
+{
+	double deadline = loop_now(dv->lp) + timeout_s;
+	dv->op_active = true;
+	dv->op_gen++;
+	dv->op_done = done;
+	dv->op_ctx = ctx;
+	dv->op_rc = 0;
+	dv->op_waiting = 0;
+	for (int i = 0; i < 3; i++) {
+		if (isnan(target[i]))
+			continue;
+		struct req *r = devices_req_new(dv, i, op, OWN_OP);
+		if (r) {
+			r->target = target[i];
+			r->on = op == R_HOME;
+			r->deadline = deadline;
+		}
+		if (devices_req_submit(r) == 0)
+			dv->op_waiting++;
+	}
+	if (!dv->op_waiting) {
+		dv->op_active = false;
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	return 0;
+}
+
+int devices_move(struct devices *dv, const double target[3], devices_done_fn done, void *ctx, struct acq_err *err)
+{
+	if (dv->op_active)
+		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
+	bool any = false;
+	for (int i = 0; i < 3; i++) {
+		if (isnan(target[i]))
+			continue;
+		any = true;
+		const char *name = dname(i);
+		if (!dv->c->axis[i])
+			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", name, dv->slot[i].note);
+		double lo, hi;
+		axis_cfg_limits(dv->c->axis[i], &lo, &hi);
+		if (!(target[i] >= lo && target[i] <= hi))
+			return acq_errf(err, ACQ_E_RANGE, "%s: %g° is outside the soft limits [%g°, %g°]", name, target[i],
+					lo, hi);
+		if (!dv->slot[i].available)
+			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", name, dv->slot[i].note);
+	}
+	if (!any)
+		return acq_errf(err, ACQ_E_INVAL, "move: give at least one of laser_theta, detector_theta, detector_phi");
+	return begin_axes(dv, target, R_MOVE, dv->c->sweep.move_timeout_s, done, ctx, err);
 }
 
 int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages, double power_pct,
 		    devices_done_fn done, void *ctx, struct acq_err *err)
 {
-	if (dv->op_timer)
+	if (dv->op_active)
 		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
-	if (!dv->spectro)
+	if (!dv->slot[CONF_DEV_SPECTRO].available)
 		return acq_errf(err, ACQ_E_UNSUPPORTED, "spectrometer: unavailable (%s)", dv->slot[CONF_DEV_SPECTRO].note);
 	/* A dark needs the laser off (and known to be off); a sample or reference needs the beam, switched on for
 	 * the measurement only. */
 	bool dark = !strcmp(kind, "dark");
-	if (!dv->laser && (!dark || dv->slot[CONF_DEV_LASER].configured || dv->c->devpresent[CONF_DEV_LASER]))
-		return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: the laser is unavailable (%s)", kind,
-				dv->slot[CONF_DEV_LASER].note);
-	if (!dark && dv->laser && !isnan(power_pct) && dv->drv->laser_set_power(dv->laser, power_pct, err))
-		return acq_err_prefix(err, "%s: setting the laser power: ", kind);
-	if (dv->laser && dv->drv->laser_set_emission(dv->laser, !dark, err))
-		return acq_err_prefix(err, "%s: switching the laser %s: ", kind, dark ? "off" : "on");
-	if (!dv->frame && !(dv->frame = malloc(sizeof *dv->frame)))
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	const struct dev_slot *ls = &dv->slot[CONF_DEV_LASER];
+	if (!ls->available && (!dark || ls->configured || dv->c->devpresent[CONF_DEV_LASER]))
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: the laser is unavailable (%s)", kind, ls->note);
 	struct spectro_meas m = { .integration_ms = integration_ms, .averages = (unsigned)averages,
 				  .saturation_detection = true };
-	if (dv->drv->spectro_start(dv->spectro, &m, loop_now(dv->lp), err)) {
-		if (!dark && dv->laser)
-			dv->drv->laser_set_emission(dv->laser, false, NULL);
-		return -1;
-	}
-	dv->op_laser = !dark && dv->laser;
+	if (!(m.integration_ms > 0) || m.averages < 1)
+		return acq_errf(err, ACQ_E_INVAL, "spectrometer: integration time must be > 0 ms and averages ≥ 1");
 	snprintf(dv->op_kind, sizeof dv->op_kind, "%s", kind);
+	dv->op_active = true;
+	dv->op_gen++;
 	dv->op_done = done;
 	dv->op_ctx = ctx;
-	/* Polled by timer: a measurement takes milliseconds to seconds, 10 ms granularity is plenty. */
-	dv->op_timer = loop_timer_add(dv->lp, 0.01, 0.01, measure_step, dv);
-	return 0;
-}
-
-/* ---- the sweep executor's device operations over these handles (executor.h) ------------------------- */
-
-static struct axis *ax_of(struct devices *dv, int a, struct acq_err *err)
-{
-	struct axis *ax = devices_axis(dv, (enum conf_dev)a);
-	if (!ax)
-		acq_errf(err, ACQ_E_DISCONNECTED, "%s unavailable", conf_dev_name((enum conf_dev)a));
-	return ax;
-}
-
-static int o_move_begin(void *ctx, int a, double target, double now, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	return ax ? axis_move_begin(ax, target, now, err) : -1;
-}
-
-static int o_move_step(void *ctx, int a, double now, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	return ax ? axis_move_step(ax, now, err) : AXIS_MOVE_FAILED;
-}
-
-static double o_next_poll(void *ctx, int a)
-{
-	struct devices *dv = ctx;
-	struct axis *ax = devices_axis(dv, (enum conf_dev)a);
-	return ax ? axis_next_poll(ax) : loop_now(dv->lp);
-}
-
-static int o_stop(void *ctx, int a, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	return ax ? axis_stop(ax, err) : -1;
-}
-
-static int o_position(void *ctx, int a, double *deg, bool *homed, bool *alarm, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	struct axis_status st;
-	if (!ax || axis_read_status(ax, &st, err))
-		return -1;
-	*deg = st.position_deg;
-	*homed = st.homed;
-	*alarm = st.alarm;
-	return 0;
-}
-
-static int o_home_begin(void *ctx, int a, double now, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	return ax ? axis_home_begin(ax, now, err) : -1;
-}
-
-static int o_alarm_reset(void *ctx, int a, struct acq_err *err)
-{
-	struct axis *ax = ax_of(ctx, a, err);
-	return ax ? axis_alarm_reset(ax, err) : -1;
-}
-
-static int o_laser_set(void *ctx, bool on, struct acq_err *err)
-{
-	struct devices *dv = ctx;
-	struct laser *l = devices_laser(dv);
-	if (!l)
-		return on ? acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable") : 0; /* absent = dark */
-	return laser_set_emission(l, on, err);
-}
-
-static int o_laser_power(void *ctx, double pct, struct acq_err *err)
-{
-	struct devices *dv = ctx;
-	struct laser *l = devices_laser(dv);
-	if (!l)
-		return acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable");
-	return laser_set_power(l, pct, err);
-}
-
-static int o_laser_state(void *ctx, bool *emission, bool *ready, struct acq_err *err)
-{
-	struct devices *dv = ctx;
-	struct laser *l = devices_laser(dv);
-	struct laser_status st;
-	if (!l)
-		return acq_errf(err, ACQ_E_DISCONNECTED, "laser unavailable");
-	if (laser_status(l, &st, err))
-		return -1;
-	*emission = st.emission;
-	*ready = st.interlock_ok && !st.fault;
-	return 0;
-}
-
-/* The daemon's device manager reconnects on its own timer; here: is the device back and answering? */
-static int o_reconnect(void *ctx, int dev, struct acq_err *err)
-{
-	struct devices *dv = ctx;
-	if (dev <= EX_DEV_DETECTOR_PHI) {
-		bool homed, alarm;
-		double d;
-		return o_position(ctx, dev, &d, &homed, &alarm, err);
+	dv->op_laser = !dark && ls->available;
+	struct req *r;
+	if (ls->available) {
+		r = devices_req_new(dv, CONF_DEV_LASER, R_LASER, OWN_OP);
+		if (r) {
+			r->on = !dark;
+			r->pct = dark ? NAN : power_pct;
+			r->meas = m;
+		}
+	} else { /* no laser at all: a dark straight away */
+		r = devices_req_new(dv, CONF_DEV_SPECTRO, R_MEASURE, OWN_OP);
+		if (r) {
+			r->meas = m;
+			r->frame = malloc(sizeof *r->frame);
+		}
 	}
-	if (dev == EX_DEV_SPECTRO) {
-		struct spectro *s = devices_spectro(dv);
-		return s && spectro_info(s) ? 0 : acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
+	if (devices_req_submit(r)) {
+		dv->op_active = false;
+		dv->op_laser = false;
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
-	bool e, r;
-	return o_laser_state(ctx, &e, &r, err);
+	return 0;
 }
 
-static int o_spectro_start(void *ctx, const struct spectro_meas *m, double now, struct acq_err *err)
+int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *ctx, struct acq_err *err)
 {
-	struct devices *dv = ctx;
-	struct spectro *s = devices_spectro(dv);
-	if (!s)
-		return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
-	return spectro_start(s, m, now, err);
+	if (dv->op_active)
+		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
+	for (int i = 0; i < 3; i++)
+		if ((mask & (1u << i)) && !dv->slot[i].available)
+			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", dname(i),
+					dv->slot[i].note[0] ? dv->slot[i].note : "not configured");
+	if (!(mask & 7u))
+		return acq_errf(err, ACQ_E_INVAL, "home: no axis selected");
+	double t[3];
+	for (int i = 0; i < 3; i++)
+		t[i] = mask & (1u << i) ? 0 : NAN;
+	/* a homing run is slower than a move */
+	return begin_axes(dv, t, R_HOME, 4 * dv->c->sweep.move_timeout_s, done, ctx, err);
 }
 
-static int o_spectro_fetch(void *ctx, struct spectro_frame *f, double now, struct acq_err *err)
+int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err)
 {
-	struct devices *dv = ctx;
-	struct spectro *s = devices_spectro(dv);
-	if (!s)
-		return acq_errf(err, ACQ_E_DISCONNECTED, "spectrometer unavailable");
-	return spectro_fetch(s, f, now, err);
+	(void)err;
+	*stopped = dv->op_active;
+	for (int i = 0; i < 3; i++) { /* every axis, moving or not: whatever moves stops */
+		if (!dv->slot[i].available || !dv->slot[i].port)
+			continue;
+		port_interrupt(dv->slot[i].port);
+		devices_req_submit(devices_req_new(dv, i, R_STOP, OWN_MGR));
+	}
+	if (*stopped) {
+		struct dev_slot *sp = &dv->slot[CONF_DEV_SPECTRO];
+		if (dv->op_kind[0] && sp->available && sp->port) {
+			port_interrupt(sp->port);
+			devices_req_submit(devices_req_new(dv, CONF_DEV_SPECTRO, R_SPECTRO_STOP, OWN_MGR));
+		}
+		struct acq_err e = { 0 };
+		acq_errf(&e, ACQ_E_STATE, "stopped by the operator");
+		op_finish(dv, -1, &e, NULL); /* also switches off a laser it switched on */
+	}
+	return 0;
 }
 
-static int o_spectro_stop(void *ctx, struct acq_err *err)
+static void call_done(struct req *r)
 {
-	struct devices *dv = ctx;
-	struct spectro *s = devices_spectro(dv);
-	return s ? spectro_stop(s, err) : 0;
+	struct acq_err err = r->err;
+	if (!r->rc && r->have_lst && r->lst.emission)
+		r->rc = acq_errf(&err, ACQ_E_DEVICE, "emission still reported on after switching it off");
+	if (r->rc) {
+		acq_err_prefix(&err, "laser: ");
+		r->done(r->done_ctx, -1, &err, NULL);
+	} else {
+		r->done(r->done_ctx, 0, NULL, json_pack("{s:b}", "emission", 0));
+	}
 }
 
-static const struct spectro_info *o_spectro_info(void *ctx)
+int devices_laser_off(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err)
 {
-	struct devices *dv = ctx;
-	struct spectro *s = devices_spectro(dv);
-	return s ? spectro_info(s) : NULL;
-}
-
-static double o_wall(void *ctx)
-{
-	struct devices *dv = ctx;
-	return dv->wallclock();
-}
-
-/* A link-level failure hands the device back to the manager (close, reconnect on its timer); a device that
- * answered with an error (alarm, interlock) keeps its handle. */
-static void o_lost(void *ctx, int dev, const struct acq_err *err)
-{
-	struct devices *dv = ctx;
-	int code = err ? err->code : ACQ_E_DEVICE;
-	if (code == ACQ_E_TIMEOUT || code == ACQ_E_DISCONNECTED || code == ACQ_E_IO || code == ACQ_E_PROTO)
-		if (dev != EX_DEV_SPECTRO || devices_spectro(dv))
-			devices_lost(dv, (enum conf_dev)dev, err ? err->msg : "device error");
-}
-
-static void o_limits(void *ctx, int a, double *lo, double *hi)
-{
-	struct devices *dv = ctx;
-	const struct axis_cfg *c = a >= 0 && a < 3 ? dv->c->axis[a] : NULL;
-	if (c)
-		axis_cfg_limits(c, lo, hi);
-}
-
-static const struct ex_ops ex_dev_ops = {
-	.move_begin = o_move_begin, .move_step = o_move_step, .next_poll = o_next_poll, .stop = o_stop,
-	.position = o_position, .home_begin = o_home_begin, .alarm_reset = o_alarm_reset, .reconnect = o_reconnect,
-	.laser_set = o_laser_set, .laser_power = o_laser_power, .laser_state = o_laser_state, .spectro_start = o_spectro_start,
-	.spectro_fetch = o_spectro_fetch, .spectro_stop = o_spectro_stop, .spectro_info = o_spectro_info,
-	.wall = o_wall, .lost = o_lost, .limits = o_limits,
-};
-
-const struct ex_ops *devices_ex_ops(void)
-{
-	return &ex_dev_ops;
+	const struct dev_slot *s = &dv->slot[CONF_DEV_LASER];
+	if (!s->available)
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "laser: unavailable (%s)", s->note[0] ? s->note : "not configured");
+	struct req *r = devices_req_new(dv, CONF_DEV_LASER, R_LASER, OWN_CALL);
+	if (r) {
+		r->on = false;
+		r->done = done;
+		r->done_ctx = ctx;
+	}
+	return devices_req_submit(r) ? acq_errf(err, ACQ_E_NOMEM, "out of memory") : 0;
 }

@@ -33,7 +33,6 @@ void ex_cfg_defaults(struct ex_cfg *c)
 	c->max_point_faults = 6;
 	c->laser_power_pct = 100.0;
 	c->max_invalid_frac = 0.005;
-	c->db_path = NULL;
 }
 
 const char *ex_state_name(enum ex_state s)
@@ -118,6 +117,7 @@ void ex_reset_acq(struct ex *x)
 	x->ntimes = 0;
 	x->e = 0;
 	x->shot_in_flight = false;
+	x->shot_landed = false;
 }
 
 int ex_laser_off(struct ex *x, struct acq_err *err)
@@ -133,6 +133,7 @@ int ex_laser_off(struct ex *x, struct acq_err *err)
 /* Best effort: stop the spectrometer and the arms, laser off. */
 void ex_safe_stop(struct ex *x)
 {
+	memset(x->pos_got, 0, sizeof x->pos_got);
 	struct acq_err err = { 0 };
 	if (x->shot_in_flight && x->ops.spectro_stop)
 		x->ops.spectro_stop(x->octx, &err);
@@ -187,6 +188,7 @@ void ex_pause_now(struct ex *x, bool by_fault, const char *fmt, ...)
 void ex_fault(struct ex *x, int dev, const struct acq_err *err)
 {
 	x->stats.faults++;
+	memset(x->pos_got, 0, sizeof x->pos_got);
 	snprintf(x->fault_msg, sizeof x->fault_msg, "%s", err && err->msg[0] ? err->msg : "device error");
 	x->fault_dev = dev;
 	if (x->ops.lost)
@@ -220,6 +222,7 @@ void ex_fault(struct ex *x, int dev, const struct acq_err *err)
 	x->state = EX_SUSPENDED;
 	x->phase = PH_NONE;
 	x->fault_attempts = 0;
+	x->reconnecting = false;
 	x->backoff = x->cfg.fault_backoff_s;
 	snprintf(x->phase_text, sizeof x->phase_text, "suspended: %s", ex_dev_names[dev]);
 	x->retry_at = -1;
@@ -317,8 +320,15 @@ int ex_current_step(const struct ex *x)
 
 /* ---- control ---------------------------------------------------------------------------------- */
 
+void ex_io_wait(struct ex *x, double now)
+{
+	x->wake = now + EX_IO_RECHECK_S;
+}
+
 void ex_begin_segment(struct ex *x, double now)
 {
+	memset(x->alarm_reset_sent, 0, sizeof x->alarm_reset_sent);
+	memset(x->pos_got, 0, sizeof x->pos_got);
 	x->laser_unknown = true;
 	x->phase = PH_VERIFY;
 	x->first_move = true;
@@ -341,7 +351,7 @@ int ex_start(struct ex *x, int first_step, bool resumed, double now, struct acq_
 	x->cur = first_step;
 	x->stats.points_done = first_step;
 	if (x->st) {
-		static _Thread_local float grid[CALIB_MAX_GRID];
+		float *grid = x->scratch;
 		int n = calib_grid_size(&x->cfg.cal);
 		for (int k = 0; k < n; k++)
 			grid[k] = (float)(x->cfg.cal.grid_min_nm + k * x->cfg.cal.grid_step_nm);
@@ -395,6 +405,7 @@ int ex_resume(struct ex *x, double now, struct acq_err *err)
 	if (x->paused_by_fault) {
 		x->state = EX_SUSPENDED;
 		x->fault_attempts = 0;
+		x->reconnecting = false;
 		x->backoff = x->cfg.fault_backoff_s;
 		x->retry_at = now;
 		ex_event(x, "resume", ex_dev_names[x->fault_dev], "resumed by the operator: trying %s again",
@@ -429,21 +440,39 @@ static void run_suspended(struct ex *x, double now)
 {
 	if (x->retry_at < 0)
 		x->retry_at = now + x->backoff;
-	if (now + 1e-12 < x->retry_at) {
-		x->wake = x->retry_at;
-		return;
+	if (!x->reconnecting) {
+		if (now + 1e-12 < x->retry_at) {
+			x->wake = x->retry_at;
+			return;
+		}
+		x->fault_attempts++;
+		x->stats.retries++;
+		x->reconnecting = true;
+		x->recon_stage = 0;
 	}
 	struct acq_err err = { 0 };
-	x->fault_attempts++;
-	x->stats.retries++;
 	int dev = x->fault_dev;
-	int rc = x->ops.reconnect(x->octx, dev, &err);
-	if (rc == 0 && dev == EX_DEV_LASER) {
+	int rc = 0;
+	if (x->recon_stage == 0) {
+		rc = x->ops.reconnect(x->octx, dev, &err);
+		if (rc == EX_PENDING) {
+			ex_io_wait(x, now);
+			return;
+		}
+		if (rc == 0 && dev == EX_DEV_LASER)
+			x->recon_stage = 1;
+	}
+	if (rc == 0 && x->recon_stage == 1) {
 		bool emission = false, ready = false;
 		rc = x->ops.laser_state(x->octx, &emission, &ready, &err);
+		if (rc == EX_PENDING) {
+			ex_io_wait(x, now);
+			return;
+		}
 		if (rc == 0 && !ready)
 			rc = acq_errf(&err, ACQ_E_DEVICE, "laser not ready (interlock open or fault)");
 	}
+	x->reconnecting = false;
 	if (rc == 0 && dev == EX_DEV_SPECTRO) {
 		x->info = NULL;
 		if (!ex_want_wl(x))
@@ -481,6 +510,7 @@ double ex_step(struct ex *x, double now)
 			case PH_MOVE: ex_run_move(x, now); break;
 			case PH_SETTLE: ex_run_settle(x, now); break;
 			case PH_ACQ: ex_run_acq(x, now); break;
+			case PH_LASER_OFF: ex_run_laser_off(x, now); break;
 			case PH_NONE: break;
 			}
 		} else {

@@ -36,8 +36,15 @@ enum ex_state { EX_IDLE = 0, EX_RUNNING, EX_PAUSED, EX_SUSPENDED, EX_COMPLETED, 
 enum ex_dev { EX_DEV_LASER_THETA = 0, EX_DEV_DETECTOR_THETA, EX_DEV_DETECTOR_PHI, EX_DEV_SPECTRO, EX_DEV_LASER,
 	      EX_DEV__COUNT };
 
-/* Device operations (the real drivers: devices_ex_ops() in devices.c; a test double in the unit tests). Each
- * returns 0 or -1 with err unless stated; axis is EX_DEV_LASER_THETA..EX_DEV_DETECTOR_PHI. */
+/* A read that is on its way (position, laser_state, reconnect): call it again after the executor is stepped. */
+#define EX_PENDING 1
+
+/* Device operations (the real drivers: devices_ex_ops() in devices.c, each device on its own I/O thread; a test
+ * double in the unit tests). Each returns 0 or -1 with err unless stated; axis is EX_DEV_LASER_THETA..
+ * EX_DEV_DETECTOR_PHI. Commands (move_begin, home_begin, stop, alarm_reset, laser_set, laser_power,
+ * spectro_start, spectro_stop) may only queue the operation: its failure is then reported by the next poll
+ * (move_step, spectro_fetch) or read of that device. Reads (position, laser_state, reconnect) may return
+ * EX_PENDING: the result comes with a later call, after the owner stepped the executor again. */
 struct ex_ops {
 	int (*move_begin)(void *ctx, int axis, double target_deg, double now, struct acq_err *err);
 	int (*move_step)(void *ctx, int axis, double now, struct acq_err *err); /* enum axis_move_state */
@@ -95,7 +102,6 @@ struct ex_cfg {
 	int max_point_attempts;      /* acquisitions of one point spoiled by saturation before accepting it */
 	int max_point_faults;        /* faults on one point (each recovered) before pausing for the operator */
 	double max_invalid_frac;     /* saturated share of the grid range that spoils an acquisition */
-	const char *db_path;         /* the database file, to reload the reference on resume (read-only) */
 };
 
 /* Counters for tests and status. */

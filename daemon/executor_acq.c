@@ -3,7 +3,6 @@
 #include "daemon/executor_int.h"
 
 #include <math.h>
-#include <sqlite3.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -26,6 +25,7 @@ static void drop_exposures(struct ex *x)
 	x->ntimes = 0;
 	x->e = 0;
 	x->shot_in_flight = false;
+	x->shot_landed = false;
 }
 
 static double quantize(const struct ex *x, double t)
@@ -67,117 +67,53 @@ bool ex_want_wl(struct ex *x)
 
 /* ---- reference reload (crash-resume) ------------------------------------------------------------ */
 
-static int blob_floats(sqlite3_stmt *s, int col, int npix, double *dst_d, float *dst_f)
+/* One stored reference spectrum: darks back into the dark cache (never reused for new spectra), exposures
+ * into net rates, exactly as when they were taken. */
+static int reload_one(void *ctx, const struct store_ref_spectrum *sp)
 {
-	const void *b = sqlite3_column_blob(s, col);
-	int n = sqlite3_column_bytes(s, col);
-	if (!b || n != 4 * npix)
-		return -1;
-	const float *f = b;
-	for (int i = 0; i < npix; i++) {
-		float v;
-		memcpy(&v, f + i, sizeof v);
-		if (dst_d)
-			dst_d[i] = v;
-		if (dst_f)
-			dst_f[i] = v;
+	struct ex *x = ctx;
+	double t = sp->integration_ms;
+	unsigned av = sp->averages > 0 ? (unsigned)sp->averages : 0;
+	if (sp->npix != x->info->npix || av < 1 || x->nref >= EX_MAX_TIMES)
+		return 0;
+	if (!strcmp(sp->kind, "dark")) {
+		exp_avg_init(x->avg, sp->npix, t);
+		exp_avg_add(x->avg, sp->counts, sp->stddev, av, NULL, t, NULL);
+		x->avg->temperature_c = sp->temperature_c;
+		exp_dark_store(x->darks, x->avg, -1e300); /* old: never reused for new spectra */
+		return 0;
 	}
+	const struct exp_dark *dk = exp_dark_find(x->darks, t);
+	if (dk && !exp_net_rate(&x->cfg.pol, sp->counts, sp->stddev, av, sp->saturated, sp->npix, t, dk,
+				x->info->max_counts > 0 ? x->info->max_counts : 65535.0, x->rates[x->nref], NULL))
+		x->nref++;
 	return 0;
 }
 
-/* The reference of this sweep from the database: the spectra listed by the last "reference" event, darks
- * and exposures alike, turned into net rates and merged exactly as when they were taken. 1 loaded, 0 none. */
+/* The reference of this sweep from the store: the spectra listed by the last "reference" event, darks and
+ * exposures alike, turned into net rates and merged exactly as when they were taken. 1 loaded, 0 none. */
 int ex_load_reference(struct ex *x, struct acq_err *err)
 {
-	if (!x->cfg.db_path || !ex_want_wl(x))
+	if (!x->st || !ex_want_wl(x))
 		return 0;
-	sqlite3 *db = NULL;
-	int found = 0;
-	if (sqlite3_open_v2(x->cfg.db_path, &db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
-		acq_errf(err, ACQ_E_IO, "%s: %s", x->cfg.db_path, db ? sqlite3_errmsg(db) : "cannot open");
-		sqlite3_close(db);
+	double dt = NAN;
+	exp_darks_clear(x->darks);
+	x->nref = 0;
+	int n = store_reference_each(x->st, x->sweep_id, &dt, reload_one, x, err);
+	exp_darks_clear(x->darks);
+	if (n < 0)
 		return -1;
-	}
-	sqlite3_busy_timeout(db, 2000);
-	sqlite3_stmt *s = NULL;
-	long long lo = 0, hi = 0;
-	if (sqlite3_prepare_v2(db, "SELECT message FROM events WHERE sweep_id = ? AND kind = 'reference' "
-				   "ORDER BY id DESC LIMIT 1", -1, &s, NULL) != SQLITE_OK)
-		goto dberr;
-	sqlite3_bind_int64(s, 1, x->sweep_id);
-	if (sqlite3_step(s) == SQLITE_ROW) {
-		const char *m = (const char *)sqlite3_column_text(s, 0);
-		const char *p = m ? strstr(m, "spectra ") : NULL;
-		if (!p || sscanf(p, "spectra %lld-%lld", &lo, &hi) != 2)
-			lo = hi = 0;
-		double lt, dt, dp;
-		const char *q = m ? strstr(m, "at (") : NULL;
-		if (q && sscanf(q, "at (%lf, %lf, %lf)", &lt, &dt, &dp) == 3)
-			x->cfg.cal.ref_theta_o_deg = fabs(dt);
-	}
-	sqlite3_finalize(s);
-	s = NULL;
-	if (lo <= 0 || hi < lo)
-		goto out;
-	if (sqlite3_prepare_v2(db, "SELECT kind, integration_ms, averages, npix, counts, stddev, saturation_mask, "
-				   "temperature_c FROM spectra WHERE sweep_id = ? AND id BETWEEN ? AND ? ORDER BY id",
-			       -1, &s, NULL) != SQLITE_OK)
-		goto dberr;
-	sqlite3_bind_int64(s, 1, x->sweep_id);
-	sqlite3_bind_int64(s, 2, lo);
-	sqlite3_bind_int64(s, 3, hi);
-	exp_darks_clear(x->darks);
-	int n = 0;
-	static _Thread_local float sd[SPECTRO_MAX_PIXELS];
-	while (sqlite3_step(s) == SQLITE_ROW && n < EX_MAX_TIMES) {
-		const char *kind = (const char *)sqlite3_column_text(s, 0);
-		double t = sqlite3_column_double(s, 1);
-		int av = sqlite3_column_int(s, 2), npix = sqlite3_column_int(s, 3);
-		if (!kind || npix != x->info->npix || av < 1)
-			continue;
-		exp_avg_init(x->avg, npix, t);
-		if (blob_floats(s, 4, npix, x->frame->counts, NULL))
-			continue;
-		if (sqlite3_column_type(s, 5) == SQLITE_NULL)
-			memset(sd, 0, sizeof(float) * (size_t)npix);
-		else if (blob_floats(s, 5, npix, NULL, sd))
-			continue;
-		memset(x->frame->saturated, 0, (size_t)npix);
-		if (sqlite3_column_type(s, 6) != SQLITE_NULL && sqlite3_column_bytes(s, 6) == npix)
-			memcpy(x->frame->saturated, sqlite3_column_blob(s, 6), (size_t)npix);
-		if (!strcmp(kind, "dark")) {
-			exp_avg_add(x->avg, x->frame->counts, sd, (unsigned)av, NULL, t, NULL);
-			x->avg->temperature_c = sqlite3_column_type(s, 7) == SQLITE_NULL ? NAN : sqlite3_column_double(s, 7);
-			exp_dark_store(x->darks, x->avg, -1e300); /* old: never reused for new spectra */
-		} else {
-			const struct exp_dark *dk = exp_dark_find(x->darks, t);
-			if (!dk || exp_net_rate(&x->cfg.pol, x->frame->counts, sd, (unsigned)av, x->frame->saturated, npix,
-						t, dk, x->info->max_counts > 0 ? x->info->max_counts : 65535.0,
-						x->rates[n], NULL))
-				continue;
-			n++;
-		}
-	}
-	sqlite3_finalize(s);
-	s = NULL;
-	exp_darks_clear(x->darks);
-	if (n > 0) {
-		const struct exp_rate *list[EX_MAX_TIMES];
-		for (int i = 0; i < n; i++)
-			list[i] = x->rates[i];
-		if (exp_merge(list, n, x->ref_rate, err) == 0) {
-			ex_mask_black(x, x->ref_rate);
-			found = 1;
-		}
-	}
-	goto out;
-dberr:
-	acq_errf(err, ACQ_E_IO, "%s: %s", x->cfg.db_path, sqlite3_errmsg(db));
-	found = -1;
-out:
-	sqlite3_finalize(s);
-	sqlite3_close(db);
-	return found;
+	if (isfinite(dt))
+		x->cfg.cal.ref_theta_o_deg = fabs(dt);
+	if (x->nref == 0)
+		return 0;
+	const struct exp_rate *list[EX_MAX_TIMES];
+	for (int i = 0; i < x->nref; i++)
+		list[i] = x->rates[i];
+	if (exp_merge(list, x->nref, x->ref_rate, err))
+		return 0;
+	ex_mask_black(x, x->ref_rate);
+	return 1;
 }
 
 /* ---- acquisition ------------------------------------------------------------------------------ */
@@ -189,38 +125,48 @@ static const char *expose_kind(const struct ex *x)
 	return x->cfg.cal.method == CALIB_ABSOLUTE ? "beam" : "reference";
 }
 
-static int want_laser(struct ex *x, bool on, struct acq_err *err, int *dev)
+/* The laser as the next shot needs it: 0, EX_PENDING (its state is being read), or -1 with err. A command
+ * that changed it is confirmed by a read of the state before the shot. */
+static int want_laser(struct ex *x, bool on, struct acq_err *err)
 {
-	*dev = EX_DEV_LASER;
-	if (on == x->stats.laser_on && !on)
+	if (on == x->stats.laser_on && !on && !x->laser_confirm)
 		return 0;
 	if (on && !x->power_set && x->ops.laser_power) {
 		if (x->ops.laser_power(x->octx, x->cfg.laser_power_pct, err))
 			return -1;
 		x->power_set = true;
+		x->laser_confirm = true;
 	}
 	if (on != x->stats.laser_on) {
 		if (x->ops.laser_set(x->octx, on, err))
 			return -1;
 		x->stats.laser_on = on;
+		x->laser_confirm = true;
 	}
-	if (on) {
-		bool emission = false, ready = false;
-		if (x->ops.laser_state(x->octx, &emission, &ready, err))
-			return -1;
-		if (!emission || !ready)
-			return acq_errf(err, ACQ_E_DEVICE, "laser not emitting (interlock open or laser fault)");
-	}
+	bool emission = false, ready = false;
+	int rc = x->ops.laser_state(x->octx, &emission, &ready, err);
+	if (rc)
+		return rc;
+	x->laser_confirm = false;
+	if (on && (!emission || !ready))
+		return acq_errf(err, ACQ_E_DEVICE, "laser not emitting (interlock open or laser fault)");
+	if (!on && emission)
+		return acq_errf(err, ACQ_E_DEVICE, "laser still emitting after emission off");
 	return 0;
 }
 
-static void start_shot(struct ex *x, enum shot_kind k, double t, double now)
+/* Start a shot of kind k at t ms: 0 started, EX_PENDING (waiting for the laser), -1 after a fault. */
+static int start_shot(struct ex *x, enum shot_kind k, double t, double now)
 {
 	struct acq_err err = { 0 };
-	int dev = EX_DEV_LASER;
-	if (want_laser(x, k != SHOT_DARK, &err, &dev)) {
-		ex_fault(x, dev, &err);
-		return;
+	int rc = want_laser(x, k != SHOT_DARK, &err);
+	if (rc == EX_PENDING) {
+		ex_io_wait(x, now);
+		return EX_PENDING;
+	}
+	if (rc) {
+		ex_fault(x, EX_DEV_LASER, &err);
+		return -1;
 	}
 	x->shot = k;
 	x->meas.integration_ms = t;
@@ -228,11 +174,14 @@ static void start_shot(struct ex *x, enum shot_kind k, double t, double now)
 	x->meas.saturation_detection = true;
 	if (x->ops.spectro_start(x->octx, &x->meas, now, &err)) {
 		ex_fault(x, EX_DEV_SPECTRO, &err);
-		return;
+		return -1;
 	}
+	if (k == SHOT_PROBE)
+		x->probe_no++;
 	x->shot_in_flight = true;
 	/* First look when the exposures should be over, then every poll_s (the fetch deadline is the driver's). */
 	x->wake = now + fmax(t * 1e-3 * x->meas.averages, 1e-4);
+	return 0;
 }
 
 static int keep_frame(struct ex *x, const char *kind, double taken_at)
@@ -285,19 +234,6 @@ static void after_shot(struct ex *x, double now)
 		f->meas.averages = x->meas.averages;
 	if (isfinite(f->temperature_c))
 		x->temperature = f->temperature_c;
-	if (x->shot != SHOT_DARK) {
-		/* The laser must still be emitting: an interlock opened during the exposure spoils it. */
-		bool emission = false, ready = false;
-		if (x->ops.laser_state(x->octx, &emission, &ready, &err)) {
-			ex_fault(x, EX_DEV_LASER, &err);
-			return;
-		}
-		if (!emission || !ready) {
-			acq_errf(&err, ACQ_E_DEVICE, "laser stopped emitting during the exposure (interlock or fault)");
-			ex_fault(x, EX_DEV_LASER, &err);
-			return;
-		}
-	}
 	switch (x->shot) {
 	case SHOT_PROBE: {
 		x->stats.probes++;
@@ -403,6 +339,26 @@ void ex_run_acq(struct ex *x, double now)
 			return;
 		}
 		x->shot_in_flight = false;
+		x->shot_landed = true;
+	}
+	if (x->shot_landed) {
+		if (x->shot != SHOT_DARK) {
+			/* The laser must still be emitting: an interlock opened during the exposure spoils it. */
+			bool emission = false, ready = false;
+			int rc = x->ops.laser_state(x->octx, &emission, &ready, &err);
+			if (rc == EX_PENDING) {
+				ex_io_wait(x, now);
+				return;
+			}
+			if (rc == 0 && (!emission || !ready))
+				rc = acq_errf(&err, ACQ_E_DEVICE,
+					      "laser stopped emitting during the exposure (interlock or fault)");
+			if (rc) {
+				ex_fault(x, EX_DEV_LASER, &err);
+				return;
+			}
+		}
+		x->shot_landed = false;
 		after_shot(x, now);
 		return;
 	}
@@ -415,24 +371,19 @@ void ex_run_acq(struct ex *x, double now)
 		} else {
 			if (x->probe_no == 0)
 				x->t_probe = x->t_last;
-			x->probe_no++;
 			start_shot(x, SHOT_PROBE, x->t_probe, now);
 			return;
 		}
 	}
 	double t = x->times[x->e];
 	enum exp_dark_need need = exp_dark_check(x->darks, &x->cfg.pol, t, now, x->temperature);
-	if (need != EXP_DARK_FRESH) {
-		start_shot(x, SHOT_DARK, t, now);
-		return;
-	}
-	start_shot(x, SHOT_EXPOSE, t, now);
+	start_shot(x, need != EXP_DARK_FRESH ? SHOT_DARK : SHOT_EXPOSE, t, now);
 }
 
 static int put_spectrum(struct ex *x, const struct pending *p, int64_t point_id, bool completes, int64_t *id,
 			struct acq_err *err)
 {
-	static _Thread_local float counts[SPECTRO_MAX_PIXELS];
+	float *counts = x->scratch;
 	const struct spectro_frame *f = p->frame;
 	for (int i = 0; i < f->npix; i++)
 		counts[i] = (float)f->counts[i];
@@ -455,6 +406,7 @@ static int put_spectrum(struct ex *x, const struct pending *p, int64_t point_id,
 		.detector_theta = x->actual.det_theta,
 		.detector_phi = x->actual.det_phi,
 	};
+	ex_pos_angles(&x->geom, &x->actual, &sp.theta_i, &sp.phi_i, &sp.theta_o, &sp.phi_o);
 	return store_spectrum_add(x->st, &sp, id, err);
 }
 
@@ -477,6 +429,47 @@ static void finish_sweep(struct ex *x)
 	ex_set_db_state(x, "completed");
 	ex_event(x, "complete", NULL, "all %d points measured and calibrated (%s method); %d faults, %d recovered",
 	      x->nsteps, calib_method_name(x->cfg.cal.method), x->stats.faults, x->stats.recoveries);
+}
+
+/* The reference (or direct beam) is in: store its spectra, keep its merged rate, then pause for the sample swap
+ * or go on to the first point. */
+static void commit_reference(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	int64_t first = 0, last = 0;
+	for (int i = 0; i < x->npend; i++) {
+		int64_t id = 0;
+		if (put_spectrum(x, &x->pend[i], 0, false, &id, &err)) {
+			ex_failed(x, "storing the reference: %s", err.msg);
+			return;
+		}
+		if (!first)
+			first = id;
+		last = id;
+		x->stats.spectra++;
+	}
+	/* Paused in the store before the marker: a crash in between measures the reference again. */
+	if (x->cfg.pause_after_reference)
+		ex_set_db_state(x, "paused");
+	memcpy(x->ref_rate, x->merged, sizeof *x->ref_rate);
+	x->have_ref = true;
+	x->cfg.cal.ref_theta_o_deg = fabs(x->actual.det_theta);
+	x->in_reference = false;
+	ex_clear_pending(x);
+	ex_event(x, "reference", NULL, "%s measured at (%.4f, %.4f, %.4f): spectra %lld-%lld",
+	      x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "white reference", x->actual.laser_theta,
+	      x->actual.det_theta, x->actual.det_phi, (long long)first, (long long)last);
+	if (x->cfg.pause_after_reference) {
+		ex_pause_now(x, false, "%s measured: place the sample on the stage, then resume",
+			  x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "reference");
+		return;
+	}
+	if (x->pause_requested) {
+		ex_pause_now(x, false, "paused by the operator after the reference");
+		return;
+	}
+	ex_begin_segment(x, now);
+	return;
 }
 
 /* The point's exposures are in: merge, check saturation, calibrate, commit, go on. */
@@ -534,39 +527,7 @@ static void commit_point(struct ex *x, double now)
 		}
 	}
 	if (x->in_reference) {
-		int64_t first = 0, last = 0;
-		for (int i = 0; i < x->npend; i++) {
-			int64_t id = 0;
-			if (put_spectrum(x, &x->pend[i], 0, false, &id, &err)) {
-				ex_failed(x, "storing the reference: %s", err.msg);
-				return;
-			}
-			if (!first)
-				first = id;
-			last = id;
-			x->stats.spectra++;
-		}
-		/* Paused in the store before the marker: a crash in between measures the reference again. */
-		if (x->cfg.pause_after_reference)
-			ex_set_db_state(x, "paused");
-		memcpy(x->ref_rate, x->merged, sizeof *x->ref_rate);
-		x->have_ref = true;
-		x->cfg.cal.ref_theta_o_deg = fabs(x->actual.det_theta);
-		x->in_reference = false;
-		ex_clear_pending(x);
-		ex_event(x, "reference", NULL, "%s measured at (%.4f, %.4f, %.4f): spectra %lld-%lld",
-		      x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "white reference", x->actual.laser_theta,
-		      x->actual.det_theta, x->actual.det_phi, (long long)first, (long long)last);
-		if (x->cfg.pause_after_reference) {
-			ex_pause_now(x, false, "%s measured: place the sample on the stage, then resume",
-				  x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "reference");
-			return;
-		}
-		if (x->pause_requested) {
-			ex_pause_now(x, false, "paused by the operator after the reference");
-			return;
-		}
-		ex_begin_segment(x, now);
+		commit_reference(x, now);
 		return;
 	}
 	/* Calibrate at the measured angles. */
@@ -598,7 +559,7 @@ static void commit_point(struct ex *x, double now)
 		x->stats.spectra++;
 	}
 	if (calibrated) {
-		static _Thread_local float fb[CALIB_MAX_GRID], fs[CALIB_MAX_GRID];
+		float *fb = x->scratch, *fs = x->scratch + CALIB_MAX_GRID;
 		for (int k = 0; k < x->cal->n; k++) {
 			fb[k] = (float)x->cal->f[k];
 			fs[k] = (float)x->cal->u[k];
@@ -636,17 +597,16 @@ static void commit_point(struct ex *x, double now)
 		ex_pause_now(x, false, "paused by the operator after point %d", x->cur);
 		return;
 	}
-	x->phase = PH_MOVE;
 	x->first_move = false;
 	x->point_started = now;
-	if (x->stats.laser_on && ex_laser_off(x, &err)) {
-		ex_fault(x, EX_DEV_LASER, &err);
-		return;
+	if (x->stats.laser_on) {
+		if (ex_laser_off(x, &err)) {
+			ex_fault(x, EX_DEV_LASER, &err);
+			return;
+		}
+		x->laser_confirm = true;
 	}
-	if (ex_plan_path(x)) {
-		ex_pause_now(x, false, "no collision-free path to point %d: move the arms and resume", x->cur);
-		return;
-	}
-	ex_set_phase_text(x, "moving");
-	ex_begin_waypoints(x, now);
+	x->move_from_verify = false;
+	x->phase = PH_LASER_OFF;
+	x->wake = now;
 }

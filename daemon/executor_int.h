@@ -8,6 +8,7 @@
 #define EX_MAX_PENDING 24
 #define EX_MAX_TIMES 8
 #define EX_POS_TOL_DEG 1e-3
+#define EX_IO_RECHECK_S 0.25  /* a read is pending: step again at the latest after this (its completion kicks) */
 
 enum phase {
 	PH_NONE = 0,
@@ -16,6 +17,7 @@ enum phase {
 	PH_MOVE,     /* waypoint segments */
 	PH_SETTLE,
 	PH_ACQ,      /* acquisition shots */
+	PH_LASER_OFF, /* the laser confirmed off, then the move starts */
 };
 
 enum shot_kind { SHOT_PROBE, SHOT_DARK, SHOT_EXPOSE };
@@ -47,6 +49,12 @@ struct ex {
 	bool first_move;             /* next move starts from the measured position (plan_move) */
 	bool pause_requested;
 	bool paused_by_fault;
+	bool laser_confirm;          /* a laser command was queued: read the state before relying on it */
+	bool move_from_verify;       /* PH_LASER_OFF after verifying positions (else after a commit) */
+	bool alarm_reset_sent[3];    /* this verification already reset the axis's alarm */
+	bool pos_got[3];             /* positions read so far by this read of all three axes */
+	double pos_val[3];
+	bool pos_homed[3], pos_alarm[3];
 	char reason[512];
 	char phase_text[96];
 	double wake;
@@ -63,6 +71,7 @@ struct ex {
 
 	/* acquisition */
 	bool shot_in_flight;
+	bool shot_landed;            /* the frame is in; the laser check after it may be pending */
 	enum shot_kind shot;
 	struct spectro_meas meas;
 	struct spectro_frame *frame; /* receive buffer */
@@ -71,6 +80,7 @@ struct ex {
 	bool have_t0;
 	double times[EX_MAX_TIMES];
 	int ntimes, e;
+	int nref;                    /* reference exposures reloaded so far (ex_load_reference) */
 	struct exp_rate *rates[EX_MAX_TIMES];
 	struct exp_rate *merged, *ref_rate;
 	struct pending pend[EX_MAX_PENDING];
@@ -85,12 +95,15 @@ struct ex {
 	int nroi;
 	struct calib_spectrum *cal;
 	struct exp_avg *avg;
+	float scratch[SPECTRO_MAX_PIXELS > 2 * CALIB_MAX_GRID ? SPECTRO_MAX_PIXELS : 2 * CALIB_MAX_GRID]; /* float32 rows for the store */
 
 	/* faults */
 	int point_faults;            /* faults since the current point started (reset when it commits) */
 	int fault_dev;
 	int fault_attempts;
 	double backoff, retry_at;
+	bool reconnecting;           /* an attempt is under way (its reads may be pending) */
+	int recon_stage;             /* 0: the device answers? 1: the laser is ready? */
 	char fault_msg[512];
 
 	/* progress */
@@ -127,6 +140,8 @@ void ex_pause_now(struct ex *x, bool by_fault, const char *fmt, ...) __attribute
 void ex_fault(struct ex *x, int dev, const struct acq_err *err);
 /* Start a segment of points: verify positions (laser state unknown) before the next move. */
 void ex_begin_segment(struct ex *x, double now);
+/* A device read is on its way (EX_PENDING): wait for its completion's kick. */
+void ex_io_wait(struct ex *x, double now);
 
 /* ---- motion (executor_motion.c) ---- */
 /* Waypoints to the current target into x->wps; 0, or -1 when no collision-free path stays inside the limits. */
@@ -138,6 +153,8 @@ void ex_run_verify(struct ex *x, double now);
 void ex_run_homing(struct ex *x, double now);
 void ex_run_move(struct ex *x, double now);
 void ex_run_settle(struct ex *x, double now);
+/* Confirm the laser is off (when a command switched it), plan the path, start the move. */
+void ex_run_laser_off(struct ex *x, double now);
 
 /* ---- acquisition (executor_acq.c) ---- */
 /* The spectrometer's wavelengths and region of interest, once known; false while it is absent. */

@@ -4,6 +4,7 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <string.h>
 
 #include "drivers/axis.h"
 
@@ -133,27 +134,71 @@ void ex_begin_waypoints(struct ex *x, double now)
 	x->wake = now;
 }
 
+/* Read the three axes' positions (the reads run side by side; an axis whose answer is in is not asked again
+ * while the others are pending). 0, EX_PENDING, or -1 after a fault. */
+static int read_positions(struct ex *x, double now, double pos[3], bool homed[3], bool alarm[3])
+{
+	struct acq_err err = { 0 };
+	int pending = 0;
+	for (int a = 0; a < 3; a++) {
+		if (x->pos_got[a])
+			continue;
+		x->pos_homed[a] = true;
+		x->pos_alarm[a] = false;
+		int rc = x->ops.position(x->octx, a, &x->pos_val[a], &x->pos_homed[a], &x->pos_alarm[a], &err);
+		if (rc == EX_PENDING) {
+			pending++;
+		} else if (rc) {
+			ex_fault(x, a, &err);
+			return -1;
+		} else {
+			x->pos_got[a] = true;
+		}
+	}
+	if (pending) {
+		ex_io_wait(x, now);
+		return EX_PENDING;
+	}
+	for (int a = 0; a < 3; a++) {
+		pos[a] = x->pos_val[a];
+		homed[a] = x->pos_homed[a];
+		alarm[a] = x->pos_alarm[a];
+	}
+	memset(x->pos_got, 0, sizeof x->pos_got);
+	return 0;
+}
+
 void ex_run_verify(struct ex *x, double now)
 {
 	struct acq_err err = { 0 };
 	ex_set_phase_text(x, "verifying positions");
 	double pos[3];
-	bool homed[3];
+	bool homed[3], alarm[3];
+	if (read_positions(x, now, pos, homed, alarm))
+		return;
+	/* An axis in alarm is reset once, then read again: still in alarm is a fault. */
+	bool reset = false;
 	for (int a = 0; a < 3; a++) {
-		bool alarm = false;
-		homed[a] = true;
-		if (x->ops.position(x->octx, a, &pos[a], &homed[a], &alarm, &err)) {
+		if (!alarm[a])
+			continue;
+		if (x->alarm_reset_sent[a]) {
+			acq_errf(&err, ACQ_E_DEVICE, "%s still in alarm after an alarm reset", ex_dev_names[a]);
 			ex_fault(x, a, &err);
 			return;
 		}
-		if (alarm) {
-			if (x->ops.alarm_reset(x->octx, a, &err)) {
-				ex_fault(x, a, &err);
-				return;
-			}
-			ex_event(x, "info", ex_dev_names[a], "alarm cleared on %s before moving", ex_dev_names[a]);
+		if (x->ops.alarm_reset(x->octx, a, &err)) {
+			ex_fault(x, a, &err);
+			return;
 		}
+		x->alarm_reset_sent[a] = true;
+		reset = true;
+		ex_event(x, "info", ex_dev_names[a], "alarm cleared on %s before moving", ex_dev_names[a]);
 	}
+	if (reset) {
+		x->wake = now;
+		return;
+	}
+	memset(x->alarm_reset_sent, 0, sizeof x->alarm_reset_sent);
 	/* Homing, when configured: one axis at a time, only when its way home is collision-free. */
 	for (int a = 0; a < 3 && x->cfg.home_unhomed; a++) {
 		if (homed[a])
@@ -184,20 +229,50 @@ void ex_run_verify(struct ex *x, double now)
 	x->known = (struct plan_pos){ pos[0], pos[1], pos[2] };
 	x->known_valid = true;
 	/* Laser off before any motion (also when a crashed predecessor may have left it on). */
-	if ((x->stats.laser_on || x->laser_unknown) && ex_laser_off(x, &err)) {
-		ex_fault(x, EX_DEV_LASER, &err);
-		return;
+	if (x->stats.laser_on || x->laser_unknown) {
+		if (ex_laser_off(x, &err)) {
+			ex_fault(x, EX_DEV_LASER, &err);
+			return;
+		}
+		x->laser_confirm = true;
 	}
 	x->laser_unknown = false;
+	x->move_from_verify = true;
+	x->phase = PH_LASER_OFF;
+	x->wake = now;
+}
+
+void ex_run_laser_off(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	if (x->laser_confirm && x->ops.laser_state) {
+		bool emission = false, ready = false;
+		int rc = x->ops.laser_state(x->octx, &emission, &ready, &err);
+		if (rc == EX_PENDING) {
+			ex_io_wait(x, now);
+			return;
+		}
+		if (rc == 0 && emission)
+			rc = acq_errf(&err, ACQ_E_DEVICE, "laser still emitting after emission off");
+		if (rc) {
+			ex_fault(x, EX_DEV_LASER, &err);
+			return;
+		}
+	}
+	x->laser_confirm = false;
 	if (ex_plan_path(x)) {
-		ex_pause_now(x, false, "no collision-free path from (%.2f, %.2f, %.2f) to the next point: move the arms and "
-			  "resume", pos[0], pos[1], pos[2]);
+		if (x->move_from_verify)
+			ex_pause_now(x, false, "no collision-free path from (%.2f, %.2f, %.2f) to the next point: move the "
+				     "arms and resume", x->known.laser_theta, x->known.det_theta, x->known.det_phi);
+		else
+			ex_pause_now(x, false, "no collision-free path to point %d: move the arms and resume", x->cur);
 		return;
 	}
 	x->first_move = false;
 	x->phase = PH_MOVE;
-	x->point_started = now;
-	ex_set_phase_text(x, x->in_reference ? "moving to the reference pose" : "moving");
+	if (x->move_from_verify)
+		x->point_started = now;
+	ex_set_phase_text(x, x->in_reference && x->move_from_verify ? "moving to the reference pose" : "moving");
 	ex_begin_waypoints(x, now);
 }
 
@@ -284,13 +359,11 @@ void ex_run_settle(struct ex *x, double now)
 	}
 	struct acq_err err = { 0 };
 	double pos[3];
+	bool homed[3], alarm[3];
+	if (read_positions(x, now, pos, homed, alarm))
+		return;
 	for (int a = 0; a < 3; a++) {
-		bool homed, alarm;
-		if (x->ops.position(x->octx, a, &pos[a], &homed, &alarm, &err)) {
-			ex_fault(x, a, &err);
-			return;
-		}
-		if (alarm) {
+		if (alarm[a]) {
 			acq_errf(&err, ACQ_E_DEVICE, "%s in alarm after the move", ex_dev_names[a]);
 			ex_fault(x, a, &err);
 			return;

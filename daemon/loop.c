@@ -79,6 +79,11 @@ void loop_free(struct loop *lp)
 	free(lp);
 }
 
+double loop_rate(const struct loop *lp)
+{
+	return lp->clk.rate;
+}
+
 double loop_now(const struct loop *lp)
 {
 	return lp->clk.now(lp->clk.ctx);

@@ -35,6 +35,8 @@ struct loop *loop_new(const struct loop_clock *clk, struct acq_err *err);
 void loop_free(struct loop *lp);
 /* Current time of the loop's clock, monotonic seconds. */
 double loop_now(const struct loop *lp);
+/* Clock seconds per real second (1 for real time, the time scale with --sim). */
+double loop_rate(const struct loop *lp);
 /* Real CLOCK_MONOTONIC seconds (the default clock). */
 double loop_monotonic(void *ctx);
 

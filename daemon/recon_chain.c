@@ -1,11 +1,8 @@
 /* recon_chain: the completion chain of a sweep — its calibrated samples exported as CSV into the state
- * directory, then the reconstruction stages (brdf-recon fit, merl, dhr --plot, render) one after the other in
+ * directory (store_export_csv_file: the angles measured at commit, as every reader), then the reconstruction stages (brdf-recon fit, merl, dhr --plot, render) one after the other in
  * child processes (job.h), each run and output recorded in the store (recon_runs), every step an event. */
 #include "daemon/recon_chain.h"
 
-#include <errno.h>
-#include <math.h>
-#include <sqlite3.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -13,7 +10,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "daemon/executor.h"
 #include "daemon/job.h"
 #include "daemon/log.h"
 #include "daemon/store.h"
@@ -22,7 +18,6 @@ enum { RC_FIT, RC_MERL, RC_DHR, RC_RENDER, RC__COUNT };
 
 struct recon_chain {
 	const struct sweep_env *env; /* the sweep's (its conf follows reloads) */
-	enum calib_method method;    /* of the export's header */
 	int64_t id;                  /* the sweep being reconstructed */
 	struct job *job;
 	int rstage;
@@ -65,102 +60,6 @@ static void chain_emit(struct recon_chain *ch, const char *name, json_t *data)
 		ch->env->emit(ch->env->emit_ctx, name, data);
 	else
 		json_decref(data);
-}
-
-/* One row per calibrated point: sweep angles from the measured axis positions (zeniths ≥ 0, azimuths in
- * [0, 360)), the grid's values, then their sigma_<nm> columns; NaN as an empty field. */
-static int export_csv(struct recon_chain *ch, int64_t id, const char *path, int *nrows, struct acq_err *err)
-{
-	*nrows = 0;
-	sqlite3 *db = NULL;
-	FILE *f = NULL;
-	sqlite3_stmt *s = NULL;
-	float *grid = NULL;
-	int rc = -1;
-	if (sqlite3_open_v2(ch->env->conf->d.database, &db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
-		acq_errf(err, ACQ_E_IO, "%s: %s", ch->env->conf->d.database, db ? sqlite3_errmsg(db) : "cannot open");
-		goto out;
-	}
-	sqlite3_busy_timeout(db, 5000);
-	if (sqlite3_prepare_v2(db, "SELECT wavelength_grid FROM sweeps WHERE id = ?", -1, &s, NULL) != SQLITE_OK)
-		goto dberr;
-	sqlite3_bind_int64(s, 1, id);
-	if (sqlite3_step(s) != SQLITE_ROW || sqlite3_column_bytes(s, 0) <= 0 || sqlite3_column_bytes(s, 0) % 4) {
-		acq_errf(err, ACQ_E_STATE, "sweep %lld has no wavelength grid", (long long)id);
-		goto out;
-	}
-	int nb = sqlite3_column_bytes(s, 0), n = nb / 4;
-	grid = malloc((size_t)nb);
-	if (!grid) {
-		acq_errf(err, ACQ_E_NOMEM, "out of memory");
-		goto out;
-	}
-	memcpy(grid, sqlite3_column_blob(s, 0), (size_t)nb);
-	sqlite3_finalize(s);
-	s = NULL;
-	char tmp[4200];
-	snprintf(tmp, sizeof tmp, "%s.tmp", path);
-	if (!(f = fopen(tmp, "w"))) {
-		acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
-		goto out;
-	}
-	fprintf(f, "# acquisitiond sweep %lld: calibrated spectral BRDF samples (sr^-1) with standard uncertainty\n",
-		(long long)id);
-	fprintf(f, "# calibration: %s method; angles from the measured axis positions\n",
-		calib_method_name(ch->method));
-	fputs("theta_i,phi_i,theta_o,phi_o", f);
-	for (int k = 0; k < n; k++)
-		fprintf(f, ",%g", (double)grid[k]);
-	for (int k = 0; k < n; k++)
-		fprintf(f, ",sigma_%g", (double)grid[k]);
-	fputc('\n', f);
-	if (sqlite3_prepare_v2(db, "SELECT coalesce(p.laser_theta, p.theta_i), coalesce(p.detector_theta, p.theta_o), "
-				   "coalesce(p.detector_phi, p.phi_o), c.brdf, c.sigma, p.laser_theta IS NULL FROM calibrated c "
-				   "JOIN points p ON p.id = c.point_id WHERE c.sweep_id = ? AND p.state = 'done' "
-				   "ORDER BY p.order_index", -1, &s, NULL) != SQLITE_OK)
-		goto dberr;
-	sqlite3_bind_int64(s, 1, id);
-	while (sqlite3_step(s) == SQLITE_ROW) {
-		if (sqlite3_column_bytes(s, 3) != nb || sqlite3_column_bytes(s, 4) != nb)
-			continue;
-		struct plan_pos p = { sqlite3_column_double(s, 0), sqlite3_column_double(s, 1), sqlite3_column_double(s, 2) };
-		double ti, pi, to, po;
-		ex_pos_angles(&ch->env->conf->bench, &p, &ti, &pi, &to, &po);
-		fprintf(f, "%.6f,%.6f,%.6f,%.6f", ti, pi, to, po);
-		const unsigned char *b = sqlite3_column_blob(s, 3), *u = sqlite3_column_blob(s, 4);
-		for (int pass = 0; pass < 2; pass++)
-			for (int k = 0; k < n; k++) {
-				float v;
-				memcpy(&v, (pass ? u : b) + 4 * k, 4);
-				if (isfinite(v))
-					fprintf(f, ",%.7g", (double)v);
-				else
-					fputc(',', f);
-			}
-		fputc('\n', f);
-		(*nrows)++;
-	}
-	if (fclose(f) != 0) {
-		f = NULL;
-		acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
-		goto out;
-	}
-	f = NULL;
-	if (rename(tmp, path)) {
-		acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
-		goto out;
-	}
-	rc = 0;
-	goto out;
-dberr:
-	acq_errf(err, ACQ_E_IO, "%s: %s", ch->env->conf->d.database, sqlite3_errmsg(db));
-out:
-	if (f)
-		fclose(f);
-	sqlite3_finalize(s);
-	sqlite3_close(db);
-	free(grid);
-	return rc;
 }
 
 /* brdf-recon: an absolute path, next to acquisitiond, or in PATH. 0 or -1. */
@@ -319,8 +218,7 @@ static void recon_next(struct recon_chain *ch)
 		    ch->recon_failed, RC__COUNT, summary);
 }
 
-int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, enum calib_method method, int64_t *run_id,
-		    struct acq_err *err)
+int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, int64_t *run_id, struct acq_err *err)
 {
 	const struct conf *c = ch->env->conf;
 	if (run_id)
@@ -328,13 +226,12 @@ int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, enum cal
 	if (ch->job)
 		return acq_errf(err, ACQ_E_STATE, "a reconstruction is still running");
 	ch->id = id;
-	ch->method = method;
 	snprintf(ch->outdir, sizeof ch->outdir, "%s/sweep-%lld", c->recon.output_dir, (long long)id);
 	mkdir(c->recon.output_dir, 0750);
 	mkdir(ch->outdir, 0750);
 	snprintf(ch->csv, sizeof ch->csv, "%s/samples.csv", ch->outdir);
 	int rows = 0;
-	if (export_csv(ch, id, ch->csv, &rows, err)) {
+	if (store_export_csv_file(ch->env->store, id, ch->csv, &rows, err)) {
 		recon_event(ch, "info", "exporting the calibrated samples failed: %s; no reconstruction ran", err->msg);
 		return -1;
 	}

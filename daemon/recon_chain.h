@@ -8,7 +8,6 @@
 #include <stdint.h>
 
 #include "config/acq_err.h"
-#include "daemon/calib.h"
 #include "daemon/sweep.h"
 
 struct recon_chain;
@@ -18,10 +17,9 @@ struct recon_chain *recon_chain_new(const struct sweep_env *env);
 /* Free; a stage still running is recorded as cancelled (the body's job_finish() kills it). NULL is fine. */
 void recon_chain_free(struct recon_chain *ch);
 /* The chain for sweep id: export, then the stages when wanted (automatic: only with sweep.auto_recon) and
- * brdf-recon is found; method names the calibration in the export's header. *run_id (may be NULL): the
- * recon_runs row. ACQ_E_STATE while a stage runs, ACQ_E_UNSUPPORTED without brdf-recon. 0 or -1. */
-int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, enum calib_method method, int64_t *run_id,
-		    struct acq_err *err);
+ * brdf-recon is found. *run_id (may be NULL): the recon_runs row. ACQ_E_STATE while a stage runs,
+ * ACQ_E_UNSUPPORTED without brdf-recon. 0 or -1. */
+int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, int64_t *run_id, struct acq_err *err);
 /* True while a stage's child process runs. */
 bool recon_chain_busy(const struct recon_chain *ch);
 

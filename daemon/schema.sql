@@ -1,6 +1,9 @@
--- schema.sql: the acquisitiond database, schema version 1 (PRAGMA user_version = 1,
--- PRAGMA application_id = 0x42524446 "BRDF"). Reference copy: daemon/store.c holds the migrations that
--- create it, and tests/integration/test_store.py checks that a fresh database has exactly this schema.
+-- schema.sql: the acquisitiond database, schema version 2 (PRAGMA user_version = 2,
+-- PRAGMA application_id = 0x42524446 "BRDF"). A new database is created from this file as it is (daemon/store.c
+-- embeds it); an older one is migrated by the steps in daemon/store.c (1 → 2: the measured sample-frame angles
+-- and the calibrated_samples view). tests/integration/test_store_schema.py checks that a fresh database has
+-- exactly this schema. Only daemon/store.c writes; readers of calibrated samples (the CSV export, the daemon's
+-- reconstruction, brdf-recon fit --db in recon/dbload.c) read the calibrated_samples view.
 -- Conventions: times are Unix seconds (REAL, UTC); angles are degrees; every *_blob column holds
 -- little-endian IEEE-754 float32 values (4 bytes each), one per pixel or per wavelength of the sweep's grid.
 
@@ -39,22 +42,25 @@ CREATE TABLE sweeps (
   wavelength_grid BLOB                    -- float32 nm: the grid of calibrated samples (NULL until calibrated)
 );
 
--- The devices a sweep used (provenance).
+-- The devices a sweep used (provenance): written when the sweep is created, one row per connected device.
 CREATE TABLE sweep_devices (
   sweep_id INTEGER NOT NULL REFERENCES sweeps(id),
   device_id INTEGER NOT NULL REFERENCES devices(id),
   PRIMARY KEY (sweep_id, device_id)
 );
 
--- The planned points of a sweep, in execution order, and what was reached.
+-- The planned points of a sweep, in execution order, and what was reached. Angles in the sample frame are
+-- zeniths in [0, 90] and azimuths in [0, 360); the arms' own angles may be signed (a zenith below 0 is the
+-- other side: azimuth + 180).
 CREATE TABLE points (
   id INTEGER PRIMARY KEY,
   sweep_id INTEGER NOT NULL REFERENCES sweeps(id),
   order_index INTEGER NOT NULL,
-  theta_i REAL NOT NULL, phi_i REAL NOT NULL, theta_o REAL NOT NULL, phi_o REAL NOT NULL,  -- planned
-  laser_theta REAL, detector_theta REAL, detector_phi REAL,                               -- actual
+  theta_i REAL NOT NULL, phi_i REAL NOT NULL, theta_o REAL NOT NULL, phi_o REAL NOT NULL,  -- planned, sample frame
+  laser_theta REAL, detector_theta REAL, detector_phi REAL,                               -- actual, arm angles
   state TEXT NOT NULL DEFAULT 'pending' CHECK (state IN ('pending', 'done', 'skipped', 'failed')),
   done_at REAL,
+  m_theta_i REAL, m_phi_i REAL, m_theta_o REAL, m_phi_o REAL,  -- actual, sample frame: written at commit
   UNIQUE (sweep_id, order_index)
 );
 
@@ -83,6 +89,14 @@ CREATE TABLE calibrated (
   brdf BLOB NOT NULL,
   sigma BLOB NOT NULL CHECK (length(sigma) = length(brdf))
 );
+
+-- The calibrated samples of every sweep as every reader takes them: the points done, at the sample-frame angles
+-- actually measured, in execution order.
+CREATE VIEW calibrated_samples AS
+  SELECT c.sweep_id AS sweep_id, p.id AS point_id, p.order_index AS order_index, p.m_theta_i AS theta_i,
+         p.m_phi_i AS phi_i, p.m_theta_o AS theta_o, p.m_phi_o AS phi_o, c.brdf AS brdf, c.sigma AS sigma
+  FROM calibrated c JOIN points p ON p.id = c.point_id
+  WHERE p.state = 'done';
 
 -- Reconstruction runs (child processes) and what they produced.
 CREATE TABLE recon_runs (

@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "drivers/spectro.h"
 
@@ -19,8 +20,32 @@ __asm__(".pushsection .rodata\n"
 	".popsection\n");
 extern const char store_schema_sql[];
 
-/* Migrations: entry v brings the schema from version v to v + 1. */
-static const char *const store_migrations[STORE_SCHEMA_VERSION] = { store_schema_sql };
+#define WRAP360(x) "CASE WHEN (" x ") >= 360 THEN (" x ") - 360 WHEN (" x ") < 0 THEN (" x ") + 360 ELSE (" x ") END"
+
+/* Migrations: entry v brings the schema from version v to v + 1 (a new database is created from schema.sql, the
+ * current version, in one step). */
+static const char *const store_migrations[STORE_SCHEMA_VERSION] = {
+	[0] = NULL, /* version 1's own schema: no database is created at version 1 any more */
+	/* 1 → 2: the measured sample-frame angles of each point and the view readers share. Points done under
+	 * version 1 get their arm angles in the sample frame (the laser's azimuth from the plan: exact for plans
+	 * whose incidence zenith is >= 0, i.e. every plan); done without recorded arm angles, the planned angles. */
+	[1] = "ALTER TABLE points ADD COLUMN m_theta_i REAL;"
+	      "ALTER TABLE points ADD COLUMN m_phi_i REAL;"
+	      "ALTER TABLE points ADD COLUMN m_theta_o REAL;"
+	      "ALTER TABLE points ADD COLUMN m_phi_o REAL;"
+	      "UPDATE points SET m_theta_i = abs(laser_theta), m_theta_o = abs(detector_theta), "
+	      "m_phi_i = " WRAP360("phi_i + CASE WHEN laser_theta < 0 THEN 180 ELSE 0 END") ", "
+	      "m_phi_o = " WRAP360("detector_phi + CASE WHEN detector_theta < 0 THEN 180 ELSE 0 END") " "
+	      "WHERE state = 'done' AND laser_theta IS NOT NULL AND detector_theta IS NOT NULL AND "
+	      "detector_phi IS NOT NULL;"
+	      "UPDATE points SET m_theta_i = theta_i, m_phi_i = phi_i, m_theta_o = theta_o, m_phi_o = phi_o "
+	      "WHERE state = 'done' AND m_theta_i IS NULL;"
+	      "CREATE VIEW calibrated_samples AS\n"
+	      "  SELECT c.sweep_id AS sweep_id, p.id AS point_id, p.order_index AS order_index, p.m_theta_i AS theta_i,\n"
+	      "         p.m_phi_i AS phi_i, p.m_theta_o AS theta_o, p.m_phi_o AS phi_o, c.brdf AS brdf, c.sigma AS sigma\n"
+	      "  FROM calibrated c JOIN points p ON p.id = c.point_id\n"
+	      "  WHERE p.state = 'done';",
+};
 
 enum { ST_SPECTRUM, ST_POINT_DONE, ST_EVENT, ST__COUNT };
 static const char *const store_sql[ST__COUNT] = {
@@ -28,7 +53,8 @@ static const char *const store_sql[ST__COUNT] = {
 			"npix, counts, stddev, saturated_count, saturation_mask, temperature_c, taken_at) "
 			"VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
 	[ST_POINT_DONE] = "UPDATE points SET state = 'done', done_at = ?, laser_theta = ?, detector_theta = ?, "
-			  "detector_phi = ? WHERE id = ? AND state = 'pending'",
+			  "detector_phi = ?, m_theta_i = ?, m_phi_i = ?, m_theta_o = ?, m_phi_o = ? "
+			  "WHERE id = ? AND state = 'pending'",
 	[ST_EVENT] = "INSERT INTO events (at, sweep_id, kind, device, message) VALUES (?,?,?,?,?)",
 };
 
@@ -145,16 +171,18 @@ static int migrate(struct store *st, struct acq_err *err)
 		return db_err(st, err, "reading user_version");
 	for (int64_t v = ver; v < STORE_SCHEMA_VERSION; v++) {
 		char bump[128];
+		int64_t to = v == 0 ? STORE_SCHEMA_VERSION : v + 1; /* a new database: the current schema at once */
 		snprintf(bump, sizeof bump, "PRAGMA application_id = %d; PRAGMA user_version = %lld;",
-			 STORE_APPLICATION_ID, (long long)v + 1);
+			 STORE_APPLICATION_ID, (long long)to);
 		if (exec(st, "BEGIN IMMEDIATE", err))
 			return -1;
-		if (exec(st, store_migrations[v], err) || exec(st, bump, err)) {
+		if (exec(st, v == 0 ? store_schema_sql : store_migrations[v], err) || exec(st, bump, err)) {
 			exec(st, "ROLLBACK", NULL);
 			return acq_err_prefix(err, "migrating schema %lld → %lld: ", (long long)v, (long long)v + 1);
 		}
 		if (exec(st, "COMMIT", err))
 			return -1;
+		v = to - 1;
 	}
 	return 0;
 }
@@ -378,21 +406,6 @@ int store_sweep_next_point(struct store *st, int64_t id, int *order_index, int64
 	return rc == SQLITE_ROW || rc == SQLITE_DONE ? 0 : db_err(st, err, "finding next point");
 }
 
-int store_point_set_state(struct store *st, int64_t point_id, const char *state, double at, struct acq_err *err)
-{
-	if (!in_list(state, (const char *const[]){ "pending", "skipped", "failed", "done", NULL }))
-		return acq_errf(err, ACQ_E_INVAL, "store: unknown point state '%s'", state ? state : "(null)");
-	sqlite3_stmt *s = prep(st, "UPDATE points SET state = ?, done_at = ? WHERE id = ?", err);
-	if (!s)
-		return -1;
-	bind_text(s, 1, state);
-	sqlite3_bind_double(s, 2, at);
-	sqlite3_bind_int64(s, 3, point_id);
-	if (run1(st, s, err, "setting point state"))
-		return -1;
-	return sqlite3_changes(st->db) == 1 ? 0 : acq_errf(err, ACQ_E_NOTFOUND, "no point %lld", (long long)point_id);
-}
-
 int store_point_discard_partial(struct store *st, int64_t point_id, struct acq_err *err)
 {
 	sqlite3_stmt *s = prep(st, "DELETE FROM spectra WHERE point_id = ?1 AND "
@@ -445,7 +458,11 @@ int store_spectrum_add(struct store *st, const struct store_spectrum *sp, int64_
 		bind_real(s, 2, sp->laser_theta);
 		bind_real(s, 3, sp->detector_theta);
 		bind_real(s, 4, sp->detector_phi);
-		sqlite3_bind_int64(s, 5, sp->point_id);
+		bind_real(s, 5, sp->theta_i);
+		bind_real(s, 6, sp->phi_i);
+		bind_real(s, 7, sp->theta_o);
+		bind_real(s, 8, sp->phi_o);
+		sqlite3_bind_int64(s, 9, sp->point_id);
 		if (step_done(st, s, err, "completing point"))
 			goto fail;
 		if (sqlite3_changes(st->db) != 1) {
@@ -801,9 +818,8 @@ int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out,
 	for (int i = 0; i < n; i++)
 		fprintf(out, ",sigma_%.7g", (double)grid[i]);
 	fputc('\n', out);
-	s = prep(st, "SELECT coalesce(p.laser_theta, p.theta_i), p.phi_i, coalesce(p.detector_theta, p.theta_o), "
-		     "coalesce(p.detector_phi, p.phi_o), c.brdf, c.sigma FROM calibrated c JOIN points p ON "
-		     "p.id = c.point_id WHERE c.sweep_id = ? ORDER BY p.order_index LIMIT ?", err);
+	s = prep(st, "SELECT theta_i, phi_i, theta_o, phi_o, brdf, sigma FROM calibrated_samples WHERE sweep_id = ? "
+		     "ORDER BY order_index LIMIT ?", err);
 	if (!s)
 		goto out;
 	sqlite3_bind_int64(s, 1, sweep_id);
@@ -813,6 +829,12 @@ int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out,
 		if (sqlite3_column_bytes(s, 4) != nb || sqlite3_column_bytes(s, 5) != nb) {
 			acq_errf(err, ACQ_E_INVAL, "sweep %lld: calibrated sample length differs from the grid",
 				 (long long)sweep_id);
+			sqlite3_finalize(s);
+			goto out;
+		}
+		if (sqlite3_column_type(s, 0) == SQLITE_NULL || sqlite3_column_type(s, 1) == SQLITE_NULL ||
+		    sqlite3_column_type(s, 2) == SQLITE_NULL || sqlite3_column_type(s, 3) == SQLITE_NULL) {
+			acq_errf(err, ACQ_E_INVAL, "sweep %lld: a point done without its measured angles", (long long)sweep_id);
 			sqlite3_finalize(s);
 			goto out;
 		}
@@ -845,6 +867,107 @@ int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out,
 out:
 	free(grid);
 	return rc;
+}
+
+int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, int *nrows, struct acq_err *err)
+{
+	char tmp[4200];
+	snprintf(tmp, sizeof tmp, "%s.tmp", path);
+	FILE *f = fopen(tmp, "w");
+	if (!f)
+		return acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
+	int rc = store_export_csv(st, sweep_id, f, nrows, err);
+	if (fclose(f) != 0 && !rc)
+		rc = acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
+	if (!rc && rename(tmp, path))
+		rc = acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
+	if (rc)
+		unlink(tmp);
+	return rc;
+}
+
+/* float32 blob of npix values into dst (double and/or float). 0, or -1 when the length differs. */
+static int blob_floats(sqlite3_stmt *s, int col, int npix, double *dst_d, float *dst_f)
+{
+	const void *b = sqlite3_column_blob(s, col);
+	int n = sqlite3_column_bytes(s, col);
+	if (!b || n != 4 * npix)
+		return -1;
+	const float *f = b;
+	for (int i = 0; i < npix; i++) {
+		float v;
+		memcpy(&v, f + i, sizeof v);
+		if (dst_d)
+			dst_d[i] = v;
+		if (dst_f)
+			dst_f[i] = v;
+	}
+	return 0;
+}
+
+int store_reference_each(struct store *st, int64_t sweep_id, double *detector_theta, store_reference_fn fn,
+			 void *ctx, struct acq_err *err)
+{
+	long long lo = 0, hi = 0;
+	sqlite3_stmt *s = prep(st, "SELECT message FROM events WHERE sweep_id = ? AND kind = 'reference' "
+				   "ORDER BY id DESC LIMIT 1", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_int64(s, 1, sweep_id);
+	if (sqlite3_step(s) == SQLITE_ROW) {
+		const char *m = (const char *)sqlite3_column_text(s, 0);
+		const char *p = m ? strstr(m, "spectra ") : NULL;
+		if (!p || sscanf(p, "spectra %lld-%lld", &lo, &hi) != 2)
+			lo = hi = 0;
+		double lt, dt, dp;
+		const char *q = m ? strstr(m, "at (") : NULL;
+		if (q && sscanf(q, "at (%lf, %lf, %lf)", &lt, &dt, &dp) == 3 && detector_theta)
+			*detector_theta = dt;
+	}
+	sqlite3_finalize(s);
+	if (lo <= 0 || hi < lo)
+		return 0;
+	s = prep(st, "SELECT kind, integration_ms, averages, npix, counts, stddev, saturation_mask, temperature_c "
+		     "FROM spectra WHERE sweep_id = ? AND id BETWEEN ? AND ? ORDER BY id", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_int64(s, 1, sweep_id);
+	sqlite3_bind_int64(s, 2, lo);
+	sqlite3_bind_int64(s, 3, hi);
+	struct store_ref_spectrum *r = malloc(sizeof *r);
+	if (!r) {
+		sqlite3_finalize(s);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	int n = 0, rc;
+	while ((rc = sqlite3_step(s)) == SQLITE_ROW) {
+		const char *kind = (const char *)sqlite3_column_text(s, 0);
+		int npix = sqlite3_column_int(s, 3);
+		if (!kind || npix <= 0 || npix > SPECTRO_MAX_PIXELS || strlen(kind) >= sizeof r->kind)
+			continue;
+		snprintf(r->kind, sizeof r->kind, "%s", kind);
+		r->integration_ms = sqlite3_column_double(s, 1);
+		r->averages = sqlite3_column_int(s, 2);
+		r->npix = npix;
+		if (blob_floats(s, 4, npix, r->counts, NULL))
+			continue;
+		if (sqlite3_column_type(s, 5) == SQLITE_NULL)
+			memset(r->stddev, 0, sizeof(float) * (size_t)npix);
+		else if (blob_floats(s, 5, npix, NULL, r->stddev))
+			continue;
+		memset(r->saturated, 0, (size_t)npix);
+		if (sqlite3_column_type(s, 6) != SQLITE_NULL && sqlite3_column_bytes(s, 6) == npix)
+			memcpy(r->saturated, sqlite3_column_blob(s, 6), (size_t)npix);
+		r->temperature_c = sqlite3_column_type(s, 7) == SQLITE_NULL ? NAN : sqlite3_column_double(s, 7);
+		n++;
+		if (fn(ctx, r))
+			break;
+	}
+	sqlite3_finalize(s);
+	free(r);
+	if (rc != SQLITE_ROW && rc != SQLITE_DONE)
+		return db_err(st, err, "reading the reference");
+	return n;
 }
 
 int store_open_reader(const char *path, struct store **out, struct acq_err *err)

@@ -10,9 +10,10 @@
 #include <stdio.h>
 
 #include "config/acq_err.h"
+#include "drivers/spectro.h"
 
 #define STORE_APPLICATION_ID 0x42524446  /* "BRDF" */
-#define STORE_SCHEMA_VERSION 1
+#define STORE_SCHEMA_VERSION 2
 
 struct store;
 struct spectro_info;
@@ -45,9 +46,11 @@ struct store_spectrum {
 	const unsigned char *saturated;  /* npix flags or NULL */
 	double temperature_c;            /* NaN = unknown */
 	double taken_at;
-	/* When set, the same transaction marks point_id done with these actual angles (NaN = unknown). */
+	/* When set, the same transaction marks point_id done with these actual angles (NaN = unknown): the arms'
+	 * and the sample-frame angles they make (ex_pos_angles), which every reader of the samples uses. */
 	bool completes_point;
 	double laser_theta, detector_theta, detector_phi;
+	double theta_i, phi_i, theta_o, phi_o;
 };
 
 /* Open (creating if absent or empty) the database at path; migrate an older schema. Refuses, without
@@ -69,8 +72,6 @@ int store_sweep_interrupted(struct store *st, int64_t *id, struct acq_err *err);
 /* Order index of the first point of sweep id not yet done/skipped/failed (-1 when all are). 0 or -1. */
 int store_sweep_next_point(struct store *st, int64_t id, int *order_index, int64_t *point_id,
 			   struct acq_err *err);
-/* Mark a point skipped or failed (with a reason in the event log). 0 or -1. */
-int store_point_set_state(struct store *st, int64_t point_id, const char *state, double at, struct acq_err *err);
 /* Delete the spectra of a point not yet done (a partial point before a resume: nothing twice). 0 or -1. */
 int store_point_discard_partial(struct store *st, int64_t point_id, struct acq_err *err);
 
@@ -115,9 +116,29 @@ int store_event(struct store *st, int64_t sweep_id, const char *kind, const char
 json_t *store_sweep_list(struct store *st, int limit, struct acq_err *err);
 /* JSON object of one sweep (with plan text, counts, events); NULL with ACQ_E_NOTFOUND if absent. */
 json_t *store_sweep_show(struct store *st, int64_t id, bool with_points, struct acq_err *err);
-/* Write a sweep's calibrated samples in the CSV interchange format (design.md). Rows written in *nrows.
- * ACQ_E_NOTFOUND for no sweep, ACQ_E_STATE if it has no calibrated samples. 0 or -1. */
+/* One spectrum of a sweep's stored reference (store_reference_each). */
+struct store_ref_spectrum {
+	char kind[16];                   /* "dark", "reference" or "beam" */
+	double integration_ms;
+	int averages, npix;
+	double counts[SPECTRO_MAX_PIXELS];
+	float stddev[SPECTRO_MAX_PIXELS];          /* 0 when not stored */
+	unsigned char saturated[SPECTRO_MAX_PIXELS];
+	double temperature_c;            /* NaN = unknown */
+};
+/* Called per spectrum in id order; nonzero stops. */
+typedef int (*store_reference_fn)(void *ctx, const struct store_ref_spectrum *sp);
+/* The spectra listed by the sweep's last "reference" event (crash-resume), each to fn; *detector_theta (may
+ * be NULL) gets the detector zenith the reference was measured at when the event says. The number of spectra
+ * (0: no reference stored), or -1 with err. */
+int store_reference_each(struct store *st, int64_t sweep_id, double *detector_theta, store_reference_fn fn,
+			 void *ctx, struct acq_err *err);
+/* Write a sweep's calibrated samples in the CSV interchange format (design.md): the calibrated_samples view,
+ * i.e. the sample-frame angles measured at commit. Rows written in *nrows. ACQ_E_NOTFOUND for no sweep,
+ * ACQ_E_STATE if it has no calibrated samples. 0 or -1. */
 int store_export_csv(struct store *st, int64_t sweep_id, FILE *out, int *nrows, struct acq_err *err);
+/* The same into the file path, whole or not at all (written beside it, then renamed). 0 or -1. */
+int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, int *nrows, struct acq_err *err);
 /* store_export_csv() of the first limit rows in sweep order (limit <= 0: all). */
 int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct acq_err *err);
 /* A read-only connection to an existing database (no migration, no checkpoint at close) for a worker thread:

@@ -16,9 +16,6 @@
 #include "daemon/plan/plan.h"
 #include "daemon/recon_chain.h"
 #include "daemon/store.h"
-#include "drivers/axis.h"
-#include "drivers/laser.h"
-#include "drivers/spectro.h"
 
 struct sweep {
 	struct sweep_env env;
@@ -108,7 +105,7 @@ static void on_completed(struct loop *lp, void *arg)
 	struct sweep *sw = arg;
 	sw->done_timer = 0;
 	struct acq_err err = { 0 };
-	if (recon_chain_run(sw->chain, sw->done_id, true, sw->cfg.cal.method, NULL, &err) && err.code != ACQ_E_UNSUPPORTED)
+	if (recon_chain_run(sw->chain, sw->done_id, true, NULL, &err) && err.code != ACQ_E_UNSUPPORTED)
 		log_msg(LOG_WARNING, "sweep %lld: completion: %s", (long long)sw->done_id, err.msg);
 }
 
@@ -124,7 +121,7 @@ int sweep_recon_start(struct sweep *sw, int64_t sweep_id, int64_t *run_id, struc
 	if (!js)
 		return -1;
 	json_decref(js);
-	return recon_chain_run(sw->chain, sweep_id, false, sw->cfg.cal.method, run_id, err);
+	return recon_chain_run(sw->chain, sweep_id, false, run_id, err);
 }
 
 bool sweep_recon_busy(const struct sweep *sw)
@@ -201,6 +198,14 @@ static void kick(struct sweep *sw)
 	schedule(sw, loop_now(sw->env.loop));
 }
 
+/* A device completion the executor waits for came in: step it now. */
+static void on_device(void *ctx)
+{
+	struct sweep *sw = ctx;
+	if (sw->ex)
+		kick(sw);
+}
+
 static int load_cfg(const struct conf *c, struct ex_cfg *cfg, struct acq_err *err)
 {
 	ex_cfg_defaults(cfg);
@@ -217,7 +222,6 @@ static int load_cfg(const struct conf *c, struct ex_cfg *cfg, struct acq_err *er
 	cfg->auto_resume_faults = c->sweep.auto_resume_faults;
 	if (ex_cfg_parse(c->sweep.acquisition, c->sweep.calibration, cfg, err))
 		return -1;
-	cfg->db_path = c->d.database;
 	return exp_policy_check(&cfg->pol, err);
 }
 
@@ -236,6 +240,8 @@ int sweep_init(const struct sweep_env *env, struct sweep **out, struct acq_err *
 		free(sw);
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
+	if (env->devices)
+		devices_set_kick(env->devices, on_device, sw);
 	sw->last.eta_s = NAN;
 	*out = sw;
 	return 0;
@@ -252,6 +258,8 @@ void sweep_finish(struct sweep *sw)
 	if (sw->ex)
 		ex_shutdown(sw->ex, "daemon stopping");
 	recon_chain_free(sw->chain);
+	if (sw->env.devices)
+		devices_set_kick(sw->env.devices, NULL, NULL);
 	release(sw);
 	free(sw);
 }
@@ -308,6 +316,17 @@ static int make_plan(struct sweep *sw, const char *text, const char *name, struc
 	return exp_policy_check(&cfg->pol, err);
 }
 
+/* Provenance: the devices (arm controllers, laser) the sweep runs with, in sweep_devices. 0 or -1. */
+static int record_devices(struct sweep *sw, int64_t id, struct acq_err *err)
+{
+	for (int d = 0; d < CONF_DEV__COUNT; d++) {
+		int64_t dev = devices_device_id(sw->env.devices, (enum conf_dev)d);
+		if (dev > 0 && store_sweep_device(sw->env.store, id, dev, err))
+			return -1;
+	}
+	return 0;
+}
+
 static struct ex_sink sink_of(struct sweep *sw)
 {
 	return (struct ex_sink){ .event = on_event, .progress = on_progress, .ctx = sw };
@@ -320,10 +339,7 @@ int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64
 		return acq_errf(err, ACQ_E_STATE, "sweep %lld is %s", (long long)sw->id, ex_state_name(ex_state(sw->ex)));
 	char missing[256] = "";
 	for (int d = 0; d < CONF_DEV__COUNT; d++) {
-		bool ok = d <= CONF_DEV_DETECTOR_PHI ? devices_axis(sw->env.devices, (enum conf_dev)d) != NULL
-			  : d == CONF_DEV_SPECTRO   ? devices_spectro(sw->env.devices) != NULL
-						    : devices_laser(sw->env.devices) != NULL;
-		if (!ok)
+		if (!devices_up(sw->env.devices, (enum conf_dev)d))
 			snprintf(missing + strlen(missing), sizeof missing - strlen(missing), "%s%s", missing[0] ? ", " : "",
 				 conf_dev_name((enum conf_dev)d));
 	}
@@ -356,7 +372,7 @@ int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64
 	};
 	int rc = store_sweep_create(sw->env.store, &nw, pts, (int)n, &sw->id, err);
 	free(pts);
-	if (rc)
+	if (rc || record_devices(sw, sw->id, err))
 		goto fail;
 	struct ex_sink sk = sink_of(sw);
 	sw->ex = ex_new(&cfg, devices_ex_ops(), sw->env.devices, &sk, sw->env.store, sw->id, nw.spectrometer_id, &sw->env.conf->bench,
@@ -420,6 +436,8 @@ static int recover_id(struct sweep *sw, int64_t id, bool hold, struct acq_err *e
 	else if (store_point_discard_partial(sw->env.store, pid, err))
 		goto out;
 	sw->id = id;
+	if (record_devices(sw, id, err)) /* after a restart the controllers may be others */
+		goto out;
 	struct ex_sink sk = sink_of(sw);
 	sw->ex = ex_new(&cfg, devices_ex_ops(), sw->env.devices, &sk, sw->env.store, id, devices_spectrometer_id(sw->env.devices),
 			&sw->env.conf->bench, sw->plan, err);

@@ -446,12 +446,6 @@ static int dev_pollfd(const void *dev)
 	return -1; /* libusb's fds would need its event loop: the daemon polls fetch() by timer */
 }
 
-static double dev_temperature(void *dev)
-{
-	(void)dev;
-	return NAN;
-}
-
 /* ---- libusb transport -------------------------------------------------------------------------------- */
 
 struct usb_link {
@@ -606,5 +600,4 @@ const struct spectro_backend spectro_avaspec_backend = {
 	.fetch = dev_fetch,
 	.stop = dev_stop,
 	.pollfd = dev_pollfd,
-	.temperature = dev_temperature,
 };

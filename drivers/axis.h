@@ -1,8 +1,9 @@
 /* axis: one motorised rotation axis of a goniometer arm (laser zenith, detector zenith, detector azimuth).
  *
- * A driver is a const table of functions behind an opaque handle (style habit 1). The only real backend
- * today is Modbus (drivers/axis_modbus.c, register map from config: drivers/regmap.h); acq-sim serves the
- * same Modbus maps, so the daemon drives the simulated bench through the real driver.
+ * A driver is a const table of functions behind an opaque handle (style habit 1, drivers/axis_backend.h): the
+ * real backend is Modbus (drivers/axis_modbus.c, register map from config: drivers/regmap.h; acq-sim serves the
+ * same Modbus maps, so the daemon drives the simulated bench through the real driver); drivers/axis_fake.c is
+ * the fake for unit tests (link type fake). drivers/axis.c dispatches.
  *
  * Every operation is a bounded transaction (at most the configured response timeout, plus retries) and
  * never sleeps. Waiting for a move is a state machine stepped by the caller's event loop with its own

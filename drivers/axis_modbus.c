@@ -4,7 +4,7 @@
  * Every call does a handful of Modbus transactions and stops at the first failure, so it never blocks for
  * longer than one response timeout per transaction. Recovery is ours, never MODBUS_ERROR_RECOVERY_LINK
  * (which sleeps and retries inside libmodbus): a link error marks the link down and the caller schedules
- * axis_reconnect() with its own backoff (axis_backoff_s()). */
+ * mb_reconnect() with its own backoff (axis_backoff_s()). */
 #include <errno.h>
 #include <math.h>
 #include <modbus.h>
@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "drivers/axis.h"
+#include "drivers/axis_backend.h"
 #include "drivers/axis_modbus.h"
 #include "drivers/regmap.h"
 
@@ -42,7 +43,7 @@ struct axis_link {
 
 enum ax_state { ST_IDLE, ST_MOVE, ST_SETTLE, ST_HOME, ST_DONE, ST_FAILED };
 
-struct axis {
+struct axis_dev {
 	const struct axis_cfg *cfg;
 	struct axis_link *link;
 	int state;
@@ -57,11 +58,16 @@ struct axis {
 	struct acq_err fail;   /* why the state machine failed */
 };
 
+static void mb_close(struct axis_dev *ax);
+static int mb_read_status(struct axis_dev *ax, struct axis_status *st, struct acq_err *err);
+static int mb_read_bits(struct axis_dev *ax, bool *limit_pos, bool *limit_neg, bool *stall, struct acq_err *err);
+static int mb_stop(struct axis_dev *ax, struct acq_err *err);
+
 /* ---- configuration -------------------------------------------------------------------------------- */
 
 static int parse_link(struct yc_node *link, struct axis_link_cfg *l, struct acq_err *err)
 {
-	static const char *const types[] = { "tcp", "rtu", NULL };
+	static const char *const types[] = { "tcp", "rtu", "fake", NULL };
 	static const char *const parities[] = { "none", "even", "odd", NULL };
 	if (!link)
 		return acq_errf(err, ACQ_E_CONFIG, "arm has no `link`");
@@ -74,6 +80,8 @@ static int parse_link(struct yc_node *link, struct axis_link_cfg *l, struct acq_
 	l->type = type;
 	l->response_timeout_ms = 500;
 	l->byte_timeout_ms = 100;
+	if (type == AXIS_LINK_FAKE) /* drivers/axis_fake.c: no controller, for tests */
+		return yc_check_unknown(link, "link", err);
 	long long v;
 	if (type == AXIS_LINK_TCP) {
 		const char *host = "127.0.0.1";
@@ -140,7 +148,8 @@ static int cfg_parse(struct yc_node *node, struct yc_node *link, struct yc_node 
 		c->link.response_timeout_ms = resp_ms;
 	if (byte_ms > 0 && !yc_get(link, "byte_timeout_ms"))
 		c->link.byte_timeout_ms = byte_ms;
-	if (yc_int(node, "unit", true, 1, 247, &unit, err) || yc_string(node, "map", true, &mapname, err) ||
+	bool fake = c->link.type == AXIS_LINK_FAKE;
+	if (yc_int(node, "unit", !fake, 1, 247, &unit, err) || yc_string(node, "map", !fake, &mapname, err) ||
 	    yc_double(node, "soft_min_deg", false, -720, 720, &c->soft_min, err) ||
 	    yc_double(node, "soft_max_deg", false, -720, 720, &c->soft_max, err) ||
 	    yc_double(node, "deadband_deg", false, 0, 10, &c->deadband, err) ||
@@ -172,7 +181,7 @@ static int cfg_parse(struct yc_node *node, struct yc_node *link, struct yc_node 
 	c->unit = (int)unit;
 	c->retries = (int)retries;
 	c->backlash_dir = dir == 0 ? 1 : -1;
-	if (regmap_parse(maps, mapname, yc_get(node, "map"), &c->map, err))
+	if (!fake && regmap_parse(maps, mapname, yc_get(node, "map"), &c->map, err))
 		goto fail;
 	if (yc_check_unknown(node, name, err))
 		goto fail;
@@ -332,7 +341,7 @@ static void link_down(struct axis_link *l)
 }
 
 /* Classify a failed libmodbus call (errno) into an error record; a broken link is marked down. */
-static int mb_fail(struct axis *ax, const char *what, int addr, struct acq_err *err)
+static int mb_fail(struct axis_dev *ax, const char *what, int addr, struct acq_err *err)
 {
 	int e = errno;
 	const struct axis_cfg *c = ax->cfg;
@@ -355,7 +364,7 @@ static int mb_fail(struct axis *ax, const char *what, int addr, struct acq_err *
 			what, addr, msg);
 }
 
-static int link_ready(struct axis *ax, struct acq_err *err)
+static int link_ready(struct axis_dev *ax, struct acq_err *err)
 {
 	struct axis_link *l = ax->link;
 	if (!l->up || !l->ctx)
@@ -369,7 +378,7 @@ static int link_ready(struct axis *ax, struct acq_err *err)
 	return 0;
 }
 
-static int read_regs(struct axis *ax, int space, int addr, int n, uint16_t *regs, const char *what,
+static int read_regs(struct axis_dev *ax, int space, int addr, int n, uint16_t *regs, const char *what,
 		     struct acq_err *err)
 {
 	if (link_ready(ax, err))
@@ -387,7 +396,7 @@ static int read_regs(struct axis *ax, int space, int addr, int n, uint16_t *regs
 	return 0;
 }
 
-static int write_regs(struct axis *ax, int addr, int n, const uint16_t *regs, const char *what,
+static int write_regs(struct axis_dev *ax, int addr, int n, const uint16_t *regs, const char *what,
 		      struct acq_err *err)
 {
 	if (link_ready(ax, err))
@@ -401,7 +410,7 @@ static int write_regs(struct axis *ax, int addr, int n, const uint16_t *regs, co
 	return 0;
 }
 
-static int read_field(struct axis *ax, int id, double *value, double *raw, struct acq_err *err)
+static int read_field(struct axis_dev *ax, int id, double *value, double *raw, struct acq_err *err)
 {
 	const struct regmap_field *f = &ax->cfg->map->f[id];
 	uint16_t regs[2];
@@ -414,7 +423,7 @@ static int read_field(struct axis *ax, int id, double *value, double *raw, struc
 	return 0;
 }
 
-static int send_cmd(struct axis *ax, int id, bool clear_now, struct acq_err *err)
+static int send_cmd(struct axis_dev *ax, int id, bool clear_now, struct acq_err *err)
 {
 	const struct regmap_cmd *c = &ax->cfg->map->cmd[id];
 	if (!c->present)
@@ -437,7 +446,7 @@ static int send_cmd(struct axis *ax, int id, bool clear_now, struct acq_err *err
 }
 
 /* Clear a level-style command bit set by the previous call (the driver owns clearing it). */
-static int clear_pending(struct axis *ax, struct acq_err *err)
+static int clear_pending(struct axis_dev *ax, struct acq_err *err)
 {
 	if (ax->clear_cmd < 0)
 		return 0;
@@ -457,7 +466,7 @@ static int clear_pending(struct axis *ax, struct acq_err *err)
 }
 
 /* Write the move fields (one FC16 block or one write per field), then the start command if any. */
-static int send_move(struct axis *ax, double target, struct acq_err *err)
+static int send_move(struct axis_dev *ax, double target, struct acq_err *err)
 {
 	const struct axis_cfg *c = ax->cfg;
 	const struct regmap *m = c->map;
@@ -495,9 +504,9 @@ static int send_move(struct axis *ax, double target, struct acq_err *err)
 
 /* ---- public operations ------------------------------------------------------------------------------ */
 
-static int open_common(const struct axis_cfg *cfg, struct axis_link *shared, struct axis **out, struct acq_err *err)
+static int open_common(const struct axis_cfg *cfg, struct axis_link *shared, struct axis_dev **out, struct acq_err *err)
 {
-	struct axis *ax = calloc(1, sizeof *ax);
+	struct axis_dev *ax = calloc(1, sizeof *ax);
 	if (!ax)
 		return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", cfg->name);
 	ax->cfg = cfg;
@@ -518,7 +527,7 @@ static int open_common(const struct axis_cfg *cfg, struct axis_link *shared, str
 		else
 			snprintf(ax->link->where, sizeof ax->link->where, "%s", cfg->link.device);
 		if (link_connect(ax->link, cfg, err)) {
-			axis_close(ax);
+			mb_close(ax);
 			return -1;
 		}
 	}
@@ -526,12 +535,12 @@ static int open_common(const struct axis_cfg *cfg, struct axis_link *shared, str
 	return 0;
 }
 
-int axis_open(const struct axis_cfg *cfg, struct axis **out, struct acq_err *err)
+static int mb_open(const struct axis_cfg *cfg, struct axis_dev **out, struct acq_err *err)
 {
 	return open_common(cfg, NULL, out, err);
 }
 
-int axis_open_shared(const struct axis_cfg *cfg, struct axis *peer, struct axis **out, struct acq_err *err)
+static int mb_open_shared(const struct axis_cfg *cfg, struct axis_dev *peer, struct axis_dev **out, struct acq_err *err)
 {
 	const struct axis_link_cfg *a = &cfg->link, *b = &peer->cfg->link;
 	if (a->type != b->type || strcmp(a->host, b->host) || a->port != b->port || strcmp(a->device, b->device))
@@ -540,34 +549,12 @@ int axis_open_shared(const struct axis_cfg *cfg, struct axis *peer, struct axis 
 	return open_common(cfg, peer->link, out, err);
 }
 
-int axis_arm_open(struct axis_cfg *const *cfg, int n, struct axis **out, struct acq_err *err)
-{
-	for (int i = 0; i < n; i++) {
-		int rc = -1;
-		out[i] = NULL;
-		for (int j = 0; j < i && rc != 0; j++) {
-			const struct axis_link_cfg *a = &cfg[i]->link, *b = &cfg[j]->link;
-			if (a->type == b->type && !strcmp(a->host, b->host) && a->port == b->port &&
-			    !strcmp(a->device, b->device))
-				rc = axis_open_shared(cfg[i], out[j], &out[i], err) ? -2 : 0;
-		}
-		if (rc == -1)
-			rc = axis_open(cfg[i], &out[i], err);
-		if (rc != 0) {
-			while (i-- > 0)
-				axis_close(out[i]);
-			return -1;
-		}
-	}
-	return 0;
-}
-
-void axis_close(struct axis *ax)
+static void mb_close(struct axis_dev *ax)
 {
 	if (!ax)
 		return;
 	if (ax->link->up && (ax->state == ST_MOVE || ax->state == ST_HOME))
-		axis_stop(ax, NULL);
+		mb_stop(ax, NULL);
 	if (--ax->link->refs == 0) {
 		if (ax->link->ctx) {
 			modbus_close(ax->link->ctx);
@@ -578,16 +565,15 @@ void axis_close(struct axis *ax)
 	free(ax);
 }
 
-const char *axis_name(const struct axis *ax) { return ax->cfg->name; }
-bool axis_connected(const struct axis *ax) { return ax->link->up; }
-double axis_next_poll(const struct axis *ax) { return ax->next_poll; }
+static bool mb_connected(const struct axis_dev *ax) { return ax->link->up; }
+static double mb_next_poll(const struct axis_dev *ax) { return ax->next_poll; }
 
 static bool bit(const struct regmap *m, uint32_t word, int b)
 {
 	return m->bit[b] >= 0 && (word >> m->bit[b]) & 1u;
 }
 
-int axis_read_status(struct axis *ax, struct axis_status *st, struct acq_err *err)
+static int mb_read_status(struct axis_dev *ax, struct axis_status *st, struct acq_err *err)
 {
 	const struct regmap *m = ax->cfg->map;
 	double word, pos;
@@ -614,7 +600,7 @@ int axis_read_status(struct axis *ax, struct axis_status *st, struct acq_err *er
 	return 0;
 }
 
-int axis_read_bits(struct axis *ax, bool *limit_pos, bool *limit_neg, bool *stall, struct acq_err *err)
+static int mb_read_bits(struct axis_dev *ax, bool *limit_pos, bool *limit_neg, bool *stall, struct acq_err *err)
 {
 	double word;
 	if (read_field(ax, RM_STATUS, NULL, &word, err))
@@ -626,7 +612,7 @@ int axis_read_bits(struct axis *ax, bool *limit_pos, bool *limit_neg, bool *stal
 	return 0;
 }
 
-static int fail_move(struct axis *ax, struct acq_err *err)
+static int fail_move(struct axis_dev *ax, struct acq_err *err)
 {
 	ax->state = ST_FAILED;
 	ax->fail = *err;
@@ -634,7 +620,7 @@ static int fail_move(struct axis *ax, struct acq_err *err)
 }
 
 /* Start one leg towards `leg`: backlash take-up first when approaching from the wrong side. */
-static int start_leg(struct axis *ax, double from, double now, bool allow_pre, struct acq_err *err)
+static int start_leg(struct axis_dev *ax, double from, double now, bool allow_pre, struct acq_err *err)
 {
 	const struct axis_cfg *c = ax->cfg;
 	double leg = ax->target;
@@ -677,7 +663,7 @@ static double resolve_target(const struct axis_cfg *c, double target, double fro
 	return best;
 }
 
-int axis_move_begin(struct axis *ax, double target_deg, double now, struct acq_err *err)
+static int mb_move_begin(struct axis_dev *ax, double target_deg, double now, struct acq_err *err)
 {
 	const struct axis_cfg *c = ax->cfg;
 	if (!isfinite(target_deg) || fabs(target_deg) > 1e6)
@@ -692,7 +678,7 @@ int axis_move_begin(struct axis *ax, double target_deg, double now, struct acq_e
 	if (ax->state == ST_MOVE || ax->state == ST_HOME)
 		return acq_errf(err, ACQ_E_STATE, "%s: a move is already running", c->name);
 	struct axis_status st;
-	if (clear_pending(ax, err) || axis_read_status(ax, &st, err))
+	if (clear_pending(ax, err) || mb_read_status(ax, &st, err))
 		return -1;
 	if (st.alarm)
 		return acq_errf(err, ACQ_E_DEVICE, "%s: controller in alarm (code 0x%x): reset it first", c->name,
@@ -707,12 +693,12 @@ int axis_move_begin(struct axis *ax, double target_deg, double now, struct acq_e
 	return 0;
 }
 
-double axis_target(const struct axis *ax)
+static double mb_target(const struct axis_dev *ax)
 {
 	return ax->target;
 }
 
-int axis_move_step(struct axis *ax, double now, struct acq_err *err)
+static int mb_move_step(struct axis_dev *ax, double now, struct acq_err *err)
 {
 	const struct axis_cfg *c = ax->cfg;
 	switch (ax->state) {
@@ -729,7 +715,7 @@ int axis_move_step(struct axis *ax, double now, struct acq_err *err)
 	if (now < ax->next_poll)
 		return AXIS_MOVE_RUNNING;
 	struct axis_status st;
-	if (clear_pending(ax, err) || axis_read_status(ax, &st, err))
+	if (clear_pending(ax, err) || mb_read_status(ax, &st, err))
 		return fail_move(ax, err);
 	if (st.alarm) {
 		acq_errf(err, ACQ_E_DEVICE, "%s: controller alarm (code 0x%x) at %.4f° during %s", c->name,
@@ -745,8 +731,8 @@ int axis_move_step(struct axis *ax, double now, struct acq_err *err)
 		if (now > ax->deadline) {
 			struct acq_err e2;
 			bool lp = false, ln = false, stall = false;
-			axis_read_bits(ax, &lp, &ln, &stall, &e2);
-			axis_stop(ax, &e2);
+			mb_read_bits(ax, &lp, &ln, &stall, &e2);
+			mb_stop(ax, &e2);
 			acq_errf(err, ACQ_E_TIMEOUT, "%s: %s did not complete in time (at %.4f°, target %.4f°%s); stopped",
 				 c->name, ax->state == ST_HOME ? "homing" : "move", st.position_deg, ax->leg,
 				 stall ? ", the controller reports a stall" : "");
@@ -791,12 +777,12 @@ int axis_move_step(struct axis *ax, double now, struct acq_err *err)
 	return fail_move(ax, err);
 }
 
-int axis_move_retries_used(const struct axis *ax)
+static int mb_move_retries_used(const struct axis_dev *ax)
 {
 	return ax->cfg->retries - ax->retries_left;
 }
 
-int axis_stop(struct axis *ax, struct acq_err *err)
+static int mb_stop(struct axis_dev *ax, struct acq_err *err)
 {
 	struct acq_err local;
 	if (!err)
@@ -811,7 +797,7 @@ int axis_stop(struct axis *ax, struct acq_err *err)
 	return rc;
 }
 
-int axis_home_begin(struct axis *ax, double now, struct acq_err *err)
+static int mb_home_begin(struct axis_dev *ax, double now, struct acq_err *err)
 {
 	if (ax->state == ST_MOVE || ax->state == ST_HOME)
 		return acq_errf(err, ACQ_E_STATE, "%s: a move is already running", ax->cfg->name);
@@ -826,7 +812,7 @@ int axis_home_begin(struct axis *ax, double now, struct acq_err *err)
 	return 0;
 }
 
-int axis_alarm_reset(struct axis *ax, struct acq_err *err)
+static int mb_alarm_reset(struct axis_dev *ax, struct acq_err *err)
 {
 	if (clear_pending(ax, err) || send_cmd(ax, RM_CMD_ALARM_RESET, true, err))
 		return -1;
@@ -835,7 +821,7 @@ int axis_alarm_reset(struct axis *ax, struct acq_err *err)
 	return 0;
 }
 
-int axis_identity(struct axis *ax, struct axis_identity *id, struct acq_err *err)
+static int mb_identity(struct axis_dev *ax, struct axis_identity *id, struct acq_err *err)
 {
 	const struct regmap *m = ax->cfg->map;
 	memset(id, 0, sizeof *id);
@@ -855,7 +841,7 @@ int axis_identity(struct axis *ax, struct axis_identity *id, struct acq_err *err
 	return 0;
 }
 
-int axis_reconnect(struct axis *ax, struct acq_err *err)
+static int mb_reconnect(struct axis_dev *ax, struct acq_err *err)
 {
 	if (link_connect(ax->link, ax->cfg, err))
 		return -1;
@@ -865,4 +851,53 @@ int axis_reconnect(struct axis *ax, struct acq_err *err)
 	}
 	ax->clear_cmd = -1;
 	return 0;
+}
+
+const struct axis_backend axis_modbus_backend = {
+	.name = "modbus", .open = mb_open, .close = mb_close, .read_status = mb_read_status,
+	.move_begin = mb_move_begin, .move_step = mb_move_step, .next_poll = mb_next_poll, .stop = mb_stop,
+	.home_begin = mb_home_begin, .alarm_reset = mb_alarm_reset, .identity = mb_identity,
+	.reconnect = mb_reconnect, .connected = mb_connected,
+};
+
+const struct axis_backend *axis_cfg_backend(const struct axis_cfg *cfg)
+{
+	return cfg->link.type == AXIS_LINK_FAKE ? &axis_fake_backend : &axis_modbus_backend;
+}
+
+/* ---- extras of the Modbus backend (axis_modbus.h) ---------------------------------------------------- */
+
+static struct axis_dev *mb_of(const struct axis *ax)
+{
+	return axis_dev_of(ax, &axis_modbus_backend);
+}
+
+int axis_open_shared(const struct axis_cfg *cfg, struct axis *peer, struct axis **out, struct acq_err *err)
+{
+	struct axis_dev *p = mb_of(peer), *d = NULL;
+	if (!p || cfg->link.type == AXIS_LINK_FAKE)
+		return acq_errf(err, ACQ_E_INVAL, "%s: only Modbus links can be shared", cfg->name);
+	if (mb_open_shared(cfg, p, &d, err))
+		return -1;
+	return axis_wrap(cfg, &axis_modbus_backend, d, out, err);
+}
+
+int axis_read_bits(struct axis *ax, bool *limit_pos, bool *limit_neg, bool *stall, struct acq_err *err)
+{
+	struct axis_dev *d = mb_of(ax);
+	if (!d)
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "axis: limit and stall bits need a Modbus axis");
+	return mb_read_bits(d, limit_pos, limit_neg, stall, err);
+}
+
+double axis_target(const struct axis *ax)
+{
+	const struct axis_dev *d = mb_of(ax);
+	return d ? mb_target(d) : NAN;
+}
+
+int axis_move_retries_used(const struct axis *ax)
+{
+	const struct axis_dev *d = mb_of(ax);
+	return d ? mb_move_retries_used(d) : 0;
 }

@@ -1,4 +1,5 @@
-/* axis_modbus: extras of the Modbus axis backend beyond drivers/axis.h: link description, shared links,
+/* axis_modbus: the Modbus axis backend (axis_modbus_backend) and its extras beyond drivers/axis.h: the axis
+ * configuration parser (link type tcp|rtu|fake selects the backend), link description, shared links,
  * whole-arm parsing, the trapezoid timing the move timeout uses, and reconnect backoff. */
 #ifndef AXIS_MODBUS_H
 #define AXIS_MODBUS_H
@@ -10,7 +11,7 @@
 #include "drivers/axis.h"
 #include "drivers/regmap.h"
 
-enum axis_link_type { AXIS_LINK_TCP = 0, AXIS_LINK_RTU = 1 };
+enum axis_link_type { AXIS_LINK_TCP = 0, AXIS_LINK_RTU = 1, AXIS_LINK_FAKE = 2 /* drivers/axis_fake.c */ };
 
 struct axis_link_cfg {
 	int type;                 /* enum axis_link_type */
@@ -36,9 +37,6 @@ const char *axis_cfg_name(const struct axis_cfg *cfg);
 int axis_cfg_set_endpoint(struct axis_cfg *cfg, int port, const char *device, struct acq_err *err);
 /* Open an axis that shares peer's link (same bus or connection; links must match). 0 or -1. */
 int axis_open_shared(const struct axis_cfg *cfg, struct axis *peer, struct axis **out, struct acq_err *err);
-/* Open the n axes of an arm (from axis_arm_parse), sharing one link between axes whose links match (an
- * RS-485 bus carries every unit; one TCP connection per controller or gateway). 0, or -1 with none open. */
-int axis_arm_open(struct axis_cfg *const *cfg, int n, struct axis **out, struct acq_err *err);
 /* Duration (s) of a trapezoidal move over dist degrees with max speed and accel/decel (triangle if short). */
 double axis_trapezoid_s(double dist, double speed, double accel, double decel);
 /* Suggested delay before reconnect attempt number attempt (0, 1, ...): 0.1 s doubling, capped at 5 s. */

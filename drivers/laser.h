@@ -1,5 +1,7 @@
-/* laser: the supercontinuum source on a serial line (libserialport); line protocol in drivers/laser_serial.c.
- * The handle switches emission off on close and on every error path it sees. Libraries do not log. */
+/* laser: the supercontinuum source, a const table of functions behind an opaque handle (laser_backend.h): the
+ * serial line backend (libserialport; line protocol in drivers/laser_serial.c) or the fake for unit tests
+ * (drivers/laser_fake.c). The handle switches emission off on close and on every error path it sees. Libraries
+ * do not log. */
 #ifndef LASER_H
 #define LASER_H
 

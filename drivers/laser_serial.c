@@ -27,7 +27,7 @@
  * Config (devices.laser):
  *   device: /dev/ttyUSB0   baud: 115200   data_bits: 8   parity: none|odd|even   stop_bits: 1|2
  *   flow_control: none|xonxoff|rtscts      timeout_ms: 500     max_power_pct: 100
- *   transport: auto|serialport|termios
+ *   transport: auto|serialport|termios      backend: serial (this file) | fake (drivers/laser_fake.c, tests)
  * With acq-sim, the device is the pty written in its ports file ("laser": {"device": "/dev/pts/N"}):
  * laser_cfg_set_device() puts it in.
  *
@@ -36,7 +36,9 @@
  * have; upstream treats PTYs as out of scope, sigrokproject/libserialport PR #4), so a device that resolves to
  * /dev/pts/N uses the same line protocol over plain termios + poll ("auto", the default). "serialport" or
  * "termios" force one. */
+#include "config/acq_num.h"
 #include "drivers/laser.h"
+#include "drivers/laser_backend.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -59,26 +61,27 @@ struct laser_cfg {
 	int timeout_ms;
 	double max_power_pct;
 	int transport;          /* enum laser_transport */
+	int backend;            /* 0 serial (this file), 1 fake (drivers/laser_fake.c) */
 };
 
 enum laser_transport { LASER_T_AUTO, LASER_T_SERIALPORT, LASER_T_TERMIOS };
 
-struct laser;
+struct laser_dev;
 
 /* The byte link under the line protocol: libserialport or termios (see the file comment). */
 struct laser_io {
 	const char *name;
-	int (*open)(struct laser *l, struct acq_err *err);
+	int (*open)(struct laser_dev *l, struct acq_err *err);
 	/* Write all n bytes within timeout_ms. 0 or -1. */
-	int (*write)(struct laser *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err);
+	int (*write)(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err);
 	/* Read one byte: 1, 0 (nothing within timeout_ms), -1. */
-	int (*read)(struct laser *l, char *c, int timeout_ms, struct acq_err *err);
+	int (*read)(struct laser_dev *l, char *c, int timeout_ms, struct acq_err *err);
 	/* Discard unread input. */
-	void (*flush)(struct laser *l);
-	void (*close)(struct laser *l);
+	void (*flush)(struct laser_dev *l);
+	void (*close)(struct laser_dev *l);
 };
 
-struct laser {
+struct laser_dev {
 	const struct laser_cfg *cfg;
 	const struct laser_io *io;
 	struct sp_port *port;   /* serialport transport */
@@ -97,7 +100,8 @@ int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err
 	static const char *const parities[] = { "none", "odd", "even", NULL };
 	static const char *const flows[] = { "none", "xonxoff", "rtscts", NULL };
 	static const char *const transports[] = { "auto", "serialport", "termios", NULL };
-	int transport = 0;
+	static const char *const backends[] = { "serial", "fake", NULL };
+	int transport = 0, backend = 0;
 	const char *device = NULL;
 	long long baud = 115200, bits = 8, stop = 1, timeout = 500;
 	int parity = 0, flow = 0;
@@ -108,7 +112,8 @@ int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err
 	    yc_enum(node, "flow_control", false, flows, &flow, err) ||
 	    yc_int(node, "timeout_ms", false, 1, 60000, &timeout, err) ||
 	    yc_double(node, "max_power_pct", false, 0, 100, &maxp, err) ||
-	    yc_enum(node, "transport", false, transports, &transport, err) || yc_check_unknown(node, "laser", err))
+	    yc_enum(node, "transport", false, transports, &transport, err) ||
+	    yc_enum(node, "backend", false, backends, &backend, err) || yc_check_unknown(node, "laser", err))
 		return -1;
 	struct laser_cfg *c = calloc(1, sizeof *c);
 	if (!c || (device && !(c->device = strdup(device)))) {
@@ -123,6 +128,7 @@ int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err
 	c->timeout_ms = (int)timeout;
 	c->max_power_pct = maxp;
 	c->transport = transport;
+	c->backend = backend;
 	*out = c;
 	return 0;
 }
@@ -163,7 +169,7 @@ static int sp_errf(struct acq_err *err, const char *dev, const char *what)
 }
 
 /* Send cmd and read one reply line into l->line (without the newline). 0 or -1. */
-static int exchange(struct laser *l, const char *cmd, struct acq_err *err)
+static int exchange(struct laser_dev *l, const char *cmd, struct acq_err *err)
 {
 	const char *dev = l->cfg->device;
 	char out[LASER_LINE_MAX + 2];
@@ -213,7 +219,7 @@ static int exchange(struct laser *l, const char *cmd, struct acq_err *err)
 	return 0;
 }
 
-static int expect_ok(struct laser *l, const char *cmd, struct acq_err *err)
+static int expect_ok(struct laser_dev *l, const char *cmd, struct acq_err *err)
 {
 	if (exchange(l, cmd, err))
 		return -1;
@@ -223,27 +229,16 @@ static int expect_ok(struct laser *l, const char *cmd, struct acq_err *err)
 }
 
 /* Best-effort emission off after an error; err keeps the first error. */
-static int fail_safe(struct laser *l)
+static int fail_safe(struct laser_dev *l)
 {
 	struct acq_err ignored;
 	(void)expect_ok(l, "EMISSION OFF", &ignored);
 	return -1;
 }
 
-static int parse_number(const char *s, double lo, double hi, double *out)
-{
-	char *end;
-	errno = 0;
-	double v = strtod(s, &end);
-	if (end == s || *end || errno || !isfinite(v) || v < lo || v > hi)
-		return -1;
-	*out = v;
-	return 0;
-}
-
 /* ---- transports --------------------------------------------------------------------------------------- */
 
-static int sp_open_port(struct laser *l, struct acq_err *err)
+static int sp_open_port(struct laser_dev *l, struct acq_err *err)
 {
 	const struct laser_cfg *cfg = l->cfg;
 	static const enum sp_parity par[] = { SP_PARITY_NONE, SP_PARITY_ODD, SP_PARITY_EVEN };
@@ -265,7 +260,7 @@ static int sp_open_port(struct laser *l, struct acq_err *err)
 	return 0;
 }
 
-static int sp_write_all(struct laser *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
+static int sp_write_all(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
 {
 	int w = sp_blocking_write(l->port, buf, n, (unsigned)timeout_ms);
 	if (w < 0)
@@ -275,7 +270,7 @@ static int sp_write_all(struct laser *l, const char *buf, size_t n, int timeout_
 	return 0;
 }
 
-static int sp_read_byte(struct laser *l, char *c, int timeout_ms, struct acq_err *err)
+static int sp_read_byte(struct laser_dev *l, char *c, int timeout_ms, struct acq_err *err)
 {
 	int r = sp_blocking_read(l->port, c, 1, (unsigned)(timeout_ms > 0 ? timeout_ms : 1));
 	if (r < 0)
@@ -283,12 +278,12 @@ static int sp_read_byte(struct laser *l, char *c, int timeout_ms, struct acq_err
 	return r;
 }
 
-static void sp_flush_in(struct laser *l)
+static void sp_flush_in(struct laser_dev *l)
 {
 	sp_flush(l->port, SP_BUF_INPUT);
 }
 
-static void sp_close_port(struct laser *l)
+static void sp_close_port(struct laser_dev *l)
 {
 	if (l->port) {
 		sp_close(l->port);
@@ -301,7 +296,7 @@ static const struct laser_io io_serialport = {
 	"libserialport", sp_open_port, sp_write_all, sp_read_byte, sp_flush_in, sp_close_port,
 };
 
-static int tio_open(struct laser *l, struct acq_err *err)
+static int tio_open(struct laser_dev *l, struct acq_err *err)
 {
 	const struct laser_cfg *cfg = l->cfg;
 	static const struct { int baud; speed_t sp; } speeds[] = {
@@ -342,7 +337,7 @@ static int tio_open(struct laser *l, struct acq_err *err)
 	return 0;
 }
 
-static int tio_write(struct laser *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
+static int tio_write(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
 {
 	double deadline = mono_ms() + timeout_ms;
 	while (n) {
@@ -364,7 +359,7 @@ static int tio_write(struct laser *l, const char *buf, size_t n, int timeout_ms,
 	return 0;
 }
 
-static int tio_read(struct laser *l, char *c, int timeout_ms, struct acq_err *err)
+static int tio_read(struct laser_dev *l, char *c, int timeout_ms, struct acq_err *err)
 {
 	struct pollfd p = { .fd = l->fd, .events = POLLIN };
 	int r = poll(&p, 1, timeout_ms > 0 ? timeout_ms : 1);
@@ -382,12 +377,12 @@ static int tio_read(struct laser *l, char *c, int timeout_ms, struct acq_err *er
 	return acq_errf(err, ACQ_E_IO, "laser %s: read: %s", l->cfg->device, strerror(errno));
 }
 
-static void tio_flush(struct laser *l)
+static void tio_flush(struct laser_dev *l)
 {
 	tcflush(l->fd, TCIFLUSH);
 }
 
-static void tio_close(struct laser *l)
+static void tio_close(struct laser_dev *l)
 {
 	if (l->fd >= 0)
 		close(l->fd);
@@ -410,12 +405,12 @@ static const struct laser_io *pick_io(const struct laser_cfg *cfg)
 
 /* ---- API ------------------------------------------------------------------------------------------------- */
 
-int laser_open(const struct laser_cfg *cfg, struct laser **out, struct acq_err *err)
+static int ls_open(const struct laser_cfg *cfg, struct laser_dev **out, struct acq_err *err)
 {
 	*out = NULL;
 	if (!cfg->device)
 		return acq_errf(err, ACQ_E_CONFIG, "laser: no serial device configured (devices.laser.device)");
-	struct laser *l = calloc(1, sizeof *l);
+	struct laser_dev *l = calloc(1, sizeof *l);
 	if (!l)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	l->cfg = cfg;
@@ -449,7 +444,7 @@ fail:
 	return -1;
 }
 
-void laser_close(struct laser *l)
+static void ls_close(struct laser_dev *l)
 {
 	if (!l)
 		return;
@@ -458,14 +453,14 @@ void laser_close(struct laser *l)
 	free(l);
 }
 
-int laser_set_emission(struct laser *l, bool on, struct acq_err *err)
+static int ls_set_emission(struct laser_dev *l, bool on, struct acq_err *err)
 {
 	if (expect_ok(l, on ? "EMISSION ON" : "EMISSION OFF", err))
 		return fail_safe(l);
 	return 0;
 }
 
-int laser_set_power(struct laser *l, double pct, struct acq_err *err)
+static int ls_set_power(struct laser_dev *l, double pct, struct acq_err *err)
 {
 	if (!isfinite(pct) || pct < 0 || pct > l->cfg->max_power_pct) {
 		acq_errf(err, ACQ_E_RANGE, "laser %s: power %g%% outside [0, %g]", l->cfg->device, pct,
@@ -479,7 +474,7 @@ int laser_set_power(struct laser *l, double pct, struct acq_err *err)
 	return 0;
 }
 
-int laser_status(struct laser *l, struct laser_status *st, struct acq_err *err)
+static int ls_status(struct laser_dev *l, struct laser_status *st, struct acq_err *err)
 {
 	memset(st, 0, sizeof *st);
 	if (exchange(l, "STATUS?", err))
@@ -497,7 +492,7 @@ int laser_status(struct laser *l, struct laser_status *st, struct acq_err *err)
 	st->fault_code = fault;
 	if (exchange(l, "POWER?", err))
 		return fail_safe(l);
-	if (strncmp(l->line, "POWER ", 6) || parse_number(l->line + 6, 0, 100, &st->power_pct)) {
+	if (strncmp(l->line, "POWER ", 6) || acq_num_parse(l->line + 6, 0, 100, &st->power_pct)) {
 		acq_errf(err, ACQ_E_PROTO, "laser %s: 'POWER?': expected 'POWER <0..100>', got '%s'", l->cfg->device,
 			 l->line);
 		return fail_safe(l);
@@ -505,7 +500,22 @@ int laser_status(struct laser *l, struct laser_status *st, struct acq_err *err)
 	return 0;
 }
 
-const struct laser_identity *laser_identity(const struct laser *l)
+static const struct laser_identity *ls_identity(const struct laser_dev *l)
 {
 	return &l->id;
+}
+
+const struct laser_backend laser_serial_backend = {
+	.name = "serial", .open = ls_open, .close = ls_close, .set_emission = ls_set_emission,
+	.set_power = ls_set_power, .status = ls_status, .identity = ls_identity,
+};
+
+const struct laser_backend *laser_cfg_backend(const struct laser_cfg *cfg)
+{
+	return cfg->backend == 1 ? &laser_fake_backend : &laser_serial_backend;
+}
+
+double laser_cfg_max_power(const struct laser_cfg *cfg)
+{
+	return cfg->max_power_pct;
 }

@@ -7,7 +7,8 @@
 
 #include "drivers/spectro_backend.h"
 
-static const struct spectro_backend *const backends[] = { &spectro_avaspec_backend, &spectro_sim_backend, NULL };
+static const struct spectro_backend *const backends[] = { &spectro_avaspec_backend, &spectro_sim_backend,
+							   &spectro_fake_backend, NULL };
 
 struct spectro_cfg {
 	const struct spectro_backend *be;
@@ -110,9 +111,4 @@ int spectro_stop(struct spectro *s, struct acq_err *err)
 int spectro_pollfd(const struct spectro *s)
 {
 	return s->cfg->be->pollfd ? s->cfg->be->pollfd(s->dev) : -1;
-}
-
-double spectro_temperature(struct spectro *s)
-{
-	return s->cfg->be->temperature ? s->cfg->be->temperature(s->dev) : NAN;
 }

@@ -1,5 +1,6 @@
 /* spectro: the spectrometer interface, a const table of functions behind an opaque handle.
- * Backends: "avaspec-usb" (libusb-1.0, drivers/avaspec*.c) and "sim" (talks to acq-sim, drivers/spectro_sim.c).
+ * Backends: "avaspec-usb" (libusb-1.0, drivers/avaspec*.c), "sim" (talks to acq-sim, drivers/spectro_sim.c) and
+ * "fake" (no device, for unit tests: drivers/spectro_fake.c).
  *
  * A measurement never blocks the caller's loop: spectro_start() sends the request, then spectro_fetch() is
  * called (from a timer) until it returns 1 (frame ready), 0 (not yet), or -1 (error). Timeouts scale with
@@ -72,7 +73,5 @@ int spectro_fetch(struct spectro *s, struct spectro_frame *frame, double now, st
 int spectro_stop(struct spectro *s, struct acq_err *err);
 /* A file descriptor that becomes readable when spectro_fetch() may progress, or -1 (then poll by timer). */
 int spectro_pollfd(const struct spectro *s);
-/* Sensor temperature in °C, or NaN. */
-double spectro_temperature(struct spectro *s);
 
 #endif

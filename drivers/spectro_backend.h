@@ -15,11 +15,11 @@ struct spectro_backend {
 	int (*start)(void *dev, const struct spectro_meas *m, double now, struct acq_err *err);
 	int (*fetch)(void *dev, struct spectro_frame *frame, double now, struct acq_err *err);
 	int (*stop)(void *dev, struct acq_err *err);
-	int (*pollfd)(const void *dev);
-	double (*temperature)(void *dev);
+	int (*pollfd)(const void *dev); /* readable when fetch may progress (the port thread waits on it); NULL: none */
 };
 
 extern const struct spectro_backend spectro_avaspec_backend;  /* drivers/avaspec.c */
 extern const struct spectro_backend spectro_sim_backend;      /* drivers/spectro_sim.c */
+extern const struct spectro_backend spectro_fake_backend;     /* drivers/spectro_fake.c (unit tests) */
 
 #endif

@@ -516,11 +516,6 @@ static int dev_pollfd(const void *dev)
 	return d->fd;
 }
 
-static double dev_temperature(void *dev)
-{
-	return ((struct sim_dev *)dev)->temperature;
-}
-
 const struct spectro_backend spectro_sim_backend = {
 	.name = "sim",
 	.cfg_parse = parse,
@@ -531,5 +526,4 @@ const struct spectro_backend spectro_sim_backend = {
 	.fetch = dev_fetch,
 	.stop = dev_stop,
 	.pollfd = dev_pollfd,
-	.temperature = dev_temperature,
 };

@@ -1,5 +1,5 @@
-/* dbload: calibrated samples of one sweep read from the daemon's SQLite database (schema version 1,
- * daemon/schema.sql), as struct recon_samples. Read-only; no state kept. */
+/* dbload: calibrated samples of one sweep read from the daemon's SQLite database (schema version 2,
+ * daemon/schema.sql) through its calibrated_samples view, as struct recon_samples. Read-only; no state kept. */
 #include <math.h>
 #include <sqlite3.h>
 #include <stdint.h>
@@ -9,7 +9,7 @@
 #include "recon/recon.h"
 
 #define DB_APP_ID 0x42524446 /* "BRDF" */
-#define DB_VERSION 1
+#define DB_VERSION 2 /* the first with calibrated_samples; acquisitiond migrates older files when it opens them */
 
 static int pragma_int(sqlite3 *db, const char *sql, long long *out)
 {
@@ -33,10 +33,9 @@ static double f32le(const unsigned char *p)
 }
 
 /*
- * Which angles: the planned (theta_i, phi_i, theta_o, phi_o) of each point, in the sample's frame by
- * definition; the arms' actual positions (laser_theta, detector_theta, detector_phi) are in arm coordinates
- * and their mapping is bench geometry, not this library's business. Points without a calibrated row are
- * skipped (never measured, blind zone, failed); NaN values in the blobs mean "not measured"; ±Inf is an
+ * Which angles: those of the calibrated_samples view, the sample-frame angles measured when the point was
+ * committed (zeniths in [0, 90], azimuths in [0, 360)) — the same the daemon's CSV export and its own
+ * reconstruction use. Only points done are in the view; NaN values in the blobs mean "not measured"; ±Inf is an
  * error naming the point.
  */
 int recon_load_db(const char *db_path, long long sweep_id, struct recon_samples *s, struct acq_err *err)
@@ -61,8 +60,8 @@ int recon_load_db(const char *db_path, long long sweep_id, struct recon_samples 
 		goto out;
 	}
 	if (ver != DB_VERSION) {
-		acq_errf(err, ACQ_E_UNSUPPORTED, "%s: schema version %lld, this program reads version %d", db_path, ver,
-			 DB_VERSION);
+		acq_errf(err, ACQ_E_UNSUPPORTED, "%s: schema version %lld, this program reads version %d%s", db_path, ver,
+			 DB_VERSION, ver < DB_VERSION ? " (start acquisitiond on it once to migrate it)" : "");
 		goto out;
 	}
 	if (sqlite3_prepare_v2(db, "SELECT wavelength_grid, state FROM sweeps WHERE id = ?", -1, &st, NULL) !=
@@ -105,8 +104,8 @@ int recon_load_db(const char *db_path, long long sweep_id, struct recon_samples 
 	sqlite3_finalize(st);
 	st = NULL;
 	if (sqlite3_prepare_v2(db,
-			       "SELECT p.id, p.theta_i, p.phi_i, p.theta_o, p.phi_o, c.brdf, c.sigma FROM calibrated c "
-			       "JOIN points p ON p.id = c.point_id WHERE c.sweep_id = ? ORDER BY p.order_index",
+			       "SELECT point_id, theta_i, phi_i, theta_o, phi_o, brdf, sigma FROM calibrated_samples "
+			       "WHERE sweep_id = ? ORDER BY order_index",
 			       -1, &st, NULL) != SQLITE_OK) {
 		acq_errf(err, ACQ_E_IO, "%s: %s", db_path, sqlite3_errmsg(db));
 		goto out;

@@ -1,12 +1,15 @@
-/* rng: the one random-number generator of librecon (xoshiro256**, seeded by splitmix64): Monte-Carlo draws of
- * the DHR, the checker's random pairs, the RGB path's construction-time measurements. Reproducible per seed. */
+/* rng: librecon's draws from the tree's one generator (config/acq_rng.h: xoshiro256**, seeded by splitmix64):
+ * Monte-Carlo draws of the DHR, the checker's random pairs, the RGB path's construction-time measurements.
+ * Reproducible per seed. */
 #ifndef RECON_RNG_H
 #define RECON_RNG_H
 
 #include <stdint.h>
 
+#include "config/acq_rng.h"
+
 struct recon_rng {
-	uint64_t s[4];
+	struct acq_rng g;
 };
 
 /* Seed the state from one 64-bit value (splitmix64: any seed, 0 included, gives a good state). */

@@ -701,11 +701,6 @@ int simarm_moves(struct sim_service *svc, int axis)
 	return axis >= 0 && axis < s->nax ? s->ax[axis].moves : -1;
 }
 
-int simarm_clients(struct sim_service *svc)
-{
-	return ((struct sim_arm *)svc->self)->nclients;
-}
-
 int simarm_port(struct sim_service *svc)
 {
 	return ((struct sim_arm *)svc->self)->port;

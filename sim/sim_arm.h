@@ -13,8 +13,6 @@ struct simmot *simarm_motion(struct sim_service *svc, int axis);
 int simarm_alarm(struct sim_service *svc, int axis);
 /* Moves axis i was commanded (triggers that started or were refused), -1 if no such axis. */
 int simarm_moves(struct sim_service *svc, int axis);
-/* TCP clients connected now. */
-int simarm_clients(struct sim_service *svc);
 /* TCP port the arm listens on (0 for RTU). */
 int simarm_port(struct sim_service *svc);
 /* Length of the RTU request frame starting at req (function codes 1–6, 15, 16), -1 if unknown. */

@@ -4,31 +4,12 @@
 #include <math.h>
 #include <string.h>
 
-static double urand(uint64_t *s)
-{
-	/* xorshift64*: reproducible from the world's seed */
-	uint64_t x = *s ? *s : 0x9E3779B97F4A7C15ull;
-	x ^= x >> 12;
-	x ^= x << 25;
-	x ^= x >> 27;
-	*s = x;
-	return (double)((x * 2685821657736338717ull) >> 11) * (1.0 / 9007199254740992.0);
-}
-
-static double gauss(uint64_t *s)
-{
-	double u1 = urand(s), u2 = urand(s);
-	if (u1 < 1e-300)
-		u1 = 1e-300;
-	return sqrt(-2.0 * log(u1)) * cos(2.0 * M_PI * u2);
-}
-
 void simmot_init(struct simmot *m, const struct bench_axis *k, double pos, uint64_t seed)
 {
 	memset(m, 0, sizeof *m);
 	m->k = *k;
 	m->motor = m->load = pos;
-	m->rng = seed * 0x9E3779B97F4A7C15ull + 1;
+	acq_rng_seed(&m->rng, seed);
 }
 
 /* Phase durations of a profile over distance d (> 0) from speed v0 with max speed V. */
@@ -161,7 +142,7 @@ int simmot_advance(struct simmot *m, double now)
 	} else if (now - m->t0 >= m->ta + m->tc + m->td) {
 		p = m->p1;
 		if (m->add_noise && m->k.noise_deg > 0)
-			p += m->k.noise_deg * gauss(&m->rng);
+			p += m->k.noise_deg * acq_rng_gauss(&m->rng);
 		if (m->add_noise && m->bias_moves > 0) {
 			m->bias_moves--;
 			p += m->bias_deg;

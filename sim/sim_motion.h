@@ -7,6 +7,8 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "config/acq_rng.h"
+
 #include "config/bench.h"
 
 enum simmot_event {
@@ -33,7 +35,7 @@ struct simmot {
 	bool add_noise;        /* noise added when the profile ends (not for stops) */
 	int bias_moves;        /* test hook: the next bias_moves moves end bias_deg past their target */
 	double bias_deg;
-	uint64_t rng;
+	struct acq_rng rng;   /* position noise */
 };
 
 /* Initialise at position pos (motor = load), with the axis's kinematics and a random seed. */

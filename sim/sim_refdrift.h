@@ -11,6 +11,11 @@
  *    uniform and weights c normal from the seed, normalised so that sum c_kj^2 / 2 = 1 (the oscillating part
  *    has rms 1 over long times; the constant offset that makes h(0) = 0 adds to it); h(0) = 0, so the source is nominal at bench time 0 and a reference measured at t_r and a
  *    sample at t_s differ by the ratio of the factors.
+ * Stated uncertainties for a budget: the reference deviation's is u (at every wavelength, fully correlated over
+ * correlation_nm); the drift's, for a sample at a random time long after the reference, averaged over seeds:
+ * amplitude sqrt(2 (1 + tilt^2 / 3)) (the oscillation and the offset each contribute amplitude; the tilt
+ * amplitude x tilt x rms of x over 450-1100 nm, 1/sqrt(3)): 0.0074 for amplitude 0.005, tilt 0.5. A DHR averages
+ * samples taken at many times, so its drift error is smaller.
  * Both are off by default (u = 0, amplitude = 0): the existing tests compare calibrated values with the
  * certificate's truth at tolerances that a 1-sigma reference error or a 0.5 % drift would eat into.
  * Configuration (the `sim:` section, read by acq-sim's spectrometer):

@@ -741,10 +741,6 @@ static double raster_time(const struct planner *P)
 			c = have ? plan_move(P->g, &cur, &pb, wps, &nw) : 0;
 		}
 		if (c < 0) {
-#ifdef PLAN_DEBUG
-			fprintf(stderr, "raster: skip %zu (%g %g %g) from (%g %g %g)\n", i, pb.laser_theta, pb.det_theta,
-				pb.det_phi, cur.laser_theta, cur.det_theta, cur.det_phi);
-#endif
 			continue;
 		}
 		t += c + P->dwell;
@@ -982,9 +978,6 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		for (size_t i = 0; i < P.nm; i++)
 			nk += keep[c][i] != 0;
 		t += (double)nk * P.dwell;
-#ifdef PLAN_DEBUG
-		fprintf(stderr, "candidate %d: %zu of %zu points, %.3f s\n", c, nk, P.nm, t);
-#endif
 		/* prefer the order that keeps the most points, then the fastest */
 		size_t bk = 0;
 		if (bi >= 0)

@@ -17,7 +17,10 @@ Tables printed (and written to $ACQ_BENCH_OUT/bench_dhr_honesty.csv as material,
      ACQ_HONESTY_ACC_SEEDS seeds (default 3);
   3. fit time: CPU seconds of every `brdf-recon fit`, worst per material and overall (issue goal <= 3 s).
 Environment: ACQ_HONESTY_SEEDS (20), ACQ_HONESTY_NOISE (0.01), ACQ_HONESTY_WL (450:1100:10),
-ACQ_HONESTY_MATERIALS (all), ACQ_HONESTY_DHR_ARGS (extra `brdf-recon dhr` options)."""
+ACQ_HONESTY_MATERIALS (all), ACQ_HONESTY_DHR_ARGS (extra `brdf-recon dhr` options), ACQ_HONESTY_GRID_ARGS (extra
+`acq-sim truth --grid` options: e.g. "--reference 0.002 --drift 0.005" gives samples calibrated against a white
+standard off its certificate and with source drift, sim/sim_refdrift.h, the errors an uncertainty budget must
+cover; the seed of both follows the noise seed)."""
 import os
 import subprocess
 import sys
@@ -39,6 +42,7 @@ ALL = "green-paint,white,metal,clear-coat,rough-backscatter,cloth-sheen,sharp-lo
 MATS = os.environ.get("ACQ_HONESTY_MATERIALS", ALL).split(",")
 THETAS = (8, 30, 60)
 EXTRA = os.environ.get("ACQ_HONESTY_DHR_ARGS", "").split()
+GRID_EXTRA = os.environ.get("ACQ_HONESTY_GRID_ARGS", "").split()
 NHELD = 2000
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -70,6 +74,19 @@ def read_csv(path):
     return head, np.array([ln.split(",") for ln in lines[1:]], dtype=float)
 
 
+def systematics(seed):
+    """ACQ_HONESTY_GRID_ARGS with the reference standard and the drift drawn per noise seed (U -> U,100,seed;
+    AMP -> AMP,3600,seed) unless given in full."""
+    out, it = [], iter(GRID_EXTRA)
+    for a in it:
+        out.append(a)
+        if a in ("--reference", "--drift"):
+            v = next(it)
+            out.append(v if v.count(",") == 2 else "%s,%s,%d" % (v.split(",")[0], "100" if a == "--reference" else "3600",
+                                                                  seed))
+    return out
+
+
 def heldout(d, rng):
     """NHELD random direction pairs (degrees) in the plan's range, written as a query CSV; returns (path, radians)."""
     a = np.column_stack([rng.uniform(0, 80, NHELD), np.zeros(NHELD), rng.uniform(0, 80, NHELD),
@@ -92,7 +109,8 @@ def main():
     d = tempfile.mkdtemp(prefix="bench_honesty_")
     q, ang = heldout(d, np.random.default_rng(12345))
     rows, honesty, accuracy, fits = [], [], [], {}
-    print("bench_dhr_honesty: %d seeds, noise %s, wavelengths %s, data in %s" % (NSEEDS, NOISE, WLS, d))
+    print("bench_dhr_honesty: %d seeds, noise %s, wavelengths %s, grid options %s, data in %s" % (
+        NSEEDS, NOISE, WLS, " ".join(GRID_EXTRA) or "none", d))
     for mat in MATS:
         tr = os.path.join(d, "truth_%s.csv" % mat)
         run([SIM, "truth", mat, "--dhr", tr, "--theta-i", ",".join(map(str, THETAS)), "--wavelengths", WLS])
@@ -106,7 +124,7 @@ def main():
         for seed in range(1, NSEEDS + 1):
             s, m, o, e = (os.path.join(d, "%s_%d.%s" % (mat, seed, x)) for x in ("csv", "model", "dhr.csv", "eval.csv"))
             run([SIM, "truth", mat, "--grid", "10x10x10", "--noise", NOISE, "--seed", str(seed), "--wavelengths",
-                 WLS, "-o", s])
+                 WLS, "-o", s, *systematics(seed)])
             fits[mat].append(run_cpu([B, "fit", s, "-o", m]))
             run([B, "dhr", m, "--theta-i", ",".join(map(str, THETAS)), "--seed", str(seed), "-o", o, *EXTRA])
             head, A = read_csv(o)

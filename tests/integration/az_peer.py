@@ -3,7 +3,7 @@
 stack we did not write), to test our axis driver against an independent peer.
 
 Usage: az_peer.py --tcp PORT|0 --ports-file F [--units 1,2] [--seed N]
-       az_peer.py --rtu DEVICE [--units 1,2] [--seed N]
+       az_peer.py --rtu DEVICE [--ports-file F] [--units 1,2] [--seed N]   (F written once serving)
 
 Map (0-based, upper word first, 100 steps per degree), written from the AZ manual independently of our
 regmap.c: block 0x58..0x67 (op data, op type, position, speed, accel, decel, current, trigger), input
@@ -154,6 +154,11 @@ async def main():
         server = ModbusSerialServer(ctx, framer=ModbusRtuFramer, port=a.rtu, baudrate=115200,
                                     ignore_missing_slaves=True)
         await server.start()
+        if a.ports_file:  # readiness: the serial port is open and served
+            import os
+            with open(a.ports_file + ".tmp", "w") as f:
+                f.write("%s\n" % a.rtu)
+            os.rename(a.ports_file + ".tmp", a.ports_file)
         print("az_peer: serving RTU on", a.rtu, flush=True)
         while True:
             await asyncio.sleep(3600)

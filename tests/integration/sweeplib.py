@@ -24,7 +24,8 @@ SKIP = 77
 
 
 class Skip(Exception):
-    """A piece the test needs is not on this branch yet: exit 77 with the reason."""
+    """A tool the test needs is genuinely absent from the machine: exit 77 with the reason (a missing or
+    failing piece of this tree is a failure, never a skip)."""
 
 
 def say(*a):
@@ -80,7 +81,7 @@ class Bench:
     def __init__(self, state_dir=None, scale=200.0, seed=SEED, sweep_yaml=None, daemon_extra=""):
         for prog in (SIM, DAEMON):
             if not os.access(prog, os.X_OK):
-                raise Skip("%s not built" % prog)
+                raise AssertionError("%s not built (make all)" % prog)
         self.dir = state_dir or tempfile.mkdtemp(prefix="acq-sweep.")
         os.makedirs(self.dir, exist_ok=True)
         os.chmod(self.dir, 0o755)
@@ -106,7 +107,7 @@ class Bench:
             if self.sim.poll() is not None:
                 text = open(self.sim_log, errors="replace").read()
                 if "not implemented" in text:
-                    raise Skip("acq-sim: " + text.strip().splitlines()[-1])
+                    raise AssertionError("acq-sim: " + text.strip().splitlines()[-1])
                 raise AssertionError("acq-sim exited %d:\n%s" % (self.sim.returncode, text))
             if time.time() - t0 > 15:
                 raise AssertionError("acq-sim wrote no ports file in 15 s")
@@ -143,7 +144,7 @@ class Bench:
                 if time.time() - t0 > timeout:
                     notes = "; ".join("%s: %s" % (d.get("name"), d.get("note") or d.get("state")) for d in missing)
                     if "not implemented" in notes:
-                        raise Skip("devices not on main yet: " + notes)
+                        raise AssertionError("devices unavailable: " + notes)
                     raise AssertionError("devices unavailable after %g s: %s" % (timeout, notes))
                 time.sleep(0.1)
         finally:
@@ -269,7 +270,7 @@ def start_sweep(bench, plan_text, name="test", white_first=True):
     if not r.get("ok"):
         err = r.get("error", {})
         if err.get("code") == "unavailable":
-            raise Skip("sweep.start: " + err.get("message", ""))
+            raise AssertionError("sweep.start refused: %s" % r)
         raise AssertionError("sweep.start refused: %s" % r)
     return int(r.get("sweep") or r.get("id"))
 
@@ -363,7 +364,7 @@ def zscores(bench, sid, material="green-paint", grid_step=None):
                         "%g:%g:%g" % (wl[0], wl[-1], step)], capture_output=True, text=True)
     if r.returncode != 0:
         if "not implemented" in r.stderr + r.stdout:
-            raise Skip("acq-sim truth --eval: not implemented yet")
+            raise AssertionError("acq-sim truth --eval: " + (r.stderr or r.stdout))
         raise AssertionError("acq-sim truth --eval failed: %s" % (r.stderr or r.stdout))
     truth = []
     with open(opath) as f:

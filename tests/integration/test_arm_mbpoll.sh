@@ -7,6 +7,8 @@ set -uo pipefail
 : "${ACQ_BUILD:?}" "${ACQ_SRC:?}" "${ACQ_SEED:=1}"
 echo "seed $ACQ_SEED"
 for t in mbpoll socat; do command -v $t >/dev/null || { echo "skip: $t not installed"; exit 77; }; done
+# mbpoll's response timeout (1 s by default) scaled for busy machines (socat ptys, both cores loaded)
+PEER_T=${ACQ_PEER_TIMEOUT_S:-5}
 sim="$ACQ_BUILD/acq-sim"
 [ -x "$sim" ] || { echo "skip: $sim not built"; exit 77; }
 tmp=$(mktemp -d); pids=()
@@ -40,14 +42,14 @@ val() { sed -n "s/^\[$1\]:[[:space:]]*\(-\?[0-9]\+\).*/\1/p" | head -n 1; }
 # The simulated axis has positioning noise (bench noise_deg, 0.005° = 0.5 count): allow 3 counts.
 check_move() {
   local before after st i
-  before=$(mbpoll -a 1 -0 -r 204 -t 4:int -B -c 1 -1 "$@" | val 204)
+  before=$(mbpoll -o "$PEER_T" -a 1 -0 -r 204 -t 4:int -B -c 1 -1 "$@" | val 204)
   [ -n "$before" ] || { echo "FAIL: cannot read the position with mbpoll $*"; exit 1; }
   echo "position before: $before counts"
-  mbpoll -a 1 -0 -r 88 -t 4:int -B "$@" 0 1 4237 2000 6000 6000 1000 1 | grep -q "Written 8 references" ||
+  mbpoll -o "$PEER_T" -a 1 -0 -r 88 -t 4:int -B "$@" 0 1 4237 2000 6000 6000 1000 1 | grep -q "Written 8 references" ||
     { echo "FAIL: move block not written"; exit 1; }
   for i in $(seq 300); do
-    after=$(mbpoll -a 1 -0 -r 204 -t 4:int -B -c 1 -1 "$@" | val 204)
-    st=$(mbpoll -a 1 -0 -r 127 -t 4 -c 1 -1 "$@" | val 127)
+    after=$(mbpoll -o "$PEER_T" -a 1 -0 -r 204 -t 4:int -B -c 1 -1 "$@" | val 204)
+    st=$(mbpoll -o "$PEER_T" -a 1 -0 -r 127 -t 4 -c 1 -1 "$@" | val 127)
     if [ -n "$after" ] && [ -n "$st" ] && [ $(( after > 4237 ? after - 4237 : 4237 - after )) -le 3 ] &&
        [ $(( st & (1 << 8) )) -eq 0 ]; then
       break

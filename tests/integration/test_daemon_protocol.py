@@ -32,6 +32,20 @@ def wait_event(w, name, limit=50):
     raise AssertionError("no %s event in %d events" % (name, limit))
 
 
+def read_until(pipe, text, timeout):
+    """What a child writes to pipe until it contains text, or timeout seconds (raw reads: no buffering hides a
+    line from select)."""
+    import select
+    out, deadline = b"", time.time() + timeout
+    while text.encode() not in out and time.time() < deadline:
+        if select.select([pipe], [], [], max(0.0, deadline - time.time()))[0]:
+            chunk = os.read(pipe.fileno(), 65536)
+            if not chunk:
+                break
+            out += chunk
+    return out.decode(errors="replace")
+
+
 def seed_sweep(db, completed=True, calibrated=True):
     """Insert a sweep with two points and calibrated samples, as the executor would."""
     con = sqlite3.connect(db, timeout=5)
@@ -43,8 +57,9 @@ def seed_sweep(db, completed=True, calibrated=True):
     grid = struct.pack("<3f", 450, 500, 550)
     cur.execute("UPDATE sweeps SET wavelength_grid = ? WHERE id = ?", (grid, sid))
     for k in range(2):
-        cur.execute("INSERT INTO points (sweep_id, order_index, theta_i, phi_i, theta_o, phi_o, state) "
-                    "VALUES (?, ?, ?, 0, ?, 180, 'done')", (sid, k, 10.0 * k, 30.0 + k))
+        cur.execute("INSERT INTO points (sweep_id, order_index, theta_i, phi_i, theta_o, phi_o, state, m_theta_i, "
+                    "m_phi_i, m_theta_o, m_phi_o) VALUES (?, ?, ?, 0, ?, 180, 'done', ?, 0, ?, 180)",
+                    (sid, k, 10.0 * k, 30.0 + k, 10.0 * k, 30.0 + k))
         pid = cur.lastrowid
         if calibrated:
             cur.execute("INSERT INTO calibrated (point_id, sweep_id, brdf, sigma) VALUES (?, ?, ?, ?)",
@@ -75,7 +90,7 @@ def main():
 
         # --- information commands
         r = c.req("version", _id="v-1")
-        check(r["ok"] and r["id"] == "v-1" and r["protocol"] == 1 and r["schema"] == 1 and r["role"] == "controller",
+        check(r["ok"] and r["id"] == "v-1" and r["protocol"] == 1 and r["schema"] == 2 and r["role"] == "controller",
               "version %r" % r)
         r = c.req("status", _id=2)
         check(r["ok"] and r["id"] == 2 and r["daemon"] == "running", "status %r" % r)
@@ -180,29 +195,27 @@ def main():
         check(err_code(c.req("recon.start", sweep=999)) == "not_found", "recon on missing sweep")
         check(err_code(c.req("recon.status")) == "not_found", "recon.status before any run")
         r = c.req("recon.start", sweep=sid)
-        if r["ok"] is False:
-            # The executor's reconstruction chain is not there (placeholder daemon/sweep.c).
-            check(err_code(r) == "unavailable" and "executor" in r["error"]["message"], "recon.start %r" % r)
-            check(c.req("recon.status", sweep=sid)["error"]["code"] == "not_found", "no run recorded")
-        else:
-            # The executor runs the chain with the stand-in program; it must finish and be recorded.
-            check(r["sweep"] == sid, "recon.start %r" % r)
-            deadline = time.time() + 30
-            while time.time() < deadline:
-                st = c.req("recon.status", sweep=sid)
-                if st["ok"] and st["run"]["state"] != "running":
-                    break
-                time.sleep(0.2)
-            check(st["ok"] and st["run"]["state"] in ("succeeded", "failed"), "recon finished %r" % st)
-            check(c.req("status")["recon"]["running"] is False, "status after recon")
+        # The executor runs the chain with the stand-in program (every stage exits 0 and writes its -o file):
+        # it must be accepted, finish, succeed and be recorded.
+        check(r["ok"] and r["sweep"] == sid, "recon.start %r" % r)
+        deadline = time.time() + 30
+        while time.time() < deadline:
+            st = c.req("recon.status", sweep=sid)
+            if st["ok"] and st["run"]["state"] != "running":
+                break
+            time.sleep(0.05)  # polling with a deadline, not a fixed wait
+        check(st["ok"] and st["run"]["state"] == "succeeded", "recon finished %r" % st)
+        check(c.req("status")["recon"]["running"] is False, "status after recon")
         # --- SIGHUP with a broken file keeps the running configuration
         good = open(d.conf).read()
         with open(d.conf, "a") as f:
             f.write("bogus_key: 1\n")
         d.proc.send_signal(signal.SIGHUP)
-        time.sleep(0.3)
-        check(c.req("version")["ok"], "alive after a bad SIGHUP")
+        deadline = time.time() + 10  # the signal is handled when the loop sees it: wait for its log line
+        while not ("reload refused" in d.logtext() and "bogus_key" in d.logtext()) and time.time() < deadline:
+            time.sleep(0.02)
         check("reload refused" in d.logtext() and "bogus_key" in d.logtext(), "bad reload logged")
+        check(c.req("version")["ok"], "alive after a bad SIGHUP")
         r = c.req("reload")
         check(err_code(r) == "invalid" and "bogus_key" in r["error"]["message"], "reload command error %r" % r)
         with open(d.conf, "w") as f:
@@ -271,14 +284,17 @@ def main():
         p = subprocess.run([ACQCTL, "help"], capture_output=True, text=True)
         check(p.returncode == 0 and "sweep start" in p.stdout and "recon status" in p.stdout, "help")
         # acqctl watch, not a terminal: JSON lines
-        wp = subprocess.Popen([ACQCTL, "-s", d.sock, "watch"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                              text=True)
-        time.sleep(0.3)
+        before = c.req("status").get("watchers", 0)
+        wp = subprocess.Popen([ACQCTL, "-s", d.sock, "watch"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        deadline = time.time() + 10  # subscribed (the daemon counts one more watcher): now an event reaches it
+        while c.req("status").get("watchers", 0) <= before and time.time() < deadline:
+            time.sleep(0.02)
+        check(c.req("status").get("watchers", 0) > before, "acqctl watch subscribed")
         c.req("reload")
-        time.sleep(0.3)
+        out = read_until(wp.stdout, "\"config\"", 10)
         wp.terminate()
-        out, _ = wp.communicate(timeout=5)
-        evs = [json.loads(x) for x in out.splitlines()]
+        wp.communicate(timeout=5)
+        evs = [json.loads(x) for x in out.splitlines() if x.strip()]
         check({"event": "config", "path": d.conf} in evs, "acqctl watch output %r" % out)
 
         # --- loopback TCP: observers only (no peer credentials), acqctl -s tcp:PORT

@@ -31,8 +31,9 @@ def seed_big(db, npts=NPTS):
     grid = [450.0 + i for i in range(NWL)]
     cur.execute("UPDATE sweeps SET wavelength_grid = ? WHERE id = ?", (struct.pack("<%df" % NWL, *grid), sid))
     for k in range(npts):
-        cur.execute("INSERT INTO points (sweep_id, order_index, theta_i, phi_i, theta_o, phi_o, state) "
-                    "VALUES (?, ?, ?, 0, ?, ?, 'done')", (sid, k, (k % 10) * 8.0, (k % 7) * 9.0, (k * 36) % 360))
+        ang = ((k % 10) * 8.0, 0.0, (k % 7) * 9.0, float((k * 36) % 360))  # measured = planned here
+        cur.execute("INSERT INTO points (sweep_id, order_index, theta_i, phi_i, theta_o, phi_o, state, m_theta_i, "
+                    "m_phi_i, m_theta_o, m_phi_o) VALUES (?, ?, ?, ?, ?, ?, 'done', ?, ?, ?, ?)", (sid, k, *ang, *ang))
         pid = cur.lastrowid
         vals = struct.pack("<%df" % NWL, *[0.1 + 1e-4 * ((k * 7 + i) % 1000) for i in range(NWL)])
         sig = struct.pack("<%df" % NWL, *[1e-3 + 1e-7 * i for i in range(NWL)])

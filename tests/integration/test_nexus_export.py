@@ -24,7 +24,7 @@ def make_db(path, rng):
     db = sqlite3.connect(path)
     db.executescript(open(os.path.join(SRC, "daemon", "schema.sql")).read())
     db.execute("PRAGMA application_id = %d" % 0x42524446)
-    db.execute("PRAGMA user_version = 1")
+    db.execute("PRAGMA user_version = 2")
     npix, nwl = 64, 23
     db.execute("INSERT INTO spectrometers VALUES (1, 'AvaSpec-ULS2048', '1234567U1', '2.1', ?, 450.0, 0.32, "
                "-1.1e-5, 2e-9, 0, NULL, 1700000000.0)", (npix,))
@@ -41,7 +41,8 @@ def make_db(path, rng):
     pts = [(10, 1, 0, 30.0, 0.0, 45.0, 180.0, 30.01, 44.98, 179.9, "done", 1.7e9 + 100),
            (11, 1, 1, 30.0, 0.0, 60.0, 90.0, None, None, None, "skipped", None),
            (12, 1, 2, 0.0, 0.0, 10.0, 0.0, 0.0, 10.02, 0.01, "done", 1.7e9 + 200)]
-    db.executemany("INSERT INTO points VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", pts)
+    db.executemany("INSERT INTO points (id, sweep_id, order_index, theta_i, phi_i, theta_o, phi_o, laser_theta, "
+                   "detector_theta, detector_phi, state, done_at) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", pts)
     spectra = []
     sid = 100
     for kind, point, sd in (("reference", None, True), ("dark", None, True), ("sample", 10, True), ("dark", 10, False),

@@ -126,7 +126,9 @@ def main():
     assert np.all(np.isfinite(v))
     nodata = np.count_nonzero(v < 0)
     print("MERL: %d no-data values, %d data values" % (nodata, v.size - nodata))
-    assert nodata == 3 * (1458000 - 1096216) and np.all(v[v >= 0] >= 0) and v.max() > 0
+    # every negative value is the no-data marker (MERL_NO_DATA, -1: below the horizon), nothing else is negative,
+    # and the data cells are not all zero
+    assert nodata == 3 * (1458000 - 1096216) and np.all(v[v < 0] == -1.0) and v.max() > 0
     assert os.path.exists(mb + ".colour.json")
     rp = os.path.join(d, "r.png")
     run("render", m, "-o", rp, "--size", "64")

@@ -42,7 +42,7 @@ def main():
     db = sqlite3.connect(dbp)
     db.executescript(open(schema).read())
     db.execute("PRAGMA application_id = %d" % 0x42524446)
-    db.execute("PRAGMA user_version = 1")
+    db.execute("PRAGMA user_version = 2")
     db.execute("INSERT INTO sweeps (id, name, plan_text, config_snapshot, state, created_at, software_version, "
                "points_total, wavelength_grid) VALUES (7, 't', '', '', 'completed', 0, 'x', ?, ?)",
                (len(ang), blob(wl)))
@@ -50,8 +50,10 @@ def main():
                "VALUES (8, 'u', '', '', 'running', 0, 'x')")
     deg = np.degrees(ang)
     for k in range(len(ang)):
-        db.execute("INSERT INTO points (id, sweep_id, order_index, theta_i, phi_i, theta_o, phi_o, state) "
-                   "VALUES (?, 7, ?, ?, ?, ?, ?, 'done')", (k + 1, k, *map(float, deg[k])))
+        # planned angles off by a degree: the measured ones (m_*, what the readers use) are the samples' own
+        db.execute("INSERT INTO points (id, sweep_id, order_index, theta_i, phi_i, theta_o, phi_o, state, m_theta_i, "
+                   "m_phi_i, m_theta_o, m_phi_o) VALUES (?, 7, ?, ?, ?, ?, ?, 'done', ?, ?, ?, ?)",
+                   (k + 1, k, *[min(90.0, float(v) + 1) for v in deg[k]], *map(float, deg[k])))
         db.execute("INSERT INTO calibrated (point_id, sweep_id, brdf, sigma) VALUES (?, 7, ?, ?)",
                    (k + 1, blob(meas[k]), blob(sig[k])))
     db.commit()

@@ -131,10 +131,9 @@ static int py_start(struct peer *p, int port)
 	snprintf(seed, sizeof seed, "%llu", ah_seed());
 	unlink(pf);
 	if (p->rtu) {
-		char *argv[] = { PY, script, "--rtu", p->pty.b, "--seed", seed, NULL };
+		char *argv[] = { PY, script, "--rtu", p->pty.b, "--ports-file", pf, "--seed", seed, NULL };
 		p->py = ah_spawn(argv, log);
-		ah_sleep(0.8); /* no readiness file for RTU: the driver's first request retries below */
-		return 0;
+		return ah_wait_file(pf, 10) ? 0 : -1; /* written once the serial port is served */
 	}
 	char *argv[] = { PY, script, "--tcp", portarg, "--ports-file", pf, "--seed", seed, NULL };
 	p->py = ah_spawn(argv, log);

@@ -171,7 +171,7 @@ static void test_angular_term(void **state)
 	const double s = 0.04; /* relative slope of f per degree at θo = 40° */
 	c.angle_rel_per_deg = s;
 	static struct exp_rate es, eref;
-	static struct calib_spectrum sp, prev, next;
+	static struct calib_spectrum sp;
 	struct synth_rng r = { .s = seed ^ 0x77 };
 	es.npix = eref.npix = NPIX;
 	double sz2 = 0, s2n = 0;
@@ -198,26 +198,6 @@ static void test_angular_term(void **state)
 	print_message("angle: var of z %.3f\n", sz2 / n);
 	assert_true(sz2 / n > 0.85 && sz2 / n < 1.15);
 	assert_true(s2n / n > 100); /* ignoring the term would be badly wrong */
-
-	/* neighbours at θ ∓ 2°, f linear in θ: the central difference is exact */
-	for (int p = 0; p < NPIX; p++)
-		es.rate[p] = 1000 * f_true(wl[p]) * (1 - 2 * s);
-	calib_spectrum(&c, wl, &es, &eref, &g, &prev, NULL);
-	for (int p = 0; p < NPIX; p++)
-		es.rate[p] = 1000 * f_true(wl[p]) * (1 + 2 * s);
-	calib_spectrum(&c, wl, &es, &eref, &g, &next, NULL);
-	for (int p = 0; p < NPIX; p++)
-		es.rate[p] = 1000 * f_true(wl[p]);
-	calib_spectrum(&c, wl, &es, &eref, &g, &sp, NULL);
-	assert_int_equal(calib_angle_from_neighbours(&prev, 38, &sp, 40, &next, 42, 0.3, NULL), 0);
-	for (int k = 0; k < sp.n; k += 7) {
-		double want = s * sp.f[k] * 0.3;
-		assert_true(fabs(sp.u_angle[k] - want) < 1e-9 * fmax(want, 1e-12) + 1e-15);
-		assert_true(sp.u[k] >= sp.u_angle[k]);
-	}
-	/* one-sided when only one neighbour */
-	assert_int_equal(calib_angle_from_neighbours(NULL, 0, &sp, 40, &next, 42, 0.3, NULL), 0);
-	assert_int_equal(calib_angle_from_neighbours(NULL, 0, &sp, 40, NULL, 0, 0.3, NULL), -1);
 }
 
 /* Binning: pixels in each bin averaged with independent terms in quadrature and common terms linearly;

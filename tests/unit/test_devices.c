@@ -1,6 +1,9 @@
-/* Unit tests for daemon/devices.c on fake drivers and a fake clock: opening and identities recorded in the
- * store, manual moves checked against soft limits and stepped to completion, measurements stored (dark
- * switches the laser off first), a lost device reconnected by the retry timer, safe stop at finish. */
+/* Unit tests for daemon/devices.c on the drivers' fake backends (drivers/axis_fake.c, laser_fake.c,
+ * spectro_fake.c, selected by the configuration) and a fake clock: every device on its own I/O thread; opening
+ * and identities recorded, manual moves checked against soft limits and completed, measurements stored (dark
+ * switches the laser off first), a lost device reconnected by the retry timer, safe stop at finish and reload;
+ * a device whose every call blocks does not hold the loop; the executor's reads are EX_PENDING until their
+ * completion kicks. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -9,215 +12,44 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 #include <cmocka.h>
 
 #include "daemon/conf.h"
 #include "daemon/devices.h"
+#include "daemon/executor.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
 #include "drivers/axis.h"
-#include "drivers/laser.h"
-#include "drivers/spectro.h"
-
-/* ---- fakes ---- */
-struct axis {
-	double pos, target;
-	bool moving;
-	int stops;
-};
-struct spectro {
-	struct spectro_info info;
-	int fetches;
-	bool running;
-};
-struct laser {
-	bool emission;
-	struct laser_identity id;
-};
-static struct axis fake_axes[3];
-static struct spectro fake_spec;
-static struct laser fake_laser;
-static int cfg_token[5];
-static bool fail_open[5];
-
-static int slot_of_cfg(const void *cfg)
-{
-	return (int)((const int *)cfg - cfg_token);
-}
-
-static int f_axis_open(const struct axis_cfg *cfg, struct axis **out, struct acq_err *err)
-{
-	int i = slot_of_cfg(cfg);
-	if (fail_open[i])
-		return acq_errf(err, ACQ_E_DISCONNECTED, "fake axis %d: no answer", i);
-	*out = &fake_axes[i];
-	return 0;
-}
-static void f_axis_close(struct axis *ax)
-{
-	(void)ax;
-}
-static void f_axis_cfg_limits(const struct axis_cfg *cfg, double *lo, double *hi)
-{
-	(void)cfg;
-	*lo = -10;
-	*hi = 90;
-}
-static int f_axis_read_status(struct axis *ax, struct axis_status *st, struct acq_err *err)
-{
-	(void)err;
-	*st = (struct axis_status){ .position_deg = ax->pos, .ready = true, .busy = ax->moving, .homed = true };
-	return 0;
-}
-static int f_axis_move_begin(struct axis *ax, double target, double now, struct acq_err *err)
-{
-	(void)now;
-	(void)err;
-	ax->target = target;
-	ax->moving = true;
-	return 0;
-}
-/* Homing: a move to 0. */
-static int f_axis_home_begin(struct axis *ax, double now, struct acq_err *err)
-{
-	return f_axis_move_begin(ax, 0, now, err);
-}
-static int f_axis_alarm_reset(struct axis *ax, struct acq_err *err)
-{
-	(void)ax;
-	(void)err;
-	return 0;
-}
-/* Moves 10 degrees per step. */
-static int f_axis_move_step(struct axis *ax, double now, struct acq_err *err)
-{
-	(void)now;
-	(void)err;
-	double d = ax->target - ax->pos;
-	ax->pos += fabs(d) <= 10 ? d : (d > 0 ? 10 : -10);
-	ax->moving = ax->pos != ax->target;
-	return ax->moving ? AXIS_MOVE_RUNNING : AXIS_MOVE_DONE;
-}
-static int f_axis_stop(struct axis *ax, struct acq_err *err)
-{
-	(void)err;
-	ax->moving = false;
-	ax->stops++;
-	return 0;
-}
-static int f_axis_identity(struct axis *ax, struct axis_identity *id, struct acq_err *err)
-{
-	(void)err;
-	snprintf(id->vendor, sizeof id->vendor, "FakeMotion");
-	snprintf(id->model, sizeof id->model, "AX-%d", (int)(ax - fake_axes));
-	snprintf(id->serial, sizeof id->serial, "S%d", (int)(ax - fake_axes));
-	snprintf(id->firmware, sizeof id->firmware, "1.0");
-	return 0;
-}
-static int f_spectro_open(const struct spectro_cfg *cfg, struct spectro **out, struct acq_err *err)
-{
-	if (fail_open[slot_of_cfg(cfg)])
-		return acq_errf(err, ACQ_E_DISCONNECTED, "fake spectrometer: gone");
-	fake_spec.info = (struct spectro_info){ .model = "FakeSpec", .serial = "1234", .firmware = "2", .npix = 16,
-						.wl_coef = { 450, 40, 0, 0, 0 }, .max_counts = 65535 };
-	*out = &fake_spec;
-	return 0;
-}
-static void f_spectro_close(struct spectro *s)
-{
-	(void)s;
-}
-static const struct spectro_info *f_spectro_info(const struct spectro *s)
-{
-	return &s->info;
-}
-static int f_spectro_start(struct spectro *s, const struct spectro_meas *m, double now, struct acq_err *err)
-{
-	(void)m;
-	(void)now;
-	(void)err;
-	s->running = true;
-	s->fetches = 0;
-	return 0;
-}
-static int f_spectro_fetch(struct spectro *s, struct spectro_frame *f, double now, struct acq_err *err)
-{
-	(void)now;
-	(void)err;
-	if (++s->fetches < 3)
-		return 0;
-	memset(f, 0, sizeof *f);
-	f->npix = 16;
-	for (int i = 0; i < 16; i++)
-		f->counts[i] = 100.0 * i;
-	f->saturated[15] = 1;
-	f->nsaturated = 1;
-	f->temperature_c = NAN;
-	f->meas = (struct spectro_meas){ .integration_ms = 12.5, .averages = 3 };
-	s->running = false;
-	return 1;
-}
-static int f_spectro_stop(struct spectro *s, struct acq_err *err)
-{
-	(void)err;
-	s->running = false;
-	return 0;
-}
-static int f_laser_open(const struct laser_cfg *cfg, struct laser **out, struct acq_err *err)
-{
-	if (fail_open[slot_of_cfg(cfg)])
-		return acq_errf(err, ACQ_E_DISCONNECTED, "fake laser: gone");
-	*out = &fake_laser;
-	return 0;
-}
-static void f_laser_close(struct laser *l)
-{
-	l->emission = false;
-}
-static int f_laser_set_emission(struct laser *l, bool on, struct acq_err *err)
-{
-	(void)err;
-	l->emission = on;
-	return 0;
-}
-static double fake_power;
-static int f_laser_set_power(struct laser *l, double pct, struct acq_err *err)
-{
-	(void)l;
-	(void)err;
-	fake_power = pct;
-	return 0;
-}
-static int f_laser_status(struct laser *l, struct laser_status *st, struct acq_err *err)
-{
-	(void)err;
-	*st = (struct laser_status){ .emission = l->emission, .interlock_ok = true };
-	return 0;
-}
-static const struct laser_identity *f_laser_identity(const struct laser *l)
-{
-	return &l->id;
-}
-static const struct devices_drv fake_drv = {
-	f_axis_open, f_axis_close, f_axis_cfg_limits, f_axis_read_status, f_axis_move_begin, f_axis_move_step,
-	f_axis_stop, f_axis_identity, f_spectro_open, f_spectro_close, f_spectro_info, f_spectro_start,
-	f_spectro_fetch, f_spectro_stop, f_laser_open, f_laser_close, f_laser_set_emission, f_laser_set_power, f_laser_status,
-	f_laser_identity, f_axis_home_begin, f_axis_alarm_reset,
-};
+#include "drivers/axis_fake.h"
+#include "drivers/laser_fake.h"
+#include "drivers/spectro_fake.h"
 
 /* ---- harness ---- */
 static double now_s;
 static double fake_clock(void *ctx)
 {
 	(void)ctx;
-	return now_s;
+	double v;
+	__atomic_load(&now_s, &v, __ATOMIC_SEQ_CST);
+	return v;
+}
+static void set_clock(double v)
+{
+	__atomic_store(&now_s, &v, __ATOMIC_SEQ_CST);
 }
 static double wall(void)
 {
-	return 1.7e9 + now_s;
+	return 1.7e9 + fake_clock(NULL);
 }
-static int ups, downs;
+static double real_s(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+static int ups, downs, kicks;
 static void notify(void *ctx, enum conf_dev d, bool up, const char *why)
 {
 	(void)ctx;
@@ -227,6 +59,11 @@ static void notify(void *ctx, enum conf_dev d, bool up, const char *why)
 		ups++;
 	else
 		downs++;
+}
+static void kick(void *ctx)
+{
+	(void)ctx;
+	kicks++;
 }
 static int done_calls, done_rc;
 static json_t *done_result;
@@ -250,13 +87,69 @@ struct fixture {
 	struct devices *dv;
 };
 
-static void advance(struct fixture *fx, double dt, int steps)
+/* Run the loop (the clock advancing dt per pass) until cond holds; false after 10 s of real time. */
+static bool wait_for(struct fixture *fx, double dt, bool (*cond)(void))
 {
-	for (int i = 0; i < steps; i++) {
-		now_s += dt / steps;
-		loop_run_once(fx->lp, 0);
+	double t0 = real_s();
+	while (!cond()) {
+		if (real_s() - t0 > 10)
+			return false;
+		set_clock(fake_clock(NULL) + dt);
+		loop_run_once(fx->lp, 0.005);
 	}
+	return true;
 }
+
+static struct fixture *g_fx;
+static bool all_up(void)
+{
+	return devices_available(g_fx->dv) == 5;
+}
+static bool four_up_one_down(void)
+{
+	return devices_available(g_fx->dv) == 4 && downs >= 1;
+}
+static bool op_done(void)
+{
+	return done_calls > 0;
+}
+static bool laser_off(void)
+{
+	return !laser_fake_state()->emission;
+}
+static bool theta_up(void)
+{
+	return devices_up(g_fx->dv, CONF_DEV_DETECTOR_THETA);
+}
+static bool laser_up(void)
+{
+	return devices_up(g_fx->dv, CONF_DEV_LASER);
+}
+static int stops_before;
+static bool laser_theta_stopped(void)
+{
+	return axis_fake_get("laser.theta")->stops > stops_before;
+}
+static bool kicked(void)
+{
+	return kicks > 0;
+}
+
+static const char *const CONF_TEXT =
+	"daemon: {state_dir: %s, device_retry_s: 1}\n"
+	"sweep: {move_timeout_s: 5}\n"
+	"devices:\n"
+	"  laser_arm:\n"
+	"    link: {type: fake}\n"
+	"    axes:\n"
+	"      theta: {soft_min_deg: -3, soft_max_deg: 88}\n"
+	"  detector_arm:\n"
+	"    link: {type: fake}\n"
+	"    axes:\n"
+	"      theta: {soft_min_deg: -3, soft_max_deg: 88}\n"
+	"      phi: {soft_min_deg: -179, soft_max_deg: 359}\n"
+	"  spectrometer: {backend: fake}\n"
+	"  laser: {backend: fake}\n";
 
 static int setup(void **state)
 {
@@ -264,26 +157,24 @@ static int setup(void **state)
 	snprintf(fx->dir, sizeof fx->dir, "/tmp/test_devices.XXXXXX");
 	if (!mkdtemp(fx->dir))
 		return -1;
-	now_s = 100;
-	memset(fake_axes, 0, sizeof fake_axes);
-	memset(fail_open, 0, sizeof fail_open);
-	fake_laser.emission = true;
-	ups = downs = done_calls = 0;
+	set_clock(100);
+	axis_fake_reset();
+	laser_fake_reset();
+	spectro_fake_reset();
+	ups = downs = done_calls = kicks = 0;
 	struct loop_clock clk = { .now = fake_clock };
 	fx->lp = loop_new(&clk, NULL);
-	char text[256], db[128];
-	snprintf(text, sizeof text, "daemon: {state_dir: %s, device_retry_s: 1}\nsweep: {move_timeout_s: 5}\n", fx->dir);
+	char text[1024], db[128];
+	snprintf(text, sizeof text, CONF_TEXT, fx->dir);
 	struct acq_err err = { 0 };
-	if (conf_load_text("t.yaml", text, strlen(text), NULL, &fx->c, &err))
+	if (conf_load_text("t.yaml", text, strlen(text), NULL, &fx->c, &err)) {
+		fprintf(stderr, "%s\n", err.msg);
 		return -1;
-	/* Fake parsed configurations: only ever passed back to the fake drivers. */
-	for (int i = 0; i < 3; i++)
-		fx->c->axis[i] = (struct axis_cfg *)&cfg_token[i];
-	fx->c->spectro = (struct spectro_cfg *)&cfg_token[CONF_DEV_SPECTRO];
-	fx->c->laser = (struct laser_cfg *)&cfg_token[CONF_DEV_LASER];
+	}
 	snprintf(db, sizeof db, "%s/t.db", fx->dir);
 	if (store_open(db, &fx->st, &err))
 		return -1;
+	g_fx = fx;
 	*state = fx;
 	return 0;
 }
@@ -292,10 +183,6 @@ static int teardown(void **state)
 {
 	struct fixture *fx = *state;
 	devices_finish(fx->dv);
-	for (int i = 0; i < 3; i++)
-		fx->c->axis[i] = NULL;
-	fx->c->spectro = NULL;
-	fx->c->laser = NULL;
 	conf_free(fx->c);
 	store_close(fx->st);
 	loop_free(fx->lp);
@@ -312,69 +199,74 @@ static void test_open_and_identities(void **state)
 {
 	struct fixture *fx = *state;
 	struct acq_err err = { 0 };
-	assert_int_equal(devices_init(fx->lp, fx->st, fx->c, &fake_drv, notify, NULL, wall, &fx->dv, &err), 0);
-	assert_int_equal(devices_available(fx->dv), 5);
+	assert_int_equal(devices_init(fx->lp, fx->st, fx->c, notify, NULL, wall, &fx->dv, &err), 0);
+	assert_true(wait_for(fx, 0.01, all_up));
 	assert_int_equal(ups, 5);
 	assert_true(devices_spectrometer_id(fx->dv) > 0);
 	json_t *j = devices_json(fx->dv);
 	assert_int_equal(json_array_size(j), 5);
 	json_t *a0 = json_array_get(j, 0);
 	assert_string_equal(json_string_value(json_object_get(a0, "state")), "connected");
-	assert_string_equal(json_string_value(json_object_get(json_object_get(a0, "identity"), "model")), "AX-0");
+	assert_string_equal(json_string_value(json_object_get(json_object_get(a0, "identity"), "serial")), "laser.theta");
 	assert_true(json_is_array(json_object_get(a0, "limits_deg")));
+	assert_true(json_is_object(json_object_get(a0, "status"))); /* read at open */
 	json_decref(j);
 	/* A reload reopens everything on the same object (the executor keeps its pointer); the laser goes off. */
 	struct devices *before = fx->dv;
-	fake_laser.emission = true;
+	laser_fake_state()->emission = true;
 	assert_int_equal(devices_reconfigure(fx->dv, fx->c, &err), 0);
 	assert_ptr_equal(fx->dv, before);
-	assert_false(fake_laser.emission);
+	assert_false(laser_fake_state()->emission);
+	assert_true(wait_for(fx, 0.01, all_up));
 	assert_int_equal(ups, 10);
-	assert_int_equal(devices_available(fx->dv), 5);
-	fake_laser.emission = true;
 	/* Finish: laser off, every arm stopped. */
-	assert_true(fake_laser.emission);
+	laser_fake_state()->emission = true;
 	devices_finish(fx->dv);
 	fx->dv = NULL;
-	assert_false(fake_laser.emission);
+	assert_false(laser_fake_state()->emission);
+	const char *names[3] = { "laser.theta", "detector.theta", "detector.phi" };
 	for (int i = 0; i < 3; i++)
-		assert_true(fake_axes[i].stops >= 1);
+		assert_true(axis_fake_get(names[i])->stops >= 1);
 }
 
 static void test_move_limits_and_completion(void **state)
 {
 	struct fixture *fx = *state;
 	struct acq_err err = { 0 };
-	assert_int_equal(devices_init(fx->lp, fx->st, fx->c, &fake_drv, notify, NULL, wall, &fx->dv, &err), 0);
+	assert_int_equal(devices_init(fx->lp, fx->st, fx->c, notify, NULL, wall, &fx->dv, &err), 0);
+	assert_true(wait_for(fx, 0.01, all_up));
 	double out_of_range[3] = { 95, NAN, NAN };
 	assert_int_equal(devices_move(fx->dv, out_of_range, done, NULL, &err), -1);
 	assert_int_equal(err.code, ACQ_E_RANGE);
 	assert_non_null(strstr(err.msg, "laser.theta"));
-	assert_false(fake_axes[0].moving);
+	assert_int_equal(axis_fake_get("laser.theta")->moves, 0);
 	double none[3] = { NAN, NAN, NAN };
 	assert_int_equal(devices_move(fx->dv, none, done, NULL, &err), -1);
 	assert_int_equal(err.code, ACQ_E_INVAL);
+	axis_fake_get("laser.theta")->move_s = 0.5;
 	double t[3] = { 45, NAN, -5 };
 	assert_int_equal(devices_move(fx->dv, t, done, NULL, &err), 0);
 	assert_true(devices_busy(fx->dv));
 	assert_int_equal(devices_move(fx->dv, t, done, NULL, &err), -1);
 	assert_int_equal(err.code, ACQ_E_STATE);
-	advance(fx, 1.0, 40);
-	assert_int_equal(done_calls, 1);
+	assert_true(wait_for(fx, 0.01, op_done));
 	assert_int_equal(done_rc, 0);
 	assert_false(devices_busy(fx->dv));
-	assert_true(fake_axes[0].pos == 45 && fake_axes[2].pos == -5 && fake_axes[1].pos == 0);
+	assert_true(axis_fake_get("laser.theta")->pos == 45 && axis_fake_get("detector.phi")->pos == -5 &&
+		    axis_fake_get("detector.theta")->pos == 0);
 	assert_true(json_real_value(json_object_get(done_result, "laser.theta")) == 45);
+	double pos[3];
+	devices_positions(fx->dv, pos);
+	assert_true(pos[0] == 45 && pos[2] == -5);
 	/* A lost axis: the move is refused as unavailable, and the retry timer brings it back. */
 	devices_lost(fx->dv, CONF_DEV_DETECTOR_THETA, "fake: cable pulled");
 	assert_int_equal(downs, 1);
-	assert_null(devices_axis(fx->dv, CONF_DEV_DETECTOR_THETA));
+	assert_false(devices_up(fx->dv, CONF_DEV_DETECTOR_THETA));
 	double t2[3] = { NAN, 30, NAN };
 	assert_int_equal(devices_move(fx->dv, t2, done, NULL, &err), -1);
 	assert_int_equal(err.code, ACQ_E_UNSUPPORTED);
 	assert_non_null(strstr(err.msg, "cable pulled"));
-	advance(fx, 1.5, 3);
-	assert_non_null(devices_axis(fx->dv, CONF_DEV_DETECTOR_THETA));
+	assert_true(wait_for(fx, 0.05, theta_up));
 	assert_int_equal(ups, 6);
 }
 
@@ -382,34 +274,182 @@ static void test_measure_and_dark(void **state)
 {
 	struct fixture *fx = *state;
 	struct acq_err err = { 0 };
-	fail_open[CONF_DEV_LASER] = true;
-	assert_int_equal(devices_init(fx->lp, fx->st, fx->c, &fake_drv, notify, NULL, wall, &fx->dv, &err), 0);
-	assert_int_equal(devices_available(fx->dv), 4);
+	laser_fake_state()->fail_open = true;
+	assert_int_equal(devices_init(fx->lp, fx->st, fx->c, notify, NULL, wall, &fx->dv, &err), 0);
+	assert_true(wait_for(fx, 0.001, four_up_one_down));
 	/* Without the laser a dark cannot be guaranteed dark. */
 	assert_int_equal(devices_measure(fx->dv, "dark", 10, 1, NAN, done, NULL, &err), -1);
 	assert_int_equal(err.code, ACQ_E_UNSUPPORTED);
-	fail_open[CONF_DEV_LASER] = false;
-	advance(fx, 1.2, 3);
-	assert_non_null(devices_laser(fx->dv));
-	fake_laser.emission = true;
+	laser_fake_state()->fail_open = false;
+	assert_true(wait_for(fx, 0.05, laser_up));
+	laser_fake_state()->emission = true;
 	assert_int_equal(devices_measure(fx->dv, "dark", 12.5, 3, 50, done, NULL, &err), 0);
-	assert_false(fake_laser.emission);
-	advance(fx, 0.1, 10);
-	assert_int_equal(done_calls, 1);
+	assert_true(wait_for(fx, 0.01, op_done));
 	assert_int_equal(done_rc, 0);
+	assert_false(laser_fake_state()->emission);
+	assert_int_equal(laser_fake_state()->sets_on, 0);
 	assert_string_equal(json_string_value(json_object_get(done_result, "kind")), "dark");
-	assert_int_equal(json_integer_value(json_object_get(done_result, "npix")), 16);
-	assert_int_equal(json_integer_value(json_object_get(done_result, "saturated")), 1);
-	assert_true(json_real_value(json_object_get(done_result, "peak")) == 1500);
+	assert_int_equal(json_integer_value(json_object_get(done_result, "npix")), 600);
+	assert_true(json_real_value(json_object_get(done_result, "peak")) == 21000);
 	assert_int_equal(store_spectrum_count(fx->st, 0, &err), 1);
-	assert_true(fake_power == 0); /* a dark does not touch the power */
+	assert_int_equal(laser_fake_state()->power_sets, 0); /* a dark does not touch the power */
+	done_calls = 0;
 	assert_int_equal(devices_measure(fx->dv, "sample", 12.5, 3, 40, done, NULL, &err), 0);
-	assert_true(fake_laser.emission); /* on for the sample */
-	assert_true(fake_power == 40);
-	advance(fx, 0.1, 10);
-	assert_false(fake_laser.emission); /* and off again */
-	assert_int_equal(done_calls, 2);
+	assert_true(wait_for(fx, 0.01, op_done));
+	assert_int_equal(done_rc, 0);
+	assert_int_equal(laser_fake_state()->sets_on, 1); /* on for the sample */
+	assert_true(laser_fake_state()->power_pct == 40);
+	assert_true(wait_for(fx, 0.01, laser_off)); /* and off again */
 	assert_int_equal(store_spectrum_count(fx->st, 0, &err), 2);
+	/* The interlock open: the sample is refused with the reason, the laser stays off. */
+	laser_fake_state()->interlock_open = true;
+	done_calls = 0;
+	assert_int_equal(devices_measure(fx->dv, "sample", 12.5, 1, NAN, done, NULL, &err), 0);
+	assert_true(wait_for(fx, 0.01, op_done));
+	assert_int_equal(done_rc, -1);
+	assert_non_null(strstr(done_err.msg, "interlock"));
+	assert_false(laser_fake_state()->emission);
+}
+
+/* A device whose every call blocks (a controller that does not answer) delays its own requests only: the loop
+ * keeps running timers while a `devices` query waits for it. */
+static bool timer_fired;
+static void on_timer(struct loop *lp, void *arg)
+{
+	(void)lp;
+	(void)arg;
+	timer_fired = true;
+}
+static bool fired(void)
+{
+	return timer_fired;
+}
+
+static void test_blocking_device_does_not_hold_the_loop(void **state)
+{
+	struct fixture *fx = *state;
+	struct acq_err err = { 0 };
+	assert_int_equal(devices_init(fx->lp, fx->st, fx->c, notify, NULL, wall, &fx->dv, &err), 0);
+	assert_true(wait_for(fx, 0.01, all_up));
+	axis_fake_get("detector.phi")->delay_s = 1.0;
+	done_calls = 0;
+	assert_int_equal(devices_query(fx->dv, done, NULL, &err), 0);
+	timer_fired = false;
+	double t0 = real_s();
+	loop_timer_add(fx->lp, 0, 0, on_timer, NULL);
+	assert_true(wait_for(fx, 0, fired));
+	double held = real_s() - t0;
+	assert_true(held < 0.2); /* the query waits ~1 s for detector.phi; the loop did not */
+	assert_int_equal(done_calls, 0);
+	assert_true(wait_for(fx, 0, op_done));
+	assert_true(real_s() - t0 >= 0.9);
+	json_t *devs = json_object_get(done_result, "devices");
+	assert_int_equal(json_array_size(devs), 5);
+	axis_fake_get("detector.phi")->delay_s = 0;
+}
+
+/* The executor's device operations: reads are EX_PENDING until the completion (which kicks), commands are
+ * queued and report through the next poll. */
+static void test_executor_ops_pending(void **state)
+{
+	struct fixture *fx = *state;
+	struct acq_err err = { 0 };
+	assert_int_equal(devices_init(fx->lp, fx->st, fx->c, notify, NULL, wall, &fx->dv, &err), 0);
+	assert_true(wait_for(fx, 0.01, all_up));
+	devices_set_kick(fx->dv, kick, NULL);
+	const struct ex_ops *ops = devices_ex_ops();
+	axis_fake_get("laser.theta")->pos = 12.5;
+	double deg = 0;
+	bool homed = false, alarm = true;
+	assert_int_equal(ops->position(fx->dv, EX_DEV_LASER_THETA, &deg, &homed, &alarm, &err), EX_PENDING);
+	assert_int_equal(ops->position(fx->dv, EX_DEV_LASER_THETA, &deg, &homed, &alarm, &err), EX_PENDING);
+	assert_true(wait_for(fx, 0, kicked));
+	assert_int_equal(ops->position(fx->dv, EX_DEV_LASER_THETA, &deg, &homed, &alarm, &err), 0);
+	assert_true(deg == 12.5 && homed && !alarm);
+	/* A move: queued, running until its completion, then done. */
+	kicks = 0;
+	axis_fake_get("laser.theta")->move_s = 0.2;
+	assert_int_equal(ops->move_begin(fx->dv, EX_DEV_LASER_THETA, 30, fake_clock(NULL), &err), 0);
+	assert_int_equal(ops->move_step(fx->dv, EX_DEV_LASER_THETA, fake_clock(NULL), &err), AXIS_MOVE_RUNNING);
+	assert_true(wait_for(fx, 0.01, kicked));
+	assert_int_equal(ops->move_step(fx->dv, EX_DEV_LASER_THETA, fake_clock(NULL), &err), AXIS_MOVE_DONE);
+	assert_true(axis_fake_get("laser.theta")->pos == 30);
+	/* A refused move (soft limits) fails at the poll, with the driver's reason. */
+	kicks = 0;
+	assert_int_equal(ops->move_begin(fx->dv, EX_DEV_LASER_THETA, 95, fake_clock(NULL), &err), 0);
+	assert_true(wait_for(fx, 0.01, kicked));
+	assert_int_equal(ops->move_step(fx->dv, EX_DEV_LASER_THETA, fake_clock(NULL), &err), AXIS_MOVE_FAILED);
+	assert_int_equal(err.code, ACQ_E_RANGE);
+	/* A laser command that fails is reported by the next state read. */
+	laser_fake_state()->interlock_open = true;
+	assert_int_equal(ops->laser_set(fx->dv, true, &err), 0);
+	bool emission = true, ready = true;
+	int rc;
+	kicks = 0;
+	while ((rc = ops->laser_state(fx->dv, &emission, &ready, &err)) == EX_PENDING)
+		assert_true(wait_for(fx, 0, kicked)), kicks = 0;
+	assert_int_equal(rc, -1);
+	assert_non_null(strstr(err.msg, "interlock"));
+	/* An absent device is an immediate error, never pending. */
+	devices_lost(fx->dv, CONF_DEV_DETECTOR_PHI, "fake: gone");
+	assert_int_equal(ops->position(fx->dv, EX_DEV_DETECTOR_PHI, &deg, &homed, &alarm, &err), -1);
+	assert_int_equal(err.code, ACQ_E_DISCONNECTED);
+	devices_set_kick(fx->dv, NULL, NULL);
+}
+
+/* Manual homing (an alarm reset first), stop (the running operation ends with "stopped by the operator" and the
+ * arms get a stop), laser off read back: all on the devices' threads. */
+static void test_home_stop_laser_off(void **state)
+{
+	struct fixture *fx = *state;
+	struct acq_err err = { 0 };
+	assert_int_equal(devices_init(fx->lp, fx->st, fx->c, notify, NULL, wall, &fx->dv, &err), 0);
+	assert_true(wait_for(fx, 0.01, all_up));
+	struct axis_fake *th = axis_fake_get("detector.theta");
+	th->pos = 30;
+	th->homed = false;
+	th->alarm = true;
+	assert_int_equal(devices_home(fx->dv, 0, done, NULL, &err), -1);
+	assert_int_equal(err.code, ACQ_E_INVAL);
+	done_calls = 0;
+	assert_int_equal(devices_home(fx->dv, 1u << CONF_DEV_DETECTOR_THETA, done, NULL, &err), 0);
+	assert_true(devices_busy(fx->dv));
+	assert_true(wait_for(fx, 0.01, op_done));
+	assert_int_equal(done_rc, 0);
+	assert_int_equal(th->resets, 1);
+	assert_int_equal(th->homings, 1);
+	assert_true(th->homed && th->pos == 0 && !th->alarm);
+	/* a long move stopped by the operator */
+	axis_fake_get("laser.theta")->move_s = 1e6;
+	done_calls = 0;
+	double t[3] = { 40, NAN, NAN };
+	assert_int_equal(devices_move(fx->dv, t, done, NULL, &err), 0);
+	bool stopped = false;
+	stops_before = axis_fake_get("laser.theta")->stops;
+	assert_int_equal(devices_stop(fx->dv, &stopped, &err), 0);
+	assert_true(stopped);
+	assert_int_equal(done_calls, 1);
+	assert_int_equal(done_rc, -1);
+	assert_int_equal(done_err.code, ACQ_E_STATE);
+	assert_false(devices_busy(fx->dv));
+	assert_true(wait_for(fx, 0.01, laser_theta_stopped));
+	/* a new operation is not disturbed by the stopped one's late completion */
+	axis_fake_get("laser.theta")->move_s = 0;
+	done_calls = 0;
+	double t2[3] = { 20, NAN, NAN };
+	assert_int_equal(devices_move(fx->dv, t2, done, NULL, &err), 0);
+	assert_true(wait_for(fx, 0.01, op_done));
+	assert_int_equal(done_rc, 0);
+	assert_int_equal(done_calls, 1);
+	assert_true(axis_fake_get("laser.theta")->pos == 20);
+	/* laser off: switched and read back */
+	laser_fake_state()->emission = true;
+	done_calls = 0;
+	assert_int_equal(devices_laser_off(fx->dv, done, NULL, &err), 0);
+	assert_true(wait_for(fx, 0.01, op_done));
+	assert_int_equal(done_rc, 0);
+	assert_false(laser_fake_state()->emission);
+	assert_true(json_is_false(json_object_get(done_result, "emission")));
 }
 
 int main(void)
@@ -418,6 +458,9 @@ int main(void)
 		cmocka_unit_test_setup_teardown(test_open_and_identities, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_move_limits_and_completion, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_measure_and_dark, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_blocking_device_does_not_hold_the_loop, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_executor_ops_pending, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_home_stop_laser_off, setup, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

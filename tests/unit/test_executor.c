@@ -54,9 +54,23 @@ struct fake {
 	int collisions;           /* arms closer than their bodies allow (ψ < laser_body + detector_body) */
 	int out_of_limits;        /* move targets outside the axes' soft limits */
 	int shots, darks;
+	/* reads answer like the daemon's device threads: EX_PENDING first, the result at the next call */
+	bool deferred;
+	bool waiting[3][EX_DEV__COUNT];
+	int pendings;
 };
 
 static struct fake F;
+
+/* In deferred mode, every other call of a read (op, dev) is EX_PENDING. */
+static bool defer(int op, int dev)
+{
+	if (!F.deferred)
+		return false;
+	F.waiting[op][dev] = !F.waiting[op][dev];
+	F.pendings += F.waiting[op][dev];
+	return F.waiting[op][dev];
+}
 
 static double wl_of(int p)
 {
@@ -154,6 +168,8 @@ static int f_stop(void *ctx, int a, struct acq_err *err)
 static int f_position(void *ctx, int a, double *deg, bool *homed, bool *alarm, struct acq_err *err)
 {
 	(void)ctx;
+	if (defer(0, a))
+		return EX_PENDING;
 	if (F.axis_down[a])
 		return acq_errf(err, ACQ_E_TIMEOUT, "axis %d: no answer", a);
 	*deg = F.pos[a];
@@ -183,6 +199,8 @@ static int f_alarm_reset(void *ctx, int a, struct acq_err *err)
 static int f_reconnect(void *ctx, int dev, struct acq_err *err)
 {
 	(void)ctx;
+	if (defer(1, dev))
+		return EX_PENDING;
 	if (dev <= 2) {
 		if (F.axis_down[dev] && F.now >= F.down_until[dev])
 			F.axis_down[dev] = false;
@@ -213,6 +231,8 @@ static int f_laser_state(void *ctx, bool *emission, bool *ready, struct acq_err 
 {
 	(void)ctx;
 	(void)err;
+	if (defer(2, EX_DEV_LASER))
+		return EX_PENDING;
 	if (F.interlock_open && F.interlock_close_at > 0 && F.now >= F.interlock_close_at)
 		F.interlock_open = false;
 	*emission = F.emission;
@@ -409,7 +429,6 @@ static void cfg_for_test(struct ex_cfg *c)
 	c->fault_backoff_s = 0.2;
 	c->fault_backoff_max_s = 1.0;
 	c->fault_retries = 4;
-	c->db_path = dbpath;
 	c->home_unhomed = true; /* the fake homes to (0, 60, 180): clear of each other */
 	c->home_deg[0] = 0;
 	c->home_deg[1] = 60;
@@ -557,14 +576,17 @@ static int teardown(void **state)
 	return system(cmd) == 0 ? 0 : -1;
 }
 
-static void test_full_sweep(void **state)
+/* A whole sweep on the fake bench; deferred: every read answers one step late (as the daemon's device threads
+ * do), with an alarm on the detector arm reset and read again first. */
+static void full_sweep(bool deferred)
 {
-	(void)state;
 	struct store *st = open_store();
 	int64_t sweep = new_sweep(st);
 	struct ex_cfg cfg;
 	cfg_for_test(&cfg);
 	struct acq_err err = { 0 };
+	F.deferred = deferred;
+	F.alarm[1] = deferred;
 	struct ex *x = ex_new(&cfg, &fake_ops, NULL, &sink, st, sweep, 0, &geom, plan, &err);
 	assert_non_null(x);
 	assert_int_equal(ex_start(x, 0, false, 0, &err), 0);
@@ -572,21 +594,38 @@ static void test_full_sweep(void **state)
 	print_message("  finished at t=%.1f s: %s %s\n", t, ex_state_name(ex_state(x)), ex_reason(x));
 	assert_int_equal(ex_state(x), EX_COMPLETED);
 	const struct ex_stats *s = ex_stats(x);
-	print_message("  %d points, %d spectra, %d darks, %d probes, %d exposures\n", s->points_done, s->spectra,
-		      s->darks, s->probes, s->exposures);
+	print_message("  %d points, %d spectra, %d darks, %d probes, %d exposures, %d reads deferred\n", s->points_done,
+		      s->spectra, s->darks, s->probes, s->exposures, F.pendings);
 	assert_int_equal(s->points_done, (int)plan->n_steps);
 	assert_int_equal(F.laser_on_during_motion, 0);
 	assert_int_equal(s->laser_on_while_moving, 0);
+	assert_int_equal(F.laser_on_during_dark, 0);
 	assert_int_equal(F.collisions, 0);
 	assert_int_equal(F.out_of_limits, 0);
 	assert_false(F.emission); /* off when completed */
+	assert_false(F.alarm[1]);
 	assert_true(s->darks < s->points_done);     /* darks are reused across points */
 	assert_true(s->probes < 2 * s->points_done); /* the previous time seeds the next probe */
+	if (deferred)
+		assert_true(F.pendings > 3 * s->points_done); /* positions after each move, laser checks after each shot */
 	assert_int_equal(count_events("reference"), 1);
 	assert_int_equal(count_events("complete"), 1);
 	ex_free(x, t);
 	store_close(st);
 	check_db(sweep, true);
+}
+
+static void test_full_sweep(void **state)
+{
+	(void)state;
+	full_sweep(false);
+}
+
+/* The same sweep with every read answering one step late. */
+static void test_full_sweep_deferred_reads(void **state)
+{
+	(void)state;
+	full_sweep(true);
 }
 
 static void test_pause_resume_abort(void **state)
@@ -730,6 +769,13 @@ static void test_faults(void **state)
 
 /* A crash (the executor vanishes without cleaning up) in the middle, then a new executor resumes at the
  * first pending point, with the reference reloaded from the database: nothing lost, nothing twice. */
+/* The faults again, every read answering one step late. */
+static void test_faults_deferred_reads(void **state)
+{
+	F.deferred = true;
+	test_faults(state);
+}
+
 static void test_crash_resume(void **state)
 {
 	(void)state;
@@ -795,8 +841,10 @@ int main(void)
 	printf("# plan: %zu steps\n", plan->n_steps);
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test_setup_teardown(test_full_sweep, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_full_sweep_deferred_reads, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_pause_resume_abort, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_faults, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_faults_deferred_reads, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_crash_resume, setup, teardown),
 	};
 	int rc = cmocka_run_group_tests(tests, NULL, NULL);

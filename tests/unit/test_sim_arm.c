@@ -84,10 +84,15 @@ static struct fix *fix_start(void **state, bool rtu)
 	return f;
 }
 
-/* Run mbpoll with args (NULL-terminated, after the binary); its stdout into out. Exit status. */
+/* Run mbpoll with args (NULL-terminated, after the binary); its stdout into out. Exit status. mbpoll's own
+ * response timeout (1 s by default) is raised to ACQ_PEER_TIMEOUT_S (default 5 s): over socat's ptys on a
+ * machine whose cores are busy, an answer can take longer than a second; a dead simulator still fails. */
 static int mbpoll(char *out, size_t len, const char *const *args)
 {
 	char cmd[1024] = MBPOLL;
+	const char *t = getenv("ACQ_PEER_TIMEOUT_S");
+	strncat(cmd, " -o ", sizeof cmd - strlen(cmd) - 1);
+	strncat(cmd, t && *t ? t : "5", sizeof cmd - strlen(cmd) - 1);
 	for (int i = 0; args[i]; i++) {
 		strncat(cmd, " ", sizeof cmd - strlen(cmd) - 1);
 		strncat(cmd, args[i], sizeof cmd - strlen(cmd) - 1);

@@ -13,7 +13,10 @@
 #include <unistd.h>
 #include <cmocka.h>
 
+#include "daemon/executor.h"
 #include "daemon/store.h"
+#include "recon/csvio.h"
+#include "recon/recon.h"
 
 static char dir[256];
 
@@ -118,6 +121,19 @@ static void test_sweep_points_spectra(void **state)
 	store_close(st);
 }
 
+/* Mark point pt done with one sample spectrum, the arms' angles and the sample-frame angles they make. */
+static int complete(struct store *st, int64_t sw, int64_t pt, double lt, double dt, double dp, double ti, double pi,
+		    double to, double po)
+{
+	float counts[4] = { 1, 2, 3, 4 };
+	struct store_spectrum sp = { .sweep_id = sw, .point_id = pt, .kind = "sample", .integration_ms = 10,
+				     .averages = 1, .npix = 4, .counts = counts, .temperature_c = NAN, .taken_at = 1001,
+				     .completes_point = true, .laser_theta = lt, .detector_theta = dt, .detector_phi = dp,
+				     .theta_i = ti, .phi_i = pi, .theta_o = to, .phi_o = po };
+	struct acq_err err = { 0 };
+	return store_spectrum_add(st, &sp, NULL, &err);
+}
+
 static void test_export_csv(void **state)
 {
 	(void)state;
@@ -140,6 +156,11 @@ static void test_export_csv(void **state)
 	assert_int_equal(store_sweep_next_point(st, sw, &order, &pt, &err), 0);
 	float b[3] = { 0.1f, NAN, 0.3f }, s[3] = { 0.01f, 0.02f, 0.03f };
 	assert_int_equal(store_calibrated_put(st, sw, pt, b, s, 3, &err), 0);
+	/* Not done yet: not a sample. */
+	assert_int_equal(store_export_csv(st, sw, f, &rows, &err), -1);
+	assert_int_equal(err.code, ACQ_E_STATE);
+	rewind(f);
+	assert_int_equal(complete(st, sw, pt, 0, 20, 180, 0, 0, 20, 180), 0);
 	assert_int_equal(store_export_csv(st, sw, f, &rows, &err), 0);
 	assert_int_equal(rows, 1);
 	rewind(f);
@@ -228,11 +249,122 @@ static void test_foreign_and_corrupt_refused(void **state)
 	store_close(st);
 }
 
+/* The three readers of calibrated samples — the CSV export (`export`), the file the daemon's reconstruction
+ * reads (store_export_csv_file, recon_chain.c) and brdf-recon's --db (recon/dbload.c) — give the same samples:
+ * the sample-frame angles measured at commit (an arm at -0.003° is θi 0.003° at φi + 180°, which the CSV reader
+ * accepts), the same values, and no sample of a point not done. */
+static void test_three_readers_same_samples(void **state)
+{
+	(void)state;
+	char p[300], csvp[300];
+	path_of(p, sizeof p, "three.db");
+	path_of(csvp, sizeof csvp, "samples.csv");
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_open(p, &st, &err), 0);
+	int64_t sw = mk_sweep(st, 4);
+	float grid[3] = { 450, 500, 550 };
+	assert_int_equal(store_sweep_set_grid(st, sw, grid, 3, &err), 0);
+	struct bench_geom g = { .laser_phi_deg = 0 };
+	const double arms[4][3] = { { -0.003, 30, -90 }, { 20, -15, 10 }, { 40, 60, 350 }, { 50, 50, 50 } };
+	for (int k = 0; k < 4; k++) {
+		int order;
+		int64_t pt;
+		assert_int_equal(store_sweep_next_point(st, sw, &order, &pt, &err), 0);
+		float b[3] = { 0.1f * (float)(k + 1), NAN, 0.3f / (float)(k + 1) }, sg[3] = { 0.01f, 0.02f, 1e-3f * (float)k };
+		assert_int_equal(store_calibrated_put(st, sw, pt, b, sg, 3, &err), 0);
+		if (k == 3)
+			break; /* calibrated but not done (a crash before the commit): no sample */
+		struct plan_pos pos = { arms[k][0], arms[k][1], arms[k][2] };
+		double ti, pi, to, po;
+		ex_pos_angles(&g, &pos, &ti, &pi, &to, &po);
+		assert_int_equal(complete(st, sw, pt, arms[k][0], arms[k][1], arms[k][2], ti, pi, to, po), 0);
+	}
+	struct recon_samples a = { 0 }, b = { 0 }, c = { 0 };
+	char *text = NULL;
+	size_t len = 0;
+	FILE *f = open_memstream(&text, &len);
+	int rows = 0;
+	assert_int_equal(store_export_csv(st, sw, f, &rows, &err), 0);
+	fclose(f);
+	assert_int_equal(rows, 3);
+	assert_int_equal(csvio_parse_samples("export", text, len, &a, &err), 0);
+	free(text);
+	assert_int_equal(store_export_csv_file(st, sw, csvp, &rows, &err), 0);
+	assert_int_equal(csvio_read_samples(csvp, &b, &err), 0);
+	store_close(st);
+	assert_int_equal(recon_load_db(p, sw, &c, &err), 0);
+	const struct recon_samples *r[3] = { &a, &b, &c };
+	for (int m = 0; m < 3; m++) {
+		assert_int_equal(r[m]->n, 3);
+		assert_int_equal(r[m]->nwl, 3);
+		/* point 0: the arm at -0.003° is on the other side */
+		assert_true(fabs(r[m]->deg[0] - 0.003) < 1e-9 && fabs(r[m]->deg[1] - 180) < 1e-9);
+		assert_true(fabs(r[m]->deg[2] - 30) < 1e-9 && fabs(r[m]->deg[3] - 270) < 1e-9);
+		/* point 1: detector zenith -15 at φ 10 is 15 at 190 */
+		assert_true(fabs(r[m]->deg[6] - 15) < 1e-9 && fabs(r[m]->deg[7] - 190) < 1e-9);
+		for (size_t i = 0; i < 12; i++) /* the CSV prints 9 significant digits: angles agree to 1e-9 relative */
+			assert_true(fabs(r[m]->deg[i] - c.deg[i]) <= 1e-9 * fmax(1, fabs(c.deg[i])));
+		for (size_t i = 0; i < 9; i++) {
+			/* float32 values printed with 9 digits read back within 1e-8 relative of the stored float */
+			double x = r[m]->val[i], y = c.val[i];
+			assert_true((isnan(x) && isnan(y)) || fabs(x - y) <= 1e-8 * fabs(y));
+			x = r[m]->sig[i];
+			y = c.sig[i];
+			assert_true(fabs(x - y) <= 1e-8 * fabs(y));
+		}
+	}
+	csvio_samples_free(&a);
+	csvio_samples_free(&b);
+	csvio_samples_free(&c);
+}
+
+/* A version-1 database (before the measured sample-frame angles) is migrated when opened: its done points get
+ * their arm angles in the sample frame, and the readers' view appears. */
+static void test_migration_1_to_2(void **state)
+{
+	(void)state;
+	char p[300];
+	path_of(p, sizeof p, "v1.db");
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_open(p, &st, &err), 0);
+	int64_t sw = mk_sweep(st, 2); /* planned (0, 0, 20, 180) and (10, 0, 21, 180) */
+	float grid[1] = { 500 };
+	assert_int_equal(store_sweep_set_grid(st, sw, grid, 1, &err), 0);
+	int order;
+	int64_t pt;
+	assert_int_equal(store_sweep_next_point(st, sw, &order, &pt, &err), 0);
+	float b[1] = { 0.5f }, sg[1] = { 0.05f };
+	assert_int_equal(store_calibrated_put(st, sw, pt, b, sg, 1, &err), 0);
+	assert_int_equal(complete(st, sw, pt, -0.003, -20, 170, NAN, NAN, NAN, NAN), 0);
+	store_close(st);
+	sqlite3 *db;
+	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
+	assert_int_equal(sqlite3_exec(db, "DROP VIEW calibrated_samples; ALTER TABLE points DROP COLUMN m_theta_i; "
+					  "ALTER TABLE points DROP COLUMN m_phi_i; ALTER TABLE points DROP COLUMN m_theta_o; "
+					  "ALTER TABLE points DROP COLUMN m_phi_o; PRAGMA user_version = 1;",
+				     NULL, NULL, NULL),
+			 SQLITE_OK);
+	sqlite3_close(db);
+	assert_int_equal(store_open(p, &st, &err), 0);
+	assert_int_equal(store_schema_version(st), 2);
+	store_close(st);
+	struct recon_samples c = { 0 };
+	assert_int_equal(recon_load_db(p, sw, &c, &err), 0);
+	assert_int_equal(c.n, 1);
+	assert_true(fabs(c.deg[0] - 0.003) < 1e-12 && fabs(c.deg[1] - 180) < 1e-12);
+	assert_true(fabs(c.deg[2] - 20) < 1e-12 && fabs(c.deg[3] - 350) < 1e-12);
+	csvio_samples_free(&c);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_sweep_points_spectra),
 		cmocka_unit_test(test_export_csv),
+		cmocka_unit_test(test_three_readers_same_samples),
+		cmocka_unit_test(test_migration_1_to_2),
 		cmocka_unit_test(test_foreign_and_corrupt_refused),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

@@ -1,0 +1,235 @@
+/* port: a device's I/O thread with a request queue and a completion eventfd (port.h). */
+#include "daemon/port.h"
+
+#include <errno.h>
+#include <math.h>
+#include <poll.h>
+#include <pthread.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/eventfd.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "daemon/loop.h"
+
+struct port {
+	struct loop *lp;
+	char name[64];
+	pthread_t thread;
+	pthread_mutex_t mu;
+	pthread_cond_t cv;            /* work queued, interrupt or quit */
+	struct port_req *head, *tail; /* queued */
+	struct port_req *done_head, *done_tail;
+	int npending;                 /* queued + running + completed not yet dispatched (loop side count) */
+	unsigned long interrupt_gen;  /* bumped by port_interrupt() */
+	unsigned long run_gen;        /* the generation the running request was submitted in */
+	bool quit;
+	bool running;                 /* the thread is running a request */
+	pthread_cond_t idle;          /* the queue ran empty and nothing runs */
+	int efd;
+};
+
+static void push(struct port_req **head, struct port_req **tail, struct port_req *r)
+{
+	r->next = NULL;
+	if (*tail)
+		(*tail)->next = r;
+	else
+		*head = r;
+	*tail = r;
+}
+
+static struct port_req *pop(struct port_req **head, struct port_req **tail)
+{
+	struct port_req *r = *head;
+	if (r) {
+		*head = r->next;
+		if (!*head)
+			*tail = NULL;
+		r->next = NULL;
+	}
+	return r;
+}
+
+static void *thread_main(void *arg)
+{
+	struct port *p = arg;
+	pthread_mutex_lock(&p->mu);
+	for (;;) {
+		while (!p->head && !p->quit)
+			pthread_cond_wait(&p->cv, &p->mu);
+		struct port_req *r = pop(&p->head, &p->tail);
+		if (!r)
+			break; /* quit with an empty queue */
+		p->run_gen = r->gen; /* queued before an interrupt: interrupted too */
+		p->running = true;
+		pthread_mutex_unlock(&p->mu);
+		r->run(r, p);
+		pthread_mutex_lock(&p->mu);
+		push(&p->done_head, &p->done_tail, r);
+		p->running = false;
+		if (!p->head)
+			pthread_cond_broadcast(&p->idle);
+		uint64_t one = 1;
+		if (write(p->efd, &one, sizeof one) < 0 && errno != EAGAIN) {
+			/* cannot happen with a valid eventfd; the loop still finds the request at the next wake-up */
+		}
+	}
+	pthread_mutex_unlock(&p->mu);
+	return NULL;
+}
+
+static void dispatch(struct port *p)
+{
+	for (;;) {
+		pthread_mutex_lock(&p->mu);
+		struct port_req *r = pop(&p->done_head, &p->done_tail);
+		if (r)
+			p->npending--;
+		pthread_mutex_unlock(&p->mu);
+		if (!r)
+			return;
+		r->done(r);
+	}
+}
+
+static void on_efd(struct loop *lp, int fd, short revents, void *arg)
+{
+	(void)lp;
+	(void)revents;
+	uint64_t n;
+	if (read(fd, &n, sizeof n) < 0 && errno != EAGAIN)
+		return;
+	dispatch(arg);
+}
+
+int port_new(struct loop *lp, const char *name, struct port **out, struct acq_err *err)
+{
+	*out = NULL;
+	struct port *p = calloc(1, sizeof *p);
+	if (!p)
+		return acq_errf(err, ACQ_E_NOMEM, "port %s: out of memory", name);
+	p->lp = lp;
+	snprintf(p->name, sizeof p->name, "%s", name);
+	p->efd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+	if (p->efd < 0) {
+		free(p);
+		return acq_errf(err, ACQ_E_IO, "port %s: eventfd: %s", name, strerror(errno));
+	}
+	pthread_mutex_init(&p->mu, NULL);
+	pthread_cond_init(&p->cv, NULL);
+	pthread_cond_init(&p->idle, NULL);
+	if (loop_fd_add(lp, p->efd, POLLIN, on_efd, p, err)) {
+		close(p->efd);
+		free(p);
+		return -1;
+	}
+	int e = pthread_create(&p->thread, NULL, thread_main, p);
+	if (e) {
+		loop_fd_del(lp, p->efd);
+		close(p->efd);
+		free(p);
+		return acq_errf(err, ACQ_E_IO, "port %s: thread: %s", name, strerror(e));
+	}
+	*out = p;
+	return 0;
+}
+
+void port_submit(struct port *p, struct port_req *r)
+{
+	pthread_mutex_lock(&p->mu);
+	r->gen = p->interrupt_gen;
+	push(&p->head, &p->tail, r);
+	p->npending++;
+	pthread_cond_signal(&p->cv);
+	pthread_mutex_unlock(&p->mu);
+}
+
+void port_interrupt(struct port *p)
+{
+	pthread_mutex_lock(&p->mu);
+	p->interrupt_gen++;
+	pthread_cond_broadcast(&p->cv);
+	pthread_mutex_unlock(&p->mu);
+}
+
+bool port_interrupted(struct port *p)
+{
+	struct port *q = p;
+	pthread_mutex_lock(&q->mu);
+	bool i = q->run_gen != q->interrupt_gen;
+	pthread_mutex_unlock(&q->mu);
+	return i;
+}
+
+double port_now(const struct port *p)
+{
+	return loop_now(p->lp);
+}
+
+void port_wait(struct port *p, double clock_s, int fd)
+{
+	port_wait_real(p, clock_s / loop_rate(p->lp), fd);
+}
+
+void port_wait_real(struct port *p, double real, int fd)
+{
+	if (!(real > 0))
+		return;
+	if (real > 60)
+		real = 60;
+	if (fd >= 0) {
+		struct pollfd pfd = { .fd = fd, .events = POLLIN };
+		poll(&pfd, 1, (int)ceil(real * 1e3));
+		return;
+	}
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	double t = (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9 + real;
+	ts.tv_sec = (time_t)t;
+	ts.tv_nsec = (long)((t - (double)ts.tv_sec) * 1e9);
+	pthread_mutex_lock(&p->mu);
+	while (p->run_gen == p->interrupt_gen && !p->quit)
+		if (pthread_cond_timedwait(&p->cv, &p->mu, &ts) == ETIMEDOUT)
+			break;
+	pthread_mutex_unlock(&p->mu);
+}
+
+void port_flush(struct port *p)
+{
+	pthread_mutex_lock(&p->mu);
+	while (p->head || p->running)
+		pthread_cond_wait(&p->idle, &p->mu);
+	pthread_mutex_unlock(&p->mu);
+	dispatch(p);
+}
+
+int port_pending(struct port *p)
+{
+	struct port *q = p;
+	pthread_mutex_lock(&q->mu);
+	int n = q->npending;
+	pthread_mutex_unlock(&q->mu);
+	return n;
+}
+
+void port_free(struct port *p)
+{
+	if (!p)
+		return;
+	pthread_mutex_lock(&p->mu);
+	p->quit = true; /* the thread empties the queue first, then exits */
+	pthread_cond_broadcast(&p->cv);
+	pthread_mutex_unlock(&p->mu);
+	pthread_join(p->thread, NULL);
+	dispatch(p);
+	loop_fd_del(p->lp, p->efd);
+	close(p->efd);
+	pthread_mutex_destroy(&p->mu);
+	pthread_cond_destroy(&p->cv);
+	pthread_cond_destroy(&p->idle);
+	free(p);
+}
