@@ -64,7 +64,7 @@ DEB_PKGS   := build-essential pkg-config libusb-1.0-0-dev libmodbus-dev libseria
 
 .DEFAULT_GOAL := all
 .SECONDARY:
-.PHONY: all deps check check-unit check-integration check-fuzz demo bench fuzz install install-files man uninstall clean \
+.PHONY: all deps check check-unit check-integration check-fuzz demo bench fuzz soak install install-files man uninstall clean \
         test-programs distclean
 
 -include $(wildcard */module.mk)
@@ -186,6 +186,11 @@ check-integration: test-programs
 
 check-fuzz: test-programs
 	@$(TEST_ENV) tests/run-tests.sh fuzz
+
+# make soak: the daemon under hostile clients while a sweep runs (SOAK_SECONDS, default 1200).
+SOAK_SECONDS ?= 1200
+soak: $(PROGRAMS)
+	@$(TEST_ENV) SOAK_SECONDS=$(SOAK_SECONDS) tests/soak/soak.py
 
 fuzz: $(FUZZERS)
 	@$(TEST_ENV) tests/fuzz/run-fuzzers.sh $(FUZZERS)

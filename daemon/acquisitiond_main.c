@@ -23,6 +23,7 @@
 #include "daemon/server.h"
 #include "daemon/store.h"
 #include "daemon/sweep.h"
+#include "drivers/laser.h"
 
 static int sig_pipe[2] = { -1, -1 };
 
@@ -104,21 +105,75 @@ static void status_tick(struct loop *lp, void *arg)
 	}
 }
 
+/* The watchdog is fed by a timer of the loop itself (no thread): a loop blocked by anything stops feeding it
+ * and systemd restarts the daemon (the sweep resumes after its last committed point). A turn that came
+ * late is logged with the measured block, so a stall shorter than WatchdogSec is visible too. */
+static double wd_period_real, wd_last_real;
+
 static void watchdog_tick(struct loop *lp, void *arg)
 {
 	(void)lp;
 	(void)arg;
+	double now = loop_monotonic(NULL);
+	if (wd_last_real > 0 && now - wd_last_real > wd_period_real + 1.0)
+		log_msg(LOG_WARNING, "watchdog: the loop was blocked for about %.1f s (fed %.1f s after the last time, "
+			"period %.1f s)", now - wd_last_real - wd_period_real, now - wd_last_real, wd_period_real);
+	wd_last_real = now;
 	sd_notify(0, "WATCHDOG=1");
+}
+
+/* The laser's keep-alive is refreshed by the loop itself: a daemon that dies or stalls stops refreshing it
+ * and the laser switches emission off by itself within devices.laser.keepalive_ms. */
+static void laser_keepalive_tick(struct loop *lp, void *arg)
+{
+	(void)lp;
+	struct app *app = arg;
+	if (app->dev)
+		devices_laser_keepalive(app->dev); /* on the laser's port thread; a failure is logged there */
+}
+
+/* --laser-off (ExecStopPost=): open the configured laser, which switches emission off, and close it. */
+static int laser_off_main(const char *path, const struct conf_sim *sim)
+{
+	struct conf *c = NULL;
+	struct acq_err err = { 0 };
+	if (conf_load(path, sim, &c, &err)) {
+		fprintf(stderr, "acquisitiond --laser-off: %s\n", err.msg);
+		return 1;
+	}
+	int rc = 0;
+	struct laser *l = NULL;
+	if (!c->laser) {
+		fprintf(stderr, "acquisitiond --laser-off: no laser configured: nothing to switch off\n");
+	} else if (laser_open(c->laser, &l, &err)) {
+		fprintf(stderr, "acquisitiond --laser-off: laser emission off NOT confirmed: %s\n", err.msg);
+		rc = 1;
+	} else {
+		struct laser_status st;
+		if (laser_status(l, &st, &err) || st.emission) {
+			fprintf(stderr, "acquisitiond --laser-off: laser emission off NOT confirmed: %s\n",
+				err.msg[0] ? err.msg : "it still reports emission");
+			rc = 1;
+		} else {
+			printf("acquisitiond --laser-off: laser emission off (confirmed by its status)\n");
+		}
+		laser_close(l);
+	}
+	conf_free(c);
+	return rc;
 }
 
 static void usage(FILE *f)
 {
 	fprintf(f, "usage: acquisitiond -c FILE [-f] [--sim PORTS.json]\n"
 		   "       acquisitiond --check-config FILE [--sim PORTS.json]\n"
+		   "       acquisitiond --laser-off -c FILE [--sim PORTS.json]\n"
 		   "  -c, --config FILE     configuration (bench, devices, daemon, sweep, recon)\n"
 		   "  -f, --foreground      log to stderr even when started by systemd (it never forks)\n"
 		   "      --sim PORTS.json  use the simulator's endpoints (acq-sim's ports file)\n"
 		   "      --check-config F  validate F and exit 0 (valid) or 1\n"
+		   "      --laser-off       switch the configured laser's emission off and exit 0 (confirmed) or 1\n"
+		   "                        (the unit's ExecStopPost=, after any exit of the daemon)\n"
 		   "  -V, --version         print the version\n");
 }
 
@@ -158,11 +213,12 @@ int main(int argc, char **argv)
 					      { "foreground", no_argument, NULL, 'f' },
 					      { "sim", required_argument, NULL, 's' },
 					      { "check-config", required_argument, NULL, 'k' },
+					      { "laser-off", no_argument, NULL, 'L' },
 					      { "version", no_argument, NULL, 'V' },
 					      { "help", no_argument, NULL, 'h' },
 					      { NULL, 0, NULL, 0 } };
 	const char *conf_path = NULL, *sim_path = NULL, *check = NULL;
-	bool foreground = false;
+	bool foreground = false, laser_off = false;
 	int o;
 	while ((o = getopt_long(argc, argv, "c:fVh", opts, NULL)) != -1) {
 		switch (o) {
@@ -170,6 +226,7 @@ int main(int argc, char **argv)
 		case 'f': foreground = true; break;
 		case 's': sim_path = optarg; break;
 		case 'k': check = optarg; break;
+		case 'L': laser_off = true; break;
 		case 'V': printf("acquisitiond %s (protocol %d, schema %d)\n", ACQ_VERSION, PROTO_VERSION,
 				 STORE_SCHEMA_VERSION); return 0;
 		case 'h': usage(stdout); return 0;
@@ -191,6 +248,8 @@ int main(int argc, char **argv)
 	}
 	if (check)
 		return check_config(check, sim_path ? &app.sim : NULL);
+	if (laser_off)
+		return laser_off_main(conf_path, sim_path ? &app.sim : NULL);
 
 	int rc = 1;
 	bool journal = !foreground && getenv("JOURNAL_STREAM") && getenv("INVOCATION_ID");
@@ -226,6 +285,14 @@ int main(int argc, char **argv)
 	app.started_wall = app_wallclock();
 	if (store_open(app.conf->d.database, &app.store, &err))
 		goto fail;
+	{
+		/* Runs of a daemon that died: their children died with it (PR_SET_PDEATHSIG, daemon/job.c). */
+		int n = 0;
+		if (store_recon_interrupted(app.store, app_wallclock(), &n, &err))
+			goto fail;
+		if (n)
+			log_msg(LOG_WARNING, "%d reconstruction run(s) left running by a stopped daemon marked interrupted", n);
+	}
 	if (signals_init(&err) || loop_fd_add(app.lp, sig_pipe[0], POLLIN, on_sigpipe, &app, &err))
 		goto fail;
 	job_init(app.lp);
@@ -248,11 +315,19 @@ int main(int argc, char **argv)
 			log_msg(LOG_NOTICE, "resuming interrupted sweep %lld", (long long)id);
 	}
 	uint64_t wd_usec = 0;
+	double rate = app.have_sim && app.sim.time_scale > 0 ? app.sim.time_scale : 1; /* loop seconds per s */
 	if (sd_watchdog_enabled(0, &wd_usec) > 0 && wd_usec)
-		loop_timer_add(app.lp, (double)wd_usec / 2e6, (double)wd_usec / 2e6, watchdog_tick, NULL);
+		wd_period_real = (double)wd_usec / 2e6;
 	else if (app.conf->d.watchdog_s > 0)
-		loop_timer_add(app.lp, app.conf->d.watchdog_s / 2, app.conf->d.watchdog_s / 2, watchdog_tick, NULL);
+		wd_period_real = app.conf->d.watchdog_s / 2;
+	if (wd_period_real > 0) /* WATCHDOG_USEC is real time; the loop's clock may run faster (simulated bench) */
+		loop_timer_add(app.lp, wd_period_real * rate, wd_period_real * rate, watchdog_tick, NULL);
 	loop_timer_add(app.lp, 1.0, 1.0, status_tick, &app);
+	if (app.conf->laser) {
+		/* A quarter of the shortest keep-alive the driver accepts to arm: emission survives one late turn. The
+		 * period is real time, the loop's clock may run faster (simulated bench). */
+		loop_timer_add(app.lp, 0.25 * rate, 0.25 * rate, laser_keepalive_tick, &app);
+	}
 	status_tick(app.lp, &app);
 	log_msg(LOG_NOTICE, "acquisitiond %s ready: socket %s, database %s, %d/%d devices available%s", ACQ_VERSION,
 		app.conf->d.socket_path, app.conf->d.database, devices_available(app.dev), CONF_DEV__COUNT,

@@ -3,7 +3,9 @@
 #include "daemon/app.h"
 
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 #include <systemd/sd-daemon.h>
@@ -21,9 +23,37 @@ double app_wallclock(void)
 	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
+/* Crash injection for the kill tests: ACQ_CRASH_AT=STEP:N SIGKILLs the daemon right after the N-th
+ * durable step STEP of this process (its event committed): a sweep event kind (start, reference, pause,
+ * resume, fault, complete, ...), "point" (a point committed) or "recon" (a reconstruction event: exported,
+ * a stage started, ...). Unset in production: no effect. */
+static void crash_hook(const char *event, json_t *data)
+{
+	static bool init;
+	static char step[32];
+	static int want, seen;
+	if (!init) {
+		init = true;
+		const char *e = getenv("ACQ_CRASH_AT");
+		if (e && sscanf(e, "%31[a-z_]:%d", step, &want) != 2)
+			step[0] = 0;
+	}
+	if (!step[0])
+		return;
+	const char *k = !strcmp(event, "sweep.progress") ? "point"
+			: !strcmp(event, "sweep.fault") ? "fault"
+			: !strcmp(event, "recon") ? "recon"
+			: !strcmp(event, "sweep.state") ? json_string_value(json_object_get(data, "event")) : NULL;
+	if (k && !strcmp(k, step) && ++seen == want) {
+		log_msg(LOG_WARNING, "ACQ_CRASH_AT=%s:%d: SIGKILL now", step, want);
+		raise(SIGKILL);
+	}
+}
+
 void app_emit(void *ctx, const char *event, json_t *data)
 {
 	struct app *app = ctx;
+	crash_hook(event, data);
 	if (!strncmp(event, "sweep.", 6) && app->sweep) { /* systemd's STATUS= follows the sweep at once */
 		char line[256];
 		app_status_line(app, line, sizeof line);
@@ -54,6 +84,9 @@ void app_status_line(struct app *app, char *buf, size_t cap)
 	if (p.state == SWEEP_IDLE)
 		snprintf(buf, cap, "idle; devices %d/%d available%s", avail, CONF_DEV__COUNT,
 			 sweep_recon_busy(app->sweep) ? "; reconstruction running" : "");
+	else if (p.state == SWEEP_FAULTED && p.message[0]) /* what is wrong matters more than the ETA */
+		snprintf(buf, cap, "sweep %lld %s: %d/%d points: %s", (long long)p.sweep_id, sweep_state_name(p.state),
+			 p.points_done, p.points_total, p.message);
 	else if (isfinite(p.eta_s))
 		snprintf(buf, cap, "sweep %lld %s: %d/%d points, ETA %.0f s", (long long)p.sweep_id,
 			 sweep_state_name(p.state), p.points_done, p.points_total, p.eta_s);

@@ -14,6 +14,7 @@
 #include "acq_version.h"
 #include "daemon/devices.h"
 #include "daemon/export.h"
+#include "daemon/job.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
@@ -45,29 +46,108 @@ static json_t *progress_json(struct app *app)
 	return o;
 }
 
-/* ---- plan: dry run against the running configuration's bench ---- */
-static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+/* ---- plan: dry run against the running configuration's bench, in a child with a deadline ----
+ * The planner's cost grows fast with the points (1000 × 10 Fibonacci points took 31 s and 2000 × 10 320 MB on
+ * the loop): it runs in a forked child, at most PLAN_CHILDREN at once, killed after PLAN_DEADLINE_S (real
+ * seconds) and limited to PLAN_MEM_BYTES of address space, so no request holds the loop or its memory. */
+#define PLAN_CHILDREN 2
+#define PLAN_DEADLINE_S 10.0
+#define PLAN_MEM_BYTES ((size_t)1 << 30)
+
+static int plan_children;
+
+struct plan_job {
+	struct app *app;
+	uint64_t serial;
+	json_t *id;
+	/* valid in the child (its copy of memory): */
+	const char *text;        /* the request's plan text */
+	bool points;             /* the reply lists every step */
+	struct plan_timing tm;   /* this daemon's executor timing */
+};
+
+/* In the child: plan, print {"plan": {...}, "source": "daemon"} (the same object as the local dry run) or
+ * {"code": ..., "message": ...} on fd. */
+static int plan_child(void *arg, int fd)
 {
+	struct plan_job *pj = arg;
+	const struct conf *c = pj->app->conf;
 	struct acq_err err = { 0 };
 	struct plan_spec *spec = NULL;
 	struct plan_result *res = NULL;
-	if (plan_load_string("plan", json_string_value(json_object_get(req->root, "plan")), &spec, &err) ||
-	    plan_make(spec, &app->conf->bench, &res, &err)) {
-		plan_spec_free(spec);
+	json_t *o;
+	if (plan_load_string("plan", pj->text, &spec, &err) || plan_make(spec, &c->bench, &res, &err)) {
+		o = json_pack("{s:s,s:s}", "code", proto_code_of(&err), "message", err.msg);
+	} else {
+		plan_time_apply(spec, &c->bench, &pj->tm, res);
+		json_t *p = plan_to_json(spec, res, pj->points);
+		if (p) {
+			json_object_set_new(p, "bench_config", json_string(c->path));
+			json_object_set_new(p, "time_scale", json_real(pj->tm.time_scale)); /* bench s per wall s */
+		}
+		o = json_pack("{s:o,s:s}", "plan", p, "source", "daemon");
+	}
+	char *line = o ? json_dumps(o, JSON_COMPACT) : NULL;
+	if (!line)
+		return 3;
+	struct acq_err werr;
+	return proto_write_all(fd, line, strlen(line), &werr) ? 4 : 0;
+}
+
+static void plan_done(struct job *j, int status, const char *output, size_t len, void *arg)
+{
+	struct plan_job *pj = arg;
+	struct app *app = pj->app;
+	plan_children--;
+	json_t *o = status == 0 && !job_output_truncated(j) ? json_loadb(output, len, 0, NULL) : NULL;
+	char msg[200];
+	if (o && json_object_get(o, "plan")) {
+		server_reply(app->srv, pj->serial, pj->id, json_incref(o));
+	} else if (o) {
+		server_reply_error(app->srv, pj->serial, pj->id, json_string_value(json_object_get(o, "code")),
+				   json_string_value(json_object_get(o, "message")));
+	} else {
+		if (job_timed_out(j))
+			snprintf(msg, sizeof msg, "plan: not planned within %.0f s, the daemon's bound: use fewer points "
+				 "or plan it offline (acqctl plan FILE without the daemon)", PLAN_DEADLINE_S);
+		else if (job_output_truncated(j))
+			snprintf(msg, sizeof msg, "plan: the reply is longer than %d bytes: ask without points=true or plan "
+				 "it offline (acqctl plan FILE without the daemon)", PROTO_MAX_LINE);
+		else
+			snprintf(msg, sizeof msg, "plan: the planner failed (status %d; memory is bounded to %zu MiB)", status,
+				 PLAN_MEM_BYTES >> 20);
+		log_msg(LOG_NOTICE, "%s", msg);
+		server_reply_error(app->srv, pj->serial, pj->id, PROTO_E_RANGE, msg);
+	}
+	json_decref(o);
+	json_decref(pj->id);
+	free(pj);
+}
+
+static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	if (plan_children >= PLAN_CHILDREN) {
+		acq_errf(&err, ACQ_E_UNSUPPORTED, "plan: %d plans are being computed already; retry later", plan_children);
+		return server_reply_error(app->srv, peer->serial, req->id, PROTO_E_UNAVAILABLE, err.msg);
+	}
+	struct plan_job *pj = calloc(1, sizeof *pj);
+	if (!pj) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 		return reply_err(app, peer, req->id, &err);
 	}
-	struct plan_timing tm;
-	sweep_plan_timing(app->sweep, &tm);
-	plan_time_apply(spec, &app->conf->bench, &tm, res);
-	/* The same object as the local dry run (acqctl renders both alike). */
-	json_t *o = plan_to_json(spec, res, json_is_true(json_object_get(req->root, "points")));
-	if (o) {
-		json_object_set_new(o, "bench_config", json_string(app->conf->path));
-		json_object_set_new(o, "time_scale", json_real(tm.time_scale)); /* bench seconds per wall second */
+	*pj = (struct plan_job){ .app = app, .serial = peer->serial, .id = json_incref(req->id),
+				 .text = json_string_value(json_object_get(req->root, "plan")),
+				 .points = json_is_true(json_object_get(req->root, "points")) };
+	sweep_plan_timing(app->sweep, &pj->tm);
+	double rate = app->have_sim && app->sim.time_scale > 0 ? app->sim.time_scale : 1; /* loop seconds per s */
+	if (job_fork(plan_child, pj, PLAN_MEM_BYTES, PLAN_DEADLINE_S * rate, plan_done, pj, NULL, &err)) {
+		json_decref(pj->id);
+		free(pj);
+		return reply_err(app, peer, req->id, &err);
 	}
-	plan_result_free(res);
-	plan_spec_free(spec);
-	server_reply(app->srv, peer->serial, req->id, json_pack("{s:o,s:s}", "plan", o, "source", "daemon"));
+	pj->text = NULL; /* the request is freed after this call; the child has its own copy */
+	plan_children++;
 }
 
 /* A manual move must not make the arms collide, on the way or at the target (straight
@@ -181,19 +261,36 @@ static void cmd_measure(struct app *app, const struct srv_peer *peer, struct pro
 }
 
 /* `devices`: the report waits for fresh status reads on the devices' own threads (the loop never does). */
+/* Fresh device reads are queued on the devices' threads in front of the sweep's own requests (and of the
+ * laser's keep-alive): one query at a time for all clients together; a request arriving while one runs gets
+ * what is known now (devices_json: no device I/O). */
+static bool devices_query_running;
+
+static void devices_query_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
+{
+	devices_query_running = false;
+	pending_done(ctx, rc, err, result);
+}
+
 static void cmd_devices(struct app *app, const struct srv_peer *peer, struct proto_req *req)
 {
+	if (devices_query_running) {
+		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_json(app->dev)));
+		return;
+	}
 	struct acq_err err = { 0 };
 	struct pending *p = pending_new(app, peer, req->id);
 	if (!p) {
 		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 		return reply_err(app, peer, req->id, &err);
 	}
-	if (devices_query(app->dev, pending_done, p, &err)) {
+	if (devices_query(app->dev, devices_query_done, p, &err)) {
 		json_decref(p->id);
 		free(p);
 		reply_err(app, peer, req->id, &err);
+		return;
 	}
+	devices_query_running = true;
 }
 
 /* home [axis]: one axis by its name (laser.theta or laser_theta, ...), or all three one after the other
@@ -533,17 +630,28 @@ static json_t *status_json(struct app *app)
 	server_counts(app->srv, &clients, &watchers);
 	char line[256];
 	app_status_line(app, line, sizeof line);
+	struct server_stats ss;
+	server_get_stats(app->srv, &ss);
+	json_t *srvj = json_pack("{s:I,s:I,s:I,s:I}", "refused", (json_int_t)ss.refused, "dropped_unread",
+				 (json_int_t)ss.dropped_output, "dropped_stalled", (json_int_t)ss.dropped_stalled,
+				 "timed_out", (json_int_t)ss.timed_out);
 	int64_t rrun = store_recon_latest(app->store), rsweep = 0;
 	if (rrun) {
 		json_t *r = store_recon_show(app->store, rrun, 0, NULL);
 		rsweep = (int64_t)json_integer_value(json_object_get(r, "sweep_id"));
 		json_decref(r);
 	}
-	return json_pack("{s:s,s:s,s:i,s:f,s:f,s:o,s:{s:i,s:i},s:i,s:i,s:{s:b,s:I,s:I},s:s,s:b}", "daemon", "running",
+	json_t *o = json_pack("{s:s,s:s,s:i,s:f,s:f,s:o,s:{s:i,s:i},s:i,s:i,s:{s:b,s:I,s:I},s:s,s:b}", "daemon", "running",
 			 "version", ACQ_VERSION, "pid", (int)getpid(), "uptime_s", app_wallclock() - app->started_wall,
 			 "started_at", app->started_wall, "sweep", progress_json(app), "devices", "available",
 			 devices_available(app->dev), "total", CONF_DEV__COUNT, "clients", clients, "watchers", watchers,
-			 "recon", "running", sweep_recon_busy(app->sweep), "run", (json_int_t)rrun, "sweep", (json_int_t)rsweep, "summary", line, "sim", app->have_sim);
+			 "recon", "running", sweep_recon_busy(app->sweep), "run", (json_int_t)rrun, "sweep", (json_int_t)rsweep,
+			 "summary", line, "sim", app->have_sim);
+	if (o)
+		json_object_set_new(o, "server", srvj);
+	else
+		json_decref(srvj);
+	return o;
 }
 
 void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *req)
@@ -561,8 +669,12 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
 	} else if (!strcmp(cmd, "devices")) {
 		cmd_devices(app, peer, req);
 	} else if (!strcmp(cmd, "config")) {
-		server_reply(app->srv, peer->serial, req->id,
-			     json_pack("{s:o}", "config", config_json(app, json_is_true(json_object_get(req->root, "text")))));
+		bool text = json_is_true(json_object_get(req->root, "text"));
+		if (text && peer->tcp) /* the file may name users, paths and devices: local users with a uid only */
+			server_reply_error(app->srv, peer->serial, req->id, PROTO_E_FORBIDDEN,
+					   "config text: not over TCP (no credentials); use the Unix socket");
+		else
+			server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "config", config_json(app, text)));
 	} else if (!strcmp(cmd, "plan")) {
 		cmd_plan(app, peer, req);
 	} else if (!strncmp(cmd, "sweep.", 6)) {

@@ -172,6 +172,9 @@ static void req_run(struct port_req *pr, struct port *p)
 	case R_SPECTRO_STOP:
 		r->rc = !s->sp ? 0 : spectro_stop(s->sp, &r->err);
 		break;
+	case R_KEEPALIVE:
+		r->rc = !s->ls ? 0 : laser_keepalive(s->ls, &r->err);
+		break;
 	}
 }
 
@@ -289,7 +292,11 @@ static void req_done(struct port_req *pr)
 		query_step(r->q);
 	else if (r->owner == OWN_CALL)
 		call_done(r);
-	else if (r->owner == OWN_MGR && r->rc && (r->op == R_LASER || r->op == R_STOP))
+	else if (r->op == R_KEEPALIVE) {
+		dv->keepalive_pending = false;
+		if (r->rc)
+			log_msg(LOG_WARNING, "laser keep-alive: %s (emission switched off)", r->err.msg);
+	} else if (r->owner == OWN_MGR && r->rc && (r->op == R_LASER || r->op == R_STOP))
 		log_msg(LOG_ERR, "safe stop: %s: %s not confirmed: %s", dname(r->d),
 			r->op == R_LASER ? "laser emission off" : "stop", r->err.msg);
 	free(r->frame);
@@ -868,6 +875,15 @@ static void call_done(struct req *r)
 	} else {
 		r->done(r->done_ctx, 0, NULL, json_pack("{s:b}", "emission", 0));
 	}
+}
+
+void devices_laser_keepalive(struct devices *dv)
+{
+	if (!dv->slot[CONF_DEV_LASER].available || dv->keepalive_pending)
+		return;
+	struct req *r = devices_req_new(dv, CONF_DEV_LASER, R_KEEPALIVE, OWN_MGR);
+	if (r && !devices_req_submit(r))
+		dv->keepalive_pending = true;
 }
 
 int devices_laser_off(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err)

@@ -84,6 +84,9 @@ int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err);
 /* Switch the laser emission off on its thread and read it back; done(ctx, 0, NULL, {emission: false}) or the
  * error. -1 at once when the laser is unavailable. */
 int devices_laser_off(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err);
+/* Refresh the laser's keep-alive on its thread (one at a time: skipped while one is queued); a failure is
+ * logged (the driver then switched emission off). Called by the loop every 250 ms. */
+void devices_laser_keepalive(struct devices *dv);
 int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages, double power_pct,
 		    devices_done_fn done, void *ctx, struct acq_err *err);
 

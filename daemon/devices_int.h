@@ -12,7 +12,7 @@
 #include "drivers/spectro.h"
 
 enum rop { R_OPEN, R_CLOSE, R_STATUS, R_MOVE, R_HOME, R_STOP, R_ALARM_RESET, R_LASER, R_POWER, R_MEASURE,
-	   R_SPECTRO_STOP };
+	   R_SPECTRO_STOP, R_KEEPALIVE };
 
 /* The executor's view of a slot: one move (or homing), one read, one measurement at a time; seq ties a
  * completion to the call that wants it. */
@@ -58,6 +58,7 @@ struct dev_slot {
 };
 
 struct devices {
+	bool keepalive_pending;        /* a laser keep-alive is queued or running on the laser's port */
 	struct loop *lp;
 	struct store *st;
 	const struct conf *c;

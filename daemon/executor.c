@@ -80,8 +80,20 @@ void ex_event(struct ex *x, const char *kind, const char *device, const char *fm
 	vsnprintf(msg, sizeof msg, fmt, ap);
 	va_end(ap);
 	struct acq_err err = { 0 };
-	if (x->st)
-		store_event(x->st, x->sweep_id, kind, device, msg, ex_wall_now(x), &err);
+	double at = ex_wall_now(x);
+	if (x->st && store_event(x->st, x->sweep_id, kind, device, msg, at, &err)) {
+		/* Kept for ex_flush_unrecorded(): a failure must not go unrecorded because recording failed. */
+		if (x->nlost_ev == 4) {
+			memmove(&x->lost_ev[0], &x->lost_ev[1], 3 * sizeof x->lost_ev[0]);
+			x->nlost_ev = 3;
+		}
+		struct ex_lost_event *e = &x->lost_ev[x->nlost_ev++];
+		snprintf(e->kind, sizeof e->kind, "%s", kind);
+		snprintf(e->device, sizeof e->device, "%s", device ? device : "");
+		snprintf(e->msg, sizeof e->msg, "%s", msg);
+		e->at = at;
+		snprintf(x->lost_err, sizeof x->lost_err, "%s", err.msg);
+	}
 	if (x->sink.event)
 		x->sink.event(x->sink.ctx, x->sweep_id, kind, device, msg);
 }
@@ -89,8 +101,46 @@ void ex_event(struct ex *x, const char *kind, const char *device, const char *fm
 void ex_set_db_state(struct ex *x, const char *state)
 {
 	struct acq_err err = { 0 };
-	if (x->st)
-		store_sweep_set_state(x->st, x->sweep_id, state, ex_wall_now(x), &err);
+	double at = ex_wall_now(x);
+	if (!x->st)
+		return;
+	if (store_sweep_set_state(x->st, x->sweep_id, state, at, &err)) {
+		snprintf(x->lost_state, sizeof x->lost_state, "%s", state);
+		x->lost_state_at = at;
+		snprintf(x->lost_err, sizeof x->lost_err, "%s", err.msg);
+	} else {
+		x->lost_state[0] = 0; /* the latest state is stored */
+	}
+}
+
+bool ex_has_unrecorded(const struct ex *x)
+{
+	return x->lost_state[0] || x->nlost_ev;
+}
+
+const char *ex_unrecorded_error(const struct ex *x)
+{
+	return x->lost_err;
+}
+
+int ex_flush_unrecorded(struct ex *x, struct acq_err *err)
+{
+	while (x->nlost_ev) {
+		struct ex_lost_event *e = &x->lost_ev[0];
+		if (store_event(x->st, x->sweep_id, e->kind, e->device[0] ? e->device : NULL, e->msg, e->at, err))
+			goto fail;
+		memmove(&x->lost_ev[0], &x->lost_ev[1], (size_t)(x->nlost_ev - 1) * sizeof x->lost_ev[0]);
+		x->nlost_ev--;
+	}
+	if (x->lost_state[0]) {
+		if (store_sweep_set_state(x->st, x->sweep_id, x->lost_state, x->lost_state_at, err))
+			goto fail;
+		x->lost_state[0] = 0;
+	}
+	return 0;
+fail:
+	snprintf(x->lost_err, sizeof x->lost_err, "%s", err->msg);
+	return -1;
 }
 
 void ex_clear_pending(struct ex *x)
@@ -376,6 +426,14 @@ int ex_start(struct ex *x, int first_step, bool resumed, double now, struct acq_
 		ex_event(x, "info", NULL, "no reference will be measured: calibrated values need one (take_reference)");
 	ex_begin_segment(x, now);
 	ex_set_phase_text(x, "verifying positions");
+	/* The reference → sample swap is one durable state: resumed with the reference stored and no point
+	 * committed, nothing proves the sample was placed (a crash may have come between the reference and its
+	 * pause, or between the operator's resume and the first point), so the operator is asked again; the white
+	 * standard is never measured as the sample. */
+	if (resumed && x->have_ref && first_step == 0 && x->nsteps > 0 && x->cfg.take_reference &&
+	    x->cfg.pause_after_reference)
+		ex_pause_now(x, false, "%s measured before the restart: place the sample on the stage (if not done yet), "
+			     "then resume", x->cfg.cal.method == CALIB_ABSOLUTE ? "direct beam" : "reference");
 	return 0;
 }
 

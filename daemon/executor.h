@@ -159,6 +159,12 @@ const char *ex_phase(const struct ex *x);
 const struct ex_stats *ex_stats(const struct ex *x);
 /* The reason of the last pause/failure/abort ("" if none). */
 const char *ex_reason(const struct ex *x);
+/* True while a state or event of the sweep could not be stored (disk full...) and awaits a retry. */
+bool ex_has_unrecorded(const struct ex *x);
+/* The database's last error for those records. */
+const char *ex_unrecorded_error(const struct ex *x);
+/* Store the records the database refused, oldest first. 0 when all are stored, or -1 with err. */
+int ex_flush_unrecorded(struct ex *x, struct acq_err *err);
 /* Index of the step being worked on (== n_steps when done). */
 int ex_current_step(const struct ex *x);
 

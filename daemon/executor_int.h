@@ -59,6 +59,16 @@ struct ex {
 	char phase_text[96];
 	double wake;
 
+	/* Records of the sweep the database refused (disk full, I/O error): ex_flush_unrecorded() retries them. */
+	char lost_state[16];         /* the latest sweep state not stored ("" = none) */
+	double lost_state_at;
+	struct ex_lost_event {
+		char kind[16], device[32], msg[768];
+		double at;
+	} lost_ev[4];                /* the oldest are dropped past 4; the last (the end) is kept */
+	int nlost_ev;
+	char lost_err[256];
+
 	/* motion */
 	struct plan_wp wps[PLAN_MAX_WP + 1];
 	int n_wps, wp;

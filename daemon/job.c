@@ -8,6 +8,8 @@
 #include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -18,10 +20,11 @@ struct job {
 	int fd;                 /* read end of the output pipe, -1 once drained */
 	bool exited;
 	int status;
-	char *out;              /* the last JOB_OUTPUT_MAX bytes */
-	size_t len;
+	char *out;              /* the last cap bytes (job_start), or the first (job_fork: truncated then) */
+	size_t len, cap;
+	bool keep_head, truncated;
 	uint64_t timer;
-	bool killed;
+	bool killed, timed_out;
 	job_done_fn done;
 	void *arg;
 	struct job *next;
@@ -80,8 +83,11 @@ static void on_output(struct loop *lp, int fd, short revents, void *arg)
 	}
 	size_t k = (size_t)n;
 	_Static_assert(sizeof buf < JOB_OUTPUT_MAX, "one read fits in the kept output");
-	if (j->len + k > JOB_OUTPUT_MAX) {
-		size_t drop = j->len + k - JOB_OUTPUT_MAX;
+	if (j->keep_head && j->len + k > j->cap) {
+		k = j->cap - j->len;
+		j->truncated = true;
+	} else if (j->len + k > j->cap) {
+		size_t drop = j->len + k - j->cap;
 		memmove(j->out, j->out + drop, j->len - drop);
 		j->len -= drop;
 	}
@@ -96,6 +102,7 @@ static void on_timeout(struct loop *lp, void *arg)
 	j->timer = 0;
 	if (j->exited)
 		return;
+	j->timed_out = true;
 	/* First SIGTERM, then SIGKILL two seconds later if it is still there. */
 	kill(j->pid, j->killed ? SIGKILL : SIGTERM);
 	if (!j->killed) {
@@ -104,13 +111,32 @@ static void on_timeout(struct loop *lp, void *arg)
 	}
 }
 
-int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
-	      struct job **out, struct acq_err *err)
+/* In the child: default signal handling, and death with the daemon (a SIGKILLed daemon leaves no child
+ * writing its files: PR_SET_PDEATHSIG survives exec). Only async-signal-safe calls. */
+static void child_setup(pid_t parent)
 {
-	if (!job_loop || !argv || !argv[0])
+	sigset_t all;
+	sigemptyset(&all);
+	sigprocmask(SIG_SETMASK, &all, NULL);
+	signal(SIGPIPE, SIG_DFL);
+	signal(SIGTERM, SIG_DFL);
+	signal(SIGINT, SIG_DFL);
+	signal(SIGHUP, SIG_DFL);
+	signal(SIGCHLD, SIG_DFL);
+	prctl(PR_SET_PDEATHSIG, SIGKILL);
+	if (getppid() != parent) /* the daemon died before prctl */
+		_exit(137);
+}
+
+/* Fork with the output pipe; in the child, run fn (exec) or child_fn; in the parent, register the job. */
+static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, void *child_arg, size_t mem_bytes,
+		 double timeout_s, job_done_fn done, void *arg, struct job **out, struct acq_err *err)
+{
+	if (!job_loop || (!child_fn && (!argv || !argv[0])))
 		return acq_errf(err, ACQ_E_INVAL, "job: not initialised or no program");
 	struct job *j = calloc(1, sizeof *j);
-	if (!j || !(j->out = malloc(JOB_OUTPUT_MAX + 1))) {
+	size_t cap = child_fn ? JOB_FORK_OUTPUT_MAX : JOB_OUTPUT_MAX;
+	if (!j || !(j->out = malloc(cap + 1))) {
 		free(j);
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
@@ -120,6 +146,7 @@ int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn
 		free(j);
 		return acq_errf(err, ACQ_E_IO, "pipe: %s", strerror(errno));
 	}
+	pid_t parent = getpid();
 	pid_t pid = fork();
 	if (pid < 0) {
 		close(p[0]);
@@ -129,14 +156,7 @@ int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn
 		return acq_errf(err, ACQ_E_IO, "fork: %s", strerror(errno));
 	}
 	if (pid == 0) {
-		/* Child: only async-signal-safe calls until exec. */
-		sigset_t all;
-		sigemptyset(&all);
-		sigprocmask(SIG_SETMASK, &all, NULL);
-		signal(SIGPIPE, SIG_DFL);
-		signal(SIGTERM, SIG_DFL);
-		signal(SIGINT, SIG_DFL);
-		signal(SIGHUP, SIG_DFL);
+		child_setup(parent);
 		int nul = open("/dev/null", O_RDONLY);
 		if (nul >= 0)
 			dup2(nul, 0);
@@ -144,6 +164,21 @@ int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn
 		dup2(p[1], 2);
 		if (cwd && chdir(cwd) < 0)
 			_exit(126);
+		if (child_fn) {
+			/* Work done for a client (a dry-run plan) yields the CPU to the daemon and the bench. */
+			if (nice(10) < 0) {
+				/* unchanged priority: still bounded by the deadline */
+			}
+#if !defined(__SANITIZE_ADDRESS__) /* ASan reserves terabytes of address space: only the deadline then */
+			if (mem_bytes) {
+				struct rlimit rl = { mem_bytes, mem_bytes };
+				setrlimit(RLIMIT_AS, &rl);
+			}
+#else
+			(void)mem_bytes;
+#endif
+			_exit(child_fn(child_arg, 1));
+		}
 		execvp(argv[0], argv);
 		static const char msg[] = "job: exec failed\n";
 		ssize_t w = write(2, msg, sizeof msg - 1);
@@ -154,6 +189,8 @@ int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn
 	fcntl(p[0], F_SETFL, O_NONBLOCK);
 	j->pid = pid;
 	j->fd = p[0];
+	j->cap = cap;
+	j->keep_head = child_fn != NULL;
 	j->done = done;
 	j->arg = arg;
 	j->next = job_list;
@@ -172,6 +209,20 @@ int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn
 	return 0;
 }
 
+int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
+	      struct job **out, struct acq_err *err)
+{
+	return spawn(argv, cwd, NULL, NULL, 0, timeout_s, done, arg, out, err);
+}
+
+int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, job_done_fn done, void *arg,
+	     struct job **out, struct acq_err *err)
+{
+	if (!fn)
+		return acq_errf(err, ACQ_E_INVAL, "job: no function");
+	return spawn(NULL, NULL, fn, fn_arg, mem_bytes, timeout_s, done, arg, out, err);
+}
+
 void job_cancel(struct job *j)
 {
 	if (j && !j->exited) {
@@ -180,6 +231,16 @@ void job_cancel(struct job *j)
 		j->killed = true;
 		j->timer = loop_timer_add(job_loop, 2.0, 0, on_timeout, j);
 	}
+}
+
+bool job_output_truncated(const struct job *j)
+{
+	return j->truncated;
+}
+
+bool job_timed_out(const struct job *j)
+{
+	return j->timed_out;
 }
 
 pid_t job_pid(const struct job *j)

@@ -3,6 +3,7 @@
 #ifndef JOB_H
 #define JOB_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <sys/types.h>
 
@@ -12,6 +13,7 @@ struct loop;
 struct job;
 
 #define JOB_OUTPUT_MAX (64 * 1024)  /* captured output kept (the last bytes when longer) */
+#define JOB_FORK_OUTPUT_MAX (64 * 1024)  /* job_fork(): the first bytes kept (one reply line), the rest dropped */
 
 /* Called once from the loop when the child has exited and its output is drained. status: exit code, or
  * 128 + signal number. output is NUL-terminated (len bytes), valid during the call only. */
@@ -25,6 +27,18 @@ void job_finish(void);
  * /dev/null, killed after timeout_s (0: never). 0 or -1 (exec failure is reported as status 127). */
 int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
 	      struct job **out, struct acq_err *err);
+/* In a job_fork() child: compute, write the result to fd, return the exit status (the child then _exits). */
+typedef int (*job_child_fn)(void *arg, int fd);
+/* Run fn(fn_arg, fd) in a forked child (no exec: it sees the daemon's memory as it was) with the output
+ * captured as for job_start, at nice +10, its address space limited to mem_bytes (0: unlimited), killed after
+ * timeout_s.
+ * Children of both kinds die with the daemon (PR_SET_PDEATHSIG). 0 or -1. */
+int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, job_done_fn done, void *arg,
+	     struct job **out, struct acq_err *err);
+/* True when a job_fork() child wrote more than JOB_FORK_OUTPUT_MAX bytes (the rest was discarded). */
+bool job_output_truncated(const struct job *j);
+/* True when the job was killed because its timeout expired (valid in its done callback). */
+bool job_timed_out(const struct job *j);
 /* Ask a job to stop (SIGTERM); its callback still fires when it is gone. */
 void job_cancel(struct job *j);
 /* Process id of a running job. */

@@ -152,7 +152,7 @@ struct points_ctx {
 	int64_t n, k;
 	int64_t *id;
 	int32_t *order;
-	double *planned[4], *actual[3], *done;
+	double *planned[4], *actual[3], *measured[4], *done;
 	char **state;
 	int64_t *cal_row; /* per point, the calibrated row or −1 (filled later) */
 };
@@ -164,8 +164,10 @@ static int take_point(void *c, const struct storenx_point *p)
 		return 1;
 	x->id[x->k] = p->id;
 	x->order[x->k] = p->order_index;
-	for (int a = 0; a < 4; a++)
+	for (int a = 0; a < 4; a++) {
 		x->planned[a][x->k] = p->planned[a];
+		x->measured[a][x->k] = p->measured[a];
+	}
 	for (int a = 0; a < 3; a++)
 		x->actual[a][x->k] = p->actual[a];
 	x->done[x->k] = p->done_at;
@@ -471,7 +473,7 @@ static int write_all(struct storenx *h, int64_t sweep, hid_t file, struct nexus_
 	P.state = calloc(pn, sizeof *P.state);
 	int okp = P.id && P.order && P.done && P.state;
 	for (int a = 0; a < 4; a++)
-		okp = okp && (P.planned[a] = malloc(pn * sizeof(double)));
+		okp = okp && (P.planned[a] = malloc(pn * sizeof(double))) && (P.measured[a] = malloc(pn * sizeof(double)));
 	for (int a = 0; a < 3; a++)
 		okp = okp && (P.actual[a] = malloc(pn * sizeof(double)));
 	if (!okp) {
@@ -494,6 +496,9 @@ static int write_all(struct storenx *h, int64_t sweep, hid_t file, struct nexus_
 			char nm[32];
 			snprintf(nm, sizeof nm, "planned_%s", pn_[a]);
 			if (close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P.planned[a], "deg")))
+				goto h5fail;
+			snprintf(nm, sizeof nm, "measured_%s", pn_[a]);
+			if (close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P.measured[a], "deg")))
 				goto h5fail;
 		}
 		for (int a = 0; a < 3; a++) {
@@ -616,8 +621,10 @@ out:
 	free(P.order);
 	free(P.done);
 	free_strs(P.state, P.k);
-	for (int a = 0; a < 4; a++)
+	for (int a = 0; a < 4; a++) {
 		free(P.planned[a]);
+		free(P.measured[a]);
+	}
 	for (int a = 0; a < 3; a++)
 		free(P.actual[a]);
 	free(C.point);

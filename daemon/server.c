@@ -18,9 +18,23 @@
 #include "daemon/log.h"
 #include "daemon/loop.h"
 
-#define OUT_PAUSE_READ (1u << 20)   /* stop reading a client whose replies pile up beyond this */
-#define OUT_DROP (16u << 20)        /* drop a watcher that does not read its events at all */
-#define MAX_CLIENTS 256
+#define MAX_CLIENTS 256         /* hard bound of the client table (server_limits.max_clients is at most this) */
+#define MAX_REFUSING 64         /* refused connections kept open briefly so their refusal can be read */
+#define TIMEOUT_TICK_S 0.25     /* period of the timeout check (loop clock) */
+#define ACCEPT_PER_TURN 64      /* connections accepted per loop turn */
+#define LISTEN_BACKLOG 512
+
+const struct server_limits server_default_limits = {
+	.max_clients = 128,
+	.controller_reserve = 16,
+	.per_user = 32,
+	.out_pause = 64 * 1024,
+	.out_drop = 1024 * 1024,
+	.stall_s = 30,
+	.idle_s = 600,
+	.partial_s = 10,
+	.linger_s = 2,
+};
 
 struct client {
 	int fd;
@@ -30,6 +44,12 @@ struct client {
 	size_t outlen, outcap;
 	bool watch, closing;
 	bool backlog;           /* complete lines left for the next turn */
+	bool refusing;          /* refused: its refusal is queued, input is discarded until EOF or linger_s */
+	int inflight;           /* requests handed to the handler and not answered yet */
+	double last_in;         /* server clock: last complete line received (or the connection) */
+	double partial_since;   /* server clock: an incomplete line is buffered since (0: none) */
+	double out_since;       /* server clock: output queued and nothing sent since (0: nothing queued) */
+	double refused_at;
 	bool has_fd;            /* pass_fd leaves with the byte at offset pass_at of out (SCM_RIGHTS) */
 	int pass_fd;
 	size_t pass_at;
@@ -46,10 +66,21 @@ struct server {
 	int ufd, tfd;
 	char path[256];
 	struct client *clients;
-	int nclients;
+	int nclients, nrefusing;
 	uint64_t next_serial;
-	uint64_t drain_timer;
+	uint64_t drain_timer, timeout_timer;
+	int budget;                 /* lines left to handle in this loop turn */
+	unsigned rotation;
+	struct server_limits lim;
+	double (*now)(void *ctx);   /* real monotonic time unless a test injects a clock */
+	void *now_ctx;
+	struct server_stats stats;
 };
+
+static double srv_now(const struct server *srv)
+{
+	return srv->now(srv->now_ctx);
+}
 
 static void client_close(struct client *c)
 {
@@ -59,7 +90,10 @@ static void client_close(struct client *c)
 			*p = c->next;
 			break;
 		}
-	srv->nclients--;
+	if (c->refusing)
+		srv->nrefusing--;
+	else
+		srv->nclients--;
 	loop_fd_del(srv->lp, c->fd);
 	close(c->fd);
 	if (c->has_fd)
@@ -77,14 +111,35 @@ static struct client *client_by_serial(struct server *srv, uint64_t serial)
 	return NULL;
 }
 
+/* Reading stops while replies are queued beyond out_pause: a client that does not read its replies cannot
+ * make the daemon produce more of them. */
+static bool reading_paused(const struct client *c)
+{
+	return c->outlen >= c->srv->lim.out_pause;
+}
+
 static void update_events(struct client *c)
 {
 	short ev = 0;
-	if (c->outlen || c->closing)
+	if (c->outlen || (c->closing && !c->refusing))
 		ev |= POLLOUT; /* a closing client is closed from its next (writable) event */
-	if (!c->closing && !c->backlog && c->outlen < OUT_PAUSE_READ)
+	if (c->refusing || (!c->closing && !c->backlog && !reading_paused(c)))
 		ev |= POLLIN;
 	loop_fd_events(c->srv->lp, c->fd, ev);
+}
+
+/* Give back buffer memory a burst left behind (a client holds at most a few KiB while quiet). */
+static void trim_buffers(struct client *c)
+{
+	if (!c->outlen && c->outcap > 65536) {
+		free(c->out);
+		c->out = NULL;
+		c->outcap = 0;
+	}
+	if (c->in.len <= c->in.taken && !c->in.discarding && c->in.cap > 16384) {
+		proto_lines_free(&c->in);
+		proto_lines_init(&c->in);
+	}
 }
 
 /* send() of the bytes before a passed descriptor, or of the rest with the descriptor attached. */
@@ -129,7 +184,10 @@ static void flush_out(struct client *c)
 		c->outlen -= (size_t)n;
 		if (c->has_fd)
 			c->pass_at -= (size_t)n;
+		c->out_since = c->outlen ? srv_now(c->srv) : 0;
 	}
+	if (c->refusing && !c->outlen)
+		shutdown(c->fd, SHUT_WR); /* the refusal is out: EOF for the client, whose writes still succeed */
 }
 
 /* Queue a line (consumed); returns false if the client was dropped. */
@@ -138,12 +196,18 @@ static void client_send(struct client *c, char *line)
 	if (!line)
 		return;
 	size_t n = strlen(line);
-	if (c->outlen + n > OUT_DROP) {
-		log_msg(LOG_WARNING, "client %llu (uid %u) does not read its replies; dropping it",
-			(unsigned long long)c->peer.serial, (unsigned)c->peer.uid);
+	if (c->closing) {
+		free(line);
+		return;
+	}
+	if (c->outlen + n > c->srv->lim.out_drop) {
+		log_msg(LOG_WARNING, "client %llu (uid %u) does not read its replies (%zu bytes queued); dropping it",
+			(unsigned long long)c->peer.serial, (unsigned)c->peer.uid, c->outlen);
+		c->srv->stats.dropped_output++;
 		c->outlen = 0;
 		c->closing = true;
 		free(line);
+		update_events(c);
 		return;
 	}
 	if (c->outlen + n > c->outcap) {
@@ -159,6 +223,8 @@ static void client_send(struct client *c, char *line)
 		c->out = o;
 		c->outcap = cap;
 	}
+	if (!c->outlen)
+		c->out_since = srv_now(c->srv);
 	memcpy(c->out + c->outlen, line, n);
 	c->outlen += n;
 	free(line);
@@ -191,26 +257,59 @@ static void handle_line(struct client *c, const char *line, size_t len)
 		c->watch = true;
 		client_send(c, proto_reply_ok(req.id, json_pack("{s:b}", "watching", 1)));
 	} else {
+		c->inflight++;
 		c->srv->fn(c->srv->ctx, &c->peer, &req);
 	}
 	proto_req_free(&req);
 }
 
-#define LINES_PER_TURN 128  /* lines handled per client per loop turn, so a flood cannot starve others */
+/* Requests are handled in bounded turns so the sweep's timers and the devices' fds never wait behind clients:
+ * at most LINES_PER_TURN lines per loop turn for all clients together, at most LINES_PER_CLIENT of them from
+ * one client, the clients with lines left served in rotation at the next turn (drain_cb). */
+#define LINES_PER_TURN 64
+#define LINES_PER_CLIENT 8
 
 static void drain_cb(struct loop *lp, void *arg);
 
-/* Handle up to LINES_PER_TURN complete lines of client serial; true if more are buffered. The handler may
- * reply to this client or close others, so the client is looked up again after each line. */
+/* The next turn: a timer just after now, so that it runs at the loop's next pass over its timers (a timer
+ * due at once would run again within the same pass, and the turns would not be bounded). */
+#define DRAIN_DELAY_S 1e-4
+
+static void arm_drain(struct server *srv)
+{
+	if (!srv->drain_timer)
+		srv->drain_timer = loop_timer_add(srv->lp, DRAIN_DELAY_S, 0, drain_cb, srv);
+}
+
+/* Handle up to LINES_PER_CLIENT complete lines of client serial within the turn's budget; true if more may be
+ * buffered. The handler may reply to this client or close others, so the client is looked up again after
+ * each line. */
 static bool process_lines(struct server *srv, uint64_t serial)
 {
 	struct client *c;
 	char *line;
 	size_t len;
 	int k;
-	for (int n = 0; n < LINES_PER_TURN; n++) {
-		if (!(c = client_by_serial(srv, serial)) || c->closing || !(k = proto_lines_next(&c->in, &line, &len)))
+	for (int n = 0; n < LINES_PER_CLIENT && srv->budget > 0; n++) {
+		if (!(c = client_by_serial(srv, serial)) || c->closing)
 			return false;
+		if (reading_paused(c)) {
+			/* Lines stay buffered until the client reads its replies (POLLOUT brings it back). */
+			c->backlog = true;
+			return true;
+		}
+		if (!(k = proto_lines_next(&c->in, &line, &len))) {
+			bool partial = c->in.len > c->in.taken || c->in.discarding;
+			if (!partial)
+				c->partial_since = 0;
+			else if (!c->partial_since)
+				c->partial_since = srv_now(srv);
+			return false;
+		}
+		c->last_in = srv_now(srv);
+		c->partial_since = 0;
+		srv->budget--;
+		arm_drain(srv); /* refills the budget at the next turn */
 		if (k == PROTO_LINE_TOO_LONG) {
 			char msg[96];
 			snprintf(msg, sizeof msg, "line longer than %d bytes: ignored up to its newline", PROTO_MAX_LINE);
@@ -223,17 +322,17 @@ static bool process_lines(struct server *srv, uint64_t serial)
 	if (!c || c->closing)
 		return false;
 	c->backlog = true;
-	if (!srv->drain_timer)
-		srv->drain_timer = loop_timer_add(srv->lp, 0, 0, drain_cb, srv);
+	arm_drain(srv);
 	return true;
 }
 
 static void finish_turn(struct client *c)
 {
-	if (c->closing && !c->outlen) {
+	if (c->closing && !c->refusing && !c->outlen) {
 		client_close(c);
 		return;
 	}
+	trim_buffers(c);
 	update_events(c);
 }
 
@@ -243,19 +342,31 @@ static void drain_cb(struct loop *lp, void *arg)
 	(void)lp;
 	struct server *srv = arg;
 	srv->drain_timer = 0;
-	uint64_t serials[MAX_CLIENTS];
+	srv->budget = LINES_PER_TURN;
+	uint64_t serials[MAX_CLIENTS + MAX_REFUSING];
 	int n = 0;
-	for (struct client *c = srv->clients; c && n < MAX_CLIENTS; c = c->next)
-		if (c->backlog) {
-			c->backlog = false;
+	for (struct client *c = srv->clients; c && n < MAX_CLIENTS + MAX_REFUSING; c = c->next)
+		if (c->backlog && !reading_paused(c))
 			serials[n++] = c->peer.serial;
-		}
-	for (int i = 0; i < n; i++) {
-		process_lines(srv, serials[i]);
-		struct client *c = client_by_serial(srv, serials[i]);
-		if (c)
+	if (!n)
+		return;
+	/* In rotation: this turn starts where the last one's budget ran out. */
+	int first = (int)(srv->rotation++ % (unsigned)n);
+	for (int j = 0; j < n && srv->budget > 0; j++) {
+		uint64_t serial = serials[(first + j) % n];
+		struct client *c = client_by_serial(srv, serial);
+		if (!c)
+			continue;
+		c->backlog = false;
+		process_lines(srv, serial);
+		if ((c = client_by_serial(srv, serial)))
 			finish_turn(c);
 	}
+	for (struct client *c = srv->clients; c; c = c->next)
+		if (c->backlog && !reading_paused(c)) {
+			arm_drain(srv);
+			break;
+		}
 }
 
 static void on_client(struct loop *lp, int fd, short revents, void *arg)
@@ -264,8 +375,29 @@ static void on_client(struct loop *lp, int fd, short revents, void *arg)
 	struct client *c = arg;
 	struct server *srv = c->srv;
 	uint64_t serial = c->peer.serial;
-	if (revents & POLLOUT)
+	if (revents & POLLOUT) {
+		bool was_paused = reading_paused(c);
 		flush_out(c);
+		if (was_paused && !reading_paused(c) && c->backlog) {
+			c->backlog = false; /* its buffered lines get their turn again */
+			process_lines(srv, serial);
+			if (!(c = client_by_serial(srv, serial)))
+				return;
+		}
+	}
+	if (c->refusing) {
+		/* Discard what it sends; close at EOF (or after linger_s, from the timeout check). */
+		if (revents & (POLLIN | POLLHUP | POLLERR)) {
+			char buf[4096];
+			ssize_t n = recv(fd, buf, sizeof buf, MSG_DONTWAIT);
+			if (n == 0 || (n < 0 && errno != EINTR && errno != EAGAIN)) {
+				client_close(c);
+				return;
+			}
+		}
+		update_events(c);
+		return;
+	}
 	/* With lines still buffered, read nothing more until they are handled (bounded memory). */
 	if ((revents & (POLLIN | POLLHUP | POLLERR)) && !c->closing && !c->backlog) {
 		char buf[65536];
@@ -319,20 +451,118 @@ enum proto_role server_role_of(const struct conf_daemon *d, uid_t uid)
 	return 0;
 }
 
-static void on_accept(struct loop *lp, int lfd, short revents, void *arg)
+static void on_client(struct loop *lp, int fd, short revents, void *arg);
+
+static int user_connections(const struct server *srv, const struct srv_peer *peer)
 {
-	(void)revents;
-	struct server *srv = arg;
-	int fd = accept4(lfd, NULL, NULL, SOCK_CLOEXEC | SOCK_NONBLOCK);
-	if (fd < 0)
-		return;
-	if (srv->nclients >= MAX_CLIENTS) {
-		static const char msg[] = "{\"id\":null,\"ok\":false,\"error\":{\"code\":\"unavailable\",\"message\":"
-					  "\"too many clients\"}}\n";
-		ssize_t w = send(fd, msg, sizeof msg - 1, MSG_NOSIGNAL | MSG_DONTWAIT);
-		(void)w;
+	int n = 0;
+	for (const struct client *c = srv->clients; c; c = c->next)
+		n += !c->refusing && c->peer.tcp == peer->tcp && (peer->tcp || c->peer.uid == peer->uid);
+	return n;
+}
+
+/* Keep a refused connection open for linger_s with its banner and refusal queued, reading and discarding
+ * its input: a client that writes its request before reading gets the refusal, not a broken pipe. */
+static void refuse(struct server *srv, int fd, const struct srv_peer *peer, const char *code, const char *msg)
+{
+	srv->stats.refused++;
+	double now = srv_now(srv);
+	if (now - srv->stats.refused_logged_at >= 10 || !strcmp(code, PROTO_E_FORBIDDEN)) {
+		srv->stats.refused_logged_at = now;
+		log_msg(LOG_NOTICE, "refused a client (uid %d%s): %s (%llu refused so far)", peer->tcp ? -1 : (int)peer->uid,
+			peer->tcp ? ", TCP" : "", msg, (unsigned long long)srv->stats.refused);
+	}
+	char *banner = proto_banner(srv->version);
+	char *err = proto_reply_err(NULL, code, msg);
+	struct client *c = srv->nrefusing < MAX_REFUSING ? calloc(1, sizeof *c) : NULL;
+	struct acq_err e = { 0 };
+	if (!c || loop_fd_add(srv->lp, fd, POLLIN | POLLOUT, on_client, c, &e)) {
+		/* Too many refusals at once: best effort, then close. */
+		if (banner)
+			(void)!send(fd, banner, strlen(banner), MSG_NOSIGNAL | MSG_DONTWAIT);
+		if (err)
+			(void)!send(fd, err, strlen(err), MSG_NOSIGNAL | MSG_DONTWAIT);
+		free(banner);
+		free(err);
+		free(c);
 		close(fd);
 		return;
+	}
+	c->fd = fd;
+	c->srv = srv;
+	c->peer = *peer;
+	c->peer.serial = ++srv->next_serial;
+	c->refusing = c->closing = true;
+	c->refused_at = now;
+	proto_lines_init(&c->in);
+	c->next = srv->clients;
+	srv->clients = c;
+	srv->nrefusing++;
+	c->closing = false; /* client_send drops lines to closing clients */
+	client_send(c, banner);
+	client_send(c, err);
+	c->closing = true;
+	update_events(c);
+}
+
+static void accept_one(struct server *srv, int lfd, int fd);
+
+/* Accept what is pending (a bounded number per turn): a connection flood must not fill the listen backlog,
+ * where a controller's connection would wait or be refused by the kernel without an answer. */
+static void on_accept(struct loop *lp, int lfd, short revents, void *arg)
+{
+	(void)lp;
+	(void)revents;
+	struct server *srv = arg;
+	for (int i = 0; i < ACCEPT_PER_TURN; i++) {
+		int fd = accept4(lfd, NULL, NULL, SOCK_CLOEXEC | SOCK_NONBLOCK);
+		if (fd < 0)
+			return;
+		accept_one(srv, lfd, fd);
+	}
+}
+
+static void accept_one(struct server *srv, int lfd, int fd)
+{
+	struct loop *lp = srv->lp;
+	struct srv_peer peer = { 0 };
+	if (lfd == srv->ufd) {
+		struct ucred cr;
+		socklen_t l = sizeof cr;
+		peer.uid = (uid_t)-1;
+		if (getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cr, &l) == 0) {
+			peer.uid = cr.uid;
+			peer.pid = cr.pid;
+			peer.role = server_role_of(srv->d, cr.uid);
+		}
+	} else {
+		/* Loopback TCP carries no credentials: read-only, for whoever is on this machine (see server.h). */
+		peer.tcp = true;
+		peer.uid = (uid_t)-1;
+		peer.role = PROTO_OBSERVER;
+	}
+	const struct server_limits *lim = &srv->lim;
+	char msg[160];
+	if (!peer.role) {
+		snprintf(msg, sizeof msg, "uid %u is neither a controller nor an observer of this daemon", (unsigned)peer.uid);
+		return refuse(srv, fd, &peer, PROTO_E_FORBIDDEN, msg);
+	}
+	if (srv->nclients >= lim->max_clients || srv->nclients >= MAX_CLIENTS) {
+		snprintf(msg, sizeof msg, "too many clients (%d connected)", srv->nclients);
+		return refuse(srv, fd, &peer, PROTO_E_UNAVAILABLE, msg);
+	}
+	if (peer.role < PROTO_CONTROLLER && srv->nclients >= lim->max_clients - lim->controller_reserve) {
+		snprintf(msg, sizeof msg, "too many clients: the last %d of %d slots are kept for controllers",
+			 lim->controller_reserve, lim->max_clients);
+		return refuse(srv, fd, &peer, PROTO_E_UNAVAILABLE, msg);
+	}
+	if (user_connections(srv, &peer) >= lim->per_user) {
+		if (peer.tcp)
+			snprintf(msg, sizeof msg, "too many clients: %d TCP connections already (the limit)", lim->per_user);
+		else
+			snprintf(msg, sizeof msg, "too many clients: uid %u has %d connections already (the limit per user)",
+				 (unsigned)peer.uid, lim->per_user);
+		return refuse(srv, fd, &peer, PROTO_E_UNAVAILABLE, msg);
 	}
 	struct client *c = calloc(1, sizeof *c);
 	if (!c) {
@@ -341,22 +571,10 @@ static void on_accept(struct loop *lp, int lfd, short revents, void *arg)
 	}
 	c->fd = fd;
 	c->srv = srv;
+	c->peer = peer;
 	c->peer.serial = ++srv->next_serial;
+	c->last_in = srv_now(srv);
 	proto_lines_init(&c->in);
-	if (lfd == srv->ufd) {
-		struct ucred cr;
-		socklen_t l = sizeof cr;
-		if (getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cr, &l) == 0) {
-			c->peer.uid = cr.uid;
-			c->peer.pid = cr.pid;
-			c->peer.role = server_role_of(srv->d, cr.uid);
-		}
-	} else {
-		/* Loopback TCP carries no credentials: read-only. */
-		c->peer.tcp = true;
-		c->peer.uid = (uid_t)-1;
-		c->peer.role = PROTO_OBSERVER;
-	}
 	struct acq_err err = { 0 };
 	if (loop_fd_add(lp, fd, POLLIN, on_client, c, &err)) {
 		close(fd);
@@ -367,14 +585,48 @@ static void on_accept(struct loop *lp, int lfd, short revents, void *arg)
 	srv->clients = c;
 	srv->nclients++;
 	client_send(c, proto_banner(srv->version));
-	if (!c->peer.role) {
+}
+
+/* Every TIMEOUT_TICK_S: refused connections past linger_s, output not read for stall_s, an incomplete line
+ * pending for partial_s, no request for idle_s (watchers and clients awaiting a reply are not idle). */
+static void timeout_cb(struct loop *lp, void *arg)
+{
+	(void)lp;
+	struct server *srv = arg;
+	const struct server_limits *lim = &srv->lim;
+	double now = srv_now(srv);
+	for (struct client *c = srv->clients, *next; c; c = next) {
+		next = c->next;
+		if (c->refusing) {
+			if (now - c->refused_at >= lim->linger_s)
+				client_close(c);
+			continue;
+		}
+		if (c->outlen && c->out_since && now - c->out_since >= lim->stall_s) {
+			log_msg(LOG_WARNING, "client %llu (uid %d): %zu bytes of replies unread for %.0f s; dropping it",
+				(unsigned long long)c->peer.serial, c->peer.tcp ? -1 : (int)c->peer.uid, c->outlen, lim->stall_s);
+			srv->stats.dropped_stalled++;
+			client_close(c);
+			continue;
+		}
+		if (c->closing)
+			continue;
 		char msg[128];
-		snprintf(msg, sizeof msg, "uid %u is neither a controller nor an observer of this daemon",
-			 (unsigned)c->peer.uid);
-		log_msg(LOG_NOTICE, "refused a client: %s", msg);
-		send_error(c, NULL, PROTO_E_FORBIDDEN, msg);
+		if (c->partial_since && now - c->partial_since >= lim->partial_s) {
+			snprintf(msg, sizeof msg, "incomplete line for %.0f s (a request ends with a newline): closing",
+				 lim->partial_s);
+			srv->stats.timed_out++;
+		} else if (!c->watch && !c->inflight && !c->outlen && !c->backlog && now - c->last_in >= lim->idle_s) {
+			snprintf(msg, sizeof msg, "no request for %.0f s: closing", lim->idle_s);
+			srv->stats.timed_out++;
+		} else {
+			continue;
+		}
+		log_msg(LOG_INFO, "client %llu (uid %d): %s", (unsigned long long)c->peer.serial,
+			c->peer.tcp ? -1 : (int)c->peer.uid, msg);
+		send_error(c, NULL, PROTO_E_STATE, msg);
 		c->closing = true;
-		update_events(c);
+		finish_turn(c);
 	}
 }
 
@@ -415,7 +667,7 @@ static int listen_unix(struct server *srv, const struct conf_daemon *d, struct a
 	}
 	if (chmod(d->socket_path, d->socket_mode) < 0)
 		return acq_errf(err, ACQ_E_IO, "%s: chmod: %s", d->socket_path, strerror(errno));
-	if (listen(srv->ufd, 64) < 0)
+	if (listen(srv->ufd, LISTEN_BACKLOG) < 0)
 		return acq_errf(err, ACQ_E_IO, "%s: listen: %s", d->socket_path, strerror(errno));
 	return loop_fd_add(srv->lp, srv->ufd, POLLIN, on_accept, srv, err);
 }
@@ -427,7 +679,7 @@ static int listen_tcp(struct server *srv, int port, struct acq_err *err)
 	srv->tfd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
 	int one = 1;
 	if (srv->tfd < 0 || setsockopt(srv->tfd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one) < 0 ||
-	    bind(srv->tfd, (struct sockaddr *)&sa, sizeof sa) < 0 || listen(srv->tfd, 64) < 0)
+	    bind(srv->tfd, (struct sockaddr *)&sa, sizeof sa) < 0 || listen(srv->tfd, LISTEN_BACKLOG) < 0)
 		return acq_errf(err, ACQ_E_IO, "127.0.0.1:%d: %s", port, strerror(errno));
 	return loop_fd_add(srv->lp, srv->tfd, POLLIN, on_accept, srv, err);
 }
@@ -438,11 +690,17 @@ int server_init(struct loop *lp, const struct conf_daemon *d, const char *versio
 	struct server *srv = calloc(1, sizeof *srv);
 	if (!srv)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	*srv = (struct server){ .lp = lp, .d = d, .fn = fn, .ctx = ctx, .ufd = -1, .tfd = -1 };
+	*srv = (struct server){ .lp = lp, .d = d, .fn = fn, .ctx = ctx, .ufd = -1, .tfd = -1,
+				.lim = server_default_limits, .now = loop_monotonic, .budget = LINES_PER_TURN };
 	snprintf(srv->version, sizeof srv->version, "%s", version);
 	if (listen_unix(srv, d, err) || (d->tcp_port && listen_tcp(srv, d->tcp_port, err))) {
 		server_finish(srv);
 		return -1;
+	}
+	srv->timeout_timer = loop_timer_add(lp, TIMEOUT_TICK_S, TIMEOUT_TICK_S, timeout_cb, srv);
+	if (!srv->timeout_timer) {
+		server_finish(srv);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
 	*out = srv;
 	return 0;
@@ -453,6 +711,7 @@ void server_finish(struct server *srv)
 	if (!srv)
 		return;
 	loop_timer_cancel(srv->lp, srv->drain_timer);
+	loop_timer_cancel(srv->lp, srv->timeout_timer);
 	while (srv->clients) {
 		flush_out(srv->clients);
 		client_close(srv->clients);
@@ -475,6 +734,24 @@ void server_set_conf(struct server *srv, const struct conf_daemon *d)
 	srv->d = d;
 }
 
+void server_set_limits(struct server *srv, const struct server_limits *lim)
+{
+	srv->lim = *lim;
+	if (srv->lim.max_clients > MAX_CLIENTS)
+		srv->lim.max_clients = MAX_CLIENTS;
+}
+
+void server_set_clock(struct server *srv, double (*now)(void *ctx), void *ctx)
+{
+	srv->now = now ? now : loop_monotonic;
+	srv->now_ctx = now ? ctx : NULL;
+}
+
+void server_get_stats(const struct server *srv, struct server_stats *st)
+{
+	*st = srv->stats;
+}
+
 void server_reply(struct server *srv, uint64_t serial, json_t *id, json_t *data)
 {
 	struct client *c = client_by_serial(srv, serial);
@@ -482,6 +759,8 @@ void server_reply(struct server *srv, uint64_t serial, json_t *id, json_t *data)
 		json_decref(data);
 		return;
 	}
+	if (c->inflight)
+		c->inflight--;
 	client_send(c, proto_reply_ok(id, data));
 }
 
@@ -493,6 +772,8 @@ int server_reply_fd(struct server *srv, uint64_t serial, json_t *id, json_t *dat
 		close(fd);
 		return -1;
 	}
+	if (c->inflight)
+		c->inflight--;
 	c->has_fd = true;
 	c->pass_fd = fd;
 	c->pass_at = c->outlen;
@@ -508,14 +789,17 @@ int server_reply_fd(struct server *srv, uint64_t serial, json_t *id, json_t *dat
 void server_reply_error(struct server *srv, uint64_t serial, json_t *id, const char *code, const char *msg)
 {
 	struct client *c = client_by_serial(srv, serial);
-	if (c)
-		send_error(c, id, code, msg);
+	if (!c)
+		return;
+	if (c->inflight)
+		c->inflight--;
+	send_error(c, id, code, msg);
 }
 
 void server_broadcast(struct server *srv, const char *event, json_t *data)
 {
 	int n = 0;
-	for (struct client *c = srv->clients; c; c = c->next)
+	for (const struct client *c = srv->clients; c; c = c->next)
 		n += c->watch && !c->closing;
 	if (!n) {
 		json_decref(data);
@@ -537,5 +821,5 @@ void server_counts(const struct server *srv, int *clients, int *watchers)
 	*clients = srv->nclients;
 	*watchers = 0;
 	for (const struct client *c = srv->clients; c; c = c->next)
-		*watchers += c->watch;
+		*watchers += c->watch && !c->refusing;
 }

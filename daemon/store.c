@@ -143,6 +143,12 @@ static int check_existing(const char *path, struct acq_err *err)
 		goto out;
 	}
 	int64_t ver = pragma_int(db, "PRAGMA user_version", &ok);
+	/* Ours always carries a schema version: application_id and user_version are set in one transaction. */
+	if (appid == STORE_APPLICATION_ID && ver == 0) {
+		acq_errf(err, ACQ_E_INVAL, "%s: carries acquisitiond's application_id but no schema version (%lld tables): "
+			 "not a database this daemon wrote; refusing to use it, left as is", path, (long long)ntables);
+		goto out;
+	}
 	if (ver > STORE_SCHEMA_VERSION) {
 		acq_errf(err, ACQ_E_UNSUPPORTED, "%s: schema version %lld is newer than this acquisitiond's (%d)", path,
 			 (long long)ver, STORE_SCHEMA_VERSION);
@@ -620,6 +626,21 @@ int store_recon_begin(struct store *st, int64_t sweep_id, const char *program, c
 	if (run1(st, s, err, "starting reconstruction run"))
 		return -1;
 	*run_id = sqlite3_last_insert_rowid(st->db);
+	return 0;
+}
+
+int store_recon_interrupted(struct store *st, double at, int *n, struct acq_err *err)
+{
+	*n = 0;
+	sqlite3_stmt *s = prep(st, "UPDATE recon_runs SET state = 'failed', finished_at = ?, output = "
+				   "'interrupted: the daemon stopped (crash or kill) during the run; its child died with it' "
+				   "|| CASE WHEN output IS NULL THEN '' ELSE char(10) || output END WHERE state = 'running'", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_double(s, 1, at);
+	if (run1(st, s, err, "marking interrupted reconstruction runs"))
+		return -1;
+	*n = sqlite3_changes(st->db);
 	return 0;
 }
 

@@ -98,6 +98,9 @@ int store_calibrated_put(struct store *st, int64_t sweep_id, int64_t point_id, c
 /* Start a reconstruction run record (args: JSON array text). 0 or -1. */
 int store_recon_begin(struct store *st, int64_t sweep_id, const char *program, const char *args, double at,
 		      int64_t *run_id, struct acq_err *err);
+/* Runs left 'running' by a daemon that died: 'failed' with "interrupted: ..." (the schema has no
+ * 'interrupted' state; the output says it). *n = runs marked. 0 or -1. */
+int store_recon_interrupted(struct store *st, double at, int *n, struct acq_err *err);
 /* Finish a run: state succeeded/failed/cancelled, exit status, captured output. 0 or -1. */
 int store_recon_end(struct store *st, int64_t run_id, const char *state, int exit_status, const char *output,
 		    double at, struct acq_err *err);

@@ -251,6 +251,8 @@ static int point_row(struct storenx *h, sqlite3_stmt *st, void *fn, void *ctx, s
 		p.actual[k] = real_or_nan(st, 6 + k);
 	p.state = (const char *)sqlite3_column_text(st, 9);
 	p.done_at = real_or_nan(st, 10);
+	for (int k = 0; k < 4; k++)
+		p.measured[k] = real_or_nan(st, 11 + k);
 	return ((int (*)(void *, const struct storenx_point *))fn)(ctx, &p);
 }
 
@@ -259,7 +261,8 @@ int storenx_points(struct storenx *h, int64_t id, int (*fn)(void *, const struct
 {
 	sqlite3_stmt *st = NULL;
 	if (sqlite3_prepare_v2(h->db, "SELECT id, order_index, theta_i, phi_i, theta_o, phi_o, laser_theta, "
-			       "detector_theta, detector_phi, state, done_at FROM points WHERE sweep_id = ? "
+			       "detector_theta, detector_phi, state, done_at, m_theta_i, m_phi_i, m_theta_o, m_phi_o "
+			       "FROM points WHERE sweep_id = ? "
 			       "ORDER BY order_index", -1, &st, NULL) != SQLITE_OK)
 		return db_fail(h, err, "reading points");
 	sqlite3_bind_int64(st, 1, id);

@@ -26,6 +26,7 @@ struct storenx_point {
 	int order_index;
 	double planned[4];  /* θi, φi, θo, φo, degrees */
 	double actual[3];   /* laser_theta, detector_theta, detector_phi, degrees (NAN: not reached) */
+	double measured[4]; /* θi, φi, θo, φo actually measured, sample frame, degrees (NAN: not done) */
 	const char *state;
 	double done_at;     /* NAN when not done */
 };

@@ -33,6 +33,7 @@ struct sweep {
 	int64_t done_id;
 	uint64_t done_timer;
 	struct recon_chain *chain;
+	bool unrecorded_logged;      /* the end of the sweep awaits being recorded (logged once) */
 };
 
 /* ---- events --------------------------------------------------------------------------------------- */
@@ -169,6 +170,25 @@ static void tick(struct loop *lp, void *arg)
 	snapshot(sw);
 	enum ex_state s = ex_state(sw->ex);
 	if (s == EX_COMPLETED || s == EX_ABORTED || s == EX_FAILED) {
+		struct acq_err err = { 0 };
+		if (ex_has_unrecorded(sw->ex) && ex_flush_unrecorded(sw->ex, &err)) {
+			/* The database and the daemon must not disagree on how the sweep ended: the executor stays
+			 * loaded (no new sweep) and the records are retried until the database takes them. */
+			if (!sw->unrecorded_logged)
+				log_msg(LOG_ERR, "sweep %lld %s, but the database refused to record it (%s): retrying every "
+					"2 s; no new sweep until then", (long long)sw->id, ex_state_name(s), err.msg);
+			sw->unrecorded_logged = true;
+			sw->last.state = SWEEP_FAULTED;
+			snprintf(sw->last.message, sizeof sw->last.message, "sweep %lld %s (%s); NOT recorded in the "
+				 "database yet: %s; retrying", (long long)sw->id, ex_state_name(s), ex_reason(sw->ex), err.msg);
+			const struct conf *c = sw->env.conf;
+			schedule(sw, now + 2.0 * (c->have_sim && c->sim.time_scale > 0 ? c->sim.time_scale : 1));
+			return;
+		}
+		if (sw->unrecorded_logged)
+			log_msg(LOG_NOTICE, "sweep %lld: its end (%s) is now recorded in the database", (long long)sw->id,
+				ex_state_name(s));
+		sw->unrecorded_logged = false;
 		sw->last.state = SWEEP_IDLE;
 		snprintf(sw->last.message, sizeof sw->last.message, "sweep %lld %s%s%s", (long long)sw->id,
 			 ex_state_name(s), ex_reason(sw->ex)[0] ? ": " : "", ex_reason(sw->ex));

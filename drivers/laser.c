@@ -53,3 +53,8 @@ const struct laser_identity *laser_identity(const struct laser *l)
 {
 	return l->be->identity(l->dev);
 }
+
+int laser_keepalive(struct laser *l, struct acq_err *err)
+{
+	return l->be->keepalive ? l->be->keepalive(l->dev, err) : 0;
+}

@@ -41,6 +41,9 @@ int laser_set_emission(struct laser *l, bool on, struct acq_err *err);
 int laser_set_power(struct laser *l, double pct, struct acq_err *err);
 /* Query emission, power, interlock, fault. 0 or -1. */
 int laser_status(struct laser *l, struct laser_status *st, struct acq_err *err);
+/* Refresh the laser's keep-alive (armed at open with keepalive_ms; emission stops if not refreshed within
+ * it). Call at least every keepalive_ms / 2. No-op when disarmed. 0 or -1 (emission then switched off). */
+int laser_keepalive(struct laser *l, struct acq_err *err);
 /* Identity read at open. */
 const struct laser_identity *laser_identity(const struct laser *l);
 

@@ -16,6 +16,7 @@ struct laser_backend {
 	int (*set_power)(struct laser_dev *dev, double pct, struct acq_err *err);
 	int (*status)(struct laser_dev *dev, struct laser_status *st, struct acq_err *err);
 	const struct laser_identity *(*identity)(const struct laser_dev *dev);
+	int (*keepalive)(struct laser_dev *dev, struct acq_err *err);  /* NULL: the backend has none */
 };
 
 extern const struct laser_backend laser_serial_backend;  /* drivers/laser_serial.c */
@@ -23,6 +24,8 @@ extern const struct laser_backend laser_fake_backend;    /* drivers/laser_fake.c
 
 /* The backend a parsed configuration selects (the configuration is parsed in drivers/laser_serial.c). */
 const struct laser_backend *laser_cfg_backend(const struct laser_cfg *cfg);
+/* The configuration's keepalive_ms (0: none). */
+int laser_cfg_keepalive_ms(const struct laser_cfg *cfg);
 /* The configuration's max_power_pct. */
 double laser_cfg_max_power(const struct laser_cfg *cfg);
 

@@ -10,6 +10,9 @@
  *   EMISSION?       → EMISSION <0|1>                           (answered by the simulator; the driver uses STATUS?)
  *   POWER <pct>     → OK | ERR <code> <text>                   (pct in [0, 100], decimal)
  *   POWER?          → POWER <pct>                              e.g. "POWER 42.0"
+ *   KEEPALIVE <ms>  → OK        arm the laser's watchdog: emission stops if no command arrives within ms
+ *                               (0 disarms); every command, and "KEEPALIVE" alone, refreshes it
+ *   KEEPALIVE       → OK
  *   STATUS?         → STATUS emission=<0|1> interlock=<0|1> fault=<code>
  *                     interlock=1 means closed (emission allowed); fault 0 = none
  *   any error       → ERR <code> <text>: 1 unknown command, 2 bad argument, 3 interlock open,
@@ -22,11 +25,12 @@
  * overlong line, a non-printable byte) is an ACQ_E_PROTO error quoting the line; "ERR n text" is
  * ACQ_E_DEVICE with detail = n.
  * Safety: open switches emission off; every failed call switches it off (best effort) before returning;
- * close switches it off.
+ * close switches it off. Open arms the laser's keep-alive (keepalive_ms, default 1000): a daemon that dies
+ * or stalls stops refreshing it (laser_keepalive(), called by its loop) and emission stops by itself.
  *
  * Config (devices.laser):
  *   device: /dev/ttyUSB0   baud: 115200   data_bits: 8   parity: none|odd|even   stop_bits: 1|2
- *   flow_control: none|xonxoff|rtscts      timeout_ms: 500     max_power_pct: 100
+ *   flow_control: none|xonxoff|rtscts      timeout_ms: 500     max_power_pct: 100     keepalive_ms: 1000
  *   transport: auto|serialport|termios      backend: serial (this file) | fake (drivers/laser_fake.c, tests)
  * With acq-sim, the device is the pty written in its ports file ("laser": {"device": "/dev/pts/N"}):
  * laser_cfg_set_device() puts it in.
@@ -59,6 +63,7 @@ struct laser_cfg {
 	char *device;
 	int baud, data_bits, parity, stop_bits, flow;
 	int timeout_ms;
+	int keepalive_ms;       /* 0: the laser's watchdog stays disarmed */
 	double max_power_pct;
 	int transport;          /* enum laser_transport */
 	int backend;            /* 0 serial (this file), 1 fake (drivers/laser_fake.c) */
@@ -103,7 +108,7 @@ int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err
 	static const char *const backends[] = { "serial", "fake", NULL };
 	int transport = 0, backend = 0;
 	const char *device = NULL;
-	long long baud = 115200, bits = 8, stop = 1, timeout = 500;
+	long long baud = 115200, bits = 8, stop = 1, timeout = 500, keepalive = 1000;
 	int parity = 0, flow = 0;
 	double maxp = 100;
 	if (yc_string(node, "device", false, &device, err) || yc_int(node, "baud", false, 50, 4000000, &baud, err) ||
@@ -111,10 +116,14 @@ int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err
 	    yc_int(node, "stop_bits", false, 1, 2, &stop, err) ||
 	    yc_enum(node, "flow_control", false, flows, &flow, err) ||
 	    yc_int(node, "timeout_ms", false, 1, 60000, &timeout, err) ||
+	    yc_int(node, "keepalive_ms", false, 0, 60000, &keepalive, err) ||
 	    yc_double(node, "max_power_pct", false, 0, 100, &maxp, err) ||
 	    yc_enum(node, "transport", false, transports, &transport, err) ||
 	    yc_enum(node, "backend", false, backends, &backend, err) || yc_check_unknown(node, "laser", err))
 		return -1;
+	if (keepalive && keepalive < 500) /* the daemon refreshes it every 250 ms */
+		return yc_errf(err, yc_get(node, "keepalive_ms"), "laser.keepalive_ms: %lld: expected 0 (off) or 500 to "
+			       "60000 ms", keepalive);
 	struct laser_cfg *c = calloc(1, sizeof *c);
 	if (!c || (device && !(c->device = strdup(device)))) {
 		free(c);
@@ -126,6 +135,7 @@ int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err
 	c->stop_bits = (int)stop;
 	c->flow = flow;
 	c->timeout_ms = (int)timeout;
+	c->keepalive_ms = (int)keepalive;
 	c->max_power_pct = maxp;
 	c->transport = transport;
 	c->backend = backend;
@@ -434,6 +444,14 @@ static int ls_open(const struct laser_cfg *cfg, struct laser_dev **out, struct a
 	snprintf(l->id.firmware, sizeof l->id.firmware, "%s", fw);
 	if (expect_ok(l, "EMISSION OFF", err))
 		goto fail;
+	if (cfg->keepalive_ms) {
+		char cmd[32];
+		snprintf(cmd, sizeof cmd, "KEEPALIVE %d", cfg->keepalive_ms);
+		if (expect_ok(l, cmd, err)) {
+			acq_err_prefix(err, "arming the keep-alive (devices.laser.keepalive_ms: 0 runs without): ");
+			goto fail;
+		}
+	}
 	*out = l;
 	return 0;
 fail:
@@ -500,6 +518,15 @@ static int ls_status(struct laser_dev *l, struct laser_status *st, struct acq_er
 	return 0;
 }
 
+static int ls_keepalive(struct laser_dev *l, struct acq_err *err)
+{
+	if (!l->cfg->keepalive_ms)
+		return 0;
+	if (expect_ok(l, "KEEPALIVE", err))
+		return fail_safe(l);
+	return 0;
+}
+
 static const struct laser_identity *ls_identity(const struct laser_dev *l)
 {
 	return &l->id;
@@ -507,12 +534,17 @@ static const struct laser_identity *ls_identity(const struct laser_dev *l)
 
 const struct laser_backend laser_serial_backend = {
 	.name = "serial", .open = ls_open, .close = ls_close, .set_emission = ls_set_emission,
-	.set_power = ls_set_power, .status = ls_status, .identity = ls_identity,
+	.set_power = ls_set_power, .status = ls_status, .identity = ls_identity, .keepalive = ls_keepalive,
 };
 
 const struct laser_backend *laser_cfg_backend(const struct laser_cfg *cfg)
 {
 	return cfg->backend == 1 ? &laser_fake_backend : &laser_serial_backend;
+}
+
+int laser_cfg_keepalive_ms(const struct laser_cfg *cfg)
+{
+	return cfg->keepalive_ms;
 }
 
 double laser_cfg_max_power(const struct laser_cfg *cfg)

@@ -26,6 +26,7 @@ struct opts {
 	const char *sock;
 	bool json, points, csv;
 	const char *out;       /* -o FILE (export, spectrum --csv) */
+	const char *format;    /* export --format csv|nexus */
 	const char *bench;     /* plan --config */
 	int timeout_ms;
 	double wait_s;         /* --wait: keep trying to connect this long */
@@ -85,7 +86,8 @@ static void usage(FILE *f)
 		   "(client side)\n");
 	fprintf(f, "\n--wait S: keep trying to connect for S seconds (a daemon starting up)\n");
 	fprintf(f, "\noptions after the command: --json, --points (plan), --config BENCH.yaml (plan, local dry run),\n"
-		   "  -o FILE (export, spectrum --csv: written by acqctl as you), --csv (spectrum)\n"
+		   "  -o FILE (export, spectrum --csv: written by acqctl as you), --csv (spectrum),\n"
+		   "  --format csv|nexus (export; nexus: the whole sweep as NeXus/HDF5, needs -o FILE or path=NAME)\n"
 		   "exit status: 0 ok, 1 refused by the daemon, 64 usage, 65 bad local input, 66 unreadable input,\n"
 		   "  69 no daemon answers, 70 internal error, 73 cannot write the output, 75 wait timed out,\n"
 		   "  76 protocol error\n"
@@ -294,7 +296,12 @@ static int copy_export(json_t *rep, int src)
 	}
 	long long rows = json_integer_value(json_object_get(rep, "rows"));
 	long long head = json_integer_value(json_object_get(rep, "header_lines"));
-	if (!rc && lines != rows + head)
+	bool nexus = json_is_string(json_object_get(rep, "format"));
+	long long want = json_integer_value(json_object_get(rep, "bytes"));
+	if (!rc && nexus && bytes != want)
+		rc = fail(CTL_EXIT_PROTOCOL, "io", "NeXus export of sweep %lld: %lld of %lld bytes received",
+			  (long long)json_integer_value(json_object_get(rep, "sweep")), bytes, want);
+	else if (!rc && !nexus && lines != rows + head)
 		rc = fail(CTL_EXIT_PROTOCOL, "io", "export of sweep %lld ended after %lld of %lld rows (see the daemon's log)",
 			  (long long)json_integer_value(json_object_get(rep, "sweep")), lines - head, rows);
 	if (O.out && close(out) && !rc)
@@ -304,6 +311,11 @@ static int copy_export(json_t *rep, int src)
 		json_object_set_new(rep, "output", O.out ? json_string(O.out) : json_null());
 		if (O.json)
 			print_json(rep);
+		else if (O.out && nexus)
+			fprintf(stdout, "sweep %lld: NeXus, %lld points, %lld calibrated, %lld bytes written to %s\n",
+				(long long)json_integer_value(json_object_get(rep, "sweep")),
+				(long long)json_integer_value(json_object_get(rep, "points")),
+				(long long)json_integer_value(json_object_get(rep, "calibrated")), bytes, O.out);
 		else if (O.out)
 			fprintf(stdout, "sweep %lld: %lld rows, %lld bytes written to %s\n",
 				(long long)json_integer_value(json_object_get(rep, "sweep")), rows, bytes, O.out);
@@ -567,6 +579,9 @@ int main(int argc, char **argv)
 				O.wait_s = x;
 			else
 				wait_timeout = x;
+		} else if (TAKES("-f", "--format")) {
+			if (!(O.format = val) || (strcmp(val, "csv") && strcmp(val, "nexus")))
+				return fail(CTL_EXIT_USAGE, "usage", "--format: expected csv or nexus");
 		} else if (TAKES("-o", "--output")) {
 			if (!(O.out = val))
 				return fail(CTL_EXIT_USAGE, "usage", "-o needs a file name");
@@ -678,6 +693,19 @@ int main(int argc, char **argv)
 		}
 	if (!strcmp(cmd, "plan") && O.points)
 		json_object_set_new(req, "points", json_true());
+	if (O.format && strcmp(cmd, "export")) {
+		rc = fail(CTL_EXIT_USAGE, "usage", "--format is an option of export");
+		goto out;
+	}
+	if (O.format)
+		json_object_set_new(req, "format", json_string(O.format));
+	if (!strcmp(cmd, "export") && !O.out && !json_object_get(req, "path") &&
+	    json_is_string(json_object_get(req, "format")) &&
+	    !strcmp(json_string_value(json_object_get(req, "format")), "nexus") && isatty(1)) {
+		rc = fail(CTL_EXIT_USAGE, "usage", "export --format nexus writes a binary HDF5 file: give -o FILE (or "
+			  "redirect the output)");
+		goto out;
+	}
 	if (!strcmp(cmd, "export") && O.json && !O.out && !json_object_get(req, "path")) {
 		rc = fail(CTL_EXIT_USAGE, "usage", "export --json prints the summary: give -o FILE for the CSV");
 		goto out;

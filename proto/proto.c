@@ -128,8 +128,9 @@ const struct proto_cmd proto_cmds[] = {
 	  { I("sweep", true, 1, ID_MAX) }, 1 },
 	{ "recon.status", PROTO_OBSERVER, "state of a reconstruction run (latest of a sweep, or by run id)",
 	  { I("sweep", false, 1, ID_MAX), I("run", false, 1, ID_MAX) }, 2 },
-	{ "export", PROTO_OBSERVER, "a sweep's calibrated samples as CSV (a stream passed to the client, or a new "
-	  "file NAME in the daemon's export folder)", { I("sweep", true, 1, ID_MAX), S("path", false, 255) }, 2 },
+	{ "export", PROTO_OBSERVER, "a sweep's calibrated samples as CSV, or format=nexus: the whole sweep as NeXus/HDF5 "
+	  "(a stream passed to the client, or a new file NAME in the daemon's export folder)",
+	  { I("sweep", true, 1, ID_MAX), S("path", false, 255), S("format", false, 16) }, 3 },
 	{ "spectrum", PROTO_OBSERVER, "one stored spectrum: kind, settings, wavelengths and counts",
 	  { I("spectrum", true, 1, ID_MAX) }, 1 },
 	{ "watch", PROTO_OBSERVER, "stream events (progress with ETA, device state, faults, recon)", { { 0 } }, 0 },

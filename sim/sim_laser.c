@@ -2,6 +2,10 @@
  * drivers/laser_serial.c; it writes world->laser_emission / laser_power_pct and obeys the interlock and fault
  * injections (emission forced off, STATUS reports them, EMISSION ON refused).
  *
+ * Keep-alive (the laser's own watchdog): "KEEPALIVE <ms>" arms it, and then emission stops when no command
+ * has arrived for ms of real time (whatever the bench's time scale: it stands for the laser's firmware
+ * timer); any command refreshes it, "KEEPALIVE" alone too. Expiries are counted in `keepalive_expired`.
+ *
  * Options (all optional), `sim: {laser: {...}}`: model, serial, firmware (ID? reply tokens). The device's
  * own config mapping (devices.laser) is not read: the pty path is chosen by the system and published by
  * describe() as "laser": {"device": "/dev/pts/N"}. */
@@ -15,6 +19,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <termios.h>
+#include <time.h>
 #include <unistd.h>
 
 #define SL_LINE_MAX 128
@@ -30,7 +35,17 @@ struct sim_laser {
 	bool overlong;
 	char out[4096];
 	size_t outlen;
+	int keepalive_ms;       /* 0: disarmed */
+	double last_cmd;        /* real monotonic seconds of the last command */
+	unsigned keepalive_expired;
 };
+
+static double real_now(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
 
 static void reply(struct sim_laser *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
@@ -87,6 +102,17 @@ static void command(struct sim_laser *s, const char *cmd)
 		}
 	} else if (!strcmp(cmd, "POWER?")) {
 		reply(s, "POWER %.1f", w->laser_power_pct);
+	} else if (!strcmp(cmd, "KEEPALIVE")) {
+		reply(s, "OK");
+	} else if (!strncmp(cmd, "KEEPALIVE ", 10)) {
+		char *end;
+		long v = strtol(cmd + 10, &end, 10);
+		if (end == cmd + 10 || *end || v < 0 || v > 600000)
+			reply(s, "ERR 2 keep-alive must be an integer in [0, 600000] ms");
+		else {
+			s->keepalive_ms = (int)v;
+			reply(s, "OK");
+		}
 	} else if (!strcmp(cmd, "STATUS?")) {
 		reply(s, "STATUS emission=%d interlock=%d fault=%d", w->laser_emission, !w->faults.laser_interlock_open,
 		      w->faults.laser_fault ? 1 : 0);
@@ -132,6 +158,7 @@ static void sl_handle(void *self, const struct pollfd *fds, int n, double now)
 			if (c == '\n') {
 				s->line[s->len] = '\0';
 				sl_tick(s, now); /* faults apply before the command is judged */
+				s->last_cmd = real_now();
 				if (s->overlong)
 					reply(s, "ERR 5 line too long");
 				else
@@ -155,6 +182,11 @@ static void sl_tick(void *self, double now)
 	struct sim_laser *s = self;
 	if (emission_blocked(s))
 		s->w->laser_emission = false;
+	if (s->keepalive_ms && s->w->laser_emission && real_now() - s->last_cmd > s->keepalive_ms * 1e-3) {
+		s->w->laser_emission = false;
+		s->keepalive_expired++;
+		fprintf(stderr, "acq-sim: laser: no command for %d ms: keep-alive expired, emission off\n", s->keepalive_ms);
+	}
 }
 
 static void sl_describe(void *self, char *buf, size_t len)

@@ -105,7 +105,9 @@ class RGL:
         spread=True also returns the interpolation tolerance of each value, in the same units: the range
         (max - min) of the table at the 8 corners used (4 per incidence node; the first-order change over one
         cell) plus 1/8 of the largest second difference there along the grid and the incidence (the curvature
-        term h^2/8 |g''| of linear interpolation, for a peak inside a cell)."""
+        term h^2/8 |g''| of linear interpolation, for a peak inside a cell); in the grid's first column, the pole,
+        the half vector moves like the square root of the warped coordinate, and that term is |A|/4 of the
+        sqrt(t) part instead (see _eval)."""
         wi, wo = np.atleast_2d(wi).astype(float), np.atleast_2d(wo).astype(float)
         parts = [self._eval(wi[a:a + chunk], wo[a:a + chunk], table) for a in range(0, len(wi), chunk)]
         val = np.concatenate([p[0] for p in parts])
@@ -153,5 +155,13 @@ class RGL:
             return np.abs(tab[lo[0], :, lo[1], lo[2]] - 2 * tab[kk, :, jj, ii] + tab[hi[0], :, hi[1], hi[2]])
         curv = np.stack([d2(kk, jj, ii, a) for kk in (k, k + 1) for jj in (j, j + 1) for ii in (i, i + 1)
                          for a in range(3)]).max(0)
+        # the first column of the warped grid (x = 0) is the pole: all its nodes are the normal, and near it the
+        # VNDF's density grows like theta_m (area element), so its conditional CDF s_x ~ theta_m^2 and the
+        # half vector moves like sqrt(s_x). A smooth f = f0 + grad f . w_m + O(theta_m^2) is then, across that
+        # cell (t = s_x / h), g = g0 + A sqrt(t) + B t: the lerp errs by up to |A|/4 (at t = 1/4), and with
+        # the nodes at t = 0, 1, 2, A = -(g0 - 2 g1 + g2)/(2 - sqrt 2). So there the curvature term is the
+        # second difference at column 1 times 2/(2 - sqrt 2) (= |A|/4 once divided by 8 below), not 1.
+        pole = np.stack([d2(kk, jj, np.ones_like(i), 2) for kk in (k, k + 1) for jj in (j, j + 1)]).max(0)
+        curv = np.where((i == 0)[:, None], np.maximum(curv, pole * (2 / (2 - np.sqrt(2)))), curv)
         spr = (corners.max(0) - corners.min(0) + curv / 8) * fac[:, None]
         return (val[:, 0], spr[:, 0]) if table == "luminance" else (val, spr)

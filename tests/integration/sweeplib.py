@@ -23,6 +23,19 @@ DAEMON = os.path.join(BUILD, "acquisitiond")
 SKIP = 77
 
 
+# A 52-point plan of 3 incidences x 18 directions (auto exposure): the crash, disk-full and soak runs.
+PLAN_3X18 = """name: it-3x18
+incidence:
+  theta_deg: [15, 40, 60]
+observation:
+  theta_deg: [25, 55, 75]
+  phi_deg: [0, 60, 120, 180, 240, 300]
+integration: {mode: auto, target_peak: 0.8, estimate_ms: 20, max_ms: 2000}
+averages: 4
+blind_points: drop
+"""
+
+
 class Skip(Exception):
     """A tool the test needs is genuinely absent from the machine: exit 77 with the reason (a missing or
     failing piece of this tree is a failure, never a skip)."""

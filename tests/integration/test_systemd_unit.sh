@@ -19,7 +19,7 @@ fi
 [ -z "$bad" ] || echo "verify notes: $bad"
 for d in "Type=notify" "StateDirectory=acquisitiond" "RuntimeDirectory=acquisitiond" "ProtectSystem=strict" \
          "DevicePolicy=closed" "DeviceAllow=char-ttyUSB rw" "DeviceAllow=char-usb_device rw" "NoNewPrivileges=yes" \
-         "SupplementaryGroups=dialout" "WatchdogSec=" "ExecReload=/bin/kill -HUP \$MAINPID"; do
+         "SupplementaryGroups=dialout" "WatchdogSec=" "ExecStopPost=-$ACQ_BUILD/acquisitiond --laser-off" "ExecReload=/bin/kill -HUP \$MAINPID"; do
   grep -qF "$d" "$unit" || { echo "FAIL: directive $d missing"; exit 1; }
 done
 grep -q 'ATTR{idVendor}=="1992"' "$ACQ_SRC/systemd/60-avaspec.rules" || { echo "FAIL: udev rule"; exit 1; }

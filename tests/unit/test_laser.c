@@ -21,6 +21,7 @@
 #include <cmocka.h>
 
 #include "drivers/laser.h"
+#include "drivers/laser_backend.h"
 #include "sim/sim.h"
 
 struct shared {
@@ -183,7 +184,7 @@ static int open_pty(char *path, size_t len, int *keep)
 }
 
 /* A child answering each command line with the next scripted reply (sent verbatim; NULL = stay silent);
- * "EMISSION OFF" is always answered "OK\n". Received lines are recorded in shared memory. */
+ * "EMISSION OFF" and "KEEPALIVE..." are always answered "OK\n". Received lines are recorded in shared memory. */
 static pid_t script_peer(int master, const char *const *script)
 {
 	sh->nlines = 0;
@@ -209,7 +210,8 @@ static pid_t script_peer(int master, const char *const *script)
 		len = 0;
 		if (sh->nlines < 32)
 			snprintf(sh->lines[sh->nlines++], sizeof sh->lines[0], "%s", line);
-		const char *r = !strcmp(line, "EMISSION OFF") ? "OK\n" : script[k] ? script[k++] : NULL;
+		const char *r = !strcmp(line, "EMISSION OFF") || !strncmp(line, "KEEPALIVE", 9) ? "OK\n"
+				: script[k] ? script[k++] : NULL;
 		if (r && write(master, r, strlen(r)) < 0)
 			for (;;)
 				pause();
@@ -327,6 +329,44 @@ static void test_dead_line_times_out(void **state)
 	laser_cfg_free(cfg);
 }
 
+/* Open arms the laser's keep-alive with the configured period; laser_keepalive() refreshes it; 0 disarms;
+ * a period the daemon's 250 ms refresh cannot hold is a configuration error. */
+static void test_keepalive(void **state)
+{
+	(void)state;
+	char path[128];
+	int keep, m = open_pty(path, sizeof path, &keep);
+	static const char *const script[] = { "ID M S F\n", NULL };
+	pid_t pid = script_peer(m, script);
+	struct laser_cfg *cfg = make_cfg(path, 200);
+	struct laser *l = NULL;
+	struct acq_err err = { 0 };
+	if (laser_open(cfg, &l, &err))
+		fail_msg("%s", err.msg);
+	assert_int_equal(laser_cfg_keepalive_ms(cfg), 1000);
+	assert_int_equal(laser_keepalive(l, &err), 0);
+	assert_true(sh->nlines >= 4);
+	assert_string_equal(sh->lines[2], "KEEPALIVE 1000");
+	assert_string_equal(sh->lines[3], "KEEPALIVE");
+	laser_close(l);
+	stop_child(pid);
+	close(m);
+	close(keep);
+	laser_cfg_free(cfg);
+	for (int k = 0; k < 2; k++) {
+		char text[256];
+		snprintf(text, sizeof text, "device: /dev/null\nkeepalive_ms: %d\n", k ? 0 : 200);
+		struct yc_doc *doc = NULL;
+		assert_int_equal(yc_load_string("laser.yaml", text, strlen(text), &doc, &err), 0);
+		struct laser_cfg *c = NULL;
+		assert_int_equal(laser_cfg_parse(yc_root(doc), &c, &err), k ? 0 : -1);
+		if (!k)
+			assert_non_null(strstr(err.msg, "laser.yaml:2"));
+		laser_cfg_free(c);
+		yc_free(doc);
+	}
+}
+
 static void test_config_errors(void **state)
 {
 	(void)state;
@@ -396,6 +436,7 @@ int main(void)
 		cmocka_unit_test(test_malformed_identity),
 		cmocka_unit_test(test_malformed_status_switches_emission_off),
 		cmocka_unit_test(test_dead_line_times_out),
+		cmocka_unit_test(test_keepalive),
 		cmocka_unit_test(test_config_errors),
 		cmocka_unit_test(test_example_configs),
 	};

@@ -1,0 +1,81 @@
+#!/usr/bin/python3
+"""The laser is off whenever nothing controls it: acquisitiond is SIGKILLed while the laser emits (a long
+manual `measure` on the simulated bench) and the time until the simulated laser stops emitting is measured.
+1. Keep-alive alone: the driver armed the laser's keep-alive (devices.laser.keepalive_ms, 1000 ms) and the
+   daemon's loop refreshed it every 250 ms; nobody refreshes it after the kill, so emission must stop within
+   1 s (asserted < 1.2 s: 0.2 s for scheduling the simulator's loop on a loaded 2-core machine). Before the
+   kill, emission must have lasted well past one keep-alive period (the refresh works).
+2. The unit's ExecStopPost= helper, `acquisitiond --laser-off`, run right after the kill: emission off when it
+   returns, exit 0 (confirmed by the laser's status).
+Without the keep-alive the emission stays on after a SIGKILL until a new daemon opens the laser."""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import sweeplib as L  # noqa: E402
+
+
+def emission(b):
+    return L.Bench.sim_status(b).get("emission") == "1"
+
+
+def start_long_measure(b):
+    """A manual measurement whose exposure lasts far longer than the test (bench time 600 s)."""
+    c = b.client()
+    c.n += 1
+    c.sock.sendall(('{"cmd":"measure","id":%d,"integration_ms":600000,"averages":1,"power_pct":10}\n' % c.n).encode())
+    t0 = time.time()
+    while not emission(b):
+        if time.time() - t0 > 10:
+            raise AssertionError("the laser never emitted; daemon log:\n" + b.daemon_text()[-3000:])
+        time.sleep(0.01)
+    return c
+
+
+def time_to_off(b, limit):
+    t0 = time.monotonic()
+    while emission(b):
+        if time.monotonic() - t0 > limit:
+            return None
+        time.sleep(0.005)
+    return time.monotonic() - t0
+
+
+def run():
+    b = L.Bench(scale=20)
+    try:
+        b.start_sim()
+        b.start_daemon()
+        b.ctl("sample white")
+        c = start_long_measure(b)
+        time.sleep(2.0)  # two keep-alive periods: the daemon's refresh keeps it on
+        assert emission(b), "emission stopped while the daemon was alive (keep-alive not refreshed)"
+        b.kill_daemon(signal.SIGKILL)
+        c.close()
+        dt = time_to_off(b, 5.0)
+        L.say("keep-alive: emission stopped %s after SIGKILL" % ("%.3f s" % dt if dt is not None else "NOT within 5 s"))
+        assert dt is not None, "emission still on 5 s after the daemon was killed"
+        assert dt < 1.2, "emission stopped %.3f s after the kill (keep-alive 1 s)" % dt
+        assert "keep-alive expired" in open(b.sim_log, errors="replace").read(), "the simulator did not log the expiry"
+
+        b.start_daemon()
+        c = start_long_measure(b)
+        b.kill_daemon(signal.SIGKILL)
+        t0 = time.monotonic()
+        r = subprocess.run([L.DAEMON, "--laser-off", "-c", b.conf, "--sim", b.ports], capture_output=True,
+                           text=True, timeout=30)
+        dt = time.monotonic() - t0
+        on = emission(b)
+        c.close()
+        L.say("ExecStopPost helper: rc %d in %.3f s, emission %s afterwards: %s" % (
+            r.returncode, dt, "ON" if on else "off", (r.stdout + r.stderr).strip()))
+        assert r.returncode == 0, "acquisitiond --laser-off failed: " + r.stdout + r.stderr
+        assert not on, "emission still on after acquisitiond --laser-off"
+    finally:
+        b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
+
+
+L.main(run)
