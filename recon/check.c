@@ -23,7 +23,7 @@ int recon_check(const struct recon_model *m, size_t npairs, size_t nalb, uint64_
 	/* the independent rule (Gauss-Legendre in cos²θo), 48 × 96 refined up to 192 × 384 */
 	int cmu = 48, cphi = 96;
 	size_t cq;
-	recon_lobe_rule(m, ALB_NMU_MAX, &cmu, &cphi, &cq);
+	recon_lobe_rule(m, ALB_NMU_MAX, 0, &cmu, &cphi, &cq);
 	if (recon_albedo_ws_init(&ws, m, cq, err))
 		goto out;
 	struct recon_rng r;

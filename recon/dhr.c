@@ -15,11 +15,6 @@
 /* Misfit counted beyond 3σ_g and 0.02 in the transformed space (2 % in f for the log transform). */
 #define MISFIT_Z 3.0
 #define MISFIT_MIN 0.02
-/* The prior on the unseen part of the hemisphere (recon/reconstruction.md): ln f has the GP amplitude
- * PRIOR_ALPHA (prior std √(α K(x, x)) ≈ 1-1.4, a factor e) where no sample is within PRIOR_R0 (chordal, product
- * metric: 0.35 ≈ 20°; the paper's 10 × 10 × 10 plan leaves no node of the DHR at 8-60° that far). */
-#define PRIOR_ALPHA 1.0
-#define PRIOR_R0 0.35
 #define DHR_FLOOR 1e-300  /* refined to 1e-3 relative: an absolute floor let two rules agree on a missed lobe */
 
 /*
@@ -80,41 +75,10 @@ static int model_variance(const struct recon_model *m, size_t Q, const double *c
 }
 
 /*
- * Misfit: the data the smoothed model does not honour. The fit's residual at sample k is r = η·λ_k·w_k (from
- * (K + ηΛ)w = g − μ); it counts where it exceeds both MISFIT_Z σ_g and MISFIT_MIN (a noise-level residual is the
- * smoothing doing its job). In BRDF units Δf = f̂_k(e^r − 1) (log transform; (ĝ + r)² − ĝ² for sqrt), into
- * df[k*L + l], 0 where the sample is honoured.
- */
-static int misfit_df(const struct recon_model *m, double *df, struct acq_err *err)
-{
-	size_t n = m->n, L = m->nwl;
-	double *wk = malloc(recon_eval_work_size(m) * sizeof *wk);
-	if (!wk)
-		return acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
-	recon_eval_canon(m, n, m->ctr, 1, df, wk); /* df[k*L + l] = f̂ at the samples */
-	free(wk);
-	for (size_t k = 0; k < n; k++)
-		for (size_t l = 0; l < L; l++) {
-			double r = m->eta * m->lam[k] * m->w[l * n + k], sg = m->gsig[l * n + k], fh = df[k * L + l], d = 0;
-			if (fabs(r) > MISFIT_Z * sg && fabs(r) > MISFIT_MIN) {
-				if (m->transform == RECON_T_SQRT) {
-					double gh = sqrt(fh);
-					d = (gh + r) * (gh + r) - fh;
-				} else {
-					d = fh * expm1(fmin(r, G_MAX));
-				}
-			}
-			df[k * L + l] = isfinite(d) ? d : 0.0;
-		}
-	return 0;
-}
-
-/*
  * At one incidence's Q nodes c6 (weights × energy factor in scale[q*L + l]): fold the GP amplitude into the
- * sensitivities C, α_λ where samples are near and α_λ + PRIOR_ALPHA where none is (the prior on the unseen part
- * of the hemisphere: a node farther than PRIOR_R0 from every sample in the product metric, reciprocal images
- * included, is partly unseen, beyond 2·PRIOR_R0 wholly, smoothstep between); and add up the misfit of the
- * nearest sample over the nodes within PRIOR_R0 of it (nearest-neighbour quadrature of Δf, signed) into mis[L].
+ * sensitivities C, α_λ where samples are near and α_λ + RECON_PRIOR_ALPHA where none is (recon_unseen: the prior
+ * on the unseen part of the hemisphere); and add up the misfit of the
+ * nearest sample over the nodes within RECON_PRIOR_R0 of it (nearest-neighbour quadrature of Δf, signed) into mis[L].
  */
 static void unseen_and_misfit(const struct recon_model *m, size_t Q, const double *c6, const double *scale,
 			      const double *alpha, const double *dfmis, double *C, double *mis)
@@ -123,14 +87,84 @@ static void unseen_and_misfit(const struct recon_model *m, size_t Q, const doubl
 	for (size_t q = 0; q < Q; q++) {
 		size_t k;
 		double d = recon_nearest_centre(m, c6 + 6 * q, &k);
-		if (d <= PRIOR_R0)
+		if (d <= RECON_PRIOR_R0)
 			for (size_t l = 0; l < L; l++)
 				mis[l] += scale[q * L + l] * dfmis[k * L + l];
-		double u = (d - PRIOR_R0) / PRIOR_R0;
-		u = u <= 0 ? 0 : u >= 1 ? 1 : u * u * (3 - 2 * u);
+		double u = recon_unseen(d);
 		for (size_t l = 0; l < L; l++)
-			C[q * L + l] *= sqrt(alpha[l] + u * PRIOR_ALPHA);
+			C[q * L + l] *= sqrt(alpha[l] + u * RECON_PRIOR_ALPHA);
 	}
+}
+
+/*
+ * Resolution in the incidence angle: the samples fix the model at the incidences they were taken at (every θi and,
+ * by reciprocity, every θo of the data); between them the DHR is an interpolation the data do not check. A lobe
+ * narrower than that spacing (a sharp specular lobe that moves with θi) shows as a DHR at θi far from the cubic
+ * through the DHRs at the two sampled incidences below and the two above it (the line through the two
+ * bracketing ones where fewer exist). For a resolved material the cubic is within O(h⁴) of the curve (a line
+ * would not be: at 60° on a microfacet paint its curvature term alone made σ five times too large,
+ * test_recon_honesty). res[l] = |DHR(θi) − interpolant|; 0 at a sampled incidence (within 0.25°) or outside
+ * the sampled range.
+ */
+static int resolution(const struct recon_model *m, double theta, int nmu, int nphi, struct albedo_ws *ws,
+		      const double *dhr, double *res, struct acq_err *err)
+{
+	size_t L = m->nwl;
+	double lo[2] = { -INFINITY, -INFINITY }, hi[2] = { INFINITY, INFINITY }, tol = 0.25 * M_PI / 180;
+	for (size_t k = 0; k < 2 * m->n; k++) { /* the two nearest distinct sampled incidences on each side */
+		double a = m->ang[4 * (k / 2) + 2 * (k % 2)];
+		if (fabs(a - theta) <= tol)
+			return 0; /* sampled */
+		if (a < theta) {
+			if (a > lo[0] + tol) {
+				lo[1] = lo[0];
+				lo[0] = a;
+			} else if (a < lo[0] - tol && a > lo[1] + tol) {
+				lo[1] = a;
+			}
+		} else {
+			if (a < hi[0] - tol) {
+				hi[1] = hi[0];
+				hi[0] = a;
+			} else if (a > hi[0] + tol && a < hi[1] - tol) {
+				hi[1] = a;
+			}
+		}
+	}
+	if (!isfinite(lo[0]) || !isfinite(hi[0]))
+		return 0;
+	double x[4];
+	int np = 0;
+	if (isfinite(lo[1]) && isfinite(hi[1]))
+		x[np++] = lo[1];
+	x[np++] = lo[0];
+	x[np++] = hi[0];
+	if (np == 3)
+		x[np++] = hi[1];
+	double *dv = malloc((size_t)np * L * sizeof *dv);
+	if (!dv)
+		return acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
+	int rc = 0;
+	for (int i = 0; i < np && !rc; i++)
+		rc = recon_albedo_adaptive(m, x[i], nmu, nphi, ALB_NMU_MAX, 0, 1, TAB_TOL, DHR_FLOOR, -HUGE_VAL, ws,
+					   dv + (size_t)i * L, NULL, err);
+	if (!rc) {
+		double w[4]; /* Lagrange weights at θ */
+		for (int i = 0; i < np; i++) {
+			w[i] = 1;
+			for (int j = 0; j < np; j++)
+				if (j != i)
+					w[i] *= (theta - x[j]) / (x[i] - x[j]);
+		}
+		for (size_t l = 0; l < L; l++) {
+			double p = 0;
+			for (int i = 0; i < np; i++)
+				p += w[i] * fmin(dv[(size_t)i * L + l], 1.0);
+			res[l] = fabs(dhr[l] - p);
+		}
+	}
+	free(dv);
+	return rc ? -1 : 0;
 }
 
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
@@ -174,11 +208,12 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	double *U = malloc(Q * L * sizeof *U), *Bt = malloc(L * n * sizeof *Bt), *X = malloc(L * n * sizeof *X);
 	double *Ainv = malloc(n * n * sizeof *Ainv), *alpha = calloc(L, sizeof *alpha);
 	double *dfmis = malloc(n * L * sizeof *dfmis), *misacc = calloc(nth * L, sizeof *misacc);
+	double *sres = calloc(nth * L, sizeof *sres);
 	double *vmod = calloc(nth * L, sizeof *vmod), *squad = calloc(nth * L, sizeof *squad);
 	double *tb = malloc(nth * Q * TREND_NB * sizeof *tb);
 	struct albedo_ws ws = { 0 };
 	if (!Kq || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud || !C || !KQQ || !soaQ || !U ||
-	    !Bt || !X || !Ainv || !alpha || !dfmis || !misacc || !vmod || !squad || !tb) {
+	    !Bt || !X || !Ainv || !alpha || !dfmis || !misacc || !sres || !vmod || !squad || !tb) {
 		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
 		goto out;
 	}
@@ -218,7 +253,7 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 			acc += m->w[l * n + k] * m->w[l * n + k] / Ainv[k * n + k];
 		alpha[l] = acc / (double)n;
 	}
-	if (misfit_df(m, dfmis, err))
+	if (recon_misfit(m, MISFIT_Z, MISFIT_MIN, dfmis, NULL, err) < 0)
 		goto out;
 	/* draw 0 is the nominal model; draws 1..ndraws are perturbed */
 	struct recon_rng r;
@@ -281,7 +316,7 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	 * the quadrature term of σ. */
 	int dmu = DHR_NMU, dphi = DHR_NPHI;
 	size_t dq;
-	recon_lobe_rule(m, ALB_NMU_MAX, &dmu, &dphi, &dq);
+	recon_lobe_rule(m, ALB_NMU_MAX, 0, &dmu, &dphi, &dq);
 	if (recon_albedo_ws_init(&ws, m, dq, err))
 		goto out;
 	for (size_t t = 0; t < nth; t++) {
@@ -293,11 +328,13 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 				squad[t * L + l] += dhr[t * L + l] - 1.0;
 				dhr[t * L + l] = 1.0;
 			}
+		if (resolution(m, theta[t], dmu, dphi, &ws, dhr + t * L, sres + t * L, err))
+			goto out;
 	}
 	for (size_t i = 0; i < nth * L; i++) {
 		double sn = ndraws > 1 ? sqrt(m2[i] / (ndraws - 1)) : 0.0, sm = sqrt(vmod[i]);
 		double sb = sn > sm ? sn : sm, smis = fmin(fabs(misacc[i]), 1.0);
-		sig[i] = sqrt(sb * sb + squad[i] * squad[i] + smis * smis);
+		sig[i] = sqrt(sb * sb + squad[i] * squad[i] + smis * smis + sres[i] * sres[i]);
 		if (parts->noise)
 			parts->noise[i] = sn;
 		if (parts->model)
@@ -306,6 +343,8 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 			parts->quad[i] = squad[i];
 		if (parts->misfit)
 			parts->misfit[i] = smis;
+		if (parts->res)
+			parts->res[i] = sres[i];
 		if (!isfinite(sig[i]) || !isfinite(dhr[i])) {
 			acq_errf(err, ACQ_E_NUMERIC, "dhr: non-finite result");
 			goto out;
@@ -333,6 +372,7 @@ out:
 	free(alpha);
 	free(dfmis);
 	free(misacc);
+	free(sres);
 	free(vmod);
 	free(squad);
 	free(tb);

@@ -52,7 +52,13 @@ double recon_energy_scale(const struct recon_model *m, double ti, double to, siz
  * (nch × n; m->w itself when chan is NULL). out is b × nch, row-major.
  */
 void recon_eval_block(const struct recon_model *m, size_t b, const double *c6, int scaled, size_t nch,
-		       const size_t *chan, const double *wsub, double *out, double *work)
+		      const size_t *chan, const double *wsub, double *out, double *work)
+{
+	recon_eval_block_part(m, b, c6, scaled, RECON_PART_ALL, nch, chan, wsub, out, work);
+}
+
+void recon_eval_block_part(const struct recon_model *m, size_t b, const double *c6, int scaled, int part, size_t nch,
+			   const size_t *chan, const double *wsub, double *out, double *work)
 {
 	size_t n = m->n;
 	rbf_kmatrix_soa(m->kernel, m->shape, b, c6, n, m->soa, work);
@@ -64,13 +70,24 @@ void recon_eval_block(const struct recon_model *m, size_t b, const double *c6, i
 		const double *ai = m->tab_alb, *ao = m->tab_alb;
 		double tb[TREND_NB];
 		trend_at(m, c, tb);
+		if (part != RECON_PART_ALL) /* split at the lobe terms: [0, TREND_LOBE) and [TREND_LOBE, TREND_NB) */
+			for (int j = 0; j < TREND_NB; j++)
+				if ((j >= TREND_LOBE) == (part == RECON_PART_NOLOBE))
+					tb[j] = 0;
 		if (scaled && m->ntab >= 2) {
 			ai += recon_tab_interval(m, theta_of(c)) * m->nwl;
 			ao += recon_tab_interval(m, theta_of(c + 3)) * m->nwl;
 		}
 		for (size_t k = 0; k < nch; k++) {
 			size_t l = chan ? chan[k] : k;
-			double f = untransform(m->transform, out[q * nch + k] + m->mu[l], m->eps[l], trend_factor(m, tb, l));
+			double f;
+			if (part == RECON_PART_LOBE) { /* T_lobe·e^g: ≥ 0, no offset */
+				double g = out[q * nch + k] + m->mu[l];
+				f = trend_val(m, tb, l) * exp(g < G_MAX ? g : G_MAX);
+				f = f < 1e300 ? f : 1e300;
+			} else {
+				f = untransform(m->transform, out[q * nch + k] + m->mu[l], m->eps[l], trend_factor(m, tb, l));
+			}
 			if (scaled && m->ntab >= 2)
 				f *= energy_scale_of(ai[l], ao[l]);
 			out[q * nch + k] = f;
@@ -156,4 +173,46 @@ double recon_nearest_centre(const struct recon_model *m, const double *c6, size_
 	if (kmin)
 		*kmin = bk;
 	return sqrt(best);
+}
+
+/*
+ * The data the final model does not honour: at each sample, the measured value (from the stored transformed
+ * data g, relative to the trend) against the final (smoothed, energy-scaled) model. Smoothing and the energy
+ * factor may both pull the model away from a sample: a lobe narrower than the kernel allows cannot keep its
+ * peak under the albedo bound.
+ */
+long recon_misfit(const struct recon_model *m, double zlim, double rmin, double *df, struct recon_misfit_worst *worst,
+		  struct acq_err *err)
+{
+	size_t n = m->n, L = m->nwl;
+	double *wk = malloc(recon_eval_work_size(m) * sizeof *wk);
+	if (!wk)
+		return acq_errf(err, ACQ_E_NOMEM, "misfit: out of memory");
+	recon_eval_canon(m, n, m->ctr, 1, df, wk); /* df[k*L + l] = f̂ at the samples */
+	free(wk);
+	long count = 0;
+	double wr = 0;
+	for (size_t k = 0; k < n; k++) {
+		double tb[TREND_NB];
+		trend_at(m, m->ctr + 6 * k, tb);
+		for (size_t l = 0; l < L; l++) {
+			double g = m->g[l * n + k], sg = m->gsig[l * n + k], fh = df[k * L + l], tf = trend_factor(m, tb, l);
+			double ghat = m->transform == RECON_T_SQRT ? sqrt(fh) : log((fh + m->eps[l]) / tf);
+			double r = fabs(g - ghat), d = 0;
+			if (isfinite(r) && r > rmin && isfinite(sg) && r > zlim * sg) {
+				double fd = untransform(m->transform, g, m->eps[l], tf);
+				d = fd - fh;
+				count++;
+				if (worst && fabs(d) > wr) {
+					wr = fabs(d);
+					worst->k = k;
+					worst->l = l;
+					worst->data = fd;
+					worst->model = fh;
+				}
+			}
+			df[k * L + l] = isfinite(d) ? d : 0.0;
+		}
+	}
+	return count;
 }

@@ -13,6 +13,15 @@
 
 #define RECON_MAX_N 8000
 #define MERGE_TOL 1e-9
+/* A sample the final model does not honour (fit warning): beyond 5σ_g and 0.02 in the transformed space (with
+ * 1 % noise 550 × 651 values would put hundreds beyond 3σ by chance, none beyond 5σ). */
+#define FIT_MISFIT_Z 5.0
+#define FIT_MISFIT_MIN 0.02
+/* The trend is a candidate only with at least TREND_MIN_DIRS distinct directions whose incidence (the smaller
+ * zenith of the pair, reciprocity) spans TREND_MIN_SPAN: a lobe seen at one incidence only (normal incidence
+ * data) says nothing of where the lobe goes at others, and the trend would invent it there. */
+#define TREND_MIN_DIRS 24
+#define TREND_MIN_SPAN (20.0 * M_PI / 180.0)
 
 /* Median by quickselect (Hoare partition), O(n); reorders v. */
 static double median(double *v, size_t n)
@@ -398,6 +407,16 @@ static int fit_transform(struct fitwork *F, struct acq_err *err)
 	const unsigned char *imp = F->imp;
 	int any_sig = F->any_sig;
 	double *tlog = NULL, *tbas = NULL;
+	if (m->trend == RECON_TREND_GGX && o->trend < 0) { /* auto: is the trend admissible on these directions? */
+		double lo = INFINITY, hi = -INFINITY;
+		for (size_t j = 0; j < n; j++) {
+			double t = fmin(m->ang[4 * j], m->ang[4 * j + 2]);
+			lo = fmin(lo, t);
+			hi = fmax(hi, t);
+		}
+		if (n < TREND_MIN_DIRS || !(hi - lo >= TREND_MIN_SPAN))
+			m->trend = RECON_TREND_NONE;
+	}
 	F->cand_ggx = m->trend == RECON_TREND_GGX && o->trend < 0;
 	F->ncand = F->cand_ggx ? 2 : 1; /* candidate 0: none, 1: ggx */
 	m->tcoef = calloc(L * TREND_NB, sizeof *m->tcoef);
@@ -677,12 +696,74 @@ static int fit_solve(struct fitwork *F, struct acq_err *err)
 	return 0;
 }
 
+/*
+ * What the samples cannot support, as "warning=" lines for the metadata (brdf-recon fit prints them, info shows
+ * them): too few distinct directions; parts of the hemisphere no sample is near (the unseen fraction of the
+ * cosine-weighted hemisphere at θi = 0, 10, .., 80°: there a hemisphere-wide quantity rests on the prior,
+ * recon_unseen); samples the final model does not honour (beyond 5σ); a leave-one-out RMS above 1 in ln f.
+ */
+static int fit_warnings(struct fitwork *F, char *buf, size_t cap, struct acq_err *err)
+{
+	struct recon_model *m = F->m;
+	size_t n = m->n, L = m->nwl, at = 0;
+	buf[0] = 0;
+#define WARN(...) do { int k_ = snprintf(buf + at, cap - at, "warning=" __VA_ARGS__); \
+		if (k_ > 0) at = at + (size_t)k_ < cap ? at + (size_t)k_ : cap - 1; } while (0)
+	if (n < TREND_MIN_DIRS)
+		WARN("only %zu distinct directions: hemisphere-wide quantities (DHR, albedo) rest mostly on the prior\n", n);
+	double c6[16 * 24 * 6], wt[16 * 24], worst = 0, wth = 0;
+	for (int t = 0; t <= 8; t++) {
+		double th = t * 10.0 * M_PI / 180.0, u = 0;
+		recon_hemi_nodes(th, 16, 24, 0, c6, wt);
+		for (size_t q = 0; q < 16 * 24; q++)
+			u += wt[q] * recon_unseen(recon_nearest_centre(m, c6 + 6 * q, NULL));
+		u /= M_PI;
+		if (u > worst) {
+			worst = u;
+			wth = t * 10.0;
+		}
+	}
+	if (worst > 0.2)
+		WARN("%.0f%% of the cosine-weighted hemisphere at theta_i = %g deg has no sample within 20 deg: "
+		     "hemisphere-wide quantities (DHR, albedo) there rest on the prior (dhr sigma_model says how much)\n",
+		     100 * worst, wth);
+	double *df = malloc(n * L * sizeof *df);
+	if (!df)
+		return acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
+	struct recon_misfit_worst w = { 0 };
+	long nm = recon_misfit(m, FIT_MISFIT_Z, FIT_MISFIT_MIN, df, &w, err);
+	free(df);
+	if (nm < 0)
+		return -1;
+	if (nm > 0) {
+		const double *a = m->ang + 4 * w.k;
+		WARN("%ld sample values are not honoured by the model beyond 5 sigma (worst: theta_i %.1f, phi_i %.1f, "
+		     "theta_o %.1f, phi_o %.1f deg at %g nm: data %.4g, model %.4g 1/sr); smoothing %g: %s\n", nm,
+		     a[0] * 180 / M_PI, a[1] * 180 / M_PI, a[2] * 180 / M_PI, a[3] * 180 / M_PI, m->wl[w.l], w.data,
+		     w.model, m->eta,
+		     w.model < w.data ? "a feature narrower than the sampling, or the energy bound (albedo <= 1) of a lobe "
+					"that narrow; dhr sigma_misfit counts it"
+				      : "no setting that honours every sample also predicted held-out samples");
+	}
+	if (m->tab_capped)
+		WARN("the energy table reached its work budget (a model with lobes far narrower than its kernel): its "
+		     "bound is coarser; run brdf-recon check\n");
+	if (m->loo_rms > 1.0)
+		WARN("leave-one-out RMS %.3g in ln f: a held-out sample is predicted only to a factor %.3g; the samples "
+		     "do not determine the BRDF between them\n", m->loo_rms, exp(m->loo_rms));
+#undef WARN
+	return 0;
+}
+
 /* The energy table of the unscaled interpolant, and the metadata. */
 static int fit_finish(struct fitwork *F, struct acq_err *err)
 {
 	const struct recon_fit_opts *o = F->o;
 	struct recon_model *m = F->m;
 	if (recon_energy_table(m, err, o->progress, o->progress_ctx))
+		return -1;
+	char warn[1024];
+	if (fit_warnings(F, warn, sizeof warn, err))
 		return -1;
 	char when[32];
 	time_t now = time(NULL);
@@ -692,11 +773,11 @@ static int fit_finish(struct fitwork *F, struct acq_err *err)
 	snprintf(m->meta, sizeof m->meta,
 		 "software=acquisitiond %s\ncreated=%s\nsource=%s\nrows=%zu\nrows_dropped_empty=%zu\n"
 		 "rows_merged=%zu\nvalues_imputed=%zu\nuncertainties=%s\nloo_rms_transformed=%.6g\n"
-		 "rcond=%.6g\nalbedo_margin=%.6g\ntrend=%s\ntrend_alpha=%.6g\ntrend_rms_log=%.6g\nsymmetry=isotropic%s\n",
+		 "rcond=%.6g\nalbedo_margin=%.6g\ntrend=%s\ntrend_alpha=%.6g\ntrend_rms_log=%.6g\nsymmetry=isotropic%s\n%s",
 		 ACQ_VERSION, when, o->source ? o->source : "-", F->n0, F->dropped, F->merged, F->imputed,
 		 F->have_sig ? "given" : "leave-one-out", m->loo_rms, m->rcond, m->alb_margin, trend_name(m->trend),
 		 m->trend_alpha, F->trend_rms,
-		 F->phi_i_varies ? " (phi_i varies in the data: azimuths taken relative to phi_i)" : "");
+		 F->phi_i_varies ? " (phi_i varies in the data: azimuths taken relative to phi_i)" : "", warn);
 	for (char *p = m->meta; *p; p++) /* keep metadata printable */
 		if ((unsigned char)*p < 0x20 && *p != '\n')
 			*p = '?';

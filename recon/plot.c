@@ -209,6 +209,57 @@ static int resolve_range(double *lo, double *hi, double dlo, double dhi, int nic
 	return 0;
 }
 
+/* The residual panel between pixel rows top and bottom under the plot frame f (same x mapping): r->y in units of
+ * σ, symmetric range at least ±3, lines at 0 and ±2, points joined. -1 if no point is finite. */
+static int residual_panel(cairo_t *cr, const struct plot_frame *f, const struct plot_curve *r, double top, double bottom)
+{
+	double m = 3;
+	size_t ok = 0;
+	for (size_t i = 0; r->wl && r->y && i < r->n; i++)
+		if (point_ok(r, i)) {
+			m = fmax(m, fabs(r->y[i]) * 1.1);
+			ok++;
+		}
+	if (!ok || bottom - top < 16)
+		return -1;
+	m = fmin(m, 1e6);
+	struct plot_frame g = *f;
+	g.px_top = top;
+	g.px_bottom = bottom;
+	g.y_min = -m;
+	g.y_max = m;
+	char lab[32];
+	cairo_set_font_size(cr, 11);
+	for (int k = -2; k <= 2; k += 2) {
+		double py = round(plot_y_to_px(&g, k)) + 0.5;
+		cairo_set_source_rgb(cr, k ? 0.75 : 0.4, k ? 0.3 : 0.4, k ? 0.3 : 0.4);
+		cairo_set_line_width(cr, 1);
+		cairo_move_to(cr, g.px_left, py);
+		cairo_line_to(cr, g.px_right, py);
+		cairo_stroke(cr);
+		cairo_set_source_rgb(cr, 0, 0, 0);
+		snprintf(lab, sizeof lab, "%+d", k);
+		text_at(cr, k ? lab : "0", g.px_left - 8, py, 1, 0.5);
+	}
+	cairo_save(cr);
+	cairo_rectangle(cr, g.px_left, g.px_top, g.px_right - g.px_left, g.px_bottom - g.px_top);
+	cairo_clip(cr);
+	line_path(cr, &g, r);
+	cairo_set_source_rgb(cr, 0.1, 0.1, 0.1);
+	cairo_set_line_width(cr, 1.5);
+	cairo_stroke(cr);
+	cairo_restore(cr);
+	cairo_set_source_rgb(cr, 0, 0, 0);
+	cairo_rectangle(cr, g.px_left + 0.5, g.px_top + 0.5, g.px_right - g.px_left - 1, g.px_bottom - g.px_top - 1);
+	cairo_stroke(cr);
+	cairo_save(cr);
+	cairo_translate(cr, 16, (g.px_top + g.px_bottom) / 2);
+	cairo_rotate(cr, -M_PI / 2);
+	text_at(cr, r->label && *r->label ? r->label : "residual / \xcf\x83", 0, 0, 0.5, 0);
+	cairo_restore(cr);
+	return 0;
+}
+
 int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurves, const struct plot_curve *reference,
 		 const struct plot_dhr_opts *o, struct plot_frame *frame, struct acq_err *err)
 {
@@ -254,6 +305,8 @@ int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurv
 	f.px_right = W - 18;
 	f.px_top = o->title ? 42 : 18;
 	f.px_bottom = H - 58;
+	double panel = o->residual ? floor(0.26 * (H - 58 - f.px_top)) : 0; /* residual panel below the axes */
+	f.px_bottom -= panel;
 	if (f.px_right - f.px_left < 16 || f.px_bottom - f.px_top < 16)
 		return acq_errf(err, ACQ_E_INVAL, "plot: image %d × %d too small for the axes", o->width, o->height);
 
@@ -422,6 +475,9 @@ int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurv
 			text_at(cr, bandtxt, bx + 8, y + rowh / 2, 0, 0.5);
 		}
 	}
+
+	if (o->residual && residual_panel(cr, &f, o->residual, f.px_bottom + 26, H - 58) != 0)
+		cairo_set_source_rgb(cr, 0, 0, 0); /* nothing drawable: the panel stays empty */
 
 	cairo_surface_flush(surf);
 	int rc = 0;

@@ -24,6 +24,8 @@ struct plot_dhr_opts {
 	const char *y_label; /* default "DHR" */
 	double x_min, x_max; /* axis range; NaN (default) = automatic (data range) */
 	double y_min, y_max; /* NaN (default) = automatic (0 .. nice value above max y + k·σ) */
+	const struct plot_curve *residual; /* NULL (default) or a lower panel: y = (model − reference)/σ (both
+					    * uncertainties), with lines at 0 and ±2; its label names it (recon side) */
 };
 
 /* Where the data went: plot area in pixels (left, top, right, bottom edges) and the axis ranges. */

@@ -81,13 +81,15 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 		       int scaled, size_t nch, struct albedo_ws *ws, double *acc, struct acq_err *err)
 {
 	size_t Q = (size_t)nmu * (size_t)nphi;
-	if (Q > ws->qmax || recon_hemi_nodes(theta_i, nmu, nphi, square_rule, ws->c6, ws->wt))
+	if (Q > ws->qmax || (ws->part == RECON_PART_LOBE ? recon_hv_nodes(theta_i, m->trend_alpha, nmu, nphi, ws->c6, ws->wt)
+						       : recon_hemi_nodes(theta_i, nmu, nphi, square_rule, ws->c6, ws->wt)))
 		return acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", nmu, nphi);
 	for (size_t k = 0; k < nch; k++)
 		acc[k] = 0;
 	for (size_t q0 = 0; q0 < Q; q0 += RECON_EVAL_BLOCK) {
 		size_t b = Q - q0 < RECON_EVAL_BLOCK ? Q - q0 : RECON_EVAL_BLOCK;
-		recon_eval_block(m, b, ws->c6 + 6 * q0, scaled, nch, ws->chan, ws->wsub, ws->vals, ws->work);
+		recon_eval_block_part(m, b, ws->c6 + 6 * q0, scaled, ws->part, nch, ws->chan, ws->wsub, ws->vals, ws->work);
+		ws->evals += (double)b * (double)m->n * (1.0 + (double)nch / 64.0);
 		for (size_t q = 0; q < b; q++)
 			for (size_t k = 0; k < nch; k++)
 				acc[k] += ws->wt[q0 + q] * ws->vals[q * nch + k];
@@ -105,7 +107,7 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
  * nmu, nphi are raised to it (at most nmu_max/2 so one doubling fits); *qmax is the size of the finest rule
  * the ladder can reach.
  */
-void recon_lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *nphi, size_t *qmax)
+void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe, int *nmu, int *nphi, size_t *qmax)
 {
 	double H = 0;
 	if (m->transform != RECON_T_SQRT)
@@ -119,7 +121,7 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *np
 			H = fmax(H, hi - lo);
 		}
 	double s = m->shape / sqrt(20.0 * (H + 1.0)); /* radians */
-	if (m->trend == RECON_TREND_GGX) {
+	if (m->trend == RECON_TREND_GGX && !no_trend_lobe) {
 		double lobe = 0;
 		for (size_t l = 0; l < m->nwl; l++) {
 			double sum = 0; /* the lobe terms' albedo is ≤ the sum of their coefficients */
@@ -150,7 +152,8 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *np
  * the channels still disagreeing are evaluated again, so one narrow lobe does not make every channel pay
  * for the finest rule. A channel is also done once fine + 4·|fine − coarse| ≤ below with |fine − coarse| ≤
  * TAB_BELOW_DIFF (the energy table only
- * compares its bound, fine + 2·|fine − coarse|, with 1: a value clearly below needs no more digits; −∞ turns
+ * compares its bound, fine + 2·|fine − coarse|, with 1: a value clearly below needs no more digits; with
+ * ws->offset the rest of a split albedo is added to the comparison; −∞ turns
  * this off). out[l] is the finest value; diff[l] (may be NULL) the last |fine − coarse|, or 0 when no
  * doubling fits under nmu_max.
  */
@@ -180,7 +183,8 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 			out[l] = ws->fine[k];
 			if (diff)
 				diff[l] = d;
-			if (!(d <= tol * ref) && !(ws->fine[k] + 4.0 * d <= below && d <= TAB_BELOW_DIFF)) {
+			double off = ws->offset ? ws->offset[l] : 0.0; /* the rest of a split albedo (fine + 4d) */
+			if (!(d <= tol * ref) && !(ws->fine[k] + 4.0 * d + off <= below && d <= TAB_BELOW_DIFF)) {
 				if (keep != k) {
 					ws->chan[keep] = l;
 					memmove(ws->wsub + keep * n, ws->wsub + k * n, n * sizeof *ws->wsub);
@@ -189,6 +193,40 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 			}
 		}
 		nch = keep;
+	}
+	return 0;
+}
+
+int recon_hv_nodes(double theta_i, double alpha, int nu, int nphi, double *c6, double *wt)
+{
+	double x[256], w[256];
+	if (nu > 256 || rbf_gauss_legendre01(nu, x, w) || !(alpha > 0))
+		return -1;
+	double si = sin(theta_i), ci = cos(theta_i), wi[3] = { si, 0, ci }, a2 = alpha * alpha;
+	size_t k = 0;
+	for (int i = 0; i < nu; i++) {
+		/* tan²θh = α² u/(1 − u); dωh = sinθh dθh dφ = (α² + t²)² / (2α²(1 + t²)^{3/2}) du dφ, t = tanθh */
+		double u = x[i], t2 = a2 * u / (1 - u), t = sqrt(t2), ch = 1 / sqrt(1 + t2), sh = t * ch;
+		double jac = (a2 + t2) * (a2 + t2) / (2 * a2 * (1 + t2) * sqrt(1 + t2));
+		for (int j = 0; j < nphi; j++) {
+			double p = (j + 0.5) * M_PI / nphi;
+			double h[3] = { sh * cos(p), sh * sin(p), ch }; /* about the normal, the specular half vector */
+			double d = wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2];
+			double wo[3] = { 2 * d * h[0] - wi[0], 2 * d * h[1] - wi[1], 2 * d * h[2] - wi[2] };
+			double weight = 0;
+			if (d > 0 && wo[2] > 1e-12) {
+				weight = w[i] * jac * (2.0 * M_PI / nphi) * 4 * d * wo[2];
+			} else {
+				wo[0] = -wi[0];
+				wo[1] = 0;
+				wo[2] = wi[2] > 1e-12 ? wi[2] : 1e-12; /* any valid point; weight 0 */
+			}
+			double to = acos(fmin(1, fmax(0, wo[2] / sqrt(wo[0] * wo[0] + wo[1] * wo[1] + wo[2] * wo[2]))));
+			double po = atan2(wo[1], wo[0]);
+			rbf_canon(theta_i, 0.0, to, po, c6 + 6 * k);
+			wt[k] = weight;
+			k++;
+		}
 	}
 	return 0;
 }

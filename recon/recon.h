@@ -60,6 +60,7 @@ struct recon_model {
 	double *tab_theta;   /* [ntab] increasing nodes from 0 to π/2 (10° apart, bisected where needed) */
 	double *tab_alb;     /* [(ntab-1)*nwl] upper bound of the albedo on each interval, row-major */
 	double alb_margin;   /* largest quadrature-error margin included in tab_alb (albedo units) */
+	int tab_capped;      /* the table reached its work budget (energy.c; fit only, not stored) */
 	double loo_rms;      /* leave-one-out RMS residual in the transformed space (all channels) */
 	double rcond;        /* reciprocal condition number estimate of K + Λ (dpocon) */
 	char meta[2048];     /* key=value lines: source, sizes, merges, imputations, version, time */
@@ -104,15 +105,17 @@ int recon_albedo(const struct recon_model *m, double theta_i, int nmu, int nphi,
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err);
 /* The parts of the DHR's standard uncertainty, each [nth*nwl] like the DHR (any may be NULL); recon_dhr's σ is
- * √(max(noise, model)² + quad² + misfit²) (dhr.c, recon/reconstruction.md):
+ * √(max(noise, model)² + quad² + misfit² + res²) (dhr.c, recon/reconstruction.md):
  *  noise  the samples' uncertainties propagated by Monte Carlo through the one factorisation;
  *  model  the interpolation error between samples (GP posterior variance, amplitude from the leave-one-out
  *         residuals) including the prior on the unseen part of the hemisphere;
  *  quad   the quadrature error (last refinement step plus any overshoot above 1);
- *  misfit the data the smoothed model does not honour (nearest-neighbour quadrature of the significant
- *         residuals of the fit). */
+ *  misfit the data the final model does not honour (nearest-neighbour quadrature of its significant
+ *         differences from the samples: smoothing, energy scaling);
+ *  res    resolution in θi: distance of the DHR from the line between the DHRs at the bracketing sampled
+ *         incidences (a lobe narrower than the incidence spacing). σ adds misfit² + res² to the above. */
 struct recon_dhr_parts {
-	double *noise, *model, *quad, *misfit;
+	double *noise, *model, *quad, *misfit, *res;
 };
 /* recon_dhr with its uncertainty split into parts (may be NULL). */
 int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,

@@ -84,9 +84,41 @@ static inline double theta_of(const double *v)
 void recon_eval_block(const struct recon_model *m, size_t b, const double *c6, int scaled, size_t nch,
 		      const size_t *chan, const double *wsub, double *out, double *work);
 
+/* Parts of the interpolant f̂ = max(0, (T + ε)e^g − ε), T = T_smooth + T_lobe (the trend's Lambertian and
+ * coated-diffuse terms, and its GGX lobe terms): all of it; max(0, (T_smooth + ε)e^g − ε); T_lobe·e^g. The
+ * two parts add up to at least f̂ (max(0, a + b) ≤ max(0, a) + b for b ≥ 0), so their albedos bound f̂'s. */
+enum { RECON_PART_ALL = 0, RECON_PART_NOLOBE = 1, RECON_PART_LOBE = 2 };
+/* recon_eval_block for one part of the interpolant (eval.c). */
+void recon_eval_block_part(const struct recon_model *m, size_t b, const double *c6, int scaled, int part, size_t nch,
+			   const size_t *chan, const double *wsub, double *out, double *work);
+
 /* Distance (chordal, product metric: |Δωi|² + |Δωo|², the reciprocal image included) from canonical point c6 to
  * the nearest centre of the model, whose index goes to *kmin (may be NULL) (eval.c). */
 double recon_nearest_centre(const struct recon_model *m, const double *c6, size_t *kmin);
+
+/* The prior on the unseen part of the hemisphere (recon/reconstruction.md): a direction pair farther than
+ * RECON_PRIOR_R0 (chordal, product metric: 0.35 ≈ 20°) from every sample is partly unseen, beyond twice that
+ * wholly; there ln f has the GP amplitude RECON_PRIOR_ALPHA (prior std √(α K(x, x)) ≈ 1-1.4, a factor e). The
+ * paper's 10 × 10 × 10 plan leaves no node of the DHR at 8-60° that far. */
+#define RECON_PRIOR_R0 0.35
+#define RECON_PRIOR_ALPHA 1.0
+/* How unseen a point at distance d from the nearest sample is: 0 within R0, 1 beyond 2·R0, smoothstep between. */
+static inline double recon_unseen(double d)
+{
+	double u = (d - RECON_PRIOR_R0) / RECON_PRIOR_R0;
+	return u <= 0 ? 0 : u >= 1 ? 1 : u * u * (3 - 2 * u);
+}
+
+/* The worst sample of recon_misfit: index k (merged direction), channel l, measured and model values (sr⁻¹). */
+struct recon_misfit_worst {
+	size_t k, l;
+	double data, model;
+};
+/* Samples the final model does not honour: |g_k − ĝ_k| (transformed units) > max(rmin, zlim·σ_g). Fills
+ * df[k*L + l] = data − model (sr⁻¹) there and 0 elsewhere, worst (may be NULL) with the largest |data − model|; returns
+ * the count, or -1 with err (eval.c). */
+long recon_misfit(const struct recon_model *m, double zlim, double rmin, double *df, struct recon_misfit_worst *worst,
+		  struct acq_err *err);
 
 /* Hemisphere nodes at θi (quad.c): nmu × nphi canonical points c6 and weights wt (cosθo included); square_rule =
  * Gauss-Legendre in cos²θo (the checker's independent rule). Returns -1 on a bad size. */
@@ -95,14 +127,23 @@ int recon_hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double 
 /* Workspace of recon_albedo_adaptive, sized for the finest rule it may reach. */
 struct albedo_ws {
 	size_t qmax, L;
+	int part;     /* RECON_PART_*: which part of the interpolant; the lobe part is integrated over half vectors */
+	double evals; /* work so far in kernel evaluations, a channel's GEMM counting 1/64 of one (measured: a
+		       * Wendland row value ≈ 3.5 ns, a multiply-add of the GEMM ≈ 0.05 ns); for budgets */
+	const double *offset; /* [L] or NULL: added to a channel's value in the "clearly below" test (split albedo) */
 	double *c6, *wt, *work, *vals, *wsub, *fine;
 	size_t *chan;
 };
 /* Allocate for rules of up to qmax nodes (-1 with err on failure); free (idempotent). */
 int recon_albedo_ws_init(struct albedo_ws *ws, const struct recon_model *m, size_t qmax, struct acq_err *err);
 void recon_albedo_ws_free(struct albedo_ws *ws);
-/* Raise the starting rule nmu × nphi to the narrowest lobe the model can make; *qmax the finest rule reachable. */
-void recon_lobe_rule(const struct recon_model *m, int nmu_max, int *nmu, int *nphi, size_t *qmax);
+/* Raise the starting rule nmu × nphi to the narrowest lobe the model can make (without the trend's own lobe when
+ * no_trend_lobe: the energy table integrates that over half vectors); *qmax the finest rule reachable. */
+void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe, int *nmu, int *nphi, size_t *qmax);
+/* Half-vector nodes about the mirror of θi for a GGX lobe of roughness α (quad.c): nu nodes in u = tan²θh/(α² +
+ * tan²θh) (Gauss-Legendre) × nphi azimuths of h over [0, π] (mirror doubled); canonical points c6 and weights wt
+ * (dωo = 4(ωo·h) dωh, cosθo included, 0 below the horizon). */
+int recon_hv_nodes(double theta_i, double alpha, int nu, int nphi, double *c6, double *wt);
 /* Albedo of every channel at θi by doubling rules (quad.c has the full contract); out[L], diff[L] may be NULL. */
 int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, int nphi, int nmu_max,
 			  int square_rule, int scaled, double tol, double floor, double below, struct albedo_ws *ws,

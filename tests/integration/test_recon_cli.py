@@ -68,11 +68,14 @@ def main():
     out, z = os.path.join(d, "d.csv"), os.path.join(d, "z.csv")
     p = run("dhr", m, "--theta-i", "8,30,60", "--draws", "16", "--seed", str(SEED), "--reference", ref,
             "--z-out", z, "-o", out, "--plot", os.path.join(d, "dhr.png"))
-    assert "reference" in p.stderr
+    assert "reference" in p.stderr and "agreement" in p.stderr and "chi2/n" in p.stderr
     dd = np.genfromtxt(out, delimiter=",", skip_header=1)
-    assert dd.shape == (18, 7) and np.all(np.isfinite(dd)) and np.all(dd[:, 3] > 0)
-    assert np.allclose(dd[:, 3] ** 2, np.maximum(dd[:, 4], dd[:, 5]) ** 2 + dd[:, 6] ** 2, rtol=1e-6)  # max(noise, model), + quad
+    # theta_i,wavelength_nm,dhr,sigma, noise, model, quad, misfit, res, cert, drift, wlcal, nonlin
+    assert dd.shape == (18, 13) and np.all(np.isfinite(dd)) and np.all(dd[:, 3] > 0)
+    assert np.allclose(dd[:, 3] ** 2, np.maximum(dd[:, 4], dd[:, 5]) ** 2 + np.sum(dd[:, 6:] ** 2, axis=1), rtol=1e-6)
     assert np.all(dd[:, 6] >= 0) and np.all(dd[:, 6] <= 2e-3 * dd[:, 2])  # smooth lobe: rule converged
+    assert np.all(dd[:, 9:] == 0)  # no systematic component given: 0 (and said on stderr)
+    assert "are 0" in p.stderr
     zz = np.genfromtxt(z, delimiter=",", skip_header=1)
     print("z-scores at 8 degrees:", np.round(zz[:, 5], 2))
     assert zz.shape[0] == 6 and np.all(np.abs(zz[:, 5]) < 3)
@@ -80,11 +83,39 @@ def main():
     print("DHR relative errors:", np.round(rel, 4))
     assert np.all(rel[:6] < 0.01) and np.all(rel < 0.10)
     assert os.path.getsize(os.path.join(d, "dhr.png")) > 1000
+    # the budget's systematic components: a reference 3 % above the truth (a certificate off by 3 %) disagrees
+    # without them and agrees with a certificate of 2 % standard uncertainty (a correlated component: chi2/n with
+    # it as one common factor stays small, where treating it as independent noise would not be tested at all)
+    ref3 = os.path.join(d, "ref3.csv")
+    with open(ref3, "w") as fh:
+        fh.write("wavelength_nm,dhr,sigma\n")
+        for row in tr[tr[:, 0] == 8]:
+            fh.write("%.10g,%.10g,%.10g\n" % (row[1], 1.03 * row[2], 0.002 * row[2]))
+    cert = os.path.join(d, "cert.csv")
+    with open(cert, "w") as fh:
+        fh.write("wavelength_nm,rho,u\n400,0.99,0.0198\n1200,0.99,0.0198\n")
+
+    def agreement(*extra):
+        p = run("dhr", m, "--theta-i", "8", "--draws", "8", "--reference", ref3, "-o", out, *extra)
+        line = [x for x in p.stderr.splitlines() if "agreement" in x][0]
+        share = float(line.split("agreement ")[1].split("%")[0])
+        chi2 = float(line.split("chi2/n ")[1].split()[0])
+        return share, chi2, np.genfromtxt(out, delimiter=",", names=True)
+    share0, chi0, _ = agreement()
+    share1, chi1, b1 = agreement("--cert", cert, "--wl-cal-nm", "0.5", "--drift-rel", "0.001", "--nonlin-rel", "0.002")
+    print("reference 3 %% high: agreement %.0f %% (chi2/n %.3g) without the certificate, %.0f %% (chi2/n %.3g) with it"
+          % (share0, chi0, share1, chi1))
+    assert share0 < 50 and share1 == 100 and chi1 < chi0
+    assert np.allclose(b1["sigma_cert"], 0.02 * b1["dhr"], rtol=1e-9)
+    assert np.allclose(b1["sigma_drift"], 0.001 * b1["dhr"], rtol=1e-9)
+    assert np.allclose(b1["sigma_nonlin"], 0.002 * b1["dhr"], rtol=1e-9)
+    assert np.all(b1["sigma_wlcal"] >= 0) and np.any(b1["sigma_wlcal"] > 0)
+    p = run("info", m)
+    assert "directions=" in p.stdout and "budget at theta_i=8" in p.stdout and "sigma_cert" in p.stdout
     # check: the three properties
     p = run("check", m, "--pairs", "20000", "--thetas", "8", "--seed", str(SEED))
     print(p.stdout)
     assert p.stdout.count("ok  ") == 3
-    assert "directions=" in run("info", m).stdout
     # merl: size, header, no-data cells, finite non-negative values
     mb = os.path.join(d, "t.binary")
     run("merl", m, "-o", mb)

@@ -1,0 +1,289 @@
+/* Unit tests of the reconstruction's honesty at the extremes of issue 13, each on a truth of its own:
+ *  - three samples, and one direction pair repeated 2000 times: the DHR's σ covers the truth at 8/30/60° (the
+ *    prior on the unseen part of the hemisphere, recon_unseen) and the fit warns;
+ *  - normal incidence only (θi = 0, all θo and φo) of a rough diffuse with an opposition peak: no trend (a lobe
+ *    seen at one incidence says nothing of other incidences), evaluations stay within 3× the truth, σ covers the
+ *    DHR, the fit warns about the unseen hemisphere at grazing incidence;
+ *  - a sharp Ward lobe (α = 0.01) over a 1e-8 sr⁻¹ floor, sampled at its mirror directions: the fit says which
+ *    samples it does not honour, and σ covers the DHR that the smoothed model misses;
+ *  - log-uniform random values over 12 decades (1000 rows): the fit ends (the energy table's work budget; its
+ *    time is measured by `make bench`), warns (leave-one-out RMS), and the bound still holds (recon_check).
+ * Before (main at the start of session 4): three samples |z| < 2 on 0-33 %, repeats nowhere (σ 1e-5), normal
+ * incidence 900× the truth, the Ward lobe DHR 7e-5 with σ ~1e-4 and no warning, the random case 147 s. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <cmocka.h>
+#include <time.h>
+
+#include "recon_test_util.h"
+
+#define NWL 4
+#define NTH 3
+static const double th_deg[NTH] = { 8, 30, 60 };
+
+typedef double (*truth_fn)(const double a[4], double wl);
+
+static double t_phong(const double a[4], double wl)
+{
+	return rt_truth(a, wl, 1.0);
+}
+
+/* Oren-Nayar-like rough diffuse (σ = 0.5) with an opposition (backscatter) peak of 8° about ωi = ωo. */
+static double t_oren(const double a[4], double wl)
+{
+	double rho = 0.3 + 0.2 * (wl - 450) / 650;
+	double s2 = 0.25, A = 1 - 0.5 * s2 / (s2 + 0.33), B = 0.45 * s2 / (s2 + 0.09);
+	double al = fmax(a[0], a[2]), be = fmin(a[0], a[2]), cph = cos(a[3] - a[1]);
+	double on = A + B * fmax(0, cph) * sin(al) * tan(fmin(be, 1.5));
+	double wi[3] = { sin(a[0]) * cos(a[1]), sin(a[0]) * sin(a[1]), cos(a[0]) };
+	double wo[3] = { sin(a[2]) * cos(a[3]), sin(a[2]) * sin(a[3]), cos(a[2]) };
+	double c = fmin(1, fmax(-1, wi[0] * wo[0] + wi[1] * wo[1] + wi[2] * wo[2])), g = acos(c) / (8 * M_PI / 180);
+	return rho / M_PI * on * (1 + exp(-g * g));
+}
+
+/* Ward's isotropic lobe, α = 0.01, k_s = 0.25, over a floor of 1e-8 sr⁻¹ (grey). */
+static double t_ward(const double a[4], double wl)
+{
+	(void)wl;
+	double wi[3] = { sin(a[0]) * cos(a[1]), sin(a[0]) * sin(a[1]), cos(a[0]) };
+	double wo[3] = { sin(a[2]) * cos(a[3]), sin(a[2]) * sin(a[3]), cos(a[2]) };
+	double h[3] = { wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2] }, hn = sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
+	double ch = fmax(h[2] / hn, 1e-9), t2 = (1 - ch * ch) / (ch * ch), al = 0.01;
+	double ci = fmax(wi[2], 1e-4), co = fmax(wo[2], 1e-4);
+	return 1e-8 + 0.25 * exp(-t2 / (al * al)) / (4 * M_PI * al * al * sqrt(ci * co));
+}
+
+/* Samples of truth f at n direction pairs ang (radians), 1 % noise + floor. */
+static void make_samples(struct recon_samples *s, size_t n, const double *ang, truth_fn f, double floor)
+{
+	memset(s, 0, sizeof *s);
+	s->n = n;
+	s->nwl = NWL;
+	s->wl = malloc(NWL * sizeof *s->wl);
+	s->ang = malloc(n * 4 * sizeof *s->ang);
+	s->deg = malloc(n * 4 * sizeof *s->deg);
+	s->val = malloc(n * NWL * sizeof *s->val);
+	s->sig = malloc(n * NWL * sizeof *s->sig);
+	for (size_t l = 0; l < NWL; l++)
+		s->wl[l] = 450 + 650.0 * (double)l / (NWL - 1);
+	for (size_t k = 0; k < n; k++) {
+		memcpy(s->ang + 4 * k, ang + 4 * k, 4 * sizeof *ang);
+		for (int c = 0; c < 4; c++)
+			s->deg[4 * k + c] = ang[4 * k + c] * 180 / M_PI;
+		for (size_t l = 0; l < NWL; l++) {
+			double v = f(ang + 4 * k, s->wl[l]), sg = 0.01 * v + floor;
+			s->val[k * NWL + l] = v + sg * rt_normal();
+			s->sig[k * NWL + l] = sg;
+		}
+	}
+}
+
+/* DHR of truth f at θi by Gauss-Legendre nmu in cosθo × nphi azimuth midpoints over [0, 2π). */
+static double true_dhr(truth_fn f, double ti, double wl, int nmu, int nphi)
+{
+	double x[256], w[256];
+	rbf_gauss_legendre01(nmu, x, w);
+	double s = 0;
+	for (int i = 0; i < nmu; i++)
+		for (int j = 0; j < nphi; j++) {
+			double a[4] = { ti, 0, acos(x[i]), (j + 0.5) * 2 * M_PI / nphi };
+			s += w[i] * x[i] * (2 * M_PI / nphi) * f(a, wl);
+		}
+	return s;
+}
+
+/* Fit, DHR at 8/30/60°: the largest |z| over incidences and wavelengths against truth f (quadrature nmu × nphi);
+ * *m the model (caller frees). */
+static double max_z(const struct recon_samples *s, truth_fn f, int nmu, int nphi, struct recon_model **m)
+{
+	struct acq_err e = { 0 };
+	assert_int_equal(recon_fit(s, NULL, m, &e), 0);
+	double th[NTH], d[NTH * NWL], sg[NTH * NWL], worst = 0;
+	for (int t = 0; t < NTH; t++)
+		th[t] = th_deg[t] * M_PI / 180;
+	assert_int_equal(recon_dhr(*m, NTH, th, 16, 1, d, sg, NULL, NULL, &e), 0);
+	for (int t = 0; t < NTH; t++)
+		for (int l = 0; l < NWL; l++) {
+			double tr = true_dhr(f, th[t], s->wl[l], nmu, nphi), z = (d[t * NWL + l] - tr) / sg[t * NWL + l];
+			printf("  θi %2.0f° %4.0f nm: DHR %.4f truth %.4f σ %.4f z %+.2f\n", th_deg[t], s->wl[l], d[t * NWL + l], tr,
+			       sg[t * NWL + l], z);
+			assert_true(isfinite(z));
+			worst = fmax(worst, fabs(z));
+		}
+	return worst;
+}
+
+static int has_warning(const struct recon_model *m, const char *what)
+{
+	for (const char *p = strstr(m->meta, "warning="); p; p = strstr(p + 1, "warning="))
+		if (strstr(p, what) && (!strchr(p, '\n') || strstr(p, what) < strchr(p, '\n')))
+			return 1;
+	return 0;
+}
+
+static void test_three_samples(void **state)
+{
+	(void)state;
+	rt_seed();
+	const double ang[] = { 10, 0, 30, 180, 40, 0, 50, 0, 60, 0, 20, 90 };
+	double a[12];
+	for (int i = 0; i < 12; i++)
+		a[i] = ang[i] * M_PI / 180;
+	struct recon_samples s;
+	make_samples(&s, 3, a, t_phong, 1e-4);
+	struct recon_model *m;
+	double z = max_z(&s, t_phong, 96, 384, &m);
+	printf("three samples: max |z| %.2f\n", z);
+	assert_true(z < 2);
+	assert_true(has_warning(m, "distinct directions"));
+	assert_true(has_warning(m, "no sample within 20 deg"));
+	recon_model_free(m);
+	csvio_samples_free(&s);
+}
+
+static void test_one_direction_repeated(void **state)
+{
+	(void)state;
+	rt_seed();
+	size_t n = 2000;
+	double *a = malloc(n * 4 * sizeof *a);
+	for (size_t k = 0; k < n; k++) {
+		a[4 * k] = 30 * M_PI / 180;
+		a[4 * k + 1] = 0;
+		a[4 * k + 2] = 30 * M_PI / 180;
+		a[4 * k + 3] = M_PI;
+	}
+	struct recon_samples s;
+	make_samples(&s, n, a, t_phong, 1e-4);
+	free(a);
+	struct recon_model *m;
+	double z = max_z(&s, t_phong, 96, 384, &m);
+	printf("one direction × 2000: max |z| %.2f\n", z);
+	assert_int_equal(m->n, 1);
+	assert_true(z < 2);
+	assert_true(has_warning(m, "only 1 distinct directions"));
+	recon_model_free(m);
+	csvio_samples_free(&s);
+}
+
+static void test_normal_incidence_only(void **state)
+{
+	(void)state;
+	rt_seed();
+	double a[100 * 4];
+	size_t k = 0;
+	for (int o = 0; o < 10; o++)
+		for (int p = 0; p < 10; p++, k++) {
+			a[4 * k] = 0;
+			a[4 * k + 1] = 0;
+			a[4 * k + 2] = (5 + 75.0 * o / 9) * M_PI / 180;
+			a[4 * k + 3] = 36.0 * p * M_PI / 180;
+		}
+	struct recon_samples s;
+	make_samples(&s, 100, a, t_oren, 1e-5);
+	struct recon_model *m;
+	double z = max_z(&s, t_oren, 96, 384, &m);
+	printf("normal incidence only: max |z| %.2f\n", z);
+	assert_true(z < 2);
+	assert_int_equal(m->trend, RECON_TREND_NONE); /* was: an invented GGX lobe, 900× the truth */
+	assert_true(has_warning(m, "no sample within 20 deg"));
+	double worst = 0, q[4], f[NWL];
+	struct acq_err e = { 0 };
+	for (int i = 0; i < 500; i++) {
+		rt_random_pair(q);
+		assert_int_equal(recon_eval(m, 1, q, f, &e), 0);
+		for (int l = 0; l < NWL; l++)
+			worst = fmax(worst, f[l] / t_oren(q, s.wl[l]));
+	}
+	printf("normal incidence only: largest model/truth at 500 random pairs %.2f\n", worst);
+	assert_true(worst < 3); /* measured 1.9 */
+	recon_model_free(m);
+	csvio_samples_free(&s);
+}
+
+static void test_sharp_lobe_over_floor(void **state)
+{
+	(void)state;
+	rt_seed();
+	double a[10 * 10 * 10 * 4];
+	size_t k = 0; /* θi and θo on the same grid: every incidence has a sample at its mirror direction */
+	for (int i = 0; i < 10; i++)
+		for (int o = 0; o < 10; o++)
+			for (int p = 0; p < 10; p++, k++) {
+				a[4 * k] = (5 + 75.0 * i / 9) * M_PI / 180;
+				a[4 * k + 1] = 0;
+				a[4 * k + 2] = (5 + 75.0 * o / 9) * M_PI / 180;
+				a[4 * k + 3] = 36.0 * p * M_PI / 180;
+			}
+	struct recon_samples s;
+	make_samples(&s, 1000, a, t_ward, 1e-12);
+	double peak = 0;
+	for (size_t i = 0; i < s.n * NWL; i++)
+		peak = fmax(peak, s.val[i]);
+	printf("sharp lobe: brightest sample %.4g sr⁻¹\n", peak);
+	assert_true(peak > 100);
+	struct recon_model *m;
+	double z = max_z(&s, t_ward, 256, 4096, &m);
+	printf("sharp lobe over a floor: max |z| %.2f\n", z);
+	assert_true(z < 2);
+	assert_true(has_warning(m, "not honoured"));
+	recon_model_free(m);
+	csvio_samples_free(&s);
+}
+
+static void test_log_uniform_random(void **state)
+{
+	(void)state;
+	rt_seed();
+	size_t n = 1000;
+	struct recon_samples s;
+	memset(&s, 0, sizeof s);
+	s.n = n;
+	s.nwl = NWL;
+	s.wl = malloc(NWL * sizeof *s.wl);
+	s.ang = malloc(n * 4 * sizeof *s.ang);
+	s.deg = malloc(n * 4 * sizeof *s.deg);
+	s.val = malloc(n * NWL * sizeof *s.val);
+	for (size_t l = 0; l < NWL; l++)
+		s.wl[l] = 450 + 100.0 * (double)l;
+	for (size_t k = 0; k < n; k++) {
+		double *q = s.ang + 4 * k;
+		q[0] = acos(rt_unif());
+		q[1] = 2 * M_PI * rt_unif();
+		q[2] = acos(rt_unif());
+		q[3] = 2 * M_PI * rt_unif();
+		for (int c = 0; c < 4; c++)
+			s.deg[4 * k + c] = q[c] * 180 / M_PI;
+		for (size_t l = 0; l < NWL; l++)
+			s.val[k * NWL + l] = pow(10, -8 + 12 * rt_unif());
+	}
+	struct recon_model *m;
+	struct acq_err e = { 0 };
+	clock_t c0 = clock();
+	assert_int_equal(recon_fit(&s, NULL, &m, &e), 0);
+	double cpu = (double)(clock() - c0) / CLOCKS_PER_SEC;
+	printf("log-uniform random: fit %.2f s CPU, leave-one-out RMS %.3g, table capped %d\n", cpu, m->loo_rms,
+	       m->tab_capped);
+	/* The time itself is a benchmark figure (`make bench`, bench_recon.py's random input), not a test: a
+	 * sanitizer build or a loaded machine moves it. What bounds it is the energy table's work budget. */
+	assert_true(has_warning(m, "leave-one-out RMS")); /* no sigma columns: "not honoured" cannot be judged */
+	struct recon_check_report rep;
+	assert_int_equal(recon_check(m, 2000, 8, 1, &rep, NULL, NULL, &e), 0);
+	printf("log-uniform random: check max albedo %.4f, min f %g, reciprocity %g\n", rep.max_albedo, rep.min_value,
+	       rep.max_recip_abs);
+	assert_true(rep.max_albedo <= 1.0 && rep.min_value >= 0 && rep.max_recip_abs == 0 && rep.nonfinite == 0);
+	recon_model_free(m);
+	csvio_samples_free(&s);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_three_samples),         cmocka_unit_test(test_one_direction_repeated),
+		cmocka_unit_test(test_normal_incidence_only), cmocka_unit_test(test_sharp_lobe_over_floor),
+		cmocka_unit_test(test_log_uniform_random),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
