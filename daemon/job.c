@@ -223,16 +223,6 @@ int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, 
 	return spawn(NULL, NULL, fn, fn_arg, mem_bytes, timeout_s, done, arg, out, err);
 }
 
-void job_cancel(struct job *j)
-{
-	if (j && !j->exited) {
-		kill(j->pid, SIGTERM);
-		loop_timer_cancel(job_loop, j->timer);
-		j->killed = true;
-		j->timer = loop_timer_add(job_loop, 2.0, 0, on_timeout, j);
-	}
-}
-
 bool job_output_truncated(const struct job *j)
 {
 	return j->truncated;

@@ -39,8 +39,6 @@ int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, 
 bool job_output_truncated(const struct job *j);
 /* True when the job was killed because its timeout expired (valid in its done callback). */
 bool job_timed_out(const struct job *j);
-/* Ask a job to stop (SIGTERM); its callback still fires when it is gone. */
-void job_cancel(struct job *j);
 /* Process id of a running job. */
 pid_t job_pid(const struct job *j);
 /* Reap exited children (call when SIGCHLD was seen; harmless otherwise). */

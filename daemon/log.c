@@ -23,14 +23,6 @@ void log_set_level(int level)
 	log_threshold = level;
 }
 
-int log_level_parse(const char *name)
-{
-	for (int i = LOG_ERR; i <= LOG_DEBUG; i++)
-		if (!strcmp(name, log_names[i]))
-			return i;
-	return -1;
-}
-
 void log_msg(int level, const char *fmt, ...)
 {
 	if (level > log_threshold)

@@ -11,8 +11,6 @@ void log_init(int level, bool journal);
 void log_set_level(int level);
 /* Log one message at priority level (dropped when above the threshold). */
 void log_msg(int level, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-/* Parse "error|warning|notice|info|debug" into a syslog level; -1 if unknown. */
-int log_level_parse(const char *name);
 /* Stop logging (flush). */
 void log_finish(void);
 
