@@ -62,11 +62,21 @@ static int albtab_node(struct albtab *T, double theta, double *a, int peak, stru
 	double work = T->ws.evals + T->wl.evals;
 	int nmax = work > TAB_WORK_MAX ? 2 * T->nmu : TAB_NMU_MAX;
 	/* at a peak's own zenith angle the lobe can be narrower than the coarse rules, which then agree by both
-	 * missing it: start at half the finest rule there, while the work budget allows */
+	 * missing it: start at half the finest rule there when that node (the rule and its doubling, in quad.c's
+	 * work units) costs at most 1/64 of the work budget, so the 2·TAB_PEAKS peak nodes take at most a quarter
+	 * of it (a small model; the paper-size random input, 1000 × 651, keeps the plain start) */
 	int nmu = T->nmu, nphi = T->nphi;
-	while (peak && !T->split && 2 * nmu <= TAB_NMU_MAX / 2 && work <= TAB_WORK_MAX / 4) {
-		nmu *= 2;
-		nphi *= 2;
+	if (peak && !T->split) {
+		int fm = nmu, fp = nphi;
+		while (2 * fm <= TAB_NMU_MAX / 2) {
+			fm *= 2;
+			fp *= 2;
+		}
+		double cost = 5.0 * fm * fp * (double)T->m->n * (1.0 + (double)T->L / 64.0);
+		if (cost <= TAB_WORK_MAX / 64 && work + cost <= TAB_WORK_MAX / 2) {
+			nmu = fm;
+			nphi = fp;
+		}
 	}
 	if (!T->split)
 		return recon_albedo_adaptive(T->m, theta, nmu, nphi, nmax, 0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->ws, a,
@@ -149,31 +159,33 @@ static int cmp_abs(const void *a, const void *b)
 }
 
 /* The table's starting nodes (ascending, in [0, π/2]): every 10°, and for a spiky model (leave-one-out RMS > 1
- * in ln f) also the zenith angles, θi and θo, of its TAB_PEAKS samples highest above the trend. A lobe narrower
- * than an interval is found only if a probe lands on it, and the interpolant's narrow peaks sit on the data: by
- * reciprocity a sample's peak raises the albedo at both its θi and its θo (test_recon_extremes' spike, 2° wide
- * over 13 decades, slipped between the 10° nodes' bisections at about 1 seed in 8 and reached albedos of
- * 1.4-1.9). Returns the count (≤ TAB_N + 2 TAB_PEAKS). */
-static size_t albtab_start_nodes(const struct recon_model *m, double *th, unsigned char *peak)
+ * in ln f) also the zenith angles, θi and θo, of its npeaks (≤ TAB_PEAKS) samples highest above the trend; peak[]
+ * marks those. A lobe narrower than an interval is found only if a probe lands on it, and the interpolant's
+ * narrow peaks sit on the data: by reciprocity a sample's peak raises the albedo at both its θi and its θo
+ * (test_recon_extremes' spike, 2° wide over 13 decades, slipped between the 10° nodes' bisections at 3 seeds of
+ * 17 and reached albedos of 1.4-1.9). Returns the count (≤ TAB_N + 2 TAB_PEAKS). */
+static size_t albtab_start_nodes(const struct recon_model *m, size_t npeaks, double *th, unsigned char *peak)
 {
 	size_t n = 0;
 	double h = (M_PI / 2) / (double)(TAB_N - 1);
 	for (size_t t = 0; t < TAB_N; t++)
 		th[n++] = t + 1 == TAB_N ? M_PI / 2 : h * (double)t;
 	memset(peak, 0, TAB_N + 2 * TAB_PEAKS);
-	if (!(m->loo_rms > 1.0) || !m->g || !m->ang)
+	if (!(m->loo_rms > 1.0) || !m->g || !m->ang || npeaks == 0)
 		return n;
 	size_t top[TAB_PEAKS], ntop = 0;
+	if (npeaks > TAB_PEAKS)
+		npeaks = TAB_PEAKS;
 	double topv[TAB_PEAKS];
 	for (size_t k = 0; k < m->n; k++) {
 		double v = -HUGE_VAL;
 		for (size_t l = 0; l < m->nwl; l++)
 			v = fmax(v, m->g[l * m->n + k]);
 		size_t j;
-		if (ntop < TAB_PEAKS)
+		if (ntop < npeaks)
 			j = ntop++;
-		else if (v > topv[TAB_PEAKS - 1])
-			j = TAB_PEAKS - 1;
+		else if (v > topv[npeaks - 1])
+			j = npeaks - 1;
 		else
 			continue;
 		for (; j > 0 && topv[j - 1] < v; j--) {
@@ -239,7 +251,10 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 	T.wl.part = RECON_PART_LOBE;
 	double start[TAB_N + 2 * TAB_PEAKS];
 	unsigned char peak[TAB_N + 2 * TAB_PEAKS];
-	size_t ns = albtab_start_nodes(m, start, peak);
+	/* peak nodes only as far as a quarter of the work budget pays for them at the starting rule and one doubling
+	 * (a paper-size spiky model, 1000 × 651, gets none: its table already reaches the budget without them) */
+	double node_cost = 5.0 * T.nmu * T.nphi * (double)m->n * (1.0 + (double)L / 64.0);
+	size_t ns = albtab_start_nodes(m, (size_t)fmin(TAB_PEAKS, TAB_WORK_MAX / 4 / (2 * node_cost)), start, peak);
 	for (size_t t = 0; t < ns; t++) {
 		if (pf)
 			pf(pctx, "albedo table", 0.5 * (double)t / (double)ns);
