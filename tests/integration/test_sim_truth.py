@@ -163,16 +163,24 @@ try:
     g, mdl, ref, zf = (os.path.join(tmp, x) for x in ("p.csv", "p.model", "ref.csv", "z.csv"))
     check(run("green-paint", "--grid", "10x10x10", "--seed", str(SEED), "--wavelengths", "450:1100:10", "-o", g)
           .returncode == 0, "paint samples for the reference check")
-    check(run("green-paint", "--spectrophotometer", "--seed", str(SEED), "--wavelengths", "450:1100:5", "-o", ref)
-          .returncode == 0 and open(ref).readline() == "wavelength_nm,dhr,sigma\n", "spectrophotometer -o")
     rf = subprocess.run([recon, "fit", g, "-o", mdl], capture_output=True, text=True, timeout=600)
     check(rf.returncode == 0, f"brdf-recon fit ({rf.stderr.strip()[-200:]})")
-    rd = subprocess.run([recon, "dhr", mdl, "--theta-i", "8", "--reference", ref, "--z-out", zf, "-o", os.devnull],
-                        capture_output=True, text=True, timeout=600)
-    check(rd.returncode == 0 and "within |z|" in rd.stderr, f"brdf-recon dhr --reference reads it: {rd.stderr.strip()}")
-    zs = np.genfromtxt(zf, delimiter=",", names=True)
-    check(len(zs) > 100 and np.mean(np.abs(zs["z"]) <= 2) > 0.8,
-          f"reconstruction vs spectrophotometer: {np.mean(np.abs(zs['z']) <= 2):.1%} of wavelengths within |z| <= 2")
+    # The instrument's calibration error is correlated over 150 nm, so one draw moves most wavelengths' z together:
+    # the share within |z| <= 2 of a single draw ranged 0.44-0.95 over 160 draws (12 at or below 0.8) against
+    # 0.81-0.93 for the mean of four draws (40 seeds). The check is on the mean share of four instruments.
+    shares = []
+    for k in range(4):
+        check(run("green-paint", "--spectrophotometer", "--seed", str(SEED + k), "--wavelengths", "450:1100:5", "-o",
+                  ref).returncode == 0 and open(ref).readline() == "wavelength_nm,dhr,sigma\n", "spectrophotometer -o")
+        rd = subprocess.run([recon, "dhr", mdl, "--theta-i", "8", "--reference", ref, "--z-out", zf, "-o", os.devnull],
+                            capture_output=True, text=True, timeout=600)
+        check(rd.returncode == 0 and "within |z|" in rd.stderr,
+              f"brdf-recon dhr --reference reads it: {rd.stderr.strip()}")
+        zs = np.genfromtxt(zf, delimiter=",", names=True)
+        check(len(zs) > 100, "the z table covers the wavelengths")
+        shares.append(float(np.mean(np.abs(zs["z"]) <= 2)))
+    check(np.mean(shares) > 0.8, "reconstruction vs spectrophotometer: %.1f%% of wavelengths within |z| <= 2 (mean of "
+          "four instruments: %s)" % (100 * np.mean(shares), ", ".join("%.1f%%" % (100 * x) for x in shares)))
 
     # --- MERL (values are checked against the truth in tests/unit/test_sim_truth_merl.c)
     mp = os.path.join(tmp, "w.binary")
