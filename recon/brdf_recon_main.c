@@ -5,6 +5,7 @@
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
+#include <sys/stat.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -84,20 +85,32 @@ int parse_u64(const char *s, uint64_t *out)
 	return 0;
 }
 
-/* Open the output: stdout for NULL or "-", else a temporary file renamed on success. */
+/* Open the output: stdout for NULL or "-"; an existing file that is not a regular file (/dev/null, a FIFO, a
+ * terminal) directly, since renaming over it would replace the device (as root, /dev/null became a regular
+ * file); else a temporary file renamed on success. */
 struct out {
 	FILE *f;
 	const char *path;
 	char tmp[4096];
+	int direct;
 };
 
 static int out_open(struct out *o, const char *path, struct acq_err *err)
 {
 	o->path = path;
+	o->direct = 0;
 	if (!path || !strcmp(path, "-")) {
 		o->f = stdout;
 		o->path = NULL;
 		return 0;
+	}
+	struct stat st;
+	if (stat(path, &st) == 0 && !S_ISREG(st.st_mode)) {
+		if (S_ISDIR(st.st_mode))
+			return acq_errf(err, ACQ_E_IO, "%s: is a directory", path);
+		o->direct = 1;
+		o->f = fopen(path, "w");
+		return o->f ? 0 : acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
 	}
 	snprintf(o->tmp, sizeof o->tmp, "%s.tmp.%ld", path, (long)getpid());
 	o->f = fopen(o->tmp, "w");
@@ -113,6 +126,8 @@ static int out_close(struct out *o, int ok, struct acq_err *err)
 		return ok ? 0 : -1;
 	}
 	int bad = fclose(o->f) != 0;
+	if (o->direct)
+		return !ok ? -1 : bad ? acq_errf(err, ACQ_E_IO, "%s: write failed", o->path) : 0;
 	if (!ok || bad) {
 		unlink(o->tmp);
 		return ok ? acq_errf(err, ACQ_E_IO, "%s: write failed", o->path) : -1;

@@ -6,6 +6,7 @@ for a corrupt model and a bad CSV (line and column named)."""
 import os
 import shutil
 import struct
+import stat
 import subprocess
 import sys
 import tempfile
@@ -94,6 +95,17 @@ def main():
     cert = os.path.join(d, "cert.csv")
     with open(cert, "w") as fh:
         fh.write("wavelength_nm,rho,u\n400,0.99,0.0198\n1200,0.99,0.0198\n")
+
+    # -o naming an existing non-regular file (a FIFO here; /dev/null in use) is written in place, never replaced
+    # by the temporary file's rename (as root, `-o /dev/null` once turned /dev/null into a regular file)
+    fifo = os.path.join(os.path.dirname(out), "fifo")
+    os.mkfifo(fifo)
+    reader = subprocess.Popen(["cat", fifo], stdout=subprocess.PIPE)
+    p = run("dhr", m, "--theta-i", "8", "--draws", "4", "-o", fifo)
+    got = reader.communicate(timeout=60)[0].decode()
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode), "the FIFO was replaced"
+    assert got.startswith("theta_i,wavelength_nm,dhr,sigma"), got[:80]
+    assert not [x for x in os.listdir(os.path.dirname(out)) if ".tmp." in x]
 
     def agreement(*extra):
         p = run("dhr", m, "--theta-i", "8", "--draws", "8", "--reference", ref3, "-o", out, *extra)
