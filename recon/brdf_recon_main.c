@@ -133,7 +133,8 @@ static const char main_help[] =
 	"  merl    MODEL -o FILE.binary     MERL table (RGB)\n"
 	"  render  MODEL -o OUT.png         preview render of a sphere\n"
 	"  rgl     MODEL -o FILE.bsdf       spectral RGL tabulated BRDF (Mitsuba 3, pbrt-v4)\n"
-	"  slices  MODEL -o OUT.png         in-plane slices and polar plots with samples and uncertainty\n";
+	"  slices  MODEL -o OUT.png         in-plane slices and polar plots with samples and uncertainty\n"
+	"  select  MODEL --candidates CAND.csv --target SPEC   next measurements of an adaptive sweep (JSON)\n";
 
 int main(int argc, char **argv)
 {
@@ -164,6 +165,8 @@ int main(int argc, char **argv)
 		return cmd_info(argc, argv);
 	if (!strcmp(cmd, "rgl"))
 		return cmd_rgl(argc, argv);
+	if (!strcmp(cmd, "select"))
+		return cmd_select(argc, argv);
 	if (!strcmp(cmd, "slices"))
 		return cmd_slices(argc, argv);
 	if (!strcmp(cmd, "merl") || !strcmp(cmd, "render"))

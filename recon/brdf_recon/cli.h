@@ -53,6 +53,7 @@ int cmd_info(int argc, char **argv);
 /* merl and render (cmd is "merl" or "render"). */
 int cmd_output(const char *cmd, int argc, char **argv);
 int cmd_rgl(int argc, char **argv);
+int cmd_select(int argc, char **argv);
 int cmd_slices(int argc, char **argv);
 
 #endif
