@@ -142,11 +142,14 @@ def main():
             while True:
                 err, s8, m, sig = dhr_figures(d, mdl, truth)
                 if pred is not None:  # honesty of the last batch's prediction
+                    hon = []
                     for i, th in enumerate(TH):
                         obt = float(np.sqrt(np.mean(sig[th] ** 2)))
                         ratios.append(obt / pred[i])
                         e = m["dhr"][m["theta_i"] == th] - truth[th]
                         zs.append(float(np.sqrt(np.mean(e ** 2))) / pred[i])
+                        hon.append("%g: %.3g/%.3g" % (th, obt, pred[i]))
+                    print("    sigma obtained/predicted after the batch: " + ", ".join(hon))
                 npts = len(rows)
                 rec.append((mat, seed, "adaptive", npts, err, s8))
                 print("%-12s seed %d adaptive  %4d points: max |DHR err| 8/30/60 %.4f %.4f %.4f, sigma(8) %.4f"
