@@ -34,6 +34,7 @@ struct sweep {
 	uint64_t done_timer;
 	struct recon_chain *chain;
 	bool unrecorded_logged;      /* the end of the sweep awaits being recorded (logged once) */
+	bool planning;               /* sweep_set_planning(): a plan for sweep_start_planned() is being made */
 };
 
 /* ---- events --------------------------------------------------------------------------------------- */
@@ -305,6 +306,8 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
 	}
 }
 
+static int plan_cfg(struct sweep *sw, struct ex_cfg *cfg, struct acq_err *err);
+
 /* Plan the text against the bench; the spec's integration settings override the configuration's. */
 static int make_plan(struct sweep *sw, const char *text, const char *name, struct ex_cfg *cfg, struct acq_err *err)
 {
@@ -317,6 +320,12 @@ static int make_plan(struct sweep *sw, const char *text, const char *name, struc
 	struct plan_timing tm;
 	sweep_plan_timing(sw, &tm);
 	plan_time_apply(sw->spec, &sw->env.conf->bench, &tm, sw->plan); /* the ETA's plan figure */
+	return plan_cfg(sw, cfg, err);
+}
+
+/* The executor's settings for the plan in sw: the configuration's, with the spec's integration settings. */
+static int plan_cfg(struct sweep *sw, struct ex_cfg *cfg, struct acq_err *err)
+{
 	if (sw->plan->n_steps == 0)
 		return acq_errf(err, ACQ_E_INVAL, "the plan has no visible point");
 	*cfg = sw->cfg;
@@ -352,11 +361,12 @@ static struct ex_sink sink_of(struct sweep *sw)
 	return (struct ex_sink){ .event = on_event, .progress = on_progress, .ctx = sw };
 }
 
-int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64_t *id, struct acq_err *err)
+int sweep_start_check(const struct sweep *sw, struct acq_err *err)
 {
-	*id = 0;
 	if (sw->ex)
 		return acq_errf(err, ACQ_E_STATE, "sweep %lld is %s", (long long)sw->id, ex_state_name(ex_state(sw->ex)));
+	if (sw->planning)
+		return acq_errf(err, ACQ_E_STATE, "a sweep is being planned");
 	char missing[256] = "";
 	for (int d = 0; d < CONF_DEV__COUNT; d++) {
 		if (!devices_up(sw->env.devices, (enum conf_dev)d))
@@ -365,8 +375,50 @@ int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64
 	}
 	if (missing[0])
 		return acq_errf(err, ACQ_E_DISCONNECTED, "cannot start a sweep: unavailable: %s", missing);
+	return 0;
+}
+
+void sweep_set_planning(struct sweep *sw, bool planning)
+{
+	sw->planning = planning;
+}
+
+static int start_planned(struct sweep *sw, const char *plan_text, const char *name, int64_t *id,
+			 struct acq_err *err);
+
+int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64_t *id, struct acq_err *err)
+{
+	*id = 0;
+	if (sweep_start_check(sw, err))
+		return -1;
 	struct ex_cfg cfg;
-	if (make_plan(sw, plan_text, name, &cfg, err))
+	if (make_plan(sw, plan_text, name, &cfg, err)) {
+		release(sw);
+		return -1;
+	}
+	return start_planned(sw, plan_text, name, id, err);
+}
+
+int sweep_start_planned(struct sweep *sw, const char *plan_text, const char *name, struct plan_spec *spec,
+			struct plan_result *plan, int64_t *id, struct acq_err *err)
+{
+	*id = 0;
+	if (sweep_start_check(sw, err)) { /* the devices may have gone while it was planned */
+		plan_spec_free(spec);
+		plan_result_free(plan);
+		return -1;
+	}
+	sw->spec = spec;
+	sw->plan = plan;
+	return start_planned(sw, plan_text, name, id, err);
+}
+
+/* sweep_start() from the plan in sw (sw->spec, sw->plan, released on failure). */
+static int start_planned(struct sweep *sw, const char *plan_text, const char *name, int64_t *id,
+			 struct acq_err *err)
+{
+	struct ex_cfg cfg;
+	if (plan_cfg(sw, &cfg, err))
 		goto fail;
 	size_t n = sw->plan->n_steps;
 	struct store_point_new *pts = calloc(n, sizeof *pts);
@@ -564,7 +616,7 @@ void sweep_get_progress(const struct sweep *sw, struct sweep_progress *p)
 
 bool sweep_busy(const struct sweep *sw)
 {
-	return sw->ex != NULL;
+	return sw->ex != NULL || sw->planning;
 }
 
 const char *sweep_state_name(enum sweep_state s)
