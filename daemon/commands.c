@@ -510,6 +510,7 @@ struct start_job {
 	uint64_t serial;
 	json_t *id;
 	char *text, *name;
+	int64_t resume_id;       /* sweep.resume of this stored sweep (0: sweep.start) */
 	struct plan_spec *spec;
 	struct plan_worker *worker;
 };
@@ -528,12 +529,17 @@ static void start_planned(void *ctx, int rc, const struct acq_err *perr, struct 
 		err = *perr;
 		acq_err_prefix(&err, "sweep.start: ");
 		plan_spec_free(sj->spec);
+	} else if (sj->resume_id) {
+		rc = sweep_resume_planned(app->sweep, sj->resume_id, sj->spec, plan, &err);
 	} else {
 		rc = sweep_start_planned(app->sweep, sj->text, sj->name, sj->spec, plan, &sid, &err);
 	}
 	if (rc) {
 		log_msg(LOG_NOTICE, "%s", err.msg);
 		server_reply_error(app->srv, sj->serial, sj->id, proto_code_of(&err), err.msg);
+	} else if (sj->resume_id) {
+		struct srv_peer pr = { .serial = sj->serial };
+		reply_when(app, &pr, sj->id, SWEEP_RUNNING); /* as a resume of a loaded sweep replies */
 	} else {
 		server_reply(app->srv, sj->serial, sj->id,
 			     json_pack("{s:I,s:o}", "sweep", (json_int_t)sid, "progress", progress_json(app)));
@@ -544,17 +550,19 @@ static void start_planned(void *ctx, int rc, const struct acq_err *perr, struct 
 	free(sj);
 }
 
-static void cmd_sweep_start(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+/* sweep.start, or (resume_id) sweep.resume of an interrupted sweep from its stored text and name (taken). */
+static void start_planning(struct app *app, const struct srv_peer *peer, struct proto_req *req, int64_t resume_id,
+			   char *stored_text, char *stored_name)
 {
 	struct acq_err err = { 0 };
-	const char *text = json_string_value(json_object_get(req->root, "plan"));
-	const char *name = json_string_value(json_object_get(req->root, "name"));
+	const char *text = resume_id ? stored_text : json_string_value(json_object_get(req->root, "plan"));
+	const char *name = resume_id ? stored_name : json_string_value(json_object_get(req->root, "name"));
 	struct start_job *sj = NULL;
 	if (devices_busy(app->dev)) {
 		acq_errf(&err, ACQ_E_STATE, "a manual move or measurement is running");
 		goto fail;
 	}
-	if (sweep_start_check(app->sweep, &err))
+	if (!resume_id && sweep_start_check(app->sweep, &err))
 		goto fail;
 	if (!text) {
 		acq_errf(&err, ACQ_E_INVAL, "no plan text");
@@ -564,6 +572,7 @@ static void cmd_sweep_start(struct app *app, const struct srv_peer *peer, struct
 		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 		goto fail;
 	}
+	sj->resume_id = resume_id;
 	if (plan_load_string(name && *name ? name : "plan", text, &sj->spec, &err))
 		goto fail;
 	struct plan_timing tm;
@@ -577,6 +586,8 @@ static void cmd_sweep_start(struct app *app, const struct srv_peer *peer, struct
 	sj->id = json_incref(req->id);
 	starting = sj;
 	sweep_set_planning(app->sweep, true);
+	free(stored_text);
+	free(stored_name);
 	return;
 fail:
 	if (sj) {
@@ -585,7 +596,31 @@ fail:
 		free(sj->name);
 		free(sj);
 	}
+	free(stored_text);
+	free(stored_name);
 	reply_err(app, peer, req->id, &err);
+}
+
+static void cmd_sweep_start(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	start_planning(app, peer, req, 0, NULL, NULL);
+}
+
+/* sweep.resume: a loaded sweep resumes at once; an interrupted one is re-planned from its stored text off the
+ * loop first (the same plan, deterministic). */
+static void cmd_sweep_resume(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	int64_t id = 0;
+	char *text = NULL, *name = NULL;
+	int r = sweep_resume_plan_text(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &id, &text, &name, &err);
+	if (r < 0)
+		return reply_err(app, peer, req->id, &err);
+	if (r == 0)
+		return start_planning(app, peer, req, id, text, name);
+	if (sweep_resume(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &err))
+		return reply_err(app, peer, req->id, &err);
+	reply_when(app, peer, req->id, SWEEP_RUNNING);
 }
 
 static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto_req *req)
@@ -611,8 +646,7 @@ static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto
 		if (!(rc = sweep_pause(app->sweep, &err)))
 			return reply_when(app, peer, req->id, SWEEP_PAUSED);
 	} else if (!strcmp(sub, "resume")) {
-		if (!(rc = sweep_resume(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &err)))
-			return reply_when(app, peer, req->id, SWEEP_RUNNING);
+		return cmd_sweep_resume(app, peer, req);
 	} else if (!strcmp(sub, "abort")) {
 		if (starting) { /* planning: its sweep.start gets "aborted while planning" */
 			plan_worker_abort(starting->worker);

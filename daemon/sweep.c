@@ -474,25 +474,50 @@ int sweep_pause(struct sweep *sw, struct acq_err *err)
 	return 0;
 }
 
+/* The stored sweep id if it can be resumed (running or paused in the store), else NULL with err. */
+static json_t *recover_load(struct sweep *sw, int64_t id, struct acq_err *err)
+{
+	json_t *js = store_sweep_show(sw->env.store, id, false, err);
+	if (!js)
+		return NULL;
+	const char *state = json_string_value(json_object_get(js, "state"));
+	if (!state || (strcmp(state, "running") && strcmp(state, "paused"))) {
+		acq_errf(err, ACQ_E_STATE, "sweep %lld is %s: only a running or paused sweep can be resumed",
+			 (long long)id, state ? state : "?");
+		json_decref(js);
+		return NULL;
+	}
+	return js;
+}
+
+static int recover_planned(struct sweep *sw, int64_t id, json_t *js, bool hold, struct acq_err *err);
+
 /* Resume interrupted sweep id from the store: re-plan its stored plan text (deterministic), check it matches
  * the stored points, discard a partial point and start after the last committed one. */
 static int recover_id(struct sweep *sw, int64_t id, bool hold, struct acq_err *err)
 {
-	json_t *js = store_sweep_show(sw->env.store, id, false, err);
+	json_t *js = recover_load(sw, id, err);
 	if (!js)
 		return -1;
-	const char *state = json_string_value(json_object_get(js, "state"));
 	const char *text = json_string_value(json_object_get(js, "plan_text"));
 	const char *name = json_string_value(json_object_get(js, "name"));
+	struct ex_cfg cfg;
+	if (make_plan(sw, text, name, &cfg, err)) {
+		json_decref(js);
+		release(sw);
+		return -1;
+	}
+	return recover_planned(sw, id, js, hold, err);
+}
+
+/* recover_id() once sw->spec and sw->plan are made (both released on failure); consumes js. */
+static int recover_planned(struct sweep *sw, int64_t id, json_t *js, bool hold, struct acq_err *err)
+{
+	const char *state = json_string_value(json_object_get(js, "state"));
 	json_int_t total = json_integer_value(json_object_get(js, "points_total"));
 	int rc = -1;
 	struct ex_cfg cfg;
-	if (!state || (strcmp(state, "running") && strcmp(state, "paused"))) {
-		acq_errf(err, ACQ_E_STATE, "sweep %lld is %s: only a running or paused sweep can be resumed",
-			 (long long)id, state ? state : "?");
-		goto out;
-	}
-	if (make_plan(sw, text, name, &cfg, err))
+	if (plan_cfg(sw, &cfg, err))
 		goto out;
 	if ((json_int_t)sw->plan->n_steps != total) {
 		acq_errf(err, ACQ_E_STATE, "sweep %lld: its plan now gives %zu points, %lld were stored (bench changed?)",
@@ -557,6 +582,53 @@ int sweep_resume(struct sweep *sw, int64_t id, struct acq_err *err)
 	if (!id)
 		return acq_errf(err, ACQ_E_NOTFOUND, "no paused or interrupted sweep to resume");
 	return recover_id(sw, id, false, err);
+}
+
+int sweep_resume_plan_text(struct sweep *sw, int64_t id, int64_t *found, char **text, char **name,
+			   struct acq_err *err)
+{
+	*found = 0;
+	*text = *name = NULL;
+	if (sw->ex)
+		return 1;
+	if (sw->planning)
+		return acq_errf(err, ACQ_E_STATE, "a sweep is being planned");
+	if (!id && store_sweep_interrupted(sw->env.store, &id, err))
+		return -1;
+	if (!id)
+		return acq_errf(err, ACQ_E_NOTFOUND, "no paused or interrupted sweep to resume");
+	json_t *js = recover_load(sw, id, err);
+	if (!js)
+		return -1;
+	const char *t = json_string_value(json_object_get(js, "plan_text"));
+	const char *n = json_string_value(json_object_get(js, "name"));
+	*text = strdup(t ? t : "");
+	*name = n ? strdup(n) : NULL;
+	json_decref(js);
+	if (!*text || (n && !*name)) {
+		free(*text);
+		free(*name);
+		*text = *name = NULL;
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	*found = id;
+	return 0;
+}
+
+int sweep_resume_planned(struct sweep *sw, int64_t id, struct plan_spec *spec, struct plan_result *plan,
+			 struct acq_err *err)
+{
+	json_t *js = NULL;
+	if (sw->ex || sw->planning) {
+		acq_errf(err, ACQ_E_STATE, "a sweep is loaded or being planned");
+	} else if ((js = recover_load(sw, id, err))) { /* the row may have changed while it was planned */
+		sw->spec = spec;
+		sw->plan = plan;
+		return recover_planned(sw, id, js, false, err);
+	}
+	plan_spec_free(spec);
+	plan_result_free(plan);
+	return -1;
 }
 
 int sweep_abort(struct sweep *sw, struct acq_err *err)

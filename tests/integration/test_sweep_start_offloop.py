@@ -8,9 +8,12 @@ a forked child and stores and starts it when the plan comes back.
    stored. Before the change the status requests got no reply until the plan was made.
 2. A 10 x 60 sweep (about 600 points) planned off the loop is stored whole (the plan crosses the process
    boundary) and started: its stored points are those of acqctl's local dry run of the same plan, and it
-   runs (its first state after the start: running, or paused for the sample swap)."""
+   runs (its first state after the start: running, or paused for the sample swap).
+3. After a SIGKILL (no auto-resume), sweep.resume re-plans the stored plan off the loop as well: a second
+   sweep.resume meanwhile is refused ("being planned"), then the sweep is loaded again with all its points."""
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -28,7 +31,7 @@ MEDIUM = ("name: medium\nincidence:\n  theta_deg: [5, 12, 19, 26, 33, 40, 47, 54
 
 
 def run():
-    b = L.Bench(scale=20)
+    b = L.Bench(scale=20, daemon_extra="  auto_resume: false\n")
     try:
         b.start_sim()
         b.start_daemon()
@@ -94,10 +97,31 @@ def run():
             sid, row["state"], row["points_total"], n_plan))
         assert row["points_total"] == n_plan and n_plan > 400, (row["points_total"], n_plan)
         assert row["state"] in ("running", "paused"), row
-        ab = c.req("sweep.abort")
-        assert ab.get("ok"), ab
+
+        # 3. after a crash, sweep.resume re-plans the stored text off the loop too
         c.close()
         starter.close()
+        b.kill_daemon(signal.SIGKILL)
+        b.start_daemon()
+        c = b.client(timeout=300)
+        c2 = b.client(timeout=300)
+        c.n += 1
+        c.sock.sendall((json.dumps({"cmd": "sweep.resume", "id": c.n}) + "\n").encode())
+        r2 = c2.req("sweep.resume")
+        r = c.read()
+        L.say("sweep.resume after the restart: %s; a second one meanwhile: %s" % (
+            r.get("ok"), r2.get("error", {}).get("message")))
+        assert r.get("ok"), r
+        assert not r2.get("ok") and "being planned" in r2["error"]["message"], r2
+        st = c.req("status")
+        L.say("status after the resume: %s" % json.dumps(st.get("sweep", st.get("progress")))[:200])
+        row = L.sweep_row(b, sid)
+        assert row["state"] in ("running", "paused") and row["points_total"] == n_plan, row
+        ab = c.req("sweep.abort")
+        assert ab.get("ok"), ab
+        assert L.sweep_row(b, sid)["state"] == "aborted"
+        c2.close()
+        c.close()
     except Exception:
         print(b.daemon_text()[-3000:])
         raise
