@@ -194,18 +194,20 @@ static int exchange(struct laser_dev *l, const char *cmd, struct acq_err *err)
 	double deadline = mono_ms() + l->cfg->timeout_ms;
 	size_t len = 0;
 	for (;;) {
+		/* Past the deadline, what has arrived is still read (a thread descheduled on a loaded machine wakes
+		 * after its deadline with the reply waiting): only nothing more to read ends the wait. */
 		double left = deadline - mono_ms();
-		if (left < 1) {
+		char c;
+		int r = l->io->read(l, &c, left < 1 ? 0 : (int)left, err);
+		if (r < 0)
+			return acq_err_prefix(err, "'%s': ", cmd);
+		if (r == 0) {
+			if (left >= 1)
+				continue;
 			l->line[len] = '\0';
 			return acq_errf(err, ACQ_E_TIMEOUT, "laser %s: no reply to '%s' within %d ms%s%s%s", dev, cmd,
 					l->cfg->timeout_ms, len ? " (partial: '" : "", len ? l->line : "", len ? "')" : "");
 		}
-		char c;
-		int r = l->io->read(l, &c, (int)left, err);
-		if (r < 0)
-			return acq_err_prefix(err, "'%s': ", cmd);
-		if (r == 0)
-			continue;
 		if (c == '\n')
 			break;
 		if (c == '\r')
