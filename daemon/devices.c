@@ -201,8 +201,12 @@ static void keepalive_tick(void *arg, struct port *p)
 	if (!alive)
 		return;
 	struct acq_err e = { 0 };
+	double t0 = mono_now();
 	int rc = laser_keepalive(ls, &e);
 	pthread_mutex_lock(&ka->mu);
+	if (ka->last_sent > 0 && t0 - ka->last_sent > ka->max_gap)
+		ka->max_gap = t0 - ka->last_sent;
+	ka->last_sent = t0;
 	if (rc) {
 		ka->failures++;
 		ka->last_err = e;
@@ -386,6 +390,9 @@ static void open_all(struct devices *dv)
 		if (ka_ms > 0) {
 			pthread_mutex_lock(&dv->ka.mu);
 			dv->ka.grace = 3e-3 * ka_ms;
+			dv->ka.period = 0.25e-3 * ka_ms;
+			dv->ka.last_sent = 0;
+			dv->ka.max_gap = 0;
 			dv->ka.loop_alive = mono_now();
 			pthread_mutex_unlock(&dv->ka.mu);
 			port_set_tick(s->port, 0.25e-3 * ka_ms, keepalive_tick, dv);
@@ -926,7 +933,12 @@ void devices_heartbeat(struct devices *dv)
 	struct acq_err e = ka->last_err;
 	ka->reported_failures = ka->failures;
 	ka->reported_skipped = ka->skipped;
+	double gap = ka->max_gap, period = ka->period;
+	if (gap > 2 * period)
+		ka->max_gap = 0;
 	pthread_mutex_unlock(&ka->mu);
+	if (gap > 2 * period) /* the laser's thread was held up (a slow laser command, or not scheduled) */
+		log_msg(LOG_WARNING, "laser keep-alive: %.3f s between two refreshes (period %.3f s)", gap, period);
 	if (nfail)
 		log_msg(LOG_WARNING, "laser keep-alive: %lu failure(s), the last: %s (emission switched off)", nfail, e.msg);
 	if (nskip)

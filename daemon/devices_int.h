@@ -65,6 +65,8 @@ struct keepalive {
 	double loop_alive;             /* real (monotonic) seconds of the loop's last devices_heartbeat() */
 	double grace;                  /* refresh only while the loop was alive this recently (real s) */
 	unsigned long refreshes, failures, skipped, reported_failures, reported_skipped;
+	double period;                 /* the tick's period (real s) */
+	double last_sent, max_gap;     /* real s: the last refresh sent; the longest gap since the last report */
 	struct acq_err last_err;       /* of the last failure */
 };
 
