@@ -78,9 +78,19 @@ static void run_measure(struct req *r, struct port *p, struct spectro *sp)
 	}
 }
 
+static double mono_now(void);
+static void req_run_op(struct req *r, struct port *p);
+
 static void req_run(struct port_req *pr, struct port *p)
 {
 	struct req *r = (struct req *)pr;
+	double t0 = mono_now();
+	req_run_op(r, p);
+	r->run_s = mono_now() - t0;
+}
+
+static void req_run_op(struct req *r, struct port *p)
+{
 	struct dev_slot *s = &r->dv->slot[r->d];
 	r->rc = 0;
 	switch (r->op) {
@@ -308,6 +318,11 @@ static void req_done(struct port_req *pr)
 	struct devices *dv = r->dv;
 	struct dev_slot *s = &dv->slot[r->d];
 	bool current = r->gen == s->gen;
+	/* A laser request that holds its thread longer than half the keep-alive delays the refresh (the same
+	 * thread): say so, to tell a slow laser from a thread kept off the CPU. */
+	if (r->d == CONF_DEV_LASER && dv->ka.period > 0 && r->run_s > 2 * dv->ka.period)
+		log_msg(LOG_WARNING, "laser: request %d took %.3f s on its thread%s%s", (int)r->op, r->run_s,
+			r->rc ? ": " : "", r->rc ? r->err.msg : "");
 	if (r->op == R_OPEN)
 		opened(dv, r);
 	if (current) {

@@ -116,6 +116,7 @@ struct req {
 	unsigned gen, seq;
 	const void *cfg;         /* the device's configuration (open) */
 	double target, deadline, pct;
+	double run_s;            /* real seconds the request took on the port's thread */
 	bool on;
 	struct spectro_meas meas;
 	/* results */
