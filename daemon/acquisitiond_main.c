@@ -122,14 +122,15 @@ static void watchdog_tick(struct loop *lp, void *arg)
 	sd_notify(0, "WATCHDOG=1");
 }
 
-/* The laser's keep-alive is refreshed by the loop itself: a daemon that dies or stalls stops refreshing it
- * and the laser switches emission off by itself within devices.laser.keepalive_ms. */
-static void laser_keepalive_tick(struct loop *lp, void *arg)
+/* The loop's heartbeat for the laser's keep-alive: the laser's thread refreshes it only while the loop beats,
+ * so a daemon that dies, or whose loop hangs, leaves the laser to switch emission off by itself
+ * (devices.laser.keepalive_ms after the process dies; 3 × that after the loop's last beat). */
+static void laser_heartbeat_tick(struct loop *lp, void *arg)
 {
 	(void)lp;
 	struct app *app = arg;
 	if (app->dev)
-		devices_laser_keepalive(app->dev); /* on the laser's port thread; a failure is logged there */
+		devices_heartbeat(app->dev);
 }
 
 /* --laser-off (ExecStopPost=): open the configured laser, which switches emission off, and close it. */
@@ -328,9 +329,9 @@ int main(int argc, char **argv)
 		loop_timer_add(app.lp, wd_period_real * rate, wd_period_real * rate, watchdog_tick, NULL);
 	loop_timer_add(app.lp, 1.0, 1.0, status_tick, &app);
 	if (app.conf->laser) {
-		/* A quarter of the shortest keep-alive the driver accepts to arm: emission survives one late turn. The
-		 * period is real time, the loop's clock may run faster (simulated bench). */
-		loop_timer_add(app.lp, 0.25 * rate, 0.25 * rate, laser_keepalive_tick, &app);
+		/* Every 250 ms real time (the loop's clock may run faster: simulated bench), well within the 3 ×
+		 * keepalive_ms (>= 1.5 s) the laser's thread waits for a beat. */
+		loop_timer_add(app.lp, 0.25 * rate, 0.25 * rate, laser_heartbeat_tick, &app);
 	}
 	status_tick(app.lp, &app);
 	log_msg(LOG_NOTICE, "acquisitiond %s ready: socket %s, database %s, %d/%d devices available%s", ACQ_VERSION,

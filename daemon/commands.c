@@ -17,6 +17,7 @@
 #include "daemon/job.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
+#include "daemon/plan_worker.h"
 #include "daemon/store.h"
 #include "daemon/sweep.h"
 
@@ -499,6 +500,131 @@ static void reply_when(struct app *app, const struct srv_peer *peer, json_t *id,
 	}
 	server_reply(app->srv, peer->serial, id, json_pack("{s:o}", "progress", progress_json(app)));
 }
+/* ---- sweep.start: planned off the loop (plan_worker.h), then stored and started on the loop ----
+ * The plan text is parsed here (bounded by the request line); plan_make runs in a child with the same memory
+ * bound as `plan` and a longer deadline (a sweep of many points is worth waiting for; a client's dry run is
+ * not). Meanwhile the sweep module counts as busy: no reload, manual operation or second start; sweep.abort
+ * kills the child. */
+#define START_DEADLINE_S 120.0
+
+struct start_job {
+	struct app *app;
+	uint64_t serial;
+	json_t *id;
+	char *text, *name;
+	int64_t resume_id;       /* sweep.resume of this stored sweep (0: sweep.start) */
+	struct plan_spec *spec;
+	struct plan_worker *worker;
+};
+
+static struct start_job *starting; /* the sweep.start being planned (one at a time) */
+
+static void start_planned(void *ctx, int rc, const struct acq_err *perr, struct plan_result *plan)
+{
+	struct start_job *sj = ctx;
+	struct app *app = sj->app;
+	starting = NULL;
+	sweep_set_planning(app->sweep, false);
+	struct acq_err err = { 0 };
+	int64_t sid = 0;
+	if (rc) {
+		err = *perr;
+		acq_err_prefix(&err, "sweep.start: ");
+		plan_spec_free(sj->spec);
+	} else if (sj->resume_id) {
+		rc = sweep_resume_planned(app->sweep, sj->resume_id, sj->spec, plan, &err);
+	} else {
+		rc = sweep_start_planned(app->sweep, sj->text, sj->name, sj->spec, plan, &sid, &err);
+	}
+	if (rc) {
+		log_msg(LOG_NOTICE, "%s", err.msg);
+		server_reply_error(app->srv, sj->serial, sj->id, proto_code_of(&err), err.msg);
+	} else if (sj->resume_id) {
+		struct srv_peer pr = { .serial = sj->serial };
+		reply_when(app, &pr, sj->id, SWEEP_RUNNING); /* as a resume of a loaded sweep replies */
+	} else {
+		server_reply(app->srv, sj->serial, sj->id,
+			     json_pack("{s:I,s:o}", "sweep", (json_int_t)sid, "progress", progress_json(app)));
+	}
+	json_decref(sj->id);
+	free(sj->text);
+	free(sj->name);
+	free(sj);
+}
+
+/* sweep.start, or (resume_id) sweep.resume of an interrupted sweep from its stored text and name (taken). */
+static void start_planning(struct app *app, const struct srv_peer *peer, struct proto_req *req, int64_t resume_id,
+			   char *stored_text, char *stored_name)
+{
+	struct acq_err err = { 0 };
+	const char *text = resume_id ? stored_text : json_string_value(json_object_get(req->root, "plan"));
+	const char *name = resume_id ? stored_name : json_string_value(json_object_get(req->root, "name"));
+	struct start_job *sj = NULL;
+	if (devices_busy(app->dev)) {
+		acq_errf(&err, ACQ_E_STATE, "a manual move or measurement is running");
+		goto fail;
+	}
+	if (!resume_id && sweep_start_check(app->sweep, &err))
+		goto fail;
+	if (!text) {
+		acq_errf(&err, ACQ_E_INVAL, "no plan text");
+		goto fail;
+	}
+	if (!(sj = calloc(1, sizeof *sj)) || !(sj->text = strdup(text)) || (name && !(sj->name = strdup(name)))) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		goto fail;
+	}
+	sj->resume_id = resume_id;
+	if (plan_load_string(name && *name ? name : "plan", text, &sj->spec, &err))
+		goto fail;
+	struct plan_timing tm;
+	sweep_plan_timing(app->sweep, &tm);
+	sj->app = app;
+	sj->serial = peer->serial;
+	double rate = app->have_sim && app->sim.time_scale > 0 ? app->sim.time_scale : 1; /* loop seconds per s */
+	if (plan_worker_start(sj->spec, &app->conf->bench, &tm, PLAN_MEM_BYTES, START_DEADLINE_S * rate,
+			      START_DEADLINE_S, start_planned, sj, &sj->worker, &err))
+		goto fail;
+	sj->id = json_incref(req->id);
+	starting = sj;
+	sweep_set_planning(app->sweep, true);
+	free(stored_text);
+	free(stored_name);
+	return;
+fail:
+	if (sj) {
+		plan_spec_free(sj->spec);
+		free(sj->text);
+		free(sj->name);
+		free(sj);
+	}
+	free(stored_text);
+	free(stored_name);
+	reply_err(app, peer, req->id, &err);
+}
+
+static void cmd_sweep_start(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	start_planning(app, peer, req, 0, NULL, NULL);
+}
+
+/* sweep.resume: a loaded sweep resumes at once; an interrupted one is re-planned from its stored text off the
+ * loop first (the same plan, deterministic). */
+static void cmd_sweep_resume(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	int64_t id = 0;
+	char *text = NULL, *name = NULL;
+	int r = sweep_resume_plan_text(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &id, &text, &name, &err);
+	if (r < 0)
+		return reply_err(app, peer, req->id, &err);
+	if (r == 0)
+		return start_planning(app, peer, req, id, text, name);
+	if (sweep_resume(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &err))
+		return reply_err(app, peer, req->id, &err);
+	reply_when(app, peer, req->id, SWEEP_RUNNING);
+}
+
 static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto_req *req)
 {
 	struct acq_err err = { 0 };
@@ -517,22 +643,17 @@ static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto
 			data = json_pack("{s:o}", "sweep", data);
 		rc = data ? 0 : -1;
 	} else if (!strcmp(sub, "start")) {
-		int64_t id = 0;
-		json_t *name = json_object_get(req->root, "name");
-		if (devices_busy(app->dev))
-			rc = acq_errf(&err, ACQ_E_STATE, "a manual move or measurement is running");
-		else
-			rc = sweep_start(app->sweep, json_string_value(json_object_get(req->root, "plan")),
-					 name ? json_string_value(name) : NULL, &id, &err);
-		if (!rc)
-			data = json_pack("{s:I,s:o}", "sweep", (json_int_t)id, "progress", progress_json(app));
+		return cmd_sweep_start(app, peer, req);
 	} else if (!strcmp(sub, "pause")) {
 		if (!(rc = sweep_pause(app->sweep, &err)))
 			return reply_when(app, peer, req->id, SWEEP_PAUSED);
 	} else if (!strcmp(sub, "resume")) {
-		if (!(rc = sweep_resume(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &err)))
-			return reply_when(app, peer, req->id, SWEEP_RUNNING);
+		return cmd_sweep_resume(app, peer, req);
 	} else if (!strcmp(sub, "abort")) {
+		if (starting) { /* planning: its sweep.start gets "aborted while planning" */
+			plan_worker_abort(starting->worker);
+			return reply_when(app, peer, req->id, SWEEP_IDLE);
+		}
 		if (!(rc = sweep_abort(app->sweep, &err)))
 			return reply_when(app, peer, req->id, SWEEP_IDLE);
 	}

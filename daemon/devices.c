@@ -12,6 +12,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "daemon/log.h"
 #include "daemon/loop.h"
@@ -77,9 +78,19 @@ static void run_measure(struct req *r, struct port *p, struct spectro *sp)
 	}
 }
 
+static double mono_now(void);
+static void req_run_op(struct req *r, struct port *p);
+
 static void req_run(struct port_req *pr, struct port *p)
 {
 	struct req *r = (struct req *)pr;
+	double t0 = mono_now();
+	req_run_op(r, p);
+	r->run_s = mono_now() - t0;
+}
+
+static void req_run_op(struct req *r, struct port *p)
+{
 	struct dev_slot *s = &r->dv->slot[r->d];
 	r->rc = 0;
 	switch (r->op) {
@@ -172,10 +183,47 @@ static void req_run(struct port_req *pr, struct port *p)
 	case R_SPECTRO_STOP:
 		r->rc = !s->sp ? 0 : spectro_stop(s->sp, &r->err);
 		break;
-	case R_KEEPALIVE:
-		r->rc = !s->ls ? 0 : laser_keepalive(s->ls, &r->err);
-		break;
 	}
+}
+
+static double mono_now(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+/* The laser port's periodic job: refresh the keep-alive while the loop is alive (devices_heartbeat). It runs
+ * between requests, before any queued one, so a queue of status reads cannot make the laser switch off. */
+static void keepalive_tick(void *arg, struct port *p)
+{
+	(void)p;
+	struct devices *dv = arg;
+	struct laser *ls = dv->slot[CONF_DEV_LASER].ls; /* the thread's own handle */
+	if (!ls)
+		return;
+	struct keepalive *ka = &dv->ka;
+	pthread_mutex_lock(&ka->mu);
+	bool alive = mono_now() - ka->loop_alive <= ka->grace;
+	if (!alive)
+		ka->skipped++;
+	pthread_mutex_unlock(&ka->mu);
+	if (!alive)
+		return;
+	struct acq_err e = { 0 };
+	double t0 = mono_now();
+	int rc = laser_keepalive(ls, &e);
+	pthread_mutex_lock(&ka->mu);
+	if (ka->last_sent > 0 && t0 - ka->last_sent > ka->max_gap)
+		ka->max_gap = t0 - ka->last_sent;
+	ka->last_sent = t0;
+	if (rc) {
+		ka->failures++;
+		ka->last_err = e;
+	} else {
+		ka->refreshes++;
+	}
+	pthread_mutex_unlock(&ka->mu);
 }
 
 /* ---- on the loop: requests and completions -------------------------------------------------------------- */
@@ -279,6 +327,11 @@ static void req_done(struct port_req *pr)
 	struct devices *dv = r->dv;
 	struct dev_slot *s = &dv->slot[r->d];
 	bool current = r->gen == s->gen;
+	/* A laser request that holds its thread longer than half the keep-alive delays the refresh (the same
+	 * thread): say so, to tell a slow laser from a thread kept off the CPU. */
+	if (r->d == CONF_DEV_LASER && dv->ka.period > 0 && r->run_s > 2 * dv->ka.period)
+		log_msg(LOG_WARNING, "laser: request %d took %.3f s on its thread%s%s", (int)r->op, r->run_s,
+			r->rc ? ": " : "", r->rc ? r->err.msg : "");
 	if (r->op == R_OPEN)
 		opened(dv, r);
 	if (current) {
@@ -301,11 +354,7 @@ static void req_done(struct port_req *pr)
 		query_step(r->q);
 	else if (r->owner == OWN_CALL)
 		call_done(r);
-	else if (r->op == R_KEEPALIVE) {
-		dv->keepalive_pending = false;
-		if (r->rc)
-			log_msg(LOG_WARNING, "laser keep-alive: %s (emission switched off)", r->err.msg);
-	} else if (r->owner == OWN_MGR && r->rc && (r->op == R_LASER || r->op == R_STOP)) {
+	else if (r->owner == OWN_MGR && r->rc && (r->op == R_LASER || r->op == R_STOP)) {
 		/* the driver's message names the device already ("detector.theta (unit 1 @ ...): link is down") */
 		bool named = !strncmp(r->err.msg, dname(r->d), strlen(dname(r->d)));
 		log_msg(LOG_ERR, "safe stop: %s%s%s not confirmed: %s", named ? "" : dname(r->d), named ? "" : ": ",
@@ -364,6 +413,17 @@ static void open_all(struct devices *dv)
 			snprintf(s->note, sizeof s->note, "%s", unnamed(d, err.msg));
 			continue;
 		}
+		int ka_ms = d == CONF_DEV_LASER ? laser_cfg_keepalive_ms(c->laser) : 0;
+		if (ka_ms > 0) {
+			pthread_mutex_lock(&dv->ka.mu);
+			dv->ka.grace = 3e-3 * ka_ms;
+			dv->ka.period = 0.25e-3 * ka_ms;
+			dv->ka.last_sent = 0;
+			dv->ka.max_gap = 0;
+			dv->ka.loop_alive = mono_now();
+			pthread_mutex_unlock(&dv->ka.mu);
+			port_set_tick(s->port, 0.25e-3 * ka_ms, keepalive_tick, dv);
+		}
 		try_open(dv, d);
 	}
 	/* The first attempts run side by side; wait for them, so that what starts next (a sweep resumed at
@@ -402,6 +462,7 @@ int devices_init(struct loop *lp, struct store *st, const struct conf *c, device
 	if (!dv)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	*dv = (struct devices){ .lp = lp, .st = st, .c = c, .notify = notify, .ctx = ctx, .wallclock = wallclock };
+	pthread_mutex_init(&dv->ka.mu, NULL);
 	open_all(dv);
 	*out = dv;
 	return 0;
@@ -451,6 +512,7 @@ void devices_finish(struct devices *dv)
 			done(dv->op_ctx, -1, &err, NULL);
 	}
 	close_all(dv);
+	pthread_mutex_destroy(&dv->ka.mu);
 	free(dv);
 }
 
@@ -890,13 +952,36 @@ static void call_done(struct req *r)
 	}
 }
 
-void devices_laser_keepalive(struct devices *dv)
+void devices_heartbeat(struct devices *dv)
 {
-	if (!dv->slot[CONF_DEV_LASER].available || dv->keepalive_pending)
-		return;
-	struct req *r = devices_req_new(dv, CONF_DEV_LASER, R_KEEPALIVE, OWN_MGR);
-	if (r && !devices_req_submit(r))
-		dv->keepalive_pending = true;
+	struct keepalive *ka = &dv->ka;
+	pthread_mutex_lock(&ka->mu);
+	ka->loop_alive = mono_now();
+	unsigned long nfail = ka->failures - ka->reported_failures, nskip = ka->skipped - ka->reported_skipped;
+	struct acq_err e = ka->last_err;
+	ka->reported_failures = ka->failures;
+	ka->reported_skipped = ka->skipped;
+	double gap = ka->max_gap, period = ka->period;
+	if (gap > 2 * period)
+		ka->max_gap = 0;
+	pthread_mutex_unlock(&ka->mu);
+	if (gap > 2 * period) /* the laser's thread was held up (a slow laser command, or not scheduled) */
+		log_msg(LOG_WARNING, "laser keep-alive: %.3f s between two refreshes (period %.3f s)", gap, period);
+	if (nfail)
+		log_msg(LOG_WARNING, "laser keep-alive: %lu failure(s), the last: %s (emission switched off)", nfail, e.msg);
+	if (nskip)
+		log_msg(LOG_WARNING, "laser keep-alive: not refreshed %lu time(s): the loop was silent for more than %.1f s "
+			"(the laser may have switched emission off)", nskip, ka->grace);
+}
+
+void devices_keepalive_counts(struct devices *dv, unsigned long *refreshes, unsigned long *failures,
+			      unsigned long *skipped)
+{
+	pthread_mutex_lock(&dv->ka.mu);
+	*refreshes = dv->ka.refreshes;
+	*failures = dv->ka.failures;
+	*skipped = dv->ka.skipped;
+	pthread_mutex_unlock(&dv->ka.mu);
 }
 
 int devices_laser_off(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err)

@@ -84,9 +84,14 @@ int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err);
 /* Switch the laser emission off on its thread and read it back; done(ctx, 0, NULL, {emission: false}) or the
  * error. -1 at once when the laser is unavailable. */
 int devices_laser_off(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err);
-/* Refresh the laser's keep-alive on its thread (one at a time: skipped while one is queued); a failure is
- * logged (the driver then switched emission off). Called by the loop every 250 ms. */
-void devices_laser_keepalive(struct devices *dv);
+/* The loop is alive: call from a loop timer every 250 ms of real time. The laser's keep-alive is refreshed on
+ * the laser's own thread every keepalive_ms / 4, ahead of any queued laser request (no client query can delay
+ * it), but only while this was called within the last 3 × keepalive_ms: a loop that hangs leaves the laser to
+ * switch itself off. Keep-alive failures and pauses since the last call are logged here. */
+void devices_heartbeat(struct devices *dv);
+/* Keep-alive counters of the laser's thread: refreshes sent, failures, periods skipped (loop silent). */
+void devices_keepalive_counts(struct devices *dv, unsigned long *refreshes, unsigned long *failures,
+			      unsigned long *skipped);
 int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages, double power_pct,
 		    devices_done_fn done, void *ctx, struct acq_err *err);
 

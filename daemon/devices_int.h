@@ -3,6 +3,7 @@
 #ifndef DEVICES_INT_H
 #define DEVICES_INT_H
 
+#include <pthread.h>
 #include <stdint.h>
 
 #include "daemon/devices.h"
@@ -12,7 +13,7 @@
 #include "drivers/spectro.h"
 
 enum rop { R_OPEN, R_CLOSE, R_STATUS, R_MOVE, R_HOME, R_STOP, R_ALARM_RESET, R_LASER, R_POWER, R_MEASURE,
-	   R_SPECTRO_STOP, R_KEEPALIVE };
+	   R_SPECTRO_STOP };
 
 /* The executor's view of a slot: one move (or homing), one read, one measurement at a time; seq ties a
  * completion to the call that wants it. */
@@ -57,8 +58,20 @@ struct dev_slot {
 	struct xview x;
 };
 
+/* The laser's keep-alive, refreshed by the laser port's own periodic job (port_set_tick) while the loop shows it
+ * is alive; shared by the loop and the laser's thread (the mutex). */
+struct keepalive {
+	pthread_mutex_t mu;
+	double loop_alive;             /* real (monotonic) seconds of the loop's last devices_heartbeat() */
+	double grace;                  /* refresh only while the loop was alive this recently (real s) */
+	unsigned long refreshes, failures, skipped, reported_failures, reported_skipped;
+	double period;                 /* the tick's period (real s) */
+	double last_sent, max_gap;     /* real s: the last refresh sent; the longest gap since the last report */
+	struct acq_err last_err;       /* of the last failure */
+};
+
 struct devices {
-	bool keepalive_pending;        /* a laser keep-alive is queued or running on the laser's port */
+	struct keepalive ka;
 	struct loop *lp;
 	struct store *st;
 	const struct conf *c;
@@ -103,6 +116,7 @@ struct req {
 	unsigned gen, seq;
 	const void *cfg;         /* the device's configuration (open) */
 	double target, deadline, pct;
+	double run_s;            /* real seconds the request took on the port's thread */
 	bool on;
 	struct spectro_meas meas;
 	/* results */

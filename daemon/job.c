@@ -21,7 +21,7 @@ struct job {
 	bool exited;
 	int status;
 	char *out;              /* the last cap bytes (job_start), or the first (job_fork: truncated then) */
-	size_t len, cap;
+	size_t len, cap, alloc; /* alloc: the buffer's size (+ 1 for the NUL), cap: what it may grow to */
 	bool keep_head, truncated;
 	uint64_t timer;
 	bool killed, timed_out;
@@ -83,8 +83,19 @@ static void on_output(struct loop *lp, int fd, short revents, void *arg)
 	}
 	size_t k = (size_t)n;
 	_Static_assert(sizeof buf < JOB_OUTPUT_MAX, "one read fits in the kept output");
-	if (j->keep_head && j->len + k > j->cap) {
-		k = j->cap - j->len;
+	if (j->keep_head && j->len + k > j->alloc && j->alloc < j->cap) {
+		/* job_fork_out(): the buffer grows with the output, up to its cap */
+		size_t a = j->alloc;
+		while (a < j->len + k && a < j->cap)
+			a = a * 2 < j->cap ? a * 2 : j->cap;
+		char *o = realloc(j->out, a + 1);
+		if (o) {
+			j->out = o;
+			j->alloc = a;
+		}
+	}
+	if (j->keep_head && j->len + k > j->alloc) {
+		k = j->alloc - j->len;
 		j->truncated = true;
 	} else if (j->len + k > j->cap) {
 		size_t drop = j->len + k - j->cap;
@@ -130,13 +141,15 @@ static void child_setup(pid_t parent)
 
 /* Fork with the output pipe; in the child, run fn (exec) or child_fn; in the parent, register the job. */
 static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, void *child_arg, size_t mem_bytes,
-		 double timeout_s, job_done_fn done, void *arg, struct job **out, struct acq_err *err)
+		 size_t cap, double timeout_s, job_done_fn done, void *arg, struct job **out, struct acq_err *err)
 {
 	if (!job_loop || (!child_fn && (!argv || !argv[0])))
 		return acq_errf(err, ACQ_E_INVAL, "job: not initialised or no program");
 	struct job *j = calloc(1, sizeof *j);
-	size_t cap = child_fn ? JOB_FORK_OUTPUT_MAX : JOB_OUTPUT_MAX;
-	if (!j || !(j->out = malloc(cap + 1))) {
+	size_t alloc = cap < JOB_FORK_OUTPUT_MAX ? cap : JOB_FORK_OUTPUT_MAX; /* job_fork_out(): grows up to cap */
+	if (!child_fn)
+		alloc = cap;
+	if (!j || !(j->out = malloc(alloc + 1))) {
 		free(j);
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
@@ -190,6 +203,7 @@ static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, voi
 	j->pid = pid;
 	j->fd = p[0];
 	j->cap = cap;
+	j->alloc = alloc;
 	j->keep_head = child_fn != NULL;
 	j->done = done;
 	j->arg = arg;
@@ -212,15 +226,29 @@ static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, voi
 int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
 	      struct job **out, struct acq_err *err)
 {
-	return spawn(argv, cwd, NULL, NULL, 0, timeout_s, done, arg, out, err);
+	return spawn(argv, cwd, NULL, NULL, 0, JOB_OUTPUT_MAX, timeout_s, done, arg, out, err);
 }
 
 int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, job_done_fn done, void *arg,
 	     struct job **out, struct acq_err *err)
 {
-	if (!fn)
-		return acq_errf(err, ACQ_E_INVAL, "job: no function");
-	return spawn(NULL, NULL, fn, fn_arg, mem_bytes, timeout_s, done, arg, out, err);
+	return job_fork_out(fn, fn_arg, mem_bytes, JOB_FORK_OUTPUT_MAX, timeout_s, done, arg, out, err);
+}
+
+int job_fork_out(job_child_fn fn, void *fn_arg, size_t mem_bytes, size_t out_max, double timeout_s, job_done_fn done,
+		 void *arg, struct job **out, struct acq_err *err)
+{
+	if (!fn || out_max < 1)
+		return acq_errf(err, ACQ_E_INVAL, "job: no function or no output");
+	return spawn(NULL, NULL, fn, fn_arg, mem_bytes, out_max, timeout_s, done, arg, out, err);
+}
+
+void job_kill(struct job *j)
+{
+	if (j && !j->exited) {
+		j->killed = true;
+		kill(j->pid, SIGKILL);
+	}
 }
 
 bool job_output_truncated(const struct job *j)

@@ -35,7 +35,13 @@ typedef int (*job_child_fn)(void *arg, int fd);
  * Children of both kinds die with the daemon (PR_SET_PDEATHSIG). 0 or -1. */
 int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, job_done_fn done, void *arg,
 	     struct job **out, struct acq_err *err);
-/* True when a job_fork() child wrote more than JOB_FORK_OUTPUT_MAX bytes (the rest was discarded). */
+/* job_fork() keeping up to out_max bytes of output (the buffer grows with it): a binary result. 0 or -1. */
+int job_fork_out(job_child_fn fn, void *fn_arg, size_t mem_bytes, size_t out_max, double timeout_s, job_done_fn done,
+		 void *arg, struct job **out, struct acq_err *err);
+/* SIGKILL a running job; its done() is called as usual (status 128 + 9). */
+void job_kill(struct job *j);
+/* True when a job_fork() child wrote more than its output bound (JOB_FORK_OUTPUT_MAX or out_max; the rest was
+ * discarded). */
 bool job_output_truncated(const struct job *j);
 /* True when the job was killed because its timeout expired (valid in its done callback). */
 bool job_timed_out(const struct job *j);

@@ -30,7 +30,25 @@ struct port {
 	bool running;                 /* the thread is running a request */
 	pthread_cond_t idle;          /* the queue ran empty and nothing runs */
 	int efd;
+	void (*tick_fn)(void *arg, struct port *p); /* port_set_tick() */
+	void *tick_arg;
+	double tick_period, tick_next;              /* real (CLOCK_MONOTONIC) seconds */
 };
+
+static double mono_now(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+static struct timespec mono_at(double t)
+{
+	struct timespec ts;
+	ts.tv_sec = (time_t)t;
+	ts.tv_nsec = (long)((t - (double)ts.tv_sec) * 1e9);
+	return ts;
+}
 
 static void push(struct port_req **head, struct port_req **tail, struct port_req *r)
 {
@@ -59,8 +77,27 @@ static void *thread_main(void *arg)
 	struct port *p = arg;
 	pthread_mutex_lock(&p->mu);
 	for (;;) {
-		while (!p->head && !p->quit)
-			pthread_cond_wait(&p->cv, &p->mu);
+		/* The periodic job first whenever it is due, then the next request; idle, sleep until either. */
+		for (;;) {
+			if (p->tick_fn && !p->quit && mono_now() >= p->tick_next) {
+				void (*fn)(void *, struct port *) = p->tick_fn;
+				void *targ = p->tick_arg;
+				pthread_mutex_unlock(&p->mu);
+				double t0 = mono_now();
+				fn(targ, p);
+				pthread_mutex_lock(&p->mu);
+				p->tick_next = t0 + p->tick_period;
+				continue;
+			}
+			if (p->head || p->quit)
+				break;
+			if (p->tick_fn) {
+				struct timespec ts = mono_at(p->tick_next);
+				pthread_cond_timedwait(&p->cv, &p->mu, &ts);
+			} else {
+				pthread_cond_wait(&p->cv, &p->mu);
+			}
+		}
 		struct port_req *r = pop(&p->head, &p->tail);
 		if (!r)
 			break; /* quit with an empty queue */
@@ -120,7 +157,11 @@ int port_new(struct loop *lp, const char *name, struct port **out, struct acq_er
 		return acq_errf(err, ACQ_E_IO, "port %s: eventfd: %s", name, strerror(errno));
 	}
 	pthread_mutex_init(&p->mu, NULL);
-	pthread_cond_init(&p->cv, NULL);
+	pthread_condattr_t ca; /* timed waits on the monotonic clock: a wall-clock step changes no period */
+	pthread_condattr_init(&ca);
+	pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+	pthread_cond_init(&p->cv, &ca);
+	pthread_condattr_destroy(&ca);
 	pthread_cond_init(&p->idle, NULL);
 	if (loop_fd_add(lp, p->efd, POLLIN, on_efd, p, err)) {
 		close(p->efd);
@@ -136,6 +177,17 @@ int port_new(struct loop *lp, const char *name, struct port **out, struct acq_er
 	}
 	*out = p;
 	return 0;
+}
+
+void port_set_tick(struct port *p, double period_s, void (*fn)(void *arg, struct port *p), void *arg)
+{
+	pthread_mutex_lock(&p->mu);
+	p->tick_fn = period_s > 0 ? fn : NULL;
+	p->tick_arg = arg;
+	p->tick_period = period_s;
+	p->tick_next = mono_now();
+	pthread_cond_broadcast(&p->cv);
+	pthread_mutex_unlock(&p->mu);
 }
 
 void port_submit(struct port *p, struct port_req *r)
@@ -186,11 +238,7 @@ void port_wait_real(struct port *p, double real, int fd)
 		poll(&pfd, 1, (int)ceil(real * 1e3));
 		return;
 	}
-	struct timespec ts;
-	clock_gettime(CLOCK_REALTIME, &ts);
-	double t = (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9 + real;
-	ts.tv_sec = (time_t)t;
-	ts.tv_nsec = (long)((t - (double)ts.tv_sec) * 1e9);
+	struct timespec ts = mono_at(mono_now() + real);
 	pthread_mutex_lock(&p->mu);
 	while (p->run_gen == p->interrupt_gen && !p->quit)
 		if (pthread_cond_timedwait(&p->cv, &p->mu, &ts) == ETIMEDOUT)

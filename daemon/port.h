@@ -1,7 +1,8 @@
 /* port: one I/O thread per device port, as EPICS asyn gives each port a thread. The loop submits requests to
  * the port's FIFO queue; the port's thread runs them (the only place where a device call may block); finished
  * requests come back through a completion queue whose eventfd the loop polls, and their done() runs on the
- * loop. So a device that times out delays its own requests, never the loop. */
+ * loop. So a device that times out delays its own requests, never the loop. A port may also have a periodic job
+ * of its own (port_set_tick: the laser's keep-alive) that takes precedence over queued requests. */
 #ifndef PORT_H
 #define PORT_H
 
@@ -24,6 +25,10 @@ struct port_req {
 
 /* A port named name (for messages) on loop lp, its thread started and its eventfd registered. 0 or -1. */
 int port_new(struct loop *lp, const char *name, struct port **out, struct acq_err *err);
+/* Give the port's thread a periodic job: fn(arg, p) every period_s real seconds (0: none), run between requests
+ * and before the next queued request when due, so queued requests never delay it (only the one running may).
+ * The first run is due at once. Call from the loop's thread; fn runs on the port's thread. */
+void port_set_tick(struct port *p, double period_s, void (*fn)(void *arg, struct port *p), void *arg);
 /* Queue r (FIFO). Never blocks. */
 void port_submit(struct port *p, struct port_req *r);
 /* Ask the request running now (and those queued before this call) to end early: port_wait() returns at once

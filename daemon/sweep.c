@@ -34,6 +34,7 @@ struct sweep {
 	uint64_t done_timer;
 	struct recon_chain *chain;
 	bool unrecorded_logged;      /* the end of the sweep awaits being recorded (logged once) */
+	bool planning;               /* sweep_set_planning(): a plan for sweep_start_planned() is being made */
 };
 
 /* ---- events --------------------------------------------------------------------------------------- */
@@ -308,6 +309,8 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
 	}
 }
 
+static int plan_cfg(struct sweep *sw, struct ex_cfg *cfg, struct acq_err *err);
+
 /* Plan the text against the bench; the spec's integration settings override the configuration's. */
 static int make_plan(struct sweep *sw, const char *text, const char *name, struct ex_cfg *cfg, struct acq_err *err)
 {
@@ -320,6 +323,12 @@ static int make_plan(struct sweep *sw, const char *text, const char *name, struc
 	struct plan_timing tm;
 	sweep_plan_timing(sw, &tm);
 	plan_time_apply(sw->spec, &sw->env.conf->bench, &tm, sw->plan); /* the ETA's plan figure */
+	return plan_cfg(sw, cfg, err);
+}
+
+/* The executor's settings for the plan in sw: the configuration's, with the spec's integration settings. */
+static int plan_cfg(struct sweep *sw, struct ex_cfg *cfg, struct acq_err *err)
+{
 	if (sw->plan->n_steps == 0)
 		return acq_errf(err, ACQ_E_INVAL, "the plan has no visible point");
 	*cfg = sw->cfg;
@@ -355,11 +364,12 @@ static struct ex_sink sink_of(struct sweep *sw)
 	return (struct ex_sink){ .event = on_event, .progress = on_progress, .ctx = sw };
 }
 
-int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64_t *id, struct acq_err *err)
+int sweep_start_check(const struct sweep *sw, struct acq_err *err)
 {
-	*id = 0;
 	if (sw->ex)
 		return acq_errf(err, ACQ_E_STATE, "sweep %lld is %s", (long long)sw->id, ex_state_name(ex_state(sw->ex)));
+	if (sw->planning)
+		return acq_errf(err, ACQ_E_STATE, "a sweep is being planned");
 	char missing[256] = "";
 	for (int d = 0; d < CONF_DEV__COUNT; d++) {
 		if (!devices_up(sw->env.devices, (enum conf_dev)d))
@@ -368,8 +378,50 @@ int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64
 	}
 	if (missing[0])
 		return acq_errf(err, ACQ_E_DISCONNECTED, "cannot start a sweep: unavailable: %s", missing);
+	return 0;
+}
+
+void sweep_set_planning(struct sweep *sw, bool planning)
+{
+	sw->planning = planning;
+}
+
+static int start_planned(struct sweep *sw, const char *plan_text, const char *name, int64_t *id,
+			 struct acq_err *err);
+
+int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64_t *id, struct acq_err *err)
+{
+	*id = 0;
+	if (sweep_start_check(sw, err))
+		return -1;
 	struct ex_cfg cfg;
-	if (make_plan(sw, plan_text, name, &cfg, err))
+	if (make_plan(sw, plan_text, name, &cfg, err)) {
+		release(sw);
+		return -1;
+	}
+	return start_planned(sw, plan_text, name, id, err);
+}
+
+int sweep_start_planned(struct sweep *sw, const char *plan_text, const char *name, struct plan_spec *spec,
+			struct plan_result *plan, int64_t *id, struct acq_err *err)
+{
+	*id = 0;
+	if (sweep_start_check(sw, err)) { /* the devices may have gone while it was planned */
+		plan_spec_free(spec);
+		plan_result_free(plan);
+		return -1;
+	}
+	sw->spec = spec;
+	sw->plan = plan;
+	return start_planned(sw, plan_text, name, id, err);
+}
+
+/* sweep_start() from the plan in sw (sw->spec, sw->plan, released on failure). */
+static int start_planned(struct sweep *sw, const char *plan_text, const char *name, int64_t *id,
+			 struct acq_err *err)
+{
+	struct ex_cfg cfg;
+	if (plan_cfg(sw, &cfg, err))
 		goto fail;
 	size_t n = sw->plan->n_steps;
 	struct store_point_new *pts = calloc(n, sizeof *pts);
@@ -425,25 +477,50 @@ int sweep_pause(struct sweep *sw, struct acq_err *err)
 	return 0;
 }
 
+/* The stored sweep id if it can be resumed (running or paused in the store), else NULL with err. */
+static json_t *recover_load(struct sweep *sw, int64_t id, struct acq_err *err)
+{
+	json_t *js = store_sweep_show(sw->env.store, id, false, err);
+	if (!js)
+		return NULL;
+	const char *state = json_string_value(json_object_get(js, "state"));
+	if (!state || (strcmp(state, "running") && strcmp(state, "paused"))) {
+		acq_errf(err, ACQ_E_STATE, "sweep %lld is %s: only a running or paused sweep can be resumed",
+			 (long long)id, state ? state : "?");
+		json_decref(js);
+		return NULL;
+	}
+	return js;
+}
+
+static int recover_planned(struct sweep *sw, int64_t id, json_t *js, bool hold, struct acq_err *err);
+
 /* Resume interrupted sweep id from the store: re-plan its stored plan text (deterministic), check it matches
  * the stored points, discard a partial point and start after the last committed one. */
 static int recover_id(struct sweep *sw, int64_t id, bool hold, struct acq_err *err)
 {
-	json_t *js = store_sweep_show(sw->env.store, id, false, err);
+	json_t *js = recover_load(sw, id, err);
 	if (!js)
 		return -1;
-	const char *state = json_string_value(json_object_get(js, "state"));
 	const char *text = json_string_value(json_object_get(js, "plan_text"));
 	const char *name = json_string_value(json_object_get(js, "name"));
+	struct ex_cfg cfg;
+	if (make_plan(sw, text, name, &cfg, err)) {
+		json_decref(js);
+		release(sw);
+		return -1;
+	}
+	return recover_planned(sw, id, js, hold, err);
+}
+
+/* recover_id() once sw->spec and sw->plan are made (both released on failure); consumes js. */
+static int recover_planned(struct sweep *sw, int64_t id, json_t *js, bool hold, struct acq_err *err)
+{
+	const char *state = json_string_value(json_object_get(js, "state"));
 	json_int_t total = json_integer_value(json_object_get(js, "points_total"));
 	int rc = -1;
 	struct ex_cfg cfg;
-	if (!state || (strcmp(state, "running") && strcmp(state, "paused"))) {
-		acq_errf(err, ACQ_E_STATE, "sweep %lld is %s: only a running or paused sweep can be resumed",
-			 (long long)id, state ? state : "?");
-		goto out;
-	}
-	if (make_plan(sw, text, name, &cfg, err))
+	if (plan_cfg(sw, &cfg, err))
 		goto out;
 	if ((json_int_t)sw->plan->n_steps != total) {
 		acq_errf(err, ACQ_E_STATE, "sweep %lld: its plan now gives %zu points, %lld were stored (bench changed?)",
@@ -510,6 +587,53 @@ int sweep_resume(struct sweep *sw, int64_t id, struct acq_err *err)
 	return recover_id(sw, id, false, err);
 }
 
+int sweep_resume_plan_text(struct sweep *sw, int64_t id, int64_t *found, char **text, char **name,
+			   struct acq_err *err)
+{
+	*found = 0;
+	*text = *name = NULL;
+	if (sw->ex)
+		return 1;
+	if (sw->planning)
+		return acq_errf(err, ACQ_E_STATE, "a sweep is being planned");
+	if (!id && store_sweep_interrupted(sw->env.store, &id, err))
+		return -1;
+	if (!id)
+		return acq_errf(err, ACQ_E_NOTFOUND, "no paused or interrupted sweep to resume");
+	json_t *js = recover_load(sw, id, err);
+	if (!js)
+		return -1;
+	const char *t = json_string_value(json_object_get(js, "plan_text"));
+	const char *n = json_string_value(json_object_get(js, "name"));
+	*text = strdup(t ? t : "");
+	*name = n ? strdup(n) : NULL;
+	json_decref(js);
+	if (!*text || (n && !*name)) {
+		free(*text);
+		free(*name);
+		*text = *name = NULL;
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	*found = id;
+	return 0;
+}
+
+int sweep_resume_planned(struct sweep *sw, int64_t id, struct plan_spec *spec, struct plan_result *plan,
+			 struct acq_err *err)
+{
+	json_t *js = NULL;
+	if (sw->ex || sw->planning) {
+		acq_errf(err, ACQ_E_STATE, "a sweep is loaded or being planned");
+	} else if ((js = recover_load(sw, id, err))) { /* the row may have changed while it was planned */
+		sw->spec = spec;
+		sw->plan = plan;
+		return recover_planned(sw, id, js, false, err);
+	}
+	plan_spec_free(spec);
+	plan_result_free(plan);
+	return -1;
+}
+
 int sweep_abort(struct sweep *sw, struct acq_err *err)
 {
 	if (!sw->ex)
@@ -567,7 +691,7 @@ void sweep_get_progress(const struct sweep *sw, struct sweep_progress *p)
 
 bool sweep_busy(const struct sweep *sw)
 {
-	return sw->ex != NULL;
+	return sw->ex != NULL || sw->planning;
 }
 
 const char *sweep_state_name(enum sweep_state s)

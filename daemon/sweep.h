@@ -28,6 +28,8 @@ struct loop;
 struct store;
 struct devices;
 struct sweep;
+struct plan_spec;
+struct plan_result;
 
 enum sweep_state {
 	SWEEP_IDLE = 0,    /* no sweep loaded */
@@ -63,10 +65,28 @@ int sweep_init(const struct sweep_env *env, struct sweep **out, struct acq_err *
 void sweep_finish(struct sweep *sw);
 /* Plan (YAML text) → stored sweep → running. *id is the new sweep's id. 0 or -1. */
 int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64_t *id, struct acq_err *err);
+/* Whether a sweep could start now (none loaded or being planned, every device up). 0 or -1. */
+int sweep_start_check(const struct sweep *sw, struct acq_err *err);
+/* Mark a plan being made elsewhere for sweep_start_planned() (a worker: large plans take long); meanwhile
+ * sweep_busy() is true (no reload, manual operation or other start). */
+void sweep_set_planning(struct sweep *sw, bool planning);
+/* sweep_start() with spec and plan already made from plan_text (plan_load_string, plan_make, plan_time_apply
+ * with sweep_plan_timing()); takes both, freed on failure too. 0 or -1. */
+int sweep_start_planned(struct sweep *sw, const char *plan_text, const char *name, struct plan_spec *spec,
+			struct plan_result *plan, int64_t *id, struct acq_err *err);
 /* Pause after the current spectrum is committed. 0 or -1 (ACQ_E_STATE when nothing runs). */
 int sweep_pause(struct sweep *sw, struct acq_err *err);
 /* Resume the paused sweep, or the interrupted sweep id from the store (id 0: the current one). 0 or -1. */
 int sweep_resume(struct sweep *sw, int64_t id, struct acq_err *err);
+/* For sweep_resume() off the loop: when no sweep is loaded, the interrupted sweep id (0: the latest) that
+ * would be resumed, in *found, with its stored plan text and name (the caller frees; name may be NULL) to plan
+ * elsewhere for sweep_resume_planned(). 1 when a sweep is loaded (sweep_resume() then plans nothing), 0, -1. */
+int sweep_resume_plan_text(struct sweep *sw, int64_t id, int64_t *found, char **text, char **name,
+			   struct acq_err *err);
+/* sweep_resume() of the interrupted sweep id with spec and plan made from its stored text (as for
+ * sweep_start_planned; takes both, freed on failure too). 0 or -1. */
+int sweep_resume_planned(struct sweep *sw, int64_t id, struct plan_spec *spec, struct plan_result *plan,
+			 struct acq_err *err);
 /* Abort: laser off, arms stopped, sweep 'aborted'. 0 or -1. */
 int sweep_abort(struct sweep *sw, struct acq_err *err);
 /* At start-up with daemon.auto_resume: resume an interrupted sweep after its last committed point.

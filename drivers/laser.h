@@ -44,6 +44,8 @@ int laser_status(struct laser *l, struct laser_status *st, struct acq_err *err);
 /* Refresh the laser's keep-alive (armed at open with keepalive_ms; emission stops if not refreshed within
  * it). Call at least every keepalive_ms / 2. No-op when disarmed. 0 or -1 (emission then switched off). */
 int laser_keepalive(struct laser *l, struct acq_err *err);
+/* The configuration's keepalive_ms (0: none): the laser switches emission off when not refreshed within it. */
+int laser_cfg_keepalive_ms(const struct laser_cfg *cfg);
 /* Identity read at open. */
 const struct laser_identity *laser_identity(const struct laser *l);
 

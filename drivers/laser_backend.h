@@ -24,8 +24,6 @@ extern const struct laser_backend laser_fake_backend;    /* drivers/laser_fake.c
 
 /* The backend a parsed configuration selects (the configuration is parsed in drivers/laser_serial.c). */
 const struct laser_backend *laser_cfg_backend(const struct laser_cfg *cfg);
-/* The configuration's keepalive_ms (0: none). */
-int laser_cfg_keepalive_ms(const struct laser_cfg *cfg);
 /* The configuration's max_power_pct. */
 double laser_cfg_max_power(const struct laser_cfg *cfg);
 

@@ -6,6 +6,7 @@
 #include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "drivers/laser_backend.h"
 
@@ -30,6 +31,39 @@ void laser_fake_reset(void)
 	pthread_mutex_unlock(&fake_lock);
 }
 
+static double mono_now(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+/* A command arrives: take delay_s (without the lock), then, with the lock held on return, apply the keep-alive
+ * of cfg (emission off if the previous command is older than keepalive_ms) and refresh it. */
+static void command_in(const struct laser_cfg *cfg)
+{
+	pthread_mutex_lock(&fake_lock);
+	double delay = fake.delay_s;
+	pthread_mutex_unlock(&fake_lock);
+	if (delay > 0) {
+		struct timespec ts = { (time_t)delay, (long)((delay - (double)(time_t)delay) * 1e9) };
+		nanosleep(&ts, NULL);
+	}
+	pthread_mutex_lock(&fake_lock);
+	double now = mono_now();
+	int ka = cfg ? laser_cfg_keepalive_ms(cfg) : 0;
+	if (fake.last_refresh > 0) {
+		double gap = now - fake.last_refresh;
+		if (gap > fake.max_gap)
+			fake.max_gap = gap;
+		if (ka && gap > ka * 1e-3 && fake.emission) {
+			fake.emission = false;
+			fake.expired++;
+		}
+	}
+	fake.last_refresh = now;
+}
+
 /* Injected failure: emission off, -1 with the fake's code; else 0. Called with the lock held. */
 static int io_fail(const char *what, struct acq_err *err)
 {
@@ -46,6 +80,7 @@ static int lf_open(const struct laser_cfg *cfg, struct laser_dev **out, struct a
 	if (!rc) {
 		fake.opens++;
 		fake.emission = false;
+		fake.last_refresh = mono_now(); /* open arms the keep-alive */
 	}
 	pthread_mutex_unlock(&fake_lock);
 	if (rc)
@@ -71,8 +106,7 @@ static void lf_close(struct laser_dev *d)
 
 static int lf_set_emission(struct laser_dev *d, bool on, struct acq_err *err)
 {
-	(void)d;
-	pthread_mutex_lock(&fake_lock);
+	command_in(d->cfg);
 	int rc = io_fail(on ? "EMISSION ON" : "EMISSION OFF", err);
 	if (!rc && on && (fake.interlock_open || fake.fault_code)) {
 		fake.emission = false;
@@ -94,7 +128,7 @@ static int lf_set_emission(struct laser_dev *d, bool on, struct acq_err *err)
 static int lf_set_power(struct laser_dev *d, double pct, struct acq_err *err)
 {
 	double maxp = laser_cfg_max_power(d->cfg);
-	pthread_mutex_lock(&fake_lock);
+	command_in(d->cfg);
 	int rc = io_fail("POWER", err);
 	if (!rc && (!isfinite(pct) || pct < 0 || pct > maxp)) {
 		fake.emission = false;
@@ -110,9 +144,8 @@ static int lf_set_power(struct laser_dev *d, double pct, struct acq_err *err)
 
 static int lf_status(struct laser_dev *d, struct laser_status *st, struct acq_err *err)
 {
-	(void)d;
 	memset(st, 0, sizeof *st);
-	pthread_mutex_lock(&fake_lock);
+	command_in(d->cfg);
 	int rc = io_fail("STATUS?", err);
 	if (fake.interlock_open || fake.fault_code)
 		fake.emission = false;
@@ -126,6 +159,20 @@ static int lf_status(struct laser_dev *d, struct laser_status *st, struct acq_er
 	return rc;
 }
 
+static int lf_keepalive(struct laser_dev *d, struct acq_err *err)
+{
+	if (!laser_cfg_keepalive_ms(d->cfg))
+		return 0;
+	command_in(d->cfg);
+	int rc = io_fail("KEEPALIVE", err);
+	fake.keepalives++;
+	if (fake.last_keepalive > 0 && fake.last_refresh - fake.last_keepalive > fake.max_keepalive_gap)
+		fake.max_keepalive_gap = fake.last_refresh - fake.last_keepalive;
+	fake.last_keepalive = fake.last_refresh;
+	pthread_mutex_unlock(&fake_lock);
+	return rc;
+}
+
 static const struct laser_identity *lf_identity(const struct laser_dev *d)
 {
 	return &d->id;
@@ -133,5 +180,5 @@ static const struct laser_identity *lf_identity(const struct laser_dev *d)
 
 const struct laser_backend laser_fake_backend = {
 	.name = "fake", .open = lf_open, .close = lf_close, .set_emission = lf_set_emission,
-	.set_power = lf_set_power, .status = lf_status, .identity = lf_identity,
+	.set_power = lf_set_power, .status = lf_status, .identity = lf_identity, .keepalive = lf_keepalive,
 };

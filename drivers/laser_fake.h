@@ -14,6 +14,15 @@ struct laser_fake {
 	bool fail_open;       /* open fails with ACQ_E_DISCONNECTED */
 	int fail_io;          /* nonzero: every operation fails with this acq_err code */
 	int opens, sets_on, sets_off, power_sets, status_reads;
+	double delay_s;       /* every operation takes this long (real time): a slow port */
+	/* Keep-alive (armed when the configuration's keepalive_ms is not 0): every command refreshes it, as on
+	 * the serial laser. Real monotonic seconds. */
+	int keepalives;             /* laser_keepalive() calls */
+	double last_keepalive;      /* the last laser_keepalive() (0: none yet) */
+	double max_keepalive_gap;   /* the longest time between two laser_keepalive() calls since the reset */
+	double last_refresh;        /* the last command (0: none yet) */
+	double max_gap;             /* the longest time between two commands since the reset */
+	int expired;                /* emission on when a command came later than keepalive_ms: it went off */
 };
 
 /* The fake laser's state (one per process). */

@@ -26,7 +26,8 @@
  * ACQ_E_DEVICE with detail = n.
  * Safety: open switches emission off; every failed call switches it off (best effort) before returning;
  * close switches it off. Open arms the laser's keep-alive (keepalive_ms, default 1000): a daemon that dies
- * or stalls stops refreshing it (laser_keepalive(), called by its loop) and emission stops by itself.
+ * or hangs stops refreshing it (laser_keepalive(), called by the daemon's laser thread every keepalive_ms / 4
+ * while its loop beats) and emission stops by itself.
  *
  * Config (devices.laser):
  *   device: /dev/ttyUSB0   baud: 115200   data_bits: 8   parity: none|odd|even   stop_bits: 1|2
@@ -121,7 +122,7 @@ int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err
 	    yc_enum(node, "transport", false, transports, &transport, err) ||
 	    yc_enum(node, "backend", false, backends, &backend, err) || yc_check_unknown(node, "laser", err))
 		return -1;
-	if (keepalive && keepalive < 500) /* the daemon refreshes it every 250 ms */
+	if (keepalive && keepalive < 500) /* the daemon refreshes it every keepalive_ms / 4: >= 125 ms apart */
 		return yc_errf(err, yc_get(node, "keepalive_ms"), "laser.keepalive_ms: %lld: expected 0 (off) or 500 to "
 			       "60000 ms", keepalive);
 	struct laser_cfg *c = calloc(1, sizeof *c);
@@ -193,18 +194,20 @@ static int exchange(struct laser_dev *l, const char *cmd, struct acq_err *err)
 	double deadline = mono_ms() + l->cfg->timeout_ms;
 	size_t len = 0;
 	for (;;) {
+		/* Past the deadline, what has arrived is still read (a thread descheduled on a loaded machine wakes
+		 * after its deadline with the reply waiting): only nothing more to read ends the wait. */
 		double left = deadline - mono_ms();
-		if (left < 1) {
+		char c;
+		int r = l->io->read(l, &c, left < 1 ? 0 : (int)left, err);
+		if (r < 0)
+			return acq_err_prefix(err, "'%s': ", cmd);
+		if (r == 0) {
+			if (left >= 1)
+				continue;
 			l->line[len] = '\0';
 			return acq_errf(err, ACQ_E_TIMEOUT, "laser %s: no reply to '%s' within %d ms%s%s%s", dev, cmd,
 					l->cfg->timeout_ms, len ? " (partial: '" : "", len ? l->line : "", len ? "')" : "");
 		}
-		char c;
-		int r = l->io->read(l, &c, (int)left, err);
-		if (r < 0)
-			return acq_err_prefix(err, "'%s': ", cmd);
-		if (r == 0)
-			continue;
 		if (c == '\n')
 			break;
 		if (c == '\r')

@@ -143,8 +143,16 @@ static void flush_out(struct sim_laser *s)
 
 static void sl_tick(void *self, double now);
 
+/* Bytes wait in the pty: the laser has received them (see sl_handle). */
+static bool input_waiting(const struct sim_laser *s)
+{
+	struct pollfd pfd = { .fd = s->master, .events = POLLIN };
+	return poll(&pfd, 1, 0) > 0 && (pfd.revents & POLLIN);
+}
+
 static void sl_handle(void *self, const struct pollfd *fds, int n, double now)
 {
+	(void)now;
 	struct sim_laser *s = self;
 	if (n < 1)
 		return;
@@ -157,7 +165,11 @@ static void sl_handle(void *self, const struct pollfd *fds, int n, double now)
 				continue;
 			if (c == '\n') {
 				s->line[s->len] = '\0';
-				sl_tick(s, now); /* faults apply before the command is judged */
+				/* Faults apply before the command is judged. The keep-alive is judged by sl_tick() between
+				 * reads only: a line read now may have waited in the pty while this process was not scheduled
+				 * (a loaded machine), whereas a laser's UART receives it on arrival. */
+				if (emission_blocked(s))
+					s->w->laser_emission = false;
 				s->last_cmd = real_now();
 				if (s->overlong)
 					reply(s, "ERR 5 line too long");
@@ -182,7 +194,8 @@ static void sl_tick(void *self, double now)
 	struct sim_laser *s = self;
 	if (emission_blocked(s))
 		s->w->laser_emission = false;
-	if (s->keepalive_ms && s->w->laser_emission && real_now() - s->last_cmd > s->keepalive_ms * 1e-3) {
+	if (s->keepalive_ms && s->w->laser_emission && real_now() - s->last_cmd > s->keepalive_ms * 1e-3 &&
+	    !input_waiting(s)) {
 		s->w->laser_emission = false;
 		s->keepalive_expired++;
 		fprintf(stderr, "acq-sim: laser: no command for %d ms: keep-alive expired, emission off\n", s->keepalive_ms);

@@ -2,7 +2,7 @@
 """The laser is off whenever nothing controls it: acquisitiond is SIGKILLed while the laser emits (a long
 manual `measure` on the simulated bench) and the time until the simulated laser stops emitting is measured.
 1. Keep-alive alone: the driver armed the laser's keep-alive (devices.laser.keepalive_ms, 1000 ms) and the
-   daemon's loop refreshed it every 250 ms; nobody refreshes it after the kill, so emission must stop within
+   daemon's laser thread refreshed it every 250 ms; nobody refreshes it after the kill, so emission must stop within
    1 s (asserted < 1.2 s: 0.2 s for scheduling the simulator's loop on a loaded 2-core machine). Before the
    kill, emission must have lasted well past one keep-alive period (the refresh works).
 2. The unit's ExecStopPost= helper, `acquisitiond --laser-off`, run right after the kill: emission off when it

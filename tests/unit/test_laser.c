@@ -318,7 +318,9 @@ static void test_dead_line_times_out(void **state)
 	fcntl(m, F_SETFL, fl);
 	static const char *const script[] = { "ID M S F\n", NULL };
 	pid_t pid = script_peer(m, script);
-	assert_int_equal(laser_open(cfg, &l, &err), 0);
+	/* the forked peer must answer the good start: on a saturated machine 150 ms was not always enough */
+	struct laser_cfg *slow = make_cfg(path, 1000);
+	assert_int_equal(laser_open(slow, &l, &err), 0);
 	assert_int_equal(laser_set_power(l, 10, &err), -1);
 	assert_int_equal(err.code, ACQ_E_TIMEOUT);
 	assert_non_null(strstr(err.msg, "POWER 10.00"));
@@ -327,6 +329,7 @@ static void test_dead_line_times_out(void **state)
 	close(m);
 	close(keep);
 	laser_cfg_free(cfg);
+	laser_cfg_free(slow);
 }
 
 /* Open arms the laser's keep-alive with the configured period; laser_keepalive() refreshes it; 0 disarms;
@@ -338,7 +341,7 @@ static void test_keepalive(void **state)
 	int keep, m = open_pty(path, sizeof path, &keep);
 	static const char *const script[] = { "ID M S F\n", NULL };
 	pid_t pid = script_peer(m, script);
-	struct laser_cfg *cfg = make_cfg(path, 200);
+	struct laser_cfg *cfg = make_cfg(path, 1000);
 	struct laser *l = NULL;
 	struct acq_err err = { 0 };
 	if (laser_open(cfg, &l, &err))
