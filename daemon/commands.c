@@ -79,8 +79,7 @@ static int plan_child(void *arg, int fd)
 	if (plan_load_string("plan", pj->text, &spec, &err) || plan_make(spec, &c->bench, &res, &err)) {
 		o = json_pack("{s:s,s:s}", "code", proto_code_of(&err), "message", err.msg);
 	} else {
-		plan_time_apply(spec, &c->bench, &pj->tm, res);
-		json_t *p = plan_to_json(spec, res, pj->points);
+		json_t *p = plan_dry_run_json(spec, &c->bench, &pj->tm, res, pj->points);
 		if (p) {
 			json_object_set_new(p, "bench_config", json_string(c->path));
 			json_object_set_new(p, "time_scale", json_real(pj->tm.time_scale)); /* bench s per wall s */

@@ -131,6 +131,21 @@ static int build_groups(struct planner *P, struct acq_err *err)
 	return 0;
 }
 
+/* The arms' start position as a measured point (its azimuth as it is on the axis). */
+static struct mpt start_mpt(const struct planner *P)
+{
+	struct mpt s = { .req = SIZE_MAX, .pos = P->start, .nreps = 1 };
+	s.reps[0] = P->start.det_phi;
+	return s;
+}
+
+/* Fastest safe move from the start position to b (-1: none). */
+static double start_cost(const struct planner *P, const struct mpt *b)
+{
+	struct mpt s = start_mpt(P);
+	return mcost(P, &s, b);
+}
+
 /* An order over all measured points: groups in the given direction, each ordered from the previous end. */
 static int order_all(struct planner *P, bool descending, bool ils, size_t *order, struct acq_err *err)
 {
@@ -145,7 +160,8 @@ static int order_all(struct planner *P, bool descending, bool ils, size_t *order
 			return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 		}
 		for (size_t j = 0; j < G->n; j++) {
-			double c = last == SIZE_MAX ? 0 : mcost(P, &P->m[last], &P->m[G->idx[j]]);
+			double c = last == SIZE_MAX ? (P->have_start ? start_cost(P, &P->m[G->idx[j]]) : 0)
+						    : mcost(P, &P->m[last], &P->m[G->idx[j]]);
 			s[j] = c < 0 ? INF_COST : c;
 		}
 		plan_order_group(G->C, G->n, s, p, ils);
@@ -181,7 +197,15 @@ static double choose_reps(const struct planner *P, const size_t *order, size_t n
 			dp[i * MAX_REPS + j] = INFINITY;
 			bp[i * MAX_REPS + j] = -1;
 			if (prev == SIZE_MAX) {
-				dp[i * MAX_REPS + j] = 0;
+				double t0 = 0;
+				if (P->have_start) {
+					struct plan_pos pb = b->pos;
+					pb.det_phi = b->reps[j];
+					t0 = plan_move(P->g, &P->start, &pb, wps, &nw);
+					if (t0 < 0)
+						continue;
+				}
+				dp[i * MAX_REPS + j] = t0;
 				any = true;
 				continue;
 			}
@@ -344,28 +368,23 @@ static void free_planner(struct planner *P)
 }
 
 
-int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan_result **out, struct acq_err *err)
+static int make_order(const struct plan_spec *s, const struct bench_geom *g, const struct plan_pos *start,
+		      struct plan_result *R, struct acq_err *err);
+
+/* The spec's requests expanded, de-duplicated and classified into R->req. 0 or -1 with err. */
+static int make_requests(const struct plan_spec *s, const struct bench_geom *g, struct plan_result *R,
+			 struct acq_err *err)
 {
-	*out = NULL;
-	struct planner P = { .g = g };
-	struct plan_result *R = calloc(1, sizeof *R);
-	size_t *order[NCAND] = { NULL };
-	int *rep[NCAND] = { NULL };
-	char *keep[NCAND] = { NULL };
-	if (!R)
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	if (s->averages < 1 || !(s->integ_ms > 0) || (!s->fib_count && (!s->n_obs_theta || !s->n_obs_phi)) ||
 	    !s->n_incidence) {
-		acq_errf(err, ACQ_E_INVAL, "plan '%s': empty or invalid plan", s->name);
-		goto fail;
+		return acq_errf(err, ACQ_E_INVAL, "plan '%s': empty or invalid plan", s->name);
 	}
 	{
 		/* a spec built by code gets the checks a file gets */
 		size_t per = s->fib_count ? s->fib_count : s->n_obs_theta * s->n_obs_phi;
 		if (per > PLAN_MAX_PER_INCIDENCE || (double)per * (double)s->n_incidence > PLAN_MAX_POINTS) {
-			acq_errf(err, ACQ_E_RANGE, "plan '%s': too many points (%zu per incidence, max %d; %d in all)",
-				 s->name, per, PLAN_MAX_PER_INCIDENCE, PLAN_MAX_POINTS);
-			goto fail;
+			return acq_errf(err, ACQ_E_RANGE, "plan '%s': too many points (%zu per incidence, max %d; %d in all)",
+					s->name, per, PLAN_MAX_PER_INCIDENCE, PLAN_MAX_POINTS);
 		}
 		bool finite = true;
 		for (size_t i = 0; i < s->n_incidence; i++)
@@ -375,16 +394,15 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		for (size_t i = 0; !s->fib_count && i < s->n_obs_phi; i++)
 			finite &= isfinite(s->obs_phi[i]);
 		if (!finite || (s->fib_count && !(s->fib_max_theta_deg > 0 && s->fib_max_theta_deg <= 90))) {
-			acq_errf(err, ACQ_E_INVAL, "plan '%s': non-finite or out-of-range angle", s->name);
-			goto fail;
+			return acq_errf(err, ACQ_E_INVAL, "plan '%s': non-finite or out-of-range angle", s->name);
 		}
 	}
 	if (plan_expand(s, &R->req, &R->n_req, err))
-		goto fail;
+		return -1;
 	for (size_t i = 0; i < R->n_req; i++)
 		R->req[i].status = PLAN_KEPT;
 	if (plan_mark_duplicates(R->req, R->n_req, false, err))
-		goto fail;
+		return -1;
 	for (size_t i = 0; i < R->n_req; i++)
 		if (R->req[i].status != PLAN_DUPLICATE)
 			plan_classify_req(g, &R->req[i], s->blind_policy);
@@ -399,8 +417,67 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 			plan_classify_req(g, &R->req[i], PLAN_BLIND_DROP);
 	}
 	/* a moved point may land on another point, a reciprocal partner may be a grid point: measure once */
-	if (plan_mark_duplicates(R->req, R->n_req, true, err))
+	return plan_mark_duplicates(R->req, R->n_req, true, err);
+}
+
+int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan_result **out, struct acq_err *err)
+{
+	*out = NULL;
+	struct plan_result *R = calloc(1, sizeof *R);
+	if (!R)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	if (make_requests(s, g, R, err) || make_order(s, g, NULL, R, err)) {
+		plan_result_free(R);
+		return -1;
+	}
+	*out = R;
+	return 0;
+}
+
+int plan_make_points(const struct plan_spec *s, const struct bench_geom *g, const struct plan_pos *pts, size_t n,
+		     const struct plan_pos *start, struct plan_result **out, struct acq_err *err)
+{
+	*out = NULL;
+	if (n > PLAN_MAX_POINTS)
+		return acq_errf(err, ACQ_E_RANGE, "plan '%s': %zu points is more than %d", s->name, n, PLAN_MAX_POINTS);
+	struct plan_result *R = calloc(1, sizeof *R);
+	if (!R || !(R->req = calloc(n ? n : 1, sizeof *R->req))) {
+		free(R);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	R->n_req = n;
+	for (size_t i = 0; i < n; i++) {
+		if (!isfinite(pts[i].laser_theta) || !isfinite(pts[i].det_theta) || !isfinite(pts[i].det_phi)) {
+			plan_result_free(R);
+			return acq_errf(err, ACQ_E_INVAL, "plan '%s': point %zu: non-finite angle", s->name, i);
+		}
+		R->req[i].req = pts[i];
+		R->req[i].status = PLAN_KEPT;
+	}
+	if (plan_mark_duplicates(R->req, n, false, err))
 		goto fail;
+	for (size_t i = 0; i < n; i++)
+		if (R->req[i].status != PLAN_DUPLICATE)
+			plan_classify_req(g, &R->req[i], PLAN_BLIND_DROP);
+	if (make_order(s, g, start, R, err))
+		goto fail;
+	*out = R;
+	return 0;
+fail:
+	plan_result_free(R);
+	return -1;
+}
+
+/* Order R's measured requests into steps with safe moves (from start when given), time them. 0 or -1. */
+static int make_order(const struct plan_spec *s, const struct bench_geom *g, const struct plan_pos *start,
+		      struct plan_result *R, struct acq_err *err)
+{
+	struct planner P = { .g = g, .have_start = start != NULL };
+	if (start)
+		P.start = *start;
+	size_t *order[NCAND] = { NULL };
+	int *rep[NCAND] = { NULL };
+	char *keep[NCAND] = { NULL };
 	R->point_dwell_s = (double)s->averages * (s->integ_ms / 1000.0 + g->readout_s);
 	P.dwell = R->point_dwell_s;
 
@@ -476,7 +553,7 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		goto fail;
 	}
 	double clock = 0;
-	struct plan_pos cur = { 0, 0, 0 };
+	struct plan_pos cur = P.have_start ? P.start : (struct plan_pos){ 0, 0, 0 };
 	for (size_t i = 0; i < P.nm; i++) {
 		const struct mpt *m = &P.m[order[bi][i]];
 		if (!keep[bi][i]) {
@@ -489,7 +566,7 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		st->pos = m->pos;
 		st->pos.det_phi = m->reps[rep[bi][i]];
 		st->first_wp = R->n_wps;
-		if (R->n_steps > 0) {
+		if (R->n_steps > 0 || P.have_start) {
 			size_t nw = 0;
 			double t = plan_move(g, &cur, &st->pos, &R->wps[R->n_wps], &nw);
 			if (t < 0) { /* the DP proved this move exists */
@@ -549,7 +626,6 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 	struct plan_timing tm;
 	plan_timing_defaults(&tm);
 	plan_time_apply(s, g, &tm, R);
-	*out = R;
 	return 0;
 fail:
 	for (int c = 0; c < NCAND; c++) {
@@ -558,6 +634,5 @@ fail:
 		free(keep[c]);
 	}
 	free_planner(&P);
-	plan_result_free(R);
 	return -1;
 }

@@ -38,6 +38,16 @@ struct planner {
 	struct plan_pos start;
 };
 
+/* ---- plan_spec.c, plan_adaptive.c ---- */
+/* RANGE at map[key] (a number, a list, {from, to, count} or {from, to, step}; values in [lo, hi]) into a new
+ * array *out of *n values; what names it in messages. 0 or -1 with err. */
+int plan_range_parse(struct yc_node *map, const char *key, const char *what, double lo, double hi, double **out,
+		     size_t *n, struct acq_err *err);
+/* The `integration` mapping of root onto s (defaults when absent). 0 or -1 with err. */
+int plan_integration_parse(struct yc_node *root, struct plan_spec *s, struct acq_err *err);
+/* A `kind: adaptive` plan document into a new spec (its seed's points, the adaptive part in spec->adaptive). */
+int plan_adaptive_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err);
+
 /* ---- plan_classify.c ---- */
 /* x in [0, 360). */
 double plan_norm360(double x);
