@@ -50,7 +50,7 @@ static void json_str(FILE *f, const char *s)
 static void json_num(FILE *f, double v)
 {
 	if (isfinite(v))
-		fprintf(f, "%.9g", v);
+		fprintf(f, "%.15g", v);
 	else
 		fputs("null", f);
 }
@@ -59,6 +59,44 @@ static int cmp_id(const void *a, const void *b)
 {
 	double x = *(const double *)a, y = *(const double *)b;
 	return x < y ? -1 : x > y;
+}
+
+/* A candidate file holding the header with the six columns and no data row (zero candidates: a valid input). */
+static int header_only(const char *path, const char *const *names)
+{
+	char *buf;
+	size_t len;
+	struct acq_err e = { 0 };
+	if (csvio_slurp(path, &buf, &len, &e))
+		return 0;
+	int lines = 0, ok = 1;
+	for (char *p = buf, *nl; p && *p; p = nl ? nl + 1 : NULL) {
+		nl = strchr(p, '\n');
+		if (nl)
+			*nl = '\0';
+		size_t n = strlen(p);
+		if (n && p[n - 1] == '\r')
+			p[--n] = '\0';
+		if (!n || *p == '#')
+			continue;
+		if (++lines > 1)
+			break;
+		for (int c = 0; c < 6 && ok; c++) { /* each name a whole field of the header */
+			size_t k = strlen(names[c]);
+			const char *f = p;
+			int found = 0;
+			for (const char *q = p;; q++)
+				if (*q == ',' || !*q) {
+					found |= (size_t)(q - f) == k && !strncmp(f, names[c], k);
+					if (!*q)
+						break;
+					f = q + 1;
+				}
+			ok = found;
+		}
+	}
+	free(buf);
+	return lines == 1 && ok;
 }
 
 static int bad_input(const struct acq_err *e)
@@ -114,8 +152,12 @@ int cmd_select(int argc, char **argv)
 	static const char *const names[6] = { "id", "theta_i", "phi_i", "theta_o", "phi_o", "cost_s" };
 	size_t nc = 0;
 	double *rows = NULL;
-	if (csvio_read_columns(candp, names, 6, &nc, &rows, &err))
-		return bad_input(&err);
+	if (csvio_read_columns(candp, names, 6, &nc, &rows, &err)) {
+		if (!header_only(candp, names))
+			return bad_input(&err);
+		nc = 0; /* no candidates: the target's value, no pick */
+		rows = NULL;
+	}
 	double *ang = malloc((nc ? nc : 1) * 4 * sizeof *ang), *cost = malloc((nc ? nc : 1) * sizeof *cost);
 	double *ids = malloc((nc ? nc : 1) * sizeof *ids);
 	if (!ang || !cost || !ids) {
