@@ -212,6 +212,7 @@ struct json_t *plan_dry_run_json(const struct plan_spec *spec, const struct benc
 
 /* One candidate measurement of an adaptive batch: reachable from the arms' position, visible, not measured yet. */
 struct plan_cand {
+	size_t id;                  /* its place among the spec's candidates (plan_adaptive_cand_pos) */
 	struct plan_pos pos;        /* bench position (det_phi the axis position reached fastest) */
 	double cost_s;              /* bench seconds to measure it from the arms' position: the safe move, its
 				     * settling and polling, darks when the incidence changes, probe, exposures, host */
@@ -224,6 +225,15 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 int plan_adaptive_candidates(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
 			     const struct plan_pos *from, const struct plan_pos *done, size_t n_done,
 			     struct plan_cand **out, size_t *n, struct acq_err *err);
+/* The requested (canonical) position of candidate id of spec's adaptive part. 0, or -1 when there is none. */
+int plan_adaptive_cand_pos(const struct plan_spec *spec, size_t id, struct plan_pos *out);
+/* Plan the points in the order given (no ordering, no classification: points already planned once, e.g. a stored
+ * batch), each reached by a fresh safe move from the previous one (from start when given). 0, or -1 with err
+ * (ACQ_E_RANGE: a point no safe move reaches). */
+int plan_make_fixed(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_pos *pts, size_t n,
+		    const struct plan_pos *start, struct plan_result **out, struct acq_err *err);
+/* Append b's requests, steps and waypoints to r (indices, times and predictions shifted to follow r's). 0 or -1. */
+int plan_result_append(struct plan_result *r, const struct plan_result *b, struct acq_err *err);
 /* The worst case of an adaptive plan whose seed result is seed (timed by t): the budget's bench seconds and
  * points, each the stated limit or, when only the other is given, what it allows (points at the costliest
  * candidate's price from the seed's last point). */

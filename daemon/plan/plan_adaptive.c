@@ -173,6 +173,115 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 		snprintf(buf + n, len - n, ":le=%.9g", a->le);
 }
 
+int plan_adaptive_cand_pos(const struct plan_spec *s, size_t id, struct plan_pos *out)
+{
+	const struct plan_adaptive *a = s->adaptive;
+	if (!a || !a->cand_count || id / a->cand_count >= a->n_cand_inc)
+		return -1;
+	size_t i = id / a->cand_count, j = id % a->cand_count;
+	const double golden = 180.0 * (3.0 - sqrt(5.0)); /* degrees */
+	double cmax = cos(a->cand_max_theta_deg * DEG);
+	double cz = 1.0 - (1.0 - cmax) * ((double)j + 0.5) / (double)a->cand_count;
+	*out = plan_canon((struct plan_pos){ a->cand_inc[i], acos(cz) / DEG, plan_norm360(golden * (double)j) });
+	return 0;
+}
+
+int plan_make_fixed(const struct plan_spec *s, const struct bench_geom *g, const struct plan_pos *pts, size_t n,
+		    const struct plan_pos *start, struct plan_result **out, struct acq_err *err)
+{
+	*out = NULL;
+	struct plan_result *R = calloc(1, sizeof *R);
+	if (!R || !(R->req = calloc(n ? n : 1, sizeof *R->req)) || !(R->steps = calloc(n ? n : 1, sizeof *R->steps)) ||
+	    !(R->wps = calloc((n ? n : 1) * PLAN_MAX_WP, sizeof *R->wps))) {
+		plan_result_free(R);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	double dwell = (double)s->averages * (s->integ_ms / 1000.0 + g->readout_s), clock = 0;
+	struct plan_pos cur = start ? *start : (n ? pts[0] : (struct plan_pos){ 0, 0, 0 });
+	for (size_t i = 0; i < n; i++) {
+		struct plan_req *q = &R->req[i];
+		struct plan_step *st = &R->steps[i];
+		q->req = q->pos = pts[i];
+		q->status = PLAN_KEPT;
+		q->psi_deg = plan_psi_deg(g, &pts[i]);
+		st->req = i;
+		st->pos = pts[i];
+		st->first_wp = R->n_wps;
+		if (i > 0 || start) {
+			size_t nw = 0;
+			double mv = plan_move(g, &cur, &st->pos, &R->wps[R->n_wps], &nw);
+			if (mv < 0) {
+				plan_result_free(R);
+				return acq_errf(err, ACQ_E_RANGE, "plan '%s': no safe move to point %zu (%g, %g, %g)", s->name, i,
+						pts[i].laser_theta, pts[i].det_theta, pts[i].det_phi);
+			}
+			for (size_t k = 0; k < nw; k++)
+				st->move_s += R->wps[R->n_wps + k].duration_s;
+			st->settle_s = mv - st->move_s;
+			st->n_wp = nw;
+			st->detour = nw > 1;
+			R->n_detours += st->detour;
+			R->n_wps += nw;
+		}
+		st->t_start_s = clock;
+		st->dwell_s = dwell;
+		clock += st->move_s + st->settle_s + dwell;
+		R->motion_s += st->move_s + st->settle_s;
+		R->dwell_s += dwell;
+		cur = st->pos;
+	}
+	R->n_req = R->n_steps = R->n_kept = n;
+	R->duration_s = clock;
+	R->point_dwell_s = dwell;
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	plan_time_apply(s, g, &tm, R);
+	*out = R;
+	return 0;
+}
+
+int plan_result_append(struct plan_result *r, const struct plan_result *b, struct acq_err *err)
+{
+	size_t nr = r->n_req + b->n_req, ns = r->n_steps + b->n_steps, nw = r->n_wps + b->n_wps;
+	struct plan_req *q = realloc(r->req, (nr ? nr : 1) * sizeof *q);
+	if (q)
+		r->req = q;
+	struct plan_step *st = q ? realloc(r->steps, (ns ? ns : 1) * sizeof *st) : NULL;
+	if (st)
+		r->steps = st;
+	struct plan_wp *w = st ? realloc(r->wps, (nw ? nw : 1) * sizeof *w) : NULL;
+	if (!w)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	r->wps = w;
+	memcpy(r->req + r->n_req, b->req, b->n_req * sizeof *b->req);
+	memcpy(r->wps + r->n_wps, b->wps, b->n_wps * sizeof *b->wps);
+	double t0 = r->duration_s, p0 = r->predicted_s;
+	for (size_t i = 0; i < b->n_steps; i++) {
+		struct plan_step s = b->steps[i];
+		s.req += r->n_req;
+		s.first_wp += r->n_wps;
+		s.t_start_s += t0;
+		s.predicted_start_s += p0;
+		r->steps[r->n_steps + i] = s;
+	}
+	r->n_req = nr;
+	r->n_steps = ns;
+	r->n_wps = nw;
+	r->n_kept += b->n_kept;
+	r->n_moved += b->n_moved;
+	r->n_dropped += b->n_dropped;
+	r->n_duplicate += b->n_duplicate;
+	r->duration_s += b->duration_s;
+	r->dwell_s += b->dwell_s;
+	r->motion_s += b->motion_s;
+	r->predicted_s += b->predicted_s;
+	r->darks_s += b->darks_s;
+	r->n_detours += b->n_detours;
+	for (int k = 0; k < 3; k++)
+		r->travel_deg[k] += b->travel_deg[k];
+	return 0;
+}
+
 /* The same configuration (same incidence, same observation direction to ~1e-6). */
 static bool same_config(const struct plan_pos *a, const struct plan_pos *b)
 {
@@ -212,14 +321,11 @@ int plan_adaptive_candidates(const struct plan_spec *s, const struct bench_geom 
 	if (!c)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	size_t k = 0;
-	const double golden = 180.0 * (3.0 - sqrt(5.0));
-	double cmax = cos(a->cand_max_theta_deg * DEG);
 	struct plan_wp w[PLAN_MAX_WP];
 	for (size_t i = 0; i < a->n_cand_inc; i++) {
 		for (size_t j = 0; j < a->cand_count; j++) {
-			double cz = 1.0 - (1.0 - cmax) * ((double)j + 0.5) / (double)a->cand_count;
-			struct plan_pos q = plan_canon((struct plan_pos){ a->cand_inc[i], acos(cz) / DEG,
-									  plan_norm360(golden * (double)j) });
+			struct plan_pos q;
+			plan_adaptive_cand_pos(s, i * a->cand_count + j, &q);
 			if (plan_classify(g, &q))
 				continue;
 			bool seen = false;
@@ -247,6 +353,7 @@ int plan_adaptive_candidates(const struct plan_spec *s, const struct bench_geom 
 			}
 			if (best < 0)
 				continue; /* no safe move reaches it from here */
+			c[k].id = i * a->cand_count + j;
 			c[k].pos = bq;
 			c[k].cost_s = point_cost(s, g, t, from, &bq, best, best_segs);
 			k++;

@@ -40,7 +40,7 @@ def main():
     try:
         d.start()
         c = d.client()
-        check(c.req("version")["schema"] == 3, "schema version over the protocol")
+        check(c.req("version")["schema"] == 4, "schema version over the protocol")
         c.close()
         db = os.path.join(d.state, "acquisition.db")
         check(d.stop() == 0, "clean stop")
@@ -56,7 +56,7 @@ def main():
             print("sqlite3 CLI absent: CLI checks skipped")
         con = sqlite3.connect(db)
         check(con.execute("PRAGMA application_id").fetchone()[0] == 0x42524446, "application_id")
-        check(con.execute("PRAGMA user_version").fetchone()[0] == 3, "user_version")
+        check(con.execute("PRAGMA user_version").fetchone()[0] == 4, "user_version")
         ref = sqlite3.connect(":memory:")
         ref.executescript(open(os.path.join(SRC, "daemon", "schema.sql")).read())
         check(schema_of(con) == schema_of(ref), "database schema differs from daemon/schema.sql")
