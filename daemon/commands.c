@@ -18,6 +18,7 @@
 #include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
+#include "daemon/store_adaptive.h"
 #include "daemon/sweep.h"
 
 #include "daemon/plan/plan.h"
@@ -509,7 +510,13 @@ static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto
 		rc = data ? 0 : -1;
 	} else if (!strcmp(sub, "show")) {
 		json_t *pts = json_object_get(req->root, "points");
-		data = store_sweep_show(app->store, (int64_t)num_arg(req->root, "sweep", 0), json_is_true(pts), &err);
+		int64_t sid = (int64_t)num_arg(req->root, "sweep", 0);
+		data = store_sweep_show(app->store, sid, json_is_true(pts), &err);
+		json_t *ad = data ? store_adaptive_show(app->store, sid, &err) : NULL; /* an adaptive sweep's decisions */
+		if (data && ad && json_array_size(ad))
+			json_object_set_new(data, "adaptive", ad);
+		else
+			json_decref(ad);
 		if (data)
 			data = json_pack("{s:o}", "sweep", data);
 		rc = data ? 0 : -1;

@@ -1,5 +1,5 @@
-/* recon_select: an adaptive sweep's decision between batches (see recon_select.h) — samples exported, candidates
- * written by a forked child, brdf-recon fit (warm when possible) and brdf-recon select in child processes, one
+/* recon_select: an adaptive sweep's decision between batches (see recon_select.h) — samples exported and candidates
+ * (both written by a forked child), brdf-recon fit (warm when possible) and brdf-recon select in child processes, one
  * after the other; the loop is only called back. */
 #include "daemon/recon_select.h"
 
@@ -98,7 +98,7 @@ static void stage_done(struct job *j, int status, const char *output, size_t len
 	switch (r->stage) {
 	case RS_CAND:
 		if (status != 0)
-			return finish(r, false, "writing the candidates failed (status %d): %s", status, tail(output));
+			return finish(r, false, "the samples and candidates child failed (status %d): %s", status, tail(output));
 		r->res.n_candidates = (size_t)strtoull(output, NULL, 10);
 		r->stage = RS_PROBE;
 		break;
@@ -132,7 +132,9 @@ static void stage_done(struct job *j, int status, const char *output, size_t len
 	next(r);
 }
 
-/* In the forked child: the reachable candidates from the arms' position, written to r->cand; prints their count. */
+/* In the forked child (never the parent's database connection): the sweep's samples so far exported through a
+ * read-only connection of its own, then the reachable candidates from the arms' position written to r->cand;
+ * prints their count. */
 static int cand_child(void *arg, int fd)
 {
 	struct rsel *r = arg;
@@ -142,6 +144,15 @@ static int cand_child(void *arg, int fd)
 	size_t n = 0;
 	struct acq_err err = { 0 };
 	char line[128];
+	struct store *st = NULL;
+	int rows = 0;
+	if (store_open_reader(r->env->conf->d.database, &st, &err) ||
+	    store_export_csv_file(st, q->sweep_id, r->samples, &rows, &err)) {
+		store_close(st);
+		dprintf(fd, "exporting the samples: %s\n", err.msg);
+		return 1;
+	}
+	store_close(st);
 	if (plan_adaptive_candidates(q->spec, g, &q->timing, &q->from, q->done, q->n_done, &c, &n, &err)) {
 		dprintf(fd, "%s\n", err.msg);
 		return 1;
@@ -253,9 +264,6 @@ int rsel_start(struct rsel *r, const struct rsel_req *q, rsel_done_fn done, void
 	snprintf(r->batch, sizeof r->batch, "%zu", q->batch_size);
 	plan_adaptive_target_spec(q->spec->adaptive, r->target, sizeof r->target);
 	unlink(r->out); /* a decision made again must not read the previous answer */
-	int rows = 0;
-	if (store_export_csv_file(r->env->store, q->sweep_id, r->samples, &rows, err))
-		return acq_err_prefix(err, "exporting the samples for batch %d: ", q->batch);
 	r->spec = q->spec;
 	r->q = q; /* read by the forked child only (its own copy of memory) */
 	r->stage = RS_CAND;

@@ -1,7 +1,7 @@
 /* recon_select: the decision between two batches of an adaptive sweep, every slow step in a child process (the
- * loop never waits): the sweep's calibrated samples so far exported as CSV, the reachable candidates written by a
- * forked child (planner: blind zones, collisions, limits, safe paths; cost_s from plan_time.c), `brdf-recon fit`
- * (warm-started from the previous batch's model with --warm when this brdf-recon has it), then `brdf-recon select
+ * loop never waits): in a forked child, the sweep's calibrated samples so far exported as CSV (through a read-only
+ * connection of its own) and the reachable candidates (planner: blind zones, collisions, limits, safe paths; cost_s
+ * from plan_time.c); then `brdf-recon fit` (warm-started from the previous batch's model with --warm when this brdf-recon has it), then `brdf-recon select
  * MODEL --candidates CAND.csv --target SPEC --batch N -o OUT.json` (the contract in /work/notes/OWNERS.md). */
 #ifndef RECON_SELECT_H
 #define RECON_SELECT_H

@@ -19,14 +19,15 @@ seed:
 target: {%(target)s}
 budget: {%(budget)s}
 batch: %(batch)d
-candidates: {incidence_deg: [8, 25, 40, 55], per_incidence: 30}
+candidates: {%(cands)s}
 integration: {mode: fixed, ms: 5}
 averages: 1
 """
 
 
-def plan(target="dhr_sigma: {incidence_deg: [8], le: 1.0e-9}", budget="points: 24", batch=4):
-    return PLAN % {"target": target, "budget": budget, "batch": batch}
+def plan(target="dhr_sigma: {incidence_deg: [8], le: 1.0e-9}", budget="points: 24", batch=4,
+         cands="incidence_deg: [8, 25, 40, 55], per_incidence: 30"):
+    return PLAN % {"target": target, "budget": budget, "batch": batch, "cands": cands}
 
 
 def bench(scale=50):

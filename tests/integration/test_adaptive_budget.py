@@ -61,6 +61,9 @@ def run():
             why, len(chosen), ["%.4g" % r["target_value"] for r in chosen], waited, waited / b.scale, len(chosen) + 1))
         show = L.sweep_row(b, sid)
         assert any(why in (e.get("message") or "") for e in show.get("events", [])), "the stop reason is not an event"
+        shown = show.get("adaptive") or []
+        assert [r["batch"] for r in shown] == [r["batch"] for r in rows] and shown[-1]["stop_reason"] == why, \
+            "sweep.show's decisions: %s" % [(r.get("batch"), r.get("stop_reason")) for r in shown]
         A.reconstructs(b, sid)
         # watch: one sweep.adaptive event per decision, the last one with the stop, the trend growing by one per batch
         watch.terminate()

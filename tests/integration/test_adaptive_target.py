@@ -3,7 +3,8 @@
 the σ of the DHR at 8° (0.006) that the seed alone does not reach and a budget far beyond what it needs. Checks: it
 stops saying "target met" with the value at or below the threshold, after at least one chosen batch and well
 within the budget; the values it stored are select's; and the stored decisions replay: brdf-recon select run again
-on a batch's recorded model and candidates picks the same candidates in the same order."""
+on a batch's recorded model and candidates picks the same candidates in the same order. Then a second sweep with an
+unreachable target and only 6 candidate directions stops on "nothing reachable left" before its budget."""
 import json
 import os
 import subprocess
@@ -53,6 +54,17 @@ def run():
         assert got == want, "replayed picks %s, recorded %s" % (got, want)
         assert abs(d["target"]["value"] - r1["target_value"]) <= 1e-9 * r1["target_value"], (d["target"], r1)
         L.say("batch 1 replayed: picks %s, value %.6g" % (got, d["target"]["value"]))
+
+        sid = L.start_sweep(b, A.plan(budget="points: %d" % BUDGET, cands="incidence_deg: [40], per_incidence: 6"),
+                            "it-adaptive-exhaust")
+        row = L.drive_to_end(b, sid, timeout=240, sample="white")
+        assert row["state"] == "completed", row["state"]
+        rows, why = A.check_decisions(b, sid)
+        n, _ = L.check_points(b, sid, max_exposures=1)
+        A.no_repeats(b, sid)
+        L.say("second sweep: %d points, %d batches: %s" % (n, len(rows) - 2, why))
+        assert why.startswith("nothing reachable left"), "stopped: %s" % why
+        assert n <= rows[0]["n_points"] + 6 and n < BUDGET, "%d points from 6 candidates" % n
     finally:
         b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
 
