@@ -77,25 +77,10 @@ static int put_points(struct store *st, int64_t sweep_id, const struct store_poi
 {
 	if (n <= 0)
 		return 0;
-	sqlite3_stmt *s = store_prep(st, "INSERT INTO points (sweep_id, order_index, theta_i, phi_i, theta_o, phi_o) "
-				     "VALUES (?,?,?,?,?,?)", err);
-	if (!s)
+	if (store_points_insert(st, sweep_id, p, n, err))
 		return -1;
-	for (int i = 0; i < n; i++) {
-		sqlite3_bind_int64(s, 1, sweep_id);
-		sqlite3_bind_int(s, 2, p[i].order_index);
-		sqlite3_bind_double(s, 3, p[i].theta_i);
-		sqlite3_bind_double(s, 4, p[i].phi_i);
-		sqlite3_bind_double(s, 5, p[i].theta_o);
-		sqlite3_bind_double(s, 6, p[i].phi_o);
-		if (store_step_done(st, s, err, "adding a batch's point")) {
-			sqlite3_finalize(s);
-			return -1;
-		}
-	}
-	sqlite3_finalize(s);
-	s = store_prep(st, "UPDATE sweeps SET points_total = (SELECT count(*) FROM points WHERE sweep_id = ?1) WHERE id = ?1",
-		       err);
+	sqlite3_stmt *s = store_prep(st, "UPDATE sweeps SET points_total = (SELECT count(*) FROM points WHERE sweep_id = ?1) "
+				     "WHERE id = ?1", err);
 	if (!s)
 		return -1;
 	sqlite3_bind_int64(s, 1, sweep_id);

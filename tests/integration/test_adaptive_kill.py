@@ -36,17 +36,6 @@ def snapshot(b, sid):
         db.close()
 
 
-def swap_if_asked(b, row):
-    if row["state"] != "paused":
-        return
-    ev = [e for e in row.get("events", []) if e.get("kind") in ("pause", "resume", "start", "stop")]
-    if ev and ev[0]["kind"] == "pause" and "place the sample" in (ev[0].get("message") or ""):
-        b.ctl("sample white")
-        c = b.client()
-        c.req("sweep.resume")
-        c.close()
-
-
 def run():
     rng = random.Random(L.SEED)
     b = A.bench()
@@ -62,7 +51,7 @@ def run():
                 row = L.sweep_row(b, sid)
                 if row["state"] in ("completed", "aborted", "failed"):
                     break
-                swap_if_asked(b, row)
+                L.swap_when_asked(b, row, "white")
                 time.sleep(0.02)
             if L.sweep_row(b, sid)["state"] in ("completed", "aborted", "failed"):
                 break
