@@ -7,7 +7,8 @@ one measurement, the cheaper copy's id; the predicted value never rises along th
 current value; the current value is the RMS over wavelengths of `brdf-recon dhr`'s sigma (same draws and seed,
 to 1e-9 relative) per incidence, the largest of them; a threshold above the value is met with no pick; the ln f
 target; a header-only candidate file; bad input of every kind exits 2 with a message naming what (and the row),
-never a crash."""
+never a crash. `fit --warm`: the previous shape and smoothing kept when still leave-one-out competitive; a white
+model's settings refused on a sharp lobe (full search); a conflicting kernel exits 2, a missing model 1."""
 import json
 import math
 import os
@@ -141,6 +142,30 @@ def main():
     for args, what in cases:
         p = run(*args, ok=False)
         check(p.returncode == 2 and what in p.stderr, "%s: exit 2 naming %s" % (" ".join(args[2:]), what))
+    # fit --warm: the previous settings kept when still leave-one-out competitive, else the full search
+    more, wm = os.path.join(d, "more.csv"), os.path.join(d, "warm.model")
+    subprocess.run([SIM, "truth", "green-paint", "--grid", "4x5x6", "-o", more, "--noise", "0.01", "--seed",
+                    str(SEED % 100000 + 2), "--wavelengths", "450:1100:25"], check=True, capture_output=True)
+    p = run("fit", more, "--warm", model, "-o", wm)
+    info = {k: v for k, v in (ln.split("=", 1) for ln in run("info", wm, "--no-budget").stdout.splitlines()
+                              if "=" in ln)}
+    prev = {k: v for k, v in (ln.split("=", 1) for ln in run("info", model, "--no-budget").stdout.splitlines()
+                              if "=" in ln)}
+    check("warm start from" in p.stderr and ("kept" in p.stderr or "full search" in p.stderr), "warm start said")
+    if "kept" in p.stderr:
+        check(info["shape"] == prev["shape"] and info["smoothing"] == prev["smoothing"], "warm settings kept")
+    white, wmod, lobe = os.path.join(d, "white.csv"), os.path.join(d, "white.model"), os.path.join(d, "lobe.csv")
+    subprocess.run([SIM, "truth", "white", "--grid", "3x4x5", "-o", white, "--noise", "0.01", "--seed", "1",
+                    "--wavelengths", "450:1100:25"], check=True, capture_output=True)
+    subprocess.run([SIM, "truth", "sharp-lobe", "--grid", "5x5x8", "-o", lobe, "--noise", "0.01", "--seed", "1",
+                    "--wavelengths", "450:1100:25"], check=True, capture_output=True)
+    run("fit", white, "-o", wmod)
+    p = run("fit", lobe, "--warm", wmod, "-o", os.path.join(d, "lobe.model"))
+    check("not leave-one-out competitive" in p.stderr and "full search" in p.stderr, "warm start refused on a lobe")
+    p = run("fit", lobe, "--warm", wmod, "--kernel", "exp", "-o", os.path.join(d, "x.model"), ok=False)
+    check(p.returncode == 2 and "--warm" in p.stderr, "warm with another kernel: exit 2")
+    p = run("fit", lobe, "--warm", os.path.join(d, "none.model"), "-o", os.path.join(d, "x.model"), ok=False)
+    check(p.returncode == 1 and "none.model" in p.stderr, "missing warm model named")
     print("ok")
 
 
