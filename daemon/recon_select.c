@@ -13,6 +13,7 @@
 
 #include "daemon/executor.h"
 #include "daemon/job.h"
+#include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/recon_chain.h"
 #include "daemon/store.h"
@@ -91,7 +92,6 @@ static void next(struct rsel *r);
 static void stage_done(struct job *j, int status, const char *output, size_t len, void *arg)
 {
 	(void)j;
-	(void)len;
 	struct rsel *r = arg;
 	r->job = NULL;
 	double dt = loop_now(r->env->loop) - r->t0;
@@ -104,6 +104,8 @@ static void stage_done(struct job *j, int status, const char *output, size_t len
 		break;
 	case RS_PROBE:
 		r->warm_ok = status == 0 && strstr(output, "--warm") != NULL;
+		log_msg(LOG_NOTICE, "%s fit %s --warm: refits between batches are %s (status %d, %zu bytes of help)",
+			r->prog, r->warm_ok ? "has" : "has no", r->warm_ok ? "warm-started" : "cold", status, len);
 		r->stage = RS_FIT;
 		break;
 	case RS_FIT:
@@ -192,11 +194,8 @@ static void next(struct rsel *r)
 	int argc = 0;
 	if (r->stage == RS_PROBE && r->warm_ok >= 0)
 		r->stage = RS_FIT;
-	if (r->stage == RS_FIT && r->warm_ok == 1 && r->prev[0]) {
-		r->res.warm = true;
-	} else {
-		r->res.warm = false;
-	}
+	if (r->stage == RS_FIT)
+		r->res.warm = r->warm_ok == 1 && r->prev[0] && access(r->prev, R_OK) == 0;
 	argv[argc++] = r->prog;
 	switch (r->stage) {
 	case RS_PROBE:

@@ -10,7 +10,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import sweeplib as L  # noqa: E402
 
 # A small seed (2 incidences x 8 directions, the blind ones dropped) and few candidates keep a sweep to seconds at
-# time scale 50; fixed 5 ms integration, one average.
+# time scale 20; fixed 5 ms integration, one average.
 PLAN = """name: it-adaptive
 kind: adaptive
 seed:
@@ -30,7 +30,7 @@ def plan(target="dhr_sigma: {incidence_deg: [8], le: 1.0e-9}", budget="points: 2
     return PLAN % {"target": target, "budget": budget, "batch": batch, "cands": cands}
 
 
-def bench(scale=50):
+def bench(scale=20):
     b = L.Bench(scale=scale)
     recon = os.environ.get("ACQ_ADAPTIVE_RECON")  # another brdf-recon build to run against (default: build/'s)
     if recon:
