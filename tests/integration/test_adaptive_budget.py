@@ -36,6 +36,16 @@ def run():
         d = json.loads(dry.stdout)["plan"]
         assert d["kind"] == "adaptive" and d["adaptive"]["worst_case_points"] == BUDGET, d.get("adaptive")
         seed_points = d["measured"]
+        # the same dry run without the daemon, and the example plan of the README
+        for pth in (path, os.path.join(L.SRC, "config", "plan-adaptive.yaml")):
+            loc = subprocess.run([os.path.join(L.BUILD, "acqctl"), "plan", pth, "--config",
+                                  os.path.join(L.SRC, "config", "bench-sim.yaml"), "--json"],
+                                 capture_output=True, text=True, timeout=60, env=dict(os.environ, ACQ_SOCKET="/nonexistent"))
+            assert loc.returncode == 0, "local acqctl plan %s: %s" % (pth, loc.stderr or loc.stdout)
+            ld = json.loads(loc.stdout)["plan"]
+            assert ld["kind"] == "adaptive" and ld["adaptive"]["worst_case_s"] >= ld["predicted_s"] > 0, ld["adaptive"]
+            if pth == path:
+                assert ld["measured"] == seed_points and ld["adaptive"]["worst_case_points"] == BUDGET, ld["adaptive"]
         L.say("dry run: seed %d points, predicted %.1f s; worst case %d points, %.1f s" % (
             seed_points, d["predicted_s"], d["adaptive"]["worst_case_points"], d["adaptive"]["worst_case_s"]))
 
