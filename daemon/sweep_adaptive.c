@@ -36,6 +36,8 @@ struct adapt {
 	struct plan_pos *done;      /* scratch: the positions so far, for the candidates child */
 	struct plan_pos arms;       /* where the arms were when the decision started */
 	int64_t deciding;           /* the sweep the decision under way is for (0: none) */
+	struct rsel_res ahead;      /* overlap: a decision that came in while the arms were still measuring */
+	bool ahead_ready;
 };
 
 struct adapt *adapt_new(const struct sweep_env *env, const struct adapt_ops *ops)
@@ -58,6 +60,8 @@ void adapt_free(struct adapt *a)
 	if (!a)
 		return;
 	rsel_free(a->rs);
+	if (a->ahead_ready)
+		json_decref(a->ahead.out);
 	free(a->done);
 	free(a);
 }
@@ -82,6 +86,9 @@ void adapt_end(struct adapt *a)
 	}
 	a->id = 0;
 	a->deciding = 0;
+	if (a->ahead_ready)
+		json_decref(a->ahead.out);
+	a->ahead_ready = false;
 	a->spec = NULL;
 	a->plan = NULL;
 	a->batch = 0;
@@ -182,42 +189,74 @@ static double num_or(json_t *o, const char *k, double dflt)
 }
 
 static void decided(void *ctx, const struct rsel_res *r);
+static void apply(struct adapt *a, const struct rsel_res *r);
 
-void adapt_waiting(struct adapt *a, double now)
+/* Where the arms are (the last planned point when the devices do not say). */
+static struct plan_pos arms_now(const struct adapt *a)
 {
-	if (!a->id || rsel_busy(a->rs))
-		return;
-	if (!isfinite(a->wait_start))
-		a->wait_start = now;
-	const struct plan_adaptive *ad = a->spec->adaptive;
-	double value = a->ntrend ? a->trend[a->ntrend - 1] : NAN;
-	if (ad->budget_points && a->plan->n_steps >= ad->budget_points)
-		return stop(a, value, -1, "budget spent: %zu of %zu points measured", a->plan->n_steps, ad->budget_points);
-	if (ad->budget_s > 0 && a->spent_s >= ad->budget_s)
-		return stop(a, value, -1, "budget spent: %.0f of %.0f bench seconds planned", a->spent_s, ad->budget_s);
-	struct plan_pos *d = realloc(a->done, (a->plan->n_steps + 1) * sizeof *d);
-	if (!d)
-		return pause_for(a, "choosing batch %d: out of memory; resume to try again", a->batch + 1);
-	a->done = d;
-	for (size_t i = 0; i < a->plan->n_steps; i++)
-		d[i] = a->plan->steps[i].pos;
 	double pos[3] = { NAN, NAN, NAN };
 	if (a->env->devices)
 		devices_positions(a->env->devices, pos);
 	if (isnan(pos[0]) || isnan(pos[1]) || isnan(pos[2]))
-		a->arms = a->plan->n_steps ? a->plan->steps[a->plan->n_steps - 1].pos : (struct plan_pos){ 0, 0, 0 };
-	else
-		a->arms = (struct plan_pos){ pos[0], pos[1], pos[2] };
+		return a->plan->n_steps ? a->plan->steps[a->plan->n_steps - 1].pos : (struct plan_pos){ 0, 0, 0 };
+	return (struct plan_pos){ pos[0], pos[1], pos[2] };
+}
+
+/* The budget is spent: why into buf (true), else false. */
+static bool budget_spent(const struct adapt *a, char *buf, size_t len)
+{
+	const struct plan_adaptive *ad = a->spec->adaptive;
+	if (ad->budget_points && a->plan->n_steps >= ad->budget_points)
+		return snprintf(buf, len, "budget spent: %zu of %zu points measured", a->plan->n_steps, ad->budget_points), true;
+	if (ad->budget_s > 0 && a->spent_s >= ad->budget_s)
+		return snprintf(buf, len, "budget spent: %.0f of %.0f bench seconds planned", a->spent_s, ad->budget_s), true;
+	return false;
+}
+
+/* Start choosing the next batch: from the arms (ahead: from the last planned point, where the arms will be when
+ * the batch being measured ends). 0, or -1 after pausing the sweep with the reason. */
+static int start_decision(struct adapt *a, bool ahead)
+{
+	struct plan_pos *d = realloc(a->done, (a->plan->n_steps + 1) * sizeof *d);
+	if (!d)
+		return pause_for(a, "choosing batch %d: out of memory; resume to try again", a->batch + 1), -1;
+	a->done = d;
+	for (size_t i = 0; i < a->plan->n_steps; i++)
+		d[i] = a->plan->steps[i].pos;
+	a->arms = ahead && a->plan->n_steps ? a->plan->steps[a->plan->n_steps - 1].pos : arms_now(a);
 	struct rsel_req q = {
 		.sweep_id = a->id, .batch = a->batch + 1, .spec = a->spec, .from = a->arms, .done = d,
-		.n_done = a->plan->n_steps, .prev_model = a->model, .batch_size = ad->batch,
+		.n_done = a->plan->n_steps, .prev_model = a->model, .batch_size = a->spec->adaptive->batch,
 	};
 	a->ops.timing(a->ops.ctx, &q.timing);
 	struct acq_err err = { 0 };
 	if (rsel_start(a->rs, &q, decided, a, &err))
-		return pause_for(a, "choosing batch %d: %s; resume to try again", a->batch + 1, err.msg);
+		return pause_for(a, "choosing batch %d: %s; resume to try again", a->batch + 1, err.msg), -1;
 	a->deciding = a->id;
-	log_msg(LOG_NOTICE, "sweep %lld: choosing batch %d (fit, then brdf-recon select)", (long long)a->id, a->batch + 1);
+	log_msg(LOG_NOTICE, "sweep %lld: choosing batch %d (fit, then brdf-recon select)%s", (long long)a->id,
+		a->batch + 1, ahead ? ", overlapping the measurement of the batch before it" : "");
+	return 0;
+}
+
+void adapt_waiting(struct adapt *a, double now)
+{
+	if (!a->id)
+		return;
+	if (!isfinite(a->wait_start))
+		a->wait_start = now;
+	if (a->ahead_ready) { /* chosen while the arms were measuring: at once */
+		struct rsel_res r = a->ahead;
+		a->ahead_ready = false;
+		apply(a, &r);
+		json_decref(r.out);
+		return;
+	}
+	if (rsel_busy(a->rs)) /* under way (overlap): applied when it comes */
+		return;
+	char why[256];
+	if (budget_spent(a, why, sizeof why))
+		return stop(a, a->ntrend ? a->trend[a->ntrend - 1] : NAN, -1, "%s", why);
+	start_decision(a, false);
 }
 
 /* The picks that fit the budget, planned from the arms' position into *out; their count (0: none fits). */
@@ -263,7 +302,20 @@ static void decided(void *ctx, const struct rsel_res *r)
 		return;
 	}
 	a->deciding = 0;
+	if (!isfinite(a->wait_start)) { /* overlap: the arms are still measuring; applied when they wait */
+		a->ahead = *r;
+		json_incref(a->ahead.out);
+		a->ahead_ready = true;
+		return;
+	}
+	apply(a, r);
+}
+
+/* Record and start the batch decision r chose (or stop, or pause with why it failed). */
+static void apply(struct adapt *a, const struct rsel_res *r)
+{
 	int next = a->batch + 1;
+	a->arms = arms_now(a);
 	if (!r->ok)
 		return pause_for(a, "choosing batch %d: %s; resume to try again", next, r->msg);
 	json_t *t = json_object_get(r->out, "target"), *picks = json_object_get(r->out, "picks");
@@ -360,6 +412,9 @@ static void decided(void *ctx, const struct rsel_res *r)
 		r->warm ? ", warm" : "", r->select_s);
 	emit_state(a, value, 0, waited, NULL);
 	a->ops.extend(a->ops.ctx);
+	char why[256];
+	if (a->id && a->spec->adaptive->overlap && !budget_spent(a, why, sizeof why))
+		start_decision(a, true); /* the next batch is chosen while this one is measured */
 out:
 	plan_result_free(b);
 	free(pos);

@@ -54,6 +54,7 @@ struct plan_adaptive {
 	size_t n_cand_inc;
 	size_t cand_count;          /* candidate observation directions per incidence (Fibonacci set) */
 	double cand_max_theta_deg;  /* ... over the cap θ ≤ this */
+	bool overlap;               /* choose batch k+2 (from the model through batch k) while batch k+1 is measured */
 };
 
 /* A parsed plan file (plan_load / plan_parse), or one built by code (arrays malloc'ed; plan_spec_free). */

@@ -11,6 +11,8 @@
  *   budget: {seconds: 1400, points: 866}    # one or both; the whole sweep, seed included
  *   batch: 12                               # points per batch
  *   candidates: {incidence_deg: RANGE, per_incidence: 150, max_theta_deg: 85}
+ *   overlap: false                          # true: batch k+2 is chosen (from the model through batch k) while
+ *                                           # batch k+1 is measured, so the arms need not wait for the refit
  *   integration: ...                        # as any plan: the seed's and every batch's
  *   averages: 1
  * The candidate defaults: incidences 0 to 70° every 5°, 150 Fibonacci directions per incidence over θ ≤ 85°. */
@@ -103,7 +105,7 @@ static int parse_candidates(struct yc_node *root, struct plan_adaptive *a, struc
 int plan_adaptive_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err)
 {
 	static const char *const keys[] = { "name", "kind", "seed", "target", "budget", "batch", "candidates",
-					    "integration", "averages", NULL };
+					    "overlap", "integration", "averages", NULL };
 	struct plan_spec *s = NULL;
 	struct plan_adaptive *a = calloc(1, sizeof *a);
 	*out = NULL;
@@ -140,7 +142,8 @@ int plan_adaptive_parse(struct yc_node *root, struct plan_spec **out, struct acq
 		goto fail;
 	snprintf(s->name, sizeof s->name, "%s", name);
 	if (plan_integration_parse(root, s, err) || yc_int(root, "averages", false, 1, 100000, &averages, err) ||
-	    yc_int(root, "batch", true, 1, 1000, &batch, err) || parse_target(root, a, err) ||
+	    yc_int(root, "batch", true, 1, 1000, &batch, err) || yc_bool(root, "overlap", false, &a->overlap, err) ||
+	    parse_target(root, a, err) ||
 	    parse_budget(root, a, err) || parse_candidates(root, a, err))
 		goto fail;
 	s->averages = (int)averages;

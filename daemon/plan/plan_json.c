@@ -120,6 +120,7 @@ json_t *plan_dry_run_json(const struct plan_spec *s, const struct bench_geom *g,
 	json_object_set_new(ad, "budget_s", a->budget_s > 0 ? json_real(a->budget_s) : json_null());
 	json_object_set_new(ad, "budget_points", a->budget_points > 0 ? json_integer((json_int_t)a->budget_points)
 								   : json_null());
+	json_object_set_new(ad, "overlap", json_boolean(a->overlap));
 	json_object_set_new(o, "kind", json_string("adaptive"));
 	json_object_set_new(o, "adaptive", ad);
 	return o;

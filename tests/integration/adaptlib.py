@@ -19,6 +19,7 @@ seed:
 target: {%(target)s}
 budget: {%(budget)s}
 batch: %(batch)d
+overlap: %(overlap)s
 candidates: {%(cands)s}
 integration: {mode: fixed, ms: 5}
 averages: 1
@@ -26,8 +27,9 @@ averages: 1
 
 
 def plan(target="dhr_sigma: {incidence_deg: [8], le: 1.0e-9}", budget="points: 24", batch=4,
-         cands="incidence_deg: [8, 25, 40, 55], per_incidence: 30"):
-    return PLAN % {"target": target, "budget": budget, "batch": batch, "cands": cands}
+         cands="incidence_deg: [8, 25, 40, 55], per_incidence: 30", overlap=False):
+    return PLAN % {"target": target, "budget": budget, "batch": batch, "cands": cands,
+                   "overlap": "true" if overlap else "false"}
 
 
 def bench(scale=20):

@@ -3,7 +3,9 @@
 batch, while a batch is being chosen) and restarted each time (daemon.auto_resume). The sweep must go on from its
 recorded decisions and end on its budget with nothing lost and nothing twice: every point recorded before a kill is
 still there afterwards with the same row, angles and spectra; every planned point is measured exactly once; no
-configuration is planned twice; the batches are contiguous and each batch's points are the ones its picks name."""
+configuration is planned twice; the batches are contiguous and each batch's points are the ones its picks name.
+The plan overlaps each decision with the measurement of the batch before it (overlap: true), so kills also land
+while a decision is under way or chosen and not yet recorded."""
 import os
 import random
 import signal
@@ -42,7 +44,7 @@ def run():
     try:
         b.start_sim()
         b.start_daemon()
-        sid = L.start_sweep(b, A.plan(budget="points: %d" % BUDGET), "it-adaptive-kill")
+        sid = L.start_sweep(b, A.plan(budget="points: %d" % BUDGET, overlap=True), "it-adaptive-kill")
         kills, t0, seen = 0, time.time(), []
         before, planned_before = {}, {}
         while kills < KILLS:
