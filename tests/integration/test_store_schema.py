@@ -47,10 +47,10 @@ def main():
         if have_cli:
             out = subprocess.run(["sqlite3", db, "PRAGMA application_id; PRAGMA user_version; PRAGMA journal_mode; "
                                   "PRAGMA integrity_check;"], capture_output=True, text=True).stdout.split()
-            check(out == [str(0x42524446), "3", "wal", "ok"], "sqlite3 CLI: %r" % out)
+            check(out == [str(0x42524446), "4", "wal", "ok"], "sqlite3 CLI: %r" % out)
             tables = subprocess.run(["sqlite3", db, ".tables"], capture_output=True, text=True).stdout.split()
             for t in ("sweeps", "points", "spectra", "spectrometers", "devices", "calibrated", "recon_runs",
-                      "recon_outputs", "events", "sweep_devices"):
+                      "recon_outputs", "events", "sweep_devices", "adaptive_batches", "adaptive_picks"):
                 check(t in tables, "table %s missing (%r)" % (t, tables))
         else:
             print("sqlite3 CLI absent: CLI checks skipped")
