@@ -19,6 +19,7 @@
 #include "daemon/loop.h"
 #include "daemon/plan_worker.h"
 #include "daemon/store.h"
+#include "daemon/store_adaptive.h"
 #include "daemon/sweep.h"
 
 #include "daemon/plan/plan.h"
@@ -80,8 +81,7 @@ static int plan_child(void *arg, int fd)
 	if (plan_load_string("plan", pj->text, &spec, &err) || plan_make(spec, &c->bench, &res, &err)) {
 		o = json_pack("{s:s,s:s}", "code", proto_code_of(&err), "message", err.msg);
 	} else {
-		plan_time_apply(spec, &c->bench, &pj->tm, res);
-		json_t *p = plan_to_json(spec, res, pj->points);
+		json_t *p = plan_dry_run_json(spec, &c->bench, &pj->tm, res, pj->points);
 		if (p) {
 			json_object_set_new(p, "bench_config", json_string(c->path));
 			json_object_set_new(p, "time_scale", json_real(pj->tm.time_scale)); /* bench s per wall s */
@@ -638,7 +638,13 @@ static void cmd_sweep(struct app *app, const struct srv_peer *peer, struct proto
 		rc = data ? 0 : -1;
 	} else if (!strcmp(sub, "show")) {
 		json_t *pts = json_object_get(req->root, "points");
-		data = store_sweep_show(app->store, (int64_t)num_arg(req->root, "sweep", 0), json_is_true(pts), &err);
+		int64_t sid = (int64_t)num_arg(req->root, "sweep", 0);
+		data = store_sweep_show(app->store, sid, json_is_true(pts), &err);
+		json_t *ad = data ? store_adaptive_show(app->store, sid, &err) : NULL; /* an adaptive sweep's decisions */
+		if (data && ad && json_array_size(ad))
+			json_object_set_new(data, "adaptive", ad);
+		else
+			json_decref(ad);
 		if (data)
 			data = json_pack("{s:o}", "sweep", data);
 		rc = data ? 0 : -1;

@@ -45,6 +45,7 @@ const char *ex_state_name(enum ex_state s)
 	case EX_COMPLETED: return "completed";
 	case EX_ABORTED: return "aborted";
 	case EX_FAILED: return "failed";
+	case EX_WAITING: return "waiting";
 	}
 	return "unknown";
 }
@@ -429,6 +430,11 @@ int ex_start(struct ex *x, int first_step, bool resumed, double now, struct acq_
 	x->in_reference = x->cfg.take_reference && !x->have_ref;
 	if (x->cfg.cal.method == CALIB_RELATIVE && !x->cfg.take_reference && !x->have_ref)
 		ex_event(x, "info", NULL, "no reference will be measured: calibrated values need one (take_reference)");
+	if (x->cfg.hold_at_end && first_step >= x->nsteps) { /* resumed between batches: the next is decided first */
+		x->in_reference = false;
+		ex_wait_batch(x);
+		return 0;
+	}
 	ex_begin_segment(x, now);
 	ex_set_phase_text(x, "verifying positions");
 	/* The reference → sample swap is one durable state: resumed with the reference stored and no point
@@ -449,6 +455,10 @@ int ex_pause(struct ex *x, double now, struct acq_err *err)
 		ex_pause_now(x, true, "paused by the operator while %s was faulted", ex_dev_names[x->fault_dev]);
 		return 0;
 	}
+	if (x->state == EX_WAITING) {
+		ex_pause_now(x, false, "paused by the operator after point %d (between batches)", x->cur);
+		return 0;
+	}
 	if (x->state != EX_RUNNING)
 		return acq_errf(err, ACQ_E_STATE, "sweep is %s, not running", ex_state_name(x->state));
 	x->pause_requested = true;
@@ -465,6 +475,11 @@ int ex_resume(struct ex *x, double now, struct acq_err *err)
 		return acq_errf(err, ACQ_E_STATE, "sweep is %s, not paused", ex_state_name(x->state));
 	x->reason[0] = '\0';
 	ex_set_db_state(x, "running");
+	if (x->cfg.hold_at_end && x->cur >= x->nsteps && !x->paused_by_fault) {
+		ex_event(x, "resume", NULL, "resumed after point %d: waiting for the next batch", x->cur);
+		ex_wait_batch(x);
+		return 0;
+	}
 	if (x->paused_by_fault) {
 		x->state = EX_SUSPENDED;
 		x->fault_attempts = 0;
@@ -635,7 +650,7 @@ int ex_cfg_parse(struct yc_node *acq, struct yc_node *cal, struct ex_cfg *c, str
 
 void ex_shutdown(struct ex *x, const char *why)
 {
-	if (!x || !(x->state == EX_RUNNING || x->state == EX_SUSPENDED || x->state == EX_PAUSED))
+	if (!x || !(x->state == EX_RUNNING || x->state == EX_SUSPENDED || x->state == EX_PAUSED || x->state == EX_WAITING))
 		return;
 	if (x->state == EX_PAUSED) { /* already paused (and why is in the log): it stays so after the restart */
 		ex_safe_stop(x);
@@ -651,7 +666,7 @@ void ex_shutdown(struct ex *x, const char *why)
 
 void ex_hold(struct ex *x, const char *why)
 {
-	if (!x || x->state != EX_RUNNING)
+	if (!x || (x->state != EX_RUNNING && x->state != EX_WAITING))
 		return;
 	ex_pause_now(x, false, "still paused after a restart: %s", why && *why ? why : "paused by the operator");
 }

@@ -30,7 +30,8 @@
 
 struct store;
 
-enum ex_state { EX_IDLE = 0, EX_RUNNING, EX_PAUSED, EX_SUSPENDED, EX_COMPLETED, EX_ABORTED, EX_FAILED };
+enum ex_state { EX_IDLE = 0, EX_RUNNING, EX_PAUSED, EX_SUSPENDED, EX_COMPLETED, EX_ABORTED, EX_FAILED,
+	       EX_WAITING /* hold_at_end: every step done, laser off, the sweep still running: ex_extend or ex_finish */ };
 
 /* Devices, in the daemon's slot order (conf_dev). */
 enum ex_dev { EX_DEV_LASER_THETA = 0, EX_DEV_DETECTOR_THETA, EX_DEV_DETECTOR_PHI, EX_DEV_SPECTRO, EX_DEV_LASER,
@@ -102,6 +103,7 @@ struct ex_cfg {
 	int max_point_attempts;      /* acquisitions of one point spoiled by saturation before accepting it */
 	int max_point_faults;        /* faults on one point (each recovered) before pausing for the operator */
 	double max_invalid_frac;     /* saturated share of the grid range that spoils an acquisition */
+	bool hold_at_end;            /* an adaptive sweep: after the last step wait (EX_WAITING) for more steps */
 };
 
 /* Counters for tests and status. */
@@ -150,6 +152,13 @@ int ex_pause(struct ex *x, double now, struct acq_err *err);
 int ex_resume(struct ex *x, double now, struct acq_err *err);
 /* Abort now: stop the arms, laser off, record why. 0 or -1 (ACQ_E_STATE when already finished). */
 int ex_abort(struct ex *x, const char *why, double now, struct acq_err *err);
+
+/* hold_at_end: plan (borrowed, replaces the previous one) has the steps so far as its prefix and more after them:
+ * a waiting sweep goes on with them (positions verified, then a fresh safe path from where the arms are); a
+ * paused one takes them and stays paused. 0 or -1 (ACQ_E_STATE when not waiting or paused, ACQ_E_INVAL). */
+int ex_extend(struct ex *x, const struct plan_result *plan, double now, struct acq_err *err);
+/* hold_at_end: complete a waiting (or paused, every step done) sweep, why in the event. 0 or -1 (ACQ_E_STATE). */
+int ex_finish(struct ex *x, const char *why, struct acq_err *err);
 
 enum ex_state ex_state(const struct ex *x);
 /* Stable name of a state ("running", ...). */

@@ -431,6 +431,52 @@ static void finish_sweep(struct ex *x)
 	      x->nsteps, calib_method_name(x->cfg.cal.method), x->stats.faults, x->stats.recoveries);
 }
 
+void ex_wait_batch(struct ex *x)
+{
+	struct acq_err err = { 0 };
+	if (ex_laser_off(x, &err))
+		ex_event(x, "info", NULL, "switching the laser off between batches: %s", err.msg);
+	x->state = EX_WAITING;
+	x->phase = PH_NONE;
+	x->pause_requested = false;
+	ex_set_phase_text(x, "waiting for the next batch");
+}
+
+int ex_extend(struct ex *x, const struct plan_result *plan, double now, struct acq_err *err)
+{
+	if (x->state != EX_WAITING && x->state != EX_PAUSED)
+		return acq_errf(err, ACQ_E_STATE, "sweep is %s: only a waiting or paused sweep takes more steps",
+				ex_state_name(x->state));
+	if (!plan || (int)plan->n_steps < x->nsteps)
+		return acq_errf(err, ACQ_E_INVAL, "sweep: the extended plan has fewer steps than the sweep so far");
+	x->plan = plan;
+	x->nsteps = (int)plan->n_steps;
+	x->stats.points_total = x->nsteps;
+	if (x->state == EX_PAUSED || x->cur >= x->nsteps)
+		return 0;
+	/* Darks at a new incidence, as between the points of one plan (dark_every keeps its own count). */
+	if (x->cfg.dark_every <= 0 && x->cur > 0 &&
+	    fabs(plan->steps[x->cur].pos.laser_theta - plan->steps[x->cur - 1].pos.laser_theta) > 1e-6)
+		exp_darks_clear(x->darks);
+	x->state = EX_RUNNING;
+	x->point_started = now;
+	ex_event(x, "info", NULL, "batch: points %d to %d of %d", x->cur + 1, x->nsteps, x->nsteps);
+	ex_begin_segment(x, now);
+	ex_set_phase_text(x, "verifying positions");
+	return 0;
+}
+
+int ex_finish(struct ex *x, const char *why, struct acq_err *err)
+{
+	if (!(x->state == EX_WAITING || (x->state == EX_PAUSED && x->cur >= x->nsteps)))
+		return acq_errf(err, ACQ_E_STATE, "sweep is %s at point %d of %d: it cannot complete now",
+				ex_state_name(x->state), x->cur, x->nsteps);
+	snprintf(x->reason, sizeof x->reason, "%s", why && *why ? why : "no more batches");
+	ex_event(x, "info", NULL, "%s", x->reason);
+	finish_sweep(x);
+	return 0;
+}
+
 /* The reference (or direct beam) is in: store its spectra, keep its merged rate, then pause for the sample swap
  * or go on to the first point. */
 static void commit_reference(struct ex *x, double now)
@@ -590,7 +636,10 @@ static void commit_point(struct ex *x, double now)
 	}
 	progress(x, now);
 	if (x->cur >= x->nsteps) {
-		finish_sweep(x);
+		if (x->cfg.hold_at_end)
+			ex_wait_batch(x);
+		else
+			finish_sweep(x);
 		return;
 	}
 	if (x->pause_requested) {

@@ -173,6 +173,8 @@ bool ex_want_wl(struct ex *x);
 void ex_mask_black(const struct ex *x, struct exp_rate *r);
 /* The sweep's reference from the database (crash-resume): 1 loaded, 0 none, -1 with err. */
 int ex_load_reference(struct ex *x, struct acq_err *err);
+/* hold_at_end: every step done; laser off, wait (EX_WAITING) for ex_extend or ex_finish. */
+void ex_wait_batch(struct ex *x);
 /* Phase step: acquisition shots, then the point's commit. */
 void ex_run_acq(struct ex *x, double now);
 

@@ -62,8 +62,7 @@ static void chain_emit(struct recon_chain *ch, const char *name, json_t *data)
 		json_decref(data);
 }
 
-/* brdf-recon: an absolute path, next to acquisitiond, or in PATH. 0 or -1. */
-static int find_program(const char *prog, char *out, size_t cap)
+int recon_find_program(const char *prog, char *out, size_t cap)
 {
 	if (strchr(prog, '/')) {
 		snprintf(out, cap, "%s", prog);
@@ -240,7 +239,7 @@ int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, int64_t 
 		recon_event(ch, "info", "sweep.auto_recon is off: no reconstruction ran; the samples are in %s", ch->csv);
 		return 0;
 	}
-	if (find_program(c->recon.program, ch->prog, sizeof ch->prog)) {
+	if (recon_find_program(c->recon.program, ch->prog, sizeof ch->prog)) {
 		recon_event(ch, "info", "no reconstruction ran: '%s' not found (brdf-recon not installed?); the calibrated "
 			    "samples are recorded in the database and in %s", c->recon.program, ch->csv);
 		return acq_errf(err, ACQ_E_UNSUPPORTED, "reconstruction program '%s' not found", c->recon.program);

@@ -5,6 +5,7 @@
 #define RECON_CHAIN_H
 
 #include <stdbool.h>
+#include <stddef.h>
 #include <stdint.h>
 
 #include "config/acq_err.h"
@@ -20,6 +21,8 @@ void recon_chain_free(struct recon_chain *ch);
  * brdf-recon is found. *run_id (may be NULL): the recon_runs row. ACQ_E_STATE while a stage runs,
  * ACQ_E_UNSUPPORTED without brdf-recon. 0 or -1. */
 int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, int64_t *run_id, struct acq_err *err);
+/* The program prog (brdf-recon) as an absolute path, next to acquisitiond, or in PATH into out. 0 or -1. */
+int recon_find_program(const char *prog, char *out, size_t cap);
 /* True while a stage's child process runs. */
 bool recon_chain_busy(const struct recon_chain *ch);
 

@@ -1,7 +1,8 @@
--- schema.sql: the acquisitiond database, schema version 3 (PRAGMA user_version = 3,
+-- schema.sql: the acquisitiond database, schema version 4 (PRAGMA user_version = 4,
 -- PRAGMA application_id = 0x42524446 "BRDF"). A new database is created from this file as it is
 -- (daemon/store_migrate.c embeds it); an older one is migrated by the steps in daemon/store_migrate.c (1 → 2: the
--- measured sample-frame angles and the calibrated_samples view; 2 → 3: the 'interrupted' state of recon_runs).
+-- measured sample-frame angles and the calibrated_samples view; 2 → 3: the 'interrupted' state of recon_runs;
+-- 3 → 4: the decisions of adaptive sweeps).
 -- tests/integration/test_store_schema.py checks that a fresh database has exactly this schema, and
 -- tests/unit/test_store.c that a migrated one has it too. Only the store (daemon/store*.c) writes; readers of
 -- calibrated samples (the CSV export, the daemon's reconstruction, brdf-recon fit --db in recon/dbload.c) read
@@ -117,6 +118,42 @@ CREATE TABLE recon_outputs (
   kind TEXT NOT NULL CHECK (kind IN ('model', 'merl', 'dhr', 'preview', 'report', 'other')),
   path TEXT NOT NULL,                          -- relative to the state directory
   created_at REAL NOT NULL
+);
+
+-- Adaptive sweeps (plans of kind adaptive, daemon/sweep_adaptive.c): every decision, one row per batch. Batch 0 is
+-- the seed plan; batch k > 0 was chosen by `brdf-recon select` from the model fitted on everything measured before
+-- it; the last row of a finished adaptive sweep (n_points 0) says why it stopped. A batch's row, its picks and its
+-- points are written in one transaction, before any of its points is measured.
+CREATE TABLE adaptive_batches (
+  sweep_id INTEGER NOT NULL REFERENCES sweeps(id),
+  batch INTEGER NOT NULL CHECK (batch >= 0),
+  decided_at REAL NOT NULL,
+  first_order_index INTEGER NOT NULL,          -- its points: order_index first_order_index .. + n_points - 1
+  n_points INTEGER NOT NULL CHECK (n_points >= 0),
+  target_spec TEXT NOT NULL,                   -- as given to brdf-recon select --target (e.g. dhr:8:le=0.002)
+  target_value REAL,                           -- the target's value from the model the decision used (NULL: seed)
+  target_met INTEGER,                          -- 1 when that value met the threshold
+  predicted_value REAL,                        -- select's prediction of the value after the batch
+  model TEXT,                                  -- the model file the decision used, relative to the state directory
+  criterion TEXT,                              -- select's criterion
+  warm INTEGER,                                -- 1: the fit was warm-started from the previous batch's model
+  candidates INTEGER,                          -- reachable candidates offered to select
+  predicted_s REAL NOT NULL,                   -- the batch's predicted bench seconds (the seed: the whole seed plan)
+  waited_s REAL,                               -- bench seconds the arms waited for this decision
+  stop_reason TEXT,                            -- the final row: target met, budget spent, nothing reachable left
+  PRIMARY KEY (sweep_id, batch)
+);
+-- The picks of each batch in select's choice order, with the planned arm angles (the batch's measurement order is
+-- its points' order_index: a resumed sweep replays it from here).
+CREATE TABLE adaptive_picks (
+  sweep_id INTEGER NOT NULL REFERENCES sweeps(id),
+  batch INTEGER NOT NULL,
+  rank INTEGER NOT NULL,                       -- 0: select's first choice
+  candidate_id INTEGER NOT NULL,               -- the id in the batch's candidates CSV
+  order_index INTEGER,                         -- the point measuring it (NULL: left out to keep within the budget)
+  laser_theta REAL NOT NULL, detector_theta REAL NOT NULL, detector_phi REAL NOT NULL,
+  gain REAL, cost_s REAL, predicted_value_after REAL,
+  PRIMARY KEY (sweep_id, batch, rank)
 );
 
 -- Event log: pauses, faults, resumes, starts, completions, operator actions.

@@ -39,6 +39,9 @@ bool store_in_list(const char *v, const char *const *list);
 /* Rows of a prepared statement as a JSON array of objects named by column (blobs: their size); finalizes s.
  * NULL with err. */
 json_t *store_rows_json(struct store *st, sqlite3_stmt *s, struct acq_err *err);
+/* Insert npts planned points of sweep_id (inside the caller's transaction; store_sweep.c). 0 or -1. */
+int store_points_insert(struct store *st, int64_t sweep_id, const struct store_point_new *pts, int npts,
+			struct acq_err *err);
 /* Bring an open read-write store's schema to STORE_SCHEMA_VERSION (store_migrate.c): a new database from
  * daemon/schema.sql, an older one step by step, each step one transaction. 0 or -1. */
 int store_migrate(struct store *st, struct acq_err *err);

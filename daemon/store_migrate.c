@@ -60,6 +60,36 @@ static const char *const store_migrations[STORE_SCHEMA_VERSION] = {
 	      "SELECT id, sweep_id, CASE WHEN state = 'failed' AND output LIKE 'interrupted: %' THEN 'interrupted' "
 	      "ELSE state END, program, args, started_at, finished_at, exit_status, output FROM recon_runs_v2;"
 	      "DROP TABLE recon_runs_v2;",
+	/* 3 → 4: the decisions of adaptive sweeps (daemon/store_adaptive.c): two new tables, nothing else changes. */
+	[3] = "CREATE TABLE adaptive_batches (\n"
+	      "  sweep_id INTEGER NOT NULL REFERENCES sweeps(id),\n"
+	      "  batch INTEGER NOT NULL CHECK (batch >= 0),\n"
+	      "  decided_at REAL NOT NULL,\n"
+	      "  first_order_index INTEGER NOT NULL,          -- its points: order_index first_order_index .. + n_points - 1\n"
+	      "  n_points INTEGER NOT NULL CHECK (n_points >= 0),\n"
+	      "  target_spec TEXT NOT NULL,                   -- as given to brdf-recon select --target (e.g. dhr:8:le=0.002)\n"
+	      "  target_value REAL,                           -- the target's value from the model the decision used (NULL: seed)\n"
+	      "  target_met INTEGER,                          -- 1 when that value met the threshold\n"
+	      "  predicted_value REAL,                        -- select's prediction of the value after the batch\n"
+	      "  model TEXT,                                  -- the model file the decision used, relative to the state directory\n"
+	      "  criterion TEXT,                              -- select's criterion\n"
+	      "  warm INTEGER,                                -- 1: the fit was warm-started from the previous batch's model\n"
+	      "  candidates INTEGER,                          -- reachable candidates offered to select\n"
+	      "  predicted_s REAL NOT NULL,                   -- the batch's predicted bench seconds (the seed: the whole seed plan)\n"
+	      "  waited_s REAL,                               -- bench seconds the arms waited for this decision\n"
+	      "  stop_reason TEXT,                            -- the final row: target met, budget spent, nothing reachable left\n"
+	      "  PRIMARY KEY (sweep_id, batch)\n"
+	      ");\n"
+	      "CREATE TABLE adaptive_picks (\n"
+	      "  sweep_id INTEGER NOT NULL REFERENCES sweeps(id),\n"
+	      "  batch INTEGER NOT NULL,\n"
+	      "  rank INTEGER NOT NULL,                       -- 0: select's first choice\n"
+	      "  candidate_id INTEGER NOT NULL,               -- the id in the batch's candidates CSV\n"
+	      "  order_index INTEGER,                         -- the point measuring it (NULL: left out to keep within the budget)\n"
+	      "  laser_theta REAL NOT NULL, detector_theta REAL NOT NULL, detector_phi REAL NOT NULL,\n"
+	      "  gain REAL, cost_s REAL, predicted_value_after REAL,\n"
+	      "  PRIMARY KEY (sweep_id, batch, rank)\n"
+	      ");\n",
 };
 
 /* Whether the open transaction left a foreign key dangling (a step that rebuilt a table). 0, or -1 with err. */

@@ -13,6 +13,31 @@
 
 static const char *const sweep_states[] = { "planned", "running", "paused", "completed", "aborted", "failed", NULL };
 
+int store_points_insert(struct store *st, int64_t sweep_id, const struct store_point_new *pts, int npts,
+			struct acq_err *err)
+{
+	if (npts <= 0)
+		return 0;
+	sqlite3_stmt *s = store_prep(st, "INSERT INTO points (sweep_id, order_index, theta_i, phi_i, theta_o, phi_o) "
+				     "VALUES (?,?,?,?,?,?)", err);
+	if (!s)
+		return -1;
+	for (int i = 0; i < npts; i++) {
+		sqlite3_bind_int64(s, 1, sweep_id);
+		sqlite3_bind_int(s, 2, pts[i].order_index);
+		sqlite3_bind_double(s, 3, pts[i].theta_i);
+		sqlite3_bind_double(s, 4, pts[i].phi_i);
+		sqlite3_bind_double(s, 5, pts[i].theta_o);
+		sqlite3_bind_double(s, 6, pts[i].phi_o);
+		if (store_step_done(st, s, err, "adding point")) {
+			sqlite3_finalize(s);
+			return -1;
+		}
+	}
+	sqlite3_finalize(s);
+	return 0;
+}
+
 int store_sweep_create(struct store *st, const struct store_sweep_new *sw, const struct store_point_new *pts,
 		       int npts, int64_t *id, struct acq_err *err)
 {
@@ -36,24 +61,7 @@ int store_sweep_create(struct store *st, const struct store_sweep_new *sw, const
 	if (store_run1(st, s, err, "creating sweep"))
 		goto fail;
 	int64_t sid = sqlite3_last_insert_rowid(st->db);
-	s = store_prep(st, "INSERT INTO points (sweep_id, order_index, theta_i, phi_i, theta_o, phi_o) VALUES (?,?,?,?,?,?)",
-		       err);
-	if (!s)
-		goto fail;
-	for (int i = 0; i < npts; i++) {
-		sqlite3_bind_int64(s, 1, sid);
-		sqlite3_bind_int(s, 2, pts[i].order_index);
-		sqlite3_bind_double(s, 3, pts[i].theta_i);
-		sqlite3_bind_double(s, 4, pts[i].phi_i);
-		sqlite3_bind_double(s, 5, pts[i].theta_o);
-		sqlite3_bind_double(s, 6, pts[i].phi_o);
-		if (store_step_done(st, s, err, "adding point")) {
-			sqlite3_finalize(s);
-			goto fail;
-		}
-	}
-	sqlite3_finalize(s);
-	if (store_exec(st, "COMMIT", err))
+	if (store_points_insert(st, sid, pts, npts, err) || store_exec(st, "COMMIT", err))
 		goto fail;
 	if (id)
 		*id = sid;

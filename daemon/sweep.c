@@ -16,6 +16,7 @@
 #include "daemon/plan/plan.h"
 #include "daemon/recon_chain.h"
 #include "daemon/store.h"
+#include "daemon/sweep_adaptive.h"
 
 struct sweep {
 	struct sweep_env env;
@@ -33,6 +34,7 @@ struct sweep {
 	int64_t done_id;
 	uint64_t done_timer;
 	struct recon_chain *chain;
+	struct adapt *adapt;         /* kind: adaptive: the batches after the seed (sweep_adaptive.c) */
 	bool unrecorded_logged;      /* the end of the sweep awaits being recorded (logged once) */
 	bool planning;               /* sweep_set_planning(): a plan for sweep_start_planned() is being made */
 };
@@ -42,7 +44,8 @@ struct sweep {
 static enum sweep_state map_state(enum ex_state s)
 {
 	switch (s) {
-	case EX_RUNNING: return SWEEP_RUNNING;
+	case EX_RUNNING:
+	case EX_WAITING: return SWEEP_RUNNING; /* between batches: the next is being chosen */
 	case EX_PAUSED: return SWEEP_PAUSED;
 	case EX_SUSPENDED: return SWEEP_FAULTED;
 	default: return SWEEP_IDLE;
@@ -137,6 +140,7 @@ static void schedule(struct sweep *sw, double when);
 
 static void release(struct sweep *sw)
 {
+	adapt_end(sw->adapt);
 	ex_free(sw->ex, loop_now(sw->env.loop));
 	sw->ex = NULL;
 	plan_result_free(sw->plan);
@@ -200,6 +204,11 @@ static void tick(struct loop *lp, void *arg)
 		release(sw);
 		return;
 	}
+	if (s == EX_WAITING) {
+		adapt_waiting(sw->adapt, now); /* may complete or pause it at once: then step again */
+		if (sw->ex && ex_state(sw->ex) != EX_WAITING)
+			next = now;
+	}
 	schedule(sw, next);
 }
 
@@ -246,6 +255,52 @@ static int load_cfg(const struct conf *c, struct ex_cfg *cfg, struct acq_err *er
 	return exp_policy_check(&cfg->pol, err);
 }
 
+/* ---- the adaptive loop's requests (sweep_adaptive.h) ----------------------------------------------- */
+
+static void adapt_extend(void *ctx)
+{
+	struct sweep *sw = ctx;
+	struct acq_err err = { 0 };
+	if (!sw->ex)
+		return;
+	if (ex_extend(sw->ex, sw->plan, loop_now(sw->env.loop), &err))
+		log_msg(LOG_ERR, "sweep %lld: the next batch: %s", (long long)sw->id, err.msg);
+	snapshot(sw);
+	kick(sw);
+}
+
+static void adapt_finish(void *ctx, const char *why)
+{
+	struct sweep *sw = ctx;
+	struct acq_err err = { 0 };
+	if (!sw->ex)
+		return;
+	if (ex_finish(sw->ex, why, &err))
+		log_msg(LOG_ERR, "sweep %lld: completing: %s", (long long)sw->id, err.msg);
+	kick(sw); /* the tick sees it completed: recorded, released, the reconstruction chain */
+}
+
+static void adapt_pause(void *ctx, const char *why)
+{
+	struct sweep *sw = ctx;
+	struct acq_err err = { 0 };
+	if (!sw->ex)
+		return;
+	if (ex_pause(sw->ex, loop_now(sw->env.loop), &err))
+		log_msg(LOG_ERR, "sweep %lld: pausing (%s): %s", (long long)sw->id, why, err.msg);
+	else
+		store_event(sw->env.store, sw->id, "info", NULL, why, sw->env.wallclock(), NULL);
+	snapshot(sw);
+	if (ex_state(sw->ex) == EX_PAUSED)
+		snprintf(sw->last.message, sizeof sw->last.message, "paused: %s", why);
+	kick(sw);
+}
+
+static void adapt_timing(void *ctx, struct plan_timing *t)
+{
+	sweep_plan_timing(ctx, t);
+}
+
 int sweep_init(const struct sweep_env *env, struct sweep **out, struct acq_err *err)
 {
 	struct sweep *sw = calloc(1, sizeof *sw);
@@ -257,7 +312,9 @@ int sweep_init(const struct sweep_env *env, struct sweep **out, struct acq_err *
 		free(sw);
 		return -1;
 	}
-	if (!(sw->chain = recon_chain_new(&sw->env))) {
+	struct adapt_ops aops = { adapt_extend, adapt_finish, adapt_pause, adapt_timing, sw };
+	if (!(sw->chain = recon_chain_new(&sw->env)) || !(sw->adapt = adapt_new(&sw->env, &aops))) {
+		recon_chain_free(sw->chain);
 		free(sw);
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
@@ -282,6 +339,7 @@ void sweep_finish(struct sweep *sw)
 	if (sw->env.devices)
 		devices_set_kick(sw->env.devices, NULL, NULL);
 	release(sw);
+	adapt_free(sw->adapt);
 	free(sw);
 }
 
@@ -332,6 +390,7 @@ static int plan_cfg(struct sweep *sw, struct ex_cfg *cfg, struct acq_err *err)
 	if (sw->plan->n_steps == 0)
 		return acq_errf(err, ACQ_E_INVAL, "the plan has no visible point");
 	*cfg = sw->cfg;
+	cfg->hold_at_end = sw->spec->adaptive != NULL;
 	if (sw->spec->averages > 0)
 		cfg->pol.averages = (unsigned)sw->spec->averages;
 	if (sw->spec->integ_mode == PLAN_INTEG_FIXED) {
@@ -449,6 +508,8 @@ static int start_planned(struct sweep *sw, const char *plan_text, const char *na
 	free(pts);
 	if (rc || record_devices(sw, sw->id, err))
 		goto fail;
+	if (sw->spec->adaptive && adapt_begin(sw->adapt, sw->id, sw->spec, sw->plan, err))
+		goto fail;
 	struct ex_sink sk = sink_of(sw);
 	sw->ex = ex_new(&cfg, devices_ex_ops(), sw->env.devices, &sk, sw->env.store, sw->id, nw.spectrometer_id, &sw->env.conf->bench,
 			sw->plan, err);
@@ -522,6 +583,9 @@ static int recover_planned(struct sweep *sw, int64_t id, json_t *js, bool hold, 
 	struct ex_cfg cfg;
 	if (plan_cfg(sw, &cfg, err))
 		goto out;
+	char stopped[1024] = "";
+	if (sw->spec->adaptive && adapt_resume(sw->adapt, id, sw->spec, sw->plan, stopped, sizeof stopped, err))
+		goto out;
 	if ((json_int_t)sw->plan->n_steps != total) {
 		acq_errf(err, ACQ_E_STATE, "sweep %lld: its plan now gives %zu points, %lld were stored (bench changed?)",
 			 (long long)id, sw->plan->n_steps, (long long)total);
@@ -546,7 +610,10 @@ static int recover_planned(struct sweep *sw, int64_t id, json_t *js, bool hold, 
 	sw->started_wall = sw->env.wallclock();
 	if (ex_start(sw->ex, oi, true, loop_now(sw->env.loop), err))
 		goto out;
-	if (hold && !strcmp(state, "paused")) {
+	if (stopped[0] && ex_state(sw->ex) == EX_WAITING) { /* it had stopped: only its completion was lost */
+		if (ex_finish(sw->ex, stopped, err))
+			goto out;
+	} else if (hold && !strcmp(state, "paused")) {
 		/* Paused for the operator (sample swap, fault, pause command) before the restart: stays paused. */
 		json_t *evs = json_object_get(js, "events");
 		for (size_t i = 0; i < json_array_size(evs); i++) {

@@ -338,6 +338,19 @@ void ctl_print_plan(FILE *f, json_t *r)
 		   "%lld incidences\n",
 		num_i(r, "requested"), num_i(r, "kept"), num_i(r, "moved"), num_i(r, "dropped"), num_i(r, "duplicates"),
 		num_i(r, "measured"), num_i(r, "incidences"));
+	json_t *ad = json_object_get(r, "adaptive");
+	if (json_is_object(ad)) {
+		ctl_fmt_dur(num(ad, "worst_case_s"), a, sizeof a);
+		fprintf(f, "  adaptive: the points above are the seed; then batches of %lld until %s (select's target), "
+			   "the budget (%s%s%s) or nothing reachable is left; worst case %s, %lld points\n",
+			num_i(ad, "batch"), str(ad, "target"),
+			json_is_number(json_object_get(ad, "budget_s")) ? (ctl_fmt_dur(num(ad, "budget_s"), b, sizeof b), b)
+									 : "no time limit",
+			json_is_number(json_object_get(ad, "budget_points")) ? ", points " : "",
+			json_is_number(json_object_get(ad, "budget_points"))
+				? (snprintf(c, sizeof c, "%lld", num_i(ad, "budget_points")), c) : "",
+			a, num_i(ad, "worst_case_points"));
+	}
 	if (json_is_number(json_object_get(r, "predicted_s"))) {
 		ctl_fmt_dur(num(r, "predicted_s"), a, sizeof a);
 		ctl_fmt_dur(num(r, "reference_s"), b, sizeof b);

@@ -18,6 +18,7 @@ struct ctl_view {
 	long long sweep, done, total;
 	char state[32];
 	char point[160];
+	char adaptive[240];    /* an adaptive sweep: the target's value and its trend per batch */
 	double eta_s, eta_at;  /* seconds left, and the wall time they were reported */
 	struct {
 		char name[32], state[40];
@@ -114,6 +115,39 @@ static void add_event(struct ctl_view *v, const char *text)
 		v->nev++;
 }
 
+/* A "sweep.adaptive" event: the view's target line (value, threshold, trend per batch, spending) and the event's
+ * text (the batch decided, or why the sweep stopped). */
+static void adaptive_line(struct ctl_view *v, json_t *ev, char *text, size_t cap)
+{
+	json_t *trend = json_object_get(ev, "trend"), *val = json_object_get(ev, "value"), *x;
+	char tr[120] = "", sp[32], bud[32] = "", vs[32] = "-";
+	size_t n = json_array_size(trend), k = 0;
+	for (size_t i = n > 5 ? n - 5 : 0; i < n && k < sizeof tr; i++) {
+		x = json_array_get(trend, i);
+		k += (size_t)snprintf(tr + k, sizeof tr - k, "%s%.4g", k ? " → " : (n > 5 ? "… " : ""),
+				      json_is_number(x) ? json_number_value(x) : NAN);
+	}
+	if (json_is_number(val))
+		snprintf(vs, sizeof vs, "%.4g", json_number_value(val));
+	ctl_fmt_dur(json_number_value(json_object_get(ev, "spent_s")), sp, sizeof sp);
+	if (json_is_number(json_object_get(ev, "budget_s")))
+		ctl_fmt_dur(json_number_value(json_object_get(ev, "budget_s")), bud, sizeof bud);
+	v->sweep = json_integer_value(json_object_get(ev, "sweep"));
+	snprintf(v->adaptive, sizeof v->adaptive, "%s = %s (target ≤ %g)  trend %s  batch %lld, %lld points, %s%s%s "
+		 "planned, arms waited %.1f s", s_of(ev, "target"),
+		 vs,
+		 json_number_value(json_object_get(ev, "threshold")), tr[0] ? tr : "-",
+		 (long long)json_integer_value(json_object_get(ev, "batch")),
+		 (long long)json_integer_value(json_object_get(ev, "points")), sp, bud[0] ? " of " : "", bud,
+		 json_number_value(json_object_get(ev, "waited_total_s")));
+	if (json_is_string(json_object_get(ev, "stop")))
+		snprintf(text, cap, "adaptive sweep %lld stopped: %s", v->sweep, s_of(ev, "stop"));
+	else
+		snprintf(text, cap, "adaptive sweep %lld: batch %lld chosen (%s = %s)", v->sweep,
+			 (long long)json_integer_value(json_object_get(ev, "batch")), s_of(ev, "target"),
+			 vs);
+}
+
 void ctl_view_event(struct ctl_view *v, json_t *ev)
 {
 	const char *name = s_of(ev, "event");
@@ -140,6 +174,8 @@ void ctl_view_event(struct ctl_view *v, json_t *ev)
 	} else if (!strcmp(name, "recon")) {
 		snprintf(text, sizeof text, "reconstruction of sweep %lld %s: %s",
 			 (long long)json_integer_value(json_object_get(ev, "sweep")), s_of(ev, "state"), s_of(ev, "message"));
+	} else if (!strcmp(name, "sweep.adaptive")) {
+		adaptive_line(v, ev, text, sizeof text);
 	} else if (!strcmp(name, "config")) {
 		snprintf(text, sizeof text, "configuration reloaded from %s", s_of(ev, "path"));
 	} else {
@@ -181,6 +217,8 @@ void ctl_view_draw(struct ctl_view *v, double now)
 			fprintf(f, "ETA   -\n");
 		}
 		fprintf(f, "now   %s\n", v->point);
+		if (v->adaptive[0])
+			fprintf(f, "goal  %s\n", v->adaptive);
 	} else {
 		fprintf(f, "no sweep loaded\n\n\n");
 	}

@@ -19,7 +19,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import sweeplib as L  # noqa: E402
 
 SCALE = float(os.environ.get("DEMO_TIME_SCALE", "35"))
-PLAN = os.path.join(L.SRC, "config", "plan-paper-10x10x10.yaml")
+PLAN = os.environ.get("DEMO_PLAN") or os.path.join(L.SRC, "config", "plan-paper-10x10x10.yaml")  # e.g. plan-adaptive
 ACQCTL = os.path.join(L.BUILD, "acqctl")
 RECON = os.path.join(L.BUILD, "brdf-recon")
 SAMPLE = os.environ.get("DEMO_SAMPLE", "green-paint")
@@ -87,7 +87,8 @@ def main():
         b.start_daemon()
         with open(PLAN) as f:
             plan = f.read()
-        sid = L.start_sweep(b, plan, "demo-paper-10x10x10-%s" % SAMPLE)
+        sid = L.start_sweep(b, plan, "demo-%s-%s" % (os.path.basename(PLAN).rsplit(".", 1)[0].replace("plan-", ""),
+                                                      SAMPLE))
         total = L.sweep_row(b, sid)["points_total"]
         print("demo: sweep %d started: %d points (the plan's visible ones), white reference first" % (sid, total),
               flush=True)

@@ -9,6 +9,7 @@
  * (5) choose the detector azimuth's axis position of every point (φ, φ ± 360 within limits) by dynamic
  * programming over the order with the real, collision-safe move times; keep the cheapest of the candidate
  * orders, the request (raster) order included, so the plan is never slower than the raster.
+ * Steps (1)–(3) are in plan_classify.c, the path within one group in plan_order.c (shared: plan_int.h).
  *
  * The lower bound: every point dwells the same fixed time, so dwell is a constant; the moves form a
  * Hamiltonian path over the measured points, which is a spanning tree, so their total is at least the
@@ -24,279 +25,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "daemon/plan/plan.h"
-
-#define DEG (M_PI / 180.0)
-#define MAX_REPS 4
-
-struct mpt {              /* a measured point */
-	size_t req;
-	struct plan_pos pos;  /* det_phi normalised to [0, 360) */
-	double reps[MAX_REPS];
-	int nreps;
-};
-
-struct group {
-	double theta;
-	size_t *idx;          /* indices into the measured array */
-	size_t n;
-	double *C;            /* (n) × (n) symmetric cost of moves (min over azimuth choices) */
-};
-
-struct planner {
-	const struct bench_geom *g;
-	struct mpt *m;
-	size_t nm;
-	struct group *grp;
-	size_t ngrp;
-	double dwell;
-};
-
-static double norm360(double x)
-{
-	double r = fmod(x, 360.0);
-	if (r < 0)
-		r += 360.0;
-	if (r >= 360.0)
-		r = 0;
-	return r;
-}
-
-static int phi_reps(const struct bench_geom *g, double phi, double out[MAX_REPS])
-{
-	int n = 0;
-	for (int k = -3; k <= 3 && n < MAX_REPS; k++) {
-		double x = phi + 360.0 * k;
-		if (x >= g->detector_phi.min_deg - 1e-9 && x <= g->detector_phi.max_deg + 1e-9)
-			out[n++] = fmin(fmax(x, g->detector_phi.min_deg), g->detector_phi.max_deg);
-	}
-	return n;
-}
-
-static void dir_of(double theta, double phi, double v[3])
-{
-	v[0] = sin(theta * DEG) * cos(phi * DEG);
-	v[1] = sin(theta * DEG) * sin(phi * DEG);
-	v[2] = cos(theta * DEG);
-}
-
-static void dir_to_angles(const double v[3], double *theta, double *phi, double phi_hint)
-{
-	double r = sqrt(v[0] * v[0] + v[1] * v[1]);
-	*theta = atan2(r, v[2]) / DEG;
-	*phi = r < 1e-12 ? phi_hint : norm360(atan2(v[1], v[0]) / DEG);
-}
-
-/* Canonical form: θD ≥ 0, φD in [0, 360). A negative zenith is the other side. */
-static struct plan_pos canon(struct plan_pos p)
-{
-	if (p.det_theta < 0) {
-		p.det_theta = -p.det_theta;
-		p.det_phi += 180.0;
-	}
-	p.det_phi = norm360(p.det_phi);
-	return p;
-}
-
-/* Blind reasons of a canonical point, trying each equivalent azimuth for the limits. */
-static unsigned classify(const struct bench_geom *g, const struct plan_pos *p)
-{
-	double reps[MAX_REPS];
-	int n = phi_reps(g, p->det_phi, reps);
-	struct plan_pos q = *p;
-	if (n == 0)
-		return plan_blind(g, &q) | PLAN_R_LIMITS;
-	q.det_phi = reps[0];
-	return plan_blind(g, &q);
-}
-
-static double gc_deg(const double a[3], const double b[3])
-{
-	double c[3] = { a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0] };
-	return atan2(sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]), a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / DEG;
-}
-
-/* Nearest visible observation direction at the same incidence: the blind zones are caps around ωi, so the
- * nearest point outside them lies on the great circle from ωi through ωo just past the largest active
- * half-angle; when that point breaks a limit, candidates on circles around ωi and along the limit
- * zeniths are tried and the nearest visible one wins. Returns false when none is within 30°. */
-static bool move_point(const struct bench_geom *g, const struct plan_pos *p, struct plan_pos *out, double *dist)
-{
-	double m = g->safety_margin_deg, thr = g->laser_body_halfwidth_deg + g->detector_body_halfwidth_deg + m;
-	if (g->detector_radius_mm < g->laser_radius_mm)
-		thr = fmax(thr, g->detector_body_halfwidth_deg + g->beam_halfwidth_deg + m);
-	if (g->laser_radius_mm < g->detector_radius_mm)
-		thr = fmax(thr, g->laser_body_halfwidth_deg + g->fov_halfwidth_deg + m);
-	double wi[3], wo[3];
-	dir_of(p->laser_theta, g->laser_phi_deg, wi);
-	dir_of(p->det_theta, p->det_phi, wo);
-	/* tangent basis at ωi */
-	double ref[3] = { 0, 0, 1 };
-	if (fabs(wi[2]) > 0.9) {
-		ref[0] = 1;
-		ref[2] = 0;
-	}
-	double e1[3] = { wi[1] * ref[2] - wi[2] * ref[1], wi[2] * ref[0] - wi[0] * ref[2], wi[0] * ref[1] - wi[1] * ref[0] };
-	double l = sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]);
-	for (int i = 0; i < 3; i++)
-		e1[i] /= l;
-	double e2[3] = { wi[1] * e1[2] - wi[2] * e1[1], wi[2] * e1[0] - wi[0] * e1[2], wi[0] * e1[1] - wi[1] * e1[0] };
-	/* the azimuth of ωo around ωi */
-	double u = wo[0] * e1[0] + wo[1] * e1[1] + wo[2] * e1[2], w = wo[0] * e2[0] + wo[1] * e2[1] + wo[2] * e2[2];
-	double a0 = (fabs(u) + fabs(w) > 1e-12) ? atan2(w, u) : 0;
-	bool found = false;
-	double best = 1e9;
-	struct plan_pos bp = *p;
-	const struct bench_axis *dt = &g->detector_theta;
-	for (int ring = 0; ring < 40; ring++) {
-		double rho = (thr + 2 * PLAN_EDGE_DEG + ring * 0.5) * DEG;
-		if (rho / DEG - thr > 30.0)
-			break;
-		for (int k = 0; k < 720; k++) {
-			double a = a0 + (k % 2 ? -1 : 1) * ((k + 1) / 2) * (M_PI / 360.0);
-			double v[3];
-			for (int i = 0; i < 3; i++)
-				v[i] = cos(rho) * wi[i] + sin(rho) * (cos(a) * e1[i] + sin(a) * e2[i]);
-			struct plan_pos q = { p->laser_theta, 0, 0 };
-			dir_to_angles(v, &q.det_theta, &q.det_phi, p->det_phi);
-			double d = gc_deg(v, wo);
-			if (d < best && !classify(g, &q)) {
-				best = d;
-				bp = q;
-				found = true;
-			}
-		}
-		/* points beyond the first ring are only needed when limits cut the cap's rim */
-		if (found && best < rho / DEG + 1e-9)
-			break;
-	}
-	/* along the limit zeniths (the cap rim may lie beyond them) */
-	double zl[2] = { fmax(dt->min_deg, 0), fmin(dt->max_deg, 90) };
-	for (int j = 0; j < 2; j++) {
-		for (int k = 0; k < 3600; k++) {
-			struct plan_pos q = { p->laser_theta, zl[j], k * 0.1 };
-			double v[3];
-			dir_of(q.det_theta, q.det_phi, v);
-			double d = gc_deg(v, wo);
-			if (d < best && !classify(g, &q)) {
-				best = d;
-				bp = q;
-				found = true;
-			}
-		}
-	}
-	if (!found || best > 30.0)
-		return false;
-	*out = canon(bp);
-	*dist = best;
-	return true;
-}
-
-/* ---- expansion, duplicates, classification --------------------------------------------------------- */
-
-static int expand(const struct plan_spec *s, struct plan_req **out, size_t *n, struct acq_err *err)
-{
-	size_t per = s->fib_count ? s->fib_count : s->n_obs_theta * s->n_obs_phi;
-	size_t total = per * s->n_incidence;
-	struct plan_req *r = calloc(total + s->reciprocal_pairs + 1, sizeof *r);
-	if (!r)
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory for %zu points", total);
-	size_t k = 0;
-	const double golden = 180.0 * (3.0 - sqrt(5.0)); /* degrees */
-	for (size_t i = 0; i < s->n_incidence; i++) {
-		if (s->fib_count) {
-			double cmax = cos(s->fib_max_theta_deg * DEG);
-			for (size_t j = 0; j < s->fib_count; j++) {
-				double c = 1.0 - (1.0 - cmax) * ((double)j + 0.5) / (double)s->fib_count;
-				r[k].req = (struct plan_pos){ s->incidence[i], acos(c) / DEG, norm360(golden * (double)j) };
-				k++;
-			}
-		} else {
-			for (size_t a = 0; a < s->n_obs_theta; a++)
-				for (size_t b = 0; b < s->n_obs_phi; b++) {
-					r[k].req = (struct plan_pos){ s->incidence[i], s->obs_theta[a], s->obs_phi[b] };
-					k++;
-				}
-		}
-	}
-	*out = r;
-	*n = k;
-	return 0;
-}
-
-struct dkey {
-	int64_t q[4];
-	size_t i;
-};
-
-static int cmp_dkey(const void *x, const void *y)
-{
-	const struct dkey *a = x, *b = y;
-	for (int i = 0; i < 4; i++)
-		if (a->q[i] != b->q[i])
-			return a->q[i] < b->q[i] ? -1 : 1;
-	return (a->i > b->i) - (a->i < b->i);
-}
-
-/* Mark later requests of an already requested configuration (same θL, same ωo to ~1e-7) duplicates.
- * measured: compare where points are measured (pos) among kept and moved ones, else as requested. */
-static int mark_duplicates(struct plan_req *r, size_t n, bool measured, struct acq_err *err)
-{
-	struct dkey *k = malloc((n ? n : 1) * sizeof *k);
-	if (!k)
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	size_t m = 0;
-	for (size_t i = 0; i < n; i++) {
-		if (measured && r[i].status != PLAN_KEPT && r[i].status != PLAN_MOVED)
-			continue;
-		const struct plan_pos *p = measured ? &r[i].pos : &r[i].req;
-		double v[3];
-		dir_of(p->det_theta, p->det_phi, v);
-		k[m].q[0] = llround(p->laser_theta * 1e7);
-		for (int j = 0; j < 3; j++)
-			k[m].q[j + 1] = llround(v[j] * 1e7);
-		k[m].i = i;
-		m++;
-	}
-	qsort(k, m, sizeof *k, cmp_dkey);
-	for (size_t i = 1; i < m; i++) {
-		if (!memcmp(k[i].q, k[i - 1].q, sizeof k[i].q)) {
-			size_t first = k[i - 1].i;
-			if (r[first].status == PLAN_DUPLICATE)
-				first = r[first].same_as;
-			r[k[i].i].status = PLAN_DUPLICATE;
-			r[k[i].i].same_as = first;
-		}
-	}
-	free(k);
-	return 0;
-}
-
-static void classify_req(const struct bench_geom *g, struct plan_req *r, enum plan_blind_policy policy)
-{
-	r->pos = canon(r->req);
-	r->reason = classify(g, &r->pos);
-	r->moved_deg = 0;
-	if (!r->reason) {
-		r->status = PLAN_KEPT;
-	} else if (policy == PLAN_BLIND_MOVE && r->role == PLAN_ROLE_GRID &&
-		   g->laser_theta.min_deg - 1e-9 <= r->pos.laser_theta &&
-		   r->pos.laser_theta <= g->laser_theta.max_deg + 1e-9) {
-		struct plan_pos q;
-		double d;
-		if (move_point(g, &r->pos, &q, &d)) {
-			r->status = PLAN_MOVED;
-			r->pos = q;
-			r->moved_deg = d;
-		} else {
-			r->status = PLAN_DROPPED;
-			r->reason |= PLAN_R_NO_NEARBY;
-		}
-	} else {
-		r->status = PLAN_DROPPED;
-	}
-	r->psi_deg = plan_psi_deg(g, &r->pos);
-}
+#include "daemon/plan/plan_int.h"
+#define NCAND 5 /* candidate orders */
 
 /* ---- ordering ---------------------------------------------------------------------------------------- */
 
@@ -347,226 +77,6 @@ static double mcost(const struct planner *P, const struct mpt *a, const struct m
 			best = t;
 	}
 	return best;
-}
-
-#define INF_COST 1e12
-#define OR_K 10
-#define NCAND 5 /* candidate orders */
-
-static double pcost(const double *C, size_t n, size_t a, size_t b)
-{
-	return C[a * n + b];
-}
-
-#define E(i, j) ((i) == SIZE_MAX ? s[(j)] : pcost(C, n, (i), (j)))
-/* 2-opt and Or-opt until no move improves (or 200 passes). */
-static void local_search(const double *C, size_t n, const double *s, size_t *p, size_t *tmp, size_t *pos,
-			 const size_t *nbr, size_t kn)
-{
-	bool improved = true;
-	for (int pass = 0; improved && pass < 200; pass++) {
-		improved = false;
-		/* 2-opt: reverse p[i..j]; the edge into p[i] comes from p[i-1] (or the start), the edge out of
-		 * p[j] goes to p[j+1] (or nothing at the end of the open path). */
-		for (size_t i = 0; i + 1 < n; i++) {
-			size_t a = i ? p[i - 1] : SIZE_MAX;
-			for (size_t j = i + 1; j < n; j++) {
-				double before = E(a, p[i]) + (j + 1 < n ? pcost(C, n, p[j], p[j + 1]) : 0);
-				double after = E(a, p[j]) + (j + 1 < n ? pcost(C, n, p[i], p[j + 1]) : 0);
-				if (after < before - 1e-9) {
-					for (size_t x = i, y = j; x < y; x++, y--) {
-						size_t t = p[x];
-						p[x] = p[y];
-						p[y] = t;
-					}
-					improved = true;
-					a = i ? p[i - 1] : SIZE_MAX;
-				}
-			}
-		}
-		/* Or-opt: move p[i..i+L) elsewhere, possibly reversed. Insertion places are tried next to the
-		 * K nearest neighbours of the segment's ends (and at both ends of the path): O(n·K) per pass. */
-		for (size_t x = 0; x < n; x++)
-			pos[p[x]] = x;
-		for (size_t L = 1; L <= 3 && L < n; L++) {
-			for (size_t i = 0; i + L <= n; i++) {
-				size_t a = i ? p[i - 1] : SIZE_MAX, f = p[i], l = p[i + L - 1];
-				bool has_next = i + L < n;
-				size_t nx = has_next ? p[i + L] : 0;
-				size_t nr = n - L;
-				double removed = E(a, f) + (has_next ? pcost(C, n, l, nx) : 0) -
-						 (has_next ? E(a, nx) : 0);
-#define REST(k) (p[(k) < i ? (k) : (k) + L])
-				size_t cand[4 * OR_K + 2], ncand = 0;
-				cand[ncand++] = 0;
-				cand[ncand++] = nr;
-				for (int e = 0; e < 2; e++) {
-					const size_t *nb = &nbr[(e ? l : f) * kn];
-					for (size_t q = 0; q < kn; q++) {
-						size_t pj = pos[nb[q]];
-						if (pj >= i && pj < i + L)
-							continue;
-						size_t r = pj < i ? pj : pj - L;
-						cand[ncand++] = r;
-						cand[ncand++] = r + 1;
-					}
-				}
-				double bestg = 1e-9;
-				size_t bk = SIZE_MAX;
-				bool brev = false;
-				for (size_t ci = 0; ci < ncand; ci++) {
-					size_t k = cand[ci];
-					if (k == i || k > nr)
-						continue; /* the same place */
-					size_t pa = k ? REST(k - 1) : SIZE_MAX;
-					for (int rev = 0; rev < 2; rev++) {
-						size_t s1 = rev ? l : f, s2 = rev ? f : l;
-						double add = E(pa, s1) + (k < nr ? pcost(C, n, s2, REST(k)) : 0) -
-							     (k < nr ? E(pa, REST(k)) : 0);
-						double gain = removed - add;
-						if (gain > bestg) {
-							bestg = gain;
-							bk = k;
-							brev = rev;
-						}
-					}
-				}
-#undef REST
-				if (bk == SIZE_MAX)
-					continue;
-				size_t seg[3];
-				for (size_t x = 0; x < L; x++)
-					seg[x] = p[i + (brev ? L - 1 - x : x)];
-				size_t w = 0;
-				for (size_t x = 0; x < n; x++)
-					if (x < i || x >= i + L)
-						tmp[w++] = p[x];
-				w = 0;
-				for (size_t x = 0; x < bk; x++)
-					p[w++] = tmp[x];
-				for (size_t x = 0; x < L; x++)
-					p[w++] = seg[x];
-				for (size_t x = bk; x < nr; x++)
-					p[w++] = tmp[x];
-				for (size_t x = 0; x < n; x++)
-					pos[p[x]] = x;
-				improved = true;
-			}
-		}
-	}
-}
-
-static double open_len(const double *C, size_t n, const double *s, const size_t *p)
-{
-	double t = s[p[0]];
-	for (size_t i = 1; i < n; i++)
-		t += pcost(C, n, p[i - 1], p[i]);
-	return t;
-}
-#undef E
-
-/* Nearest neighbour from the start row, then 2-opt and Or-opt (segments of 1–3, either orientation) until
- * no move improves. C is symmetric; the start row s is not part of it. */
-static void order_group(const double *C, size_t n, const double *s, size_t *p, bool ils)
-{
-	if (n == 0)
-		return;
-	char *used = calloc(n, 1);
-	size_t cur = 0;
-	for (size_t i = 0; i < n; i++) {
-		size_t bi = 0;
-		double bc = INFINITY;
-		for (size_t j = 0; j < n; j++) {
-			if (used && used[j])
-				continue;
-			double c = i == 0 ? s[j] : pcost(C, n, cur, j);
-			if (c < bc) {
-				bc = c;
-				bi = j;
-			}
-		}
-		if (!used) { /* out of memory: identity order */
-			p[i] = i;
-			continue;
-		}
-		used[bi] = 1;
-		p[i] = bi;
-		cur = bi;
-	}
-	free(used);
-	size_t kn = n - 1 < OR_K ? n - 1 : OR_K;
-	size_t *tmp = malloc(n * sizeof *tmp), *pos = malloc(n * sizeof *pos);
-	size_t *nbr = malloc((n * kn + 1) * sizeof *nbr);
-	if (!tmp || !pos || !nbr) {
-		free(tmp);
-		free(pos);
-		free(nbr);
-		return;
-	}
-	/* the kn nearest neighbours of every node, by insertion into a short sorted list */
-	for (size_t u = 0; u < n; u++) {
-		size_t *nb = &nbr[u * kn], m = 0;
-		for (size_t v = 0; v < n; v++) {
-			if (v == u)
-				continue;
-			double c = pcost(C, n, u, v);
-			if (m == kn && c >= pcost(C, n, u, nb[m - 1]))
-				continue;
-			size_t k = m < kn ? m++ : kn - 1;
-			while (k > 0 && pcost(C, n, u, nb[k - 1]) > c) {
-				nb[k] = nb[k - 1];
-				k--;
-			}
-			nb[k] = v;
-		}
-	}
-	local_search(C, n, s, p, tmp, pos, nbr, kn);
-	/* Iterated local search: a double-bridge kick (three cut points, segments B and C swapped), local
-	 * search again, keep it if shorter. The random generator is local and seeded by n: deterministic. */
-	size_t *q = malloc(n * sizeof *q);
-	if (q && ils && n >= 8) {
-		double best = open_len(C, n, s, p);
-		uint64_t rng = 0x9E3779B97F4A7C15ull ^ (uint64_t)n;
-		int kicks = n <= 300 ? 60 : n <= 1000 ? 15 : 4;
-		for (int k = 0; k < kicks; k++) {
-			size_t cut[3];
-			for (int c = 0; c < 3; c++) {
-				rng ^= rng << 13;
-				rng ^= rng >> 7;
-				rng ^= rng << 17;
-				cut[c] = 1 + (size_t)(rng % (n - 1));
-			}
-			/* sort the cuts */
-			for (int a = 0; a < 3; a++)
-				for (int b = a + 1; b < 3; b++)
-					if (cut[b] < cut[a]) {
-						size_t t = cut[a];
-						cut[a] = cut[b];
-						cut[b] = t;
-					}
-			if (cut[0] == cut[1] || cut[1] == cut[2])
-				continue;
-			size_t w = 0;
-			for (size_t x = 0; x < cut[0]; x++)
-				q[w++] = p[x];
-			for (size_t x = cut[1]; x < cut[2]; x++)
-				q[w++] = p[x];
-			for (size_t x = cut[0]; x < cut[1]; x++)
-				q[w++] = p[x];
-			for (size_t x = cut[2]; x < n; x++)
-				q[w++] = p[x];
-			local_search(C, n, s, q, tmp, pos, nbr, kn);
-			double len = open_len(C, n, s, q);
-			if (len < best - 1e-9) {
-				best = len;
-				memcpy(p, q, n * sizeof *p);
-			}
-		}
-	}
-	free(q);
-	free(tmp);
-	free(pos);
-	free(nbr);
 }
 
 static int cmp_double(const void *x, const void *y)
@@ -621,6 +131,21 @@ static int build_groups(struct planner *P, struct acq_err *err)
 	return 0;
 }
 
+/* The arms' start position as a measured point (its azimuth as it is on the axis). */
+static struct mpt start_mpt(const struct planner *P)
+{
+	struct mpt s = { .req = SIZE_MAX, .pos = P->start, .nreps = 1 };
+	s.reps[0] = P->start.det_phi;
+	return s;
+}
+
+/* Fastest safe move from the start position to b (-1: none). */
+static double start_cost(const struct planner *P, const struct mpt *b)
+{
+	struct mpt s = start_mpt(P);
+	return mcost(P, &s, b);
+}
+
 /* An order over all measured points: groups in the given direction, each ordered from the previous end. */
 static int order_all(struct planner *P, bool descending, bool ils, size_t *order, struct acq_err *err)
 {
@@ -635,10 +160,11 @@ static int order_all(struct planner *P, bool descending, bool ils, size_t *order
 			return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 		}
 		for (size_t j = 0; j < G->n; j++) {
-			double c = last == SIZE_MAX ? 0 : mcost(P, &P->m[last], &P->m[G->idx[j]]);
+			double c = last == SIZE_MAX ? (P->have_start ? start_cost(P, &P->m[G->idx[j]]) : 0)
+						    : mcost(P, &P->m[last], &P->m[G->idx[j]]);
 			s[j] = c < 0 ? INF_COST : c;
 		}
-		order_group(G->C, G->n, s, p, ils);
+		plan_order_group(G->C, G->n, s, p, ils);
 		for (size_t j = 0; j < G->n; j++)
 			order[w++] = G->idx[p[j]];
 		last = G->idx[p[G->n - 1]];
@@ -671,7 +197,15 @@ static double choose_reps(const struct planner *P, const size_t *order, size_t n
 			dp[i * MAX_REPS + j] = INFINITY;
 			bp[i * MAX_REPS + j] = -1;
 			if (prev == SIZE_MAX) {
-				dp[i * MAX_REPS + j] = 0;
+				double t0 = 0;
+				if (P->have_start) {
+					struct plan_pos pb = b->pos;
+					pb.det_phi = b->reps[j];
+					t0 = plan_move(P->g, &P->start, &pb, wps, &nw);
+					if (t0 < 0)
+						continue;
+				}
+				dp[i * MAX_REPS + j] = t0;
 				any = true;
 				continue;
 			}
@@ -833,60 +367,24 @@ static void free_planner(struct planner *P)
 	free(P->m);
 }
 
-static int add_reciprocals(const struct plan_spec *s, const struct bench_geom *g, struct plan_req *r, size_t *n)
-{
-	size_t ngrid = *n, nvis = 0;
-	for (size_t i = 0; i < ngrid; i++)
-		nvis += r[i].status == PLAN_KEPT;
-	size_t want = s->reciprocal_pairs < nvis ? s->reciprocal_pairs : nvis;
-	size_t seen = 0, k = 0;
-	for (size_t i = 0; i < ngrid && k < want; i++) {
-		if (r[i].status != PLAN_KEPT)
-			continue;
-		/* evenly spread: take visible point number floor(j·nvis/want) */
-		if (seen++ != (k * nvis) / want)
-			continue;
-		struct plan_req *q = &r[*n];
-		memset(q, 0, sizeof *q);
-		/* swap ωi and ωo, rotated about the normal so the laser stays at its azimuth (isotropic sample):
-		 * the relative azimuth φo − φi changes sign */
-		double rel = r[i].pos.det_phi - g->laser_phi_deg;
-		q->req = (struct plan_pos){ r[i].pos.det_theta, r[i].pos.laser_theta, g->laser_phi_deg - rel };
-		if (q->req.det_theta < 0) {
-			q->req.det_theta = -q->req.det_theta;
-			q->req.det_phi += 180.0;
-		}
-		q->req.det_phi = norm360(q->req.det_phi);
-		q->role = PLAN_ROLE_RECIPROCAL;
-		q->partner = i;
-		(*n)++;
-		k++;
-	}
-	return 0;
-}
 
-int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan_result **out, struct acq_err *err)
+static int make_order(const struct plan_spec *s, const struct bench_geom *g, const struct plan_pos *start,
+		      struct plan_result *R, struct acq_err *err);
+
+/* The spec's requests expanded, de-duplicated and classified into R->req. 0 or -1 with err. */
+static int make_requests(const struct plan_spec *s, const struct bench_geom *g, struct plan_result *R,
+			 struct acq_err *err)
 {
-	*out = NULL;
-	struct planner P = { .g = g };
-	struct plan_result *R = calloc(1, sizeof *R);
-	size_t *order[NCAND] = { NULL };
-	int *rep[NCAND] = { NULL };
-	char *keep[NCAND] = { NULL };
-	if (!R)
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	if (s->averages < 1 || !(s->integ_ms > 0) || (!s->fib_count && (!s->n_obs_theta || !s->n_obs_phi)) ||
 	    !s->n_incidence) {
-		acq_errf(err, ACQ_E_INVAL, "plan '%s': empty or invalid plan", s->name);
-		goto fail;
+		return acq_errf(err, ACQ_E_INVAL, "plan '%s': empty or invalid plan", s->name);
 	}
 	{
 		/* a spec built by code gets the checks a file gets */
 		size_t per = s->fib_count ? s->fib_count : s->n_obs_theta * s->n_obs_phi;
 		if (per > PLAN_MAX_PER_INCIDENCE || (double)per * (double)s->n_incidence > PLAN_MAX_POINTS) {
-			acq_errf(err, ACQ_E_RANGE, "plan '%s': too many points (%zu per incidence, max %d; %d in all)",
-				 s->name, per, PLAN_MAX_PER_INCIDENCE, PLAN_MAX_POINTS);
-			goto fail;
+			return acq_errf(err, ACQ_E_RANGE, "plan '%s': too many points (%zu per incidence, max %d; %d in all)",
+					s->name, per, PLAN_MAX_PER_INCIDENCE, PLAN_MAX_POINTS);
 		}
 		bool finite = true;
 		for (size_t i = 0; i < s->n_incidence; i++)
@@ -896,32 +394,90 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		for (size_t i = 0; !s->fib_count && i < s->n_obs_phi; i++)
 			finite &= isfinite(s->obs_phi[i]);
 		if (!finite || (s->fib_count && !(s->fib_max_theta_deg > 0 && s->fib_max_theta_deg <= 90))) {
-			acq_errf(err, ACQ_E_INVAL, "plan '%s': non-finite or out-of-range angle", s->name);
-			goto fail;
+			return acq_errf(err, ACQ_E_INVAL, "plan '%s': non-finite or out-of-range angle", s->name);
 		}
 	}
-	if (expand(s, &R->req, &R->n_req, err))
-		goto fail;
+	if (plan_expand(s, &R->req, &R->n_req, err))
+		return -1;
 	for (size_t i = 0; i < R->n_req; i++)
 		R->req[i].status = PLAN_KEPT;
-	if (mark_duplicates(R->req, R->n_req, false, err))
-		goto fail;
+	if (plan_mark_duplicates(R->req, R->n_req, false, err))
+		return -1;
 	for (size_t i = 0; i < R->n_req; i++)
 		if (R->req[i].status != PLAN_DUPLICATE)
-			classify_req(g, &R->req[i], s->blind_policy);
+			plan_classify_req(g, &R->req[i], s->blind_policy);
 		else {
-			R->req[i].pos = canon(R->req[i].req);
+			R->req[i].pos = plan_canon(R->req[i].req);
 			R->req[i].psi_deg = plan_psi_deg(g, &R->req[i].pos);
 		}
 	if (s->reciprocal_pairs) {
 		size_t n0 = R->n_req;
-		add_reciprocals(s, g, R->req, &R->n_req);
+		plan_add_reciprocals(s, g, R->req, &R->n_req);
 		for (size_t i = n0; i < R->n_req; i++)
-			classify_req(g, &R->req[i], PLAN_BLIND_DROP);
+			plan_classify_req(g, &R->req[i], PLAN_BLIND_DROP);
 	}
 	/* a moved point may land on another point, a reciprocal partner may be a grid point: measure once */
-	if (mark_duplicates(R->req, R->n_req, true, err))
+	return plan_mark_duplicates(R->req, R->n_req, true, err);
+}
+
+int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan_result **out, struct acq_err *err)
+{
+	*out = NULL;
+	struct plan_result *R = calloc(1, sizeof *R);
+	if (!R)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	if (make_requests(s, g, R, err) || make_order(s, g, NULL, R, err)) {
+		plan_result_free(R);
+		return -1;
+	}
+	*out = R;
+	return 0;
+}
+
+int plan_make_points(const struct plan_spec *s, const struct bench_geom *g, const struct plan_pos *pts, size_t n,
+		     const struct plan_pos *start, struct plan_result **out, struct acq_err *err)
+{
+	*out = NULL;
+	if (n > PLAN_MAX_POINTS)
+		return acq_errf(err, ACQ_E_RANGE, "plan '%s': %zu points is more than %d", s->name, n, PLAN_MAX_POINTS);
+	struct plan_result *R = calloc(1, sizeof *R);
+	if (!R || !(R->req = calloc(n ? n : 1, sizeof *R->req))) {
+		free(R);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	R->n_req = n;
+	for (size_t i = 0; i < n; i++) {
+		if (!isfinite(pts[i].laser_theta) || !isfinite(pts[i].det_theta) || !isfinite(pts[i].det_phi)) {
+			plan_result_free(R);
+			return acq_errf(err, ACQ_E_INVAL, "plan '%s': point %zu: non-finite angle", s->name, i);
+		}
+		R->req[i].req = pts[i];
+		R->req[i].status = PLAN_KEPT;
+	}
+	if (plan_mark_duplicates(R->req, n, false, err))
 		goto fail;
+	for (size_t i = 0; i < n; i++)
+		if (R->req[i].status != PLAN_DUPLICATE)
+			plan_classify_req(g, &R->req[i], PLAN_BLIND_DROP);
+	if (make_order(s, g, start, R, err))
+		goto fail;
+	*out = R;
+	return 0;
+fail:
+	plan_result_free(R);
+	return -1;
+}
+
+/* Order R's measured requests into steps with safe moves (from start when given), time them. 0 or -1. */
+static int make_order(const struct plan_spec *s, const struct bench_geom *g, const struct plan_pos *start,
+		      struct plan_result *R, struct acq_err *err)
+{
+	struct planner P = { .g = g, .have_start = start != NULL };
+	if (start)
+		P.start = *start;
+	size_t *order[NCAND] = { NULL };
+	int *rep[NCAND] = { NULL };
+	char *keep[NCAND] = { NULL };
 	R->point_dwell_s = (double)s->averages * (s->integ_ms / 1000.0 + g->readout_s);
 	P.dwell = R->point_dwell_s;
 
@@ -938,7 +494,7 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		struct mpt *m = &P.m[P.nm];
 		m->req = i;
 		m->pos = q->pos;
-		m->nreps = phi_reps(g, q->pos.det_phi, m->reps);
+		m->nreps = plan_phi_reps(g, q->pos.det_phi, m->reps);
 		if (m->nreps == 0) { /* cannot happen: classify checked the limits */
 			q->status = PLAN_DROPPED;
 			q->reason |= PLAN_R_LIMITS;
@@ -997,7 +553,7 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		goto fail;
 	}
 	double clock = 0;
-	struct plan_pos cur = { 0, 0, 0 };
+	struct plan_pos cur = P.have_start ? P.start : (struct plan_pos){ 0, 0, 0 };
 	for (size_t i = 0; i < P.nm; i++) {
 		const struct mpt *m = &P.m[order[bi][i]];
 		if (!keep[bi][i]) {
@@ -1010,7 +566,7 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 		st->pos = m->pos;
 		st->pos.det_phi = m->reps[rep[bi][i]];
 		st->first_wp = R->n_wps;
-		if (R->n_steps > 0) {
+		if (R->n_steps > 0 || P.have_start) {
 			size_t nw = 0;
 			double t = plan_move(g, &cur, &st->pos, &R->wps[R->n_wps], &nw);
 			if (t < 0) { /* the DP proved this move exists */
@@ -1070,7 +626,6 @@ int plan_make(const struct plan_spec *s, const struct bench_geom *g, struct plan
 	struct plan_timing tm;
 	plan_timing_defaults(&tm);
 	plan_time_apply(s, g, &tm, R);
-	*out = R;
 	return 0;
 fail:
 	for (int c = 0; c < NCAND; c++) {
@@ -1079,6 +634,5 @@ fail:
 		free(keep[c]);
 	}
 	free_planner(&P);
-	plan_result_free(R);
 	return -1;
 }

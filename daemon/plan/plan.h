@@ -33,6 +33,30 @@ enum plan_integ_mode { PLAN_INTEG_AUTO, PLAN_INTEG_FIXED };
 #define PLAN_MAX_POINTS 50000
 #define PLAN_MAX_PER_INCIDENCE 5000
 
+/* What an adaptive sweep aims at (plan_adaptive.c): `brdf-recon select --target` and the stop rule. */
+enum plan_target_kind {
+	PLAN_TARGET_DHR_SIGMA, /* σ of the DHR at the listed incidences ≤ le */
+	PLAN_TARGET_LNF_SIGMA  /* largest posterior σ of ln f over the hemisphere pair ≤ le */
+};
+#define PLAN_MAX_TARGET_INC 8
+
+/* The adaptive part of a plan (kind: adaptive): the seed is the plan_spec that holds it; after the seed, batches
+ * chosen by `brdf-recon select` among candidate directions until the target or the budget is reached. */
+struct plan_adaptive {
+	enum plan_target_kind target;
+	double target_inc[PLAN_MAX_TARGET_INC]; /* DHR σ: incidences, degrees */
+	size_t n_target_inc;
+	double le;                  /* the threshold the target's value must reach */
+	double budget_s;            /* bench seconds for the whole sweep, seed included (0: no limit) */
+	size_t budget_points;       /* points for the whole sweep, seed included (0: no limit) */
+	size_t batch;               /* points per batch */
+	double *cand_inc;           /* candidate incidences θL, degrees */
+	size_t n_cand_inc;
+	size_t cand_count;          /* candidate observation directions per incidence (Fibonacci set) */
+	double cand_max_theta_deg;  /* ... over the cap θ ≤ this */
+	bool overlap;               /* choose batch k+2 (from the model through batch k) while batch k+1 is measured */
+};
+
 /* A parsed plan file (plan_load / plan_parse), or one built by code (arrays malloc'ed; plan_spec_free). */
 struct plan_spec {
 	char name[64];
@@ -49,6 +73,7 @@ struct plan_spec {
 	int averages;
 	size_t reciprocal_pairs;    /* number of reciprocal partners to add (0: none) */
 	enum plan_blind_policy blind_policy;
+	struct plan_adaptive *adaptive; /* kind: adaptive (the fields above are then its seed plan's); else NULL */
 };
 
 /* One bench configuration: axis positions in degrees. */
@@ -157,6 +182,11 @@ void plan_spec_free(struct plan_spec *spec);
 /* Plan spec against bench g: classify, order, build safe moves, estimate. 0, or -1 with err. */
 int plan_make(const struct plan_spec *spec, const struct bench_geom *g, struct plan_result **out,
 	      struct acq_err *err);
+/* Plan the given points (requested bench positions) with spec's integration and averages against g: blind ones
+ * dropped (never moved), duplicates merged, ordered by incidence groups as plan_make does, the first move from
+ * start when given (else the sweep starts at the first point). 0, or -1 with err. */
+int plan_make_points(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_pos *pts, size_t n,
+		     const struct plan_pos *start, struct plan_result **out, struct acq_err *err);
 /* Straight-move time plus the settling of the axes that move: a lower bound of any move between a and b. */
 double plan_straight_s(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b);
 /* A pose [laser_theta, detector_theta, detector_phi] from a YAML sequence (what names it in messages). 0 or -1. */
@@ -174,6 +204,44 @@ struct json_t;
  * raster_s, lower_bound_s, motion summary, dropped and moved points, and with steps the sweep order with
  * waypoints. NULL when out of memory. */
 struct json_t *plan_to_json(const struct plan_spec *spec, const struct plan_result *res, bool steps);
+
+/* The dry run of spec planned into r against g for an executor timed by t: plan_time_apply, then plan_to_json,
+ * with, for an adaptive plan, "kind": "adaptive" and "adaptive": {target, threshold, batch, budget_s,
+ * budget_points, candidate counts, worst_case_s, worst_case_points} (the result r is its seed plan). */
+struct json_t *plan_dry_run_json(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
+				 struct plan_result *r, bool points);
+
+/* ---- adaptive plans (plan_adaptive.c) */
+
+/* One candidate measurement of an adaptive batch: reachable from the arms' position, visible, not measured yet. */
+struct plan_cand {
+	size_t id;                  /* its place among the spec's candidates (plan_adaptive_cand_pos) */
+	struct plan_pos pos;        /* bench position (det_phi the axis position reached fastest) */
+	double cost_s;              /* bench seconds to measure it from the arms' position: the safe move, its
+				     * settling and polling, darks when the incidence changes, probe, exposures, host */
+};
+/* The adaptive target as `brdf-recon select --target` takes it ("dhr:8,30,60:le=X", "lnf:le=X") into buf. */
+void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t len);
+/* The candidates of spec's adaptive part from the arms at from (timed by t): every candidate incidence ×
+ * direction that is visible, within the limits, reachable by a safe move, and not one of the n_done measured
+ * positions. A new array in *out (free()), its length in *n. 0, or -1 with err. */
+int plan_adaptive_candidates(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
+			     const struct plan_pos *from, const struct plan_pos *done, size_t n_done,
+			     struct plan_cand **out, size_t *n, struct acq_err *err);
+/* The requested (canonical) position of candidate id of spec's adaptive part. 0, or -1 when there is none. */
+int plan_adaptive_cand_pos(const struct plan_spec *spec, size_t id, struct plan_pos *out);
+/* Plan the points in the order given (no ordering, no classification: points already planned once, e.g. a stored
+ * batch), each reached by a fresh safe move from the previous one (from start when given). 0, or -1 with err
+ * (ACQ_E_RANGE: a point no safe move reaches). */
+int plan_make_fixed(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_pos *pts, size_t n,
+		    const struct plan_pos *start, struct plan_result **out, struct acq_err *err);
+/* Append b's requests, steps and waypoints to r (indices, times and predictions shifted to follow r's). 0 or -1. */
+int plan_result_append(struct plan_result *r, const struct plan_result *b, struct acq_err *err);
+/* The worst case of an adaptive plan whose seed result is seed (timed by t): the budget's bench seconds and
+ * points, each the stated limit or, when only the other is given, what it allows (points at the costliest
+ * candidate's price from the seed's last point). */
+void plan_adaptive_worst(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
+			 const struct plan_result *seed, double *worst_s, size_t *worst_points);
 
 /* ---- geometry and kinematics (also for the executor and the daemon's manual moves; the simulator keeps its
  * own implementation of the same definitions: libsim links after libdaemon, and two codes check each other) */

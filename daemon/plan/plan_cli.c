@@ -128,8 +128,7 @@ json_t *plan_cli_json(const char *plan_path, const char *bench_path, bool points
 	}
 	if (plan_load(plan_path, &spec, err) || plan_make(spec, &g, &res, err))
 		goto out;
-	plan_time_apply(spec, &g, &tm, res);
-	o = plan_to_json(spec, res, points);
+	o = plan_dry_run_json(spec, &g, &tm, res, points);
 	if (!o || json_object_set_new(o, "bench_config", json_string(bench_path))) {
 		json_decref(o);
 		o = NULL;

@@ -95,3 +95,33 @@ json_t *plan_to_json(const struct plan_spec *s, const struct plan_result *r, boo
 	return o;
 }
 
+
+json_t *plan_dry_run_json(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
+			  struct plan_result *r, bool points)
+{
+	plan_time_apply(s, g, t, r);
+	json_t *o = plan_to_json(s, r, points);
+	const struct plan_adaptive *a = s->adaptive;
+	if (!o || !a)
+		return o;
+	double worst_s = 0;
+	size_t worst_pts = 0;
+	plan_adaptive_worst(s, g, t, r, &worst_s, &worst_pts);
+	char spec[256];
+	plan_adaptive_target_spec(a, spec, sizeof spec);
+	json_t *ad = json_pack("{s:s,s:f,s:I,s:I,s:I,s:f,s:I}", "target", spec, "threshold", a->le, "batch",
+			       (json_int_t)a->batch, "candidate_incidences", (json_int_t)a->n_cand_inc,
+			       "candidates_per_incidence", (json_int_t)a->cand_count, "worst_case_s", worst_s,
+			       "worst_case_points", (json_int_t)worst_pts);
+	if (!ad) {
+		json_decref(o);
+		return NULL;
+	}
+	json_object_set_new(ad, "budget_s", a->budget_s > 0 ? json_real(a->budget_s) : json_null());
+	json_object_set_new(ad, "budget_points", a->budget_points > 0 ? json_integer((json_int_t)a->budget_points)
+								   : json_null());
+	json_object_set_new(ad, "overlap", json_boolean(a->overlap));
+	json_object_set_new(o, "kind", json_string("adaptive"));
+	json_object_set_new(o, "adaptive", ad);
+	return o;
+}

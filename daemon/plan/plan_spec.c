@@ -9,13 +9,14 @@
  *   averages: 4
  *   reciprocal_pairs: 10
  *   blind_points: drop | move
+ *   kind: grid | fibonacci | adaptive       # optional; adaptive: see plan_adaptive.c
  * RANGE is a number, a list of numbers, {from, to, count} or {from, to, step}. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "daemon/plan/plan.h"
+#include "daemon/plan/plan_int.h"
 
 #define PLAN_MAX_VALUES 100000
 
@@ -26,11 +27,13 @@ void plan_spec_free(struct plan_spec *s)
 	free(s->incidence);
 	free(s->obs_theta);
 	free(s->obs_phi);
+	if (s->adaptive)
+		free(s->adaptive->cand_inc);
+	free(s->adaptive);
 	free(s);
 }
 
-/* Parse RANGE at map[key] into a new array. */
-static int parse_range(struct yc_node *map, const char *key, const char *what, double lo, double hi, double **out,
+int plan_range_parse(struct yc_node *map, const char *key, const char *what, double lo, double hi, double **out,
 		       size_t *n, struct acq_err *err)
 {
 	struct yc_node *node = yc_get(map, key);
@@ -102,7 +105,7 @@ static int parse_range(struct yc_node *map, const char *key, const char *what, d
 	return 0;
 }
 
-static int parse_integration(struct yc_node *root, struct plan_spec *s, struct acq_err *err)
+int plan_integration_parse(struct yc_node *root, struct plan_spec *s, struct acq_err *err)
 {
 	static const char *const modes[] = { "auto", "fixed", NULL };
 	struct yc_node *n = yc_get(root, "integration");
@@ -149,7 +152,15 @@ int plan_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err
 	static const char *const policies[] = { "drop", "move", NULL };
 	/* a misspelt key is reported as such, before any "missing key" it causes */
 	static const char *const keys[] = { "name", "incidence", "observation", "integration", "averages",
-					    "reciprocal_pairs", "blind_points", NULL };
+					    "reciprocal_pairs", "blind_points", "kind", NULL };
+	static const char *const kinds[] = { "grid", "fibonacci", "adaptive", NULL };
+	int kind = -1;
+	if (yc_get(root, "kind") && yc_enum(root, "kind", false, kinds, &kind, err))
+		goto fail;
+	if (kind == 2) {
+		free(s);
+		return plan_adaptive_parse(root, out, err);
+	}
 	for (size_t i = 0; keys[i]; i++)
 		yc_get(root, keys[i]);
 	if (yc_check_unknown(root, "plan", err))
@@ -164,7 +175,7 @@ int plan_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err
 		goto fail;
 	}
 	if (yc_expect_map(inc, "incidence", err) ||
-	    parse_range(inc, "theta_deg", "incidence.theta_deg", -90, 90, &s->incidence, &s->n_incidence, err) ||
+	    plan_range_parse(inc, "theta_deg", "incidence.theta_deg", -90, 90, &s->incidence, &s->n_incidence, err) ||
 	    yc_check_unknown(inc, "incidence", err))
 		goto fail;
 
@@ -190,15 +201,20 @@ int plan_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err
 			goto fail;
 		}
 	} else {
-		if (parse_range(obs, "theta_deg", "observation.theta_deg", -90, 90, &s->obs_theta, &s->n_obs_theta,
+		if (plan_range_parse(obs, "theta_deg", "observation.theta_deg", -90, 90, &s->obs_theta, &s->n_obs_theta,
 				err) ||
-		    parse_range(obs, "phi_deg", "observation.phi_deg", -360, 720, &s->obs_phi, &s->n_obs_phi, err))
+		    plan_range_parse(obs, "phi_deg", "observation.phi_deg", -360, 720, &s->obs_phi, &s->n_obs_phi, err))
 			goto fail;
 	}
 	if (yc_check_unknown(obs, "observation", err))
 		goto fail;
+	if ((kind == 0 && fib) || (kind == 1 && !fib)) {
+		yc_errf(err, obs, "observation: kind %s needs %s", kinds[kind],
+			kind == 0 ? "'theta_deg' + 'phi_deg'" : "'fibonacci'");
+		goto fail;
+	}
 
-	if (parse_integration(root, s, err) || yc_int(root, "averages", false, 1, 100000, &averages, err) ||
+	if (plan_integration_parse(root, s, err) || yc_int(root, "averages", false, 1, 100000, &averages, err) ||
 	    yc_int(root, "reciprocal_pairs", false, 0, PLAN_MAX_VALUES, &recip, err) ||
 	    yc_enum(root, "blind_points", false, policies, &policy, err))
 		goto fail;

@@ -297,6 +297,23 @@ def progress(bench):
     return r
 
 
+def swap_when_asked(bench, row, sample):
+    """When the sweep (its sweep.show row) is paused for the sample swap after the white reference, put the sample
+    (a simulator material) on the stage and resume, as an operator would. True when it did."""
+    if row.get("state") != "paused":
+        return False
+    ev = [e for e in row.get("events", []) if e.get("kind") in ("pause", "resume", "start", "stop")]
+    if not (ev and ev[0]["kind"] == "pause" and "place the sample" in (ev[0].get("message") or "")):
+        return False
+    bench.ctl("sample %s" % sample)
+    c = bench.client()
+    r = c.req("sweep.resume")
+    c.close()
+    if not r.get("ok"):
+        raise AssertionError("sweep.resume: %s" % r)
+    return True
+
+
 def drive_to_end(bench, sid, timeout, swap=True, on_tick=None, poll=0.1, sample="green-paint"):
     """Poll the sweep until it is completed/aborted/failed; at the pause after the white reference put the
     sample (a simulator material) on the stage and resume (as an operator would). Returns the final sweep row."""
@@ -307,16 +324,8 @@ def drive_to_end(bench, sid, timeout, swap=True, on_tick=None, poll=0.1, sample=
         st = row.get("state")
         if st in ("completed", "aborted", "failed"):
             return row
-        if st == "paused" and swap:
-            ev = [e for e in row.get("events", []) if e.get("kind") in ("pause", "resume", "start", "stop")]
-            if ev and ev[0]["kind"] == "pause" and "place the sample" in (ev[0].get("message") or ""):
-                bench.ctl("sample %s" % sample)
-                swapped = True
-                c = bench.client()
-                r = c.req("sweep.resume")
-                c.close()
-                if not r.get("ok"):
-                    raise AssertionError("sweep.resume: %s" % r)
+        if swap and swap_when_asked(bench, row, sample):
+            swapped = True
         if on_tick:
             on_tick(row)
         if time.time() - t0 > timeout:

@@ -1,0 +1,407 @@
+/* plan_adaptive: adaptive plans (kind: adaptive) — their YAML, the candidate measurements of a batch and their
+ * cost, the target as `brdf-recon select` takes it, and the budget's worst case for the dry run.
+ *
+ * Layout (every key but candidates, integration and averages required):
+ *   name: adaptive-paint
+ *   kind: adaptive
+ *   seed:                                   # any plan (grid or Fibonacci) without integration or averages
+ *     incidence: {theta_deg: [0, 30, 60]}
+ *     observation: {fibonacci: {count: 24}}
+ *   target: {dhr_sigma: {incidence_deg: [8], le: 0.002}}   # or {lnf_sigma: {le: 0.05}}
+ *   budget: {seconds: 1400, points: 866}    # one or both; the whole sweep, seed included
+ *   batch: 12                               # points per batch
+ *   candidates: {incidence_deg: RANGE, per_incidence: 150, max_theta_deg: 85}
+ *   overlap: false                          # true: batch k+2 is chosen (from the model through batch k) while
+ *                                           # batch k+1 is measured, so the arms need not wait for the refit
+ *   integration: ...                        # as any plan: the seed's and every batch's
+ *   averages: 1
+ * The candidate defaults: incidences 0 to 70° every 5°, 150 Fibonacci directions per incidence over θ ≤ 85°. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "daemon/plan/plan_int.h"
+
+static int parse_target(struct yc_node *root, struct plan_adaptive *a, struct acq_err *err)
+{
+	struct yc_node *t = yc_get(root, "target");
+	if (!t)
+		return yc_errf(err, root, "adaptive plan: missing key 'target' ({dhr_sigma: {incidence_deg: [8], le: X}} "
+			       "or {lnf_sigma: {le: X}})");
+	if (yc_expect_map(t, "target", err))
+		return -1;
+	struct yc_node *d = yc_get(t, "dhr_sigma"), *l = yc_get(t, "lnf_sigma");
+	if (yc_check_unknown(t, "target", err))
+		return -1;
+	if (!d == !l)
+		return yc_errf(err, t, "target: give exactly one of 'dhr_sigma' and 'lnf_sigma'");
+	struct yc_node *n = d ? d : l;
+	const char *what = d ? "target.dhr_sigma" : "target.lnf_sigma";
+	if (yc_expect_map(n, what, err) || yc_double(n, "le", true, 1e-12, 1e6, &a->le, err))
+		return -1;
+	a->target = d ? PLAN_TARGET_DHR_SIGMA : PLAN_TARGET_LNF_SIGMA;
+	if (d) {
+		double *v = NULL;
+		size_t nv = 0;
+		if (plan_range_parse(n, "incidence_deg", "target.dhr_sigma.incidence_deg", 0, 89, &v, &nv, err))
+			return -1;
+		if (nv > PLAN_MAX_TARGET_INC) {
+			free(v);
+			return yc_errf(err, yc_get(n, "incidence_deg"), "target.dhr_sigma.incidence_deg: at most %d incidences",
+				       PLAN_MAX_TARGET_INC);
+		}
+		memcpy(a->target_inc, v, nv * sizeof *v);
+		a->n_target_inc = nv;
+		free(v);
+	}
+	return yc_check_unknown(n, what, err);
+}
+
+static int parse_budget(struct yc_node *root, struct plan_adaptive *a, struct acq_err *err)
+{
+	struct yc_node *b = yc_get(root, "budget");
+	long long pts = 0;
+	if (!b)
+		return yc_errf(err, root, "adaptive plan: missing key 'budget' ({seconds: S} and/or {points: N})");
+	if (yc_expect_map(b, "budget", err) || yc_double(b, "seconds", false, 1, 1e7, &a->budget_s, err) ||
+	    yc_int(b, "points", false, 1, PLAN_MAX_POINTS, &pts, err) || yc_check_unknown(b, "budget", err))
+		return -1;
+	if (!yc_get(b, "seconds") && !yc_get(b, "points"))
+		return yc_errf(err, b, "budget: give 'seconds' (bench time, seed included) and/or 'points'");
+	a->budget_points = (size_t)pts;
+	return 0;
+}
+
+static int parse_candidates(struct yc_node *root, struct plan_adaptive *a, struct acq_err *err)
+{
+	struct yc_node *c = yc_get(root, "candidates");
+	long long per = 150;
+	a->cand_max_theta_deg = 85;
+	if (c && (yc_expect_map(c, "candidates", err) ||
+		  yc_int(c, "per_incidence", false, 1, PLAN_MAX_PER_INCIDENCE, &per, err) ||
+		  yc_double(c, "max_theta_deg", false, 0.1, 90, &a->cand_max_theta_deg, err)))
+		return -1;
+	if (c && yc_get(c, "incidence_deg")) {
+		if (plan_range_parse(c, "incidence_deg", "candidates.incidence_deg", -90, 90, &a->cand_inc, &a->n_cand_inc,
+				     err))
+			return -1;
+	} else {
+		a->n_cand_inc = 15;
+		if (!(a->cand_inc = malloc(a->n_cand_inc * sizeof *a->cand_inc)))
+			return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+		for (size_t i = 0; i < a->n_cand_inc; i++)
+			a->cand_inc[i] = 5.0 * (double)i;
+	}
+	if (c && yc_check_unknown(c, "candidates", err))
+		return -1;
+	a->cand_count = (size_t)per;
+	if ((double)a->cand_count * (double)a->n_cand_inc > PLAN_MAX_POINTS)
+		return yc_errf(err, c, "candidates: %zu incidences × %zu directions is more than %d", a->n_cand_inc,
+			       a->cand_count, PLAN_MAX_POINTS);
+	return 0;
+}
+
+int plan_adaptive_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err)
+{
+	static const char *const keys[] = { "name", "kind", "seed", "target", "budget", "batch", "candidates",
+					    "overlap", "integration", "averages", NULL };
+	struct plan_spec *s = NULL;
+	struct plan_adaptive *a = calloc(1, sizeof *a);
+	*out = NULL;
+	if (!a)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	for (size_t i = 0; keys[i]; i++)
+		yc_get(root, keys[i]);
+	const char *name = "adaptive";
+	long long batch = 0, averages = 1;
+	if (yc_check_unknown(root, "adaptive plan", err) || yc_string(root, "name", false, &name, err))
+		goto fail;
+	struct yc_node *seed = yc_get(root, "seed");
+	if (!seed) {
+		yc_errf(err, root, "adaptive plan: missing key 'seed' (a plan: incidence, observation, ...)");
+		goto fail;
+	}
+	if (yc_expect_map(seed, "seed", err))
+		goto fail;
+	struct yc_node *sk = yc_get(seed, "kind");
+	if (sk && sk->type == YC_SCALAR && sk->value && !strcmp(sk->value, "adaptive")) {
+		yc_errf(err, sk, "seed: an adaptive plan cannot seed another");
+		goto fail;
+	}
+	for (const char *k = "integration";; k = "averages") {
+		if (yc_get(seed, k)) {
+			yc_errf(err, yc_get(seed, k), "seed: '%s' belongs at the top of the adaptive plan (one policy for "
+				"the seed and every batch)", k);
+			goto fail;
+		}
+		if (!strcmp(k, "averages"))
+			break;
+	}
+	if (plan_parse(seed, &s, err))
+		goto fail;
+	snprintf(s->name, sizeof s->name, "%s", name);
+	if (plan_integration_parse(root, s, err) || yc_int(root, "averages", false, 1, 100000, &averages, err) ||
+	    yc_int(root, "batch", true, 1, 1000, &batch, err) || yc_bool(root, "overlap", false, &a->overlap, err) ||
+	    parse_target(root, a, err) ||
+	    parse_budget(root, a, err) || parse_candidates(root, a, err))
+		goto fail;
+	s->averages = (int)averages;
+	a->batch = (size_t)batch;
+	s->adaptive = a;
+	*out = s;
+	return 0;
+fail:
+	if (a)
+		free(a->cand_inc);
+	free(a);
+	plan_spec_free(s);
+	return -1;
+}
+
+void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t len)
+{
+	size_t n = 0;
+	if (!len)
+		return;
+	buf[0] = '\0';
+	if (a->target == PLAN_TARGET_LNF_SIGMA) {
+		snprintf(buf, len, "lnf:le=%.9g", a->le);
+		return;
+	}
+	n += (size_t)snprintf(buf, len, "dhr:");
+	for (size_t i = 0; i < a->n_target_inc && n < len; i++)
+		n += (size_t)snprintf(buf + n, len - n, "%s%.9g", i ? "," : "", a->target_inc[i]);
+	if (n < len)
+		snprintf(buf + n, len - n, ":le=%.9g", a->le);
+}
+
+int plan_adaptive_cand_pos(const struct plan_spec *s, size_t id, struct plan_pos *out)
+{
+	const struct plan_adaptive *a = s->adaptive;
+	if (!a || !a->cand_count || id / a->cand_count >= a->n_cand_inc)
+		return -1;
+	size_t i = id / a->cand_count, j = id % a->cand_count;
+	const double golden = 180.0 * (3.0 - sqrt(5.0)); /* degrees */
+	double cmax = cos(a->cand_max_theta_deg * DEG);
+	double cz = 1.0 - (1.0 - cmax) * ((double)j + 0.5) / (double)a->cand_count;
+	*out = plan_canon((struct plan_pos){ a->cand_inc[i], acos(cz) / DEG, plan_norm360(golden * (double)j) });
+	return 0;
+}
+
+int plan_make_fixed(const struct plan_spec *s, const struct bench_geom *g, const struct plan_pos *pts, size_t n,
+		    const struct plan_pos *start, struct plan_result **out, struct acq_err *err)
+{
+	*out = NULL;
+	struct plan_result *R = calloc(1, sizeof *R);
+	if (!R || !(R->req = calloc(n ? n : 1, sizeof *R->req)) || !(R->steps = calloc(n ? n : 1, sizeof *R->steps)) ||
+	    !(R->wps = calloc((n ? n : 1) * PLAN_MAX_WP, sizeof *R->wps))) {
+		plan_result_free(R);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	double dwell = (double)s->averages * (s->integ_ms / 1000.0 + g->readout_s), clock = 0;
+	struct plan_pos cur = start ? *start : (n ? pts[0] : (struct plan_pos){ 0, 0, 0 });
+	for (size_t i = 0; i < n; i++) {
+		struct plan_req *q = &R->req[i];
+		struct plan_step *st = &R->steps[i];
+		q->req = q->pos = pts[i];
+		q->status = PLAN_KEPT;
+		q->psi_deg = plan_psi_deg(g, &pts[i]);
+		st->req = i;
+		st->pos = pts[i];
+		st->first_wp = R->n_wps;
+		if (i > 0 || start) {
+			size_t nw = 0;
+			double mv = plan_move(g, &cur, &st->pos, &R->wps[R->n_wps], &nw);
+			if (mv < 0) {
+				plan_result_free(R);
+				return acq_errf(err, ACQ_E_RANGE, "plan '%s': no safe move to point %zu (%g, %g, %g)", s->name, i,
+						pts[i].laser_theta, pts[i].det_theta, pts[i].det_phi);
+			}
+			for (size_t k = 0; k < nw; k++)
+				st->move_s += R->wps[R->n_wps + k].duration_s;
+			st->settle_s = mv - st->move_s;
+			st->n_wp = nw;
+			st->detour = nw > 1;
+			R->n_detours += st->detour;
+			R->n_wps += nw;
+		}
+		st->t_start_s = clock;
+		st->dwell_s = dwell;
+		clock += st->move_s + st->settle_s + dwell;
+		R->motion_s += st->move_s + st->settle_s;
+		R->dwell_s += dwell;
+		cur = st->pos;
+	}
+	R->n_req = R->n_steps = R->n_kept = n;
+	R->duration_s = clock;
+	R->point_dwell_s = dwell;
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	plan_time_apply(s, g, &tm, R);
+	*out = R;
+	return 0;
+}
+
+int plan_result_append(struct plan_result *r, const struct plan_result *b, struct acq_err *err)
+{
+	size_t nr = r->n_req + b->n_req, ns = r->n_steps + b->n_steps, nw = r->n_wps + b->n_wps;
+	struct plan_req *q = realloc(r->req, (nr ? nr : 1) * sizeof *q);
+	if (q)
+		r->req = q;
+	struct plan_step *st = q ? realloc(r->steps, (ns ? ns : 1) * sizeof *st) : NULL;
+	if (st)
+		r->steps = st;
+	struct plan_wp *w = st ? realloc(r->wps, (nw ? nw : 1) * sizeof *w) : NULL;
+	if (!w)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	r->wps = w;
+	memcpy(r->req + r->n_req, b->req, b->n_req * sizeof *b->req);
+	memcpy(r->wps + r->n_wps, b->wps, b->n_wps * sizeof *b->wps);
+	double t0 = r->duration_s, p0 = r->predicted_s;
+	for (size_t i = 0; i < b->n_steps; i++) {
+		struct plan_step s = b->steps[i];
+		s.req += r->n_req;
+		s.first_wp += r->n_wps;
+		s.t_start_s += t0;
+		s.predicted_start_s += p0;
+		r->steps[r->n_steps + i] = s;
+	}
+	r->n_req = nr;
+	r->n_steps = ns;
+	r->n_wps = nw;
+	r->n_kept += b->n_kept;
+	r->n_moved += b->n_moved;
+	r->n_dropped += b->n_dropped;
+	r->n_duplicate += b->n_duplicate;
+	r->duration_s += b->duration_s;
+	r->dwell_s += b->dwell_s;
+	r->motion_s += b->motion_s;
+	r->predicted_s += b->predicted_s;
+	r->darks_s += b->darks_s;
+	r->n_detours += b->n_detours;
+	for (int k = 0; k < 3; k++)
+		r->travel_deg[k] += b->travel_deg[k];
+	return 0;
+}
+
+/* The same configuration (same incidence, same observation direction to ~1e-6). */
+static bool same_config(const struct plan_pos *a, const struct plan_pos *b)
+{
+	if (fabs(a->laser_theta - b->laser_theta) > 1e-6)
+		return false;
+	struct plan_pos ca = plan_canon(*a), cb = plan_canon(*b);
+	double va[3], vb[3];
+	plan_dir_of(ca.det_theta, ca.det_phi, va);
+	plan_dir_of(cb.det_theta, cb.det_phi, vb);
+	return fabs(va[0] - vb[0]) < 1e-6 && fabs(va[1] - vb[1]) < 1e-6 && fabs(va[2] - vb[2]) < 1e-6;
+}
+
+/* Bench seconds to measure q from the arms at from through the safe move of mv seconds (segments segs), as the
+ * executor spends them (plan_time.c): a two-step sweep without reference whose second step is q. */
+static double point_cost(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
+			 const struct plan_pos *from, const struct plan_pos *q, double mv, double segs)
+{
+	struct plan_step st[2] = { { .pos = *from }, { .pos = *q, .move_s = segs, .settle_s = mv - segs } };
+	struct plan_result r = { .steps = st, .n_steps = 2 };
+	struct plan_timing tt = *t;
+	tt.reference = false;
+	tt.have_start = false;
+	plan_time_apply(s, g, &tt, &r);
+	return st[1].predicted_s;
+}
+
+int plan_adaptive_candidates(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
+			     const struct plan_pos *from, const struct plan_pos *done, size_t n_done,
+			     struct plan_cand **out, size_t *n, struct acq_err *err)
+{
+	const struct plan_adaptive *a = s->adaptive;
+	*out = NULL;
+	*n = 0;
+	if (!a)
+		return acq_errf(err, ACQ_E_INVAL, "plan '%s' is not adaptive", s->name);
+	struct plan_cand *c = malloc((a->n_cand_inc * a->cand_count + 1) * sizeof *c);
+	if (!c)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	size_t k = 0;
+	struct plan_wp w[PLAN_MAX_WP];
+	for (size_t i = 0; i < a->n_cand_inc; i++) {
+		for (size_t j = 0; j < a->cand_count; j++) {
+			struct plan_pos q;
+			plan_adaptive_cand_pos(s, i * a->cand_count + j, &q);
+			if (plan_classify(g, &q))
+				continue;
+			bool seen = false;
+			for (size_t d = 0; d < n_done && !seen; d++)
+				seen = same_config(&q, &done[d]);
+			if (seen)
+				continue;
+			double reps[MAX_REPS], best = -1, best_segs = 0;
+			int nr = plan_phi_reps(g, q.det_phi, reps);
+			struct plan_pos bq = q;
+			for (int r = 0; r < nr; r++) {
+				struct plan_pos p = q;
+				p.det_phi = reps[r];
+				if (best >= 0 && plan_straight_s(g, from, &p) >= best)
+					continue;
+				size_t nw = 0;
+				double mv = plan_move(g, from, &p, w, &nw);
+				if (mv < 0 || (best >= 0 && mv >= best))
+					continue;
+				best = mv;
+				best_segs = 0;
+				for (size_t x = 0; x < nw; x++)
+					best_segs += w[x].duration_s;
+				bq = p;
+			}
+			if (best < 0)
+				continue; /* no safe move reaches it from here */
+			c[k].id = i * a->cand_count + j;
+			c[k].pos = bq;
+			c[k].cost_s = point_cost(s, g, t, from, &bq, best, best_segs);
+			k++;
+		}
+	}
+	*out = c;
+	*n = k;
+	return 0;
+}
+
+void plan_adaptive_worst(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
+			 const struct plan_result *seed, double *worst_s, size_t *worst_points)
+{
+	const struct plan_adaptive *a = s->adaptive;
+	*worst_s = seed->predicted_s;
+	*worst_points = seed->n_steps;
+	if (!a || seed->n_steps == 0)
+		return;
+	double lo = INFINITY, hi = 0;
+	struct plan_pos *done = malloc(seed->n_steps * sizeof *done);
+	struct plan_cand *c = NULL;
+	size_t nc = 0;
+	if (done) {
+		for (size_t i = 0; i < seed->n_steps; i++)
+			done[i] = seed->steps[i].pos;
+		if (plan_adaptive_candidates(s, g, t, &seed->steps[seed->n_steps - 1].pos, done, seed->n_steps, &c, &nc,
+					     NULL))
+			nc = 0;
+	}
+	for (size_t i = 0; i < nc; i++) {
+		lo = fmin(lo, c[i].cost_s);
+		hi = fmax(hi, c[i].cost_s);
+	}
+	free(c);
+	free(done);
+	size_t left_pts = a->budget_points > seed->n_steps ? a->budget_points - seed->n_steps : 0;
+	if (nc < left_pts)
+		left_pts = nc;
+	if (a->budget_s > 0)
+		*worst_s = fmax(a->budget_s, seed->predicted_s);
+	else
+		*worst_s = seed->predicted_s + (double)left_pts * (nc ? hi : 0);
+	if (a->budget_points > 0)
+		*worst_points = seed->n_steps + left_pts;
+	else if (nc && lo > 0)
+		*worst_points = seed->n_steps +
+				(size_t)fmin((double)nc, floor(fmax(0, a->budget_s - seed->predicted_s) / lo));
+}

@@ -1,0 +1,228 @@
+/* plan_order: the order of one incidence group's points as an open path from a start row (nearest neighbour,
+ * then 2-opt and Or-opt under the true move cost, optionally iterated with double-bridge kicks). Internal to
+ * the planner (plan_int.h). */
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "daemon/plan/plan_int.h"
+
+#define OR_K 10
+
+static double pcost(const double *C, size_t n, size_t a, size_t b)
+{
+	return C[a * n + b];
+}
+
+#define E(i, j) ((i) == SIZE_MAX ? s[(j)] : pcost(C, n, (i), (j)))
+/* 2-opt and Or-opt until no move improves (or 200 passes). */
+static void local_search(const double *C, size_t n, const double *s, size_t *p, size_t *tmp, size_t *pos,
+			 const size_t *nbr, size_t kn)
+{
+	bool improved = true;
+	for (int pass = 0; improved && pass < 200; pass++) {
+		improved = false;
+		/* 2-opt: reverse p[i..j]; the edge into p[i] comes from p[i-1] (or the start), the edge out of
+		 * p[j] goes to p[j+1] (or nothing at the end of the open path). */
+		for (size_t i = 0; i + 1 < n; i++) {
+			size_t a = i ? p[i - 1] : SIZE_MAX;
+			for (size_t j = i + 1; j < n; j++) {
+				double before = E(a, p[i]) + (j + 1 < n ? pcost(C, n, p[j], p[j + 1]) : 0);
+				double after = E(a, p[j]) + (j + 1 < n ? pcost(C, n, p[i], p[j + 1]) : 0);
+				if (after < before - 1e-9) {
+					for (size_t x = i, y = j; x < y; x++, y--) {
+						size_t t = p[x];
+						p[x] = p[y];
+						p[y] = t;
+					}
+					improved = true;
+					a = i ? p[i - 1] : SIZE_MAX;
+				}
+			}
+		}
+		/* Or-opt: move p[i..i+L) elsewhere, possibly reversed. Insertion places are tried next to the
+		 * K nearest neighbours of the segment's ends (and at both ends of the path): O(n·K) per pass. */
+		for (size_t x = 0; x < n; x++)
+			pos[p[x]] = x;
+		for (size_t L = 1; L <= 3 && L < n; L++) {
+			for (size_t i = 0; i + L <= n; i++) {
+				size_t a = i ? p[i - 1] : SIZE_MAX, f = p[i], l = p[i + L - 1];
+				bool has_next = i + L < n;
+				size_t nx = has_next ? p[i + L] : 0;
+				size_t nr = n - L;
+				double removed = E(a, f) + (has_next ? pcost(C, n, l, nx) : 0) -
+						 (has_next ? E(a, nx) : 0);
+#define REST(k) (p[(k) < i ? (k) : (k) + L])
+				size_t cand[4 * OR_K + 2], ncand = 0;
+				cand[ncand++] = 0;
+				cand[ncand++] = nr;
+				for (int e = 0; e < 2; e++) {
+					const size_t *nb = &nbr[(e ? l : f) * kn];
+					for (size_t q = 0; q < kn; q++) {
+						size_t pj = pos[nb[q]];
+						if (pj >= i && pj < i + L)
+							continue;
+						size_t r = pj < i ? pj : pj - L;
+						cand[ncand++] = r;
+						cand[ncand++] = r + 1;
+					}
+				}
+				double bestg = 1e-9;
+				size_t bk = SIZE_MAX;
+				bool brev = false;
+				for (size_t ci = 0; ci < ncand; ci++) {
+					size_t k = cand[ci];
+					if (k == i || k > nr)
+						continue; /* the same place */
+					size_t pa = k ? REST(k - 1) : SIZE_MAX;
+					for (int rev = 0; rev < 2; rev++) {
+						size_t s1 = rev ? l : f, s2 = rev ? f : l;
+						double add = E(pa, s1) + (k < nr ? pcost(C, n, s2, REST(k)) : 0) -
+							     (k < nr ? E(pa, REST(k)) : 0);
+						double gain = removed - add;
+						if (gain > bestg) {
+							bestg = gain;
+							bk = k;
+							brev = rev;
+						}
+					}
+				}
+#undef REST
+				if (bk == SIZE_MAX)
+					continue;
+				size_t seg[3];
+				for (size_t x = 0; x < L; x++)
+					seg[x] = p[i + (brev ? L - 1 - x : x)];
+				size_t w = 0;
+				for (size_t x = 0; x < n; x++)
+					if (x < i || x >= i + L)
+						tmp[w++] = p[x];
+				w = 0;
+				for (size_t x = 0; x < bk; x++)
+					p[w++] = tmp[x];
+				for (size_t x = 0; x < L; x++)
+					p[w++] = seg[x];
+				for (size_t x = bk; x < nr; x++)
+					p[w++] = tmp[x];
+				for (size_t x = 0; x < n; x++)
+					pos[p[x]] = x;
+				improved = true;
+			}
+		}
+	}
+}
+
+static double open_len(const double *C, size_t n, const double *s, const size_t *p)
+{
+	double t = s[p[0]];
+	for (size_t i = 1; i < n; i++)
+		t += pcost(C, n, p[i - 1], p[i]);
+	return t;
+}
+#undef E
+
+/* Nearest neighbour from the start row, then 2-opt and Or-opt (segments of 1–3, either orientation) until
+ * no move improves. C is symmetric; the start row s is not part of it. */
+void plan_order_group(const double *C, size_t n, const double *s, size_t *p, bool ils)
+{
+	if (n == 0)
+		return;
+	char *used = calloc(n, 1);
+	size_t cur = 0;
+	for (size_t i = 0; i < n; i++) {
+		size_t bi = 0;
+		double bc = INFINITY;
+		for (size_t j = 0; j < n; j++) {
+			if (used && used[j])
+				continue;
+			double c = i == 0 ? s[j] : pcost(C, n, cur, j);
+			if (c < bc) {
+				bc = c;
+				bi = j;
+			}
+		}
+		if (!used) { /* out of memory: identity order */
+			p[i] = i;
+			continue;
+		}
+		used[bi] = 1;
+		p[i] = bi;
+		cur = bi;
+	}
+	free(used);
+	size_t kn = n - 1 < OR_K ? n - 1 : OR_K;
+	size_t *tmp = malloc(n * sizeof *tmp), *pos = malloc(n * sizeof *pos);
+	size_t *nbr = malloc((n * kn + 1) * sizeof *nbr);
+	if (!tmp || !pos || !nbr) {
+		free(tmp);
+		free(pos);
+		free(nbr);
+		return;
+	}
+	/* the kn nearest neighbours of every node, by insertion into a short sorted list */
+	for (size_t u = 0; u < n; u++) {
+		size_t *nb = &nbr[u * kn], m = 0;
+		for (size_t v = 0; v < n; v++) {
+			if (v == u)
+				continue;
+			double c = pcost(C, n, u, v);
+			if (m == kn && c >= pcost(C, n, u, nb[m - 1]))
+				continue;
+			size_t k = m < kn ? m++ : kn - 1;
+			while (k > 0 && pcost(C, n, u, nb[k - 1]) > c) {
+				nb[k] = nb[k - 1];
+				k--;
+			}
+			nb[k] = v;
+		}
+	}
+	local_search(C, n, s, p, tmp, pos, nbr, kn);
+	/* Iterated local search: a double-bridge kick (three cut points, segments B and C swapped), local
+	 * search again, keep it if shorter. The random generator is local and seeded by n: deterministic. */
+	size_t *q = malloc(n * sizeof *q);
+	if (q && ils && n >= 8) {
+		double best = open_len(C, n, s, p);
+		uint64_t rng = 0x9E3779B97F4A7C15ull ^ (uint64_t)n;
+		int kicks = n <= 300 ? 60 : n <= 1000 ? 15 : 4;
+		for (int k = 0; k < kicks; k++) {
+			size_t cut[3];
+			for (int c = 0; c < 3; c++) {
+				rng ^= rng << 13;
+				rng ^= rng >> 7;
+				rng ^= rng << 17;
+				cut[c] = 1 + (size_t)(rng % (n - 1));
+			}
+			/* sort the cuts */
+			for (int a = 0; a < 3; a++)
+				for (int b = a + 1; b < 3; b++)
+					if (cut[b] < cut[a]) {
+						size_t t = cut[a];
+						cut[a] = cut[b];
+						cut[b] = t;
+					}
+			if (cut[0] == cut[1] || cut[1] == cut[2])
+				continue;
+			size_t w = 0;
+			for (size_t x = 0; x < cut[0]; x++)
+				q[w++] = p[x];
+			for (size_t x = cut[1]; x < cut[2]; x++)
+				q[w++] = p[x];
+			for (size_t x = cut[0]; x < cut[1]; x++)
+				q[w++] = p[x];
+			for (size_t x = cut[2]; x < n; x++)
+				q[w++] = p[x];
+			local_search(C, n, s, q, tmp, pos, nbr, kn);
+			double len = open_len(C, n, s, q);
+			if (len < best - 1e-9) {
+				best = len;
+				memcpy(p, q, n * sizeof *p);
+			}
+		}
+	}
+	free(q);
+	free(tmp);
+	free(pos);
+	free(nbr);
+}
+

@@ -1,0 +1,283 @@
+/* recon_select: an adaptive sweep's decision between batches (see recon_select.h) — samples exported and candidates
+ * (both written by a forked child), brdf-recon fit (warm when possible) and brdf-recon select in child processes, one
+ * after the other; the loop is only called back. */
+#include "daemon/recon_select.h"
+
+#include <errno.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "daemon/executor.h"
+#include "daemon/job.h"
+#include "daemon/log.h"
+#include "daemon/loop.h"
+#include "daemon/recon_chain.h"
+#include "daemon/store.h"
+
+enum { RS_CAND, RS_PROBE, RS_FIT, RS_SELECT };
+
+struct rsel {
+	const struct sweep_env *env;
+	struct job *job;
+	int stage;
+	int warm_ok;                    /* brdf-recon fit has --warm: -1 not known yet, 0, 1 */
+	rsel_done_fn done;
+	void *ctx;
+	const struct plan_spec *spec;
+	char target[256], batch[16], prev[4096], prog[4096];
+	char samples[4200], cand[4200], out[4200];
+	struct rsel_res res;
+	double t0;
+	/* the candidates child's input (its copy of memory at fork) */
+	const struct rsel_req *q;
+};
+
+struct rsel *rsel_new(const struct sweep_env *env)
+{
+	struct rsel *r = calloc(1, sizeof *r);
+	if (r) {
+		r->env = env;
+		r->warm_ok = -1;
+	}
+	return r;
+}
+
+void rsel_free(struct rsel *r)
+{
+	free(r);
+}
+
+bool rsel_busy(const struct rsel *r)
+{
+	return r->job != NULL || r->done != NULL;
+}
+
+static double rate_of(const struct rsel *r)
+{
+	const struct conf *c = r->env->conf;
+	return c->have_sim && c->sim.time_scale > 0 ? c->sim.time_scale : 1; /* loop seconds per second */
+}
+
+static void finish(struct rsel *r, bool ok, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static void finish(struct rsel *r, bool ok, const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	vsnprintf(r->res.msg, sizeof r->res.msg, fmt, ap);
+	va_end(ap);
+	r->res.ok = ok;
+	rsel_done_fn done = r->done;
+	void *ctx = r->ctx;
+	r->done = NULL;
+	r->spec = NULL;
+	if (done)
+		done(ctx, &r->res);
+	json_decref(r->res.out);
+	r->res.out = NULL;
+}
+
+/* The tail of a child's output for a message (its whole output is in the log). */
+static const char *tail(const char *s)
+{
+	size_t n = strlen(s);
+	return n > 400 ? s + n - 400 : s;
+}
+
+static void next(struct rsel *r);
+
+static void stage_done(struct job *j, int status, const char *output, size_t len, void *arg)
+{
+	(void)j;
+	struct rsel *r = arg;
+	r->job = NULL;
+	double dt = loop_now(r->env->loop) - r->t0;
+	switch (r->stage) {
+	case RS_CAND:
+		if (status != 0)
+			return finish(r, false, "the samples and candidates child failed (status %d): %s", status, tail(output));
+		r->res.n_candidates = (size_t)strtoull(output, NULL, 10);
+		r->stage = RS_PROBE;
+		break;
+	case RS_PROBE:
+		r->warm_ok = status == 0 && strstr(output, "--warm") != NULL;
+		log_msg(LOG_NOTICE, "%s fit %s --warm: refits between batches are %s (status %d, %zu bytes of help)",
+			r->prog, r->warm_ok ? "has" : "has no", r->warm_ok ? "warm-started" : "cold", status, len);
+		r->stage = RS_FIT;
+		break;
+	case RS_FIT:
+		r->res.fit_s = dt;
+		if (status != 0)
+			return finish(r, false, "brdf-recon fit failed (status %d): %s", status, tail(output));
+		r->stage = RS_SELECT;
+		break;
+	case RS_SELECT: {
+		r->res.select_s = dt;
+		if (status != 0)
+			return finish(r, false, "brdf-recon select failed (status %d): %s", status, tail(output));
+		json_error_t je;
+		json_t *o = json_load_file(r->out, 0, &je);
+		json_t *t = o ? json_object_get(o, "target") : NULL;
+		if (!o || !json_is_object(t) || !json_is_array(json_object_get(o, "picks")) ||
+		    !json_is_number(json_object_get(t, "value"))) {
+			json_decref(o);
+			return finish(r, false, "brdf-recon select: %s: %s", r->out,
+				      o ? "no target {value} or picks [] (see the select contract)" : je.text);
+		}
+		r->res.out = o;
+		return finish(r, true, "selected");
+	}
+	}
+	next(r);
+}
+
+/* In the forked child (never the parent's database connection): the sweep's samples so far exported through a
+ * read-only connection of its own, then the reachable candidates from the arms' position written to r->cand;
+ * prints their count. */
+static int cand_child(void *arg, int fd)
+{
+	struct rsel *r = arg;
+	const struct rsel_req *q = r->q;
+	const struct bench_geom *g = &r->env->conf->bench;
+	struct plan_cand *c = NULL;
+	size_t n = 0;
+	struct acq_err err = { 0 };
+	char line[128];
+	struct store *st = NULL;
+	int rows = 0;
+	/* The daemon's descriptors (its listening socket above all) are not this child's: one that outlives a killed
+	 * daemon for a moment must not keep its socket answering, or the restarted daemon finds it "in use". */
+	if (fd > 3)
+		close_range(3, (unsigned)fd - 1, 0);
+	close_range((unsigned)fd + 1, ~0U, 0);
+	if (store_open_reader(r->env->conf->d.database, &st, &err) ||
+	    store_export_csv_file(st, q->sweep_id, r->samples, &rows, &err)) {
+		store_close(st);
+		dprintf(fd, "exporting the samples: %s\n", err.msg);
+		return 1;
+	}
+	store_close(st);
+	if (plan_adaptive_candidates(q->spec, g, &q->timing, &q->from, q->done, q->n_done, &c, &n, &err)) {
+		dprintf(fd, "%s\n", err.msg);
+		return 1;
+	}
+	FILE *f = fopen(r->cand, "w");
+	if (!f) {
+		dprintf(fd, "%s: %s\n", r->cand, strerror(errno));
+		free(c);
+		return 1;
+	}
+	fprintf(f, "id,theta_i,phi_i,theta_o,phi_o,cost_s\n");
+	for (size_t i = 0; i < n; i++) {
+		double ti, pi, to, po;
+		ex_pos_angles(g, &c[i].pos, &ti, &pi, &to, &po);
+		fprintf(f, "%zu,%.9g,%.9g,%.9g,%.9g,%.6g\n", c[i].id, ti, pi, to, po, c[i].cost_s);
+	}
+	free(c);
+	bool bad = ferror(f) != 0;
+	if (fclose(f) || bad) {
+		dprintf(fd, "%s: write failed\n", r->cand);
+		return 1;
+	}
+	snprintf(line, sizeof line, "%zu\n", n);
+	return write(fd, line, strlen(line)) < 0 ? 1 : 0;
+}
+
+static void next(struct rsel *r)
+{
+	struct acq_err err = { 0 };
+	double timeout = r->env->conf->recon.timeout_s * rate_of(r);
+	char *argv[16];
+	int argc = 0;
+	if (r->stage == RS_PROBE && r->warm_ok >= 0)
+		r->stage = RS_FIT;
+	if (r->stage == RS_FIT)
+		r->res.warm = r->warm_ok == 1 && r->prev[0] && access(r->prev, R_OK) == 0;
+	argv[argc++] = r->prog;
+	switch (r->stage) {
+	case RS_PROBE:
+		argv[argc++] = "fit";
+		argv[argc++] = "--help";
+		break;
+	case RS_FIT:
+		argv[argc++] = "fit";
+		argv[argc++] = r->samples;
+		argv[argc++] = "-o";
+		argv[argc++] = r->res.model;
+		if (r->res.warm) {
+			argv[argc++] = "--warm";
+			argv[argc++] = r->prev;
+		}
+		break;
+	case RS_SELECT:
+		argv[argc++] = "select";
+		argv[argc++] = r->res.model;
+		argv[argc++] = "--candidates";
+		argv[argc++] = r->cand;
+		argv[argc++] = "--target";
+		argv[argc++] = r->target;
+		argv[argc++] = "--batch";
+		argv[argc++] = r->batch;
+		argv[argc++] = "-o";
+		argv[argc++] = r->out;
+		break;
+	}
+	argv[argc] = NULL;
+	r->t0 = loop_now(r->env->loop);
+	if (job_start(argv, r->res.dir, r->stage == RS_PROBE ? 60 * rate_of(r) : timeout, stage_done, r, &r->job, &err))
+		finish(r, false, "brdf-recon %s could not start: %s", argv[1], err.msg);
+}
+
+static int mkdirs(const char *path)
+{
+	char p[4096];
+	snprintf(p, sizeof p, "%s", path);
+	for (char *s = p + 1; *s; s++) {
+		if (*s != '/')
+			continue;
+		*s = '\0';
+		if (mkdir(p, 0750) && errno != EEXIST)
+			return -1;
+		*s = '/';
+	}
+	return mkdir(p, 0750) && errno != EEXIST ? -1 : 0;
+}
+
+int rsel_start(struct rsel *r, const struct rsel_req *q, rsel_done_fn done, void *ctx, struct acq_err *err)
+{
+	const struct conf *c = r->env->conf;
+	if (rsel_busy(r))
+		return acq_errf(err, ACQ_E_STATE, "a batch is being chosen already");
+	if (!q->spec || !q->spec->adaptive)
+		return acq_errf(err, ACQ_E_INVAL, "not an adaptive plan");
+	if (recon_find_program(c->recon.program, r->prog, sizeof r->prog))
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "reconstruction program '%s' not found", c->recon.program);
+	memset(&r->res, 0, sizeof r->res);
+	snprintf(r->res.dir, sizeof r->res.dir, "%s/sweep-%lld/batch-%d", c->recon.output_dir, (long long)q->sweep_id,
+		 q->batch);
+	if (mkdirs(r->res.dir))
+		return acq_errf(err, ACQ_E_IO, "%s: %s", r->res.dir, strerror(errno));
+	snprintf(r->samples, sizeof r->samples, "%s/samples.csv", r->res.dir);
+	snprintf(r->cand, sizeof r->cand, "%s/candidates.csv", r->res.dir);
+	snprintf(r->out, sizeof r->out, "%s/select.json", r->res.dir);
+	snprintf(r->res.model, sizeof r->res.model, "%s/model.brdf", r->res.dir);
+	snprintf(r->prev, sizeof r->prev, "%s", q->prev_model ? q->prev_model : "");
+	snprintf(r->batch, sizeof r->batch, "%zu", q->batch_size);
+	plan_adaptive_target_spec(q->spec->adaptive, r->target, sizeof r->target);
+	unlink(r->out); /* a decision made again must not read the previous answer */
+	r->spec = q->spec;
+	r->q = q; /* read by the forked child only (its own copy of memory) */
+	r->stage = RS_CAND;
+	r->t0 = loop_now(r->env->loop);
+	if (job_fork(cand_child, r, 0, 60 * rate_of(r), stage_done, r, &r->job, err)) {
+		r->q = NULL;
+		return -1;
+	}
+	r->q = NULL;
+	r->done = done;
+	r->ctx = ctx;
+	return 0;
+}

@@ -1,0 +1,94 @@
+#!/usr/bin/python3
+"""Crash-resume of an adaptive sweep: acquisitiond is SIGKILLed at random moments (while measuring the seed or a
+batch, while a batch is being chosen) and restarted each time (daemon.auto_resume). The sweep must go on from its
+recorded decisions and end on its budget with nothing lost and nothing twice: every point recorded before a kill is
+still there afterwards with the same row, angles and spectra; every planned point is measured exactly once; no
+configuration is planned twice; the batches are contiguous and each batch's points are the ones its picks name.
+The plan overlaps each decision with the measurement of the batch before it (overlap: true), so kills also land
+while a decision is under way or chosen and not yet recorded."""
+import os
+import random
+import signal
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import adaptlib as A  # noqa: E402
+import sweeplib as L  # noqa: E402
+
+BUDGET = 35   # the seed's 15 points + 5 batches of 4
+KILLS = 6
+
+
+def snapshot(b, sid):
+    """The points done so far: id -> (order_index, measured angles, sorted spectrum ids)."""
+    db = b.db()
+    try:
+        pts = {r[0]: r[1:] for r in db.execute(
+            "SELECT id, order_index, m_theta_i, m_phi_i, m_theta_o, m_phi_o FROM points WHERE sweep_id = ? AND "
+            "state = 'done'", (sid,))}
+        spec = {}
+        for pid, sid_ in db.execute("SELECT point_id, id FROM spectra WHERE sweep_id = ? AND point_id IS NOT NULL",
+                                    (sid,)):
+            spec.setdefault(pid, []).append(sid_)
+        planned = {r[0]: r[1:] for r in db.execute(
+            "SELECT order_index, theta_i, phi_i, theta_o, phi_o FROM points WHERE sweep_id = ?", (sid,))}
+        return {k: v + (tuple(sorted(spec.get(k, []))),) for k, v in pts.items()}, planned
+    finally:
+        db.close()
+
+
+def run():
+    rng = random.Random(L.SEED)
+    b = A.bench()
+    try:
+        b.start_sim()
+        b.start_daemon()
+        sid = L.start_sweep(b, A.plan(budget="points: %d" % BUDGET, overlap=True), "it-adaptive-kill")
+        kills, t0, seen = 0, time.time(), []
+        before, planned_before = {}, {}
+        while kills < KILLS:
+            deadline = time.time() + rng.uniform(0.2, 1.5)
+            while time.time() < deadline:
+                row = L.sweep_row(b, sid)
+                if row["state"] in ("completed", "aborted", "failed"):
+                    break
+                L.swap_when_asked(b, row, "white")
+                time.sleep(0.02)
+            if L.sweep_row(b, sid)["state"] in ("completed", "aborted", "failed"):
+                break
+            before, planned_before = snapshot(b, sid)
+            b.kill_daemon(signal.SIGKILL)
+            kills += 1
+            after, planned_after = snapshot(b, sid)  # what the dead daemon left
+            assert after == before or set(before) <= set(after), "points lost at the kill"
+            seen.append((len(after), len(planned_after)))
+            b.start_daemon(wait_devices=False)
+            now, planned_now = snapshot(b, sid)
+            for pid, v in after.items():
+                assert now.get(pid) == v, "point %d changed by the restart: %s -> %s" % (pid, v, now.get(pid))
+            for oi, v in planned_after.items():
+                assert planned_now.get(oi) == v, "planned point %d changed by the restart" % oi
+        L.say("%d kills at (done, planned) points %s" % (kills, seen))
+        row = L.drive_to_end(b, sid, timeout=240, sample="white")
+        L.say("sweep %s after %.1f s" % (row["state"], time.time() - t0))
+        assert row["state"] == "completed", "sweep ended %s" % row["state"]
+        assert kills == KILLS, "the sweep completed after only %d kills: make it longer" % kills
+        final, planned = snapshot(b, sid)
+        for pid, v in before.items():
+            assert final.get(pid) == v, "point %d recorded before the last kill changed: %s -> %s" % (pid, v, final.get(pid))
+        n, _ = L.check_points(b, sid, max_exposures=1)
+        rows, why = A.check_decisions(b, sid)
+        A.no_repeats(b, sid)
+        assert why.startswith("budget spent") and n == BUDGET, "stopped after %d points: %s" % (n, why)
+        db = b.db()
+        resumes = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'resume'", (sid,)).fetchone()[0]
+        db.close()
+        L.say("%d points, %d batches after %d kills (%d resume events): %s" % (n, len(rows) - 2, kills, resumes, why))
+        assert resumes >= kills, "fewer resumes (%d) than kills (%d)" % (resumes, kills)
+    finally:
+        b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
+
+
+if __name__ == "__main__":
+    L.main(run)

@@ -1,0 +1,73 @@
+#!/usr/bin/python3
+"""An adaptive sweep on the simulated bench that stops on its target: the white reference material, a target on
+the σ of the DHR at 8° (0.006) that the seed alone does not reach and a budget far beyond what it needs. Checks: it
+stops saying "target met" with the value at or below the threshold, after at least one chosen batch and well
+within the budget; the values it stored are select's; and the stored decisions replay: brdf-recon select run again
+on a batch's recorded model and candidates picks the same candidates in the same order. Then a second sweep with an
+unreachable target and only 6 candidate directions stops on "nothing reachable left" before its budget."""
+import json
+import os
+import subprocess
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import adaptlib as A  # noqa: E402
+import sweeplib as L  # noqa: E402
+
+LE = 0.006
+BUDGET = 60
+
+
+def run():
+    b = A.bench()
+    try:
+        b.start_sim()
+        b.start_daemon()
+        sid = L.start_sweep(b, A.plan(target="dhr_sigma: {incidence_deg: [8], le: %g}" % LE,
+                                      budget="points: %d" % BUDGET), "it-adaptive-target")
+        t0 = time.time()
+        row = L.drive_to_end(b, sid, timeout=240, sample="white")
+        assert row["state"] == "completed", row["state"]
+        rows, why = A.check_decisions(b, sid)
+        n, _ = L.check_points(b, sid, max_exposures=1)
+        A.no_repeats(b, sid)
+        chosen = rows[1:-1]
+        values = [r["target_value"] for r in rows[1:]]
+        L.say("stopped after %.1f s, %d points, %d batches: %s; values %s" % (
+            time.time() - t0, n, len(chosen), why, ["%.4g" % v for v in values]))
+        assert why.startswith("target met"), "stopped: %s" % why
+        assert rows[-1]["target_met"] == 1 and rows[-1]["target_value"] <= LE, rows[-1]
+        assert chosen and all(r["target_value"] > LE for r in chosen), "a batch was chosen with the target met"
+        assert n < BUDGET - 8, "%d points: not well within the budget of %d" % (n, BUDGET)
+        # replay batch 1's decision from its records
+        r1 = chosen[0]
+        bdir = os.path.dirname(os.path.join(b.state, r1["model"]))
+        out = os.path.join(b.dir, "replay.json")
+        p = subprocess.run([os.path.join(L.BUILD, "brdf-recon"), "select", os.path.join(b.state, r1["model"]),
+                            "--candidates", os.path.join(bdir, "candidates.csv"), "--target", r1["target_spec"],
+                            "--batch", "4", "-o", out], capture_output=True, text=True, timeout=120)
+        assert p.returncode == 0, "brdf-recon select: %s" % p.stderr[-2000:]
+        d = json.load(open(out))
+        got = [x["id"] for x in d["picks"]]
+        want = [x["candidate_id"] for x in r1["picks"]]
+        assert got == want, "replayed picks %s, recorded %s" % (got, want)
+        assert abs(d["target"]["value"] - r1["target_value"]) <= 1e-9 * r1["target_value"], (d["target"], r1)
+        L.say("batch 1 replayed: picks %s, value %.6g" % (got, d["target"]["value"]))
+
+        sid = L.start_sweep(b, A.plan(budget="points: %d" % BUDGET, cands="incidence_deg: [40], per_incidence: 6"),
+                            "it-adaptive-exhaust")
+        row = L.drive_to_end(b, sid, timeout=240, sample="white")
+        assert row["state"] == "completed", row["state"]
+        rows, why = A.check_decisions(b, sid)
+        n, _ = L.check_points(b, sid, max_exposures=1)
+        A.no_repeats(b, sid)
+        L.say("second sweep: %d points, %d batches: %s" % (n, len(rows) - 2, why))
+        assert why.startswith("nothing reachable left"), "stopped: %s" % why
+        assert n <= rows[0]["n_points"] + 6 and n < BUDGET, "%d points from 6 candidates" % n
+    finally:
+        b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
+
+
+if __name__ == "__main__":
+    L.main(run)

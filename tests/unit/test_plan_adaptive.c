@@ -1,0 +1,254 @@
+/* Unit tests for the planner's adaptive part (daemon/plan/plan_adaptive.c, plan_make_points): the kind: adaptive
+ * YAML and its located errors, the target as select takes it, the candidates (visible, within the limits,
+ * reachable, never a measured configuration, costed at least their move and exposures), batches ordered from
+ * the arms' position, a stored order replayed, and a batch appended to a plan. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <cmocka.h>
+
+#include "config/bench.h"
+#include "daemon/plan/plan.h"
+
+static const char *const ADAPTIVE = "name: ad\n"
+				    "kind: adaptive\n"
+				    "seed:\n"
+				    "  incidence: {theta_deg: [8, 40]}\n"
+				    "  observation: {fibonacci: {count: 10, max_theta_deg: 80}}\n"
+				    "target: {dhr_sigma: {incidence_deg: [8, 30, 60], le: 0.002}}\n"
+				    "budget: {seconds: 600, points: 60}\n"
+				    "batch: 8\n"
+				    "candidates: {incidence_deg: {from: 0, to: 60, step: 10}, per_incidence: 40}\n"
+				    "integration: {mode: fixed, ms: 20}\n"
+				    "averages: 2\n";
+
+static struct plan_spec *load_ok(const char *text)
+{
+	struct plan_spec *s = NULL;
+	struct acq_err err = { 0 };
+	int rc = plan_load_string("t.yaml", text, &s, &err);
+	if (rc)
+		fprintf(stderr, "unexpected error: %s\n", err.msg);
+	assert_int_equal(rc, 0);
+	return s;
+}
+
+static void load_bad(const char *text, const char *want)
+{
+	struct plan_spec *s = NULL;
+	struct acq_err err = { 0 };
+	assert_int_not_equal(plan_load_string("t.yaml", text, &s, &err), 0);
+	assert_null(s);
+	if (!strstr(err.msg, want))
+		fprintf(stderr, "message '%s' lacks '%s'\n", err.msg, want);
+	assert_non_null(strstr(err.msg, want));
+	assert_non_null(strstr(err.msg, "t.yaml:"));
+}
+
+static void test_parse(void **state)
+{
+	(void)state;
+	struct plan_spec *s = load_ok(ADAPTIVE);
+	assert_non_null(s->adaptive);
+	assert_string_equal(s->name, "ad");
+	assert_int_equal(s->n_incidence, 2);
+	assert_int_equal(s->fib_count, 10);
+	assert_int_equal(s->integ_mode, PLAN_INTEG_FIXED);
+	assert_true(s->integ_ms == 20);
+	assert_int_equal(s->averages, 2);
+	const struct plan_adaptive *a = s->adaptive;
+	assert_int_equal(a->target, PLAN_TARGET_DHR_SIGMA);
+	assert_int_equal(a->n_target_inc, 3);
+	assert_true(a->le == 0.002 && a->budget_s == 600 && a->budget_points == 60 && a->batch == 8);
+	assert_int_equal(a->n_cand_inc, 7);
+	assert_int_equal(a->cand_count, 40);
+	char spec[128];
+	plan_adaptive_target_spec(a, spec, sizeof spec);
+	assert_string_equal(spec, "dhr:8,30,60:le=0.002");
+	plan_spec_free(s);
+
+	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
+		    "target: {lnf_sigma: {le: 0.05}}\nbudget: {points: 20}\nbatch: 4\n");
+	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
+	assert_string_equal(spec, "lnf:le=0.05");
+	assert_int_equal(s->adaptive->n_cand_inc, 15); /* the default candidates: 0..70 every 5 */
+	assert_true(s->adaptive->budget_s == 0);
+	plan_spec_free(s);
+	/* the other kinds, named */
+	s = load_ok("kind: grid\nincidence: {theta_deg: 30}\nobservation: {theta_deg: 40, phi_deg: 0}\n");
+	assert_null(s->adaptive);
+	plan_spec_free(s);
+}
+
+static void test_errors(void **state)
+{
+	(void)state;
+	const char *seed = "seed: {incidence: {theta_deg: 30}, observation: {fibonacci: {count: 5}}}\n";
+	char buf[1024];
+	snprintf(buf, sizeof buf, "kind: adaptive\n%sbudget: {points: 20}\nbatch: 4\n", seed);
+	load_bad(buf, "missing key 'target'");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbatch: 4\n", seed);
+	load_bad(buf, "missing key 'budget'");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {}\nbatch: 4\n", seed);
+	load_bad(buf, "give 'seconds'");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}, dhr_sigma: {incidence_deg: 8, le: 1}}\n"
+		 "budget: {points: 9}\nbatch: 4\n", seed);
+	load_bad(buf, "exactly one of");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\n", seed);
+	load_bad(buf, "batch");
+	load_bad("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {fibonacci: {count: 5}}, averages: 2}\n"
+		 "target: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n", "belongs at the top");
+	load_bad("kind: adaptive\nseed: {kind: adaptive}\ntarget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n",
+		 "cannot seed another");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
+		 "bogus: 1\n", seed);
+	load_bad(buf, "bogus");
+	load_bad("kind: fibonacci\nincidence: {theta_deg: 30}\nobservation: {theta_deg: 40, phi_deg: 0}\n",
+		 "kind fibonacci needs");
+	load_bad("kind: spiral\nincidence: {theta_deg: 30}\nobservation: {theta_deg: 40, phi_deg: 0}\n", "kind");
+}
+
+static bool same_config(const struct plan_pos *a, const struct plan_pos *b)
+{
+	double va[3] = { sin(a->det_theta * M_PI / 180) * cos(a->det_phi * M_PI / 180),
+			 sin(a->det_theta * M_PI / 180) * sin(a->det_phi * M_PI / 180), cos(a->det_theta * M_PI / 180) };
+	double vb[3] = { sin(b->det_theta * M_PI / 180) * cos(b->det_phi * M_PI / 180),
+			 sin(b->det_theta * M_PI / 180) * sin(b->det_phi * M_PI / 180), cos(b->det_theta * M_PI / 180) };
+	return fabs(a->laser_theta - b->laser_theta) < 1e-6 && fabs(va[0] - vb[0]) < 1e-6 && fabs(va[1] - vb[1]) < 1e-6 &&
+	       fabs(va[2] - vb[2]) < 1e-6;
+}
+
+static void test_candidates(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	bench_defaults(&g);
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	struct plan_spec *s = load_ok(ADAPTIVE);
+	struct plan_result *seed = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(plan_make(s, &g, &seed, &err), 0);
+	assert_true(seed->n_steps > 0);
+	struct plan_pos *done = calloc(seed->n_steps, sizeof *done);
+	for (size_t i = 0; i < seed->n_steps; i++)
+		done[i] = seed->steps[i].pos;
+	struct plan_pos from = seed->steps[seed->n_steps - 1].pos;
+	struct plan_cand *c = NULL;
+	size_t n = 0;
+	assert_int_equal(plan_adaptive_candidates(s, &g, &tm, &from, done, seed->n_steps, &c, &n, &err), 0);
+	size_t all = s->adaptive->n_cand_inc * s->adaptive->cand_count;
+	assert_true(n > all / 2 && n <= all);
+	double dwell = s->averages * (s->integ_ms / 1000 + g.readout_s);
+	size_t blind_total = 0;
+	for (size_t i = 0; i < all; i++) {
+		struct plan_pos q;
+		assert_int_equal(plan_adaptive_cand_pos(s, i, &q), 0);
+		blind_total += plan_blind(&g, &q) != 0;
+	}
+	assert_true(blind_total > 0); /* the set reaches into the blind zones: they must be left out */
+	assert_int_equal(plan_adaptive_cand_pos(s, all, &(struct plan_pos){ 0 }), -1);
+	for (size_t i = 0; i < n; i++) {
+		assert_int_equal(plan_blind(&g, &c[i].pos), 0);
+		struct plan_pos q;
+		assert_int_equal(plan_adaptive_cand_pos(s, c[i].id, &q), 0);
+		assert_true(fabs(q.laser_theta - c[i].pos.laser_theta) < 1e-9);
+		for (size_t d = 0; d < seed->n_steps; d++)
+			assert_false(same_config(&q, &done[d]));
+		struct plan_wp w[PLAN_MAX_WP];
+		size_t nw;
+		double mv = plan_move(&g, &from, &c[i].pos, w, &nw);
+		assert_true(mv >= 0);
+		/* the cost: at least the move found and the dwell, and the move is the fastest over the azimuth's turns */
+		assert_true(c[i].cost_s >= mv + dwell - 1e-9);
+		assert_true(c[i].cost_s >= plan_straight_s(&g, &from, &c[i].pos) + dwell - 1e-9);
+	}
+	/* measuring a candidate removes it */
+	struct plan_pos *done2 = realloc(done, (seed->n_steps + 1) * sizeof *done2);
+	done = done2;
+	done[seed->n_steps] = c[0].pos;
+	struct plan_cand *c2 = NULL;
+	size_t n2 = 0;
+	assert_int_equal(plan_adaptive_candidates(s, &g, &tm, &from, done, seed->n_steps + 1, &c2, &n2, &err), 0);
+	assert_int_equal(n2, n - 1);
+	for (size_t i = 0; i < n2; i++)
+		assert_true(c2[i].id != c[0].id);
+	/* the dry run's worst case: the budget's */
+	double ws;
+	size_t wp;
+	plan_adaptive_worst(s, &g, &tm, seed, &ws, &wp);
+	assert_true(ws == 600);
+	assert_int_equal(wp, 60);
+	free(c);
+	free(c2);
+	free(done);
+	plan_result_free(seed);
+	plan_spec_free(s);
+}
+
+static void test_batch_order(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	bench_defaults(&g);
+	struct plan_spec *s = load_ok(ADAPTIVE);
+	struct acq_err err = { 0 };
+	struct plan_pos pts[6] = { { 40, 30, 200 }, { 0, 45, 90 }, { 40, 60, 10 }, { 0, 20, 300 }, { 40, 70, 150 },
+				   { 0, 1, 0 } /* blind at normal incidence: dropped */ };
+	struct plan_pos start = { 40, 60, 20 };
+	struct plan_result *r = NULL;
+	assert_int_equal(plan_make_points(s, &g, pts, 6, &start, &r, &err), 0);
+	assert_int_equal(r->n_steps, 5);
+	assert_int_equal(r->n_dropped, 1);
+	assert_int_equal(r->req[5].status, PLAN_DROPPED);
+	/* from the arms at θL 40: that incidence first (the laser is the slow arm), its first step moves from start */
+	assert_true(r->steps[0].pos.laser_theta == 40);
+	assert_true(r->steps[0].move_s > 0);
+	double from_start = plan_straight_s(&g, &start, &r->steps[0].pos);
+	assert_true(r->steps[0].move_s + r->steps[0].settle_s >= from_start - 1e-9);
+	/* the stored order replayed as it is */
+	struct plan_pos order[5];
+	for (size_t i = 0; i < 5; i++)
+		order[i] = r->steps[4 - i].pos;
+	struct plan_result *f = NULL;
+	assert_int_equal(plan_make_fixed(s, &g, order, 5, &start, &f, &err), 0);
+	assert_int_equal(f->n_steps, 5);
+	for (size_t i = 0; i < 5; i++)
+		assert_memory_equal(&f->steps[i].pos, &order[i], sizeof order[i]);
+	/* appended: indices and predicted times follow */
+	struct plan_result *seed = NULL;
+	assert_int_equal(plan_make(s, &g, &seed, &err), 0);
+	size_t ns = seed->n_steps, nw = seed->n_wps, nr = seed->n_req;
+	double ps = seed->predicted_s;
+	assert_int_equal(plan_result_append(seed, f, &err), 0);
+	assert_int_equal(seed->n_steps, ns + 5);
+	assert_int_equal(seed->n_wps, nw + f->n_wps);
+	for (size_t i = 0; i < 5; i++) {
+		const struct plan_step *st = &seed->steps[ns + i];
+		assert_memory_equal(&st->pos, &order[i], sizeof order[i]);
+		assert_int_equal(st->req, nr + i);
+		assert_int_equal(st->first_wp, nw + f->steps[i].first_wp);
+		assert_true(fabs(st->predicted_start_s - (ps + f->steps[i].predicted_start_s)) < 1e-9);
+	}
+	assert_true(fabs(seed->predicted_s - (ps + f->predicted_s)) < 1e-9);
+	plan_result_free(seed);
+	plan_result_free(f);
+	plan_result_free(r);
+	plan_spec_free(s);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_parse),
+		cmocka_unit_test(test_errors),
+		cmocka_unit_test(test_candidates),
+		cmocka_unit_test(test_batch_order),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
