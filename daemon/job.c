@@ -178,6 +178,10 @@ static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, voi
 		if (cwd && chdir(cwd) < 0)
 			_exit(126);
 		if (child_fn) {
+			/* The daemon's descriptors (its listening sockets, the database) are not this child's: one
+			 * that outlived a killed daemon for a moment would keep its socket answering, and the
+			 * restarted daemon would find it "in use". (exec'd children lose them by O_CLOEXEC.) */
+			close_range(3, ~0U, 0);
 			/* Work done for a client (a dry-run plan) yields the CPU to the daemon and the bench. */
 			if (nice(10) < 0) {
 				/* unchanged priority: still bounded by the deadline */

@@ -148,11 +148,6 @@ static int cand_child(void *arg, int fd)
 	char line[128];
 	struct store *st = NULL;
 	int rows = 0;
-	/* The daemon's descriptors (its listening socket above all) are not this child's: one that outlives a killed
-	 * daemon for a moment must not keep its socket answering, or the restarted daemon finds it "in use". */
-	if (fd > 3)
-		close_range(3, (unsigned)fd - 1, 0);
-	close_range((unsigned)fd + 1, ~0U, 0);
 	if (store_open_reader(r->env->conf->d.database, &st, &err) ||
 	    store_export_csv_file(st, q->sweep_id, r->samples, &rows, &err)) {
 		store_close(st);
