@@ -1,6 +1,7 @@
 /* bench: parse the bench geometry and kinematics section. */
 #include "config/bench.h"
 
+#include <stdio.h>
 #include <string.h>
 
 static const struct bench_axis default_laser_theta = { -5.0, 90.0, 10.0, 20.0, 0.3, 0.02, 0.005 };
@@ -24,9 +25,20 @@ void bench_defaults(struct bench_geom *g)
 	g->safety_margin_deg = 1.0;
 }
 
-static int parse_axis(struct yc_node *map, const char *key, struct bench_axis *a, struct acq_err *err)
+/* The axis under its one name, or under its old name (noted in g->deprecated). */
+static int parse_axis(struct yc_node *map, const char *key, const char *old, struct bench_axis *a,
+		      struct bench_geom *g, struct acq_err *err)
 {
-	struct yc_node *n = yc_get(map, key);
+	struct yc_node *n = yc_get(map, key), *o = yc_get(map, old);
+	if (n && o)
+		return yc_errf(err, o, "bench: %s and its old name %s both given (keep %s)", key, old, key);
+	if (o) {
+		size_t l = strlen(g->deprecated);
+		snprintf(g->deprecated + l, sizeof g->deprecated - l, "%sbench.%s is now bench.%s", l ? "; " : "", old,
+			 key);
+		n = o;
+		key = old;
+	}
 	if (!n)
 		return 0;
 	if (yc_expect_map(n, key, err))
@@ -47,6 +59,7 @@ static int parse_axis(struct yc_node *map, const char *key, struct bench_axis *a
 int bench_parse(struct yc_node *node, struct bench_geom *out, struct acq_err *err)
 {
 	struct bench_geom copy = *out, *g = &copy; /* *out changes only on success */
+	g->deprecated[0] = 0;
 	if (yc_expect_map(node, "bench", err))
 		return -1;
 	if (yc_double(node, "laser_radius_mm", false, 1, 1e4, &g->laser_radius_mm, err) ||
@@ -58,9 +71,9 @@ int bench_parse(struct yc_node *node, struct bench_geom *out, struct acq_err *er
 	    yc_double(node, "fov_halfwidth_deg", false, 0, 45, &g->fov_halfwidth_deg, err) ||
 	    yc_double(node, "readout_s", false, 0, 60, &g->readout_s, err) ||
 	    yc_double(node, "safety_margin_deg", false, 0, 30, &g->safety_margin_deg, err) ||
-	    parse_axis(node, "laser_theta", &g->laser_theta, err) ||
-	    parse_axis(node, "detector_theta", &g->detector_theta, err) ||
-	    parse_axis(node, "detector_phi", &g->detector_phi, err))
+	    parse_axis(node, "laser.theta", "laser_theta", &g->laser_theta, g, err) ||
+	    parse_axis(node, "detector.theta", "detector_theta", &g->detector_theta, g, err) ||
+	    parse_axis(node, "detector.phi", "detector_phi", &g->detector_phi, g, err))
 		return -1;
 	if (yc_check_unknown(node, "bench", err))
 		return -1;

@@ -31,11 +31,14 @@ struct bench_geom {
 	struct bench_axis laser_theta, detector_theta, detector_phi;
 	double readout_s;              /* spectrometer read-out overhead per exposure */
 	double safety_margin_deg;      /* planner: added to every blind-zone and collision half-angle */
+	char deprecated[160];          /* old key names the section used (accepted; the caller warns), or "" */
 };
 
 /* Fill g with the example bench's values (config/bench-sim.yaml documents the same numbers). */
 void bench_defaults(struct bench_geom *g);
-/* Parse a `bench:` mapping onto g (absent keys keep their values; g unchanged on error). 0 or -1. */
+/* Parse a `bench:` mapping onto g (absent keys keep their values; g unchanged on error). The axes are keyed by
+ * their one name (laser.theta, detector.theta, detector.phi); the old keys (laser_theta, ...) are accepted and
+ * listed in g->deprecated for the caller to warn about. 0 or -1. */
 int bench_parse(struct yc_node *node, struct bench_geom *g, struct acq_err *err);
 
 #endif

@@ -188,6 +188,8 @@ static int check_config(const char *path, const struct conf_sim *sim)
 	for (int d = 0; d < CONF_DEV__COUNT; d++)
 		if (c->devnote[d][0])
 			printf("note: %s: %s\n", conf_dev_name((enum conf_dev)d), c->devnote[d]);
+	if (c->bench.deprecated[0])
+		printf("warning: deprecated keys (still accepted): %s\n", c->bench.deprecated);
 	printf("%s: ok\n", path);
 	conf_free(c);
 	return 0;
@@ -266,6 +268,8 @@ int main(int argc, char **argv)
 	for (int d = 0; d < CONF_DEV__COUNT; d++)
 		if (app.conf->devnote[d][0])
 			log_msg(LOG_NOTICE, "%s: %s", conf_dev_name((enum conf_dev)d), app.conf->devnote[d]);
+	if (app.conf->bench.deprecated[0])
+		log_msg(LOG_WARNING, "%s: deprecated keys (still accepted): %s", conf_path, app.conf->bench.deprecated);
 	if (mkdir_p(app.conf->d.state_dir, 0750) < 0) {
 		log_msg(LOG_ERR, "%s: %s", app.conf->d.state_dir, strerror(errno));
 		goto out_conf;

@@ -219,8 +219,10 @@ static void cmd_move(struct app *app, const struct srv_peer *peer, struct proto_
 		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: pause is not enough, abort it before moving by hand");
 		return reply_err(app, peer, req->id, &err);
 	}
-	double t[3] = { num_arg(req->root, "laser_theta", NAN), num_arg(req->root, "detector_theta", NAN),
-			num_arg(req->root, "detector_phi", NAN) };
+	/* the axes' one name (laser.theta), or the old one (laser_theta) an older client sends */
+	double t[3] = { num_arg(req->root, "laser.theta", num_arg(req->root, "laser_theta", NAN)),
+			num_arg(req->root, "detector.theta", num_arg(req->root, "detector_theta", NAN)),
+			num_arg(req->root, "detector.phi", num_arg(req->root, "detector_phi", NAN)) };
 	const char *warning;
 	if (move_check(app, t, &warning, &err))
 		return reply_err(app, peer, req->id, &err);
@@ -377,7 +379,7 @@ static void cmd_home(struct app *app, const struct srv_peer *peer, struct proto_
 			mask = 1u << i;
 	}
 	if (!mask) {
-		acq_errf(&err, ACQ_E_INVAL, "home: unknown axis \"%s\" (laser_theta, detector_theta, detector_phi or all)",
+		acq_errf(&err, ACQ_E_INVAL, "home: unknown axis \"%s\" (laser.theta, detector.theta, detector.phi or all)",
 			 axis);
 		return reply_err(app, peer, req->id, &err);
 	}

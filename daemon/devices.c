@@ -225,6 +225,14 @@ static void set_identity(struct dev_slot *s, const char *vendor, const char *mod
 	snprintf(s->firmware, sizeof s->firmware, "%s", fw);
 }
 
+/* A device's note without its own name in front (drivers name the device in their errors; the note is shown and
+ * logged after the name already: "laser.theta: cannot connect", not "laser.theta: laser.theta: ..."). */
+static const char *unnamed(int d, const char *msg)
+{
+	size_t n = strlen(dname(d));
+	return !strncmp(msg, dname(d), n) && msg[n] == ':' && msg[n + 1] == ' ' ? msg + n + 2 : msg;
+}
+
 static void opened(struct devices *dv, struct req *r)
 {
 	struct dev_slot *s = &dv->slot[r->d];
@@ -232,8 +240,9 @@ static void opened(struct devices *dv, struct req *r)
 	if (r->gen != s->gen)
 		return; /* closed since (reload): the close queued after it ends that handle */
 	if (r->rc) {
-		bool changed = strcmp(s->note, r->err.msg) != 0;
-		snprintf(s->note, sizeof s->note, "%s", r->err.msg);
+		const char *msg = unnamed(r->d, r->err.msg);
+		bool changed = strcmp(s->note, msg) != 0;
+		snprintf(s->note, sizeof s->note, "%s", msg);
 		if (changed && dv->notify)
 			dv->notify(dv->ctx, (enum conf_dev)r->d, false, s->note);
 		return;
@@ -296,9 +305,12 @@ static void req_done(struct port_req *pr)
 		dv->keepalive_pending = false;
 		if (r->rc)
 			log_msg(LOG_WARNING, "laser keep-alive: %s (emission switched off)", r->err.msg);
-	} else if (r->owner == OWN_MGR && r->rc && (r->op == R_LASER || r->op == R_STOP))
-		log_msg(LOG_ERR, "safe stop: %s: %s not confirmed: %s", dname(r->d),
+	} else if (r->owner == OWN_MGR && r->rc && (r->op == R_LASER || r->op == R_STOP)) {
+		/* the driver's message names the device already ("detector.theta (unit 1 @ ...): link is down") */
+		bool named = !strncmp(r->err.msg, dname(r->d), strlen(dname(r->d)));
+		log_msg(LOG_ERR, "safe stop: %s%s%s not confirmed: %s", named ? "" : dname(r->d), named ? "" : ": ",
 			r->op == R_LASER ? "laser emission off" : "stop", r->err.msg);
+	}
 	free(r->frame);
 	free(r);
 }
@@ -349,7 +361,7 @@ static void open_all(struct devices *dv)
 		}
 		struct acq_err err = { 0 };
 		if (port_new(dv->lp, dname(d), &s->port, &err)) {
-			snprintf(s->note, sizeof s->note, "%s", err.msg);
+			snprintf(s->note, sizeof s->note, "%s", unnamed(d, err.msg));
 			continue;
 		}
 		try_open(dv, d);
@@ -474,6 +486,7 @@ void devices_lost(struct devices *dv, enum conf_dev d, const char *why)
 	s->gen++; /* what is still running for the old handle is dropped when it completes */
 	free(s->x.frame);
 	memset(&s->x, 0, sizeof s->x);
+	why = unnamed(d, why);
 	snprintf(s->note, sizeof s->note, "%s", why);
 	if (s->port) {
 		port_interrupt(s->port);

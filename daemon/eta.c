@@ -1,9 +1,11 @@
 /* eta: remaining wall-clock time of a sweep (see eta.h). The planner's figure is in bench seconds: it is
  * divided by the measured ratio of the loop's clock to the real one (the simulator's time scale, 1 on a real
- * bench), then multiplied by how much longer (or shorter) than planned the measured points took, in running
- * time only, with the weight n/(n + 5) after n measured points (the plan alone at first; a few points already
- * correct a poor estimate, such as an auto-exposure plan's integration estimate). Without a plan: the measured
- * time per point times the points left. */
+ * bench); then every point left gets the time per point the sweep has measured beyond the plan (running time
+ * only), with the weight n/(n + 5) after n measured points (the plan alone at first). The excess is added per
+ * point, not as a ratio: what the plan misses is a cost per point (the host's time, which a loaded machine
+ * stretches; an auto-exposure sample that needs longer exposures than the plan's estimate, and the darks and
+ * HDR exposures that follow), whereas a ratio would also stretch the long moves the plan times well.
+ * Without a plan: the measured time per point times the points left. */
 #include "daemon/eta.h"
 
 #include <math.h>
@@ -57,6 +59,7 @@ double eta_update(struct eta *e, int done, int total, double plan_at_s, double p
 	if (e->measured <= 0 || !(e->run_plan > 0))
 		return plan_left;
 	double w = e->measured / (e->measured + ETA_PLAN_WEIGHT);
-	double ratio = e->run_real / (e->run_plan / e->scale);
-	return plan_left * ((1 - w) + w * ratio);
+	double excess = (e->run_real - e->run_plan / e->scale) / e->measured; /* real s per point beyond the plan */
+	double t = plan_left + w * excess * left;
+	return t > 0 ? t : 0;
 }

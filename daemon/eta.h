@@ -1,5 +1,6 @@
 /* eta: a sweep's remaining time in wall-clock seconds at any time scale — the planner's prediction of the rest,
- * scaled by how the sweep has kept to the prediction so far (paused or faulted time does not count). */
+ * plus the time per point the sweep has taken beyond the prediction so far (paused or faulted time does not
+ * count). */
 #ifndef ETA_H
 #define ETA_H
 

@@ -239,7 +239,13 @@ void ex_fault(struct ex *x, int dev, const struct acq_err *err)
 {
 	x->stats.faults++;
 	memset(x->pos_got, 0, sizeof x->pos_got);
-	snprintf(x->fault_msg, sizeof x->fault_msg, "%s", err && err->msg[0] ? err->msg : "device error");
+	/* the device's name once (the event's device, the log's prefix): drivers may put it in front of their
+	 * message already ("detector.theta: ...", "detector.theta (unit 1 @ host): link is down") */
+	const char *msg = err && err->msg[0] ? err->msg : "device error", *nm = ex_dev_names[dev];
+	size_t nl = strlen(nm);
+	if (!strncmp(msg, nm, nl) && (msg[nl] == ':' || msg[nl] == ' ') && msg[nl + 1])
+		msg += nl + (msg[nl] == ':' ? 2 : 1);
+	snprintf(x->fault_msg, sizeof x->fault_msg, "%s", msg);
 	x->fault_dev = dev;
 	if (x->ops.lost)
 		x->ops.lost(x->octx, dev, err);
@@ -251,8 +257,7 @@ void ex_fault(struct ex *x, int dev, const struct acq_err *err)
 		x->known_valid = false;
 	if (dev == EX_DEV_LASER)
 		x->power_set = false;
-	ex_event(x, "fault", ex_dev_names[dev], "%s: %s (%s)", ex_dev_names[dev], x->fault_msg,
-	      acq_errname(err ? err->code : ACQ_E_DEVICE));
+	ex_event(x, "fault", nm, "%s (%s)", x->fault_msg, acq_errname(err ? err->code : ACQ_E_DEVICE));
 	if (err && (err->code == ACQ_E_RANGE || err->code == ACQ_E_INVAL || err->code == ACQ_E_UNSUPPORTED)) {
 		/* Not a device that went away: retrying cannot help. */
 		ex_pause_now(x, true, "%s refused the operation at point %d: %s; fix the plan or the limits, then resume",

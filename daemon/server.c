@@ -251,7 +251,9 @@ static void handle_line(struct client *c, const char *line, size_t len)
 	}
 	if (req.def->role > c->peer.role) {
 		char msg[160];
-		snprintf(msg, sizeof msg, "%s needs a controller; uid %u is an observer", req.cmd, (unsigned)c->peer.uid);
+		char words[64];
+		snprintf(msg, sizeof msg, "%s needs a controller; uid %u is an observer",
+			 proto_cmd_words(req.cmd, words, sizeof words), (unsigned)c->peer.uid);
 		send_error(c, req.id, PROTO_E_FORBIDDEN, msg);
 	} else if (!strcmp(req.cmd, "watch")) {
 		c->watch = true;

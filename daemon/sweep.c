@@ -289,9 +289,12 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
 	plan_timing_defaults(t);
 	t->extra_settle_s = sw->cfg.extra_settle_s;
 	t->probe_ms = sw->cfg.pol.probe_ms;
+	t->min_ms = sw->cfg.pol.min_ms;
+	t->ladder_ratio = sw->cfg.ladder_ratio;
 	t->exposure_overhead_s = sw->cfg.poll_s / 2;
 	t->dark_averages = (int)sw->cfg.pol.dark_averages;
 	t->dark_every = sw->cfg.dark_every;
+	t->dark_max_age_s = sw->cfg.pol.dark_max_age_s;
 	t->reference = sw->cfg.take_reference;
 	t->ref_pose = sw->cfg.ref_pose;
 	if (sw->env.conf->have_sim && sw->env.conf->sim.time_scale > 0)

@@ -53,10 +53,7 @@ static const char *positional_key(const char *cmd)
 
 static void cmd_words(const char *name, char *buf, size_t cap)
 {
-	snprintf(buf, cap, "%s", name);
-	for (char *p = buf; *p; p++)
-		if (*p == '.')
-			*p = ' ';
+	proto_cmd_words(name, buf, cap);
 }
 
 static void usage_cmd(FILE *f, const struct proto_cmd *c)
@@ -68,7 +65,7 @@ static void usage_cmd(FILE *f, const struct proto_cmd *c)
 	if (pk)
 		fprintf(f, " %s", pk[0] == '@' ? "FILE" : !strcmp(pk, "axis") ? "[AXIS]" : "ID");
 	for (int i = 0; i < c->nargs; i++) {
-		if (pk && !strcmp(pk + (pk[0] == '@'), c->args[i].name))
+		if ((pk && !strcmp(pk + (pk[0] == '@'), c->args[i].name)) || c->args[i].alias_of)
 			continue;
 		fprintf(f, " %s%s=…%s", c->args[i].required ? "" : "[", c->args[i].name, c->args[i].required ? "" : "]");
 	}
@@ -183,7 +180,9 @@ static int set_arg(json_t *req, const struct proto_cmd *def, const char *key, co
 			return json_object_set_new(req, key, json_string(v));
 		}
 	}
-	return acq_errf(err, ACQ_E_INVAL, "%s: not an argument of %s (acqctl %s --help)", key, def->name, def->name);
+	char name[64];
+	cmd_words(def->name, name, sizeof name);
+	return acq_errf(err, ACQ_E_INVAL, "%s: not an argument of %s (acqctl %s --help)", key, name, name);
 }
 
 /* ---- talking to the daemon ---- */
@@ -677,18 +676,26 @@ int main(int argc, char **argv)
 			goto out;
 		}
 		*eq = 0;
-		for (char *k = words[wi]; *k; k++) /* one name per axis: laser.theta= is laser_theta= */
-			if (*k == '.')
-				*k = '_';
-		if (set_arg(req, def, words[wi], eq + 1, &err)) {
+		const char *key = words[wi];
+		for (int i = 0; i < def->nargs; i++) /* an old name (laser_theta=) is sent as the one name (laser.theta=) */
+			if (def->args[i].alias_of && !strcmp(key, def->args[i].name))
+				key = def->args[i].alias_of;
+		if (json_object_get(req, key)) {
+			rc = fail(CTL_EXIT_USAGE, "usage", "%s given twice%s%s%s", key, strcmp(key, words[wi]) ? " (as " : "",
+				  strcmp(key, words[wi]) ? words[wi] : "", strcmp(key, words[wi]) ? " too)" : "");
+			goto out;
+		}
+		if (set_arg(req, def, key, eq + 1, &err)) {
 			rc = fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
 			goto out;
 		}
 	}
 	for (int i = 0; i < def->nargs; i++)
 		if (def->args[i].required && !json_object_get(req, def->args[i].name)) {
-			rc = fail(CTL_EXIT_USAGE, "usage", "%s: missing %s (acqctl %s --help)", def->name, def->args[i].name,
-				  words[0]);
+			char name[64];
+			cmd_words(def->name, name, sizeof name);
+			rc = fail(CTL_EXIT_USAGE, "usage", "%s: missing %s (acqctl %s --help)", name, def->args[i].name,
+				  name);
 			goto out;
 		}
 	if (!strcmp(cmd, "plan") && O.points)

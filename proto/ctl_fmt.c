@@ -364,7 +364,7 @@ void ctl_print_plan(FILE *f, json_t *r)
 	ctl_fmt_angle(num(tr, "laser_theta"), t0, sizeof t0);
 	ctl_fmt_angle(num(tr, "detector_theta"), t1, sizeof t1);
 	ctl_fmt_angle(num(tr, "detector_phi"), t2, sizeof t2);
-	fprintf(f, "  travel: laser_theta %s, detector_theta %s, detector_phi %s\n", t0, t1, t2);
+	fprintf(f, "  travel: laser.theta %s, detector.theta %s, detector.phi %s\n", t0, t1, t2);
 	json_t *steps = json_object_get(r, "steps");
 	size_t limit = json_is_array(steps) ? (size_t)-1 : 20, listed = 0, i;
 	json_t *q;

@@ -86,10 +86,11 @@ int proto_lines_next(struct proto_lines *pl, char **line, size_t *len)
 }
 
 /* ---- command table ---- */
-#define S(n, req, maxlen) { n, PROTO_T_STRING, req, 0, maxlen }
-#define I(n, req, lo, hi) { n, PROTO_T_INT, req, lo, hi }
-#define N(n, req, lo, hi) { n, PROTO_T_NUMBER, req, lo, hi }
-#define B(n, req) { n, PROTO_T_BOOL, req, 0, 0 }
+#define S(n, req, maxlen) { n, PROTO_T_STRING, req, 0, maxlen, NULL }
+#define I(n, req, lo, hi) { n, PROTO_T_INT, req, lo, hi, NULL }
+#define N(n, req, lo, hi) { n, PROTO_T_NUMBER, req, lo, hi, NULL }
+#define B(n, req) { n, PROTO_T_BOOL, req, 0, 0, NULL }
+#define NA(n, lo, hi, of) { n, PROTO_T_NUMBER, false, lo, hi, of }
 #define ID_MAX 9007199254740991.0
 
 const struct proto_cmd proto_cmds[] = {
@@ -109,9 +110,11 @@ const struct proto_cmd proto_cmds[] = {
 	{ "sweep.show", PROTO_OBSERVER, "one sweep: state, counts, events (points with points=true)",
 	  { I("sweep", true, 1, ID_MAX), B("points", false) }, 2 },
 	{ "move", PROTO_CONTROLLER, "move arms to absolute angles (degrees), checked against soft limits",
-	  { N("laser_theta", false, -360, 360), N("detector_theta", false, -360, 360),
-	    N("detector_phi", false, -720, 720) }, 3 },
-	{ "home", PROTO_CONTROLLER, "home the arms (all axes, or the one named by axis)", { S("axis", false, 32) }, 1 },
+	  { N("laser.theta", false, -360, 360), N("detector.theta", false, -360, 360),
+	    N("detector.phi", false, -720, 720), NA("laser_theta", -360, 360, "laser.theta"),
+	    NA("detector_theta", -360, 360, "detector.theta"), NA("detector_phi", -720, 720, "detector.phi") }, 6 },
+	{ "home", PROTO_CONTROLLER, "home the arms (all axes, or the one named by axis: laser.theta, detector.theta, "
+	  "detector.phi)", { S("axis", false, 32) }, 1 },
 	{ "stop", PROTO_CONTROLLER, "stop a running manual move, homing or measurement (arms decelerate, laser off)",
 	  { { 0 } }, 0 },
 	{ "laser.off", PROTO_CONTROLLER, "switch the laser emission off now (refused while a sweep is loaded)",
@@ -137,6 +140,15 @@ const struct proto_cmd proto_cmds[] = {
 	{ "reload", PROTO_CONTROLLER, "reload the configuration file (refused while a sweep runs)", { { 0 } }, 0 },
 	{ NULL, 0, NULL, { { 0 } }, 0 },
 };
+
+char *proto_cmd_words(const char *cmd, char *buf, size_t cap)
+{
+	snprintf(buf, cap, "%s", cmd);
+	for (char *p = buf; *p; p++)
+		if (*p == '.')
+			*p = ' ';
+	return buf;
+}
 
 const struct proto_cmd *proto_cmd_find(const char *name)
 {
@@ -207,6 +219,8 @@ int proto_req_parse(const char *line, size_t len, struct proto_req *req, const c
 		*code = PROTO_E_UNKNOWN;
 		return acq_errf(err, ACQ_E_PROTO, "unknown command \"%.64s\" (see acqctl help)", req->cmd);
 	}
+	char words[64];
+	proto_cmd_words(req->cmd, words, sizeof words);
 	const char *key;
 	json_t *v;
 	json_object_foreach(req->root, key, v) {
@@ -217,13 +231,16 @@ int proto_req_parse(const char *line, size_t len, struct proto_req *req, const c
 			if (!strcmp(req->def->args[i].name, key))
 				break;
 		if (i == req->def->nargs)
-			return acq_errf(err, ACQ_E_PROTO, "%s: unknown argument \"%.64s\"", req->cmd, key);
+			return acq_errf(err, ACQ_E_PROTO, "%s: unknown argument \"%.64s\"", words, key);
+		if (req->def->args[i].alias_of && json_object_get(req->root, req->def->args[i].alias_of))
+			return acq_errf(err, ACQ_E_PROTO, "%s: \"%s\" and its old name \"%s\" both given", words,
+					req->def->args[i].alias_of, key);
 		if (check_arg(&req->def->args[i], v, code, err))
-			return acq_err_prefix(err, "%s: ", req->cmd);
+			return acq_err_prefix(err, "%s: ", words);
 	}
 	for (int i = 0; i < req->def->nargs; i++)
 		if (req->def->args[i].required && !json_object_get(req->root, req->def->args[i].name))
-			return acq_errf(err, ACQ_E_PROTO, "%s: missing \"%s\" (%s)", req->cmd, req->def->args[i].name,
+			return acq_errf(err, ACQ_E_PROTO, "%s: missing \"%s\" (%s)", words, req->def->args[i].name,
 					type_name(req->def->args[i].type));
 	*code = NULL;
 	return 0;

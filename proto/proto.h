@@ -55,6 +55,7 @@ struct proto_arg {
 	enum proto_argtype type;
 	bool required;
 	double min, max;     /* numbers: inclusive range (min == max == 0: any finite); strings: max length */
+	const char *alias_of; /* an old name still accepted for the argument named here (not listed by help) */
 };
 
 struct proto_cmd {
@@ -64,6 +65,9 @@ struct proto_cmd {
 	struct proto_arg args[6];
 	int nargs;
 };
+
+/* The command as the operator types it ("sweep.start" -> "sweep start") into buf. Returns buf. */
+char *proto_cmd_words(const char *cmd, char *buf, size_t cap);
 
 /* The command table, terminated by an entry with name NULL. */
 extern const struct proto_cmd proto_cmds[];

@@ -410,6 +410,8 @@ int main(int argc, char **argv)
 	struct yc_node *bench = yc_get(root, "bench");
 	if (bench && bench_parse(bench, &world.geom, &err))
 		goto out;
+	if (world.geom.deprecated[0])
+		fprintf(stderr, "acq-sim: warning: deprecated keys (still accepted): %s\n", world.geom.deprecated);
 	if (yc_expect_map(devices, "devices", &err))
 		goto out;
 	struct yc_node *maps = yc_get(devices, "register_maps");

@@ -130,9 +130,11 @@ struct plan_timing {
 				     * (half a period), plus one confirmation read after settling */
 	double extra_settle_s;      /* sweep.extra_settle_s after every move */
 	double probe_ms;            /* auto integration: one probe exposure per point */
+	double min_ms, ladder_ratio; /* auto integration: times rounded down to min_ms · ladder_ratio^k (executor) */
 	double exposure_overhead_s; /* per exposure beyond integration + read-out (start, polling, storage) */
 	int dark_averages;          /* exposures per dark */
 	int dark_every;             /* a dark every N points; 0: one per incidence */
+	double dark_max_age_s;      /* and a new dark when the last one is older than this (0: never) */
 	bool reference;             /* a reference (the plan's averages) at the start, at ref_pose, then the move to
 				     * the first point */
 	struct plan_pos ref_pose;

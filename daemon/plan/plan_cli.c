@@ -64,17 +64,20 @@ static const char *find_bench(char *buf, size_t len)
 }
 
 /* The executor's timing from the file's sweep section when it has one (as the daemon reads it): sweep.
- * extra_settle_s, dark_every; sweep.acquisition probe_ms, dark_averages, poll_s, take_reference,
- * reference_pose. Absent keys keep the defaults. 0 or -1. */
+ * extra_settle_s, dark_every, min_integration_ms; sweep.acquisition probe_ms, ladder_ratio, dark_averages, dark_max_age_s, poll_s,
+ * take_reference, reference_pose. Absent keys keep the defaults. 0 or -1. */
 static int load_timing(struct yc_node *root, struct plan_timing *t, struct acq_err *err)
 {
 	struct yc_node *sw = yc_get(root, "sweep"), *acq = sw ? yc_get(sw, "acquisition") : NULL;
 	long long every = t->dark_every, davg = t->dark_averages;
 	double poll = 2 * t->exposure_overhead_s;
 	if (sw && (yc_double(sw, "extra_settle_s", false, 0, 60, &t->extra_settle_s, err) ||
-		   yc_int(sw, "dark_every", false, 0, 100000, &every, err)))
+		   yc_int(sw, "dark_every", false, 0, 100000, &every, err) ||
+		   yc_double(sw, "min_integration_ms", false, 0.002, 600000, &t->min_ms, err)))
 		return -1;
 	if (acq && (yc_double(acq, "probe_ms", false, 1e-3, 1e6, &t->probe_ms, err) ||
+		    yc_double(acq, "ladder_ratio", false, 1.01, 10, &t->ladder_ratio, err) ||
+		    yc_double(acq, "dark_max_age_s", false, 0, 1e7, &t->dark_max_age_s, err) ||
 		    yc_int(acq, "dark_averages", false, 1, 100000, &davg, err) ||
 		    yc_double(acq, "poll_s", false, 1e-4, 10, &poll, err) ||
 		    yc_bool(acq, "take_reference", false, &t->reference, err)))

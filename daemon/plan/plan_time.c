@@ -5,20 +5,26 @@
  * optimises, and it stays as it is. The executor spends more per step, and this model adds it:
  *   - a move is seen finished by polling the controllers: on average half a poll period late, then one more
  *     read confirms the axis stayed in position after settling (1.5 periods), plus sweep.extra_settle_s;
- *   - auto integration: one probe exposure (at the plan's estimate, else probe_ms) before the measurement;
- *   - every exposure (probe, measurement, dark) costs a start/poll/fetch round trip beyond integration and
- *     read-out (exposure_overhead_s);
+ *   - an exposure of n averages at t ms lasts n·t, then the spectrometer's read-out (once per exposure: the
+ *     AvaSpec averages on board and reads out about 10 ms after the last scan, shared/docs/avaspec-usb.md;
+ *     acq-sim does the same), then a start/poll/fetch round trip (exposure_overhead_s, half a poll period);
+ *   - auto integration: the executor rounds every time down to its ladder min_ms · ladder_ratio^k (so that
+ *     darks can be reused), probes once per point at the previous point's time (the first probe at the plan's
+ *     estimate), and takes a dark per new ladder time: with one estimate that is one dark per incidence;
  *   - darks (dark_averages exposures at the point's integration) at each new incidence, or every dark_every
- *     points;
+ *     points, and when the last one is dark_max_age_s old; the first points reuse the reference's dark when
+ *     the integration time is fixed (the executor's dark cache keeps it);
  *   - the host's own time per point (point_overhead_s real seconds: calibration, storage, round trips), which
  *     a simulated bench running time_scale times faster sees time_scale times longer in bench seconds;
  *   - the reference at the start: the move to ref_pose from where the arms are (when known: the daemon knows,
  *     a local dry run does not), probe, dark and the plan's averages there, then the move from ref_pose to
  *     the first point (the first step has no move in the ordering model).
- * In auto mode the integration time is the plan's estimate (integration.estimate_ms): the measurement picks
- * its own, so the prediction is only as good as the estimate; the live ETA then corrects with the measured
- * rate (daemon/eta.c). Not modelled: saturation redos and HDR second exposures (they depend on the sample),
- * fault recovery, the operator's sample swap. */
+ * In auto mode the integration time is the plan's estimate (integration.estimate_ms) on the ladder: the bench
+ * picks each point's own time from the sample's signal, so the prediction is only as good as the estimate
+ * (a sample that needs 3x the estimate makes the sweep several % longer: more integration, a dark per ladder
+ * time it visits, a second HDR exposure where the weak end is faint). The live ETA (daemon/eta.c) adds the
+ * time per point the sweep has measured beyond this model. Not modelled: those sample-dependent extra darks
+ * and HDR exposures, saturation redos, fault recovery, the operator's sample swap. */
 #include "daemon/plan/plan.h"
 
 #include <math.h>
@@ -29,9 +35,12 @@ void plan_timing_defaults(struct plan_timing *t)
 		.axis_poll_s = 0.05,          /* drivers/axis_modbus.c poll_s default */
 		.extra_settle_s = 0,          /* sweep.extra_settle_s default */
 		.probe_ms = 10,               /* daemon/exposure.c probe_ms default */
+		.min_ms = 1,                  /* daemon/conf.c sweep.min_integration_ms default */
+		.ladder_ratio = M_SQRT2,      /* daemon/executor.c ladder_ratio default */
 		.exposure_overhead_s = 0.005, /* executor spectrometer poll 10 ms: half a period per exposure */
 		.dark_averages = 10,          /* exposure.c dark_averages default */
 		.dark_every = 0,
+		.dark_max_age_s = 600,        /* exposure.c dark_max_age_s default */
 		.reference = true,
 		.ref_pose = { 0.0, 45.0, 180.0 }, /* executor.c reference_pose default */
 		/* measured on the shared 2-core development machine (tests/bench/bench_duration.py, the paper plan
@@ -64,35 +73,66 @@ int plan_pose_parse(const struct yc_node *n, const char *what, struct plan_pos *
 	return 0;
 }
 
+/* The executor's integration ladder (executor_acq.c quantize): rounded down to min_ms · ratio^k, within
+ * [min_ms, max_ms]. */
+static double ladder(const struct plan_timing *t, double ms, double max_ms)
+{
+	double r = t->ladder_ratio > 1.0001 ? t->ladder_ratio : M_SQRT2;
+	if (!(t->min_ms > 0) || !(ms > t->min_ms))
+		return t->min_ms > 0 ? t->min_ms : ms;
+	if (max_ms > 0 && ms >= max_ms)
+		return max_ms;
+	double k = floor(log(ms / t->min_ms) / log(r) + 1e-9);
+	return t->min_ms * pow(r, k);
+}
+
+/* One exposure of n averages at ms: integration, one read-out, the round trip. */
+static double shot(const struct bench_geom *g, const struct plan_timing *t, double n, double ms)
+{
+	return n * ms / 1000.0 + g->readout_s + t->exposure_overhead_s;
+}
+
 void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
 		     struct plan_result *r)
 {
-	double integ = s->integ_ms / 1000.0, ro = g->readout_s, ovh = t->exposure_overhead_s;
 	bool aut = s->integ_mode == PLAN_INTEG_AUTO;
-	/* the executor probes at the plan's estimate when it gives one (sweep.c), else at probe_ms */
-	double probe_ms = s->integ_ms > 0 ? s->integ_ms : t->probe_ms;
-	double probe = aut && probe_ms > 0 ? probe_ms / 1000.0 + ro + ovh : 0;
-	double meas = (double)s->averages * (integ + ro) + ovh;
-	double dark = (double)t->dark_averages * (integ + ro) + ovh;
-	double clock = 0;
+	/* the executor's first probe is at the plan's estimate when it gives one (sweep.c), else at probe_ms;
+	 * the next ones at the previous point's time */
+	double est_ms = s->integ_ms > 0 ? s->integ_ms : t->probe_ms;
+	double ms = aut ? ladder(t, est_ms, s->max_integ_ms) : s->integ_ms;
+	double first_probe = aut ? shot(g, t, 1, est_ms) : 0, probe = aut ? shot(g, t, 1, ms) : 0;
+	double meas = shot(g, t, s->averages, ms);
+	double dark = shot(g, t, t->dark_averages, ms);
+	double clock = 0, dark_at = -INFINITY;
 	r->reference_s = r->darks_s = 0;
 	if (r->n_steps > 0) {
 		/* from where the arms are (when known) to the reference pose, the reference, then to the first point */
 		const struct plan_pos *first = &r->steps[0].pos;
 		if (t->have_start)
 			r->reference_s += move_time(g, t, &t->start, t->reference ? &t->ref_pose : first);
-		if (t->reference)
-			r->reference_s += probe + dark + meas + move_time(g, t, &t->ref_pose, first);
+		if (t->reference) {
+			r->reference_s += first_probe;
+			dark_at = r->reference_s; /* fixed integration: the first points use the reference's dark */
+			r->reference_s += dark + meas + move_time(g, t, &t->ref_pose, first);
+		}
 		clock = r->reference_s;
 	}
 	for (size_t i = 0; i < r->n_steps; i++) {
 		struct plan_step *st = &r->steps[i];
 		bool moves = st->move_s + st->settle_s > 0;
-		bool new_dark = t->dark_every > 0 ? i % (size_t)t->dark_every == 0
-						  : i == 0 || st->pos.laser_theta != r->steps[i - 1].pos.laser_theta;
-		double d = st->move_s + st->settle_s + (moves ? 1.5 * t->axis_poll_s + t->extra_settle_s : 0) + probe + meas +
-			   (new_dark ? dark : 0) + t->point_overhead_s * t->time_scale;
+		/* the first point: the reference's dark when it has the same integration time (fixed); then every
+		 * dark_every points or at each new incidence, and when the last dark has aged */
+		bool new_dark = i == 0 ? aut || !t->reference
+			      : t->dark_every > 0 ? i % (size_t)t->dark_every == 0
+						  : st->pos.laser_theta != r->steps[i - 1].pos.laser_theta;
+		if (t->dark_max_age_s > 0 && clock - dark_at >= t->dark_max_age_s)
+			new_dark = true;
+		double d = st->move_s + st->settle_s + (moves ? 1.5 * t->axis_poll_s + t->extra_settle_s : 0) +
+			   (i == 0 && !t->reference ? first_probe : probe) + meas + (new_dark ? dark : 0) +
+			   t->point_overhead_s * t->time_scale;
 		r->darks_s += new_dark ? dark : 0;
+		if (new_dark)
+			dark_at = clock + d - meas - t->point_overhead_s * t->time_scale; /* taken before the exposure */
 		st->predicted_start_s = clock;
 		st->predicted_s = d;
 		clock += d;

@@ -18,7 +18,7 @@ static const char select_help[] =
 	"  --candidates CAND.csv  header id,theta_i,phi_i,theta_o,phi_o,cost_s (degrees, sample frame; cost_s > 0:\n"
 	"                         bench seconds to measure the pair from the arms' current position); id an integer.\n"
 	"                         A pair and its reciprocal (or any pair equal up to rotation/mirror) count once,\n"
-	"                         at the cheaper cost\n"
+	"                         at the cheaper cost; at most 50000 rows\n"
 	"  --target SPEC          dhr:8,30,60  sigma of the DHR at those incidences (degrees), RMS over the model's\n"
 	"                                      wavelengths; the value is the largest incidence's\n"
 	"                         lnf          largest posterior sigma of ln f (RMS over wavelengths) over the grid\n"
@@ -54,6 +54,10 @@ static void json_num(FILE *f, double v)
 	else
 		fputs("null", f);
 }
+
+/* The command's limit on the candidate file (the library's memory is ~(1536 + 2n + 128·incidences) × 8 bytes per
+ * distinct candidate: 100000 candidates of a 550-direction model ≈ 2.5 GB would be refused by it anyway). */
+#define SELECT_MAX_CANDIDATES 50000
 
 static int cmp_id(const void *a, const void *b)
 {
@@ -157,6 +161,11 @@ int cmd_select(int argc, char **argv)
 			return bad_input(&err);
 		nc = 0; /* no candidates: the target's value, no pick */
 		rows = NULL;
+	}
+	if (nc > SELECT_MAX_CANDIDATES) {
+		free(rows);
+		acq_errf(&err, ACQ_E_RANGE, "%s: %zu candidates, at most %d", candp, nc, SELECT_MAX_CANDIDATES);
+		return bad_input(&err);
 	}
 	double *ang = malloc((nc ? nc : 1) * 4 * sizeof *ang), *cost = malloc((nc ? nc : 1) * sizeof *cost);
 	double *ids = malloc((nc ? nc : 1) * sizeof *ids);

@@ -10,6 +10,7 @@ at the picks, 1 % noise, sigma columns as --grid writes them), appended and refi
 ACQ_ADAPT_POINTS points. Against: the fixed grids 4x5x8 and 6x6x8 (`--grid`), and the paper's 10x10x10.
 Figures per point count: the largest |DHR - truth| over wavelengths at 8/30/60 deg (the exact DHR from
 `acq-sim truth --dhr`), and the RMS over wavelengths of the DHR's sigma at 8 deg.
+Time to accuracy: the points adaptive needs to reach each grid's error.
 Honesty of the prediction: after each batch, select's predicted sigma (predicted_per_after of its last pick)
 against the sigma obtained after measuring and refitting (ratio obtained/predicted per incidence), and the
 RMS over wavelengths of (DHR - truth) / predicted sigma ("z").
@@ -142,11 +143,14 @@ def main():
             while True:
                 err, s8, m, sig = dhr_figures(d, mdl, truth)
                 if pred is not None:  # honesty of the last batch's prediction
+                    hon = []
                     for i, th in enumerate(TH):
                         obt = float(np.sqrt(np.mean(sig[th] ** 2)))
                         ratios.append(obt / pred[i])
                         e = m["dhr"][m["theta_i"] == th] - truth[th]
                         zs.append(float(np.sqrt(np.mean(e ** 2))) / pred[i])
+                        hon.append("%g: %.3g/%.3g" % (th, obt, pred[i]))
+                    print("    sigma obtained/predicted after the batch: " + ", ".join(hon))
                 npts = len(rows)
                 rec.append((mat, seed, "adaptive", npts, err, s8))
                 print("%-12s seed %d adaptive  %4d points: max |DHR err| 8/30/60 %.4f %.4f %.4f, sigma(8) %.4f"
@@ -206,6 +210,18 @@ def main():
             else:
                 print("  %-12s %4d points: grid %-9s err %.4f sigma8 %.4f | adaptive: not run that far"
                       % (mat, n, grid, ge, gs))
+    print("\nTime to accuracy: points (x %.0f s) adaptive needs to reach each grid's largest DHR error, per seed:"
+          % POINT_S)
+    for mat in MATS:
+        for grid in ("4x5x8", "6x6x8", "10x10x10"):
+            out = []
+            for seed in range(1, NSEEDS + 1):
+                g = [r for r in rec if r[0] == mat and r[1] == seed and r[2] == "grid " + grid]
+                ad = [r[3] for r in rec if r[0] == mat and r[1] == seed and r[2] == "adaptive"
+                      and max(r[4].values()) <= max(g[0][4].values())] if g else []
+                out.append("%d" % ad[0] if ad else ">%d" % NPTS)
+            n = [r[3] for r in rec if r[0] == mat and r[2] == "grid " + grid]
+            print("  %-12s grid %-9s (%d points): adaptive %s" % (mat, grid, n[0] if n else 0, " / ".join(out)))
     if ratios:
         r, z = np.array(ratios), np.array(zs)
         print("\nprediction honesty over %d (batch, incidence): sigma obtained / predicted median %.3g, 10-90 %% "

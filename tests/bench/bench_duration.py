@@ -4,12 +4,19 @@
 For each case (plan, time scale), acq-sim + acquisitiond run the sweep the way an operator does (white reference,
 pause, sample, resume) while `acqctl watch` (JSON lines) records every progress event. Reported:
 - predicted: `acqctl plan --json` predicted_s (bench seconds; reference, darks and executor overheads included);
-- measured: bench seconds from the sweep's start to its completion, the operator's pause taken out
-  (wall seconds x time scale);
-- the ETA's error at 25, 50 and 75 % of the points: (eta_s at that point) / (wall seconds actually left) - 1.
-Cases: two small plans at time scale 1 (fixed and auto integration) and the paper's 10x10x10 at the demo's
-time scale 35 (BENCH_DURATION_QUICK=1: the small fixed one only). Writes duration.csv under $ACQ_BENCH_OUT."""
+- measured: bench seconds from the sweep's start to its completion as the daemon recorded them (sweeps.started_at,
+  finished_at: wall clock), the operator's pause (pause to resume events) taken out, times the time scale;
+- the ETA's error at 25, 50 and 75 % of the points: (eta_s at that point) / (wall seconds actually left to the
+  daemon's finished_at) - 1.
+Cases: the small plan (config/plan-quick.yaml) with fixed integration at time scales 1 and 10, with auto
+integration at time scale 1 (its estimate 20 ms), then again with the estimate set to the median integration time
+the bench chose in that sweep (`-repeat`: an operator repeating a sample); the paper's 10x10x10 (auto, estimate
+50 ms) at the demo's time scale 35, and its repeat. BENCH_DURATION_QUICK=1: the small fixed one only;
+BENCH_DURATION_CASES=a,b: those cases (name@scale for one time scale; name a repeat with the case before it).
+BENCH_DURATION_TABLE=S instead: the README trade table's plans at time scale S (duration_table.csv; see table()). Writes duration.csv under
+$ACQ_BENCH_OUT."""
 import csv
+import re
 import json
 import os
 import subprocess
@@ -46,10 +53,8 @@ def run_case(name, plan_text, scale):
         th = threading.Thread(target=reader, daemon=True)
         th.start()
         time.sleep(0.3)
-        t0 = time.time()
         sid = L.start_sweep(b, plan_text, name)
         row = L.drive_to_end(b, sid, timeout=7200)
-        t1 = time.time()
         time.sleep(0.3)
         w.terminate()
         w.wait(10)
@@ -58,42 +63,111 @@ def run_case(name, plan_text, scale):
         db = b.db()
         ev = {k: at for at, k in db.execute("SELECT at, kind FROM events WHERE sweep_id = ? AND kind IN "
                                             "('pause', 'resume')", (sid,))}
-        db.close()
+        # the integration time the bench chose per point (its first exposure), the darks and exposures taken
+        first = sorted(r[0] for r in db.execute("SELECT min(integration_ms) FROM spectra WHERE sweep_id = ? AND "
+                                                "kind = 'sample' GROUP BY point_id", (sid,)))
+        darks, expos = db.execute("SELECT sum(kind = 'dark'), sum(kind = 'sample') FROM spectra WHERE sweep_id = ? "
+                                  "AND point_id IS NOT NULL", (sid,)).fetchone()
+        started, finished = db.execute("SELECT started_at, finished_at FROM sweeps WHERE id = ?", (sid,)).fetchone()
         paused = max(0.0, ev.get("resume", 0) - ev.get("pause", 0))
-        measured = (t1 - t0 - paused) * scale
+        # the daemon's own wall-clock record (not this script's polling, 0.1 s = 3.5 bench s at time scale 35)
+        measured = (finished - started - paused) * scale
+        db.close()
         prog = [(t, e) for t, e in events if e.get("event") == "sweep.progress" and e.get("sweep") == sid]
         total = row["points_total"]
         eta_err = {}
         for frac in (0.25, 0.5, 0.75):
             for t, e in prog:
                 if e["done"] >= frac * total and e.get("eta_s") is not None:
-                    left = t1 - t
+                    left = finished - t
                     eta_err[frac] = e["eta_s"] / left - 1 if left > 0 else float("nan")
                     break
         return dict(case=name, scale=scale, points=total, predicted_s=pred, measured_s=measured,
                     error=pred / measured - 1, eta25=eta_err.get(0.25), eta50=eta_err.get(0.5),
-                    eta75=eta_err.get(0.75))
+                    eta75=eta_err.get(0.75), median_ms=first[len(first) // 2] if first else None,
+                    darks=darks, exposures=expos)
     finally:
-        b.cleanup()
+        keep = os.environ.get("ACQ_BENCH_KEEP") == "1"
+        if keep:
+            print("bench_duration: %s kept in %s" % (name, b.dir), flush=True)
+        b.cleanup(keep=keep)
+
+
+def with_estimate(text, ms):
+    """The plan with integration.estimate_ms set to ms."""
+    out = re.sub(r"estimate_ms: *[0-9.]+", "estimate_ms: %.4g" % ms, text)
+    assert out != text or "estimate_ms: %.4g" % ms in text
+    return out
+
+
+def table(scale):
+    """The README trade table's plans (bench_tradeoff.plan_yaml: grids N^3 and Fibonacci N x N^2, N = 5, 8, 10, 12, 15;
+    auto integration, estimate 50 ms, 4 averages) measured on the simulated bench at one time scale, with the
+    model's prediction at that time scale (the daemon's) and at time scale 1 (a real bench's pace, local dry run).
+    Writes duration_table.csv."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import bench_tradeoff as T  # noqa: E402 (numpy; only this mode needs it)
+    sizes = [int(x) for x in os.environ.get("BENCH_DURATION_SIZES", "5,8,10,12,15").split(",")]
+    rows = []
+    for n in sizes:
+        for fib in (False, True):
+            name = "%s-%d" % ("fib" if fib else "grid", n)
+            text = T.plan_yaml(name, n, fib)
+            planf = os.path.join(OUT, name + ".yaml")
+            with open(planf, "w") as fh:
+                fh.write(text)
+            p = subprocess.run([CTL, "--json", "plan", planf, "--config", os.path.join(L.SRC, "config", "bench-sim.yaml")],
+                               capture_output=True, text=True, check=True)
+            pred1 = json.loads(p.stdout)["plan"]["predicted_s"]
+            r = run_case(name, text, scale)
+            r["predicted_scale1_s"] = pred1
+            rows.append(r)
+            print("%-8s %4d points  time scale %g: predicted %7.1f s measured %7.1f s (%+5.1f%%)  predicted at "
+                  "time scale 1: %7.1f s (%.1f min)  ETA error 25/50/75 %%: %s" % (
+                      name, r["points"], scale, r["predicted_s"], r["measured_s"], 100 * r["error"], pred1, pred1 / 60,
+                      " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25", "eta50", "eta75"))),
+                  flush=True)
+            with open(os.path.join(OUT, "duration_table.csv"), "w", newline="") as fh:
+                wr = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
+                wr.writeheader()
+                wr.writerows(rows)
+    return 0
 
 
 def main():
     os.makedirs(OUT, exist_ok=True)
+    if os.environ.get("BENCH_DURATION_TABLE"):
+        return table(float(os.environ["BENCH_DURATION_TABLE"]))
+    # (name, plan, time scale); None as the plan: the previous case's plan with the estimate set to the median
+    # integration time the bench chose in it (an operator repeating a sample with what the last sweep showed)
     cases = [("quick-fixed", FIXED, 1.0)]
     if os.environ.get("BENCH_DURATION_QUICK") != "1":
-        cases += [("quick-auto", QUICK, 1.0), ("paper-10x10x10", PAPER, 35.0)]
+        cases += [("quick-fixed", FIXED, 10.0), ("quick-auto", QUICK, 1.0), ("quick-auto-repeat", None, 1.0),
+                  ("paper-10x10x10", PAPER, 35.0), ("paper-repeat", None, 35.0)]
+    only = os.environ.get("BENCH_DURATION_CASES")
+    if only:
+        want = only.split(",")
+        cases = [c for c in cases if c[0] in want or "%s@%g" % (c[0], c[2]) in want]
     rows = []
+    prev = None
     for name, text, scale in cases:
+        if text is None:
+            if not prev or not prev[1].get("median_ms"):
+                continue
+            text = with_estimate(prev[0], prev[1]["median_ms"])
         try:
             r = run_case(name, text, scale)
         except L.Skip as e:
             print("bench_duration: skip: %s" % e)
             return 0
+        prev = (text, r)
         rows.append(r)
         f = lambda x: "   -  " if x is None else "%+5.1f%%" % (100 * x)  # noqa: E731
-        print("%-15s scale %4g  %4d points  predicted %7.1f s  measured %7.1f s  error %s  ETA error at 25/50/75 %%: "
-              "%s %s %s" % (name, scale, r["points"], r["predicted_s"], r["measured_s"], f(r["error"]), f(r["eta25"]),
-                            f(r["eta50"]), f(r["eta75"])), flush=True)
+        print("%-17s scale %4g  %4d points  predicted %7.1f s  measured %7.1f s  error %s  ETA error at 25/50/75 %%: "
+              "%s %s %s  (median integration %s ms, %s darks, %s exposures)"
+              % (name, scale, r["points"], r["predicted_s"], r["measured_s"], f(r["error"]), f(r["eta25"]),
+                 f(r["eta50"]), f(r["eta75"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"], r["darks"],
+                 r["exposures"]), flush=True)
     with open(os.path.join(OUT, "duration.csv"), "w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
         wr.writeheader()

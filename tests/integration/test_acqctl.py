@@ -147,10 +147,18 @@ def main():
         d = c.json("plan", "plan", plan, "--points")
         check(len(d["plan"]["steps"]) == d["plan"]["measured"], "--points reaches the daemon")
         # --- manual commands on the simulated bench
-        d = c.json("home", "home", "detector_phi")
+        d = c.json("home", "home", "detector.phi")
         check(d["homed"] == ["detector.phi"] and abs(d["detector.phi"]) < 0.05, "home %r" % d)
-        d = c.json("move", "move", "laser_theta=20", "detector_theta=40", "detector_phi=90")
-        check(abs(d["laser.theta"] - 20) < 0.05 and abs(d["detector.phi"] - 90) < 0.05, "move shows the after %r" % d)
+        # one name per axis (laser.theta=); the old spelling (laser_theta=) still moves the same axis
+        d = c.json("move", "move", "laser.theta=20", "detector.theta=40", "detector_phi=90")
+        check(abs(d["laser.theta"] - 20) < 0.05 and abs(d["detector.theta"] - 40) < 0.05 and
+              abs(d["detector.phi"] - 90) < 0.05, "move shows the after %r" % d)
+        p = c.run("move", "laser.theta=20", "laser_theta=21")
+        check(p.returncode == 64 and "given twice (as laser_theta too)" in p.stderr, "one axis under both names: rc %d %r" % (p.returncode,
+                                                                                                     p.stderr))
+        p = c.run("home", "bogus")
+        check(p.returncode == 1 and "laser.theta, detector.theta, detector.phi" in p.stderr,
+              "home's error names the axes by their one name: %r" % p.stderr)
         d = c.json("stop", "stop")
         check(d["stopped"] is False, "stop with nothing running %r" % d)
         # stop a long move: its requester gets "stopped by the operator", the arm stops short of the target

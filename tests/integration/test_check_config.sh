@@ -13,6 +13,14 @@ for f in "$ACQ_SRC/config/bench-sim.yaml" "$ACQ_SRC/config/bench-real.yaml"; do
   grep -q ": ok$" <<<"$out" || fail "$f: no ok line: $out"
 done
 
+# the bench section's old axis keys (laser_theta: ...) are accepted with a deprecation warning naming the new key
+sed -e 's/^  laser\.theta: /  laser_theta: /' "$ACQ_SRC/config/bench-sim.yaml" > "$tmp/old-keys.yaml"
+out=$("$D" --check-config "$tmp/old-keys.yaml" 2>&1) || fail "old bench keys rejected: $out"
+grep -q "^warning: deprecated keys (still accepted): bench.laser_theta is now bench.laser.theta$" <<<"$out" \
+  || fail "no deprecation warning for bench.laser_theta: $out"
+out=$("$D" --check-config "$ACQ_SRC/config/bench-sim.yaml" 2>&1)
+grep -q "deprecated" <<<"$out" && fail "bench-sim.yaml uses deprecated keys: $out"
+
 # bad file → exit 1, message "file:line:col: ..." with the expected form
 check_bad() { # name, yaml, expected-location, expected-words
   printf '%s' "$2" > "$tmp/$1.yaml"

@@ -206,6 +206,8 @@ def main():
             time.sleep(0.05)  # polling with a deadline, not a fixed wait
         check(st["ok"] and st["run"]["state"] == "succeeded", "recon finished %r" % st)
         check(c.req("status")["recon"]["running"] is False, "status after recon")
+        latest = c.req("recon.status")  # no argument: the latest run, whoever started it
+        check(latest["ok"] and latest["run"] == st["run"], "recon.status without argument %r" % latest)
         # --- SIGHUP with a broken file keeps the running configuration
         good = open(d.conf).read()
         with open(d.conf, "a") as f:

@@ -123,6 +123,10 @@ def main():
         p = run("select", model, "--candidates", f, "--target", "dhr:8", ok=False)
         check(p.returncode == 2 and w1 in p.stderr and w2 in p.stderr, "bad candidates %d: exit 2 naming %s %s"
               % (k, w1, w2))
+    big = os.path.join(d, "big.csv")
+    write_cands(big, [(k, 10, 0, 20, k % 180, 5) for k in range(50001)])
+    p = run("select", model, "--candidates", big, "--target", "dhr:8", ok=False)
+    check(p.returncode == 2 and "50001 candidates, at most 50000" in p.stderr, "too many candidates: exit 2")
     with open(os.path.join(d, "nohdr.csv"), "w") as fh:
         fh.write("id,theta_i,phi_i,theta_o,cost_s\n1,10,0,10,5\n")
     junk = os.path.join(d, "junk.model")

@@ -121,6 +121,9 @@ def run():
             len(faults), len(recovered), len(redo), watch.samples, len(watch.violations)))
         for dev in ("laser.theta", "detector.theta", "spectrometer", "laser"):
             assert any(f[1] == dev for f in faults), "no fault recorded for %s" % dev
+        # the device is the event's device column (and the log line's prefix): its message does not name it again
+        named = [f for f in faults if f[2].startswith(f[1] + ":") or f[2].startswith(f[1] + " (")]
+        assert not named, "fault messages repeat their device: %s" % named[:3]
         assert len(recovered) >= len(faults) - 1, "faults without recovery: %d faults, %d recoveries" % (
             len(faults), len(recovered))
         assert redo, "the saturation burst left no trace (no point measured again)"

@@ -1,4 +1,4 @@
-/* Unit tests of eta.c: wall-clock ETA at a time scale, pauses not counted, the measured rate taking over. */
+/* Unit tests of eta.c: wall-clock ETA at a time scale, pauses not counted, the measured excess per point taking over. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -32,15 +32,40 @@ static void test_scale_and_pause(void **state)
 	real += 3, loop += 30;
 	t = eta_update(&e, 3, 10, 60, 200, loop, real);
 	assert_true(fabs(t - 14) < 1e-9);
-	/* the bench turns out twice as slow as planned: the measurement takes over */
+	/* the bench turns out 2 real s per point slower than planned: the measured excess takes over */
 	for (int d = 4; d <= 9; d++) {
 		real += 4, loop += 40;
 		t = eta_update(&e, d, 10, 20.0 * d, 200, loop, real);
 	}
-	/* measured 7 points: 1 at ratio 1, 6 at ratio 2: 26 s real for 14 s planned; weight 7/12 */
-	double ratio = 26.0 / 14.0, w = 7.0 / 12.0;
-	assert_true(fabs(t - 2.0 * ((1 - w) + w * ratio)) < 1e-9);
+	/* measured 7 points: 1 as planned, 6 with 2 s more: 26 s real for 14 s planned, 12/7 s per point beyond the
+	 * plan; weight 7/12; one point left, planned 2 s */
+	double excess = 12.0 / 7.0, w = 7.0 / 12.0;
+	assert_true(fabs(t - (2.0 + w * excess)) < 1e-9);
 	assert_true(eta_update(&e, 10, 10, 200, 200, loop, real) == 0);
+}
+
+/* The excess is a time per point: a long move left in the plan is not stretched by it (a ratio would). */
+static void test_excess_per_point(void **state)
+{
+	(void)state;
+	struct eta e;
+	eta_reset(&e);
+	double real = 0;
+	eta_running(&e, true, real, real);
+	/* plan at scale 1: points of 1 s, the last one 100 s (a long move); 11 points */
+	double plan[12];
+	plan[0] = 0;
+	for (int i = 1; i <= 11; i++)
+		plan[i] = plan[i - 1] + (i == 11 ? 100 : 1);
+	real += 1;
+	eta_update(&e, 1, 11, plan[1], plan[11], real, real); /* skipped: first after the start */
+	double t = 0;
+	for (int d = 2; d <= 10; d++) {
+		real += 1.5; /* 0.5 s per point beyond the plan (host time) */
+		t = eta_update(&e, d, 11, plan[d], plan[11], real, real);
+	}
+	/* 9 measured points, excess 0.5 s each, weight 9/14: 100 s planned + 0.5 * 9/14 */
+	assert_true(fabs(t - (100 + 0.5 * 9.0 / 14.0)) < 1e-9);
 }
 
 static void test_no_plan(void **state)
@@ -58,6 +83,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_scale_and_pause),
+		cmocka_unit_test(test_excess_per_point),
 		cmocka_unit_test(test_no_plan),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);

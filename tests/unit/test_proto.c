@@ -82,7 +82,11 @@ static void test_validation(void **state)
 	assert_string_equal(parse_code("{\"cmd\":\"status\",\"extra\":1}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":\"10\"}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":1e9}", NULL), PROTO_E_INVALID);
-	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":10}", NULL), "ok");
+	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":10}", NULL), "ok"); /* the old name */
+	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser.theta\":10,\"detector.phi\":-20}", NULL), "ok");
+	assert_string_equal(parse_code("{\"cmd\":\"move\",\"detector.phi\":1e9}", NULL), PROTO_E_INVALID);
+	/* one axis under both names: refused, not silently one of them */
+	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser.theta\":10,\"laser_theta\":11}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"sweep.show\"}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"sweep.show\",\"sweep\":1.5}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"sweep.show\",\"sweep\":3,\"points\":true}", NULL), "ok");

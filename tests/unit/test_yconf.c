@@ -101,15 +101,27 @@ static void test_bench_parse(void **state)
 	struct acq_err err = { 0 };
 	struct bench_geom g;
 	bench_defaults(&g);
-	struct yc_doc *doc = load("laser_radius_mm: 500\nlaser_theta: {speed_dps: 4, accel_dps2: 8}\n", &err);
+	struct yc_doc *doc = load("laser_radius_mm: 500\nlaser.theta: {speed_dps: 4, accel_dps2: 8}\n", &err);
 	assert_int_equal(bench_parse(yc_root(doc), &g, &err), 0);
 	assert_true(g.laser_radius_mm == 500 && g.laser_theta.speed_dps == 4 && g.laser_theta.accel_dps2 == 8);
+	assert_string_equal(g.deprecated, "");
 	yc_free(doc);
-	doc = load("laser_theta: {min_deg: 10, max_deg: 5}\n", &err);
+	/* the old key names still work, and are listed for the caller's warning */
+	doc = load("laser_theta: {speed_dps: 5}\ndetector_phi: {speed_dps: 6}\ndetector.theta: {speed_dps: 7}\n", &err);
+	assert_int_equal(bench_parse(yc_root(doc), &g, &err), 0);
+	assert_true(g.laser_theta.speed_dps == 5 && g.detector_phi.speed_dps == 6 && g.detector_theta.speed_dps == 7);
+	assert_string_equal(g.deprecated, "bench.laser_theta is now bench.laser.theta; bench.detector_phi is now "
+					  "bench.detector.phi");
+	yc_free(doc);
+	doc = load("laser_theta: {speed_dps: 5}\nlaser.theta: {speed_dps: 6}\n", &err);
+	assert_int_equal(bench_parse(yc_root(doc), &g, &err), -1);
+	assert_non_null(strstr(err.msg, "both given"));
+	yc_free(doc);
+	doc = load("laser.theta: {min_deg: 10, max_deg: 5}\n", &err);
 	assert_int_equal(bench_parse(yc_root(doc), &g, &err), -1);
 	assert_non_null(strstr(err.msg, "min_deg"));
 	yc_free(doc);
-	doc = load("laser_theta: {sped_dps: 4}\n", &err);
+	doc = load("detector.phi: {sped_dps: 4}\n", &err);
 	assert_int_equal(bench_parse(yc_root(doc), &g, &err), -1);
 	assert_non_null(strstr(err.msg, "unknown key 'sped_dps'"));
 	yc_free(doc);

@@ -1,0 +1,194 @@
+/* Unit tests of daemon/plan/plan_time.c: the executor's costs per step recomputed independently from the step's
+ * motion (ordering model) and the timing parameters: one read-out per exposure, the integration ladder in auto
+ * mode, probes, darks per incidence, the host's time per point times the time scale, the reference phase. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <cmocka.h>
+
+#include "config/bench.h"
+#include "daemon/plan/plan.h"
+
+#define TOL 1e-9 /* sums of a few dozen doubles of order 1-100 s */
+
+static const char *PLAN_FIXED = "name: t\nincidence: {theta_deg: [20, 45]}\n"
+				"observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
+				"integration: {mode: fixed, ms: 20}\naverages: 3\nblind_points: drop\n";
+static const char *PLAN_AUTO = "name: t\nincidence: {theta_deg: [20, 45]}\n"
+			       "observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
+			       "integration: {mode: auto, estimate_ms: 20, max_ms: 2000}\naverages: 3\n"
+			       "blind_points: drop\n";
+
+struct fx {
+	struct bench_geom g;
+	struct plan_spec *spec;
+	struct plan_result *res;
+};
+
+static void load(struct fx *f, const char *text)
+{
+	struct acq_err err = { 0 };
+	bench_defaults(&f->g);
+	f->g.readout_s = 0.01;
+	assert_int_equal(plan_load_string("t.yaml", text, &f->spec, &err), 0);
+	assert_int_equal(plan_make(f->spec, &f->g, &f->res, &err), 0);
+	assert_true(f->res->n_steps > 4);
+}
+
+static void unload(struct fx *f)
+{
+	plan_result_free(f->res);
+	plan_spec_free(f->spec);
+}
+
+static struct plan_timing timing(void)
+{
+	struct plan_timing t;
+	plan_timing_defaults(&t);
+	t.reference = false;
+	t.dark_averages = 8;
+	t.exposure_overhead_s = 0.005;
+	t.axis_poll_s = 0.05;
+	t.point_overhead_s = 0.02;
+	t.time_scale = 1;
+	t.min_ms = 0.01;
+	t.ladder_ratio = sqrt(2.0);
+	return t;
+}
+
+/* Step i by hand: move + settle + polling when it moves, [probe], exposure, [dark], host time. */
+static double by_hand(const struct fx *f, const struct plan_timing *t, size_t i, double ms, double probe_ms)
+{
+	const struct plan_step *st = &f->res->steps[i];
+	bool moves = st->move_s + st->settle_s > 0;
+	bool new_inc = i == 0 || st->pos.laser_theta != f->res->steps[i - 1].pos.laser_theta;
+	double shot_ovh = f->g.readout_s + t->exposure_overhead_s; /* one read-out per exposure, any averages */
+	double d = st->move_s + st->settle_s + (moves ? 1.5 * t->axis_poll_s + t->extra_settle_s : 0);
+	if (probe_ms > 0)
+		d += probe_ms / 1000 + shot_ovh;
+	d += f->spec->averages * ms / 1000 + shot_ovh;
+	if (new_inc)
+		d += t->dark_averages * ms / 1000 + shot_ovh;
+	return d + t->point_overhead_s * t->time_scale;
+}
+
+static void test_fixed_steps(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_FIXED);
+	struct plan_timing t = timing();
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double sum = 0, darks = 0;
+	for (size_t i = 0; i < f.res->n_steps; i++) {
+		double d = by_hand(&f, &t, i, 20, 0);
+		assert_true(fabs(f.res->steps[i].predicted_s - d) < TOL);
+		assert_true(fabs(f.res->steps[i].predicted_start_s - sum) < TOL);
+		sum += d;
+		bool new_inc = i == 0 || f.res->steps[i].pos.laser_theta != f.res->steps[i - 1].pos.laser_theta;
+		darks += new_inc ? 8 * 0.020 + 0.015 : 0;
+	}
+	assert_true(fabs(f.res->predicted_s - sum) < TOL);
+	assert_true(fabs(f.res->darks_s - darks) < TOL);
+	assert_true(f.res->reference_s == 0);
+	/* two incidences: two darks */
+	assert_true(fabs(darks - 2 * (8 * 0.020 + 0.015)) < TOL);
+	unload(&f);
+}
+
+/* The host's time per point is real time: a simulated bench at time scale S sees it S times longer. */
+static void test_time_scale(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_FIXED);
+	struct plan_timing t = timing();
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double p1 = f.res->predicted_s;
+	t.time_scale = 35;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(f.res->predicted_s - p1 - 34 * 0.02 * (double)f.res->n_steps) < TOL);
+	unload(&f);
+}
+
+/* Auto integration: the estimate 20 ms on the ladder 0.01 ms · √2^k is 14.48 ms (k = 21); a probe per point,
+ * the first at the estimate itself when there is no reference before it. */
+static void test_auto_ladder(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_AUTO);
+	struct plan_timing t = timing();
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double rung = 0.01 * pow(sqrt(2.0), 21);
+	assert_true(rung < 20 && rung * sqrt(2.0) > 20);
+	for (size_t i = 0; i < f.res->n_steps; i++) {
+		double d = by_hand(&f, &t, i, rung, i == 0 ? 20 : rung);
+		assert_true(fabs(f.res->steps[i].predicted_s - d) < 1e-6);
+	}
+	unload(&f);
+}
+
+/* The reference phase: from the arms' position to the reference pose, probe/dark/exposure there, then to the
+ * first point; the steps start after it. */
+static void test_reference(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_FIXED);
+	struct plan_timing t = timing();
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double without = f.res->predicted_s;
+	t.reference = true;
+	t.ref_pose = (struct plan_pos){ 0, 45, 180 };
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(f.res->reference_s > 8 * 0.02 + 3 * 0.02); /* at least the dark and the exposures */
+	assert_true(fabs(f.res->steps[0].predicted_start_s - f.res->reference_s) < TOL);
+	/* fixed integration: the first incidence uses the reference's dark (auto: the reference's time is the white
+	 * standard's, so the first point takes its own) */
+	double dark = 8 * 0.020 + 0.015;
+	assert_true(fabs(f.res->darks_s - dark) < TOL);
+	assert_true(fabs(f.res->predicted_s - (without - dark) - f.res->reference_s) < TOL);
+	/* the arms elsewhere: the move to the reference pose is added */
+	double ref = f.res->reference_s;
+	t.have_start = true;
+	t.start = (struct plan_pos){ 60, 10, 300 };
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(f.res->reference_s > ref + 1);
+	unload(&f);
+}
+
+/* A dark when the last one has aged (dark_max_age_s), whatever the incidence. */
+static void test_dark_age(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_FIXED);
+	struct plan_timing t = timing();
+	t.dark_max_age_s = 0; /* never by age: one per incidence */
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double dark = 8 * 0.020 + 0.015, per_incidence = f.res->darks_s;
+	assert_true(fabs(per_incidence - 2 * dark) < TOL);
+	t.dark_max_age_s = 1.5 * f.res->predicted_s / (double)f.res->n_steps; /* about every 1.5 points */
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	int n = (int)lround(f.res->darks_s / dark);
+	assert_true(fabs(f.res->darks_s - n * dark) < TOL);
+	assert_true(n >= (int)f.res->n_steps / 3 && n <= (int)f.res->n_steps);
+	unload(&f);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_fixed_steps),
+		cmocka_unit_test(test_time_scale),
+		cmocka_unit_test(test_auto_ladder),
+		cmocka_unit_test(test_reference),
+		cmocka_unit_test(test_dark_age),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
