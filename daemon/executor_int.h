@@ -76,6 +76,8 @@ struct ex {
 	double settle_until;
 	struct plan_pos known;       /* last commanded or measured position */
 	bool known_valid;
+	struct plan_pos seg_from;    /* where the last segment started (a safe way back from anywhere along it) */
+	bool seg_from_valid;
 	struct plan_pos actual;      /* measured after settling */
 	bool homing[3];
 

@@ -58,6 +58,30 @@ static double nearest_phi(const struct ex *x, double phi, double from)
 	return best;
 }
 
+/* Recovery when no clear path leads from where the arms are (an alarm stopped one axis mid-segment while the
+ * others ran on or decelerated, leaving the arms off the planned path, e.g. closer together than the planner's
+ * margin: the demo once stopped at ψ = 10.99° against a 12° limit): back off along the last segment to where it
+ * started, a planned position, if on that move the arms never come closer than they are (ψ ≥ min(its collision
+ * limit, ψ now), checked at every instant by plan_seg_keeps: sound), then the planner's path from there. Fills
+ * x->wps with the back-off and w[*n] with the path after it; 0, or -1 when there is no such way. */
+static int back_off(struct ex *x, const struct plan_pos *t, struct plan_wp w[PLAN_MAX_WP], size_t *n)
+{
+	*n = 0;
+	if (!x->known_valid || !x->seg_from_valid || near_pos(&x->known, &x->seg_from))
+		return -1;
+	double keep = fmin(plan_collision_deg(&x->geom), plan_psi_deg(&x->geom, &x->known)) - 2 * PLAN_EDGE_DEG;
+	if (!plan_seg_keeps(&x->geom, &x->known, &x->seg_from, keep) || plan_move(&x->geom, &x->seg_from, t, w, n) < 0)
+		return -1;
+	x->wps[x->n_wps].pos = x->seg_from;
+	x->wps[x->n_wps].duration_s = plan_seg_time(&x->geom, &x->known, &x->seg_from);
+	x->n_wps++;
+	ex_event(x, "info", NULL,
+		 "no clear path from (%.2f, %.2f, %.2f): backing off along the last segment to (%.2f, %.2f, %.2f)",
+		 x->known.laser_theta, x->known.det_theta, x->known.det_phi, x->seg_from.laser_theta,
+		 x->seg_from.det_theta, x->seg_from.det_phi);
+	return 0;
+}
+
 /* Waypoints to the current target: the planner's own when the arms are where the planner left them (the
  * previous step) and its path stays inside the soft limits; else a fresh collision-free path from where the
  * arms are, to the turn of φ nearest to the detector. */
@@ -88,7 +112,7 @@ int ex_plan_path(struct ex *x)
 		return 0;
 	size_t n = 0;
 	struct plan_wp w[PLAN_MAX_WP];
-	if (plan_move(&x->geom, &x->known, &t, w, &n) < 0)
+	if (plan_move(&x->geom, &x->known, &t, w, &n) < 0 && back_off(x, &t, w, &n))
 		return -1;
 	for (size_t i = 0; i < n; i++) {
 		if (wrap_phi(x, w[i].pos.det_phi) != w[i].pos.det_phi)
@@ -102,6 +126,8 @@ int ex_plan_path(struct ex *x)
 static int start_segment(struct ex *x, double now, int *dev, struct acq_err *err)
 {
 	const struct plan_pos *p = &x->wps[x->wp].pos;
+	x->seg_from = x->known;
+	x->seg_from_valid = x->known_valid;
 	for (int a = 0; a < 3; a++) {
 		double tgt = axis_val(p, a);
 		x->moving[a] = false;

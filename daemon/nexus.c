@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "acq_version.h"
+#include "config/acq_out.h"
 #include "daemon/store_nexus.h"
 
 static const char *const kinds[4] = { "sample", "dark", "reference", "beam" };
@@ -649,22 +650,30 @@ int nexus_export(const char *db_path, int64_t sweep, const char *out_path, struc
 	if (storenx_open(db_path, &h, err))
 		return -1;
 	H5Eset_auto2(H5E_DEFAULT, NULL, NULL); /* libhdf5 would print its error stack: errors come back here */
-	char tmp[4200];
-	snprintf(tmp, sizeof tmp, "%s.tmp.%ld", out_path, (long)getpid());
+	struct acq_out o; /* HDF5 seeks: a regular file only, written beside the target and renamed at the end */
 	int rc = -1;
-	hid_t f = H5Fcreate(tmp, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+	if (acq_out_open(&o, out_path, ACQ_OUT_SEEK, err)) {
+		acq_err_prefix(err, "nexus: ");
+		goto out;
+	}
+	hid_t f = H5Fcreate(o.name, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
 	if (f < 0) {
-		acq_errf(err, ACQ_E_IO, "nexus: cannot create %s", tmp);
+		acq_errf(err, ACQ_E_IO, "nexus: cannot create %s", o.name);
+		acq_out_abort(&o);
 		goto out;
 	}
 	if (write_all(h, sweep, f, st, err)) {
 		H5Fclose(f);
-		unlink(tmp);
+		acq_out_abort(&o);
 		goto out;
 	}
-	if (H5Fclose(f) < 0 || rename(tmp, out_path) != 0) {
-		unlink(tmp);
+	if (H5Fclose(f) < 0) {
+		acq_out_abort(&o);
 		acq_errf(err, ACQ_E_IO, "nexus: cannot finish %s", out_path);
+		goto out;
+	}
+	if (acq_out_commit(&o, err)) {
+		acq_err_prefix(err, "nexus: ");
 		goto out;
 	}
 	rc = 0;

@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "config/acq_out.h"
 #include "daemon/store_int.h"
 #include "drivers/spectro.h"
 
@@ -109,18 +110,13 @@ out:
 
 int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, int *nrows, struct acq_err *err)
 {
-	char tmp[4200];
-	snprintf(tmp, sizeof tmp, "%s.tmp", path);
-	FILE *f = fopen(tmp, "w");
-	if (!f)
-		return acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
-	int rc = store_export_csv(st, sweep_id, f, nrows, err);
-	if (fclose(f) != 0 && !rc)
-		rc = acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
-	if (!rc && rename(tmp, path))
-		rc = acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
-	if (rc)
-		unlink(tmp);
-	return rc;
+	struct acq_out o;
+	if (acq_out_open(&o, path, ACQ_OUT_STDIO, err))
+		return -1;
+	if (store_export_csv(st, sweep_id, o.f, nrows, err)) {
+		acq_out_abort(&o);
+		return -1;
+	}
+	return acq_out_commit(&o, err);
 }
 

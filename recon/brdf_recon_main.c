@@ -78,46 +78,27 @@ int parse_u64(const char *s, uint64_t *out)
 
 int out_open(struct out *o, const char *path, struct acq_err *err)
 {
-	o->path = path;
-	o->direct = 0;
-	if (!path || !strcmp(path, "-")) {
-		o->f = stdout;
-		o->path = NULL;
+	o->std = !path || !strcmp(path, "-");
+	o->f = stdout;
+	if (o->std)
 		return 0;
-	}
-	struct stat st;
-	if (stat(path, &st) == 0 && !S_ISREG(st.st_mode)) {
-		if (S_ISDIR(st.st_mode))
-			return acq_errf(err, ACQ_E_IO, "%s: is a directory", path);
-		o->direct = 1;
-		o->f = fopen(path, "w");
-		return o->f ? 0 : acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
-	}
-	snprintf(o->tmp, sizeof o->tmp, "%s.tmp.%ld", path, (long)getpid());
-	o->f = fopen(o->tmp, "w");
-	if (!o->f)
-		return acq_errf(err, ACQ_E_IO, "%s: %s", o->tmp, strerror(errno));
+	if (acq_out_open(&o->a, path, ACQ_OUT_STDIO, err))
+		return -1;
+	o->f = o->a.f;
 	return 0;
 }
 
 int out_close(struct out *o, int ok, struct acq_err *err)
 {
-	if (!o->path) {
+	if (o->std) {
 		fflush(stdout);
 		return ok ? 0 : -1;
 	}
-	int bad = fclose(o->f) != 0;
-	if (o->direct)
-		return !ok ? -1 : bad ? acq_errf(err, ACQ_E_IO, "%s: write failed", o->path) : 0;
-	if (!ok || bad) {
-		unlink(o->tmp);
-		return ok ? acq_errf(err, ACQ_E_IO, "%s: write failed", o->path) : -1;
+	if (!ok) {
+		acq_out_abort(&o->a);
+		return -1;
 	}
-	if (rename(o->tmp, o->path)) {
-		unlink(o->tmp);
-		return acq_errf(err, ACQ_E_IO, "%s: %s", o->path, strerror(errno));
-	}
-	return 0;
+	return acq_out_commit(&o->a, err);
 }
 
 static const char main_help[] =

@@ -55,29 +55,14 @@ struct albtab {
 
 static int albtab_margin(struct albtab *T, double *a);
 
-/* a[L] = the node's albedo plus its quadrature margin 2d. */
-static int albtab_node(struct albtab *T, double theta, double *a, int peak, struct acq_err *err)
+/* a[L] = the node's albedo plus its quadrature margin 2d. A lobe narrower than the rules (a spiky model's) is
+ * found by recon_albedo_adaptive's probes at the data's brightest directions, which refine the rules there. */
+static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err *err)
 {
 	/* past the work budget every further node gets the starting rule and one doubling (still a difference d) */
 	double work = T->ws.evals + T->wl.evals;
 	int nmax = work > TAB_WORK_MAX ? 2 * T->nmu : TAB_NMU_MAX;
-	/* at a peak's own zenith angle the lobe can be narrower than the coarse rules, which then agree by both
-	 * missing it: start at half the finest rule there when that node (the rule and its doubling, in quad.c's
-	 * work units) costs at most 1/64 of the work budget, so the 2·TAB_PEAKS peak nodes take at most a quarter
-	 * of it (a small model; the paper-size random input, 1000 × 651, keeps the plain start) */
 	int nmu = T->nmu, nphi = T->nphi;
-	if (peak && !T->split) {
-		int fm = nmu, fp = nphi;
-		while (2 * fm <= TAB_NMU_MAX / 2) {
-			fm *= 2;
-			fp *= 2;
-		}
-		double cost = 5.0 * fm * fp * (double)T->m->n * (1.0 + (double)T->L / 64.0);
-		if (cost <= TAB_WORK_MAX / 64 && work + cost <= TAB_WORK_MAX / 2) {
-			nmu = fm;
-			nphi = fp;
-		}
-	}
 	if (!T->split)
 		return recon_albedo_adaptive(T->m, theta, nmu, nphi, nmax, 0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->ws, a,
 					     T->diff, err) ? -1 : albtab_margin(T, a);
@@ -152,25 +137,23 @@ static void albgrid_push(struct albgrid *g, size_t L, double th, const double *a
 	g->n++;
 }
 
-static int cmp_abs(const void *a, const void *b)
+static int cmp_dbl(const void *a, const void *b)
 {
-	double x = fabs(*(const double *)a), y = fabs(*(const double *)b);
+	double x = *(const double *)a, y = *(const double *)b;
 	return (x > y) - (x < y);
 }
 
 /* The table's starting nodes (ascending, in [0, π/2]): every 10°, and for a spiky model (leave-one-out RMS > 1
- * in ln f) also the zenith angles, θi and θo, of its npeaks (≤ TAB_PEAKS) samples highest above the trend; peak[]
- * marks those. A lobe narrower than an interval is found only if a probe lands on it, and the interpolant's
- * narrow peaks sit on the data: by reciprocity a sample's peak raises the albedo at both its θi and its θo
- * (test_recon_extremes' spike, 2° wide over 13 decades, slipped between the 10° nodes' bisections at 3 seeds of
- * 17 and reached albedos of 1.4-1.9). Returns the count (≤ TAB_N + 2 TAB_PEAKS). */
-static size_t albtab_start_nodes(const struct recon_model *m, size_t npeaks, double *th, unsigned char *peak)
+ * in ln f) also the zenith angles, θi and θo, of its npeaks (≤ TAB_PEAKS) samples highest above the trend. The
+ * probes of recon_albedo_adaptive find a narrow lobe in ωo at a node's incidence; a lobe narrower than an interval
+ * in θ is found only if a node lands on it, and the interpolant's narrow peaks sit on the data: by reciprocity a
+ * sample's peak raises the albedo at both its θi and its θo. Returns the count (≤ TAB_N + 2 TAB_PEAKS). */
+static size_t albtab_start_nodes(const struct recon_model *m, size_t npeaks, double *th)
 {
 	size_t n = 0;
 	double h = (M_PI / 2) / (double)(TAB_N - 1);
 	for (size_t t = 0; t < TAB_N; t++)
 		th[n++] = t + 1 == TAB_N ? M_PI / 2 : h * (double)t;
-	memset(peak, 0, TAB_N + 2 * TAB_PEAKS);
 	if (!(m->loo_rms > 1.0) || !m->g || !m->ang || npeaks == 0)
 		return n;
 	size_t top[TAB_PEAKS], ntop = 0;
@@ -201,23 +184,12 @@ static size_t albtab_start_nodes(const struct recon_model *m, size_t npeaks, dou
 			if (isfinite(a) && a > 0 && a < M_PI / 2)
 				th[n++] = a;
 		}
-	/* a peak's angle is stored negated until sorted: |θ| keeps the order, the sign marks it */
-	for (size_t r = TAB_N; r < n; r++)
-		th[r] = -th[r];
-	qsort(th, n, sizeof *th, cmp_abs);
-	/* merge nodes within 0.05° of the one before (the grid's own nodes are 10° apart); a merged node is a peak's
-	 * if either was */
+	qsort(th, n, sizeof *th, cmp_dbl);
+	/* merge nodes within 0.05° of the one before (the grid's own nodes are 10° apart) */
 	size_t w = 0;
-	for (size_t r = 0; r < n; r++) {
-		double a = fabs(th[r]);
-		int pk = th[r] < 0;
-		if (w > 0 && a - th[w - 1] <= 0.05 * M_PI / 180) {
-			peak[w - 1] |= (unsigned char)pk;
-			continue;
-		}
-		th[w] = a;
-		peak[w++] = (unsigned char)pk;
-	}
+	for (size_t r = 0; r < n; r++)
+		if (w == 0 || th[r] - th[w - 1] > 0.05 * M_PI / 180)
+			th[w++] = th[r];
 	return w;
 }
 
@@ -250,15 +222,14 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 	T.ws.part = T.split ? RECON_PART_NOLOBE : RECON_PART_ALL;
 	T.wl.part = RECON_PART_LOBE;
 	double start[TAB_N + 2 * TAB_PEAKS];
-	unsigned char peak[TAB_N + 2 * TAB_PEAKS];
 	/* peak nodes only as far as a quarter of the work budget pays for them at the starting rule and one doubling
 	 * (a paper-size spiky model, 1000 × 651, gets none: its table already reaches the budget without them) */
 	double node_cost = 5.0 * T.nmu * T.nphi * (double)m->n * (1.0 + (double)L / 64.0);
-	size_t ns = albtab_start_nodes(m, (size_t)fmin(TAB_PEAKS, TAB_WORK_MAX / 4 / (2 * node_cost)), start, peak);
+	size_t ns = albtab_start_nodes(m, (size_t)fmin(TAB_PEAKS, TAB_WORK_MAX / 4 / (2 * node_cost)), start);
 	for (size_t t = 0; t < ns; t++) {
 		if (pf)
 			pf(pctx, "albedo table", 0.5 * (double)t / (double)ns);
-		if (albtab_node(&T, start[t], amid, peak[t], err))
+		if (albtab_node(&T, start[t], amid, err))
 			goto out;
 		albgrid_push(&g, L, start[t], amid, T.diff, NULL, 0);
 	}
@@ -280,7 +251,7 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 				continue;
 			}
 			double tmid = 0.5 * (g.th[i] + g.th[i + 1]);
-			if (albtab_node(&T, tmid, amid, 0, err))
+			if (albtab_node(&T, tmid, amid, err))
 				goto out;
 			int split = 0;
 			const double *dlo = g.dq + i * L, *dhi = g.dq + (i + 1) * L;

@@ -13,6 +13,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "config/acq_out.h"
+
 const double merl_scale[3] = { 1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0 };
 
 void merl_write_opts_default(struct merl_write_opts *o)
@@ -261,54 +263,18 @@ static int write_all(int fd, const double *data, const char *tmp, struct acq_err
 	return 0;
 }
 
-/* Write data (3 × MERL_N_CELLS stored values) to path atomically: temporary file in the same folder, fsync,
- * rename; nothing is left at path on failure. */
+/* Write data (3 × MERL_N_CELLS stored values) to path through config/acq_out (temporary file in the same folder,
+ * fsync, rename; a device or FIFO in place); the old file is left as it was on failure. */
 static int write_atomic(const char *path, const double *data, struct acq_err *err)
 {
-	int rc = -1, fd = -1;
-	char *tmp = NULL;
-	size_t pl = strlen(path);
-	tmp = malloc(pl + 16);
-	if (!tmp) {
-		acq_errf(err, ACQ_E_NOMEM, "merl: out of memory");
-		goto out;
+	struct acq_out o;
+	if (acq_out_open(&o, path, 0, err))
+		return acq_err_prefix(err, "merl: ");
+	if (write_all(o.fd, data, path, err) != 0) {
+		acq_out_abort(&o);
+		return -1;
 	}
-	memcpy(tmp, path, pl);
-	memcpy(tmp + pl, ".tmp.XXXXXX", 12);
-	fd = mkstemp(tmp);
-	if (fd < 0) {
-		acq_errf(err, ACQ_E_IO, "merl: cannot create %s: %s", tmp, strerror(errno));
-		free(tmp);
-		tmp = NULL;
-		goto out;
-	}
-	if (write_all(fd, data, tmp, err) != 0)
-		goto out;
-	if (fchmod(fd, 0644) != 0 || fsync(fd) != 0) {
-		acq_errf(err, ACQ_E_IO, "merl: syncing %s: %s", tmp, strerror(errno));
-		goto out;
-	}
-	int cfd = fd;
-	fd = -1;
-	if (close(cfd) != 0) {
-		acq_errf(err, ACQ_E_IO, "merl: closing %s: %s", tmp, strerror(errno));
-		goto out;
-	}
-	if (rename(tmp, path) != 0) {
-		acq_errf(err, ACQ_E_IO, "merl: renaming %s to %s: %s", tmp, path, strerror(errno));
-		goto out;
-	}
-	free(tmp);
-	tmp = NULL;
-	rc = 0;
-out:
-	if (fd >= 0)
-		close(fd);
-	if (tmp) {
-		unlink(tmp);
-		free(tmp);
-	}
-	return rc;
+	return acq_out_commit(&o, err) ? acq_err_prefix(err, "merl: ") : 0;
 }
 
 int merl_write_table(const char *path, const struct merl_table *t, struct acq_err *err)

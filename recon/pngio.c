@@ -1,4 +1,4 @@
-/* pngio: atomic file output (temp file, fsync, rename): PNG of a cairo surface, or a byte buffer. */
+/* pngio: file output through config/acq_out (temp file, fsync, rename): PNG of a cairo surface, or a byte buffer. */
 #include "recon/pngio.h"
 
 #include <errno.h>
@@ -10,6 +10,8 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
+
+#include "config/acq_out.h"
 
 struct sink {
 	int fd;
@@ -33,49 +35,21 @@ static int sink_write(void *closure, const unsigned char *data, size_t length)
 	return 0;
 }
 
-/* Write through emit() into a temporary file beside path, fsync, rename; 0, or -1 with err. */
+/* Write through emit() to path (config/acq_out: a temporary file beside it, fsync, rename; a device or FIFO in
+ * place); 0, or -1 with err. */
 static int write_atomic(const char *path, const char *what, int (*emit)(struct sink *s, void *ctx), void *ctx,
 			struct acq_err *err)
 {
-	size_t pl = strlen(path);
-	char *tmp = malloc(pl + 16);
-	if (!tmp)
-		return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", what);
-	memcpy(tmp, path, pl);
-	memcpy(tmp + pl, ".tmp.XXXXXX", 12);
-	struct sink s = { .fd = mkstemp(tmp), .err = 0 };
-	if (s.fd < 0) {
-		acq_errf(err, ACQ_E_IO, "%s: cannot create %s: %s", what, tmp, strerror(errno));
-		free(tmp);
+	struct acq_out o;
+	if (acq_out_open(&o, path, 0, err))
+		return acq_err_prefix(err, "%s: ", what);
+	struct sink s = { .fd = o.fd, .err = 0 };
+	if (emit(&s, ctx) != 0) {
+		acq_errf(err, ACQ_E_IO, "%s: writing %s: %s", what, path, s.err ? strerror(s.err) : "encoder failed");
+		acq_out_abort(&o);
 		return -1;
 	}
-	int rc = -1;
-	if (emit(&s, ctx) != 0) {
-		acq_errf(err, ACQ_E_IO, "%s: writing %s: %s", what, tmp, s.err ? strerror(s.err) : "encoder failed");
-		goto out;
-	}
-	if (fchmod(s.fd, 0644) != 0 || fsync(s.fd) != 0) {
-		acq_errf(err, ACQ_E_IO, "%s: syncing %s: %s", what, tmp, strerror(errno));
-		goto out;
-	}
-	int fd = s.fd;
-	s.fd = -1;
-	if (close(fd) != 0) {
-		acq_errf(err, ACQ_E_IO, "%s: closing %s: %s", what, tmp, strerror(errno));
-		goto out;
-	}
-	if (rename(tmp, path) != 0) {
-		acq_errf(err, ACQ_E_IO, "%s: renaming %s to %s: %s", what, tmp, path, strerror(errno));
-		goto out;
-	}
-	rc = 0;
-out:
-	if (s.fd >= 0)
-		close(s.fd);
-	if (rc != 0)
-		unlink(tmp);
-	free(tmp);
-	return rc;
+	return acq_out_commit(&o, err) ? acq_err_prefix(err, "%s: ", what) : 0;
 }
 
 struct membuf {

@@ -45,6 +45,8 @@ int recon_hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double 
 
 void recon_albedo_ws_free(struct albedo_ws *ws)
 {
+	free(ws->bright);
+	free(ws->cand);
 	free(ws->c6);
 	free(ws->wt);
 	free(ws->work);
@@ -68,11 +70,226 @@ int recon_albedo_ws_init(struct albedo_ws *ws, const struct recon_model *m, size
 	ws->wsub = malloc(L * n * sizeof *ws->wsub);
 	ws->fine = malloc(L * sizeof *ws->fine);
 	ws->chan = malloc(L * sizeof *ws->chan);
-	if (!ws->c6 || !ws->wt || !ws->work || !ws->vals || !ws->wsub || !ws->fine || !ws->chan) {
+	ws->bright = malloc(n * sizeof *ws->bright);
+	ws->cand = malloc(2 * n * 3 * sizeof *ws->cand);
+	if (!ws->c6 || !ws->wt || !ws->work || !ws->vals || !ws->wsub || !ws->fine || !ws->chan || !ws->bright ||
+	    !ws->cand) {
 		recon_albedo_ws_free(ws);
 		return acq_errf(err, ACQ_E_NOMEM, "albedo: out of memory");
 	}
+	/* each centre's brightness: the largest value the interpolant's data take there (the map back of g) */
+	for (size_t k = 0; k < n; k++) {
+		double b[TREND_NB], v = 0;
+		trend_at(m, m->ctr + 6 * k, b);
+		for (size_t l = 0; l < L; l++) {
+			double f = untransform(m->transform, m->g ? m->g[l * n + k] : 0.0, m->eps[l], trend_factor(m, b, l));
+			if (f > v)
+				v = f;
+		}
+		ws->bright[k] = v;
+	}
 	return 0;
+}
+
+/* Make room for Q nodes (-1 on failure). */
+static int ws_reserve(struct albedo_ws *ws, size_t Q)
+{
+	if (Q <= ws->qmax)
+		return 0;
+	double *c6 = realloc(ws->c6, Q * 6 * sizeof *c6);
+	if (!c6)
+		return -1;
+	ws->c6 = c6;
+	double *wt = realloc(ws->wt, Q * sizeof *wt);
+	if (!wt)
+		return -1;
+	ws->wt = wt;
+	ws->qmax = Q;
+	return 0;
+}
+
+static int cmp_dbl(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return (x > y) - (x < y);
+}
+
+static int cmp_cand_desc(const void *a, const void *b)
+{
+	double x = ((const double *)a)[2], y = ((const double *)b)[2];
+	return (x < y) - (x > y);
+}
+
+/*
+ * Probes at the data's brightest directions, and the boxes they call for (the mechanism that finds lobes narrower
+ * than a rule). A lobe narrower than the spacing h of the starting rule makes the coarse rules agree by both
+ * stepping over it, so refinement alone cannot find it; but the interpolant's narrow lobes sit on the data: by
+ * reciprocity and isotropy a centre (θi', φi', θo', φo') puts its value at ωo = (θo', |φo' − φi'|) when θi' is
+ * near θi, and at (θi', |φo' − φi'|) when θo' is. The 2·RECON_BOX_MAX brightest such directions (value × cosθ,
+ * each at least a box half-width from a brighter one; centres within the half-width of θi) are probed: the
+ * integrand there is compared with the starting rule's four nodes around it. A probe calls for a box where, in
+ * some channel, it is more than twice those nodes (a lobe narrower than about h/2, which a rule of spacing h
+ * integrates badly) and the mass one node would give it, value × node weight, exceeds tol · max(|estimate|,
+ * floor). A box has half-width RECON_BOX_HW·h in θ (the same arc in φ) and RECON_BOX_N nodes per dimension,
+ * doubled with the rule: about 5 times the starting density there. A model without such lobes gets no box and
+ * the plain rules, unchanged; the half-vector rule gets none (it is already centred on the mirror).
+ * Returns the number of boxes (ws->nbox), or -1 with err.
+ */
+#define RECON_BOX_HW 2.5
+#define RECON_BOX_N 24
+#define RECON_BOX_PEAK 2.0
+static int albedo_boxes(const struct recon_model *m, double theta_i, int nmu, int nphi, int square_rule, int scaled,
+			double tol, double fl, struct albedo_ws *ws, const double *est, struct acq_err *err)
+{
+	ws->nbox = 0;
+	ws->boxn = RECON_BOX_N;
+	if (ws->part == RECON_PART_LOBE || !m->ang || !ws->bright)
+		return 0;
+	double h = fmax((M_PI / 2) / nmu, M_PI / nphi), hw = RECON_BOX_HW * h;
+	size_t nc = 0, L = m->nwl;
+	for (size_t k = 0; k < m->n; k++) {
+		const double *a = m->ang + 4 * k;
+		double d = fabs(remainder(a[3] - a[1], 2.0 * M_PI));
+		if (!(ws->bright[k] > 0) || !isfinite(d))
+			continue;
+		for (int side = 0; side < 2; side++) { /* side 0: the sample's incidence is near θi; 1: its outgoing */
+			double tin = a[side ? 2 : 0], tout = a[side ? 0 : 2];
+			if (!(fabs(tin - theta_i) <= hw) || !(tout >= 0 && tout <= M_PI / 2))
+				continue;
+			ws->cand[3 * nc] = tout;
+			ws->cand[3 * nc + 1] = d > M_PI ? M_PI : d;
+			ws->cand[3 * nc + 2] = ws->bright[k] * cos(tout);
+			nc++;
+		}
+	}
+	if (nc == 0)
+		return 0;
+	qsort(ws->cand, nc, 3 * sizeof *ws->cand, cmp_cand_desc);
+	/* the probes: distinct directions, each with the starting rule's four nodes around it */
+	enum { NP = 2 * RECON_BOX_MAX };
+	double dir[NP][3], pt[NP][2], wn[NP][4], chw = cos(hw), x[256], w[256];
+	int np = 0;
+	for (size_t c = 0; c < nc && np < NP; c++) {
+		double t = ws->cand[3 * c], p = ws->cand[3 * c + 1];
+		double v[3] = { sin(t) * cos(p), sin(t) * sin(p), cos(t) };
+		int near = 0;
+		for (int b = 0; b < np && !near; b++)
+			near = v[0] * dir[b][0] + v[1] * dir[b][1] + v[2] * dir[b][2] >= chw;
+		if (near)
+			continue;
+		memcpy(dir[np], v, sizeof v);
+		pt[np][0] = t;
+		pt[np][1] = p;
+		np++;
+	}
+	if (rbf_gauss_legendre01(nmu, x, w) || ws_reserve(ws, (size_t)np * 5))
+		return acq_errf(err, ACQ_E_NOMEM, "albedo: out of memory for the probes");
+	for (int b = 0; b < np; b++) {
+		double xc = cos(pt[b][0]);
+		if (square_rule)
+			xc *= xc;
+		int i = 0, j = (int)floor(pt[b][1] * nphi / M_PI - 0.5);
+		while (i + 2 < nmu && x[i + 1] <= xc)
+			i++;
+		j = j < 0 ? 0 : j + 1 >= nphi ? (nphi > 1 ? nphi - 2 : 0) : j;
+		rbf_canon(theta_i, 0.0, pt[b][0], pt[b][1], ws->c6 + 6 * (5 * b));
+		for (int u = 0; u < 4; u++) {
+			int ii = i + (u & 1) < nmu ? i + (u & 1) : nmu - 1, jj = j + (u >> 1) < nphi ? j + (u >> 1) : nphi - 1;
+			double mu = square_rule ? sqrt(x[ii]) : x[ii];
+			wn[b][u] = (square_rule ? 0.5 * w[ii] : w[ii] * mu) * 2.0 * M_PI / nphi;
+			rbf_canon(theta_i, 0.0, acos(fmin(mu, 1.0)), (jj + 0.5) * M_PI / nphi, ws->c6 + 6 * (5 * b + 1 + u));
+		}
+	}
+	recon_eval_block_part(m, (size_t)np * 5, ws->c6, scaled, ws->part, L, ws->chan, ws->wsub, ws->vals, ws->work);
+	ws->evals += 5.0 * np * (double)m->n * (1.0 + (double)L / 64.0);
+	for (int b = 0; b < np && ws->nbox < RECON_BOX_MAX; b++) {
+		int need = 0;
+		for (size_t l = 0; l < L && !need; l++) {
+			double fc = ws->vals[(5 * b) * L + l], fn = 0, wbar = 0;
+			for (int u = 0; u < 4; u++) {
+				fn = fmax(fn, ws->vals[(5 * b + 1 + u) * L + l]);
+				wbar += 0.25 * wn[b][u];
+			}
+			need = fc > RECON_BOX_PEAK * fn && fc * wbar > tol * fmax(fabs(est[l]), fl);
+		}
+		if (!need)
+			continue;
+		double t = pt[b][0], p = pt[b][1];
+		double tlo = fmax(t - hw, 0), thi = fmin(t + hw, M_PI / 2);
+		double xlo = cos(thi), xhi = cos(tlo);
+		if (square_rule) {
+			xlo *= xlo;
+			xhi *= xhi;
+		}
+		double s = sin(t), dp = s > sin(hw) ? hw / s : M_PI; /* the same arc in azimuth */
+		double *B = ws->box[ws->nbox++];
+		B[0] = xlo;
+		B[1] = xhi;
+		B[2] = fmax(p - dp, 0);
+		B[3] = fmin(p + dp, M_PI);
+	}
+	return ws->nbox;
+}
+
+/* Nodes of the composite rule with boxes: the cells between the boxes' edges, each with Gauss-Legendre in x
+ * (cosθo, or cos²θo for the square rule) and in azimuth over [0, π] (doubled by the mirror); a cell inside a box
+ * gets the box's density boxn per box width, the others the density of the plain rule nmu × nphi (≥ 2 nodes a
+ * side). Returns the node count, or 0 on failure. */
+static size_t box_nodes(double theta_i, int nmu, int nphi, int square_rule, struct albedo_ws *ws)
+{
+	double xb[2 + 2 * RECON_BOX_MAX], pb[2 + 2 * RECON_BOX_MAX];
+	int nx = 0, np = 0;
+	xb[nx++] = 0;
+	xb[nx++] = 1;
+	pb[np++] = 0;
+	pb[np++] = M_PI;
+	for (int b = 0; b < ws->nbox; b++) {
+		xb[nx++] = ws->box[b][0];
+		xb[nx++] = ws->box[b][1];
+		pb[np++] = ws->box[b][2];
+		pb[np++] = ws->box[b][3];
+	}
+	qsort(xb, (size_t)nx, sizeof *xb, cmp_dbl);
+	qsort(pb, (size_t)np, sizeof *pb, cmp_dbl);
+	size_t Q = 0;
+	double gx[256], gwx[256], gp[256], gwp[256];
+	for (int i = 0; i + 1 < nx; i++) {
+		double a = xb[i], bx = xb[i + 1];
+		if (!(bx - a > 1e-12))
+			continue;
+		for (int j = 0; j + 1 < np; j++) {
+			double c = pb[j], d = pb[j + 1];
+			if (!(d - c > 1e-12))
+				continue;
+			double fx = 0, fp = 0; /* the densest box holding the cell */
+			for (int b = 0; b < ws->nbox; b++) {
+				const double *B = ws->box[b];
+				if (a >= B[0] - 1e-12 && bx <= B[1] + 1e-12 && c >= B[2] - 1e-12 && d <= B[3] + 1e-12) {
+					fx = fmax(fx, ws->boxn / (B[1] - B[0]));
+					fp = fmax(fp, ws->boxn / (B[3] - B[2]));
+				}
+			}
+			if (fx == 0) {
+				fx = nmu;
+				fp = nphi / M_PI;
+			}
+			int mx = (int)fmin(256, fmax(2, ceil(fx * (bx - a) - 1e-9)));
+			int mp = (int)fmin(256, fmax(2, ceil(fp * (d - c) - 1e-9)));
+			if (ws_reserve(ws, Q + (size_t)mx * (size_t)mp) || rbf_gauss_legendre01(mx, gx, gwx) ||
+			    rbf_gauss_legendre01(mp, gp, gwp))
+				return 0;
+			for (int u = 0; u < mx; u++) {
+				double x = a + (bx - a) * gx[u], wx = (bx - a) * gwx[u];
+				double mu = square_rule ? sqrt(x) : x, wmu = square_rule ? 0.5 * wx : wx * mu;
+				double to = acos(fmin(mu, 1.0));
+				for (int v = 0; v < mp; v++) {
+					rbf_canon(theta_i, 0.0, to, c + (d - c) * gp[v], ws->c6 + 6 * Q);
+					ws->wt[Q++] = wmu * (d - c) * gwp[v] * 2.0;
+				}
+			}
+		}
+	}
+	return Q;
 }
 
 /* acc[k] = albedo of channel chan[k] (k < nch) by the rule nmu × nphi; the weights of those channels are
@@ -81,8 +298,12 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 		       int scaled, size_t nch, struct albedo_ws *ws, double *acc, struct acq_err *err)
 {
 	size_t Q = (size_t)nmu * (size_t)nphi;
-	if (Q > ws->qmax || (ws->part == RECON_PART_LOBE ? recon_hv_nodes(theta_i, m->trend_alpha, nmu, nphi, ws->c6, ws->wt)
-						       : recon_hemi_nodes(theta_i, nmu, nphi, square_rule, ws->c6, ws->wt)))
+	if (ws->nbox > 0) {
+		if (!(Q = box_nodes(theta_i, nmu, nphi, square_rule, ws)))
+			return acq_errf(err, ACQ_E_NOMEM, "albedo: out of memory for a %d × %d rule with boxes", nmu, nphi);
+	} else if (Q > ws->qmax ||
+		   (ws->part == RECON_PART_LOBE ? recon_hv_nodes(theta_i, m->trend_alpha, nmu, nphi, ws->c6, ws->wt)
+						: recon_hemi_nodes(theta_i, nmu, nphi, square_rule, ws->c6, ws->wt)))
 		return acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", nmu, nphi);
 	for (size_t k = 0; k < nch; k++)
 		acc[k] = 0;
@@ -169,11 +390,18 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 			diff[l] = 0;
 	}
 	memcpy(ws->wsub, m->w, L * n * sizeof *ws->wsub);
+	/* the plain starting rule, then the probes at the data's brightest directions; where they find a lobe it
+	 * missed, the starting rule again with boxes there (and every doubling after it) */
+	ws->nbox = 0;
 	if (albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, out, err))
+		return -1;
+	int nb = albedo_boxes(m, theta_i, nmu, nphi, square_rule, scaled, tol, floor, ws, out, err);
+	if (nb < 0 || (nb > 0 && albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, out, err)))
 		return -1;
 	while (nch > 0 && 2 * nmu <= nmu_max) {
 		nmu *= 2;
 		nphi *= 2;
+		ws->boxn = ws->boxn * 2 <= 256 ? ws->boxn * 2 : 256;
 		if (albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, ws->fine, err))
 			return -1;
 		size_t keep = 0;

@@ -124,7 +124,9 @@ long recon_misfit(const struct recon_model *m, double zlim, double rmin, double 
  * Gauss-Legendre in cos²θo (the checker's independent rule). Returns -1 on a bad size. */
 int recon_hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double *c6, double *wt);
 
-/* Workspace of recon_albedo_adaptive, sized for the finest rule it may reach. */
+/* Bright directions whose neighbourhood every hemisphere rule integrates with its own finer rule (quad.c). */
+#define RECON_BOX_MAX 3
+/* Workspace of recon_albedo_adaptive, sized for the finest rule it may reach (grown for the boxes). */
 struct albedo_ws {
 	size_t qmax, L;
 	int part;     /* RECON_PART_*: which part of the interpolant; the lobe part is integrated over half vectors */
@@ -133,6 +135,12 @@ struct albedo_ws {
 	const double *offset; /* [L] or NULL: added to a channel's value in the "clearly below" test (split albedo) */
 	double *c6, *wt, *work, *vals, *wsub, *fine;
 	size_t *chan;
+	/* the data's brightest directions (quad.c): bright[n] the largest value of the interpolant's data over the
+	 * channels at each centre; cand[2n·3] scratch; nbox boxes {x_lo, x_hi, φ_lo, φ_hi} (x = cosθo, or cos²θo for
+	 * the square rule) refined by boxn nodes per dimension at the starting rule */
+	double *bright, *cand;
+	int nbox, boxn;
+	double box[RECON_BOX_MAX][4];
 };
 /* Allocate for rules of up to qmax nodes (-1 with err on failure); free (idempotent). */
 int recon_albedo_ws_init(struct albedo_ws *ws, const struct recon_model *m, size_t qmax, struct acq_err *err);

@@ -8,6 +8,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "config/acq_out.h"
 #include "recon/csvio.h"
 
 /*
@@ -115,12 +116,10 @@ int recon_model_save(const struct recon_model *m, const char *path, struct acq_e
 	for (size_t a = 0; a < sizeof arr / sizeof arr[0]; a++)
 		if (!all_finite(arr[a].p, arr[a].k))
 			return acq_errf(err, ACQ_E_NUMERIC, "model: non-finite value in %s, not written", arr[a].name);
-	char tmp[4096];
-	if (snprintf(tmp, sizeof tmp, "%s.tmp.%ld", path, (long)getpid()) >= (int)sizeof tmp)
-		return acq_errf(err, ACQ_E_INVAL, "model: path too long");
-	struct wr w = { fopen(tmp, "wb"), FNV_INIT, 0 };
-	if (!w.f)
-		return acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
+	struct acq_out o;
+	if (acq_out_open(&o, path, ACQ_OUT_STDIO, err))
+		return -1;
+	struct wr w = { o.f, FNV_INIT, 0 };
 	put(&w, MAGIC, 8);
 	put_u32(&w, VERSION);
 	put_u32(&w, (uint32_t)m->kernel);
@@ -140,18 +139,11 @@ int recon_model_save(const struct recon_model *m, const char *path, struct acq_e
 	put(&w, m->meta, ml);
 	uint64_t h = w.h;
 	put(&w, &h, 8);
-	if (fclose(w.f) != 0)
-		w.bad = 1;
 	if (w.bad) {
-		unlink(tmp);
+		acq_out_abort(&o);
 		return acq_errf(err, ACQ_E_IO, "%s: write failed", path);
 	}
-	if (rename(tmp, path) != 0) {
-		int e = errno;
-		unlink(tmp);
-		return acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(e));
-	}
-	return 0;
+	return acq_out_commit(&o, err);
 }
 
 struct rd {

@@ -25,6 +25,7 @@
 #include <unistd.h>
 
 #include "acq_version.h"
+#include "config/acq_out.h"
 #include "config/bench.h"
 #include "config/yconf.h"
 #include "sim/sim.h"
@@ -64,11 +65,10 @@ static void usage(FILE *f)
 
 static int write_ports(const char *path, struct sim_service **svc, int n, double scale, unsigned long long seed)
 {
-	char tmp[4096];
-	snprintf(tmp, sizeof tmp, "%s.tmp", path);
-	FILE *f = fopen(tmp, "w");
-	if (!f)
+	struct acq_out o;
+	if (acq_out_open(&o, path, ACQ_OUT_STDIO, NULL))
 		return -1;
+	FILE *f = o.f;
 	fprintf(f, "{\"pid\": %ld, \"time_scale\": %.17g, \"seed\": %llu", (long)getpid(), scale, seed);
 	for (int i = 0; i < n; i++) {
 		char buf[1024] = "";
@@ -78,9 +78,7 @@ static int write_ports(const char *path, struct sim_service **svc, int n, double
 			fprintf(f, ", %s", buf);
 	}
 	fprintf(f, "}\n");
-	if (fclose(f) != 0)
-		return -1;
-	return rename(tmp, path);
+	return acq_out_commit(&o, NULL);
 }
 
 /* ---- `acq-sim truth`: the command line of the ground-truth export (sim/sim_truth.h) ---------------------- */

@@ -327,7 +327,8 @@ static void svc_tick(void *self, double now)
 		if (now >= s->done_at)
 			finish_exposure(s, now);
 	}
-	if (s->cfd >= 0 && now < s->w->spectro_offline_until)
+	/* offline: no client is held, except one whose mid-read disconnect is still to come (it goes then) */
+	if (s->cfd >= 0 && now < s->w->spectro_offline_until && !s->w->faults.spectro_disconnect)
 		drop_client(s);
 	if (s->cfd >= 0 && s->nout)
 		flush(s);

@@ -270,6 +270,8 @@ double plan_clearance_deg(const struct bench_geom *g);
 bool plan_seg_safe(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
 /* The same with plan_clearance_deg: no collision and no arm across the beam or the view; planned paths. */
 bool plan_seg_clear(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q);
+/* The same with any threshold: ψ ≥ psi_min + PLAN_EDGE_DEG at every instant (recovery moves: never closer). */
+bool plan_seg_keeps(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q, double psi_min);
 /* Fastest clear move a → b found (every segment passes plan_seg_clear; templates: straight, one arm then the
  * other, detector zenith detours, azimuth escapes, approach points, a parking pose): up to PLAN_MAX_WP
  * segments into wps (the last ends at b), their count in *n, and the move's time (segments + settle)

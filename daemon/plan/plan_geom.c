@@ -215,6 +215,11 @@ bool plan_seg_clear(const struct bench_geom *g, const struct plan_pos *p, const 
 	return seg_check(g, p, q, plan_clearance_deg(g));
 }
 
+bool plan_seg_keeps(const struct bench_geom *g, const struct plan_pos *p, const struct plan_pos *q, double psi_min)
+{
+	return seg_check(g, p, q, psi_min);
+}
+
 /* A candidate path: up to BASIC_WP configurations after a (the last is b). */
 #define BASIC_WP 4
 struct cand {

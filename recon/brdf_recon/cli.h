@@ -8,6 +8,7 @@
 #include <stdio.h>
 
 #include "config/acq_err.h"
+#include "config/acq_out.h"
 #include "recon/budget.h"
 #include "recon/recon.h"
 
@@ -23,14 +24,12 @@ int parse_double(const char *s, double *out);
 int parse_u64(const char *s, uint64_t *out);
 
 
-/* An output file: stdout for NULL or "-"; an existing file that is not a regular file (/dev/null, a FIFO, a
- * terminal) directly, since renaming over it would replace the device (as root, /dev/null became a regular
- * file); else a temporary file renamed on success. */
+/* An output file: stdout for NULL or "-", else config/acq_out (a temporary file renamed on success; an existing
+ * device or FIFO written in place, since renaming over it would replace it; a directory refused). */
 struct out {
 	FILE *f;
-	const char *path;
-	char tmp[4096];
-	int direct;
+	int std;          /* stdout */
+	struct acq_out a; /* the file otherwise */
 };
 /* Open path for writing (see struct out); 0 or -1 with err set. */
 int out_open(struct out *o, const char *path, struct acq_err *err);

@@ -26,6 +26,8 @@ import time
 
 import numpy as np
 
+import benchlib
+
 BUILD = os.environ.get("ACQ_BUILD", "build")
 SRC = os.environ.get("ACQ_SRC", ".")
 OUT = os.environ.get("ACQ_BENCH_OUT", os.path.join(BUILD, "bench"))
@@ -38,16 +40,9 @@ CPU = {}
 
 def timed(args):
     """Run a child; return (wall seconds, peak RSS in MiB); its CPU time goes to CPU[args[1]]."""
-    t0 = time.perf_counter()
-    p = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    err = p.stderr.read().decode()
-    _, status, ru = os.wait4(p.pid, 0)
-    dt = time.perf_counter() - t0
-    if status != 0:
-        sys.exit("bench: %s failed: %s" % (" ".join(args), err))
+    dt, CPU[args[1]], rss, err = benchlib.run_child(args, "bench")
     print("   ", err.strip().replace("\n", "\n    "))
-    CPU[args[1]] = ru.ru_utime + ru.ru_stime
-    return dt, ru.ru_maxrss / 1024.0
+    return dt, rss
 
 
 def feat(a):
@@ -211,14 +206,7 @@ def main():
     res["speedup_fit_651"] = res["scipy_fit_s"] / res["recon_fit_s"]
     res["accuracy_ratio_logrmse_vs_scipy_default"] = res["scipy_logrmse"] / res["recon_logrmse"]
     res["accuracy_ratio_logrmse_vs_scipy_best"] = min(res["scipy_logrmse"], res["scipy_s1e-3_logrmse"]) / res["recon_logrmse"]
-    path = os.path.join(OUT, "bench_recon.csv")
-    with open(path, "w") as fh:
-        fh.write("metric,value\n")
-        for k, v in res.items():
-            fh.write("%s,%.6g\n" % (k, v))
-    for k, v in res.items():
-        print("  %-42s %.4g" % (k, v))
-    print("bench_recon: %s" % path)
+    benchlib.write_results(OUT, "bench_recon", res, 42)
     return 0
 
 

@@ -7,10 +7,8 @@ at 10^4 random pairs (theta <= 80 deg, and the whole hemisphere): max and RMS re
 wavelengths. Writes $ACQ_BENCH_OUT/bench_rgl.csv (metric,value)."""
 import math
 import os
-import subprocess
 import sys
 import tempfile
-import time
 
 import numpy as np
 
@@ -20,20 +18,16 @@ OUT = os.environ.get("ACQ_BENCH_OUT", os.path.join(BUILD, "bench"))
 SEED = int(os.environ.get("ACQ_SEED", "1")) % (2**31)
 B = os.path.join(BUILD, "brdf-recon")
 sys.path.insert(0, os.path.join(SRC, "tests", "integration"))
+import benchlib  # noqa: E402
 import rglread  # noqa: E402
 from recon_tools import model_eval, synth_model, vec  # noqa: E402
 
 
 def timed(args):
     """(wall s, CPU s, peak RSS MiB) of a child."""
-    t0 = time.perf_counter()
-    p = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    err = p.stderr.read().decode()
-    _, status, ru = os.wait4(p.pid, 0)
-    if status != 0:
-        sys.exit("bench_rgl: %s failed: %s" % (" ".join(args), err))
+    w, c, rss, err = benchlib.run_child(args, "bench_rgl")
     print("   ", err.strip())
-    return time.perf_counter() - t0, ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024.0
+    return w, c, rss
 
 
 def agreement(d, model, bsdf, tmax_deg, rng, n=10000):
@@ -67,14 +61,7 @@ def main():
             res["rgl%s_theta%d_max_rel" % (tag, dom)] = mx
             res["rgl%s_theta%d_rms_rel" % (tag, dom)] = rms
             res["rgl%s_theta%d_median_rel" % (tag, dom)] = med
-    path = os.path.join(OUT, "bench_rgl.csv")
-    with open(path, "w") as fh:
-        fh.write("metric,value\n")
-        for k, v in res.items():
-            fh.write("%s,%.6g\n" % (k, v))
-    for k, v in res.items():
-        print("  %-32s %.4g" % (k, v))
-    print("bench_rgl: %s" % path)
+    benchlib.write_results(OUT, "bench_rgl", res)
     return 0
 
 

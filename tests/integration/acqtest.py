@@ -20,6 +20,16 @@ def check(cond, what):
         raise AssertionError(what)
 
 
+def run_main(main):
+    """Run a test's main(): "FAIL: <what>" and exit status 1 when a check fails, else "ok"."""
+    try:
+        main()
+    except AssertionError as e:
+        print("FAIL: %s" % e)
+        sys.exit(1)
+    print("ok")
+
+
 class Client:
     """A raw protocol client: reads the banner, sends lines, reads JSON lines."""
 

@@ -54,9 +54,4 @@ def main():
             d.cleanup()
 
 
-try:
-    main()
-except AssertionError as e:
-    print("FAIL: %s" % e)
-    sys.exit(1)
-print("ok")
+A.run_main(main)

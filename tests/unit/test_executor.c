@@ -48,6 +48,10 @@ struct fake {
 	int dark_burst;           /* next N darks saturate */
 	int interlock_after_shots; /* open the interlock after N more laser shots (0: never) */
 	double interlock_close_at;
+	/* an alarm on the detector's θ in the first segment that passes within 3° of the planner's collision limit,
+	 * leaving the arms where the axes stopped: closer than the limit (ψ between the bodies' sum and the limit) */
+	bool squeeze, squeezed;
+	struct plan_pos squeeze_at;
 	double now;
 	/* audit */
 	int laser_on_during_motion, laser_on_during_dark;
@@ -123,6 +127,34 @@ static void check_collision(void)
 		F.collisions++;
 }
 
+/* The squeeze: the detector's stop nearest to where it is (θ and φ within 3°, 0.25° steps) with the arms
+ * closer than the planner allows but not touching (ψ 0.2° inside both bounds); true when it fired. */
+static bool squeeze_stop(void)
+{
+	double lo = geom.laser_body_halfwidth_deg + geom.detector_body_halfwidth_deg + 0.2;
+	double hi = plan_collision_deg(&geom) - 0.2, best = INFINITY;
+	struct plan_pos p = { F.pos[0], 0, 0 }, at = p;
+	for (int i = -12; i <= 12; i++)
+		for (int j = -12; j <= 12; j++) {
+			p.det_theta = F.pos[1] + 0.25 * i;
+			p.det_phi = F.pos[2] + 0.25 * j;
+			double psi = plan_psi_deg(&geom, &p), d = i * i + j * j;
+			if (psi > lo && psi < hi && d < best && p.det_theta >= 0 && p.det_theta <= 90) {
+				best = d;
+				at = p;
+			}
+		}
+	if (!(best < INFINITY))
+		return false;
+	F.pos[1] = at.det_theta;
+	F.pos[2] = at.det_phi;
+	F.moving[1] = F.moving[2] = false;
+	F.alarm[1] = true;
+	F.squeezed = true;
+	F.squeeze_at = at;
+	return true;
+}
+
 static int f_move_step(void *ctx, int a, double now, struct acq_err *err)
 {
 	(void)ctx;
@@ -148,6 +180,8 @@ static int f_move_step(void *ctx, int a, double now, struct acq_err *err)
 	}
 	F.pos[a] = F.start[a] + (F.target[a] - F.start[a]) * (now - F.t0[a]) / (F.t1[a] - F.t0[a]);
 	check_collision();
+	if (a == 1 && F.squeeze && !F.squeezed && squeeze_stop())
+		return acq_errf(err, ACQ_E_DEVICE, "detector.theta: controller alarm 0xe0 mid-move"), AXIS_MOVE_FAILED;
 	return AXIS_MOVE_RUNNING;
 }
 
@@ -362,10 +396,13 @@ static const struct ex_ops fake_ops = {
 static char events[256][64];
 static int nevents;
 
+static int backoffs; /* "backing off" events */
+
 static void sink_event(void *ctx, int64_t sweep_id, const char *kind, const char *device, const char *message)
 {
 	(void)ctx;
 	(void)sweep_id;
+	backoffs += strstr(message, "backing off") != NULL;
 	if (nevents < 256)
 		snprintf(events[nevents++], sizeof events[0], "%s", kind);
 	print_message("  event %s%s%s: %s\n", kind, device ? " " : "", device ? device : "", message);
@@ -408,6 +445,7 @@ static void fake_reset(void)
 	F.info.wl_coef[1] = 1.1;
 	F.info.max_counts = 65535;
 	nevents = 0;
+	backoffs = 0;
 }
 
 static void cfg_for_test(struct ex_cfg *c)
@@ -776,6 +814,59 @@ static void test_faults_deferred_reads(void **state)
 	test_faults(state);
 }
 
+/* An alarm mid-move leaves the arms closer together than any planned path may start (the demo's stall: no
+ * collision-free path from there, the sweep paused for the operator): the executor clears the alarm, backs off
+ * along the segment it was executing to where that started, plans again from there and completes, with no
+ * collision on the way. */
+static const char *near_text = "name: near\n"
+			       "incidence:\n  theta_deg: [30, 50]\n"
+			       "observation:\n  theta_deg: [20, 40, 60]\n  phi_deg: [20, 340, 40, 320]\n"
+			       "integration: {mode: auto, target_peak: 0.8, estimate_ms: 10, max_ms: 2000}\n"
+			       "averages: 4\nblind_points: drop\n";
+
+static void test_alarm_backs_off(void **state)
+{
+	(void)state;
+	/* a plan whose moves pass close to the laser arm (detector azimuths on both sides of the laser's) */
+	struct plan_result *small = plan, *near = NULL;
+	struct plan_spec *spec = NULL;
+	struct acq_err perr = { 0 };
+	assert_int_equal(plan_load_string("near.yaml", near_text, &spec, &perr), 0);
+	assert_int_equal(plan_make(spec, &geom, &near, &perr), 0);
+	plan_spec_free(spec);
+	plan = near;
+	struct store *st = open_store();
+	int64_t sweep = new_sweep(st);
+	struct ex_cfg cfg;
+	cfg_for_test(&cfg);
+	struct acq_err err = { 0 };
+	F.squeeze = true;
+	struct ex *x = ex_new(&cfg, &fake_ops, NULL, &sink, st, sweep, 0, &geom, plan, &err);
+	assert_non_null(x);
+	assert_int_equal(ex_start(x, 0, false, 0, &err), 0);
+	double t = drive(x, 0, 1e5, true);
+	print_message("  finished at t=%.1f s: %s %s\n", t, ex_state_name(ex_state(x)), ex_reason(x));
+	assert_true(F.squeezed);
+	double psi = plan_psi_deg(&geom, &F.squeeze_at);
+	print_message("  alarm stop at (%.2f, %.2f, %.2f), psi %.2f deg (planned paths keep >= %.2f)\n",
+		      F.squeeze_at.laser_theta, F.squeeze_at.det_theta, F.squeeze_at.det_phi, psi, plan_clearance_deg(&geom));
+	assert_true(psi < plan_clearance_deg(&geom)); /* no planned path can start there */
+	struct plan_wp w[PLAN_MAX_WP];
+	size_t n = 0;
+	assert_true(plan_move(&geom, &F.squeeze_at, &plan->steps[plan->n_steps - 1].pos, w, &n) < 0);
+	assert_int_equal(ex_state(x), EX_COMPLETED);
+	assert_int_equal(backoffs, 1);
+	assert_int_equal(F.collisions, 0);
+	assert_int_equal(F.out_of_limits, 0);
+	assert_int_equal(F.laser_on_during_motion, 0);
+	assert_true(count_events("fault") >= 1 && count_events("recovered") >= 1);
+	ex_free(x, t);
+	store_close(st);
+	check_db(sweep, true);
+	plan = small;
+	plan_result_free(near);
+}
+
 static void test_crash_resume(void **state)
 {
 	(void)state;
@@ -846,6 +937,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(test_faults, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_faults_deferred_reads, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_crash_resume, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_alarm_backs_off, setup, teardown),
 	};
 	int rc = cmocka_run_group_tests(tests, NULL, NULL);
 	plan_result_free(plan);
