@@ -121,7 +121,7 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe
 			H = fmax(H, hi - lo);
 		}
 	double s = m->shape / sqrt(20.0 * (H + 1.0)); /* radians */
-	if (m->trend == RECON_TREND_GGX && !no_trend_lobe) {
+	if (m->trend != RECON_TREND_NONE && !no_trend_lobe) {
 		double lobe = 0;
 		for (size_t l = 0; l < m->nwl; l++) {
 			double sum = 0; /* the lobe terms' albedo is ≤ the sum of their coefficients */
@@ -130,7 +130,8 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe
 			lobe = fmax(lobe, sum);
 		}
 		if (lobe >= 1e-4)
-			s = fmin(s, TREND_RULE_SPACING * m->trend_alpha);
+			s = fmin(s, m->trend == RECON_TREND_GGX ? TREND_RULE_SPACING * m->trend_alpha
+							       : trend_rule_step(m->trend, m->trend_alpha));
 	}
 	double a = ceil((M_PI / 2) / s), b = ceil(M_PI / s);
 	if (a > *nmu)

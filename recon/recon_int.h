@@ -67,7 +67,7 @@ static inline double trend_val(const struct recon_model *m, const double b[TREND
 
 static inline double trend_factor(const struct recon_model *m, const double b[TREND_NB], size_t l)
 {
-	return m->trend == RECON_TREND_GGX ? trend_val(m, b, l) + m->eps[l] : 1.0;
+	return m->trend != RECON_TREND_NONE ? trend_val(m, b, l) + m->eps[l] : 1.0;
 }
 
 static inline double theta_of(const double *v)
