@@ -1,11 +1,15 @@
-/* brdf-recon's shared command-line helpers (defined in brdf_recon_main.c) and the commands kept in their own
- * files (recon/brdf_recon/cmd_*.c). Only the program's own files include this. */
+/* brdf-recon's shared command-line helpers (defined in brdf_recon_main.c, the DHR budget in cmd_dhr.c) and the
+ * commands, one per file (recon/brdf_recon/cmd_*.c). Only the program's own files include this. */
 #ifndef RECON_BRDF_RECON_CLI_H
 #define RECON_BRDF_RECON_CLI_H
 
+#include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 
 #include "config/acq_err.h"
+#include "recon/budget.h"
+#include "recon/recon.h"
 
 /* Progress line on a terminal (stderr), and its erasure. */
 void progress(void *ctx, const char *stage, double frac);
@@ -18,8 +22,38 @@ int usage_err(const char *cmd, const char *msg);
 int parse_double(const char *s, double *out);
 int parse_u64(const char *s, uint64_t *out);
 
+
+/* An output file: stdout for NULL or "-"; an existing file that is not a regular file (/dev/null, a FIFO, a
+ * terminal) directly, since renaming over it would replace the device (as root, /dev/null became a regular
+ * file); else a temporary file renamed on success. */
+struct out {
+	FILE *f;
+	const char *path;
+	char tmp[4096];
+	int direct;
+};
+/* Open path for writing (see struct out); 0 or -1 with err set. */
+int out_open(struct out *o, const char *path, struct acq_err *err);
+/* Finish: on ok, flush and rename the temporary into place; else remove it. 0, or -1 (err set if a write failed). */
+int out_close(struct out *o, int ok, struct acq_err *err);
+
+/* The DHR budget's components, in the order of dhr's CSV columns (db_names: the column names). */
+enum { DB_NOISE, DB_MODEL, DB_QUAD, DB_MISFIT, DB_RES, DB_CERT, DB_DRIFT, DB_WLCAL, DB_NONLIN, DB_N };
+extern const char *const db_names[DB_N];
+/* DHR and budget of model m at nth (<= 64) incidences th (degrees) into dhr, sig (total) and part[DB_N][nth*L]. */
+int dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64_t draws, uint64_t seed,
+	       const struct recon_budget_opts *bo, double *dhr, double *sig, double **part, struct acq_err *err);
+
 /* The commands: argv[0] is the command's name; exit status. */
+int cmd_fit(int argc, char **argv);
+int cmd_eval(int argc, char **argv);
+int cmd_dhr(int argc, char **argv);
+int cmd_check(int argc, char **argv);
+int cmd_info(int argc, char **argv);
+/* merl and render (cmd is "merl" or "render"). */
+int cmd_output(const char *cmd, int argc, char **argv);
 int cmd_rgl(int argc, char **argv);
+int cmd_select(int argc, char **argv);
 int cmd_slices(int argc, char **argv);
 
 #endif

@@ -1,0 +1,353 @@
+/* brdf-recon dhr: directional-hemispherical reflectance with its uncertainty budget, compared with a
+ * reference. */
+#include <getopt.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "recon/brdf_recon/cli.h"
+#include "recon/budget.h"
+#include "recon/csvio.h"
+#include "recon/plot.h"
+#include "recon/recon.h"
+
+/* ---- dhr ---- */
+static const char dhr_help[] =
+	"usage: brdf-recon dhr MODEL [--theta-i 8,30,60] [--draws N] [--seed S] [-o OUT.csv] [budget options]\n"
+	"                      [--reference REF.csv [--reference-theta 8] [--z-out Z.csv]] [--plot OUT.png]\n"
+	"Directional-hemispherical reflectance DHR(theta_i, lambda) of the model with its uncertainty budget.\n"
+	"Quadrature: Gauss-Legendre 32 in cos(theta_o) x 48 azimuth midpoints (exact for a Lambertian), doubled\n"
+	"per wavelength up to 256 x 384 until two rules agree to 1e-3 (narrow lobes).\n"
+	"Output CSV (stdout by default), standard uncertainties per wavelength (recon/reconstruction.md):\n"
+	"  theta_i,wavelength_nm,dhr,sigma, then the budget:\n"
+	"  sigma_noise   the samples' sigma columns (counting, dark and white-reference noise: the files carry\n"
+	"                their sum) propagated by Monte Carlo through the one factorisation (--draws, --seed);\n"
+	"  sigma_model   interpolation between samples (GP posterior; with the prior on the unseen hemisphere);\n"
+	"  sigma_quad    quadrature;  sigma_misfit  samples the model does not honour;\n"
+	"  sigma_res     resolution in theta_i (a lobe narrower than the incidence spacing);\n"
+	"  sigma_cert    the white standard's certificate (correlated: one factor for all wavelengths);\n"
+	"  sigma_drift   source drift between reference and samples (correlated likewise);\n"
+	"  sigma_wlcal   wavelength calibration, |dDHR/dlambda| x its uncertainty;  sigma_nonlin  nonlinearity.\n"
+	"  sigma = sqrt(max(noise, model)^2 + quad^2 + misfit^2 + res^2 + cert^2 + drift^2 + wlcal^2 + nonlin^2).\n"
+	"Budget options (the sample file and database carry none of these: each is 0 unless given):\n"
+	"  --cert CERT.csv       the white standard's certificate, columns wavelength_nm,rho,u\n"
+	"  --cert-rel X          or its relative standard uncertainty at every wavelength\n"
+	"  --drift-rel X         relative standard uncertainty of the source between reference and samples\n"
+	"  --wl-cal-nm X         standard uncertainty of the wavelength calibration (nm)\n"
+	"  --nonlin-rel X        relative residual of the nonlinearity correction\n"
+	"  --reference REF.csv   compare with a measured DHR (columns wavelength_nm,dhr,sigma, e.g. a\n"
+	"                        spectrophotometer at 8 degrees: acq-sim truth MATERIAL --spectrophotometer) at\n"
+	"                        --reference-theta (default 8, must be among --theta-i): prints the agreement (share\n"
+	"                        of wavelengths with |z| < 2, z with both uncertainties) and chi2/n with the\n"
+	"                        correlated components as one common factor; per-wavelength z to --z-out (or stderr)\n"
+	"  --plot OUT.png        the curves with +-2 sigma bands, the reference band and a panel of the residual in\n"
+	"                        units of sigma\n";
+
+/* The model's curve at the reference wavelengths (linear in λ, the model's grid): value, total σ, correlated σ. */
+static void at_reference(const struct recon_model *m, const double *y, const double *s, const double *c, double wl,
+			 double *yo, double *so, double *co)
+{
+	size_t L = m->nwl, j = 0;
+	while (j + 1 < L && m->wl[j + 1] < wl)
+		j++;
+	size_t j2 = j + 1 < L ? j + 1 : j;
+	double u = j2 > j ? (wl - m->wl[j]) / (m->wl[j2] - m->wl[j]) : 0;
+	*yo = (1 - u) * y[j] + u * y[j2];
+	*so = (1 - u) * s[j] + u * s[j2];
+	*co = (1 - u) * c[j] + u * c[j2];
+}
+
+const char *const db_names[DB_N] = { "sigma_noise", "sigma_model",  "sigma_quad",  "sigma_misfit", "sigma_res",
+					    "sigma_cert",  "sigma_drift", "sigma_wlcal", "sigma_nonlin" };
+
+/* DHR and budget of model m at nth incidences th (degrees) into dhr, sig (total) and part[DB_N][nth*L]. */
+int dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64_t draws, uint64_t seed,
+		      const struct recon_budget_opts *bo, double *dhr, double *sig, double **part, struct acq_err *err)
+{
+	double thr[64];
+	for (size_t t = 0; t < nth; t++)
+		thr[t] = th[t] * M_PI / 180.0;
+	struct recon_dhr_parts parts = { .noise = part[DB_NOISE], .model = part[DB_MODEL], .quad = part[DB_QUAD],
+					 .misfit = part[DB_MISFIT], .res = part[DB_RES] };
+	double *srec = malloc(nth * m->nwl * sizeof *srec);
+	int rc = !srec ? acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory")
+		 : recon_dhr_parts(m, nth, thr, (int)draws, seed, dhr, srec, &parts, progress, NULL, err) ||
+			 recon_budget(nth, m->nwl, m->wl, dhr, srec, bo, part[DB_CERT], part[DB_DRIFT], part[DB_WLCAL],
+				      part[DB_NONLIN], sig, err)
+		 ? -1
+		 : 0;
+	free(srec);
+	return rc;
+}
+
+int cmd_dhr(int argc, char **argv)
+{
+	static const struct option lo[] = {
+		{ "output", required_argument, 0, 'o' }, { "theta-i", required_argument, 0, 't' },
+		{ "draws", required_argument, 0, 'n' }, { "seed", required_argument, 0, 's' },
+		{ "reference", required_argument, 0, 'r' }, { "reference-theta", required_argument, 0, 'R' },
+		{ "z-out", required_argument, 0, 'z' }, { "plot", required_argument, 0, 'p' },
+		{ "cert", required_argument, 0, 'C' }, { "cert-rel", required_argument, 0, 'c' },
+		{ "drift-rel", required_argument, 0, 'd' }, { "wl-cal-nm", required_argument, 0, 'w' },
+		{ "nonlin-rel", required_argument, 0, 'N' }, { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+	const char *outp = NULL, *refp = NULL, *zout = NULL, *plot = NULL, *certp = NULL;
+	double th[64] = { 8, 30, 60 }, ref_th = 8;
+	size_t nth = 3;
+	uint64_t draws = 64, seed = 1;
+	struct recon_budget_opts bo = { 0 };
+	int c;
+	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
+		switch (c) {
+		case 'o': outp = optarg; break;
+		case 't': {
+			nth = 0;
+			char *save = NULL, *dup = strdup(optarg);
+			for (char *tok = strtok_r(dup, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
+				if (nth == 64 || parse_double(tok, &th[nth]) || th[nth] < 0 || th[nth] > 90) {
+					free(dup);
+					return usage_err("dhr", "--theta-i needs up to 64 angles in [0, 90]");
+				}
+				nth++;
+			}
+			free(dup);
+			if (!nth)
+				return usage_err("dhr", "--theta-i is empty");
+			break;
+		}
+		case 'n':
+			if (parse_u64(optarg, &draws) || draws > 100000)
+				return usage_err("dhr", "--draws needs 0..100000");
+			break;
+		case 's':
+			if (parse_u64(optarg, &seed))
+				return usage_err("dhr", "--seed needs an unsigned integer");
+			break;
+		case 'r': refp = optarg; break;
+		case 'R':
+			if (parse_double(optarg, &ref_th))
+				return usage_err("dhr", "--reference-theta needs a number");
+			break;
+		case 'z': zout = optarg; break;
+		case 'p': plot = optarg; break;
+		case 'C': certp = optarg; break;
+		case 'c':
+			if (parse_double(optarg, &bo.cert_rel) || !(bo.cert_rel >= 0 && bo.cert_rel < 1))
+				return usage_err("dhr", "--cert-rel needs a number in [0, 1)");
+			break;
+		case 'd':
+			if (parse_double(optarg, &bo.drift_rel) || !(bo.drift_rel >= 0 && bo.drift_rel < 1))
+				return usage_err("dhr", "--drift-rel needs a number in [0, 1)");
+			break;
+		case 'w':
+			if (parse_double(optarg, &bo.wl_cal_nm) || !(bo.wl_cal_nm >= 0 && bo.wl_cal_nm < 100))
+				return usage_err("dhr", "--wl-cal-nm needs a number in [0, 100)");
+			break;
+		case 'N':
+			if (parse_double(optarg, &bo.nonlin_rel) || !(bo.nonlin_rel >= 0 && bo.nonlin_rel < 1))
+				return usage_err("dhr", "--nonlin-rel needs a number in [0, 1)");
+			break;
+		case 'h': fputs(dhr_help, stdout); return 0;
+		default: return usage_err("dhr", "bad option");
+		}
+	}
+	if (optind != argc - 1)
+		return usage_err("dhr", "one MODEL expected");
+	struct acq_err err = { 0 };
+	double *cert = NULL;
+	size_t ncert = 0;
+	if (certp) {
+		static const char *const cn[3] = { "wavelength_nm", "rho", "u" };
+		if (csvio_read_columns(certp, cn, 3, &ncert, &cert, &err))
+			return fail(&err);
+		double *cw = malloc(3 * ncert * sizeof *cw);
+		if (!cw || !ncert) {
+			free(cert);
+			free(cw);
+			acq_errf(&err, ACQ_E_INVAL, "dhr: --cert %s: no rows", certp);
+			return fail(&err);
+		}
+		for (size_t i = 0; i < ncert; i++) { /* rows → columns */
+			cw[i] = cert[3 * i];
+			cw[ncert + i] = cert[3 * i + 1];
+			cw[2 * ncert + i] = cert[3 * i + 2];
+		}
+		free(cert);
+		cert = cw;
+		bo.cert_wl = cert;
+		bo.cert_rho = cert + ncert;
+		bo.cert_u = cert + 2 * ncert;
+		bo.ncert = ncert;
+	}
+	struct recon_model *m;
+	if (recon_model_load(argv[optind], &m, &err)) {
+		free(cert);
+		return fail(&err);
+	}
+	size_t L = m->nwl, NL = nth * L;
+	double *dhr = malloc(NL * sizeof *dhr), *sig = malloc(NL * sizeof *sig), *pbuf = malloc(DB_N * NL * sizeof *pbuf);
+	double *part[DB_N], *ref = NULL, *corr = malloc(NL * sizeof *corr);
+	size_t nref = 0;
+	int ok = dhr && sig && pbuf && corr;
+	if (!ok)
+		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
+	for (int k = 0; k < DB_N; k++)
+		part[k] = pbuf ? pbuf + (size_t)k * NL : NULL;
+	if (ok && dhr_budget(m, nth, th, draws, seed, &bo, dhr, sig, part, &err))
+		ok = 0;
+	progress_end();
+	for (size_t i = 0; ok && i < NL; i++) /* the correlated part: one common factor (certificate, drift) */
+		corr[i] = hypot(part[DB_CERT][i], part[DB_DRIFT][i]);
+	struct out o;
+	if (ok && !out_open(&o, outp, &err)) {
+		fputs("theta_i,wavelength_nm,dhr,sigma", o.f);
+		for (int k = 0; k < DB_N; k++)
+			fprintf(o.f, ",%s", db_names[k]);
+		fputc('\n', o.f);
+		char b[64];
+		for (size_t t = 0; ok && t < nth; t++)
+			for (size_t l = 0; ok && l < L; l++) {
+				size_t i = t * L + l;
+				fprintf(o.f, "%.10g,%.10g", th[t], m->wl[l]);
+				for (int k = -2; ok && k < DB_N; k++) {
+					double v = k == -2 ? dhr[i] : k == -1 ? sig[i] : part[k][i];
+					if (csvio_fmt(b, sizeof b, v)) {
+						acq_errf(&err, ACQ_E_NUMERIC, "dhr: non-finite value");
+						ok = 0;
+					} else {
+						fprintf(o.f, ",%s", b);
+					}
+				}
+				fputc('\n', o.f);
+			}
+		if (out_close(&o, ok, &err))
+			ok = 0;
+	} else if (ok) {
+		ok = 0;
+	}
+	if (ok && !certp && bo.cert_rel == 0 && bo.drift_rel == 0 && bo.wl_cal_nm == 0 && bo.nonlin_rel == 0)
+		fprintf(stderr, "dhr: no --cert/--cert-rel, --drift-rel, --wl-cal-nm, --nonlin-rel given: those components "
+			"are 0 (the samples carry no input for them)\n");
+	size_t tref = nth;
+	double *zr = NULL, *zwl = NULL;
+	if (ok && refp) {
+		static const char *const names[3] = { "wavelength_nm", "dhr", "sigma" };
+		for (tref = 0; tref < nth; tref++)
+			if (fabs(th[tref] - ref_th) < 1e-9)
+				break;
+		if (tref == nth) {
+			acq_errf(&err, ACQ_E_INVAL, "dhr: --reference-theta %g is not among --theta-i", ref_th);
+			ok = 0;
+		} else if (csvio_read_columns(refp, names, 3, &nref, &ref, &err)) {
+			ok = 0;
+		}
+	}
+	if (ok && ref) {
+		/* the reference's wavelengths inside the model's range */
+		double *cmp = malloc(8 * (nref ? nref : 1) * sizeof *cmp);
+		if (!cmp) {
+			acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
+			ok = 0;
+		}
+		size_t nc = 0;
+		double *cw = cmp, *md = cmp + nref, *ms = cmp + 2 * nref, *mc = cmp + 3 * nref, *rv = cmp + 4 * nref,
+		       *rs = cmp + 5 * nref, *z = cmp + 6 * nref;
+		for (size_t i = 0; ok && i < nref; i++) {
+			double wl = ref[3 * i];
+			if (!(wl >= m->wl[0] && wl <= m->wl[L - 1]) || !isfinite(ref[3 * i + 1]) || !(ref[3 * i + 2] >= 0))
+				continue;
+			cw[nc] = wl;
+			at_reference(m, dhr + tref * L, sig + tref * L, corr + tref * L, wl, &md[nc], &ms[nc], &mc[nc]);
+			rv[nc] = ref[3 * i + 1];
+			rs[nc] = ref[3 * i + 2];
+			nc++;
+		}
+		struct recon_agreement ag;
+		if (ok)
+			recon_agreement(nc, cw, md, ms, mc, rv, rs, z, &ag);
+		FILE *zf = stderr;
+		struct out zo;
+		if (ok && zout) {
+			if (out_open(&zo, zout, &err))
+				ok = 0;
+			else
+				zf = zo.f;
+		}
+		if (ok) {
+			fprintf(zf, "wavelength_nm,dhr_model,sigma_model,dhr_ref,sigma_ref,z\n");
+			for (size_t i = 0; i < nc; i++)
+				fprintf(zf, "%.10g,%.10g,%.10g,%.10g,%.10g,%.6g\n", cw[i], md[i], ms[i], rv[i], rs[i], z[i]);
+		}
+		if (ok && zout && out_close(&zo, ok, &err))
+			ok = 0;
+		if (ok)
+			fprintf(stderr, "reference %s at theta_i=%g: %zu wavelengths compared, agreement %.1f%% within |z| <= 2 "
+				"(z with both uncertainties), RMS z %.3g, max |z| %.3g at %g nm, chi2/n %.3g with the "
+				"correlated components (certificate, drift) as one common factor\n", refp, ref_th, ag.n,
+				ag.n ? 100.0 * (double)ag.within2 / (double)ag.n : 0.0, ag.rms_z, ag.max_z, ag.max_z_wl,
+				ag.chi2_n);
+		if (ok && plot) { /* keep the residual for the plot */
+			zr = malloc((nc ? nc : 1) * sizeof *zr);
+			zwl = malloc((nc ? nc : 1) * sizeof *zwl);
+			if (zr && zwl) {
+				memcpy(zr, z, nc * sizeof *zr);
+				memcpy(zwl, cw, nc * sizeof *zwl);
+				nref = nc;
+			}
+		}
+		free(cmp);
+	}
+	if (ok && plot) {
+		struct plot_curve curves[64], refc, resc;
+		char labels[64][32];
+		double *refwl = NULL, *refy = NULL, *refs = NULL;
+		for (size_t t = 0; t < nth; t++) {
+			snprintf(labels[t], sizeof labels[t], "\u03b8i = %g\u00b0", th[t]);
+			curves[t] = (struct plot_curve){ labels[t], m->wl, dhr + t * L, sig + t * L, L };
+		}
+		if (ref) {
+			size_t nr = 0;
+			static const char *const names[3] = { "wavelength_nm", "dhr", "sigma" };
+			double *all = NULL;
+			if (csvio_read_columns(refp, names, 3, &nr, &all, &err) == 0) {
+				refwl = malloc(nr * sizeof *refwl);
+				refy = malloc(nr * sizeof *refy);
+				refs = malloc(nr * sizeof *refs);
+				if (refwl && refy && refs) {
+					for (size_t i = 0; i < nr; i++) {
+						refwl[i] = all[3 * i];
+						refy[i] = all[3 * i + 1];
+						refs[i] = all[3 * i + 2];
+					}
+					refc = (struct plot_curve){ "reference", refwl, refy, refs, nr };
+				}
+			}
+			free(all);
+		}
+		struct plot_dhr_opts po;
+		plot_dhr_opts_default(&po);
+		po.title = "Directional-hemispherical reflectance (bands: \u00b12\u03c3)";
+		if (zr && zwl) {
+			resc = (struct plot_curve){ "(model \u2212 ref) / \u03c3", zwl, zr, NULL, nref };
+			po.residual = &resc;
+			po.height = 720;
+		}
+		if (plot_dhr_png(plot, curves, nth, refwl && refy && refs ? &refc : NULL, &po, NULL, &err))
+			ok = 0;
+		free(refwl);
+		free(refy);
+		free(refs);
+	}
+	free(zr);
+	free(zwl);
+	free(ref);
+	free(cert);
+	free(dhr);
+	free(sig);
+	free(pbuf);
+	free(corr);
+	recon_model_free(m);
+	return ok ? 0 : fail(&err);
+}
+

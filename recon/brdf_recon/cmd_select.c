@@ -1,0 +1,249 @@
+/* brdf-recon select: the next batch of an adaptive sweep (recon/select.c), as JSON for the daemon. */
+#include <getopt.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "recon/brdf_recon/cli.h"
+#include "recon/csvio.h"
+#include "recon/recon.h"
+#include "recon/select.h"
+
+static const char select_help[] =
+	"usage: brdf-recon select MODEL --candidates CAND.csv --target SPEC [--batch N] [-o OUT.json]\n"
+	"Choose the next measurements: a greedy batch maximising the expected reduction of the target's variance per\n"
+	"second of bench time under the model's Gaussian-process reading (rank-one update between picks).\n"
+	"  --candidates CAND.csv  header id,theta_i,phi_i,theta_o,phi_o,cost_s (degrees, sample frame; cost_s > 0:\n"
+	"                         bench seconds to measure the pair from the arms' current position); id an integer.\n"
+	"                         A pair and its reciprocal (or any pair equal up to rotation/mirror) count once,\n"
+	"                         at the cheaper cost\n"
+	"  --target SPEC          dhr:8,30,60  sigma of the DHR at those incidences (degrees), RMS over the model's\n"
+	"                                      wavelengths; the value is the largest incidence's\n"
+	"                         lnf          largest posterior sigma of ln f (RMS over wavelengths) over the grid\n"
+	"                                      theta_i <= theta_o in 0..80 deg step 10, delta phi 0..180 step 20\n"
+	"                         either followed by :le=X, the threshold at which the target is met\n"
+	"  --batch N              at most N picks (default 16; 0: only report the target)\n"
+	"  --draws N --seed S     Monte-Carlo draws of the DHR's noise part (default 16, seed 1)\n"
+	"  -o OUT.json            output (stdout by default): {\"target\":{\"spec\",\"value\",\"per\",\"threshold\",\"met\"},\n"
+	"                         \"picks\":[{\"id\",\"gain\",\"gain_per_s\",\"cost_s\",\"predicted_value_after\"}], \"model\",\n"
+	"                         \"criterion\", \"candidates\":{\"read\",\"distinct\"}}; picks in choice order.\n"
+	"Exit 0 (also with no pick worth making: empty picks), 2 on bad input, 1 on a failure of the computation.\n";
+
+/* Write s as a JSON string (quotes included). */
+static void json_str(FILE *f, const char *s)
+{
+	fputc('"', f);
+	for (const unsigned char *p = (const unsigned char *)s; *p; p++) {
+		if (*p == '"' || *p == '\\')
+			fprintf(f, "\\%c", *p);
+		else if (*p < 0x20)
+			fprintf(f, "\\u%04x", *p);
+		else
+			fputc(*p, f);
+	}
+	fputc('"', f);
+}
+
+/* A finite number for JSON (%.9g); the library's outputs are finite, this keeps the file valid regardless. */
+static void json_num(FILE *f, double v)
+{
+	if (isfinite(v))
+		fprintf(f, "%.9g", v);
+	else
+		fputs("null", f);
+}
+
+static int cmp_id(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return x < y ? -1 : x > y;
+}
+
+static int bad_input(const struct acq_err *e)
+{
+	progress_end();
+	fprintf(stderr, "brdf-recon select: %s\n", e->msg[0] ? e->msg : "bad input");
+	return 2;
+}
+
+int cmd_select(int argc, char **argv)
+{
+	static const struct option lo[] = {
+		{ "output", required_argument, 0, 'o' }, { "candidates", required_argument, 0, 'c' },
+		{ "target", required_argument, 0, 't' }, { "batch", required_argument, 0, 'b' },
+		{ "draws", required_argument, 0, 'n' }, { "seed", required_argument, 0, 's' },
+		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+	const char *outp = NULL, *candp = NULL, *spec = NULL;
+	struct select_opts so;
+	select_opts_default(&so);
+	uint64_t u;
+	int c;
+	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
+		switch (c) {
+		case 'o': outp = optarg; break;
+		case 'c': candp = optarg; break;
+		case 't': spec = optarg; break;
+		case 'b':
+			if (parse_u64(optarg, &u) || u > 100000)
+				return usage_err("select", "--batch needs a count in 0..100000");
+			so.batch = (size_t)u;
+			break;
+		case 'n':
+			if (parse_u64(optarg, &u) || u > 100000)
+				return usage_err("select", "--draws needs 0..100000");
+			so.ndraws = (int)u;
+			break;
+		case 's':
+			if (parse_u64(optarg, &so.seed))
+				return usage_err("select", "--seed needs an unsigned integer");
+			break;
+		case 'h': fputs(select_help, stdout); return 0;
+		default: return usage_err("select", "bad option");
+		}
+	}
+	if (optind != argc - 1)
+		return usage_err("select", "one MODEL expected");
+	if (!candp || !spec)
+		return usage_err("select", "--candidates CAND.csv and --target SPEC are required");
+	struct acq_err err = { 0 };
+	struct select_target tg;
+	if (select_target_parse(spec, &tg, &err))
+		return bad_input(&err);
+	static const char *const names[6] = { "id", "theta_i", "phi_i", "theta_o", "phi_o", "cost_s" };
+	size_t nc = 0;
+	double *rows = NULL;
+	if (csvio_read_columns(candp, names, 6, &nc, &rows, &err))
+		return bad_input(&err);
+	double *ang = malloc((nc ? nc : 1) * 4 * sizeof *ang), *cost = malloc((nc ? nc : 1) * sizeof *cost);
+	double *ids = malloc((nc ? nc : 1) * sizeof *ids);
+	if (!ang || !cost || !ids) {
+		free(rows);
+		free(ang);
+		free(cost);
+		free(ids);
+		acq_errf(&err, ACQ_E_NOMEM, "select: out of memory");
+		return fail(&err);
+	}
+	int bad = 0;
+	for (size_t j = 0; j < nc && !bad; j++) {
+		const double *r = rows + 6 * j;
+		double id = r[0];
+		if (!(id >= 0 && id <= 9007199254740992.0 && id == floor(id))) {
+			acq_errf(&err, ACQ_E_INVAL, "%s: data row %zu: id %.17g is not a non-negative integer", candp, j + 1, id);
+			bad = 1;
+			break;
+		}
+		for (int a = 1; a <= 4 && !bad; a += 2)
+			if (!(r[a] >= 0 && r[a] <= 90)) {
+				acq_errf(&err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): %s = %g outside [0, 90] degrees", candp,
+					 j + 1, id, names[a], r[a]);
+				bad = 1;
+			}
+		if (!bad && !(r[5] > 0 && isfinite(r[5]))) {
+			acq_errf(&err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): cost_s = %g must be > 0 seconds", candp, j + 1,
+				 id, r[5]);
+			bad = 1;
+		}
+		for (int a = 0; a < 4; a++)
+			ang[4 * j + a] = r[1 + a] * M_PI / 180;
+		cost[j] = r[5];
+		ids[j] = id;
+	}
+	if (!bad && nc > 1) { /* ids are unique: sort a copy */
+		double *s = malloc(nc * sizeof *s);
+		if (s) {
+			memcpy(s, ids, nc * sizeof *s);
+			qsort(s, nc, sizeof *s, cmp_id);
+			for (size_t i = 1; i < nc && !bad; i++)
+				if (s[i] == s[i - 1]) {
+					acq_errf(&err, ACQ_E_INVAL, "%s: id %.0f appears more than once", candp, s[i]);
+					bad = 1;
+				}
+			free(s);
+		}
+	}
+	free(rows);
+	if (bad) {
+		free(ang);
+		free(cost);
+		free(ids);
+		return bad_input(&err);
+	}
+	struct recon_model *m;
+	if (recon_model_load(argv[optind], &m, &err)) {
+		free(ang);
+		free(cost);
+		free(ids);
+		return bad_input(&err);
+	}
+	struct select_result res;
+	int ok = select_batch(m, nc, ang, cost, &tg, &so, &res, &err) == 0;
+	struct out o;
+	if (ok && !out_open(&o, outp, &err)) {
+		FILE *f = o.f;
+		fputs("{\"target\":{\"spec\":", f);
+		json_str(f, spec);
+		fputs(",\"value\":", f);
+		json_num(f, res.value);
+		fputs(",\"per\":[", f);
+		for (size_t i = 0; i < res.nper; i++) {
+			if (i)
+				fputc(',', f);
+			json_num(f, res.per[i]);
+		}
+		fputs("],", f);
+		if (tg.kind == SELECT_DHR) {
+			fputs("\"theta_i\":[", f);
+			for (size_t i = 0; i < tg.nth; i++)
+				fprintf(f, i ? ",%g" : "%g", tg.theta_deg[i]);
+			fputs("],", f);
+		} else {
+			fputs("\"where\":{", f);
+			static const char *const an[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
+			for (int a = 0; a < 4; a++)
+				fprintf(f, "%s\"%s\":%g", a ? "," : "", an[a], res.where[a] * 180 / M_PI);
+			fputs("},", f);
+		}
+		fputs("\"threshold\":", f);
+		json_num(f, tg.threshold);
+		fprintf(f, ",\"met\":%s},\"picks\":[", res.met ? "true" : "false");
+		for (size_t k = 0; k < res.npicks; k++) {
+			const struct select_pick *p = &res.picks[k];
+			fprintf(f, "%s{\"id\":%.0f,\"gain\":", k ? "," : "", ids[p->index]);
+			json_num(f, p->gain);
+			fputs(",\"gain_per_s\":", f);
+			json_num(f, p->gain_per_s);
+			fputs(",\"cost_s\":", f);
+			json_num(f, cost[p->index]);
+			fputs(",\"predicted_value_after\":", f);
+			json_num(f, p->predicted);
+			fputs(",\"predicted_per_after\":[", f);
+			for (size_t i = 0; i < res.nper; i++) {
+				if (i)
+					fputc(',', f);
+				json_num(f, p->predicted_per[i]);
+			}
+			fputs("]}", f);
+		}
+		fputs("],\"model\":", f);
+		json_str(f, argv[optind]);
+		fprintf(f, ",\"criterion\":\"%s\",\"candidates\":{\"read\":%zu,\"distinct\":%zu}}\n",
+			"gp-excess-variance-reduction-per-second", nc, res.nunique);
+		if (out_close(&o, 1, &err))
+			ok = 0;
+	} else if (ok) {
+		ok = 0;
+	}
+	if (ok)
+		fprintf(stderr, "select: target %s = %.4g%s; %zu of %zu distinct candidates picked%s\n", spec, res.value,
+			res.met ? " (met)" : "", res.npicks, res.nunique,
+			res.npicks ? "" : " (none reduces the target)");
+	select_result_free(&res);
+	recon_model_free(m);
+	free(ang);
+	free(cost);
+	free(ids);
+	return ok ? 0 : fail(&err);
+}

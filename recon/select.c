@@ -1,0 +1,667 @@
+/* select: greedy choice of the next measurements by expected variance reduction of the target per second of
+ * bench time, with a rank-one update of the Gaussian-process posterior between picks. */
+#include <cblas.h>
+#include <lapacke.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "recon/recon_int.h"
+#include "recon/select.h"
+
+/* The DHR's fixed rule (dhr.c: the GP part of its σ is computed on it). */
+#define SEL_NMU 32
+#define SEL_NPHI 48
+/* A candidate at a sampled incidence zeroes the DHR's resolution term there (dhr.c: within 0.25°). */
+#define SEL_RES_TOL (0.25 * M_PI / 180)
+/* Canonical points this close (unit-vector coordinates) are the same measurement. */
+#define SEL_SAME 1e-9
+/* The ln f target's grid: θ up to 80° (beyond, no bench reaches and the prior alone speaks). */
+#define LNF_TMAX 80
+#define LNF_TSTEP 10
+#define LNF_PSTEP 20
+
+void select_opts_default(struct select_opts *o)
+{
+	o->batch = 16;
+	o->ndraws = 16;
+	o->seed = 1;
+	o->nchan = 24;
+}
+
+void select_result_free(struct select_result *r)
+{
+	free(r->picks);
+	r->picks = NULL;
+	r->npicks = 0;
+}
+
+static int parse_num(const char *s, const char *end, double *out)
+{
+	char buf[64];
+	size_t len = (size_t)(end - s);
+	if (len == 0 || len >= sizeof buf)
+		return -1;
+	memcpy(buf, s, len);
+	buf[len] = '\0';
+	char *e;
+	double v = strtod(buf, &e);
+	if (*e || !isfinite(v))
+		return -1;
+	*out = v;
+	return 0;
+}
+
+int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err)
+{
+	memset(t, 0, sizeof *t);
+	t->threshold = NAN;
+	if (!spec || !*spec)
+		return acq_errf(err, ACQ_E_INVAL, "target: empty (dhr:8,30,60 or lnf, optionally :le=X)");
+	const char *p = spec, *le = strstr(spec, ":le=");
+	const char *body_end = le ? le : spec + strlen(spec);
+	if (le) {
+		const char *x = le + 4;
+		if (parse_num(x, x + strlen(x), &t->threshold) || !(t->threshold > 0))
+			return acq_errf(err, ACQ_E_INVAL, "target '%s': le= needs a positive number", spec);
+	}
+	if ((size_t)(body_end - p) == 3 && !strncmp(p, "lnf", 3)) {
+		t->kind = SELECT_LNF;
+		return 0;
+	}
+	if (strncmp(p, "dhr:", 4) || body_end <= p + 4)
+		return acq_errf(err, ACQ_E_INVAL, "target '%s': expected dhr:THETA[,THETA...] or lnf, optionally :le=X", spec);
+	t->kind = SELECT_DHR;
+	for (const char *a = p + 4; a < body_end;) {
+		const char *c = memchr(a, ',', (size_t)(body_end - a));
+		const char *e = c ? c : body_end;
+		double th;
+		if (t->nth == SELECT_MAX_THETA)
+			return acq_errf(err, ACQ_E_INVAL, "target '%s': at most %d incidences", spec, SELECT_MAX_THETA);
+		if (parse_num(a, e, &th) || th < 0 || th > 90)
+			return acq_errf(err, ACQ_E_INVAL, "target '%s': incidence '%.*s' is not a number of degrees in [0, 90]",
+					spec, (int)(e - a), a);
+		t->theta_deg[t->nth++] = th;
+		a = c ? c + 1 : body_end;
+		if (c && a == body_end)
+			return acq_errf(err, ACQ_E_INVAL, "target '%s': empty incidence after ','", spec);
+	}
+	return 0;
+}
+
+/* The working state of one selection (see "Choosing the next measurements" in recon/reconstruction.md). */
+struct sel {
+	const struct recon_model *m;
+	const struct select_target *t;
+	size_t n, L, J, F, Lc, nth, batch;
+	double noise;    /* η · median r: the noise of a new measurement relative to the kernel's amplitude */
+	double thr2;     /* threshold², 0 without one */
+	double *A;       /* [n*n] Cholesky factor of K + ηΛ (column-major, lower) */
+	double *alpha;   /* [L] the GP amplitude per channel (leave-one-out) */
+	size_t *chan;    /* [Lc] tracked channels */
+	double *cu;      /* [J*6] unique candidates' canonical points */
+	double *soaJ;    /* [6*J] same, structure of arrays */
+	size_t *rep;     /* [J] input index of each unique candidate (the cheapest of its duplicates) */
+	double *cost;    /* [J] */
+	double *Kjn;     /* [J*n] k(candidate j, centre k) */
+	double *G;       /* [J*n] A⁻¹ k_j (column j contiguous) */
+	double *Pjj;     /* [J] posterior variance (unit amplitude) of g at candidate j */
+	double *Z;       /* [F*J] posterior covariance of functional f with g at candidate j */
+	double *v;       /* [F] posterior variance of functional f */
+	double *U;       /* [batch*J] scaled posterior rows of the picks (the low-rank part of the update) */
+	unsigned char *picked, *match; /* [J]; [nth*J] candidate j samples incidence t (SELECT_DHR) */
+	/* SELECT_DHR: per (t, tracked channel): noise floor², the σ² parts the selection does not change, res² */
+	double *sn2, *rest, *res2, *kappa;
+	unsigned char *res_done; /* [nth] */
+	double *xang;    /* SELECT_LNF: [F*4] the grid's pairs */
+	double *row, *zp; /* scratch of sel_update: [J], [F] */
+};
+
+static void sel_free(struct sel *s)
+{
+	free(s->A);
+	free(s->alpha);
+	free(s->chan);
+	free(s->cu);
+	free(s->soaJ);
+	free(s->rep);
+	free(s->cost);
+	free(s->Kjn);
+	free(s->G);
+	free(s->Pjj);
+	free(s->Z);
+	free(s->v);
+	free(s->U);
+	free(s->picked);
+	free(s->match);
+	free(s->sn2);
+	free(s->rest);
+	free(s->res2);
+	free(s->kappa);
+	free(s->res_done);
+	free(s->xang);
+	free(s->row);
+	free(s->zp);
+}
+
+/* Factor K + ηΛ of the model and the leave-one-out amplitude α_λ of every channel (as dhr.c). */
+static int sel_factor(struct sel *s, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, L = s->L;
+	double *Ainv = malloc(n * n * sizeof *Ainv);
+	s->A = malloc(n * n * sizeof *s->A);
+	s->alpha = calloc(L, sizeof *s->alpha);
+	if (!Ainv || !s->A || !s->alpha) {
+		free(Ainv);
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	}
+	double *A = s->A;
+	for (size_t j = 0; j < n; j++)
+		for (size_t i = j; i < n; i++)
+			A[j * n + i] = A[i * n + j] = rbf_kernel(m->kernel, m->shape, m->ctr + 6 * i, m->ctr + 6 * j,
+								 m->tctr + 6 * j);
+	for (size_t k = 0; k < n; k++)
+		A[k * n + k] += m->eta * m->lam[k];
+	if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)n, A, (lapack_int)n) != 0) {
+		free(Ainv);
+		return acq_errf(err, ACQ_E_NUMERIC, "select: refactorisation of the model's system failed");
+	}
+	memcpy(Ainv, A, n * n * sizeof *Ainv);
+	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, Ainv, (lapack_int)n) != 0) {
+		free(Ainv);
+		return acq_errf(err, ACQ_E_NUMERIC, "select: inverse of the model's system failed");
+	}
+	for (size_t l = 0; l < L; l++) {
+		double acc = 0;
+		for (size_t k = 0; k < n; k++)
+			acc += m->w[l * n + k] * m->w[l * n + k] / Ainv[k * n + k];
+		s->alpha[l] = acc / (double)n;
+	}
+	free(Ainv);
+	double *r = malloc(n * sizeof *r);
+	if (!r)
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	memcpy(r, m->lam, n * sizeof *r);
+	for (size_t i = 1; i < n; i++) /* insertion sort: n is a few thousand at most, once */
+		for (size_t k = i; k > 0 && r[k - 1] > r[k]; k--) {
+			double x = r[k];
+			r[k] = r[k - 1];
+			r[k - 1] = x;
+		}
+	s->noise = m->eta * (n % 2 ? r[n / 2] : 0.5 * (r[n / 2 - 1] + r[n / 2]));
+	free(r);
+	return 0;
+}
+
+static double dist2(const double *a, const double *b)
+{
+	double d = 0;
+	for (int i = 0; i < 6; i++)
+		d += (a[i] - b[i]) * (a[i] - b[i]);
+	return d;
+}
+
+/* Validate the candidates, merge coincident ones (cheapest kept), and set up their kernel rows, A⁻¹k_j and the
+ * posterior variance at each. */
+static int sel_candidates(struct sel *s, size_t nc, const double *ang, const double *cost, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n;
+	for (size_t j = 0; j < nc; j++) {
+		const double *a = ang + 4 * j;
+		if (!(a[0] >= 0 && a[0] <= M_PI / 2 && a[2] >= 0 && a[2] <= M_PI / 2) || !isfinite(a[1]) || !isfinite(a[3]))
+			return acq_errf(err, ACQ_E_RANGE, "select: candidate %zu: zenith angles must be in [0, 90] degrees and "
+					"azimuths finite", j + 1);
+		if (!(cost[j] > 0) || !isfinite(cost[j]))
+			return acq_errf(err, ACQ_E_RANGE, "select: candidate %zu: cost must be a positive number of seconds", j + 1);
+	}
+	double *c6 = malloc((nc ? nc : 1) * 12 * sizeof *c6);
+	s->cu = malloc((nc ? nc : 1) * 6 * sizeof *s->cu);
+	s->rep = malloc((nc ? nc : 1) * sizeof *s->rep);
+	s->cost = malloc((nc ? nc : 1) * sizeof *s->cost);
+	if (!c6 || !s->cu || !s->rep || !s->cost) {
+		free(c6);
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	}
+	size_t J = 0;
+	for (size_t j = 0; j < nc; j++) {
+		const double *a = ang + 4 * j;
+		double *c = c6 + 12 * j, *tc = c + 6;
+		rbf_canon(a[0], a[1], a[2], a[3], c);
+		rbf_tau(c, tc);
+		size_t u = J;
+		for (size_t i = 0; i < J; i++) { /* the same measurement: the same canonical point, or its τ image */
+			const double *b = s->cu + 6 * i;
+			if (dist2(c, b) < SEL_SAME * SEL_SAME || dist2(tc, b) < SEL_SAME * SEL_SAME) {
+				u = i;
+				break;
+			}
+		}
+		if (u == J) {
+			memcpy(s->cu + 6 * J, c, 6 * sizeof *c);
+			s->rep[J] = j;
+			s->cost[J] = cost[j];
+			J++;
+		} else if (cost[j] < s->cost[u]) {
+			s->rep[u] = j;
+			s->cost[u] = cost[j];
+		}
+	}
+	free(c6);
+	s->J = J;
+	size_t Jp = J ? J : 1;
+	s->soaJ = malloc(6 * Jp * sizeof *s->soaJ);
+	s->Kjn = malloc(Jp * n * sizeof *s->Kjn);
+	s->G = malloc(Jp * n * sizeof *s->G);
+	s->Pjj = malloc(Jp * sizeof *s->Pjj);
+	s->picked = calloc(Jp, 1);
+	if (!s->soaJ || !s->Kjn || !s->G || !s->Pjj || !s->picked)
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory for %zu candidates", J);
+	if (!J)
+		return 0;
+	rbf_soa(J, s->cu, s->soaJ);
+	rbf_kmatrix_soa(m->kernel, m->shape, J, s->cu, n, m->soa, s->Kjn);
+	memcpy(s->G, s->Kjn, J * n * sizeof *s->G);
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)J, s->A, (lapack_int)n, s->G,
+			   (lapack_int)n) != 0)
+		return acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
+	for (size_t j = 0; j < J; j++) {
+		double tc[6];
+		rbf_tau(s->cu + 6 * j, tc);
+		double p = rbf_kernel(m->kernel, m->shape, s->cu + 6 * j, s->cu + 6 * j, tc) -
+			   cblas_ddot((int)n, s->Kjn + j * n, 1, s->G + j * n, 1);
+		s->Pjj[j] = p > 0 ? p : 0;
+	}
+	return 0;
+}
+
+/* Z[f, j] = cov(φ_f, g(x_j)) − ... for functionals given by coefficients C[q*F' + f] over points c6[Q] (the
+ * amplitude folded in): Z = Cᵀ K_QJ − (A⁻¹ K_nQ C)ᵀ K_nJ, rows f0..f0+F'-1 of s->Z. */
+static int sel_functionals(struct sel *s, size_t Q, const double *c6, const double *KQn, const double *C, size_t Fp,
+			   size_t f0, double *KQJ, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, J = s->J;
+	double *B = malloc(Fp * n * sizeof *B); /* row-major F' × n = column-major n × F' */
+	if (!B)
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	cblas_dgemm(CblasRowMajor, CblasTrans, CblasNoTrans, (int)Fp, (int)n, (int)Q, 1.0, C, (int)Fp, KQn, (int)n, 0.0,
+		    B, (int)n);
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)Fp, s->A, (lapack_int)n, B, (lapack_int)n)) {
+		free(B);
+		return acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
+	}
+	double *Z = s->Z + f0 * J;
+	rbf_kmatrix_soa(m->kernel, m->shape, Q, c6, J, s->soaJ, KQJ);
+	cblas_dgemm(CblasRowMajor, CblasTrans, CblasNoTrans, (int)Fp, (int)J, (int)Q, 1.0, C, (int)Fp, KQJ, (int)J, 0.0,
+		    Z, (int)J);
+	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Fp, (int)J, (int)n, -1.0, B, (int)n, s->Kjn, (int)n,
+		    1.0, Z, (int)J);
+	free(B);
+	return 0;
+}
+
+/* The DHR functional at incidence th on the tracked channels: the fixed rule's nodes c6[Q*6] and weights wt[Q],
+ * the kernel rows KQn[Q*n], and C[q*Lc + c] = weight × energy factor × df̂/dg at the model × √(α_λ + unseen
+ * prior), as dhr.c's σ_model (scratch Y[Q*Lc], Wc[Lc*n]). */
+static int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, double *KQn, double *Y, double *Wc,
+			double *C, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, Lc = s->Lc, Q = (size_t)SEL_NMU * SEL_NPHI;
+	for (size_t c = 0; c < Lc; c++)
+		memcpy(Wc + c * n, m->w + s->chan[c] * n, n * sizeof *Wc);
+	if (recon_hemi_nodes(th, SEL_NMU, SEL_NPHI, 0, c6, wt))
+		return acq_errf(err, ACQ_E_INVAL, "select: quadrature");
+	rbf_kmatrix_soa(m->kernel, m->shape, Q, c6, n, m->soa, KQn);
+	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Q, (int)Lc, (int)n, 1.0, KQn, (int)n, Wc, (int)n, 0.0,
+		    Y, (int)Lc);
+	for (size_t q = 0; q < Q; q++) {
+		const double *c = c6 + 6 * q;
+		double b[TREND_NB], u = recon_unseen(recon_nearest_centre(m, c, NULL));
+		trend_at(m, c, b);
+		for (size_t k = 0; k < Lc; k++) {
+			size_t l = s->chan[k];
+			double sc = recon_energy_scale(m, theta_of(c), theta_of(c + 3), l) * wt[q];
+			C[q * Lc + k] = sc * untransform_deriv(m->transform, Y[q * Lc + k] + m->mu[l], m->eps[l],
+							      trend_factor(m, b, l)) *
+					sqrt(s->alpha[l] + u * RECON_PRIOR_ALPHA);
+		}
+	}
+	return 0;
+}
+
+/* The DHR target: the model's σ and its parts at every channel (recon_dhr_parts), and the GP functionals on the
+ * tracked channels: c_q = weight × energy factor × df̂/dg × √(α_λ + unseen prior) at the DHR's fixed rule. */
+static int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_result *r, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, L = s->L, nth = s->nth, Lc = s->Lc, J = s->J, Q = (size_t)SEL_NMU * SEL_NPHI;
+	double th[SELECT_MAX_THETA];
+	for (size_t t = 0; t < nth; t++)
+		th[t] = s->t->theta_deg[t] * M_PI / 180;
+	size_t NL = nth * L;
+	double *dhr = malloc(NL * sizeof *dhr), *sig = malloc(NL * sizeof *sig), *sn = malloc(NL * sizeof *sn);
+	double *sm = malloc(NL * sizeof *sm), *sres = malloc(NL * sizeof *sres);
+	double *c6 = malloc(Q * 6 * sizeof *c6), *wt = malloc(Q * sizeof *wt), *KQn = malloc(Q * n * sizeof *KQn);
+	double *Y = malloc(Q * Lc * sizeof *Y), *C = malloc(Q * Lc * sizeof *C), *Wc = malloc(Lc * n * sizeof *Wc);
+	double *KQJ = malloc(Q * (J ? J : 1) * sizeof *KQJ);
+	int rc = -1;
+	if (!dhr || !sig || !sn || !sm || !sres || !c6 || !wt || !KQn || !Y || !C || !Wc || !KQJ) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	struct recon_dhr_parts parts = { .noise = sn, .model = sm, .res = sres };
+	if (recon_dhr_parts(m, nth, th, o->ndraws, o->seed, dhr, sig, &parts, NULL, NULL, err))
+		goto out;
+	r->value = 0;
+	for (size_t t = 0; t < nth; t++) {
+		double all = 0, sub = 0;
+		for (size_t l = 0; l < L; l++)
+			all += sig[t * L + l] * sig[t * L + l];
+		all /= (double)L;
+		for (size_t c = 0; c < Lc; c++) {
+			size_t i = t * L + s->chan[c], f = t * Lc + c;
+			double b = fmax(sn[i], sm[i]);
+			sub += sig[i] * sig[i];
+			s->sn2[f] = sn[i] * sn[i];
+			s->v[f] = sm[i] * sm[i];
+			s->res2[f] = sres[i] * sres[i];
+			s->rest[f] = fmax(sig[i] * sig[i] - b * b, 0);
+		}
+		sub /= (double)Lc;
+		s->kappa[t] = sub > 0 ? all / sub : 1.0;
+		r->per[t] = sqrt(all);
+		r->value = fmax(r->value, r->per[t]);
+	}
+	r->nper = nth;
+	for (size_t t = 0; t < nth; t++) {
+		if (sel_dhr_coef(s, th[t], c6, wt, KQn, Y, Wc, C, err))
+			goto out;
+		if (J && sel_functionals(s, Q, c6, KQn, C, Lc, t * Lc, KQJ, err))
+			goto out;
+	}
+	rc = 0;
+out:
+	free(dhr);
+	free(sig);
+	free(sn);
+	free(sm);
+	free(sres);
+	free(c6);
+	free(wt);
+	free(KQn);
+	free(Y);
+	free(C);
+	free(Wc);
+	free(KQJ);
+	return rc;
+}
+
+/* The ln f grid: θi ≤ θo in {0, 10, …, 80°} × Δφ in {0, 20, …, 180°} (one azimuth at θi = 0). */
+static size_t lnf_grid(double *ang)
+{
+	size_t F = 0;
+	for (int ti = 0; ti <= LNF_TMAX; ti += LNF_TSTEP)
+		for (int to = ti; to <= LNF_TMAX; to += LNF_TSTEP)
+			for (int p = 0; p <= 180; p += LNF_PSTEP) {
+				if (ti == 0 && p > 0)
+					break;
+				if (ang) {
+					ang[4 * F] = ti * M_PI / 180;
+					ang[4 * F + 1] = 0;
+					ang[4 * F + 2] = to * M_PI / 180;
+					ang[4 * F + 3] = p * M_PI / 180;
+				}
+				F++;
+			}
+	return F;
+}
+
+/* The ln f target: the posterior variance of g (RMS amplitude over the channels, unseen prior included) at the
+ * grid's points, and their covariances with the candidates. */
+static int sel_setup_lnf(struct sel *s, struct select_result *r, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, F = s->F, J = s->J;
+	double *c6 = malloc(F * 6 * sizeof *c6), *KXn = malloc(F * n * sizeof *KXn), *GX = malloc(F * n * sizeof *GX);
+	double *amp = malloc(F * sizeof *amp);
+	int rc = -1;
+	if (!c6 || !KXn || !GX || !amp) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	double abar = 0;
+	for (size_t l = 0; l < s->L; l++)
+		abar += s->alpha[l] / (double)s->L;
+	for (size_t x = 0; x < F; x++) {
+		const double *a = s->xang + 4 * x;
+		rbf_canon(a[0], a[1], a[2], a[3], c6 + 6 * x);
+		amp[x] = sqrt(abar + recon_unseen(recon_nearest_centre(m, c6 + 6 * x, NULL)) * RECON_PRIOR_ALPHA);
+	}
+	rbf_kmatrix_soa(m->kernel, m->shape, F, c6, n, m->soa, KXn);
+	memcpy(GX, KXn, F * n * sizeof *GX);
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)F, s->A, (lapack_int)n, GX, (lapack_int)n)) {
+		acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
+		goto out;
+	}
+	r->value = 0;
+	for (size_t x = 0; x < F; x++) {
+		double tc[6];
+		rbf_tau(c6 + 6 * x, tc);
+		double p = rbf_kernel(m->kernel, m->shape, c6 + 6 * x, c6 + 6 * x, tc) -
+			   cblas_ddot((int)n, KXn + x * n, 1, GX + x * n, 1);
+		s->v[x] = amp[x] * amp[x] * (p > 0 ? p : 0);
+		if (sqrt(s->v[x]) > r->value) {
+			r->value = sqrt(s->v[x]);
+			memcpy(r->where, s->xang + 4 * x, sizeof r->where);
+		}
+	}
+	r->per[0] = r->value;
+	r->nper = 1;
+	if (J) {
+		rbf_kmatrix_soa(m->kernel, m->shape, F, c6, J, s->soaJ, s->Z);
+		cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)F, (int)J, (int)n, -1.0, GX, (int)n, s->Kjn,
+			    (int)n, 1.0, s->Z, (int)J);
+		for (size_t x = 0; x < F; x++)
+			cblas_dscal((int)J, amp[x], s->Z + x * J, 1);
+	}
+	rc = 0;
+out:
+	free(c6);
+	free(KXn);
+	free(GX);
+	free(amp);
+	return rc;
+}
+
+/*
+ * The criterion's value E (the target's variance above the threshold², summed over incidences or grid points)
+ * with candidate j's measurement added (j = SIZE_MAX: as it is), and the predicted per-incidence values.
+ */
+static double sel_excess(const struct sel *s, size_t j, double *per)
+{
+	double S = j == SIZE_MAX ? 0 : s->Pjj[j] + s->noise, E = 0;
+	if (s->t->kind == SELECT_DHR) {
+		for (size_t t = 0; t < s->nth; t++) {
+			double acc = 0;
+			int zero_res = j != SIZE_MAX && s->match[t * s->J + j] && !s->res_done[t];
+			for (size_t c = 0; c < s->Lc; c++) {
+				size_t f = t * s->Lc + c;
+				double v = s->v[f];
+				if (j != SIZE_MAX && S > 0) {
+					double z = s->Z[f * s->J + j];
+					v -= z * z / S;
+				}
+				acc += fmax(s->sn2[f], fmax(v, 0)) + s->rest[f] - (zero_res ? s->res2[f] : 0);
+			}
+			double V = s->kappa[t] * fmax(acc, 0) / (double)s->Lc;
+			if (per)
+				per[t] = sqrt(V);
+			E += fmax(V - s->thr2, 0);
+		}
+		return E;
+	}
+	double mx = 0;
+	for (size_t x = 0; x < s->F; x++) {
+		double v = s->v[x];
+		if (j != SIZE_MAX && S > 0) {
+			double z = s->Z[x * s->J + j];
+			v -= z * z / S;
+		}
+		v = fmax(v, 0);
+		mx = fmax(mx, v);
+		E += fmax(v - s->thr2, 0);
+	}
+	if (per)
+		per[0] = sqrt(mx);
+	return E / (double)s->F;
+}
+
+/* Add candidate p's measurement to the posterior: the rank-one (Schur complement) update of every tracked
+ * covariance, with the k-th pick's scaled row stored in U[k]. */
+static void sel_update(struct sel *s, size_t p, size_t k)
+{
+	double *row = s->row, *zp = s->zp;
+	const struct recon_model *m = s->m;
+	size_t J = s->J, n = s->n, F = s->F;
+	/* P(x_p, x_j) = K(p, j) − k_pᵀ A⁻¹ k_j − Σ_i U_i(p) U_i(j) */
+	rbf_krow(m->kernel, m->shape, s->cu + 6 * p, J, s->soaJ, row);
+	cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)J, (int)n, -1.0, s->Kjn, (int)n, s->G + p * n, 1, 1.0, row, 1);
+	for (size_t i = 0; i < k; i++)
+		cblas_daxpy((int)J, -s->U[i * J + p], s->U + i * J, 1, row, 1);
+	double S = s->Pjj[p] + s->noise;
+	if (!(S > 0))
+		S = 1e-300;
+	for (size_t f = 0; f < F; f++)
+		zp[f] = s->Z[f * J + p];
+	for (size_t f = 0; f < F; f++)
+		s->v[f] = fmax(s->v[f] - zp[f] * zp[f] / S, 0);
+	cblas_dger(CblasRowMajor, (int)F, (int)J, -1.0 / S, zp, 1, row, 1, s->Z, (int)J);
+	for (size_t j = 0; j < J; j++) {
+		s->Pjj[j] = fmax(s->Pjj[j] - row[j] * row[j] / S, 0);
+		s->U[k * J + j] = row[j] / sqrt(S);
+	}
+	if (s->t->kind == SELECT_DHR)
+		for (size_t t = 0; t < s->nth; t++)
+			if (s->match[t * J + p])
+				s->res_done[t] = 1;
+	s->picked[p] = 1;
+}
+
+/* Everything before the first pick: the factorisation, the candidates, the target's functionals and their
+ * covariances with the candidates, the current value into r. 0, or -1 with err (sel_free in both cases). */
+static int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const double *ang, const double *cost,
+		    const struct select_target *t, const struct select_opts *o, struct select_result *r, struct acq_err *err)
+{
+	*s = (struct sel){ .m = m, .t = t, .n = m->n, .L = m->nwl, .nth = t->kind == SELECT_DHR ? t->nth : 0 };
+	s->thr2 = isfinite(t->threshold) ? t->threshold * t->threshold : 0;
+	s->Lc = s->L < o->nchan ? s->L : o->nchan;
+	s->chan = malloc(s->Lc * sizeof *s->chan);
+	if (!s->chan)
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	for (size_t c = 0; c < s->Lc; c++)
+		s->chan[c] = s->Lc > 1 ? c * (s->L - 1) / (s->Lc - 1) : s->L / 2;
+	if (sel_factor(s, err) || sel_candidates(s, nc, ang, cost, err))
+		return -1;
+	r->nunique = s->J;
+	size_t J = s->J, Jp = J ? J : 1;
+	s->batch = o->batch < J ? o->batch : J;
+	if (t->kind == SELECT_DHR) {
+		s->F = s->nth * s->Lc;
+	} else {
+		s->F = lnf_grid(NULL);
+		s->xang = malloc(s->F * 4 * sizeof *s->xang);
+		if (!s->xang)
+			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		lnf_grid(s->xang);
+	}
+	size_t F = s->F;
+	s->Z = malloc(F * Jp * sizeof *s->Z);
+	s->v = calloc(F, sizeof *s->v);
+	s->U = malloc((s->batch ? s->batch : 1) * Jp * sizeof *s->U);
+	s->match = calloc((s->nth ? s->nth : 1) * Jp, 1);
+	s->sn2 = calloc(F, sizeof *s->sn2);
+	s->rest = calloc(F, sizeof *s->rest);
+	s->res2 = calloc(F, sizeof *s->res2);
+	s->kappa = calloc(SELECT_MAX_THETA, sizeof *s->kappa);
+	s->res_done = calloc(SELECT_MAX_THETA, 1);
+	s->row = malloc(Jp * sizeof *s->row);
+	s->zp = malloc(F * sizeof *s->zp);
+	if (!s->Z || !s->v || !s->U || !s->match || !s->sn2 || !s->rest || !s->res2 || !s->kappa || !s->res_done ||
+	    !s->row || !s->zp)
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	if (t->kind == SELECT_DHR ? sel_setup_dhr(s, o, r, err) : sel_setup_lnf(s, r, err))
+		return -1;
+	for (size_t tt = 0; tt < s->nth; tt++) { /* candidates at a target incidence (they zero its resolution term) */
+		double th = t->theta_deg[tt] * M_PI / 180;
+		for (size_t j = 0; j < J; j++) {
+			const double *a = ang + 4 * s->rep[j];
+			s->match[tt * J + j] = fabs(a[0] - th) <= SEL_RES_TOL || fabs(a[2] - th) <= SEL_RES_TOL;
+		}
+	}
+	r->met = isfinite(t->threshold) && r->value <= t->threshold;
+	return 0;
+}
+
+int select_batch(const struct recon_model *m, size_t nc, const double *ang, const double *cost,
+		 const struct select_target *t, const struct select_opts *opts, struct select_result *r, struct acq_err *err)
+{
+	struct select_opts o;
+	if (opts)
+		o = *opts;
+	else
+		select_opts_default(&o);
+	memset(r, 0, sizeof *r);
+	if (!m || !t || (nc && (!ang || !cost)))
+		return acq_errf(err, ACQ_E_INVAL, "select: no model, target or candidates");
+	if (t->kind == SELECT_DHR && (t->nth == 0 || t->nth > SELECT_MAX_THETA))
+		return acq_errf(err, ACQ_E_INVAL, "select: between 1 and %d incidences", SELECT_MAX_THETA);
+	if (o.batch > 100000 || o.nchan == 0)
+		return acq_errf(err, ACQ_E_INVAL, "select: batch at most 100000, at least one tracked channel");
+	struct sel s;
+	int rc = -1;
+	if (sel_init(&s, m, nc, ang, cost, t, &o, r, err))
+		goto out;
+	r->picks = calloc(s.batch ? s.batch : 1, sizeof *r->picks);
+	if (!r->picks) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	size_t J = s.J;
+	double E = sel_excess(&s, SIZE_MAX, NULL), E0 = E, value = r->value;
+	while (r->npicks < s.batch && !(isfinite(t->threshold) && value <= t->threshold)) {
+		size_t best = SIZE_MAX;
+		double bscore = 0, bgain = 0;
+		for (size_t j = 0; j < J; j++) {
+			if (s.picked[j])
+				continue;
+			double gain = E - sel_excess(&s, j, NULL), score = gain / s.cost[j];
+			if (gain > 1e-12 * E0 && score > bscore) {
+				best = j;
+				bscore = score;
+				bgain = gain;
+			}
+		}
+		if (best == SIZE_MAX)
+			break; /* nothing left reduces the target */
+		sel_update(&s, best, r->npicks);
+		struct select_pick *pk = &r->picks[r->npicks++];
+		pk->index = s.rep[best];
+		pk->gain = bgain;
+		pk->gain_per_s = bscore;
+		E = sel_excess(&s, SIZE_MAX, pk->predicted_per);
+		/* the predicted value: the GP part updated, the other parts as they are (DHR: the largest incidence) */
+		value = 0;
+		for (size_t i = 0; i < r->nper; i++)
+			value = fmax(value, pk->predicted_per[i]);
+		pk->predicted = value;
+	}
+	rc = 0;
+out:
+	if (rc)
+		select_result_free(r);
+	sel_free(&s);
+	return rc;
+}

@@ -1,0 +1,69 @@
+/* select: the next measurements of an adaptive sweep. Given a fitted model, reachable candidate direction pairs
+ * with their bench-time costs and a target (the DHR's σ at listed incidences, or the largest posterior σ of ln f),
+ * a greedy batch that maximises the expected reduction of the target's variance per second of bench time, under
+ * the model's Gaussian-process reading, with a rank-one update of the posterior between picks
+ * (recon/reconstruction.md, "Choosing the next measurements"). */
+#ifndef RECON_SELECT_H
+#define RECON_SELECT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "config/acq_err.h"
+#include "recon/recon.h"
+
+#define SELECT_MAX_THETA 16
+
+enum select_kind {
+	SELECT_DHR = 0, /* σ of DHR(θi, λ) at listed incidences, RMS over the model's wavelengths, largest incidence */
+	SELECT_LNF = 1  /* largest posterior σ of ln f (RMS over wavelengths) over a grid of the hemisphere pair */
+};
+
+struct select_target {
+	int kind;                            /* enum select_kind */
+	size_t nth;                          /* SELECT_DHR: incidences */
+	double theta_deg[SELECT_MAX_THETA];  /* degrees, in [0, 90] */
+	double threshold;                    /* the target is met at value ≤ threshold; NAN: none given */
+};
+
+/* Parse "dhr:8,30,60", "lnf", optionally followed by ":le=X" (X > 0). 0, or -1 with err saying what is wrong. */
+int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err);
+
+struct select_opts {
+	size_t batch;     /* largest number of picks (default 16) */
+	int ndraws;       /* Monte-Carlo draws of the DHR's noise part (default 16) */
+	uint64_t seed;    /* their seed (default 1) */
+	size_t nchan;     /* channels on which the GP part is tracked (default 24, evenly spread) */
+};
+void select_opts_default(struct select_opts *o);
+
+struct select_pick {
+	size_t index;          /* the candidate (input order) */
+	double gain;           /* expected reduction of the criterion (target variance above the threshold²) */
+	double gain_per_s;     /* gain / cost */
+	double predicted;      /* predicted target value after this pick and the ones before it */
+	double predicted_per[SELECT_MAX_THETA];
+};
+
+struct select_result {
+	double value;                       /* the target's current value */
+	double per[SELECT_MAX_THETA];       /* per incidence (SELECT_DHR) or [0] = value (SELECT_LNF) */
+	size_t nper;
+	int met;                            /* a threshold was given and value ≤ threshold */
+	double where[4];                    /* SELECT_LNF: the grid pair (θi, φi, θo, φo radians) of the largest σ */
+	size_t nunique;                     /* distinct candidates (reciprocal/isotropic duplicates merged) */
+	size_t npicks;
+	struct select_pick *picks;          /* in choice order */
+};
+
+/* Choose up to o->batch of nc candidates ang[j*4..] (θi, φi, θo, φo radians, θ in [0, π/2]) with costs cost[j] (> 0
+ * seconds) for target t on model m. Candidates whose canonical points coincide (the same pair up to rotation,
+ * mirror or reciprocity) count once, at the cheapest cost. Picking stops at the batch size, when the predicted
+ * value meets the threshold, or when no candidate reduces the criterion (an empty batch is a result). r is filled
+ * (select_result_free); 0, or -1 with err. */
+int select_batch(const struct recon_model *m, size_t nc, const double *ang, const double *cost,
+		 const struct select_target *t, const struct select_opts *o, struct select_result *r, struct acq_err *err);
+/* Release r's picks (idempotent). */
+void select_result_free(struct select_result *r);
+
+#endif
