@@ -81,7 +81,7 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 		       int scaled, size_t nch, struct albedo_ws *ws, double *acc, struct acq_err *err)
 {
 	size_t Q = (size_t)nmu * (size_t)nphi;
-	if (Q > ws->qmax || (ws->part == RECON_PART_LOBE ? recon_hv_nodes(theta_i, m->trend_alpha, nmu, nphi, ws->c6, ws->wt)
+	if (Q > ws->qmax || (ws->part == RECON_PART_LOBE ? recon_hv_nodes(theta_i, trend_hv_alpha(m->trend, m->trend_alpha), nmu, nphi, ws->c6, ws->wt)
 						       : recon_hemi_nodes(theta_i, nmu, nphi, square_rule, ws->c6, ws->wt)))
 		return acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", nmu, nphi);
 	for (size_t k = 0; k < nch; k++)

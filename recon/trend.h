@@ -57,6 +57,10 @@ int trend_fit_kind(int t, size_t n, size_t L, const double *val, const double *e
 /* Node spacing (radians in ωo) a quadrature rule needs to resolve the lobe terms of trend t at parameter alpha
  * (a quarter of the lobe's half width at a quarter of its peak); INFINITY when the lobe terms are broad. */
 double trend_rule_step(int t, double alpha);
+/* The GGX roughness whose half-vector nodes (recon_hv_nodes) resolve the lobe terms of trend t at alpha, or 0 when
+ * those nodes do not fit its lobe (sheen, rough: not a lobe about the half vector near the normal). GGX: α; phong:
+ * α/2 (cosⁿψ ≈ exp(−ψ²/α²) and ψ ≈ 2θh near the mirror: a Beckmann lobe of α/2 in θh). */
+double trend_hv_alpha(int t, double alpha);
 
 /* Name of a trend ("none", "ggx", "phong", "sheen", "rough") or NULL; and back (−1 if unknown). */
 const char *trend_name(int t);
