@@ -1,2 +1,2 @@
-# daemon/module.mk: store.c embeds daemon/schema.sql (.incbin), so it is rebuilt when the schema changes.
-$(BUILD)/obj/daemon/store.o: daemon/schema.sql
+# daemon/module.mk: store_migrate.c embeds daemon/schema.sql (.incbin), so it is rebuilt when the schema changes.
+$(BUILD)/obj/daemon/store_migrate.o: daemon/schema.sql

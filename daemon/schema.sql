@@ -1,9 +1,11 @@
--- schema.sql: the acquisitiond database, schema version 2 (PRAGMA user_version = 2,
--- PRAGMA application_id = 0x42524446 "BRDF"). A new database is created from this file as it is (daemon/store.c
--- embeds it); an older one is migrated by the steps in daemon/store.c (1 → 2: the measured sample-frame angles
--- and the calibrated_samples view). tests/integration/test_store_schema.py checks that a fresh database has
--- exactly this schema. Only daemon/store.c writes; readers of calibrated samples (the CSV export, the daemon's
--- reconstruction, brdf-recon fit --db in recon/dbload.c) read the calibrated_samples view.
+-- schema.sql: the acquisitiond database, schema version 3 (PRAGMA user_version = 3,
+-- PRAGMA application_id = 0x42524446 "BRDF"). A new database is created from this file as it is
+-- (daemon/store_migrate.c embeds it); an older one is migrated by the steps in daemon/store_migrate.c (1 → 2: the
+-- measured sample-frame angles and the calibrated_samples view; 2 → 3: the 'interrupted' state of recon_runs).
+-- tests/integration/test_store_schema.py checks that a fresh database has exactly this schema, and
+-- tests/unit/test_store.c that a migrated one has it too. Only the store (daemon/store*.c) writes; readers of
+-- calibrated samples (the CSV export, the daemon's reconstruction, brdf-recon fit --db in recon/dbload.c) read
+-- the calibrated_samples view.
 -- Conventions: times are Unix seconds (REAL, UTC); angles are degrees; every *_blob column holds
 -- little-endian IEEE-754 float32 values (4 bytes each), one per pixel or per wavelength of the sweep's grid.
 
@@ -98,11 +100,12 @@ CREATE VIEW calibrated_samples AS
   FROM calibrated c JOIN points p ON p.id = c.point_id
   WHERE p.state = 'done';
 
--- Reconstruction runs (child processes) and what they produced.
+-- Reconstruction runs (child processes) and what they produced. 'interrupted': the daemon died during the run (its
+-- child died with it); the next start marks the runs it left 'running'.
 CREATE TABLE recon_runs (
   id INTEGER PRIMARY KEY,
   sweep_id INTEGER NOT NULL REFERENCES sweeps(id),
-  state TEXT NOT NULL CHECK (state IN ('running', 'succeeded', 'failed', 'cancelled')),
+  state TEXT NOT NULL CHECK (state IN ('running', 'succeeded', 'failed', 'cancelled', 'interrupted')),
   program TEXT NOT NULL, args TEXT NOT NULL,   -- args: JSON array
   started_at REAL NOT NULL, finished_at REAL,
   exit_status INTEGER,                         -- exit code, or 128 + signal

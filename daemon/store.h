@@ -1,6 +1,7 @@
 /* store: the SQLite database of sweeps, points, spectra, calibrations, reconstruction runs and events
- * (schema: daemon/schema.sql). WAL mode, one transaction per spectrum, versioned schema with migrations;
- * a foreign or corrupt file is refused and never written. Never logs: -1 + struct acq_err. */
+ * (schema: daemon/schema.sql; the module's files daemon/store*.c, listed in store.c). WAL mode, one transaction
+ * per spectrum, versioned schema with migrations; a foreign or corrupt file is refused and never written. Never
+ * logs: -1 + struct acq_err. */
 #ifndef STORE_H
 #define STORE_H
 
@@ -13,7 +14,7 @@
 #include "drivers/spectro.h"
 
 #define STORE_APPLICATION_ID 0x42524446  /* "BRDF" */
-#define STORE_SCHEMA_VERSION 2
+#define STORE_SCHEMA_VERSION 3
 
 struct store;
 struct spectro_info;
@@ -98,8 +99,8 @@ int store_calibrated_put(struct store *st, int64_t sweep_id, int64_t point_id, c
 /* Start a reconstruction run record (args: JSON array text). 0 or -1. */
 int store_recon_begin(struct store *st, int64_t sweep_id, const char *program, const char *args, double at,
 		      int64_t *run_id, struct acq_err *err);
-/* Runs left 'running' by a daemon that died: 'failed' with "interrupted: ..." (the schema has no
- * 'interrupted' state; the output says it). *n = runs marked. 0 or -1. */
+/* Runs left 'running' by a daemon that died (call at start, before any run begins): 'interrupted', with an
+ * output line saying why. *n = runs marked. 0 or -1. */
 int store_recon_interrupted(struct store *st, double at, int *n, struct acq_err *err);
 /* Finish a run: state succeeded/failed/cancelled, exit status, captured output. 0 or -1. */
 int store_recon_end(struct store *st, int64_t run_id, const char *state, int exit_status, const char *output,

@@ -54,10 +54,11 @@ int storenx_open(const char *path, struct storenx **out, struct acq_err *err)
 		return -1;
 	}
 	int64_t ver = pragma(h->db, "PRAGMA user_version", &ok);
-	if (app != STORENX_APP_ID || ver != STORE_SCHEMA_VERSION) {
+	/* Version 2 differs from 3 only in recon_runs, which an export does not read. */
+	if (app != STORENX_APP_ID || ver < 2 || ver > STORE_SCHEMA_VERSION) {
 		acq_errf(err, app != STORENX_APP_ID ? ACQ_E_INVAL : ACQ_E_UNSUPPORTED,
-			 "%s: not an acquisitiond database of schema version %d (application_id 0x%08llx, version %lld)", path,
-			 STORE_SCHEMA_VERSION, (unsigned long long)(uint32_t)app, (long long)ver);
+			 "%s: not an acquisitiond database of schema version 2 to %d (application_id 0x%08llx, version %lld)",
+			 path, STORE_SCHEMA_VERSION, (unsigned long long)(uint32_t)app, (long long)ver);
 		storenx_close(h);
 		return -1;
 	}

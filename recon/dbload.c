@@ -9,7 +9,8 @@
 #include "recon/recon.h"
 
 #define DB_APP_ID 0x42524446 /* "BRDF" */
-#define DB_VERSION 2 /* the first with calibrated_samples; acquisitiond migrates older files when it opens them */
+#define DB_VERSION 2     /* the first with calibrated_samples; acquisitiond migrates older files when it opens them */
+#define DB_VERSION_MAX 3 /* the newest this reader knows (3 changed only recon_runs) */
 
 static int pragma_int(sqlite3 *db, const char *sql, long long *out)
 {
@@ -59,9 +60,9 @@ int recon_load_db(const char *db_path, long long sweep_id, struct recon_samples 
 			 (unsigned long long)app);
 		goto out;
 	}
-	if (ver != DB_VERSION) {
-		acq_errf(err, ACQ_E_UNSUPPORTED, "%s: schema version %lld, this program reads version %d%s", db_path, ver,
-			 DB_VERSION, ver < DB_VERSION ? " (start acquisitiond on it once to migrate it)" : "");
+	if (ver < DB_VERSION || ver > DB_VERSION_MAX) {
+		acq_errf(err, ACQ_E_UNSUPPORTED, "%s: schema version %lld, this program reads versions %d to %d%s", db_path,
+			 ver, DB_VERSION, DB_VERSION_MAX, ver < DB_VERSION ? " (start acquisitiond on it once to migrate it)" : "");
 		goto out;
 	}
 	if (sqlite3_prepare_v2(db, "SELECT wavelength_grid, state FROM sweeps WHERE id = ?", -1, &st, NULL) !=

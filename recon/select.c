@@ -251,6 +251,8 @@ static int sel_candidates(struct sel *s, size_t nc, const double *ang, const dou
 	free(c6);
 	s->J = J;
 	size_t Jp = J ? J : 1;
+	if ((double)J * (double)(SEL_NMU * SEL_NPHI + 2 * n + SELECT_MAX_THETA * s->Lc + 400) * 8.0 > 4e9)
+		return acq_errf(err, ACQ_E_RANGE, "select: %zu distinct candidates × %zu centres need too much memory", J, n);
 	s->soaJ = malloc(6 * Jp * sizeof *s->soaJ);
 	s->Kjn = malloc(Jp * n * sizeof *s->Kjn);
 	s->G = malloc(Jp * n * sizeof *s->G);

@@ -29,7 +29,17 @@ static const char fit_help[] =
 	"                          (default: leave-one-out), or sigma (Lambda = the transformed variances over\n"
 	"                          the prior variance of the data; needs sigma_<nm> columns)\n"
 	"  --max-cond X            largest accepted condition number (default 1e12)\n"
-	"  --db FILE --sweep ID    read a sweep from the daemon's database instead of a CSV file\n";
+	"  --db FILE --sweep ID    read a sweep from the daemon's database instead of a CSV file\n"
+	"  --warm PREV.model       warm start from a previous model of the same material (an adaptive sweep's last\n"
+	"                          batch): its kernel, transform, shape, smoothing and trend choice replace the\n"
+	"                          leave-one-out search (options given explicitly win); if the result's leave-one-out\n"
+	"                          RMS exceeds 1.25x PREV's + 0.01 the settings no longer fit the data and the fit is\n"
+	"                          redone with the full search (said on stderr)\n";
+
+/* The warm start's acceptance: the warm fit's leave-one-out RMS (transformed units) at most this factor of the
+ * previous model's, plus an absolute slack (a previous RMS near 0 on a handful of samples). */
+#define WARM_LOO_FACTOR 1.25
+#define WARM_LOO_SLACK 0.01
 
 int cmd_fit(int argc, char **argv)
 {
@@ -38,29 +48,33 @@ int cmd_fit(int argc, char **argv)
 		{ "transform", required_argument, 0, 't' }, { "shape", required_argument, 0, 's' },
 		{ "smoothing", required_argument, 0, 'm' }, { "max-cond", required_argument, 0, 'c' },
 		{ "db", required_argument, 0, 'd' }, { "sweep", required_argument, 0, 'w' },
-		{ "trend", required_argument, 0, 'r' }, { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+		{ "trend", required_argument, 0, 'r' }, { "warm", required_argument, 0, 'W' },
+		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
 	struct recon_fit_opts o;
 	recon_fit_opts_default(&o);
 	o.progress = progress;
-	const char *outp = NULL, *db = NULL;
+	const char *outp = NULL, *db = NULL, *warm = NULL;
 	uint64_t sweep = 0;
-	int have_sweep = 0, c;
+	int have_sweep = 0, c, set_kernel = 0, set_transform = 0, set_trend = 0;
 	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
 		switch (c) {
 		case 'o': outp = optarg; break;
 		case 'k':
 			if ((o.kernel = rbf_kernel_from_name(optarg)) < 0)
 				return usage_err("fit", "unknown kernel");
+			set_kernel = 1;
 			break;
 		case 't':
 			if ((o.transform = recon_transform_from_name(optarg)) < 0)
 				return usage_err("fit", "unknown transform");
+			set_transform = 1;
 			break;
 		case 'r':
 			if (strcmp(optarg, "auto") && (o.trend = trend_from_name(optarg)) < 0)
 				return usage_err("fit", "unknown trend (auto, ggx, phong, sheen, rough or none)");
 			if (!strcmp(optarg, "auto"))
 				o.trend = -1;
+			set_trend = 1;
 			break;
 		case 's':
 			if (!strcmp(optarg, "auto"))
@@ -81,6 +95,7 @@ int cmd_fit(int argc, char **argv)
 				return usage_err("fit", "--max-cond needs a number >= 1");
 			break;
 		case 'd': db = optarg; break;
+		case 'W': warm = optarg; break;
 		case 'w':
 			if (parse_u64(optarg, &sweep))
 				return usage_err("fit", "--sweep needs an id");
@@ -107,8 +122,49 @@ int cmd_fit(int argc, char **argv)
 		if (csvio_read_samples(argv[optind], &s, &err))
 			return fail(&err);
 	}
-	struct recon_model *m = NULL;
+	struct recon_fit_opts cold = o;
+	struct recon_model *m = NULL, *prev = NULL;
+	if (warm) { /* the previous model's settings instead of the search, unless given explicitly */
+		if (recon_model_load(warm, &prev, &err)) {
+			csvio_samples_free(&s);
+			return fail(&err);
+		}
+		if ((set_kernel && o.kernel != prev->kernel) || (set_transform && o.transform != prev->transform)) {
+			recon_model_free(prev);
+			csvio_samples_free(&s);
+			return usage_err("fit", "--warm: the previous model has another kernel or transform than the one given");
+		}
+		o.kernel = prev->kernel;
+		o.transform = prev->transform;
+		if (o.shape == 0)
+			o.shape = prev->shape;
+		if (o.smoothing < 0 && o.smoothing != RECON_SMOOTHING_SIGMA)
+			o.smoothing = prev->eta;
+		if (!set_trend)
+			o.trend = prev->trend;
+	}
 	int rc = recon_fit(&s, &o, &m, &err);
+	if (prev) {
+		double lim = WARM_LOO_FACTOR * prev->loo_rms + WARM_LOO_SLACK;
+		if (rc || m->loo_rms > lim) {
+			progress_end();
+			if (rc)
+				fprintf(stderr, "fit: warm start from %s failed (%s): full search\n", warm, err.msg);
+			else
+				fprintf(stderr, "fit: warm start from %s not leave-one-out competitive (RMS %.4g > %.4g = %.2f x "
+					"previous %.4g + %.2g): full search\n", warm, m->loo_rms, lim, WARM_LOO_FACTOR,
+					prev->loo_rms, WARM_LOO_SLACK);
+			recon_model_free(m);
+			m = NULL;
+			err.msg[0] = '\0';
+			rc = recon_fit(&s, &cold, &m, &err);
+		} else {
+			progress_end();
+			fprintf(stderr, "fit: warm start from %s: its kernel, shape, smoothing and trend kept, no search "
+				"(leave-one-out RMS %.4g, previous %.4g, limit %.4g)\n", warm, m->loo_rms, prev->loo_rms, lim);
+		}
+		recon_model_free(prev);
+	}
 	csvio_samples_free(&s);
 	if (rc)
 		return fail(&err);

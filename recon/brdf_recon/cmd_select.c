@@ -18,7 +18,7 @@ static const char select_help[] =
 	"  --candidates CAND.csv  header id,theta_i,phi_i,theta_o,phi_o,cost_s (degrees, sample frame; cost_s > 0:\n"
 	"                         bench seconds to measure the pair from the arms' current position); id an integer.\n"
 	"                         A pair and its reciprocal (or any pair equal up to rotation/mirror) count once,\n"
-	"                         at the cheaper cost\n"
+	"                         at the cheaper cost; at most 50000 rows\n"
 	"  --target SPEC          dhr:8,30,60  sigma of the DHR at those incidences (degrees), RMS over the model's\n"
 	"                                      wavelengths; the value is the largest incidence's\n"
 	"                         lnf          largest posterior sigma of ln f (RMS over wavelengths) over the grid\n"
@@ -50,15 +50,57 @@ static void json_str(FILE *f, const char *s)
 static void json_num(FILE *f, double v)
 {
 	if (isfinite(v))
-		fprintf(f, "%.9g", v);
+		fprintf(f, "%.15g", v);
 	else
 		fputs("null", f);
 }
+
+/* The command's limit on the candidate file (the library's memory is ~(1536 + 2n + 128·incidences) × 8 bytes per
+ * distinct candidate: 100000 candidates of a 550-direction model ≈ 2.5 GB would be refused by it anyway). */
+#define SELECT_MAX_CANDIDATES 50000
 
 static int cmp_id(const void *a, const void *b)
 {
 	double x = *(const double *)a, y = *(const double *)b;
 	return x < y ? -1 : x > y;
+}
+
+/* A candidate file holding the header with the six columns and no data row (zero candidates: a valid input). */
+static int header_only(const char *path, const char *const *names)
+{
+	char *buf;
+	size_t len;
+	struct acq_err e = { 0 };
+	if (csvio_slurp(path, &buf, &len, &e))
+		return 0;
+	int lines = 0, ok = 1;
+	for (char *p = buf, *nl; p && *p; p = nl ? nl + 1 : NULL) {
+		nl = strchr(p, '\n');
+		if (nl)
+			*nl = '\0';
+		size_t n = strlen(p);
+		if (n && p[n - 1] == '\r')
+			p[--n] = '\0';
+		if (!n || *p == '#')
+			continue;
+		if (++lines > 1)
+			break;
+		for (int c = 0; c < 6 && ok; c++) { /* each name a whole field of the header */
+			size_t k = strlen(names[c]);
+			const char *f = p;
+			int found = 0;
+			for (const char *q = p;; q++)
+				if (*q == ',' || !*q) {
+					found |= (size_t)(q - f) == k && !strncmp(f, names[c], k);
+					if (!*q)
+						break;
+					f = q + 1;
+				}
+			ok = found;
+		}
+	}
+	free(buf);
+	return lines == 1 && ok;
 }
 
 static int bad_input(const struct acq_err *e)
@@ -114,8 +156,17 @@ int cmd_select(int argc, char **argv)
 	static const char *const names[6] = { "id", "theta_i", "phi_i", "theta_o", "phi_o", "cost_s" };
 	size_t nc = 0;
 	double *rows = NULL;
-	if (csvio_read_columns(candp, names, 6, &nc, &rows, &err))
+	if (csvio_read_columns(candp, names, 6, &nc, &rows, &err)) {
+		if (!header_only(candp, names))
+			return bad_input(&err);
+		nc = 0; /* no candidates: the target's value, no pick */
+		rows = NULL;
+	}
+	if (nc > SELECT_MAX_CANDIDATES) {
+		free(rows);
+		acq_errf(&err, ACQ_E_RANGE, "%s: %zu candidates, at most %d", candp, nc, SELECT_MAX_CANDIDATES);
 		return bad_input(&err);
+	}
 	double *ang = malloc((nc ? nc : 1) * 4 * sizeof *ang), *cost = malloc((nc ? nc : 1) * sizeof *cost);
 	double *ids = malloc((nc ? nc : 1) * sizeof *ids);
 	if (!ang || !cost || !ids) {

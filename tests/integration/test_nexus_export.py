@@ -27,7 +27,7 @@ def make_db(path, rng):
     db = sqlite3.connect(path)
     db.executescript(open(os.path.join(SRC, "daemon", "schema.sql")).read())
     db.execute("PRAGMA application_id = %d" % 0x42524446)
-    db.execute("PRAGMA user_version = 2")
+    db.execute("PRAGMA user_version = 3")
     npix, nwl = 64, 23
     db.execute("INSERT INTO spectrometers VALUES (1, 'AvaSpec-ULS2048', '1234567U1', '2.1', ?, 450.0, 0.32, "
                "-1.1e-5, 2e-9, 0, NULL, 1700000000.0)", (npix,))

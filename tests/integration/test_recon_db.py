@@ -42,7 +42,7 @@ def main():
     db = sqlite3.connect(dbp)
     db.executescript(open(schema).read())
     db.execute("PRAGMA application_id = %d" % 0x42524446)
-    db.execute("PRAGMA user_version = 2")
+    db.execute("PRAGMA user_version = 3")
     db.execute("INSERT INTO sweeps (id, name, plan_text, config_snapshot, state, created_at, software_version, "
                "points_total, wavelength_grid) VALUES (7, 't', '', '', 'completed', 0, 'x', ?, ?)",
                (len(ang), blob(wl)))

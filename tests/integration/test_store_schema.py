@@ -40,14 +40,14 @@ def main():
     try:
         d.start()
         c = d.client()
-        check(c.req("version")["schema"] == 2, "schema version over the protocol")
+        check(c.req("version")["schema"] == 3, "schema version over the protocol")
         c.close()
         db = os.path.join(d.state, "acquisition.db")
         check(d.stop() == 0, "clean stop")
         if have_cli:
             out = subprocess.run(["sqlite3", db, "PRAGMA application_id; PRAGMA user_version; PRAGMA journal_mode; "
                                   "PRAGMA integrity_check;"], capture_output=True, text=True).stdout.split()
-            check(out == [str(0x42524446), "2", "wal", "ok"], "sqlite3 CLI: %r" % out)
+            check(out == [str(0x42524446), "3", "wal", "ok"], "sqlite3 CLI: %r" % out)
             tables = subprocess.run(["sqlite3", db, ".tables"], capture_output=True, text=True).stdout.split()
             for t in ("sweeps", "points", "spectra", "spectrometers", "devices", "calibrated", "recon_runs",
                       "recon_outputs", "events", "sweep_devices"):
@@ -56,7 +56,7 @@ def main():
             print("sqlite3 CLI absent: CLI checks skipped")
         con = sqlite3.connect(db)
         check(con.execute("PRAGMA application_id").fetchone()[0] == 0x42524446, "application_id")
-        check(con.execute("PRAGMA user_version").fetchone()[0] == 2, "user_version")
+        check(con.execute("PRAGMA user_version").fetchone()[0] == 3, "user_version")
         ref = sqlite3.connect(":memory:")
         ref.executescript(open(os.path.join(SRC, "daemon", "schema.sql")).read())
         check(schema_of(con) == schema_of(ref), "database schema differs from daemon/schema.sql")

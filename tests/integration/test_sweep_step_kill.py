@@ -199,7 +199,8 @@ def run():
         db.close()
         L.say("after the restart: runs %s" % [(r[0], r[1], (r[2] or "")[:40]) for r in rows])
         assert rows and all(r[1] != "running" for r in rows), "a run left running: %s" % rows
-        assert rows[-1][2].startswith("interrupted"), "the run is not marked interrupted: %s" % (rows[-1],)
+        assert rows[-1][1] == "interrupted" and rows[-1][2].startswith("interrupted"), \
+            "the run is not marked interrupted: %s" % (rows[-1],)
         c = b.client()
         r1 = c.req("recon.start", sweep=sid)
         r2 = c.req("recon.start", sweep=sid)

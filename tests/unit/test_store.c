@@ -2,6 +2,7 @@
  * transaction, partial-point discard, JSON views, CSV export, and refusal of foreign/corrupt/newer files. */
 #include <setjmp.h>
 #include <stdarg.h>
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <math.h>
@@ -319,9 +320,164 @@ static void test_three_readers_same_samples(void **state)
 	csvio_samples_free(&c);
 }
 
-/* A version-1 database (before the measured sample-frame angles) is migrated when opened: its done points get
- * their arm angles in the sample frame, and the readers' view appears. */
-static void test_migration_1_to_2(void **state)
+/* Turn a current (version 3) database into version 2 as version 2 created it: recon_runs without the
+ * 'interrupted' state (the CREATE text of version 2's schema.sql). */
+static void downgrade_to_v2(const char *p)
+{
+	sqlite3 *db;
+	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
+	assert_int_equal(sqlite3_exec(db, "PRAGMA foreign_keys = OFF; PRAGMA legacy_alter_table = ON; BEGIN;"
+					  "ALTER TABLE recon_runs RENAME TO r3;"
+					  "CREATE TABLE recon_runs (\n"
+					  "  id INTEGER PRIMARY KEY,\n"
+					  "  sweep_id INTEGER NOT NULL REFERENCES sweeps(id),\n"
+					  "  state TEXT NOT NULL CHECK (state IN ('running', 'succeeded', 'failed', 'cancelled')),\n"
+					  "  program TEXT NOT NULL, args TEXT NOT NULL,   -- args: JSON array\n"
+					  "  started_at REAL NOT NULL, finished_at REAL,\n"
+					  "  exit_status INTEGER,                         -- exit code, or 128 + signal\n"
+					  "  output TEXT                                  -- captured stdout+stderr (bounded)\n"
+					  ");"
+					  "INSERT INTO recon_runs SELECT * FROM r3; DROP TABLE r3; PRAGMA user_version = 2; COMMIT;",
+				     NULL, NULL, NULL),
+			 SQLITE_OK);
+	/* really version 2: the state does not exist there */
+	assert_int_not_equal(sqlite3_exec(db, "INSERT INTO recon_runs (sweep_id, state, program, args, started_at) "
+					      "SELECT id, 'interrupted', 'x', '[]', 0 FROM sweeps LIMIT 1", NULL, NULL, NULL),
+			     SQLITE_OK);
+	sqlite3_close(db);
+}
+
+/* The schema of a database as text (type, name, SQL with whitespace runs collapsed), sorted; caller frees. */
+static char *schema_text(const char *p)
+{
+	sqlite3 *db;
+	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
+	sqlite3_stmt *s;
+	assert_int_equal(sqlite3_prepare_v2(db, "SELECT type || ' ' || name || ': ' || sql FROM sqlite_master "
+						"WHERE sql IS NOT NULL ORDER BY type, name", -1, &s, NULL),
+			 SQLITE_OK);
+	size_t cap = 1 << 16, n = 0;
+	char *out = calloc(cap, 1);
+	assert_non_null(out);
+	while (sqlite3_step(s) == SQLITE_ROW) {
+		const char *r = (const char *)sqlite3_column_text(s, 0);
+		bool space = false;
+		for (; *r; r++) {
+			bool ws = *r == ' ' || *r == '\n' || *r == '\t';
+			if (ws && space)
+				continue;
+			space = ws;
+			assert_true(n + 2 < cap);
+			out[n++] = ws ? ' ' : *r;
+		}
+		out[n++] = '\n';
+	}
+	sqlite3_finalize(s);
+	sqlite3_close(db);
+	return out;
+}
+
+/* A migrated database has exactly the schema of a new one (hence of daemon/schema.sql, which
+ * test_store_schema.py compares with a new one), and passes SQLite's integrity and foreign-key checks. */
+static void assert_schema_current(const char *p)
+{
+	char fresh[300];
+	path_of(fresh, sizeof fresh, "fresh.db");
+	unlink(fresh);
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_open(fresh, &st, &err), 0);
+	store_close(st);
+	char *a = schema_text(p), *b = schema_text(fresh);
+	assert_string_equal(a, b);
+	free(a);
+	free(b);
+	sqlite3 *db;
+	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
+	sqlite3_stmt *s;
+	assert_int_equal(sqlite3_prepare_v2(db, "PRAGMA integrity_check", -1, &s, NULL), SQLITE_OK);
+	assert_int_equal(sqlite3_step(s), SQLITE_ROW);
+	assert_string_equal((const char *)sqlite3_column_text(s, 0), "ok");
+	sqlite3_finalize(s);
+	assert_int_equal(sqlite3_prepare_v2(db, "PRAGMA foreign_key_check", -1, &s, NULL), SQLITE_OK);
+	assert_int_equal(sqlite3_step(s), SQLITE_DONE);
+	sqlite3_finalize(s);
+	sqlite3_close(db);
+}
+
+/* The state of run id, read with SQLite directly, into buf. */
+static const char *run_state(const char *p, int64_t id, char *buf, size_t cap)
+{
+	sqlite3 *db;
+	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
+	sqlite3_stmt *s;
+	assert_int_equal(sqlite3_prepare_v2(db, "SELECT state FROM recon_runs WHERE id = ?", -1, &s, NULL), SQLITE_OK);
+	sqlite3_bind_int64(s, 1, id);
+	assert_int_equal(sqlite3_step(s), SQLITE_ROW);
+	snprintf(buf, cap, "%s", (const char *)sqlite3_column_text(s, 0));
+	sqlite3_finalize(s);
+	sqlite3_close(db);
+	return buf;
+}
+
+/* Version 2 → 3: recon_runs gains 'interrupted'. A run version 2 marked interrupted ('failed', "interrupted: ...")
+ * becomes 'interrupted'; other runs, their outputs and the foreign keys stay; a run left 'running' by a dead
+ * daemon is marked 'interrupted' by store_recon_interrupted(), after which a new run starts. */
+static void test_migration_2_to_3(void **state)
+{
+	(void)state;
+	char p[300], b[32];
+	path_of(p, sizeof p, "v2.db");
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_open(p, &st, &err), 0);
+	int64_t sw = mk_sweep(st, 2), run_ok, run_dead, run_old;
+	assert_int_equal(store_recon_begin(st, sw, "brdf-recon", "[\"fit\"]", 1000, &run_ok, &err), 0);
+	assert_int_equal(store_recon_output(st, run_ok, "model", "recon/1/model.json", 1001, &err), 0);
+	assert_int_equal(store_recon_end(st, run_ok, "succeeded", 0, "fit done", 1002, &err), 0);
+	assert_int_equal(store_recon_begin(st, sw, "brdf-recon", "[]", 1003, &run_old, &err), 0);
+	assert_int_equal(store_recon_end(st, run_old, "failed", 0, "interrupted: the daemon stopped (crash or kill) "
+							       "during the run; its child died with it\nfit: 10 %", 1004, &err), 0);
+	assert_int_equal(store_recon_begin(st, sw, "brdf-recon", "[]", 1005, &run_dead, &err), 0);
+	store_close(st);
+	downgrade_to_v2(p);
+
+	assert_int_equal(store_open(p, &st, &err), 0);
+	assert_int_equal(store_schema_version(st), 3);
+	store_close(st);
+	assert_schema_current(p);
+	assert_string_equal(run_state(p, run_ok, b, sizeof b), "succeeded");
+	assert_string_equal(run_state(p, run_old, b, sizeof b), "interrupted");
+	assert_string_equal(run_state(p, run_dead, b, sizeof b), "running"); /* the migration does not guess */
+
+	assert_int_equal(store_open(p, &st, &err), 0);
+	json_t *r = store_recon_show(st, run_ok, 0, &err);
+	assert_non_null(r);
+	assert_int_equal(json_array_size(json_object_get(r, "outputs")), 1);
+	assert_string_equal(json_string_value(json_object_get(r, "output_tail")), "fit done");
+	json_decref(r);
+	int n = -1;
+	assert_int_equal(store_recon_interrupted(st, 2000, &n, &err), 0);
+	assert_int_equal(n, 1);
+	r = store_recon_show(st, 0, sw, &err);
+	assert_non_null(r);
+	assert_int_equal(json_integer_value(json_object_get(r, "id")), run_dead);
+	assert_string_equal(json_string_value(json_object_get(r, "state")), "interrupted");
+	assert_true(!strncmp(json_string_value(json_object_get(r, "output_tail")), "interrupted: ", 13));
+	json_decref(r);
+	assert_int_equal(store_recon_interrupted(st, 2001, &n, &err), 0);
+	assert_int_equal(n, 0);
+	int64_t run_new;
+	assert_int_equal(store_recon_begin(st, sw, "brdf-recon", "[]", 2002, &run_new, &err), 0);
+	assert_true(run_new > run_dead);
+	store_close(st);
+	assert_string_equal(run_state(p, run_new, b, sizeof b), "running");
+}
+
+/* A version-1 database (before the measured sample-frame angles) is migrated when opened, through 2 to 3: its
+ * done points get their arm angles in the sample frame, the readers' view appears, and the schema is the
+ * current one. */
+static void test_migration_1_to_3(void **state)
 {
 	(void)state;
 	char p[300];
@@ -330,6 +486,8 @@ static void test_migration_1_to_2(void **state)
 	struct acq_err err = { 0 };
 	assert_int_equal(store_open(p, &st, &err), 0);
 	int64_t sw = mk_sweep(st, 2); /* planned (0, 0, 20, 180) and (10, 0, 21, 180) */
+	int64_t run;
+	assert_int_equal(store_recon_begin(st, sw, "brdf-recon", "[]", 1000, &run, &err), 0);
 	float grid[1] = { 500 };
 	assert_int_equal(store_sweep_set_grid(st, sw, grid, 1, &err), 0);
 	int order;
@@ -339,6 +497,7 @@ static void test_migration_1_to_2(void **state)
 	assert_int_equal(store_calibrated_put(st, sw, pt, b, sg, 1, &err), 0);
 	assert_int_equal(complete(st, sw, pt, -0.003, -20, 170, NAN, NAN, NAN, NAN), 0);
 	store_close(st);
+	downgrade_to_v2(p);
 	sqlite3 *db;
 	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
 	assert_int_equal(sqlite3_exec(db, "DROP VIEW calibrated_samples; ALTER TABLE points DROP COLUMN m_theta_i; "
@@ -348,8 +507,9 @@ static void test_migration_1_to_2(void **state)
 			 SQLITE_OK);
 	sqlite3_close(db);
 	assert_int_equal(store_open(p, &st, &err), 0);
-	assert_int_equal(store_schema_version(st), 2);
+	assert_int_equal(store_schema_version(st), STORE_SCHEMA_VERSION);
 	store_close(st);
+	assert_schema_current(p);
 	struct recon_samples c = { 0 };
 	assert_int_equal(recon_load_db(p, sw, &c, &err), 0);
 	assert_int_equal(c.n, 1);
@@ -364,7 +524,8 @@ int main(void)
 		cmocka_unit_test(test_sweep_points_spectra),
 		cmocka_unit_test(test_export_csv),
 		cmocka_unit_test(test_three_readers_same_samples),
-		cmocka_unit_test(test_migration_1_to_2),
+		cmocka_unit_test(test_migration_1_to_3),
+		cmocka_unit_test(test_migration_2_to_3),
 		cmocka_unit_test(test_foreign_and_corrupt_refused),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

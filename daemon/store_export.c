@@ -1,0 +1,126 @@
+/* store_export: a sweep's calibrated samples in the CSV interchange format (design.md), from the
+ * calibrated_samples view (part of the store module, store.h). */
+#include "daemon/store.h"
+
+#include <errno.h>
+#include <math.h>
+#include <sqlite3.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "daemon/store_int.h"
+#include "drivers/spectro.h"
+
+#include <stdio.h>
+#include <unistd.h>
+
+static void csv_num(FILE *out, double v)
+{
+	if (isfinite(v))
+		fprintf(out, ",%.9g", v);
+	else
+		fputs(",", out); /* empty field: not measured */
+}
+
+int store_export_csv(struct store *st, int64_t sweep_id, FILE *out, int *nrows, struct acq_err *err)
+{
+	return store_export_csv_n(st, sweep_id, 0, out, nrows, err);
+}
+
+int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct acq_err *err)
+{
+	*nrows = 0;
+	sqlite3_stmt *s = store_prep(st, "SELECT wavelength_grid FROM sweeps WHERE id = ?", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_int64(s, 1, sweep_id);
+	if (sqlite3_step(s) != SQLITE_ROW) {
+		sqlite3_finalize(s);
+		return acq_errf(err, ACQ_E_NOTFOUND, "no sweep %lld", (long long)sweep_id);
+	}
+	int nb = sqlite3_column_bytes(s, 0);
+	int n = nb / 4;
+	float *grid = n > 0 && nb % 4 == 0 ? malloc((size_t)nb) : NULL;
+	if (grid)
+		memcpy(grid, sqlite3_column_blob(s, 0), (size_t)nb);
+	sqlite3_finalize(s);
+	if (!grid)
+		return acq_errf(err, ACQ_E_STATE, "sweep %lld has no calibrated samples yet (no wavelength grid)",
+				(long long)sweep_id);
+	int rc = -1;
+	fprintf(out, "# acquisitiond sweep %lld: calibrated BRDF samples (sr^-1) with standard uncertainty\n",
+		(long long)sweep_id);
+	fputs("theta_i,phi_i,theta_o,phi_o", out);
+	for (int i = 0; i < n; i++)
+		fprintf(out, ",%.7g", (double)grid[i]);
+	for (int i = 0; i < n; i++)
+		fprintf(out, ",sigma_%.7g", (double)grid[i]);
+	fputc('\n', out);
+	s = store_prep(st, "SELECT theta_i, phi_i, theta_o, phi_o, brdf, sigma FROM calibrated_samples WHERE sweep_id = ? "
+		           "ORDER BY order_index LIMIT ?", err);
+	if (!s)
+		goto out;
+	sqlite3_bind_int64(s, 1, sweep_id);
+	sqlite3_bind_int64(s, 2, limit > 0 ? limit : -1);
+	int r;
+	while ((r = sqlite3_step(s)) == SQLITE_ROW) {
+		if (sqlite3_column_bytes(s, 4) != nb || sqlite3_column_bytes(s, 5) != nb) {
+			acq_errf(err, ACQ_E_INVAL, "sweep %lld: calibrated sample length differs from the grid",
+				 (long long)sweep_id);
+			sqlite3_finalize(s);
+			goto out;
+		}
+		if (sqlite3_column_type(s, 0) == SQLITE_NULL || sqlite3_column_type(s, 1) == SQLITE_NULL ||
+		    sqlite3_column_type(s, 2) == SQLITE_NULL || sqlite3_column_type(s, 3) == SQLITE_NULL) {
+			acq_errf(err, ACQ_E_INVAL, "sweep %lld: a point done without its measured angles", (long long)sweep_id);
+			sqlite3_finalize(s);
+			goto out;
+		}
+		const float *b = sqlite3_column_blob(s, 4), *sg = sqlite3_column_blob(s, 5);
+		fprintf(out, "%.9g,%.9g,%.9g,%.9g", sqlite3_column_double(s, 0), sqlite3_column_double(s, 1),
+			sqlite3_column_double(s, 2), sqlite3_column_double(s, 3));
+		for (int i = 0; i < n; i++) {
+			float v;
+			memcpy(&v, (const char *)b + 4 * i, 4);
+			csv_num(out, v);
+		}
+		for (int i = 0; i < n; i++) {
+			float v;
+			memcpy(&v, (const char *)sg + 4 * i, 4);
+			csv_num(out, v);
+		}
+		fputc('\n', out);
+		(*nrows)++;
+	}
+	sqlite3_finalize(s);
+	if (r != SQLITE_DONE) {
+		store_db_err(st, err, "exporting");
+		goto out;
+	}
+	if (*nrows == 0) {
+		acq_errf(err, ACQ_E_STATE, "sweep %lld has no calibrated samples", (long long)sweep_id);
+		goto out;
+	}
+	rc = ferror(out) ? acq_errf(err, ACQ_E_IO, "writing the CSV: %s", strerror(errno)) : 0;
+out:
+	free(grid);
+	return rc;
+}
+
+int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, int *nrows, struct acq_err *err)
+{
+	char tmp[4200];
+	snprintf(tmp, sizeof tmp, "%s.tmp", path);
+	FILE *f = fopen(tmp, "w");
+	if (!f)
+		return acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
+	int rc = store_export_csv(st, sweep_id, f, nrows, err);
+	if (fclose(f) != 0 && !rc)
+		rc = acq_errf(err, ACQ_E_IO, "%s: %s", tmp, strerror(errno));
+	if (!rc && rename(tmp, path))
+		rc = acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
+	if (rc)
+		unlink(tmp);
+	return rc;
+}
+

@@ -1,0 +1,46 @@
+/* store_int: what the files of the store module share (daemon/store*.c only; users include store.h): the
+ * handle, its prepared statements, and the SQLite helpers every file uses. */
+#ifndef DAEMON_STORE_INT_H
+#define DAEMON_STORE_INT_H
+
+#include <sqlite3.h>
+#include <stdbool.h>
+
+#include "daemon/store.h"
+
+/* Statements prepared once at store_open() (hot paths: a spectrum, its point's completion, an event). */
+enum { ST_SPECTRUM, ST_POINT_DONE, ST_EVENT, ST__COUNT };
+
+struct store {
+	sqlite3 *db;
+	char *path;
+	sqlite3_stmt *st[ST__COUNT];
+	bool reader;  /* store_open_reader(): read-only, no statements prepared, no checkpoint at close */
+};
+
+/* err = "<path>: <what>: <SQLite's message>" (ACQ_E_IO); returns -1. */
+int store_db_err(struct store *st, struct acq_err *err, const char *what);
+/* Run SQL text (several statements allowed). 0 or -1 with err (err may be NULL). */
+int store_exec(struct store *st, const char *sql, struct acq_err *err);
+/* Prepare one statement; NULL with err. */
+sqlite3_stmt *store_prep(struct store *st, const char *sql, struct acq_err *err);
+/* First column of the first row of sql (a PRAGMA or a SELECT) on db; *ok = 0 when there is none. */
+int64_t store_pragma_int(sqlite3 *db, const char *sql, int *ok);
+/* Bind an id (<= 0: NULL), a real (non-finite: NULL) or a text (NULL: NULL; not copied). */
+void store_bind_id(sqlite3_stmt *s, int i, int64_t v);
+void store_bind_real(sqlite3_stmt *s, int i, double v);
+void store_bind_text(sqlite3_stmt *s, int i, const char *v);
+/* Step a statement expecting DONE, then reset it and clear its bindings (a constraint: ACQ_E_INVAL). 0 or -1. */
+int store_step_done(struct store *st, sqlite3_stmt *s, struct acq_err *err, const char *what);
+/* store_step_done() then finalize. 0 or -1. */
+int store_run1(struct store *st, sqlite3_stmt *s, struct acq_err *err, const char *what);
+/* Whether v is one of the NULL-terminated list. */
+bool store_in_list(const char *v, const char *const *list);
+/* Rows of a prepared statement as a JSON array of objects named by column (blobs: their size); finalizes s.
+ * NULL with err. */
+json_t *store_rows_json(struct store *st, sqlite3_stmt *s, struct acq_err *err);
+/* Bring an open read-write store's schema to STORE_SCHEMA_VERSION (store_migrate.c): a new database from
+ * daemon/schema.sql, an older one step by step, each step one transaction. 0 or -1. */
+int store_migrate(struct store *st, struct acq_err *err);
+
+#endif
