@@ -654,20 +654,26 @@ static int fit_search(struct fitwork *F, struct acq_err *err)
 		return -1;
 	}
 	/*
-	 * The candidate: the first in the order of preference (GGX, the mean function measured on the trend-family
-	 * materials; the plain interpolant; phong, sheen, rough) whose leave-one-out score is within the score's own
-	 * uncertainty of the best: two standard errors of a mean of n squared residuals, 2√(2/n) relative (channels
-	 * counted as one: their residuals are correlated). A kind is admitted only when the data need it: on a
-	 * Lambertian white every kind scores within 0.2 % of the others and GGX (with its lobe ≈ 0) is kept.
+	 * The candidate. Between the plain interpolant and GGX the lower leave-one-out score decides, as before the
+	 * family (session 3's rule, measured on the trend-family materials). Another kind is admitted only when the
+	 * data need it: when its score is below that choice's by more than the score's own uncertainty, two standard
+	 * errors of a mean of n squared residuals, 2√(2/n) relative (channels counted as one: their residuals are
+	 * correlated); the lowest such score wins. On a Lambertian white every kind scores within 0.2 % of the others
+	 * and GGX (with its lobe ≈ 0) is kept; on spiky exact-interpolation fits (test_recon_extremes) the choice is
+	 * unchanged from main's.
 	 */
-	static const int pref[RECON_TREND__COUNT] = { RECON_TREND_GGX, RECON_TREND_NONE, RECON_TREND_PHONG,
-						      RECON_TREND_SHEEN, RECON_TREND_ROUGH };
 	double tol = 2.0 * sqrt(2.0 / (double)n);
 	bcand = -1;
-	for (int p = 0; p < RECON_TREND__COUNT && bcand < 0; p++)
-		for (int c = 0; c < ncand; c++)
-			if (F->kind[c] == pref[p] && F->cscore[c] <= best * (1.0 + tol) && isfinite(F->cscore[c]))
-				bcand = c;
+	for (int c = 0; c < ncand; c++)
+		if ((F->kind[c] == RECON_TREND_NONE || F->kind[c] == RECON_TREND_GGX) && isfinite(F->cscore[c]) &&
+		    (bcand < 0 || F->cscore[c] < F->cscore[bcand]))
+			bcand = c;
+	int base = bcand;
+	for (int c = 0; c < ncand; c++)
+		if (F->kind[c] != RECON_TREND_NONE && F->kind[c] != RECON_TREND_GGX && isfinite(F->cscore[c]) &&
+		    (base < 0 || F->cscore[c] < F->cscore[base] * (1.0 - tol)) &&
+		    (bcand == base || bcand < 0 || F->cscore[c] < F->cscore[bcand]))
+			bcand = c;
 	if (bcand < 0)
 		bcand = 0;
 	m->shape = cshape[bcand];
