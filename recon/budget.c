@@ -1,7 +1,9 @@
 /* budget: systematic components of the DHR's uncertainty and the agreement with a reference. */
 #include "recon/budget.h"
 
+#include <lapacke.h>
 #include <math.h>
+#include <stdlib.h>
 
 /* u(ρ)/ρ of the certificate at λ (linear between its points, the nearest end outside). */
 static double cert_rel_at(const struct recon_budget_opts *o, double wl)
@@ -52,6 +54,16 @@ int recon_budget(size_t nth, size_t L, const double *wl, const double *dhr, cons
 	return 0;
 }
 
+/* P(χ²_k ≥ x), the upper tail of the χ² distribution with k degrees of freedom, by the Wilson–Hilferty cube-root
+ * normal approximation (absolute error < 1e-3 for k ≥ 10, the reference comparisons have 60–650). */
+static double chi2_upper(double x, size_t k)
+{
+	if (k == 0)
+		return 1.0;
+	double v = 2.0 / (9.0 * (double)k), t = (cbrt(x / (double)k) - (1.0 - v)) / sqrt(v);
+	return 0.5 * erfc(t / sqrt(2.0));
+}
+
 void recon_agreement(size_t n, const double *wl, const double *md, const double *ms, const double *mc,
 		     const double *rv, const double *rs, double *z, struct recon_agreement *a)
 {
@@ -80,4 +92,70 @@ void recon_agreement(size_t n, const double *wl, const double *md, const double 
 	}
 	a->rms_z = a->n ? sqrt(sz2 / (double)a->n) : 0;
 	a->chi2_n = a->n ? (rdr - sdr * sdr / (1 + sds)) / (double)a->n : 0;
+	a->chi2_p = chi2_upper(a->chi2_n * (double)a->n, a->n);
+}
+
+int recon_agreement_ref(size_t n, const double *wl, const double *md, const double *ms, const double *mc,
+			const double *rv, const double *rs, double ref_u, double ref_len_nm,
+			const struct recon_ref_interp *ip, double *z, struct recon_agreement *a, struct acq_err *err)
+{
+	recon_agreement(n, wl, md, ms, mc, rv, rs, z, a);
+	if ((!(ref_u > 0) && !ip) || a->n == 0)
+		return 0;
+	if (!(ref_u >= 0 && ref_u < 1) || !(ref_len_nm > 0) || !isfinite(ref_len_nm))
+		return acq_errf(err, ACQ_E_INVAL, "agreement: the reference's correlated part needs u in (0, 1) and a "
+				"correlation length > 0 nm");
+	size_t *ix = malloc(n * sizeof *ix), m = 0;
+	for (size_t i = 0; ix && i < n; i++) /* the wavelengths with a finite z, as counted above */
+		if (ms[i] > 0 || rs[i] > 0)
+			if (isfinite(md[i] - rv[i]))
+				ix[m++] = i;
+	double *C = ix ? malloc(m * m * sizeof *C) : NULL, *r = ix ? malloc(m * sizeof *r) : NULL;
+	if (!ix || !C || !r) {
+		free(ix);
+		free(C);
+		free(r);
+		return acq_errf(err, ACQ_E_NOMEM, "agreement: out of memory");
+	}
+	double inv2l2 = 0.5 / (ref_len_nm * ref_len_nm);
+	for (size_t p = 0; p < m; p++) {
+		size_t i = ix[p];
+		double ci = mc ? fmin(mc[i], ms[i]) : 0, ui = ref_u * fabs(rv[i]);
+		r[p] = md[i] - rv[i];
+		for (size_t q = 0; q <= p; q++) {
+			size_t j = ix[q];
+			double cj = mc ? fmin(mc[j], ms[j]) : 0, uj = ref_u * fabs(rv[j]), dl = wl[i] - wl[j];
+			C[q * m + p] = ci * cj + ui * uj * exp(-dl * dl * inv2l2);
+			if (ip) { /* the model's independent node errors through the interpolation */
+				size_t a0 = ip->j[i], b0 = ip->j[j];
+				for (size_t da = 0; da < 2; da++)
+					for (size_t db = 0; db < 2; db++)
+						if (a0 + da == b0 + db && a0 + da < ip->L) {
+							double wa = da ? ip->u[i] : 1 - ip->u[i], wb = db ? ip->u[j] : 1 - ip->u[j];
+							C[q * m + p] += wa * wb * ip->node_sig[a0 + da] * ip->node_sig[a0 + da];
+						}
+			}
+		}
+		/* the independent parts: the model's σ without its common factor (unless propagated above), the
+		 * reference's without its calibration (its stated σ holds both; never below zero) */
+		C[p * m + p] += (ip ? ip->interp_sig[i] * ip->interp_sig[i] : fmax(0.0, ms[i] * ms[i] - ci * ci)) +
+				fmax(0.0, rs[i] * rs[i] - ui * ui);
+	}
+	int rc = 0;
+	if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)m, C, (lapack_int)m) != 0 ||
+	    LAPACKE_dtrtrs(LAPACK_COL_MAJOR, 'L', 'N', 'N', (lapack_int)m, 1, C, (lapack_int)m, r, (lapack_int)m) != 0) {
+		rc = acq_errf(err, ACQ_E_NUMERIC, "agreement: the combined covariance is not positive definite (a "
+			      "reference σ smaller than its stated calibration part?)");
+	} else {
+		double chi2 = 0;
+		for (size_t p = 0; p < m; p++)
+			chi2 += r[p] * r[p];
+		a->chi2_n = chi2 / (double)m;
+		a->chi2_p = chi2_upper(chi2, m);
+		a->ref_corr = ref_u > 0;
+	}
+	free(ix);
+	free(C);
+	free(r);
+	return rc;
 }

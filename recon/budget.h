@@ -32,10 +32,33 @@ int recon_budget(size_t nth, size_t L, const double *wl, const double *dhr, cons
 struct recon_agreement {
 	size_t n, within2;   /* wavelengths compared; |z| <= 2 among them, z = (md − rv)/√(ms² + rs²) */
 	double rms_z, max_z, max_z_wl;
-	double chi2_n;       /* χ²/n with the correlated part as one common factor (Sherman-Morrison) */
+	double chi2_n;       /* χ²/n with the correlated part as one common factor (Sherman-Morrison); with the
+			      * reference's correlated part (recon_agreement_ref) from the full covariance */
+	double chi2_p;       /* P(χ²_n ≥ χ²): the probability of a χ² this large if both agree within their σ */
+	int ref_corr;        /* the reference's correlated calibration part was given */
 };
 /* Compare at n reference wavelengths (arrays [n]); z[n] (may be NULL) receives the per-wavelength z. */
 void recon_agreement(size_t n, const double *wl, const double *md, const double *ms, const double *mc,
 		     const double *rv, const double *rs, double *z, struct recon_agreement *a);
+/* The same, where the reference's stated σ holds a calibration part correlated across wavelengths (a sphere's
+ * calibration against its white standard): relative standard uncertainty ref_u of the reference's value, squared-
+ * exponential correlation exp(−Δλ²/(2ℓ²)) of length ref_len_nm. χ² = rᵀC⁻¹r with C = the independent parts
+ * (model σ minus its common factor, reference σ minus ref_u·rv) + the model's common factor (rank one) + the
+ * reference's correlated part, by Cholesky. ref_u = 0 and ip NULL: recon_agreement. 0, or −1 with err (C not positive
+ * definite, out of memory). */
+/* How the model's curve was taken to the reference wavelengths (optional): value i = (1 − u[i])·y[j[i]] +
+ * u[i]·y[j[i] + 1] on the model's grid, whose independent σ (total minus the common factor) is node_sig[]; the
+ * model's independent errors at two reference wavelengths between the same nodes are then correlated, as they
+ * are (a reference on a 5 nm grid against a model on 10 nm: χ² 3× too large when taken as independent). */
+struct recon_ref_interp {
+	const size_t *j;
+	const double *u;
+	const double *node_sig;
+	const double *interp_sig; /* [n] the interpolation's own error at each compared wavelength (independent) */
+	size_t L;
+};
+int recon_agreement_ref(size_t n, const double *wl, const double *md, const double *ms, const double *mc,
+			const double *rv, const double *rs, double ref_u, double ref_len_nm,
+			const struct recon_ref_interp *ip, double *z, struct recon_agreement *a, struct acq_err *err);
 
 #endif

@@ -167,6 +167,32 @@ static int resolution(const struct recon_model *m, double theta, int nmu, int np
 	return rc ? -1 : 0;
 }
 
+int recon_gp_setup(const struct recon_model *m, const char *who, double *A, double *Ainv, double *alpha,
+		   struct acq_err *err)
+{
+	size_t n = m->n, L = m->nwl;
+	for (size_t j = 0; j < n; j++)
+		for (size_t i = j; i < n; i++) {
+			double v = rbf_kernel(m->kernel, m->shape, m->ctr + 6 * i, m->ctr + 6 * j, m->tctr + 6 * j);
+			A[j * n + i] = A[i * n + j] = v;
+		}
+	for (size_t k = 0; k < n; k++)
+		A[k * n + k] += m->eta * m->lam[k];
+	if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)n, A, (lapack_int)n) != 0)
+		return acq_errf(err, ACQ_E_NUMERIC, "%s: refactorisation of the model's system failed (not positive definite)",
+				who);
+	memcpy(Ainv, A, n * n * sizeof *Ainv);
+	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, Ainv, (lapack_int)n) != 0)
+		return acq_errf(err, ACQ_E_NUMERIC, "%s: inverse of the model's system failed", who);
+	for (size_t l = 0; l < L; l++) {
+		double acc = 0;
+		for (size_t k = 0; k < n; k++)
+			acc += m->w[l * n + k] * m->w[l * n + k] / Ainv[k * n + k];
+		alpha[l] = acc / (double)n;
+	}
+	return 0;
+}
+
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err)
 {
@@ -231,28 +257,8 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 		}
 	}
 	/* the one factorisation of K + Λ, and the leave-one-out amplitude α_λ of every channel */
-	for (size_t j = 0; j < n; j++)
-		for (size_t i = j; i < n; i++) {
-			double v = rbf_kernel(m->kernel, m->shape, m->ctr + 6 * i, m->ctr + 6 * j, m->tctr + 6 * j);
-			A[j * n + i] = A[i * n + j] = v;
-		}
-	for (size_t k = 0; k < n; k++)
-		A[k * n + k] += m->eta * m->lam[k];
-	if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)n, A, (lapack_int)n) != 0) {
-		acq_errf(err, ACQ_E_NUMERIC, "dhr: refactorisation of the model's system failed");
+	if (recon_gp_setup(m, "dhr", A, Ainv, alpha, err))
 		goto out;
-	}
-	memcpy(Ainv, A, n * n * sizeof *Ainv);
-	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, Ainv, (lapack_int)n) != 0) {
-		acq_errf(err, ACQ_E_NUMERIC, "dhr: inverse of the model's system failed");
-		goto out;
-	}
-	for (size_t l = 0; l < L; l++) {
-		double acc = 0;
-		for (size_t k = 0; k < n; k++)
-			acc += m->w[l * n + k] * m->w[l * n + k] / Ainv[k * n + k];
-		alpha[l] = acc / (double)n;
-	}
 	if (recon_misfit(m, MISFIT_Z, MISFIT_MIN, dfmis, NULL, err) < 0)
 		goto out;
 	/* draw 0 is the nominal model; draws 1..ndraws are perturbed */

@@ -208,7 +208,7 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 	 * miss by more than a factor e (leave-one-out RMS > 1 in ln f: spikes) gets the whole on one rule sized for
 	 * every lobe, as before the split (at seed 2155509500 of test_recon_extremes' dynamic range, LOO RMS 9.7, the
 	 * split left the bound 7 % low at 89.9°) */
-	T.split = m->trend == RECON_TREND_GGX && m->trend_alpha > 0 && m->loo_rms <= 1.0;
+	T.split = trend_hv_alpha(m->trend, m->trend_alpha) > 0 && m->loo_rms <= 1.0; /* GGX, phong (trend.h) */
 	recon_lobe_rule(m, TAB_NMU_MAX, T.split, &T.nmu, &T.nphi, &qmax);
 	T.al = malloc(3 * L * sizeof *T.al);
 	T.dl = T.al ? T.al + L : NULL;

@@ -302,7 +302,8 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 		if (!(Q = box_nodes(theta_i, nmu, nphi, square_rule, ws)))
 			return acq_errf(err, ACQ_E_NOMEM, "albedo: out of memory for a %d × %d rule with boxes", nmu, nphi);
 	} else if (Q > ws->qmax ||
-		   (ws->part == RECON_PART_LOBE ? recon_hv_nodes(theta_i, m->trend_alpha, nmu, nphi, ws->c6, ws->wt)
+		   (ws->part == RECON_PART_LOBE ? recon_hv_nodes(theta_i, trend_hv_alpha(m->trend, m->trend_alpha), nmu, nphi,
+								 ws->c6, ws->wt)
 						: recon_hemi_nodes(theta_i, nmu, nphi, square_rule, ws->c6, ws->wt)))
 		return acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", nmu, nphi);
 	for (size_t k = 0; k < nch; k++)
@@ -342,7 +343,7 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe
 			H = fmax(H, hi - lo);
 		}
 	double s = m->shape / sqrt(20.0 * (H + 1.0)); /* radians */
-	if (m->trend == RECON_TREND_GGX && !no_trend_lobe) {
+	if (m->trend != RECON_TREND_NONE && !no_trend_lobe) {
 		double lobe = 0;
 		for (size_t l = 0; l < m->nwl; l++) {
 			double sum = 0; /* the lobe terms' albedo is ≤ the sum of their coefficients */
@@ -351,7 +352,8 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe
 			lobe = fmax(lobe, sum);
 		}
 		if (lobe >= 1e-4)
-			s = fmin(s, TREND_RULE_SPACING * m->trend_alpha);
+			s = fmin(s, m->trend == RECON_TREND_GGX ? TREND_RULE_SPACING * m->trend_alpha
+							       : trend_rule_step(m->trend, m->trend_alpha));
 	}
 	double a = ceil((M_PI / 2) / s), b = ceil(M_PI / s);
 	if (a > *nmu)

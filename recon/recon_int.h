@@ -67,7 +67,7 @@ static inline double trend_val(const struct recon_model *m, const double b[TREND
 
 static inline double trend_factor(const struct recon_model *m, const double b[TREND_NB], size_t l)
 {
-	return m->trend == RECON_TREND_GGX ? trend_val(m, b, l) + m->eps[l] : 1.0;
+	return m->trend != RECON_TREND_NONE ? trend_val(m, b, l) + m->eps[l] : 1.0;
 }
 
 static inline double theta_of(const double *v)
@@ -145,6 +145,12 @@ struct albedo_ws {
 /* Allocate for rules of up to qmax nodes (-1 with err on failure); free (idempotent). */
 int recon_albedo_ws_init(struct albedo_ws *ws, const struct recon_model *m, size_t qmax, struct acq_err *err);
 void recon_albedo_ws_free(struct albedo_ws *ws);
+/* The Gaussian-process set-up shared by the DHR's and the slices' uncertainty: A[n*n] receives the lower
+ * Cholesky factor of K + ηΛ (the fit's system, column-major), alpha[L] the leave-one-out amplitude of every
+ * channel, α_λ = mean_k w_k²/(A⁻¹)_kk (Ainv[n*n] is scratch). Errors name the caller `who`. 0 ok, −1 error. */
+int recon_gp_setup(const struct recon_model *m, const char *who, double *A, double *Ainv, double *alpha,
+		   struct acq_err *err);
+
 /* Raise the starting rule nmu × nphi to the narrowest lobe the model can make (without the trend's own lobe when
  * no_trend_lobe: the energy table integrates that over half vectors); *qmax the finest rule reachable. */
 void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe, int *nmu, int *nphi, size_t *qmax);

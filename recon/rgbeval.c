@@ -212,7 +212,7 @@ out:
  * e^g − ε). */
 static inline double bin_trend(const struct recon_rgb *R, const double tb[TREND_NB], size_t l)
 {
-	if (R->m->trend != RECON_TREND_GGX)
+	if (R->m->trend == RECON_TREND_NONE)
 		return 1.0 - R->eps[l]; /* factor 1: f = e^g − ε */
 	return trend_dot(R->tc + l * TREND_NB, tb);
 }

@@ -30,8 +30,8 @@
  *   w[nwl·n] g[nwl·n] gsig[nwl·n]              f64 channel-major: weights, data, uncertainties (≥ 0)
  *   tab_theta[ntab]                            f64 increasing, 0 to π/2
  *   tab_alb[(ntab−1)·nwl]                      f64 ≥ 0, albedo upper bounds
- *   trend       u32      0 none, 1 ggx                                 (trend.h; version 2 only)
- *   trend_alpha f64      GGX roughness in [0.005, 1] (ggx), 0 (none)
+ *   trend       u32      0 none, 1 ggx, 2 phong, 3 sheen, 4 rough      (trend.h; version 2 only)
+ *   trend_alpha f64      the trend's roughness in [0.005, 1] (trend.h), 0 (none)
  *   tcoef[nwl·5]                               f64 ≥ 0, trend coefficients (TREND_NB; all 0 for none)
  *   meta_len    u32      ≤ 65535, then meta_len bytes of UTF-8 "key=value\n" text (no NUL)
  *   checksum    u64      FNV-1a 64 of every preceding byte
@@ -284,7 +284,7 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 		bad = "trend (unknown, or not with the log transform)";
 	if (!bad && !isfinite(m->trend_alpha))
 		bad = "trend roughness";
-	if (!bad && trend == RECON_TREND_GGX &&
+	if (!bad && trend != RECON_TREND_NONE &&
 	    !(m->trend_alpha >= TREND_ALPHA_MIN * 0.999 && m->trend_alpha <= TREND_ALPHA_MAX * 1.001))
 		bad = "trend roughness";
 	for (size_t i = 0; !bad && i < L * TREND_NB; i++)

@@ -11,6 +11,7 @@
 #include "recon/plot.h"
 #include "recon/pngio.h"
 #include "recon/rbf.h"
+#include "recon/recon_int.h"
 
 void slices_opts_default(struct slices_opts *o)
 {
@@ -79,28 +80,9 @@ int slices_band(const struct recon_model *m, size_t nq, const double *ang, const
 	}
 	if (recon_eval(m, nq, ang, F, err))
 		goto out;
-	/* A = K + ηΛ of the model (its Cholesky factor) and diag(A⁻¹) for the leave-one-out amplitude α_λ */
-	for (size_t j = 0; j < n; j++)
-		for (size_t i = j; i < n; i++)
-			A[j * n + i] = A[i * n + j] = rbf_kernel(m->kernel, m->shape, m->ctr + 6 * i, m->ctr + 6 * j,
-								 m->tctr + 6 * j);
-	for (size_t q = 0; q < n; q++)
-		A[q * n + q] += m->eta * m->lam[q];
-	if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)n, A, (lapack_int)n) != 0) {
-		acq_errf(err, ACQ_E_NUMERIC, "slices: the model's system is not positive definite");
+	/* A = K + ηΛ of the model (its Cholesky factor) and the leave-one-out amplitude α_λ (as for the DHR) */
+	if (recon_gp_setup(m, "slices", A, Ai, alpha, err))
 		goto out;
-	}
-	memcpy(Ai, A, n * n * sizeof *Ai);
-	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, Ai, (lapack_int)n) != 0) {
-		acq_errf(err, ACQ_E_NUMERIC, "slices: inverse of the model's system failed");
-		goto out;
-	}
-	for (size_t l = 0; l < L; l++) {
-		double acc = 0;
-		for (size_t q = 0; q < n; q++)
-			acc += m->w[l * n + q] * m->w[l * n + q] / Ai[q * n + q];
-		alpha[l] = acc / (double)n;
-	}
 	for (size_t q = 0; q < nq; q++)
 		rbf_canon(ang[4 * q], ang[4 * q + 1], ang[4 * q + 2], ang[4 * q + 3], c6 + 6 * q);
 	rbf_kmatrix_soa(m->kernel, m->shape, nq, c6, n, m->soa, Kq);

@@ -14,6 +14,11 @@
 enum recon_trend {
 	RECON_TREND_NONE = 0, /* constant: the plain RBF interpolant of the transformed data */
 	RECON_TREND_GGX = 1,  /* c0/π + c1·AS diffuse + D·G2/(4μiμo)·(c2 + c3(1 − ωi·h)² + c4(1 − ωi·h)⁵) */
+	RECON_TREND_PHONG = 2, /* c0/π + c1·AS diffuse + P_n(ψ)·(c2 + c3(1 − ωi·h)² + c4(1 − ωi·h)⁵), a normalised
+				* Phong lobe about the mirror direction, n = 2/α² − 2 */
+	RECON_TREND_SHEEN = 3, /* c0/π + c1·AS diffuse + c2·Charlie sheen (r = α) + c3·sheen·(1 − ωi·h)⁵ + c4·ON */
+	RECON_TREND_ROUGH = 4, /* c0/π + c1·AS diffuse + c2·retro-reflection peak (width α rad) + c3·ON + c4·LS: a
+				* rough diffuse (Oren–Nayar's second term, Lommel–Seeliger) with an opposition peak */
 	RECON_TREND__COUNT
 };
 
@@ -22,8 +27,8 @@ enum recon_trend {
 #define TREND_ALPHA_MIN 0.005 /* roughness range searched by the fit */
 #define TREND_ALPHA_MAX 1.0
 
-/* Basis values of trend t at c6: trend_basis for RECON_TREND_GGX, zeros for none. */
-static inline void trend_eval_basis(int t, double alpha, const double c6[6], double b[TREND_NB]);
+/* Basis values of trend t at c6 (zeros for none); finite and ≥ 0 on and above the horizon, symmetric in ωi ↔ ωo. */
+void trend_eval_basis(int t, double alpha, const double c6[6], double b[TREND_NB]);
 /* The trend value Σ_j coef[j]·b[j] of one channel's coefficients at basis values b. */
 static inline double trend_dot(const double *coef, const double b[TREND_NB])
 {
@@ -46,18 +51,18 @@ void trend_basis(double alpha, const double c6[6], double b[TREND_NB]);
  */
 int trend_fit(size_t n, size_t L, const double *val, const double *eps, const double *c6, const size_t *chan,
 	      size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err);
+/* trend_fit for the trend kind t (RECON_TREND_GGX .. RECON_TREND__COUNT − 1). */
+int trend_fit_kind(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
+		   const size_t *chan, size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err);
+/* Node spacing (radians in ωo) a quadrature rule needs to resolve the lobe terms of trend t at parameter alpha
+ * (a quarter of the lobe's half width at a quarter of its peak); INFINITY when the lobe terms are broad. */
+double trend_rule_step(int t, double alpha);
+/* The GGX roughness whose half-vector nodes (recon_hv_nodes) resolve the lobe terms of trend t at alpha, or 0 when
+ * those nodes do not fit its lobe (sheen, rough: not a lobe about the half vector near the normal). GGX: α; phong:
+ * α/2 (cosⁿψ ≈ exp(−ψ²/α²) and ψ ≈ 2θh near the mirror: a Beckmann lobe of α/2 in θh). */
+double trend_hv_alpha(int t, double alpha);
 
-static inline void trend_eval_basis(int t, double alpha, const double c6[6], double b[TREND_NB])
-{
-	if (t == RECON_TREND_GGX) {
-		trend_basis(alpha, c6, b);
-	} else {
-		for (int j = 0; j < TREND_NB; j++)
-			b[j] = 0.0;
-	}
-}
-
-/* Name of a trend ("none", "ggx") or NULL; and back (−1 if unknown). */
+/* Name of a trend ("none", "ggx", "phong", "sheen", "rough") or NULL; and back (−1 if unknown). */
 const char *trend_name(int t);
 int trend_from_name(const char *name);
 

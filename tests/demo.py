@@ -8,6 +8,7 @@ sample (`acq-sim truth SAMPLE --spectrophotometer`, read by `brdf-recon dhr --re
 output is. Everything started here is stopped here, also on Ctrl-C."""
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -23,9 +24,66 @@ PLAN = os.environ.get("DEMO_PLAN") or os.path.join(L.SRC, "config", "plan-paper-
 ACQCTL = os.path.join(L.BUILD, "acqctl")
 RECON = os.path.join(L.BUILD, "brdf-recon")
 SAMPLE = os.environ.get("DEMO_SAMPLE", "green-paint")
+# The simulator's calibration errors (sim/sim_refdrift.h), off unless asked for: DEMO_REFERENCE_U=0.002 puts a white
+# standard off its certificate by that standard deviation on the stage, DEMO_DRIFT=0.005 lets the source drift.
+REF_U = float(os.environ.get("DEMO_REFERENCE_U", "0"))
+DRIFT = float(os.environ.get("DEMO_DRIFT", "0"))
 
 
-def reference_check(out, seed):
+def sim_section_value(text, section, key):
+    """A number under `  section:` / `    key:` of the composed configuration's sim part (0 if absent)."""
+    m = re.search(r"^  %s:\s*(?:#.*)?\n((?:    .*\n)+)" % re.escape(section), text, re.M)
+    if not m:
+        return 0.0
+    k = re.search(r"^    %s:\s*([-0-9.eE+]+)" % re.escape(key), m.group(1), re.M)
+    return float(k.group(1)) if k else 0.0
+
+
+def set_systematics(conf):
+    """Turn the simulator's reference-standard and drift errors on in the composed configuration (DEMO_REFERENCE_U,
+    DEMO_DRIFT); the daemon's calibration is unchanged (it believes the certificate and a steady source)."""
+    if REF_U <= 0 and DRIFT <= 0:
+        return
+    with open(conf) as f:
+        text = f.read()
+    if REF_U > 0:
+        text = re.sub(r"(^  reference_standard:.*\n    u:\s*)[-0-9.eE+]+", lambda m: m.group(1) + repr(REF_U), text,
+                      count=1, flags=re.M)
+    if DRIFT > 0:
+        text = re.sub(r"(^  source_drift:.*\n    amplitude:\s*)[-0-9.eE+]+", lambda m: m.group(1) + repr(DRIFT), text,
+                      count=1, flags=re.M)
+    with open(conf, "w") as f:
+        f.write(text)
+
+
+def budget_args(conf, out):
+    """The `brdf-recon dhr` budget options that match the simulator's systematic errors where they are on
+    (recon/reconstruction.md, sim/sim_refdrift.h): --cert with the certificate table of the daemon's calibration and
+    the standard's stated u when the standard is off its certificate; --drift-rel amplitude * sqrt(2 (1 + tilt^2/3))
+    (the drift's stated uncertainty) when the source drifts. Empty when both are off."""
+    with open(conf) as f:
+        text = f.read()
+    args = []
+    u = sim_section_value(text, "reference_standard", "u")
+    if u > 0:
+        m = re.search(r"^\s*table:\s*(\[\[.*\]\])\s*$", text, re.M)
+        if m:
+            cert = os.path.join(out, "certificate.csv")
+            with open(cert, "w") as f:
+                f.write("wavelength_nm,rho,u\n")
+                for wl, rho, _ in json.loads(m.group(1)):
+                    f.write("%g,%.6g,%.6g\n" % (wl, rho, u))
+            args += ["--cert", cert]
+        else:
+            args += ["--cert-rel", "%.6g" % (u / 0.98)]
+    a = sim_section_value(text, "source_drift", "amplitude")
+    if a > 0:
+        tilt = sim_section_value(text, "source_drift", "tilt")
+        args += ["--drift-rel", "%.6g" % (a * (2 * (1 + tilt * tilt / 3)) ** 0.5)]
+    return args
+
+
+def reference_check(out, seed, conf=None):
     """The paper's Fig. 4: the reconstructed DHR at 8 deg vs a simulated spectrophotometer (d/8 sphere) measurement
     of the sample, z = (model - reference) / sqrt(sigma_model^2 + sigma_ref^2) per wavelength. Returns a summary
     line (or why there is none); writes spectrophotometer.csv, dhr-reference-z.csv and dhr-reference.png in out."""
@@ -41,13 +99,21 @@ def reference_check(out, seed):
     zpath = os.path.join(out, "dhr-reference-z.csv")
     helptext = subprocess.run([RECON, "dhr", "--help"], capture_output=True, text=True)
     if "--reference" in helptext.stdout + helptext.stderr:
+        # the instrument's stated calibration part, correlated over 150 nm (sim/sim_sphere.h), and the budget
+        # options matching the simulator's systematic errors where they are on
+        extra = ["--reference-corr", "0.003,150"] if "--reference-corr" in helptext.stdout else []
+        extra += budget_args(conf, out) if conf else []
         r = subprocess.run([RECON, "dhr", model, "--theta-i", "8", "--reference", ref, "--z-out", zpath, "-o",
-                            os.path.join(out, "dhr8.csv"), "--plot", os.path.join(out, "dhr-reference.png")],
+                            os.path.join(out, "dhr8.csv"), "--plot", os.path.join(out, "dhr-reference.png"), *extra],
                            capture_output=True, text=True)
         if r.returncode != 0:
             return "brdf-recon dhr --reference failed: %s" % r.stderr.strip()[-500:]
         z = np.genfromtxt(zpath, delimiter=",", names=True)["z"]
-        how = "brdf-recon dhr --reference"
+        how = "brdf-recon dhr --reference %s" % " ".join(extra)
+        chi = re.search(r"chi2 ([0-9.eE+-]+) for (\d+) wavelengths, P\(chi2 >= that \| agreement\) = ([0-9.eE+-]+): "
+                        r"(NOT consistent|consistent)", r.stderr)
+        if chi:
+            how += "; chi2 %s for %s wavelengths, P(chi2) %s: %s at the 1 %% level" % chi.groups()
     else:
         # a build without --reference: the same comparison here, from `brdf-recon dhr` at 8 deg
         d8 = os.path.join(out, "dhr8.csv")
@@ -79,6 +145,7 @@ def main():
         print("make demo: %s is missing (the planner's example plans are not merged yet)" % PLAN, file=sys.stderr)
         return 1
     b = L.Bench(state_dir=demo, scale=SCALE, seed=int(os.environ.get("ACQ_SEED", "1")))
+    set_systematics(b.conf)
     watch = None
     t0 = time.time()
     try:
@@ -128,7 +195,7 @@ def main():
         print("accuracy:            %s" % acc)
         print("reconstruction:      %s" % (verdict or "no word from the reconstruction within 15 min"))
         try:
-            agree = reference_check(out, int(os.environ.get("ACQ_SEED", "1")))
+            agree = reference_check(out, int(os.environ.get("ACQ_SEED", "1")), b.conf)
         except (OSError, ValueError) as e:
             agree = "comparison failed: %s" % e
         print("spectrophotometer:   DHR at 8 deg vs the simulated d/8 sphere measurement of %s: %s" % (SAMPLE, agree))

@@ -16,7 +16,8 @@
 /* ---- dhr ---- */
 static const char dhr_help[] =
 	"usage: brdf-recon dhr MODEL [--theta-i 8,30,60] [--draws N] [--seed S] [-o OUT.csv] [budget options]\n"
-	"                      [--reference REF.csv [--reference-theta 8] [--z-out Z.csv]] [--plot OUT.png]\n"
+	"                      [--reference REF.csv [--reference-theta 8] [--reference-corr U[,L]] [--z-out Z.csv]]\n"
+	"                      [--plot OUT.png]\n"
 	"Directional-hemispherical reflectance DHR(theta_i, lambda) of the model with its uncertainty budget.\n"
 	"Quadrature: Gauss-Legendre 32 in cos(theta_o) x 48 azimuth midpoints (exact for a Lambertian), doubled\n"
 	"per wavelength up to 256 x 384 until two rules agree to 1e-3 (narrow lobes).\n"
@@ -42,12 +43,18 @@ static const char dhr_help[] =
 	"                        --reference-theta (default 8, must be among --theta-i): prints the agreement (share\n"
 	"                        of wavelengths with |z| < 2, z with both uncertainties) and chi2/n with the\n"
 	"                        correlated components as one common factor; per-wavelength z to --z-out (or stderr)\n"
+	"  --reference-corr U[,L]  the reference's stated sigma holds a calibration part of relative standard\n"
+	"                        uncertainty U correlated across wavelengths (squared exponential, length L nm,\n"
+	"                        default 150: acq-sim's spectrophotometer is 0.003,150): chi2 with the full\n"
+	"                        covariance and P(chi2) judge the agreement\n"
 	"  --plot OUT.png        the curves with +-2 sigma bands, the reference band and a panel of the residual in\n"
 	"                        units of sigma\n";
 
-/* The model's curve at the reference wavelengths (linear in λ, the model's grid): value, total σ, correlated σ. */
+/* The model's curve at the reference wavelengths (linear in λ, the model's grid): value, total σ (with the linear
+ * interpolation's own error, u(1 − u)/2 × the curve's second difference at the nearer node, in quadrature),
+ * correlated σ; the lower node j and weight u; the interpolation error alone in *eo. */
 static void at_reference(const struct recon_model *m, const double *y, const double *s, const double *c, double wl,
-			 double *yo, double *so, double *co)
+			 double *yo, double *so, double *co, size_t *jo, double *uo, double *eo)
 {
 	size_t L = m->nwl, j = 0;
 	while (j + 1 < L && m->wl[j + 1] < wl)
@@ -57,6 +64,13 @@ static void at_reference(const struct recon_model *m, const double *y, const dou
 	*yo = (1 - u) * y[j] + u * y[j2];
 	*so = (1 - u) * s[j] + u * s[j2];
 	*co = (1 - u) * c[j] + u * c[j2];
+	size_t k = u < 0.5 ? j : j2; /* the curve's second difference at the nearer node (interior) */
+	k = k < 1 ? 1 : k + 1 >= L ? (L > 2 ? L - 2 : k) : k;
+	double d2 = L >= 3 && k >= 1 && k + 1 < L ? y[k - 1] - 2 * y[k] + y[k + 1] : 0.0;
+	*eo = 0.5 * u * (1 - u) * fabs(d2);
+	*so = hypot(*so, *eo);
+	*jo = j;
+	*uo = u;
 }
 
 const char *const db_names[DB_N] = { "sigma_noise", "sigma_model",  "sigma_quad",  "sigma_misfit", "sigma_res",
@@ -91,9 +105,10 @@ int cmd_dhr(int argc, char **argv)
 		{ "z-out", required_argument, 0, 'z' }, { "plot", required_argument, 0, 'p' },
 		{ "cert", required_argument, 0, 'C' }, { "cert-rel", required_argument, 0, 'c' },
 		{ "drift-rel", required_argument, 0, 'd' }, { "wl-cal-nm", required_argument, 0, 'w' },
-		{ "nonlin-rel", required_argument, 0, 'N' }, { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+		{ "nonlin-rel", required_argument, 0, 'N' }, { "reference-corr", required_argument, 0, 'K' },
+		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
 	const char *outp = NULL, *refp = NULL, *zout = NULL, *plot = NULL, *certp = NULL;
-	double th[64] = { 8, 30, 60 }, ref_th = 8;
+	double th[64] = { 8, 30, 60 }, ref_th = 8, ref_u = 0, ref_len = 150;
 	size_t nth = 3;
 	uint64_t draws = 64, seed = 1;
 	struct recon_budget_opts bo = { 0 };
@@ -148,6 +163,15 @@ int cmd_dhr(int argc, char **argv)
 			if (parse_double(optarg, &bo.nonlin_rel) || !(bo.nonlin_rel >= 0 && bo.nonlin_rel < 1))
 				return usage_err("dhr", "--nonlin-rel needs a number in [0, 1)");
 			break;
+		case 'K': {
+			char *comma = strchr(optarg, ',');
+			if (comma)
+				*comma = 0;
+			if (parse_double(optarg, &ref_u) || !(ref_u >= 0 && ref_u < 1) ||
+			    (comma && (parse_double(comma + 1, &ref_len) || !(ref_len > 0 && ref_len < 1e6))))
+				return usage_err("dhr", "--reference-corr needs U[,LENGTH_NM]: U in [0, 1), length > 0 nm");
+			break;
+		}
 		case 'h': fputs(dhr_help, stdout); return 0;
 		default: return usage_err("dhr", "bad option");
 		}
@@ -245,27 +269,34 @@ int cmd_dhr(int argc, char **argv)
 	}
 	if (ok && ref) {
 		/* the reference's wavelengths inside the model's range */
-		double *cmp = malloc(8 * (nref ? nref : 1) * sizeof *cmp);
-		if (!cmp) {
+		double *cmp = malloc(10 * (nref ? nref : 1) * sizeof *cmp), *nsig = malloc(L * sizeof *nsig);
+		size_t *ji = malloc((nref ? nref : 1) * sizeof *ji);
+		if (!cmp || !nsig || !ji) {
 			acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
 			ok = 0;
 		}
 		size_t nc = 0;
 		double *cw = cmp, *md = cmp + nref, *ms = cmp + 2 * nref, *mc = cmp + 3 * nref, *rv = cmp + 4 * nref,
-		       *rs = cmp + 5 * nref, *z = cmp + 6 * nref;
+		       *rs = cmp + 5 * nref, *z = cmp + 6 * nref, *ui = cmp + 8 * nref, *ei = cmp + 9 * nref;
 		for (size_t i = 0; ok && i < nref; i++) {
 			double wl = ref[3 * i];
 			if (!(wl >= m->wl[0] && wl <= m->wl[L - 1]) || !isfinite(ref[3 * i + 1]) || !(ref[3 * i + 2] >= 0))
 				continue;
 			cw[nc] = wl;
-			at_reference(m, dhr + tref * L, sig + tref * L, corr + tref * L, wl, &md[nc], &ms[nc], &mc[nc]);
+			at_reference(m, dhr + tref * L, sig + tref * L, corr + tref * L, wl, &md[nc], &ms[nc], &mc[nc], &ji[nc],
+				     &ui[nc], &ei[nc]);
 			rv[nc] = ref[3 * i + 1];
 			rs[nc] = ref[3 * i + 2];
 			nc++;
 		}
+		for (size_t l = 0; ok && l < L; l++) { /* the model's independent σ at its own wavelengths */
+			double s = sig[tref * L + l], cc = fmin(corr[tref * L + l], s);
+			nsig[l] = sqrt(fmax(0.0, s * s - cc * cc));
+		}
+		struct recon_ref_interp ip = { ji, ui, nsig, ei, L };
 		struct recon_agreement ag;
-		if (ok)
-			recon_agreement(nc, cw, md, ms, mc, rv, rs, z, &ag);
+		if (ok && recon_agreement_ref(nc, cw, md, ms, mc, rv, rs, ref_u, ref_len, &ip, z, &ag, &err))
+			ok = 0;
 		FILE *zf = stderr;
 		struct out zo;
 		if (ok && zout) {
@@ -284,9 +315,16 @@ int cmd_dhr(int argc, char **argv)
 		if (ok)
 			fprintf(stderr, "reference %s at theta_i=%g: %zu wavelengths compared, agreement %.1f%% within |z| <= 2 "
 				"(z with both uncertainties), RMS z %.3g, max |z| %.3g at %g nm, chi2/n %.3g with the "
-				"correlated components (certificate, drift) as one common factor\n", refp, ref_th, ag.n,
+				"correlated components (certificate, drift%s) as one common factor\n", refp, ref_th, ag.n,
 				ag.n ? 100.0 * (double)ag.within2 / (double)ag.n : 0.0, ag.rms_z, ag.max_z, ag.max_z_wl,
-				ag.chi2_n);
+				ag.chi2_n, ag.ref_corr ? "; the reference's calibration correlated over wavelengths" : "");
+		if (ok)
+			fprintf(stderr, "reference %s: chi2 %.4g for %zu wavelengths, P(chi2 >= that | agreement) = %.3g: %s at "
+				"the 1%% level%s\n", refp, ag.chi2_n * (double)ag.n, ag.n, ag.chi2_p,
+				ag.chi2_p >= 0.01 ? "consistent" : "NOT consistent",
+				ag.ref_corr ? "" : " (no --reference-corr: the reference's sigma taken as independent across "
+						  "wavelengths; a calibration error correlated over wavelengths then moves many "
+						  "z together and the share within |z| <= 2 varies from one instrument to the next)");
 		if (ok && plot) { /* keep the residual for the plot */
 			zr = malloc((nc ? nc : 1) * sizeof *zr);
 			zwl = malloc((nc ? nc : 1) * sizeof *zwl);
@@ -297,6 +335,8 @@ int cmd_dhr(int argc, char **argv)
 			}
 		}
 		free(cmp);
+		free(nsig);
+		free(ji);
 	}
 	if (ok && plot) {
 		struct plot_curve curves[64], refc, resc;

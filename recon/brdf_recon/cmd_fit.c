@@ -17,10 +17,13 @@ static const char fit_help[] =
 	"  --kernel K              wendland (default, positive definite), exp, gauss, paper (Gaussian of d_Rec,\n"
 	"                          the paper's literal construction, not guaranteed positive definite)\n"
 	"  --transform T           log (default: interpolate ln(f+eps)) or sqrt\n"
-	"  --trend T               auto (default), ggx or none. ggx: interpolate relative to a fitted Lambertian\n"
-	"                          + GGX lobe + coated diffuse, so a lobe narrower than the sampling keeps a\n"
-	"                          microfacet shape; none: the plain interpolant (the only choice with sqrt);\n"
-	"                          auto: whichever has the lower leave-one-out error (log transform)\n"
+	"  --trend T               auto (default), ggx, phong, sheen, rough or none. ggx: interpolate relative to\n"
+	"                          a fitted Lambertian + GGX lobe + coated diffuse, so a lobe narrower than the\n"
+	"                          sampling keeps a microfacet shape; phong: a normalised lobe about the mirror;\n"
+	"                          sheen: Charlie sheen + Oren-Nayar; rough: Oren-Nayar + Lommel-Seeliger +\n"
+	"                          retro-reflection peak; none: the plain interpolant (the only choice with\n"
+	"                          sqrt); auto: leave-one-out over all, a kind other than ggx (or none) kept\n"
+	"                          only when it is better beyond the score's uncertainty (log transform)\n"
 	"  --shape X|auto          kernel shape parameter (default auto: Rippa leave-one-out over a grid)\n"
 	"  --smoothing X|auto|sigma  eta in (K + eta*diag(r)) w = g, r from the uncertainties: a number, auto\n"
 	"                          (default: leave-one-out), or sigma (Lambda = the transformed variances over\n"
@@ -68,7 +71,7 @@ int cmd_fit(int argc, char **argv)
 			break;
 		case 'r':
 			if (strcmp(optarg, "auto") && (o.trend = trend_from_name(optarg)) < 0)
-				return usage_err("fit", "unknown trend (auto, ggx or none)");
+				return usage_err("fit", "unknown trend (auto, ggx, phong, sheen, rough or none)");
 			if (!strcmp(optarg, "auto"))
 				o.trend = -1;
 			set_trend = 1;

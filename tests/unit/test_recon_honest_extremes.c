@@ -264,8 +264,8 @@ static void test_log_uniform_random(void **state)
 	clock_t c0 = clock();
 	assert_int_equal(recon_fit(&s, NULL, &m, &e), 0);
 	double cpu = (double)(clock() - c0) / CLOCKS_PER_SEC;
-	printf("log-uniform random: fit %.2f s CPU, leave-one-out RMS %.3g, table capped %d\n", cpu, m->loo_rms,
-	       m->tab_capped);
+	printf("log-uniform random: fit %.2f s CPU, leave-one-out RMS %.3g, table capped %d, trend %s (alpha %.3g)\n", cpu,
+	       m->loo_rms, m->tab_capped, trend_name(m->trend), m->trend_alpha);
 	/* The time itself is a benchmark figure (`make bench`, bench_recon.py's random input), not a test: a
 	 * sanitizer build or a loaded machine moves it. What bounds it is the energy table's work budget. */
 	assert_true(has_warning(m, "leave-one-out RMS")); /* no sigma columns: "not honoured" cannot be judged */
