@@ -465,6 +465,11 @@ int ex_pause(struct ex *x, double now, struct acq_err *err)
 	return 0;
 }
 
+bool ex_pause_pending(const struct ex *x)
+{
+	return x->state == EX_RUNNING && x->pause_requested;
+}
+
 int ex_resume(struct ex *x, double now, struct acq_err *err)
 {
 	if (x->state == EX_SUSPENDED) {

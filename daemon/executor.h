@@ -168,6 +168,8 @@ const char *ex_phase(const struct ex *x);
 const struct ex_stats *ex_stats(const struct ex *x);
 /* The reason of the last pause/failure/abort ("" if none). */
 const char *ex_reason(const struct ex *x);
+/* True while a pause was asked and the point in hand is still being measured (it pauses after it). */
+bool ex_pause_pending(const struct ex *x);
 /* True while a state or event of the sweep could not be stored (disk full...) and awaits a retry. */
 bool ex_has_unrecorded(const struct ex *x);
 /* The database's last error for those records. */

@@ -160,6 +160,7 @@ static void snapshot(struct sweep *sw)
 	p->points_done = st->points_done;
 	p->points_total = st->points_total;
 	p->started_at = sw->started_wall;
+	p->pause_pending = ex_pause_pending(sw->ex);
 	const char *r = ex_reason(sw->ex);
 	snprintf(p->message, sizeof p->message, "%s%s%s", ex_phase(sw->ex), r[0] ? ": " : "", r);
 }
@@ -753,6 +754,7 @@ void sweep_get_progress(const struct sweep *sw, struct sweep_progress *p)
 	if (!sw->ex) {
 		p->state = SWEEP_IDLE;
 		p->eta_s = NAN;
+		p->pause_pending = false;
 	}
 }
 

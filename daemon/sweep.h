@@ -46,6 +46,7 @@ struct sweep_progress {
 	double eta_s;              /* estimated seconds left, NaN if unknown */
 	double started_at;         /* Unix seconds, 0 if idle */
 	char message[256];         /* what it is doing or why it is suspended */
+	bool pause_pending;        /* running, and pauses after the point in hand */
 };
 
 struct sweep_env {

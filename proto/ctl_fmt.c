@@ -204,6 +204,8 @@ static void print_progress(FILE *f, const char *label, json_t *p)
 		total > 0 ? 100.0 * (double)done / (double)total : 0.0);
 	if (!strcmp(state, "running") && strcmp(eta, "-"))
 		fprintf(f, ", ETA %s", eta);
+	if (json_is_true(json_object_get(p, "pause_pending")))
+		fprintf(f, ", pausing after this point");
 	const char *msg = str(p, "message");
 	if (msg[0])
 		fprintf(f, " — %s", msg);
