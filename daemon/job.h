@@ -31,7 +31,7 @@ int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn
 typedef int (*job_child_fn)(void *arg, int fd);
 /* Run fn(fn_arg, fd) in a forked child (no exec: it sees the daemon's memory as it was) with the output
  * captured as for job_start, at nice +10, its address space limited to mem_bytes (0: unlimited), killed after
- * timeout_s.
+ * timeout_s; the child keeps none of the daemon's descriptors but fd.
  * Children of both kinds die with the daemon (PR_SET_PDEATHSIG). 0 or -1. */
 int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, job_done_fn done, void *arg,
 	     struct job **out, struct acq_err *err);
