@@ -156,29 +156,10 @@ static int sel_factor(struct sel *s, struct acq_err *err)
 		free(Ainv);
 		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 	}
-	double *A = s->A;
-	for (size_t j = 0; j < n; j++)
-		for (size_t i = j; i < n; i++)
-			A[j * n + i] = A[i * n + j] = rbf_kernel(m->kernel, m->shape, m->ctr + 6 * i, m->ctr + 6 * j,
-								 m->tctr + 6 * j);
-	for (size_t k = 0; k < n; k++)
-		A[k * n + k] += m->eta * m->lam[k];
-	if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)n, A, (lapack_int)n) != 0) {
-		free(Ainv);
-		return acq_errf(err, ACQ_E_NUMERIC, "select: refactorisation of the model's system failed");
-	}
-	memcpy(Ainv, A, n * n * sizeof *Ainv);
-	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, Ainv, (lapack_int)n) != 0) {
-		free(Ainv);
-		return acq_errf(err, ACQ_E_NUMERIC, "select: inverse of the model's system failed");
-	}
-	for (size_t l = 0; l < L; l++) {
-		double acc = 0;
-		for (size_t k = 0; k < n; k++)
-			acc += m->w[l * n + k] * m->w[l * n + k] / Ainv[k * n + k];
-		s->alpha[l] = acc / (double)n;
-	}
+	int rc = recon_gp_setup(m, "select", s->A, Ainv, s->alpha, err); /* dhr.c: the DHR's σ uses the same */
 	free(Ainv);
+	if (rc)
+		return -1;
 	double *r = malloc(n * sizeof *r);
 	if (!r)
 		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
