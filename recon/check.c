@@ -13,7 +13,7 @@ int recon_check(const struct recon_model *m, size_t npairs, size_t nalb, uint64_
 	memset(rep, 0, sizeof *rep);
 	size_t L = m->nwl, B = 1024;
 	double *ang = malloc(B * 4 * sizeof *ang), *swp = malloc(B * 4 * sizeof *swp);
-	double *f1 = malloc(B * L * sizeof *f1), *f2 = malloc(B * L * sizeof *f2), *alb = malloc(L * sizeof *alb);
+	double *f1 = malloc(B * L * sizeof *f1), *f2 = malloc(B * L * sizeof *f2), *alb = malloc(2 * L * sizeof *alb);
 	int rc = -1;
 	struct albedo_ws ws = { 0 };
 	if (!ang || !swp || !f1 || !f2 || !alb) {
@@ -30,6 +30,7 @@ int recon_check(const struct recon_model *m, size_t npairs, size_t nalb, uint64_
 	recon_rng_seed(&r, seed);
 	rep->min_value = INFINITY;
 	rep->max_albedo = -INFINITY;
+	rep->energy_excess = -INFINITY;
 	for (size_t p0 = 0; p0 < npairs; p0 += B) {
 		size_t b = npairs - p0 < B ? npairs - p0 : B;
 		if (progress)
@@ -70,18 +71,24 @@ int recon_check(const struct recon_model *m, size_t npairs, size_t nalb, uint64_
 		if (progress)
 			progress(pctx, "albedo", (double)t / (double)(nalb + 2));
 		double th = t == 0 ? 0.0 : t == 1 ? M_PI / 2 : asin(recon_rng_unif(&r)) ; /* sinθ uniform: more grazing */
-		if (recon_albedo_adaptive(m, th, cmu, cphi, ALB_NMU_MAX, 1, 1, TAB_TOL, 1e-300, -HUGE_VAL, &ws, alb, NULL, err))
+		if (recon_albedo_adaptive(m, th, cmu, cphi, ALB_NMU_MAX, 1, 1, TAB_TOL, 1e-300, -HUGE_VAL, &ws, alb, alb + L, err))
 			goto out;
 		for (size_t l = 0; l < L; l++) {
 			if (!isfinite(alb[l])) {
 				rep->nonfinite++;
 				continue;
 			}
+			/* the rule's own error: the refinement stops once two rules agree to TAB_TOL, so on a model of
+			 * huge dynamic range the check and the energy table can differ by that much */
+			double q = 2.0 * fabs(alb[L + l]);
 			if (alb[l] > rep->max_albedo) {
 				rep->max_albedo = alb[l];
 				rep->max_albedo_theta = th;
 				rep->max_albedo_wl = m->wl[l];
+				rep->max_albedo_qerr = q;
 			}
+			if (alb[l] - q - 1.0 > rep->energy_excess)
+				rep->energy_excess = alb[l] - q - 1.0;
 		}
 		rep->nalb++;
 	}

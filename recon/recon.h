@@ -135,6 +135,9 @@ struct recon_check_report {
 	double max_albedo;        /* largest albedo found (must be ≤ 1) */
 	double max_albedo_theta;  /* where (radians) */
 	double max_albedo_wl;     /* at which wavelength (nm) */
+	double max_albedo_qerr;   /* the check's own quadrature uncertainty there: 2 × its last rule difference */
+	double energy_excess;     /* largest albedo − 2 × its rule difference − 1 over every incidence and channel:
+				   * > 0 is a violation beyond the check's quadrature uncertainty */
 	size_t nonfinite;         /* non-finite outputs (must be 0) */
 };
 /* Verify non-negativity and reciprocity at npairs random pairs, and the albedo at nalb random incidences

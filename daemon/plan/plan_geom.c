@@ -331,6 +331,13 @@ static double move_basic(const struct bench_geom *g, const struct plan_pos *a, c
 		add_cand(c, &nc, CAP, v2, 4);
 		add_cand(c, &nc, CAP, v3, 4);
 	}
+	/* park the laser at the normal while the detector goes to b, then raise it: the way to a point near the
+	 * laser's plane on the detector's soft limits, which every other path reaches by sweeping past the laser */
+	{
+		double l0 = clampd(0, g->laser_theta.min_deg, g->laser_theta.max_deg);
+		struct plan_pos park[3] = { { l0, a->det_theta, a->det_phi }, { l0, b->det_theta, b->det_phi }, *b };
+		add_cand(c, &nc, CAP, park, 3);
+	}
 	/* azimuth escapes: swing the detector clear of the laser's plane, move the laser, come back */
 	const struct bench_axis *dp = &g->detector_phi;
 	for (int side = 0; side < 4; side++) {

@@ -9,6 +9,7 @@
 #include <cmocka.h>
 
 #include "recon_test_util.h"
+#include "recon/recon_int.h"
 
 #define NWL 4
 
@@ -169,6 +170,16 @@ static void test_energy_scaling_of_unphysical_input(void **state)
 	double sc[2];
 	assert_int_equal(recon_albedo(m, 0.3, 64, 96, 1, sc, &err), 0);
 	assert_true(sc[0] <= 1.0 && sc[0] > 0.9);
+	/* the check can fail: without the energy table's scaling (every bound capped at 1) it must report the
+	 * interpolant's own violation beyond its quadrature uncertainty */
+	for (size_t i = 0; i + 1 < m->ntab; i++)
+		for (size_t l = 0; l < m->nwl; l++)
+			m->tab_alb[i * m->nwl + l] = fmin(m->tab_alb[i * m->nwl + l], 1.0);
+	struct recon_check_report r;
+	assert_int_equal(recon_check(m, 50, 6, 3, &r, NULL, NULL, &err), 0);
+	printf("without the scaling: check max albedo %.4f ± %.2g, excess %.4f\n", r.max_albedo, r.max_albedo_qerr,
+	       r.energy_excess);
+	assert_true(r.max_albedo > 1.2 && r.energy_excess > 0.1);
 	recon_model_free(m);
 	csvio_samples_free(&s);
 }

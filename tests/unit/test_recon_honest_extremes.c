@@ -273,7 +273,8 @@ static void test_log_uniform_random(void **state)
 	assert_int_equal(recon_check(m, 2000, 8, 1, &rep, NULL, NULL, &e), 0);
 	printf("log-uniform random: check max albedo %.4f, min f %g, reciprocity %g\n", rep.max_albedo, rep.min_value,
 	       rep.max_recip_abs);
-	assert_true(rep.max_albedo <= 1.0 && rep.min_value >= 0 && rep.max_recip_abs == 0 && rep.nonfinite == 0);
+	/* ≤ 1 within the check's own quadrature uncertainty (see test_recon_extremes: at ACQ_SEED 109 it read 1.0002) */
+	assert_true(rep.energy_excess <= 0 && rep.min_value >= 0 && rep.max_recip_abs == 0 && rep.nonfinite == 0);
 	recon_model_free(m);
 	csvio_samples_free(&s);
 }
