@@ -583,10 +583,10 @@ static int fit_search(struct fitwork *F, struct acq_err *err)
 			acq_errf(err, ACQ_E_INVAL, "fit: --smoothing sigma needs sigma_<nm> columns");
 			return -1;
 		}
-		for (size_t l = 0; l < L; l++) {
+		for (size_t l = 0; l < L; l++) { /* the first candidate's data (plain, or the one explicit trend's) */
 			double v = 0;
 			for (size_t j = 0; j < n; j++)
-				v += fc->G[l * n + j] * fc->G[l * n + j];
+				v += Gs[0][l * n + j] * Gs[0][l * n + j];
 			varG += v / (double)n / (double)L;
 		}
 		if (!(varG > 0))

@@ -345,7 +345,9 @@ static void test_smoothing_from_sigma(void **state)
 	assert_int_equal(recon_fit(&S, &o, &m, &err), 0);
 	/* 2 % relative noise → σ_g ≈ 0.02; the data's log spread is O(0.3): η ≈ 4e-4·diagK/var ~ 1e-3 */
 	printf("eta from sigma: %g\n", m->eta);
-	assert_true(m->eta > 1e-5 && m->eta < 1e-1);
+	/* measured 9.26e-4 on seeds 1, 2 and 2542839291; a variance of the data read from the wrong (unset) buffer gave
+	 * 6.7e-3 in the plain build and 5.9e8 under the sanitizers */
+	assert_true(m->eta > 2e-4 && m->eta < 4e-3);
 	double a[4] = { 0.5, 0.0, 0.5, M_PI }, f[NWL];
 	assert_int_equal(recon_eval(m, 1, a, f, &err), 0);
 	double t = rt_truth(a, M->wl[0], 1.0);
