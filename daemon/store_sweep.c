@@ -136,6 +136,17 @@ int store_point_discard_partial(struct store *st, int64_t point_id, struct acq_e
 	return store_run1(st, s, err, "discarding a partial point");
 }
 
+/* Bind a spectrometer's identity (model, serial, firmware, pixels, wavelength coefficients) as parameters 1-9. */
+static void bind_identity(sqlite3_stmt *s, const struct spectro_info *info)
+{
+	store_bind_text(s, 1, info->model);
+	store_bind_text(s, 2, info->serial);
+	store_bind_text(s, 3, info->firmware);
+	sqlite3_bind_int(s, 4, info->npix);
+	for (int i = 0; i < 5; i++)
+		sqlite3_bind_double(s, 5 + i, info->wl_coef[i]);
+}
+
 int store_spectrometer_put(struct store *st, const struct spectro_info *info, double at, int64_t *id,
 			   struct acq_err *err)
 {
@@ -154,12 +165,7 @@ int store_spectrometer_put(struct store *st, const struct spectro_info *info, do
 				         "nonlinearity, first_seen) VALUES (?,?,?,?,?,?,?,?,?,?,?)", err);
 	if (!s)
 		return -1;
-	store_bind_text(s, 1, info->model);
-	store_bind_text(s, 2, info->serial);
-	store_bind_text(s, 3, info->firmware);
-	sqlite3_bind_int(s, 4, info->npix);
-	for (int i = 0; i < 5; i++)
-		sqlite3_bind_double(s, 5 + i, info->wl_coef[i]);
+	bind_identity(s, info);
 	store_bind_text(s, 10, nonlin[0] ? nonlin : NULL);
 	sqlite3_bind_double(s, 11, at);
 	if (store_run1(st, s, err, "recording spectrometer"))
@@ -168,12 +174,7 @@ int store_spectrometer_put(struct store *st, const struct spectro_info *info, do
 		           "AND c2=? AND c3=? AND c4=?", err);
 	if (!s)
 		return -1;
-	store_bind_text(s, 1, info->model);
-	store_bind_text(s, 2, info->serial);
-	store_bind_text(s, 3, info->firmware);
-	sqlite3_bind_int(s, 4, info->npix);
-	for (int i = 0; i < 5; i++)
-		sqlite3_bind_double(s, 5 + i, info->wl_coef[i]);
+	bind_identity(s, info);
 	int rc = sqlite3_step(s);
 	if (rc == SQLITE_ROW && id)
 		*id = sqlite3_column_int64(s, 0);
