@@ -126,8 +126,13 @@ int ex_plan_path(struct ex *x)
 static int start_segment(struct ex *x, double now, int *dev, struct acq_err *err)
 {
 	const struct plan_pos *p = &x->wps[x->wp].pos;
-	x->seg_from = x->known;
-	x->seg_from_valid = x->known_valid;
+	/* only a position a planned path can start from is a way back: a back-off that starts inside the margin and
+	 * is itself stopped by an alarm keeps the safe start it was heading for (test_sweep_full met two alarms in a
+	 * row under load and paused) */
+	if (!x->known_valid || plan_psi_deg(&x->geom, &x->known) >= plan_clearance_deg(&x->geom)) {
+		x->seg_from = x->known;
+		x->seg_from_valid = x->known_valid;
+	}
 	for (int a = 0; a < 3; a++) {
 		double tgt = axis_val(p, a);
 		x->moving[a] = false;
