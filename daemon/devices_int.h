@@ -67,6 +67,8 @@ struct keepalive {
 	unsigned long refreshes, failures, skipped, reported_failures, reported_skipped;
 	double period;                 /* the tick's period (real s) */
 	double last_sent, max_gap;     /* real s: the last refresh sent; the longest gap since the last report */
+	double last_cpu_wait;          /* the thread's total wait for a CPU at the last refresh (cputime.h) */
+	double max_gap_cpu_wait;       /* of max_gap, the seconds the thread waited for a CPU */
 	struct acq_err last_err;       /* of the last failure */
 };
 
@@ -116,7 +118,6 @@ struct req {
 	unsigned gen, seq;
 	const void *cfg;         /* the device's configuration (open) */
 	double target, deadline, pct;
-	double run_s;            /* real seconds the request took on the port's thread */
 	bool on;
 	struct spectro_meas meas;
 	/* results */
