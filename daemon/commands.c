@@ -270,16 +270,23 @@ static void cmd_measure(struct app *app, const struct srv_peer *peer, struct pro
  * laser's keep-alive): one query at a time for all clients together; a request arriving while one runs gets
  * what is known now (devices_json: no device I/O). */
 static bool devices_query_running;
+/* An observer's `devices` reads the hardware at most once per DEVICES_OBSERVER_READ_S (real seconds) and gets
+ * the cached view otherwise: clients without control cannot keep the devices' lines busy (a flood of `devices`
+ * held the laser's line with status reads, ahead of the sweep's laser commands). Controllers read live. */
+#define DEVICES_OBSERVER_READ_S 1.0
+static double devices_query_end; /* real (monotonic) seconds the last live read ended */
 
 static void devices_query_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
 {
 	devices_query_running = false;
+	devices_query_end = loop_monotonic(NULL);
 	pending_done(ctx, rc, err, result);
 }
 
 static void cmd_devices(struct app *app, const struct srv_peer *peer, struct proto_req *req)
 {
-	if (devices_query_running) {
+	if (devices_query_running || (peer->role != PROTO_CONTROLLER && devices_query_end > 0 &&
+				      loop_monotonic(NULL) - devices_query_end < DEVICES_OBSERVER_READ_S)) {
 		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_json(app->dev)));
 		return;
 	}
