@@ -22,8 +22,12 @@ p99 < 50 ms, RSS < 64 MB; exit 1 when one is missed.
 Priorities: the daemon at nice -5 (the unit's Nice=, applied to every thread: setpriority() on a pid changes
 only its main thread), the simulator at -10 (it stands for hardware with its own processors), the load at
 SOAK_LOAD_NICE (default 0).
-Environment: SOAK_SECONDS, SOAK_SCALE (bench time scale, default 10), SOAK_LOAD_NICE, ACQ_BUILD, ACQ_SRC,
-ACQ_SEED."""
+SOAK_LOAD_SESSION=1 puts the load clients in a session of their own: Linux's autogroup then gives them one CPU
+share, as a unit's cgroup and the users' are separate on a real machine (default 0: they share the daemon's).
+Also printed: the scheduler's run and wait-for-a-CPU times of the simulator's and the daemon's threads during
+the loaded and the control sweeps.
+Environment: SOAK_SECONDS, SOAK_SCALE (bench time scale, default 10), SOAK_LOAD_NICE, SOAK_LOAD_SESSION,
+ACQ_BUILD, ACQ_SRC, ACQ_SEED."""
 import json
 import multiprocessing as mp
 import os
@@ -40,6 +44,7 @@ import sweeplib as L  # noqa: E402
 SECONDS = float(os.environ.get("SOAK_SECONDS", "1200"))
 SCALE = float(os.environ.get("SOAK_SCALE", "10"))
 LOAD_NICE = int(os.environ.get("SOAK_LOAD_NICE", "0"))
+LOAD_SESSION = os.environ.get("SOAK_LOAD_SESSION", "0") == "1"
 OBSERVERS = ["daemon", "bin", "sys", "sync", "games", "man"]
 
 PLAN = L.PLAN_3X18
@@ -284,20 +289,54 @@ WORKERS = [(w_flood, OBSERVERS[0]), (w_flood, OBSERVERS[0]), (w_flood, OBSERVERS
            (w_huge, OBSERVERS[5]), (w_huge, OBSERVERS[5]), (w_half, OBSERVERS[1]), (w_config, OBSERVERS[0])]
 
 
-def start_load(sock):
-    stop = mp.Event()
+def load_group(sock, stop):
+    """The load clients' parent: in a session of its own when SOAK_LOAD_SESSION=1, so that Linux's autogroup
+    gives the clients one CPU share of their own, as users' processes (user.slice) and the unit (system.slice)
+    have on a real machine; otherwise they share the soak's group with the daemon and the simulator."""
+    if LOAD_SESSION:
+        os.setsid()
     procs = []
     for fn, user in WORKERS:
         p = mp.Process(target=fn, args=(sock, user, stop), daemon=True)
         p.start()
         procs.append(p)
-    return stop, procs
+    stop.wait()
+    for p in procs:
+        p.join(3)
+        if p.is_alive():
+            p.kill()
+            p.join(3)
+
+
+def start_load(sock):
+    stop = mp.Event()
+    p = mp.Process(target=load_group, args=(sock, stop))
+    p.start()
+    return stop, [p]
+
+
+def sched_times(pid, main_only=False):
+    """(seconds on a CPU, seconds waiting for one) summed over pid's threads (/proc/PID/task/*/schedstat), or of
+    its main thread only (the daemon's loop)."""
+    run = wait = 0
+    try:
+        for tid in (["%d" % pid] if main_only else os.listdir("/proc/%d/task" % pid)):
+            try:
+                with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
+                    a = f.read().split()
+                run += int(a[0])
+                wait += int(a[1])
+            except (OSError, IndexError, ValueError):
+                pass
+    except OSError:
+        pass
+    return run * 1e-9, wait * 1e-9
 
 
 def stop_load(stop, procs):
     stop.set()
     for p in procs:
-        p.join(3)
+        p.join(10)
         if p.is_alive():
             p.kill()
             p.join(3)
@@ -325,8 +364,9 @@ def main():
         renice_all(b.sim.pid, -10)
         renice_all(b.daemon.pid, -5)
         t_start = time.time()
-        print("soak: %g s, bench time scale %g, plan of %s points, seed %d, load clients at nice %d; %s" % (
-            SECONDS, SCALE, "52", L.SEED, LOAD_NICE, load_str()), flush=True)
+        print("soak: %g s, bench time scale %g, plan of %s points, seed %d, load clients at nice %d, %s; %s" % (
+            SECONDS, SCALE, "52", L.SEED, LOAD_NICE, "in a session (CPU group) of their own" if LOAD_SESSION else
+            "in the daemon's session (CPU group)", load_str()), flush=True)
         good = L.Client(b.sock, timeout=10)  # connected before the load, like an operator's watch
         lat, ctl_lat, errors, rss = [], [], 0, []
         last = [0.0]
@@ -349,8 +389,23 @@ def main():
 
         paused = []
 
-        def drive(name, into, deadline):
-            """One sweep of the plan, probing status meanwhile; its gaps by point."""
+        sched = {"load": [0.0] * 6, "control": [0.0] * 6}
+
+        def drive(name, into, deadline, kind=None):
+            """One sweep of the plan, probing status meanwhile; its gaps by point. kind: where to add the sweep's
+            scheduler times of the simulator's and the daemon's threads."""
+            s0, d0, m0 = sched_times(b.sim.pid), sched_times(b.daemon.pid), sched_times(b.daemon.pid, True)
+            try:
+                return drive1(name, into, deadline)
+            finally:
+                if kind:
+                    s1, d1, m1 = sched_times(b.sim.pid), sched_times(b.daemon.pid), sched_times(b.daemon.pid, True)
+                    acc = sched[kind]
+                    for i, v in enumerate((s1[0] - s0[0], s1[1] - s0[1], d1[0] - d0[0], d1[1] - d0[1],
+                                           m1[0] - m0[0], m1[1] - m0[1])):
+                        acc[i] += v
+
+        def drive1(name, into, deadline):
             r = good.req("sweep.start", plan=PLAN, name=name)
             if not r.get("ok"):
                 raise AssertionError("sweep.start %s: %s" % (name, r))
@@ -386,12 +441,12 @@ def main():
         excess, excess_ctl, load_gaps, ctl_gaps, sweeps, points = [], [], [], [], 0, 0
         while time.time() < load_end or sweeps == 0:
             load = start_load(b.sock)
-            sid, g = drive("soak-%d" % sweeps, lat, load_end + max(600, SECONDS))
+            sid, g = drive("soak-%d" % sweeps, lat, load_end + max(600, SECONDS), "load")
             lstr = load_str()
             stop_load(*load)
             load = None
             # the control beside it: the same plan on the same machine now, without the load clients
-            csid, cg = drive("control-%d" % sweeps, ctl_lat, time.time() + 3600)
+            csid, cg = drive("control-%d" % sweeps, ctl_lat, time.time() + 3600, "control")
             sweeps += 1
             points += len(g) + 1
             load_gaps += list(g.values())
@@ -423,6 +478,11 @@ def main():
                   1e3 * pct(ctl_lat, 99)))
         print("daemon RSS: peak %.1f MB (goal < 64 MB)" % max(rss))
         print("sweeps paused by device faults: %d%s" % (len(paused), (" (%s)" % paused[0]) if paused else ""))
+        for kind in ("load", "control"):
+            a = sched[kind]
+            print("scheduler, the %s sweeps: acq-sim's threads ran %.1f s and waited %.1f s for a CPU; the daemon's "
+                  "ran %.1f s and waited %.1f s, of which its loop (main thread) ran %.1f s and waited %.1f s" % (
+                      (kind if kind == "control" else "loaded",) + tuple(a)))
         for line in thread_report(b.daemon_text()):
             print("daemon threads: " + line)
         print("machine at the end: %s on %d CPUs" % (load_str(), os.cpu_count()))
