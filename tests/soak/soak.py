@@ -24,10 +24,12 @@ only its main thread), the simulator at -10 (it stands for hardware with its own
 SOAK_LOAD_NICE (default 0).
 SOAK_LOAD_SESSION=1 puts the load clients in a session of their own: Linux's autogroup then gives them one CPU
 share, as a unit's cgroup and the users' are separate on a real machine (default 0: they share the daemon's).
+SOAK_SIM_SESSION=1 does the same for acq-sim, which stands for controllers and a laser with processors of their
+own (default 0: it shares the daemon's CPU group, and the daemon's work for the clients delays the "hardware").
 Also printed: the scheduler's run and wait-for-a-CPU times of the simulator's and the daemon's threads during
 the loaded and the control sweeps.
 Environment: SOAK_SECONDS, SOAK_SCALE (bench time scale, default 10), SOAK_LOAD_NICE, SOAK_LOAD_SESSION,
-ACQ_BUILD, ACQ_SRC, ACQ_SEED."""
+SOAK_SIM_SESSION, ACQ_BUILD, ACQ_SRC, ACQ_SEED."""
 import json
 import multiprocessing as mp
 import os
@@ -45,6 +47,7 @@ SECONDS = float(os.environ.get("SOAK_SECONDS", "1200"))
 SCALE = float(os.environ.get("SOAK_SCALE", "10"))
 LOAD_NICE = int(os.environ.get("SOAK_LOAD_NICE", "0"))
 LOAD_SESSION = os.environ.get("SOAK_LOAD_SESSION", "0") == "1"
+SIM_SESSION = os.environ.get("SOAK_SIM_SESSION", "0") == "1"
 OBSERVERS = ["daemon", "bin", "sys", "sync", "games", "man"]
 
 PLAN = L.PLAN_3X18
@@ -351,7 +354,7 @@ def main():
     sweep = L.strip_sections(sweep, {"recon", "daemon"}).replace("auto_recon: true", "auto_recon: false")
     sweep = sweep.replace("pause_after_reference: true", "pause_after_reference: false")
     b = L.Bench(scale=SCALE, sweep_yaml=sweep,
-                daemon_extra="  observers: [%s]\n" % ", ".join(OBSERVERS))
+                daemon_extra="  observers: [%s]\n" % ", ".join(OBSERVERS), sim_session=SIM_SESSION)
     os.chmod(b.dir, 0o755)
     load = None
     try:
@@ -367,6 +370,8 @@ def main():
         print("soak: %g s, bench time scale %g, plan of %s points, seed %d, load clients at nice %d, %s; %s" % (
             SECONDS, SCALE, "52", L.SEED, LOAD_NICE, "in a session (CPU group) of their own" if LOAD_SESSION else
             "in the daemon's session (CPU group)", load_str()), flush=True)
+        print("soak: acq-sim %s" % ("in a session (CPU group) of its own" if SIM_SESSION else
+                                    "in the daemon's session (CPU group)"), flush=True)
         good = L.Client(b.sock, timeout=10)  # connected before the load, like an operator's watch
         lat, ctl_lat, errors, rss = [], [], 0, []
         last = [0.0]
