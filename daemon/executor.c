@@ -93,7 +93,6 @@ void ex_event(struct ex *x, const char *kind, const char *device, const char *fm
 		snprintf(e->device, sizeof e->device, "%s", device ? device : "");
 		snprintf(e->msg, sizeof e->msg, "%s", msg);
 		e->at = at;
-		snprintf(x->lost_err, sizeof x->lost_err, "%s", err.msg);
 	}
 	if (x->sink.event)
 		x->sink.event(x->sink.ctx, x->sweep_id, kind, device, msg);
@@ -108,7 +107,6 @@ void ex_set_db_state(struct ex *x, const char *state)
 	if (store_sweep_set_state(x->st, x->sweep_id, state, at, &err)) {
 		snprintf(x->lost_state, sizeof x->lost_state, "%s", state);
 		x->lost_state_at = at;
-		snprintf(x->lost_err, sizeof x->lost_err, "%s", err.msg);
 	} else {
 		x->lost_state[0] = 0; /* the latest state is stored */
 	}
@@ -119,29 +117,21 @@ bool ex_has_unrecorded(const struct ex *x)
 	return x->lost_state[0] || x->nlost_ev;
 }
 
-const char *ex_unrecorded_error(const struct ex *x)
-{
-	return x->lost_err;
-}
-
 int ex_flush_unrecorded(struct ex *x, struct acq_err *err)
 {
 	while (x->nlost_ev) {
 		struct ex_lost_event *e = &x->lost_ev[0];
 		if (store_event(x->st, x->sweep_id, e->kind, e->device[0] ? e->device : NULL, e->msg, e->at, err))
-			goto fail;
+			return -1;
 		memmove(&x->lost_ev[0], &x->lost_ev[1], (size_t)(x->nlost_ev - 1) * sizeof x->lost_ev[0]);
 		x->nlost_ev--;
 	}
 	if (x->lost_state[0]) {
 		if (store_sweep_set_state(x->st, x->sweep_id, x->lost_state, x->lost_state_at, err))
-			goto fail;
+			return -1;
 		x->lost_state[0] = 0;
 	}
 	return 0;
-fail:
-	snprintf(x->lost_err, sizeof x->lost_err, "%s", err->msg);
-	return -1;
 }
 
 void ex_clear_pending(struct ex *x)
