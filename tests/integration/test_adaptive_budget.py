@@ -18,6 +18,29 @@ import sweeplib as L  # noqa: E402
 BUDGET = 27  # the seed's 15 points + 3 batches of 4 (the last one cut to 0 by the budget is not planned)
 
 
+def check_show_human(b, sid, rows, why):
+    """`acqctl sweep show` (human) lists every decision: batch, points, the target's value, select's prediction, the
+    measured picks' summed gain, the model; then the stop reason."""
+    p = subprocess.run([os.path.join(L.BUILD, "acqctl"), "-s", b.sock, "sweep", "show", str(sid)],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, "acqctl sweep show: %s" % (p.stderr or p.stdout)
+    lines = p.stdout.splitlines()
+    assert any(ln.strip().startswith("decisions (adaptive, target %s)" % rows[0]["target_spec"]) for ln in lines), \
+        p.stdout[-3000:]
+    db = b.db()
+    pred = dict(db.execute("SELECT batch, predicted_value FROM adaptive_batches WHERE sweep_id = ?", (sid,)).fetchall())
+    db.close()
+    for r in rows[1:-1]:
+        gain = sum(x["gain"] for x in r["picks"] if x["order_index"] is not None)
+        want = [str(r["batch"]), str(r["n_points"]), "%.6g" % r["target_value"], "%.6g" % pred[r["batch"]],
+                "%.3g" % gain]
+        got = [ln.split() for ln in lines if ln.split()[:2] == want[:2]]
+        assert got and got[0][:5] == want and r["model"] in got[0], "batch %d: shown %s, want %s and %s" % (
+            r["batch"], got, want, r["model"])
+    assert "  stop after batch %d: %s" % (rows[-1]["batch"] - 1, why) in lines, p.stdout[-3000:]
+    L.say("acqctl sweep show lists the %d decisions and the stop" % (len(rows) - 2))
+
+
 def run():
     b = A.bench()
     watch = None
@@ -74,6 +97,7 @@ def run():
         shown = show.get("adaptive") or []
         assert [r["batch"] for r in shown] == [r["batch"] for r in rows] and shown[-1]["stop_reason"] == why, \
             "sweep.show's decisions: %s" % [(r.get("batch"), r.get("stop_reason")) for r in shown]
+        check_show_human(b, sid, rows, why)
         A.reconstructs(b, sid)
         # watch: one sweep.adaptive event per decision, the last one with the stop, the trend growing by one per batch
         watch.terminate()
