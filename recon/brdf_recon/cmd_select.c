@@ -23,6 +23,10 @@ static const char select_help[] =
 	"                                      wavelengths; the value is the largest incidence's\n"
 	"                         lnf          largest posterior sigma of ln f (RMS over wavelengths) over the grid\n"
 	"                                      theta_i <= theta_o in 0..80 deg step 10, delta phi 0..180 step 20\n"
+	"                         rgb          sigma (sr^-1) of the linear-sRGB BRDF values a MERL table of the model\n"
+	"                                      holds (brdf-recon merl's colour chain), RMS over R, G, B and over the\n"
+	"                                      table's cells weighted by cos(theta_i) cos(theta_o) dwi dwo (12^3 of\n"
+	"                                      its cells); the wavelengths' errors taken as fully correlated\n"
 	"                         either followed by :le=X, the threshold at which the target is met\n"
 	"  --batch N              at most N picks (default 16; 0: only report the target)\n"
 	"  --draws N --seed S     Monte-Carlo draws of the DHR's noise part (default 16, seed 1)\n"
@@ -250,7 +254,7 @@ int cmd_select(int argc, char **argv)
 			for (size_t i = 0; i < tg.nth; i++)
 				fprintf(f, i ? ",%g" : "%g", tg.theta_deg[i]);
 			fputs("],", f);
-		} else {
+		} else if (tg.kind == SELECT_LNF) {
 			fputs("\"where\":{", f);
 			static const char *const an[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
 			for (int a = 0; a < 4; a++)
