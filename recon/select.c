@@ -31,6 +31,7 @@ void select_opts_default(struct select_opts *o)
 	o->ndraws = 16;
 	o->seed = 1;
 	o->nchan = 24;
+	o->nvalue = 0;
 }
 
 void select_result_free(struct select_result *r)
@@ -108,6 +109,9 @@ struct sel {
 	double *A;       /* [n*n] Cholesky factor of K + ηΛ (column-major, lower) */
 	double *alpha;   /* [L] the GP amplitude per channel (leave-one-out) */
 	size_t *chan;    /* [Lc] tracked channels */
+	size_t *vchan;   /* SELECT_DHR: [LV] the channels the value is computed on (NULL: all L) */
+	size_t LV;       /* their count (L without vchan) */
+	size_t *cpos;    /* [Lc] each tracked channel's position among them */
 	double *cu;      /* [J*6] unique candidates' canonical points */
 	double *soaJ;    /* [6*J] same, structure of arrays */
 	size_t *rep;     /* [J] input index of each unique candidate (the cheapest of its duplicates) */
@@ -132,6 +136,8 @@ static void sel_free(struct sel *s)
 	free(s->A);
 	free(s->alpha);
 	free(s->chan);
+	free(s->vchan);
+	free(s->cpos);
 	free(s->cu);
 	free(s->soaJ);
 	free(s->rep);
@@ -326,12 +332,68 @@ static int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, 
 	return 0;
 }
 
-/* The DHR target: the model's σ and its parts at every channel (recon_dhr_parts), and the GP functionals on the
- * tracked channels: c_q = weight × energy factor × df̂/dg × √(α_λ + unseen prior) at the DHR's fixed rule. */
+/* A view of m on its channels ch[0..k-1] only (the per-channel arrays copied, the directions and the factor's inputs
+ * shared): what recon_dhr_parts needs for the value on a channel subset. sub_free releases what it allocated. */
+static int sub_model(const struct recon_model *m, const size_t *ch, size_t k, struct recon_model *sub,
+		     struct acq_err *err)
+{
+	size_t n = m->n, nt = m->ntab > 1 ? m->ntab - 1 : 0;
+	*sub = *m;
+	sub->nwl = k;
+	sub->wl = malloc(k * sizeof *sub->wl);
+	sub->eps = malloc(k * sizeof *sub->eps);
+	sub->mu = malloc(k * sizeof *sub->mu);
+	sub->w = malloc(k * n * sizeof *sub->w);
+	sub->g = m->g ? malloc(k * n * sizeof *sub->g) : NULL;
+	sub->gsig = m->gsig ? malloc(k * n * sizeof *sub->gsig) : NULL;
+	sub->tcoef = m->tcoef ? malloc(k * TREND_NB * sizeof *sub->tcoef) : NULL;
+	sub->tab_alb = m->tab_alb && nt ? malloc(nt * k * sizeof *sub->tab_alb) : NULL;
+	if (!sub->wl || !sub->eps || !sub->mu || !sub->w || (m->g && !sub->g) || (m->gsig && !sub->gsig) ||
+	    (m->tcoef && !sub->tcoef) || (m->tab_alb && nt && !sub->tab_alb))
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	for (size_t j = 0; j < k; j++) {
+		size_t l = ch[j];
+		sub->wl[j] = m->wl[l];
+		sub->eps[j] = m->eps[l];
+		sub->mu[j] = m->mu[l];
+		memcpy(sub->w + j * n, m->w + l * n, n * sizeof *sub->w);
+		if (sub->g)
+			memcpy(sub->g + j * n, m->g + l * n, n * sizeof *sub->g);
+		if (sub->gsig)
+			memcpy(sub->gsig + j * n, m->gsig + l * n, n * sizeof *sub->gsig);
+		if (sub->tcoef)
+			memcpy(sub->tcoef + j * TREND_NB, m->tcoef + l * TREND_NB, TREND_NB * sizeof *sub->tcoef);
+		for (size_t t = 0; sub->tab_alb && t < nt; t++)
+			sub->tab_alb[t * k + j] = m->tab_alb[t * m->nwl + l];
+	}
+	return 0;
+}
+
+static void sub_free(struct recon_model *sub)
+{
+	free(sub->wl);
+	free(sub->eps);
+	free(sub->mu);
+	free(sub->w);
+	free(sub->g);
+	free(sub->gsig);
+	free(sub->tcoef);
+	free(sub->tab_alb);
+}
+
+/* The DHR target: the model's σ and its parts (recon_dhr_parts) at every channel, or on the value channels
+ * s->vchan only (a sub-model of those channels: the same computation per channel, at LV/L of the cost, the noise
+ * part's Monte-Carlo draws then other draws), and the GP functionals on the tracked channels: c_q = weight × energy
+ * factor × df̂/dg × √(α_λ + unseen prior) at the DHR's fixed rule. */
 static int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_result *r, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
-	size_t n = s->n, L = s->L, nth = s->nth, Lc = s->Lc, J = s->J, Q = (size_t)SEL_NMU * SEL_NPHI;
+	size_t n = s->n, L = s->LV, nth = s->nth, Lc = s->Lc, J = s->J, Q = (size_t)SEL_NMU * SEL_NPHI;
+	struct recon_model sub = { 0 };
+	if (s->vchan && sub_model(m, s->vchan, s->LV, &sub, err)) {
+		sub_free(&sub);
+		return -1;
+	}
 	double th[SELECT_MAX_THETA];
 	for (size_t t = 0; t < nth; t++)
 		th[t] = s->t->theta_deg[t] * M_PI / 180;
@@ -347,29 +409,30 @@ static int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct sele
 		goto out;
 	}
 	struct recon_dhr_parts parts = { .noise = sn, .model = sm, .res = sres };
-	if (recon_dhr_parts(m, nth, th, o->ndraws, o->seed, dhr, sig, &parts, NULL, NULL, err))
+	if (recon_dhr_parts(s->vchan ? &sub : m, nth, th, o->ndraws, o->seed, dhr, sig, &parts, NULL, NULL, err))
 		goto out;
 	r->value = 0;
 	for (size_t t = 0; t < nth; t++) {
-		double all = 0, sub = 0;
+		double all = 0, part = 0;
 		for (size_t l = 0; l < L; l++)
 			all += sig[t * L + l] * sig[t * L + l];
 		all /= (double)L;
 		for (size_t c = 0; c < Lc; c++) {
-			size_t i = t * L + s->chan[c], f = t * Lc + c;
+			size_t i = t * L + s->cpos[c], f = t * Lc + c;
 			double b = fmax(sn[i], sm[i]);
-			sub += sig[i] * sig[i];
+			part += sig[i] * sig[i];
 			s->sn2[f] = sn[i] * sn[i];
 			s->v[f] = sm[i] * sm[i];
 			s->res2[f] = sres[i] * sres[i];
 			s->rest[f] = fmax(sig[i] * sig[i] - b * b, 0);
 		}
-		sub /= (double)Lc;
-		s->kappa[t] = sub > 0 ? all / sub : 1.0;
+		part /= (double)Lc;
+		s->kappa[t] = part > 0 ? all / part : 1.0;
 		r->per[t] = sqrt(all);
 		r->value = fmax(r->value, r->per[t]);
 	}
 	r->nper = nth;
+	r->nvalue = L;
 	for (size_t t = 0; t < nth; t++) {
 		if (sel_dhr_coef(s, th[t], c6, wt, KQn, Y, Wc, C, err))
 			goto out;
@@ -378,6 +441,7 @@ static int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct sele
 	}
 	rc = 0;
 out:
+	sub_free(&sub);
 	free(dhr);
 	free(sig);
 	free(sn);
@@ -703,11 +767,22 @@ static int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const
 	*s = (struct sel){ .m = m, .t = t, .n = m->n, .L = m->nwl, .nth = t->kind == SELECT_DHR ? t->nth : 0 };
 	s->thr2 = isfinite(t->threshold) ? t->threshold * t->threshold : 0;
 	s->Lc = s->L < o->nchan ? s->L : o->nchan;
+	s->LV = s->L;
+	if (t->kind == SELECT_DHR && o->nvalue && s->L > o->nvalue) { /* the value on nvalue channels, evenly spread */
+		s->LV = o->nvalue > s->Lc ? o->nvalue : s->Lc;
+		if (!(s->vchan = malloc(s->LV * sizeof *s->vchan)))
+			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		for (size_t v = 0; v < s->LV; v++)
+			s->vchan[v] = s->LV > 1 ? v * (s->L - 1) / (s->LV - 1) : s->L / 2;
+	}
 	s->chan = malloc(s->Lc * sizeof *s->chan);
-	if (!s->chan)
+	s->cpos = malloc(s->Lc * sizeof *s->cpos);
+	if (!s->chan || !s->cpos)
 		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
-	for (size_t c = 0; c < s->Lc; c++)
-		s->chan[c] = s->Lc > 1 ? c * (s->L - 1) / (s->Lc - 1) : s->L / 2;
+	for (size_t c = 0; c < s->Lc; c++) { /* the tracked channels, among the value channels */
+		s->cpos[c] = s->Lc > 1 ? c * (s->LV - 1) / (s->Lc - 1) : s->LV / 2;
+		s->chan[c] = s->vchan ? s->vchan[s->cpos[c]] : s->cpos[c];
+	}
 	if (sel_factor(s, err) || sel_candidates(s, nc, ang, cost, err))
 		return -1;
 	r->nunique = s->J;

@@ -36,6 +36,8 @@ struct select_opts {
 	int ndraws;       /* Monte-Carlo draws of the DHR's noise part (default 16) */
 	uint64_t seed;    /* their seed (default 1) */
 	size_t nchan;     /* channels on which the GP part is tracked (default 24, evenly spread) */
+	size_t nvalue;    /* SELECT_DHR: the value (and the σ parts the selection holds) on this many channels, evenly
+			   * spread, the tracked ones among them, when the model has more (0, the default: on all) */
 };
 void select_opts_default(struct select_opts *o);
 
@@ -54,6 +56,7 @@ struct select_result {
 	int met;                            /* a threshold was given and value ≤ threshold */
 	double where[4];                    /* SELECT_LNF: the grid pair (θi, φi, θo, φo radians) of the largest σ */
 	size_t nunique;                     /* distinct candidates (reciprocal/isotropic duplicates merged) */
+	size_t nvalue;                      /* SELECT_DHR: the channels the value was computed on (0 otherwise) */
 	size_t npicks;
 	struct select_pick *picks;          /* in choice order */
 };

@@ -9,6 +9,7 @@
  *  - the RGB (MERL table) target: its value equals a direct computation (brute-force posterior, colour weights
  *    applied to the model's own evaluation), its rank-one update equals a refactorisation, and on models of a
  *    known truth (rt_truth) it is within a factor 3 of the table's actual output-weighted error;
+ *  - the DHR value on a channel subset equals the RMS of recon_dhr's σ over those channels;
  *  - the target's specification parser. */
 #include <setjmp.h>
 #include <stdarg.h>
@@ -544,6 +545,52 @@ static void test_rgb_target(void **state)
 	}
 }
 
+/* The DHR target's value on a channel subset (--value-channels): without noise draws it is exactly the RMS over
+ * those channels of recon_dhr's σ on the whole model (the sub-model holds the same per-channel data: weights,
+ * trend, energy table), and with as many channels as the model has it is the whole computation. */
+static void test_value_channels(void **state)
+{
+	(void)state;
+	rt_seed();
+	size_t L = 40, LV = 30; /* at least the 24 tracked channels */
+	struct recon_model *m = rgb_model(4, 4, 6, L);
+	struct select_target t;
+	struct acq_err e = { 0 };
+	assert_int_equal(select_target_parse("dhr:8,40", &t, &e), 0);
+	struct select_opts o;
+	select_opts_default(&o);
+	o.batch = 0;
+	o.ndraws = 0;
+	o.nvalue = LV;
+	struct select_result r = { 0 }, ra = { 0 };
+	assert_int_equal(select_batch(m, 0, NULL, NULL, &t, &o, &r, &e), 0);
+	assert_int_equal(r.nvalue, LV);
+	double th[2] = { 8 * M_PI / 180, 40 * M_PI / 180 }, dhr[2 * 40], sig[2 * 40];
+	assert_int_equal(recon_dhr(m, 2, th, 0, 1, dhr, sig, NULL, NULL, &e), 0);
+	for (size_t k = 0; k < 2; k++) {
+		double acc = 0;
+		for (size_t v = 0; v < LV; v++) {
+			double x = sig[k * L + v * (L - 1) / (LV - 1)];
+			acc += x * x;
+		}
+		printf("dhr %g: value on %zu of %zu channels %.9g, RMS of recon_dhr's σ there %.9g\n", t.theta_deg[k], LV, L,
+		       r.per[k], sqrt(acc / LV));
+		assert_true(fabs(r.per[k] - sqrt(acc / LV)) <= 1e-12 * r.per[k]);
+	}
+	o.nvalue = L; /* no fewer channels than the model's: all of them */
+	assert_int_equal(select_batch(m, 0, NULL, NULL, &t, &o, &ra, &e), 0);
+	assert_int_equal(ra.nvalue, L);
+	for (size_t k = 0; k < 2; k++) {
+		double acc = 0;
+		for (size_t l = 0; l < L; l++)
+			acc += sig[k * L + l] * sig[k * L + l];
+		assert_true(fabs(ra.per[k] - sqrt(acc / L)) <= 1e-12 * ra.per[k]);
+	}
+	select_result_free(&r);
+	select_result_free(&ra);
+	recon_model_free(m);
+}
+
 static void test_target_parse(void **state)
 {
 	(void)state;
@@ -575,7 +622,8 @@ int main(void)
 		cmocka_unit_test(test_rank_one_lnf),    cmocka_unit_test(test_rank_one_dhr),
 		cmocka_unit_test(test_known_information), cmocka_unit_test(test_cost_weighting),
 		cmocka_unit_test(test_reciprocity),     cmocka_unit_test(test_extremes),
-		cmocka_unit_test(test_rgb_target),      cmocka_unit_test(test_target_parse),
+		cmocka_unit_test(test_rgb_target),      cmocka_unit_test(test_value_channels),
+		cmocka_unit_test(test_target_parse),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
