@@ -8,7 +8,9 @@ the whole sweep's bench time from start to stop (wall x scale), so both costs of
 
   ACQ_BUILD=$PWD/build ACQ_SRC=$PWD /usr/bin/python3 tests/bench/bench_adaptive_overlap.py
 Environment: ACQ_OVERLAP_SEEDS (default 1,2), ACQ_OVERLAP_SCALE (simulated bench time scale, default 35),
-ACQ_OVERLAP_SAMPLE (default green-paint), ACQ_OVERLAP_PLAN (default the example). Not part of make check."""
+ACQ_OVERLAP_SAMPLE (default green-paint), ACQ_OVERLAP_PLAN (default the example), ACQ_OVERLAP_MODES (default
+"false,true": the overlap settings to run), ACQ_ADAPTIVE_RECON (another brdf-recon for the daemon, as adaptlib).
+Not part of make check."""
 import os
 import re
 import sys
@@ -26,6 +28,10 @@ PLAN = os.environ.get("ACQ_OVERLAP_PLAN") or os.path.join(L.SRC, "config", "plan
 
 def one(text, overlap, seed):
     b = L.Bench(scale=SCALE, seed=seed)
+    recon = os.environ.get("ACQ_ADAPTIVE_RECON")
+    if recon:
+        with open(b.conf, "a") as f:
+            f.write("recon:\n  program: %s\n" % recon)
     try:
         b.start_sim()
         b.start_daemon()
@@ -56,7 +62,7 @@ def main():
     text = open(PLAN).read()
     res = []
     for seed in SEEDS:
-        for overlap in (False, True):
+        for overlap in [m == "true" for m in os.environ.get("ACQ_OVERLAP_MODES", "false,true").split(",")]:
             r = one(text, overlap, seed)
             res.append(r)
             print("seed %d overlap %-5s: %s, %d points, %d batches, arms waited %.0f s, first sample to last point "
@@ -65,6 +71,8 @@ def main():
                       r["predicted_s"], r["wall_s"], " ".join(r["values"]), r["why"]), flush=True)
     for overlap in (False, True):
         rs = [r for r in res if r["overlap"] == overlap]
+        if not rs:
+            continue
         print("overlap %-5s: mean points %.1f, mean wait %.0f bench s, mean span %.0f bench s" % (
             overlap, sum(r["points"] for r in rs) / len(rs), sum(r["waited_s"] for r in rs) / len(rs),
             sum(r["sample_span_s"] or 0 for r in rs) / len(rs)))
