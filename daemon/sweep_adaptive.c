@@ -297,15 +297,17 @@ void adapt_waiting(struct adapt *a, double now)
 }
 
 /* The picks that fit the budget (the bench seconds measured so far, measured, plus the batch's predicted time, its
- * worst case), planned from the arms' position into *out; their count (0: none fits). */
+ * worst case), planned from the arms' position into *out; their count (0: none fits, *need = the bench seconds
+ * select's first pick alone would take: its cost, or its planned time). */
 static size_t plan_batch(struct adapt *a, json_t *picks, struct plan_pos *pos, size_t n, double measured,
-			 struct plan_result **out, struct acq_err *err)
+			 struct plan_result **out, double *need, struct acq_err *err)
 {
 	const struct plan_adaptive *ad = a->spec->adaptive;
 	const struct bench_geom *g = &a->env->conf->bench;
 	double left_s = ad->budget_s > 0 ? ad->budget_s - measured : INFINITY, cost = 0;
 	size_t left_pts = ad->budget_points ? ad->budget_points - a->plan->n_steps : n;
 	size_t k = 0;
+	*need = n ? num_or(json_array_get(picks, 0), "cost_s", 0) : 0;
 	while (k < n && k < left_pts) {
 		double c = num_or(json_array_get(picks, k), "cost_s", 0);
 		if (cost + c > left_s)
@@ -324,6 +326,8 @@ static size_t plan_batch(struct adapt *a, json_t *picks, struct plan_pos *pos, s
 		plan_time_apply(a->spec, g, &tm, *out);
 		if ((*out)->predicted_s <= left_s || !isfinite(left_s))
 			return k;
+		if (k == 1)
+			*need = (*out)->predicted_s;
 		plan_result_free(*out);
 		*out = NULL;
 	}
@@ -401,7 +405,8 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 	double measured = a->spec->adaptive->budget_s > 0 ? measured_s(a) : 0;
 	if (measured < 0)
 		goto out;
-	size_t k = plan_batch(a, picks, pos, n, measured, &b, &err);
+	double need = 0;
+	size_t k = plan_batch(a, picks, pos, n, measured, &b, &need, &err);
 	if (k == 0 && err.code) {
 		pause_for(a, "planning batch %d: %s; resume to try again", next, err.msg);
 		goto out;
@@ -410,7 +415,8 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 		if (k == 0 && a->spec->adaptive->budget_s > 0 && !(a->spec->adaptive->budget_points &&
 								    a->plan->n_steps >= a->spec->adaptive->budget_points))
 			stop(a, value, 0, "budget spent: %.1f of %.0f bench seconds measured, not one more pick fits what is "
-			     "left (%s value %.6g)", measured, a->spec->adaptive->budget_s, spec, value);
+			     "left (select's first pick needs %.1f s; %s value %.6g)", measured, a->spec->adaptive->budget_s,
+			     need, spec, value);
 		else
 			stop(a, value, 0, "%s (%s value %.6g)", k == 0 ? "budget spent: not one more pick fits what is left of "
 			     "it" : "nothing reachable left: the planner found no safe path to the picks", spec, value);
