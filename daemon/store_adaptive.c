@@ -132,3 +132,37 @@ json_t *store_adaptive_show(struct store *st, int64_t sweep_id, struct acq_err *
 	}
 	return rows;
 }
+
+int store_adaptive_measured(struct store *st, int64_t sweep_id, double *wall_s, int *npoints, struct acq_err *err)
+{
+	/* per done point in order: its done_at, the previous done point's, its batch's decision time when it opens a
+	 * batch, and the sweep's last start/resume event before it */
+	sqlite3_stmt *s = store_prep(st, "SELECT p.done_at, p.prev, b.decided_at, (SELECT max(e.at) FROM events e WHERE "
+				     "e.sweep_id = ?1 AND e.kind IN ('start', 'resume') AND e.at <= p.done_at) FROM "
+				     "(SELECT order_index, done_at, lag(done_at) OVER (ORDER BY order_index) AS prev FROM points "
+				     "WHERE sweep_id = ?1 AND state = 'done' AND done_at IS NOT NULL) p LEFT JOIN "
+				     "adaptive_batches b ON b.sweep_id = ?1 AND b.first_order_index = p.order_index AND "
+				     "b.n_points > 0 ORDER BY p.order_index", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_int64(s, 1, sweep_id);
+	double sum = 0;
+	int n = 0, rc;
+	while ((rc = sqlite3_step(s)) == SQLITE_ROW) {
+		double done = sqlite3_column_double(s, 0), from = -INFINITY;
+		for (int c = 1; c <= 3; c++)
+			if (sqlite3_column_type(s, c) != SQLITE_NULL)
+				from = fmax(from, sqlite3_column_double(s, c));
+		if (isfinite(from) && done > from)
+			sum += done - from;
+		n++;
+	}
+	sqlite3_finalize(s);
+	if (rc != SQLITE_DONE)
+		return acq_errf(err, ACQ_E_IO, "store: sweep %lld: reading its points' times: %s", (long long)sweep_id,
+				sqlite3_errstr(rc));
+	*wall_s = sum;
+	if (npoints)
+		*npoints = n;
+	return 0;
+}

@@ -47,5 +47,11 @@ int store_adaptive_batch(struct store *st, int64_t sweep_id, const struct store_
 /* The batches of sweep_id in order, each an object of its columns with "picks": [its picks by rank]; an empty
  * array for a sweep without any. NULL with err. */
 json_t *store_adaptive_show(struct store *st, int64_t sweep_id, struct acq_err *err);
+/* The wall seconds sweep_id's measurement took so far, from its stored points: per done point, in order, done_at minus
+ * the latest of the previous done point's done_at, its batch's decision time (when it opens a batch: the arms' wait
+ * for a decision is not measuring) and the sweep's last start/resume event before it (a pause, the sample swap or
+ * a daemon restart is not measuring either; a point interrupted by one is counted from the resume). The white
+ * reference taken before a swap pause is not counted. *npoints (may be NULL): the done points. 0 or -1. */
+int store_adaptive_measured(struct store *st, int64_t sweep_id, double *wall_s, int *npoints, struct acq_err *err);
 
 #endif

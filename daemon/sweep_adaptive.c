@@ -111,6 +111,15 @@ static void target_spec(const struct adapt *a, char *buf, size_t len)
 	plan_adaptive_target_spec(a->spec->adaptive, buf, len);
 }
 
+/* The bench seconds the sweep's measurement took so far (store_adaptive_measured × the simulator's time scale), or
+ * NaN with err. */
+static double measured_raw(const struct adapt *a, struct acq_err *err)
+{
+	const struct conf *c = a->env->conf;
+	double wall, rate = c->have_sim && c->sim.time_scale > 0 ? c->sim.time_scale : 1; /* bench s per wall s */
+	return store_adaptive_measured(a->env->store, a->id, &wall, NULL, err) ? NAN : wall * rate;
+}
+
 /* The "sweep.adaptive" event for watchers (and the log). */
 static void emit_state(struct adapt *a, double value, int met, double waited, const char *stop)
 {
@@ -122,9 +131,12 @@ static void emit_state(struct adapt *a, double value, int met, double waited, co
 		json_array_append_new(trend, json_real(a->trend[i]));
 	json_t *d = json_pack("{s:I,s:i,s:s,s:f,s:o,s:I,s:f,s:f}", "sweep", (json_int_t)a->id, "batch", a->batch,
 			      "target", spec, "threshold", ad->le, "trend", trend, "points", (json_int_t)a->plan->n_steps,
-			      "spent_s", a->spent_s, "waited_total_s", a->waited_s);
+			      "predicted_s", a->spent_s, "waited_total_s", a->waited_s);
 	if (!d)
 		return;
+	struct acq_err err = { 0 };
+	double m = measured_raw(a, &err);
+	json_object_set_new(d, "spent_s", isfinite(m) ? json_real(m) : json_null()); /* measured bench seconds */
 	json_object_set_new(d, "value", isfinite(value) ? json_real(value) : json_null());
 	json_object_set_new(d, "met", met < 0 ? json_null() : json_boolean(met));
 	json_object_set_new(d, "waited_s", isfinite(waited) ? json_real(waited) : json_null());
@@ -175,9 +187,11 @@ static void stop(struct adapt *a, double value, int met, const char *fmt, ...)
 		a->waited_s += waited;
 	a->wait_start = NAN;
 	char msg[1400];
+	struct acq_err merr = { 0 };
 	snprintf(msg, sizeof msg, "adaptive sweep stopped after %d batches, %zu points, %.0f s of %s bench time "
-		 "predicted (the arms waited %.1f s for decisions): %s", a->batch, a->plan->n_steps, a->spent_s,
-		 a->spec->adaptive->budget_s > 0 ? "the budgeted" : "unbudgeted", a->waited_s, why);
+		 "measured (%.0f s predicted; the arms waited %.1f s for decisions): %s", a->batch, a->plan->n_steps,
+		 measured_raw(a, &merr), a->spec->adaptive->budget_s > 0 ? "the budgeted" : "unbudgeted", a->spent_s,
+		 a->waited_s, why);
 	emit_state(a, value, met, waited, why);
 	a->ops.finish(a->ops.ctx, msg);
 }
@@ -202,14 +216,33 @@ static struct plan_pos arms_now(const struct adapt *a)
 	return (struct plan_pos){ pos[0], pos[1], pos[2] };
 }
 
-/* The budget is spent: why into buf (true), else false. */
-static bool budget_spent(const struct adapt *a, char *buf, size_t len)
+/* measured_raw, or -1 after pausing the sweep if the store cannot say. */
+static double measured_s(struct adapt *a)
+{
+	struct acq_err err = { 0 };
+	double m = measured_raw(a, &err);
+	if (isnan(m)) {
+		pause_for(a, "the budget: %s; resume to try again", err.msg);
+		return -1;
+	}
+	return m;
+}
+
+/* The budget is spent, counting the bench seconds measured so far plus ahead_s predicted for a batch still being
+ * measured: why into buf (true), else false; *meas (may be NULL): the measured seconds (-1: the store failed and
+ * the sweep is paused: true). */
+static bool budget_spent(struct adapt *a, double ahead_s, char *buf, size_t len, double *meas)
 {
 	const struct plan_adaptive *ad = a->spec->adaptive;
+	double m = ad->budget_s > 0 ? measured_s(a) : 0;
+	if (meas)
+		*meas = m;
+	if (m < 0)
+		return snprintf(buf, len, "the budget could not be read"), true;
 	if (ad->budget_points && a->plan->n_steps >= ad->budget_points)
 		return snprintf(buf, len, "budget spent: %zu of %zu points measured", a->plan->n_steps, ad->budget_points), true;
-	if (ad->budget_s > 0 && a->spent_s >= ad->budget_s)
-		return snprintf(buf, len, "budget spent: %.0f of %.0f bench seconds planned", a->spent_s, ad->budget_s), true;
+	if (ad->budget_s > 0 && m + ahead_s >= ad->budget_s)
+		return snprintf(buf, len, "budget spent: %.1f of %.0f bench seconds measured", m, ad->budget_s), true;
 	return false;
 }
 
@@ -254,20 +287,27 @@ void adapt_waiting(struct adapt *a, double now)
 	if (rsel_busy(a->rs)) /* under way (overlap): applied when it comes */
 		return;
 	char why[256];
-	if (budget_spent(a, why, sizeof why))
-		return stop(a, a->ntrend ? a->trend[a->ntrend - 1] : NAN, -1, "%s", why);
+	double m;
+	if (budget_spent(a, 0, why, sizeof why, &m)) {
+		if (m >= 0)
+			stop(a, a->ntrend ? a->trend[a->ntrend - 1] : NAN, -1, "%s", why);
+		return;
+	}
 	start_decision(a, false);
 }
 
-/* The picks that fit the budget, planned from the arms' position into *out; their count (0: none fits). */
-static size_t plan_batch(struct adapt *a, json_t *picks, struct plan_pos *pos, size_t n, struct plan_result **out,
-			 struct acq_err *err)
+/* The picks that fit the budget (the bench seconds measured so far, measured, plus the batch's predicted time, its
+ * worst case), planned from the arms' position into *out; their count (0: none fits, *need = the bench seconds
+ * select's first pick alone would take: its cost, or its planned time). */
+static size_t plan_batch(struct adapt *a, json_t *picks, struct plan_pos *pos, size_t n, double measured,
+			 struct plan_result **out, double *need, struct acq_err *err)
 {
 	const struct plan_adaptive *ad = a->spec->adaptive;
 	const struct bench_geom *g = &a->env->conf->bench;
-	double left_s = ad->budget_s > 0 ? ad->budget_s - a->spent_s : INFINITY, cost = 0;
+	double left_s = ad->budget_s > 0 ? ad->budget_s - measured : INFINITY, cost = 0;
 	size_t left_pts = ad->budget_points ? ad->budget_points - a->plan->n_steps : n;
 	size_t k = 0;
+	*need = n ? num_or(json_array_get(picks, 0), "cost_s", 0) : 0;
 	while (k < n && k < left_pts) {
 		double c = num_or(json_array_get(picks, k), "cost_s", 0);
 		if (cost + c > left_s)
@@ -286,6 +326,8 @@ static size_t plan_batch(struct adapt *a, json_t *picks, struct plan_pos *pos, s
 		plan_time_apply(a->spec, g, &tm, *out);
 		if ((*out)->predicted_s <= left_s || !isfinite(left_s))
 			return k;
+		if (k == 1)
+			*need = (*out)->predicted_s;
 		plan_result_free(*out);
 		*out = NULL;
 	}
@@ -360,16 +402,24 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 					     .cost_s = num_or(p, "cost_s", NAN),
 					     .predicted_value_after = num_or(p, "predicted_value_after", NAN) };
 	}
-	size_t k = plan_batch(a, picks, pos, n, &b, &err);
+	double measured = a->spec->adaptive->budget_s > 0 ? measured_s(a) : 0;
+	if (measured < 0)
+		goto out;
+	double need = 0;
+	size_t k = plan_batch(a, picks, pos, n, measured, &b, &need, &err);
 	if (k == 0 && err.code) {
 		pause_for(a, "planning batch %d: %s; resume to try again", next, err.msg);
 		goto out;
 	}
 	if (k == 0 || !b || b->n_steps == 0) {
-		bool budget = k == 0;
-		stop(a, value, 0, "%s (%s value %.6g)",
-		     budget ? "budget spent: not one more pick fits what is left of it" : "nothing reachable left: the "
-		     "planner found no safe path to the picks", spec, value);
+		if (k == 0 && a->spec->adaptive->budget_s > 0 && !(a->spec->adaptive->budget_points &&
+								    a->plan->n_steps >= a->spec->adaptive->budget_points))
+			stop(a, value, 0, "budget spent: %.1f of %.0f bench seconds measured, not one more pick fits what is "
+			     "left (select's first pick needs %.1f s; %s value %.6g)", measured, a->spec->adaptive->budget_s,
+			     need, spec, value);
+		else
+			stop(a, value, 0, "%s (%s value %.6g)", k == 0 ? "budget spent: not one more pick fits what is left of "
+			     "it" : "nothing reachable left: the planner found no safe path to the picks", spec, value);
 		goto out;
 	}
 	size_t first = a->plan->n_steps;
@@ -413,7 +463,7 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 	emit_state(a, value, 0, waited, NULL);
 	a->ops.extend(a->ops.ctx);
 	char why[256];
-	if (a->id && a->spec->adaptive->overlap && !budget_spent(a, why, sizeof why))
+	if (a->id && a->spec->adaptive->overlap && !budget_spent(a, b->predicted_s, why, sizeof why, NULL))
 		start_decision(a, true); /* the next batch is chosen while this one is measured */
 out:
 	plan_result_free(b);

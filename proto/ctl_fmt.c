@@ -273,6 +273,46 @@ static void print_sweep_list(FILE *f, json_t *arr)
 		fprintf(f, "(no sweeps)\n");
 }
 
+/* An adaptive sweep's decisions (sweep.show's "adaptive" rows): per batch its points, the target's value from the
+ * model the decision used, select's predicted value after the batch, the picks' summed predicted gain, the arms'
+ * wait and the model; then why the sweep stopped. */
+static void print_adaptive_decisions(FILE *f, json_t *rows)
+{
+	if (!json_array_size(rows))
+		return;
+	fprintf(f, "  decisions (adaptive, target %s):\n", str(json_array_get(rows, 0), "target_spec"));
+	fprintf(f, "  %5s %6s %12s %12s %10s %8s  %s\n", "BATCH", "POINTS", "VALUE", "PREDICTED", "GAIN", "WAITED",
+		"MODEL");
+	size_t i, j;
+	json_t *r, *p;
+	json_array_foreach(rows, i, r) {
+		const char *why = str(r, "stop_reason");
+		if (why[0]) {
+			fprintf(f, "  stop after batch %lld: %s\n", num_i(r, "batch") - 1, why);
+			continue;
+		}
+		double gain = 0;
+		size_t ng = 0;
+		json_array_foreach(json_object_get(r, "picks"), j, p)
+			if (json_is_number(json_object_get(p, "gain")) && json_is_integer(json_object_get(p, "order_index"))) {
+				gain += num(p, "gain");
+				ng++;
+			}
+		char v[24] = "seed", pv[24] = "-", g[24] = "-", w[24] = "-";
+		if (isfinite(num(r, "target_value")))
+			snprintf(v, sizeof v, "%.6g", num(r, "target_value"));
+		if (isfinite(num(r, "predicted_value")))
+			snprintf(pv, sizeof pv, "%.6g", num(r, "predicted_value"));
+		if (ng)
+			snprintf(g, sizeof g, "%.3g", gain);
+		if (isfinite(num(r, "waited_s")))
+			snprintf(w, sizeof w, "%.1f s", num(r, "waited_s"));
+		const char *model = str(r, "model");
+		fprintf(f, "  %5lld %6lld %12s %12s %10s %8s  %s%s\n", num_i(r, "batch"), num_i(r, "n_points"), v, pv, g, w,
+			model[0] ? model : "-", num_i(r, "warm") == 1 ? " (warm)" : "");
+	}
+}
+
 static void print_sweep_show(FILE *f, json_t *s)
 {
 	char a[48], b[48], c[48];
@@ -316,6 +356,7 @@ static void print_sweep_show(FILE *f, json_t *s)
 				str(p, "state"));
 		}
 	}
+	print_adaptive_decisions(f, json_object_get(s, "adaptive"));
 	const char *plan = str(s, "plan_text");
 	if (plan[0]) {
 		fprintf(f, "  plan:\n");

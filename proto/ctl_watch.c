@@ -134,7 +134,7 @@ static void adaptive_line(struct ctl_view *v, json_t *ev, char *text, size_t cap
 		ctl_fmt_dur(json_number_value(json_object_get(ev, "budget_s")), bud, sizeof bud);
 	v->sweep = json_integer_value(json_object_get(ev, "sweep"));
 	snprintf(v->adaptive, sizeof v->adaptive, "%s = %s (target ≤ %g)  trend %s  batch %lld, %lld points, %s%s%s "
-		 "planned, arms waited %.1f s", s_of(ev, "target"),
+		 "measured, arms waited %.1f s", s_of(ev, "target"),
 		 vs,
 		 json_number_value(json_object_get(ev, "threshold")), tr[0] ? tr : "-",
 		 (long long)json_integer_value(json_object_get(ev, "batch")),

@@ -6,6 +6,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "recon/colour.h"
+#include "recon/merl.h"
 #include "recon/recon_int.h"
 #include "recon/select.h"
 
@@ -20,6 +22,8 @@
 #define LNF_TMAX 80
 #define LNF_TSTEP 10
 #define LNF_PSTEP 20
+/* The RGB target's nodes: a 12 × 12 × 12 subset of the MERL table's cells (θh, θd, φd indices, cell centres). */
+#define RGB_NODES 12
 
 void select_opts_default(struct select_opts *o)
 {
@@ -27,6 +31,7 @@ void select_opts_default(struct select_opts *o)
 	o->ndraws = 16;
 	o->seed = 1;
 	o->nchan = 24;
+	o->nvalue = 0;
 }
 
 void select_result_free(struct select_result *r)
@@ -57,7 +62,7 @@ int select_target_parse(const char *spec, struct select_target *t, struct acq_er
 	memset(t, 0, sizeof *t);
 	t->threshold = NAN;
 	if (!spec || !*spec)
-		return acq_errf(err, ACQ_E_INVAL, "target: empty (dhr:8,30,60 or lnf, optionally :le=X)");
+		return acq_errf(err, ACQ_E_INVAL, "target: empty (dhr:8,30,60, lnf or rgb, optionally :le=X)");
 	const char *p = spec, *le = strstr(spec, ":le=");
 	const char *body_end = le ? le : spec + strlen(spec);
 	if (le) {
@@ -69,8 +74,13 @@ int select_target_parse(const char *spec, struct select_target *t, struct acq_er
 		t->kind = SELECT_LNF;
 		return 0;
 	}
+	if ((size_t)(body_end - p) == 3 && !strncmp(p, "rgb", 3)) {
+		t->kind = SELECT_RGB;
+		return 0;
+	}
 	if (strncmp(p, "dhr:", 4) || body_end <= p + 4)
-		return acq_errf(err, ACQ_E_INVAL, "target '%s': expected dhr:THETA[,THETA...] or lnf, optionally :le=X", spec);
+		return acq_errf(err, ACQ_E_INVAL, "target '%s': expected dhr:THETA[,THETA...], lnf or rgb, optionally :le=X",
+				spec);
 	t->kind = SELECT_DHR;
 	for (const char *a = p + 4; a < body_end;) {
 		const char *c = memchr(a, ',', (size_t)(body_end - a));
@@ -99,6 +109,9 @@ struct sel {
 	double *A;       /* [n*n] Cholesky factor of K + ηΛ (column-major, lower) */
 	double *alpha;   /* [L] the GP amplitude per channel (leave-one-out) */
 	size_t *chan;    /* [Lc] tracked channels */
+	size_t *vchan;   /* SELECT_DHR: [LV] the channels the value is computed on (NULL: all L) */
+	size_t LV;       /* their count (L without vchan) */
+	size_t *cpos;    /* [Lc] each tracked channel's position among them */
 	double *cu;      /* [J*6] unique candidates' canonical points */
 	double *soaJ;    /* [6*J] same, structure of arrays */
 	size_t *rep;     /* [J] input index of each unique candidate (the cheapest of its duplicates) */
@@ -113,7 +126,8 @@ struct sel {
 	/* SELECT_DHR: per (t, tracked channel): noise floor², the σ² parts the selection does not change, res² */
 	double *sn2, *rest, *res2, *kappa;
 	unsigned char *res_done; /* [nth] */
-	double *xang;    /* SELECT_LNF: [F*4] the grid's pairs */
+	double *xang;    /* SELECT_LNF, SELECT_RGB: [F*4] the grid's / nodes' pairs */
+	double *xw;      /* SELECT_RGB: [F] the nodes' share of the table's projected measure (sum 1) */
 	double *row, *zp; /* scratch of sel_update: [J], [F] */
 };
 
@@ -122,6 +136,8 @@ static void sel_free(struct sel *s)
 	free(s->A);
 	free(s->alpha);
 	free(s->chan);
+	free(s->vchan);
+	free(s->cpos);
 	free(s->cu);
 	free(s->soaJ);
 	free(s->rep);
@@ -140,6 +156,7 @@ static void sel_free(struct sel *s)
 	free(s->kappa);
 	free(s->res_done);
 	free(s->xang);
+	free(s->xw);
 	free(s->row);
 	free(s->zp);
 }
@@ -315,12 +332,68 @@ static int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, 
 	return 0;
 }
 
-/* The DHR target: the model's σ and its parts at every channel (recon_dhr_parts), and the GP functionals on the
- * tracked channels: c_q = weight × energy factor × df̂/dg × √(α_λ + unseen prior) at the DHR's fixed rule. */
+/* A view of m on its channels ch[0..k-1] only (the per-channel arrays copied, the directions and the factor's inputs
+ * shared): what recon_dhr_parts needs for the value on a channel subset. sub_free releases what it allocated. */
+static int sub_model(const struct recon_model *m, const size_t *ch, size_t k, struct recon_model *sub,
+		     struct acq_err *err)
+{
+	size_t n = m->n, nt = m->ntab > 1 ? m->ntab - 1 : 0;
+	*sub = *m;
+	sub->nwl = k;
+	sub->wl = malloc(k * sizeof *sub->wl);
+	sub->eps = malloc(k * sizeof *sub->eps);
+	sub->mu = malloc(k * sizeof *sub->mu);
+	sub->w = malloc(k * n * sizeof *sub->w);
+	sub->g = m->g ? malloc(k * n * sizeof *sub->g) : NULL;
+	sub->gsig = m->gsig ? malloc(k * n * sizeof *sub->gsig) : NULL;
+	sub->tcoef = m->tcoef ? malloc(k * TREND_NB * sizeof *sub->tcoef) : NULL;
+	sub->tab_alb = m->tab_alb && nt ? malloc(nt * k * sizeof *sub->tab_alb) : NULL;
+	if (!sub->wl || !sub->eps || !sub->mu || !sub->w || (m->g && !sub->g) || (m->gsig && !sub->gsig) ||
+	    (m->tcoef && !sub->tcoef) || (m->tab_alb && nt && !sub->tab_alb))
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	for (size_t j = 0; j < k; j++) {
+		size_t l = ch[j];
+		sub->wl[j] = m->wl[l];
+		sub->eps[j] = m->eps[l];
+		sub->mu[j] = m->mu[l];
+		memcpy(sub->w + j * n, m->w + l * n, n * sizeof *sub->w);
+		if (sub->g)
+			memcpy(sub->g + j * n, m->g + l * n, n * sizeof *sub->g);
+		if (sub->gsig)
+			memcpy(sub->gsig + j * n, m->gsig + l * n, n * sizeof *sub->gsig);
+		if (sub->tcoef)
+			memcpy(sub->tcoef + j * TREND_NB, m->tcoef + l * TREND_NB, TREND_NB * sizeof *sub->tcoef);
+		for (size_t t = 0; sub->tab_alb && t < nt; t++)
+			sub->tab_alb[t * k + j] = m->tab_alb[t * m->nwl + l];
+	}
+	return 0;
+}
+
+static void sub_free(struct recon_model *sub)
+{
+	free(sub->wl);
+	free(sub->eps);
+	free(sub->mu);
+	free(sub->w);
+	free(sub->g);
+	free(sub->gsig);
+	free(sub->tcoef);
+	free(sub->tab_alb);
+}
+
+/* The DHR target: the model's σ and its parts (recon_dhr_parts) at every channel, or on the value channels
+ * s->vchan only (a sub-model of those channels: the same computation per channel, at LV/L of the cost, the noise
+ * part's Monte-Carlo draws then other draws), and the GP functionals on the tracked channels: c_q = weight × energy
+ * factor × df̂/dg × √(α_λ + unseen prior) at the DHR's fixed rule. */
 static int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_result *r, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
-	size_t n = s->n, L = s->L, nth = s->nth, Lc = s->Lc, J = s->J, Q = (size_t)SEL_NMU * SEL_NPHI;
+	size_t n = s->n, L = s->LV, nth = s->nth, Lc = s->Lc, J = s->J, Q = (size_t)SEL_NMU * SEL_NPHI;
+	struct recon_model sub = { 0 };
+	if (s->vchan && sub_model(m, s->vchan, s->LV, &sub, err)) {
+		sub_free(&sub);
+		return -1;
+	}
 	double th[SELECT_MAX_THETA];
 	for (size_t t = 0; t < nth; t++)
 		th[t] = s->t->theta_deg[t] * M_PI / 180;
@@ -336,29 +409,30 @@ static int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct sele
 		goto out;
 	}
 	struct recon_dhr_parts parts = { .noise = sn, .model = sm, .res = sres };
-	if (recon_dhr_parts(m, nth, th, o->ndraws, o->seed, dhr, sig, &parts, NULL, NULL, err))
+	if (recon_dhr_parts(s->vchan ? &sub : m, nth, th, o->ndraws, o->seed, dhr, sig, &parts, NULL, NULL, err))
 		goto out;
 	r->value = 0;
 	for (size_t t = 0; t < nth; t++) {
-		double all = 0, sub = 0;
+		double all = 0, part = 0;
 		for (size_t l = 0; l < L; l++)
 			all += sig[t * L + l] * sig[t * L + l];
 		all /= (double)L;
 		for (size_t c = 0; c < Lc; c++) {
-			size_t i = t * L + s->chan[c], f = t * Lc + c;
+			size_t i = t * L + s->cpos[c], f = t * Lc + c;
 			double b = fmax(sn[i], sm[i]);
-			sub += sig[i] * sig[i];
+			part += sig[i] * sig[i];
 			s->sn2[f] = sn[i] * sn[i];
 			s->v[f] = sm[i] * sm[i];
 			s->res2[f] = sres[i] * sres[i];
 			s->rest[f] = fmax(sig[i] * sig[i] - b * b, 0);
 		}
-		sub /= (double)Lc;
-		s->kappa[t] = sub > 0 ? all / sub : 1.0;
+		part /= (double)Lc;
+		s->kappa[t] = part > 0 ? all / part : 1.0;
 		r->per[t] = sqrt(all);
 		r->value = fmax(r->value, r->per[t]);
 	}
 	r->nper = nth;
+	r->nvalue = L;
 	for (size_t t = 0; t < nth; t++) {
 		if (sel_dhr_coef(s, th[t], c6, wt, KQn, Y, Wc, C, err))
 			goto out;
@@ -367,6 +441,7 @@ static int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct sele
 	}
 	rc = 0;
 out:
+	sub_free(&sub);
 	free(dhr);
 	free(sig);
 	free(sn);
@@ -402,16 +477,54 @@ static size_t lnf_grid(double *ang)
 	return F;
 }
 
+/* Point targets (ln f, RGB): the posterior variance v[x] = amp[x]² P(x, x) of g at the F points c6 (unit-amplitude
+ * posterior P) and their covariances Z[x, j] = amp[x] P(x, candidate j) with the candidates. */
+static int sel_point_cov(struct sel *s, const double *c6, const double *amp, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, F = s->F, J = s->J;
+	double *KXn = malloc(F * n * sizeof *KXn), *GX = malloc(F * n * sizeof *GX);
+	int rc = -1;
+	if (!KXn || !GX) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	rbf_kmatrix_soa(m->kernel, m->shape, F, c6, n, m->soa, KXn);
+	memcpy(GX, KXn, F * n * sizeof *GX);
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)F, s->A, (lapack_int)n, GX, (lapack_int)n)) {
+		acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
+		goto out;
+	}
+	for (size_t x = 0; x < F; x++) {
+		double tc[6];
+		rbf_tau(c6 + 6 * x, tc);
+		double p = rbf_kernel(m->kernel, m->shape, c6 + 6 * x, c6 + 6 * x, tc) -
+			   cblas_ddot((int)n, KXn + x * n, 1, GX + x * n, 1);
+		s->v[x] = amp[x] * amp[x] * (p > 0 ? p : 0);
+	}
+	if (J) {
+		rbf_kmatrix_soa(m->kernel, m->shape, F, c6, J, s->soaJ, s->Z);
+		cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)F, (int)J, (int)n, -1.0, GX, (int)n, s->Kjn,
+			    (int)n, 1.0, s->Z, (int)J);
+		for (size_t x = 0; x < F; x++)
+			cblas_dscal((int)J, amp[x], s->Z + x * J, 1);
+	}
+	rc = 0;
+out:
+	free(KXn);
+	free(GX);
+	return rc;
+}
+
 /* The ln f target: the posterior variance of g (RMS amplitude over the channels, unseen prior included) at the
  * grid's points, and their covariances with the candidates. */
 static int sel_setup_lnf(struct sel *s, struct select_result *r, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
-	size_t n = s->n, F = s->F, J = s->J;
-	double *c6 = malloc(F * 6 * sizeof *c6), *KXn = malloc(F * n * sizeof *KXn), *GX = malloc(F * n * sizeof *GX);
-	double *amp = malloc(F * sizeof *amp);
+	size_t F = s->F;
+	double *c6 = malloc(F * 6 * sizeof *c6), *amp = calloc(F, sizeof *amp);
 	int rc = -1;
-	if (!c6 || !KXn || !GX || !amp) {
+	if (!c6 || !amp) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
@@ -423,39 +536,146 @@ static int sel_setup_lnf(struct sel *s, struct select_result *r, struct acq_err 
 		rbf_canon(a[0], a[1], a[2], a[3], c6 + 6 * x);
 		amp[x] = sqrt(abar + recon_unseen(recon_nearest_centre(m, c6 + 6 * x, NULL)) * RECON_PRIOR_ALPHA);
 	}
-	rbf_kmatrix_soa(m->kernel, m->shape, F, c6, n, m->soa, KXn);
-	memcpy(GX, KXn, F * n * sizeof *GX);
-	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)F, s->A, (lapack_int)n, GX, (lapack_int)n)) {
-		acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
+	if (sel_point_cov(s, c6, amp, err))
 		goto out;
-	}
 	r->value = 0;
-	for (size_t x = 0; x < F; x++) {
-		double tc[6];
-		rbf_tau(c6 + 6 * x, tc);
-		double p = rbf_kernel(m->kernel, m->shape, c6 + 6 * x, c6 + 6 * x, tc) -
-			   cblas_ddot((int)n, KXn + x * n, 1, GX + x * n, 1);
-		s->v[x] = amp[x] * amp[x] * (p > 0 ? p : 0);
+	for (size_t x = 0; x < F; x++)
 		if (sqrt(s->v[x]) > r->value) {
 			r->value = sqrt(s->v[x]);
 			memcpy(r->where, s->xang + 4 * x, sizeof r->where);
 		}
-	}
 	r->per[0] = r->value;
 	r->nper = 1;
-	if (J) {
-		rbf_kmatrix_soa(m->kernel, m->shape, F, c6, J, s->soaJ, s->Z);
-		cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)F, (int)J, (int)n, -1.0, GX, (int)n, s->Kjn,
-			    (int)n, 1.0, s->Z, (int)J);
-		for (size_t x = 0; x < F; x++)
-			cblas_dscal((int)J, amp[x], s->Z + x * J, 1);
-	}
 	rc = 0;
 out:
 	free(c6);
-	free(KXn);
-	free(GX);
 	free(amp);
+	return rc;
+}
+
+/* The RGB target's nodes: MERL cells (iθh, iθd, iφd) = ((k + ½)·N/RGB_NODES) for k < RGB_NODES in each index, those
+ * with both directions within LNF_TMAX (80°) of the normal, at the writer's cell centres (merl.h: beyond, no bench
+ * reaches and the prior alone speaks, as for ln f; on green paint the grazing Fresnel cells θd > 80° held 97 % of
+ * a 10 × 10 × 10 model's squared table error, a region no plan samples); ang[x*4] their pairs (θi, φi, θo,
+ * φo) and w[x] the table's projected measure of the block the node stands for: the Rusinkiewicz Jacobian
+ * dωi dωo = 4 cosθd sinθh sinθd dθh dθd dφd dφh (φh integrated out: isotropy), × dθh/diθh (θh is quadratic in its
+ * index), × cosθi cosθo; normalised to sum 1. Either pointer may be NULL (count only). */
+static size_t rgb_nodes(double *ang, double *w)
+{
+	size_t F = 0;
+	const double zmin = cos(LNF_TMAX * M_PI / 180);
+	double tot = 0;
+	for (int a = 0; a < RGB_NODES; a++)
+		for (int b = 0; b < RGB_NODES; b++)
+			for (int c = 0; c < RGB_NODES; c++) {
+				int ih = (int)((a + 0.5) * MERL_N_THETA_H / RGB_NODES);
+				int id = (int)((b + 0.5) * MERL_N_THETA_D / RGB_NODES);
+				int ip = (int)((c + 0.5) * MERL_N_PHI_D / RGB_NODES);
+				double wi[3], wo[3], th, td, pd;
+				if (merl_cell_dirs(ih, id, ip, wi, wo) != 1 || wi[2] <= zmin || wo[2] <= zmin)
+					continue;
+				merl_cell_angles(ih, id, ip, &th, &td, &pd);
+				double dth = 2.0 * (ih + 0.5) / (MERL_N_THETA_H * MERL_N_THETA_H) * (M_PI / 2);
+				double wx = 4 * cos(td) * sin(th) * sin(td) * dth * wi[2] * wo[2];
+				if (ang) {
+					ang[4 * F] = acos(fmin(1, wi[2]));
+					ang[4 * F + 1] = atan2(wi[1], wi[0]);
+					ang[4 * F + 2] = acos(fmin(1, wo[2]));
+					ang[4 * F + 3] = atan2(wo[1], wo[0]);
+				}
+				if (w)
+					w[F] = wx;
+				tot += wx;
+				F++;
+			}
+	if (w)
+		for (size_t x = 0; x < F; x++)
+			w[x] /= tot;
+	return F;
+}
+
+/*
+ * The RGB target: the σ of the linear-sRGB BRDF values (sr⁻¹) a MERL table of the model holds, through the outputs'
+ * spectra → RGB chain (colour_opts_brdf: D65, Bradford, absolute, linear; colour_weights W[c, λ] at the model's
+ * wavelengths), RMS over the three channels and over the table under its projected measure (rgb_nodes). Under the
+ * GP reading the error of channel λ at x is √(α_λ + unseen prior) · df̂/dg · energy factor · z(x); the errors of
+ * one point are taken as fully correlated across wavelengths (one interpolation error of the shape, the GP's
+ * common kernel: a missed lobe is missed at every wavelength), so RGB_c has the amplitude
+ *   a_c(x) = |Σ_λ W[c, λ] · s_λ(x) · df̂/dg(x, λ) · √(α_λ + u(x)·prior)|
+ * and the value is √(Σ_x w_x P(x, x) Σ_c a_c(x)²). (Independent channels would give a value ~√(visible channels)
+ * smaller; test_recon_select checks the value against the error of models of a known truth.)
+ */
+static int sel_setup_rgb(struct sel *s, struct select_result *r, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, L = s->L, F = s->F;
+	double *W = malloc(3 * L * sizeof *W), *c6 = malloc(F * 6 * sizeof *c6), *amp = calloc(F, sizeof *amp);
+	size_t *vis = malloc(L * sizeof *vis);
+	double *Wv = NULL, *KXn = NULL, *Y = NULL;
+	int rc = -1;
+	if (!W || !c6 || !amp || !vis) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	struct colour_opts co;
+	colour_opts_brdf(&co);
+	if (colour_weights(&co, m->wl, L, W, err))
+		goto out;
+	size_t V = 0; /* the channels that carry colour weight */
+	for (size_t l = 0; l < L; l++)
+		if (W[l] != 0 || W[L + l] != 0 || W[2 * L + l] != 0)
+			vis[V++] = l;
+	Wv = malloc((V ? V : 1) * n * sizeof *Wv);
+	KXn = malloc(F * n * sizeof *KXn);
+	Y = malloc(F * (V ? V : 1) * sizeof *Y);
+	if (!Wv || !KXn || !Y) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	for (size_t x = 0; x < F; x++) {
+		const double *a = s->xang + 4 * x;
+		rbf_canon(a[0], a[1], a[2], a[3], c6 + 6 * x);
+	}
+	if (V) { /* the interpolant (without its mean) at the nodes on the visible channels */
+		for (size_t v = 0; v < V; v++)
+			memcpy(Wv + v * n, m->w + vis[v] * n, n * sizeof *Wv);
+		rbf_kmatrix_soa(m->kernel, m->shape, F, c6, n, m->soa, KXn);
+		cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)F, (int)V, (int)n, 1.0, KXn, (int)n, Wv, (int)n,
+			    0.0, Y, (int)V);
+	}
+	for (size_t x = 0; x < F; x++) {
+		const double *c = c6 + 6 * x;
+		double b[TREND_NB], u = recon_unseen(recon_nearest_centre(m, c, NULL)), ac[3] = { 0, 0, 0 };
+		trend_at(m, c, b);
+		for (size_t v = 0; v < V; v++) {
+			size_t l = vis[v];
+			double d = recon_energy_scale(m, theta_of(c), theta_of(c + 3), l) *
+				   untransform_deriv(m->transform, Y[x * V + v] + m->mu[l], m->eps[l], trend_factor(m, b, l)) *
+				   sqrt(s->alpha[l] + u * RECON_PRIOR_ALPHA);
+			for (int k = 0; k < 3; k++)
+				ac[k] += W[k * L + l] * d;
+		}
+		amp[x] = sqrt(ac[0] * ac[0] + ac[1] * ac[1] + ac[2] * ac[2]);
+		if (!isfinite(amp[x]))
+			amp[x] = 0;
+		amp[x] *= sqrt(s->xw[x]); /* the measure folded in: v sums to the value² */
+	}
+	if (sel_point_cov(s, c6, amp, err))
+		goto out;
+	double sum = 0;
+	for (size_t x = 0; x < F; x++)
+		sum += s->v[x];
+	r->value = r->per[0] = sqrt(sum);
+	r->nper = 1;
+	rc = 0;
+out:
+	free(W);
+	free(c6);
+	free(amp);
+	free(vis);
+	free(Wv);
+	free(KXn);
+	free(Y);
 	return rc;
 }
 
@@ -486,7 +706,7 @@ static double sel_excess(const struct sel *s, size_t j, double *per)
 		}
 		return E;
 	}
-	double mx = 0;
+	double mx = 0, sum = 0;
 	for (size_t x = 0; x < s->F; x++) {
 		double v = s->v[x];
 		if (j != SIZE_MAX && S > 0) {
@@ -495,7 +715,13 @@ static double sel_excess(const struct sel *s, size_t j, double *per)
 		}
 		v = fmax(v, 0);
 		mx = fmax(mx, v);
+		sum += v;
 		E += fmax(v - s->thr2, 0);
+	}
+	if (s->t->kind == SELECT_RGB) { /* one aggregate: the measure is folded into v */
+		if (per)
+			per[0] = sqrt(sum);
+		return fmax(sum - s->thr2, 0);
 	}
 	if (per)
 		per[0] = sqrt(mx);
@@ -541,11 +767,22 @@ static int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const
 	*s = (struct sel){ .m = m, .t = t, .n = m->n, .L = m->nwl, .nth = t->kind == SELECT_DHR ? t->nth : 0 };
 	s->thr2 = isfinite(t->threshold) ? t->threshold * t->threshold : 0;
 	s->Lc = s->L < o->nchan ? s->L : o->nchan;
+	s->LV = s->L;
+	if (t->kind == SELECT_DHR && o->nvalue && s->L > o->nvalue) { /* the value on nvalue channels, evenly spread */
+		s->LV = o->nvalue > s->Lc ? o->nvalue : s->Lc;
+		if (!(s->vchan = malloc(s->LV * sizeof *s->vchan)))
+			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		for (size_t v = 0; v < s->LV; v++)
+			s->vchan[v] = s->LV > 1 ? v * (s->L - 1) / (s->LV - 1) : s->L / 2;
+	}
 	s->chan = malloc(s->Lc * sizeof *s->chan);
-	if (!s->chan)
+	s->cpos = malloc(s->Lc * sizeof *s->cpos);
+	if (!s->chan || !s->cpos)
 		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
-	for (size_t c = 0; c < s->Lc; c++)
-		s->chan[c] = s->Lc > 1 ? c * (s->L - 1) / (s->Lc - 1) : s->L / 2;
+	for (size_t c = 0; c < s->Lc; c++) { /* the tracked channels, among the value channels */
+		s->cpos[c] = s->Lc > 1 ? c * (s->LV - 1) / (s->Lc - 1) : s->LV / 2;
+		s->chan[c] = s->vchan ? s->vchan[s->cpos[c]] : s->cpos[c];
+	}
 	if (sel_factor(s, err) || sel_candidates(s, nc, ang, cost, err))
 		return -1;
 	r->nunique = s->J;
@@ -553,14 +790,24 @@ static int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const
 	s->batch = o->batch < J ? o->batch : J;
 	if (t->kind == SELECT_DHR) {
 		s->F = s->nth * s->Lc;
-	} else {
+	} else if (t->kind == SELECT_LNF) {
 		s->F = lnf_grid(NULL);
 		s->xang = malloc(s->F * 4 * sizeof *s->xang);
 		if (!s->xang)
 			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		lnf_grid(s->xang);
+	} else {
+		s->F = rgb_nodes(NULL, NULL);
+		s->xang = malloc(s->F * 4 * sizeof *s->xang);
+		s->xw = malloc(s->F * sizeof *s->xw);
+		if (!s->xang || !s->xw)
+			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		rgb_nodes(s->xang, s->xw);
 	}
 	size_t F = s->F;
+	if ((double)F * (double)Jp * 8.0 > 4e9)
+		return acq_errf(err, ACQ_E_RANGE, "select: %zu distinct candidates × %zu target points need too much memory",
+				J, F);
 	s->Z = malloc(F * Jp * sizeof *s->Z);
 	s->v = calloc(F, sizeof *s->v);
 	s->U = malloc((s->batch ? s->batch : 1) * Jp * sizeof *s->U);
@@ -575,7 +822,8 @@ static int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const
 	if (!s->Z || !s->v || !s->U || !s->match || !s->sn2 || !s->rest || !s->res2 || !s->kappa || !s->res_done ||
 	    !s->row || !s->zp)
 		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
-	if (t->kind == SELECT_DHR ? sel_setup_dhr(s, o, r, err) : sel_setup_lnf(s, r, err))
+	if (t->kind == SELECT_DHR ? sel_setup_dhr(s, o, r, err)
+				  : t->kind == SELECT_LNF ? sel_setup_lnf(s, r, err) : sel_setup_rgb(s, r, err))
 		return -1;
 	for (size_t tt = 0; tt < s->nth; tt++) { /* candidates at a target incidence (they zero its resolution term) */
 		double th = t->theta_deg[tt] * M_PI / 180;

@@ -16,7 +16,9 @@
 
 enum select_kind {
 	SELECT_DHR = 0, /* σ of DHR(θi, λ) at listed incidences, RMS over the model's wavelengths, largest incidence */
-	SELECT_LNF = 1  /* largest posterior σ of ln f (RMS over wavelengths) over a grid of the hemisphere pair */
+	SELECT_LNF = 1, /* largest posterior σ of ln f (RMS over wavelengths) over a grid of the hemisphere pair */
+	SELECT_RGB = 2  /* σ of the linear-sRGB BRDF (sr⁻¹) a MERL table of the model holds, through the outputs' colour
+			 * chain, RMS over R, G, B and over the table under its projected measure cosθi cosθo dωi dωo */
 };
 
 struct select_target {
@@ -26,7 +28,7 @@ struct select_target {
 	double threshold;                    /* the target is met at value ≤ threshold; NAN: none given */
 };
 
-/* Parse "dhr:8,30,60", "lnf", optionally followed by ":le=X" (X > 0). 0, or -1 with err saying what is wrong. */
+/* Parse "dhr:8,30,60", "lnf", "rgb", optionally followed by ":le=X" (X > 0). 0, or -1 with err saying what is wrong. */
 int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err);
 
 struct select_opts {
@@ -34,6 +36,8 @@ struct select_opts {
 	int ndraws;       /* Monte-Carlo draws of the DHR's noise part (default 16) */
 	uint64_t seed;    /* their seed (default 1) */
 	size_t nchan;     /* channels on which the GP part is tracked (default 24, evenly spread) */
+	size_t nvalue;    /* SELECT_DHR: the value (and the σ parts the selection holds) on this many channels, evenly
+			   * spread, the tracked ones among them, when the model has more (0, the default: on all) */
 };
 void select_opts_default(struct select_opts *o);
 
@@ -47,11 +51,12 @@ struct select_pick {
 
 struct select_result {
 	double value;                       /* the target's current value */
-	double per[SELECT_MAX_THETA];       /* per incidence (SELECT_DHR) or [0] = value (SELECT_LNF) */
+	double per[SELECT_MAX_THETA];       /* per incidence (SELECT_DHR) or [0] = value (SELECT_LNF, SELECT_RGB) */
 	size_t nper;
 	int met;                            /* a threshold was given and value ≤ threshold */
 	double where[4];                    /* SELECT_LNF: the grid pair (θi, φi, θo, φo radians) of the largest σ */
 	size_t nunique;                     /* distinct candidates (reciprocal/isotropic duplicates merged) */
+	size_t nvalue;                      /* SELECT_DHR: the channels the value was computed on (0 otherwise) */
 	size_t npicks;
 	struct select_pick *picks;          /* in choice order */
 };

@@ -36,7 +36,8 @@ enum plan_integ_mode { PLAN_INTEG_AUTO, PLAN_INTEG_FIXED };
 /* What an adaptive sweep aims at (plan_adaptive.c): `brdf-recon select --target` and the stop rule. */
 enum plan_target_kind {
 	PLAN_TARGET_DHR_SIGMA, /* σ of the DHR at the listed incidences ≤ le */
-	PLAN_TARGET_LNF_SIGMA  /* largest posterior σ of ln f over the hemisphere pair ≤ le */
+	PLAN_TARGET_LNF_SIGMA, /* largest posterior σ of ln f over the hemisphere pair ≤ le */
+	PLAN_TARGET_RGB_SIGMA  /* σ of the MERL table's RGB values (sr⁻¹), RMS under the table's projected measure ≤ le */
 };
 #define PLAN_MAX_TARGET_INC 8
 
@@ -220,7 +221,7 @@ struct plan_cand {
 	double cost_s;              /* bench seconds to measure it from the arms' position: the safe move, its
 				     * settling and polling, darks when the incidence changes, probe, exposures, host */
 };
-/* The adaptive target as `brdf-recon select --target` takes it ("dhr:8,30,60:le=X", "lnf:le=X") into buf. */
+/* The adaptive target as `brdf-recon select --target` takes it ("dhr:8,30,60:le=X", "lnf:le=X", "rgb:le=X") into buf. */
 void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t len);
 /* The candidates of spec's adaptive part from the arms at from (timed by t): every candidate incidence ×
  * direction that is visible, within the limits, reachable by a safe move, and not one of the n_done measured

@@ -7,7 +7,7 @@
  *   seed:                                   # any plan (grid or Fibonacci) without integration or averages
  *     incidence: {theta_deg: [0, 30, 60]}
  *     observation: {fibonacci: {count: 24}}
- *   target: {dhr_sigma: {incidence_deg: [8], le: 0.002}}   # or {lnf_sigma: {le: 0.05}}
+ *   target: {dhr_sigma: {incidence_deg: [8], le: 0.002}}   # or {lnf_sigma: {le: 0.05}} or {rgb_sigma: {le: 0.01}}
  *   budget: {seconds: 1400, points: 866}    # one or both; the whole sweep, seed included
  *   batch: 12                               # points per batch
  *   candidates: {incidence_deg: RANGE, per_incidence: 150, max_theta_deg: 85}
@@ -27,20 +27,20 @@ static int parse_target(struct yc_node *root, struct plan_adaptive *a, struct ac
 {
 	struct yc_node *t = yc_get(root, "target");
 	if (!t)
-		return yc_errf(err, root, "adaptive plan: missing key 'target' ({dhr_sigma: {incidence_deg: [8], le: X}} "
-			       "or {lnf_sigma: {le: X}})");
+		return yc_errf(err, root, "adaptive plan: missing key 'target' ({dhr_sigma: {incidence_deg: [8], le: X}}, "
+			       "{lnf_sigma: {le: X}} or {rgb_sigma: {le: X}})");
 	if (yc_expect_map(t, "target", err))
 		return -1;
-	struct yc_node *d = yc_get(t, "dhr_sigma"), *l = yc_get(t, "lnf_sigma");
+	struct yc_node *d = yc_get(t, "dhr_sigma"), *l = yc_get(t, "lnf_sigma"), *g = yc_get(t, "rgb_sigma");
 	if (yc_check_unknown(t, "target", err))
 		return -1;
-	if (!d == !l)
-		return yc_errf(err, t, "target: give exactly one of 'dhr_sigma' and 'lnf_sigma'");
-	struct yc_node *n = d ? d : l;
-	const char *what = d ? "target.dhr_sigma" : "target.lnf_sigma";
+	if ((d != NULL) + (l != NULL) + (g != NULL) != 1)
+		return yc_errf(err, t, "target: give exactly one of 'dhr_sigma', 'lnf_sigma' and 'rgb_sigma'");
+	struct yc_node *n = d ? d : l ? l : g;
+	const char *what = d ? "target.dhr_sigma" : l ? "target.lnf_sigma" : "target.rgb_sigma";
 	if (yc_expect_map(n, what, err) || yc_double(n, "le", true, 1e-12, 1e6, &a->le, err))
 		return -1;
-	a->target = d ? PLAN_TARGET_DHR_SIGMA : PLAN_TARGET_LNF_SIGMA;
+	a->target = d ? PLAN_TARGET_DHR_SIGMA : l ? PLAN_TARGET_LNF_SIGMA : PLAN_TARGET_RGB_SIGMA;
 	if (d) {
 		double *v = NULL;
 		size_t nv = 0;
@@ -165,8 +165,8 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 	if (!len)
 		return;
 	buf[0] = '\0';
-	if (a->target == PLAN_TARGET_LNF_SIGMA) {
-		snprintf(buf, len, "lnf:le=%.9g", a->le);
+	if (a->target != PLAN_TARGET_DHR_SIGMA) {
+		snprintf(buf, len, "%s:le=%.9g", a->target == PLAN_TARGET_LNF_SIGMA ? "lnf" : "rgb", a->le);
 		return;
 	}
 	n += (size_t)snprintf(buf, len, "dhr:");

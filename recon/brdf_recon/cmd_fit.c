@@ -31,8 +31,10 @@ static const char fit_help[] =
 	"  --max-cond X            largest accepted condition number (default 1e12)\n"
 	"  --db FILE --sweep ID    read a sweep from the daemon's database instead of a CSV file\n"
 	"  --warm PREV.model       warm start from a previous model of the same material (an adaptive sweep's last\n"
-	"                          batch): its kernel, transform, shape, smoothing and trend choice replace the\n"
-	"                          leave-one-out search (options given explicitly win); if the result's leave-one-out\n"
+	"                          batch): its kernel, transform and trend kind replace the trend family's leave-one-\n"
+	"                          out choice; shape and smoothing are searched as in a cold fit (options given\n"
+	"                          explicitly win), so the model equals a cold fit's whenever that keeps the trend\n"
+	"                          kind; if the result's leave-one-out\n"
 	"                          RMS exceeds 1.25x PREV's + 0.01 the settings no longer fit the data and the fit is\n"
 	"                          redone with the full search (said on stderr)\n";
 
@@ -136,10 +138,10 @@ int cmd_fit(int argc, char **argv)
 		}
 		o.kernel = prev->kernel;
 		o.transform = prev->transform;
-		if (o.shape == 0)
-			o.shape = prev->shape;
-		if (o.smoothing < 0 && o.smoothing != RECON_SMOOTHING_SIGMA)
-			o.smoothing = prev->eta;
+		/* the shape and the smoothing are searched again (only the trend family's choice is kept): their leave-
+		 * one-out optimum moves with the data (a batch more: a smaller η, another shape), and kept from PREV they
+		 * gave σ ×0.6–5.1 of a cold fit's (σ_misfit of unhonoured samples, σ_model of another kernel width); with
+		 * them searched the warm model IS the cold one whenever the cold search keeps the trend kind */
 		if (!set_trend)
 			o.trend = prev->trend;
 	}
@@ -160,7 +162,7 @@ int cmd_fit(int argc, char **argv)
 			rc = recon_fit(&s, &cold, &m, &err);
 		} else {
 			progress_end();
-			fprintf(stderr, "fit: warm start from %s: its kernel, shape, smoothing and trend kept, no search "
+			fprintf(stderr, "fit: warm start from %s: its kernel and trend kind kept, shape and smoothing searched "
 				"(leave-one-out RMS %.4g, previous %.4g, limit %.4g)\n", warm, m->loo_rms, prev->loo_rms, lim);
 		}
 		recon_model_free(prev);

@@ -1,6 +1,7 @@
 #!/usr/bin/python3
 """An adaptive sweep on the simulated bench that stops on its budget: a seed plan, then batches chosen by
-`brdf-recon select` (an unreachable target, so only the budget of points can stop it). Checks: it stops saying
+`brdf-recon select` (an unreachable target on the σ of the MERL table's RGB values, rgb_sigma, so only the budget of
+points can stop it). Checks: it stops saying
 "budget spent" with exactly the budgeted points; every decision is stored (batch, picks in choice order with their
 points, target value, model, candidates, predicted time, the arms' wait); no blind-zone direction and no
 configuration twice; `acqctl watch` streams the target's value and its trend per batch; the finished sweep
@@ -16,6 +17,30 @@ import adaptlib as A  # noqa: E402
 import sweeplib as L  # noqa: E402
 
 BUDGET = 27  # the seed's 15 points + 3 batches of 4 (the last one cut to 0 by the budget is not planned)
+TARGET = "rgb_sigma: {le: 1.0e-9}"
+
+
+def check_show_human(b, sid, rows, why):
+    """`acqctl sweep show` (human) lists every decision: batch, points, the target's value, select's prediction, the
+    measured picks' summed gain, the model; then the stop reason."""
+    p = subprocess.run([os.path.join(L.BUILD, "acqctl"), "-s", b.sock, "sweep", "show", str(sid)],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, "acqctl sweep show: %s" % (p.stderr or p.stdout)
+    lines = p.stdout.splitlines()
+    assert any(ln.strip().startswith("decisions (adaptive, target %s)" % rows[0]["target_spec"]) for ln in lines), \
+        p.stdout[-3000:]
+    db = b.db()
+    pred = dict(db.execute("SELECT batch, predicted_value FROM adaptive_batches WHERE sweep_id = ?", (sid,)).fetchall())
+    db.close()
+    for r in rows[1:-1]:
+        gain = sum(x["gain"] for x in r["picks"] if x["order_index"] is not None)
+        want = [str(r["batch"]), str(r["n_points"]), "%.6g" % r["target_value"], "%.6g" % pred[r["batch"]],
+                "%.3g" % gain]
+        got = [ln.split() for ln in lines if ln.split()[:2] == want[:2]]
+        assert got and got[0][:5] == want and r["model"] in got[0], "batch %d: shown %s, want %s and %s" % (
+            r["batch"], got, want, r["model"])
+    assert "  stop after batch %d: %s" % (rows[-1]["batch"] - 1, why) in lines, p.stdout[-3000:]
+    L.say("acqctl sweep show lists the %d decisions and the stop" % (len(rows) - 2))
 
 
 def run():
@@ -29,7 +54,7 @@ def run():
                                  stderr=subprocess.STDOUT)
         path = os.path.join(b.dir, "plan.yaml")
         with open(path, "w") as f:
-            f.write(A.plan(budget="points: %d" % BUDGET))
+            f.write(A.plan(target=TARGET, budget="points: %d" % BUDGET))
         dry = subprocess.run([os.path.join(L.BUILD, "acqctl"), "-s", b.sock, "plan", path, "--json"],
                              capture_output=True, text=True, timeout=60)
         assert dry.returncode == 0, "acqctl plan: %s" % (dry.stderr or dry.stdout)
@@ -49,13 +74,14 @@ def run():
         L.say("dry run: seed %d points, predicted %.1f s; worst case %d points, %.1f s" % (
             seed_points, d["predicted_s"], d["adaptive"]["worst_case_points"], d["adaptive"]["worst_case_s"]))
 
-        sid = L.start_sweep(b, A.plan(budget="points: %d" % BUDGET), "it-adaptive-budget")
+        sid = L.start_sweep(b, A.plan(target=TARGET, budget="points: %d" % BUDGET), "it-adaptive-budget")
         t0 = time.time()
         row = L.drive_to_end(b, sid, timeout=240, sample="white")
         L.say("sweep %s: %s/%s points in %.1f s" % (row["state"], row.get("points_done"), row.get("points_total"),
                                                    time.time() - t0))
         assert row["state"] == "completed", row["state"]
         rows, why = A.check_decisions(b, sid)
+        assert all(r["target_spec"] == "rgb:le=1e-09" for r in rows), [r["target_spec"] for r in rows]
         assert rows[0]["n_points"] == seed_points, "seed %d points, dry run %d" % (rows[0]["n_points"], seed_points)
         assert why.startswith("budget spent"), "stopped: %s" % why
         n, cal = L.check_points(b, sid, max_exposures=1)
@@ -74,6 +100,7 @@ def run():
         shown = show.get("adaptive") or []
         assert [r["batch"] for r in shown] == [r["batch"] for r in rows] and shown[-1]["stop_reason"] == why, \
             "sweep.show's decisions: %s" % [(r.get("batch"), r.get("stop_reason")) for r in shown]
+        check_show_human(b, sid, rows, why)
         A.reconstructs(b, sid)
         # watch: one sweep.adaptive event per decision, the last one with the stop, the trend growing by one per batch
         watch.terminate()

@@ -7,8 +7,10 @@ one measurement, the cheaper copy's id; the predicted value never rises along th
 current value; the current value is the RMS over wavelengths of `brdf-recon dhr`'s sigma (same draws and seed,
 to 1e-9 relative) per incidence, the largest of them; a threshold above the value is met with no pick; the ln f
 target; a header-only candidate file; bad input of every kind exits 2 with a message naming what (and the row),
-never a crash. `fit --warm`: the previous shape and smoothing kept when still leave-one-out competitive; a white
-model's settings refused on a sharp lobe (full search); a conflicting kernel exits 2, a missing model 1."""
+never a crash. `fit --warm`: the previous trend kind kept, shape and smoothing searched, so the model (settings, DHR
+and σ) equals a cold fit's when that keeps the trend kind; a white model's settings refused on a sharp lobe (full
+search); a conflicting kernel exits 2, a missing model 1."""
+import csv
 import json
 import math
 import os
@@ -156,8 +158,24 @@ def main():
     prev = {k: v for k, v in (ln.split("=", 1) for ln in run("info", model, "--no-budget").stdout.splitlines()
                               if "=" in ln)}
     check("warm start from" in p.stderr and ("kept" in p.stderr or "full search" in p.stderr), "warm start said")
-    if "kept" in p.stderr:
-        check(info["shape"] == prev["shape"] and info["smoothing"] == prev["smoothing"], "warm settings kept")
+    # the warm model is the cold one when the trend kind is kept (shape and smoothing searched as in a cold fit):
+    # the same settings, and the same DHR and σ (the value and the σ select stops on) to 1e-9
+    cm = os.path.join(d, "cold.model")
+    run("fit", more, "-o", cm)
+    cold = {k: v for k, v in (ln.split("=", 1) for ln in run("info", cm, "--no-budget").stdout.splitlines()
+                              if "=" in ln)}
+    if "kept" in p.stderr and cold["trend"] == prev["trend"]:
+        for k in ("shape", "smoothing", "trend", "trend_alpha", "loo_rms_transformed"):
+            check(info[k] == cold[k], "warm %s %s, cold %s" % (k, info[k], cold[k]))
+        out = []
+        for mod in (wm, cm):
+            o = os.path.join(d, os.path.basename(mod) + ".dhr.csv")
+            run("dhr", mod, "--theta-i", "8,30,60", "--draws", "16", "--seed", "1", "-o", o)
+            out.append([(float(r["dhr"]), float(r["sigma"])) for r in csv.DictReader(open(o))])
+        worst = max(max(abs(a[0] - b[0]), abs(a[1] - b[1])) / b[1] for a, b in zip(*out))
+        check(len(out[0]) == len(out[1]) and worst <= 1e-9, "warm and cold DHR/σ differ by %.3g σ" % worst)
+        print("fit --warm: the same model as a cold fit (trend %s, shape %s, smoothing %s; DHR and σ within %.2g σ)"
+              % (cold["trend"], cold["shape"], cold["smoothing"], worst))
     white, wmod, lobe = os.path.join(d, "white.csv"), os.path.join(d, "white.model"), os.path.join(d, "lobe.csv")
     subprocess.run([SIM, "truth", "white", "--grid", "3x4x5", "-o", white, "--noise", "0.01", "--seed", "1",
                     "--wavelengths", "450:1100:25"], check=True, capture_output=True)

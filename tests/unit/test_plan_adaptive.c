@@ -79,6 +79,11 @@ static void test_parse(void **state)
 	assert_int_equal(s->adaptive->n_cand_inc, 15); /* the default candidates: 0..70 every 5 */
 	assert_true(s->adaptive->budget_s == 0);
 	plan_spec_free(s);
+	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
+		    "target: {rgb_sigma: {le: 0.004}}\nbudget: {points: 20}\nbatch: 4\n");
+	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
+	assert_string_equal(spec, "rgb:le=0.004");
+	plan_spec_free(s);
 	/* the other kinds, named */
 	s = load_ok("kind: grid\nincidence: {theta_deg: 30}\nobservation: {theta_deg: 40, phi_deg: 0}\n");
 	assert_null(s->adaptive);
@@ -99,6 +104,12 @@ static void test_errors(void **state)
 	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}, dhr_sigma: {incidence_deg: 8, le: 1}}\n"
 		 "budget: {points: 9}\nbatch: 4\n", seed);
 	load_bad(buf, "exactly one of");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {rgb_sigma: {le: 1}, lnf_sigma: {le: 1}}\n"
+		 "budget: {points: 9}\nbatch: 4\n", seed);
+	load_bad(buf, "exactly one of");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {rgb_sigma: {incidence_deg: 8, le: 1}}\n"
+		 "budget: {points: 9}\nbatch: 4\n", seed);
+	load_bad(buf, "unknown key 'incidence_deg' in target.rgb_sigma");
 	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\n", seed);
 	load_bad(buf, "batch");
 	load_bad("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {fibonacci: {count: 5}}, averages: 2}\n"
