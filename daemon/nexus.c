@@ -373,6 +373,14 @@ static int h5_failed(struct acq_err *err)
 	return acq_errf(err, ACQ_E_IO, "nexus: writing the HDF5 file failed (libhdf5)");
 }
 
+/* Close group g (if open) after its writes; 0, or -1 with err when a write (bad) or the close failed. */
+static int group_done(hid_t g, int bad, struct acq_err *err)
+{
+	if (g >= 0 && H5Gclose(g) < 0)
+		bad = 1;
+	return bad ? h5_failed(err) : 0;
+}
+
 /* The file's root attributes and /entry with the sweep's identity, sample, configuration and plan; *entry open
  * on success (the caller closes it). The groups follow daemon/nexus.md in order, here and in the writers below. */
 static int write_entry(hid_t file, int64_t sweep, const struct storenx_sweep *sw, hid_t *entry, struct acq_err *err)
@@ -476,6 +484,29 @@ out:
 	return rc;
 }
 
+/* /entry/events: the sweep's event log (read into E). */
+static int write_events(struct storenx *h, int64_t sweep, hid_t entry, struct ev_ctx *E, struct acq_err *err)
+{
+	if (storenx_count(h, sweep, "events", &E->n, err))
+		return -1;
+	size_t en = E->n ? (size_t)E->n : 1;
+	E->at = malloc(en * sizeof *E->at);
+	E->kind = calloc(en, sizeof *E->kind);
+	E->device = calloc(en, sizeof *E->device);
+	E->msg = calloc(en, sizeof *E->msg);
+	if (!E->at || !E->kind || !E->device || !E->msg)
+		return acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+	if (storenx_events(h, sweep, take_event, E, err) < 0)
+		return -1;
+	hsize_t d1 = (hsize_t)E->k;
+	hid_t g = group(entry, "events", "NXcollection");
+	int bad = g < 0 || close_ok(dset_num(g, "time", H5T_NATIVE_DOUBLE, 1, &d1, E->at, "s")) ||
+		  dset_strs(g, "kind", (size_t)E->k, (const char *const *)E->kind) ||
+		  dset_strs(g, "device", (size_t)E->k, (const char *const *)E->device) ||
+		  dset_strs(g, "message", (size_t)E->k, (const char *const *)E->msg);
+	return group_done(g, bad, err);
+}
+
 /* /entry/points: planned, measured and actual angles, state and time of every point (read into P). */
 static int write_points(struct storenx *h, int64_t sweep, hid_t entry, struct points_ctx *P, struct acq_err *err)
 {
@@ -515,9 +546,7 @@ static int write_points(struct storenx *h, int64_t sweep, hid_t entry, struct po
 		snprintf(nm, sizeof nm, "actual_%s", an_[a]);
 		bad = close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P->actual[a], "deg"));
 	}
-	if (g >= 0 && H5Gclose(g) < 0)
-		bad = 1;
-	return bad ? h5_failed(err) : 0;
+	return group_done(g, bad, err);
 }
 
 /* /entry/data: calibrated f and sigma (read into C) with the planned angles of their points (from P). */
@@ -575,40 +604,15 @@ static int write_data(struct storenx *h, int64_t sweep, hid_t entry, const struc
 	if (bad)
 		goto h5fail;
 	rc = 0;
-	goto out;
-h5fail:
-	h5_failed(err);
 out:
 	for (int a = 0; a < 4; a++)
 		free(ang[a]);
 	if (g >= 0)
 		H5Gclose(g);
 	return rc;
-}
-
-/* /entry/events: the sweep's event log (read into E). */
-static int write_events(struct storenx *h, int64_t sweep, hid_t entry, struct ev_ctx *E, struct acq_err *err)
-{
-	if (storenx_count(h, sweep, "events", &E->n, err))
-		return -1;
-	size_t en = E->n ? (size_t)E->n : 1;
-	E->at = malloc(en * sizeof *E->at);
-	E->kind = calloc(en, sizeof *E->kind);
-	E->device = calloc(en, sizeof *E->device);
-	E->msg = calloc(en, sizeof *E->msg);
-	if (!E->at || !E->kind || !E->device || !E->msg)
-		return acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
-	if (storenx_events(h, sweep, take_event, E, err) < 0)
-		return -1;
-	hsize_t d1 = (hsize_t)E->k;
-	hid_t g = group(entry, "events", "NXcollection");
-	int bad = g < 0 || close_ok(dset_num(g, "time", H5T_NATIVE_DOUBLE, 1, &d1, E->at, "s")) ||
-		  dset_strs(g, "kind", (size_t)E->k, (const char *const *)E->kind) ||
-		  dset_strs(g, "device", (size_t)E->k, (const char *const *)E->device) ||
-		  dset_strs(g, "message", (size_t)E->k, (const char *const *)E->msg);
-	if (g >= 0 && H5Gclose(g) < 0)
-		bad = 1;
-	return bad ? h5_failed(err) : 0;
+h5fail:
+	h5_failed(err);
+	goto out;
 }
 
 /* Everything of daemon/nexus.md, group after group; the raw spectra through write_spectra. */
