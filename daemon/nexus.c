@@ -368,235 +368,273 @@ static void free_strs(char **v, int64_t n)
 	free(v);
 }
 
-/* Everything but the raw spectra, in one function per group would be longer than it is useful: the groups
- * below follow daemon/nexus.md in order. */
-static int write_all(struct storenx *h, int64_t sweep, hid_t file, struct nexus_stats *st, struct acq_err *err)
+static int h5_failed(struct acq_err *err)
 {
-	struct storenx_sweep sw;
-	if (storenx_sweep_get(h, sweep, &sw, err))
-		return -1;
-	int rc = -1;
+	return acq_errf(err, ACQ_E_IO, "nexus: writing the HDF5 file failed (libhdf5)");
+}
+
+/* Close group g (if open) after its writes; 0, or -1 with err when a write (bad) or the close failed. */
+static int group_done(hid_t g, int bad, struct acq_err *err)
+{
+	if (g >= 0 && H5Gclose(g) < 0)
+		bad = 1;
+	return bad ? h5_failed(err) : 0;
+}
+
+/* The file's root attributes and /entry with the sweep's identity, sample, configuration and plan; *entry open
+ * on success (the caller closes it). The groups follow daemon/nexus.md in order, here and in the writers below. */
+static int write_entry(hid_t file, int64_t sweep, const struct storenx_sweep *sw, hid_t *entry, struct acq_err *err)
+{
 	char t0[64], t1[64], tc[64];
-	hid_t entry = -1, g = -1, sub = -1;
-	struct points_ctx P = { 0 };
-	struct cal_ctx C = { .brdf = -1, .sigma = -1 };
-	struct ev_ctx E = { 0 };
-	struct dev_ctx D = { 0 };
-	iso8601(sw.started_at, t0, sizeof t0);
-	iso8601(sw.finished_at, t1, sizeof t1);
-	iso8601(sw.created_at, tc, sizeof tc);
+	iso8601(sw->started_at, t0, sizeof t0);
+	iso8601(sw->finished_at, t1, sizeof t1);
+	iso8601(sw->created_at, tc, sizeof tc);
+	hid_t e = -1, g = -1;
 	if (attr_str(file, "NX_class", "NXroot") || attr_str(file, "creator", "acquisitiond acq-nexus " ACQ_VERSION) ||
-	    attr_str(file, "HDF5_Version", H5_VERS_INFO) || (entry = group(file, "entry", "NXentry")) < 0 ||
-	    attr_str(file, "default", "entry") || attr_str(entry, "default", "data") ||
-	    dset_str(entry, "title", sw.name) || dset_str(entry, "start_time", t0[0] ? t0 : tc) ||
-	    dset_str(entry, "end_time", t1) || dset_str(entry, "created_time", tc) || dset_str(entry, "state", sw.state) ||
-	    dset_str(entry, "program_name", sw.software_version) ||
-	    dset_str(entry, "calibration_method", sw.calibration_method)) {
-		acq_errf(err, ACQ_E_IO, "nexus: writing /entry failed");
-		goto out;
-	}
+	    attr_str(file, "HDF5_Version", H5_VERS_INFO) || (e = *entry = group(file, "entry", "NXentry")) < 0 ||
+	    attr_str(file, "default", "entry") || attr_str(e, "default", "data") ||
+	    dset_str(e, "title", sw->name) || dset_str(e, "start_time", t0[0] ? t0 : tc) ||
+	    dset_str(e, "end_time", t1) || dset_str(e, "created_time", tc) || dset_str(e, "state", sw->state) ||
+	    dset_str(e, "program_name", sw->software_version) ||
+	    dset_str(e, "calibration_method", sw->calibration_method))
+		return acq_errf(err, ACQ_E_IO, "nexus: writing /entry failed");
 	int64_t sid = sweep;
 	hsize_t one = 1;
-	if (close_ok(dset_num(entry, "sweep_id", H5T_NATIVE_INT64, 1, &one, &sid, NULL)))
-		goto h5fail;
+	if (close_ok(dset_num(e, "sweep_id", H5T_NATIVE_INT64, 1, &one, &sid, NULL)))
+		return h5_failed(err);
 	/* sample, configuration and plan */
-	if ((g = group(entry, "sample", "NXsample")) < 0 || dset_str(g, "name", sw.name) || H5Gclose(g) < 0)
+	if ((g = group(e, "sample", "NXsample")) < 0 || dset_str(g, "name", sw->name) || H5Gclose(g) < 0)
 		goto h5fail;
 	g = -1;
-	if ((g = group(entry, "configuration", "NXnote")) < 0 || dset_str(g, "type", "text/yaml") ||
+	if ((g = group(e, "configuration", "NXnote")) < 0 || dset_str(g, "type", "text/yaml") ||
 	    dset_str(g, "description", "the daemon's configuration file when the sweep started") ||
-	    dset_str(g, "data", sw.config_snapshot) || H5Gclose(g) < 0)
+	    dset_str(g, "data", sw->config_snapshot) || H5Gclose(g) < 0)
 		goto h5fail;
 	g = -1;
-	if ((g = group(entry, "plan", "NXnote")) < 0 || dset_str(g, "type", "text/yaml") ||
-	    dset_str(g, "description", "the sampling plan as submitted") || dset_str(g, "data", sw.plan_text) ||
+	if ((g = group(e, "plan", "NXnote")) < 0 || dset_str(g, "type", "text/yaml") ||
+	    dset_str(g, "description", "the sampling plan as submitted") || dset_str(g, "data", sw->plan_text) ||
 	    H5Gclose(g) < 0)
 		goto h5fail;
-	g = -1;
-	/* instrument: spectrometer (with its wavelength calibration) and the devices used */
-	if ((g = group(entry, "instrument", "NXinstrument")) < 0)
+	return 0;
+h5fail:
+	if (g >= 0)
+		H5Gclose(g);
+	return h5_failed(err);
+}
+
+/* /entry/instrument: the spectrometer (with its wavelength calibration) and the devices used (read into D). */
+static int write_instrument(struct storenx *h, int64_t sweep, hid_t entry, const struct storenx_sweep *sw,
+			    struct dev_ctx *D, struct acq_err *err)
+{
+	int rc = -1;
+	hid_t g = -1, sub = -1;
+	if ((g = group(entry, "instrument", "NXinstrument")) < 0 || (sub = group(g, "spectrometer", "NXdetector")) < 0)
 		goto h5fail;
-	if ((sub = group(g, "spectrometer", "NXdetector")) < 0)
-		goto h5fail;
-	if (sw.has_spectrometer) {
-		hsize_t five = 5, np = (hsize_t)sw.npix;
-		double *lam = malloc((size_t)(sw.npix > 0 ? sw.npix : 1) * sizeof *lam);
+	if (sw->has_spectrometer) {
+		hsize_t five = 5, np = (hsize_t)sw->npix, one = 1;
+		double *lam = malloc((size_t)(sw->npix > 0 ? sw->npix : 1) * sizeof *lam);
 		if (!lam) {
 			acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
 			goto out;
 		}
-		for (int p = 0; p < sw.npix; p++) {
+		for (int p = 0; p < sw->npix; p++) {
 			double x = p, v = 0;
 			for (int k = 4; k >= 0; k--)
-				v = v * x + sw.sp_coef[k];
+				v = v * x + sw->sp_coef[k];
 			lam[p] = v;
 		}
-		int32_t npix = sw.npix;
-		hid_t cd = dset_num(sub, "wavelength_calibration", H5T_NATIVE_DOUBLE, 1, &five, sw.sp_coef, NULL);
+		int32_t npix = sw->npix;
+		hid_t cd = dset_num(sub, "wavelength_calibration", H5T_NATIVE_DOUBLE, 1, &five, sw->sp_coef, NULL);
 		int bad = cd < 0 || attr_str(cd, "description", "lambda(p) = c0 + c1 p + c2 p^2 + c3 p^3 + c4 p^4 (nm)") ||
 			  close_ok(cd) || close_ok(dset_num(sub, "pixel_wavelength", H5T_NATIVE_DOUBLE, 1, &np, lam, "nm")) ||
 			  close_ok(dset_num(sub, "number_of_pixels", H5T_NATIVE_INT32, 1, &one, &npix, NULL)) ||
-			  dset_str(sub, "model", sw.sp_model) || dset_str(sub, "serial_number", sw.sp_serial) ||
-			  dset_str(sub, "firmware", sw.sp_firmware) || dset_str(sub, "nonlinearity", sw.sp_nonlinearity);
+			  dset_str(sub, "model", sw->sp_model) || dset_str(sub, "serial_number", sw->sp_serial) ||
+			  dset_str(sub, "firmware", sw->sp_firmware) || dset_str(sub, "nonlinearity", sw->sp_nonlinearity);
 		free(lam);
 		if (bad)
 			goto h5fail;
 	}
 	H5Gclose(sub);
 	sub = -1;
-	if (storenx_count(h, sweep, "devices", &D.n, err))
+	if (storenx_count(h, sweep, "devices", &D->n, err))
 		goto out;
 	for (int i = 0; i < 5; i++)
-		if (!(D.f[i] = calloc((size_t)(D.n ? D.n : 1), sizeof(char *)))) {
+		if (!(D->f[i] = calloc((size_t)(D->n ? D->n : 1), sizeof(char *)))) {
 			acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
 			goto out;
 		}
-	if (storenx_devices(h, sweep, take_device, &D, err) < 0)
+	if (storenx_devices(h, sweep, take_device, D, err) < 0)
 		goto out;
 	if ((sub = group(g, "devices", "NXcollection")) < 0 ||
-	    dset_strs(sub, "name", (size_t)D.k, (const char *const *)D.f[0]) ||
-	    dset_strs(sub, "vendor", (size_t)D.k, (const char *const *)D.f[1]) ||
-	    dset_strs(sub, "model", (size_t)D.k, (const char *const *)D.f[2]) ||
-	    dset_strs(sub, "serial_number", (size_t)D.k, (const char *const *)D.f[3]) ||
-	    dset_strs(sub, "firmware", (size_t)D.k, (const char *const *)D.f[4]))
+	    dset_strs(sub, "name", (size_t)D->k, (const char *const *)D->f[0]) ||
+	    dset_strs(sub, "vendor", (size_t)D->k, (const char *const *)D->f[1]) ||
+	    dset_strs(sub, "model", (size_t)D->k, (const char *const *)D->f[2]) ||
+	    dset_strs(sub, "serial_number", (size_t)D->k, (const char *const *)D->f[3]) ||
+	    dset_strs(sub, "firmware", (size_t)D->k, (const char *const *)D->f[4]))
 		goto h5fail;
-	H5Gclose(sub);
-	sub = -1;
-	H5Gclose(g);
-	g = -1;
-	/* points: planned and actual angles, state, time */
-	if (storenx_count(h, sweep, "points", &P.n, err))
-		goto out;
-	size_t pn = P.n ? (size_t)P.n : 1;
-	P.id = malloc(pn * sizeof *P.id);
-	P.order = malloc(pn * sizeof *P.order);
-	P.done = malloc(pn * sizeof *P.done);
-	P.state = calloc(pn, sizeof *P.state);
-	int okp = P.id && P.order && P.done && P.state;
-	for (int a = 0; a < 4; a++)
-		okp = okp && (P.planned[a] = malloc(pn * sizeof(double))) && (P.measured[a] = malloc(pn * sizeof(double)));
-	for (int a = 0; a < 3; a++)
-		okp = okp && (P.actual[a] = malloc(pn * sizeof(double)));
-	if (!okp) {
-		acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
-		goto out;
-	}
-	if (storenx_points(h, sweep, take_point, &P, err) < 0)
-		goto out;
-	{
-		hsize_t d1 = (hsize_t)P.k;
-		static const char *const pn_[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
-		static const char *const an_[3] = { "laser_theta", "detector_theta", "detector_phi" };
-		if ((g = group(entry, "points", "NXcollection")) < 0 ||
-		    close_ok(dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, P.id, NULL)) ||
-		    close_ok(dset_num(g, "order_index", H5T_NATIVE_INT32, 1, &d1, P.order, NULL)) ||
-		    close_ok(dset_num(g, "done_time", H5T_NATIVE_DOUBLE, 1, &d1, P.done, "s")) ||
-		    dset_strs(g, "state", (size_t)P.k, (const char *const *)P.state))
-			goto h5fail;
-		for (int a = 0; a < 4; a++) {
-			char nm[32];
-			snprintf(nm, sizeof nm, "planned_%s", pn_[a]);
-			if (close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P.planned[a], "deg")))
-				goto h5fail;
-			snprintf(nm, sizeof nm, "measured_%s", pn_[a]);
-			if (close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P.measured[a], "deg")))
-				goto h5fail;
-		}
-		for (int a = 0; a < 3; a++) {
-			char nm[32];
-			snprintf(nm, sizeof nm, "actual_%s", an_[a]);
-			if (close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P.actual[a], "deg")))
-				goto h5fail;
-		}
+	rc = 0;
+	goto out;
+h5fail:
+	h5_failed(err);
+out:
+	if (sub >= 0)
+		H5Gclose(sub);
+	if (g >= 0)
 		H5Gclose(g);
-		g = -1;
+	return rc;
+}
+
+/* /entry/events: the sweep's event log (read into E). */
+static int write_events(struct storenx *h, int64_t sweep, hid_t entry, struct ev_ctx *E, struct acq_err *err)
+{
+	if (storenx_count(h, sweep, "events", &E->n, err))
+		return -1;
+	size_t en = E->n ? (size_t)E->n : 1;
+	E->at = malloc(en * sizeof *E->at);
+	E->kind = calloc(en, sizeof *E->kind);
+	E->device = calloc(en, sizeof *E->device);
+	E->msg = calloc(en, sizeof *E->msg);
+	if (!E->at || !E->kind || !E->device || !E->msg)
+		return acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+	if (storenx_events(h, sweep, take_event, E, err) < 0)
+		return -1;
+	hsize_t d1 = (hsize_t)E->k;
+	hid_t g = group(entry, "events", "NXcollection");
+	int bad = g < 0 || close_ok(dset_num(g, "time", H5T_NATIVE_DOUBLE, 1, &d1, E->at, "s")) ||
+		  dset_strs(g, "kind", (size_t)E->k, (const char *const *)E->kind) ||
+		  dset_strs(g, "device", (size_t)E->k, (const char *const *)E->device) ||
+		  dset_strs(g, "message", (size_t)E->k, (const char *const *)E->msg);
+	return group_done(g, bad, err);
+}
+
+/* /entry/points: planned, measured and actual angles, state and time of every point (read into P). */
+static int write_points(struct storenx *h, int64_t sweep, hid_t entry, struct points_ctx *P, struct acq_err *err)
+{
+	if (storenx_count(h, sweep, "points", &P->n, err))
+		return -1;
+	size_t pn = P->n ? (size_t)P->n : 1;
+	P->id = malloc(pn * sizeof *P->id);
+	P->order = malloc(pn * sizeof *P->order);
+	P->done = malloc(pn * sizeof *P->done);
+	P->state = calloc(pn, sizeof *P->state);
+	int okp = P->id && P->order && P->done && P->state;
+	for (int a = 0; a < 4; a++)
+		okp = okp && (P->planned[a] = malloc(pn * sizeof(double))) && (P->measured[a] = malloc(pn * sizeof(double)));
+	for (int a = 0; a < 3; a++)
+		okp = okp && (P->actual[a] = malloc(pn * sizeof(double)));
+	if (!okp)
+		return acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+	if (storenx_points(h, sweep, take_point, P, err) < 0)
+		return -1;
+	hsize_t d1 = (hsize_t)P->k;
+	static const char *const pn_[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
+	static const char *const an_[3] = { "laser_theta", "detector_theta", "detector_phi" };
+	hid_t g = group(entry, "points", "NXcollection");
+	int bad = g < 0 || close_ok(dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, P->id, NULL)) ||
+		  close_ok(dset_num(g, "order_index", H5T_NATIVE_INT32, 1, &d1, P->order, NULL)) ||
+		  close_ok(dset_num(g, "done_time", H5T_NATIVE_DOUBLE, 1, &d1, P->done, "s")) ||
+		  dset_strs(g, "state", (size_t)P->k, (const char *const *)P->state);
+	for (int a = 0; a < 4 && !bad; a++) {
+		char nm[32];
+		snprintf(nm, sizeof nm, "planned_%s", pn_[a]);
+		bad = close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P->planned[a], "deg"));
+		snprintf(nm, sizeof nm, "measured_%s", pn_[a]);
+		bad = bad || close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P->measured[a], "deg"));
 	}
-	/* raw spectra by kind */
-	for (int k = 0; k < 4; k++)
+	for (int a = 0; a < 3 && !bad; a++) {
+		char nm[32];
+		snprintf(nm, sizeof nm, "actual_%s", an_[a]);
+		bad = close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P->actual[a], "deg"));
+	}
+	return group_done(g, bad, err);
+}
+
+/* /entry/data: calibrated f and sigma (read into C) with the planned angles of their points (from P). */
+static int write_data(struct storenx *h, int64_t sweep, hid_t entry, const struct storenx_sweep *sw,
+		      const struct points_ctx *P, struct cal_ctx *C, struct acq_err *err)
+{
+	if (storenx_count(h, sweep, "calibrated", &C->n, err))
+		return -1;
+	C->nwl = sw->ngrid;
+	if (C->n && !sw->grid)
+		return acq_errf(err, ACQ_E_INVAL, "nexus: sweep %lld has calibrated samples but no wavelength grid",
+				(long long)sweep);
+	C->point = malloc((size_t)(C->n ? C->n : 1) * sizeof *C->point);
+	if (!C->point)
+		return acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+	int rc = -1;
+	double *ang[4] = { NULL };
+	hsize_t d2[2] = { (hsize_t)C->n, (hsize_t)C->nwl }, dw = (hsize_t)C->nwl, d1 = (hsize_t)C->n;
+	hid_t g = group(entry, "data", "NXdata");
+	if (g < 0 || attr_str(g, "signal", "brdf") || attr_strs(g, "axes", 2, (const char *const[]){ ".", "wavelength" }) ||
+	    attr_int(g, "wavelength_indices", 1))
+		goto h5fail;
+	C->brdf = dset_num(g, "brdf", H5T_NATIVE_FLOAT, 2, d2, NULL, "1/sr");
+	C->sigma = dset_num(g, "brdf_errors", H5T_NATIVE_FLOAT, 2, d2, NULL, "1/sr");
+	if (C->brdf < 0 || C->sigma < 0 || attr_str(C->sigma, "description", "standard uncertainty (1 sigma)"))
+		goto h5fail;
+	if (C->n) {
+		int r = storenx_calibrated(h, sweep, take_cal, C, err);
+		if (r < 0)
+			goto out;
+		if (r || C->bad || C->k != C->n) {
+			acq_errf(err, ACQ_E_INVAL, "nexus: calibrated rows do not all match the %d-wavelength grid", C->nwl);
+			goto out;
+		}
+	}
+	for (int a = 0; a < 4; a++)
+		if (!(ang[a] = malloc((size_t)(C->n ? C->n : 1) * sizeof(double)))) {
+			acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
+			goto out;
+		}
+	for (int64_t i = 0; i < C->n; i++) { /* the planned angles of each calibrated point */
+		int64_t j = 0;
+		while (j < P->k && P->id[j] != C->point[i])
+			j++;
+		for (int a = 0; a < 4; a++)
+			ang[a][i] = j < P->k ? P->planned[a][j] : NAN;
+	}
+	static const char *const an[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
+	float dummy = 0;
+	int bad = close_ok(dset_num(g, "wavelength", H5T_NATIVE_FLOAT, 1, &dw,
+				    sw->grid ? (void *)sw->grid : (void *)&dummy, "nm")) ||
+		  close_ok(dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, C->point, NULL));
+	for (int a = 0; a < 4 && !bad; a++)
+		bad = close_ok(dset_num(g, an[a], H5T_NATIVE_DOUBLE, 1, &d1, ang[a], "deg"));
+	if (bad)
+		goto h5fail;
+	rc = 0;
+out:
+	for (int a = 0; a < 4; a++)
+		free(ang[a]);
+	if (g >= 0)
+		H5Gclose(g);
+	return rc;
+h5fail:
+	h5_failed(err);
+	goto out;
+}
+
+/* Everything of daemon/nexus.md, group after group; the raw spectra through write_spectra. */
+static int write_all(struct storenx *h, int64_t sweep, hid_t file, struct nexus_stats *st, struct acq_err *err)
+{
+	struct storenx_sweep sw;
+	if (storenx_sweep_get(h, sweep, &sw, err))
+		return -1;
+	int rc = -1;
+	hid_t entry = -1;
+	struct points_ctx P = { 0 };
+	struct cal_ctx C = { .brdf = -1, .sigma = -1 };
+	struct ev_ctx E = { 0 };
+	struct dev_ctx D = { 0 };
+	if (write_entry(file, sweep, &sw, &entry, err) || write_instrument(h, sweep, entry, &sw, &D, err) ||
+	    write_points(h, sweep, entry, &P, err))
+		goto out;
+	for (int k = 0; k < 4; k++) /* raw spectra by kind */
 		if (write_spectra(h, sweep, entry, k, sw.has_spectrometer ? sw.npix : 0, &st->spectra[k], err))
 			goto out;
-	/* calibrated f and σ with the planned angles of their points */
-	if (storenx_count(h, sweep, "calibrated", &C.n, err))
+	if (write_data(h, sweep, entry, &sw, &P, &C, err) || write_events(h, sweep, entry, &E, err))
 		goto out;
-	C.nwl = sw.ngrid;
-	if (C.n && !sw.grid) {
-		acq_errf(err, ACQ_E_INVAL, "nexus: sweep %lld has calibrated samples but no wavelength grid", (long long)sweep);
-		goto out;
-	}
-	C.point = malloc((size_t)(C.n ? C.n : 1) * sizeof *C.point);
-	if (!C.point) {
-		acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
-		goto out;
-	}
-	{
-		hsize_t d2[2] = { (hsize_t)C.n, (hsize_t)C.nwl }, dw = (hsize_t)C.nwl, d1 = (hsize_t)C.n;
-		if ((g = group(entry, "data", "NXdata")) < 0 || attr_str(g, "signal", "brdf") ||
-		    attr_strs(g, "axes", 2, (const char *const[]){ ".", "wavelength" }) || attr_int(g, "wavelength_indices", 1))
-			goto h5fail;
-		C.brdf = dset_num(g, "brdf", H5T_NATIVE_FLOAT, 2, d2, NULL, "1/sr");
-		C.sigma = dset_num(g, "brdf_errors", H5T_NATIVE_FLOAT, 2, d2, NULL, "1/sr");
-		if (C.brdf < 0 || C.sigma < 0 || attr_str(C.sigma, "description", "standard uncertainty (1 sigma)"))
-			goto h5fail;
-		if (C.n) {
-			int r = storenx_calibrated(h, sweep, take_cal, &C, err);
-			if (r < 0)
-				goto out;
-			if (r || C.bad || C.k != C.n) {
-				acq_errf(err, ACQ_E_INVAL, "nexus: calibrated rows do not all match the %d-wavelength grid", C.nwl);
-				goto out;
-			}
-		}
-		float *wl = sw.grid;
-		float dummy = 0;
-		double *ang[4] = { NULL };
-		for (int a = 0; a < 4; a++)
-			ang[a] = malloc((size_t)(C.n ? C.n : 1) * sizeof(double));
-		if (!ang[0] || !ang[1] || !ang[2] || !ang[3]) {
-			for (int a = 0; a < 4; a++)
-				free(ang[a]);
-			acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
-			goto out;
-		}
-		for (int64_t i = 0; i < C.n; i++) { /* the planned angles of each calibrated point */
-			int64_t j = 0;
-			while (j < P.k && P.id[j] != C.point[i])
-				j++;
-			for (int a = 0; a < 4; a++)
-				ang[a][i] = j < P.k ? P.planned[a][j] : NAN;
-		}
-		static const char *const an[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
-		int bad = close_ok(dset_num(g, "wavelength", H5T_NATIVE_FLOAT, 1, &dw, wl ? (void *)wl : (void *)&dummy, "nm")) ||
-			  close_ok(dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, C.point, NULL));
-		for (int a = 0; a < 4 && !bad; a++)
-			bad = close_ok(dset_num(g, an[a], H5T_NATIVE_DOUBLE, 1, &d1, ang[a], "deg"));
-		for (int a = 0; a < 4; a++)
-			free(ang[a]);
-		if (bad)
-			goto h5fail;
-	}
-	/* events */
-	if (storenx_count(h, sweep, "events", &E.n, err))
-		goto out;
-	{
-		size_t en = E.n ? (size_t)E.n : 1;
-		E.at = malloc(en * sizeof *E.at);
-		E.kind = calloc(en, sizeof *E.kind);
-		E.device = calloc(en, sizeof *E.device);
-		E.msg = calloc(en, sizeof *E.msg);
-		if (!E.at || !E.kind || !E.device || !E.msg) {
-			acq_errf(err, ACQ_E_NOMEM, "nexus: out of memory");
-			goto out;
-		}
-		if (storenx_events(h, sweep, take_event, &E, err) < 0)
-			goto out;
-		hsize_t d1 = (hsize_t)E.k;
-		if ((sub = group(entry, "events", "NXcollection")) < 0 ||
-		    close_ok(dset_num(sub, "time", H5T_NATIVE_DOUBLE, 1, &d1, E.at, "s")) ||
-		    dset_strs(sub, "kind", (size_t)E.k, (const char *const *)E.kind) ||
-		    dset_strs(sub, "device", (size_t)E.k, (const char *const *)E.device) ||
-		    dset_strs(sub, "message", (size_t)E.k, (const char *const *)E.msg))
-			goto h5fail;
-	}
 	st->points = P.k;
 	st->calibrated = C.k;
 	st->events = E.k;
@@ -604,18 +642,11 @@ static int write_all(struct storenx *h, int64_t sweep, hid_t file, struct nexus_
 	st->npix = sw.npix;
 	st->nwl = sw.ngrid;
 	rc = 0;
-	goto out;
-h5fail:
-	acq_errf(err, ACQ_E_IO, "nexus: writing the HDF5 file failed (libhdf5)");
 out:
 	if (C.brdf >= 0)
 		H5Dclose(C.brdf);
 	if (C.sigma >= 0)
 		H5Dclose(C.sigma);
-	if (sub >= 0)
-		H5Gclose(sub);
-	if (g >= 0)
-		H5Gclose(g);
 	if (entry >= 0)
 		H5Gclose(entry);
 	free(P.id);

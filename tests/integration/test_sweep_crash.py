@@ -14,16 +14,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import sweeplib as L  # noqa: E402
 
-PLAN = """name: it-crash
-incidence:
-  theta_deg: [15, 40, 60]
-observation:
-  theta_deg: [25, 55, 75]
-  phi_deg: [0, 60, 120, 180, 240, 300]
-integration: {mode: auto, target_peak: 0.8, estimate_ms: 20, max_ms: 2000}
-averages: 4
-blind_points: drop
-"""
+PLAN = L.PLAN_3X18
 
 KILLS = 20
 
