@@ -70,6 +70,8 @@ struct plan_spec {
 	double integ_ms;            /* fixed: the integration time; auto: the estimate used for timing */
 	double target_peak;         /* auto: target peak as a fraction of full scale */
 	double max_integ_ms;        /* auto: upper bound on the integration time */
+	double integ_spread;        /* auto, timing only: longest / shortest time the sample needs within one incidence
+				     * (integration.spread; 0: PLAN_AUTO_SPREAD; 1: every point at the estimate) */
 	int averages;
 	size_t reciprocal_pairs;    /* number of reciprocal partners to add (0: none) */
 	enum plan_blind_policy blind_policy;
@@ -146,7 +148,13 @@ struct plan_result {
 	double predicted_s;
 	double reference_s;         /* of predicted_s: the reference phase and the move from it to the first point */
 	double darks_s;             /* of predicted_s: dark spectra */
+	double host_s;              /* of predicted_s: the host's time per point (point_overhead_s × time_scale each),
+				     * load-dependent at high time scales: reported apart */
 };
+
+/* The default integration.spread of auto plans: measured on the simulated bench's green paint (quick plan: 14.5 to
+ * 116 ms within one incidence, HDR exposure included), see plan_time.c. */
+#define PLAN_AUTO_SPREAD 8.0
 
 /* The executor's costs the ordering model leaves out; plan_timing_defaults() gives the executor's and the
  * arm driver's defaults, the daemon fills it from its configuration (sweep, acquisition, devices). */

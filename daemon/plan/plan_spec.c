@@ -5,7 +5,8 @@
  *   incidence: {theta_deg: RANGE}
  *   observation: {theta_deg: RANGE, phi_deg: RANGE}          # grid, per incidence
  *            or  {fibonacci: {count: N, max_theta_deg: 85}}  # near-uniform directions, per incidence
- *   integration: {mode: auto, target_peak: 0.8, estimate_ms: 50, max_ms: 5000} | {mode: fixed, ms: 20}
+ *   integration: {mode: auto, target_peak: 0.8, estimate_ms: 50, max_ms: 5000, spread: 8} | {mode: fixed, ms: 20}
+ *                (spread: timing only, the longest / shortest time the sample needs within an incidence)
  *   averages: 4
  *   reciprocal_pairs: 10
  *   blind_points: drop | move
@@ -127,7 +128,8 @@ int plan_integration_parse(struct yc_node *root, struct plan_spec *s, struct acq
 	} else {
 		if (yc_double(n, "target_peak", false, 0.01, 1.0, &s->target_peak, err) ||
 		    yc_double(n, "max_ms", false, 0.001, 600000, &s->max_integ_ms, err) ||
-		    yc_double(n, "estimate_ms", false, 0.001, 600000, &s->integ_ms, err))
+		    yc_double(n, "estimate_ms", false, 0.001, 600000, &s->integ_ms, err) ||
+		    yc_double(n, "spread", false, 1, 1e6, &s->integ_spread, err))
 			return -1;
 		if (s->integ_ms > s->max_integ_ms)
 			return yc_errf(err, yc_get(n, "estimate_ms"), "integration: estimate_ms (%g) exceeds max_ms (%g)",

@@ -42,8 +42,16 @@ def run_case(name, plan_text, scale):
         b.start_daemon()
         planf = os.path.join(b.dir, "plan.yaml")
         open(planf, "w").write(plan_text)
-        p = subprocess.run([CTL, "-s", b.sock, "--json", "plan", planf], capture_output=True, text=True, check=True)
-        pred = json.loads(p.stdout)["plan"]["predicted_s"]
+        # with the steps (predicted_start_s per step, kept with ACQ_BENCH_KEEP=1) when the reply is small enough
+        p = subprocess.run([CTL, "-s", b.sock, "--json", "plan", planf, "--points"], capture_output=True, text=True)
+        if p.returncode == 0:
+            with open(os.path.join(b.dir, "plan.json"), "w") as fh:
+                fh.write(p.stdout)
+        else:
+            p = subprocess.run([CTL, "-s", b.sock, "--json", "plan", planf], capture_output=True, text=True, check=True)
+        pj = json.loads(p.stdout)["plan"]
+        pred, host = pj["predicted_s"], pj.get("host_s", 0.0)
+        load0 = os.getloadavg()[0]
         events = []
         w = subprocess.Popen([CTL, "-s", b.sock, "watch"], stdout=subprocess.PIPE, text=True)
 
@@ -82,8 +90,12 @@ def run_case(name, plan_text, scale):
                     left = finished - t
                     eta_err[frac] = e["eta_s"] / left - 1 if left > 0 else float("nan")
                     break
+        # the host's time per point (real seconds) the measurement implies: what it took beyond the model's bench
+        # part, per point and time scale (the model's constant: host_s / points / scale)
+        host_pp = (measured - (pred - host)) / total / scale
         return dict(case=name, scale=scale, points=total, predicted_s=pred, measured_s=measured,
-                    error=pred / measured - 1, eta25=eta_err.get(0.25), eta50=eta_err.get(0.5),
+                    error=pred / measured - 1, predicted_host_s=host, host_per_point_s=host_pp,
+                    load=(load0 + os.getloadavg()[0]) / 2, eta25=eta_err.get(0.25), eta50=eta_err.get(0.5),
                     eta75=eta_err.get(0.75), median_ms=first[len(first) // 2] if first else None,
                     darks=darks, exposures=expos)
     finally:
@@ -122,9 +134,11 @@ def table(scale):
             r = run_case(name, text, scale)
             r["predicted_scale1_s"] = pred1
             rows.append(r)
-            print("%-8s %4d points  time scale %g: predicted %7.1f s measured %7.1f s (%+5.1f%%)  predicted at "
-                  "time scale 1: %7.1f s (%.1f min)  ETA error 25/50/75 %%: %s" % (
-                      name, r["points"], scale, r["predicted_s"], r["measured_s"], 100 * r["error"], pred1, pred1 / 60,
+            print("%-8s %4d points  time scale %g: predicted %7.1f s (host %.1f s) measured %7.1f s (%+5.1f%%; host per "
+                  "point %.4f s implied, load %.1f)  predicted at time scale 1: %7.1f s (%.1f min)  ETA error 25/50/75 %%: "
+                  "%s" % (
+                      name, r["points"], scale, r["predicted_s"], r["predicted_host_s"], r["measured_s"],
+                      100 * r["error"], r["host_per_point_s"], r["load"], pred1, pred1 / 60,
                       " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25", "eta50", "eta75"))),
                   flush=True)
             with open(os.path.join(OUT, "duration_table.csv"), "w", newline="") as fh:
@@ -163,11 +177,12 @@ def main():
         prev = (text, r)
         rows.append(r)
         f = lambda x: "   -  " if x is None else "%+5.1f%%" % (100 * x)  # noqa: E731
-        print("%-17s scale %4g  %4d points  predicted %7.1f s  measured %7.1f s  error %s  ETA error at 25/50/75 %%: "
-              "%s %s %s  (median integration %s ms, %s darks, %s exposures)"
-              % (name, scale, r["points"], r["predicted_s"], r["measured_s"], f(r["error"]), f(r["eta25"]),
-                 f(r["eta50"]), f(r["eta75"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"], r["darks"],
-                 r["exposures"]), flush=True)
+        print("%-17s scale %4g  %4d points  predicted %7.1f s (host %.1f s)  measured %7.1f s  error %s  ETA error at "
+              "25/50/75 %%: %s %s %s  (median integration %s ms, %s darks, %s exposures; host per point %.4f s "
+              "implied; load %.1f)"
+              % (name, scale, r["points"], r["predicted_s"], r["predicted_host_s"], r["measured_s"], f(r["error"]),
+                 f(r["eta25"]), f(r["eta50"]), f(r["eta75"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"],
+                 r["darks"], r["exposures"], r["host_per_point_s"], r["load"]), flush=True)
     with open(os.path.join(OUT, "duration.csv"), "w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
         wr.writeheader()

@@ -20,8 +20,14 @@ static const char *PLAN_FIXED = "name: t\nincidence: {theta_deg: [20, 45]}\n"
 				"integration: {mode: fixed, ms: 20}\naverages: 3\nblind_points: drop\n";
 static const char *PLAN_AUTO = "name: t\nincidence: {theta_deg: [20, 45]}\n"
 			       "observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
-			       "integration: {mode: auto, estimate_ms: 20, max_ms: 2000}\naverages: 3\n"
+			       "integration: {mode: auto, estimate_ms: 20, max_ms: 2000, spread: 1}\naverages: 3\n"
 			       "blind_points: drop\n";
+/* The same with the sample's times spread over 4x around the estimate: 10 to 40 ms, the ladder's rungs inside it
+ * 10.24, 14.48, 20.48, 28.96 ms (0.01 · √2^k, k = 20..23) */
+static const char *PLAN_SPREAD = "name: t\nincidence: {theta_deg: [20, 45]}\n"
+				 "observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
+				 "integration: {mode: auto, estimate_ms: 20, max_ms: 2000, spread: 4}\naverages: 3\n"
+				 "blind_points: drop\n";
 
 struct fx {
 	struct bench_geom g;
@@ -133,6 +139,47 @@ static void test_auto_ladder(void **state)
 	unload(&f);
 }
 
+/* Auto integration with the sample's spread: each exposure and probe at the mean of the band's rungs, and a dark
+ * at the j-th point of an incidence with probability (1 - 1/k)^j; over an incidence of n points k(1 - (1 - 1/k)^n)
+ * darks, more than the one of spread 1 and at most one per point. */
+static void test_auto_spread(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_SPREAD);
+	struct plan_timing t = timing();
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double r2 = sqrt(2.0), rung[4] = { 0.01 * pow(r2, 20), 0.01 * pow(r2, 21), 0.01 * pow(r2, 22), 0.01 * pow(r2, 23) };
+	assert_true(rung[0] > 10 && rung[0] / r2 < 10 && rung[3] < 40 && rung[3] * r2 > 40);
+	double mean = (rung[0] + rung[1] + rung[2] + rung[3]) / 4, k = 4;
+	double shot_ovh = f.g.readout_s + t.exposure_overhead_s, dark = 8 * mean / 1000 + shot_ovh;
+	double darks = 0, sum = 0;
+	size_t j = 0;
+	for (size_t i = 0; i < f.res->n_steps; i++) {
+		const struct plan_step *st = &f.res->steps[i];
+		bool new_inc = i == 0 || st->pos.laser_theta != f.res->steps[i - 1].pos.laser_theta;
+		j = new_inc ? 0 : j + 1;
+		double p = pow(1 - 1 / k, (double)j);
+		double d = st->move_s + st->settle_s + (st->move_s + st->settle_s > 0 ? 1.5 * t.axis_poll_s : 0) +
+			   (i == 0 ? 20.0 : mean) / 1000 + shot_ovh + 3 * mean / 1000 + shot_ovh + p * dark +
+			   t.point_overhead_s;
+		assert_true(fabs(st->predicted_s - d) < 1e-9);
+		darks += p * dark;
+		sum += d;
+	}
+	assert_true(fabs(f.res->darks_s - darks) < 1e-9);
+	assert_true(fabs(f.res->predicted_s - sum) < 1e-9);
+	/* two incidences of 8 (or 7) points: between 2 and 2·4 darks, k(1 - (3/4)^n) each */
+	double n_darks = darks / dark;
+	assert_true(n_darks > 2 * 4 * (1 - pow(0.75, 7)) - 1e-9 && n_darks < 2 * 4 * (1 - pow(0.75, 8)) + 1e-9);
+	/* longer than with every point at the estimate's rung (spread 1) */
+	double spread = f.res->predicted_s;
+	f.spec->integ_spread = 1;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(spread > f.res->predicted_s + 3 * dark);
+	unload(&f);
+}
+
 /* The reference phase: from the arms' position to the reference pose, probe/dark/exposure there, then to the
  * first point; the steps start after it. */
 static void test_reference(void **state)
@@ -187,6 +234,7 @@ int main(void)
 		cmocka_unit_test(test_fixed_steps),
 		cmocka_unit_test(test_time_scale),
 		cmocka_unit_test(test_auto_ladder),
+		cmocka_unit_test(test_auto_spread),
 		cmocka_unit_test(test_reference),
 		cmocka_unit_test(test_dark_age),
 	};
