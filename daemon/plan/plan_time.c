@@ -14,7 +14,7 @@
  *     (new incidence, dark_every, age). The sample decides those times: it needs a different time in every
  *     direction (on the simulated green paint 14.5 to 116 ms within one incidence for a 20 ms estimate). The
  *     model takes its times log-uniformly over a band of integration.spread (longest / shortest, default
- *     PLAN_AUTO_SPREAD = 8) around the estimate, on the ladder's k rungs there: each exposure and probe at their
+ *     PLAN_AUTO_SPREAD) around the estimate, on the ladder's k rungs there: each exposure and probe at their
  *     mean, and the j-th point after a clearing needs a dark with probability (1 - 1/k)^j (its rung not yet
  *     visited), k(1 - (1 - 1/k)^n) darks for n points. spread: 1 is the old model (every point at the estimate,
  *     one dark per incidence). This was the term the model missed: auto plans ran 7-11 % longer than predicted,
@@ -28,8 +28,10 @@
  *   - the reference at the start: the move to ref_pose from where the arms are (when known: the daemon knows,
  *     a local dry run does not), probe, dark and the plan's averages there, then the move from ref_pose to
  *     the first point (the first step has no move in the ordering model).
- * Not modelled: the second (HDR) exposures a faint end of the spectrum asks for (2 of 15 points on green paint),
- * saturation redos, fault recovery, the operator's sample swap; the live ETA (daemon/eta.c) adds the time per
+ *   - auto integration, HDR: a fraction integration.hdr_fraction of the points (default PLAN_AUTO_HDR, 0.09 on the
+ *     simulated green paint) takes a second exposure at hdr_ratio times the first's time when max_exposures > 1,
+ *     its darks mostly those the longer base times took already (not counted again);
+ * Not modelled: saturation redos, fault recovery, the operator's sample swap; the live ETA (daemon/eta.c) adds the time per
  * point the sweep has measured beyond this model. */
 #include "daemon/plan/plan.h"
 
@@ -47,6 +49,8 @@ void plan_timing_defaults(struct plan_timing *t)
 		.dark_averages = 10,          /* exposure.c dark_averages default */
 		.dark_every = 0,
 		.dark_max_age_s = 600,        /* exposure.c dark_max_age_s default */
+		.max_exposures = 3,           /* exposure.c max_exposures default */
+		.hdr_ratio = 8,               /* exposure.c hdr_ratio default */
 		.reference = true,
 		.ref_pose = { 0.0, 45.0, 180.0 }, /* executor.c reference_pose default */
 		/* measured on the shared 2-core development machine (tests/bench/bench_duration.py, the paper plan
@@ -98,25 +102,49 @@ static double shot(const struct bench_geom *g, const struct plan_timing *t, doub
 	return n * ms / 1000.0 + g->readout_s + t->exposure_overhead_s;
 }
 
-/* Auto integration: the ladder's rungs inside the band the sample's times fall in, [est/√spread, est·√spread]
- * (the estimate its geometric middle; within [min_ms, max_ms]), each taken as likely; at least the estimate's rung.
- * Returns their count k (<= cap) and their mean in *mean_ms. */
-static int auto_rungs(const struct plan_timing *t, double est_ms, double spread, double max_ms, double *mean_ms)
+/* Auto integration: the sample's times log-uniform over a band of width S (longest / shortest) whose geometric
+ * middle is the estimate; the executor rounds each down to the ladder (ratio r: on average by (1 - 1/r)/ln r,
+ * 0.845 for √2). Returns the expected number of rungs the band covers, 1 + ln S / ln r, and the expected time of
+ * an exposure in *mean_ms: est · (√S - 1/√S) / ln S · (1 - 1/r) / ln r, within [min_ms, max_ms]. S = 1: the
+ * estimate's own rung, one rung. */
+static double auto_band(const struct plan_timing *t, double est_ms, double spread, double max_ms, double *mean_ms)
 {
-	enum { cap = 64 };
-	double r = t->ladder_ratio > 1.0001 ? t->ladder_ratio : M_SQRT2, half = sqrt(spread >= 1 ? spread : 1);
-	double lo = ladder(t, est_ms / half, max_ms), hi = ladder(t, est_ms * half, max_ms), sum = 0;
-	if (lo < est_ms / half * (1 - 1e-9))
-		lo *= r; /* the first rung inside the band */
-	int k = 0;
-	for (double v = lo; v <= hi * (1 + 1e-9) && k < cap; v *= r, k++)
-		sum += v;
-	if (k == 0) {
+	double r = t->ladder_ratio > 1.0001 ? t->ladder_ratio : M_SQRT2;
+	if (!(spread > 1.0001)) {
 		*mean_ms = ladder(t, est_ms, max_ms);
 		return 1;
 	}
-	*mean_ms = sum / k;
-	return k;
+	double ls = log(spread), m = est_ms * (sqrt(spread) - 1 / sqrt(spread)) / ls * (1 - 1 / r) / log(r);
+	if (t->min_ms > 0 && m < t->min_ms)
+		m = t->min_ms;
+	if (max_ms > 0 && m > max_ms)
+		m = max_ms;
+	*mean_ms = m;
+	return 1 + ls / log(r);
+}
+
+/* The band's width for plan s: the sample's own spread at one viewing zenith (integration.spread, default
+ * PLAN_AUTO_SPREAD) times the geometry's, (cos θo_min / cos θo_max)² over the plan's points: the signal from the lit
+ * spot falls with the viewing zenith (the projected spot, and the paint's own fall towards grazing). The square is
+ * empirical, from the simulated green paint: the quick plan (θo 30-60°) chose 14.5-81.9 ms within an incidence
+ * (5.7x; 2 · 1.73² = 6), the paper plan (θo 0-81°) 16-256x within an incidence with a mean time 1.7x its median
+ * (2 · 6.4² = 82); the first power fits one of them, not both. */
+static double plan_spread(const struct plan_spec *s, const struct plan_result *r)
+{
+	double sample = s->integ_spread > 0 ? s->integ_spread : PLAN_AUTO_SPREAD;
+	double cmin = 1, cmax = 0;
+	for (size_t i = 0; i < r->n_steps; i++) {
+		double c = cos(fabs(r->steps[i].pos.det_theta) * M_PI / 180);
+		cmin = fmin(cmin, c);
+		cmax = fmax(cmax, c);
+	}
+	return cmin > 0.01 && cmax >= cmin ? sample * (cmax / cmin) * (cmax / cmin) : sample;
+}
+
+/* ms within the plan's max_ms (auto). */
+static double max_ms_of(const struct plan_spec *s, double ms)
+{
+	return s->max_integ_ms > 0 && ms > s->max_integ_ms ? s->max_integ_ms : ms;
 }
 
 void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
@@ -127,12 +155,18 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 	 * the next ones at the previous point's time */
 	double est_ms = s->integ_ms > 0 ? s->integ_ms : t->probe_ms;
 	double ms = s->integ_ms;
-	int k = 1;
+	double k = 1;
 	if (aut)
-		k = auto_rungs(t, est_ms, s->integ_spread > 0 ? s->integ_spread : PLAN_AUTO_SPREAD, s->max_integ_ms, &ms);
+		k = auto_band(t, est_ms, plan_spread(s, r), s->max_integ_ms, &ms);
 	double first_probe = aut ? shot(g, t, 1, est_ms) : 0, probe = aut ? shot(g, t, 1, ms) : 0;
 	double meas = shot(g, t, s->averages, ms);
 	double dark = shot(g, t, t->dark_averages, ms);
+	/* the HDR exposure a fraction h of the points needs, at hdr_ratio times a typical first time, the estimate's
+	 * rung (paper plan on green paint: 76 HDR exposures of 326 ms on average, 8 x 40.96 ms, the rung of its 50 ms
+	 * estimate); its darks are those of the longer base times the incidence has taken already (paper plan: 100
+	 * darks in all, 10 per incidence, what the base rungs alone give) */
+	double h = aut && t->max_exposures > 1 && t->hdr_ratio > 1 ? (s->integ_hdr >= 0 ? s->integ_hdr : PLAN_AUTO_HDR) : 0;
+	double hdr = h > 0 ? h * shot(g, t, s->averages, max_ms_of(s, t->hdr_ratio * ladder(t, est_ms, s->max_integ_ms))) : 0;
 	double clock = 0, dark_at = -INFINITY;
 	size_t since_clear = 0; /* points since the dark cache was last cleared */
 	r->reference_s = r->darks_s = 0;
@@ -165,7 +199,7 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 		 * point's rung is new with probability (1 - 1/k)^j after j points) */
 		double p_dark = clear ? 1.0 : aut ? pow(1.0 - 1.0 / k, (double)since_clear) : 0.0;
 		double d = st->move_s + st->settle_s + (moves ? 1.5 * t->axis_poll_s + t->extra_settle_s : 0) +
-			   (i == 0 && !t->reference ? first_probe : probe) + meas + p_dark * dark +
+			   (i == 0 && !t->reference ? first_probe : probe) + meas + p_dark * dark + hdr +
 			   t->point_overhead_s * t->time_scale;
 		r->darks_s += p_dark * dark;
 		if (clear)

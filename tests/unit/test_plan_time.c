@@ -18,15 +18,18 @@
 static const char *PLAN_FIXED = "name: t\nincidence: {theta_deg: [20, 45]}\n"
 				"observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
 				"integration: {mode: fixed, ms: 20}\naverages: 3\nblind_points: drop\n";
+/* one viewing zenith and spread 1: every point at the estimate's rung */
 static const char *PLAN_AUTO = "name: t\nincidence: {theta_deg: [20, 45]}\n"
-			       "observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
-			       "integration: {mode: auto, estimate_ms: 20, max_ms: 2000, spread: 1}\naverages: 3\n"
+			       "observation: {theta_deg: [30], phi_deg: [0, 45, 90, 135, 180, 225, 270, 315]}\n"
+			       "integration: {mode: auto, estimate_ms: 20, max_ms: 2000, spread: 1, hdr_fraction: 0}\n"
+			       "averages: 3\n"
 			       "blind_points: drop\n";
-/* The same with the sample's times spread over 4x around the estimate: 10 to 40 ms, the ladder's rungs inside it
- * 10.24, 14.48, 20.48, 28.96 ms (0.01 · √2^k, k = 20..23) */
+/* The sample's own spread 4 at one zenith, and the plan's zeniths 30° and 60° spread the times by
+ * (cos 30°/cos 60°)² = 3 more: S = 12 */
 static const char *PLAN_SPREAD = "name: t\nincidence: {theta_deg: [20, 45]}\n"
 				 "observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
-				 "integration: {mode: auto, estimate_ms: 20, max_ms: 2000, spread: 4}\naverages: 3\n"
+				 "integration: {mode: auto, estimate_ms: 20, max_ms: 2000, spread: 4, hdr_fraction: 0}\n"
+				 "averages: 3\n"
 				 "blind_points: drop\n";
 
 struct fx {
@@ -139,9 +142,10 @@ static void test_auto_ladder(void **state)
 	unload(&f);
 }
 
-/* Auto integration with the sample's spread: each exposure and probe at the mean of the band's rungs, and a dark
- * at the j-th point of an incidence with probability (1 - 1/k)^j; over an incidence of n points k(1 - (1 - 1/k)^n)
- * darks, more than the one of spread 1 and at most one per point. */
+/* Auto integration with the sample's spread: times log-uniform over a band S wide around the estimate, rounded
+ * down to the ladder: each exposure and probe at est · (√S - 1/√S)/ln S · (1 - 1/√2)/ln √2, and a dark at the j-th
+ * point of an incidence with probability (1 - 1/k)^j, k = 1 + ln S / ln √2 rungs: over an incidence of n points
+ * k(1 - (1 - 1/k)^n) darks, more than the one of spread 1 and at most one per point. */
 static void test_auto_spread(void **state)
 {
 	(void)state;
@@ -149,9 +153,9 @@ static void test_auto_spread(void **state)
 	load(&f, PLAN_SPREAD);
 	struct plan_timing t = timing();
 	plan_time_apply(f.spec, &f.g, &t, f.res);
-	double r2 = sqrt(2.0), rung[4] = { 0.01 * pow(r2, 20), 0.01 * pow(r2, 21), 0.01 * pow(r2, 22), 0.01 * pow(r2, 23) };
-	assert_true(rung[0] > 10 && rung[0] / r2 < 10 && rung[3] < 40 && rung[3] * r2 > 40);
-	double mean = (rung[0] + rung[1] + rung[2] + rung[3]) / 4, k = 4;
+	double c = cos(30 * M_PI / 180) / cos(60 * M_PI / 180), S = 4 * c * c, r2 = sqrt(2.0);
+	double mean = 20 * (sqrt(S) - 1 / sqrt(S)) / log(S) * (1 - 1 / r2) / log(r2), k = 1 + log(S) / log(r2);
+	assert_true(fabs(S - 12) < 1e-9 && mean > 21 && mean < 22 && k > 8 && k < 8.5);
 	double shot_ovh = f.g.readout_s + t.exposure_overhead_s, dark = 8 * mean / 1000 + shot_ovh;
 	double darks = 0, sum = 0;
 	size_t j = 0;
@@ -169,14 +173,38 @@ static void test_auto_spread(void **state)
 	}
 	assert_true(fabs(f.res->darks_s - darks) < 1e-9);
 	assert_true(fabs(f.res->predicted_s - sum) < 1e-9);
-	/* two incidences of 8 (or 7) points: between 2 and 2·4 darks, k(1 - (3/4)^n) each */
+	/* two incidences of 8 (or 7) points: between 2 and 2k darks, k(1 - (1 - 1/k)^n) each */
 	double n_darks = darks / dark;
-	assert_true(n_darks > 2 * 4 * (1 - pow(0.75, 7)) - 1e-9 && n_darks < 2 * 4 * (1 - pow(0.75, 8)) + 1e-9);
-	/* longer than with every point at the estimate's rung (spread 1) */
+	assert_true(n_darks > 2 * k * (1 - pow(1 - 1 / k, 7)) - 1e-9 && n_darks < 2 * k * (1 - pow(1 - 1 / k, 8)) + 1e-9);
+	/* longer than with every point at the estimate's rung (spread 1 at one zenith: test_auto_ladder) */
 	double spread = f.res->predicted_s;
 	f.spec->integ_spread = 1;
 	plan_time_apply(f.spec, &f.g, &t, f.res);
-	assert_true(spread > f.res->predicted_s + 3 * dark);
+	assert_true(spread > f.res->predicted_s); /* the geometry alone (S = 3) still spreads the times */
+	unload(&f);
+}
+
+/* HDR exposures: a fraction h of the points takes a second exposure at hdr_ratio times the estimate's rung (its
+ * dark one the longer base times took already); none when the executor takes one exposure per point (max_exposures 1). */
+static void test_auto_hdr(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_SPREAD);
+	struct plan_timing t = timing();
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double without = f.res->predicted_s, darks0 = f.res->darks_s;
+	f.spec->integ_hdr = 0.5;
+	t.hdr_ratio = 8;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double rung = 0.01 * pow(sqrt(2.0), 21); /* the estimate's: 14.48 ms */
+	double ovh = f.g.readout_s + t.exposure_overhead_s;
+	double extra = (double)f.res->n_steps * 0.5 * (3 * 8 * rung / 1000 + ovh);
+	assert_true(fabs(f.res->predicted_s - without - extra) < 1e-9);
+	assert_true(fabs(f.res->darks_s - darks0) < 1e-12);
+	t.max_exposures = 1;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(f.res->predicted_s - without) < 1e-9);
 	unload(&f);
 }
 
@@ -235,6 +263,7 @@ int main(void)
 		cmocka_unit_test(test_time_scale),
 		cmocka_unit_test(test_auto_ladder),
 		cmocka_unit_test(test_auto_spread),
+		cmocka_unit_test(test_auto_hdr),
 		cmocka_unit_test(test_reference),
 		cmocka_unit_test(test_dark_age),
 	};
