@@ -191,7 +191,7 @@ def main():
         res = {}
         t = threading.Thread(target=lambda: res.update(p=c.run("--json", "move", "detector_phi=350")))
         t.start()
-        wait_for(lambda: float(b.sim_status()["detector_phi"]) > 91, "the arm moving towards 350")  # under way, far from 350
+        wait_for(lambda: float(b.sim_status()["detector.phi"]) > 91, "the arm moving towards 350")  # under way, far from 350
         d = c.json("stop", "stop")
         t.join(30)
         check(d["stopped"] is True and 90 < d["detector.phi"] < 349, "stop mid-move %r" % d)
