@@ -186,7 +186,7 @@ int devices_move(struct devices *dv, const double target[3], devices_done_fn don
 			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", name, dv->slot[i].note);
 	}
 	if (!any)
-		return acq_errf(err, ACQ_E_INVAL, "move: give at least one of laser_theta, detector_theta, detector_phi");
+		return acq_errf(err, ACQ_E_INVAL, "move: give at least one of laser.theta, detector.theta, detector.phi");
 	return begin_axes(dv, target, R_MOVE, dv->c->sweep.move_timeout_s, done, ctx, err);
 }
 

@@ -607,7 +607,7 @@ int ex_cfg_parse(struct yc_node *acq, struct yc_node *cal, struct ex_cfg *c, str
 			if (yc_expect_seq(home, "sweep.acquisition.home_deg", err))
 				return -1;
 			if (home->n != 3)
-				return yc_errf(err, home, "home_deg: expected [laser_theta, detector_theta, detector_phi]");
+				return yc_errf(err, home, "home_deg: expected [laser.theta, detector.theta, detector.phi]");
 			for (int i = 0; i < 3; i++)
 				if (yc_node_double(home->items[i], "home_deg angle", -360, 720, &q.home_deg[i], err))
 					return -1;

@@ -313,8 +313,10 @@ json_t *store_sweep_show(struct store *st, int64_t id, bool with_points, struct 
 		goto fail;
 	json_object_set_new(sw, "events", ev);
 	if (with_points) {
-		s = store_prep(st, "SELECT id, order_index, theta_i, phi_i, theta_o, phi_o, laser_theta, detector_theta, "
-			           "detector_phi, state FROM points WHERE sweep_id = ? ORDER BY order_index", err);
+		/* the reply names the axes as everywhere (laser.theta); SQL spells them laser_theta (README) */
+		s = store_prep(st, "SELECT id, order_index, theta_i, phi_i, theta_o, phi_o, laser_theta AS \"laser.theta\", "
+			           "detector_theta AS \"detector.theta\", detector_phi AS \"detector.phi\", state FROM points "
+			           "WHERE sweep_id = ? ORDER BY order_index", err);
 		json_t *pts = s ? (sqlite3_bind_int64(s, 1, id), store_rows_json(st, s, err)) : NULL;
 		if (!pts)
 			goto fail;

@@ -355,6 +355,8 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
 	t->dark_averages = (int)sw->cfg.pol.dark_averages;
 	t->dark_every = sw->cfg.dark_every;
 	t->dark_max_age_s = sw->cfg.pol.dark_max_age_s;
+	t->max_exposures = sw->cfg.pol.max_exposures;
+	t->hdr_ratio = sw->cfg.pol.hdr_ratio;
 	t->reference = sw->cfg.take_reference;
 	t->ref_pose = sw->cfg.ref_pose;
 	if (sw->env.conf->have_sim && sw->env.conf->sim.time_scale > 0)

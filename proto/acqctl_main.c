@@ -698,7 +698,7 @@ int main(int argc, char **argv)
 				  name);
 			goto out;
 		}
-	if (!strcmp(cmd, "plan") && O.points)
+	if ((!strcmp(cmd, "plan") || !strcmp(cmd, "sweep.show")) && O.points)
 		json_object_set_new(req, "points", json_true());
 	if (O.format && strcmp(cmd, "export")) {
 		rc = fail(CTL_EXIT_USAGE, "usage", "--format is an option of export");

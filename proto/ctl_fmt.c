@@ -367,9 +367,10 @@ static void print_sweep_show(FILE *f, json_t *s)
 static void pos3(json_t *p, char *buf, size_t cap)
 {
 	char a[24], b[24], c[24];
-	ctl_fmt_angle(num(p, "theta_i"), a, sizeof a);
-	ctl_fmt_angle(num(p, "theta_o"), b, sizeof b);
-	ctl_fmt_angle(num(p, "phi_o"), c, sizeof c);
+	bool old = !json_object_get(p, "laser.theta"); /* a daemon of before the renames: theta_i, theta_o, phi_o */
+	ctl_fmt_angle(num(p, old ? "theta_i" : "laser.theta"), a, sizeof a);
+	ctl_fmt_angle(num(p, old ? "theta_o" : "detector.theta"), b, sizeof b);
+	ctl_fmt_angle(num(p, old ? "phi_o" : "detector.phi"), c, sizeof c);
 	snprintf(buf, cap, "(θi %s, θo %s, φo %s)", a, b, c);
 }
 
@@ -398,7 +399,12 @@ void ctl_print_plan(FILE *f, json_t *r)
 		ctl_fmt_dur(num(r, "predicted_s"), a, sizeof a);
 		ctl_fmt_dur(num(r, "reference_s"), b, sizeof b);
 		ctl_fmt_dur(num(r, "darks_s"), c, sizeof c);
-		fprintf(f, "  predicted sweep time %s (reference %s, darks %s included)", a, b, c);
+		fprintf(f, "  predicted sweep time %s (reference %s, darks %s", a, b, c);
+		if (json_is_number(json_object_get(r, "host_s"))) { /* the host's time per point, load-dependent */
+			ctl_fmt_dur(num(r, "host_s"), c, sizeof c);
+			fprintf(f, ", host %s", c);
+		}
+		fputs(" included)", f);
 		double ts = num(r, "time_scale");
 		if (ts > 0 && ts != 1) {
 			ctl_fmt_dur(num(r, "predicted_s") / ts, a, sizeof a);
@@ -417,9 +423,11 @@ void ctl_print_plan(FILE *f, json_t *r)
 		num_i(r, "detours"));
 	json_t *tr = json_object_get(r, "travel_deg");
 	char t0[24], t1[24], t2[24];
-	ctl_fmt_angle(num(tr, "laser_theta"), t0, sizeof t0);
-	ctl_fmt_angle(num(tr, "detector_theta"), t1, sizeof t1);
-	ctl_fmt_angle(num(tr, "detector_phi"), t2, sizeof t2);
+	/* a daemon of before the renames said laser_theta, detector_theta, detector_phi */
+	bool old = !json_object_get(tr, "laser.theta");
+	ctl_fmt_angle(num(tr, old ? "laser_theta" : "laser.theta"), t0, sizeof t0);
+	ctl_fmt_angle(num(tr, old ? "detector_theta" : "detector.theta"), t1, sizeof t1);
+	ctl_fmt_angle(num(tr, old ? "detector_phi" : "detector.phi"), t2, sizeof t2);
 	fprintf(f, "  travel: laser.theta %s, detector.theta %s, detector.phi %s\n", t0, t1, t2);
 	json_t *steps = json_object_get(r, "steps");
 	size_t limit = json_is_array(steps) ? (size_t)-1 : 20, listed = 0, i;

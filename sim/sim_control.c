@@ -4,19 +4,19 @@
  * Protocol: a Unix stream socket, one command per line (<= 511 bytes), one reply line per command:
  * "ok[ details]" or "error: <what>". Commands:
  *   help                                   list the commands
- *   status                                 ok t=<bench s> laser_theta= detector_theta= detector_phi= emission=
+ *   status                                 ok t=<bench s> laser.theta= detector.theta= detector.phi= emission=
  *                                          power= sample= temperature= faults=<comma list or none>
  *                                          laser_status_reads=<STATUS? commands the laser answered>
  *   time                                   ok <bench seconds>
  *   sample MATERIAL|none                   what is on the stage (a material of sim/material.h)
  *   temperature <C>                        spectrometer sensor temperature (-40..80)
- *   pose <laser_theta> <det_theta> <det_phi>  set the arms' actual positions (degrees; for runs without the
+ *   pose <laser.theta> <detector.theta> <detector.phi>  set the axes' actual positions (degrees; for runs without the
  *                                          arm services: a running arm service overwrites them)
  *   laser on|off [power_pct]               set emission and power (for runs without the laser service)
- *   fault modbus-timeout laser|detector [on|off]
- *   fault drop-connection laser|detector   (once)
- *   fault alarm-mid-move laser|detector    (next move)
- *   fault stall laser|detector             (next move)
+ *   fault modbus-timeout ARM [on|off]      ARM: the arm controller, laser_arm | detector_arm (the names of
+ *   fault drop-connection ARM   (once)     README "Names, one per thing"; the older laser | detector are
+ *   fault alarm-mid-move ARM    (next move) still accepted)
+ *   fault stall ARM             (next move)
  *   fault spectro-disconnect [offline_s]   the spectrometer vanishes half way through the next exposure and
  *                                          refuses connections for offline_s bench seconds after (default 0)
  *   fault saturation-burst <N>             the next N spectra are saturated
@@ -24,8 +24,8 @@
  *   fault laser-fault on|off
  *   fault clear                            clear every fault flag
  *
- * Schedule (config):  sim.faults: { seed: N (default --seed), schedule: [ {at: S, fault: NAME, arm: laser|
- * detector, duration: S, count: N, offline_s: S}, ... ], random: {rate_per_min: R, faults: [NAME, ...],
+ * Schedule (config):  sim.faults: { seed: N (default --seed), schedule: [ {at: S, fault: NAME, arm: laser_arm|
+ * detector_arm, duration: S, count: N, offline_s: S}, ... ], random: {rate_per_min: R, faults: [NAME, ...],
  * duration: S (default 5)} }. `at` is bench seconds; `duration` clears an on/off fault after S seconds; random faults
  * arrive as a Poisson process of R per bench minute, kind and arm drawn from the seeded generator. */
 #include <errno.h>
@@ -164,10 +164,14 @@ static int parse_onoff(const char *s, bool *on)
 	return -1;
 }
 
+/* The arm controllers by name (index % 2: 0 the laser's, 1 the detector's): laser_arm, detector_arm as everywhere
+ * else; laser, detector are the older spellings, still accepted. */
+static const char *const arm_names[] = { "laser_arm", "detector_arm", "laser", "detector", NULL };
+
 static void faults_list(const struct sim_world *w, char *buf, size_t len)
 {
 	const struct sim_faults *f = &w->faults;
-	static const char *const arms[2] = { "laser", "detector" };
+	static const char *const arms[2] = { "laser_arm", "detector_arm" };
 	size_t n = 0;
 	buf[0] = 0;
 #define ADD(...) do { if (n < len) n += (size_t)snprintf(buf + n, len - n, "%s", n ? "," : ""); \
@@ -207,15 +211,15 @@ static int command(struct control *c, struct client *k, char *line, double now)
 	const char *cmd = argv[0];
 	if (!strcmp(cmd, "help")) {
 		return reply(k, "ok commands: help | status | time | sample MATERIAL|none | temperature C"
-				" | pose LASER_THETA DET_THETA DET_PHI | laser on|off [POWER_PCT] | fault NAME [ARGS] | fault clear;"
+				" | pose LASER.THETA DETECTOR.THETA DETECTOR.PHI | laser on|off [POWER_PCT] | fault NAME [ARGS] | fault clear;"
 				" faults: modbus-timeout ARM [on|off], drop-connection ARM, alarm-mid-move ARM, stall ARM,"
 				" spectro-disconnect [OFFLINE_S], saturation-burst N, laser-interlock on|off, laser-fault on|off;"
-				" ARM: laser|detector");
+				" ARM: laser_arm|detector_arm");
 	}
 	if (!strcmp(cmd, "status")) {
 		char fl[512];
 		faults_list(w, fl, sizeof fl);
-		return reply(k, "ok t=%.6f laser_theta=%.4f detector_theta=%.4f detector_phi=%.4f emission=%d power=%.2f"
+		return reply(k, "ok t=%.6f laser.theta=%.4f detector.theta=%.4f detector.phi=%.4f emission=%d power=%.2f"
 				" sample=%s temperature=%.2f faults=%s laser_status_reads=%lu",
 			     now, w->laser_theta_deg, w->detector_theta_deg, w->detector_phi_deg, w->laser_emission ? 1 : 0,
 			     w->laser_power_pct, phys_sample_name(w->sample), w->sensor_temp_c, fl, w->laser_status_reads);
@@ -240,7 +244,7 @@ static int command(struct control *c, struct client *k, char *line, double now)
 		double a, b, d;
 		if (argc != 4 || acq_num_parse(argv[1], -360, 360, &a) || acq_num_parse(argv[2], -360, 360, &b) ||
 		    acq_num_parse(argv[3], -720, 720, &d))
-			return reply(k, "error: pose: expected LASER_THETA DETECTOR_THETA DETECTOR_PHI in degrees");
+			return reply(k, "error: pose: expected LASER.THETA DETECTOR.THETA DETECTOR.PHI in degrees");
 		w->laser_theta_deg = a;
 		w->detector_theta_deg = b;
 		w->detector_phi_deg = d;
@@ -267,10 +271,10 @@ static int command(struct control *c, struct client *k, char *line, double now)
 		struct event e = { .at = now, .kind = kind, .on = true };
 		int next = 2;
 		if (arm_fault(kind)) {
-			static const char *const arms[] = { "laser", "detector", NULL };
-			e.arm = argc > 2 ? find_name(arms, argv[2]) : -1;
+			e.arm = argc > 2 ? find_name(arm_names, argv[2]) : -1;
 			if (e.arm < 0)
-				return reply(k, "error: fault %s: expected the arm: laser|detector", argv[1]);
+				return reply(k, "error: fault %s: expected the arm: laser_arm|detector_arm", argv[1]);
+			e.arm %= 2;
 			next = 3;
 		}
 		if (kind == F_SATURATION_BURST) {
@@ -478,17 +482,16 @@ static int parse_faults(struct control *c, struct yc_node *fn, struct acq_err *e
 			struct yc_node *it = sched->items[i];
 			struct event e = { .on = true };
 			int arm = -1;
-			static const char *const arms[] = { "laser", "detector", NULL };
 			long long count = 1;
 			if (yc_expect_map(it, "a fault schedule entry", err) ||
 			    yc_double(it, "at", true, 0, 1e9, &e.at, err) || yc_enum(it, "fault", true, fault_names, &e.kind, err) ||
-			    yc_enum(it, "arm", false, arms, &arm, err) || yc_double(it, "duration", false, 0, 1e9, &e.duration, err) ||
+			    yc_enum(it, "arm", false, arm_names, &arm, err) || yc_double(it, "duration", false, 0, 1e9, &e.duration, err) ||
 			    yc_int(it, "count", false, 0, 1000000, &count, err) ||
 			    yc_double(it, "offline_s", false, 0, 1e9, &e.offline_s, err))
 				return -1;
 			if (arm_fault(e.kind) && arm < 0)
-				return yc_errf(err, it, "fault %s needs `arm: laser|detector`", fault_names[e.kind]);
-			e.arm = arm < 0 ? 0 : arm;
+				return yc_errf(err, it, "fault %s needs `arm: laser_arm|detector_arm`", fault_names[e.kind]);
+			e.arm = arm < 0 ? 0 : arm % 2;
 			e.count = (int)count;
 			if (yc_check_unknown(it, "a fault schedule entry", err))
 				return -1;

@@ -71,6 +71,10 @@ struct plan_spec {
 	double integ_ms;            /* fixed: the integration time; auto: the estimate used for timing */
 	double target_peak;         /* auto: target peak as a fraction of full scale */
 	double max_integ_ms;        /* auto: upper bound on the integration time */
+	double integ_spread;        /* auto, timing only: longest / shortest time the sample needs at one viewing zenith
+				     * (integration.spread; 0: PLAN_AUTO_SPREAD; 1 and fixed θo: every point at the estimate) */
+	double integ_hdr;           /* auto, timing only: the fraction of points needing an HDR exposure
+				     * (integration.hdr_fraction; < 0: PLAN_AUTO_HDR) */
 	int averages;
 	size_t reciprocal_pairs;    /* number of reciprocal partners to add (0: none) */
 	enum plan_blind_policy blind_policy;
@@ -147,7 +151,17 @@ struct plan_result {
 	double predicted_s;
 	double reference_s;         /* of predicted_s: the reference phase and the move from it to the first point */
 	double darks_s;             /* of predicted_s: dark spectra */
+	double host_s;              /* of predicted_s: the host's time per point (point_overhead_s × time_scale each),
+				     * load-dependent at high time scales: reported apart */
 };
+
+/* The default integration.spread of auto plans: the range of times the bench chose at one viewing zenith on the
+ * simulated green paint, quick plan: 41 to 81.9 ms at θo 60°, 57.9 ms at 30° off the specular plane (14.5 ms in
+ * it): 1-4x, 2 typical; see plan_time.c. */
+#define PLAN_AUTO_SPREAD 2.0
+/* The default integration.hdr_fraction of auto plans: the points that needed a second (HDR) exposure on the
+ * simulated green paint (paper plan 76 of 866, quick plan 2 of 15). */
+#define PLAN_AUTO_HDR 0.09
 
 /* The executor's costs the ordering model leaves out; plan_timing_defaults() gives the executor's and the
  * arm driver's defaults, the daemon fills it from its configuration (sweep, acquisition, devices). */
@@ -161,6 +175,8 @@ struct plan_timing {
 	int dark_averages;          /* exposures per dark */
 	int dark_every;             /* a dark every N points; 0: one per incidence */
 	double dark_max_age_s;      /* and a new dark when the last one is older than this (0: never) */
+	int max_exposures;          /* auto: exposures per point at most (a second, HDR, one when the weak end is faint) */
+	double hdr_ratio;           /* auto: the HDR exposure's time / the first's */
 	bool reference;             /* a reference (the plan's averages) at the start, at ref_pose, then the move to
 				     * the first point */
 	struct plan_pos ref_pose;

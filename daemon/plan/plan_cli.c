@@ -65,11 +65,12 @@ static const char *find_bench(char *buf, size_t len)
 
 /* The executor's timing from the file's sweep section when it has one (as the daemon reads it): sweep.
  * extra_settle_s, dark_every, min_integration_ms; sweep.acquisition probe_ms, ladder_ratio, dark_averages, dark_max_age_s, poll_s,
+ * max_exposures, hdr_ratio,
  * take_reference, reference_pose. Absent keys keep the defaults. 0 or -1. */
 static int load_timing(struct yc_node *root, struct plan_timing *t, struct acq_err *err)
 {
 	struct yc_node *sw = yc_get(root, "sweep"), *acq = sw ? yc_get(sw, "acquisition") : NULL;
-	long long every = t->dark_every, davg = t->dark_averages;
+	long long every = t->dark_every, davg = t->dark_averages, nexp = t->max_exposures;
 	double poll = 2 * t->exposure_overhead_s;
 	if (sw && (yc_double(sw, "extra_settle_s", false, 0, 60, &t->extra_settle_s, err) ||
 		   yc_int(sw, "dark_every", false, 0, 100000, &every, err) ||
@@ -80,6 +81,8 @@ static int load_timing(struct yc_node *root, struct plan_timing *t, struct acq_e
 		    yc_double(acq, "dark_max_age_s", false, 0, 1e7, &t->dark_max_age_s, err) ||
 		    yc_int(acq, "dark_averages", false, 1, 100000, &davg, err) ||
 		    yc_double(acq, "poll_s", false, 1e-4, 10, &poll, err) ||
+		    yc_int(acq, "max_exposures", false, 1, 8, &nexp, err) ||
+		    yc_double(acq, "hdr_ratio", false, 1.01, 1e4, &t->hdr_ratio, err) ||
 		    yc_bool(acq, "take_reference", false, &t->reference, err)))
 		return -1;
 	struct yc_node *pose = acq ? yc_get(acq, "reference_pose") : NULL;
@@ -87,6 +90,7 @@ static int load_timing(struct yc_node *root, struct plan_timing *t, struct acq_e
 		return -1;
 	t->dark_every = (int)every;
 	t->dark_averages = (int)davg;
+	t->max_exposures = (int)nexp;
 	t->exposure_overhead_s = poll / 2;
 	return 0;
 }

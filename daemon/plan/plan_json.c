@@ -17,7 +17,9 @@ static const char *status_name(enum plan_status s)
 
 static json_t *pos_json(const struct plan_pos *p)
 {
-	return json_pack("{s:f,s:f,s:f}", "theta_i", p->laser_theta, "theta_o", p->det_theta, "phi_o", p->det_phi);
+	/* the arms' pose, by the axes' names (README "Names, one per thing"; theta_i, theta_o, phi_o before) */
+	return json_pack("{s:f,s:f,s:f}", "laser.theta", p->laser_theta, "detector.theta", p->det_theta, "detector.phi",
+			 p->det_phi);
 }
 
 json_t *plan_to_json(const struct plan_spec *s, const struct plan_result *r, bool points)
@@ -42,6 +44,7 @@ json_t *plan_to_json(const struct plan_spec *s, const struct plan_result *r, boo
 	json_object_set_new(o, "predicted_s", json_real(r->predicted_s));
 	json_object_set_new(o, "reference_s", json_real(r->reference_s));
 	json_object_set_new(o, "darks_s", json_real(r->darks_s));
+	json_object_set_new(o, "host_s", json_real(r->host_s));
 	json_object_set_new(o, "detours", json_integer((json_int_t)r->n_detours));
 	json_object_set_new(o, "blind_points", json_string(s->blind_policy == PLAN_BLIND_MOVE ? "move" : "drop"));
 	json_object_set_new(o, "averages", json_integer(s->averages));
@@ -52,8 +55,9 @@ json_t *plan_to_json(const struct plan_spec *s, const struct plan_result *r, boo
 		nrec += r->req[i].role == PLAN_ROLE_RECIPROCAL &&
 			(r->req[i].status == PLAN_KEPT || r->req[i].status == PLAN_MOVED);
 	json_object_set_new(o, "reciprocal_measured", json_integer((json_int_t)nrec));
-	json_object_set_new(o, "travel_deg", json_pack("{s:f,s:f,s:f}", "laser_theta", r->travel_deg[0],
-						      "detector_theta", r->travel_deg[1], "detector_phi",
+	/* the axes' names as everywhere (README "Names, one per thing"; laser_theta... before schema 5) */
+	json_object_set_new(o, "travel_deg", json_pack("{s:f,s:f,s:f}", "laser.theta", r->travel_deg[0],
+						      "detector.theta", r->travel_deg[1], "detector.phi",
 						      r->travel_deg[2]));
 	json_t *dl = json_array(), *mv = json_array();
 	for (size_t i = 0; i < r->n_req; i++) {

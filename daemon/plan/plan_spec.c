@@ -5,7 +5,9 @@
  *   incidence: {theta_deg: RANGE}
  *   observation: {theta_deg: RANGE, phi_deg: RANGE}          # grid, per incidence
  *            or  {fibonacci: {count: N, max_theta_deg: 85}}  # near-uniform directions, per incidence
- *   integration: {mode: auto, target_peak: 0.8, estimate_ms: 50, max_ms: 5000} | {mode: fixed, ms: 20}
+ *   integration: {mode: auto, target_peak: 0.8, estimate_ms: 50, max_ms: 5000, spread: 4} | {mode: fixed, ms: 20}
+ *                (timing only: spread, the longest / shortest time the sample needs at one viewing zenith;
+ *                hdr_fraction, the points that need a second exposure)
  *   averages: 4
  *   reciprocal_pairs: 10
  *   blind_points: drop | move
@@ -113,6 +115,7 @@ int plan_integration_parse(struct yc_node *root, struct plan_spec *s, struct acq
 	s->integ_ms = 50;
 	s->target_peak = 0.8;
 	s->max_integ_ms = 5000;
+	s->integ_hdr = -1; /* PLAN_AUTO_HDR unless the plan says */
 	if (!n)
 		return 0;
 	if (yc_expect_map(n, "integration", err))
@@ -127,7 +130,9 @@ int plan_integration_parse(struct yc_node *root, struct plan_spec *s, struct acq
 	} else {
 		if (yc_double(n, "target_peak", false, 0.01, 1.0, &s->target_peak, err) ||
 		    yc_double(n, "max_ms", false, 0.001, 600000, &s->max_integ_ms, err) ||
-		    yc_double(n, "estimate_ms", false, 0.001, 600000, &s->integ_ms, err))
+		    yc_double(n, "estimate_ms", false, 0.001, 600000, &s->integ_ms, err) ||
+		    yc_double(n, "spread", false, 1, 1e6, &s->integ_spread, err) ||
+		    yc_double(n, "hdr_fraction", false, 0, 1, &s->integ_hdr, err))
 			return -1;
 		if (s->integ_ms > s->max_integ_ms)
 			return yc_errf(err, yc_get(n, "estimate_ms"), "integration: estimate_ms (%g) exceeds max_ms (%g)",

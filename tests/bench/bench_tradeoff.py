@@ -186,7 +186,7 @@ def plan(name, text):
     lp = laser_phi()
     ang = []
     for s in d["steps"]:
-        ti, to, po = s["theta_i"], s["theta_o"], s["phi_o"]
+        ti, to, po = s["laser.theta"], s["detector.theta"], s["detector.phi"]  # the arms' pose
         pi = lp + (180.0 if ti < 0 else 0.0)
         if to < 0:
             to, po = -to, po + 180.0

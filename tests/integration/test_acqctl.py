@@ -191,7 +191,7 @@ def main():
         res = {}
         t = threading.Thread(target=lambda: res.update(p=c.run("--json", "move", "detector_phi=350")))
         t.start()
-        wait_for(lambda: float(b.sim_status()["detector_phi"]) > 91, "the arm moving towards 350")  # under way, far from 350
+        wait_for(lambda: float(b.sim_status()["detector.phi"]) > 91, "the arm moving towards 350")  # under way, far from 350
         d = c.json("stop", "stop")
         t.join(30)
         check(d["stopped"] is True and 90 < d["detector.phi"] < 349, "stop mid-move %r" % d)
@@ -249,7 +249,11 @@ def main():
         check(d["sweeps"][0]["state"] == "aborted", "aborted in the list %r" % d["sweeps"][0])
         out = c.human("sweep", "list")
         check("aborted" in out and "T" in out.splitlines()[1], "sweep list with dates %r" % out)
-        c.json("sweep.show", "sweep", "show", str(d["sweeps"][0]["id"]))
+        d = c.json("sweep.show", "sweep", "show", str(d["sweeps"][0]["id"]), "--points")
+        pts = d["sweep"]["points"]
+        check(pts and all("laser.theta" in p and "laser_theta" not in p for p in pts) and
+              all(isinstance(p["detector.phi"], (int, float)) for p in pts if p["state"] == "done"),
+              "sweep show --points names the axes as everywhere %r" % pts[:2])
         d = c.json("error", "recon", "status", "1", rc=1)  # positional form, no run for this sweep
         check(d["error"]["code"] == "not_found", "recon status 1 %r" % d)
         # --- watch: JSON lines, reconnects across a daemon restart
@@ -313,7 +317,7 @@ def main():
         check(p.returncode == 0 and json.loads(p.stdout) == {"ok": True, "sample": "metal"}, "ctl sample %r" % p.stdout)
         p = subprocess.run([sim, "ctl", "--control", b.ctl_path, "--json", "truth"], capture_output=True, text=True)
         t = json.loads(p.stdout)
-        check(p.returncode == 0 and t["sample"] == "metal" and "laser_theta" in t, "ctl truth %r" % t)
+        check(p.returncode == 0 and t["sample"] == "metal" and "laser.theta" in t and "laser_theta" not in t, "ctl truth %r" % t)
         p = subprocess.run([sim, "ctl", "fault", "bogus"], capture_output=True, text=True, env=env)
         check(p.returncode == 1 and "unknown fault" in p.stderr, "ctl refused %r" % p.stderr)
         p = subprocess.run([sim, "ctl", "fault", "saturation-burst", "2"], capture_output=True, text=True, env=env)

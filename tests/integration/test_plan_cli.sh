@@ -22,6 +22,13 @@ assert d["kept"] + d["moved"] + d["dropped"] + d["duplicates"] == d["requested"]
 assert d["measured"] == d["kept"] + d["moved"] == len(d["steps"])
 assert len(d["dropped_points"]) == d["dropped"] and len(d["moved_points"]) == d["moved"]
 assert 0 < d["lower_bound_s"] <= d["duration_s"] <= d["raster_s"], d
+# one name per axis (README "Names, one per thing"): the arms' pose and travel by the axes' names
+axes = {"laser.theta", "detector.theta", "detector.phi"}
+assert set(d["travel_deg"]) == axes, d["travel_deg"]
+assert all(axes <= set(s) and "theta_i" not in s for s in d["steps"]), d["steps"][0]
+assert all(set(p["requested"]) == axes for p in d["dropped_points"] + d["moved_points"])
+# the prediction's parts: the host's time per point is reported apart (0 < host_s < predicted_s)
+assert 0 < d["host_s"] < d["predicted_s"] and 0 < d["darks_s"] < d["predicted_s"], d
 # the step times add up to the estimate
 steps = d["steps"]
 end = steps[-1]["t_start_s"] + steps[-1]["move_s"] + steps[-1]["settle_s"] + d["point_dwell_s"]

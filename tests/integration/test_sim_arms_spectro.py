@@ -126,14 +126,14 @@ def measure():
 control("sample white")
 control("laser on 100")
 status = control("status")
-lt = float(re.search(r"laser_theta=(-?[\d.]+)", status).group(1))
+lt = float(re.search(r"laser\.theta=(-?[\d.]+)", status).group(1))
 check(abs(lt) < 0.5, f"laser arm parked near the zenith ({lt})")
 at = move_detector_theta(3.0)  # 3 deg from the laser arm: requested inside the blind zone
 print(f"requested 3 deg, stopped at {at} deg")
 check(at > 7.5, "the arm stopped before the blind zone (the bodies touch first)")
 c_near, occ = measure()
 st = control("status")
-check(abs(float(re.search(r"detector_theta=(-?[\d.]+)", st).group(1)) - at) < 0.05, f"world has the actual position: {st}")
+check(abs(float(re.search(r"detector\.theta=(-?[\d.]+)", st).group(1)) - at) < 0.05, f"world has the actual position: {st}")
 check(occ == 0 and c_near > 3000, f"spectrum of the actual position: no occlusion, light ({c_near:.0f} counts)")
 mb("-r", "125", "-t", "4", values=("128",))  # ALM-RST
 at2 = move_detector_theta(40.0)

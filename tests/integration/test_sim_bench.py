@@ -231,10 +231,13 @@ try:
                       ("fault saturation-burst -3", "count")]:
         r = ctl(cmd)
         check(r.startswith("error:") and want in r, f"'{cmd}' -> {r}")
-    r = ctl("fault modbus-timeout laser on")
-    check("modbus-timeout:laser" in r, f"arm fault flags are set: {r}")
-    r = ctl("fault alarm-mid-move detector")
-    check("alarm-mid-move:detector" in r, f"{r}")
+    r = ctl("fault modbus-timeout laser_arm on")  # the arm controllers' names (README "Names, one per thing")
+    check("modbus-timeout:laser_arm" in r, f"arm fault flags are set: {r}")
+    r = ctl("fault alarm-mid-move detector")  # the older spelling still names the detector's arm
+    check("alarm-mid-move:detector_arm" in r and "modbus-timeout:laser_arm" in r, f"{r}")
+    st = ctl("status")
+    check(all(k + "=" in st for k in ("laser.theta", "detector.theta", "detector.phi")) and "_theta=" not in st,
+          f"status names the axes as everywhere else: {st}")
     r = ctl("x" * 600)
     check(r.startswith("error: command line longer"), "overlong command line is refused")
 

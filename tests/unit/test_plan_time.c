@@ -18,10 +18,19 @@
 static const char *PLAN_FIXED = "name: t\nincidence: {theta_deg: [20, 45]}\n"
 				"observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
 				"integration: {mode: fixed, ms: 20}\naverages: 3\nblind_points: drop\n";
+/* one viewing zenith and spread 1: every point at the estimate's rung */
 static const char *PLAN_AUTO = "name: t\nincidence: {theta_deg: [20, 45]}\n"
-			       "observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
-			       "integration: {mode: auto, estimate_ms: 20, max_ms: 2000}\naverages: 3\n"
+			       "observation: {theta_deg: [30], phi_deg: [0, 45, 90, 135, 180, 225, 270, 315]}\n"
+			       "integration: {mode: auto, estimate_ms: 20, max_ms: 2000, spread: 1, hdr_fraction: 0}\n"
+			       "averages: 3\n"
 			       "blind_points: drop\n";
+/* The sample's own spread 4 at one zenith, and the plan's zeniths 30° and 60° spread the times by
+ * (cos 30°/cos 60°)² = 3 more: S = 12 */
+static const char *PLAN_SPREAD = "name: t\nincidence: {theta_deg: [20, 45]}\n"
+				 "observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
+				 "integration: {mode: auto, estimate_ms: 20, max_ms: 2000, spread: 4, hdr_fraction: 0}\n"
+				 "averages: 3\n"
+				 "blind_points: drop\n";
 
 struct fx {
 	struct bench_geom g;
@@ -133,6 +142,72 @@ static void test_auto_ladder(void **state)
 	unload(&f);
 }
 
+/* Auto integration with the sample's spread: times log-uniform over a band S wide around the estimate, rounded
+ * down to the ladder: each exposure and probe at est · (√S - 1/√S)/ln S · (1 - 1/√2)/ln √2, and a dark at the j-th
+ * point of an incidence with probability (1 - 1/k)^j, k = 1 + ln S / ln √2 rungs: over an incidence of n points
+ * k(1 - (1 - 1/k)^n) darks, more than the one of spread 1 and at most one per point. */
+static void test_auto_spread(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_SPREAD);
+	struct plan_timing t = timing();
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double c = cos(30 * M_PI / 180) / cos(60 * M_PI / 180), S = 4 * c * c, r2 = sqrt(2.0);
+	double mean = 20 * (sqrt(S) - 1 / sqrt(S)) / log(S) * (1 - 1 / r2) / log(r2), k = 1 + log(S) / log(r2);
+	assert_true(fabs(S - 12) < 1e-9 && mean > 21 && mean < 22 && k > 8 && k < 8.5);
+	double shot_ovh = f.g.readout_s + t.exposure_overhead_s, dark = 8 * mean / 1000 + shot_ovh;
+	double darks = 0, sum = 0;
+	size_t j = 0;
+	for (size_t i = 0; i < f.res->n_steps; i++) {
+		const struct plan_step *st = &f.res->steps[i];
+		bool new_inc = i == 0 || st->pos.laser_theta != f.res->steps[i - 1].pos.laser_theta;
+		j = new_inc ? 0 : j + 1;
+		double p = pow(1 - 1 / k, (double)j);
+		double d = st->move_s + st->settle_s + (st->move_s + st->settle_s > 0 ? 1.5 * t.axis_poll_s : 0) +
+			   (i == 0 ? 20.0 : mean) / 1000 + shot_ovh + 3 * mean / 1000 + shot_ovh + p * dark +
+			   t.point_overhead_s;
+		assert_true(fabs(st->predicted_s - d) < 1e-9);
+		darks += p * dark;
+		sum += d;
+	}
+	assert_true(fabs(f.res->darks_s - darks) < 1e-9);
+	assert_true(fabs(f.res->predicted_s - sum) < 1e-9);
+	/* two incidences of 8 (or 7) points: between 2 and 2k darks, k(1 - (1 - 1/k)^n) each */
+	double n_darks = darks / dark;
+	assert_true(n_darks > 2 * k * (1 - pow(1 - 1 / k, 7)) - 1e-9 && n_darks < 2 * k * (1 - pow(1 - 1 / k, 8)) + 1e-9);
+	/* longer than with every point at the estimate's rung (spread 1 at one zenith: test_auto_ladder) */
+	double spread = f.res->predicted_s;
+	f.spec->integ_spread = 1;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(spread > f.res->predicted_s); /* the geometry alone (S = 3) still spreads the times */
+	unload(&f);
+}
+
+/* HDR exposures: a fraction h of the points takes a second exposure at hdr_ratio times the estimate's rung (its
+ * dark one the longer base times took already); none when the executor takes one exposure per point (max_exposures 1). */
+static void test_auto_hdr(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_SPREAD);
+	struct plan_timing t = timing();
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double without = f.res->predicted_s, darks0 = f.res->darks_s;
+	f.spec->integ_hdr = 0.5;
+	t.hdr_ratio = 8;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double rung = 0.01 * pow(sqrt(2.0), 21); /* the estimate's: 14.48 ms */
+	double ovh = f.g.readout_s + t.exposure_overhead_s;
+	double extra = (double)f.res->n_steps * 0.5 * (3 * 8 * rung / 1000 + ovh);
+	assert_true(fabs(f.res->predicted_s - without - extra) < 1e-9);
+	assert_true(fabs(f.res->darks_s - darks0) < 1e-12);
+	t.max_exposures = 1;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(f.res->predicted_s - without) < 1e-9);
+	unload(&f);
+}
+
 /* The reference phase: from the arms' position to the reference pose, probe/dark/exposure there, then to the
  * first point; the steps start after it. */
 static void test_reference(void **state)
@@ -187,6 +262,8 @@ int main(void)
 		cmocka_unit_test(test_fixed_steps),
 		cmocka_unit_test(test_time_scale),
 		cmocka_unit_test(test_auto_ladder),
+		cmocka_unit_test(test_auto_spread),
+		cmocka_unit_test(test_auto_hdr),
 		cmocka_unit_test(test_reference),
 		cmocka_unit_test(test_dark_age),
 	};

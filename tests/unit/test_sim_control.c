@@ -46,7 +46,7 @@ static void test_schedule(void **state)
 				     "    - {at: 1, fault: modbus-timeout, arm: detector, duration: 2}\n"
 				     "    - {at: 5, fault: spectro-disconnect, offline_s: 3}\n"
 				     "    - {at: 6, fault: saturation-burst, count: 4}\n"
-				     "    - {at: 7, fault: stall, arm: laser}\n",
+				     "    - {at: 7, fault: stall, arm: laser_arm}\n",
 				     &doc, dir, &err);
 	if (!s)
 		fail_msg("%s", err.msg);
