@@ -327,11 +327,13 @@ def analyse(rows):
 
 def plot(rows, plt):
     n = len(MATS)
-    fig, axs = plt.subplots(2, n, figsize=(3.2 * n, 6.4), squeeze=False)
+    nc = min(n, 4)
+    npair = (n + nc - 1) // nc
+    fig, axs = plt.subplots(2 * npair, nc, figsize=(3.6 * nc, 5.6 * npair), squeeze=False)
     P = PAPER_S[0] / 60
     for j, mat in enumerate(MATS):
         for i, (key, lab) in enumerate((("dhr_err", "DHR error (worst of 8/30/60°)"), ("logrmse", "held-out log-RMSE"))):
-            ax = axs[i][j]
+            ax = axs[2 * (j // nc) + i][j % nc]
             for kind, col in (("grid", "C0"), ("fibonacci", "C1"), ("adaptive", "C3")):
                 st = [r for r in rows if r["material"] == mat and r["kind"] == kind]
                 if kind == "adaptive":
@@ -357,7 +359,7 @@ def plot(rows, plt):
                 ax.set_title(mat, fontsize=9)
             if i == 1:
                 ax.set_xlabel("bench time (min, planner)", fontsize=8)
-            if j == 0:
+            if j % nc == 0:
                 ax.set_ylabel(lab, fontsize=8)
             ax.tick_params(labelsize=7)
     axs[0][0].legend(fontsize=6)
