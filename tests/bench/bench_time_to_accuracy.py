@@ -408,7 +408,7 @@ def validate(rows, paper_s):
         text = adaptive_plan(paper_s, os.path.join(WORK, "validate.yaml"), budget_s=budget)
         sid = L.start_sweep(b, text, "tta-validate")
         t0 = time.time()
-        row = L.drive_to_end(b, sid, timeout=3600, sample=mat)
+        row = L.drive_to_end(b, sid, timeout=900, sample=mat)
         if row["state"] != "completed":
             return out + ["  the sweep ended %s: NOT VALIDATED" % row["state"]]
         dec, why = A.check_decisions(b, sid)
