@@ -1,0 +1,236 @@
+/* bench_tta_plan: the planner's side of the daemon's adaptive loop for tests/bench/bench_time_to_accuracy.py (the
+ * offline time-to-accuracy study), with the daemon's own code: its configuration loader and executor timing
+ * (conf_load, sweep_init + sweep_plan_timing), the seed plan (plan_make + plan_time_apply, as a sweep start), the
+ * candidates with their cost (plan_adaptive_candidates, as daemon/recon_select.c's child writes them), and a batch
+ * (as daemon/sweep_adaptive.c's plan_batch: select's picks kept in order while their cost fits the budget left,
+ * planned from the arms with plan_make_points, re-planned one pick shorter while the batch's predicted time exceeds
+ * what is left). Run alone (as `make bench` does) it only says what it is.
+ *
+ *   bench_tta_plan seed  CONF PLAN [--time-scale S]                 -> JSON {predicted_s, steps}
+ *   bench_tta_plan cand  CONF PLAN STATE.json OUT.csv [--time-scale S] -> OUT.csv; prints the count
+ *   bench_tta_plan batch CONF PLAN STATE.json SELECT.json [--time-scale S] -> JSON {k, predicted_s, steps}
+ * STATE.json: {"done": [[laser_theta, detector_theta, detector_phi], ...] (every planned point so far),
+ * "from": [..3..] (the arms), "spent_s": S (predicted seconds so far)}. A step is [laser_theta, detector_theta,
+ * detector_phi, theta_i, phi_i, theta_o, phi_o, pick rank (batch; -1 for the seed)]. Exit 2 on bad input. */
+#include <jansson.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "daemon/conf.h"
+#include "daemon/executor.h"
+#include "daemon/plan/plan.h"
+#include "daemon/sweep.h"
+
+static int fail(const char *what, const char *msg)
+{
+	fprintf(stderr, "bench_tta_plan: %s: %s\n", what, msg);
+	return 2;
+}
+
+/* The daemon's executor timing for the configuration file at path, at time scale scale. 0 or -1 (message printed). */
+static int load(const char *path, double scale, struct conf **conf, struct plan_timing *t)
+{
+	struct acq_err err = { 0 };
+	struct conf_sim sim = { .time_scale = scale };
+	if (conf_load(path, scale != 1 ? &sim : NULL, conf, &err))
+		return fail(path, err.msg), -1;
+	struct sweep_env env = { .conf = *conf };
+	struct sweep *sw = NULL;
+	if (sweep_init(&env, &sw, &err))
+		return fail(path, err.msg), -1;
+	sweep_plan_timing(sw, t);
+	/* not sweep_finish(): it would stop a loop this process has none of; the process ends soon */
+	return 0;
+}
+
+static int pos_of(json_t *a, struct plan_pos *p)
+{
+	if (!json_is_array(a) || json_array_size(a) != 3)
+		return -1;
+	p->laser_theta = json_number_value(json_array_get(a, 0));
+	p->det_theta = json_number_value(json_array_get(a, 1));
+	p->det_phi = json_number_value(json_array_get(a, 2));
+	return 0;
+}
+
+static json_t *steps_json(const struct bench_geom *g, const struct plan_result *r, bool batch)
+{
+	json_t *s = json_array();
+	for (size_t i = 0; i < r->n_steps; i++) {
+		double ti, pi, to, po;
+		const struct plan_pos *p = &r->steps[i].pos;
+		ex_pos_angles(g, p, &ti, &pi, &to, &po);
+		json_array_append_new(s, json_pack("[ffffffff]", p->laser_theta, p->det_theta, p->det_phi, ti, pi, to, po,
+						   batch ? (double)r->steps[i].req : -1.0));
+	}
+	return s;
+}
+
+static int print_json(json_t *o)
+{
+	int rc = json_dumpf(o, stdout, JSON_COMPACT) || fputc('\n', stdout) == EOF ? 1 : 0;
+	json_decref(o);
+	return rc;
+}
+
+/* The sweep's state: done positions (new array, count in *n), the arms in *from, the predicted seconds so far. */
+static int state_load(const char *path, struct plan_pos **done, size_t *n, struct plan_pos *from, double *spent)
+{
+	json_error_t je;
+	json_t *o = json_load_file(path, 0, &je), *d = o ? json_object_get(o, "done") : NULL;
+	if (!o || !json_is_array(d) || pos_of(json_object_get(o, "from"), from)) {
+		json_decref(o);
+		return fail(path, o ? "needs done [[3 numbers]...] and from [3 numbers]" : je.text), -1;
+	}
+	*n = json_array_size(d);
+	*done = calloc(*n + 1, sizeof **done);
+	for (size_t i = 0; i < *n; i++)
+		if (pos_of(json_array_get(d, i), &(*done)[i])) {
+			json_decref(o);
+			return fail(path, "a done position is not [3 numbers]"), -1;
+		}
+	*spent = json_number_value(json_object_get(o, "spent_s"));
+	json_decref(o);
+	return 0;
+}
+
+static int cmd_cand(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
+		    const char *state, const char *out)
+{
+	struct plan_pos *done = NULL, from;
+	size_t nd = 0, n = 0;
+	double spent;
+	if (state_load(state, &done, &nd, &from, &spent))
+		return 2;
+	struct plan_cand *c = NULL;
+	struct acq_err err = { 0 };
+	if (plan_adaptive_candidates(s, g, t, &from, done, nd, &c, &n, &err)) {
+		free(done);
+		return fail("candidates", err.msg);
+	}
+	FILE *f = fopen(out, "w");
+	if (!f) {
+		free(done);
+		free(c);
+		return fail(out, "cannot write");
+	}
+	fprintf(f, "id,theta_i,phi_i,theta_o,phi_o,cost_s\n");
+	for (size_t i = 0; i < n; i++) {
+		double ti, pi, to, po;
+		ex_pos_angles(g, &c[i].pos, &ti, &pi, &to, &po);
+		fprintf(f, "%zu,%.9g,%.9g,%.9g,%.9g,%.6g\n", c[i].id, ti, pi, to, po, c[i].cost_s);
+	}
+	int bad = fclose(f);
+	printf("%zu\n", n);
+	free(done);
+	free(c);
+	return bad ? fail(out, "write failed") : 0;
+}
+
+static int cmd_batch(const struct plan_spec *s, const struct bench_geom *g, struct plan_timing t, const char *state,
+		     const char *sel)
+{
+	struct plan_pos *done = NULL, from;
+	size_t nd = 0;
+	double spent;
+	if (state_load(state, &done, &nd, &from, &spent))
+		return 2;
+	free(done);
+	json_error_t je;
+	json_t *o = json_load_file(sel, 0, &je), *picks = o ? json_object_get(o, "picks") : NULL;
+	if (!json_is_array(picks)) {
+		json_decref(o);
+		return fail(sel, o ? "no picks []" : je.text);
+	}
+	const struct plan_adaptive *ad = s->adaptive;
+	size_t n = json_array_size(picks), k = 0;
+	double left_s = ad->budget_s > 0 ? ad->budget_s - spent : INFINITY, cost = 0;
+	size_t left_pts = ad->budget_points ? (ad->budget_points > nd ? ad->budget_points - nd : 0) : n;
+	struct plan_pos *pos = calloc(n + 1, sizeof *pos);
+	for (size_t i = 0; i < n; i++) {
+		json_t *id = json_object_get(json_array_get(picks, i), "id");
+		if (!json_is_integer(id) || plan_adaptive_cand_pos(s, (size_t)json_integer_value(id), &pos[i])) {
+			free(pos);
+			json_decref(o);
+			return fail(sel, "a pick names no candidate of the plan");
+		}
+	}
+	while (k < n && k < left_pts) {
+		double c = json_number_value(json_object_get(json_array_get(picks, k), "cost_s"));
+		if (cost + c > left_s)
+			break;
+		cost += c;
+		k++;
+	}
+	json_decref(o);
+	t.reference = false;
+	t.have_start = false;
+	struct plan_result *r = NULL;
+	struct acq_err err = { 0 };
+	for (; k > 0; k--) {
+		if (plan_make_points(s, g, pos, k, &from, &r, &err)) {
+			free(pos);
+			return fail("planning the batch", err.msg);
+		}
+		plan_time_apply(s, g, &t, r);
+		if (r->predicted_s <= left_s || !isfinite(left_s))
+			break;
+		plan_result_free(r);
+		r = NULL;
+	}
+	free(pos);
+	json_t *out = json_pack("{s:I, s:f, s:o}", "k", (json_int_t)k, "predicted_s", r ? r->predicted_s : 0.0, "steps",
+				r ? steps_json(g, r, true) : json_array());
+	plan_result_free(r);
+	return print_json(out);
+}
+
+int main(int argc, char **argv)
+{
+	if (argc < 4) {
+		printf("bench_tta_plan: the planner side of tests/bench/bench_time_to_accuracy.py (run by it; nothing to "
+		       "measure alone)\n");
+		return argc == 1 ? 0 : 2;
+	}
+	double scale = 1;
+	if (argc >= 6 && strcmp(argv[argc - 2], "--time-scale") == 0) {
+		scale = strtod(argv[argc - 1], NULL);
+		argc -= 2;
+		if (!(scale > 0))
+			return fail("--time-scale", "not a positive number");
+	}
+	struct conf *conf = NULL;
+	struct plan_timing t;
+	struct plan_spec *s = NULL;
+	struct acq_err err = { 0 };
+	if (load(argv[2], scale, &conf, &t))
+		return 2;
+	if (plan_load(argv[3], &s, &err)) {
+		conf_free(conf);
+		return fail(argv[3], err.msg);
+	}
+	const struct bench_geom *g = &conf->bench;
+	int rc;
+	if (strcmp(argv[1], "seed") == 0 && argc == 4) {
+		struct plan_result *r = NULL;
+		if (plan_make(s, g, &r, &err))
+			rc = fail(argv[3], err.msg);
+		else {
+			plan_time_apply(s, g, &t, r);
+			rc = print_json(json_pack("{s:f, s:o}", "predicted_s", r->predicted_s, "steps", steps_json(g, r, false)));
+		}
+		plan_result_free(r);
+	} else if (!s->adaptive)
+		rc = fail(argv[3], "not an adaptive plan");
+	else if (strcmp(argv[1], "cand") == 0 && argc == 6)
+		rc = cmd_cand(s, g, &t, argv[4], argv[5]);
+	else if (strcmp(argv[1], "batch") == 0 && argc == 6)
+		rc = cmd_batch(s, g, t, argv[4], argv[5]);
+	else
+		rc = fail(argv[1], "usage: seed CONF PLAN | cand CONF PLAN STATE OUT.csv | batch CONF PLAN STATE SELECT.json");
+	plan_spec_free(s);
+	conf_free(conf);
+	return rc;
+}
