@@ -402,6 +402,18 @@ static struct yc_node *yc_lookup(struct yc_node *map, const char *key, bool requ
 	return n;
 }
 
+/* The scalar at key: NULL with *rc 0 (absent and optional) or -1 (missing though required, or not a scalar). */
+static struct yc_node *yc_lookup_scalar(struct yc_node *map, const char *key, bool required, int *rc,
+					struct acq_err *err)
+{
+	struct yc_node *n = yc_lookup(map, key, required, rc, err);
+	if (n && yc_scalar_of(n, key, err)) {
+		*rc = -1;
+		return NULL;
+	}
+	return n;
+}
+
 int yc_double(struct yc_node *map, const char *key, bool required, double min, double max, double *out,
 	      struct acq_err *err)
 {
@@ -421,11 +433,9 @@ int yc_int(struct yc_node *map, const char *key, bool required, long long min, l
 int yc_bool(struct yc_node *map, const char *key, bool required, bool *out, struct acq_err *err)
 {
 	int rc;
-	struct yc_node *n = yc_lookup(map, key, required, &rc, err);
+	struct yc_node *n = yc_lookup_scalar(map, key, required, &rc, err);
 	if (!n)
 		return rc;
-	if (yc_scalar_of(n, key, err))
-		return -1;
 	static const char *const t[] = { "true", "yes", "on" }, *const f[] = { "false", "no", "off" };
 	for (int i = 0; i < 3; i++) {
 		if (!strcasecmp(n->value, t[i])) { *out = true; return 0; }
@@ -437,11 +447,9 @@ int yc_bool(struct yc_node *map, const char *key, bool required, bool *out, stru
 int yc_string(struct yc_node *map, const char *key, bool required, const char **out, struct acq_err *err)
 {
 	int rc;
-	struct yc_node *n = yc_lookup(map, key, required, &rc, err);
+	struct yc_node *n = yc_lookup_scalar(map, key, required, &rc, err);
 	if (!n)
 		return rc;
-	if (yc_scalar_of(n, key, err))
-		return -1;
 	*out = n->value;
 	return 0;
 }
@@ -450,11 +458,9 @@ int yc_enum(struct yc_node *map, const char *key, bool required, const char *con
 	    struct acq_err *err)
 {
 	int rc;
-	struct yc_node *n = yc_lookup(map, key, required, &rc, err);
+	struct yc_node *n = yc_lookup_scalar(map, key, required, &rc, err);
 	if (!n)
 		return rc;
-	if (yc_scalar_of(n, key, err))
-		return -1;
 	char list[256] = "";
 	size_t off = 0;
 	for (int i = 0; names[i]; i++) {

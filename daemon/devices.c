@@ -1,5 +1,6 @@
-/* devices: the bench's devices, each behind its own I/O thread (port.h): opening, reconnecting, status reports
- * from a cache, manual move and measure, and the sweep executor's device operations (devices.h).
+/* devices: the bench's devices, each behind its own I/O thread (port.h): requests and their completions,
+ * opening, reconnecting, status reports from a cache, the laser's keep-alive (devices.h). A request's driver
+ * calls are in devices_io.c, the manual operations in devices_op.c, the executor's operations in devices_ex.c.
  *
  * The loop never calls a driver. Every device call is a request run on the device's port thread; its
  * completion comes back to the loop, updates the slot's cache and continues whoever asked (the device
@@ -12,7 +13,6 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "daemon/log.h"
 #include "daemon/loop.h"
@@ -21,176 +21,9 @@
 #include "drivers/laser.h"
 #include "drivers/spectro.h"
 
-/* ---- on the port's thread ------------------------------------------------------------------------------ */
-
-static int no_handle(struct req *r)
-{
-	return acq_errf(&r->err, ACQ_E_DISCONNECTED, "%s unavailable", dname(r->d));
-}
-
-/* A move or homing from start to end on the thread: step at the driver's poll times; an interrupt stops it. */
-static void run_motion(struct req *r, struct port *p, struct axis *ax)
-{
-	double now = port_now(p);
-	r->rc = r->op == R_HOME ? axis_home_begin(ax, now, &r->err) : axis_move_begin(ax, r->target, now, &r->err);
-	while (r->rc == 0) {
-		now = port_now(p);
-		int s = axis_move_step(ax, now, &r->err);
-		if (s == AXIS_MOVE_DONE)
-			break;
-		if (s == AXIS_MOVE_FAILED) {
-			r->rc = -1;
-			break;
-		}
-		if (port_interrupted(p) || now > r->deadline) {
-			struct acq_err e2;
-			axis_stop(ax, &e2);
-			if (port_interrupted(p))
-				r->rc = acq_errf(&r->err, ACQ_E_STATE, "%s: move stopped by request", dname(r->d));
-			else
-				r->rc = acq_errf(&r->err, ACQ_E_TIMEOUT, "move not finished after %g s",
-						 r->dv->c->sweep.move_timeout_s);
-			break;
-		}
-		double wait = axis_next_poll(ax) - now;
-		port_wait(p, wait > 0.5 ? 0.5 : wait, -1);
-	}
-	r->have_ast = axis_read_status(ax, &r->ast, NULL) == 0;
-}
-
-static void run_measure(struct req *r, struct port *p, struct spectro *sp)
-{
-	r->rc = spectro_start(sp, &r->meas, port_now(p), &r->err);
-	while (r->rc == 0) {
-		int f = spectro_fetch(sp, r->frame, port_now(p), &r->err);
-		if (f == 1)
-			break;
-		if (f < 0) {
-			r->rc = -1;
-			break;
-		}
-		if (port_interrupted(p)) {
-			spectro_stop(sp, NULL);
-			r->rc = acq_errf(&r->err, ACQ_E_STATE, "spectrometer: measurement stopped by request");
-			break;
-		}
-		port_wait_real(p, 0.005, spectro_pollfd(sp));
-	}
-}
-
-static double mono_now(void);
-static void req_run_op(struct req *r, struct port *p);
-
-static void req_run(struct port_req *pr, struct port *p)
-{
-	struct req *r = (struct req *)pr;
-	double t0 = mono_now();
-	req_run_op(r, p);
-	r->run_s = mono_now() - t0;
-}
-
-static void req_run_op(struct req *r, struct port *p)
-{
-	struct dev_slot *s = &r->dv->slot[r->d];
-	r->rc = 0;
-	switch (r->op) {
-	case R_OPEN:
-		if (is_axis(r->d)) {
-			if (!s->ax)
-				r->rc = axis_open(r->cfg, &s->ax, &r->err);
-			if (!r->rc) {
-				axis_identity(s->ax, &r->aid, NULL);
-				r->have_ast = axis_read_status(s->ax, &r->ast, NULL) == 0;
-			}
-		} else if (r->d == CONF_DEV_SPECTRO) {
-			if (!s->sp)
-				r->rc = spectro_open(r->cfg, &s->sp, &r->err);
-			if (!r->rc) {
-				r->info = *spectro_info(s->sp);
-				r->have_info = true;
-			}
-		} else {
-			if (!s->ls)
-				r->rc = laser_open(r->cfg, &s->ls, &r->err);
-			if (!r->rc) {
-				r->lid = *laser_identity(s->ls);
-				r->have_lst = laser_status(s->ls, &r->lst, NULL) == 0;
-			}
-		}
-		break;
-	case R_CLOSE:
-		axis_close(s->ax);
-		spectro_close(s->sp);
-		laser_close(s->ls);
-		s->ax = NULL;
-		s->sp = NULL;
-		s->ls = NULL;
-		break;
-	case R_STATUS:
-		if (is_axis(r->d))
-			r->rc = !s->ax ? no_handle(r) : axis_read_status(s->ax, &r->ast, &r->err);
-		else
-			r->rc = !s->ls ? no_handle(r) : laser_status(s->ls, &r->lst, &r->err);
-		r->have_ast = !r->rc && is_axis(r->d);
-		r->have_lst = !r->rc && !is_axis(r->d);
-		break;
-	case R_MOVE:
-	case R_HOME:
-		if (!s->ax) {
-			r->rc = no_handle(r);
-			break;
-		}
-		if (r->op == R_HOME && r->on) { /* manual homing: an alarm is reset first */
-			struct axis_status st;
-			if (!axis_read_status(s->ax, &st, NULL) && st.alarm && axis_alarm_reset(s->ax, &r->err)) {
-				r->rc = -1;
-				acq_err_prefix(&r->err, "resetting its alarm: ");
-				break;
-			}
-		}
-		run_motion(r, p, s->ax);
-		break;
-	case R_STOP:
-		r->rc = !s->ax ? 0 : axis_stop(s->ax, &r->err);
-		break;
-	case R_ALARM_RESET:
-		r->rc = !s->ax ? no_handle(r) : axis_alarm_reset(s->ax, &r->err);
-		break;
-	case R_LASER:
-		if (!s->ls) {
-			r->rc = r->on ? no_handle(r) : 0;
-			break;
-		}
-		if (r->on && !isnan(r->pct))
-			r->rc = laser_set_power(s->ls, r->pct, &r->err);
-		if (!r->rc)
-			r->rc = laser_set_emission(s->ls, r->on, &r->err);
-		r->have_lst = laser_status(s->ls, &r->lst, r->rc ? NULL : &r->err) == 0;
-		if (!r->rc && !r->have_lst)
-			r->rc = -1;
-		break;
-	case R_POWER:
-		r->rc = !s->ls ? no_handle(r) : laser_set_power(s->ls, r->pct, &r->err);
-		break;
-	case R_MEASURE:
-		if (!s->sp)
-			r->rc = no_handle(r);
-		else if (!r->frame)
-			r->rc = acq_errf(&r->err, ACQ_E_NOMEM, "out of memory");
-		else
-			run_measure(r, p, s->sp);
-		break;
-	case R_SPECTRO_STOP:
-		r->rc = !s->sp ? 0 : spectro_stop(s->sp, &r->err);
-		break;
-	}
-}
-
 static double mono_now(void)
 {
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+	return loop_monotonic(NULL);
 }
 
 /* The laser port's periodic job: refresh the keep-alive while the loop is alive (devices_heartbeat). It runs
@@ -235,7 +68,7 @@ struct req *devices_req_new(struct devices *dv, int d, enum rop op, enum owner o
 	struct req *r = calloc(1, sizeof *r);
 	if (!r)
 		return NULL;
-	r->pr.run = req_run;
+	r->pr.run = devices_req_run;
 	r->pr.done = req_done;
 	r->dv = dv;
 	r->d = d;
@@ -317,7 +150,6 @@ static void opened(struct devices *dv, struct req *r)
 		dv->notify(dv->ctx, (enum conf_dev)r->d, true, "connected");
 }
 
-static void op_done(struct devices *dv, struct req *r);
 static void query_step(struct query *q);
 static void call_done(struct req *r);
 
@@ -349,7 +181,7 @@ static void req_done(struct port_req *pr)
 	if (r->owner == OWN_EX && current)
 		devices_ex_done(dv, r);
 	else if (r->owner == OWN_OP)
-		op_done(dv, r);
+		devices_op_done(dv, r);
 	else if (r->owner == OWN_QUERY)
 		query_step(r->q);
 	else if (r->owner == OWN_CALL)
@@ -673,270 +505,6 @@ int devices_query(struct devices *dv, devices_done_fn done, void *ctx, struct ac
 int devices_read_positions(struct devices *dv, devices_done_fn done, void *ctx, struct acq_err *err)
 {
 	return query(dv, true, done, ctx, err);
-}
-
-/* ---- manual operations -------------------------------------------------------------------------------------- */
-
-static void op_finish(struct devices *dv, int rc, const struct acq_err *err, json_t *result)
-{
-	if (dv->op_laser && dv->slot[CONF_DEV_LASER].available) {
-		struct req *r = devices_req_new(dv, CONF_DEV_LASER, R_LASER, OWN_MGR);
-		if (r)
-			r->on = false;
-		devices_req_submit(r);
-	}
-	dv->op_laser = false;
-	dv->op_active = false;
-	dv->op_kind[0] = 0;
-	devices_done_fn done = dv->op_done;
-	dv->op_done = NULL;
-	if (done)
-		done(dv->op_ctx, rc, err, result);
-	else
-		json_decref(result);
-}
-
-static void measure_stored(struct devices *dv, struct req *r)
-{
-	struct acq_err err = { 0 };
-	struct spectro_frame *f = r->frame;
-	int n = f->npix > 0 && f->npix <= SPECTRO_MAX_PIXELS ? f->npix : 0;
-	float *counts = malloc((size_t)(n ? n : 1) * sizeof *counts);
-	if (!counts || !n) {
-		free(counts);
-		acq_errf(&err, n ? ACQ_E_NOMEM : ACQ_E_DEVICE, n ? "out of memory" : "spectrometer returned no pixels");
-		op_finish(dv, -1, &err, NULL);
-		return;
-	}
-	double peak = 0;
-	for (int i = 0; i < n; i++) {
-		counts[i] = (float)f->counts[i];
-		if (f->counts[i] > peak)
-			peak = f->counts[i];
-	}
-	struct store_spectrum sp = { .kind = dv->op_kind, .spectrometer_id = dv->spectro_id,
-				     .integration_ms = f->meas.integration_ms, .averages = (int)f->meas.averages,
-				     .npix = n, .counts = counts, .stddev = f->stddev, .saturated_count = f->nsaturated,
-				     .saturated = f->saturated, .temperature_c = f->temperature_c,
-				     .taken_at = dv->wallclock() };
-	int64_t id = 0;
-	int rc = store_spectrum_add(dv->st, &sp, &id, &err);
-	free(counts);
-	if (rc) {
-		op_finish(dv, -1, &err, NULL);
-		return;
-	}
-	op_finish(dv, 0, NULL,
-		  json_pack("{s:I,s:s,s:i,s:f,s:i,s:f,s:i}", "spectrum_id", (json_int_t)id, "kind", dv->op_kind, "npix", n,
-			    "peak", peak, "saturated", f->nsaturated, "integration_ms", f->meas.integration_ms, "averages",
-			    (int)f->meas.averages));
-}
-
-/* Name the device in a driver's message unless the driver already did. */
-static void name_err(struct acq_err *err, int d)
-{
-	size_t n = strlen(dname(d));
-	if (strncmp(err->msg, dname(d), n))
-		acq_err_prefix(err, "%s: ", dname(d));
-}
-
-static void op_done(struct devices *dv, struct req *r)
-{
-	if (!dv->op_active || r->seq != dv->op_gen)
-		return; /* the operation ended (stopped) before this completion */
-	if (r->op == R_MOVE || r->op == R_HOME) {
-		if (r->rc && !dv->op_rc) {
-			dv->op_rc = -1;
-			dv->op_err = r->err;
-			name_err(&dv->op_err, r->d);
-			for (int i = 0; i < 3; i++) /* the others stop too */
-				if (i != r->d && dv->slot[i].port)
-					port_interrupt(dv->slot[i].port);
-		}
-		if (--dv->op_waiting > 0)
-			return;
-		if (dv->op_rc) {
-			op_finish(dv, -1, &dv->op_err, NULL);
-			return;
-		}
-		json_t *res = json_object();
-		for (int i = 0; i < 3; i++)
-			if (dv->slot[i].available && dv->slot[i].have_status)
-				json_object_set_new(res, dname(i), json_real(dv->slot[i].ast.position_deg));
-		op_finish(dv, 0, NULL, res);
-		return;
-	}
-	if (r->op == R_LASER) { /* the laser is as the measurement needs it: measure */
-		if (r->rc || (r->on && !(r->lst.emission && r->lst.interlock_ok && !r->lst.fault)) ||
-		    (!r->on && r->lst.emission)) {
-			struct acq_err err = r->err;
-			if (!r->rc)
-				acq_errf(&err, ACQ_E_DEVICE, "laser %s", r->on ? "not emitting (interlock open or fault)"
-									   : "still emitting");
-			acq_err_prefix(&err, "%s: switching the laser %s: ", dv->op_kind, r->on ? "on" : "off");
-			op_finish(dv, -1, &err, NULL);
-			return;
-		}
-		struct req *m = devices_req_new(dv, CONF_DEV_SPECTRO, R_MEASURE, OWN_OP);
-		if (m) {
-			m->meas = r->meas;
-			m->frame = malloc(sizeof *m->frame);
-		}
-		if (devices_req_submit(m)) {
-			struct acq_err err = { 0 };
-			acq_errf(&err, ACQ_E_NOMEM, "out of memory");
-			op_finish(dv, -1, &err, NULL);
-		}
-		return;
-	}
-	if (r->op == R_MEASURE) {
-		if (r->rc)
-			op_finish(dv, -1, &r->err, NULL);
-		else
-			measure_stored(dv, r);
-	}
-}
-
-/* Start the manual operation op (R_MOVE, or R_HOME with alarm reset) on the axes whose target is not NaN, each
- * on its thread, ended after timeout_s. 0 or -1. */
-static int begin_axes(struct devices *dv, const double target[3], enum rop op, double timeout_s, devices_done_fn done,
-		      void *ctx, struct acq_err *err)
-{
-	double deadline = loop_now(dv->lp) + timeout_s;
-	dv->op_active = true;
-	dv->op_gen++;
-	dv->op_done = done;
-	dv->op_ctx = ctx;
-	dv->op_rc = 0;
-	dv->op_waiting = 0;
-	for (int i = 0; i < 3; i++) {
-		if (isnan(target[i]))
-			continue;
-		struct req *r = devices_req_new(dv, i, op, OWN_OP);
-		if (r) {
-			r->target = target[i];
-			r->on = op == R_HOME;
-			r->deadline = deadline;
-		}
-		if (devices_req_submit(r) == 0)
-			dv->op_waiting++;
-	}
-	if (!dv->op_waiting) {
-		dv->op_active = false;
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	}
-	return 0;
-}
-
-int devices_move(struct devices *dv, const double target[3], devices_done_fn done, void *ctx, struct acq_err *err)
-{
-	if (dv->op_active)
-		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
-	bool any = false;
-	for (int i = 0; i < 3; i++) {
-		if (isnan(target[i]))
-			continue;
-		any = true;
-		const char *name = dname(i);
-		if (!dv->c->axis[i])
-			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", name, dv->slot[i].note);
-		double lo, hi;
-		axis_cfg_limits(dv->c->axis[i], &lo, &hi);
-		if (!(target[i] >= lo && target[i] <= hi))
-			return acq_errf(err, ACQ_E_RANGE, "%s: %g° is outside the soft limits [%g°, %g°]", name, target[i],
-					lo, hi);
-		if (!dv->slot[i].available)
-			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", name, dv->slot[i].note);
-	}
-	if (!any)
-		return acq_errf(err, ACQ_E_INVAL, "move: give at least one of laser_theta, detector_theta, detector_phi");
-	return begin_axes(dv, target, R_MOVE, dv->c->sweep.move_timeout_s, done, ctx, err);
-}
-
-int devices_measure(struct devices *dv, const char *kind, double integration_ms, int averages, double power_pct,
-		    devices_done_fn done, void *ctx, struct acq_err *err)
-{
-	if (dv->op_active)
-		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
-	if (!dv->slot[CONF_DEV_SPECTRO].available)
-		return acq_errf(err, ACQ_E_UNSUPPORTED, "spectrometer: unavailable (%s)", dv->slot[CONF_DEV_SPECTRO].note);
-	/* A dark needs the laser off (and known to be off); a sample or reference needs the beam, switched on for
-	 * the measurement only. */
-	bool dark = !strcmp(kind, "dark");
-	const struct dev_slot *ls = &dv->slot[CONF_DEV_LASER];
-	if (!ls->available && (!dark || ls->configured || dv->c->devpresent[CONF_DEV_LASER]))
-		return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: the laser is unavailable (%s)", kind, ls->note);
-	struct spectro_meas m = { .integration_ms = integration_ms, .averages = (unsigned)averages,
-				  .saturation_detection = true };
-	if (!(m.integration_ms > 0) || m.averages < 1)
-		return acq_errf(err, ACQ_E_INVAL, "spectrometer: integration time must be > 0 ms and averages ≥ 1");
-	snprintf(dv->op_kind, sizeof dv->op_kind, "%s", kind);
-	dv->op_active = true;
-	dv->op_gen++;
-	dv->op_done = done;
-	dv->op_ctx = ctx;
-	dv->op_laser = !dark && ls->available;
-	struct req *r;
-	if (ls->available) {
-		r = devices_req_new(dv, CONF_DEV_LASER, R_LASER, OWN_OP);
-		if (r) {
-			r->on = !dark;
-			r->pct = dark ? NAN : power_pct;
-			r->meas = m;
-		}
-	} else { /* no laser at all: a dark straight away */
-		r = devices_req_new(dv, CONF_DEV_SPECTRO, R_MEASURE, OWN_OP);
-		if (r) {
-			r->meas = m;
-			r->frame = malloc(sizeof *r->frame);
-		}
-	}
-	if (devices_req_submit(r)) {
-		dv->op_active = false;
-		dv->op_laser = false;
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	}
-	return 0;
-}
-
-int devices_home(struct devices *dv, unsigned mask, devices_done_fn done, void *ctx, struct acq_err *err)
-{
-	if (dv->op_active)
-		return acq_errf(err, ACQ_E_STATE, "a manual operation is already running");
-	for (int i = 0; i < 3; i++)
-		if ((mask & (1u << i)) && !dv->slot[i].available)
-			return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: unavailable (%s)", dname(i),
-					dv->slot[i].note[0] ? dv->slot[i].note : "not configured");
-	if (!(mask & 7u))
-		return acq_errf(err, ACQ_E_INVAL, "home: no axis selected");
-	double t[3];
-	for (int i = 0; i < 3; i++)
-		t[i] = mask & (1u << i) ? 0 : NAN;
-	/* a homing run is slower than a move */
-	return begin_axes(dv, t, R_HOME, 4 * dv->c->sweep.move_timeout_s, done, ctx, err);
-}
-
-int devices_stop(struct devices *dv, bool *stopped, struct acq_err *err)
-{
-	(void)err;
-	*stopped = dv->op_active;
-	for (int i = 0; i < 3; i++) { /* every axis, moving or not: whatever moves stops */
-		if (!dv->slot[i].available || !dv->slot[i].port)
-			continue;
-		port_interrupt(dv->slot[i].port);
-		devices_req_submit(devices_req_new(dv, i, R_STOP, OWN_MGR));
-	}
-	if (*stopped) {
-		struct dev_slot *sp = &dv->slot[CONF_DEV_SPECTRO];
-		if (dv->op_kind[0] && sp->available && sp->port) {
-			port_interrupt(sp->port);
-			devices_req_submit(devices_req_new(dv, CONF_DEV_SPECTRO, R_SPECTRO_STOP, OWN_MGR));
-		}
-		struct acq_err e = { 0 };
-		acq_errf(&e, ACQ_E_STATE, "stopped by the operator");
-		op_finish(dv, -1, &e, NULL); /* also switches off a laser it switched on */
-	}
-	return 0;
 }
 
 static void call_done(struct req *r)

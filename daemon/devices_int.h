@@ -1,5 +1,6 @@
-/* devices_int: the device layer's internals shared by devices.c (ports, manager, manual operations) and
- * devices_ex.c (the sweep executor's operations). Not for other modules. */
+/* devices_int: the device layer's internals shared by devices.c (requests, completions, manager, queries,
+ * keep-alive), devices_io.c (a request's driver calls on its port's thread), devices_op.c (manual operations)
+ * and devices_ex.c (the sweep executor's operations). Not for other modules. */
 #ifndef DEVICES_INT_H
 #define DEVICES_INT_H
 
@@ -148,6 +149,10 @@ static inline bool is_axis(int d)
 struct req *devices_req_new(struct devices *dv, int d, enum rop op, enum owner owner);
 /* Queue r on its slot's port. -1 (r freed) when the slot has no port or r is NULL. */
 int devices_req_submit(struct req *r);
+/* On the port's thread: run r's driver calls (devices_io.c); results in r, real time taken in r->run_s. */
+void devices_req_run(struct port_req *pr, struct port *p);
+/* On the loop: continue the manual operation r belongs to (devices_op.c); stale completions are dropped. */
+void devices_op_done(struct devices *dv, struct req *r);
 /* An executor request completed (on the loop): record its result for the next call, kick the executor. */
 void devices_ex_done(struct devices *dv, struct req *r);
 

@@ -93,7 +93,6 @@ void ex_event(struct ex *x, const char *kind, const char *device, const char *fm
 		snprintf(e->device, sizeof e->device, "%s", device ? device : "");
 		snprintf(e->msg, sizeof e->msg, "%s", msg);
 		e->at = at;
-		snprintf(x->lost_err, sizeof x->lost_err, "%s", err.msg);
 	}
 	if (x->sink.event)
 		x->sink.event(x->sink.ctx, x->sweep_id, kind, device, msg);
@@ -108,7 +107,6 @@ void ex_set_db_state(struct ex *x, const char *state)
 	if (store_sweep_set_state(x->st, x->sweep_id, state, at, &err)) {
 		snprintf(x->lost_state, sizeof x->lost_state, "%s", state);
 		x->lost_state_at = at;
-		snprintf(x->lost_err, sizeof x->lost_err, "%s", err.msg);
 	} else {
 		x->lost_state[0] = 0; /* the latest state is stored */
 	}
@@ -119,29 +117,21 @@ bool ex_has_unrecorded(const struct ex *x)
 	return x->lost_state[0] || x->nlost_ev;
 }
 
-const char *ex_unrecorded_error(const struct ex *x)
-{
-	return x->lost_err;
-}
-
 int ex_flush_unrecorded(struct ex *x, struct acq_err *err)
 {
 	while (x->nlost_ev) {
 		struct ex_lost_event *e = &x->lost_ev[0];
 		if (store_event(x->st, x->sweep_id, e->kind, e->device[0] ? e->device : NULL, e->msg, e->at, err))
-			goto fail;
+			return -1;
 		memmove(&x->lost_ev[0], &x->lost_ev[1], (size_t)(x->nlost_ev - 1) * sizeof x->lost_ev[0]);
 		x->nlost_ev--;
 	}
 	if (x->lost_state[0]) {
 		if (store_sweep_set_state(x->st, x->sweep_id, x->lost_state, x->lost_state_at, err))
-			goto fail;
+			return -1;
 		x->lost_state[0] = 0;
 	}
 	return 0;
-fail:
-	snprintf(x->lost_err, sizeof x->lost_err, "%s", err->msg);
-	return -1;
 }
 
 void ex_clear_pending(struct ex *x)
@@ -149,26 +139,6 @@ void ex_clear_pending(struct ex *x)
 	for (int i = 0; i < x->npend; i++)
 		free(x->pend[i].frame);
 	x->npend = 0;
-}
-
-/* Pending spectra thrown away: their darks leave the cache too (every dark used is a stored dark). */
-static void discard_pending(struct ex *x)
-{
-	for (int i = 0; i < x->npend; i++)
-		if (!strcmp(x->pend[i].kind, "dark"))
-			exp_dark_forget(x->darks, x->pend[i].frame->meas.integration_ms);
-	ex_clear_pending(x);
-}
-
-void ex_reset_acq(struct ex *x)
-{
-	discard_pending(x);
-	x->have_t0 = false;
-	x->probe_no = 0;
-	x->ntimes = 0;
-	x->e = 0;
-	x->shot_in_flight = false;
-	x->shot_landed = false;
 }
 
 int ex_laser_off(struct ex *x, struct acq_err *err)
@@ -203,16 +173,22 @@ void ex_set_phase_text(struct ex *x, const char *s)
 	snprintf(x->phase_text, sizeof x->phase_text, "%s", s);
 }
 
+/* The sweep stops moving and measuring for the reason fmt/ap (x->reason) and enters state (failed, paused). */
+static void __attribute__((format(printf, 3, 0))) halt(struct ex *x, enum ex_state state, const char *fmt, va_list ap)
+{
+	vsnprintf(x->reason, sizeof x->reason, fmt, ap);
+	ex_safe_stop(x);
+	ex_reset_acq(x);
+	x->state = state;
+	x->phase = PH_NONE;
+}
+
 void ex_failed(struct ex *x, const char *fmt, ...)
 {
 	va_list ap;
 	va_start(ap, fmt);
-	vsnprintf(x->reason, sizeof x->reason, fmt, ap);
+	halt(x, EX_FAILED, fmt, ap);
 	va_end(ap);
-	ex_safe_stop(x);
-	ex_reset_acq(x);
-	x->state = EX_FAILED;
-	x->phase = PH_NONE;
 	ex_set_phase_text(x, "failed");
 	ex_set_db_state(x, "failed");
 	ex_event(x, "failed", NULL, "%s", x->reason);
@@ -222,14 +198,10 @@ void ex_pause_now(struct ex *x, bool by_fault, const char *fmt, ...)
 {
 	va_list ap;
 	va_start(ap, fmt);
-	vsnprintf(x->reason, sizeof x->reason, fmt, ap);
+	halt(x, EX_PAUSED, fmt, ap);
 	va_end(ap);
-	ex_safe_stop(x);
-	ex_reset_acq(x);
-	x->state = EX_PAUSED;
 	x->paused_by_fault = by_fault;
 	x->pause_requested = false;
-	x->phase = PH_NONE;
 	ex_set_phase_text(x, "paused");
 	ex_set_db_state(x, "paused");
 	ex_event(x, "pause", by_fault ? ex_dev_names[x->fault_dev] : NULL, "%s", x->reason);

@@ -172,8 +172,6 @@ const char *ex_reason(const struct ex *x);
 bool ex_pause_pending(const struct ex *x);
 /* True while a state or event of the sweep could not be stored (disk full...) and awaits a retry. */
 bool ex_has_unrecorded(const struct ex *x);
-/* The database's last error for those records. */
-const char *ex_unrecorded_error(const struct ex *x);
 /* Store the records the database refused, oldest first. 0 when all are stored, or -1 with err. */
 int ex_flush_unrecorded(struct ex *x, struct acq_err *err);
 /* Index of the step being worked on (== n_steps when done). */

@@ -9,6 +9,27 @@
 
 #include "daemon/store.h"
 
+/* The point's acquisition starts over: no probe, no exposure times, no shot (its pending spectra untouched). */
+static void restart_point(struct ex *x)
+{
+	x->have_t0 = false;
+	x->probe_no = 0;
+	x->ntimes = 0;
+	x->e = 0;
+	x->shot_in_flight = false;
+	x->shot_landed = false;
+}
+
+void ex_reset_acq(struct ex *x)
+{
+	/* pending spectra thrown away: their darks leave the cache too (every dark used is a stored dark) */
+	for (int i = 0; i < x->npend; i++)
+		if (!strcmp(x->pend[i].kind, "dark"))
+			exp_dark_forget(x->darks, x->pend[i].frame->meas.integration_ms);
+	ex_clear_pending(x);
+	restart_point(x);
+}
+
 /* A point measured again keeps the darks it took (they stay in the cache and must reach the store). */
 static void drop_exposures(struct ex *x)
 {
@@ -20,12 +41,7 @@ static void drop_exposures(struct ex *x)
 			free(x->pend[i].frame);
 	}
 	x->npend = k;
-	x->have_t0 = false;
-	x->probe_no = 0;
-	x->ntimes = 0;
-	x->e = 0;
-	x->shot_in_flight = false;
-	x->shot_landed = false;
+	restart_point(x);
 }
 
 static double quantize(const struct ex *x, double t)

@@ -67,7 +67,6 @@ struct ex {
 		double at;
 	} lost_ev[4];                /* the oldest are dropped past 4; the last (the end) is kept */
 	int nlost_ev;
-	char lost_err[256];
 
 	/* motion */
 	struct plan_wp wps[PLAN_MAX_WP + 1];

@@ -41,6 +41,17 @@ int store_exec(struct store *st, const char *sql, struct acq_err *err)
 	return 0;
 }
 
+int store_tx_end(struct store *st, int rc, int64_t row, int64_t *id, struct acq_err *err)
+{
+	if (rc == 0 && store_exec(st, "COMMIT", err) == 0) {
+		if (id)
+			*id = row;
+		return 0;
+	}
+	store_exec(st, "ROLLBACK", NULL);
+	return -1;
+}
+
 sqlite3_stmt *store_prep(struct store *st, const char *sql, struct acq_err *err)
 {
 	sqlite3_stmt *s = NULL;

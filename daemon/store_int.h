@@ -22,6 +22,9 @@ struct store {
 int store_db_err(struct store *st, struct acq_err *err, const char *what);
 /* Run SQL text (several statements allowed). 0 or -1 with err (err may be NULL). */
 int store_exec(struct store *st, const char *sql, struct acq_err *err);
+/* End the transaction begun with BEGIN: COMMIT when rc is 0, then *id = row (id may be NULL); else, or when the
+ * commit fails, ROLLBACK (err keeps the first failure's message). 0 or -1. */
+int store_tx_end(struct store *st, int rc, int64_t row, int64_t *id, struct acq_err *err);
 /* Prepare one statement; NULL with err. */
 sqlite3_stmt *store_prep(struct store *st, const char *sql, struct acq_err *err);
 /* First column of the first row of sql (a PRAGMA or a SELECT) on db; *ok = 0 when there is none. */

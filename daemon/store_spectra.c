@@ -22,6 +22,8 @@ int store_spectrum_add(struct store *st, const struct store_spectrum *sp, int64_
 		return acq_errf(err, ACQ_E_INVAL, "store: completes_point without a point");
 	if (store_exec(st, "BEGIN IMMEDIATE", err))
 		return -1;
+	int rc = -1;
+	int64_t sid = 0;
 	sqlite3_stmt *s = st->st[ST_SPECTRUM];
 	int n4 = sp->npix * 4;
 	store_bind_id(s, 1, sp->sweep_id);
@@ -45,8 +47,8 @@ int store_spectrum_add(struct store *st, const struct store_spectrum *sp, int64_
 	store_bind_real(s, 12, sp->temperature_c);
 	sqlite3_bind_double(s, 13, sp->taken_at);
 	if (store_step_done(st, s, err, "inserting spectrum"))
-		goto fail;
-	int64_t sid = sqlite3_last_insert_rowid(st->db);
+		goto end;
+	sid = sqlite3_last_insert_rowid(st->db);
 	if (sp->completes_point) {
 		s = st->st[ST_POINT_DONE];
 		sqlite3_bind_double(s, 1, sp->taken_at);
@@ -59,20 +61,15 @@ int store_spectrum_add(struct store *st, const struct store_spectrum *sp, int64_
 		store_bind_real(s, 8, sp->phi_o);
 		sqlite3_bind_int64(s, 9, sp->point_id);
 		if (store_step_done(st, s, err, "completing point"))
-			goto fail;
+			goto end;
 		if (sqlite3_changes(st->db) != 1) {
 			acq_errf(err, ACQ_E_STATE, "store: point %lld is not pending", (long long)sp->point_id);
-			goto fail;
+			goto end;
 		}
 	}
-	if (store_exec(st, "COMMIT", err))
-		goto fail;
-	if (id)
-		*id = sid;
-	return 0;
-fail:
-	store_exec(st, "ROLLBACK", NULL);
-	return -1;
+	rc = 0;
+end:
+	return store_tx_end(st, rc, sid, id, err);
 }
 
 int64_t store_spectrum_count(struct store *st, int64_t sweep_id, struct acq_err *err)

@@ -45,11 +45,13 @@ int store_sweep_create(struct store *st, const struct store_sweep_new *sw, const
 		return acq_errf(err, ACQ_E_INVAL, "store: sweep without plan or configuration");
 	if (store_exec(st, "BEGIN IMMEDIATE", err))
 		return -1;
+	int rc = -1;
+	int64_t sid = 0;
 	sqlite3_stmt *s = store_prep(st, "INSERT INTO sweeps (name, plan_text, config_snapshot, state, created_at, "
 				         "software_version, calibration_method, spectrometer_id, points_total) "
 				         "VALUES (?,?,?,'planned',?,?,?,?,?)", err);
 	if (!s)
-		goto fail;
+		goto end;
 	store_bind_text(s, 1, sw->name ? sw->name : "");
 	store_bind_text(s, 2, sw->plan_text);
 	store_bind_text(s, 3, sw->config_snapshot);
@@ -59,16 +61,11 @@ int store_sweep_create(struct store *st, const struct store_sweep_new *sw, const
 	store_bind_id(s, 7, sw->spectrometer_id);
 	sqlite3_bind_int(s, 8, npts);
 	if (store_run1(st, s, err, "creating sweep"))
-		goto fail;
-	int64_t sid = sqlite3_last_insert_rowid(st->db);
-	if (store_points_insert(st, sid, pts, npts, err) || store_exec(st, "COMMIT", err))
-		goto fail;
-	if (id)
-		*id = sid;
-	return 0;
-fail:
-	store_exec(st, "ROLLBACK", NULL);
-	return -1;
+		goto end;
+	sid = sqlite3_last_insert_rowid(st->db);
+	rc = store_points_insert(st, sid, pts, npts, err);
+end:
+	return store_tx_end(st, rc, sid, id, err);
 }
 
 int store_sweep_set_state(struct store *st, int64_t id, const char *state, double at, struct acq_err *err)

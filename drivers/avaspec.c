@@ -66,7 +66,7 @@ struct avs_dev {
 
 /* ---- configuration ------------------------------------------------------------------------------------ */
 
-static void cfg_free(void *state)
+static void av_cfg_free(void *state)
 {
 	struct avs_config *c = state;
 	if (!c)
@@ -95,7 +95,7 @@ static int parse_int_list(struct yc_node *map, const char *key, int *out, int ma
 	return 0;
 }
 
-static int cfg_parse(struct yc_node *node, void **state, struct acq_err *err)
+static int av_cfg_parse(struct yc_node *node, void **state, struct acq_err *err)
 {
 	*state = NULL;
 	struct avs_config *c = calloc(1, sizeof *c);
@@ -150,7 +150,7 @@ static int cfg_parse(struct yc_node *node, void **state, struct acq_err *err)
 	*state = c;
 	return 0;
 fail:
-	cfg_free(c);
+	av_cfg_free(c);
 	return -1;
 }
 
@@ -265,7 +265,7 @@ static int reset_run(struct avs_dev *d, struct acq_err *err)
 
 /* ---- backend -------------------------------------------------------------------------------------------- */
 
-static void dev_close(void *dev)
+static void av_close(void *dev)
 {
 	struct avs_dev *d = dev;
 	if (!d)
@@ -325,11 +325,11 @@ int avs_open_transport(const void *state, const struct avs_transport *t, void **
 fail:
 	d->dirty = false;
 	d->state = AVS_IDLE;
-	dev_close(d);
+	av_close(d);
 	return -1;
 }
 
-static int dev_start(void *dev, const struct spectro_meas *sm, double now, struct acq_err *err)
+static int av_start(void *dev, const struct spectro_meas *sm, double now, struct acq_err *err)
 {
 	struct avs_dev *d = dev;
 	if (d->state == AVS_RUNNING)
@@ -375,7 +375,7 @@ static int run_failed(struct avs_dev *d)
 	return -1;
 }
 
-static int dev_fetch(void *dev, struct spectro_frame *f, double now, struct acq_err *err)
+static int av_fetch(void *dev, struct spectro_frame *f, double now, struct acq_err *err)
 {
 	struct avs_dev *d = dev;
 	if (d->state != AVS_RUNNING)
@@ -427,7 +427,7 @@ static int dev_fetch(void *dev, struct spectro_frame *f, double now, struct acq_
 	return 1;
 }
 
-static int dev_stop(void *dev, struct acq_err *err)
+static int av_stop(void *dev, struct acq_err *err)
 {
 	struct avs_dev *d = dev;
 	if (d->state != AVS_RUNNING && !d->dirty)
@@ -440,7 +440,7 @@ static int dev_stop(void *dev, struct acq_err *err)
 	return 0;
 }
 
-static int dev_pollfd(const void *dev)
+static int av_pollfd(const void *dev)
 {
 	(void)dev;
 	return -1; /* libusb's fds would need its event loop: the daemon polls fetch() by timer */
@@ -515,7 +515,7 @@ static bool pid_wanted(const struct avs_config *c, int pid)
 	return false;
 }
 
-static int dev_open(const void *state, void **dev, struct spectro_info *info, struct acq_err *err)
+static int av_open(const void *state, void **dev, struct spectro_info *info, struct acq_err *err)
 {
 	const struct avs_config *c = state;
 	*dev = NULL;
@@ -592,12 +592,12 @@ static int dev_open(const void *state, void **dev, struct spectro_info *info, st
 
 const struct spectro_backend spectro_avaspec_backend = {
 	.name = "avaspec-usb",
-	.cfg_parse = cfg_parse,
-	.cfg_free = cfg_free,
-	.open = dev_open,
-	.close = dev_close,
-	.start = dev_start,
-	.fetch = dev_fetch,
-	.stop = dev_stop,
-	.pollfd = dev_pollfd,
+	.cfg_parse = av_cfg_parse,
+	.cfg_free = av_cfg_free,
+	.open = av_open,
+	.close = av_close,
+	.start = av_start,
+	.fetch = av_fetch,
+	.stop = av_stop,
+	.pollfd = av_pollfd,
 };

@@ -1,6 +1,6 @@
 /* avaspec_proto: pure AvaSpec (AS5216 family) framing, parsing and spectrum corrections; no I/O, no state.
  *
- * Framing (docs/avaspec-usb.md): byte 0 type (0x20 host→device, 0x21 device→host), byte 1 sequence number,
+ * Framing (drivers/avaspec-usb.md): byte 0 type (0x20 host→device, 0x21 device→host), byte 1 sequence number,
  * bytes 2–3 length = payload + 2 (uint16 little-endian), byte 4 command, byte 5 0x00, payload from byte 6.
  * Multi-byte payload fields are big-endian. A reply carries cmd + 0x80; an error reply has length 3, cmd 0x00
  * and the reason in byte 6.

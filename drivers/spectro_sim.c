@@ -44,7 +44,7 @@ struct sim_dev {
 	uint32_t seq, pending_seq;
 	bool pending, gone;
 	double deadline, started;
-	double started_real;     /* mono(): the margin also runs in real time (see dev_fetch) */
+	double started_real;     /* mono(): the margin also runs in real time (see ss_fetch) */
 	struct spectro_meas meas;
 	struct spectro_info info;
 	double temperature;
@@ -52,7 +52,7 @@ struct sim_dev {
 	size_t nbuf;
 };
 
-static int parse(struct yc_node *node, void **state, struct acq_err *err)
+static int ss_cfg_parse(struct yc_node *node, void **state, struct acq_err *err)
 {
 	*state = NULL;
 	struct sim_cfg *c = calloc(1, sizeof *c);
@@ -88,7 +88,7 @@ fail:
 	return -1;
 }
 
-static void cfg_free(void *state)
+static void ss_cfg_free(void *state)
 {
 	free(state);
 }
@@ -294,7 +294,7 @@ int ssp_parse_identity(const unsigned char *p, uint32_t len, struct spectro_info
 	return 0;
 }
 
-static void dev_close(void *dev)
+static void ss_close(void *dev)
 {
 	struct sim_dev *d = dev;
 	if (!d)
@@ -305,7 +305,7 @@ static void dev_close(void *dev)
 	free(d);
 }
 
-static int dev_open(const void *state, void **dev, struct spectro_info *info, struct acq_err *err)
+static int ss_open(const void *state, void **dev, struct spectro_info *info, struct acq_err *err)
 {
 	const struct sim_cfg *c = state;
 	*dev = NULL;
@@ -354,11 +354,11 @@ static int dev_open(const void *state, void **dev, struct spectro_info *info, st
 	return 0;
 fail:
 	acq_err_prefix(err, "%s: ", path);
-	dev_close(d);
+	ss_close(d);
 	return -1;
 }
 
-static int dev_start(void *dev, const struct spectro_meas *m, double now, struct acq_err *err)
+static int ss_start(void *dev, const struct spectro_meas *m, double now, struct acq_err *err)
 {
 	struct sim_dev *d = dev;
 	if (d->gone)
@@ -446,7 +446,7 @@ int ssp_parse_spectrum(const unsigned char *p, uint32_t len, const struct spectr
 	return 0;
 }
 
-static int dev_fetch(void *dev, struct spectro_frame *frame, double now, struct acq_err *err)
+static int ss_fetch(void *dev, struct spectro_frame *frame, double now, struct acq_err *err)
 {
 	struct sim_dev *d = dev;
 	if (!d->pending)
@@ -504,7 +504,7 @@ static int dev_fetch(void *dev, struct spectro_frame *frame, double now, struct 
 	return 0;
 }
 
-static int dev_stop(void *dev, struct acq_err *err)
+static int ss_stop(void *dev, struct acq_err *err)
 {
 	struct sim_dev *d = dev;
 	if (!d->pending)
@@ -515,7 +515,7 @@ static int dev_stop(void *dev, struct acq_err *err)
 	return send_msg(d, SSP_STOP, NULL, 0, err);
 }
 
-static int dev_pollfd(const void *dev)
+static int ss_pollfd(const void *dev)
 {
 	const struct sim_dev *d = dev;
 	return d->fd;
@@ -523,12 +523,12 @@ static int dev_pollfd(const void *dev)
 
 const struct spectro_backend spectro_sim_backend = {
 	.name = "sim",
-	.cfg_parse = parse,
-	.cfg_free = cfg_free,
-	.open = dev_open,
-	.close = dev_close,
-	.start = dev_start,
-	.fetch = dev_fetch,
-	.stop = dev_stop,
-	.pollfd = dev_pollfd,
+	.cfg_parse = ss_cfg_parse,
+	.cfg_free = ss_cfg_free,
+	.open = ss_open,
+	.close = ss_close,
+	.start = ss_start,
+	.fetch = ss_fetch,
+	.stop = ss_stop,
+	.pollfd = ss_pollfd,
 };

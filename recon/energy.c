@@ -37,7 +37,7 @@
  * second difference Δ = |a_lo − 2a_mid + a_hi| exceeds TAB_CURV_TOL · max(1, a) (plus, where the interval
  * is clearly below 1, what the nodes' quadrature uncertainty can make of it, 3(d_lo + 2d_mid + d_hi)) (a
  * feature narrower than the interval: a spike in θi), bisected, down to 10°/2^TAB_DEPTH. Both halves then get the bound
- * max(a + 2d over the three nodes) + Δ (the interpolation error h²/8·|a''| of a C² function, with a''
+ * max(a + 2d + TAB_TOL·max(a, 1) over the three nodes: albtab_margin) + Δ (the interpolation error h²/8·|a''| of a C² function, with a''
  * from Δ, doubled). The evaluated function is s·f̂ with s = 1/max(1, A(θi), A(θo)), whose albedo at θi is
  * ≤ a(θi)/max(1, A(θi)) ≤ 1 whenever A bounds a. `brdf-recon check` verifies it with an independent rule.
  * The work is bounded: intervals are bisected level by level (all of one level before the next) up to
@@ -84,11 +84,18 @@ static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err
 	return albtab_margin(T, a);
 }
 
-/* Add the quadrature margin 2d (and 1e-9 relative) to a[L]; 0. */
+/*
+ * Add the quadrature margin to a[L]; 0. The margin is 2d + TAB_TOL·max(|a|, 1): the rules stop once two of them
+ * agree to TAB_TOL (relative above 1), which is all the value is known to. 2d alone holds only once the rules
+ * converge (the finer one's error well below their difference); from a coarse start two rules can agree by both
+ * missing the same part: at ACQ_SEED 109 of test_log_uniform_random (1000 random centres, 12 decades) the node
+ * at θ = 0 read 4.4495 with d = 1.6e-3 from 10 × 16 and 20 × 32 nodes, where the check's 96 × 192 rule reads
+ * 4.4539 (an error of 2.8 d): the bound 4.4531 was 2e-4 low and the check read an albedo of 1.0002.
+ */
 static int albtab_margin(struct albtab *T, double *a)
 {
 	for (size_t l = 0; l < T->L; l++) {
-		double mg = 2.0 * T->diff[l] + 1e-9 * fabs(a[l]);
+		double mg = 2.0 * T->diff[l] + TAB_TOL * fmax(fabs(a[l]), 1.0);
 		if (mg > T->margin)
 			T->margin = mg;
 		a[l] += mg;

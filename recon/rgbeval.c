@@ -523,14 +523,10 @@ int recon_rgb_batch(const struct recon_rgb *R, size_t nq, const double *wi, cons
 	double *Z = malloc(BATCH * r * sizeof *Z), *G = malloc(RGB_PAD4(BATCH * nc) * sizeof *G);
 	int f32 = R->f32 && !reduced;
 	float *Kf = f32 ? malloc(BATCH * n * sizeof *Kf) : NULL, *Gf = f32 ? malloc(BATCH * nc * sizeof *Gf) : NULL;
+	int rc = 0;
 	if (!c6 || !K || !Z || !G || (f32 && (!Kf || !Gf))) {
-		free(c6);
-		free(K);
-		free(Z);
-		free(G);
-		free(Kf);
-		free(Gf);
-		return acq_errf(err, ACQ_E_NOMEM, "rgb: out of memory");
+		rc = acq_errf(err, ACQ_E_NOMEM, "rgb: out of memory");
+		goto out;
 	}
 	for (size_t q0 = 0; q0 < nq; q0 += BATCH) {
 		size_t b = nq - q0 < BATCH ? nq - q0 : BATCH;
@@ -565,13 +561,14 @@ int recon_rgb_batch(const struct recon_rgb *R, size_t nq, const double *wi, cons
 		for (size_t q = 0; q < b; q++)
 			finish_pair(R, c6 + 6 * q, G + q * nc, rgb + 3 * (q0 + q), stats);
 	}
+out:
 	free(c6);
 	free(K);
 	free(Z);
 	free(G);
 	free(Kf);
 	free(Gf);
-	return 0;
+	return rc;
 }
 
 /* One θh row of the MERL table (all its θd, φd cells): a job of the table's pool. Cells below the horizon get

@@ -12,7 +12,7 @@ TEST_TIMEOUT=${TEST_TIMEOUT:-300}
 report_fail() { failures+=("$1"); echo "FAIL $1 (log: $2)"; tail -n 30 "$2" | sed 's/^/    | /'; }
 
 run_unit() {
-  local t name log p f
+  local t name log p f s
   for t in "$ACQ_BUILD"/tests/test_*; do
     [ -x "$t" ] || continue
     name=$(basename "$t"); log="$logdir/$name.log"
@@ -20,12 +20,14 @@ run_unit() {
     # cmocka prints "[  PASSED  ] N test(s)." and "[  FAILED  ] N test(s)" per group.
     p=$(grep -E '^\[  PASSED  \] [0-9]+ test' "$log" | awk '{s+=$4} END{print s+0}')
     f=$(grep -E '^\[  FAILED  \] [0-9]+ test' "$log" | awk '{s+=$4} END{print s+0}')
-    passed=$((passed + p)); failed=$((failed + f))
+    # a skipped case counts as skipped (not as passed), with the reason the test printed ("skip: ...")
+    s=$(grep -E '^\[  SKIPPED \] [0-9]+ test' "$log" | awk '{s+=$4} END{print s+0}')
+    passed=$((passed + p)); failed=$((failed + f)); skipped=$((skipped + s))
     if [ "$rc" -ne 0 ]; then
       [ "$f" -gt 0 ] || failed=$((failed + 1))
       report_fail "unit/$name (exit $rc)" "$log"
     else
-      echo "ok   unit/$name ($p cases)"
+      echo "ok   unit/$name ($p cases$([ "$s" -eq 0 ] || echo ", $s skipped: $(grep '^skip: ' "$log" | sort -u | tr '\n' ' ')"))"
     fi
   done
 }

@@ -73,6 +73,32 @@ class Ctl:
         return p.stdout if rc == 0 else p.stderr
 
 
+def wait_for(cond, what, timeout=30):
+    """Poll cond() until it is true (a deadline, not a fixed wait: the machine may be loaded)."""
+    end = time.time() + timeout
+    while not cond():
+        check(time.time() < end, "%s: not within %d s" % (what, timeout))
+        time.sleep(0.02)
+
+
+class Lines:
+    """A subprocess's stdout read line by line on a thread, so a test can wait for a line as it arrives."""
+
+    def __init__(self, proc):
+        self.lines, self.lock = [], threading.Lock()
+        self.t = threading.Thread(target=self._read, args=(proc.stdout,), daemon=True)
+        self.t.start()
+
+    def _read(self, f):
+        for line in f:
+            with self.lock:
+                self.lines.append(line)
+
+    def events(self):
+        with self.lock:
+            return [json.loads(x)["event"] for x in self.lines]
+
+
 def hanging_socket(path):
     """A listener that accepts and never says anything: a client that connects waits forever."""
     s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -165,7 +191,7 @@ def main():
         res = {}
         t = threading.Thread(target=lambda: res.update(p=c.run("--json", "move", "detector_phi=350")))
         t.start()
-        time.sleep(0.3)
+        wait_for(lambda: float(b.sim_status()["detector_phi"]) > 91, "the arm moving towards 350")  # under way, far from 350
         d = c.json("stop", "stop")
         t.join(30)
         check(d["stopped"] is True and 90 < d["detector.phi"] < 349, "stop mid-move %r" % d)
@@ -227,19 +253,24 @@ def main():
         d = c.json("error", "recon", "status", "1", rc=1)  # positional form, no run for this sweep
         check(d["error"]["code"] == "not_found", "recon status 1 %r" % d)
         # --- watch: JSON lines, reconnects across a daemon restart
+        watchers = lambda: c.json("status", "status").get("watchers", 0)
+        before = watchers()
         w = subprocess.Popen([CTL, "-s", b.sock, "watch"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        time.sleep(0.5)
+        seen = Lines(w)
+        wait_for(lambda: watchers() > before, "acqctl watch subscribed")
         c.json("reload", "reload")
-        time.sleep(0.3)
+        wait_for(lambda: seen.events().count("config") == 1, "the first config event")
         b.kill_daemon(signal.SIGTERM)
-        time.sleep(1.5)
+        wait_for(lambda: "acqctl.disconnected" in seen.events(), "watch sees the daemon go")
         b.start_daemon()
-        time.sleep(2.5)
+        wait_for(lambda: "acqctl.reconnected" in seen.events(), "watch reconnects")
+        wait_for(lambda: watchers() > 0, "acqctl watch subscribed again")
         c.json("reload", "reload")
-        time.sleep(0.5)
+        wait_for(lambda: seen.events().count("config") == 2, "the second config event")
         w.terminate()
-        out, err = w.communicate(timeout=10)
-        evs = [json.loads(x) for x in out.splitlines()]
+        w.wait(10)
+        seen.t.join(10)
+        evs = [json.loads(x) for x in seen.lines]
         for e in evs:
             validate(e, "watch")
         names = [e["event"] for e in evs]
@@ -261,7 +292,7 @@ def main():
             except OSError:
                 break
         c.json("reload", "reload")
-        t_end = time.time() + 3
+        t_end = time.time() + 30
         while time.time() < t_end and b"configuration reloaded" not in buf:
             try:
                 buf += os.read(mfd, 65536)

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """acq-sim serves the laser on a pty named in its ports file, and it speaks the line protocol of
-drivers/laser_serial.c there: ID?, EMISSION ON/OFF, POWER, POWER?, STATUS?, errors. Skips (77) while another
-simulator service is still a placeholder (acq-sim then refuses to start)."""
+drivers/laser_serial.c there: ID?, EMISSION ON/OFF, POWER, POWER?, STATUS?, errors. An acq-sim that does not
+start is a failure."""
 import json
 import os
 import select
@@ -44,9 +44,6 @@ with tempfile.TemporaryDirectory() as tmp:
         while not os.path.exists(ports):
             if sim.poll() is not None:
                 err = sim.stderr.read()
-                if "not implemented" in err:
-                    print("acq-sim does not start yet: " + err.strip().splitlines()[-1])
-                    sys.exit(77)
                 sys.exit("acq-sim exited %d: %s" % (sim.returncode, err))
             if time.monotonic() > end:
                 sys.exit("acq-sim wrote no ports file in 10 s")

@@ -4,7 +4,7 @@
 set -uo pipefail
 : "${ACQ_BUILD:?}" "${ACQ_SRC:?}"
 acqctl="$ACQ_BUILD/acqctl"
-[ -x "$acqctl" ] || { echo "no $acqctl"; exit 77; }
+[ -x "$acqctl" ] || { echo "FAIL: $acqctl not built"; exit 1; }
 tmp=$(mktemp -d); trap 'rm -rf "$tmp"' EXIT
 fail() { echo "FAIL: $*"; exit 1; }
 

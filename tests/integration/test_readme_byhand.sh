@@ -5,7 +5,7 @@
 # Every command must succeed; the sweep must complete and the exported CSV hold its rows.
 set -uo pipefail
 : "${ACQ_BUILD:?}" "${ACQ_SRC:?}"
-for p in acq-sim acquisitiond acqctl brdf-recon; do [ -x "$ACQ_BUILD/$p" ] || { echo "no $ACQ_BUILD/$p"; exit 77; }; done
+for p in acq-sim acquisitiond acqctl brdf-recon; do [ -x "$ACQ_BUILD/$p" ] || { echo "FAIL: $ACQ_BUILD/$p not built"; exit 1; }; done
 tmp=$(mktemp -d); trap 'rm -rf "$tmp"' EXIT
 fail() { echo "FAIL: $*"; exit 1; }
 

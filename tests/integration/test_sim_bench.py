@@ -17,8 +17,7 @@ SEED = int(os.environ.get("ACQ_SEED", "1"))
 SIM = os.path.join(BUILD, "acq-sim")
 print(f"ACQ_SEED={SEED}")
 if not os.access(SIM, os.X_OK):
-    print(f"skip: {SIM} not built")
-    sys.exit(77)
+    sys.exit(f"FAIL: {SIM} not built")
 
 MAGIC, HDR = 0x4D495341, 16
 procs = []

@@ -19,8 +19,7 @@ SEED = int(os.environ.get("ACQ_SEED", "1"))
 SIM = os.path.join(BUILD, "acq-sim")
 print(f"ACQ_SEED={SEED}")
 if not os.access(SIM, os.X_OK):
-    print(f"skip: {SIM} not built")
-    sys.exit(77)
+    sys.exit(f"FAIL: {SIM} not built")
 tmp = tempfile.mkdtemp(prefix="acq-truth-test.")
 # every simulator material (sim/material.h): the trend-family ones, then the truths outside that family
 ALL = ("white", "green-paint", "metal", "clear-coat", "rough-backscatter", "cloth-sheen", "sharp-lobe", "narrow-lines")

@@ -12,15 +12,21 @@
 
 static uint64_t rt_state = 88172645463325252ull;
 
+/* Seed the generator as ACQ_SEED=v would (a test's fixed counter-example). */
+static inline void rt_seed_value(uint64_t v)
+{
+	rt_state = v * 2654435761ull + 88172645463325252ull;
+	if (!rt_state)
+		rt_state = 1;
+}
+
 /* Seed from ACQ_SEED (printed, so a failure can be replayed). */
 static inline uint64_t rt_seed(void)
 {
 	const char *s = getenv("ACQ_SEED");
 	uint64_t v = s && *s ? strtoull(s, NULL, 10) : 1;
 	printf("ACQ_SEED=%llu\n", (unsigned long long)v);
-	rt_state = v * 2654435761ull + 88172645463325252ull;
-	if (!rt_state)
-		rt_state = 1;
+	rt_seed_value(v);
 	return v;
 }
 

@@ -148,8 +148,10 @@ out:
 
 static void run_under_umockdev(const char *name)
 {
-	if (system("command -v umockdev-run >/dev/null 2>&1") != 0)
+	if (system("command -v umockdev-run >/dev/null 2>&1") != 0) {
+		printf("skip: umockdev-run is not installed (make deps installs umockdev)\n");
 		skip();
+	}
 	const char *src = getenv("ACQ_SRC") ? getenv("ACQ_SRC") : ".";
 	char dev[4096], ioc[4096];
 	snprintf(dev, sizeof dev, "%s/tests/golden/avaspec/avaspec.umockdev", src);

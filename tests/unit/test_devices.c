@@ -311,6 +311,18 @@ static void test_measure_and_dark(void **state)
 	assert_int_equal(done_rc, -1);
 	assert_non_null(strstr(done_err.msg, "interlock"));
 	assert_false(laser_fake_state()->emission);
+	/* The spectrometer failing mid-operation: the sample fails with the spectrometer's own message, the laser it
+	 * switched on goes off again, nothing is stored. */
+	laser_fake_state()->interlock_open = false;
+	spectro_fake_state()->fail_io = ACQ_E_IO;
+	done_calls = 0;
+	assert_int_equal(devices_measure(fx->dv, "sample", 12.5, 1, NAN, done, NULL, &err), 0);
+	assert_true(wait_for(fx, 0.01, op_done));
+	assert_int_equal(done_rc, -1);
+	assert_non_null(strstr(done_err.msg, "spectrometer (fake): start failed"));
+	assert_true(wait_for(fx, 0.01, laser_off));
+	assert_int_equal(store_spectrum_count(fx->st, 0, &err), 2);
+	spectro_fake_state()->fail_io = 0;
 }
 
 /* A device whose every call blocks (a controller that does not answer) delays its own requests only: the loop

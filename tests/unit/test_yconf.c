@@ -41,6 +41,27 @@ static void test_getters_and_positions(void **state)
 	assert_int_equal(mode, 1);
 	assert_int_equal(yc_check_unknown(root, "root", &err), 0);
 	yc_free(doc);
+	/* bool, string and enum refuse a value that is not a single one, and leave an absent optional key alone */
+	doc = load("c: [1, 2]\nname: {x: 1}\nmode:\n  - tcp\n", &err);
+	assert_non_null(doc);
+	root = yc_root(doc);
+	c = false;
+	name = NULL;
+	mode = -1;
+	assert_int_equal(yc_bool(root, "c", true, &c, &err), -1);
+	assert_non_null(strstr(err.msg, "t.yaml:1:4: c: expected a single value"));
+	assert_int_equal(yc_string(root, "name", true, &name, &err), -1);
+	assert_non_null(strstr(err.msg, "name: expected a single value"));
+	assert_int_equal(yc_enum(root, "mode", true, modes, &mode, &err), -1);
+	assert_non_null(strstr(err.msg, "mode: expected a single value"));
+	assert_true(!c && !name && mode == -1);
+	assert_int_equal(yc_bool(root, "absent", false, &c, &err), 0);
+	assert_int_equal(yc_string(root, "absent", false, &name, &err), 0);
+	assert_int_equal(yc_enum(root, "absent", false, modes, &mode, &err), 0);
+	assert_true(!c && !name && mode == -1);
+	assert_int_equal(yc_bool(root, "absent", true, &c, &err), -1);
+	assert_non_null(strstr(err.msg, "missing required key 'absent'"));
+	yc_free(doc);
 }
 
 static void test_errors_name_line_and_column(void **state)

@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 """Writes the umockdev golden files of the AvaSpec driver tests, deterministically, from the protocol as
-docs/avaspec-usb.md describes it (written independently of the C framing code, so a framing bug in the
+drivers/avaspec-usb.md describes it (written independently of the C framing code, so a framing bug in the
 driver shows up as an OUT mismatch under umockdev).
 
 Usage: tests/golden/avaspec/gen_golden.py [OUTDIR]      (default: this script's folder)
