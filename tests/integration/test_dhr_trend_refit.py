@@ -15,27 +15,20 @@ deviation over seeds of the DHR / RMS of sigma_noise. It must lie in [0.75, 1.15
 fails); a sigma_noise twice too large gives 0.5 (fails). Also z = (DHR - truth) / sigma: RMS in [0.6, 1.4]
 (measured 0.97-1.07)."""
 import os
-import subprocess
 import sys
 import tempfile
 import shutil
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from recon_tools import run  # noqa: E402  (run a command, print it, exit on failure)
+
 BUILD = os.environ.get("ACQ_BUILD", "build")
 SEED = int(os.environ.get("ACQ_SEED", "1")) % 100000
 SIM = os.environ.get("ACQ_SIM_BIN", os.path.join(BUILD, "acq-sim"))
-B = os.path.join(BUILD, "brdf-recon")
 NSEED = 20
 WL = "450:1100:50"
-
-
-def run(args):
-    p = subprocess.run(args, capture_output=True, text=True)
-    if p.returncode != 0:
-        print(p.stdout, p.stderr)
-        sys.exit("FAIL: %s" % " ".join(args))
-    return p
 
 
 def read_csv(path):
@@ -50,16 +43,16 @@ def main():
     d = tempfile.mkdtemp(prefix="test_dhr_refit_")
     try:
         tr = os.path.join(d, "truth.csv")
-        run([SIM, "truth", "sharp-lobe", "--dhr", tr, "--theta-i", "8,30", "--wavelengths", WL])
+        run("truth", "sharp-lobe", "--dhr", tr, "--theta-i", "8,30", "--wavelengths", WL, prog=SIM)
         truth = read_csv(tr)[1][:, 2]
         dhr, sig, sn = [], [], []
         for i in range(NSEED):
             s = SEED * NSEED + i + 1
             smp, m, o = (os.path.join(d, x) for x in ("s.csv", "m.model", "d.csv"))
-            run([SIM, "truth", "sharp-lobe", "--grid", "10x10x10", "--noise", "0.01", "--seed", str(s), "--wavelengths",
-                 WL, "-o", smp])
-            run([B, "fit", smp, "-o", m])
-            run([B, "dhr", m, "--theta-i", "8,30", "--seed", str(s), "-o", o])
+            run("truth", "sharp-lobe", "--grid", "10x10x10", "--noise", "0.01", "--seed", str(s), "--wavelengths", WL,
+                "-o", smp, prog=SIM)
+            run("fit", smp, "-o", m)
+            run("dhr", m, "--theta-i", "8,30", "--seed", str(s), "-o", o)
             c, A = read_csv(o)
             dhr.append(A[:, c["dhr"]])
             sig.append(A[:, c["sigma"]])
