@@ -142,12 +142,16 @@ $(BUILD)/fuzz-replay/%: $(BUILD)/obj/tests/fuzz/%.o $(BUILD)/obj/tests/fuzz/repl
 	@mkdir -p $(dir $@)
 	$(Q)$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
-# libFuzzer builds (clang), separate objects.
-FUZZ_CFLAGS := -std=c17 -D_GNU_SOURCE -g -O1 -I. -I$(BUILD)/gen $(PKG_CFLAGS) \
-               -fsanitize=fuzzer,address,undefined
-$(BUILD)/fuzz/%: tests/fuzz/%.c $(foreach d,$(LIBDIRS),$(call lib_srcs,$(d))) $(BUILD)/gen/acq_version.h
+# libFuzzer builds (clang), separate objects: the libraries are compiled once (fuzzer-instrumented), each target
+# links them.
+FUZZ_CFLAGS := -std=c17 -D_GNU_SOURCE -g -O1 -I. -I$(BUILD)/gen $(PKG_CFLAGS) -fsanitize=address,undefined
+FUZZ_OBJS  := $(patsubst %.c,$(BUILD)/fuzz-obj/%.o,$(foreach d,$(LIBDIRS),$(call lib_srcs,$(d))))
+$(BUILD)/fuzz-obj/%.o: %.c $(BUILD)/gen/acq_version.h
 	@mkdir -p $(dir $@)
-	clang $(FUZZ_CFLAGS) -o $@ $< $(foreach d,$(LIBDIRS),$(call lib_srcs,$(d))) $(LDLIBS)
+	$(Q)clang $(FUZZ_CFLAGS) -fsanitize=fuzzer-no-link -c -o $@ $<
+$(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_OBJS)
+	@mkdir -p $(dir $@)
+	clang $(FUZZ_CFLAGS) -fsanitize=fuzzer -o $@ $< $(FUZZ_OBJS) $(LDLIBS)
 
 -include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)
 

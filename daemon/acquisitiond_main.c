@@ -16,6 +16,7 @@
 #include "acq_version.h"
 #include "daemon/app.h"
 #include "daemon/conf.h"
+#include "daemon/cputime.h"
 #include "daemon/devices.h"
 #include "daemon/job.h"
 #include "daemon/log.h"
@@ -108,17 +109,21 @@ static void status_tick(struct loop *lp, void *arg)
 /* The watchdog is fed by a timer of the loop itself (no thread): a loop blocked by anything stops feeding it
  * and systemd restarts the daemon (the sweep resumes after its last committed point). A turn that came
  * late is logged with the measured block, so a stall shorter than WatchdogSec is visible too. */
-static double wd_period_real, wd_last_real;
+static double wd_period_real, wd_last_real, wd_last_cpu_wait;
 
 static void watchdog_tick(struct loop *lp, void *arg)
 {
 	(void)lp;
 	(void)arg;
 	double now = loop_monotonic(NULL);
+	struct cputime ct; /* how much of a block was the machine's: the loop's thread waiting for a CPU */
+	cputime_thread(&ct);
 	if (wd_last_real > 0 && now - wd_last_real > wd_period_real + 1.0)
 		log_msg(LOG_WARNING, "watchdog: the loop was blocked for about %.1f s (fed %.1f s after the last time, "
-			"period %.1f s)", now - wd_last_real - wd_period_real, now - wd_last_real, wd_period_real);
+			"period %.1f s; the loop's thread waited %.1f s of it for a CPU)", now - wd_last_real - wd_period_real,
+			now - wd_last_real, wd_period_real, ct.waiting - wd_last_cpu_wait);
 	wd_last_real = now;
+	wd_last_cpu_wait = ct.waiting;
 	sd_notify(0, "WATCHDOG=1");
 }
 
@@ -314,10 +319,10 @@ int main(int argc, char **argv)
 		int64_t id = 0;
 		int64_t pending = 0;
 		store_sweep_interrupted(app.store, &pending, NULL);
-		if (pending && sweep_recover(app.sweep, &id, &err))
+		if (pending && commands_auto_resume(&app, &id, &err))
 			log_msg(LOG_WARNING, "interrupted sweep %lld not resumed: %s", (long long)pending, err.msg);
-		else if (id)
-			log_msg(LOG_NOTICE, "resuming interrupted sweep %lld", (long long)id);
+		else if (id) /* planned off the loop: "resuming interrupted sweep N" is logged once it is */
+			log_msg(LOG_NOTICE, "re-planning interrupted sweep %lld off the loop to resume it", (long long)id);
 	}
 	uint64_t wd_usec = 0;
 	double rate = app.have_sim && app.sim.time_scale > 0 ? app.sim.time_scale : 1; /* loop seconds per s */

@@ -34,6 +34,11 @@ struct app {
 
 /* Handle one authorised request (server_req_fn). */
 void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *req);
+/* At start-up with daemon.auto_resume: re-plan the latest interrupted sweep's stored plan in a worker (as
+ * sweep.resume does), so the loop serves clients and feeds the watchdog meanwhile; once planned it resumes after
+ * its last committed point (paused for the operator if it was), and the outcome is logged. *id: the sweep
+ * being planned. 0 (planning, or nothing to resume) or -1 with err. */
+int commands_auto_resume(struct app *app, int64_t *id, struct acq_err *err);
 /* Reload the configuration file: refused while a sweep or a manual operation runs. 0 or -1. */
 int app_reload(struct app *app, struct acq_err *err);
 /* Unix time now, seconds. */

@@ -270,16 +270,23 @@ static void cmd_measure(struct app *app, const struct srv_peer *peer, struct pro
  * laser's keep-alive): one query at a time for all clients together; a request arriving while one runs gets
  * what is known now (devices_json: no device I/O). */
 static bool devices_query_running;
+/* An observer's `devices` reads the hardware at most once per DEVICES_OBSERVER_READ_S (real seconds) and gets
+ * the cached view otherwise: clients without control cannot keep the devices' lines busy (a flood of `devices`
+ * held the laser's line with status reads, ahead of the sweep's laser commands). Controllers read live. */
+#define DEVICES_OBSERVER_READ_S 1.0
+static double devices_query_end; /* real (monotonic) seconds the last live read ended */
 
 static void devices_query_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
 {
 	devices_query_running = false;
+	devices_query_end = loop_monotonic(NULL);
 	pending_done(ctx, rc, err, result);
 }
 
 static void cmd_devices(struct app *app, const struct srv_peer *peer, struct proto_req *req)
 {
-	if (devices_query_running) {
+	if (devices_query_running || (peer->role != PROTO_CONTROLLER && devices_query_end > 0 &&
+				      loop_monotonic(NULL) - devices_query_end < DEVICES_OBSERVER_READ_S)) {
 		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_json(app->dev)));
 		return;
 	}
@@ -515,11 +522,24 @@ struct start_job {
 	json_t *id;
 	char *text, *name;
 	int64_t resume_id;       /* sweep.resume of this stored sweep (0: sweep.start) */
+	bool hold;               /* the resume at start-up (serial 0: no client): a sweep paused for the operator
+				    stays paused */
 	struct plan_spec *spec;
 	struct plan_worker *worker;
 };
 
 static struct start_job *starting; /* the sweep.start being planned (one at a time) */
+
+/* sweep.resume requests that came while the start-up resume was planned: run once it is (then they resume the
+ * loaded sweep, e.g. after the sample swap, instead of failing with "being planned"). */
+struct deferred_resume {
+	struct srv_peer peer;
+	json_t *root;
+	struct deferred_resume *next;
+};
+static struct deferred_resume *after_auto_resume;
+
+static void cmd_sweep_resume(struct app *app, const struct srv_peer *peer, struct proto_req *req);
 
 static void start_planned(void *ctx, int rc, const struct acq_err *perr, struct plan_result *plan)
 {
@@ -534,11 +554,17 @@ static void start_planned(void *ctx, int rc, const struct acq_err *perr, struct 
 		acq_err_prefix(&err, "sweep.start: ");
 		plan_spec_free(sj->spec);
 	} else if (sj->resume_id) {
-		rc = sweep_resume_planned(app->sweep, sj->resume_id, sj->spec, plan, &err);
+		rc = sweep_resume_planned(app->sweep, sj->resume_id, sj->spec, plan, sj->hold, &err);
 	} else {
 		rc = sweep_start_planned(app->sweep, sj->text, sj->name, sj->spec, plan, &sid, &err);
 	}
-	if (rc) {
+	if (!sj->serial) { /* the resume at start-up: no client to answer */
+		if (rc)
+			log_msg(LOG_WARNING, "interrupted sweep %lld not resumed: %s", (long long)sj->resume_id, err.msg);
+		else
+			log_msg(LOG_NOTICE, "resuming interrupted sweep %lld (planned off the loop)",
+				(long long)sj->resume_id);
+	} else if (rc) {
 		log_msg(LOG_NOTICE, "%s", err.msg);
 		server_reply_error(app->srv, sj->serial, sj->id, proto_code_of(&err), err.msg);
 	} else if (sj->resume_id) {
@@ -551,7 +577,62 @@ static void start_planned(void *ctx, int rc, const struct acq_err *perr, struct 
 	json_decref(sj->id);
 	free(sj->text);
 	free(sj->name);
+	bool auto_resume = !sj->serial;
 	free(sj);
+	while (auto_resume && after_auto_resume) {
+		struct deferred_resume *d = after_auto_resume;
+		after_auto_resume = d->next;
+		struct proto_req req = { .root = d->root, .id = json_object_get(d->root, "id"), .cmd = "sweep.resume" };
+		cmd_sweep_resume(app, &d->peer, &req);
+		json_decref(d->root);
+		free(d);
+	}
+}
+
+/* Plan text (named name) in a worker for sweep.start (resume_id 0) or the resume of stored sweep resume_id;
+ * the answer goes to client serial with request id (serial 0: logged only). 0 once planning, or -1. */
+static int start_job(struct app *app, uint64_t serial, json_t *id, int64_t resume_id, bool hold, const char *text,
+		     const char *name, struct acq_err *err)
+{
+	struct start_job *sj = NULL;
+	if (devices_busy(app->dev)) {
+		acq_errf(err, ACQ_E_STATE, "a manual move or measurement is running");
+		goto fail;
+	}
+	if (!resume_id && sweep_start_check(app->sweep, err))
+		goto fail;
+	if (!text) {
+		acq_errf(err, ACQ_E_INVAL, "no plan text");
+		goto fail;
+	}
+	if (!(sj = calloc(1, sizeof *sj)) || !(sj->text = strdup(text)) || (name && !(sj->name = strdup(name)))) {
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
+		goto fail;
+	}
+	sj->resume_id = resume_id;
+	sj->hold = hold;
+	if (plan_load_string(name && *name ? name : "plan", text, &sj->spec, err))
+		goto fail;
+	struct plan_timing tm;
+	sweep_plan_timing(app->sweep, &tm);
+	sj->app = app;
+	sj->serial = serial;
+	double rate = app->have_sim && app->sim.time_scale > 0 ? app->sim.time_scale : 1; /* loop seconds per s */
+	if (plan_worker_start(sj->spec, &app->conf->bench, &tm, PLAN_MEM_BYTES, START_DEADLINE_S * rate,
+			      START_DEADLINE_S, start_planned, sj, &sj->worker, err))
+		goto fail;
+	sj->id = json_incref(id);
+	starting = sj;
+	sweep_set_planning(app->sweep, true);
+	return 0;
+fail:
+	if (sj) {
+		plan_spec_free(sj->spec);
+		free(sj->text);
+		free(sj->name);
+		free(sj);
+	}
+	return -1;
 }
 
 /* sweep.start, or (resume_id) sweep.resume of an interrupted sweep from its stored text and name (taken). */
@@ -561,48 +642,24 @@ static void start_planning(struct app *app, const struct srv_peer *peer, struct 
 	struct acq_err err = { 0 };
 	const char *text = resume_id ? stored_text : json_string_value(json_object_get(req->root, "plan"));
 	const char *name = resume_id ? stored_name : json_string_value(json_object_get(req->root, "name"));
-	struct start_job *sj = NULL;
-	if (devices_busy(app->dev)) {
-		acq_errf(&err, ACQ_E_STATE, "a manual move or measurement is running");
-		goto fail;
-	}
-	if (!resume_id && sweep_start_check(app->sweep, &err))
-		goto fail;
-	if (!text) {
-		acq_errf(&err, ACQ_E_INVAL, "no plan text");
-		goto fail;
-	}
-	if (!(sj = calloc(1, sizeof *sj)) || !(sj->text = strdup(text)) || (name && !(sj->name = strdup(name)))) {
-		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
-		goto fail;
-	}
-	sj->resume_id = resume_id;
-	if (plan_load_string(name && *name ? name : "plan", text, &sj->spec, &err))
-		goto fail;
-	struct plan_timing tm;
-	sweep_plan_timing(app->sweep, &tm);
-	sj->app = app;
-	sj->serial = peer->serial;
-	double rate = app->have_sim && app->sim.time_scale > 0 ? app->sim.time_scale : 1; /* loop seconds per s */
-	if (plan_worker_start(sj->spec, &app->conf->bench, &tm, PLAN_MEM_BYTES, START_DEADLINE_S * rate,
-			      START_DEADLINE_S, start_planned, sj, &sj->worker, &err))
-		goto fail;
-	sj->id = json_incref(req->id);
-	starting = sj;
-	sweep_set_planning(app->sweep, true);
+	int rc = start_job(app, peer->serial, req->id, resume_id, false, text, name, &err);
 	free(stored_text);
 	free(stored_name);
-	return;
-fail:
-	if (sj) {
-		plan_spec_free(sj->spec);
-		free(sj->text);
-		free(sj->name);
-		free(sj);
-	}
-	free(stored_text);
-	free(stored_name);
-	reply_err(app, peer, req->id, &err);
+	if (rc)
+		reply_err(app, peer, req->id, &err);
+}
+
+int commands_auto_resume(struct app *app, int64_t *id, struct acq_err *err)
+{
+	char *text = NULL, *name = NULL;
+	*id = 0;
+	int r = sweep_resume_plan_text(app->sweep, 0, id, &text, &name, err);
+	if (r)
+		return r < 0 ? -1 : 0; /* 1: a sweep is loaded already (not at start-up) */
+	r = start_job(app, 0, NULL, *id, true, text, name, err);
+	free(text);
+	free(name);
+	return r;
 }
 
 static void cmd_sweep_start(struct app *app, const struct srv_peer *peer, struct proto_req *req)
@@ -615,6 +672,19 @@ static void cmd_sweep_start(struct app *app, const struct srv_peer *peer, struct
 static void cmd_sweep_resume(struct app *app, const struct srv_peer *peer, struct proto_req *req)
 {
 	struct acq_err err = { 0 };
+	if (starting && !starting->serial) { /* the start-up resume is being planned: after it */
+		struct deferred_resume *d = calloc(1, sizeof *d), **tail = &after_auto_resume;
+		if (!d) {
+			acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+			return reply_err(app, peer, req->id, &err);
+		}
+		d->peer = *peer;
+		d->root = json_incref(req->root);
+		while (*tail)
+			tail = &(*tail)->next;
+		*tail = d;
+		return;
+	}
 	int64_t id = 0;
 	char *text = NULL, *name = NULL;
 	int r = sweep_resume_plan_text(app->sweep, (int64_t)num_arg(req->root, "sweep", 0), &id, &text, &name, &err);

@@ -14,6 +14,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "daemon/cputime.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/store.h"
@@ -44,12 +45,17 @@ static void keepalive_tick(void *arg, struct port *p)
 	if (!alive)
 		return;
 	struct acq_err e = { 0 };
+	struct cputime ct;
+	cputime_thread(&ct);
 	double t0 = mono_now();
 	int rc = laser_keepalive(ls, &e);
 	pthread_mutex_lock(&ka->mu);
-	if (ka->last_sent > 0 && t0 - ka->last_sent > ka->max_gap)
+	if (ka->last_sent > 0 && t0 - ka->last_sent > ka->max_gap) {
 		ka->max_gap = t0 - ka->last_sent;
+		ka->max_gap_cpu_wait = ct.waiting - ka->last_cpu_wait; /* the thread's wait for a CPU in the gap */
+	}
 	ka->last_sent = t0;
+	ka->last_cpu_wait = ct.waiting;
 	if (rc) {
 		ka->failures++;
 		ka->last_err = e;
@@ -161,9 +167,11 @@ static void req_done(struct port_req *pr)
 	bool current = r->gen == s->gen;
 	/* A laser request that holds its thread longer than half the keep-alive delays the refresh (the same
 	 * thread): say so, to tell a slow laser from a thread kept off the CPU. */
-	if (r->d == CONF_DEV_LASER && dv->ka.period > 0 && r->run_s > 2 * dv->ka.period)
-		log_msg(LOG_WARNING, "laser: request %d took %.3f s on its thread%s%s", (int)r->op, r->run_s,
-			r->rc ? ": " : "", r->rc ? r->err.msg : "");
+	if (r->d == CONF_DEV_LASER && dv->ka.period > 0 && r->pr.took_s > 2 * dv->ka.period)
+		log_msg(LOG_WARNING, "laser: request %d took %.3f s on its thread (%.3f s running, %.3f s waiting for a "
+			"CPU, %.3f s waiting for the laser)%s%s", (int)r->op, r->pr.took_s, r->pr.on_cpu_s,
+			r->pr.cpu_wait_s, r->pr.took_s - r->pr.on_cpu_s - r->pr.cpu_wait_s, r->rc ? ": " : "",
+			r->rc ? r->err.msg : "");
 	if (r->op == R_OPEN)
 		opened(dv, r);
 	if (current) {
@@ -529,12 +537,13 @@ void devices_heartbeat(struct devices *dv)
 	struct acq_err e = ka->last_err;
 	ka->reported_failures = ka->failures;
 	ka->reported_skipped = ka->skipped;
-	double gap = ka->max_gap, period = ka->period;
+	double gap = ka->max_gap, period = ka->period, gap_wait = ka->max_gap_cpu_wait;
 	if (gap > 2 * period)
 		ka->max_gap = 0;
 	pthread_mutex_unlock(&ka->mu);
 	if (gap > 2 * period) /* the laser's thread was held up (a slow laser command, or not scheduled) */
-		log_msg(LOG_WARNING, "laser keep-alive: %.3f s between two refreshes (period %.3f s)", gap, period);
+		log_msg(LOG_WARNING, "laser keep-alive: %.3f s between two refreshes (period %.3f s; the laser's thread "
+			"waited %.3f s of it for a CPU)", gap, period, gap_wait);
 	if (nfail)
 		log_msg(LOG_WARNING, "laser keep-alive: %lu failure(s), the last: %s (emission switched off)", nfail, e.msg);
 	if (nskip)

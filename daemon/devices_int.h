@@ -68,6 +68,8 @@ struct keepalive {
 	unsigned long refreshes, failures, skipped, reported_failures, reported_skipped;
 	double period;                 /* the tick's period (real s) */
 	double last_sent, max_gap;     /* real s: the last refresh sent; the longest gap since the last report */
+	double last_cpu_wait;          /* the thread's total wait for a CPU at the last refresh (cputime.h) */
+	double max_gap_cpu_wait;       /* of max_gap, the seconds the thread waited for a CPU */
 	struct acq_err last_err;       /* of the last failure */
 };
 
@@ -117,7 +119,6 @@ struct req {
 	unsigned gen, seq;
 	const void *cfg;         /* the device's configuration (open) */
 	double target, deadline, pct;
-	double run_s;            /* real seconds the request took on the port's thread */
 	bool on;
 	struct spectro_meas meas;
 	/* results */
@@ -149,7 +150,7 @@ static inline bool is_axis(int d)
 struct req *devices_req_new(struct devices *dv, int d, enum rop op, enum owner owner);
 /* Queue r on its slot's port. -1 (r freed) when the slot has no port or r is NULL. */
 int devices_req_submit(struct req *r);
-/* On the port's thread: run r's driver calls (devices_io.c); results in r, real time taken in r->run_s. */
+/* On the port's thread: run r's driver calls (devices_io.c); results in r, the time taken in r->pr (port.h). */
 void devices_req_run(struct port_req *pr, struct port *p);
 /* On the loop: continue the manual operation r belongs to (devices_op.c); stale completions are dropped. */
 void devices_op_done(struct devices *dv, struct req *r);

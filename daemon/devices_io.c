@@ -165,11 +165,8 @@ static void req_run_op(struct req *r, struct port *p)
 	}
 }
 
-/* The request's driver calls, timed in real seconds (r->run_s). */
+/* The request's driver calls (the port times them: r->pr.took_s, on_cpu_s, cpu_wait_s). */
 void devices_req_run(struct port_req *pr, struct port *p)
 {
-	struct req *r = (struct req *)pr;
-	double t0 = loop_monotonic(NULL);
-	req_run_op(r, p);
-	r->run_s = loop_monotonic(NULL) - t0;
+	req_run_op((struct req *)pr, p);
 }

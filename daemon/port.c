@@ -13,6 +13,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "daemon/cputime.h"
 #include "daemon/loop.h"
 
 struct port {
@@ -104,7 +105,14 @@ static void *thread_main(void *arg)
 		p->run_gen = r->gen; /* queued before an interrupt: interrupted too */
 		p->running = true;
 		pthread_mutex_unlock(&p->mu);
+		struct cputime c0, c1;
+		cputime_thread(&c0);
+		double t0 = mono_now();
 		r->run(r, p);
+		r->took_s = mono_now() - t0;
+		cputime_thread(&c1);
+		r->on_cpu_s = c1.on_cpu - c0.on_cpu;
+		r->cpu_wait_s = c1.waiting - c0.waiting;
 		pthread_mutex_lock(&p->mu);
 		push(&p->done_head, &p->done_tail, r);
 		p->running = false;

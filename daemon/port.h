@@ -18,6 +18,9 @@ struct port_req {
 	void (*run)(struct port_req *r, struct port *p);
 	/* On the loop after run; the request belongs to done() from then on. */
 	void (*done)(struct port_req *r);
+	/* Filled by the port's thread around run(), for diagnostics (cputime.h): real seconds run() took, and of
+	 * them those the thread ran on a CPU and those it waited for one (the rest it slept: device, timeout). */
+	double took_s, on_cpu_s, cpu_wait_s;
 	/* the port's: */
 	unsigned long gen;
 	struct port_req *next;

@@ -345,17 +345,22 @@ static void drain_cb(struct loop *lp, void *arg)
 	struct server *srv = arg;
 	srv->drain_timer = 0;
 	srv->budget = LINES_PER_TURN;
-	uint64_t serials[MAX_CLIENTS + MAX_REFUSING];
-	int n = 0;
-	for (struct client *c = srv->clients; c && n < MAX_CLIENTS + MAX_REFUSING; c = c->next)
-		if (c->backlog && !reading_paused(c))
-			serials[n++] = c->peer.serial;
-	if (!n)
+	uint64_t serials[MAX_CLIENTS + MAX_REFUSING], ctl[MAX_CLIENTS + MAX_REFUSING];
+	int n = 0, nctl = 0;
+	for (struct client *c = srv->clients; c && n + nctl < MAX_CLIENTS + MAX_REFUSING; c = c->next)
+		if (c->backlog && !reading_paused(c)) {
+			if (c->peer.role == PROTO_CONTROLLER)
+				ctl[nctl++] = c->peer.serial;
+			else
+				serials[n++] = c->peer.serial;
+		}
+	if (!n && !nctl)
 		return;
-	/* In rotation: this turn starts where the last one's budget ran out. */
-	int first = (int)(srv->rotation++ % (unsigned)n);
-	for (int j = 0; j < n && srv->budget > 0; j++) {
-		uint64_t serial = serials[(first + j) % n];
+	/* Controllers first (observers cannot delay the operator's requests by more than a turn), then the others
+	 * in rotation: this turn starts where the last one's budget ran out. */
+	int first = n ? (int)(srv->rotation++ % (unsigned)n) : 0;
+	for (int j = 0; j < nctl + n && srv->budget > 0; j++) {
+		uint64_t serial = j < nctl ? ctl[j] : serials[(first + j - nctl) % n];
 		struct client *c = client_by_serial(srv, serial);
 		if (!c)
 			continue;

@@ -686,7 +686,7 @@ int sweep_resume_plan_text(struct sweep *sw, int64_t id, int64_t *found, char **
 	return 0;
 }
 
-int sweep_resume_planned(struct sweep *sw, int64_t id, struct plan_spec *spec, struct plan_result *plan,
+int sweep_resume_planned(struct sweep *sw, int64_t id, struct plan_spec *spec, struct plan_result *plan, bool hold,
 			 struct acq_err *err)
 {
 	json_t *js = NULL;
@@ -695,7 +695,7 @@ int sweep_resume_planned(struct sweep *sw, int64_t id, struct plan_spec *spec, s
 	} else if ((js = recover_load(sw, id, err))) { /* the row may have changed while it was planned */
 		sw->spec = spec;
 		sw->plan = plan;
-		return recover_planned(sw, id, js, false, err);
+		return recover_planned(sw, id, js, hold, err);
 	}
 	plan_spec_free(spec);
 	plan_result_free(plan);
@@ -709,22 +709,6 @@ int sweep_abort(struct sweep *sw, struct acq_err *err)
 	if (ex_abort(sw->ex, "aborted by the operator", loop_now(sw->env.loop), err))
 		return -1;
 	kick(sw); /* the tick releases it */
-	return 0;
-}
-
-int sweep_recover(struct sweep *sw, int64_t *id, struct acq_err *err)
-{
-	*id = 0;
-	if (sw->ex)
-		return acq_errf(err, ACQ_E_STATE, "a sweep is already loaded");
-	int64_t found = 0;
-	if (store_sweep_interrupted(sw->env.store, &found, err))
-		return -1;
-	if (!found)
-		return 0;
-	if (recover_id(sw, found, true, err))
-		return -1;
-	*id = found;
 	return 0;
 }
 

@@ -85,14 +85,12 @@ int sweep_resume(struct sweep *sw, int64_t id, struct acq_err *err);
 int sweep_resume_plan_text(struct sweep *sw, int64_t id, int64_t *found, char **text, char **name,
 			   struct acq_err *err);
 /* sweep_resume() of the interrupted sweep id with spec and plan made from its stored text (as for
- * sweep_start_planned; takes both, freed on failure too). 0 or -1. */
-int sweep_resume_planned(struct sweep *sw, int64_t id, struct plan_spec *spec, struct plan_result *plan,
+ * sweep_start_planned; takes both, freed on failure too). hold (the resume at start-up, daemon.auto_resume): a
+ * sweep paused for the operator before the restart stays paused. 0 or -1. */
+int sweep_resume_planned(struct sweep *sw, int64_t id, struct plan_spec *spec, struct plan_result *plan, bool hold,
 			 struct acq_err *err);
 /* Abort: laser off, arms stopped, sweep 'aborted'. 0 or -1. */
 int sweep_abort(struct sweep *sw, struct acq_err *err);
-/* At start-up with daemon.auto_resume: resume an interrupted sweep after its last committed point.
- * *id is the sweep resumed (0: none). 0 or -1. */
-int sweep_recover(struct sweep *sw, int64_t *id, struct acq_err *err);
 /* `recon.start`: run the completion chain again for a finished sweep (export of its calibrated samples,
  * then the reconstruction stages in child processes through job.h). *run_id: its recon_runs row (0 if not
  * known yet). ACQ_E_STATE while a sweep or a reconstruction runs, ACQ_E_NOTFOUND for no such sweep,

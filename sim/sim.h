@@ -57,6 +57,7 @@ struct sim_world {
 	/* laser state, written by the laser service */
 	bool laser_emission;
 	double laser_power_pct;
+	unsigned long laser_status_reads; /* STATUS? commands answered (the ctl status shows the device traffic) */
 	struct sim_faults faults;
 	uint64_t seed;
 	/* spectrometer side (sim/sim_spectro.c, sim/sim_control.c) */

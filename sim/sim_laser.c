@@ -114,6 +114,7 @@ static void command(struct sim_laser *s, const char *cmd)
 			reply(s, "OK");
 		}
 	} else if (!strcmp(cmd, "STATUS?")) {
+		w->laser_status_reads++;
 		reply(s, "STATUS emission=%d interlock=%d fault=%d", w->laser_emission, !w->faults.laser_interlock_open,
 		      w->faults.laser_fault ? 1 : 0);
 	} else {

@@ -91,7 +91,7 @@ def compose_config(path, state, sock, scale, sweep_yaml=None, daemon_extra="", l
 class Bench:
     """acq-sim + acquisitiond in a state directory; stop() ends both, whatever happened."""
 
-    def __init__(self, state_dir=None, scale=200.0, seed=SEED, sweep_yaml=None, daemon_extra=""):
+    def __init__(self, state_dir=None, scale=200.0, seed=SEED, sweep_yaml=None, daemon_extra="", sim_session=False):
         for prog in (SIM, DAEMON):
             if not os.access(prog, os.X_OK):
                 raise AssertionError("%s not built (make all)" % prog)
@@ -104,6 +104,7 @@ class Bench:
         self.ports = os.path.join(self.dir, "sim-ports.json")
         self.conf = os.path.join(self.dir, "acquisitiond.yaml")
         self.scale, self.seed = scale, seed
+        self.sim_session = sim_session  # acq-sim in a session (Linux autogroup: CPU share) of its own (the soak)
         compose_config(self.conf, self.state, self.sock, scale, sweep_yaml, daemon_extra)
         self.sim = self.daemon = None
         self.sim_log = os.path.join(self.dir, "acq-sim.log")
@@ -114,7 +115,7 @@ class Bench:
         log = open(self.sim_log, "ab")
         self.sim = subprocess.Popen([SIM, "-c", self.conf, "--time-scale", str(self.scale), "--seed", str(self.seed),
                                      "--ports-file", self.ports, "--control", self.ctl_path],
-                                    stdout=log, stderr=subprocess.STDOUT)
+                                    stdout=log, stderr=subprocess.STDOUT, start_new_session=self.sim_session)
         t0 = time.time()
         while not os.path.exists(self.ports):
             if self.sim.poll() is not None:

@@ -10,7 +10,9 @@ a forked child and stores and starts it when the plan comes back.
    boundary) and started: its stored points are those of acqctl's local dry run of the same plan, and it
    runs (its first state after the start: running, or paused for the sample swap).
 3. After a SIGKILL (no auto-resume), sweep.resume re-plans the stored plan off the loop as well: a second
-   sweep.resume meanwhile is refused ("being planned"), then the sweep is loaded again with all its points."""
+   sweep.resume meanwhile is refused ("being planned"), then the sweep is loaded again with all its points.
+4. After another SIGKILL, a daemon started with auto_resume re-plans the sweep off the loop: it logs "ready"
+   (READY=1, clients served, the watchdog fed) before the resumed sweep is loaded, with all its points."""
 import json
 import os
 import signal
@@ -117,6 +119,44 @@ def run():
         L.say("status after the resume: %s" % json.dumps(st.get("sweep", st.get("progress")))[:200])
         row = L.sweep_row(b, sid)
         assert row["state"] in ("running", "paused") and row["points_total"] == n_plan, row
+
+        # 4. the resume at start-up (daemon.auto_resume) plans off the loop too: the daemon is ready (serving
+        # clients, feeding the watchdog) before the plan is made, and resumes the sweep once it is
+        c2.close()
+        c.close()
+        b.kill_daemon(signal.SIGKILL)
+        with open(b.conf) as f:
+            conf = f.read()
+        assert "auto_resume: false" in conf
+        with open(b.conf, "w") as f:
+            f.write(conf.replace("auto_resume: false", "auto_resume: true"))
+        mark = len(b.daemon_text())
+        b.start_daemon()
+        c = b.client(timeout=300)
+        c2 = b.client(timeout=300)
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 120:
+            log = b.daemon_text()[mark:]
+            if "resuming interrupted sweep %d" % sid in log or "not resumed" in log:
+                break
+            time.sleep(0.05)
+        log = b.daemon_text()[mark:]
+        lines = log.splitlines()
+
+        def first(s):
+            return next((i for i, ln in enumerate(lines) if s in ln), None)
+        i_plan, i_ready = first("re-planning interrupted sweep %d" % sid), first("ready: socket")
+        i_res = first("resuming interrupted sweep %d (planned off the loop)" % sid)
+        L.say("auto-resume after a second SIGKILL: log lines re-planning %s, ready %s, resumed %s" % (
+            i_plan, i_ready, i_res))
+        assert i_plan is not None and i_ready is not None and i_res is not None, log[-3000:]
+        # before the change the plan was made on the loop before the daemon said ready
+        assert i_plan < i_ready < i_res, "the start-up resume was planned before the daemon was ready:\n" + log
+        row = L.sweep_row(b, sid)
+        assert row["state"] in ("running", "paused") and row["points_total"] == n_plan, row
+        st = c.req("status")
+        L.say("status after the auto-resume: %s" % json.dumps(st.get("sweep"))[:200])
+        assert st["sweep"]["id"] == sid and st["sweep"]["state"] in ("running", "paused"), st
         ab = c.req("sweep.abort")
         assert ab.get("ok"), ab
         assert L.sweep_row(b, sid)["state"] == "aborted"

@@ -9,17 +9,32 @@
   half lines  10 connections sending half a request and nothing more (reconnect when closed)
   config      1 connection asking for the configuration text in a loop
 and one well-behaved controller sends `status` every 50 ms. Load processes run as other users (observers).
-Prints: the sweep's stall (largest gap between consecutive points under load, the baseline's, and the
-largest excess of a point's gap over the same point's gap in the baseline: same plan, same seed), the
-well-behaved client's reply latency p50/p99/max, the daemon's peak RSS, and the server's refusal, drop and
-timeout counters. Goals: stall (excess) <= 100 ms, p99 < 50 ms, RSS < 64 MB; exit 1 when one is missed.
-Priorities: the daemon at nice -5 (the unit's Nice=), the simulator at -10 (it stands for hardware with its own
-processors), the load at 0.
-Environment: SOAK_SECONDS, SOAK_SCALE (bench time scale, default 10), ACQ_BUILD, ACQ_SRC, ACQ_SEED."""
+After each sweep under load, a control sweep runs beside it with the load clients stopped (same plan, same seed,
+same machine a minute later), so the machine's own stalls (7 engineers on 2 cores) are told from those the
+clients cause.
+Prints: the sweep's stall (largest gap between consecutive points under load; the largest excess of a point's
+gap over the same point in the control sweep beside it, the goal's figure; and over the first, unloaded
+baseline), the well-behaved client's reply latency p50/p99/max, the daemon's peak RSS, the server's refusal,
+drop and timeout counters, the machine's load average beside every sweep, and where the daemon's threads lost
+time (its log: laser requests and keep-alive gaps split into running, waiting for a CPU and waiting for the
+laser; loop blocks with the loop's wait for a CPU). Goals: stall (excess over the control) <= 100 ms,
+p99 < 50 ms, RSS < 64 MB; exit 1 when one is missed.
+Priorities: the daemon at nice -5 (the unit's Nice=, applied to every thread: setpriority() on a pid changes
+only its main thread), the simulator at -10 (it stands for hardware with its own processors), the load at
+SOAK_LOAD_NICE (default 0).
+SOAK_LOAD_SESSION=1 puts the load clients in a session of their own: Linux's autogroup then gives them one CPU
+share, as a unit's cgroup and the users' are separate on a real machine (default 0: they share the daemon's).
+SOAK_SIM_SESSION=1 does the same for acq-sim, which stands for controllers and a laser with processors of their
+own (default 0: it shares the daemon's CPU group, and the daemon's work for the clients delays the "hardware").
+Also printed: the scheduler's run and wait-for-a-CPU times of the simulator's and the daemon's threads during
+the loaded and the control sweeps.
+Environment: SOAK_SECONDS, SOAK_SCALE (bench time scale, default 10), SOAK_LOAD_NICE, SOAK_LOAD_SESSION,
+SOAK_SIM_SESSION, ACQ_BUILD, ACQ_SRC, ACQ_SEED."""
 import json
 import multiprocessing as mp
 import os
 import pwd
+import re
 import signal
 import socket
 import sys
@@ -30,6 +45,9 @@ import sweeplib as L  # noqa: E402
 
 SECONDS = float(os.environ.get("SOAK_SECONDS", "1200"))
 SCALE = float(os.environ.get("SOAK_SCALE", "10"))
+LOAD_NICE = int(os.environ.get("SOAK_LOAD_NICE", "0"))
+LOAD_SESSION = os.environ.get("SOAK_LOAD_SESSION", "0") == "1"
+SIM_SESSION = os.environ.get("SOAK_SIM_SESSION", "0") == "1"
 OBSERVERS = ["daemon", "bin", "sys", "sync", "games", "man"]
 
 PLAN = L.PLAN_3X18
@@ -39,6 +57,8 @@ HUGE = ("name: huge\nincidence:\n  theta_deg: [0, 8, 16, 24, 32, 40, 48, 56, 64,
 
 
 def become(user):
+    if LOAD_NICE:
+        os.setpriority(os.PRIO_PROCESS, 0, LOAD_NICE)
     pw = pwd.getpwnam(user)
     os.setgid(pw.pw_gid)
     os.setuid(pw.pw_uid)
@@ -179,6 +199,56 @@ def w_config(path, user, stop):
             time.sleep(0.1)
 
 
+def renice_all(pid, nice):
+    """Every thread of pid at nice (Linux: a thread's nice is its own; setpriority(pid) sets the main one's)."""
+    for tid in os.listdir("/proc/%d/task" % pid):
+        try:
+            os.setpriority(os.PRIO_PROCESS, int(tid), nice)
+        except OSError:
+            pass
+
+
+def pressure():
+    try:
+        with open("/proc/pressure/cpu") as f:
+            return f.readline().split()[1]  # some avg10=...
+    except (OSError, IndexError):
+        return "avg10=?"
+
+
+def load_str():
+    return "load %.1f %.1f %.1f, cpu pressure %s" % (os.getloadavg() + (pressure(),))
+
+
+def thread_report(text):
+    """Where the daemon's threads lost time, from its log (daemon/cputime.h diagnostics)."""
+    out = []
+    req = [tuple(map(float, m)) for m in re.findall(
+        r"laser: request \d+ took ([0-9.]+) s on its thread \(([0-9.]+) s running, ([0-9.]+) s waiting for a CPU, "
+        r"(-?[0-9.]+) s waiting for the laser\)", text)]
+    if req:
+        out.append("laser requests holding the laser's thread > 2 keep-alive periods: %d, %.1f s in all (max %.2f s):"
+                   " %.1f s running, %.1f s waiting for a CPU, %.1f s waiting for the laser" % (
+                       len(req), sum(r[0] for r in req), max(r[0] for r in req), sum(r[1] for r in req),
+                       sum(r[2] for r in req), sum(r[3] for r in req)))
+    ka = [tuple(map(float, m)) for m in re.findall(
+        r"laser keep-alive: ([0-9.]+) s between two refreshes \(period [0-9.]+ s; the laser's thread waited "
+        r"(-?[0-9.]+) s of it for a CPU\)", text)]
+    if ka:
+        out.append("laser keep-alive gaps > 2 periods: %d (max %.2f s); of their %.1f s the laser's thread waited "
+                   "%.1f s for a CPU" % (len(ka), max(k[0] for k in ka), sum(k[0] for k in ka), sum(k[1] for k in ka)))
+    wd = [tuple(map(float, m)) for m in re.findall(
+        r"watchdog: the loop was blocked for about ([0-9.]+) s \(fed [0-9.]+ s after the last time, period [0-9.]+ s; "
+        r"the loop's thread waited (-?[0-9.]+) s of it for a CPU\)", text)]
+    if wd:
+        out.append("loop blocks > 1 s (late watchdog feeds): %d (max %.1f s); the loop waited %.1f s of them for a "
+                   "CPU" % (len(wd), max(w[0] for w in wd), sum(w[1] for w in wd)))
+    faults = len(re.findall(r"stopped emitting", text))
+    out.append("laser faults (stopped emitting during an exposure): %d; keep-alive failures: %d" % (
+        faults, len(re.findall(r"laser keep-alive: \d+ failure", text))))
+    return out
+
+
 def rss_mb(pid):
     try:
         with open("/proc/%d/status" % pid) as f:
@@ -217,6 +287,64 @@ def pct(xs, p):
     return xs[min(len(xs) - 1, int(p / 100.0 * len(xs)))] if xs else float("nan")
 
 
+WORKERS = [(w_flood, OBSERVERS[0]), (w_flood, OBSERVERS[0]), (w_flood, OBSERVERS[1]), (w_flood, OBSERVERS[1]),
+           (w_noread, OBSERVERS[2]), (w_noread, OBSERVERS[2]), (w_slots, OBSERVERS[3]), (w_slots, OBSERVERS[4]),
+           (w_huge, OBSERVERS[5]), (w_huge, OBSERVERS[5]), (w_half, OBSERVERS[1]), (w_config, OBSERVERS[0])]
+
+
+def load_group(sock, stop):
+    """The load clients' parent: in a session of its own when SOAK_LOAD_SESSION=1, so that Linux's autogroup
+    gives the clients one CPU share of their own, as users' processes (user.slice) and the unit (system.slice)
+    have on a real machine; otherwise they share the soak's group with the daemon and the simulator."""
+    if LOAD_SESSION:
+        os.setsid()
+    procs = []
+    for fn, user in WORKERS:
+        p = mp.Process(target=fn, args=(sock, user, stop), daemon=True)
+        p.start()
+        procs.append(p)
+    stop.wait()
+    for p in procs:
+        p.join(3)
+        if p.is_alive():
+            p.kill()
+            p.join(3)
+
+
+def start_load(sock):
+    stop = mp.Event()
+    p = mp.Process(target=load_group, args=(sock, stop))
+    p.start()
+    return stop, [p]
+
+
+def sched_times(pid, main_only=False):
+    """(seconds on a CPU, seconds waiting for one) summed over pid's threads (/proc/PID/task/*/schedstat), or of
+    its main thread only (the daemon's loop)."""
+    run = wait = 0
+    try:
+        for tid in (["%d" % pid] if main_only else os.listdir("/proc/%d/task" % pid)):
+            try:
+                with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
+                    a = f.read().split()
+                run += int(a[0])
+                wait += int(a[1])
+            except (OSError, IndexError, ValueError):
+                pass
+    except OSError:
+        pass
+    return run * 1e-9, wait * 1e-9
+
+
+def stop_load(stop, procs):
+    stop.set()
+    for p in procs:
+        p.join(10)
+        if p.is_alive():
+            p.kill()
+            p.join(3)
+
+
 def main():
     if os.geteuid() != 0:
         print("soak: needs root (load clients run as other users)")
@@ -226,50 +354,29 @@ def main():
     sweep = L.strip_sections(sweep, {"recon", "daemon"}).replace("auto_recon: true", "auto_recon: false")
     sweep = sweep.replace("pause_after_reference: true", "pause_after_reference: false")
     b = L.Bench(scale=SCALE, sweep_yaml=sweep,
-                daemon_extra="  observers: [%s]\n" % ", ".join(OBSERVERS))
+                daemon_extra="  observers: [%s]\n" % ", ".join(OBSERVERS), sim_session=SIM_SESSION)
     os.chmod(b.dir, 0o755)
-    procs, stop = [], mp.Event()
+    load = None
     try:
         b.start_sim()
         b.start_daemon()
         os.chmod(b.sock, 0o666)
         # Priorities as on a real bench: the unit runs the daemon at Nice=-5; the simulator stands for
         # controllers and a laser that have their own processors (-10 here, so the load does not starve it).
-        os.setpriority(os.PRIO_PROCESS, b.sim.pid, -10)
-        os.setpriority(os.PRIO_PROCESS, b.daemon.pid, -5)
+        # Every thread: the daemon's device threads exist already, and a thread's nice is its own.
+        renice_all(b.sim.pid, -10)
+        renice_all(b.daemon.pid, -5)
         t_start = time.time()
-        print("soak: %g s, bench time scale %g, plan of %s points, seed %d" % (SECONDS, SCALE, "52", L.SEED),
-              flush=True)
+        print("soak: %g s, bench time scale %g, plan of %s points, seed %d, load clients at nice %d, %s; %s" % (
+            SECONDS, SCALE, "52", L.SEED, LOAD_NICE, "in a session (CPU group) of their own" if LOAD_SESSION else
+            "in the daemon's session (CPU group)", load_str()), flush=True)
+        print("soak: acq-sim %s" % ("in a session (CPU group) of its own" if SIM_SESSION else
+                                    "in the daemon's session (CPU group)"), flush=True)
         good = L.Client(b.sock, timeout=10)  # connected before the load, like an operator's watch
-        base_lat = []
-        t_prev = [0.0]
-
-        def base_probe(_row):
-            if time.monotonic() - t_prev[0] < 0.05:
-                return
-            t_prev[0] = time.monotonic()
-            t0 = time.monotonic()
-            good.req("status")
-            base_lat.append(time.monotonic() - t0)
-        base_sid = run_sweep(b, "baseline", on_tick=base_probe)
-        base = gaps(b, base_sid)
-        print("baseline sweep %d (no load): %d points, gap between points median %.0f ms, max %.0f ms; status "
-              "latency p50 %.1f ms, p99 %.1f ms" % (
-                  base_sid, len(base) + 1, 1e3 * pct(list(base.values()), 50), 1e3 * max(base.values()),
-                  1e3 * pct(base_lat, 50), 1e3 * pct(base_lat, 99)), flush=True)
-
-        workers = [(w_flood, OBSERVERS[0]), (w_flood, OBSERVERS[0]), (w_flood, OBSERVERS[1]),
-                   (w_flood, OBSERVERS[1]), (w_noread, OBSERVERS[2]), (w_noread, OBSERVERS[2]),
-                   (w_slots, OBSERVERS[3]), (w_slots, OBSERVERS[4]), (w_huge, OBSERVERS[5]),
-                   (w_huge, OBSERVERS[5]), (w_half, OBSERVERS[1]), (w_config, OBSERVERS[0])]
-        for fn, user in workers:
-            p = mp.Process(target=fn, args=(b.sock, user, stop), daemon=True)
-            p.start()
-            procs.append(p)
-        lat, errors, rss = [], 0, []
+        lat, ctl_lat, errors, rss = [], [], 0, []
         last = [0.0]
 
-        def probe(_row=None):
+        def probe(into):
             nonlocal errors
             now = time.monotonic()
             if now - last[0] < 0.05:
@@ -278,23 +385,38 @@ def main():
             t0 = time.monotonic()
             try:
                 r = good.req("status")
-                lat.append(time.monotonic() - t0)
+                into.append(time.monotonic() - t0)
                 if not r.get("ok"):
                     errors += 1
             except Exception:
                 errors += 1
             rss.append(rss_mb(b.daemon.pid))
 
-        load_end = t_start + SECONDS
-        excess, load_gaps, sweeps, points, paused = [], [], 0, 0, []
-        while time.time() < load_end or sweeps == 0:
-            c = good
-            r = c.req("sweep.start", plan=PLAN, name="soak-%d" % sweeps)
+        paused = []
+
+        sched = {"load": [0.0] * 6, "control": [0.0] * 6}
+
+        def drive(name, into, deadline, kind=None):
+            """One sweep of the plan, probing status meanwhile; its gaps by point. kind: where to add the sweep's
+            scheduler times of the simulator's and the daemon's threads."""
+            s0, d0, m0 = sched_times(b.sim.pid), sched_times(b.daemon.pid), sched_times(b.daemon.pid, True)
+            try:
+                return drive1(name, into, deadline)
+            finally:
+                if kind:
+                    s1, d1, m1 = sched_times(b.sim.pid), sched_times(b.daemon.pid), sched_times(b.daemon.pid, True)
+                    acc = sched[kind]
+                    for i, v in enumerate((s1[0] - s0[0], s1[1] - s0[1], d1[0] - d0[0], d1[1] - d0[1],
+                                           m1[0] - m0[0], m1[1] - m0[1])):
+                        acc[i] += v
+
+        def drive1(name, into, deadline):
+            r = good.req("sweep.start", plan=PLAN, name=name)
             if not r.get("ok"):
-                raise AssertionError("sweep.start under load: %s" % r)
+                raise AssertionError("sweep.start %s: %s" % (name, r))
             sid = int(r["sweep"])
             while True:
-                probe()
+                probe(into)
                 st = good.req("sweep.show", sweep=sid)
                 state = st["sweep"]["state"] if st.get("ok") else "?"
                 if state in ("completed", "aborted", "failed"):
@@ -304,48 +426,78 @@ def main():
                     # resumed as an operator would.
                     ev = [e for e in st["sweep"].get("events", []) if e.get("kind") == "pause"]
                     paused.append(ev[0].get("message", "") if ev else "?")
-                    print("  sweep %d paused under load: %s; resuming" % (sid, paused[-1]), flush=True)
+                    print("  sweep %d paused: %s; resuming" % (sid, paused[-1]), flush=True)
                     good.req("sweep.resume")
-                if time.time() > load_end + max(600, SECONDS):
-                    raise AssertionError("sweep %d not finished %.0f s after the load's end" % (
-                        sid, time.time() - load_end))
+                if time.time() > deadline:
+                    raise AssertionError("sweep %d (%s) not finished in time" % (sid, name))
                 time.sleep(0.05)
             if st["sweep"]["state"] != "completed":
-                raise AssertionError("sweep %d ended %s under load" % (sid, st["sweep"]["state"]))
-            g = gaps(b, sid)
+                raise AssertionError("sweep %d (%s) ended %s" % (sid, name, st["sweep"]["state"]))
+            return sid, gaps(b, sid)
+
+        base_lat = []
+        base_sid, base = drive("baseline", base_lat, time.time() + 3600)
+        print("baseline sweep %d (no load): %d points, gap between points median %.0f ms, max %.0f ms; status "
+              "latency p50 %.1f ms, p99 %.1f ms; %s" % (
+                  base_sid, len(base) + 1, 1e3 * pct(list(base.values()), 50), 1e3 * max(base.values()),
+                  1e3 * pct(base_lat, 50), 1e3 * pct(base_lat, 99), load_str()), flush=True)
+
+        load_end = t_start + SECONDS
+        excess, excess_ctl, load_gaps, ctl_gaps, sweeps, points = [], [], [], [], 0, 0
+        while time.time() < load_end or sweeps == 0:
+            load = start_load(b.sock)
+            sid, g = drive("soak-%d" % sweeps, lat, load_end + max(600, SECONDS), "load")
+            lstr = load_str()
+            stop_load(*load)
+            load = None
+            # the control beside it: the same plan on the same machine now, without the load clients
+            csid, cg = drive("control-%d" % sweeps, ctl_lat, time.time() + 3600, "control")
             sweeps += 1
             points += len(g) + 1
             load_gaps += list(g.values())
-            excess += [g[k] - base[k] for k in g if k in base]
-            print("  sweep %d under load: max gap %.0f ms, max excess over the baseline %.0f ms; status p99 so far "
-                  "%.1f ms; RSS %.1f MB" % (sid, 1e3 * max(g.values()), 1e3 * max(excess), 1e3 * pct(lat, 99),
-                                           max(rss) if rss else 0), flush=True)
-        stop.set()
+            ctl_gaps += list(cg.values())
+            ex_b = [g[k] - base[k] for k in g if k in base]
+            ex_c = [g[k] - cg[k] for k in g if k in cg]
+            excess += ex_b
+            excess_ctl += ex_c
+            print("  sweep %d under load: max gap %.0f ms (%s); control sweep %d beside it: max gap %.0f ms (%s); "
+                  "largest excess of a point's gap over the same point in the control %.0f ms, over the baseline "
+                  "%.0f ms; status p99 so far %.1f ms; RSS %.1f MB" % (
+                      sid, 1e3 * max(g.values()), lstr, csid, 1e3 * max(cg.values()), load_str(), 1e3 * max(ex_c),
+                      1e3 * max(ex_b), 1e3 * pct(lat, 99), max(rss) if rss else 0), flush=True)
         st = good.req("status")
         srv = st.get("server", {})
         good.close()
         elapsed = time.time() - t_start
         print()
-        print("soak: %.0f s; %d sweeps (%d points) under load" % (elapsed, sweeps, points))
-        print("sweep stall: max gap between points under load %.0f ms (baseline max %.0f ms); largest excess of a "
-              "point's gap over the same point without load %.0f ms (goal <= 100 ms)" % (
-                  1e3 * max(load_gaps), 1e3 * max(base.values()), 1e3 * max(excess)))
-        print("well-behaved client: %d status requests, latency p50 %.1f ms, p99 %.1f ms, max %.1f ms, %d errors "
-              "(goal p99 < 50 ms)" % (len(lat), 1e3 * pct(lat, 50), 1e3 * pct(lat, 99), 1e3 * max(lat), errors))
+        print("soak: %.0f s; %d sweeps (%d points) under load, each followed by a control sweep without it" % (
+            elapsed, sweeps, points))
+        print("sweep stall: max gap between points under load %.0f ms, in the control sweeps %.0f ms, in the "
+              "baseline %.0f ms" % (1e3 * max(load_gaps), 1e3 * max(ctl_gaps), 1e3 * max(base.values())))
+        print("sweep stall from the load clients: largest excess of a point's gap over the same point in the control "
+              "sweep beside it %.0f ms (goal <= 100 ms); over the first baseline %.0f ms" % (
+                  1e3 * max(excess_ctl), 1e3 * max(excess)))
+        print("well-behaved client: %d status requests under load, latency p50 %.1f ms, p99 %.1f ms, max %.1f ms, "
+              "%d errors (goal p99 < 50 ms); in the control sweeps p50 %.1f ms, p99 %.1f ms" % (
+                  len(lat), 1e3 * pct(lat, 50), 1e3 * pct(lat, 99), 1e3 * max(lat), errors, 1e3 * pct(ctl_lat, 50),
+                  1e3 * pct(ctl_lat, 99)))
         print("daemon RSS: peak %.1f MB (goal < 64 MB)" % max(rss))
-        print("sweeps paused by device faults under load: %d%s" % (len(paused), (" (%s)" % paused[0]) if paused else ""))
-        print("machine load average (1/5/15 min) at the end: %.1f %.1f %.1f on %d CPUs" % (
-            os.getloadavg() + (os.cpu_count(),)))
+        print("sweeps paused by device faults: %d%s" % (len(paused), (" (%s)" % paused[0]) if paused else ""))
+        for kind in ("load", "control"):
+            a = sched[kind]
+            print("scheduler, the %s sweeps: acq-sim's threads ran %.1f s and waited %.1f s for a CPU; the daemon's "
+                  "ran %.1f s and waited %.1f s, of which its loop (main thread) ran %.1f s and waited %.1f s" % (
+                      (kind if kind == "control" else "loaded",) + tuple(a)))
+        for line in thread_report(b.daemon_text()):
+            print("daemon threads: " + line)
+        print("machine at the end: %s on %d CPUs" % (load_str(), os.cpu_count()))
         print("server: %s" % json.dumps(srv))
-        ok = max(excess) <= 0.100 and pct(lat, 99) < 0.050 and max(rss) < 64 and errors == 0 and not paused
+        ok = max(excess_ctl) <= 0.100 and pct(lat, 99) < 0.050 and max(rss) < 64 and errors == 0 and not paused
         print("soak: %s" % ("all goals met" if ok else "GOALS MISSED"))
         return 0 if ok else 1
     finally:
-        stop.set()
-        for p in procs:
-            p.join(3)
-            if p.is_alive():
-                p.kill()
+        if load:
+            stop_load(*load)
         b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
 
 

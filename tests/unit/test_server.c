@@ -11,7 +11,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <pwd.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
 #include <sys/un.h>
 #include <unistd.h>
 #include <cmocka.h>
@@ -33,6 +36,7 @@ struct fx {
 	struct loop *lp;
 	struct server *srv;
 	long handled;
+	long ctl_at;  /* handled when a controller's request was last handled */
 };
 
 static char pad[1001];
@@ -42,6 +46,8 @@ static void on_req(void *ctx, const struct srv_peer *peer, struct proto_req *req
 {
 	struct fx *f = ctx;
 	f->handled++;
+	if (peer->role == PROTO_CONTROLLER)
+		f->ctl_at = f->handled;
 	server_reply(f->srv, peer->serial, req->id, json_pack("{s:s}", "pad", pad));
 }
 
@@ -52,7 +58,10 @@ static int setup(void **state)
 	snprintf(f->dir, sizeof f->dir, "/tmp/test_server.XXXXXX");
 	assert_non_null(mkdtemp(f->dir));
 	snprintf(f->path, sizeof f->path, "%s/s.sock", f->dir);
-	f->d = (struct conf_daemon){ .state_dir = f->dir, .socket_path = f->path, .socket_mode = 0600 };
+	/* observers: the "daemon" user (test_controller_first connects as it; the other tests as root) */
+	f->d = (struct conf_daemon){ .state_dir = f->dir, .socket_path = f->path, .socket_mode = 0666,
+				     .observers = { "daemon" }, .nobservers = 1 };
+	chmod(f->dir, 0755);
 	fake_now = 1000;
 	struct loop_clock clk = { .now = fake_clock };
 	struct acq_err err = { 0 };
@@ -342,6 +351,89 @@ static void test_bounded_turns(void **state)
 	free(buf);
 }
 
+/* 30 observers (another uid) each pipeline 50 requests; a controller (root) asking meanwhile is served at the
+ * next turn, ahead of the rotation: at most one turn's worth of observer lines (64) is handled before its request.
+ * In plain rotation it waited for up to four turns (31 clients x 8 lines / 64 a turn). */
+static void test_controller_first(void **state)
+{
+	struct fx *f = *state;
+	enum { NC = 30, NREQ = 50, NROOT = 8 };
+	struct passwd *pw = getpwnam("daemon");
+	if (!pw)
+		skip();
+	static const char req[] = "{\"cmd\":\"version\",\"id\":1}\n";
+	char batch[NREQ * sizeof req];
+	for (int i = 0; i < NREQ; i++)
+		memcpy(batch + i * (sizeof req - 1), req, sizeof req - 1);
+	int gate[2], go[2];
+	assert_int_equal(pipe(gate), 0);
+	assert_int_equal(pipe(go), 0);
+	pid_t kids[NC];
+	for (int c = 0; c < NC; c++) {
+		kids[c] = fork();
+		assert_true(kids[c] >= 0);
+		if (kids[c] == 0) {
+			close(gate[1]);
+			close(go[1]);
+			if (setgid(pw->pw_gid) || setuid(pw->pw_uid))
+				_exit(3);
+			int fd = socket(AF_UNIX, SOCK_STREAM, 0);
+			struct sockaddr_un sa = { .sun_family = AF_UNIX };
+			snprintf(sa.sun_path, sizeof sa.sun_path, "%s", f->path);
+			char b;
+			if (connect(fd, (struct sockaddr *)&sa, sizeof sa) || read(go[0], &b, 1) != 1 ||
+			    send(fd, batch, NREQ * (sizeof req - 1), 0) != (ssize_t)(NREQ * (sizeof req - 1)))
+				_exit(4);
+			(void)!read(gate[0], &b, 1); /* hold the connection until the parent is done */
+			_exit(0);
+		}
+	}
+	close(gate[0]);
+	close(go[0]);
+	int nclients = 0, nwatch = 0;
+	for (int t = 0; t < 20000 && nclients < NC; t++) { /* every observer accepted */
+		fake_now += 1e-3;
+		loop_run_once(f->lp, 1);
+		server_counts(f->srv, &nclients, &nwatch);
+	}
+	assert_int_equal(nclients, NC);
+	int root = connect_client(f);
+	char *buf = malloc(1 << 16);
+	bool eof;
+	drain(root, buf, 1 << 16, &eof);
+	char gobytes[NC];
+	memset(gobytes, 'g', sizeof gobytes);
+	assert_int_equal(write(go[1], gobytes, NC), NC);
+	usleep(300000); /* their batches in the sockets */
+	long before = f->handled, worst = 0;
+	for (int k = 0; k < NROOT; k++) {
+		long h0 = f->handled;
+		assert_int_equal(send(root, req, sizeof req - 1, 0), (ssize_t)(sizeof req - 1));
+		long got = 0;
+		for (int t = 0; t < 1000 && !got; t++) {
+			fake_now += 1e-3;
+			loop_run_once(f->lp, 0);
+			got = count_lines(buf, drain(root, buf, 1 << 16, &eof));
+		}
+		assert_int_equal(got, 1);
+		if (f->ctl_at - h0 - 1 > worst)
+			worst = f->ctl_at - h0 - 1;
+	}
+	print_message("  a controller's request waited for at most %ld observer requests (%d observers pipelining, "
+		      "%ld of their requests handled meanwhile)\n", worst, NC, f->handled - before - NROOT);
+	assert_true(f->handled - before - NROOT < NC * NREQ); /* the observers still had lines waiting throughout */
+	assert_true(worst <= 64);
+	close(root);
+	close(gate[1]);
+	close(go[1]);
+	for (int c = 0; c < NC; c++) {
+		int st;
+		waitpid(kids[c], &st, 0);
+		assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 0);
+	}
+	free(buf);
+}
+
 int main(void)
 {
 	log_init(LOG_ERR, false);
@@ -353,6 +445,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(test_output_bound_drops_watcher, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_refusal_readable_after_write, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_bounded_turns, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_controller_first, setup, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
