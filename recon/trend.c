@@ -263,7 +263,7 @@ static void nnls(const double *M, const double *r, double *c)
 }
 
 /* Coefficients of one channel at fixed roughness (basis B[k*TREND_NB]); returns the sum of squared log residuals. */
-static double fit_channel(size_t n, const double *v, double eps, const double *B, double *c)
+double trend_fit_coef(size_t n, const double *v, double eps, const double *B, double *c)
 {
 	enum { N = TREND_NB };
 	double M[N * N] = { 0 }, r[N] = { 0 };
@@ -307,7 +307,7 @@ static double score(int t, size_t n, const double *val, const double *eps, const
 	double ss = 0, c[TREND_NB];
 	int lobe = 0;
 	for (size_t i = 0; i < nc; i++) {
-		ss += fit_channel(n, val + chan[i] * n, eps[chan[i]], B, c);
+		ss += trend_fit_coef(n, val + chan[i] * n, eps[chan[i]], B, c);
 		for (int j = 0; j < TREND_NB; j++)
 			if (is_lobe(t, j) && c[j] > 0)
 				lobe = 1;
@@ -402,7 +402,7 @@ int trend_fit_kind(int t, size_t n, size_t L, const double *val, const double *e
 	}
 	double ss = 0;
 	for (size_t l = 0, i = 0; l < L; l++) {
-		double e = fit_channel(n, val + l * n, eps[l], B, coef + l * TREND_NB);
+		double e = trend_fit_coef(n, val + l * n, eps[l], B, coef + l * TREND_NB);
 		if (i < nc && chan[i] == l) {
 			ss += e;
 			i++;

@@ -51,6 +51,10 @@ void trend_basis(double alpha, const double c6[6], double b[TREND_NB]);
  */
 int trend_fit(size_t n, size_t L, const double *val, const double *eps, const double *c6, const size_t *chan,
 	      size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err);
+/* The non-negative coefficients c[TREND_NB] of one channel at a fixed roughness: basis values B[k*TREND_NB] at the
+ * n samples, linear values v[k] (negatives count as 0), offset eps; weights 1/(f + ε)² as in trend_fit. Returns
+ * the sum of squared log residuals. */
+double trend_fit_coef(size_t n, const double *v, double eps, const double *B, double *c);
 /* trend_fit for the trend kind t (RECON_TREND_GGX .. RECON_TREND__COUNT − 1). */
 int trend_fit_kind(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
 		   const size_t *chan, size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err);
