@@ -184,34 +184,66 @@ static inline __attribute__((always_inline)) double wendland_bf(double t)
  * an AVX2 copy is chosen at run time where the CPU has it). The arithmetic is
  * the same, in the same order, as chord() in rbf_kernel, so both paths give the same bits.
  */
+/*
+ * One Wendland row for both precisions (written once: T the element type, SQRT its square root, W its
+ * branch-free Wendland). In double it is chord()'s arithmetic in chord()'s order (q1 + oy is q1 - (-oy),
+ * exactly), so both paths give the same bits; the casts are then no-ops.
+ */
+#define KROW_WENDLAND_ROW(T, SQRT, W)                                                                        \
+	do {                                                                                                 \
+		const T *restrict cx = soa, *restrict cy = soa + n, *restrict cz = soa + 2 * n,              \
+			*restrict ox = soa + 3 * n, *restrict oy = soa + 4 * n, *restrict oz = soa + 5 * n;  \
+		T *restrict krow = krow_;                                                                    \
+		const T q0 = (T)q[0], q1 = (T)q[1], q2 = (T)q[2], q3 = (T)q[3], q4 = (T)q[4], q5 = (T)q[5],  \
+			inv = (T)(1.0 / shape);                                                              \
+		for (size_t j = 0; j < n; j++) {                                                             \
+			T a = q0 - cx[j], b = q1 - cy[j], c = q2 - cz[j];                                    \
+			T r1 = SQRT(a * a + b * b + c * c);                                                  \
+			T d = q3 - ox[j], e = q4 - oy[j], f = q5 - oz[j];                                    \
+			T r2 = SQRT(d * d + e * e + f * f);                                                  \
+			T g = q0 - ox[j], h = q1 + oy[j], i = q2 - oz[j];                                    \
+			T t1 = SQRT(g * g + h * h + i * i);                                                  \
+			T k = q3 - cx[j], l = q4 + cy[j], o = q5 - cz[j];                                    \
+			T t2 = SQRT(k * k + l * l + o * o);                                                  \
+			krow[j] = W(r1 * inv) * W(r2 * inv) + W(t1 * inv) * W(t2 * inv);                     \
+		}                                                                                            \
+	} while (0)
+
 /* The Wendland row, inlined into a baseline and an AVX2 copy (chosen at run time by rbf_krow). */
 static inline __attribute__((always_inline)) void krow_wendland(double shape, const double q[6], size_t n,
 								const double *soa, double *krow_)
 {
-	const double *restrict cx = soa, *restrict cy = soa + n, *restrict cz = soa + 2 * n,
-		     *restrict ox = soa + 3 * n, *restrict oy = soa + 4 * n, *restrict oz = soa + 5 * n;
-	double *restrict krow = krow_;
-	const double q0 = q[0], q1 = q[1], q2 = q[2], q3 = q[3], q4 = q[4], q5 = q[5], inv = 1.0 / shape;
-	for (size_t j = 0; j < n; j++) {
-		double a = q0 - cx[j], b = q1 - cy[j], c = q2 - cz[j];
-		double r1 = sqrt(a * a + b * b + c * c);
-		double d = q3 - ox[j], e = q4 - oy[j], f = q5 - oz[j];
-		double r2 = sqrt(d * d + e * e + f * f);
-		double g = q0 - ox[j], h = q1 - -oy[j], i = q2 - oz[j];
-		double t1 = sqrt(g * g + h * h + i * i);
-		double k = q3 - cx[j], l = q4 - -cy[j], o = q5 - cz[j];
-		double t2 = sqrt(k * k + l * l + o * o);
-		krow[j] = wendland_bf(r1 * inv) * wendland_bf(r2 * inv) + wendland_bf(t1 * inv) * wendland_bf(t2 * inv);
-	}
+	KROW_WENDLAND_ROW(double, sqrt, wendland_bf);
 }
 
+/* A row's baseline and AVX2 copies, and NAME_run choosing one at run time (the CPU's answer is cached). */
 #if defined(__x86_64__)
-__attribute__((target("avx2"))) static void krow_wendland_avx2(double shape, const double q[6], size_t n,
-								 const double *soa, double *krow)
-{
-	krow_wendland(shape, q, n, soa, krow);
-}
+#define KROW_CLONES(NAME, T)                                                                                 \
+	__attribute__((target("avx2"))) static void NAME##_avx2(double shape, const double q[6], size_t n,   \
+								const T *soa, T *krow)                       \
+	{                                                                                                    \
+		NAME(shape, q, n, soa, krow);                                                                \
+	}                                                                                                    \
+	static void NAME##_base(double shape, const double q[6], size_t n, const T *soa, T *krow)            \
+	{                                                                                                    \
+		NAME(shape, q, n, soa, krow);                                                                \
+	}                                                                                                    \
+	static void NAME##_run(double shape, const double q[6], size_t n, const T *soa, T *krow)             \
+	{                                                                                                    \
+		if (__builtin_cpu_supports("avx2"))                                                          \
+			NAME##_avx2(shape, q, n, soa, krow);                                                 \
+		else                                                                                         \
+			NAME##_base(shape, q, n, soa, krow);                                                 \
+	}
+#else
+#define KROW_CLONES(NAME, T)                                                                                 \
+	static void NAME##_run(double shape, const double q[6], size_t n, const T *soa, T *krow)             \
+	{                                                                                                    \
+		NAME(shape, q, n, soa, krow);                                                                \
+	}
 #endif
+
+KROW_CLONES(krow_wendland, double)
 
 /* The same row in single precision (8 lanes with AVX2): for the MERL table's single-precision GEMM, whose
  * error (this row's included) rgbeval measures against the double path before using it. */
@@ -225,36 +257,10 @@ static inline __attribute__((always_inline)) float wendland_bf_f(float t)
 static inline __attribute__((always_inline)) void krow_wendland_f(double shape, const double q[6], size_t n,
 								  const float *soa, float *krow_)
 {
-	const float *restrict cx = soa, *restrict cy = soa + n, *restrict cz = soa + 2 * n, *restrict ox = soa + 3 * n,
-		    *restrict oy = soa + 4 * n, *restrict oz = soa + 5 * n;
-	float *restrict krow = krow_;
-	const float q0 = (float)q[0], q1 = (float)q[1], q2 = (float)q[2], q3 = (float)q[3], q4 = (float)q[4],
-		    q5 = (float)q[5], inv = (float)(1.0 / shape);
-	for (size_t j = 0; j < n; j++) {
-		float a = q0 - cx[j], b = q1 - cy[j], c = q2 - cz[j];
-		float r1 = sqrtf(a * a + b * b + c * c);
-		float d = q3 - ox[j], e = q4 - oy[j], f = q5 - oz[j];
-		float r2 = sqrtf(d * d + e * e + f * f);
-		float g = q0 - ox[j], h = q1 + oy[j], i = q2 - oz[j];
-		float t1 = sqrtf(g * g + h * h + i * i);
-		float k = q3 - cx[j], l = q4 + cy[j], o = q5 - cz[j];
-		float t2 = sqrtf(k * k + l * l + o * o);
-		krow[j] = wendland_bf_f(r1 * inv) * wendland_bf_f(r2 * inv) + wendland_bf_f(t1 * inv) * wendland_bf_f(t2 * inv);
-	}
+	KROW_WENDLAND_ROW(float, sqrtf, wendland_bf_f);
 }
 
-#if defined(__x86_64__)
-__attribute__((target("avx2"))) static void krow_wendland_f_avx2(double shape, const double q[6], size_t n,
-								   const float *soa, float *krow)
-{
-	krow_wendland_f(shape, q, n, soa, krow);
-}
-#endif
-
-static void krow_wendland_f_base(double shape, const double q[6], size_t n, const float *soa, float *krow)
-{
-	krow_wendland_f(shape, q, n, soa, krow);
-}
+KROW_CLONES(krow_wendland_f, float)
 
 void rbf_soa_f32(size_t n, const double *ctr, float *soa)
 {
@@ -265,32 +271,14 @@ void rbf_soa_f32(size_t n, const double *ctr, float *soa)
 
 void rbf_kmatrix_wendland_f32(double shape, size_t m, const double *q, size_t n, const float *soa, float *K)
 {
-#if defined(__x86_64__)
-	if (__builtin_cpu_supports("avx2")) {
-		for (size_t i = 0; i < m; i++)
-			krow_wendland_f_avx2(shape, q + 6 * i, n, soa, K + i * n);
-		return;
-	}
-#endif
 	for (size_t i = 0; i < m; i++)
-		krow_wendland_f_base(shape, q + 6 * i, n, soa, K + i * n);
-}
-
-static void krow_wendland_base(double shape, const double q[6], size_t n, const double *soa, double *krow)
-{
-	krow_wendland(shape, q, n, soa, krow);
+		krow_wendland_f_run(shape, q + 6 * i, n, soa, K + i * n);
 }
 
 void rbf_krow(int kernel, double shape, const double q[6], size_t n, const double *soa, double *krow)
 {
 	if (kernel == RBF_K_WENDLAND) {
-#if defined(__x86_64__)
-		if (__builtin_cpu_supports("avx2")) {
-			krow_wendland_avx2(shape, q, n, soa, krow);
-			return;
-		}
-#endif
-		krow_wendland_base(shape, q, n, soa, krow);
+		krow_wendland_run(shape, q, n, soa, krow);
 		return;
 	}
 	const double *cx = soa, *cy = soa + n, *cz = soa + 2 * n, *ox = soa + 3 * n, *oy = soa + 4 * n,
@@ -323,6 +311,19 @@ int rbf_kernel_from_name(const char *name)
 	return -1;
 }
 
+/* P_n(z) by the three-term recurrence; returns P_n and sets *dp to P_n'(z). */
+static double legendre_p(int n, double z, double *dp)
+{
+	double p1 = 1.0, p2 = 0.0;
+	for (int j = 1; j <= n; j++) {
+		double p3 = p2;
+		p2 = p1;
+		p1 = ((2.0 * j - 1.0) * z * p2 - (j - 1.0) * p3) / j;
+	}
+	*dp = n * (z * p1 - p2) / (z * z - 1.0);
+	return p1;
+}
+
 /* Gauss-Legendre on [−1, 1] by Newton on P_n (Golub-Welsch not needed at n ≤ 256), mapped to [0, 1]. */
 int rbf_gauss_legendre01(int n, double *x, double *w)
 {
@@ -331,26 +332,14 @@ int rbf_gauss_legendre01(int n, double *x, double *w)
 	for (int i = 0; i < (n + 1) / 2; i++) {
 		double z = cos(M_PI * (i + 0.75) / (n + 0.5)), pp = 1.0;
 		for (int it = 0; it < 100; it++) {
-			double p1 = 1.0, p2 = 0.0;
-			for (int j = 1; j <= n; j++) {
-				double p3 = p2;
-				p2 = p1;
-				p1 = ((2.0 * j - 1.0) * z * p2 - (j - 1.0) * p3) / j;
-			}
-			pp = n * (z * p1 - p2) / (z * z - 1.0);
+			double p1 = legendre_p(n, z, &pp);
 			double z1 = z;
 			z = z1 - p1 / pp;
 			if (fabs(z - z1) < 1e-15)
 				break;
 		}
 		/* recompute the derivative at the converged root */
-		double p1 = 1.0, p2 = 0.0;
-		for (int j = 1; j <= n; j++) {
-			double p3 = p2;
-			p2 = p1;
-			p1 = ((2.0 * j - 1.0) * z * p2 - (j - 1.0) * p3) / j;
-		}
-		pp = n * (z * p1 - p2) / (z * z - 1.0);
+		legendre_p(n, z, &pp);
 		double wi = 2.0 / ((1.0 - z * z) * pp * pp);
 		x[i] = 0.5 * (1.0 - z);
 		x[n - 1 - i] = 0.5 * (1.0 + z);
