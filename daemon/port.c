@@ -263,15 +263,6 @@ void port_flush(struct port *p)
 	dispatch(p);
 }
 
-int port_pending(struct port *p)
-{
-	struct port *q = p;
-	pthread_mutex_lock(&q->mu);
-	int n = q->npending;
-	pthread_mutex_unlock(&q->mu);
-	return n;
-}
-
 void port_free(struct port *p)
 {
 	if (!p)

@@ -49,8 +49,6 @@ double port_now(const struct port *p);
 /* Block until everything queued so far has run, then complete it (done() on the caller, the loop's thread).
  * For start-up and reloads only: it waits as long as the device takes. */
 void port_flush(struct port *p);
-/* Requests queued or running. */
-int port_pending(struct port *p);
 /* Run what is queued (so a final safe stop reaches the device), stop and join the thread, complete what is
  * left, unregister, free. NULL is fine. */
 void port_free(struct port *p);

@@ -66,16 +66,6 @@ void adapt_free(struct adapt *a)
 	free(a);
 }
 
-bool adapt_busy(const struct adapt *a)
-{
-	return a && a->id && rsel_busy(a->rs);
-}
-
-double adapt_waited_s(const struct adapt *a)
-{
-	return a ? a->waited_s : 0;
-}
-
 void adapt_end(struct adapt *a)
 {
 	if (!a)

@@ -41,11 +41,7 @@ int adapt_resume(struct adapt *a, int64_t id, const struct plan_spec *spec, stru
 		 size_t stop_len, struct acq_err *err);
 /* The executor has measured every planned point and waits (now: loop seconds): choose the next batch or stop. */
 void adapt_waiting(struct adapt *a, double now);
-/* True while a decision is under way. */
-bool adapt_busy(const struct adapt *a);
 /* The sweep is released: forget it (a decision under way is abandoned). */
 void adapt_end(struct adapt *a);
-/* Bench seconds the arms waited for decisions so far. */
-double adapt_waited_s(const struct adapt *a);
 
 #endif

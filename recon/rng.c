@@ -8,11 +8,6 @@ void recon_rng_seed(struct recon_rng *r, uint64_t seed)
 	acq_rng_seed(&r->g, seed);
 }
 
-uint64_t recon_rng_u64(struct recon_rng *r)
-{
-	return acq_rng_next(&r->g);
-}
-
 double recon_rng_unif(struct recon_rng *r)
 {
 	return acq_rng_uniform(&r->g);

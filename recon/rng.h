@@ -14,8 +14,6 @@ struct recon_rng {
 
 /* Seed the state from one 64-bit value (splitmix64: any seed, 0 included, gives a good state). */
 void recon_rng_seed(struct recon_rng *r, uint64_t seed);
-/* Next 64 random bits. */
-uint64_t recon_rng_u64(struct recon_rng *r);
 /* Uniform in [0, 1) with 53 random bits. */
 double recon_rng_unif(struct recon_rng *r);
 /* Standard normal (Box-Muller, one value per call; u clamped away from 0 so the result is finite). */
