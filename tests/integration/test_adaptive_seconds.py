@@ -115,9 +115,11 @@ def run():
                 "batch %d: %.1f s measured before it + %.1f s predicted > budget %d" % (
                     r["batch"], before, r["predicted_s"], budget)
         # the stop is not premature: the budget is gone, or select's first pick (the batch's prefix: picks are
-        # taken in select's order) would not have fitted what was left
+        # taken in select's order) would not have fitted what was left. The reason prints both figures to 0.1 s
+        # (each within 0.05 of the daemon's value): a sum within 0.1 below the budget is the rounding (seen under
+        # the sanitizers at ACQ_SEED 4256352481: 72.0 + 2.0 of 74, the stored points say 71.99)
         need = re.search(r"first pick needs ([0-9.]+) s", why)
-        assert x >= budget or (need and x + float(need.group(1)) > budget), \
+        assert x >= budget - 0.05 or (need and x + float(need.group(1)) > budget - 0.1), \
             "stopped at %.1f of %d s: %s" % (x, budget, why)
     finally:
         b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
