@@ -190,6 +190,17 @@ class Bench:
         if not keep:
             shutil.rmtree(self.dir, ignore_errors=True)
 
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, exc, tb):
+        """`with Bench(...) as b:` a failure prints the daemon's last log lines; the bench is cleaned up either
+        way (its folder kept with ACQ_KEEP=1)."""
+        if kind is not None:
+            print(self.daemon_text()[-3000:])
+        self.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
+        return False
+
     def daemon_text(self):
         try:
             return open(self.daemon_log, errors="replace").read()

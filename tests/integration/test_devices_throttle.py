@@ -43,8 +43,7 @@ def reads(b):
 
 
 def run():
-    b = L.Bench(scale=20, daemon_extra="  observers: [%s]\n" % OBSERVER)
-    try:
+    with L.Bench(scale=20, daemon_extra="  observers: [%s]\n" % OBSERVER) as b:
         b.start_sim()
         b.start_daemon()
         os.chmod(b.sock, 0o666)
@@ -91,11 +90,6 @@ def run():
         L.say("controller's devices: ok %s, laser STATUS? reads %d" % (r.get("ok"), got))
         assert r.get("ok") and got >= 1, "a controller's `devices` did not read the laser: %s" % r
         c.close()
-    except Exception:
-        print(b.daemon_text()[-3000:])
-        raise
-    finally:
-        b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
 
 
 L.main(run)

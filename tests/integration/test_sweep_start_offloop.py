@@ -33,8 +33,7 @@ MEDIUM = ("name: medium\nincidence:\n  theta_deg: [5, 12, 19, 26, 33, 40, 47, 54
 
 
 def run():
-    b = L.Bench(scale=20, daemon_extra="  auto_resume: false\n")
-    try:
+    with L.Bench(scale=20, daemon_extra="  auto_resume: false\n") as b:
         b.start_sim()
         b.start_daemon()
         b.ctl("sample white")
@@ -162,11 +161,6 @@ def run():
         assert L.sweep_row(b, sid)["state"] == "aborted"
         c2.close()
         c.close()
-    except Exception:
-        print(b.daemon_text()[-3000:])
-        raise
-    finally:
-        b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
 
 
 L.main(run)

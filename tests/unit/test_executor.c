@@ -18,6 +18,7 @@
 #include "daemon/store.h"
 #include "drivers/axis.h"
 #include "tests/unit/synth.h"
+#include "tests/unit/tmpdir.h"
 
 static uint64_t seed;
 
@@ -598,8 +599,7 @@ static void check_db(int64_t sweep, bool zcheck)
 static int setup(void **state)
 {
 	(void)state;
-	snprintf(dir, sizeof dir, "/tmp/test_executor.XXXXXX");
-	assert_non_null(mkdtemp(dir));
+	assert_int_equal(ut_tmpdir_make(dir, sizeof dir, "test_executor"), 0);
 	snprintf(dbpath, sizeof dbpath, "%s/acq.db", dir);
 	unlink(dbpath);
 	fake_reset();
@@ -609,9 +609,7 @@ static int setup(void **state)
 static int teardown(void **state)
 {
 	(void)state;
-	char cmd[400];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-	return system(cmd) == 0 ? 0 : -1;
+	return ut_tmpdir_remove(dir);
 }
 
 /* A whole sweep on the fake bench; deferred: every read answers one step late (as the daemon's device threads

@@ -18,22 +18,20 @@
 #include "daemon/store.h"
 #include "recon/csvio.h"
 #include "recon/recon.h"
+#include "tests/unit/tmpdir.h"
 
 static char dir[256];
 
 static int setup(void **state)
 {
 	(void)state;
-	snprintf(dir, sizeof dir, "/tmp/test_store.XXXXXX");
-	return mkdtemp(dir) ? 0 : -1;
+	return ut_tmpdir_make(dir, sizeof dir, "test_store");
 }
 
 static int teardown(void **state)
 {
 	(void)state;
-	char cmd[300];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-	return system(cmd) == 0 ? 0 : -1;
+	return ut_tmpdir_remove(dir);
 }
 
 static void path_of(char *out, size_t cap, const char *name)

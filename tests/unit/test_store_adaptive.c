@@ -15,22 +15,20 @@
 
 #include "daemon/store.h"
 #include "daemon/store_adaptive.h"
+#include "tests/unit/tmpdir.h"
 
 static char dir[256];
 
 static int setup(void **state)
 {
 	(void)state;
-	snprintf(dir, sizeof dir, "/tmp/test_store_adaptive.XXXXXX");
-	return mkdtemp(dir) ? 0 : -1;
+	return ut_tmpdir_make(dir, sizeof dir, "test_store_adaptive");
 }
 
 static int teardown(void **state)
 {
 	(void)state;
-	char cmd[300];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-	return system(cmd) == 0 ? 0 : -1;
+	return ut_tmpdir_remove(dir);
 }
 
 static int64_t mk_sweep(struct store *st, int npts)

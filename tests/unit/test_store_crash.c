@@ -17,6 +17,7 @@
 #include <cmocka.h>
 
 #include "daemon/store.h"
+#include "tests/unit/tmpdir.h"
 
 #define NPIX 2048
 
@@ -48,8 +49,8 @@ static void test_sigkill_keeps_committed(void **state)
 	unsigned seed = seed_s ? (unsigned)strtoul(seed_s, NULL, 10) : (unsigned)time(NULL);
 	printf("seed %u (ACQ_SEED)\n", seed);
 	srand(seed);
-	char dir[] = "/tmp/test_store_crash.XXXXXX";
-	assert_non_null(mkdtemp(dir));
+	char dir[64];
+	assert_int_equal(ut_tmpdir_make(dir, sizeof dir, "test_store_crash"), 0);
 	char path[300];
 	snprintf(path, sizeof path, "%s/crash.db", dir);
 	int64_t reported_total = 0;
@@ -108,9 +109,7 @@ static void test_sigkill_keeps_committed(void **state)
 	assert_int_equal(store_open(path, &st, &err), 0);
 	assert_true(store_spectrum_count(st, 0, &err) >= reported_total);
 	store_close(st);
-	char cmd[400];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-	assert_int_equal(system(cmd), 0);
+	assert_int_equal(ut_tmpdir_remove(dir), 0);
 }
 
 int main(void)
