@@ -120,7 +120,8 @@ static void emit_state(struct adapt *a, double value, int met, double waited, co
 	for (int i = 0; i < a->ntrend; i++)
 		json_array_append_new(trend, json_real(a->trend[i]));
 	json_t *d = json_pack("{s:I,s:i,s:s,s:f,s:o,s:I,s:f,s:f}", "sweep", (json_int_t)a->id, "batch", a->batch,
-			      "target", spec, "threshold", ad->le, "trend", trend, "points", (json_int_t)a->plan->n_steps,
+			      "target", spec, "threshold", plan_adaptive_threshold(ad), "trend", trend, "points",
+			      (json_int_t)a->plan->n_steps,
 			      "predicted_s", a->spent_s, "waited_total_s", a->waited_s);
 	if (!d)
 		return;
@@ -353,7 +354,7 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 	json_t *t = json_object_get(r->out, "target"), *picks = json_object_get(r->out, "picks");
 	double value = num_or(t, "value", NAN);
 	int met = json_is_boolean(json_object_get(t, "met")) ? json_is_true(json_object_get(t, "met"))
-							     : value <= a->spec->adaptive->le;
+							     : value <= plan_adaptive_threshold(a->spec->adaptive);
 	snprintf(a->model, sizeof a->model, "%s", r->model);
 	if (a->ntrend < ADAPT_TREND)
 		a->trend[a->ntrend++] = value;
@@ -361,7 +362,7 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 	target_spec(a, spec, sizeof spec);
 	if (met)
 		return stop(a, value, 1, "target met: %s value %.6g <= %.6g with %zu points", spec, value,
-			    a->spec->adaptive->le, a->plan->n_steps);
+			    plan_adaptive_threshold(a->spec->adaptive), a->plan->n_steps);
 	if (r->n_candidates == 0)
 		return stop(a, value, 0, "nothing reachable left: no visible, reachable candidate is unmeasured (%s value "
 			    "%.6g)", spec, value);
@@ -381,7 +382,7 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 	for (size_t i = 0; i < n; i++) {
 		json_t *p = json_array_get(picks, i), *id = json_object_get(p, "id");
 		if (!json_is_integer(id) || json_integer_value(id) < 0 ||
-		    plan_adaptive_cand_pos(a->spec, (size_t)json_integer_value(id), &pos[i])) {
+		    plan_adaptive_cand_pos(a->spec, &a->env->conf->bench, (size_t)json_integer_value(id), &pos[i])) {
 			pause_for(a, "batch %d: select's pick %zu names no candidate of %s; resume to try again", next, i,
 				  r->dir);
 			goto out;

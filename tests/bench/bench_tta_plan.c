@@ -151,7 +151,7 @@ static int cmd_batch(const struct plan_spec *s, const struct bench_geom *g, stru
 	struct plan_pos *pos = calloc(n + 1, sizeof *pos);
 	for (size_t i = 0; i < n; i++) {
 		json_t *id = json_object_get(json_array_get(picks, i), "id");
-		if (!json_is_integer(id) || plan_adaptive_cand_pos(s, (size_t)json_integer_value(id), &pos[i])) {
+		if (!json_is_integer(id) || plan_adaptive_cand_pos(s, g, (size_t)json_integer_value(id), &pos[i])) {
 			free(pos);
 			json_decref(o);
 			return fail(sel, "a pick names no candidate of the plan");
