@@ -129,6 +129,17 @@ struct sel {
 	double *xang;    /* SELECT_LNF, SELECT_RGB: [F*4] the grid's / nodes' pairs */
 	double *xw;      /* SELECT_RGB: [F] the nodes' share of the table's projected measure (sum 1) */
 	double *row, *zp; /* scratch of sel_update: [J], [F] */
+	/* SELECT_DHR, the noise part's fall with n: the functional's linear noise variance q = Σ_k N_k h_k² under the
+	 * GP's weights h = A⁻¹b (N_k = η λ_k, a new sample's = noise), tracked through the picks by the same block
+	 * elimination as the posterior; the Monte-Carlo floor sn2 is predicted as sn2 · q/q0. */
+	double *Nk;      /* [n] the samples' noise η λ_k */
+	double *q, *q0, *qmin; /* [F] current, initial and smallest-so-far noise variance of each functional (the
+			  * floor predicted never rises: an estimator may ignore a sample that would spread its weights) */
+	double *X;       /* [F*J] Σ_k N_k h_fk w_jk over the current samples (w_j: candidate j's weights A⁻¹k_j) */
+	double *Yn;      /* [J] Σ_k N_k w_jk² */
+	double *Gc;      /* [J*n] w_j's part on the model's samples (the picks' parts in gn) */
+	double *gn;      /* [batch*J] w_j's part on pick i */
+	double *mrow, *gp; /* scratch: [J], [n] */
 };
 
 static void sel_free(struct sel *s)
@@ -159,6 +170,16 @@ static void sel_free(struct sel *s)
 	free(s->xw);
 	free(s->row);
 	free(s->zp);
+	free(s->Nk);
+	free(s->q);
+	free(s->q0);
+	free(s->qmin);
+	free(s->X);
+	free(s->Yn);
+	free(s->Gc);
+	free(s->gn);
+	free(s->mrow);
+	free(s->gp);
 }
 
 /* Factor K + ηΛ of the model and the leave-one-out amplitude α_λ of every channel (as dhr.c). */
@@ -291,6 +312,25 @@ static int sel_functionals(struct sel *s, size_t Q, const double *c6, const doub
 	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)Fp, s->A, (lapack_int)n, B, (lapack_int)n)) {
 		free(B);
 		return acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
+	}
+	if (s->X) { /* the noise variance of the functionals and its cross terms with the candidates' weights */
+		double *BN = malloc(Fp * n * sizeof *BN);
+		if (!BN) {
+			free(B);
+			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		}
+		for (size_t f = 0; f < Fp; f++) {
+			double qq = 0;
+			for (size_t k = 0; k < n; k++) {
+				BN[f * n + k] = s->Nk[k] * B[f * n + k];
+				qq += BN[f * n + k] * B[f * n + k];
+			}
+			s->q[f0 + f] = s->q0[f0 + f] = s->qmin[f0 + f] = qq;
+		}
+		if (J)
+			cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Fp, (int)J, (int)n, 1.0, BN, (int)n, s->G,
+				    (int)n, 0.0, s->X + f0 * J, (int)J);
+		free(BN);
 	}
 	double *Z = s->Z + f0 * J;
 	rbf_kmatrix_soa(m->kernel, m->shape, Q, c6, J, s->soaJ, KQJ);
@@ -692,12 +732,15 @@ static double sel_excess(const struct sel *s, size_t j, double *per)
 			int zero_res = j != SIZE_MAX && s->match[t * s->J + j] && !s->res_done[t];
 			for (size_t c = 0; c < s->Lc; c++) {
 				size_t f = t * s->Lc + c;
-				double v = s->v[f];
+				double v = s->v[f], q = s->qmin[f];
 				if (j != SIZE_MAX && S > 0) {
-					double z = s->Z[f * s->J + j];
+					double z = s->Z[f * s->J + j], a = z / S;
 					v -= z * z / S;
+					if (s->X)
+						q = fmin(q, s->q[f] + a * (a * (s->Yn[j] + s->noise) - 2 * s->X[f * s->J + j]));
 				}
-				acc += fmax(s->sn2[f], fmax(v, 0)) + s->rest[f] - (zero_res ? s->res2[f] : 0);
+				double floor2 = s->sn2[f] * (s->q0[f] > 0 ? fmin(fmax(q / s->q0[f], 0), 1) : 1);
+				acc += fmax(floor2, fmax(v, 0)) + s->rest[f] - (zero_res ? s->res2[f] : 0);
 			}
 			double V = s->kappa[t] * fmax(acc, 0) / (double)s->Lc;
 			if (per)
@@ -728,6 +771,42 @@ static double sel_excess(const struct sel *s, size_t j, double *per)
 	return E / (double)s->F;
 }
 
+/* The noise variance's terms after candidate p's measurement (the k-th pick; S its posterior variance + noise):
+ * with a_f = cov(f, p)/S and b_j = P(p, j)/S (in s->zp, s->row), the functional's weights become h − a w_p and
+ * a on the new sample, candidate j's w_j − b_j w_p and b_j; q, X and Yn follow (M_j = Σ N w_p w_j). */
+static void sel_update_noise(struct sel *s, size_t p, size_t k, double S)
+{
+	size_t J = s->J, n = s->n, F = s->F;
+	double *M = s->mrow, *gp = s->gp, yp = s->Yn[p] + s->noise;
+	for (size_t i = 0; i < n; i++)
+		gp[i] = s->Nk[i] * s->Gc[p * n + i];
+	cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)J, (int)n, 1.0, s->Gc, (int)n, gp, 1, 0.0, M, 1);
+	for (size_t i = 0; i < k; i++)
+		cblas_daxpy((int)J, s->noise * s->gn[i * J + p], s->gn + i * J, 1, M, 1);
+	for (size_t f = 0; f < F; f++) {
+		double a = s->zp[f] / S, xp = s->X[f * J + p];
+		s->q[f] += a * (a * yp - 2 * xp);
+		s->qmin[f] = fmin(s->qmin[f], s->q[f]);
+		double *x = s->X + f * J;
+		for (size_t j = 0; j < J; j++) {
+			double b = s->row[j] / S;
+			x[j] += -a * M[j] - b * xp + a * b * yp;
+		}
+	}
+	for (size_t j = 0; j < J; j++) {
+		double b = s->row[j] / S;
+		s->Yn[j] += b * (b * yp - 2 * M[j]);
+	}
+	memcpy(gp, s->Gc + p * n, n * sizeof *gp);
+	cblas_dger(CblasRowMajor, (int)J, (int)n, -1.0 / S, s->row, 1, gp, 1, s->Gc, (int)n);
+	for (size_t i = 0; i < k; i++) {
+		double g = s->gn[i * J + p];
+		cblas_daxpy((int)J, -g / S, s->row, 1, s->gn + i * J, 1);
+	}
+	for (size_t j = 0; j < J; j++)
+		s->gn[k * J + j] = s->row[j] / S;
+}
+
 /* Add candidate p's measurement to the posterior: the rank-one (Schur complement) update of every tracked
  * covariance, with the k-th pick's scaled row stored in U[k]. */
 static void sel_update(struct sel *s, size_t p, size_t k)
@@ -745,6 +824,8 @@ static void sel_update(struct sel *s, size_t p, size_t k)
 		S = 1e-300;
 	for (size_t f = 0; f < F; f++)
 		zp[f] = s->Z[f * J + p];
+	if (s->X)
+		sel_update_noise(s, p, k, S);
 	for (size_t f = 0; f < F; f++)
 		s->v[f] = fmax(s->v[f] - zp[f] * zp[f] / S, 0);
 	cblas_dger(CblasRowMajor, (int)F, (int)J, -1.0 / S, zp, 1, row, 1, s->Z, (int)J);
@@ -822,6 +903,32 @@ static int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const
 	if (!s->Z || !s->v || !s->U || !s->match || !s->sn2 || !s->rest || !s->res2 || !s->kappa || !s->res_done ||
 	    !s->row || !s->zp)
 		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	s->q = calloc(F, sizeof *s->q);
+	s->q0 = calloc(F, sizeof *s->q0);
+	s->qmin = calloc(F, sizeof *s->qmin);
+	if (!s->q || !s->q0 || !s->qmin)
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	if (t->kind == SELECT_DHR) { /* the noise part's fall with n (sel_update_noise) */
+		size_t n = s->n;
+		s->Nk = malloc(n * sizeof *s->Nk);
+		s->X = calloc(F * Jp, sizeof *s->X);
+		s->Yn = calloc(Jp, sizeof *s->Yn);
+		s->Gc = malloc(Jp * n * sizeof *s->Gc);
+		s->gn = calloc((s->batch ? s->batch : 1) * Jp, sizeof *s->gn);
+		s->mrow = malloc(Jp * sizeof *s->mrow);
+		s->gp = malloc(n * sizeof *s->gp);
+		if (!s->Nk || !s->X || !s->Yn || !s->Gc || !s->gn || !s->mrow || !s->gp)
+			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory for %zu candidates", J);
+		for (size_t k = 0; k < n; k++)
+			s->Nk[k] = m->eta * m->lam[k];
+		memcpy(s->Gc, s->G, J * n * sizeof *s->Gc);
+		for (size_t j = 0; j < J; j++) {
+			double y = 0;
+			for (size_t k = 0; k < n; k++)
+				y += s->Nk[k] * s->Gc[j * n + k] * s->Gc[j * n + k];
+			s->Yn[j] = y;
+		}
+	}
 	if (t->kind == SELECT_DHR ? sel_setup_dhr(s, o, r, err)
 				  : t->kind == SELECT_LNF ? sel_setup_lnf(s, r, err) : sel_setup_rgb(s, r, err))
 		return -1;
