@@ -57,7 +57,29 @@ static int parse_num(const char *s, const char *end, double *out)
 	return 0;
 }
 
+static int target_parse_one(const char *spec, struct select_target *t, struct acq_err *err);
+
 int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err)
+{
+	const char *plus = spec ? strchr(spec, '+') : NULL;
+	if (!plus)
+		return target_parse_one(spec, t, err);
+	char first[512];
+	struct select_target t2;
+	if ((size_t)(plus - spec) >= sizeof first)
+		return acq_errf(err, ACQ_E_INVAL, "target '%s': too long", spec);
+	memcpy(first, spec, (size_t)(plus - spec));
+	first[plus - spec] = '\0';
+	if (target_parse_one(first, t, err) || target_parse_one(plus + 1, &t2, err))
+		return -1;
+	if (t->kind != SELECT_DHR || t2.kind != SELECT_LNF || !isfinite(t->threshold) || !isfinite(t2.threshold))
+		return acq_errf(err, ACQ_E_INVAL, "target '%s': a combined target is dhr:THETA[,...]:le=X+lnf:le=Y (both "
+				"thresholds given: both must be met)", spec);
+	t->lnf_threshold = t2.threshold;
+	return 0;
+}
+
+static int target_parse_one(const char *spec, struct select_target *t, struct acq_err *err)
 {
 	memset(t, 0, sizeof *t);
 	t->threshold = NAN;
@@ -943,6 +965,12 @@ static int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const
 	return 0;
 }
 
+/* A combined target's value: the larger of each part's value over its threshold. */
+static double combined_value(const struct select_target *t, double dhr, double lnf)
+{
+	return fmax(dhr / t->threshold, lnf / t->lnf_threshold);
+}
+
 int select_batch(const struct recon_model *m, size_t nc, const double *ang, const double *cost,
 		 const struct select_target *t, const struct select_opts *opts, struct select_result *r, struct acq_err *err)
 {
@@ -958,25 +986,52 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 		return acq_errf(err, ACQ_E_INVAL, "select: between 1 and %d incidences", SELECT_MAX_THETA);
 	if (o.batch > 100000 || o.nchan == 0)
 		return acq_errf(err, ACQ_E_INVAL, "select: batch at most 100000, at least one tracked channel");
-	struct sel s;
+	bool both = t->lnf_threshold > 0;
+	if (both && (t->kind != SELECT_DHR || !(t->threshold > 0)))
+		return acq_errf(err, ACQ_E_INVAL, "select: a combined target needs the DHR part's threshold");
+	/* the parts: one state each (a combined target: the DHR part, then the ln f part; same candidates) */
+	struct select_target tp[2] = { *t, { .kind = SELECT_LNF, .threshold = t->lnf_threshold } };
+	tp[0].lnf_threshold = 0;
+	struct select_result r2 = { 0 };
+	struct sel s[2];
+	size_t np = both ? 2 : 1;
 	int rc = -1;
-	if (sel_init(&s, m, nc, ang, cost, t, &o, r, err))
+	memset(s, 0, sizeof s);
+	if (sel_init(&s[0], m, nc, ang, cost, &tp[0], &o, r, err) ||
+	    (both && sel_init(&s[1], m, nc, ang, cost, &tp[1], &o, &r2, err)))
 		goto out;
-	r->picks = calloc(s.batch ? s.batch : 1, sizeof *r->picks);
+	if (both) {
+		r->part[0] = r->value;
+		r->part[1] = r2.value;
+		r->per[r->nper++] = r2.value;
+		memcpy(r->where, r2.where, sizeof r->where);
+		r->value = combined_value(t, r->part[0], r->part[1]);
+		r->met = r->value <= 1;
+	}
+	r->picks = calloc(s[0].batch ? s[0].batch : 1, sizeof *r->picks);
 	if (!r->picks) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
-	size_t J = s.J;
-	double E = sel_excess(&s, SIZE_MAX, NULL), E0 = E, value = r->value;
-	while (r->npicks < s.batch && !(isfinite(t->threshold) && value <= t->threshold)) {
+	size_t J = s[0].J;
+	double E[2], E0[2], value = r->value, thr = both ? 1.0 : t->threshold;
+	for (size_t k = 0; k < np; k++)
+		E[k] = E0[k] = sel_excess(&s[k], SIZE_MAX, NULL);
+	while (r->npicks < s[0].batch && !(isfinite(thr) && value <= thr)) {
 		size_t best = SIZE_MAX;
 		double bscore = 0, bgain = 0;
 		for (size_t j = 0; j < J; j++) {
-			if (s.picked[j])
+			if (s[0].picked[j])
 				continue;
-			double gain = E - sel_excess(&s, j, NULL), score = gain / s.cost[j];
-			if (gain > 1e-12 * E0 && score > bscore) {
+			double gain = 0;
+			bool any = false;
+			for (size_t k = 0; k < np; k++) {
+				double g = E[k] - sel_excess(&s[k], j, NULL);
+				any |= g > 1e-12 * E0[k];
+				gain += both ? (E0[k] > 0 ? g / E0[k] : 0) : g;
+			}
+			double score = gain / s[0].cost[j];
+			if (any && gain > 0 && score > bscore) {
 				best = j;
 				bscore = score;
 				bgain = gain;
@@ -984,22 +1039,31 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 		}
 		if (best == SIZE_MAX)
 			break; /* nothing left reduces the target */
-		sel_update(&s, best, r->npicks);
-		struct select_pick *pk = &r->picks[r->npicks++];
-		pk->index = s.rep[best];
+		struct select_pick *pk = &r->picks[r->npicks];
+		for (size_t k = 0; k < np; k++)
+			sel_update(&s[k], best, r->npicks);
+		r->npicks++;
+		pk->index = s[0].rep[best];
 		pk->gain = bgain;
 		pk->gain_per_s = bscore;
-		E = sel_excess(&s, SIZE_MAX, pk->predicted_per);
+		E[0] = sel_excess(&s[0], SIZE_MAX, pk->predicted_per);
 		/* the predicted value: the GP part updated, the other parts as they are (DHR: the largest incidence) */
 		value = 0;
-		for (size_t i = 0; i < r->nper; i++)
+		for (size_t i = 0; i < (both ? r->nper - 1 : r->nper); i++)
 			value = fmax(value, pk->predicted_per[i]);
+		if (both) {
+			double lp;
+			E[1] = sel_excess(&s[1], SIZE_MAX, &lp);
+			pk->predicted_per[r->nper - 1] = lp;
+			value = combined_value(t, value, lp);
+		}
 		pk->predicted = value;
 	}
 	rc = 0;
 out:
 	if (rc)
 		select_result_free(r);
-	sel_free(&s);
+	for (size_t k = 0; k < np; k++)
+		sel_free(&s[k]);
 	return rc;
 }

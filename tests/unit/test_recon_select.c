@@ -704,6 +704,84 @@ static void test_noise_fall(void **state)
 	recon_model_free(m);
 }
 
+/* The combined target (dhr + lnf, both must be met): its parts' values are the single targets' values, its value
+ * the larger ratio to the thresholds; a batch is chosen while either part is unmet (a met DHR part alone would
+ * pick nothing), the first pick maximises the sum of the parts' relative reductions per second; the parser wants
+ * both thresholds. */
+static void test_combined_target(void **state)
+{
+	(void)state;
+	rt_seed();
+	struct recon_model *m = toy_model();
+	size_t nc = 60;
+	double ang[60 * 4], cost[60];
+	random_cands(nc, ang, cost);
+	struct acq_err e = { 0 };
+	struct select_target td, tl, tc;
+	assert_int_equal(select_target_parse("dhr:8,30", &td, &e), 0);
+	assert_int_equal(select_target_parse("lnf", &tl, &e), 0);
+	struct select_opts o;
+	select_opts_default(&o);
+	o.batch = 0;
+	struct select_result rd, rl, rc;
+	assert_int_equal(select_batch(m, nc, ang, cost, &td, &o, &rd, &e), 0);
+	assert_int_equal(select_batch(m, nc, ang, cost, &tl, &o, &rl, &e), 0);
+	/* thresholds: the DHR part met (2x its value), ln f not (half its value) */
+	char spec[128];
+	snprintf(spec, sizeof spec, "dhr:8,30:le=%.17g+lnf:le=%.17g", 2 * rd.value, 0.5 * rl.value);
+	assert_int_equal(select_target_parse(spec, &tc, &e), 0);
+	assert_true(tc.kind == SELECT_DHR && tc.nth == 2 && tc.lnf_threshold == 0.5 * rl.value);
+	o.batch = 4;
+	assert_int_equal(select_batch(m, nc, ang, cost, &tc, &o, &rc, &e), 0);
+	printf("combined: dhr part %.6g (alone %.6g), lnf part %.6g (alone %.6g), value %.4g, %zu picks\n", rc.part[0],
+	       rd.value, rc.part[1], rl.value, rc.value, rc.npicks);
+	assert_true(fabs(rc.part[0] - rd.value) <= 1e-12 * rd.value && fabs(rc.part[1] - rl.value) <= 1e-12 * rl.value);
+	assert_true(fabs(rc.value - 2.0) < 1e-12 && !rc.met);
+	assert_int_equal(rc.nper, 3);
+	assert_true(rc.npicks > 0);
+	struct select_result r1;
+	struct select_target t1 = td;
+	t1.threshold = 2 * rd.value;
+	assert_int_equal(select_batch(m, nc, ang, cost, &t1, &o, &r1, &e), 0);
+	assert_int_equal(r1.npicks, 0); /* the DHR part alone is met */
+	select_result_free(&r1);
+	/* the first pick: the largest (ΔE_dhr/E_dhr + ΔE_lnf/E_lnf) / cost, from the parts' own states */
+	struct select_target p0 = td, p1 = tl;
+	p0.threshold = 2 * rd.value;
+	p1.threshold = 0.5 * rl.value;
+	struct sel a, b;
+	struct select_result ra = { 0 }, rb = { 0 };
+	assert_int_equal(sel_init(&a, m, nc, ang, cost, &p0, &o, &ra, &e), 0);
+	assert_int_equal(sel_init(&b, m, nc, ang, cost, &p1, &o, &rb, &e), 0);
+	double Ea = sel_excess(&a, SIZE_MAX, NULL), Eb = sel_excess(&b, SIZE_MAX, NULL), best = -1;
+	size_t bj = SIZE_MAX;
+	for (size_t j = 0; j < a.J; j++) {
+		double g = (Ea > 0 ? (Ea - sel_excess(&a, j, NULL)) / Ea : 0) + (Eb - sel_excess(&b, j, NULL)) / Eb;
+		if (g / a.cost[j] > best) {
+			best = g / a.cost[j];
+			bj = a.rep[j];
+		}
+	}
+	assert_int_equal(rc.picks[0].index, bj);
+	assert_true(fabs(rc.picks[0].gain_per_s - best) <= 1e-9 * best);
+	sel_free(&a);
+	sel_free(&b);
+	/* both met: no pick; the parser */
+	snprintf(spec, sizeof spec, "dhr:8,30:le=%.17g+lnf:le=%.17g", 2 * rd.value, 2 * rl.value);
+	select_result_free(&rc);
+	assert_int_equal(select_target_parse(spec, &tc, &e), 0);
+	assert_int_equal(select_batch(m, nc, ang, cost, &tc, &o, &rc, &e), 0);
+	assert_true(rc.met && rc.npicks == 0);
+	assert_int_equal(select_target_parse("dhr:8+lnf:le=1", &tc, &e), -1);
+	assert_non_null(strstr(e.msg, "both"));
+	assert_int_equal(select_target_parse("lnf:le=1+dhr:8:le=1", &tc, &e), -1);
+	assert_int_equal(select_target_parse("dhr:8:le=1+rgb:le=1", &tc, &e), -1);
+	select_result_free(&rc);
+	select_result_free(&rd);
+	select_result_free(&rl);
+	recon_model_free(m);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -712,6 +790,7 @@ int main(void)
 		cmocka_unit_test(test_reciprocity),     cmocka_unit_test(test_extremes),
 		cmocka_unit_test(test_rgb_target),      cmocka_unit_test(test_value_channels),
 		cmocka_unit_test(test_target_parse),     cmocka_unit_test(test_noise_fall),
+		cmocka_unit_test(test_combined_target),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
