@@ -260,6 +260,10 @@ int plan_adaptive_candidates(const struct plan_spec *spec, const struct bench_ge
  * (a ring direction the blind zones or limits hide is replaced by its reciprocal when that one is usable).
  * 0, or -1 when there is none. */
 int plan_adaptive_cand_pos(const struct plan_spec *spec, const struct bench_geom *g, size_t id, struct plan_pos *out);
+/* Which of select's picks (their costs cost[0..n-1], in choice order) a batch takes: each in turn when its cost fits
+ * what the ones taken before it leave of left_s (INFINITY: no limit), a dearer pick skipped and a cheaper later one
+ * still taken, at most max_k. Their indices, ascending, into keep[n]; their count. */
+size_t plan_adaptive_fit_picks(const double *cost, size_t n, double left_s, size_t max_k, size_t *keep);
 /* The threshold the select value of spec's target is compared with: le, or 1 for a combined target (whose value is
  * the larger of each part's value over its threshold). */
 double plan_adaptive_threshold(const struct plan_adaptive *a);

@@ -253,6 +253,18 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 		snprintf(buf + n, len - n, "+lnf:le=%.9g", a->le_lnf);
 }
 
+size_t plan_adaptive_fit_picks(const double *cost, size_t n, double left_s, size_t max_k, size_t *keep)
+{
+	size_t k = 0;
+	double spent = 0;
+	for (size_t i = 0; i < n && k < max_k; i++)
+		if (spent + cost[i] <= left_s) {
+			spent += cost[i];
+			keep[k++] = i;
+		}
+	return k;
+}
+
 double plan_adaptive_threshold(const struct plan_adaptive *a)
 {
 	return a->le_lnf > 0 ? 1.0 : a->le;

@@ -332,6 +332,24 @@ static void test_specular(void **state)
 	plan_spec_free(s);
 }
 
+/* A batch's picks within what is left of the budget: in select's order, a dearer pick skipped for a cheaper later one
+ * (before, the first pick that did not fit ended the batch, and a first pick too dear stopped the sweep). */
+static void test_fit_picks(void **state)
+{
+	(void)state;
+	const double cost[6] = { 10, 3, 8, 2, 1, 4 };
+	size_t keep[6];
+	assert_int_equal(plan_adaptive_fit_picks(cost, 6, 6, 6, keep), 3); /* 10 skipped, 3, 8 skipped, 2, 1 */
+	assert_true(keep[0] == 1 && keep[1] == 3 && keep[2] == 4);
+	assert_int_equal(plan_adaptive_fit_picks(cost, 6, 6, 2, keep), 2); /* the points left */
+	assert_true(keep[0] == 1 && keep[1] == 3);
+	assert_int_equal(plan_adaptive_fit_picks(cost, 6, INFINITY, 6, keep), 6); /* no limit: all, in order */
+	for (size_t i = 0; i < 6; i++)
+		assert_int_equal(keep[i], i);
+	assert_int_equal(plan_adaptive_fit_picks(cost, 6, 0.5, 6, keep), 0); /* none fits */
+	assert_int_equal(plan_adaptive_fit_picks(cost, 0, 100, 6, keep), 0);
+}
+
 static void test_batch_order(void **state)
 {
 	(void)state;
@@ -390,6 +408,7 @@ int main(void)
 		cmocka_unit_test(test_errors),
 		cmocka_unit_test(test_candidates),
 		cmocka_unit_test(test_specular),
+		cmocka_unit_test(test_fit_picks),
 		cmocka_unit_test(test_batch_order),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
