@@ -245,6 +245,11 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
             break
     for r in rows:
         r["stop"] = stop
+    # the accounting (a check of this loop): a state's bench time is measured + waited, the waits never negative,
+    # and every decision made cost the arms a wait (without overlap)
+    assert all(abs(r["bench_s"] - r["measured_s"] - r["waited_s"]) < 1e-9 for r in rows)
+    assert all(b["waited_s"] >= a["waited_s"] for a, b in zip(rows, rows[1:]))
+    assert overlap or all(b["waited_s"] > a["waited_s"] for a, b in zip(rows, rows[1:]) if b["points"] > a["points"])
     log("   %-17s seed %d adaptive: %d batches, %d points, %.0f s measured + %.0f s waited (%s); DHR err %.4f, "
         "log-RMSE %.5f; fits %.2f s CPU mean" % (mat, seed, k, len(done), spent, waited, stop, rows[-1]["dhr_err"],
                                                  rows[-1]["logrmse"], np.mean(fits)))
