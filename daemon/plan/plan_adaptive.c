@@ -28,6 +28,24 @@
 
 #include "daemon/plan/plan_int.h"
 
+/* RANGE at map[key] (plan_range_parse, values in [lo, hi]) into out[max], its count into *n; what names it. 0 or -1. */
+static int parse_list(struct yc_node *map, const char *key, const char *what, double lo, double hi, double *out,
+		      size_t max, size_t *n, struct acq_err *err)
+{
+	double *v = NULL;
+	size_t nv = 0;
+	if (plan_range_parse(map, key, what, lo, hi, &v, &nv, err))
+		return -1;
+	if (nv > max) {
+		free(v);
+		return yc_errf(err, yc_get(map, key), "%s: at most %zu values", what, max);
+	}
+	memcpy(out, v, nv * sizeof *v);
+	*n = nv;
+	free(v);
+	return 0;
+}
+
 static int parse_target(struct yc_node *root, struct plan_adaptive *a, struct acq_err *err)
 {
 	struct yc_node *t = yc_get(root, "target");
@@ -53,20 +71,9 @@ static int parse_target(struct yc_node *root, struct plan_adaptive *a, struct ac
 	if (yc_expect_map(n, what, err) || yc_double(n, "le", true, 1e-12, 1e6, &a->le, err))
 		return -1;
 	a->target = d ? PLAN_TARGET_DHR_SIGMA : l ? PLAN_TARGET_LNF_SIGMA : PLAN_TARGET_RGB_SIGMA;
-	if (d) {
-		double *v = NULL;
-		size_t nv = 0;
-		if (plan_range_parse(n, "incidence_deg", "target.dhr_sigma.incidence_deg", 0, 89, &v, &nv, err))
-			return -1;
-		if (nv > PLAN_MAX_TARGET_INC) {
-			free(v);
-			return yc_errf(err, yc_get(n, "incidence_deg"), "target.dhr_sigma.incidence_deg: at most %d incidences",
-				       PLAN_MAX_TARGET_INC);
-		}
-		memcpy(a->target_inc, v, nv * sizeof *v);
-		a->n_target_inc = nv;
-		free(v);
-	}
+	if (d && parse_list(n, "incidence_deg", "target.dhr_sigma.incidence_deg", 0, 89, a->target_inc,
+			    PLAN_MAX_TARGET_INC, &a->n_target_inc, err))
+		return -1;
 	return yc_check_unknown(n, what, err);
 }
 
@@ -109,20 +116,9 @@ static int parse_specular(struct yc_node *c, struct plan_adaptive *a, struct acq
 	    yc_int(sp, "per_ring", false, 1, 64, &per, err))
 		return -1;
 	a->spec_per_ring = (size_t)per;
-	if (yc_get(sp, "rings_deg")) {
-		double *v = NULL;
-		size_t nv = 0;
-		if (plan_range_parse(sp, "rings_deg", "candidates.specular.rings_deg", 0.1, 45, &v, &nv, err))
-			return -1;
-		if (nv > PLAN_MAX_SPEC_RINGS) {
-			free(v);
-			return yc_errf(err, yc_get(sp, "rings_deg"), "candidates.specular.rings_deg: at most %d rings",
-				       PLAN_MAX_SPEC_RINGS);
-		}
-		memcpy(a->spec_rings_deg, v, nv * sizeof *v);
-		a->n_spec_rings = nv;
-		free(v);
-	}
+	if (yc_get(sp, "rings_deg") && parse_list(sp, "rings_deg", "candidates.specular.rings_deg", 0.1, 45,
+						  a->spec_rings_deg, PLAN_MAX_SPEC_RINGS, &a->n_spec_rings, err))
+		return -1;
 	return yc_check_unknown(sp, "candidates.specular", err);
 }
 
@@ -131,19 +127,8 @@ static int parse_seed_specular(struct yc_node *root, struct plan_adaptive *a, st
 {
 	if (!yc_get(root, "seed_specular_deg"))
 		return 0;
-	double *v = NULL;
-	size_t nv = 0;
-	if (plan_range_parse(root, "seed_specular_deg", "seed_specular_deg", -45, 45, &v, &nv, err))
-		return -1;
-	if (nv > PLAN_MAX_SEED_SPEC) {
-		free(v);
-		return yc_errf(err, yc_get(root, "seed_specular_deg"), "seed_specular_deg: at most %d offsets",
-			       PLAN_MAX_SEED_SPEC);
-	}
-	memcpy(a->seed_spec_deg, v, nv * sizeof *v);
-	a->n_seed_spec = nv;
-	free(v);
-	return 0;
+	return parse_list(root, "seed_specular_deg", "seed_specular_deg", -45, 45, a->seed_spec_deg, PLAN_MAX_SEED_SPEC,
+			  &a->n_seed_spec, err);
 }
 
 static int parse_candidates(struct yc_node *root, struct plan_adaptive *a, struct acq_err *err)

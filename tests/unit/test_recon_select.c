@@ -177,6 +177,33 @@ static void test_rank_one_lnf(void **state)
 	recon_model_free(m);
 }
 
+/* The DHR functional's coefficients at incidence th (degrees) on the tracked channels (sel_dhr_coef's arrays). */
+struct dcoef {
+	double *c6, *wt, *KQn, *Y, *Wc, *C;
+};
+
+static void dcoef_make(struct dcoef *d, const struct sel *s, double th, struct acq_err *e)
+{
+	size_t Q = (size_t)SEL_NMU * SEL_NPHI, Lc = s->Lc, n = s->n;
+	d->c6 = malloc(Q * 6 * sizeof *d->c6);
+	d->wt = malloc(Q * sizeof *d->wt);
+	d->KQn = malloc(Q * n * sizeof *d->KQn);
+	d->Y = malloc(Q * Lc * sizeof *d->Y);
+	d->Wc = malloc(Lc * n * sizeof *d->Wc);
+	d->C = malloc(Q * Lc * sizeof *d->C);
+	assert_int_equal(sel_dhr_coef(s, th * M_PI / 180, d->c6, d->wt, d->KQn, d->Y, d->Wc, d->C, e), 0);
+}
+
+static void dcoef_free(struct dcoef *d)
+{
+	free(d->c6);
+	free(d->wt);
+	free(d->KQn);
+	free(d->Y);
+	free(d->Wc);
+	free(d->C);
+}
+
 static void test_rank_one_dhr(void **state)
 {
 	(void)state;
@@ -191,9 +218,9 @@ static void test_rank_one_dhr(void **state)
 	fix_sel(&f, m, nc, ang, cost);
 	struct sel *s = &f.s;
 	size_t Q = (size_t)SEL_NMU * SEL_NPHI, Lc = s->Lc, n = s->n;
-	double *c6 = malloc(Q * 6 * sizeof *c6), *wt = malloc(Q * sizeof *wt), *KQn = malloc(Q * n * sizeof *KQn);
-	double *Y = malloc(Q * Lc * sizeof *Y), *Wc = malloc(Lc * n * sizeof *Wc), *C = malloc(Q * Lc * sizeof *C);
-	assert_int_equal(sel_dhr_coef(s, 30 * M_PI / 180, c6, wt, KQn, Y, Wc, C, &f.e), 0);
+	struct dcoef dc;
+	dcoef_make(&dc, s, 30, &f.e);
+	const double *c6 = dc.c6, *C = dc.C;
 	size_t picks[2] = { 3, 11 }, np = 0;
 	double worst = 0;
 	for (;;) {
@@ -216,12 +243,7 @@ static void test_rank_one_dhr(void **state)
 	printf("DHR functional: largest |tracked − refactorisation| / prior variance = %.3g (0 picks: dhr.c's σ_model²)\n",
 	       worst);
 	assert_true(worst <= 1e-9);
-	free(c6);
-	free(wt);
-	free(KQn);
-	free(Y);
-	free(Wc);
-	free(C);
+	dcoef_free(&dc);
 	fix_free(&f);
 	recon_model_free(m);
 }
@@ -633,19 +655,15 @@ static void test_noise_fall(void **state)
 	size_t nc = 40;
 	double ang[40 * 4], cost[40];
 	random_cands(nc, ang, cost);
-	struct select_target t;
-	struct acq_err e = { 0 };
-	assert_int_equal(select_target_parse("dhr:30", &t, &e), 0);
-	struct select_opts o;
-	select_opts_default(&o);
-	o.batch = 3;
-	struct select_result r = { 0 };
-	struct sel s;
-	assert_int_equal(sel_init(&s, m, nc, ang, cost, &t, &o, &r, &e), 0);
+	struct fix f;
+	fix_spec(&f, "dhr:30");
+	f.o.batch = 3;
+	fix_sel(&f, m, nc, ang, cost);
+	struct sel s = f.s;
 	size_t Q = (size_t)SEL_NMU * SEL_NPHI, Lc = s.Lc, n = s.n;
-	double *c6 = malloc(Q * 6 * sizeof *c6), *wt = malloc(Q * sizeof *wt), *KQn = malloc(Q * n * sizeof *KQn);
-	double *Y = malloc(Q * Lc * sizeof *Y), *Wc = malloc(Lc * n * sizeof *Wc), *C = malloc(Q * Lc * sizeof *C);
-	assert_int_equal(sel_dhr_coef(&s, 30 * M_PI / 180, c6, wt, KQn, Y, Wc, C, &e), 0);
+	struct dcoef dc;
+	dcoef_make(&dc, &s, 30, &f.e);
+	const double *c6 = dc.c6, *C = dc.C;
 	size_t picks[3], np = 0;
 	for (size_t i = 0; i < 3; i++)
 		picks[i] = (size_t)(rt_unif() * (double)s.J) % s.J;
@@ -684,28 +702,25 @@ static void test_noise_fall(void **state)
 	printf("noise variance of the DHR functional: largest |tracked − refactorisation| / q = %.3g (channel %zu: "
 	       "q %.4g → %.4g after 3 picks)\n", worst, s.chan[0], q0, q3);
 	assert_true(worst <= 1e-9); /* (q need not fall for any pick: a smoother's weights can spread onto noisier data) */
-	sel_free(&s);
-	select_result_free(&r);
+	f.s = s;
+	fix_free(&f);
 
 	/* on the noise floor: the floor dominates every tracked channel, yet the best pick's gain is not ~0 and the
 	 * predicted value falls with it */
-	memset(&r, 0, sizeof r);
-	assert_int_equal(sel_init(&s, m, nc, ang, cost, &t, &o, &r, &e), 0);
-	for (size_t f = 0; f < s.F; f++)
-		s.sn2[f] = 100 * (s.v[f] + 1e-30);
+	fix_spec(&f, "dhr:30");
+	f.o.batch = 3;
+	fix_sel(&f, m, nc, ang, cost);
+	s = f.s;
+	for (size_t x = 0; x < s.F; x++)
+		s.sn2[x] = 100 * (s.v[x] + 1e-30);
 	double E = sel_excess(&s, SIZE_MAX, NULL), best = 0;
 	for (size_t j = 0; j < s.J; j++)
 		best = fmax(best, E - sel_excess(&s, j, NULL));
 	printf("on the noise floor: criterion %.4g, best gain %.4g (%.2g of it)\n", E, best, best / E);
 	assert_true(best > 1e-3 * E);
-	sel_free(&s);
-	select_result_free(&r);
-	free(c6);
-	free(wt);
-	free(KQn);
-	free(Y);
-	free(Wc);
-	free(C);
+	f.s = s;
+	fix_free(&f);
+	dcoef_free(&dc);
 	recon_model_free(m);
 }
 
