@@ -21,7 +21,7 @@
  * 12 decades: 5.3e9 evaluations, 19 s, without it); the paper-size fits of the simulator's materials need
  * 1e8-5e8. brdf-recon check verifies the bound with an independent rule either way; the fit warns. The budget
  * does not cut the start nodes nor the first level's midpoints: the log-uniform random 1000 × 651 input (bench_recon)
- * spends 2.8e9 there with the nested rules (3.4e9 with Gauss-Legendre ones): 19 nodes of 1.3e8-2.2e8 each. */
+ * spends ~2.4e9 there with the nested rules (3.4e9 with Gauss-Legendre ones), 19 nodes. */
 #define TAB_WORK_MAX 1e9
 /* The trend's GGX lobe over half vectors (recon_hv_nodes): 16 nodes in u × 16 azimuths on [0, π] to start,
  * doubled up to 64 × 64 (the largest difference from a 256 × 2048 hemisphere rule there: 9e-4, where the horizon

@@ -54,7 +54,10 @@ int recon_hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double 
  * azimuth on [0, π], doubled by the mirror (2M equally spaced points on the circle: the same accuracy as M
  * midpoints). R(N, M) ⊂ R(2N, 2M): a doubling evaluates only the 3/4 of its nodes that are new, so a node rule
  * and its doubling cost 4 units instead of Gauss-Legendre's 1 + 4. The horizon node (weight 0 with the cosine)
- * is left out and the pole is one node (every azimuth is the same direction there).
+ * is left out and the pole is one node (every azimuth is the same direction there). Near the pole a row of
+ * azimuths is a circle of radius sinθo: rows with sinθo ≤ 1/2 (≤ 1/4) take M/2 (M/4) intervals, so no row's
+ * spacing in arc, sinθo·π/M_k, exceeds the equator's π/M (M a multiple of 4; a row keeps its share at every
+ * level, so the rules stay nested): ~16 % fewer nodes.
  */
 #define CC_NMAX 1024
 static int cc01(int N, double *x, double *w)
@@ -78,7 +81,14 @@ static double trap_w(int j, int M)
 	return (j == 0 || j == M ? 0.5 : 1.0) * 2.0 * M_PI / M;
 }
 
-/* Nodes of R(N, M) (only_new: those not in R(N/2, M/2); N, M even), in the order k = 1 … N−1, j = 0 … M, then
+/* Azimuth intervals of row μ = x of R(·, M): M / 2^p, 2^p·sinθo ≤ 1, p ≤ 2 (M not a multiple of 4: M). */
+static int cc_row_m(double x, int M)
+{
+	double s = sqrt(fmax(0.0, (1.0 - x) * (1.0 + x)));
+	return M % 4 ? M : s <= 0.25 ? M / 4 : s <= 0.5 ? M / 2 : M;
+}
+
+/* Nodes of R(N, M) (only_new: those not in R(N/2, M/2); N, M even), in the order k = 1 … N−1, j = 0 … M_k, then
  * the pole; the count, or −1 on a bad size. */
 static long cc_nodes(double theta_i, int N, int M, int only_new, double *c6, double *wt)
 {
@@ -88,11 +98,12 @@ static long cc_nodes(double theta_i, int N, int M, int only_new, double *c6, dou
 	long q = 0;
 	for (int k = 1; k < N; k++) {
 		double to = acos(x[k]);
-		for (int j = 0; j <= M; j++) {
+		int mk = cc_row_m(x[k], M);
+		for (int j = 0; j <= mk; j++) {
 			if (only_new && !(k & 1) && !(j & 1))
 				continue;
-			rbf_canon(theta_i, 0.0, to, j * M_PI / M, c6 + 6 * q);
-			wt[q++] = w[k] * x[k] * trap_w(j, M);
+			rbf_canon(theta_i, 0.0, to, j * M_PI / mk, c6 + 6 * q);
+			wt[q++] = w[k] * x[k] * trap_w(j, mk);
 		}
 	}
 	if (!only_new) {
@@ -228,7 +239,7 @@ static int albedo_boxes(const struct recon_model *m, double theta_i, int nmu, in
 	/* the probes: distinct directions, each with the starting rule's four nodes around it */
 	enum { NP = 2 * RECON_BOX_MAX };
 	double dir[NP][3], pt[NP][2], wn[NP][4], chw = cos(hw), x[CC_NMAX + 1], w[CC_NMAX + 1];
-	int cc = ws->nested && !square_rule, nx = cc ? nmu + 1 : nmu, nq = cc ? nphi + 1 : nphi; /* the rule's nodes */
+	int cc = ws->nested && !square_rule, nx = cc ? nmu + 1 : nmu; /* the rule's rows */
 	int np = 0;
 	for (size_t c = 0; c < nc && np < NP; c++) {
 		double t = ws->cand[3 * c], p = ws->cand[3 * c + 1];
@@ -249,16 +260,18 @@ static int albedo_boxes(const struct recon_model *m, double theta_i, int nmu, in
 		double xc = cos(pt[b][0]);
 		if (square_rule)
 			xc *= xc;
-		int i = 0, j = (int)floor(pt[b][1] * nphi / M_PI - (cc ? 0.0 : 0.5));
+		int i = 0;
 		while (i + 2 < nx && x[i + 1] <= xc)
 			i++;
-		j = j < 0 ? 0 : j + 1 >= nq ? (nq > 1 ? nq - 2 : 0) : j;
 		rbf_canon(theta_i, 0.0, pt[b][0], pt[b][1], ws->c6 + 6 * (5 * b));
-		for (int u = 0; u < 4; u++) {
-			int ii = i + (u & 1) < nx ? i + (u & 1) : nx - 1, jj = j + (u >> 1) < nq ? j + (u >> 1) : nq - 1;
+		for (int u = 0; u < 4; u++) { /* the two nearest azimuths of rows i and i + 1 (the nested rule's rows differ) */
+			int ii = i + (u & 1) < nx ? i + (u & 1) : nx - 1, mr = cc ? cc_row_m(x[ii], nphi) : nphi;
+			int nr = cc ? mr + 1 : mr, j = (int)floor(pt[b][1] * mr / M_PI - (cc ? 0.0 : 0.5));
+			j = j < 0 ? 0 : j + 1 >= nr ? (nr > 1 ? nr - 2 : 0) : j;
+			int jj = j + (u >> 1) < nr ? j + (u >> 1) : nr - 1;
 			double mu = square_rule ? sqrt(x[ii]) : x[ii];
-			wn[b][u] = (square_rule ? 0.5 * w[ii] : w[ii] * mu) * 2.0 * M_PI / nphi;
-			rbf_canon(theta_i, 0.0, acos(fmin(mu, 1.0)), (jj + (cc ? 0.0 : 0.5)) * M_PI / nphi,
+			wn[b][u] = (square_rule ? 0.5 * w[ii] : w[ii] * mu) * 2.0 * M_PI / mr;
+			rbf_canon(theta_i, 0.0, acos(fmin(mu, 1.0)), (jj + (cc ? 0.0 : 0.5)) * M_PI / mr,
 				  ws->c6 + 6 * (5 * b + 1 + u));
 		}
 	}
@@ -428,8 +441,8 @@ static int albedo_rule_cc(const struct recon_model *m, double theta_i, int N, in
 		cc01(N, x, w);
 		size_t idx = 0;
 		for (int k = 2; k < N; k += 2)
-			for (int j = 0; j <= M; j += 2, idx++) {
-				double wq = w[k] * x[k] * trap_w(j, M);
+			for (int j = 0, mk = cc_row_m(x[k], M); j <= mk; j += 2, idx++) {
+				double wq = w[k] * x[k] * trap_w(j, mk);
 				for (size_t c = 0; c < nch; c++)
 					acc[c] += wq * ws->keep[idx * L + ws->chan[c]];
 			}
@@ -519,6 +532,8 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 	ws->nbox = 0;
 	ws->keep_n = 0;
 	ws->store = ws->nested; /* the starting rule keeps its values for the first doubling (nested rules) */
+	if (ws->nested && !square_rule && ws->part != RECON_PART_LOBE)
+		nphi = (nphi + 3) / 4 * 4; /* fewer azimuths near the pole (cc_row_m) */
 	int rc = albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, out, err);
 	ws->store = 0;
 	if (rc)
