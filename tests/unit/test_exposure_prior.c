@@ -14,23 +14,10 @@
 #include "daemon/exposure.h"
 #include "daemon/plan/plan.h"
 #include "daemon/store.h"
+#define UT_TMPDIR_NAME "test_exposure_prior"
 #include "tests/unit/tmpdir.h"
 
 #define TOL 1e-12 /* means of a few exact doubles */
-
-static char dir[256];
-
-static int setup(void **state)
-{
-	(void)state;
-	return ut_tmpdir_make(dir, sizeof dir, "test_exposure_prior");
-}
-
-static int teardown(void **state)
-{
-	(void)state;
-	return ut_tmpdir_remove(dir);
-}
 
 /* One exposure of a point (completing it when last). */
 static void shot(struct store *st, int64_t sw, int64_t pt, const char *kind, double ms, bool last)
@@ -93,7 +80,7 @@ static void test_prior_figures(void **state)
 {
 	(void)state;
 	char p[300];
-	snprintf(p, sizeof p, "%s/a.db", dir);
+	snprintf(p, sizeof p, "%s/a.db", ut_dir);
 	struct store *st = NULL;
 	struct acq_err err = { 0 };
 	assert_int_equal(store_open(p, &st, &err), 0);
@@ -171,5 +158,5 @@ int main(void)
 		cmocka_unit_test(test_prior_figures),
 		cmocka_unit_test(test_plan_sample_key),
 	};
-	return cmocka_run_group_tests(tests, setup, teardown);
+	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);
 }

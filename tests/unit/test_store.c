@@ -461,7 +461,7 @@ static void test_migration_4_to_5(void **state)
 	struct store *st = NULL;
 	struct acq_err err = { 0 };
 	assert_int_equal(store_open(p, &st, &err), 0);
-	int64_t old = mk_sweep(st, 2);
+	int64_t old = ut_sweep_create(st, 2, "t", "plan: 1");
 	store_close(st);
 	sqlite3 *db;
 	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
@@ -485,16 +485,13 @@ static void test_migration_4_to_5(void **state)
 	assert_int_equal(store_sweep_set_state(st, now, "completed", 2100, &err), 0);
 	store_close(st);
 	assert_schema_current(p);
-	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
-	sqlite3_stmt *s;
-	assert_int_equal(sqlite3_prepare_v2(db, "SELECT group_concat(sweep_id || ':' || sample || ':' || auto_exposure) "
-						"FROM sweep_samples", -1, &s, NULL), SQLITE_OK);
+	sqlite3_stmt *s = ut_sql_open(p, "SELECT group_concat(sweep_id || ':' || sample || ':' || auto_exposure) "
+					 "FROM sweep_samples", &db);
 	assert_int_equal(sqlite3_step(s), SQLITE_ROW);
 	char want[64];
 	snprintf(want, sizeof want, "%lld:paint:1", (long long)now);
 	assert_string_equal((const char *)sqlite3_column_text(s, 0), want);
-	sqlite3_finalize(s);
-	sqlite3_close(db);
+	ut_sql_close(db, s);
 }
 
 int main(void)
