@@ -345,6 +345,13 @@ bool plan_seg_keeps(const struct bench_geom *g, const struct plan_pos *p, const 
 #define PLAN_MAX_WP 13
 double plan_move(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
 		 struct plan_wp wps[PLAN_MAX_WP], size_t *n);
+/* From a configuration inside the clearance (a move stopped part-way by one axis's alarm while the others went on),
+ * a way out: one segment moving the detector straight away from the laser's direction that never brings the arms
+ * closer than they are (ψ ≥ min(collision limit, ψ now) at every instant, plan_seg_keeps), ending clear, then
+ * plan_move's path to b. Up to PLAN_MAX_WP + 1 segments into wps, their count in *n, the time returned; -1 when a
+ * is not inside the clearance or no such way exists. */
+double plan_escape(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
+		   struct plan_wp wps[PLAN_MAX_WP + 1], size_t *n);
 /* Readable name of the most telling reason bit set (limit, collision, beam, view, unreachable, none nearby). */
 const char *plan_reason_name(unsigned reason);
 
