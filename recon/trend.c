@@ -408,41 +408,45 @@ static double score_coat(size_t n, const double *val, const double *eps, const d
 	return ss / (double)(n * nc);
 }
 
-/* Golden section of f(x) over [lo, hi] (NGOLDEN steps): the best x and its value into *x, *fx (kept when no point
- * beats *fx). fx_at(x) evaluates. */
-struct gs_coat {
+/* One coordinate of a roughness search: the score of kind t as a function of x = ln α (the coat kind: ln α at α2 =
+ * e^other, or ln α2 at α = e^other). golden: golden section over [lo, hi] (NGOLDEN steps); the best x and its score
+ * into *x, *fx, which are kept when no point beats *fx. */
+struct gs {
+	int t;
 	size_t n, nc;
 	const double *val, *eps, *c6;
 	const size_t *chan;
 	double *B, other;
-	int which; /* 0: x = ln α at α2 = e^other; 1: x = ln α2 at α = e^other */
+	int which; /* coat: 0 x = ln α, 1 x = ln α2 */
 };
 
-static double gs_coat_at(const struct gs_coat *g, double x)
+static double gs_at(const struct gs *g, double x)
 {
+	if (g->t != RECON_TREND_COAT)
+		return score(g->t, g->n, g->val, g->eps, g->c6, g->chan, g->nc, exp(x), g->B);
 	double a = g->which ? exp(g->other) : exp(x), a2 = g->which ? exp(x) : exp(g->other);
 	return score_coat(g->n, g->val, g->eps, g->c6, g->chan, g->nc, a, a2, g->B);
 }
 
-static void golden_coat(const struct gs_coat *g, double lo, double hi, double *x, double *fx)
+static void golden(const struct gs *g, double lo, double hi, double *x, double *fx)
 {
 	if (!(hi > lo))
 		return;
 	const double gr = 0.5 * (sqrt(5.0) - 1.0);
-	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo), s1 = gs_coat_at(g, x1), s2 = gs_coat_at(g, x2);
+	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo), s1 = gs_at(g, x1), s2 = gs_at(g, x2);
 	for (int it = 0; it < NGOLDEN; it++) {
 		if (s1 < s2) {
 			hi = x2;
 			x2 = x1;
 			s2 = s1;
 			x1 = hi - gr * (hi - lo);
-			s1 = gs_coat_at(g, x1);
+			s1 = gs_at(g, x1);
 		} else {
 			lo = x1;
 			x1 = x2;
 			s1 = s2;
 			x2 = lo + gr * (hi - lo);
-			s2 = gs_coat_at(g, x2);
+			s2 = gs_at(g, x2);
 		}
 	}
 	if (s1 < *fx) {
@@ -476,14 +480,14 @@ static double fit_coat_alphas(size_t n, const double *val, const double *eps, co
 			}
 		}
 	if (isfinite(bs)) {
-		struct gs_coat g = { n, nc, val, eps, c6, chan, B, 0, 0 };
+		struct gs g = { RECON_TREND_COAT, n, nc, val, eps, c6, chan, B, 0, 0 };
 		for (int round = 0; round < 2; round++) {
 			g.which = 0;
 			g.other = xb;
-			golden_coat(&g, fmax(xa - h, la), fmin(xa + h, xb - lr), &xa, &bs);
+			golden(&g, fmax(xa - h, la), fmin(xa + h, xb - lr), &xa, &bs);
 			g.which = 1;
 			g.other = xa;
-			golden_coat(&g, fmax(xb - h, xa + lr), fmin(xb + h, lb), &xb, &bs);
+			golden(&g, fmax(xb - h, xa + lr), fmin(xb + h, lb), &xb, &bs);
 		}
 	}
 	*alpha = exp(xa);
@@ -503,6 +507,22 @@ int trend_fit_kind(int t, size_t n, size_t L, const double *val, const double *e
 	return trend_fit_kind2(t, n, L, val, eps, c6, chan, nc, alpha, NULL, coef, rms, err);
 }
 
+/* Every channel's coefficients at the basis B; *rms (may be NULL) the RMS log residual over the scored channels. */
+static void fit_all_coef(size_t n, size_t L, const double *val, const double *eps, const size_t *chan, size_t nc,
+			 const double *B, double *coef, double *rms)
+{
+	double ss = 0;
+	for (size_t l = 0, i = 0; l < L; l++) {
+		double e = trend_fit_coef(n, val + l * n, eps[l], B, coef + l * TREND_NB);
+		if (i < nc && chan[i] == l) {
+			ss += e;
+			i++;
+		}
+	}
+	if (rms)
+		*rms = sqrt(ss / (double)(n * nc));
+}
+
 /* The coat kind's fit (trend_fit_kind2): both roughnesses, then every channel's coefficients. */
 static void fit_coat(size_t n, size_t L, const double *val, const double *eps, const double *c6, const size_t *chan,
 		     size_t nc, double *B, double *alpha, double *alpha2, double *coef, double *rms)
@@ -518,16 +538,7 @@ static void fit_coat(size_t n, size_t L, const double *val, const double *eps, c
 		for (int j = 1; nolobe && j < TREND_NB; j++)
 			B[TREND_NB * k + j] = 0.0;
 	}
-	double ss = 0;
-	for (size_t l = 0, i = 0; l < L; l++) {
-		double e = trend_fit_coef(n, val + l * n, eps[l], B, coef + l * TREND_NB);
-		if (i < nc && chan[i] == l) {
-			ss += e;
-			i++;
-		}
-	}
-	if (rms)
-		*rms = sqrt(ss / (double)(n * nc));
+	fit_all_coef(n, L, val, eps, chan, nc, B, coef, rms);
 }
 
 int trend_fit_kind2(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
@@ -562,33 +573,9 @@ int trend_fit_kind2(int t, size_t n, size_t L, const double *val, const double *
 		}
 	}
 	double lo = la + h * (bi > 0 ? bi - 1 : 0), hi = la + h * (bi < NGRID - 1 ? bi + 1 : NGRID - 1);
-	const double gr = 0.5 * (sqrt(5.0) - 1.0);
-	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo);
-	double s1 = score(t, n, val, eps, c6, chan, nc, exp(x1), B), s2 = score(t, n, val, eps, c6, chan, nc, exp(x2), B);
-	for (int it = 0; it < NGOLDEN; it++) {
-		if (s1 < s2) {
-			hi = x2;
-			x2 = x1;
-			s2 = s1;
-			x1 = hi - gr * (hi - lo);
-			s1 = score(t, n, val, eps, c6, chan, nc, exp(x1), B);
-		} else {
-			lo = x1;
-			x1 = x2;
-			s1 = s2;
-			x2 = lo + gr * (hi - lo);
-			s2 = score(t, n, val, eps, c6, chan, nc, exp(x2), B);
-		}
-	}
 	double best = la + h * bi;
-	if (s1 < bs) {
-		best = x1;
-		bs = s1;
-	}
-	if (s2 < bs) {
-		best = x2;
-		bs = s2;
-	}
+	struct gs g = { t, n, nc, val, eps, c6, chan, B, 0, 0 };
+	golden(&g, lo, hi, &best, &bs);
 	/* no admissible roughness: the data show no lobe of measurable width; the diffuse terms only (the
 	 * roughness is then irrelevant and recorded as the largest) */
 	int nolobe = !isfinite(bs);
@@ -600,16 +587,7 @@ int trend_fit_kind2(int t, size_t n, size_t L, const double *val, const double *
 				if (is_lobe(t, j))
 					B[TREND_NB * k + j] = 0.0;
 	}
-	double ss = 0;
-	for (size_t l = 0, i = 0; l < L; l++) {
-		double e = trend_fit_coef(n, val + l * n, eps[l], B, coef + l * TREND_NB);
-		if (i < nc && chan[i] == l) {
-			ss += e;
-			i++;
-		}
-	}
-	if (rms)
-		*rms = sqrt(ss / (double)(n * nc));
+	fit_all_coef(n, L, val, eps, chan, nc, B, coef, rms);
 	free(B);
 	return 0;
 }
