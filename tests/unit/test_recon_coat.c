@@ -21,6 +21,32 @@ static void dir(double th, double ph, double v[3])
 	v[2] = cos(th);
 }
 
+/* out[0..k) = ∫ fn(ωi, ωo)[j] cosθo dωo at θi by a fine rule: Gauss-Legendre 256 in cosθo × 2048 azimuths. */
+static void fine_albedo(double ti, void (*fn)(const double wi[3], const double wo[3], double *f), int k, double *out)
+{
+	static double x[256], w[256];
+	rbf_gauss_legendre01(256, x, w);
+	double wi[3], f[TREND_NB + 8];
+	dir(ti, 0, wi);
+	for (int j = 0; j < k; j++)
+		out[j] = 0;
+	for (int i = 0; i < 256; i++)
+		for (int q = 0; q < 2048; q++) {
+			double wo[3];
+			dir(acos(x[i]), (q + 0.5) * 2 * M_PI / 2048, wo);
+			fn(wi, wo, f);
+			for (int j = 0; j < k; j++)
+				out[j] += w[i] * x[i] * (2 * M_PI / 2048) * f[j];
+		}
+}
+
+/* The coat kind's basis at α 0.05, α2 0.3 (the simulator's clear coat). */
+static void coat_basis_at(const double wi[3], const double wo[3], double *b)
+{
+	double c6[6] = { wi[0], wi[1], wi[2], wo[0], wo[1], wo[2] };
+	trend_eval_basis2(RECON_TREND_COAT, 0.05, 0.3, c6, b);
+}
+
 static void test_coat_basis_properties(void **state)
 {
 	(void)state;
@@ -52,23 +78,11 @@ static void test_coat_basis_properties(void **state)
 			assert_true(fabs(b3[j] - b1[j]) <= 1e-9 * fmax(b1[j], 1e-20 * (1 + b1[1] + b1[2])));
 		}
 	}
-	/* each term's albedo ≤ 1 (fine rule: Gauss-Legendre 256 in cosθo × 2048 azimuths; its error on an α = 0.05
-	 * lobe is ~1e-4); the Lambertian term exactly 1 */
-	static double x[256], w[256];
-	rbf_gauss_legendre01(256, x, w);
+	/* each term's albedo ≤ 1 (fine rule: its error on an α = 0.05 lobe is ~1e-4); the Lambertian term exactly 1 */
 	static const double thetas[] = { 0, 30, 60, 85 };
 	for (int t = 0; t < 4; t++) {
-		double wi[3], alb[TREND_NB] = { 0 };
-		dir(thetas[t] * M_PI / 180, 0, wi);
-		for (int i = 0; i < 256; i++)
-			for (int k = 0; k < 2048; k++) {
-				double c6[6], b[TREND_NB];
-				memcpy(c6, wi, sizeof wi);
-				dir(acos(x[i]), (k + 0.5) * 2 * M_PI / 2048, c6 + 3);
-				trend_eval_basis2(RECON_TREND_COAT, 0.05, 0.3, c6, b);
-				for (int j = 0; j < TREND_NB; j++)
-					alb[j] += w[i] * x[i] * (2 * M_PI / 2048) * b[j];
-			}
+		double alb[TREND_NB];
+		fine_albedo(thetas[t] * M_PI / 180, coat_basis_at, TREND_NB, alb);
 		printf("coat basis albedo at %2.0f°: %.6f %.6f %.6f %.6f %.6f\n", thetas[t], alb[0], alb[1], alb[2], alb[3],
 		       alb[4]);
 		assert_true(fabs(alb[0] - 1.0) < 1e-9);
@@ -136,24 +150,6 @@ static void coat_truth(const double wi[3], const double wo[3], double f[NCH])
 		f[l] = coat + rho_ch[l] * base;
 }
 
-/* DHR of the truth at θi by the fine rule (256 × 2048). */
-static void coat_truth_dhr(double ti, double d[NCH])
-{
-	static double x[256], w[256];
-	rbf_gauss_legendre01(256, x, w);
-	double wi[3];
-	dir(ti, 0, wi);
-	for (int l = 0; l < NCH; l++)
-		d[l] = 0;
-	for (int i = 0; i < 256; i++)
-		for (int k = 0; k < 2048; k++) {
-			double wo[3], f[NCH];
-			dir(acos(x[i]), (k + 0.5) * 2 * M_PI / 2048, wo);
-			coat_truth(wi, wo, f);
-			for (int l = 0; l < NCH; l++)
-				d[l] += w[i] * x[i] * (2 * M_PI / 2048) * f[l];
-		}
-}
 
 /* The paper's plan as acq-sim makes it: θ at the cell centres 4, 12, …, 76°, φo every 36°, φi = 0, pairs closer
  * than 7.5° (the bench's blind zone) dropped; 1 % relative noise. */
@@ -192,6 +188,19 @@ static void coat_samples(struct recon_samples *s)
 	s->n = k;
 }
 
+/* Samples of the truth (coat_samples) fitted with the defaults (--trend auto). */
+static struct recon_model *fit_truth(struct recon_samples *s)
+{
+	coat_samples(s);
+	struct recon_model *m = NULL;
+	struct acq_err err = { 0 };
+	int rc = recon_fit(s, NULL, &m, &err);
+	if (rc)
+		printf("fit failed: %s\n", err.msg);
+	assert_int_equal(rc, 0);
+	return m;
+}
+
 /*
  * Over NSEED noise seeds: the default fit (--trend auto) takes the coat kind, its roughnesses within 25 % of the
  * truth's, and the DHR at 8/30/60° within COAT_DHR_TOL of the truth's at every seed and channel; z = error/σ over all
@@ -211,13 +220,11 @@ static void test_coat_truth_recovered(void **state)
 	double ref[3][NCH], zz = 0, worst = 0;
 	int nz = 0;
 	for (int t = 0; t < 3; t++)
-		coat_truth_dhr(th[t], ref[t]);
+		fine_albedo(th[t], coat_truth, NCH, ref[t]);
 	for (int sd = 0; sd < NSEED; sd++) {
 		struct recon_samples s;
-		coat_samples(&s);
-		struct recon_model *m = NULL;
 		struct acq_err err = { 0 };
-		assert_int_equal(recon_fit(&s, NULL, &m, &err), 0);
+		struct recon_model *m = fit_truth(&s);
 		printf("seed %d: trend %s alpha %.4f alpha2 %.4f (truth %.2f, %.2f)\n", sd, trend_name(m->trend), m->trend_alpha,
 		       m->trend_alpha2, COAT_A, BASE_A);
 		assert_int_equal(m->trend, RECON_TREND_COAT);
@@ -268,10 +275,7 @@ static void test_one_lobe_not_coat(void **state)
 	one_lobe = 1;
 	for (int sd = 0; sd < NSEED; sd++) {
 		struct recon_samples s;
-		coat_samples(&s);
-		struct recon_model *m = NULL;
-		struct acq_err err = { 0 };
-		assert_int_equal(recon_fit(&s, NULL, &m, &err), 0);
+		struct recon_model *m = fit_truth(&s);
 		const char *p = strstr(m->meta, "trend_loo=");
 		printf("one-lobe paint, seed %d: trend %s alpha %.4f; %.*s\n", sd, trend_name(m->trend), m->trend_alpha,
 		       p ? (int)strcspn(p, "\n") : 0, p ? p : "");

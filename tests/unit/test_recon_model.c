@@ -12,15 +12,21 @@
 static struct recon_model *M, *MG; /* without trend; with the GGX trend */
 static char path[64];
 
+/* The samples and the fixed fit options of this file's models (shape and smoothing fixed: quick fits). */
+static void fixture(struct recon_samples *s, struct recon_fit_opts *o)
+{
+	rt_samples(s, 3, 0.02, 1.0);
+	recon_fit_opts_default(o);
+	o->shape = 1.8;
+	o->smoothing = 1e-3;
+}
+
 static int setup(void **state)
 {
 	(void)state;
 	struct recon_samples s;
-	rt_samples(&s, 3, 0.02, 1.0);
 	struct recon_fit_opts o;
-	recon_fit_opts_default(&o);
-	o.shape = 1.8;
-	o.smoothing = 1e-3;
+	fixture(&s, &o);
 	o.source = "unit test";
 	o.trend = RECON_TREND_NONE;
 	struct acq_err err = { 0 };
@@ -259,11 +265,8 @@ static void test_two_lobe_trend_v3(void **state)
 	(void)state;
 	struct acq_err err = { 0 };
 	struct recon_samples s;
-	rt_samples(&s, 3, 0.02, 1.0);
 	struct recon_fit_opts o;
-	recon_fit_opts_default(&o);
-	o.shape = 1.8;
-	o.smoothing = 1e-3;
+	fixture(&s, &o);
 	o.trend = RECON_TREND_COAT;
 	struct recon_model *mc = NULL, *m2 = NULL;
 	assert_int_equal(recon_fit(&s, &o, &mc, &err), 0);
