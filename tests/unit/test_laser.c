@@ -96,15 +96,23 @@ static void stop_child(pid_t pid)
 	waitpid(pid, NULL, 0);
 }
 
+/* serve_sim, then the driver opened on the served pty; the test fails if it does not open. */
+static struct laser *open_served(struct served *sv)
+{
+	serve_sim(sv);
+	struct acq_err err = { 0 };
+	struct laser *l = NULL;
+	if (laser_open(sv->cfg, &l, &err))
+		fail_msg("%s", err.msg);
+	return l;
+}
+
 static void test_sim_identity_emission_power(void **state)
 {
 	(void)state;
 	struct served sv;
-	serve_sim(&sv);
+	struct laser *l = open_served(&sv);
 	struct acq_err err = { 0 };
-	struct laser *l = NULL;
-	if (laser_open(sv.cfg, &l, &err))
-		fail_msg("%s", err.msg);
 	assert_string_equal(laser_identity(l)->model, "SIM-SC450");
 	assert_string_equal(laser_identity(l)->serial, "SIM0001");
 	assert_int_equal(laser_set_power(l, 42.5, &err), 0);
@@ -130,11 +138,8 @@ static void test_sim_interlock_and_fault(void **state)
 {
 	(void)state;
 	struct served sv;
-	serve_sim(&sv);
+	struct laser *l = open_served(&sv);
 	struct acq_err err = { 0 };
-	struct laser *l = NULL;
-	if (laser_open(sv.cfg, &l, &err))
-		fail_msg("%s", err.msg);
 	assert_int_equal(laser_set_emission(l, true, &err), 0);
 	assert_true(sh->world.laser_emission);
 	sh->world.faults.laser_interlock_open = true;
