@@ -40,6 +40,8 @@ enum plan_target_kind {
 	PLAN_TARGET_RGB_SIGMA  /* σ of the MERL table's RGB values (sr⁻¹), RMS under the table's projected measure ≤ le */
 };
 #define PLAN_MAX_TARGET_INC 8
+#define PLAN_MAX_SPEC_RINGS 8   /* rings of candidates around the mirror direction */
+#define PLAN_MAX_SEED_SPEC 16   /* in-plane offsets from the mirror direction added to an adaptive seed */
 
 /* The adaptive part of a plan (kind: adaptive): the seed is the plan_spec that holds it; after the seed, batches
  * chosen by `brdf-recon select` among candidate directions until the target or the budget is reached. */
@@ -48,6 +50,7 @@ struct plan_adaptive {
 	double target_inc[PLAN_MAX_TARGET_INC]; /* DHR σ: incidences, degrees */
 	size_t n_target_inc;
 	double le;                  /* the threshold the target's value must reach */
+	double le_lnf;              /* > 0: a combined target, the DHR σ ≤ le AND the largest σ of ln f ≤ le_lnf */
 	double budget_s;            /* bench seconds for the whole sweep, seed included (0: no limit) */
 	size_t budget_points;       /* points for the whole sweep, seed included (0: no limit) */
 	size_t batch;               /* points per batch */
@@ -56,11 +59,21 @@ struct plan_adaptive {
 	size_t cand_count;          /* candidate observation directions per incidence (Fibonacci set) */
 	double cand_max_theta_deg;  /* ... over the cap θ ≤ this */
 	bool overlap;               /* choose batch k+2 (from the model through batch k) while batch k+1 is measured */
+	bool cand_specular;         /* per candidate incidence also the mirror direction and rings around it */
+	double spec_rings_deg[PLAN_MAX_SPEC_RINGS]; /* ... the rings' angular radii around it, degrees */
+	size_t n_spec_rings;
+	size_t spec_per_ring;       /* ... directions per ring */
+	double seed_spec_deg[PLAN_MAX_SEED_SPEC];  /* the seed's extra points per incidence: in the specular plane at
+						    * these offsets (degrees of θo) from the mirror direction */
+	size_t n_seed_spec;
 };
 
 /* A parsed plan file (plan_load / plan_parse), or one built by code (arrays malloc'ed; plan_spec_free). */
+#define PLAN_SAMPLE_MAX 64
 struct plan_spec {
 	char name[64];
+	char sample[PLAN_SAMPLE_MAX]; /* the sample's name (plan key sample:; "" when not given): identifies the
+				       * previous sweep an exposure prior comes from */
 	double *incidence;          /* laser zeniths θL, n_incidence of them */
 	size_t n_incidence;
 	double *obs_theta, *obs_phi; /* grid mode: observation zeniths × azimuths per incidence */
@@ -163,6 +176,30 @@ struct plan_result {
  * simulated green paint (paper plan 76 of 866, quick plan 2 of 15). */
 #define PLAN_AUTO_HDR 0.09
 
+/* An exposure prior: what the auto exposure chose in the previous completed auto sweep of the same sample (the
+ * plan's sample: name), per incidence (exp_prior_build, daemon/exposure.c, from the database). With one, the
+ * duration model times each point of an incidence with the prior's figures for the nearest incidence instead of the
+ * band around the plan's estimate (plan_time.c). */
+#define PLAN_PRIOR_MAX_INC 64
+struct plan_prior_inc {
+	double theta_i;             /* the incidence zenith, degrees (sample frame) */
+	size_t points;              /* points done there */
+	double median_ms, mean_ms;  /* each point's first exposure: median and mean integration time */
+	double spread;              /* longest / shortest first exposure */
+	double darks_per_clear;     /* darks taken at the incidence: the distinct times the cache needed */
+	double dark_ms;             /* their mean integration time */
+	double extra_per_point;     /* further (HDR) exposures per point */
+	double extra_ms;            /* their mean integration time */
+};
+struct plan_prior {
+	long long sweep;            /* the sweep it comes from (0: no prior) */
+	char sample[PLAN_SAMPLE_MAX];
+	size_t points;              /* over all incidences: */
+	double median_ms, spread, hdr_fraction; /* median first exposure, longest/shortest, points with an HDR exposure */
+	size_t n_inc;
+	struct plan_prior_inc inc[PLAN_PRIOR_MAX_INC];
+};
+
 /* The executor's costs the ordering model leaves out; plan_timing_defaults() gives the executor's and the
  * arm driver's defaults, the daemon fills it from its configuration (sweep, acquisition, devices). */
 struct plan_timing {
@@ -185,6 +222,7 @@ struct plan_timing {
 	double time_scale;          /* ... which cost time_scale times as much bench time on a simulated bench */
 	bool have_start;            /* the arms' position when the sweep starts is known (the daemon knows it) */
 	struct plan_pos start;      /* then the move from there to ref_pose (or the first point) is counted */
+	struct plan_prior prior;    /* auto integration: the exposure prior when prior.sweep > 0 (plan_time.c) */
 };
 
 /* Load and validate a plan file; errors name file:line:col. 0, or -1 with err (*out NULL). */
@@ -245,8 +283,18 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 int plan_adaptive_candidates(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
 			     const struct plan_pos *from, const struct plan_pos *done, size_t n_done,
 			     struct plan_cand **out, size_t *n, struct acq_err *err);
-/* The requested (canonical) position of candidate id of spec's adaptive part. 0, or -1 when there is none. */
-int plan_adaptive_cand_pos(const struct plan_spec *spec, size_t id, struct plan_pos *out);
+/* The requested (canonical) position of candidate id of spec's adaptive part on bench g: ids below
+ * incidences × per_incidence are the Fibonacci directions, then per incidence the mirror direction and its rings
+ * (a ring direction the blind zones or limits hide is replaced by its reciprocal when that one is usable).
+ * 0, or -1 when there is none. */
+int plan_adaptive_cand_pos(const struct plan_spec *spec, const struct bench_geom *g, size_t id, struct plan_pos *out);
+/* Which of select's picks (their costs cost[0..n-1], in choice order) a batch takes: each in turn when its cost fits
+ * what the ones taken before it leave of left_s (INFINITY: no limit), a dearer pick skipped and a cheaper later one
+ * still taken, at most max_k. Their indices, ascending, into keep[n]; their count. */
+size_t plan_adaptive_fit_picks(const double *cost, size_t n, double left_s, size_t max_k, size_t *keep);
+/* The threshold the select value of spec's target is compared with: le, or 1 for a combined target (whose value is
+ * the larger of each part's value over its threshold). */
+double plan_adaptive_threshold(const struct plan_adaptive *a);
 /* Plan the points in the order given (no ordering, no classification: points already planned once, e.g. a stored
  * batch), each reached by a fresh safe move from the previous one (from start when given). 0, or -1 with err
  * (ACQ_E_RANGE: a point no safe move reaches). */
@@ -297,6 +345,13 @@ bool plan_seg_keeps(const struct bench_geom *g, const struct plan_pos *p, const 
 #define PLAN_MAX_WP 13
 double plan_move(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
 		 struct plan_wp wps[PLAN_MAX_WP], size_t *n);
+/* From a configuration inside the clearance (a move stopped part-way by one axis's alarm while the others went on),
+ * a way out: one segment moving the detector straight away from the laser's direction that never brings the arms
+ * closer than they are (ψ ≥ min(collision limit, ψ now) at every instant, plan_seg_keeps), ending clear, then
+ * plan_move's path to b. Up to PLAN_MAX_WP + 1 segments into wps, their count in *n, the time returned; -1 when a
+ * is not inside the clearance or no such way exists. */
+double plan_escape(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
+		   struct plan_wp wps[PLAN_MAX_WP + 1], size_t *n);
 /* Readable name of the most telling reason bit set (limit, collision, beam, view, unreachable, none nearby). */
 const char *plan_reason_name(unsigned reason);
 
