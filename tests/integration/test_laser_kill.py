@@ -8,6 +8,7 @@ manual `measure` on the simulated bench) and the time until the simulated laser 
 2. The unit's ExecStopPost= helper, `acquisitiond --laser-off`, run right after the kill: emission off when it
    returns, exit 0 (confirmed by the laser's status).
 Without the keep-alive the emission stays on after a SIGKILL until a new daemon opens the laser."""
+import json
 import os
 import signal
 import subprocess
@@ -44,11 +45,33 @@ def time_to_off(b, limit):
     return time.monotonic() - t0
 
 
+def ttys(pid):
+    """The terminals (pty master or slave) among pid's own open files (not 0-2: inherited from whoever ran us)."""
+    out = []
+    for fd in os.listdir("/proc/%d/fd" % pid):
+        if int(fd) < 3:
+            continue
+        try:
+            t = os.readlink("/proc/%d/fd/%s" % (pid, fd))
+        except OSError:
+            continue
+        if t == "/dev/ptmx" or t.startswith("/dev/pts/"):
+            out.append(t)
+    return out
+
+
 def run():
     b = L.Bench(scale=20)
     try:
         b.start_sim()
         b.start_daemon()
+        # The laser's line is a Unix socket, not a pty: a pty's bytes wait for a kernel worker thread that a
+        # loaded machine kept off the CPU for up to 0.8 s, longer than the keep-alive's margin (sim/sim_laser.c).
+        with open(b.ports) as f:
+            dev = json.load(f)["laser"]["device"]
+        assert dev.startswith("unix:"), "the simulated laser's link is %r, not a Unix socket" % dev
+        assert not ttys(b.sim.pid) and not ttys(b.daemon.pid), "a tty on the laser's link: acq-sim %s, daemon %s" % (
+            ttys(b.sim.pid), ttys(b.daemon.pid))
         b.ctl("sample white")
         c = start_long_measure(b)
         time.sleep(2.0)  # two keep-alive periods: the daemon's refresh keeps it on
