@@ -48,6 +48,7 @@ SCALE = float(os.environ.get("SOAK_SCALE", "10"))
 LOAD_NICE = int(os.environ.get("SOAK_LOAD_NICE", "0"))
 LOAD_SESSION = os.environ.get("SOAK_LOAD_SESSION", "0") == "1"
 SIM_SESSION = os.environ.get("SOAK_SIM_SESSION", "0") == "1"
+OBSERVER_RATE = os.environ.get("SOAK_OBSERVER_RATE")  # daemon.observer_rate (unset: the daemon's default)
 OBSERVERS = ["daemon", "bin", "sys", "sync", "games", "man"]
 
 PLAN = L.PLAN_3X18
@@ -354,7 +355,9 @@ def main():
     sweep = L.strip_sections(sweep, {"recon", "daemon"}).replace("auto_recon: true", "auto_recon: false")
     sweep = sweep.replace("pause_after_reference: true", "pause_after_reference: false")
     b = L.Bench(scale=SCALE, sweep_yaml=sweep,
-                daemon_extra="  observers: [%s]\n" % ", ".join(OBSERVERS), sim_session=SIM_SESSION)
+                daemon_extra="  observers: [%s]\n%s" % (", ".join(OBSERVERS), "  observer_rate: %s\n" % OBSERVER_RATE
+                                                      if OBSERVER_RATE is not None else ""),
+                sim_session=SIM_SESSION)
     os.chmod(b.dir, 0o755)
     load = None
     try:
