@@ -28,15 +28,20 @@ SOAK_SIM_SESSION=1 does the same for acq-sim, which stands for controllers and a
 own (default 0: it shares the daemon's CPU group, and the daemon's work for the clients delays the "hardware").
 Also printed: the scheduler's run and wait-for-a-CPU times of the simulator's and the daemon's threads during
 the loaded and the control sweeps.
+SOAK_OBSERVER_RATE sets daemon.observer_rate (requests per second per observer; 0: no limit, for comparison;
+unset: the daemon's default).
+The last block ("soak results") states each goal's figure, the goal and met/MISSED, with the source commit, the
+knobs, the simulated laser's line and the machine's load: on a shared machine every figure includes the other
+work, which the control sweeps show.
 Environment: SOAK_SECONDS, SOAK_SCALE (bench time scale, default 10), SOAK_LOAD_NICE, SOAK_LOAD_SESSION,
-SOAK_SIM_SESSION, ACQ_BUILD, ACQ_SRC, ACQ_SEED."""
+SOAK_SIM_SESSION, SOAK_OBSERVER_RATE, ACQ_BUILD, ACQ_SRC, ACQ_SEED."""
 import json
 import multiprocessing as mp
 import os
 import pwd
 import re
-import signal
 import socket
+import subprocess
 import sys
 import time
 
@@ -250,6 +255,26 @@ def thread_report(text):
     return out
 
 
+def describe_src():
+    """The source tree's commit (and whether it has local changes), for the record."""
+    try:
+        rev = subprocess.run(["git", "-C", L.SRC, "describe", "--always", "--dirty"], capture_output=True, text=True,
+                             timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        rev = ""
+    return "source %s" % (rev or "(not a git tree)")
+
+
+def laser_link(b):
+    """The simulated laser's line as the daemon opened it (acq-sim's ports file)."""
+    try:
+        with open(b.ports) as f:
+            dev = json.load(f).get("laser", {}).get("device", "?")
+    except (OSError, ValueError):
+        return "?"
+    return "%s (%s)" % (dev, "Unix socket" if dev.startswith("unix:") else "pty")
+
+
 def rss_mb(pid):
     try:
         with open("/proc/%d/status" % pid) as f:
@@ -447,10 +472,12 @@ def main():
 
         load_end = t_start + SECONDS
         excess, excess_ctl, load_gaps, ctl_gaps, sweeps, points = [], [], [], [], 0, 0
+        per_sweep, loads = [], []
         while time.time() < load_end or sweeps == 0:
             load = start_load(b.sock)
             sid, g = drive("soak-%d" % sweeps, lat, load_end + max(600, SECONDS), "load")
             lstr = load_str()
+            loads.append(os.getloadavg()[0])
             stop_load(*load)
             load = None
             # the control beside it: the same plan on the same machine now, without the load clients
@@ -463,6 +490,7 @@ def main():
             ex_c = [g[k] - cg[k] for k in g if k in cg]
             excess += ex_b
             excess_ctl += ex_c
+            per_sweep.append(max(ex_c))
             print("  sweep %d under load: max gap %.0f ms (%s); control sweep %d beside it: max gap %.0f ms (%s); "
                   "largest excess of a point's gap over the same point in the control %.0f ms, over the baseline "
                   "%.0f ms; status p99 so far %.1f ms; RSS %.1f MB" % (
@@ -496,6 +524,25 @@ def main():
         print("machine at the end: %s on %d CPUs" % (load_str(), os.cpu_count()))
         print("server: %s" % json.dumps(srv))
         ok = max(excess_ctl) <= 0.100 and pct(lat, 99) < 0.050 and max(rss) < 64 and errors == 0 and not paused
+        text = b.daemon_text()
+        print()
+        print("soak results (the issue's goals), measured on %d CPUs with the machine's 1-min load average %.1f-%.1f at "
+              "the end of the loaded sweeps (other work on the machine counts in every figure: compare with the "
+              "control sweeps):" % (os.cpu_count(), min(loads), max(loads)))
+        print("  setup: %s; %s; laser line %s; daemon.observer_rate %s" % (
+            describe_src(), "SOAK_SECONDS=%g SOAK_SCALE=%g ACQ_SEED=%d SOAK_LOAD_NICE=%d SOAK_LOAD_SESSION=%d "
+            "SOAK_SIM_SESSION=%d" % (SECONDS, SCALE, L.SEED, LOAD_NICE, LOAD_SESSION, SIM_SESSION),
+            laser_link(b), OBSERVER_RATE if OBSERVER_RATE is not None else "the daemon's default"))
+        verdict = lambda good: "met" if good else "MISSED"  # noqa: E731
+        print("  stall (largest excess of a point's gap over the same point in the control sweep): %.0f ms, goal <= "
+              "100 ms: %s; per loaded sweep: %s ms" % (1e3 * max(excess_ctl), verdict(max(excess_ctl) <= 0.100),
+                                                     ", ".join("%.0f" % (1e3 * x) for x in per_sweep)))
+        print("  well-behaved controller's status latency under load: p50 %.1f ms, p99 %.1f ms (%d requests, %d errors),"
+              " goal p99 < 50 ms: %s" % (1e3 * pct(lat, 50), 1e3 * pct(lat, 99), len(lat), errors,
+                                        verdict(pct(lat, 99) < 0.050 and errors == 0)))
+        print("  daemon RSS peak: %.1f MB, goal < 64 MB: %s" % (max(rss), verdict(max(rss) < 64)))
+        print("  sweeps paused by device faults: %d; laser requests > 2 keep-alive periods: %d; laser faults: %d" % (
+            len(paused), len(re.findall(r"laser: request \d+ took", text)), len(re.findall(r"stopped emitting", text))))
         print("soak: %s" % ("all goals met" if ok else "GOALS MISSED"))
         return 0 if ok else 1
     finally:
