@@ -40,8 +40,17 @@ enum ex_dev { EX_DEV_LASER_THETA = 0, EX_DEV_DETECTOR_THETA, EX_DEV_DETECTOR_PHI
 /* A read that is on its way (position, laser_state, reconnect): call it again after the executor is stepped. */
 #define EX_PENDING 1
 
-/* Device operations (the real drivers: devices_ex_ops() in devices.c, each device on its own I/O thread; a test
- * double in the unit tests). Each returns 0 or -1 with err unless stated; axis is EX_DEV_LASER_THETA..
+/* Device operations: the executor's one seam to the devices, with one implementation (devices_ex_ops() in
+ * devices_ex.c: each operation becomes a request to the device manager, run on that device's port thread) and one
+ * test double (tests/unit/test_executor.c: a fake bench at injected time, so a whole sweep with faults runs in
+ * seconds). It is kept on purpose, and it is not a driver table: the drivers' tables (drivers/axis_backend.h,
+ * laser_backend.h, spectro_backend.h) are one per device class and synchronous, and only the port threads call
+ * them; this table is one per executor and speaks for all five devices as the loop sees them: commands only
+ * queued, reads that may be EX_PENDING, a reconnection the executor schedules, `lost` handing a failed device
+ * back to the manager. Folding it into direct calls of devices_ex.c would tie the executor to the daemon's
+ * threads and real time (its unit test could no longer inject either); folding it into the drivers' tables
+ * would put driver calls on the loop again.
+ * Each returns 0 or -1 with err unless stated; axis is EX_DEV_LASER_THETA..
  * EX_DEV_DETECTOR_PHI. Commands (move_begin, home_begin, stop, alarm_reset, laser_set, laser_power,
  * spectro_start, spectro_stop) may only queue the operation: its failure is then reported by the next poll
  * (move_step, spectro_fetch) or read of that device. Reads (position, laser_state, reconnect) may return

@@ -536,16 +536,10 @@ static int local_plan(const char *file)
 	return 0;
 }
 
-int main(int argc, char **argv)
+/* The command line: options anywhere (into O, *wait_timeout and *help); words that are not options form the command
+ * and its arguments (words, at most 64, *nw). -1 to go on, or the exit status (--version: 0, a usage error). */
+static int parse_options(int argc, char **argv, char **words, int *nw, double *wait_timeout, bool *help)
 {
-	O.sock = getenv("ACQ_SOCKET");
-	if (!O.sock || !*O.sock)
-		O.sock = DEFAULT_SOCKET;
-	/* Options anywhere; words that are not options form the command and its arguments. */
-	char *words[64];
-	int nw = 0;
-	double wait_timeout = 3600;
-	bool help = false;
 	for (int i = 1; i < argc; i++) {
 		const char *a = argv[i];
 		const char *val = NULL;
@@ -553,7 +547,7 @@ int main(int argc, char **argv)
 		if (!strcmp(a, "--json") || !strcmp(a, "-j"))
 			O.json = true;
 		else if (!strcmp(a, "--help") || !strcmp(a, "-h"))
-			help = true;
+			*help = true;
 		else if (!strcmp(a, "--version") || !strcmp(a, "-V")) {
 			printf("acqctl %s (protocol %d)\n", ACQ_VERSION, PROTO_VERSION);
 			return 0;
@@ -577,7 +571,7 @@ int main(int argc, char **argv)
 			if (a[1] == 'w' || !strcmp(a, "--wait"))
 				O.wait_s = x;
 			else
-				wait_timeout = x;
+				*wait_timeout = x;
 		} else if (TAKES("-f", "--format")) {
 			if (!(O.format = val) || (strcmp(val, "csv") && strcmp(val, "nexus")))
 				return fail(CTL_EXIT_USAGE, "usage", "--format: expected csv or nexus");
@@ -589,10 +583,175 @@ int main(int argc, char **argv)
 				return fail(CTL_EXIT_USAGE, "usage", "--config needs a file name");
 		} else if (a[0] == '-' && a[1] && strcmp(a, "-"))
 			return fail(CTL_EXIT_USAGE, "usage", "unknown option %s (acqctl --help)", a);
-		else if (nw < 64)
-			words[nw++] = argv[i];
+		else if (*nw < 64)
+			words[(*nw)++] = argv[i];
 #undef TAKES
 	}
+	return -1;
+}
+
+/* The protocol command the words from *wi name: two words ("sweep start", "laser off") when they name one, else
+ * one; its name in cmd, *wi past it. NULL when none does. */
+static const struct proto_cmd *find_command(char **words, int nw, int *wi, char *cmd, size_t cap)
+{
+	const struct proto_cmd *def = NULL;
+	if (*wi + 1 < nw) {
+		snprintf(cmd, cap, "%s.%s", words[*wi], words[*wi + 1]);
+		if ((def = proto_cmd_find(cmd)))
+			*wi += 2;
+	}
+	if (!def) {
+		snprintf(cmd, cap, "%s", words[*wi]);
+		if ((def = proto_cmd_find(cmd)))
+			(*wi)++;
+	}
+	return def;
+}
+
+/* The command's arguments into req: the positional one (a plan file's text for "@" keys, its name in *plan_file),
+ * then key=value (old names sent as the one name, each key once), typed by the command table. 0, or the exit
+ * status of the usage or input error (reported). */
+static int fill_args(json_t *req, const struct proto_cmd *def, const char *cmd, char **words, int wi, int nw,
+		     const char **plan_file)
+{
+	struct acq_err err = { 0 };
+	const char *pk = positional_key(cmd);
+	for (; wi < nw; wi++) {
+		char *eq = strchr(words[wi], '=');
+		if (!eq && pk) {
+			if (pk[0] == '@') {
+				*plan_file = words[wi];
+				char *text = read_text(*plan_file, &err);
+				if (!text)
+					return fail(err.code == ACQ_E_IO ? CTL_EXIT_NOINPUT : CTL_EXIT_DATAERR, "not_found", "%s",
+						    err.msg);
+				json_object_set_new(req, pk + 1, json_string(text));
+				free(text);
+			} else if (set_arg(req, def, pk, words[wi], &err)) {
+				return fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
+			}
+			pk = NULL;
+			continue;
+		}
+		if (!eq)
+			return fail(CTL_EXIT_USAGE, "usage", "%s: expected key=value (acqctl %s --help)", words[wi], words[0]);
+		*eq = 0;
+		const char *key = words[wi];
+		for (int i = 0; i < def->nargs; i++) /* an old name (laser_theta=) is sent as the one name (laser.theta=) */
+			if (def->args[i].alias_of && !strcmp(key, def->args[i].name))
+				key = def->args[i].alias_of;
+		if (json_object_get(req, key))
+			return fail(CTL_EXIT_USAGE, "usage", "%s given twice%s%s%s", key, strcmp(key, words[wi]) ? " (as " : "",
+				    strcmp(key, words[wi]) ? words[wi] : "", strcmp(key, words[wi]) ? " too)" : "");
+		if (set_arg(req, def, key, eq + 1, &err))
+			return fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
+	}
+	return CTL_EXIT_OK;
+}
+
+/* The request checked before anything is sent: required arguments, then the options that go with the command
+ * (--points, --format, export's output). 0, or the usage error's status (reported). */
+static int check_request(json_t *req, const struct proto_cmd *def, const char *cmd)
+{
+	for (int i = 0; i < def->nargs; i++)
+		if (def->args[i].required && !json_object_get(req, def->args[i].name)) {
+			char name[64];
+			cmd_words(def->name, name, sizeof name);
+			return fail(CTL_EXIT_USAGE, "usage", "%s: missing %s (acqctl %s --help)", name, def->args[i].name,
+				    name);
+		}
+	if ((!strcmp(cmd, "plan") || !strcmp(cmd, "sweep.show")) && O.points)
+		json_object_set_new(req, "points", json_true());
+	if (O.format && strcmp(cmd, "export"))
+		return fail(CTL_EXIT_USAGE, "usage", "--format is an option of export");
+	if (O.format)
+		json_object_set_new(req, "format", json_string(O.format));
+	if (!strcmp(cmd, "export") && !O.out && !json_object_get(req, "path") &&
+	    json_is_string(json_object_get(req, "format")) &&
+	    !strcmp(json_string_value(json_object_get(req, "format")), "nexus") && isatty(1))
+		return fail(CTL_EXIT_USAGE, "usage", "export --format nexus writes a binary HDF5 file: give -o FILE (or "
+			    "redirect the output)");
+	if (!strcmp(cmd, "export") && O.json && !O.out && !json_object_get(req, "path"))
+		return fail(CTL_EXIT_USAGE, "usage", "export --json prints the summary: give -o FILE for the CSV");
+	return CTL_EXIT_OK;
+}
+
+/* The daemon's reply to cmd: a refusal on stderr (commands named as typed), an export's stream or inline CSV, a
+ * spectrum's CSV, else JSON or the human view. Returns the exit status. */
+static int show_reply(const char *cmd, json_t *rep, int passed)
+{
+	if (!json_is_true(json_object_get(rep, "ok"))) {
+		json_t *e = json_object_get(rep, "error");
+		char words2[64];
+		cmd_words(cmd, words2, sizeof words2);
+		/* the daemon's message names commands as the protocol does ("sweep.abort"): say them as typed */
+		const char *msg = json_string_value(json_object_get(e, "message"));
+		char said[1024];
+		snprintf(said, sizeof said, "%s", msg ? msg : "");
+		char *hit = strstr(said, cmd);
+		if (hit && strchr(cmd, '.'))
+			hit[strchr(cmd, '.') - cmd] = ' ';
+		fprintf(stderr, "acqctl: %s: %s (%s)\n", words2, said, json_string_value(json_object_get(e, "code")));
+		if (O.json)
+			print_json(rep);
+		return CTL_EXIT_REFUSED;
+	}
+	if (!strcmp(cmd, "export") && json_is_true(json_object_get(rep, "stream"))) {
+		if (passed < 0)
+			return fail(CTL_EXIT_PROTOCOL, "protocol", "export: the daemon sent no stream (over TCP? use the Unix "
+				    "socket)");
+		return copy_export(rep, passed);
+	}
+	if (!strcmp(cmd, "export") && json_is_string(json_object_get(rep, "csv")))
+		return write_inline(rep);
+	if (!strcmp(cmd, "spectrum") && O.csv)
+		return spectrum_csv(rep);
+	if (O.json)
+		print_json(rep);
+	else
+		ctl_print_human(stdout, cmd, rep);
+	return CTL_EXIT_OK;
+}
+
+/* The request sent and its reply shown (plan falls back to the local dry run when no daemon answers). Returns the
+ * exit status. */
+static int send_request(json_t *req, const char *cmd, const char *plan_file)
+{
+	struct acq_err err = { 0 };
+	struct conn c;
+	if (conn_open(&c, &err)) {
+		conn_close(&c);
+		if (!strcmp(cmd, "plan") && err.code != ACQ_E_STATE)
+			return local_plan(plan_file);
+		return fail(CTL_EXIT_UNAVAILABLE, "unavailable", "cannot connect to acquisitiond: %s (socket: -s or "
+			    "$ACQ_SOCKET)", err.msg);
+	}
+	int passed = -1;
+	json_t *rep = conn_call(&c, req, !strcmp(cmd, "export") ? &passed : NULL, &err);
+	conn_close(&c);
+	if (!rep)
+		return fail(err.code == ACQ_E_PROTO ? CTL_EXIT_PROTOCOL : CTL_EXIT_UNAVAILABLE,
+			    err.code == ACQ_E_PROTO ? "protocol" : "unavailable", "%s: %s", O.sock, err.msg);
+	json_object_del(rep, "id");
+	int rc = show_reply(cmd, rep, passed);
+	if (passed >= 0)
+		close(passed);
+	json_decref(rep);
+	return rc;
+}
+
+int main(int argc, char **argv)
+{
+	O.sock = getenv("ACQ_SOCKET");
+	if (!O.sock || !*O.sock)
+		O.sock = DEFAULT_SOCKET;
+	char *words[64];
+	int nw = 0;
+	double wait_timeout = 3600;
+	bool help = false;
+	int rc = parse_options(argc, argv, words, &nw, &wait_timeout, &help);
+	if (rc >= 0)
+		return rc;
 	if (nw == 0) {
 		if (help) {
 			usage(stdout);
@@ -621,19 +780,8 @@ int main(int argc, char **argv)
 			return fail(CTL_EXIT_USAGE, "usage", "wait: expected one state (acqctl wait --help)");
 		return run_wait(words[wi + 1], wait_timeout);
 	}
-	/* The command: two words ("sweep start", "laser off") when they name one, else one. */
 	char cmd[64];
-	const struct proto_cmd *def = NULL;
-	if (wi + 1 < nw) {
-		snprintf(cmd, sizeof cmd, "%s.%s", words[wi], words[wi + 1]);
-		if ((def = proto_cmd_find(cmd)))
-			wi += 2;
-	}
-	if (!def) {
-		snprintf(cmd, sizeof cmd, "%s", words[wi]);
-		if ((def = proto_cmd_find(cmd)))
-			wi++;
-	}
+	const struct proto_cmd *def = find_command(words, nw, &wi, cmd, sizeof cmd);
 	if (!def)
 		return fail(CTL_EXIT_USAGE, "usage", "unknown command '%s' (acqctl help)", words[help_cmd]);
 	if (help || help_cmd) {
@@ -648,133 +796,12 @@ int main(int argc, char **argv)
 	}
 	/* The request, checked before anything is sent. */
 	json_t *req = json_pack("{s:s,s:i}", "cmd", cmd, "id", 1);
-	struct acq_err err = { 0 };
-	const char *pk = positional_key(cmd), *plan_file = NULL;
-	int rc = CTL_EXIT_OK;
-	for (; wi < nw; wi++) {
-		char *eq = strchr(words[wi], '=');
-		if (!eq && pk) {
-			if (pk[0] == '@') {
-				plan_file = words[wi];
-				char *text = read_text(plan_file, &err);
-				if (!text) {
-					rc = fail(err.code == ACQ_E_IO ? CTL_EXIT_NOINPUT : CTL_EXIT_DATAERR, "not_found", "%s",
-						  err.msg);
-					goto out;
-				}
-				json_object_set_new(req, pk + 1, json_string(text));
-				free(text);
-			} else if (set_arg(req, def, pk, words[wi], &err)) {
-				rc = fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
-				goto out;
-			}
-			pk = NULL;
-			continue;
-		}
-		if (!eq) {
-			rc = fail(CTL_EXIT_USAGE, "usage", "%s: expected key=value (acqctl %s --help)", words[wi], words[0]);
-			goto out;
-		}
-		*eq = 0;
-		const char *key = words[wi];
-		for (int i = 0; i < def->nargs; i++) /* an old name (laser_theta=) is sent as the one name (laser.theta=) */
-			if (def->args[i].alias_of && !strcmp(key, def->args[i].name))
-				key = def->args[i].alias_of;
-		if (json_object_get(req, key)) {
-			rc = fail(CTL_EXIT_USAGE, "usage", "%s given twice%s%s%s", key, strcmp(key, words[wi]) ? " (as " : "",
-				  strcmp(key, words[wi]) ? words[wi] : "", strcmp(key, words[wi]) ? " too)" : "");
-			goto out;
-		}
-		if (set_arg(req, def, key, eq + 1, &err)) {
-			rc = fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
-			goto out;
-		}
-	}
-	for (int i = 0; i < def->nargs; i++)
-		if (def->args[i].required && !json_object_get(req, def->args[i].name)) {
-			char name[64];
-			cmd_words(def->name, name, sizeof name);
-			rc = fail(CTL_EXIT_USAGE, "usage", "%s: missing %s (acqctl %s --help)", name, def->args[i].name,
-				  name);
-			goto out;
-		}
-	if ((!strcmp(cmd, "plan") || !strcmp(cmd, "sweep.show")) && O.points)
-		json_object_set_new(req, "points", json_true());
-	if (O.format && strcmp(cmd, "export")) {
-		rc = fail(CTL_EXIT_USAGE, "usage", "--format is an option of export");
-		goto out;
-	}
-	if (O.format)
-		json_object_set_new(req, "format", json_string(O.format));
-	if (!strcmp(cmd, "export") && !O.out && !json_object_get(req, "path") &&
-	    json_is_string(json_object_get(req, "format")) &&
-	    !strcmp(json_string_value(json_object_get(req, "format")), "nexus") && isatty(1)) {
-		rc = fail(CTL_EXIT_USAGE, "usage", "export --format nexus writes a binary HDF5 file: give -o FILE (or "
-			  "redirect the output)");
-		goto out;
-	}
-	if (!strcmp(cmd, "export") && O.json && !O.out && !json_object_get(req, "path")) {
-		rc = fail(CTL_EXIT_USAGE, "usage", "export --json prints the summary: give -o FILE for the CSV");
-		goto out;
-	}
-	if (!strcmp(cmd, "plan") && O.bench) {
-		rc = local_plan(plan_file);
-		goto out;
-	}
-	struct conn c;
-	if (conn_open(&c, &err)) {
-		conn_close(&c);
-		if (!strcmp(cmd, "plan") && err.code != ACQ_E_STATE) {
-			rc = local_plan(plan_file);
-			goto out;
-		}
-		rc = fail(CTL_EXIT_UNAVAILABLE, "unavailable", "cannot connect to acquisitiond: %s (socket: -s or "
-			  "$ACQ_SOCKET)", err.msg);
-		goto out;
-	}
-	int passed = -1;
-	json_t *rep = conn_call(&c, req, !strcmp(cmd, "export") ? &passed : NULL, &err);
-	conn_close(&c);
-	if (!rep) {
-		rc = fail(err.code == ACQ_E_PROTO ? CTL_EXIT_PROTOCOL : CTL_EXIT_UNAVAILABLE,
-			  err.code == ACQ_E_PROTO ? "protocol" : "unavailable", "%s: %s", O.sock, err.msg);
-		goto out;
-	}
-	json_object_del(rep, "id");
-	if (!json_is_true(json_object_get(rep, "ok"))) {
-		json_t *e = json_object_get(rep, "error");
-		char words2[64];
-		cmd_words(cmd, words2, sizeof words2);
-		/* the daemon's message names commands as the protocol does ("sweep.abort"): say them as typed */
-		const char *msg = json_string_value(json_object_get(e, "message"));
-		char said[1024];
-		snprintf(said, sizeof said, "%s", msg ? msg : "");
-		char *hit = strstr(said, cmd);
-		if (hit && strchr(cmd, '.'))
-			hit[strchr(cmd, '.') - cmd] = ' ';
-		fprintf(stderr, "acqctl: %s: %s (%s)\n", words2, said, json_string_value(json_object_get(e, "code")));
-		if (O.json)
-			print_json(rep);
-		rc = CTL_EXIT_REFUSED;
-	} else if (!strcmp(cmd, "export") && json_is_true(json_object_get(rep, "stream"))) {
-		if (passed < 0)
-			rc = fail(CTL_EXIT_PROTOCOL, "protocol", "export: the daemon sent no stream (over TCP? use the Unix "
-				  "socket)");
-		else
-			rc = copy_export(rep, passed);
-	} else if (!strcmp(cmd, "export") && json_is_string(json_object_get(rep, "csv"))) {
-		rc = write_inline(rep);
-	} else if (!strcmp(cmd, "spectrum") && O.csv) {
-		rc = spectrum_csv(rep);
-	} else if (O.json) {
-		print_json(rep);
-	} else {
-		ctl_print_human(stdout, cmd, rep);
-	}
-	if (passed >= 0)
-		close(passed);
-	json_decref(rep);
-out:
+	const char *plan_file = NULL;
+	rc = fill_args(req, def, cmd, words, wi, nw, &plan_file);
+	if (rc == CTL_EXIT_OK)
+		rc = check_request(req, def, cmd);
+	if (rc == CTL_EXIT_OK)
+		rc = !strcmp(cmd, "plan") && O.bench ? local_plan(plan_file) : send_request(req, cmd, plan_file);
 	json_decref(req);
 	if (fflush(stdout) && !rc)
 		rc = CTL_EXIT_CANTCREAT;

@@ -372,8 +372,201 @@ static int cmp_d(const void *a, const void *b)
 	return x < y ? -1 : x > y;
 }
 
+/* The measured incidences: the distinct θi (0.05° apart) of s's in-plane samples (|sin(φo − φi)| ≤ stol), sorted,
+ * into th (SLICES_MAX_THETA at most), their number in *nth; 0 or -1 with err. */
+static int measured_theta(const struct recon_samples *s, double stol, double *th, size_t *nth, struct acq_err *err)
+{
+	if (!s || !s->n)
+		return acq_errf(err, ACQ_E_INVAL, "slices: no incidences given and no samples to take them from");
+	double *all = malloc(s->n * sizeof *all);
+	size_t na = 0, n = 0;
+	if (!all)
+		return acq_errf(err, ACQ_E_NOMEM, "slices: out of memory");
+	for (size_t i = 0; i < s->n; i++)
+		if (fabs(sin(s->ang[4 * i + 3] - s->ang[4 * i + 1])) <= stol)
+			all[na++] = s->ang[4 * i];
+	qsort(all, na, sizeof *all, cmp_d);
+	for (size_t i = 0; i < na; i++)
+		if (!n || all[i] - th[n - 1] > 0.05 * M_PI / 180) {
+			if (n == SLICES_MAX_THETA) {
+				free(all);
+				return acq_errf(err, ACQ_E_RANGE, "slices: more than %d measured incidences (give --theta-i)",
+						SLICES_MAX_THETA);
+			}
+			th[n++] = all[i];
+		}
+	free(all);
+	*nth = n;
+	return 0;
+}
+
+/* Sample i of s reduced by the weights wsel over the model's channels (the sample's spectrum read linearly at
+ * each channel): its value *v and σ *sg (NAN without σ columns). 0, or -1 when a value it needs is not finite or no
+ * weight falls on it. */
+static int sample_reduce(const struct recon_model *m, const struct recon_samples *s, size_t i, const double *wsel,
+			 double *v, double *sg)
+{
+	double val = 0, sig = 0, wsum = 0;
+	for (size_t l = 0; l < m->nwl; l++) {
+		if (wsel[l] == 0)
+			continue;
+		size_t b = 0;
+		while (b + 2 < s->nwl && s->wl[b + 1] <= m->wl[l])
+			b++;
+		double tt = s->nwl > 1 ? (m->wl[l] - s->wl[b]) / (s->wl[b + 1] - s->wl[b]) : 0;
+		tt = tt < 0 ? 0 : tt > 1 ? 1 : tt;
+		size_t b1 = s->nwl > 1 ? b + 1 : b;
+		double x0 = s->val[i * s->nwl + b], x1 = s->val[i * s->nwl + b1];
+		if (!isfinite(x0) || !isfinite(x1))
+			return -1;
+		val += wsel[l] * ((1 - tt) * x0 + tt * x1);
+		if (s->sig) {
+			double s0 = s->sig[i * s->nwl + b], s1 = s->sig[i * s->nwl + b1];
+			sig += wsel[l] * ((1 - tt) * s0 + tt * s1);
+		}
+		wsum += wsel[l];
+	}
+	if (!(wsum > 0))
+		return -1;
+	*v = val;
+	*sg = s->sig && isfinite(sig) ? sig : NAN;
+	return 0;
+}
+
+/* Range of the plotted values so far: the smallest positive one and the largest upper end. */
+struct vrange {
+	double min, max;
+};
+
+/* One incidence's series q at θi = ti: the model's band over signed θo (np points, ang a scratch of np·4) and the
+ * in-plane samples at ti with their ±k σ; widens *vr; 0 or -1 with err. */
+static int series_fill(struct series *q, const struct recon_model *m, const struct recon_samples *s, double ti,
+		       size_t np, double *ang, const double *wsel, const struct slices_opts *o, double stol,
+		       struct vrange *vr, struct acq_err *err)
+{
+	q->theta = ti;
+	q->np = np;
+	q->x = malloc(np * sizeof *q->x);
+	q->f = malloc(np * sizeof *q->f);
+	q->lo = malloc(np * sizeof *q->lo);
+	q->hi = malloc(np * sizeof *q->hi);
+	size_t cap = s ? s->n : 0;
+	q->sx = malloc((cap ? cap : 1) * sizeof *q->sx);
+	q->sv = malloc((cap ? cap : 1) * sizeof *q->sv);
+	q->ss = malloc((cap ? cap : 1) * sizeof *q->ss);
+	if (!q->x || !q->f || !q->lo || !q->hi || !q->sx || !q->sv || !q->ss)
+		return acq_errf(err, ACQ_E_NOMEM, "slices: out of memory");
+	for (size_t i = 0; i < np; i++) {
+		double a = -90 + 180.0 * (double)i / (double)(np - 1); /* signed θo, degrees; ±90 kept just inside */
+		a = fmax(-89.5, fmin(89.5, a));
+		q->x[i] = a;
+		ang[4 * i] = ti;
+		ang[4 * i + 1] = 0;
+		ang[4 * i + 2] = fabs(a) * M_PI / 180;
+		ang[4 * i + 3] = a >= 0 ? M_PI : 0;
+	}
+	if (slices_band(m, np, ang, wsel, o->band_k, q->f, q->lo, q->hi, err))
+		return -1;
+	for (size_t i = 0; i < np; i++) {
+		if (q->f[i] > 0)
+			vr->min = fmin(vr->min, q->f[i]);
+		vr->max = fmax(vr->max, q->hi[i]);
+	}
+	/* in-plane samples at this incidence, reduced by the same weights (sample spectra read linearly) */
+	for (size_t i = 0; s && i < s->n; i++) {
+		const double *a = s->ang + 4 * i;
+		double dphi = a[3] - a[1], v, sg;
+		if (fabs(a[0] - ti) > 0.05 * M_PI / 180 || fabs(sin(dphi)) > stol)
+			continue;
+		if (sample_reduce(m, s, i, wsel, &v, &sg))
+			continue;
+		q->sx[q->ns] = (cos(dphi) < 0 ? 1 : -1) * a[2] * 180 / M_PI;
+		q->sv[q->ns] = v;
+		q->ss[q->ns] = sg;
+		if (v > 0)
+			vr->min = fmin(vr->min, v);
+		vr->max = fmax(vr->max, v + (isfinite(q->ss[q->ns]) ? o->band_k * q->ss[q->ns] : 0));
+		q->ns++;
+	}
+	return 0;
+}
+
+/* The in-plane figure of the nth series to png, on the log frame *fr; 0 or -1 with err. */
+static int inplane_png(const struct series *S, size_t nth, const struct slices_opts *o, const struct frame *fr,
+		       const char *png, struct acq_err *err)
+{
+	char title[160];
+	if (o->wl_lo == o->wl_hi)
+		snprintf(title, sizeof title, "In-plane BRDF at \u03bb = %g nm (model, \u00b1%g\u03c3 band; samples \u00b1%g\u03c3)",
+			 o->wl_lo, o->band_k, o->band_k);
+	else
+		snprintf(title, sizeof title, "In-plane BRDF, %g\u2013%g nm band mean (model, \u00b1%g\u03c3 band; samples "
+			 "\u00b1%g\u03c3)", o->wl_lo, o->wl_hi, o->band_k, o->band_k);
+	cairo_surface_t *sf = cairo_image_surface_create(CAIRO_FORMAT_RGB24, o->width, o->height);
+	cairo_t *cr = cairo_create(sf);
+	draw_inplane(cr, o, S, nth, fr, title);
+	cairo_destroy(cr);
+	int rc = write_png(sf, png, err);
+	cairo_surface_destroy(sf);
+	return rc;
+}
+
+/* One polar plot per incidence (four to a row) to png, the radius log f from a little below vmin to fr->y1; 0 or -1
+ * with err. */
+static int polar_png(const struct series *S, size_t nth, const struct slices_opts *o, const struct frame *fr,
+		     double vmin, const char *png, struct acq_err *err)
+{
+	int cols = nth < 4 ? (int)nth : 4, rows = (int)((nth + 3) / 4), pw = 300, ph = 190;
+	cairo_surface_t *sf = cairo_image_surface_create(CAIRO_FORMAT_RGB24, cols * pw, rows * ph + 30);
+	cairo_t *cr = cairo_create(sf);
+	cairo_set_source_rgb(cr, 1, 1, 1);
+	cairo_paint(cr);
+	cairo_select_font_face(cr, "sans-serif", CAIRO_FONT_SLANT_NORMAL, CAIRO_FONT_WEIGHT_NORMAL);
+	cairo_set_font_size(cr, 12);
+	cairo_set_source_rgb(cr, 0, 0, 0);
+	/* radius: log f from a little below the smallest value, so the diffuse part is not squeezed */
+	double py0 = fmax(fr->y0, log10(vmin) - 0.25);
+	char pt[160];
+	snprintf(pt, sizeof pt, "polar: radius log10 f from %.3g to %.3g (rings at decades); dashed: incidence", py0,
+		 fr->y1);
+	text(cr, cols * pw / 2.0, 8, pt, 0.5, 0);
+	for (size_t t = 0; t < nth; t++)
+		draw_polar(cr, o, &S[t], t, pw * (double)(t % 4) + pw / 2.0, 30 + ph * (double)(t / 4) + ph - 32, 130, py0,
+			   fr->y1);
+	cairo_destroy(cr);
+	int rc = write_png(sf, png, err);
+	cairo_surface_destroy(sf);
+	return rc;
+}
+
+/* The plotted numbers to csv (kind,theta_i,theta_o_signed,value,lo,hi: the model's band, then the samples ±k σ);
+ * 0 or -1 with err. */
+static int series_csv(const struct series *S, size_t nth, const struct slices_opts *o, const char *csv,
+		      struct acq_err *err)
+{
+	FILE *cf = fopen(csv, "w");
+	if (!cf)
+		return acq_errf(err, ACQ_E_IO, "slices: cannot create %s", csv);
+	fprintf(cf, "kind,theta_i,theta_o_signed,value,lo,hi\n");
+	for (size_t t = 0; t < nth; t++) {
+		for (size_t i = 0; i < S[t].np; i++)
+			fprintf(cf, "model,%.10g,%.10g,%.10g,%.10g,%.10g\n", S[t].theta * 180 / M_PI, S[t].x[i], S[t].f[i],
+				S[t].lo[i], S[t].hi[i]);
+		for (size_t i = 0; i < S[t].ns; i++) {
+			double sg = isfinite(S[t].ss[i]) ? o->band_k * S[t].ss[i] : 0;
+			fprintf(cf, "sample,%.10g,%.10g,%.10g,%.10g,%.10g\n", S[t].theta * 180 / M_PI, S[t].sx[i], S[t].sv[i],
+				S[t].sv[i] - sg, S[t].sv[i] + sg);
+		}
+	}
+	int bad = ferror(cf);
+	bad |= fclose(cf) != 0;
+	if (bad)
+		return acq_errf(err, ACQ_E_IO, "slices: writing %s failed", csv);
+	return 0;
+}
+
 int slices_plot(const struct recon_model *m, const struct recon_samples *s, const double *theta, size_t nth,
-		const struct slices_opts *o, const char *png, const char *polar_png, const char *csv,
+		const struct slices_opts *o, const char *png, const char *polar_png_path, const char *csv,
 		struct slices_result *res, struct acq_err *err)
 {
 	if (o->width < 64 || o->width > 8192 || o->height < 64 || o->height > 8192 || o->npts < 4 || o->npts > 4096 ||
@@ -394,32 +587,11 @@ int slices_plot(const struct recon_model *m, const struct recon_samples *s, cons
 		return acq_errf(err, ACQ_E_RANGE, "slices: %zu incidences (at most %d)", nth, SLICES_MAX_THETA);
 	}
 	memcpy(th, theta, nth * sizeof *th);
-	if (!nth) { /* the measured incidences: distinct θi (0.05° apart) of in-plane samples */
-		if (!s || !s->n) {
+	if (!nth) {
+		if (measured_theta(s, stol, th, &nth, err)) {
 			free(wsel);
-			return acq_errf(err, ACQ_E_INVAL, "slices: no incidences given and no samples to take them from");
+			return -1;
 		}
-		double *all = malloc(s->n * sizeof *all);
-		size_t na = 0;
-		if (!all) {
-			free(wsel);
-			return acq_errf(err, ACQ_E_NOMEM, "slices: out of memory");
-		}
-		for (size_t i = 0; i < s->n; i++)
-			if (fabs(sin(s->ang[4 * i + 3] - s->ang[4 * i + 1])) <= stol)
-				all[na++] = s->ang[4 * i];
-		qsort(all, na, sizeof *all, cmp_d);
-		for (size_t i = 0; i < na; i++)
-			if (!nth || all[i] - th[nth - 1] > 0.05 * M_PI / 180) {
-				if (nth == SLICES_MAX_THETA) {
-					free(all);
-					free(wsel);
-					return acq_errf(err, ACQ_E_RANGE, "slices: more than %d measured incidences (give --theta-i)",
-							SLICES_MAX_THETA);
-				}
-				th[nth++] = all[i];
-			}
-		free(all);
 		if (!nth) {
 			free(wsel);
 			return acq_errf(err, ACQ_E_INVAL, "slices: no sample lies in the plane (|sin(phi_o - phi_i)| <= "
@@ -427,167 +599,35 @@ int slices_plot(const struct recon_model *m, const struct recon_samples *s, cons
 		}
 	}
 	int rc = -1;
-	size_t np = 2 * (size_t)o->npts + 1;
+	size_t np = 2 * (size_t)o->npts + 1, nsamp = 0;
 	struct series S[SLICES_MAX_THETA];
 	memset(S, 0, sizeof S);
 	double *ang = malloc(np * 4 * sizeof *ang);
-	FILE *cf = NULL;
-	cairo_surface_t *sf = NULL;
-	cairo_t *cr = NULL;
-	double vmin = HUGE_VAL, vmax = 0;
-	size_t nsamp = 0;
+	struct vrange vr = { HUGE_VAL, 0 };
 	if (!ang) {
 		acq_errf(err, ACQ_E_NOMEM, "slices: out of memory");
 		goto out;
 	}
 	for (size_t t = 0; t < nth; t++) {
-		struct series *q = &S[t];
-		q->theta = th[t];
-		q->np = np;
-		q->x = malloc(np * sizeof *q->x);
-		q->f = malloc(np * sizeof *q->f);
-		q->lo = malloc(np * sizeof *q->lo);
-		q->hi = malloc(np * sizeof *q->hi);
-		size_t cap = s ? s->n : 0;
-		q->sx = malloc((cap ? cap : 1) * sizeof *q->sx);
-		q->sv = malloc((cap ? cap : 1) * sizeof *q->sv);
-		q->ss = malloc((cap ? cap : 1) * sizeof *q->ss);
-		if (!q->x || !q->f || !q->lo || !q->hi || !q->sx || !q->sv || !q->ss) {
-			acq_errf(err, ACQ_E_NOMEM, "slices: out of memory");
+		if (series_fill(&S[t], m, s, th[t], np, ang, wsel, o, stol, &vr, err))
 			goto out;
-		}
-		for (size_t i = 0; i < np; i++) {
-			double a = -90 + 180.0 * (double)i / (double)(np - 1); /* signed θo, degrees; ±90 kept just inside */
-			a = fmax(-89.5, fmin(89.5, a));
-			q->x[i] = a;
-			ang[4 * i] = th[t];
-			ang[4 * i + 1] = 0;
-			ang[4 * i + 2] = fabs(a) * M_PI / 180;
-			ang[4 * i + 3] = a >= 0 ? M_PI : 0;
-		}
-		if (slices_band(m, np, ang, wsel, o->band_k, q->f, q->lo, q->hi, err))
-			goto out;
-		for (size_t i = 0; i < np; i++) {
-			if (q->f[i] > 0)
-				vmin = fmin(vmin, q->f[i]);
-			vmax = fmax(vmax, q->hi[i]);
-		}
-		/* in-plane samples at this incidence, reduced by the same weights (sample spectra read linearly) */
-		for (size_t i = 0; s && i < s->n; i++) {
-			const double *a = s->ang + 4 * i;
-			double dphi = a[3] - a[1];
-			if (fabs(a[0] - th[t]) > 0.05 * M_PI / 180 || fabs(sin(dphi)) > stol)
-				continue;
-			double v = 0, sg = 0, wsum = 0;
-			int bad = 0;
-			for (size_t l = 0; l < L && !bad; l++) {
-				if (wsel[l] == 0)
-					continue;
-				size_t b = 0;
-				while (b + 2 < s->nwl && s->wl[b + 1] <= m->wl[l])
-					b++;
-				double tt = s->nwl > 1 ? (m->wl[l] - s->wl[b]) / (s->wl[b + 1] - s->wl[b]) : 0;
-				tt = tt < 0 ? 0 : tt > 1 ? 1 : tt;
-				size_t b1 = s->nwl > 1 ? b + 1 : b;
-				double x0 = s->val[i * s->nwl + b], x1 = s->val[i * s->nwl + b1];
-				if (!isfinite(x0) || !isfinite(x1)) {
-					bad = 1;
-					break;
-				}
-				v += wsel[l] * ((1 - tt) * x0 + tt * x1);
-				if (s->sig) {
-					double s0 = s->sig[i * s->nwl + b], s1 = s->sig[i * s->nwl + b1];
-					sg += wsel[l] * ((1 - tt) * s0 + tt * s1);
-				}
-				wsum += wsel[l];
-			}
-			if (bad || !(wsum > 0))
-				continue;
-			q->sx[q->ns] = (cos(dphi) < 0 ? 1 : -1) * a[2] * 180 / M_PI;
-			q->sv[q->ns] = v;
-			q->ss[q->ns] = s->sig && isfinite(sg) ? sg : NAN;
-			if (v > 0)
-				vmin = fmin(vmin, v);
-			vmax = fmax(vmax, v + (isfinite(q->ss[q->ns]) ? o->band_k * q->ss[q->ns] : 0));
-			q->ns++;
-			nsamp++;
-		}
+		nsamp += S[t].ns;
 	}
-	if (!(vmax > 0)) {
+	if (!(vr.max > 0)) {
 		acq_errf(err, ACQ_E_NUMERIC, "slices: the model is 0 on every slice at this wavelength selection");
 		goto out;
 	}
-	if (!(vmin < HUGE_VAL))
-		vmin = vmax * 1e-6;
+	if (!(vr.min < HUGE_VAL))
+		vr.min = vr.max * 1e-6;
 	struct frame fr = { 80, 40, o->width - 200.0, o->height - 60.0, -90, 90, 0, 0 };
-	fr.y1 = ceil(log10(vmax) * 4) / 4;
-	fr.y0 = fmax(floor(log10(vmin) * 4) / 4, fr.y1 - 6);
+	fr.y1 = ceil(log10(vr.max) * 4) / 4;
+	fr.y0 = fmax(floor(log10(vr.min) * 4) / 4, fr.y1 - 6);
 	if (fr.y1 - fr.y0 < 1)
 		fr.y0 = fr.y1 - 1;
-	char title[160];
-	if (o->wl_lo == o->wl_hi)
-		snprintf(title, sizeof title, "In-plane BRDF at \u03bb = %g nm (model, \u00b1%g\u03c3 band; samples \u00b1%g\u03c3)",
-			 o->wl_lo, o->band_k, o->band_k);
-	else
-		snprintf(title, sizeof title, "In-plane BRDF, %g\u2013%g nm band mean (model, \u00b1%g\u03c3 band; samples "
-			 "\u00b1%g\u03c3)", o->wl_lo, o->wl_hi, o->band_k, o->band_k);
-	sf = cairo_image_surface_create(CAIRO_FORMAT_RGB24, o->width, o->height);
-	cr = cairo_create(sf);
-	draw_inplane(cr, o, S, nth, &fr, title);
-	cairo_destroy(cr);
-	cr = NULL;
-	if (write_png(sf, png, err))
+	if (inplane_png(S, nth, o, &fr, png, err) ||
+	    (polar_png_path && polar_png(S, nth, o, &fr, vr.min, polar_png_path, err)) ||
+	    (csv && series_csv(S, nth, o, csv, err)))
 		goto out;
-	cairo_surface_destroy(sf);
-	sf = NULL;
-	if (polar_png) {
-		int cols = nth < 4 ? (int)nth : 4, rows = (int)((nth + 3) / 4), pw = 300, ph = 190;
-		sf = cairo_image_surface_create(CAIRO_FORMAT_RGB24, cols * pw, rows * ph + 30);
-		cr = cairo_create(sf);
-		cairo_set_source_rgb(cr, 1, 1, 1);
-		cairo_paint(cr);
-		cairo_select_font_face(cr, "sans-serif", CAIRO_FONT_SLANT_NORMAL, CAIRO_FONT_WEIGHT_NORMAL);
-		cairo_set_font_size(cr, 12);
-		cairo_set_source_rgb(cr, 0, 0, 0);
-		/* radius: log f from a little below the smallest value, so the diffuse part is not squeezed */
-		double py0 = fmax(fr.y0, log10(vmin) - 0.25);
-		char pt[160];
-		snprintf(pt, sizeof pt, "polar: radius log10 f from %.3g to %.3g (rings at decades); dashed: incidence", py0,
-			 fr.y1);
-		text(cr, cols * pw / 2.0, 8, pt, 0.5, 0);
-		for (size_t t = 0; t < nth; t++)
-			draw_polar(cr, o, &S[t], t, pw * (double)(t % 4) + pw / 2.0, 30 + ph * (double)(t / 4) + ph - 32, 130,
-				   py0, fr.y1);
-		cairo_destroy(cr);
-		cr = NULL;
-		if (write_png(sf, polar_png, err))
-			goto out;
-	}
-	if (csv) {
-		cf = fopen(csv, "w");
-		if (!cf) {
-			acq_errf(err, ACQ_E_IO, "slices: cannot create %s", csv);
-			goto out;
-		}
-		fprintf(cf, "kind,theta_i,theta_o_signed,value,lo,hi\n");
-		for (size_t t = 0; t < nth; t++) {
-			for (size_t i = 0; i < S[t].np; i++)
-				fprintf(cf, "model,%.10g,%.10g,%.10g,%.10g,%.10g\n", S[t].theta * 180 / M_PI, S[t].x[i], S[t].f[i],
-					S[t].lo[i], S[t].hi[i]);
-			for (size_t i = 0; i < S[t].ns; i++) {
-				double sg = isfinite(S[t].ss[i]) ? o->band_k * S[t].ss[i] : 0;
-				fprintf(cf, "sample,%.10g,%.10g,%.10g,%.10g,%.10g\n", S[t].theta * 180 / M_PI, S[t].sx[i], S[t].sv[i],
-					S[t].sv[i] - sg, S[t].sv[i] + sg);
-			}
-		}
-		int bad = ferror(cf);
-		bad |= fclose(cf) != 0;
-		cf = NULL;
-		if (bad) {
-			acq_errf(err, ACQ_E_IO, "slices: writing %s failed", csv);
-			goto out;
-		}
-	}
 	if (res) {
 		memset(res, 0, sizeof *res);
 		res->nth = nth;
@@ -598,12 +638,6 @@ int slices_plot(const struct recon_model *m, const struct recon_samples *s, cons
 	}
 	rc = 0;
 out:
-	if (cf)
-		fclose(cf);
-	if (cr)
-		cairo_destroy(cr);
-	if (sf)
-		cairo_surface_destroy(sf);
 	for (size_t t = 0; t < SLICES_MAX_THETA; t++) {
 		free(S[t].x);
 		free(S[t].f);

@@ -96,7 +96,36 @@ int dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64
 	return rc;
 }
 
-int cmd_dhr(int argc, char **argv)
+/* dhr's command line. */
+struct dhr_args {
+	const char *model, *outp, *refp, *zout, *plot, *certp;
+	double th[64], ref_th, ref_u, ref_len;
+	size_t nth;
+	uint64_t draws, seed;
+	struct recon_budget_opts bo;
+};
+
+/* --theta-i's list into a->th; 0, or a usage error's status. */
+static int dhr_parse_theta(const char *arg, struct dhr_args *a)
+{
+	a->nth = 0;
+	char *save = NULL, *dup = strdup(arg);
+	for (char *tok = strtok_r(dup, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
+		if (a->nth == 64 || parse_double(tok, &a->th[a->nth]) || a->th[a->nth] < 0 || a->th[a->nth] > 90) {
+			free(dup);
+			return usage_err("dhr", "--theta-i needs up to 64 angles in [0, 90]");
+		}
+		a->nth++;
+	}
+	free(dup);
+	if (!a->nth)
+		return usage_err("dhr", "--theta-i is empty");
+	return 0;
+}
+
+/* The options and the model's path into a (defaults first); -1 to go on, or the exit status (help: 0, a usage
+ * error: 2). */
+static int dhr_parse(int argc, char **argv, struct dhr_args *a)
 {
 	static const struct option lo[] = {
 		{ "output", required_argument, 0, 'o' }, { "theta-i", required_argument, 0, 't' },
@@ -107,68 +136,55 @@ int cmd_dhr(int argc, char **argv)
 		{ "drift-rel", required_argument, 0, 'd' }, { "wl-cal-nm", required_argument, 0, 'w' },
 		{ "nonlin-rel", required_argument, 0, 'N' }, { "reference-corr", required_argument, 0, 'K' },
 		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
-	const char *outp = NULL, *refp = NULL, *zout = NULL, *plot = NULL, *certp = NULL;
-	double th[64] = { 8, 30, 60 }, ref_th = 8, ref_u = 0, ref_len = 150;
-	size_t nth = 3;
-	uint64_t draws = 64, seed = 1;
-	struct recon_budget_opts bo = { 0 };
+	*a = (struct dhr_args){ .th = { 8, 30, 60 }, .nth = 3, .ref_th = 8, .ref_u = 0, .ref_len = 150, .draws = 64,
+				.seed = 1 };
+	struct recon_budget_opts *bo = &a->bo;
 	int c;
 	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
 		switch (c) {
-		case 'o': outp = optarg; break;
-		case 't': {
-			nth = 0;
-			char *save = NULL, *dup = strdup(optarg);
-			for (char *tok = strtok_r(dup, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
-				if (nth == 64 || parse_double(tok, &th[nth]) || th[nth] < 0 || th[nth] > 90) {
-					free(dup);
-					return usage_err("dhr", "--theta-i needs up to 64 angles in [0, 90]");
-				}
-				nth++;
-			}
-			free(dup);
-			if (!nth)
-				return usage_err("dhr", "--theta-i is empty");
+		case 'o': a->outp = optarg; break;
+		case 't':
+			if (dhr_parse_theta(optarg, a))
+				return 2;
 			break;
-		}
 		case 'n':
-			if (parse_u64(optarg, &draws) || draws > 100000)
+			if (parse_u64(optarg, &a->draws) || a->draws > 100000)
 				return usage_err("dhr", "--draws needs 0..100000");
 			break;
 		case 's':
-			if (parse_u64(optarg, &seed))
+			if (parse_u64(optarg, &a->seed))
 				return usage_err("dhr", "--seed needs an unsigned integer");
 			break;
-		case 'r': refp = optarg; break;
+		case 'r': a->refp = optarg; break;
 		case 'R':
-			if (parse_double(optarg, &ref_th))
+			if (parse_double(optarg, &a->ref_th))
 				return usage_err("dhr", "--reference-theta needs a number");
 			break;
-		case 'z': zout = optarg; break;
-		case 'p': plot = optarg; break;
-		case 'C': certp = optarg; break;
+		case 'z': a->zout = optarg; break;
+		case 'p': a->plot = optarg; break;
+		case 'C': a->certp = optarg; break;
 		case 'c':
-			if (parse_double(optarg, &bo.cert_rel) || !(bo.cert_rel >= 0 && bo.cert_rel < 1))
+			if (parse_double(optarg, &bo->cert_rel) || !(bo->cert_rel >= 0 && bo->cert_rel < 1))
 				return usage_err("dhr", "--cert-rel needs a number in [0, 1)");
 			break;
 		case 'd':
-			if (parse_double(optarg, &bo.drift_rel) || !(bo.drift_rel >= 0 && bo.drift_rel < 1))
+			if (parse_double(optarg, &bo->drift_rel) || !(bo->drift_rel >= 0 && bo->drift_rel < 1))
 				return usage_err("dhr", "--drift-rel needs a number in [0, 1)");
 			break;
 		case 'w':
-			if (parse_double(optarg, &bo.wl_cal_nm) || !(bo.wl_cal_nm >= 0 && bo.wl_cal_nm < 100))
+			if (parse_double(optarg, &bo->wl_cal_nm) || !(bo->wl_cal_nm >= 0 && bo->wl_cal_nm < 100))
 				return usage_err("dhr", "--wl-cal-nm needs a number in [0, 100)");
 			break;
 		case 'N':
-			if (parse_double(optarg, &bo.nonlin_rel) || !(bo.nonlin_rel >= 0 && bo.nonlin_rel < 1))
+			if (parse_double(optarg, &bo->nonlin_rel) || !(bo->nonlin_rel >= 0 && bo->nonlin_rel < 1))
 				return usage_err("dhr", "--nonlin-rel needs a number in [0, 1)");
 			break;
 		case 'K': {
 			char *comma = strchr(optarg, ',');
 			if (comma)
 				*comma = 0;
-			if (parse_double(optarg, &ref_u) || !(ref_u >= 0 && ref_u < 1) ||
-			    (comma && (parse_double(comma + 1, &ref_len) || !(ref_len > 0 && ref_len < 1e6))))
+			if (parse_double(optarg, &a->ref_u) || !(a->ref_u >= 0 && a->ref_u < 1) ||
+			    (comma && (parse_double(comma + 1, &a->ref_len) || !(a->ref_len > 0 && a->ref_len < 1e6))))
 				return usage_err("dhr", "--reference-corr needs U[,LENGTH_NM]: U in [0, 1), length > 0 nm");
 			break;
 		}
@@ -178,38 +194,235 @@ int cmd_dhr(int argc, char **argv)
 	}
 	if (optind != argc - 1)
 		return usage_err("dhr", "one MODEL expected");
+	a->model = argv[optind];
+	return -1;
+}
+
+/* The certificate file (wavelength_nm,rho,u rows) into bo as columns, in *cert (caller frees); 0 or -1 with err. */
+static int dhr_cert_load(const char *certp, struct recon_budget_opts *bo, double **cert, struct acq_err *err)
+{
+	static const char *const cn[3] = { "wavelength_nm", "rho", "u" };
+	size_t ncert = 0;
+	double *rows = NULL;
+	if (csvio_read_columns(certp, cn, 3, &ncert, &rows, err))
+		return -1;
+	double *cw = malloc(3 * ncert * sizeof *cw);
+	if (!cw || !ncert) {
+		free(rows);
+		free(cw);
+		return acq_errf(err, ACQ_E_INVAL, "dhr: --cert %s: no rows", certp);
+	}
+	for (size_t i = 0; i < ncert; i++) { /* rows → columns */
+		cw[i] = rows[3 * i];
+		cw[ncert + i] = rows[3 * i + 1];
+		cw[2 * ncert + i] = rows[3 * i + 2];
+	}
+	free(rows);
+	*cert = cw;
+	bo->cert_wl = cw;
+	bo->cert_rho = cw + ncert;
+	bo->cert_u = cw + 2 * ncert;
+	bo->ncert = ncert;
+	return 0;
+}
+
+/* The CSV: theta_i, wavelength_nm, dhr, sigma and the budget's columns, to outp (stdout when NULL); 0 or -1 with
+ * err (a non-finite value, or the output failing). */
+static int dhr_write(const char *outp, const struct recon_model *m, const struct dhr_args *a, const double *dhr,
+		     const double *sig, double *const *part, struct acq_err *err)
+{
+	size_t L = m->nwl;
+	struct out o;
+	if (out_open(&o, outp, err))
+		return -1;
+	int ok = 1;
+	fputs("theta_i,wavelength_nm,dhr,sigma", o.f);
+	for (int k = 0; k < DB_N; k++)
+		fprintf(o.f, ",%s", db_names[k]);
+	fputc('\n', o.f);
+	char b[64];
+	for (size_t t = 0; ok && t < a->nth; t++)
+		for (size_t l = 0; ok && l < L; l++) {
+			size_t i = t * L + l;
+			fprintf(o.f, "%.10g,%.10g", a->th[t], m->wl[l]);
+			for (int k = -2; ok && k < DB_N; k++) {
+				double v = k == -2 ? dhr[i] : k == -1 ? sig[i] : part[k][i];
+				if (csvio_fmt(b, sizeof b, v)) {
+					acq_errf(err, ACQ_E_NUMERIC, "dhr: non-finite value");
+					ok = 0;
+				} else {
+					fprintf(o.f, ",%s", b);
+				}
+			}
+			fputc('\n', o.f);
+		}
+	if (out_close(&o, ok, err))
+		ok = 0;
+	return ok ? 0 : -1;
+}
+
+/* The reference file for --reference: its rows (wavelength_nm,dhr,sigma) in *ref, *nref, and the index of
+ * --reference-theta among --theta-i in *tref; 0 or -1 with err. */
+static int dhr_ref_read(const struct dhr_args *a, size_t *tref, double **ref, size_t *nref, struct acq_err *err)
+{
+	static const char *const names[3] = { "wavelength_nm", "dhr", "sigma" };
+	for (*tref = 0; *tref < a->nth; (*tref)++)
+		if (fabs(a->th[*tref] - a->ref_th) < 1e-9)
+			break;
+	if (*tref == a->nth)
+		return acq_errf(err, ACQ_E_INVAL, "dhr: --reference-theta %g is not among --theta-i", a->ref_th);
+	return csvio_read_columns(a->refp, names, 3, nref, ref, err) ? -1 : 0;
+}
+
+/* The residual (model − reference) / σ per compared wavelength, kept for the plot. */
+struct dhr_resid {
+	double *z, *wl;
+	size_t n;
+};
+
+/* The model at incidence tref against the reference rows: per-wavelength z to --z-out (or stderr), the agreement and
+ * χ² lines on stderr; the residual into *res when a plot is asked for. 0 or -1 with err. */
+static int dhr_compare(const struct dhr_args *a, const struct recon_model *m, const double *dhr, const double *sig,
+		       const double *corr, size_t tref, const double *ref, size_t nref, struct dhr_resid *res,
+		       struct acq_err *err)
+{
+	size_t L = m->nwl;
+	int ok = 1;
+	/* the reference's wavelengths inside the model's range */
+	double *cmp = malloc(10 * (nref ? nref : 1) * sizeof *cmp), *nsig = malloc(L * sizeof *nsig);
+	size_t *ji = malloc((nref ? nref : 1) * sizeof *ji);
+	if (!cmp || !nsig || !ji) {
+		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
+		ok = 0;
+	}
+	size_t nc = 0;
+	double *cw = cmp, *md = cmp + nref, *ms = cmp + 2 * nref, *mc = cmp + 3 * nref, *rv = cmp + 4 * nref,
+	       *rs = cmp + 5 * nref, *z = cmp + 6 * nref, *ui = cmp + 8 * nref, *ei = cmp + 9 * nref;
+	for (size_t i = 0; ok && i < nref; i++) {
+		double wl = ref[3 * i];
+		if (!(wl >= m->wl[0] && wl <= m->wl[L - 1]) || !isfinite(ref[3 * i + 1]) || !(ref[3 * i + 2] >= 0))
+			continue;
+		cw[nc] = wl;
+		at_reference(m, dhr + tref * L, sig + tref * L, corr + tref * L, wl, &md[nc], &ms[nc], &mc[nc], &ji[nc],
+			     &ui[nc], &ei[nc]);
+		rv[nc] = ref[3 * i + 1];
+		rs[nc] = ref[3 * i + 2];
+		nc++;
+	}
+	for (size_t l = 0; ok && l < L; l++) { /* the model's independent σ at its own wavelengths */
+		double s = sig[tref * L + l], cc = fmin(corr[tref * L + l], s);
+		nsig[l] = sqrt(fmax(0.0, s * s - cc * cc));
+	}
+	struct recon_ref_interp ip = { ji, ui, nsig, ei, L };
+	struct recon_agreement ag;
+	if (ok && recon_agreement_ref(nc, cw, md, ms, mc, rv, rs, a->ref_u, a->ref_len, &ip, z, &ag, err))
+		ok = 0;
+	FILE *zf = stderr;
+	struct out zo;
+	if (ok && a->zout) {
+		if (out_open(&zo, a->zout, err))
+			ok = 0;
+		else
+			zf = zo.f;
+	}
+	if (ok) {
+		fprintf(zf, "wavelength_nm,dhr_model,sigma_model,dhr_ref,sigma_ref,z\n");
+		for (size_t i = 0; i < nc; i++)
+			fprintf(zf, "%.10g,%.10g,%.10g,%.10g,%.10g,%.6g\n", cw[i], md[i], ms[i], rv[i], rs[i], z[i]);
+	}
+	if (ok && a->zout && out_close(&zo, ok, err))
+		ok = 0;
+	if (ok)
+		fprintf(stderr, "reference %s at theta_i=%g: %zu wavelengths compared, agreement %.1f%% within |z| <= 2 "
+			"(z with both uncertainties), RMS z %.3g, max |z| %.3g at %g nm, chi2/n %.3g with the "
+			"correlated components (certificate, drift%s) as one common factor\n", a->refp, a->ref_th, ag.n,
+			ag.n ? 100.0 * (double)ag.within2 / (double)ag.n : 0.0, ag.rms_z, ag.max_z, ag.max_z_wl,
+			ag.chi2_n, ag.ref_corr ? "; the reference's calibration correlated over wavelengths" : "");
+	if (ok)
+		fprintf(stderr, "reference %s: chi2 %.4g for %zu wavelengths, P(chi2 >= that | agreement) = %.3g: %s at "
+			"the 1%% level%s\n", a->refp, ag.chi2_n * (double)ag.n, ag.n, ag.chi2_p,
+			ag.chi2_p >= 0.01 ? "consistent" : "NOT consistent",
+			ag.ref_corr ? "" : " (no --reference-corr: the reference's sigma taken as independent across "
+					  "wavelengths; a calibration error correlated over wavelengths then moves many "
+					  "z together and the share within |z| <= 2 varies from one instrument to the next)");
+	if (ok && a->plot) { /* keep the residual for the plot */
+		res->z = malloc((nc ? nc : 1) * sizeof *res->z);
+		res->wl = malloc((nc ? nc : 1) * sizeof *res->wl);
+		if (res->z && res->wl) {
+			memcpy(res->z, z, nc * sizeof *res->z);
+			memcpy(res->wl, cw, nc * sizeof *res->wl);
+			res->n = nc;
+		}
+	}
+	free(cmp);
+	free(nsig);
+	free(ji);
+	return ok ? 0 : -1;
+}
+
+/* --plot: the curves with their bands, the reference (read again from its file, when compared) and the residual
+ * panel (when kept); 0 or -1 with err. */
+static int dhr_plot(const struct dhr_args *a, const struct recon_model *m, const double *dhr, const double *sig,
+		    int with_ref, const struct dhr_resid *res, struct acq_err *err)
+{
+	size_t L = m->nwl;
+	struct plot_curve curves[64], refc, resc;
+	char labels[64][32];
+	double *refwl = NULL, *refy = NULL, *refs = NULL;
+	for (size_t t = 0; t < a->nth; t++) {
+		snprintf(labels[t], sizeof labels[t], "\u03b8i = %g\u00b0", a->th[t]);
+		curves[t] = (struct plot_curve){ labels[t], m->wl, dhr + t * L, sig + t * L, L };
+	}
+	if (with_ref) {
+		size_t nr = 0;
+		static const char *const names[3] = { "wavelength_nm", "dhr", "sigma" };
+		double *all = NULL;
+		if (csvio_read_columns(a->refp, names, 3, &nr, &all, err) == 0) {
+			refwl = malloc(nr * sizeof *refwl);
+			refy = malloc(nr * sizeof *refy);
+			refs = malloc(nr * sizeof *refs);
+			if (refwl && refy && refs) {
+				for (size_t i = 0; i < nr; i++) {
+					refwl[i] = all[3 * i];
+					refy[i] = all[3 * i + 1];
+					refs[i] = all[3 * i + 2];
+				}
+				refc = (struct plot_curve){ "reference", refwl, refy, refs, nr };
+			}
+		}
+		free(all);
+	}
+	struct plot_dhr_opts po;
+	plot_dhr_opts_default(&po);
+	po.title = "Directional-hemispherical reflectance (bands: \u00b12\u03c3)";
+	if (res->z && res->wl) {
+		resc = (struct plot_curve){ "(model \u2212 ref) / \u03c3", res->wl, res->z, NULL, res->n };
+		po.residual = &resc;
+		po.height = 720;
+	}
+	int rc = plot_dhr_png(a->plot, curves, a->nth, refwl && refy && refs ? &refc : NULL, &po, NULL, err) ? -1 : 0;
+	free(refwl);
+	free(refy);
+	free(refs);
+	return rc;
+}
+
+int cmd_dhr(int argc, char **argv)
+{
+	struct dhr_args a;
+	int rc = dhr_parse(argc, argv, &a);
+	if (rc >= 0)
+		return rc;
 	struct acq_err err = { 0 };
 	double *cert = NULL;
-	size_t ncert = 0;
-	if (certp) {
-		static const char *const cn[3] = { "wavelength_nm", "rho", "u" };
-		if (csvio_read_columns(certp, cn, 3, &ncert, &cert, &err))
-			return fail(&err);
-		double *cw = malloc(3 * ncert * sizeof *cw);
-		if (!cw || !ncert) {
-			free(cert);
-			free(cw);
-			acq_errf(&err, ACQ_E_INVAL, "dhr: --cert %s: no rows", certp);
-			return fail(&err);
-		}
-		for (size_t i = 0; i < ncert; i++) { /* rows → columns */
-			cw[i] = cert[3 * i];
-			cw[ncert + i] = cert[3 * i + 1];
-			cw[2 * ncert + i] = cert[3 * i + 2];
-		}
-		free(cert);
-		cert = cw;
-		bo.cert_wl = cert;
-		bo.cert_rho = cert + ncert;
-		bo.cert_u = cert + 2 * ncert;
-		bo.ncert = ncert;
-	}
+	if (a.certp && dhr_cert_load(a.certp, &a.bo, &cert, &err))
+		return fail(&err);
 	struct recon_model *m;
-	if (recon_model_load(argv[optind], &m, &err)) {
+	if (recon_model_load(a.model, &m, &err)) {
 		free(cert);
 		return fail(&err);
 	}
-	size_t L = m->nwl, NL = nth * L;
+	size_t L = m->nwl, NL = a.nth * L;
 	double *dhr = malloc(NL * sizeof *dhr), *sig = malloc(NL * sizeof *sig), *pbuf = malloc(DB_N * NL * sizeof *pbuf);
 	double *part[DB_N], *ref = NULL, *corr = malloc(NL * sizeof *corr);
 	size_t nref = 0;
@@ -218,169 +431,26 @@ int cmd_dhr(int argc, char **argv)
 		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
 	for (int k = 0; k < DB_N; k++)
 		part[k] = pbuf ? pbuf + (size_t)k * NL : NULL;
-	if (ok && dhr_budget(m, nth, th, draws, seed, &bo, dhr, sig, part, &err))
+	if (ok && dhr_budget(m, a.nth, a.th, a.draws, a.seed, &a.bo, dhr, sig, part, &err))
 		ok = 0;
 	progress_end();
 	for (size_t i = 0; ok && i < NL; i++) /* the correlated part: one common factor (certificate, drift) */
 		corr[i] = hypot(part[DB_CERT][i], part[DB_DRIFT][i]);
-	struct out o;
-	if (ok && !out_open(&o, outp, &err)) {
-		fputs("theta_i,wavelength_nm,dhr,sigma", o.f);
-		for (int k = 0; k < DB_N; k++)
-			fprintf(o.f, ",%s", db_names[k]);
-		fputc('\n', o.f);
-		char b[64];
-		for (size_t t = 0; ok && t < nth; t++)
-			for (size_t l = 0; ok && l < L; l++) {
-				size_t i = t * L + l;
-				fprintf(o.f, "%.10g,%.10g", th[t], m->wl[l]);
-				for (int k = -2; ok && k < DB_N; k++) {
-					double v = k == -2 ? dhr[i] : k == -1 ? sig[i] : part[k][i];
-					if (csvio_fmt(b, sizeof b, v)) {
-						acq_errf(&err, ACQ_E_NUMERIC, "dhr: non-finite value");
-						ok = 0;
-					} else {
-						fprintf(o.f, ",%s", b);
-					}
-				}
-				fputc('\n', o.f);
-			}
-		if (out_close(&o, ok, &err))
-			ok = 0;
-	} else if (ok) {
+	if (ok && dhr_write(a.outp, m, &a, dhr, sig, part, &err))
 		ok = 0;
-	}
-	if (ok && !certp && bo.cert_rel == 0 && bo.drift_rel == 0 && bo.wl_cal_nm == 0 && bo.nonlin_rel == 0)
+	if (ok && !a.certp && a.bo.cert_rel == 0 && a.bo.drift_rel == 0 && a.bo.wl_cal_nm == 0 && a.bo.nonlin_rel == 0)
 		fprintf(stderr, "dhr: no --cert/--cert-rel, --drift-rel, --wl-cal-nm, --nonlin-rel given: those components "
 			"are 0 (the samples carry no input for them)\n");
-	size_t tref = nth;
-	double *zr = NULL, *zwl = NULL;
-	if (ok && refp) {
-		static const char *const names[3] = { "wavelength_nm", "dhr", "sigma" };
-		for (tref = 0; tref < nth; tref++)
-			if (fabs(th[tref] - ref_th) < 1e-9)
-				break;
-		if (tref == nth) {
-			acq_errf(&err, ACQ_E_INVAL, "dhr: --reference-theta %g is not among --theta-i", ref_th);
-			ok = 0;
-		} else if (csvio_read_columns(refp, names, 3, &nref, &ref, &err)) {
-			ok = 0;
-		}
-	}
-	if (ok && ref) {
-		/* the reference's wavelengths inside the model's range */
-		double *cmp = malloc(10 * (nref ? nref : 1) * sizeof *cmp), *nsig = malloc(L * sizeof *nsig);
-		size_t *ji = malloc((nref ? nref : 1) * sizeof *ji);
-		if (!cmp || !nsig || !ji) {
-			acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
-			ok = 0;
-		}
-		size_t nc = 0;
-		double *cw = cmp, *md = cmp + nref, *ms = cmp + 2 * nref, *mc = cmp + 3 * nref, *rv = cmp + 4 * nref,
-		       *rs = cmp + 5 * nref, *z = cmp + 6 * nref, *ui = cmp + 8 * nref, *ei = cmp + 9 * nref;
-		for (size_t i = 0; ok && i < nref; i++) {
-			double wl = ref[3 * i];
-			if (!(wl >= m->wl[0] && wl <= m->wl[L - 1]) || !isfinite(ref[3 * i + 1]) || !(ref[3 * i + 2] >= 0))
-				continue;
-			cw[nc] = wl;
-			at_reference(m, dhr + tref * L, sig + tref * L, corr + tref * L, wl, &md[nc], &ms[nc], &mc[nc], &ji[nc],
-				     &ui[nc], &ei[nc]);
-			rv[nc] = ref[3 * i + 1];
-			rs[nc] = ref[3 * i + 2];
-			nc++;
-		}
-		for (size_t l = 0; ok && l < L; l++) { /* the model's independent σ at its own wavelengths */
-			double s = sig[tref * L + l], cc = fmin(corr[tref * L + l], s);
-			nsig[l] = sqrt(fmax(0.0, s * s - cc * cc));
-		}
-		struct recon_ref_interp ip = { ji, ui, nsig, ei, L };
-		struct recon_agreement ag;
-		if (ok && recon_agreement_ref(nc, cw, md, ms, mc, rv, rs, ref_u, ref_len, &ip, z, &ag, &err))
-			ok = 0;
-		FILE *zf = stderr;
-		struct out zo;
-		if (ok && zout) {
-			if (out_open(&zo, zout, &err))
-				ok = 0;
-			else
-				zf = zo.f;
-		}
-		if (ok) {
-			fprintf(zf, "wavelength_nm,dhr_model,sigma_model,dhr_ref,sigma_ref,z\n");
-			for (size_t i = 0; i < nc; i++)
-				fprintf(zf, "%.10g,%.10g,%.10g,%.10g,%.10g,%.6g\n", cw[i], md[i], ms[i], rv[i], rs[i], z[i]);
-		}
-		if (ok && zout && out_close(&zo, ok, &err))
-			ok = 0;
-		if (ok)
-			fprintf(stderr, "reference %s at theta_i=%g: %zu wavelengths compared, agreement %.1f%% within |z| <= 2 "
-				"(z with both uncertainties), RMS z %.3g, max |z| %.3g at %g nm, chi2/n %.3g with the "
-				"correlated components (certificate, drift%s) as one common factor\n", refp, ref_th, ag.n,
-				ag.n ? 100.0 * (double)ag.within2 / (double)ag.n : 0.0, ag.rms_z, ag.max_z, ag.max_z_wl,
-				ag.chi2_n, ag.ref_corr ? "; the reference's calibration correlated over wavelengths" : "");
-		if (ok)
-			fprintf(stderr, "reference %s: chi2 %.4g for %zu wavelengths, P(chi2 >= that | agreement) = %.3g: %s at "
-				"the 1%% level%s\n", refp, ag.chi2_n * (double)ag.n, ag.n, ag.chi2_p,
-				ag.chi2_p >= 0.01 ? "consistent" : "NOT consistent",
-				ag.ref_corr ? "" : " (no --reference-corr: the reference's sigma taken as independent across "
-						  "wavelengths; a calibration error correlated over wavelengths then moves many "
-						  "z together and the share within |z| <= 2 varies from one instrument to the next)");
-		if (ok && plot) { /* keep the residual for the plot */
-			zr = malloc((nc ? nc : 1) * sizeof *zr);
-			zwl = malloc((nc ? nc : 1) * sizeof *zwl);
-			if (zr && zwl) {
-				memcpy(zr, z, nc * sizeof *zr);
-				memcpy(zwl, cw, nc * sizeof *zwl);
-				nref = nc;
-			}
-		}
-		free(cmp);
-		free(nsig);
-		free(ji);
-	}
-	if (ok && plot) {
-		struct plot_curve curves[64], refc, resc;
-		char labels[64][32];
-		double *refwl = NULL, *refy = NULL, *refs = NULL;
-		for (size_t t = 0; t < nth; t++) {
-			snprintf(labels[t], sizeof labels[t], "\u03b8i = %g\u00b0", th[t]);
-			curves[t] = (struct plot_curve){ labels[t], m->wl, dhr + t * L, sig + t * L, L };
-		}
-		if (ref) {
-			size_t nr = 0;
-			static const char *const names[3] = { "wavelength_nm", "dhr", "sigma" };
-			double *all = NULL;
-			if (csvio_read_columns(refp, names, 3, &nr, &all, &err) == 0) {
-				refwl = malloc(nr * sizeof *refwl);
-				refy = malloc(nr * sizeof *refy);
-				refs = malloc(nr * sizeof *refs);
-				if (refwl && refy && refs) {
-					for (size_t i = 0; i < nr; i++) {
-						refwl[i] = all[3 * i];
-						refy[i] = all[3 * i + 1];
-						refs[i] = all[3 * i + 2];
-					}
-					refc = (struct plot_curve){ "reference", refwl, refy, refs, nr };
-				}
-			}
-			free(all);
-		}
-		struct plot_dhr_opts po;
-		plot_dhr_opts_default(&po);
-		po.title = "Directional-hemispherical reflectance (bands: \u00b12\u03c3)";
-		if (zr && zwl) {
-			resc = (struct plot_curve){ "(model \u2212 ref) / \u03c3", zwl, zr, NULL, nref };
-			po.residual = &resc;
-			po.height = 720;
-		}
-		if (plot_dhr_png(plot, curves, nth, refwl && refy && refs ? &refc : NULL, &po, NULL, &err))
-			ok = 0;
-		free(refwl);
-		free(refy);
-		free(refs);
-	}
-	free(zr);
-	free(zwl);
+	size_t tref = a.nth;
+	struct dhr_resid res = { 0 };
+	if (ok && a.refp && dhr_ref_read(&a, &tref, &ref, &nref, &err))
+		ok = 0;
+	if (ok && ref && dhr_compare(&a, m, dhr, sig, corr, tref, ref, nref, &res, &err))
+		ok = 0;
+	if (ok && a.plot && dhr_plot(&a, m, dhr, sig, ref != NULL, &res, &err))
+		ok = 0;
+	free(res.z);
+	free(res.wl);
 	free(ref);
 	free(cert);
 	free(dhr);
@@ -390,4 +460,3 @@ int cmd_dhr(int argc, char **argv)
 	recon_model_free(m);
 	return ok ? 0 : fail(&err);
 }
-

@@ -140,6 +140,16 @@ class Daemon:
         self.stop(signal.SIGKILL)
         shutil.rmtree(self.tmp, ignore_errors=True)
 
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, exc, tb):
+        """`with Daemon(...) as d:` a failure prints the daemon's last log lines; cleaned up either way."""
+        if kind is not None:
+            print(self.logtext()[-3000:])
+        self.cleanup()
+        return False
+
 
 def acqctl(sock, *args, timeout=20, env=None):
     return subprocess.run([ACQCTL, "-s", sock] + list(args), capture_output=True, text=True, timeout=timeout,

@@ -15,6 +15,8 @@ import sys
 import tempfile
 import time
 
+import acqtest
+
 BUILD = os.environ.get("ACQ_BUILD") or os.path.abspath("build")
 SRC = os.environ.get("ACQ_SRC") or os.path.abspath(".")
 SEED = int(os.environ.get("ACQ_SEED", "1"))
@@ -239,23 +241,13 @@ class Bench:
         return os.path.join(self.state, "acquisition.db")
 
 
-class Client:
-    def __init__(self, path, timeout=20):
-        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        self.sock.settimeout(timeout)
-        self.sock.connect(path)
-        self.buf = b""
-        self.n = 0
-        self.banner = self.read()
+class Client(acqtest.Client):
+    """acqtest's protocol client with numbered requests: req() returns the reply that carries its own id (events
+    and replies to earlier requests in between are passed over)."""
 
-    def read(self):
-        while b"\n" not in self.buf:
-            chunk = self.sock.recv(1 << 16)
-            if not chunk:
-                raise EOFError("connection closed")
-            self.buf += chunk
-        line, self.buf = self.buf.split(b"\n", 1)
-        return json.loads(line)
+    def __init__(self, path, timeout=20):
+        self.n = 0
+        super().__init__(path, timeout)
 
     def req(self, cmd, **args):
         self.n += 1
@@ -266,9 +258,6 @@ class Client:
             r = self.read()
             if r.get("id") == self.n:
                 return r
-
-    def close(self):
-        self.sock.close()
 
 
 def sweep_row(bench, sid):

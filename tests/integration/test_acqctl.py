@@ -149,9 +149,8 @@ def offline_checks(tmp):
 
 
 def main():
-    b = L.Bench(scale=5.0)  # slow enough for a move to be stopped midway
-    tmp = b.dir
-    try:
+    with L.Bench(scale=5.0) as b:  # slow enough for a move to be stopped midway
+        tmp = b.dir
         plan, local = offline_checks(tmp)
         b.start_sim()
         b.start_daemon()
@@ -329,8 +328,6 @@ def main():
         p = subprocess.run([sim, "ctl"], capture_output=True, text=True)
         check(p.returncode == 64, "ctl usage: %d" % p.returncode)
         print("ok: acqctl commands, schemas, exit codes, watch reconnection, acq-sim ctl")
-    finally:
-        b.cleanup()
 
 
 if __name__ == "__main__":

@@ -36,8 +36,7 @@ def row_state(b, sid):
 
 
 def run():
-    b = L.Bench(scale=20)
-    try:
+    with L.Bench(scale=20) as b:
         b.start_sim()
         log = open(b.daemon_log, "ab")
         b.daemon = subprocess.Popen([L.DAEMON, "-f", "-c", b.conf, "--sim", b.ports], stdout=log,
@@ -94,8 +93,6 @@ def run():
         r = c.req("sweep.start", plan=PLAN, name="after")
         c.close()
         assert r.get("ok"), "a new sweep is refused after the recovery: %s" % r
-    finally:
-        b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
 
 
 L.main(run)

@@ -71,8 +71,7 @@ def run():
     names = {m.group(1) for m in re.finditer(r"^([A-Za-z_][A-Za-z0-9_]*):", text, re.M)}
     sweep = L.strip_sections(text, names - {"sweep"})
     assert "auto_recon: true" in sweep, "config/bench-sim.yaml's sweep section has no auto_recon: true"
-    b = L.Bench(scale=100, sweep_yaml=sweep.replace("auto_recon: true", "auto_recon: false"))
-    try:
+    with L.Bench(scale=100, sweep_yaml=sweep.replace("auto_recon: true", "auto_recon: false")) as b:
         b.start_sim()
         b.start_daemon()
         sid = L.start_sweep(b, PLAN, "it-nexus")
@@ -162,8 +161,6 @@ def run():
         left = [x for x in os.listdir(os.path.join(b.state, "export")) if x.startswith(".")]
         assert not left, "temporary files left in the export folder: %s" % left
         assert not os.path.exists(missing)
-    finally:
-        b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
 
 
 L.main(run)

@@ -69,8 +69,7 @@ def main():
     seed = int(os.environ.get("ACQ_SEED", "1"))
     rng = random.Random(seed)
     print("seed", seed)
-    d = Daemon()
-    try:
+    with Daemon() as d:
         d.start()
         lines = make_lines(rng)
         big = [b"y" * 70000, b"z" * (1 << 20)]
@@ -140,11 +139,6 @@ def main():
         other.close()
         flood.close()
         check(d.stop() == 0, "clean stop")
-    except Exception:
-        print(d.logtext()[-3000:])
-        raise
-    finally:
-        d.cleanup()
 
 
 if __name__ == "__main__":

@@ -6,7 +6,6 @@ stops where the arm bodies touch (collision alarm): the spectrum is that of the 
 occlusion), not of the requested one (dark). After an alarm reset and a move to 40 deg, the white reference's
 counts scale with cos(theta_o) between the two actual positions. Skips (77) only when mbpoll is not installed;
 an acq-sim that does not start is a failure."""
-import json
 import math
 import os
 import re
@@ -14,62 +13,19 @@ import shutil
 import socket
 import struct
 import subprocess
-import sys
-import tempfile
 import time
 
-BUILD = os.environ.get("ACQ_BUILD", "build")
-SRC = os.environ.get("ACQ_SRC", ".")
-SEED = os.environ.get("ACQ_SEED", "1")
-SIM = os.path.join(BUILD, "acq-sim")
-print(f"ACQ_SEED={SEED}")
-if not os.access(SIM, os.X_OK):
-    sys.exit(f"FAIL: {SIM} not built")
+from simlib import SEED, SRC, Ctl, SimTest
+
+T = SimTest("acq-sim-arms.")
+check, finish = T.check, T.finish
 if not shutil.which("mbpoll"):
-    print("skip: mbpoll not installed (make deps installs it)")
-    sys.exit(77)
-tmp = tempfile.mkdtemp(prefix="acq-sim-arms.")
-proc = None
-
-
-def finish(code, msg):
-    print(msg)
-    if proc and proc.poll() is None:
-        proc.terminate()
-        proc.wait(5)
-    shutil.rmtree(tmp, ignore_errors=True)
-    sys.exit(code)
-
-
-def check(cond, what):
-    if not cond:
-        finish(1, "FAIL: " + what)
-    print("ok:", what)
-
-
-ports, ctl_path = os.path.join(tmp, "ports.json"), os.path.join(tmp, "ctl.sock")
-proc = subprocess.Popen([SIM, "-c", os.path.join(SRC, "config/bench-sim.yaml"), "--time-scale", "50", "--seed", SEED,
-                         "--ports-file", ports, "--control", ctl_path], stderr=subprocess.PIPE, text=True)
-end = time.monotonic() + 10
-while not os.path.exists(ports):
-    if proc.poll() is not None:
-        err = proc.stderr.read().strip()
-        finish(1, "FAIL: acq-sim exited: " + err)
-    if time.monotonic() > end:
-        finish(1, "FAIL: no ports file in 10 s")
-    time.sleep(0.02)
-with open(ports) as f:
-    pj = json.load(f)
+    T.finish(77, "skip: mbpoll not installed (make deps installs it)")
+ctl_path = T.path("ctl.sock")
+proc, pj = T.start(["-c", os.path.join(SRC, "config/bench-sim.yaml"), "--time-scale", "50", "--seed", SEED,
+                    "--control", ctl_path], T.path("ports.json"))
 port = pj["detector_arm"]["port"]
-ctl = socket.socket(socket.AF_UNIX)
-ctl.connect(ctl_path)
-cf = ctl.makefile("rw")
-
-
-def control(line):
-    cf.write(line + "\n")
-    cf.flush()
-    return cf.readline().strip()
+control = Ctl(ctl_path)
 
 
 def mb(*args, values=()):
@@ -99,26 +55,16 @@ def move_detector_theta(deg):
     finish(1, f"FAIL: detector arm still moving after 10 s (at {last})")
 
 
-def recv_exact(s, n):
-    b = b""
-    while len(b) < n:
-        c = s.recv(n - len(b))
-        if not c:
-            finish(1, "FAIL: spectrometer closed the connection")
-        b += c
-    return b
-
-
 sp = socket.socket(socket.AF_UNIX)
 sp.settimeout(10)
 sp.connect(pj["spectrometer"]["socket"])
-recv_exact(sp, 16 + 36)
+T.recv(sp, 16 + 36)
 
 
 def measure():
     sp.sendall(struct.pack("<IHHII", 0x4D495341, 1, 2, 9, 16) + struct.pack("<dII", 20.0, 4, 0))
-    typ = struct.unpack("<IHHII", recv_exact(sp, 16))
-    p = recv_exact(sp, typ[4])
+    typ = struct.unpack("<IHHII", T.recv(sp, 16))
+    p = T.recv(sp, typ[4])
     npix, occ = struct.unpack_from("<II", p, 28)[0], struct.unpack_from("<I", p, 36)[0]
     return sum(struct.unpack_from(f"<{npix}d", p, 48)[4:]) / (npix - 4), occ
 

@@ -2,45 +2,18 @@
 """Integration test of acq-sim as a process: ports file, the spectrometer socket protocol
 (drivers/spectro_sim_proto.h) spoken from Python, control-socket commands changing what the spectrometer
 sees, the seeded fault schedule, the time scale, and clear errors for bad configuration and commands."""
-import json
 import os
-import shutil
 import socket
 import struct
 import subprocess
-import sys
-import tempfile
 import time
 
-BUILD = os.environ.get("ACQ_BUILD", "build")
-SEED = int(os.environ.get("ACQ_SEED", "1"))
-SIM = os.path.join(BUILD, "acq-sim")
-print(f"ACQ_SEED={SEED}")
-if not os.access(SIM, os.X_OK):
-    sys.exit(f"FAIL: {SIM} not built")
+import simlib
+from simlib import SIM, Ctl, SimTest, recv_exact
 
 MAGIC, HDR = 0x4D495341, 16
-procs = []
-tmp = tempfile.mkdtemp(prefix="acq-sim-test.")
-
-
-def cleanup():
-    for p in procs:
-        if p.poll() is None:
-            p.terminate()
-            try:
-                p.wait(5)
-            except subprocess.TimeoutExpired:
-                p.kill()
-    shutil.rmtree(tmp, ignore_errors=True)
-
-
-def check(cond, what):
-    if not cond:
-        print("FAIL:", what)
-        cleanup()
-        sys.exit(1)
-    print("ok:", what)
+T = SimTest("acq-sim-test.")
+SEED, tmp, check = int(simlib.SEED), T.tmp, T.check
 
 
 def write_config(name, sim_section, spec_sock):
@@ -52,43 +25,8 @@ def write_config(name, sim_section, spec_sock):
 
 
 def start(cfg, tag, extra=()):
-    ports = os.path.join(tmp, f"{tag}.ports.json")
-    ctl = os.path.join(tmp, f"{tag}.ctl")
-    p = subprocess.Popen([SIM, "-c", cfg, "--disable", "laser_arm,detector_arm,laser", "--time-scale", "100",
-                          "--seed", str(SEED), "--ports-file", ports, "--control", ctl, *extra],
-                         stderr=subprocess.PIPE, text=True)
-    procs.append(p)
-    t0 = time.time()
-    while not os.path.exists(ports):
-        if p.poll() is not None:
-            check(False, f"acq-sim started ({p.stderr.read().strip()})")
-        if time.time() - t0 > 10:
-            check(False, "ports file written within 10 s")
-        time.sleep(0.02)
-    with open(ports) as f:
-        return p, json.load(f)
-
-
-class Ctl:
-    def __init__(self, path):
-        self.s = socket.socket(socket.AF_UNIX)
-        self.s.connect(path)
-        self.f = self.s.makefile("rw")
-
-    def __call__(self, line):
-        self.f.write(line + "\n")
-        self.f.flush()
-        return self.f.readline().strip()
-
-
-def recv_exact(s, n):
-    b = b""
-    while len(b) < n:
-        c = s.recv(n - len(b))
-        if not c:
-            return None
-        b += c
-    return b
+    return T.start(["-c", cfg, "--disable", "laser_arm,detector_arm,laser", "--time-scale", "100", "--seed", str(SEED),
+                    "--control", os.path.join(tmp, f"{tag}.ctl"), *extra], os.path.join(tmp, f"{tag}.ports.json"))
 
 
 def recv_msg(s):
@@ -263,4 +201,4 @@ try:
         check(r.returncode == 2 and want in r.stderr, f"bad argument {args}: {r.stderr.strip()}")
     print("all passed")
 finally:
-    cleanup()
+    T.cleanup()

@@ -2,40 +2,16 @@
 """The simulated laser (its line protocol, on its default link: a Unix socket) and the simulated spectrometer
 share one world: counts follow EMISSION and POWER set over the laser's link, and an interlock opened on the control socket darkens the
 spectrum and is reported by the laser. Arm services are left out (positions set with `pose`)."""
-import json
 import os
 import select
-import shutil
 import socket
 import struct
-import subprocess
-import sys
-import tempfile
 import time
 
-BUILD = os.environ.get("ACQ_BUILD", "build")
-SEED = os.environ.get("ACQ_SEED", "1")
-SIM = os.path.join(BUILD, "acq-sim")
-print(f"ACQ_SEED={SEED}")
-if not os.access(SIM, os.X_OK):
-    sys.exit(f"FAIL: {SIM} not built")
-tmp = tempfile.mkdtemp(prefix="acq-sim-laser.")
-proc = None
+from simlib import SEED, Ctl, SimTest
 
-
-def finish(code, msg):
-    print(msg)
-    if proc and proc.poll() is None:
-        proc.terminate()
-        proc.wait(5)
-    shutil.rmtree(tmp, ignore_errors=True)
-    sys.exit(code)
-
-
-def check(cond, what):
-    if not cond:
-        finish(1, "FAIL: " + what)
-    print("ok:", what)
+T = SimTest("acq-sim-laser.")
+check, finish = T.check, T.finish
 
 
 def ask(fd, cmd, timeout=3.0):
@@ -49,64 +25,34 @@ def ask(fd, cmd, timeout=3.0):
     return buf.decode().rstrip("\r\n")
 
 
-def recv_exact(s, n):
-    b = b""
-    while len(b) < n:
-        c = s.recv(n - len(b))
-        if not c:
-            finish(1, "FAIL: spectrometer closed the connection")
-        b += c
-    return b
-
-
 def measure(s, it, avg):
     s.sendall(struct.pack("<IHHII", 0x4D495341, 1, 2, 7, 16) + struct.pack("<dII", it, avg, 0))
-    magic, ver, typ, seq, ln = struct.unpack("<IHHII", recv_exact(s, 16))
-    p = recv_exact(s, ln)
+    magic, ver, typ, seq, ln = struct.unpack("<IHHII", T.recv(s, 16))
+    p = T.recv(s, ln)
     check(typ == 0x82, "spectrum received")
     npix = struct.unpack_from("<I", p, 28)[0]
     counts = struct.unpack_from(f"<{npix}d", p, 48)
     return sum(counts[4:]) / (npix - 4)
 
 
-cfg = os.path.join(tmp, "bench.yaml")
-spec, ctl_path, ports = (os.path.join(tmp, n) for n in ("spec.sock", "ctl.sock", "ports.json"))
+cfg, spec, ctl_path = (T.path(n) for n in ("bench.yaml", "spec.sock", "ctl.sock"))
 with open(cfg, "w") as f:
     f.write(f"devices:\n  spectrometer: {{backend: sim, socket: {spec}}}\n  laser: {{}}\nsim:\n  sample: white\n")
-proc = subprocess.Popen([SIM, "-c", cfg, "--disable", "laser_arm,detector_arm", "--time-scale", "100",
-                         "--seed", SEED, "--ports-file", ports, "--control", ctl_path],
-                        stderr=subprocess.PIPE, text=True)
-end = time.monotonic() + 10
-while not os.path.exists(ports):
-    if proc.poll() is not None:
-        err = proc.stderr.read().strip()
-        finish(1, "FAIL: acq-sim exited: " + err)
-    if time.monotonic() > end:
-        finish(1, "FAIL: no ports file in 10 s")
-    time.sleep(0.02)
-with open(ports) as f:
-    pj = json.load(f)
+proc, pj = T.start(["-c", cfg, "--disable", "laser_arm,detector_arm", "--time-scale", "100", "--seed", SEED,
+                    "--control", ctl_path], T.path("ports.json"))
 check("laser" in pj and "device" in pj["laser"] and "spectrometer" in pj, f"ports file lists laser and spectrometer: {pj}")
 check(pj["laser"]["device"].startswith("unix:"), "the laser's default link is a Unix socket: %s" % pj["laser"])
 laser = socket.socket(socket.AF_UNIX)
 laser.settimeout(10)
 laser.connect(pj["laser"]["device"][5:])
 fd = laser.fileno()
-ctl = socket.socket(socket.AF_UNIX)
-ctl.connect(ctl_path)
-cf = ctl.makefile("rw")
-
-
-def control(line):
-    cf.write(line + "\n")
-    cf.flush()
-    return cf.readline().strip()
+control = Ctl(ctl_path)
 
 
 sp = socket.socket(socket.AF_UNIX)
 sp.settimeout(10)
 sp.connect(spec)
-recv_exact(sp, 16 + 36)  # HELLO
+T.recv(sp, 16 + 36)  # HELLO
 check(control("pose 20 40 150").startswith("ok"), "pose")
 dark = measure(sp, 20, 4)
 check(ask(fd, "POWER 50") == "OK" and ask(fd, "EMISSION ON") == "OK", "laser: POWER 50, EMISSION ON")

@@ -7,30 +7,17 @@ import csv
 import math
 import os
 import re
-import shutil
 import subprocess
-import sys
-import tempfile
 
 import numpy as np
 
-BUILD = os.environ.get("ACQ_BUILD", "build")
-SEED = int(os.environ.get("ACQ_SEED", "1"))
-SIM = os.path.join(BUILD, "acq-sim")
-print(f"ACQ_SEED={SEED}")
-if not os.access(SIM, os.X_OK):
-    sys.exit(f"FAIL: {SIM} not built")
-tmp = tempfile.mkdtemp(prefix="acq-truth-test.")
+import simlib
+from simlib import BUILD, SIM, SimTest
+
+T = SimTest("acq-truth-test.")
+SEED, tmp, check = int(simlib.SEED), T.tmp, T.check
 # every simulator material (sim/material.h): the trend-family ones, then the truths outside that family
 ALL = ("white", "green-paint", "metal", "clear-coat", "rough-backscatter", "cloth-sheen", "sharp-lobe", "narrow-lines")
-
-
-def check(cond, what):
-    if not cond:
-        print("FAIL:", what)
-        shutil.rmtree(tmp, ignore_errors=True)
-        sys.exit(1)
-    print("ok:", what)
 
 
 def run(*args):
@@ -241,4 +228,4 @@ try:
     check(not os.path.exists(os.path.join(tmp, "o.csv")), "no half-written output after an error")
     print("all passed")
 finally:
-    shutil.rmtree(tmp, ignore_errors=True)
+    T.cleanup()

@@ -36,8 +36,7 @@ def refused(d, db, words):
 
 def main():
     have_cli = shutil.which("sqlite3") is not None
-    d = Daemon()
-    try:
+    with Daemon() as d:
         d.start()
         c = d.client()
         check(c.req("version")["schema"] == 4, "schema version over the protocol")
@@ -113,11 +112,6 @@ def main():
         p = subprocess.run([DAEMON, "--check-config", d.conf], capture_output=True, text=True)
         check(p.returncode == 0 and "ok" in p.stdout, "check-config %r" % p.stdout)
         print("ok: schema matches daemon/schema.sql; foreign, corrupt and newer databases refused untouched")
-    except Exception:
-        print(d.logtext()[-3000:])
-        raise
-    finally:
-        d.cleanup()
 
 
 if __name__ == "__main__":

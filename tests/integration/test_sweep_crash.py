@@ -21,8 +21,7 @@ KILLS = 20
 
 def run():
     rng = random.Random(L.SEED)
-    b = L.Bench(scale=20)
-    try:
+    with L.Bench(scale=20) as b:
         b.start_sim()
         b.start_daemon()
         sid = L.start_sweep(b, PLAN, "it-crash")
@@ -86,8 +85,6 @@ def run():
         z = np.array(zs)
         L.say("z-scores after the crashes: %d values, mean %.3f, std %.3f" % (len(z), z.mean(), z.std()))
         assert abs(z.mean()) < 0.3 and 0.6 < z.std() < 1.6, "calibration spoiled by the restarts"
-    finally:
-        b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
 
 
 L.main(run)

@@ -39,8 +39,7 @@ def wait_recon(b, sid, nruns, timeout=240):
 
 def run():
     import numpy as np
-    b = L.Bench(scale=100)  # higher scales leave the drivers a few real ms for bench-time timeouts
-    try:
+    with L.Bench(scale=100) as b:  # higher scales leave the drivers a few real ms for bench-time timeouts
         b.start_sim()
         b.start_daemon()
         sid = L.start_sweep(b, PLAN, "it-full")
@@ -90,8 +89,6 @@ def run():
                                              (sid,))]
             db.close()
             assert any("no reconstruction ran" in m for m in msgs), "no plain word about the missing brdf-recon"
-    finally:
-        b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
 
 
 L.main(run)

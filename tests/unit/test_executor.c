@@ -522,6 +522,29 @@ static struct store *open_store(void)
 	return st;
 }
 
+/* A started sweep: a new sweep of the plan in a fresh store and its executor, started at point 0 at time 0 with
+ * cfg_for_test's configuration (the pause after the reference as asked); the fake's state F is the caller's to set
+ * first. Returns the executor (also in r->x). */
+struct run {
+	struct store *st;
+	int64_t sweep;
+	struct ex_cfg cfg;
+	struct ex *x;
+};
+
+static struct ex *start_sweep(struct run *r, bool pause_after_reference)
+{
+	struct acq_err err = { 0 };
+	r->st = open_store();
+	r->sweep = new_sweep(r->st);
+	cfg_for_test(&r->cfg);
+	r->cfg.pause_after_reference = pause_after_reference;
+	r->x = ex_new(&r->cfg, &fake_ops, NULL, &sink, r->st, r->sweep, 0, &geom, plan, &err);
+	assert_non_null(r->x);
+	assert_int_equal(ex_start(r->x, 0, false, 0, &err), 0);
+	return r->x;
+}
+
 static long long q1(sqlite3 *db, const char *sql, int64_t sweep)
 {
 	sqlite3_stmt *s = NULL;
@@ -616,16 +639,10 @@ static int teardown(void **state)
  * do), with an alarm on the detector arm reset and read again first. */
 static void full_sweep(bool deferred)
 {
-	struct store *st = open_store();
-	int64_t sweep = new_sweep(st);
-	struct ex_cfg cfg;
-	cfg_for_test(&cfg);
-	struct acq_err err = { 0 };
 	F.deferred = deferred;
 	F.alarm[1] = deferred;
-	struct ex *x = ex_new(&cfg, &fake_ops, NULL, &sink, st, sweep, 0, &geom, plan, &err);
-	assert_non_null(x);
-	assert_int_equal(ex_start(x, 0, false, 0, &err), 0);
+	struct run r;
+	struct ex *x = start_sweep(&r, true);
 	double t = drive(x, 0, 1e5, true);
 	print_message("  finished at t=%.1f s: %s %s\n", t, ex_state_name(ex_state(x)), ex_reason(x));
 	assert_int_equal(ex_state(x), EX_COMPLETED);
@@ -647,8 +664,8 @@ static void full_sweep(bool deferred)
 	assert_int_equal(count_events("reference"), 1);
 	assert_int_equal(count_events("complete"), 1);
 	ex_free(x, t);
-	store_close(st);
-	check_db(sweep, true);
+	store_close(r.st);
+	check_db(r.sweep, true);
 }
 
 static void test_full_sweep(void **state)
@@ -667,15 +684,10 @@ static void test_full_sweep_deferred_reads(void **state)
 static void test_pause_resume_abort(void **state)
 {
 	(void)state;
-	struct store *st = open_store();
-	int64_t sweep = new_sweep(st);
-	struct ex_cfg cfg;
-	cfg_for_test(&cfg);
-	cfg.pause_after_reference = false;
 	F.sample = S_PAINT; /* the reference is then wrong, which does not matter here */
+	struct run r;
+	struct ex *x = start_sweep(&r, false);
 	struct acq_err err = { 0 };
-	struct ex *x = ex_new(&cfg, &fake_ops, NULL, &sink, st, sweep, 0, &geom, plan, &err);
-	assert_int_equal(ex_start(x, 0, false, 0, &err), 0);
 	double t = 0;
 	while (ex_current_step(x) < 3) {
 		F.now = t;
@@ -711,12 +723,12 @@ static void test_pause_resume_abort(void **state)
 	assert_int_equal(err.code, ACQ_E_STATE);
 	assert_int_equal(count_events("abort"), 1);
 	ex_free(x, t);
-	store_close(st);
+	store_close(r.st);
 	sqlite3 *db = NULL;
 	sqlite3_open(dbpath, &db);
 	sqlite3_stmt *s = NULL;
 	sqlite3_prepare_v2(db, "SELECT state FROM sweeps WHERE id = ?", -1, &s, NULL);
-	sqlite3_bind_int64(s, 1, sweep);
+	sqlite3_bind_int64(s, 1, r.sweep);
 	assert_int_equal(sqlite3_step(s), SQLITE_ROW);
 	assert_string_equal((const char *)sqlite3_column_text(s, 0), "aborted");
 	sqlite3_finalize(s);
@@ -728,13 +740,9 @@ static void test_pause_resume_abort(void **state)
 static void test_faults(void **state)
 {
 	(void)state;
-	struct store *st = open_store();
-	int64_t sweep = new_sweep(st);
-	struct ex_cfg cfg;
-	cfg_for_test(&cfg);
+	struct run r;
+	struct ex *x = start_sweep(&r, true);
 	struct acq_err err = { 0 };
-	struct ex *x = ex_new(&cfg, &fake_ops, NULL, &sink, st, sweep, 0, &geom, plan, &err);
-	assert_int_equal(ex_start(x, 0, false, 0, &err), 0);
 	double t = 0;
 	int injected = 0;
 	bool swapped = false;
@@ -799,8 +807,8 @@ static void test_faults(void **state)
 	assert_true(count_events("fault") >= 4 && count_events("recovered") >= 4);
 	assert_false(F.emission);
 	ex_free(x, t);
-	store_close(st);
-	check_db(sweep, true);
+	store_close(r.st);
+	check_db(r.sweep, true);
 }
 
 /* A crash (the executor vanishes without cleaning up) in the middle, then a new executor resumes at the
@@ -833,15 +841,9 @@ static void test_alarm_backs_off(void **state)
 	assert_int_equal(plan_make(spec, &geom, &near, &perr), 0);
 	plan_spec_free(spec);
 	plan = near;
-	struct store *st = open_store();
-	int64_t sweep = new_sweep(st);
-	struct ex_cfg cfg;
-	cfg_for_test(&cfg);
-	struct acq_err err = { 0 };
 	F.squeeze = true;
-	struct ex *x = ex_new(&cfg, &fake_ops, NULL, &sink, st, sweep, 0, &geom, plan, &err);
-	assert_non_null(x);
-	assert_int_equal(ex_start(x, 0, false, 0, &err), 0);
+	struct run r;
+	struct ex *x = start_sweep(&r, true);
 	double t = drive(x, 0, 1e5, true);
 	print_message("  finished at t=%.1f s: %s %s\n", t, ex_state_name(ex_state(x)), ex_reason(x));
 	assert_true(F.squeezed);
@@ -859,8 +861,8 @@ static void test_alarm_backs_off(void **state)
 	assert_int_equal(F.laser_on_during_motion, 0);
 	assert_true(count_events("fault") >= 1 && count_events("recovered") >= 1);
 	ex_free(x, t);
-	store_close(st);
-	check_db(sweep, true);
+	store_close(r.st);
+	check_db(r.sweep, true);
 	plan = small;
 	plan_result_free(near);
 }
@@ -868,13 +870,9 @@ static void test_alarm_backs_off(void **state)
 static void test_crash_resume(void **state)
 {
 	(void)state;
-	struct store *st = open_store();
-	int64_t sweep = new_sweep(st);
-	struct ex_cfg cfg;
-	cfg_for_test(&cfg);
+	struct run r;
+	struct ex *x = start_sweep(&r, true);
 	struct acq_err err = { 0 };
-	struct ex *x = ex_new(&cfg, &fake_ops, NULL, &sink, st, sweep, 0, &geom, plan, &err);
-	assert_int_equal(ex_start(x, 0, false, 0, &err), 0);
 	double t = 0;
 	bool swapped = false;
 	int crash_at = (int)(plan->n_steps / 2);
@@ -892,28 +890,28 @@ static void test_crash_resume(void **state)
 	/* crash: no cleanup (memory released without touching devices or the store) */
 	x->state = EX_IDLE;
 	ex_free(x, t);
-	store_close(st);
+	store_close(r.st);
 	F.emission = false; /* a real laser driver's watchdog / the restart switches it off */
 	F.homed[2] = false; /* and the controller lost its reference meanwhile */
 
-	st = open_store();
+	r.st = open_store();
 	int64_t found = 0;
-	assert_int_equal(store_sweep_interrupted(st, &found, &err), 0);
-	assert_int_equal(found, sweep);
+	assert_int_equal(store_sweep_interrupted(r.st, &found, &err), 0);
+	assert_int_equal(found, r.sweep);
 	int oi = -1;
 	int64_t pid = 0;
-	assert_int_equal(store_sweep_next_point(st, sweep, &oi, &pid, &err), 0);
+	assert_int_equal(store_sweep_next_point(r.st, r.sweep, &oi, &pid, &err), 0);
 	assert_int_equal(oi, crash_at);
-	assert_int_equal(store_point_discard_partial(st, pid, &err), 0);
-	x = ex_new(&cfg, &fake_ops, NULL, &sink, st, sweep, 0, &geom, plan, &err);
+	assert_int_equal(store_point_discard_partial(r.st, pid, &err), 0);
+	x = ex_new(&r.cfg, &fake_ops, NULL, &sink, r.st, r.sweep, 0, &geom, plan, &err);
 	assert_int_equal(ex_start(x, oi, true, t, &err), 0);
 	t = drive(x, t, t + 1e5, false);
 	assert_int_equal(ex_state(x), EX_COMPLETED);
 	assert_int_equal(count_events("reference"), 1); /* not measured again */
 	assert_true(F.homed[2]);
 	ex_free(x, t);
-	store_close(st);
-	check_db(sweep, true);
+	store_close(r.st);
+	check_db(r.sweep, true);
 }
 
 int main(void)

@@ -113,15 +113,26 @@ static void serve_sim_on(struct served *sv, bool pty)
 	sv->cfg = make_cfg(sv->path, 500);
 }
 
-static void serve_sim(struct served *sv)
-{
-	serve_sim_on(sv, false);
-}
-
 static void stop_child(pid_t pid)
 {
 	kill(pid, SIGKILL);
 	waitpid(pid, NULL, 0);
+}
+
+/* serve_sim_on, then the driver opened on the served line; the test fails if it does not open. */
+static struct laser *open_served_on(struct served *sv, bool pty)
+{
+	serve_sim_on(sv, pty);
+	struct acq_err err = { 0 };
+	struct laser *l = NULL;
+	if (laser_open(sv->cfg, &l, &err))
+		fail_msg("%s", err.msg);
+	return l;
+}
+
+static struct laser *open_served(struct served *sv)
+{
+	return open_served_on(sv, false);
 }
 
 /* The driver against the simulator on both links (the default socket and sim.laser.link: pty). */
@@ -130,11 +141,8 @@ static void test_sim_identity_emission_power(void **state)
 	(void)state;
 	for (int pty = 0; pty < 2; pty++) {
 		struct served sv;
-		serve_sim_on(&sv, pty);
+		struct laser *l = open_served_on(&sv, pty);
 		struct acq_err err = { 0 };
-		struct laser *l = NULL;
-		if (laser_open(sv.cfg, &l, &err))
-			fail_msg("%s", err.msg);
 		assert_string_equal(laser_identity(l)->model, "SIM-SC450");
 		assert_string_equal(laser_identity(l)->serial, "SIM0001");
 		assert_int_equal(laser_set_power(l, 42.5, &err), 0);
@@ -250,11 +258,8 @@ static void test_sim_interlock_and_fault(void **state)
 {
 	(void)state;
 	struct served sv;
-	serve_sim(&sv);
+	struct laser *l = open_served(&sv);
 	struct acq_err err = { 0 };
-	struct laser *l = NULL;
-	if (laser_open(sv.cfg, &l, &err))
-		fail_msg("%s", err.msg);
 	assert_int_equal(laser_set_emission(l, true, &err), 0);
 	assert_true(sh->world.laser_emission);
 	sh->world.faults.laser_interlock_open = true;

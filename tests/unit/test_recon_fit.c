@@ -149,6 +149,23 @@ static void test_properties_at_random_points(void **state)
 	check_properties(M, 3000);
 }
 
+/* The model of s fitted with the default options but a fixed kernel shape, and the smoothing and transform when
+ * given (NAN, -1: the default's); the fit must succeed. */
+static struct recon_model *fit_fixed(const struct recon_samples *s, double shape, double smoothing, int transform)
+{
+	struct recon_fit_opts o;
+	recon_fit_opts_default(&o);
+	o.shape = shape;
+	if (!isnan(smoothing))
+		o.smoothing = smoothing;
+	if (transform >= 0)
+		o.transform = transform;
+	struct recon_model *m = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(recon_fit(s, &o, &m, &err), 0);
+	return m;
+}
+
 /* Data scaled ×4 (albedo up to ~2.5): the fitted model must still conserve energy, and stay close to 1 at
  * the worst incidence (the factor scales, it does not zero the BRDF). */
 static void test_energy_scaling_of_unphysical_input(void **state)
@@ -156,12 +173,8 @@ static void test_energy_scaling_of_unphysical_input(void **state)
 	(void)state;
 	struct recon_samples s;
 	rt_samples(&s, 2, 0.01, 4.0);
-	struct recon_model *m;
+	struct recon_model *m = fit_fixed(&s, 2.6, NAN, -1);
 	struct acq_err err = { 0 };
-	struct recon_fit_opts o;
-	recon_fit_opts_default(&o);
-	o.shape = 2.6;
-	assert_int_equal(recon_fit(&s, &o, &m, &err), 0);
 	double raw[2];
 	assert_int_equal(recon_albedo(m, 0.3, 32, 48, 0, raw, &err), 0);
 	printf("unscaled albedo at 17°: %.3f %.3f\n", raw[0], raw[1]);
@@ -198,13 +211,7 @@ static void test_nonnegative_dark_noisy(void **state)
 	}
 	assert_true(negatives > 50);
 	for (int t = 0; t < RECON_T__COUNT; t++) {
-		struct recon_model *m;
-		struct acq_err err = { 0 };
-		struct recon_fit_opts o;
-		recon_fit_opts_default(&o);
-		o.transform = t;
-		o.shape = 1.8;
-		assert_int_equal(recon_fit(&s, &o, &m, &err), 0);
+		struct recon_model *m = fit_fixed(&s, 1.8, NAN, t);
 		check_properties(m, 500);
 		recon_model_free(m);
 	}
@@ -224,14 +231,8 @@ static void test_lambertian_dhr_exact(void **state)
 			s.sig[k * 3 + l] = 0.01 * rho[l] / M_PI;
 		}
 	for (int t = 0; t < RECON_T__COUNT; t++) {
-		struct recon_model *m;
+		struct recon_model *m = fit_fixed(&s, 1.8, 1e-3, t);
 		struct acq_err err = { 0 };
-		struct recon_fit_opts o;
-		recon_fit_opts_default(&o);
-		o.transform = t;
-		o.shape = 1.8;
-		o.smoothing = 1e-3;
-		assert_int_equal(recon_fit(&s, &o, &m, &err), 0);
 		double th[4] = { 0, 8 * M_PI / 180, 60 * M_PI / 180, M_PI / 2 }, d[12], sg[12];
 		assert_int_equal(recon_dhr(m, 4, th, 8, 1, d, sg, NULL, NULL, &err), 0);
 		for (int i = 0; i < 12; i++) {
@@ -254,13 +255,8 @@ static void test_dhr_uncertainty_calibrated(void **state)
 	for (int k = 0; k < NSET; k++) {
 		struct recon_samples s;
 		rt_samples(&s, 1, 0.02, 1.0);
-		struct recon_model *m;
+		struct recon_model *m = fit_fixed(&s, 1.8, 1e-3, -1);
 		struct acq_err err = { 0 };
-		struct recon_fit_opts o;
-		recon_fit_opts_default(&o);
-		o.shape = 1.8;
-		o.smoothing = 1e-3;
-		assert_int_equal(recon_fit(&s, &o, &m, &err), 0);
 		double d, sg;
 		double sgt;
 		assert_int_equal(recon_dhr_ex(m, 1, &th, k == 0 ? 64 : 0, 11, &d, &sgt, &sg, NULL, NULL, NULL, NULL, &err), 0);

@@ -101,6 +101,35 @@ static double brute_var(const struct sel *s, const double *A, const double *P, s
 	return v;
 }
 
+/* A selection state with what it points to: struct sel keeps pointers to the target, the options and the result,
+ * so the four live together. fix_spec parses the target and takes the default options (a test then changes what it
+ * needs); fix_sel builds the state on the candidates; fix_free undoes both. */
+struct fix {
+	struct select_target t;
+	struct select_opts o;
+	struct select_result r;
+	struct sel s;
+	struct acq_err e;
+};
+
+static void fix_spec(struct fix *f, const char *spec)
+{
+	memset(f, 0, sizeof *f);
+	assert_int_equal(select_target_parse(spec, &f->t, &f->e), 0);
+	select_opts_default(&f->o);
+}
+
+static void fix_sel(struct fix *f, const struct recon_model *m, size_t nc, const double *ang, const double *cost)
+{
+	assert_int_equal(sel_init(&f->s, m, nc, ang, cost, &f->t, &f->o, &f->r, &f->e), 0);
+}
+
+static void fix_free(struct fix *f)
+{
+	sel_free(&f->s);
+	select_result_free(&f->r);
+}
+
 static void test_rank_one_lnf(void **state)
 {
 	(void)state;
@@ -109,37 +138,33 @@ static void test_rank_one_lnf(void **state)
 	size_t nc = 60;
 	double ang[60 * 4], cost[60];
 	random_cands(nc, ang, cost);
-	struct select_target t;
-	struct acq_err e = { 0 };
-	assert_int_equal(select_target_parse("lnf", &t, &e), 0);
-	struct select_opts o;
-	select_opts_default(&o);
-	o.batch = 3;
-	struct select_result r = { 0 };
-	struct sel s;
-	assert_int_equal(sel_init(&s, m, nc, ang, cost, &t, &o, &r, &e), 0);
+	struct fix f;
+	fix_spec(&f, "lnf");
+	f.o.batch = 3;
+	fix_sel(&f, m, nc, ang, cost);
+	struct sel *s = &f.s;
 	/* the amplitude² of each grid point: v / (prior posterior variance by brute force) */
-	size_t F = s.F, picks[3] = { 0, 0, 0 };
-	double *amp2 = malloc(F * sizeof *amp2), *c6 = malloc(F * 6 * sizeof *c6), *P, *A = extended_factor(&s, picks, 0, &P);
+	size_t F = s->F, picks[3] = { 0, 0, 0 };
+	double *amp2 = malloc(F * sizeof *amp2), *c6 = malloc(F * 6 * sizeof *c6), *P, *A = extended_factor(s, picks, 0, &P);
 	double one = 1;
 	for (size_t x = 0; x < F; x++) {
-		const double *a = s.xang + 4 * x;
+		const double *a = s->xang + 4 * x;
 		rbf_canon(a[0], a[1], a[2], a[3], c6 + 6 * x);
-		double p0 = brute_var(&s, A, P, s.n, 1, c6 + 6 * x, &one, 1);
-		amp2[x] = s.v[x] / p0;
-		assert_true(fabs(s.v[x] - amp2[x] * p0) <= 1e-12 * s.v[x]);
+		double p0 = brute_var(s, A, P, s->n, 1, c6 + 6 * x, &one, 1);
+		amp2[x] = s->v[x] / p0;
+		assert_true(fabs(s->v[x] - amp2[x] * p0) <= 1e-12 * s->v[x]);
 	}
 	free(A);
 	free(P);
 	double worst = 0;
 	for (size_t k = 0; k < 3; k++) {
-		picks[k] = (k * 17 + 5) % s.J;
-		sel_update(&s, picks[k], k);
-		A = extended_factor(&s, picks, k + 1, &P);
+		picks[k] = (k * 17 + 5) % s->J;
+		sel_update(s, picks[k], k);
+		A = extended_factor(s, picks, k + 1, &P);
 		for (size_t x = 0; x < F; x++) {
-			double bf = amp2[x] * brute_var(&s, A, P, s.n + k + 1, 1, c6 + 6 * x, &one, 1);
+			double bf = amp2[x] * brute_var(s, A, P, s->n + k + 1, 1, c6 + 6 * x, &one, 1);
 			double prior = amp2[x] * kern(m, c6 + 6 * x, c6 + 6 * x);
-			worst = fmax(worst, fabs(s.v[x] - bf) / prior);
+			worst = fmax(worst, fabs(s->v[x] - bf) / prior);
 		}
 		free(A);
 		free(P);
@@ -148,8 +173,7 @@ static void test_rank_one_lnf(void **state)
 	assert_true(worst <= 1e-9);
 	free(amp2);
 	free(c6);
-	sel_free(&s);
-	select_result_free(&r);
+	fix_free(&f);
 	recon_model_free(m);
 }
 
@@ -161,28 +185,24 @@ static void test_rank_one_dhr(void **state)
 	size_t nc = 40;
 	double ang[40 * 4], cost[40];
 	random_cands(nc, ang, cost);
-	struct select_target t;
-	struct acq_err e = { 0 };
-	assert_int_equal(select_target_parse("dhr:30", &t, &e), 0);
-	struct select_opts o;
-	select_opts_default(&o);
-	o.batch = 2;
-	struct select_result r = { 0 };
-	struct sel s;
-	assert_int_equal(sel_init(&s, m, nc, ang, cost, &t, &o, &r, &e), 0);
-	size_t Q = (size_t)SEL_NMU * SEL_NPHI, Lc = s.Lc, n = s.n;
+	struct fix f;
+	fix_spec(&f, "dhr:30");
+	f.o.batch = 2;
+	fix_sel(&f, m, nc, ang, cost);
+	struct sel *s = &f.s;
+	size_t Q = (size_t)SEL_NMU * SEL_NPHI, Lc = s->Lc, n = s->n;
 	double *c6 = malloc(Q * 6 * sizeof *c6), *wt = malloc(Q * sizeof *wt), *KQn = malloc(Q * n * sizeof *KQn);
 	double *Y = malloc(Q * Lc * sizeof *Y), *Wc = malloc(Lc * n * sizeof *Wc), *C = malloc(Q * Lc * sizeof *C);
-	assert_int_equal(sel_dhr_coef(&s, 30 * M_PI / 180, c6, wt, KQn, Y, Wc, C, &e), 0);
+	assert_int_equal(sel_dhr_coef(s, 30 * M_PI / 180, c6, wt, KQn, Y, Wc, C, &f.e), 0);
 	size_t picks[2] = { 3, 11 }, np = 0;
 	double worst = 0;
 	for (;;) {
-		double *P, *A = extended_factor(&s, picks, np, &P);
+		double *P, *A = extended_factor(s, picks, np, &P);
 		for (size_t c = 0; c < Lc; c++) {
-			double bf = brute_var(&s, A, P, n + np, Q, c6, C + c, Lc);
-			double prior = brute_var(&s, A, P, 0, Q, c6, C + c, Lc);
-			double d = fabs(s.v[c] - bf) / prior;
-			printf("  %zu picks, channel %zu: tracked %.10g, refactorised %.10g (prior %.4g)\n", np, s.chan[c], s.v[c],
+			double bf = brute_var(s, A, P, n + np, Q, c6, C + c, Lc);
+			double prior = brute_var(s, A, P, 0, Q, c6, C + c, Lc);
+			double d = fabs(s->v[c] - bf) / prior;
+			printf("  %zu picks, channel %zu: tracked %.10g, refactorised %.10g (prior %.4g)\n", np, s->chan[c], s->v[c],
 			       bf, prior);
 			worst = fmax(worst, d);
 		}
@@ -190,7 +210,7 @@ static void test_rank_one_dhr(void **state)
 		free(P);
 		if (np == 2)
 			break;
-		sel_update(&s, picks[np], np);
+		sel_update(s, picks[np], np);
 		np++;
 	}
 	printf("DHR functional: largest |tracked − refactorisation| / prior variance = %.3g (0 picks: dhr.c's σ_model²)\n",
@@ -202,8 +222,7 @@ static void test_rank_one_dhr(void **state)
 	free(Y);
 	free(Wc);
 	free(C);
-	sel_free(&s);
-	select_result_free(&r);
+	fix_free(&f);
 	recon_model_free(m);
 }
 
@@ -211,34 +230,27 @@ static void test_rank_one_dhr(void **state)
 static void gains(const struct recon_model *m, size_t nc, const double *ang, const double *cost, const char *spec,
 		  double *g, size_t *nunique)
 {
-	struct select_target t;
-	struct acq_err e = { 0 };
-	assert_int_equal(select_target_parse(spec, &t, &e), 0);
-	struct select_opts o;
-	select_opts_default(&o);
-	struct select_result r = { 0 };
-	struct sel s;
-	assert_int_equal(sel_init(&s, m, nc, ang, cost, &t, &o, &r, &e), 0);
-	double E = sel_excess(&s, SIZE_MAX, NULL);
+	struct fix f;
+	fix_spec(&f, spec);
+	fix_sel(&f, m, nc, ang, cost);
+	struct sel *s = &f.s;
+	double E = sel_excess(s, SIZE_MAX, NULL);
 	for (size_t j = 0; j < nc; j++)
 		g[j] = NAN;
-	for (size_t j = 0; j < s.J; j++)
-		g[s.rep[j]] = E - sel_excess(&s, j, NULL);
+	for (size_t j = 0; j < s->J; j++)
+		g[s->rep[j]] = E - sel_excess(s, j, NULL);
 	if (nunique)
-		*nunique = s.J;
-	sel_free(&s);
+		*nunique = s->J;
+	fix_free(&f);
 }
 
 static size_t pick1(const struct recon_model *m, size_t nc, const double *ang, const double *cost, const char *spec,
 		    size_t batch, struct select_result *r)
 {
-	struct select_target t;
-	struct acq_err e = { 0 };
-	assert_int_equal(select_target_parse(spec, &t, &e), 0);
-	struct select_opts o;
-	select_opts_default(&o);
-	o.batch = batch;
-	assert_int_equal(select_batch(m, nc, ang, cost, &t, &o, r, &e), 0);
+	struct fix f;
+	fix_spec(&f, spec);
+	f.o.batch = batch;
+	assert_int_equal(select_batch(m, nc, ang, cost, &f.t, &f.o, r, &f.e), 0);
 	return r->npicks ? r->picks[0].index : SIZE_MAX;
 }
 
@@ -287,19 +299,15 @@ static void test_known_information(void **state)
 		a2[5] += 0.5 * M_PI / 180; /* half a degree away: a distinct candidate */
 		gap_pair(m, a2 + 8);
 		gains(m, 3, a2, c2, specs[sp], g2, NULL);
-		struct select_target t;
-		struct acq_err e = { 0 };
-		assert_int_equal(select_target_parse(specs[sp], &t, &e), 0);
-		struct select_opts o;
-		select_opts_default(&o);
-		struct sel st;
-		assert_int_equal(sel_init(&st, m, 3, a2, c2, &t, &o, &r, &e), 0);
-		assert_int_equal(st.J, 3);
-		sel_update(&st, 0, 0);
-		double E = sel_excess(&st, SIZE_MAX, NULL), after = E - sel_excess(&st, 1, NULL);
+		struct fix f;
+		fix_spec(&f, specs[sp]);
+		fix_sel(&f, m, 3, a2, c2);
+		assert_int_equal(f.s.J, 3);
+		sel_update(&f.s, 0, 0);
+		double E = sel_excess(&f.s, SIZE_MAX, NULL), after = E - sel_excess(&f.s, 1, NULL);
 		printf("  neighbour of a pick: gain %.3g before, %.3g after the pick\n", g2[1], after);
 		assert_true(after >= 0 && after < 0.15 * g2[1]); /* measured ≤ 0.063 over 30 seeds; a missing update gives ~1 */
-		sel_free(&st);
+		fix_free(&f);
 	}
 	recon_model_free(m);
 }
@@ -466,32 +474,30 @@ static void test_rgb_target(void **state)
 		size_t nc = 40;
 		double ang[40 * 4], cost[40];
 		random_cands(nc, ang, cost);
-		struct select_target t;
-		struct acq_err e = { 0 };
-		assert_int_equal(select_target_parse("rgb", &t, &e), 0);
-		struct select_opts o;
-		select_opts_default(&o);
-		o.batch = 2;
-		struct select_result r = { 0 };
-		struct sel s;
-		assert_int_equal(sel_init(&s, m, nc, ang, cost, &t, &o, &r, &e), 0);
-		size_t F = s.F, picks[2] = { 3, 11 };
+		struct fix fx;
+		fix_spec(&fx, "rgb");
+		fx.o.batch = 2;
+		fix_sel(&fx, m, nc, ang, cost);
+		struct sel *s = &fx.s;
+		struct select_result *r = &fx.r;
+		struct acq_err *e = &fx.e;
+		size_t F = s->F, picks[2] = { 3, 11 };
 		assert_true(F > 500);
 		double *W = malloc(3 * L * sizeof *W), *f = malloc(F * L * sizeof *f), *amp2 = malloc(F * sizeof *amp2);
-		double *c6 = malloc(F * 6 * sizeof *c6), *P, *A = extended_factor(&s, picks, 0, &P), one = 1;
+		double *c6 = malloc(F * 6 * sizeof *c6), *P, *A = extended_factor(s, picks, 0, &P), one = 1;
 		struct colour_opts co;
 		colour_opts_brdf(&co);
-		assert_int_equal(colour_weights(&co, m->wl, L, W, &e), 0);
-		assert_int_equal(recon_eval(m, F, s.xang, f, &e), 0);
+		assert_int_equal(colour_weights(&co, m->wl, L, W, e), 0);
+		assert_int_equal(recon_eval(m, F, s->xang, f, e), 0);
 		double direct = 0, truth_err = 0, wsum = 0, indep = 0;
 		for (size_t x = 0; x < F; x++) {
-			const double *a = s.xang + 4 * x;
+			const double *a = s->xang + 4 * x;
 			rbf_canon(a[0], a[1], a[2], a[3], c6 + 6 * x);
 			double u = recon_unseen(recon_nearest_centre(m, c6 + 6 * x, NULL)), ac[3] = { 0, 0, 0 }, ai = 0;
 			double rm[3] = { 0, 0, 0 }, rtr[3] = { 0, 0, 0 };
 			for (size_t l = 0; l < L; l++) {
 				double sc = recon_energy_scale(m, a[0], a[2], l);
-				double d = (f[x * L + l] + sc * m->eps[l]) * sqrt(s.alpha[l] + u * RECON_PRIOR_ALPHA);
+				double d = (f[x * L + l] + sc * m->eps[l]) * sqrt(s->alpha[l] + u * RECON_PRIOR_ALPHA);
 				double tr = rt_truth(a, m->wl[l], 1.0);
 				for (int c = 0; c < 3; c++) {
 					ac[c] += W[c * L + l] * d;
@@ -500,13 +506,13 @@ static void test_rgb_target(void **state)
 					rtr[c] += W[c * L + l] * tr;
 				}
 			}
-			amp2[x] = s.xw[x] * (ac[0] * ac[0] + ac[1] * ac[1] + ac[2] * ac[2]);
-			double p0 = brute_var(&s, A, P, s.n, 1, c6 + 6 * x, &one, 1);
+			amp2[x] = s->xw[x] * (ac[0] * ac[0] + ac[1] * ac[1] + ac[2] * ac[2]);
+			double p0 = brute_var(s, A, P, s->n, 1, c6 + 6 * x, &one, 1);
 			direct += amp2[x] * p0;
-			indep += s.xw[x] * ai * p0;
+			indep += s->xw[x] * ai * p0;
 			for (int c = 0; c < 3; c++)
-				truth_err += s.xw[x] * (rm[c] - rtr[c]) * (rm[c] - rtr[c]);
-			wsum += s.xw[x];
+				truth_err += s->xw[x] * (rm[c] - rtr[c]) * (rm[c] - rtr[c]);
+			wsum += s->xw[x];
 		}
 		free(A);
 		free(P);
@@ -514,21 +520,21 @@ static void test_rgb_target(void **state)
 		truth_err = sqrt(truth_err);
 		assert_true(fabs(wsum - 1) <= 1e-12);
 		printf("rgb target, %dx%dx%d grid: value %.6g, direct %.6g, actual table error %.6g (ratio %.3f; with "
-		       "independent wavelengths the value would be %.6g)\n", grids[gi][0], grids[gi][1], grids[gi][2], r.value,
-		       direct, truth_err, truth_err / r.value, sqrt(indep));
-		assert_true(fabs(r.value - direct) <= 1e-9 * direct);
-		assert_true(truth_err >= r.value / 3 && truth_err <= 3 * r.value);
-		assert_true(r.value < prev); /* more data, a smaller σ */
-		prev = r.value;
+		       "independent wavelengths the value would be %.6g)\n", grids[gi][0], grids[gi][1], grids[gi][2], r->value,
+		       direct, truth_err, truth_err / r->value, sqrt(indep));
+		assert_true(fabs(r->value - direct) <= 1e-9 * direct);
+		assert_true(truth_err >= r->value / 3 && truth_err <= 3 * r->value);
+		assert_true(r->value < prev); /* more data, a smaller σ */
+		prev = r->value;
 		/* the rank-one update: after two picks, the sum over nodes equals the refactorised system's */
 		double worst = 0;
 		for (size_t k = 0; k < 2; k++) {
-			sel_update(&s, picks[k], k);
-			A = extended_factor(&s, picks, k + 1, &P);
+			sel_update(s, picks[k], k);
+			A = extended_factor(s, picks, k + 1, &P);
 			double sum = 0, bf = 0;
 			for (size_t x = 0; x < F; x++) {
-				sum += s.v[x];
-				bf += amp2[x] * brute_var(&s, A, P, s.n + k + 1, 1, c6 + 6 * x, &one, 1);
+				sum += s->v[x];
+				bf += amp2[x] * brute_var(s, A, P, s->n + k + 1, 1, c6 + 6 * x, &one, 1);
 			}
 			worst = fmax(worst, fabs(sum - bf) / (direct * direct));
 			free(A);
@@ -539,8 +545,7 @@ static void test_rgb_target(void **state)
 		free(f);
 		free(amp2);
 		free(c6);
-		sel_free(&s);
-		select_result_free(&r);
+		fix_free(&fx);
 		recon_model_free(m);
 	}
 }

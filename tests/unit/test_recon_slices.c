@@ -12,14 +12,22 @@
 
 #include "recon/slices.h"
 
+/* A model holding only its wavelengths: five channels at 400, 500, …, 800 nm (in wl, 5 entries). */
+static void five_channels(struct recon_model *m, double *wl)
+{
+	for (int l = 0; l < 5; l++)
+		wl[l] = 400 + 100 * l;
+	memset(m, 0, sizeof *m);
+	m->wl = wl;
+	m->nwl = 5;
+}
+
 static void test_one_wavelength(void **state)
 {
 	(void)state;
-	double wl[5] = { 400, 500, 600, 700, 800 }, w[5];
+	double wl[5], w[5];
 	struct recon_model m;
-	memset(&m, 0, sizeof m);
-	m.wl = wl;
-	m.nwl = 5;
+	five_channels(&m, wl);
 	assert_int_equal(slices_weights(&m, 550, 550, w, NULL), 0);
 	assert_true(fabs(w[1] - 0.5) < 1e-12 && fabs(w[2] - 0.5) < 1e-12 && w[0] == 0 && w[3] == 0);
 	assert_int_equal(slices_weights(&m, 800, 800, w, NULL), 0); /* the last channel itself */
@@ -35,11 +43,9 @@ static void test_one_wavelength(void **state)
 static void test_band(void **state)
 {
 	(void)state;
-	double wl[5] = { 400, 500, 600, 700, 800 }, w[5];
+	double wl[5], w[5];
 	struct recon_model m;
-	memset(&m, 0, sizeof m);
-	m.wl = wl;
-	m.nwl = 5;
+	five_channels(&m, wl);
 	/* 450..650: channel 500 covers 450..550 (100), 600 covers 550..650 (100) */
 	assert_int_equal(slices_weights(&m, 450, 650, w, NULL), 0);
 	assert_true(fabs(w[1] - 0.5) < 1e-12 && fabs(w[2] - 0.5) < 1e-12 && w[0] == 0 && w[3] == 0);

@@ -18,39 +18,13 @@
 #include "daemon/store.h"
 #include "recon/csvio.h"
 #include "recon/recon.h"
+#include "tests/unit/storefix.h"
+#define UT_TMPDIR_NAME "test_store"
 #include "tests/unit/tmpdir.h"
-
-static char dir[256];
-
-static int setup(void **state)
-{
-	(void)state;
-	return ut_tmpdir_make(dir, sizeof dir, "test_store");
-}
-
-static int teardown(void **state)
-{
-	(void)state;
-	return ut_tmpdir_remove(dir);
-}
 
 static void path_of(char *out, size_t cap, const char *name)
 {
-	snprintf(out, cap, "%s/%s", dir, name);
-}
-
-static int64_t mk_sweep(struct store *st, int npts)
-{
-	struct store_point_new pts[16];
-	for (int i = 0; i < npts; i++)
-		pts[i] = (struct store_point_new){ i, 10.0 * i, 0, 20.0 + i, 180 };
-	struct store_sweep_new sw = { .name = "t", .plan_text = "plan: 1", .config_snapshot = "bench: {}",
-				      .software_version = "test", .created_at = 1000 };
-	int64_t id = 0;
-	struct acq_err err = { 0 };
-	assert_int_equal(store_sweep_create(st, &sw, pts, npts, &id, &err), 0);
-	assert_true(id > 0);
-	return id;
+	snprintf(out, cap, "%s/%s", ut_dir, name);
 }
 
 static void test_sweep_points_spectra(void **state)
@@ -62,7 +36,7 @@ static void test_sweep_points_spectra(void **state)
 	struct acq_err err = { 0 };
 	assert_int_equal(store_open(p, &st, &err), 0);
 	assert_int_equal(store_schema_version(st), STORE_SCHEMA_VERSION);
-	int64_t sw = mk_sweep(st, 3);
+	int64_t sw = ut_sweep_create(st, 3, "t", "plan: 1");
 	assert_int_equal(store_sweep_set_state(st, sw, "running", 1001, &err), 0);
 	assert_int_equal(store_sweep_set_state(st, sw, "bogus", 1001, &err), -1);
 	assert_int_equal(store_sweep_set_state(st, 999, "paused", 1001, &err), -1);
@@ -141,7 +115,7 @@ static void test_export_csv(void **state)
 	struct store *st = NULL;
 	struct acq_err err = { 0 };
 	assert_int_equal(store_open(p, &st, &err), 0);
-	int64_t sw = mk_sweep(st, 2);
+	int64_t sw = ut_sweep_create(st, 2, "t", "plan: 1");
 	FILE *f = tmpfile();
 	int rows = -1;
 	assert_int_equal(store_export_csv(st, sw, f, &rows, &err), -1);
@@ -261,7 +235,7 @@ static void test_three_readers_same_samples(void **state)
 	struct store *st = NULL;
 	struct acq_err err = { 0 };
 	assert_int_equal(store_open(p, &st, &err), 0);
-	int64_t sw = mk_sweep(st, 4);
+	int64_t sw = ut_sweep_create(st, 4, "t", "plan: 1");
 	float grid[3] = { 450, 500, 550 };
 	assert_int_equal(store_sweep_set_grid(st, sw, grid, 3, &err), 0);
 	struct bench_geom g = { .laser_phi_deg = 0 };
@@ -346,51 +320,13 @@ static void downgrade_to_v2(const char *p)
 	sqlite3_close(db);
 }
 
-/* The schema of a database as text (type, name, SQL with whitespace runs collapsed), sorted; caller frees. */
-static char *schema_text(const char *p)
-{
-	sqlite3 *db;
-	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
-	sqlite3_stmt *s;
-	assert_int_equal(sqlite3_prepare_v2(db, "SELECT type || ' ' || name || ': ' || sql FROM sqlite_master "
-						"WHERE sql IS NOT NULL ORDER BY type, name", -1, &s, NULL),
-			 SQLITE_OK);
-	size_t cap = 1 << 16, n = 0;
-	char *out = calloc(cap, 1);
-	assert_non_null(out);
-	while (sqlite3_step(s) == SQLITE_ROW) {
-		const char *r = (const char *)sqlite3_column_text(s, 0);
-		bool space = false;
-		for (; *r; r++) {
-			bool ws = *r == ' ' || *r == '\n' || *r == '\t';
-			if (ws && space)
-				continue;
-			space = ws;
-			assert_true(n + 2 < cap);
-			out[n++] = ws ? ' ' : *r;
-		}
-		out[n++] = '\n';
-	}
-	sqlite3_finalize(s);
-	sqlite3_close(db);
-	return out;
-}
-
 /* A migrated database has exactly the schema of a new one (hence of daemon/schema.sql, which
  * test_store_schema.py compares with a new one), and passes SQLite's integrity and foreign-key checks. */
 static void assert_schema_current(const char *p)
 {
 	char fresh[300];
 	path_of(fresh, sizeof fresh, "fresh.db");
-	unlink(fresh);
-	struct store *st = NULL;
-	struct acq_err err = { 0 };
-	assert_int_equal(store_open(fresh, &st, &err), 0);
-	store_close(st);
-	char *a = schema_text(p), *b = schema_text(fresh);
-	assert_string_equal(a, b);
-	free(a);
-	free(b);
+	ut_assert_schema_of_new(p, fresh);
 	sqlite3 *db;
 	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
 	sqlite3_stmt *s;
@@ -408,14 +344,11 @@ static void assert_schema_current(const char *p)
 static const char *run_state(const char *p, int64_t id, char *buf, size_t cap)
 {
 	sqlite3 *db;
-	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
-	sqlite3_stmt *s;
-	assert_int_equal(sqlite3_prepare_v2(db, "SELECT state FROM recon_runs WHERE id = ?", -1, &s, NULL), SQLITE_OK);
+	sqlite3_stmt *s = ut_sql_open(p, "SELECT state FROM recon_runs WHERE id = ?", &db);
 	sqlite3_bind_int64(s, 1, id);
 	assert_int_equal(sqlite3_step(s), SQLITE_ROW);
 	snprintf(buf, cap, "%s", (const char *)sqlite3_column_text(s, 0));
-	sqlite3_finalize(s);
-	sqlite3_close(db);
+	ut_sql_close(db, s);
 	return buf;
 }
 
@@ -430,7 +363,7 @@ static void test_migration_2_to_3(void **state)
 	struct store *st = NULL;
 	struct acq_err err = { 0 };
 	assert_int_equal(store_open(p, &st, &err), 0);
-	int64_t sw = mk_sweep(st, 2), run_ok, run_dead, run_old;
+	int64_t sw = ut_sweep_create(st, 2, "t", "plan: 1"), run_ok, run_dead, run_old;
 	assert_int_equal(store_recon_begin(st, sw, "brdf-recon", "[\"fit\"]", 1000, &run_ok, &err), 0);
 	assert_int_equal(store_recon_output(st, run_ok, "model", "recon/1/model.json", 1001, &err), 0);
 	assert_int_equal(store_recon_end(st, run_ok, "succeeded", 0, "fit done", 1002, &err), 0);
@@ -484,7 +417,7 @@ static void test_migration_1_to_3(void **state)
 	struct store *st = NULL;
 	struct acq_err err = { 0 };
 	assert_int_equal(store_open(p, &st, &err), 0);
-	int64_t sw = mk_sweep(st, 2); /* planned (0, 0, 20, 180) and (10, 0, 21, 180) */
+	int64_t sw = ut_sweep_create(st, 2, "t", "plan: 1"); /* planned (0, 0, 20, 180) and (10, 0, 21, 180) */
 	int64_t run;
 	assert_int_equal(store_recon_begin(st, sw, "brdf-recon", "[]", 1000, &run, &err), 0);
 	float grid[1] = { 500 };
@@ -527,5 +460,5 @@ int main(void)
 		cmocka_unit_test(test_migration_2_to_3),
 		cmocka_unit_test(test_foreign_and_corrupt_refused),
 	};
-	return cmocka_run_group_tests(tests, setup, teardown);
+	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);
 }

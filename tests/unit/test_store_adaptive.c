@@ -15,45 +15,17 @@
 
 #include "daemon/store.h"
 #include "daemon/store_adaptive.h"
+#include "tests/unit/storefix.h"
+#define UT_TMPDIR_NAME "test_store_adaptive"
 #include "tests/unit/tmpdir.h"
-
-static char dir[256];
-
-static int setup(void **state)
-{
-	(void)state;
-	return ut_tmpdir_make(dir, sizeof dir, "test_store_adaptive");
-}
-
-static int teardown(void **state)
-{
-	(void)state;
-	return ut_tmpdir_remove(dir);
-}
-
-static int64_t mk_sweep(struct store *st, int npts)
-{
-	struct store_point_new pts[8];
-	for (int i = 0; i < npts; i++)
-		pts[i] = (struct store_point_new){ i, 10.0 * i, 0, 20.0 + i, 180 };
-	struct store_sweep_new sw = { .name = "a", .plan_text = "kind: adaptive", .config_snapshot = "bench: {}",
-				      .software_version = "test", .created_at = 1000 };
-	int64_t id = 0;
-	struct acq_err err = { 0 };
-	assert_int_equal(store_sweep_create(st, &sw, pts, npts, &id, &err), 0);
-	return id;
-}
 
 static int64_t count(const char *path, const char *sql)
 {
 	sqlite3 *db;
-	sqlite3_stmt *s;
-	assert_int_equal(sqlite3_open(path, &db), SQLITE_OK);
-	assert_int_equal(sqlite3_prepare_v2(db, sql, -1, &s, NULL), SQLITE_OK);
+	sqlite3_stmt *s = ut_sql_open(path, sql, &db);
 	assert_int_equal(sqlite3_step(s), SQLITE_ROW);
 	int64_t v = sqlite3_column_int64(s, 0);
-	sqlite3_finalize(s);
-	sqlite3_close(db);
+	ut_sql_close(db, s);
 	return v;
 }
 
@@ -61,11 +33,11 @@ static void test_batches(void **state)
 {
 	(void)state;
 	char p[300];
-	snprintf(p, sizeof p, "%s/a.db", dir);
+	snprintf(p, sizeof p, "%s/a.db", ut_dir);
 	struct store *st = NULL;
 	struct acq_err err = { 0 };
 	assert_int_equal(store_open(p, &st, &err), 0);
-	int64_t sw = mk_sweep(st, 3);
+	int64_t sw = ut_sweep_create(st, 3, "a", "kind: adaptive");
 	struct store_batch seed = { .batch = 0, .decided_at = 1000, .n_points = 3, .target_spec = "dhr:8:le=0.002",
 				    .target_value = NAN, .target_met = -1, .predicted_value = NAN, .warm = -1,
 				    .candidates = -1, .predicted_s = 30, .waited_s = NAN };
@@ -125,34 +97,16 @@ static void test_batches(void **state)
 	assert_int_equal(count(p, "SELECT count(*) FROM adaptive_batches"), 3);
 }
 
-/* The schema of a database as text (type, name, SQL), sorted; caller frees. */
-static char *schema_text(const char *p)
-{
-	sqlite3 *db;
-	sqlite3_stmt *s;
-	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
-	assert_int_equal(sqlite3_prepare_v2(db, "SELECT type || ' ' || name || ' ' || ifnull(sql, '') FROM sqlite_master "
-						"ORDER BY type, name", -1, &s, NULL), SQLITE_OK);
-	size_t cap = 1 << 16, n = 0;
-	char *out = calloc(cap, 1);
-	while (sqlite3_step(s) == SQLITE_ROW)
-		n += (size_t)snprintf(out + n, cap - n, "%s\n", (const char *)sqlite3_column_text(s, 0));
-	assert_true(n < cap);
-	sqlite3_finalize(s);
-	sqlite3_close(db);
-	return out;
-}
-
 static void test_migration_3_to_4(void **state)
 {
 	(void)state;
 	char p[300], fresh[300];
-	snprintf(p, sizeof p, "%s/v3.db", dir);
-	snprintf(fresh, sizeof fresh, "%s/fresh.db", dir);
+	snprintf(p, sizeof p, "%s/v3.db", ut_dir);
+	snprintf(fresh, sizeof fresh, "%s/fresh.db", ut_dir);
 	struct store *st = NULL;
 	struct acq_err err = { 0 };
 	assert_int_equal(store_open(p, &st, &err), 0);
-	int64_t sw = mk_sweep(st, 2);
+	int64_t sw = ut_sweep_create(st, 2, "a", "kind: adaptive");
 	store_close(st);
 	sqlite3 *db;
 	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
@@ -166,12 +120,7 @@ static void test_migration_3_to_4(void **state)
 				    .waited_s = NAN };
 	assert_int_equal(store_adaptive_batch(st, sw, &seed, NULL, 0, NULL, 0, &err), 0);
 	store_close(st);
-	assert_int_equal(store_open(fresh, &st, &err), 0);
-	store_close(st);
-	char *a = schema_text(p), *b = schema_text(fresh);
-	assert_string_equal(a, b);
-	free(a);
-	free(b);
+	ut_assert_schema_of_new(p, fresh);
 	assert_int_equal(count(p, "SELECT count(*) FROM points"), 2); /* the migration touched nothing else */
 }
 
@@ -181,5 +130,5 @@ int main(void)
 		cmocka_unit_test(test_batches),
 		cmocka_unit_test(test_migration_3_to_4),
 	};
-	return cmocka_run_group_tests(tests, setup, teardown);
+	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);
 }

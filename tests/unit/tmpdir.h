@@ -27,4 +27,22 @@ static inline int ut_tmpdir_remove(const char *dir)
 	return nftw(dir, ut_tmpdir_rm1, 16, FTW_DEPTH | FTW_PHYS);
 }
 
+#ifdef UT_TMPDIR_NAME
+/* For a test that defines UT_TMPDIR_NAME before including this file: cmocka group set-up and tear-down of the
+ * scratch folder ut_dir (/tmp/UT_TMPDIR_NAME.XXXXXX), made before the first test and removed after the last. */
+static char ut_dir[256];
+
+static int ut_dir_setup(void **state)
+{
+	(void)state;
+	return ut_tmpdir_make(ut_dir, sizeof ut_dir, UT_TMPDIR_NAME);
+}
+
+static int ut_dir_teardown(void **state)
+{
+	(void)state;
+	return ut_tmpdir_remove(ut_dir);
+}
+#endif
+
 #endif
