@@ -354,19 +354,21 @@ static int tio_open(struct laser_dev *l, struct acq_err *err)
 	return 0;
 }
 
-static int tio_write(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
+/* Write all n bytes to l->fd within timeout_ms: write(2) on a terminal, send(2) on a socket (a closed peer then
+ * gives EPIPE, not SIGPIPE). 0 or -1. */
+static int fd_write_all(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, bool sock, struct acq_err *err)
 {
 	double deadline = mono_ms() + timeout_ms;
 	while (n) {
-		ssize_t w = write(l->fd, buf, n);
+		ssize_t w = sock ? send(l->fd, buf, n, MSG_NOSIGNAL) : write(l->fd, buf, n);
 		if (w > 0) {
 			buf += w;
 			n -= (size_t)w;
 			continue;
 		}
 		if (w < 0 && errno != EAGAIN && errno != EINTR)
-			return acq_errf(err, errno == EIO ? ACQ_E_DISCONNECTED : ACQ_E_IO, "laser %s: write: %s",
-					l->cfg->device, strerror(errno));
+			return acq_errf(err, errno == EIO || errno == EPIPE || errno == ECONNRESET ? ACQ_E_DISCONNECTED : ACQ_E_IO,
+					"laser %s: write: %s", l->cfg->device, strerror(errno));
 		double left = deadline - mono_ms();
 		if (left < 1)
 			return acq_errf(err, ACQ_E_TIMEOUT, "laser %s: not sent within %d ms", l->cfg->device, timeout_ms);
@@ -374,6 +376,11 @@ static int tio_write(struct laser_dev *l, const char *buf, size_t n, int timeout
 		poll(&p, 1, (int)left);
 	}
 	return 0;
+}
+
+static int tio_write(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
+{
+	return fd_write_all(l, buf, n, timeout_ms, false, err);
 }
 
 static int tio_read(struct laser_dev *l, char *c, int timeout_ms, struct acq_err *err)
@@ -432,24 +439,7 @@ static int sock_open(struct laser_dev *l, struct acq_err *err)
 
 static int sock_write(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
 {
-	double deadline = mono_ms() + timeout_ms;
-	while (n) {
-		ssize_t w = send(l->fd, buf, n, MSG_NOSIGNAL); /* a closed peer: EPIPE, not SIGPIPE */
-		if (w > 0) {
-			buf += w;
-			n -= (size_t)w;
-			continue;
-		}
-		if (w < 0 && errno != EAGAIN && errno != EINTR)
-			return acq_errf(err, errno == EPIPE || errno == ECONNRESET ? ACQ_E_DISCONNECTED : ACQ_E_IO,
-					"laser %s: send: %s", l->cfg->device, strerror(errno));
-		double left = deadline - mono_ms();
-		if (left < 1)
-			return acq_errf(err, ACQ_E_TIMEOUT, "laser %s: not sent within %d ms", l->cfg->device, timeout_ms);
-		struct pollfd p = { .fd = l->fd, .events = POLLOUT };
-		poll(&p, 1, (int)left);
-	}
-	return 0;
+	return fd_write_all(l, buf, n, timeout_ms, true, err);
 }
 
 static void sock_flush(struct laser_dev *l)
