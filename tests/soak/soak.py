@@ -256,7 +256,8 @@ def thread_report(text):
 
 
 def describe_src():
-    """The source tree's commit (and whether it has local changes), for the record."""
+    """The source tree's commit (and whether it has local changes) at the start, for the record (the binaries are
+    ACQ_BUILD's: built from it by make soak)."""
     try:
         rev = subprocess.run(["git", "-C", L.SRC, "describe", "--always", "--dirty"], capture_output=True, text=True,
                              timeout=10).stdout.strip()
@@ -395,11 +396,13 @@ def main():
         renice_all(b.sim.pid, -10)
         renice_all(b.daemon.pid, -5)
         t_start = time.time()
+        src_rev = describe_src()  # now: the tree may change while the soak runs
         print("soak: %g s, bench time scale %g, plan of %s points, seed %d, load clients at nice %d, %s; %s" % (
             SECONDS, SCALE, "52", L.SEED, LOAD_NICE, "in a session (CPU group) of their own" if LOAD_SESSION else
             "in the daemon's session (CPU group)", load_str()), flush=True)
-        print("soak: acq-sim %s" % ("in a session (CPU group) of its own" if SIM_SESSION else
-                                    "in the daemon's session (CPU group)"), flush=True)
+        print("soak: acq-sim %s; %s; laser line %s" % ("in a session (CPU group) of its own" if SIM_SESSION else
+                                                     "in the daemon's session (CPU group)", src_rev, laser_link(b)),
+              flush=True)
         good = L.Client(b.sock, timeout=10)  # connected before the load, like an operator's watch
         lat, ctl_lat, errors, rss = [], [], 0, []
         last = [0.0]
@@ -530,7 +533,7 @@ def main():
               "the end of the loaded sweeps (other work on the machine counts in every figure: compare with the "
               "control sweeps):" % (os.cpu_count(), min(loads), max(loads)))
         print("  setup: %s; %s; laser line %s; daemon.observer_rate %s" % (
-            describe_src(), "SOAK_SECONDS=%g SOAK_SCALE=%g ACQ_SEED=%d SOAK_LOAD_NICE=%d SOAK_LOAD_SESSION=%d "
+            src_rev, "SOAK_SECONDS=%g SOAK_SCALE=%g ACQ_SEED=%d SOAK_LOAD_NICE=%d SOAK_LOAD_SESSION=%d "
             "SOAK_SIM_SESSION=%d" % (SECONDS, SCALE, L.SEED, LOAD_NICE, LOAD_SESSION, SIM_SESSION),
             laser_link(b), OBSERVER_RATE if OBSERVER_RATE is not None else "the daemon's default"))
         verdict = lambda good: "met" if good else "MISSED"  # noqa: E731
