@@ -451,19 +451,6 @@ void sweep_set_planning(struct sweep *sw, bool planning)
 static int start_planned(struct sweep *sw, const char *plan_text, const char *name, int64_t *id,
 			 struct acq_err *err);
 
-int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64_t *id, struct acq_err *err)
-{
-	*id = 0;
-	if (sweep_start_check(sw, err))
-		return -1;
-	struct ex_cfg cfg;
-	if (make_plan(sw, plan_text, name, &cfg, err)) {
-		release(sw);
-		return -1;
-	}
-	return start_planned(sw, plan_text, name, id, err);
-}
-
 int sweep_start_planned(struct sweep *sw, const char *plan_text, const char *name, struct plan_spec *spec,
 			struct plan_result *plan, int64_t *id, struct acq_err *err)
 {
@@ -478,7 +465,7 @@ int sweep_start_planned(struct sweep *sw, const char *plan_text, const char *nam
 	return start_planned(sw, plan_text, name, id, err);
 }
 
-/* sweep_start() from the plan in sw (sw->spec, sw->plan, released on failure). */
+/* A start from the plan in sw (sw->spec, sw->plan, released on failure). */
 static int start_planned(struct sweep *sw, const char *plan_text, const char *name, int64_t *id,
 			 struct acq_err *err)
 {

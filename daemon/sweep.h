@@ -5,7 +5,7 @@
  * Contract with the body:
  *  - The body calls sweep_init() after the store, devices and server exist, and sweep_finish() before
  *    them at shutdown (the executor leaves an unfinished sweep 'paused' in the store, with an event).
- *  - Commands arrive through sweep_start/pause/resume/abort; errors are struct acq_err with ACQ_E_STATE
+ *  - Commands arrive through sweep_start_planned/pause/resume/abort; errors are struct acq_err with ACQ_E_STATE
  *    (not now), ACQ_E_NOTFOUND, ACQ_E_INVAL (bad plan, message names line:col), ACQ_E_UNSUPPORTED (missing
  *    piece), ACQ_E_DEVICE/ACQ_E_DISCONNECTED (device fault) — the body maps them to wire codes.
  *  - Events the executor emits (env->emit(ctx, name, data), data consumed): "sweep.progress"
@@ -64,15 +64,14 @@ struct sweep_env {
 int sweep_init(const struct sweep_env *env, struct sweep **out, struct acq_err *err);
 /* Stop timers, leave an unfinished sweep resumable (state 'paused' + event), free. NULL is fine. */
 void sweep_finish(struct sweep *sw);
-/* Plan (YAML text) → stored sweep → running. *id is the new sweep's id. 0 or -1. */
-int sweep_start(struct sweep *sw, const char *plan_text, const char *name, int64_t *id, struct acq_err *err);
 /* Whether a sweep could start now (none loaded or being planned, every device up). 0 or -1. */
 int sweep_start_check(const struct sweep *sw, struct acq_err *err);
 /* Mark a plan being made elsewhere for sweep_start_planned() (a worker: large plans take long); meanwhile
  * sweep_busy() is true (no reload, manual operation or other start). */
 void sweep_set_planning(struct sweep *sw, bool planning);
-/* sweep_start() with spec and plan already made from plan_text (plan_load_string, plan_make, plan_time_apply
- * with sweep_plan_timing()); takes both, freed on failure too. 0 or -1. */
+/* Stored sweep → running, from spec and plan already made from plan_text (plan_load_string, plan_make,
+ * plan_time_apply with sweep_plan_timing(), in a worker); *id is the new sweep's id. Takes both, freed on failure
+ * too. 0 or -1. */
 int sweep_start_planned(struct sweep *sw, const char *plan_text, const char *name, struct plan_spec *spec,
 			struct plan_result *plan, int64_t *id, struct acq_err *err);
 /* Pause after the current spectrum is committed. 0 or -1 (ACQ_E_STATE when nothing runs). */

@@ -120,7 +120,8 @@ static void emit_state(struct adapt *a, double value, int met, double waited, co
 	for (int i = 0; i < a->ntrend; i++)
 		json_array_append_new(trend, json_real(a->trend[i]));
 	json_t *d = json_pack("{s:I,s:i,s:s,s:f,s:o,s:I,s:f,s:f}", "sweep", (json_int_t)a->id, "batch", a->batch,
-			      "target", spec, "threshold", ad->le, "trend", trend, "points", (json_int_t)a->plan->n_steps,
+			      "target", spec, "threshold", plan_adaptive_threshold(ad), "trend", trend, "points",
+			      (json_int_t)a->plan->n_steps,
 			      "predicted_s", a->spent_s, "waited_total_s", a->waited_s);
 	if (!d)
 		return;
@@ -289,39 +290,51 @@ void adapt_waiting(struct adapt *a, double now)
 /* The picks that fit the budget (the bench seconds measured so far, measured, plus the batch's predicted time, its
  * worst case), planned from the arms' position into *out; their count (0: none fits, *need = the bench seconds
  * select's first pick alone would take: its cost, or its planned time). */
-static size_t plan_batch(struct adapt *a, json_t *picks, struct plan_pos *pos, size_t n, double measured,
-			 struct plan_result **out, double *need, struct acq_err *err)
+static size_t plan_batch(struct adapt *a, json_t *picks, const struct plan_pos *pos, size_t n, double measured,
+			 size_t *keep, struct plan_result **out, double *need, struct acq_err *err)
 {
 	const struct plan_adaptive *ad = a->spec->adaptive;
 	const struct bench_geom *g = &a->env->conf->bench;
-	double left_s = ad->budget_s > 0 ? ad->budget_s - measured : INFINITY, cost = 0;
+	double left_s = ad->budget_s > 0 ? ad->budget_s - measured : INFINITY;
 	size_t left_pts = ad->budget_points ? ad->budget_points - a->plan->n_steps : n;
-	size_t k = 0;
-	*need = n ? num_or(json_array_get(picks, 0), "cost_s", 0) : 0;
-	while (k < n && k < left_pts) {
-		double c = num_or(json_array_get(picks, k), "cost_s", 0);
-		if (cost + c > left_s)
-			break;
-		cost += c;
-		k++;
+	double *cost = malloc((n ? n : 1) * sizeof *cost);
+	struct plan_pos *kp = malloc((n ? n : 1) * sizeof *kp);
+	*out = NULL;
+	*need = INFINITY;
+	if (!cost || !kp) {
+		free(cost);
+		free(kp);
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
+		return 0;
 	}
+	for (size_t i = 0; i < n; i++) {
+		cost[i] = num_or(json_array_get(picks, i), "cost_s", 0);
+		*need = fmin(*need, cost[i]);
+	}
+	/* select's picks in order, a dearer one skipped while a cheaper later one fits what is left */
+	size_t k = plan_adaptive_fit_picks(cost, n, left_s, left_pts, keep);
+	for (size_t i = 0; i < k; i++)
+		kp[i] = pos[keep[i]];
 	struct plan_timing tm;
 	a->ops.timing(a->ops.ctx, &tm);
 	tm.reference = false;
 	tm.have_start = false; /* the batch's first step moves from the arms' position itself */
-	*out = NULL;
 	for (; k > 0; k--) {
-		if (plan_make_points(a->spec, g, pos, k, &a->arms, out, err))
-			return 0;
+		if (plan_make_points(a->spec, g, kp, k, &a->arms, out, err)) {
+			k = 0;
+			break;
+		}
 		plan_time_apply(a->spec, g, &tm, *out);
 		if ((*out)->predicted_s <= left_s || !isfinite(left_s))
-			return k;
+			break;
 		if (k == 1)
 			*need = (*out)->predicted_s;
 		plan_result_free(*out);
 		*out = NULL;
 	}
-	return 0;
+	free(cost);
+	free(kp);
+	return k;
 }
 
 static void decided(void *ctx, const struct rsel_res *r)
@@ -353,7 +366,7 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 	json_t *t = json_object_get(r->out, "target"), *picks = json_object_get(r->out, "picks");
 	double value = num_or(t, "value", NAN);
 	int met = json_is_boolean(json_object_get(t, "met")) ? json_is_true(json_object_get(t, "met"))
-							     : value <= a->spec->adaptive->le;
+							     : value <= plan_adaptive_threshold(a->spec->adaptive);
 	snprintf(a->model, sizeof a->model, "%s", r->model);
 	if (a->ntrend < ADAPT_TREND)
 		a->trend[a->ntrend++] = value;
@@ -361,7 +374,7 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 	target_spec(a, spec, sizeof spec);
 	if (met)
 		return stop(a, value, 1, "target met: %s value %.6g <= %.6g with %zu points", spec, value,
-			    a->spec->adaptive->le, a->plan->n_steps);
+			    plan_adaptive_threshold(a->spec->adaptive), a->plan->n_steps);
 	if (r->n_candidates == 0)
 		return stop(a, value, 0, "nothing reachable left: no visible, reachable candidate is unmeasured (%s value "
 			    "%.6g)", spec, value);
@@ -372,16 +385,17 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 	struct plan_pos *pos = calloc(n, sizeof *pos);
 	struct store_pick *sp = calloc(n, sizeof *sp);
 	struct store_point_new *pts = calloc(n, sizeof *pts);
+	size_t *keep = calloc(n, sizeof *keep);
 	struct plan_result *b = NULL;
 	struct acq_err err = { 0 };
-	if (!pos || !sp || !pts) {
+	if (!pos || !sp || !pts || !keep) {
 		pause_for(a, "choosing batch %d: out of memory; resume to try again", next);
 		goto out;
 	}
 	for (size_t i = 0; i < n; i++) {
 		json_t *p = json_array_get(picks, i), *id = json_object_get(p, "id");
 		if (!json_is_integer(id) || json_integer_value(id) < 0 ||
-		    plan_adaptive_cand_pos(a->spec, (size_t)json_integer_value(id), &pos[i])) {
+		    plan_adaptive_cand_pos(a->spec, &a->env->conf->bench, (size_t)json_integer_value(id), &pos[i])) {
 			pause_for(a, "batch %d: select's pick %zu names no candidate of %s; resume to try again", next, i,
 				  r->dir);
 			goto out;
@@ -396,7 +410,7 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 	if (measured < 0)
 		goto out;
 	double need = 0;
-	size_t k = plan_batch(a, picks, pos, n, measured, &b, &need, &err);
+	size_t k = plan_batch(a, picks, pos, n, measured, keep, &b, &need, &err);
 	if (k == 0 && err.code) {
 		pause_for(a, "planning batch %d: %s; resume to try again", next, err.msg);
 		goto out;
@@ -405,8 +419,8 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 		if (k == 0 && a->spec->adaptive->budget_s > 0 && !(a->spec->adaptive->budget_points &&
 								    a->plan->n_steps >= a->spec->adaptive->budget_points))
 			stop(a, value, 0, "budget spent: %.1f of %.0f bench seconds measured, not one more pick fits what is "
-			     "left (select's first pick needs %.1f s; %s value %.6g)", measured, a->spec->adaptive->budget_s,
-			     need, spec, value);
+			     "left (the cheapest of select's %zu picks needs %.1f s; %s value %.6g)", measured,
+			     a->spec->adaptive->budget_s, n, need, spec, value);
 		else
 			stop(a, value, 0, "%s (%s value %.6g)", k == 0 ? "budget spent: not one more pick fits what is left of "
 			     "it" : "nothing reachable left: the planner found no safe path to the picks", spec, value);
@@ -414,7 +428,7 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 	}
 	size_t first = a->plan->n_steps;
 	for (size_t s = 0; s < b->n_steps; s++) {
-		size_t pick = b->steps[s].req;
+		size_t pick = keep[b->steps[s].req];
 		pts[s].order_index = (int)(first + s);
 		ex_pos_angles(&a->env->conf->bench, &b->steps[s].pos, &pts[s].theta_i, &pts[s].phi_i, &pts[s].theta_o,
 			      &pts[s].phi_o);
@@ -425,7 +439,7 @@ static void apply(struct adapt *a, const struct rsel_res *r)
 	}
 	double now = loop_now(a->env->loop);
 	double waited = isfinite(a->wait_start) ? now - a->wait_start : NAN;
-	json_t *last = json_array_get(picks, k - 1);
+	json_t *last = json_array_get(picks, keep[k - 1]);
 	struct store_batch rec = {
 		.batch = next, .decided_at = a->env->wallclock(), .first_order_index = (int)first,
 		.n_points = (int)b->n_steps, .target_spec = spec, .target_value = value, .target_met = 0,
@@ -460,6 +474,7 @@ out:
 	free(pos);
 	free(sp);
 	free(pts);
+	free(keep);
 }
 
 int adapt_begin(struct adapt *a, int64_t id, const struct plan_spec *spec, struct plan_result *plan,

@@ -16,7 +16,6 @@ static const char *const bit_names[RM__NBITS] = {
 static const char *const cmd_names[RM__NCMDS] = { "start", "home", "stop", "alarm_reset" };
 
 const char *regmap_field_name(int id) { return id >= 0 && id < RM__NFIELDS ? field_names[id] : "?"; }
-const char *regmap_bit_name(int id) { return id >= 0 && id < RM__NBITS ? bit_names[id] : "?"; }
 const char *regmap_cmd_name(int id) { return id >= 0 && id < RM__NCMDS ? cmd_names[id] : "?"; }
 
 enum addressing { ADDR_ZERO, ADDR_ONE, ADDR_MODICON };

@@ -89,9 +89,8 @@ int regmap_parse(struct yc_node *maps, const char *name, const struct yc_node *r
 		 struct acq_err *err);
 /* Free a map (NULL is fine). */
 void regmap_free(struct regmap *m);
-/* Stable name of a field, bit or command (for messages and the config keys). */
+/* Stable name of a field or command (for messages and the config keys). */
 const char *regmap_field_name(int id);
-const char *regmap_bit_name(int id);
 const char *regmap_cmd_name(int id);
 /* Registers a field occupies (1 or 2). */
 int regmap_width(const struct regmap_field *f);

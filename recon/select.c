@@ -57,7 +57,29 @@ static int parse_num(const char *s, const char *end, double *out)
 	return 0;
 }
 
+static int target_parse_one(const char *spec, struct select_target *t, struct acq_err *err);
+
 int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err)
+{
+	const char *plus = spec ? strchr(spec, '+') : NULL;
+	if (!plus)
+		return target_parse_one(spec, t, err);
+	char first[512];
+	struct select_target t2;
+	if ((size_t)(plus - spec) >= sizeof first)
+		return acq_errf(err, ACQ_E_INVAL, "target '%s': too long", spec);
+	memcpy(first, spec, (size_t)(plus - spec));
+	first[plus - spec] = '\0';
+	if (target_parse_one(first, t, err) || target_parse_one(plus + 1, &t2, err))
+		return -1;
+	if (t->kind != SELECT_DHR || t2.kind != SELECT_LNF || !isfinite(t->threshold) || !isfinite(t2.threshold))
+		return acq_errf(err, ACQ_E_INVAL, "target '%s': a combined target is dhr:THETA[,...]:le=X+lnf:le=Y (both "
+				"thresholds given: both must be met)", spec);
+	t->lnf_threshold = t2.threshold;
+	return 0;
+}
+
+static int target_parse_one(const char *spec, struct select_target *t, struct acq_err *err)
 {
 	memset(t, 0, sizeof *t);
 	t->threshold = NAN;
@@ -129,6 +151,17 @@ struct sel {
 	double *xang;    /* SELECT_LNF, SELECT_RGB: [F*4] the grid's / nodes' pairs */
 	double *xw;      /* SELECT_RGB: [F] the nodes' share of the table's projected measure (sum 1) */
 	double *row, *zp; /* scratch of sel_update: [J], [F] */
+	/* SELECT_DHR, the noise part's fall with n: the functional's linear noise variance q = Σ_k N_k h_k² under the
+	 * GP's weights h = A⁻¹b (N_k = η λ_k, a new sample's = noise), tracked through the picks by the same block
+	 * elimination as the posterior; the Monte-Carlo floor sn2 is predicted as sn2 · q/q0. */
+	double *Nk;      /* [n] the samples' noise η λ_k */
+	double *q, *q0, *qmin; /* [F] current, initial and smallest-so-far noise variance of each functional (the
+			  * floor predicted never rises: an estimator may ignore a sample that would spread its weights) */
+	double *X;       /* [F*J] Σ_k N_k h_fk w_jk over the current samples (w_j: candidate j's weights A⁻¹k_j) */
+	double *Yn;      /* [J] Σ_k N_k w_jk² */
+	double *Gc;      /* [J*n] w_j's part on the model's samples (the picks' parts in gn) */
+	double *gn;      /* [batch*J] w_j's part on pick i */
+	double *mrow, *gp; /* scratch: [J], [n] */
 };
 
 static void sel_free(struct sel *s)
@@ -159,6 +192,16 @@ static void sel_free(struct sel *s)
 	free(s->xw);
 	free(s->row);
 	free(s->zp);
+	free(s->Nk);
+	free(s->q);
+	free(s->q0);
+	free(s->qmin);
+	free(s->X);
+	free(s->Yn);
+	free(s->Gc);
+	free(s->gn);
+	free(s->mrow);
+	free(s->gp);
 }
 
 /* Factor K + ηΛ of the model and the leave-one-out amplitude α_λ of every channel (as dhr.c). */
@@ -291,6 +334,25 @@ static int sel_functionals(struct sel *s, size_t Q, const double *c6, const doub
 	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)Fp, s->A, (lapack_int)n, B, (lapack_int)n)) {
 		free(B);
 		return acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
+	}
+	if (s->X) { /* the noise variance of the functionals and its cross terms with the candidates' weights */
+		double *BN = malloc(Fp * n * sizeof *BN);
+		if (!BN) {
+			free(B);
+			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		}
+		for (size_t f = 0; f < Fp; f++) {
+			double qq = 0;
+			for (size_t k = 0; k < n; k++) {
+				BN[f * n + k] = s->Nk[k] * B[f * n + k];
+				qq += BN[f * n + k] * B[f * n + k];
+			}
+			s->q[f0 + f] = s->q0[f0 + f] = s->qmin[f0 + f] = qq;
+		}
+		if (J)
+			cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Fp, (int)J, (int)n, 1.0, BN, (int)n, s->G,
+				    (int)n, 0.0, s->X + f0 * J, (int)J);
+		free(BN);
 	}
 	double *Z = s->Z + f0 * J;
 	rbf_kmatrix_soa(m->kernel, m->shape, Q, c6, J, s->soaJ, KQJ);
@@ -692,12 +754,15 @@ static double sel_excess(const struct sel *s, size_t j, double *per)
 			int zero_res = j != SIZE_MAX && s->match[t * s->J + j] && !s->res_done[t];
 			for (size_t c = 0; c < s->Lc; c++) {
 				size_t f = t * s->Lc + c;
-				double v = s->v[f];
+				double v = s->v[f], q = s->qmin[f];
 				if (j != SIZE_MAX && S > 0) {
-					double z = s->Z[f * s->J + j];
+					double z = s->Z[f * s->J + j], a = z / S;
 					v -= z * z / S;
+					if (s->X)
+						q = fmin(q, s->q[f] + a * (a * (s->Yn[j] + s->noise) - 2 * s->X[f * s->J + j]));
 				}
-				acc += fmax(s->sn2[f], fmax(v, 0)) + s->rest[f] - (zero_res ? s->res2[f] : 0);
+				double floor2 = s->sn2[f] * (s->q0[f] > 0 ? fmin(fmax(q / s->q0[f], 0), 1) : 1);
+				acc += fmax(floor2, fmax(v, 0)) + s->rest[f] - (zero_res ? s->res2[f] : 0);
 			}
 			double V = s->kappa[t] * fmax(acc, 0) / (double)s->Lc;
 			if (per)
@@ -728,6 +793,42 @@ static double sel_excess(const struct sel *s, size_t j, double *per)
 	return E / (double)s->F;
 }
 
+/* The noise variance's terms after candidate p's measurement (the k-th pick; S its posterior variance + noise):
+ * with a_f = cov(f, p)/S and b_j = P(p, j)/S (in s->zp, s->row), the functional's weights become h − a w_p and
+ * a on the new sample, candidate j's w_j − b_j w_p and b_j; q, X and Yn follow (M_j = Σ N w_p w_j). */
+static void sel_update_noise(struct sel *s, size_t p, size_t k, double S)
+{
+	size_t J = s->J, n = s->n, F = s->F;
+	double *M = s->mrow, *gp = s->gp, yp = s->Yn[p] + s->noise;
+	for (size_t i = 0; i < n; i++)
+		gp[i] = s->Nk[i] * s->Gc[p * n + i];
+	cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)J, (int)n, 1.0, s->Gc, (int)n, gp, 1, 0.0, M, 1);
+	for (size_t i = 0; i < k; i++)
+		cblas_daxpy((int)J, s->noise * s->gn[i * J + p], s->gn + i * J, 1, M, 1);
+	for (size_t f = 0; f < F; f++) {
+		double a = s->zp[f] / S, xp = s->X[f * J + p];
+		s->q[f] += a * (a * yp - 2 * xp);
+		s->qmin[f] = fmin(s->qmin[f], s->q[f]);
+		double *x = s->X + f * J;
+		for (size_t j = 0; j < J; j++) {
+			double b = s->row[j] / S;
+			x[j] += -a * M[j] - b * xp + a * b * yp;
+		}
+	}
+	for (size_t j = 0; j < J; j++) {
+		double b = s->row[j] / S;
+		s->Yn[j] += b * (b * yp - 2 * M[j]);
+	}
+	memcpy(gp, s->Gc + p * n, n * sizeof *gp);
+	cblas_dger(CblasRowMajor, (int)J, (int)n, -1.0 / S, s->row, 1, gp, 1, s->Gc, (int)n);
+	for (size_t i = 0; i < k; i++) {
+		double g = s->gn[i * J + p];
+		cblas_daxpy((int)J, -g / S, s->row, 1, s->gn + i * J, 1);
+	}
+	for (size_t j = 0; j < J; j++)
+		s->gn[k * J + j] = s->row[j] / S;
+}
+
 /* Add candidate p's measurement to the posterior: the rank-one (Schur complement) update of every tracked
  * covariance, with the k-th pick's scaled row stored in U[k]. */
 static void sel_update(struct sel *s, size_t p, size_t k)
@@ -745,6 +846,8 @@ static void sel_update(struct sel *s, size_t p, size_t k)
 		S = 1e-300;
 	for (size_t f = 0; f < F; f++)
 		zp[f] = s->Z[f * J + p];
+	if (s->X)
+		sel_update_noise(s, p, k, S);
 	for (size_t f = 0; f < F; f++)
 		s->v[f] = fmax(s->v[f] - zp[f] * zp[f] / S, 0);
 	cblas_dger(CblasRowMajor, (int)F, (int)J, -1.0 / S, zp, 1, row, 1, s->Z, (int)J);
@@ -822,6 +925,32 @@ static int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const
 	if (!s->Z || !s->v || !s->U || !s->match || !s->sn2 || !s->rest || !s->res2 || !s->kappa || !s->res_done ||
 	    !s->row || !s->zp)
 		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	s->q = calloc(F, sizeof *s->q);
+	s->q0 = calloc(F, sizeof *s->q0);
+	s->qmin = calloc(F, sizeof *s->qmin);
+	if (!s->q || !s->q0 || !s->qmin)
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	if (t->kind == SELECT_DHR) { /* the noise part's fall with n (sel_update_noise) */
+		size_t n = s->n;
+		s->Nk = malloc(n * sizeof *s->Nk);
+		s->X = calloc(F * Jp, sizeof *s->X);
+		s->Yn = calloc(Jp, sizeof *s->Yn);
+		s->Gc = malloc(Jp * n * sizeof *s->Gc);
+		s->gn = calloc((s->batch ? s->batch : 1) * Jp, sizeof *s->gn);
+		s->mrow = malloc(Jp * sizeof *s->mrow);
+		s->gp = malloc(n * sizeof *s->gp);
+		if (!s->Nk || !s->X || !s->Yn || !s->Gc || !s->gn || !s->mrow || !s->gp)
+			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory for %zu candidates", J);
+		for (size_t k = 0; k < n; k++)
+			s->Nk[k] = m->eta * m->lam[k];
+		memcpy(s->Gc, s->G, J * n * sizeof *s->Gc);
+		for (size_t j = 0; j < J; j++) {
+			double y = 0;
+			for (size_t k = 0; k < n; k++)
+				y += s->Nk[k] * s->Gc[j * n + k] * s->Gc[j * n + k];
+			s->Yn[j] = y;
+		}
+	}
 	if (t->kind == SELECT_DHR ? sel_setup_dhr(s, o, r, err)
 				  : t->kind == SELECT_LNF ? sel_setup_lnf(s, r, err) : sel_setup_rgb(s, r, err))
 		return -1;
@@ -834,6 +963,12 @@ static int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const
 	}
 	r->met = isfinite(t->threshold) && r->value <= t->threshold;
 	return 0;
+}
+
+/* A combined target's value: the larger of each part's value over its threshold. */
+static double combined_value(const struct select_target *t, double dhr, double lnf)
+{
+	return fmax(dhr / t->threshold, lnf / t->lnf_threshold);
 }
 
 int select_batch(const struct recon_model *m, size_t nc, const double *ang, const double *cost,
@@ -851,25 +986,52 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 		return acq_errf(err, ACQ_E_INVAL, "select: between 1 and %d incidences", SELECT_MAX_THETA);
 	if (o.batch > 100000 || o.nchan == 0)
 		return acq_errf(err, ACQ_E_INVAL, "select: batch at most 100000, at least one tracked channel");
-	struct sel s;
+	bool both = t->lnf_threshold > 0;
+	if (both && (t->kind != SELECT_DHR || !(t->threshold > 0)))
+		return acq_errf(err, ACQ_E_INVAL, "select: a combined target needs the DHR part's threshold");
+	/* the parts: one state each (a combined target: the DHR part, then the ln f part; same candidates) */
+	struct select_target tp[2] = { *t, { .kind = SELECT_LNF, .threshold = t->lnf_threshold } };
+	tp[0].lnf_threshold = 0;
+	struct select_result r2 = { 0 };
+	struct sel s[2];
+	size_t np = both ? 2 : 1;
 	int rc = -1;
-	if (sel_init(&s, m, nc, ang, cost, t, &o, r, err))
+	memset(s, 0, sizeof s);
+	if (sel_init(&s[0], m, nc, ang, cost, &tp[0], &o, r, err) ||
+	    (both && sel_init(&s[1], m, nc, ang, cost, &tp[1], &o, &r2, err)))
 		goto out;
-	r->picks = calloc(s.batch ? s.batch : 1, sizeof *r->picks);
+	if (both) {
+		r->part[0] = r->value;
+		r->part[1] = r2.value;
+		r->per[r->nper++] = r2.value;
+		memcpy(r->where, r2.where, sizeof r->where);
+		r->value = combined_value(t, r->part[0], r->part[1]);
+		r->met = r->value <= 1;
+	}
+	r->picks = calloc(s[0].batch ? s[0].batch : 1, sizeof *r->picks);
 	if (!r->picks) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
-	size_t J = s.J;
-	double E = sel_excess(&s, SIZE_MAX, NULL), E0 = E, value = r->value;
-	while (r->npicks < s.batch && !(isfinite(t->threshold) && value <= t->threshold)) {
+	size_t J = s[0].J;
+	double E[2], E0[2], value = r->value, thr = both ? 1.0 : t->threshold;
+	for (size_t k = 0; k < np; k++)
+		E[k] = E0[k] = sel_excess(&s[k], SIZE_MAX, NULL);
+	while (r->npicks < s[0].batch && !(isfinite(thr) && value <= thr)) {
 		size_t best = SIZE_MAX;
 		double bscore = 0, bgain = 0;
 		for (size_t j = 0; j < J; j++) {
-			if (s.picked[j])
+			if (s[0].picked[j])
 				continue;
-			double gain = E - sel_excess(&s, j, NULL), score = gain / s.cost[j];
-			if (gain > 1e-12 * E0 && score > bscore) {
+			double gain = 0;
+			bool any = false;
+			for (size_t k = 0; k < np; k++) {
+				double g = E[k] - sel_excess(&s[k], j, NULL);
+				any |= g > 1e-12 * E0[k];
+				gain += both ? (E0[k] > 0 ? g / E0[k] : 0) : g;
+			}
+			double score = gain / s[0].cost[j];
+			if (any && gain > 0 && score > bscore) {
 				best = j;
 				bscore = score;
 				bgain = gain;
@@ -877,22 +1039,31 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 		}
 		if (best == SIZE_MAX)
 			break; /* nothing left reduces the target */
-		sel_update(&s, best, r->npicks);
-		struct select_pick *pk = &r->picks[r->npicks++];
-		pk->index = s.rep[best];
+		struct select_pick *pk = &r->picks[r->npicks];
+		for (size_t k = 0; k < np; k++)
+			sel_update(&s[k], best, r->npicks);
+		r->npicks++;
+		pk->index = s[0].rep[best];
 		pk->gain = bgain;
 		pk->gain_per_s = bscore;
-		E = sel_excess(&s, SIZE_MAX, pk->predicted_per);
+		E[0] = sel_excess(&s[0], SIZE_MAX, pk->predicted_per);
 		/* the predicted value: the GP part updated, the other parts as they are (DHR: the largest incidence) */
 		value = 0;
-		for (size_t i = 0; i < r->nper; i++)
+		for (size_t i = 0; i < (both ? r->nper - 1 : r->nper); i++)
 			value = fmax(value, pk->predicted_per[i]);
+		if (both) {
+			double lp;
+			E[1] = sel_excess(&s[1], SIZE_MAX, &lp);
+			pk->predicted_per[r->nper - 1] = lp;
+			value = combined_value(t, value, lp);
+		}
 		pk->predicted = value;
 	}
 	rc = 0;
 out:
 	if (rc)
 		select_result_free(r);
-	sel_free(&s);
+	for (size_t k = 0; k < np; k++)
+		sel_free(&s[k]);
 	return rc;
 }

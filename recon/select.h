@@ -26,9 +26,13 @@ struct select_target {
 	size_t nth;                          /* SELECT_DHR: incidences */
 	double theta_deg[SELECT_MAX_THETA];  /* degrees, in [0, 90] */
 	double threshold;                    /* the target is met at value ≤ threshold; NAN: none given */
+	double lnf_threshold;                /* > 0: a combined target (kind SELECT_DHR): the DHR part ≤ threshold AND
+					      * the ln f part ≤ lnf_threshold; its value is the larger of each part's
+					      * value over its threshold (met at ≤ 1) */
 };
 
-/* Parse "dhr:8,30,60", "lnf", "rgb", optionally followed by ":le=X" (X > 0). 0, or -1 with err saying what is wrong. */
+/* Parse "dhr:8,30,60", "lnf", "rgb", optionally followed by ":le=X" (X > 0), or the combined
+ * "dhr:8,30,60:le=X+lnf:le=Y" (both thresholds required). 0, or -1 with err saying what is wrong. */
 int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err);
 
 struct select_opts {
@@ -43,20 +47,23 @@ void select_opts_default(struct select_opts *o);
 
 struct select_pick {
 	size_t index;          /* the candidate (input order) */
-	double gain;           /* expected reduction of the criterion (target variance above the threshold²) */
+	double gain;           /* expected reduction of the criterion (target variance above the threshold²; a combined
+				* target: the sum of each part's reduction relative to its criterion before the batch) */
 	double gain_per_s;     /* gain / cost */
 	double predicted;      /* predicted target value after this pick and the ones before it */
-	double predicted_per[SELECT_MAX_THETA];
+	double predicted_per[SELECT_MAX_THETA + 1];
 };
 
 struct select_result {
 	double value;                       /* the target's current value */
-	double per[SELECT_MAX_THETA];       /* per incidence (SELECT_DHR) or [0] = value (SELECT_LNF, SELECT_RGB) */
+	double per[SELECT_MAX_THETA + 1];   /* per incidence (SELECT_DHR; a combined target: then the ln f part's value)
+					     * or [0] = value (SELECT_LNF, SELECT_RGB) */
 	size_t nper;
 	int met;                            /* a threshold was given and value ≤ threshold */
 	double where[4];                    /* SELECT_LNF: the grid pair (θi, φi, θo, φo radians) of the largest σ */
 	size_t nunique;                     /* distinct candidates (reciprocal/isotropic duplicates merged) */
 	size_t nvalue;                      /* SELECT_DHR: the channels the value was computed on (0 otherwise) */
+	double part[2];                     /* a combined target: the DHR part's value and the ln f part's */
 	size_t npicks;
 	struct select_pick *picks;          /* in choice order */
 };

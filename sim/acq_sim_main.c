@@ -25,6 +25,7 @@
 #include <unistd.h>
 
 #include "acq_version.h"
+#include "config/acq_num.h"
 #include "config/acq_out.h"
 #include "config/bench.h"
 #include "config/yconf.h"
@@ -207,8 +208,8 @@ static int truth_main(int argc, char **argv)
 		case 'k': g.keep_blind = true; break;
 		case 'n':
 		case 'f': {
-			double v = strtod(optarg, &end);
-			if (end == optarg || *end || !(v >= 0 && v <= 10)) {
+			double v;
+			if (acq_num_parse(optarg, 0, 10, &v)) {
 				fprintf(stderr, "acq-sim truth: --%s: expected a number in [0, 10], got '%s'\n",
 					c == 'n' ? "noise" : "noise-floor", optarg);
 				return 2;
@@ -249,8 +250,7 @@ static int truth_main(int argc, char **argv)
 			}
 			break;
 		case 'P':
-			g.point_s = strtod(optarg, &end);
-			if (end == optarg || *end || !(g.point_s >= 0 && g.point_s <= 1e6)) {
+			if (acq_num_parse(optarg, 0, 1e6, &g.point_s)) {
 				fprintf(stderr, "acq-sim truth: --point-time: expected seconds in [0, 1e6], got '%s'\n", optarg);
 				return 2;
 			}
@@ -351,8 +351,7 @@ int main(int argc, char **argv)
 		switch (c) {
 		case 'c': config = optarg; break;
 		case 's':
-			scale = strtod(optarg, &end);
-			if (*end || !(scale >= 0.01 && scale <= 1e5)) {
+			if (acq_num_parse(optarg, 0.01, 1e5, &scale)) {
 				fprintf(stderr, "acq-sim: --time-scale: expected a number in [0.01, 100000], got '%s'\n", optarg);
 				return 2;
 			}

@@ -37,6 +37,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "config/acq_num.h"
+
 #define SL_LINE_MAX 128
 
 struct sim_laser {
@@ -110,9 +112,8 @@ static void command(struct sim_laser *s, const char *cmd)
 	} else if (!strcmp(cmd, "EMISSION?")) {
 		reply(s, "EMISSION %d", w->laser_emission);
 	} else if (!strncmp(cmd, "POWER ", 6)) {
-		char *end;
-		double v = strtod(cmd + 6, &end);
-		if (end == cmd + 6 || *end || !isfinite(v) || v < 0 || v > 100)
+		double v;
+		if (acq_num_parse(cmd + 6, 0, 100, &v))
 			reply(s, "ERR 2 power must be a number in [0, 100]");
 		else {
 			w->laser_power_pct = v;

@@ -397,7 +397,7 @@ static int make_requests(const struct plan_spec *s, const struct bench_geom *g, 
 			return acq_errf(err, ACQ_E_INVAL, "plan '%s': non-finite or out-of-range angle", s->name);
 		}
 	}
-	if (plan_expand(s, &R->req, &R->n_req, err))
+	if (plan_expand(s, &R->req, &R->n_req, err) || plan_adaptive_seed_extra(s, g, &R->req, &R->n_req, err))
 		return -1;
 	for (size_t i = 0; i < R->n_req; i++)
 		R->req[i].status = PLAN_KEPT;

@@ -40,6 +40,8 @@ enum plan_target_kind {
 	PLAN_TARGET_RGB_SIGMA  /* σ of the MERL table's RGB values (sr⁻¹), RMS under the table's projected measure ≤ le */
 };
 #define PLAN_MAX_TARGET_INC 8
+#define PLAN_MAX_SPEC_RINGS 8   /* rings of candidates around the mirror direction */
+#define PLAN_MAX_SEED_SPEC 16   /* in-plane offsets from the mirror direction added to an adaptive seed */
 
 /* The adaptive part of a plan (kind: adaptive): the seed is the plan_spec that holds it; after the seed, batches
  * chosen by `brdf-recon select` among candidate directions until the target or the budget is reached. */
@@ -48,6 +50,7 @@ struct plan_adaptive {
 	double target_inc[PLAN_MAX_TARGET_INC]; /* DHR σ: incidences, degrees */
 	size_t n_target_inc;
 	double le;                  /* the threshold the target's value must reach */
+	double le_lnf;              /* > 0: a combined target, the DHR σ ≤ le AND the largest σ of ln f ≤ le_lnf */
 	double budget_s;            /* bench seconds for the whole sweep, seed included (0: no limit) */
 	size_t budget_points;       /* points for the whole sweep, seed included (0: no limit) */
 	size_t batch;               /* points per batch */
@@ -56,6 +59,13 @@ struct plan_adaptive {
 	size_t cand_count;          /* candidate observation directions per incidence (Fibonacci set) */
 	double cand_max_theta_deg;  /* ... over the cap θ ≤ this */
 	bool overlap;               /* choose batch k+2 (from the model through batch k) while batch k+1 is measured */
+	bool cand_specular;         /* per candidate incidence also the mirror direction and rings around it */
+	double spec_rings_deg[PLAN_MAX_SPEC_RINGS]; /* ... the rings' angular radii around it, degrees */
+	size_t n_spec_rings;
+	size_t spec_per_ring;       /* ... directions per ring */
+	double seed_spec_deg[PLAN_MAX_SEED_SPEC];  /* the seed's extra points per incidence: in the specular plane at
+						    * these offsets (degrees of θo) from the mirror direction */
+	size_t n_seed_spec;
 };
 
 /* A parsed plan file (plan_load / plan_parse), or one built by code (arrays malloc'ed; plan_spec_free). */
@@ -245,8 +255,18 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 int plan_adaptive_candidates(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
 			     const struct plan_pos *from, const struct plan_pos *done, size_t n_done,
 			     struct plan_cand **out, size_t *n, struct acq_err *err);
-/* The requested (canonical) position of candidate id of spec's adaptive part. 0, or -1 when there is none. */
-int plan_adaptive_cand_pos(const struct plan_spec *spec, size_t id, struct plan_pos *out);
+/* The requested (canonical) position of candidate id of spec's adaptive part on bench g: ids below
+ * incidences × per_incidence are the Fibonacci directions, then per incidence the mirror direction and its rings
+ * (a ring direction the blind zones or limits hide is replaced by its reciprocal when that one is usable).
+ * 0, or -1 when there is none. */
+int plan_adaptive_cand_pos(const struct plan_spec *spec, const struct bench_geom *g, size_t id, struct plan_pos *out);
+/* Which of select's picks (their costs cost[0..n-1], in choice order) a batch takes: each in turn when its cost fits
+ * what the ones taken before it leave of left_s (INFINITY: no limit), a dearer pick skipped and a cheaper later one
+ * still taken, at most max_k. Their indices, ascending, into keep[n]; their count. */
+size_t plan_adaptive_fit_picks(const double *cost, size_t n, double left_s, size_t max_k, size_t *keep);
+/* The threshold the select value of spec's target is compared with: le, or 1 for a combined target (whose value is
+ * the larger of each part's value over its threshold). */
+double plan_adaptive_threshold(const struct plan_adaptive *a);
 /* Plan the points in the order given (no ordering, no classification: points already planned once, e.g. a stored
  * batch), each reached by a fresh safe move from the previous one (from start when given). 0, or -1 with err
  * (ACQ_E_RANGE: a point no safe move reaches). */

@@ -7,15 +7,20 @@
  *   seed:                                   # any plan (grid or Fibonacci) without integration or averages
  *     incidence: {theta_deg: [0, 30, 60]}
  *     observation: {fibonacci: {count: 24}}
- *   target: {dhr_sigma: {incidence_deg: [8], le: 0.002}}   # or {lnf_sigma: {le: 0.05}} or {rgb_sigma: {le: 0.01}}
+ *   target: {dhr_sigma: {incidence_deg: [8], le: 0.002}}   # or {lnf_sigma: {le: 0.05}} or {rgb_sigma: {le: 0.01}},
+ *                                           # or dhr_sigma and lnf_sigma together: both must be met
  *   budget: {seconds: 1400, points: 866}    # one or both; the whole sweep, seed included
  *   batch: 12                               # points per batch
- *   candidates: {incidence_deg: RANGE, per_incidence: 150, max_theta_deg: 85}
+ *   candidates: {incidence_deg: RANGE, per_incidence: 150, max_theta_deg: 85,
+ *                specular: {rings_deg: [2, 4, 7, 11], per_ring: 8}}   # or specular: false
+ *   seed_specular_deg: [-4, 0, 4]           # the seed also measures these in-plane offsets from the mirror direction
  *   overlap: false                          # true: batch k+2 is chosen (from the model through batch k) while
  *                                           # batch k+1 is measured, so the arms need not wait for the refit
  *   integration: ...                        # as any plan: the seed's and every batch's
  *   averages: 1
- * The candidate defaults: incidences 0 to 70° every 5°, 150 Fibonacci directions per incidence over θ ≤ 85°. */
+ * The candidate defaults: incidences 0 to 70° every 5°, 150 Fibonacci directions per incidence over θ ≤ 85°, and per
+ * incidence the mirror direction (θo = θi, φo = φi + 180°) with 8 directions on each of rings 2, 4, 7 and 11° around
+ * it (a Fibonacci set ~11° apart never tests a lobe a few degrees wide; the rings resolve one of 4° half width). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -23,38 +28,52 @@
 
 #include "daemon/plan/plan_int.h"
 
+/* RANGE at map[key] (plan_range_parse, values in [lo, hi]) into out[max], its count into *n; what names it. 0 or -1. */
+static int parse_list(struct yc_node *map, const char *key, const char *what, double lo, double hi, double *out,
+		      size_t max, size_t *n, struct acq_err *err)
+{
+	double *v = NULL;
+	size_t nv = 0;
+	if (plan_range_parse(map, key, what, lo, hi, &v, &nv, err))
+		return -1;
+	if (nv > max) {
+		free(v);
+		return yc_errf(err, yc_get(map, key), "%s: at most %zu values", what, max);
+	}
+	memcpy(out, v, nv * sizeof *v);
+	*n = nv;
+	free(v);
+	return 0;
+}
+
 static int parse_target(struct yc_node *root, struct plan_adaptive *a, struct acq_err *err)
 {
 	struct yc_node *t = yc_get(root, "target");
 	if (!t)
 		return yc_errf(err, root, "adaptive plan: missing key 'target' ({dhr_sigma: {incidence_deg: [8], le: X}}, "
-			       "{lnf_sigma: {le: X}} or {rgb_sigma: {le: X}})");
+			       "{lnf_sigma: {le: X}}, {rgb_sigma: {le: X}}, or dhr_sigma and lnf_sigma together)");
 	if (yc_expect_map(t, "target", err))
 		return -1;
 	struct yc_node *d = yc_get(t, "dhr_sigma"), *l = yc_get(t, "lnf_sigma"), *g = yc_get(t, "rgb_sigma");
 	if (yc_check_unknown(t, "target", err))
 		return -1;
-	if ((d != NULL) + (l != NULL) + (g != NULL) != 1)
-		return yc_errf(err, t, "target: give exactly one of 'dhr_sigma', 'lnf_sigma' and 'rgb_sigma'");
+	bool both = d && l && !g;
+	if ((d != NULL) + (l != NULL) + (g != NULL) != 1 && !both)
+		return yc_errf(err, t, "target: give exactly one of 'dhr_sigma', 'lnf_sigma' and 'rgb_sigma', or 'dhr_sigma' and "
+			       "'lnf_sigma' together (both must be met)");
+	if (both) {
+		if (yc_expect_map(l, "target.lnf_sigma", err) || yc_double(l, "le", true, 1e-12, 1e6, &a->le_lnf, err) ||
+		    yc_check_unknown(l, "target.lnf_sigma", err))
+			return -1;
+	}
 	struct yc_node *n = d ? d : l ? l : g;
 	const char *what = d ? "target.dhr_sigma" : l ? "target.lnf_sigma" : "target.rgb_sigma";
 	if (yc_expect_map(n, what, err) || yc_double(n, "le", true, 1e-12, 1e6, &a->le, err))
 		return -1;
 	a->target = d ? PLAN_TARGET_DHR_SIGMA : l ? PLAN_TARGET_LNF_SIGMA : PLAN_TARGET_RGB_SIGMA;
-	if (d) {
-		double *v = NULL;
-		size_t nv = 0;
-		if (plan_range_parse(n, "incidence_deg", "target.dhr_sigma.incidence_deg", 0, 89, &v, &nv, err))
-			return -1;
-		if (nv > PLAN_MAX_TARGET_INC) {
-			free(v);
-			return yc_errf(err, yc_get(n, "incidence_deg"), "target.dhr_sigma.incidence_deg: at most %d incidences",
-				       PLAN_MAX_TARGET_INC);
-		}
-		memcpy(a->target_inc, v, nv * sizeof *v);
-		a->n_target_inc = nv;
-		free(v);
-	}
+	if (d && parse_list(n, "incidence_deg", "target.dhr_sigma.incidence_deg", 0, 89, a->target_inc,
+			    PLAN_MAX_TARGET_INC, &a->n_target_inc, err))
+		return -1;
 	return yc_check_unknown(n, what, err);
 }
 
@@ -73,6 +92,45 @@ static int parse_budget(struct yc_node *root, struct plan_adaptive *a, struct ac
 	return 0;
 }
 
+/* Candidates per incidence around the mirror direction: itself and its rings. */
+static size_t spec_count(const struct plan_adaptive *a)
+{
+	return a->cand_specular ? 1 + a->n_spec_rings * a->spec_per_ring : 0;
+}
+
+/* candidates.specular: false, or {rings_deg: LIST, per_ring: N} (defaults: rings 2, 4, 7, 11°, 8 per ring). */
+static int parse_specular(struct yc_node *c, struct plan_adaptive *a, struct acq_err *err)
+{
+	static const double rings[] = { 2, 4, 7, 11 };
+	a->cand_specular = true;
+	a->n_spec_rings = sizeof rings / sizeof rings[0];
+	memcpy(a->spec_rings_deg, rings, sizeof rings);
+	a->spec_per_ring = 8;
+	struct yc_node *sp = c ? yc_get(c, "specular") : NULL;
+	if (!sp)
+		return 0;
+	if (sp->type == YC_SCALAR)
+		return yc_bool(c, "specular", false, &a->cand_specular, err);
+	long long per = (long long)a->spec_per_ring;
+	if (yc_expect_map(sp, "candidates.specular", err) ||
+	    yc_int(sp, "per_ring", false, 1, 64, &per, err))
+		return -1;
+	a->spec_per_ring = (size_t)per;
+	if (yc_get(sp, "rings_deg") && parse_list(sp, "rings_deg", "candidates.specular.rings_deg", 0.1, 45,
+						  a->spec_rings_deg, PLAN_MAX_SPEC_RINGS, &a->n_spec_rings, err))
+		return -1;
+	return yc_check_unknown(sp, "candidates.specular", err);
+}
+
+/* seed_specular_deg: in-plane offsets (degrees of θo) from the mirror direction the seed also measures. */
+static int parse_seed_specular(struct yc_node *root, struct plan_adaptive *a, struct acq_err *err)
+{
+	if (!yc_get(root, "seed_specular_deg"))
+		return 0;
+	return parse_list(root, "seed_specular_deg", "seed_specular_deg", -45, 45, a->seed_spec_deg, PLAN_MAX_SEED_SPEC,
+			  &a->n_seed_spec, err);
+}
+
 static int parse_candidates(struct yc_node *root, struct plan_adaptive *a, struct acq_err *err)
 {
 	struct yc_node *c = yc_get(root, "candidates");
@@ -81,6 +139,8 @@ static int parse_candidates(struct yc_node *root, struct plan_adaptive *a, struc
 	if (c && (yc_expect_map(c, "candidates", err) ||
 		  yc_int(c, "per_incidence", false, 1, PLAN_MAX_PER_INCIDENCE, &per, err) ||
 		  yc_double(c, "max_theta_deg", false, 0.1, 90, &a->cand_max_theta_deg, err)))
+		return -1;
+	if (parse_specular(c, a, err))
 		return -1;
 	if (c && yc_get(c, "incidence_deg")) {
 		if (plan_range_parse(c, "incidence_deg", "candidates.incidence_deg", -90, 90, &a->cand_inc, &a->n_cand_inc,
@@ -96,7 +156,7 @@ static int parse_candidates(struct yc_node *root, struct plan_adaptive *a, struc
 	if (c && yc_check_unknown(c, "candidates", err))
 		return -1;
 	a->cand_count = (size_t)per;
-	if ((double)a->cand_count * (double)a->n_cand_inc > PLAN_MAX_POINTS)
+	if ((double)(a->cand_count + spec_count(a)) * (double)a->n_cand_inc > PLAN_MAX_POINTS)
 		return yc_errf(err, c, "candidates: %zu incidences × %zu directions is more than %d", a->n_cand_inc,
 			       a->cand_count, PLAN_MAX_POINTS);
 	return 0;
@@ -105,7 +165,7 @@ static int parse_candidates(struct yc_node *root, struct plan_adaptive *a, struc
 int plan_adaptive_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err)
 {
 	static const char *const keys[] = { "name", "kind", "seed", "target", "budget", "batch", "candidates",
-					    "overlap", "integration", "averages", NULL };
+					    "overlap", "integration", "averages", "seed_specular_deg", NULL };
 	struct plan_spec *s = NULL;
 	struct plan_adaptive *a = calloc(1, sizeof *a);
 	*out = NULL;
@@ -144,7 +204,7 @@ int plan_adaptive_parse(struct yc_node *root, struct plan_spec **out, struct acq
 	if (plan_integration_parse(root, s, err) || yc_int(root, "averages", false, 1, 100000, &averages, err) ||
 	    yc_int(root, "batch", true, 1, 1000, &batch, err) || yc_bool(root, "overlap", false, &a->overlap, err) ||
 	    parse_target(root, a, err) ||
-	    parse_budget(root, a, err) || parse_candidates(root, a, err))
+	    parse_budget(root, a, err) || parse_candidates(root, a, err) || parse_seed_specular(root, a, err))
 		goto fail;
 	s->averages = (int)averages;
 	a->batch = (size_t)batch;
@@ -173,19 +233,112 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 	for (size_t i = 0; i < a->n_target_inc && n < len; i++)
 		n += (size_t)snprintf(buf + n, len - n, "%s%.9g", i ? "," : "", a->target_inc[i]);
 	if (n < len)
-		snprintf(buf + n, len - n, ":le=%.9g", a->le);
+		n += (size_t)snprintf(buf + n, len - n, ":le=%.9g", a->le);
+	if (a->le_lnf > 0 && n < len)
+		snprintf(buf + n, len - n, "+lnf:le=%.9g", a->le_lnf);
 }
 
-int plan_adaptive_cand_pos(const struct plan_spec *s, size_t id, struct plan_pos *out)
+size_t plan_adaptive_fit_picks(const double *cost, size_t n, double left_s, size_t max_k, size_t *keep)
+{
+	size_t k = 0;
+	double spent = 0;
+	for (size_t i = 0; i < n && k < max_k; i++)
+		if (spent + cost[i] <= left_s) {
+			spent += cost[i];
+			keep[k++] = i;
+		}
+	return k;
+}
+
+double plan_adaptive_threshold(const struct plan_adaptive *a)
+{
+	return a->le_lnf > 0 ? 1.0 : a->le;
+}
+
+/* The incidence direction's azimuth of laser position th on g, degrees. */
+static double inc_phi(const struct bench_geom *g, double th)
+{
+	return g->laser_phi_deg + (th < 0 ? 180.0 : 0.0);
+}
+
+/* Direction r of the set around the mirror direction of laser position th (0: the mirror direction; then ring
+ * (r-1)/per_ring at azimuth step (r-1)%per_ring about it, odd rings turned by half a step) as a bench position;
+ * -1 when it leaves the cap θ ≤ max_theta. */
+static int spec_dir(const struct plan_adaptive *a, const struct bench_geom *g, double th, size_t r, struct plan_pos *out)
+{
+	double ti = fabs(th), pm = inc_phi(g, th) + 180.0, m[3], e1[3], e2[3], v[3];
+	plan_dir_of(ti, pm, m);
+	e1[0] = cos(ti * DEG) * cos(pm * DEG); /* along θ in the specular plane */
+	e1[1] = cos(ti * DEG) * sin(pm * DEG);
+	e1[2] = -sin(ti * DEG);
+	e2[0] = -sin(pm * DEG); /* across it */
+	e2[1] = cos(pm * DEG);
+	e2[2] = 0;
+	double d = 0, psi = 0;
+	if (r > 0) {
+		size_t ring = (r - 1) / a->spec_per_ring, k = (r - 1) % a->spec_per_ring;
+		d = a->spec_rings_deg[ring] * DEG;
+		psi = 2.0 * M_PI * ((double)k + 0.5 * (double)(ring % 2)) / (double)a->spec_per_ring;
+	}
+	for (int i = 0; i < 3; i++)
+		v[i] = cos(d) * m[i] + sin(d) * (cos(psi) * e1[i] + sin(psi) * e2[i]);
+	double to = atan2(sqrt(v[0] * v[0] + v[1] * v[1]), v[2]) / DEG;
+	if (to > a->cand_max_theta_deg + 1e-9)
+		return -1;
+	double po = fabs(v[0]) + fabs(v[1]) < 1e-12 ? pm : atan2(v[1], v[0]) / DEG;
+	*out = plan_canon((struct plan_pos){ th, to, po });
+	return 0;
+}
+
+int plan_adaptive_cand_pos(const struct plan_spec *s, const struct bench_geom *g, size_t id, struct plan_pos *out)
 {
 	const struct plan_adaptive *a = s->adaptive;
-	if (!a || !a->cand_count || id / a->cand_count >= a->n_cand_inc)
+	if (!a || !a->cand_count)
 		return -1;
+	size_t nfib = a->n_cand_inc * a->cand_count, ns = spec_count(a);
+	if (id >= nfib) {
+		if (!ns || (id - nfib) / ns >= a->n_cand_inc)
+			return -1;
+		double th = a->cand_inc[(id - nfib) / ns];
+		struct plan_pos q;
+		if (spec_dir(a, g, th, (id - nfib) % ns, &q))
+			return -1;
+		*out = q;
+		if (plan_classify(g, &q)) { /* hidden: its reciprocal (the pair swapped; isotropy keeps the azimuth) */
+			struct plan_pos rq = plan_canon((struct plan_pos){ q.det_theta, fabs(th),
+									  g->laser_phi_deg + q.det_phi - inc_phi(g, th) });
+			if (!plan_classify(g, &rq))
+				*out = rq;
+		}
+		return 0;
+	}
 	size_t i = id / a->cand_count, j = id % a->cand_count;
 	const double golden = 180.0 * (3.0 - sqrt(5.0)); /* degrees */
 	double cmax = cos(a->cand_max_theta_deg * DEG);
 	double cz = 1.0 - (1.0 - cmax) * ((double)j + 0.5) / (double)a->cand_count;
 	*out = plan_canon((struct plan_pos){ a->cand_inc[i], acos(cz) / DEG, plan_norm360(golden * (double)j) });
+	return 0;
+}
+
+int plan_adaptive_seed_extra(const struct plan_spec *s, const struct bench_geom *g, struct plan_req **r, size_t *n,
+			     struct acq_err *err)
+{
+	const struct plan_adaptive *a = s->adaptive;
+	if (!a || !a->n_seed_spec)
+		return 0;
+	size_t add = a->n_seed_spec * s->n_incidence;
+	struct plan_req *q = realloc(*r, (*n + add + s->reciprocal_pairs + 1) * sizeof *q);
+	if (!q)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	*r = q;
+	for (size_t i = 0; i < s->n_incidence; i++)
+		for (size_t k = 0; k < a->n_seed_spec; k++) {
+			double th = s->incidence[i];
+			memset(&q[*n], 0, sizeof q[*n]);
+			q[*n].req = (struct plan_pos){ th, fabs(th) + a->seed_spec_deg[k], inc_phi(g, th) + 180.0 };
+			q[*n].req.det_phi = plan_norm360(q[*n].req.det_phi);
+			(*n)++;
+		}
 	return 0;
 }
 
@@ -320,47 +473,45 @@ int plan_adaptive_candidates(const struct plan_spec *s, const struct bench_geom 
 	*n = 0;
 	if (!a)
 		return acq_errf(err, ACQ_E_INVAL, "plan '%s' is not adaptive", s->name);
-	struct plan_cand *c = malloc((a->n_cand_inc * a->cand_count + 1) * sizeof *c);
+	size_t nfib = a->n_cand_inc * a->cand_count, nall = nfib + a->n_cand_inc * spec_count(a);
+	struct plan_cand *c = malloc((nall + 1) * sizeof *c);
 	if (!c)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	size_t k = 0;
 	struct plan_wp w[PLAN_MAX_WP];
-	for (size_t i = 0; i < a->n_cand_inc; i++) {
-		for (size_t j = 0; j < a->cand_count; j++) {
-			struct plan_pos q;
-			plan_adaptive_cand_pos(s, i * a->cand_count + j, &q);
-			if (plan_classify(g, &q))
+	for (size_t id = 0; id < nall; id++) {
+		struct plan_pos q;
+		if (plan_adaptive_cand_pos(s, g, id, &q) || plan_classify(g, &q))
+			continue;
+		bool seen = false;
+		for (size_t d = 0; d < n_done && !seen; d++)
+			seen = same_config(&q, &done[d]);
+		if (seen)
+			continue;
+		double reps[MAX_REPS], best = -1, best_segs = 0;
+		int nr = plan_phi_reps(g, q.det_phi, reps);
+		struct plan_pos bq = q;
+		for (int r = 0; r < nr; r++) {
+			struct plan_pos p = q;
+			p.det_phi = reps[r];
+			if (best >= 0 && plan_straight_s(g, from, &p) >= best)
 				continue;
-			bool seen = false;
-			for (size_t d = 0; d < n_done && !seen; d++)
-				seen = same_config(&q, &done[d]);
-			if (seen)
+			size_t nw = 0;
+			double mv = plan_move(g, from, &p, w, &nw);
+			if (mv < 0 || (best >= 0 && mv >= best))
 				continue;
-			double reps[MAX_REPS], best = -1, best_segs = 0;
-			int nr = plan_phi_reps(g, q.det_phi, reps);
-			struct plan_pos bq = q;
-			for (int r = 0; r < nr; r++) {
-				struct plan_pos p = q;
-				p.det_phi = reps[r];
-				if (best >= 0 && plan_straight_s(g, from, &p) >= best)
-					continue;
-				size_t nw = 0;
-				double mv = plan_move(g, from, &p, w, &nw);
-				if (mv < 0 || (best >= 0 && mv >= best))
-					continue;
-				best = mv;
-				best_segs = 0;
-				for (size_t x = 0; x < nw; x++)
-					best_segs += w[x].duration_s;
-				bq = p;
-			}
-			if (best < 0)
-				continue; /* no safe move reaches it from here */
-			c[k].id = i * a->cand_count + j;
-			c[k].pos = bq;
-			c[k].cost_s = point_cost(s, g, t, from, &bq, best, best_segs);
-			k++;
+			best = mv;
+			best_segs = 0;
+			for (size_t x = 0; x < nw; x++)
+				best_segs += w[x].duration_s;
+			bq = p;
 		}
+		if (best < 0)
+			continue; /* no safe move reaches it from here */
+		c[k].id = id;
+		c[k].pos = bq;
+		c[k].cost_s = point_cost(s, g, t, from, &bq, best, best_segs);
+		k++;
 	}
 	*out = c;
 	*n = k;

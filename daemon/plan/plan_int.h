@@ -47,6 +47,10 @@ int plan_range_parse(struct yc_node *map, const char *key, const char *what, dou
 int plan_integration_parse(struct yc_node *root, struct plan_spec *s, struct acq_err *err);
 /* A `kind: adaptive` plan document into a new spec (its seed's points, the adaptive part in spec->adaptive). */
 int plan_adaptive_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err);
+/* An adaptive seed's extra requests (seed_specular_deg: in-plane points around the mirror direction of each
+ * incidence on bench g) appended to *r (count *n, reallocated). 0 or -1 with err. */
+int plan_adaptive_seed_extra(const struct plan_spec *s, const struct bench_geom *g, struct plan_req **r, size_t *n,
+			     struct acq_err *err);
 
 /* ---- plan_classify.c ---- */
 /* x in [0, 360). */

@@ -113,7 +113,8 @@ json_t *plan_dry_run_json(const struct plan_spec *s, const struct bench_geom *g,
 	plan_adaptive_worst(s, g, t, r, &worst_s, &worst_pts);
 	char spec[256];
 	plan_adaptive_target_spec(a, spec, sizeof spec);
-	json_t *ad = json_pack("{s:s,s:f,s:I,s:I,s:I,s:f,s:I}", "target", spec, "threshold", a->le, "batch",
+	json_t *ad = json_pack("{s:s,s:f,s:I,s:I,s:I,s:f,s:I}", "target", spec, "threshold", plan_adaptive_threshold(a),
+			       "batch",
 			       (json_int_t)a->batch, "candidate_incidences", (json_int_t)a->n_cand_inc,
 			       "candidates_per_incidence", (json_int_t)a->cand_count, "worst_case_s", worst_s,
 			       "worst_case_points", (json_int_t)worst_pts);

@@ -28,6 +28,10 @@ static const char select_help[] =
 	"                                      table's cells weighted by cos(theta_i) cos(theta_o) dwi dwo (12^3 of\n"
 	"                                      its cells); the wavelengths' errors taken as fully correlated\n"
 	"                         either followed by :le=X, the threshold at which the target is met\n"
+	"                         dhr:8,30,60:le=X+lnf:le=Y  both: met when both parts are; its value is the larger\n"
+	"                                      of each part's value over its threshold (met at <= 1), each pick's gain\n"
+	"                                      the sum of the parts' reductions relative to their criterion before the\n"
+	"                                      batch; per = the DHR incidences' values, then the ln f part's\n"
 	"  --batch N              at most N picks (default 16; 0: only report the target)\n"
 	"  --draws N --seed S     Monte-Carlo draws of the DHR's noise part (default 16, seed 1)\n"
 	"  --value-channels N     dhr: compute the value on N evenly spread channels (the tracked ones among them)\n"
@@ -36,7 +40,8 @@ static const char select_help[] =
 	"                         channels' spikes (measured -5.5 % .. +0.8 % of all channels' on a paper-size model)\n"
 	"  -o OUT.json            output (stdout by default): {\"target\":{\"spec\",\"value\",\"per\",\"threshold\",\"met\"},\n"
 	"                         \"picks\":[{\"id\",\"gain\",\"gain_per_s\",\"cost_s\",\"predicted_value_after\"}], \"model\",\n"
-	"                         \"criterion\", \"candidates\":{\"read\",\"distinct\"}}; picks in choice order.\n"
+	"                         \"criterion\", \"candidates\":{\"read\",\"distinct\"}}; picks in choice order; a combined\n"
+	"                         target adds \"parts\":{\"dhr\":{\"value\",\"threshold\"},\"lnf\":{...}} to \"target\".\n"
 	"Exit 0 (also with no pick worth making: empty picks), 2 on bad input, 1 on a failure of the computation.\n";
 
 /* Write s as a JSON string (quotes included). */
@@ -264,15 +269,27 @@ int cmd_select(int argc, char **argv)
 			for (size_t i = 0; i < tg.nth; i++)
 				fprintf(f, i ? ",%g" : "%g", tg.theta_deg[i]);
 			fprintf(f, "],\"value_channels\":%zu,", res.nvalue);
-		} else if (tg.kind == SELECT_LNF) {
+		}
+		if (tg.kind == SELECT_LNF || tg.lnf_threshold > 0) {
 			fputs("\"where\":{", f);
 			static const char *const an[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
 			for (int a = 0; a < 4; a++)
 				fprintf(f, "%s\"%s\":%g", a ? "," : "", an[a], res.where[a] * 180 / M_PI);
 			fputs("},", f);
 		}
+		if (tg.lnf_threshold > 0) {
+			fputs("\"parts\":{\"dhr\":{\"value\":", f);
+			json_num(f, res.part[0]);
+			fputs(",\"threshold\":", f);
+			json_num(f, tg.threshold);
+			fputs("},\"lnf\":{\"value\":", f);
+			json_num(f, res.part[1]);
+			fputs(",\"threshold\":", f);
+			json_num(f, tg.lnf_threshold);
+			fputs("}},", f);
+		}
 		fputs("\"threshold\":", f);
-		json_num(f, tg.threshold);
+		json_num(f, tg.lnf_threshold > 0 ? 1.0 : tg.threshold);
 		fprintf(f, ",\"met\":%s},\"picks\":[", res.met ? "true" : "false");
 		for (size_t k = 0; k < res.npicks; k++) {
 			const struct select_pick *p = &res.picks[k];

@@ -2,9 +2,9 @@
  * offline time-to-accuracy study), with the daemon's own code: its configuration loader and executor timing
  * (conf_load, sweep_init + sweep_plan_timing), the seed plan (plan_make + plan_time_apply, as a sweep start), the
  * candidates with their cost (plan_adaptive_candidates, as daemon/recon_select.c's child writes them), and a batch
- * (as daemon/sweep_adaptive.c's plan_batch: select's picks kept in order while their cost fits the budget left,
- * planned from the arms with plan_make_points, re-planned one pick shorter while the batch's predicted time exceeds
- * what is left). Run alone (as `make bench` does) it only says what it is.
+ * (as daemon/sweep_adaptive.c's plan_batch: select's picks taken in order when their cost fits the budget left, a
+ * dearer one skipped (plan_adaptive_fit_picks), planned from the arms with plan_make_points, re-planned one pick
+ * shorter while the batch's predicted time exceeds what is left). Run alone (as `make bench` does) it only says what it is.
  *
  *   bench_tta_plan seed  CONF PLAN [--time-scale S]                 -> JSON {predicted_s, steps}
  *   bench_tta_plan cand  CONF PLAN STATE.json OUT.csv [--time-scale S] -> OUT.csv; prints the count
@@ -146,24 +146,25 @@ static int cmd_batch(const struct plan_spec *s, const struct bench_geom *g, stru
 	}
 	const struct plan_adaptive *ad = s->adaptive;
 	size_t n = json_array_size(picks), k = 0;
-	double left_s = ad->budget_s > 0 ? ad->budget_s - spent : INFINITY, cost = 0;
+	double left_s = ad->budget_s > 0 ? ad->budget_s - spent : INFINITY;
 	size_t left_pts = ad->budget_points ? (ad->budget_points > nd ? ad->budget_points - nd : 0) : n;
 	struct plan_pos *pos = calloc(n + 1, sizeof *pos);
 	for (size_t i = 0; i < n; i++) {
 		json_t *id = json_object_get(json_array_get(picks, i), "id");
-		if (!json_is_integer(id) || plan_adaptive_cand_pos(s, (size_t)json_integer_value(id), &pos[i])) {
+		if (!json_is_integer(id) || plan_adaptive_cand_pos(s, g, (size_t)json_integer_value(id), &pos[i])) {
 			free(pos);
 			json_decref(o);
 			return fail(sel, "a pick names no candidate of the plan");
 		}
 	}
-	while (k < n && k < left_pts) {
-		double c = json_number_value(json_object_get(json_array_get(picks, k), "cost_s"));
-		if (cost + c > left_s)
-			break;
-		cost += c;
-		k++;
-	}
+	double *cost_of = calloc(n + 1, sizeof *cost_of);
+	size_t *keep = calloc(n + 1, sizeof *keep);
+	for (size_t i = 0; i < n; i++)
+		cost_of[i] = json_number_value(json_object_get(json_array_get(picks, i), "cost_s"));
+	k = plan_adaptive_fit_picks(cost_of, n, left_s, left_pts, keep); /* as sweep_adaptive.c's plan_batch */
+	for (size_t i = 0; i < k; i++)
+		pos[i] = pos[keep[i]];
+	free(cost_of);
 	json_decref(o);
 	t.reference = false;
 	t.have_start = false;
@@ -172,6 +173,7 @@ static int cmd_batch(const struct plan_spec *s, const struct bench_geom *g, stru
 	for (; k > 0; k--) {
 		if (plan_make_points(s, g, pos, k, &from, &r, &err)) {
 			free(pos);
+			free(keep);
 			return fail("planning the batch", err.msg);
 		}
 		plan_time_apply(s, g, &t, r);
@@ -181,6 +183,9 @@ static int cmd_batch(const struct plan_spec *s, const struct bench_geom *g, stru
 		r = NULL;
 	}
 	free(pos);
+	for (size_t i = 0; r && i < r->n_steps; i++)
+		r->steps[i].req = keep[r->steps[i].req]; /* the pick's rank in select's order */
+	free(keep);
 	json_t *out = json_pack("{s:I, s:f, s:o}", "k", (json_int_t)k, "predicted_s", r ? r->predicted_s : 0.0, "steps",
 				r ? steps_json(g, r, true) : json_array());
 	plan_result_free(r);

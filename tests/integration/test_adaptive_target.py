@@ -4,7 +4,7 @@ the σ of the DHR at 8° (0.006) that the seed alone does not reach and a budget
 stops saying "target met" with the value at or below the threshold, after at least one chosen batch and well
 within the budget; the values it stored are select's; and the stored decisions replay: brdf-recon select run again
 on a batch's recorded model and candidates picks the same candidates in the same order. Then a second sweep with an
-unreachable target and only 6 candidate directions stops on "nothing reachable left" before its budget."""
+unreachable target and only 6 candidate directions (no specular set) stops on "nothing reachable left" before its budget."""
 import json
 import os
 import subprocess
@@ -58,7 +58,8 @@ def run():
         assert abs(d["target"]["value"] - r1["target_value"]) <= 1e-9 * r1["target_value"], (d["target"], r1)
         L.say("batch 1 replayed: picks %s, value %.6g" % (got, d["target"]["value"]))
 
-        sid = L.start_sweep(b, A.plan(budget="points: %d" % BUDGET, cands="incidence_deg: [40], per_incidence: 6"),
+        sid = L.start_sweep(b, A.plan(budget="points: %d" % BUDGET,
+                                      cands="incidence_deg: [40], per_incidence: 6, specular: false"),
                             "it-adaptive-exhaust")
         row = L.drive_to_end(b, sid, timeout=240, sample="white")
         assert row["state"] == "completed", row["state"]

@@ -104,6 +104,16 @@ def main():
     jl = json.loads(p.stdout)
     check(len(jl["target"]["per"]) == 1 and jl["target"]["value"] > 0 and len(jl["picks"]) == 3, "lnf target")
     check(set(jl["target"]["where"]) == {"theta_i", "phi_i", "theta_o", "phi_o"}, "lnf where")
+    # dhr + lnf, both must be met: the parts are the single targets' values, the value their larger ratio
+    spec = "dhr:8,30,60:le=%.9g+lnf:le=%.9g" % (2 * t["value"], 0.5 * jl["target"]["value"])
+    p = run("select", model, "--candidates", cands, "--target", spec, "--batch", "3")
+    jc = json.loads(p.stdout)["target"]
+    print("combined:", json.dumps(jc))
+    check(abs(jc["parts"]["dhr"]["value"] - t["value"]) <= 1e-12 * t["value"] and
+          abs(jc["parts"]["lnf"]["value"] - jl["target"]["value"]) <= 1e-12 * jl["target"]["value"], "combined parts")
+    check(abs(jc["value"] - 2.0) < 1e-6 and jc["threshold"] == 1 and jc["met"] is False and len(jc["per"]) == 4,
+          "combined value: the larger part/threshold ratio, unmet while the ln f part is")
+    check(len(json.loads(p.stdout)["picks"]) == 3, "combined: picks while one part is unmet")
     # zero candidates
     empty = os.path.join(d, "empty.csv")
     write_cands(empty, [])

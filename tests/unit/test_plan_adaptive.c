@@ -101,9 +101,21 @@ static void test_errors(void **state)
 	load_bad(buf, "missing key 'budget'");
 	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {}\nbatch: 4\n", seed);
 	load_bad(buf, "give 'seconds'");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}, dhr_sigma: {incidence_deg: 8, le: 1}}\n"
-		 "budget: {points: 9}\nbatch: 4\n", seed);
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}, dhr_sigma: {incidence_deg: 8, le: 1}, "
+		 "rgb_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n", seed);
 	load_bad(buf, "exactly one of");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {}, dhr_sigma: {incidence_deg: 8, le: 1}}\n"
+		 "budget: {points: 9}\nbatch: 4\n", seed);
+	load_bad(buf, "le");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
+		 "candidates: {specular: {per_ring: 0}}\n", seed);
+	load_bad(buf, "per_ring");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
+		 "candidates: {specular: {rings: [2]}}\n", seed);
+	load_bad(buf, "unknown key 'rings' in candidates.specular");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
+		 "seed_specular_deg: [0, 60]\n", seed);
+	load_bad(buf, "seed_specular_deg");
 	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {rgb_sigma: {le: 1}, lnf_sigma: {le: 1}}\n"
 		 "budget: {points: 9}\nbatch: 4\n", seed);
 	load_bad(buf, "exactly one of");
@@ -153,21 +165,23 @@ static void test_candidates(void **state)
 	struct plan_cand *c = NULL;
 	size_t n = 0;
 	assert_int_equal(plan_adaptive_candidates(s, &g, &tm, &from, done, seed->n_steps, &c, &n, &err), 0);
-	size_t all = s->adaptive->n_cand_inc * s->adaptive->cand_count;
+	const struct plan_adaptive *ad = s->adaptive;
+	size_t all = ad->n_cand_inc * (ad->cand_count + 1 + ad->n_spec_rings * ad->spec_per_ring);
+	assert_true(ad->cand_specular); /* the default */
 	assert_true(n > all / 2 && n <= all);
 	double dwell = s->averages * (s->integ_ms / 1000 + g.readout_s);
 	size_t blind_total = 0;
 	for (size_t i = 0; i < all; i++) {
 		struct plan_pos q;
-		assert_int_equal(plan_adaptive_cand_pos(s, i, &q), 0);
+		assert_int_equal(plan_adaptive_cand_pos(s, &g, i, &q), 0);
 		blind_total += plan_blind(&g, &q) != 0;
 	}
 	assert_true(blind_total > 0); /* the set reaches into the blind zones: they must be left out */
-	assert_int_equal(plan_adaptive_cand_pos(s, all, &(struct plan_pos){ 0 }), -1);
+	assert_int_equal(plan_adaptive_cand_pos(s, &g, all, &(struct plan_pos){ 0 }), -1);
 	for (size_t i = 0; i < n; i++) {
 		assert_int_equal(plan_blind(&g, &c[i].pos), 0);
 		struct plan_pos q;
-		assert_int_equal(plan_adaptive_cand_pos(s, c[i].id, &q), 0);
+		assert_int_equal(plan_adaptive_cand_pos(s, &g, c[i].id, &q), 0);
 		assert_true(fabs(q.laser_theta - c[i].pos.laser_theta) < 1e-9);
 		for (size_t d = 0; d < seed->n_steps; d++)
 			assert_false(same_config(&q, &done[d]));
@@ -200,6 +214,140 @@ static void test_candidates(void **state)
 	free(done);
 	plan_result_free(seed);
 	plan_spec_free(s);
+}
+
+/* Angle (degrees) between the observation direction of bench position p and the mirror direction of its
+ * incidence: invariant under reciprocity (swapping the pair) and rotation about the normal. */
+static double off_specular_deg(const struct bench_geom *g, const struct plan_pos *p)
+{
+	double pi = g->laser_phi_deg + (p->laser_theta < 0 ? 180 : 0), ti = fabs(p->laser_theta), d = M_PI / 180;
+	double m[3] = { sin(ti * d) * cos((pi + 180) * d), sin(ti * d) * sin((pi + 180) * d), cos(ti * d) };
+	double v[3] = { sin(p->det_theta * d) * cos(p->det_phi * d), sin(p->det_theta * d) * sin(p->det_phi * d),
+			cos(p->det_theta * d) };
+	double c = fmin(1, fmax(-1, m[0] * v[0] + m[1] * v[1] + m[2] * v[2]));
+	return acos(c) / d;
+}
+
+/* The mirror-direction candidates: per candidate incidence the mirror direction itself whenever it is usable and
+ * reachable, rings at their stated angular radius (a hidden ring direction offered as its reciprocal when that is
+ * usable, never when hidden too), nothing blind, out of the limits or unreachable; and the seed's specular plane. */
+static void test_specular(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	bench_defaults(&g);
+	g.detector_theta.max_deg = 56; /* ring directions beyond it are hidden; their reciprocals are not */
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	struct plan_spec *s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: [8, 40]}, observation: "
+				      "{fibonacci: {count: 10, max_theta_deg: 50}}}\n"
+				      "target: {dhr_sigma: {incidence_deg: [8], le: 0.002}}\nbudget: {points: 60}\nbatch: 8\n"
+				      "candidates: {incidence_deg: {from: 0, to: 55, step: 5}, per_incidence: 40, "
+				      "max_theta_deg: 80, specular: {rings_deg: [2, 4, 7], per_ring: 6}}\n"
+				      "seed_specular_deg: [-4, 0, 4]\nintegration: {mode: fixed, ms: 20}\n");
+	const struct plan_adaptive *a = s->adaptive;
+	assert_true(a->cand_specular && a->n_spec_rings == 3 && a->spec_per_ring == 6 && a->n_seed_spec == 3);
+	size_t nfib = a->n_cand_inc * a->cand_count, ns = 1 + 3 * 6, nall = nfib + a->n_cand_inc * ns;
+	struct plan_result *seed = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(plan_make(s, &g, &seed, &err), 0);
+	/* the seed: the mirror direction and ±4° in the specular plane at each incidence, where usable */
+	size_t seed_spec = 0;
+	for (int i = 0; i < 2; i++)
+		for (int k = -1; k <= 1; k++) {
+			double th = i ? 40 : 8;
+			struct plan_pos q = { th, th + 4 * k, g.laser_phi_deg + 180 };
+			bool found = false;
+			for (size_t x = 0; x < seed->n_steps; x++)
+				found |= same_config(&q, &seed->steps[x].pos);
+			if (plan_blind(&g, &q) == 0) {
+				assert_true(found);
+				seed_spec++;
+			}
+		}
+	assert_true(seed_spec >= 4);
+	struct plan_pos from = seed->steps[seed->n_steps - 1].pos;
+	struct plan_cand *c = NULL;
+	size_t n = 0, mirrors = 0, recip = 0, hidden_both = 0;
+	assert_int_equal(plan_adaptive_candidates(s, &g, &tm, &from, NULL, 0, &c, &n, &err), 0);
+	assert_int_equal(plan_adaptive_cand_pos(s, &g, nall, &(struct plan_pos){ 0 }), -1);
+	for (size_t id = nfib; id < nall; id++) {
+		size_t i = (id - nfib) / ns, r = (id - nfib) % ns;
+		double th = a->cand_inc[i], want = r == 0 ? 0 : a->spec_rings_deg[(r - 1) / 6];
+		struct plan_pos q;
+		if (plan_adaptive_cand_pos(s, &g, id, &q))
+			continue; /* beyond the cap */
+		assert_true(fabs(off_specular_deg(&g, &q) - want) < 1e-6);
+		bool offered = false;
+		for (size_t k = 0; k < n; k++)
+			if (c[k].id == id) {
+				offered = true;
+				assert_true(same_config(&q, &c[k].pos));
+			}
+		struct plan_pos direct = q;
+		if (fabs(q.laser_theta - th) > 1e-9) { /* the reciprocal: usable, and the direct position is hidden */
+			recip++;
+			assert_int_equal(plan_blind(&g, &q), 0);
+			direct = (struct plan_pos){ th, q.laser_theta, 0 };
+			assert_true(q.det_theta == fabs(th) || fabs(q.det_theta - fabs(th)) < 1e-9);
+		} else if (plan_blind(&g, &q)) {
+			hidden_both++;
+			assert_false(offered);
+			continue;
+		}
+		(void)direct;
+		struct plan_wp w[PLAN_MAX_WP];
+		size_t nw;
+		bool reach = false;
+		for (double k = -360; k <= 360; k += 360) {
+			struct plan_pos p = q;
+			p.det_phi += k;
+			if (p.det_phi >= g.detector_phi.min_deg && p.det_phi <= g.detector_phi.max_deg &&
+			    plan_move(&g, &from, &p, w, &nw) >= 0)
+				reach = true;
+		}
+		assert_true(offered == reach);
+		if (r == 0 && offered)
+			mirrors++;
+	}
+	printf("specular candidates: %zu incidences, %zu mirror directions offered, %zu reciprocals, %zu hidden both ways\n",
+	       a->n_cand_inc, mirrors, recip, hidden_both);
+	assert_true(mirrors >= a->n_cand_inc - 2); /* at 0° (and 5°) the mirror is the laser's own direction */
+	assert_true(recip > 0);
+	assert_true(hidden_both > 0);
+	free(c);
+	plan_result_free(seed);
+	plan_spec_free(s);
+
+	/* candidates.specular: false: the Fibonacci set only; the combined target's spec */
+	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: [8]}, observation: {fibonacci: {count: 10}}}\n"
+		    "target: {dhr_sigma: {incidence_deg: [8, 30], le: 0.002}, lnf_sigma: {le: 0.05}}\nbudget: {points: 60}\n"
+		    "batch: 8\ncandidates: {specular: false, per_incidence: 20}\n");
+	assert_false(s->adaptive->cand_specular);
+	assert_int_equal(plan_adaptive_cand_pos(s, &g, s->adaptive->n_cand_inc * 20, &(struct plan_pos){ 0 }), -1);
+	char spec[128];
+	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
+	assert_string_equal(spec, "dhr:8,30:le=0.002+lnf:le=0.05");
+	assert_true(plan_adaptive_threshold(s->adaptive) == 1.0);
+	plan_spec_free(s);
+}
+
+/* A batch's picks within what is left of the budget: in select's order, a dearer pick skipped for a cheaper later one
+ * (before, the first pick that did not fit ended the batch, and a first pick too dear stopped the sweep). */
+static void test_fit_picks(void **state)
+{
+	(void)state;
+	const double cost[6] = { 10, 3, 8, 2, 1, 4 };
+	size_t keep[6];
+	assert_int_equal(plan_adaptive_fit_picks(cost, 6, 6, 6, keep), 3); /* 10 skipped, 3, 8 skipped, 2, 1 */
+	assert_true(keep[0] == 1 && keep[1] == 3 && keep[2] == 4);
+	assert_int_equal(plan_adaptive_fit_picks(cost, 6, 6, 2, keep), 2); /* the points left */
+	assert_true(keep[0] == 1 && keep[1] == 3);
+	assert_int_equal(plan_adaptive_fit_picks(cost, 6, INFINITY, 6, keep), 6); /* no limit: all, in order */
+	for (size_t i = 0; i < 6; i++)
+		assert_int_equal(keep[i], i);
+	assert_int_equal(plan_adaptive_fit_picks(cost, 6, 0.5, 6, keep), 0); /* none fits */
+	assert_int_equal(plan_adaptive_fit_picks(cost, 0, 100, 6, keep), 0);
 }
 
 static void test_batch_order(void **state)
@@ -259,6 +407,8 @@ int main(void)
 		cmocka_unit_test(test_parse),
 		cmocka_unit_test(test_errors),
 		cmocka_unit_test(test_candidates),
+		cmocka_unit_test(test_specular),
+		cmocka_unit_test(test_fit_picks),
 		cmocka_unit_test(test_batch_order),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
