@@ -310,6 +310,9 @@ static int open_pty(char *path, size_t len, int *keep)
 
 /* A child answering each command line with the next scripted reply (sent verbatim; NULL = stay silent);
  * "EMISSION OFF" and "KEEPALIVE..." are always answered "OK\n". Received lines are recorded in shared memory. */
+/* How long the driver waits for a scripted peer's reply that does come (tests of what the reply says). */
+#define PEER_PATIENCE_MS 2000
+
 static pid_t script_peer(int master, const char *const *script)
 {
 	sh->nlines = 0;
@@ -348,7 +351,9 @@ static void expect_open_error(const char *const *script, int code, const char *n
 	char path[128];
 	int keep, m = open_pty(path, sizeof path, &keep);
 	pid_t pid = script_peer(m, script);
-	struct laser_cfg *cfg = make_cfg(path, 200);
+	/* the reply comes: the timeout is only patience (a pty's bytes wait for a kernel worker, and the forked peer
+	 * for a CPU: on a loaded machine 200 ms was not always enough) */
+	struct laser_cfg *cfg = make_cfg(path, PEER_PATIENCE_MS);
 	struct laser *l = NULL;
 	struct acq_err err = { 0 };
 	assert_int_equal(laser_open(cfg, &l, &err), -1);
@@ -396,7 +401,7 @@ static void test_malformed_status_switches_emission_off(void **state)
 		int keep, m = open_pty(path, sizeof path, &keep);
 		const char *script[] = { "ID M S F\n", "OK\n", bad[i][0], bad[i][1], NULL };
 		pid_t pid = script_peer(m, script);
-		struct laser_cfg *cfg = make_cfg(path, 200);
+		struct laser_cfg *cfg = make_cfg(path, PEER_PATIENCE_MS);
 		struct laser *l = NULL;
 		struct acq_err err = { 0 };
 		if (laser_open(cfg, &l, &err))
