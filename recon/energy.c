@@ -6,7 +6,8 @@
 
 #include "recon/recon_int.h"
 
-/* Albedo table: nodes every 10°, bisected; node rules from Gauss-Legendre 10 in cosθo × 12 azimuth midpoints. */
+/* Albedo table: nodes every 10°, bisected; node rules from Clenshaw-Curtis 10 in cosθo × 12 azimuth intervals,
+ * nested (quad.c cc_nodes: each doubling reuses the rule before it). */
 #define TAB_N 10
 #define TAB_NMU 10
 #define TAB_NPHI 12
@@ -20,7 +21,7 @@
  * 12 decades: 5.3e9 evaluations, 19 s, without it); the paper-size fits of the simulator's materials need
  * 1e8-5e8. brdf-recon check verifies the bound with an independent rule either way; the fit warns. The budget
  * does not cut the start nodes nor the first level's midpoints: the log-uniform random 1000 × 651 input (bench_recon)
- * spends 3.4e9 there, 19 nodes of 1.6e8-2.3e8 each (12 s of its 13-14 s fit, one core at load 8-20). */
+ * spends ~2.4e9 there with the nested rules (3.4e9 with Gauss-Legendre ones), 19 nodes. */
 #define TAB_WORK_MAX 1e9
 /* The trend's GGX lobe over half vectors (recon_hv_nodes): 16 nodes in u × 16 azimuths on [0, π] to start,
  * doubled up to 64 × 64 (the largest difference from a 256 × 2048 hemisphere rule there: 9e-4, where the horizon
@@ -32,7 +33,8 @@
 
 /*
  * The energy table: A(θ, λ) ≥ the albedo a(θ, λ) of the unscaled interpolant on each interval of θ.
- * Each node's channels come from recon_albedo_adaptive (from 10 × 12, doubled up to 160 × 192 until two rules
+ * Each node's channels come from recon_albedo_adaptive on nested rules (from 10 × 12, doubled up to 160 × 192, each
+ * doubling evaluating only its new nodes, until two rules
  * agree to TAB_TOL in albedo units, relative above 1: the table is only ever compared with 1), because the
  * map back e^g can make lobes far narrower than the kernel; d is the last difference between rules. The
  * nodes start every 10°; each interval [θ_lo, θ_hi] is probed at its midpoint and, while some channel's
@@ -229,6 +231,7 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 		goto out;
 	}
 	T.ws.part = T.split ? RECON_PART_NOLOBE : RECON_PART_ALL;
+	T.ws.nested = 1; /* hemisphere rules that hold the rule before them (quad.c, cc_nodes) */
 	T.wl.part = RECON_PART_LOBE;
 	double start[TAB_N + 2 * TAB_PEAKS];
 	/* peak nodes only as far as a quarter of the work budget pays for them at the starting rule and one doubling

@@ -6,6 +6,10 @@
 
 #include "recon/recon_int.h"
 
+/* Nodes per kernel block of the quadrature (the GEMM's rows): 4 × RECON_EVAL_BLOCK, so the weights (channels ×
+ * centres, 5 MB at 1000 × 651) are packed for the GEMM a quarter as often. */
+#define QUAD_BLOCK (4 * RECON_EVAL_BLOCK)
+
 /*
  * Hemisphere quadrature of the albedo a(θi) = ∫ f cosθo dωo = ∫₀¹ ∫₀^{2π} f μ dφ dμ (μ = cosθo).
  * μ: Gauss-Legendre with nmu nodes, exact for polynomials of degree 2·nmu − 1 in μ (so exact for a
@@ -43,6 +47,72 @@ int recon_hemi_nodes(double theta_i, int nmu, int nphi, int square_rule, double 
 	return 0;
 }
 
+/*
+ * The nested rule of the energy table, R(N, M): Clenshaw-Curtis with N intervals in μ = cosθo (nodes
+ * sin²(kπ/2N), exact for polynomials of degree N; for integrands analytic near [0, 1] it converges like
+ * Gauss-Legendre with as many nodes: Trefethen, SIAM Review 50, 2008) × the trapezoid rule with M intervals in
+ * azimuth on [0, π], doubled by the mirror (2M equally spaced points on the circle: the same accuracy as M
+ * midpoints). R(N, M) ⊂ R(2N, 2M): a doubling evaluates only the 3/4 of its nodes that are new, so a node rule
+ * and its doubling cost 4 units instead of Gauss-Legendre's 1 + 4. The horizon node (weight 0 with the cosine)
+ * is left out and the pole is one node (every azimuth is the same direction there). Near the pole a row of
+ * azimuths is a circle of radius sinθo: rows with sinθo ≤ 1/2 (≤ 1/4) take M/2 (M/4) intervals, so no row's
+ * spacing in arc, sinθo·π/M_k, exceeds the equator's π/M (M a multiple of 4; a row keeps its share at every
+ * level, so the rules stay nested): ~16 % fewer nodes.
+ */
+#define CC_NMAX 1024
+static int cc01(int N, double *x, double *w)
+{
+	if (N < 1 || N > CC_NMAX)
+		return -1;
+	for (int k = 0; k <= N; k++) {
+		double th = k * M_PI / N, s = 0;
+		for (int j = 1; 2 * j <= N; j++)
+			s += (2 * j == N ? 1.0 : 2.0) / (4.0 * j * j - 1.0) * cos(2.0 * j * th);
+		w[k] = 0.5 * (k == 0 || k == N ? 1.0 : 2.0) / N * (1.0 - s);
+		double h = sin(0.5 * th);
+		x[k] = h * h;
+	}
+	return 0;
+}
+
+/* Azimuth weight (mirror included) of node j of the trapezoid rule with M intervals on [0, π]. */
+static double trap_w(int j, int M)
+{
+	return (j == 0 || j == M ? 0.5 : 1.0) * 2.0 * M_PI / M;
+}
+
+/* Azimuth intervals of row μ = x of R(·, M): M / 2^p, 2^p·sinθo ≤ 1, p ≤ 2 (M not a multiple of 4: M). */
+static int cc_row_m(double x, int M)
+{
+	double s = sqrt(fmax(0.0, (1.0 - x) * (1.0 + x)));
+	return M % 4 ? M : s <= 0.25 ? M / 4 : s <= 0.5 ? M / 2 : M;
+}
+
+/* Nodes of R(N, M) (only_new: those not in R(N/2, M/2); N, M even), in the order k = 1 … N−1, j = 0 … M_k, then
+ * the pole; the count, or −1 on a bad size. */
+static long cc_nodes(double theta_i, int N, int M, int only_new, double *c6, double *wt)
+{
+	double x[CC_NMAX + 1], w[CC_NMAX + 1];
+	if (cc01(N, x, w) || M < 1 || (only_new && (N % 2 || M % 2)))
+		return -1;
+	long q = 0;
+	for (int k = 1; k < N; k++) {
+		double to = acos(x[k]);
+		int mk = cc_row_m(x[k], M);
+		for (int j = 0; j <= mk; j++) {
+			if (only_new && !(k & 1) && !(j & 1))
+				continue;
+			rbf_canon(theta_i, 0.0, to, j * M_PI / mk, c6 + 6 * q);
+			wt[q++] = w[k] * x[k] * trap_w(j, mk);
+		}
+	}
+	if (!only_new) {
+		rbf_canon(theta_i, 0.0, 0.0, 0.0, c6 + 6 * q);
+		wt[q++] = w[N] * 2.0 * M_PI;
+	}
+	return q;
+}
+
 void recon_albedo_ws_free(struct albedo_ws *ws)
 {
 	free(ws->bright);
@@ -54,6 +124,7 @@ void recon_albedo_ws_free(struct albedo_ws *ws)
 	free(ws->wsub);
 	free(ws->fine);
 	free(ws->chan);
+	free(ws->keep);
 	memset(ws, 0, sizeof *ws);
 }
 
@@ -65,8 +136,8 @@ int recon_albedo_ws_init(struct albedo_ws *ws, const struct recon_model *m, size
 	ws->L = L;
 	ws->c6 = malloc(qmax * 6 * sizeof *ws->c6);
 	ws->wt = malloc(qmax * sizeof *ws->wt);
-	ws->work = malloc(recon_eval_work_size(m) * sizeof *ws->work);
-	ws->vals = malloc((size_t)RECON_EVAL_BLOCK * L * sizeof *ws->vals);
+	ws->work = malloc((size_t)QUAD_BLOCK * n * sizeof *ws->work);
+	ws->vals = malloc((size_t)QUAD_BLOCK * L * sizeof *ws->vals);
 	ws->wsub = malloc(L * n * sizeof *ws->wsub);
 	ws->fine = malloc(L * sizeof *ws->fine);
 	ws->chan = malloc(L * sizeof *ws->chan);
@@ -167,7 +238,8 @@ static int albedo_boxes(const struct recon_model *m, double theta_i, int nmu, in
 	qsort(ws->cand, nc, 3 * sizeof *ws->cand, cmp_cand_desc);
 	/* the probes: distinct directions, each with the starting rule's four nodes around it */
 	enum { NP = 2 * RECON_BOX_MAX };
-	double dir[NP][3], pt[NP][2], wn[NP][4], chw = cos(hw), x[256], w[256];
+	double dir[NP][3], pt[NP][2], wn[NP][4], chw = cos(hw), x[CC_NMAX + 1], w[CC_NMAX + 1];
+	int cc = ws->nested && !square_rule, nx = cc ? nmu + 1 : nmu; /* the rule's rows */
 	int np = 0;
 	for (size_t c = 0; c < nc && np < NP; c++) {
 		double t = ws->cand[3 * c], p = ws->cand[3 * c + 1];
@@ -182,22 +254,25 @@ static int albedo_boxes(const struct recon_model *m, double theta_i, int nmu, in
 		pt[np][1] = p;
 		np++;
 	}
-	if (rbf_gauss_legendre01(nmu, x, w) || ws_reserve(ws, (size_t)np * 5))
+	if ((cc ? cc01(nmu, x, w) : rbf_gauss_legendre01(nmu, x, w)) || ws_reserve(ws, (size_t)np * 5))
 		return acq_errf(err, ACQ_E_NOMEM, "albedo: out of memory for the probes");
 	for (int b = 0; b < np; b++) {
 		double xc = cos(pt[b][0]);
 		if (square_rule)
 			xc *= xc;
-		int i = 0, j = (int)floor(pt[b][1] * nphi / M_PI - 0.5);
-		while (i + 2 < nmu && x[i + 1] <= xc)
+		int i = 0;
+		while (i + 2 < nx && x[i + 1] <= xc)
 			i++;
-		j = j < 0 ? 0 : j + 1 >= nphi ? (nphi > 1 ? nphi - 2 : 0) : j;
 		rbf_canon(theta_i, 0.0, pt[b][0], pt[b][1], ws->c6 + 6 * (5 * b));
-		for (int u = 0; u < 4; u++) {
-			int ii = i + (u & 1) < nmu ? i + (u & 1) : nmu - 1, jj = j + (u >> 1) < nphi ? j + (u >> 1) : nphi - 1;
+		for (int u = 0; u < 4; u++) { /* the two nearest azimuths of rows i and i + 1 (the nested rule's rows differ) */
+			int ii = i + (u & 1) < nx ? i + (u & 1) : nx - 1, mr = cc ? cc_row_m(x[ii], nphi) : nphi;
+			int nr = cc ? mr + 1 : mr, j = (int)floor(pt[b][1] * mr / M_PI - (cc ? 0.0 : 0.5));
+			j = j < 0 ? 0 : j + 1 >= nr ? (nr > 1 ? nr - 2 : 0) : j;
+			int jj = j + (u >> 1) < nr ? j + (u >> 1) : nr - 1;
 			double mu = square_rule ? sqrt(x[ii]) : x[ii];
-			wn[b][u] = (square_rule ? 0.5 * w[ii] : w[ii] * mu) * 2.0 * M_PI / nphi;
-			rbf_canon(theta_i, 0.0, acos(fmin(mu, 1.0)), (jj + 0.5) * M_PI / nphi, ws->c6 + 6 * (5 * b + 1 + u));
+			wn[b][u] = (square_rule ? 0.5 * w[ii] : w[ii] * mu) * 2.0 * M_PI / mr;
+			rbf_canon(theta_i, 0.0, acos(fmin(mu, 1.0)), (jj + (cc ? 0.0 : 0.5)) * M_PI / mr,
+				  ws->c6 + 6 * (5 * b + 1 + u));
 		}
 	}
 	recon_eval_block_part(m, (size_t)np * 5, ws->c6, scaled, ws->part, L, ws->chan, ws->wsub, ws->vals, ws->work);
@@ -294,10 +369,17 @@ static size_t box_nodes(double theta_i, int nmu, int nphi, int square_rule, stru
 
 /* acc[k] = albedo of channel chan[k] (k < nch) by the rule nmu × nphi; the weights of those channels are
  * already packed in ws->wsub. Evaluated block by block: memory does not grow with the rule. */
+static int albedo_rule_cc(const struct recon_model *m, double theta_i, int N, int M, int scaled, size_t nch,
+			  struct albedo_ws *ws, double *acc, struct acq_err *err);
+
 static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int nphi, int square_rule,
 		       int scaled, size_t nch, struct albedo_ws *ws, double *acc, struct acq_err *err)
 {
 	size_t Q = (size_t)nmu * (size_t)nphi;
+	if (ws->nbox > 0)
+		ws->keep_n = 0; /* the boxes' composite rules are not nested */
+	else if (ws->nested && !square_rule && ws->part != RECON_PART_LOBE)
+		return albedo_rule_cc(m, theta_i, nmu, nphi, scaled, nch, ws, acc, err);
 	if (ws->nbox > 0) {
 		if (!(Q = box_nodes(theta_i, nmu, nphi, square_rule, ws)))
 			return acq_errf(err, ACQ_E_NOMEM, "albedo: out of memory for a %d × %d rule with boxes", nmu, nphi);
@@ -308,14 +390,67 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 		return acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", nmu, nphi);
 	for (size_t k = 0; k < nch; k++)
 		acc[k] = 0;
-	for (size_t q0 = 0; q0 < Q; q0 += RECON_EVAL_BLOCK) {
-		size_t b = Q - q0 < RECON_EVAL_BLOCK ? Q - q0 : RECON_EVAL_BLOCK;
+	for (size_t q0 = 0; q0 < Q; q0 += QUAD_BLOCK) {
+		size_t b = Q - q0 < QUAD_BLOCK ? Q - q0 : QUAD_BLOCK;
 		recon_eval_block_part(m, b, ws->c6 + 6 * q0, scaled, ws->part, nch, ws->chan, ws->wsub, ws->vals, ws->work);
 		ws->evals += (double)b * (double)m->n * (1.0 + (double)nch / 64.0);
 		for (size_t q = 0; q < b; q++)
 			for (size_t k = 0; k < nch; k++)
 				acc[k] += ws->wt[q0 + q] * ws->vals[q * nch + k];
 	}
+	return 0;
+}
+
+/* albedo_rule on the nested rule R(N, M) (nmu, nphi read as interval counts). The rule that ws->store asks for
+ * keeps every channel's values at its nodes (ws->keep; all channels are active then); the doubling after it
+ * evaluates only its new nodes and adds the kept values with its own weights. */
+static int albedo_rule_cc(const struct recon_model *m, double theta_i, int N, int M, int scaled, size_t nch,
+			  struct albedo_ws *ws, double *acc, struct acq_err *err)
+{
+	size_t L = ws->L;
+	int reuse = ws->keep_n > 0 && 2 * ws->keep_n == N && 2 * ws->keep_m == M;
+	if (ws_reserve(ws, (size_t)N * (size_t)(M + 1) + 1))
+		return acq_errf(err, ACQ_E_NOMEM, "albedo: out of memory for a %d × %d rule", N, M);
+	long Q = cc_nodes(theta_i, N, M, reuse, ws->c6, ws->wt);
+	if (Q < 0)
+		return acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", N, M);
+	int store = ws->store && !reuse && nch == L;
+	if (store && ws->keep_cap < (size_t)Q * L) {
+		double *k = realloc(ws->keep, (size_t)Q * L * sizeof *k);
+		if (k) {
+			ws->keep = k;
+			ws->keep_cap = (size_t)Q * L;
+		} else {
+			store = 0; /* the doubling then evaluates every node */
+		}
+	}
+	for (size_t k = 0; k < nch; k++)
+		acc[k] = 0;
+	for (size_t q0 = 0; q0 < (size_t)Q; q0 += QUAD_BLOCK) {
+		size_t b = (size_t)Q - q0 < QUAD_BLOCK ? (size_t)Q - q0 : QUAD_BLOCK;
+		recon_eval_block_part(m, b, ws->c6 + 6 * q0, scaled, ws->part, nch, ws->chan, ws->wsub, ws->vals, ws->work);
+		ws->evals += (double)b * (double)m->n * (1.0 + (double)nch / 64.0);
+		for (size_t q = 0; q < b; q++)
+			for (size_t k = 0; k < nch; k++)
+				acc[k] += ws->wt[q0 + q] * ws->vals[q * nch + k];
+		if (store)
+			memcpy(ws->keep + q0 * L, ws->vals, b * L * sizeof *ws->vals);
+	}
+	if (reuse) { /* the kept nodes, in cc_nodes' order, at this rule's weights */
+		double x[CC_NMAX + 1], w[CC_NMAX + 1];
+		cc01(N, x, w);
+		size_t idx = 0;
+		for (int k = 2; k < N; k += 2)
+			for (int j = 0, mk = cc_row_m(x[k], M); j <= mk; j += 2, idx++) {
+				double wq = w[k] * x[k] * trap_w(j, mk);
+				for (size_t c = 0; c < nch; c++)
+					acc[c] += wq * ws->keep[idx * L + ws->chan[c]];
+			}
+		for (size_t c = 0; c < nch; c++)
+			acc[c] += w[N] * 2.0 * M_PI * ws->keep[idx * L + ws->chan[c]];
+	}
+	ws->keep_n = store ? N : 0;
+	ws->keep_m = store ? M : 0;
 	return 0;
 }
 
@@ -395,7 +530,13 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 	/* the plain starting rule, then the probes at the data's brightest directions; where they find a lobe it
 	 * missed, the starting rule again with boxes there (and every doubling after it) */
 	ws->nbox = 0;
-	if (albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, out, err))
+	ws->keep_n = 0;
+	ws->store = ws->nested; /* the starting rule keeps its values for the first doubling (nested rules) */
+	if (ws->nested && !square_rule && ws->part != RECON_PART_LOBE)
+		nphi = (nphi + 3) / 4 * 4; /* fewer azimuths near the pole (cc_row_m) */
+	int rc = albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, out, err);
+	ws->store = 0;
+	if (rc)
 		return -1;
 	int nb = albedo_boxes(m, theta_i, nmu, nphi, square_rule, scaled, tol, floor, ws, out, err);
 	if (nb < 0 || (nb > 0 && albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, out, err)))

@@ -141,6 +141,12 @@ struct albedo_ws {
 	double *bright, *cand;
 	int nbox, boxn;
 	double box[RECON_BOX_MAX][4];
+	/* nested: the hemisphere rules are Clenshaw-Curtis in cosθo × the trapezoid rule in azimuth, each doubling
+	 * holding the rule before it, whose values (keep[q·L + l], rule keep_n × keep_m; 0: none) it reuses (the
+	 * energy table's; quad.c) */
+	int nested, store, keep_n, keep_m;
+	double *keep;
+	size_t keep_cap;
 };
 /* Allocate for rules of up to qmax nodes (-1 with err on failure); free (idempotent). */
 int recon_albedo_ws_init(struct albedo_ws *ws, const struct recon_model *m, size_t qmax, struct acq_err *err);

@@ -63,6 +63,8 @@ struct select_result {
 	double where[4];                    /* SELECT_LNF: the grid pair (θi, φi, θo, φo radians) of the largest σ */
 	size_t nunique;                     /* distinct candidates (reciprocal/isotropic duplicates merged) */
 	size_t nvalue;                      /* SELECT_DHR: the channels the value was computed on (0 otherwise) */
+	int value_checked;                  /* SELECT_DHR on value channels: the value, near the threshold, was
+					     * recomputed on all channels (so met is decided on all) */
 	double part[2];                     /* a combined target: the DHR part's value and the ln f part's */
 	size_t npicks;
 	struct select_pick *picks;          /* in choice order */

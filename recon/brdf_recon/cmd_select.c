@@ -37,7 +37,9 @@ static const char select_help[] =
 	"  --value-channels N     dhr: compute the value on N evenly spread channels (the tracked ones among them)\n"
 	"                         when the model has more (default 0: all, as brdf-recon dhr); its cost scales with\n"
 	"                         N (651 -> 64 wavelengths: 6.6x less CPU) and the RMS over N channels can miss single\n"
-	"                         channels' spikes (measured -5.5 % .. +0.8 % of all channels' on a paper-size model)\n"
+	"                         channels' spikes (measured -5.5 % .. +0.8 % of all channels' on a paper-size model,\n"
+	"                         2.2x on one with a noisy edge channel), so a value within 4x of the threshold is\n"
+	"                         recomputed on all channels (value_checked_all): met is always decided on all\n"
 	"  -o OUT.json            output (stdout by default): {\"target\":{\"spec\",\"value\",\"per\",\"threshold\",\"met\"},\n"
 	"                         \"picks\":[{\"id\",\"gain\",\"gain_per_s\",\"cost_s\",\"predicted_value_after\"}], \"model\",\n"
 	"                         \"criterion\", \"candidates\":{\"read\",\"distinct\"}}; picks in choice order; a combined\n"
@@ -268,7 +270,8 @@ int cmd_select(int argc, char **argv)
 			fputs("\"theta_i\":[", f);
 			for (size_t i = 0; i < tg.nth; i++)
 				fprintf(f, i ? ",%g" : "%g", tg.theta_deg[i]);
-			fprintf(f, "],\"value_channels\":%zu,", res.nvalue);
+			fprintf(f, "],\"value_channels\":%zu,\"value_checked_all\":%s,", res.nvalue,
+				res.value_checked ? "true" : "false");
 		}
 		if (tg.kind == SELECT_LNF || tg.lnf_threshold > 0) {
 			fputs("\"where\":{", f);

@@ -65,8 +65,19 @@ static void test_reciprocity_nonneg(void **state)
 	}
 }
 
-/* Albedo <= 1 at 10^4 random incidences per material (level 0 quadrature + its own bound), grazing included;
- * level 0 is coarse, so its bound is the level-1 difference. */
+/* cosθ of stratum k of n under random_dir's distribution of μ (2/3 uniform on [0, 1], 1/3 on [0, 0.05]): its CDF
+ * F(μ) = 2μ/3 + min(μ/0.05, 1)/3 inverted at (k + U)/n, U uniform: one draw per stratum of probability 1/n. */
+static double stratified_mu(struct sim_rng *r, int k, int n)
+{
+	double u = (k + sim_rng_uniform(r)) / n;
+	return u <= 11.0 / 30 ? u * 3.0 / 22 : 1.5 * (u - 1.0 / 3);
+}
+
+/* Albedo <= 1 at 2500 random incidences per material (level 0 quadrature + its own bound), grazing included;
+ * level 0 is coarse, so its bound is the level-1 difference. The DHR depends on θi only; the incidences are
+ * stratified under random_dir's distribution (one per stratum of probability 1/2500), so no incidence is farther
+ * than 2/2500 in probability from a sampled one, closer than the 10^4 independent draws used before (their
+ * largest gap ≈ (ln 10^4 + 0.58)/10^4 = 9.8e-4), at a quarter of the cost (17 of test_material's 22 s CPU). */
 static void test_albedo_at_random_incidences(void **state)
 {
 	(void)state;
@@ -78,12 +89,10 @@ static void test_albedo_at_random_incidences(void **state)
 		struct mat *m = mat_new(id, 4, w4, &err);
 		assert_non_null(m);
 		double amax = 0;
-		int n = 10000;
+		int n = 2500;
 		for (int t = 0; t < n; t++) {
-			double wi[3];
-			random_dir(&r, wi);
 			double dhr[4], sig[4];
-			assert_int_equal(mat_dhr(m, acos(wi[2]), 0, dhr, sig, &err), 0);
+			assert_int_equal(mat_dhr(m, acos(stratified_mu(&r, t, n)), 0, dhr, sig, &err), 0);
 			for (int l = 0; l < 4; l++) {
 				assert_true(dhr[l] >= 0);
 				assert_true(dhr[l] - sig[l] <= 1.0);

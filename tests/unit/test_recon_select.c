@@ -613,6 +613,27 @@ static void test_value_channels(void **state)
 			acc += sig[k * L + l] * sig[k * L + l];
 		assert_true(fabs(ra.per[k] - sqrt(acc / L)) <= 1e-12 * ra.per[k]);
 	}
+	/* with a threshold: a subset value near it is recomputed on all channels, so met is decided on all; far above
+	 * it (more than SEL_VALUE_CHECK = 4x) the subset's value stands */
+	double all = fmax(ra.per[0], ra.per[1]);
+	for (int near = 0; near < 2; near++) {
+		char spec[64];
+		double thr = near ? all * 1.001 : r.value / 5;
+		snprintf(spec, sizeof spec, "dhr:8,40:le=%.17g", thr);
+		struct select_target tt;
+		struct select_result rc = { 0 };
+		assert_int_equal(select_target_parse(spec, &tt, &e), 0);
+		o.nvalue = LV;
+		assert_int_equal(select_batch(m, 0, NULL, NULL, &tt, &o, &rc, &e), 0);
+		printf("threshold %.6g: value %.9g (subset %.9g, all %.9g), checked on all %d, met %d\n", thr, rc.value,
+		       r.value, all, rc.value_checked, rc.met);
+		assert_int_equal(rc.value_checked, near);
+		assert_int_equal(rc.nvalue, LV);
+		for (size_t k = 0; k < 2; k++)
+			assert_true(fabs(rc.per[k] - (near ? ra.per[k] : r.per[k])) <= 1e-12 * rc.per[k]);
+		assert_int_equal(rc.met, near);
+		select_result_free(&rc);
+	}
 	select_result_free(&r);
 	select_result_free(&ra);
 	recon_model_free(m);
