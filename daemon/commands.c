@@ -839,9 +839,9 @@ static json_t *status_json(struct app *app)
 	app_status_line(app, line, sizeof line);
 	struct server_stats ss;
 	server_get_stats(app->srv, &ss);
-	json_t *srvj = json_pack("{s:I,s:I,s:I,s:I}", "refused", (json_int_t)ss.refused, "dropped_unread",
+	json_t *srvj = json_pack("{s:I,s:I,s:I,s:I,s:I}", "refused", (json_int_t)ss.refused, "dropped_unread",
 				 (json_int_t)ss.dropped_output, "dropped_stalled", (json_int_t)ss.dropped_stalled,
-				 "timed_out", (json_int_t)ss.timed_out);
+				 "timed_out", (json_int_t)ss.timed_out, "rate_limited", (json_int_t)ss.rate_limited);
 	int64_t rrun = store_recon_latest(app->store), rsweep = 0;
 	if (rrun) {
 		json_t *r = store_recon_show(app->store, rrun, 0, NULL);

@@ -222,6 +222,8 @@ static int parse_daemon(struct conf_priv *cp, struct yc_node *node, struct acq_e
 	d->log_level = LOG_INFO;
 	d->auto_resume = true;
 	d->device_retry_s = 5;
+	d->observer_rate = CONF_OBSERVER_RATE;
+	d->observer_burst = CONF_OBSERVER_BURST;
 	const char *db = "acquisition.db";
 	if (!node)
 		goto paths;
@@ -266,6 +268,8 @@ static int parse_daemon(struct conf_priv *cp, struct yc_node *node, struct acq_e
 	if (yc_bool(node, "auto_resume", false, &d->auto_resume, err) ||
 	    yc_double(node, "device_retry_s", false, 0.1, 3600, &d->device_retry_s, err) ||
 	    yc_double(node, "watchdog_s", false, 0, 3600, &d->watchdog_s, err) ||
+	    yc_double(node, "observer_rate", false, 0, 100000, &d->observer_rate, err) ||
+	    yc_double(node, "observer_burst", false, 1, 100000, &d->observer_burst, err) ||
 	    yc_check_unknown(node, "daemon", err))
 		return -1;
 paths:

@@ -20,6 +20,10 @@ enum conf_dev { CONF_DEV_LASER_THETA, CONF_DEV_DETECTOR_THETA, CONF_DEV_DETECTOR
 		CONF_DEV_LASER, CONF_DEV__COUNT };
 
 #define CONF_MAX_PRINCIPALS 16
+/* Defaults of daemon.observer_rate / observer_burst: a status panel or a script polling a few times a second
+ * stays far below them; a flood of one observer costs the loop at most this many requests a second. */
+#define CONF_OBSERVER_RATE 20.0
+#define CONF_OBSERVER_BURST 40.0
 
 struct conf_daemon {
 	const char *state_dir;     /* absolute; requests' paths are confined to it */
@@ -36,6 +40,8 @@ struct conf_daemon {
 	bool auto_resume;          /* resume an interrupted sweep at start-up */
 	double device_retry_s;     /* period of reconnection attempts for unavailable devices */
 	double watchdog_s;         /* 0 = from WATCHDOG_USEC only */
+	double observer_rate;      /* requests per second of one observer (a uid; all TCP peers together); 0 = no limit */
+	double observer_burst;     /* requests an observer may send at once beyond the rate (the bucket's size) */
 };
 
 struct conf_sweep {

@@ -65,6 +65,16 @@ static void keepalive_tick(void *arg, struct port *p)
 	pthread_mutex_unlock(&ka->mu);
 }
 
+void devices_keepalive_armed(struct devices *dv)
+{
+	struct cputime ct;
+	cputime_thread(&ct);
+	pthread_mutex_lock(&dv->ka.mu);
+	dv->ka.last_sent = mono_now(); /* the open's KEEPALIVE <ms>: the first refresh's gap counts from it */
+	dv->ka.last_cpu_wait = ct.waiting;
+	pthread_mutex_unlock(&dv->ka.mu);
+}
+
 /* ---- on the loop: requests and completions -------------------------------------------------------------- */
 
 static void req_done(struct port_req *pr);

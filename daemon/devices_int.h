@@ -99,6 +99,10 @@ struct devices {
 	double op_power;
 };
 
+/* On the laser's thread, after the driver opened the laser and armed its keep-alive: the refresh gaps count
+ * from now (a daemon held up before its first refresh is seen too). */
+void devices_keepalive_armed(struct devices *dv);
+
 enum owner { OWN_MGR, OWN_EX, OWN_OP, OWN_QUERY, OWN_CALL };
 
 struct query {

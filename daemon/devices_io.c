@@ -89,8 +89,8 @@ static void req_run_op(struct req *r, struct port *p)
 				r->have_info = true;
 			}
 		} else {
-			if (!s->ls)
-				r->rc = laser_open(r->cfg, &s->ls, &r->err);
+			if (!s->ls && !(r->rc = laser_open(r->cfg, &s->ls, &r->err)))
+				devices_keepalive_armed(r->dv);
 			if (!r->rc) {
 				r->lid = *laser_identity(s->ls);
 				r->have_lst = laser_status(s->ls, &r->lst, NULL) == 0;

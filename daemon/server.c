@@ -36,6 +36,21 @@ const struct server_limits server_default_limits = {
 	.linger_s = 2,
 };
 
+/* Per-observer request rate: a token bucket per observer (a uid; all TCP peers together, they carry no
+ * credentials), d->observer_burst tokens refilled at d->observer_rate a second, one token per complete line.
+ * With the bucket empty the observer's lines wait: its connections are not read (the kernel's socket buffer
+ * fills and the client's writes block) until a token comes, then its requests are answered in order.
+ * Delayed rather than answered with an error: an excess request then costs the loop nothing (an error reply
+ * is still a line parsed, answered and sent, at whatever rate the flood goes, and invites a retry loop), and
+ * every request still gets its real reply. Controllers are never limited. */
+struct bucket {
+	uid_t uid;
+	bool tcp;
+	int refs;               /* clients holding it */
+	double tokens, at;      /* tokens at server time at */
+	struct bucket *next;
+};
+
 struct client {
 	int fd;
 	struct srv_peer peer;
@@ -45,6 +60,8 @@ struct client {
 	bool watch, closing;
 	bool backlog;           /* complete lines left for the next turn */
 	bool refusing;          /* refused: its refusal is queued, input is discarded until EOF or linger_s */
+	bool limited;           /* lines wait for its observer's bucket (backlog set; not drained until a token) */
+	struct bucket *bucket;  /* observers only */
 	int inflight;           /* requests handed to the handler and not answered yet */
 	double last_in;         /* server clock: last complete line received (or the connection) */
 	double partial_since;   /* server clock: an incomplete line is buffered since (0: none) */
@@ -68,7 +85,9 @@ struct server {
 	struct client *clients;
 	int nclients, nrefusing;
 	uint64_t next_serial;
-	uint64_t drain_timer, timeout_timer;
+	uint64_t drain_timer, timeout_timer, rate_timer;
+	double rate_due;            /* server time the rate timer fires */
+	struct bucket *buckets;
 	int budget;                 /* lines left to handle in this loop turn */
 	unsigned rotation;
 	struct server_limits lim;
@@ -80,6 +99,66 @@ struct server {
 static double srv_now(const struct server *srv)
 {
 	return srv->now(srv->now_ctx);
+}
+
+/* ---- per-observer request rate (struct bucket) ---- */
+
+static double rate_burst(const struct server *srv)
+{
+	return srv->d && srv->d->observer_burst > 1 ? srv->d->observer_burst : 1;
+}
+
+static void bucket_refill(const struct server *srv, struct bucket *b, double now)
+{
+	double rate = srv->d ? srv->d->observer_rate : 0;
+	if (rate > 0 && now > b->at)
+		b->tokens += (now - b->at) * rate;
+	if (rate <= 0 || b->tokens > rate_burst(srv))
+		b->tokens = rate_burst(srv);
+	b->at = now;
+}
+
+/* Forget unused buckets that have refilled: reconnecting gives no fresh burst before that. */
+static void buckets_prune(struct server *srv)
+{
+	double now = srv_now(srv);
+	for (struct bucket **p = &srv->buckets; *p;) {
+		struct bucket *b = *p;
+		if (!b->refs)
+			bucket_refill(srv, b, now);
+		if (!b->refs && b->tokens >= rate_burst(srv)) {
+			*p = b->next;
+			free(b);
+		} else {
+			p = &b->next;
+		}
+	}
+}
+
+/* The bucket of an observer's connection (NULL: out of memory). */
+static struct bucket *bucket_get(struct server *srv, const struct srv_peer *peer)
+{
+	buckets_prune(srv);
+	for (struct bucket *b = srv->buckets; b; b = b->next)
+		if (b->tcp == peer->tcp && (peer->tcp || b->uid == peer->uid)) {
+			b->refs++;
+			return b;
+		}
+	struct bucket *b = calloc(1, sizeof *b);
+	if (!b)
+		return NULL;
+	*b = (struct bucket){ .uid = peer->uid, .tcp = peer->tcp, .refs = 1, .tokens = rate_burst(srv),
+			      .at = srv_now(srv), .next = srv->buckets };
+	srv->buckets = b;
+	return b;
+}
+
+static void bucket_put(struct server *srv, struct bucket *b)
+{
+	if (!b)
+		return;
+	b->refs--;
+	buckets_prune(srv);
 }
 
 static void client_close(struct client *c)
@@ -98,6 +177,7 @@ static void client_close(struct client *c)
 	close(c->fd);
 	if (c->has_fd)
 		close(c->pass_fd);
+	bucket_put(srv, c->bucket);
 	proto_lines_free(&c->in);
 	free(c->out);
 	free(c);
@@ -283,9 +363,77 @@ static void arm_drain(struct server *srv)
 		srv->drain_timer = loop_timer_add(srv->lp, DRAIN_DELAY_S, 0, drain_cb, srv);
 }
 
+static void rate_cb(struct loop *lp, void *arg);
+
+/* A complete (or overlong) line is buffered: proto_lines_next() has something to hand out. */
+static bool line_pending(const struct proto_lines *pl)
+{
+	if (pl->len <= pl->taken)
+		return false;
+	size_t n = pl->len - pl->taken;
+	return memchr(pl->buf + pl->taken, '\n', n) || n > (pl->max ? pl->max : PROTO_MAX_LINE);
+}
+
+/* Fire the rate timer by server time due (or earlier). */
+static void arm_rate(struct server *srv, double due)
+{
+	if (srv->rate_timer && srv->rate_due <= due)
+		return;
+	loop_timer_cancel(srv->lp, srv->rate_timer);
+	double now = srv_now(srv), lrate = loop_rate(srv->lp);
+	double delay = due > now ? due - now : 0;
+	srv->rate_due = due;
+	/* the loop's clock may run faster than the server's (a simulated bench's time scale) */
+	srv->rate_timer = loop_timer_add(srv->lp, (delay + DRAIN_DELAY_S) * (lrate > 0 ? lrate : 1), 0, rate_cb, srv);
+}
+
+/* An observer with lines waiting and an empty bucket: hold them until its next token. */
+static void hold(struct server *srv, struct client *c)
+{
+	c->backlog = true;
+	if (!c->limited) {
+		c->limited = true;
+		srv->stats.rate_limited++;
+		double now = srv_now(srv);
+		if (now - srv->stats.limited_logged_at >= 10) {
+			srv->stats.limited_logged_at = now;
+			log_msg(LOG_NOTICE, "observer uid %d%s is over its request rate (daemon.observer_rate %g/s, burst %g): "
+				"its requests wait (%llu times so far)", c->peer.tcp ? -1 : (int)c->peer.uid,
+				c->peer.tcp ? " (TCP)" : "", srv->d->observer_rate, rate_burst(srv),
+				(unsigned long long)srv->stats.rate_limited);
+		}
+	}
+	double rate = srv->d->observer_rate;
+	arm_rate(srv, c->bucket->at + (1 - c->bucket->tokens) / rate);
+	update_events(c);
+}
+
+/* Tokens came: the held observers whose bucket has one are drained again. */
+static void rate_cb(struct loop *lp, void *arg)
+{
+	(void)lp;
+	struct server *srv = arg;
+	srv->rate_timer = 0;
+	double now = srv_now(srv), rate = srv->d ? srv->d->observer_rate : 0;
+	bool ready = false;
+	for (struct client *c = srv->clients; c; c = c->next) {
+		if (!c->limited)
+			continue;
+		bucket_refill(srv, c->bucket, now);
+		if (c->bucket->tokens >= 1) {
+			c->limited = false;
+			ready = true;
+		} else {
+			arm_rate(srv, now + (1 - c->bucket->tokens) / rate);
+		}
+	}
+	if (ready)
+		arm_drain(srv);
+}
+
 /* Handle up to LINES_PER_CLIENT complete lines of client serial within the turn's budget; true if more may be
  * buffered. The handler may reply to this client or close others, so the client is looked up again after
- * each line. */
+ * each line. An observer's lines also wait for its bucket's tokens (struct bucket). */
 static bool process_lines(struct server *srv, uint64_t serial)
 {
 	struct client *c;
@@ -300,6 +448,14 @@ static bool process_lines(struct server *srv, uint64_t serial)
 			c->backlog = true;
 			return true;
 		}
+		bool metered = c->bucket && srv->d->observer_rate > 0;
+		if (metered) {
+			bucket_refill(srv, c->bucket, srv_now(srv));
+			if (c->bucket->tokens < 1 && line_pending(&c->in)) {
+				hold(srv, c);
+				return true;
+			}
+		}
 		if (!(k = proto_lines_next(&c->in, &line, &len))) {
 			bool partial = c->in.len > c->in.taken || c->in.discarding;
 			if (!partial)
@@ -310,6 +466,8 @@ static bool process_lines(struct server *srv, uint64_t serial)
 		}
 		c->last_in = srv_now(srv);
 		c->partial_since = 0;
+		if (metered)
+			c->bucket->tokens -= 1;
 		srv->budget--;
 		arm_drain(srv); /* refills the budget at the next turn */
 		if (k == PROTO_LINE_TOO_LONG) {
@@ -348,7 +506,7 @@ static void drain_cb(struct loop *lp, void *arg)
 	uint64_t serials[MAX_CLIENTS + MAX_REFUSING], ctl[MAX_CLIENTS + MAX_REFUSING];
 	int n = 0, nctl = 0;
 	for (struct client *c = srv->clients; c && n + nctl < MAX_CLIENTS + MAX_REFUSING; c = c->next)
-		if (c->backlog && !reading_paused(c)) {
+		if (c->backlog && !c->limited && !reading_paused(c)) {
 			if (c->peer.role == PROTO_CONTROLLER)
 				ctl[nctl++] = c->peer.serial;
 			else
@@ -370,7 +528,7 @@ static void drain_cb(struct loop *lp, void *arg)
 			finish_turn(c);
 	}
 	for (struct client *c = srv->clients; c; c = c->next)
-		if (c->backlog && !reading_paused(c)) {
+		if (c->backlog && !c->limited && !reading_paused(c)) {
 			arm_drain(srv);
 			break;
 		}
@@ -583,7 +741,9 @@ static void accept_one(struct server *srv, int lfd, int fd)
 	c->last_in = srv_now(srv);
 	proto_lines_init(&c->in);
 	struct acq_err err = { 0 };
-	if (loop_fd_add(lp, fd, POLLIN, on_client, c, &err)) {
+	if ((peer.role < PROTO_CONTROLLER && !(c->bucket = bucket_get(srv, &peer))) ||
+	    loop_fd_add(lp, fd, POLLIN, on_client, c, &err)) {
+		bucket_put(srv, c->bucket);
 		close(fd);
 		free(c);
 		return;
@@ -719,9 +879,15 @@ void server_finish(struct server *srv)
 		return;
 	loop_timer_cancel(srv->lp, srv->drain_timer);
 	loop_timer_cancel(srv->lp, srv->timeout_timer);
+	loop_timer_cancel(srv->lp, srv->rate_timer);
 	while (srv->clients) {
 		flush_out(srv->clients);
 		client_close(srv->clients);
+	}
+	while (srv->buckets) {
+		struct bucket *b = srv->buckets;
+		srv->buckets = b->next;
+		free(b);
 	}
 	if (srv->ufd >= 0) {
 		loop_fd_del(srv->lp, srv->ufd);

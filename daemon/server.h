@@ -3,7 +3,9 @@
  * No client can hold the loop or its memory: reading stops while a client's replies are unread (out_pause)
  * and it is dropped past out_drop or stall_s; incomplete lines and idle connections time out; connections
  * are limited per user with the last slots kept for controllers; a refused client gets the banner and the
- * refusal before the connection closes. Loopback TCP (daemon.tcp_port, off by default) gives observer
+ * refusal before the connection closes. Each observer's requests are limited to daemon.observer_rate a second
+ * (bursts of daemon.observer_burst): beyond, its lines wait unread until the rate allows them (server.c,
+ * struct bucket); controllers are never limited. Loopback TCP (daemon.tcp_port, off by default) gives observer
  * access to every local user: it carries no credentials. */
 #ifndef SERVER_H
 #define SERVER_H
@@ -37,7 +39,8 @@ extern const struct server_limits server_default_limits;
 /* Counters since start (status, soak). */
 struct server_stats {
 	unsigned long long refused, dropped_output, dropped_stalled, timed_out;
-	double refused_logged_at;
+	unsigned long long rate_limited;  /* times an observer's lines were held for its request rate */
+	double refused_logged_at, limited_logged_at;
 };
 
 struct srv_peer {

@@ -32,15 +32,17 @@
  * Config (devices.laser):
  *   device: /dev/ttyUSB0   baud: 115200   data_bits: 8   parity: none|odd|even   stop_bits: 1|2
  *   flow_control: none|xonxoff|rtscts      timeout_ms: 500     max_power_pct: 100     keepalive_ms: 1000
- *   transport: auto|serialport|termios      backend: serial (this file) | fake (drivers/laser_fake.c, tests)
- * With acq-sim, the device is the pty written in its ports file ("laser": {"device": "/dev/pts/N"}):
- * laser_cfg_set_device() puts it in.
+ *   transport: auto|serialport|termios|socket   backend: serial (this file) | fake (drivers/laser_fake.c, tests)
+ * With acq-sim, the device is the one written in its ports file ("laser": {"device": "unix:PATH"}, or
+ * "/dev/pts/N" with sim.laser.link: pty): laser_cfg_set_device() puts it in.
  *
  * Transport: real serial ports go through libserialport. libserialport 0.1.1 refuses pseudo-terminals
  * (sp_get_port_by_name wants a /sys/class/tty entry, sp_open needs the TIOCMGET modem-line ioctl a pty does not
  * have; upstream treats PTYs as out of scope, sigrokproject/libserialport PR #4), so a device that resolves to
- * /dev/pts/N uses the same line protocol over plain termios + poll ("auto", the default). "serialport" or
- * "termios" force one. */
+ * /dev/pts/N uses the same line protocol over plain termios + poll ("auto", the default). A device
+ * "unix:PATH" is a serial line served on a Unix stream socket (a serial device server such as ser2net, or
+ * acq-sim's laser): the same line protocol over the socket ("socket"; the line settings do not apply there).
+ * "serialport", "termios" or "socket" force one. */
 #include "config/acq_num.h"
 #include "drivers/laser.h"
 #include "drivers/laser_backend.h"
@@ -54,6 +56,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/socket.h>
+#include <sys/un.h>
 #include <termios.h>
 #include <time.h>
 #include <unistd.h>
@@ -70,7 +74,7 @@ struct laser_cfg {
 	int backend;            /* 0 serial (this file), 1 fake (drivers/laser_fake.c) */
 };
 
-enum laser_transport { LASER_T_AUTO, LASER_T_SERIALPORT, LASER_T_TERMIOS };
+enum laser_transport { LASER_T_AUTO, LASER_T_SERIALPORT, LASER_T_TERMIOS, LASER_T_SOCKET };
 
 struct laser_dev;
 
@@ -105,7 +109,7 @@ int laser_cfg_parse(struct yc_node *node, struct laser_cfg **out, struct acq_err
 		return -1;
 	static const char *const parities[] = { "none", "odd", "even", NULL };
 	static const char *const flows[] = { "none", "xonxoff", "rtscts", NULL };
-	static const char *const transports[] = { "auto", "serialport", "termios", NULL };
+	static const char *const transports[] = { "auto", "serialport", "termios", "socket", NULL };
 	static const char *const backends[] = { "serial", "fake", NULL };
 	int transport = 0, backend = 0;
 	const char *device = NULL;
@@ -350,19 +354,21 @@ static int tio_open(struct laser_dev *l, struct acq_err *err)
 	return 0;
 }
 
-static int tio_write(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
+/* Write all n bytes to l->fd within timeout_ms: write(2) on a terminal, send(2) on a socket (a closed peer then
+ * gives EPIPE, not SIGPIPE). 0 or -1. */
+static int fd_write_all(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, bool sock, struct acq_err *err)
 {
 	double deadline = mono_ms() + timeout_ms;
 	while (n) {
-		ssize_t w = write(l->fd, buf, n);
+		ssize_t w = sock ? send(l->fd, buf, n, MSG_NOSIGNAL) : write(l->fd, buf, n);
 		if (w > 0) {
 			buf += w;
 			n -= (size_t)w;
 			continue;
 		}
 		if (w < 0 && errno != EAGAIN && errno != EINTR)
-			return acq_errf(err, errno == EIO ? ACQ_E_DISCONNECTED : ACQ_E_IO, "laser %s: write: %s",
-					l->cfg->device, strerror(errno));
+			return acq_errf(err, errno == EIO || errno == EPIPE || errno == ECONNRESET ? ACQ_E_DISCONNECTED : ACQ_E_IO,
+					"laser %s: write: %s", l->cfg->device, strerror(errno));
 		double left = deadline - mono_ms();
 		if (left < 1)
 			return acq_errf(err, ACQ_E_TIMEOUT, "laser %s: not sent within %d ms", l->cfg->device, timeout_ms);
@@ -370,6 +376,11 @@ static int tio_write(struct laser_dev *l, const char *buf, size_t n, int timeout
 		poll(&p, 1, (int)left);
 	}
 	return 0;
+}
+
+static int tio_write(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
+{
+	return fd_write_all(l, buf, n, timeout_ms, false, err);
 }
 
 static int tio_read(struct laser_dev *l, char *c, int timeout_ms, struct acq_err *err)
@@ -404,12 +415,50 @@ static void tio_close(struct laser_dev *l)
 
 static const struct laser_io io_termios = { "termios", tio_open, tio_write, tio_read, tio_flush, tio_close };
 
+/* The socket transport: "unix:PATH" (or a bare path with transport: socket). */
+static const char *sock_path(const char *device)
+{
+	return strncmp(device, "unix:", 5) ? device : device + 5;
+}
+
+static int sock_open(struct laser_dev *l, struct acq_err *err)
+{
+	const char *dev = l->cfg->device, *path = sock_path(dev);
+	struct sockaddr_un sa = { .sun_family = AF_UNIX };
+	if (strlen(path) >= sizeof sa.sun_path)
+		return acq_errf(err, ACQ_E_CONFIG, "laser %s: socket path longer than %zu bytes", dev, sizeof sa.sun_path - 1);
+	strcpy(sa.sun_path, path);
+	l->fd = socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+	if (l->fd < 0)
+		return acq_errf(err, ACQ_E_IO, "laser %s: socket: %s", dev, strerror(errno));
+	if (connect(l->fd, (struct sockaddr *)&sa, sizeof sa) < 0)
+		return acq_errf(err, errno == ENOENT || errno == ECONNREFUSED ? ACQ_E_NOTFOUND : ACQ_E_IO,
+				"laser %s: connect: %s", dev, strerror(errno));
+	return 0;
+}
+
+static int sock_write(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err)
+{
+	return fd_write_all(l, buf, n, timeout_ms, true, err);
+}
+
+static void sock_flush(struct laser_dev *l)
+{
+	char buf[256];
+	while (recv(l->fd, buf, sizeof buf, MSG_DONTWAIT) > 0)
+		;
+}
+
+static const struct laser_io io_socket = { "socket", sock_open, sock_write, tio_read, sock_flush, tio_close };
+
 static const struct laser_io *pick_io(const struct laser_cfg *cfg)
 {
 	if (cfg->transport == LASER_T_SERIALPORT)
 		return &io_serialport;
 	if (cfg->transport == LASER_T_TERMIOS)
 		return &io_termios;
+	if (cfg->transport == LASER_T_SOCKET || !strncmp(cfg->device, "unix:", 5))
+		return &io_socket;
 	char real[PATH_MAX];
 	if (realpath(cfg->device, real) && !strncmp(real, "/dev/pts/", 9))
 		return &io_termios;

@@ -9,8 +9,8 @@
  *
  * Ports file (--ports-file, JSON, written atomically once every service listens):
  *   {"pid": N, "time_scale": S, "seed": N, "laser_arm": {"port": N}, "detector_arm": {"port": N},
- *    "laser": {"device": "/dev/pts/K"}, "spectrometer": {"socket": PATH, "pixels": N},
- *    "control": {"socket": PATH}}
+ *    "laser": {"device": "unix:PATH"} (with sim.laser.link: pty, "/dev/pts/K"),
+ *    "spectrometer": {"socket": PATH, "pixels": N}, "control": {"socket": PATH}}
  * (the arm and laser members are written by their services' describe()). */
 #include <errno.h>
 #include <getopt.h>

@@ -1,14 +1,28 @@
-/* sim_laser: the simulated supercontinuum laser on a pseudo-terminal, speaking the line protocol of
- * drivers/laser_serial.c; it writes world->laser_emission / laser_power_pct and obeys the interlock and fault
- * injections (emission forced off, STATUS reports them, EMISSION ON refused).
+/* sim_laser: the simulated supercontinuum laser, speaking the line protocol of drivers/laser_serial.c; it
+ * writes world->laser_emission / laser_power_pct and obeys the interlock and fault injections (emission forced
+ * off, STATUS reports them, EMISSION ON refused).
+ *
+ * The link (`sim: {laser: {link: socket|pty}}`, default socket):
+ * - socket: a Unix stream socket, as a serial device server (ser2net, a terminal server in raw mode) serves a
+ *   serial line; published as "laser": {"device": "unix:PATH"}, which the driver opens with its socket
+ *   transport. The latest connection gets the line (an earlier one is closed), as a serial port has no
+ *   connections. Bytes written to a socket are in the reader's queue when write() returns.
+ * - pty: a pseudo-terminal, published as "laser": {"device": "/dev/pts/N"} (the driver's termios transport,
+ *   terminal programs). A pty moves every byte through the kernel's tty flip buffer, pushed by a kernel worker
+ *   thread (flush_to_ldisc on the events_unbound workqueue, nice 0): on a CPU-starved machine that worker
+ *   waited up to 0.82 s for a CPU before a reply reached the daemon (issue 15's soak stalls; a laser's own
+ *   USB-serial adapter goes through the same worker), whatever priority the daemon and the simulator run at.
+ *   So the bench's default link is the socket.
  *
  * Keep-alive (the laser's own watchdog): "KEEPALIVE <ms>" arms it, and then emission stops when no command
  * has arrived for ms of real time (whatever the bench's time scale: it stands for the laser's firmware
- * timer); any command refreshes it, "KEEPALIVE" alone too. Expiries are counted in `keepalive_expired`.
+ * timer); any command refreshes it, "KEEPALIVE" alone too. A command already waiting on the link when the
+ * period ends counts as arrived (a UART receives it on arrival; this process may read it late). Expiries are
+ * counted in `keepalive_expired`.
  *
- * Options (all optional), `sim: {laser: {...}}`: model, serial, firmware (ID? reply tokens). The device's
- * own config mapping (devices.laser) is not read: the pty path is chosen by the system and published by
- * describe() as "laser": {"device": "/dev/pts/N"}. */
+ * Options (all optional), `sim: {laser: {...}}`: model, serial, firmware (ID? reply tokens), link, socket
+ * (the socket's path; default /tmp/acq-sim.<pid>.laser.sock). The device's own config mapping
+ * (devices.laser) is not read: the endpoint is published by describe(). */
 #include "sim/sim.h"
 
 #include <errno.h>
@@ -18,6 +32,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/socket.h>
 #include <termios.h>
 #include <time.h>
 #include <unistd.h>
@@ -29,7 +44,10 @@
 struct sim_laser {
 	struct sim_service svc;  /* returned to the caller; freed with the rest by destroy */
 	struct sim_world *w;
-	int master, slave;      /* the slave stays open so the master never sees a hang-up between clients */
+	bool pty;               /* link: pty (else socket) */
+	int master, slave;      /* pty: the slave stays open so the master never sees a hang-up between clients */
+	int lfd;                /* socket: listening */
+	int link;               /* the line's fd: the pty master, or the connected client (-1: none) */
 	char path[128];
 	char model[64], serial[64], firmware[64];
 	char line[SL_LINE_MAX + 1];
@@ -126,16 +144,32 @@ static void command(struct sim_laser *s, const char *cmd)
 static int sl_pollfds(void *self, struct pollfd *fds, int max)
 {
 	struct sim_laser *s = self;
-	if (max < 1)
-		return 0;
-	fds[0] = (struct pollfd){ .fd = s->master, .events = (short)(POLLIN | (s->outlen ? POLLOUT : 0)) };
-	return 1;
+	int n = 0;
+	if (!s->pty && n < max)
+		fds[n++] = (struct pollfd){ .fd = s->lfd, .events = POLLIN };
+	if (s->link >= 0 && n < max)
+		fds[n++] = (struct pollfd){ .fd = s->link, .events = (short)(POLLIN | (s->outlen ? POLLOUT : 0)) };
+	return n;
+}
+
+/* socket: the client went away; the laser keeps its state (the keep-alive stops an orphaned emission). */
+static void drop_link(struct sim_laser *s)
+{
+	if (s->pty || s->link < 0)
+		return;
+	close(s->link);
+	s->link = -1;
+	s->len = s->outlen = 0;
+	s->overlong = false;
 }
 
 static void flush_out(struct sim_laser *s)
 {
-	while (s->outlen) {
-		ssize_t n = write(s->master, s->out, s->outlen);
+	while (s->outlen && s->link >= 0) {
+		ssize_t n = s->pty ? write(s->link, s->out, s->outlen)
+				   : send(s->link, s->out, s->outlen, MSG_NOSIGNAL | MSG_DONTWAIT);
+		if (n < 0 && !s->pty && errno != EAGAIN && errno != EINTR)
+			drop_link(s);
 		if (n <= 0)
 			return;
 		memmove(s->out, s->out + n, s->outlen - (size_t)n);
@@ -143,24 +177,35 @@ static void flush_out(struct sim_laser *s)
 	}
 }
 
-static void sl_tick(void *self, double now);
-
-/* Bytes wait in the pty: the laser has received them (see sl_handle). */
+/* Bytes wait on the link: the laser has received them (see sl_handle). */
 static bool input_waiting(const struct sim_laser *s)
 {
-	struct pollfd pfd = { .fd = s->master, .events = POLLIN };
-	return poll(&pfd, 1, 0) > 0 && (pfd.revents & POLLIN);
+	struct pollfd pfd = { .fd = s->link, .events = POLLIN };
+	return s->link >= 0 && poll(&pfd, 1, 0) > 0 && (pfd.revents & POLLIN);
 }
 
 static void sl_handle(void *self, const struct pollfd *fds, int n, double now)
 {
 	(void)now;
 	struct sim_laser *s = self;
-	if (n < 1)
+	int k = 0;
+	if (!s->pty && k < n && fds[k++].revents & POLLIN) {
+		int fd = accept4(s->lfd, NULL, NULL, SOCK_CLOEXEC | SOCK_NONBLOCK);
+		if (fd >= 0) {
+			drop_link(s); /* the latest opener gets the line */
+			s->link = fd;
+			return;
+		}
+	}
+	if (k >= n || s->link < 0 || fds[k].fd != s->link)
 		return;
-	if (fds[0].revents & POLLIN) {
+	if (fds[k].revents & (POLLIN | POLLHUP | POLLERR)) {
 		char buf[512];
-		ssize_t got = read(s->master, buf, sizeof buf);
+		ssize_t got = read(s->link, buf, sizeof buf);
+		if (!s->pty && (got == 0 || (got < 0 && errno != EAGAIN && errno != EINTR))) {
+			drop_link(s);
+			return;
+		}
 		for (ssize_t i = 0; i < got; i++) {
 			char c = buf[i];
 			if (c == '\r')
@@ -168,8 +213,8 @@ static void sl_handle(void *self, const struct pollfd *fds, int n, double now)
 			if (c == '\n') {
 				s->line[s->len] = '\0';
 				/* Faults apply before the command is judged. The keep-alive is judged by sl_tick() between
-				 * reads only: a line read now may have waited in the pty while this process was not scheduled
-				 * (a loaded machine), whereas a laser's UART receives it on arrival. */
+				 * reads only: a line read now may have waited on the link while this process was not
+				 * scheduled (a loaded machine), whereas a laser's UART receives it on arrival. */
 				if (emission_blocked(s))
 					s->w->laser_emission = false;
 				s->last_cmd = real_now();
@@ -207,7 +252,7 @@ static void sl_tick(void *self, double now)
 static void sl_describe(void *self, char *buf, size_t len)
 {
 	struct sim_laser *s = self;
-	snprintf(buf, len, "\"laser\": {\"device\": \"%s\"}", s->path);
+	snprintf(buf, len, "\"laser\": {\"device\": \"%s%s\"}", s->pty ? "" : "unix:", s->path);
 }
 
 static void sl_destroy(void *self)
@@ -220,7 +265,32 @@ static void sl_destroy(void *self)
 		close(s->slave);
 	if (s->master >= 0)
 		close(s->master);
+	if (!s->pty && s->link >= 0)
+		close(s->link);
+	if (s->lfd >= 0) {
+		close(s->lfd);
+		unlink(s->path);
+	}
 	free(s);
+}
+
+/* link: pty — a pseudo-terminal in raw mode; s->path is its slave's name. 0 or -1. */
+static int open_pty(struct sim_laser *s, struct acq_err *err)
+{
+	s->master = posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
+	const char *name = NULL;
+	if (s->master < 0 || grantpt(s->master) || unlockpt(s->master) || !(name = ptsname(s->master)))
+		return acq_errf(err, ACQ_E_IO, "simulated laser: pseudo-terminal: %s", strerror(errno));
+	snprintf(s->path, sizeof s->path, "%s", name);
+	s->slave = open(s->path, O_RDWR | O_NOCTTY | O_CLOEXEC);
+	struct termios t;
+	if (s->slave < 0 || tcgetattr(s->slave, &t))
+		return acq_errf(err, ACQ_E_IO, "simulated laser: %s: %s", s->path, strerror(errno));
+	cfmakeraw(&t); /* no echo, no line editing: the driver sees only our replies */
+	if (tcsetattr(s->slave, TCSANOW, &t))
+		return acq_errf(err, ACQ_E_IO, "simulated laser: %s: %s", s->path, strerror(errno));
+	s->link = s->master;
+	return 0;
 }
 
 struct sim_service *sim_laser_new(struct sim_world *w, struct yc_node *node, struct yc_node *simcfg,
@@ -228,14 +298,22 @@ struct sim_service *sim_laser_new(struct sim_world *w, struct yc_node *node, str
 {
 	(void)node;
 	struct yc_node *opts = simcfg ? yc_get(simcfg, "laser") : NULL;
-	const char *model = "SIM-SC450", *serial = "SIM0001", *firmware = "1.0";
+	const char *model = "SIM-SC450", *serial = "SIM0001", *firmware = "1.0", *path = NULL;
+	static const char *const links[] = { "socket", "pty", NULL };
+	int link = 0;
 	if (opts && (yc_expect_map(opts, "sim.laser", err) || yc_string(opts, "model", false, &model, err) ||
 		     yc_string(opts, "serial", false, &serial, err) || yc_string(opts, "firmware", false, &firmware, err) ||
+		     yc_enum(opts, "link", false, links, &link, err) || yc_string(opts, "socket", false, &path, err) ||
 		     yc_check_unknown(opts, "sim.laser", err)))
 		return NULL;
 	if (strpbrk(model, " \t") || strpbrk(serial, " \t") || strpbrk(firmware, " \t") || !*model || !*serial ||
 	    !*firmware) {
 		yc_errf(err, opts, "sim.laser: model, serial and firmware must be single words");
+		return NULL;
+	}
+	if (path && (link == 1 || !*path || strchr(path, '"') || strchr(path, '\\'))) {
+		yc_errf(err, yc_get(opts, "socket"), "sim.laser.socket: %s", link == 1 ? "only with link: socket" :
+			"expected a path without quotes or backslashes");
 		return NULL;
 	}
 	struct sim_laser *s = calloc(1, sizeof *s);
@@ -244,27 +322,23 @@ struct sim_service *sim_laser_new(struct sim_world *w, struct yc_node *node, str
 		return NULL;
 	}
 	s->w = w;
-	s->slave = -1;
+	s->pty = link == 1;
+	s->master = s->slave = s->lfd = s->link = -1;
 	snprintf(s->model, sizeof s->model, "%s", model);
 	snprintf(s->serial, sizeof s->serial, "%s", serial);
 	snprintf(s->firmware, sizeof s->firmware, "%s", firmware);
-	s->master = posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
-	const char *name = NULL;
-	if (s->master < 0 || grantpt(s->master) || unlockpt(s->master) || !(name = ptsname(s->master))) {
-		acq_errf(err, ACQ_E_IO, "simulated laser: pseudo-terminal: %s", strerror(errno));
-		goto fail;
-	}
-	snprintf(s->path, sizeof s->path, "%s", name);
-	s->slave = open(s->path, O_RDWR | O_NOCTTY | O_CLOEXEC);
-	struct termios t;
-	if (s->slave < 0 || tcgetattr(s->slave, &t)) {
-		acq_errf(err, ACQ_E_IO, "simulated laser: %s: %s", s->path, strerror(errno));
-		goto fail;
-	}
-	cfmakeraw(&t); /* no echo, no line editing: the driver sees only our replies */
-	if (tcsetattr(s->slave, TCSANOW, &t)) {
-		acq_errf(err, ACQ_E_IO, "simulated laser: %s: %s", s->path, strerror(errno));
-		goto fail;
+	if (s->pty) {
+		if (open_pty(s, err))
+			goto fail;
+	} else {
+		if (path)
+			snprintf(s->path, sizeof s->path, "%s", path);
+		else
+			snprintf(s->path, sizeof s->path, "/tmp/acq-sim.%ld.laser.sock", (long)getpid());
+		if ((s->lfd = sim_listen_unix(s->path, err)) < 0) {
+			acq_err_prefix(err, "simulated laser: ");
+			goto fail;
+		}
 	}
 	w->laser_emission = false;
 	s->svc = (struct sim_service){ .name = "laser", .self = s, .pollfds = sl_pollfds, .handle = sl_handle,

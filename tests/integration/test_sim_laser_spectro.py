@@ -1,14 +1,12 @@
 #!/usr/bin/python3
-"""The simulated laser (its pty line protocol) and the simulated spectrometer share one world: counts follow
-EMISSION and POWER set over the laser's pty, and an interlock opened on the control socket darkens the
+"""The simulated laser (its line protocol, on its default link: a Unix socket) and the simulated spectrometer
+share one world: counts follow EMISSION and POWER set over the laser's link, and an interlock opened on the control socket darkens the
 spectrum and is reported by the laser. Arm services are left out (positions set with `pose`)."""
 import os
 import select
 import socket
 import struct
-import termios
 import time
-import tty
 
 from simlib import SEED, Ctl, SimTest
 
@@ -43,9 +41,11 @@ with open(cfg, "w") as f:
 proc, pj = T.start(["-c", cfg, "--disable", "laser_arm,detector_arm", "--time-scale", "100", "--seed", SEED,
                     "--control", ctl_path], T.path("ports.json"))
 check("laser" in pj and "device" in pj["laser"] and "spectrometer" in pj, f"ports file lists laser and spectrometer: {pj}")
-fd = os.open(pj["laser"]["device"], os.O_RDWR | os.O_NOCTTY)
-tty.setraw(fd)
-termios.tcflush(fd, termios.TCIFLUSH)
+check(pj["laser"]["device"].startswith("unix:"), "the laser's default link is a Unix socket: %s" % pj["laser"])
+laser = socket.socket(socket.AF_UNIX)
+laser.settimeout(10)
+laser.connect(pj["laser"]["device"][5:])
+fd = laser.fileno()
 control = Ctl(ctl_path)
 
 
@@ -69,5 +69,5 @@ check(abs(locked) < 3 and "interlock=0" in status and "emission=0" in status,
 check(ask(fd, "EMISSION ON").startswith("ERR"), "emission refused while the interlock is open")
 control("fault laser-interlock off")
 check(ask(fd, "EMISSION ON") == "OK" and measure(sp, 20, 4) - dark > 0.9 * s25, "interlock closed: light again")
-os.close(fd)
+laser.close()
 finish(0, "all passed")

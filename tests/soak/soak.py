@@ -28,15 +28,20 @@ SOAK_SIM_SESSION=1 does the same for acq-sim, which stands for controllers and a
 own (default 0: it shares the daemon's CPU group, and the daemon's work for the clients delays the "hardware").
 Also printed: the scheduler's run and wait-for-a-CPU times of the simulator's and the daemon's threads during
 the loaded and the control sweeps.
+SOAK_OBSERVER_RATE sets daemon.observer_rate (requests per second per observer; 0: no limit, for comparison;
+unset: the daemon's default).
+The last block ("soak results") states each goal's figure, the goal and met/MISSED, with the source commit, the
+knobs, the simulated laser's line and the machine's load: on a shared machine every figure includes the other
+work, which the control sweeps show.
 Environment: SOAK_SECONDS, SOAK_SCALE (bench time scale, default 10), SOAK_LOAD_NICE, SOAK_LOAD_SESSION,
-SOAK_SIM_SESSION, ACQ_BUILD, ACQ_SRC, ACQ_SEED."""
+SOAK_SIM_SESSION, SOAK_OBSERVER_RATE, ACQ_BUILD, ACQ_SRC, ACQ_SEED."""
 import json
 import multiprocessing as mp
 import os
 import pwd
 import re
-import signal
 import socket
+import subprocess
 import sys
 import time
 
@@ -48,6 +53,7 @@ SCALE = float(os.environ.get("SOAK_SCALE", "10"))
 LOAD_NICE = int(os.environ.get("SOAK_LOAD_NICE", "0"))
 LOAD_SESSION = os.environ.get("SOAK_LOAD_SESSION", "0") == "1"
 SIM_SESSION = os.environ.get("SOAK_SIM_SESSION", "0") == "1"
+OBSERVER_RATE = os.environ.get("SOAK_OBSERVER_RATE")  # daemon.observer_rate (unset: the daemon's default)
 OBSERVERS = ["daemon", "bin", "sys", "sync", "games", "man"]
 
 PLAN = L.PLAN_3X18
@@ -249,6 +255,27 @@ def thread_report(text):
     return out
 
 
+def describe_src():
+    """The source tree's commit (and whether it has local changes) at the start, for the record (the binaries are
+    ACQ_BUILD's: built from it by make soak)."""
+    try:
+        rev = subprocess.run(["git", "-C", L.SRC, "describe", "--always", "--dirty"], capture_output=True, text=True,
+                             timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        rev = ""
+    return "source %s" % (rev or "(not a git tree)")
+
+
+def laser_link(b):
+    """The simulated laser's line as the daemon opened it (acq-sim's ports file)."""
+    try:
+        with open(b.ports) as f:
+            dev = json.load(f).get("laser", {}).get("device", "?")
+    except (OSError, ValueError):
+        return "?"
+    return "%s (%s)" % (dev, "Unix socket" if dev.startswith("unix:") else "pty")
+
+
 def rss_mb(pid):
     try:
         with open("/proc/%d/status" % pid) as f:
@@ -354,7 +381,9 @@ def main():
     sweep = L.strip_sections(sweep, {"recon", "daemon"}).replace("auto_recon: true", "auto_recon: false")
     sweep = sweep.replace("pause_after_reference: true", "pause_after_reference: false")
     b = L.Bench(scale=SCALE, sweep_yaml=sweep,
-                daemon_extra="  observers: [%s]\n" % ", ".join(OBSERVERS), sim_session=SIM_SESSION)
+                daemon_extra="  observers: [%s]\n%s" % (", ".join(OBSERVERS), "  observer_rate: %s\n" % OBSERVER_RATE
+                                                      if OBSERVER_RATE is not None else ""),
+                sim_session=SIM_SESSION)
     os.chmod(b.dir, 0o755)
     load = None
     try:
@@ -367,11 +396,13 @@ def main():
         renice_all(b.sim.pid, -10)
         renice_all(b.daemon.pid, -5)
         t_start = time.time()
+        src_rev = describe_src()  # now: the tree may change while the soak runs
         print("soak: %g s, bench time scale %g, plan of %s points, seed %d, load clients at nice %d, %s; %s" % (
             SECONDS, SCALE, "52", L.SEED, LOAD_NICE, "in a session (CPU group) of their own" if LOAD_SESSION else
             "in the daemon's session (CPU group)", load_str()), flush=True)
-        print("soak: acq-sim %s" % ("in a session (CPU group) of its own" if SIM_SESSION else
-                                    "in the daemon's session (CPU group)"), flush=True)
+        print("soak: acq-sim %s; %s; laser line %s" % ("in a session (CPU group) of its own" if SIM_SESSION else
+                                                     "in the daemon's session (CPU group)", src_rev, laser_link(b)),
+              flush=True)
         good = L.Client(b.sock, timeout=10)  # connected before the load, like an operator's watch
         lat, ctl_lat, errors, rss = [], [], 0, []
         last = [0.0]
@@ -444,10 +475,12 @@ def main():
 
         load_end = t_start + SECONDS
         excess, excess_ctl, load_gaps, ctl_gaps, sweeps, points = [], [], [], [], 0, 0
+        per_sweep, loads = [], []
         while time.time() < load_end or sweeps == 0:
             load = start_load(b.sock)
             sid, g = drive("soak-%d" % sweeps, lat, load_end + max(600, SECONDS), "load")
             lstr = load_str()
+            loads.append(os.getloadavg()[0])
             stop_load(*load)
             load = None
             # the control beside it: the same plan on the same machine now, without the load clients
@@ -460,6 +493,7 @@ def main():
             ex_c = [g[k] - cg[k] for k in g if k in cg]
             excess += ex_b
             excess_ctl += ex_c
+            per_sweep.append(max(ex_c))
             print("  sweep %d under load: max gap %.0f ms (%s); control sweep %d beside it: max gap %.0f ms (%s); "
                   "largest excess of a point's gap over the same point in the control %.0f ms, over the baseline "
                   "%.0f ms; status p99 so far %.1f ms; RSS %.1f MB" % (
@@ -493,6 +527,25 @@ def main():
         print("machine at the end: %s on %d CPUs" % (load_str(), os.cpu_count()))
         print("server: %s" % json.dumps(srv))
         ok = max(excess_ctl) <= 0.100 and pct(lat, 99) < 0.050 and max(rss) < 64 and errors == 0 and not paused
+        text = b.daemon_text()
+        print()
+        print("soak results (the issue's goals), measured on %d CPUs with the machine's 1-min load average %.1f-%.1f at "
+              "the end of the loaded sweeps (other work on the machine counts in every figure: compare with the "
+              "control sweeps):" % (os.cpu_count(), min(loads), max(loads)))
+        print("  setup: %s; %s; laser line %s; daemon.observer_rate %s" % (
+            src_rev, "SOAK_SECONDS=%g SOAK_SCALE=%g ACQ_SEED=%d SOAK_LOAD_NICE=%d SOAK_LOAD_SESSION=%d "
+            "SOAK_SIM_SESSION=%d" % (SECONDS, SCALE, L.SEED, LOAD_NICE, LOAD_SESSION, SIM_SESSION),
+            laser_link(b), OBSERVER_RATE if OBSERVER_RATE is not None else "the daemon's default"))
+        verdict = lambda good: "met" if good else "MISSED"  # noqa: E731
+        print("  stall (largest excess of a point's gap over the same point in the control sweep): %.0f ms, goal <= "
+              "100 ms: %s; per loaded sweep: %s ms" % (1e3 * max(excess_ctl), verdict(max(excess_ctl) <= 0.100),
+                                                     ", ".join("%.0f" % (1e3 * x) for x in per_sweep)))
+        print("  well-behaved controller's status latency under load: p50 %.1f ms, p99 %.1f ms (%d requests, %d errors),"
+              " goal p99 < 50 ms: %s" % (1e3 * pct(lat, 50), 1e3 * pct(lat, 99), len(lat), errors,
+                                        verdict(pct(lat, 99) < 0.050 and errors == 0)))
+        print("  daemon RSS peak: %.1f MB, goal < 64 MB: %s" % (max(rss), verdict(max(rss) < 64)))
+        print("  sweeps paused by device faults: %d; laser requests > 2 keep-alive periods: %d; laser faults: %d" % (
+            len(paused), len(re.findall(r"laser: request \d+ took", text)), len(re.findall(r"stopped emitting", text))))
         print("soak: %s" % ("all goals met" if ok else "GOALS MISSED"))
         return 0 if ok else 1
     finally:

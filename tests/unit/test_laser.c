@@ -14,6 +14,8 @@
 #include <string.h>
 #include <sys/mman.h>
 #include <sys/prctl.h>
+#include <sys/socket.h>
+#include <sys/un.h>
 #include <sys/wait.h>
 #include <termios.h>
 #include <time.h>
@@ -28,6 +30,7 @@ struct shared {
 	struct sim_world world;
 	int nlines;
 	char lines[32][160];  /* what a scripted peer received */
+	char desc[256];       /* the served laser's endpoint (its describe()) */
 };
 
 static struct shared *sh;
@@ -61,21 +64,36 @@ struct served {
 	struct laser_cfg *cfg;
 };
 
-static void serve_sim(struct served *sv)
+/* The simulator's laser on its link (pty: sim.laser.link pty; else the default, a Unix socket). */
+static struct sim_service *sim_laser_on(bool pty)
 {
-	memset(&sh->world, 0, sizeof sh->world);
+	struct yc_doc *doc = NULL;
 	struct acq_err err = { 0 };
-	struct sim_service *svc = sim_laser_new(&sh->world, NULL, NULL, &err);
+	static const char text[] = "laser: {link: pty}\n";
+	if (pty)
+		assert_int_equal(yc_load_string("sim.yaml", text, strlen(text), &doc, &err), 0);
+	struct sim_service *svc = sim_laser_new(&sh->world, NULL, pty ? yc_root(doc) : NULL, &err);
 	if (!svc)
 		fail_msg("sim_laser_new: %s", err.msg);
-	char desc[256] = "";
-	svc->describe(svc->self, desc, sizeof desc);
-	assert_int_equal(sscanf(desc, "\"laser\": {\"device\": \"%127[^\"]\"}", sv->path), 1);
-	assert_non_null(strstr(sv->path, "/dev/pts/"));
+	yc_free(doc);
+	return svc;
+}
+
+/* The simulated laser served by a forked child (which owns its link: a socket's file goes with it). */
+static void serve_sim_on(struct served *sv, bool pty)
+{
+	memset(&sh->world, 0, sizeof sh->world);
+	sh->desc[0] = 0;
+	int ready[2];
+	assert_int_equal(pipe(ready), 0);
 	sv->pid = fork();
 	assert_true(sv->pid >= 0);
 	if (sv->pid == 0) {
 		prctl(PR_SET_PDEATHSIG, SIGKILL);
+		close(ready[0]);
+		struct sim_service *svc = sim_laser_on(pty);
+		svc->describe(svc->self, sh->desc, sizeof sh->desc);
+		(void)!write(ready[1], "r", 1);
 		for (;;) {
 			struct pollfd fds[4];
 			int n = svc->pollfds(svc->self, fds, 4);
@@ -85,8 +103,13 @@ static void serve_sim(struct served *sv)
 			svc->tick(svc->self, 0);
 		}
 	}
-	svc->destroy(svc->self); /* the parent's copies of the pty fds; the world in shared memory stays */
-	sh->world.laser_emission = false;
+	close(ready[1]);
+	char b;
+	assert_int_equal(read(ready[0], &b, 1), 1);
+	close(ready[0]);
+	assert_int_equal(sscanf(sh->desc, "\"laser\": {\"device\": \"%127[^\"]\"}", sv->path), 1);
+	/* the default link is a socket: no tty in the way (sim_laser.c: a pty's bytes wait for a kernel worker) */
+	assert_non_null(strstr(sv->path, pty ? "/dev/pts/" : "unix:/"));
 	sv->cfg = make_cfg(sv->path, 500);
 }
 
@@ -96,10 +119,10 @@ static void stop_child(pid_t pid)
 	waitpid(pid, NULL, 0);
 }
 
-/* serve_sim, then the driver opened on the served pty; the test fails if it does not open. */
-static struct laser *open_served(struct served *sv)
+/* serve_sim_on, then the driver opened on the served line; the test fails if it does not open. */
+static struct laser *open_served_on(struct served *sv, bool pty)
 {
-	serve_sim(sv);
+	serve_sim_on(sv, pty);
 	struct acq_err err = { 0 };
 	struct laser *l = NULL;
 	if (laser_open(sv->cfg, &l, &err))
@@ -107,31 +130,128 @@ static struct laser *open_served(struct served *sv)
 	return l;
 }
 
+static struct laser *open_served(struct served *sv)
+{
+	return open_served_on(sv, false);
+}
+
+/* The driver against the simulator on both links (the default socket and sim.laser.link: pty). */
 static void test_sim_identity_emission_power(void **state)
 {
 	(void)state;
-	struct served sv;
-	struct laser *l = open_served(&sv);
-	struct acq_err err = { 0 };
-	assert_string_equal(laser_identity(l)->model, "SIM-SC450");
-	assert_string_equal(laser_identity(l)->serial, "SIM0001");
-	assert_int_equal(laser_set_power(l, 42.5, &err), 0);
-	assert_true(fabs(sh->world.laser_power_pct - 42.5) < 1e-9);
-	assert_int_equal(laser_set_emission(l, true, &err), 0);
+	for (int pty = 0; pty < 2; pty++) {
+		struct served sv;
+		struct laser *l = open_served_on(&sv, pty);
+		struct acq_err err = { 0 };
+		assert_string_equal(laser_identity(l)->model, "SIM-SC450");
+		assert_string_equal(laser_identity(l)->serial, "SIM0001");
+		assert_int_equal(laser_set_power(l, 42.5, &err), 0);
+		assert_true(fabs(sh->world.laser_power_pct - 42.5) < 1e-9);
+		assert_int_equal(laser_set_emission(l, true, &err), 0);
+		assert_true(sh->world.laser_emission);
+		struct laser_status st;
+		assert_int_equal(laser_status(l, &st, &err), 0);
+		assert_true(st.emission && st.interlock_ok && !st.fault);
+		assert_true(fabs(st.power_pct - 42.5) < 1e-9);
+		/* above the configured maximum: refused before sending, emission switched off */
+		assert_int_equal(laser_set_power(l, 90, &err), -1);
+		assert_int_equal(err.code, ACQ_E_RANGE);
+		assert_false(sh->world.laser_emission);
+		assert_int_equal(laser_set_emission(l, true, &err), 0);
+		laser_close(l); /* switches emission off */
+		assert_false(sh->world.laser_emission);
+		stop_child(sv.pid);
+		laser_cfg_free(sv.cfg);
+	}
+}
+
+/* One turn of the simulator's loop for svc (as acq-sim's: poll its fds up to 5 ms, handle, tick). */
+static void sim_turn(struct sim_service *svc)
+{
+	struct pollfd fds[4];
+	int n = svc->pollfds(svc->self, fds, 4);
+	if (poll(fds, (nfds_t)n, 5) > 0)
+		svc->handle(svc->self, fds, n, 0);
+	svc->tick(svc->self, 0);
+}
+
+static int connect_laser(const char *path)
+{
+	int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	struct sockaddr_un sa = { .sun_family = AF_UNIX };
+	snprintf(sa.sun_path, sizeof sa.sun_path, "%s", path);
+	assert_true(fd >= 0);
+	assert_int_equal(connect(fd, (struct sockaddr *)&sa, sizeof sa), 0);
+	return fd;
+}
+
+/* Send cmd on fd and run the simulator until its reply line arrives (at most 2000 turns): the reply. */
+static const char *sim_ask(struct sim_service *svc, int fd, const char *cmd)
+{
+	static char line[160];
+	size_t len = 0;
+	char out[160];
+	int n = snprintf(out, sizeof out, "%s\n", cmd);
+	assert_int_equal(send(fd, out, (size_t)n, MSG_NOSIGNAL), n);
+	for (int t = 0; t < 2000; t++) {
+		sim_turn(svc);
+		char c;
+		while (recv(fd, &c, 1, MSG_DONTWAIT) == 1) {
+			if (c == '\n') {
+				line[len] = 0;
+				return line;
+			}
+			if (len < sizeof line - 1)
+				line[len++] = c;
+		}
+	}
+	fail_msg("no reply to '%s'", cmd);
+	return NULL;
+}
+
+/* The simulated laser's socket link: the latest connection gets the line (the earlier one sees EOF), and the
+ * keep-alive counts a command already waiting on the link as arrived (a laser's UART receives it on arrival;
+ * the simulator may read it late), then expires when nothing comes. In process, on real time. */
+static void test_sim_socket_link_and_keepalive(void **state)
+{
+	(void)state;
+	memset(&sh->world, 0, sizeof sh->world);
+	struct sim_service *svc = sim_laser_on(false);
+	char desc[256] = "", path[128];
+	svc->describe(svc->self, desc, sizeof desc);
+	assert_int_equal(sscanf(desc, "\"laser\": {\"device\": \"unix:%127[^\"]\"}", path), 1);
+	int a = connect_laser(path);
+	assert_string_equal(sim_ask(svc, a, "KEEPALIVE 1000"), "OK");
+	assert_string_equal(sim_ask(svc, a, "EMISSION ON"), "OK");
 	assert_true(sh->world.laser_emission);
-	struct laser_status st;
-	assert_int_equal(laser_status(l, &st, &err), 0);
-	assert_true(st.emission && st.interlock_ok && !st.fault);
-	assert_true(fabs(st.power_pct - 42.5) < 1e-9);
-	/* above the configured maximum: refused before sending, emission switched off */
-	assert_int_equal(laser_set_power(l, 90, &err), -1);
-	assert_int_equal(err.code, ACQ_E_RANGE);
+	int b = connect_laser(path);
+	bool eof = false;
+	for (int t = 0; t < 2000 && !eof; t++) {
+		sim_turn(svc);
+		char c;
+		eof = recv(a, &c, 1, MSG_DONTWAIT) == 0;
+	}
+	assert_true(eof);
+	assert_string_equal(sim_ask(svc, b, "EMISSION?"), "EMISSION 1");
+	/* a refresh sent in time but not read before the period ends: emission stays on */
+	assert_int_equal(send(b, "KEEPALIVE\n", 10, MSG_NOSIGNAL), 10);
+	usleep(1300 * 1000);
+	svc->tick(svc->self, 0);
+	assert_true(sh->world.laser_emission);
+	char got[8] = "";
+	for (int t = 0; t < 2000 && !strchr(got, '\n'); t++) {
+		sim_turn(svc);
+		(void)!recv(b, got + strlen(got), sizeof got - 1 - strlen(got), MSG_DONTWAIT);
+	}
+	assert_string_equal(got, "OK\n");
+	/* nothing more: expired */
+	usleep(1300 * 1000);
+	svc->tick(svc->self, 0);
 	assert_false(sh->world.laser_emission);
-	assert_int_equal(laser_set_emission(l, true, &err), 0);
-	laser_close(l); /* switches emission off */
-	assert_false(sh->world.laser_emission);
-	stop_child(sv.pid);
-	laser_cfg_free(sv.cfg);
+	close(a);
+	close(b);
+	svc->destroy(svc->self);
+	assert_int_equal(access(path, F_OK), -1); /* the socket file goes with the service */
 }
 
 static void test_sim_interlock_and_fault(void **state)
@@ -190,6 +310,9 @@ static int open_pty(char *path, size_t len, int *keep)
 
 /* A child answering each command line with the next scripted reply (sent verbatim; NULL = stay silent);
  * "EMISSION OFF" and "KEEPALIVE..." are always answered "OK\n". Received lines are recorded in shared memory. */
+/* How long the driver waits for a scripted peer's reply that does come (tests of what the reply says). */
+#define PEER_PATIENCE_MS 2000
+
 static pid_t script_peer(int master, const char *const *script)
 {
 	sh->nlines = 0;
@@ -228,7 +351,9 @@ static void expect_open_error(const char *const *script, int code, const char *n
 	char path[128];
 	int keep, m = open_pty(path, sizeof path, &keep);
 	pid_t pid = script_peer(m, script);
-	struct laser_cfg *cfg = make_cfg(path, 200);
+	/* the reply comes: the timeout is only patience (a pty's bytes wait for a kernel worker, and the forked peer
+	 * for a CPU: on a loaded machine 200 ms was not always enough) */
+	struct laser_cfg *cfg = make_cfg(path, PEER_PATIENCE_MS);
 	struct laser *l = NULL;
 	struct acq_err err = { 0 };
 	assert_int_equal(laser_open(cfg, &l, &err), -1);
@@ -276,7 +401,7 @@ static void test_malformed_status_switches_emission_off(void **state)
 		int keep, m = open_pty(path, sizeof path, &keep);
 		const char *script[] = { "ID M S F\n", "OK\n", bad[i][0], bad[i][1], NULL };
 		pid_t pid = script_peer(m, script);
-		struct laser_cfg *cfg = make_cfg(path, 200);
+		struct laser_cfg *cfg = make_cfg(path, PEER_PATIENCE_MS);
 		struct laser *l = NULL;
 		struct acq_err err = { 0 };
 		if (laser_open(cfg, &l, &err))
@@ -441,6 +566,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_sim_identity_emission_power),
 		cmocka_unit_test(test_sim_interlock_and_fault),
+		cmocka_unit_test(test_sim_socket_link_and_keepalive),
 		cmocka_unit_test(test_malformed_identity),
 		cmocka_unit_test(test_malformed_status_switches_emission_off),
 		cmocka_unit_test(test_dead_line_times_out),

@@ -37,6 +37,8 @@ struct fx {
 	struct server *srv;
 	long handled;
 	long ctl_at;  /* handled when a controller's request was last handled */
+	long by_uid[3]; /* handled for root, the "daemon" user and the "bin" user (test_observer_rate_limited) */
+	uid_t uid_daemon, uid_bin;
 };
 
 static char pad[1001];
@@ -48,6 +50,8 @@ static void on_req(void *ctx, const struct srv_peer *peer, struct proto_req *req
 	f->handled++;
 	if (peer->role == PROTO_CONTROLLER)
 		f->ctl_at = f->handled;
+	f->by_uid[peer->uid == 0 ? 0 : peer->uid == f->uid_daemon ? 1 : peer->uid == f->uid_bin ? 2 : 0] +=
+		peer->uid == 0 || peer->uid == f->uid_daemon || peer->uid == f->uid_bin;
 	server_reply(f->srv, peer->serial, req->id, json_pack("{s:s}", "pad", pad));
 }
 
@@ -58,9 +62,14 @@ static int setup(void **state)
 	snprintf(f->dir, sizeof f->dir, "/tmp/test_server.XXXXXX");
 	assert_non_null(mkdtemp(f->dir));
 	snprintf(f->path, sizeof f->path, "%s/s.sock", f->dir);
-	/* observers: the "daemon" user (test_controller_first connects as it; the other tests as root) */
+	/* observers: the "daemon" and "bin" users (test_controller_first and test_observer_rate_limited connect as
+	 * them; the other tests as root); no request rate limit unless a test sets one */
 	f->d = (struct conf_daemon){ .state_dir = f->dir, .socket_path = f->path, .socket_mode = 0666,
-				     .observers = { "daemon" }, .nobservers = 1 };
+				     .observers = { "daemon", "bin" }, .nobservers = 2 };
+	struct passwd *pw = getpwnam("daemon");
+	f->uid_daemon = pw ? pw->pw_uid : (uid_t)-2;
+	pw = getpwnam("bin");
+	f->uid_bin = pw ? pw->pw_uid : (uid_t)-2;
 	chmod(f->dir, 0755);
 	fake_now = 1000;
 	struct loop_clock clk = { .now = fake_clock };
@@ -434,6 +443,157 @@ static void test_controller_first(void **state)
 	free(buf);
 }
 
+/* A child connected as user name: sends n requests at once, then reads until it has the banner and n replies or
+ * the parent closes gate (its read end); writes the number of lines it got to report. Never returns. */
+static void observer_child(struct fx *f, const char *name, int n, int gate, int report)
+{
+	struct passwd *pw = getpwnam(name);
+	if (!pw || setgid(pw->pw_gid) || setuid(pw->pw_uid))
+		_exit(3);
+	int fd = socket(AF_UNIX, SOCK_STREAM, 0);
+	struct sockaddr_un sa = { .sun_family = AF_UNIX };
+	snprintf(sa.sun_path, sizeof sa.sun_path, "%s", f->path);
+	if (connect(fd, (struct sockaddr *)&sa, sizeof sa))
+		_exit(4);
+	static const char req[] = "{\"cmd\":\"version\",\"id\":1}\n";
+	char *batch = malloc((size_t)n * (sizeof req - 1));
+	for (int i = 0; batch && i < n; i++)
+		memcpy(batch + (size_t)i * (sizeof req - 1), req, sizeof req - 1);
+	if (!batch || send(fd, batch, (size_t)n * (sizeof req - 1), 0) != (ssize_t)((size_t)n * (sizeof req - 1)))
+		_exit(5);
+	free(batch);
+	long lines = 0;
+	char buf[65536];
+	while (lines < n + 1) {
+		struct pollfd p[2] = { { .fd = fd, .events = POLLIN }, { .fd = gate, .events = POLLIN } };
+		poll(p, 2, -1);
+		if (p[0].revents) {
+			ssize_t k = recv(fd, buf, sizeof buf, 0);
+			if (k <= 0)
+				break;
+			lines += count_lines(buf, (size_t)k);
+		}
+		if (p[1].revents)
+			break;
+	}
+	(void)!write(report, &lines, sizeof lines);
+	_exit(0);
+}
+
+/* n loop turns of dt on the fake clock; with dt 0, 1 ms of real time between turns for the children's bytes
+ * (the fixture's clock has no rate: a loop turn must not wait). */
+static void turns(struct fx *f, int n, double dt)
+{
+	for (int i = 0; i < n; i++) {
+		fake_now += dt;
+		loop_run_once(f->lp, 0);
+		if (dt == 0)
+			usleep(1000);
+	}
+}
+
+/* daemon.observer_rate 10/s, observer_burst 20 (the server reads them from the configuration it was given): an
+ * observer ("daemon") pipelining 300 requests has 20 handled at once, then 10 per second of the (fake) clock, and
+ * all 300 in the end (delayed, none refused); meanwhile another observer ("bin") is answered at once and a
+ * controller (root) pipelining 300 requests is served in full within 0.1 s of the clock. */
+static void test_observer_rate_limited(void **state)
+{
+	struct fx *f = *state;
+	if (!getpwnam("daemon") || !getpwnam("bin"))
+		skip();
+	f->d.observer_rate = 10;
+	f->d.observer_burst = 20;
+	enum { NREQ = 300 };
+	int gate[2], rep[2];
+	assert_int_equal(pipe(gate), 0);
+	assert_int_equal(pipe(rep), 0);
+	pid_t a = fork();
+	assert_true(a >= 0);
+	if (a == 0) {
+		close(gate[1]);
+		observer_child(f, "daemon", NREQ, gate[0], rep[1]);
+	}
+	/* its connection and lines (real time; the clock stands still meanwhile), then 0.1 s of the clock: the
+	 * burst, at most one token more */
+	for (int t = 0; t < 10000 && f->by_uid[1] < 20; t++)
+		turns(f, 1, 0);
+	turns(f, 500, 2e-4);
+	print_message("  burst: %ld requests of the flooding observer handled in the first 0.1 s\n", f->by_uid[1]);
+	assert_true(f->by_uid[1] >= 20 && f->by_uid[1] <= 21);
+	struct server_stats st;
+	server_get_stats(f->srv, &st);
+	assert_true(st.rate_limited >= 1);
+	/* another observer: answered at its next turns, while the first one still waits */
+	pid_t b = fork();
+	assert_true(b >= 0);
+	if (b == 0) {
+		close(gate[1]);
+		observer_child(f, "bin", 1, gate[0], rep[1]);
+	}
+	for (int t = 0; t < 10000 && f->by_uid[2] < 1; t++)
+		turns(f, 1, 0);
+	assert_int_equal(f->by_uid[2], 1);
+	assert_true(f->by_uid[1] <= 22);
+	/* a controller pipelining NREQ: all served within 0.1 s of the clock (the observer's rate would take 30 s) */
+	int root = connect_client(f);
+	char *buf = malloc(1 << 20);
+	bool eof;
+	drain(root, buf, 1 << 20, &eof);
+	static const char req[] = "{\"cmd\":\"version\",\"id\":1}\n";
+	char batch[NREQ * (sizeof req - 1)];
+	for (int i = 0; i < NREQ; i++)
+		memcpy(batch + i * (sizeof req - 1), req, sizeof req - 1);
+	assert_int_equal(send(root, batch, sizeof batch, 0), (ssize_t)sizeof batch);
+	double t0 = fake_now;
+	long got = 0;
+	for (int t = 0; t < 500 && got < NREQ; t++) {
+		turns(f, 1, 2e-4);
+		got += count_lines(buf, drain(root, buf, 1 << 20, &eof));
+	}
+	print_message("  controller: %ld of %d requests answered in %.3f s of the clock; the observer meanwhile %ld\n", got,
+		      NREQ, fake_now - t0, f->by_uid[1]);
+	assert_int_equal(got, NREQ);
+	assert_true(fake_now - t0 <= 0.1 + 1e-9);
+	/* the flooding observer: 10 a second of the clock */
+	long h0 = f->by_uid[1];
+	double c0 = fake_now;
+	turns(f, 2000, 1e-3);
+	long dh = f->by_uid[1] - h0;
+	print_message("  rate: %ld requests of the flooding observer in %.1f s of the clock\n", dh, fake_now - c0);
+	assert_true(dh >= 18 && dh <= 21);
+	/* and every request answered in the end */
+	for (int t = 0; t < 20000 && f->by_uid[1] < NREQ; t++) {
+		turns(f, 1, 0.02);
+		usleep(500); /* the child reads its replies in real time (unread, they would pause its requests) */
+	}
+	assert_int_equal(f->by_uid[1], NREQ);
+	/* the children report once they have every reply (the loop keeps sending meanwhile) */
+	long lines[2] = { 0, 0 };
+	int got_reports = 0;
+	for (int t = 0; t < 20000 && got_reports < 2; t++) {
+		turns(f, 1, 0);
+		struct pollfd p = { .fd = rep[0], .events = POLLIN };
+		if (poll(&p, 1, 0) == 1) {
+			assert_int_equal(read(rep[0], &lines[got_reports], sizeof lines[0]), (ssize_t)sizeof lines[0]);
+			got_reports++;
+		}
+	}
+	close(gate[1]); /* a child still waiting reports what it got */
+	int sts[2];
+	waitpid(a, &sts[0], 0);
+	waitpid(b, &sts[1], 0);
+	for (; got_reports < 2; got_reports++)
+		assert_int_equal(read(rep[0], &lines[got_reports], sizeof lines[0]), (ssize_t)sizeof lines[0]);
+	assert_true(WIFEXITED(sts[0]) && WEXITSTATUS(sts[0]) == 0 && WIFEXITED(sts[1]) && WEXITSTATUS(sts[1]) == 0);
+	/* banner + replies, in whichever order the children reported */
+	assert_true((lines[0] == NREQ + 1 && lines[1] == 2) || (lines[0] == 2 && lines[1] == NREQ + 1));
+	close(gate[0]);
+	close(rep[0]);
+	close(rep[1]);
+	close(root);
+	free(buf);
+}
+
 int main(void)
 {
 	log_init(LOG_ERR, false);
@@ -446,6 +606,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(test_refusal_readable_after_write, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_bounded_turns, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_controller_first, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_observer_rate_limited, setup, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
