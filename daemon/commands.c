@@ -143,6 +143,11 @@ static void cmd_plan(struct app *app, const struct srv_peer *peer, struct proto_
 				 .text = json_string_value(json_object_get(req->root, "plan")),
 				 .points = json_is_true(json_object_get(req->root, "points")) };
 	sweep_plan_timing(app->sweep, &pj->tm);
+	struct plan_spec *spec = NULL; /* the sample's exposure prior needs the database: read here, not in the child */
+	if (pj->text && plan_load_string("plan", pj->text, &spec, &err) == 0)
+		sweep_plan_prior(app->sweep, spec, 0, &pj->tm);
+	plan_spec_free(spec);
+	err = (struct acq_err){ 0 }; /* the child reports the plan's errors */
 	double rate = app->have_sim && app->sim.time_scale > 0 ? app->sim.time_scale : 1; /* loop seconds per s */
 	if (job_fork(plan_child, pj, PLAN_MEM_BYTES, PLAN_DEADLINE_S * rate, plan_done, pj, NULL, &err)) {
 		json_decref(pj->id);
@@ -615,6 +620,7 @@ static int start_job(struct app *app, uint64_t serial, json_t *id, int64_t resum
 		goto fail;
 	struct plan_timing tm;
 	sweep_plan_timing(app->sweep, &tm);
+	sweep_plan_prior(app->sweep, sj->spec, resume_id, &tm);
 	sj->app = app;
 	sj->serial = serial;
 	double rate = app->have_sim && app->sim.time_scale > 0 ? app->sim.time_scale : 1; /* loop seconds per s */

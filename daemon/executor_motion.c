@@ -28,6 +28,20 @@ static bool near_pos(const struct plan_pos *a, const struct plan_pos *b)
 	return true;
 }
 
+/* Last resort after a move stopped inside the clearance (one axis's alarm while the others went on): the detector
+ * straight away from the laser, never closer, then the planner's path (plan_escape). 0, or -1 with no such way. */
+static int escape(struct ex *x, const struct plan_pos *t, struct plan_wp w[PLAN_MAX_WP + 1], size_t *n)
+{
+	*n = 0;
+	if (!x->known_valid || plan_escape(&x->geom, &x->known, t, w, n) < 0)
+		return -1;
+	ex_event(x, "info", NULL,
+		 "arms inside the clearance at (%.2f, %.2f, %.2f), ψ %.2f°: moving the detector away from the laser to "
+		 "(%.2f, %.2f, %.2f) first", x->known.laser_theta, x->known.det_theta, x->known.det_phi,
+		 plan_psi_deg(&x->geom, &x->known), w[0].pos.laser_theta, w[0].pos.det_theta, w[0].pos.det_phi);
+	return 0;
+}
+
 /* Waypoints to the current target: the planner's own when coming from the previous planned point, else a
  * fresh collision-free path from where the arms are. */
 /* φ is periodic: bring a detector azimuth inside the axis's soft limits by whole turns when it is outside. */
@@ -111,8 +125,8 @@ int ex_plan_path(struct ex *x)
 	if (x->known_valid && near_pos(&x->known, &t))
 		return 0;
 	size_t n = 0;
-	struct plan_wp w[PLAN_MAX_WP];
-	if (plan_move(&x->geom, &x->known, &t, w, &n) < 0 && back_off(x, &t, w, &n))
+	struct plan_wp w[PLAN_MAX_WP + 1];
+	if (plan_move(&x->geom, &x->known, &t, w, &n) < 0 && back_off(x, &t, w, &n) && escape(x, &t, w, &n))
 		return -1;
 	for (size_t i = 0; i < n; i++) {
 		if (wrap_phi(x, w[i].pos.det_phi) != w[i].pos.det_phi)

@@ -1,8 +1,8 @@
--- schema.sql: the acquisitiond database, schema version 4 (PRAGMA user_version = 4,
+-- schema.sql: the acquisitiond database, schema version 5 (PRAGMA user_version = 5,
 -- PRAGMA application_id = 0x42524446 "BRDF"). A new database is created from this file as it is
 -- (daemon/store_migrate.c embeds it); an older one is migrated by the steps in daemon/store_migrate.c (1 → 2: the
 -- measured sample-frame angles and the calibrated_samples view; 2 → 3: the 'interrupted' state of recon_runs;
--- 3 → 4: the decisions of adaptive sweeps).
+-- 3 → 4: the decisions of adaptive sweeps; 4 → 5: the sample a sweep measured, sweep_samples).
 -- tests/integration/test_store_schema.py checks that a fresh database has exactly this schema, and
 -- tests/unit/test_store.c that a migrated one has it too. Only the store (daemon/store*.c) writes; readers of
 -- calibrated samples (the CSV export, the daemon's reconstruction, brdf-recon fit --db in recon/dbload.c) read
@@ -44,6 +44,16 @@ CREATE TABLE sweeps (
   points_total INTEGER NOT NULL DEFAULT 0,
   wavelength_grid BLOB                    -- float32 nm: the grid of calibrated samples (NULL until calibrated)
 );
+
+-- The sample a sweep measured, by the name its plan gave it (plan key sample:; sweeps without one have no row), and
+-- whether the auto exposure chose its exposures: a later auto sweep of the same sample takes its exposure prior (the
+-- duration model's integration times, darks and HDR exposures per incidence) from the latest completed such sweep.
+CREATE TABLE sweep_samples (
+  sweep_id INTEGER PRIMARY KEY REFERENCES sweeps(id),
+  sample TEXT NOT NULL,
+  auto_exposure INTEGER NOT NULL CHECK (auto_exposure IN (0, 1))
+);
+CREATE INDEX sweep_samples_by_sample ON sweep_samples (sample, sweep_id);
 
 -- The devices a sweep used (provenance): written when the sweep is created, one row per connected device.
 CREATE TABLE sweep_devices (

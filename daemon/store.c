@@ -2,7 +2,8 @@
  * closing, the read-only worker connection and the SQLite helpers the other store files share (store_int.h).
  * The module's other files: store_migrate.c (schema creation and migrations), store_sweep.c (sweeps, points,
  * devices, calibrated samples, events), store_spectra.c (spectra and the stored reference), store_recon.c
- * (reconstruction runs), store_export.c (the CSV interchange format). */
+ * (reconstruction runs), store_export.c (the CSV interchange format), store_prior.c (the sample a sweep measured,
+ * the exposures of an exposure prior). */
 #include "daemon/store.h"
 
 #include <errno.h>

@@ -14,7 +14,7 @@
 #include "drivers/spectro.h"
 
 #define STORE_APPLICATION_ID 0x42524446  /* "BRDF" */
-#define STORE_SCHEMA_VERSION 4
+#define STORE_SCHEMA_VERSION 5
 
 struct store;
 struct spectro_info;
@@ -27,6 +27,8 @@ struct store_sweep_new {
 	const char *calibration_method;  /* may be NULL */
 	int64_t spectrometer_id;         /* 0 = unknown */
 	double created_at;               /* Unix seconds */
+	const char *sample;              /* the sample's name (the plan's sample:), NULL or "": not recorded */
+	bool auto_exposure;              /* its exposures are the auto exposure's choice (an exposure prior's source) */
 };
 
 struct store_point_new {
@@ -145,6 +147,25 @@ int store_export_csv(struct store *st, int64_t sweep_id, FILE *out, int *nrows, 
 int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, int *nrows, struct acq_err *err);
 /* store_export_csv() of the first limit rows in sweep order (limit <= 0: all). */
 int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct acq_err *err);
+/* ---- exposure priors (store_prior.c) */
+/* Record the sample a sweep measures (in the caller's transaction: store_sweep_create does). 0 or -1. */
+int store_sweep_sample_put(struct store *st, int64_t sweep_id, const char *sample, bool auto_exposure,
+			   struct acq_err *err);
+/* One exposure of a done point of a prior's source sweep: its incidence zenith (sample frame, planned), the point,
+ * whether it is a dark (else a sample exposure) and its integration time. */
+struct store_prior_row {
+	double theta_i;
+	int64_t point_id;
+	bool dark;
+	double integration_ms;
+};
+typedef int (*store_prior_fn)(void *ctx, const struct store_prior_row *row);
+/* The latest completed sweep of sample (by name) whose exposures the auto exposure chose, other than exclude (0:
+ * none): its id in *sweep_id (0 when there is none, and fn is not called), and its done points' sample and dark
+ * exposures to fn, by incidence, point and time taken (fn nonzero stops). 0 or -1. */
+int store_prior_each(struct store *st, const char *sample, int64_t exclude, int64_t *sweep_id, store_prior_fn fn,
+		     void *ctx, struct acq_err *err);
+
 /* A read-only connection to an existing database (no migration, no checkpoint at close) for a worker thread:
  * only the export and show functions may be used on it. 0 or -1. */
 int store_open_reader(const char *path, struct store **out, struct acq_err *err);

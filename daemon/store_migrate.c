@@ -90,6 +90,14 @@ static const char *const store_migrations[STORE_SCHEMA_VERSION] = {
 	      "  gain REAL, cost_s REAL, predicted_value_after REAL,\n"
 	      "  PRIMARY KEY (sweep_id, batch, rank)\n"
 	      ");\n",
+	/* 4 → 5: the sample a sweep measured (exposure priors, daemon/store_prior.c): one new table; older sweeps have
+	 * no sample name (their plans could not give one), so no row and no prior. */
+	[4] = "CREATE TABLE sweep_samples (\n"
+	      "  sweep_id INTEGER PRIMARY KEY REFERENCES sweeps(id),\n"
+	      "  sample TEXT NOT NULL,\n"
+	      "  auto_exposure INTEGER NOT NULL CHECK (auto_exposure IN (0, 1))\n"
+	      ");\n"
+	      "CREATE INDEX sweep_samples_by_sample ON sweep_samples (sample, sweep_id);\n",
 };
 
 /* Whether the open transaction left a foreign key dangling (a step that rebuilt a table). 0, or -1 with err. */

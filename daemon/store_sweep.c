@@ -63,6 +63,8 @@ int store_sweep_create(struct store *st, const struct store_sweep_new *sw, const
 	if (store_run1(st, s, err, "creating sweep"))
 		goto end;
 	sid = sqlite3_last_insert_rowid(st->db);
+	if (sw->sample && *sw->sample && store_sweep_sample_put(st, sid, sw->sample, sw->auto_exposure, err))
+		goto end;
 	rc = store_points_insert(st, sid, pts, npts, err);
 end:
 	return store_tx_end(st, rc, sid, id, err);

@@ -11,6 +11,7 @@
 #include "daemon/devices.h"
 #include "daemon/eta.h"
 #include "daemon/executor.h"
+#include "daemon/exposure.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
 #include "daemon/plan/plan.h"
@@ -370,6 +371,19 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
 	}
 }
 
+void sweep_plan_prior(const struct sweep *sw, const struct plan_spec *spec, int64_t exclude, struct plan_timing *t)
+{
+	memset(&t->prior, 0, sizeof t->prior);
+	if (!spec || spec->integ_mode != PLAN_INTEG_AUTO || !spec->sample[0] || !sw->env.store)
+		return;
+	struct acq_err err = { 0 };
+	if (exp_prior_load(sw->env.store, spec->sample, exclude, &t->prior, &err)) {
+		log_msg(LOG_WARNING, "exposure prior of sample '%s': %s (timed from the plan's estimate)", spec->sample,
+			err.msg);
+		memset(&t->prior, 0, sizeof t->prior);
+	}
+}
+
 static int plan_cfg(struct sweep *sw, struct ex_cfg *cfg, struct acq_err *err);
 
 /* Plan the text against the bench; the spec's integration settings override the configuration's. */
@@ -383,6 +397,7 @@ static int make_plan(struct sweep *sw, const char *text, const char *name, struc
 		return -1;
 	struct plan_timing tm;
 	sweep_plan_timing(sw, &tm);
+	sweep_plan_prior(sw, sw->spec, sw->id, &tm);
 	plan_time_apply(sw->spec, &sw->env.conf->bench, &tm, sw->plan); /* the ETA's plan figure */
 	return plan_cfg(sw, cfg, err);
 }
@@ -493,6 +508,8 @@ static int start_planned(struct sweep *sw, const char *plan_text, const char *na
 		.calibration_method = method,
 		.spectrometer_id = devices_spectrometer_id(sw->env.devices),
 		.created_at = sw->env.wallclock(),
+		.sample = sw->spec->sample,
+		.auto_exposure = sw->spec->integ_mode == PLAN_INTEG_AUTO,
 	};
 	int rc = store_sweep_create(sw->env.store, &nw, pts, (int)n, &sw->id, err);
 	free(pts);

@@ -412,6 +412,18 @@ void ctl_print_plan(FILE *f, json_t *r)
 		}
 		fputc('\n', f);
 	}
+	json_t *pr = json_object_get(r, "exposure_prior");
+	if (json_is_object(pr))
+		fprintf(f, "  auto exposure timed from sweep %lld of sample %s (%lld points at %lld incidences: median %.3g ms, "
+			   "spread %.3gx, HDR on %.0f %% of the points)\n",
+			num_i(pr, "sweep"), str(pr, "sample"), num_i(pr, "points"), num_i(pr, "incidences"),
+			num(pr, "median_ms"), num(pr, "spread"), 100 * num(pr, "hdr_fraction"));
+	else if (json_is_string(json_object_get(r, "sample")))
+		fprintf(f, "  auto exposure timed from the plan's estimate: no completed auto sweep of sample %s to take a "
+			   "prior from (only a daemon reads its database)\n", str(r, "sample"));
+	else if (json_object_get(r, "exposure_prior"))
+		fputs("  auto exposure timed from the plan's estimate (name the sample, sample: NAME, and its next sweep is "
+		      "timed from this one)\n", f);
 	ctl_fmt_dur(num(r, "duration_s"), a, sizeof a);
 	ctl_fmt_dur(num(r, "raster_s"), b, sizeof b);
 	ctl_fmt_dur(num(r, "lower_bound_s"), c, sizeof c);

@@ -181,8 +181,8 @@ double recon_nearest_centre(const struct recon_model *m, const double *c6, size_
  * factor may both pull the model away from a sample: a lobe narrower than the kernel allows cannot keep its
  * peak under the albedo bound.
  */
-long recon_misfit(const struct recon_model *m, double zlim, double rmin, double *df, struct recon_misfit_worst *worst,
-		  struct acq_err *err)
+long recon_misfit(const struct recon_model *m, double zlim, double rmin, double *df, double *ratio,
+		  struct recon_misfit_worst *worst, struct acq_err *err)
 {
 	size_t n = m->n, L = m->nwl;
 	double *wk = malloc(recon_eval_work_size(m) * sizeof *wk);
@@ -198,10 +198,11 @@ long recon_misfit(const struct recon_model *m, double zlim, double rmin, double 
 		for (size_t l = 0; l < L; l++) {
 			double g = m->g[l * n + k], sg = m->gsig[l * n + k], fh = df[k * L + l], tf = trend_factor(m, tb, l);
 			double ghat = m->transform == RECON_T_SQRT ? sqrt(fh) : log((fh + m->eps[l]) / tf);
-			double r = fabs(g - ghat), d = 0;
+			double r = fabs(g - ghat), d = 0, q = 1.0;
 			if (isfinite(r) && r > rmin && isfinite(sg) && r > zlim * sg) {
 				double fd = untransform(m->transform, g, m->eps[l], tf);
 				d = fd - fh;
+				q = (fd + m->eps[l]) / (fh + m->eps[l]);
 				count++;
 				if (worst && fabs(d) > wr) {
 					wr = fabs(d);
@@ -212,6 +213,8 @@ long recon_misfit(const struct recon_model *m, double zlim, double rmin, double 
 				}
 			}
 			df[k * L + l] = isfinite(d) ? d : 0.0;
+			if (ratio)
+				ratio[k * L + l] = isfinite(q) && isfinite(d) ? q : 1.0;
 		}
 	}
 	return count;

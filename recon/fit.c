@@ -186,6 +186,7 @@ struct fitwork {
 	int ncand, auto_trend, kind[RECON_TREND__COUNT];
 	size_t chan[16], nc;            /* channels scored by the trend's and the leave-one-out searches */
 	double trend_rms, crms[RECON_TREND__COUNT], calpha[RECON_TREND__COUNT], cscore[RECON_TREND__COUNT];
+	double calpha2[RECON_TREND__COUNT]; /* the coat kind's second roughness (0 for the others) */
 	double *ccoef[RECON_TREND__COUNT]; /* [L*TREND_NB] coefficients per candidate */
 	double *tlog[RECON_TREND__COUNT]; /* ln(T + ε) [L*n] per candidate (NULL: none) */
 	double *Gc[RECON_TREND__COUNT];   /* centred data relative to each candidate's trend [L*n] */
@@ -455,12 +456,13 @@ static int fit_transform(struct fitwork *F, struct acq_err *err)
 			acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
 			return -1;
 		}
-		if (trend_fit_kind(t, n, L, val, m->eps, c6, chan, nc, &F->calpha[c], F->ccoef[c], &F->crms[c], err)) {
+		if (trend_fit_kind2(t, n, L, val, m->eps, c6, chan, nc, &F->calpha[c], &F->calpha2[c], F->ccoef[c],
+				    &F->crms[c], err)) {
 			free(tbas);
 			return -1;
 		}
 		for (size_t j = 0; j < n; j++) /* the basis once per sample, not once per channel */
-			trend_eval_basis(t, F->calpha[c], c6 + 6 * j, tbas + j * TREND_NB);
+			trend_eval_basis2(t, F->calpha[c], F->calpha2[c], c6 + 6 * j, tbas + j * TREND_NB);
 		for (size_t l = 0; l < L; l++)
 			for (size_t j = 0; j < n; j++)
 				F->tlog[c][l * n + j] = log(trend_dot(F->ccoef[c] + l * TREND_NB, tbas + j * TREND_NB) +
@@ -682,6 +684,7 @@ static int fit_search(struct fitwork *F, struct acq_err *err)
 	m->trend = F->kind[bcand];
 	if (F->tlog[bcand]) { /* a trend is kept: the model's data are relative to it */
 		m->trend_alpha = F->calpha[bcand];
+		m->trend_alpha2 = F->calpha2[bcand];
 		F->trend_rms = F->crms[bcand];
 		memcpy(m->tcoef, F->ccoef[bcand], L * TREND_NB * sizeof *m->tcoef);
 		for (size_t l = 0; l < L; l++) {
@@ -692,6 +695,7 @@ static int fit_search(struct fitwork *F, struct acq_err *err)
 		}
 	} else {
 		m->trend_alpha = 0;
+		m->trend_alpha2 = 0;
 	}
 	F->best = bcand;
 	return 0;
@@ -779,7 +783,7 @@ static int fit_warnings(struct fitwork *F, char *buf, size_t cap, struct acq_err
 	if (!df)
 		return acq_errf(err, ACQ_E_NOMEM, "fit: out of memory");
 	struct recon_misfit_worst w = { 0 };
-	long nm = recon_misfit(m, FIT_MISFIT_Z, FIT_MISFIT_MIN, df, &w, err);
+	long nm = recon_misfit(m, FIT_MISFIT_Z, FIT_MISFIT_MIN, df, NULL, &w, err);
 	free(df);
 	if (nm < 0)
 		return -1;
@@ -821,6 +825,9 @@ static int fit_finish(struct fitwork *F, struct acq_err *err)
 		if (c == F->ncand - 1)
 			snprintf(cands + at, sizeof cands - (size_t)at, "\n");
 	}
+	char a2[48] = ""; /* the second roughness of a two-lobe trend */
+	if (trend_two_lobes(m->trend))
+		snprintf(a2, sizeof a2, "trend_alpha2=%.6g\n", m->trend_alpha2);
 	char when[32];
 	time_t now = time(NULL);
 	struct tm tmv;
@@ -829,10 +836,10 @@ static int fit_finish(struct fitwork *F, struct acq_err *err)
 	snprintf(m->meta, sizeof m->meta,
 		 "software=acquisitiond %s\ncreated=%s\nsource=%s\nrows=%zu\nrows_dropped_empty=%zu\n"
 		 "rows_merged=%zu\nvalues_imputed=%zu\nuncertainties=%s\nloo_rms_transformed=%.6g\n"
-		 "rcond=%.6g\nalbedo_margin=%.6g\ntrend=%s\ntrend_alpha=%.6g\ntrend_rms_log=%.6g\n%ssymmetry=isotropic%s\n%s",
+		 "rcond=%.6g\nalbedo_margin=%.6g\ntrend=%s\ntrend_alpha=%.6g\n%strend_rms_log=%.6g\n%ssymmetry=isotropic%s\n%s",
 		 ACQ_VERSION, when, o->source ? o->source : "-", F->n0, F->dropped, F->merged, F->imputed,
 		 F->have_sig ? "given" : "leave-one-out", m->loo_rms, m->rcond, m->alb_margin, trend_name(m->trend),
-		 m->trend_alpha, F->trend_rms, cands,
+		 m->trend_alpha, a2, F->trend_rms, cands,
 		 F->phi_i_varies ? " (phi_i varies in the data: azimuths taken relative to phi_i)" : "", warn);
 	for (char *p = m->meta; *p; p++) /* keep metadata printable */
 		if ((unsigned char)*p < 0x20 && *p != '\n')

@@ -490,6 +490,14 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe
 			s = fmin(s, m->trend == RECON_TREND_GGX ? TREND_RULE_SPACING * m->trend_alpha
 							       : trend_rule_step(m->trend, m->trend_alpha));
 	}
+	/* a two-lobe trend's broad lobe (b1) is always on this rule, split or not (honest, session 7) */
+	if (trend_two_lobes(m->trend)) {
+		double base = 0;
+		for (size_t l = 0; l < m->nwl; l++)
+			base = fmax(base, m->tcoef[l * TREND_NB + 1]);
+		if (base >= 1e-4)
+			s = fmin(s, trend_base_step(m->trend, m->trend_alpha2));
+	}
 	double a = ceil((M_PI / 2) / s), b = ceil(M_PI / s);
 	if (a > *nmu)
 		*nmu = a < nmu_max / 2 ? (int)a : nmu_max / 2;

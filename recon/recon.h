@@ -54,7 +54,8 @@ struct recon_model {
 	double *g;           /* [nwl*n] transformed data (with imputed values), for Monte Carlo */
 	double *gsig;        /* [nwl*n] standard uncertainty of g (delta method, or LOO RMS without sigmas) */
 	int trend;           /* enum recon_trend; g, w and mu are relative to it: g = ln(f + ε) − ln(T + ε) */
-	double trend_alpha;  /* GGX roughness of the trend */
+	double trend_alpha;  /* roughness of the trend (the coat kind: its narrow lobe) */
+	double trend_alpha2; /* the coat kind's second roughness (its broad base lobe); 0 for the other kinds */
 	double *tcoef;       /* [nwl*TREND_NB] non-negative trend coefficients (all 0 without a trend) */
 	size_t ntab;         /* albedo table: A(θ, λ) ≥ albedo of the unscaled interpolant on [θ_t, θ_t+1] */
 	double *tab_theta;   /* [ntab] increasing nodes from 0 to π/2 (10° apart, bisected where needed) */

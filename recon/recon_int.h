@@ -57,7 +57,7 @@ static inline double untransform_deriv(int transform, double g, double eps, doub
  * of the map back, T + ε with a trend and 1 without. */
 static inline void trend_at(const struct recon_model *m, const double *c6, double b[TREND_NB])
 {
-	trend_eval_basis(m->trend, m->trend_alpha, c6, b);
+	trend_eval_basis2(m->trend, m->trend_alpha, m->trend_alpha2, c6, b);
 }
 
 static inline double trend_val(const struct recon_model *m, const double b[TREND_NB], size_t l)
@@ -115,10 +115,10 @@ struct recon_misfit_worst {
 	double data, model;
 };
 /* Samples the final model does not honour: |g_k − ĝ_k| (transformed units) > max(rmin, zlim·σ_g). Fills
- * df[k*L + l] = data − model (sr⁻¹) there and 0 elsewhere, worst (may be NULL) with the largest |data − model|; returns
- * the count, or -1 with err (eval.c). */
-long recon_misfit(const struct recon_model *m, double zlim, double rmin, double *df, struct recon_misfit_worst *worst,
-		  struct acq_err *err);
+ * df[k*L + l] = data − model (sr⁻¹) there and 0 elsewhere, ratio[k*L + l] (may be NULL) = (data + ε)/(model + ε) there
+ * and 1 elsewhere, worst (may be NULL) with the largest |data − model|; returns the count, or -1 with err (eval.c). */
+long recon_misfit(const struct recon_model *m, double zlim, double rmin, double *df, double *ratio,
+		  struct recon_misfit_worst *worst, struct acq_err *err);
 
 /* Hemisphere nodes at θi (quad.c): nmu × nphi canonical points c6 and weights wt (cosθo included); square_rule =
  * Gauss-Legendre in cos²θo (the checker's independent rule). Returns -1 on a bad size. */

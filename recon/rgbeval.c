@@ -235,7 +235,7 @@ static void bins_to_lin(const struct recon_rgb *R, const double *c6, const doubl
 	double cti = acos(fmin(1, fmax(0, c6[2]))), cto = acos(fmin(1, fmax(0, c6[5])));
 	size_t ji = recon_tab_interval(m, cti), jo = recon_tab_interval(m, cto);
 	double tb[TREND_NB];
-	trend_eval_basis(m->trend, m->trend_alpha, c6, tb);
+	trend_eval_basis2(m->trend, m->trend_alpha, m->trend_alpha2, c6, tb);
 	lin[0] = lin[1] = lin[2] = 0;
 	for (size_t l = 0; l < nc; l++) {
 		double x = e[l], f;

@@ -12,11 +12,11 @@
 #include "recon/csvio.h"
 
 /*
- * Model file, version 2 (version 1 files, without the trend block, are still read: trend none). All integers unsigned little-endian, all reals IEEE-754 binary64 little-endian,
- * no padding:
+ * Model file, version 2, or 3 for a two-lobe trend (version 1 files, without the trend block, are still read: trend
+ * none). All integers unsigned little-endian, all reals IEEE-754 binary64 little-endian, no padding:
  *
  *   magic       8 bytes  "BRDFRBF\n"
- *   version     u32      2
+ *   version     u32      2; 3 when the trend has two roughnesses (coat); a one-lobe model stays version 2
  *   kernel      u32      0 wendland, 1 exp, 2 gauss, 3 paper          (rbf.h)
  *   transform   u32      0 log, 1 sqrt                                 (recon.h)
  *   flags       u32      0 (reserved; bit 0 would mark an anisotropic model)
@@ -30,8 +30,9 @@
  *   w[nwl·n] g[nwl·n] gsig[nwl·n]              f64 channel-major: weights, data, uncertainties (≥ 0)
  *   tab_theta[ntab]                            f64 increasing, 0 to π/2
  *   tab_alb[(ntab−1)·nwl]                      f64 ≥ 0, albedo upper bounds
- *   trend       u32      0 none, 1 ggx, 2 phong, 3 sheen, 4 rough      (trend.h; version 2 only)
+ *   trend       u32      0 none, 1 ggx, 2 phong, 3 sheen, 4 rough, 5 coat (trend.h; version ≥ 2; coat: 3 only)
  *   trend_alpha f64      the trend's roughness in [0.005, 1] (trend.h), 0 (none)
+ *   trend_alpha2 f64     version 3 only: the coat's second (base) roughness, in [2·trend_alpha, 1]
  *   tcoef[nwl·5]                               f64 ≥ 0, trend coefficients (TREND_NB; all 0 for none)
  *   meta_len    u32      ≤ 65535, then meta_len bytes of UTF-8 "key=value\n" text (no NUL)
  *   checksum    u64      FNV-1a 64 of every preceding byte
@@ -41,6 +42,7 @@
  */
 #define MAGIC "BRDFRBF\n"
 #define VERSION 2u
+#define VERSION_2LOBE 3u /* written only for a trend with two roughnesses */
 
 static int little_endian(void)
 {
@@ -109,7 +111,8 @@ int recon_model_save(const struct recon_model *m, const char *path, struct acq_e
 		{ "tab_theta", m->tab_theta, m->ntab }, { "tab_alb", m->tab_alb, (m->ntab - 1) * L },
 	};
 	double hdr[5] = { m->shape, m->eta, m->alb_margin, m->loo_rms, m->rcond };
-	if (!all_finite(hdr, 5) || !isfinite(m->trend_alpha) || !m->tcoef)
+	int v3 = trend_two_lobes(m->trend);
+	if (!all_finite(hdr, 5) || !isfinite(m->trend_alpha) || !isfinite(m->trend_alpha2) || !m->tcoef)
 		return acq_errf(err, ACQ_E_NUMERIC, "model: non-finite parameter, not written");
 	if (!all_finite(m->tcoef, L * TREND_NB))
 		return acq_errf(err, ACQ_E_NUMERIC, "model: non-finite value in tcoef, not written");
@@ -121,7 +124,7 @@ int recon_model_save(const struct recon_model *m, const char *path, struct acq_e
 		return -1;
 	struct wr w = { o.f, FNV_INIT, 0 };
 	put(&w, MAGIC, 8);
-	put_u32(&w, VERSION);
+	put_u32(&w, v3 ? VERSION_2LOBE : VERSION);
 	put_u32(&w, (uint32_t)m->kernel);
 	put_u32(&w, (uint32_t)m->transform);
 	put_u32(&w, 0);
@@ -133,6 +136,8 @@ int recon_model_save(const struct recon_model *m, const char *path, struct acq_e
 		put(&w, arr[a].p, arr[a].k * sizeof(double));
 	put_u32(&w, (uint32_t)m->trend);
 	put(&w, &m->trend_alpha, sizeof m->trend_alpha);
+	if (v3)
+		put(&w, &m->trend_alpha2, sizeof m->trend_alpha2);
 	put(&w, m->tcoef, L * TREND_NB * sizeof(double));
 	size_t ml = strnlen(m->meta, sizeof m->meta);
 	put_u32(&w, (uint32_t)ml);
@@ -186,9 +191,9 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 	if (get(&r, &version, 4) || get(&r, &kernel, 4) || get(&r, &transform, 4) || get(&r, &flags, 4) ||
 	    get(&r, &n, 8) || get(&r, &L, 8) || get(&r, &ntab, 8) || get(&r, hdr, sizeof hdr))
 		return acq_errf(err, ACQ_E_INVAL, "%s: truncated header", name);
-	if (version != VERSION && version != 1)
-		return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: model format version %u, this program reads %u", name,
-				version, VERSION);
+	if (version < 1 || version > VERSION_2LOBE)
+		return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: model format version %u, this program reads 1 to %u", name,
+				version, VERSION_2LOBE);
 	if (kernel >= RBF_K__COUNT)
 		return acq_errf(err, ACQ_E_INVAL, "%s: unknown kernel %u", name, kernel);
 	if (transform >= RECON_T__COUNT)
@@ -200,7 +205,7 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 				(unsigned long long)n, (unsigned long long)L, (unsigned long long)ntab);
 	uint64_t reals = 3 * L + 5 * n + 3 * n * L + ntab + (ntab - 1) * L;
 	if (version >= 2)
-		reals += 1 + TREND_NB * L;
+		reals += 1 + TREND_NB * L + (version >= 3);
 	uint64_t fixed = 8 + 16 + 24 + 40 + reals * 8 + 4 + (version >= 2 ? 4 : 0);
 	if (len < fixed + 8)
 		return acq_errf(err, ACQ_E_INVAL, "%s: truncated (%zu bytes, header implies at least %llu)", name, len,
@@ -230,7 +235,8 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 	}
 	uint32_t trend = RECON_TREND_NONE;
 	if (version >= 2) {
-		if (get(&r, &trend, 4) || get(&r, &m->trend_alpha, 8) || !(m->tcoef = get_arr(&r, L * TREND_NB))) {
+		if (get(&r, &trend, 4) || get(&r, &m->trend_alpha, 8) || (version >= 3 && get(&r, &m->trend_alpha2, 8)) ||
+		    !(m->tcoef = get_arr(&r, L * TREND_NB))) {
 			recon_model_free(m);
 			return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory or truncated", name);
 		}
@@ -287,6 +293,14 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 	if (!bad && trend != RECON_TREND_NONE &&
 	    !(m->trend_alpha >= TREND_ALPHA_MIN * 0.999 && m->trend_alpha <= TREND_ALPHA_MAX * 1.001))
 		bad = "trend roughness";
+	/* the second roughness: exactly the two-lobe kinds carry one (version 3), in [2α, TREND_ALPHA_MAX] */
+	if (!bad && trend < RECON_TREND__COUNT && trend_two_lobes((int)trend) != (version >= 3))
+		bad = version >= 3 ? "trend (version 3 carries a second roughness for a two-lobe trend only)"
+				   : "trend (a two-lobe trend needs model file version 3)";
+	if (!bad && version >= 3 &&
+	    !(isfinite(m->trend_alpha2) && m->trend_alpha2 >= 2.0 * m->trend_alpha * 0.999 &&
+	      m->trend_alpha2 <= TREND_ALPHA_MAX * 1.001))
+		bad = "trend second roughness (must be finite, in [2·trend_alpha, 1])";
 	for (size_t i = 0; !bad && i < L * TREND_NB; i++)
 		if (!isfinite(m->tcoef[i]) || m->tcoef[i] < 0 || (trend == RECON_TREND_NONE && m->tcoef[i] != 0))
 			bad = "trend coefficients";

@@ -12,7 +12,7 @@
 
 const char *trend_name(int t)
 {
-	static const char *const names[RECON_TREND__COUNT] = { "none", "ggx", "phong", "sheen", "rough" };
+	static const char *const names[RECON_TREND__COUNT] = { "none", "ggx", "phong", "sheen", "rough", "coat" };
 	return t >= 0 && t < RECON_TREND__COUNT ? names[t] : NULL;
 }
 
@@ -43,6 +43,16 @@ static double smith_lambda(double alpha, double mu)
  * ωi ↔ ωo and invariant under rotation about the normal and the mirror, like the model; their albedo is
  * ≤ 1 (the single-scattering microfacet lobe loses energy, never gains it).
  */
+/* The GGX lobe D·G2/(4μiμo) of roughness α at cosθh = ch (height-correlated Smith G2): symmetric in μi ↔ μo bit
+ * for bit. */
+static double ggx_lobe(double alpha, double mi, double mo, double ch)
+{
+	double a2 = alpha * alpha, t = ch * ch * (a2 - 1.0) + 1.0;
+	double d = a2 / (M_PI * t * t);
+	double g2 = 1.0 / (1.0 + (smith_lambda(alpha, mi) + smith_lambda(alpha, mo))); /* symmetric bit for bit */
+	return d * g2 / (4.0 * (mi * mo));
+}
+
 void trend_basis(double alpha, const double c6[6], double b[TREND_NB])
 {
 	double mi = c6[2] > MU_MIN ? c6[2] : MU_MIN, mo = c6[5] > MU_MIN ? c6[5] : MU_MIN;
@@ -51,10 +61,7 @@ void trend_basis(double alpha, const double c6[6], double b[TREND_NB])
 	double ch = hn > 1e-12 ? hz / hn : 0.0;
 	double dot = c6[0] * c6[3] + c6[1] * c6[4] + c6[2] * c6[5];
 	double cd = sqrt(fmax(0.0, 0.5 * (1.0 + dot))); /* cos θd = ωi·h */
-	double a2 = alpha * alpha, t = ch * ch * (a2 - 1.0) + 1.0;
-	double d = a2 / (M_PI * t * t);
-	double g2 = 1.0 / (1.0 + (smith_lambda(alpha, mi) + smith_lambda(alpha, mo))); /* symmetric bit for bit */
-	double s = d * g2 / (4.0 * (mi * mo));
+	double s = ggx_lobe(alpha, mi, mo, ch);
 	double f = 1.0 - (cd < 1.0 ? cd : 1.0), f2 = f * f;
 	double qi = 1.0 - 0.5 * mi, qo = 1.0 - 0.5 * mo, qi2 = qi * qi, qo2 = qo * qo;
 	b[0] = 1.0 / M_PI;
@@ -102,8 +109,39 @@ static double phong_n(double alpha)
 
 void trend_eval_basis(int t, double alpha, const double c6[6], double b[TREND_NB])
 {
+	trend_eval_basis2(t, alpha, 0.0, c6, b);
+}
+
+/*
+ * coat (session 7, issue 13): two GGX lobes of different widths, b = [1/π, G(α2), G(α), G(α) f², G(α) f⁵], G the
+ * lobe of trend_basis: a narrow coat lobe (roughness α, with the dielectric Fresnel shapes of the GGX kind) over a
+ * broad base lobe (α2 ≥ 2α, one flat term: a metal's Fresnel is nearly flat to 60°, and the coat's transmission,
+ * 1 − its albedo, is within ~10 % of 1 there; the RBF corrects the rest). acq-sim's clear coat is GGX 0.05 over
+ * a copper-like GGX 0.30. One GGX lobe (α ≈ 0.22) spread the coat's energy into the 36° azimuth gaps: the DHR at
+ * 30°/60° was 0.022/0.108 too high. Each lobe's albedo is ≤ 1 per unit coefficient, like GGX's.
+ */
+static void coat_basis(double alpha, double alpha2, const double c6[6], double b[TREND_NB])
+{
+	struct tgeom g;
+	tgeom(c6, &g);
+	double f = 1.0 - (g.cd < 1.0 ? g.cd : 1.0), f2 = f * f, s = ggx_lobe(alpha, g.mi, g.mo, g.ch);
+	b[0] = 1.0 / M_PI;
+	double qi = 1.0 - g.mi, qo = 1.0 - g.mo, qi2 = qi * qi, qo2 = qo * qo;
+	double ti = 1.0 - qi2 * qi2 * qi, to = 1.0 - qo2 * qo2 * qo; /* the coat's transmission, (1 − F)/(1 − F0) */
+	b[1] = alpha2 > 0 ? ggx_lobe(alpha2, g.mi, g.mo, g.ch) * (ti * to) : 0.0;
+	b[2] = s;
+	b[3] = s * f2;
+	b[4] = s * f2 * f2 * f;
+}
+
+void trend_eval_basis2(int t, double alpha, double alpha2, const double c6[6], double b[TREND_NB])
+{
 	if (t == RECON_TREND_GGX) {
 		trend_basis(alpha, c6, b);
+		return;
+	}
+	if (t == RECON_TREND_COAT) {
+		coat_basis(alpha, alpha2, c6, b);
 		return;
 	}
 	if (t != RECON_TREND_PHONG && t != RECON_TREND_SHEEN && t != RECON_TREND_ROUGH) {
@@ -155,7 +193,7 @@ static double lobe_shape(int t, double alpha, const double *p)
 {
 	struct tgeom g;
 	tgeom(p, &g);
-	if (t == RECON_TREND_GGX) {
+	if (t == RECON_TREND_GGX || t == RECON_TREND_COAT) {
 		double c2 = g.ch * g.ch, t2 = c2 > 0 ? (1.0 - c2) / c2 : INFINITY, q = 1.0 + t2 / (alpha * alpha);
 		return g.ch > 0 ? 1.0 / (q * q) : 0.0;
 	}
@@ -171,13 +209,19 @@ static double lobe_shape(int t, double alpha, const double *p)
 
 double trend_hv_alpha(int t, double alpha)
 {
-	return t == RECON_TREND_GGX ? alpha : t == RECON_TREND_PHONG ? 0.5 * alpha : 0.0;
+	return t == RECON_TREND_GGX || t == RECON_TREND_COAT ? alpha : t == RECON_TREND_PHONG ? 0.5 * alpha : 0.0;
+}
+
+double trend_base_step(int t, double alpha2)
+{
+	return t == RECON_TREND_COAT && alpha2 > 0 ? 0.5 * alpha2 : INFINITY;
 }
 
 double trend_rule_step(int t, double alpha)
 {
 	switch (t) {
 	case RECON_TREND_GGX:
+	case RECON_TREND_COAT: /* its narrow lobe (the base is broader) */
 		return 0.5 * alpha; /* half width ≈ 2α in ωo */
 	case RECON_TREND_PHONG:
 		return 0.3 * alpha; /* cosⁿψ = 1/4 at ψ ≈ 1.18α */
@@ -334,6 +378,123 @@ static double score(int t, size_t n, const double *val, const double *eps, const
 	return ss / (double)(n * nc);
 }
 
+/*
+ * Score of the coat kind at (α, α2), as score(): the coat lobe (b2..b4, roughness α) needs TREND_MIN_INLOBE samples
+ * in its core (tanθh ≤ α) and on its flank (shape 0.01–0.9, where the width changes the value), the base lobe (b1)
+ * TREND_MIN_INLOBE in its core; an unused lobe needs nothing. Without the flank rule the coat's width would be a
+ * guess from the exact mirror samples alone, and with it the coat's albedo (∝ peak × α²) and the DHR.
+ */
+static double score_coat(size_t n, const double *val, const double *eps, const double *c6, const size_t *chan,
+			 size_t nc, double alpha, double alpha2, double *B)
+{
+	for (size_t k = 0; k < n; k++)
+		coat_basis(alpha, alpha2, c6 + 6 * k, B + TREND_NB * k);
+	double ss = 0, c[TREND_NB];
+	int coat = 0, base = 0;
+	for (size_t i = 0; i < nc; i++) {
+		ss += trend_fit_coef(n, val + chan[i] * n, eps[chan[i]], B, c);
+		base |= c[1] > 0;
+		coat |= c[2] > 0 || c[3] > 0 || c[4] > 0;
+	}
+	size_t core = 0, flank = 0, bcore = 0;
+	for (size_t k = 0; k < n && (coat || base); k++) {
+		double sh = lobe_shape(RECON_TREND_GGX, alpha, c6 + 6 * k), sb = lobe_shape(RECON_TREND_GGX, alpha2, c6 + 6 * k);
+		core += sh >= 0.25;
+		flank += sh >= 0.01 && sh <= 0.9;
+		bcore += sb >= 0.25;
+	}
+	if ((coat && (core < TREND_MIN_INLOBE || flank < TREND_MIN_INLOBE)) || (base && bcore < TREND_MIN_INLOBE))
+		return INFINITY;
+	return ss / (double)(n * nc);
+}
+
+/* One coordinate of a roughness search: the score of kind t as a function of x = ln α (the coat kind: ln α at α2 =
+ * e^other, or ln α2 at α = e^other). golden: golden section over [lo, hi] (NGOLDEN steps); the best x and its score
+ * into *x, *fx, which are kept when no point beats *fx. */
+struct gs {
+	int t;
+	size_t n, nc;
+	const double *val, *eps, *c6;
+	const size_t *chan;
+	double *B, other;
+	int which; /* coat: 0 x = ln α, 1 x = ln α2 */
+};
+
+static double gs_at(const struct gs *g, double x)
+{
+	if (g->t != RECON_TREND_COAT)
+		return score(g->t, g->n, g->val, g->eps, g->c6, g->chan, g->nc, exp(x), g->B);
+	double a = g->which ? exp(g->other) : exp(x), a2 = g->which ? exp(x) : exp(g->other);
+	return score_coat(g->n, g->val, g->eps, g->c6, g->chan, g->nc, a, a2, g->B);
+}
+
+static void golden(const struct gs *g, double lo, double hi, double *x, double *fx)
+{
+	if (!(hi > lo))
+		return;
+	const double gr = 0.5 * (sqrt(5.0) - 1.0);
+	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo), s1 = gs_at(g, x1), s2 = gs_at(g, x2);
+	for (int it = 0; it < NGOLDEN; it++) {
+		if (s1 < s2) {
+			hi = x2;
+			x2 = x1;
+			s2 = s1;
+			x1 = hi - gr * (hi - lo);
+			s1 = gs_at(g, x1);
+		} else {
+			lo = x1;
+			x1 = x2;
+			s1 = s2;
+			x2 = lo + gr * (hi - lo);
+			s2 = gs_at(g, x2);
+		}
+	}
+	if (s1 < *fx) {
+		*fx = s1;
+		*x = x1;
+	}
+	if (s2 < *fx) {
+		*fx = s2;
+		*x = x2;
+	}
+}
+
+/* The two roughnesses of the coat kind: a log grid of NGRID/2 values per roughness (pairs with α2 ≥ 2α), then two
+ * rounds of golden sections, ln α with α2 fixed and ln α2 with α fixed, each within a grid step of the current
+ * point. Returns the score at (*alpha, *alpha2) (INFINITY: no admissible pair). */
+#define NGRID2 (NGRID / 2)
+static double fit_coat_alphas(size_t n, const double *val, const double *eps, const double *c6, const size_t *chan,
+			      size_t nc, double *B, double *alpha, double *alpha2)
+{
+	double la = log(TREND_ALPHA_MIN), lb = log(TREND_ALPHA_MAX), h = (lb - la) / (NGRID2 - 1), lr = log(2.0);
+	double bs = INFINITY, xa = la, xb = lb;
+	for (int i = 0; i < NGRID2; i++)
+		for (int j = i + 1; j < NGRID2; j++) {
+			if (h * (j - i) < lr)
+				continue;
+			double s = score_coat(n, val, eps, c6, chan, nc, exp(la + h * i), exp(la + h * j), B);
+			if (s < bs) {
+				bs = s;
+				xa = la + h * i;
+				xb = la + h * j;
+			}
+		}
+	if (isfinite(bs)) {
+		struct gs g = { RECON_TREND_COAT, n, nc, val, eps, c6, chan, B, 0, 0 };
+		for (int round = 0; round < 2; round++) {
+			g.which = 0;
+			g.other = xb;
+			golden(&g, fmax(xa - h, la), fmin(xa + h, xb - lr), &xa, &bs);
+			g.which = 1;
+			g.other = xa;
+			golden(&g, fmax(xb - h, xa + lr), fmin(xb + h, lb), &xb, &bs);
+		}
+	}
+	*alpha = exp(xa);
+	*alpha2 = exp(xb);
+	return bs;
+}
+
 int trend_fit(size_t n, size_t L, const double *val, const double *eps, const double *c6, const size_t *chan,
 	      size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err)
 {
@@ -343,13 +504,63 @@ int trend_fit(size_t n, size_t L, const double *val, const double *eps, const do
 int trend_fit_kind(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
 		   const size_t *chan, size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err)
 {
+	return trend_fit_kind2(t, n, L, val, eps, c6, chan, nc, alpha, NULL, coef, rms, err);
+}
+
+/* Every channel's coefficients at the basis B; *rms (may be NULL) the RMS log residual over the scored channels. */
+static void fit_all_coef(size_t n, size_t L, const double *val, const double *eps, const size_t *chan, size_t nc,
+			 const double *B, double *coef, double *rms)
+{
+	double ss = 0;
+	for (size_t l = 0, i = 0; l < L; l++) {
+		double e = trend_fit_coef(n, val + l * n, eps[l], B, coef + l * TREND_NB);
+		if (i < nc && chan[i] == l) {
+			ss += e;
+			i++;
+		}
+	}
+	if (rms)
+		*rms = sqrt(ss / (double)(n * nc));
+}
+
+/* The coat kind's fit (trend_fit_kind2): both roughnesses, then every channel's coefficients. */
+static void fit_coat(size_t n, size_t L, const double *val, const double *eps, const double *c6, const size_t *chan,
+		     size_t nc, double *B, double *alpha, double *alpha2, double *coef, double *rms)
+{
+	double bs = fit_coat_alphas(n, val, eps, c6, chan, nc, B, alpha, alpha2);
+	int nolobe = !isfinite(bs); /* no admissible pair: the Lambertian term only, roughnesses recorded as 0.5, 1 */
+	if (nolobe) {
+		*alpha = 0.5 * TREND_ALPHA_MAX;
+		*alpha2 = TREND_ALPHA_MAX;
+	}
+	for (size_t k = 0; k < n; k++) {
+		coat_basis(*alpha, *alpha2, c6 + 6 * k, B + TREND_NB * k);
+		for (int j = 1; nolobe && j < TREND_NB; j++)
+			B[TREND_NB * k + j] = 0.0;
+	}
+	fit_all_coef(n, L, val, eps, chan, nc, B, coef, rms);
+}
+
+int trend_fit_kind2(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
+		    const size_t *chan, size_t nc, double *alpha, double *alpha2, double *coef, double *rms,
+		    struct acq_err *err)
+{
 	if (t <= RECON_TREND_NONE || t >= RECON_TREND__COUNT)
 		return acq_errf(err, ACQ_E_INVAL, "trend: unknown kind %d", t);
 	if (n == 0 || L == 0 || nc == 0)
 		return acq_errf(err, ACQ_E_INVAL, "trend: no data");
+	if (trend_two_lobes(t) && !alpha2)
+		return acq_errf(err, ACQ_E_INVAL, "trend: the %s kind has two roughnesses", trend_name(t));
 	double *B = malloc(n * TREND_NB * sizeof *B);
 	if (!B)
 		return acq_errf(err, ACQ_E_NOMEM, "trend: out of memory");
+	if (alpha2)
+		*alpha2 = 0.0;
+	if (trend_two_lobes(t)) {
+		fit_coat(n, L, val, eps, c6, chan, nc, B, alpha, alpha2, coef, rms);
+		free(B);
+		return 0;
+	}
 	/* log-spaced grid, then golden section on log α around the best grid point */
 	double la = log(TREND_ALPHA_MIN), lb = log(TREND_ALPHA_MAX), h = (lb - la) / (NGRID - 1);
 	double bs = INFINITY;
@@ -362,33 +573,9 @@ int trend_fit_kind(int t, size_t n, size_t L, const double *val, const double *e
 		}
 	}
 	double lo = la + h * (bi > 0 ? bi - 1 : 0), hi = la + h * (bi < NGRID - 1 ? bi + 1 : NGRID - 1);
-	const double gr = 0.5 * (sqrt(5.0) - 1.0);
-	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo);
-	double s1 = score(t, n, val, eps, c6, chan, nc, exp(x1), B), s2 = score(t, n, val, eps, c6, chan, nc, exp(x2), B);
-	for (int it = 0; it < NGOLDEN; it++) {
-		if (s1 < s2) {
-			hi = x2;
-			x2 = x1;
-			s2 = s1;
-			x1 = hi - gr * (hi - lo);
-			s1 = score(t, n, val, eps, c6, chan, nc, exp(x1), B);
-		} else {
-			lo = x1;
-			x1 = x2;
-			s1 = s2;
-			x2 = lo + gr * (hi - lo);
-			s2 = score(t, n, val, eps, c6, chan, nc, exp(x2), B);
-		}
-	}
 	double best = la + h * bi;
-	if (s1 < bs) {
-		best = x1;
-		bs = s1;
-	}
-	if (s2 < bs) {
-		best = x2;
-		bs = s2;
-	}
+	struct gs g = { t, n, nc, val, eps, c6, chan, B, 0, 0 };
+	golden(&g, lo, hi, &best, &bs);
 	/* no admissible roughness: the data show no lobe of measurable width; the diffuse terms only (the
 	 * roughness is then irrelevant and recorded as the largest) */
 	int nolobe = !isfinite(bs);
@@ -400,16 +587,7 @@ int trend_fit_kind(int t, size_t n, size_t L, const double *val, const double *e
 				if (is_lobe(t, j))
 					B[TREND_NB * k + j] = 0.0;
 	}
-	double ss = 0;
-	for (size_t l = 0, i = 0; l < L; l++) {
-		double e = trend_fit_coef(n, val + l * n, eps[l], B, coef + l * TREND_NB);
-		if (i < nc && chan[i] == l) {
-			ss += e;
-			i++;
-		}
-	}
-	if (rms)
-		*rms = sqrt(ss / (double)(n * nc));
+	fit_all_coef(n, L, val, eps, chan, nc, B, coef, rms);
 	free(B);
 	return 0;
 }

@@ -19,6 +19,8 @@ enum recon_trend {
 	RECON_TREND_SHEEN = 3, /* c0/π + c1·AS diffuse + c2·Charlie sheen (r = α) + c3·sheen·(1 − ωi·h)⁵ + c4·ON */
 	RECON_TREND_ROUGH = 4, /* c0/π + c1·AS diffuse + c2·retro-reflection peak (width α rad) + c3·ON + c4·LS: a
 				* rough diffuse (Oren–Nayar's second term, Lommel–Seeliger) with an opposition peak */
+	RECON_TREND_COAT = 5,  /* c0/π + c1·GGX(α2) + GGX(α)·(c2 + c3(1 − ωi·h)² + c4(1 − ωi·h)⁵): two lobes of
+				* different widths, a narrow coat (α) over a broad base (α2 ≥ 2α); model file v3 */
 	RECON_TREND__COUNT
 };
 
@@ -27,8 +29,16 @@ enum recon_trend {
 #define TREND_ALPHA_MIN 0.005 /* roughness range searched by the fit */
 #define TREND_ALPHA_MAX 1.0
 
-/* Basis values of trend t at c6 (zeros for none); finite and ≥ 0 on and above the horizon, symmetric in ωi ↔ ωo. */
+/* Basis values of trend t at c6 (zeros for none); finite and ≥ 0 on and above the horizon, symmetric in ωi ↔ ωo.
+ * alpha2 is the second roughness of the two-lobe kind (coat: the base lobe; ignored by the others). */
+void trend_eval_basis2(int t, double alpha, double alpha2, const double c6[6], double b[TREND_NB]);
+/* trend_eval_basis2 for the one-roughness kinds (the coat kind's base term is 0 here: use trend_eval_basis2). */
 void trend_eval_basis(int t, double alpha, const double c6[6], double b[TREND_NB]);
+/* Does trend t have a second roughness (a second lobe: the coat kind)? */
+static inline int trend_two_lobes(int t)
+{
+	return t == RECON_TREND_COAT;
+}
 /* The trend value Σ_j coef[j]·b[j] of one channel's coefficients at basis values b. */
 static inline double trend_dot(const double *coef, const double b[TREND_NB])
 {
@@ -55,9 +65,17 @@ int trend_fit(size_t n, size_t L, const double *val, const double *eps, const do
  * n samples, linear values v[k] (negatives count as 0), offset eps; weights 1/(f + ε)² as in trend_fit. Returns
  * the sum of squared log residuals. */
 double trend_fit_coef(size_t n, const double *v, double eps, const double *B, double *c);
-/* trend_fit for the trend kind t (RECON_TREND_GGX .. RECON_TREND__COUNT − 1). */
+/* trend_fit for the trend kind t (RECON_TREND_GGX .. RECON_TREND__COUNT − 1); *alpha2 (may be NULL for the
+ * one-roughness kinds, 0 written there) the second roughness of the two-lobe kind: a 2-D search (log grid, then
+ * alternating golden sections) over α ∈ [TREND_ALPHA_MIN, α2/2], α2 ≤ TREND_ALPHA_MAX. */
 int trend_fit_kind(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
 		   const size_t *chan, size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err);
+int trend_fit_kind2(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
+		    const size_t *chan, size_t nc, double *alpha, double *alpha2, double *coef, double *rms,
+		    struct acq_err *err);
+/* Node spacing (radians in ωo) a hemisphere rule needs for the terms of trend t that the energy table does NOT
+ * integrate over half vectors (the coat kind's base lobe b1, GGX of α2: 0.5·α2); INFINITY for the other kinds. */
+double trend_base_step(int t, double alpha2);
 /* Node spacing (radians in ωo) a quadrature rule needs to resolve the lobe terms of trend t at parameter alpha
  * (a quarter of the lobe's half width at a quarter of its peak); INFINITY when the lobe terms are broad. */
 double trend_rule_step(int t, double alpha);
@@ -66,7 +84,7 @@ double trend_rule_step(int t, double alpha);
  * α/2 (cosⁿψ ≈ exp(−ψ²/α²) and ψ ≈ 2θh near the mirror: a Beckmann lobe of α/2 in θh). */
 double trend_hv_alpha(int t, double alpha);
 
-/* Name of a trend ("none", "ggx", "phong", "sheen", "rough") or NULL; and back (−1 if unknown). */
+/* Name of a trend ("none", "ggx", "phong", "sheen", "rough", "coat") or NULL; and back (−1 if unknown). */
 const char *trend_name(int t);
 int trend_from_name(const char *name);
 

@@ -69,8 +69,11 @@ struct plan_adaptive {
 };
 
 /* A parsed plan file (plan_load / plan_parse), or one built by code (arrays malloc'ed; plan_spec_free). */
+#define PLAN_SAMPLE_MAX 64
 struct plan_spec {
 	char name[64];
+	char sample[PLAN_SAMPLE_MAX]; /* the sample's name (plan key sample:; "" when not given): identifies the
+				       * previous sweep an exposure prior comes from */
 	double *incidence;          /* laser zeniths θL, n_incidence of them */
 	size_t n_incidence;
 	double *obs_theta, *obs_phi; /* grid mode: observation zeniths × azimuths per incidence */
@@ -173,6 +176,30 @@ struct plan_result {
  * simulated green paint (paper plan 76 of 866, quick plan 2 of 15). */
 #define PLAN_AUTO_HDR 0.09
 
+/* An exposure prior: what the auto exposure chose in the previous completed auto sweep of the same sample (the
+ * plan's sample: name), per incidence (exp_prior_build, daemon/exposure.c, from the database). With one, the
+ * duration model times each point of an incidence with the prior's figures for the nearest incidence instead of the
+ * band around the plan's estimate (plan_time.c). */
+#define PLAN_PRIOR_MAX_INC 64
+struct plan_prior_inc {
+	double theta_i;             /* the incidence zenith, degrees (sample frame) */
+	size_t points;              /* points done there */
+	double median_ms, mean_ms;  /* each point's first exposure: median and mean integration time */
+	double spread;              /* longest / shortest first exposure */
+	double darks_per_clear;     /* darks taken at the incidence: the distinct times the cache needed */
+	double dark_ms;             /* their mean integration time */
+	double extra_per_point;     /* further (HDR) exposures per point */
+	double extra_ms;            /* their mean integration time */
+};
+struct plan_prior {
+	long long sweep;            /* the sweep it comes from (0: no prior) */
+	char sample[PLAN_SAMPLE_MAX];
+	size_t points;              /* over all incidences: */
+	double median_ms, spread, hdr_fraction; /* median first exposure, longest/shortest, points with an HDR exposure */
+	size_t n_inc;
+	struct plan_prior_inc inc[PLAN_PRIOR_MAX_INC];
+};
+
 /* The executor's costs the ordering model leaves out; plan_timing_defaults() gives the executor's and the
  * arm driver's defaults, the daemon fills it from its configuration (sweep, acquisition, devices). */
 struct plan_timing {
@@ -195,6 +222,7 @@ struct plan_timing {
 	double time_scale;          /* ... which cost time_scale times as much bench time on a simulated bench */
 	bool have_start;            /* the arms' position when the sweep starts is known (the daemon knows it) */
 	struct plan_pos start;      /* then the move from there to ref_pose (or the first point) is counted */
+	struct plan_prior prior;    /* auto integration: the exposure prior when prior.sweep > 0 (plan_time.c) */
 };
 
 /* Load and validate a plan file; errors name file:line:col. 0, or -1 with err (*out NULL). */
@@ -317,6 +345,13 @@ bool plan_seg_keeps(const struct bench_geom *g, const struct plan_pos *p, const 
 #define PLAN_MAX_WP 13
 double plan_move(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
 		 struct plan_wp wps[PLAN_MAX_WP], size_t *n);
+/* From a configuration inside the clearance (a move stopped part-way by one axis's alarm while the others went on),
+ * a way out: one segment moving the detector straight away from the laser's direction that never brings the arms
+ * closer than they are (ψ ≥ min(collision limit, ψ now) at every instant, plan_seg_keeps), ending clear, then
+ * plan_move's path to b. Up to PLAN_MAX_WP + 1 segments into wps, their count in *n, the time returned; -1 when a
+ * is not inside the clearance or no such way exists. */
+double plan_escape(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
+		   struct plan_wp wps[PLAN_MAX_WP + 1], size_t *n);
 /* Readable name of the most telling reason bit set (limit, collision, beam, view, unreachable, none nearby). */
 const char *plan_reason_name(unsigned reason);
 

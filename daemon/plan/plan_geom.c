@@ -543,3 +543,32 @@ double plan_move(const struct bench_geom *g, const struct plan_pos *a, const str
 	}
 	return best;
 }
+
+double plan_escape(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
+		   struct plan_wp wps[PLAN_MAX_WP + 1], size_t *n)
+{
+	double psi = plan_psi_deg(g, a), R = plan_clearance_deg(g);
+	double keep = fmin(plan_collision_deg(g), psi) - 2 * PLAN_EDGE_DEG;
+	/* the smallest step out of the clearance first, then wider ones (a zenith limit can eat part of a step) */
+	double deltas[] = { R - psi + 0.5, R - psi + 2, 5, 10, 20, 40 };
+	*n = 0;
+	if (psi >= R)
+		return -1;
+	for (size_t i = 0; i < sizeof deltas / sizeof deltas[0]; i++) {
+		struct plan_pos e;
+		struct plan_wp w[PLAN_MAX_WP];
+		size_t m = 0;
+		if (deltas[i] <= 0 || !push_away(g, a, deltas[i], &e) || plan_psi_deg(g, &e) < R + PLAN_EDGE_DEG ||
+		    !plan_seg_keeps(g, a, &e, keep))
+			continue;
+		double t = plan_move(g, &e, b, w, &m);
+		if (t < 0)
+			continue;
+		wps[0].pos = e;
+		wps[0].duration_s = plan_seg_time(g, a, &e);
+		memcpy(wps + 1, w, m * sizeof *w);
+		*n = m + 1;
+		return wps[0].duration_s + t;
+	}
+	return -1;
+}

@@ -43,6 +43,9 @@ struct planner {
  * array *out of *n values; what names it in messages. 0 or -1 with err. */
 int plan_range_parse(struct yc_node *map, const char *key, const char *what, double lo, double hi, double **out,
 		     size_t *n, struct acq_err *err);
+/* The optional top-level key sample: (a name of printable characters) of a plan document into out ("" when
+ * absent). 0 or -1 with err. */
+int plan_sample_parse(struct yc_node *root, char out[PLAN_SAMPLE_MAX], struct acq_err *err);
 /* The `integration` mapping of root onto s (defaults when absent). 0 or -1 with err. */
 int plan_integration_parse(struct yc_node *root, struct plan_spec *s, struct acq_err *err);
 /* A `kind: adaptive` plan document into a new spec (its seed's points, the adaptive part in spec->adaptive). */

@@ -105,6 +105,19 @@ json_t *plan_dry_run_json(const struct plan_spec *s, const struct bench_geom *g,
 {
 	plan_time_apply(s, g, t, r);
 	json_t *o = plan_to_json(s, r, points);
+	if (o && s->integ_mode == PLAN_INTEG_AUTO) {
+		/* which exposure prior timed the auto exposures: the previous sweep of the same sample, or none (the
+		 * band around the estimate) */
+		const struct plan_prior *p = &t->prior;
+		json_t *pr = p->sweep > 0 && p->n_inc > 0
+				     ? json_pack("{s:I,s:s,s:I,s:I,s:f,s:f,s:f}", "sweep", (json_int_t)p->sweep, "sample",
+						 p->sample, "points", (json_int_t)p->points, "incidences", (json_int_t)p->n_inc,
+						 "median_ms", p->median_ms, "spread", p->spread, "hdr_fraction", p->hdr_fraction)
+				     : json_null();
+		json_object_set_new(o, "exposure_prior", pr ? pr : json_null());
+		if (s->sample[0])
+			json_object_set_new(o, "sample", json_string(s->sample));
+	}
 	const struct plan_adaptive *a = s->adaptive;
 	if (!o || !a)
 		return o;

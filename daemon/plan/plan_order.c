@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "config/acq_rng.h"
 #include "daemon/plan/plan_int.h"
 
 #define OR_K 10
@@ -179,20 +180,18 @@ void plan_order_group(const double *C, size_t n, const double *s, size_t *p, boo
 	}
 	local_search(C, n, s, p, tmp, pos, nbr, kn);
 	/* Iterated local search: a double-bridge kick (three cut points, segments B and C swapped), local
-	 * search again, keep it if shorter. The random generator is local and seeded by n: deterministic. */
+	 * search again, keep it if shorter. The tree's generator (config/acq_rng.h) seeded by n: deterministic, the
+	 * same order for the same group on every run. */
 	size_t *q = malloc(n * sizeof *q);
 	if (q && ils && n >= 8) {
 		double best = open_len(C, n, s, p);
-		uint64_t rng = 0x9E3779B97F4A7C15ull ^ (uint64_t)n;
+		struct acq_rng rng;
+		acq_rng_seed(&rng, (uint64_t)n);
 		int kicks = n <= 300 ? 60 : n <= 1000 ? 15 : 4;
 		for (int k = 0; k < kicks; k++) {
 			size_t cut[3];
-			for (int c = 0; c < 3; c++) {
-				rng ^= rng << 13;
-				rng ^= rng >> 7;
-				rng ^= rng << 17;
-				cut[c] = 1 + (size_t)(rng % (n - 1));
-			}
+			for (int c = 0; c < 3; c++)
+				cut[c] = 1 + (size_t)(acq_rng_next(&rng) % (n - 1));
 			/* sort the cuts */
 			for (int a = 0; a < 3; a++)
 				for (int b = a + 1; b < 3; b++)

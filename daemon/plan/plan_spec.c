@@ -11,6 +11,8 @@
  *   averages: 4
  *   reciprocal_pairs: 10
  *   blind_points: drop | move
+ *   sample: green-paint-A3                  # the sample's name: a later sweep of the same name times its auto
+ *                                           # exposures from this one's (the exposure prior, plan.h)
  *   kind: grid | fibonacci | adaptive       # optional; adaptive: see plan_adaptive.c
  * RANGE is a number, a list of numbers, {from, to, count} or {from, to, step}. */
 #include <math.h>
@@ -107,6 +109,24 @@ int plan_range_parse(struct yc_node *map, const char *key, const char *what, dou
 	return 0;
 }
 
+int plan_sample_parse(struct yc_node *root, char out[PLAN_SAMPLE_MAX], struct acq_err *err)
+{
+	const char *v = NULL;
+	out[0] = 0;
+	if (yc_string(root, "sample", false, &v, err))
+		return -1;
+	if (!v)
+		return 0;
+	size_t n = strlen(v);
+	if (n == 0 || n >= PLAN_SAMPLE_MAX)
+		return yc_errf(err, yc_get(root, "sample"), "sample: expected a name of 1 to %d characters", PLAN_SAMPLE_MAX - 1);
+	for (size_t i = 0; i < n; i++)
+		if ((unsigned char)v[i] < 0x20 || v[i] == 0x7f)
+			return yc_errf(err, yc_get(root, "sample"), "sample: a control character at position %zu", i + 1);
+	memcpy(out, v, n + 1);
+	return 0;
+}
+
 int plan_integration_parse(struct yc_node *root, struct plan_spec *s, struct acq_err *err)
 {
 	static const char *const modes[] = { "auto", "fixed", NULL };
@@ -157,7 +177,7 @@ int plan_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err
 	static const char *const policies[] = { "drop", "move", NULL };
 	/* a misspelt key is reported as such, before any "missing key" it causes */
 	static const char *const keys[] = { "name", "incidence", "observation", "integration", "averages",
-					    "reciprocal_pairs", "blind_points", "kind", NULL };
+					    "reciprocal_pairs", "blind_points", "kind", "sample", NULL };
 	static const char *const kinds[] = { "grid", "fibonacci", "adaptive", NULL };
 	int kind = -1;
 	if (yc_get(root, "kind") && yc_enum(root, "kind", false, kinds, &kind, err))
@@ -173,6 +193,8 @@ int plan_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err
 	if (yc_string(root, "name", false, &name, err))
 		goto fail;
 	snprintf(s->name, sizeof s->name, "%s", name);
+	if (plan_sample_parse(root, s->sample, err))
+		goto fail;
 
 	struct yc_node *inc = yc_get(root, "incidence");
 	if (!inc) {

@@ -31,6 +31,10 @@
  *   - auto integration, HDR: a fraction integration.hdr_fraction of the points (default PLAN_AUTO_HDR, 0.09 on the
  *     simulated green paint) takes a second exposure at hdr_ratio times the first's time when max_exposures > 1,
  *     its darks mostly those the longer base times took already (not counted again);
+ *   - an exposure prior (t->prior, from the previous auto sweep of the same sample; plan.h): each incidence takes
+ *     the nearest prior incidence's figures instead of the band: its mean first exposure for the probe and the
+ *     measurement, its darks (as many distinct times as it needed, at their mean time) and its HDR exposures per
+ *     point. The repeat of a sweep is then timed by what the sample took, whatever estimate the plan gives;
  * Not modelled: saturation redos, fault recovery, the operator's sample swap; the live ETA (daemon/eta.c) adds the time per
  * point the sweep has measured beyond this model. */
 #include "daemon/plan/plan.h"
@@ -150,6 +154,36 @@ static double max_ms_of(const struct plan_spec *s, double ms)
 	return s->max_integ_ms > 0 && ms > s->max_integ_ms ? s->max_integ_ms : ms;
 }
 
+/* The costs of one point of an incidence: its probe and measurement, a dark when one is due, the HDR term, and k,
+ * the number of distinct times the dark cache needs there. */
+struct inc_cost {
+	double probe, meas, dark, hdr, k;
+};
+
+/* The prior's row for incidence zenith theta_i (degrees): the nearest one. */
+static const struct plan_prior_inc *prior_row(const struct plan_prior *p, double theta_i)
+{
+	const struct plan_prior_inc *best = NULL;
+	for (size_t i = 0; i < p->n_inc && i < PLAN_PRIOR_MAX_INC; i++)
+		if (!best || fabs(p->inc[i].theta_i - theta_i) < fabs(best->theta_i - theta_i))
+			best = &p->inc[i];
+	return best;
+}
+
+/* An incidence timed by the prior's row q: the times the previous sweep of the sample took there (each point's
+ * first exposure at the mean, the darks it needed, its HDR exposures per point), not the band around the estimate. */
+static struct inc_cost prior_cost(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
+				  const struct plan_prior_inc *q)
+{
+	struct inc_cost c;
+	c.probe = shot(g, t, 1, q->mean_ms);
+	c.meas = shot(g, t, s->averages, q->mean_ms);
+	c.dark = shot(g, t, t->dark_averages, q->dark_ms > 0 ? q->dark_ms : q->mean_ms);
+	c.hdr = q->extra_per_point > 0 ? q->extra_per_point * shot(g, t, s->averages, q->extra_ms) : 0;
+	c.k = q->darks_per_clear >= 1 ? q->darks_per_clear : 1;
+	return c;
+}
+
 void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
 		     struct plan_result *r)
 {
@@ -186,9 +220,13 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 		}
 		clock = r->reference_s;
 	}
+	const struct plan_prior *pr = aut && t->prior.sweep > 0 && t->prior.n_inc > 0 ? &t->prior : NULL;
+	struct inc_cost band = { probe, meas, dark, hdr, k }, c = band;
 	for (size_t i = 0; i < r->n_steps; i++) {
 		struct plan_step *st = &r->steps[i];
 		bool moves = st->move_s + st->settle_s > 0;
+		if (pr && (i == 0 || st->pos.laser_theta != r->steps[i - 1].pos.laser_theta))
+			c = prior_cost(s, g, t, prior_row(pr, fabs(st->pos.laser_theta)));
 		/* the dark cache is cleared every dark_every points or at each new incidence, and a dark is due when
 		 * the last one has aged; the first point uses the reference's dark when it has the same (fixed) time */
 		bool clear = i == 0 ? aut || !t->reference
@@ -200,13 +238,13 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 			since_clear = 0;
 		/* expected darks: fixed, one per clearing; auto, one per rung first visited since the clearing (the
 		 * point's rung is new with probability (1 - 1/k)^j after j points) */
-		double p_dark = clear ? 1.0 : aut ? pow(1.0 - 1.0 / k, (double)since_clear) : 0.0;
+		double p_dark = clear ? 1.0 : aut ? pow(1.0 - 1.0 / c.k, (double)since_clear) : 0.0;
 		double d = st->move_s + st->settle_s + (moves ? 1.5 * t->axis_poll_s + t->extra_settle_s : 0) +
-			   (i == 0 && !t->reference ? first_probe : probe) + meas + p_dark * dark + hdr +
+			   (i == 0 && !t->reference ? first_probe : c.probe) + c.meas + p_dark * c.dark + c.hdr +
 			   t->point_overhead_s * t->time_scale;
-		r->darks_s += p_dark * dark;
+		r->darks_s += p_dark * c.dark;
 		if (clear)
-			dark_at = clock + d - meas - t->point_overhead_s * t->time_scale; /* taken before the exposure */
+			dark_at = clock + d - c.meas - t->point_overhead_s * t->time_scale; /* taken before the exposure */
 		since_clear++;
 		st->predicted_start_s = clock;
 		st->predicted_s = d;

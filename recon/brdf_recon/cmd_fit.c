@@ -17,11 +17,12 @@ static const char fit_help[] =
 	"  --kernel K              wendland (default, positive definite), exp, gauss, paper (Gaussian of d_Rec,\n"
 	"                          the paper's literal construction, not guaranteed positive definite)\n"
 	"  --transform T           log (default: interpolate ln(f+eps)) or sqrt\n"
-	"  --trend T               auto (default), ggx, phong, sheen, rough or none. ggx: interpolate relative to\n"
+	"  --trend T               auto (default), ggx, phong, sheen, rough, coat or none. ggx: interpolate relative to\n"
 	"                          a fitted Lambertian + GGX lobe + coated diffuse, so a lobe narrower than the\n"
 	"                          sampling keeps a microfacet shape; phong: a normalised lobe about the mirror;\n"
 	"                          sheen: Charlie sheen + Oren-Nayar; rough: Oren-Nayar + Lommel-Seeliger +\n"
-	"                          retro-reflection peak; none: the plain interpolant (the only choice with\n"
+	"                          retro-reflection peak; coat: a narrow GGX coat lobe over a broad GGX base\n"
+	"                          lobe (two roughnesses); none: the plain interpolant (the only choice with\n"
 	"                          sqrt); auto: leave-one-out over all, a kind other than ggx (or none) kept\n"
 	"                          only when it is better beyond the score's uncertainty (log transform)\n"
 	"  --shape X|auto          kernel shape parameter (default auto: Rippa leave-one-out over a grid)\n"
@@ -73,7 +74,7 @@ int cmd_fit(int argc, char **argv)
 			break;
 		case 'r':
 			if (strcmp(optarg, "auto") && (o.trend = trend_from_name(optarg)) < 0)
-				return usage_err("fit", "unknown trend (auto, ggx, phong, sheen, rough or none)");
+				return usage_err("fit", "unknown trend (auto, ggx, phong, sheen, rough, coat or none)");
 			if (!strcmp(optarg, "auto"))
 				o.trend = -1;
 			set_trend = 1;
@@ -175,9 +176,12 @@ int cmd_fit(int argc, char **argv)
 		recon_model_free(m);
 		return fail(&err);
 	}
-	fprintf(stderr, "fit: %zu directions, %zu wavelengths, kernel %s shape %.3g, transform %s, trend %s (alpha %.3g), "
+	char a2[32] = ""; /* a two-lobe trend's second (base) roughness */
+	if (trend_two_lobes(m->trend))
+		snprintf(a2, sizeof a2, ", base %.3g", m->trend_alpha2);
+	fprintf(stderr, "fit: %zu directions, %zu wavelengths, kernel %s shape %.3g, transform %s, trend %s (alpha %.3g%s), "
 		"smoothing %.3g, leave-one-out RMS %.4g, rcond %.3g -> %s\n", m->n, m->nwl, rbf_kernel_name(m->kernel),
-		m->shape, recon_transform_name(m->transform), trend_name(m->trend), m->trend_alpha, m->eta, m->loo_rms,
+		m->shape, recon_transform_name(m->transform), trend_name(m->trend), m->trend_alpha, a2, m->eta, m->loo_rms,
 		m->rcond, outp);
 	for (const char *p = strstr(m->meta, "warning="); p; p = strstr(p + 1, "\nwarning=")) {
 		const char *b = strchr(p, '=') + 1, *e = strchr(b, '\n');

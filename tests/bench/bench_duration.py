@@ -9,17 +9,17 @@ pause, sample, resume) while `acqctl watch` (JSON lines) records every progress 
 - the ETA's error at 25, 50 and 75 % of the points: (eta_s at that point) / (wall seconds actually left to the
   daemon's finished_at) - 1.
 Cases: the small plan (config/plan-quick.yaml) with fixed integration at time scales 1 and 10, with auto
-integration at time scale 1 (its estimate 20 ms), then again with the estimate set to the median integration time
-the bench chose in that sweep (`-repeat`: an operator repeating a sample); the paper's 10x10x10 (auto, estimate
-50 ms) at the demo's time scale 35, and its repeat. BENCH_DURATION_QUICK=1: the small fixed one only;
+integration at time scale 1 (its estimate 20 ms), then again on the same bench (`-repeat`: an operator repeating
+a sample; the plans name it, sample: green-paint, so the repeat is timed from the first sweep's exposures, the
+exposure prior); the paper's 10x10x10 (auto, estimate 50 ms) at the demo's time scale 35, and its repeat. BENCH_DURATION_QUICK=1: the small fixed one only;
 BENCH_DURATION_CASES=a,b: those cases (name@scale for one time scale; name a repeat with the case before it).
 Also reported: the host's part of the prediction (host_s: point_overhead_s x time scale per point, load-dependent),
-the residual per point (real seconds beyond the model's bench part) and the load average. On a shared machine the
+the residual per point (real seconds beyond the model's bench part), the load average, the faults the sweep
+recovered from (not in the model) and the exposure prior used. On a shared machine the
 script runs as its own session with a raised share (prioritize(); root only), else every figure at a high time scale
-measures the other sessions' load. BENCH_DURATION_TABLE=S instead: the README trade table's plans at time scale S (duration_table.csv; see table()). Writes duration.csv under
+measures the other sessions' load. BENCH_DURATION_TABLE=S instead: the README trade table's plans at time scale S (duration_table.csv; see table()); with BENCH_DURATION_REPEAT=1 each plan names its sample and runs twice on one bench, the second timed by the exposure prior. Writes duration.csv under
 $ACQ_BENCH_OUT."""
 import csv
-import re
 import json
 import os
 import subprocess
@@ -38,11 +38,14 @@ FIXED = QUICK.replace("mode: auto, target_peak: 0.8, estimate_ms: 20, max_ms: 20
 PAPER = open(os.path.join(L.SRC, "config", "plan-paper-10x10x10.yaml")).read()
 
 
-def run_case(name, plan_text, scale):
-    b = L.Bench(scale=scale)
+def run_case(name, plan_text, scale, bench=None, keep_open=False):
+    """One sweep of plan_text on a new bench, or on bench (a repeat: its database holds the previous sweeps, so the
+    sample's exposure prior applies). With keep_open the bench is returned with the row, not cleaned up."""
+    b = bench or L.Bench(scale=scale)
     try:
-        b.start_sim()
-        b.start_daemon()
+        if not bench:
+            b.start_sim()
+            b.start_daemon()
         planf = os.path.join(b.dir, "plan.yaml")
         open(planf, "w").write(plan_text)
         # with the steps (predicted_start_s per step, kept with ACQ_BENCH_KEEP=1) when the reply is small enough
@@ -54,6 +57,7 @@ def run_case(name, plan_text, scale):
             p = subprocess.run([CTL, "-s", b.sock, "--json", "plan", planf], capture_output=True, text=True, check=True)
         pj = json.loads(p.stdout)["plan"]
         pred, host = pj["predicted_s"], pj.get("host_s", 0.0)
+        prior = pj.get("exposure_prior") or {}
         load0 = os.getloadavg()[0]
         events = []
         w = subprocess.Popen([CTL, "-s", b.sock, "watch"], stdout=subprocess.PIPE, text=True)
@@ -80,6 +84,8 @@ def run_case(name, plan_text, scale):
         darks, expos = db.execute("SELECT sum(kind = 'dark'), sum(kind = 'sample') FROM spectra WHERE sweep_id = ? "
                                   "AND point_id IS NOT NULL", (sid,)).fetchone()
         started, finished = db.execute("SELECT started_at, finished_at FROM sweeps WHERE id = ?", (sid,)).fetchone()
+        # faults the sweep recovered from (the simulator answering late on a loaded machine): not in the model
+        faults = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'fault'", (sid,)).fetchone()[0]
         paused = max(0.0, ev.get("resume", 0) - ev.get("pause", 0))
         # the daemon's own wall-clock record (not this script's polling, 0.1 s = 3.5 bench s at time scale 35)
         measured = (finished - started - paused) * scale
@@ -97,23 +103,26 @@ def run_case(name, plan_text, scale):
         # time per point when the bench part is right (fixed integration), compare the model's constant
         # host_s / points / scale; with auto integration it also holds the sample's error
         host_pp = (measured - (pred - host)) / total / scale
-        return dict(case=name, scale=scale, points=total, predicted_s=pred, measured_s=measured,
+        row = dict(case=name, scale=scale, points=total, predicted_s=pred, measured_s=measured,
                     error=pred / measured - 1, predicted_host_s=host, residual_per_point_s=host_pp,
                     load=(load0 + os.getloadavg()[0]) / 2, eta25=eta_err.get(0.25), eta50=eta_err.get(0.5),
                     eta75=eta_err.get(0.75), median_ms=first[len(first) // 2] if first else None,
-                    darks=darks, exposures=expos)
+                    darks=darks, exposures=expos, faults=faults, prior_sweep=prior.get("sweep"))
+        return (row, b) if keep_open else row
+    except BaseException:
+        keep_open = False
+        raise
     finally:
-        keep = os.environ.get("ACQ_BENCH_KEEP") == "1"
-        if keep:
-            print("bench_duration: %s kept in %s" % (name, b.dir), flush=True)
-        b.cleanup(keep=keep)
+        if not keep_open:
+            keep = os.environ.get("ACQ_BENCH_KEEP") == "1"
+            if keep:
+                print("bench_duration: %s kept in %s" % (name, b.dir), flush=True)
+            b.cleanup(keep=keep)
 
 
-def with_estimate(text, ms):
-    """The plan with integration.estimate_ms set to ms."""
-    out = re.sub(r"estimate_ms: *[0-9.]+", "estimate_ms: %.4g" % ms, text)
-    assert out != text or "estimate_ms: %.4g" % ms in text
-    return out
+def SAMPLE(text):
+    """The plan naming its sample (the simulator's green paint): a later sweep of it gets the exposure prior."""
+    return text.rstrip("\n") + "\nsample: green-paint\n"
 
 
 def table(scale):
@@ -135,21 +144,35 @@ def table(scale):
             p = subprocess.run([CTL, "--json", "plan", planf, "--config", os.path.join(L.SRC, "config", "bench-sim.yaml")],
                                capture_output=True, text=True, check=True)
             pred1 = json.loads(p.stdout)["plan"]["predicted_s"]
-            r = run_case(name, text, scale)
-            r["predicted_scale1_s"] = pred1
-            rows.append(r)
-            print("%-8s %4d points  time scale %g: predicted %7.1f s (host %.1f s) measured %7.1f s (%+5.1f%%; residual "
-                  "per point %.4f s, load %.1f)  predicted at time scale 1: %7.1f s (%.1f min)  ETA error 25/50/75 %%: "
-                  "%s" % (
-                      name, r["points"], scale, r["predicted_s"], r["predicted_host_s"], r["measured_s"],
-                      100 * r["error"], r["residual_per_point_s"], r["load"], pred1, pred1 / 60,
-                      " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25", "eta50", "eta75"))),
-                  flush=True)
+            runs = []
+            if os.environ.get("BENCH_DURATION_REPEAT") == "1":
+                # the plan naming its sample, then again on the same bench: the repeat is timed by the exposure prior
+                text = SAMPLE(text)
+                r, b = run_case(name, text, scale, keep_open=True)
+                runs = [r, run_case(name + "-repeat", text, scale, bench=b)]
+            else:
+                runs = [run_case(name, text, scale)]
+            for r in runs:
+                r["predicted_scale1_s"] = pred1
+                rows.append(r)
+                table_line(r, scale, pred1)
             with open(os.path.join(OUT, "duration_table.csv"), "w", newline="") as fh:
                 wr = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
                 wr.writeheader()
                 wr.writerows(rows)
     return 0
+
+
+def table_line(r, scale, pred1):
+    """One row of the table mode's report."""
+    name = r["case"]
+    print("%-8s %4d points  time scale %g: predicted %7.1f s (host %.1f s) measured %7.1f s (%+5.1f%%; residual "
+          "per point %.4f s, load %.1f, %d faults)  predicted at time scale 1: %7.1f s (%.1f min)  ETA error 25/50/75 %%: "
+          "%s" % (
+              name, r["points"], scale, r["predicted_s"], r["predicted_host_s"], r["measured_s"],
+              100 * r["error"], r["residual_per_point_s"], r["load"], r["faults"], pred1, pred1 / 60,
+              " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25", "eta50", "eta75"))),
+          flush=True)
 
 
 def prioritize():
@@ -175,37 +198,43 @@ def main():
     print("bench_duration: %s; load average %.1f" % (prioritize(), os.getloadavg()[0]), flush=True)
     if os.environ.get("BENCH_DURATION_TABLE"):
         return table(float(os.environ["BENCH_DURATION_TABLE"]))
-    # (name, plan, time scale); None as the plan: the previous case's plan with the estimate set to the median
-    # integration time the bench chose in it (an operator repeating a sample with what the last sweep showed)
+    # (name, plan, time scale); None as the plan: the previous case's plan again on the same bench (an operator
+    # repeating a sample: the plan names it, sample: green-paint, so the daemon times it from the previous sweep's
+    # exposures, the exposure prior; the plan's estimate is left as it was)
     cases = [("quick-fixed", FIXED, 1.0)]
     if os.environ.get("BENCH_DURATION_QUICK") != "1":
-        cases += [("quick-fixed", FIXED, 10.0), ("quick-auto", QUICK, 1.0), ("quick-auto-repeat", None, 1.0),
-                  ("paper-10x10x10", PAPER, 35.0), ("paper-repeat", None, 35.0)]
+        cases += [("quick-fixed", FIXED, 10.0), ("quick-auto", SAMPLE(QUICK), 1.0), ("quick-auto-repeat", None, 1.0),
+                  ("paper-10x10x10", SAMPLE(PAPER), 35.0), ("paper-repeat", None, 35.0)]
     only = os.environ.get("BENCH_DURATION_CASES")
     if only:
         want = only.split(",")
         cases = [c for c in cases if c[0] in want or "%s@%g" % (c[0], c[2]) in want]
     rows = []
     prev = None
-    for name, text, scale in cases:
+    for i, (name, text, scale) in enumerate(cases):
+        repeat_next = i + 1 < len(cases) and cases[i + 1][1] is None
+        bench = None
         if text is None:
-            if not prev or not prev[1].get("median_ms"):
+            if not prev:
                 continue
-            text = with_estimate(prev[0], prev[1]["median_ms"])
+            text, bench = prev
         try:
-            r = run_case(name, text, scale)
+            r = run_case(name, text, scale, bench=bench, keep_open=repeat_next)
         except L.Skip as e:
             print("bench_duration: skip: %s" % e)
             return 0
-        prev = (text, r)
+        if repeat_next:
+            r, b = r
+            prev = (text, b)
         rows.append(r)
         f = lambda x: "   -  " if x is None else "%+5.1f%%" % (100 * x)  # noqa: E731
         print("%-17s scale %4g  %4d points  predicted %7.1f s (host %.1f s)  measured %7.1f s  error %s  ETA error at "
               "25/50/75 %%: %s %s %s  (median integration %s ms, %s darks, %s exposures; residual per point %.4f "
-              "s; load %.1f)"
+              "s; load %.1f; %d faults; exposure prior %s)"
               % (name, scale, r["points"], r["predicted_s"], r["predicted_host_s"], r["measured_s"], f(r["error"]),
                  f(r["eta25"]), f(r["eta50"]), f(r["eta75"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"],
-                 r["darks"], r["exposures"], r["residual_per_point_s"], r["load"]), flush=True)
+                 r["darks"], r["exposures"], r["residual_per_point_s"], r["load"], r["faults"],
+                 "sweep %s" % r["prior_sweep"] if r["prior_sweep"] else "none"), flush=True)
     with open(os.path.join(OUT, "duration.csv"), "w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
         wr.writeheader()

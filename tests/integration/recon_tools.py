@@ -24,6 +24,14 @@ def run(*args, ok=True, prog=B):
     return p
 
 
+def read_csv(path):
+    """A CSV with optional # comment lines: ({column name: index}, float array of the rows)."""
+    with open(path) as f:
+        lines = [ln for ln in f if not ln.startswith("#") and ln.strip()]
+    head = lines[0].strip().split(",")
+    return {h: i for i, h in enumerate(head)}, np.array([ln.split(",") for ln in lines[1:]], dtype=float)
+
+
 def synth_model(d, nwl, seed):
     """recon_synth.py samples (Lambertian + GGX truth, paper sampling, 2 % noise) fitted: (model, samples.csv)."""
     s, m = os.path.join(d, "s.csv"), os.path.join(d, "m.model")

@@ -22,20 +22,13 @@ import shutil
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from recon_tools import run  # noqa: E402  (run a command, print it, exit on failure)
+from recon_tools import read_csv, run  # noqa: E402  (a CSV's columns; run a command, print it, exit on failure)
 
 BUILD = os.environ.get("ACQ_BUILD", "build")
 SEED = int(os.environ.get("ACQ_SEED", "1")) % 100000
 SIM = os.environ.get("ACQ_SIM_BIN", os.path.join(BUILD, "acq-sim"))
 NSEED = 20
 WL = "450:1100:50"
-
-
-def read_csv(path):
-    with open(path) as f:
-        lines = [ln for ln in f if not ln.startswith("#") and ln.strip()]
-    head = lines[0].strip().split(",")
-    return {h: i for i, h in enumerate(head)}, np.array([ln.split(",") for ln in lines[1:]], dtype=float)
 
 
 def main():

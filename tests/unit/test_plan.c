@@ -460,6 +460,65 @@ static void test_detours(void **state)
 	}
 }
 
+/* A move stopped part-way inside the clearance (test_sweep_full under load: detector.theta's alarm at 32.15° while
+ * the azimuth went on, arms at (40, 32.15, -13.18), ψ 11.0° < 12°): no planned path starts there, plan_escape
+ * leaves it without coming closer (independent check of every instant) and then keeps clear. Random stops inside
+ * the clearance: every path found is checked the same way; from outside the clearance there is nothing to escape. */
+static void check_escape(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b,
+			 const struct plan_wp *w, size_t n, double T)
+{
+	double R = coll_thr(g), psi0 = psi_of(g, a->laser_theta, a->det_theta, a->det_phi);
+	assert_true(n >= 2 && n <= PLAN_MAX_WP + 1);
+	struct plan_pos prev = *a;
+	double sum = 0;
+	for (size_t k = 0; k < n; k++) {
+		double worst = check_segment(g, &prev, &w[k].pos, w[k].duration_s);
+		if (k == 0 && !(worst >= fmin(R, psi0) - 3e-3))
+			fail_msg("escape from ψ %.4f came closer: %.4f", psi0, worst);
+		if (k > 0 && !(worst >= R - 1e-9))
+			fail_msg("segment %zu after the escape: ψ %.4f < %g", k, worst, R);
+		sum += w[k].duration_s;
+		prev = w[k].pos;
+	}
+	assert_true(prev.laser_theta == b->laser_theta && prev.det_theta == b->det_theta && prev.det_phi == b->det_phi);
+	assert_true(T >= sum && T <= sum + 1.0);
+}
+
+static void test_escape(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	bench_defaults(&g);
+	double R = plan_clearance_deg(&g);
+	struct plan_pos a = { 40, 32.15, -13.18 }, b = { 10, 50, 90 };
+	struct plan_wp w[PLAN_MAX_WP + 1];
+	size_t n = 0;
+	assert_true(psi_of(&g, a.laser_theta, a.det_theta, a.det_phi) < R);
+	assert_true(plan_move(&g, &a, &b, w, &n) < 0);
+	double T = plan_escape(&g, &a, &b, w, &n);
+	assert_true(T > 0);
+	check_escape(&g, &a, &b, w, n, T);
+	struct plan_pos out = { 40, 60, 0 };
+	assert_true(plan_escape(&g, &out, &b, w, &n) < 0 && n == 0);
+	rng_state = 0x9e3779b97f4a7c15ULL;
+	int found = 0, tried = 0;
+	while (tried < 300) {
+		struct plan_pos s = { urand(0, 70), urand(0, 85), urand(-90, 90) }, t = { urand(0, 70), urand(0, 85), urand(-170, 170) };
+		double ps = psi_of(&g, s.laser_theta, s.det_theta, s.det_phi);
+		if (ps < R - 1 || ps >= R || psi_of(&g, t.laser_theta, t.det_theta, t.det_phi) < R + 0.1)
+			continue;
+		tried++;
+		T = plan_escape(&g, &s, &t, w, &n);
+		if (T < 0)
+			continue;
+		found++;
+		check_escape(&g, &s, &t, w, n, T);
+	}
+	printf("escape: %d of %d random stops inside the clearance (ψ in [%g, %g)) found a way out, every one checked\n",
+	       found, tried, R - 1, R);
+	assert_true(found >= tried * 9 / 10);
+}
+
 /* Manual moves (plan_seg_safe) only avoid collisions; planned paths (plan_seg_clear) also keep off the beam
  * and the view: on a bench whose beam cone is wider than the arms' collision cone the two differ. */
 static void test_safe_vs_clear(void **state)
@@ -806,6 +865,7 @@ int main(void)
 		cmocka_unit_test(test_bad_plan_files),
 		cmocka_unit_test(test_bad_specs),
 		cmocka_unit_test(test_detours),
+		cmocka_unit_test(test_escape),
 		cmocka_unit_test(test_safe_vs_clear),
 		cmocka_unit_test(test_paper_plan),
 		cmocka_unit_test(test_random_plans),

@@ -256,6 +256,66 @@ static void test_dark_age(void **state)
 	unload(&f);
 }
 
+/* An exposure prior (plan.h) times each incidence with the nearest prior incidence's figures: the probe and the
+ * measurement at its mean first exposure, one dark per clearing and then a new one with probability (1 - 1/k)^j for
+ * its k darks at their mean time, its HDR exposures per point; the plan's estimate then only sets the first probe. */
+static void test_prior(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_SPREAD); /* incidences 20° and 45° */
+	struct plan_timing t = timing();
+	t.prior = (struct plan_prior){ .sweep = 7, .n_inc = 2 };
+	/* rows at 18° and 50°: the plan's 20° takes the first, 45° the second (the nearest) */
+	t.prior.inc[0] = (struct plan_prior_inc){ .theta_i = 18, .points = 9, .median_ms = 40, .mean_ms = 60,
+						  .spread = 8, .darks_per_clear = 3, .dark_ms = 90, .extra_per_point = 0.25,
+						  .extra_ms = 320 };
+	t.prior.inc[1] = (struct plan_prior_inc){ .theta_i = 50, .points = 9, .median_ms = 100, .mean_ms = 150,
+						  .spread = 4, .darks_per_clear = 1, .dark_ms = 150, .extra_per_point = 0,
+						  .extra_ms = 0 };
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double shot_ovh = f.g.readout_s + t.exposure_overhead_s, sum = 0, darks = 0;
+	size_t j = 0;
+	for (size_t i = 0; i < f.res->n_steps; i++) {
+		const struct plan_step *st = &f.res->steps[i];
+		bool new_inc = i == 0 || st->pos.laser_theta != f.res->steps[i - 1].pos.laser_theta;
+		j = new_inc ? 0 : j + 1;
+		const struct plan_prior_inc *q = &t.prior.inc[fabs(st->pos.laser_theta) < 30 ? 0 : 1];
+		double p = new_inc ? 1 : pow(1 - 1 / q->darks_per_clear, (double)j); /* k = 1: no second dark */
+		double dark = 8 * q->dark_ms / 1000 + shot_ovh;
+		double d = st->move_s + st->settle_s + (st->move_s + st->settle_s > 0 ? 1.5 * t.axis_poll_s : 0) +
+			   (i == 0 ? 20.0 : q->mean_ms) / 1000 + shot_ovh + 3 * q->mean_ms / 1000 + shot_ovh + p * dark +
+			   q->extra_per_point * (3 * q->extra_ms / 1000 + shot_ovh) + t.point_overhead_s;
+		assert_true(fabs(st->predicted_s - d) < TOL);
+		darks += p * dark;
+		sum += d;
+	}
+	assert_true(fabs(f.res->darks_s - darks) < TOL);
+	assert_true(fabs(f.res->predicted_s - sum) < TOL);
+	/* with the prior, the estimate only moves the first probe: 80 ms instead of 20 adds 60 ms */
+	double at20 = f.res->predicted_s;
+	f.spec->integ_ms = 80;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(f.res->predicted_s - at20 - 0.060) < TOL);
+	/* a fixed plan ignores the prior; an auto plan without one (sweep 0) is the band model again */
+	f.spec->integ_ms = 20;
+	t.prior.sweep = 0;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double band = f.res->predicted_s;
+	assert_true(fabs(band - at20) > 1);
+	struct plan_timing t0 = timing();
+	plan_time_apply(f.spec, &f.g, &t0, f.res);
+	assert_true(fabs(f.res->predicted_s - band) < TOL);
+	unload(&f);
+	load(&f, PLAN_FIXED);
+	plan_time_apply(f.spec, &f.g, &t0, f.res);
+	double fixed = f.res->predicted_s;
+	t.prior.sweep = 7;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(f.res->predicted_s - fixed) < TOL);
+	unload(&f);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -266,6 +326,7 @@ int main(void)
 		cmocka_unit_test(test_auto_hdr),
 		cmocka_unit_test(test_reference),
 		cmocka_unit_test(test_dark_age),
+		cmocka_unit_test(test_prior),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -12,15 +12,21 @@
 static struct recon_model *M, *MG; /* without trend; with the GGX trend */
 static char path[64];
 
+/* The samples and the fixed fit options of this file's models (shape and smoothing fixed: quick fits). */
+static void fixture(struct recon_samples *s, struct recon_fit_opts *o)
+{
+	rt_samples(s, 3, 0.02, 1.0);
+	recon_fit_opts_default(o);
+	o->shape = 1.8;
+	o->smoothing = 1e-3;
+}
+
 static int setup(void **state)
 {
 	(void)state;
 	struct recon_samples s;
-	rt_samples(&s, 3, 0.02, 1.0);
 	struct recon_fit_opts o;
-	recon_fit_opts_default(&o);
-	o.shape = 1.8;
-	o.smoothing = 1e-3;
+	fixture(&s, &o);
 	o.source = "unit test";
 	o.trend = RECON_TREND_NONE;
 	struct acq_err err = { 0 };
@@ -130,8 +136,8 @@ static void test_rejects_corrupt_files(void **state)
 	c[0] = 'X';
 	expect_reject(c, len, "bad magic");
 	memcpy(c, b, len);
-	c[8] = 3;
-	expect_reject(c, len, "version 3");
+	c[8] = 4; /* version 3 exists since session 7 (two-lobe trends) */
+	expect_reject(c, len, "version 4");
 	memcpy(c, b, len);
 	c[12] = 9;
 	expect_reject(c, len, "unknown kernel");
@@ -250,6 +256,81 @@ static void test_trend_block(void **state)
 	free(d);
 }
 
+/* Version 3 (session 7): a two-lobe trend (coat) carries its second roughness after the first; the file round-trips
+ * bit for bit; a second roughness out of [2α, 1] or not finite, a two-lobe trend in a version-2 layout, a one-lobe
+ * trend in a version-3 layout and an unknown version are each rejected with a message naming what is wrong; a
+ * one-lobe model is still written as version 2. */
+static void test_two_lobe_trend_v3(void **state)
+{
+	(void)state;
+	struct acq_err err = { 0 };
+	struct recon_samples s;
+	struct recon_fit_opts o;
+	fixture(&s, &o);
+	o.trend = RECON_TREND_COAT;
+	struct recon_model *mc = NULL, *m2 = NULL;
+	assert_int_equal(recon_fit(&s, &o, &mc, &err), 0);
+	csvio_samples_free(&s);
+	assert_int_equal(mc->trend, RECON_TREND_COAT);
+	assert_true(mc->trend_alpha2 >= 2 * mc->trend_alpha * 0.999 && mc->trend_alpha2 <= TREND_ALPHA_MAX);
+	assert_non_null(strstr(mc->meta, "trend_alpha2="));
+	assert_int_equal(recon_model_save(mc, path, &err), 0);
+	assert_int_equal(recon_model_load(path, &m2, &err), 0);
+	assert_int_equal(m2->trend, RECON_TREND_COAT);
+	assert_true(m2->trend_alpha == mc->trend_alpha && m2->trend_alpha2 == mc->trend_alpha2);
+	assert_same_model(mc, m2);
+	recon_model_free(m2);
+	size_t len;
+	unsigned char *b = slurp(path, &len), *c = malloc(len + 8);
+	assert_non_null(b);
+	uint32_t v;
+	memcpy(&v, b + 8, 4);
+	assert_int_equal(v, 3);
+	/* the trend block: u32 kind, f64 α, f64 α2, tcoef */
+	size_t at = len - 8 - strnlen(mc->meta, sizeof mc->meta) - 4 - (4 + 16 + mc->nwl * TREND_NB * 8);
+	memcpy(&v, b + at, 4);
+	assert_int_equal(v, RECON_TREND_COAT);
+	double x;
+	memcpy(&x, b + at + 12, 8);
+	assert_true(x == mc->trend_alpha2);
+	const double bad[] = { mc->trend_alpha, 1.5 * mc->trend_alpha, 2.0, NAN, -0.3 };
+	for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+		memcpy(c, b, len);
+		memcpy(c + at + 12, &bad[i], 8);
+		reseal(c, len);
+		expect_reject(c, len, "invalid trend second roughness");
+	}
+	/* the same bytes without α2, labelled version 2: a two-lobe trend needs version 3 */
+	memcpy(c, b, at + 12);
+	memcpy(c + at + 12, b + at + 20, len - at - 20);
+	v = 2;
+	memcpy(c + 8, &v, 4);
+	reseal(c, len - 8);
+	expect_reject(c, len - 8, "needs model file version 3");
+	/* a one-lobe trend (GGX) in the version-3 layout */
+	memcpy(c, b, len);
+	v = RECON_TREND_GGX;
+	memcpy(c + at, &v, 4);
+	reseal(c, len);
+	expect_reject(c, len, "for a two-lobe trend only");
+	/* a version this program does not know */
+	memcpy(c, b, len);
+	v = 4;
+	memcpy(c + 8, &v, 4);
+	reseal(c, len);
+	expect_reject(c, len, "this program reads 1 to 3");
+	free(b);
+	/* a one-lobe model is still written as version 2 */
+	assert_int_equal(recon_model_save(MG, path, &err), 0);
+	b = slurp(path, &len);
+	assert_non_null(b);
+	memcpy(&v, b + 8, 4);
+	assert_int_equal(v, 2);
+	free(b);
+	free(c);
+	recon_model_free(mc);
+}
+
 static void test_save_refuses_nonfinite(void **state)
 {
 	(void)state;
@@ -272,6 +353,7 @@ int main(void)
 		cmocka_unit_test(test_round_trip),
 		cmocka_unit_test(test_rejects_corrupt_files),
 		cmocka_unit_test(test_trend_block),
+		cmocka_unit_test(test_two_lobe_trend_v3),
 		cmocka_unit_test(test_save_refuses_nonfinite),
 	};
 	return cmocka_run_group_tests_name("recon_model", tests, setup, teardown);

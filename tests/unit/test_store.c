@@ -299,6 +299,7 @@ static void downgrade_to_v2(const char *p)
 	sqlite3 *db;
 	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
 	assert_int_equal(sqlite3_exec(db, "PRAGMA foreign_keys = OFF; PRAGMA legacy_alter_table = ON; BEGIN;"
+					  "DROP TABLE sweep_samples;" /* version 5's */
 					  "DROP TABLE adaptive_picks; DROP TABLE adaptive_batches;" /* version 4's */
 					  "ALTER TABLE recon_runs RENAME TO r3;"
 					  "CREATE TABLE recon_runs (\n"
@@ -450,6 +451,49 @@ static void test_migration_1_to_3(void **state)
 	csvio_samples_free(&c);
 }
 
+/* Version 4 → 5: sweep_samples appears (the sample a sweep measured, for exposure priors). The sweeps of a version-4
+ * database keep everything and have no sample (so no prior); a sweep created after the migration records its. */
+static void test_migration_4_to_5(void **state)
+{
+	(void)state;
+	char p[300];
+	path_of(p, sizeof p, "v4.db");
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_open(p, &st, &err), 0);
+	int64_t old = ut_sweep_create(st, 2, "t", "plan: 1");
+	store_close(st);
+	sqlite3 *db;
+	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
+	assert_int_equal(sqlite3_exec(db, "DROP TABLE sweep_samples; PRAGMA user_version = 4;", NULL, NULL, NULL),
+			 SQLITE_OK);
+	sqlite3_close(db);
+	assert_int_equal(store_open(p, &st, &err), 0);
+	assert_int_equal(store_schema_version(st), STORE_SCHEMA_VERSION);
+	assert_int_equal(store_sweep_set_state(st, old, "completed", 1100, &err), 0);
+	json_t *show = store_sweep_show(st, old, true, &err);
+	assert_non_null(show);
+	assert_int_equal(json_array_size(json_object_get(show, "points")), 2);
+	json_decref(show);
+	int64_t id = 0;
+	assert_int_equal(store_prior_each(st, "paint", 0, &id, NULL, NULL, &err), 0);
+	assert_int_equal(id, 0);
+	struct store_sweep_new nw = { .name = "n", .plan_text = "name: n", .config_snapshot = "{}",
+				      .software_version = "test", .created_at = 2000, .sample = "paint", .auto_exposure = true };
+	int64_t now = 0;
+	assert_int_equal(store_sweep_create(st, &nw, NULL, 0, &now, &err), 0);
+	assert_int_equal(store_sweep_set_state(st, now, "completed", 2100, &err), 0);
+	store_close(st);
+	assert_schema_current(p);
+	sqlite3_stmt *s = ut_sql_open(p, "SELECT group_concat(sweep_id || ':' || sample || ':' || auto_exposure) "
+					 "FROM sweep_samples", &db);
+	assert_int_equal(sqlite3_step(s), SQLITE_ROW);
+	char want[64];
+	snprintf(want, sizeof want, "%lld:paint:1", (long long)now);
+	assert_string_equal((const char *)sqlite3_column_text(s, 0), want);
+	ut_sql_close(db, s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -458,6 +502,7 @@ int main(void)
 		cmocka_unit_test(test_three_readers_same_samples),
 		cmocka_unit_test(test_migration_1_to_3),
 		cmocka_unit_test(test_migration_2_to_3),
+		cmocka_unit_test(test_migration_4_to_5),
 		cmocka_unit_test(test_foreign_and_corrupt_refused),
 	};
 	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);

@@ -1,0 +1,162 @@
+/* Unit tests of daemon/exposure_prior.c and daemon/store_prior.c: the exposure prior of a sample from its previous
+ * completed auto sweep in the database (which sweep is chosen, the per-incidence figures by hand, none for a fixed
+ * sweep, another sample, an unfinished sweep or a sweep without a sample). */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <cmocka.h>
+
+#include "daemon/exposure.h"
+#include "daemon/plan/plan.h"
+#include "daemon/store.h"
+#define UT_TMPDIR_NAME "test_exposure_prior"
+#include "tests/unit/tmpdir.h"
+
+#define TOL 1e-12 /* means of a few exact doubles */
+
+/* One exposure of a point (completing it when last). */
+static void shot(struct store *st, int64_t sw, int64_t pt, const char *kind, double ms, bool last)
+{
+	float c[4] = { 1, 2, 3, 4 };
+	struct store_spectrum sp = { .sweep_id = sw, .point_id = pt, .kind = kind, .integration_ms = ms, .averages = 4,
+				     .npix = 4, .counts = c, .temperature_c = NAN, .taken_at = 1000, .completes_point = last,
+				     .laser_theta = NAN, .detector_theta = NAN, .detector_phi = NAN, .theta_i = NAN,
+				     .phi_i = NAN, .theta_o = NAN, .phi_o = NAN };
+	struct acq_err err = { 0 };
+	assert_int_equal(store_spectrum_add(st, &sp, NULL, &err), 0);
+}
+
+/* A sweep of sample (NULL: none) with two incidences, 10° (3 points) and 40° (2 points); the exposures of each point
+ * (darks, then the sample exposures) as the table below; finished in state. */
+static int64_t mk_sweep(struct store *st, const char *sample, bool aut, const char *state)
+{
+	struct store_point_new pts[5] = { { 0, 10, 0, 20, 0 }, { 1, 10, 0, 30, 90 }, { 2, 10, 0, 40, 180 },
+					   { 3, 40, 0, 20, 0 }, { 4, 40, 0, 60, 90 } };
+	struct store_sweep_new nw = { .name = "t", .plan_text = "name: t", .config_snapshot = "{}",
+				      .software_version = "test", .created_at = 1000, .sample = sample,
+				      .auto_exposure = aut };
+	int64_t id = 0;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_sweep_create(st, &nw, pts, 5, &id, &err), 0);
+	for (int i = 0; i < 5; i++) {
+		int order;
+		int64_t pt;
+		assert_int_equal(store_sweep_next_point(st, id, &order, &pt, &err), 0);
+		assert_int_equal(order, i);
+		switch (i) {
+		case 0: /* 10°: a dark and an exposure at 40 ms */
+			shot(st, id, pt, "dark", 40, false);
+			shot(st, id, pt, "sample", 40, true);
+			break;
+		case 1: /* a dark at 20 ms, then an exposure at 20 ms and its HDR exposure at 160 ms (its dark too) */
+			shot(st, id, pt, "dark", 20, false);
+			shot(st, id, pt, "sample", 20, false);
+			shot(st, id, pt, "dark", 160, false);
+			shot(st, id, pt, "sample", 160, true);
+			break;
+		case 2: /* 40 ms again: no dark */
+			shot(st, id, pt, "sample", 40, true);
+			break;
+		case 3: /* 40°: a dark and an exposure at 100 ms */
+			shot(st, id, pt, "dark", 100, false);
+			shot(st, id, pt, "sample", 100, true);
+			break;
+		default: /* an exposure at 400 ms with its dark */
+			shot(st, id, pt, "dark", 400, false);
+			shot(st, id, pt, "sample", 400, true);
+		}
+	}
+	if (state)
+		assert_int_equal(store_sweep_set_state(st, id, state, 1100, &err), 0);
+	return id;
+}
+
+static void test_prior_figures(void **state)
+{
+	(void)state;
+	char p[300];
+	snprintf(p, sizeof p, "%s/a.db", ut_dir);
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_open(p, &st, &err), 0);
+	struct plan_prior pr;
+	/* nothing yet; a sweep without a sample is never a prior */
+	mk_sweep(st, NULL, true, "completed");
+	assert_int_equal(exp_prior_load(st, "paint", 0, &pr, &err), 0);
+	assert_int_equal(pr.sweep, 0);
+	int64_t a = mk_sweep(st, "paint", true, "completed");
+	mk_sweep(st, "paint", false, "completed");  /* fixed integration: its times are not the sample's */
+	mk_sweep(st, "paint", true, "aborted");     /* not finished */
+	mk_sweep(st, "white", true, "completed");   /* another sample */
+	int64_t running = mk_sweep(st, "paint", true, NULL);
+	assert_int_equal(exp_prior_load(st, "paint", running, &pr, &err), 0);
+	assert_int_equal(pr.sweep, a);
+	assert_string_equal(pr.sample, "paint");
+	assert_int_equal(pr.points, 5);
+	assert_int_equal(pr.n_inc, 2);
+	/* first exposures 40, 20, 40 | 100, 400: median 40, spread 400/20; one point of five took an HDR exposure */
+	assert_true(fabs(pr.median_ms - 40) < TOL && fabs(pr.spread - 20) < TOL && fabs(pr.hdr_fraction - 0.2) < TOL);
+	const struct plan_prior_inc *q = &pr.inc[0];
+	assert_true(fabs(q->theta_i - 10) < TOL);
+	assert_int_equal(q->points, 3);
+	assert_true(fabs(q->median_ms - 40) < TOL && fabs(q->mean_ms - 100.0 / 3) < TOL && fabs(q->spread - 2) < TOL);
+	assert_true(fabs(q->darks_per_clear - 3) < TOL && fabs(q->dark_ms - 220.0 / 3) < TOL);
+	assert_true(fabs(q->extra_per_point - 1.0 / 3) < TOL && fabs(q->extra_ms - 160) < TOL);
+	q = &pr.inc[1];
+	assert_true(fabs(q->theta_i - 40) < TOL);
+	assert_int_equal(q->points, 2);
+	assert_true(fabs(q->median_ms - 250) < TOL && fabs(q->mean_ms - 250) < TOL && fabs(q->spread - 4) < TOL);
+	assert_true(fabs(q->darks_per_clear - 2) < TOL && fabs(q->dark_ms - 250) < TOL);
+	assert_true(q->extra_per_point == 0 && q->extra_ms == 0);
+	/* a newer completed sweep of the sample is the prior; excluded, the older one again */
+	int64_t b = mk_sweep(st, "paint", true, "completed");
+	assert_int_equal(exp_prior_load(st, "paint", 0, &pr, &err), 0);
+	assert_int_equal(pr.sweep, b);
+	assert_int_equal(exp_prior_load(st, "paint", b, &pr, &err), 0);
+	assert_int_equal(pr.sweep, a);
+	assert_int_equal(exp_prior_load(st, "nothing of that name", 0, &pr, &err), 0);
+	assert_int_equal(pr.sweep, 0);
+	assert_int_equal(exp_prior_load(st, "", 0, &pr, &err), 0);
+	assert_int_equal(pr.sweep, 0);
+	store_close(st);
+}
+
+/* The plan's sample: key: a printable name of 1 to 63 characters, none when absent. */
+static void test_plan_sample_key(void **state)
+{
+	(void)state;
+	const char *base = "name: t\nincidence: {theta_deg: [20]}\nobservation: {theta_deg: [30], phi_deg: [0]}\n";
+	char text[512];
+	struct plan_spec *s = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(plan_load_string("t.yaml", base, &s, &err), 0);
+	assert_string_equal(s->sample, "");
+	plan_spec_free(s);
+	snprintf(text, sizeof text, "%ssample: green paint A3\n", base);
+	assert_int_equal(plan_load_string("t.yaml", text, &s, &err), 0);
+	assert_string_equal(s->sample, "green paint A3");
+	plan_spec_free(s);
+	snprintf(text, sizeof text, "%ssample: \"\"\n", base);
+	assert_int_equal(plan_load_string("t.yaml", text, &s, &err), -1);
+	assert_non_null(strstr(err.msg, "sample"));
+	snprintf(text, sizeof text, "%ssample: \"a\\tb\"\n", base);
+	assert_int_equal(plan_load_string("t.yaml", text, &s, &err), -1);
+	assert_non_null(strstr(err.msg, "control character"));
+	snprintf(text, sizeof text, "%ssample: %064d\n", base, 7);
+	assert_int_equal(plan_load_string("t.yaml", text, &s, &err), -1);
+	assert_non_null(strstr(err.msg, "1 to 63"));
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_prior_figures),
+		cmocka_unit_test(test_plan_sample_key),
+	};
+	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);
+}
