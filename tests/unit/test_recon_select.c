@@ -130,6 +130,15 @@ static void fix_free(struct fix *f)
 	select_result_free(&f->r);
 }
 
+/* The selection state on the candidates for spec with batch picks (fix_spec, the batch, fix_sel). */
+static void fix_make(struct fix *f, const struct recon_model *m, size_t nc, const double *ang, const double *cost,
+		     const char *spec, size_t batch)
+{
+	fix_spec(f, spec);
+	f->o.batch = batch;
+	fix_sel(f, m, nc, ang, cost);
+}
+
 static void test_rank_one_lnf(void **state)
 {
 	(void)state;
@@ -139,9 +148,7 @@ static void test_rank_one_lnf(void **state)
 	double ang[60 * 4], cost[60];
 	random_cands(nc, ang, cost);
 	struct fix f;
-	fix_spec(&f, "lnf");
-	f.o.batch = 3;
-	fix_sel(&f, m, nc, ang, cost);
+	fix_make(&f, m, nc, ang, cost, "lnf", 3);
 	struct sel *s = &f.s;
 	/* the amplitude² of each grid point: v / (prior posterior variance by brute force) */
 	size_t F = s->F, picks[3] = { 0, 0, 0 };
@@ -213,9 +220,7 @@ static void test_rank_one_dhr(void **state)
 	double ang[40 * 4], cost[40];
 	random_cands(nc, ang, cost);
 	struct fix f;
-	fix_spec(&f, "dhr:30");
-	f.o.batch = 2;
-	fix_sel(&f, m, nc, ang, cost);
+	fix_make(&f, m, nc, ang, cost, "dhr:30", 2);
 	struct sel *s = &f.s;
 	size_t Q = (size_t)SEL_NMU * SEL_NPHI, Lc = s->Lc, n = s->n;
 	struct dcoef dc;
@@ -497,9 +502,7 @@ static void test_rgb_target(void **state)
 		double ang[40 * 4], cost[40];
 		random_cands(nc, ang, cost);
 		struct fix fx;
-		fix_spec(&fx, "rgb");
-		fx.o.batch = 2;
-		fix_sel(&fx, m, nc, ang, cost);
+		fix_make(&fx, m, nc, ang, cost, "rgb", 2);
 		struct sel *s = &fx.s;
 		struct select_result *r = &fx.r;
 		struct acq_err *e = &fx.e;
@@ -677,9 +680,7 @@ static void test_noise_fall(void **state)
 	double ang[40 * 4], cost[40];
 	random_cands(nc, ang, cost);
 	struct fix f;
-	fix_spec(&f, "dhr:30");
-	f.o.batch = 3;
-	fix_sel(&f, m, nc, ang, cost);
+	fix_make(&f, m, nc, ang, cost, "dhr:30", 3);
 	struct sel s = f.s;
 	size_t Q = (size_t)SEL_NMU * SEL_NPHI, Lc = s.Lc, n = s.n;
 	struct dcoef dc;
@@ -728,9 +729,7 @@ static void test_noise_fall(void **state)
 
 	/* on the noise floor: the floor dominates every tracked channel, yet the best pick's gain is not ~0 and the
 	 * predicted value falls with it */
-	fix_spec(&f, "dhr:30");
-	f.o.batch = 3;
-	fix_sel(&f, m, nc, ang, cost);
+	fix_make(&f, m, nc, ang, cost, "dhr:30", 3);
 	s = f.s;
 	for (size_t x = 0; x < s.F; x++)
 		s.sn2[x] = 100 * (s.v[x] + 1e-30);
