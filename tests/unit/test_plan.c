@@ -490,14 +490,20 @@ static void test_escape(void **state)
 	struct bench_geom g;
 	bench_defaults(&g);
 	double R = plan_clearance_deg(&g);
-	struct plan_pos a = { 40, 32.15, -13.18 }, b = { 10, 50, 90 };
+	/* the two stops logged under load: test_sweep_full, and the adaptive example (alarms on laser.theta and
+	 * detector.theta during a move, ψ 10.98°) */
+	struct plan_pos stops[] = { { 40, 32.15, -13.18 }, { 60, 52.15, -9.27 } }, b = { 10, 50, 90 };
 	struct plan_wp w[PLAN_MAX_WP + 1];
 	size_t n = 0;
-	assert_true(psi_of(&g, a.laser_theta, a.det_theta, a.det_phi) < R);
-	assert_true(plan_move(&g, &a, &b, w, &n) < 0);
-	double T = plan_escape(&g, &a, &b, w, &n);
-	assert_true(T > 0);
-	check_escape(&g, &a, &b, w, n, T);
+	double T;
+	for (size_t i = 0; i < sizeof stops / sizeof stops[0]; i++) {
+		const struct plan_pos *a = &stops[i];
+		assert_true(psi_of(&g, a->laser_theta, a->det_theta, a->det_phi) < R);
+		assert_true(plan_move(&g, a, &b, w, &n) < 0);
+		T = plan_escape(&g, a, &b, w, &n);
+		assert_true(T > 0);
+		check_escape(&g, a, &b, w, n, T);
+	}
 	struct plan_pos out = { 40, 60, 0 };
 	assert_true(plan_escape(&g, &out, &b, w, &n) < 0 && n == 0);
 	rng_state = 0x9e3779b97f4a7c15ULL;
