@@ -121,6 +121,17 @@ def no_repeats(b, sid):
     assert len(rows) == len(set(rows)), "%d points, %d distinct configurations" % (len(rows), len(set(rows)))
 
 
+def completes(b, sid, timeout=240):
+    """Drive sweep sid to its end (white on the stage when asked); it must complete, its decisions check
+    (check_decisions), its points carry one exposure each and no configuration repeats: (rows, stop reason, points)."""
+    row = L.drive_to_end(b, sid, timeout=timeout, sample="white")
+    assert row["state"] == "completed", row["state"]
+    rows, why = check_decisions(b, sid)
+    n, _ = L.check_points(b, sid, max_exposures=1)
+    no_repeats(b, sid)
+    return rows, why, n
+
+
 def reconstructs(b, sid):
     """The finished sweep reconstructs like any other: the daemon's chain succeeded, and brdf-recon fits it from
     the database and from its CSV export with the same number of samples."""

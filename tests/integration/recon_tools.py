@@ -11,6 +11,8 @@ import numpy as np
 BUILD = os.environ.get("ACQ_BUILD", "build")
 SRC = os.environ.get("ACQ_SRC", ".")
 B = os.path.join(BUILD, "brdf-recon")
+SIM = os.environ.get("ACQ_SIM_BIN", os.path.join(BUILD, "acq-sim"))
+SEED = int(os.environ.get("ACQ_SEED", "1")) % 100000
 
 
 def run(*args, ok=True, prog=B):
@@ -57,3 +59,23 @@ def model_eval(d, model, ang):
 def vec(t, p):
     """Unit vectors [n, 3] from zenith t and azimuth p (radians)."""
     return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], 1)
+
+
+def sim_truth_dhr(d, material, wl, thetas):
+    """acq-sim's exact DHR of material at the incidences thetas (degrees) and wavelengths wl, written in folder d:
+    the rows (theta_i, wavelength, dhr)."""
+    tr = os.path.join(d, "truth.csv")
+    run("truth", material, "--dhr", tr, "--theta-i", ",".join(map(str, thetas)), "--wavelengths", wl, prog=SIM)
+    return read_csv(tr)[1]
+
+
+def sim_fit_dhr(d, material, seed, wl, thetas):
+    """acq-sim's material on the paper's 10 x 10 x 10 plan with 1 % noise (noise seed seed, wavelengths wl) in folder
+    d, `brdf-recon fit`, then `dhr` at thetas with the same seed: (model path, the DHR CSV's columns, its rows)."""
+    smp, m, o = (os.path.join(d, x) for x in ("s.csv", "m.model", "d.csv"))
+    run("truth", material, "--grid", "10x10x10", "--noise", "0.01", "--seed", str(seed), "--wavelengths", wl,
+        "-o", smp, prog=SIM)
+    run("fit", smp, "-o", m)
+    run("dhr", m, "--theta-i", ",".join(map(str, thetas)), "--seed", str(seed), "-o", o)
+    c, A = read_csv(o)
+    return m, c, A

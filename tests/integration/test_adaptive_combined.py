@@ -22,11 +22,7 @@ def run():
         b.start_daemon()
         sid = L.start_sweep(b, A.plan(target="dhr_sigma: {incidence_deg: [8], le: 1}, lnf_sigma: {le: 1.0e-9}",
                                       budget="points: %d" % BUDGET), "it-adaptive-combined")
-        row = L.drive_to_end(b, sid, timeout=240, sample="white")
-        assert row["state"] == "completed", row["state"]
-        rows, why = A.check_decisions(b, sid)
-        n, _ = L.check_points(b, sid, max_exposures=1)
-        A.no_repeats(b, sid)
+        rows, why, n = A.completes(b, sid)
         chosen = rows[1:-1]
         L.say("combined target: %d points, %d batches: %s; values %s" % (
             n, len(chosen), why, ["%.4g" % r["target_value"] for r in rows[1:]]))

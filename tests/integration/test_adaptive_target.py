@@ -27,11 +27,7 @@ def run():
         sid = L.start_sweep(b, A.plan(target="dhr_sigma: {incidence_deg: [8], le: %g}" % LE,
                                       budget="points: %d" % BUDGET), "it-adaptive-target")
         t0 = time.time()
-        row = L.drive_to_end(b, sid, timeout=240, sample="white")
-        assert row["state"] == "completed", row["state"]
-        rows, why = A.check_decisions(b, sid)
-        n, _ = L.check_points(b, sid, max_exposures=1)
-        A.no_repeats(b, sid)
+        rows, why, n = A.completes(b, sid)
         chosen = rows[1:-1]
         values = [r["target_value"] for r in rows[1:]]
         L.say("stopped after %.1f s, %d points, %d batches: %s; values %s" % (
@@ -61,11 +57,7 @@ def run():
         sid = L.start_sweep(b, A.plan(budget="points: %d" % BUDGET,
                                       cands="incidence_deg: [40], per_incidence: 6, specular: false"),
                             "it-adaptive-exhaust")
-        row = L.drive_to_end(b, sid, timeout=240, sample="white")
-        assert row["state"] == "completed", row["state"]
-        rows, why = A.check_decisions(b, sid)
-        n, _ = L.check_points(b, sid, max_exposures=1)
-        A.no_repeats(b, sid)
+        rows, why, n = A.completes(b, sid)
         L.say("second sweep: %d points, %d batches: %s" % (n, len(rows) - 2, why))
         assert why.startswith("nothing reachable left"), "stopped: %s" % why
         assert n <= rows[0]["n_points"] + 6 and n < BUDGET, "%d points from 6 candidates" % n

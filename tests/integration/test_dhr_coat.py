@@ -11,18 +11,14 @@ kind by leave-one-out) must choose `coat`; `brdf-recon dhr` at 8, 30 and 60 deg 
 at 8 deg (sigma 8x too large); with the coat kind but the misfit taken as absolute, z RMS 0.14 at 60 deg (seed 1:
 sigma_misfit 0.022 against an error of 0.003). Both fail here."""
 import os
-import shutil
 import sys
 import tempfile
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from recon_tools import read_csv, run  # noqa: E402  (a CSV's columns; run a command, print it, exit on failure)
+from recon_tools import SEED, run, sim_fit_dhr, sim_truth_dhr  # noqa: E402
 
-BUILD = os.environ.get("ACQ_BUILD", "build")
-SEED = int(os.environ.get("ACQ_SEED", "1")) % 100000
-SIM = os.environ.get("ACQ_SIM_BIN", os.path.join(BUILD, "acq-sim"))
 NSEED = 3
 WL = "450:1100:50"
 THETAS = (8, 30, 60)
@@ -30,27 +26,19 @@ THETAS = (8, 30, 60)
 
 def main():
     print("ACQ_SEED=%d" % SEED)
-    d = tempfile.mkdtemp(prefix="test_dhr_coat_")
-    try:
-        tr = os.path.join(d, "truth.csv")
-        run("truth", "clear-coat", "--dhr", tr, "--theta-i", ",".join(map(str, THETAS)), "--wavelengths", WL, prog=SIM)
-        _, T = read_csv(tr)
+    with tempfile.TemporaryDirectory(prefix="test_dhr_coat_") as d:
+        T = sim_truth_dhr(d, "clear-coat", WL, THETAS)
         err, sig = [], []
         ok = True
         for i in range(NSEED):
             s = SEED * NSEED + i + 1
-            smp, m, o = (os.path.join(d, x) for x in ("s.csv", "m.model", "d.csv"))
-            run("truth", "clear-coat", "--grid", "10x10x10", "--noise", "0.01", "--seed", str(s), "--wavelengths", WL,
-                "-o", smp, prog=SIM)
-            run("fit", smp, "-o", m)
+            m, c, A = sim_fit_dhr(d, "clear-coat", s, WL, THETAS)
             info = run("info", m).stdout
             kind = [ln for ln in info.splitlines() if ln.startswith("trend=")]
             print("noise seed %d: %s" % (s, kind))
             if kind != ["trend=coat"]:
                 print("FAIL: the two-lobe trend was not chosen on the clear coat")
                 ok = False
-            run("dhr", m, "--theta-i", ",".join(map(str, THETAS)), "--seed", str(s), "-o", o)
-            c, A = read_csv(o)
             err.append(A[:, c["dhr"]] - T[:, 2])
             sig.append(A[:, c["sigma"]])
         err, sig = np.array(err), np.array(sig)
@@ -66,8 +54,6 @@ def main():
                 print("FAIL: z RMS %.2f at %d deg not in [0.5, 1.6]" % (zr, t))
                 ok = False
         return 0 if ok else 1
-    finally:
-        shutil.rmtree(d, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -17,36 +17,24 @@ fails); a sigma_noise twice too large gives 0.5 (fails). Also z = (DHR - truth) 
 import os
 import sys
 import tempfile
-import shutil
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from recon_tools import read_csv, run  # noqa: E402  (a CSV's columns; run a command, print it, exit on failure)
+from recon_tools import SEED, sim_fit_dhr, sim_truth_dhr  # noqa: E402
 
-BUILD = os.environ.get("ACQ_BUILD", "build")
-SEED = int(os.environ.get("ACQ_SEED", "1")) % 100000
-SIM = os.environ.get("ACQ_SIM_BIN", os.path.join(BUILD, "acq-sim"))
 NSEED = 20
 WL = "450:1100:50"
 
 
 def main():
     print("ACQ_SEED=%d" % SEED)
-    d = tempfile.mkdtemp(prefix="test_dhr_refit_")
-    try:
-        tr = os.path.join(d, "truth.csv")
-        run("truth", "sharp-lobe", "--dhr", tr, "--theta-i", "8,30", "--wavelengths", WL, prog=SIM)
-        truth = read_csv(tr)[1][:, 2]
+    with tempfile.TemporaryDirectory(prefix="test_dhr_refit_") as d:
+        truth = sim_truth_dhr(d, "sharp-lobe", WL, (8, 30))[:, 2]
         dhr, sig, sn = [], [], []
         for i in range(NSEED):
             s = SEED * NSEED + i + 1
-            smp, m, o = (os.path.join(d, x) for x in ("s.csv", "m.model", "d.csv"))
-            run("truth", "sharp-lobe", "--grid", "10x10x10", "--noise", "0.01", "--seed", str(s), "--wavelengths", WL,
-                "-o", smp, prog=SIM)
-            run("fit", smp, "-o", m)
-            run("dhr", m, "--theta-i", "8,30", "--seed", str(s), "-o", o)
-            c, A = read_csv(o)
+            _, c, A = sim_fit_dhr(d, "sharp-lobe", s, WL, (8, 30))
             dhr.append(A[:, c["dhr"]])
             sig.append(A[:, c["sigma"]])
             sn.append(A[:, c["sigma_noise"]])
@@ -66,8 +54,6 @@ def main():
             print("FAIL: z RMS %.2f against the truth not in [0.6, 1.4]" % zr)
             ok = False
         return 0 if ok else 1
-    finally:
-        shutil.rmtree(d, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -7,6 +7,16 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+/* Open (creating) the store of dir/file; its path into path[cap]. Fails the test unless it opens. */
+static inline struct store *ut_store_new(char *path, size_t cap, const char *dir, const char *file)
+{
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	snprintf(path, cap, "%s/%s", dir, file);
+	assert_int_equal(store_open(path, &st, &err), 0);
+	return st;
+}
+
 /* Create a sweep named name with plan_text and npts points (≤ 16; θi = 10·i, φi = 0, θo = 20 + i, φo = 180) in st;
  * fails the test unless it is stored with an id > 0. */
 static inline int64_t ut_sweep_create(struct store *st, int npts, const char *name, const char *plan_text)

@@ -9,11 +9,13 @@
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+#include <sqlite3.h>
 #include <cmocka.h>
 
 #include "daemon/exposure.h"
 #include "daemon/plan/plan.h"
 #include "daemon/store.h"
+#include "tests/unit/storefix.h"
 #define UT_TMPDIR_NAME "test_exposure_prior"
 #include "tests/unit/tmpdir.h"
 
@@ -80,10 +82,8 @@ static void test_prior_figures(void **state)
 {
 	(void)state;
 	char p[300];
-	snprintf(p, sizeof p, "%s/a.db", ut_dir);
-	struct store *st = NULL;
+	struct store *st = ut_store_new(p, sizeof p, ut_dir, "a.db");
 	struct acq_err err = { 0 };
-	assert_int_equal(store_open(p, &st, &err), 0);
 	struct plan_prior pr;
 	/* nothing yet; a sweep without a sample is never a prior */
 	mk_sweep(st, NULL, true, "completed");

@@ -33,10 +33,8 @@ static void test_batches(void **state)
 {
 	(void)state;
 	char p[300];
-	snprintf(p, sizeof p, "%s/a.db", ut_dir);
-	struct store *st = NULL;
+	struct store *st = ut_store_new(p, sizeof p, ut_dir, "a.db");
 	struct acq_err err = { 0 };
-	assert_int_equal(store_open(p, &st, &err), 0);
 	int64_t sw = ut_sweep_create(st, 3, "a", "kind: adaptive");
 	struct store_batch seed = { .batch = 0, .decided_at = 1000, .n_points = 3, .target_spec = "dhr:8:le=0.002",
 				    .target_value = NAN, .target_met = -1, .predicted_value = NAN, .warm = -1,
