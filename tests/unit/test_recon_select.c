@@ -101,6 +101,24 @@ static double brute_var(const struct sel *s, const double *A, const double *P, s
 	return v;
 }
 
+/* The tests' common start: the seed from ACQ_SEED, the toy model and nc ≤ 64 random candidates (in that order, so
+ * the draws are the ones each test made itself before). */
+struct toy {
+	struct recon_model *m;
+	size_t nc;
+	double ang[64 * 4], cost[64];
+};
+
+static struct recon_model *toy_start(struct toy *t, size_t nc)
+{
+	assert_true(nc <= 64);
+	rt_seed();
+	t->m = toy_model();
+	t->nc = nc;
+	random_cands(nc, t->ang, t->cost);
+	return t->m;
+}
+
 /* A selection state with what it points to: struct sel keeps pointers to the target, the options and the result,
  * so the four live together. fix_spec parses the target and takes the default options (a test then changes what it
  * needs); fix_sel builds the state on the candidates; fix_free undoes both. */
@@ -142,11 +160,10 @@ static void fix_make(struct fix *f, const struct recon_model *m, size_t nc, cons
 static void test_rank_one_lnf(void **state)
 {
 	(void)state;
-	rt_seed();
-	struct recon_model *m = toy_model();
-	size_t nc = 60;
-	double ang[60 * 4], cost[60];
-	random_cands(nc, ang, cost);
+	struct toy ty;
+	struct recon_model *m = toy_start(&ty, 60);
+	size_t nc = ty.nc;
+	double *ang = ty.ang, *cost = ty.cost;
 	struct fix f;
 	fix_make(&f, m, nc, ang, cost, "lnf", 3);
 	struct sel *s = &f.s;
@@ -214,11 +231,10 @@ static void dcoef_free(struct dcoef *d)
 static void test_rank_one_dhr(void **state)
 {
 	(void)state;
-	rt_seed();
-	struct recon_model *m = toy_model();
-	size_t nc = 40;
-	double ang[40 * 4], cost[40];
-	random_cands(nc, ang, cost);
+	struct toy ty;
+	struct recon_model *m = toy_start(&ty, 40);
+	size_t nc = ty.nc;
+	double *ang = ty.ang, *cost = ty.cost;
 	struct fix f;
 	fix_make(&f, m, nc, ang, cost, "dhr:30", 2);
 	struct sel *s = &f.s;
@@ -342,11 +358,10 @@ static void test_known_information(void **state)
 static void test_cost_weighting(void **state)
 {
 	(void)state;
-	rt_seed();
-	struct recon_model *m = toy_model();
-	size_t nc = 30;
-	double ang[30 * 4], cost[30], g[30];
-	random_cands(nc, ang, cost);
+	struct toy ty;
+	struct recon_model *m = toy_start(&ty, 30);
+	size_t nc = ty.nc;
+	double *ang = ty.ang, *cost = ty.cost, g[30];
 	for (size_t j = 0; j < nc; j++)
 		cost[j] = 10;
 	gains(m, nc, ang, cost, "dhr:8,30,60", g, NULL);
@@ -674,11 +689,10 @@ static void test_target_parse(void **state)
 static void test_noise_fall(void **state)
 {
 	(void)state;
-	rt_seed();
-	struct recon_model *m = toy_model();
-	size_t nc = 40;
-	double ang[40 * 4], cost[40];
-	random_cands(nc, ang, cost);
+	struct toy ty;
+	struct recon_model *m = toy_start(&ty, 40);
+	size_t nc = ty.nc;
+	double *ang = ty.ang, *cost = ty.cost;
 	struct fix f;
 	fix_make(&f, m, nc, ang, cost, "dhr:30", 3);
 	struct sel s = f.s;
@@ -751,11 +765,10 @@ static void test_noise_fall(void **state)
 static void test_combined_target(void **state)
 {
 	(void)state;
-	rt_seed();
-	struct recon_model *m = toy_model();
-	size_t nc = 60;
-	double ang[60 * 4], cost[60];
-	random_cands(nc, ang, cost);
+	struct toy ty;
+	struct recon_model *m = toy_start(&ty, 60);
+	size_t nc = ty.nc;
+	double *ang = ty.ang, *cost = ty.cost;
 	struct acq_err e = { 0 };
 	struct select_target td, tl, tc;
 	assert_int_equal(select_target_parse("dhr:8,30", &td, &e), 0);
