@@ -1,13 +1,23 @@
 /* Unit test of the DHR uncertainty's honesty (recon_dhr_ex) on the synthetic truth (Lambertian + cos²⁰ Phong
- * lobe, the paper's 10 × 10 × 10 sampling, 2 % noise), over NSEED independent noisy data sets (default fit,
- * as a user gets it: on this lobe the leave-one-out choice drops the GGX trend, see test_recon_trend).
- * z = (DHR − truth)/σ; its RMS over seeds and wavelengths (the spread about 0: the error includes a
- * deterministic interpolation bias, so the spread about the mean would hide it) must be in [0.45, 1.6] at 8°
- * (measured 0.67-0.97 over ACQ_SEED 1-4 with σ = max(σ_noise, σ_model); 0.51-0.73 when the two were added,
- * which counted the noise twice), and the band must reject σ three times too large or small. At 30° the
- * error is dominated by the bias of the 36° azimuth step on a lobe that is not a microfacet lobe (half-width
- * 15°): the noise-only σ gives an RMS z of ≈ 5, the interpolation-error term must bring it below 0.7× that
- * (measured 2.9-3.1, ratio 0.56-0.58: not honest there; recon/reconstruction.md). */
+ * lobe, the paper's 10 × 10 × 10 sampling, 2 % noise), over NSEED independent noisy data sets × NWL wavelengths
+ * (default fit, as a user gets it: on this lobe the leave-one-out choice takes the phong trend, see
+ * test_recon_trend). z = (DHR − truth)/σ; its RMS over data sets and wavelengths (the spread about 0: the error
+ * includes a deterministic interpolation bias, so the spread about the mean would hide it) must lie in
+ * [Z_LO, Z_HI] at 8°, 30° and 60°, and the same σ scaled by 3 or by 1/3 must fall outside that band.
+ *
+ * The band and the design (session 8). The statistic is a sample RMS, so its spread over ACQ_SEED is set by how
+ * many z values it pools: with 10 data sets × 3 wavelengths (30 values, sessions 3-7) the microfacet paint's 30°
+ * value fell to 0.55, under that test's floor, at ACQ_SEED=364333693 (make check, session 7), and a bootstrap of
+ * 52 data sets (156 z per incidence) put its 60° value below 0.55 in 0.25 % of seeds. Wavelengths are nearly free
+ * (one factorisation for all channels: a data set costs ~0.55 s CPU with 3 and ~0.8 s with 24) and their noise is
+ * independent, so the tests now pool 5 data sets × 24 wavelengths (120 values): the variance of a data set's mean
+ * z² measured 0.3-1.6× what independent wavelengths give, so at least ~75 effective values, whose RMS lies within
+ * ×0.71…×1.31 of its centre except with probability 1e-4 (χ² with 75 degrees of freedom; measured kurtosis of z
+ * 2.6-3.3, Gaussian-like). Measured centres (pooled z RMS over data sets from other seeds, 8/30/60°): microfacet
+ * paint 0.88 / 0.92 / 0.83 (3 wavelengths, 156 values) and 0.89-0.99 (24 wavelengths), this Phong truth
+ * 0.92-0.94. So the statistic stays within [0.56, 1.30] at every incidence, inside [Z_LO, Z_HI] = [0.5, 1.45],
+ * whose ratio (2.9 < 3) makes σ × 3 (z RMS ≤ 1.30/3 = 0.43) and σ / 3 (≥ 3 × 0.56 = 1.68) fail at every seed.
+ * The issue's bench goal [0.7, 1.3] is for 1320 values (bench_dhr_honesty); 120 values cannot hold it at 1e-4. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -16,9 +26,11 @@
 
 #include "recon_test_util.h"
 
-#define NWL 3
-#define NSEED 10
+#define NWL 24
+#define NSEED 5
 #define NTH 3
+#define Z_LO 0.5
+#define Z_HI 1.45
 
 static double true_dhr(double ti, double wl)
 {
@@ -43,6 +55,18 @@ static double zrms(const double *err, const double *sig, int t, double k)
 			acc += z * z;
 		}
 	return sqrt(acc / (NSEED * NWL));
+}
+
+/* Incidence t's z RMS lies in [Z_LO, Z_HI] and σ × 3 or σ / 3 would not (the header says why this band). */
+static void assert_band(const char *what, const double *err, const double *sig, int t)
+{
+	static const int deg[NTH] = { 8, 30, 60 };
+	double z = zrms(err, sig, t, 1.0), z3 = zrms(err, sig, t, 3.0), z13 = zrms(err, sig, t, 1.0 / 3.0);
+	printf("%s θi = %2d°: RMS z %.2f over %d data sets × %d wavelengths (band [%.2f, %.2f]; σ×3: %.2f, σ/3: %.2f)\n",
+	       what, deg[t], z, NSEED, NWL, Z_LO, Z_HI, z3, z13);
+	assert_true(z >= Z_LO && z <= Z_HI);
+	assert_false(z3 >= Z_LO && z3 <= Z_HI);
+	assert_false(z13 >= Z_LO && z13 <= Z_HI);
 }
 
 static void test_dhr_zscores_calibrated(void **state)
@@ -81,24 +105,13 @@ static void test_dhr_zscores_calibrated(void **state)
 		recon_model_free(m);
 		csvio_samples_free(&smp);
 	}
-	for (int t = 0; t < NTH; t++) {
-		double zt = zrms(err, sig, t, 1.0), zn = zrms(err, sn, t, 1.0);
-		printf("θi = %2.0f°: RMS of z over %d data sets × %d wavelengths: %.2f (noise-only σ: %.2f)\n",
-		       th[t] * 180 / M_PI, NSEED, NWL, zt, zn);
-	}
-	double z8 = zrms(err, sig, 0, 1.0);
-	assert_true(z8 >= 0.45 && z8 <= 1.6);
-	assert_false(zrms(err, sig, 0, 3.0) >= 0.45);       /* the band rejects σ three times too large */
-	assert_false(zrms(err, sig, 0, 1.0 / 3.0) <= 1.6); /* ... and three times too small */
+	for (int t = 0; t < NTH; t++)
+		printf("θi = %2.0f°: RMS of z with the noise-only σ: %.2f\n", th[t] * 180 / M_PI, zrms(err, sn, t, 1.0));
 	/* Session 5: the mirror-Phong lobe now takes the phong trend (issue 13 item 4), which removes the 36° azimuth
 	 * step's bias at 30° and 60° (plain interpolant: noise-only z RMS > 2 at 30°; now 0.9-1.1, ACQ_SEED 1-30), so
 	 * σ is calibrated at every incidence, not only at 8°. */
-	for (int t = 1; t < NTH; t++) {
-		double zt = zrms(err, sig, t, 1.0);
-		assert_true(zt >= 0.45 && zt <= 1.6);
-		assert_false(zrms(err, sig, t, 3.0) >= 0.45);
-		assert_false(zrms(err, sig, t, 1.0 / 3.0) <= 1.6);
-	}
+	for (int t = 0; t < NTH; t++)
+		assert_band("Phong lobe", err, sig, t);
 }
 
 /* A microfacet paint (Lambertian + GGX lobe, α = 0.15, Smith masking, Schlick Fresnel F0 = 0.04): the kind of
@@ -119,8 +132,8 @@ static double ggx_truth(const double a[4], double wl)
 /*
  * The fast version of bench_dhr_honesty for make check: the microfacet paint on the paper's 10 × 10 × 10 plan,
  * 1 % noise, NSEED data sets × NWL wavelengths, z against the truth (bias included) at 8, 30 and 60°. Each
- * incidence's z RMS must lie in [0.55, 1.6], and the same σ scaled by 3 or by 1/3 must fall outside that band
- * (the test fails for a σ three times too large or too small). Measured (ACQ_SEED 1-3): 0.77-1.2.
+ * incidence's z RMS must lie in [Z_LO, Z_HI], and the same σ scaled by 3 or by 1/3 must fall outside that band
+ * (the test fails for a σ three times too large or too small; the file's header gives the measured spread).
  */
 static void test_microfacet_paint_calibrated(void **state)
 {
@@ -160,13 +173,8 @@ static void test_microfacet_paint_calibrated(void **state)
 		recon_model_free(m);
 		csvio_samples_free(&smp);
 	}
-	for (int t = 0; t < NTH; t++) {
-		double z = zrms(err, sig, t, 1.0), z3 = zrms(err, sig, t, 3.0), z13 = zrms(err, sig, t, 1.0 / 3.0);
-		printf("microfacet paint θi = %2.0f°: RMS z %.2f (σ×3: %.2f, σ/3: %.2f)\n", th[t] * 180 / M_PI, z, z3, z13);
-		assert_true(z >= 0.55 && z <= 1.6);
-		assert_false(z3 >= 0.55 && z3 <= 1.6);
-		assert_false(z13 >= 0.55 && z13 <= 1.6);
-	}
+	for (int t = 0; t < NTH; t++)
+		assert_band("microfacet paint", err, sig, t);
 }
 
 int main(void)
