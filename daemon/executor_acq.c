@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "daemon/stall.h"
 #include "daemon/store.h"
 
 /* The point's acquisition starts over: no probe, no exposure times, no shot (its pending spectra untouched). */
@@ -513,6 +514,7 @@ static void commit_reference(struct ex *x, double now)
 	/* Paused in the store before the marker: a crash in between measures the reference again. */
 	if (x->cfg.pause_after_reference)
 		ex_set_db_state(x, "paused");
+	ex_stall_reset(x);
 	memcpy(x->ref_rate, x->merged, sizeof *x->ref_rate);
 	x->have_ref = true;
 	x->cfg.cal.ref_theta_o_deg = fabs(x->actual.det_theta);
@@ -605,6 +607,7 @@ static void commit_point(struct ex *x, double now)
 	}
 	int oi = -1;
 	int64_t pid = 0;
+	double t_store = stall_now();
 	if (store_sweep_next_point(x->st, x->sweep_id, &oi, &pid, &err)) {
 		ex_failed(x, "reading the next point: %s", err.msg);
 		return;
@@ -638,6 +641,8 @@ static void commit_point(struct ex *x, double now)
 		}
 		x->stats.spectra++;
 	}
+	stall_store(stall_now() - t_store);
+	ex_stall_report(x, x->cur);
 	ex_clear_pending(x);
 	x->point_faults = 0;
 	x->stats.points_done++;

@@ -7,6 +7,8 @@
 #include <stdlib.h>
 #include <time.h>
 
+#include "daemon/stall.h"
+
 struct loop_fd {
 	int fd;
 	short events;
@@ -196,7 +198,10 @@ static int run_timers(struct loop *lp)
 		} else {
 			lp->timers[best] = lp->timers[--lp->ntimers];
 		}
+		double t0 = stall_now();
+		stall_timer_late((loop_now(lp) - t.due) / lp->clk.rate);
 		t.cb(lp, t.arg);
+		stall_callback(stall_now() - t0);
 		ran++;
 	}
 	return ran;
@@ -245,7 +250,9 @@ int loop_run_once(struct loop *lp, double max_wait_s)
 		struct loop_fd *f = &lp->fds[i];
 		if (f->dead || f->fd != lp->pfds[i].fd)
 			continue;
+		double t0 = stall_now();
 		f->cb(lp, f->fd, re, f->arg);
+		stall_callback(stall_now() - t0);
 		ran++;
 	}
 	ran += run_timers(lp);

@@ -21,6 +21,9 @@ struct port_req {
 	/* Filled by the port's thread around run(), for diagnostics (cputime.h): real seconds run() took, and of
 	 * them those the thread ran on a CPU and those it waited for one (the rest it slept: device, timeout). */
 	double took_s, on_cpu_s, cpu_wait_s;
+	/* Real monotonic seconds it was submitted and its run ended (stall.h: its wait in the queue and for the
+	 * loop). */
+	double submitted_at, ended_at;
 	/* the port's: */
 	unsigned long gen;
 	struct port_req *next;

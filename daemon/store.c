@@ -172,6 +172,8 @@ int store_open(const char *path, struct store **out, struct acq_err *err)
 	for (int i = 0; i < ST__COUNT; i++)
 		if (!(st->st[i] = store_prep(st, store_sql[i], err)))
 			goto fail;
+	if (store_ckpt_start(st, err))
+		goto fail;
 	*out = st;
 	return 0;
 fail:
@@ -186,6 +188,8 @@ void store_close(struct store *st)
 	for (int i = 0; i < ST__COUNT; i++)
 		sqlite3_finalize(st->st[i]);
 	if (st->db) {
+		if (!st->reader)
+			store_ckpt_stop(st);
 		if (!st->reader)
 			sqlite3_exec(st->db, "PRAGMA wal_checkpoint(TRUNCATE)", NULL, NULL, NULL);
 		sqlite3_close(st->db);

@@ -177,4 +177,8 @@ int64_t store_recon_latest(struct store *st);
  * spectrometer's polynomial when known. NULL with ACQ_E_NOTFOUND if there is none. */
 json_t *store_spectrum_json(struct store *st, int64_t id, struct acq_err *err);
 
+/* The WAL's checkpoints run so far on the store's own thread (store_ckpt.c): how many, their seconds in all, the
+ * longest (zeros where SQLite checkpoints on the committing thread instead). */
+void store_ckpt_stats(const struct store *st, unsigned long *runs, double *seconds, double *max_s);
+
 #endif

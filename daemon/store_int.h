@@ -16,6 +16,7 @@ struct store {
 	char *path;
 	sqlite3_stmt *st[ST__COUNT];
 	bool reader;  /* store_open_reader(): read-only, no statements prepared, no checkpoint at close */
+	struct store_ckpt *ckpt; /* the WAL's checkpoints off the committing thread (store_ckpt.c) */
 };
 
 /* err = "<path>: <what>: <SQLite's message>" (ACQ_E_IO); returns -1. */
@@ -48,5 +49,10 @@ int store_points_insert(struct store *st, int64_t sweep_id, const struct store_p
 /* Bring an open read-write store's schema to STORE_SCHEMA_VERSION (store_migrate.c): a new database from
  * daemon/schema.sql, an older one step by step, each step one transaction. 0 or -1. */
 int store_migrate(struct store *st, struct acq_err *err);
+/* Take over the WAL's checkpoints of a read-write store: a thread of its own runs them (store_ckpt.c); where
+ * it cannot start, SQLite's own stay. 0. */
+int store_ckpt_start(struct store *st, struct acq_err *err);
+/* Stop them (before the store's connection closes). */
+void store_ckpt_stop(struct store *st);
 
 #endif

@@ -26,6 +26,16 @@ SOAK_LOAD_SESSION=1 puts the load clients in a session of their own: Linux's aut
 share, as a unit's cgroup and the users' are separate on a real machine (default 0: they share the daemon's).
 SOAK_SIM_SESSION=1 does the same for acq-sim, which stands for controllers and a laser with processors of their
 own (default 0: it shares the daemon's CPU group, and the daemon's work for the clients delays the "hardware").
+Every point whose gap exceeds the same point's in the control sweep by more than 50 ms explains itself (a
+"stall, sweep N point K" line): the daemon logs at debug level, per point, where the real time since the previous
+commit went (daemon/executor_stall.c: what the executor waited for by phase — laser off, move, settle, dark,
+exposure —, its own steps and database writes, WAL checkpoints (off the loop), the loop's callbacks (device
+completions, the executor's, the rest: clients, plans), timers run late, the loop thread's wait for a CPU, and per
+device port its requests' wait in the queue, run time with the thread's CPU wait, and wait for the loop), and the
+soak adds acq-sim's wait for a CPU over the same interval (its threads' schedstat, sampled); each line compares
+them with the control's and names the largest growth as the cause (the daemon's own: database writes on the loop,
+the loop busy with other callbacks, requests queued on a device thread, completions waiting for the loop; or the
+host's: the loop, the device threads or acq-sim waiting for a CPU). The results block counts the causes.
 Also printed: the scheduler's run and wait-for-a-CPU times of the simulator's and the daemon's threads during
 the loaded and the control sweeps.
 SOAK_OBSERVER_RATE sets daemon.observer_rate (requests per second per observer; 0: no limit, for comparison;
@@ -314,6 +324,94 @@ def pct(xs, p):
     return xs[min(len(xs) - 1, int(p / 100.0 * len(xs)))] if xs else float("nan")
 
 
+STALL_RE = re.compile(r"stall: sweep (\d+) point (\d+): ([0-9.]+) ms since the last commit \(monotonic ([0-9.]+)-"
+                      r"([0-9.]+)\); waited, ms: (.*?); executor (.*?); loop (.*?); ports: (.*)$", re.M)
+KV_RE = re.compile(r"([a-z_]+)=(-?[0-9.]+)")
+EXPLAIN_MS = 50.0  # a point whose gap exceeds the control's by more than this explains itself
+
+
+def stall_points(text, sid):
+    """The daemon's per-point stall lines (executor_stall.c, log_level debug) of sweep sid: {point: record}."""
+    out = {}
+    for m in STALL_RE.finditer(text):
+        if int(m.group(1)) != sid:
+            continue
+        rec = {"total": float(m.group(3)), "t0": float(m.group(4)), "t1": float(m.group(5)), "ports": {}}
+        for part in (m.group(6), m.group(7), m.group(8)):
+            rec.update({k: float(v) for k, v in KV_RE.findall(part)})
+        for port in m.group(9).split("; "):
+            name, _, rest = port.partition(": ")
+            if rest:
+                rec["ports"][name] = {k: float(v) for k, v in KV_RE.findall(rest)}
+        out[int(m.group(2))] = rec
+    return out
+
+
+def sched_between(samples, t0, t1, idx):
+    """Growth of column idx of the scheduler samples (monotonic time first) between t0 and t1, interpolated."""
+    def at(t):
+        prev = None
+        for s in samples:
+            if s[0] >= t:
+                if prev is None:
+                    return s[idx]
+                f = (t - prev[0]) / (s[0] - prev[0]) if s[0] > prev[0] else 1.0
+                return prev[idx] + f * (s[idx] - prev[idx])
+            prev = s
+        return prev[idx] if prev else 0.0
+    return max(0.0, at(t1) - at(t0)) * 1e3 if samples else float("nan")
+
+
+PHASES = ("laser_off", "verify", "homing", "move", "settle", "dark", "exposure", "acq", "retry", "other")
+CAUSES = (("daemon: database writes on the loop (commit fsync, WAL checkpoint)", "store"),
+          ("daemon: loop busy with other callbacks (clients, plans)", "loop_other"),
+          ("daemon: device requests queued behind others on their thread", "queued"),
+          ("daemon: device completions waiting for the loop", "completion_wait"),
+          ("host: the daemon's loop waited for a CPU", "loop_cpu_wait"),
+          ("host: the daemon's device threads waited for a CPU", "port_cpu_wait"),
+          ("host: acq-sim waited for a CPU", "sim_cpu_wait"))
+
+
+def figures(rec, samples):
+    ports = rec["ports"].values()
+    return {"store": rec.get("store", 0) + rec.get("checkpoint", 0), "loop_other": rec.get("loop_other", 0),
+            "queued": sum(p.get("queued", 0) for p in ports),
+            "completion_wait": sum(p.get("loop", 0) for p in ports),
+            "loop_cpu_wait": rec.get("loop_cpu_wait", 0), "port_cpu_wait": sum(p.get("cpu_wait", 0) for p in ports),
+            "sim_cpu_wait": sched_between(samples, rec["t0"], rec["t1"], 1),
+            "device_run": sum(p.get("run", 0) for p in ports)}
+
+
+def explain(k, excess_ms, lrec, crec, lsamp, csamp):
+    """One stalled point: its phases and causes under load against the same point in the control sweep; the
+    cause is the largest growth among the daemon's and the host's figures (they can overlap: all are shown)."""
+    if not lrec or not crec:
+        return "point %d: +%.0f ms over the control; no stall record (log_level debug?)" % (k, excess_ms), "unknown"
+    grew = sorted(((lrec.get(p, 0) - crec.get(p, 0), p) for p in PHASES), reverse=True)
+    lf, cf = figures(lrec, lsamp), figures(crec, csamp)
+    d = {key: lf[key] - cf[key] for key in lf}
+    causes = sorted(((d[key], label) for label, key in CAUSES if d[key] == d[key]), reverse=True)
+    cause = causes[0][1] if causes and causes[0][0] > 0.25 * excess_ms else \
+        "not in the daemon's figures (device time: the simulator)" if d["device_run"] > 0.5 * excess_ms else \
+        "unexplained"
+    ports = "; ".join("%s queued %+.0f run %+.0f (cpu wait %+.0f) loop %+.0f" % (
+        n, p.get("queued", 0) - crec["ports"].get(n, {}).get("queued", 0),
+        p.get("run", 0) - crec["ports"].get(n, {}).get("run", 0),
+        p.get("cpu_wait", 0) - crec["ports"].get(n, {}).get("cpu_wait", 0),
+        p.get("loop", 0) - crec["ports"].get(n, {}).get("loop", 0)) for n, p in lrec["ports"].items() if p.get("n"))
+    text = ("point %d: gap %.0f ms vs %.0f ms in the control (+%.0f ms at commit times); phases grew %s; "
+            "store %+.0f ms (checkpoints %d: %.0f ms), loop callbacks %+.0f (max %.0f ms; others' %+.0f), timers "
+            "late %+.0f (max %.0f ms), loop waited for a CPU %+.0f, acq-sim waited for a CPU %+.0f ms; ports (ms "
+            "vs control): %s; cause: %s" % (
+                k, lrec["total"], crec["total"], excess_ms,
+                ", ".join("%s %+.0f" % (p, v) for v, p in grew[:3] if abs(v) >= 1) or "none",
+                d["store"], lrec.get("checkpoints", 0), lrec.get("checkpoint", 0),
+                lrec.get("callbacks", 0) - crec.get("callbacks", 0), lrec.get("callback_max", 0), d["loop_other"],
+                lrec.get("timers_late", 0) - crec.get("timers_late", 0), lrec.get("timer_late_max", 0),
+                d["loop_cpu_wait"], d["sim_cpu_wait"], ports, cause))
+    return text, cause
+
+
 WORKERS = [(w_flood, OBSERVERS[0]), (w_flood, OBSERVERS[0]), (w_flood, OBSERVERS[1]), (w_flood, OBSERVERS[1]),
            (w_noread, OBSERVERS[2]), (w_noread, OBSERVERS[2]), (w_slots, OBSERVERS[3]), (w_slots, OBSERVERS[4]),
            (w_huge, OBSERVERS[5]), (w_huge, OBSERVERS[5]), (w_half, OBSERVERS[1]), (w_config, OBSERVERS[0])]
@@ -384,6 +482,10 @@ def main():
                 daemon_extra="  observers: [%s]\n%s" % (", ".join(OBSERVERS), "  observer_rate: %s\n" % OBSERVER_RATE
                                                       if OBSERVER_RATE is not None else ""),
                 sim_session=SIM_SESSION)
+    with open(b.conf) as f:  # the per-point stall lines (executor_stall.c) are logged at debug level
+        conf = f.read()
+    with open(b.conf, "w") as f:
+        f.write(conf.replace("log_level: info", "log_level: debug"))
     os.chmod(b.dir, 0o755)
     load = None
     try:
@@ -424,6 +526,7 @@ def main():
             rss.append(rss_mb(b.daemon.pid))
 
         paused = []
+        samples = {}
 
         sched = {"load": [0.0] * 6, "control": [0.0] * 6}
 
@@ -446,7 +549,10 @@ def main():
             if not r.get("ok"):
                 raise AssertionError("sweep.start %s: %s" % (name, r))
             sid = int(r["sweep"])
+            samp = samples[sid] = []  # acq-sim's scheduler times along the sweep, for its stalled points
             while True:
+                run_s, wait_s = sched_times(b.sim.pid)
+                samp.append((time.monotonic(), wait_s, run_s))
                 probe(into)
                 st = good.req("sweep.show", sweep=sid)
                 state = st["sweep"]["state"] if st.get("ok") else "?"
@@ -475,7 +581,7 @@ def main():
 
         load_end = t_start + SECONDS
         excess, excess_ctl, load_gaps, ctl_gaps, sweeps, points = [], [], [], [], 0, 0
-        per_sweep, loads = [], []
+        per_sweep, loads, explained = [], [], []
         while time.time() < load_end or sweeps == 0:
             load = start_load(b.sock)
             sid, g = drive("soak-%d" % sweeps, lat, load_end + max(600, SECONDS), "load")
@@ -494,6 +600,16 @@ def main():
             excess += ex_b
             excess_ctl += ex_c
             per_sweep.append(max(ex_c))
+            text = b.daemon_text()
+            lrecs, crecs = stall_points(text, sid), stall_points(text, csid)
+            for k in sorted(g):
+                if k in cg and 1e3 * (g[k] - cg[k]) > EXPLAIN_MS:
+                    line, cause = explain(k, 1e3 * (g[k] - cg[k]), lrecs.get(k), crecs.get(k), samples.get(sid),
+                                          samples.get(csid))
+                    explained.append((1e3 * (g[k] - cg[k]), cause))
+                    print("    stall, sweep %d %s" % (sid, line), flush=True)
+            samples.pop(sid, None)
+            samples.pop(csid, None)
             print("  sweep %d under load: max gap %.0f ms (%s); control sweep %d beside it: max gap %.0f ms (%s); "
                   "largest excess of a point's gap over the same point in the control %.0f ms, over the baseline "
                   "%.0f ms; status p99 so far %.1f ms; RSS %.1f MB" % (
@@ -546,6 +662,12 @@ def main():
         print("  daemon RSS peak: %.1f MB, goal < 64 MB: %s" % (max(rss), verdict(max(rss) < 64)))
         print("  sweeps paused by device faults: %d; laser requests > 2 keep-alive periods: %d; laser faults: %d" % (
             len(paused), len(re.findall(r"laser: request \d+ took", text)), len(re.findall(r"stopped emitting", text))))
+        causes = {}
+        for ms, cause in explained:
+            causes.setdefault(cause, []).append(ms)
+        print("  stall attribution: %d points over %.0f ms beyond the control%s" % (
+            len(explained), EXPLAIN_MS, "".join("; %s: %d (max +%.0f ms)" % (c, len(v), max(v))
+                                                for c, v in sorted(causes.items(), key=lambda kv: -max(kv[1])))))
         print("soak: %s" % ("all goals met" if ok else "GOALS MISSED"))
         return 0 if ok else 1
     finally:
