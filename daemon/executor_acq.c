@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "daemon/crashpoint.h"
 #include "daemon/stall.h"
 #include "daemon/store.h"
 
@@ -514,6 +515,7 @@ static void commit_reference(struct ex *x, double now)
 	/* Paused in the store before the marker: a crash in between measures the reference again. */
 	if (x->cfg.pause_after_reference)
 		ex_set_db_state(x, "paused");
+	crash_point("reference_stored"); /* the window the kill tests probe: spectra in, marker not */
 	ex_stall_reset(x);
 	memcpy(x->ref_rate, x->merged, sizeof *x->ref_rate);
 	x->have_ref = true;
