@@ -140,7 +140,7 @@ static void dispatch(struct port *p)
 		if (!r)
 			return;
 		stall_port_req(p->name, r->ended_at - r->took_s - r->submitted_at, r->took_s, r->on_cpu_s,
-			       r->cpu_wait_s, mono_now() - r->ended_at);
+			       r->cpu_wait_s, mono_now() - r->ended_at, r->yields);
 		r->done(r);
 	}
 }
@@ -182,6 +182,7 @@ int port_new(struct loop *lp, const char *name, struct port **out, struct acq_er
 		free(p);
 		return -1;
 	}
+	loop_fd_urgent(lp, p->efd); /* completions are the devices' answers the sweep waits for */
 	int e = pthread_create(&p->thread, NULL, thread_main, p);
 	if (e) {
 		loop_fd_del(lp, p->efd);
@@ -209,7 +210,15 @@ void port_submit(struct port *p, struct port_req *r)
 	pthread_mutex_lock(&p->mu);
 	r->gen = p->interrupt_gen;
 	r->submitted_at = mono_now();
-	push(&p->head, &p->tail, r);
+	if (r->yields || !p->tail || !p->tail->yields) {
+		push(&p->head, &p->tail, r);
+	} else { /* before the first yielding request */
+		struct port_req **at = &p->head;
+		while (*at && !(*at)->yields)
+			at = &(*at)->next;
+		r->next = *at;
+		*at = r;
+	}
 	p->npending++;
 	pthread_cond_signal(&p->cv);
 	pthread_mutex_unlock(&p->mu);

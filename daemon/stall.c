@@ -48,7 +48,7 @@ void stall_timer_late(double late_s)
 }
 
 void stall_port_req(const char *name, double queued_s, double run_s, double cpu_s, double cpu_wait_s,
-		    double dispatch_s)
+		    double dispatch_s, bool yields)
 {
 	struct stall_port *p = NULL;
 	for (int i = 0; i < acc.nports && !p; i++)
@@ -66,6 +66,8 @@ void stall_port_req(const char *name, double queued_s, double run_s, double cpu_
 	p->run_cpu += cpu_s;
 	p->run_wait += cpu_wait_s;
 	add_max(&p->dispatch, &p->max_dispatch, dispatch_s > 0 ? dispatch_s : 0);
+	if (yields)
+		p->yielding += run_s > 0 ? run_s : 0;
 }
 
 void stall_take(struct stall_acc *out)
@@ -86,10 +88,10 @@ void stall_ports_text(const struct stall_acc *a, char *buf, size_t n)
 		const struct stall_port *p = &a->port[i];
 		int w = snprintf(buf + len, n - len,
 				 "%s%s: n=%d queued=%.1f queued_max=%.1f run=%.1f run_max=%.1f cpu=%.1f cpu_wait=%.1f "
-				 "loop=%.1f loop_max=%.1f",
+				 "loop=%.1f loop_max=%.1f clients=%.1f",
 				 i ? "; " : "", p->name, p->requests, 1e3 * p->queued, 1e3 * p->max_queued, 1e3 * p->run,
 				 1e3 * p->max_run, 1e3 * p->run_cpu, 1e3 * p->run_wait, 1e3 * p->dispatch,
-				 1e3 * p->max_dispatch);
+				 1e3 * p->max_dispatch, 1e3 * p->yielding);
 		if (w < 0)
 			break;
 		len += (size_t)w;

@@ -6,6 +6,7 @@
 #ifndef STALL_H
 #define STALL_H
 
+#include <stdbool.h>
 #include <stddef.h>
 
 #define STALL_MAX_PORTS 8
@@ -18,6 +19,7 @@ struct stall_port {
 	double run_cpu;    /* of run: on a CPU */
 	double run_wait;   /* of run: waiting for a CPU */
 	double dispatch;   /* finished → its completion ran on the loop (the loop busy or not scheduled) */
+	double yielding;   /* of run: the requests that yield (clients' status reads, port.h) */
 	double max_run, max_queued, max_dispatch;
 };
 
@@ -44,9 +46,10 @@ void stall_executor(double s);
 void stall_store(double s);
 /* A timer ran late_s seconds after it was due (real seconds). */
 void stall_timer_late(double late_s);
-/* A request of port name: queued, ran (cpu, cpu_wait of it), then waited dispatch_s for the loop. */
+/* A request of port name: queued, ran (cpu, cpu_wait of it), then waited dispatch_s for the loop; yields: a
+ * client's read (port.h). */
 void stall_port_req(const char *name, double queued_s, double run_s, double cpu_s, double cpu_wait_s,
-		    double dispatch_s);
+		    double dispatch_s, bool yields);
 /* Copy the totals since the last take into out and start again. */
 void stall_take(struct stall_acc *out);
 /* The ports' part of acc as text ("spectrometer: n=3 queued=0.1 queued_max=0.1 run=40.2 ... loop=0.2

@@ -31,7 +31,8 @@ Every point whose gap exceeds the same point's in the control sweep by more than
 commit went (daemon/executor_stall.c: what the executor waited for by phase — laser off, move, settle, dark,
 exposure —, its own steps and database writes, WAL checkpoints (off the loop), the loop's callbacks (device
 completions, the executor's, the rest: clients, plans), timers run late, the loop thread's wait for a CPU, and per
-device port its requests' wait in the queue, run time with the thread's CPU wait, and wait for the loop), and the
+device port its requests' wait in the queue, run time with the thread's CPU wait and the part of clients' status
+reads, and wait for the loop), and the
 soak adds acq-sim's wait for a CPU over the same interval (its threads' schedstat, sampled); each line compares
 them with the control's and names the largest growth as the cause (the daemon's own: database writes on the loop,
 the loop busy with other callbacks, requests queued on a device thread, completions waiting for the loop; or the
@@ -365,17 +366,36 @@ def sched_between(samples, t0, t1, idx):
 PHASES = ("laser_off", "verify", "homing", "move", "settle", "dark", "exposure", "acq", "retry", "other")
 CAUSES = (("daemon: database writes on the loop (commit fsync, WAL checkpoint)", "store"),
           ("daemon: loop busy with other callbacks (clients, plans)", "loop_other"),
-          ("daemon: device requests queued behind others on their thread", "queued"),
+          ("daemon: device threads busy with clients' status reads", "client_reads"),
+          ("daemon: device requests queued on their thread (behind others, or the thread not scheduled)", "queued"),
           ("daemon: device completions waiting for the loop", "completion_wait"),
           ("host: the daemon's loop waited for a CPU", "loop_cpu_wait"),
           ("host: the daemon's device threads waited for a CPU", "port_cpu_wait"),
           ("host: acq-sim waited for a CPU", "sim_cpu_wait"))
 
 
+def pick_cause(d, excess_ms):
+    """The cause named for a stalled point, from the growths d over the control (ms). Ordered rules, as the
+    figures overlap: a loop that waited for a CPU also runs its timers and completions late, so the loop's own
+    lateness counts as the daemon's only when the loop was on a CPU; the first rule whose figure reaches its
+    share of the excess wins, else the largest growth."""
+    label = dict((key, text) for text, key in CAUSES)
+    for key, share in (("store", 0.5), ("client_reads", 0.25), ("loop_cpu_wait", 0.5), ("loop_other", 0.5),
+                       ("completion_wait", 0.5), ("sim_cpu_wait", 0.5), ("port_cpu_wait", 0.5), ("queued", 0.5)):
+        if d[key] == d[key] and d[key] >= share * excess_ms:
+            return label[key]
+    best = max(((d[key], text) for text, key in CAUSES if d[key] == d[key]), default=(0, ""))
+    if best[0] > 0.25 * excess_ms:
+        return best[1]
+    return ("not in the daemon's figures (device time: the simulator)" if d["device_run"] > 0.5 * excess_ms
+            else "unexplained")
+
+
 def figures(rec, samples):
     ports = rec["ports"].values()
     return {"store": rec.get("store", 0) + rec.get("checkpoint", 0), "loop_other": rec.get("loop_other", 0),
             "queued": sum(p.get("queued", 0) for p in ports),
+            "client_reads": sum(p.get("clients", 0) for p in ports),
             "completion_wait": sum(p.get("loop", 0) for p in ports),
             "loop_cpu_wait": rec.get("loop_cpu_wait", 0), "port_cpu_wait": sum(p.get("cpu_wait", 0) for p in ports),
             "sim_cpu_wait": sched_between(samples, rec["t0"], rec["t1"], 1),
@@ -390,14 +410,12 @@ def explain(k, excess_ms, lrec, crec, lsamp, csamp):
     grew = sorted(((lrec.get(p, 0) - crec.get(p, 0), p) for p in PHASES), reverse=True)
     lf, cf = figures(lrec, lsamp), figures(crec, csamp)
     d = {key: lf[key] - cf[key] for key in lf}
-    causes = sorted(((d[key], label) for label, key in CAUSES if d[key] == d[key]), reverse=True)
-    cause = causes[0][1] if causes and causes[0][0] > 0.25 * excess_ms else \
-        "not in the daemon's figures (device time: the simulator)" if d["device_run"] > 0.5 * excess_ms else \
-        "unexplained"
-    ports = "; ".join("%s queued %+.0f run %+.0f (cpu wait %+.0f) loop %+.0f" % (
+    cause = pick_cause(d, excess_ms)
+    ports = "; ".join("%s queued %+.0f run %+.0f (cpu wait %+.0f; clients' reads %+.0f) loop %+.0f" % (
         n, p.get("queued", 0) - crec["ports"].get(n, {}).get("queued", 0),
         p.get("run", 0) - crec["ports"].get(n, {}).get("run", 0),
         p.get("cpu_wait", 0) - crec["ports"].get(n, {}).get("cpu_wait", 0),
+        p.get("clients", 0) - crec["ports"].get(n, {}).get("clients", 0),
         p.get("loop", 0) - crec["ports"].get(n, {}).get("loop", 0)) for n, p in lrec["ports"].items() if p.get("n"))
     text = ("point %d: gap %.0f ms vs %.0f ms in the control (+%.0f ms at commit times); phases grew %s; "
             "store %+.0f ms (checkpoints %d: %.0f ms), loop callbacks %+.0f (max %.0f ms; others' %+.0f), timers "
