@@ -21,7 +21,7 @@ static bool refused(const char *path)
 	if (strlen(path) >= sizeof a.sun_path)
 		return false;
 	strcpy(a.sun_path, path);
-	int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0); /* a full backlog: EAGAIN, kept */
 	if (fd < 0)
 		return false;
 	bool r = connect(fd, (struct sockaddr *)&a, sizeof a) && errno == ECONNREFUSED;
