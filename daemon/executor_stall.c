@@ -46,6 +46,11 @@ void ex_stall_reset(struct ex *x)
 	x->stall_from = x->stall_last = stall_now();
 	x->stall_cpu_wait0 = loop_cpu_wait();
 	x->stall_bucket = bucket(x);
+	double max_s;
+	x->stall_ck_runs = 0;
+	x->stall_ck_s = 0;
+	if (x->st) /* the checkpoints from here on (the store's totals run since the daemon started) */
+		store_ckpt_stats(x->st, &x->stall_ck_runs, &x->stall_ck_s, &max_s);
 }
 
 double ex_step(struct ex *x, double now)
