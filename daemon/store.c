@@ -44,6 +44,12 @@ int store_exec(struct store *st, const char *sql, struct acq_err *err)
 
 int store_tx_end(struct store *st, int rc, int64_t row, int64_t *id, struct acq_err *err)
 {
+	if (st->group) {
+		st->group_failed |= rc != 0;
+		if (rc == 0 && id)
+			*id = row;
+		return rc ? -1 : 0;
+	}
 	if (rc == 0 && store_exec(st, "COMMIT", err) == 0) {
 		if (id)
 			*id = row;
