@@ -25,7 +25,7 @@ static long file_size(const char *path)
 	return stat(path, &sb) ? -1 : (long)sb.st_size;
 }
 
-/* 1100 spectra (~4400 pages, four times the threshold): the thread checkpointed (its count grew, which SQLite's own
+/* 1100 spectra (~4400 pages, far past the threshold): the thread checkpointed (its count grew, which SQLite's own
  * checkpoint would not do) and the WAL restarted from its beginning instead of growing to ~18 MB. */
 static void test_checkpoints_off_the_committing_thread(void **state)
 {
