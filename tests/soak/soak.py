@@ -34,7 +34,7 @@ completions, the executor's, the rest: clients, plans), timers run late, the loo
 device port its requests' wait in the queue, run time with the thread's CPU wait and the part of clients' status
 reads, and wait for the loop), and the
 soak adds acq-sim's wait for a CPU over the same interval (its threads' schedstat, sampled); each line compares
-them with the control's and names the largest growth as the cause (the daemon's own: database writes on the loop,
+them with the control's and names the cause by ordered rules (the daemon's own: its executor steps (a commit's database writes),
 the loop busy with other callbacks, requests queued on a device thread, completions waiting for the loop; or the
 host's: the loop, the device threads or acq-sim waiting for a CPU). The results block counts the causes.
 Also printed: the scheduler's run and wait-for-a-CPU times of the simulator's and the daemon's threads during
@@ -364,7 +364,7 @@ def sched_between(samples, t0, t1, idx):
 
 
 PHASES = ("laser_off", "verify", "homing", "move", "settle", "dark", "exposure", "acq", "retry", "other")
-CAUSES = (("daemon: database writes on the loop (commit fsync, WAL checkpoint)", "store"),
+CAUSES = (("daemon: the executor's own steps on the loop (the previous point's commit: database writes)", "executor"),
           ("daemon: loop busy with other callbacks (clients, plans)", "loop_other"),
           ("daemon: device threads busy with clients' status reads", "client_reads"),
           ("daemon: device requests queued on their thread (behind others, or the thread not scheduled)", "queued"),
@@ -380,7 +380,7 @@ def pick_cause(d, excess_ms):
     lateness counts as the daemon's only when the loop was on a CPU; the first rule whose figure reaches its
     share of the excess wins, else the largest growth."""
     label = dict((key, text) for text, key in CAUSES)
-    for key, share in (("store", 0.5), ("client_reads", 0.25), ("loop_cpu_wait", 0.5), ("loop_other", 0.5),
+    for key, share in (("executor", 0.5), ("client_reads", 0.25), ("loop_cpu_wait", 0.5), ("loop_other", 0.5),
                        ("completion_wait", 0.5), ("sim_cpu_wait", 0.5), ("port_cpu_wait", 0.5), ("queued", 0.5)):
         if d[key] == d[key] and d[key] >= share * excess_ms:
             return label[key]
@@ -393,7 +393,7 @@ def pick_cause(d, excess_ms):
 
 def figures(rec, samples):
     ports = rec["ports"].values()
-    return {"store": rec.get("store", 0) + rec.get("checkpoint", 0), "loop_other": rec.get("loop_other", 0),
+    return {"executor": rec.get("steps", 0), "loop_other": rec.get("loop_other", 0),
             "queued": sum(p.get("queued", 0) for p in ports),
             "client_reads": sum(p.get("clients", 0) for p in ports),
             "completion_wait": sum(p.get("loop", 0) for p in ports),
@@ -402,9 +402,13 @@ def figures(rec, samples):
             "device_run": sum(p.get("run", 0) for p in ports)}
 
 
-def explain(k, excess_ms, lrec, crec, lsamp, csamp):
+def explain(k, excess_ms, lrecs, crecs, lsamp, csamp):
     """One stalled point: its phases and causes under load against the same point in the control sweep; the
-    cause is the largest growth among the daemon's and the host's figures (they can overlap: all are shown)."""
+    cause is the largest growth among the daemon's and the host's figures (they can overlap: all are shown).
+    The gap (done_at: the point's last spectrum) spans the end of the previous point's commit, so the executor's
+    steps of this record (which include that commit) and the previous point's database writes are shown."""
+    lrec, crec = lrecs.get(k), crecs.get(k)
+    lprev, cprev = lrecs.get(k - 1, {}), crecs.get(k - 1, {})
     if not lrec or not crec:
         return "point %d: +%.0f ms over the control; no stall record (log_level debug?)" % (k, excess_ms), "unknown"
     grew = sorted(((lrec.get(p, 0) - crec.get(p, 0), p) for p in PHASES), reverse=True)
@@ -417,13 +421,15 @@ def explain(k, excess_ms, lrec, crec, lsamp, csamp):
         p.get("cpu_wait", 0) - crec["ports"].get(n, {}).get("cpu_wait", 0),
         p.get("clients", 0) - crec["ports"].get(n, {}).get("clients", 0),
         p.get("loop", 0) - crec["ports"].get(n, {}).get("loop", 0)) for n, p in lrec["ports"].items() if p.get("n"))
-    text = ("point %d: gap %.0f ms vs %.0f ms in the control (+%.0f ms at commit times); phases grew %s; "
-            "store %+.0f ms (checkpoints %d: %.0f ms), loop callbacks %+.0f (max %.0f ms; others' %+.0f), timers "
+    text = ("point %d: +%.0f ms over the control between the points' last spectra (commit to commit %.0f vs %.0f "
+            "ms); phases grew %s; executor steps %+.0f ms (the previous commit's database writes %.0f vs %.0f ms; WAL "
+            "checkpoints off the loop %d: %.0f ms), loop callbacks %+.0f (max %.0f ms; others' %+.0f), timers "
             "late %+.0f (max %.0f ms), loop waited for a CPU %+.0f, acq-sim waited for a CPU %+.0f ms; ports (ms "
             "vs control): %s; cause: %s" % (
-                k, lrec["total"], crec["total"], excess_ms,
+                k, excess_ms, lrec["total"], crec["total"],
                 ", ".join("%s %+.0f" % (p, v) for v, p in grew[:3] if abs(v) >= 1) or "none",
-                d["store"], lrec.get("checkpoints", 0), lrec.get("checkpoint", 0),
+                d["executor"], lprev.get("store", float("nan")), cprev.get("store", float("nan")),
+                lrec.get("checkpoints", 0), lrec.get("checkpoint", 0),
                 lrec.get("callbacks", 0) - crec.get("callbacks", 0), lrec.get("callback_max", 0), d["loop_other"],
                 lrec.get("timers_late", 0) - crec.get("timers_late", 0), lrec.get("timer_late_max", 0),
                 d["loop_cpu_wait"], d["sim_cpu_wait"], ports, cause))
@@ -622,8 +628,7 @@ def main():
             lrecs, crecs = stall_points(text, sid), stall_points(text, csid)
             for k in sorted(g):
                 if k in cg and 1e3 * (g[k] - cg[k]) > EXPLAIN_MS:
-                    line, cause = explain(k, 1e3 * (g[k] - cg[k]), lrecs.get(k), crecs.get(k), samples.get(sid),
-                                          samples.get(csid))
+                    line, cause = explain(k, 1e3 * (g[k] - cg[k]), lrecs, crecs, samples.get(sid), samples.get(csid))
                     explained.append((1e3 * (g[k] - cg[k]), cause))
                     print("    stall, sweep %d %s" % (sid, line), flush=True)
             samples.pop(sid, None)
