@@ -3,13 +3,13 @@
 #include "daemon/app.h"
 
 #include <math.h>
-#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 #include <systemd/sd-daemon.h>
 
+#include "daemon/crashpoint.h"
 #include "daemon/devices.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
@@ -23,31 +23,15 @@ double app_wallclock(void)
 	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
-/* Crash injection for the kill tests: ACQ_CRASH_AT=STEP:N SIGKILLs the daemon right after the N-th
- * durable step STEP of this process (its event committed): a sweep event kind (start, reference, pause,
- * resume, fault, complete, ...), "point" (a point committed) or "recon" (a reconstruction event: exported,
- * a stage started, ...). Unset in production: no effect. */
+/* Crash injection for the kill tests (crashpoint.h): the durable steps are the events emitted here, once
+ * committed: a sweep event kind (start, reference, pause, resume, fault, complete, ...), "point" (a point committed)
+ * or "recon" (a reconstruction event: exported, a stage started, ...). */
 static void crash_hook(const char *event, json_t *data)
 {
-	static bool init;
-	static char step[32];
-	static int want, seen;
-	if (!init) {
-		init = true;
-		const char *e = getenv("ACQ_CRASH_AT");
-		if (e && sscanf(e, "%31[a-z_]:%d", step, &want) != 2)
-			step[0] = 0;
-	}
-	if (!step[0])
-		return;
-	const char *k = !strcmp(event, "sweep.progress") ? "point"
-			: !strcmp(event, "sweep.fault") ? "fault"
-			: !strcmp(event, "recon") ? "recon"
-			: !strcmp(event, "sweep.state") ? json_string_value(json_object_get(data, "event")) : NULL;
-	if (k && !strcmp(k, step) && ++seen == want) {
-		log_msg(LOG_WARNING, "ACQ_CRASH_AT=%s:%d: SIGKILL now", step, want);
-		raise(SIGKILL);
-	}
+	crash_point(!strcmp(event, "sweep.progress") ? "point"
+		    : !strcmp(event, "sweep.fault") ? "fault"
+		    : !strcmp(event, "recon") ? "recon"
+		    : !strcmp(event, "sweep.state") ? json_string_value(json_object_get(data, "event")) : NULL);
 }
 
 void app_emit(void *ctx, const char *event, json_t *data)

@@ -90,6 +90,7 @@ struct req *devices_req_new(struct devices *dv, int d, enum rop op, enum owner o
 	r->d = d;
 	r->op = op;
 	r->owner = owner;
+	r->pr.yields = owner == OWN_QUERY; /* a client's status read: the sweep's requests go first (port.h) */
 	r->gen = dv->slot[d].gen;
 	if (owner == OWN_OP)
 		r->seq = dv->op_gen;

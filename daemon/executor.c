@@ -388,6 +388,7 @@ int ex_start(struct ex *x, int first_step, bool resumed, double now, struct acq_
 	}
 	x->state = EX_RUNNING;
 	x->point_avg_s = NAN;
+	ex_stall_reset(x);
 	ex_set_db_state(x, "running");
 	if (resumed) {
 		struct acq_err lerr = { 0 };
@@ -551,7 +552,7 @@ static void run_suspended(struct ex *x, double now)
 	x->wake = x->retry_at;
 }
 
-double ex_step(struct ex *x, double now)
+double ex_step_run(struct ex *x, double now)
 {
 	/* Bounded work per call: a few transitions, then hand back to the loop. */
 	for (int guard = 0; guard < 16; guard++) {

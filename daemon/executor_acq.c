@@ -7,6 +7,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "daemon/crashpoint.h"
+#include "daemon/stall.h"
 #include "daemon/store.h"
 
 /* The point's acquisition starts over: no probe, no exposure times, no shot (its pending spectra untouched). */
@@ -513,6 +515,8 @@ static void commit_reference(struct ex *x, double now)
 	/* Paused in the store before the marker: a crash in between measures the reference again. */
 	if (x->cfg.pause_after_reference)
 		ex_set_db_state(x, "paused");
+	crash_point("reference_stored"); /* the window the kill tests probe: spectra in, marker not */
+	ex_stall_reset(x);
 	memcpy(x->ref_rate, x->merged, sizeof *x->ref_rate);
 	x->have_ref = true;
 	x->cfg.cal.ref_theta_o_deg = fabs(x->actual.det_theta);
@@ -532,6 +536,34 @@ static void commit_reference(struct ex *x, double now)
 	}
 	ex_begin_segment(x, now);
 	return;
+}
+
+/* The point's rows inside the store's group: the spectra, the calibrated sample, the completing spectrum (the
+ * point done). 0, or -1 with err and *what (the step that failed). */
+static int store_point(struct ex *x, int64_t pid, bool calibrated, const char **what, struct acq_err *err)
+{
+	for (int i = 0; i + 1 < x->npend; i++) {
+		if (put_spectrum(x, &x->pend[i], pid, false, NULL, err))
+			return -1;
+		x->stats.spectra++;
+	}
+	if (calibrated) {
+		float *fb = x->scratch, *fs = x->scratch + CALIB_MAX_GRID;
+		for (int k = 0; k < x->cal->n; k++) {
+			fb[k] = (float)x->cal->f[k];
+			fs[k] = (float)x->cal->u[k];
+		}
+		*what = "storing the calibrated sample of point";
+		if (store_calibrated_put(x->st, x->sweep_id, pid, fb, fs, x->cal->n, err))
+			return -1;
+	}
+	if (x->npend > 0) {
+		*what = "completing point";
+		if (put_spectrum(x, &x->pend[x->npend - 1], pid, true, NULL, err))
+			return -1;
+		x->stats.spectra++;
+	}
+	return 0;
 }
 
 /* The point's exposures are in: merge, check saturation, calibrate, commit, go on. */
@@ -605,6 +637,7 @@ static void commit_point(struct ex *x, double now)
 	}
 	int oi = -1;
 	int64_t pid = 0;
+	double t_store = stall_now();
 	if (store_sweep_next_point(x->st, x->sweep_id, &oi, &pid, &err)) {
 		ex_failed(x, "reading the next point: %s", err.msg);
 		return;
@@ -613,31 +646,18 @@ static void commit_point(struct ex *x, double now)
 		ex_failed(x, "the database's next pending point is %d, the executor is at %d", oi, x->cur);
 		return;
 	}
-	for (int i = 0; i + 1 < x->npend; i++) {
-		if (put_spectrum(x, &x->pend[i], pid, false, NULL, &err)) {
-			ex_failed(x, "storing point %d: %s", x->cur, err.msg);
-			return;
-		}
-		x->stats.spectra++;
+	/* One transaction for the point: one commit on the loop, and the point is stored whole or not at all. */
+	const char *what = "storing point";
+	int rc = store_group_begin(x->st, &err);
+	if (!rc)
+		rc = store_point(x, pid, calibrated, &what, &err);
+	struct acq_err gerr = { 0 };
+	if (store_group_end(x->st, rc, rc ? NULL : &gerr) || rc) {
+		ex_failed(x, "%s %d: %s", rc ? what : "committing point", x->cur, rc ? err.msg : gerr.msg);
+		return;
 	}
-	if (calibrated) {
-		float *fb = x->scratch, *fs = x->scratch + CALIB_MAX_GRID;
-		for (int k = 0; k < x->cal->n; k++) {
-			fb[k] = (float)x->cal->f[k];
-			fs[k] = (float)x->cal->u[k];
-		}
-		if (store_calibrated_put(x->st, x->sweep_id, pid, fb, fs, x->cal->n, &err)) {
-			ex_failed(x, "storing the calibrated sample of point %d: %s", x->cur, err.msg);
-			return;
-		}
-	}
-	if (x->npend > 0) {
-		if (put_spectrum(x, &x->pend[x->npend - 1], pid, true, NULL, &err)) {
-			ex_failed(x, "completing point %d: %s", x->cur, err.msg);
-			return;
-		}
-		x->stats.spectra++;
-	}
+	stall_store(stall_now() - t_store);
+	ex_stall_report(x, x->cur);
 	ex_clear_pending(x);
 	x->point_faults = 0;
 	x->stats.points_done++;

@@ -22,6 +22,10 @@ enum phase {
 
 enum shot_kind { SHOT_PROBE, SHOT_DARK, SHOT_EXPOSE };
 
+/* What the executor waited for between two steps (ex_stall_step). */
+enum ex_stall { EX_STALL_LASER_OFF, EX_STALL_VERIFY, EX_STALL_HOMING, EX_STALL_MOVE, EX_STALL_SETTLE, EX_STALL_DARK,
+		EX_STALL_EXPOSURE, EX_STALL_ACQ, EX_STALL_RETRY, EX_STALL_OTHER, EX_STALL__COUNT };
+
 struct pending {
 	const char *kind;            /* "dark", "sample", "reference", "beam" */
 	struct spectro_frame *frame;
@@ -119,6 +123,11 @@ struct ex {
 
 	/* progress */
 	double point_started, point_avg_s;
+	/* where the real time since the last commit went (ex_stall_*, logged at debug level with stall.h's) */
+	double stall_in[EX_STALL__COUNT];
+	double stall_from, stall_last, stall_cpu_wait0, stall_ck_s;
+	unsigned long stall_ck_runs;
+	int stall_bucket;
 	struct ex_stats stats;
 };
 
@@ -126,6 +135,12 @@ struct ex {
 extern const char *const ex_dev_names[EX_DEV__COUNT];
 
 /* ---- core (executor.c) ---- */
+/* ex_step's state machine (ex_step in executor_stall.c counts the real time around it). */
+double ex_step_run(struct ex *x, double now);
+/* Start counting where the real time goes from now (a commit, a start). */
+void ex_stall_reset(struct ex *x);
+/* After a point's commit: log (debug level) where the real time since the previous commit went. */
+void ex_stall_report(struct ex *x, int point);
 /* Unix seconds for the records (ops.wall, else the system clock). */
 double ex_wall_now(struct ex *x);
 /* Record an event in the store and tell the sink (a store failure is not fatal). */

@@ -7,10 +7,16 @@
 #include <stdlib.h>
 #include <time.h>
 
+#include "daemon/stall.h"
+
+/* Real seconds of fd callbacks in one round before the due timers and the urgent fds get a turn in between. */
+#define LOOP_SLICE_S 0.002
+
 struct loop_fd {
 	int fd;
 	short events;
 	bool dead;
+	bool urgent;      /* loop_fd_urgent() */
 	loop_fd_cb cb;
 	void *arg;
 };
@@ -196,7 +202,37 @@ static int run_timers(struct loop *lp)
 		} else {
 			lp->timers[best] = lp->timers[--lp->ntimers];
 		}
+		double t0 = stall_now();
+		stall_timer_late((loop_now(lp) - t.due) / lp->clk.rate);
 		t.cb(lp, t.arg);
+		stall_callback(stall_now() - t0);
+		ran++;
+	}
+	return ran;
+}
+
+void loop_fd_urgent(struct loop *lp, int fd)
+{
+	struct loop_fd *f = find_fd(lp, fd);
+	if (f)
+		f->urgent = true;
+}
+
+/* In the middle of a round of fd callbacks: the timers due, then the urgent fds ready now (their own poll). */
+static int run_urgent(struct loop *lp)
+{
+	int ran = run_timers(lp);
+	for (size_t i = 0; i < lp->nfds; i++) {
+		if (!lp->fds[i].urgent || lp->fds[i].dead)
+			continue;
+		struct pollfd p = { .fd = lp->fds[i].fd, .events = lp->fds[i].events };
+		if (poll(&p, 1, 0) != 1 || !p.revents)
+			continue;
+		loop_fd_cb cb = lp->fds[i].cb; /* the callback may add fds (the array moves) */
+		void *arg = lp->fds[i].arg;
+		double t0 = stall_now();
+		cb(lp, p.fd, p.revents, arg);
+		stall_callback(stall_now() - t0);
 		ran++;
 	}
 	return ran;
@@ -236,7 +272,13 @@ int loop_run_once(struct loop *lp, double max_wait_s)
 	int rc = poll(lp->pfds, (nfds_t)n, timeout_ms);
 	if (rc < 0)
 		return errno == EINTR ? ran : -1;
+	double slice_from = stall_now();
 	for (size_t i = 0; i < n && rc > 0; i++) {
+		/* A long round (many clients) does not hold up the sweep's steps and the devices' completions. */
+		if (stall_now() - slice_from > LOOP_SLICE_S) {
+			ran += run_urgent(lp);
+			slice_from = stall_now();
+		}
 		short re = lp->pfds[i].revents;
 		if (!re)
 			continue;
@@ -245,7 +287,9 @@ int loop_run_once(struct loop *lp, double max_wait_s)
 		struct loop_fd *f = &lp->fds[i];
 		if (f->dead || f->fd != lp->pfds[i].fd)
 			continue;
+		double t0 = stall_now();
 		f->cb(lp, f->fd, re, f->arg);
+		stall_callback(stall_now() - t0);
 		ran++;
 	}
 	ran += run_timers(lp);

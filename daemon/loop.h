@@ -44,6 +44,10 @@ double loop_monotonic(void *ctx);
 int loop_fd_add(struct loop *lp, int fd, short events, loop_fd_cb cb, void *arg, struct acq_err *err);
 /* Change the events watched on a registered fd. 0 or -1 if fd is not registered. */
 int loop_fd_events(struct loop *lp, int fd, short events);
+/* Mark a registered fd urgent: when a round of fd callbacks runs long (many ready clients), the due timers run
+ * and the urgent fds are polled again and served between two callbacks, not after the whole round. An urgent
+ * fd's callback may then also see readiness the poll reported before it was served: it must read non-blocking. */
+void loop_fd_urgent(struct loop *lp, int fd);
 /* Stop watching fd (safe from inside callbacks). Unknown fd is ignored. */
 void loop_fd_del(struct loop *lp, int fd);
 

@@ -15,6 +15,7 @@
 
 #include "daemon/cputime.h"
 #include "daemon/loop.h"
+#include "daemon/stall.h"
 
 struct port {
 	struct loop *lp;
@@ -109,7 +110,8 @@ static void *thread_main(void *arg)
 		cputime_thread(&c0);
 		double t0 = mono_now();
 		r->run(r, p);
-		r->took_s = mono_now() - t0;
+		r->ended_at = mono_now();
+		r->took_s = r->ended_at - t0;
 		cputime_thread(&c1);
 		r->on_cpu_s = c1.on_cpu - c0.on_cpu;
 		r->cpu_wait_s = c1.waiting - c0.waiting;
@@ -137,6 +139,8 @@ static void dispatch(struct port *p)
 		pthread_mutex_unlock(&p->mu);
 		if (!r)
 			return;
+		stall_port_req(p->name, r->ended_at - r->took_s - r->submitted_at, r->took_s, r->on_cpu_s,
+			       r->cpu_wait_s, mono_now() - r->ended_at, r->yields);
 		r->done(r);
 	}
 }
@@ -148,7 +152,9 @@ static void on_efd(struct loop *lp, int fd, short revents, void *arg)
 	uint64_t n;
 	if (read(fd, &n, sizeof n) < 0 && errno != EAGAIN)
 		return;
+	double t0 = mono_now();
 	dispatch(arg);
+	stall_devices(mono_now() - t0);
 }
 
 int port_new(struct loop *lp, const char *name, struct port **out, struct acq_err *err)
@@ -176,6 +182,7 @@ int port_new(struct loop *lp, const char *name, struct port **out, struct acq_er
 		free(p);
 		return -1;
 	}
+	loop_fd_urgent(lp, p->efd); /* completions are the devices' answers the sweep waits for */
 	int e = pthread_create(&p->thread, NULL, thread_main, p);
 	if (e) {
 		loop_fd_del(lp, p->efd);
@@ -202,7 +209,16 @@ void port_submit(struct port *p, struct port_req *r)
 {
 	pthread_mutex_lock(&p->mu);
 	r->gen = p->interrupt_gen;
-	push(&p->head, &p->tail, r);
+	r->submitted_at = mono_now();
+	if (r->yields || !p->tail || !p->tail->yields) {
+		push(&p->head, &p->tail, r);
+	} else { /* before the first yielding request */
+		struct port_req **at = &p->head;
+		while (*at && !(*at)->yields)
+			at = &(*at)->next;
+		r->next = *at;
+		*at = r;
+	}
 	p->npending++;
 	pthread_cond_signal(&p->cv);
 	pthread_mutex_unlock(&p->mu);

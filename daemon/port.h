@@ -21,6 +21,13 @@ struct port_req {
 	/* Filled by the port's thread around run(), for diagnostics (cputime.h): real seconds run() took, and of
 	 * them those the thread ran on a CPU and those it waited for one (the rest it slept: device, timeout). */
 	double took_s, on_cpu_s, cpu_wait_s;
+	/* Real monotonic seconds it was submitted and its run ended (stall.h: its wait in the queue and for the
+	 * loop). */
+	double submitted_at, ended_at;
+	/* Set by the submitter: a request others may overtake (a client's status read). The requests without it are
+	 * queued ahead of those with it (each kind stays first in, first out), so a client's reads never delay the
+	 * sweep's commands on a device's line. */
+	bool yields;
 	/* the port's: */
 	unsigned long gen;
 	struct port_req *next;
@@ -32,7 +39,7 @@ int port_new(struct loop *lp, const char *name, struct port **out, struct acq_er
  * and before the next queued request when due, so queued requests never delay it (only the one running may).
  * The first run is due at once. Call from the loop's thread; fn runs on the port's thread. */
 void port_set_tick(struct port *p, double period_s, void (*fn)(void *arg, struct port *p), void *arg);
-/* Queue r (FIFO). Never blocks. */
+/* Queue r (first in, first out; ahead of the yielding ones unless r yields too). Never blocks. */
 void port_submit(struct port *p, struct port_req *r);
 /* Ask the request running now (and those queued before this call) to end early: port_wait() returns at once
  * and port_interrupted() is true for them. Requests submitted afterwards run normally. */

@@ -44,6 +44,12 @@ int store_exec(struct store *st, const char *sql, struct acq_err *err)
 
 int store_tx_end(struct store *st, int rc, int64_t row, int64_t *id, struct acq_err *err)
 {
+	if (st->group) {
+		st->group_failed |= rc != 0;
+		if (rc == 0 && id)
+			*id = row;
+		return rc ? -1 : 0;
+	}
 	if (rc == 0 && store_exec(st, "COMMIT", err) == 0) {
 		if (id)
 			*id = row;
@@ -172,6 +178,8 @@ int store_open(const char *path, struct store **out, struct acq_err *err)
 	for (int i = 0; i < ST__COUNT; i++)
 		if (!(st->st[i] = store_prep(st, store_sql[i], err)))
 			goto fail;
+	if (store_ckpt_start(st, err))
+		goto fail;
 	*out = st;
 	return 0;
 fail:
@@ -186,6 +194,8 @@ void store_close(struct store *st)
 	for (int i = 0; i < ST__COUNT; i++)
 		sqlite3_finalize(st->st[i]);
 	if (st->db) {
+		if (!st->reader)
+			store_ckpt_stop(st);
 		if (!st->reader)
 			sqlite3_exec(st->db, "PRAGMA wal_checkpoint(TRUNCATE)", NULL, NULL, NULL);
 		sqlite3_close(st->db);

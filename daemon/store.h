@@ -177,4 +177,13 @@ int64_t store_recon_latest(struct store *st);
  * spectrometer's polynomial when known. NULL with ACQ_E_NOTFOUND if there is none. */
 json_t *store_spectrum_json(struct store *st, int64_t id, struct acq_err *err);
 
+/* Group the writes that follow, until store_group_end(), in one transaction (one commit): a point's spectra, its
+ * calibrated sample and its completion, stored whole or not at all (store_group.c). 0 or -1. */
+int store_group_begin(struct store *st, struct acq_err *err);
+/* End the group: commit when rc is 0 and no write in it failed, else roll all of it back. 0 or -1. */
+int store_group_end(struct store *st, int rc, struct acq_err *err);
+/* The WAL's checkpoints run so far on the store's own thread (store_ckpt.c): how many, their seconds in all, the
+ * longest (zeros where SQLite checkpoints on the committing thread instead). */
+void store_ckpt_stats(const struct store *st, unsigned long *runs, double *seconds, double *max_s);
+
 #endif

@@ -16,13 +16,17 @@ struct store {
 	char *path;
 	sqlite3_stmt *st[ST__COUNT];
 	bool reader;  /* store_open_reader(): read-only, no statements prepared, no checkpoint at close */
+	struct store_ckpt *ckpt; /* the WAL's checkpoints off the committing thread (store_ckpt.c) */
+	bool group, group_failed; /* store_group_begin(): the writes join its transaction; one of them failed */
 };
 
 /* err = "<path>: <what>: <SQLite's message>" (ACQ_E_IO); returns -1. */
 int store_db_err(struct store *st, struct acq_err *err, const char *what);
 /* Run SQL text (several statements allowed). 0 or -1 with err (err may be NULL). */
 int store_exec(struct store *st, const char *sql, struct acq_err *err);
-/* End the transaction begun with BEGIN: COMMIT when rc is 0, then *id = row (id may be NULL); else, or when the
+/* BEGIN IMMEDIATE, or nothing inside a group (store_group.c: the write joins the group's transaction). 0 or -1. */
+int store_tx_begin(struct store *st, struct acq_err *err);
+/* End the transaction begun with BEGIN (inside a group: only note a failure, the group ends it): COMMIT when rc is 0, then *id = row (id may be NULL); else, or when the
  * commit fails, ROLLBACK (err keeps the first failure's message). 0 or -1. */
 int store_tx_end(struct store *st, int rc, int64_t row, int64_t *id, struct acq_err *err);
 /* Prepare one statement; NULL with err. */
@@ -48,5 +52,10 @@ int store_points_insert(struct store *st, int64_t sweep_id, const struct store_p
 /* Bring an open read-write store's schema to STORE_SCHEMA_VERSION (store_migrate.c): a new database from
  * daemon/schema.sql, an older one step by step, each step one transaction. 0 or -1. */
 int store_migrate(struct store *st, struct acq_err *err);
+/* Take over the WAL's checkpoints of a read-write store: a thread of its own runs them (store_ckpt.c); where
+ * it cannot start, SQLite's own stay. 0. */
+int store_ckpt_start(struct store *st, struct acq_err *err);
+/* Stop them (before the store's connection closes). */
+void store_ckpt_stop(struct store *st);
 
 #endif

@@ -20,7 +20,7 @@ int store_spectrum_add(struct store *st, const struct store_spectrum *sp, int64_
 		return acq_errf(err, ACQ_E_INVAL, "store: spectrum without counts or with %d pixels", sp->npix);
 	if (sp->completes_point && sp->point_id <= 0)
 		return acq_errf(err, ACQ_E_INVAL, "store: completes_point without a point");
-	if (store_exec(st, "BEGIN IMMEDIATE", err))
+	if (store_tx_begin(st, err))
 		return -1;
 	int rc = -1;
 	int64_t sid = 0;

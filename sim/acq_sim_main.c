@@ -429,6 +429,10 @@ int main(int argc, char **argv)
 		if (yc_check_unknown(services, "sim.services", &err))
 			goto out;
 	}
+	/* Socket files that simulators killed before their clean-up left behind (SIGKILL, a crash). */
+	int stale = sim_stale_sockets_remove("/tmp");
+	if (stale > 0)
+		fprintf(stderr, "acq-sim: removed %d stale socket file(s) of simulators no longer running from /tmp\n", stale);
 	/* The detector arm starts parked away from the laser arm; the white reference is on the stage. */
 	world.laser_theta_deg = 0;
 	world.detector_theta_deg = 60;

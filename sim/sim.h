@@ -84,6 +84,9 @@ struct sim_service {
 
 /* Listen on a Unix stream socket at path (a stale socket file is replaced), non-blocking. fd or -1 with err. */
 int sim_listen_unix(const char *path, struct acq_err *err);
+/* Remove from dir the default socket files (acq-sim.<pid>.<service>.sock) whose simulator is gone (no process
+ * <pid>; sockets of this user only). Returns how many were removed (sim_stale.c). */
+int sim_stale_sockets_remove(const char *dir);
 
 /* Bench seconds now. */
 double sim_now(const struct sim_world *w);

@@ -6,7 +6,10 @@ manual `measure` on the simulated bench) and the time until the simulated laser 
    1 s (asserted < 1.2 s: 0.2 s for scheduling the simulator's loop on a loaded 2-core machine). Before the
    kill, emission must have lasted well past one keep-alive period (the refresh works); if it stopped, the
    daemon must have logged a late refresh (its laser thread or loop held off the CPU for more than the period:
-   the laser then rightly switches off), and the measurement is tried again (3 attempts).
+   the laser then rightly switches off), and the measurement is tried again (3 attempts). A stop later than
+   1.2 s counts only if acq-sim (which stands for the laser's own controller, timing on its own processor)
+   waited for a CPU during it by at least the excess (its schedstat); then the kill is repeated (3 kills), else
+   the test fails (seen: 1.232 s beside `stress-ng --cpu 4` at load 23).
 2. The unit's ExecStopPost= helper, `acquisitiond --laser-off`, run right after the kill: emission off when it
    returns, exit 0 (confirmed by the laser's status).
 Without the keep-alive the emission stays on after a SIGKILL until a new daemon opens the laser."""
@@ -37,6 +40,46 @@ def start_long_measure(b):
             raise AssertionError("the laser never emitted; daemon log:\n" + b.daemon_text()[-3000:])
         time.sleep(0.01)
     return c
+
+
+def emitting(b):
+    """A long measurement with the laser emitting, checked to stay on for two keep-alive periods (the daemon's
+    refresh works); its client connection."""
+    for attempt in range(1, 4):
+        mark = len(b.daemon_text())
+        c = start_long_measure(b)
+        time.sleep(2.0)  # two keep-alive periods: the daemon's refresh keeps it on
+        if emission(b):
+            return c
+        # Emission stopped while the daemon lived. Right only if the daemon's refreshes came late (its laser
+        # thread held off the CPU, or its loop silent): the daemon logs every such gap (> 2 refresh
+        # periods), skip and failure within a heartbeat (0.25 s). Without one, the refresh does not work.
+        time.sleep(0.5)
+        late = re.findall(r"laser keep-alive: ([0-9.]+ s between two refreshes[^\n]*|not refreshed[^\n]*|"
+                          r"\d+ failure[^\n]*)", b.daemon_text()[mark:])
+        assert late, "emission stopped while the daemon was alive and its keep-alive refreshes were on time"
+        L.say("attempt %d: the keep-alive expired after a late refresh the daemon logged (%s); again" % (
+            attempt, late[0]))
+        s = b.client()
+        r = s.req("stop")  # the measurement ends (its reply on c), the daemon is free for the next one
+        s.close()
+        assert r.get("ok"), "stop: %s" % r
+        c.read()
+        c.close()
+    raise AssertionError("three attempts, each with a late keep-alive refresh: the machine starves the laser's "
+                         "thread for more than a keep-alive period")
+
+
+def sim_cpu_wait(pid):
+    """Seconds acq-sim's threads have waited for a CPU so far (/proc/PID/task/*/schedstat)."""
+    total = 0
+    for tid in os.listdir("/proc/%d/task" % pid):
+        try:
+            with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
+                total += int(f.read().split()[1])
+        except (OSError, IndexError, ValueError):
+            pass
+    return total * 1e-9
 
 
 def time_to_off(b, limit):
@@ -76,36 +119,28 @@ def run():
         assert not ttys(b.sim.pid) and not ttys(b.daemon.pid), "a tty on the laser's link: acq-sim %s, daemon %s" % (
             ttys(b.sim.pid), ttys(b.daemon.pid))
         b.ctl("sample white")
-        for attempt in range(1, 4):
-            mark = len(b.daemon_text())
-            c = start_long_measure(b)
-            time.sleep(2.0)  # two keep-alive periods: the daemon's refresh keeps it on
-            if emission(b):
-                break
-            # Emission stopped while the daemon lived. Right only if the daemon's refreshes came late (its laser
-            # thread held off the CPU, or its loop silent): the daemon logs every such gap (> 2 refresh
-            # periods), skip and failure within a heartbeat (0.25 s). Without one, the refresh does not work.
-            time.sleep(0.5)
-            late = re.findall(r"laser keep-alive: ([0-9.]+ s between two refreshes[^\n]*|not refreshed[^\n]*|"
-                              r"\d+ failure[^\n]*)", b.daemon_text()[mark:])
-            assert late, "emission stopped while the daemon was alive and its keep-alive refreshes were on time"
-            L.say("attempt %d: the keep-alive expired after a late refresh the daemon logged (%s); again" % (
-                attempt, late[0]))
-            s = b.client()
-            r = s.req("stop")  # the measurement ends (its reply on c), the daemon is free for the next one
-            s.close()
-            assert r.get("ok"), "stop: %s" % r
-            c.read()
+        for kill in range(1, 4):
+            c = emitting(b)
+            w0 = sim_cpu_wait(b.sim.pid)
+            b.kill_daemon(signal.SIGKILL)
             c.close()
+            dt = time_to_off(b, 5.0)
+            waited = sim_cpu_wait(b.sim.pid) - w0
+            L.say("keep-alive: emission stopped %s after SIGKILL (acq-sim waited %.3f s for a CPU meanwhile)" % (
+                "%.3f s" % dt if dt is not None else "NOT within 5 s", waited))
+            assert dt is not None, "emission still on 5 s after the daemon was killed"
+            if dt < 1.2:
+                break
+            # Late. acq-sim stands for the laser's own controller, which keeps its time on its own processor: the
+            # expiry may come late only when the simulator itself was kept off the CPU, by at least the excess;
+            # then it is measured again (the bound stays).
+            assert dt - waited < 1.2, "emission stopped %.3f s after the kill (keep-alive 1 s); acq-sim waited only " \
+                "%.3f s for a CPU" % (dt, waited)
+            L.say("kill %d: late by the simulator's own wait for a CPU; again" % kill)
+            b.start_daemon()
         else:
-            raise AssertionError("three attempts, each with a late keep-alive refresh: the machine starves the laser's "
-                                 "thread for more than a keep-alive period")
-        b.kill_daemon(signal.SIGKILL)
-        c.close()
-        dt = time_to_off(b, 5.0)
-        L.say("keep-alive: emission stopped %s after SIGKILL" % ("%.3f s" % dt if dt is not None else "NOT within 5 s"))
-        assert dt is not None, "emission still on 5 s after the daemon was killed"
-        assert dt < 1.2, "emission stopped %.3f s after the kill (keep-alive 1 s)" % dt
+            raise AssertionError("three kills, each with acq-sim kept off the CPU past the bound: the machine starves "
+                                 "the simulated laser")
         assert "keep-alive expired" in open(b.sim_log, errors="replace").read(), "the simulator did not log the expiry"
 
         b.start_daemon()

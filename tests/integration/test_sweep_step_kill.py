@@ -3,7 +3,9 @@
 (ACQ_CRASH_AT=STEP:N: start, reference, the pause for the sample swap, the operator's resume, a committed point,
 complete, a reconstruction stage started) and restarted (daemon.auto_resume) each time; the sweep must end complete with every point once,
 integrity ok, and a restart after the reference must ask for the sample swap again before measuring any point
-(before the fix it resumed "after point 0 (reference reloaded)" and measured the white standard as the sample).
+(before the fix it resumed "after point 0 (reference reloaded)" and measured the white standard as the sample); killed
+between the reference's spectra and their marker (reference_stored, inside the executor's commit), the sweep is
+already paused in the database.
 A daemon killed while `brdf-recon fit` runs leaves no child behind (PR_SET_PDEATHSIG), the run is marked
 interrupted at the next start (not left `running`), and `recon start` is accepted again once, refused while
 that one runs. The random-time kills are tests/integration/test_sweep_crash.py."""
@@ -43,7 +45,7 @@ def start_with(b, step):
         try:
             L.Client(b.sock, 2).close()
             return
-        except OSError:
+        except (OSError, EOFError):  # EOF: killed between accepting this connection and its banner
             if time.time() - t0 > 15:
                 raise AssertionError("acquisitiond did not listen in 15 s")
             time.sleep(0.02)
@@ -119,7 +121,24 @@ def run():
         sid = db.execute("SELECT max(id) FROM sweeps").fetchone()[0]
         db.close()
         assert sid, "no sweep stored before the kill at start"
-        # 2. right after the reference is committed (before its pause: the window of the defect)
+        # 2a. between the reference's spectra and its marker (the "reference" event that lists them): the sweep is
+        # already paused in the database, so the swap step is durable from the spectra on
+        start_with(b, "reference_stored:1")
+        wait_killed(b, "reference_stored")
+        db = b.db()
+        state = db.execute("SELECT state FROM sweeps WHERE id = ?", (sid,)).fetchone()[0]
+        nref = db.execute("SELECT count(*) FROM spectra WHERE sweep_id = ? AND point_id IS NULL AND kind = "
+                          "'reference'", (sid,)).fetchone()[0]
+        marks = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'reference'",
+                           (sid,)).fetchone()[0]
+        db.close()
+        L.say("killed between the reference's spectra and its marker: sweep %s, %d reference spectra, %d markers" % (
+            state, nref, marks))
+        assert nref >= 1 and marks == 0, "not the window: %d reference spectra, %d markers" % (nref, marks)
+        assert state == "paused", "the sweep is %s in the database with its reference stored: the sample swap " \
+            "is not a durable state from the reference's spectra on" % state
+        # 2b. right after the reference is committed (before its pause: the window of the defect); the reference
+        # is measured again (its first spectra have no marker)
         start_with(b, "reference:1")
         wait_killed(b, "reference")
         # 3. restarted: it must ask for the swap again, with no point measured

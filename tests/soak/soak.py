@@ -26,6 +26,17 @@ SOAK_LOAD_SESSION=1 puts the load clients in a session of their own: Linux's aut
 share, as a unit's cgroup and the users' are separate on a real machine (default 0: they share the daemon's).
 SOAK_SIM_SESSION=1 does the same for acq-sim, which stands for controllers and a laser with processors of their
 own (default 0: it shares the daemon's CPU group, and the daemon's work for the clients delays the "hardware").
+Every point whose gap exceeds the same point's in the control sweep by more than 50 ms explains itself (a
+"stall, sweep N point K" line): the daemon logs at debug level, per point, where the real time since the previous
+commit went (daemon/executor_stall.c: what the executor waited for by phase — laser off, move, settle, dark,
+exposure —, its own steps and database writes, WAL checkpoints (off the loop), the loop's callbacks (device
+completions, the executor's, the rest: clients, plans), timers run late, the loop thread's wait for a CPU, and per
+device port its requests' wait in the queue, run time with the thread's CPU wait and the part of clients' status
+reads, and wait for the loop), and the
+soak adds acq-sim's wait for a CPU over the same interval (its threads' schedstat, sampled); each line compares
+them with the control's and names the cause by ordered rules (the daemon's own: its executor steps (a commit's database writes),
+the loop busy with other callbacks, requests queued on a device thread, completions waiting for the loop; or the
+host's: the loop, the device threads or acq-sim waiting for a CPU). The results block counts the causes.
 Also printed: the scheduler's run and wait-for-a-CPU times of the simulator's and the daemon's threads during
 the loaded and the control sweeps.
 SOAK_OBSERVER_RATE sets daemon.observer_rate (requests per second per observer; 0: no limit, for comparison;
@@ -314,6 +325,117 @@ def pct(xs, p):
     return xs[min(len(xs) - 1, int(p / 100.0 * len(xs)))] if xs else float("nan")
 
 
+STALL_RE = re.compile(r"stall: sweep (\d+) point (\d+): ([0-9.]+) ms since the last commit \(monotonic ([0-9.]+)-"
+                      r"([0-9.]+)\); waited, ms: (.*?); executor (.*?); loop (.*?); ports: (.*)$", re.M)
+KV_RE = re.compile(r"([a-z_]+)=(-?[0-9.]+)")
+EXPLAIN_MS = 50.0  # a point whose gap exceeds the control's by more than this explains itself
+
+
+def stall_points(text, sid):
+    """The daemon's per-point stall lines (executor_stall.c, log_level debug) of sweep sid: {point: record}."""
+    out = {}
+    for m in STALL_RE.finditer(text):
+        if int(m.group(1)) != sid:
+            continue
+        rec = {"total": float(m.group(3)), "t0": float(m.group(4)), "t1": float(m.group(5)), "ports": {}}
+        for part in (m.group(6), m.group(7), m.group(8)):
+            rec.update({k: float(v) for k, v in KV_RE.findall(part)})
+        for port in m.group(9).split("; "):
+            name, _, rest = port.partition(": ")
+            if rest:
+                rec["ports"][name] = {k: float(v) for k, v in KV_RE.findall(rest)}
+        out[int(m.group(2))] = rec
+    return out
+
+
+def sched_between(samples, t0, t1, idx):
+    """Growth of column idx of the scheduler samples (monotonic time first) between t0 and t1, interpolated."""
+    def at(t):
+        prev = None
+        for s in samples:
+            if s[0] >= t:
+                if prev is None:
+                    return s[idx]
+                f = (t - prev[0]) / (s[0] - prev[0]) if s[0] > prev[0] else 1.0
+                return prev[idx] + f * (s[idx] - prev[idx])
+            prev = s
+        return prev[idx] if prev else 0.0
+    return max(0.0, at(t1) - at(t0)) * 1e3 if samples else float("nan")
+
+
+PHASES = ("laser_off", "verify", "homing", "move", "settle", "dark", "exposure", "acq", "retry", "other")
+CAUSES = (("daemon: the executor's own steps on the loop (the previous point's commit: database writes)", "executor"),
+          ("daemon: loop busy with other callbacks (clients, plans)", "loop_other"),
+          ("daemon: device threads busy with clients' status reads", "client_reads"),
+          ("daemon: device requests queued on their thread (behind others, or the thread not scheduled)", "queued"),
+          ("daemon: device completions waiting for the loop", "completion_wait"),
+          ("host: the daemon's loop waited for a CPU", "loop_cpu_wait"),
+          ("host: the daemon's device threads waited for a CPU", "port_cpu_wait"),
+          ("host: acq-sim waited for a CPU", "sim_cpu_wait"))
+
+
+def pick_cause(d, excess_ms):
+    """The cause named for a stalled point, from the growths d over the control (ms). Ordered rules, as the
+    figures overlap: a loop that waited for a CPU also runs its timers and completions late, so the loop's own
+    lateness counts as the daemon's only when the loop was on a CPU; the first rule whose figure reaches its
+    share of the excess wins, else the largest growth."""
+    label = dict((key, text) for text, key in CAUSES)
+    for key, share in (("executor", 0.5), ("client_reads", 0.25), ("loop_cpu_wait", 0.5), ("loop_other", 0.5),
+                       ("completion_wait", 0.5), ("sim_cpu_wait", 0.5), ("port_cpu_wait", 0.5), ("queued", 0.5)):
+        if d[key] == d[key] and d[key] >= share * excess_ms:
+            return label[key]
+    best = max(((d[key], text) for text, key in CAUSES if d[key] == d[key]), default=(0, ""))
+    if best[0] > 0.25 * excess_ms:
+        return best[1]
+    return ("not in the daemon's figures (device time: the simulator)" if d["device_run"] > 0.5 * excess_ms
+            else "unexplained")
+
+
+def figures(rec, samples):
+    ports = rec["ports"].values()
+    return {"executor": rec.get("steps", 0), "loop_other": rec.get("loop_other", 0),
+            "queued": sum(p.get("queued", 0) for p in ports),
+            "client_reads": sum(p.get("clients", 0) for p in ports),
+            "completion_wait": sum(p.get("loop", 0) for p in ports),
+            "loop_cpu_wait": rec.get("loop_cpu_wait", 0), "port_cpu_wait": sum(p.get("cpu_wait", 0) for p in ports),
+            "sim_cpu_wait": sched_between(samples, rec["t0"], rec["t1"], 1),
+            "device_run": sum(p.get("run", 0) for p in ports)}
+
+
+def explain(k, excess_ms, lrecs, crecs, lsamp, csamp):
+    """One stalled point: its phases and causes under load against the same point in the control sweep; the
+    cause is the largest growth among the daemon's and the host's figures (they can overlap: all are shown).
+    The gap (done_at: the point's last spectrum) spans the end of the previous point's commit, so the executor's
+    steps of this record (which include that commit) and the previous point's database writes are shown."""
+    lrec, crec = lrecs.get(k), crecs.get(k)
+    lprev, cprev = lrecs.get(k - 1, {}), crecs.get(k - 1, {})
+    if not lrec or not crec:
+        return "point %d: +%.0f ms over the control; no stall record (log_level debug?)" % (k, excess_ms), "unknown"
+    grew = sorted(((lrec.get(p, 0) - crec.get(p, 0), p) for p in PHASES), reverse=True)
+    lf, cf = figures(lrec, lsamp), figures(crec, csamp)
+    d = {key: lf[key] - cf[key] for key in lf}
+    cause = pick_cause(d, excess_ms)
+    ports = "; ".join("%s queued %+.0f run %+.0f (cpu wait %+.0f; clients' reads %+.0f) loop %+.0f" % (
+        n, p.get("queued", 0) - crec["ports"].get(n, {}).get("queued", 0),
+        p.get("run", 0) - crec["ports"].get(n, {}).get("run", 0),
+        p.get("cpu_wait", 0) - crec["ports"].get(n, {}).get("cpu_wait", 0),
+        p.get("clients", 0) - crec["ports"].get(n, {}).get("clients", 0),
+        p.get("loop", 0) - crec["ports"].get(n, {}).get("loop", 0)) for n, p in lrec["ports"].items() if p.get("n"))
+    text = ("point %d: +%.0f ms over the control between the points' last spectra (commit to commit %.0f vs %.0f "
+            "ms); phases grew %s; executor steps %+.0f ms (the previous commit's database writes %.0f vs %.0f ms; WAL "
+            "checkpoints off the loop %d: %.0f ms), loop callbacks %+.0f (max %.0f ms; others' %+.0f), timers "
+            "late %+.0f (max %.0f ms), loop waited for a CPU %+.0f, acq-sim waited for a CPU %+.0f ms; ports (ms "
+            "vs control): %s; cause: %s" % (
+                k, excess_ms, lrec["total"], crec["total"],
+                ", ".join("%s %+.0f" % (p, v) for v, p in grew[:3] if abs(v) >= 1) or "none",
+                d["executor"], lprev.get("store", float("nan")), cprev.get("store", float("nan")),
+                lrec.get("checkpoints", 0), lrec.get("checkpoint", 0),
+                lrec.get("callbacks", 0) - crec.get("callbacks", 0), lrec.get("callback_max", 0), d["loop_other"],
+                lrec.get("timers_late", 0) - crec.get("timers_late", 0), lrec.get("timer_late_max", 0),
+                d["loop_cpu_wait"], d["sim_cpu_wait"], ports, cause))
+    return text, cause
+
+
 WORKERS = [(w_flood, OBSERVERS[0]), (w_flood, OBSERVERS[0]), (w_flood, OBSERVERS[1]), (w_flood, OBSERVERS[1]),
            (w_noread, OBSERVERS[2]), (w_noread, OBSERVERS[2]), (w_slots, OBSERVERS[3]), (w_slots, OBSERVERS[4]),
            (w_huge, OBSERVERS[5]), (w_huge, OBSERVERS[5]), (w_half, OBSERVERS[1]), (w_config, OBSERVERS[0])]
@@ -384,6 +506,10 @@ def main():
                 daemon_extra="  observers: [%s]\n%s" % (", ".join(OBSERVERS), "  observer_rate: %s\n" % OBSERVER_RATE
                                                       if OBSERVER_RATE is not None else ""),
                 sim_session=SIM_SESSION)
+    with open(b.conf) as f:  # the per-point stall lines (executor_stall.c) are logged at debug level
+        conf = f.read()
+    with open(b.conf, "w") as f:
+        f.write(conf.replace("log_level: info", "log_level: debug"))
     os.chmod(b.dir, 0o755)
     load = None
     try:
@@ -424,6 +550,7 @@ def main():
             rss.append(rss_mb(b.daemon.pid))
 
         paused = []
+        samples = {}
 
         sched = {"load": [0.0] * 6, "control": [0.0] * 6}
 
@@ -446,7 +573,10 @@ def main():
             if not r.get("ok"):
                 raise AssertionError("sweep.start %s: %s" % (name, r))
             sid = int(r["sweep"])
+            samp = samples[sid] = []  # acq-sim's scheduler times along the sweep, for its stalled points
             while True:
+                run_s, wait_s = sched_times(b.sim.pid)
+                samp.append((time.monotonic(), wait_s, run_s))
                 probe(into)
                 st = good.req("sweep.show", sweep=sid)
                 state = st["sweep"]["state"] if st.get("ok") else "?"
@@ -475,7 +605,7 @@ def main():
 
         load_end = t_start + SECONDS
         excess, excess_ctl, load_gaps, ctl_gaps, sweeps, points = [], [], [], [], 0, 0
-        per_sweep, loads = [], []
+        per_sweep, loads, explained = [], [], []
         while time.time() < load_end or sweeps == 0:
             load = start_load(b.sock)
             sid, g = drive("soak-%d" % sweeps, lat, load_end + max(600, SECONDS), "load")
@@ -494,6 +624,15 @@ def main():
             excess += ex_b
             excess_ctl += ex_c
             per_sweep.append(max(ex_c))
+            text = b.daemon_text()
+            lrecs, crecs = stall_points(text, sid), stall_points(text, csid)
+            for k in sorted(g):
+                if k in cg and 1e3 * (g[k] - cg[k]) > EXPLAIN_MS:
+                    line, cause = explain(k, 1e3 * (g[k] - cg[k]), lrecs, crecs, samples.get(sid), samples.get(csid))
+                    explained.append((1e3 * (g[k] - cg[k]), cause))
+                    print("    stall, sweep %d %s" % (sid, line), flush=True)
+            samples.pop(sid, None)
+            samples.pop(csid, None)
             print("  sweep %d under load: max gap %.0f ms (%s); control sweep %d beside it: max gap %.0f ms (%s); "
                   "largest excess of a point's gap over the same point in the control %.0f ms, over the baseline "
                   "%.0f ms; status p99 so far %.1f ms; RSS %.1f MB" % (
@@ -546,6 +685,12 @@ def main():
         print("  daemon RSS peak: %.1f MB, goal < 64 MB: %s" % (max(rss), verdict(max(rss) < 64)))
         print("  sweeps paused by device faults: %d; laser requests > 2 keep-alive periods: %d; laser faults: %d" % (
             len(paused), len(re.findall(r"laser: request \d+ took", text)), len(re.findall(r"stopped emitting", text))))
+        causes = {}
+        for ms, cause in explained:
+            causes.setdefault(cause, []).append(ms)
+        print("  stall attribution: %d points over %.0f ms beyond the control%s" % (
+            len(explained), EXPLAIN_MS, "".join("; %s: %d (max +%.0f ms)" % (c, len(v), max(v))
+                                                for c, v in sorted(causes.items(), key=lambda kv: -max(kv[1])))))
         print("soak: %s" % ("all goals met" if ok else "GOALS MISSED"))
         return 0 if ok else 1
     finally:

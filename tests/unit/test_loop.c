@@ -4,6 +4,8 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <poll.h>
+#include <sys/eventfd.h>
+#include <time.h>
 #include <unistd.h>
 #include <cmocka.h>
 
@@ -135,6 +137,86 @@ static void test_scaled_clock(void **state)
 	loop_free(lp);
 }
 
+/* A long round of fd callbacks (12 ready clients, 1 ms each) lets a timer that falls due during it and an urgent fd
+ * that becomes ready during it (a device's completion) run in between, not after the whole round. */
+struct round {
+	int order, clients, timer_at, urgent_at, efd;
+	int pipes[12][2];
+};
+
+static void spin_ms(double ms)
+{
+	struct timespec a, b;
+	clock_gettime(CLOCK_MONOTONIC, &a);
+	do
+		clock_gettime(CLOCK_MONOTONIC, &b);
+	while ((b.tv_sec - a.tv_sec) * 1e3 + (b.tv_nsec - a.tv_nsec) * 1e-6 < ms);
+}
+
+static void busy_client(struct loop *lp, int fd, short re, void *arg)
+{
+	(void)lp;
+	(void)re;
+	struct round *r = arg;
+	char c;
+	assert_int_equal(read(fd, &c, 1), 1);
+	++r->order;
+	if (++r->clients == 2) { /* the completion arrives while the round runs */
+		uint64_t one = 1;
+		assert_int_equal(write(r->efd, &one, sizeof one), (ssize_t)sizeof one);
+	}
+	spin_ms(1.0);
+}
+
+static void due_timer(struct loop *lp, void *arg)
+{
+	(void)lp;
+	struct round *r = arg;
+	r->timer_at = ++r->order;
+}
+
+static void completion(struct loop *lp, int fd, short re, void *arg)
+{
+	(void)lp;
+	(void)re;
+	struct round *r = arg;
+	uint64_t n;
+	if (read(fd, &n, sizeof n) == (ssize_t)sizeof n && !r->urgent_at)
+		r->urgent_at = ++r->order;
+}
+
+static void test_long_round_yields(void **state)
+{
+	(void)state;
+	struct round r = { 0 };
+	struct loop *lp = loop_new(NULL, NULL);
+	assert_non_null(lp);
+	r.efd = eventfd(0, EFD_NONBLOCK);
+	assert_true(r.efd >= 0);
+	assert_int_equal(loop_fd_add(lp, r.efd, POLLIN, completion, &r, NULL), 0);
+	loop_fd_urgent(lp, r.efd);
+	for (int i = 0; i < 12; i++) {
+		assert_int_equal(pipe(r.pipes[i]), 0);
+		assert_int_equal(write(r.pipes[i][1], "x", 1), 1);
+		assert_int_equal(loop_fd_add(lp, r.pipes[i][0], POLLIN, busy_client, &r, NULL), 0);
+	}
+	assert_true(loop_timer_add(lp, 0.003, 0, due_timer, &r) > 0);
+	loop_run_once(lp, 0);
+	/* 12 callbacks + the timer + the completion = 14 turns; without slicing both would come last (13, 14) or
+	 * the completion in the next round. */
+	print_message("timer ran at turn %d, the completion at turn %d (of 14)\n", r.timer_at, r.urgent_at);
+	assert_true(r.timer_at > 0 && r.timer_at < 12);
+	assert_true(r.urgent_at > 0 && r.urgent_at < 12);
+	for (int i = 0; i < 12; i++) {
+		loop_fd_del(lp, r.pipes[i][0]);
+		close(r.pipes[i][0]);
+		close(r.pipes[i][1]);
+	}
+	loop_fd_del(lp, r.efd);
+	close(r.efd);
+	loop_free(lp);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -142,6 +224,7 @@ int main(void)
 		cmocka_unit_test(test_cancel_inside_callback),
 		cmocka_unit_test(test_fd_callbacks),
 		cmocka_unit_test(test_scaled_clock),
+		cmocka_unit_test(test_long_round_yields),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -1,0 +1,123 @@
+/* store checkpoints off the loop: the WAL is copied back into the database (a checkpoint: database writes and
+ * their fsyncs) on a thread of its own with its own connection, when a commit has grown the WAL past
+ * STORE_CKPT_PAGES (SQLite's automatic checkpoint would run it inside that commit, on the loop, at 1000 pages). PASSIVE, as the
+ * automatic one: it never waits for the writer, which keeps appending meanwhile. */
+#include <pthread.h>
+#include <sqlite3.h>
+#include <stdlib.h>
+
+#include "daemon/stall.h"
+#include "daemon/store_int.h"
+
+/* Pages in the WAL that start a checkpoint: SQLite's default. Smaller checkpoints (64 pages) would share the disk
+ * less with the next commit's fsync (a 637 ms checkpoint of ~1000 pages held a commit 340 ms in a soak), but a
+ * WAL restarted that often lets small writes through on a full disk while larger ones fail (a sweep's 'failed'
+ * state stored without its event: test_disk_full), so not before a halt's state and event share a transaction. */
+#define STORE_CKPT_PAGES 1000
+
+struct store_ckpt {
+	pthread_t thread;
+	pthread_mutex_t mu;
+	pthread_cond_t cv;
+	bool due, quit;
+	sqlite3 *db; /* the thread's connection */
+	unsigned long runs;
+	double seconds, max_s;
+};
+
+static int wal_hook(void *arg, sqlite3 *db, const char *name, int pages)
+{
+	(void)db;
+	(void)name;
+	struct store_ckpt *c = arg;
+	if (pages >= STORE_CKPT_PAGES) {
+		pthread_mutex_lock(&c->mu);
+		c->due = true;
+		pthread_cond_signal(&c->cv);
+		pthread_mutex_unlock(&c->mu);
+	}
+	return SQLITE_OK;
+}
+
+static void *ckpt_main(void *arg)
+{
+	struct store_ckpt *c = arg;
+	pthread_mutex_lock(&c->mu);
+	for (;;) {
+		while (!c->due && !c->quit)
+			pthread_cond_wait(&c->cv, &c->mu);
+		if (c->quit)
+			break;
+		c->due = false;
+		pthread_mutex_unlock(&c->mu);
+		double t0 = stall_now();
+		sqlite3_wal_checkpoint_v2(c->db, NULL, SQLITE_CHECKPOINT_PASSIVE, NULL, NULL);
+		double s = stall_now() - t0;
+		pthread_mutex_lock(&c->mu);
+		c->runs++;
+		c->seconds += s;
+		if (s > c->max_s)
+			c->max_s = s;
+	}
+	pthread_mutex_unlock(&c->mu);
+	return NULL;
+}
+
+int store_ckpt_start(struct store *st, struct acq_err *err)
+{
+	(void)err;
+	struct store_ckpt *c = calloc(1, sizeof *c);
+	if (!c)
+		return 0; /* SQLite's own checkpoints (on the committing thread) stay */
+	if (sqlite3_open_v2(st->path, &c->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOFOLLOW, NULL) != SQLITE_OK ||
+	    sqlite3_exec(c->db, "PRAGMA synchronous = FULL", NULL, NULL, NULL) != SQLITE_OK) {
+		sqlite3_close(c->db);
+		free(c);
+		return 0;
+	}
+	sqlite3_busy_timeout(c->db, 2000);
+	pthread_mutex_init(&c->mu, NULL);
+	pthread_cond_init(&c->cv, NULL);
+	if (pthread_create(&c->thread, NULL, ckpt_main, c)) {
+		pthread_mutex_destroy(&c->mu);
+		pthread_cond_destroy(&c->cv);
+		sqlite3_close(c->db);
+		free(c);
+		return 0;
+	}
+	st->ckpt = c;
+	sqlite3_wal_hook(st->db, wal_hook, c); /* replaces SQLite's automatic checkpoint */
+	return 0;
+}
+
+void store_ckpt_stats(const struct store *st, unsigned long *runs, double *seconds, double *max_s)
+{
+	struct store_ckpt *c = st->ckpt;
+	*runs = 0;
+	*seconds = *max_s = 0;
+	if (!c)
+		return;
+	pthread_mutex_lock(&c->mu);
+	*runs = c->runs;
+	*seconds = c->seconds;
+	*max_s = c->max_s;
+	pthread_mutex_unlock(&c->mu);
+}
+
+void store_ckpt_stop(struct store *st)
+{
+	struct store_ckpt *c = st->ckpt;
+	if (!c)
+		return;
+	sqlite3_wal_hook(st->db, NULL, NULL);
+	pthread_mutex_lock(&c->mu);
+	c->quit = true;
+	pthread_cond_signal(&c->cv);
+	pthread_mutex_unlock(&c->mu);
+	pthread_join(c->thread, NULL);
+	sqlite3_close(c->db);
+	pthread_mutex_destroy(&c->mu);
+	pthread_cond_destroy(&c->cv);
+	free(c);
+	st->ckpt = NULL;
+}
