@@ -17,12 +17,14 @@
 
 #include "daemon/log.h"
 #include "daemon/loop.h"
+#include "daemon/sockprobe.h"
 
 #define MAX_CLIENTS 256         /* hard bound of the client table (server_limits.max_clients is at most this) */
 #define MAX_REFUSING 64         /* refused connections kept open briefly so their refusal can be read */
 #define TIMEOUT_TICK_S 0.25     /* period of the timeout check (loop clock) */
 #define ACCEPT_PER_TURN 64      /* connections accepted per loop turn */
 #define LISTEN_BACKLOG 512
+#define PROBE_WAIT_S 3.0        /* how long a socket that accepts but never answers is given to go away */
 
 const struct server_limits server_default_limits = {
 	.max_clients = 128,
@@ -807,13 +809,12 @@ static int listen_unix(struct server *srv, const struct conf_daemon *d, struct a
 	if (lstat(d->socket_path, &sb) == 0) {
 		if (!S_ISSOCK(sb.st_mode))
 			return acq_errf(err, ACQ_E_IO, "%s exists and is not a socket; not touching it", d->socket_path);
-		int probe = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-		bool alive = probe >= 0 && connect(probe, (struct sockaddr *)&sa, sizeof sa) == 0;
-		if (probe >= 0)
-			close(probe);
-		if (alive)
-			return acq_errf(err, ACQ_E_STATE, "%s: another acquisitiond is listening there", d->socket_path);
-		unlink(d->socket_path); /* stale socket of a killed daemon */
+		enum sockprobe st = sockprobe_unix(&sa, PROBE_WAIT_S);
+		if (st != SOCKPROBE_STALE)
+			return acq_errf(err, ACQ_E_STATE, "%s: %s", d->socket_path, st == SOCKPROBE_SERVING
+				? "another acquisitiond is listening there"
+				: "something accepts connections there but never answered (a stopped acquisitiond?)");
+		unlink(d->socket_path); /* stale socket of a killed daemon (or of its child, now gone) */
 	}
 	srv->ufd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
 	if (srv->ufd < 0)

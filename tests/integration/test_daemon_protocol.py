@@ -6,6 +6,7 @@ executor commands (their real answers), recon.start/status, export
 only), acqctl exit codes and output (human, --json, watch), a second daemon refused, SIGTERM."""
 import json
 import os
+import select
 import signal
 import socket
 import sqlite3
@@ -331,6 +332,38 @@ def main():
                            text=True, timeout=10)
         check(p.returncode == 1 and "another acquisitiond" in p.stderr, "second daemon %r" % p.stderr)
         d2.cleanup()
+
+        # --- a socket file whose holder accepts but never answers: a killed daemon's child between fork() and
+        #     exec holds the listening descriptor for a moment; the restarted daemon waits it out (it used to
+        #     refuse: "another acquisitiond is listening there"). One held for good is refused, not replaced.
+        for hold_s in (0.3, None):
+            d3 = Daemon()
+            holder = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            holder.bind(d3.sock)
+            holder.listen(64)
+            d3.start(wait=False)
+            t0 = time.time()
+            # the daemon's first probe reaches the holder's backlog while it is held
+            ready = select.select([holder], [], [], 20)[0]
+            check(ready, "the daemon probed the held socket")
+            if hold_s is not None:
+                time.sleep(hold_s)
+                holder.close()  # the file stays, as a killed process leaves it
+                deadline = time.time() + 20
+                while time.time() < deadline and d3.proc.poll() is None:
+                    if acqctl(d3.sock, "--json", "status").returncode == 0:
+                        break
+                    time.sleep(0.05)
+                check(d3.proc.poll() is None, "daemon started after the holder went: %s" % d3.logtext()[-600:])
+                check(acqctl(d3.sock, "--json", "status").returncode == 0, "the new daemon serves the socket")
+            else:
+                rc = d3.proc.wait(30)
+                waited = time.time() - t0
+                holder.close()
+                check(rc == 1 and "never answered" in d3.logtext(), "silent holder refused: %s" % d3.logtext()[-600:])
+                check(waited >= 2.5, "gave the holder its wait (%.2f s)" % waited)
+                check(os.path.exists(d3.sock), "the held socket file is not replaced")
+            d3.cleanup()
 
         w.close()
         c.close()
