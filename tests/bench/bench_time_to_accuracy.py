@@ -37,8 +37,8 @@ Goals (issue 17), reported met / not met with the figures:
   G3 every material: at the paper plan's time, adaptive is never worse than the paper plan (DHR error and log-RMSE,
      mean over seeds).
 Environment: ACQ_TTA_MATERIALS (all eight), ACQ_TTA_SEEDS (3), ACQ_TTA_SEED_LIST (instead: e.g. 2,3), ACQ_TTA_SIZES (5,6,8,10: grids N^3 and
-Fibonacci N x N^2; the trade study's 12 and 15 take 35-68 min, beyond every budget here), ACQ_TTA_WL (450:1100:25), ACQ_TTA_BUDGET (1.5), ACQ_TTA_JOBS (2), ACQ_TTA_VALIDATE (1),
-ACQ_TTA_VALIDATE_SCALE (35), ACQ_TTA_TARGET (above). Writes $ACQ_BENCH_OUT/time_to_accuracy.csv (every state), time_to_accuracy_summary.txt
+Fibonacci N x N^2; the trade study's 12 and 15 take 35-68 min, beyond every budget here), ACQ_TTA_WL (450:1100:25), ACQ_TTA_BUDGET (1.5), ACQ_TTA_JOBS (2), ACQ_TTA_VALIDATE (1; ACQ_TTA_VALIDATE_ONLY=1: that sweep alone, beside ACQ_TTA_ROWS, an earlier CSV),
+ACQ_TTA_VALIDATE_SCALE (20), ACQ_TTA_VALIDATE_BUDGET (700), ACQ_TTA_TARGET (above). Writes $ACQ_BENCH_OUT/time_to_accuracy.csv (every state), time_to_accuracy_summary.txt
 and time_to_accuracy.png (error vs bench time, one line per plan kind, per material)."""
 import concurrent.futures as cf
 import json
@@ -78,6 +78,7 @@ TARGET = os.environ.get("ACQ_TTA_TARGET", "dhr:8,30,60:le=1e-09+lnf:le=1e-09")
 DIFFUSE = ["white", "narrow-lines", "rough-backscatter", "green-paint"]
 LOBES = ["sharp-lobe", "clear-coat"]
 DHR_GOAL, LOBE_GOAL = 0.005, 0.01
+DAEMON_VALUE_CHANNELS = "64"  # daemon/recon_select.c RSEL_VALUE_CHANNELS: the replay runs select as the daemon does
 TH = T.THETA_DHR
 T.WL = WL
 T.WORK = WORK
@@ -481,7 +482,7 @@ def validate(rows, paper_s):
             if ids_same:
                 worst["cost"] = max(worst["cost"], float(np.max(np.abs(mine[:, 5] - theirs[:, 5]) / theirs[:, 5])))
             T.run([T.REC, "select", os.path.join(bdir, "model.brdf"), "--candidates", os.path.join(bdir, "candidates.csv"),
-                   "--target", r["target_spec"], "--batch", "16", "-o", sj])
+                   "--target", r["target_spec"], "--batch", "16", "--value-channels", DAEMON_VALUE_CHANNELS, "-o", sj])
             sel = json.load(open(sj))
             picks_same = [x["id"] for x in sel["picks"]] == [p["candidate_id"] for p in r["picks"]]
             bb = helper("batch", conf, plan_path, st, sj, "--time-scale", scale)
@@ -552,6 +553,14 @@ def main():
             sys.exit("bench_time_to_accuracy: %s missing (make all build/bench/bench_tta_plan)" % p)
     os.makedirs(WORK, exist_ok=True)
     os.makedirs(T.WORK, exist_ok=True)
+    if os.environ.get("ACQ_TTA_VALIDATE_ONLY") == "1":  # the daemon validation alone (offline rows: ACQ_TTA_ROWS CSV)
+        d, _ = T.plan("grid-10", T.plan_yaml("grid-10", 10, False))
+        rows = load_rows(os.environ["ACQ_TTA_ROWS"]) if os.environ.get("ACQ_TTA_ROWS") else []
+        val = "\n".join(validate(rows, float(d["predicted_s"])))
+        with open(os.path.join(OUT, "time_to_accuracy_validation.txt"), "w") as fh:
+            fh.write(val + "\n")
+        print(val + "\nwall time %.0f s" % (time.time() - t0))
+        return 0
     plans = []
     for n in SIZES:
         for fib in (False, True):
