@@ -25,7 +25,7 @@ tests/integration/adaptlib.py; green paint, small budget) — its recorded decis
 daemon's own samples and candidates (same picks, planned points and predicted batch times), and its DHR error at
 each decision is set beside the offline loop's at equal bench time.
 
-Figures per (material, seed, plan): bench time, points, DHR error = the largest over 8/30/60 deg of the mean over
+Figures per (material, seed, plan): bench time, points, its motion seconds (plan.h motion_s, settle included), DHR error = the largest over 8/30/60 deg of the mean over
 wavelengths of |DHR - truth| / truth (the trade table's measure, its worst incidence), also the largest absolute
 |DHR - truth|, and the held-out log-RMSE (bench_tradeoff: 1000 directions, cosine-weighted). Time to accuracy: the
 first bench time at which both criteria hold (a fixed family: its cheapest member that meets them).
@@ -36,9 +36,9 @@ Goals (issue 17), reported met / not met with the figures:
      paper plan's time (every seed);
   G3 every material: at the paper plan's time, adaptive is never worse than the paper plan (DHR error and log-RMSE,
      mean over seeds).
-Environment: ACQ_TTA_MATERIALS (all eight), ACQ_TTA_SEEDS (3), ACQ_TTA_SIZES (5,6,8,10: grids N^3 and
-Fibonacci N x N^2; the trade study's 12 and 15 take 35-68 min, beyond every budget here), ACQ_TTA_WL (450:1100:25), ACQ_TTA_BUDGET (1.5), ACQ_TTA_JOBS (2), ACQ_TTA_VALIDATE (1),
-ACQ_TTA_VALIDATE_SCALE (35), ACQ_TTA_TARGET (above). Writes $ACQ_BENCH_OUT/time_to_accuracy.csv (every state), time_to_accuracy_summary.txt
+Environment: ACQ_TTA_MATERIALS (all eight), ACQ_TTA_SEEDS (3), ACQ_TTA_SEED_LIST (instead: e.g. 2,3), ACQ_TTA_SIZES (5,6,8,10: grids N^3 and
+Fibonacci N x N^2; the trade study's 12 and 15 take 35-68 min, beyond every budget here), ACQ_TTA_WL (450:1100:25), ACQ_TTA_BUDGET (1.5), ACQ_TTA_JOBS (2), ACQ_TTA_VALIDATE (1; ACQ_TTA_VALIDATE_ONLY=1: that sweep alone, beside ACQ_TTA_ROWS, an earlier CSV),
+ACQ_TTA_VALIDATE_SCALE (20), ACQ_TTA_VALIDATE_BUDGET (700), ACQ_TTA_TARGET (above). Writes $ACQ_BENCH_OUT/time_to_accuracy.csv (every state), time_to_accuracy_summary.txt
 and time_to_accuracy.png (error vs bench time, one line per plan kind, per material)."""
 import concurrent.futures as cf
 import json
@@ -61,6 +61,11 @@ CONF = os.path.join(SRC, "config", "bench-sim.yaml")
 ALL = "green-paint,white,metal,clear-coat,rough-backscatter,cloth-sheen,sharp-lobe,narrow-lines"
 MATS = os.environ.get("ACQ_TTA_MATERIALS", ALL).split(",")
 NSEEDS = int(os.environ.get("ACQ_TTA_SEEDS", "3"))
+# the seeds run: 1..ACQ_TTA_SEEDS, or ACQ_TTA_SEED_LIST (e.g. "2,3": a study split over runs whose CSVs are joined
+# for ACQ_TTA_REPORT; each seed's figures do not depend on the others')
+SEED_LIST = [int(x) for x in os.environ["ACQ_TTA_SEED_LIST"].split(",")] if os.environ.get("ACQ_TTA_SEED_LIST") \
+    else list(range(1, NSEEDS + 1))
+NSEEDS = max(SEED_LIST)
 SIZES = [int(x) for x in os.environ.get("ACQ_TTA_SIZES", "5,6,8,10").split(",")]
 WL = os.environ.get("ACQ_TTA_WL", "450:1100:25")
 BUDGET_X = float(os.environ.get("ACQ_TTA_BUDGET", "1.5"))
@@ -73,6 +78,7 @@ TARGET = os.environ.get("ACQ_TTA_TARGET", "dhr:8,30,60:le=1e-09+lnf:le=1e-09")
 DIFFUSE = ["white", "narrow-lines", "rough-backscatter", "green-paint"]
 LOBES = ["sharp-lobe", "clear-coat"]
 DHR_GOAL, LOBE_GOAL = 0.005, 0.01
+DAEMON_VALUE_CHANNELS = "64"  # daemon/recon_select.c RSEL_VALUE_CHANNELS: the replay runs select as the daemon does
 TH = T.THETA_DHR
 T.WL = WL
 T.WORK = WORK
@@ -148,7 +154,8 @@ def fixed_run(mat, truth, seed, plans):
         T.run([T.REC, "fit", sp, "-o", mp])
         rel, ab, lr, s8 = truth.figures(mp, tag)
         rows.append(dict(material=mat, seed=seed, kind=kind, plan=name, batch=-1, points=len(ang),
-                         bench_s=float(d["predicted_s"]), dhr_err=rel, dhr_abs=ab, logrmse=lr, sigma8=s8))
+                         bench_s=float(d["predicted_s"]), dhr_err=rel, dhr_abs=ab, logrmse=lr, sigma8=s8,
+                         motion_s=float(d["motion_s"])))
         for x in (sp, mp):
             os.unlink(x)
     return rows
@@ -162,6 +169,7 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
     tag = "adaptive_%s_s%d" % (mat, seed)
     steps = seed_plan["steps"]
     spent = seed_plan["predicted_s"]  # measured bench seconds (the budget's)
+    motion = seed_plan["split"]["motion_s"]  # of spent: the arms' motion with settle (plan.h motion_s)
     waited = 0.0  # the arms' waits for decisions
     done = [s[:3] for s in steps]
     ang = np.array([s[3:7] for s in steps])
@@ -204,7 +212,7 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         rel, ab, lr, s8 = truth.figures(m_, tag)
         return dict(material=mat, seed=seed, kind="adaptive", plan="adaptive", batch=batch, points=len(done),
                     bench_s=spent + waited, dhr_err=rel, dhr_abs=ab, logrmse=lr, sigma8=s8, measured_s=spent,
-                    waited_s=waited)
+                    waited_s=waited, motion_s=motion)
 
     m = fit(None)
     ahead_cpu = 0.0
@@ -226,6 +234,7 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         _, v, s = samples(mat, bang, 1000 * seed + 1 + len(models), tag + "_b%d" % (k + 1))
         done += [s_[:3] for s_ in b["steps"]]
         spent += b["predicted_s"]
+        motion += b["split"]["motion_s"]
         b_prev_s = b["predicted_s"]
         k += 1
         pending = None
@@ -473,7 +482,7 @@ def validate(rows, paper_s):
             if ids_same:
                 worst["cost"] = max(worst["cost"], float(np.max(np.abs(mine[:, 5] - theirs[:, 5]) / theirs[:, 5])))
             T.run([T.REC, "select", os.path.join(bdir, "model.brdf"), "--candidates", os.path.join(bdir, "candidates.csv"),
-                   "--target", r["target_spec"], "--batch", "16", "-o", sj])
+                   "--target", r["target_spec"], "--batch", "16", "--value-channels", DAEMON_VALUE_CHANNELS, "-o", sj])
             sel = json.load(open(sj))
             picks_same = [x["id"] for x in sel["picks"]] == [p["candidate_id"] for p in r["picks"]]
             bb = helper("batch", conf, plan_path, st, sj, "--time-scale", scale)
@@ -515,7 +524,7 @@ def load_rows(path):
             r = dict(zip(keys, line.rstrip("\n").split(",")))
             for k in ("seed", "batch", "points"):
                 r[k] = int(r[k])
-            for k in ("bench_s", "dhr_err", "dhr_abs", "logrmse", "sigma8", "measured_s", "waited_s"):
+            for k in ("bench_s", "dhr_err", "dhr_abs", "logrmse", "sigma8", "measured_s", "waited_s", "motion_s"):
                 if r.get(k):
                     r[k] = float(r[k])
             rows.append(r)
@@ -544,6 +553,14 @@ def main():
             sys.exit("bench_time_to_accuracy: %s missing (make all build/bench/bench_tta_plan)" % p)
     os.makedirs(WORK, exist_ok=True)
     os.makedirs(T.WORK, exist_ok=True)
+    if os.environ.get("ACQ_TTA_VALIDATE_ONLY") == "1":  # the daemon validation alone (offline rows: ACQ_TTA_ROWS CSV)
+        d, _ = T.plan("grid-10", T.plan_yaml("grid-10", 10, False))
+        rows = load_rows(os.environ["ACQ_TTA_ROWS"]) if os.environ.get("ACQ_TTA_ROWS") else []
+        val = "\n".join(validate(rows, float(d["predicted_s"])))
+        with open(os.path.join(OUT, "time_to_accuracy_validation.txt"), "w") as fh:
+            fh.write(val + "\n")
+        print(val + "\nwall time %.0f s" % (time.time() - t0))
+        return 0
     plans = []
     for n in SIZES:
         for fib in (False, True):
@@ -563,11 +580,11 @@ def main():
     seed_plan = helper("seed", CONF, plan_path)
     dry = json.loads(subprocess.run([T.CTL, "--json", "plan", plan_path, "--config", CONF], capture_output=True,
                                     text=True, check=True).stdout)["plan"]
-    log("bench_time_to_accuracy: materials %s, %d seeds, wavelengths %s, plans %s; paper plan (grid-10) %.0f s "
+    log("bench_time_to_accuracy: materials %s, seeds %s, wavelengths %s, plans %s; paper plan (grid-10) %.0f s "
         "predicted; adaptive: seed %d points %.1f s (acqctl plan: %.1f s), budget %.0f s (%s; else %.0f s), overlap %s; "
         "offline loop "
         "(bench time = the planner's prediction at time scale 1); work in %s" % (
-            ",".join(MATS), NSEEDS, WL, ",".join(p[0] for p in plans), PAPER_S[0], len(seed_plan["steps"]),
+            ",".join(MATS), ",".join(map(str, SEED_LIST)), WL, ",".join(p[0] for p in plans), PAPER_S[0], len(seed_plan["steps"]),
             seed_plan["predicted_s"], dry["predicted_s"], BUDGET_X * PAPER_S[0], ",".join(LOBES), BUDGET_OTHER * PAPER_S[0],
             overlap, WORK))
     if abs(seed_plan["predicted_s"] - dry["predicted_s"]) > 1e-6 * dry["predicted_s"]:
@@ -582,14 +599,14 @@ def main():
         truths = {m: f.result() for m, f in truths.items()}
         jobs = {}
         # seed after seed (a run cut short still has whole seeds: ACQ_TTA_REPORT on its CSV), the longest first
-        for seed in range(1, NSEEDS + 1):
+        for seed in SEED_LIST:
             for mat in sorted(MATS, key=lambda m: m not in LOBES):
                 lobe = mat in LOBES
                 jobs[pool.submit(adaptive_run, mat, truths[mat], seed, plan_path if lobe else plan_other, overlap,
                                  seed_plan, (BUDGET_X if lobe else BUDGET_OTHER) * PAPER_S[0])] = mat
                 jobs[pool.submit(fixed_run, mat, truths[mat], seed, plans)] = mat
         keys = ["material", "seed", "kind", "plan", "batch", "points", "bench_s", "dhr_err", "dhr_abs", "logrmse",
-                "sigma8", "measured_s", "waited_s", "stop"]
+                "sigma8", "measured_s", "waited_s", "motion_s", "stop"]
         with open(os.path.join(OUT, "time_to_accuracy.csv"), "w") as fh:
             fh.write(",".join(keys) + "\n")
             for fu in cf.as_completed(jobs):

@@ -68,6 +68,18 @@ static json_t *steps_json(const struct bench_geom *g, const struct plan_result *
 	return s;
 }
 
+/* Where a plan's predicted seconds go (plan.h: motion with settle, dwell, darks, reference, host; the rest of
+ * predicted_s is the executor's per-point polling, probes and HDR exposures, plan_time.c) and the axes' travel. */
+static json_t *split_json(const struct plan_result *r)
+{
+	if (!r)
+		return json_object();
+	return json_pack("{s:f, s:f, s:f, s:f, s:f, s:f, s:f, s:f, s:I}", "motion_s", r->motion_s, "dwell_s", r->dwell_s,
+			 "darks_s", r->darks_s, "reference_s", r->reference_s, "host_s", r->host_s, "laser_deg",
+			 r->travel_deg[0], "det_theta_deg", r->travel_deg[1], "det_phi_deg", r->travel_deg[2], "incidences",
+			 (json_int_t)r->n_groups);
+}
+
 static int print_json(json_t *o)
 {
 	int rc = json_dumpf(o, stdout, JSON_COMPACT) || fputc('\n', stdout) == EOF ? 1 : 0;
@@ -186,8 +198,8 @@ static int cmd_batch(const struct plan_spec *s, const struct bench_geom *g, stru
 	for (size_t i = 0; r && i < r->n_steps; i++)
 		r->steps[i].req = keep[r->steps[i].req]; /* the pick's rank in select's order */
 	free(keep);
-	json_t *out = json_pack("{s:I, s:f, s:o}", "k", (json_int_t)k, "predicted_s", r ? r->predicted_s : 0.0, "steps",
-				r ? steps_json(g, r, true) : json_array());
+	json_t *out = json_pack("{s:I, s:f, s:o, s:o}", "k", (json_int_t)k, "predicted_s", r ? r->predicted_s : 0.0,
+				"steps", r ? steps_json(g, r, true) : json_array(), "split", split_json(r));
 	plan_result_free(r);
 	return print_json(out);
 }
@@ -224,7 +236,8 @@ int main(int argc, char **argv)
 			rc = fail(argv[3], err.msg);
 		else {
 			plan_time_apply(s, g, &t, r);
-			rc = print_json(json_pack("{s:f, s:o}", "predicted_s", r->predicted_s, "steps", steps_json(g, r, false)));
+			rc = print_json(json_pack("{s:f, s:o, s:o}", "predicted_s", r->predicted_s, "steps",
+						  steps_json(g, r, false), "split", split_json(r)));
 		}
 		plan_result_free(r);
 	} else if (!s->adaptive)
