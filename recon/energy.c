@@ -17,11 +17,13 @@
 #define TAB_MAX_NODES 96  /* node budget of the bisection (breadth first) */
 #define TAB_PEAKS 8       /* a spiky model's brightest samples whose zenith angles start the table (θi and θo) */
 /* Work budget of the table in kernel evaluations (~3 s on one core): past it no interval is bisected and each
- * remaining node gets its starting rule and one doubling. Spiky models reach it (log-uniform random values over
+ * remaining node gets its starting rule only, its difference d from the half rule inside it (session 8; before, one
+ * doubling beyond the starting rule). Spiky models reach it (log-uniform random values over
  * 12 decades: 5.3e9 evaluations, 19 s, without it); the paper-size fits of the simulator's materials need
  * 1e8-5e8. brdf-recon check verifies the bound with an independent rule either way; the fit warns. The budget
  * does not cut the start nodes nor the first level's midpoints: the log-uniform random 1000 × 651 input (bench_recon)
- * spends ~2.4e9 there with the nested rules (3.4e9 with Gauss-Legendre ones), 19 nodes. */
+ * spent ~2.4e9 there with the nested rules (3.4e9 with Gauss-Legendre ones), 19 nodes; ~1.45e9 once the nodes past
+ * the budget (12 of its 19) took the starting rule only. */
 #define TAB_WORK_MAX 1e9
 /* The trend's GGX lobe over half vectors (recon_hv_nodes): 16 nodes in u × 16 azimuths on [0, π] to start,
  * doubled up to 64 × 64 (the largest difference from a 256 × 2048 hemisphere rule there: 9e-4, where the horizon
