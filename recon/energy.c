@@ -17,11 +17,13 @@
 #define TAB_MAX_NODES 96  /* node budget of the bisection (breadth first) */
 #define TAB_PEAKS 8       /* a spiky model's brightest samples whose zenith angles start the table (θi and θo) */
 /* Work budget of the table in kernel evaluations (~3 s on one core): past it no interval is bisected and each
- * remaining node gets its starting rule and one doubling. Spiky models reach it (log-uniform random values over
+ * remaining node gets its starting rule only, its difference d from the half rule inside it (session 8; before, one
+ * doubling beyond the starting rule). Spiky models reach it (log-uniform random values over
  * 12 decades: 5.3e9 evaluations, 19 s, without it); the paper-size fits of the simulator's materials need
  * 1e8-5e8. brdf-recon check verifies the bound with an independent rule either way; the fit warns. The budget
  * does not cut the start nodes nor the first level's midpoints: the log-uniform random 1000 × 651 input (bench_recon)
- * spends ~2.4e9 there with the nested rules (3.4e9 with Gauss-Legendre ones), 19 nodes. */
+ * spent ~2.4e9 there with the nested rules (3.4e9 with Gauss-Legendre ones), 19 nodes; ~1.45e9 once the nodes past
+ * the budget (12 of its 19) took the starting rule only. */
 #define TAB_WORK_MAX 1e9
 /* The trend's GGX lobe over half vectors (recon_hv_nodes): 16 nodes in u × 16 azimuths on [0, π] to start,
  * doubled up to 64 × 64 (the largest difference from a 256 × 2048 hemisphere rule there: 9e-4, where the horizon
@@ -63,16 +65,24 @@ static int albtab_margin(struct albtab *T, double *a);
  * found by recon_albedo_adaptive's probes at the data's brightest directions, which refine the rules there. */
 static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err *err)
 {
-	/* past the work budget every further node gets the starting rule and one doubling (still a difference d) */
+	/* past the work budget every further node gets the starting rule only, its difference d from the half rule it
+	 * holds (nested rules: the doubling from half the starting rule evaluates only the starting rule's nodes; d
+	 * is then larger, the bound more conservative, than with one doubling beyond: 4× the work on the random
+	 * 1000 × 651 input, whose nodes past the budget cost 60 % of its fit) */
 	double work = T->ws.evals + T->wl.evals;
-	int nmax = work > TAB_WORK_MAX ? 2 * T->nmu : TAB_NMU_MAX;
-	int nmu = T->nmu, nphi = T->nphi;
+	int capped = work > TAB_WORK_MAX, nmu = T->nmu, nphi = T->nphi;
+	int nmax = capped ? (T->ws.nested ? nmu : 2 * nmu) : TAB_NMU_MAX;
+	if (capped && T->ws.nested) {
+		nmu = (nmu + 1) / 2;
+		nphi = (nphi + 1) / 2;
+		nmax = 2 * nmu;
+	}
 	if (!T->split)
 		return recon_albedo_adaptive(T->m, theta, nmu, nphi, nmax, 0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->ws, a,
 					     T->diff, err) ? -1 : albtab_margin(T, a);
 	/* split: the smooth part on the hemisphere rule, refined to TAB_TOL absolute (a part being below 1 says nothing
 	 * of the whole), then the lobe over half vectors, which stops once the whole is clearly below 1 */
-	if (recon_albedo_adaptive(T->m, theta, T->nmu, T->nphi, nmax, 0, 0, TAB_TOL, 1.0, -HUGE_VAL, &T->ws, a, T->diff,
+	if (recon_albedo_adaptive(T->m, theta, nmu, nphi, nmax, 0, 0, TAB_TOL, 1.0, -HUGE_VAL, &T->ws, a, T->diff,
 				  err))
 		return -1;
 	for (size_t l = 0; l < T->L; l++) /* the lobe part may stop once the whole is clearly below 1 */
