@@ -388,26 +388,10 @@ static int tables_alloc(struct tables *t, size_t L, size_t ML, size_t nd, size_t
 
 static void tables_free(struct tables *t)
 {
-	free(t->ch);
-	free(t->yw);
-	free(t->theta);
-	free(t->D1);
-	free(t->S1);
-	free(t->rho);
-	free(t->ndf);
-	free(t->sig);
-	free(t->rang);
-	free(t->rval);
-	free(t->fndf);
-	free(t->fsig);
-	free(t->fth);
-	free(t->fwl);
-	free(t->vndf);
-	free(t->lum);
-	free(t->spec);
-	free(t->zero);
-	free(t->desc);
-	free(t->file);
+	void *all[] = { t->ch, t->yw, t->theta, t->D1, t->S1, t->rho, t->ndf, t->sig, t->rang, t->rval, t->fndf, t->fsig,
+			t->fth, t->fwl, t->vndf, t->lum, t->spec, t->zero, t->desc, t->file };
+	for (size_t i = 0; i < sizeof all / sizeof all[0]; i++)
+		free(all[i]);
 }
 
 /* Wavelength map (the model's channels each written wavelength lies between) and luminance weights (ȳ ×
