@@ -104,7 +104,8 @@ struct yc_node *yc_root(const struct yc_doc *doc)
 	return doc ? doc->root : NULL;
 }
 
-const char *yc_file(const struct yc_doc *doc)
+/* The file name the document was read from. */
+static const char *yc_file(const struct yc_doc *doc)
 {
 	return doc ? doc->file : "?";
 }

@@ -36,8 +36,6 @@ int yc_load_string(const char *name, const char *text, size_t len, struct yc_doc
 void yc_free(struct yc_doc *doc);
 /* The root node (NULL for an empty document). */
 struct yc_node *yc_root(const struct yc_doc *doc);
-/* The file name the document was read from. */
-const char *yc_file(const struct yc_doc *doc);
 
 /* Error prefixed "file:line:col: " of node (or of the file when node is NULL); returns -1. */
 int yc_errf(struct acq_err *err, const struct yc_node *node, const char *fmt, ...)

@@ -155,8 +155,11 @@ static void px_invalid(struct calib_px *o, int i)
 	o->f[i] = o->u_noise[i] = o->u_dark[i] = o->u_refn[i] = o->u_refs[i] = o->u_angle[i] = NAN;
 }
 
-int calib_pixels(const struct calib_cfg *c, const double *wl, const struct exp_rate *s, const struct exp_rate *r,
-		 const struct calib_geom *g, struct calib_px *o, struct acq_err *err)
+/* Per-pixel BRDF from the sample's net rate and the reference's (relative) or the direct beam's (absolute)
+ * net rate measured on the same pixels; wl: pixel wavelengths. Pixels where either input is invalid or the
+ * reference is not positive are invalid. 0 or -1 on bad input. */
+static int calib_pixels(const struct calib_cfg *c, const double *wl, const struct exp_rate *s,
+			const struct exp_rate *r, const struct calib_geom *g, struct calib_px *o, struct acq_err *err)
 {
 	if (s->npix <= 0 || s->npix > SPECTRO_MAX_PIXELS || r->npix != s->npix)
 		return acq_errf(err, ACQ_E_INVAL, "calibration: sample has %d pixels, reference %d", s->npix, r->npix);
@@ -212,7 +215,8 @@ int calib_pixels(const struct calib_cfg *c, const double *wl, const struct exp_r
 	return 0;
 }
 
-void calib_combine(struct calib_spectrum *s)
+/* Recompute the combined u from the four components. */
+static void calib_combine(struct calib_spectrum *s)
 {
 	for (int k = 0; k < s->n; k++) {
 		double a = s->u_noise[k], b = s->u_dark[k], r = s->u_ref[k], g = s->u_angle[k];

@@ -88,11 +88,6 @@ int calib_grid_size(const struct calib_cfg *c);
 /* Interpolate a table at wl (value and uncertainty). */
 void calib_table_eval(const struct calib_table *t, double wl, double *val, double *u);
 
-/* Per-pixel BRDF from the sample's net rate and the reference's (relative) or the direct beam's (absolute)
- * net rate measured on the same pixels; wl: pixel wavelengths. Pixels where either input is invalid or the
- * reference is not positive are invalid. 0 or -1 on bad input. */
-int calib_pixels(const struct calib_cfg *c, const double *wl, const struct exp_rate *sample,
-		 const struct exp_rate *ref, const struct calib_geom *g, struct calib_px *out, struct acq_err *err);
 /* Bin pixel values onto the configured grid (see the header comment). 0 or -1. */
 int calib_resample(const struct calib_cfg *c, const double *wl, const struct calib_px *px,
 		   struct calib_spectrum *out, struct acq_err *err);
@@ -100,7 +95,5 @@ int calib_resample(const struct calib_cfg *c, const double *wl, const struct cal
 int calib_spectrum(const struct calib_cfg *c, const double *wl, const struct exp_rate *sample,
 		   const struct exp_rate *ref, const struct calib_geom *g, struct calib_spectrum *out,
 		   struct acq_err *err);
-/* Recompute the combined u from the four components. */
-void calib_combine(struct calib_spectrum *s);
 
 #endif

@@ -285,6 +285,8 @@ static void open_all(struct devices *dv)
 	dv->retry_timer = loop_timer_add(dv->lp, c->d.device_retry_s, c->d.device_retry_s, retry_cb, dv);
 }
 
+static void devices_safe_stop(struct devices *dv);
+
 /* Safe stop, close every handle and end every port (each runs what is queued first). */
 static void close_all(struct devices *dv)
 {
@@ -329,7 +331,9 @@ int devices_reconfigure(struct devices *dv, const struct conf *c, struct acq_err
 	return 0;
 }
 
-void devices_safe_stop(struct devices *dv)
+/* Laser emission off, every arm and the spectrometer stopped (queued first on each port, what runs there is
+ * interrupted); a failure is logged when it comes back. */
+static void devices_safe_stop(struct devices *dv)
 {
 	if (!dv)
 		return;

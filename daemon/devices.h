@@ -31,9 +31,6 @@ int devices_reconfigure(struct devices *dv, const struct conf *c, struct acq_err
 /* Safe stop (laser off, arms stopped), close every device, end the threads (after what is queued), free.
  * NULL is fine. */
 void devices_finish(struct devices *dv);
-/* Laser emission off, every arm and the spectrometer stopped (queued first on each port, what runs there is
- * interrupted); a failure is logged when it comes back. */
-void devices_safe_stop(struct devices *dv);
 
 /* True when device d is open and answering (as far as the last operation knows). */
 bool devices_up(const struct devices *dv, enum conf_dev d);

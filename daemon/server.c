@@ -606,7 +606,8 @@ static bool listed(const char *const *list, int n, const struct passwd *pw)
 	return false;
 }
 
-enum proto_role server_role_of(const struct conf_daemon *d, uid_t uid)
+/* Role of a local user per the configuration (root and the daemon's own uid are controllers); 0 = refused. */
+static enum proto_role server_role_of(const struct conf_daemon *d, uid_t uid)
 {
 	if (uid == 0 || uid == geteuid())
 		return PROTO_CONTROLLER;

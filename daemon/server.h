@@ -79,7 +79,5 @@ void server_reply_error(struct server *srv, uint64_t serial, json_t *id, const c
 void server_broadcast(struct server *srv, const char *event, json_t *data);
 /* Number of connected clients and of watchers. */
 void server_counts(const struct server *srv, int *clients, int *watchers);
-/* Role of a local user per the configuration (root and the daemon's own uid are controllers); 0 = refused. */
-enum proto_role server_role_of(const struct conf_daemon *d, uid_t uid);
 
 #endif

@@ -171,75 +171,73 @@ static int cmp_double(const void *a, const void *b)
 	return x < y ? -1 : x > y;
 }
 
-/* Shared parser: want_values = 0 reads only the angle columns (queries). */
-static int parse(const char *name, const char *text, size_t len, int want_values, struct recon_samples *s,
-		 struct acq_err *err)
-{
-	memset(s, 0, sizeof *s);
-	struct lines L = { text, len, 0, 0 };
-	struct field *fs = NULL;
-	struct col *cols = NULL;
-	double *wls = NULL;
-	size_t cap = 0;
-	int rc = -1;
-	const char *p;
-	size_t n;
-	char shown[48];
+static const char *const angle_names[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
 
-	if (!text)
-		return acq_errf(err, ACQ_E_INVAL, "%s: no text", name);
-	if (len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3))
-		L.pos = 3;
-	/* header: skip comments and blank lines */
+/* One parse: the text's lines, the header's columns (fs: a row's fields, maxf of them at most; cols: ncols
+ * roles; wls: the nwl sorted wavelengths) and where the header was. */
+struct parser {
+	const char *name;
+	int want_values;
+	struct lines L;
+	struct field *fs;
+	struct col *cols;
+	double *wls;
+	size_t maxf, ncols, nwl;
+	long header_line;
+	int sig_seen_any;
+	char shown[48];
+};
+
+/* The header line (comments and blank lines skipped): 0 with p, n set, or -1 with err. */
+static int find_header(struct parser *P, const char **p, size_t *n, struct acq_err *err)
+{
 	for (;;) {
-		if (!next_line(&L, &p, &n)) {
-			acq_errf(err, ACQ_E_INVAL, "%s: no header line (theta_i,phi_i,theta_o,phi_o,...)", name);
-			goto out;
-		}
-		if (n && p[0] == '#')
+		if (!next_line(&P->L, p, n))
+			return acq_errf(err, ACQ_E_INVAL, "%s: no header line (theta_i,phi_i,theta_o,phi_o,...)", P->name);
+		if (*n && (*p)[0] == '#')
 			continue;
-		if (blank(p, n))
+		if (blank(*p, *n))
 			continue;
-		break;
+		return 0;
 	}
-	long header_line = L.lineno;
-	size_t maxf = 1;
+}
+
+/* The header's columns: the arrays sized for its fields, each column's role (angle, wavelength, sigma or
+ * ignored) and wavelength; the unsorted wavelengths in wls. 0, or -1 with err. */
+static int header_columns(struct parser *P, const char *p, size_t n, struct acq_err *err)
+{
+	const char *name = P->name;
+	P->header_line = P->L.lineno;
+	P->maxf = 1;
 	for (size_t i = 0; i < n; i++)
-		maxf += p[i] == ',';
-	if (maxf > CSV_MAX_COLS) {
-		acq_errf(err, ACQ_E_INVAL, "%s:%ld: too many columns (%zu, limit %d)", name, L.lineno, maxf,
-			 CSV_MAX_COLS);
-		goto out;
-	}
-	fs = malloc(maxf * sizeof *fs);
-	cols = malloc(maxf * sizeof *cols);
-	wls = malloc(maxf * sizeof *wls);
-	if (!fs || !cols || !wls) {
-		acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", name);
-		goto out;
-	}
-	long nf = split(p, n, fs, maxf);
-	size_t ncols = (size_t)nf;
+		P->maxf += p[i] == ',';
+	if (P->maxf > CSV_MAX_COLS)
+		return acq_errf(err, ACQ_E_INVAL, "%s:%ld: too many columns (%zu, limit %d)", name, P->L.lineno,
+				P->maxf, CSV_MAX_COLS);
+	P->fs = malloc(P->maxf * sizeof *P->fs);
+	P->cols = malloc(P->maxf * sizeof *P->cols);
+	P->wls = malloc(P->maxf * sizeof *P->wls);
+	if (!P->fs || !P->cols || !P->wls)
+		return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", name);
+	struct field *fs = P->fs;
+	struct col *cols = P->cols;
+	P->ncols = (size_t)split(p, n, fs, P->maxf);
 	int seen[4] = { 0, 0, 0, 0 };
-	static const char *const angle_names[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
-	size_t nwl = 0, nsig = 0;
-	for (size_t c = 0; c < ncols; c++) {
+	for (size_t c = 0; c < P->ncols; c++) {
 		cols[c].role = COL_IGNORE;
 		int a;
 		for (a = 0; a < 4; a++)
 			if (field_is(&fs[c], angle_names[a]))
 				break;
 		if (a < 4) {
-			if (seen[a]) {
-				acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: duplicate column %s", name, L.lineno,
-					 c + 1, angle_names[a]);
-				goto out;
-			}
+			if (seen[a])
+				return acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: duplicate column %s", name,
+						P->L.lineno, c + 1, angle_names[a]);
 			seen[a] = 1;
 			cols[c].role = a;
 			continue;
 		}
-		if (!want_values)
+		if (!P->want_values)
 			continue;
 		struct field g = fs[c];
 		int is_sig = 0;
@@ -250,148 +248,178 @@ static int parse(const char *name, const char *text, size_t len, int want_values
 		}
 		double nm;
 		if (parse_num(&g, &nm) != 0 || !(nm > 0) || nm > 1e6) {
-			show(&fs[c], shown, sizeof shown);
-			acq_errf(err, ACQ_E_INVAL,
-				 "%s:%ld: column %zu: header '%s' is neither an angle column, a wavelength in nm, "
-				 "nor sigma_<nm>", name, L.lineno, c + 1, shown);
-			goto out;
+			show(&fs[c], P->shown, sizeof P->shown);
+			return acq_errf(err, ACQ_E_INVAL,
+					"%s:%ld: column %zu: header '%s' is neither an angle column, a wavelength in nm, "
+					"nor sigma_<nm>", name, P->L.lineno, c + 1, P->shown);
 		}
 		cols[c].role = is_sig ? COL_SIG : COL_VAL;
 		cols[c].nm = nm;
 		if (!is_sig)
-			wls[nwl++] = nm;
-		else
-			nsig++;
+			P->wls[P->nwl++] = nm;
 	}
 	for (int a = 0; a < 4; a++)
-		if (!seen[a]) {
-			acq_errf(err, ACQ_E_INVAL, "%s:%ld: missing column %s", name, header_line, angle_names[a]);
-			goto out;
-		}
-	if (want_values && nwl == 0) {
-		acq_errf(err, ACQ_E_INVAL, "%s:%ld: no wavelength column", name, header_line);
-		goto out;
-	}
+		if (!seen[a])
+			return acq_errf(err, ACQ_E_INVAL, "%s:%ld: missing column %s", name, P->header_line, angle_names[a]);
+	return 0;
+}
+
+/* The wavelengths sorted and distinct, each wavelength and sigma column pointed at its index, at most one
+ * sigma per wavelength (sig_seen_any: some). 0, or -1 with err. */
+static int header_wavelengths(struct parser *P, struct acq_err *err)
+{
+	const char *name = P->name;
+	double *wls = P->wls;
+	size_t nwl = P->nwl;
+	struct col *cols = P->cols;
+	if (P->want_values && nwl == 0)
+		return acq_errf(err, ACQ_E_INVAL, "%s:%ld: no wavelength column", name, P->header_line);
 	qsort(wls, nwl, sizeof *wls, cmp_double);
 	for (size_t k = 1; k < nwl; k++)
-		if (wls[k] == wls[k - 1]) {
-			acq_errf(err, ACQ_E_INVAL, "%s:%ld: wavelength %g nm appears twice", name, header_line, wls[k]);
-			goto out;
-		}
-	int sig_seen_any = 0;
-	unsigned char *sig_seen = want_values ? calloc(nwl ? nwl : 1, 1) : NULL;
-	if (want_values && !sig_seen) {
-		acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", name);
-		goto out;
-	}
-	for (size_t c = 0; c < ncols; c++) {
+		if (wls[k] == wls[k - 1])
+			return acq_errf(err, ACQ_E_INVAL, "%s:%ld: wavelength %g nm appears twice", name, P->header_line,
+					wls[k]);
+	unsigned char *sig_seen = P->want_values ? calloc(nwl ? nwl : 1, 1) : NULL;
+	if (P->want_values && !sig_seen)
+		return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", name);
+	int rc = 0;
+	for (size_t c = 0; c < P->ncols && rc == 0; c++) {
 		if (cols[c].role != COL_VAL && cols[c].role != COL_SIG)
 			continue;
 		double *hit = bsearch(&cols[c].nm, wls, nwl, sizeof *wls, cmp_double);
 		if (!hit) {
-			free(sig_seen);
-			acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: sigma_%g has no wavelength column %g", name,
-				 header_line, c + 1, cols[c].nm, cols[c].nm);
-			goto out;
+			rc = acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: sigma_%g has no wavelength column %g", name,
+				      P->header_line, c + 1, cols[c].nm, cols[c].nm);
+			break;
 		}
 		cols[c].wl = (size_t)(hit - wls);
 		if (cols[c].role == COL_SIG) {
 			if (sig_seen[cols[c].wl]) {
-				free(sig_seen);
-				acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: duplicate sigma_%g", name, header_line,
-					 c + 1, cols[c].nm);
-				goto out;
+				rc = acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: duplicate sigma_%g", name,
+					      P->header_line, c + 1, cols[c].nm);
+				break;
 			}
 			sig_seen[cols[c].wl] = 1;
-			sig_seen_any = 1;
+			P->sig_seen_any = 1;
 		}
 	}
 	free(sig_seen);
-	(void)nsig;
+	return rc;
+}
+
+/* One angle field's value v (pr: parse_num's result) of column c checked and stored in row r. 0 or -1. */
+static int row_angle(struct parser *P, size_t c, int pr, double v, struct recon_samples *s, size_t r,
+		     struct acq_err *err)
+{
+	const char *name = P->name;
+	int role = P->cols[c].role;
+	if (pr == 1)
+		return acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: angle %s is missing", name, P->L.lineno, c + 1,
+				angle_names[role]);
+	int is_theta = role == COL_TI || role == COL_TO;
+	if (is_theta && (v < 0 || v > 90))
+		return acq_errf(err, ACQ_E_RANGE, "%s:%ld: column %zu: zenith %s = %g outside [0, 90] degrees", name,
+				P->L.lineno, c + 1, angle_names[role], v);
+	if (!is_theta && fabs(v) > 1e6)
+		return acq_errf(err, ACQ_E_RANGE, "%s:%ld: column %zu: azimuth %g is absurd", name, P->L.lineno, c + 1,
+				v);
+	s->deg[r * 4 + role] = v;
+	s->ang[r * 4 + role] = v * (M_PI / 180.0);
+	return 0;
+}
+
+/* The data row p, n appended to s (grown as needed; *cap its capacity). 0, or -1 with err. */
+static int parse_row(struct parser *P, const char *p, size_t n, struct recon_samples *s, size_t *cap,
+		     struct acq_err *err)
+{
+	const char *name = P->name;
+	size_t nwl = P->nwl, ncols = P->ncols;
+	struct field *fs = P->fs;
+	struct col *cols = P->cols;
+	long k = split(p, n, fs, P->maxf);
+	if (k != (long)ncols)
+		return acq_errf(err, ACQ_E_INVAL, "%s:%ld: expected %zu fields, found %s%ld", name, P->L.lineno, ncols,
+				k < 0 ? "more than " : "", k < 0 ? (long)P->maxf : k);
+	if (s->n == *cap) {
+		size_t nc = *cap ? 2 * *cap : 64;
+		if (csvio_samples_grow(s, nc, P->want_values, P->want_values && P->sig_seen_any))
+			return acq_errf(err, ACQ_E_NOMEM, "%s:%ld: out of memory", name, P->L.lineno);
+		*cap = nc;
+	}
+	size_t r = s->n;
+	for (size_t w = 0; P->want_values && w < nwl; w++) {
+		s->val[r * nwl + w] = NAN;
+		if (s->sig)
+			s->sig[r * nwl + w] = NAN;
+	}
+	for (size_t c = 0; c < ncols; c++) {
+		if (cols[c].role == COL_IGNORE)
+			continue;
+		double v;
+		int pr = parse_num(&fs[c], &v);
+		if (pr < 0) {
+			show(&fs[c], P->shown, sizeof P->shown);
+			return acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: '%s' is not a finite number", name,
+					P->L.lineno, c + 1, P->shown);
+		}
+		if (cols[c].role <= COL_PO) {
+			if (row_angle(P, c, pr, v, s, r, err) != 0)
+				return -1;
+		} else if (cols[c].role == COL_VAL) {
+			s->val[r * nwl + cols[c].wl] = v;
+		} else {
+			if (pr == 0 && v < 0)
+				return acq_errf(err, ACQ_E_RANGE, "%s:%ld: column %zu: negative uncertainty %g", name,
+						P->L.lineno, c + 1, v);
+			s->sig[r * nwl + cols[c].wl] = v;
+		}
+	}
+	s->n++;
+	return 0;
+}
+
+/* Shared parser: want_values = 0 reads only the angle columns (queries). */
+static int parse(const char *name, const char *text, size_t len, int want_values, struct recon_samples *s,
+		 struct acq_err *err)
+{
+	memset(s, 0, sizeof *s);
+	if (!text)
+		return acq_errf(err, ACQ_E_INVAL, "%s: no text", name);
+	struct parser P = { .name = name, .want_values = want_values, .L = { text, len, 0, 0 } };
+	size_t cap = 0;
+	int rc = -1;
+	const char *p;
+	size_t n;
+
+	if (len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3))
+		P.L.pos = 3;
+	if (find_header(&P, &p, &n, err) != 0 || header_columns(&P, p, n, err) != 0 ||
+	    header_wavelengths(&P, err) != 0)
+		goto out;
 
 	/* rows */
-	s->nwl = nwl;
-	s->wl = malloc((nwl ? nwl : 1) * sizeof *s->wl);
+	s->nwl = P.nwl;
+	s->wl = malloc((P.nwl ? P.nwl : 1) * sizeof *s->wl);
 	if (!s->wl) {
 		acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", name);
 		goto out;
 	}
-	memcpy(s->wl, wls, nwl * sizeof *wls);
-	while (next_line(&L, &p, &n)) {
+	memcpy(s->wl, P.wls, P.nwl * sizeof *P.wls);
+	while (next_line(&P.L, &p, &n)) {
 		if (blank(p, n) || (n && p[0] == '#'))
 			continue;
-		long k = split(p, n, fs, maxf);
-		if (k != (long)ncols) {
-			acq_errf(err, ACQ_E_INVAL, "%s:%ld: expected %zu fields, found %s%ld", name, L.lineno, ncols,
-				 k < 0 ? "more than " : "", k < 0 ? (long)maxf : k);
+		if (parse_row(&P, p, n, s, &cap, err) != 0)
 			goto out;
-		}
-		if (s->n == cap) {
-			size_t nc = cap ? 2 * cap : 64;
-			if (csvio_samples_grow(s, nc, want_values, want_values && sig_seen_any)) {
-				acq_errf(err, ACQ_E_NOMEM, "%s:%ld: out of memory", name, L.lineno);
-				goto out;
-			}
-			cap = nc;
-		}
-		size_t r = s->n;
-		for (size_t w = 0; want_values && w < nwl; w++) {
-			s->val[r * nwl + w] = NAN;
-			if (s->sig)
-				s->sig[r * nwl + w] = NAN;
-		}
-		for (size_t c = 0; c < ncols; c++) {
-			if (cols[c].role == COL_IGNORE)
-				continue;
-			double v;
-			int pr = parse_num(&fs[c], &v);
-			if (pr < 0) {
-				show(&fs[c], shown, sizeof shown);
-				acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: '%s' is not a finite number", name,
-					 L.lineno, c + 1, shown);
-				goto out;
-			}
-			if (cols[c].role <= COL_PO) {
-				if (pr == 1) {
-					acq_errf(err, ACQ_E_INVAL, "%s:%ld: column %zu: angle %s is missing", name,
-						 L.lineno, c + 1, angle_names[cols[c].role]);
-					goto out;
-				}
-				int is_theta = cols[c].role == COL_TI || cols[c].role == COL_TO;
-				if (is_theta && (v < 0 || v > 90)) {
-					acq_errf(err, ACQ_E_RANGE, "%s:%ld: column %zu: zenith %s = %g outside [0, 90] degrees",
-						 name, L.lineno, c + 1, angle_names[cols[c].role], v);
-					goto out;
-				}
-				if (!is_theta && fabs(v) > 1e6) {
-					acq_errf(err, ACQ_E_RANGE, "%s:%ld: column %zu: azimuth %g is absurd", name, L.lineno,
-						 c + 1, v);
-					goto out;
-				}
-				s->deg[r * 4 + cols[c].role] = v;
-				s->ang[r * 4 + cols[c].role] = v * (M_PI / 180.0);
-			} else if (cols[c].role == COL_VAL) {
-				s->val[r * nwl + cols[c].wl] = v;
-			} else {
-				if (pr == 0 && v < 0) {
-					acq_errf(err, ACQ_E_RANGE, "%s:%ld: column %zu: negative uncertainty %g", name,
-						 L.lineno, c + 1, v);
-					goto out;
-				}
-				s->sig[r * nwl + cols[c].wl] = v;
-			}
-		}
-		s->n++;
 	}
 	if (s->n == 0) {
-		acq_errf(err, ACQ_E_INVAL, "%s: no data rows after the header (line %ld)", name, header_line);
+		acq_errf(err, ACQ_E_INVAL, "%s: no data rows after the header (line %ld)", name, P.header_line);
 		goto out;
 	}
 	rc = 0;
 out:
-	free(fs);
-	free(cols);
-	free(wls);
+	free(P.fs);
+	free(P.cols);
+	free(P.wls);
 	if (rc)
 		csvio_samples_free(s);
 	return rc;

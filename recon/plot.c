@@ -260,13 +260,10 @@ static int residual_panel(cairo_t *cr, const struct plot_frame *f, const struct 
 	return 0;
 }
 
-int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurves, const struct plot_curve *reference,
-		 const struct plot_dhr_opts *o, struct plot_frame *frame, struct acq_err *err)
+/* plot_dhr_png's arguments checked: 0, or -1 with err saying which. */
+static int check_args(const char *path, const struct plot_curve *curves, size_t ncurves,
+		      const struct plot_curve *reference, const struct plot_dhr_opts *o, struct acq_err *err)
 {
-	struct plot_dhr_opts def;
-	plot_dhr_opts_default(&def);
-	if (!o)
-		o = &def;
 	if (!path || !*path)
 		return acq_errf(err, ACQ_E_INVAL, "plot: no output path");
 	if (o->width < 64 || o->width > 8192 || o->height < 64 || o->height > 8192)
@@ -282,8 +279,14 @@ int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurv
 			return -1;
 	if (reference && check_curve(reference, "reference", 0, err) != 0)
 		return -1;
+	return 0;
+}
 
-	/* Ranges: data extents (bands included); y starts at 0 unless data go below. */
+/* The frame *f: data ranges (bands included; y starts at 0 unless data go below) unless o gives them, and the
+ * pixel box of the axes (the residual panel, if any, below it). 0, or -1 with err. */
+static int layout(const struct plot_curve *curves, size_t ncurves, const struct plot_curve *reference,
+		  const struct plot_dhr_opts *o, struct plot_frame *f, struct acq_err *err)
+{
 	double k = o->band_k;
 	double x0 = INFINITY, x1 = -INFINITY, y0 = 0, y1 = -INFINITY;
 	for (size_t i = 0; i < ncurves; i++)
@@ -292,75 +295,76 @@ int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurv
 		extend(reference, k, &x0, &x1, &y0, &y1);
 	if (!(y1 >= y0))
 		y1 = y0;
-	struct plot_frame f = { 0 };
-	f.x_min = o->x_min;
-	f.x_max = o->x_max;
-	f.y_min = o->y_min;
-	f.y_max = o->y_max;
-	if (resolve_range(&f.x_min, &f.x_max, x0, x1, 0, "x", err) != 0 ||
-	    resolve_range(&f.y_min, &f.y_max, y0, y1, 1, "y", err) != 0)
+	*f = (struct plot_frame){ 0 };
+	f->x_min = o->x_min;
+	f->x_max = o->x_max;
+	f->y_min = o->y_min;
+	f->y_max = o->y_max;
+	if (resolve_range(&f->x_min, &f->x_max, x0, x1, 0, "x", err) != 0 ||
+	    resolve_range(&f->y_min, &f->y_max, y0, y1, 1, "y", err) != 0)
 		return -1;
 	double W = o->width, H = o->height;
-	f.px_left = 78;
-	f.px_right = W - 18;
-	f.px_top = o->title ? 42 : 18;
-	f.px_bottom = H - 58;
-	double panel = o->residual ? floor(0.26 * (H - 58 - f.px_top)) : 0; /* residual panel below the axes */
-	f.px_bottom -= panel;
-	if (f.px_right - f.px_left < 16 || f.px_bottom - f.px_top < 16)
+	f->px_left = 78;
+	f->px_right = W - 18;
+	f->px_top = o->title ? 42 : 18;
+	f->px_bottom = H - 58;
+	double panel = o->residual ? floor(0.26 * (H - 58 - f->px_top)) : 0; /* residual panel below the axes */
+	f->px_bottom -= panel;
+	if (f->px_right - f->px_left < 16 || f->px_bottom - f->px_top < 16)
 		return acq_errf(err, ACQ_E_INVAL, "plot: image %d × %d too small for the axes", o->width, o->height);
+	return 0;
+}
 
-	cairo_surface_t *surf = cairo_image_surface_create(CAIRO_FORMAT_RGB24, o->width, o->height);
-	cairo_t *cr = cairo_create(surf);
-	cairo_set_source_rgb(cr, 1, 1, 1);
-	cairo_paint(cr);
-	cairo_select_font_face(cr, "sans-serif", CAIRO_FONT_SLANT_NORMAL, CAIRO_FONT_WEIGHT_NORMAL);
-	cairo_set_font_size(cr, 13);
-
-	/* grid and ticks */
-	double xs = nice_step((f.x_max - f.x_min) / 8), ys = nice_step((f.y_max - f.y_min) / 6);
+/* Grid lines and ticks with their labels, x then y. */
+static void draw_grid(cairo_t *cr, const struct plot_frame *f)
+{
+	double xs = nice_step((f->x_max - f->x_min) / 8), ys = nice_step((f->y_max - f->y_min) / 6);
 	char lab[64];
 	cairo_set_line_width(cr, 1);
-	double xstart = ceil(f.x_min / xs - 1e-9) * xs, ystart = ceil(f.y_min / ys - 1e-9) * ys;
+	double xstart = ceil(f->x_min / xs - 1e-9) * xs, ystart = ceil(f->y_min / ys - 1e-9) * ys;
 	for (int it = 0; it < 100; it++) {
 		double x = xstart + it * xs;
-		if (x > f.x_max + 1e-9 * xs)
+		if (x > f->x_max + 1e-9 * xs)
 			break;
-		double px = round(plot_x_to_px(&f, x)) + 0.5;
+		double px = round(plot_x_to_px(f, x)) + 0.5;
 		cairo_set_source_rgb(cr, 0.9, 0.9, 0.9);
-		cairo_move_to(cr, px, f.px_top);
-		cairo_line_to(cr, px, f.px_bottom);
+		cairo_move_to(cr, px, f->px_top);
+		cairo_line_to(cr, px, f->px_bottom);
 		cairo_stroke(cr);
 		cairo_set_source_rgb(cr, 0, 0, 0);
-		cairo_move_to(cr, px, f.px_bottom);
-		cairo_line_to(cr, px, f.px_bottom + 5);
+		cairo_move_to(cr, px, f->px_bottom);
+		cairo_line_to(cr, px, f->px_bottom + 5);
 		cairo_stroke(cr);
 		snprintf(lab, sizeof(lab), "%g", fabs(x) < 1e-12 * xs ? 0.0 : x);
-		text_at(cr, lab, px, f.px_bottom + 8, 0.5, 0);
+		text_at(cr, lab, px, f->px_bottom + 8, 0.5, 0);
 	}
 	for (int it = 0; it < 100; it++) {
 		double y = ystart + it * ys;
-		if (y > f.y_max + 1e-9 * ys)
+		if (y > f->y_max + 1e-9 * ys)
 			break;
-		double py = round(plot_y_to_px(&f, y)) + 0.5;
+		double py = round(plot_y_to_px(f, y)) + 0.5;
 		cairo_set_source_rgb(cr, 0.9, 0.9, 0.9);
-		cairo_move_to(cr, f.px_left, py);
-		cairo_line_to(cr, f.px_right, py);
+		cairo_move_to(cr, f->px_left, py);
+		cairo_line_to(cr, f->px_right, py);
 		cairo_stroke(cr);
 		cairo_set_source_rgb(cr, 0, 0, 0);
-		cairo_move_to(cr, f.px_left - 5, py);
-		cairo_line_to(cr, f.px_left, py);
+		cairo_move_to(cr, f->px_left - 5, py);
+		cairo_line_to(cr, f->px_left, py);
 		cairo_stroke(cr);
 		snprintf(lab, sizeof(lab), "%g", fabs(y) < 1e-12 * ys ? 0.0 : y);
-		text_at(cr, lab, f.px_left - 8, py, 1, 0.5);
+		text_at(cr, lab, f->px_left - 8, py, 1, 0.5);
 	}
+}
 
-	/* data, clipped to the plot area */
+/* The data, clipped to the plot area: bands (the reference's filled, the curves' hatched), then the lines. */
+static void draw_data(cairo_t *cr, const struct plot_frame *f, const struct plot_curve *curves, size_t ncurves,
+		      const struct plot_curve *reference, double k)
+{
 	cairo_save(cr);
-	cairo_rectangle(cr, f.px_left, f.px_top, f.px_right - f.px_left, f.px_bottom - f.px_top);
+	cairo_rectangle(cr, f->px_left, f->px_top, f->px_right - f->px_left, f->px_bottom - f->px_top);
 	cairo_clip(cr);
 	if (reference && reference->sigma) {
-		band_path(cr, &f, reference, k);
+		band_path(cr, f, reference, k);
 		cairo_set_source_rgba(cr, ref_band[0], ref_band[1], ref_band[2], 0.35);
 		cairo_fill(cr);
 	}
@@ -369,11 +373,11 @@ int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurv
 			continue;
 		const double *c = palette[i % PALETTE_N];
 		cairo_save(cr);
-		band_path(cr, &f, &curves[i], k);
+		band_path(cr, f, &curves[i], k);
 		cairo_set_source_rgba(cr, c[0], c[1], c[2], 0.10);
 		cairo_fill_preserve(cr);
 		cairo_clip(cr);
-		hatch(cr, &f, i % 2 ? -1 : 1, 7 + (double)(i % 3));
+		hatch(cr, f, i % 2 ? -1 : 1, 7 + (double)(i % 3));
 		cairo_set_source_rgba(cr, c[0], c[1], c[2], 0.45);
 		cairo_set_line_width(cr, 1);
 		cairo_stroke(cr);
@@ -382,27 +386,31 @@ int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurv
 	cairo_set_line_join(cr, CAIRO_LINE_JOIN_ROUND);
 	cairo_set_line_width(cr, 2);
 	if (reference) {
-		line_path(cr, &f, reference);
+		line_path(cr, f, reference);
 		cairo_set_source_rgb(cr, ref_line[0], ref_line[1], ref_line[2]);
 		cairo_stroke(cr);
 	}
 	for (size_t i = 0; i < ncurves; i++) {
 		const double *c = palette[i % PALETTE_N];
-		line_path(cr, &f, &curves[i]);
+		line_path(cr, f, &curves[i]);
 		cairo_set_source_rgb(cr, c[0], c[1], c[2]);
 		cairo_stroke(cr);
 	}
 	cairo_restore(cr);
+}
 
-	/* frame, labels, title */
+/* The axes' frame, the axis labels and the title. */
+static void draw_labels(cairo_t *cr, const struct plot_frame *f, const struct plot_dhr_opts *o)
+{
+	double W = o->width, H = o->height;
 	cairo_set_source_rgb(cr, 0, 0, 0);
 	cairo_set_line_width(cr, 1);
-	cairo_rectangle(cr, f.px_left + 0.5, f.px_top + 0.5, f.px_right - f.px_left - 1, f.px_bottom - f.px_top - 1);
+	cairo_rectangle(cr, f->px_left + 0.5, f->px_top + 0.5, f->px_right - f->px_left - 1, f->px_bottom - f->px_top - 1);
 	cairo_stroke(cr);
 	cairo_set_font_size(cr, 14);
-	text_at(cr, o->x_label ? o->x_label : "", (f.px_left + f.px_right) / 2, H - 22, 0.5, 0);
+	text_at(cr, o->x_label ? o->x_label : "", (f->px_left + f->px_right) / 2, H - 22, 0.5, 0);
 	cairo_save(cr);
-	cairo_translate(cr, 16, (f.px_top + f.px_bottom) / 2);
+	cairo_translate(cr, 16, (f->px_top + f->px_bottom) / 2);
 	cairo_rotate(cr, -M_PI / 2);
 	text_at(cr, o->y_label ? o->y_label : "", 0, 0, 0.5, 0);
 	cairo_restore(cr);
@@ -410,8 +418,18 @@ int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurv
 		cairo_set_font_size(cr, 15);
 		text_at(cr, o->title, W / 2, 12, 0.5, 0);
 	}
+}
 
-	/* legend, top right inside the plot area: one row per labelled curve, then the band convention */
+/* The legend's label of curve i (i == ncurves: the reference); NULL or "" for none. */
+static const char *legend_label(const struct plot_curve *c, size_t i, size_t ncurves)
+{
+	return i < ncurves ? c->label : (c->label && *c->label ? c->label : "reference");
+}
+
+/* The legend, top right inside the plot area: one row per labelled curve, then the band convention. */
+static void draw_legend(cairo_t *cr, const struct plot_frame *f, const struct plot_curve *curves, size_t ncurves,
+			const struct plot_curve *reference, double k)
+{
 	cairo_set_font_size(cr, 12);
 	size_t rows = 0;
 	double wmax = 0;
@@ -422,7 +440,7 @@ int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurv
 		if (!c)
 			continue;
 		any_sigma |= c->sigma != NULL;
-		const char *l = i < ncurves ? c->label : (c->label && *c->label ? c->label : "reference");
+		const char *l = legend_label(c, i, ncurves);
 		if (!l || !*l)
 			continue;
 		cairo_text_extents_t e;
@@ -437,46 +455,69 @@ int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurv
 		wmax = fmax(wmax, e.x_advance - 30);
 		rows++;
 	}
-	if (rows > 0) {
-		double rowh = 18, bw = wmax + 46, bh = (double)rows * rowh + 8;
-		double bx = f.px_right - bw - 8, by = f.px_top + 8, y = by + 4;
-		cairo_rectangle(cr, bx, by, bw, bh);
-		cairo_set_source_rgba(cr, 1, 1, 1, 0.85);
-		cairo_fill_preserve(cr);
-		cairo_set_source_rgb(cr, 0.6, 0.6, 0.6);
+	if (rows == 0)
+		return;
+	double rowh = 18, bw = wmax + 46, bh = (double)rows * rowh + 8;
+	double bx = f->px_right - bw - 8, by = f->px_top + 8, y = by + 4;
+	cairo_rectangle(cr, bx, by, bw, bh);
+	cairo_set_source_rgba(cr, 1, 1, 1, 0.85);
+	cairo_fill_preserve(cr);
+	cairo_set_source_rgb(cr, 0.6, 0.6, 0.6);
+	cairo_stroke(cr);
+	for (size_t i = 0; i <= ncurves; i++) {
+		const struct plot_curve *c = i < ncurves ? &curves[i] : reference;
+		if (!c)
+			continue;
+		const char *l = legend_label(c, i, ncurves);
+		if (!l || !*l)
+			continue;
+		const double *col = i < ncurves ? palette[i % PALETTE_N] : ref_line;
+		if (c->sigma) {
+			cairo_rectangle(cr, bx + 6, y + 3, 26, rowh - 6);
+			if (i < ncurves)
+				cairo_set_source_rgba(cr, col[0], col[1], col[2], 0.25);
+			else
+				cairo_set_source_rgba(cr, ref_band[0], ref_band[1], ref_band[2], 0.35);
+			cairo_fill(cr);
+		}
+		cairo_set_source_rgb(cr, col[0], col[1], col[2]);
+		cairo_set_line_width(cr, 2);
+		cairo_move_to(cr, bx + 6, y + rowh / 2);
+		cairo_line_to(cr, bx + 32, y + rowh / 2);
 		cairo_stroke(cr);
-		for (size_t i = 0; i <= ncurves; i++) {
-			const struct plot_curve *c = i < ncurves ? &curves[i] : reference;
-			if (!c)
-				continue;
-			const char *l = i < ncurves ? c->label : (c->label && *c->label ? c->label : "reference");
-			if (!l || !*l)
-				continue;
-			const double *col = i < ncurves ? palette[i % PALETTE_N] : ref_line;
-			if (c->sigma) {
-				cairo_rectangle(cr, bx + 6, y + 3, 26, rowh - 6);
-				if (i < ncurves)
-					cairo_set_source_rgba(cr, col[0], col[1], col[2], 0.25);
-				else
-					cairo_set_source_rgba(cr, ref_band[0], ref_band[1], ref_band[2], 0.35);
-				cairo_fill(cr);
-			}
-			cairo_set_source_rgb(cr, col[0], col[1], col[2]);
-			cairo_set_line_width(cr, 2);
-			cairo_move_to(cr, bx + 6, y + rowh / 2);
-			cairo_line_to(cr, bx + 32, y + rowh / 2);
-			cairo_stroke(cr);
-			cairo_set_source_rgb(cr, 0, 0, 0);
-			text_at(cr, l, bx + 38, y + rowh / 2, 0, 0.5);
-			y += rowh;
-		}
-		if (any_sigma) {
-			cairo_set_source_rgb(cr, 0.25, 0.25, 0.25);
-			text_at(cr, bandtxt, bx + 8, y + rowh / 2, 0, 0.5);
-		}
+		cairo_set_source_rgb(cr, 0, 0, 0);
+		text_at(cr, l, bx + 38, y + rowh / 2, 0, 0.5);
+		y += rowh;
 	}
+	if (any_sigma) {
+		cairo_set_source_rgb(cr, 0.25, 0.25, 0.25);
+		text_at(cr, bandtxt, bx + 8, y + rowh / 2, 0, 0.5);
+	}
+}
 
-	if (o->residual && residual_panel(cr, &f, o->residual, f.px_bottom + 26, H - 58) != 0)
+int plot_dhr_png(const char *path, const struct plot_curve *curves, size_t ncurves, const struct plot_curve *reference,
+		 const struct plot_dhr_opts *o, struct plot_frame *frame, struct acq_err *err)
+{
+	struct plot_dhr_opts def;
+	plot_dhr_opts_default(&def);
+	if (!o)
+		o = &def;
+	struct plot_frame f;
+	if (check_args(path, curves, ncurves, reference, o, err) != 0 ||
+	    layout(curves, ncurves, reference, o, &f, err) != 0)
+		return -1;
+
+	cairo_surface_t *surf = cairo_image_surface_create(CAIRO_FORMAT_RGB24, o->width, o->height);
+	cairo_t *cr = cairo_create(surf);
+	cairo_set_source_rgb(cr, 1, 1, 1);
+	cairo_paint(cr);
+	cairo_select_font_face(cr, "sans-serif", CAIRO_FONT_SLANT_NORMAL, CAIRO_FONT_WEIGHT_NORMAL);
+	cairo_set_font_size(cr, 13);
+	draw_grid(cr, &f);
+	draw_data(cr, &f, curves, ncurves, reference, o->band_k);
+	draw_labels(cr, &f, o);
+	draw_legend(cr, &f, curves, ncurves, reference, o->band_k);
+	if (o->residual && residual_panel(cr, &f, o->residual, f.px_bottom + 26, o->height - 58) != 0)
 		cairo_set_source_rgb(cr, 0, 0, 0); /* nothing drawable: the panel stays empty */
 
 	cairo_surface_flush(surf);

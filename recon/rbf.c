@@ -4,7 +4,8 @@
 #include <math.h>
 #include <string.h>
 
-double rbf_hav(double x)
+/* Haversine hav(x) = sin²(x/2). */
+static double rbf_hav(double x)
 {
 	double s = sin(0.5 * x);
 	return s * s;

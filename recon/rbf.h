@@ -14,8 +14,6 @@ enum rbf_kernel {
 	RBF_K__COUNT
 };
 
-/* Haversine hav(x) = sin²(x/2). */
-double rbf_hav(double x);
 /* Great-circle distance between (th1,ph1) and (th2,ph2), haversine form (paper Eq. 2), in [0, π]. */
 double rbf_gc_dist(double th1, double ph1, double th2, double ph2);
 /* Product metric d_Ω (paper Eq. 3) between a = (θi,φi,θo,φo) and b. */

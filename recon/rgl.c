@@ -324,45 +324,82 @@ static char *describe(const struct recon_model *m, const struct rgl_opts *o, con
 	return d;
 }
 
-int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char *path, struct rgl_stats *st,
-	      struct acq_err *err)
+/* rgl_write's options checked against the model; *wl and *L the wavelengths to write. 0, or -1 with err. */
+static int check_opts(const struct recon_model *m, const struct rgl_opts *o, const double **wl, size_t *L,
+		      struct acq_err *err)
 {
 	if (o->res < 4 || o->res > 256 || o->ndf_res < 8 || o->ndf_res > 1024 || o->ntheta < 2 || o->ntheta > 180 ||
 	    o->threads < 1 || o->threads > 16)
 		return acq_errf(err, ACQ_E_INVAL, "rgl: resolution %d (4..256), ndf %d (8..1024), theta nodes %d (2..180) "
 				"or threads %d (1..16) out of range", o->res, o->ndf_res, o->ntheta, o->threads);
-	const double *wl = o->wl ? o->wl : m->wl;
-	size_t L = o->wl ? o->nwl : m->nwl, ML = m->nwl;
-	if (L < 1 || L > RGL_MAX_WL)
-		return acq_errf(err, ACQ_E_INVAL, "rgl: %zu wavelengths (1..%d)", L, RGL_MAX_WL);
-	for (size_t l = 0; l < L; l++) {
-		if (!(wl[l] >= m->wl[0] - 1e-9 && wl[l] <= m->wl[ML - 1] + 1e-9))
-			return acq_errf(err, ACQ_E_RANGE, "rgl: wavelength %g nm is outside the model's range %g..%g nm", wl[l],
+	*wl = o->wl ? o->wl : m->wl;
+	*L = o->wl ? o->nwl : m->nwl;
+	size_t ML = m->nwl;
+	if (*L < 1 || *L > RGL_MAX_WL)
+		return acq_errf(err, ACQ_E_INVAL, "rgl: %zu wavelengths (1..%d)", *L, RGL_MAX_WL);
+	for (size_t l = 0; l < *L; l++) {
+		const double *w = *wl;
+		if (!(w[l] >= m->wl[0] - 1e-9 && w[l] <= m->wl[ML - 1] + 1e-9))
+			return acq_errf(err, ACQ_E_RANGE, "rgl: wavelength %g nm is outside the model's range %g..%g nm", w[l],
 					m->wl[0], m->wl[ML - 1]);
-		if (l && !(wl[l] > wl[l - 1]))
-			return acq_errf(err, ACQ_E_INVAL, "rgl: wavelengths must increase (%g after %g nm)", wl[l], wl[l - 1]);
+		if (l && !(w[l] > w[l - 1]))
+			return acq_errf(err, ACQ_E_INVAL, "rgl: wavelengths must increase (%g after %g nm)", w[l], w[l - 1]);
 	}
-	size_t R = (size_t)o->res, N = R * R, nd = (size_t)o->ndf_res, nth = (size_t)o->ntheta;
-	int rc = -1;
-	struct chan *ch = calloc(L, sizeof *ch);
-	double *yw = calloc(L, sizeof *yw), *theta = calloc(nth, sizeof *theta);
-	double *D1 = calloc(nd, sizeof *D1), *S1 = calloc(nd, sizeof *S1), *rho = calloc(nd, sizeof *rho);
-	double *ndf = calloc(nd * nd, sizeof *ndf), *sig = calloc(nd * nd, sizeof *sig);
-	double *rang = calloc(nd * 4, sizeof *rang), *rval = calloc(nd * ML, sizeof *rval);
-	float *fndf = calloc(nd * nd, sizeof *fndf), *fsig = calloc(nd * nd, sizeof *fsig);
-	float *fth = calloc(nth, sizeof *fth), *fwl = calloc(L, sizeof *fwl);
-	float *vndf = calloc(nth * N, sizeof *vndf), *lum = calloc(nth * N, sizeof *lum);
-	float *spec = calloc(nth * L * N, sizeof *spec);
-	size_t *zero = calloc(nth, sizeof *zero);
-	char *desc = describe(m, o, wl, L);
-	unsigned char *file = NULL;
-	struct job j = { 0 };
-	if (!ch || !yw || !theta || !D1 || !S1 || !rho || !ndf || !sig || !rang || !rval || !fndf || !fsig || !fth ||
-	    !fwl || !vndf || !lum || !spec || !zero || !desc) {
-		acq_errf(err, ACQ_E_NOMEM, "rgl: out of memory (%zu incidences x %zu wavelengths x %zu nodes)", nth, L, N);
-		goto out;
-	}
-	/* wavelength map and luminance weights (ȳ × trapezoid width; equal weights when none is visible) */
+	return 0;
+}
+
+/* Every array rgl_write fills (sizes from the options: L wavelengths, nd NDF columns, nth incidences, N warped
+ * nodes), the description and the serialised file. */
+struct tables {
+	struct chan *ch;
+	double *yw, *theta, *D1, *S1, *rho, *ndf, *sig, *rang, *rval;
+	float *fndf, *fsig, *fth, *fwl, *vndf, *lum, *spec;
+	size_t *zero;
+	char *desc;
+	unsigned char *file;
+};
+
+/* 0, or -1 if any allocation failed (what was allocated is for tables_free). */
+static int tables_alloc(struct tables *t, size_t L, size_t ML, size_t nd, size_t nth, size_t N)
+{
+	t->ch = calloc(L, sizeof *t->ch);
+	t->yw = calloc(L, sizeof *t->yw);
+	t->theta = calloc(nth, sizeof *t->theta);
+	t->D1 = calloc(nd, sizeof *t->D1);
+	t->S1 = calloc(nd, sizeof *t->S1);
+	t->rho = calloc(nd, sizeof *t->rho);
+	t->ndf = calloc(nd * nd, sizeof *t->ndf);
+	t->sig = calloc(nd * nd, sizeof *t->sig);
+	t->rang = calloc(nd * 4, sizeof *t->rang);
+	t->rval = calloc(nd * ML, sizeof *t->rval);
+	t->fndf = calloc(nd * nd, sizeof *t->fndf);
+	t->fsig = calloc(nd * nd, sizeof *t->fsig);
+	t->fth = calloc(nth, sizeof *t->fth);
+	t->fwl = calloc(L, sizeof *t->fwl);
+	t->vndf = calloc(nth * N, sizeof *t->vndf);
+	t->lum = calloc(nth * N, sizeof *t->lum);
+	t->spec = calloc(nth * L * N, sizeof *t->spec);
+	t->zero = calloc(nth, sizeof *t->zero);
+	if (!t->ch || !t->yw || !t->theta || !t->D1 || !t->S1 || !t->rho || !t->ndf || !t->sig || !t->rang || !t->rval ||
+	    !t->fndf || !t->fsig || !t->fth || !t->fwl || !t->vndf || !t->lum || !t->spec || !t->zero)
+		return -1;
+	return 0;
+}
+
+static void tables_free(struct tables *t)
+{
+	void *all[] = { t->ch, t->yw, t->theta, t->D1, t->S1, t->rho, t->ndf, t->sig, t->rang, t->rval, t->fndf, t->fsig,
+			t->fth, t->fwl, t->vndf, t->lum, t->spec, t->zero, t->desc, t->file };
+	for (size_t i = 0; i < sizeof all / sizeof all[0]; i++)
+		free(all[i]);
+}
+
+/* Wavelength map (the model's channels each written wavelength lies between) and luminance weights (ȳ ×
+ * trapezoid width; equal weights when none is visible). */
+static void wavelength_map(const struct recon_model *m, const double *wl, size_t L, struct tables *t)
+{
+	size_t ML = m->nwl;
+	struct chan *ch = t->ch;
 	double ysum = 0;
 	for (size_t l = 0; l < L; l++) {
 		size_t a = 0;
@@ -377,33 +414,40 @@ int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char 
 		if (ch[l].t > 1)
 			ch[l].t = 1;
 		double width = L == 1 ? 1 : 0.5 * (wl[l + 1 < L ? l + 1 : l] - wl[l ? l - 1 : 0]);
-		yw[l] = ybar(wl[l]) * width;
-		ysum += yw[l];
-		fwl[l] = to_f32(wl[l]);
+		t->yw[l] = ybar(wl[l]) * width;
+		ysum += t->yw[l];
+		t->fwl[l] = to_f32(wl[l]);
 	}
 	for (size_t l = 0; l < L; l++)
-		yw[l] = ysum > 0 ? yw[l] / ysum : 1.0 / (double)L;
-	/* retro-reflection luminance ρ(θ) at the NDF columns */
+		t->yw[l] = ysum > 0 ? t->yw[l] / ysum : 1.0 / (double)L;
+}
+
+/* The NDF D1 and its projected area S1 over nd columns: retro-reflection luminance ρ(θ), then the fixed point
+ * D ← ρ·cosθ·σ, floored and normalised (∫ D cos dω = 1). 0, or -1 with err (the model's evaluation). */
+static int ndf_fit(const struct recon_model *m, size_t L, size_t nd, struct tables *t, struct acq_err *err)
+{
+	size_t ML = m->nwl;
+	const struct chan *ch = t->ch;
+	double *D1 = t->D1, *S1 = t->S1;
 	for (size_t c = 0; c < nd; c++) {
-		double t = theta_of_u((double)c / (double)(nd - 1));
-		if (t > RETRO_MAX)
-			t = RETRO_MAX;
-		rang[c * 4] = rang[c * 4 + 2] = t;
+		double th = theta_of_u((double)c / (double)(nd - 1));
+		if (th > RETRO_MAX)
+			th = RETRO_MAX;
+		t->rang[c * 4] = t->rang[c * 4 + 2] = th;
 	}
-	if (recon_eval(m, nd, rang, rval, err))
-		goto out;
+	if (recon_eval(m, nd, t->rang, t->rval, err))
+		return -1;
 	for (size_t c = 0; c < nd; c++) {
 		double y = 0;
 		for (size_t l = 0; l < L; l++)
-			y += yw[l] * ((1 - ch[l].t) * rval[c * ML + ch[l].l0] + ch[l].t * rval[c * ML + ch[l].l1]);
-		rho[c] = y;
+			y += t->yw[l] * ((1 - ch[l].t) * t->rval[c * ML + ch[l].l0] + ch[l].t * t->rval[c * ML + ch[l].l1]);
+		t->rho[c] = y;
 		S1[c] = 1;
 	}
-	/* fixed point D ← ρ·cosθ·σ, floored and normalised (∫ D cos dω = 1) */
 	for (int it = 0; it < NDF_ITERS; it++) {
 		double mx = 0;
 		for (size_t c = 0; c < nd; c++) {
-			D1[c] = rho[c] * cos(theta_of_u((double)c / (double)(nd - 1))) * S1[c];
+			D1[c] = t->rho[c] * cos(theta_of_u((double)c / (double)(nd - 1))) * S1[c];
 			if (!(D1[c] > 0))
 				D1[c] = 0;
 			mx = D1[c] > mx ? D1[c] : mx;
@@ -419,26 +463,79 @@ int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char 
 		for (size_t c = 0; c < nd; c++)
 			S1[c] = ndf_integral(D1, nd, 1, theta_of_u((double)c / (double)(nd - 1)));
 	}
-	/* the stored tables (rows along u_φ identical: isotropic), and what the reader will interpolate */
+	return 0;
+}
+
+/* The stored tables (rows along u_φ identical: isotropic), what the reader will interpolate, and the
+ * incidence nodes. */
+static void ndf_tables(size_t nd, size_t nth, struct tables *t)
+{
+	double *D1 = t->D1, *S1 = t->S1;
 	for (size_t c = 0; c < nd; c++)
 		D1[c] = (double)to_f32(D1[c]);
 	for (size_t c = 0; c < nd; c++)
 		S1[c] = (double)to_f32(ndf_integral(D1, nd, 1, theta_of_u((double)c / (double)(nd - 1))));
 	for (size_t r = 0; r < nd; r++)
 		for (size_t c = 0; c < nd; c++) {
-			ndf[r * nd + c] = D1[c];
-			sig[r * nd + c] = S1[c];
-			fndf[r * nd + c] = to_f32(D1[c]);
-			fsig[r * nd + c] = to_f32(S1[c]);
+			t->ndf[r * nd + c] = D1[c];
+			t->sig[r * nd + c] = S1[c];
+			t->fndf[r * nd + c] = to_f32(D1[c]);
+			t->fsig[r * nd + c] = to_f32(S1[c]);
 		}
 	for (size_t k = 0; k < nth; k++) {
-		fth[k] = to_f32((double)k * (M_PI / 2) / (double)nth);
-		theta[k] = fth[k];
+		t->fth[k] = to_f32((double)k * (M_PI / 2) / (double)nth);
+		t->theta[k] = t->fth[k];
 	}
-	j = (struct job){ .m = m, .nwl = L, .res = R, .nd = nd, .nth = nth, .ch = ch, .yw = yw, .wl = wl, .ndf = ndf,
-			  .sig = sig, .theta = theta, .vndf = vndf, .lum = lum, .spec = spec, .zero = zero };
-	for (int t = 0; t < o->threads; t++) {
-		struct scratch *w = &j.ws[t];
+}
+
+/* The tensor file's fields serialised into t->file (*len bytes). 0, or -1 with err. */
+static int build_file(struct tables *t, size_t L, size_t R, size_t nd, size_t nth, size_t *len, struct acq_err *err)
+{
+	size_t N = R * R;
+	float phi0 = 0;
+	unsigned char jac = 1;
+	struct field f[] = {
+		{ "description", T_U8, 1, { strlen(t->desc) }, t->desc, strlen(t->desc), 0 },
+		{ "jacobian", T_U8, 1, { 1 }, &jac, 1, 0 },
+		{ "ndf", T_F32, 2, { nd, nd }, t->fndf, nd * nd * 4, 0 },
+		{ "sigma", T_F32, 2, { nd, nd }, t->fsig, nd * nd * 4, 0 },
+		{ "theta_i", T_F32, 1, { nth }, t->fth, nth * 4, 0 },
+		{ "phi_i", T_F32, 1, { 1 }, &phi0, 4, 0 },
+		{ "wavelengths", T_F32, 1, { L }, t->fwl, L * 4, 0 },
+		{ "vndf", T_F32, 4, { 1, nth, R, R }, t->vndf, nth * N * 4, 0 },
+		{ "luminance", T_F32, 4, { 1, nth, R, R }, t->lum, nth * N * 4, 0 },
+		{ "spectra", T_F32, 5, { 1, nth, L, R, R }, t->spec, nth * L * N * 4, 0 },
+	};
+	t->file = tensor_build(f, sizeof f / sizeof f[0], len, err);
+	return t->file ? 0 : -1;
+}
+
+int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char *path, struct rgl_stats *st,
+	      struct acq_err *err)
+{
+	const double *wl = NULL;
+	size_t L = 0;
+	if (check_opts(m, o, &wl, &L, err) != 0)
+		return -1;
+	size_t ML = m->nwl, R = (size_t)o->res, N = R * R, nd = (size_t)o->ndf_res, nth = (size_t)o->ntheta;
+	int rc = -1;
+	struct tables t = { 0 };
+	struct job j = { 0 };
+	int nomem = tables_alloc(&t, L, ML, nd, nth, N);
+	t.desc = describe(m, o, wl, L);
+	if (nomem || !t.desc) {
+		acq_errf(err, ACQ_E_NOMEM, "rgl: out of memory (%zu incidences x %zu wavelengths x %zu nodes)", nth, L, N);
+		goto out;
+	}
+	wavelength_map(m, wl, L, &t);
+	if (ndf_fit(m, L, nd, &t, err))
+		goto out;
+	ndf_tables(nd, nth, &t);
+	j = (struct job){ .m = m, .nwl = L, .res = R, .nd = nd, .nth = nth, .ch = t.ch, .yw = t.yw, .wl = wl,
+			  .ndf = t.ndf, .sig = t.sig, .theta = t.theta, .vndf = t.vndf, .lum = t.lum, .spec = t.spec,
+			  .zero = t.zero };
+	for (int k = 0; k < o->threads; k++) {
+		struct scratch *w = &j.ws[k];
 		w->dens = malloc(N * sizeof *w->dens);
 		w->ang = malloc(N * 4 * sizeof *w->ang);
 		w->val = malloc(N * (ML + 1) * sizeof *w->val);
@@ -450,23 +547,8 @@ int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char 
 	}
 	if (pool_run(o->threads, nth, node_job, &j, NULL, err))
 		goto out;
-	float phi0 = 0;
-	unsigned char jac = 1;
-	struct field f[] = {
-		{ "description", T_U8, 1, { strlen(desc) }, desc, strlen(desc), 0 },
-		{ "jacobian", T_U8, 1, { 1 }, &jac, 1, 0 },
-		{ "ndf", T_F32, 2, { nd, nd }, fndf, nd * nd * 4, 0 },
-		{ "sigma", T_F32, 2, { nd, nd }, fsig, nd * nd * 4, 0 },
-		{ "theta_i", T_F32, 1, { nth }, fth, nth * 4, 0 },
-		{ "phi_i", T_F32, 1, { 1 }, &phi0, 4, 0 },
-		{ "wavelengths", T_F32, 1, { L }, fwl, L * 4, 0 },
-		{ "vndf", T_F32, 4, { 1, nth, R, R }, vndf, nth * N * 4, 0 },
-		{ "luminance", T_F32, 4, { 1, nth, R, R }, lum, nth * N * 4, 0 },
-		{ "spectra", T_F32, 5, { 1, nth, L, R, R }, spec, nth * L * N * 4, 0 },
-	};
 	size_t len = 0;
-	file = tensor_build(f, sizeof f / sizeof f[0], &len, err);
-	if (!file || pngio_write_bytes(path, file, len, err))
+	if (build_file(&t, L, R, nd, nth, &len, err) || pngio_write_bytes(path, t.file, len, err))
 		goto out;
 	if (st) {
 		memset(st, 0, sizeof *st);
@@ -477,35 +559,16 @@ int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char 
 		st->ndf_res = nd;
 		st->ndf_floor = NDF_FLOOR;
 		for (size_t k = 0; k < nth; k++)
-			st->zero_nodes += zero[k];
+			st->zero_nodes += t.zero[k];
 	}
 	rc = 0;
 out:
-	for (int t = 0; t < POOL_MAX_THREADS; t++) {
-		free(j.ws[t].dens);
-		free(j.ws[t].ang);
-		free(j.ws[t].val);
-		free(j.ws[t].idx);
+	for (int k = 0; k < POOL_MAX_THREADS; k++) {
+		free(j.ws[k].dens);
+		free(j.ws[k].ang);
+		free(j.ws[k].val);
+		free(j.ws[k].idx);
 	}
-	free(ch);
-	free(yw);
-	free(theta);
-	free(D1);
-	free(S1);
-	free(rho);
-	free(ndf);
-	free(sig);
-	free(rang);
-	free(rval);
-	free(fndf);
-	free(fsig);
-	free(fth);
-	free(fwl);
-	free(vndf);
-	free(lum);
-	free(spec);
-	free(zero);
-	free(desc);
-	free(file);
+	tables_free(&t);
 	return rc;
 }

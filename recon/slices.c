@@ -66,8 +66,13 @@ int slices_weights(const struct recon_model *m, double lo, double hi, double *ws
 	return 0;
 }
 
-int slices_band(const struct recon_model *m, size_t nq, const double *ang, const double *wsel, double k, double *f,
-		double *lo, double *hi, struct acq_err *err)
+/* The model at nq directions ang[q*4..] (θi, φi, θo, φo) reduced by the channel weights wsel (f), and its
+ * pointwise band lo..hi: the Gaussian-process posterior σ of the transformed value (variance α_λ (K(x,x) −
+ * k_xᵀ A⁻¹ k_x) with A = K + ηΛ and α_λ from the leave-one-out residuals, as the DHR's σ_model), mapped back
+ * through the transform at ± k σ, the energy factor applied, channels combined with their weights (fully
+ * correlated: conservative). 0, or -1 with err. */
+static int slices_band(const struct recon_model *m, size_t nq, const double *ang, const double *wsel, double k,
+		       double *f, double *lo, double *hi, struct acq_err *err)
 {
 	size_t n = m->n, L = m->nwl;
 	int rc = -1;

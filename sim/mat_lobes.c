@@ -26,13 +26,15 @@ double lobe_fresnel(double c, double n, double k)
 	return r < 0 ? 0 : r > 1 ? 1 : r;
 }
 
-double lobe_ggx_d(double alpha, double ch)
+/* GGX distribution D(cos theta_h) of roughness alpha. */
+static double lobe_ggx_d(double alpha, double ch)
 {
 	double a2 = alpha * alpha, t = ch * ch * (a2 - 1.0) + 1.0;
 	return a2 / (M_PI * t * t);
 }
 
-double lobe_ggx_lambda(double alpha, double mu)
+/* Smith Lambda of GGX at direction cosine mu. */
+static double lobe_ggx_lambda(double alpha, double mu)
 {
 	double t2 = (1.0 - mu * mu) / (mu * mu);
 	return 0.5 * (sqrt(1.0 + alpha * alpha * t2) - 1.0);

@@ -41,10 +41,6 @@ struct lobe_etab {
 
 /* Exact unpolarised Fresnel reflectance from air onto n + ik (k = 0: dielectric) at incidence cosine c. */
 double lobe_fresnel(double c, double n, double k);
-/* GGX distribution D(cos theta_h) of roughness alpha. */
-double lobe_ggx_d(double alpha, double ch);
-/* Smith Lambda of GGX at direction cosine mu. */
-double lobe_ggx_lambda(double alpha, double mu);
 /* The lobe's value without its Fresnel factor at wi, wo (cosines mi, mo > 0), half-vector cosine ch with the
  * normal; 0 when undefined. */
 double lobe_hv_geom(const struct lobe_hv *L, double mi, double mo, double ch);

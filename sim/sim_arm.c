@@ -323,7 +323,8 @@ static uint16_t crc16(const uint8_t *p, int n)
 	return crc;
 }
 
-int simarm_rtu_frame_len(const uint8_t *req, int avail)
+/* Length of the RTU request frame starting at req (function codes 1–6, 15, 16), -1 if unknown. */
+static int simarm_rtu_frame_len(const uint8_t *req, int avail)
 {
 	if (avail < 2)
 		return -1;

@@ -15,7 +15,5 @@ int simarm_alarm(struct sim_service *svc, int axis);
 int simarm_moves(struct sim_service *svc, int axis);
 /* TCP port the arm listens on (0 for RTU). */
 int simarm_port(struct sim_service *svc);
-/* Length of the RTU request frame starting at req (function codes 1–6, 15, 16), -1 if unknown. */
-int simarm_rtu_frame_len(const uint8_t *req, int avail);
 
 #endif

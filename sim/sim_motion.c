@@ -48,7 +48,8 @@ static double peak(const struct simmot *m)
 	return m->v0 + m->acc * m->ta;
 }
 
-double simmot_profile_pos(const struct simmot *m, double t)
+/* Profile position at bench time t (no limits, no noise). */
+static double simmot_profile_pos(const struct simmot *m, double t)
 {
 	if (!m->moving)
 		return m->motor;

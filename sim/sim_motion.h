@@ -54,8 +54,6 @@ void simmot_stop(struct simmot *m, double now);
 void simmot_halt(struct simmot *m);
 /* Current speed (deg/s, signed) at bench time now. */
 double simmot_speed(const struct simmot *m, double now);
-/* Profile position at bench time t (no limits, no noise). */
-double simmot_profile_pos(const struct simmot *m, double t);
 /* Great-circle angle (degrees) between the laser-arm direction (θL at azimuth laser_phi; θL < 0 means
  * azimuth + 180°) and the detector direction (θD, φD). */
 double simmot_arm_separation(double theta_l, double laser_phi, double theta_d, double phi_d);

@@ -7,7 +7,8 @@
 #include "sim/sim_refdrift.h"
 #include "sim/sim_rng.h"
 
-double sphere_noise_sd(double wl, double v)
+/* The noise part's standard deviation at wavelength wl for a value v. */
+static double sphere_noise_sd(double wl, double v)
 {
 	return wl < SPHERE_DETECTOR_CHANGE_NM ? 0.001 * fabs(v) + 1e-4 : 0.002 * fabs(v) + 2e-4;
 }

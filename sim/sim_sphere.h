@@ -34,7 +34,5 @@ int sphere_measure(const struct mat *m, int nwl, const double *wl, uint64_t seed
 /* The same from the truth's DHR at 8 deg already computed (dhr8[nwl]). 0 or -1 with err. */
 int sphere_apply(int nwl, const double *wl, const double *dhr8, uint64_t seed, double *val, double *sigma,
 		 struct acq_err *err);
-/* The noise part's standard deviation at wavelength wl for a value v. */
-double sphere_noise_sd(double wl, double v);
 
 #endif
