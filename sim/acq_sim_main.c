@@ -460,6 +460,7 @@ int main(int argc, char **argv)
 	signal(SIGPIPE, SIG_IGN);
 	fprintf(stderr, "acq-sim: serving (time scale %g, seed %llu)\n", scale, seed);
 
+	double turn_mono = mono_now();
 	while (!stop_requested) {
 		struct pollfd fds[MAX_FDS];
 		int first[MAX_SERVICES], count[MAX_SERVICES], nfds = 0;
@@ -474,7 +475,12 @@ int main(int argc, char **argv)
 			acq_errf(&err, ACQ_E_IO, "poll: %s", strerror(errno));
 			goto out;
 		}
-		double now = sim_now(&world);
+		double now = sim_now(&world), turn_end = now / world.scale + world.t0_mono;
+		/* A turn (poll of at most 1 ms, then the handlers) longer than SIM_LAG_TURN_S: the host kept this
+		 * process from its models (load), late by the rest; summed as the ctl status' lag_s. */
+		if (turn_end - turn_mono > SIM_LAG_TURN_S)
+			world.lag_s += turn_end - turn_mono - SIM_LAG_TURN_S;
+		turn_mono = turn_end;
 		for (int i = 0; i < nsvc; i++) {
 			if (n > 0 && count[i] && svc[i]->handle)
 				svc[i]->handle(svc[i]->self, fds + first[i], count[i], now);

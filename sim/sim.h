@@ -64,7 +64,10 @@ struct sim_world {
 	int sample;                 /* enum sim_sample */
 	double sensor_temp_c;       /* spectrometer sensor temperature (TEC set point by default) */
 	double spectro_offline_until; /* bench time until which the spectrometer refuses connections */
+	double lag_s;               /* real seconds the main loop's turns took beyond SIM_LAG_TURN_S (the host's load) */
 };
+
+#define SIM_LAG_TURN_S 0.002        /* a loop turn: poll of at most 1 ms, then the handlers */
 
 /* A service of the simulator: owns file descriptors and advances its model with bench time. */
 struct sim_service {

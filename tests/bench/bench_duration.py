@@ -67,10 +67,24 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False):
                 events.append((time.time(), json.loads(line)))
         th = threading.Thread(target=reader, daemon=True)
         th.start()
+        lags, stop = [], threading.Event()
+
+        def lag_sampler():
+            # the simulator's own lag (ctl status lag_s: real seconds its loop ran late, summed), 5 times a second
+            while not stop.is_set():
+                try:
+                    lags.append((time.time(), float(b.sim_status()["lag_s"])))
+                except (OSError, KeyError, ValueError, AssertionError):
+                    pass
+                stop.wait(0.2)
+        ls = threading.Thread(target=lag_sampler, daemon=True)
+        ls.start()
         time.sleep(0.3)
         sid = L.start_sweep(b, plan_text, name)
         row = L.drive_to_end(b, sid, timeout=7200)
         time.sleep(0.3)
+        stop.set()
+        ls.join(10)
         w.terminate()
         w.wait(10)
         if row["state"] != "completed":
@@ -92,22 +106,28 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False):
         db.close()
         prog = [(t, e) for t, e in events if e.get("event") == "sweep.progress" and e.get("sweep") == sid]
         total = row["points_total"]
-        eta_err = {}
+        eta_err, eta_host = {}, {}
+        first_pt = next(((t, e["done"]) for t, e in prog if e["done"] >= 1), None)
         for frac in (0.25, 0.5, 0.75):
             for t, e in prog:
                 if e["done"] >= frac * total and e.get("eta_s") is not None:
                     left = finished - t
                     eta_err[frac] = e["eta_s"] / left - 1 if left > 0 else float("nan")
+                    eta_host[frac] = host_shift(lags, first_pt, (t, e["done"]), (finished, total))
                     break
         # real seconds per point beyond the model's bench part (predicted_s - host_s), per time scale: the host's
         # time per point when the bench part is right (fixed integration), compare the model's constant
         # host_s / points / scale; with auto integration it also holds the sample's error
         host_pp = (measured - (pred - host)) / total / scale
+        # the simulator's lag while the sweep ran (from the operator's resume, or the start, to the completion)
+        sim_lag = lag_between(lags, ev.get("resume", started), finished)
         row = dict(case=name, scale=scale, points=total, predicted_s=pred, measured_s=measured,
                     error=pred / measured - 1, predicted_host_s=host, residual_per_point_s=host_pp,
                     load=(load0 + os.getloadavg()[0]) / 2, eta25=eta_err.get(0.25), eta50=eta_err.get(0.5),
                     eta75=eta_err.get(0.75), median_ms=first[len(first) // 2] if first else None,
-                    darks=darks, exposures=expos, faults=faults, prior_sweep=prior.get("sweep"))
+                    darks=darks, exposures=expos, faults=faults, prior_sweep=prior.get("sweep"),
+                    sim_lag_s=sim_lag, sim_lag_share=(sim_lag * scale / measured if sim_lag is not None else None),
+                    eta25_host=eta_host.get(0.25), eta50_host=eta_host.get(0.5), eta75_host=eta_host.get(0.75))
         return (row, b) if keep_open else row
     except BaseException:
         keep_open = False
@@ -118,6 +138,36 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False):
             if keep:
                 print("bench_duration: %s kept in %s" % (name, b.dir), flush=True)
             b.cleanup(keep=keep)
+
+
+def lag_at(lags, t):
+    """The simulator's summed lag (real s) at wall time t, interpolated between the samples; None outside them."""
+    for (t0, l0), (t1, l1) in zip(lags, lags[1:]):
+        if t0 <= t <= t1:
+            return l0 + (l1 - l0) * (t - t0) / (t1 - t0) if t1 > t0 else l1
+    return None
+
+
+def lag_between(lags, t0, t1):
+    """Real seconds the simulator ran late between wall times t0 and t1 (None without samples there)."""
+    a, b = lag_at(lags, t0), lag_at(lags, t1)
+    return None if a is None or b is None else b - a
+
+
+def host_shift(lags, first, at, end):
+    """The part of the ETA's error at `at` = (wall time, points done) that the host's lag changing after it
+    explains: an ETA that carries the lag per point measured so far (from `first`, the first point after the
+    operator's resume) into the points left is off by -(lag per point after - lag per point before) x points left,
+    over the wall time actually left (to `end` = (finished, total)). Measured on the simulator's own lag (ctl status
+    lag_s), a lower bound of the host's part: the daemon and the client wait on the same host. None without
+    samples."""
+    if not first or at[1] <= first[1] or end[1] <= at[1] or end[0] <= at[0]:
+        return None
+    before, after = lag_between(lags, first[0], at[0]), lag_between(lags, at[0], end[0])
+    if before is None or after is None:
+        return None
+    pp_before, pp_after = before / (at[1] - first[1]), after / (end[1] - at[1])
+    return -(pp_after - pp_before) * (end[1] - at[1]) / (end[0] - at[0])
 
 
 def SAMPLE(text):
@@ -171,8 +221,19 @@ def table_line(r, scale, pred1):
           "%s" % (
               name, r["points"], scale, r["predicted_s"], r["predicted_host_s"], r["measured_s"],
               100 * r["error"], r["residual_per_point_s"], r["load"], r["faults"], pred1, pred1 / 60,
-              " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25", "eta50", "eta75"))),
+              " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25", "eta50", "eta75")))
+          + "  (of it the simulator's lag changing: %s; simulator lag %s)" % (
+              " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25_host", "eta50_host",
+                                                                                  "eta75_host")), lag_text(r)),
           flush=True)
+
+
+def lag_text(r):
+    """The simulator's own lag over the sweep: real seconds, and its share of the measured time in bench seconds
+    (the part of the measurement that is the host not keeping the time scale)."""
+    if r["sim_lag_s"] is None:
+        return "-"
+    return "%.2f real s = %.1f%% of the measured" % (r["sim_lag_s"], 100 * r["sim_lag_share"])
 
 
 def prioritize():
@@ -229,11 +290,13 @@ def main():
         rows.append(r)
         f = lambda x: "   -  " if x is None else "%+5.1f%%" % (100 * x)  # noqa: E731
         print("%-17s scale %4g  %4d points  predicted %7.1f s (host %.1f s)  measured %7.1f s  error %s  ETA error at "
-              "25/50/75 %%: %s %s %s  (median integration %s ms, %s darks, %s exposures; residual per point %.4f "
-              "s; load %.1f; %d faults; exposure prior %s)"
+              "25/50/75 %%: %s %s %s  (of it the simulator's lag changing: %s %s %s)  (median integration %s ms, %s "
+              "darks, %s exposures; residual per point %.4f s; simulator lag %s; load %.1f; %d faults; exposure prior "
+              "%s)"
               % (name, scale, r["points"], r["predicted_s"], r["predicted_host_s"], r["measured_s"], f(r["error"]),
-                 f(r["eta25"]), f(r["eta50"]), f(r["eta75"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"],
-                 r["darks"], r["exposures"], r["residual_per_point_s"], r["load"], r["faults"],
+                 f(r["eta25"]), f(r["eta50"]), f(r["eta75"]), f(r["eta25_host"]), f(r["eta50_host"]),
+                 f(r["eta75_host"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"],
+                 r["darks"], r["exposures"], r["residual_per_point_s"], lag_text(r), r["load"], r["faults"],
                  "sweep %s" % r["prior_sweep"] if r["prior_sweep"] else "none"), flush=True)
     with open(os.path.join(OUT, "duration.csv"), "w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
