@@ -43,7 +43,7 @@ static void crash_hook(const char *event, json_t *data)
 	const char *k = !strcmp(event, "sweep.progress") ? "point"
 			: !strcmp(event, "sweep.fault") ? "fault"
 			: !strcmp(event, "recon") ? "recon"
-			: !strcmp(event, "sweep.state") ? json_string_value(json_object_get(data, "event")) : NULL;
+			: !strcmp(event, "sweep.state") ? json_string_value(json_object_get(data, "kind")) : NULL;
 	if (k && !strcmp(k, step) && ++seen == want) {
 		log_msg(LOG_WARNING, "ACQ_CRASH_AT=%s:%d: SIGKILL now", step, want);
 		raise(SIGKILL);

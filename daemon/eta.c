@@ -6,7 +6,7 @@
  * stretches; an auto-exposure sample that needs longer exposures than the plan's estimate, and the darks and
  * HDR exposures that follow), whereas a ratio would also stretch the long moves the plan times well.
  * The excess per point is a recent average, not the sweep's whole mean: each measured interval of k points moves
- * it by 1 - exp(-k/M) towards the interval's own excess, M = an eighth of the sweep's points (at least 10, at most
+ * the averages of its real and planned seconds per point by 1 - exp(-k/M) towards the interval's own, M = an eighth of the sweep's points (at least 10, at most
  * 120): the host's time drifts along a long sweep (a machine loaded, then not), and the mean of the whole past
  * would keep the early rate for the rest of the sweep; an eighth of the sweep still averages over about one
  * incidence (the paper's 10x10x10: 108 points), so the darks and HDR exposures that cluster at some viewing
@@ -24,7 +24,7 @@
 void eta_reset(struct eta *e)
 {
 	*e = (struct eta){ .t0_loop = NAN, .t0_real = NAN, .scale = 1, .last_real = NAN, .last_plan = NAN,
-			   .excess = NAN };
+			   .recent_real = NAN, .recent_plan = NAN };
 }
 
 static void clocks(struct eta *e, double loop_now, double real_now)
@@ -46,18 +46,22 @@ void eta_running(struct eta *e, bool running, double loop_now, double real_now)
 	e->skip = running;
 }
 
-/* The recent excess per point after an interval of k points that took real_s running for plan_s of the plan. */
-static void recent_excess(struct eta *e, int k, double real_s, double plan_s, int total)
+/* The recent averages per point after an interval of k points that took real_s running for plan_s of the plan.
+ * Real and plan seconds are averaged apart and compared at the current scale: the scale is measured over the
+ * sweep's first half second, and the first points may come before it is known. */
+static void recent(struct eta *e, int k, double real_s, double plan_s, int total)
 {
-	double x = (real_s - plan_s / e->scale) / k;
-	if (!isfinite(x))
+	if (!isfinite(real_s) || !isfinite(plan_s))
 		return;
-	if (!isfinite(e->excess)) {
-		e->excess = x;
+	if (!isfinite(e->recent_real)) {
+		e->recent_real = real_s / k;
+		e->recent_plan = plan_s / k;
 		return;
 	}
 	double m = fmin(fmax(ETA_MEMORY_FRACTION * total, ETA_MEMORY_MIN), ETA_MEMORY_MAX);
-	e->excess += (1 - exp(-k / m)) * (x - e->excess);
+	double a = 1 - exp(-k / m);
+	e->recent_real += a * (real_s / k - e->recent_real);
+	e->recent_plan += a * (plan_s / k - e->recent_plan);
 }
 
 double eta_update(struct eta *e, int done, int total, double plan_at_s, double plan_total_s, double loop_now,
@@ -70,7 +74,7 @@ double eta_update(struct eta *e, int done, int total, double plan_at_s, double p
 		e->run_real += real_s;
 		e->run_plan += plan_s;
 		e->measured += done - e->last_done;
-		recent_excess(e, done - e->last_done, real_s, plan_s, total);
+		recent(e, done - e->last_done, real_s, plan_s, total);
 	}
 	e->skip = false;
 	e->last_real = real_now;
@@ -83,9 +87,10 @@ double eta_update(struct eta *e, int done, int total, double plan_at_s, double p
 	if (!plan)
 		return e->measured > 0 ? e->run_real / e->measured * left : NAN;
 	double plan_left = (plan_total_s - plan_at_s) / e->scale;
-	if (e->measured <= 0 || !(e->run_plan > 0) || !isfinite(e->excess))
+	if (e->measured <= 0 || !(e->run_plan > 0) || !isfinite(e->recent_real))
 		return plan_left;
 	double w = e->measured / (e->measured + ETA_PLAN_WEIGHT);
-	double t = plan_left + w * e->excess * left; /* excess: real s per point beyond the plan, recently */
+	double excess = e->recent_real - e->recent_plan / e->scale; /* real s per point beyond the plan, recently */
+	double t = plan_left + w * excess * left;
 	return t > 0 ? t : 0;
 }

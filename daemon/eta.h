@@ -16,7 +16,8 @@ struct eta {
 	double run_real;           /* real seconds spent running over the measured intervals */
 	double run_plan;           /* the plan's bench seconds for the same points */
 	int measured;              /* points completed in those intervals */
-	double excess;             /* real s per point beyond the plan, recent average (eta.c); NAN until measured */
+	double recent_real;        /* real s per point, recent average (eta.c); NAN until measured */
+	double recent_plan;        /* the plan's bench s per point over the same points, with the same weights */
 };
 
 /* A new sweep (or a resumed one): nothing measured yet. */

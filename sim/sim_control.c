@@ -7,7 +7,7 @@
  *   status                                 ok t=<bench s> laser.theta= detector.theta= detector.phi= emission=
  *                                          power= sample= temperature= faults=<comma list or none>
  *                                          laser_status_reads=<STATUS? commands the laser answered>
- *                                          lag_s=<real s the main loop ran late: turns beyond 2 ms, summed>
+ *                                          lag_s=<real s the main loop's 1 ms waits ended late, summed>
  *   time                                   ok <bench seconds>
  *   sample MATERIAL|none                   what is on the stage (a material of sim/material.h)
  *   temperature <C>                        spectrometer sensor temperature (-40..80)

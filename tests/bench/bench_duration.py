@@ -11,9 +11,13 @@ pause, sample, resume) while `acqctl watch` (JSON lines) records every progress 
 Cases: the small plan (config/plan-quick.yaml) with fixed integration at time scales 1 and 10, with auto
 integration at time scale 1 (its estimate 20 ms), then again on the same bench (`-repeat`: an operator repeating
 a sample; the plans name it, sample: green-paint, so the repeat is timed from the first sweep's exposures, the
-exposure prior); the paper's 10x10x10 (auto, estimate 50 ms) at the demo's time scale 35, and its repeat. BENCH_DURATION_QUICK=1: the small fixed one only;
+exposure prior; the repeat starts once the first sweep's automatic reconstruction has ended, see wait_recon); the
+paper's 10x10x10 (auto, estimate 50 ms) at the demo's time scale 35, and its repeat. BENCH_DURATION_QUICK=1: the small fixed one only;
 BENCH_DURATION_CASES=a,b: those cases (name@scale for one time scale; name a repeat with the case before it).
-Also reported: the host's part of the prediction (host_s: point_overhead_s x time scale per point, load-dependent),
+Also reported: the simulator's own lag (acq-sim ctl status lag_s: its 1 ms waits ending late, the host not keeping
+the time scale) over the sweep and its share of the measured time, and per ETA checkpoint the part of the ETA's
+error that the change of that lag after the checkpoint explains (host_shift): an ETA error with a large such part is
+the host's, not the model's. Also: the host's part of the prediction (host_s: point_overhead_s x time scale per point, load-dependent),
 the residual per point (real seconds beyond the model's bench part), the load average, the faults the sweep
 recovered from (not in the model) and the exposure prior used. On a shared machine the
 script runs as its own session with a raised share (prioritize(); root only), else every figure at a high time scale
@@ -38,14 +42,35 @@ FIXED = QUICK.replace("mode: auto, target_peak: 0.8, estimate_ms: 20, max_ms: 20
 PAPER = open(os.path.join(L.SRC, "config", "plan-paper-10x10x10.yaml")).read()
 
 
-def run_case(name, plan_text, scale, bench=None, keep_open=False):
+def wait_recon(b, sid, timeout=900):
+    """Wait until the automatic reconstruction of sweep sid has ended (or never started within 10 s); returns the
+    wall seconds waited. A repeat starts after it: its CPU time is real seconds that the time scale does not
+    shorten (at time scale 35, 25 s of fitting stand for 15 bench minutes, which a real bench's repeat would not
+    overlap), and measured over the repeat's first half it is host time no model or ETA can foresee."""
+    t0 = time.time()
+    while time.time() - t0 < timeout:
+        c = b.client()
+        r = c.req("recon.status", sweep=sid)
+        c.close()
+        state = (r.get("run") or {}).get("state")
+        if state not in (None, "running") or (state is None and time.time() - t0 > 10):
+            break
+        time.sleep(0.2)
+    return time.time() - t0
+
+
+def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
     """One sweep of plan_text on a new bench, or on bench (a repeat: its database holds the previous sweeps, so the
-    sample's exposure prior applies). With keep_open the bench is returned with the row, not cleaned up."""
+    sample's exposure prior applies; after = the previous sweep, whose reconstruction it waits for). With keep_open
+    the bench is returned with the row, not cleaned up."""
     b = bench or L.Bench(scale=scale)
     try:
+        recon_wait = 0.0
         if not bench:
             b.start_sim()
             b.start_daemon()
+        elif after:
+            recon_wait = wait_recon(b, after)
         planf = os.path.join(b.dir, "plan.yaml")
         open(planf, "w").write(plan_text)
         # with the steps (predicted_start_s per step, kept with ACQ_BENCH_KEEP=1) when the reply is small enough
@@ -121,7 +146,8 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False):
         host_pp = (measured - (pred - host)) / total / scale
         # the simulator's lag while the sweep ran (from the operator's resume, or the start, to the completion)
         sim_lag = lag_between(lags, ev.get("resume", started), finished)
-        row = dict(case=name, scale=scale, points=total, predicted_s=pred, measured_s=measured,
+        row = dict(case=name, sweep=sid, recon_wait_s=recon_wait, scale=scale, points=total, predicted_s=pred,
+                   measured_s=measured,
                     error=pred / measured - 1, predicted_host_s=host, residual_per_point_s=host_pp,
                     load=(load0 + os.getloadavg()[0]) / 2, eta25=eta_err.get(0.25), eta50=eta_err.get(0.5),
                     eta75=eta_err.get(0.75), median_ms=first[len(first) // 2] if first else None,
@@ -199,7 +225,7 @@ def table(scale):
                 # the plan naming its sample, then again on the same bench: the repeat is timed by the exposure prior
                 text = SAMPLE(text)
                 r, b = run_case(name, text, scale, keep_open=True)
-                runs = [r, run_case(name + "-repeat", text, scale, bench=b)]
+                runs = [r, run_case(name + "-repeat", text, scale, bench=b, after=r["sweep"])]
             else:
                 runs = [run_case(name, text, scale)]
             for r in runs:
@@ -222,9 +248,10 @@ def table_line(r, scale, pred1):
               name, r["points"], scale, r["predicted_s"], r["predicted_host_s"], r["measured_s"],
               100 * r["error"], r["residual_per_point_s"], r["load"], r["faults"], pred1, pred1 / 60,
               " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25", "eta50", "eta75")))
-          + "  (of it the simulator's lag changing: %s; simulator lag %s)" % (
+          + "  (of it the simulator's lag changing: %s; simulator lag %s; waited %.0f s for the previous reconstruction)" % (
               " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25_host", "eta50_host",
-                                                                                  "eta75_host")), lag_text(r)),
+                                                                                  "eta75_host")), lag_text(r),
+              r["recon_wait_s"]),
           flush=True)
 
 
@@ -274,13 +301,14 @@ def main():
     prev = None
     for i, (name, text, scale) in enumerate(cases):
         repeat_next = i + 1 < len(cases) and cases[i + 1][1] is None
-        bench = None
+        bench = after = None
         if text is None:
             if not prev:
                 continue
             text, bench = prev
+            after = rows[-1]["sweep"]
         try:
-            r = run_case(name, text, scale, bench=bench, keep_open=repeat_next)
+            r = run_case(name, text, scale, bench=bench, keep_open=repeat_next, after=after)
         except L.Skip as e:
             print("bench_duration: skip: %s" % e)
             return 0
@@ -292,12 +320,12 @@ def main():
         print("%-17s scale %4g  %4d points  predicted %7.1f s (host %.1f s)  measured %7.1f s  error %s  ETA error at "
               "25/50/75 %%: %s %s %s  (of it the simulator's lag changing: %s %s %s)  (median integration %s ms, %s "
               "darks, %s exposures; residual per point %.4f s; simulator lag %s; load %.1f; %d faults; exposure prior "
-              "%s)"
+              "%s; waited %.0f s for the previous sweep's reconstruction)"
               % (name, scale, r["points"], r["predicted_s"], r["predicted_host_s"], r["measured_s"], f(r["error"]),
                  f(r["eta25"]), f(r["eta50"]), f(r["eta75"]), f(r["eta25_host"]), f(r["eta50_host"]),
                  f(r["eta75_host"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"],
                  r["darks"], r["exposures"], r["residual_per_point_s"], lag_text(r), r["load"], r["faults"],
-                 "sweep %s" % r["prior_sweep"] if r["prior_sweep"] else "none"), flush=True)
+                 "sweep %s" % r["prior_sweep"] if r["prior_sweep"] else "none", r["recon_wait_s"]), flush=True)
     with open(os.path.join(OUT, "duration.csv"), "w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
         wr.writeheader()
