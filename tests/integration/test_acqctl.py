@@ -8,7 +8,7 @@
   emission off), spectrum ID (--json, --csv, -o);
 - replies show the state after the command (sweep abort -> idle, move -> the new positions);
 - `acqctl watch` (not a terminal) prints JSON lines and reconnects when the daemon restarts;
-- `acq-sim ctl` drives the simulator (sample, fault, truth) with its exit codes; --version of the four programs."""
+- `acq-sim ctl` drives the simulator (sample, fault, truth) with its exit codes; --version of the five programs."""
 import json
 import os
 import signal
@@ -119,7 +119,7 @@ def offline_checks(tmp):
                   % (" ".join(args), p.returncode, p.stderr))
         check(subprocess.run([CTL, "--version"], capture_output=True, text=True).stdout.startswith("acqctl "),
               "acqctl --version")
-        for prog in ("acquisitiond", "acq-sim", "brdf-recon"):
+        for prog in ("acquisitiond", "acq-sim", "brdf-recon", "acq-nexus"):
             p = subprocess.run([os.path.join(L.BUILD, prog), "--version"], capture_output=True, text=True, timeout=10)
             check(p.returncode == 0 and p.stdout.startswith(prog + " "), "%s --version: %d %r" % (prog, p.returncode,
                                                                                               p.stdout + p.stderr))
