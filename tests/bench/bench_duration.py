@@ -16,9 +16,10 @@ paper's 10x10x10 (auto, estimate 50 ms) at the demo's time scale 35, and its rep
 small fixed one only;
 BENCH_DURATION_CASES=a,b: those cases (name@scale for one time scale; name a repeat with the case before it).
 Also reported: the simulator's own lag (acq-sim ctl status lag_s: its 1 ms waits ending late, the host not keeping
-the time scale) over the sweep and its share of the measured time, and per ETA checkpoint the part of the ETA's
-error that the change of that lag after the checkpoint explains (host_shift): an ETA error with a large such part is
-the host's, not the model's. Also: the host's part of the prediction (host_s: point_overhead_s x time scale per
+the time scale) over the sweep and its share of the measured time; the run-queue wait of the simulator's and the
+daemon's threads (runq_wait: runnable, not run); per ETA checkpoint the part of the ETA's error that the change of
+that wait after the checkpoint explains (host_shift): an ETA error with a large such part is the host's, not the
+model's. Also: the host's part of the prediction (host_s: point_overhead_s x time scale per
 point, load-dependent),
 the residual per point (real seconds beyond the model's bench part), the load average, the faults the sweep
 recovered from (not in the model) and the exposure prior used. On a shared machine the
@@ -94,13 +95,18 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                 events.append((time.time(), json.loads(line)))
         th = threading.Thread(target=reader, daemon=True)
         th.start()
-        lags, stop = [], threading.Event()
+        lags, waits, stop = [], [], threading.Event()
 
         def lag_sampler():
-            # the simulator's own lag (ctl status lag_s: real seconds its loop ran late, summed), 5 times a second
+            # 5 times a second: the simulator's own lag (ctl status lag_s: real seconds its 1 ms waits ended late)
+            # and the seconds the simulator's and the daemon's threads were runnable but not run (runq_wait)
             while not stop.is_set():
+                now = time.time()
+                w = runq_wait([b.sim.pid, b.daemon.pid])
+                if w is not None:
+                    waits.append((now, w))
                 try:
-                    lags.append((time.time(), float(b.sim_status()["lag_s"])))
+                    lags.append((now, float(b.sim_status()["lag_s"])))
                 except (OSError, KeyError, ValueError, AssertionError):
                     pass
                 stop.wait(0.2)
@@ -140,7 +146,7 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                 if e["done"] >= frac * total and e.get("eta_s") is not None:
                     left = finished - t
                     eta_err[frac] = e["eta_s"] / left - 1 if left > 0 else float("nan")
-                    eta_host[frac] = host_shift(lags, first_pt, (t, e["done"]), (finished, total))
+                    eta_host[frac] = host_shift(waits, first_pt, (t, e["done"]), (finished, total))
                     break
         # real seconds per point beyond the model's bench part (predicted_s - host_s), per time scale: the host's
         # time per point when the bench part is right (fixed integration), compare the model's constant
@@ -148,6 +154,10 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
         host_pp = (measured - (pred - host)) / total / scale
         # the simulator's lag while the sweep ran (from the operator's resume, or the start, to the completion)
         sim_lag = lag_between(lags, ev.get("resume", started), finished)
+        host_wait = lag_between(waits, ev.get("resume", started), finished)
+        if os.environ.get("ACQ_BENCH_KEEP") == "1":  # the raw series, for a look at where the time went
+            with open(os.path.join(b.dir, "series-%d.json" % sid), "w") as fh:
+                json.dump({"events": events, "sim_lag": lags, "runq_wait": waits}, fh)
         row = dict(case=name, sweep=sid, recon_wait_s=recon_wait, scale=scale, points=total, predicted_s=pred,
                    measured_s=measured,
                     error=pred / measured - 1, predicted_host_s=host, residual_per_point_s=host_pp,
@@ -155,6 +165,7 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                     eta75=eta_err.get(0.75), median_ms=first[len(first) // 2] if first else None,
                     darks=darks, exposures=expos, faults=faults, prior_sweep=prior.get("sweep"),
                     sim_lag_s=sim_lag, sim_lag_share=(sim_lag * scale / measured if sim_lag is not None else None),
+                    runq_wait_s=host_wait,
                     eta25_host=eta_host.get(0.25), eta50_host=eta_host.get(0.5), eta75_host=eta_host.get(0.75))
         return (row, b) if keep_open else row
     except BaseException:
@@ -166,6 +177,22 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
             if keep:
                 print("bench_duration: %s kept in %s" % (name, b.dir), flush=True)
             b.cleanup(keep=keep)
+
+
+def runq_wait(pids):
+    """Seconds the threads of these processes have been runnable but not running (/proc/PID/task/*/schedstat, the
+    second field: run-queue wait in ns), summed; None when the kernel does not say. The host not keeping the time
+    scale, measured: at time scale S each such second costs S bench seconds on the sweep's path."""
+    total, seen = 0, False
+    for pid in pids:
+        try:
+            for task in os.listdir("/proc/%d/task" % pid):
+                with open("/proc/%d/task/%s/schedstat" % (pid, task)) as fh:
+                    total += int(fh.read().split()[1])
+                    seen = True
+        except (OSError, ValueError, IndexError):
+            continue
+    return total * 1e-9 if seen else None
 
 
 def lag_at(lags, t):
@@ -183,12 +210,11 @@ def lag_between(lags, t0, t1):
 
 
 def host_shift(lags, first, at, end):
-    """The part of the ETA's error at `at` = (wall time, points done) that the host's lag changing after it
-    explains: an ETA that carries the lag per point measured so far (from `first`, the first point after the
-    operator's resume) into the points left is off by -(lag per point after - lag per point before) x points left,
-    over the wall time actually left (to `end` = (finished, total)). Measured on the simulator's own lag (ctl status
-    lag_s), a lower bound of the host's part: the daemon and the client wait on the same host. None without
-    samples."""
+    """The part of the ETA's error at `at` = (wall time, points done) that the host's delay changing after it
+    explains: an ETA that carries the delay per point measured so far (from `first`, the first point after the
+    operator's resume) into the points left is off by -(delay per point after - delay per point before) x points
+    left, over the wall time actually left (to `end` = (finished, total)). lags: (wall time, summed delay) samples,
+    the run-queue wait of the simulator's and the daemon's threads (runq_wait). None without samples."""
     if not first or at[1] <= first[1] or end[1] <= at[1] or end[0] <= at[0]:
         return None
     before, after = lag_between(lags, first[0], at[0]), lag_between(lags, at[0], end[0])
@@ -250,7 +276,7 @@ def table_line(r, scale, pred1):
               name, r["points"], scale, r["predicted_s"], r["predicted_host_s"], r["measured_s"],
               100 * r["error"], r["residual_per_point_s"], r["load"], r["faults"], pred1, pred1 / 60,
               " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25", "eta50", "eta75")))
-          + "  (of it the simulator's lag changing: %s; simulator lag %s; waited %.0f s for the previous "
+          + "  (of it the host's delay changing: %s; simulator lag %s; waited %.0f s for the previous "
              "reconstruction)" % (
               " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25_host", "eta50_host",
                                                                                   "eta75_host")), lag_text(r),
@@ -264,7 +290,9 @@ def lag_text(r):
     late wake-up with nothing due costs nothing): an indicator of the host's part, not a decomposition."""
     if r["sim_lag_s"] is None:
         return "-"
-    return "%.2f real s (%.1f%% of the measured in bench s)" % (r["sim_lag_s"], 100 * r["sim_lag_share"])
+    rq = "" if r["runq_wait_s"] is None else "; simulator and daemon runnable, not run: %.2f real s (%.1f%%)" % (
+        r["runq_wait_s"], 100 * r["runq_wait_s"] * r["scale"] / r["measured_s"])
+    return "%.2f real s (%.1f%% of the measured in bench s)%s" % (r["sim_lag_s"], 100 * r["sim_lag_share"], rq)
 
 
 def prioritize():
@@ -322,7 +350,7 @@ def main():
         rows.append(r)
         f = lambda x: "   -  " if x is None else "%+5.1f%%" % (100 * x)  # noqa: E731
         print("%-17s scale %4g  %4d points  predicted %7.1f s (host %.1f s)  measured %7.1f s  error %s  ETA error at "
-              "25/50/75 %%: %s %s %s  (of it the simulator's lag changing: %s %s %s)  (median integration %s ms, %s "
+              "25/50/75 %%: %s %s %s  (of it the host's delay changing: %s %s %s)  (median integration %s ms, %s "
               "darks, %s exposures; residual per point %.4f s; simulator lag %s; load %.1f; %d faults; exposure prior "
               "%s; waited %.0f s for the previous sweep's reconstruction)"
               % (name, scale, r["points"], r["predicted_s"], r["predicted_host_s"], r["measured_s"], f(r["error"]),
