@@ -16,10 +16,10 @@ paper's 10x10x10 (auto, estimate 50 ms) at the demo's time scale 35, and its rep
 small fixed one only;
 BENCH_DURATION_CASES=a,b: those cases (name@scale for one time scale; name a repeat with the case before it).
 Also reported: the simulator's own lag (acq-sim ctl status lag_s: its 1 ms waits ending late, the host not keeping
-the time scale) over the sweep and its share of the measured time; the run-queue wait of the simulator's and the
-daemon's threads (runq_wait: runnable, not run); per ETA checkpoint the part of the ETA's error that the change of
-that wait after the checkpoint explains (host_shift): an ETA error with a large such part is the host's, not the
-model's. Also: the host's part of the prediction (host_s: point_overhead_s x time scale per
+the time scale) over the sweep and its share of the measured time; the host's time per point (host_per_point: real
+seconds its exposures and planned move do not account for) against the model's; per ETA checkpoint the ETA's error
+had the host's time per point of the rest been known (host_known): what is left is the model's, the difference the
+host's. Also: the host's part of the prediction (host_s: point_overhead_s x time scale per
 point, load-dependent),
 the residual per point (real seconds beyond the model's bench part), the load average, the faults the sweep
 recovered from (not in the model) and the exposure prior used. On a shared machine the
@@ -81,7 +81,13 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
         if p.returncode == 0:
             with open(os.path.join(b.dir, "plan.json"), "w") as fh:
                 fh.write(p.stdout)
+            steps = json.loads(p.stdout)["plan"].get("steps") or []
         else:
+            # the moves per step from a local dry run on the same bench configuration (the same planner and
+            # order; only the exposure timing, which this does not use, may differ)
+            loc = subprocess.run([CTL, "--json", "plan", planf, "--points", "--config", b.conf], capture_output=True,
+                                 text=True)
+            steps = json.loads(loc.stdout)["plan"].get("steps") or [] if loc.returncode == 0 else []
             p = subprocess.run([CTL, "-s", b.sock, "--json", "plan", planf], capture_output=True, text=True, check=True)
         pj = json.loads(p.stdout)["plan"]
         pred, host = pj["predicted_s"], pj.get("host_s", 0.0)
@@ -95,18 +101,13 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                 events.append((time.time(), json.loads(line)))
         th = threading.Thread(target=reader, daemon=True)
         th.start()
-        lags, waits, stop = [], [], threading.Event()
+        lags, stop = [], threading.Event()
 
         def lag_sampler():
-            # 5 times a second: the simulator's own lag (ctl status lag_s: real seconds its 1 ms waits ended late)
-            # and the seconds the simulator's and the daemon's threads were runnable but not run (runq_wait)
+            # the simulator's own lag (ctl status lag_s: real seconds its 1 ms waits ended late), 5 times a second
             while not stop.is_set():
-                now = time.time()
-                w = runq_wait([b.sim.pid, b.daemon.pid])
-                if w is not None:
-                    waits.append((now, w))
                 try:
-                    lags.append((now, float(b.sim_status()["lag_s"])))
+                    lags.append((time.time(), float(b.sim_status()["lag_s"])))
                 except (OSError, KeyError, ValueError, AssertionError):
                     pass
                 stop.wait(0.2)
@@ -131,6 +132,7 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
         darks, expos = db.execute("SELECT sum(kind = 'dark'), sum(kind = 'sample') FROM spectra WHERE sweep_id = ? "
                                   "AND point_id IS NOT NULL", (sid,)).fetchone()
         started, finished = db.execute("SELECT started_at, finished_at FROM sweeps WHERE id = ?", (sid,)).fetchone()
+        host_pts = host_per_point(db, sid, steps, scale)
         # faults the sweep recovered from (the simulator answering late on a loaded machine): not in the model
         faults = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'fault'", (sid,)).fetchone()[0]
         paused = max(0.0, ev.get("resume", 0) - ev.get("pause", 0))
@@ -140,13 +142,12 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
         prog = [(t, e) for t, e in events if e.get("event") == "sweep.progress" and e.get("sweep") == sid]
         total = row["points_total"]
         eta_err, eta_host = {}, {}
-        first_pt = next(((t, e["done"]) for t, e in prog if e["done"] >= 1), None)
         for frac in (0.25, 0.5, 0.75):
             for t, e in prog:
                 if e["done"] >= frac * total and e.get("eta_s") is not None:
                     left = finished - t
                     eta_err[frac] = e["eta_s"] / left - 1 if left > 0 else float("nan")
-                    eta_host[frac] = host_shift(waits, first_pt, (t, e["done"]), (finished, total))
+                    eta_host[frac] = host_known(host_pts, t, e["eta_s"], finished)
                     break
         # real seconds per point beyond the model's bench part (predicted_s - host_s), per time scale: the host's
         # time per point when the bench part is right (fixed integration), compare the model's constant
@@ -154,10 +155,9 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
         host_pp = (measured - (pred - host)) / total / scale
         # the simulator's lag while the sweep ran (from the operator's resume, or the start, to the completion)
         sim_lag = lag_between(lags, ev.get("resume", started), finished)
-        host_wait = lag_between(waits, ev.get("resume", started), finished)
         if os.environ.get("ACQ_BENCH_KEEP") == "1":  # the raw series, for a look at where the time went
             with open(os.path.join(b.dir, "series-%d.json" % sid), "w") as fh:
-                json.dump({"events": events, "sim_lag": lags, "runq_wait": waits}, fh)
+                json.dump({"events": events, "sim_lag": lags, "host_per_point": host_pts}, fh)
         row = dict(case=name, sweep=sid, recon_wait_s=recon_wait, scale=scale, points=total, predicted_s=pred,
                    measured_s=measured,
                     error=pred / measured - 1, predicted_host_s=host, residual_per_point_s=host_pp,
@@ -165,7 +165,7 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                     eta75=eta_err.get(0.75), median_ms=first[len(first) // 2] if first else None,
                     darks=darks, exposures=expos, faults=faults, prior_sweep=prior.get("sweep"),
                     sim_lag_s=sim_lag, sim_lag_share=(sim_lag * scale / measured if sim_lag is not None else None),
-                    runq_wait_s=host_wait,
+                    host_per_point_s=(sum(h for _, h in host_pts) / len(host_pts) if host_pts else None),
                     eta25_host=eta_host.get(0.25), eta50_host=eta_host.get(0.5), eta75_host=eta_host.get(0.75))
         return (row, b) if keep_open else row
     except BaseException:
@@ -177,22 +177,6 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
             if keep:
                 print("bench_duration: %s kept in %s" % (name, b.dir), flush=True)
             b.cleanup(keep=keep)
-
-
-def runq_wait(pids):
-    """Seconds the threads of these processes have been runnable but not running (/proc/PID/task/*/schedstat, the
-    second field: run-queue wait in ns), summed; None when the kernel does not say. The host not keeping the time
-    scale, measured: at time scale S each such second costs S bench seconds on the sweep's path."""
-    total, seen = 0, False
-    for pid in pids:
-        try:
-            for task in os.listdir("/proc/%d/task" % pid):
-                with open("/proc/%d/task/%s/schedstat" % (pid, task)) as fh:
-                    total += int(fh.read().split()[1])
-                    seen = True
-        except (OSError, ValueError, IndexError):
-            continue
-    return total * 1e-9 if seen else None
 
 
 def lag_at(lags, t):
@@ -209,19 +193,37 @@ def lag_between(lags, t0, t1):
     return None if a is None or b is None else b - a
 
 
-def host_shift(lags, first, at, end):
-    """The part of the ETA's error at `at` = (wall time, points done) that the host's delay changing after it
-    explains: an ETA that carries the delay per point measured so far (from `first`, the first point after the
-    operator's resume) into the points left is off by -(delay per point after - delay per point before) x points
-    left, over the wall time actually left (to `end` = (finished, total)). lags: (wall time, summed delay) samples,
-    the run-queue wait of the simulator's and the daemon's threads (runq_wait). None without samples."""
-    if not first or at[1] <= first[1] or end[1] <= at[1] or end[0] <= at[0]:
+def host_per_point(db, sid, steps, scale):
+    """Per point after the first (which carries the move from the reference): (done_at, host seconds) = the real
+    seconds since the previous point's commit that neither its exposures (its spectra's integration_ms x averages,
+    darks included) nor its planned move and settle (steps[i].move_s + settle_s) account for, at the time scale:
+    the host's time (and what the model does not time, the same for every point: probes, round trips). Empty
+    without the steps."""
+    if not steps:
+        return []
+    pts = db.execute("SELECT p.order_index, p.done_at, coalesce(sum(s.integration_ms * s.averages), 0) / 1000.0 "
+                     "FROM points p LEFT JOIN spectra s ON s.point_id = p.id WHERE p.sweep_id = ? AND p.state = 'done' "
+                     "GROUP BY p.id ORDER BY p.done_at", (sid,)).fetchall()
+    out = []
+    for (_, t0, _), (i, t1, expo) in zip(pts, pts[1:]):
+        if i < len(steps):
+            move = steps[i].get("move_s", 0) + steps[i].get("settle_s", 0)
+            out.append((t1, (t1 - t0) - (expo + move) / scale))
+    return out
+
+
+def host_known(host, t, eta_s, finished):
+    """The ETA's error at wall time t had the host's time per point of the rest been known: the ETA carries the
+    host's time per point measured so far into the points left; the points after t took (after - before) more
+    each. What is left of the error is the model's (exposures, darks, moves the plan timed wrong). None without
+    per-point host times."""
+    before = [h for at, h in host if at <= t]
+    after = [h for at, h in host if at > t]
+    left = finished - t
+    if not before or not after or left <= 0:
         return None
-    before, after = lag_between(lags, first[0], at[0]), lag_between(lags, at[0], end[0])
-    if before is None or after is None:
-        return None
-    pp_before, pp_after = before / (at[1] - first[1]), after / (end[1] - at[1])
-    return -(pp_after - pp_before) * (end[1] - at[1]) / (end[0] - at[0])
+    shift = (sum(after) / len(after) - sum(before) / len(before)) * len(after)
+    return (eta_s + shift) / left - 1
 
 
 def SAMPLE(text):
@@ -276,7 +278,7 @@ def table_line(r, scale, pred1):
               name, r["points"], scale, r["predicted_s"], r["predicted_host_s"], r["measured_s"],
               100 * r["error"], r["residual_per_point_s"], r["load"], r["faults"], pred1, pred1 / 60,
               " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25", "eta50", "eta75")))
-          + "  (of it the host's delay changing: %s; simulator lag %s; waited %.0f s for the previous "
+          + "  (had the host's time of the rest been known: %s; simulator lag %s; waited %.0f s for the previous "
              "reconstruction)" % (
               " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25_host", "eta50_host",
                                                                                   "eta75_host")), lag_text(r),
@@ -290,8 +292,10 @@ def lag_text(r):
     late wake-up with nothing due costs nothing): an indicator of the host's part, not a decomposition."""
     if r["sim_lag_s"] is None:
         return "-"
-    rq = "" if r["runq_wait_s"] is None else "; simulator and daemon runnable, not run: %.2f real s (%.1f%%)" % (
-        r["runq_wait_s"], 100 * r["runq_wait_s"] * r["scale"] / r["measured_s"])
+    model = 1000 * r["predicted_host_s"] / r["points"] / r["scale"]
+    rq = "" if r["host_per_point_s"] is None else ("; real time per point beyond its stored exposures and planned "
+                                                   "move %.1f ms (host, probe, round trips; the model's host part "
+                                                   "%.1f ms)" % (1000 * r["host_per_point_s"], model))
     return "%.2f real s (%.1f%% of the measured in bench s)%s" % (r["sim_lag_s"], 100 * r["sim_lag_share"], rq)
 
 
@@ -350,7 +354,8 @@ def main():
         rows.append(r)
         f = lambda x: "   -  " if x is None else "%+5.1f%%" % (100 * x)  # noqa: E731
         print("%-17s scale %4g  %4d points  predicted %7.1f s (host %.1f s)  measured %7.1f s  error %s  ETA error at "
-              "25/50/75 %%: %s %s %s  (of it the host's delay changing: %s %s %s)  (median integration %s ms, %s "
+              "25/50/75 %%: %s %s %s  (had the host's time of the rest been known: %s %s %s)  (median integration %s "
+              "ms, %s "
               "darks, %s exposures; residual per point %.4f s; simulator lag %s; load %.1f; %d faults; exposure prior "
               "%s; waited %.0f s for the previous sweep's reconstruction)"
               % (name, scale, r["points"], r["predicted_s"], r["predicted_host_s"], r["measured_s"], f(r["error"]),
