@@ -1,4 +1,4 @@
-/* Unit tests of the measurement selection (recon/select.c, included for its internals) on a small fitted model:
+/* Unit tests of the measurement selection (recon/select*.c, internals via select_int.h) on a small fitted model:
  *  - the rank-one (Schur complement) update: after 1-3 picks the tracked posterior variances equal a full
  *    refactorisation of the system with the picks appended (ln f points and the DHR functionals), to 1e-9 of the
  *    functional's prior variance; before any pick the DHR functional's variance equals dhr.c's σ_model²;
@@ -16,9 +16,16 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <cmocka.h>
+#include <cblas.h>
+#include <lapacke.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
 
 #include "recon_test_util.h"
-#include "recon/select.c"
+#include "recon/colour.h"
+#include "recon/recon_int.h"
+#include "recon/select_int.h"
 
 #define NWL 4
 

@@ -1,0 +1,101 @@
+/* select_int: the working state of one selection and the functions the selection's files share (recon/select.c
+ * the greedy pick, select_state.c the state's set-up, select_setup.c the targets' functionals); internal to
+ * recon/select*.c and their unit test. */
+#ifndef RECON_SELECT_INT_H
+#define RECON_SELECT_INT_H
+
+#include <stddef.h>
+
+#include "config/acq_err.h"
+#include "recon/select.h"
+
+/* The DHR's fixed rule (dhr.c: the GP part of its σ is computed on it). */
+#define SEL_NMU 32
+#define SEL_NPHI 48
+/* A candidate at a sampled incidence zeroes the DHR's resolution term there (dhr.c: within 0.25°). */
+#define SEL_RES_TOL (0.25 * M_PI / 180)
+/* value channels: a value within this factor of the threshold is recomputed on all channels, so the stop decision
+ * never rests on the subset (white at ACQ_SEED=3: the 1100 nm edge channel, σ 0.068, weighs 1/64 in the subset
+ * against 1/651: 0.0087 on 64 channels, 0.0040 on all) */
+#define SEL_VALUE_CHECK 4.0
+/* Canonical points this close (unit-vector coordinates) are the same measurement. */
+#define SEL_SAME 1e-9
+/* The ln f target's grid: θ up to 80° (beyond, no bench reaches and the prior alone speaks). */
+#define LNF_TMAX 80
+#define LNF_TSTEP 10
+#define LNF_PSTEP 20
+/* The RGB target's nodes: a 12 × 12 × 12 subset of the MERL table's cells (θh, θd, φd indices, cell centres). */
+#define RGB_NODES 12
+
+/* The working state of one selection (see "Choosing the next measurements" in recon/reconstruction.md). */
+struct sel {
+	const struct recon_model *m;
+	const struct select_target *t;
+	size_t n, L, J, F, Lc, nth, batch;
+	double noise;    /* η · median r: the noise of a new measurement relative to the kernel's amplitude */
+	double thr2;     /* threshold², 0 without one */
+	double *A;       /* [n*n] Cholesky factor of K + ηΛ (column-major, lower) */
+	double *alpha;   /* [L] the GP amplitude per channel (leave-one-out) */
+	size_t *chan;    /* [Lc] tracked channels */
+	size_t *vchan;   /* SELECT_DHR: [LV] the channels the value is computed on (NULL: all L) */
+	size_t LV;       /* their count (L without vchan) */
+	size_t *cpos;    /* [Lc] each tracked channel's position among them */
+	double *cu;      /* [J*6] unique candidates' canonical points */
+	double *soaJ;    /* [6*J] same, structure of arrays */
+	size_t *rep;     /* [J] input index of each unique candidate (the cheapest of its duplicates) */
+	double *cost;    /* [J] */
+	double *Kjn;     /* [J*n] k(candidate j, centre k) */
+	double *G;       /* [J*n] A⁻¹ k_j (column j contiguous) */
+	double *Pjj;     /* [J] posterior variance (unit amplitude) of g at candidate j */
+	double *Z;       /* [F*J] posterior covariance of functional f with g at candidate j */
+	double *v;       /* [F] posterior variance of functional f */
+	double *U;       /* [batch*J] scaled posterior rows of the picks (the low-rank part of the update) */
+	unsigned char *picked, *match; /* [J]; [nth*J] candidate j samples incidence t (SELECT_DHR) */
+	/* SELECT_DHR: per (t, tracked channel): noise floor², the σ² parts the selection does not change, res² */
+	double *sn2, *rest, *res2, *kappa;
+	unsigned char *res_done; /* [nth] */
+	double *xang;    /* SELECT_LNF, SELECT_RGB: [F*4] the grid's / nodes' pairs */
+	double *xw;      /* SELECT_RGB: [F] the nodes' share of the table's projected measure (sum 1) */
+	double *row, *zp; /* scratch of sel_update: [J], [F] */
+	/* SELECT_DHR, the noise part's fall with n: the functional's linear noise variance q = Σ_k N_k h_k² under the
+	 * GP's weights h = A⁻¹b (N_k = η λ_k, a new sample's = noise), tracked through the picks by the same block
+	 * elimination as the posterior; the Monte-Carlo floor sn2 is predicted as sn2 · q/q0. */
+	double *Nk;      /* [n] the samples' noise η λ_k */
+	double *q, *q0, *qmin; /* [F] current, initial and smallest-so-far noise variance of each functional (the
+			  * floor predicted never rises: an estimator may ignore a sample that would spread its weights) */
+	double *X;       /* [F*J] Σ_k N_k h_fk w_jk over the current samples (w_j: candidate j's weights A⁻¹k_j) */
+	double *Yn;      /* [J] Σ_k N_k w_jk² */
+	double *Gc;      /* [J*n] w_j's part on the model's samples (the picks' parts in gn) */
+	double *gn;      /* [batch*J] w_j's part on pick i */
+	double *mrow, *gp; /* scratch: [J], [n] */
+};
+
+/* Everything before the first pick: the factorisation, the candidates, the target's functionals and their
+ * covariances with the candidates, the current value into r. 0, or -1 with err (sel_free in both cases). */
+int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const double *ang, const double *cost,
+	     const struct select_target *t, const struct select_opts *o, struct select_result *r, struct acq_err *err);
+/* Release what sel_init allocated (idempotent on a zeroed state). */
+void sel_free(struct sel *s);
+
+/* The targets' set-ups (select_setup.c): the current value into r, the tracked functionals' posterior variances
+ * s->v and covariances s->Z with the candidates (DHR: also its fixed parts). 0, or -1 with err. */
+int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_result *r, struct acq_err *err);
+int sel_setup_lnf(struct sel *s, struct select_result *r, struct acq_err *err);
+int sel_setup_rgb(struct sel *s, struct select_result *r, struct acq_err *err);
+/* The DHR functional's coefficients at incidence th (select_setup.c; arrays as there). 0, or -1 with err. */
+int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, double *KQn, double *Y, double *Wc,
+		 double *C, struct acq_err *err);
+/* The ln f target's grid pairs into ang[F*4] (NULL: count only); returns F. */
+size_t sel_lnf_grid(double *ang);
+/* The RGB target's node pairs into ang[F*4] and their measure shares into w[F] (either NULL); returns F. */
+size_t sel_rgb_nodes(double *ang, double *w);
+
+/* The criterion's value with candidate j measured (SIZE_MAX: as it is), predicted per-incidence values into per
+ * (may be NULL). */
+double sel_excess(const struct sel *s, size_t j, double *per);
+/* Candidate p's measurement, the k-th pick, added to the posterior (rank-one update). */
+void sel_update(struct sel *s, size_t p, size_t k);
+/* The noise variance's terms after candidate p's measurement (the k-th pick; S its posterior variance + noise). */
+void sel_update_noise(struct sel *s, size_t p, size_t k, double S);
+
+#endif

@@ -1,0 +1,474 @@
+/* select_setup: the targets' set-ups of a selection: the DHR's σ and its functionals at its fixed rule, the ln f
+ * grid's and the RGB table's point variances, each with its covariances with the candidates. */
+#include <cblas.h>
+#include <lapacke.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "recon/colour.h"
+#include "recon/merl.h"
+#include "recon/recon_int.h"
+#include "recon/select_int.h"
+
+/* Z[f, j] = cov(φ_f, g(x_j)) − ... for functionals given by coefficients C[q*F' + f] over points c6[Q] (the
+ * amplitude folded in): Z = Cᵀ K_QJ − (A⁻¹ K_nQ C)ᵀ K_nJ, rows f0..f0+F'-1 of s->Z. */
+static int sel_functionals(struct sel *s, size_t Q, const double *c6, const double *KQn, const double *C, size_t Fp,
+			   size_t f0, double *KQJ, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, J = s->J;
+	double *B = malloc(Fp * n * sizeof *B); /* row-major F' × n = column-major n × F' */
+	if (!B)
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	cblas_dgemm(CblasRowMajor, CblasTrans, CblasNoTrans, (int)Fp, (int)n, (int)Q, 1.0, C, (int)Fp, KQn, (int)n, 0.0,
+		    B, (int)n);
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)Fp, s->A, (lapack_int)n, B, (lapack_int)n)) {
+		free(B);
+		return acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
+	}
+	if (s->X) { /* the noise variance of the functionals and its cross terms with the candidates' weights */
+		double *BN = malloc(Fp * n * sizeof *BN);
+		if (!BN) {
+			free(B);
+			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		}
+		for (size_t f = 0; f < Fp; f++) {
+			double qq = 0;
+			for (size_t k = 0; k < n; k++) {
+				BN[f * n + k] = s->Nk[k] * B[f * n + k];
+				qq += BN[f * n + k] * B[f * n + k];
+			}
+			s->q[f0 + f] = s->q0[f0 + f] = s->qmin[f0 + f] = qq;
+		}
+		if (J)
+			cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Fp, (int)J, (int)n, 1.0, BN, (int)n, s->G,
+				    (int)n, 0.0, s->X + f0 * J, (int)J);
+		free(BN);
+	}
+	double *Z = s->Z + f0 * J;
+	rbf_kmatrix_soa(m->kernel, m->shape, Q, c6, J, s->soaJ, KQJ);
+	cblas_dgemm(CblasRowMajor, CblasTrans, CblasNoTrans, (int)Fp, (int)J, (int)Q, 1.0, C, (int)Fp, KQJ, (int)J, 0.0,
+		    Z, (int)J);
+	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Fp, (int)J, (int)n, -1.0, B, (int)n, s->Kjn, (int)n,
+		    1.0, Z, (int)J);
+	free(B);
+	return 0;
+}
+
+/* The DHR functional at incidence th on the tracked channels: the fixed rule's nodes c6[Q*6] and weights wt[Q],
+ * the kernel rows KQn[Q*n], and C[q*Lc + c] = weight × energy factor × df̂/dg at the model × √(α_λ + unseen
+ * prior), as dhr.c's σ_model (scratch Y[Q*Lc], Wc[Lc*n]). */
+int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, double *KQn, double *Y, double *Wc,
+			double *C, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, Lc = s->Lc, Q = (size_t)SEL_NMU * SEL_NPHI;
+	for (size_t c = 0; c < Lc; c++)
+		memcpy(Wc + c * n, m->w + s->chan[c] * n, n * sizeof *Wc);
+	if (recon_hemi_nodes(th, SEL_NMU, SEL_NPHI, 0, c6, wt))
+		return acq_errf(err, ACQ_E_INVAL, "select: quadrature");
+	rbf_kmatrix_soa(m->kernel, m->shape, Q, c6, n, m->soa, KQn);
+	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Q, (int)Lc, (int)n, 1.0, KQn, (int)n, Wc, (int)n, 0.0,
+		    Y, (int)Lc);
+	for (size_t q = 0; q < Q; q++) {
+		const double *c = c6 + 6 * q;
+		double b[TREND_NB], u = recon_unseen(recon_nearest_centre(m, c, NULL));
+		trend_at(m, c, b);
+		for (size_t k = 0; k < Lc; k++) {
+			size_t l = s->chan[k];
+			double sc = recon_energy_scale(m, theta_of(c), theta_of(c + 3), l) * wt[q];
+			C[q * Lc + k] = sc * untransform_deriv(m->transform, Y[q * Lc + k] + m->mu[l], m->eps[l],
+							      trend_factor(m, b, l)) *
+					sqrt(s->alpha[l] + u * RECON_PRIOR_ALPHA);
+		}
+	}
+	return 0;
+}
+
+/* A view of m on its channels ch[0..k-1] only (the per-channel arrays copied, the directions and the factor's inputs
+ * shared): what recon_dhr_parts needs for the value on a channel subset. sub_free releases what it allocated. */
+static int sub_model(const struct recon_model *m, const size_t *ch, size_t k, struct recon_model *sub,
+		     struct acq_err *err)
+{
+	size_t n = m->n, nt = m->ntab > 1 ? m->ntab - 1 : 0;
+	*sub = *m;
+	sub->nwl = k;
+	sub->wl = malloc(k * sizeof *sub->wl);
+	sub->eps = malloc(k * sizeof *sub->eps);
+	sub->mu = malloc(k * sizeof *sub->mu);
+	sub->w = malloc(k * n * sizeof *sub->w);
+	sub->g = m->g ? malloc(k * n * sizeof *sub->g) : NULL;
+	sub->gsig = m->gsig ? malloc(k * n * sizeof *sub->gsig) : NULL;
+	sub->tcoef = m->tcoef ? malloc(k * TREND_NB * sizeof *sub->tcoef) : NULL;
+	sub->tab_alb = m->tab_alb && nt ? malloc(nt * k * sizeof *sub->tab_alb) : NULL;
+	if (!sub->wl || !sub->eps || !sub->mu || !sub->w || (m->g && !sub->g) || (m->gsig && !sub->gsig) ||
+	    (m->tcoef && !sub->tcoef) || (m->tab_alb && nt && !sub->tab_alb))
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	for (size_t j = 0; j < k; j++) {
+		size_t l = ch[j];
+		sub->wl[j] = m->wl[l];
+		sub->eps[j] = m->eps[l];
+		sub->mu[j] = m->mu[l];
+		memcpy(sub->w + j * n, m->w + l * n, n * sizeof *sub->w);
+		if (sub->g)
+			memcpy(sub->g + j * n, m->g + l * n, n * sizeof *sub->g);
+		if (sub->gsig)
+			memcpy(sub->gsig + j * n, m->gsig + l * n, n * sizeof *sub->gsig);
+		if (sub->tcoef)
+			memcpy(sub->tcoef + j * TREND_NB, m->tcoef + l * TREND_NB, TREND_NB * sizeof *sub->tcoef);
+		for (size_t t = 0; sub->tab_alb && t < nt; t++)
+			sub->tab_alb[t * k + j] = m->tab_alb[t * m->nwl + l];
+	}
+	return 0;
+}
+
+static void sub_free(struct recon_model *sub)
+{
+	free(sub->wl);
+	free(sub->eps);
+	free(sub->mu);
+	free(sub->w);
+	free(sub->g);
+	free(sub->gsig);
+	free(sub->tcoef);
+	free(sub->tab_alb);
+}
+
+/* The mean of x[0..n-1]²: an incidence's σ² over its channels (n > 0). */
+static double mean_sq(const double *x, size_t n)
+{
+	double a = 0;
+	for (size_t l = 0; l < n; l++)
+		a += x[l] * x[l];
+	return a / (double)n;
+}
+
+/* The DHR value on all channels (the value channels' screening said it is near the threshold): r->per and the value
+ * recomputed, each incidence's κ rescaled so predictions aim at the same value; r->value_checked set. 0 or -1. */
+static int sel_value_all(struct sel *s, const double *th, const struct select_opts *o, struct select_result *r,
+			 struct acq_err *err)
+{
+	size_t L = s->L, nth = s->nth, NL = nth * L;
+	double *dhr = malloc(NL * sizeof *dhr), *sig = malloc(NL * sizeof *sig);
+	int rc = -1;
+	if (!dhr || !sig) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	if (recon_dhr_parts(s->m, nth, th, o->ndraws, o->seed, dhr, sig, NULL, NULL, NULL, err))
+		goto out;
+	r->value = 0;
+	for (size_t t = 0; t < nth; t++) {
+		double all = mean_sq(sig + t * L, L);
+		double sub = r->per[t] * r->per[t];
+		if (sub > 0)
+			s->kappa[t] *= all / sub;
+		r->per[t] = sqrt(all);
+		r->value = fmax(r->value, r->per[t]);
+	}
+	r->value_checked = 1;
+	rc = 0;
+out:
+	free(dhr);
+	free(sig);
+	return rc;
+}
+
+/* The DHR target: the model's σ and its parts (recon_dhr_parts) at every channel, or on the value channels
+ * s->vchan only (a sub-model of those channels: the same computation per channel, at LV/L of the cost, the noise
+ * part's Monte-Carlo draws then other draws), and the GP functionals on the tracked channels: c_q = weight × energy
+ * factor × df̂/dg × √(α_λ + unseen prior) at the DHR's fixed rule. */
+int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_result *r, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, L = s->LV, nth = s->nth, Lc = s->Lc, J = s->J, Q = (size_t)SEL_NMU * SEL_NPHI;
+	struct recon_model sub = { 0 };
+	if (s->vchan && sub_model(m, s->vchan, s->LV, &sub, err)) {
+		sub_free(&sub);
+		return -1;
+	}
+	double th[SELECT_MAX_THETA];
+	for (size_t t = 0; t < nth; t++)
+		th[t] = s->t->theta_deg[t] * M_PI / 180;
+	size_t NL = nth * L;
+	double *dhr = malloc(NL * sizeof *dhr), *sig = malloc(NL * sizeof *sig), *sn = malloc(NL * sizeof *sn);
+	double *sm = malloc(NL * sizeof *sm), *sres = malloc(NL * sizeof *sres);
+	double *c6 = malloc(Q * 6 * sizeof *c6), *wt = malloc(Q * sizeof *wt), *KQn = malloc(Q * n * sizeof *KQn);
+	double *Y = malloc(Q * Lc * sizeof *Y), *C = malloc(Q * Lc * sizeof *C), *Wc = malloc(Lc * n * sizeof *Wc);
+	double *KQJ = malloc(Q * (J ? J : 1) * sizeof *KQJ);
+	int rc = -1;
+	if (!dhr || !sig || !sn || !sm || !sres || !c6 || !wt || !KQn || !Y || !C || !Wc || !KQJ) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	struct recon_dhr_parts parts = { .noise = sn, .model = sm, .res = sres };
+	if (recon_dhr_parts(s->vchan ? &sub : m, nth, th, o->ndraws, o->seed, dhr, sig, &parts, NULL, NULL, err))
+		goto out;
+	r->value = 0;
+	for (size_t t = 0; t < nth; t++) {
+		double all = mean_sq(sig + t * L, L), part = 0;
+		for (size_t c = 0; c < Lc; c++) {
+			size_t i = t * L + s->cpos[c], f = t * Lc + c;
+			double b = fmax(sn[i], sm[i]);
+			part += sig[i] * sig[i];
+			s->sn2[f] = sn[i] * sn[i];
+			s->v[f] = sm[i] * sm[i];
+			s->res2[f] = sres[i] * sres[i];
+			s->rest[f] = fmax(sig[i] * sig[i] - b * b, 0);
+		}
+		part /= (double)Lc;
+		s->kappa[t] = part > 0 ? all / part : 1.0;
+		r->per[t] = sqrt(all);
+		r->value = fmax(r->value, r->per[t]);
+	}
+	r->nper = nth;
+	r->nvalue = L;
+	if (s->vchan && isfinite(s->t->threshold) && r->value <= SEL_VALUE_CHECK * s->t->threshold &&
+	    sel_value_all(s, th, o, r, err))
+		goto out;
+	for (size_t t = 0; t < nth; t++) {
+		if (sel_dhr_coef(s, th[t], c6, wt, KQn, Y, Wc, C, err))
+			goto out;
+		if (J && sel_functionals(s, Q, c6, KQn, C, Lc, t * Lc, KQJ, err))
+			goto out;
+	}
+	rc = 0;
+out:
+	sub_free(&sub);
+	free(dhr);
+	free(sig);
+	free(sn);
+	free(sm);
+	free(sres);
+	free(c6);
+	free(wt);
+	free(KQn);
+	free(Y);
+	free(C);
+	free(Wc);
+	free(KQJ);
+	return rc;
+}
+
+/* The ln f grid: θi ≤ θo in {0, 10, …, 80°} × Δφ in {0, 20, …, 180°} (one azimuth at θi = 0). */
+size_t sel_lnf_grid(double *ang)
+{
+	size_t F = 0;
+	for (int ti = 0; ti <= LNF_TMAX; ti += LNF_TSTEP)
+		for (int to = ti; to <= LNF_TMAX; to += LNF_TSTEP)
+			for (int p = 0; p <= 180; p += LNF_PSTEP) {
+				if (ti == 0 && p > 0)
+					break;
+				if (ang) {
+					ang[4 * F] = ti * M_PI / 180;
+					ang[4 * F + 1] = 0;
+					ang[4 * F + 2] = to * M_PI / 180;
+					ang[4 * F + 3] = p * M_PI / 180;
+				}
+				F++;
+			}
+	return F;
+}
+
+/* Point targets (ln f, RGB): the posterior variance v[x] = amp[x]² P(x, x) of g at the F points c6 (unit-amplitude
+ * posterior P) and their covariances Z[x, j] = amp[x] P(x, candidate j) with the candidates. */
+static int sel_point_cov(struct sel *s, const double *c6, const double *amp, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, F = s->F, J = s->J;
+	double *KXn = malloc(F * n * sizeof *KXn), *GX = malloc(F * n * sizeof *GX);
+	int rc = -1;
+	if (!KXn || !GX) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	rbf_kmatrix_soa(m->kernel, m->shape, F, c6, n, m->soa, KXn);
+	memcpy(GX, KXn, F * n * sizeof *GX);
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)F, s->A, (lapack_int)n, GX, (lapack_int)n)) {
+		acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
+		goto out;
+	}
+	for (size_t x = 0; x < F; x++) {
+		double tc[6];
+		rbf_tau(c6 + 6 * x, tc);
+		double p = rbf_kernel(m->kernel, m->shape, c6 + 6 * x, c6 + 6 * x, tc) -
+			   cblas_ddot((int)n, KXn + x * n, 1, GX + x * n, 1);
+		s->v[x] = amp[x] * amp[x] * (p > 0 ? p : 0);
+	}
+	if (J) {
+		rbf_kmatrix_soa(m->kernel, m->shape, F, c6, J, s->soaJ, s->Z);
+		cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)F, (int)J, (int)n, -1.0, GX, (int)n, s->Kjn,
+			    (int)n, 1.0, s->Z, (int)J);
+		for (size_t x = 0; x < F; x++)
+			cblas_dscal((int)J, amp[x], s->Z + x * J, 1);
+	}
+	rc = 0;
+out:
+	free(KXn);
+	free(GX);
+	return rc;
+}
+
+/* The ln f target: the posterior variance of g (RMS amplitude over the channels, unseen prior included) at the
+ * grid's points, and their covariances with the candidates. */
+int sel_setup_lnf(struct sel *s, struct select_result *r, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t F = s->F;
+	double *c6 = calloc(F * 6, sizeof *c6), *amp = calloc(F, sizeof *amp); /* calloc: gcc's maybe-uninitialized */
+	int rc = -1;
+	if (!c6 || !amp) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	double abar = 0;
+	for (size_t l = 0; l < s->L; l++)
+		abar += s->alpha[l] / (double)s->L;
+	for (size_t x = 0; x < F; x++) {
+		const double *a = s->xang + 4 * x;
+		rbf_canon(a[0], a[1], a[2], a[3], c6 + 6 * x);
+		amp[x] = sqrt(abar + recon_unseen(recon_nearest_centre(m, c6 + 6 * x, NULL)) * RECON_PRIOR_ALPHA);
+	}
+	if (sel_point_cov(s, c6, amp, err))
+		goto out;
+	r->value = 0;
+	for (size_t x = 0; x < F; x++)
+		if (sqrt(s->v[x]) > r->value) {
+			r->value = sqrt(s->v[x]);
+			memcpy(r->where, s->xang + 4 * x, sizeof r->where);
+		}
+	r->per[0] = r->value;
+	r->nper = 1;
+	rc = 0;
+out:
+	free(c6);
+	free(amp);
+	return rc;
+}
+
+/* The RGB target's nodes: MERL cells (iθh, iθd, iφd) = ((k + ½)·N/RGB_NODES) for k < RGB_NODES in each index, those
+ * with both directions within LNF_TMAX (80°) of the normal, at the writer's cell centres (merl.h: beyond, no bench
+ * reaches and the prior alone speaks, as for ln f; on green paint the grazing Fresnel cells θd > 80° held 97 % of
+ * a 10 × 10 × 10 model's squared table error, a region no plan samples); ang[x*4] their pairs (θi, φi, θo,
+ * φo) and w[x] the table's projected measure of the block the node stands for: the Rusinkiewicz Jacobian
+ * dωi dωo = 4 cosθd sinθh sinθd dθh dθd dφd dφh (φh integrated out: isotropy), × dθh/diθh (θh is quadratic in its
+ * index), × cosθi cosθo; normalised to sum 1. Either pointer may be NULL (count only). */
+size_t sel_rgb_nodes(double *ang, double *w)
+{
+	size_t F = 0;
+	const double zmin = cos(LNF_TMAX * M_PI / 180);
+	double tot = 0;
+	for (int a = 0; a < RGB_NODES; a++)
+		for (int b = 0; b < RGB_NODES; b++)
+			for (int c = 0; c < RGB_NODES; c++) {
+				int ih = (int)((a + 0.5) * MERL_N_THETA_H / RGB_NODES);
+				int id = (int)((b + 0.5) * MERL_N_THETA_D / RGB_NODES);
+				int ip = (int)((c + 0.5) * MERL_N_PHI_D / RGB_NODES);
+				double wi[3], wo[3], th, td, pd;
+				if (merl_cell_dirs(ih, id, ip, wi, wo) != 1 || wi[2] <= zmin || wo[2] <= zmin)
+					continue;
+				merl_cell_angles(ih, id, ip, &th, &td, &pd);
+				double dth = 2.0 * (ih + 0.5) / (MERL_N_THETA_H * MERL_N_THETA_H) * (M_PI / 2);
+				double wx = 4 * cos(td) * sin(th) * sin(td) * dth * wi[2] * wo[2];
+				if (ang) {
+					ang[4 * F] = acos(fmin(1, wi[2]));
+					ang[4 * F + 1] = atan2(wi[1], wi[0]);
+					ang[4 * F + 2] = acos(fmin(1, wo[2]));
+					ang[4 * F + 3] = atan2(wo[1], wo[0]);
+				}
+				if (w)
+					w[F] = wx;
+				tot += wx;
+				F++;
+			}
+	if (w)
+		for (size_t x = 0; x < F; x++)
+			w[x] /= tot;
+	return F;
+}
+
+/*
+ * The RGB target: the σ of the linear-sRGB BRDF values (sr⁻¹) a MERL table of the model holds, through the outputs'
+ * spectra → RGB chain (colour_opts_brdf: D65, Bradford, absolute, linear; colour_weights W[c, λ] at the model's
+ * wavelengths), RMS over the three channels and over the table under its projected measure (sel_rgb_nodes). Under the
+ * GP reading the error of channel λ at x is √(α_λ + unseen prior) · df̂/dg · energy factor · z(x); the errors of
+ * one point are taken as fully correlated across wavelengths (one interpolation error of the shape, the GP's
+ * common kernel: a missed lobe is missed at every wavelength), so RGB_c has the amplitude
+ *   a_c(x) = |Σ_λ W[c, λ] · s_λ(x) · df̂/dg(x, λ) · √(α_λ + u(x)·prior)|
+ * and the value is √(Σ_x w_x P(x, x) Σ_c a_c(x)²). (Independent channels would give a value ~√(visible channels)
+ * smaller; test_recon_select checks the value against the error of models of a known truth.)
+ */
+int sel_setup_rgb(struct sel *s, struct select_result *r, struct acq_err *err)
+{
+	const struct recon_model *m = s->m;
+	size_t n = s->n, L = s->L, F = s->F;
+	double *W = malloc(3 * L * sizeof *W), *c6 = malloc(F * 6 * sizeof *c6), *amp = calloc(F, sizeof *amp);
+	size_t *vis = malloc(L * sizeof *vis);
+	double *Wv = NULL, *KXn = NULL, *Y = NULL;
+	int rc = -1;
+	if (!W || !c6 || !amp || !vis) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	struct colour_opts co;
+	colour_opts_brdf(&co);
+	if (colour_weights(&co, m->wl, L, W, err))
+		goto out;
+	size_t V = 0; /* the channels that carry colour weight */
+	for (size_t l = 0; l < L; l++)
+		if (W[l] != 0 || W[L + l] != 0 || W[2 * L + l] != 0)
+			vis[V++] = l;
+	Wv = malloc((V ? V : 1) * n * sizeof *Wv);
+	KXn = malloc(F * n * sizeof *KXn);
+	Y = malloc(F * (V ? V : 1) * sizeof *Y);
+	if (!Wv || !KXn || !Y) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	for (size_t x = 0; x < F; x++) {
+		const double *a = s->xang + 4 * x;
+		rbf_canon(a[0], a[1], a[2], a[3], c6 + 6 * x);
+	}
+	if (V) { /* the interpolant (without its mean) at the nodes on the visible channels */
+		for (size_t v = 0; v < V; v++)
+			memcpy(Wv + v * n, m->w + vis[v] * n, n * sizeof *Wv);
+		rbf_kmatrix_soa(m->kernel, m->shape, F, c6, n, m->soa, KXn);
+		cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)F, (int)V, (int)n, 1.0, KXn, (int)n, Wv, (int)n,
+			    0.0, Y, (int)V);
+	}
+	for (size_t x = 0; x < F; x++) {
+		const double *c = c6 + 6 * x;
+		double b[TREND_NB], u = recon_unseen(recon_nearest_centre(m, c, NULL)), ac[3] = { 0, 0, 0 };
+		trend_at(m, c, b);
+		for (size_t v = 0; v < V; v++) {
+			size_t l = vis[v];
+			double d = recon_energy_scale(m, theta_of(c), theta_of(c + 3), l) *
+				   untransform_deriv(m->transform, Y[x * V + v] + m->mu[l], m->eps[l], trend_factor(m, b, l)) *
+				   sqrt(s->alpha[l] + u * RECON_PRIOR_ALPHA);
+			for (int k = 0; k < 3; k++)
+				ac[k] += W[k * L + l] * d;
+		}
+		amp[x] = sqrt(ac[0] * ac[0] + ac[1] * ac[1] + ac[2] * ac[2]);
+		if (!isfinite(amp[x]))
+			amp[x] = 0;
+		amp[x] *= sqrt(s->xw[x]); /* the measure folded in: v sums to the value² */
+	}
+	if (sel_point_cov(s, c6, amp, err))
+		goto out;
+	double sum = 0;
+	for (size_t x = 0; x < F; x++)
+		sum += s->v[x];
+	r->value = r->per[0] = sqrt(sum);
+	r->nper = 1;
+	rc = 0;
+out:
+	free(W);
+	free(c6);
+	free(amp);
+	free(vis);
+	free(Wv);
+	free(KXn);
+	free(Y);
+	return rc;
+}
