@@ -140,9 +140,11 @@ struct recon_check_report {
 	double energy_excess;     /* largest albedo − 2 × its rule difference − 1 over every incidence and channel:
 				   * > 0 is a violation beyond the check's quadrature uncertainty */
 	size_t nonfinite;         /* non-finite outputs (must be 0) */
+	size_t alb_unresolved;    /* channel × incidence albedos the check's cubature left above its error target
+				   * (1e-3 relative): their energy verdict is only as good as that estimate */
 };
 /* Verify non-negativity and reciprocity at npairs random pairs, and the albedo at nalb random incidences
- * (plus 0 and 90°) with an independent finer quadrature (Gauss-Legendre 48 in cos²θo × 96 azimuths). */
+ * (plus 0 and 90°) with an independent quadrature (adaptive cubature over cells of cosθo × azimuth). */
 int recon_check(const struct recon_model *m, size_t npairs, size_t nalb, uint64_t seed,
 		struct recon_check_report *rep, recon_progress_fn progress, void *pctx, struct acq_err *err);
 

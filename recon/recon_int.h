@@ -169,6 +169,15 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 			  int square_rule, int scaled, double tol, double floor, double below, struct albedo_ws *ws,
 			  double *out, double *diff, struct acq_err *err);
 
+/* The checker's albedo of every channel at θi (quad.c): globally adaptive cubature over cells of (cosθo, azimuth), Genz-Malik
+ * degree 7/5 on each, from ncx × ncp cells until every channel's error estimate is ≤ tol · max(|value|, floor) or
+ * max_cells cells (per chunk of RECON_CUB_CHUNK channels); out[L], errest[L]; *unresolved counts the channels left
+ * above their target. -1 with err on a bad argument or no memory. */
+#define RECON_CUB_CHUNK 64
+int recon_albedo_cubature(const struct recon_model *m, double theta_i, int ncx, int ncp, int scaled, double tol,
+			  double floor, size_t max_cells, struct albedo_ws *ws, double *out, double *errest,
+			  size_t *unresolved, struct acq_err *err);
+
 /* Build m->tab_theta, m->tab_alb, m->ntab, m->alb_margin: the energy table of the unscaled interpolant
  * (energy.c). */
 int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progress_fn pf, void *pctx);
