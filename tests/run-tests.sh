@@ -2,64 +2,153 @@
 # Runs the test suites and prints one closing line "N passed, N failed, N skipped".
 # Usage: tests/run-tests.sh [unit|integration|fuzz]...   (default: all three)
 # Environment (set by `make check`): ACQ_BUILD, ACQ_SRC, ACQ_SEED.
+#   ACQ_TEST_JOBS  tests run at once (default 2): unit tests, fuzz replays and the integration tests
+#                  that are not timing-sensitive (see SERIAL below). 1 runs everything one at a time.
+# Results are printed in a fixed order (unit, fuzz, integration; by name) whatever order the tests end
+# in. Each test's wall and CPU seconds go to its log's last line and to $ACQ_BUILD/test-logs/times.tsv;
+# the slowest are listed before the closing line.
 set -uo pipefail
 : "${ACQ_BUILD:?}" "${ACQ_SRC:?}" "${ACQ_SEED:=1}"
 suites=("$@"); [ ${#suites[@]} -gt 0 ] || suites=(unit fuzz integration)
 logdir="$ACQ_BUILD/test-logs"; mkdir -p "$logdir"
+resdir=$(mktemp -d "$logdir/.results.XXXXXX") || exit 2
+trap 'rm -rf "$resdir"' EXIT
 passed=0; failed=0; skipped=0; failures=()
 TEST_TIMEOUT=${TEST_TIMEOUT:-300}
+JOBS=${ACQ_TEST_JOBS:-2}
+SLOWEST=${ACQ_TEST_SLOWEST:-15}
 
-report_fail() { failures+=("$1"); echo "FAIL $1 (log: $2)"; tail -n 30 "$2" | sed 's/^/    | /'; }
+# Integration tests that measure time or need the CPU at a given moment (latency bounds, a kill inside a
+# window, a watchdog period): they run alone, after the others, so a neighbour test cannot make them flake.
+SERIAL=" test_acqctl.py test_adaptive_kill.py test_adaptive_seconds.py test_client_limits.py test_daemon_sim.py
+ test_devices_throttle.py test_disk_full.py test_export.py test_laser_kill.py test_laser_sim.py test_malformed_flood.py
+ test_sd_notify.py test_sim_bench.py test_sweep_crash.py test_sweep_start_offloop.py test_sweep_step_kill.py
+ test_watchdog.py "
 
-run_unit() {
-  local t name log p f s
-  for t in "$ACQ_BUILD"/tests/test_*; do
-    [ -x "$t" ] || continue
-    name=$(basename "$t"); log="$logdir/$name.log"
-    if timeout "$TEST_TIMEOUT" "$t" >"$log" 2>&1; then rc=0; else rc=$?; fi
-    # cmocka prints "[  PASSED  ] N test(s)." and "[  FAILED  ] N test(s)" per group.
-    p=$(grep -E '^\[  PASSED  \] [0-9]+ test' "$log" | awk '{s+=$4} END{print s+0}')
-    f=$(grep -E '^\[  FAILED  \] [0-9]+ test' "$log" | awk '{s+=$4} END{print s+0}')
-    # a skipped case counts as skipped (not as passed), with the reason the test printed ("skip: ...")
-    s=$(grep -E '^\[  SKIPPED \] [0-9]+ test' "$log" | awk '{s+=$4} END{print s+0}')
-    passed=$((passed + p)); failed=$((failed + f)); skipped=$((skipped + s))
+# ---- one test: run it, keep its log, its times and its result line (read back in order later) ------------
+# timed KEY LOG CMD...: runs CMD with stdout+stderr to LOG; writes "rc wall user sys" to $resdir/KEY.t.
+timed() {
+  local key=$1 log=$2 rc; shift 2
+  local TIMEFORMAT='%R %U %S'
+  { time { "$@" >"$log" 2>&1; rc=$?; }; } 2>"$resdir/$key.time"
+  echo "$rc $(cat "$resdir/$key.time")" >"$resdir/$key.t"
+  read -r _ w u s <"$resdir/$key.t"
+  echo "[time] wall ${w}s, cpu ${u}s user + ${s}s sys" >>"$log"
+}
+
+# Each job writes $resdir/KEY.r: "passed failed skipped" on the first line, then the lines to print.
+job_unit() {
+  local t=$1 key=$2 name log rc p f s
+  name=$(basename "$t"); log="$logdir/$name.log"
+  timed "$key" "$log" timeout "$TEST_TIMEOUT" "$t"; read -r rc _ <"$resdir/$key.t"
+  # cmocka prints "[  PASSED  ] N test(s)." and "[  FAILED  ] N test(s)" per group.
+  p=$(grep -E '^\[  PASSED  \] [0-9]+ test' "$log" | awk '{s+=$4} END{print s+0}')
+  f=$(grep -E '^\[  FAILED  \] [0-9]+ test' "$log" | awk '{s+=$4} END{print s+0}')
+  # a skipped case counts as skipped (not as passed), with the reason the test printed ("skip: ...")
+  s=$(grep -E '^\[  SKIPPED \] [0-9]+ test' "$log" | awk '{s+=$4} END{print s+0}')
+  {
     if [ "$rc" -ne 0 ]; then
-      [ "$f" -gt 0 ] || failed=$((failed + 1))
-      report_fail "unit/$name (exit $rc)" "$log"
+      [ "$f" -gt 0 ] || f=$((f + 1))
+      echo "$p $f $s"; echo "FAIL unit/$name (exit $rc)|$log"
     else
+      echo "$p $f $s"
       echo "ok   unit/$name ($p cases$([ "$s" -eq 0 ] || echo ", $s skipped: $(grep '^skip: ' "$log" | sort -u | tr '\n' ' ')"))"
     fi
-  done
+  } >"$resdir/$key.r"
 }
 
-run_fuzz() {
-  local t name corpus log
-  for t in "$ACQ_BUILD"/fuzz-replay/fuzz_*; do
-    [ -x "$t" ] || continue
-    name=$(basename "$t"); corpus="$ACQ_SRC/tests/fuzz/corpus/$name"; log="$logdir/$name.log"
-    if timeout "$TEST_TIMEOUT" "$t" --seed "$ACQ_SEED" --mutations 3000 "$corpus" >"$log" 2>&1; then
-      passed=$((passed + 1)); echo "ok   fuzz/$name ($(tail -n 1 "$log"))"
-    else
-      failed=$((failed + 1)); report_fail "fuzz/$name" "$log"
+job_fuzz() {
+  local t=$1 key=$2 name corpus log rc
+  name=$(basename "$t"); corpus="$ACQ_SRC/tests/fuzz/corpus/$name"; log="$logdir/$name.log"
+  timed "$key" "$log" timeout "$TEST_TIMEOUT" "$t" --seed "$ACQ_SEED" --mutations 3000 "$corpus"
+  read -r rc _ <"$resdir/$key.t"
+  if [ "$rc" -eq 0 ]; then
+    printf '1 0 0\nok   fuzz/%s (%s)\n' "$name" "$(tail -n 2 "$log" | head -n 1)"
+  else
+    printf '0 1 0\nFAIL fuzz/%s|%s\n' "$name" "$log"
+  fi >"$resdir/$key.r"
+}
+
+job_integration() {
+  local t=$1 key=$2 name log rc
+  name=$(basename "$t"); log="$logdir/$name.log"
+  timed "$key" "$log" run_in_src timeout "$TEST_TIMEOUT" "$t"; read -r rc _ <"$resdir/$key.t"
+  case $rc in
+    0)  printf '1 0 0\nok   integration/%s\n' "$name";;
+    77) printf '0 0 1\nskip integration/%s: %s\n' "$name" "$(tail -n 2 "$log" | head -n 1)";;
+    *)  printf '0 1 0\nFAIL integration/%s (exit %s)|%s\n' "$name" "$rc" "$log";;
+  esac >"$resdir/$key.r"
+}
+run_in_src() { cd "$ACQ_SRC" && "$@"; }
+
+# ---- the pool: at most JOBS jobs at once; results read back in the order the tests were listed ----------
+queue=()    # "suite key test", in print order
+shared=()   # indices into queue of the tests that may run beside others
+alone=()    # ... and of those that run alone (SERIAL)
+enqueue() {   # enqueue SUITE TEST shared|alone
+  queue+=("$1 $(printf 'k%04d' "${#queue[@]}") $2")
+  if [ "$3" = alone ]; then alone+=($((${#queue[@]} - 1))); else shared+=($((${#queue[@]} - 1))); fi
+}
+
+run_pool() {   # run_pool NJOBS INDEX...: runs those queue entries with at most NJOBS at once
+  local n=$1 i suite key t; shift
+  for i in "$@"; do
+    read -r suite key t <<<"${queue[i]}"
+    while [ "$(jobs -rp | wc -l)" -ge "$n" ]; do wait -n; done
+    "job_$suite" "$t" "$key" &
+  done
+  wait
+}
+
+print_results() {
+  local q suite key t line log c1 c2 c3
+  for q in "${queue[@]}"; do
+    read -r suite key t <<<"$q"
+    if [ ! -s "$resdir/$key.r" ]; then   # the job itself died: count it as a failure
+      failed=$((failed + 1)); failures+=("$suite/$(basename "$t") (no result)")
+      echo "FAIL $suite/$(basename "$t") (no result)"
+      continue
     fi
-  done
-}
-
-run_integration() {
-  local t name log rc
-  for t in "$ACQ_SRC"/tests/integration/test_*; do
-    [ -x "$t" ] || continue
-    name=$(basename "$t"); log="$logdir/$name.log"
-    if (cd "$ACQ_SRC" && timeout "$TEST_TIMEOUT" "$t") >"$log" 2>&1; then rc=0; else rc=$?; fi
-    case $rc in
-      0)  passed=$((passed + 1)); echo "ok   integration/$name";;
-      77) skipped=$((skipped + 1)); echo "skip integration/$name: $(tail -n 1 "$log")";;
-      *)  failed=$((failed + 1)); report_fail "integration/$name (exit $rc)" "$log";;
+    { read -r c1 c2 c3; read -r line; } <"$resdir/$key.r"
+    passed=$((passed + c1)); failed=$((failed + c2)); skipped=$((skipped + c3))
+    case $line in
+      FAIL*) log=${line##*|}; line=${line%|*}; failures+=("${line#FAIL }")
+             echo "$line (log: $log)"; tail -n 30 "$log" | sed 's/^/    | /';;
+      *)     echo "$line";;
     esac
   done
 }
 
-for s in "${suites[@]}"; do "run_$s"; done
+for s in "${suites[@]}"; do
+  case $s in
+    unit)        for t in "$ACQ_BUILD"/tests/test_*; do [ -x "$t" ] && enqueue unit "$t" shared; done;;
+    fuzz)        for t in "$ACQ_BUILD"/fuzz-replay/fuzz_*; do [ -x "$t" ] && enqueue fuzz "$t" shared; done;;
+    integration) for t in "$ACQ_SRC"/tests/integration/test_*; do
+                   [ -x "$t" ] || continue
+                   case $SERIAL in *" $(basename "$t") "*) enqueue integration "$t" alone;;
+                                   *) enqueue integration "$t" shared;; esac
+                 done;;
+    *) echo "run-tests.sh: unknown suite '$s' (unit, integration or fuzz)" >&2; exit 2;;
+  esac
+done
+run_pool "$JOBS" "${shared[@]}"   # everything that may share the CPU with another test
+run_pool 1 "${alone[@]}"          # then the timing-sensitive integration tests, one at a time
+print_results
+
+# ---- times: one row per test, and the slowest listed ----------------------------------------------------
+{
+  printf 'test\trc\twall_s\tuser_s\tsys_s\n'
+  for q in "${queue[@]}"; do
+    read -r suite key t <<<"$q"
+    [ -s "$resdir/$key.t" ] && read -r rc w u s <"$resdir/$key.t" &&
+      printf '%s/%s\t%s\t%s\t%s\t%s\n' "$suite" "$(basename "$t")" "$rc" "$w" "$u" "$s"
+  done
+} >"$logdir/times.tsv"
+echo
+echo "slowest (wall s, cpu s; all in $logdir/times.tsv):"
+tail -n +2 "$logdir/times.tsv" | sort -t$'\t' -k3,3 -rn | head -n "$SLOWEST" |
+  awk -F'\t' '{printf "  %7.2f %7.2f  %s\n", $3, $4 + $5, $1}'
+
 echo
 [ ${#failures[@]} -eq 0 ] || { echo "failed:"; printf '  %s\n' "${failures[@]}"; }
 echo "$passed passed, $failed failed, $skipped skipped"
