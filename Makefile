@@ -218,7 +218,7 @@ DOCDIR     := $(PREFIX)/share/doc/acquisitiond
 MANDIR     := $(PREFIX)/share/man
 COMPDIR    := $(PREFIX)/share/bash-completion/completions
 UNITDIR    := $(PREFIX)/lib/systemd/system
-DOCS       := README.md recon/reconstruction.md recon/output.md
+DOCS       := README.md recon/reconstruction.md recon/output.md daemon/nexus.md
 # Every file `install` writes (uninstall removes exactly these, then the folders that are ours).
 INSTALLED  := $(addprefix $(PREFIX)/bin/,$(notdir $(PROGRAMS))) \
               $(foreach m,$(MAN_SRCS),$(MANDIR)/man$(subst .,,$(suffix $(basename $(m))))/$(notdir $(basename $(m)))) \

@@ -31,7 +31,7 @@ static void crash_hook(const char *event, json_t *data)
 	crash_point(!strcmp(event, "sweep.progress") ? "point"
 		    : !strcmp(event, "sweep.fault") ? "fault"
 		    : !strcmp(event, "recon") ? "recon"
-		    : !strcmp(event, "sweep.state") ? json_string_value(json_object_get(data, "event")) : NULL);
+		    : !strcmp(event, "sweep.state") ? json_string_value(json_object_get(data, "kind")) : NULL);
 }
 
 void app_emit(void *ctx, const char *event, json_t *data)

@@ -1,5 +1,5 @@
 /* eta: a sweep's remaining time in wall-clock seconds at any time scale — the planner's prediction of the rest,
- * plus the time per point the sweep has taken beyond the prediction so far (paused or faulted time does not
+ * plus the time per point the sweep has taken beyond the prediction recently (paused or faulted time does not
  * count). */
 #ifndef ETA_H
 #define ETA_H
@@ -16,6 +16,8 @@ struct eta {
 	double run_real;           /* real seconds spent running over the measured intervals */
 	double run_plan;           /* the plan's bench seconds for the same points */
 	int measured;              /* points completed in those intervals */
+	double recent_real;        /* real s per point, recent average (eta.c); NAN until measured */
+	double recent_plan;        /* the plan's bench s per point over the same points, with the same weights */
 };
 
 /* A new sweep (or a resumed one): nothing measured yet. */

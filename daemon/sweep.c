@@ -80,7 +80,7 @@ static void on_event(void *ctx, int64_t sweep_id, const char *kind, const char *
 	    !strcmp(kind, "complete"))
 		eta_running(&sw->eta, run, loop_now(sw->env.loop), loop_monotonic(NULL));
 	const char *state = sw->ex ? ex_state_name(ex_state(sw->ex)) : "idle";
-	emit(sw, "sweep.state", json_pack("{s:I,s:s,s:s,s:s}", "sweep", (json_int_t)sweep_id, "state", state, "event",
+	emit(sw, "sweep.state", json_pack("{s:I,s:s,s:s,s:s}", "sweep", (json_int_t)sweep_id, "state", state, "kind",
 					  kind, "reason", message));
 }
 

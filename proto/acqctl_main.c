@@ -88,7 +88,8 @@ static void usage(FILE *f)
 		   "exit status: 0 ok, 1 refused by the daemon, 64 usage, 65 bad local input, 66 unreadable input,\n"
 		   "  69 no daemon answers, 70 internal error, 73 cannot write the output, 75 wait timed out,\n"
 		   "  76 protocol error\n"
-		   "see acqctl(1); --json replies follow the schemas of acqctl-json(5)\n");
+		   "see acqctl(1); --json replies follow the schemas in\n"
+		   "  /usr/share/acquisitiond/acqctl-replies.schema.json\n");
 }
 
 /* ---- one output per command ---- */

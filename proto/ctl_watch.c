@@ -162,7 +162,7 @@ void ctl_view_event(struct ctl_view *v, json_t *ev)
 		snprintf(v->state, sizeof v->state, "%s", s_of(ev, "state"));
 		if (strcmp(v->state, "running"))
 			v->eta_s = NAN;
-		snprintf(text, sizeof text, "sweep %lld %s: %s", v->sweep, s_of(ev, "event"), s_of(ev, "reason"));
+		snprintf(text, sizeof text, "sweep %lld %s: %s", v->sweep, s_of(ev, "kind"), s_of(ev, "reason"));
 	} else if (!strcmp(name, "sweep.fault")) {
 		snprintf(text, sizeof text, "sweep %lld fault on %s: %s",
 			 (long long)json_integer_value(json_object_get(ev, "sweep")), s_of(ev, "device"), s_of(ev, "message"));

@@ -473,12 +473,18 @@ int main(int argc, char **argv)
 			nfds += count[i];
 		}
 		/* Models advance every millisecond of real time at most; motion is smooth at any scale. */
+		double wait_mono = mono_now();
 		int n = poll(fds, (nfds_t)nfds, 1);
 		if (n < 0 && errno != EINTR) {
 			acq_errf(&err, ACQ_E_IO, "poll: %s", strerror(errno));
 			goto out;
 		}
-		double now = sim_now(&world);
+		double now = sim_now(&world), woke = now / world.scale + world.t0_mono;
+		/* A 1 ms wait that ended more than SIM_LAG_SLACK_S late: the host did not run this process when its
+		 * models were due (load), late by the rest; summed as the ctl status' lag_s (scheduling only, not the
+		 * handlers' own work). */
+		if (n == 0 && woke - wait_mono > 0.001 + SIM_LAG_SLACK_S)
+			world.lag_s += woke - wait_mono - 0.001;
 		for (int i = 0; i < nsvc; i++) {
 			if (n > 0 && count[i] && svc[i]->handle)
 				svc[i]->handle(svc[i]->self, fds + first[i], count[i], now);

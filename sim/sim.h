@@ -64,7 +64,10 @@ struct sim_world {
 	int sample;                 /* enum sim_sample */
 	double sensor_temp_c;       /* spectrometer sensor temperature (TEC set point by default) */
 	double spectro_offline_until; /* bench time until which the spectrometer refuses connections */
+	double lag_s;               /* real seconds the main loop's 1 ms waits ended late (the host's load), summed */
 };
+
+#define SIM_LAG_SLACK_S 0.0005      /* a wait ending this much late is not counted (timer slack, wake-up) */
 
 /* A service of the simulator: owns file descriptors and advances its model with bench time. */
 struct sim_service {

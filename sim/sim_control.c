@@ -7,6 +7,7 @@
  *   status                                 ok t=<bench s> laser.theta= detector.theta= detector.phi= emission=
  *                                          power= sample= temperature= faults=<comma list or none>
  *                                          laser_status_reads=<STATUS? commands the laser answered>
+ *                                          lag_s=<real s the main loop's 1 ms waits ended late, summed>
  *   time                                   ok <bench seconds>
  *   sample MATERIAL|none                   what is on the stage (a material of sim/material.h)
  *   temperature <C>                        spectrometer sensor temperature (-40..80)
@@ -220,9 +221,10 @@ static int command(struct control *c, struct client *k, char *line, double now)
 		char fl[512];
 		faults_list(w, fl, sizeof fl);
 		return reply(k, "ok t=%.6f laser.theta=%.4f detector.theta=%.4f detector.phi=%.4f emission=%d power=%.2f"
-				" sample=%s temperature=%.2f faults=%s laser_status_reads=%lu",
+				" sample=%s temperature=%.2f faults=%s laser_status_reads=%lu lag_s=%.6f",
 			     now, w->laser_theta_deg, w->detector_theta_deg, w->detector_phi_deg, w->laser_emission ? 1 : 0,
-			     w->laser_power_pct, phys_sample_name(w->sample), w->sensor_temp_c, fl, w->laser_status_reads);
+			     w->laser_power_pct, phys_sample_name(w->sample), w->sensor_temp_c, fl, w->laser_status_reads,
+			     w->lag_s);
 	}
 	if (!strcmp(cmd, "time"))
 		return reply(k, "ok %.6f", now);

@@ -11,9 +11,16 @@ pause, sample, resume) while `acqctl watch` (JSON lines) records every progress 
 Cases: the small plan (config/plan-quick.yaml) with fixed integration at time scales 1 and 10, with auto
 integration at time scale 1 (its estimate 20 ms), then again on the same bench (`-repeat`: an operator repeating
 a sample; the plans name it, sample: green-paint, so the repeat is timed from the first sweep's exposures, the
-exposure prior); the paper's 10x10x10 (auto, estimate 50 ms) at the demo's time scale 35, and its repeat. BENCH_DURATION_QUICK=1: the small fixed one only;
+exposure prior; the repeat starts once the first sweep's automatic reconstruction has ended, see wait_recon); the
+paper's 10x10x10 (auto, estimate 50 ms) at the demo's time scale 35, and its repeat. BENCH_DURATION_QUICK=1: the
+small fixed one only;
 BENCH_DURATION_CASES=a,b: those cases (name@scale for one time scale; name a repeat with the case before it).
-Also reported: the host's part of the prediction (host_s: point_overhead_s x time scale per point, load-dependent),
+Also reported: the simulator's own lag (acq-sim ctl status lag_s: its 1 ms waits ending late, the host not keeping
+the time scale) over the sweep and its share of the measured time; the host's time per point (host_per_point: real
+seconds its exposures and planned move do not account for) against the model's; per ETA checkpoint the ETA's error
+had the host's time per point of the rest been known (host_known): what is left is the model's, the difference the
+host's. Also: the host's part of the prediction (host_s: point_overhead_s x time scale per
+point, load-dependent),
 the residual per point (real seconds beyond the model's bench part), the load average, the faults the sweep
 recovered from (not in the model) and the exposure prior used. On a shared machine the
 script runs as its own session with a raised share (prioritize(); root only), else every figure at a high time scale
@@ -38,14 +45,35 @@ FIXED = QUICK.replace("mode: auto, target_peak: 0.8, estimate_ms: 20, max_ms: 20
 PAPER = open(os.path.join(L.SRC, "config", "plan-paper-10x10x10.yaml")).read()
 
 
-def run_case(name, plan_text, scale, bench=None, keep_open=False):
+def wait_recon(b, sid, timeout=900):
+    """Wait until the automatic reconstruction of sweep sid has ended (or never started within 10 s); returns the
+    wall seconds waited. A repeat starts after it: its CPU time is real seconds that the time scale does not
+    shorten (at time scale 35, 25 s of fitting stand for 15 bench minutes, which a real bench's repeat would not
+    overlap), and measured over the repeat's first half it is host time no model or ETA can foresee."""
+    t0 = time.time()
+    while time.time() - t0 < timeout:
+        c = b.client()
+        r = c.req("recon.status", sweep=sid)
+        c.close()
+        state = (r.get("run") or {}).get("state")
+        if state not in (None, "running") or (state is None and time.time() - t0 > 10):
+            break
+        time.sleep(0.2)
+    return time.time() - t0
+
+
+def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
     """One sweep of plan_text on a new bench, or on bench (a repeat: its database holds the previous sweeps, so the
-    sample's exposure prior applies). With keep_open the bench is returned with the row, not cleaned up."""
+    sample's exposure prior applies; after = the previous sweep, whose reconstruction it waits for). With keep_open
+    the bench is returned with the row, not cleaned up."""
     b = bench or L.Bench(scale=scale)
     try:
+        recon_wait = 0.0
         if not bench:
             b.start_sim()
             b.start_daemon()
+        elif after:
+            recon_wait = wait_recon(b, after)
         planf = os.path.join(b.dir, "plan.yaml")
         open(planf, "w").write(plan_text)
         # with the steps (predicted_start_s per step, kept with ACQ_BENCH_KEEP=1) when the reply is small enough
@@ -53,7 +81,13 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False):
         if p.returncode == 0:
             with open(os.path.join(b.dir, "plan.json"), "w") as fh:
                 fh.write(p.stdout)
+            steps = json.loads(p.stdout)["plan"].get("steps") or []
         else:
+            # the moves per step from a local dry run on the same bench configuration (the same planner and
+            # order; only the exposure timing, which this does not use, may differ)
+            loc = subprocess.run([CTL, "--json", "plan", planf, "--points", "--config", b.conf], capture_output=True,
+                                 text=True)
+            steps = json.loads(loc.stdout)["plan"].get("steps") or [] if loc.returncode == 0 else []
             p = subprocess.run([CTL, "-s", b.sock, "--json", "plan", planf], capture_output=True, text=True, check=True)
         pj = json.loads(p.stdout)["plan"]
         pred, host = pj["predicted_s"], pj.get("host_s", 0.0)
@@ -67,10 +101,24 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False):
                 events.append((time.time(), json.loads(line)))
         th = threading.Thread(target=reader, daemon=True)
         th.start()
+        lags, stop = [], threading.Event()
+
+        def lag_sampler():
+            # the simulator's own lag (ctl status lag_s: real seconds its 1 ms waits ended late), 5 times a second
+            while not stop.is_set():
+                try:
+                    lags.append((time.time(), float(b.sim_status()["lag_s"])))
+                except (OSError, KeyError, ValueError, AssertionError):
+                    pass
+                stop.wait(0.2)
+        ls = threading.Thread(target=lag_sampler, daemon=True)
+        ls.start()
         time.sleep(0.3)
         sid = L.start_sweep(b, plan_text, name)
         row = L.drive_to_end(b, sid, timeout=7200)
         time.sleep(0.3)
+        stop.set()
+        ls.join(10)
         w.terminate()
         w.wait(10)
         if row["state"] != "completed":
@@ -84,6 +132,7 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False):
         darks, expos = db.execute("SELECT sum(kind = 'dark'), sum(kind = 'sample') FROM spectra WHERE sweep_id = ? "
                                   "AND point_id IS NOT NULL", (sid,)).fetchone()
         started, finished = db.execute("SELECT started_at, finished_at FROM sweeps WHERE id = ?", (sid,)).fetchone()
+        host_pts = host_per_point(db, sid, steps, scale)
         # faults the sweep recovered from (the simulator answering late on a loaded machine): not in the model
         faults = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'fault'", (sid,)).fetchone()[0]
         paused = max(0.0, ev.get("resume", 0) - ev.get("pause", 0))
@@ -92,22 +141,32 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False):
         db.close()
         prog = [(t, e) for t, e in events if e.get("event") == "sweep.progress" and e.get("sweep") == sid]
         total = row["points_total"]
-        eta_err = {}
+        eta_err, eta_host = {}, {}
         for frac in (0.25, 0.5, 0.75):
             for t, e in prog:
                 if e["done"] >= frac * total and e.get("eta_s") is not None:
                     left = finished - t
                     eta_err[frac] = e["eta_s"] / left - 1 if left > 0 else float("nan")
+                    eta_host[frac] = host_known(host_pts, t, e["eta_s"], finished)
                     break
         # real seconds per point beyond the model's bench part (predicted_s - host_s), per time scale: the host's
         # time per point when the bench part is right (fixed integration), compare the model's constant
         # host_s / points / scale; with auto integration it also holds the sample's error
         host_pp = (measured - (pred - host)) / total / scale
-        row = dict(case=name, scale=scale, points=total, predicted_s=pred, measured_s=measured,
+        # the simulator's lag while the sweep ran (from the operator's resume, or the start, to the completion)
+        sim_lag = lag_between(lags, ev.get("resume", started), finished)
+        if os.environ.get("ACQ_BENCH_KEEP") == "1":  # the raw series, for a look at where the time went
+            with open(os.path.join(b.dir, "series-%d.json" % sid), "w") as fh:
+                json.dump({"events": events, "sim_lag": lags, "host_per_point": host_pts}, fh)
+        row = dict(case=name, sweep=sid, recon_wait_s=recon_wait, scale=scale, points=total, predicted_s=pred,
+                   measured_s=measured,
                     error=pred / measured - 1, predicted_host_s=host, residual_per_point_s=host_pp,
                     load=(load0 + os.getloadavg()[0]) / 2, eta25=eta_err.get(0.25), eta50=eta_err.get(0.5),
                     eta75=eta_err.get(0.75), median_ms=first[len(first) // 2] if first else None,
-                    darks=darks, exposures=expos, faults=faults, prior_sweep=prior.get("sweep"))
+                    darks=darks, exposures=expos, faults=faults, prior_sweep=prior.get("sweep"),
+                    sim_lag_s=sim_lag, sim_lag_share=(sim_lag * scale / measured if sim_lag is not None else None),
+                    host_per_point_s=(sum(h for _, h in host_pts) / len(host_pts) if host_pts else None),
+                    eta25_host=eta_host.get(0.25), eta50_host=eta_host.get(0.5), eta75_host=eta_host.get(0.75))
         return (row, b) if keep_open else row
     except BaseException:
         keep_open = False
@@ -118,6 +177,53 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False):
             if keep:
                 print("bench_duration: %s kept in %s" % (name, b.dir), flush=True)
             b.cleanup(keep=keep)
+
+
+def lag_at(lags, t):
+    """The simulator's summed lag (real s) at wall time t, interpolated between the samples; None outside them."""
+    for (t0, l0), (t1, l1) in zip(lags, lags[1:]):
+        if t0 <= t <= t1:
+            return l0 + (l1 - l0) * (t - t0) / (t1 - t0) if t1 > t0 else l1
+    return None
+
+
+def lag_between(lags, t0, t1):
+    """Real seconds the simulator ran late between wall times t0 and t1 (None without samples there)."""
+    a, b = lag_at(lags, t0), lag_at(lags, t1)
+    return None if a is None or b is None else b - a
+
+
+def host_per_point(db, sid, steps, scale):
+    """Per point after the first (which carries the move from the reference): (done_at, host seconds) = the real
+    seconds since the previous point's commit that neither its exposures (its spectra's integration_ms x averages,
+    darks included) nor its planned move and settle (steps[i].move_s + settle_s) account for, at the time scale:
+    the host's time (and what the model does not time, the same for every point: probes, round trips). Empty
+    without the steps."""
+    if not steps:
+        return []
+    pts = db.execute("SELECT p.order_index, p.done_at, coalesce(sum(s.integration_ms * s.averages), 0) / 1000.0 "
+                     "FROM points p LEFT JOIN spectra s ON s.point_id = p.id WHERE p.sweep_id = ? AND p.state = 'done' "
+                     "GROUP BY p.id ORDER BY p.done_at", (sid,)).fetchall()
+    out = []
+    for (_, t0, _), (i, t1, expo) in zip(pts, pts[1:]):
+        if i < len(steps):
+            move = steps[i].get("move_s", 0) + steps[i].get("settle_s", 0)
+            out.append((t1, (t1 - t0) - (expo + move) / scale))
+    return out
+
+
+def host_known(host, t, eta_s, finished):
+    """The ETA's error at wall time t had the host's time per point of the rest been known: the ETA carries the
+    host's time per point measured so far into the points left; the points after t took (after - before) more
+    each. What is left of the error is the model's (exposures, darks, moves the plan timed wrong). None without
+    per-point host times."""
+    before = [h for at, h in host if at <= t]
+    after = [h for at, h in host if at > t]
+    left = finished - t
+    if not before or not after or left <= 0:
+        return None
+    shift = (sum(after) / len(after) - sum(before) / len(before)) * len(after)
+    return (eta_s + shift) / left - 1
 
 
 def SAMPLE(text):
@@ -149,7 +255,7 @@ def table(scale):
                 # the plan naming its sample, then again on the same bench: the repeat is timed by the exposure prior
                 text = SAMPLE(text)
                 r, b = run_case(name, text, scale, keep_open=True)
-                runs = [r, run_case(name + "-repeat", text, scale, bench=b)]
+                runs = [r, run_case(name + "-repeat", text, scale, bench=b, after=r["sweep"])]
             else:
                 runs = [run_case(name, text, scale)]
             for r in runs:
@@ -171,8 +277,26 @@ def table_line(r, scale, pred1):
           "%s" % (
               name, r["points"], scale, r["predicted_s"], r["predicted_host_s"], r["measured_s"],
               100 * r["error"], r["residual_per_point_s"], r["load"], r["faults"], pred1, pred1 / 60,
-              " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25", "eta50", "eta75"))),
+              " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25", "eta50", "eta75")))
+          + "  (had the host's time of the rest been known: %s; simulator lag %s; waited %.0f s for the previous "
+             "reconstruction)" % (
+              " ".join("-" if r[k] is None else "%+.1f%%" % (100 * r[k]) for k in ("eta25_host", "eta50_host",
+                                                                                  "eta75_host")), lag_text(r),
+              r["recon_wait_s"]),
           flush=True)
+
+
+def lag_text(r):
+    """The simulator's own lag over the sweep: real seconds its 1 ms waits ended late, and that in bench seconds as a
+    share of the measured time. The host holding the bench's processes back, not all of it on the sweep's path (a
+    late wake-up with nothing due costs nothing): an indicator of the host's part, not a decomposition."""
+    if r["sim_lag_s"] is None:
+        return "-"
+    model = 1000 * r["predicted_host_s"] / r["points"] / r["scale"]
+    rq = "" if r["host_per_point_s"] is None else ("; real time per point beyond its stored exposures and planned "
+                                                   "move %.1f ms (host, probe, round trips; the model's host part "
+                                                   "%.1f ms)" % (1000 * r["host_per_point_s"], model))
+    return "%.2f real s (%.1f%% of the measured in bench s)%s" % (r["sim_lag_s"], 100 * r["sim_lag_share"], rq)
 
 
 def prioritize():
@@ -213,13 +337,14 @@ def main():
     prev = None
     for i, (name, text, scale) in enumerate(cases):
         repeat_next = i + 1 < len(cases) and cases[i + 1][1] is None
-        bench = None
+        bench = after = None
         if text is None:
             if not prev:
                 continue
             text, bench = prev
+            after = rows[-1]["sweep"]
         try:
-            r = run_case(name, text, scale, bench=bench, keep_open=repeat_next)
+            r = run_case(name, text, scale, bench=bench, keep_open=repeat_next, after=after)
         except L.Skip as e:
             print("bench_duration: skip: %s" % e)
             return 0
@@ -229,12 +354,15 @@ def main():
         rows.append(r)
         f = lambda x: "   -  " if x is None else "%+5.1f%%" % (100 * x)  # noqa: E731
         print("%-17s scale %4g  %4d points  predicted %7.1f s (host %.1f s)  measured %7.1f s  error %s  ETA error at "
-              "25/50/75 %%: %s %s %s  (median integration %s ms, %s darks, %s exposures; residual per point %.4f "
-              "s; load %.1f; %d faults; exposure prior %s)"
+              "25/50/75 %%: %s %s %s  (had the host's time of the rest been known: %s %s %s)  (median integration %s "
+              "ms, %s "
+              "darks, %s exposures; residual per point %.4f s; simulator lag %s; load %.1f; %d faults; exposure prior "
+              "%s; waited %.0f s for the previous sweep's reconstruction)"
               % (name, scale, r["points"], r["predicted_s"], r["predicted_host_s"], r["measured_s"], f(r["error"]),
-                 f(r["eta25"]), f(r["eta50"]), f(r["eta75"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"],
-                 r["darks"], r["exposures"], r["residual_per_point_s"], r["load"], r["faults"],
-                 "sweep %s" % r["prior_sweep"] if r["prior_sweep"] else "none"), flush=True)
+                 f(r["eta25"]), f(r["eta50"]), f(r["eta75"]), f(r["eta25_host"]), f(r["eta50_host"]),
+                 f(r["eta75_host"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"],
+                 r["darks"], r["exposures"], r["residual_per_point_s"], lag_text(r), r["load"], r["faults"],
+                 "sweep %s" % r["prior_sweep"] if r["prior_sweep"] else "none", r["recon_wait_s"]), flush=True)
     with open(os.path.join(OUT, "duration.csv"), "w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
         wr.writeheader()

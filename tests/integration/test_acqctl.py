@@ -8,7 +8,7 @@
   emission off), spectrum ID (--json, --csv, -o);
 - replies show the state after the command (sweep abort -> idle, move -> the new positions);
 - `acqctl watch` (not a terminal) prints JSON lines and reconnects when the daemon restarts;
-- `acq-sim ctl` drives the simulator (sample, fault, truth) with its exit codes; --version of the four programs."""
+- `acq-sim ctl` drives the simulator (sample, fault, truth) with its exit codes; --version of the five programs."""
 import json
 import os
 import signal
@@ -119,7 +119,7 @@ def offline_checks(tmp):
                   % (" ".join(args), p.returncode, p.stderr))
         check(subprocess.run([CTL, "--version"], capture_output=True, text=True).stdout.startswith("acqctl "),
               "acqctl --version")
-        for prog in ("acquisitiond", "acq-sim", "brdf-recon"):
+        for prog in ("acquisitiond", "acq-sim", "brdf-recon", "acq-nexus"):
             p = subprocess.run([os.path.join(L.BUILD, prog), "--version"], capture_output=True, text=True, timeout=10)
             check(p.returncode == 0 and p.stdout.startswith(prog + " "), "%s --version: %d %r" % (prog, p.returncode,
                                                                                               p.stdout + p.stderr))
@@ -220,6 +220,12 @@ def main():
         check(open(csvf).read() == out, "spectrum -o FILE")
         d = c.json("error", "spectrum", "999999", rc=1)
         check(d["error"]["code"] == "not_found", "missing spectrum %r" % d)
+        # a dark (laser off) and a reference (the white standard is on the stage), each a stored spectrum
+        d = c.json("dark", "dark", "integration_ms=20", "averages=1")
+        check(d["spectrum_id"] > sid and b.sim_status()["emission"] == "0", "dark %r" % d)
+        d = c.json("reference", "reference", "integration_ms=20", "averages=1")
+        check(d["spectrum_id"] > sid and c.json("spectrum", "spectrum", str(d["spectrum_id"]))["spectrum"]["kind"] ==
+              "reference", "reference %r" % d)
         c.human("move", "detector_theta=500", rc=1)  # refused by the daemon: 1
         # --- a sweep: replies show the state after the command
         b.ctl("sample white")
@@ -248,13 +254,20 @@ def main():
         check(d["sweeps"][0]["state"] == "aborted", "aborted in the list %r" % d["sweeps"][0])
         out = c.human("sweep", "list")
         check("aborted" in out and "T" in out.splitlines()[1], "sweep list with dates %r" % out)
-        d = c.json("sweep.show", "sweep", "show", str(d["sweeps"][0]["id"]), "--points")
+        swid = d["sweeps"][0]["id"]
+        d = c.json("sweep.show", "sweep", "show", str(swid), "--points")
         pts = d["sweep"]["points"]
         check(pts and all("laser.theta" in p and "laser_theta" not in p for p in pts) and
               all(isinstance(p["detector.phi"], (int, float)) for p in pts if p["state"] == "done"),
               "sweep show --points names the axes as everywhere %r" % pts[:2])
         d = c.json("error", "recon", "status", "1", rc=1)  # positional form, no run for this sweep
         check(d["error"]["code"] == "not_found", "recon status 1 %r" % d)
+        d = c.json("error", "recon", "start", "999999", rc=1)
+        check(d["error"]["code"] == "not_found", "recon start of no sweep %r" % d)
+        # export --json -o: the CSV in the file (written by acqctl), the summary on stdout
+        xf = os.path.join(tmp, "aborted.csv")
+        d = c.json("export", "-o", xf, "export", str(swid))
+        check(d["output"] == xf and os.path.getsize(xf) == d["bytes"], "export -o %r" % d)
         # --- watch: JSON lines, reconnects across a daemon restart
         watchers = lambda: c.json("status", "status").get("watchers", 0)
         before = watchers()

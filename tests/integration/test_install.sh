@@ -2,7 +2,7 @@
 # Installation: `make install-files` (what `make install` runs after building) into a temporary prefix, then
 # - the installed unit passes `systemd-analyze verify` (its ExecStart= points at the installed programs), its
 #   Documentation= names man pages that are installed, and it has no systemd-udev-settle ordering;
-# - every man page (four programs, the configuration format) renders with `man -l` without warnings;
+# - every man page (the five programs, the configuration format) renders with `man -l` without warnings;
 # - sysusers.d and tmpfiles.d entries parse (systemd-sysusers/-tmpfiles --cat-config style dry runs), the udev
 #   rule is group-based without uaccess, the completion script loads in bash, the docs and schemas are there;
 # - `make uninstall` then leaves no file behind.
@@ -35,7 +35,7 @@ for d in $docs; do
 done
 
 pages=0
-for page in acqctl.1 acq-sim.1 brdf-recon.1 acquisitiond.8 acquisitiond.yaml.5; do
+for page in acqctl.1 acq-sim.1 brdf-recon.1 acq-nexus.1 acquisitiond.8 acquisitiond.yaml.5; do
   f=$(ls "$prefix"/share/man/man*/"$page" 2>/dev/null) || fail "man page $page not installed"
   warn=$(MANWIDTH=100 man --warnings -l "$f" 2>&1 >"$tmp/page.txt")
   [ -z "$warn" ] || fail "man -l $page: $warn"
@@ -64,6 +64,11 @@ for f in share/acquisitiond/schema.sql share/acquisitiond/acqctl-replies.schema.
          share/acquisitiond/config/bench-sim.yaml bin/acqctl bin/acquisitiond bin/acq-sim bin/brdf-recon; do
   [ -f "$prefix/$f" ] || fail "$f not installed"
 done
+# every installed program has its man page (acq-nexus had none), and the docs the pages point at are installed
+for b in "$prefix"/bin/*; do
+  ls "$prefix"/share/man/man[18]/"$(basename "$b")".[18] >/dev/null 2>&1 || fail "no man page for bin/$(basename "$b")"
+done
+[ -f "$prefix/share/doc/acquisitiond/nexus.md" ] || fail "share/doc/acquisitiond/nexus.md (acq-nexus(1)) not installed"
 "$prefix/bin/acqctl" --version >/dev/null || fail "installed acqctl does not run"
 n=$(find "$tmp/usr" "$tmp/etc" -type f | wc -l)
 
