@@ -18,12 +18,14 @@ TEST_TIMEOUT=${TEST_TIMEOUT:-300}
 JOBS=${ACQ_TEST_JOBS:-2}
 SLOWEST=${ACQ_TEST_SLOWEST:-15}
 
-# Integration tests that measure time or need the CPU at a given moment (latency bounds, a kill inside a
-# window, a watchdog period): they run alone, after the others, so a neighbour test cannot make them flake.
+# Tests that measure time or need the CPU at a given moment (latency bounds, a kill inside a window, a
+# watchdog period; the unit tests against real-time device peers): they run alone, after the others, so a
+# neighbour test cannot make them flake.
 SERIAL=" test_acqctl.py test_adaptive_kill.py test_adaptive_seconds.py test_client_limits.py test_daemon_sim.py
  test_devices_throttle.py test_disk_full.py test_export.py test_laser_kill.py test_laser_sim.py test_malformed_flood.py
  test_sd_notify.py test_sim_bench.py test_sweep_crash.py test_sweep_start_offloop.py test_sweep_step_kill.py
- test_watchdog.py "
+ test_watchdog.py
+ test_axis_modbus test_axis_modbus_sim test_laser test_spectro_sim "
 
 # ---- one test: run it, keep its log, its times and its result line (read back in order later) ------------
 # timed KEY LOG CMD...: runs CMD with stdout+stderr to LOG; writes "rc wall user sys" to $resdir/KEY.t.
@@ -121,7 +123,11 @@ print_results() {
 
 for s in "${suites[@]}"; do
   case $s in
-    unit)        for t in "$ACQ_BUILD"/tests/test_*; do [ -x "$t" ] && enqueue unit "$t" shared; done;;
+    unit)        for t in "$ACQ_BUILD"/tests/test_*; do
+                   [ -x "$t" ] || continue
+                   case $SERIAL in *" $(basename "$t") "*) enqueue unit "$t" alone;;
+                                   *) enqueue unit "$t" shared;; esac
+                 done;;
     fuzz)        for t in "$ACQ_BUILD"/fuzz-replay/fuzz_*; do [ -x "$t" ] && enqueue fuzz "$t" shared; done;;
     integration) for t in "$ACQ_SRC"/tests/integration/test_*; do
                    [ -x "$t" ] || continue
