@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Crash windows of the sweep state machine: acquisitiond is SIGKILLed right after each named durable step
 (ACQ_CRASH_AT=STEP:N: start, reference, the pause for the sample swap, the operator's resume, a committed point,
-complete, a reconstruction stage started) and restarted (daemon.auto_resume) each time; the sweep must end complete with every point once,
+a device fault, complete, a reconstruction stage started) and restarted (daemon.auto_resume) each time; the sweep must end complete with every point once,
 integrity ok, and a restart after the reference must ask for the sample swap again before measuring any point
 (before the fix it resumed "after point 0 (reference reloaded)" and measured the white standard as the sample); killed
 between the reference's spectra and their marker (reference_stored, inside the executor's commit), the sweep is
@@ -169,6 +169,17 @@ def run():
         wait_killed(b, "point 2")
         n2 = done_points(b, sid)
         assert n2 >= 1, "no point committed before the kill at point 2"
+        # 5b. killed right after a device fault is recorded (the "fault" step: the connection to the detector's
+        # controller dropped mid-sweep, its event committed, the recovery not yet done)
+        start_with(b, "fault:1")
+        b.ctl("fault drop-connection detector")
+        wait_killed(b, "a device fault", timeout=120)
+        db = b.db()
+        nf = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'fault'", (sid,)).fetchone()[0]
+        db.close()
+        L.say("killed after a device fault: %d fault event(s), %d points done" % (nf, done_points(b, sid)))
+        assert nf >= 1, "no fault event stored before the kill at fault"
+        assert done_points(b, sid) >= n2, "points lost across the kill at the fault"
         # 6. killed right after completion
         start_with(b, "complete:1")
         wait_killed(b, "complete", timeout=120)
