@@ -110,4 +110,31 @@ static inline void rt_random_pair(double a[4])
 	a[3] = 2 * M_PI * rt_unif();
 }
 
+/* n samples at random direction pairs (cosθ uniform in [0, 1]) with log-uniform values over 12 decades
+ * (1e-8 to 1e4) on nwl wavelengths 450, 550, ... nm, from the generator's state: the extreme input of the
+ * reconstruction's tests (no physical material; the energy table's work budget and the check's bound). */
+static inline void rt_samples_log_uniform(struct recon_samples *s, size_t n, size_t nwl)
+{
+	memset(s, 0, sizeof *s);
+	s->n = n;
+	s->nwl = nwl;
+	s->wl = malloc(nwl * sizeof *s->wl);
+	s->ang = malloc(n * 4 * sizeof *s->ang);
+	s->deg = malloc(n * 4 * sizeof *s->deg);
+	s->val = malloc(n * nwl * sizeof *s->val);
+	for (size_t l = 0; l < nwl; l++)
+		s->wl[l] = 450 + 100.0 * (double)l;
+	for (size_t k = 0; k < n; k++) {
+		double *q = s->ang + 4 * k;
+		q[0] = acos(rt_unif());
+		q[1] = 2 * M_PI * rt_unif();
+		q[2] = acos(rt_unif());
+		q[3] = 2 * M_PI * rt_unif();
+		for (int c = 0; c < 4; c++)
+			s->deg[4 * k + c] = q[c] * 180 / M_PI;
+		for (size_t l = 0; l < nwl; l++)
+			s->val[k * nwl + l] = pow(10, -8 + 12 * rt_unif());
+	}
+}
+
 #endif

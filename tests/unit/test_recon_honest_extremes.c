@@ -300,26 +300,7 @@ static void log_uniform_case(void)
 {
 	size_t n = 1000;
 	struct recon_samples s;
-	memset(&s, 0, sizeof s);
-	s.n = n;
-	s.nwl = NWL;
-	s.wl = malloc(NWL * sizeof *s.wl);
-	s.ang = malloc(n * 4 * sizeof *s.ang);
-	s.deg = malloc(n * 4 * sizeof *s.deg);
-	s.val = malloc(n * NWL * sizeof *s.val);
-	for (size_t l = 0; l < NWL; l++)
-		s.wl[l] = 450 + 100.0 * (double)l;
-	for (size_t k = 0; k < n; k++) {
-		double *q = s.ang + 4 * k;
-		q[0] = acos(rt_unif());
-		q[1] = 2 * M_PI * rt_unif();
-		q[2] = acos(rt_unif());
-		q[3] = 2 * M_PI * rt_unif();
-		for (int c = 0; c < 4; c++)
-			s.deg[4 * k + c] = q[c] * 180 / M_PI;
-		for (size_t l = 0; l < NWL; l++)
-			s.val[k * NWL + l] = pow(10, -8 + 12 * rt_unif());
-	}
+	rt_samples_log_uniform(&s, n, NWL);
 	struct recon_model *m;
 	struct acq_err e = { 0 };
 	clock_t c0 = clock();
