@@ -50,6 +50,17 @@ static inline void ut_sql_close(sqlite3 *db, sqlite3_stmt *s)
 	sqlite3_close(db);
 }
 
+/* The single integer a query returns (a count) from the database at path; fails the test without a row. */
+static inline int64_t ut_sql_count(const char *path, const char *sql)
+{
+	sqlite3 *db;
+	sqlite3_stmt *s = ut_sql_open(path, sql, &db);
+	assert_int_equal(sqlite3_step(s), SQLITE_ROW);
+	int64_t v = sqlite3_column_int64(s, 0);
+	ut_sql_close(db, s);
+	return v;
+}
+
 /* The schema of the database at path as text: a line per entry of sqlite_master (type, name, SQL with whitespace
  * runs collapsed), sorted; caller frees. */
 static inline char *ut_schema_text(const char *path)

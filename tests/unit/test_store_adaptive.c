@@ -19,16 +19,6 @@
 #define UT_TMPDIR_NAME "test_store_adaptive"
 #include "tests/unit/tmpdir.h"
 
-static int64_t count(const char *path, const char *sql)
-{
-	sqlite3 *db;
-	sqlite3_stmt *s = ut_sql_open(path, sql, &db);
-	assert_int_equal(sqlite3_step(s), SQLITE_ROW);
-	int64_t v = sqlite3_column_int64(s, 0);
-	ut_sql_close(db, s);
-	return v;
-}
-
 static void test_batches(void **state)
 {
 	(void)state;
@@ -89,10 +79,10 @@ static void test_batches(void **state)
 	assert_int_equal(json_array_size(rows), 0);
 	json_decref(rows);
 	store_close(st);
-	assert_int_equal(count(p, "SELECT points_total FROM sweeps"), 5);
-	assert_int_equal(count(p, "SELECT count(*) FROM points"), 5);
-	assert_int_equal(count(p, "SELECT count(*) FROM adaptive_picks"), 3);
-	assert_int_equal(count(p, "SELECT count(*) FROM adaptive_batches"), 3);
+	assert_int_equal(ut_sql_count(p, "SELECT points_total FROM sweeps"), 5);
+	assert_int_equal(ut_sql_count(p, "SELECT count(*) FROM points"), 5);
+	assert_int_equal(ut_sql_count(p, "SELECT count(*) FROM adaptive_picks"), 3);
+	assert_int_equal(ut_sql_count(p, "SELECT count(*) FROM adaptive_batches"), 3);
 }
 
 static void test_migration_3_to_4(void **state)
@@ -120,7 +110,7 @@ static void test_migration_3_to_4(void **state)
 	assert_int_equal(store_adaptive_batch(st, sw, &seed, NULL, 0, NULL, 0, &err), 0);
 	store_close(st);
 	ut_assert_schema_of_new(p, fresh);
-	assert_int_equal(count(p, "SELECT count(*) FROM points"), 2); /* the migration touched nothing else */
+	assert_int_equal(ut_sql_count(p, "SELECT count(*) FROM points"), 2); /* the migration touched nothing else */
 }
 
 int main(void)

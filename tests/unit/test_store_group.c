@@ -17,16 +17,6 @@
 
 static float counts[16], brdf[4] = { 0.1f, 0.2f, 0.3f, 0.4f }, sig[4] = { 0.01f, 0.01f, 0.01f, 0.01f };
 
-static int count(const char *path, const char *sql)
-{
-	sqlite3 *db;
-	sqlite3_stmt *s = ut_sql_open(path, sql, &db);
-	assert_int_equal(sqlite3_step(s), SQLITE_ROW);
-	int n = sqlite3_column_int(s, 0);
-	ut_sql_close(db, s);
-	return n;
-}
-
 static int point_rows(struct store *st, int64_t sid, int64_t pid, bool pending_ok)
 {
 	struct acq_err err = { 0 };
@@ -57,27 +47,27 @@ static void test_point_in_one_transaction(void **state)
 	assert_int_equal(store_group_begin(st, &err), 0);
 	assert_int_equal(store_group_begin(st, &err), -1); /* no nesting */
 	assert_int_equal(point_rows(st, sid, pid, true), 0);
-	assert_int_equal(count(path, "SELECT count(*) FROM spectra"), 0);
-	assert_int_equal(count(path, "SELECT count(*) FROM calibrated"), 0);
+	assert_int_equal(ut_sql_count(path, "SELECT count(*) FROM spectra"), 0);
+	assert_int_equal(ut_sql_count(path, "SELECT count(*) FROM calibrated"), 0);
 	assert_int_equal(store_group_end(st, 0, &err), 0);
-	assert_int_equal(count(path, "SELECT count(*) FROM spectra"), 2);
-	assert_int_equal(count(path, "SELECT count(*) FROM calibrated"), 1);
-	assert_int_equal(count(path, "SELECT count(*) FROM points WHERE state = 'done'"), 1);
+	assert_int_equal(ut_sql_count(path, "SELECT count(*) FROM spectra"), 2);
+	assert_int_equal(ut_sql_count(path, "SELECT count(*) FROM calibrated"), 1);
+	assert_int_equal(ut_sql_count(path, "SELECT count(*) FROM points WHERE state = 'done'"), 1);
 	/* 2. a point whose completion fails: its dark and calibrated sample are rolled back with it */
 	assert_int_equal(store_sweep_next_point(st, sid, &oi, &pid, &err), 0);
 	assert_int_equal(oi, 1);
 	assert_int_equal(store_group_begin(st, &err), 0);
 	assert_int_equal(point_rows(st, sid, pid, false), -1);
 	assert_int_equal(store_group_end(st, 0, &err), -1); /* a write failed: the group is not committed */
-	assert_int_equal(count(path, "SELECT count(*) FROM spectra"), 2);
-	assert_int_equal(count(path, "SELECT count(*) FROM calibrated"), 1);
-	assert_int_equal(count(path, "SELECT count(*) FROM points WHERE state = 'done'"), 1);
+	assert_int_equal(ut_sql_count(path, "SELECT count(*) FROM spectra"), 2);
+	assert_int_equal(ut_sql_count(path, "SELECT count(*) FROM calibrated"), 1);
+	assert_int_equal(ut_sql_count(path, "SELECT count(*) FROM points WHERE state = 'done'"), 1);
 	assert_int_equal(store_group_end(st, 0, &err), -1); /* none open */
 	/* 3. outside a group every write is its own transaction again */
 	struct store_spectrum one = { .sweep_id = sid, .kind = "dark", .integration_ms = 10, .averages = 1, .npix = 16,
 				      .counts = counts, .temperature_c = NAN, .taken_at = 2 };
 	assert_int_equal(store_spectrum_add(st, &one, NULL, &err), 0);
-	assert_int_equal(count(path, "SELECT count(*) FROM spectra"), 3);
+	assert_int_equal(ut_sql_count(path, "SELECT count(*) FROM spectra"), 3);
 	store_close(st);
 	ut_tmpdir_remove(dir);
 }
