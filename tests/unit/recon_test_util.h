@@ -61,18 +61,25 @@ static inline double rt_truth(const double a[4], double wl, double scale)
 	return scale * (rho / M_PI + ks * (ni + 2) / (2 * M_PI) * lobe);
 }
 
+/* s emptied, then its arrays allocated for n direction pairs on nwl wavelengths (sig too when with_sig). */
+static inline void rt_samples_alloc(struct recon_samples *s, size_t n, size_t nwl, int with_sig)
+{
+	memset(s, 0, sizeof *s);
+	s->n = n;
+	s->nwl = nwl;
+	s->wl = malloc(nwl * sizeof *s->wl);
+	s->ang = malloc(n * 4 * sizeof *s->ang);
+	s->deg = malloc(n * 4 * sizeof *s->deg);
+	s->val = malloc(n * nwl * sizeof *s->val);
+	if (with_sig)
+		s->sig = malloc(n * nwl * sizeof *s->sig);
+}
+
 /* A ni × no × np sampling (θi 0..75°, θo 5..80°, φo every 360/np °, φi = 0) with relative noise. */
 static inline void rt_samples_grid(struct recon_samples *s, int ni, int no, int np, size_t nwl, double noise,
 				   double scale)
 {
-	memset(s, 0, sizeof *s);
-	s->n = (size_t)(ni * no * np);
-	s->nwl = nwl;
-	s->wl = malloc(nwl * sizeof *s->wl);
-	s->ang = malloc(s->n * 4 * sizeof *s->ang);
-	s->deg = malloc(s->n * 4 * sizeof *s->deg);
-	s->val = malloc(s->n * nwl * sizeof *s->val);
-	s->sig = malloc(s->n * nwl * sizeof *s->sig);
+	rt_samples_alloc(s, (size_t)(ni * no * np), nwl, 1);
 	for (size_t l = 0; l < nwl; l++)
 		s->wl[l] = nwl > 1 ? 450 + 650.0 * (double)l / (double)(nwl - 1) : 550;
 	size_t k = 0;
@@ -115,13 +122,7 @@ static inline void rt_random_pair(double a[4])
  * reconstruction's tests (no physical material; the energy table's work budget and the check's bound). */
 static inline void rt_samples_log_uniform(struct recon_samples *s, size_t n, size_t nwl)
 {
-	memset(s, 0, sizeof *s);
-	s->n = n;
-	s->nwl = nwl;
-	s->wl = malloc(nwl * sizeof *s->wl);
-	s->ang = malloc(n * 4 * sizeof *s->ang);
-	s->deg = malloc(n * 4 * sizeof *s->deg);
-	s->val = malloc(n * nwl * sizeof *s->val);
+	rt_samples_alloc(s, n, nwl, 0);
 	for (size_t l = 0; l < nwl; l++)
 		s->wl[l] = 450 + 100.0 * (double)l;
 	for (size_t k = 0; k < n; k++) {

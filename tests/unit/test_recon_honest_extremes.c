@@ -68,14 +68,7 @@ static double t_even(const double a[4], double wl)
 static void make_samples_noise(struct recon_samples *s, size_t n, const double *ang, truth_fn f, double rel,
 			       double floor)
 {
-	memset(s, 0, sizeof *s);
-	s->n = n;
-	s->nwl = NWL;
-	s->wl = malloc(NWL * sizeof *s->wl);
-	s->ang = malloc(n * 4 * sizeof *s->ang);
-	s->deg = malloc(n * 4 * sizeof *s->deg);
-	s->val = malloc(n * NWL * sizeof *s->val);
-	s->sig = malloc(n * NWL * sizeof *s->sig);
+	rt_samples_alloc(s, n, NWL, 1);
 	for (size_t l = 0; l < NWL; l++)
 		s->wl[l] = 450 + 650.0 * (double)l / (NWL - 1);
 	for (size_t k = 0; k < n; k++) {
