@@ -126,6 +126,7 @@ struct ex {
 	/* where the real time since the last commit went (ex_stall_*, logged at debug level with stall.h's) */
 	double stall_in[EX_STALL__COUNT];
 	double stall_from, stall_last, stall_cpu_wait0, stall_ck_s;
+	bool stall_stale; /* the baselines were not kept (debug off): the next report only restarts them */
 	unsigned long stall_ck_runs;
 	int stall_bucket;
 	struct ex_stats stats;

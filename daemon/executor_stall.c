@@ -43,6 +43,7 @@ void ex_stall_reset(struct ex *x)
 	stall_take(&drop);
 	for (int i = 0; i < EX_STALL__COUNT; i++)
 		x->stall_in[i] = 0;
+	x->stall_stale = false;
 	x->stall_from = x->stall_last = stall_now();
 	x->stall_cpu_wait0 = loop_cpu_wait();
 	x->stall_bucket = bucket(x);
@@ -67,6 +68,20 @@ double ex_step(struct ex *x, double now)
 
 void ex_stall_report(struct ex *x, int point)
 {
+	/* Gathered only for the debug line: without it, no /proc read, no totals, no text on the loop per point;
+	 * the interval restarts (and a debug level turned on later starts from a fresh baseline). */
+	if (!log_enabled(LOG_DEBUG)) {
+		struct stall_acc drop;
+		stall_take(&drop);
+		for (int i = 0; i < EX_STALL__COUNT; i++)
+			x->stall_in[i] = 0;
+		x->stall_stale = true;
+		return;
+	}
+	if (x->stall_stale) {
+		ex_stall_reset(x);
+		return;
+	}
 	double t = stall_now(), w = loop_cpu_wait();
 	struct stall_acc a;
 	stall_take(&a);

@@ -23,6 +23,11 @@ void log_set_level(int level)
 	log_threshold = level;
 }
 
+bool log_enabled(int level)
+{
+	return level <= log_threshold;
+}
+
 void log_msg(int level, const char *fmt, ...)
 {
 	if (level > log_threshold)

@@ -9,6 +9,8 @@
 void log_init(int level, bool journal);
 /* Change the threshold (after a configuration reload). */
 void log_set_level(int level);
+/* Whether a message at priority level would be logged (to skip gathering what only such a message reports). */
+bool log_enabled(int level);
 /* Log one message at priority level (dropped when above the threshold). */
 void log_msg(int level, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* Stop logging (flush). */
