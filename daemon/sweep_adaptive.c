@@ -331,6 +331,8 @@ static size_t plan_batch(struct adapt *a, json_t *picks, const struct plan_pos *
 	a->ops.timing(a->ops.ctx, &tm);
 	tm.reference = false;
 	tm.have_start = false; /* the batch's first step moves from the arms' position itself */
+	if (a->plan->n_steps) /* the dark cache as the sweep's points left it (kept at the same incidence) */
+		plan_timing_continue(&tm, &a->plan->steps[0].pos, a->plan->n_steps, sizeof *a->plan->steps);
 	for (; k > 0; k--) {
 		if (plan_make_points(a->spec, g, kp, k, &a->arms, out, err)) {
 			k = 0;

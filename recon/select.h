@@ -38,7 +38,8 @@ int select_target_parse(const char *spec, struct select_target *t, struct acq_er
 /* The batch's route, for charging each pick its increment to it (NULL in select_opts: each pick costs its cost[j],
  * the measurement from the arms' position). Candidate j (input order) is measured at bench axis positions
  * pos[3j..3j+2] (laser θ, detector θ, detector φ, degrees) and costs base[j] seconds at an incidence (laser position)
- * the batch visits already, base[j] + open[j] at one it does not (the darks of a new incidence); its motion is the
+ * the batch visits already (the arms' own included: the executor keeps its dark cache while the incidence stays),
+ * base[j] + open[j] at one it does not (the darks of a new incidence); its motion is the
  * increment of inserting it into the batch's route from the arms (from) through the picks, at the cheapest place,
  * each move timed as the planner's straight move: per axis a trapezoid (speed, accel), the slowest axis, the largest
  * settle of the axes that move, plus move_s (polling, extra settling). The azimuth's distance is taken modulo 360°. */

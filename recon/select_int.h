@@ -71,12 +71,12 @@ struct sel {
 };
 
 /* The batch's route while it is chosen (select_route.c): the arms, then the picks in route order; the incidences
- * (laser positions) the picks visit. */
+ * (laser positions) the arms and the picks visit. */
 struct sel_route {
 	const struct select_route *r;
 	double *pts;     /* [(batch+1)*3] */
 	size_t n;
-	double *inc;     /* [batch+1] */
+	double *inc;     /* [batch+2]: the arms' incidence, then the picks' new ones */
 	size_t ng;
 };
 /* Set up an empty route from r->from for at most batch picks. 0, or -1 out of memory (w freed). */

@@ -1,6 +1,7 @@
 /* select_route: a pick's cost as its increment to the batch's route (struct select_route in select.h): the motion of
  * inserting it into the route from the arms through the picks so far, at the cheapest place, plus its measurement
- * and, when it opens an incidence the batch does not visit yet, that incidence's darks. */
+ * and, when it opens an incidence the batch does not visit yet (the arms' own counts as visited: the executor keeps
+ * its dark cache while the incidence stays), that incidence's darks. */
 #include <math.h>
 #include <stdlib.h>
 
@@ -35,13 +36,14 @@ int sel_route_init(struct sel_route *w, const struct select_route *r, size_t bat
 	w->n = 1;
 	w->ng = 0;
 	w->pts = malloc((batch + 1) * 3 * sizeof *w->pts);
-	w->inc = malloc((batch + 1) * sizeof *w->inc);
+	w->inc = malloc((batch + 2) * sizeof *w->inc);
 	if (!w->pts || !w->inc) {
 		sel_route_free(w);
 		return -1;
 	}
 	for (int k = 0; k < 3; k++)
 		w->pts[k] = r->from[k];
+	w->inc[w->ng++] = r->from[0]; /* the arms' incidence: the executor keeps its darks there */
 	return 0;
 }
 

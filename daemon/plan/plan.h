@@ -223,6 +223,12 @@ struct plan_timing {
 	bool have_start;            /* the arms' position when the sweep starts is known (the daemon knows it) */
 	struct plan_pos start;      /* then the move from there to ref_pose (or the first point) is counted */
 	struct plan_prior prior;    /* auto integration: the exposure prior when prior.sweep > 0 (plan_time.c) */
+	/* an adaptive batch appended to a running sweep (plan_timing_continue): the executor keeps its dark cache
+	 * unless the batch starts at another incidence (executor_acq.c), so the first step clears it only then, and
+	 * the rungs counted after cont_since_clear points there */
+	bool cont;
+	double cont_laser;          /* the last measured point's laser position */
+	double cont_since_clear;    /* points measured there since the cache was last cleared */
 };
 
 /* Load and validate a plan file; errors name file:line:col. 0, or -1 with err (*out NULL). */
@@ -279,6 +285,10 @@ struct plan_cand {
 				     * to the batch's route: base_s, open_s when its incidence is new to the batch, and
 				     * the motion of inserting it into the batch's route, plan_adaptive_route_spec) */
 };
+/* t continues a sweep whose points so far are at positions n_done (each stride bytes after the previous: an array of
+ * struct plan_pos, or the pos member of struct plan_step): the cache state of its last incidence (cont fields). The
+ * age rule (dark_max_age_s) is left to the new steps' own clock. n 0: no continuation. */
+void plan_timing_continue(struct plan_timing *t, const struct plan_pos *done, size_t n, size_t stride);
 /* The batch's route model as `brdf-recon select --route` takes it (13 numbers, comma-separated: the arms' position
  * from (laser θ, detector θ, detector φ), then per axis in that order speed °/s, acceleration °/s², settle s, then the
  * executor's seconds per move beyond the trapezoids and settling: 1.5 polls + extra settle, plan_time.c) into buf. */

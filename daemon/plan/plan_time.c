@@ -205,7 +205,7 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 	double h = aut && t->max_exposures > 1 && t->hdr_ratio > 1 ? (s->integ_hdr >= 0 ? s->integ_hdr : PLAN_AUTO_HDR) : 0;
 	double hdr = h > 0 ? h * shot(g, t, s->averages, max_ms_of(s, t->hdr_ratio * ladder(t, est_ms, s->max_integ_ms))) : 0;
 	double clock = 0, dark_at = -INFINITY;
-	size_t since_clear = 0; /* points since the dark cache was last cleared */
+	double since_clear = t->cont ? t->cont_since_clear : 0; /* points since the dark cache was last cleared */
 	r->reference_s = r->darks_s = 0;
 	r->host_s = t->point_overhead_s * t->time_scale * (double)r->n_steps;
 	if (r->n_steps > 0) {
@@ -220,6 +220,8 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 		}
 		clock = r->reference_s;
 	}
+	if (t->cont)
+		dark_at = 0; /* a continued sweep: its dark's age is counted from the batch's start (plan_timing_continue) */
 	const struct plan_prior *pr = aut && t->prior.sweep > 0 && t->prior.n_inc > 0 ? &t->prior : NULL;
 	struct inc_cost band = { probe, meas, dark, hdr, k }, c = band;
 	for (size_t i = 0; i < r->n_steps; i++) {
@@ -229,16 +231,17 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 			c = prior_cost(s, g, t, prior_row(pr, fabs(st->pos.laser_theta)));
 		/* the dark cache is cleared every dark_every points or at each new incidence, and a dark is due when
 		 * the last one has aged; the first point uses the reference's dark when it has the same (fixed) time */
-		bool clear = i == 0 ? aut || !t->reference
-			    : t->dark_every > 0 ? i % (size_t)t->dark_every == 0
-						: st->pos.laser_theta != r->steps[i - 1].pos.laser_theta;
+		double prev_laser = i ? r->steps[i - 1].pos.laser_theta : t->cont_laser;
+		bool clear = i == 0 && !t->cont ? aut || !t->reference
+			    : t->dark_every > 0 ? ((t->cont ? (size_t)t->cont_since_clear : 0) + i) % (size_t)t->dark_every == 0
+						: fabs(st->pos.laser_theta - prev_laser) > 1e-6;
 		if (t->dark_max_age_s > 0 && clock - dark_at >= t->dark_max_age_s)
 			clear = true;
 		if (clear)
 			since_clear = 0;
 		/* expected darks: fixed, one per clearing; auto, one per rung first visited since the clearing (the
 		 * point's rung is new with probability (1 - 1/k)^j after j points) */
-		double p_dark = clear ? 1.0 : aut ? pow(1.0 - 1.0 / c.k, (double)since_clear) : 0.0;
+		double p_dark = clear ? 1.0 : aut ? pow(1.0 - 1.0 / c.k, since_clear) : 0.0;
 		double d = st->move_s + st->settle_s + (moves ? 1.5 * t->axis_poll_s + t->extra_settle_s : 0) +
 			   (i == 0 && !t->reference ? first_probe : c.probe) + c.meas + p_dark * c.dark + c.hdr +
 			   t->point_overhead_s * t->time_scale;

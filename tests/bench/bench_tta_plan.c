@@ -141,6 +141,7 @@ static int cmd_batch(const struct plan_spec *s, const struct bench_geom *g, stru
 	double spent;
 	if (state_load(state, &done, &nd, &from, &spent))
 		return 2;
+	plan_timing_continue(&t, done, nd, sizeof *done); /* as sweep_adaptive.c's plan_batch */
 	free(done);
 	json_error_t je;
 	json_t *o = json_load_file(sel, 0, &je), *picks = o ? json_object_get(o, "picks") : NULL;

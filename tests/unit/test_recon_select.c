@@ -859,11 +859,12 @@ static size_t picks2(const struct recon_model *m, const double *ang, const doubl
 	return res->npicks;
 }
 
-/* The route increment: the arms are at incidence 30° (candidate B's), the most informative candidate P at 60°, and
+/* The route increment: the arms are at incidence 0°, candidate B at 30°, the most informative candidate P at 60°, and
  * A, a twin of B in information (B's pair half a degree away) but at P's incidence next to P. Charged from the arms
- * alone (the old rule) B is cheap and A dear, so the batch is {P, B}: two incidences, two darks, the laser there and
- * back. Charged its increment to the batch's route, A after P costs its measurement and a 2° detector move, B its
- * incidence's darks and the laser's way back: the batch is P then A, and A's charge is exactly that increment. */
+ * alone (the old rule) B is cheaper than A (the laser's 30° instead of 60°), so the batch is P, B: two incidences,
+ * two darks, the laser to 60° and 30°. Charged its increment to the batch's route, A after P costs its measurement and
+ * a 2° detector move, B its incidence's darks and a detour of the laser: the batch is P then A, and A's charge is
+ * exactly that increment. A candidate at the arms' incidence is charged no darks (the executor keeps them). */
 static void test_route_increment(void **state)
 {
 	(void)state;
@@ -892,19 +893,21 @@ static void test_route_increment(void **state)
 	gains(m, 3, ang, c3, "lnf", ga, NULL);
 	printf("route: gains P %.3g, A %.3g, B %.3g\n", ga[0], ga[1], ga[2]);
 	assert_true(fabs(ga[1] - ga[2]) <= 0.1 * ga[2]); /* equally informative, to 10 % */
-	/* bench positions (laser θ, detector θ, detector φ): P and A at laser 60°, 2° apart; B at the arms, laser 30° */
+	/* bench positions (laser θ, detector θ, detector φ): P and A at laser 60°, 2° apart; B at 30°; the arms at 0° */
 	double pos[9] = { 60, 40, 100, 60, 42, 100, 30, 40, 100 }, base[3] = { 2, 2, 2 }, open[3] = { 3, 3, 3 };
-	struct select_route rt = { .pos = pos, .base = base, .open = open, .from = { 30, 40, 100 },
+	struct select_route rt = { .pos = pos, .base = base, .open = open, .from = { 0, 40, 100 },
 				   .speed = { 10, 20, 30 }, .accel = { 20, 60, 90 }, .settle = { 0.3, 0.2, 0.2 },
 				   .move_s = 0.075 };
-	/* the old rule: each from the arms (the laser's 30° and a dark for P and A; B at the arms' incidence) */
-	double old[3] = { 2 + 3 + sel_route_move(&rt, rt.from, pos), 2 + 3 + sel_route_move(&rt, rt.from, pos + 3),
-			  2 + sel_route_move(&rt, rt.from, pos + 6) };
+	/* the old rule: each from the arms (its incidence's darks and the laser's move) */
+	double old[3];
+	for (int j = 0; j < 3; j++)
+		old[j] = 2 + 3 + sel_route_move(&rt, rt.from, pos + 3 * j);
 	size_t got[2];
 	struct select_result r;
 	assert_int_equal(picks2(m, ang, old, NULL, got, &r), 2);
 	printf("route: old rule picks %zu, %zu (costs %.2f %.2f %.2f)\n", got[0], got[1], old[0], old[1], old[2]);
-	assert_true((got[0] == 0 && got[1] == 2) || (got[0] == 2 && got[1] == 0));
+	assert_int_equal(got[0], 0);
+	assert_int_equal(got[1], 2);
 	select_result_free(&r);
 	/* the increment: P first (from the arms: its darks and the laser's move), then A (no dark, a 2° detector move) */
 	assert_int_equal(picks2(m, ang, old, &rt, got, &r), 2);
@@ -926,6 +929,12 @@ static void test_route_increment(void **state)
 	assert_int_equal(at, 1);
 	assert_true(fabs(cB - (2 + 3 + ins)) < 1e-12);
 	assert_true(cB < 2 + 3 + sel_route_move(&rt, pos, pos + 6)); /* inserting beats appending (the laser's way back) */
+	sel_route_free(&w);
+	/* from the arms at B's incidence B is charged no darks, only its move */
+	rt.from[0] = 30;
+	rt.from[1] = 30;
+	assert_int_equal(sel_route_init(&w, &rt, 2), 0);
+	assert_true(fabs(sel_route_cost(&w, 2, &at) - (2 + sel_route_move(&rt, rt.from, pos + 6))) < 1e-12);
 	sel_route_free(&w);
 	/* the azimuth modulo 360°: 359° from 1° is a 2° move */
 	double p1[3] = { 0, 0, 1 }, p2[3] = { 0, 0, 359 }, p3[3] = { 0, 0, 3 };
