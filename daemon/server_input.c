@@ -45,7 +45,7 @@ void srv_input_arm(struct server *srv)
 /* Handle up to LINES_PER_CLIENT complete lines of client serial within the turn's budget; true if more may be
  * buffered. The handler may reply to this client or close others, so the client is looked up again after
  * each line. An observer's lines also wait for its bucket's tokens (server_rate.c). */
-bool srv_input_lines(struct server *srv, uint64_t serial)
+static bool process_lines(struct server *srv, uint64_t serial)
 {
 	struct client *c;
 	char *line;
@@ -127,7 +127,7 @@ static void drain_cb(struct loop *lp, void *arg)
 		if (!c)
 			continue;
 		c->backlog = false;
-		srv_input_lines(srv, serial);
+		process_lines(srv, serial);
 		if ((c = srv_client_by_serial(srv, serial)))
 			srv_input_finish(c);
 	}
@@ -149,7 +149,7 @@ void srv_input_event(struct loop *lp, int fd, short revents, void *arg)
 		srv_out_flush(c);
 		if (was_paused && !srv_out_paused(c) && c->backlog) {
 			c->backlog = false; /* its buffered lines get their turn again */
-			srv_input_lines(srv, serial);
+			process_lines(srv, serial);
 			if (!(c = srv_client_by_serial(srv, serial)))
 				return;
 		}
@@ -177,7 +177,7 @@ void srv_input_event(struct loop *lp, int fd, short revents, void *arg)
 			srv_client_close(c);
 			return;
 		}
-		srv_input_lines(srv, serial);
+		process_lines(srv, serial);
 		if (!(c = srv_client_by_serial(srv, serial)))
 			return;
 	}

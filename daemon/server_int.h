@@ -106,8 +106,6 @@ void srv_admit_accept(struct loop *lp, int lfd, short revents, void *arg);
 /* server_input.c */
 /* A client's loop callback (arg: the client): output flushed, input read and handled, refusals discarded. */
 void srv_input_event(struct loop *lp, int fd, short revents, void *arg);
-/* Handle up to LINES_PER_CLIENT buffered lines of connection serial; true if more may be buffered. */
-bool srv_input_lines(struct server *srv, uint64_t serial);
 /* Close c if it is closing and its output is out, else trim its buffers and update its events. */
 void srv_input_finish(struct client *c);
 /* Have buffered lines handled at the loop's next turn (idempotent). */
