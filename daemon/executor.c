@@ -567,6 +567,7 @@ double ex_step_run(struct ex *x, double now)
 			case PH_SETTLE: ex_run_settle(x, now); break;
 			case PH_ACQ: ex_run_acq(x, now); break;
 			case PH_LASER_OFF: ex_run_laser_off(x, now); break;
+			case PH_DURABLE: ex_run_durable(x, now); break;
 			case PH_NONE: break;
 			}
 		} else {

@@ -1,10 +1,12 @@
 /* store checkpoints off the loop: the WAL is copied back into the database (a checkpoint: database writes and
  * their fsyncs) on a thread of its own with its own connection, when a commit has grown the WAL past
- * STORE_CKPT_PAGES (SQLite's automatic checkpoint would run it inside that commit, on the loop, at 1000 pages). PASSIVE, as the
- * automatic one: it never waits for the writer, which keeps appending meanwhile. */
+ * STORE_CKPT_PAGES (SQLite's automatic checkpoint would run it inside that commit, on the loop, at 1000 pages; the
+ * store's WAL hook, store_sync.c, tells it). PASSIVE, as the automatic one: it never waits for the writer, which
+ * keeps appending meanwhile. */
 #include <pthread.h>
 #include <sqlite3.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "daemon/stall.h"
 #include "daemon/store_int.h"
@@ -25,18 +27,14 @@ struct store_ckpt {
 	double seconds, max_s;
 };
 
-static int wal_hook(void *arg, sqlite3 *db, const char *name, int pages)
+void store_ckpt_note(struct store_ckpt *c, int pages)
 {
-	(void)db;
-	(void)name;
-	struct store_ckpt *c = arg;
-	if (pages >= STORE_CKPT_PAGES) {
-		pthread_mutex_lock(&c->mu);
-		c->due = true;
-		pthread_cond_signal(&c->cv);
-		pthread_mutex_unlock(&c->mu);
-	}
-	return SQLITE_OK;
+	if (pages < STORE_CKPT_PAGES)
+		return;
+	pthread_mutex_lock(&c->mu);
+	c->due = true;
+	pthread_cond_signal(&c->cv);
+	pthread_mutex_unlock(&c->mu);
 }
 
 static void *ckpt_main(void *arg)
@@ -65,28 +63,30 @@ static void *ckpt_main(void *arg)
 
 int store_ckpt_start(struct store *st, struct acq_err *err)
 {
-	(void)err;
 	struct store_ckpt *c = calloc(1, sizeof *c);
 	if (!c)
-		return 0; /* SQLite's own checkpoints (on the committing thread) stay */
+		return acq_errf(err, ACQ_E_NOMEM, "%s: checkpoint thread: out of memory", st->path);
 	if (sqlite3_open_v2(st->path, &c->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_NOFOLLOW, NULL) != SQLITE_OK ||
 	    sqlite3_exec(c->db, "PRAGMA synchronous = FULL", NULL, NULL, NULL) != SQLITE_OK) {
+		acq_errf(err, ACQ_E_IO, "%s: checkpoint thread's connection: %s", st->path,
+			 c->db ? sqlite3_errmsg(c->db) : "out of memory");
 		sqlite3_close(c->db);
 		free(c);
-		return 0;
+		return -1;
 	}
 	sqlite3_busy_timeout(c->db, 2000);
 	pthread_mutex_init(&c->mu, NULL);
 	pthread_cond_init(&c->cv, NULL);
-	if (pthread_create(&c->thread, NULL, ckpt_main, c)) {
+	int e = pthread_create(&c->thread, NULL, ckpt_main, c);
+	if (e) {
+		acq_errf(err, ACQ_E_IO, "%s: checkpoint thread: %s", st->path, strerror(e));
 		pthread_mutex_destroy(&c->mu);
 		pthread_cond_destroy(&c->cv);
 		sqlite3_close(c->db);
 		free(c);
-		return 0;
+		return -1;
 	}
 	st->ckpt = c;
-	sqlite3_wal_hook(st->db, wal_hook, c); /* replaces SQLite's automatic checkpoint */
 	return 0;
 }
 
@@ -109,7 +109,6 @@ void store_ckpt_stop(struct store *st)
 	struct store_ckpt *c = st->ckpt;
 	if (!c)
 		return;
-	sqlite3_wal_hook(st->db, NULL, NULL);
 	pthread_mutex_lock(&c->mu);
 	c->quit = true;
 	pthread_cond_signal(&c->cv);
