@@ -444,8 +444,7 @@ static void finish_sweep(struct ex *x)
 	x->state = EX_COMPLETED;
 	x->phase = PH_NONE;
 	ex_set_phase_text(x, "completed");
-	ex_set_db_state(x, "completed");
-	ex_event(x, "complete", NULL, "all %d points measured and calibrated (%s method); %d faults, %d recovered",
+	ex_state_event(x, "completed", "complete", NULL, "all %d points measured and calibrated (%s method); %d faults, %d recovered",
 	      x->nsteps, calib_method_name(x->cfg.cal.method), x->stats.faults, x->stats.recoveries);
 }
 

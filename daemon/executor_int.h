@@ -149,6 +149,10 @@ double ex_wall_now(struct ex *x);
 /* Record an event in the store and tell the sink (a store failure is not fatal). */
 void ex_event(struct ex *x, const char *kind, const char *device, const char *fmt, ...)
 	__attribute__((format(printf, 4, 5)));
+/* The sweep's state and its event in one transaction (a halt: both stored or neither), then the sink as
+ * ex_event. */
+void ex_state_event(struct ex *x, const char *state, const char *kind, const char *device, const char *fmt, ...)
+	__attribute__((format(printf, 5, 6)));
 /* The sweep's state in the store (best effort). */
 void ex_set_db_state(struct ex *x, const char *state);
 /* Free every pending spectrum. */
