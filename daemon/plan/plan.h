@@ -166,6 +166,13 @@ struct plan_result {
 	double darks_s;             /* of predicted_s: dark spectra */
 	double host_s;              /* of predicted_s: the host's time per point (point_overhead_s × time_scale each),
 				     * load-dependent at high time scales: reported apart */
+	/* predicted_s term by term (plan_time.c; they sum to it): each exposure term holds its shots' integration,
+	 * read-out and round trip */
+	double t_motion_s;          /* the points' moves (trapezoids), the ordering model's move_s */
+	double t_settle_s;          /* their settling, polling for the end and in-position check, extra_settle_s */
+	double t_probe_s;           /* auto: the probe exposures (one per point) */
+	double t_first_s;           /* each point's first (base) exposure, the plan's averages */
+	double t_hdr_s;             /* auto: the further (HDR) exposures */
 };
 
 /* The default integration.spread of auto plans: the range of times the bench chose at one viewing zenith on the
@@ -196,6 +203,8 @@ struct plan_prior {
 	char sample[PLAN_SAMPLE_MAX];
 	size_t points;              /* over all incidences: */
 	double median_ms, spread, hdr_fraction; /* median first exposure, longest/shortest, points with an HDR exposure */
+	double host_per_point_s;    /* the host's real seconds per point there (exp_prior_build), over host_points points */
+	size_t host_points;         /* (0: not measured; point_overhead_s then) */
 	size_t n_inc;
 	struct plan_prior_inc inc[PLAN_PRIOR_MAX_INC];
 };
