@@ -30,6 +30,7 @@ import csv
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
 import threading
@@ -139,7 +140,8 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
         paused = max(0.0, ev.get("resume", 0) - ev.get("pause", 0))
         # the daemon's own wall-clock record (not this script's polling, 0.1 s = 3.5 bench s at time scale 35)
         measured = (finished - started - paused) * scale
-        meas_terms, shot_check = measured_terms(db, sid, scale, steps, b.conf, started, finished, ev)
+        meas_terms, shot_check = measured_terms(db, sid, scale, steps, b.conf, started, finished, ev,
+                                                 auto=pj.get("integration_mode") != "fixed")
         redos = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'info' AND message LIKE "
                            "'%measuring the point again%'", (sid,)).fetchone()[0]
         db.close()
@@ -204,11 +206,11 @@ def shot_price(conf):
     return (float(ro.group(1)) if ro else 0.01) + (float(poll.group(1)) if poll else 0.01) / 2
 
 
-def measured_terms(db, sid, scale, steps, conf, started, finished, ev):
+def measured_terms(db, sid, scale, steps, conf, started, finished, ev, auto=True):
     """The measured sweep split into the model's terms (acqctl plan --json predicted_terms), bench seconds:
     - probes_s, darks_s, first_exposures_s, hdr_s: what the bench took, from the stored spectra (every dark and
       exposure with its time and averages; the probe, not stored, at the previous point's first time, as the executor
-      takes it, the first point's at the reference's), each priced as the model prices a shot (averages x time +
+      takes it, the first point's at the reference's; none with fixed integration), each priced as the model prices a shot (averages x time +
       read-out + round trip): the counts and times are measured, the price per shot is the model's (shot_check tests
       it against the wall clock);
     - motion_s, settle_s: the plan's moves between the points (steps' move_s; settle_s with 1.5 polls per move as
@@ -253,7 +255,7 @@ def measured_terms(db, sid, scale, steps, conf, started, finished, ev):
                 priced += c
                 nshot += 1
             last_at = at
-        if prev_first is not None:
+        if auto and prev_first is not None:  # fixed integration: no probe
             c = prev_first / 1000.0 + price
             t["probes_s"] += c
             own += c
@@ -427,8 +429,57 @@ def prioritize():
         return "not prioritized (%s)" % e
 
 
+class Report:
+    """The report's lines, to stdout and to $ACQ_BENCH_OUT/duration.log. Run detached (setsid ... | tee, a pipe whose
+    reader went away with the shell that started it), a print to stdout raised BrokenPipeError: the script ended with
+    rc 1 after its first line and its traceback went down the same broken pipe (session 8). Now a stdout that fails
+    is dropped and the run goes on to the log and duration.csv."""
+
+    def __init__(self, path):
+        self.log = open(path, "a")
+        self.out = sys.stdout
+
+    def write(self, text):
+        self.log.write(text)
+        self.log.flush()
+        if self.out is not None:
+            try:
+                self.out.write(text)
+                self.out.flush()
+            except (BrokenPipeError, OSError):
+                self.out = None
+                try:  # stdout's descriptor to /dev/null: the interpreter's own flush at exit must not fail either
+                    fd = os.open(os.devnull, os.O_WRONLY)
+                    os.dup2(fd, 1)
+                    os.close(fd)
+                except OSError:
+                    pass
+
+    def flush(self):
+        pass
+
+
+def select_cases(cases, only):
+    """The cases BENCH_DURATION_CASES names (name, or name@scale), each repeat with the case it repeats (a repeat runs
+    on its first sweep's bench). A name that matches no case is an error naming the known ones (before: nothing ran,
+    and the csv's rows[0] raised IndexError)."""
+    want = [w.strip() for w in only.split(",") if w.strip()]
+    names = ["%s@%g" % (c[0], c[2]) for c in cases]
+    unknown = [w for w in want if not any(w == c[0] or w == n for c, n in zip(cases, names))]
+    if unknown or not want:
+        raise ValueError("BENCH_DURATION_CASES=%r: no case named %s (cases: %s)" % (
+            only, ", ".join(unknown) if unknown else "(none given)", ", ".join(names)))
+    keep = [c[0] in want or n in want for c, n in zip(cases, names)]
+    for i in range(len(cases) - 1, 0, -1):
+        if keep[i] and cases[i][1] is None:
+            keep[i - 1] = True
+    return [c for c, k in zip(cases, keep) if k]
+
+
 def main():
     os.makedirs(OUT, exist_ok=True)
+    sys.stdout = Report(os.path.join(OUT, "duration.log"))
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)  # detached: the starting shell's hang-up is not this run's end
     print("bench_duration: %s; load average %.1f" % (prioritize(), os.getloadavg()[0]), flush=True)
     if os.environ.get("BENCH_DURATION_TABLE"):
         return table(float(os.environ["BENCH_DURATION_TABLE"]))
@@ -441,8 +492,11 @@ def main():
                   ("paper-10x10x10", SAMPLE(PAPER), 35.0), ("paper-repeat", None, 35.0)]
     only = os.environ.get("BENCH_DURATION_CASES")
     if only:
-        want = only.split(",")
-        cases = [c for c in cases if c[0] in want or "%s@%g" % (c[0], c[2]) in want]
+        try:
+            cases = select_cases(cases, only)
+        except ValueError as e:
+            print("bench_duration: %s" % e, file=sys.stderr)
+            return 2
     rows = []
     prev = None
     for i, (name, text, scale) in enumerate(cases):
@@ -473,6 +527,9 @@ def main():
                  f(r["eta75_host"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"],
                  r["darks"], r["exposures"], r["residual_per_point_s"], lag_text(r), r["load"], r["faults"],
                  "sweep %s" % r["prior_sweep"] if r["prior_sweep"] else "none", r["recon_wait_s"]), flush=True)
+    if not rows:
+        print("bench_duration: no case ran")
+        return 1
     with open(os.path.join(OUT, "duration.csv"), "w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
         wr.writeheader()
@@ -481,4 +538,10 @@ def main():
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except Exception:
+        import traceback
+        if isinstance(sys.stdout, Report):  # also into duration.log: stderr may be a pipe nobody reads any more
+            sys.stdout.log.write(traceback.format_exc())
+        raise
