@@ -192,4 +192,26 @@ int store_group_end(struct store *st, int rc, struct acq_err *err);
  * longest (zeros where SQLite checkpoints on the committing thread instead). */
 void store_ckpt_stats(const struct store *st, unsigned long *runs, double *seconds, double *max_s);
 
+/* ---- durability (store_sync.c). A read-write store's commits return before their fsync (synchronous=NORMAL: a
+ * process crash keeps them, a power loss may lose the latest); a thread of the store's fsyncs the WAL after them.
+ * A commit is on disk once store_durable() says so for its mark. Where that thread cannot start, every commit
+ * fsyncs before it returns (store_degraded() says so) and every mark is durable at once. */
+/* The mark of the latest commit on st (0: none yet). */
+uint64_t store_commit_mark(const struct store *st);
+/* 1 when every commit up to mark is on disk, 0 not yet, -1 with err when an fsync failed (sticky: no later
+ * commit is known durable either). */
+int store_durable(struct store *st, uint64_t mark, struct acq_err *err);
+/* store_durable(), waiting (blocking) while it is 0. 1 or -1. */
+int store_durable_wait(struct store *st, uint64_t mark, struct acq_err *err);
+/* A descriptor readable when more commits became durable or an fsync failed (-1: none, durability is
+ * synchronous); store_durable_drain() resets it (non-blocking). */
+int store_durable_fd(const struct store *st);
+void store_durable_drain(struct store *st);
+/* What of the store's own threads could not start, and what SQLite does instead (NULL: all run). */
+const char *store_degraded(const struct store *st);
+/* Test seam: fn(ctx) runs on the fsync thread before each fsync (a delay; nonzero with why filled: that fsync
+ * fails). NULL removes it. */
+typedef int (*store_sync_hook_fn)(void *ctx, char *why, size_t n);
+void store_sync_set_hook(struct store *st, store_sync_hook_fn fn, void *ctx);
+
 #endif

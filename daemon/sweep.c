@@ -4,6 +4,7 @@
 #include "daemon/sweep.h"
 
 #include <math.h>
+#include <poll.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -238,6 +239,18 @@ static void on_device(void *ctx)
 		kick(sw);
 }
 
+/* A committed point the executor waits for is on disk (store_durable_fd): step it now. */
+static void on_durable(struct loop *lp, int fd, short revents, void *arg)
+{
+	(void)lp;
+	(void)fd;
+	(void)revents;
+	struct sweep *sw = arg;
+	store_durable_drain(sw->env.store);
+	if (sw->ex)
+		kick(sw);
+}
+
 static int load_cfg(const struct conf *c, struct ex_cfg *cfg, struct acq_err *err)
 {
 	ex_cfg_defaults(cfg);
@@ -322,6 +335,12 @@ int sweep_init(const struct sweep_env *env, struct sweep **out, struct acq_err *
 	}
 	if (env->devices)
 		devices_set_kick(env->devices, on_device, sw);
+	/* The points' fsyncs run on the store's thread; its completions step the executor (else it waits in its step). */
+	int dfd = env->store ? store_durable_fd(env->store) : -1;
+	if (dfd >= 0 && loop_fd_add(env->loop, dfd, POLLIN, on_durable, sw, NULL) == 0) {
+		loop_fd_urgent(env->loop, dfd);
+		sw->cfg.durable_async = true;
+	}
 	sw->last.eta_s = NAN;
 	*out = sw;
 	return 0;
@@ -340,6 +359,8 @@ void sweep_finish(struct sweep *sw)
 	recon_chain_free(sw->chain);
 	if (sw->env.devices)
 		devices_set_kick(sw->env.devices, NULL, NULL);
+	if (sw->cfg.durable_async)
+		loop_fd_del(sw->env.loop, store_durable_fd(sw->env.store));
 	release(sw);
 	adapt_free(sw->adapt);
 	free(sw);

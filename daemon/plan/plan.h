@@ -283,7 +283,16 @@ struct plan_cand {
 	struct plan_pos pos;        /* bench position (det_phi the axis position reached fastest) */
 	double cost_s;              /* bench seconds to measure it from the arms' position: the safe move, its
 				     * settling and polling, darks when the incidence changes, probe, exposures, host */
+	double base_s;              /* of it: the point at an incidence the executor is at already, without a move */
+	double open_s;              /* and the darks more at a new incidence (select charges each pick its increment
+				     * to the batch's route: base_s, open_s when its incidence is new to the batch, and
+				     * the motion of inserting it into the batch's route, plan_adaptive_route_spec) */
 };
+/* The batch's route model as `brdf-recon select --route` takes it (13 numbers, comma-separated: the arms' position
+ * from (laser θ, detector θ, detector φ), then per axis in that order speed °/s, acceleration °/s², settle s, then the
+ * executor's seconds per move beyond the trapezoids and settling: 1.5 polls + extra settle, plan_time.c) into buf. */
+void plan_adaptive_route_spec(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *from,
+			      char *buf, size_t len);
 /* The adaptive target as `brdf-recon select --target` takes it ("dhr:8,30,60:le=X", "lnf:le=X", "rgb:le=X") into buf. */
 void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t len);
 /* The candidates of spec's adaptive part from the arms at from (timed by t): every candidate incidence ×
