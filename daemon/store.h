@@ -160,11 +160,17 @@ struct store_prior_row {
 	int64_t point_id;
 	bool dark;
 	double integration_ms;
+	int averages;
+	/* the point's: */
+	int64_t order_index;
+	double done_at;             /* wall clock, s */
+	double arm[3];              /* the arms' reached angles: laser.theta, detector.theta, detector.phi */
 };
 typedef int (*store_prior_fn)(void *ctx, const struct store_prior_row *row);
 /* The latest completed sweep of sample (by name) whose exposures the auto exposure chose, other than exclude (0:
  * none): its id in *sweep_id (0 when there is none, and fn is not called), and its done points' sample and dark
- * exposures to fn, by incidence, point and time taken (fn nonzero stops). 0 or -1. */
+ * exposures with their point's order, commit time and reached angles to fn, by incidence, point and time taken (fn
+ * nonzero stops). 0 or -1. */
 int store_prior_each(struct store *st, const char *sample, int64_t exclude, int64_t *sweep_id, store_prior_fn fn,
 		     void *ctx, struct acq_err *err);
 

@@ -398,7 +398,7 @@ void sweep_plan_prior(const struct sweep *sw, const struct plan_spec *spec, int6
 	if (!spec || spec->integ_mode != PLAN_INTEG_AUTO || !spec->sample[0] || !sw->env.store)
 		return;
 	struct acq_err err = { 0 };
-	if (exp_prior_load(sw->env.store, spec->sample, exclude, &t->prior, &err)) {
+	if (exp_prior_load(sw->env.store, spec->sample, exclude, &sw->env.conf->bench, t, &t->prior, &err)) {
 		log_msg(LOG_WARNING, "exposure prior of sample '%s': %s (timed from the plan's estimate)", spec->sample,
 			err.msg);
 		memset(&t->prior, 0, sizeof t->prior);

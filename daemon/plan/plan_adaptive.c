@@ -511,6 +511,11 @@ int plan_adaptive_candidates(const struct plan_spec *s, const struct bench_geom 
 		c[k].id = id;
 		c[k].pos = bq;
 		c[k].cost_s = point_cost(s, g, t, from, &bq, best, best_segs);
+		/* the same point without a move: from its own incidence, then from another one (its darks) */
+		struct plan_pos other = bq;
+		other.laser_theta += 1;
+		c[k].base_s = point_cost(s, g, t, &bq, &bq, 0, 0);
+		c[k].open_s = fmax(point_cost(s, g, t, &other, &bq, 0, 0) - c[k].base_s, 0);
 		k++;
 	}
 	*out = c;
@@ -555,4 +560,16 @@ void plan_adaptive_worst(const struct plan_spec *s, const struct bench_geom *g, 
 	else if (nc && lo > 0)
 		*worst_points = seed->n_steps +
 				(size_t)fmin((double)nc, floor(fmax(0, a->budget_s - seed->predicted_s) / lo));
+}
+
+void plan_adaptive_route_spec(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *from,
+			      char *buf, size_t len)
+{
+	const struct bench_axis *ax[3] = { &g->laser_theta, &g->detector_theta, &g->detector_phi };
+	size_t n = (size_t)snprintf(buf, len, "%.9g,%.9g,%.9g", from->laser_theta, from->det_theta, from->det_phi);
+	for (int k = 0; k < 3 && n < len; k++)
+		n += (size_t)snprintf(buf + n, len - n, ",%.9g,%.9g,%.9g", ax[k]->speed_dps, ax[k]->accel_dps2,
+				      ax[k]->settle_s);
+	if (n < len)
+		snprintf(buf + n, len - n, ",%.9g", 1.5 * t->axis_poll_s + t->extra_settle_s);
 }
