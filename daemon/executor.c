@@ -72,9 +72,6 @@ double ex_wall_now(struct ex *x)
 	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
-/* Store the sweep's state (NULL: none) and an event at one time, in one transaction (both or neither: a full disk
- * cannot keep a halt's state without its event), and tell the sink. What the store refuses is kept for
- * ex_flush_unrecorded(): a failure must not go unrecorded because recording failed; not fatal otherwise. */
 /* The sweep's state was stored (rc 0: the latest stored) or refused (rc -1: kept for ex_flush_unrecorded). */
 static void keep_state(struct ex *x, const char *state, double at, int rc)
 {
@@ -86,6 +83,9 @@ static void keep_state(struct ex *x, const char *state, double at, int rc)
 	}
 }
 
+/* Store the sweep's state (NULL: none) and an event at one time, in one transaction (both or neither: a full disk
+ * cannot keep a halt's state without its event), and tell the sink. What the store refuses is kept for
+ * ex_flush_unrecorded(): a failure must not go unrecorded because recording failed; not fatal otherwise. */
 static void record(struct ex *x, const char *state, const char *kind, const char *device, const char *msg)
 {
 	double at = ex_wall_now(x);
@@ -672,8 +672,8 @@ void ex_shutdown(struct ex *x, const char *why)
 	ex_safe_stop(x);
 	ex_reset_acq(x);
 	x->state = EX_PAUSED;
-	ex_state_event(x, "paused", "stop", NULL, "%s: the sweep stays resumable after point %d of %d", why && *why ? why : "daemon stopping",
-	      x->cur, x->nsteps);
+	ex_state_event(x, "paused", "stop", NULL, "%s: the sweep stays resumable after point %d of %d",
+		       why && *why ? why : "daemon stopping", x->cur, x->nsteps);
 }
 
 void ex_hold(struct ex *x, const char *why)

@@ -444,8 +444,9 @@ static void finish_sweep(struct ex *x)
 	x->state = EX_COMPLETED;
 	x->phase = PH_NONE;
 	ex_set_phase_text(x, "completed");
-	ex_state_event(x, "completed", "complete", NULL, "all %d points measured and calibrated (%s method); %d faults, %d recovered",
-	      x->nsteps, calib_method_name(x->cfg.cal.method), x->stats.faults, x->stats.recoveries);
+	ex_state_event(x, "completed", "complete", NULL,
+		       "all %d points measured and calibrated (%s method); %d faults, %d recovered", x->nsteps,
+		       calib_method_name(x->cfg.cal.method), x->stats.faults, x->stats.recoveries);
 }
 
 void ex_wait_batch(struct ex *x)
