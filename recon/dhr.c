@@ -87,11 +87,22 @@ static int model_variance(const struct recon_model *m, size_t Q, const double *c
  * elsewhere Δf itself (a feature the model lost, e.g. the Ward spike: its width is unknown, σ must say so).
  */
 #define MISFIT_REL_MAX 2.0
+struct unseen_in {
+	double theta;        /* the incidence */
+	const double *wt;    /* [Q] the rule's weights (cosθo dω, Σ = π) */
+	const double *Y;     /* [Q × L] the nominal g − μ at the nodes, mud[L] its μ, tb the nodes' trend bases */
+	const double *mud, *tb;
+	double *aseen;       /* [L] scratch */
+};
 static void unseen_and_misfit(const struct recon_model *m, size_t Q, const double *c6, const double *scale,
-			      const double *alpha, const double *dfmis, const double *ratio, double *C, double *mis)
+			      const double *alpha, const double *dfmis, const double *ratio, const struct unseen_in *in,
+			      double *C, double *mis, double *senergy)
 {
 	size_t L = m->nwl;
 	int rel = m->transform == RECON_T_LOG;
+	double U = 0, *aseen = in->aseen, *aunseen = senergy;
+	for (size_t l = 0; l < L; l++)
+		aseen[l] = aunseen[l] = 0;
 	for (size_t q = 0; q < Q; q++) {
 		size_t k;
 		double d = recon_nearest_centre(m, c6 + 6 * q, &k);
@@ -102,9 +113,21 @@ static void unseen_and_misfit(const struct recon_model *m, size_t Q, const doubl
 												 : scale[q * L + l] * dfmis[k * L + l];
 			}
 		double u = recon_unseen(d);
-		for (size_t l = 0; l < L; l++)
+		double ue = recon_unseen_energy(d);
+		U += ue * in->wt[q];
+		for (size_t l = 0; l < L; l++) {
+			double fv = scale[q * L + l] * untransform(m->transform, in->Y[q * L + l] + in->mud[l], m->eps[l],
+								   trend_factor(m, in->tb + q * TREND_NB, l));
+			aseen[l] += (1 - ue) * fv;
+			aunseen[l] += ue * fv;
 			C[q * L + l] *= sqrt(alpha[l] + u * RECON_PRIOR_ALPHA);
+		}
 	}
+	double mir[6]; /* the mirror direction, where a specular lobe the samples missed would sit */
+	rbf_canon(in->theta, 0.0, in->theta, M_PI, mir);
+	double ph = fmax(U / M_PI, recon_unseen_energy(recon_nearest_centre(m, mir, NULL)));
+	for (size_t l = 0; l < L; l++)
+		senergy[l] = recon_prior_energy_sd(ph, aseen[l], aunseen[l]);
 }
 
 /*
@@ -400,11 +423,13 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	double *dfmis = malloc(n * L * sizeof *dfmis), *mratio = malloc(n * L * sizeof *mratio), *misacc = calloc(nth * L, sizeof *misacc);
 	double *sres = calloc(nth * L, sizeof *sres);
 	double *vmod = calloc(nth * L, sizeof *vmod), *squad = calloc(nth * L, sizeof *squad);
+	double *senergy = calloc(nth * L, sizeof *senergy), *aseen = malloc(L * sizeof *aseen);
 	double *tb = malloc(nth * Q * TREND_NB * sizeof *tb);
 	double *Bs = NULL, *ylog = NULL, *fl = NULL, *cdraw = NULL;
 	struct dhr_quad dq = { 0 };
 	if (!Kq || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud || !C || !KQQ || !soaQ || !U ||
-	    !Bt || !X || !Ainv || !alpha || !dfmis || !mratio || !misacc || !sres || !vmod || !squad || !tb) {
+	    !Bt || !X || !Ainv || !alpha || !dfmis || !mratio || !misacc || !sres || !vmod || !squad || !tb ||
+	    !senergy || !aseen) {
 		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
 		goto out;
 	}
@@ -503,9 +528,12 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 					m2[t * L + l] += delta * (acc - mean[t * L + l]);
 				}
 			}
-			if (d == 0)
-				unseen_and_misfit(m, Q, c6 + t * Q * 6, scale + t * Q * L, alpha, dfmis, mratio, C,
-						  misacc + t * L);
+			if (d == 0) {
+				struct unseen_in ui = { .theta = theta[t], .wt = wt, .Y = Y, .mud = mud, .tb = tb + t * Q * TREND_NB,
+							.aseen = aseen };
+				unseen_and_misfit(m, Q, c6 + t * Q * 6, scale + t * Q * L, alpha, dfmis, mratio, &ui, C,
+						  misacc + t * L, senergy + t * L);
+			}
 			if (d == 0 && model_variance(m, Q, c6 + t * Q * 6, Kq + t * Q * n, A, C, KQQ, soaQ, U, Bt, X,
 						     vmod + t * L, err))
 				goto out;
@@ -530,7 +558,7 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 			goto out;
 	}
 	for (size_t i = 0; i < nth * L; i++) {
-		double sn = ndraws > 1 ? sqrt(m2[i] / (ndraws - 1)) : 0.0, sm = sqrt(vmod[i]);
+		double sn = ndraws > 1 ? sqrt(m2[i] / (ndraws - 1)) : 0.0, sm = fmax(sqrt(vmod[i]), senergy[i]);
 		double sb = sn > sm ? sn : sm, smis = fmin(fabs(misacc[i]), 1.0);
 		sig[i] = sqrt(sb * sb + squad[i] * squad[i] + smis * smis + sres[i] * sres[i]);
 		if (parts->noise)
@@ -573,6 +601,8 @@ out:
 	free(misacc);
 	free(sres);
 	free(vmod);
+	free(senergy);
+	free(aseen);
 	free(squad);
 	free(tb);
 	free(Bs);

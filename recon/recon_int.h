@@ -103,11 +103,42 @@ double recon_nearest_centre(const struct recon_model *m, const double *c6, size_
  * paper's 10 × 10 × 10 plan leaves no node of the DHR at 8-60° that far. */
 #define RECON_PRIOR_R0 0.35
 #define RECON_PRIOR_ALPHA 1.0
+/* 0 for d ≤ r0, 1 for d ≥ r1, smoothstep between. */
+static inline double recon_ramp(double d, double r0, double r1)
+{
+	double u = (d - r0) / (r1 - r0);
+	return u <= 0 ? 0 : u >= 1 ? 1 : u * u * (3 - 2 * u);
+}
 /* How unseen a point at distance d from the nearest sample is: 0 within R0, 1 beyond 2·R0, smoothstep between. */
 static inline double recon_unseen(double d)
 {
-	double u = (d - RECON_PRIOR_R0) / RECON_PRIOR_R0;
-	return u <= 0 ? 0 : u >= 1 ? 1 : u * u * (3 - 2 * u);
+	return recon_ramp(d, RECON_PRIOR_R0, 2 * RECON_PRIOR_R0);
+}
+
+/* The energy-bounded prior on the unseen part (recon/reconstruction.md, "Honest σ where the data are thin"). For
+ * energy, a direction pair is unseen from RECON_PRIOR_R0 on (wholly beyond RECON_PRIOR_RE, a smoothstep between
+ * for continuity): a lobe narrower than the distance to the nearest sample can hide there (the GP's softer
+ * recon_unseen counts a node 20-40° away as partly seen, which for a sharp lobe it is not). At one incidence, U is
+ * the unseen share of the cosine-weighted hemisphere (Σ u_q w_q / π), A_seen and A_unseen the model's DHR over
+ * the seen and the unseen parts (Σ (1 − u_q) w_q f̂_q and Σ u_q w_q f̂_q). Energy conservation bounds what the
+ * unseen part holds by [0, R], R = 1 − A_seen, and nothing else does (a specular lobe the samples missed can carry
+ * all of R). The prior: with probability p the unseen part holds an amount uniform on [0, R], else the model's
+ * A_unseen is right; the RMS error of the model's value is then √p · √((R/2 − A_unseen)² + R²/12) (with p = 1
+ * any truth in [0, R] is within √3 of it). p = U (a missed lobe's direction uniform over the cosine-weighted
+ * hemisphere), but 1 where the mirror direction itself is unseen (u of it: where a specular lobe would be).
+ * The paper's plan has U = 0 and its mirror directions seen at 8-60° (nothing changes there). */
+#define RECON_PRIOR_RE 0.40
+static inline double recon_unseen_energy(double d)
+{
+	return recon_ramp(d, RECON_PRIOR_R0, RECON_PRIOR_RE);
+}
+static inline double recon_prior_energy_sd(double p, double a_seen, double a_unseen)
+{
+	double R = 1.0 - a_seen;
+	if (!(R > 0) || !(p > 0))
+		return 0.0;
+	double c = 0.5 * R - a_unseen;
+	return sqrt(fmin(p, 1.0) * (c * c + R * R / 12.0));
 }
 
 /* The worst sample of recon_misfit: index k (merged direction), channel l, measured and model values (sr⁻¹). */
