@@ -193,6 +193,8 @@ int store_group_end(struct store *st, int rc, struct acq_err *err);
 /* The WAL's checkpoints run so far on the store's own thread (store_ckpt.c): how many, their seconds in all, the
  * longest (zeros where SQLite checkpoints on the committing thread instead). */
 void store_ckpt_stats(const struct store *st, unsigned long *runs, double *seconds, double *max_s);
+/* True when no checkpoint is due or under way on the store's thread (always true without that thread). */
+bool store_ckpt_idle(const struct store *st);
 
 /* ---- durability (store_sync.c). A read-write store's commits return before their fsync (synchronous=NORMAL: a
  * process crash keeps them, a power loss may lose the latest); a thread of the store's fsyncs the WAL after them.
