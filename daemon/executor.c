@@ -114,24 +114,28 @@ static void record(struct ex *x, const char *state, const char *kind, const char
 		x->sink.event(x->sink.ctx, x->sweep_id, kind, device, msg);
 }
 
-void ex_event(struct ex *x, const char *kind, const char *device, const char *fmt, ...)
+static void __attribute__((format(printf, 5, 0))) vrecord(struct ex *x, const char *state, const char *kind,
+							  const char *device, const char *fmt, va_list ap)
 {
 	char msg[768];
+	vsnprintf(msg, sizeof msg, fmt, ap);
+	record(x, state, kind, device, msg);
+}
+
+void ex_event(struct ex *x, const char *kind, const char *device, const char *fmt, ...)
+{
 	va_list ap;
 	va_start(ap, fmt);
-	vsnprintf(msg, sizeof msg, fmt, ap);
+	vrecord(x, NULL, kind, device, fmt, ap);
 	va_end(ap);
-	record(x, NULL, kind, device, msg);
 }
 
 void ex_state_event(struct ex *x, const char *state, const char *kind, const char *device, const char *fmt, ...)
 {
-	char msg[768];
 	va_list ap;
 	va_start(ap, fmt);
-	vsnprintf(msg, sizeof msg, fmt, ap);
+	vrecord(x, state, kind, device, fmt, ap);
 	va_end(ap);
-	record(x, state, kind, device, msg);
 }
 
 void ex_set_db_state(struct ex *x, const char *state)

@@ -1,7 +1,8 @@
 /* store: the SQLite database of sweeps, points, spectra, calibrations, reconstruction runs and events
  * (schema: daemon/schema.sql; the module's files daemon/store*.c, listed in store.c). WAL mode, one transaction
- * per spectrum, versioned schema with migrations; a foreign or corrupt file is refused and never written. Never
- * logs: -1 + struct acq_err. */
+ * per write (a point's writes grouped in one), commits made durable by the store's own thread (store_durable),
+ * versioned schema with migrations; a foreign or corrupt file is refused and never written. Never logs: -1 +
+ * struct acq_err. */
 #ifndef STORE_H
 #define STORE_H
 
@@ -78,7 +79,8 @@ int store_sweep_next_point(struct store *st, int64_t id, int *order_index, int64
 /* Delete the spectra of a point not yet done (a partial point before a resume: nothing twice). 0 or -1. */
 int store_point_discard_partial(struct store *st, int64_t point_id, struct acq_err *err);
 
-/* Insert one spectrum in its own transaction (committed on return). *id may be NULL. 0 or -1. */
+/* Insert one spectrum in its own transaction (committed on return; on disk once store_durable says so). *id may be
+ * NULL. 0 or -1. */
 int store_spectrum_add(struct store *st, const struct store_spectrum *sp, int64_t *id, struct acq_err *err);
 /* Number of spectra (of sweep_id, or all when sweep_id is 0). -1 on error. */
 int64_t store_spectrum_count(struct store *st, int64_t sweep_id, struct acq_err *err);
@@ -191,6 +193,8 @@ int store_group_end(struct store *st, int rc, struct acq_err *err);
 /* The WAL's checkpoints run so far on the store's own thread (store_ckpt.c): how many, their seconds in all, the
  * longest (zeros where SQLite checkpoints on the committing thread instead). */
 void store_ckpt_stats(const struct store *st, unsigned long *runs, double *seconds, double *max_s);
+/* True when no checkpoint is due or under way on the store's thread (always true without that thread). */
+bool store_ckpt_idle(const struct store *st);
 
 /* ---- durability (store_sync.c). A read-write store's commits return before their fsync (synchronous=NORMAL: a
  * process crash keeps them, a power loss may lose the latest); a thread of the store's fsyncs the WAL after them.

@@ -25,6 +25,7 @@ struct store_ckpt {
 	pthread_mutex_t mu;
 	pthread_cond_t cv;
 	bool due, quit;
+	bool running; /* a checkpoint is under way (due cleared, not yet counted) */
 	sqlite3 *db; /* the thread's connection */
 	unsigned long runs;
 	double seconds, max_s;
@@ -50,11 +51,13 @@ static void *ckpt_main(void *arg)
 		if (c->quit)
 			break;
 		c->due = false;
+		c->running = true;
 		pthread_mutex_unlock(&c->mu);
 		double t0 = stall_now();
 		sqlite3_wal_checkpoint_v2(c->db, NULL, SQLITE_CHECKPOINT_PASSIVE, NULL, NULL);
 		double s = stall_now() - t0;
 		pthread_mutex_lock(&c->mu);
+		c->running = false;
 		c->runs++;
 		c->seconds += s;
 		if (s > c->max_s)
@@ -105,6 +108,17 @@ void store_ckpt_stats(const struct store *st, unsigned long *runs, double *secon
 	*seconds = c->seconds;
 	*max_s = c->max_s;
 	pthread_mutex_unlock(&c->mu);
+}
+
+bool store_ckpt_idle(const struct store *st)
+{
+	struct store_ckpt *c = st->ckpt;
+	if (!c)
+		return true;
+	pthread_mutex_lock(&c->mu);
+	bool idle = !c->due && !c->running;
+	pthread_mutex_unlock(&c->mu);
+	return idle;
 }
 
 void store_ckpt_stop(struct store *st)

@@ -70,7 +70,7 @@ void recon_eval_block_part(const struct recon_model *m, size_t b, const double *
 		const double *ai = m->tab_alb, *ao = m->tab_alb;
 		double tb[TREND_NB];
 		trend_at(m, c, tb);
-		if (part != RECON_PART_ALL) /* split at the lobe terms: [0, TREND_LOBE) and [TREND_LOBE, TREND_NB) */
+		if (part == RECON_PART_LOBE || part == RECON_PART_NOLOBE) /* split at the lobe terms: [0, TREND_LOBE) and [TREND_LOBE, TREND_NB) */
 			for (int j = 0; j < TREND_NB; j++)
 				if ((j >= TREND_LOBE) == (part == RECON_PART_NOLOBE))
 					tb[j] = 0;
@@ -85,6 +85,12 @@ void recon_eval_block_part(const struct recon_model *m, size_t b, const double *
 				double g = out[q * nch + k] + m->mu[l];
 				f = trend_val(m, tb, l) * exp(g < G_MAX ? g : G_MAX);
 				f = f < 1e300 ? f : 1e300;
+			} else if (part == RECON_PART_REST) { /* f̂ − T_lobe·e^g, the lobe part as above */
+				double g = out[q * nch + k] + m->mu[l], tl = 0;
+				for (int j = TREND_LOBE; j < TREND_NB; j++)
+					tl += m->tcoef[l * TREND_NB + j] * tb[j];
+				f = untransform(m->transform, g, m->eps[l], trend_factor(m, tb, l)) -
+				    fmin(tl * exp(g < G_MAX ? g : G_MAX), 1e300);
 			} else {
 				f = untransform(m->transform, out[q * nch + k] + m->mu[l], m->eps[l], trend_factor(m, tb, l));
 			}

@@ -559,6 +559,8 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 		for (size_t k = 0; k < nch; k++) {
 			size_t l = ws->chan[k];
 			double d = fabs(ws->fine[k] - out[l]), ref = fmax(fabs(ws->fine[k]), floor);
+			if (ws->floor_ch)
+				ref = fmax(ref, ws->floor_ch[l]);
 			out[l] = ws->fine[k];
 			if (diff)
 				diff[l] = d;

@@ -87,7 +87,8 @@ void recon_eval_block(const struct recon_model *m, size_t b, const double *c6, i
 /* Parts of the interpolant f̂ = max(0, (T + ε)e^g − ε), T = T_smooth + T_lobe (the trend's Lambertian and
  * coated-diffuse terms, and its GGX lobe terms): all of it; max(0, (T_smooth + ε)e^g − ε); T_lobe·e^g. The
  * two parts add up to at least f̂ (max(0, a + b) ≤ max(0, a) + b for b ≥ 0), so their albedos bound f̂'s. */
-enum { RECON_PART_ALL = 0, RECON_PART_NOLOBE = 1, RECON_PART_LOBE = 2 };
+/* RECON_PART_REST: the whole minus the lobe part, f̂ − T_lobe·e^g (so that REST + LOBE = ALL node by node; the DHR) */
+enum { RECON_PART_ALL = 0, RECON_PART_NOLOBE = 1, RECON_PART_LOBE = 2, RECON_PART_REST = 3 };
 /* recon_eval_block for one part of the interpolant (eval.c). */
 void recon_eval_block_part(const struct recon_model *m, size_t b, const double *c6, int scaled, int part, size_t nch,
 			   const size_t *chan, const double *wsub, double *out, double *work);
@@ -123,7 +124,10 @@ static inline double recon_unseen(double d)
  * unseen part holds by [0, R], R = 1 − A_seen, and nothing else does (a specular lobe the samples missed can carry
  * all of R). The prior: with probability p the unseen part holds an amount uniform on [0, R], else the model's
  * A_unseen is right; the RMS error of the model's value is then √p · √((R/2 − A_unseen)² + R²/12) (with p = 1
- * any truth in [0, R] is within √3 of it). p = U (a missed lobe's direction uniform over the cosine-weighted
+ * any truth in [0, R] is within √3 of it): the mixture's standard deviation, GUM's standard uncertainty. Its
+ * linear form p · s was tried (tighter where p is small: a 3 × 4 × 6 plan of green paint, σ 0.0015-0.0028 instead
+ * of 0.015-0.024 at 30/60° against errors ≤ 0.004) and left a sharp-lobe fit of 11 samples at |z| 7.7 at 60°
+ * (√p · s: 1.9): an error that has probability p must not read as 7σ. p = U (a missed lobe's direction uniform over the cosine-weighted
  * hemisphere), but 1 where the mirror direction itself is unseen (u of it: where a specular lobe would be).
  * The paper's plan has U = 0 and its mirror directions seen at 8-60° (nothing changes there). */
 #define RECON_PRIOR_RE 0.40
@@ -164,6 +168,8 @@ struct albedo_ws {
 	double evals; /* work so far in kernel evaluations, a channel's GEMM counting 1/64 of one (measured: a
 		       * Wendland row value ≈ 3.5 ns, a multiply-add of the GEMM ≈ 0.05 ns); for budgets */
 	const double *offset; /* [L] or NULL: added to a channel's value in the "clearly below" test (split albedo) */
+	const double *floor_ch; /* [L] or NULL: a channel's own floor of the relative tolerance (the DHR's rest part:
+				 * its lobe part's value, so the rest is refined relative to the whole) */
 	double *c6, *wt, *work, *vals, *wsub, *fine;
 	size_t *chan;
 	/* the data's brightest directions (quad.c): bright[n] the largest value of the interpolant's data over the

@@ -28,8 +28,10 @@ measures the other sessions' load. BENCH_DURATION_TABLE=S instead: the README tr
 $ACQ_BENCH_OUT."""
 import csv
 import json
+import math
 import os
 import re
+import signal
 import subprocess
 import sys
 import threading
@@ -83,12 +85,14 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
             with open(os.path.join(b.dir, "plan.json"), "w") as fh:
                 fh.write(p.stdout)
             steps = json.loads(p.stdout)["plan"].get("steps") or []
+            steps_host = None  # the daemon's own per-step prediction: its host_s below
         else:
             # the moves per step from a local dry run on the same bench configuration (the same planner and
             # order; only the exposure timing, which this does not use, may differ)
             loc = subprocess.run([CTL, "--json", "plan", planf, "--points", "--config", b.conf], capture_output=True,
                                  text=True)
             steps = json.loads(loc.stdout)["plan"].get("steps") or [] if loc.returncode == 0 else []
+            steps_host = json.loads(loc.stdout)["plan"].get("host_s") if loc.returncode == 0 else None
             p = subprocess.run([CTL, "-s", b.sock, "--json", "plan", planf], capture_output=True, text=True, check=True)
         pj = json.loads(p.stdout)["plan"]
         pred, host = pj["predicted_s"], pj.get("host_s", 0.0)
@@ -139,20 +143,33 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
         paused = max(0.0, ev.get("resume", 0) - ev.get("pause", 0))
         # the daemon's own wall-clock record (not this script's polling, 0.1 s = 3.5 bench s at time scale 35)
         measured = (finished - started - paused) * scale
-        meas_terms, shot_check = measured_terms(db, sid, scale, steps, b.conf, started, finished, ev)
+        meas_terms, shot_check = measured_terms(db, sid, scale, steps, b.conf, started, finished, ev,
+                                                 auto=pj.get("integration_mode") != "fixed")
         redos = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'info' AND message LIKE "
                            "'%measuring the point again%'", (sid,)).fetchone()[0]
         db.close()
         prog = [(t, e) for t, e in events if e.get("event") == "sweep.progress" and e.get("sweep") == sid]
         total = row["points_total"]
-        eta_err, eta_host = {}, {}
+        eta_err, eta_host, eta_parts = {}, {}, {}
+        # the per-step prediction the ETA used: the daemon's steps, or a local dry run's (no prior, time scale 1),
+        # which times the exposures as the daemon did only without a prior
+        split_ok = steps and (steps_host is None or not prior)
+        per_pt = split_points(b.db(), sid, steps, pj, steps_host, scale, shot_price(b.conf),
+                              pj.get("integration_mode") != "fixed") if split_ok else None
         for frac in (0.25, 0.5, 0.75):
             for t, e in prog:
                 if e["done"] >= frac * total and e.get("eta_s") is not None:
                     left = finished - t
                     eta_err[frac] = e["eta_s"] / left - 1 if left > 0 else float("nan")
                     eta_host[frac] = host_known(host_pts, t, e["eta_s"], finished)
+                    if per_pt and left > 0:
+                        eta_parts[frac] = eta_split(per_pt, e["done"], total, left)
                     break
+        if eta_parts:
+            print("%-17s ETA error split at 25/50/75 %%: %s" % (name, "; ".join(
+                "%d %%: model %+.1f %%, host %+.1f %% (the rest's host %.1f ms/point, the recent past's %.1f)" % (
+                    100 * f, 100 * m, 100 * hh, 1000 * hr, 1000 * hp) for f, (m, hh, hr, hp) in sorted(
+                        eta_parts.items()))), flush=True)
         # real seconds per point beyond the model's bench part (predicted_s - host_s), per time scale: the host's
         # time per point when the bench part is right (fixed integration), compare the model's constant
         # host_s / points / scale; with auto integration it also holds the sample's error
@@ -204,11 +221,11 @@ def shot_price(conf):
     return (float(ro.group(1)) if ro else 0.01) + (float(poll.group(1)) if poll else 0.01) / 2
 
 
-def measured_terms(db, sid, scale, steps, conf, started, finished, ev):
+def measured_terms(db, sid, scale, steps, conf, started, finished, ev, auto=True):
     """The measured sweep split into the model's terms (acqctl plan --json predicted_terms), bench seconds:
     - probes_s, darks_s, first_exposures_s, hdr_s: what the bench took, from the stored spectra (every dark and
       exposure with its time and averages; the probe, not stored, at the previous point's first time, as the executor
-      takes it, the first point's at the reference's), each priced as the model prices a shot (averages x time +
+      takes it, the first point's at the reference's; none with fixed integration), each priced as the model prices a shot (averages x time +
       read-out + round trip): the counts and times are measured, the price per shot is the model's (shot_check tests
       it against the wall clock);
     - motion_s, settle_s: the plan's moves between the points (steps' move_s; settle_s with 1.5 polls per move as
@@ -253,7 +270,7 @@ def measured_terms(db, sid, scale, steps, conf, started, finished, ev):
                 priced += c
                 nshot += 1
             last_at = at
-        if prev_first is not None:
+        if auto and prev_first is not None:  # fixed integration: no probe
             c = prev_first / 1000.0 + price
             t["probes_s"] += c
             own += c
@@ -320,6 +337,71 @@ def host_per_point(db, sid, steps, scale):
             move = steps[i].get("move_s", 0) + steps[i].get("settle_s", 0)
             out.append((t1, (t1 - t0) - (expo + move) / scale))
     return out
+
+
+# daemon/eta.c's constants: the plan's weight in points, the recent average's memory (fraction of the sweep's points,
+# bounds)
+ETA_PLAN_WEIGHT, ETA_MEMORY = 5.0, (0.125, 10.0, 120.0)
+
+
+def split_points(db, sid, steps, pj, steps_host, scale, price, auto):
+    """Per point after the first, in order: (e_b, h, h_plan): real seconds the point's exposures took beyond what the
+    ETA's plan gave them (the measured shots priced as measured_terms does, less the plan's step less its moves and
+    host), the host's real seconds (the real interval less the measured exposures and the plan's moves at the time
+    scale), and the plan's host per point (real s). None when the record does not allow it."""
+    n = len(steps)
+    host_pp = (steps_host if steps_host is not None else pj.get("host_s", 0.0)) / max(n, 1)  # bench s per step
+    ts = 1.0 if steps_host is not None else scale  # the time scale the steps were predicted at
+    pts = db.execute("SELECT id, order_index, done_at FROM points WHERE sweep_id = ? AND state = 'done' ORDER BY "
+                     "order_index", (sid,)).fetchall()
+    sp = {}
+    for pid, kind, ms, k in db.execute("SELECT point_id, kind, integration_ms, averages FROM spectra WHERE sweep_id = ? "
+                                       "AND point_id IS NOT NULL ORDER BY id", (sid,)):
+        sp.setdefault(pid, []).append((kind, ms, k))
+    prev = db.execute("SELECT min(integration_ms) FROM spectra WHERE sweep_id = ? AND kind = 'reference'",
+                      (sid,)).fetchone()[0]
+    db.close()
+    if len(pts) != n:
+        return None
+    out = []
+    for i, (pid, oi, done) in enumerate(pts):
+        s = sp.get(pid, [])
+        samples = [ms for kind, ms, _ in s if kind == "sample"]
+        meas = sum(k * ms / 1000.0 + price for _, ms, k in s) + (prev / 1000.0 + price if auto and prev else 0.0)
+        st = steps[oi]
+        mv = st.get("move_s", 0.0) + st.get("settle_s", 0.0)
+        mv += 1.5 * 0.05 if mv > 0 else 0.0
+        nxt = steps[oi + 1]["predicted_start_s"] if oi + 1 < n else pj.get("predicted_s") if steps_host is None else None
+        if nxt is None:  # the local run's total is not given here: the last point left out
+            break
+        plan_exp = nxt - st["predicted_start_s"] - mv - host_pp
+        if i > 0:
+            real = done - pts[i - 1][2]
+            out.append(((meas - plan_exp) / scale, real - (meas + mv) / scale, host_pp / ts))
+        prev = min(samples) if samples else prev
+    return out
+
+
+def eta_split(per_pt, done, total, left_real):
+    """The ETA's error at `done` points (daemon/eta.c: the plan's rest plus, per point left, the recent excess per point
+    weighted n/(n + 5)) split into the model's part (the rest's exposures against the recent past's excess over the
+    plan) and the host's (the rest's host time against the plan's host plus the recent past's excess): each as a
+    fraction of the real time left. Returns (model, host, host per point of the rest, the recent past's)."""
+    m = min(max(ETA_MEMORY[0] * total, ETA_MEMORY[1]), ETA_MEMORY[2])
+    a = 1 - math.exp(-1 / m)
+    past, rest = per_pt[:max(done - 1, 0)], per_pt[max(done - 1, 0):]
+    left = total - done
+    if not past or not rest:
+        return (float("nan"),) * 4
+    re = rh = None
+    for e_b, h, hp in past:
+        re = e_b if re is None else re + a * (e_b - re)
+        rh = (h - hp) if rh is None else rh + a * ((h - hp) - rh)
+    w = len(past) / (len(past) + ETA_PLAN_WEIGHT)
+    model = left * w * re - sum(x[0] for x in rest)
+    host = sum(x[2] for x in rest) + left * w * rh - sum(x[1] for x in rest)
+    recent_host = past[-1][2] + rh
+    return model / left_real, host / left_real, sum(x[1] for x in rest) / len(rest), recent_host
 
 
 def host_known(host, t, eta_s, finished):
@@ -427,8 +509,57 @@ def prioritize():
         return "not prioritized (%s)" % e
 
 
+class Report:
+    """The report's lines, to stdout and to $ACQ_BENCH_OUT/duration.log. Run detached (setsid ... | tee, a pipe whose
+    reader went away with the shell that started it), a print to stdout raised BrokenPipeError: the script ended with
+    rc 1 after its first line and its traceback went down the same broken pipe (session 8). Now a stdout that fails
+    is dropped and the run goes on to the log and duration.csv."""
+
+    def __init__(self, path):
+        self.log = open(path, "a")
+        self.out = sys.stdout
+
+    def write(self, text):
+        self.log.write(text)
+        self.log.flush()
+        if self.out is not None:
+            try:
+                self.out.write(text)
+                self.out.flush()
+            except (BrokenPipeError, OSError):
+                self.out = None
+                try:  # stdout's descriptor to /dev/null: the interpreter's own flush at exit must not fail either
+                    fd = os.open(os.devnull, os.O_WRONLY)
+                    os.dup2(fd, 1)
+                    os.close(fd)
+                except OSError:
+                    pass
+
+    def flush(self):
+        pass
+
+
+def select_cases(cases, only):
+    """The cases BENCH_DURATION_CASES names (name, or name@scale), each repeat with the case it repeats (a repeat runs
+    on its first sweep's bench). A name that matches no case is an error naming the known ones (before: nothing ran,
+    and the csv's rows[0] raised IndexError)."""
+    want = [w.strip() for w in only.split(",") if w.strip()]
+    names = ["%s@%g" % (c[0], c[2]) for c in cases]
+    unknown = [w for w in want if not any(w == c[0] or w == n for c, n in zip(cases, names))]
+    if unknown or not want:
+        raise ValueError("BENCH_DURATION_CASES=%r: no case named %s (cases: %s)" % (
+            only, ", ".join(unknown) if unknown else "(none given)", ", ".join(names)))
+    keep = [c[0] in want or n in want for c, n in zip(cases, names)]
+    for i in range(len(cases) - 1, 0, -1):
+        if keep[i] and cases[i][1] is None:
+            keep[i - 1] = True
+    return [c for c, k in zip(cases, keep) if k]
+
+
 def main():
     os.makedirs(OUT, exist_ok=True)
+    sys.stdout = Report(os.path.join(OUT, "duration.log"))
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)  # detached: the starting shell's hang-up is not this run's end
     print("bench_duration: %s; load average %.1f" % (prioritize(), os.getloadavg()[0]), flush=True)
     if os.environ.get("BENCH_DURATION_TABLE"):
         return table(float(os.environ["BENCH_DURATION_TABLE"]))
@@ -441,8 +572,11 @@ def main():
                   ("paper-10x10x10", SAMPLE(PAPER), 35.0), ("paper-repeat", None, 35.0)]
     only = os.environ.get("BENCH_DURATION_CASES")
     if only:
-        want = only.split(",")
-        cases = [c for c in cases if c[0] in want or "%s@%g" % (c[0], c[2]) in want]
+        try:
+            cases = select_cases(cases, only)
+        except ValueError as e:
+            print("bench_duration: %s" % e, file=sys.stderr)
+            return 2
     rows = []
     prev = None
     for i, (name, text, scale) in enumerate(cases):
@@ -473,6 +607,9 @@ def main():
                  f(r["eta75_host"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"],
                  r["darks"], r["exposures"], r["residual_per_point_s"], lag_text(r), r["load"], r["faults"],
                  "sweep %s" % r["prior_sweep"] if r["prior_sweep"] else "none", r["recon_wait_s"]), flush=True)
+    if not rows:
+        print("bench_duration: no case ran")
+        return 1
     with open(os.path.join(OUT, "duration.csv"), "w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
         wr.writeheader()
@@ -481,4 +618,10 @@ def main():
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except Exception:
+        import traceback
+        if isinstance(sys.stdout, Report):  # also into duration.log: stderr may be a pipe nobody reads any more
+            sys.stdout.log.write(traceback.format_exc())
+        raise

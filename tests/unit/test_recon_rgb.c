@@ -102,7 +102,10 @@ static void test_merl_half_table_exact(void **state)
 	(void)state;
 	struct merl_table half = { NULL }, all = { NULL };
 	struct acq_err err = { 0 };
-	assert_int_equal(recon_rgb_merl_table(R, &half, 0, NULL, NULL, NULL, &err), 0);
+	struct merl_table two = { NULL };
+	struct colour_stats s1 = { 0 }, s2 = { 0 };
+	/* one worker: the table recon_rgb_merl_table makes (its tone statistics kept for the two-worker check) */
+	assert_int_equal(recon_rgb_merl_table_ex(R, &half, 0, 1, &s1, NULL, NULL, &err), 0);
 	assert_int_equal(recon_rgb_merl_table(R, &all, 1, NULL, NULL, NULL, &err), 0);
 	size_t nodata = 0;
 	double worst = 0;
@@ -120,10 +123,6 @@ static void test_merl_half_table_exact(void **state)
 	assert_int_equal(nodata, 3 * (size_t)(MERL_N_CELLS - 1096216));
 	assert_true(worst < 1e-10);
 	/* two workers give the same table bit for bit, and the same tone statistics */
-	struct merl_table two = { NULL };
-	struct colour_stats s1 = { 0 }, s2 = { 0 };
-	merl_free(&half);
-	assert_int_equal(recon_rgb_merl_table_ex(R, &half, 0, 1, &s1, NULL, NULL, &err), 0);
 	assert_int_equal(recon_rgb_merl_table_ex(R, &two, 0, 2, &s2, NULL, NULL, &err), 0);
 	assert_memory_equal(half.data, two.data, 3 * (size_t)MERL_N_CELLS * sizeof *two.data);
 	assert_true(s1.n == s2.n && s1.n > 0 && s1.clipped == s2.clipped && s1.out_of_gamut == s2.out_of_gamut);
@@ -162,7 +161,8 @@ static void test_merl_half_table_exact(void **state)
 
 /* The single-precision batch GEMM. A nearly interpolating fit of noise-free data (η = 1e-8, shape 4: large
  * cancelling weights) measures ≈ 2e-3 in ln f, above the 1e-4 limit: single precision is refused and the batch
- * path stays in double. A default fit of noisy data (the usual case) measures ≈ 1.6e-5: there the whole MERL
+ * path stays in double. A default fit of noisy data (the usual case; 6 × 6 × 8 directions) measures ≈ 1.5e-5
+ * (7e-6 to 1.7e-5 over seeds 1-3 and both trends; the paper's 10 × 10 × 10 grid: 1.5e-5): there the whole MERL
  * table changes by no more than that error allows (|Δ ln f| ≤ e gives |Δf|/f ≤ e^e − 1; the colour chain is
  * linear in f before clamping; 2× for the sampling of the measurement, which sees 2048 of 1.1 M cells). */
 static void test_single_precision_table(void **state)
@@ -191,7 +191,7 @@ static void test_single_precision_table(void **state)
 	recon_rgb_free(r);
 	recon_model_free(m);
 
-	rt_samples_grid(&s, 10, 10, 10, 131, 0.02, 1.0);
+	rt_samples_grid(&s, 6, 6, 8, 131, 0.02, 1.0); /* 288 samples: the table's cost grows with the centres */
 	recon_fit_opts_default(&o);
 	o.trend = TREND;
 	assert_int_equal(recon_fit(&s, &o, &m, &err), 0);

@@ -102,20 +102,30 @@ static int wait_durable(struct store *st, uint64_t mark, struct acq_err *err)
 	return r;
 }
 
+/* A new store in a new folder (dir[256], path[300]) with a sweep of 3 points (*sid), its commits so far on disk,
+ * and the gate's hook on it: shut and failing as asked, its count of calls at 0. */
+static struct store *open_store(char *dir, char *path, const char *file, int64_t *sid, bool open, bool fail)
+{
+	assert_int_equal(ut_tmpdir_make(dir, 256, "acq-test-sync"), 0);
+	struct store *st = ut_store_new(path, 300, dir, file);
+	*sid = ut_sweep_create(st, 3, "sync", "name: sync");
+	struct acq_err err = { 0 };
+	gate_set(true, false);
+	assert_int_equal(store_durable_wait(st, store_commit_mark(st), &err), 1);
+	G.entered = 0;
+	gate_set(open, fail);
+	store_sync_set_hook(st, gate_hook, &G);
+	return st;
+}
+
 static void test_commit_before_fsync(void **state)
 {
 	(void)state;
 	char dir[256], path[300];
-	assert_int_equal(ut_tmpdir_make(dir, sizeof dir, "acq-test-sync"), 0);
-	struct store *st = ut_store_new(path, sizeof path, dir, "s.db");
+	int64_t sid = 0;
+	struct store *st = open_store(dir, path, "s.db", &sid, false, false);
 	assert_null(store_degraded(st)); /* both threads run */
-	int64_t sid = ut_sweep_create(st, 3, "sync", "name: sync");
 	struct acq_err err = { 0 };
-	gate_set(true, false);
-	assert_int_equal(store_durable_wait(st, store_commit_mark(st), &err), 1); /* the sweep's creation */
-	G.entered = 0;
-	gate_set(false, false);
-	store_sync_set_hook(st, gate_hook, &G);
 	/* The commit returns while its fsync is held on the store's thread: with the fsync in the commit, this
 	 * thread would sit in the hook until the gate's 5 s ran out and find the point durable below. */
 	commit_point(st, sid);
@@ -141,12 +151,9 @@ static void test_fsync_failure_sticks(void **state)
 {
 	(void)state;
 	char dir[256], path[300];
-	assert_int_equal(ut_tmpdir_make(dir, sizeof dir, "acq-test-sync"), 0);
-	struct store *st = ut_store_new(path, sizeof path, dir, "f.db");
-	int64_t sid = ut_sweep_create(st, 3, "sync", "name: sync");
+	int64_t sid = 0;
+	struct store *st = open_store(dir, path, "f.db", &sid, true, true); /* every fsync fails */
 	struct acq_err err = { 0 };
-	gate_set(true, true); /* every fsync fails */
-	store_sync_set_hook(st, gate_hook, &G);
 	commit_point(st, sid);
 	uint64_t mark = store_commit_mark(st);
 	assert_int_equal(wait_durable(st, mark, &err), -1);
@@ -177,15 +184,8 @@ static void test_close_syncs(void **state)
 {
 	(void)state;
 	char dir[256], path[300];
-	assert_int_equal(ut_tmpdir_make(dir, sizeof dir, "acq-test-sync"), 0);
-	struct store *st = ut_store_new(path, sizeof path, dir, "c.db");
-	int64_t sid = ut_sweep_create(st, 3, "sync", "name: sync");
-	struct acq_err err = { 0 };
-	gate_set(true, false);
-	assert_int_equal(store_durable_wait(st, store_commit_mark(st), &err), 1);
-	G.entered = 0;
-	gate_set(false, false);
-	store_sync_set_hook(st, gate_hook, &G);
+	int64_t sid = 0;
+	struct store *st = open_store(dir, path, "c.db", &sid, false, false);
 	commit_point(st, sid);
 	gate_wait_entered(1); /* the first commit's fsync is held */
 	commit_point(st, sid);  /* the second waits behind it */
