@@ -17,6 +17,7 @@
 #include "daemon/app.h"
 #include "daemon/conf.h"
 #include "daemon/cputime.h"
+#include "daemon/crashpoint.h"
 #include "daemon/devices.h"
 #include "daemon/job.h"
 #include "daemon/log.h"
@@ -295,6 +296,9 @@ int main(int argc, char **argv)
 	app.started_wall = app_wallclock();
 	if (store_open(app.conf->d.database, &app.store, &err))
 		goto fail;
+	if (store_degraded(app.store))
+		log_msg(LOG_WARNING, "database: %s", store_degraded(app.store));
+	crash_slow_sync(app.store);
 	{
 		/* Runs of a daemon that died: their children died with it (PR_SET_PDEATHSIG, daemon/job.c). */
 		int n = 0;

@@ -72,44 +72,78 @@ double ex_wall_now(struct ex *x)
 	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
-/* Record an event in the store and tell the sink. A store failure here is not fatal (the sink still hears). */
-void ex_event(struct ex *x, const char *kind, const char *device, const char *fmt, ...)
+/* Store the sweep's state (NULL: none) and an event at one time, in one transaction (both or neither: a full disk
+ * cannot keep a halt's state without its event), and tell the sink. What the store refuses is kept for
+ * ex_flush_unrecorded(): a failure must not go unrecorded because recording failed; not fatal otherwise. */
+/* The sweep's state was stored (rc 0: the latest stored) or refused (rc -1: kept for ex_flush_unrecorded). */
+static void keep_state(struct ex *x, const char *state, double at, int rc)
 {
-	char msg[768];
-	va_list ap;
-	va_start(ap, fmt);
-	vsnprintf(msg, sizeof msg, fmt, ap);
-	va_end(ap);
-	struct acq_err err = { 0 };
+	if (rc) {
+		snprintf(x->lost_state, sizeof x->lost_state, "%s", state);
+		x->lost_state_at = at;
+	} else {
+		x->lost_state[0] = 0;
+	}
+}
+
+static void record(struct ex *x, const char *state, const char *kind, const char *device, const char *msg)
+{
 	double at = ex_wall_now(x);
-	if (x->st && store_event(x->st, x->sweep_id, kind, device, msg, at, &err)) {
-		/* Kept for ex_flush_unrecorded(): a failure must not go unrecorded because recording failed. */
-		if (x->nlost_ev == 4) {
-			memmove(&x->lost_ev[0], &x->lost_ev[1], 3 * sizeof x->lost_ev[0]);
-			x->nlost_ev = 3;
+	if (x->st) {
+		struct acq_err err = { 0 };
+		bool group = state && store_group_begin(x->st, &err) == 0;
+		int rs = state ? store_sweep_set_state(x->st, x->sweep_id, state, at, &err) : 0;
+		int re = store_event(x->st, x->sweep_id, kind, device, msg, at, &err);
+		if (group && store_group_end(x->st, rs || re, NULL))
+			rs = re = -1; /* rolled back together */
+		if (state)
+			keep_state(x, state, at, rs);
+		if (re) {
+			if (x->nlost_ev == 4) {
+				memmove(&x->lost_ev[0], &x->lost_ev[1], 3 * sizeof x->lost_ev[0]);
+				x->nlost_ev = 3;
+			}
+			struct ex_lost_event *e = &x->lost_ev[x->nlost_ev++];
+			snprintf(e->kind, sizeof e->kind, "%s", kind);
+			snprintf(e->device, sizeof e->device, "%s", device ? device : "");
+			snprintf(e->msg, sizeof e->msg, "%s", msg);
+			e->at = at;
 		}
-		struct ex_lost_event *e = &x->lost_ev[x->nlost_ev++];
-		snprintf(e->kind, sizeof e->kind, "%s", kind);
-		snprintf(e->device, sizeof e->device, "%s", device ? device : "");
-		snprintf(e->msg, sizeof e->msg, "%s", msg);
-		e->at = at;
 	}
 	if (x->sink.event)
 		x->sink.event(x->sink.ctx, x->sweep_id, kind, device, msg);
+}
+
+static void __attribute__((format(printf, 5, 0))) vrecord(struct ex *x, const char *state, const char *kind,
+							  const char *device, const char *fmt, va_list ap)
+{
+	char msg[768];
+	vsnprintf(msg, sizeof msg, fmt, ap);
+	record(x, state, kind, device, msg);
+}
+
+void ex_event(struct ex *x, const char *kind, const char *device, const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	vrecord(x, NULL, kind, device, fmt, ap);
+	va_end(ap);
+}
+
+void ex_state_event(struct ex *x, const char *state, const char *kind, const char *device, const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	vrecord(x, state, kind, device, fmt, ap);
+	va_end(ap);
 }
 
 void ex_set_db_state(struct ex *x, const char *state)
 {
 	struct acq_err err = { 0 };
 	double at = ex_wall_now(x);
-	if (!x->st)
-		return;
-	if (store_sweep_set_state(x->st, x->sweep_id, state, at, &err)) {
-		snprintf(x->lost_state, sizeof x->lost_state, "%s", state);
-		x->lost_state_at = at;
-	} else {
-		x->lost_state[0] = 0; /* the latest state is stored */
-	}
+	if (x->st)
+		keep_state(x, state, at, store_sweep_set_state(x->st, x->sweep_id, state, at, &err));
 }
 
 bool ex_has_unrecorded(const struct ex *x)
@@ -119,18 +153,20 @@ bool ex_has_unrecorded(const struct ex *x)
 
 int ex_flush_unrecorded(struct ex *x, struct acq_err *err)
 {
-	while (x->nlost_ev) {
-		struct ex_lost_event *e = &x->lost_ev[0];
-		if (store_event(x->st, x->sweep_id, e->kind, e->device[0] ? e->device : NULL, e->msg, e->at, err))
-			return -1;
-		memmove(&x->lost_ev[0], &x->lost_ev[1], (size_t)(x->nlost_ev - 1) * sizeof x->lost_ev[0]);
-		x->nlost_ev--;
+	/* One transaction, as they were meant to be stored: all of them or none. */
+	if (store_group_begin(x->st, err))
+		return -1;
+	int rc = 0;
+	for (int i = 0; i < x->nlost_ev && !rc; i++) {
+		struct ex_lost_event *e = &x->lost_ev[i];
+		rc = store_event(x->st, x->sweep_id, e->kind, e->device[0] ? e->device : NULL, e->msg, e->at, err);
 	}
-	if (x->lost_state[0]) {
-		if (store_sweep_set_state(x->st, x->sweep_id, x->lost_state, x->lost_state_at, err))
-			return -1;
-		x->lost_state[0] = 0;
-	}
+	if (!rc && x->lost_state[0])
+		rc = store_sweep_set_state(x->st, x->sweep_id, x->lost_state, x->lost_state_at, err);
+	if (store_group_end(x->st, rc, rc ? NULL : err) || rc)
+		return -1;
+	x->nlost_ev = 0;
+	x->lost_state[0] = 0;
 	return 0;
 }
 
@@ -190,8 +226,7 @@ void ex_failed(struct ex *x, const char *fmt, ...)
 	halt(x, EX_FAILED, fmt, ap);
 	va_end(ap);
 	ex_set_phase_text(x, "failed");
-	ex_set_db_state(x, "failed");
-	ex_event(x, "failed", NULL, "%s", x->reason);
+	ex_state_event(x, "failed", "failed", NULL, "%s", x->reason);
 }
 
 void ex_pause_now(struct ex *x, bool by_fault, const char *fmt, ...)
@@ -203,8 +238,7 @@ void ex_pause_now(struct ex *x, bool by_fault, const char *fmt, ...)
 	x->paused_by_fault = by_fault;
 	x->pause_requested = false;
 	ex_set_phase_text(x, "paused");
-	ex_set_db_state(x, "paused");
-	ex_event(x, "pause", by_fault ? ex_dev_names[x->fault_dev] : NULL, "%s", x->reason);
+	ex_state_event(x, "paused", "pause", by_fault ? ex_dev_names[x->fault_dev] : NULL, "%s", x->reason);
 }
 
 /* A device error: the sweep suspends, and retries the device with backoff (or pauses at once). */
@@ -485,8 +519,8 @@ int ex_abort(struct ex *x, const char *why, double now, struct acq_err *err)
 	x->state = EX_ABORTED;
 	x->phase = PH_NONE;
 	ex_set_phase_text(x, "aborted");
-	ex_set_db_state(x, "aborted");
-	ex_event(x, "abort", NULL, "aborted at point %d of %d: %s (laser off, arms stopped)", x->cur, x->nsteps, x->reason);
+	ex_state_event(x, "aborted", "abort", NULL, "aborted at point %d of %d: %s (laser off, arms stopped)", x->cur,
+		       x->nsteps, x->reason);
 	return 0;
 }
 
@@ -567,6 +601,7 @@ double ex_step_run(struct ex *x, double now)
 			case PH_SETTLE: ex_run_settle(x, now); break;
 			case PH_ACQ: ex_run_acq(x, now); break;
 			case PH_LASER_OFF: ex_run_laser_off(x, now); break;
+			case PH_DURABLE: ex_run_durable(x, now); break;
 			case PH_NONE: break;
 			}
 		} else {
@@ -637,8 +672,7 @@ void ex_shutdown(struct ex *x, const char *why)
 	ex_safe_stop(x);
 	ex_reset_acq(x);
 	x->state = EX_PAUSED;
-	ex_set_db_state(x, "paused");
-	ex_event(x, "stop", NULL, "%s: the sweep stays resumable after point %d of %d", why && *why ? why : "daemon stopping",
+	ex_state_event(x, "paused", "stop", NULL, "%s: the sweep stays resumable after point %d of %d", why && *why ? why : "daemon stopping",
 	      x->cur, x->nsteps);
 }
 

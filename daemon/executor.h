@@ -113,6 +113,8 @@ struct ex_cfg {
 	int max_point_faults;        /* faults on one point (each recovered) before pausing for the operator */
 	double max_invalid_frac;     /* saturated share of the grid range that spoils an acquisition */
 	bool hold_at_end;            /* an adaptive sweep: after the last step wait (EX_WAITING) for more steps */
+	bool durable_async;          /* a point's commit is waited on disk through store_durable_fd(), which the
+				      * caller watches and then steps the executor (false: the step waits, blocking) */
 };
 
 /* Counters for tests and status. */

@@ -444,8 +444,7 @@ static void finish_sweep(struct ex *x)
 	x->state = EX_COMPLETED;
 	x->phase = PH_NONE;
 	ex_set_phase_text(x, "completed");
-	ex_set_db_state(x, "completed");
-	ex_event(x, "complete", NULL, "all %d points measured and calibrated (%s method); %d faults, %d recovered",
+	ex_state_event(x, "completed", "complete", NULL, "all %d points measured and calibrated (%s method); %d faults, %d recovered",
 	      x->nsteps, calib_method_name(x->cfg.cal.method), x->stats.faults, x->stats.recoveries);
 }
 
@@ -646,7 +645,8 @@ static void commit_point(struct ex *x, double now)
 		ex_failed(x, "the database's next pending point is %d, the executor is at %d", oi, x->cur);
 		return;
 	}
-	/* One transaction for the point: one commit on the loop, and the point is stored whole or not at all. */
+	/* One transaction for the point, stored whole or not at all; the commit returns before its fsync, which the
+	 * store's thread runs: the sweep goes on once the point is on disk (PH_DURABLE), the loop serving meanwhile. */
 	const char *what = "storing point";
 	int rc = store_group_begin(x->st, &err);
 	if (!rc)
@@ -657,8 +657,32 @@ static void commit_point(struct ex *x, double now)
 		return;
 	}
 	stall_store(stall_now() - t_store);
-	ex_stall_report(x, x->cur);
 	ex_clear_pending(x);
+	x->durable_mark = store_commit_mark(x->st);
+	x->phase = PH_DURABLE;
+	char text[64];
+	snprintf(text, sizeof text, "storing point %d: waiting for the disk", x->cur);
+	ex_set_phase_text(x, text);
+	ex_run_durable(x, now);
+}
+
+void ex_run_durable(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	int r = x->cfg.durable_async ? store_durable(x->st, x->durable_mark, &err)
+				     : store_durable_wait(x->st, x->durable_mark, &err);
+	if (r < 0) {
+		ex_failed(x, "point %d is stored but not known to be on disk: %s", x->cur, err.msg);
+		return;
+	}
+	if (r == 0) {
+		ex_io_wait(x, now); /* store_durable_fd's kick steps it sooner */
+		return;
+	}
+	char text[64];
+	snprintf(text, sizeof text, "point %d stored", x->cur);
+	ex_set_phase_text(x, text);
+	ex_stall_report(x, x->cur);
 	x->point_faults = 0;
 	x->stats.points_done++;
 	x->cur++;

@@ -18,13 +18,14 @@ enum phase {
 	PH_SETTLE,
 	PH_ACQ,      /* acquisition shots */
 	PH_LASER_OFF, /* the laser confirmed off, then the move starts */
+	PH_DURABLE,  /* the point is committed: wait for its fsync (store_durable) before going on */
 };
 
 enum shot_kind { SHOT_PROBE, SHOT_DARK, SHOT_EXPOSE };
 
 /* What the executor waited for between two steps (ex_stall_step). */
 enum ex_stall { EX_STALL_LASER_OFF, EX_STALL_VERIFY, EX_STALL_HOMING, EX_STALL_MOVE, EX_STALL_SETTLE, EX_STALL_DARK,
-		EX_STALL_EXPOSURE, EX_STALL_ACQ, EX_STALL_RETRY, EX_STALL_OTHER, EX_STALL__COUNT };
+		EX_STALL_EXPOSURE, EX_STALL_ACQ, EX_STALL_RETRY, EX_STALL_DURABLE, EX_STALL_OTHER, EX_STALL__COUNT };
 
 struct pending {
 	const char *kind;            /* "dark", "sample", "reference", "beam" */
@@ -98,6 +99,7 @@ struct ex {
 	int nref;                    /* reference exposures reloaded so far (ex_load_reference) */
 	struct exp_rate *rates[EX_MAX_TIMES];
 	struct exp_rate *merged, *ref_rate;
+	uint64_t durable_mark;       /* PH_DURABLE: the point's commit (store_commit_mark) */
 	struct pending pend[EX_MAX_PENDING];
 	int npend;
 	int attempts;                /* acquisitions of this point spoiled by saturation */
@@ -147,6 +149,10 @@ double ex_wall_now(struct ex *x);
 /* Record an event in the store and tell the sink (a store failure is not fatal). */
 void ex_event(struct ex *x, const char *kind, const char *device, const char *fmt, ...)
 	__attribute__((format(printf, 4, 5)));
+/* The sweep's state and its event in one transaction (a halt: both stored or neither), then the sink as
+ * ex_event. */
+void ex_state_event(struct ex *x, const char *state, const char *kind, const char *device, const char *fmt, ...)
+	__attribute__((format(printf, 5, 6)));
 /* The sweep's state in the store (best effort). */
 void ex_set_db_state(struct ex *x, const char *state);
 /* Free every pending spectrum. */
@@ -194,5 +200,7 @@ int ex_load_reference(struct ex *x, struct acq_err *err);
 void ex_wait_batch(struct ex *x);
 /* Phase step: acquisition shots, then the point's commit. */
 void ex_run_acq(struct ex *x, double now);
+/* Phase step: the committed point on disk? Then the sweep goes on to the next (a failed fsync fails it). */
+void ex_run_durable(struct ex *x, double now);
 
 #endif

@@ -138,18 +138,24 @@ void exp_dark_forget(struct exp_darks *d, double t_ms);
 const char *exp_dark_need_name(enum exp_dark_need n);
 
 /* ---- exposure priors (exposure_prior.c) */
+struct bench_geom;
 struct plan_prior;
+struct plan_timing;
 struct store;
 struct store_prior_row;
 /* The exposure prior (plan.h) of one sweep from its exposures (store_prior_each's rows, in incidence, point and time
  * order): per incidence the points' first exposures (median, mean, longest/shortest), the darks taken there (count,
  * mean time) and the further (HDR) exposures per point (count, mean time); over the sweep the median, spread and
  * the fraction of points with an HDR exposure. Incidences past PLAN_PRIOR_MAX_INC are left out of the rows (counted
- * over the sweep). sweep and sample are not set. 0, or -1 out of memory. */
-int exp_prior_build(const struct store_prior_row *rows, size_t n, struct plan_prior *out);
+ * over the sweep); with g and t (the bench and the executor's timing, time scale included) also the host's real
+ * seconds per point there (host_per_point_s, host_points: what the sweep took between commits beyond the bench's
+ * part). sweep and sample are not set. 0, or -1 out of memory. */
+int exp_prior_build(const struct store_prior_row *rows, size_t n, const struct bench_geom *g,
+		    const struct plan_timing *t, struct plan_prior *out);
 /* The exposure prior of a plan naming sample: from the latest completed auto sweep of that sample in st other than
- * exclude (0: none); out->sweep 0 when there is none (or it has no done point). 0, or -1 with err. */
-int exp_prior_load(struct store *st, const char *sample, long long exclude, struct plan_prior *out,
-		   struct acq_err *err);
+ * exclude (0: none), the host's time per point priced with g and t (NULL: none); out->sweep 0 when there is none
+ * (or it has no done point). 0, or -1 with err. */
+int exp_prior_load(struct store *st, const char *sample, long long exclude, const struct bench_geom *g,
+		   const struct plan_timing *t, struct plan_prior *out, struct acq_err *err);
 
 #endif

@@ -40,16 +40,88 @@ static void prior_inc(struct plan_prior_inc *q, double theta_i, double *first, s
 	q->median_ms = median_of(first, np);
 }
 
-int exp_prior_build(const struct store_prior_row *rows, size_t n, struct plan_prior *out)
+/* One done point of the prior's sweep, for the host's time per point. */
+struct hpt {
+	int64_t order;
+	double done_at, first_ms, shots_s; /* its commit (wall s), first exposure, its exposures' bench time */
+	struct plan_pos pos;
+};
+
+static int cmp_hpt(const void *a, const void *b)
+{
+	const struct hpt *x = a, *y = b;
+	return (x->order > y->order) - (x->order < y->order);
+}
+
+/* Moves shorter than this (degrees) are the arms' positioning noise and backlash, not a move of the plan. */
+#define HOST_STILL_DEG 0.05
+
+/* The host's real seconds per point in the prior's sweep (see exp_prior_build): for each point that follows its
+ * predecessor in the plan's order, the real time between their commits less what the bench took at the time scale
+ * (the straight move between the reached angles with its settling and polling, the probe at the previous point's
+ * first time, its exposures and darks). The mean over the points within 1 s of the median (a pause or a fault
+ * recovery is no host time). */
+static void prior_host(struct hpt *h, size_t n, const struct bench_geom *g, const struct plan_timing *t,
+		       struct plan_prior *out)
+{
+	out->host_per_point_s = 0;
+	out->host_points = 0;
+	if (!g || !t || n < 2 || !(t->time_scale > 0))
+		return;
+	qsort(h, n, sizeof *h, cmp_hpt);
+	double *v = malloc(n * sizeof *v), *w = malloc(n * sizeof *w);
+	if (!v || !w) {
+		free(v);
+		free(w);
+		return;
+	}
+	size_t m = 0;
+	for (size_t i = 1; i < n; i++) {
+		if (h[i].order != h[i - 1].order + 1 || !(h[i].done_at > 0) || !(h[i - 1].done_at > 0))
+			continue;
+		struct plan_pos a = h[i - 1].pos, b = h[i].pos;
+		if (fabs(a.laser_theta - b.laser_theta) < HOST_STILL_DEG)
+			b.laser_theta = a.laser_theta;
+		if (fabs(a.det_theta - b.det_theta) < HOST_STILL_DEG)
+			b.det_theta = a.det_theta;
+		if (fabs(a.det_phi - b.det_phi) < HOST_STILL_DEG)
+			b.det_phi = a.det_phi;
+		double mv = plan_straight_s(g, &a, &b);
+		double bench = (mv > 0 ? mv + 1.5 * t->axis_poll_s + t->extra_settle_s : 0) + h[i].shots_s +
+			       h[i - 1].first_ms / 1000.0 + g->readout_s + t->exposure_overhead_s;
+		v[m++] = h[i].done_at - h[i - 1].done_at - bench / t->time_scale;
+	}
+	if (m > 0) {
+		memcpy(w, v, m * sizeof *w);
+		double med = median_of(w, m), sum = 0;
+		size_t k = 0;
+		for (size_t i = 0; i < m; i++)
+			if (v[i] <= med + 1.0) {
+				sum += v[i];
+				k++;
+			}
+		out->host_per_point_s = fmax(0, sum / (double)k);
+		out->host_points = k;
+	}
+	free(v);
+	free(w);
+}
+
+int exp_prior_build(const struct store_prior_row *rows, size_t n, const struct bench_geom *g,
+		    const struct plan_timing *t, struct plan_prior *out)
 {
 	out->points = out->n_inc = 0;
 	out->median_ms = out->spread = out->hdr_fraction = 0;
 	double *all = malloc((n ? n : 1) * sizeof *all), *first = malloc((n ? n : 1) * sizeof *first);
-	if (!all || !first) {
+	struct hpt *hp = malloc((n ? n : 1) * sizeof *hp);
+	size_t nh = 0;
+	if (!all || !first || !hp) {
 		free(all);
 		free(first);
+		free(hp);
 		return -1;
 	}
+	double ovh = g ? g->readout_s + (t ? t->exposure_overhead_s : 0) : 0;
 	size_t na = 0, n_hdr = 0;
 	for (size_t i = 0; i < n;) {
 		/* one incidence: rows[i..j) */
@@ -61,8 +133,10 @@ int exp_prior_build(const struct store_prior_row *rows, size_t n, struct plan_pr
 			/* one point: rows[j..k); its first exposure is its shortest (an HDR one is hdr_ratio times longer) */
 			int64_t pid = rows[j].point_id;
 			size_t ns = 0;
-			double lo = INFINITY, sum = 0;
+			double lo = INFINITY, sum = 0, shots = 0;
+			const struct store_prior_row *p0 = &rows[j];
 			for (; j < n && rows[j].point_id == pid && fabs(rows[j].theta_i - th) < 1e-6; j++) {
+				shots += rows[j].averages * rows[j].integration_ms / 1000.0 + ovh;
 				if (rows[j].dark) {
 					nd++;
 					dms += rows[j].integration_ms;
@@ -74,6 +148,8 @@ int exp_prior_build(const struct store_prior_row *rows, size_t n, struct plan_pr
 			}
 			if (ns == 0)
 				continue;
+			hp[nh++] = (struct hpt){ p0->order_index, p0->done_at, lo, shots,
+						 { p0->arm[0], p0->arm[1], p0->arm[2] } };
 			first[np++] = all[na++] = lo;
 			nx += ns - 1;
 			xms += sum - lo;
@@ -94,8 +170,10 @@ int exp_prior_build(const struct store_prior_row *rows, size_t n, struct plan_pr
 		out->hdr_fraction = (double)n_hdr / (double)na;
 		out->median_ms = median_of(all, na);
 	}
+	prior_host(hp, nh, g, t, out);
 	free(all);
 	free(first);
+	free(hp);
 	return 0;
 }
 
@@ -119,14 +197,15 @@ static int add_row(void *ctx, const struct store_prior_row *r)
 	return 0;
 }
 
-int exp_prior_load(struct store *st, const char *sample, long long exclude, struct plan_prior *out, struct acq_err *err)
+int exp_prior_load(struct store *st, const char *sample, long long exclude, const struct bench_geom *g,
+		   const struct plan_timing *t, struct plan_prior *out, struct acq_err *err)
 {
 	memset(out, 0, sizeof *out);
 	struct rows R = { 0 };
 	int64_t id = 0;
 	int rc = store_prior_each(st, sample, exclude, &id, add_row, &R, err);
 	if (rc == 0 && id > 0) {
-		if (exp_prior_build(R.v, R.n, out))
+		if (exp_prior_build(R.v, R.n, g, t, out))
 			rc = acq_errf(err, ACQ_E_NOMEM, "exposure prior of sample '%s': out of memory", sample);
 		else if (out->n_inc > 0) {
 			out->sweep = id;

@@ -32,7 +32,7 @@ struct rsel {
 	rsel_done_fn done;
 	void *ctx;
 	const struct plan_spec *spec;
-	char target[256], batch[16], prev[4096], prog[4096];
+	char target[256], batch[16], prev[4096], prog[4096], route[512];
 	char samples[4200], cand[4200], out[4200];
 	struct rsel_res res;
 	double t0;
@@ -163,33 +163,40 @@ static int cand_child(void *arg, int fd)
 		dprintf(fd, "%s\n", err.msg);
 		return 1;
 	}
-	FILE *f = fopen(r->cand, "w");
-	if (!f) {
-		dprintf(fd, "%s: %s\n", r->cand, strerror(errno));
-		free(c);
-		return 1;
-	}
-	fprintf(f, "id,theta_i,phi_i,theta_o,phi_o,cost_s\n");
-	for (size_t i = 0; i < n; i++) {
-		double ti, pi, to, po;
-		ex_pos_angles(g, &c[i].pos, &ti, &pi, &to, &po);
-		fprintf(f, "%zu,%.9g,%.9g,%.9g,%.9g,%.6g\n", c[i].id, ti, pi, to, po, c[i].cost_s);
-	}
+	int bad = rsel_write_candidates(r->cand, g, c, n, &err);
 	free(c);
-	bool bad = ferror(f) != 0;
-	if (fclose(f) || bad) {
-		dprintf(fd, "%s: write failed\n", r->cand);
+	if (bad) {
+		dprintf(fd, "%s\n", err.msg);
 		return 1;
 	}
 	snprintf(line, sizeof line, "%zu\n", n);
 	return write(fd, line, strlen(line)) < 0 ? 1 : 0;
 }
 
+int rsel_write_candidates(const char *path, const struct bench_geom *g, const struct plan_cand *c, size_t n,
+			  struct acq_err *err)
+{
+	FILE *f = fopen(path, "w");
+	if (!f)
+		return acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
+	fprintf(f, "id,theta_i,phi_i,theta_o,phi_o,cost_s,base_s,open_s,laser_deg,det_theta_deg,det_phi_deg\n");
+	for (size_t i = 0; i < n; i++) {
+		double ti, pi, to, po;
+		ex_pos_angles(g, &c[i].pos, &ti, &pi, &to, &po);
+		fprintf(f, "%zu,%.9g,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.9g,%.9g,%.9g\n", c[i].id, ti, pi, to, po, c[i].cost_s,
+			c[i].base_s, c[i].open_s, c[i].pos.laser_theta, c[i].pos.det_theta, c[i].pos.det_phi);
+	}
+	bool bad = ferror(f) != 0;
+	if (fclose(f) || bad)
+		return acq_errf(err, ACQ_E_IO, "%s: write failed", path);
+	return 0;
+}
+
 static void next(struct rsel *r)
 {
 	struct acq_err err = { 0 };
 	double timeout = r->env->conf->recon.timeout_s * rate_of(r);
-	char *argv[16];
+	char *argv[20];
 	int argc = 0;
 	if (r->stage == RS_PROBE && r->warm_ok >= 0)
 		r->stage = RS_FIT;
@@ -216,6 +223,8 @@ static void next(struct rsel *r)
 		argv[argc++] = r->res.model;
 		argv[argc++] = "--candidates";
 		argv[argc++] = r->cand;
+		argv[argc++] = "--route"; /* each pick charged its increment to the batch's route from the arms */
+		argv[argc++] = r->route;
 		argv[argc++] = "--target";
 		argv[argc++] = r->target;
 		argv[argc++] = "--batch";
@@ -268,6 +277,7 @@ int rsel_start(struct rsel *r, const struct rsel_req *q, rsel_done_fn done, void
 	snprintf(r->prev, sizeof r->prev, "%s", q->prev_model ? q->prev_model : "");
 	snprintf(r->batch, sizeof r->batch, "%zu", q->batch_size);
 	plan_adaptive_target_spec(q->spec->adaptive, r->target, sizeof r->target);
+	plan_adaptive_route_spec(&c->bench, &q->timing, &q->from, r->route, sizeof r->route);
 	unlink(r->out); /* a decision made again must not read the previous answer */
 	r->spec = q->spec;
 	r->q = q; /* read by the forked child only (its own copy of memory) */

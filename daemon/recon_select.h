@@ -2,7 +2,8 @@
  * loop never waits): in a forked child, the sweep's calibrated samples so far exported as CSV (through a read-only
  * connection of its own) and the reachable candidates (planner: blind zones, collisions, limits, safe paths; cost_s
  * from plan_time.c); then `brdf-recon fit` (warm-started from the previous batch's model with --warm when this brdf-recon has it), then `brdf-recon select
- * MODEL --candidates CAND.csv --target SPEC --batch N -o OUT.json` (the contract in /work/notes/OWNERS.md). */
+ * MODEL --candidates CAND.csv --route ROUTE --target SPEC --batch N -o OUT.json` (each pick charged its increment to
+ * the batch's route, plan_adaptive_route_spec) (the contract in /work/notes/OWNERS.md). */
 #ifndef RECON_SELECT_H
 #define RECON_SELECT_H
 
@@ -16,6 +17,12 @@
 #include "daemon/sweep.h"
 
 struct rsel;
+
+/* Write the candidates c[n] on bench g to path as `brdf-recon select --candidates` reads them (header id, theta_i,
+ * phi_i, theta_o, phi_o, cost_s, base_s, open_s, laser_deg, det_theta_deg, det_phi_deg: sample-frame angles, costs,
+ * bench axis positions; the daemon's decisions and the offline study's helper write them alike). 0, or -1 with err. */
+int rsel_write_candidates(const char *path, const struct bench_geom *g, const struct plan_cand *c, size_t n,
+			  struct acq_err *err);
 
 /* One decision to make (everything borrowed until rsel_start returns, spec until the callback). */
 struct rsel_req {

@@ -4,7 +4,7 @@
  * and it is dropped past out_drop or stall_s; incomplete lines and idle connections time out; connections
  * are limited per user with the last slots kept for controllers; a refused client gets the banner and the
  * refusal before the connection closes. Each observer's requests are limited to daemon.observer_rate a second
- * (bursts of daemon.observer_burst): beyond, its lines wait unread until the rate allows them (server.c,
+ * (bursts of daemon.observer_burst): beyond, its lines wait unread until the rate allows them (server_rate.c,
  * struct bucket); controllers are never limited. Loopback TCP (daemon.tcp_port, off by default) gives observer
  * access to every local user: it carries no credentials. */
 #ifndef SERVER_H

@@ -3,7 +3,8 @@
  * The module's other files: store_migrate.c (schema creation and migrations), store_sweep.c (sweeps, points,
  * devices, calibrated samples, events), store_spectra.c (spectra and the stored reference), store_recon.c
  * (reconstruction runs), store_export.c (the CSV interchange format), store_prior.c (the sample a sweep measured,
- * the exposures of an exposure prior). */
+ * the exposures of an exposure prior), store_group.c (a point's writes in one transaction), store_ckpt.c and
+ * store_sync.c (the WAL's checkpoints and the commits' fsyncs on threads of their own). */
 #include "daemon/store.h"
 
 #include <errno.h>
@@ -147,6 +148,11 @@ out:
 	return rc;
 }
 
+const char *store_degraded(const struct store *st)
+{
+	return st->degraded[0] ? st->degraded : NULL;
+}
+
 int store_open(const char *path, struct store **out, struct acq_err *err)
 {
 	*out = NULL;
@@ -178,8 +184,21 @@ int store_open(const char *path, struct store **out, struct acq_err *err)
 	for (int i = 0; i < ST__COUNT; i++)
 		if (!(st->st[i] = store_prep(st, store_sql[i], err)))
 			goto fail;
-	if (store_ckpt_start(st, err))
-		goto fail;
+	/* The commits' fsyncs and the WAL's checkpoints on threads of their own, off the caller's (the daemon's
+	 * loop); what cannot start falls back to SQLite's own on the committing thread, said by store_degraded(). */
+	struct acq_err e1 = { 0 }, e2 = { 0 };
+	if (store_ckpt_start(st, &e1))
+		snprintf(st->degraded, sizeof st->degraded, "%s: SQLite checkpoints the WAL inside commits", e1.msg);
+	if (store_sync_start(st, &e2) == 0) {
+		if (store_exec(st, "PRAGMA synchronous = NORMAL", err))
+			goto fail;
+	} else {
+		size_t n = strlen(st->degraded);
+		snprintf(st->degraded + n, sizeof st->degraded - n, "%s%s: every commit fsyncs before it returns",
+			 n ? "; " : "", e2.msg);
+	}
+	if (st->ckpt || st->sync)
+		sqlite3_wal_hook(st->db, store_wal_hook, st);
 	*out = st;
 	return 0;
 fail:
@@ -194,8 +213,11 @@ void store_close(struct store *st)
 	for (int i = 0; i < ST__COUNT; i++)
 		sqlite3_finalize(st->st[i]);
 	if (st->db) {
-		if (!st->reader)
+		if (!st->reader) {
+			sqlite3_wal_hook(st->db, NULL, NULL);
+			store_sync_stop(st);
 			store_ckpt_stop(st);
+		}
 		if (!st->reader)
 			sqlite3_exec(st->db, "PRAGMA wal_checkpoint(TRUNCATE)", NULL, NULL, NULL);
 		sqlite3_close(st->db);

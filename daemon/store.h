@@ -1,7 +1,8 @@
 /* store: the SQLite database of sweeps, points, spectra, calibrations, reconstruction runs and events
  * (schema: daemon/schema.sql; the module's files daemon/store*.c, listed in store.c). WAL mode, one transaction
- * per spectrum, versioned schema with migrations; a foreign or corrupt file is refused and never written. Never
- * logs: -1 + struct acq_err. */
+ * per write (a point's writes grouped in one), commits made durable by the store's own thread (store_durable),
+ * versioned schema with migrations; a foreign or corrupt file is refused and never written. Never logs: -1 +
+ * struct acq_err. */
 #ifndef STORE_H
 #define STORE_H
 
@@ -78,7 +79,8 @@ int store_sweep_next_point(struct store *st, int64_t id, int *order_index, int64
 /* Delete the spectra of a point not yet done (a partial point before a resume: nothing twice). 0 or -1. */
 int store_point_discard_partial(struct store *st, int64_t point_id, struct acq_err *err);
 
-/* Insert one spectrum in its own transaction (committed on return). *id may be NULL. 0 or -1. */
+/* Insert one spectrum in its own transaction (committed on return; on disk once store_durable says so). *id may be
+ * NULL. 0 or -1. */
 int store_spectrum_add(struct store *st, const struct store_spectrum *sp, int64_t *id, struct acq_err *err);
 /* Number of spectra (of sweep_id, or all when sweep_id is 0). -1 on error. */
 int64_t store_spectrum_count(struct store *st, int64_t sweep_id, struct acq_err *err);
@@ -158,11 +160,17 @@ struct store_prior_row {
 	int64_t point_id;
 	bool dark;
 	double integration_ms;
+	int averages;
+	/* the point's: */
+	int64_t order_index;
+	double done_at;             /* wall clock, s */
+	double arm[3];              /* the arms' reached angles: laser.theta, detector.theta, detector.phi */
 };
 typedef int (*store_prior_fn)(void *ctx, const struct store_prior_row *row);
 /* The latest completed sweep of sample (by name) whose exposures the auto exposure chose, other than exclude (0:
  * none): its id in *sweep_id (0 when there is none, and fn is not called), and its done points' sample and dark
- * exposures to fn, by incidence, point and time taken (fn nonzero stops). 0 or -1. */
+ * exposures with their point's order, commit time and reached angles to fn, by incidence, point and time taken (fn
+ * nonzero stops). 0 or -1. */
 int store_prior_each(struct store *st, const char *sample, int64_t exclude, int64_t *sweep_id, store_prior_fn fn,
 		     void *ctx, struct acq_err *err);
 
@@ -185,5 +193,27 @@ int store_group_end(struct store *st, int rc, struct acq_err *err);
 /* The WAL's checkpoints run so far on the store's own thread (store_ckpt.c): how many, their seconds in all, the
  * longest (zeros where SQLite checkpoints on the committing thread instead). */
 void store_ckpt_stats(const struct store *st, unsigned long *runs, double *seconds, double *max_s);
+
+/* ---- durability (store_sync.c). A read-write store's commits return before their fsync (synchronous=NORMAL: a
+ * process crash keeps them, a power loss may lose the latest); a thread of the store's fsyncs the WAL after them.
+ * A commit is on disk once store_durable() says so for its mark. Where that thread cannot start, every commit
+ * fsyncs before it returns (store_degraded() says so) and every mark is durable at once. */
+/* The mark of the latest commit on st (0: none yet). */
+uint64_t store_commit_mark(const struct store *st);
+/* 1 when every commit up to mark is on disk, 0 not yet, -1 with err when an fsync failed (sticky: no later
+ * commit is known durable either). */
+int store_durable(struct store *st, uint64_t mark, struct acq_err *err);
+/* store_durable(), waiting (blocking) while it is 0. 1 or -1. */
+int store_durable_wait(struct store *st, uint64_t mark, struct acq_err *err);
+/* A descriptor readable when more commits became durable or an fsync failed (-1: none, durability is
+ * synchronous); store_durable_drain() resets it (non-blocking). */
+int store_durable_fd(const struct store *st);
+void store_durable_drain(struct store *st);
+/* What of the store's own threads could not start, and what SQLite does instead (NULL: all run). */
+const char *store_degraded(const struct store *st);
+/* Test seam: fn(ctx) runs on the fsync thread before each fsync (a delay; nonzero with why filled: that fsync
+ * fails). NULL removes it. */
+typedef int (*store_sync_hook_fn)(void *ctx, char *why, size_t n);
+void store_sync_set_hook(struct store *st, store_sync_hook_fn fn, void *ctx);
 
 #endif

@@ -5,6 +5,7 @@
 
 #include <sqlite3.h>
 #include <stdbool.h>
+#include <stdint.h>
 
 #include "daemon/store.h"
 
@@ -17,6 +18,9 @@ struct store {
 	sqlite3_stmt *st[ST__COUNT];
 	bool reader;  /* store_open_reader(): read-only, no statements prepared, no checkpoint at close */
 	struct store_ckpt *ckpt; /* the WAL's checkpoints off the committing thread (store_ckpt.c) */
+	struct store_sync *sync; /* the commits' fsyncs off the committing thread (store_sync.c) */
+	uint64_t mark;           /* the latest commit's mark (store_commit_mark) */
+	char degraded[1200];     /* store_degraded(): what could not start ("" = nothing) */
 	bool group, group_failed; /* store_group_begin(): the writes join its transaction; one of them failed */
 };
 
@@ -52,10 +56,20 @@ int store_points_insert(struct store *st, int64_t sweep_id, const struct store_p
 /* Bring an open read-write store's schema to STORE_SCHEMA_VERSION (store_migrate.c): a new database from
  * daemon/schema.sql, an older one step by step, each step one transaction. 0 or -1. */
 int store_migrate(struct store *st, struct acq_err *err);
-/* Take over the WAL's checkpoints of a read-write store: a thread of its own runs them (store_ckpt.c); where
- * it cannot start, SQLite's own stay. 0. */
+/* Take over the WAL's checkpoints of a read-write store: a thread of its own runs them (store_ckpt.c), told by
+ * store_wal_hook. 0, or -1 with err (nothing started: SQLite's own checkpoints stay). */
 int store_ckpt_start(struct store *st, struct acq_err *err);
+/* A commit left pages in the WAL: past the threshold, the thread checkpoints. */
+void store_ckpt_note(struct store_ckpt *c, int pages);
 /* Stop them (before the store's connection closes). */
 void store_ckpt_stop(struct store *st);
+/* Take over the commits' fsyncs of a read-write store (store_sync.c): a thread of its own runs them, told by
+ * store_wal_hook. 0, or -1 with err (nothing started: the caller keeps synchronous=FULL). */
+int store_sync_start(struct store *st, struct acq_err *err);
+/* Stop it, after it synced every commit made (before the store's connection closes). */
+void store_sync_stop(struct store *st);
+/* The WAL hook of the write connection (arg: the store): after every commit, tell the sync and checkpoint
+ * threads (without a checkpoint thread: SQLite's own automatic checkpoint). SQLITE_OK. */
+int store_wal_hook(void *arg, sqlite3 *db, const char *name, int pages);
 
 #endif

@@ -39,7 +39,9 @@ int store_prior_each(struct store *st, const char *sample, int64_t exclude, int6
 	if (!id)
 		return 0;
 	/* a dark is stored with the point it was taken for (before that point's exposure) */
-	s = store_prep(st, "SELECT p.theta_i, p.id, x.kind = 'dark', x.integration_ms FROM points p "
+	s = store_prep(st, "SELECT p.theta_i, p.id, x.kind = 'dark', x.integration_ms, x.averages, p.order_index, "
+			   "coalesce(p.done_at, 0), coalesce(p.laser_theta, 0), coalesce(p.detector_theta, 0), "
+			   "coalesce(p.detector_phi, 0) FROM points p "
 			   "JOIN spectra x ON x.sweep_id = p.sweep_id AND x.point_id = p.id "
 			   "WHERE p.sweep_id = ? AND p.state = 'done' AND x.kind IN ('sample', 'dark') "
 			   "ORDER BY p.theta_i, p.order_index, x.id", err);
@@ -48,7 +50,11 @@ int store_prior_each(struct store *st, const char *sample, int64_t exclude, int6
 	sqlite3_bind_int64(s, 1, id);
 	while ((rc = sqlite3_step(s)) == SQLITE_ROW) {
 		struct store_prior_row r = { sqlite3_column_double(s, 0), sqlite3_column_int64(s, 1),
-					     sqlite3_column_int(s, 2) != 0, sqlite3_column_double(s, 3) };
+					     sqlite3_column_int(s, 2) != 0, sqlite3_column_double(s, 3),
+					     sqlite3_column_int(s, 4), sqlite3_column_int64(s, 5),
+					     sqlite3_column_double(s, 6),
+					     { sqlite3_column_double(s, 7), sqlite3_column_double(s, 8),
+					       sqlite3_column_double(s, 9) } };
 		if (fn(ctx, &r))
 			break;
 	}

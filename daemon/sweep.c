@@ -4,6 +4,7 @@
 #include "daemon/sweep.h"
 
 #include <math.h>
+#include <poll.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -238,6 +239,18 @@ static void on_device(void *ctx)
 		kick(sw);
 }
 
+/* A committed point the executor waits for is on disk (store_durable_fd): step it now. */
+static void on_durable(struct loop *lp, int fd, short revents, void *arg)
+{
+	(void)lp;
+	(void)fd;
+	(void)revents;
+	struct sweep *sw = arg;
+	store_durable_drain(sw->env.store);
+	if (sw->ex)
+		kick(sw);
+}
+
 static int load_cfg(const struct conf *c, struct ex_cfg *cfg, struct acq_err *err)
 {
 	ex_cfg_defaults(cfg);
@@ -322,6 +335,12 @@ int sweep_init(const struct sweep_env *env, struct sweep **out, struct acq_err *
 	}
 	if (env->devices)
 		devices_set_kick(env->devices, on_device, sw);
+	/* The points' fsyncs run on the store's thread; its completions step the executor (else it waits in its step). */
+	int dfd = env->store ? store_durable_fd(env->store) : -1;
+	if (dfd >= 0 && loop_fd_add(env->loop, dfd, POLLIN, on_durable, sw, NULL) == 0) {
+		loop_fd_urgent(env->loop, dfd);
+		sw->cfg.durable_async = true;
+	}
 	sw->last.eta_s = NAN;
 	*out = sw;
 	return 0;
@@ -340,6 +359,8 @@ void sweep_finish(struct sweep *sw)
 	recon_chain_free(sw->chain);
 	if (sw->env.devices)
 		devices_set_kick(sw->env.devices, NULL, NULL);
+	if (sw->cfg.durable_async)
+		loop_fd_del(sw->env.loop, store_durable_fd(sw->env.store));
 	release(sw);
 	adapt_free(sw->adapt);
 	free(sw);
@@ -377,7 +398,7 @@ void sweep_plan_prior(const struct sweep *sw, const struct plan_spec *spec, int6
 	if (!spec || spec->integ_mode != PLAN_INTEG_AUTO || !spec->sample[0] || !sw->env.store)
 		return;
 	struct acq_err err = { 0 };
-	if (exp_prior_load(sw->env.store, spec->sample, exclude, &t->prior, &err)) {
+	if (exp_prior_load(sw->env.store, spec->sample, exclude, &sw->env.conf->bench, t, &t->prior, &err)) {
 		log_msg(LOG_WARNING, "exposure prior of sample '%s': %s (timed from the plan's estimate)", spec->sample,
 			err.msg);
 		memset(&t->prior, 0, sizeof t->prior);

@@ -412,12 +412,29 @@ void ctl_print_plan(FILE *f, json_t *r)
 		}
 		fputc('\n', f);
 	}
+	json_t *tm = json_object_get(r, "predicted_terms");
+	if (json_is_object(tm)) { /* the prediction term by term (plan.h; they sum to it) */
+		static const char *const keys[][2] = { { "reference_s", "reference" }, { "motion_s", "motion" },
+						       { "settle_s", "settling" }, { "probes_s", "probes" },
+						       { "darks_s", "darks" }, { "first_exposures_s", "first exposures" },
+						       { "hdr_s", "HDR exposures" }, { "host_s", "host" } };
+		fputs("  of which", f);
+		for (size_t i = 0; i < sizeof keys / sizeof keys[0]; i++) {
+			ctl_fmt_dur(num(tm, keys[i][0]), a, sizeof a);
+			fprintf(f, "%s %s %s", i ? "," : "", keys[i][1], a);
+		}
+		fputc('\n', f);
+	}
 	json_t *pr = json_object_get(r, "exposure_prior");
-	if (json_is_object(pr))
+	if (json_is_object(pr)) {
 		fprintf(f, "  auto exposure timed from sweep %lld of sample %s (%lld points at %lld incidences: median %.3g ms, "
-			   "spread %.3gx, HDR on %.0f %% of the points)\n",
+			   "spread %.3gx, HDR on %.0f %% of the points",
 			num_i(pr, "sweep"), str(pr, "sample"), num_i(pr, "points"), num_i(pr, "incidences"),
 			num(pr, "median_ms"), num(pr, "spread"), 100 * num(pr, "hdr_fraction"));
+		if (json_is_number(json_object_get(pr, "host_per_point_s")))
+			fprintf(f, "; the host's time per point there %.1f ms", 1000 * num(pr, "host_per_point_s"));
+		fputs(")\n", f);
+	}
 	else if (json_is_string(json_object_get(r, "sample")))
 		fprintf(f, "  auto exposure timed from the plan's estimate: no completed auto sweep of sample %s to take a "
 			   "prior from (only a daemon reads its database)\n", str(r, "sample"));

@@ -1,7 +1,6 @@
 /* select: greedy choice of the next measurements by expected variance reduction of the target per second of
  * bench time, with a rank-one update of the Gaussian-process posterior between picks. */
 #include <cblas.h>
-#include <cblas.h>
 #include <lapacke.h>
 #include <math.h>
 #include <stdlib.h>
@@ -12,6 +11,7 @@
 
 void select_opts_default(struct select_opts *o)
 {
+	o->route = NULL;
 	o->batch = 16;
 	o->ndraws = 16;
 	o->seed = 1;
@@ -176,6 +176,7 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 	tp[0].lnf_threshold = 0;
 	struct select_result r2 = { 0 };
 	struct sel s[2];
+	struct sel_route route = { 0 };
 	size_t np = both ? 2 : 1;
 	int rc = -1;
 	memset(s, 0, sizeof s);
@@ -196,12 +197,20 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 		goto out;
 	}
 	size_t J = s[0].J;
+	if (o.route && (!o.route->pos || !o.route->base || !o.route->open)) {
+		acq_errf(err, ACQ_E_INVAL, "select: a route needs the candidates' positions, base and open costs");
+		goto out;
+	}
+	if (o.route && sel_route_init(&route, o.route, s[0].batch)) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
 	double E[2], E0[2], value = r->value, thr = both ? 1.0 : t->threshold;
 	for (size_t k = 0; k < np; k++)
 		E[k] = E0[k] = sel_excess(&s[k], SIZE_MAX, NULL);
 	while (r->npicks < s[0].batch && !(isfinite(thr) && value <= thr)) {
-		size_t best = SIZE_MAX;
-		double bscore = 0, bgain = 0;
+		size_t best = SIZE_MAX, bat = 0;
+		double bscore = 0, bgain = 0, bcost = 0;
 		for (size_t j = 0; j < J; j++) {
 			if (s[0].picked[j])
 				continue;
@@ -212,11 +221,16 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 				any |= g > 1e-12 * E0[k];
 				gain += both ? (E0[k] > 0 ? g / E0[k] : 0) : g;
 			}
-			double score = gain / s[0].cost[j];
-			if (any && gain > 0 && score > bscore) {
+			if (!any || !(gain > 0))
+				continue;
+			size_t at = 0;
+			double c = o.route ? sel_route_cost(&route, s[0].rep[j], &at) : s[0].cost[j], score = gain / c;
+			if (score > bscore) {
 				best = j;
 				bscore = score;
 				bgain = gain;
+				bcost = c;
+				bat = at;
 			}
 		}
 		if (best == SIZE_MAX)
@@ -228,6 +242,9 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 		pk->index = s[0].rep[best];
 		pk->gain = bgain;
 		pk->gain_per_s = bscore;
+		pk->cost = bcost;
+		if (o.route)
+			sel_route_add(&route, pk->index, bat);
 		E[0] = sel_excess(&s[0], SIZE_MAX, pk->predicted_per);
 		/* the predicted value: the GP part updated, the other parts as they are (DHR: the largest incidence) */
 		value = 0;
@@ -243,6 +260,7 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 	}
 	rc = 0;
 out:
+	sel_route_free(&route);
 	if (rc)
 		select_result_free(r);
 	for (size_t k = 0; k < np; k++)

@@ -35,7 +35,23 @@ struct select_target {
  * "dhr:8,30,60:le=X+lnf:le=Y" (both thresholds required). 0, or -1 with err saying what is wrong. */
 int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err);
 
+/* The batch's route, for charging each pick its increment to it (NULL in select_opts: each pick costs its cost[j],
+ * the measurement from the arms' position). Candidate j (input order) is measured at bench axis positions
+ * pos[3j..3j+2] (laser θ, detector θ, detector φ, degrees) and costs base[j] seconds at an incidence (laser position)
+ * the batch visits already (the arms' own included: the executor keeps its dark cache while the incidence stays),
+ * base[j] + open[j] at one it does not (the darks of a new incidence); its motion is the
+ * increment of inserting it into the batch's route from the arms (from) through the picks, at the cheapest place,
+ * each move timed as the planner's straight move: per axis a trapezoid (speed, accel), the slowest axis, the largest
+ * settle of the axes that move, plus move_s (polling, extra settling). The azimuth's distance is taken modulo 360°. */
+struct select_route {
+	const double *pos, *base, *open;
+	double from[3];
+	double speed[3], accel[3], settle[3]; /* degrees/s, degrees/s², s; speed and accel > 0 */
+	double move_s;
+};
+
 struct select_opts {
+	const struct select_route *route; /* NULL (default): each pick costs cost[j] */
 	size_t batch;     /* largest number of picks (default 16) */
 	int ndraws;       /* Monte-Carlo draws of the DHR's noise part (default 16) */
 	uint64_t seed;    /* their seed (default 1) */
@@ -50,6 +66,7 @@ struct select_pick {
 	double gain;           /* expected reduction of the criterion (target variance above the threshold²; a combined
 				* target: the sum of each part's reduction relative to its criterion before the batch) */
 	double gain_per_s;     /* gain / cost */
+	double cost;           /* the seconds charged: cost[index], or with a route its increment to the batch's route */
 	double predicted;      /* predicted target value after this pick and the ones before it */
 	double predicted_per[SELECT_MAX_THETA + 1];
 };

@@ -70,6 +70,27 @@ struct sel {
 	double *mrow, *gp; /* scratch: [J], [n] */
 };
 
+/* The batch's route while it is chosen (select_route.c): the arms, then the picks in route order; the incidences
+ * (laser positions) the arms and the picks visit. */
+struct sel_route {
+	const struct select_route *r;
+	double *pts;     /* [(batch+1)*3] */
+	size_t n;
+	double *inc;     /* [batch+2]: the arms' incidence, then the picks' new ones */
+	size_t ng;
+};
+/* Set up an empty route from r->from for at most batch picks. 0, or -1 out of memory (w freed). */
+int sel_route_init(struct sel_route *w, const struct select_route *r, size_t batch);
+/* Release it (idempotent after init or on a failed init). */
+void sel_route_free(struct sel_route *w);
+/* Candidate i's (input order) cost with the route as it is: its cheapest insertion's motion, base, and open when its
+ * incidence is new; where it would go into *at (may be NULL). > 0. */
+double sel_route_cost(const struct sel_route *w, size_t i, size_t *at);
+/* Insert candidate i at place at (from sel_route_cost). */
+void sel_route_add(struct sel_route *w, size_t i, size_t at);
+/* The straight move's seconds from bench position p to q under r's axis model (0: no axis moves). */
+double sel_route_move(const struct select_route *r, const double *p, const double *q);
+
 /* Everything before the first pick: the factorisation, the candidates, the target's functionals and their
  * covariances with the candidates, the current value into r. 0, or -1 with err (sel_free in both cases). */
 int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const double *ang, const double *cost,

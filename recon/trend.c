@@ -498,13 +498,7 @@ static double fit_coat_alphas(size_t n, const double *val, const double *eps, co
 int trend_fit(size_t n, size_t L, const double *val, const double *eps, const double *c6, const size_t *chan,
 	      size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err)
 {
-	return trend_fit_kind(RECON_TREND_GGX, n, L, val, eps, c6, chan, nc, alpha, coef, rms, err);
-}
-
-int trend_fit_kind(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
-		   const size_t *chan, size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err)
-{
-	return trend_fit_kind2(t, n, L, val, eps, c6, chan, nc, alpha, NULL, coef, rms, err);
+	return trend_fit_kind2(RECON_TREND_GGX, n, L, val, eps, c6, chan, nc, alpha, NULL, coef, rms, err);
 }
 
 /* Every channel's coefficients at the basis B; *rms (may be NULL) the RMS log residual over the scored channels. */

@@ -68,8 +68,6 @@ double trend_fit_coef(size_t n, const double *v, double eps, const double *B, do
 /* trend_fit for the trend kind t (RECON_TREND_GGX .. RECON_TREND__COUNT − 1); *alpha2 (may be NULL for the
  * one-roughness kinds, 0 written there) the second roughness of the two-lobe kind: a 2-D search (log grid, then
  * alternating golden sections) over α ∈ [TREND_ALPHA_MIN, α2/2], α2 ≤ TREND_ALPHA_MAX. */
-int trend_fit_kind(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
-		   const size_t *chan, size_t nc, double *alpha, double *coef, double *rms, struct acq_err *err);
 int trend_fit_kind2(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
 		    const size_t *chan, size_t nc, double *alpha, double *alpha2, double *coef, double *rms,
 		    struct acq_err *err);

@@ -51,7 +51,8 @@ static double mono_now(void)
 	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
-double sim_now(const struct sim_world *w)
+/* Bench seconds now. */
+static double sim_now(const struct sim_world *w)
 {
 	return (mono_now() - w->t0_mono) * w->scale;
 }

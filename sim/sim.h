@@ -91,9 +91,6 @@ int sim_listen_unix(const char *path, struct acq_err *err);
  * <pid>; sockets of this user only). Returns how many were removed (sim_stale.c). */
 int sim_stale_sockets_remove(const char *dir);
 
-/* Bench seconds now. */
-double sim_now(const struct sim_world *w);
-
 /* Service constructors (each in its own file). node: the device's config mapping; simcfg: the `sim:`
  * mapping (may be NULL). NULL with err on failure. */
 struct sim_service *sim_arm_new(struct sim_world *w, enum sim_arm_id arm, struct yc_node *node,

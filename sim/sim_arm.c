@@ -673,6 +673,11 @@ struct sim_service *sim_arm_new(struct sim_world *w, enum sim_arm_id arm, struct
 	}
 	if (s->ctx)
 		modbus_set_byte_timeout(s->ctx, 0, 100000);
+	/* On a server's context libmodbus uses the response timeout only for the pause before it flushes the input
+	 * after a request it rejects itself in modbus_reply (a quantity out of range, say): with its default 0.5 s,
+	 * one such frame froze every simulated device of acq-sim (one loop) for half a real second. */
+	if (s->ctx)
+		modbus_set_response_timeout(s->ctx, 0, 1000);
 	s->svc = (struct sim_service){ .name = key, .self = s, .pollfds = arm_pollfds, .handle = arm_handle,
 				       .tick = arm_tick, .describe = arm_describe, .destroy = arm_destroy };
 	return &s->svc;

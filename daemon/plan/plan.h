@@ -166,6 +166,13 @@ struct plan_result {
 	double darks_s;             /* of predicted_s: dark spectra */
 	double host_s;              /* of predicted_s: the host's time per point (point_overhead_s × time_scale each),
 				     * load-dependent at high time scales: reported apart */
+	/* predicted_s term by term (plan_time.c; they sum to it): each exposure term holds its shots' integration,
+	 * read-out and round trip */
+	double t_motion_s;          /* the points' moves (trapezoids), the ordering model's move_s */
+	double t_settle_s;          /* their settling, polling for the end and in-position check, extra_settle_s */
+	double t_probe_s;           /* auto: the probe exposures (one per point) */
+	double t_first_s;           /* each point's first (base) exposure, the plan's averages */
+	double t_hdr_s;             /* auto: the further (HDR) exposures */
 };
 
 /* The default integration.spread of auto plans: the range of times the bench chose at one viewing zenith on the
@@ -196,6 +203,8 @@ struct plan_prior {
 	char sample[PLAN_SAMPLE_MAX];
 	size_t points;              /* over all incidences: */
 	double median_ms, spread, hdr_fraction; /* median first exposure, longest/shortest, points with an HDR exposure */
+	double host_per_point_s;    /* the host's real seconds per point there (exp_prior_build), over host_points points */
+	size_t host_points;         /* (0: not measured; point_overhead_s then) */
 	size_t n_inc;
 	struct plan_prior_inc inc[PLAN_PRIOR_MAX_INC];
 };
@@ -223,6 +232,12 @@ struct plan_timing {
 	bool have_start;            /* the arms' position when the sweep starts is known (the daemon knows it) */
 	struct plan_pos start;      /* then the move from there to ref_pose (or the first point) is counted */
 	struct plan_prior prior;    /* auto integration: the exposure prior when prior.sweep > 0 (plan_time.c) */
+	/* an adaptive batch appended to a running sweep (plan_timing_continue): the executor keeps its dark cache
+	 * unless the batch starts at another incidence (executor_acq.c), so the first step clears it only then, and
+	 * the rungs counted after cont_since_clear points there */
+	bool cont;
+	double cont_laser;          /* the last measured point's laser position */
+	double cont_since_clear;    /* points measured there since the cache was last cleared */
 };
 
 /* Load and validate a plan file; errors name file:line:col. 0, or -1 with err (*out NULL). */
@@ -274,7 +289,20 @@ struct plan_cand {
 	struct plan_pos pos;        /* bench position (det_phi the axis position reached fastest) */
 	double cost_s;              /* bench seconds to measure it from the arms' position: the safe move, its
 				     * settling and polling, darks when the incidence changes, probe, exposures, host */
+	double base_s;              /* of it: the point at an incidence the executor is at already, without a move */
+	double open_s;              /* and the darks more at a new incidence (select charges each pick its increment
+				     * to the batch's route: base_s, open_s when its incidence is new to the batch, and
+				     * the motion of inserting it into the batch's route, plan_adaptive_route_spec) */
 };
+/* t continues a sweep whose points so far are at positions n_done (each stride bytes after the previous: an array of
+ * struct plan_pos, or the pos member of struct plan_step): the cache state of its last incidence (cont fields). The
+ * age rule (dark_max_age_s) is left to the new steps' own clock. n 0: no continuation. */
+void plan_timing_continue(struct plan_timing *t, const struct plan_pos *done, size_t n, size_t stride);
+/* The batch's route model as `brdf-recon select --route` takes it (13 numbers, comma-separated: the arms' position
+ * from (laser θ, detector θ, detector φ), then per axis in that order speed °/s, acceleration °/s², settle s, then the
+ * executor's seconds per move beyond the trapezoids and settling: 1.5 polls + extra settle, plan_time.c) into buf. */
+void plan_adaptive_route_spec(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *from,
+			      char *buf, size_t len);
 /* The adaptive target as `brdf-recon select --target` takes it ("dhr:8,30,60:le=X", "lnf:le=X", "rgb:le=X") into buf. */
 void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t len);
 /* The candidates of spec's adaptive part from the arms at from (timed by t): every candidate incidence ×

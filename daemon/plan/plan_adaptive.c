@@ -479,6 +479,10 @@ int plan_adaptive_candidates(const struct plan_spec *s, const struct bench_geom 
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	size_t k = 0;
 	struct plan_wp w[PLAN_MAX_WP];
+	struct plan_timing tc = *t; /* the executor's dark cache as the measured points left it, the arms' point once */
+	plan_timing_continue(&tc, done, n_done, sizeof *done);
+	if (tc.cont && tc.cont_since_clear > 0)
+		tc.cont_since_clear--; /* point_cost's first step is the arms' point, counted again */
 	for (size_t id = 0; id < nall; id++) {
 		struct plan_pos q;
 		if (plan_adaptive_cand_pos(s, g, id, &q) || plan_classify(g, &q))
@@ -510,7 +514,12 @@ int plan_adaptive_candidates(const struct plan_spec *s, const struct bench_geom 
 			continue; /* no safe move reaches it from here */
 		c[k].id = id;
 		c[k].pos = bq;
-		c[k].cost_s = point_cost(s, g, t, from, &bq, best, best_segs);
+		c[k].cost_s = point_cost(s, g, &tc, from, &bq, best, best_segs);
+		/* the same point without a move: from its own incidence, then from another one (its darks) */
+		struct plan_pos other = bq;
+		other.laser_theta += 1;
+		c[k].base_s = point_cost(s, g, &tc, &bq, &bq, 0, 0);
+		c[k].open_s = fmax(point_cost(s, g, &tc, &other, &bq, 0, 0) - c[k].base_s, 0);
 		k++;
 	}
 	*out = c;
@@ -555,4 +564,34 @@ void plan_adaptive_worst(const struct plan_spec *s, const struct bench_geom *g, 
 	else if (nc && lo > 0)
 		*worst_points = seed->n_steps +
 				(size_t)fmin((double)nc, floor(fmax(0, a->budget_s - seed->predicted_s) / lo));
+}
+
+void plan_adaptive_route_spec(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *from,
+			      char *buf, size_t len)
+{
+	const struct bench_axis *ax[3] = { &g->laser_theta, &g->detector_theta, &g->detector_phi };
+	size_t n = (size_t)snprintf(buf, len, "%.9g,%.9g,%.9g", from->laser_theta, from->det_theta, from->det_phi);
+	for (int k = 0; k < 3 && n < len; k++)
+		n += (size_t)snprintf(buf + n, len - n, ",%.9g,%.9g,%.9g", ax[k]->speed_dps, ax[k]->accel_dps2,
+				      ax[k]->settle_s);
+	if (n < len)
+		snprintf(buf + n, len - n, ",%.9g", 1.5 * t->axis_poll_s + t->extra_settle_s);
+}
+
+void plan_timing_continue(struct plan_timing *t, const struct plan_pos *done, size_t n, size_t stride)
+{
+	t->cont = n > 0;
+	t->cont_since_clear = 0;
+	if (!n)
+		return;
+	const char *b = (const char *)done;
+	double last = ((const struct plan_pos *)(const void *)(b + (n - 1) * stride))->laser_theta;
+	t->cont_laser = last;
+	for (size_t i = n; i-- > 0;) {
+		if (fabs(((const struct plan_pos *)(const void *)(b + i * stride))->laser_theta - last) > 1e-6)
+			break;
+		t->cont_since_clear++;
+	}
+	if (t->dark_every > 0)
+		t->cont_since_clear = (double)(n % (size_t)t->dark_every);
 }

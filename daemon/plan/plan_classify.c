@@ -67,7 +67,8 @@ unsigned plan_classify(const struct bench_geom *g, const struct plan_pos *p)
 	return plan_blind(g, &q);
 }
 
-double plan_gc_deg(const double a[3], const double b[3])
+/* Great-circle angle between two unit vectors, degrees. */
+static double plan_gc_deg(const double a[3], const double b[3])
 {
 	double c[3] = { a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0] };
 	return atan2(sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]), a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / DEG;

@@ -43,9 +43,6 @@ struct planner {
  * array *out of *n values; what names it in messages. 0 or -1 with err. */
 int plan_range_parse(struct yc_node *map, const char *key, const char *what, double lo, double hi, double **out,
 		     size_t *n, struct acq_err *err);
-/* The optional top-level key sample: (a name of printable characters) of a plan document into out ("" when
- * absent). 0 or -1 with err. */
-int plan_sample_parse(struct yc_node *root, char out[PLAN_SAMPLE_MAX], struct acq_err *err);
 /* The `integration` mapping of root onto s (defaults when absent). 0 or -1 with err. */
 int plan_integration_parse(struct yc_node *root, struct plan_spec *s, struct acq_err *err);
 /* A `kind: adaptive` plan document into a new spec (its seed's points, the adaptive part in spec->adaptive). */
@@ -62,8 +59,6 @@ double plan_norm360(double x);
 int plan_phi_reps(const struct bench_geom *g, double phi, double out[MAX_REPS]);
 /* Unit vector of direction (θ, φ) in degrees. */
 void plan_dir_of(double theta, double phi, double v[3]);
-/* Great-circle angle between two unit vectors, degrees. */
-double plan_gc_deg(const double a[3], const double b[3]);
 /* Canonical form: θD ≥ 0, φD in [0, 360) (a negative zenith is the other side). */
 struct plan_pos plan_canon(struct plan_pos p);
 /* Blind reasons of a canonical point, trying each equivalent azimuth for the limits (0: usable). */

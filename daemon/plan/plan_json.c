@@ -45,6 +45,12 @@ json_t *plan_to_json(const struct plan_spec *s, const struct plan_result *r, boo
 	json_object_set_new(o, "reference_s", json_real(r->reference_s));
 	json_object_set_new(o, "darks_s", json_real(r->darks_s));
 	json_object_set_new(o, "host_s", json_real(r->host_s));
+	/* predicted_s term by term, in the executor's order of a point (they sum to it; plan.h) */
+	json_object_set_new(o, "predicted_terms",
+			    json_pack("{s:f,s:f,s:f,s:f,s:f,s:f,s:f,s:f}", "reference_s", r->reference_s, "motion_s",
+				      r->t_motion_s, "settle_s", r->t_settle_s, "probes_s", r->t_probe_s,
+				      "darks_s", r->darks_s, "first_exposures_s", r->t_first_s, "hdr_s", r->t_hdr_s,
+				      "host_s", r->host_s));
 	json_object_set_new(o, "detours", json_integer((json_int_t)r->n_detours));
 	json_object_set_new(o, "blind_points", json_string(s->blind_policy == PLAN_BLIND_MOVE ? "move" : "drop"));
 	json_object_set_new(o, "averages", json_integer(s->averages));
@@ -114,6 +120,8 @@ json_t *plan_dry_run_json(const struct plan_spec *s, const struct bench_geom *g,
 						 p->sample, "points", (json_int_t)p->points, "incidences", (json_int_t)p->n_inc,
 						 "median_ms", p->median_ms, "spread", p->spread, "hdr_fraction", p->hdr_fraction)
 				     : json_null();
+		if (pr && p->host_points > 0) /* the host's time per point that sweep measured (plan_time.c) */
+			json_object_set_new(pr, "host_per_point_s", json_real(p->host_per_point_s));
 		json_object_set_new(o, "exposure_prior", pr ? pr : json_null());
 		if (s->sample[0])
 			json_object_set_new(o, "sample", json_string(s->sample));

@@ -109,7 +109,9 @@ int plan_range_parse(struct yc_node *map, const char *key, const char *what, dou
 	return 0;
 }
 
-int plan_sample_parse(struct yc_node *root, char out[PLAN_SAMPLE_MAX], struct acq_err *err)
+/* The optional top-level key sample: (a name of printable characters) of a plan document into out ("" when
+ * absent). 0 or -1 with err. */
+static int plan_sample_parse(struct yc_node *root, char out[PLAN_SAMPLE_MAX], struct acq_err *err)
 {
 	const char *v = NULL;
 	out[0] = 0;

@@ -32,6 +32,17 @@ static const char select_help[] =
 	"                                      of each part's value over its threshold (met at <= 1), each pick's gain\n"
 	"                                      the sum of the parts' reductions relative to their criterion before the\n"
 	"                                      batch; per = the DHR incidences' values, then the ln f part's\n"
+	"  --route SPEC           charge each pick its increment to the batch's route instead of cost_s: SPEC is 13\n"
+	"                         numbers, comma-separated: the arms' bench position (laser theta, detector theta,\n"
+	"                         detector phi, degrees), per axis in that order speed (deg/s), acceleration (deg/s^2),\n"
+	"                         settle (s), then seconds per move beyond them (polling). The candidates then need the\n"
+	"                         columns base_s (> 0: the point at an incidence the batch visits already, no move),\n"
+	"                         open_s (>= 0: more at a new incidence: its darks) and laser_deg, det_theta_deg,\n"
+	"                         det_phi_deg (its bench position); a pick costs base_s, open_s when its laser position\n"
+	"                         is new to the batch, and the motion of inserting it at the cheapest place of the\n"
+	"                         route from the arms through the picks so far (straight moves: the slowest axis's\n"
+	"                         trapezoid + the largest settle of the axes that move + the per-move seconds; the\n"
+	"                         azimuth modulo 360 deg)\n"
 	"  --batch N              at most N picks (default 16; 0: only report the target)\n"
 	"  --draws N --seed S     Monte-Carlo draws of the DHR's noise part (default 16, seed 1)\n"
 	"  --value-channels N     dhr: compute the value on N evenly spread channels (the tracked ones among them)\n"
@@ -41,9 +52,10 @@ static const char select_help[] =
 	"                         2.2x on one with a noisy edge channel), so a value within 4x of the threshold is\n"
 	"                         recomputed on all channels (value_checked_all): met is always decided on all\n"
 	"  -o OUT.json            output (stdout by default): {\"target\":{\"spec\",\"value\",\"per\",\"threshold\",\"met\"},\n"
-	"                         \"picks\":[{\"id\",\"gain\",\"gain_per_s\",\"cost_s\",\"predicted_value_after\"}], \"model\",\n"
-	"                         \"criterion\", \"candidates\":{\"read\",\"distinct\"}}; picks in choice order; a combined\n"
-	"                         target adds \"parts\":{\"dhr\":{\"value\",\"threshold\"},\"lnf\":{...}} to \"target\".\n"
+	"                         \"picks\":[{\"id\",\"gain\",\"gain_per_s\",\"cost_s\",\"predicted_value_after\"}],\n"
+	"                         \"model\", \"route\" (SPEC, when given), \"criterion\", \"candidates\":{\"read\",\n"
+	"                         \"distinct\"}}; picks in choice order, cost_s the seconds charged (--route: the\n"
+	"                         increment); a combined target adds \"parts\":{\"dhr\":{\"value\",\"threshold\"},\"lnf\":{...}} to \"target\".\n"
 	"Exit 0 (also with no pick worth making: empty picks), 2 on bad input, 1 on a failure of the computation.\n";
 
 /* Write s as a JSON string (quotes included). */
@@ -118,6 +130,34 @@ static int header_only(const char *path, const char *const *names)
 	return lines == 1 && ok;
 }
 
+/* --route SPEC into r (positions and arrays left to the caller). 0, or -1 with err saying what is wrong. */
+static int parse_route(const char *spec, struct select_route *r, struct acq_err *err)
+{
+	double v[13];
+	const char *p = spec;
+	for (int k = 0; k < 13; k++) {
+		char *end;
+		v[k] = strtod(p, &end);
+		if (end == p || !isfinite(v[k]) || (k < 12 && *end != ',') || (k == 12 && *end))
+			return acq_errf(err, ACQ_E_INVAL, "--route: expected 13 comma-separated numbers (from laser, detector "
+					"theta, detector phi; speed, accel, settle per axis; per-move seconds), at number %d", k + 1);
+		p = end + 1;
+	}
+	for (int a = 0; a < 3; a++) {
+		r->from[a] = v[a];
+		r->speed[a] = v[3 + 3 * a];
+		r->accel[a] = v[4 + 3 * a];
+		r->settle[a] = v[5 + 3 * a];
+		if (!(r->speed[a] > 0 && r->accel[a] > 0 && r->settle[a] >= 0))
+			return acq_errf(err, ACQ_E_RANGE, "--route: axis %d needs speed > 0, accel > 0, settle >= 0 (got %g, %g, "
+					"%g)", a + 1, r->speed[a], r->accel[a], r->settle[a]);
+	}
+	r->move_s = v[12];
+	if (!(r->move_s >= 0))
+		return acq_errf(err, ACQ_E_RANGE, "--route: per-move seconds %g < 0", r->move_s);
+	return 0;
+}
+
 static int bad_input(const struct acq_err *e)
 {
 	progress_end();
@@ -131,9 +171,9 @@ int cmd_select(int argc, char **argv)
 		{ "output", required_argument, 0, 'o' }, { "candidates", required_argument, 0, 'c' },
 		{ "target", required_argument, 0, 't' }, { "batch", required_argument, 0, 'b' },
 		{ "draws", required_argument, 0, 'n' }, { "seed", required_argument, 0, 's' },
-		{ "value-channels", required_argument, 0, 'v' },
+		{ "value-channels", required_argument, 0, 'v' }, { "route", required_argument, 0, 'r' },
 		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
-	const char *outp = NULL, *candp = NULL, *spec = NULL;
+	const char *outp = NULL, *candp = NULL, *spec = NULL, *routep = NULL;
 	struct select_opts so;
 	select_opts_default(&so);
 	uint64_t u;
@@ -158,6 +198,7 @@ int cmd_select(int argc, char **argv)
 				return usage_err("select", "--value-channels needs a count in 0..100000 (0: all)");
 			so.nvalue = (size_t)u;
 			break;
+		case 'r': routep = optarg; break;
 		case 's':
 			if (parse_u64(optarg, &so.seed))
 				return usage_err("select", "--seed needs an unsigned integer");
@@ -174,10 +215,14 @@ int cmd_select(int argc, char **argv)
 	struct select_target tg;
 	if (select_target_parse(spec, &tg, &err))
 		return bad_input(&err);
-	static const char *const names[6] = { "id", "theta_i", "phi_i", "theta_o", "phi_o", "cost_s" };
-	size_t nc = 0;
+	static const char *const names[11] = { "id", "theta_i", "phi_i", "theta_o", "phi_o", "cost_s",
+					       "base_s", "open_s", "laser_deg", "det_theta_deg", "det_phi_deg" };
+	struct select_route route;
+	if (routep && parse_route(routep, &route, &err))
+		return bad_input(&err);
+	size_t nc = 0, ncol = routep ? 11 : 6;
 	double *rows = NULL;
-	if (csvio_read_columns(candp, names, 6, &nc, &rows, &err)) {
+	if (csvio_read_columns(candp, names, ncol, &nc, &rows, &err)) {
 		if (!header_only(candp, names))
 			return bad_input(&err);
 		nc = 0; /* no candidates: the target's value, no pick */
@@ -189,7 +234,7 @@ int cmd_select(int argc, char **argv)
 		return bad_input(&err);
 	}
 	double *ang = malloc((nc ? nc : 1) * 4 * sizeof *ang), *cost = malloc((nc ? nc : 1) * sizeof *cost);
-	double *ids = malloc((nc ? nc : 1) * sizeof *ids);
+	double *ids = malloc((nc ? nc : 1) * (routep ? 6 : 1) * sizeof *ids); /* then the route's pos[3nc], base, open */
 	if (!ang || !cost || !ids) {
 		free(rows);
 		free(ang);
@@ -200,7 +245,7 @@ int cmd_select(int argc, char **argv)
 	}
 	int bad = 0;
 	for (size_t j = 0; j < nc && !bad; j++) {
-		const double *r = rows + 6 * j;
+		const double *r = rows + ncol * j;
 		double id = r[0];
 		if (!(id >= 0 && id <= 9007199254740992.0 && id == floor(id))) {
 			acq_errf(&err, ACQ_E_INVAL, "%s: data row %zu: id %.17g is not a non-negative integer", candp, j + 1, id);
@@ -218,10 +263,34 @@ int cmd_select(int argc, char **argv)
 				 id, r[5]);
 			bad = 1;
 		}
+		if (!bad && routep) {
+			for (int a = 8; a < 11 && !bad; a++)
+				if (!isfinite(r[a])) {
+					acq_errf(&err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): %s is not a number", candp, j + 1, id,
+						 names[a]);
+					bad = 1;
+				}
+			if (!bad && !(r[6] > 0 && isfinite(r[6]) && r[7] >= 0 && isfinite(r[7]))) {
+				acq_errf(&err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): base_s = %g must be > 0 and open_s = %g "
+					 ">= 0 seconds", candp, j + 1, id, r[6], r[7]);
+				bad = 1;
+			}
+			double *rd = ids + nc;
+			for (int a = 0; a < 3; a++)
+				rd[3 * j + a] = r[8 + a];
+			rd[3 * nc + j] = r[6];
+			rd[4 * nc + j] = r[7];
+		}
 		for (int a = 0; a < 4; a++)
 			ang[4 * j + a] = r[1 + a] * M_PI / 180;
 		cost[j] = r[5];
 		ids[j] = id;
+	}
+	if (routep) {
+		route.pos = ids + nc;
+		route.base = ids + 4 * nc;
+		route.open = ids + 5 * nc;
+		so.route = &route;
 	}
 	if (!bad && nc > 1) { /* ids are unique: sort a copy */
 		double *s = malloc(nc * sizeof *s);
@@ -301,7 +370,7 @@ int cmd_select(int argc, char **argv)
 			fputs(",\"gain_per_s\":", f);
 			json_num(f, p->gain_per_s);
 			fputs(",\"cost_s\":", f);
-			json_num(f, cost[p->index]);
+			json_num(f, p->cost);
 			fputs(",\"predicted_value_after\":", f);
 			json_num(f, p->predicted);
 			fputs(",\"predicted_per_after\":[", f);
@@ -314,6 +383,10 @@ int cmd_select(int argc, char **argv)
 		}
 		fputs("],\"model\":", f);
 		json_str(f, argv[optind]);
+		if (routep) { /* the decision's record: a replay needs it */
+			fputs(",\"route\":", f);
+			json_str(f, routep);
+		}
 		fprintf(f, ",\"criterion\":\"%s\",\"candidates\":{\"read\":%zu,\"distinct\":%zu}}\n",
 			"gp-excess-variance-reduction-per-second", nc, res.nunique);
 		if (out_close(&o, 1, &err))

@@ -29,6 +29,7 @@ $ACQ_BENCH_OUT."""
 import csv
 import json
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -138,6 +139,9 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
         paused = max(0.0, ev.get("resume", 0) - ev.get("pause", 0))
         # the daemon's own wall-clock record (not this script's polling, 0.1 s = 3.5 bench s at time scale 35)
         measured = (finished - started - paused) * scale
+        meas_terms, shot_check = measured_terms(db, sid, scale, steps, b.conf, started, finished, ev)
+        redos = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'info' AND message LIKE "
+                           "'%measuring the point again%'", (sid,)).fetchone()[0]
         db.close()
         prog = [(t, e) for t, e in events if e.get("event") == "sweep.progress" and e.get("sweep") == sid]
         total = row["points_total"]
@@ -166,7 +170,14 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                     darks=darks, exposures=expos, faults=faults, prior_sweep=prior.get("sweep"),
                     sim_lag_s=sim_lag, sim_lag_share=(sim_lag * scale / measured if sim_lag is not None else None),
                     host_per_point_s=(sum(h for _, h in host_pts) / len(host_pts) if host_pts else None),
-                    eta25_host=eta_host.get(0.25), eta50_host=eta_host.get(0.5), eta75_host=eta_host.get(0.75))
+                    eta25_host=eta_host.get(0.25), eta50_host=eta_host.get(0.5), eta75_host=eta_host.get(0.75),
+                    redos=redos, prior_host_ms=(1000 * prior["host_per_point_s"] if "host_per_point_s" in prior
+                                                else None))
+        for k in TERMS:
+            row["pred_" + k] = (pj.get("predicted_terms") or {}).get(k)
+            row["meas_" + k] = meas_terms[k]
+        print(terms_line(name, pj.get("predicted_terms") or {}, meas_terms, shot_check, total, scale)
+              + "; %d saturation redos" % redos, flush=True)
         return (row, b) if keep_open else row
     except BaseException:
         keep_open = False
@@ -177,6 +188,105 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
             if keep:
                 print("bench_duration: %s kept in %s" % (name, b.dir), flush=True)
             b.cleanup(keep=keep)
+
+
+TERMS = ("reference_s", "motion_s", "settle_s", "probes_s", "darks_s", "first_exposures_s", "hdr_s", "host_s")
+
+
+def shot_price(conf):
+    """The model's cost of one exposure beyond its integration (bench seconds): the read-out (bench.readout_s) and
+    half a spectrometer poll (sweep.acquisition.poll_s / 2), read from the bench's configuration as the daemon does
+    (plan_time.c shot; the defaults where the file does not say)."""
+    text = open(conf).read()
+    ro = re.search(r"^\s*readout_s:\s*([0-9.eE+-]+)", text, re.M)
+    acq = text.split("acquisition:", 1)[1] if "acquisition:" in text else ""
+    poll = re.search(r"^\s*poll_s:\s*([0-9.eE+-]+)", acq, re.M)
+    return (float(ro.group(1)) if ro else 0.01) + (float(poll.group(1)) if poll else 0.01) / 2
+
+
+def measured_terms(db, sid, scale, steps, conf, started, finished, ev):
+    """The measured sweep split into the model's terms (acqctl plan --json predicted_terms), bench seconds:
+    - probes_s, darks_s, first_exposures_s, hdr_s: what the bench took, from the stored spectra (every dark and
+      exposure with its time and averages; the probe, not stored, at the previous point's first time, as the executor
+      takes it, the first point's at the reference's), each priced as the model prices a shot (averages x time +
+      read-out + round trip): the counts and times are measured, the price per shot is the model's (shot_check tests
+      it against the wall clock);
+    - motion_s, settle_s: the plan's moves between the points (steps' move_s; settle_s with 1.5 polls per move as
+      the model counts): the record has no time stamp between a move's end and the probe, so these are the plan's;
+    - reference_s: from the start to the operator's pause, plus the first point's time after the resume less its
+      exposures (the move from the reference pose; the first point's host time with it);
+    - host_s: the rest, measured minus everything above: the host's time (calibration, storage, round trips, late
+      wake-ups) plus anything the other terms miss (saturation redos, whose spectra are dropped; re-probes).
+    Returns (terms, shot_check) with shot_check = (wall s, priced s, count) over the shots that follow another shot
+    of the same point (their wall time is the interval between the two spectra's taken_at)."""
+    price = shot_price(conf)
+    pts = db.execute("SELECT id, order_index, done_at FROM points WHERE sweep_id = ? AND state = 'done' ORDER BY "
+                     "order_index", (sid,)).fetchall()
+    sp = {}
+    for pid, kind, ms, n, at in db.execute("SELECT point_id, kind, integration_ms, averages, taken_at FROM spectra "
+                                           "WHERE sweep_id = ? AND point_id IS NOT NULL ORDER BY id", (sid,)):
+        sp.setdefault(pid, []).append((kind, ms, n, at))
+    ref = db.execute("SELECT min(integration_ms) FROM spectra WHERE sweep_id = ? AND kind = 'reference'",
+                     (sid,)).fetchone()[0]
+    t = dict.fromkeys(TERMS, 0.0)
+    wall = priced = 0.0
+    nshot = 0
+    prev_first = ref
+    first_point_shots = 0.0
+    for k, (pid, oi, done) in enumerate(pts):
+        shots = sp.get(pid, [])
+        samples = [ms for kind, ms, _, _ in shots if kind == "sample"]
+        first = min(samples) if samples else None
+        seen_first, last_at, own = False, None, 0.0
+        for kind, ms, n, at in shots:
+            c = n * ms / 1000.0 + price
+            if kind == "dark":
+                term = "darks_s"
+            elif not seen_first and ms == first:
+                term, seen_first = "first_exposures_s", True
+            else:
+                term = "hdr_s"
+            t[term] += c
+            own += c
+            if last_at is not None:
+                wall += (at - last_at) * scale
+                priced += c
+                nshot += 1
+            last_at = at
+        if prev_first is not None:
+            c = prev_first / 1000.0 + price
+            t["probes_s"] += c
+            own += c
+        if k == 0:
+            first_point_shots = own
+        prev_first = first if first is not None else prev_first
+    for i, st in enumerate(steps):
+        if i == 0:
+            continue  # the move from the reference pose: in reference_s, as the model has it
+        mv, se = st.get("move_s", 0.0), st.get("settle_s", 0.0)
+        t["motion_s"] += mv
+        t["settle_s"] += se + (1.5 * 0.05 if mv + se > 0 else 0.0)
+    pause, resume = ev.get("pause"), ev.get("resume")
+    if pts and pause and resume:
+        t["reference_s"] = ((pause - started) + (pts[0][2] - resume)) * scale - first_point_shots
+    elif pts:
+        t["reference_s"] = (pts[0][2] - started) * scale - first_point_shots
+    total = (finished - started - (resume - pause if pause and resume else 0)) * scale
+    t["host_s"] = total - sum(v for k, v in t.items() if k != "host_s")
+    return t, (wall, priced, nshot)
+
+
+def terms_line(name, pred, meas, shots, points, scale):
+    """Each term predicted against measured (bench seconds), and the shot price's check."""
+    parts = []
+    for k in TERMS:
+        p, m = pred.get(k), meas.get(k)
+        parts.append("%s %s/%.1f" % (k[:-2], "-" if p is None else "%.1f" % p, m))
+    wall, priced, n = shots
+    return ("%-17s terms, predicted/measured bench s: %s; host per point %.2f ms real predicted, %.2f measured; "
+            "shot price check: %d shots after another of the same point took %.1f s by the wall clock, priced %.1f s" % (
+                name, ", ".join(parts), 1000 * pred.get("host_s", 0) / points / scale,
+                1000 * meas["host_s"] / points / scale, n, wall, priced))
 
 
 def lag_at(lags, t):

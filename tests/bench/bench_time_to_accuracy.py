@@ -196,10 +196,11 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         with open(st, "w") as fh:
             json.dump({"done": done_, "from": frm, "spent_s": spent_}, fh)
         cc, sj = os.path.join(WORK, tag + ".cand.csv"), os.path.join(WORK, tag + ".select.json")
-        nc = int(helper("cand", CONF, plan_path, st, cc, out="text"))
-        if nc == 0:
+        nc, route = helper("cand", CONF, plan_path, st, cc, out="text").split()
+        if int(nc) == 0:
             return None, None, "nothing reachable left (no candidate)", 0.0
-        cpu = T.run([T.REC, "select", model, "--candidates", cc, "--target", target, "--batch", "16", "-o", sj])[0]
+        cpu = T.run([T.REC, "select", model, "--candidates", cc, "--route", route, "--target", target, "--batch", "16",
+                     "-o", sj])[0]
         sel = json.load(open(sj))
         if not sel["picks"]:
             return sel, None, "nothing reachable left worth measuring", cpu
@@ -475,14 +476,14 @@ def validate(rows, paper_s):
             with open(st, "w") as fh:
                 json.dump({"done": pos[:first], "from": pos[first - 1], "spent_s": spent}, fh)
             cc, sj = os.path.join(WORK, "validate.cand.csv"), os.path.join(WORK, "validate.select.json")
-            helper("cand", conf, plan_path, st, cc, "--time-scale", scale, out="text")
+            route = helper("cand", conf, plan_path, st, cc, "--time-scale", scale, out="text").split()[1]
             _, mine = T.read_csv(cc)
             _, theirs = T.read_csv(os.path.join(bdir, "candidates.csv"))
             ids_same = mine.shape == theirs.shape and np.array_equal(mine[:, 0], theirs[:, 0])
             if ids_same:
                 worst["cost"] = max(worst["cost"], float(np.max(np.abs(mine[:, 5] - theirs[:, 5]) / theirs[:, 5])))
             T.run([T.REC, "select", os.path.join(bdir, "model.brdf"), "--candidates", os.path.join(bdir, "candidates.csv"),
-                   "--target", r["target_spec"], "--batch", "16", "--value-channels", DAEMON_VALUE_CHANNELS, "-o", sj])
+                   "--route", route, "--target", r["target_spec"], "--batch", "16", "--value-channels", DAEMON_VALUE_CHANNELS, "-o", sj])
             sel = json.load(open(sj))
             picks_same = [x["id"] for x in sel["picks"]] == [p["candidate_id"] for p in r["picks"]]
             bb = helper("batch", conf, plan_path, st, sj, "--time-scale", scale)

@@ -7,7 +7,8 @@
  * shorter while the batch's predicted time exceeds what is left). Run alone (as `make bench` does) it only says what it is.
  *
  *   bench_tta_plan seed  CONF PLAN [--time-scale S]                 -> JSON {predicted_s, steps}
- *   bench_tta_plan cand  CONF PLAN STATE.json OUT.csv [--time-scale S] -> OUT.csv; prints the count
+ *   bench_tta_plan cand  CONF PLAN STATE.json OUT.csv [--time-scale S] -> OUT.csv (rsel_write_candidates, as the
+ *                                                   daemon writes them); prints the count, then select's --route
  *   bench_tta_plan batch CONF PLAN STATE.json SELECT.json [--time-scale S] -> JSON {k, predicted_s, steps}
  * STATE.json: {"done": [[laser_theta, detector_theta, detector_phi], ...] (every planned point so far),
  * "from": [..3..] (the arms), "spent_s": S (predicted seconds so far)}. A step is [laser_theta, detector_theta,
@@ -21,6 +22,7 @@
 #include "daemon/conf.h"
 #include "daemon/executor.h"
 #include "daemon/plan/plan.h"
+#include "daemon/recon_select.h"
 #include "daemon/sweep.h"
 
 static int fail(const char *what, const char *msg)
@@ -122,23 +124,13 @@ static int cmd_cand(const struct plan_spec *s, const struct bench_geom *g, const
 		free(done);
 		return fail("candidates", err.msg);
 	}
-	FILE *f = fopen(out, "w");
-	if (!f) {
-		free(done);
-		free(c);
-		return fail(out, "cannot write");
-	}
-	fprintf(f, "id,theta_i,phi_i,theta_o,phi_o,cost_s\n");
-	for (size_t i = 0; i < n; i++) {
-		double ti, pi, to, po;
-		ex_pos_angles(g, &c[i].pos, &ti, &pi, &to, &po);
-		fprintf(f, "%zu,%.9g,%.9g,%.9g,%.9g,%.6g\n", c[i].id, ti, pi, to, po, c[i].cost_s);
-	}
-	int bad = fclose(f);
-	printf("%zu\n", n);
+	int bad = rsel_write_candidates(out, g, c, n, &err); /* as the daemon's decision writes them */
+	char route[512];
+	plan_adaptive_route_spec(g, t, &from, route, sizeof route);
+	printf("%zu\n%s\n", n, route);
 	free(done);
 	free(c);
-	return bad ? fail(out, "write failed") : 0;
+	return bad ? fail(out, err.msg) : 0;
 }
 
 static int cmd_batch(const struct plan_spec *s, const struct bench_geom *g, struct plan_timing t, const char *state,
@@ -149,6 +141,7 @@ static int cmd_batch(const struct plan_spec *s, const struct bench_geom *g, stru
 	double spent;
 	if (state_load(state, &done, &nd, &from, &spent))
 		return 2;
+	plan_timing_continue(&t, done, nd, sizeof *done); /* as sweep_adaptive.c's plan_batch */
 	free(done);
 	json_error_t je;
 	json_t *o = json_load_file(sel, 0, &je), *picks = o ? json_object_get(o, "picks") : NULL;

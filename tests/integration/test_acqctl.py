@@ -145,6 +145,11 @@ def offline_checks(tmp):
     open(plan, "w").write(PLAN)
     d = c.json("plan", "plan", plan, "--config", os.path.join(L.SRC, "config", "bench-sim.yaml"))
     check(d["source"] == "local", "local plan %r" % d)
+    # the prediction term by term: the terms sum to it (JSON floats of 6 decimals); fixed integration: no probe
+    t, pred = d["plan"]["predicted_terms"], d["plan"]["predicted_s"]
+    check(abs(sum(t.values()) - pred) < 1e-4 and t["motion_s"] > 0 and t["first_exposures_s"] > 0 and
+          t["probes_s"] == 0 and t["hdr_s"] == 0,
+          "terms %r sum to %r, predicted %r" % (t, sum(t.values()), pred))
     return plan, d
 
 

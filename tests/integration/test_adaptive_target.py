@@ -40,10 +40,13 @@ def run():
         r1 = chosen[0]
         bdir = os.path.dirname(os.path.join(b.state, r1["model"]))
         out = os.path.join(b.dir, "replay.json")
-        vch = json.load(open(os.path.join(bdir, "select.json")))["target"]["value_channels"]
+        rec = json.load(open(os.path.join(bdir, "select.json")))
+        vch = rec["target"]["value_channels"]
+        assert rec.get("route"), "the decision did not record select's --route (each pick's increment to the route)"
         assert 24 <= vch <= 64, "the daemon's select computed the value on %d channels" % vch
         p = subprocess.run([os.path.join(L.BUILD, "brdf-recon"), "select", os.path.join(b.state, r1["model"]),
-                            "--candidates", os.path.join(bdir, "candidates.csv"), "--target", r1["target_spec"],
+                            "--candidates", os.path.join(bdir, "candidates.csv"), "--route", rec["route"],
+                            "--target", r1["target_spec"],
                             "--batch", "4", "--value-channels", str(vch), "-o", out], capture_output=True,
                            text=True, timeout=120)
         assert p.returncode == 0, "brdf-recon select: %s" % p.stderr[-2000:]

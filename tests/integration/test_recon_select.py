@@ -155,6 +155,32 @@ def main():
         (["select", model, "--target", "dhr:8"], "--candidates"),
         (["select", model, "--candidates", cands, "--target", "dhr:8", "--batch", "-1"], "--batch"),
     ]
+    # --route: each pick charged its increment to the batch's route (the candidates' bench positions, base and open
+    # costs as columns); the charged cost_s adds up to at most base + open + the moves, and bad input says what
+    rcands = os.path.join(d, "route.csv")
+    with open(rcands, "w") as fh:
+        fh.write("id,theta_i,phi_i,theta_o,phi_o,cost_s,base_s,open_s,laser_deg,det_theta_deg,det_phi_deg\n")
+        for r in rows:
+            fh.write("%d,%.9g,%.9g,%.9g,%.9g,%.9g,2,3,%.9g,%.9g,%.9g\n" % (tuple(r) + (r[1], r[3], r[4])))
+    route = "0,0,0,10,20,0.3,20,60,0.2,30,90,0.2,0.075"
+    p = run("select", model, "--candidates", rcands, "--route", route, "--target", "lnf", "--batch", "4")
+    jr = json.loads(p.stdout)
+    check(len(jr["picks"]) == 4 and all(2 <= x["cost_s"] <= 2 + 3 + 20 for x in jr["picks"]) and
+          jr["picks"][0]["cost_s"] >= 5, "route: picks charged base (+ open when new) + their move")
+    with open(os.path.join(d, "noroute.csv"), "w") as fh:
+        fh.write("id,theta_i,phi_i,theta_o,phi_o,cost_s\n1,10,0,10,0,5\n")
+    with open(os.path.join(d, "badbase.csv"), "w") as fh:
+        fh.write("id,theta_i,phi_i,theta_o,phi_o,cost_s,base_s,open_s,laser_deg,det_theta_deg,det_phi_deg\n"
+                 "1,10,0,10,0,5,0,3,10,10,0\n")
+    cases += [
+        (["select", model, "--candidates", rcands, "--target", "lnf", "--route", "1,2,3"], "13 comma-separated"),
+        (["select", model, "--candidates", rcands, "--target", "lnf", "--route", route.replace("10,20", "0,20", 1)],
+         "axis 1 needs speed > 0"),
+        (["select", model, "--candidates", os.path.join(d, "noroute.csv"), "--target", "lnf", "--route", route],
+         "base_s"),
+        (["select", model, "--candidates", os.path.join(d, "badbase.csv"), "--target", "lnf", "--route", route],
+         "base_s = 0 must be > 0"),
+    ]
     for args, what in cases:
         p = run(*args, ok=False)
         check(p.returncode == 2 and what in p.stderr, "%s: exit 2 naming %s" % (" ".join(args[2:]), what))

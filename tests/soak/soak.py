@@ -363,7 +363,7 @@ def sched_between(samples, t0, t1, idx):
     return max(0.0, at(t1) - at(t0)) * 1e3 if samples else float("nan")
 
 
-PHASES = ("laser_off", "verify", "homing", "move", "settle", "dark", "exposure", "acq", "retry", "other")
+PHASES = ("laser_off", "verify", "homing", "move", "settle", "dark", "exposure", "acq", "retry", "durable", "other")
 CAUSES = (("daemon: the executor's own steps on the loop (the previous point's commit: database writes)", "executor"),
           ("daemon: loop busy with other callbacks (clients, plans)", "loop_other"),
           ("daemon: device threads busy with clients' status reads", "client_reads"),

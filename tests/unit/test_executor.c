@@ -914,6 +914,38 @@ static void test_crash_resume(void **state)
 	check_db(r.sweep, true);
 }
 
+/* The sweep's state of a halt and its event are one transaction: the store refusing the event (a trigger standing
+ * for a disk that takes the small row and not the other) keeps neither, and both are stored by the retry once it
+ * takes them. With two transactions the row read 'failed' with no 'failed' event. */
+static void test_halt_state_and_event_together(void **state)
+{
+	(void)state;
+	struct run r;
+	struct ex *x = start_sweep(&r, false);
+	sqlite3 *db = NULL;
+	assert_int_equal(sqlite3_open(dbpath, &db), SQLITE_OK);
+	sqlite3_busy_timeout(db, 2000);
+	assert_int_equal(sqlite3_exec(db, "CREATE TRIGGER refuse_failed BEFORE INSERT ON events WHEN NEW.kind = 'failed' "
+				      "BEGIN SELECT RAISE(ABORT, 'refused (test)'); END", NULL, NULL, NULL), SQLITE_OK);
+	ex_failed(x, "test failure");
+	assert_int_equal(ex_state(x), EX_FAILED);
+	assert_true(ex_has_unrecorded(x));
+	assert_int_equal(count_events("failed"), 1); /* the sink heard it all the same */
+	assert_int_equal(q1(db, "SELECT count(*) FROM sweeps WHERE id = ?1 AND state = 'running'", r.sweep), 1);
+	assert_int_equal(q1(db, "SELECT count(*) FROM events WHERE sweep_id = ?1 AND kind = 'failed'", r.sweep), 0);
+	struct acq_err err = { 0 };
+	assert_int_equal(ex_flush_unrecorded(x, &err), -1); /* still refused: still neither */
+	assert_int_equal(q1(db, "SELECT count(*) FROM sweeps WHERE id = ?1 AND state = 'running'", r.sweep), 1);
+	assert_int_equal(sqlite3_exec(db, "DROP TRIGGER refuse_failed", NULL, NULL, NULL), SQLITE_OK);
+	assert_int_equal(ex_flush_unrecorded(x, &err), 0);
+	assert_false(ex_has_unrecorded(x));
+	assert_int_equal(q1(db, "SELECT count(*) FROM sweeps WHERE id = ?1 AND state = 'failed'", r.sweep), 1);
+	assert_int_equal(q1(db, "SELECT count(*) FROM events WHERE sweep_id = ?1 AND kind = 'failed'", r.sweep), 1);
+	sqlite3_close(db);
+	ex_free(x, 0);
+	store_close(r.st);
+}
+
 int main(void)
 {
 	seed = synth_seed("test_executor");
@@ -934,6 +966,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(test_faults_deferred_reads, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_crash_resume, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_alarm_backs_off, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_halt_state_and_event_together, setup, teardown),
 	};
 	int rc = cmocka_run_group_tests(tests, NULL, NULL);
 	plan_result_free(plan);

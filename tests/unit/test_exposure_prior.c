@@ -87,14 +87,14 @@ static void test_prior_figures(void **state)
 	struct plan_prior pr;
 	/* nothing yet; a sweep without a sample is never a prior */
 	mk_sweep(st, NULL, true, "completed");
-	assert_int_equal(exp_prior_load(st, "paint", 0, &pr, &err), 0);
+	assert_int_equal(exp_prior_load(st, "paint", 0, NULL, NULL, &pr, &err), 0);
 	assert_int_equal(pr.sweep, 0);
 	int64_t a = mk_sweep(st, "paint", true, "completed");
 	mk_sweep(st, "paint", false, "completed");  /* fixed integration: its times are not the sample's */
 	mk_sweep(st, "paint", true, "aborted");     /* not finished */
 	mk_sweep(st, "white", true, "completed");   /* another sample */
 	int64_t running = mk_sweep(st, "paint", true, NULL);
-	assert_int_equal(exp_prior_load(st, "paint", running, &pr, &err), 0);
+	assert_int_equal(exp_prior_load(st, "paint", running, NULL, NULL, &pr, &err), 0);
 	assert_int_equal(pr.sweep, a);
 	assert_string_equal(pr.sample, "paint");
 	assert_int_equal(pr.points, 5);
@@ -113,20 +113,63 @@ static void test_prior_figures(void **state)
 	assert_true(fabs(q->median_ms - 250) < TOL && fabs(q->mean_ms - 250) < TOL && fabs(q->spread - 4) < TOL);
 	assert_true(fabs(q->darks_per_clear - 2) < TOL && fabs(q->dark_ms - 250) < TOL);
 	assert_true(q->extra_per_point == 0 && q->extra_ms == 0);
+	assert_int_equal(pr.host_points, 0); /* no bench, no time scale: the host's time is not measured */
 	/* a newer completed sweep of the sample is the prior; excluded, the older one again */
 	int64_t b = mk_sweep(st, "paint", true, "completed");
-	assert_int_equal(exp_prior_load(st, "paint", 0, &pr, &err), 0);
+	assert_int_equal(exp_prior_load(st, "paint", 0, NULL, NULL, &pr, &err), 0);
 	assert_int_equal(pr.sweep, b);
-	assert_int_equal(exp_prior_load(st, "paint", b, &pr, &err), 0);
+	assert_int_equal(exp_prior_load(st, "paint", b, NULL, NULL, &pr, &err), 0);
 	assert_int_equal(pr.sweep, a);
-	assert_int_equal(exp_prior_load(st, "nothing of that name", 0, &pr, &err), 0);
+	assert_int_equal(exp_prior_load(st, "nothing of that name", 0, NULL, NULL, &pr, &err), 0);
 	assert_int_equal(pr.sweep, 0);
-	assert_int_equal(exp_prior_load(st, "", 0, &pr, &err), 0);
+	assert_int_equal(exp_prior_load(st, "", 0, NULL, NULL, &pr, &err), 0);
 	assert_int_equal(pr.sweep, 0);
 	store_close(st);
 }
 
 /* The plan's sample: key: a printable name of 1 to 63 characters, none when absent. */
+/* The host's real seconds per point in the prior's sweep: the real time between two consecutive points' commits less
+ * the bench's part at the time scale (the straight move between the reached angles with its polling, the probe at the
+ * previous point's first time, the point's shots with read-out and round trip); arms' noise under 0.05° is no move; a
+ * gap in the order or a pause (more than 1 s over the median) is left out. By hand at time scale 10. */
+static void test_prior_host(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	bench_defaults(&g);
+	g.readout_s = 0.01;
+	struct plan_timing t;
+	plan_timing_defaults(&t);
+	t.exposure_overhead_s = 0.005;
+	t.axis_poll_s = 0.05;
+	t.time_scale = 10;
+	/* theta_i, point, dark, ms, averages, order, done_at, arms */
+	const struct store_prior_row rows[] = {
+		{ 10, 1, false, 40, 4, 0, 100.0, { 10, 20, 0 } },
+		{ 10, 2, true, 40, 8, 1, 101.0, { 10, 30, 0 } },   /* detector.theta moves 10° */
+		{ 10, 2, false, 40, 4, 1, 101.0, { 10, 30, 0 } },
+		{ 10, 3, false, 20, 4, 2, 101.5, { 10.01, 30.02, -0.02 } }, /* noise: not moved */
+		{ 10, 4, false, 20, 4, 4, 200.0, { 10, 30, 0 } },  /* order 3 missing: not counted */
+		{ 10, 5, false, 20, 4, 5, 300.0, { 10, 30, 0 } },  /* 100 s after order 4: a pause, left out */
+	};
+	struct plan_prior pr;
+	assert_int_equal(exp_prior_build(rows, 6, &g, &t, &pr), 0);
+	struct plan_pos a = { 10, 20, 0 }, b = { 10, 30, 0 };
+	double ovh = 0.015, mv = plan_straight_s(&g, &a, &b);
+	assert_true(mv > 0.5);
+	double h1 = 1.0 - (mv + 0.075 + (8 * 0.040 + ovh) + (4 * 0.040 + ovh) + (0.040 + ovh)) / 10;
+	double h2 = 0.5 - ((4 * 0.020 + ovh) + (0.040 + ovh)) / 10;
+	assert_int_equal(pr.host_points, 2);
+	assert_true(fabs(pr.host_per_point_s - (h1 + h2) / 2) < 1e-12);
+	/* at time scale 1 the same commits leave the host less */
+	t.time_scale = 1;
+	assert_int_equal(exp_prior_build(rows, 6, &g, &t, &pr), 0);
+	assert_true(pr.host_per_point_s < (h1 + h2) / 2 - 0.05);
+	/* without the bench: not measured */
+	assert_int_equal(exp_prior_build(rows, 6, NULL, NULL, &pr), 0);
+	assert_int_equal(pr.host_points, 0);
+}
+
 static void test_plan_sample_key(void **state)
 {
 	(void)state;
@@ -156,6 +199,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_prior_figures),
+		cmocka_unit_test(test_prior_host),
 		cmocka_unit_test(test_plan_sample_key),
 	};
 	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);

@@ -1,7 +1,8 @@
 /* Unit tests for the planner's adaptive part (daemon/plan/plan_adaptive.c, plan_make_points): the kind: adaptive
  * YAML and its located errors, the target as select takes it, the candidates (visible, within the limits,
  * reachable, never a measured configuration, costed at least their move and exposures), batches ordered from
- * the arms' position, a stored order replayed, and a batch appended to a plan. */
+ * the arms' position, a stored order replayed, a batch appended to a plan, and a batch continuing the sweep's dark
+ * cache (base_s, open_s of the candidates). */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -401,6 +402,62 @@ static void test_batch_order(void **state)
 	plan_spec_free(s);
 }
 
+/* An adaptive batch continues the sweep's dark cache (executor_acq.c clears it only when the batch starts at another
+ * incidence): a batch of fixed integration at the last point's incidence is predicted without a dark at its first
+ * step, one at another incidence with it, and without the continuation (the old model) the first step always had
+ * one. The candidates' base_s and open_s: cost_s is base_s (+ open_s at another incidence than the arms') plus the
+ * move; open_s is one dark, 0 for nothing. */
+static void test_continue_darks(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	bench_defaults(&g);
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	tm.reference = false;
+	struct plan_spec *s = load_ok(ADAPTIVE);
+	struct acq_err err = { 0 };
+	struct plan_pos done[3] = { { 0, 30, 10 }, { 40, 30, 200 }, { 40, 60, 10 } }, same = { 40, 45, 100 },
+			other = { 20, 45, 100 };
+	double dark = tm.dark_averages * s->integ_ms / 1000 + g.readout_s + tm.exposure_overhead_s; /* one exposure */
+	struct plan_result *r = NULL;
+	for (int k = 0; k < 2; k++) {
+		const struct plan_pos *p = k ? &other : &same;
+		assert_int_equal(plan_make_points(s, &g, p, 1, &done[2], &r, &err), 0);
+		plan_time_apply(s, &g, &tm, r);
+		double fresh = r->darks_s;
+		struct plan_timing tc = tm;
+		plan_timing_continue(&tc, done, 3, sizeof *done);
+		assert_true(tc.cont && tc.cont_laser == 40 && tc.cont_since_clear == 2);
+		plan_time_apply(s, &g, &tc, r);
+		printf("continue: batch at %s incidence: darks %.3f s (fresh cache %.3f s)\n", k ? "another" : "the same",
+		       r->darks_s, fresh);
+		assert_true(fabs(fresh - dark) < 1e-9);
+		assert_true(fabs(r->darks_s - (k ? dark : 0)) < 1e-9);
+		plan_result_free(r);
+	}
+	plan_timing_continue(&tm, done, 0, sizeof *done);
+	assert_false(tm.cont);
+	/* the candidates from the arms at done[2]: cost = base (+ open at another incidence) + the move */
+	struct plan_cand *c = NULL;
+	size_t n = 0;
+	assert_int_equal(plan_adaptive_candidates(s, &g, &tm, &done[2], done, 3, &c, &n, &err), 0);
+	size_t nsame = 0, nother = 0;
+	for (size_t i = 0; i < n; i++) {
+		struct plan_wp w[PLAN_MAX_WP];
+		size_t nw;
+		double mv = plan_move(&g, &done[2], &c[i].pos, w, &nw), poll = mv > 0 ? 1.5 * tm.axis_poll_s : 0;
+		bool at = c[i].pos.laser_theta == 40;
+		nsame += at;
+		nother += !at;
+		assert_true(c[i].base_s > 0 && fabs(c[i].open_s - dark) < 1e-9);
+		assert_true(fabs(c[i].cost_s - (c[i].base_s + (at ? 0 : c[i].open_s) + mv + poll)) < 1e-6);
+	}
+	assert_true(nsame > 0 && nother > 0);
+	free(c);
+	plan_spec_free(s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -410,6 +467,7 @@ int main(void)
 		cmocka_unit_test(test_specular),
 		cmocka_unit_test(test_fit_picks),
 		cmocka_unit_test(test_batch_order),
+		cmocka_unit_test(test_continue_darks),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -32,6 +32,13 @@ static const char *PLAN_SPREAD = "name: t\nincidence: {theta_deg: [20, 45]}\n"
 				 "averages: 3\n"
 				 "blind_points: drop\n";
 
+/* predicted_s as the sum of its terms (plan.h) */
+static double terms_sum(const struct plan_result *r)
+{
+	return r->reference_s + r->t_motion_s + r->t_settle_s + r->t_probe_s + r->darks_s + r->t_first_s + r->t_hdr_s +
+	       r->host_s;
+}
+
 struct fx {
 	struct bench_geom g;
 	struct plan_spec *spec;
@@ -104,6 +111,10 @@ static void test_fixed_steps(void **state)
 	assert_true(fabs(f.res->predicted_s - sum) < TOL);
 	assert_true(fabs(f.res->darks_s - darks) < TOL);
 	assert_true(f.res->reference_s == 0);
+	/* fixed integration: no probe, no HDR exposure; every term sums to the total */
+	assert_true(f.res->t_probe_s == 0 && f.res->t_hdr_s == 0);
+	assert_true(fabs(f.res->t_first_s - (double)f.res->n_steps * (3 * 0.020 + 0.015)) < TOL);
+	assert_true(fabs(terms_sum(f.res) - f.res->predicted_s) < TOL);
 	/* two incidences: two darks */
 	assert_true(fabs(darks - 2 * (8 * 0.020 + 0.015)) < TOL);
 	unload(&f);
@@ -228,6 +239,7 @@ static void test_reference(void **state)
 	double dark = 8 * 0.020 + 0.015;
 	assert_true(fabs(f.res->darks_s - dark) < TOL);
 	assert_true(fabs(f.res->predicted_s - (without - dark) - f.res->reference_s) < TOL);
+	assert_true(fabs(terms_sum(f.res) - f.res->predicted_s) < TOL);
 	/* the arms elsewhere: the move to the reference pose is added */
 	double ref = f.res->reference_s;
 	t.have_start = true;
@@ -275,6 +287,8 @@ static void test_prior(void **state)
 						  .extra_ms = 0 };
 	plan_time_apply(f.spec, &f.g, &t, f.res);
 	double shot_ovh = f.g.readout_s + t.exposure_overhead_s, sum = 0, darks = 0;
+	/* the terms by hand: motion, settle (with polling), probes, first exposures, HDR exposures, host */
+	double motion = 0, settle = 0, probes = 0, firsts = 0, hdrs = 0, host = 0;
 	size_t j = 0;
 	for (size_t i = 0; i < f.res->n_steps; i++) {
 		const struct plan_step *st = &f.res->steps[i];
@@ -283,15 +297,40 @@ static void test_prior(void **state)
 		const struct plan_prior_inc *q = &t.prior.inc[fabs(st->pos.laser_theta) < 30 ? 0 : 1];
 		double p = new_inc ? 1 : pow(1 - 1 / q->darks_per_clear, (double)j); /* k = 1: no second dark */
 		double dark = 8 * q->dark_ms / 1000 + shot_ovh;
-		double d = st->move_s + st->settle_s + (st->move_s + st->settle_s > 0 ? 1.5 * t.axis_poll_s : 0) +
-			   (i == 0 ? 20.0 : q->mean_ms) / 1000 + shot_ovh + 3 * q->mean_ms / 1000 + shot_ovh + p * dark +
-			   q->extra_per_point * (3 * q->extra_ms / 1000 + shot_ovh) + t.point_overhead_s;
+		double se = st->settle_s + (st->move_s + st->settle_s > 0 ? 1.5 * t.axis_poll_s : 0);
+		double pb = (i == 0 ? 20.0 : q->mean_ms) / 1000 + shot_ovh, fe = 3 * q->mean_ms / 1000 + shot_ovh;
+		double hd = q->extra_per_point * (3 * q->extra_ms / 1000 + shot_ovh);
+		double d = st->move_s + se + pb + fe + p * dark + hd + t.point_overhead_s;
 		assert_true(fabs(st->predicted_s - d) < TOL);
+		motion += st->move_s;
+		settle += se;
+		probes += pb;
+		firsts += fe;
+		hdrs += hd;
+		host += t.point_overhead_s;
 		darks += p * dark;
 		sum += d;
 	}
 	assert_true(fabs(f.res->darks_s - darks) < TOL);
 	assert_true(fabs(f.res->predicted_s - sum) < TOL);
+	const struct plan_result *r = f.res;
+	assert_true(fabs(r->t_motion_s - motion) < TOL && fabs(r->t_settle_s - settle) < TOL);
+	assert_true(fabs(r->t_probe_s - probes) < TOL && fabs(r->t_first_s - firsts) < TOL);
+	assert_true(fabs(r->t_hdr_s - hdrs) < TOL && fabs(r->host_s - host) < TOL && r->reference_s == 0);
+	assert_true(motion > 1 && settle > 1 && probes > 0.1 && firsts > 0.1 && hdrs > 0.1 && darks > 0.1);
+	assert_true(fabs(terms_sum(r) - r->predicted_s) < TOL);
+	/* the host's time per point the prior's sweep measured replaces the default (at the time scale) */
+	t.prior.host_per_point_s = 0.004;
+	t.prior.host_points = 40;
+	t.time_scale = 35;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(r->host_s - 0.004 * 35 * (double)r->n_steps) < TOL);
+	assert_true(fabs(r->predicted_s - (sum - host + r->host_s)) < TOL);
+	assert_true(fabs(terms_sum(r) - r->predicted_s) < TOL);
+	t.prior.host_points = 0; /* not measured: the default */
+	t.time_scale = 1;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(r->predicted_s - sum) < TOL);
 	/* with the prior, the estimate only moves the first probe: 80 ms instead of 20 adds 60 ms */
 	double at20 = f.res->predicted_s;
 	f.spec->integ_ms = 80;

@@ -10,7 +10,9 @@
  *    applied to the model's own evaluation), its rank-one update equals a refactorisation, and on models of a
  *    known truth (rt_truth) it is within a factor 3 of the table's actual output-weighted error;
  *  - the DHR value on a channel subset equals the RMS of recon_dhr's σ over those channels;
- *  - the target's specification parser. */
+ *  - the target's specification parser;
+ *  - the route increment: a candidate on the batch's route (at a pick's incidence, next to it) is chosen over an
+ *    equally informative one the old rule (cost from the arms alone) prefers, and is charged exactly its increment. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -842,6 +844,104 @@ static void test_combined_target(void **state)
 	recon_model_free(m);
 }
 
+/* Select with the route r (NULL: costs from the arms alone) on candidates ang/cost, batch 2, target lnf: the picks'
+ * input indices into got[2]; the result in *res (select_result_free). */
+static size_t picks2(const struct recon_model *m, const double *ang, const double *cost, const struct select_route *rt,
+		     size_t got[2], struct select_result *res)
+{
+	struct fix f;
+	fix_spec(&f, "lnf");
+	f.o.batch = 2;
+	f.o.route = rt;
+	assert_int_equal(select_batch(m, 3, ang, cost, &f.t, &f.o, res, &f.e), 0);
+	for (size_t k = 0; k < 2; k++)
+		got[k] = k < res->npicks ? res->picks[k].index : SIZE_MAX;
+	return res->npicks;
+}
+
+/* The route increment: the arms are at incidence 0°, candidate B at 30°, the most informative candidate P at 60°, and
+ * A, a twin of B in information (B's pair half a degree away) but at P's incidence next to P. Charged from the arms
+ * alone (the old rule) B is cheaper than A (the laser's 30° instead of 60°), so the batch is P, B: two incidences,
+ * two darks, the laser to 60° and 30°. Charged its increment to the batch's route, A after P costs its measurement and
+ * a 2° detector move, B its incidence's darks and a detour of the laser: the batch is P then A, and A's charge is
+ * exactly that increment. A candidate at the arms' incidence is charged no darks (the executor keeps them). */
+static void test_route_increment(void **state)
+{
+	(void)state;
+	struct toy ty;
+	struct recon_model *m = toy_start(&ty, 30);
+	double ang[12], g[31], gall[31 * 4];
+	gap_pair(m, gall);
+	memcpy(gall + 4, ty.ang, 30 * 4 * sizeof *gall);
+	double c31[31];
+	for (int j = 0; j < 31; j++)
+		c31[j] = 10;
+	gains(m, 31, gall, c31, "lnf", g, NULL);
+	size_t P = 0, B = SIZE_MAX;
+	for (size_t j = 1; j < 31; j++)
+		if (g[j] > g[P])
+			P = j;
+	for (size_t j = 0; j < 31; j++) /* B: informative, but clearly less than P */
+		if (j != P && g[j] <= 0.5 * g[P] && (B == SIZE_MAX || g[j] > g[B]))
+			B = j;
+	assert_true(B != SIZE_MAX && g[B] > 0.05 * g[P]);
+	memcpy(ang, gall + 4 * P, 4 * sizeof *ang);      /* 0: P */
+	memcpy(ang + 4, gall + 4 * B, 4 * sizeof *ang);  /* 1: A, B's twin */
+	ang[4 + 2] = fmin(ang[4 + 2] + 0.5 * M_PI / 180, 0.5 * M_PI - 0.01);
+	memcpy(ang + 8, gall + 4 * B, 4 * sizeof *ang);  /* 2: B */
+	double ga[3], c3[3] = { 10, 10, 10 };
+	gains(m, 3, ang, c3, "lnf", ga, NULL);
+	printf("route: gains P %.3g, A %.3g, B %.3g\n", ga[0], ga[1], ga[2]);
+	assert_true(fabs(ga[1] - ga[2]) <= 0.1 * ga[2]); /* equally informative, to 10 % */
+	/* bench positions (laser θ, detector θ, detector φ): P and A at laser 60°, 2° apart; B at 30°; the arms at 0° */
+	double pos[9] = { 60, 40, 100, 60, 42, 100, 30, 40, 100 }, base[3] = { 2, 2, 2 }, open[3] = { 3, 3, 3 };
+	struct select_route rt = { .pos = pos, .base = base, .open = open, .from = { 0, 40, 100 },
+				   .speed = { 10, 20, 30 }, .accel = { 20, 60, 90 }, .settle = { 0.3, 0.2, 0.2 },
+				   .move_s = 0.075 };
+	/* the old rule: each from the arms (its incidence's darks and the laser's move) */
+	double old[3];
+	for (int j = 0; j < 3; j++)
+		old[j] = 2 + 3 + sel_route_move(&rt, rt.from, pos + 3 * j);
+	size_t got[2];
+	struct select_result r;
+	assert_int_equal(picks2(m, ang, old, NULL, got, &r), 2);
+	printf("route: old rule picks %zu, %zu (costs %.2f %.2f %.2f)\n", got[0], got[1], old[0], old[1], old[2]);
+	assert_int_equal(got[0], 0);
+	assert_int_equal(got[1], 2);
+	select_result_free(&r);
+	/* the increment: P first (from the arms: its darks and the laser's move), then A (no dark, a 2° detector move) */
+	assert_int_equal(picks2(m, ang, old, &rt, got, &r), 2);
+	printf("route: increment rule picks %zu, %zu (charged %.3f, %.3f s)\n", got[0], got[1], r.picks[0].cost,
+	       r.picks[1].cost);
+	assert_int_equal(got[0], 0);
+	assert_int_equal(got[1], 1);
+	double dA = 2 * sqrt(2.0 / 60) + 0.2 + 0.075; /* detector θ: a 2° trapezoid (no cruise), its settle, polling */
+	assert_true(fabs(r.picks[0].cost - (2 + 3 + sel_route_move(&rt, rt.from, pos))) < 1e-12);
+	assert_true(fabs(r.picks[1].cost - (2 + dA)) < 1e-12);
+	select_result_free(&r);
+	/* B after P: its incidence is new to the batch (its darks), the cheapest insertion is before P (arms → B → P) */
+	struct sel_route w;
+	assert_int_equal(sel_route_init(&w, &rt, 2), 0);
+	sel_route_add(&w, 0, 1);
+	size_t at;
+	double cB = sel_route_cost(&w, 2, &at);
+	double ins = sel_route_move(&rt, rt.from, pos + 6) + sel_route_move(&rt, pos + 6, pos) - sel_route_move(&rt, rt.from, pos);
+	assert_int_equal(at, 1);
+	assert_true(fabs(cB - (2 + 3 + ins)) < 1e-12);
+	assert_true(cB < 2 + 3 + sel_route_move(&rt, pos, pos + 6)); /* inserting beats appending (the laser's way back) */
+	sel_route_free(&w);
+	/* from the arms at B's incidence B is charged no darks, only its move */
+	rt.from[0] = 30;
+	rt.from[1] = 30;
+	assert_int_equal(sel_route_init(&w, &rt, 2), 0);
+	assert_true(fabs(sel_route_cost(&w, 2, &at) - (2 + sel_route_move(&rt, rt.from, pos + 6))) < 1e-12);
+	sel_route_free(&w);
+	/* the azimuth modulo 360°: 359° from 1° is a 2° move */
+	double p1[3] = { 0, 0, 1 }, p2[3] = { 0, 0, 359 }, p3[3] = { 0, 0, 3 };
+	assert_true(fabs(sel_route_move(&rt, p1, p2) - sel_route_move(&rt, p1, p3)) < 1e-12);
+	recon_model_free(m);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -850,7 +950,7 @@ int main(void)
 		cmocka_unit_test(test_reciprocity),     cmocka_unit_test(test_extremes),
 		cmocka_unit_test(test_rgb_target),      cmocka_unit_test(test_value_channels),
 		cmocka_unit_test(test_target_parse),     cmocka_unit_test(test_noise_fall),
-		cmocka_unit_test(test_combined_target),
+		cmocka_unit_test(test_combined_target), cmocka_unit_test(test_route_increment),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -50,6 +50,8 @@ static void test_checkpoints_off_the_committing_thread(void **state)
 					     .npix = NPIX, .counts = counts, .stddev = sd, .temperature_c = NAN,
 					     .taken_at = 1000 + k };
 		assert_int_equal(store_spectrum_add(st, &sp, NULL, &err), 0);
+		/* as the sweep does: the next point only once this one is on disk (store_sync.c's fsync) */
+		assert_int_equal(store_durable_wait(st, store_commit_mark(st), &err), 1);
 		long w = file_size(wal);
 		if (w > wal_max)
 			wal_max = w;
