@@ -86,8 +86,7 @@ static void prior_host(struct hpt *h, size_t n, const struct bench_geom *g, cons
 			b.det_theta = a.det_theta;
 		if (fabs(a.det_phi - b.det_phi) < HOST_STILL_DEG)
 			b.det_phi = a.det_phi;
-		double mv = plan_straight_s(g, &a, &b);
-		double bench = (mv > 0 ? mv + 1.5 * t->axis_poll_s + t->extra_settle_s : 0) + h[i].shots_s +
+		double bench = plan_move_time_s(g, t, &a, &b) + h[i].shots_s +
 			       h[i - 1].first_ms / 1000.0 + g->readout_s + t->exposure_overhead_s;
 		v[m++] = h[i].done_at - h[i - 1].done_at - bench / t->time_scale;
 	}

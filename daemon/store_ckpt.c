@@ -17,8 +17,8 @@
  * but they did not measurably help either: test_store_ckpt (1100 commits, each waited durable), 3 runs each at load
  * ~10: 64 pages 543-851 checkpoints, 1.5-1.8 s of checkpoints in all, longest 28-59 ms, 2.4-3.2 s wall; 1000 pages
  * 107-238 checkpoints, 0.5-0.6 s, longest 19-40 ms, 2.8-4.0 s wall. And the commit's fsync is off the loop now
- * (store_sync.c): a checkpoint sharing the disk delays the sweep's next point, not the loop. */
-#define STORE_CKPT_PAGES 1000
+ * (store_sync.c): a checkpoint sharing the disk delays the sweep's next point, not the loop. STORE_CKPT_PAGES is in
+ * store_int.h (store_sync.c's WAL hook checkpoints at it too when this thread could not start). */
 
 struct store_ckpt {
 	pthread_t thread;

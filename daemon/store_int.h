@@ -9,6 +9,9 @@
 
 #include "daemon/store.h"
 
+/* Pages in the WAL that start a checkpoint (SQLite's default; store_ckpt.c says why not fewer). */
+#define STORE_CKPT_PAGES 1000
+
 /* Statements prepared once at store_open() (hot paths: a spectrum, its point's completion, an event). */
 enum { ST_SPECTRUM, ST_POINT_DONE, ST_EVENT, ST__COUNT };
 

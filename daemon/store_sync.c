@@ -164,7 +164,7 @@ int store_wal_hook(void *arg, sqlite3 *db, const char *name, int pages)
 	}
 	if (st->ckpt)
 		store_ckpt_note(st->ckpt, pages);
-	else if (pages >= 1000) /* SQLite's own automatic checkpoint, which a WAL hook replaces */
+	else if (pages >= STORE_CKPT_PAGES) /* SQLite's own automatic checkpoint, which a WAL hook replaces */
 		sqlite3_wal_checkpoint(db, name);
 	return SQLITE_OK;
 }

@@ -259,6 +259,10 @@ int plan_make_points(const struct plan_spec *spec, const struct bench_geom *g, c
 		     const struct plan_pos *start, struct plan_result **out, struct acq_err *err);
 /* Straight-move time plus the settling of the axes that move: a lower bound of any move between a and b. */
 double plan_straight_s(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b);
+/* A straight move between two poses as the executor sees it (bench s): plan_straight_s, then 1.5 polls and the extra
+ * settling; 0 when nothing moves. */
+double plan_move_time_s(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *a,
+			const struct plan_pos *b);
 /* A pose [laser_theta, detector_theta, detector_phi] from a YAML sequence (what names it in messages). 0 or -1. */
 int plan_pose_parse(const struct yc_node *n, const char *what, struct plan_pos *out, struct acq_err *err);
 /* The executor's and drivers' default timing (see struct plan_timing). */

@@ -73,8 +73,7 @@ void plan_timing_defaults(struct plan_timing *t)
 	};
 }
 
-/* A straight move between two poses as the executor sees it: trapezoids, settling, polling. */
-static double move_time(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *a,
+double plan_move_time_s(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *a,
 			const struct plan_pos *b)
 {
 	double mv = plan_straight_s(g, a, b);
@@ -220,11 +219,11 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 		/* from where the arms are (when known) to the reference pose, the reference, then to the first point */
 		const struct plan_pos *first = &r->steps[0].pos;
 		if (t->have_start)
-			r->reference_s += move_time(g, t, &t->start, t->reference ? &t->ref_pose : first);
+			r->reference_s += plan_move_time_s(g, t, &t->start, t->reference ? &t->ref_pose : first);
 		if (t->reference) {
 			r->reference_s += first_probe;
 			dark_at = r->reference_s; /* fixed integration: the first points use the reference's dark */
-			r->reference_s += dark + meas + move_time(g, t, &t->ref_pose, first);
+			r->reference_s += dark + meas + plan_move_time_s(g, t, &t->ref_pose, first);
 		}
 		clock = r->reference_s;
 	}
