@@ -1,9 +1,8 @@
 /* commands: what each protocol command does in the daemon (dispatch from server.c; see proto_cmds[]): the
- * dispatch, the information commands (version, status, config, spectrum, reload) and the helpers every
- * handler uses; the families of commands have a file each (commands_int.h). */
+ * dispatch and the information commands (version, status, config, spectrum, reload); the families of commands
+ * have a file each, and the helpers every handler uses are in commands_reply.c (commands_int.h). */
 #include "daemon/commands_int.h"
 
-#include <math.h>
 #include <stdio.h>
 #include <string.h>
 #include <unistd.h>
@@ -13,32 +12,6 @@
 #include "daemon/export.h"
 #include "daemon/store.h"
 #include "daemon/sweep.h"
-
-/* ---- helpers ---- */
-
-void cmd_reply_err(struct app *app, const struct srv_peer *peer, json_t *id, const struct acq_err *err)
-{
-	server_reply_error(app->srv, peer->serial, id, proto_code_of(err), err->msg);
-}
-
-double cmd_num_arg(json_t *req, const char *key, double dflt)
-{
-	json_t *v = json_object_get(req, key);
-	return v ? json_number_value(v) : dflt;
-}
-
-json_t *cmd_progress_json(struct app *app)
-{
-	struct sweep_progress p;
-	sweep_get_progress(app->sweep, &p);
-	json_t *o = json_pack("{s:s,s:I,s:i,s:i,s:s}", "state", sweep_state_name(p.state), "id", (json_int_t)p.sweep_id,
-			      "done", p.points_done, "total", p.points_total, "message", p.message);
-	/* wall-clock seconds, only while running: a paused sweep has no ETA that counts down */
-	json_object_set_new(o, "eta_s", p.state == SWEEP_RUNNING && isfinite(p.eta_s) ? json_real(p.eta_s) : json_null());
-	/* a pause asked while a point is measured takes effect after it (sweep.pause replies by then or after 10 s) */
-	json_object_set_new(o, "pause_pending", json_boolean(p.state == SWEEP_RUNNING && p.pause_pending));
-	return o;
-}
 
 /* ---- information ---- */
 static void cmd_spectrum(struct app *app, const struct srv_peer *peer, struct proto_req *req)

@@ -1,5 +1,6 @@
 /* commands_int.h: what the command handlers' files share (commands.c dispatches; one file per family of
- * commands: commands_plan.c, commands_sweep.c, commands_manual.c, commands_recon.c). Internal to the daemon. */
+ * commands: commands_plan.c, commands_sweep.c, commands_manual.c, commands_recon.c; the helpers they all use:
+ * commands_reply.c). Internal to the daemon. */
 #ifndef COMMANDS_INT_H
 #define COMMANDS_INT_H
 
@@ -10,7 +11,7 @@
 /* The address-space bound of a planning child: the dry run (`plan`) and sweep.start's planner alike. */
 #define PLAN_MEM_BYTES ((size_t)1 << 30)
 
-/* commands.c: helpers for every handler */
+/* commands_reply.c: helpers for every handler */
 /* Reply to client peer's request id with err's protocol code and message. */
 void cmd_reply_err(struct app *app, const struct srv_peer *peer, json_t *id, const struct acq_err *err);
 /* The number req[key] (0 if it is not a number), or dflt when the key is absent. */
