@@ -49,6 +49,14 @@ void eta_running(struct eta *e, bool running, double loop_now, double real_now)
 	e->skip = running;
 }
 
+void eta_replan(struct eta *e)
+{
+	e->run_real = e->run_plan = 0;
+	e->measured = 0;
+	e->recent_real = e->recent_plan = NAN;
+	e->skip = true;
+}
+
 /* The recent averages per point after an interval of k points that took real_s running for plan_s of the plan.
  * Real and plan seconds are averaged apart and compared at the current scale: the scale is measured over the
  * sweep's first half second, and the first points may come before it is known. */

@@ -24,6 +24,10 @@ struct eta {
 void eta_reset(struct eta *e);
 /* The sweep runs (true) or stops running (pause, fault: false) at these clock readings. */
 void eta_running(struct eta *e, bool running, double loop_now, double real_now);
+/* The plan was re-timed (its predicted_start_s changed, sweep_retime.c): what was measured against the old one
+ * is dropped (the excess, its weight, and the interval under way, whose two ends are in different plans); the
+ * clocks' scale is kept. */
+void eta_replan(struct eta *e);
 /* After a point: wall seconds left. plan_at_s: the plan's predicted time (bench s from the sweep's start) at
  * which step `done` starts; plan_total_s: the plan's whole predicted time (NAN: no plan). */
 double eta_update(struct eta *e, int done, int total, double plan_at_s, double plan_total_s, double loop_now,

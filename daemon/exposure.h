@@ -157,5 +157,9 @@ int exp_prior_build(const struct store_prior_row *rows, size_t n, const struct b
  * (or it has no done point). 0, or -1 with err. */
 int exp_prior_load(struct store *st, const char *sample, long long exclude, const struct bench_geom *g,
 		   const struct plan_timing *t, struct plan_prior *out, struct acq_err *err);
+/* The exposure prior of sweep_id's own done points so far (a running sweep re-timing the rest of its plan, see
+ * sweep.c): as exp_prior_load, out->sweep = sweep_id when it has a done point, sample empty. 0, or -1 with err. */
+int exp_prior_load_sweep(struct store *st, long long sweep_id, const struct bench_geom *g,
+			 const struct plan_timing *t, struct plan_prior *out, struct acq_err *err);
 
 #endif
