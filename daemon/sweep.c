@@ -100,7 +100,7 @@ static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double
 		if (rc < 0)
 			log_msg(LOG_WARNING, "sweep %lld: re-timing the plan: %s", (long long)sweep_id, err.msg);
 		else if (rc > 0) {
-			eta_replan(&sw->eta);
+			eta_replan(&sw->eta, sweep_retime_plan_at, sw->plan);
 			log_msg(LOG_DEBUG, "sweep %lld: plan re-timed at point %d from its own exposures: %.1f s",
 				(long long)sweep_id, done, sw->plan->predicted_s);
 		}

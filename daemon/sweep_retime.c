@@ -35,3 +35,9 @@ int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long 
 	r->retimed++;
 	return 1;
 }
+
+double sweep_retime_plan_at(const void *plan, int i)
+{
+	const struct plan_result *r = plan;
+	return i >= 0 && (size_t)i < r->n_steps ? r->steps[i].predicted_start_s : r->predicted_s;
+}

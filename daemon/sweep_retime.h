@@ -5,7 +5,8 @@
  * not at all for what comes later at another incidence (its darks at other ladder times, longer exposures). At each
  * new incidence the sweep's own done points so far become its exposure prior (exp_prior_load_sweep: per incidence
  * the times, darks and HDR exposures it chose, and the host's time per point), the plan is timed again with it
- * (plan_time_apply: each incidence by the nearest one measured) and the ETA starts its excess afresh (eta_replan).
+ * (plan_time_apply: each incidence by the nearest one measured) and the ETA's measured excess is re-expressed
+ * against it (eta_replan).
  * A sweep that has a prior from an earlier sweep of its sample keeps it (its exposures are the sample's already),
  * as do fixed integration and adaptive sweeps (their batches are timed as they are chosen). */
 #ifndef SWEEP_RETIME_H
@@ -33,10 +34,12 @@ void sweep_retime_setup(struct sweep_retime *r, const struct plan_spec *spec, co
  * when r re-times and has not re-timed there yet. */
 bool sweep_retime_due(const struct sweep_retime *r, const struct plan_result *plan, int done);
 /* At step done, time plan (sweep sweep_id's, from spec, on bench g) again with the sweep's own exposures so far
- * from st as its prior. 1 when re-timed, 0 when there was nothing to time it with (no done point), -1 with err (the
- * plan is then unchanged). */
+ * from st as its prior. 1 when re-timed, 0 when there was nothing to time it with (no done point), -1 with err (the plan is then
+ * unchanged). */
 int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long long sweep_id,
 		       const struct plan_spec *spec, const struct bench_geom *g, struct plan_result *plan,
 		       struct acq_err *err);
+/* For eta_replan: plan (a struct plan_result) predicted start of step i, bench s (its end for i = n_steps). */
+double sweep_retime_plan_at(const void *plan, int i);
 
 #endif

@@ -147,7 +147,7 @@ static double eta_error_at_change(bool retime, int *retimed)
 		assert_int_equal(sweep_retime_due(&rt, r, (int)done), retime && done == change);
 		if (sweep_retime_due(&rt, r, (int)done)) {
 			assert_int_equal(sweep_retime_apply(&rt, (int)done, st, sid, spec, &g, r, &err), 1);
-			eta_replan(&e);
+			eta_replan(&e, sweep_retime_plan_at, r);
 			assert_false(sweep_retime_due(&rt, r, (int)done)); /* once per incidence */
 		}
 		eta = eta_update(&e, (int)done, (int)n, r->steps[done].predicted_start_s, r->predicted_s, real, real);
