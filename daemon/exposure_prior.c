@@ -233,3 +233,22 @@ int exp_prior_load_sweep(struct store *st, long long sweep_id, const struct benc
 	free(R.v);
 	return rc;
 }
+
+int exp_host_load(struct store *st, long long exclude, const struct bench_geom *g, const struct plan_timing *t,
+		  double *host_s, long long *sweep, struct acq_err *err)
+{
+	*sweep = 0;
+	int64_t id = 0;
+	if (store_latest_completed(st, exclude, &id, err))
+		return -1;
+	if (id <= 0)
+		return 0;
+	struct plan_prior pr;
+	if (exp_prior_load_sweep(st, id, g, t, &pr, err))
+		return -1;
+	if (pr.host_points >= EXP_HOST_MIN_POINTS) {
+		*host_s = pr.host_per_point_s;
+		*sweep = id;
+	}
+	return 0;
+}

@@ -73,3 +73,20 @@ int store_prior_rows(struct store *st, int64_t sweep_id, store_prior_fn fn, void
 		return store_db_err(st, err, "reading a sweep's exposures");
 	return 0;
 }
+
+int store_latest_completed(struct store *st, int64_t exclude, int64_t *sweep_id, struct acq_err *err)
+{
+	*sweep_id = 0;
+	sqlite3_stmt *s = store_prep(st, "SELECT id FROM sweeps WHERE state = 'completed' AND id <> ? "
+				         "ORDER BY id DESC LIMIT 1", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_int64(s, 1, exclude);
+	int rc = sqlite3_step(s);
+	if (rc == SQLITE_ROW)
+		*sweep_id = sqlite3_column_int64(s, 0);
+	sqlite3_finalize(s);
+	if (rc != SQLITE_ROW && rc != SQLITE_DONE)
+		return store_db_err(st, err, "finding the latest completed sweep");
+	return 0;
+}

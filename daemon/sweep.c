@@ -409,14 +409,20 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
 void sweep_plan_prior(const struct sweep *sw, const struct plan_spec *spec, int64_t exclude, struct plan_timing *t)
 {
 	memset(&t->prior, 0, sizeof t->prior);
-	if (!spec || spec->integ_mode != PLAN_INTEG_AUTO || !spec->sample[0] || !sw->env.store)
+	t->host_sweep = 0;
+	if (!spec || !sw->env.store)
 		return;
 	struct acq_err err = { 0 };
-	if (exp_prior_load(sw->env.store, spec->sample, exclude, &sw->env.conf->bench, t, &t->prior, &err)) {
+	if (spec->integ_mode == PLAN_INTEG_AUTO && spec->sample[0] &&
+	    exp_prior_load(sw->env.store, spec->sample, exclude, &sw->env.conf->bench, t, &t->prior, &err)) {
 		log_msg(LOG_WARNING, "exposure prior of sample '%s': %s (timed from the plan's estimate)", spec->sample,
 			err.msg);
 		memset(&t->prior, 0, sizeof t->prior);
 	}
+	/* without the sample's own host figure, the host's time per point as this host's latest sweep measured it */
+	if (!(t->prior.sweep > 0 && t->prior.host_points > 0) &&
+	    exp_host_load(sw->env.store, exclude, &sw->env.conf->bench, t, &t->point_overhead_s, &t->host_sweep, &err))
+		log_msg(LOG_WARNING, "the host's time per point from the latest sweep: %s (the default)", err.msg);
 }
 
 static int plan_cfg(struct sweep *sw, struct ex_cfg *cfg, struct acq_err *err);
