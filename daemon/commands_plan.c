@@ -74,8 +74,9 @@ static void plan_done(struct job *j, int status, const char *output, size_t len,
 			snprintf(msg, sizeof msg, "plan: not planned within %.0f s, the daemon's bound: use fewer points "
 				 "or plan it offline (acqctl plan FILE without the daemon)", PLAN_DEADLINE_S);
 		else if (job_output_truncated(j))
-			snprintf(msg, sizeof msg, "plan: the reply is longer than %d bytes: ask without points=true or plan "
-				 "it offline (acqctl plan FILE without the daemon)", PROTO_MAX_LINE);
+			snprintf(msg, sizeof msg, "plan: the reply is longer than %zu bytes: ask without points=true or plan "
+				 "it offline (acqctl plan FILE without the daemon)",
+				 pj->points ? (size_t)PROTO_MAX_REPLY : (size_t)JOB_FORK_OUTPUT_MAX);
 		else
 			snprintf(msg, sizeof msg, "plan: the planner failed (status %d; memory is bounded to %zu MiB)", status,
 				 PLAN_MEM_BYTES >> 20);
@@ -109,7 +110,10 @@ void cmd_plan_handle(struct app *app, const struct srv_peer *peer, struct proto_
 	plan_spec_free(spec);
 	err = (struct acq_err){ 0 }; /* the child reports the plan's errors */
 	double rate = app->have_sim && app->sim.time_scale > 0 ? app->sim.time_scale : 1; /* loop seconds per s */
-	if (job_fork(plan_child, pj, PLAN_MEM_BYTES, PLAN_DEADLINE_S * rate, plan_done, pj, NULL, &err)) {
+	/* with every step the reply grows with the plan (the paper's 866 points: about 0.3 MB): bounded by what a
+	 * client accepts as a reply */
+	size_t out_max = pj->points ? PROTO_MAX_REPLY : JOB_FORK_OUTPUT_MAX;
+	if (job_fork_out(plan_child, pj, PLAN_MEM_BYTES, out_max, PLAN_DEADLINE_S * rate, plan_done, pj, NULL, &err)) {
 		json_decref(pj->id);
 		free(pj);
 		return cmd_reply_err(app, peer, req->id, &err);
