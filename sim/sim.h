@@ -106,5 +106,7 @@ struct sim_service *sim_control_new(struct sim_world *w, struct yc_node *simcfg,
 
 /* `acq-sim ctl ...` (argv[0] is "ctl"): one command to the control socket of a running acq-sim; exit status. */
 int simctl_main(int argc, char **argv);
+/* `acq-sim truth ...` (argv[0] is "truth"): the ground-truth export (sim_truthcli.c); exit status. */
+int simtruth_main(int argc, char **argv);
 
 #endif
