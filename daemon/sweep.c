@@ -82,7 +82,7 @@ static void on_event(void *ctx, int64_t sweep_id, const char *kind, const char *
 	if (run || !strcmp(kind, "pause") || !strcmp(kind, "abort") || !strcmp(kind, "failed") ||
 	    !strcmp(kind, "complete"))
 		eta_running(&sw->eta, run, loop_now(sw->env.loop), loop_monotonic(NULL));
-	const char *state = sw->ex ? ex_state_name(ex_state(sw->ex)) : "idle";
+	const char *state = !sw->ex ? "idle" : ex_stopping(sw->ex) ? "stopping" : ex_state_name(ex_state(sw->ex));
 	emit(sw, "sweep.state", json_pack("{s:I,s:s,s:s,s:s}", "sweep", (json_int_t)sweep_id, "state", state, "kind",
 					  kind, "reason", message));
 }
@@ -171,7 +171,7 @@ static void snapshot(struct sweep *sw)
 	if (!sw->ex)
 		return;
 	const struct ex_stats *st = ex_stats(sw->ex);
-	p->state = map_state(ex_state(sw->ex));
+	p->state = ex_stopping(sw->ex) ? SWEEP_STOPPING : map_state(ex_state(sw->ex));
 	p->sweep_id = sw->id;
 	p->points_done = st->points_done;
 	p->points_total = st->points_total;
@@ -188,10 +188,14 @@ static void tick(struct loop *lp, void *arg)
 	if (!sw->ex)
 		return;
 	double now = loop_now(lp);
+	bool was_stopping = sw->last.state == SWEEP_STOPPING;
 	double next = ex_step(sw->ex, now);
 	snapshot(sw);
 	enum ex_state s = ex_state(sw->ex);
-	if (s == EX_COMPLETED || s == EX_ABORTED || s == EX_FAILED) {
+	if (was_stopping && !ex_stopping(sw->ex))
+		emit(sw, "sweep.state", json_pack("{s:I,s:s,s:s,s:s}", "sweep", (json_int_t)sw->id, "state", ex_state_name(s),
+						  "kind", "laser-off", "reason", "the laser's emission off is confirmed"));
+	if ((s == EX_COMPLETED || s == EX_ABORTED || s == EX_FAILED) && !ex_stopping(sw->ex)) {
 		struct acq_err err = { 0 };
 		if (ex_has_unrecorded(sw->ex) && ex_flush_unrecorded(sw->ex, &err)) {
 			/* The database and the daemon must not disagree on how the sweep ended: the executor stays

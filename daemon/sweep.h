@@ -36,7 +36,8 @@ enum sweep_state {
 	SWEEP_RUNNING,     /* moving / measuring */
 	SWEEP_PAUSED,      /* paused by the operator */
 	SWEEP_FAULTED,     /* suspended by a device fault (resumes by itself when the device is back, if allowed) */
-	SWEEP_STOPPING,    /* abort or completion in progress (arms stopping, laser going off) */
+	SWEEP_STOPPING,    /* a halt in progress (pause, fault, abort, failure, completion): the laser's emission-off is
+			    * queued and not yet confirmed by a read of the laser (ex_stopping) */
 };
 
 struct sweep_progress {

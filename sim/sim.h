@@ -44,6 +44,7 @@ struct sim_faults {
 	int saturation_burst;       /* next N spectra are saturated */
 	bool laser_interlock_open;  /* interlock open: emission forced off */
 	bool laser_fault;           /* laser reports a fault, emission forced off */
+	int laser_delay_ms;         /* the laser acts on and answers each command this many real ms after it arrives */
 };
 
 struct sim_world {
