@@ -93,7 +93,7 @@ static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double
 	/* eta (the executor's, loop seconds) is replaced by the wall-clock estimate: the planner's remaining time
 	 * refined by the measured rate (eta.c). */
 	(void)eta;
-	if (sweep_retime_due(&sw->retime, sw->plan, done)) {
+	if (sw->env.store && sweep_retime_due(&sw->retime, sw->plan, done)) {
 		struct acq_err err = { 0 };
 		int rc = sweep_retime_apply(&sw->retime, done, sw->env.store, sweep_id, sw->spec, &sw->env.conf->bench,
 					    sw->plan, &err);

@@ -170,8 +170,8 @@ static void test_prior_host(void **state)
 	assert_int_equal(pr.host_points, 0);
 }
 
-/* A completed sweep of n points (no sample) that stay at one pose, one 10 ms exposure of 4 averages each, committed
- * every `every` seconds. */
+/* A sweep of n points (no sample) that stay at one pose, one 10 ms exposure of 4 averages each, committed every
+ * `every` seconds, then in state. */
 static int64_t mk_host_sweep(struct store *st, int n, double every, const char *state)
 {
 	struct store_point_new pts[64];
@@ -195,8 +195,7 @@ static int64_t mk_host_sweep(struct store *st, int n, double every, const char *
 					     .phi_o = 0 };
 		assert_int_equal(store_spectrum_add(st, &sp, NULL, &err), 0);
 	}
-	if (state)
-		assert_int_equal(store_sweep_set_state(st, id, state, 3000, &err), 0);
+	assert_int_equal(store_sweep_set_state(st, id, state, 3000, &err), 0);
 	return id;
 }
 

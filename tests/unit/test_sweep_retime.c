@@ -85,6 +85,18 @@ static void put(struct store *st, int64_t sw, int64_t pt, const char *kind, doub
 	assert_int_equal(store_spectrum_add(st, &sp, NULL, &err), 0);
 }
 
+/* The quick plan on the default bench (read-out 10 ms): its spec in *spec and the plan. */
+static struct plan_result *load_plan(struct bench_geom *g, struct plan_spec **spec)
+{
+	struct acq_err err = { 0 };
+	struct plan_result *r = NULL;
+	bench_defaults(g);
+	g->readout_s = 0.01;
+	assert_int_equal(plan_load_string("t.yaml", PLAN, spec, &err), 0);
+	assert_int_equal(plan_make(*spec, g, &r, &err), 0);
+	return r;
+}
+
 /* The ETA's relative error at the first point of the second incidence, the sweep run on the simulated bench with
  * the ETA fed at every point (real time injected); with retime the sweep re-times its plan there. */
 static double eta_error_at_change(bool retime, int *retimed)
@@ -94,13 +106,9 @@ static double eta_error_at_change(bool retime, int *retimed)
 	snprintf(file, sizeof file, "r%d.db", retime);
 	struct store *st = ut_store_new(path, sizeof path, ut_dir, file);
 	struct bench_geom g;
-	bench_defaults(&g);
-	g.readout_s = 0.01;
-	struct acq_err err = { 0 };
 	struct plan_spec *spec = NULL;
-	struct plan_result *r = NULL;
-	assert_int_equal(plan_load_string("t.yaml", PLAN, &spec, &err), 0);
-	assert_int_equal(plan_make(spec, &g, &r, &err), 0);
+	struct plan_result *r = load_plan(&g, &spec);
+	struct acq_err err = { 0 };
 	struct plan_timing tm;
 	plan_timing_defaults(&tm);
 	tm.reference = false;
@@ -190,12 +198,8 @@ static void test_retime_who(void **state)
 {
 	(void)state;
 	struct bench_geom g;
-	bench_defaults(&g);
-	struct acq_err err = { 0 };
 	struct plan_spec *spec = NULL;
-	struct plan_result *r = NULL;
-	assert_int_equal(plan_load_string("t.yaml", PLAN, &spec, &err), 0);
-	assert_int_equal(plan_make(spec, &g, &r, &err), 0);
+	struct plan_result *r = load_plan(&g, &spec);
 	struct plan_timing tm;
 	plan_timing_defaults(&tm);
 	struct sweep_retime rt;
