@@ -78,6 +78,10 @@ TARGET = os.environ.get("ACQ_TTA_TARGET", "dhr:8,30,60:le=1e-09+lnf:le=1e-09")
 DIFFUSE = ["white", "narrow-lines", "rough-backscatter", "green-paint"]
 LOBES = ["sharp-lobe", "clear-coat"]
 DHR_GOAL, LOBE_GOAL = 0.005, 0.01
+# the adaptive plan the study runs (its target and budget replaced): config/plan-adaptive.yaml, or ACQ_TTA_PLAN (a
+# variant of it, e.g. another batch size); select gets its batch, as the daemon passes the plan's
+PLAN_SRC = os.environ.get("ACQ_TTA_PLAN", os.path.join(SRC, "config", "plan-adaptive.yaml"))
+BATCH = [int(re.search(r"\nbatch: (\d+)", open(PLAN_SRC).read()).group(1))]
 DAEMON_VALUE_CHANNELS = "64"  # daemon/recon_select.c RSEL_VALUE_CHANNELS: the replay runs select as the daemon does
 TH = T.THETA_DHR
 T.WL = WL
@@ -98,7 +102,7 @@ def helper(*args, out=None):
 
 def adaptive_plan(paper_s, path, overlap=None, budget_s=None, target=None):
     """config/plan-adaptive.yaml with the study's target and budget written to path."""
-    text = open(os.path.join(SRC, "config", "plan-adaptive.yaml")).read()
+    text = open(PLAN_SRC).read()
     tg = target or ("{dhr_sigma: {incidence_deg: [8, 30, 60], le: 1e-9}%s}"
                     % (", lnf_sigma: {le: 1e-9}" if "+lnf" in TARGET else ""))
     text = re.sub(r"\ntarget:\n  dhr_sigma: [^\n]*\n", "\ntarget: %s\n" % tg, text)
@@ -199,7 +203,7 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         nc, route = helper("cand", CONF, plan_path, st, cc, out="text").split()
         if int(nc) == 0:
             return None, None, "nothing reachable left (no candidate)", 0.0
-        cpu = T.run([T.REC, "select", model, "--candidates", cc, "--route", route, "--target", target, "--batch", "16",
+        cpu = T.run([T.REC, "select", model, "--candidates", cc, "--route", route, "--target", target, "--batch", str(BATCH[0]),
                      "-o", sj])[0]
         sel = json.load(open(sj))
         if not sel["picks"]:
@@ -483,7 +487,7 @@ def validate(rows, paper_s):
             if ids_same:
                 worst["cost"] = max(worst["cost"], float(np.max(np.abs(mine[:, 5] - theirs[:, 5]) / theirs[:, 5])))
             T.run([T.REC, "select", os.path.join(bdir, "model.brdf"), "--candidates", os.path.join(bdir, "candidates.csv"),
-                   "--route", route, "--target", r["target_spec"], "--batch", "16", "--value-channels", DAEMON_VALUE_CHANNELS, "-o", sj])
+                   "--route", route, "--target", r["target_spec"], "--batch", str(BATCH[0]), "--value-channels", DAEMON_VALUE_CHANNELS, "-o", sj])
             sel = json.load(open(sj))
             picks_same = [x["id"] for x in sel["picks"]] == [p["candidate_id"] for p in r["picks"]]
             bb = helper("batch", conf, plan_path, st, sj, "--time-scale", scale)
