@@ -661,8 +661,9 @@ double ex_step_run(struct ex *x, double now)
 		} else {
 			return INFINITY;
 		}
-		/* A transition that scheduled nothing (e.g. into suspended) runs the new state at once. */
-		if (x->wake == INFINITY && (x->state == EX_RUNNING || x->state == EX_SUSPENDED))
+		/* A transition that scheduled nothing (e.g. into suspended, or a halt whose emission-off is still to be
+		 * confirmed: a sweep failed while storing a point) runs the new state at once. */
+		if (x->wake == INFINITY && (x->state == EX_RUNNING || x->state == EX_SUSPENDED || ex_stopping(x)))
 			continue;
 		if (x->wake > now)
 			return x->wake;
