@@ -182,6 +182,10 @@ static int dhr_quad_init(struct dhr_quad *dq, const struct recon_model *m, struc
 	 * the trend's lobe */
 	int can = m->transform == RECON_T_LOG && trend_hv_alpha(m->trend, m->trend_alpha) > 0 && lobe >= 1e-4 &&
 		  m->loo_rms <= 1.0;
+	/* nor where the energy factor can step (a table bound above 1): the hemisphere rule cuts at its steps
+	 * (quad.c energy_steps), the half-vector rule could not */
+	for (size_t i = 0; can && m->ntab >= 2 && i < (m->ntab - 1) * L; i++)
+		can = m->tab_alb[i] <= 1.0;
 	/* split only when it is cheaper: the rules' nodes up to their usual stop (the start and one doubling, 5 × the
 	 * start; the half-vector rule two, 21 × 16²: measured at every incidence on clear-coat and green paint). The
 	 * GGX paint (α 0.12) keeps its single rule, 32 × 53 (8.5k nodes against 13k split); the coat kind (α 0.05)
