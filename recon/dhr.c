@@ -201,6 +201,7 @@ static int dhr_quad_init(struct dhr_quad *dq, const struct recon_model *m, struc
 		qmax = qs;
 	if (recon_albedo_ws_init(&dq->ws, m, qmax, err))
 		return -1;
+	dq->ws.indep = 1; /* σ_quad from two rules that share no node (quad.c) */
 	if (!dq->split)
 		return 0;
 	dq->ws.part = RECON_PART_REST;
@@ -546,8 +547,8 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	/* the nominal DHR by the adaptive rule (the fixed rule above serves the spread and the model variance):
 	 * a lobe narrower than the 32 × 48 rule resolves is refined, per channel, up to 256 × 384. The exact
 	 * albedo of the scaled model is ≤ 1 by construction, so an estimate above 1 is quadrature error: it is
-	 * clipped (which only moves it towards the exact value) and, with the last refinement step, kept as
-	 * the quadrature term of σ. */
+	 * clipped (which only moves it towards the exact value) and, with the last refinement step (against the
+	 * finer rule and the coarser rule's independent twin: dq->ws.indep), kept as the quadrature term of σ. */
 	if (dhr_quad_init(&dq, m, err))
 		goto out;
 	for (size_t t = 0; t < nth; t++) {
