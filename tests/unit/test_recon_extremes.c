@@ -522,15 +522,17 @@ static void test_single_wavelength(void **state)
 /*
  * The DHR's quadrature is honest: at θ its adaptive rule's value (recon_dhr_ex, from 32 × 48) is within Z_QUAD of
  * its own σ_quad of an independent reference, the checker's adaptive cubature (Genz–Malik cells, to 1e-6 relative)
- * from two cell grids, whose disagreement u counts as the reference's own error (it is ~1e-5 relative where the
- * energy factor steps inside its cells, ~1e-6 elsewhere): z = |DHR − ref| / √(σ_quad² + u² + (1e-6·ref)²), the last
- * term the reference's tolerance. Z_QUAD = 3: σ_quad is the last refinement step, |fine − coarse|, a bound-like
- * estimate of the coarser rule's error and not a standard deviation, so a converging rule reads z ≪ 1 (measured on
- * this spike's data set, 200 seeds × 2 transforms × 4 channels: max z 0.97, /work/notes/s10/quad.md); before the
- * rules were cut at the energy factor's steps (quad.c energy_steps) a third of the seeds had a channel with z > 4,
- * up to 137 (ACQ_SEED=3020495829: 0.17498 ± 3.7e-5 against 0.162878). Both sides ≤ 1 and ≥ 0.
+ * from two cell grids, whose disagreement u counts as the reference's own error (median 1e-5 relative, up to 2e-3
+ * where the energy factor steps inside its cells): z = |DHR − ref| / √(σ_quad² + u² + (1e-6·ref)²), the last
+ * term the reference's tolerance. Z_QUAD = 5: σ_quad is the last refinement step (against the finer rule and the
+ * coarser rule's independent twin), an estimate of the coarser rule's error and not a standard deviation; measured
+ * on this spike's data set (45 seeds × 2 transforms × 4 channels of a driver: recon/reconstruction.md, DHR): max z 2.6
+ * (a relative error of 4e-4, within the rule's 1e-3 tolerance, against σ_quad 2e-5), median 0.13, so 5 leaves a
+ * margin of ~2 over the worst seen. Before the rules were cut at the energy factor's steps (quad.c energy_steps),
+ * 51 of 150 seeds had a channel with z > 5, up to 646 (ACQ_SEED=3020495829: 0.17498 ± 3.7e-5 against 0.166141,
+ * z 230). Both sides ≤ 1 and ≥ 0.
  */
-#define Z_QUAD 3.0
+#define Z_QUAD 5.0
 static void assert_dhr_quad_honest(const struct recon_model *m, double theta)
 {
 	size_t L = m->nwl, un = 0;
