@@ -182,6 +182,10 @@ static int dhr_quad_init(struct dhr_quad *dq, const struct recon_model *m, struc
 	 * the trend's lobe */
 	int can = m->transform == RECON_T_LOG && trend_hv_alpha(m->trend, m->trend_alpha) > 0 && lobe >= 1e-4 &&
 		  m->loo_rms <= 1.0;
+	/* nor where the energy factor can step (a table bound above 1): the hemisphere rule cuts at its steps
+	 * (quad.c energy_steps), the half-vector rule could not */
+	for (size_t i = 0; can && m->ntab >= 2 && i < (m->ntab - 1) * L; i++)
+		can = m->tab_alb[i] <= 1.0;
 	/* split only when it is cheaper: the rules' nodes up to their usual stop (the start and one doubling, 5 × the
 	 * start; the half-vector rule two, 21 × 16²: measured at every incidence on clear-coat and green paint). The
 	 * GGX paint (α 0.12) keeps its single rule, 32 × 53 (8.5k nodes against 13k split); the coat kind (α 0.05)
@@ -197,6 +201,7 @@ static int dhr_quad_init(struct dhr_quad *dq, const struct recon_model *m, struc
 		qmax = qs;
 	if (recon_albedo_ws_init(&dq->ws, m, qmax, err))
 		return -1;
+	dq->ws.indep = 1; /* σ_quad from two rules that share no node (quad.c) */
 	if (!dq->split)
 		return 0;
 	dq->ws.part = RECON_PART_REST;
@@ -542,8 +547,8 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	/* the nominal DHR by the adaptive rule (the fixed rule above serves the spread and the model variance):
 	 * a lobe narrower than the 32 × 48 rule resolves is refined, per channel, up to 256 × 384. The exact
 	 * albedo of the scaled model is ≤ 1 by construction, so an estimate above 1 is quadrature error: it is
-	 * clipped (which only moves it towards the exact value) and, with the last refinement step, kept as
-	 * the quadrature term of σ. */
+	 * clipped (which only moves it towards the exact value) and, with the last refinement step (against the
+	 * finer rule and the coarser rule's independent twin: dq->ws.indep), kept as the quadrature term of σ. */
 	if (dhr_quad_init(&dq, m, err))
 		goto out;
 	for (size_t t = 0; t < nth; t++) {

@@ -184,6 +184,14 @@ struct albedo_ws {
 	int nested, store, keep_n, keep_m;
 	double *keep;
 	size_t keep_cap;
+	/* steps: the x (cosθo, or cos²θo) of the energy factor's steps at this θi (scaled rules; quad.c), nstep of
+	 * them (room for the table's nodes): every rule integrates between them, the factor being constant there */
+	double *step;
+	int nstep;
+	/* indep: before accepting a doubling, the coarser rule's independent twin (nodes in cos²θo, azimuths shifted
+	 * by half a step; alt[L] its values) must agree with the finer rule too (the DHR's; quad.c) */
+	int indep, alt_rule;
+	double *alt;
 };
 /* Allocate for rules of up to qmax nodes (-1 with err on failure); free (idempotent). */
 int recon_albedo_ws_init(struct albedo_ws *ws, const struct recon_model *m, size_t qmax, struct acq_err *err);

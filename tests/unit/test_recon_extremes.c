@@ -17,6 +17,7 @@
 #include "recon/merl.h"
 #include "recon/rgbeval.h"
 #include "recon_test_util.h"
+#include "recon/recon_int.h"
 
 #define DEG (M_PI / 180)
 
@@ -518,6 +519,44 @@ static void test_single_wavelength(void **state)
 	csvio_samples_free(&s);
 }
 
+/*
+ * The DHR's quadrature is honest: at θ its adaptive rule's value (recon_dhr_ex, from 32 × 48) is within Z_QUAD of
+ * its own σ_quad of an independent reference, the checker's adaptive cubature (Genz–Malik cells, to 1e-6 relative)
+ * from two cell grids, whose disagreement u counts as the reference's own error (median 1e-5 relative, up to 2e-3
+ * where the energy factor steps inside its cells): z = |DHR − ref| / √(σ_quad² + u² + (TAB_TOL/4 · ref)²) ≤ Z_QUAD = 5.
+ * σ_quad is the last refinement step (against the finer rule and the coarser rule's independent twin), an estimate
+ * of the coarser rule's error, not a standard deviation. The floor TAB_TOL/4 (2.5e-4 relative): below a quarter of
+ * the rule's own tolerance σ_quad is not asserted, because it still under-states there (measured on this spike's
+ * data set, 80 seeds × 2 transforms × 4 channels of a driver, recon/reconstruction.md: 2 seeds read errors of 1e-4
+ * and 4.3e-4 relative with σ_quad 1.4e-6 and 3.3e-6). With the floor: max z 1.7 over those 80 seeds. The old
+ * rule (before quad.c's energy_steps and the twin): 42 of 150 seeds above 5, up to 453 (ACQ_SEED=3020495829:
+ * 0.17498 ± 3.7e-5 against 0.166141). Both sides ≤ 1 and ≥ 0.
+ */
+#define Z_QUAD 5.0
+static void assert_dhr_quad_honest(const struct recon_model *m, double theta)
+{
+	size_t L = m->nwl, un = 0;
+	double *d = malloc(7 * L * sizeof *d);
+	assert_non_null(d);
+	double *s = d + L, *q = d + 2 * L, *ref = d + 3 * L, *ref2 = d + 4 * L, *e = d + 5 * L; /* e: 2L */
+	struct acq_err err = { 0 };
+	struct albedo_ws ws;
+	assert_int_equal(recon_dhr_ex(m, 1, &theta, 0, 1, d, s, NULL, NULL, q, NULL, NULL, &err), 0);
+	assert_int_equal(recon_albedo_ws_init(&ws, m, 4096, &err), 0);
+	assert_int_equal(recon_albedo_cubature(m, theta, 16, 32, 1, 1e-6, 1e-3, 400000, &ws, ref, e, &un, &err), 0);
+	assert_int_equal(recon_albedo_cubature(m, theta, 41, 83, 1, 1e-6, 1e-3, 400000, &ws, ref2, e, &un, &err), 0);
+	recon_albedo_ws_free(&ws);
+	for (size_t l = 0; l < L; l++) {
+		double r = fmin(ref[l], 1.0), u = fabs(fmin(ref2[l], 1.0) - r);
+		double z = fabs(d[l] - r) / sqrt(q[l] * q[l] + u * u + 0.0625 * TAB_TOL * TAB_TOL * r * r);
+		printf("  dhr at %g° (%g nm): %.6g ± %.2g (quadrature), reference %.6g ± %.2g: z %.3g\n", theta / DEG, m->wl[l],
+		       d[l], q[l], r, u, z);
+		assert_true(d[l] >= 0 && d[l] <= 1.0);
+		assert_true(z <= Z_QUAD);
+	}
+	free(d);
+}
+
 /* Thirteen decades in one data set: a diffuse floor of 1e-8 sr⁻¹ and a specular spike up to 1e5 sr⁻¹ (far
  * beyond energy conservation, its neighbours 2-3° away at the floor: a lobe narrower than the energy table's
  * first quadrature rule resolves), both transforms. Finite, ≥ 0, reciprocal, albedo ≤ 1 (the energy factor
@@ -583,23 +622,7 @@ static void test_dynamic_range(void **state)
 				assert_true(alb[l] <= 1.02);
 			}
 		}
-		/* the DHR at the spike: its adaptive rule (from 32 × 48) must agree with a rule started 4 × 5 finer
-		 * to its own quadrature term plus 2e-3, and stay ≤ 1 (the fixed 32 × 48 rule alone misses the lobe) */
-		double th35 = 35 * DEG, d35[4], s35[4], q35[4], f35[4];
-		assert_int_equal(recon_dhr_ex(m, 1, &th35, 0, 1, d35, s35, NULL, NULL, q35, NULL, NULL, &err), 0);
-		assert_int_equal(recon_albedo(m, th35, 128, 240, 1, f35, &err), 0);
-		for (size_t l = 0; l < s.nwl; l++) {
-			double ref = fmin(f35[l], 1.0);
-			printf("  dhr at the spike (%g nm): %.6g ± %.2g (quadrature), fine rule %.6g\n", s.wl[l], d35[l],
-			       q35[l], f35[l]);
-			assert_true(d35[l] >= 0 && d35[l] <= 1.0);
-			/* converged (quadrature term within ~1e-3 relative): it must agree with the finer rule to 2 %
-			 * + 1e-3 absolute (two rules that step over the same part of a lobe agree with each other:
-			 * seen up to 0.9 % on this spike, sqrt transform); the fixed rule alone was off by 97 %.
-			 * Unconverged, σ_quad says so and only [0, 1] is asserted. */
-			if (q35[l] <= 1e-3 * fmax(d35[l], 0.1))
-				assert_true(fabs(d35[l] - ref) <= 0.02 * ref + 1e-3 + q35[l]);
-		}
+		assert_dhr_quad_honest(m, 35 * DEG);
 		if (t == RECON_T_LOG)
 			assert_merl_finite(m, "range");
 		free(f);
