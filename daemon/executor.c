@@ -662,7 +662,7 @@ double ex_step_run(struct ex *x, double now)
 			return INFINITY;
 		}
 		/* A transition that scheduled nothing (e.g. into suspended) runs the new state at once. */
-		if (x->wake == INFINITY && (x->state == EX_RUNNING || x->state == EX_SUSPENDED))
+		if (x->wake == INFINITY && (x->state == EX_RUNNING || x->state == EX_SUSPENDED || ex_stopping(x)))
 			continue;
 		if (x->wake > now)
 			return x->wake;
