@@ -66,16 +66,18 @@ double sel_excess(const struct sel *s, size_t j, double *per)
 		v = fmax(v, 0);
 		mx = fmax(mx, v);
 		sum += v;
-		E += fmax(v - s->thr2, 0);
+		E += s->xw[x] * fmax(v - s->thr2, 0);
 	}
 	if (s->t->kind == SELECT_RGB) { /* one aggregate: the measure is folded into v */
 		if (per)
 			per[0] = sqrt(sum);
 		return fmax(sum - s->thr2, 0);
 	}
+	/* ln f: the value is the largest σ; the criterion the variance above the threshold² integrated over the
+	 * hemisphere pair under its projected measure (the grid cells' shares xw) */
 	if (per)
 		per[0] = sqrt(mx);
-	return E / (double)s->F;
+	return E;
 }
 
 /* The noise variance's terms after candidate p's measurement (the k-th pick; S its posterior variance + noise):

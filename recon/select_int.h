@@ -55,7 +55,8 @@ struct sel {
 	double *sn2, *rest, *res2, *kappa;
 	unsigned char *res_done; /* [nth] */
 	double *xang;    /* SELECT_LNF, SELECT_RGB: [F*4] the grid's / nodes' pairs */
-	double *xw;      /* SELECT_RGB: [F] the nodes' share of the table's projected measure (sum 1) */
+	double *xw;      /* SELECT_RGB: [F] the nodes' share of the table's projected measure (sum 1); SELECT_LNF: the
+			  * grid cells' share of the hemisphere pair's (the criterion integrates the variance under it) */
 	double *row, *zp; /* scratch of sel_update: [J], [F] */
 	/* SELECT_DHR, the noise part's fall with n: the functional's linear noise variance q = Σ_k N_k h_k² under the
 	 * GP's weights h = A⁻¹b (N_k = η λ_k, a new sample's = noise), tracked through the picks by the same block
@@ -106,8 +107,9 @@ int sel_setup_rgb(struct sel *s, struct select_result *r, struct acq_err *err);
 /* The DHR functional's coefficients at incidence th (select_setup.c; arrays as there). 0, or -1 with err. */
 int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, double *KQn, double *Y, double *Wc,
 		 double *C, struct acq_err *err);
-/* The ln f target's grid pairs into ang[F*4] (NULL: count only); returns F. */
-size_t sel_lnf_grid(double *ang);
+/* The ln f target's grid pairs into ang[F*4] and their cells' shares of the hemisphere pair's projected measure
+ * cosθi cosθo dωi dωo into w[F] (sum 1; either NULL: count only); returns F. */
+size_t sel_lnf_grid(double *ang, double *w);
 /* The RGB target's node pairs into ang[F*4] and their measure shares into w[F] (either NULL); returns F. */
 size_t sel_rgb_nodes(double *ang, double *w);
 

@@ -252,22 +252,40 @@ out:
 }
 
 /* The ln f grid: θi ≤ θo in {0, 10, …, 80°} × Δφ in {0, 20, …, 180°} (one azimuth at θi = 0). */
-size_t sel_lnf_grid(double *ang)
+/* ∫ sinθ cosθ dθ over [a, b] (radians): a θ cell's share of the projected solid angle. */
+static double proj_band(double a, double b)
+{
+	return 0.5 * (sin(b) * sin(b) - sin(a) * sin(a));
+}
+
+size_t sel_lnf_grid(double *ang, double *w)
 {
 	size_t F = 0;
+	double sum = 0, h = 0.5 * LNF_TSTEP * M_PI / 180, tmax = LNF_TMAX * M_PI / 180, dp = LNF_PSTEP * M_PI / 180;
 	for (int ti = 0; ti <= LNF_TMAX; ti += LNF_TSTEP)
 		for (int to = ti; to <= LNF_TMAX; to += LNF_TSTEP)
 			for (int p = 0; p <= 180; p += LNF_PSTEP) {
 				if (ti == 0 && p > 0)
 					break;
+				double a = ti * M_PI / 180, b = to * M_PI / 180;
 				if (ang) {
-					ang[4 * F] = ti * M_PI / 180;
+					ang[4 * F] = a;
 					ang[4 * F + 1] = 0;
-					ang[4 * F + 2] = to * M_PI / 180;
+					ang[4 * F + 2] = b;
 					ang[4 * F + 3] = p * M_PI / 180;
 				}
+				/* the node's cell: θ ± half a step within [0, LNF_TMAX], φ ± half a step within [0, π] (the
+				 * whole φ range at θi = 0, where φ is moot), × 2 off the diagonal (the reciprocal pair) */
+				double wi = proj_band(fmax(a - h, 0), fmin(a + h, tmax)), wo = proj_band(fmax(b - h, 0), fmin(b + h, tmax));
+				double wp = ti == 0 ? M_PI : (p == 0 || p == 180 ? 0.5 * dp : dp);
+				double x = wi * wo * wp * (to > ti ? 2 : 1);
+				if (w)
+					w[F] = x;
+				sum += x;
 				F++;
 			}
+	for (size_t x = 0; w && x < F; x++)
+		w[x] /= sum;
 	return F;
 }
 

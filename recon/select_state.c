@@ -194,11 +194,12 @@ int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const double
 	if (t->kind == SELECT_DHR) {
 		s->F = s->nth * s->Lc;
 	} else if (t->kind == SELECT_LNF) {
-		s->F = sel_lnf_grid(NULL);
+		s->F = sel_lnf_grid(NULL, NULL);
 		s->xang = malloc(s->F * 4 * sizeof *s->xang);
-		if (!s->xang)
+		s->xw = malloc(s->F * sizeof *s->xw);
+		if (!s->xang || !s->xw)
 			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
-		sel_lnf_grid(s->xang);
+		sel_lnf_grid(s->xang, s->xw);
 	} else {
 		s->F = sel_rgb_nodes(NULL, NULL);
 		s->xang = malloc(s->F * 4 * sizeof *s->xang);

@@ -38,7 +38,10 @@ Goals (issue 17), reported met / not met with the figures:
      mean over seeds).
 Environment: ACQ_TTA_MATERIALS (all eight), ACQ_TTA_SEEDS (3), ACQ_TTA_SEED_LIST (instead: e.g. 2,3), ACQ_TTA_SIZES (5,6,8,10: grids N^3 and
 Fibonacci N x N^2; the trade study's 12 and 15 take 35-68 min, beyond every budget here), ACQ_TTA_WL (450:1100:25), ACQ_TTA_BUDGET (1.5), ACQ_TTA_JOBS (2), ACQ_TTA_VALIDATE (1; ACQ_TTA_VALIDATE_ONLY=1: that sweep alone, beside ACQ_TTA_ROWS, an earlier CSV),
-ACQ_TTA_VALIDATE_SCALE (20), ACQ_TTA_VALIDATE_BUDGET (700), ACQ_TTA_TARGET (above). Writes $ACQ_BENCH_OUT/time_to_accuracy.csv (every state), time_to_accuracy_summary.txt
+ACQ_TTA_VALIDATE_SCALE (20), ACQ_TTA_VALIDATE_BUDGET (700), ACQ_TTA_TARGET (above), ACQ_TTA_PLAN (the adaptive plan:
+config/plan-adaptive.yaml; select gets its batch). Adaptive rows also carry darks_s (of measured_s, the darks) and
+charged_s (what select's route model charged the measured picks: against measured_s minus the seed's, how far its
+costs fall short of the planner's). Writes $ACQ_BENCH_OUT/time_to_accuracy.csv (every state), time_to_accuracy_summary.txt
 and time_to_accuracy.png (error vs bench time, one line per plan kind, per material)."""
 import concurrent.futures as cf
 import json
@@ -78,6 +81,10 @@ TARGET = os.environ.get("ACQ_TTA_TARGET", "dhr:8,30,60:le=1e-09+lnf:le=1e-09")
 DIFFUSE = ["white", "narrow-lines", "rough-backscatter", "green-paint"]
 LOBES = ["sharp-lobe", "clear-coat"]
 DHR_GOAL, LOBE_GOAL = 0.005, 0.01
+# the adaptive plan the study runs (its target and budget replaced): config/plan-adaptive.yaml, or ACQ_TTA_PLAN (a
+# variant of it, e.g. another batch size); select gets its batch, as the daemon passes the plan's
+PLAN_SRC = os.environ.get("ACQ_TTA_PLAN", os.path.join(SRC, "config", "plan-adaptive.yaml"))
+BATCH = [int(re.search(r"\nbatch: (\d+)", open(PLAN_SRC).read()).group(1))]
 DAEMON_VALUE_CHANNELS = "64"  # daemon/recon_select.c RSEL_VALUE_CHANNELS: the replay runs select as the daemon does
 TH = T.THETA_DHR
 T.WL = WL
@@ -98,7 +105,7 @@ def helper(*args, out=None):
 
 def adaptive_plan(paper_s, path, overlap=None, budget_s=None, target=None):
     """config/plan-adaptive.yaml with the study's target and budget written to path."""
-    text = open(os.path.join(SRC, "config", "plan-adaptive.yaml")).read()
+    text = open(PLAN_SRC).read()
     tg = target or ("{dhr_sigma: {incidence_deg: [8, 30, 60], le: 1e-9}%s}"
                     % (", lnf_sigma: {le: 1e-9}" if "+lnf" in TARGET else ""))
     text = re.sub(r"\ntarget:\n  dhr_sigma: [^\n]*\n", "\ntarget: %s\n" % tg, text)
@@ -170,6 +177,8 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
     steps = seed_plan["steps"]
     spent = seed_plan["predicted_s"]  # measured bench seconds (the budget's)
     motion = seed_plan["split"]["motion_s"]  # of spent: the arms' motion with settle (plan.h motion_s)
+    darks = seed_plan["split"]["darks_s"]  # of spent: the darks (plan.h darks_s)
+    charged = 0.0  # of the batches' spent: what select charged their picks (its route model's cost_s)
     waited = 0.0  # the arms' waits for decisions
     done = [s[:3] for s in steps]
     ang = np.array([s[3:7] for s in steps])
@@ -177,7 +186,7 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
     V, S, A = [v], [s], [ang]
     sp = os.path.join(WORK, tag + ".csv")
     models = []  # model after batch k (index k)
-    pending = None  # overlap: the batch decided ahead, not measured yet
+    pending = sel_pending = None  # overlap: the batch decided ahead (and its selection), not measured yet
     rows, k, fits, stop = [], 0, [], None
     target = TARGET
 
@@ -199,7 +208,7 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         nc, route = helper("cand", CONF, plan_path, st, cc, out="text").split()
         if int(nc) == 0:
             return None, None, "nothing reachable left (no candidate)", 0.0
-        cpu = T.run([T.REC, "select", model, "--candidates", cc, "--route", route, "--target", target, "--batch", "16",
+        cpu = T.run([T.REC, "select", model, "--candidates", cc, "--route", route, "--target", target, "--batch", str(BATCH[0]),
                      "-o", sj])[0]
         sel = json.load(open(sj))
         if not sel["picks"]:
@@ -213,7 +222,7 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         rel, ab, lr, s8 = truth.figures(m_, tag)
         return dict(material=mat, seed=seed, kind="adaptive", plan="adaptive", batch=batch, points=len(done),
                     bench_s=spent + waited, dhr_err=rel, dhr_abs=ab, logrmse=lr, sigma8=s8, measured_s=spent,
-                    waited_s=waited, motion_s=motion)
+                    waited_s=waited, motion_s=motion, darks_s=darks, charged_s=charged)
 
     m = fit(None)
     ahead_cpu = 0.0
@@ -224,11 +233,12 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
             break
         if pending is None:  # decide from the model of everything measured (the arms wait: fit + select)
             sel, b, stop, cpu = decide(m, done, done[-1], spent, k + 1)
+            sel_b = sel
             waited += fits[-1] + cpu
             if stop:
                 break
         else:
-            b = pending
+            b, sel_b = pending, sel_pending
             waited += max(0.0, ahead_cpu - b_prev_s)  # decided while the previous batch was measured
         # measure batch b
         bang = np.array([s_[3:7] for s_ in b["steps"]])
@@ -236,6 +246,8 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         done += [s_[:3] for s_ in b["steps"]]
         spent += b["predicted_s"]
         motion += b["split"]["motion_s"]
+        darks += b["split"]["darks_s"]
+        charged += sum(sel_b["picks"][int(s_[7])]["cost_s"] for s_ in b["steps"])
         b_prev_s = b["predicted_s"]
         k += 1
         pending = None
@@ -243,7 +255,7 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
             # batch k+1 chosen while batch k is measured: from the model before batch k, costs from its last point
             sel2, b2, why, cpu2 = decide(m, done, done[-1], spent, k + 1)
             ahead_cpu = fits[-1] + cpu2
-            pending = b2
+            pending, sel_pending = b2, sel2
             if why:
                 stop = why
         A.append(bang)
@@ -483,7 +495,7 @@ def validate(rows, paper_s):
             if ids_same:
                 worst["cost"] = max(worst["cost"], float(np.max(np.abs(mine[:, 5] - theirs[:, 5]) / theirs[:, 5])))
             T.run([T.REC, "select", os.path.join(bdir, "model.brdf"), "--candidates", os.path.join(bdir, "candidates.csv"),
-                   "--route", route, "--target", r["target_spec"], "--batch", "16", "--value-channels", DAEMON_VALUE_CHANNELS, "-o", sj])
+                   "--route", route, "--target", r["target_spec"], "--batch", str(BATCH[0]), "--value-channels", DAEMON_VALUE_CHANNELS, "-o", sj])
             sel = json.load(open(sj))
             picks_same = [x["id"] for x in sel["picks"]] == [p["candidate_id"] for p in r["picks"]]
             bb = helper("batch", conf, plan_path, st, sj, "--time-scale", scale)
@@ -525,7 +537,8 @@ def load_rows(path):
             r = dict(zip(keys, line.rstrip("\n").split(",")))
             for k in ("seed", "batch", "points"):
                 r[k] = int(r[k])
-            for k in ("bench_s", "dhr_err", "dhr_abs", "logrmse", "sigma8", "measured_s", "waited_s", "motion_s"):
+            for k in ("bench_s", "dhr_err", "dhr_abs", "logrmse", "sigma8", "measured_s", "waited_s", "motion_s",
+                      "darks_s", "charged_s"):
                 if r.get(k):
                     r[k] = float(r[k])
             rows.append(r)
@@ -607,7 +620,7 @@ def main():
                                  seed_plan, (BUDGET_X if lobe else BUDGET_OTHER) * PAPER_S[0])] = mat
                 jobs[pool.submit(fixed_run, mat, truths[mat], seed, plans)] = mat
         keys = ["material", "seed", "kind", "plan", "batch", "points", "bench_s", "dhr_err", "dhr_abs", "logrmse",
-                "sigma8", "measured_s", "waited_s", "motion_s", "stop"]
+                "sigma8", "measured_s", "waited_s", "motion_s", "darks_s", "charged_s", "stop"]
         with open(os.path.join(OUT, "time_to_accuracy.csv"), "w") as fh:
             fh.write(",".join(keys) + "\n")
             for fu in cf.as_completed(jobs):

@@ -942,6 +942,72 @@ static void test_route_increment(void **state)
 	recon_model_free(m);
 }
 
+/* ∫ g cosθi cosθo dωi dωo / ∫ cosθi cosθo dωi dωo over θi, θo ≤ 80° for g = cos²θi cos²θo (exact: each factor
+ * ∫ cos³θ sinθ dθ / ∫ cosθ sinθ dθ = (1 − c⁴)/4 / ((1 − c²)/2), c = cos 80°). */
+static double proj_mean_cos2(void)
+{
+	double c = cos(80 * M_PI / 180), one = (1 - pow(c, 4)) / 4 / ((1 - c * c) / 2);
+	return one * one;
+}
+
+/* The ln f criterion integrates the posterior variance over the hemisphere pair under its projected measure: the
+ * grid's weights are a quadrature of that measure (cos²θi cos²θo's mean within 3 %: a 10° midpoint rule), the
+ * criterion is Σ w v, and of two candidates the one
+ * whose gain lies where the measure is large wins over one near grazing whose unweighted gain (the rule before: the
+ * grid's plain mean) is larger. */
+static void test_lnf_measure(void **state)
+{
+	(void)state;
+	size_t F = sel_lnf_grid(NULL, NULL);
+	double *ang = malloc(F * 4 * sizeof *ang), *w = malloc(F * sizeof *w), sw = 0, sg = 0, su = 0;
+	sel_lnf_grid(ang, w);
+	for (size_t x = 0; x < F; x++) {
+		assert_true(w[x] > 0);
+		double g = pow(cos(ang[4 * x]) * cos(ang[4 * x + 2]), 2);
+		sw += w[x];
+		sg += w[x] * g;
+		su += g / (double)F;
+	}
+	printf("lnf measure: weights sum %.15g; mean of cos²θi cos²θo %.4f (uniform weights %.4f), exact %.4f\n", sw, sg,
+	       su, proj_mean_cos2());
+	assert_true(fabs(sw - 1) < 1e-12);
+	assert_true(fabs(sg - proj_mean_cos2()) <= 0.03 * proj_mean_cos2());
+	free(ang);
+	free(w);
+	/* two candidates, equal cost: M in a gap of the toy model's samples at mid angles, G near grazing */
+	rt_seed();
+	struct recon_model *m = toy_model();
+	double deg[2][4] = { { 37.5, 0, 42.5, 30 }, { 80, 0, 80, 150 } }, ca[8], cost[2] = { 1, 1 };
+	for (int j = 0; j < 2; j++)
+		for (int c = 0; c < 4; c++)
+			ca[4 * j + c] = deg[j][c] * M_PI / 180;
+	struct fix f;
+	fix_make(&f, m, 2, ca, cost, "lnf", 1);
+	struct sel *s = &f.s;
+	assert_int_equal(s->J, 2);
+	double E = sel_excess(s, SIZE_MAX, NULL), Ew = 0, gw[2], gu[2];
+	for (size_t x = 0; x < s->F; x++)
+		Ew += s->xw[x] * s->v[x];
+	assert_true(fabs(E - Ew) <= 1e-12 * Ew);
+	for (size_t j = 0; j < 2; j++) {
+		double S = s->Pjj[j] + s->noise;
+		gu[s->rep[j]] = 0;
+		for (size_t x = 0; x < s->F; x++) {
+			double z = s->Z[x * s->J + j];
+			gu[s->rep[j]] += fmin(z * z / S, s->v[x]) / (double)s->F;
+		}
+		gw[s->rep[j]] = E - sel_excess(s, j, NULL);
+	}
+	printf("lnf measure: gains M %.4g, G %.4g (the grid's plain mean: M %.4g, G %.4g)\n", gw[0], gw[1], gu[0], gu[1]);
+	assert_true(gu[1] > gu[0]); /* the rule before would choose G */
+	assert_true(gw[0] > gw[1]);
+	fix_free(&f);
+	struct select_result r;
+	assert_int_equal(pick1(m, 2, ca, cost, "lnf", 1, &r), 0);
+	select_result_free(&r);
+	recon_model_free(m);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -951,6 +1017,7 @@ int main(void)
 		cmocka_unit_test(test_rgb_target),      cmocka_unit_test(test_value_channels),
 		cmocka_unit_test(test_target_parse),     cmocka_unit_test(test_noise_fall),
 		cmocka_unit_test(test_combined_target), cmocka_unit_test(test_route_increment),
+		cmocka_unit_test(test_lnf_measure),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
