@@ -185,7 +185,7 @@ double recon_trend_width(const struct recon_model *m, int specular)
 {
 	double a = m->trend_alpha;
 	if (!(a > 0))
-		return specular ? INFINITY : 0.0;
+		return specular ? RECON_PRIOR_LOBE_NONE : 0.0;
 	double hv = trend_hv_alpha(m->trend, a);
 	if (hv > 0)
 		return 2.0 * hv;

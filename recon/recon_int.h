@@ -141,6 +141,10 @@ static inline double recon_unseen(double d)
  * sample 10° off its mirror does not see a lobe 5° wide (session 9: a 3 × 4 × 6 plan of sharp-lobe at 30°,
  * |z| 7.3, the nearest sample at θi 40°, θo 30°). */
 #define RECON_PRIOR_LOBE_CUT 1.25
+/* Without a trend the data show no lobe and bound no width: the mirror then needs a sample within R0/2 (10°) of
+ * its own mirror direction (an 11-sample sharp-lobe fit, trend none, its mirror at 8° "seen" by a sample 12° off
+ * its own: |z| 4.0). */
+#define RECON_PRIOR_LOBE_NONE (0.5 * RECON_PRIOR_R0)
 static inline double recon_energy_reach(double w)
 {
 	return fmin(2 * RECON_PRIOR_R0, fmax(RECON_PRIOR_RE, RECON_PRIOR_WIDTHS * w));
@@ -159,7 +163,8 @@ static inline double recon_mirror_offset(const double c6[6])
  * mirror: GGX and the coat's narrow lobe 2α, Phong α), the retro-reflection peak's α, the sheen band's half width
  * √(2 ln 4 · r). Without a trend 0: the data show no feature, so nothing bounds how narrow a missed one is (an
  * 11-sample sharp-lobe fit has no trend: reach 0.70 instead of 0.40 read |z| 6.7 at 60°). specular: the
- * specular lobe's width only, INFINITY for the other kinds and without a trend. */
+ * specular lobe's width only: INFINITY for the kinds without one (sheen, rough), RECON_PRIOR_LOBE_NONE without a
+ * trend. */
 double recon_trend_width(const struct recon_model *m, int specular);
 /* How unseen the mirror point mir (canonical) is, given the specular lobe width w (INFINITY: the distance alone):
  * the least over the samples (and their reciprocal images) of max(recon_unseen_energy(d, RECON_PRIOR_RE), ramp of
