@@ -566,6 +566,10 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 			parts->noise[i] = sn;
 		if (parts->model)
 			parts->model[i] = sm;
+		if (parts->kriging)
+			parts->kriging[i] = sqrt(vmod[i]);
+		if (parts->energy)
+			parts->energy[i] = senergy[i];
 		if (parts->quad)
 			parts->quad[i] = squad[i];
 		if (parts->misfit)
