@@ -201,16 +201,8 @@ double recon_trend_width(const struct recon_model *m, int specular)
 double recon_mirror_unseen(const struct recon_model *m, const double mir[6], double w)
 {
 	double best = 1.0;
-	for (size_t k = 0; k < 2 * m->n && best > 0; k++) {
-		const double *a = (k < m->n ? m->ctr : m->tctr) + 6 * (k % m->n);
-		double d2 = 0;
-		for (int i = 0; i < 6; i++)
-			d2 += (mir[i] - a[i]) * (mir[i] - a[i]);
-		double u = recon_unseen_energy(sqrt(d2), RECON_PRIOR_RE);
-		if (u < best && isfinite(w))
-			u = fmax(u, recon_ramp(recon_mirror_offset(a) / w, 1.0, RECON_PRIOR_LOBE_CUT));
-		best = fmin(best, u);
-	}
+	for (size_t k = 0; k < m->n && best > 0; k++)
+		best = fmin(best, recon_mirror_term(mir, m->ctr + 6 * k, m->tctr + 6 * k, w));
 	return best;
 }
 

@@ -159,6 +159,21 @@ static inline double recon_mirror_offset(const double c6[6])
 	double c = c6[2] * c6[5] - c6[0] * c6[3] - c6[1] * c6[4];
 	return acos(c > 1 ? 1 : c < -1 ? -1 : c);
 }
+/* How unseen the mirror point mir is by one sample at canonical point a (its reciprocal image ta), given the specular
+ * lobe width w (INFINITY: the distance alone): max(recon_unseen_energy(d, RECON_PRIOR_RE), the ramp of ψ/w from 1
+ * to RECON_PRIOR_LOBE_CUT), d the nearer image's distance, ψ the sample's own mirror offset. */
+static inline double recon_mirror_term(const double mir[6], const double a[6], const double ta[6], double w)
+{
+	double d1 = 0, d2 = 0;
+	for (int i = 0; i < 6; i++) {
+		d1 += (mir[i] - a[i]) * (mir[i] - a[i]);
+		d2 += (mir[i] - ta[i]) * (mir[i] - ta[i]);
+	}
+	double u = recon_unseen_energy(sqrt(d1 < d2 ? d1 : d2), RECON_PRIOR_RE);
+	if (u < 1 && isfinite(w))
+		u = fmax(u, recon_ramp(recon_mirror_offset(a) / w, 1.0, RECON_PRIOR_LOBE_CUT));
+	return u;
+}
 /* The width (rad) of the narrowest feature of m's trend: a specular lobe's ψ-width 2·α_hv (exp(−ψ²/w²) about the
  * mirror: GGX and the coat's narrow lobe 2α, Phong α), the retro-reflection peak's α, the sheen band's half width
  * √(2 ln 4 · r). Without a trend 0: the data show no feature, so nothing bounds how narrow a missed one is (an
@@ -166,9 +181,7 @@ static inline double recon_mirror_offset(const double c6[6])
  * specular lobe's width only: INFINITY for the kinds without one (sheen, rough), RECON_PRIOR_LOBE_NONE without a
  * trend. */
 double recon_trend_width(const struct recon_model *m, int specular);
-/* How unseen the mirror point mir (canonical) is, given the specular lobe width w (INFINITY: the distance alone):
- * the least over the samples (and their reciprocal images) of max(recon_unseen_energy(d, RECON_PRIOR_RE), ramp of
- * ψ/w from 1 to RECON_PRIOR_LOBE_CUT), ψ the sample's own mirror offset. */
+/* How unseen the mirror point mir (canonical) is: the least recon_mirror_term over the samples. */
 double recon_mirror_unseen(const struct recon_model *m, const double mir[6], double w);
 static inline double recon_prior_energy_sd(double p, double a_seen, double a_unseen)
 {

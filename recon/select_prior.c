@@ -35,15 +35,6 @@ static double dist2(const double *a, const double *b, const double *tb)
 	return fmin(d1, d2);
 }
 
-/* The mirror's unseen-ness at incidence t with a sample at x (image tx), as recon_mirror_unseen's term. */
-static double mirror_term(const struct sel_prior *pr, size_t t, const double *x, const double *tx)
-{
-	double u = recon_unseen_energy(sqrt(dist2(pr->mir + 6 * t, x, tx)), RECON_PRIOR_RE);
-	if (u < 1 && isfinite(pr->w))
-		u = fmax(u, recon_ramp(recon_mirror_offset(x) / pr->w, 1.0, RECON_PRIOR_LOBE_CUT));
-	return u;
-}
-
 /* p at incidence t with an extra sample at canonical point x (NULL: none). */
 static double p_with(const struct sel_prior *pr, size_t t, const double *x)
 {
@@ -51,7 +42,7 @@ static double p_with(const struct sel_prior *pr, size_t t, const double *x)
 	if (x) {
 		rbf_tau(x, tx);
 		if (um > 0)
-			um = fmin(um, mirror_term(pr, t, x, tx));
+			um = fmin(um, recon_mirror_term(pr->mir + 6 * t, x, tx, pr->w));
 	}
 	const double *c6 = pr->c6 + t * pr->Q * 6, *d = pr->d + t * pr->Q, *wt = pr->wt + t * pr->Q;
 	for (size_t q = 0; q < pr->Q; q++) {
@@ -153,7 +144,7 @@ void sel_prior_pick(struct sel *s, size_t p)
 			double *dq = pr->d + t * pr->Q + q;
 			*dq = fmin(*dq, sqrt(dist2(pr->c6 + (t * pr->Q + q) * 6, x, tx)));
 		}
-		pr->umir[t] = fmin(pr->umir[t], mirror_term(pr, t, x, tx));
+		pr->umir[t] = fmin(pr->umir[t], recon_mirror_term(pr->mir + 6 * t, x, tx, pr->w));
 		pr->p[t] = p_with(pr, t, NULL);
 		double r = pold > 0 ? fmin(pr->p[t] / pold, 1.0) : 0;
 		for (size_t c = 0; c < pr->Lc; c++)
