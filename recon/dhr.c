@@ -101,6 +101,7 @@ static void unseen_and_misfit(const struct recon_model *m, size_t Q, const doubl
 	size_t L = m->nwl;
 	int rel = m->transform == RECON_T_LOG;
 	double U = 0, *aseen = in->aseen, *aunseen = senergy;
+	double reach = recon_energy_reach(recon_trend_width(m, 0));
 	for (size_t l = 0; l < L; l++)
 		aseen[l] = aunseen[l] = 0;
 	for (size_t q = 0; q < Q; q++) {
@@ -113,7 +114,7 @@ static void unseen_and_misfit(const struct recon_model *m, size_t Q, const doubl
 												 : scale[q * L + l] * dfmis[k * L + l];
 			}
 		double u = recon_unseen(d);
-		double ue = recon_unseen_energy(d);
+		double ue = recon_unseen_energy(d, reach);
 		U += ue * in->wt[q];
 		for (size_t l = 0; l < L; l++) {
 			double fv = scale[q * L + l] * untransform(m->transform, in->Y[q * L + l] + in->mud[l], m->eps[l],
@@ -125,7 +126,7 @@ static void unseen_and_misfit(const struct recon_model *m, size_t Q, const doubl
 	}
 	double mir[6]; /* the mirror direction, where a specular lobe the samples missed would sit */
 	rbf_canon(in->theta, 0.0, in->theta, M_PI, mir);
-	double ph = fmax(U / M_PI, recon_unseen_energy(recon_nearest_centre(m, mir, NULL)));
+	double ph = fmax(U / M_PI, recon_mirror_unseen(m, mir, recon_trend_width(m, 1)));
 	for (size_t l = 0; l < L; l++)
 		senergy[l] = recon_prior_energy_sd(ph, aseen[l], aunseen[l]);
 }
@@ -570,6 +571,10 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 			parts->noise[i] = sn;
 		if (parts->model)
 			parts->model[i] = sm;
+		if (parts->kriging)
+			parts->kriging[i] = sqrt(vmod[i]);
+		if (parts->energy)
+			parts->energy[i] = senergy[i];
 		if (parts->quad)
 			parts->quad[i] = squad[i];
 		if (parts->misfit)

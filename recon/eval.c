@@ -181,6 +181,31 @@ double recon_nearest_centre(const struct recon_model *m, const double *c6, size_
 	return sqrt(best);
 }
 
+double recon_trend_width(const struct recon_model *m, int specular)
+{
+	double a = m->trend_alpha;
+	if (!(a > 0))
+		return specular ? RECON_PRIOR_LOBE_NONE : 0.0;
+	double hv = trend_hv_alpha(m->trend, a);
+	if (hv > 0)
+		return 2.0 * hv;
+	if (specular)
+		return INFINITY;
+	if (m->trend == RECON_TREND_ROUGH)
+		return a;
+	if (m->trend == RECON_TREND_SHEEN)
+		return sqrt(2.0 * log(4.0) * a);
+	return specular ? INFINITY : 0.0;
+}
+
+double recon_mirror_unseen(const struct recon_model *m, const double mir[6], double w)
+{
+	double best = 1.0;
+	for (size_t k = 0; k < m->n && best > 0; k++)
+		best = fmin(best, recon_mirror_term(mir, m->ctr + 6 * k, m->tctr + 6 * k, w));
+	return best;
+}
+
 /*
  * The data the final model does not honour: at each sample, the measured value (from the stored transformed
  * data g, relative to the trend) against the final (smoothed, energy-scaled) model. Smoothing and the energy

@@ -109,7 +109,8 @@ int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int 
  * √(max(noise, model)² + quad² + misfit² + res²) (dhr.c, recon/reconstruction.md):
  *  noise  the samples' uncertainties propagated by Monte Carlo through the one factorisation;
  *  model  the interpolation error between samples (GP posterior variance, amplitude from the leave-one-out
- *         residuals) including the prior on the unseen part of the hemisphere;
+ *         residuals) including the prior on the unseen part of the hemisphere: max(kriging, energy);
+ *  kriging, energy  its two terms: the GP's posterior σ, and the energy-bounded prior σ_E (recon_int.h);
  *  quad   the quadrature error (last refinement step plus any overshoot above 1);
  *  misfit the data the final model does not honour (nearest-neighbour quadrature of its significant
  *         differences from the samples: smoothing, energy scaling);
@@ -117,6 +118,7 @@ int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int 
  *         incidences (a lobe narrower than the incidence spacing). σ adds misfit² + res² to the above. */
 struct recon_dhr_parts {
 	double *noise, *model, *quad, *misfit, *res;
+	double *kriging, *energy;
 };
 /* recon_dhr with its uncertainty split into parts (may be NULL). */
 int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,

@@ -116,9 +116,13 @@ static inline double recon_unseen(double d)
 }
 
 /* The energy-bounded prior on the unseen part (recon/reconstruction.md, "Honest σ where the data are thin"). For
- * energy, a direction pair is unseen from RECON_PRIOR_R0 on (wholly beyond RECON_PRIOR_RE, a smoothstep between
- * for continuity): a lobe narrower than the distance to the nearest sample can hide there (the GP's softer
- * recon_unseen counts a node 20-40° away as partly seen, which for a sharp lobe it is not). At one incidence, U is
+ * energy, a direction pair is unseen from RECON_PRIOR_R0 on, wholly from a reach r1 on (a smoothstep between):
+ * a lobe narrower than the distance to the nearest sample can hide there (the GP's softer recon_unseen counts a
+ * node 20-40° away as partly seen, which for a sharp lobe it is not). r1 = recon_energy_reach(w) follows the
+ * narrowest feature w of the fitted trend (recon_trend_width): RECON_PRIOR_RE (0.40) for a lobe narrower than
+ * RECON_PRIOR_RE / RECON_PRIOR_WIDTHS, RECON_PRIOR_WIDTHS · w for broader ones (a lobe as wide as w centred 2w from
+ * a sample shows there at e⁻⁴ of its peak: only beyond that can one of that width hide), at most the GP's 2·R0.
+ * At one incidence, U is
  * the unseen share of the cosine-weighted hemisphere (Σ u_q w_q / π), A_seen and A_unseen the model's DHR over
  * the seen and the unseen parts (Σ (1 − u_q) w_q f̂_q and Σ u_q w_q f̂_q). Energy conservation bounds what the
  * unseen part holds by [0, R], R = 1 − A_seen, and nothing else does (a specular lobe the samples missed can carry
@@ -128,13 +132,57 @@ static inline double recon_unseen(double d)
  * linear form p · s was tried (tighter where p is small: a 3 × 4 × 6 plan of green paint, σ 0.0015-0.0028 instead
  * of 0.015-0.024 at 30/60° against errors ≤ 0.004) and left a sharp-lobe fit of 11 samples at |z| 7.7 at 60°
  * (√p · s: 1.9): an error that has probability p must not read as 7σ. p = U (a missed lobe's direction uniform over the cosine-weighted
- * hemisphere), but 1 where the mirror direction itself is unseen (u of it: where a specular lobe would be).
- * The paper's plan has U = 0 and its mirror directions seen at 8-60° (nothing changes there). */
+ * hemisphere), but 1 where the mirror direction itself is unseen (recon_mirror_unseen: where a specular lobe
+ * would be). The paper's plan has U = 0 and its mirror directions seen at 8-60° (nothing changes there). */
 #define RECON_PRIOR_RE 0.40
-static inline double recon_unseen_energy(double d)
+#define RECON_PRIOR_WIDTHS 2.0
+/* The mirror direction is seen by a sample within RECON_PRIOR_R0 of it (product metric) whose own offset ψ from
+ * its mirror direction is within the trend lobe's width w: wholly unseen from ψ = RECON_PRIOR_LOBE_CUT · w on. A
+ * sample 10° off its mirror does not see a lobe 5° wide (session 9: a 3 × 4 × 6 plan of sharp-lobe at 30°,
+ * |z| 7.3, the nearest sample at θi 40°, θo 30°). */
+#define RECON_PRIOR_LOBE_CUT 1.25
+/* Without a trend the data show no lobe and bound no width: the mirror then needs a sample within R0/2 (10°) of
+ * its own mirror direction (an 11-sample sharp-lobe fit, trend none, its mirror at 8° "seen" by a sample 12° off
+ * its own: |z| 4.0). */
+#define RECON_PRIOR_LOBE_NONE (0.5 * RECON_PRIOR_R0)
+static inline double recon_energy_reach(double w)
 {
-	return recon_ramp(d, RECON_PRIOR_R0, RECON_PRIOR_RE);
+	return fmin(2 * RECON_PRIOR_R0, fmax(RECON_PRIOR_RE, RECON_PRIOR_WIDTHS * w));
 }
+static inline double recon_unseen_energy(double d, double r1)
+{
+	return recon_ramp(d, RECON_PRIOR_R0, r1);
+}
+/* ψ at canonical point c6: the angle between ωo and the mirror image of ωi (cos ψ = 2 μi μo − ωi·ωo). */
+static inline double recon_mirror_offset(const double c6[6])
+{
+	double c = c6[2] * c6[5] - c6[0] * c6[3] - c6[1] * c6[4];
+	return acos(c > 1 ? 1 : c < -1 ? -1 : c);
+}
+/* How unseen the mirror point mir is by one sample at canonical point a (its reciprocal image ta), given the specular
+ * lobe width w (INFINITY: the distance alone): max(recon_unseen_energy(d, RECON_PRIOR_RE), the ramp of ψ/w from 1
+ * to RECON_PRIOR_LOBE_CUT), d the nearer image's distance, ψ the sample's own mirror offset. */
+static inline double recon_mirror_term(const double mir[6], const double a[6], const double ta[6], double w)
+{
+	double d1 = 0, d2 = 0;
+	for (int i = 0; i < 6; i++) {
+		d1 += (mir[i] - a[i]) * (mir[i] - a[i]);
+		d2 += (mir[i] - ta[i]) * (mir[i] - ta[i]);
+	}
+	double u = recon_unseen_energy(sqrt(d1 < d2 ? d1 : d2), RECON_PRIOR_RE);
+	if (u < 1 && isfinite(w))
+		u = fmax(u, recon_ramp(recon_mirror_offset(a) / w, 1.0, RECON_PRIOR_LOBE_CUT));
+	return u;
+}
+/* The width (rad) of the narrowest feature of m's trend: a specular lobe's ψ-width 2·α_hv (exp(−ψ²/w²) about the
+ * mirror: GGX and the coat's narrow lobe 2α, Phong α), the retro-reflection peak's α, the sheen band's half width
+ * √(2 ln 4 · r). Without a trend 0: the data show no feature, so nothing bounds how narrow a missed one is (an
+ * 11-sample sharp-lobe fit has no trend: reach 0.70 instead of 0.40 read |z| 6.7 at 60°). specular: the
+ * specular lobe's width only: INFINITY for the kinds without one (sheen, rough), RECON_PRIOR_LOBE_NONE without a
+ * trend. */
+double recon_trend_width(const struct recon_model *m, int specular);
+/* How unseen the mirror point mir (canonical) is: the least recon_mirror_term over the samples. */
+double recon_mirror_unseen(const struct recon_model *m, const double mir[6], double w);
 static inline double recon_prior_energy_sd(double p, double a_seen, double a_unseen)
 {
 	double R = 1.0 - a_seen;

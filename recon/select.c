@@ -47,7 +47,8 @@ double sel_excess(const struct sel *s, size_t j, double *per)
 						q = fmin(q, s->q[f] + a * (a * (s->Yn[j] + s->noise) - 2 * s->X[f * s->J + j]));
 				}
 				double floor2 = s->sn2[f] * (s->q0[f] > 0 ? fmin(fmax(q / s->q0[f], 0), 1) : 1);
-				acc += fmax(floor2, fmax(v, 0)) + s->rest[f] - (zero_res ? s->res2[f] : 0);
+				acc += fmax(floor2, fmax(fmax(v, 0), sel_prior_e2(s, t, c, j))) + s->rest[f] -
+				       (zero_res ? s->res2[f] : 0);
 			}
 			double V = s->kappa[t] * fmax(acc, 0) / (double)s->Lc;
 			if (per)
@@ -146,6 +147,7 @@ void sel_update(struct sel *s, size_t p, size_t k)
 		for (size_t t = 0; t < s->nth; t++)
 			if (s->match[t * J + p])
 				s->res_done[t] = 1;
+	sel_prior_pick(s, p);
 	s->picked[p] = 1;
 }
 

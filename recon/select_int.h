@@ -69,6 +69,7 @@ struct sel {
 	double *Gc;      /* [J*n] w_j's part on the model's samples (the picks' parts in gn) */
 	double *gn;      /* [batch*J] w_j's part on pick i */
 	double *mrow, *gp; /* scratch: [J], [n] */
+	struct sel_prior *prior; /* SELECT_DHR: the energy prior's σ_E after picks (select_prior.c), or NULL */
 };
 
 /* The batch's route while it is chosen (select_route.c): the arms, then the picks in route order; the incidences
@@ -112,6 +113,14 @@ int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, double 
 size_t sel_lnf_grid(double *ang, double *w);
 /* The RGB target's node pairs into ang[F*4] and their measure shares into w[F] (either NULL); returns F. */
 size_t sel_rgb_nodes(double *ang, double *w);
+
+/* The energy prior's σ_E after picks (select_prior.c; SELECT_DHR): set up from the DHR's σ_E se[t*ldse + l] at
+ * the incidences th; 0, or -1 with err. sel_prior_e2: σ_E² at incidence t, tracked channel c with candidate j
+ * measured (SIZE_MAX: as it is; 0 without a prior). sel_prior_pick: candidate p measured. */
+int sel_prior_init(struct sel *s, const double *th, const double *se, size_t ldse, struct acq_err *err);
+double sel_prior_e2(const struct sel *s, size_t t, size_t c, size_t j);
+void sel_prior_pick(struct sel *s, size_t p);
+void sel_prior_free(struct sel *s);
 
 /* The criterion's value with candidate j measured (SIZE_MAX: as it is), predicted per-incidence values into per
  * (may be NULL). */

@@ -194,15 +194,16 @@ int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_resu
 	size_t NL = nth * L;
 	double *dhr = malloc(NL * sizeof *dhr), *sig = malloc(NL * sizeof *sig), *sn = malloc(NL * sizeof *sn);
 	double *sm = malloc(NL * sizeof *sm), *sres = malloc(NL * sizeof *sres);
+	double *sk = malloc(NL * sizeof *sk), *se = malloc(NL * sizeof *se);
 	double *c6 = malloc(Q * 6 * sizeof *c6), *wt = malloc(Q * sizeof *wt), *KQn = malloc(Q * n * sizeof *KQn);
 	double *Y = malloc(Q * Lc * sizeof *Y), *C = malloc(Q * Lc * sizeof *C), *Wc = malloc(Lc * n * sizeof *Wc);
 	double *KQJ = malloc(Q * (J ? J : 1) * sizeof *KQJ);
 	int rc = -1;
-	if (!dhr || !sig || !sn || !sm || !sres || !c6 || !wt || !KQn || !Y || !C || !Wc || !KQJ) {
+	if (!dhr || !sig || !sn || !sm || !sres || !sk || !se || !c6 || !wt || !KQn || !Y || !C || !Wc || !KQJ) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
-	struct recon_dhr_parts parts = { .noise = sn, .model = sm, .res = sres };
+	struct recon_dhr_parts parts = { .noise = sn, .model = sm, .res = sres, .kriging = sk, .energy = se };
 	if (recon_dhr_parts(s->vchan ? &sub : m, nth, th, o->ndraws, o->seed, dhr, sig, &parts, NULL, NULL, err))
 		goto out;
 	r->value = 0;
@@ -213,7 +214,7 @@ int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_resu
 			double b = fmax(sn[i], sm[i]);
 			part += sig[i] * sig[i];
 			s->sn2[f] = sn[i] * sn[i];
-			s->v[f] = sm[i] * sm[i];
+			s->v[f] = sk[i] * sk[i]; /* the GP part: σ_E (sel_prior_e2) follows the picks apart */
 			s->res2[f] = sres[i] * sres[i];
 			s->rest[f] = fmax(sig[i] * sig[i] - b * b, 0);
 		}
@@ -224,6 +225,8 @@ int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_resu
 	}
 	r->nper = nth;
 	r->nvalue = L;
+	if (sel_prior_init(s, th, se, L, err))
+		goto out;
 	if (s->vchan && isfinite(s->t->threshold) && r->value <= SEL_VALUE_CHECK * s->t->threshold &&
 	    sel_value_all(s, th, o, r, err))
 		goto out;
@@ -241,6 +244,8 @@ out:
 	free(sn);
 	free(sm);
 	free(sres);
+	free(sk);
+	free(se);
 	free(c6);
 	free(wt);
 	free(KQn);

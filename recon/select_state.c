@@ -25,6 +25,7 @@ void sel_free(struct sel *s)
 	free(s->Pjj);
 	free(s->Z);
 	free(s->v);
+	sel_prior_free(s);
 	free(s->U);
 	free(s->picked);
 	free(s->match);

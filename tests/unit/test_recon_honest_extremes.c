@@ -228,6 +228,53 @@ static void test_specular_lobe_missed(void **state)
 	assert_true(worst[1] < 2);
 }
 
+/* A sharp lobe over a blue pigment, as acq-sim's sharp-lobe: normalised Phong n = 250 (ψ-width 1/√125 ≈ 5°), k_s 0.30,
+ * over ρ 0.05-0.30; its DHR 0.35-0.6. */
+static double t_sharp(const double a[4], double wl)
+{
+	double wi[3] = { sin(a[0]) * cos(a[1]), sin(a[0]) * sin(a[1]), cos(a[0]) };
+	double wo[3] = { sin(a[2]) * cos(a[3]), sin(a[2]) * sin(a[3]), cos(a[2]) };
+	double c = 2 * wi[2] * wo[2] - (wi[0] * wo[0] + wi[1] * wo[1] + wi[2] * wo[2]), n = 250;
+	double rho = 0.05 + 0.25 * exp(-(wl - 460) * (wl - 460) / (2 * 80.0 * 80.0));
+	return rho / M_PI + (c > 0 ? 0.30 * (n + 2) / (2 * M_PI) * pow(c, n) : 0);
+}
+
+/* Issue 13 item 3 on an intermediate plan (session 10): acq-sim's 3 × 4 × 6 grid (θi 13.3/40/66.7°, θo 10-70° by 20°,
+ * φo by 60°) of t_sharp. At 30° the nearest sample to the mirror direction (30°, 30°, 180°) is (40°, 30°, 180°):
+ * within RECON_PRIOR_R0 of it, so the distance rule alone counted the mirror as seen, but 10° off its own mirror
+ * direction, twice the lobe's width: the lobe the model holds there is a guess. σ must cover the truth at 8/30/60°
+ * over two noise seeds (recon_mirror_unseen: the sample must lie within the trend lobe's width of its mirror).
+ * The distance rule alone (session 9) read max |z| 5.9 at 30° here (ACQ_SEED 1: FAILS); this rule 1.21. */
+static void test_sharp_lobe_coarse_grid(void **state)
+{
+	(void)state;
+	uint64_t seed = rt_seed();
+	double a[3 * 4 * 6 * 4], worst = 0;
+	size_t n = 0;
+	for (int i = 0; i < 3; i++)
+		for (int o = 0; o < 4; o++)
+			for (int p = 0; p < 6; p++, n++) {
+				a[4 * n] = (40.0 / 3 + 80.0 / 3 * i) * M_PI / 180;
+				a[4 * n + 1] = 0;
+				a[4 * n + 2] = (10 + 20.0 * o) * M_PI / 180;
+				a[4 * n + 3] = 60.0 * p * M_PI / 180;
+			}
+	for (uint64_t r = 0; r < 2; r++) {
+		rt_seed_value(seed + r);
+		struct recon_samples s;
+		make_samples(&s, n, a, t_sharp, 1e-4);
+		struct recon_model *m;
+		double z = max_z(&s, t_sharp, 256, 1024, &m);
+		printf("sharp lobe on a 3 × 4 × 6 grid, seed %llu: trend %s α %.3f, max |z| %.2f\n",
+		       (unsigned long long)(seed + r), trend_name(m->trend), m->trend_alpha, z);
+		worst = fmax(worst, z);
+		recon_model_free(m);
+		csvio_samples_free(&s);
+	}
+	printf("sharp lobe on a 3 × 4 × 6 grid: max |z| %.2f\n", worst);
+	assert_true(worst < 2);
+}
+
 static void test_normal_incidence_only(void **state)
 {
 	(void)state;
@@ -387,7 +434,7 @@ int main(void)
 		cmocka_unit_test(test_three_samples),         cmocka_unit_test(test_one_direction_repeated),
 		cmocka_unit_test(test_normal_incidence_only), cmocka_unit_test(test_sharp_lobe_over_floor),
 		cmocka_unit_test(test_log_uniform_random),    cmocka_unit_test(test_res_mirrored_incidence),
-		cmocka_unit_test(test_specular_lobe_missed),
+		cmocka_unit_test(test_specular_lobe_missed),  cmocka_unit_test(test_sharp_lobe_coarse_grid),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

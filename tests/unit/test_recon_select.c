@@ -12,7 +12,8 @@
  *  - the DHR value on a channel subset equals the RMS of recon_dhr's σ over those channels;
  *  - the target's specification parser;
  *  - the route increment: a candidate on the batch's route (at a pick's incidence, next to it) is chosen over an
- *    equally informative one the old rule (cost from the arms alone) prefers, and is charged exactly its increment. */
+ *    equally informative one the old rule (cost from the arms alone) prefers, and is charged exactly its increment;
+ *  - the energy prior's σ_E after a pick at an unseen mirror direction (test_prior_after_pick, prior's). */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -1008,6 +1009,86 @@ static void test_lnf_measure(void **state)
 	recon_model_free(m);
 }
 
+/* The energy prior after a pick (recon/select_prior.c, session 10): a 6 × 6 × 8 grid of rt_truth with every sample
+ * within 0.45 (chordal) of the 30° mirror point removed leaves that mirror unseen (p = 1: σ_E is σ_model there).
+ * A candidate at the mirror must be predicted to lower σ_E to what dhr.c gives the model refitted with that sample
+ * (within a factor 2 in σ), and be picked with a predicted value below the current one; σ_E as a floor (before:
+ * the GP part's update only) predicts no fall: fails. */
+static void test_prior_after_pick(void **state)
+{
+	(void)state;
+	rt_seed();
+	struct recon_samples g, s;
+	rt_samples_grid(&g, 6, 6, 8, NWL, 0.01, 1.0);
+	double th = 30 * M_PI / 180, mir[6], tmir[6], c[6];
+	rbf_canon(th, 0, th, M_PI, mir);
+	rbf_tau(mir, tmir);
+	size_t keep[6 * 6 * 8], n = 0;
+	for (size_t k = 0; k < g.n; k++) {
+		const double *a = g.ang + 4 * k;
+		rbf_canon(a[0], a[1], a[2], a[3], c);
+		double d1 = 0, d2 = 0;
+		for (int i = 0; i < 6; i++) {
+			d1 += (c[i] - mir[i]) * (c[i] - mir[i]);
+			d2 += (c[i] - tmir[i]) * (c[i] - tmir[i]);
+		}
+		if (sqrt(fmin(d1, d2)) >= 0.45)
+			keep[n++] = k;
+	}
+	rt_samples_alloc(&s, n + 1, NWL, 1);
+	memcpy(s.wl, g.wl, NWL * sizeof *s.wl);
+	for (size_t i = 0; i < n; i++) {
+		memcpy(s.ang + 4 * i, g.ang + 4 * keep[i], 4 * sizeof *s.ang);
+		memcpy(s.deg + 4 * i, g.deg + 4 * keep[i], 4 * sizeof *s.deg);
+		memcpy(s.val + NWL * i, g.val + NWL * keep[i], NWL * sizeof *s.val);
+		memcpy(s.sig + NWL * i, g.sig + NWL * keep[i], NWL * sizeof *s.sig);
+	}
+	csvio_samples_free(&g);
+	s.n = n;
+	struct recon_model *m = NULL, *m2 = NULL;
+	struct acq_err e = { 0 };
+	assert_int_equal(recon_fit(&s, NULL, &m, &e), 0);
+	double ang[8] = { th, 0, th, M_PI, th, 0, 60 * M_PI / 180, M_PI / 2 }, cost[2] = { 1, 1 };
+	struct fix f;
+	fix_make(&f, m, 2, ang, cost, "dhr:30", 1);
+	struct sel *sl = &f.s;
+	assert_non_null(sl->prior);
+	size_t jA = sl->rep[0] == 0 ? 0 : 1;
+	/* the refit with candidate A measured: its σ_E per tracked channel */
+	memcpy(s.ang + 4 * n, ang, 4 * sizeof *s.ang);
+	for (int i = 0; i < 4; i++)
+		s.deg[4 * n + i] = ang[i] * 180 / M_PI;
+	for (size_t l = 0; l < NWL; l++) {
+		double v = rt_truth(ang, s.wl[l], 1.0), sg = 0.01 * v + 1e-4;
+		s.val[NWL * n + l] = v + sg * rt_normal();
+		s.sig[NWL * n + l] = sg;
+	}
+	s.n = n + 1;
+	assert_int_equal(recon_fit(&s, NULL, &m2, &e), 0);
+	double d0[NWL], sg0[NWL], en0[NWL], d1[NWL], sg1[NWL], en1[NWL];
+	struct recon_dhr_parts p0 = { .energy = en0 }, p1 = { .energy = en1 };
+	assert_int_equal(recon_dhr_parts(m, 1, &th, 16, 1, d0, sg0, &p0, NULL, NULL, &e), 0);
+	assert_int_equal(recon_dhr_parts(m2, 1, &th, 16, 1, d1, sg1, &p1, NULL, NULL, &e), 0);
+	for (size_t k = 0; k < sl->Lc; k++) {
+		size_t l = sl->chan[k];
+		double now = sqrt(sel_prior_e2(sl, 0, k, SIZE_MAX)), pred = sqrt(sel_prior_e2(sl, 0, k, jA));
+		printf("  %4.0f nm: σ_E %.4f (dhr %.4f), predicted with the mirror sample %.4f, refitted with it %.4f\n",
+		       s.wl[l], now, en0[l], pred, en1[l]);
+		assert_true(fabs(now - en0[l]) <= 1e-12 * (1 + en0[l]));
+		assert_true(pred < 0.5 * now);
+		assert_true(pred <= 2 * en1[l] && en1[l] <= 2 * pred);
+	}
+	fix_free(&f);
+	struct select_result r;
+	assert_int_equal(pick1(m, 2, ang, cost, "dhr:30", 1, &r), 0);
+	printf("prior after a pick: value %.4f, predicted after the mirror pick %.4f\n", r.per[0], r.picks[0].predicted);
+	assert_true(r.picks[0].predicted < 0.7 * r.per[0]);
+	select_result_free(&r);
+	recon_model_free(m);
+	recon_model_free(m2);
+	csvio_samples_free(&s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1018,6 +1099,7 @@ int main(void)
 		cmocka_unit_test(test_target_parse),     cmocka_unit_test(test_noise_fall),
 		cmocka_unit_test(test_combined_target), cmocka_unit_test(test_route_increment),
 		cmocka_unit_test(test_lnf_measure),
+		cmocka_unit_test(test_prior_after_pick),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
