@@ -76,7 +76,7 @@ static int ex_command(struct devices *dv, int d, enum rop op, double target, boo
 	struct req *r = devices_req_new(dv, d, op, OWN_EX);
 	if (!r)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	r->seq = ++s->x.seq;
+	r->seq = s->x.cmd_seq = ++s->x.seq;
 	r->target = target;
 	r->on = on;
 	r->pct = pct;
@@ -96,6 +96,8 @@ static int ex_read(struct devices *dv, int d, struct acq_err *err)
 	struct xview *x = &s->x;
 	if (x->read == XW_READY && real_now() - x->read_real > EX_STALE_REAL_S)
 		x->read = XW_IDLE; /* nobody took it in time: read again */
+	if (x->read == XW_READY && (int)(x->cmd_seq - x->read_seq) > 0)
+		x->read = XW_IDLE; /* queued before the latest command (e.g. emission off): it cannot tell its outcome */
 	if (x->read == XW_READY) {
 		x->read = XW_IDLE;
 		if (x->sticky) {

@@ -26,6 +26,7 @@ struct xview {
 	struct acq_err move_err;
 	enum xwait read;
 	unsigned read_seq;
+	unsigned cmd_seq;              /* the latest command queued (ex_command): a read queued before it is stale */
 	double read_real;              /* real time the read completed */
 	int read_rc;
 	struct acq_err read_err;

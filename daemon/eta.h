@@ -6,6 +6,8 @@
 
 #include <stdbool.h>
 
+#define ETA_HISTORY 1024
+
 struct eta {
 	double t0_loop, t0_real;   /* first sample of the two clocks (the loop's may run time-scale faster) */
 	double scale;              /* loop seconds per real second, measured; 1 until known */
@@ -18,12 +20,22 @@ struct eta {
 	int measured;              /* points completed in those intervals */
 	double recent_real;        /* real s per point, recent average (eta.c); NAN until measured */
 	double recent_plan;        /* the plan's bench s per point over the same points, with the same weights */
+	double recent_w;           /* the weights' sum (each interval's 1 - exp(-k / memory), the older decayed) */
+	/* the last measured intervals (steps from..to), oldest first from hist_n - ETA_HISTORY: a re-timed plan's
+	 * recent_plan is replayed over them (eta_replan); older ones weigh under exp(-ETA_HISTORY / 120) = 2e-4 */
+	struct { int from, to; } hist[ETA_HISTORY];
+	long hist_n;               /* intervals recorded since the reset */
+	int total;                 /* the sweep's points at the last update */
 };
 
 /* A new sweep (or a resumed one): nothing measured yet. */
 void eta_reset(struct eta *e);
 /* The sweep runs (true) or stops running (pause, fault: false) at these clock readings. */
 void eta_running(struct eta *e, bool running, double loop_now, double real_now);
+/* The plan was re-timed (sweep_retime.c): its time at step i is now plan_at(ctx, i) (bench s). The plan's side of
+ * the recent average is replayed over the remembered intervals in the new plan, so the excess measured so far is
+ * kept, against the new plan; the interval under way (its two ends in different plans) is not measured. */
+void eta_replan(struct eta *e, double (*plan_at)(const void *ctx, int step), const void *ctx);
 /* After a point: wall seconds left. plan_at_s: the plan's predicted time (bench s from the sweep's start) at
  * which step `done` starts; plan_total_s: the plan's whole predicted time (NAN: no plan). */
 double eta_update(struct eta *e, int done, int total, double plan_at_s, double plan_total_s, double loop_now,

@@ -181,9 +181,17 @@ int ex_laser_off(struct ex *x, struct acq_err *err)
 {
 	if (!x->ops.laser_set)
 		return 0;
+	/* Emission may be on (commanded, a command in flight, or unknown after a restart): the off is queued to the
+	 * laser's thread, so it is confirmed by a read before anything relies on it (laser_confirm; a halt reports
+	 * `stopping` until then, ex_stopping). */
+	bool maybe_on = x->stats.laser_on || x->laser_confirm || x->laser_unknown;
 	int rc = x->ops.laser_set(x->octx, false, err);
 	if (rc == 0)
 		x->stats.laser_on = false;
+	if (maybe_on && x->ops.laser_state) {
+		x->laser_confirm = true;
+		x->off_tries = 0;
+	}
 	return rc;
 }
 
@@ -524,6 +532,47 @@ int ex_abort(struct ex *x, const char *why, double now, struct acq_err *err)
 	return 0;
 }
 
+/* ---- a halt's laser off ------------------------------------------------------------------------ */
+
+bool ex_stopping(const struct ex *x)
+{
+	return x->laser_confirm && x->state != EX_RUNNING && x->state != EX_WAITING && x->state != EX_IDLE;
+}
+
+/* A halt queued the laser's emission-off: read the laser until it says off. True while the read is on its way
+ * (the sweep reports `stopping`); false once confirmed, or after an event saying why it could not be (the laser
+ * does not answer, or still emits after EX_OFF_TRIES commands): the halt is never held up by the laser. */
+static bool halt_laser_confirm(struct ex *x, double now)
+{
+	struct acq_err err = { 0 };
+	bool emission = false, ready = false;
+	int rc = x->ops.laser_state(x->octx, &emission, &ready, &err);
+	if (rc == EX_PENDING) {
+		ex_io_wait(x, now);
+		return true;
+	}
+	x->laser_confirm = false;
+	if (rc == 0 && !emission)
+		return false;
+	if (rc == 0 && ++x->off_tries < EX_OFF_TRIES) {
+		int tries = x->off_tries;
+		x->stats.laser_on = true; /* so that ex_laser_off asks for a confirmation again */
+		if (ex_laser_off(x, &err) == 0) {
+			x->off_tries = tries;
+			x->wake = now;
+			return true;
+		}
+		rc = -1;
+	}
+	if (rc == 0)
+		acq_errf(&err, ACQ_E_DEVICE, "still emitting after %d emission-off commands", EX_OFF_TRIES);
+	x->stats.laser_on = false;
+	ex_event(x, "info", ex_dev_names[EX_DEV_LASER], "the sweep %s, but the laser's emission off is NOT confirmed: "
+		 "%s; check the laser (its keep-alive stops emission when the daemon stops refreshing it)",
+		 ex_state_name(x->state), err.msg[0] ? err.msg : "no answer");
+	return false;
+}
+
 /* ---- faults ----------------------------------------------------------------------------------- */
 
 static void run_suspended(struct ex *x, double now)
@@ -591,6 +640,11 @@ double ex_step_run(struct ex *x, double now)
 	/* Bounded work per call: a few transitions, then hand back to the loop. */
 	for (int guard = 0; guard < 16; guard++) {
 		x->wake = INFINITY;
+		if (ex_stopping(x)) {
+			if (halt_laser_confirm(x, now))
+				return x->wake > now ? x->wake : now;
+			continue;
+		}
 		if (x->state == EX_SUSPENDED) {
 			run_suspended(x, now);
 		} else if (x->state == EX_RUNNING) {

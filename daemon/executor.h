@@ -8,6 +8,8 @@
  *              when a faulted device did not come back within the retry limits. Laser off.
  *   suspended  a device error: laser off, arms stopped, reconnection attempts with exponential backoff; the
  *              point restarts from its move when the device answers again.
+ * A halt (pause, suspend, abort, failure, completion) queues the laser's emission-off; until a read of the laser
+ * confirms it, ex_stopping() is true (status `stopping`), so no state without laser is reported while it emits.
  * Commit order of a point: its darks and exposures, one transaction each, then the calibrated sample, then
  * the last exposure in the transaction that marks the point done (so a done point always has its raw
  * spectra and its calibrated sample; a crash inside the sequence leaves a pending point whose partial
@@ -179,6 +181,10 @@ const char *ex_phase(const struct ex *x);
 const struct ex_stats *ex_stats(const struct ex *x);
 /* The reason of the last pause/failure/abort ("" if none). */
 const char *ex_reason(const struct ex *x);
+/* True while the sweep halted (paused, suspended, aborted, failed, completed) and the laser's emission-off it
+ * queued is not yet confirmed by a read of the laser: the owner reports it `stopping` and keeps stepping it (a
+ * finished sweep is released only after). Never for long: a laser that does not answer ends it with an event. */
+bool ex_stopping(const struct ex *x);
 /* True while a pause was asked and the point in hand is still being measured (it pauses after it). */
 bool ex_pause_pending(const struct ex *x);
 /* True while a state or event of the sweep could not be stored (disk full...) and awaits a retry. */

@@ -8,6 +8,7 @@
 #define EX_MAX_PENDING 24
 #define EX_MAX_TIMES 8
 #define EX_POS_TOL_DEG 1e-3
+#define EX_OFF_TRIES 3 /* a halt sends emission off this many times while the laser reads on, then says so */
 #define EX_IO_RECHECK_S 0.25  /* a read is pending: step again at the latest after this (its completion kicks) */
 
 enum phase {
@@ -54,7 +55,9 @@ struct ex {
 	bool first_move;             /* next move starts from the measured position (plan_move) */
 	bool pause_requested;
 	bool paused_by_fault;
-	bool laser_confirm;          /* a laser command was queued: read the state before relying on it */
+	bool laser_confirm;          /* a laser command was queued: read the state before relying on it (and a halt
+				      * reports `stopping` until it is read off: ex_stopping) */
+	int off_tries;               /* emission-off commands a halt sent while the laser still read on */
 	bool move_from_verify;       /* PH_LASER_OFF after verifying positions (else after a commit) */
 	bool alarm_reset_sent[3];    /* this verification already reset the axis's alarm */
 	bool pos_got[3];             /* positions read so far by this read of all three axes */

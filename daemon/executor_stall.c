@@ -71,6 +71,7 @@ void ex_stall_report(struct ex *x, int point)
 {
 	/* Gathered only for the debug line: without it, no /proc read, no totals, no text on the loop per point;
 	 * the interval restarts (and a debug level turned on later starts from a fresh baseline). */
+	stall_cpu_on(log_enabled(LOG_DEBUG));
 	if (!log_enabled(LOG_DEBUG)) {
 		struct stall_acc drop;
 		stall_take(&drop);
@@ -97,14 +98,15 @@ void ex_stall_report(struct ex *x, int point)
 		"stall: sweep %lld point %d: %.1f ms since the last commit (monotonic %.3f-%.3f); waited, ms: "
 		"laser_off=%.1f verify=%.1f homing=%.1f move=%.1f settle=%.1f dark=%.1f exposure=%.1f acq=%.1f "
 		"retry=%.1f durable=%.1f other=%.1f; executor steps=%.1f store=%.1f store_max=%.1f checkpoints=%lu "
-		"checkpoint=%.1f (off the loop); loop callbacks=%.1f callback_max=%.1f completions=%.1f loop_other=%.1f "
+		"checkpoint=%.1f (off the loop); loop callbacks=%.1f callback_max=%.1f callback_max_on_cpu=%.1f callback_max_at=0x%lx callback_cpu_max=%.1f callback_cpu_max_at=0x%lx completions=%.1f loop_other=%.1f "
 		"timers_late=%.1f timer_late_max=%.1f loop_cpu_wait=%.1f; ports: %s",
 		(long long)x->sweep_id, point, 1e3 * (t - x->stall_from), x->stall_from, t, 1e3 * in[EX_STALL_LASER_OFF],
 		1e3 * in[EX_STALL_VERIFY], 1e3 * in[EX_STALL_HOMING], 1e3 * in[EX_STALL_MOVE], 1e3 * in[EX_STALL_SETTLE],
 		1e3 * in[EX_STALL_DARK], 1e3 * in[EX_STALL_EXPOSURE], 1e3 * in[EX_STALL_ACQ], 1e3 * in[EX_STALL_RETRY],
 		1e3 * in[EX_STALL_DURABLE], 1e3 * in[EX_STALL_OTHER], 1e3 * a.executor, 1e3 * a.store, 1e3 * a.max_store,
 		ck_runs - x->stall_ck_runs, 1e3 * (ck_s - x->stall_ck_s), 1e3 * a.callbacks, 1e3 * a.max_callback,
-		1e3 * a.devices,
+		1e3 * a.max_callback_cpu, (unsigned long)stall_fn_offset(a.max_callback_fn), 1e3 * a.max_cpu,
+		(unsigned long)stall_fn_offset(a.max_cpu_fn), 1e3 * a.devices,
 		1e3 * (a.callbacks - a.devices - a.executor), 1e3 * a.timer_late, 1e3 * a.max_timer_late,
 		1e3 * (w - x->stall_cpu_wait0), ports);
 	for (int i = 0; i < EX_STALL__COUNT; i++)

@@ -157,5 +157,17 @@ int exp_prior_build(const struct store_prior_row *rows, size_t n, const struct b
  * (or it has no done point). 0, or -1 with err. */
 int exp_prior_load(struct store *st, const char *sample, long long exclude, const struct bench_geom *g,
 		   const struct plan_timing *t, struct plan_prior *out, struct acq_err *err);
+/* The exposure prior of sweep_id's own done points so far (a running sweep re-timing the rest of its plan, see
+ * sweep.c): as exp_prior_load, out->sweep = sweep_id when it has a done point, sample empty. 0, or -1 with err. */
+int exp_prior_load_sweep(struct store *st, long long sweep_id, const struct bench_geom *g,
+			 const struct plan_timing *t, struct plan_prior *out, struct acq_err *err);
+/* Sweeps with fewer points measured between commits than this do not time the host (the quick plan's 15 points at
+ * time scale 1 gave -27 to +5 ms per point: the bench's own jitter). */
+#define EXP_HOST_MIN_POINTS 50
+/* The host's real seconds per point as the latest completed sweep other than exclude measured it (any sample, any
+ * integration; exp_prior_build's host figure with g and t): *host_s and *sweep (0, *host_s unchanged: none, or
+ * fewer than EXP_HOST_MIN_POINTS measured). 0, or -1 with err. */
+int exp_host_load(struct store *st, long long exclude, const struct bench_geom *g, const struct plan_timing *t,
+		  double *host_s, long long *sweep, struct acq_err *err);
 
 #endif

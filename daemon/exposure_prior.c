@@ -196,6 +196,19 @@ static int add_row(void *ctx, const struct store_prior_row *r)
 	return 0;
 }
 
+/* The prior from rows in R (sweep id of the sample name; NULL: none) into out. */
+static int prior_from(struct rows *R, int64_t id, const char *sample, const struct bench_geom *g,
+		      const struct plan_timing *t, struct plan_prior *out, struct acq_err *err)
+{
+	if (exp_prior_build(R->v, R->n, g, t, out))
+		return acq_errf(err, ACQ_E_NOMEM, "exposure prior of sweep %lld: out of memory", (long long)id);
+	if (out->n_inc > 0) {
+		out->sweep = id;
+		snprintf(out->sample, sizeof out->sample, "%s", sample ? sample : "");
+	}
+	return 0;
+}
+
 int exp_prior_load(struct store *st, const char *sample, long long exclude, const struct bench_geom *g,
 		   const struct plan_timing *t, struct plan_prior *out, struct acq_err *err)
 {
@@ -203,14 +216,39 @@ int exp_prior_load(struct store *st, const char *sample, long long exclude, cons
 	struct rows R = { 0 };
 	int64_t id = 0;
 	int rc = store_prior_each(st, sample, exclude, &id, add_row, &R, err);
-	if (rc == 0 && id > 0) {
-		if (exp_prior_build(R.v, R.n, g, t, out))
-			rc = acq_errf(err, ACQ_E_NOMEM, "exposure prior of sample '%s': out of memory", sample);
-		else if (out->n_inc > 0) {
-			out->sweep = id;
-			snprintf(out->sample, sizeof out->sample, "%s", sample);
-		}
-	}
+	if (rc == 0 && id > 0)
+		rc = prior_from(&R, id, sample, g, t, out, err);
 	free(R.v);
 	return rc;
+}
+
+int exp_prior_load_sweep(struct store *st, long long sweep_id, const struct bench_geom *g,
+			 const struct plan_timing *t, struct plan_prior *out, struct acq_err *err)
+{
+	memset(out, 0, sizeof *out);
+	struct rows R = { 0 };
+	int rc = store_prior_rows(st, sweep_id, add_row, &R, err);
+	if (rc == 0 && R.n > 0)
+		rc = prior_from(&R, sweep_id, NULL, g, t, out, err);
+	free(R.v);
+	return rc;
+}
+
+int exp_host_load(struct store *st, long long exclude, const struct bench_geom *g, const struct plan_timing *t,
+		  double *host_s, long long *sweep, struct acq_err *err)
+{
+	*sweep = 0;
+	int64_t id = 0;
+	if (store_latest_completed(st, exclude, &id, err))
+		return -1;
+	if (id <= 0)
+		return 0;
+	struct plan_prior pr;
+	if (exp_prior_load_sweep(st, id, g, t, &pr, err))
+		return -1;
+	if (pr.host_points >= EXP_HOST_MIN_POINTS) {
+		*host_s = pr.host_per_point_s;
+		*sweep = id;
+	}
+	return 0;
 }

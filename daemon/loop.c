@@ -202,10 +202,10 @@ static int run_timers(struct loop *lp)
 		} else {
 			lp->timers[best] = lp->timers[--lp->ntimers];
 		}
-		double t0 = stall_now();
+		double t0 = stall_now(), c0 = stall_cpu();
 		stall_timer_late((loop_now(lp) - t.due) / lp->clk.rate);
 		t.cb(lp, t.arg);
-		stall_callback(stall_now() - t0);
+		stall_callback(stall_now() - t0, stall_cpu() - c0, (uintptr_t)t.cb);
 		ran++;
 	}
 	return ran;
@@ -230,9 +230,9 @@ static int run_urgent(struct loop *lp)
 			continue;
 		loop_fd_cb cb = lp->fds[i].cb; /* the callback may add fds (the array moves) */
 		void *arg = lp->fds[i].arg;
-		double t0 = stall_now();
+		double t0 = stall_now(), c0 = stall_cpu();
 		cb(lp, p.fd, p.revents, arg);
-		stall_callback(stall_now() - t0);
+		stall_callback(stall_now() - t0, stall_cpu() - c0, (uintptr_t)cb);
 		ran++;
 	}
 	return ran;
@@ -287,9 +287,10 @@ int loop_run_once(struct loop *lp, double max_wait_s)
 		struct loop_fd *f = &lp->fds[i];
 		if (f->dead || f->fd != lp->pfds[i].fd)
 			continue;
-		double t0 = stall_now();
+		double t0 = stall_now(), c0 = stall_cpu();
+		loop_fd_cb cb = f->cb;
 		f->cb(lp, f->fd, re, f->arg);
-		stall_callback(stall_now() - t0);
+		stall_callback(stall_now() - t0, stall_cpu() - c0, (uintptr_t)cb);
 		ran++;
 	}
 	ran += run_timers(lp);

@@ -35,6 +35,7 @@ struct port {
 	void (*tick_fn)(void *arg, struct port *p); /* port_set_tick() */
 	void *tick_arg;
 	double tick_period, tick_next;              /* real (CLOCK_MONOTONIC) seconds */
+	bool tick_yield;                            /* the job overran its period: a queued request goes first */
 };
 
 static double mono_now(void)
@@ -79,16 +80,20 @@ static void *thread_main(void *arg)
 	struct port *p = arg;
 	pthread_mutex_lock(&p->mu);
 	for (;;) {
-		/* The periodic job first whenever it is due, then the next request; idle, sleep until either. */
+		/* The periodic job first whenever it is due, then the next request; idle, sleep until either. A job that
+		 * overran its period (a device that does not answer: the laser's keep-alive refresh waits its timeout)
+		 * lets one queued request run before it runs again, else it would starve the queue for good. */
 		for (;;) {
-			if (p->tick_fn && !p->quit && mono_now() >= p->tick_next) {
+			if (p->tick_fn && !p->quit && mono_now() >= p->tick_next && !(p->tick_yield && p->head)) {
 				void (*fn)(void *, struct port *) = p->tick_fn;
 				void *targ = p->tick_arg;
 				pthread_mutex_unlock(&p->mu);
 				double t0 = mono_now();
 				fn(targ, p);
+				double t1 = mono_now();
 				pthread_mutex_lock(&p->mu);
 				p->tick_next = t0 + p->tick_period;
+				p->tick_yield = t1 >= p->tick_next;
 				continue;
 			}
 			if (p->head || p->quit)
@@ -103,6 +108,7 @@ static void *thread_main(void *arg)
 		struct port_req *r = pop(&p->head, &p->tail);
 		if (!r)
 			break; /* quit with an empty queue */
+		p->tick_yield = false;
 		p->run_gen = r->gen; /* queued before an interrupt: interrupted too */
 		p->running = true;
 		pthread_mutex_unlock(&p->mu);

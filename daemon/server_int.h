@@ -16,6 +16,7 @@
  * one client, the clients with lines left served in rotation at the next turn (server_input.c). */
 #define LINES_PER_TURN 64
 #define LINES_PER_CLIENT 8
+#define TURN_REAL_S 0.002   /* a loop callback handles lines for this long (real s; at least one line) */
 
 /* The next turn: a timer just after now, so that it runs at the loop's next pass over its timers (a timer
  * due at once would run again within the same pass, and the turns would not be bounded). */
@@ -74,6 +75,7 @@ struct server {
 	double rate_due;            /* server time the rate timer fires */
 	struct bucket *buckets;
 	int budget;                 /* lines left to handle in this loop turn */
+	double turn_until;          /* real (monotonic) seconds: this callback handles no further line after it */
 	unsigned rotation;
 	struct server_limits lim;
 	double (*now)(void *ctx);   /* real monotonic time unless a test injects a clock */

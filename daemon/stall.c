@@ -1,11 +1,14 @@
 /* stall: totals of where the loop's real time went between two committed points (stall.h). */
 #include "daemon/stall.h"
 
+#include <dlfcn.h>
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 #include <time.h>
 
 static struct stall_acc acc;
+static bool cpu_on;
 
 double stall_now(void)
 {
@@ -21,9 +24,38 @@ static void add_max(double *sum, double *max, double s)
 		*max = s;
 }
 
-void stall_callback(double s)
+void stall_cpu_on(bool on)
 {
+	cpu_on = on;
+}
+
+double stall_cpu(void)
+{
+	struct timespec ts;
+	if (!cpu_on || clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts))
+		return NAN; /* a difference with it is NAN: not counted (e.g. a callback across the switch on) */
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+void stall_callback(double s, double cpu_s, uintptr_t fn)
+{
+	if (s > acc.max_callback) {
+		acc.max_callback_fn = fn;
+		acc.max_callback_cpu = cpu_s;
+	}
+	if (cpu_s > acc.max_cpu) {
+		acc.max_cpu = cpu_s;
+		acc.max_cpu_fn = fn;
+	}
 	add_max(&acc.callbacks, &acc.max_callback, s);
+}
+
+uintptr_t stall_fn_offset(uintptr_t fn)
+{
+	Dl_info info;
+	if (!fn || !dladdr((void *)fn, &info) || !info.dli_fbase)
+		return 0;
+	return fn - (uintptr_t)info.dli_fbase;
 }
 
 void stall_devices(double s)

@@ -8,6 +8,7 @@
 
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
 
 #define STALL_MAX_PORTS 8
 
@@ -25,6 +26,10 @@ struct stall_port {
 
 struct stall_acc {
 	double callbacks, max_callback;     /* loop callbacks (fd and timer), all of them */
+	uintptr_t max_callback_fn;          /* the longest one's function (stall_fn_offset names it) */
+	double max_callback_cpu;            /* of the longest one: on the loop thread's CPU (stall_cpu_on) */
+	double max_cpu;                     /* the largest CPU time of one callback, and its function */
+	uintptr_t max_cpu_fn;
 	double devices;                     /* of which the ports' completions (the executor's steps they kick not) */
 	double executor;                    /* of which the executor's own steps (commits included); the rest is
 					     * the clients', the server's timers', plans' and the reconstruction's */
@@ -36,8 +41,14 @@ struct stall_acc {
 
 /* Real monotonic seconds (CLOCK_MONOTONIC). */
 double stall_now(void);
-/* A loop callback took s seconds. */
-void stall_callback(double s);
+/* A loop callback (function fn, cast) took s seconds, cpu_s of them on the CPU. */
+void stall_callback(double s, double cpu_s, uintptr_t fn);
+/* Measure the loop's callbacks' CPU time too (on while the per-point stall report is logged). */
+void stall_cpu_on(bool on);
+/* The calling thread's CPU seconds, or NAN while off. */
+double stall_cpu(void);
+/* fn's address in its executable (what `addr2line -f -e acquisitiond 0x...` names), 0 if unknown. */
+uintptr_t stall_fn_offset(uintptr_t fn);
 /* Of the callbacks: dispatching a port's completions took s seconds. */
 void stall_devices(double s);
 /* Of the callbacks: an executor step took s seconds. */

@@ -38,16 +38,26 @@ int store_prior_each(struct store *st, const char *sample, int64_t exclude, int6
 		return store_db_err(st, err, "finding the sample's previous sweep");
 	if (!id)
 		return 0;
+	if (store_prior_rows(st, id, fn, ctx, err))
+		return -1;
+	*sweep_id = id;
+	return 0;
+}
+
+int store_prior_rows(struct store *st, int64_t sweep_id, store_prior_fn fn, void *ctx, struct acq_err *err)
+{
 	/* a dark is stored with the point it was taken for (before that point's exposure) */
-	s = store_prep(st, "SELECT p.theta_i, p.id, x.kind = 'dark', x.integration_ms, x.averages, p.order_index, "
-			   "coalesce(p.done_at, 0), coalesce(p.laser_theta, 0), coalesce(p.detector_theta, 0), "
-			   "coalesce(p.detector_phi, 0) FROM points p "
-			   "JOIN spectra x ON x.sweep_id = p.sweep_id AND x.point_id = p.id "
-			   "WHERE p.sweep_id = ? AND p.state = 'done' AND x.kind IN ('sample', 'dark') "
-			   "ORDER BY p.theta_i, p.order_index, x.id", err);
+	sqlite3_stmt *s = store_prep(st,
+				     "SELECT p.theta_i, p.id, x.kind = 'dark', x.integration_ms, x.averages, p.order_index, "
+				     "coalesce(p.done_at, 0), coalesce(p.laser_theta, 0), coalesce(p.detector_theta, 0), "
+				     "coalesce(p.detector_phi, 0) FROM points p "
+				     "JOIN spectra x ON x.sweep_id = p.sweep_id AND x.point_id = p.id "
+				     "WHERE p.sweep_id = ? AND p.state = 'done' AND x.kind IN ('sample', 'dark') "
+				     "ORDER BY p.theta_i, p.order_index, x.id", err);
 	if (!s)
 		return -1;
-	sqlite3_bind_int64(s, 1, id);
+	sqlite3_bind_int64(s, 1, sweep_id);
+	int rc;
 	while ((rc = sqlite3_step(s)) == SQLITE_ROW) {
 		struct store_prior_row r = { sqlite3_column_double(s, 0), sqlite3_column_int64(s, 1),
 					     sqlite3_column_int(s, 2) != 0, sqlite3_column_double(s, 3),
@@ -60,7 +70,23 @@ int store_prior_each(struct store *st, const char *sample, int64_t exclude, int6
 	}
 	sqlite3_finalize(s);
 	if (rc != SQLITE_ROW && rc != SQLITE_DONE)
-		return store_db_err(st, err, "reading the sample's previous sweep");
-	*sweep_id = id;
+		return store_db_err(st, err, "reading a sweep's exposures");
+	return 0;
+}
+
+int store_latest_completed(struct store *st, int64_t exclude, int64_t *sweep_id, struct acq_err *err)
+{
+	*sweep_id = 0;
+	sqlite3_stmt *s = store_prep(st, "SELECT id FROM sweeps WHERE state = 'completed' AND id <> ? "
+				         "ORDER BY id DESC LIMIT 1", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_int64(s, 1, exclude);
+	int rc = sqlite3_step(s);
+	if (rc == SQLITE_ROW)
+		*sweep_id = sqlite3_column_int64(s, 0);
+	sqlite3_finalize(s);
+	if (rc != SQLITE_ROW && rc != SQLITE_DONE)
+		return store_db_err(st, err, "finding the latest completed sweep");
 	return 0;
 }

@@ -19,6 +19,7 @@
 #include "daemon/recon_chain.h"
 #include "daemon/store.h"
 #include "daemon/sweep_adaptive.h"
+#include "daemon/sweep_retime.h"
 
 struct sweep {
 	struct sweep_env env;
@@ -31,6 +32,7 @@ struct sweep {
 	double started_wall;
 	struct sweep_progress last;  /* kept after the executor is gone */
 	struct eta eta;              /* wall-clock ETA (eta.c), fed by the events and the progress below */
+	struct sweep_retime retime;  /* a first auto sweep re-times its plan at each incidence (sweep_retime.h) */
 	char point_text[128];
 	/* completion: export + reconstruction chain (recon_chain.c) */
 	int64_t done_id;
@@ -80,7 +82,7 @@ static void on_event(void *ctx, int64_t sweep_id, const char *kind, const char *
 	if (run || !strcmp(kind, "pause") || !strcmp(kind, "abort") || !strcmp(kind, "failed") ||
 	    !strcmp(kind, "complete"))
 		eta_running(&sw->eta, run, loop_now(sw->env.loop), loop_monotonic(NULL));
-	const char *state = sw->ex ? ex_state_name(ex_state(sw->ex)) : "idle";
+	const char *state = !sw->ex ? "idle" : ex_stopping(sw->ex) ? "stopping" : ex_state_name(ex_state(sw->ex));
 	emit(sw, "sweep.state", json_pack("{s:I,s:s,s:s,s:s}", "sweep", (json_int_t)sweep_id, "state", state, "kind",
 					  kind, "reason", message));
 }
@@ -91,6 +93,18 @@ static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double
 	/* eta (the executor's, loop seconds) is replaced by the wall-clock estimate: the planner's remaining time
 	 * refined by the measured rate (eta.c). */
 	(void)eta;
+	if (sw->env.store && sweep_retime_due(&sw->retime, sw->plan, done)) {
+		struct acq_err err = { 0 };
+		int rc = sweep_retime_apply(&sw->retime, done, sw->env.store, sweep_id, sw->spec, &sw->env.conf->bench,
+					    sw->plan, &err);
+		if (rc < 0)
+			log_msg(LOG_WARNING, "sweep %lld: re-timing the plan: %s", (long long)sweep_id, err.msg);
+		else if (rc > 0) {
+			eta_replan(&sw->eta, sweep_retime_plan_at, sw->plan);
+			log_msg(LOG_DEBUG, "sweep %lld: plan re-timed at point %d from its own exposures: %.1f s",
+				(long long)sweep_id, done, sw->plan->predicted_s);
+		}
+	}
 	double plan_at = NAN, plan_total = NAN;
 	if (sw->plan && done >= 0) {
 		plan_total = sw->plan->predicted_s;
@@ -157,7 +171,7 @@ static void snapshot(struct sweep *sw)
 	if (!sw->ex)
 		return;
 	const struct ex_stats *st = ex_stats(sw->ex);
-	p->state = map_state(ex_state(sw->ex));
+	p->state = ex_stopping(sw->ex) ? SWEEP_STOPPING : map_state(ex_state(sw->ex));
 	p->sweep_id = sw->id;
 	p->points_done = st->points_done;
 	p->points_total = st->points_total;
@@ -174,10 +188,14 @@ static void tick(struct loop *lp, void *arg)
 	if (!sw->ex)
 		return;
 	double now = loop_now(lp);
+	bool was_stopping = sw->last.state == SWEEP_STOPPING;
 	double next = ex_step(sw->ex, now);
 	snapshot(sw);
 	enum ex_state s = ex_state(sw->ex);
-	if (s == EX_COMPLETED || s == EX_ABORTED || s == EX_FAILED) {
+	if (was_stopping && !ex_stopping(sw->ex))
+		emit(sw, "sweep.state", json_pack("{s:I,s:s,s:s,s:s}", "sweep", (json_int_t)sw->id, "state", ex_state_name(s),
+						  "kind", "laser-off", "reason", "the laser's emission off is confirmed"));
+	if ((s == EX_COMPLETED || s == EX_ABORTED || s == EX_FAILED) && !ex_stopping(sw->ex)) {
 		struct acq_err err = { 0 };
 		if (ex_has_unrecorded(sw->ex) && ex_flush_unrecorded(sw->ex, &err)) {
 			/* The database and the daemon must not disagree on how the sweep ended: the executor stays
@@ -395,17 +413,32 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
 void sweep_plan_prior(const struct sweep *sw, const struct plan_spec *spec, int64_t exclude, struct plan_timing *t)
 {
 	memset(&t->prior, 0, sizeof t->prior);
-	if (!spec || spec->integ_mode != PLAN_INTEG_AUTO || !spec->sample[0] || !sw->env.store)
+	t->host_sweep = 0;
+	if (!spec || !sw->env.store)
 		return;
 	struct acq_err err = { 0 };
-	if (exp_prior_load(sw->env.store, spec->sample, exclude, &sw->env.conf->bench, t, &t->prior, &err)) {
+	if (spec->integ_mode == PLAN_INTEG_AUTO && spec->sample[0] &&
+	    exp_prior_load(sw->env.store, spec->sample, exclude, &sw->env.conf->bench, t, &t->prior, &err)) {
 		log_msg(LOG_WARNING, "exposure prior of sample '%s': %s (timed from the plan's estimate)", spec->sample,
 			err.msg);
 		memset(&t->prior, 0, sizeof t->prior);
 	}
+	/* without the sample's own host figure, the host's time per point as this host's latest sweep measured it */
+	if (!(t->prior.sweep > 0 && t->prior.host_points > 0) &&
+	    exp_host_load(sw->env.store, exclude, &sw->env.conf->bench, t, &t->point_overhead_s, &t->host_sweep, &err))
+		log_msg(LOG_WARNING, "the host's time per point from the latest sweep: %s (the default)", err.msg);
 }
 
 static int plan_cfg(struct sweep *sw, struct ex_cfg *cfg, struct acq_err *err);
+
+/* Whether the sweep in sw re-times its plan as it goes (sweep_retime.h): the timing its plan was made with. */
+static void retime_begin(struct sweep *sw)
+{
+	struct plan_timing tm;
+	sweep_plan_timing(sw, &tm);
+	sweep_plan_prior(sw, sw->spec, sw->id, &tm);
+	sweep_retime_setup(&sw->retime, sw->spec, &tm);
+}
 
 /* Plan the text against the bench; the spec's integration settings override the configuration's. */
 static int make_plan(struct sweep *sw, const char *text, const char *name, struct ex_cfg *cfg, struct acq_err *err)
@@ -544,6 +577,7 @@ static int start_planned(struct sweep *sw, const char *plan_text, const char *na
 	if (!sw->ex)
 		goto fail;
 	sw->started_wall = sw->env.wallclock();
+	retime_begin(sw);
 	if (ex_start(sw->ex, 0, false, loop_now(sw->env.loop), err))
 		goto fail;
 	*id = sw->id;
@@ -636,6 +670,7 @@ static int recover_planned(struct sweep *sw, int64_t id, json_t *js, bool hold, 
 	if (!sw->ex)
 		goto out;
 	sw->started_wall = sw->env.wallclock();
+	retime_begin(sw);
 	if (ex_start(sw->ex, oi, true, loop_now(sw->env.loop), err))
 		goto out;
 	if (stopped[0] && ex_state(sw->ex) == EX_WAITING) { /* it had stopped: only its completion was lost */

@@ -36,7 +36,8 @@ enum sweep_state {
 	SWEEP_RUNNING,     /* moving / measuring */
 	SWEEP_PAUSED,      /* paused by the operator */
 	SWEEP_FAULTED,     /* suspended by a device fault (resumes by itself when the device is back, if allowed) */
-	SWEEP_STOPPING,    /* abort or completion in progress (arms stopping, laser going off) */
+	SWEEP_STOPPING,    /* a halt in progress (pause, fault, abort, failure, completion): the laser's emission-off is
+			    * queued and not yet confirmed by a read of the laser (ex_stopping) */
 };
 
 struct sweep_progress {
@@ -109,7 +110,9 @@ bool sweep_busy(const struct sweep *sw);
 struct plan_timing;
 void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t);
 /* The exposure prior of spec into t->prior (plan.h): for an auto plan that names its sample, from the latest
- * completed auto sweep of that sample but exclude (0: none); none otherwise (a database error is logged). */
+ * completed auto sweep of that sample but exclude (0: none); none otherwise. Without the prior's host figure, the
+ * host's time per point (t->point_overhead_s, t->host_sweep) from the latest completed sweep but exclude when it
+ * measured it (exp_host_load). A database error is logged (the defaults then). */
 void sweep_plan_prior(const struct sweep *sw, const struct plan_spec *spec, int64_t exclude, struct plan_timing *t);
 /* "idle", "running", "paused", "faulted", "stopping". */
 const char *sweep_state_name(enum sweep_state s);

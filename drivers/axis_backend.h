@@ -27,7 +27,7 @@ struct axis_backend {
 extern const struct axis_backend axis_modbus_backend;  /* drivers/axis_modbus.c */
 extern const struct axis_backend axis_fake_backend;    /* drivers/axis_fake.c */
 
-/* The backend a parsed configuration selects (drivers/axis_modbus.c, where the configuration is parsed). */
+/* The backend a parsed configuration selects (drivers/axis_modbus_cfg.c, where the configuration is parsed). */
 const struct axis_backend *axis_cfg_backend(const struct axis_cfg *cfg);
 /* Wrap a backend instance in a handle (for backends that open instances themselves, e.g. a shared link).
  * 0 or -1 (out of memory: dev is closed). */

@@ -1,38 +1,25 @@
 /* acqctl: the command-line client of acquisitiond — one subcommand per protocol command, one output per
  * command (human, or one JSON document with --json) whether or not a daemon answers, sysexits exit codes
  * (see ctl.h and acqctl(1)); `plan` runs the local dry run when no daemon answers; `export` copies the stream
- * the daemon passes over the socket; `watch` is a live view on a terminal, JSON lines otherwise. */
+ * the daemon passes over the socket; `watch` is a live view on a terminal, JSON lines otherwise. This file is the
+ * command line (options, the command and its arguments, the request, the reply's output); the connection, the
+ * outputs and watch/wait are in proto/acqctl/ (acqctl.h). */
 #include <errno.h>
-#include <fcntl.h>
 #include <math.h>
-#include <poll.h>
-#include <signal.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "acq_version.h"
 #include "daemon/plan/plan_cli.h"
+#include "proto/acqctl/acqctl.h"
 #include "proto/ctl.h"
 #include "proto/proto.h"
 
 #define DEFAULT_SOCKET "/run/acquisitiond/acquisitiond.sock"
 
-struct opts {
-	const char *sock;
-	bool json, points, csv;
-	const char *out;       /* -o FILE (export, spectrum --csv) */
-	const char *format;    /* export --format csv|nexus */
-	const char *bench;     /* plan --config */
-	int timeout_ms;
-	double wait_s;         /* --wait: keep trying to connect this long */
-};
-
-static struct opts O = { .timeout_ms = 30000 };
+struct acqctl_opts acqctl_o = { .timeout_ms = 30000 };
 
 /* Shortcuts: the positional argument of a command and the key it fills ("@plan": the file's text). */
 static const struct {
@@ -90,34 +77,6 @@ static void usage(FILE *f)
 		   "  76 protocol error\n"
 		   "see acqctl(1); --json replies follow the schemas in\n"
 		   "  /usr/share/acquisitiond/acqctl-replies.schema.json\n");
-}
-
-/* ---- one output per command ---- */
-
-static void print_json(json_t *o)
-{
-	char *s = json_dumps(o, JSON_COMPACT | JSON_REAL_PRECISION(10));
-	puts(s ? s : "{\"ok\":false}");
-	free(s);
-	fflush(stdout);
-}
-
-/* An error of the client itself (no daemon, bad input): stderr, and the JSON document with --json. */
-static int fail(int rc, const char *code, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-static int fail(int rc, const char *code, const char *fmt, ...)
-{
-	char msg[1024];
-	va_list ap;
-	va_start(ap, fmt);
-	vsnprintf(msg, sizeof msg, fmt, ap);
-	va_end(ap);
-	fprintf(stderr, "acqctl: %s\n", msg);
-	if (O.json) {
-		json_t *o = json_pack("{s:b,s:{s:s,s:s}}", "ok", 0, "error", "code", code, "message", msg);
-		print_json(o);
-		json_decref(o);
-	}
-	return rc;
 }
 
 static char *read_text(const char *path, struct acq_err *err)
@@ -186,351 +145,17 @@ static int set_arg(json_t *req, const struct proto_cmd *def, const char *key, co
 	return acq_errf(err, ACQ_E_INVAL, "%s: not an argument of %s (acqctl %s --help)", key, name, name);
 }
 
-/* ---- talking to the daemon ---- */
-
-struct conn {
-	int fd;
-	struct proto_lines pl;
-	json_t *banner;
-};
-
-static double mono(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-static int conn_open(struct conn *c, struct acq_err *err)
-{
-	proto_lines_init(&c->pl);
-	c->pl.max = PROTO_MAX_REPLY;
-	c->banner = NULL;
-	double deadline = mono() + O.wait_s;
-	while ((c->fd = proto_client_connect(O.sock, err)) < 0 && mono() < deadline)
-		usleep(100000);
-	if (c->fd < 0)
-		return -1;
-	c->banner = proto_client_read(c->fd, &c->pl, O.timeout_ms, err);
-	if (!c->banner || json_integer_value(json_object_get(c->banner, "protocol")) != PROTO_VERSION) {
-		/* A refusal before the banner ("too many clients", "not authorised") is a one-line error reply. */
-		json_t *e = json_object_get(c->banner, "error");
-		if (e)
-			acq_errf(err, ACQ_E_STATE, "%s", json_string_value(json_object_get(e, "message")));
-		else if (c->banner)
-			acq_errf(err, ACQ_E_PROTO, "unsupported protocol version");
-		return -1;
-	}
-	return 0;
-}
-
-static void conn_close(struct conn *c)
-{
-	if (c->fd >= 0)
-		close(c->fd);
-	c->fd = -1;
-	proto_lines_free(&c->pl);
-	json_decref(c->banner);
-	c->banner = NULL;
-}
-
-/* Send req (borrowed) and read its reply; passed receives a descriptor sent with it (NULL: none expected). */
-static json_t *conn_call(struct conn *c, json_t *req, int *passed, struct acq_err *err)
-{
-	char *line = json_dumps(req, JSON_COMPACT);
-	if (!line) {
-		acq_errf(err, ACQ_E_NOMEM, "out of memory");
-		return NULL;
-	}
-	size_t n = strlen(line);
-	line[n] = '\n'; /* json_dumps' NUL becomes the newline (the request is sent by length) */
-	int rc = proto_write_all(c->fd, line, n + 1, err);
-	free(line);
-	if (rc) {
-		/* The daemon may have refused us and closed: its reason is still to be read. */
-		struct acq_err e2 = { 0 };
-		json_t *why = proto_client_read_fd(c->fd, &c->pl, 1000, passed, &e2);
-		if (why && json_is_false(json_object_get(why, "ok")))
-			return why;
-		json_decref(why);
-		return NULL;
-	}
-	return proto_client_read_fd(c->fd, &c->pl, O.timeout_ms, passed, err);
-}
-
-/* ---- export and spectrum: the data part ---- */
-
-static int open_out(const char *path)
-{
-	if (!path)
-		return 1;
-	return open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
-}
-
-/* Copy the export stream to the output; the stream must carry the reply's rows (header and comment lines
- * aside), else the daemon stopped early. */
-static int copy_export(json_t *rep, int src)
-{
-	int out = open_out(O.out);
-	if (out < 0)
-		return fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out, strerror(errno));
-	char buf[65536];
-	long long bytes = 0, lines = 0;
-	ssize_t n;
-	int rc = 0;
-	while ((n = read(src, buf, sizeof buf)) != 0) {
-		if (n < 0 && errno == EINTR)
-			continue;
-		if (n < 0) {
-			rc = fail(CTL_EXIT_PROTOCOL, "io", "export stream: %s", strerror(errno));
-			break;
-		}
-		for (ssize_t i = 0; i < n; i++)
-			lines += buf[i] == '\n';
-		bytes += n;
-		struct acq_err err = { 0 };
-		if (proto_write_all(out, buf, (size_t)n, &err)) {
-			rc = fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out ? O.out : "stdout", err.msg);
-			break;
-		}
-	}
-	long long rows = json_integer_value(json_object_get(rep, "rows"));
-	long long head = json_integer_value(json_object_get(rep, "header_lines"));
-	bool nexus = json_is_string(json_object_get(rep, "format"));
-	long long want = json_integer_value(json_object_get(rep, "bytes"));
-	if (!rc && nexus && bytes != want)
-		rc = fail(CTL_EXIT_PROTOCOL, "io", "NeXus export of sweep %lld: %lld of %lld bytes received",
-			  (long long)json_integer_value(json_object_get(rep, "sweep")), bytes, want);
-	else if (!rc && !nexus && lines != rows + head)
-		rc = fail(CTL_EXIT_PROTOCOL, "io", "export of sweep %lld ended after %lld of %lld rows (see the daemon's log)",
-			  (long long)json_integer_value(json_object_get(rep, "sweep")), lines - head, rows);
-	if (O.out && close(out) && !rc)
-		rc = fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out, strerror(errno));
-	if (!rc) {
-		json_object_set_new(rep, "bytes", json_integer(bytes));
-		json_object_set_new(rep, "output", O.out ? json_string(O.out) : json_null());
-		if (O.json)
-			print_json(rep);
-		else if (O.out && nexus)
-			fprintf(stdout, "sweep %lld: NeXus, %lld points, %lld calibrated, %lld bytes written to %s\n",
-				(long long)json_integer_value(json_object_get(rep, "sweep")),
-				(long long)json_integer_value(json_object_get(rep, "points")),
-				(long long)json_integer_value(json_object_get(rep, "calibrated")), bytes, O.out);
-		else if (O.out)
-			fprintf(stdout, "sweep %lld: %lld rows, %lld bytes written to %s\n",
-				(long long)json_integer_value(json_object_get(rep, "sweep")), rows, bytes, O.out);
-	}
-	return rc;
-}
-
-/* A small export sent inline (over TCP, where no descriptor can be passed). */
-static int write_inline(json_t *rep)
-{
-	const char *csv = json_string_value(json_object_get(rep, "csv"));
-	int out = open_out(O.out);
-	struct acq_err err = { 0 };
-	if (out < 0 || proto_write_all(out, csv, strlen(csv), &err) || (O.out && close(out)))
-		return fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out ? O.out : "stdout", out < 0 ? strerror(errno) : err.msg);
-	json_int_t len = (json_int_t)strlen(csv);
-	json_object_del(rep, "csv");
-	json_object_set_new(rep, "bytes", json_integer(len));
-	json_object_set_new(rep, "output", O.out ? json_string(O.out) : json_null());
-	if (O.json)
-		print_json(rep);
-	return 0;
-}
-
-static int spectrum_csv(json_t *rep)
-{
-	json_t *s = json_object_get(rep, "spectrum");
-	json_t *wl = json_object_get(s, "wavelength_nm"), *ct = json_object_get(s, "counts");
-	json_t *sd = json_object_get(s, "stddev");
-	if (!json_is_array(wl) || !json_is_array(ct) || json_array_size(wl) != json_array_size(ct))
-		return fail(CTL_EXIT_PROTOCOL, "protocol", "spectrum reply without matching wavelength_nm and counts");
-	FILE *f = O.out ? fopen(O.out, "w") : stdout;
-	if (!f)
-		return fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out, strerror(errno));
-	fprintf(f, "# acquisitiond spectrum %lld (%s)\nwavelength_nm,counts%s\n",
-		(long long)json_integer_value(json_object_get(s, "id")), json_string_value(json_object_get(s, "kind")),
-		json_is_array(sd) ? ",stddev" : "");
-	for (size_t i = 0; i < json_array_size(wl); i++) {
-		fprintf(f, "%.6g,%.9g", json_number_value(json_array_get(wl, i)), json_number_value(json_array_get(ct, i)));
-		if (json_is_array(sd))
-			fprintf(f, ",%.6g", json_number_value(json_array_get(sd, i)));
-		fputc('\n', f);
-	}
-	if ((O.out ? fclose(f) : fflush(f)) != 0)
-		return fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", O.out ? O.out : "stdout", strerror(errno));
-	if (O.out)
-		printf("spectrum %lld: %zu rows written to %s\n", (long long)json_integer_value(json_object_get(s, "id")),
-		       json_array_size(wl), O.out);
-	return 0;
-}
-
-/* ---- watch ---- */
-
-static volatile sig_atomic_t stop_watch;
-static void on_signal(int sig)
-{
-	(void)sig;
-	stop_watch = 1;
-}
-
-static double wall(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_REALTIME, &ts);
-	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-static void json_line_event(const char *name, const char *msg)
-{
-	json_t *o = json_pack("{s:s,s:s,s:f}", "event", name, "message", msg, "at", wall());
-	print_json(o);
-	json_decref(o);
-}
-
-/* Follow the daemon's events until interrupted, reconnecting (every second) when it goes away. */
-static int run_watch(void)
-{
-	bool tty = !O.json && isatty(STDOUT_FILENO);
-	struct ctl_view *view = tty ? ctl_view_new(stdout, O.sock) : NULL;
-	struct sigaction sa = { .sa_handler = on_signal };
-	sigaction(SIGINT, &sa, NULL);
-	sigaction(SIGTERM, &sa, NULL);
-	bool ever = false;
-	char last_err[512] = "";
-	while (!stop_watch) {
-		struct conn c;
-		struct acq_err err = { 0 };
-		json_t *req = NULL, *st = NULL, *dv = NULL, *rep = NULL;
-		if (conn_open(&c, &err))
-			goto lost;
-		if (view) {
-			req = json_pack("{s:s,s:i}", "cmd", "status", "id", 1);
-			st = conn_call(&c, req, NULL, &err);
-			json_decref(req);
-			req = json_pack("{s:s,s:i}", "cmd", "devices", "id", 2);
-			dv = st ? conn_call(&c, req, NULL, &err) : NULL;
-			json_decref(req);
-			if (!dv)
-				goto lost;
-			ctl_view_status(view, st, dv);
-		}
-		req = json_pack("{s:s,s:i}", "cmd", "watch", "id", 3);
-		rep = conn_call(&c, req, NULL, &err);
-		json_decref(req);
-		if (!rep)
-			goto lost;
-		if (!json_is_true(json_object_get(rep, "ok"))) {
-			json_t *e = json_object_get(rep, "error");
-			int rc = fail(CTL_EXIT_REFUSED, json_string_value(json_object_get(e, "code")), "watch: %s",
-				      json_string_value(json_object_get(e, "message")));
-			json_decref(rep);
-			conn_close(&c);
-			ctl_view_free(view);
-			return rc;
-		}
-		json_decref(rep);
-		if (view)
-			ctl_view_link(view, "connected");
-		else if (ever)
-			json_line_event("acqctl.reconnected", O.sock);
-		ever = true;
-		last_err[0] = 0;
-		while (!stop_watch) {
-			if (view)
-				ctl_view_draw(view, wall());
-			json_t *ev = proto_client_read(c.fd, &c.pl, 1000, &err);
-			if (!ev && err.code == ACQ_E_TIMEOUT)
-				continue;
-			if (!ev)
-				break;
-			if (view)
-				ctl_view_event(view, ev);
-			else
-				print_json(ev);
-			json_decref(ev);
-		}
-	lost:
-		json_decref(st);
-		json_decref(dv);
-		conn_close(&c);
-		if (stop_watch)
-			break;
-		if (strcmp(last_err, err.msg)) {
-			snprintf(last_err, sizeof last_err, "%s", err.msg);
-			char text[600];
-			snprintf(text, sizeof text, "reconnecting: %s", err.msg);
-			if (view)
-				ctl_view_link(view, text);
-			else
-				json_line_event("acqctl.disconnected", err.msg);
-		}
-		if (view)
-			ctl_view_draw(view, wall());
-		sleep(1);
-	}
-	if (view)
-		fputc('\n', stdout);
-	ctl_view_free(view);
-	return 0;
-}
-
-/* ---- wait: until the sweep is in a state (client side, by polling status) ---- */
-static int run_wait(const char *want, double timeout_s)
-{
-	static const char *const states[] = { "idle", "running", "paused", "faulted", NULL };
-	bool known = false;
-	for (int i = 0; states[i]; i++)
-		known |= !strcmp(want, states[i]);
-	if (!known)
-		return fail(CTL_EXIT_USAGE, "usage", "wait: expected idle, running, paused or faulted, got '%s'", want);
-	struct conn c;
-	struct acq_err err = { 0 };
-	if (conn_open(&c, &err)) {
-		conn_close(&c);
-		return fail(CTL_EXIT_UNAVAILABLE, "unavailable", "cannot connect to acquisitiond: %s", err.msg);
-	}
-	double deadline = mono() + timeout_s;
-	json_t *req = json_pack("{s:s,s:i}", "cmd", "status", "id", 1);
-	int rc = -1;
-	while (rc < 0) {
-		json_t *rep = conn_call(&c, req, NULL, &err);
-		json_t *p = json_object_get(rep, "sweep");
-		if (!rep)
-			rc = fail(CTL_EXIT_UNAVAILABLE, "unavailable", "%s: %s", O.sock, err.msg);
-		else if (!strcmp(json_string_value(json_object_get(p, "state")) ?: "", want)) {
-			json_object_del(rep, "id");
-			if (O.json)
-				print_json(rep);
-			else
-				ctl_print_human(stdout, "status", rep);
-			rc = 0;
-		} else if (mono() > deadline)
-			rc = fail(75, "state", "wait: the sweep is still %s after %g s (wanted %s)",
-				  json_string_value(json_object_get(p, "state")), timeout_s, want);
-		else
-			usleep(250000);
-		json_decref(rep);
-	}
-	json_decref(req);
-	conn_close(&c);
-	return rc;
-}
-
-/* ---- plan without a daemon ---- */
 static int local_plan(const char *file)
 {
 	struct acq_err err = { 0 };
-	json_t *p = plan_cli_json(file, O.bench, O.points, &err);
+	json_t *p = plan_cli_json(file, acqctl_o.bench, acqctl_o.points, &err);
 	if (!p)
-		return fail(err.code == ACQ_E_NOTFOUND || err.code == ACQ_E_IO ? CTL_EXIT_NOINPUT : CTL_EXIT_REFUSED,
+		return out_fail(err.code == ACQ_E_NOTFOUND || err.code == ACQ_E_IO ? CTL_EXIT_NOINPUT : CTL_EXIT_REFUSED,
 			    err.code == ACQ_E_NOTFOUND || err.code == ACQ_E_IO ? "not_found" : "invalid", "plan: %s",
 			    err.msg);
 	json_t *rep = json_pack("{s:b,s:o,s:s}", "ok", 1, "plan", p, "source", "local");
-	if (O.json)
-		print_json(rep);
+	if (acqctl_o.json)
+		out_json(rep);
 	else
 		ctl_print_plan(stdout, p);
 	json_decref(rep);
@@ -546,44 +171,44 @@ static int parse_options(int argc, char **argv, char **words, int *nw, double *w
 		const char *val = NULL;
 #define TAKES(s, l) ((!strcmp(a, s) || !strcmp(a, l)) && (val = i + 1 < argc ? argv[++i] : NULL, 1))
 		if (!strcmp(a, "--json") || !strcmp(a, "-j"))
-			O.json = true;
+			acqctl_o.json = true;
 		else if (!strcmp(a, "--help") || !strcmp(a, "-h"))
 			*help = true;
 		else if (!strcmp(a, "--version") || !strcmp(a, "-V")) {
 			printf("acqctl %s (protocol %d)\n", ACQ_VERSION, PROTO_VERSION);
 			return 0;
 		} else if (!strcmp(a, "--points"))
-			O.points = true;
+			acqctl_o.points = true;
 		else if (!strcmp(a, "--csv"))
-			O.csv = true;
+			acqctl_o.csv = true;
 		else if (TAKES("-s", "--socket")) {
-			if (!(O.sock = val))
-				return fail(CTL_EXIT_USAGE, "usage", "%s needs a value (acqctl --help)", a);
+			if (!(acqctl_o.sock = val))
+				return out_fail(CTL_EXIT_USAGE, "usage", "%s needs a value (acqctl --help)", a);
 		} else if (TAKES("-t", "--timeout")) {
 			char *end;
-			O.timeout_ms = val ? (int)strtol(val, &end, 10) : 0;
-			if (!val || *end || O.timeout_ms <= 0)
-				return fail(CTL_EXIT_USAGE, "usage", "-t: expected milliseconds > 0");
+			acqctl_o.timeout_ms = val ? (int)strtol(val, &end, 10) : 0;
+			if (!val || *end || acqctl_o.timeout_ms <= 0)
+				return out_fail(CTL_EXIT_USAGE, "usage", "-t: expected milliseconds > 0");
 		} else if (TAKES("-w", "--wait") || TAKES("-T", "--timeout-s")) {
 			char *end;
 			double x = val ? strtod(val, &end) : -1;
 			if (!val || *end || !(x >= 0 && x <= 1e6))
-				return fail(CTL_EXIT_USAGE, "usage", "%s: expected seconds", a);
+				return out_fail(CTL_EXIT_USAGE, "usage", "%s: expected seconds", a);
 			if (a[1] == 'w' || !strcmp(a, "--wait"))
-				O.wait_s = x;
+				acqctl_o.wait_s = x;
 			else
 				*wait_timeout = x;
 		} else if (TAKES("-f", "--format")) {
-			if (!(O.format = val) || (strcmp(val, "csv") && strcmp(val, "nexus")))
-				return fail(CTL_EXIT_USAGE, "usage", "--format: expected csv or nexus");
+			if (!(acqctl_o.format = val) || (strcmp(val, "csv") && strcmp(val, "nexus")))
+				return out_fail(CTL_EXIT_USAGE, "usage", "--format: expected csv or nexus");
 		} else if (TAKES("-o", "--output")) {
-			if (!(O.out = val))
-				return fail(CTL_EXIT_USAGE, "usage", "-o needs a file name");
+			if (!(acqctl_o.out = val))
+				return out_fail(CTL_EXIT_USAGE, "usage", "-o needs a file name");
 		} else if (TAKES("-c", "--config")) {
-			if (!(O.bench = val))
-				return fail(CTL_EXIT_USAGE, "usage", "--config needs a file name");
+			if (!(acqctl_o.bench = val))
+				return out_fail(CTL_EXIT_USAGE, "usage", "--config needs a file name");
 		} else if (a[0] == '-' && a[1] && strcmp(a, "-"))
-			return fail(CTL_EXIT_USAGE, "usage", "unknown option %s (acqctl --help)", a);
+			return out_fail(CTL_EXIT_USAGE, "usage", "unknown option %s (acqctl --help)", a);
 		else if (*nw < 64)
 			words[(*nw)++] = argv[i];
 #undef TAKES
@@ -624,28 +249,28 @@ static int fill_args(json_t *req, const struct proto_cmd *def, const char *cmd, 
 				*plan_file = words[wi];
 				char *text = read_text(*plan_file, &err);
 				if (!text)
-					return fail(err.code == ACQ_E_IO ? CTL_EXIT_NOINPUT : CTL_EXIT_DATAERR, "not_found", "%s",
+					return out_fail(err.code == ACQ_E_IO ? CTL_EXIT_NOINPUT : CTL_EXIT_DATAERR, "not_found", "%s",
 						    err.msg);
 				json_object_set_new(req, pk + 1, json_string(text));
 				free(text);
 			} else if (set_arg(req, def, pk, words[wi], &err)) {
-				return fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
+				return out_fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
 			}
 			pk = NULL;
 			continue;
 		}
 		if (!eq)
-			return fail(CTL_EXIT_USAGE, "usage", "%s: expected key=value (acqctl %s --help)", words[wi], words[0]);
+			return out_fail(CTL_EXIT_USAGE, "usage", "%s: expected key=value (acqctl %s --help)", words[wi], words[0]);
 		*eq = 0;
 		const char *key = words[wi];
 		for (int i = 0; i < def->nargs; i++) /* an old name (laser_theta=) is sent as the one name (laser.theta=) */
 			if (def->args[i].alias_of && !strcmp(key, def->args[i].name))
 				key = def->args[i].alias_of;
 		if (json_object_get(req, key))
-			return fail(CTL_EXIT_USAGE, "usage", "%s given twice%s%s%s", key, strcmp(key, words[wi]) ? " (as " : "",
+			return out_fail(CTL_EXIT_USAGE, "usage", "%s given twice%s%s%s", key, strcmp(key, words[wi]) ? " (as " : "",
 				    strcmp(key, words[wi]) ? words[wi] : "", strcmp(key, words[wi]) ? " too)" : "");
 		if (set_arg(req, def, key, eq + 1, &err))
-			return fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
+			return out_fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
 	}
 	return CTL_EXIT_OK;
 }
@@ -658,22 +283,22 @@ static int check_request(json_t *req, const struct proto_cmd *def, const char *c
 		if (def->args[i].required && !json_object_get(req, def->args[i].name)) {
 			char name[64];
 			cmd_words(def->name, name, sizeof name);
-			return fail(CTL_EXIT_USAGE, "usage", "%s: missing %s (acqctl %s --help)", name, def->args[i].name,
+			return out_fail(CTL_EXIT_USAGE, "usage", "%s: missing %s (acqctl %s --help)", name, def->args[i].name,
 				    name);
 		}
-	if ((!strcmp(cmd, "plan") || !strcmp(cmd, "sweep.show")) && O.points)
+	if ((!strcmp(cmd, "plan") || !strcmp(cmd, "sweep.show")) && acqctl_o.points)
 		json_object_set_new(req, "points", json_true());
-	if (O.format && strcmp(cmd, "export"))
-		return fail(CTL_EXIT_USAGE, "usage", "--format is an option of export");
-	if (O.format)
-		json_object_set_new(req, "format", json_string(O.format));
-	if (!strcmp(cmd, "export") && !O.out && !json_object_get(req, "path") &&
+	if (acqctl_o.format && strcmp(cmd, "export"))
+		return out_fail(CTL_EXIT_USAGE, "usage", "--format is an option of export");
+	if (acqctl_o.format)
+		json_object_set_new(req, "format", json_string(acqctl_o.format));
+	if (!strcmp(cmd, "export") && !acqctl_o.out && !json_object_get(req, "path") &&
 	    json_is_string(json_object_get(req, "format")) &&
 	    !strcmp(json_string_value(json_object_get(req, "format")), "nexus") && isatty(1))
-		return fail(CTL_EXIT_USAGE, "usage", "export --format nexus writes a binary HDF5 file: give -o FILE (or "
+		return out_fail(CTL_EXIT_USAGE, "usage", "export --format nexus writes a binary HDF5 file: give -o FILE (or "
 			    "redirect the output)");
-	if (!strcmp(cmd, "export") && O.json && !O.out && !json_object_get(req, "path"))
-		return fail(CTL_EXIT_USAGE, "usage", "export --json prints the summary: give -o FILE for the CSV");
+	if (!strcmp(cmd, "export") && acqctl_o.json && !acqctl_o.out && !json_object_get(req, "path"))
+		return out_fail(CTL_EXIT_USAGE, "usage", "export --json prints the summary: give -o FILE for the CSV");
 	return CTL_EXIT_OK;
 }
 
@@ -693,22 +318,22 @@ static int show_reply(const char *cmd, json_t *rep, int passed)
 		if (hit && strchr(cmd, '.'))
 			hit[strchr(cmd, '.') - cmd] = ' ';
 		fprintf(stderr, "acqctl: %s: %s (%s)\n", words2, said, json_string_value(json_object_get(e, "code")));
-		if (O.json)
-			print_json(rep);
+		if (acqctl_o.json)
+			out_json(rep);
 		return CTL_EXIT_REFUSED;
 	}
 	if (!strcmp(cmd, "export") && json_is_true(json_object_get(rep, "stream"))) {
 		if (passed < 0)
-			return fail(CTL_EXIT_PROTOCOL, "protocol", "export: the daemon sent no stream (over TCP? use the Unix "
+			return out_fail(CTL_EXIT_PROTOCOL, "protocol", "export: the daemon sent no stream (over TCP? use the Unix "
 				    "socket)");
-		return copy_export(rep, passed);
+		return out_export(rep, passed);
 	}
 	if (!strcmp(cmd, "export") && json_is_string(json_object_get(rep, "csv")))
-		return write_inline(rep);
-	if (!strcmp(cmd, "spectrum") && O.csv)
-		return spectrum_csv(rep);
-	if (O.json)
-		print_json(rep);
+		return out_inline(rep);
+	if (!strcmp(cmd, "spectrum") && acqctl_o.csv)
+		return out_spectrum_csv(rep);
+	if (acqctl_o.json)
+		out_json(rep);
 	else
 		ctl_print_human(stdout, cmd, rep);
 	return CTL_EXIT_OK;
@@ -724,15 +349,15 @@ static int send_request(json_t *req, const char *cmd, const char *plan_file)
 		conn_close(&c);
 		if (!strcmp(cmd, "plan") && err.code != ACQ_E_STATE)
 			return local_plan(plan_file);
-		return fail(CTL_EXIT_UNAVAILABLE, "unavailable", "cannot connect to acquisitiond: %s (socket: -s or "
+		return out_fail(CTL_EXIT_UNAVAILABLE, "unavailable", "cannot connect to acquisitiond: %s (socket: -s or "
 			    "$ACQ_SOCKET)", err.msg);
 	}
 	int passed = -1;
 	json_t *rep = conn_call(&c, req, !strcmp(cmd, "export") ? &passed : NULL, &err);
 	conn_close(&c);
 	if (!rep)
-		return fail(err.code == ACQ_E_PROTO ? CTL_EXIT_PROTOCOL : CTL_EXIT_UNAVAILABLE,
-			    err.code == ACQ_E_PROTO ? "protocol" : "unavailable", "%s: %s", O.sock, err.msg);
+		return out_fail(err.code == ACQ_E_PROTO ? CTL_EXIT_PROTOCOL : CTL_EXIT_UNAVAILABLE,
+			    err.code == ACQ_E_PROTO ? "protocol" : "unavailable", "%s: %s", acqctl_o.sock, err.msg);
 	json_object_del(rep, "id");
 	int rc = show_reply(cmd, rep, passed);
 	if (passed >= 0)
@@ -743,9 +368,9 @@ static int send_request(json_t *req, const char *cmd, const char *plan_file)
 
 int main(int argc, char **argv)
 {
-	O.sock = getenv("ACQ_SOCKET");
-	if (!O.sock || !*O.sock)
-		O.sock = DEFAULT_SOCKET;
+	acqctl_o.sock = getenv("ACQ_SOCKET");
+	if (!acqctl_o.sock || !*acqctl_o.sock)
+		acqctl_o.sock = DEFAULT_SOCKET;
 	char *words[64];
 	int nw = 0;
 	double wait_timeout = 3600;
@@ -778,13 +403,13 @@ int main(int argc, char **argv)
 			return 0;
 		}
 		if (nw != wi + 2)
-			return fail(CTL_EXIT_USAGE, "usage", "wait: expected one state (acqctl wait --help)");
-		return run_wait(words[wi + 1], wait_timeout);
+			return out_fail(CTL_EXIT_USAGE, "usage", "wait: expected one state (acqctl wait --help)");
+		return watch_wait(words[wi + 1], wait_timeout);
 	}
 	char cmd[64];
 	const struct proto_cmd *def = find_command(words, nw, &wi, cmd, sizeof cmd);
 	if (!def)
-		return fail(CTL_EXIT_USAGE, "usage", "unknown command '%s' (acqctl help)", words[help_cmd]);
+		return out_fail(CTL_EXIT_USAGE, "usage", "unknown command '%s' (acqctl help)", words[help_cmd]);
 	if (help || help_cmd) {
 		printf("usage: acqctl [options] ");
 		usage_cmd(stdout, def);
@@ -792,8 +417,8 @@ int main(int argc, char **argv)
 	}
 	if (!strcmp(cmd, "watch")) {
 		if (wi < nw)
-			return fail(CTL_EXIT_USAGE, "usage", "watch takes no arguments");
-		return run_watch();
+			return out_fail(CTL_EXIT_USAGE, "usage", "watch takes no arguments");
+		return watch_run();
 	}
 	/* The request, checked before anything is sent. */
 	json_t *req = json_pack("{s:s,s:i}", "cmd", cmd, "id", 1);
@@ -802,7 +427,7 @@ int main(int argc, char **argv)
 	if (rc == CTL_EXIT_OK)
 		rc = check_request(req, def, cmd);
 	if (rc == CTL_EXIT_OK)
-		rc = !strcmp(cmd, "plan") && O.bench ? local_plan(plan_file) : send_request(req, cmd, plan_file);
+		rc = !strcmp(cmd, "plan") && acqctl_o.bench ? local_plan(plan_file) : send_request(req, cmd, plan_file);
 	json_decref(req);
 	if (fflush(stdout) && !rc)
 		rc = CTL_EXIT_CANTCREAT;

@@ -1,12 +1,7 @@
-/* brdf-recon: command-line front end of the reconstruction library: the command table and the helpers the
- * commands share (recon/brdf_recon/cli.h). Only the program's files print. */
-#include <errno.h>
+/* brdf-recon: command-line front end of the reconstruction library: the command table (the commands, one per
+ * file, and the helpers they share: recon/brdf_recon/cli.h, cli.c). Only the program's files print. */
 #include <getopt.h>
-#include <math.h>
-#include <stdint.h>
 #include <stdio.h>
-#include <sys/stat.h>
-#include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
@@ -22,83 +17,6 @@ const char *__lsan_default_suppressions(void);
 const char *__lsan_default_suppressions(void)
 {
 	return "leak:libfontconfig.so\n";
-}
-
-void progress(void *ctx, const char *stage, double frac)
-{
-	(void)ctx;
-	if (!isatty(2))
-		return;
-	fprintf(stderr, "\r  %-14s %3d%%%s", stage, (int)(100 * frac + 0.5), frac >= 1.0 ? "\n" : "");
-	fflush(stderr);
-}
-
-void progress_end(void)
-{
-	if (isatty(2))
-		fprintf(stderr, "\r%40s\r", "");
-}
-
-int fail(const struct acq_err *e)
-{
-	progress_end();
-	fprintf(stderr, "%s: %s\n", prog, e->msg[0] ? e->msg : "error");
-	return 1;
-}
-
-int usage_err(const char *cmd, const char *msg)
-{
-	fprintf(stderr, "%s %s: %s (see %s %s --help)\n", prog, cmd, msg, prog, cmd);
-	return 2;
-}
-
-int parse_double(const char *s, double *out)
-{
-	char *end;
-	errno = 0;
-	double v = strtod(s, &end);
-	if (end == s || *end || errno || !isfinite(v))
-		return -1;
-	*out = v;
-	return 0;
-}
-
-int parse_u64(const char *s, uint64_t *out)
-{
-	char *end;
-	errno = 0;
-	if (!*s || *s == '-')
-		return -1;
-	unsigned long long v = strtoull(s, &end, 10);
-	if (*end || errno)
-		return -1;
-	*out = v;
-	return 0;
-}
-
-int out_open(struct out *o, const char *path, struct acq_err *err)
-{
-	o->std = !path || !strcmp(path, "-");
-	o->f = stdout;
-	if (o->std)
-		return 0;
-	if (acq_out_open(&o->a, path, ACQ_OUT_STDIO, err))
-		return -1;
-	o->f = o->a.f;
-	return 0;
-}
-
-int out_close(struct out *o, int ok, struct acq_err *err)
-{
-	if (o->std) {
-		fflush(stdout);
-		return ok ? 0 : -1;
-	}
-	if (!ok) {
-		acq_out_abort(&o->a);
-		return -1;
-	}
-	return acq_out_commit(&o->a, err);
 }
 
 static const char main_help[] =

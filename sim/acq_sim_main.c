@@ -14,10 +14,8 @@
  * (the arm and laser members are written by their services' describe()). */
 #include <errno.h>
 #include <getopt.h>
-#include <math.h>
 #include <signal.h>
 #include <stdbool.h>
-#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -30,8 +28,6 @@
 #include "config/bench.h"
 #include "config/yconf.h"
 #include "sim/sim.h"
-#include "sim/sim_sphere.h"
-#include "sim/sim_truth.h"
 
 #define MAX_SERVICES 8
 #define MAX_FDS 256
@@ -83,262 +79,20 @@ static int write_ports(const char *path, struct sim_service **svc, int n, double
 	return acq_out_commit(&o, NULL);
 }
 
-/* ---- `acq-sim truth`: the command line of the ground-truth export (sim/sim_truth.h) ---------------------- */
+/* The services of the bench, in the order of the ports file, the config's sim.services and --disable. */
+static const char *const svc_keys[] = { "laser_arm", "detector_arm", "laser", "spectrometer", NULL };
 
-static void truth_usage(FILE *f)
+/* The command line of the serving mode. */
+struct sim_opts {
+	const char *config, *ports_file, *control;
+	bool enabled[4];               /* by svc_keys: not left out by --disable */
+	double scale;
+	unsigned long long seed;
+};
+
+/* The serving mode's options into o. -1 to go on, else the exit status (help printed, or the error reported). */
+static int parse_options(int argc, char **argv, struct sim_opts *o)
 {
-	fprintf(f,
-		"usage: acq-sim truth MATERIAL ACTION [options]\n"
-		"  MATERIAL: green-paint (or paint) | white | metal | clear-coat | rough-backscatter | cloth-sheen |\n"
-		"            sharp-lobe | narrow-lines | merl:FILE (a MERL binary table, upsampled to spectra: sim/material.h)\n"
-		"  actions (exactly one):\n"
-		"    --dhr OUT.csv [--theta-i 8,30,60]    columns theta_i,wavelength_nm,dhr,sigma (sigma: quadrature bound)\n"
-		"    --eval QUERIES.csv [-o OUT.csv]      f at the rows' theta_i,phi_i,theta_o,phi_o (degrees), 1/sr\n"
-		"    --grid NIxNOxNP -o SAMPLES.csv       noisy samples: NI incidences, NO observation zeniths in (0, 80),\n"
-		"          [--noise REL] [--noise-floor ABS] [--seed N] [--keep-blind]   NP azimuths; sigma_<nm> columns\n"
-		"          [--reference U[,CORR_NM[,SEED]]]  calibrated against a white standard whose reflectance differs\n"
-		"                                            from its certificate by a smooth deviation of std U\n"
-		"          [--drift AMP[,PERIOD_S[,SEED]]] [--point-time S]  source drift (rms AMP) between the reference\n"
-		"                                            (bench time 0) and sample k (time k S, default 20 s)\n"
-		"          (both as acq-sim's sim.reference_standard / sim.source_drift: sim/sim_refdrift.h; off by default)\n"
-		"    --merl OUT.binary                    MERL table, linear sRGB in 1/sr (D65, Bradford; recon/colour.h)\n"
-		"    --spectrophotometer [-o OUT.csv] [--seed N]   a simulated d/8 integrating-sphere measurement of the DHR\n"
-		"                                         at 8 deg with its own noise and stated uncertainty (sim/sim_sphere.h):\n"
-		"                                         columns wavelength_nm,dhr,sigma (brdf-recon dhr --reference)\n"
-		"  --wavelengths A:B:STEP   spectral sampling in nm within 450..1100 (default 450:1100:1)\n"
-		"  --level N                DHR quadrature level 0..5 (default 2)\n");
-}
-
-/* "A[,B[,C]]" into a (required), b, c (kept when absent); c an integer. 0 or -1. */
-static int parse_triple(const char *s, double *a, double *b, uint64_t *c)
-{
-	char *end;
-	*a = strtod(s, &end);
-	if (end == s || !isfinite(*a))
-		return -1;
-	if (*end == ',') {
-		const char *q = end + 1;
-		*b = strtod(q, &end);
-		if (end == q || !isfinite(*b))
-			return -1;
-		if (*end == ',') {
-			q = end + 1;
-			errno = 0;
-			*c = strtoull(q, &end, 10);
-			if (end == q || errno || *q == '-')
-				return -1;
-		}
-	}
-	return *end ? -1 : 0;
-}
-
-/* Open path for writing ("-": standard output); NULL with a message. */
-static FILE *truth_open(const char *path)
-{
-	FILE *f = strcmp(path, "-") ? fopen(path, "w") : stdout;
-	if (!f)
-		fprintf(stderr, "acq-sim truth: %s: %s\n", path, strerror(errno));
-	return f;
-}
-
-/* Close f (not standard output); on failure (rc != 0 or a close error) remove the half-written file. */
-static int truth_close(FILE *f, const char *path, int rc)
-{
-	if (f != stdout) {
-		if (fclose(f) && !rc) {
-			fprintf(stderr, "acq-sim truth: %s: %s\n", path, strerror(errno));
-			rc = 1;
-		}
-		if (rc)
-			unlink(path);
-	} else if (fflush(stdout) && !rc) {
-		rc = 1;
-	}
-	return rc;
-}
-
-static int truth_main(int argc, char **argv)
-{
-	const char *dhr = NULL, *eval = NULL, *grid = NULL, *merl = NULL, *out = NULL, *thetas = "8,30,60",
-		   *wls = "450:1100:1";
-	struct truth_grid g = { .rel = 0.01, .seed = 1, .point_s = 20 };
-	refdrift_defaults(&g.cal);
-	bool sphere = false;
-	long level = 2;
-	static const struct option opts[] = {
-		{ "dhr", required_argument, NULL, 'd' },      { "eval", required_argument, NULL, 'e' },
-		{ "grid", required_argument, NULL, 'g' },     { "merl", required_argument, NULL, 'm' },
-		{ "theta-i", required_argument, NULL, 't' },  { "wavelengths", required_argument, NULL, 'w' },
-		{ "noise", required_argument, NULL, 'n' },    { "noise-floor", required_argument, NULL, 'f' },
-		{ "seed", required_argument, NULL, 's' },     { "keep-blind", no_argument, NULL, 'k' },
-		{ "level", required_argument, NULL, 'L' },    { "output", required_argument, NULL, 'o' },
-		{ "reference", required_argument, NULL, 'R' }, { "drift", required_argument, NULL, 'D' },
-		{ "point-time", required_argument, NULL, 'P' }, { "spectrophotometer", no_argument, NULL, 'S' },
-		{ "help", no_argument, NULL, 'h' },           { NULL, 0, NULL, 0 },
-	};
-	if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
-		truth_usage(argc < 2 ? stderr : stdout);
-		return argc < 2 ? 2 : 0;
-	}
-	const char *material = argv[1], *merl_file = NULL;
-	int id = mat_from_name(material);
-	if (!strncmp(material, "merl:", 5) && material[5]) {
-		id = MAT_MERL;
-		merl_file = material + 5;
-	}
-	if (id < 0 || (id == MAT_MERL && !merl_file)) {
-		fprintf(stderr, "acq-sim truth: unknown material '%s' (expected %s, or merl:FILE)\n", material,
-			mat_names_list());
-		return 2;
-	}
-	/* options after MATERIAL: parse argv + 1 from its index 1; optind = 0 re-initialises getopt */
-	optind = 0;
-	int c, nact = 0, oargc = argc - 1;
-	char **oargv = argv + 1;
-	while ((c = getopt_long(oargc, oargv, "o:h", opts, NULL)) != -1) {
-		char *end = NULL;
-		switch (c) {
-		case 'd': dhr = optarg; nact++; break;
-		case 'e': eval = optarg; nact++; break;
-		case 'g': grid = optarg; nact++; break;
-		case 'm': merl = optarg; nact++; break;
-		case 'S': sphere = true; nact++; break;
-		case 't': thetas = optarg; break;
-		case 'w': wls = optarg; break;
-		case 'o': out = optarg; break;
-		case 'k': g.keep_blind = true; break;
-		case 'n':
-		case 'f': {
-			double v;
-			if (acq_num_parse(optarg, 0, 10, &v)) {
-				fprintf(stderr, "acq-sim truth: --%s: expected a number in [0, 10], got '%s'\n",
-					c == 'n' ? "noise" : "noise-floor", optarg);
-				return 2;
-			}
-			*(c == 'n' ? &g.rel : &g.floor_) = v;
-			break;
-		}
-		case 's':
-			errno = 0;
-			g.seed = strtoull(optarg, &end, 10);
-			if (end == optarg || *end || errno || optarg[0] == '-') {
-				fprintf(stderr, "acq-sim truth: --seed: expected a non-negative integer, got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'L':
-			level = strtol(optarg, &end, 10);
-			if (end == optarg || *end || level < 0 || level > 5) {
-				fprintf(stderr, "acq-sim truth: --level: expected 0..5, got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'R':
-			if (parse_triple(optarg, &g.cal.ref_u, &g.cal.ref_corr_nm, &g.cal.ref_seed) ||
-			    !(g.cal.ref_u >= 0 && g.cal.ref_u <= 0.1) || !(g.cal.ref_corr_nm >= 5 && g.cal.ref_corr_nm <= 10000)) {
-				fprintf(stderr, "acq-sim truth: --reference: expected U[,CORR_NM[,SEED]] with U in [0, 0.1], "
-						"CORR_NM in [5, 10000], got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'D':
-			if (parse_triple(optarg, &g.cal.drift_amp, &g.cal.drift_period_s, &g.cal.drift_seed) ||
-			    !(g.cal.drift_amp >= 0 && g.cal.drift_amp <= 0.05) ||
-			    !(g.cal.drift_period_s >= 1 && g.cal.drift_period_s <= 1e7)) {
-				fprintf(stderr, "acq-sim truth: --drift: expected AMP[,PERIOD_S[,SEED]] with AMP in [0, 0.05], "
-						"PERIOD_S in [1, 1e7], got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'P':
-			if (acq_num_parse(optarg, 0, 1e6, &g.point_s)) {
-				fprintf(stderr, "acq-sim truth: --point-time: expected seconds in [0, 1e6], got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'h': truth_usage(stdout); return 0;
-		default: truth_usage(stderr); return 2;
-		}
-	}
-	if (optind < oargc) {
-		fprintf(stderr, "acq-sim truth: unexpected argument '%s'\n", oargv[optind]);
-		return 2;
-	}
-	if (nact != 1) {
-		fprintf(stderr, "acq-sim truth: give exactly one of --dhr, --eval, --grid, --merl, --spectrophotometer\n");
-		return 2;
-	}
-	if (grid && !out) {
-		fprintf(stderr, "acq-sim truth: --grid needs -o SAMPLES.csv (or -o - for standard output)\n");
-		return 2;
-	}
-	struct acq_err err = { 0 };
-	double th[TRUTH_MAX_THETAS], *wl = NULL;
-	int nth = 0, nwl = 0;
-	if (truth_wavelengths(wls, &wl, &nwl, &err) || (dhr && truth_thetas(thetas, th, &nth, &err)) ||
-	    (grid && truth_grid_size(grid, &g, &err))) {
-		fprintf(stderr, "acq-sim truth: %s\n", err.msg);
-		free(wl);
-		return 2;
-	}
-	struct mat *m = merl_file ? mat_new_merl(merl_file, nwl, wl, &err) : mat_new((enum mat_id)id, nwl, wl, &err);
-	int rc = 1;
-	FILE *f = NULL;
-	const char *path = dhr ? dhr : out ? out : "-";
-	if (!m) {
-		fprintf(stderr, "acq-sim truth: %s\n", err.msg);
-	} else if (merl) {
-		struct colour_opts o;
-		struct colour_stats st;
-		if (truth_write_merl(merl, m, wl, nwl, &o, &st, &err)) {
-			fprintf(stderr, "acq-sim truth: --merl: %s\n", err.msg);
-		} else {
-			fprintf(stderr, "acq-sim truth: MERL table written to %s; colour decisions: ", merl);
-			colour_opts_write_json(stderr, &o, &st, NULL);
-			fputc('\n', stderr);
-			rc = 0;
-		}
-	} else if ((f = truth_open(path))) {
-		int rows = 0, dropped = 0;
-		if (dhr)
-			rc = truth_write_dhr(f, m, th, nth, (int)level, wl, nwl, &err);
-		else if (eval)
-			rc = truth_write_eval(f, m, eval, wl, nwl, &err);
-		else if (grid)
-			rc = truth_write_grid(f, m, &g, wl, nwl, &rows, &dropped, &err);
-		else
-			rc = truth_write_sphere(f, m, g.seed, wl, nwl, &err);
-		if (rc)
-			fprintf(stderr, "acq-sim truth: %s\n", err.msg);
-		else if (grid)
-			fprintf(stderr, "acq-sim truth: %d samples written, %d in blind zones dropped\n", rows, dropped);
-		else if (sphere)
-			fprintf(stderr, "acq-sim truth: spectrophotometer (d/8 sphere, seed %llu): DHR at %g deg, stated sigma "
-					"= calibration %.1f %% (correlated over %g nm) + noise (sim/sim_sphere.h)\n",
-				(unsigned long long)g.seed, SPHERE_THETA_DEG, 100 * SPHERE_U_CAL, SPHERE_CORR_NM);
-		rc = truth_close(f, path, rc ? 1 : 0);
-	}
-	mat_free(m);
-	free(wl);
-	return rc;
-}
-
-int main(int argc, char **argv)
-{
-	if (argc > 1 && !strcmp(argv[1], "truth"))
-		return truth_main(argc - 1, argv + 1);
-	if (argc > 1 && !strcmp(argv[1], "ctl"))
-		return simctl_main(argc - 1, argv + 1);
-	if (argc > 1 && !strcmp(argv[1], "--version")) {
-		printf("acq-sim %s\n", ACQ_VERSION);
-		return 0;
-	}
-
-	const char *config = NULL, *ports_file = NULL, *control = NULL;
-	static const char *const svc_keys[] = { "laser_arm", "detector_arm", "laser", "spectrometer", NULL };
-	bool enabled[4] = { true, true, true, true };
-	double scale = 1.0;
-	unsigned long long seed = 1;
 	static const struct option opts[] = {
 		{ "config", required_argument, NULL, 'c' }, { "time-scale", required_argument, NULL, 's' },
 		{ "seed", required_argument, NULL, 'S' },   { "ports-file", required_argument, NULL, 'p' },
@@ -350,16 +104,16 @@ int main(int argc, char **argv)
 	while ((c = getopt_long(argc, argv, "c:h", opts, NULL)) != -1) {
 		char *end;
 		switch (c) {
-		case 'c': config = optarg; break;
+		case 'c': o->config = optarg; break;
 		case 's':
-			if (acq_num_parse(optarg, 0.01, 1e5, &scale)) {
+			if (acq_num_parse(optarg, 0.01, 1e5, &o->scale)) {
 				fprintf(stderr, "acq-sim: --time-scale: expected a number in [0.01, 100000], got '%s'\n", optarg);
 				return 2;
 			}
 			break;
 		case 'S':
 			errno = 0;
-			seed = strtoull(optarg, &end, 10);
+			o->seed = strtoull(optarg, &end, 10);
 			if (*end || end == optarg || errno || optarg[0] == '-') {
 				fprintf(stderr, "acq-sim: --seed: expected a non-negative integer, got '%s'\n", optarg);
 				return 2;
@@ -377,94 +131,97 @@ int main(int argc, char **argv)
 							"detector_arm, laser, spectrometer)\n", t);
 					return 2;
 				}
-				enabled[k] = false;
+				o->enabled[k] = false;
 			}
 			break;
 		}
-		case 'p': ports_file = optarg; break;
-		case 'C': control = optarg; break;
+		case 'p': o->ports_file = optarg; break;
+		case 'C': o->control = optarg; break;
 		case 'h': usage(stdout); return 0;
 		default: usage(stderr); return 2;
 		}
 	}
-	if (!config) {
+	if (!o->config) {
 		usage(stderr);
 		return 2;
 	}
+	return -1;
+}
 
-	struct acq_err err = { 0 };
-	struct yc_doc *doc = NULL;
-	if (yc_load_file(config, &doc, &err)) {
-		fprintf(stderr, "acq-sim: %s\n", err.msg);
-		return 1;
-	}
-	static struct sim_world world;
-	world.scale = scale;
-	world.seed = seed;
-	world.t0_mono = mono_now();
-	bench_defaults(&world.geom);
-
-	struct sim_service *svc[MAX_SERVICES];
-	int nsvc = 0, rc = 1;
-	struct yc_node *root = yc_root(doc), *devices = yc_get(root, "devices"), *simcfg = yc_get(root, "sim");
+/* The config's sections the services read: bench (into world->geom), devices, its register_maps, sim; and
+ * sim.services, which leaves services out of o->enabled. 0 or -1 with err. */
+static int read_config(struct yc_doc *doc, struct sim_world *world, struct sim_opts *o, struct yc_node **devices,
+		       struct yc_node **maps, struct yc_node **simcfg, struct acq_err *err)
+{
+	struct yc_node *root = yc_root(doc);
+	*devices = yc_get(root, "devices");
+	*simcfg = yc_get(root, "sim");
+	*maps = NULL;
 	struct yc_node *bench = yc_get(root, "bench");
-	if (bench && bench_parse(bench, &world.geom, &err))
-		goto out;
-	if (world.geom.deprecated[0])
-		fprintf(stderr, "acq-sim: warning: deprecated keys (still accepted): %s\n", world.geom.deprecated);
-	if (yc_expect_map(devices, "devices", &err))
-		goto out;
-	struct yc_node *maps = yc_get(devices, "register_maps");
-	if (simcfg && yc_expect_map(simcfg, "sim", &err))
-		goto out;
-	struct yc_node *services = simcfg ? yc_get(simcfg, "services") : NULL;
+	if (bench && bench_parse(bench, &world->geom, err))
+		return -1;
+	if (world->geom.deprecated[0])
+		fprintf(stderr, "acq-sim: warning: deprecated keys (still accepted): %s\n", world->geom.deprecated);
+	if (yc_expect_map(*devices, "devices", err))
+		return -1;
+	*maps = yc_get(*devices, "register_maps");
+	if (*simcfg && yc_expect_map(*simcfg, "sim", err))
+		return -1;
+	struct yc_node *services = *simcfg ? yc_get(*simcfg, "services") : NULL;
 	if (services) {
-		if (yc_expect_map(services, "sim.services", &err))
-			goto out;
+		if (yc_expect_map(services, "sim.services", err))
+			return -1;
 		for (int k = 0; svc_keys[k]; k++) {
 			bool on = true;
-			if (yc_bool(services, svc_keys[k], false, &on, &err))
-				goto out;
-			enabled[k] = enabled[k] && on;
+			if (yc_bool(services, svc_keys[k], false, &on, err))
+				return -1;
+			o->enabled[k] = o->enabled[k] && on;
 		}
-		if (yc_check_unknown(services, "sim.services", &err))
-			goto out;
+		if (yc_check_unknown(services, "sim.services", err))
+			return -1;
 	}
-	/* Socket files that simulators killed before their clean-up left behind (SIGKILL, a crash). */
-	int stale = sim_stale_sockets_remove("/tmp");
-	if (stale > 0)
-		fprintf(stderr, "acq-sim: removed %d stale socket file(s) of simulators no longer running from /tmp\n", stale);
-	/* The detector arm starts parked away from the laser arm; the white reference is on the stage. */
-	world.laser_theta_deg = 0;
-	world.detector_theta_deg = 60;
-	world.detector_phi_deg = 180;
-	world.sample = SIM_SAMPLE_WHITE;
-	world.sensor_temp_c = 5.0;
-	if (enabled[0] && !(svc[nsvc++] = sim_arm_new(&world, SIM_ARM_LASER, yc_get(devices, "laser_arm"), maps, simcfg, &err)))
+	return 0;
+}
+
+/* The world at start: the detector arm parked away from the laser arm; the white reference on the stage. */
+static void world_park(struct sim_world *world)
+{
+	world->laser_theta_deg = 0;
+	world->detector_theta_deg = 60;
+	world->detector_phi_deg = 180;
+	world->sample = SIM_SAMPLE_WHITE;
+	world->sensor_temp_c = 5.0;
+}
+
+/* Start the enabled services and the control socket into svc[0..*nsvc-1] (those started, also on failure). 0 or
+ * -1 with err. */
+static int start_services(struct sim_world *world, const struct sim_opts *o, struct yc_node *devices,
+			  struct yc_node *maps, struct yc_node *simcfg, struct sim_service **svc, int *nsvc,
+			  struct acq_err *err)
+{
+	const bool *enabled = o->enabled;
+	if (enabled[0] &&
+	    !(svc[(*nsvc)++] = sim_arm_new(world, SIM_ARM_LASER, yc_get(devices, "laser_arm"), maps, simcfg, err)))
 		goto fail_svc;
 	if (enabled[1] &&
-	    !(svc[nsvc++] = sim_arm_new(&world, SIM_ARM_DETECTOR, yc_get(devices, "detector_arm"), maps, simcfg, &err)))
+	    !(svc[(*nsvc)++] = sim_arm_new(world, SIM_ARM_DETECTOR, yc_get(devices, "detector_arm"), maps, simcfg, err)))
 		goto fail_svc;
-	if (enabled[2] && !(svc[nsvc++] = sim_laser_new(&world, yc_get(devices, "laser"), simcfg, &err)))
+	if (enabled[2] && !(svc[(*nsvc)++] = sim_laser_new(world, yc_get(devices, "laser"), simcfg, err)))
 		goto fail_svc;
-	if (enabled[3] && !(svc[nsvc++] = sim_spectro_new(&world, yc_get(devices, "spectrometer"), simcfg, &err)))
+	if (enabled[3] && !(svc[(*nsvc)++] = sim_spectro_new(world, yc_get(devices, "spectrometer"), simcfg, err)))
 		goto fail_svc;
-	if (!(svc[nsvc++] = sim_control_new(&world, simcfg, control, &err)))
+	if (!(svc[(*nsvc)++] = sim_control_new(world, simcfg, o->control, err)))
 		goto fail_svc;
-	/* Unknown keys of `sim:` are reported when every service ran (a disabled one did not ask for its keys). */
-	if (simcfg && enabled[0] && enabled[1] && enabled[2] && enabled[3] && yc_check_unknown(simcfg, "sim", &err))
-		goto out;
+	return 0;
+fail_svc:
+	(*nsvc)--; /* the failed constructor returned NULL */
+	return -1;
+}
 
-	if (ports_file && write_ports(ports_file, svc, nsvc, scale, seed)) {
-		acq_errf(&err, ACQ_E_IO, "%s: cannot write ports file: %s", ports_file, strerror(errno));
-		goto out;
-	}
-	struct sigaction sa = { .sa_handler = on_signal };
-	sigaction(SIGTERM, &sa, NULL);
-	sigaction(SIGINT, &sa, NULL);
-	signal(SIGPIPE, SIG_IGN);
-	fprintf(stderr, "acq-sim: serving (time scale %g, seed %llu)\n", scale, seed);
-
+/* The poll loop: every service's descriptors, its handler when they are ready and its tick at least every
+ * millisecond of real time, until SIGTERM or SIGINT. 0, or -1 with err (poll failed). */
+static int serve(struct sim_world *world, struct sim_service **svc, int nsvc, struct acq_err *err)
+{
 	while (!stop_requested) {
 		struct pollfd fds[MAX_FDS];
 		int first[MAX_SERVICES], count[MAX_SERVICES], nfds = 0;
@@ -476,16 +233,14 @@ int main(int argc, char **argv)
 		/* Models advance every millisecond of real time at most; motion is smooth at any scale. */
 		double wait_mono = mono_now();
 		int n = poll(fds, (nfds_t)nfds, 1);
-		if (n < 0 && errno != EINTR) {
-			acq_errf(&err, ACQ_E_IO, "poll: %s", strerror(errno));
-			goto out;
-		}
-		double now = sim_now(&world), woke = now / world.scale + world.t0_mono;
+		if (n < 0 && errno != EINTR)
+			return acq_errf(err, ACQ_E_IO, "poll: %s", strerror(errno));
+		double now = sim_now(world), woke = now / world->scale + world->t0_mono;
 		/* A 1 ms wait that ended more than SIM_LAG_SLACK_S late: the host did not run this process when its
 		 * models were due (load), late by the rest; summed as the ctl status' lag_s (scheduling only, not the
 		 * handlers' own work). */
 		if (n == 0 && woke - wait_mono > 0.001 + SIM_LAG_SLACK_S)
-			world.lag_s += woke - wait_mono - 0.001;
+			world->lag_s += woke - wait_mono - 0.001;
 		for (int i = 0; i < nsvc; i++) {
 			if (n > 0 && count[i] && svc[i]->handle)
 				svc[i]->handle(svc[i]->self, fds + first[i], count[i], now);
@@ -493,10 +248,66 @@ int main(int argc, char **argv)
 				svc[i]->tick(svc[i]->self, now);
 		}
 	}
+	return 0;
+}
+
+int main(int argc, char **argv)
+{
+	if (argc > 1 && !strcmp(argv[1], "truth"))
+		return simtruth_main(argc - 1, argv + 1);
+	if (argc > 1 && !strcmp(argv[1], "ctl"))
+		return simctl_main(argc - 1, argv + 1);
+	if (argc > 1 && !strcmp(argv[1], "--version")) {
+		printf("acq-sim %s\n", ACQ_VERSION);
+		return 0;
+	}
+	struct sim_opts o = { .enabled = { true, true, true, true }, .scale = 1.0, .seed = 1 };
+	int rc = parse_options(argc, argv, &o);
+	if (rc >= 0)
+		return rc;
+
+	struct acq_err err = { 0 };
+	struct yc_doc *doc = NULL;
+	if (yc_load_file(o.config, &doc, &err)) {
+		fprintf(stderr, "acq-sim: %s\n", err.msg);
+		return 1;
+	}
+	static struct sim_world world;
+	world.scale = o.scale;
+	world.seed = o.seed;
+	world.t0_mono = mono_now();
+	bench_defaults(&world.geom);
+
+	struct sim_service *svc[MAX_SERVICES];
+	int nsvc = 0;
+	rc = 1;
+	struct yc_node *devices, *maps, *simcfg;
+	if (read_config(doc, &world, &o, &devices, &maps, &simcfg, &err))
+		goto out;
+	/* Socket files that simulators killed before their clean-up left behind (SIGKILL, a crash). */
+	int stale = sim_stale_sockets_remove("/tmp");
+	if (stale > 0)
+		fprintf(stderr, "acq-sim: removed %d stale socket file(s) of simulators no longer running from /tmp\n", stale);
+	world_park(&world);
+	if (start_services(&world, &o, devices, maps, simcfg, svc, &nsvc, &err))
+		goto out;
+	/* Unknown keys of `sim:` are reported when every service ran (a disabled one did not ask for its keys). */
+	const bool *enabled = o.enabled;
+	if (simcfg && enabled[0] && enabled[1] && enabled[2] && enabled[3] && yc_check_unknown(simcfg, "sim", &err))
+		goto out;
+
+	if (o.ports_file && write_ports(o.ports_file, svc, nsvc, o.scale, o.seed)) {
+		acq_errf(&err, ACQ_E_IO, "%s: cannot write ports file: %s", o.ports_file, strerror(errno));
+		goto out;
+	}
+	struct sigaction sa = { .sa_handler = on_signal };
+	sigaction(SIGTERM, &sa, NULL);
+	sigaction(SIGINT, &sa, NULL);
+	signal(SIGPIPE, SIG_IGN);
+	fprintf(stderr, "acq-sim: serving (time scale %g, seed %llu)\n", o.scale, o.seed);
+	if (serve(&world, svc, nsvc, &err))
+		goto out;
 	rc = 0;
-	goto out;
-fail_svc:
-	nsvc--; /* the failed constructor returned NULL */
 out:
 	if (rc)
 		fprintf(stderr, "acq-sim: %s\n", err.msg);

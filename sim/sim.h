@@ -44,6 +44,7 @@ struct sim_faults {
 	int saturation_burst;       /* next N spectra are saturated */
 	bool laser_interlock_open;  /* interlock open: emission forced off */
 	bool laser_fault;           /* laser reports a fault, emission forced off */
+	int laser_delay_ms;         /* the laser acts on and answers each command this many real ms after it arrives */
 };
 
 struct sim_world {
@@ -105,5 +106,7 @@ struct sim_service *sim_control_new(struct sim_world *w, struct yc_node *simcfg,
 
 /* `acq-sim ctl ...` (argv[0] is "ctl"): one command to the control socket of a running acq-sim; exit status. */
 int simctl_main(int argc, char **argv);
+/* `acq-sim truth ...` (argv[0] is "truth"): the ground-truth export (sim_truthcli.c); exit status. */
+int simtruth_main(int argc, char **argv);
 
 #endif

@@ -23,7 +23,10 @@
  *   fault saturation-burst <N>             the next N spectra are saturated
  *   fault laser-interlock on|off
  *   fault laser-fault on|off
- *   fault clear                            clear every fault flag
+ *   fault clear                            clear every fault flag (and the laser's delay)
+ *   laser-delay <ms>                       the laser acts on and answers each command ms real milliseconds after
+ *                                          it arrives (0: at once; a slow serial device; keep it under the
+ *                                          driver's timeout_ms, 500 by default)
  *
  * Schedule (config):  sim.faults: { seed: N (default --seed), schedule: [ {at: S, fault: NAME, arm: laser_arm|
  * detector_arm, duration: S, count: N, offline_s: S}, ... ], random: {rate_per_min: R, faults: [NAME, ...],
@@ -187,6 +190,7 @@ static void faults_list(const struct sim_world *w, char *buf, size_t len)
 	if (f->saturation_burst > 0) ADD("saturation-burst:%d", f->saturation_burst);
 	if (f->laser_interlock_open) ADD("laser-interlock");
 	if (f->laser_fault) ADD("laser-fault");
+	if (f->laser_delay_ms > 0) ADD("laser-delay:%d", f->laser_delay_ms);
 #undef ADD
 	if (!buf[0])
 		snprintf(buf, len, "none");
@@ -215,7 +219,7 @@ static int command(struct control *c, struct client *k, char *line, double now)
 				" | pose LASER.THETA DETECTOR.THETA DETECTOR.PHI | laser on|off [POWER_PCT] | fault NAME [ARGS] | fault clear;"
 				" faults: modbus-timeout ARM [on|off], drop-connection ARM, alarm-mid-move ARM, stall ARM,"
 				" spectro-disconnect [OFFLINE_S], saturation-burst N, laser-interlock on|off, laser-fault on|off;"
-				" ARM: laser_arm|detector_arm");
+				" ARM: laser_arm|detector_arm | laser-delay MS");
 	}
 	if (!strcmp(cmd, "status")) {
 		char fl[512];
@@ -260,6 +264,13 @@ static int command(struct control *c, struct client *k, char *line, double now)
 		w->laser_emission = on;
 		w->laser_power_pct = p;
 		return reply(k, "ok emission=%d power=%.2f", on ? 1 : 0, p);
+	}
+	if (!strcmp(cmd, "laser-delay")) {
+		double ms;
+		if (argc != 2 || acq_num_parse(argv[1], 0, 60000, &ms) || ms != floor(ms))
+			return reply(k, "error: laser-delay: expected whole milliseconds in [0, 60000]");
+		w->faults.laser_delay_ms = (int)ms;
+		return reply(k, "ok laser-delay=%d", (int)ms);
 	}
 	if (!strcmp(cmd, "fault")) {
 		if (argc == 2 && !strcmp(argv[1], "clear")) {

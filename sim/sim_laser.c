@@ -20,6 +20,10 @@
  * period ends counts as arrived (a UART receives it on arrival; this process may read it late). Expiries are
  * counted in `keepalive_expired`.
  *
+ * Delay (the control socket's `laser-delay MS`, a slow serial device): each command is acted on and answered MS
+ * real milliseconds after it arrived (in order, by the delay set at the time; the keep-alive counts it at its
+ * arrival). At most 64 commands are held: more are lost, as by a receive buffer's overrun.
+ *
  * Options (all optional), `sim: {laser: {...}}`: model, serial, firmware (ID? reply tokens), link, socket
  * (the socket's path; default /tmp/acq-sim.<pid>.laser.sock). The device's own config mapping
  * (devices.laser) is not read: the endpoint is published by describe(). */
@@ -40,6 +44,7 @@
 #include "config/acq_num.h"
 
 #define SL_LINE_MAX 128
+#define SL_DELAYED_MAX 64 /* commands a slow laser holds; more are lost (a receive buffer overrun) */
 
 struct sim_laser {
 	struct sim_service svc;  /* returned to the caller; freed with the rest by destroy */
@@ -58,6 +63,13 @@ struct sim_laser {
 	int keepalive_ms;       /* 0: disarmed */
 	double last_cmd;        /* real monotonic seconds of the last command */
 	unsigned keepalive_expired;
+	struct sl_delayed {     /* commands received while a delay is set, oldest first */
+		char line[SL_LINE_MAX + 1];
+		bool overlong;
+		double at;      /* real monotonic seconds of its arrival */
+	} delayed[SL_DELAYED_MAX];
+	int ndelayed;
+	unsigned long delayed_lost;
 };
 
 static double real_now(void)
@@ -177,6 +189,57 @@ static void flush_out(struct sim_laser *s)
 	}
 }
 
+/* Act on one received line and queue its reply. Faults apply before the command is judged. */
+static void run_line(struct sim_laser *s, const char *line, bool overlong)
+{
+	if (emission_blocked(s))
+		s->w->laser_emission = false;
+	if (overlong)
+		reply(s, "ERR 5 line too long");
+	else
+		command(s, line);
+	if (s->link < 0)
+		s->outlen = 0; /* the client that asked has gone: its reply is not for the next one */
+}
+
+/* The delayed commands that are due (by the delay set now), in order. */
+static void run_delayed(struct sim_laser *s)
+{
+	double due = real_now() - s->w->faults.laser_delay_ms * 1e-3;
+	int k = 0;
+	while (k < s->ndelayed && s->delayed[k].at <= due) {
+		run_line(s, s->delayed[k].line, s->delayed[k].overlong);
+		k++;
+	}
+	if (k) {
+		memmove(s->delayed, s->delayed + k, (size_t)(s->ndelayed - k) * sizeof s->delayed[0]);
+		s->ndelayed -= k;
+		flush_out(s);
+	}
+}
+
+/* A line has arrived: act on it now, or after the delay (behind any still delayed). */
+static void received(struct sim_laser *s)
+{
+	s->line[s->len] = '\0';
+	s->last_cmd = real_now();
+	int delay = s->w->faults.laser_delay_ms;
+	if ((delay > 0 || s->ndelayed) && s->ndelayed == SL_DELAYED_MAX) {
+		if (!s->delayed_lost++)
+			fprintf(stderr, "acq-sim: laser: more than %d commands held by laser-delay: the newest are lost\n",
+				SL_DELAYED_MAX);
+	} else if (delay > 0 || s->ndelayed) {
+		struct sl_delayed *d = &s->delayed[s->ndelayed++];
+		memcpy(d->line, s->line, s->len + 1);
+		d->overlong = s->overlong;
+		d->at = s->last_cmd;
+	} else {
+		run_line(s, s->line, s->overlong);
+	}
+	s->len = 0;
+	s->overlong = false;
+}
+
 /* Bytes wait on the link: the laser has received them (see sl_handle). */
 static bool input_waiting(const struct sim_laser *s)
 {
@@ -211,19 +274,10 @@ static void sl_handle(void *self, const struct pollfd *fds, int n, double now)
 			if (c == '\r')
 				continue;
 			if (c == '\n') {
-				s->line[s->len] = '\0';
-				/* Faults apply before the command is judged. The keep-alive is judged by sl_tick() between
-				 * reads only: a line read now may have waited on the link while this process was not
-				 * scheduled (a loaded machine), whereas a laser's UART receives it on arrival. */
-				if (emission_blocked(s))
-					s->w->laser_emission = false;
-				s->last_cmd = real_now();
-				if (s->overlong)
-					reply(s, "ERR 5 line too long");
-				else
-					command(s, s->line);
-				s->len = 0;
-				s->overlong = false;
+				/* The keep-alive is judged by sl_tick() between reads only: a line read now may have
+				 * waited on the link while this process was not scheduled (a loaded machine), whereas a
+				 * laser's UART receives it on arrival. */
+				received(s);
 				continue;
 			}
 			if (s->len >= SL_LINE_MAX)
@@ -239,6 +293,7 @@ static void sl_tick(void *self, double now)
 {
 	(void)now;
 	struct sim_laser *s = self;
+	run_delayed(s);
 	if (emission_blocked(s))
 		s->w->laser_emission = false;
 	if (s->keepalive_ms && s->w->laser_emission && real_now() - s->last_cmd > s->keepalive_ms * 1e-3 &&

@@ -1,5 +1,5 @@
 /* sim_truth: the simulator's ground truth exported, so accuracy is measured, not assumed (the library part of
- * `acq-sim truth`; its command line is in sim/acq_sim_main.c): DHR(theta_i, lambda) with its quadrature error
+ * `acq-sim truth`; its command line is in sim/sim_truthcli.c): DHR(theta_i, lambda) with its quadrature error
  * bound, evaluation at given directions, noisy sparse samples on a plan-like grid (the CSV interchange format of
  * docs/design.md, with the bench's systematic errors if asked), a MERL table, and a simulated spectrophotometer
  * measurement of the DHR at 8 deg. Each writer takes a stream the caller opened and returns 0, or -1 with err;

@@ -229,6 +229,7 @@ struct plan_timing {
 	double point_overhead_s;    /* real seconds per point the host spends beyond the bench's own time
 				     * (calibration, storage with fsync, protocol round trips) ... */
 	double time_scale;          /* ... which cost time_scale times as much bench time on a simulated bench */
+	long long host_sweep;       /* point_overhead_s is what this completed sweep measured (0: the default) */
 	bool have_start;            /* the arms' position when the sweep starts is known (the daemon knows it) */
 	struct plan_pos start;      /* then the move from there to ref_pose (or the first point) is counted */
 	struct plan_prior prior;    /* auto integration: the exposure prior when prior.sweep > 0 (plan_time.c) */

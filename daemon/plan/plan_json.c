@@ -111,6 +111,11 @@ json_t *plan_dry_run_json(const struct plan_spec *s, const struct bench_geom *g,
 {
 	plan_time_apply(s, g, t, r);
 	json_t *o = plan_to_json(s, r, points);
+	if (o && t->host_sweep > 0 && !(t->prior.sweep > 0 && t->prior.host_points > 0)) {
+		/* the host's time per point as that sweep measured it, not the default (sweep_plan_prior) */
+		json_object_set_new(o, "host_sweep", json_integer(t->host_sweep));
+		json_object_set_new(o, "host_per_point_s", json_real(t->point_overhead_s));
+	}
 	if (o && s->integ_mode == PLAN_INTEG_AUTO) {
 		/* which exposure prior timed the auto exposures: the previous sweep of the same sample, or none (the
 		 * band around the estimate) */

@@ -62,13 +62,15 @@ void plan_timing_defaults(struct plan_timing *t)
 		.hdr_ratio = 8,               /* exposure.c hdr_ratio default */
 		.reference = true,
 		.ref_pose = { 0.0, 45.0, 180.0 }, /* executor.c reference_pose default */
-		/* the host's time per point (real seconds: calibration, storage, protocol round trips), measured on
-		 * the shared 2-core development machine with tests/bench/bench_duration.py as what a sweep took beyond
-		 * this model's bench part: the paper plan at time scale 35, 0.0182 s (session 6, the bench's session
-		 * prioritized, load 14.6) and 0.0128 s (session 5's 2068.6 s at load 5-7); the small fixed plan
-		 * 0.009-0.013 s (fewer shots per point); 0.3-0.6 s when the bench's processes wait behind other
-		 * sessions (load 20+, not prioritized). Reported apart as host_s. */
-		.point_overhead_s = 0.016,
+		/* the host's time per point (real seconds: calibration, storage, protocol round trips) when nothing
+		 * better is known (the daemon uses what its latest completed sweep measured, sweep_plan_prior), measured
+		 * on the shared 2-core development machine with tests/bench/bench_duration.py as what a sweep took
+		 * between commits beyond this model's bench part (exp_prior_build's host figure): the paper plan's first
+		 * sweeps at time scale 35, 10.3, 13.6, 13.5, 13.1, 14.4 ms (session 9, load 11-20), 10.9 and 15.2 ms
+		 * (session 10, load 8.9 and 10.4): the median, 13.5 ms (sessions 5-6: 12.8 and 18.2 ms, the old default
+		 * 16). Its repeats took 11.5-19.2 ms (CPU contention: the stall lines, session 10's notes); the small
+		 * fixed plan 5.1 ms at time scale 10 (fewer exposures and requests per point). Reported apart as host_s. */
+		.point_overhead_s = 0.0135,
 		.time_scale = 1,
 	};
 }

@@ -1,4 +1,4 @@
-/* brdf-recon's shared command-line helpers (defined in brdf_recon_main.c, the DHR budget in cmd_dhr.c) and the
+/* brdf-recon's shared command-line helpers (defined in cli.c, the DHR budget in cmd_dhr.c) and the
  * commands, one per file (recon/brdf_recon/cmd_*.c). Only the program's own files include this. */
 #ifndef RECON_BRDF_RECON_CLI_H
 #define RECON_BRDF_RECON_CLI_H

@@ -1,6 +1,7 @@
 /* brdf-recon select: the next batch of an adaptive sweep (recon/select.c), as JSON for the daemon. */
 #include <getopt.h>
 #include <math.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -165,7 +166,33 @@ static int bad_input(const struct acq_err *e)
 	return 2;
 }
 
-int cmd_select(int argc, char **argv)
+/* The columns of a candidate file: the first six always, the last five with --route. */
+static const char *const cand_names[11] = { "id", "theta_i", "phi_i", "theta_o", "phi_o", "cost_s",
+					    "base_s", "open_s", "laser_deg", "det_theta_deg", "det_phi_deg" };
+
+/* The command line. */
+struct select_args {
+	const char *outp, *candp, *spec, *routep;
+	const char *model;       /* MODEL, the one operand */
+	struct select_opts so;
+};
+
+/* The candidates as select_batch takes them: nc rows of angles (radians, 4 per row), costs and ids; with --route
+ * ids holds 6·nc numbers (ids, then the route's pos[3nc], base, open). */
+struct select_cands {
+	size_t nc;
+	double *ang, *cost, *ids;
+};
+
+static void cands_free(struct select_cands *cd)
+{
+	free(cd->ang);
+	free(cd->cost);
+	free(cd->ids);
+}
+
+/* Options into a. -1 to go on, else the exit status (help printed, or a usage error reported). */
+static int parse_args(int argc, char **argv, struct select_args *a)
 {
 	static const struct option lo[] = {
 		{ "output", required_argument, 0, 'o' }, { "candidates", required_argument, 0, 'c' },
@@ -173,34 +200,32 @@ int cmd_select(int argc, char **argv)
 		{ "draws", required_argument, 0, 'n' }, { "seed", required_argument, 0, 's' },
 		{ "value-channels", required_argument, 0, 'v' }, { "route", required_argument, 0, 'r' },
 		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
-	const char *outp = NULL, *candp = NULL, *spec = NULL, *routep = NULL;
-	struct select_opts so;
-	select_opts_default(&so);
+	struct select_opts *so = &a->so;
 	uint64_t u;
 	int c;
 	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
 		switch (c) {
-		case 'o': outp = optarg; break;
-		case 'c': candp = optarg; break;
-		case 't': spec = optarg; break;
+		case 'o': a->outp = optarg; break;
+		case 'c': a->candp = optarg; break;
+		case 't': a->spec = optarg; break;
 		case 'b':
 			if (parse_u64(optarg, &u) || u > 100000)
 				return usage_err("select", "--batch needs a count in 0..100000");
-			so.batch = (size_t)u;
+			so->batch = (size_t)u;
 			break;
 		case 'n':
 			if (parse_u64(optarg, &u) || u > 100000)
 				return usage_err("select", "--draws needs 0..100000");
-			so.ndraws = (int)u;
+			so->ndraws = (int)u;
 			break;
 		case 'v':
 			if (parse_u64(optarg, &u) || u > 100000)
 				return usage_err("select", "--value-channels needs a count in 0..100000 (0: all)");
-			so.nvalue = (size_t)u;
+			so->nvalue = (size_t)u;
 			break;
-		case 'r': routep = optarg; break;
+		case 'r': a->routep = optarg; break;
 		case 's':
-			if (parse_u64(optarg, &so.seed))
+			if (parse_u64(optarg, &so->seed))
 				return usage_err("select", "--seed needs an unsigned integer");
 			break;
 		case 'h': fputs(select_help, stdout); return 0;
@@ -209,21 +234,70 @@ int cmd_select(int argc, char **argv)
 	}
 	if (optind != argc - 1)
 		return usage_err("select", "one MODEL expected");
-	if (!candp || !spec)
+	if (!a->candp || !a->spec)
 		return usage_err("select", "--candidates CAND.csv and --target SPEC are required");
+	a->model = argv[optind];
+	return -1;
+}
+
+/* Check data row j (ncol numbers: r) of candp. 0, or -1 with err naming the row and the column. */
+static int check_row(const char *candp, size_t j, const double *r, bool route, struct acq_err *err)
+{
+	const char *const *names = cand_names;
+	double id = r[0];
+	if (!(id >= 0 && id <= 9007199254740992.0 && id == floor(id)))
+		return acq_errf(err, ACQ_E_INVAL, "%s: data row %zu: id %.17g is not a non-negative integer", candp, j + 1,
+				id);
+	for (int a = 1; a <= 4; a += 2)
+		if (!(r[a] >= 0 && r[a] <= 90))
+			return acq_errf(err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): %s = %g outside [0, 90] degrees", candp,
+					j + 1, id, names[a], r[a]);
+	if (!(r[5] > 0 && isfinite(r[5])))
+		return acq_errf(err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): cost_s = %g must be > 0 seconds", candp,
+				j + 1, id, r[5]);
+	if (route) {
+		for (int a = 8; a < 11; a++)
+			if (!isfinite(r[a]))
+				return acq_errf(err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): %s is not a number", candp, j + 1,
+						id, names[a]);
+		if (!(r[6] > 0 && isfinite(r[6]) && r[7] >= 0 && isfinite(r[7])))
+			return acq_errf(err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): base_s = %g must be > 0 and open_s = %g "
+					">= 0 seconds", candp, j + 1, id, r[6], r[7]);
+	}
+	return 0;
+}
+
+/* Ids are unique: a sorted copy of the nc ids has no two equal. 0, or -1 with err naming the id. */
+static int check_unique_ids(const char *candp, const double *ids, size_t nc, struct acq_err *err)
+{
+	if (nc < 2)
+		return 0;
+	double *s = malloc(nc * sizeof *s);
+	int bad = 0;
+	if (s) {
+		memcpy(s, ids, nc * sizeof *s);
+		qsort(s, nc, sizeof *s, cmp_id);
+		for (size_t i = 1; i < nc && !bad; i++)
+			if (s[i] == s[i - 1]) {
+				acq_errf(err, ACQ_E_INVAL, "%s: id %.0f appears more than once", candp, s[i]);
+				bad = 1;
+			}
+		free(s);
+	}
+	return bad ? -1 : 0;
+}
+
+/* Read and check a->candp into cd (and, with --route, route's arrays, pointing into cd->ids). 0, or the exit
+ * status with the error reported (2: bad input, 1: out of memory) and nothing left allocated. */
+static int read_candidates(const struct select_args *a, struct select_route *route, struct select_cands *cd)
+{
 	struct acq_err err = { 0 };
-	struct select_target tg;
-	if (select_target_parse(spec, &tg, &err))
-		return bad_input(&err);
-	static const char *const names[11] = { "id", "theta_i", "phi_i", "theta_o", "phi_o", "cost_s",
-					       "base_s", "open_s", "laser_deg", "det_theta_deg", "det_phi_deg" };
-	struct select_route route;
-	if (routep && parse_route(routep, &route, &err))
-		return bad_input(&err);
-	size_t nc = 0, ncol = routep ? 11 : 6;
+	const char *candp = a->candp;
+	bool routed = a->routep != NULL;
+	size_t nc = 0, ncol = routed ? 11 : 6;
 	double *rows = NULL;
-	if (csvio_read_columns(candp, names, ncol, &nc, &rows, &err)) {
-		if (!header_only(candp, names))
+	if (csvio_read_columns(candp, cand_names, ncol, &nc, &rows, &err)) {
+		if (!header_only(candp, cand_names))
 			return bad_input(&err);
 		nc = 0; /* no candidates: the target's value, no pick */
 		rows = NULL;
@@ -233,175 +307,174 @@ int cmd_select(int argc, char **argv)
 		acq_errf(&err, ACQ_E_RANGE, "%s: %zu candidates, at most %d", candp, nc, SELECT_MAX_CANDIDATES);
 		return bad_input(&err);
 	}
-	double *ang = malloc((nc ? nc : 1) * 4 * sizeof *ang), *cost = malloc((nc ? nc : 1) * sizeof *cost);
-	double *ids = malloc((nc ? nc : 1) * (routep ? 6 : 1) * sizeof *ids); /* then the route's pos[3nc], base, open */
-	if (!ang || !cost || !ids) {
+	cd->nc = nc;
+	cd->ang = malloc((nc ? nc : 1) * 4 * sizeof *cd->ang);
+	cd->cost = malloc((nc ? nc : 1) * sizeof *cd->cost);
+	cd->ids = malloc((nc ? nc : 1) * (routed ? 6 : 1) * sizeof *cd->ids);
+	if (!cd->ang || !cd->cost || !cd->ids) {
 		free(rows);
-		free(ang);
-		free(cost);
-		free(ids);
+		cands_free(cd);
 		acq_errf(&err, ACQ_E_NOMEM, "select: out of memory");
 		return fail(&err);
 	}
 	int bad = 0;
 	for (size_t j = 0; j < nc && !bad; j++) {
 		const double *r = rows + ncol * j;
-		double id = r[0];
-		if (!(id >= 0 && id <= 9007199254740992.0 && id == floor(id))) {
-			acq_errf(&err, ACQ_E_INVAL, "%s: data row %zu: id %.17g is not a non-negative integer", candp, j + 1, id);
+		if (check_row(candp, j, r, routed, &err)) {
 			bad = 1;
 			break;
 		}
-		for (int a = 1; a <= 4 && !bad; a += 2)
-			if (!(r[a] >= 0 && r[a] <= 90)) {
-				acq_errf(&err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): %s = %g outside [0, 90] degrees", candp,
-					 j + 1, id, names[a], r[a]);
-				bad = 1;
-			}
-		if (!bad && !(r[5] > 0 && isfinite(r[5]))) {
-			acq_errf(&err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): cost_s = %g must be > 0 seconds", candp, j + 1,
-				 id, r[5]);
-			bad = 1;
-		}
-		if (!bad && routep) {
-			for (int a = 8; a < 11 && !bad; a++)
-				if (!isfinite(r[a])) {
-					acq_errf(&err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): %s is not a number", candp, j + 1, id,
-						 names[a]);
-					bad = 1;
-				}
-			if (!bad && !(r[6] > 0 && isfinite(r[6]) && r[7] >= 0 && isfinite(r[7]))) {
-				acq_errf(&err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): base_s = %g must be > 0 and open_s = %g "
-					 ">= 0 seconds", candp, j + 1, id, r[6], r[7]);
-				bad = 1;
-			}
-			double *rd = ids + nc;
-			for (int a = 0; a < 3; a++)
-				rd[3 * j + a] = r[8 + a];
+		if (routed) {
+			double *rd = cd->ids + nc;
+			for (int k = 0; k < 3; k++)
+				rd[3 * j + k] = r[8 + k];
 			rd[3 * nc + j] = r[6];
 			rd[4 * nc + j] = r[7];
 		}
-		for (int a = 0; a < 4; a++)
-			ang[4 * j + a] = r[1 + a] * M_PI / 180;
-		cost[j] = r[5];
-		ids[j] = id;
+		for (int k = 0; k < 4; k++)
+			cd->ang[4 * j + k] = r[1 + k] * M_PI / 180;
+		cd->cost[j] = r[5];
+		cd->ids[j] = r[0];
 	}
-	if (routep) {
-		route.pos = ids + nc;
-		route.base = ids + 4 * nc;
-		route.open = ids + 5 * nc;
-		so.route = &route;
+	if (routed) {
+		route->pos = cd->ids + nc;
+		route->base = cd->ids + 4 * nc;
+		route->open = cd->ids + 5 * nc;
 	}
-	if (!bad && nc > 1) { /* ids are unique: sort a copy */
-		double *s = malloc(nc * sizeof *s);
-		if (s) {
-			memcpy(s, ids, nc * sizeof *s);
-			qsort(s, nc, sizeof *s, cmp_id);
-			for (size_t i = 1; i < nc && !bad; i++)
-				if (s[i] == s[i - 1]) {
-					acq_errf(&err, ACQ_E_INVAL, "%s: id %.0f appears more than once", candp, s[i]);
-					bad = 1;
-				}
-			free(s);
-		}
-	}
+	if (!bad && check_unique_ids(candp, cd->ids, nc, &err))
+		bad = 1;
 	free(rows);
 	if (bad) {
-		free(ang);
-		free(cost);
-		free(ids);
+		cands_free(cd);
 		return bad_input(&err);
 	}
+	return 0;
+}
+
+/* The "target" object of the JSON: spec, value, per, the DHR's incidences, where (ln f), parts, threshold, met. */
+static void write_target(FILE *f, const char *spec, const struct select_target *tg, const struct select_result *res)
+{
+	fputs("{\"target\":{\"spec\":", f);
+	json_str(f, spec);
+	fputs(",\"value\":", f);
+	json_num(f, res->value);
+	fputs(",\"per\":[", f);
+	for (size_t i = 0; i < res->nper; i++) {
+		if (i)
+			fputc(',', f);
+		json_num(f, res->per[i]);
+	}
+	fputs("],", f);
+	if (tg->kind == SELECT_DHR) {
+		fputs("\"theta_i\":[", f);
+		for (size_t i = 0; i < tg->nth; i++)
+			fprintf(f, i ? ",%g" : "%g", tg->theta_deg[i]);
+		fprintf(f, "],\"value_channels\":%zu,\"value_checked_all\":%s,", res->nvalue,
+			res->value_checked ? "true" : "false");
+	}
+	if (tg->kind == SELECT_LNF || tg->lnf_threshold > 0) {
+		fputs("\"where\":{", f);
+		static const char *const an[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
+		for (int a = 0; a < 4; a++)
+			fprintf(f, "%s\"%s\":%g", a ? "," : "", an[a], res->where[a] * 180 / M_PI);
+		fputs("},", f);
+	}
+	if (tg->lnf_threshold > 0) {
+		fputs("\"parts\":{\"dhr\":{\"value\":", f);
+		json_num(f, res->part[0]);
+		fputs(",\"threshold\":", f);
+		json_num(f, tg->threshold);
+		fputs("},\"lnf\":{\"value\":", f);
+		json_num(f, res->part[1]);
+		fputs(",\"threshold\":", f);
+		json_num(f, tg->lnf_threshold);
+		fputs("}},", f);
+	}
+	fputs("\"threshold\":", f);
+	json_num(f, tg->lnf_threshold > 0 ? 1.0 : tg->threshold);
+	fprintf(f, ",\"met\":%s}", res->met ? "true" : "false");
+}
+
+/* The "picks" array of the JSON, in choice order (ids: the candidates' ids by index). */
+static void write_picks(FILE *f, const struct select_result *res, const double *ids)
+{
+	fputs(",\"picks\":[", f);
+	for (size_t k = 0; k < res->npicks; k++) {
+		const struct select_pick *p = &res->picks[k];
+		fprintf(f, "%s{\"id\":%.0f,\"gain\":", k ? "," : "", ids[p->index]);
+		json_num(f, p->gain);
+		fputs(",\"gain_per_s\":", f);
+		json_num(f, p->gain_per_s);
+		fputs(",\"cost_s\":", f);
+		json_num(f, p->cost);
+		fputs(",\"predicted_value_after\":", f);
+		json_num(f, p->predicted);
+		fputs(",\"predicted_per_after\":[", f);
+		for (size_t i = 0; i < res->nper; i++) {
+			if (i)
+				fputc(',', f);
+			json_num(f, p->predicted_per[i]);
+		}
+		fputs("]}", f);
+	}
+	fputc(']', f);
+}
+
+/* The decision as one JSON line to a->outp (stdout without -o). 0 or -1 with err. */
+static int write_result(const struct select_args *a, const struct select_target *tg, const struct select_result *res,
+			const struct select_cands *cd, struct acq_err *err)
+{
+	struct out o;
+	if (out_open(&o, a->outp, err))
+		return -1;
+	FILE *f = o.f;
+	write_target(f, a->spec, tg, res);
+	write_picks(f, res, cd->ids);
+	fputs(",\"model\":", f);
+	json_str(f, a->model);
+	if (a->routep) { /* the decision's record: a replay needs it */
+		fputs(",\"route\":", f);
+		json_str(f, a->routep);
+	}
+	fprintf(f, ",\"criterion\":\"%s\",\"candidates\":{\"read\":%zu,\"distinct\":%zu}}\n",
+		"gp-excess-variance-reduction-per-second", cd->nc, res->nunique);
+	return out_close(&o, 1, err) ? -1 : 0;
+}
+
+int cmd_select(int argc, char **argv)
+{
+	struct select_args a = { 0 };
+	select_opts_default(&a.so);
+	int rc = parse_args(argc, argv, &a);
+	if (rc >= 0)
+		return rc;
+	struct acq_err err = { 0 };
+	struct select_target tg;
+	if (select_target_parse(a.spec, &tg, &err))
+		return bad_input(&err);
+	struct select_route route;
+	if (a.routep && parse_route(a.routep, &route, &err))
+		return bad_input(&err);
+	struct select_cands cd = { 0 };
+	if ((rc = read_candidates(&a, &route, &cd)))
+		return rc;
+	if (a.routep)
+		a.so.route = &route;
 	struct recon_model *m;
-	if (recon_model_load(argv[optind], &m, &err)) {
-		free(ang);
-		free(cost);
-		free(ids);
+	if (recon_model_load(a.model, &m, &err)) {
+		cands_free(&cd);
 		return bad_input(&err);
 	}
 	struct select_result res;
-	int ok = select_batch(m, nc, ang, cost, &tg, &so, &res, &err) == 0;
-	struct out o;
-	if (ok && !out_open(&o, outp, &err)) {
-		FILE *f = o.f;
-		fputs("{\"target\":{\"spec\":", f);
-		json_str(f, spec);
-		fputs(",\"value\":", f);
-		json_num(f, res.value);
-		fputs(",\"per\":[", f);
-		for (size_t i = 0; i < res.nper; i++) {
-			if (i)
-				fputc(',', f);
-			json_num(f, res.per[i]);
-		}
-		fputs("],", f);
-		if (tg.kind == SELECT_DHR) {
-			fputs("\"theta_i\":[", f);
-			for (size_t i = 0; i < tg.nth; i++)
-				fprintf(f, i ? ",%g" : "%g", tg.theta_deg[i]);
-			fprintf(f, "],\"value_channels\":%zu,\"value_checked_all\":%s,", res.nvalue,
-				res.value_checked ? "true" : "false");
-		}
-		if (tg.kind == SELECT_LNF || tg.lnf_threshold > 0) {
-			fputs("\"where\":{", f);
-			static const char *const an[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
-			for (int a = 0; a < 4; a++)
-				fprintf(f, "%s\"%s\":%g", a ? "," : "", an[a], res.where[a] * 180 / M_PI);
-			fputs("},", f);
-		}
-		if (tg.lnf_threshold > 0) {
-			fputs("\"parts\":{\"dhr\":{\"value\":", f);
-			json_num(f, res.part[0]);
-			fputs(",\"threshold\":", f);
-			json_num(f, tg.threshold);
-			fputs("},\"lnf\":{\"value\":", f);
-			json_num(f, res.part[1]);
-			fputs(",\"threshold\":", f);
-			json_num(f, tg.lnf_threshold);
-			fputs("}},", f);
-		}
-		fputs("\"threshold\":", f);
-		json_num(f, tg.lnf_threshold > 0 ? 1.0 : tg.threshold);
-		fprintf(f, ",\"met\":%s},\"picks\":[", res.met ? "true" : "false");
-		for (size_t k = 0; k < res.npicks; k++) {
-			const struct select_pick *p = &res.picks[k];
-			fprintf(f, "%s{\"id\":%.0f,\"gain\":", k ? "," : "", ids[p->index]);
-			json_num(f, p->gain);
-			fputs(",\"gain_per_s\":", f);
-			json_num(f, p->gain_per_s);
-			fputs(",\"cost_s\":", f);
-			json_num(f, p->cost);
-			fputs(",\"predicted_value_after\":", f);
-			json_num(f, p->predicted);
-			fputs(",\"predicted_per_after\":[", f);
-			for (size_t i = 0; i < res.nper; i++) {
-				if (i)
-					fputc(',', f);
-				json_num(f, p->predicted_per[i]);
-			}
-			fputs("]}", f);
-		}
-		fputs("],\"model\":", f);
-		json_str(f, argv[optind]);
-		if (routep) { /* the decision's record: a replay needs it */
-			fputs(",\"route\":", f);
-			json_str(f, routep);
-		}
-		fprintf(f, ",\"criterion\":\"%s\",\"candidates\":{\"read\":%zu,\"distinct\":%zu}}\n",
-			"gp-excess-variance-reduction-per-second", nc, res.nunique);
-		if (out_close(&o, 1, &err))
-			ok = 0;
-	} else if (ok) {
+	int ok = select_batch(m, cd.nc, cd.ang, cd.cost, &tg, &a.so, &res, &err) == 0;
+	if (ok && write_result(&a, &tg, &res, &cd, &err))
 		ok = 0;
-	}
 	if (ok)
-		fprintf(stderr, "select: target %s = %.4g%s; %zu of %zu distinct candidates picked%s\n", spec, res.value,
+		fprintf(stderr, "select: target %s = %.4g%s; %zu of %zu distinct candidates picked%s\n", a.spec, res.value,
 			res.met ? " (met)" : "", res.npicks, res.nunique,
 			res.npicks ? "" : " (none reduces the target)");
 	select_result_free(&res);
 	recon_model_free(m);
-	free(ang);
-	free(cost);
-	free(ids);
+	cands_free(&cd);
 	return ok ? 0 : fail(&err);
 }

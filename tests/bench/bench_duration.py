@@ -15,6 +15,7 @@ exposure prior; the repeat starts once the first sweep's automatic reconstructio
 paper's 10x10x10 (auto, estimate 50 ms) at the demo's time scale 35, and its repeat. BENCH_DURATION_QUICK=1: the
 small fixed one only;
 BENCH_DURATION_CASES=a,b: those cases (name@scale for one time scale; name a repeat with the case before it).
+BENCH_DURATION_LOG=debug: the daemon logs at that level (debug: a stall line per point: where the host's time went).
 Also reported: the simulator's own lag (acq-sim ctl status lag_s: its 1 ms waits ending late, the host not keeping
 the time scale) over the sweep and its share of the measured time; the host's time per point (host_per_point: real
 seconds its exposures and planned move do not account for) against the model's; per ETA checkpoint the ETA's error
@@ -72,6 +73,10 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
     b = bench or L.Bench(scale=scale)
     try:
         recon_wait = 0.0
+        if not bench and os.environ.get("BENCH_DURATION_LOG"):
+            # the daemon's log level (debug: a stall line per point, where the host's time went; kept with
+            # ACQ_BENCH_KEEP=1 in the bench's acquisitiond.log)
+            L.compose_config(b.conf, b.state, b.sock, scale, log_level=os.environ["BENCH_DURATION_LOG"])
         if not bench:
             b.start_sim()
             b.start_daemon()

@@ -1,4 +1,4 @@
-/* Fuzz target: the register-map and axis-config loaders (drivers/regmap.c, drivers/axis_modbus.c) on arbitrary
+/* Fuzz target: the register-map and axis-config loaders (drivers/regmap.c, drivers/axis_modbus_cfg.c) on arbitrary
  * YAML, then encode/decode through every field a valid map defines. Must never crash or leak. */
 #include <stdint.h>
 #include <stdio.h>

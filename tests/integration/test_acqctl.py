@@ -176,6 +176,20 @@ def main():
             check(d["plan"][k] == local["plan"][k], "plan %s: daemon %r, local %r" % (k, d["plan"][k], local["plan"][k]))
         d = c.json("plan", "plan", plan, "--points")
         check(len(d["plan"]["steps"]) == d["plan"]["measured"], "--points reaches the daemon")
+        # a plan whose steps take more than a request line (64 KiB; 287 points: 84 KB) comes whole from the daemon
+        # (the paper's 866 points were refused: "the reply is longer than 65536 bytes")
+        bigf = os.path.join(b.dir, "big.yaml")
+        with open(bigf, "w") as fh:
+            fh.write(PLAN.replace("theta_deg: [20]", "theta_deg: [10, 30, 50, 65]")
+                     .replace("theta_deg: [40]", "theta_deg: [10, 25, 40, 55, 70]")
+                     .replace("phi_deg: [0, 180]", "phi_deg: [%s]" % ", ".join(str(24 * k) for k in range(15))))
+        p = c.run("--json", "plan", bigf, "--points")
+        check(p.returncode == 0 and len(p.stdout) > 65536, "a large --points plan from the daemon: rc %d, %d bytes, %s"
+              % (p.returncode, len(p.stdout), p.stderr.strip()))
+        d = json.loads(p.stdout)
+        check(d["source"] == "daemon" and len(d["plan"]["steps"]) == d["plan"]["measured"] > 250,
+              "large --points: %s, %d steps of %d" % (d["source"], len(d["plan"]["steps"]), d["plan"]["measured"]))
+        validate(d, "plan")
         # --- manual commands on the simulated bench
         d = c.json("home", "home", "detector.phi")
         check(d["homed"] == ["detector.phi"] and abs(d["detector.phi"]) < 0.05, "home %r" % d)

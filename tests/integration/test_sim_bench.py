@@ -183,6 +183,15 @@ try:
     p.wait(5)
     check(p.returncode == 0 and not os.path.exists(spec_sock), "SIGTERM: clean exit, sockets removed")
 
+    # sim.services in the config leaves services out as --disable does (no --disable here)
+    c = write_config("svc.yaml", "sim:\n  services: {laser_arm: false, detector_arm: false, laser: false}\n",
+                     os.path.join(tmp, "svc.sock"))
+    p, ports = T.start(["-c", c, "--control", os.path.join(tmp, "svc.ctl")], os.path.join(tmp, "svc.ports.json"))
+    check("spectrometer" in ports and not {"laser_arm", "detector_arm", "laser"} & set(ports),
+          f"sim.services false: those services absent from the ports file: {sorted(ports)}")
+    p.terminate()
+    p.wait(5)
+
     # bad configurations and arguments: clear errors naming the place
     for name, section, want in [
         ("b1.yaml", "sim:\n  sample: velvet\n", "b1.yaml:4"),

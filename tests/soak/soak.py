@@ -340,6 +340,9 @@ def stall_points(text, sid):
         rec = {"total": float(m.group(3)), "t0": float(m.group(4)), "t1": float(m.group(5)), "ports": {}}
         for part in (m.group(6), m.group(7), m.group(8)):
             rec.update({k: float(v) for k, v in KV_RE.findall(part)})
+        for key in ("callback_max_at", "callback_cpu_max_at"):  # (KV_RE read their "0x" as 0)
+            at = re.search(r"\b%s=(0x[0-9a-f]+)" % key, m.group(8))
+            rec[key] = at.group(1) if at else None
         for port in m.group(9).split("; "):
             name, _, rest = port.partition(": ")
             if rest:
@@ -402,6 +405,17 @@ def figures(rec, samples):
             "device_run": sum(p.get("run", 0) for p in ports)}
 
 
+def fn_name(addr):
+    """The daemon's function at addr (its offset in the binary, stall.c's callback_max_at), by addr2line."""
+    if not addr or addr == "0x0":
+        return "?"
+    try:
+        out = subprocess.run(["addr2line", "-f", "-e", L.DAEMON, addr], capture_output=True, text=True, timeout=10)
+        return out.stdout.split("\n")[0] or "?"
+    except (OSError, subprocess.SubprocessError):
+        return addr
+
+
 def explain(k, excess_ms, lrecs, crecs, lsamp, csamp):
     """One stalled point: its phases and causes under load against the same point in the control sweep; the
     cause is the largest growth among the daemon's and the host's figures (they can overlap: all are shown).
@@ -423,14 +437,16 @@ def explain(k, excess_ms, lrecs, crecs, lsamp, csamp):
         p.get("loop", 0) - crec["ports"].get(n, {}).get("loop", 0)) for n, p in lrec["ports"].items() if p.get("n"))
     text = ("point %d: +%.0f ms over the control between the points' last spectra (commit to commit %.0f vs %.0f "
             "ms); phases grew %s; executor steps %+.0f ms (the previous commit's database writes %.0f vs %.0f ms; WAL "
-            "checkpoints off the loop %d: %.0f ms), loop callbacks %+.0f (max %.0f ms; others' %+.0f), timers "
+            "checkpoints off the loop %d: %.0f ms), loop callbacks %+.0f (max %.0f ms in %s, %.0f ms of it on the CPU; most CPU %.0f ms in %s; others' %+.0f), timers "
             "late %+.0f (max %.0f ms), loop waited for a CPU %+.0f, acq-sim waited for a CPU %+.0f ms; ports (ms "
             "vs control): %s; cause: %s" % (
                 k, excess_ms, lrec["total"], crec["total"],
                 ", ".join("%s %+.0f" % (p, v) for v, p in grew[:3] if abs(v) >= 1) or "none",
                 d["executor"], lprev.get("store", float("nan")), cprev.get("store", float("nan")),
                 lrec.get("checkpoints", 0), lrec.get("checkpoint", 0),
-                lrec.get("callbacks", 0) - crec.get("callbacks", 0), lrec.get("callback_max", 0), d["loop_other"],
+                lrec.get("callbacks", 0) - crec.get("callbacks", 0), lrec.get("callback_max", 0),
+                fn_name(lrec.get("callback_max_at")), lrec.get("callback_max_on_cpu", 0),
+                lrec.get("callback_cpu_max", 0), fn_name(lrec.get("callback_cpu_max_at")), d["loop_other"],
                 lrec.get("timers_late", 0) - crec.get("timers_late", 0), lrec.get("timer_late_max", 0),
                 d["loop_cpu_wait"], d["sim_cpu_wait"], ports, cause))
     return text, cause

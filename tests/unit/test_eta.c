@@ -38,10 +38,11 @@ static void test_scale_and_pause(void **state)
 		real += 4, loop += 40;
 		t = eta_update(&e, d, 10, 20.0 * d, 200, loop, real);
 	}
-	/* measured 7 points: 1 as planned (excess 0), then 6 intervals of one point with 2 s more: the recent average
-	 * (memory 10 points, the minimum) moves by 1 - exp(-1/10) of the way to 2 s six times; weight 7/12; one point
-	 * left, planned 2 s */
-	double excess = 2 * (1 - pow(exp(-0.1), 6)), w = 7.0 / 12.0;
+	/* measured 7 points: 1 as planned (excess 0), then 6 intervals of one point with 2 s more: in the recent
+	 * average (memory 10 points, the minimum) the i-th of the 7 intervals weighs (1 - d) d^(7-i), d = exp(-1/10),
+	 * normalised by their sum 1 - d^7: the six with the excess 1 - d^6 of it; weight 7/12; one point left, planned
+	 * 2 s */
+	double d = exp(-0.1), excess = 2 * (1 - pow(d, 6)) / (1 - pow(d, 7)), w = 7.0 / 12.0;
 	assert_true(fabs(t - (2.0 + w * excess)) < 1e-9);
 	assert_true(eta_update(&e, 10, 10, 200, 200, loop, real) == 0);
 }

@@ -63,6 +63,9 @@ struct fake {
 	bool deferred;
 	bool waiting[3][EX_DEV__COUNT];
 	int pendings;
+	/* the laser as the daemon's laser thread runs it: a command takes effect when the next read completes */
+	bool laser_lag, lag_pending, lag_on;
+	bool laser_silent;        /* reads fail: the laser does not answer */
 };
 
 static struct fake F;
@@ -258,6 +261,11 @@ static int f_laser_set(void *ctx, bool on, struct acq_err *err)
 		F.emission = false;
 		return acq_errf(err, ACQ_E_DEVICE, "interlock open");
 	}
+	if (F.laser_lag) {
+		F.lag_pending = true;
+		F.lag_on = on;
+		return 0;
+	}
 	F.emission = on;
 	return 0;
 }
@@ -268,6 +276,12 @@ static int f_laser_state(void *ctx, bool *emission, bool *ready, struct acq_err 
 	(void)err;
 	if (defer(2, EX_DEV_LASER))
 		return EX_PENDING;
+	if (F.laser_silent)
+		return acq_errf(err, ACQ_E_TIMEOUT, "no reply to 'STATUS?' (test)");
+	if (F.lag_pending) {
+		F.emission = F.lag_on;
+		F.lag_pending = false;
+	}
 	if (F.interlock_open && F.interlock_close_at > 0 && F.now >= F.interlock_close_at)
 		F.interlock_open = false;
 	*emission = F.emission;
@@ -946,6 +960,66 @@ static void test_halt_state_and_event_together(void **state)
 	store_close(r.st);
 }
 
+/* Step x until the fake laser emits (the sweep acquiring); the time reached. */
+static double until_emitting(struct ex *x, double t)
+{
+	for (long it = 0; it < 1000000 && !F.emission; it++) {
+		F.now = t;
+		double next = ex_step(x, t);
+		assert_int_equal(ex_state(x), EX_RUNNING);
+		t = next > t ? next : t + 1e-6;
+	}
+	assert_true(F.emission);
+	return t;
+}
+
+/* A halt queues the laser's emission-off (as the daemon's laser thread runs it, effective at the next read):
+ * ex_stopping() holds until a read says off, and is never false while the fake laser emits; a laser that does not
+ * answer ends it with an event. With the state reported at once (no confirmation), ex_stopping() is false right
+ * after the abort while the laser still emits. */
+static void test_halt_waits_for_laser_off(void **state)
+{
+	(void)state;
+	struct run r;
+	struct ex *x = start_sweep(&r, false);
+	F.deferred = true; /* every read answers EX_PENDING first */
+	F.laser_lag = true;
+	double t = until_emitting(x, 0);
+	struct acq_err err = { 0 };
+	assert_int_equal(ex_abort(x, "test", t, &err), 0);
+	assert_int_equal(ex_state(x), EX_ABORTED);
+	assert_true(F.emission);    /* queued, not done */
+	assert_true(ex_stopping(x)); /* so not reported as stopped */
+	int steps = 0;
+	while (ex_stopping(x) && steps < 10) {
+		double next = ex_step(x, t);
+		steps++;
+		assert_true(ex_stopping(x) || !F.emission);
+		if (ex_stopping(x))
+			assert_true(next < INFINITY); /* it wants to be stepped again (the read's completion) */
+	}
+	assert_false(ex_stopping(x));
+	assert_false(F.emission);
+	ex_free(x, t);
+	store_close(r.st);
+
+	/* the laser does not answer: the pause ends anyway, with an event saying so */
+	fake_reset();
+	x = start_sweep(&r, false);
+	F.laser_lag = true;
+	t = until_emitting(x, 0);
+	F.laser_silent = true;
+	int infos = count_events("info");
+	ex_pause_now(x, false, "test pause");
+	assert_int_equal(ex_state(x), EX_PAUSED);
+	assert_true(ex_stopping(x));
+	ex_step(x, t);
+	assert_false(ex_stopping(x));
+	assert_int_equal(count_events("info"), infos + 1);
+	ex_free(x, t);
+	store_close(r.st);
+}
+
 int main(void)
 {
 	seed = synth_seed("test_executor");
@@ -967,6 +1041,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(test_crash_resume, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_alarm_backs_off, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_halt_state_and_event_together, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_halt_waits_for_laser_off, setup, teardown),
 	};
 	int rc = cmocka_run_group_tests(tests, NULL, NULL);
 	plan_result_free(plan);

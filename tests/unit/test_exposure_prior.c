@@ -170,6 +170,72 @@ static void test_prior_host(void **state)
 	assert_int_equal(pr.host_points, 0);
 }
 
+/* A sweep of n points (no sample) that stay at one pose, one 10 ms exposure of 4 averages each, committed every
+ * `every` seconds, then in state. */
+static int64_t mk_host_sweep(struct store *st, int n, double every, const char *state)
+{
+	struct store_point_new pts[64];
+	assert_true(n <= 64);
+	for (int i = 0; i < n; i++)
+		pts[i] = (struct store_point_new){ i, 10, 0, 30, 0 };
+	struct store_sweep_new nw = { .name = "h", .plan_text = "name: h", .config_snapshot = "{}",
+				      .software_version = "test", .created_at = 1000 };
+	int64_t id = 0;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_sweep_create(st, &nw, pts, n, &id, &err), 0);
+	float c[4] = { 1, 2, 3, 4 };
+	for (int i = 0; i < n; i++) {
+		int order;
+		int64_t pt;
+		assert_int_equal(store_sweep_next_point(st, id, &order, &pt, &err), 0);
+		struct store_spectrum sp = { .sweep_id = id, .point_id = pt, .kind = "sample", .integration_ms = 10,
+					     .averages = 4, .npix = 4, .counts = c, .temperature_c = NAN,
+					     .taken_at = 2000 + every * i, .completes_point = true, .laser_theta = 10,
+					     .detector_theta = 30, .detector_phi = 0, .theta_i = 10, .phi_i = 0, .theta_o = 30,
+					     .phi_o = 0 };
+		assert_int_equal(store_spectrum_add(st, &sp, NULL, &err), 0);
+	}
+	assert_int_equal(store_sweep_set_state(st, id, state, 3000, &err), 0);
+	return id;
+}
+
+/* The host's time per point from the latest completed sweep of any sample (a plan without its sample's prior): at
+ * time scale 10, points committed every 0.5 s, each the probe at 10 ms and an exposure of 4 x 10 ms with read-out
+ * and round trip: 0.5 - (0.01 + 0.015 + 0.04 + 0.015) / 10 s. Not from a sweep with fewer than EXP_HOST_MIN_POINTS
+ * points measured, an unfinished one, or the excluded one. */
+static void test_host_latest(void **state)
+{
+	(void)state;
+	char p[300];
+	struct store *st = ut_store_new(p, sizeof p, ut_dir, "h.db");
+	struct bench_geom g;
+	bench_defaults(&g);
+	g.readout_s = 0.01;
+	struct plan_timing t;
+	plan_timing_defaults(&t);
+	t.exposure_overhead_s = 0.005;
+	t.time_scale = 10;
+	struct acq_err err = { 0 };
+	double host = -1;
+	long long sweep = -1;
+	assert_int_equal(exp_host_load(st, 0, &g, &t, &host, &sweep, &err), 0);
+	assert_true(sweep == 0 && host == -1); /* no sweep yet */
+	int64_t a = mk_host_sweep(st, EXP_HOST_MIN_POINTS + 1, 0.5, "completed");
+	mk_host_sweep(st, EXP_HOST_MIN_POINTS + 1, 0.3, "aborted");
+	assert_int_equal(exp_host_load(st, 0, &g, &t, &host, &sweep, &err), 0);
+	assert_int_equal(sweep, a);
+	assert_true(fabs(host - (0.5 - 0.08 / 10)) < 1e-9);
+	/* a newer completed sweep too short to time the host: none (the default stays) */
+	int64_t b = mk_host_sweep(st, EXP_HOST_MIN_POINTS, 0.4, "completed");
+	host = -1;
+	assert_int_equal(exp_host_load(st, 0, &g, &t, &host, &sweep, &err), 0);
+	assert_true(sweep == 0 && host == -1);
+	/* excluded: the one before */
+	assert_int_equal(exp_host_load(st, b, &g, &t, &host, &sweep, &err), 0);
+	assert_int_equal(sweep, a);
+	store_close(st);
+}
+
 static void test_plan_sample_key(void **state)
 {
 	(void)state;
@@ -200,6 +266,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_prior_figures),
 		cmocka_unit_test(test_prior_host),
+		cmocka_unit_test(test_host_latest),
 		cmocka_unit_test(test_plan_sample_key),
 	};
 	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);

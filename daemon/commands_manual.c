@@ -1,0 +1,315 @@
+/* commands_manual: manual device operations (move, measure/dark/reference, devices, home, stop, laser.off);
+ * refused while a sweep is loaded, answered when the devices' threads have done them. */
+#include "daemon/commands_int.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "daemon/devices.h"
+#include "daemon/log.h"
+#include "daemon/loop.h"
+#include "daemon/sweep.h"
+
+#include "daemon/plan/plan.h"
+
+/* A manual move must not make the arms collide, on the way or at the target (straight
+ * segment, all axes together — what devices_move() does). Blind zones for the beam or the view are allowed
+ * (alignment needs them) and reported in the reply. 0, or -1 with ACQ_E_RANGE. */
+static int move_check(struct app *app, const double t[3], const char **warning, struct acq_err *err)
+{
+	*warning = NULL;
+	double cur[3];
+	devices_positions(app->dev, cur);
+	for (int i = 0; i < 3; i++)
+		if (isnan(cur[i]))
+			return 0; /* an axis is unavailable: devices_move() refuses the move anyway */
+	struct plan_pos a = { cur[0], cur[1], cur[2] };
+	struct plan_pos b = { isnan(t[0]) ? cur[0] : t[0], isnan(t[1]) ? cur[1] : t[1], isnan(t[2]) ? cur[2] : t[2] };
+	unsigned blind = plan_blind(&app->conf->bench, &b);
+	if (blind & (PLAN_R_COLLISION | PLAN_R_LIMITS))
+		return acq_errf(err, ACQ_E_RANGE, "move to (%g°, %g°, %g°) refused: %s", b.laser_theta, b.det_theta,
+				b.det_phi, plan_reason_name(blind & (PLAN_R_COLLISION | PLAN_R_LIMITS)));
+	/* From a position that already violates the clearance (e.g. both arms parked at the zenith) any path
+	 * "collides" at its start: then only the target is checked, so the operator can move out. */
+	bool stuck = plan_blind(&app->conf->bench, &a) & PLAN_R_COLLISION;
+	if (!stuck && !plan_seg_safe(&app->conf->bench, &a, &b))
+		return acq_errf(err, ACQ_E_RANGE, "move from (%g°, %g°, %g°) to (%g°, %g°, %g°) refused: the arms would "
+				"collide on the way; move one arm first", a.laser_theta, a.det_theta, a.det_phi,
+				b.laser_theta, b.det_theta, b.det_phi);
+	if (blind)
+		*warning = plan_reason_name(blind);
+	return 0;
+}
+
+/* ---- manual device operations: replies arrive later ---- */
+struct pending {
+	struct app *app;
+	uint64_t serial;
+	json_t *id;
+	const char *warning;  /* static text added to a successful reply */
+	int stopped;          /* >= 0: `stopped` added to a successful reply (stop) */
+};
+
+static void pending_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
+{
+	struct pending *p = ctx;
+	if (rc)
+		server_reply_error(p->app->srv, p->serial, p->id, proto_code_of(err), err->msg);
+	else {
+		if (p->warning && json_is_object(result))
+			json_object_set_new(result, "warning", json_string(p->warning));
+		if (p->stopped >= 0 && json_is_object(result))
+			json_object_set_new(result, "stopped", json_boolean(p->stopped));
+		server_reply(p->app->srv, p->serial, p->id, result);
+	}
+	json_decref(p->id);
+	free(p);
+}
+
+static struct pending *pending_new(struct app *app, const struct srv_peer *peer, json_t *id)
+{
+	struct pending *p = calloc(1, sizeof *p);
+	if (p)
+		*p = (struct pending){ .app = app, .serial = peer->serial, .id = json_incref(id), .stopped = -1 };
+	return p;
+}
+
+void cmd_manual_move(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep)) {
+		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: pause is not enough, abort it before moving by hand");
+		return cmd_reply_err(app, peer, req->id, &err);
+	}
+	/* the axes' one name (laser.theta), or the old one (laser_theta) an older client sends */
+	double t[3] = { cmd_num_arg(req->root, "laser.theta", cmd_num_arg(req->root, "laser_theta", NAN)),
+			cmd_num_arg(req->root, "detector.theta", cmd_num_arg(req->root, "detector_theta", NAN)),
+			cmd_num_arg(req->root, "detector.phi", cmd_num_arg(req->root, "detector_phi", NAN)) };
+	const char *warning;
+	if (move_check(app, t, &warning, &err))
+		return cmd_reply_err(app, peer, req->id, &err);
+	if (warning)
+		log_msg(LOG_NOTICE, "manual move into a blind zone (%s)", warning);
+	struct pending *p = pending_new(app, peer, req->id);
+	if (!p) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return cmd_reply_err(app, peer, req->id, &err);
+	}
+	p->warning = warning;
+	if (devices_move(app->dev, t, pending_done, p, &err)) {
+		json_decref(p->id);
+		free(p);
+		cmd_reply_err(app, peer, req->id, &err);
+	}
+}
+
+void cmd_manual_measure(struct app *app, const struct srv_peer *peer, struct proto_req *req, const char *kind)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep)) {
+		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: abort it before measuring by hand");
+		return cmd_reply_err(app, peer, req->id, &err);
+	}
+	double it = cmd_num_arg(req->root, "integration_ms", 100);
+	int avg = (int)cmd_num_arg(req->root, "averages", app->conf->sweep.averages);
+	struct pending *p = pending_new(app, peer, req->id);
+	if (!p) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return cmd_reply_err(app, peer, req->id, &err);
+	}
+	if (devices_measure(app->dev, kind, it, avg, cmd_num_arg(req->root, "power_pct", NAN), pending_done, p, &err)) {
+		json_decref(p->id);
+		free(p);
+		cmd_reply_err(app, peer, req->id, &err);
+	}
+}
+
+/* `devices`: the report waits for fresh status reads on the devices' own threads (the loop never does). */
+/* Fresh device reads are queued on the devices' threads in front of the sweep's own requests (and of the
+ * laser's keep-alive): one query at a time for all clients together; a request arriving while one runs gets
+ * what is known now (devices_json: no device I/O). */
+static bool devices_query_running;
+/* An observer's `devices` reads the hardware at most once per DEVICES_OBSERVER_READ_S (real seconds) and gets
+ * the cached view otherwise: clients without control cannot keep the devices' lines busy (a flood of `devices`
+ * held the laser's line with status reads, ahead of the sweep's laser commands). Controllers read live. */
+#define DEVICES_OBSERVER_READ_S 1.0
+static double devices_query_end; /* real (monotonic) seconds the last live read ended */
+
+static void devices_query_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
+{
+	devices_query_running = false;
+	devices_query_end = loop_monotonic(NULL);
+	pending_done(ctx, rc, err, result);
+}
+
+void cmd_manual_devices(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	if (devices_query_running || (peer->role != PROTO_CONTROLLER && devices_query_end > 0 &&
+				      loop_monotonic(NULL) - devices_query_end < DEVICES_OBSERVER_READ_S)) {
+		server_reply(app->srv, peer->serial, req->id, json_pack("{s:o}", "devices", devices_json(app->dev)));
+		return;
+	}
+	struct acq_err err = { 0 };
+	struct pending *p = pending_new(app, peer, req->id);
+	if (!p) {
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return cmd_reply_err(app, peer, req->id, &err);
+	}
+	if (devices_query(app->dev, devices_query_done, p, &err)) {
+		json_decref(p->id);
+		free(p);
+		cmd_reply_err(app, peer, req->id, &err);
+		return;
+	}
+	devices_query_running = true;
+}
+
+/* home [axis]: one axis by its name (laser.theta or laser_theta, ...), or all three one after the other
+ * (detector.phi first), each only if its way to the home position (0°) is collision-free. */
+struct homing {
+	struct app *app;
+	uint64_t serial;
+	json_t *id;
+	unsigned todo;       /* axes left, as bits */
+	json_t *homed;       /* names homed so far */
+};
+
+static void home_next(struct homing *h);
+
+static void home_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
+{
+	struct homing *h = ctx;
+	json_decref(result);
+	if (rc) {
+		server_reply_error(h->app->srv, h->serial, h->id, proto_code_of(err), err->msg);
+		json_decref(h->homed);
+		json_decref(h->id);
+		free(h);
+		return;
+	}
+	home_next(h);
+}
+
+static void home_next(struct homing *h)
+{
+	static const int order[3] = { CONF_DEV_DETECTOR_PHI, CONF_DEV_LASER_THETA, CONF_DEV_DETECTOR_THETA };
+	struct acq_err err = { 0 };
+	for (int k = 0; k < 3; k++) {
+		int a = order[k];
+		if (!(h->todo & (1u << a)))
+			continue;
+		h->todo &= ~(1u << a);
+		double t[3] = { NAN, NAN, NAN };
+		t[a] = 0;
+		const char *warning;
+		if (move_check(h->app, t, &warning, &err)) {
+			acq_err_prefix(&err, "home %s: ", conf_dev_name((enum conf_dev)a));
+			goto fail;
+		}
+		if (devices_home(h->app->dev, 1u << a, home_done, h, &err))
+			goto fail;
+		json_array_append_new(h->homed, json_string(conf_dev_name((enum conf_dev)a)));
+		return;
+	}
+	double pos[3];
+	devices_positions(h->app->dev, pos);
+	json_t *o = json_pack("{s:O}", "homed", h->homed);
+	for (int i = 0; i < 3; i++)
+		json_object_set_new(o, conf_dev_name((enum conf_dev)i), isnan(pos[i]) ? json_null() : json_real(pos[i]));
+	server_reply(h->app->srv, h->serial, h->id, o);
+	goto out;
+fail:
+	server_reply_error(h->app->srv, h->serial, h->id, proto_code_of(&err), err.msg);
+out:
+	json_decref(h->homed);
+	json_decref(h->id);
+	free(h);
+}
+
+void cmd_manual_home(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep) || devices_busy(app->dev)) {
+		acq_errf(&err, ACQ_E_STATE, sweep_busy(app->sweep) ? "a sweep is loaded: abort it before homing by hand"
+								   : "a manual operation is running (acqctl stop ends it)");
+		return cmd_reply_err(app, peer, req->id, &err);
+	}
+	const char *axis = json_string_value(json_object_get(req->root, "axis"));
+	unsigned mask = 0;
+	if (!axis || !strcmp(axis, "all"))
+		mask = 7;
+	for (int i = 0; i < 3 && !mask; i++) {
+		char alt[32];
+		snprintf(alt, sizeof alt, "%s", conf_dev_name((enum conf_dev)i));
+		for (char *q = alt; *q; q++)
+			if (*q == '.')
+				*q = '_';
+		if (!strcmp(axis, conf_dev_name((enum conf_dev)i)) || !strcmp(axis, alt))
+			mask = 1u << i;
+	}
+	if (!mask) {
+		acq_errf(&err, ACQ_E_INVAL, "home: unknown axis \"%s\" (laser.theta, detector.theta, detector.phi or all)",
+			 axis);
+		return cmd_reply_err(app, peer, req->id, &err);
+	}
+	struct homing *h = calloc(1, sizeof *h);
+	if (!h || !(h->homed = json_array())) {
+		free(h);
+		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		return cmd_reply_err(app, peer, req->id, &err);
+	}
+	*h = (struct homing){ .app = app, .serial = peer->serial, .id = json_incref(req->id), .todo = mask,
+			      .homed = h->homed };
+	home_next(h);
+}
+
+/* stop: a manual move, homing or measurement (a sweep is stopped with sweep pause/abort). */
+void cmd_manual_stop(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep)) {
+		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: use sweep pause or sweep abort");
+		return cmd_reply_err(app, peer, req->id, &err);
+	}
+	bool stopped = false;
+	if (devices_stop(app->dev, &stopped, &err))
+		return cmd_reply_err(app, peer, req->id, &err);
+	/* the positions read after the stops on each axis's thread: where the arms stopped */
+	struct pending *p = pending_new(app, peer, req->id);
+	if (p)
+		p->stopped = stopped ? 1 : 0;
+	if (!p || devices_read_positions(app->dev, pending_done, p, &err)) {
+		if (p) {
+			json_decref(p->id);
+			free(p);
+		} else {
+			acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		}
+		cmd_reply_err(app, peer, req->id, &err);
+	}
+}
+
+void cmd_manual_laser_off(struct app *app, const struct srv_peer *peer, struct proto_req *req)
+{
+	struct acq_err err = { 0 };
+	if (sweep_busy(app->sweep))
+		acq_errf(&err, ACQ_E_STATE, "a sweep is loaded: sweep pause or sweep abort switches the laser off");
+	else if (devices_busy(app->dev))
+		acq_errf(&err, ACQ_E_STATE, "a manual measurement is running: acqctl stop ends it with the laser off");
+	else {
+		/* the laser's own thread switches it off and reads it back; the reply {emission: false} comes then */
+		struct pending *p = pending_new(app, peer, req->id);
+		if (!p)
+			acq_errf(&err, ACQ_E_NOMEM, "out of memory");
+		else if (devices_laser_off(app->dev, pending_done, p, &err)) {
+			json_decref(p->id);
+			free(p);
+		} else {
+			log_msg(LOG_NOTICE, "laser off requested by the operator (uid %u)", (unsigned)peer->uid);
+			return;
+		}
+	}
+	cmd_reply_err(app, peer, req->id, &err);
+}

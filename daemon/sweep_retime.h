@@ -1,0 +1,45 @@
+/* sweep_retime: a first auto sweep of a sample re-times the rest of its plan from what it has measured itself.
+ * Without an exposure prior (no earlier sweep of the sample) the plan times every auto exposure from a band around
+ * the plan's estimate (plan_time.c), which can be far from the sample (quick plan on the simulated green paint: a
+ * 20 ms estimate, 57.9 ms chosen); the live ETA's measured excess (eta.c) follows such an error only slowly, and
+ * not at all for what comes later at another incidence (its darks at other ladder times, longer exposures). At each
+ * new incidence the sweep's own done points so far become its exposure prior (exp_prior_load_sweep: per incidence
+ * the times, darks and HDR exposures it chose, and the host's time per point), the plan is timed again with it
+ * (plan_time_apply: each incidence by the nearest one measured) and the ETA's measured excess is re-expressed
+ * against it (eta_replan).
+ * A sweep that has a prior from an earlier sweep of its sample keeps it (its exposures are the sample's already),
+ * as do fixed integration and adaptive sweeps (their batches are timed as they are chosen). */
+#ifndef SWEEP_RETIME_H
+#define SWEEP_RETIME_H
+
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "config/acq_err.h"
+#include "daemon/plan/plan.h"
+
+struct store;
+
+struct sweep_retime {
+	bool on;                    /* this sweep re-times its plan */
+	struct plan_timing tm;      /* the timing its plan was made with (the prior replaced at each re-timing) */
+	int retimed;                /* re-timings done */
+	int at;                     /* the step the last one was due at */
+};
+
+/* Whether the sweep planned with spec and tm (its exposure prior in tm->prior) re-times its plan: auto
+ * integration, not adaptive, no prior from an earlier sweep. Keeps a copy of tm. */
+void sweep_retime_setup(struct sweep_retime *r, const struct plan_spec *spec, const struct plan_timing *tm);
+/* Whether step done (the next to be measured) of plan starts a new incidence after at least one measured point,
+ * when r re-times and has not re-timed there yet. */
+bool sweep_retime_due(const struct sweep_retime *r, const struct plan_result *plan, int done);
+/* At step done, time plan (sweep sweep_id's, from spec, on bench g) again with the sweep's own exposures so far
+ * from st as its prior. 1 when re-timed, 0 when there was nothing to time it with (no done point), -1 with err (the plan is then
+ * unchanged). */
+int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long long sweep_id,
+		       const struct plan_spec *spec, const struct bench_geom *g, struct plan_result *plan,
+		       struct acq_err *err);
+/* For eta_replan: plan (a struct plan_result) predicted start of step i, bench s (its end for i = n_steps). */
+double sweep_retime_plan_at(const void *plan, int i);
+
+#endif

@@ -1,0 +1,236 @@
+/* Unit tests of daemon/sweep_retime.c with daemon/eta.c: a first auto sweep re-times the rest of its plan from its
+ * own exposures at each new incidence, and the live ETA (time injected) then starts afresh against it. A simulated
+ * bench (below, independent of the duration model) measures the quick plan on a sample darker than the plan's 20 ms
+ * estimate; at the incidence change the ETA must be within 1 % of the time actually left with the re-timing; without
+ * it, it is 4.6 % off (the band around the estimate, and the first incidence's excess carried over with its weight:
+ * its darks at the sample's two times came first). */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <sqlite3.h>
+#include <cmocka.h>
+
+#include "config/bench.h"
+#include "daemon/eta.h"
+#include "daemon/plan/plan.h"
+#include "daemon/store.h"
+#include "daemon/sweep_retime.h"
+#include "tests/unit/storefix.h"
+#define UT_TMPDIR_NAME "test_sweep_retime"
+#include "tests/unit/tmpdir.h"
+
+/* the quick plan (config/plan-quick.yaml) with its sample named */
+static const char *PLAN = "name: t\nsample: dark paint\nincidence: {theta_deg: [20, 45]}\n"
+			  "observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
+			  "integration: {mode: auto, estimate_ms: 20, max_ms: 2000}\naverages: 2\nblind_points: drop\n";
+
+#define HOST_S 0.004     /* the simulated host's real seconds per point */
+#define DARK_N 10        /* exposures per dark (plan_timing_defaults) */
+
+/* The simulated sample's first exposure at step i: two rungs of the ladder (1 ms · √2^k), 90.5 and 181 ms, in
+ * turn (about 4.5 and 9 times the estimate) */
+static double sample_ms(size_t i)
+{
+	return i % 2 ? 181.019336 : 90.509668;
+}
+
+/* One exposure as the simulated bench takes it: n averages, the read-out, the round trip. */
+static double bench_shot(const struct bench_geom *g, const struct plan_timing *t, int n, double ms)
+{
+	return n * ms / 1000.0 + g->readout_s + t->exposure_overhead_s;
+}
+
+struct sim {
+	double d[64];     /* real seconds of step i (time scale 1) */
+	bool dark[64];    /* step i took a dark (its rung new at its incidence) */
+};
+
+/* The simulated bench's time per step: the planned move and its settling with 1.5 polls, the probe at the previous
+ * step's time (the first at the estimate), a dark when the step's rung is new at its incidence, the measurement, the
+ * host. */
+static void simulate(const struct plan_result *r, const struct bench_geom *g, const struct plan_timing *t,
+		     struct sim *s)
+{
+	assert_true(r->n_steps <= 64);
+	bool seen[2] = { false, false };
+	for (size_t i = 0; i < r->n_steps; i++) {
+		const struct plan_step *st = &r->steps[i];
+		if (i > 0 && st->pos.laser_theta != r->steps[i - 1].pos.laser_theta)
+			seen[0] = seen[1] = false;
+		double move = st->move_s + st->settle_s > 0 ? st->move_s + st->settle_s + 1.5 * t->axis_poll_s : 0;
+		double probe = bench_shot(g, t, 1, i ? sample_ms(i - 1) : 20);
+		s->dark[i] = !seen[i % 2];
+		seen[i % 2] = true;
+		s->d[i] = move + probe + (s->dark[i] ? bench_shot(g, t, DARK_N, sample_ms(i)) : 0) +
+			  bench_shot(g, t, 2, sample_ms(i)) + HOST_S;
+	}
+}
+
+/* A spectrum of point pt of sweep sw (completing the point when last, at real time at with the arms at p). */
+static void put(struct store *st, int64_t sw, int64_t pt, const char *kind, double ms, int n, bool last, double at,
+		const struct plan_pos *p)
+{
+	float c[4] = { 1, 2, 3, 4 };
+	struct store_spectrum sp = { .sweep_id = sw, .point_id = pt, .kind = kind, .integration_ms = ms, .averages = n,
+				     .npix = 4, .counts = c, .temperature_c = NAN, .taken_at = at, .completes_point = last,
+				     .laser_theta = p->laser_theta, .detector_theta = p->det_theta,
+				     .detector_phi = p->det_phi, .theta_i = fabs(p->laser_theta), .phi_i = 0,
+				     .theta_o = fabs(p->det_theta), .phi_o = 0 };
+	struct acq_err err = { 0 };
+	assert_int_equal(store_spectrum_add(st, &sp, NULL, &err), 0);
+}
+
+/* The quick plan on the default bench (read-out 10 ms): its spec in *spec and the plan. */
+static struct plan_result *load_plan(struct bench_geom *g, struct plan_spec **spec)
+{
+	struct acq_err err = { 0 };
+	struct plan_result *r = NULL;
+	bench_defaults(g);
+	g->readout_s = 0.01;
+	assert_int_equal(plan_load_string("t.yaml", PLAN, spec, &err), 0);
+	assert_int_equal(plan_make(*spec, g, &r, &err), 0);
+	return r;
+}
+
+/* The ETA's relative error at the first point of the second incidence, the sweep run on the simulated bench with
+ * the ETA fed at every point (real time injected); with retime the sweep re-times its plan there. */
+static double eta_error_at_change(bool retime, int *retimed)
+{
+	char path[300];
+	char file[32];
+	snprintf(file, sizeof file, "r%d.db", retime);
+	struct store *st = ut_store_new(path, sizeof path, ut_dir, file);
+	struct bench_geom g;
+	struct plan_spec *spec = NULL;
+	struct plan_result *r = load_plan(&g, &spec);
+	struct acq_err err = { 0 };
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	tm.reference = false;
+	plan_time_apply(spec, &g, &tm, r);
+	struct sim s;
+	simulate(r, &g, &tm, &s);
+	size_t n = r->n_steps, change = 0;
+	for (size_t i = 1; i < n && !change; i++)
+		if (r->steps[i].pos.laser_theta != r->steps[i - 1].pos.laser_theta)
+			change = i;
+	assert_true(change >= 4 && change + 4 <= n);
+
+	struct store_point_new pts[64];
+	for (size_t i = 0; i < n; i++)
+		pts[i] = (struct store_point_new){ (int)i, fabs(r->steps[i].pos.laser_theta), 0,
+						   fabs(r->steps[i].pos.det_theta), 0 };
+	struct store_sweep_new nw = { .name = "t", .plan_text = PLAN, .config_snapshot = "{}", .software_version = "test",
+				      .created_at = 1000, .sample = "dark paint", .auto_exposure = true };
+	int64_t sid = 0;
+	assert_int_equal(store_sweep_create(st, &nw, pts, (int)n, &sid, &err), 0);
+
+	struct sweep_retime rt;
+	sweep_retime_setup(&rt, spec, &tm);
+	assert_true(rt.on);
+	if (!retime)
+		rt.on = false;
+	struct eta e;
+	eta_reset(&e);
+	double real = 1000;
+	eta_running(&e, true, real, real);
+	double eta = NAN;
+	for (size_t done = 1; done <= change; done++) {
+		/* step done-1 measured on the simulated bench and stored */
+		size_t i = done - 1;
+		real += s.d[i];
+		int order;
+		int64_t pt;
+		assert_int_equal(store_sweep_next_point(st, sid, &order, &pt, &err), 0);
+		assert_int_equal(order, (int)i);
+		if (s.dark[i])
+			put(st, sid, pt, "dark", sample_ms(i), DARK_N, false, real, &r->steps[i].pos);
+		put(st, sid, pt, "sample", sample_ms(i), 2, true, real, &r->steps[i].pos);
+		/* what sweep.c's on_progress does */
+		assert_int_equal(sweep_retime_due(&rt, r, (int)done), retime && done == change);
+		if (sweep_retime_due(&rt, r, (int)done)) {
+			assert_int_equal(sweep_retime_apply(&rt, (int)done, st, sid, spec, &g, r, &err), 1);
+			eta_replan(&e, sweep_retime_plan_at, r);
+			assert_false(sweep_retime_due(&rt, r, (int)done)); /* once per incidence */
+		}
+		eta = eta_update(&e, (int)done, (int)n, r->steps[done].predicted_start_s, r->predicted_s, real, real);
+	}
+	double left = 0;
+	for (size_t i = change; i < n; i++)
+		left += s.d[i];
+	*retimed = rt.retimed;
+	if (retime) {
+		/* the sweep's own prior: its first incidence's points, the host's time per point measured from them */
+		assert_int_equal(rt.tm.prior.sweep, sid);
+		assert_int_equal(rt.tm.prior.n_inc, 1);
+		assert_int_equal(rt.tm.prior.inc[0].points, change);
+		assert_true(fabs(rt.tm.prior.inc[0].darks_per_clear - 2) < 1e-12);
+		assert_true(rt.tm.prior.host_points > 0 && fabs(rt.tm.prior.host_per_point_s - HOST_S) < 0.002);
+	}
+	plan_result_free(r);
+	plan_spec_free(spec);
+	store_close(st);
+	return eta / left - 1;
+}
+
+static void test_retime_eta(void **state)
+{
+	(void)state;
+	int k = 0;
+	double with = eta_error_at_change(true, &k);
+	assert_int_equal(k, 1);
+	double without = eta_error_at_change(false, &k);
+	assert_int_equal(k, 0);
+	print_message("ETA error at the incidence change: %+.2f %% re-timed, %+.2f %% not\n", 100 * with,
+		      100 * without);
+	assert_true(fabs(with) < 0.01);
+	assert_true(fabs(without) > 0.03); /* +4.6 %: the first incidence's darks, carried as an excess per point */
+}
+
+/* Who re-times: auto integration without a prior from an earlier sweep; not a fixed plan, an adaptive one or one
+ * with a prior; due only at a new incidence after a measured point, once. */
+static void test_retime_who(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	struct plan_spec *spec = NULL;
+	struct plan_result *r = load_plan(&g, &spec);
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	struct sweep_retime rt;
+	sweep_retime_setup(&rt, spec, &tm);
+	assert_true(rt.on);
+	assert_false(sweep_retime_due(&rt, r, 0));
+	int changes = 0;
+	for (size_t i = 1; i < r->n_steps; i++) {
+		bool inc = r->steps[i].pos.laser_theta != r->steps[i - 1].pos.laser_theta;
+		assert_int_equal(sweep_retime_due(&rt, r, (int)i), inc);
+		changes += inc;
+	}
+	assert_int_equal(changes, 1);
+	assert_false(sweep_retime_due(&rt, r, (int)r->n_steps));
+	tm.prior.sweep = 7;
+	tm.prior.n_inc = 1;
+	sweep_retime_setup(&rt, spec, &tm);
+	assert_false(rt.on);
+	tm.prior.sweep = 0;
+	spec->integ_mode = PLAN_INTEG_FIXED;
+	sweep_retime_setup(&rt, spec, &tm);
+	assert_false(rt.on);
+	plan_result_free(r);
+	plan_spec_free(spec);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_retime_eta),
+		cmocka_unit_test(test_retime_who),
+	};
+	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);
+}
