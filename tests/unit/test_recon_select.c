@@ -12,7 +12,8 @@
  *  - the DHR value on a channel subset equals the RMS of recon_dhr's σ over those channels;
  *  - the target's specification parser;
  *  - the route increment: a candidate on the batch's route (at a pick's incidence, next to it) is chosen over an
- *    equally informative one the old rule (cost from the arms alone) prefers, and is charged exactly its increment. */
+ *    equally informative one the old rule (cost from the arms alone) prefers, and is charged exactly its increment;
+ *  - the ln f criterion under the projected measure: the grid's weights, Σ w v, a mid-angle pick over a grazing one. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
