@@ -13,6 +13,7 @@
  *  - the target's specification parser;
  *  - the route increment: a candidate on the batch's route (at a pick's incidence, next to it) is chosen over an
  *    equally informative one the old rule (cost from the arms alone) prefers, and is charged exactly its increment;
+ *  - the ln f criterion under the projected measure: the grid's weights, Σ w v, a mid-angle pick over a grazing one;
  *  - the energy prior's σ_E after a pick at an unseen mirror direction (test_prior_after_pick, prior's). */
 #include <setjmp.h>
 #include <stdarg.h>
