@@ -164,13 +164,7 @@ double recon_nearest_centre(const struct recon_model *m, const double *c6, size_
 	double best = INFINITY;
 	size_t bk = 0;
 	for (size_t k = 0; k < m->n; k++) {
-		const double *a = m->ctr + 6 * k, *b = m->tctr + 6 * k;
-		double d1 = 0, d2 = 0;
-		for (int i = 0; i < 6; i++) {
-			d1 += (c6[i] - a[i]) * (c6[i] - a[i]);
-			d2 += (c6[i] - b[i]) * (c6[i] - b[i]);
-		}
-		double d = d1 < d2 ? d1 : d2;
+		double d = rbf_canon_dist2(c6, m->ctr + 6 * k, m->tctr + 6 * k);
 		if (d < best) {
 			best = d;
 			bk = k;

@@ -27,6 +27,16 @@ double rbf_rec_dist(const double a[4], const double b[4]);
 void rbf_canon(double ti, double pi, double to, double po, double out[6]);
 /* The involution τ of the canonical frame (swap then mirror): the image of a canonical point under σ. */
 void rbf_tau(const double in[6], double out[6]);
+/* Squared chordal distance of canonical point a from b or its reciprocal image tb = rbf_tau(b), the nearer one. */
+static inline double rbf_canon_dist2(const double a[6], const double b[6], const double tb[6])
+{
+	double d1 = 0, d2 = 0;
+	for (int i = 0; i < 6; i++) {
+		d1 += (a[i] - b[i]) * (a[i] - b[i]);
+		d2 += (a[i] - tb[i]) * (a[i] - tb[i]);
+	}
+	return d1 < d2 ? d1 : d2;
+}
 
 /* Symmetrised kernel K(a,b) = k(a,b) + k(a,τb) (or the paper's Gaussian of d_Rec) on canonical points;
  * tb must be rbf_tau(b). shape > 0 is the kernel's length scale (chordal units, radians for exp/paper). */

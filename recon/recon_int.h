@@ -6,6 +6,7 @@
 #include <math.h>
 #include <stddef.h>
 
+#include "recon/rbf.h"
 #include "recon/recon.h"
 
 /* Albedo quadrature (quad.c): node rules refined until a doubled rule agrees to TAB_TOL (relative); a channel
@@ -164,12 +165,7 @@ static inline double recon_mirror_offset(const double c6[6])
  * to RECON_PRIOR_LOBE_CUT), d the nearer image's distance, ψ the sample's own mirror offset. */
 static inline double recon_mirror_term(const double mir[6], const double a[6], const double ta[6], double w)
 {
-	double d1 = 0, d2 = 0;
-	for (int i = 0; i < 6; i++) {
-		d1 += (mir[i] - a[i]) * (mir[i] - a[i]);
-		d2 += (mir[i] - ta[i]) * (mir[i] - ta[i]);
-	}
-	double u = recon_unseen_energy(sqrt(d1 < d2 ? d1 : d2), RECON_PRIOR_RE);
+	double u = recon_unseen_energy(sqrt(rbf_canon_dist2(mir, a, ta)), RECON_PRIOR_RE);
 	if (u < 1 && isfinite(w))
 		u = fmax(u, recon_ramp(recon_mirror_offset(a) / w, 1.0, RECON_PRIOR_LOBE_CUT));
 	return u;

@@ -24,17 +24,6 @@ struct sel_prior {
 	double *e2;       /* [nth*Lc] σ_E² at p */
 };
 
-/* Squared distance of canonical point a from b or its reciprocal image tb. */
-static double dist2(const double *a, const double *b, const double *tb)
-{
-	double d1 = 0, d2 = 0;
-	for (int i = 0; i < 6; i++) {
-		d1 += (a[i] - b[i]) * (a[i] - b[i]);
-		d2 += (a[i] - tb[i]) * (a[i] - tb[i]);
-	}
-	return fmin(d1, d2);
-}
-
 /* p at incidence t with an extra sample at canonical point x (NULL: none). */
 static double p_with(const struct sel_prior *pr, size_t t, const double *x)
 {
@@ -48,7 +37,7 @@ static double p_with(const struct sel_prior *pr, size_t t, const double *x)
 	for (size_t q = 0; q < pr->Q; q++) {
 		double dq = d[q];
 		if (x && dq > RECON_PRIOR_R0)
-			dq = fmin(dq, sqrt(dist2(c6 + 6 * q, x, tx)));
+			dq = fmin(dq, sqrt(rbf_canon_dist2(c6 + 6 * q, x, tx)));
 		U += recon_unseen_energy(dq, pr->reach) * wt[q];
 	}
 	return fmax(U / M_PI, um);
@@ -142,7 +131,7 @@ void sel_prior_pick(struct sel *s, size_t p)
 		double pold = pr->p[t];
 		for (size_t q = 0; q < pr->Q; q++) {
 			double *dq = pr->d + t * pr->Q + q;
-			*dq = fmin(*dq, sqrt(dist2(pr->c6 + (t * pr->Q + q) * 6, x, tx)));
+			*dq = fmin(*dq, sqrt(rbf_canon_dist2(pr->c6 + (t * pr->Q + q) * 6, x, tx)));
 		}
 		pr->umir[t] = fmin(pr->umir[t], recon_mirror_term(pr->mir + 6 * t, x, tx, pr->w));
 		pr->p[t] = p_with(pr, t, NULL);
