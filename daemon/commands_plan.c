@@ -158,7 +158,7 @@ static void plan_done(struct job *j, int status, const char *output, size_t len,
 			snprintf(msg, sizeof msg, "plan: the planner failed (status %d; memory is bounded to %zu MiB)", status,
 				 PLAN_MEM_BYTES >> 20);
 		log_msg(LOG_NOTICE, "%s", msg);
-		server_reply_error(app->srv, pj->serial, pj->id, PROTO_E_RANGE, msg);
+		server_reply_error(app->srv, pj->serial, pj->id, job_lost(j) ? PROTO_E_UNAVAILABLE : PROTO_E_RANGE, msg);
 	}
 	json_decref(o);
 	plan_job_free(pj);
