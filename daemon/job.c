@@ -45,6 +45,26 @@ static int h_sock = -1;
 static pid_t h_pid;
 static uint64_t h_next = 1;
 static unsigned h_starts;
+static pid_t h_dead[8]; /* helpers gone but not reaped yet (job_reap) */
+
+/* Reap h_pid if it has exited, else keep it for job_reap; h_pid is 0 after. */
+static void helper_forget(void)
+{
+	if (h_pid <= 0)
+		return;
+	if (waitpid(h_pid, NULL, WNOHANG) != h_pid) {
+		size_t i = 0;
+		while (i < sizeof h_dead / sizeof h_dead[0] && h_dead[i])
+			i++;
+		if (i == sizeof h_dead / sizeof h_dead[0]) { /* full (unlikely): wait for the oldest, SIGKILLed */
+			kill(h_dead[0], SIGKILL);
+			waitpid(h_dead[0], NULL, 0);
+			i = 0;
+		}
+		h_dead[i] = h_pid;
+	}
+	h_pid = 0;
+}
 
 void job_init(struct loop *lp)
 {
@@ -78,45 +98,56 @@ static void maybe_done(struct job *j)
 	job_free(j);
 }
 
+/* Append up to 4 reads (of at most 64 KiB) of the child's output: a large output (a plan with every step) costs
+ * few loop turns, each bounded. */
 static void on_output(struct loop *lp, int fd, short revents, void *arg)
 {
 	(void)lp;
 	(void)revents;
 	struct job *j = arg;
 	char buf[8192];
-	ssize_t n = read(fd, buf, sizeof buf);
-	if (n < 0 && (errno == EINTR || errno == EAGAIN))
-		return;
-	if (n <= 0) {
-		loop_fd_del(job_loop, fd);
-		close(fd);
-		j->fd = -1;
-		maybe_done(j);
-		return;
-	}
-	size_t k = (size_t)n;
 	_Static_assert(sizeof buf < JOB_OUTPUT_MAX, "one read fits in the kept output");
-	if (j->keep_head && j->len + k > j->alloc && j->alloc < j->cap) {
-		/* job_fork_out(): the buffer grows with the output, up to its cap */
-		size_t a = j->alloc;
-		while (a < j->len + k && a < j->cap)
-			a = a * 2 < j->cap ? a * 2 : j->cap;
-		char *o = realloc(j->out, a + 1);
-		if (o) {
-			j->out = o;
-			j->alloc = a;
+	for (int turn = 0; turn < 4; turn++) {
+		if (j->keep_head && j->alloc - j->len < 65536 && j->alloc < j->cap) {
+			/* job_fork_out(): the buffer grows with the output, up to its cap */
+			size_t a = j->alloc;
+			while (a < j->len + 65536 && a < j->cap)
+				a = a * 2 < j->cap ? a * 2 : j->cap;
+			char *o = realloc(j->out, a + 1);
+			if (o) {
+				j->out = o;
+				j->alloc = a;
+			}
 		}
+		bool direct = j->keep_head && j->alloc > j->len; /* into the kept output itself */
+		size_t room = direct ? j->alloc - j->len : sizeof buf;
+		ssize_t n = read(fd, direct ? j->out + j->len : buf, room < 65536 ? room : 65536);
+		if (n < 0 && (errno == EINTR || errno == EAGAIN))
+			return;
+		if (n <= 0) {
+			loop_fd_del(job_loop, fd);
+			close(fd);
+			j->fd = -1;
+			maybe_done(j);
+			return;
+		}
+		size_t k = (size_t)n;
+		if (direct) {
+			j->len += k;
+			continue;
+		}
+		if (j->keep_head) { /* past the bound: dropped */
+			j->truncated = true;
+			continue;
+		}
+		if (j->len + k > j->cap) { /* job_start(): the last cap bytes */
+			size_t drop = j->len + k - j->cap;
+			memmove(j->out, j->out + drop, j->len - drop);
+			j->len -= drop;
+		}
+		memcpy(j->out + j->len, buf, k);
+		j->len += k;
 	}
-	if (j->keep_head && j->len + k > j->alloc) {
-		k = j->alloc - j->len;
-		j->truncated = true;
-	} else if (j->len + k > j->cap) {
-		size_t drop = j->len + k - j->cap;
-		memmove(j->out, j->out + drop, j->len - drop);
-		j->len -= drop;
-	}
-	memcpy(j->out + j->len, buf, k);
-	j->len += k;
 }
 
 /* ---- the helper's side of the daemon (job_fork_msg) ---- */
@@ -167,12 +198,9 @@ static void helper_lost(bool kill_it)
 	loop_fd_del(job_loop, h_sock);
 	close(h_sock);
 	h_sock = -1;
-	if (h_pid > 0) {
-		if (kill_it)
-			kill(h_pid, SIGKILL);
-		if (waitpid(h_pid, NULL, WNOHANG) == h_pid)
-			h_pid = 0; /* else job_reap() reaps it */
-	}
+	if (h_pid > 0 && kill_it)
+		kill(h_pid, SIGKILL);
+	helper_forget(); /* reaped now or by job_reap() */
 	for (struct job *j = job_list, *next; j; j = next) {
 		next = j->next;
 		if (!j->hid || j->exited)
@@ -221,8 +249,7 @@ int job_helper_start(struct acq_err *err)
 		return 0;
 	if (!job_loop)
 		return acq_errf(err, ACQ_E_INVAL, "job: not initialised");
-	if (h_pid > 0 && waitpid(h_pid, NULL, WNOHANG) == h_pid)
-		h_pid = 0;
+	helper_forget();
 	int sock;
 	pid_t pid;
 	if (jobh_spawn(&sock, &pid, err))
@@ -496,6 +523,9 @@ int job_count(void)
 
 void job_reap(void)
 {
+	for (size_t i = 0; i < sizeof h_dead / sizeof h_dead[0]; i++)
+		if (h_dead[i] > 0 && waitpid(h_dead[i], NULL, WNOHANG) == h_dead[i])
+			h_dead[i] = 0;
 	if (h_pid > 0 && waitpid(h_pid, NULL, WNOHANG) == h_pid) { /* the helper: its socket's EOF tells the jobs */
 		h_pid = 0;
 		if (h_sock >= 0)
@@ -534,6 +564,12 @@ void job_finish(void)
 		}
 		h_pid = 0;
 	}
+	for (size_t i = 0; i < sizeof h_dead / sizeof h_dead[0]; i++)
+		if (h_dead[i] > 0) {
+			kill(h_dead[i], SIGKILL);
+			waitpid(h_dead[i], NULL, 0);
+			h_dead[i] = 0;
+		}
 	h_starts = 0;
 	for (struct job *j = job_list; j; j = j->next)
 		if (j->hid)
