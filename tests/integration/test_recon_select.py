@@ -6,7 +6,8 @@ Checked: the JSON's fields and types; the picks are candidates of the file, at m
 one measurement, the cheaper copy's id; the predicted value never rises along the batch and starts below the
 current value; the current value is the RMS over wavelengths of `brdf-recon dhr`'s sigma (same draws and seed,
 to 1e-9 relative) per incidence, the largest of them; a threshold above the value is met with no pick; the ln f
-target; a header-only candidate file; bad input of every kind exits 2 with a message naming what (and the row),
+target; --route's charges (base/open, and with band nodes the planner's exposure price: the picks' charges add up to
+their formula; a dark due, more rungs, a wider band cost more); a header-only candidate file; bad input of every kind exits 2 with a message naming what (and the row),
 never a crash. `fit --warm`: the previous trend kind kept, shape and smoothing searched, so the model (settings, DHR
 and σ) equals a cold fit's when that keeps the trend kind; a white model's settings refused on a sharp lobe (full
 search); a conflicting kernel exits 2, a missing model 1."""

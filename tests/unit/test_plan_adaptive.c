@@ -2,7 +2,8 @@
  * YAML and its located errors, the target as select takes it, the candidates (visible, within the limits,
  * reachable, never a measured configuration, costed at least their move and exposures), batches ordered from
  * the arms' position, a stored order replayed, a batch appended to a plan, and a batch continuing the sweep's dark
- * cache (base_s, open_s of the candidates). */
+ * cache (base_s, open_s of the candidates), and select's price of a batch's exposures (the candidates' point_s,
+ * dark_s, rungs, since, band_cos and the route's band nodes) against the planner's. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -403,6 +404,14 @@ static void test_batch_order(void **state)
 	plan_spec_free(s);
 }
 
+/* The default bench and executor timing of an adaptive batch (no reference: a batch continues the sweep). */
+static void batch_setup(struct bench_geom *g, struct plan_timing *tm)
+{
+	bench_defaults(g);
+	plan_timing_defaults(tm);
+	tm->reference = false;
+}
+
 /* An adaptive batch continues the sweep's dark cache (executor_acq.c clears it only when the batch starts at another
  * incidence): a batch of fixed integration at the last point's incidence is predicted without a dark at its first
  * step, one at another incidence with it, and without the continuation (the old model) the first step always had
@@ -412,10 +421,8 @@ static void test_continue_darks(void **state)
 {
 	(void)state;
 	struct bench_geom g;
-	bench_defaults(&g);
 	struct plan_timing tm;
-	plan_timing_defaults(&tm);
-	tm.reference = false;
+	batch_setup(&g, &tm);
 	struct plan_spec *s = load_ok(ADAPTIVE);
 	struct acq_err err = { 0 };
 	struct plan_pos done[3] = { { 0, 30, 10 }, { 40, 30, 200 }, { 40, 60, 10 } }, same = { 40, 45, 100 },
@@ -471,10 +478,8 @@ static void test_route_price(void **state)
 {
 	(void)state;
 	struct bench_geom g;
-	bench_defaults(&g);
 	struct plan_timing tm;
-	plan_timing_defaults(&tm);
-	tm.reference = false;
+	batch_setup(&g, &tm);
 	char yaml[2048];
 	const char *fixed = strstr(ADAPTIVE, "integration:");
 	snprintf(yaml, sizeof yaml, "%.*sintegration: {mode: auto, estimate_ms: 20}\naverages: 2\n", (int)(fixed - ADAPTIVE),
