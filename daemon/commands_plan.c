@@ -23,13 +23,12 @@
 
 static int plan_children;
 
-/* The child's request: this header, then the configuration's path (path_len bytes) and the plan's text. */
+/* The child's request: this header, then the configuration's path and the plan's text (job_msg_pack). */
 struct plan_msg {
 	struct bench_geom g;
 	struct plan_timing tm;   /* this daemon's executor timing */
 	bool points;             /* the reply lists every step */
 	bool prior_given;        /* tm holds the sample's prior (the second request) */
-	size_t path_len, text_len;
 };
 
 struct plan_job {
@@ -79,15 +78,11 @@ static json_t *plan_reply(const struct plan_msg *m, const char *path, const char
 static int plan_child(const char *payload, size_t len, int fd)
 {
 	struct plan_msg m;
-	if (len < sizeof m)
+	char *path = NULL, tag;
+	const char *text = NULL;
+	if (job_msg_unpack(payload, len, &m, sizeof m, &path, &text))
 		return 5;
-	memcpy(&m, payload, sizeof m);
-	if (m.path_len > len - sizeof m || m.text_len != len - sizeof m - m.path_len)
-		return 5;
-	char *path = strndup(payload + sizeof m, m.path_len);
-	const char *text = payload + sizeof m + m.path_len; /* NUL-terminated: the payload's end */
-	char tag;
-	json_t *o = path ? plan_reply(&m, path, text, &tag) : NULL;
+	json_t *o = plan_reply(&m, path, text, &tag);
 	char *line = !o ? NULL
 		     : tag == PLAN_OUT_PRIOR ? strdup(json_string_value(o))
 					     : json_dumps(o, JSON_COMPACT | JSON_ENSURE_ASCII);
@@ -175,21 +170,18 @@ void cmd_plan_handle(struct app *app, const struct srv_peer *peer, struct proto_
 	const char *path = app->conf->path ? app->conf->path : "";
 	if (!text)
 		text = ""; /* the child's parse says what is missing */
-	struct plan_msg m = { .g = app->conf->bench, .points = json_is_true(json_object_get(req->root, "points")),
-			      .path_len = strlen(path), .text_len = strlen(text) };
+	struct plan_msg m = { .g = app->conf->bench, .points = json_is_true(json_object_get(req->root, "points")) };
 	sweep_plan_timing(app->sweep, &m.tm);
 	sweep_plan_prior_of(app->sweep, "", 0, &m.tm); /* the host's figure; the sample's prior if the plan asks */
 	struct plan_job *pj = calloc(1, sizeof *pj);
-	size_t len = sizeof m + m.path_len + m.text_len;
-	if (!pj || !(pj->msg = malloc(len))) {
+	size_t len = 0;
+	char *msg = pj ? job_msg_pack(&m, sizeof m, path, text, &len) : NULL;
+	if (!msg) {
 		free(pj);
 		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 		return cmd_reply_err(app, peer, req->id, &err);
 	}
-	memcpy(pj->msg, &m, sizeof m);
-	memcpy(pj->msg + sizeof m, path, m.path_len);
-	memcpy(pj->msg + sizeof m + m.path_len, text, m.text_len);
-	*pj = (struct plan_job){ .app = app, .serial = peer->serial, .id = json_incref(req->id), .msg = pj->msg,
+	*pj = (struct plan_job){ .app = app, .serial = peer->serial, .id = json_incref(req->id), .msg = msg,
 				 .msg_len = len };
 	if (plan_submit(pj, &err)) {
 		plan_job_free(pj);

@@ -485,6 +485,34 @@ fail:
 	return -1;
 }
 
+char *job_msg_pack(const void *hdr, size_t hdr_len, const char *a, const char *b, size_t *len)
+{
+	uint64_t na = strlen(a);
+	size_t nb = strlen(b);
+	*len = hdr_len + sizeof na + na + nb;
+	char *m = malloc(*len);
+	if (m) {
+		memcpy(m, hdr, hdr_len);
+		memcpy(m + hdr_len, &na, sizeof na);
+		memcpy(m + hdr_len + sizeof na, a, na);
+		memcpy(m + hdr_len + sizeof na + na, b, nb);
+	}
+	return m;
+}
+
+int job_msg_unpack(const char *payload, size_t len, void *hdr, size_t hdr_len, char **a, const char **b)
+{
+	uint64_t na;
+	if (len < hdr_len + sizeof na)
+		return -1;
+	memcpy(hdr, payload, hdr_len);
+	memcpy(&na, payload + hdr_len, sizeof na);
+	if (na > len - hdr_len - sizeof na || !(*a = strndup(payload + hdr_len + sizeof na, (size_t)na)))
+		return -1;
+	*b = payload + hdr_len + sizeof na + na;
+	return 0;
+}
+
 void job_kill(struct job *j)
 {
 	if (j && !j->exited) {

@@ -53,6 +53,12 @@ pid_t job_helper_pid(void);
  * dies ends its running children as killed and job_lost(). 0 or -1 (the helper not answering: restarted). */
 int job_fork_msg(job_msg_fn fn, const void *payload, size_t len, size_t mem_bytes, size_t out_max, double timeout_s,
 		 job_done_fn done, void *arg, struct job **out, struct acq_err *err);
+/* A job_fork_msg() payload: a fixed header (hdr_len bytes) and two strings, packed into a new buffer (free()) of
+ * *len bytes; NULL when out of memory. */
+char *job_msg_pack(const void *hdr, size_t hdr_len, const char *a, const char *b, size_t *len);
+/* In the child: the header back into hdr, a as a new string, b pointing into the payload (NUL-terminated: the
+ * payload's end). 0, or -1 when the payload is not such a message. */
+int job_msg_unpack(const char *payload, size_t len, void *hdr, size_t hdr_len, char **a, const char **b);
 /* True when the job's helper died while it ran (valid in its done callback: status 128 + 9 then). */
 bool job_lost(const struct job *j);
 /* SIGKILL a running job; its done() is called as usual (status 128 + 9). */

@@ -31,11 +31,10 @@ struct plan_worker {
 	bool aborted;
 };
 
-/* The child's request: this, then the plan's name (name_len bytes) and text. */
+/* The child's request: this, then the plan's name and text (job_msg_pack). */
 struct pw_msg {
 	struct bench_geom g;
 	struct plan_timing tm;
-	size_t name_len, text_len;
 };
 
 static int write_all(int fd, const void *buf, size_t n)
@@ -146,18 +145,13 @@ int plan_worker_decode(const char *buf, size_t len, struct plan_result **out, st
 static int child(const char *payload, size_t len, int fd)
 {
 	struct pw_msg m;
-	if (len < sizeof m)
+	char *name = NULL;
+	const char *text = NULL;
+	if (job_msg_unpack(payload, len, &m, sizeof m, &name, &text))
 		return 5;
-	memcpy(&m, payload, sizeof m);
-	if (m.name_len > len - sizeof m || m.text_len != len - sizeof m - m.name_len)
-		return 5;
-	char *name = strndup(payload + sizeof m, m.name_len);
-	const char *text = payload + sizeof m + m.name_len; /* NUL-terminated: the payload's end */
 	struct acq_err err = { 0 };
 	struct plan_spec *spec = NULL;
 	struct plan_result *r = NULL;
-	if (!name)
-		return 3;
 	if (plan_load_string(name, text, &spec, &err) || plan_make(spec, &m.g, &r, &err))
 		return encode_error(&err, fd) ? 4 : 0;
 	plan_time_apply(spec, &m.g, &m.tm, r);
@@ -196,18 +190,14 @@ int plan_worker_start(const char *name, const char *text, const struct bench_geo
 {
 	if (out)
 		*out = NULL;
-	struct pw_msg m = { .g = *g, .tm = *tm, .name_len = strlen(name), .text_len = strlen(text) };
-	size_t len = sizeof m + m.name_len + m.text_len;
+	struct pw_msg m = { .g = *g, .tm = *tm };
+	size_t len = 0;
 	struct plan_worker *w = calloc(1, sizeof *w);
-	char *msg = malloc(len);
-	if (!w || !msg) {
+	char *msg = w ? job_msg_pack(&m, sizeof m, name, text, &len) : NULL;
+	if (!msg) {
 		free(w);
-		free(msg);
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
-	memcpy(msg, &m, sizeof m);
-	memcpy(msg + sizeof m, name, m.name_len);
-	memcpy(msg + sizeof m + m.name_len, text, m.text_len);
 	*w = (struct plan_worker){ .real_deadline_s = real_deadline_s, .done = done, .ctx = ctx };
 	int rc = job_fork_msg(child, msg, len, mem_bytes, PW_OUT_MAX, deadline_s, on_done, w, &w->job, err);
 	free(msg);

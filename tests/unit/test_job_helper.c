@@ -2,7 +2,7 @@
  * helper, not by the caller, get their own copy of the payload, run at nice +10 within their memory bound and
  * report their status, output, deadline and kill; a helper killed while a child runs ends that job as lost
  * (status 128 + 9, the child dead with it) and the next job starts a new helper; a helper that hangs is killed
- * when a SIGKILLed child is not reported within 2 s. */
+ * when a SIGKILLed child is not reported within 2 s; the payload's header-and-strings packing. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -226,10 +226,32 @@ static void test_helper_lost_and_restarted(void **state)
 	loop_free(lp);
 }
 
+/* job_msg_pack/unpack: header and strings back; a short or inconsistent payload refused. */
+static void test_msg_pack(void **state)
+{
+	(void)state;
+	struct { double x; int k; } h = { 2.5, 7 }, back = { 0, 0 };
+	size_t len = 0;
+	char *m = job_msg_pack(&h, sizeof h, "path/a.yaml", "text: 1\n", &len);
+	assert_non_null(m);
+	char *a = NULL;
+	const char *b = NULL;
+	assert_int_equal(job_msg_unpack(m, len, &back, sizeof back, &a, &b), 0);
+	assert_true(back.x == 2.5 && back.k == 7);
+	assert_string_equal(a, "path/a.yaml");
+	assert_memory_equal(b, "text: 1\n", 8);
+	assert_int_equal((size_t)(b - m) + 8, len);
+	free(a);
+	assert_int_equal(job_msg_unpack(m, sizeof h + 3, &back, sizeof back, &a, &b), -1); /* shorter than its length */
+	assert_int_equal(job_msg_unpack(m, sizeof h + 8 + 4, &back, sizeof back, &a, &b), -1); /* a cut */
+	free(m);
+}
+
 int main(void)
 {
 	signal(SIGPIPE, SIG_IGN);
 	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_msg_pack),
 		cmocka_unit_test(test_children_of_the_helper),
 		cmocka_unit_test(test_helper_lost_and_restarted),
 	};
