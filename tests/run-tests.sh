@@ -23,8 +23,8 @@ SLOWEST=${ACQ_TEST_SLOWEST:-15}
 # neighbour test cannot make them flake.
 SERIAL=" test_acqctl.py test_adaptive_kill.py test_adaptive_seconds.py test_client_limits.py test_daemon_sim.py
  test_devices_throttle.py test_disk_full.py test_export.py test_laser_kill.py test_laser_sim.py test_malformed_flood.py
- test_sd_notify.py test_sim_bench.py test_sweep_crash.py test_sweep_start_offloop.py test_sweep_step_kill.py
- test_watchdog.py
+ test_plan_helper.py test_sd_notify.py test_sim_bench.py test_sweep_crash.py test_sweep_start_offloop.py
+ test_sweep_step_kill.py test_watchdog.py
  test_axis_modbus test_axis_modbus_sim test_laser test_spectro_sim "
 
 # ---- one test: run it, keep its log, its times and its result line (read back in order later) ------------
