@@ -107,6 +107,8 @@ static int on_message(int sock)
 		}
 	if ((size_t)n == sizeof m && m.type == JOBH_START && nfd == 2 && m.fn)
 		start_child(sock, &m, fds[0], fds[1]);
+	else if ((size_t)n == sizeof m && m.type == JOBH_START)
+		send_done(sock, m.id, 126); /* its descriptors did not arrive: the job fails, the helper goes on */
 	else if ((size_t)n == sizeof m && m.type == JOBH_KILL)
 		for (int i = 0; i < n_kids; i++)
 			if (kids[i].id == m.id)

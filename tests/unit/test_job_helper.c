@@ -1,8 +1,9 @@
 /* Unit tests for the job helper (daemon/job_helper.c, job.c's job_fork_msg): its children are forked by the
  * helper, not by the caller, get their own copy of the payload, run at nice +10 within their memory bound and
- * report their status, output, deadline and kill; a helper killed while a child runs ends that job as lost
- * (status 128 + 9, the child dead with it) and the next job starts a new helper; a helper that hangs is killed
- * when a SIGKILLed child is not reported within 2 s; the payload's header-and-strings packing. */
+ * report their status, output, deadline and kill (a start beyond the helper's 64 children fails alone, 126); a
+ * helper killed while a child runs ends that job as lost (status 128 + 9, the child dead with it) and the next
+ * job starts a new helper; a helper that hangs is killed when a SIGKILLed child is not reported within 2 s; the
+ * payload's header-and-strings packing. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -137,6 +138,25 @@ static void test_children_of_the_helper(void **state)
 	assert_int_equal(got_status, 128 + SIGKILL);
 	assert_false(got_lost);
 	assert_int_equal(job_helper_pid(), hp); /* the same helper all along */
+	/* a start the helper cannot run (its 64 children running): that job fails with 126, the others go on */
+	struct job *many[65];
+	calls = 0;
+	for (int i = 0; i < 65; i++)
+		assert_int_equal(job_fork_msg(sleeping_child, "", 0, 0, 1024, 0, done, NULL, &many[i], NULL), 0);
+	run_until(lp, 10);
+	assert_int_equal(calls, 1);
+	assert_int_equal(got_status, 126);
+	assert_false(got_lost);
+	assert_int_equal(job_count(), 64);
+	assert_int_equal(job_helper_pid(), hp);
+	for (int i = 0; i < 64; i++)
+		job_kill(many[i]);
+	for (int i = 0; i < 1000 && calls < 65; i++) {
+		loop_run_once(lp, 0.01);
+		job_reap();
+	}
+	assert_int_equal(calls, 65);
+	assert_int_equal(job_count(), 0);
 	job_finish();
 	loop_free(lp);
 }
