@@ -193,7 +193,7 @@ static int parse_route(const char *spec, struct select_route *r, double *nodes, 
 
 static int bad_input(const struct acq_err *e)
 {
-	progress_end();
+	cli_progress_end();
 	fprintf(stderr, "brdf-recon select: %s\n", e->msg[0] ? e->msg : "bad input");
 	return 2;
 }
@@ -244,33 +244,33 @@ static int parse_args(int argc, char **argv, struct select_args *a)
 		case 'c': a->candp = optarg; break;
 		case 't': a->spec = optarg; break;
 		case 'b':
-			if (parse_u64(optarg, &u) || u > 100000)
-				return usage_err("select", "--batch needs a count in 0..100000");
+			if (cli_parse_u64(optarg, &u) || u > 100000)
+				return cli_usage_err("select", "--batch needs a count in 0..100000");
 			so->batch = (size_t)u;
 			break;
 		case 'n':
-			if (parse_u64(optarg, &u) || u > 100000)
-				return usage_err("select", "--draws needs 0..100000");
+			if (cli_parse_u64(optarg, &u) || u > 100000)
+				return cli_usage_err("select", "--draws needs 0..100000");
 			so->ndraws = (int)u;
 			break;
 		case 'v':
-			if (parse_u64(optarg, &u) || u > 100000)
-				return usage_err("select", "--value-channels needs a count in 0..100000 (0: all)");
+			if (cli_parse_u64(optarg, &u) || u > 100000)
+				return cli_usage_err("select", "--value-channels needs a count in 0..100000 (0: all)");
 			so->nvalue = (size_t)u;
 			break;
 		case 'r': a->routep = optarg; break;
 		case 's':
-			if (parse_u64(optarg, &so->seed))
-				return usage_err("select", "--seed needs an unsigned integer");
+			if (cli_parse_u64(optarg, &so->seed))
+				return cli_usage_err("select", "--seed needs an unsigned integer");
 			break;
 		case 'h': fputs(select_help, stdout); return 0;
-		default: return usage_err("select", "bad option");
+		default: return cli_usage_err("select", "bad option");
 		}
 	}
 	if (optind != argc - 1)
-		return usage_err("select", "one MODEL expected");
+		return cli_usage_err("select", "one MODEL expected");
 	if (!a->candp || !a->spec)
-		return usage_err("select", "--candidates CAND.csv and --target SPEC are required");
+		return cli_usage_err("select", "--candidates CAND.csv and --target SPEC are required");
 	a->model = argv[optind];
 	return -1;
 }
@@ -354,7 +354,7 @@ static int read_candidates(const struct select_args *a, struct select_route *rou
 		free(rows);
 		cands_free(cd);
 		acq_errf(&err, ACQ_E_NOMEM, "select: out of memory");
-		return fail(&err);
+		return cli_fail(&err);
 	}
 	int bad = 0;
 	for (size_t j = 0; j < nc && !bad; j++) {
@@ -472,8 +472,8 @@ static void write_picks(FILE *f, const struct select_result *res, const double *
 static int write_result(const struct select_args *a, const struct select_target *tg, const struct select_result *res,
 			const struct select_cands *cd, struct acq_err *err)
 {
-	struct out o;
-	if (out_open(&o, a->outp, err))
+	struct cli_out o;
+	if (cli_out_open(&o, a->outp, err))
 		return -1;
 	FILE *f = o.f;
 	write_target(f, a->spec, tg, res);
@@ -486,7 +486,7 @@ static int write_result(const struct select_args *a, const struct select_target 
 	}
 	fprintf(f, ",\"criterion\":\"%s\",\"candidates\":{\"read\":%zu,\"distinct\":%zu}}\n",
 		"gp-excess-variance-reduction-per-second", cd->nc, res->nunique);
-	return out_close(&o, 1, err) ? -1 : 0;
+	return cli_out_close(&o, 1, err) ? -1 : 0;
 }
 
 int cmd_select(int argc, char **argv)
@@ -525,5 +525,5 @@ int cmd_select(int argc, char **argv)
 	select_result_free(&res);
 	recon_model_free(m);
 	cands_free(&cd);
-	return ok ? 0 : fail(&err);
+	return ok ? 0 : cli_fail(&err);
 }
