@@ -32,7 +32,7 @@ struct rsel {
 	rsel_done_fn done;
 	void *ctx;
 	const struct plan_spec *spec;
-	char target[256], batch[16], prev[4096], prog[4096], route[512];
+	char target[256], batch[16], prev[4096], prog[4096], route[PLAN_ROUTE_SPEC_LEN];
 	char samples[4200], cand[4200], out[4200];
 	struct rsel_res res;
 	double t0;
@@ -179,12 +179,14 @@ int rsel_write_candidates(const char *path, const struct bench_geom *g, const st
 	FILE *f = fopen(path, "w");
 	if (!f)
 		return acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
-	fprintf(f, "id,theta_i,phi_i,theta_o,phi_o,cost_s,base_s,open_s,laser_deg,det_theta_deg,det_phi_deg\n");
+	fprintf(f, "id,theta_i,phi_i,theta_o,phi_o,cost_s,base_s,open_s,laser_deg,det_theta_deg,det_phi_deg,point_s,dark_s,"
+		   "rungs,since,band_cos\n");
 	for (size_t i = 0; i < n; i++) {
 		double ti, pi, to, po;
 		ex_pos_angles(g, &c[i].pos, &ti, &pi, &to, &po);
-		fprintf(f, "%zu,%.9g,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.9g,%.9g,%.9g\n", c[i].id, ti, pi, to, po, c[i].cost_s,
-			c[i].base_s, c[i].open_s, c[i].pos.laser_theta, c[i].pos.det_theta, c[i].pos.det_phi);
+		fprintf(f, "%zu,%.9g,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", c[i].id, ti, pi,
+			to, po, c[i].cost_s, c[i].base_s, c[i].open_s, c[i].pos.laser_theta, c[i].pos.det_theta,
+			c[i].pos.det_phi, c[i].point_s, c[i].dark_s, c[i].rungs, c[i].since, c[i].band_cos);
 	}
 	bool bad = ferror(f) != 0;
 	if (fclose(f) || bad)
@@ -277,7 +279,7 @@ int rsel_start(struct rsel *r, const struct rsel_req *q, rsel_done_fn done, void
 	snprintf(r->prev, sizeof r->prev, "%s", q->prev_model ? q->prev_model : "");
 	snprintf(r->batch, sizeof r->batch, "%zu", q->batch_size);
 	plan_adaptive_target_spec(q->spec->adaptive, r->target, sizeof r->target);
-	plan_adaptive_route_spec(&c->bench, &q->timing, &q->from, r->route, sizeof r->route);
+	plan_adaptive_route_spec(q->spec, &c->bench, &q->timing, &q->from, r->route, sizeof r->route);
 	unlink(r->out); /* a decision made again must not read the previous answer */
 	r->spec = q->spec;
 	r->q = q; /* read by the forked child only (its own copy of memory) */

@@ -157,6 +157,7 @@ static void schedule(struct sweep *sw, double when);
 static void release(struct sweep *sw)
 {
 	adapt_end(sw->adapt);
+	sweep_retime_end(&sw->retime);
 	ex_free(sw->ex, loop_now(sw->env.loop));
 	sw->ex = NULL;
 	plan_result_free(sw->plan);
