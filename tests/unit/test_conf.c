@@ -99,6 +99,17 @@ static void test_located_errors(void **state)
 	expect_error("daemon: {}\nextra_section: 1\n", "2:1", "extra_section");
 	expect_error("sim: 3\n", "1:6", "sim");
 	expect_error("- a list\n", "1:1", "mapping");
+	/* home.park: each value within the soft limits, all three present, the pose clear of collision and blind zones */
+	expect_error("home:\n  park: {laser.theta: 95, detector.theta: 30, detector.phi: 180}\n", "2:23",
+		     "home.park.laser.theta (soft limits): 95 is outside [-5, 90]");
+	expect_error("home:\n  park: {laser.theta: 30, detector.theta: 30}\n", "2:9", "home.park: detector.phi missing");
+	expect_error("home:\n  park: {laser.theta: 30, detector.theta: 30, detector.phi: 0}\n", "2:9",
+		     "home.park: the pose (30°, 30°, 0°) is a collision");
+	/* (the shipped geometry's beam zone lies inside the collision cone: a wider beam puts one outside it) */
+	expect_error("bench:\n  beam_halfwidth_deg: 10\nhome:\n  park: {laser.theta: 30, detector.theta: 16, detector.phi: 0}\n",
+		     "4:9", "in a blind zone: beam-occluded");
+	expect_error("home:\n  park: {laser.theta: 30, detector.theta: 30, detector.phi: 180, x: 1}\n", "2:", "x");
+	expect_error("home:\n  parking: {}\n", "2:3", "parking");
 }
 
 static void test_sim_overrides(void **state)
