@@ -202,6 +202,16 @@ def home_all(b, c):
     check(len(axes) == 3 and all(x["status"]["homed"] for x in axes), "every axis referenced %r" % axes)
     out = c.human("home")
     check("homed laser.theta, detector.theta, detector.phi" in out and "30" in out, "home human %r" % out)
+    # from (10, 10, 90) every first step closes the arms in (each axis's home is within 12° of the other arm):
+    # no order exists, refused before anything moves
+    c.json("move", "move", "detector.theta=10", "detector.phi=90")
+    c.json("move", "move", "laser.theta=10")
+    p = c.run("home")
+    check(p.returncode == 1 and "no order of single-axis moves" in p.stderr and "move the arms apart" in p.stderr,
+          "home from (10, 10, 90): rc %d %r" % (p.returncode, p.stderr))
+    sim = b.sim_status()
+    check(abs(float(sim["laser.theta"]) - 10) < 0.05 and abs(float(sim["detector.theta"]) - 10) < 0.05 and
+          abs(float(sim["detector.phi"]) - 90) < 0.05, "a refused home moves nothing %r" % sim)
 
 
 def main():
