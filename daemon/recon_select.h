@@ -19,8 +19,9 @@
 struct rsel;
 
 /* Write the candidates c[n] on bench g to path as `brdf-recon select --candidates` reads them (header id, theta_i,
- * phi_i, theta_o, phi_o, cost_s, base_s, open_s, laser_deg, det_theta_deg, det_phi_deg: sample-frame angles, costs,
- * bench axis positions; the daemon's decisions and the offline study's helper write them alike). 0, or -1 with err. */
+ * phi_i, theta_o, phi_o, cost_s, base_s, open_s, laser_deg, det_theta_deg, det_phi_deg, point_s, dark_s, rungs,
+ * since, band_cos: sample-frame angles, costs, bench axis positions, the exposures' price (struct plan_cand); the
+ * daemon's decisions and the offline study's helper write them alike). 0, or -1 with err. */
 int rsel_write_candidates(const char *path, const struct bench_geom *g, const struct plan_cand *c, size_t n,
 			  struct acq_err *err);
 

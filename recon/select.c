@@ -201,8 +201,11 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 		goto out;
 	}
 	size_t J = s[0].J;
-	if (o.route && (!o.route->pos || !o.route->base || !o.route->open)) {
-		acq_errf(err, ACQ_E_INVAL, "select: a route needs the candidates' positions, base and open costs");
+	if (o.route && (!o.route->pos || !o.route->base || !o.route->open ||
+			(o.route->nnodes && (!o.route->nodes || !o.route->point || !o.route->dark || !o.route->rungs ||
+					     !o.route->since || !o.route->band_cos)))) {
+		acq_errf(err, ACQ_E_INVAL, "select: a route needs the candidates' positions, base and open costs (with band "
+				"nodes: point, dark, rungs, since, band_cos)");
 		goto out;
 	}
 	if (o.route && sel_route_init(&route, o.route, s[0].batch)) {

@@ -42,9 +42,20 @@ int select_target_parse(const char *spec, struct select_target *t, struct acq_er
  * base[j] + open[j] at one it does not (the darks of a new incidence); its motion is the
  * increment of inserting it into the batch's route from the arms (from) through the picks, at the cheapest place,
  * each move timed as the planner's straight move: per axis a trapezoid (speed, accel), the slowest axis, the largest
- * settle of the axes that move, plus move_s (polling, extra settling). The azimuth's distance is taken modulo 360°. */
+ * settle of the axes that move, plus move_s (polling, extra settling). The azimuth's distance is taken modulo 360°.
+ * With band nodes (nnodes > 0) the exposures are priced as the planner's duration model does instead of base and open
+ * (daemon/plan/plan_time.c): candidate j's point[j] seconds (probe, exposure, HDR share, host) and, as the k-th pick at
+ * its incidence, a dark of dark[j] seconds with probability q^(since[j] + k), q = 1 - 1/rungs[j] (the dark cache's
+ * rungs; since[j] the points measured there since the cache was cleared: the arms' incidence); the batch's band
+ * rho = largest / smallest band_cos over its picks (1 when the smallest is ≤ 0.01) moves every pick's terms by the
+ * nodes' (rho, point, dark, rungs, rho ascending from 1; linear in ln rho, held beyond the last): point by the
+ * nodes' difference from rho 1, dark and rungs by their ratio. A pick that widens the band is charged what it adds
+ * to the picks before it too. */
 struct select_route {
 	const double *pos, *base, *open;
+	const double *point, *dark, *rungs, *since, *band_cos; /* with nodes */
+	const double *nodes; /* [4 nnodes] */
+	size_t nnodes;
 	double from[3];
 	double speed[3], accel[3], settle[3]; /* degrees/s, degrees/s², s; speed and accel > 0 */
 	double move_s;

@@ -80,13 +80,20 @@ struct sel_route {
 	size_t n;
 	double *inc;     /* [batch+2]: the arms' incidence, then the picks' new ones */
 	size_t ng;
+	/* with band nodes: per incidence the picks visit (its first pick's figures at rho 1) */
+	double *gl, *gn, *gs, *gd, *gk; /* [batch+1]: laser position, picks, since, dark, rungs */
+	size_t ngl;
+	double cmin, cmax; /* band_cos over the picks */
+	double pt;       /* Σ point over the picks */
+	double T;        /* the picks' exposure seconds at their band */
 };
 /* Set up an empty route from r->from for at most batch picks. 0, or -1 out of memory (w freed). */
 int sel_route_init(struct sel_route *w, const struct select_route *r, size_t batch);
 /* Release it (idempotent after init or on a failed init). */
 void sel_route_free(struct sel_route *w);
 /* Candidate i's (input order) cost with the route as it is: its cheapest insertion's motion, base, and open when its
- * incidence is new; where it would go into *at (may be NULL). > 0. */
+ * incidence is new (with band nodes: its increment to the picks' exposure seconds); where it would go into *at (may
+ * be NULL). > 0. */
 double sel_route_cost(const struct sel_route *w, size_t i, size_t *at);
 /* Insert candidate i at place at (from sel_route_cost). */
 void sel_route_add(struct sel_route *w, size_t i, size_t at);

@@ -271,6 +271,18 @@ void plan_timing_defaults(struct plan_timing *t);
 /* Fill the predicted_* fields of r (made from spec against g) for an executor timed by t. */
 void plan_time_apply(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
 		     struct plan_result *r);
+/* One point's exposure costs as plan_time_apply counts them (bench seconds, no move). */
+struct plan_point_cost {
+	double point_s;             /* probe, exposure, HDR share, the host's time */
+	double dark_s;              /* one dark */
+	double rungs;               /* the distinct times the dark cache needs at an incidence: the j-th point after a
+				     * clearing takes a dark with probability (1 - 1/rungs)^j (fixed integration: 1) */
+};
+/* The costs of one point at incidence theta_i (degrees) in a plan whose detector zeniths span cos ratio rho ≥ 1
+ * (largest / smallest cos θ of the plan's points: the auto band widens with it; an exposure prior or fixed
+ * integration does not), timed by t: plan_time_apply's per-point terms, for `brdf-recon select`'s price. */
+void plan_time_point(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
+		     double theta_i, double rho, struct plan_point_cost *out);
 /* Free a result (NULL is fine). */
 void plan_result_free(struct plan_result *res);
 
@@ -298,16 +310,28 @@ struct plan_cand {
 	double open_s;              /* and the darks more at a new incidence (select charges each pick its increment
 				     * to the batch's route: base_s, open_s when its incidence is new to the batch, and
 				     * the motion of inserting it into the batch's route, plan_adaptive_route_spec) */
+	/* select's price of the exposures (plan_time_point at the point alone, rho 1): the batch's j-th point at an
+	 * incidence takes a dark with probability (1 - 1/rungs)^(since + j), and the batch's band (the spread of
+	 * band_cos over its points) scales these terms as the route spec's band nodes say */
+	double point_s;             /* probe, exposure, HDR share, host */
+	double dark_s;              /* one dark at its incidence */
+	double rungs;               /* the distinct times the dark cache needs there */
+	double since;               /* points measured at its incidence since the cache was cleared (its incidence is the
+				     * arms': the executor keeps the cache; else 0) */
+	double band_cos;            /* cos of its detector zenith: what the auto band spans */
 };
 /* t continues a sweep whose points so far are at positions n_done (each stride bytes after the previous: an array of
  * struct plan_pos, or the pos member of struct plan_step): the cache state of its last incidence (cont fields). The
  * age rule (dark_max_age_s) is left to the new steps' own clock. n 0: no continuation. */
 void plan_timing_continue(struct plan_timing *t, const struct plan_pos *done, size_t n, size_t stride);
-/* The batch's route model as `brdf-recon select --route` takes it (13 numbers, comma-separated: the arms' position
- * from (laser θ, detector θ, detector φ), then per axis in that order speed °/s, acceleration °/s², settle s, then the
- * executor's seconds per move beyond the trapezoids and settling: 1.5 polls + extra settle, plan_time.c) into buf. */
-void plan_adaptive_route_spec(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *from,
-			      char *buf, size_t len);
+/* The batch's route model as `brdf-recon select --route` takes it (comma-separated: the arms' position from (laser
+ * θ, detector θ, detector φ), then per axis in that order speed °/s, acceleration °/s², settle s, then the executor's
+ * seconds per move beyond the trapezoids and settling: 1.5 polls + extra settle, plan_time.c; then spec's band nodes,
+ * four numbers each: rho, then plan_time_point's point_s, dark_s, rungs at that band (rho 1 first, rising; one node
+ * when the band does not change them: fixed integration, an exposure prior)) into buf (PLAN_ROUTE_SPEC_LEN). */
+#define PLAN_ROUTE_SPEC_LEN 2048
+void plan_adaptive_route_spec(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
+			      const struct plan_pos *from, char *buf, size_t len);
 /* The adaptive target as `brdf-recon select --target` takes it ("dhr:8,30,60:le=X", "lnf:le=X", "rgb:le=X") into buf. */
 void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t len);
 /* The candidates of spec's adaptive part from the arms at from (timed by t): every candidate incidence ×

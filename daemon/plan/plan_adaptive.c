@@ -481,6 +481,7 @@ int plan_adaptive_candidates(const struct plan_spec *s, const struct bench_geom 
 	struct plan_wp w[PLAN_MAX_WP];
 	struct plan_timing tc = *t; /* the executor's dark cache as the measured points left it, the arms' point once */
 	plan_timing_continue(&tc, done, n_done, sizeof *done);
+	double since = tc.cont_since_clear; /* the points at the arms' incidence since the cache was cleared */
 	if (tc.cont && tc.cont_since_clear > 0)
 		tc.cont_since_clear--; /* point_cost's first step is the arms' point, counted again */
 	for (size_t id = 0; id < nall; id++) {
@@ -520,6 +521,13 @@ int plan_adaptive_candidates(const struct plan_spec *s, const struct bench_geom 
 		other.laser_theta += 1;
 		c[k].base_s = point_cost(s, g, &tc, &bq, &bq, 0, 0);
 		c[k].open_s = fmax(point_cost(s, g, &tc, &other, &bq, 0, 0) - c[k].base_s, 0);
+		struct plan_point_cost pc;
+		plan_time_point(s, g, t, bq.laser_theta, 1, &pc);
+		c[k].point_s = pc.point_s;
+		c[k].dark_s = pc.dark_s;
+		c[k].rungs = pc.rungs;
+		c[k].since = tc.cont && fabs(bq.laser_theta - tc.cont_laser) <= 1e-6 ? since : 0;
+		c[k].band_cos = cos(fabs(bq.det_theta) * M_PI / 180);
 		k++;
 	}
 	*out = c;
@@ -566,8 +574,13 @@ void plan_adaptive_worst(const struct plan_spec *s, const struct bench_geom *g, 
 				(size_t)fmin((double)nc, floor(fmax(0, a->budget_s - seed->predicted_s) / lo));
 }
 
-void plan_adaptive_route_spec(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *from,
-			      char *buf, size_t len)
+/* The band nodes of the route spec: rho = cos ratio of the batch's detector zeniths, 1 to ROUTE_BAND_MAX (plan_time's
+ * band ignores cos θ ≤ 0.01) in ROUTE_BAND_NODES geometric steps (select interpolates linearly in ln rho). */
+#define ROUTE_BAND_NODES 20
+#define ROUTE_BAND_MAX 100.0
+
+void plan_adaptive_route_spec(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
+			      const struct plan_pos *from, char *buf, size_t len)
 {
 	const struct bench_axis *ax[3] = { &g->laser_theta, &g->detector_theta, &g->detector_phi };
 	size_t n = (size_t)snprintf(buf, len, "%.9g,%.9g,%.9g", from->laser_theta, from->det_theta, from->det_phi);
@@ -575,7 +588,19 @@ void plan_adaptive_route_spec(const struct bench_geom *g, const struct plan_timi
 		n += (size_t)snprintf(buf + n, len - n, ",%.9g,%.9g,%.9g", ax[k]->speed_dps, ax[k]->accel_dps2,
 				      ax[k]->settle_s);
 	if (n < len)
-		snprintf(buf + n, len - n, ",%.9g", 1.5 * t->axis_poll_s + t->extra_settle_s);
+		n += (size_t)snprintf(buf + n, len - n, ",%.9g", 1.5 * t->axis_poll_s + t->extra_settle_s);
+	/* the band's nodes, priced at the arms' incidence (the band itself is the same at every incidence; a prior's
+	 * per-incidence figures do not depend on it, and then one node says so) */
+	struct plan_point_cost lo, hi;
+	plan_time_point(s, g, t, from->laser_theta, 1, &lo);
+	plan_time_point(s, g, t, from->laser_theta, ROUTE_BAND_MAX, &hi);
+	bool flat = hi.point_s == lo.point_s && hi.dark_s == lo.dark_s && hi.rungs == lo.rungs;
+	for (int k = 0; k < (flat ? 1 : ROUTE_BAND_NODES) && n < len; k++) {
+		double rho = pow(ROUTE_BAND_MAX, (double)k / (ROUTE_BAND_NODES - 1));
+		struct plan_point_cost pc;
+		plan_time_point(s, g, t, from->laser_theta, rho, &pc);
+		n += (size_t)snprintf(buf + n, len - n, ",%.9g,%.9g,%.9g,%.9g", rho, pc.point_s, pc.dark_s, pc.rungs);
+	}
 }
 
 void plan_timing_continue(struct plan_timing *t, const struct plan_pos *done, size_t n, size_t stride)

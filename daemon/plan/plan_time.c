@@ -49,7 +49,7 @@
 void plan_timing_defaults(struct plan_timing *t)
 {
 	*t = (struct plan_timing){
-		.axis_poll_s = 0.05,          /* drivers/axis_modbus.c poll_s default */
+		.axis_poll_s = 0.05,          /* drivers/axis_modbus_cfg.c poll_s default */
 		.extra_settle_s = 0,          /* sweep.extra_settle_s default */
 		.probe_ms = 10,               /* daemon/exposure.c probe_ms default */
 		.min_ms = 1,                  /* daemon/conf.c sweep.min_integration_ms default */
@@ -267,4 +267,26 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 		clock += d;
 	}
 	r->predicted_s = clock;
+}
+
+void plan_time_point(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t, double theta_i,
+		     double rho, struct plan_point_cost *out)
+{
+	/* plan_time_apply's figures for one point of a plan whose band spread is the sample's times rho² */
+	bool aut = s->integ_mode == PLAN_INTEG_AUTO;
+	double est_ms = s->integ_ms > 0 ? s->integ_ms : t->probe_ms, ms = s->integ_ms, k = 1;
+	double sample = s->integ_spread > 0 ? s->integ_spread : PLAN_AUTO_SPREAD;
+	if (aut)
+		k = auto_band(t, est_ms, sample * fmax(rho, 1) * fmax(rho, 1), s->max_integ_ms, &ms);
+	double h = aut && t->max_exposures > 1 && t->hdr_ratio > 1 ? (s->integ_hdr >= 0 ? s->integ_hdr : PLAN_AUTO_HDR) : 0;
+	struct inc_cost c = { aut ? shot(g, t, 1, ms) : 0, shot(g, t, s->averages, ms), shot(g, t, t->dark_averages, ms),
+			      h > 0 ? h * shot(g, t, s->averages, max_ms_of(s, t->hdr_ratio * ladder(t, est_ms, s->max_integ_ms))) : 0,
+			      k };
+	const struct plan_prior *pr = aut && t->prior.sweep > 0 && t->prior.n_inc > 0 ? &t->prior : NULL;
+	if (pr)
+		c = prior_cost(s, g, t, prior_row(pr, fabs(theta_i)));
+	double host = (pr && pr->host_points > 0 ? pr->host_per_point_s : t->point_overhead_s) * t->time_scale;
+	out->point_s = c.probe + c.meas + c.hdr + host;
+	out->dark_s = c.dark;
+	out->rungs = aut ? c.k : 1; /* fixed integration: one dark per clearing */
 }

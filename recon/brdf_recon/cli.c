@@ -11,7 +11,7 @@
 
 static const char *prog = "brdf-recon";
 
-void progress(void *ctx, const char *stage, double frac)
+void cli_progress(void *ctx, const char *stage, double frac)
 {
 	(void)ctx;
 	if (!isatty(2))
@@ -20,26 +20,26 @@ void progress(void *ctx, const char *stage, double frac)
 	fflush(stderr);
 }
 
-void progress_end(void)
+void cli_progress_end(void)
 {
 	if (isatty(2))
 		fprintf(stderr, "\r%40s\r", "");
 }
 
-int fail(const struct acq_err *e)
+int cli_fail(const struct acq_err *e)
 {
-	progress_end();
+	cli_progress_end();
 	fprintf(stderr, "%s: %s\n", prog, e->msg[0] ? e->msg : "error");
 	return 1;
 }
 
-int usage_err(const char *cmd, const char *msg)
+int cli_usage_err(const char *cmd, const char *msg)
 {
 	fprintf(stderr, "%s %s: %s (see %s %s --help)\n", prog, cmd, msg, prog, cmd);
 	return 2;
 }
 
-int parse_double(const char *s, double *out)
+int cli_parse_double(const char *s, double *out)
 {
 	char *end;
 	errno = 0;
@@ -50,7 +50,7 @@ int parse_double(const char *s, double *out)
 	return 0;
 }
 
-int parse_u64(const char *s, uint64_t *out)
+int cli_parse_u64(const char *s, uint64_t *out)
 {
 	char *end;
 	errno = 0;
@@ -63,7 +63,7 @@ int parse_u64(const char *s, uint64_t *out)
 	return 0;
 }
 
-int out_open(struct out *o, const char *path, struct acq_err *err)
+int cli_out_open(struct cli_out *o, const char *path, struct acq_err *err)
 {
 	o->std = !path || !strcmp(path, "-");
 	o->f = stdout;
@@ -75,7 +75,7 @@ int out_open(struct out *o, const char *path, struct acq_err *err)
 	return 0;
 }
 
-int out_close(struct out *o, int ok, struct acq_err *err)
+int cli_out_close(struct cli_out *o, int ok, struct acq_err *err)
 {
 	if (o->std) {
 		fflush(stdout);

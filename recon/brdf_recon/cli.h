@@ -1,5 +1,5 @@
-/* brdf-recon's shared command-line helpers (defined in cli.c, the DHR budget in cmd_dhr.c) and the
- * commands, one per file (recon/brdf_recon/cmd_*.c). Only the program's own files include this. */
+/* brdf-recon's shared command-line helpers (cli_*, defined in cli.c; the DHR budget cmd_dhr_* in cmd_dhr.c) and
+ * the commands, one per file (recon/brdf_recon/cmd_*.c). Only the program's own files include this. */
 #ifndef RECON_BRDF_RECON_CLI_H
 #define RECON_BRDF_RECON_CLI_H
 
@@ -13,35 +13,35 @@
 #include "recon/recon.h"
 
 /* Progress line on a terminal (stderr), and its erasure. */
-void progress(void *ctx, const char *stage, double frac);
-void progress_end(void);
+void cli_progress(void *ctx, const char *stage, double frac);
+void cli_progress_end(void);
 /* Print "brdf-recon: message" and return 1. */
-int fail(const struct acq_err *e);
+int cli_fail(const struct acq_err *e);
 /* Print a usage error of a command and return 2. */
-int usage_err(const char *cmd, const char *msg);
+int cli_usage_err(const char *cmd, const char *msg);
 /* Strict number parsers: 0, or -1 for anything but a whole finite number / unsigned integer. */
-int parse_double(const char *s, double *out);
-int parse_u64(const char *s, uint64_t *out);
+int cli_parse_double(const char *s, double *out);
+int cli_parse_u64(const char *s, uint64_t *out);
 
 
 /* An output file: stdout for NULL or "-", else config/acq_out (a temporary file renamed on success; an existing
  * device or FIFO written in place, since renaming over it would replace it; a directory refused). */
-struct out {
+struct cli_out {
 	FILE *f;
 	int std;          /* stdout */
 	struct acq_out a; /* the file otherwise */
 };
-/* Open path for writing (see struct out); 0 or -1 with err set. */
-int out_open(struct out *o, const char *path, struct acq_err *err);
+/* Open path for writing (see struct cli_out); 0 or -1 with err set. */
+int cli_out_open(struct cli_out *o, const char *path, struct acq_err *err);
 /* Finish: on ok, flush and rename the temporary into place; else remove it. 0, or -1 (err set if a write failed). */
-int out_close(struct out *o, int ok, struct acq_err *err);
+int cli_out_close(struct cli_out *o, int ok, struct acq_err *err);
 
-/* The DHR budget's components, in the order of dhr's CSV columns (db_names: the column names). */
+/* The DHR budget's components, in the order of dhr's CSV columns (cmd_dhr_db_names: the column names). */
 enum { DB_NOISE, DB_MODEL, DB_QUAD, DB_MISFIT, DB_RES, DB_CERT, DB_DRIFT, DB_WLCAL, DB_NONLIN, DB_N };
-extern const char *const db_names[DB_N];
+extern const char *const cmd_dhr_db_names[DB_N];
 /* DHR and budget of model m at nth (<= 64) incidences th (degrees) into dhr, sig (total) and part[DB_N][nth*L]. */
-int dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64_t draws, uint64_t seed,
-	       const struct recon_budget_opts *bo, double *dhr, double *sig, double **part, struct acq_err *err);
+int cmd_dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64_t draws, uint64_t seed,
+		   const struct recon_budget_opts *bo, double *dhr, double *sig, double **part, struct acq_err *err);
 
 /* The commands: argv[0] is the command's name; exit status. */
 int cmd_fit(int argc, char **argv);

@@ -26,33 +26,33 @@ int cmd_check(int argc, char **argv)
 	while ((c = getopt_long(argc, argv, "h", lo, NULL)) != -1) {
 		switch (c) {
 		case 'p':
-			if (parse_u64(optarg, &pairs) || pairs > 100000000)
-				return usage_err("check", "--pairs needs a count");
+			if (cli_parse_u64(optarg, &pairs) || pairs > 100000000)
+				return cli_usage_err("check", "--pairs needs a count");
 			break;
 		case 't':
-			if (parse_u64(optarg, &thetas) || thetas > 100000)
-				return usage_err("check", "--thetas needs a count");
+			if (cli_parse_u64(optarg, &thetas) || thetas > 100000)
+				return cli_usage_err("check", "--thetas needs a count");
 			break;
 		case 's':
-			if (parse_u64(optarg, &seed))
-				return usage_err("check", "--seed needs an unsigned integer");
+			if (cli_parse_u64(optarg, &seed))
+				return cli_usage_err("check", "--seed needs an unsigned integer");
 			break;
 		case 'h': fputs(check_help, stdout); return 0;
-		default: return usage_err("check", "bad option");
+		default: return cli_usage_err("check", "bad option");
 		}
 	}
 	if (optind != argc - 1)
-		return usage_err("check", "one MODEL expected");
+		return cli_usage_err("check", "one MODEL expected");
 	struct acq_err err = { 0 };
 	struct recon_model *m;
 	if (recon_model_load(argv[optind], &m, &err))
-		return fail(&err);
+		return cli_fail(&err);
 	struct recon_check_report r;
-	int rc = recon_check(m, pairs, thetas, seed, &r, progress, NULL, &err);
-	progress_end();
+	int rc = recon_check(m, pairs, thetas, seed, &r, cli_progress, NULL, &err);
+	cli_progress_end();
 	recon_model_free(m);
 	if (rc)
-		return fail(&err);
+		return cli_fail(&err);
 	int nonneg = r.min_value >= 0 && r.nonfinite == 0, recip = r.max_recip_abs == 0.0,
 	    energy = r.energy_excess <= 0;
 	printf("check: %zu random pairs, %zu incidences (seed %llu)\n", r.npairs, r.nalb, (unsigned long long)seed);

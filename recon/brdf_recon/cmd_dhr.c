@@ -73,12 +73,12 @@ static void at_reference(const struct recon_model *m, const double *y, const dou
 	*uo = u;
 }
 
-const char *const db_names[DB_N] = { "sigma_noise", "sigma_model",  "sigma_quad",  "sigma_misfit", "sigma_res",
+const char *const cmd_dhr_db_names[DB_N] = { "sigma_noise", "sigma_model",  "sigma_quad",  "sigma_misfit", "sigma_res",
 					    "sigma_cert",  "sigma_drift", "sigma_wlcal", "sigma_nonlin" };
 
 /* DHR and budget of model m at nth incidences th (degrees) into dhr, sig (total) and part[DB_N][nth*L]. */
-int dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64_t draws, uint64_t seed,
-		      const struct recon_budget_opts *bo, double *dhr, double *sig, double **part, struct acq_err *err)
+int cmd_dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64_t draws, uint64_t seed,
+		   const struct recon_budget_opts *bo, double *dhr, double *sig, double **part, struct acq_err *err)
 {
 	double thr[64];
 	for (size_t t = 0; t < nth; t++)
@@ -87,7 +87,7 @@ int dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64
 					 .misfit = part[DB_MISFIT], .res = part[DB_RES] };
 	double *srec = malloc(nth * m->nwl * sizeof *srec);
 	int rc = !srec ? acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory")
-		 : recon_dhr_parts(m, nth, thr, (int)draws, seed, dhr, srec, &parts, progress, NULL, err) ||
+		 : recon_dhr_parts(m, nth, thr, (int)draws, seed, dhr, srec, &parts, cli_progress, NULL, err) ||
 			 recon_budget(nth, m->nwl, m->wl, dhr, srec, bo, part[DB_CERT], part[DB_DRIFT], part[DB_WLCAL],
 				      part[DB_NONLIN], sig, err)
 		 ? -1
@@ -111,15 +111,15 @@ static int dhr_parse_theta(const char *arg, struct dhr_args *a)
 	a->nth = 0;
 	char *save = NULL, *dup = strdup(arg);
 	for (char *tok = strtok_r(dup, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
-		if (a->nth == 64 || parse_double(tok, &a->th[a->nth]) || a->th[a->nth] < 0 || a->th[a->nth] > 90) {
+		if (a->nth == 64 || cli_parse_double(tok, &a->th[a->nth]) || a->th[a->nth] < 0 || a->th[a->nth] > 90) {
 			free(dup);
-			return usage_err("dhr", "--theta-i needs up to 64 angles in [0, 90]");
+			return cli_usage_err("dhr", "--theta-i needs up to 64 angles in [0, 90]");
 		}
 		a->nth++;
 	}
 	free(dup);
 	if (!a->nth)
-		return usage_err("dhr", "--theta-i is empty");
+		return cli_usage_err("dhr", "--theta-i is empty");
 	return 0;
 }
 
@@ -148,52 +148,52 @@ static int dhr_parse(int argc, char **argv, struct dhr_args *a)
 				return 2;
 			break;
 		case 'n':
-			if (parse_u64(optarg, &a->draws) || a->draws > 100000)
-				return usage_err("dhr", "--draws needs 0..100000");
+			if (cli_parse_u64(optarg, &a->draws) || a->draws > 100000)
+				return cli_usage_err("dhr", "--draws needs 0..100000");
 			break;
 		case 's':
-			if (parse_u64(optarg, &a->seed))
-				return usage_err("dhr", "--seed needs an unsigned integer");
+			if (cli_parse_u64(optarg, &a->seed))
+				return cli_usage_err("dhr", "--seed needs an unsigned integer");
 			break;
 		case 'r': a->refp = optarg; break;
 		case 'R':
-			if (parse_double(optarg, &a->ref_th))
-				return usage_err("dhr", "--reference-theta needs a number");
+			if (cli_parse_double(optarg, &a->ref_th))
+				return cli_usage_err("dhr", "--reference-theta needs a number");
 			break;
 		case 'z': a->zout = optarg; break;
 		case 'p': a->plot = optarg; break;
 		case 'C': a->certp = optarg; break;
 		case 'c':
-			if (parse_double(optarg, &bo->cert_rel) || !(bo->cert_rel >= 0 && bo->cert_rel < 1))
-				return usage_err("dhr", "--cert-rel needs a number in [0, 1)");
+			if (cli_parse_double(optarg, &bo->cert_rel) || !(bo->cert_rel >= 0 && bo->cert_rel < 1))
+				return cli_usage_err("dhr", "--cert-rel needs a number in [0, 1)");
 			break;
 		case 'd':
-			if (parse_double(optarg, &bo->drift_rel) || !(bo->drift_rel >= 0 && bo->drift_rel < 1))
-				return usage_err("dhr", "--drift-rel needs a number in [0, 1)");
+			if (cli_parse_double(optarg, &bo->drift_rel) || !(bo->drift_rel >= 0 && bo->drift_rel < 1))
+				return cli_usage_err("dhr", "--drift-rel needs a number in [0, 1)");
 			break;
 		case 'w':
-			if (parse_double(optarg, &bo->wl_cal_nm) || !(bo->wl_cal_nm >= 0 && bo->wl_cal_nm < 100))
-				return usage_err("dhr", "--wl-cal-nm needs a number in [0, 100)");
+			if (cli_parse_double(optarg, &bo->wl_cal_nm) || !(bo->wl_cal_nm >= 0 && bo->wl_cal_nm < 100))
+				return cli_usage_err("dhr", "--wl-cal-nm needs a number in [0, 100)");
 			break;
 		case 'N':
-			if (parse_double(optarg, &bo->nonlin_rel) || !(bo->nonlin_rel >= 0 && bo->nonlin_rel < 1))
-				return usage_err("dhr", "--nonlin-rel needs a number in [0, 1)");
+			if (cli_parse_double(optarg, &bo->nonlin_rel) || !(bo->nonlin_rel >= 0 && bo->nonlin_rel < 1))
+				return cli_usage_err("dhr", "--nonlin-rel needs a number in [0, 1)");
 			break;
 		case 'K': {
 			char *comma = strchr(optarg, ',');
 			if (comma)
 				*comma = 0;
-			if (parse_double(optarg, &a->ref_u) || !(a->ref_u >= 0 && a->ref_u < 1) ||
-			    (comma && (parse_double(comma + 1, &a->ref_len) || !(a->ref_len > 0 && a->ref_len < 1e6))))
-				return usage_err("dhr", "--reference-corr needs U[,LENGTH_NM]: U in [0, 1), length > 0 nm");
+			if (cli_parse_double(optarg, &a->ref_u) || !(a->ref_u >= 0 && a->ref_u < 1) ||
+			    (comma && (cli_parse_double(comma + 1, &a->ref_len) || !(a->ref_len > 0 && a->ref_len < 1e6))))
+				return cli_usage_err("dhr", "--reference-corr needs U[,LENGTH_NM]: U in [0, 1), length > 0 nm");
 			break;
 		}
 		case 'h': fputs(dhr_help, stdout); return 0;
-		default: return usage_err("dhr", "bad option");
+		default: return cli_usage_err("dhr", "bad option");
 		}
 	}
 	if (optind != argc - 1)
-		return usage_err("dhr", "one MODEL expected");
+		return cli_usage_err("dhr", "one MODEL expected");
 	a->model = argv[optind];
 	return -1;
 }
@@ -232,13 +232,13 @@ static int dhr_write(const char *outp, const struct recon_model *m, const struct
 		     const double *sig, double *const *part, struct acq_err *err)
 {
 	size_t L = m->nwl;
-	struct out o;
-	if (out_open(&o, outp, err))
+	struct cli_out o;
+	if (cli_out_open(&o, outp, err))
 		return -1;
 	int ok = 1;
 	fputs("theta_i,wavelength_nm,dhr,sigma", o.f);
 	for (int k = 0; k < DB_N; k++)
-		fprintf(o.f, ",%s", db_names[k]);
+		fprintf(o.f, ",%s", cmd_dhr_db_names[k]);
 	fputc('\n', o.f);
 	char b[64];
 	for (size_t t = 0; ok && t < a->nth; t++)
@@ -256,7 +256,7 @@ static int dhr_write(const char *outp, const struct recon_model *m, const struct
 			}
 			fputc('\n', o.f);
 		}
-	if (out_close(&o, ok, err))
+	if (cli_out_close(&o, ok, err))
 		ok = 0;
 	return ok ? 0 : -1;
 }
@@ -318,9 +318,9 @@ static int dhr_compare(const struct dhr_args *a, const struct recon_model *m, co
 	if (ok && recon_agreement_ref(nc, cw, md, ms, mc, rv, rs, a->ref_u, a->ref_len, &ip, z, &ag, err))
 		ok = 0;
 	FILE *zf = stderr;
-	struct out zo;
+	struct cli_out zo;
 	if (ok && a->zout) {
-		if (out_open(&zo, a->zout, err))
+		if (cli_out_open(&zo, a->zout, err))
 			ok = 0;
 		else
 			zf = zo.f;
@@ -330,7 +330,7 @@ static int dhr_compare(const struct dhr_args *a, const struct recon_model *m, co
 		for (size_t i = 0; i < nc; i++)
 			fprintf(zf, "%.10g,%.10g,%.10g,%.10g,%.10g,%.6g\n", cw[i], md[i], ms[i], rv[i], rs[i], z[i]);
 	}
-	if (ok && a->zout && out_close(&zo, ok, err))
+	if (ok && a->zout && cli_out_close(&zo, ok, err))
 		ok = 0;
 	if (ok)
 		fprintf(stderr, "reference %s at theta_i=%g: %zu wavelengths compared, agreement %.1f%% within |z| <= 2 "
@@ -416,11 +416,11 @@ int cmd_dhr(int argc, char **argv)
 	struct acq_err err = { 0 };
 	double *cert = NULL;
 	if (a.certp && dhr_cert_load(a.certp, &a.bo, &cert, &err))
-		return fail(&err);
+		return cli_fail(&err);
 	struct recon_model *m;
 	if (recon_model_load(a.model, &m, &err)) {
 		free(cert);
-		return fail(&err);
+		return cli_fail(&err);
 	}
 	size_t L = m->nwl, NL = a.nth * L;
 	double *dhr = malloc(NL * sizeof *dhr), *sig = malloc(NL * sizeof *sig), *pbuf = malloc(DB_N * NL * sizeof *pbuf);
@@ -431,9 +431,9 @@ int cmd_dhr(int argc, char **argv)
 		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
 	for (int k = 0; k < DB_N; k++)
 		part[k] = pbuf ? pbuf + (size_t)k * NL : NULL;
-	if (ok && dhr_budget(m, a.nth, a.th, a.draws, a.seed, &a.bo, dhr, sig, part, &err))
+	if (ok && cmd_dhr_budget(m, a.nth, a.th, a.draws, a.seed, &a.bo, dhr, sig, part, &err))
 		ok = 0;
-	progress_end();
+	cli_progress_end();
 	for (size_t i = 0; ok && i < NL; i++) /* the correlated part: one common factor (certificate, drift) */
 		corr[i] = hypot(part[DB_CERT][i], part[DB_DRIFT][i]);
 	if (ok && dhr_write(a.outp, m, &a, dhr, sig, part, &err))
@@ -458,5 +458,5 @@ int cmd_dhr(int argc, char **argv)
 	free(pbuf);
 	free(corr);
 	recon_model_free(m);
-	return ok ? 0 : fail(&err);
+	return ok ? 0 : cli_fail(&err);
 }

@@ -35,23 +35,23 @@ int cmd_eval(int argc, char **argv)
 			fputs(eval_help, stdout);
 			return 0;
 		} else
-			return usage_err("eval", "bad option");
+			return cli_usage_err("eval", "bad option");
 	}
 	if (optind != argc - 2)
-		return usage_err("eval", "MODEL and QUERIES.csv expected");
+		return cli_usage_err("eval", "MODEL and QUERIES.csv expected");
 	struct acq_err err = { 0 };
 	struct recon_model *m;
 	if (recon_model_load(argv[optind], &m, &err))
-		return fail(&err);
+		return cli_fail(&err);
 	struct recon_samples q;
 	if (csvio_read_queries(argv[optind + 1], &q, &err)) {
 		recon_model_free(m);
-		return fail(&err);
+		return cli_fail(&err);
 	}
 	size_t L = m->nwl, B = 4096;
 	double *vals = malloc(B * L * sizeof *vals);
-	struct out o;
-	int ok = vals && !out_open(&o, outp, &err);
+	struct cli_out o;
+	int ok = vals && !cli_out_open(&o, outp, &err);
 	if (!vals)
 		acq_errf(&err, ACQ_E_NOMEM, "eval: out of memory");
 	if (ok) {
@@ -59,7 +59,7 @@ int cmd_eval(int argc, char **argv)
 		write_header_wl(o.f, m);
 		for (size_t q0 = 0; ok && q0 < q.n; q0 += B) {
 			size_t b = q.n - q0 < B ? q.n - q0 : B;
-			progress(NULL, "eval", (double)q0 / (double)q.n);
+			cli_progress(NULL, "eval", (double)q0 / (double)q.n);
 			if (recon_eval(m, b, q.ang + 4 * q0, vals, &err)) {
 				ok = 0;
 				break;
@@ -79,13 +79,13 @@ int cmd_eval(int argc, char **argv)
 				fputc('\n', o.f);
 			}
 		}
-		if (out_close(&o, ok, &err))
+		if (cli_out_close(&o, ok, &err))
 			ok = 0;
 	}
-	progress_end();
+	cli_progress_end();
 	free(vals);
 	csvio_samples_free(&q);
 	recon_model_free(m);
-	return ok ? 0 : fail(&err);
+	return ok ? 0 : cli_fail(&err);
 }
 

@@ -55,7 +55,7 @@ int cmd_fit(int argc, char **argv)
 		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
 	struct recon_fit_opts o;
 	recon_fit_opts_default(&o);
-	o.progress = progress;
+	o.progress = cli_progress;
 	const char *outp = NULL, *db = NULL, *warm = NULL;
 	uint64_t sweep = 0;
 	int have_sweep = 0, c, set_kernel = 0, set_transform = 0, set_trend = 0;
@@ -64,17 +64,17 @@ int cmd_fit(int argc, char **argv)
 		case 'o': outp = optarg; break;
 		case 'k':
 			if ((o.kernel = rbf_kernel_from_name(optarg)) < 0)
-				return usage_err("fit", "unknown kernel");
+				return cli_usage_err("fit", "unknown kernel");
 			set_kernel = 1;
 			break;
 		case 't':
 			if ((o.transform = recon_transform_from_name(optarg)) < 0)
-				return usage_err("fit", "unknown transform");
+				return cli_usage_err("fit", "unknown transform");
 			set_transform = 1;
 			break;
 		case 'r':
 			if (strcmp(optarg, "auto") && (o.trend = trend_from_name(optarg)) < 0)
-				return usage_err("fit", "unknown trend (auto, ggx, phong, sheen, rough, coat or none)");
+				return cli_usage_err("fit", "unknown trend (auto, ggx, phong, sheen, rough, coat or none)");
 			if (!strcmp(optarg, "auto"))
 				o.trend = -1;
 			set_trend = 1;
@@ -82,60 +82,60 @@ int cmd_fit(int argc, char **argv)
 		case 's':
 			if (!strcmp(optarg, "auto"))
 				o.shape = 0;
-			else if (parse_double(optarg, &o.shape) || !(o.shape > 0))
-				return usage_err("fit", "--shape needs a positive number or auto");
+			else if (cli_parse_double(optarg, &o.shape) || !(o.shape > 0))
+				return cli_usage_err("fit", "--shape needs a positive number or auto");
 			break;
 		case 'm':
 			if (!strcmp(optarg, "auto"))
 				o.smoothing = -1;
 			else if (!strcmp(optarg, "sigma"))
 				o.smoothing = RECON_SMOOTHING_SIGMA;
-			else if (parse_double(optarg, &o.smoothing) || o.smoothing < 0)
-				return usage_err("fit", "--smoothing needs a number >= 0, auto or sigma");
+			else if (cli_parse_double(optarg, &o.smoothing) || o.smoothing < 0)
+				return cli_usage_err("fit", "--smoothing needs a number >= 0, auto or sigma");
 			break;
 		case 'c':
-			if (parse_double(optarg, &o.max_cond) || !(o.max_cond >= 1))
-				return usage_err("fit", "--max-cond needs a number >= 1");
+			if (cli_parse_double(optarg, &o.max_cond) || !(o.max_cond >= 1))
+				return cli_usage_err("fit", "--max-cond needs a number >= 1");
 			break;
 		case 'd': db = optarg; break;
 		case 'W': warm = optarg; break;
 		case 'w':
-			if (parse_u64(optarg, &sweep))
-				return usage_err("fit", "--sweep needs an id");
+			if (cli_parse_u64(optarg, &sweep))
+				return cli_usage_err("fit", "--sweep needs an id");
 			have_sweep = 1;
 			break;
 		case 'h': fputs(fit_help, stdout); return 0;
-		default: return usage_err("fit", "bad option");
+		default: return cli_usage_err("fit", "bad option");
 		}
 	}
 	if (!outp)
-		return usage_err("fit", "-o MODEL is required");
+		return cli_usage_err("fit", "-o MODEL is required");
 	struct acq_err err = { 0 };
 	struct recon_samples s;
 	if (db) {
 		if (!have_sweep || optind != argc)
-			return usage_err("fit", "--db needs --sweep ID and no CSV file");
+			return cli_usage_err("fit", "--db needs --sweep ID and no CSV file");
 		if (recon_load_db(db, (long long)sweep, &s, &err))
-			return fail(&err);
+			return cli_fail(&err);
 		o.source = db;
 	} else {
 		if (optind != argc - 1)
-			return usage_err("fit", "one SAMPLES.csv expected");
+			return cli_usage_err("fit", "one SAMPLES.csv expected");
 		o.source = argv[optind];
 		if (csvio_read_samples(argv[optind], &s, &err))
-			return fail(&err);
+			return cli_fail(&err);
 	}
 	struct recon_fit_opts cold = o;
 	struct recon_model *m = NULL, *prev = NULL;
 	if (warm) { /* the previous model's settings instead of the search, unless given explicitly */
 		if (recon_model_load(warm, &prev, &err)) {
 			csvio_samples_free(&s);
-			return fail(&err);
+			return cli_fail(&err);
 		}
 		if ((set_kernel && o.kernel != prev->kernel) || (set_transform && o.transform != prev->transform)) {
 			recon_model_free(prev);
 			csvio_samples_free(&s);
-			return usage_err("fit", "--warm: the previous model has another kernel or transform than the one given");
+			return cli_usage_err("fit", "--warm: the previous model has another kernel or transform than the one given");
 		}
 		o.kernel = prev->kernel;
 		o.transform = prev->transform;
@@ -150,7 +150,7 @@ int cmd_fit(int argc, char **argv)
 	if (prev) {
 		double lim = WARM_LOO_FACTOR * prev->loo_rms + WARM_LOO_SLACK;
 		if (rc || m->loo_rms > lim) {
-			progress_end();
+			cli_progress_end();
 			if (rc)
 				fprintf(stderr, "fit: warm start from %s failed (%s): full search\n", warm, err.msg);
 			else
@@ -162,7 +162,7 @@ int cmd_fit(int argc, char **argv)
 			err.msg[0] = '\0';
 			rc = recon_fit(&s, &cold, &m, &err);
 		} else {
-			progress_end();
+			cli_progress_end();
 			fprintf(stderr, "fit: warm start from %s: its kernel and trend kind kept, shape and smoothing searched "
 				"(leave-one-out RMS %.4g, previous %.4g, limit %.4g)\n", warm, m->loo_rms, prev->loo_rms, lim);
 		}
@@ -170,11 +170,11 @@ int cmd_fit(int argc, char **argv)
 	}
 	csvio_samples_free(&s);
 	if (rc)
-		return fail(&err);
-	progress_end();
+		return cli_fail(&err);
+	cli_progress_end();
 	if (recon_model_save(m, outp, &err)) {
 		recon_model_free(m);
-		return fail(&err);
+		return cli_fail(&err);
 	}
 	char a2[32] = ""; /* a two-lobe trend's second (base) roughness */
 	if (trend_two_lobes(m->trend))

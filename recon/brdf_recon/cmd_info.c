@@ -30,11 +30,11 @@ int cmd_info(int argc, char **argv)
 		return 0;
 	}
 	if (argc != 2)
-		return usage_err("info", "one MODEL expected");
+		return cli_usage_err("info", "one MODEL expected");
 	struct acq_err err = { 0 };
 	struct recon_model *m;
 	if (recon_model_load(argv[1], &m, &err))
-		return fail(&err);
+		return cli_fail(&err);
 	printf("directions=%zu\nwavelengths=%zu (%g..%g nm)\nkernel=%s\nshape=%.6g\ntransform=%s\nsmoothing=%.6g\n%s",
 	       m->n, m->nwl, m->wl[0], m->wl[m->nwl - 1], rbf_kernel_name(m->kernel), m->shape,
 	       recon_transform_name(m->transform), m->eta, m->meta);
@@ -48,22 +48,22 @@ int cmd_info(int argc, char **argv)
 			acq_errf(&err, ACQ_E_NOMEM, "info: out of memory");
 		for (int k = 0; ok && k < DB_N; k++)
 			part[k] = buf + (size_t)k * L;
-		if (ok && dhr_budget(m, 1, &th, 16, 1, &bo, buf + DB_N * L, buf + (DB_N + 1) * L, part, &err))
+		if (ok && cmd_dhr_budget(m, 1, &th, 16, 1, &bo, buf + DB_N * L, buf + (DB_N + 1) * L, part, &err))
 			ok = 0;
-		progress_end();
+		cli_progress_end();
 		if (ok) {
 			double *tmp = buf + (DB_N + 2) * L;
 			printf("budget at theta_i=8 deg (standard uncertainty over %zu wavelengths: median, max):\n", L);
 			for (int k = -2; k < DB_N; k++) {
 				memcpy(tmp, k == -2 ? buf + DB_N * L : k == -1 ? buf + (DB_N + 1) * L : part[k], L * sizeof *tmp);
 				qsort(tmp, L, sizeof *tmp, cmp_double);
-				printf("  %-13s %.3g  %.3g\n", k == -2 ? "dhr" : k == -1 ? "sigma" : db_names[k], tmp[L / 2],
+				printf("  %-13s %.3g  %.3g\n", k == -2 ? "dhr" : k == -1 ? "sigma" : cmd_dhr_db_names[k], tmp[L / 2],
 				       tmp[L - 1]);
 			}
 		}
 		free(buf);
 	}
 	recon_model_free(m);
-	return ok ? 0 : fail(&err);
+	return ok ? 0 : cli_fail(&err);
 }
 

@@ -34,8 +34,8 @@ static int write_decisions(const char *out, const struct colour_opts *co, const 
 {
 	char p[4096];
 	snprintf(p, sizeof p, "%s.colour.json", out);
-	struct out o;
-	if (out_open(&o, p, err))
+	struct cli_out o;
+	if (cli_out_open(&o, p, err))
 		return -1;
 	size_t nc, r;
 	recon_rgb_sizes(R, &nc, &r);
@@ -53,7 +53,7 @@ static int write_decisions(const char *out, const struct colour_opts *co, const 
 		"\"reduction_max_rel_error\": %.3g, \"batch_precision\": \"%s\", \"single_precision_max_abs_error_ln_f\": %.3g}\n",
 		full ? "full" : "reduced", bin_nm, nc, r, recon_rgb_reduction_error(R), recon_rgb_f32(R) ? "single" : "double",
 		recon_rgb_f32_error(R));
-	return out_close(&o, ok, err);
+	return cli_out_close(&o, ok, err);
 }
 
 static const char merl_help[] =
@@ -83,7 +83,19 @@ static const char render_help[] =
 	"By default the model is tabulated as a MERL table in memory (batched) and rendered through its nearest-cell\n"
 	"lookup; --direct evaluates the reduced model per ray, --full-spectrum every channel per ray.\n";
 
-int cmd_output(const char *cmd, int argc, char **argv)
+/* What one merl or render invocation asked for (parse_args). */
+struct output_args {
+	const char *cmd;   /* "merl" or "render" */
+	int is_merl;
+	const char *model, *outp, *exr, *env;
+	struct colour_opts co;
+	uint64_t threads, size, spp, rseed;
+	double bin_nm, exposure, env_scale, sun_el, sun_az;
+	int full, direct, dbl, no_sun, old_lights;
+};
+
+/* Read the options into a (defaults first): -1 to go on, or the exit status (help, a usage error, a bad --colour). */
+static int parse_args(const char *cmd, int argc, char **argv, struct output_args *a)
 {
 	static const struct option lo[] = {
 		{ "output", required_argument, 0, 'o' }, { "colour", required_argument, 0, 'c' },
@@ -95,148 +107,182 @@ int cmd_output(const char *cmd, int argc, char **argv)
 		{ "env", required_argument, 0, 'E' }, { "env-scale", required_argument, 0, 'K' },
 		{ "sun-elevation", required_argument, 0, 'A' }, { "sun-azimuth", required_argument, 0, 'Z' },
 		{ "no-sun", no_argument, 0, 'N' }, { "lights", no_argument, 0, 'L' }, { 0, 0, 0, 0 } };
-	int direct = 0, dbl = 0, no_sun = 0, old_lights = 0;
-	const char *exr = NULL, *env = NULL;
-	double env_scale = 1, sun_el = 40, sun_az = -36;
-	uint64_t spp = 64, rseed = 1;
-	double bin_nm = 5;
-	int is_merl = !strcmp(cmd, "merl");
-	const char *outp = NULL;
+	*a = (struct output_args){ .cmd = cmd, .is_merl = !strcmp(cmd, "merl"), .threads = 2, .size = 256, .spp = 64,
+				   .rseed = 1, .bin_nm = 5, .exposure = 1, .env_scale = 1, .sun_el = 40, .sun_az = -36 };
+	colour_opts_brdf(&a->co);
 	struct acq_err err = { 0 };
-	struct colour_opts co;
-	colour_opts_brdf(&co);
-	uint64_t threads = 2, size = 256;
-	double exposure = 1;
-	int full = 0, c;
+	int c;
 	while ((c = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
 		switch (c) {
-		case 'o': outp = optarg; break;
+		case 'o': a->outp = optarg; break;
 		case 'c':
-			if (colour_arg(&co, optarg, &err))
-				return fail(&err);
+			if (colour_arg(&a->co, optarg, &err))
+				return cli_fail(&err);
 			break;
 		case 't':
-			if (parse_u64(optarg, &threads) || threads < 1 || threads > 16)
-				return usage_err(cmd, "--threads needs 1..16");
+			if (cli_parse_u64(optarg, &a->threads) || a->threads < 1 || a->threads > 16)
+				return cli_usage_err(cmd, "--threads needs 1..16");
 			break;
-		case 'f': full = 1; break;
-		case 'd': direct = 1; break;
-		case 'D': dbl = 1; break;
+		case 'f': a->full = 1; break;
+		case 'd': a->direct = 1; break;
+		case 'D': a->dbl = 1; break;
 		case 'b':
-			if (parse_double(optarg, &bin_nm) || !(bin_nm >= 0.5 && bin_nm <= 50))
-				return usage_err(cmd, "--bin-nm needs 0.5..50");
+			if (cli_parse_double(optarg, &a->bin_nm) || !(a->bin_nm >= 0.5 && a->bin_nm <= 50))
+				return cli_usage_err(cmd, "--bin-nm needs 0.5..50");
 			break;
 		case 's':
-			if (is_merl || parse_u64(optarg, &size) || size < 8 || size > 4096)
-				return usage_err(cmd, "--size needs 8..4096 (render only)");
+			if (a->is_merl || cli_parse_u64(optarg, &a->size) || a->size < 8 || a->size > 4096)
+				return cli_usage_err(cmd, "--size needs 8..4096 (render only)");
 			break;
 		case 'e':
-			if (is_merl || parse_double(optarg, &exposure) || !(exposure > 0))
-				return usage_err(cmd, "--exposure needs a positive number (render only)");
+			if (a->is_merl || cli_parse_double(optarg, &a->exposure) || !(a->exposure > 0))
+				return cli_usage_err(cmd, "--exposure needs a positive number (render only)");
 			break;
-		case 'h': fputs(is_merl ? merl_help : render_help, stdout); return 0;
-		case 'X': exr = optarg; break;
-		case 'E': env = optarg; break;
-		case 'N': no_sun = 1; break;
-		case 'L': old_lights = 1; break;
+		case 'h': fputs(a->is_merl ? merl_help : render_help, stdout); return 0;
+		case 'X': a->exr = optarg; break;
+		case 'E': a->env = optarg; break;
+		case 'N': a->no_sun = 1; break;
+		case 'L': a->old_lights = 1; break;
 		case 'P': case 'S':
-			if (parse_u64(optarg, c == 'P' ? &spp : &rseed) || (c == 'P' && (spp < 8 || spp > 4096)))
-				return usage_err(cmd, "--spp needs 8..4096, --seed an unsigned integer");
+			if (cli_parse_u64(optarg, c == 'P' ? &a->spp : &a->rseed) || (c == 'P' && (a->spp < 8 || a->spp > 4096)))
+				return cli_usage_err(cmd, "--spp needs 8..4096, --seed an unsigned integer");
 			break;
 		case 'K': case 'A': case 'Z': {
-			double *t = c == 'K' ? &env_scale : c == 'A' ? &sun_el : &sun_az;
-			if (parse_double(optarg, t) || (c == 'K' && !(env_scale > 0)) || (c == 'A' && !(sun_el > 0 && sun_el <= 90)))
-				return usage_err(cmd, "--env-scale needs a positive number, --sun-elevation 0..90, --sun-azimuth degrees");
+			double *t = c == 'K' ? &a->env_scale : c == 'A' ? &a->sun_el : &a->sun_az;
+			if (cli_parse_double(optarg, t) || (c == 'K' && !(a->env_scale > 0)) ||
+			    (c == 'A' && !(a->sun_el > 0 && a->sun_el <= 90)))
+				return cli_usage_err(cmd, "--env-scale needs a positive number, --sun-elevation 0..90, --sun-azimuth degrees");
 			break;
 		}
-		default: return usage_err(cmd, "bad option");
+		default: return cli_usage_err(cmd, "bad option");
 		}
 	}
-	if (optind != argc - 1 || !outp)
-		return usage_err(cmd, "MODEL and -o OUT expected");
-	if (is_merl && (exr || env || old_lights))
-		return usage_err(cmd, "--exr, --env and --lights are render options");
-	struct recon_model *m;
-	if (recon_model_load(argv[optind], &m, &err))
-		return fail(&err);
-	struct sky *sky = NULL;
+	if (optind != argc - 1 || !a->outp)
+		return cli_usage_err(cmd, "MODEL and -o OUT expected");
+	if (a->is_merl && (a->exr || a->env || a->old_lights))
+		return cli_usage_err(cmd, "--exr, --env and --lights are render options");
+	a->model = argv[optind];
+	return -1;
+}
+
+/* render's lighting into *sky: the procedural sky with its sun, or the --env map; NULL for merl and --lights.
+ * 0, or -1 with err set. */
+static int make_sky(const struct output_args *a, struct sky **sky, struct acq_err *err)
+{
 	struct sky_opts so;
 	sky_opts_default(&so);
-	double el = sun_el * M_PI / 180, az = sun_az * M_PI / 180;
+	double el = a->sun_el * M_PI / 180, az = a->sun_az * M_PI / 180;
 	so.sun_dir[0] = cos(el) * sin(az);
 	so.sun_dir[1] = sin(el);
 	so.sun_dir[2] = cos(el) * cos(az);
-	if (no_sun)
+	if (a->no_sun)
 		so.sun_rgb[0] = so.sun_rgb[1] = so.sun_rgb[2] = 0;
-	if (!is_merl && !old_lights && (env ? sky_envmap(env, env_scale, no_sun ? NULL : &so, &sky, &err)
-					  : sky_procedural(&so, &sky, &err))) {
+	*sky = NULL;
+	if (a->is_merl || a->old_lights)
+		return 0;
+	return a->env ? sky_envmap(a->env, a->env_scale, a->no_sun ? NULL : &so, sky, err) : sky_procedural(&so, sky, err);
+}
+
+/* The model reduced to what RGB needs (*R), its sizes and errors reported on stderr. 0, or -1 with err set. */
+static int make_rgb(const struct output_args *a, const struct recon_model *m, struct recon_rgb **R,
+		    struct acq_err *err)
+{
+	if (recon_rgb_new(m, &a->co, a->bin_nm, R, err))
+		return -1;
+	size_t nc, r;
+	if (a->dbl)
+		recon_rgb_set_f32(*R, 0);
+	recon_rgb_sizes(*R, &nc, &r);
+	fprintf(stderr, "%s: %s path, %zu of %zu channels (%g nm bins), spectral rank %zu, reduction error %.2g "
+		"(relative); batch GEMM in %s precision (single-precision error %.2g in ln f)\n", a->cmd,
+		a->full ? "full-spectrum" : "reduced", nc, m->nwl, a->bin_nm, r, recon_rgb_reduction_error(*R),
+		recon_rgb_f32(*R) ? "single" : "double", recon_rgb_f32_error(*R));
+	return 0;
+}
+
+/* The MERL file: the batched table as it is, else one callback per cell (fn, ctx). 0, or -1 with err set. */
+static int write_merl(const struct output_args *a, const struct merl_table *table, merl_rgb_fn fn, void *ctx,
+		      struct acq_err *err)
+{
+	struct merl_write_opts mo;
+	merl_write_opts_default(&mo);
+	mo.threads = (int)a->threads;
+	/* the table is already in the writer's cells and units: written as it is (no per-cell lookup) */
+	if (table->data)
+		return merl_write_table(a->outp, table, err) ? -1 : 0;
+	return merl_write_ex(a->outp, fn, ctx, &mo, err) ? -1 : 0;
+}
+
+/* The preview: the sphere through (fn, ctx) under sky to the PNG (and the linear radiance to --exr); ro and tone
+ * are filled for the decisions file. 0, or -1 with err set. */
+static int write_render(const struct output_args *a, const struct recon_model *m, struct sky *sky, merl_rgb_fn fn,
+			void *ctx, struct render_opts *ro, struct colour_stats *tone, struct acq_err *err)
+{
+	ro->width = ro->height = (int)a->size;
+	ro->exposure = a->exposure;
+	ro->threads = (int)a->threads;
+	ro->sky = sky;
+	ro->spp = (int)a->spp;
+	ro->seed = a->rseed;
+	ro->lobe_alpha = m->trend != RECON_TREND_NONE && m->trend_alpha >= 0.01 && m->trend_alpha <= 1 ? m->trend_alpha : 0.3;
+	float *lin = malloc((size_t)a->size * (size_t)a->size * 3 * sizeof *lin);
+	int ok = 1;
+	if (!lin)
+		ok = acq_errf(err, ACQ_E_NOMEM, "render: out of memory") == 0;
+	ok = ok && render_sphere(ro, fn, ctx, a->outp, lin, tone, err) == 0;
+	if (ok && a->exr) {
+		char note[1024];
+		snprintf(note, sizeof note, "brdf-recon render of %s: linear scene-referred radiance x exposure %g, "
+			 "Rec. 709 primaries, D65; lighting: %s", a->model, a->exposure,
+			 sky ? sky->desc : "two lights + gradient sky");
+		ok = exrio_write_rgb(a->exr, lin, ro->width, ro->height, note, err) == 0;
+	}
+	free(lin);
+	return ok ? 0 : -1;
+}
+
+int cmd_output(const char *cmd, int argc, char **argv)
+{
+	struct output_args a;
+	int rc = parse_args(cmd, argc, argv, &a);
+	if (rc >= 0)
+		return rc;
+	struct acq_err err = { 0 };
+	struct recon_model *m;
+	if (recon_model_load(a.model, &m, &err))
+		return cli_fail(&err);
+	struct sky *sky;
+	if (make_sky(&a, &sky, &err)) {
 		recon_model_free(m);
-		return fail(&err);
+		return cli_fail(&err);
 	}
 	struct recon_rgb *R = NULL;
-	int ok = recon_rgb_new(m, &co, bin_nm, &R, &err) == 0;
-	if (ok) {
-		size_t nc, r;
-		if (dbl)
-			recon_rgb_set_f32(R, 0);
-		recon_rgb_sizes(R, &nc, &r);
-		fprintf(stderr, "%s: %s path, %zu of %zu channels (%g nm bins), spectral rank %zu, reduction error %.2g "
-			"(relative); batch GEMM in %s precision (single-precision error %.2g in ln f)\n", cmd,
-			full ? "full-spectrum" : "reduced", nc, m->nwl, bin_nm, r, recon_rgb_reduction_error(R),
-			recon_rgb_f32(R) ? "single" : "double", recon_rgb_f32_error(R));
-	}
+	int ok = make_rgb(&a, m, &R, &err) == 0;
 	/* default: the table is computed in batches (GEMMs) and both outputs read it: the MERL writer through
 	 * the reference lookup (which returns each cell's own value at the cell centres it asks for), the
 	 * renderer through the same nearest-cell lookup. --full-spectrum / --direct: per-direction callbacks. */
 	struct merl_table table = { NULL };
 	struct colour_stats st = { 0 };
-	if (ok && !full && !direct) {
-		ok = recon_rgb_merl_table_ex(R, &table, 0, (int)threads, &st, progress, NULL, &err) == 0;
-		progress_end();
+	if (ok && !a.full && !a.direct) {
+		ok = recon_rgb_merl_table_ex(R, &table, 0, (int)a.threads, &st, cli_progress, NULL, &err) == 0;
+		cli_progress_end();
 	}
-	merl_rgb_fn fn = full ? recon_rgb_full_fn : direct ? recon_rgb_fn : merl_table_fn;
-	void *ctx = (full || direct) ? (void *)R : (void *)&table;
-	if (ok && is_merl) {
-		struct merl_write_opts mo;
-		merl_write_opts_default(&mo);
-		mo.threads = (int)threads;
-		/* the table is already in the writer's cells and units: written as it is (no per-cell lookup) */
-		ok = (table.data ? merl_write_table(outp, &table, &err) : merl_write_ex(outp, fn, ctx, &mo, &err)) == 0;
-	}
+	merl_rgb_fn fn = a.full ? recon_rgb_full_fn : a.direct ? recon_rgb_fn : merl_table_fn;
+	void *ctx = (a.full || a.direct) ? (void *)R : (void *)&table;
 	struct render_opts ro;
 	struct colour_stats tone = { 0 };
 	render_opts_default(&ro);
-	float *lin = NULL;
-	if (ok && !is_merl) {
-		ro.width = ro.height = (int)size;
-		ro.exposure = exposure;
-		ro.threads = (int)threads;
-		ro.sky = sky;
-		ro.spp = (int)spp;
-		ro.seed = rseed;
-		ro.lobe_alpha = m->trend != RECON_TREND_NONE && m->trend_alpha >= 0.01 && m->trend_alpha <= 1 ? m->trend_alpha : 0.3;
-		lin = malloc((size_t)size * (size_t)size * 3 * sizeof *lin);
-		if (!lin)
-			ok = acq_errf(&err, ACQ_E_NOMEM, "render: out of memory") == 0;
-		ok = ok && render_sphere(&ro, fn, ctx, outp, lin, &tone, &err) == 0;
-		if (ok && exr) {
-			char note[1024];
-			snprintf(note, sizeof note, "brdf-recon render of %s: linear scene-referred radiance x exposure %g, "
-				 "Rec. 709 primaries, D65; lighting: %s", argv[optind], exposure,
-				 sky ? sky->desc : "two lights + gradient sky");
-			ok = exrio_write_rgb(exr, lin, ro.width, ro.height, note, &err) == 0;
-		}
-	}
+	if (ok)
+		ok = (a.is_merl ? write_merl(&a, &table, fn, ctx, &err)
+				: write_render(&a, m, sky, fn, ctx, &ro, &tone, &err)) == 0;
 	merl_free(&table);
 	if (ok)
-		ok = write_decisions(outp, &co, R, full, bin_nm, is_merl ? NULL : &ro, &tone, exr, &err) == 0;
-	free(lin);
+		ok = write_decisions(a.outp, &a.co, R, a.full, a.bin_nm, a.is_merl ? NULL : &ro, &tone, a.exr, &err) == 0;
 	sky_free(sky);
 	recon_rgb_free(R);
 	recon_model_free(m);
 	if (!ok)
-		return fail(&err);
-	fprintf(stderr, "%s: wrote %s\n", cmd, outp);
+		return cli_fail(&err);
+	fprintf(stderr, "%s: wrote %s\n", cmd, a.outp);
 	return 0;
 }
-

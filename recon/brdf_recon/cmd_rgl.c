@@ -38,29 +38,29 @@ int cmd_rgl(int argc, char **argv)
 		case 'o': outp = optarg; break;
 		case 'w':
 			if (rgl_parse_wavelengths(optarg, wl, RGL_MAX_WL, &o.nwl, &err))
-				return fail(&err);
+				return cli_fail(&err);
 			o.wl = wl;
 			break;
 		case 'r': case 't': case 'n': case 'j':
-			if (parse_u64(optarg, &v) || v > 4096)
-				return usage_err("rgl", "--resolution, --theta-i, --ndf and --threads need a count");
+			if (cli_parse_u64(optarg, &v) || v > 4096)
+				return cli_usage_err("rgl", "--resolution, --theta-i, --ndf and --threads need a count");
 			*(c == 'r' ? &o.res : c == 't' ? &o.ntheta : c == 'n' ? &o.ndf_res : &o.threads) = (int)v;
 			break;
 		case 'h': fputs(rgl_help, stdout); return 0;
-		default: return usage_err("rgl", "bad option");
+		default: return cli_usage_err("rgl", "bad option");
 		}
 	}
 	if (optind != argc - 1 || !outp)
-		return usage_err("rgl", "MODEL and -o FILE.bsdf expected");
+		return cli_usage_err("rgl", "MODEL and -o FILE.bsdf expected");
 	struct recon_model *m;
 	if (recon_model_load(argv[optind], &m, &err))
-		return fail(&err);
+		return cli_fail(&err);
 	o.source = argv[optind];
 	struct rgl_stats st;
 	int rc = rgl_write(m, &o, outp, &st, &err);
 	recon_model_free(m);
 	if (rc)
-		return fail(&err);
+		return cli_fail(&err);
 	fprintf(stderr, "rgl: %zu incidences x %zu wavelengths on a %zux%zu warped grid (ndf %zux%zu), %zu nodes below "
 		"the horizon, %zu bytes -> %s\n", st.ntheta, st.nwl, st.res, st.res, st.ndf_res, st.ndf_res, st.zero_nodes,
 		st.bytes, outp);

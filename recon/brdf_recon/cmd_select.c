@@ -43,7 +43,15 @@ static const char select_help[] =
 	"                         is new to the batch, and the motion of inserting it at the cheapest place of the\n"
 	"                         route from the arms through the picks so far (straight moves: the slowest axis's\n"
 	"                         trapezoid + the largest settle of the axes that move + the per-move seconds; the\n"
-	"                         azimuth modulo 360 deg)\n"
+	"                         azimuth modulo 360 deg). SPEC may go on with band nodes, 4 numbers each: rho (1\n"
+	"                         first, rising), point_s, dark_s, rungs (the planner's per-point terms when the\n"
+	"                         batch's detector zeniths span cos ratio rho); then the candidates also need\n"
+	"                         point_s (> 0), dark_s (>= 0), rungs (>= 1), since (>= 0), band_cos (in [0, 1]), and a\n"
+	"                         pick's exposures are charged as the planner counts them instead of base_s/open_s:\n"
+	"                         point_s, the k-th pick at an incidence a dark of dark_s with probability\n"
+	"                         (1 - 1/rungs)^(since + k), these scaled by the nodes at the band of the picks'\n"
+	"                         band_cos (largest / smallest; point by the difference from rho 1, dark and rungs by\n"
+	"                         the ratio), and a pick that widens the band charged its widening of the others\n"
 	"  --batch N              at most N picks (default 16; 0: only report the target)\n"
 	"  --draws N --seed S     Monte-Carlo draws of the DHR's noise part (default 16, seed 1)\n"
 	"  --value-channels N     dhr: compute the value on N evenly spread channels (the tracked ones among them)\n"
@@ -131,19 +139,34 @@ static int header_only(const char *path, const char *const *names)
 	return lines == 1 && ok;
 }
 
-/* --route SPEC into r (positions and arrays left to the caller). 0, or -1 with err saying what is wrong. */
-static int parse_route(const char *spec, struct select_route *r, struct acq_err *err)
+/* The most band nodes --route takes. */
+#define ROUTE_MAX_NODES 64
+
+/* --route SPEC into r, its band nodes into nodes[4 ROUTE_MAX_NODES] (positions and arrays left to the caller). 0, or
+ * -1 with err saying what is wrong. */
+static int parse_route(const char *spec, struct select_route *r, double *nodes, struct acq_err *err)
 {
-	double v[13];
+	double v[13 + 4 * ROUTE_MAX_NODES];
 	const char *p = spec;
-	for (int k = 0; k < 13; k++) {
+	int n = 0;
+	for (;;) {
 		char *end;
-		v[k] = strtod(p, &end);
-		if (end == p || !isfinite(v[k]) || (k < 12 && *end != ',') || (k == 12 && *end))
+		if (n == (int)(sizeof v / sizeof *v))
+			return acq_errf(err, ACQ_E_INVAL, "--route: more than %d band nodes", ROUTE_MAX_NODES);
+		v[n] = strtod(p, &end);
+		if (end == p || !isfinite(v[n]) || (*end && *end != ','))
 			return acq_errf(err, ACQ_E_INVAL, "--route: expected 13 comma-separated numbers (from laser, detector "
-					"theta, detector phi; speed, accel, settle per axis; per-move seconds), at number %d", k + 1);
+					"theta, detector phi; speed, accel, settle per axis; per-move seconds), then band nodes, "
+					"at number %d", n + 1);
+		n++;
+		if (!*end)
+			break;
 		p = end + 1;
 	}
+	if (n < 13 || (n - 13) % 4)
+		return acq_errf(err, ACQ_E_INVAL, "--route: expected 13 comma-separated numbers (from laser, detector theta, "
+				"detector phi; speed, accel, settle per axis; per-move seconds), then band nodes of 4 numbers "
+				"(rho, point_s, dark_s, rungs): got %d numbers", n);
 	for (int a = 0; a < 3; a++) {
 		r->from[a] = v[a];
 		r->speed[a] = v[3 + 3 * a];
@@ -156,19 +179,30 @@ static int parse_route(const char *spec, struct select_route *r, struct acq_err 
 	r->move_s = v[12];
 	if (!(r->move_s >= 0))
 		return acq_errf(err, ACQ_E_RANGE, "--route: per-move seconds %g < 0", r->move_s);
+	r->nnodes = (size_t)(n - 13) / 4;
+	r->nodes = r->nnodes ? nodes : NULL;
+	for (size_t k = 0; k < r->nnodes; k++) {
+		const double *b = v + 13 + 4 * k;
+		if (!(k ? b[0] > b[-4] : b[0] == 1) || !(b[1] > 0 && b[2] >= 0 && b[3] >= 1))
+			return acq_errf(err, ACQ_E_RANGE, "--route: band node %zu (%g, %g, %g, %g) needs rho rising from 1, "
+					"point_s > 0, dark_s >= 0, rungs >= 1", k + 1, b[0], b[1], b[2], b[3]);
+		memcpy(nodes + 4 * k, b, 4 * sizeof *b);
+	}
 	return 0;
 }
 
 static int bad_input(const struct acq_err *e)
 {
-	progress_end();
+	cli_progress_end();
 	fprintf(stderr, "brdf-recon select: %s\n", e->msg[0] ? e->msg : "bad input");
 	return 2;
 }
 
-/* The columns of a candidate file: the first six always, the last five with --route. */
-static const char *const cand_names[11] = { "id", "theta_i", "phi_i", "theta_o", "phi_o", "cost_s",
-					    "base_s", "open_s", "laser_deg", "det_theta_deg", "det_phi_deg" };
+/* The columns of a candidate file: the first six always, the next five with --route, the last five with its band
+ * nodes. */
+static const char *const cand_names[16] = { "id", "theta_i", "phi_i", "theta_o", "phi_o", "cost_s",
+					    "base_s", "open_s", "laser_deg", "det_theta_deg", "det_phi_deg",
+					    "point_s", "dark_s", "rungs", "since", "band_cos" };
 
 /* The command line. */
 struct select_args {
@@ -178,7 +212,8 @@ struct select_args {
 };
 
 /* The candidates as select_batch takes them: nc rows of angles (radians, 4 per row), costs and ids; with --route
- * ids holds 6·nc numbers (ids, then the route's pos[3nc], base, open). */
+ * ids holds 6·nc numbers (ids, then the route's pos[3nc], base, open), with band nodes 11·nc (then point, dark,
+ * rungs, since, band_cos). */
 struct select_cands {
 	size_t nc;
 	double *ang, *cost, *ids;
@@ -209,39 +244,39 @@ static int parse_args(int argc, char **argv, struct select_args *a)
 		case 'c': a->candp = optarg; break;
 		case 't': a->spec = optarg; break;
 		case 'b':
-			if (parse_u64(optarg, &u) || u > 100000)
-				return usage_err("select", "--batch needs a count in 0..100000");
+			if (cli_parse_u64(optarg, &u) || u > 100000)
+				return cli_usage_err("select", "--batch needs a count in 0..100000");
 			so->batch = (size_t)u;
 			break;
 		case 'n':
-			if (parse_u64(optarg, &u) || u > 100000)
-				return usage_err("select", "--draws needs 0..100000");
+			if (cli_parse_u64(optarg, &u) || u > 100000)
+				return cli_usage_err("select", "--draws needs 0..100000");
 			so->ndraws = (int)u;
 			break;
 		case 'v':
-			if (parse_u64(optarg, &u) || u > 100000)
-				return usage_err("select", "--value-channels needs a count in 0..100000 (0: all)");
+			if (cli_parse_u64(optarg, &u) || u > 100000)
+				return cli_usage_err("select", "--value-channels needs a count in 0..100000 (0: all)");
 			so->nvalue = (size_t)u;
 			break;
 		case 'r': a->routep = optarg; break;
 		case 's':
-			if (parse_u64(optarg, &so->seed))
-				return usage_err("select", "--seed needs an unsigned integer");
+			if (cli_parse_u64(optarg, &so->seed))
+				return cli_usage_err("select", "--seed needs an unsigned integer");
 			break;
 		case 'h': fputs(select_help, stdout); return 0;
-		default: return usage_err("select", "bad option");
+		default: return cli_usage_err("select", "bad option");
 		}
 	}
 	if (optind != argc - 1)
-		return usage_err("select", "one MODEL expected");
+		return cli_usage_err("select", "one MODEL expected");
 	if (!a->candp || !a->spec)
-		return usage_err("select", "--candidates CAND.csv and --target SPEC are required");
+		return cli_usage_err("select", "--candidates CAND.csv and --target SPEC are required");
 	a->model = argv[optind];
 	return -1;
 }
 
 /* Check data row j (ncol numbers: r) of candp. 0, or -1 with err naming the row and the column. */
-static int check_row(const char *candp, size_t j, const double *r, bool route, struct acq_err *err)
+static int check_row(const char *candp, size_t j, const double *r, size_t ncol, struct acq_err *err)
 {
 	const char *const *names = cand_names;
 	double id = r[0];
@@ -255,8 +290,8 @@ static int check_row(const char *candp, size_t j, const double *r, bool route, s
 	if (!(r[5] > 0 && isfinite(r[5])))
 		return acq_errf(err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): cost_s = %g must be > 0 seconds", candp,
 				j + 1, id, r[5]);
-	if (route) {
-		for (int a = 8; a < 11; a++)
+	if (ncol > 6) {
+		for (size_t a = 8; a < ncol; a++)
 			if (!isfinite(r[a]))
 				return acq_errf(err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): %s is not a number", candp, j + 1,
 						id, names[a]);
@@ -264,6 +299,10 @@ static int check_row(const char *candp, size_t j, const double *r, bool route, s
 			return acq_errf(err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): base_s = %g must be > 0 and open_s = %g "
 					">= 0 seconds", candp, j + 1, id, r[6], r[7]);
 	}
+	if (ncol > 11 && !(r[11] > 0 && r[12] >= 0 && r[13] >= 1 && r[14] >= 0 && r[15] >= 0 && r[15] <= 1))
+		return acq_errf(err, ACQ_E_RANGE, "%s: data row %zu (id %.0f): needs point_s > 0, dark_s >= 0, rungs >= 1, "
+				"since >= 0, band_cos in [0, 1] (got %g, %g, %g, %g, %g)", candp, j + 1, id, r[11], r[12], r[13],
+				r[14], r[15]);
 	return 0;
 }
 
@@ -294,7 +333,7 @@ static int read_candidates(const struct select_args *a, struct select_route *rou
 	struct acq_err err = { 0 };
 	const char *candp = a->candp;
 	bool routed = a->routep != NULL;
-	size_t nc = 0, ncol = routed ? 11 : 6;
+	size_t nc = 0, ncol = !routed ? 6 : route->nnodes ? 16 : 11, nper = ncol == 16 ? 11 : routed ? 6 : 1;
 	double *rows = NULL;
 	if (csvio_read_columns(candp, cand_names, ncol, &nc, &rows, &err)) {
 		if (!header_only(candp, cand_names))
@@ -310,17 +349,17 @@ static int read_candidates(const struct select_args *a, struct select_route *rou
 	cd->nc = nc;
 	cd->ang = malloc((nc ? nc : 1) * 4 * sizeof *cd->ang);
 	cd->cost = malloc((nc ? nc : 1) * sizeof *cd->cost);
-	cd->ids = malloc((nc ? nc : 1) * (routed ? 6 : 1) * sizeof *cd->ids);
+	cd->ids = malloc((nc ? nc : 1) * nper * sizeof *cd->ids);
 	if (!cd->ang || !cd->cost || !cd->ids) {
 		free(rows);
 		cands_free(cd);
 		acq_errf(&err, ACQ_E_NOMEM, "select: out of memory");
-		return fail(&err);
+		return cli_fail(&err);
 	}
 	int bad = 0;
 	for (size_t j = 0; j < nc && !bad; j++) {
 		const double *r = rows + ncol * j;
-		if (check_row(candp, j, r, routed, &err)) {
+		if (check_row(candp, j, r, ncol, &err)) {
 			bad = 1;
 			break;
 		}
@@ -330,6 +369,8 @@ static int read_candidates(const struct select_args *a, struct select_route *rou
 				rd[3 * j + k] = r[8 + k];
 			rd[3 * nc + j] = r[6];
 			rd[4 * nc + j] = r[7];
+			for (size_t k = 11; k < ncol; k++) /* point, dark, rungs, since, band_cos */
+				rd[(k - 6) * nc + j] = r[k];
 		}
 		for (int k = 0; k < 4; k++)
 			cd->ang[4 * j + k] = r[1 + k] * M_PI / 180;
@@ -340,6 +381,13 @@ static int read_candidates(const struct select_args *a, struct select_route *rou
 		route->pos = cd->ids + nc;
 		route->base = cd->ids + 4 * nc;
 		route->open = cd->ids + 5 * nc;
+		if (route->nnodes) {
+			route->point = cd->ids + 6 * nc;
+			route->dark = cd->ids + 7 * nc;
+			route->rungs = cd->ids + 8 * nc;
+			route->since = cd->ids + 9 * nc;
+			route->band_cos = cd->ids + 10 * nc;
+		}
 	}
 	if (!bad && check_unique_ids(candp, cd->ids, nc, &err))
 		bad = 1;
@@ -424,8 +472,8 @@ static void write_picks(FILE *f, const struct select_result *res, const double *
 static int write_result(const struct select_args *a, const struct select_target *tg, const struct select_result *res,
 			const struct select_cands *cd, struct acq_err *err)
 {
-	struct out o;
-	if (out_open(&o, a->outp, err))
+	struct cli_out o;
+	if (cli_out_open(&o, a->outp, err))
 		return -1;
 	FILE *f = o.f;
 	write_target(f, a->spec, tg, res);
@@ -438,7 +486,7 @@ static int write_result(const struct select_args *a, const struct select_target 
 	}
 	fprintf(f, ",\"criterion\":\"%s\",\"candidates\":{\"read\":%zu,\"distinct\":%zu}}\n",
 		"gp-excess-variance-reduction-per-second", cd->nc, res->nunique);
-	return out_close(&o, 1, err) ? -1 : 0;
+	return cli_out_close(&o, 1, err) ? -1 : 0;
 }
 
 int cmd_select(int argc, char **argv)
@@ -452,8 +500,9 @@ int cmd_select(int argc, char **argv)
 	struct select_target tg;
 	if (select_target_parse(a.spec, &tg, &err))
 		return bad_input(&err);
-	struct select_route route;
-	if (a.routep && parse_route(a.routep, &route, &err))
+	struct select_route route = { 0 };
+	double nodes[4 * ROUTE_MAX_NODES];
+	if (a.routep && parse_route(a.routep, &route, nodes, &err))
 		return bad_input(&err);
 	struct select_cands cd = { 0 };
 	if ((rc = read_candidates(&a, &route, &cd)))
@@ -476,5 +525,5 @@ int cmd_select(int argc, char **argv)
 	select_result_free(&res);
 	recon_model_free(m);
 	cands_free(&cd);
-	return ok ? 0 : fail(&err);
+	return ok ? 0 : cli_fail(&err);
 }

@@ -50,20 +50,20 @@ int cmd_slices(int argc, char **argv)
 		case 'p': polar = optarg; break;
 		case 'c': csv = optarg; break;
 		case 'w':
-			if (parse_u64(optarg, &sweep))
-				return usage_err("slices", "--sweep needs an id");
+			if (cli_parse_u64(optarg, &sweep))
+				return cli_usage_err("slices", "--sweep needs an id");
 			have_sweep = 1;
 			break;
 		case 'l':
-			if (parse_double(optarg, &o.wl_lo) || !(o.wl_lo > 0))
-				return usage_err("slices", "--wavelength needs a positive number (nm)");
+			if (cli_parse_double(optarg, &o.wl_lo) || !(o.wl_lo > 0))
+				return cli_usage_err("slices", "--wavelength needs a positive number (nm)");
 			o.wl_hi = o.wl_lo;
 			break;
 		case 'b': {
 			char *end;
 			o.wl_lo = strtod(optarg, &end);
-			if (*end != ':' || parse_double(end + 1, &o.wl_hi) || !(o.wl_lo > 0) || !(o.wl_hi > o.wl_lo))
-				return usage_err("slices", "--band needs LO:HI in nm with LO < HI");
+			if (*end != ':' || cli_parse_double(end + 1, &o.wl_hi) || !(o.wl_lo > 0) || !(o.wl_hi > o.wl_lo))
+				return cli_usage_err("slices", "--band needs LO:HI in nm with LO < HI");
 			break;
 		}
 		case 't': {
@@ -71,9 +71,9 @@ int cmd_slices(int argc, char **argv)
 			nth = 0;
 			for (char *tok = strtok_r(dup, ",", &save); tok; tok = strtok_r(NULL, ",", &save)) {
 				double v;
-				if (nth == SLICES_MAX_THETA || parse_double(tok, &v) || v < 0 || v >= 90) {
+				if (nth == SLICES_MAX_THETA || cli_parse_double(tok, &v) || v < 0 || v >= 90) {
 					free(dup);
-					return usage_err("slices", "--theta-i needs up to 32 angles in [0, 90)");
+					return cli_usage_err("slices", "--theta-i needs up to 32 angles in [0, 90)");
 				}
 				th[nth++] = v * M_PI / 180;
 			}
@@ -81,29 +81,29 @@ int cmd_slices(int argc, char **argv)
 			break;
 		}
 		case 'k':
-			if (parse_double(optarg, &o.band_k) || !(o.band_k > 0))
-				return usage_err("slices", "--sigma-k needs a positive number");
+			if (cli_parse_double(optarg, &o.band_k) || !(o.band_k > 0))
+				return cli_usage_err("slices", "--sigma-k needs a positive number");
 			break;
 		case 'f':
-			if (parse_double(optarg, &o.phi_tol_deg) || !(o.phi_tol_deg > 0 && o.phi_tol_deg < 45))
-				return usage_err("slices", "--phi-tol needs 0..45 degrees");
+			if (cli_parse_double(optarg, &o.phi_tol_deg) || !(o.phi_tol_deg > 0 && o.phi_tol_deg < 45))
+				return cli_usage_err("slices", "--phi-tol needs 0..45 degrees");
 			break;
 		case 'z':
 			if (sscanf(optarg, "%dx%d", &o.width, &o.height) != 2)
-				return usage_err("slices", "--size needs WxH");
+				return cli_usage_err("slices", "--size needs WxH");
 			break;
 		case 'h': fputs(slices_help, stdout); return 0;
-		default: return usage_err("slices", "bad option");
+		default: return cli_usage_err("slices", "bad option");
 		}
 	}
 	if (optind != argc - 1 || !outp)
-		return usage_err("slices", "MODEL and -o OUT.png expected");
+		return cli_usage_err("slices", "MODEL and -o OUT.png expected");
 	if ((db != NULL) != have_sweep || (db && samples))
-		return usage_err("slices", "--db needs --sweep ID (and no --samples)");
+		return cli_usage_err("slices", "--db needs --sweep ID (and no --samples)");
 	struct acq_err err = { 0 };
 	struct recon_model *m;
 	if (recon_model_load(argv[optind], &m, &err))
-		return fail(&err);
+		return cli_fail(&err);
 	if (isnan(o.wl_lo)) {
 		double mid = 0.5 * (m->wl[0] + m->wl[m->nwl - 1]);
 		o.wl_lo = o.wl_hi = (550 >= m->wl[0] && 550 <= m->wl[m->nwl - 1]) ? 550 : mid;
@@ -130,5 +130,5 @@ out:
 	if (have)
 		csvio_samples_free(&s);
 	recon_model_free(m);
-	return rc ? fail(&err) : 0;
+	return rc ? cli_fail(&err) : 0;
 }

@@ -125,8 +125,8 @@ static int cmd_cand(const struct plan_spec *s, const struct bench_geom *g, const
 		return fail("candidates", err.msg);
 	}
 	int bad = rsel_write_candidates(out, g, c, n, &err); /* as the daemon's decision writes them */
-	char route[512];
-	plan_adaptive_route_spec(g, t, &from, route, sizeof route);
+	char route[PLAN_ROUTE_SPEC_LEN];
+	plan_adaptive_route_spec(s, g, t, &from, route, sizeof route);
 	printf("%zu\n%s\n", n, route);
 	free(done);
 	free(c);

@@ -6,7 +6,8 @@ Checked: the JSON's fields and types; the picks are candidates of the file, at m
 one measurement, the cheaper copy's id; the predicted value never rises along the batch and starts below the
 current value; the current value is the RMS over wavelengths of `brdf-recon dhr`'s sigma (same draws and seed,
 to 1e-9 relative) per incidence, the largest of them; a threshold above the value is met with no pick; the ln f
-target; a header-only candidate file; bad input of every kind exits 2 with a message naming what (and the row),
+target; --route's charges (base/open, and with band nodes the planner's exposure price: the picks' charges add up to
+their formula; a dark due, more rungs, a wider band cost more); a header-only candidate file; bad input of every kind exits 2 with a message naming what (and the row),
 never a crash. `fit --warm`: the previous trend kind kept, shape and smoothing searched, so the model (settings, DHR
 and σ) equals a cold fit's when that keeps the trend kind; a white model's settings refused on a sharp lobe (full
 search); a conflicting kernel exits 2, a missing model 1."""
@@ -167,6 +168,48 @@ def main():
     jr = json.loads(p.stdout)
     check(len(jr["picks"]) == 4 and all(2 <= x["cost_s"] <= 2 + 3 + 20 for x in jr["picks"]) and
           jr["picks"][0]["cost_s"] >= 5, "route: picks charged base (+ open when new) + their move")
+    # --route with band nodes (the planner's price of the exposures, plan_time.c): every candidate at the arms' bench
+    # position (no motion) and incidence, so the picks' charges add up to their exposure seconds: point_s each, a dark
+    # of dark_s with probability q^(since + k) for the k-th, q = 1 - 1/rungs, the band of the picks' band_cos
+    # (largest / smallest) moving point by the nodes' difference, dark and rungs by their ratio
+    nodes = [(1, 2.0, 1.0, 4.0), (10, 3.0, 2.0, 8.0)]
+    broute = "40,30,0,10,20,0.3,20,60,0.2,30,90,0.2,0.075," + ",".join("%g,%g,%g,%g" % x for x in nodes)
+    bcands = os.path.join(d, "band.csv")
+
+    def banded(since, coses, rungs=4.0, n=None):
+        some = [r for r in rows if r[0] < 100000 and r[1] == 30 and r[3] in (35, 65)][:n] if n else rows
+        with open(bcands, "w") as fh:
+            fh.write("id,theta_i,phi_i,theta_o,phi_o,cost_s,base_s,open_s,laser_deg,det_theta_deg,det_phi_deg,"
+                     "point_s,dark_s,rungs,since,band_cos\n")
+            for k, r in enumerate(some):
+                fh.write("%d,%.9g,%.9g,%.9g,%.9g,%.9g,2,3,40,30,0,2,1,%g,%g,%g\n"
+                         % (tuple(r) + (rungs, since, coses[k % len(coses)])))
+        picks = json.loads(run("select", model, "--candidates", bcands, "--route", broute, "--target", "lnf",
+                               "--batch", str(n or 4)).stdout)["picks"]
+        cs = [coses[[r[0] for r in some].index(x["id"]) % len(coses)] for x in picks]
+        rho = max(cs) / min(cs)
+        f = math.log(rho) / math.log(nodes[1][0])  # the nodes' band, linear in ln rho
+        node = [a + f * (b - a) for a, b in zip(nodes[0], nodes[1])]
+        q = 1 - 1 / (rungs * node[3] / nodes[0][3])
+        k = len(picks)
+        want = k * node[1] + node[2] / nodes[0][2] * q ** since * (1 - q ** k) / (1 - q)
+        got = sum(x["cost_s"] for x in picks)
+        print("band price: since %g, band_cos %s, rungs %g: %d picks charged %.6f s, expected %.6f s (rho %g)"
+              % (since, coses, rungs, k, got, want, rho))
+        check(k == (n or 4) and abs(got - want) < 1e-6, "band price: the picks' charges are their exposure seconds")
+        return got
+
+    fresh, cached, more = banded(0, [1.0]), banded(2, [1.0]), banded(2, [1.0], rungs=8.0)
+    banded(0, [1.0, 0.5, 0.25, 0.1])  # whichever band the picks span
+    two, wide = banded(0, [1.0, 1.0], n=2), banded(0, [1.0, 0.1], n=2)  # two picks: the second widens the band
+    check(fresh > cached and more > cached and wide > two + 1.9, "band price: a dark due, more rungs, a wider band "
+          "(its point 1 s dearer for both picks) cost more")
+    cases += [
+        (["select", model, "--candidates", rcands, "--target", "lnf", "--route", broute], "point_s"),
+        (["select", model, "--candidates", bcands, "--target", "lnf", "--route", broute.replace(",1,2,1,4,", ",2,2,1,4,")],
+         "band node 1"),
+        (["select", model, "--candidates", bcands, "--target", "lnf", "--route", broute + ",20,1"], "band nodes of 4"),
+    ]
     with open(os.path.join(d, "noroute.csv"), "w") as fh:
         fh.write("id,theta_i,phi_i,theta_o,phi_o,cost_s\n1,10,0,10,0,5\n")
     with open(os.path.join(d, "badbase.csv"), "w") as fh:

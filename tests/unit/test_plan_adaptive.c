@@ -2,7 +2,8 @@
  * YAML and its located errors, the target as select takes it, the candidates (visible, within the limits,
  * reachable, never a measured configuration, costed at least their move and exposures), batches ordered from
  * the arms' position, a stored order replayed, a batch appended to a plan, and a batch continuing the sweep's dark
- * cache (base_s, open_s of the candidates). */
+ * cache (base_s, open_s of the candidates), and select's price of a batch's exposures (the candidates' point_s,
+ * dark_s, rungs, since, band_cos and the route's band nodes) against the planner's. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -15,6 +16,7 @@
 
 #include "config/bench.h"
 #include "daemon/plan/plan.h"
+#include "recon/select_int.h"
 
 static const char *const ADAPTIVE = "name: ad\n"
 				    "kind: adaptive\n"
@@ -402,6 +404,14 @@ static void test_batch_order(void **state)
 	plan_spec_free(s);
 }
 
+/* The default bench and executor timing of an adaptive batch (no reference: a batch continues the sweep). */
+static void batch_setup(struct bench_geom *g, struct plan_timing *tm)
+{
+	bench_defaults(g);
+	plan_timing_defaults(tm);
+	tm->reference = false;
+}
+
 /* An adaptive batch continues the sweep's dark cache (executor_acq.c clears it only when the batch starts at another
  * incidence): a batch of fixed integration at the last point's incidence is predicted without a dark at its first
  * step, one at another incidence with it, and without the continuation (the old model) the first step always had
@@ -411,10 +421,8 @@ static void test_continue_darks(void **state)
 {
 	(void)state;
 	struct bench_geom g;
-	bench_defaults(&g);
 	struct plan_timing tm;
-	plan_timing_defaults(&tm);
-	tm.reference = false;
+	batch_setup(&g, &tm);
 	struct plan_spec *s = load_ok(ADAPTIVE);
 	struct acq_err err = { 0 };
 	struct plan_pos done[3] = { { 0, 30, 10 }, { 40, 30, 200 }, { 40, 60, 10 } }, same = { 40, 45, 100 },
@@ -458,6 +466,138 @@ static void test_continue_darks(void **state)
 	plan_spec_free(s);
 }
 
+/* Select's price of a batch against the planner's (recon/select_route.c against plan_time.c): an auto-integration
+ * batch of 12 candidates over three incidences (5 at the arms' incidence, whose dark cache holds 2 points' rungs)
+ * with a spread of detector zeniths, each pick charged its increment as `brdf-recon select --route` does from the
+ * candidates' point_s, dark_s, rungs, since, band_cos and the route spec's band nodes: the charged exposure seconds
+ * are the planner's batch seconds without the motion to 1 % (the planner's first probe is at the estimate, not the
+ * band's mean). The old price (base_s, open_s at a new incidence) charged ~3/4 of it (printed), as session 10
+ * measured on whole runs. The charge of the same pick with a dark due (since 0 instead of the cache's count) or more
+ * rungs is higher. */
+static void test_route_price(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	struct plan_timing tm;
+	batch_setup(&g, &tm);
+	char yaml[2048];
+	const char *fixed = strstr(ADAPTIVE, "integration:");
+	snprintf(yaml, sizeof yaml, "%.*sintegration: {mode: auto, estimate_ms: 20}\naverages: 2\n", (int)(fixed - ADAPTIVE),
+		 ADAPTIVE);
+	struct plan_spec *s = load_ok(yaml);
+	struct acq_err err = { 0 };
+	struct plan_pos done[3] = { { 0, 30, 10 }, { 40, 30, 200 }, { 40, 60, 10 } };
+	struct plan_cand *c = NULL;
+	size_t n = 0;
+	assert_int_equal(plan_adaptive_candidates(s, &g, &tm, &done[2], done, 3, &c, &n, &err), 0);
+	/* the route spec as select parses it */
+	char spec[PLAN_ROUTE_SPEC_LEN];
+	plan_adaptive_route_spec(s, &g, &tm, &done[2], spec, sizeof spec);
+	double v[13 + 4 * 64];
+	size_t nv = 0;
+	for (char *p = spec, *e; nv < sizeof v / sizeof *v; p = e + 1) {
+		v[nv++] = strtod(p, &e);
+		if (!*e)
+			break;
+	}
+	assert_true(nv > 13 + 4 && (nv - 13) % 4 == 0);
+	assert_true(v[13] == 1 && v[nv - 4] > v[13] && v[nv - 3] > v[14]); /* the band widens: dearer points */
+	/* 12 picks: at the arms' incidence 40 (5), 0 (4), 20 (3), every 5th candidate there */
+	const double inc[3] = { 40, 0, 20 };
+	const size_t want[3] = { 5, 4, 3 };
+	size_t pick[12], k = 0;
+	for (int q = 0; q < 3; q++)
+		for (size_t i = 0, m = 0, got = 0; i < n && got < want[q]; i++)
+			if (c[i].pos.laser_theta == inc[q] && m++ % 5 == 0)
+				pick[k++] = i, got++;
+	assert_int_equal(k, 12);
+	double *col = malloc(9 * n * sizeof *col);
+	assert_non_null(col);
+	for (size_t i = 0; i < n; i++) {
+		col[3 * i] = c[i].pos.laser_theta;
+		col[3 * i + 1] = c[i].pos.det_theta;
+		col[3 * i + 2] = c[i].pos.det_phi;
+		double *r = col + 3 * n;
+		r[i] = c[i].base_s, r[n + i] = c[i].open_s, r[2 * n + i] = c[i].point_s, r[3 * n + i] = c[i].dark_s;
+		r[4 * n + i] = c[i].rungs, r[5 * n + i] = c[i].since;
+	}
+	double *bc = malloc(n * sizeof *bc);
+	assert_non_null(bc);
+	for (size_t i = 0; i < n; i++)
+		bc[i] = c[i].band_cos;
+	struct select_route rt = { .pos = col, .base = col + 3 * n, .open = col + 4 * n, .point = col + 5 * n,
+				   .dark = col + 6 * n, .rungs = col + 7 * n, .since = col + 8 * n, .band_cos = bc,
+				   .nodes = v + 13, .nnodes = (nv - 13) / 4, .move_s = v[12] };
+	for (int a = 0; a < 3; a++)
+		rt.from[a] = v[a], rt.speed[a] = v[3 + 3 * a], rt.accel[a] = v[4 + 3 * a], rt.settle[a] = v[5 + 3 * a];
+	struct sel_route w;
+	assert_int_equal(sel_route_init(&w, &rt, 12), 0);
+	double charged = 0, old = 0, moves = 0;
+	struct plan_pos pts[12];
+	for (size_t j = 0; j < 12; j++) {
+		size_t at, i = pick[j];
+		double cj = sel_route_cost(&w, i, &at);
+		/* the exposure part of the charge: the charge less the insertion's motion */
+		double before = w.T;
+		sel_route_add(&w, i, at);
+		charged += cj;
+		moves += cj - (w.T - before);
+		bool seen = false;
+		for (size_t x = 0; x < j; x++)
+			seen |= c[pick[x]].pos.laser_theta == c[i].pos.laser_theta;
+		old += c[i].base_s + (seen || c[i].pos.laser_theta == 40 ? 0 : c[i].open_s);
+		pts[j] = c[i].pos;
+	}
+	/* a dark due (since 0) or more rungs make the same last pick dearer: the route before it, then each variant */
+	struct sel_route w2;
+	assert_int_equal(sel_route_init(&w2, &rt, 12), 0);
+	for (size_t j = 0; j < 11; j++) {
+		size_t at;
+		sel_route_cost(&w2, pick[j], &at);
+		sel_route_add(&w2, pick[j], at);
+	}
+	size_t last = pick[0]; /* at the arms' incidence, since 2: its dark partly cached */
+	double *since = col + 8 * n, *rungs = col + 7 * n;
+	struct sel_route w3;
+	assert_int_equal(sel_route_init(&w3, &rt, 12), 0);
+	size_t at;
+	double c0 = sel_route_cost(&w3, last, &at);
+	since[last] = 0;
+	double cdue = sel_route_cost(&w3, last, &at);
+	since[last] = c[last].since;
+	rungs[last] *= 2;
+	double crung = sel_route_cost(&w3, last, &at);
+	rungs[last] = c[last].rungs;
+	printf("route price: first pick at the arms' incidence %.4f s, with a dark due %.4f s, twice the rungs %.4f s\n",
+	       c0, cdue, crung);
+	/* alone in the batch (its own band): the dark's probability q^since against 1, q = 1 - 1/rungs */
+	double q = 1 - 1 / c[last].rungs;
+	assert_true(c[last].since == 2 && c[last].dark_s > 0 && c[last].rungs > 2);
+	assert_true(fabs(cdue - c0 - c[last].dark_s * (1 - q * q)) < 1e-9);
+	assert_true(fabs(crung - c0 - c[last].dark_s * (pow(1 - 0.5 / c[last].rungs, 2) - q * q)) < 1e-9);
+	sel_route_free(&w3);
+	sel_route_free(&w2);
+	/* the planner's batch */
+	struct plan_result *r = NULL;
+	assert_int_equal(plan_make_points(s, &g, pts, 12, &done[2], &r, &err), 0);
+	assert_int_equal(r->n_steps, 12);
+	struct plan_timing tc = tm;
+	plan_timing_continue(&tc, done, 3, sizeof *done);
+	plan_time_apply(s, &g, &tc, r);
+	double expo = r->predicted_s - r->t_motion_s - r->t_settle_s;
+	printf("route price: planner %.3f s (exposures %.3f s, darks %.3f s); charged %.3f s (exposures %.3f, motion "
+	       "%.3f s); the old price's exposures %.3f s (%.1f %%)\n", r->predicted_s, expo, r->darks_s, charged, w.T,
+	       moves, old, 100 * old / expo);
+	assert_true(fabs(w.T - expo) < 0.01 * expo);
+	assert_true(fabs(charged - moves - w.T) < 1e-9);
+	sel_route_free(&w);
+	plan_result_free(r);
+	free(bc);
+	free(col);
+	free(c);
+	plan_spec_free(s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -468,6 +608,7 @@ int main(void)
 		cmocka_unit_test(test_fit_picks),
 		cmocka_unit_test(test_batch_order),
 		cmocka_unit_test(test_continue_darks),
+		cmocka_unit_test(test_route_price),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
