@@ -10,6 +10,8 @@
 #include <strings.h>
 #include <yaml.h>
 
+#include "config/acq_file.h"
+
 #define YC_MAX_DEPTH 64
 #define YC_MAX_FILE (16u << 20)
 
@@ -251,34 +253,11 @@ int yc_load_string(const char *name, const char *text, size_t len, struct yc_doc
 int yc_load_file(const char *path, struct yc_doc **out, struct acq_err *err)
 {
 	*out = NULL;
-	FILE *f = fopen(path, "rb");
-	if (!f)
-		return acq_errf(err, errno == ENOENT ? ACQ_E_NOTFOUND : ACQ_E_IO, "%s: cannot open: %s", path,
-				strerror(errno));
-	char *buf = NULL;
-	size_t len = 0, cap = 0;
-	int rc = 0;
-	for (;;) {
-		if (len + 4096 > cap) {
-			cap = cap ? cap * 2 : 8192;
-			char *nb = cap > YC_MAX_FILE ? NULL : realloc(buf, cap);
-			if (!nb) {
-				rc = acq_errf(err, ACQ_E_RANGE, "%s: file larger than %u bytes", path, YC_MAX_FILE);
-				break;
-			}
-			buf = nb;
-		}
-		size_t got = fread(buf + len, 1, cap - len, f);
-		len += got;
-		if (got == 0) {
-			if (ferror(f))
-				rc = acq_errf(err, ACQ_E_IO, "%s: read error: %s", path, strerror(errno));
-			break;
-		}
-	}
-	fclose(f);
-	if (rc == 0)
-		rc = yc_load_string(path, buf ? buf : "", len, out, err);
+	char *buf;
+	size_t len;
+	if (acq_file_read(path, YC_MAX_FILE, 0, &buf, &len, err))
+		return -1;
+	int rc = yc_load_string(path, buf, len, out, err);
 	free(buf);
 	return rc;
 }

@@ -294,6 +294,11 @@ int main(int argc, char **argv)
 		goto fail;
 	app.started_mono = loop_now(app.lp);
 	app.started_wall = app_wallclock();
+	/* The job helper now, while the daemon is small (no thread, no database): plans are forked from it, never
+	 * from the daemon (job.h, job_fork_msg). */
+	job_init(app.lp);
+	if (job_helper_start(&err))
+		goto fail;
 	if (store_open(app.conf->d.database, &app.store, &err))
 		goto fail;
 	if (store_degraded(app.store))
@@ -309,7 +314,6 @@ int main(int argc, char **argv)
 	}
 	if (signals_init(&err) || loop_fd_add(app.lp, sig_pipe[0], POLLIN, on_sigpipe, &app, &err))
 		goto fail;
-	job_init(app.lp);
 	if (server_init(app.lp, &app.conf->d, ACQ_VERSION, commands_handle, &app, &app.srv, &err))
 		goto fail;
 	if (devices_init(app.lp, app.store, app.conf, app_device_notify, &app, app_wallclock, &app.dev, &err))

@@ -178,15 +178,28 @@ struct homing {
 
 static void home_next(struct homing *h);
 
+/* Reply err, naming the axes homed before it (the reply shows the state after the command), and end h. */
+static void home_refused(struct homing *h, const struct acq_err *err)
+{
+	char msg[sizeof err->msg + 128];
+	size_t n = (size_t)snprintf(msg, sizeof msg, "%s", err->msg);
+	for (size_t i = 0; i < json_array_size(h->homed) && n < sizeof msg; i++)
+		n += (size_t)snprintf(msg + n, sizeof msg - n, "%s%s", i ? ", " : "; homed before: ",
+				      json_string_value(json_array_get(h->homed, i)));
+	server_reply_error(h->app->srv, h->serial, h->id, proto_code_of(err), msg);
+	json_decref(h->homed);
+	json_decref(h->id);
+	free(h);
+}
+
 static void home_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
 {
 	struct homing *h = ctx;
 	json_decref(result);
 	if (rc) {
-		server_reply_error(h->app->srv, h->serial, h->id, proto_code_of(err), err->msg);
-		json_decref(h->homed);
-		json_decref(h->id);
-		free(h);
+		/* the axis that failed is the last one named */
+		json_array_remove(h->homed, json_array_size(h->homed) - 1);
+		home_refused(h, err);
 		return;
 	}
 	home_next(h);
@@ -219,13 +232,12 @@ static void home_next(struct homing *h)
 	for (int i = 0; i < 3; i++)
 		json_object_set_new(o, conf_dev_name((enum conf_dev)i), isnan(pos[i]) ? json_null() : json_real(pos[i]));
 	server_reply(h->app->srv, h->serial, h->id, o);
-	goto out;
-fail:
-	server_reply_error(h->app->srv, h->serial, h->id, proto_code_of(&err), err.msg);
-out:
 	json_decref(h->homed);
 	json_decref(h->id);
 	free(h);
+	return;
+fail:
+	home_refused(h, &err);
 }
 
 void cmd_manual_home(struct app *app, const struct srv_peer *peer, struct proto_req *req)

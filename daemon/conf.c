@@ -8,6 +8,7 @@
 #include <string.h>
 #include <syslog.h>
 
+#include "config/acq_file.h"
 #include "drivers/axis.h"
 #include "drivers/laser.h"
 #include "drivers/spectro.h"
@@ -461,41 +462,14 @@ static int parse_devices(struct conf *c, struct yc_node *devs, struct acq_err *e
 	return yc_check_unknown(devs, "devices", err);
 }
 
-static char *read_text(const char *path, struct acq_err *err)
-{
-	FILE *f = fopen(path, "rb");
-	if (!f) {
-		acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
-		return NULL;
-	}
-	size_t cap = 4096, n = 0;
-	char *buf = malloc(cap);
-	while (buf) {
-		n += fread(buf + n, 1, cap - n - 1, f);
-		if (n < cap - 1)
-			break;
-		char *nb = cap > (16u << 20) ? NULL : realloc(buf, cap * 2);
-		if (!nb) {
-			free(buf);
-			buf = NULL;
-			break;
-		}
-		buf = nb;
-		cap *= 2;
-	}
-	fclose(f);
-	if (!buf)
-		acq_errf(err, ACQ_E_NOMEM, "%s: too large or out of memory", path);
-	else
-		buf[n] = 0;
-	return buf;
-}
+/* The largest configuration file read (acq_file_read refuses a larger one). */
+#define CONF_MAX_BYTES ((size_t)16 << 20)
 
 int conf_load(const char *path, const struct conf_sim *sim, struct conf **out, struct acq_err *err)
 {
 	*out = NULL;
-	char *text = read_text(path, err);
-	if (!text)
+	char *text;
+	if (acq_file_read(path, CONF_MAX_BYTES, 0, &text, NULL, err))
 		return -1;
 	int rc = conf_load_text(path, text, strlen(text), sim, out, err);
 	free(text);

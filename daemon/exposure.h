@@ -161,6 +161,19 @@ int exp_prior_load(struct store *st, const char *sample, long long exclude, cons
  * sweep.c): as exp_prior_load, out->sweep = sweep_id when it has a done point, sample empty. 0, or -1 with err. */
 int exp_prior_load_sweep(struct store *st, long long sweep_id, const struct bench_geom *g,
 			 const struct plan_timing *t, struct plan_prior *out, struct acq_err *err);
+/* A running sweep's exposure rows read so far (exp_prior_update; zero-initialised: none read). */
+struct exp_prior_rows {
+	struct store_prior_row *v;
+	size_t n, cap;
+	long long next_order;       /* the points before this order index are read */
+};
+/* exp_prior_load_sweep() reading only the points committed since R's last update (their rows kept in R): the same
+ * prior as reading them all, for the cost of the new ones' query (O(new) rows read instead of O(done); the figures
+ * are still computed over every row). 0, or -1 with err (R then holds the rows read before). */
+int exp_prior_update(struct exp_prior_rows *R, struct store *st, long long sweep_id, const struct bench_geom *g,
+		     const struct plan_timing *t, struct plan_prior *out, struct acq_err *err);
+/* Free R's rows; R is then empty (none read). */
+void exp_prior_rows_free(struct exp_prior_rows *R);
 /* Sweeps with fewer points measured between commits than this do not time the host (the quick plan's 15 points at
  * time scale 1 gave -27 to +5 ms per point: the bench's own jitter). */
 #define EXP_HOST_MIN_POINTS 50

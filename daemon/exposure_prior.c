@@ -176,14 +176,9 @@ int exp_prior_build(const struct store_prior_row *rows, size_t n, const struct b
 	return 0;
 }
 
-struct rows {
-	struct store_prior_row *v;
-	size_t n, cap;
-};
-
 static int add_row(void *ctx, const struct store_prior_row *r)
 {
-	struct rows *R = ctx;
+	struct exp_prior_rows *R = ctx;
 	if (R->n == R->cap) {
 		size_t cap = R->cap ? 2 * R->cap : 1024;
 		struct store_prior_row *v = realloc(R->v, cap * sizeof *v);
@@ -197,9 +192,10 @@ static int add_row(void *ctx, const struct store_prior_row *r)
 }
 
 /* The prior from rows in R (sweep id of the sample name; NULL: none) into out. */
-static int prior_from(struct rows *R, int64_t id, const char *sample, const struct bench_geom *g,
+static int prior_from(const struct exp_prior_rows *R, int64_t id, const char *sample, const struct bench_geom *g,
 		      const struct plan_timing *t, struct plan_prior *out, struct acq_err *err)
 {
+	memset(out, 0, sizeof *out);
 	if (exp_prior_build(R->v, R->n, g, t, out))
 		return acq_errf(err, ACQ_E_NOMEM, "exposure prior of sweep %lld: out of memory", (long long)id);
 	if (out->n_inc > 0) {
@@ -213,24 +209,69 @@ int exp_prior_load(struct store *st, const char *sample, long long exclude, cons
 		   const struct plan_timing *t, struct plan_prior *out, struct acq_err *err)
 {
 	memset(out, 0, sizeof *out);
-	struct rows R = { 0 };
+	struct exp_prior_rows R = { 0 };
 	int64_t id = 0;
 	int rc = store_prior_each(st, sample, exclude, &id, add_row, &R, err);
 	if (rc == 0 && id > 0)
 		rc = prior_from(&R, id, sample, g, t, out, err);
-	free(R.v);
+	exp_prior_rows_free(&R);
 	return rc;
+}
+
+void exp_prior_rows_free(struct exp_prior_rows *R)
+{
+	free(R->v);
+	*R = (struct exp_prior_rows){ 0 };
+}
+
+/* The rows of the points committed since the last read into R, which stays in store_prior_rows' order (incidence,
+ * point, time taken): the new points come after every point read (points are committed in the plan's order and
+ * never return to pending), so they merge into R by incidence alone, after R's rows of the same incidence. */
+static int rows_update(struct exp_prior_rows *R, struct store *st, long long sweep_id, struct acq_err *err)
+{
+	struct exp_prior_rows N = { 0 };
+	if (store_prior_rows(st, sweep_id, R->next_order, add_row, &N, err)) {
+		exp_prior_rows_free(&N);
+		return -1;
+	}
+	if (N.n == 0)
+		return 0;
+	if (R->n + N.n > R->cap) {
+		struct store_prior_row *v = realloc(R->v, (R->n + N.n) * sizeof *v);
+		if (!v) {
+			exp_prior_rows_free(&N);
+			return acq_errf(err, ACQ_E_NOMEM, "exposure prior of sweep %lld: out of memory", sweep_id);
+		}
+		R->v = v;
+		R->cap = R->n + N.n;
+	}
+	/* merge from the back: of equal incidences R's rows go first */
+	size_t i = R->n, j = N.n, k = R->n + N.n;
+	while (j > 0)
+		R->v[--k] = i > 0 && R->v[i - 1].theta_i > N.v[j - 1].theta_i ? R->v[--i] : N.v[--j];
+	R->n += N.n;
+	for (size_t m = 0; m < N.n; m++)
+		if (N.v[m].order_index >= R->next_order)
+			R->next_order = N.v[m].order_index + 1;
+	exp_prior_rows_free(&N);
+	return 0;
+}
+
+int exp_prior_update(struct exp_prior_rows *R, struct store *st, long long sweep_id, const struct bench_geom *g,
+		     const struct plan_timing *t, struct plan_prior *out, struct acq_err *err)
+{
+	memset(out, 0, sizeof *out);
+	if (rows_update(R, st, sweep_id, err))
+		return -1;
+	return R->n > 0 ? prior_from(R, sweep_id, NULL, g, t, out, err) : 0;
 }
 
 int exp_prior_load_sweep(struct store *st, long long sweep_id, const struct bench_geom *g,
 			 const struct plan_timing *t, struct plan_prior *out, struct acq_err *err)
 {
-	memset(out, 0, sizeof *out);
-	struct rows R = { 0 };
-	int rc = store_prior_rows(st, sweep_id, add_row, &R, err);
-	if (rc == 0 && R.n > 0)
-		rc = prior_from(&R, sweep_id, NULL, g, t, out, err);
-	free(R.v);
+	struct exp_prior_rows R = { 0 };
+	int rc = exp_prior_update(&R, st, sweep_id, g, t, out, err);
+	exp_prior_rows_free(&R);
 	return rc;
 }
 

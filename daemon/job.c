@@ -9,14 +9,20 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/prctl.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "daemon/job_int.h"
+#include "daemon/log.h"
 #include "daemon/loop.h"
 
 struct job {
-	pid_t pid;
+	pid_t pid;              /* 0 for a helper's child (job_fork_msg): hid names it */
+	uint64_t hid;
+	bool lost;              /* the helper died while it ran */
 	int fd;                 /* read end of the output pipe, -1 once drained */
 	bool exited;
 	int status;
@@ -25,6 +31,7 @@ struct job {
 	bool keep_head, truncated;
 	uint64_t timer;
 	bool killed, timed_out;
+	bool hkilled;           /* a helper's child: SIGKILL asked for (its timer then checks the helper) */
 	job_done_fn done;
 	void *arg;
 	struct job *next;
@@ -32,6 +39,32 @@ struct job {
 
 static struct loop *job_loop;
 static struct job *job_list;
+
+/* The helper (job_helper.c): its socket (-1: not running), process, the next child's id. */
+static int h_sock = -1;
+static pid_t h_pid;
+static uint64_t h_next = 1;
+static unsigned h_starts;
+static pid_t h_dead[8]; /* helpers gone but not reaped yet (job_reap) */
+
+/* Reap h_pid if it has exited, else keep it for job_reap; h_pid is 0 after. */
+static void helper_forget(void)
+{
+	if (h_pid <= 0)
+		return;
+	if (waitpid(h_pid, NULL, WNOHANG) != h_pid) {
+		size_t i = 0;
+		while (i < sizeof h_dead / sizeof h_dead[0] && h_dead[i])
+			i++;
+		if (i == sizeof h_dead / sizeof h_dead[0]) { /* full (unlikely): wait for the oldest, SIGKILLed */
+			kill(h_dead[0], SIGKILL);
+			waitpid(h_dead[0], NULL, 0);
+			i = 0;
+		}
+		h_dead[i] = h_pid;
+	}
+	h_pid = 0;
+}
 
 void job_init(struct loop *lp)
 {
@@ -65,45 +98,179 @@ static void maybe_done(struct job *j)
 	job_free(j);
 }
 
+/* Append up to 4 reads (of at most 64 KiB) of the child's output: a large output (a plan with every step) costs
+ * few loop turns, each bounded. */
 static void on_output(struct loop *lp, int fd, short revents, void *arg)
 {
 	(void)lp;
 	(void)revents;
 	struct job *j = arg;
 	char buf[8192];
-	ssize_t n = read(fd, buf, sizeof buf);
-	if (n < 0 && (errno == EINTR || errno == EAGAIN))
-		return;
-	if (n <= 0) {
-		loop_fd_del(job_loop, fd);
-		close(fd);
-		j->fd = -1;
-		maybe_done(j);
-		return;
-	}
-	size_t k = (size_t)n;
 	_Static_assert(sizeof buf < JOB_OUTPUT_MAX, "one read fits in the kept output");
-	if (j->keep_head && j->len + k > j->alloc && j->alloc < j->cap) {
-		/* job_fork_out(): the buffer grows with the output, up to its cap */
-		size_t a = j->alloc;
-		while (a < j->len + k && a < j->cap)
-			a = a * 2 < j->cap ? a * 2 : j->cap;
-		char *o = realloc(j->out, a + 1);
-		if (o) {
-			j->out = o;
-			j->alloc = a;
+	for (int turn = 0; turn < 4; turn++) {
+		if (j->keep_head && j->alloc - j->len < 65536 && j->alloc < j->cap) {
+			/* job_fork_out(): the buffer grows with the output, up to its cap */
+			size_t a = j->alloc;
+			while (a < j->len + 65536 && a < j->cap)
+				a = a * 2 < j->cap ? a * 2 : j->cap;
+			char *o = realloc(j->out, a + 1);
+			if (o) {
+				j->out = o;
+				j->alloc = a;
+			}
 		}
+		bool direct = j->keep_head && j->alloc > j->len; /* into the kept output itself */
+		size_t room = direct ? j->alloc - j->len : sizeof buf;
+		ssize_t n = read(fd, direct ? j->out + j->len : buf, room < 65536 ? room : 65536);
+		if (n < 0 && (errno == EINTR || errno == EAGAIN))
+			return;
+		if (n <= 0) {
+			loop_fd_del(job_loop, fd);
+			close(fd);
+			j->fd = -1;
+			maybe_done(j);
+			return;
+		}
+		size_t k = (size_t)n;
+		if (direct) {
+			j->len += k;
+			continue;
+		}
+		if (j->keep_head) { /* past the bound: dropped */
+			j->truncated = true;
+			continue;
+		}
+		if (j->len + k > j->cap) { /* job_start(): the last cap bytes */
+			size_t drop = j->len + k - j->cap;
+			memmove(j->out, j->out + drop, j->len - drop);
+			j->len -= drop;
+		}
+		memcpy(j->out + j->len, buf, k);
+		j->len += k;
 	}
-	if (j->keep_head && j->len + k > j->alloc) {
-		k = j->alloc - j->len;
-		j->truncated = true;
-	} else if (j->len + k > j->cap) {
-		size_t drop = j->len + k - j->cap;
-		memmove(j->out, j->out + drop, j->len - drop);
-		j->len -= drop;
+}
+
+/* ---- the helper's side of the daemon (job_fork_msg) ---- */
+
+static int helper_send(struct jobh_msg *m, const int *fds, int nfd)
+{
+	union {
+		char buf[CMSG_SPACE(2 * sizeof(int))];
+		struct cmsghdr align;
+	} cb;
+	struct iovec iov = { m, sizeof *m };
+	struct msghdr mh = { .msg_iov = &iov, .msg_iovlen = 1 };
+	if (nfd) {
+		memset(&cb, 0, sizeof cb);
+		mh.msg_control = cb.buf;
+		mh.msg_controllen = CMSG_SPACE(nfd * sizeof(int));
+		struct cmsghdr *c = CMSG_FIRSTHDR(&mh);
+		c->cmsg_level = SOL_SOCKET;
+		c->cmsg_type = SCM_RIGHTS;
+		c->cmsg_len = CMSG_LEN(nfd * sizeof(int));
+		memcpy(CMSG_DATA(c), fds, nfd * sizeof(int));
 	}
-	memcpy(j->out + j->len, buf, k);
-	j->len += k;
+	ssize_t n;
+	do /* never waits: a helper that does not read its messages fails the request */
+		n = sendmsg(h_sock, &mh, MSG_DONTWAIT | MSG_NOSIGNAL);
+	while (n < 0 && errno == EINTR);
+	return n == (ssize_t)sizeof *m ? 0 : -1;
+}
+
+static void signal_job(struct job *j, int sig)
+{
+	if (!j->hid) {
+		kill(j->pid, sig);
+		return;
+	}
+	struct jobh_msg m = { .type = JOBH_KILL, .sig_or_status = sig, .id = j->hid };
+	if (h_sock >= 0 && helper_send(&m, NULL, 0) < 0)
+		log_msg(LOG_WARNING, "job helper: the kill of child %llu not sent: %s", (unsigned long long)j->hid,
+			strerror(errno));
+}
+
+/* The helper has gone (EOF, or kill: it hangs): its children die with it (PR_SET_PDEATHSIG); each running one
+ * ends as killed, lost; the next job_fork_msg() starts a new helper. */
+static void helper_lost(bool kill_it)
+{
+	if (h_sock < 0)
+		return;
+	loop_fd_del(job_loop, h_sock);
+	close(h_sock);
+	h_sock = -1;
+	if (h_pid > 0 && kill_it)
+		kill(h_pid, SIGKILL);
+	helper_forget(); /* reaped now or by job_reap() */
+	for (struct job *j = job_list, *next; j; j = next) {
+		next = j->next;
+		if (!j->hid || j->exited)
+			continue;
+		j->exited = j->lost = true;
+		j->status = 128 + SIGKILL;
+		loop_timer_cancel(job_loop, j->timer);
+		j->timer = 0;
+		maybe_done(j); /* once its pipe has drained: the child died with the helper */
+	}
+}
+
+static void on_helper(struct loop *lp, int fd, short revents, void *arg)
+{
+	(void)lp;
+	(void)revents;
+	(void)arg;
+	for (int k = 0; k < 64; k++) {
+		struct jobh_msg m;
+		ssize_t n = recv(fd, &m, sizeof m, MSG_DONTWAIT);
+		if (n < 0 && (errno == EINTR || errno == EAGAIN))
+			return;
+		if (n <= 0) {
+			log_msg(LOG_WARNING, "job helper (pid %d) has gone: its running children end as killed; a new "
+				"one starts with the next job", (int)h_pid);
+			helper_lost(false);
+			return;
+		}
+		if ((size_t)n != sizeof m || m.type != JOBH_DONE)
+			continue;
+		for (struct job *j = job_list; j; j = j->next)
+			if (j->hid == m.id && !j->exited) {
+				j->exited = true;
+				j->status = m.sig_or_status;
+				loop_timer_cancel(job_loop, j->timer);
+				j->timer = 0;
+				maybe_done(j);
+				break;
+			}
+	}
+}
+
+int job_helper_start(struct acq_err *err)
+{
+	if (h_sock >= 0)
+		return 0;
+	if (!job_loop)
+		return acq_errf(err, ACQ_E_INVAL, "job: not initialised");
+	helper_forget();
+	int sock;
+	pid_t pid;
+	if (jobh_spawn(&sock, &pid, err))
+		return -1;
+	fcntl(sock, F_SETFL, O_NONBLOCK);
+	if (loop_fd_add(job_loop, sock, POLLIN, on_helper, NULL, err)) {
+		close(sock);
+		kill(pid, SIGKILL);
+		waitpid(pid, NULL, 0);
+		return -1;
+	}
+	if (h_starts++)
+		log_msg(LOG_NOTICE, "job helper restarted (pid %d)", (int)pid);
+	h_sock = sock;
+	h_pid = pid;
+	return 0;
+}
+
+pid_t job_helper_pid(void)
+{
+	return h_sock >= 0 ? h_pid : 0;
 }
 
 static void on_timeout(struct loop *lp, void *arg)
@@ -114,9 +281,15 @@ static void on_timeout(struct loop *lp, void *arg)
 	if (j->exited)
 		return;
 	j->timed_out = true;
+	if (j->hid && j->hkilled) { /* SIGKILL sent 2 s ago and the helper reported nothing: it hangs */
+		log_msg(LOG_WARNING, "job helper: no report of a killed child within 2 s: restarting the helper");
+		helper_lost(true);
+		return;
+	}
 	/* First SIGTERM, then SIGKILL two seconds later if it is still there. */
-	kill(j->pid, j->killed ? SIGKILL : SIGTERM);
-	if (!j->killed) {
+	signal_job(j, j->killed ? SIGKILL : SIGTERM);
+	if (!j->killed || j->hid) {
+		j->hkilled = j->killed;
 		j->killed = true;
 		j->timer = loop_timer_add(job_loop, 2.0, 0, on_timeout, j);
 	}
@@ -124,7 +297,7 @@ static void on_timeout(struct loop *lp, void *arg)
 
 /* In the child: default signal handling, and death with the daemon (a SIGKILLed daemon leaves no child
  * writing its files: PR_SET_PDEATHSIG survives exec). Only async-signal-safe calls. */
-static void child_setup(pid_t parent)
+void job_child_setup(pid_t parent)
 {
 	sigset_t all;
 	sigemptyset(&all);
@@ -139,37 +312,73 @@ static void child_setup(pid_t parent)
 		_exit(137);
 }
 
+void job_child_limits(size_t mem_bytes)
+{
+	/* Work done for a client (a dry-run plan) yields the CPU to the daemon and the bench. */
+	if (nice(10) < 0) {
+		/* unchanged priority: still bounded by the deadline */
+	}
+#if !defined(__SANITIZE_ADDRESS__) /* ASan reserves terabytes of address space: only the deadline then */
+	if (mem_bytes) {
+		struct rlimit rl = { mem_bytes, mem_bytes };
+		setrlimit(RLIMIT_AS, &rl);
+	}
+#else
+	(void)mem_bytes;
+#endif
+}
+
+/* A new job reading its output from fd (taken), kept up to cap bytes (the first ones for a function's child:
+ * keep_head), registered with the loop and its timeout. NULL with err (fd closed) on failure. */
+static struct job *job_new(int fd, size_t cap, bool keep_head, double timeout_s, job_done_fn done, void *arg,
+			   struct acq_err *err)
+{
+	struct job *j = calloc(1, sizeof *j);
+	size_t alloc = keep_head && cap > JOB_FORK_OUTPUT_MAX ? JOB_FORK_OUTPUT_MAX : cap; /* grows up to cap */
+	if (!j || !(j->out = malloc(alloc + 1))) {
+		free(j);
+		close(fd);
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
+		return NULL;
+	}
+	fcntl(fd, F_SETFL, O_NONBLOCK);
+	j->fd = fd;
+	j->cap = cap;
+	j->alloc = alloc;
+	j->keep_head = keep_head;
+	j->done = done;
+	j->arg = arg;
+	if (loop_fd_add(job_loop, j->fd, POLLIN, on_output, j, err)) {
+		close(fd);
+		free(j->out);
+		free(j);
+		return NULL;
+	}
+	j->next = job_list;
+	job_list = j;
+	if (timeout_s > 0)
+		j->timer = loop_timer_add(job_loop, timeout_s, 0, on_timeout, j);
+	return j;
+}
+
 /* Fork with the output pipe; in the child, run fn (exec) or child_fn; in the parent, register the job. */
 static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, void *child_arg, size_t mem_bytes,
 		 size_t cap, double timeout_s, job_done_fn done, void *arg, struct job **out, struct acq_err *err)
 {
 	if (!job_loop || (!child_fn && (!argv || !argv[0])))
 		return acq_errf(err, ACQ_E_INVAL, "job: not initialised or no program");
-	struct job *j = calloc(1, sizeof *j);
-	size_t alloc = cap < JOB_FORK_OUTPUT_MAX ? cap : JOB_FORK_OUTPUT_MAX; /* job_fork_out(): grows up to cap */
-	if (!child_fn)
-		alloc = cap;
-	if (!j || !(j->out = malloc(alloc + 1))) {
-		free(j);
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	}
 	int p[2];
-	if (pipe2(p, O_CLOEXEC) < 0) {
-		free(j->out);
-		free(j);
+	if (pipe2(p, O_CLOEXEC) < 0)
 		return acq_errf(err, ACQ_E_IO, "pipe: %s", strerror(errno));
-	}
 	pid_t parent = getpid();
 	pid_t pid = fork();
 	if (pid < 0) {
 		close(p[0]);
 		close(p[1]);
-		free(j->out);
-		free(j);
 		return acq_errf(err, ACQ_E_IO, "fork: %s", strerror(errno));
 	}
 	if (pid == 0) {
-		child_setup(parent);
+		job_child_setup(parent);
 		int nul = open("/dev/null", O_RDONLY);
 		if (nul >= 0)
 			dup2(nul, 0);
@@ -182,18 +391,7 @@ static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, voi
 			 * that outlived a killed daemon for a moment would keep its socket answering, and the
 			 * restarted daemon would find it "in use". (exec'd children lose them by O_CLOEXEC.) */
 			close_range(3, ~0U, 0);
-			/* Work done for a client (a dry-run plan) yields the CPU to the daemon and the bench. */
-			if (nice(10) < 0) {
-				/* unchanged priority: still bounded by the deadline */
-			}
-#if !defined(__SANITIZE_ADDRESS__) /* ASan reserves terabytes of address space: only the deadline then */
-			if (mem_bytes) {
-				struct rlimit rl = { mem_bytes, mem_bytes };
-				setrlimit(RLIMIT_AS, &rl);
-			}
-#else
-			(void)mem_bytes;
-#endif
+			job_child_limits(mem_bytes);
 			_exit(child_fn(child_arg, 1));
 		}
 		execvp(argv[0], argv);
@@ -203,25 +401,13 @@ static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, voi
 		_exit(127);
 	}
 	close(p[1]);
-	fcntl(p[0], F_SETFL, O_NONBLOCK);
-	j->pid = pid;
-	j->fd = p[0];
-	j->cap = cap;
-	j->alloc = alloc;
-	j->keep_head = child_fn != NULL;
-	j->done = done;
-	j->arg = arg;
-	j->next = job_list;
-	job_list = j;
-	if (loop_fd_add(job_loop, j->fd, POLLIN, on_output, j, err)) {
+	struct job *j = job_new(p[0], cap, child_fn != NULL, timeout_s, done, arg, err);
+	if (!j) {
 		kill(pid, SIGKILL);
 		waitpid(pid, NULL, 0);
-		j->done = NULL;
-		job_free(j);
 		return -1;
 	}
-	if (timeout_s > 0)
-		j->timer = loop_timer_add(job_loop, timeout_s, 0, on_timeout, j);
+	j->pid = pid;
 	if (out)
 		*out = j;
 	return 0;
@@ -247,12 +433,97 @@ int job_fork_out(job_child_fn fn, void *fn_arg, size_t mem_bytes, size_t out_max
 	return spawn(NULL, NULL, fn, fn_arg, mem_bytes, out_max, timeout_s, done, arg, out, err);
 }
 
+int job_fork_msg(job_msg_fn fn, const void *payload, size_t len, size_t mem_bytes, size_t out_max, double timeout_s,
+		 job_done_fn done, void *arg, struct job **out, struct acq_err *err)
+{
+	if (!fn || out_max < 1)
+		return acq_errf(err, ACQ_E_INVAL, "job: no function or no output");
+	if (job_helper_start(err))
+		return -1;
+	int p[2] = { -1, -1 };
+	int mfd = memfd_create("acq-job", MFD_CLOEXEC);
+	if (mfd < 0)
+		return acq_errf(err, ACQ_E_IO, "memfd_create: %s", strerror(errno));
+	for (size_t off = 0; off < len;) {
+		ssize_t w = write(mfd, (const char *)payload + off, len - off);
+		if (w < 0 && errno == EINTR)
+			continue;
+		if (w <= 0) {
+			acq_errf(err, ACQ_E_IO, "job payload: %s", w < 0 ? strerror(errno) : "short write");
+			goto fail;
+		}
+		off += (size_t)w;
+	}
+	if (pipe2(p, O_CLOEXEC) < 0) {
+		acq_errf(err, ACQ_E_IO, "pipe: %s", strerror(errno));
+		goto fail;
+	}
+	struct jobh_msg m = { .type = JOBH_START, .id = h_next++, .mem_bytes = mem_bytes, .fn = fn };
+	int fds[2] = { mfd, p[1] };
+	if (helper_send(&m, fds, 2) < 0) {
+		acq_errf(err, ACQ_E_UNSUPPORTED, "the job helper (pid %d) does not take the request: %s; it is restarted: "
+			 "retry", (int)h_pid, strerror(errno));
+		helper_lost(true);
+		goto fail;
+	}
+	close(mfd);
+	close(p[1]);
+	struct job *j = job_new(p[0], out_max, true, timeout_s, done, arg, err);
+	if (!j) { /* its child writes into a closed pipe and ends; the helper's report then matches no job */
+		return -1;
+	}
+	j->hid = m.id;
+	if (out)
+		*out = j;
+	return 0;
+fail:
+	close(mfd);
+	if (p[0] >= 0) {
+		close(p[0]);
+		close(p[1]);
+	}
+	return -1;
+}
+
+char *job_msg_pack(const void *hdr, size_t hdr_len, const char *a, const char *b, size_t *len)
+{
+	uint64_t na = strlen(a);
+	size_t nb = strlen(b);
+	*len = hdr_len + sizeof na + na + nb;
+	char *m = malloc(*len);
+	if (m) {
+		memcpy(m, hdr, hdr_len);
+		memcpy(m + hdr_len, &na, sizeof na);
+		memcpy(m + hdr_len + sizeof na, a, na);
+		memcpy(m + hdr_len + sizeof na + na, b, nb);
+	}
+	return m;
+}
+
+int job_msg_unpack(const char *payload, size_t len, void *hdr, size_t hdr_len, char **a, const char **b)
+{
+	uint64_t na;
+	if (len < hdr_len + sizeof na)
+		return -1;
+	memcpy(hdr, payload, hdr_len);
+	memcpy(&na, payload + hdr_len, sizeof na);
+	if (na > len - hdr_len - sizeof na || !(*a = strndup(payload + hdr_len + sizeof na, (size_t)na)))
+		return -1;
+	*b = payload + hdr_len + sizeof na + na;
+	return 0;
+}
+
 void job_kill(struct job *j)
 {
 	if (j && !j->exited) {
 		j->killed = true;
-		kill(j->pid, SIGKILL);
+		signal_job(j, SIGKILL);
 	}
+}
+
+bool job_lost(const struct job *j)
+{
+	return j->lost;
 }
 
 bool job_output_truncated(const struct job *j)
@@ -280,9 +551,17 @@ int job_count(void)
 
 void job_reap(void)
 {
+	for (size_t i = 0; i < sizeof h_dead / sizeof h_dead[0]; i++)
+		if (h_dead[i] > 0 && waitpid(h_dead[i], NULL, WNOHANG) == h_dead[i])
+			h_dead[i] = 0;
+	if (h_pid > 0 && waitpid(h_pid, NULL, WNOHANG) == h_pid) { /* the helper: its socket's EOF tells the jobs */
+		h_pid = 0;
+		if (h_sock >= 0)
+			on_helper(job_loop, h_sock, POLLHUP, NULL);
+	}
 	for (struct job *j = job_list, *next; j; j = next) {
 		next = j->next;
-		if (j->exited)
+		if (j->exited || j->hid) /* a helper's child: the helper reports it */
 			continue;
 		int st;
 		pid_t r = waitpid(j->pid, &st, WNOHANG);
@@ -298,6 +577,31 @@ void job_reap(void)
 
 void job_finish(void)
 {
+	if (h_sock >= 0) { /* the helper ends at its socket's EOF, its children with it (PR_SET_PDEATHSIG) */
+		loop_fd_del(job_loop, h_sock);
+		close(h_sock);
+		h_sock = -1;
+	}
+	if (h_pid > 0) {
+		bool gone = false;
+		for (int i = 0; i < 200 && !(gone = waitpid(h_pid, NULL, WNOHANG) == h_pid); i++)
+			usleep(10000);
+		if (!gone) {
+			kill(h_pid, SIGKILL);
+			waitpid(h_pid, NULL, 0);
+		}
+		h_pid = 0;
+	}
+	for (size_t i = 0; i < sizeof h_dead / sizeof h_dead[0]; i++)
+		if (h_dead[i] > 0) {
+			kill(h_dead[i], SIGKILL);
+			waitpid(h_dead[i], NULL, 0);
+			h_dead[i] = 0;
+		}
+	h_starts = 0;
+	for (struct job *j = job_list; j; j = j->next)
+		if (j->hid)
+			j->exited = true;
 	for (struct job *j = job_list; j; j = j->next)
 		if (!j->exited)
 			kill(j->pid, SIGTERM);

@@ -38,6 +38,29 @@ int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, 
 /* job_fork() keeping up to out_max bytes of output (the buffer grows with it): a binary result. 0 or -1. */
 int job_fork_out(job_child_fn fn, void *fn_arg, size_t mem_bytes, size_t out_max, double timeout_s, job_done_fn done,
 		 void *arg, struct job **out, struct acq_err *err);
+/* In a job_fork_msg() child: payload is its own copy of the request's bytes (len of them, NUL after); compute,
+ * write the result to fd, return the exit status. */
+typedef int (*job_msg_fn)(const char *payload, size_t len, int fd);
+/* Start the job helper (job_helper.c): a small process forking the job_fork_msg() children. Call it early, before
+ * any thread and large allocation (the daemon: right after the loop); job_fork_msg() starts it again when it has
+ * died. 0 or -1. */
+int job_helper_start(struct acq_err *err);
+/* The helper's process id (0: not running). */
+pid_t job_helper_pid(void);
+/* Run fn(copy of payload, len, fd) in a child forked by the helper (so the loop never forks the daemon: it
+ * writes the payload to a memfd and one message), with the output captured up to out_max bytes as for
+ * job_fork_out, at nice +10, its address space limited to mem_bytes, killed after timeout_s; a helper that
+ * dies ends its running children as killed and job_lost(). 0 or -1 (the helper not answering: restarted). */
+int job_fork_msg(job_msg_fn fn, const void *payload, size_t len, size_t mem_bytes, size_t out_max, double timeout_s,
+		 job_done_fn done, void *arg, struct job **out, struct acq_err *err);
+/* A job_fork_msg() payload: a fixed header (hdr_len bytes) and two strings, packed into a new buffer (free()) of
+ * *len bytes; NULL when out of memory. */
+char *job_msg_pack(const void *hdr, size_t hdr_len, const char *a, const char *b, size_t *len);
+/* In the child: the header back into hdr, a as a new string, b pointing into the payload (NUL-terminated: the
+ * payload's end). 0, or -1 when the payload is not such a message. */
+int job_msg_unpack(const char *payload, size_t len, void *hdr, size_t hdr_len, char **a, const char **b);
+/* True when the job's helper died while it ran (valid in its done callback: status 128 + 9 then). */
+bool job_lost(const struct job *j);
 /* SIGKILL a running job; its done() is called as usual (status 128 + 9). */
 void job_kill(struct job *j);
 /* True when a job_fork() child wrote more than its output bound (JOB_FORK_OUTPUT_MAX or out_max; the rest was
@@ -45,7 +68,7 @@ void job_kill(struct job *j);
 bool job_output_truncated(const struct job *j);
 /* True when the job was killed because its timeout expired (valid in its done callback). */
 bool job_timed_out(const struct job *j);
-/* Process id of a running job. */
+/* Process id of a running job (0 for a job_fork_msg() child). */
 pid_t job_pid(const struct job *j);
 /* Reap exited children (call when SIGCHLD was seen; harmless otherwise). */
 void job_reap(void);

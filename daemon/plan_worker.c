@@ -1,4 +1,4 @@
-/* plan_worker: a sweep's plan made in a forked child and sent back whole (plan_worker.h). */
+/* plan_worker: a sweep's plan made in a child of the job helper and sent back whole (plan_worker.h). */
 #include "daemon/plan_worker.h"
 
 #include <errno.h>
@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "daemon/job.h"
+#include "daemon/plan/plan.h"
 
 /* The child's reply: this header, then on success the struct plan_result (its pointers meaningless) and its
  * three arrays; on failure the error message. Same binary on both ends (a fork), so raw structs are fine. */
@@ -24,13 +25,16 @@ struct pw_header {
 
 struct plan_worker {
 	struct job *job;
-	const struct plan_spec *spec;         /* the child's copy */
-	const struct bench_geom *g;
-	struct plan_timing tm;
 	double real_deadline_s;
 	plan_worker_done_fn done;
 	void *ctx;
 	bool aborted;
+};
+
+/* The child's request: this, then the plan's name and text (job_msg_pack). */
+struct pw_msg {
+	struct bench_geom g;
+	struct plan_timing tm;
 };
 
 static int write_all(int fd, const void *buf, size_t n)
@@ -137,15 +141,20 @@ int plan_worker_decode(const char *buf, size_t len, struct plan_result **out, st
 	return 0;
 }
 
-/* In the child: plan, reply. */
-static int child(void *arg, int fd)
+/* In the child: parse, plan, reply. */
+static int child(const char *payload, size_t len, int fd)
 {
-	struct plan_worker *w = arg;
+	struct pw_msg m;
+	char *name = NULL;
+	const char *text = NULL;
+	if (job_msg_unpack(payload, len, &m, sizeof m, &name, &text))
+		return 5;
 	struct acq_err err = { 0 };
+	struct plan_spec *spec = NULL;
 	struct plan_result *r = NULL;
-	if (plan_make(w->spec, w->g, &r, &err))
+	if (plan_load_string(name, text, &spec, &err) || plan_make(spec, &m.g, &r, &err))
 		return encode_error(&err, fd) ? 4 : 0;
-	plan_time_apply(w->spec, w->g, &w->tm, r);
+	plan_time_apply(spec, &m.g, &m.tm, r);
 	return plan_worker_encode(r, fd) ? 4 : 0;
 }
 
@@ -157,6 +166,9 @@ static void on_done(struct job *j, int status, const char *output, size_t len, v
 	int rc = -1;
 	if (w->aborted)
 		acq_errf(&err, ACQ_E_STATE, "aborted while planning");
+	else if (job_lost(j))
+		acq_errf(&err, ACQ_E_UNSUPPORTED, "the planner's process was lost (the job helper died; it is restarted): "
+			 "retry");
 	else if (job_timed_out(j))
 		acq_errf(&err, ACQ_E_RANGE, "not planned within %.0f s, the daemon's bound: use fewer points (acqctl plan "
 			 "FILE without the daemon shows the planner's time)", w->real_deadline_s);
@@ -172,18 +184,24 @@ static void on_done(struct job *j, int status, const char *output, size_t len, v
 	done(ctx, rc, rc ? &err : NULL, r);
 }
 
-int plan_worker_start(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *tm,
+int plan_worker_start(const char *name, const char *text, const struct bench_geom *g, const struct plan_timing *tm,
 		      size_t mem_bytes, double deadline_s, double real_deadline_s, plan_worker_done_fn done, void *ctx,
 		      struct plan_worker **out, struct acq_err *err)
 {
 	if (out)
 		*out = NULL;
+	struct pw_msg m = { .g = *g, .tm = *tm };
+	size_t len = 0;
 	struct plan_worker *w = calloc(1, sizeof *w);
-	if (!w)
+	char *msg = w ? job_msg_pack(&m, sizeof m, name, text, &len) : NULL;
+	if (!msg) {
+		free(w);
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	*w = (struct plan_worker){ .spec = spec, .g = g, .tm = *tm, .real_deadline_s = real_deadline_s, .done = done,
-				   .ctx = ctx };
-	if (job_fork_out(child, w, mem_bytes, PW_OUT_MAX, deadline_s, on_done, w, &w->job, err)) {
+	}
+	*w = (struct plan_worker){ .real_deadline_s = real_deadline_s, .done = done, .ctx = ctx };
+	int rc = job_fork_msg(child, msg, len, mem_bytes, PW_OUT_MAX, deadline_s, on_done, w, &w->job, err);
+	free(msg);
+	if (rc) {
 		free(w);
 		return -1;
 	}

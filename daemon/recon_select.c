@@ -18,7 +18,7 @@
 #include "daemon/recon_chain.h"
 #include "daemon/store.h"
 
-enum { RS_CAND, RS_PROBE, RS_FIT, RS_SELECT };
+enum { RS_CAND, RS_SAMPLES, RS_PROBE, RS_FIT, RS_SELECT };
 /* brdf-recon select --value-channels: the DHR target's value (and the σ parts the selection holds) on this many
  * evenly spread channels; all when the model has no more (the simulated bench's 651 wavelengths: 3.9 → 0.6 s CPU
  * per decision for three incidences, value within -5.5 %..+0.8 % of all channels', select's help) */
@@ -38,6 +38,7 @@ struct rsel {
 	double t0;
 	/* the candidates child's input (its copy of memory at fork) */
 	const struct rsel_req *q;
+	int64_t sweep_id;
 };
 
 struct rsel *rsel_new(const struct sweep_env *env)
@@ -93,9 +94,36 @@ static const char *tail(const char *s)
 
 static void next(struct rsel *r);
 
+/* The samples child's request (job_fork_msg). */
+struct samples_msg {
+	int64_t sweep_id;
+	char database[4096], samples[4200];
+};
+
+/* In a child of the job helper (forked before the daemon opened its database: SQLite's state of the daemon's
+ * connection is not inherited, which a read-only connection opened in a fork of the daemon trips over: "locking
+ * protocol"): the sweep's samples so far exported through a read-only connection. */
+static int samples_child(const char *payload, size_t len, int fd)
+{
+	struct samples_msg m;
+	if (len != sizeof m)
+		return 5;
+	memcpy(&m, payload, sizeof m);
+	struct acq_err err = { 0 };
+	struct store *st = NULL;
+	int rows = 0;
+	if (store_open_reader(m.database, &st, &err) || store_export_csv_file(st, m.sweep_id, m.samples, &rows, &err)) {
+		store_close(st);
+		dprintf(fd, "exporting the samples: %s\n", err.msg);
+		return 1;
+	}
+	store_close(st);
+	return 0;
+}
+
+
 static void stage_done(struct job *j, int status, const char *output, size_t len, void *arg)
 {
-	(void)j;
 	struct rsel *r = arg;
 	r->job = NULL;
 	double dt = loop_now(r->env->loop) - r->t0;
@@ -104,6 +132,21 @@ static void stage_done(struct job *j, int status, const char *output, size_t len
 		if (status != 0)
 			return finish(r, false, "the samples and candidates child failed (status %d): %s", status, tail(output));
 		r->res.n_candidates = (size_t)strtoull(output, NULL, 10);
+		r->stage = RS_SAMPLES;
+		{
+			struct samples_msg m = { .sweep_id = r->sweep_id };
+			snprintf(m.database, sizeof m.database, "%s", r->env->conf->d.database);
+			snprintf(m.samples, sizeof m.samples, "%s", r->samples);
+			struct acq_err err = { 0 };
+			if (job_fork_msg(samples_child, (const char *)&m, sizeof m, 0, JOB_FORK_OUTPUT_MAX, 60 * rate_of(r),
+					 stage_done, r, &r->job, &err))
+				return finish(r, false, "the samples child could not start: %s", err.msg);
+		}
+		return;
+	case RS_SAMPLES:
+		if (status != 0)
+			return finish(r, false, "the samples child failed (status %d%s): %s", status,
+				      job_lost(j) ? ", its job helper lost" : "", tail(output));
 		r->stage = RS_PROBE;
 		break;
 	case RS_PROBE:
@@ -138,9 +181,7 @@ static void stage_done(struct job *j, int status, const char *output, size_t len
 	next(r);
 }
 
-/* In the forked child (never the parent's database connection): the sweep's samples so far exported through a
- * read-only connection of its own, then the reachable candidates from the arms' position written to r->cand;
- * prints their count. */
+/* In the forked child: the reachable candidates from the arms' position written to r->cand; prints their count. */
 static int cand_child(void *arg, int fd)
 {
 	struct rsel *r = arg;
@@ -150,15 +191,6 @@ static int cand_child(void *arg, int fd)
 	size_t n = 0;
 	struct acq_err err = { 0 };
 	char line[128];
-	struct store *st = NULL;
-	int rows = 0;
-	if (store_open_reader(r->env->conf->d.database, &st, &err) ||
-	    store_export_csv_file(st, q->sweep_id, r->samples, &rows, &err)) {
-		store_close(st);
-		dprintf(fd, "exporting the samples: %s\n", err.msg);
-		return 1;
-	}
-	store_close(st);
 	if (plan_adaptive_candidates(q->spec, g, &q->timing, &q->from, q->done, q->n_done, &c, &n, &err)) {
 		dprintf(fd, "%s\n", err.msg);
 		return 1;
@@ -283,6 +315,7 @@ int rsel_start(struct rsel *r, const struct rsel_req *q, rsel_done_fn done, void
 	unlink(r->out); /* a decision made again must not read the previous answer */
 	r->spec = q->spec;
 	r->q = q; /* read by the forked child only (its own copy of memory) */
+	r->sweep_id = q->sweep_id;
 	r->stage = RS_CAND;
 	r->t0 = loop_now(r->env->loop);
 	if (job_fork(cand_child, r, 0, 60 * rate_of(r), stage_done, r, &r->job, err)) {

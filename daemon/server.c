@@ -2,6 +2,7 @@
  * server_*.c files and server_int.h hold the listeners, admission, input, output and request rate). */
 #include "daemon/server.h"
 
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -176,6 +177,37 @@ void server_reply(struct server *srv, uint64_t serial, json_t *id, json_t *data)
 	if (c->inflight)
 		c->inflight--;
 	srv_out_send(c, proto_reply_ok(id, data));
+}
+
+void server_reply_raw(struct server *srv, uint64_t serial, json_t *id, const char *obj, size_t len)
+{
+	struct client *c = srv_client_by_serial(srv, serial);
+	if (!c)
+		return;
+	if (c->inflight)
+		c->inflight--;
+	if (len < 2 || obj[0] != '{' || obj[len - 1] != '}' || memchr(obj, '\n', len)) {
+		srv_out_error(c, id, PROTO_E_INTERNAL, "the daemon built a malformed reply");
+		return;
+	}
+	char *ids = json_dumps(id ? id : json_null(), JSON_COMPACT | JSON_ENCODE_ANY | JSON_ENSURE_ASCII);
+	size_t n = ids ? strlen(ids) : 0;
+	char *line = ids ? malloc(n + len + 20) : NULL;
+	if (line) { /* {"id":ID,"ok":true[,fields]}\n: proto_reply_ok's line */
+		char *p = line;
+		p += sprintf(p, "{\"id\":%s,\"ok\":true", ids);
+		if (len > 2) {
+			*p++ = ',';
+			memcpy(p, obj + 1, len - 1);
+			p += len - 1;
+		} else {
+			*p++ = '}';
+		}
+		*p++ = '\n';
+		*p = '\0';
+	}
+	free(ids);
+	srv_out_send(c, line);
 }
 
 int server_reply_fd(struct server *srv, uint64_t serial, json_t *id, json_t *data, int fd)

@@ -70,6 +70,10 @@ void server_set_clock(struct server *srv, double (*now)(void *ctx), void *ctx);
 void server_get_stats(const struct server *srv, struct server_stats *st);
 /* Reply ok with data's fields (data consumed, may be NULL) to connection serial (gone: dropped). */
 void server_reply(struct server *srv, uint64_t serial, json_t *id, json_t *data);
+/* Reply ok with the fields of obj, a compact one-line JSON object's text (len bytes, ASCII), passed as it is
+ * (a reply built elsewhere, e.g. in a job's child: not parsed again on the loop); a malformed one is replied as an
+ * internal error. */
+void server_reply_raw(struct server *srv, uint64_t serial, json_t *id, const char *obj, size_t len);
 /* Reply ok with data (consumed) and pass fd (consumed: closed here once sent) along with the reply's first byte
  * (SCM_RIGHTS). -1, fd closed and nothing sent, for a TCP or gone client or one with a descriptor pending. */
 int server_reply_fd(struct server *srv, uint64_t serial, json_t *id, json_t *data, int fd);

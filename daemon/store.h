@@ -175,9 +175,10 @@ int store_prior_each(struct store *st, const char *sample, int64_t exclude, int6
 		     void *ctx, struct acq_err *err);
 /* The latest completed sweep other than exclude (0: none), any sample and mode, in *sweep_id (0: none). 0 or -1. */
 int store_latest_completed(struct store *st, int64_t exclude, int64_t *sweep_id, struct acq_err *err);
-/* The done points' sample and dark exposures of sweep_id (any state: a running sweep's so far) to fn, as
- * store_prior_each gives them. 0 or -1. */
-int store_prior_rows(struct store *st, int64_t sweep_id, store_prior_fn fn, void *ctx, struct acq_err *err);
+/* The done points' sample and dark exposures of sweep_id (any state: a running sweep's so far) whose order index is
+ * from_order or more to fn, as store_prior_each gives them. 0 or -1. */
+int store_prior_rows(struct store *st, int64_t sweep_id, int64_t from_order, store_prior_fn fn, void *ctx,
+		     struct acq_err *err);
 
 /* A read-only connection to an existing database (no migration, no checkpoint at close) for a worker thread:
  * only the export and show functions may be used on it. 0 or -1. */

@@ -38,13 +38,14 @@ int store_prior_each(struct store *st, const char *sample, int64_t exclude, int6
 		return store_db_err(st, err, "finding the sample's previous sweep");
 	if (!id)
 		return 0;
-	if (store_prior_rows(st, id, fn, ctx, err))
+	if (store_prior_rows(st, id, 0, fn, ctx, err))
 		return -1;
 	*sweep_id = id;
 	return 0;
 }
 
-int store_prior_rows(struct store *st, int64_t sweep_id, store_prior_fn fn, void *ctx, struct acq_err *err)
+int store_prior_rows(struct store *st, int64_t sweep_id, int64_t from_order, store_prior_fn fn, void *ctx,
+		     struct acq_err *err)
 {
 	/* a dark is stored with the point it was taken for (before that point's exposure) */
 	sqlite3_stmt *s = store_prep(st,
@@ -52,11 +53,12 @@ int store_prior_rows(struct store *st, int64_t sweep_id, store_prior_fn fn, void
 				     "coalesce(p.done_at, 0), coalesce(p.laser_theta, 0), coalesce(p.detector_theta, 0), "
 				     "coalesce(p.detector_phi, 0) FROM points p "
 				     "JOIN spectra x ON x.sweep_id = p.sweep_id AND x.point_id = p.id "
-				     "WHERE p.sweep_id = ? AND p.state = 'done' AND x.kind IN ('sample', 'dark') "
-				     "ORDER BY p.theta_i, p.order_index, x.id", err);
+				     "WHERE p.sweep_id = ? AND p.order_index >= ? AND p.state = 'done' "
+				     "AND x.kind IN ('sample', 'dark') ORDER BY p.theta_i, p.order_index, x.id", err);
 	if (!s)
 		return -1;
 	sqlite3_bind_int64(s, 1, sweep_id);
+	sqlite3_bind_int64(s, 2, from_order);
 	int rc;
 	while ((rc = sqlite3_step(s)) == SQLITE_ROW) {
 		struct store_prior_row r = { sqlite3_column_double(s, 0), sqlite3_column_int64(s, 1),

@@ -157,6 +157,7 @@ static void schedule(struct sweep *sw, double when);
 static void release(struct sweep *sw)
 {
 	adapt_end(sw->adapt);
+	sweep_retime_end(&sw->retime);
 	ex_free(sw->ex, loop_now(sw->env.loop));
 	sw->ex = NULL;
 	plan_result_free(sw->plan);
@@ -412,15 +413,21 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
 
 void sweep_plan_prior(const struct sweep *sw, const struct plan_spec *spec, int64_t exclude, struct plan_timing *t)
 {
+	if (spec)
+		sweep_plan_prior_of(sw, spec->integ_mode == PLAN_INTEG_AUTO ? spec->sample : "", exclude, t);
+	else
+		sweep_plan_prior_of(sw, NULL, exclude, t);
+}
+
+void sweep_plan_prior_of(const struct sweep *sw, const char *sample, int64_t exclude, struct plan_timing *t)
+{
 	memset(&t->prior, 0, sizeof t->prior);
 	t->host_sweep = 0;
-	if (!spec || !sw->env.store)
+	if (!sample || !sw->env.store)
 		return;
 	struct acq_err err = { 0 };
-	if (spec->integ_mode == PLAN_INTEG_AUTO && spec->sample[0] &&
-	    exp_prior_load(sw->env.store, spec->sample, exclude, &sw->env.conf->bench, t, &t->prior, &err)) {
-		log_msg(LOG_WARNING, "exposure prior of sample '%s': %s (timed from the plan's estimate)", spec->sample,
-			err.msg);
+	if (sample[0] && exp_prior_load(sw->env.store, sample, exclude, &sw->env.conf->bench, t, &t->prior, &err)) {
+		log_msg(LOG_WARNING, "exposure prior of sample '%s': %s (timed from the plan's estimate)", sample, err.msg);
 		memset(&t->prior, 0, sizeof t->prior);
 	}
 	/* without the sample's own host figure, the host's time per point as this host's latest sweep measured it */

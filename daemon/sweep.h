@@ -114,6 +114,8 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t);
  * host's time per point (t->point_overhead_s, t->host_sweep) from the latest completed sweep but exclude when it
  * measured it (exp_host_load). A database error is logged (the defaults then). */
 void sweep_plan_prior(const struct sweep *sw, const struct plan_spec *spec, int64_t exclude, struct plan_timing *t);
+/* The same from what it reads of the spec: the sample's name for an auto plan ("" for none), NULL for no spec. */
+void sweep_plan_prior_of(const struct sweep *sw, const char *sample, int64_t exclude, struct plan_timing *t);
 /* "idle", "running", "paused", "faulted", "stopping". */
 const char *sweep_state_name(enum sweep_state s);
 

@@ -7,10 +7,17 @@
 
 void sweep_retime_setup(struct sweep_retime *r, const struct plan_spec *spec, const struct plan_timing *tm)
 {
+	exp_prior_rows_free(&r->rows);
 	r->tm = *tm;
 	r->retimed = 0;
 	r->at = -1;
 	r->on = spec && spec->integ_mode == PLAN_INTEG_AUTO && !spec->adaptive && tm->prior.sweep == 0;
+}
+
+void sweep_retime_end(struct sweep_retime *r)
+{
+	exp_prior_rows_free(&r->rows);
+	r->on = false;
 }
 
 bool sweep_retime_due(const struct sweep_retime *r, const struct plan_result *plan, int done)
@@ -26,7 +33,7 @@ int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long 
 {
 	struct plan_prior pr;
 	r->at = done;
-	if (exp_prior_load_sweep(st, sweep_id, g, &r->tm, &pr, err))
+	if (exp_prior_update(&r->rows, st, sweep_id, g, &r->tm, &pr, err))
 		return -1;
 	if (pr.sweep <= 0 || pr.n_inc == 0)
 		return 0;

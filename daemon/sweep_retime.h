@@ -16,6 +16,7 @@
 #include <stddef.h>
 
 #include "config/acq_err.h"
+#include "daemon/exposure.h"
 #include "daemon/plan/plan.h"
 
 struct store;
@@ -25,16 +26,20 @@ struct sweep_retime {
 	struct plan_timing tm;      /* the timing its plan was made with (the prior replaced at each re-timing) */
 	int retimed;                /* re-timings done */
 	int at;                     /* the step the last one was due at */
+	struct exp_prior_rows rows; /* the sweep's exposures read so far (each re-timing reads only the new points) */
 };
 
 /* Whether the sweep planned with spec and tm (its exposure prior in tm->prior) re-times its plan: auto
- * integration, not adaptive, no prior from an earlier sweep. Keeps a copy of tm. */
+ * integration, not adaptive, no prior from an earlier sweep. Keeps a copy of tm; r is zero-initialised or was set
+ * up before (its rows are dropped: a recovered sweep reads its points again). */
 void sweep_retime_setup(struct sweep_retime *r, const struct plan_spec *spec, const struct plan_timing *tm);
+/* The sweep has ended: r's rows freed (r is then set up for nothing). */
+void sweep_retime_end(struct sweep_retime *r);
 /* Whether step done (the next to be measured) of plan starts a new incidence after at least one measured point,
  * when r re-times and has not re-timed there yet. */
 bool sweep_retime_due(const struct sweep_retime *r, const struct plan_result *plan, int done);
 /* At step done, time plan (sweep sweep_id's, from spec, on bench g) again with the sweep's own exposures so far
- * from st as its prior. 1 when re-timed, 0 when there was nothing to time it with (no done point), -1 with err (the plan is then
+ * from st as its prior (exp_prior_update: only the points committed since the last re-timing are read). 1 when re-timed, 0 when there was nothing to time it with (no done point), -1 with err (the plan is then
  * unchanged). */
 int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long long sweep_id,
 		       const struct plan_spec *spec, const struct bench_geom *g, struct plan_result *plan,

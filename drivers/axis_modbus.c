@@ -51,19 +51,13 @@ static int open_common(const struct axis_cfg *cfg, struct axis_link *shared, str
 	ax->clear_cmd = -1;
 	ax->state = ST_IDLE;
 	if (shared) {
-		ax->link = shared;
-		shared->refs++;
+		ax->link = mb_link_ref(shared);
 	} else {
-		ax->link = calloc(1, sizeof *ax->link);
+		ax->link = mb_link_new(cfg);
 		if (!ax->link) {
 			free(ax);
 			return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", cfg->name);
 		}
-		ax->link->refs = 1;
-		if (cfg->link.type == AXIS_LINK_TCP)
-			snprintf(ax->link->where, sizeof ax->link->where, "%s:%d", cfg->link.host, cfg->link.port);
-		else
-			snprintf(ax->link->where, sizeof ax->link->where, "%s", cfg->link.device);
 		if (mb_link_connect(ax->link, cfg, err)) {
 			mb_close(ax);
 			return -1;
@@ -93,13 +87,7 @@ static void mb_close(struct axis_dev *ax)
 		return;
 	if (ax->link->up && (ax->state == ST_MOVE || ax->state == ST_HOME))
 		mb_stop(ax, NULL);
-	if (--ax->link->refs == 0) {
-		if (ax->link->ctx) {
-			modbus_close(ax->link->ctx);
-			modbus_free(ax->link->ctx);
-		}
-		free(ax->link);
-	}
+	mb_link_unref(ax->link);
 	free(ax);
 }
 

@@ -2,7 +2,7 @@
  * configuration, the link and the instance, and the link's and the register map's I/O. The files:
  * axis_modbus.c (the backend's table of functions: open/close, status, the move state machine, stop, home,
  * identity, reconnect; the extras of axis_modbus.h), axis_modbus_cfg.c (the configuration parser and its
- * accessors), axis_modbus_link.c (the connection over TCP or RTU and its bounded transactions),
+ * accessors), axis_modbus_link.c (the connection over TCP or RTU: its life and its bounded transactions),
  * axis_modbus_regs.c (the register map's fields and commands on the wire). */
 #ifndef AXIS_MODBUS_INT_H
 #define AXIS_MODBUS_INT_H
@@ -58,6 +58,12 @@ struct axis_dev {
 
 /* axis_modbus_link.c: the connection (one per link) and its transactions; each call stops at the first failure
  * and blocks at most one response timeout. */
+/* A new link for c's connection (one reference, not connected: mb_link_connect); NULL when out of memory. */
+struct axis_link *mb_link_new(const struct axis_cfg *c);
+/* One more axis behind l (a shared bus or connection); returns l. */
+struct axis_link *mb_link_ref(struct axis_link *l);
+/* Drop one reference (NULL: nothing); the last closes the connection and frees the context and l. */
+void mb_link_unref(struct axis_link *l);
 /* (Re)connect l as c's link says (TCP or RTU, our own error recovery, the configured timeouts). 0 or -1
  * (ACQ_E_INVAL: no context; ACQ_E_DISCONNECTED: no connection). */
 int mb_link_connect(struct axis_link *l, const struct axis_cfg *c, struct acq_err *err);

@@ -1,9 +1,41 @@
-/* axis_modbus_link: one Modbus connection over TCP or RTU (libmodbus), shared by the axes behind it, and its
- * bounded register transactions; a failure is classified and a broken link marked down (no retry here). */
+/* axis_modbus_link: one Modbus connection over TCP or RTU (libmodbus), shared by the axes behind it (counted
+ * references; the libmodbus context is made and freed here only), and its bounded register transactions; a
+ * failure is classified and a broken link marked down (no retry here). */
 #include <errno.h>
 #include <stdio.h>
+#include <stdlib.h>
 
 #include "drivers/axis_modbus_int.h"
+
+struct axis_link *mb_link_new(const struct axis_cfg *c)
+{
+	struct axis_link *l = calloc(1, sizeof *l);
+	if (!l)
+		return NULL;
+	l->refs = 1;
+	if (c->link.type == AXIS_LINK_TCP)
+		snprintf(l->where, sizeof l->where, "%s:%d", c->link.host, c->link.port);
+	else
+		snprintf(l->where, sizeof l->where, "%s", c->link.device);
+	return l;
+}
+
+struct axis_link *mb_link_ref(struct axis_link *l)
+{
+	l->refs++;
+	return l;
+}
+
+void mb_link_unref(struct axis_link *l)
+{
+	if (!l || --l->refs > 0)
+		return;
+	if (l->ctx) {
+		modbus_close(l->ctx);
+		modbus_free(l->ctx);
+	}
+	free(l);
+}
 
 int mb_link_connect(struct axis_link *l, const struct axis_cfg *c, struct acq_err *err)
 {

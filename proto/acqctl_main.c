@@ -4,7 +4,6 @@
  * the daemon passes over the socket; `watch` is a live view on a terminal, JSON lines otherwise. This file is the
  * command line (options, the command and its arguments, the request, the reply's output); the connection, the
  * outputs and watch/wait are in proto/acqctl/ (acqctl.h). */
-#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -12,6 +11,7 @@
 #include <unistd.h>
 
 #include "acq_version.h"
+#include "config/acq_file.h"
 #include "daemon/plan/plan_cli.h"
 #include "proto/acqctl/acqctl.h"
 #include "proto/ctl.h"
@@ -77,39 +77,6 @@ static void usage(FILE *f)
 		   "  76 protocol error\n"
 		   "see acqctl(1); --json replies follow the schemas in\n"
 		   "  /usr/share/acquisitiond/acqctl-replies.schema.json\n");
-}
-
-static char *read_text(const char *path, struct acq_err *err)
-{
-	FILE *f = strcmp(path, "-") ? fopen(path, "rb") : stdin;
-	if (!f) {
-		acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
-		return NULL;
-	}
-	size_t cap = 8192, n = 0;
-	char *buf = malloc(cap);
-	while (buf) {
-		n += fread(buf + n, 1, cap - n - 1, f);
-		if (n < cap - 1)
-			break;
-		if (cap > (2u << 20)) {
-			free(buf);
-			buf = NULL;
-			acq_errf(err, ACQ_E_RANGE, "%s: larger than 2 MiB", path);
-			break;
-		}
-		char *nb = realloc(buf, cap *= 2);
-		if (!nb)
-			free(buf);
-		buf = nb;
-	}
-	if (f != stdin)
-		fclose(f);
-	if (buf)
-		buf[n] = 0;
-	else if (!err->code)
-		acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	return buf;
 }
 
 /* key=value with the type the command table gives the key. 0, or -1 with a message in err. */
@@ -247,10 +214,10 @@ static int fill_args(json_t *req, const struct proto_cmd *def, const char *cmd, 
 		if (!eq && pk) {
 			if (pk[0] == '@') {
 				*plan_file = words[wi];
-				char *text = read_text(*plan_file, &err);
-				if (!text)
-					return out_fail(err.code == ACQ_E_IO ? CTL_EXIT_NOINPUT : CTL_EXIT_DATAERR, "not_found", "%s",
-						    err.msg);
+				char *text;
+				if (acq_file_read(*plan_file, (size_t)2 << 20, ACQ_FILE_STDIN, &text, NULL, &err))
+					return out_fail(err.code == ACQ_E_IO || err.code == ACQ_E_NOTFOUND ? CTL_EXIT_NOINPUT
+						    : CTL_EXIT_DATAERR, "not_found", "%s", err.msg);
 				json_object_set_new(req, pk + 1, json_string(text));
 				free(text);
 			} else if (set_arg(req, def, pk, words[wi], &err)) {

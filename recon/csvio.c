@@ -8,6 +8,8 @@
 #include <string.h>
 #include <strings.h>
 
+#include "config/acq_file.h"
+
 #define CSV_MAX_COLS 100000
 #define CSV_FIELD_MAX 128
 
@@ -439,43 +441,7 @@ int csvio_parse_queries(const char *name, const char *text, size_t len, struct r
 
 int csvio_slurp(const char *path, char **out, size_t *len, struct acq_err *err)
 {
-	*out = NULL;
-	*len = 0;
-	FILE *f = fopen(path, "rb");
-	if (!f)
-		return acq_errf(err, ACQ_E_IO, "%s: %s", path, strerror(errno));
-	size_t cap = 1 << 16, n = 0;
-	char *buf = malloc(cap + 1);
-	for (;;) {
-		if (!buf) {
-			fclose(f);
-			return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", path);
-		}
-		size_t k = fread(buf + n, 1, cap - n, f);
-		n += k;
-		if (n < cap)
-			break;
-		if (cap >= ((size_t)1 << 30)) {
-			free(buf);
-			fclose(f);
-			return acq_errf(err, ACQ_E_RANGE, "%s: file larger than 1 GiB", path);
-		}
-		cap *= 2;
-		char *nb = realloc(buf, cap + 1);
-		if (!nb)
-			free(buf);
-		buf = nb;
-	}
-	if (ferror(f)) {
-		free(buf);
-		fclose(f);
-		return acq_errf(err, ACQ_E_IO, "%s: read error", path);
-	}
-	fclose(f);
-	buf[n] = '\0';
-	*out = buf;
-	*len = n;
-	return 0;
+	return acq_file_read(path, (size_t)1 << 30, 0, out, len, err);
 }
 
 int csvio_read_samples(const char *path, struct recon_samples *s, struct acq_err *err)

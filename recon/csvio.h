@@ -34,7 +34,7 @@ int csvio_parse_queries(const char *name, const char *text, size_t len, struct r
 int csvio_read_queries(const char *path, struct recon_samples *s, struct acq_err *err);
 /* Free the arrays of *s and zero it. */
 void csvio_samples_free(struct recon_samples *s);
-/* Read a whole file into a NUL-terminated heap buffer (max 1 GiB); *len excludes the NUL. */
+/* Read a whole file into a NUL-terminated heap buffer (max 1 GiB; config/acq_file.h); *len excludes the NUL. */
 int csvio_slurp(const char *path, char **out, size_t *len, struct acq_err *err);
 /* Read the named numeric columns (k ≤ 16) of a CSV table with a header (# comments before it); *data gets
  * rows × k values row-major (free()); empty fields and nan are errors. */

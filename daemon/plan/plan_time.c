@@ -49,7 +49,7 @@
 void plan_timing_defaults(struct plan_timing *t)
 {
 	*t = (struct plan_timing){
-		.axis_poll_s = 0.05,          /* drivers/axis_modbus.c poll_s default */
+		.axis_poll_s = 0.05,          /* drivers/axis_modbus_cfg.c poll_s default */
 		.extra_settle_s = 0,          /* sweep.extra_settle_s default */
 		.probe_ms = 10,               /* daemon/exposure.c probe_ms default */
 		.min_ms = 1,                  /* daemon/conf.c sweep.min_integration_ms default */

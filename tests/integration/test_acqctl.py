@@ -193,6 +193,17 @@ def main():
         # --- manual commands on the simulated bench
         d = c.json("home", "home", "detector.phi")
         check(d["homed"] == ["detector.phi"] and abs(d["detector.phi"]) < 0.05, "home %r" % d)
+        # home of every axis: detector.phi, laser.theta, then detector.theta, whose home (0°, the laser's place at
+        # 0°) is a collision: refused (rc 1), naming the axes homed before the refusal (the state after it)
+        c.json("move", "move", "laser.theta=10", "detector.theta=40", "detector.phi=90")
+        p = c.run("home")
+        check(p.returncode == 1 and "home detector.theta" in p.stderr and
+              "homed before: detector.phi, laser.theta" in p.stderr, "home of all axes: rc %d %r" % (p.returncode,
+                                                                                                p.stderr))
+        sim = b.sim_status()
+        check(abs(float(sim["laser.theta"])) < 0.05 and abs(float(sim["detector.phi"])) < 0.05 and
+              abs(float(sim["detector.theta"]) - 40) < 0.05,
+              "home of all axes: laser.theta and detector.phi at 0, detector.theta left at 40 %r" % sim)
         # one name per axis (laser.theta=); the old spelling (laser_theta=) still moves the same axis
         d = c.json("move", "move", "laser.theta=20", "detector.theta=40", "detector_phi=90")
         check(abs(d["laser.theta"] - 20) < 0.05 and abs(d["detector.theta"] - 40) < 0.05 and

@@ -11,6 +11,8 @@
 #include <cmocka.h>
 
 #include "config/bench.h"
+#include "daemon/executor.h"
+#include "daemon/exposure.h"
 #include "daemon/plan/plan.h"
 
 #define TOL 1e-9 /* sums of a few dozen doubles of order 1-100 s */
@@ -355,6 +357,32 @@ static void test_prior(void **state)
 	unload(&f);
 }
 
+/* The model's defaults (what `acqctl plan` uses without a daemon; the daemon takes them from its configuration,
+ * sweep_plan_timing) are the executor's and the auto exposure's own defaults, as plan_time.c's comments say: a
+ * default changed in one place and not the other times every daemonless dry run wrong. */
+static void test_defaults_match(void **state)
+{
+	(void)state;
+	struct plan_timing t;
+	plan_timing_defaults(&t);
+	struct ex_cfg ex;
+	ex_cfg_defaults(&ex);
+	struct exp_policy pol;
+	exp_policy_defaults(&pol);
+	assert_true(t.probe_ms == pol.probe_ms && t.probe_ms == ex.pol.probe_ms);
+	assert_true(t.ladder_ratio == ex.ladder_ratio);
+	assert_true(t.exposure_overhead_s == ex.poll_s / 2);
+	assert_true(t.extra_settle_s == ex.extra_settle_s);
+	assert_int_equal(t.dark_averages, (int)pol.dark_averages);
+	assert_int_equal(t.dark_every, ex.dark_every);
+	assert_true(t.dark_max_age_s == pol.dark_max_age_s);
+	assert_int_equal(t.max_exposures, pol.max_exposures);
+	assert_true(t.hdr_ratio == pol.hdr_ratio);
+	assert_true(t.reference == ex.take_reference);
+	assert_true(t.ref_pose.laser_theta == ex.ref_pose.laser_theta && t.ref_pose.det_theta == ex.ref_pose.det_theta &&
+		    t.ref_pose.det_phi == ex.ref_pose.det_phi);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -366,6 +394,7 @@ int main(void)
 		cmocka_unit_test(test_reference),
 		cmocka_unit_test(test_dark_age),
 		cmocka_unit_test(test_prior),
+		cmocka_unit_test(test_defaults_match),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

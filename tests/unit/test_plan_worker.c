@@ -158,7 +158,7 @@ static void test_worker_equals_in_process(void **state)
 	assert_true(ref->n_steps > 50 && ref->n_wps >= ref->n_steps);
 
 	pw_calls = 0;
-	assert_int_equal(plan_worker_start(spec, &g, &tm, (size_t)1 << 30, 30, 30, pw_done, NULL, NULL, &err), 0);
+	assert_int_equal(plan_worker_start("t.yaml", PLAN, &g, &tm, (size_t)1 << 30, 30, 30, pw_done, NULL, NULL, &err), 0);
 	run_until(lp, &pw_calls, 30);
 	assert_int_equal(pw_calls, 1);
 	assert_int_equal(pw_rc, 0);
@@ -191,7 +191,7 @@ static void test_worker_equals_in_process(void **state)
 	struct plan_spec *big = NULL;
 	assert_int_equal(plan_load_string("big.yaml", BIGPLAN, &big, &err), 0);
 	pw_calls = 0;
-	assert_int_equal(plan_worker_start(big, &g, &tm, (size_t)1 << 30, 0.05, 7, pw_done, NULL, NULL, &err), 0);
+	assert_int_equal(plan_worker_start("big.yaml", BIGPLAN, &g, &tm, (size_t)1 << 30, 0.05, 7, pw_done, NULL, NULL, &err), 0);
 	run_until(lp, &pw_calls, 30);
 	assert_int_equal(pw_calls, 1);
 	assert_int_equal(pw_rc, -1);
@@ -203,7 +203,7 @@ static void test_worker_equals_in_process(void **state)
 	/* abort: done() says so */
 	pw_calls = 0;
 	struct plan_worker *w = NULL;
-	assert_int_equal(plan_worker_start(spec, &g, &tm, (size_t)1 << 30, 30, 30, pw_done, NULL, &w, &err), 0);
+	assert_int_equal(plan_worker_start("t.yaml", PLAN, &g, &tm, (size_t)1 << 30, 30, 30, pw_done, NULL, &w, &err), 0);
 	plan_worker_abort(w);
 	run_until(lp, &pw_calls, 10);
 	assert_int_equal(pw_calls, 1);

@@ -130,7 +130,7 @@ static double eta_error_at_change(bool retime, int *retimed)
 	int64_t sid = 0;
 	assert_int_equal(store_sweep_create(st, &nw, pts, (int)n, &sid, &err), 0);
 
-	struct sweep_retime rt;
+	struct sweep_retime rt = { 0 };
 	sweep_retime_setup(&rt, spec, &tm);
 	assert_true(rt.on);
 	if (!retime)
@@ -172,6 +172,7 @@ static double eta_error_at_change(bool retime, int *retimed)
 		assert_true(fabs(rt.tm.prior.inc[0].darks_per_clear - 2) < 1e-12);
 		assert_true(rt.tm.prior.host_points > 0 && fabs(rt.tm.prior.host_per_point_s - HOST_S) < 0.002);
 	}
+	sweep_retime_end(&rt);
 	plan_result_free(r);
 	plan_spec_free(spec);
 	store_close(st);
@@ -202,7 +203,7 @@ static void test_retime_who(void **state)
 	struct plan_result *r = load_plan(&g, &spec);
 	struct plan_timing tm;
 	plan_timing_defaults(&tm);
-	struct sweep_retime rt;
+	struct sweep_retime rt = { 0 };
 	sweep_retime_setup(&rt, spec, &tm);
 	assert_true(rt.on);
 	assert_false(sweep_retime_due(&rt, r, 0));
@@ -222,8 +223,127 @@ static void test_retime_who(void **state)
 	spec->integ_mode = PLAN_INTEG_FIXED;
 	sweep_retime_setup(&rt, spec, &tm);
 	assert_false(rt.on);
+	sweep_retime_end(&rt);
 	plan_result_free(r);
 	plan_spec_free(spec);
+}
+
+/* Two priors alike, field by field (exactly: the same rows in the same order give the same sums). */
+static void same_prior(const struct plan_prior *a, const struct plan_prior *b)
+{
+	assert_int_equal(a->sweep, b->sweep);
+	assert_string_equal(a->sample, b->sample);
+	assert_int_equal(a->points, b->points);
+	assert_true(a->median_ms == b->median_ms && a->spread == b->spread && a->hdr_fraction == b->hdr_fraction);
+	assert_true(a->host_per_point_s == b->host_per_point_s);
+	assert_int_equal(a->host_points, b->host_points);
+	assert_int_equal(a->n_inc, b->n_inc);
+	for (size_t i = 0; i < a->n_inc; i++) {
+		const struct plan_prior_inc *x = &a->inc[i], *y = &b->inc[i];
+		assert_true(x->theta_i == y->theta_i && x->points == y->points && x->median_ms == y->median_ms &&
+			    x->mean_ms == y->mean_ms && x->spread == y->spread &&
+			    x->darks_per_clear == y->darks_per_clear && x->dark_ms == y->dark_ms &&
+			    x->extra_per_point == y->extra_per_point && x->extra_ms == y->extra_ms);
+	}
+}
+
+/* The re-timing reads only the points committed since the last one (exp_prior_update) and must give the prior and
+ * the re-timed plan that reading every done point gives (exp_prior_load_sweep), whatever the incidences' order: a
+ * plan of three incidences stored with incidence zeniths 40, 20, 40 (so the third merges into the first's rows, out
+ * of the commit order), darks at each new rung, an HDR exposure every fifth point, commits at uneven times. Checked
+ * after every point and at every incidence change through sweep_retime_apply against a sweep set up afresh there
+ * (a recovered daemon reads everything). */
+static void test_retime_incremental(void **state)
+{
+	(void)state;
+	static const char *P3 = "name: t\nsample: dark paint\nincidence: {theta_deg: [20, 45, 60]}\n"
+				"observation: {theta_deg: [30, 60], phi_deg: [0, 90, 180, 270]}\n"
+				"integration: {mode: auto, estimate_ms: 20, max_ms: 2000}\naverages: 2\n"
+				"blind_points: drop\n";
+	char path[300];
+	struct store *st = ut_store_new(path, sizeof path, ut_dir, "inc.db");
+	struct bench_geom g;
+	bench_defaults(&g);
+	g.readout_s = 0.01;
+	struct plan_spec *spec = NULL;
+	struct plan_result *ra = NULL, *rb = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(plan_load_string("t.yaml", P3, &spec, &err), 0);
+	assert_int_equal(plan_make(spec, &g, &ra, &err), 0);
+	assert_int_equal(plan_make(spec, &g, &rb, &err), 0);
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	tm.reference = false;
+	plan_time_apply(spec, &g, &tm, ra);
+	plan_time_apply(spec, &g, &tm, rb);
+	size_t n = ra->n_steps;
+	assert_true(n >= 12 && n <= 64);
+	/* incidence k of the plan stored at zenith 40, 20, 40 */
+	struct store_point_new pts[64];
+	int inc = 0;
+	for (size_t i = 0; i < n; i++) {
+		inc += i > 0 && ra->steps[i].pos.laser_theta != ra->steps[i - 1].pos.laser_theta;
+		pts[i] = (struct store_point_new){ (int)i, inc == 1 ? 20 : 40, 0, fabs(ra->steps[i].pos.det_theta), 0 };
+	}
+	assert_int_equal(inc, 2);
+	struct store_sweep_new nw = { .name = "t", .plan_text = P3, .config_snapshot = "{}", .software_version = "test",
+				      .created_at = 1000, .sample = "dark paint", .auto_exposure = true };
+	int64_t sid = 0;
+	assert_int_equal(store_sweep_create(st, &nw, pts, (int)n, &sid, &err), 0);
+
+	struct exp_prior_rows R = { 0 };
+	struct sweep_retime inc_rt = { 0 }, full_rt = { 0 };
+	sweep_retime_setup(&inc_rt, spec, &tm);
+	double real = 1000;
+	bool seen[2] = { false, false };
+	int changes = 0;
+	for (size_t done = 1; done <= n; done++) {
+		size_t i = done - 1;
+		if (i > 0 && ra->steps[i].pos.laser_theta != ra->steps[i - 1].pos.laser_theta)
+			seen[0] = seen[1] = false;
+		real += 0.3 + 0.01 * (double)(i % 7);
+		int order;
+		int64_t pt;
+		assert_int_equal(store_sweep_next_point(st, sid, &order, &pt, &err), 0);
+		assert_int_equal(order, (int)i);
+		if (!seen[i % 2])
+			put(st, sid, pt, "dark", sample_ms(i), DARK_N, false, real, &ra->steps[i].pos);
+		seen[i % 2] = true;
+		put(st, sid, pt, "sample", sample_ms(i), 2, i % 5 != 4, real, &ra->steps[i].pos);
+		if (i % 5 == 4)
+			put(st, sid, pt, "sample", 8 * sample_ms(i), 2, true, real, &ra->steps[i].pos);
+		/* the cache after every point against a full read */
+		struct plan_prior a, b;
+		assert_int_equal(exp_prior_update(&R, st, sid, &g, &tm, &a, &err), 0);
+		assert_int_equal(exp_prior_load_sweep(st, sid, &g, &tm, &b, &err), 0);
+		assert_int_equal(a.points, done);
+		same_prior(&a, &b);
+		/* the re-timing at an incidence change, against a sweep that reads everything there */
+		if (sweep_retime_due(&inc_rt, ra, (int)done)) {
+			sweep_retime_setup(&full_rt, spec, &tm);
+			assert_int_equal(sweep_retime_apply(&inc_rt, (int)done, st, sid, spec, &g, ra, &err), 1);
+			assert_int_equal(sweep_retime_apply(&full_rt, (int)done, st, sid, spec, &g, rb, &err), 1);
+			same_prior(&inc_rt.tm.prior, &full_rt.tm.prior);
+			assert_true(ra->predicted_s == rb->predicted_s);
+			for (size_t k = 0; k < n; k++)
+				assert_true(ra->steps[k].predicted_start_s == rb->steps[k].predicted_start_s);
+			changes++;
+		}
+	}
+	assert_int_equal(changes, 2);
+	/* the third incidence's rows merged into the first's: two incidences in the prior; nothing new to read */
+	struct plan_prior a;
+	assert_int_equal(exp_prior_update(&R, st, sid, &g, &tm, &a, &err), 0);
+	assert_int_equal(a.n_inc, 2);
+	assert_int_equal(a.points, n);
+	assert_true(R.next_order == (long long)n);
+	exp_prior_rows_free(&R);
+	sweep_retime_end(&inc_rt);
+	sweep_retime_end(&full_rt);
+	plan_result_free(ra);
+	plan_result_free(rb);
+	plan_spec_free(spec);
+	store_close(st);
 }
 
 int main(void)
@@ -231,6 +351,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_retime_eta),
 		cmocka_unit_test(test_retime_who),
+		cmocka_unit_test(test_retime_incremental),
 	};
 	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);
 }

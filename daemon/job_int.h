@@ -1,0 +1,40 @@
+/* job_int: what job.c (the daemon's side) and job_helper.c (the helper process) share: the helper's messages
+ * and the children's set-up. Not for other modules. */
+#ifndef DAEMON_JOB_INT_H
+#define DAEMON_JOB_INT_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <sys/types.h>
+
+#include "config/acq_err.h"
+#include "daemon/job.h"
+
+/* One message on the helper's socket (SOCK_SEQPACKET, both directions). The helper is a fork of this program,
+ * so fn is a valid address on both ends. */
+enum jobh_type {
+	JOBH_START = 1, /* daemon → helper: fork a child running fn (id, fn, mem_bytes); SCM_RIGHTS: the payload
+			 * (a memfd), the output pipe's write end */
+	JOBH_KILL,      /* daemon → helper: signal sig to child id (ignored once it has ended) */
+	JOBH_DONE,      /* helper → daemon: child id ended with status (exit code or 128 + signal) */
+};
+
+struct jobh_msg {
+	uint32_t type;
+	int32_t sig_or_status;
+	uint64_t id;
+	uint64_t mem_bytes;
+	job_msg_fn fn;
+};
+
+/* Fork the helper process: *sock is the daemon's end of its socket (close-on-exec), *pid its process. In the
+ * helper, every descriptor but its end is closed. 0 or -1 with err. */
+int jobh_spawn(int *sock, pid_t *pid, struct acq_err *err);
+
+/* In a freshly forked child: default signals and mask, death with parent (PR_SET_PDEATHSIG; exits at once
+ * when parent is gone already). Async-signal-safe. */
+void job_child_setup(pid_t parent);
+/* In a job child before its work: nice +10 and the address space bounded to mem_bytes (0: unbounded). */
+void job_child_limits(size_t mem_bytes);
+
+#endif
