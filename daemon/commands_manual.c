@@ -13,6 +13,7 @@
 #include "daemon/sweep.h"
 
 #include "daemon/plan/plan.h"
+#include "daemon/plan/plan_home.h"
 
 /* A manual move must not make the arms collide, on the way or at the target (straight
  * segment, all axes together — what devices_move() does). Blind zones for the beam or the view are allowed
@@ -166,17 +167,28 @@ void cmd_manual_devices(struct app *app, const struct srv_peer *peer, struct pro
 	devices_query_running = true;
 }
 
-/* home [axis]: one axis by its name (laser.theta or laser_theta, ...), or all three one after the other
- * (detector.phi first), each only if its way to the home position (0°) is collision-free. */
+/* home [axis]: one axis by its name (laser.theta or laser_theta, ...), only if its way to the home position (0°)
+ * is collision-free; or all three: each referenced at 0° and then moved to its park (home.park in the
+ * configuration), in an order (plan_home_order) where every single-axis move is collision-free. Every step goes
+ * through move_check, as a manual move does; the first refusal or failure ends the homing, naming the axes homed. */
 struct homing {
 	struct app *app;
 	uint64_t serial;
 	json_t *id;
-	unsigned todo;       /* axes left, as bits */
+	struct plan_home_step steps[PLAN_HOME_MAX_STEPS];
+	int nsteps, next;
 	json_t *homed;       /* names homed so far */
+	bool parked;         /* the parks were part of the sequence */
 };
 
 static void home_next(struct homing *h);
+
+static void home_free(struct homing *h)
+{
+	json_decref(h->homed);
+	json_decref(h->id);
+	free(h);
+}
 
 /* Reply err, naming the axes homed before it (the reply shows the state after the command), and end h. */
 static void home_refused(struct homing *h, const struct acq_err *err)
@@ -187,57 +199,74 @@ static void home_refused(struct homing *h, const struct acq_err *err)
 		n += (size_t)snprintf(msg + n, sizeof msg - n, "%s%s", i ? ", " : "; homed before: ",
 				      json_string_value(json_array_get(h->homed, i)));
 	server_reply_error(h->app->srv, h->serial, h->id, proto_code_of(err), msg);
-	json_decref(h->homed);
-	json_decref(h->id);
-	free(h);
+	home_free(h);
 }
 
 static void home_done(void *ctx, int rc, const struct acq_err *err, json_t *result)
 {
 	struct homing *h = ctx;
 	json_decref(result);
+	const struct plan_home_step *s = &h->steps[h->next - 1];
 	if (rc) {
-		/* the axis that failed is the last one named */
-		json_array_remove(h->homed, json_array_size(h->homed) - 1);
-		home_refused(h, err);
-		return;
+		struct acq_err e = *err;
+		acq_err_prefix(&e, "%s %s: ", s->park ? "park" : "home", conf_dev_name((enum conf_dev)s->axis));
+		return home_refused(h, &e);
 	}
+	if (!s->park)
+		json_array_append_new(h->homed, json_string(conf_dev_name((enum conf_dev)s->axis)));
 	home_next(h);
 }
 
 static void home_next(struct homing *h)
 {
-	static const int order[3] = { CONF_DEV_DETECTOR_PHI, CONF_DEV_LASER_THETA, CONF_DEV_DETECTOR_THETA };
 	struct acq_err err = { 0 };
-	for (int k = 0; k < 3; k++) {
-		int a = order[k];
-		if (!(h->todo & (1u << a)))
-			continue;
-		h->todo &= ~(1u << a);
+	if (h->next < h->nsteps) {
+		const struct plan_home_step *s = &h->steps[h->next++];
+		const char *verb = s->park ? "park" : "home";
 		double t[3] = { NAN, NAN, NAN };
-		t[a] = 0;
+		t[s->axis] = s->target;
 		const char *warning;
 		if (move_check(h->app, t, &warning, &err)) {
-			acq_err_prefix(&err, "home %s: ", conf_dev_name((enum conf_dev)a));
-			goto fail;
+			acq_err_prefix(&err, "%s %s: ", verb, conf_dev_name((enum conf_dev)s->axis));
+			return home_refused(h, &err);
 		}
-		if (devices_home(h->app->dev, 1u << a, home_done, h, &err))
-			goto fail;
-		json_array_append_new(h->homed, json_string(conf_dev_name((enum conf_dev)a)));
+		if (s->park ? devices_move(h->app->dev, t, home_done, h, &err)
+			    : devices_home(h->app->dev, 1u << s->axis, home_done, h, &err)) {
+			acq_err_prefix(&err, "%s %s: ", verb, conf_dev_name((enum conf_dev)s->axis));
+			return home_refused(h, &err);
+		}
 		return;
 	}
 	double pos[3];
 	devices_positions(h->app->dev, pos);
-	json_t *o = json_pack("{s:O}", "homed", h->homed);
+	json_t *o = json_pack("{s:O, s:b}", "homed", h->homed, "parked", h->parked);
 	for (int i = 0; i < 3; i++)
 		json_object_set_new(o, conf_dev_name((enum conf_dev)i), isnan(pos[i]) ? json_null() : json_real(pos[i]));
 	server_reply(h->app->srv, h->serial, h->id, o);
-	json_decref(h->homed);
-	json_decref(h->id);
-	free(h);
-	return;
-fail:
-	home_refused(h, &err);
+	home_free(h);
+}
+
+/* The steps of an all-axes home from the arms' positions now: 0, or -1 with err saying why none is safe. */
+static int home_plan_all(struct homing *h, struct acq_err *err)
+{
+	const struct conf *c = h->app->conf;
+	double cur[3];
+	devices_positions(h->app->dev, cur);
+	for (int a = 0; a < 3; a++)
+		if (isnan(cur[a]))
+			return acq_errf(err, ACQ_E_STATE, "home: %s is unavailable (acqctl devices)",
+					conf_dev_name((enum conf_dev)a));
+	struct plan_pos from = { cur[0], cur[1], cur[2] };
+	h->parked = c->have_park;
+	h->nsteps = plan_home_order(&c->bench, &from, c->have_park ? c->park : NULL, 7, h->steps);
+	if (h->nsteps >= 0)
+		return 0;
+	if (!c->have_park)
+		return acq_errf(err, ACQ_E_RANGE, "home: the arms cannot all be at their homes (0°, 0°, 0°) at once "
+				"(a collision): set home.park in %s (where each axis waits after its home)", c->path);
+	return acq_errf(err, ACQ_E_RANGE, "home: no order of single-axis moves from (%g°, %g°, %g°) homes every axis "
+			"and parks it at (%g°, %g°, %g°) without a collision; move the arms apart first",
+			cur[0], cur[1], cur[2], c->park[0], c->park[1], c->park[2]);
 }
 
 void cmd_manual_home(struct app *app, const struct srv_peer *peer, struct proto_req *req)
@@ -272,8 +301,15 @@ void cmd_manual_home(struct app *app, const struct srv_peer *peer, struct proto_
 		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 		return cmd_reply_err(app, peer, req->id, &err);
 	}
-	*h = (struct homing){ .app = app, .serial = peer->serial, .id = json_incref(req->id), .todo = mask,
-			      .homed = h->homed };
+	*h = (struct homing){ .app = app, .serial = peer->serial, .id = json_incref(req->id), .homed = h->homed };
+	if (mask != 7) {
+		int a = mask == 1 ? 0 : mask == 2 ? 1 : 2;
+		h->steps[0] = (struct plan_home_step){ .axis = a, .park = false, .target = 0 };
+		h->nsteps = 1;
+	} else if (home_plan_all(h, &err)) {
+		home_free(h);
+		return cmd_reply_err(app, peer, req->id, &err);
+	}
 	home_next(h);
 }
 

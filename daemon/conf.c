@@ -13,6 +13,8 @@
 #include "drivers/laser.h"
 #include "drivers/spectro.h"
 
+#include "daemon/plan/plan.h"
+
 /* Owned strings built from the file (joined paths); freed with the configuration. */
 struct conf_priv {
 	struct conf pub;
@@ -462,6 +464,51 @@ static int parse_devices(struct conf *c, struct yc_node *devs, struct acq_err *e
 	return yc_check_unknown(devs, "devices", err);
 }
 
+/* home.park: where `acqctl home` (all axes) leaves each axis after referencing it. Each value within the bench's
+ * axis limits and the controller's soft limits; the three together a pose with the arms clear of each other,
+ * the beam and the view. Absent: no parks (c->have_park false). */
+static int parse_home(struct conf *c, struct yc_node *node, struct acq_err *err)
+{
+	c->have_park = false;
+	if (!node)
+		return 0;
+	struct yc_node *park = yc_get(node, "park");
+	if (yc_expect_map(node, "home", err) || (park && yc_expect_map(park, "home.park", err)))
+		return -1;
+	if (park) {
+		const struct bench_axis *ba[3] = { &c->bench.laser_theta, &c->bench.detector_theta,
+						   &c->bench.detector_phi };
+		for (int a = 0; a < 3; a++) {
+			const char *name = conf_dev_name((enum conf_dev)a);
+			double lo = ba[a]->min_deg, hi = ba[a]->max_deg;
+			if (c->axis[a]) {
+				double smin, smax;
+				axis_cfg_limits(c->axis[a], &smin, &smax);
+				lo = smin > lo ? smin : lo;
+				hi = smax < hi ? smax : hi;
+			}
+			if (!yc_get(park, name))
+				return yc_errf(err, park, "home.park: %s missing (expected a park for each of laser.theta, "
+					       "detector.theta, detector.phi)", name);
+			char what[64];
+			snprintf(what, sizeof what, "home.park.%s (soft limits)", name);
+			if (yc_node_double(yc_get(park, name), what, lo, hi, &c->park[a], err))
+				return -1;
+		}
+		struct plan_pos p = { c->park[0], c->park[1], c->park[2] };
+		unsigned blind = plan_blind(&c->bench, &p);
+		if (blind)
+			return yc_errf(err, park, "home.park: the pose (%g°, %g°, %g°) is %s%s; expected a pose with the "
+				       "arms clear of each other, the beam and the view", p.laser_theta, p.det_theta,
+				       p.det_phi, blind & PLAN_R_COLLISION ? "a collision of the arms" : "in a blind zone: ",
+				       blind & PLAN_R_COLLISION ? "" : plan_reason_name(blind));
+		if (yc_check_unknown(park, "home.park", err))
+			return -1;
+		c->have_park = true;
+	}
+	return yc_check_unknown(node, "home", err);
+}
+
 /* The largest configuration file read (acq_file_read refuses a larger one). */
 #define CONF_MAX_BYTES ((size_t)16 << 20)
 
@@ -518,7 +565,8 @@ int conf_load_text(const char *name, const char *text, size_t len, const struct 
 		goto fail;
 	}
 	if (parse_daemon(cp, yc_get(root, "daemon"), err) || parse_sweep(&c->sweep, yc_get(root, "sweep"), err) ||
-	    parse_recon(cp, yc_get(root, "recon"), err) || yc_check_unknown(root, "the configuration", err))
+	    parse_recon(cp, yc_get(root, "recon"), err) || parse_home(c, yc_get(root, "home"), err) ||
+	    yc_check_unknown(root, "the configuration", err))
 		goto fail;
 	*out = c;
 	return 0;

@@ -93,6 +93,8 @@ struct conf {
 	struct conf_recon recon;
 	struct conf_sim sim;
 	bool have_sim;
+	double park[3];            /* home.park: CONF_DEV_LASER_THETA.. DETECTOR_PHI, degrees (when have_park) */
+	bool have_park;
 };
 
 /* Read a simulator ports file (JSON) into sim. 0 or -1 naming the file and the offending key. */

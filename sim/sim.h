@@ -55,6 +55,7 @@ struct sim_world {
 	double laser_theta_deg;
 	double detector_theta_deg, detector_phi_deg;
 	bool collision;             /* arms in contact: both controllers in alarm */
+	unsigned long collisions;   /* contacts since start (the control socket's status shows them) */
 	/* laser state, written by the laser service */
 	bool laser_emission;
 	double laser_power_pct;

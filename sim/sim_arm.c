@@ -463,6 +463,8 @@ static void collide(struct sim_arm *s)
 {
 	for (int i = 0; i < s->nax; i++)
 		raise_alarm(&s->ax[i], 0xE0);
+	if (!s->w->collision)
+		s->w->collisions++;
 	s->w->collision = true;
 	s->was_colliding = true;
 }
@@ -522,6 +524,8 @@ static void arm_tick(void *self, double now)
 	for (int i = 0; i < s->nax; i++)
 		axis_tick(&s->ax[i], now);
 	bool coll = colliding(w);
+	if (coll && !w->collision)
+		w->collisions++;
 	w->collision = coll;
 	if (coll && !s->was_colliding)
 		for (int i = 0; i < s->nax; i++)

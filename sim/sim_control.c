@@ -225,10 +225,10 @@ static int command(struct control *c, struct client *k, char *line, double now)
 		char fl[512];
 		faults_list(w, fl, sizeof fl);
 		return reply(k, "ok t=%.6f laser.theta=%.4f detector.theta=%.4f detector.phi=%.4f emission=%d power=%.2f"
-				" sample=%s temperature=%.2f faults=%s laser_status_reads=%lu lag_s=%.6f",
+				" sample=%s temperature=%.2f faults=%s laser_status_reads=%lu lag_s=%.6f collisions=%lu",
 			     now, w->laser_theta_deg, w->detector_theta_deg, w->detector_phi_deg, w->laser_emission ? 1 : 0,
 			     w->laser_power_pct, phys_sample_name(w->sample), w->sensor_temp_c, fl, w->laser_status_reads,
-			     w->lag_s);
+			     w->lag_s, w->collisions);
 	}
 	if (!strcmp(cmd, "time"))
 		return reply(k, "ok %.6f", now);

@@ -87,14 +87,93 @@ static int truth_close(FILE *f, const char *path, int rc)
 	return rc;
 }
 
-int simtruth_main(int argc, char **argv)
+/* What one `acq-sim truth` invocation asked for (truth_parse). */
+struct truth_args {
+	const char *material, *merl_file; /* merl_file: the FILE of merl:FILE, else NULL */
+	int id;                           /* enum mat_id */
+	const char *dhr, *eval, *grid, *merl, *out, *thetas, *wls;
+	bool sphere;
+	long level;
+	struct truth_grid g;
+	int nact; /* actions given */
+};
+
+/* One option c (with its argument arg) into a: -1 to go on, or the exit status (help; a bad value, reported). */
+static int truth_option(int c, char *arg, struct truth_args *a)
 {
-	const char *dhr = NULL, *eval = NULL, *grid = NULL, *merl = NULL, *out = NULL, *thetas = "8,30,60",
-		   *wls = "450:1100:1";
-	struct truth_grid g = { .rel = 0.01, .seed = 1, .point_s = 20 };
-	refdrift_defaults(&g.cal);
-	bool sphere = false;
-	long level = 2;
+	struct truth_grid *g = &a->g;
+	char *end = NULL;
+	switch (c) {
+	case 'd': a->dhr = arg; a->nact++; break;
+	case 'e': a->eval = arg; a->nact++; break;
+	case 'g': a->grid = arg; a->nact++; break;
+	case 'm': a->merl = arg; a->nact++; break;
+	case 'S': a->sphere = true; a->nact++; break;
+	case 't': a->thetas = arg; break;
+	case 'w': a->wls = arg; break;
+	case 'o': a->out = arg; break;
+	case 'k': g->keep_blind = true; break;
+	case 'n':
+	case 'f': {
+		double v;
+		if (acq_num_parse(arg, 0, 10, &v)) {
+			fprintf(stderr, "acq-sim truth: --%s: expected a number in [0, 10], got '%s'\n",
+				c == 'n' ? "noise" : "noise-floor", arg);
+			return 2;
+		}
+		*(c == 'n' ? &g->rel : &g->floor_) = v;
+		break;
+	}
+	case 's':
+		errno = 0;
+		g->seed = strtoull(arg, &end, 10);
+		if (end == arg || *end || errno || arg[0] == '-') {
+			fprintf(stderr, "acq-sim truth: --seed: expected a non-negative integer, got '%s'\n", arg);
+			return 2;
+		}
+		break;
+	case 'L':
+		a->level = strtol(arg, &end, 10);
+		if (end == arg || *end || a->level < 0 || a->level > 5) {
+			fprintf(stderr, "acq-sim truth: --level: expected 0..5, got '%s'\n", arg);
+			return 2;
+		}
+		break;
+	case 'R':
+		if (parse_triple(arg, &g->cal.ref_u, &g->cal.ref_corr_nm, &g->cal.ref_seed) ||
+		    !(g->cal.ref_u >= 0 && g->cal.ref_u <= 0.1) || !(g->cal.ref_corr_nm >= 5 && g->cal.ref_corr_nm <= 10000)) {
+			fprintf(stderr, "acq-sim truth: --reference: expected U[,CORR_NM[,SEED]] with U in [0, 0.1], "
+					"CORR_NM in [5, 10000], got '%s'\n", arg);
+			return 2;
+		}
+		break;
+	case 'D':
+		if (parse_triple(arg, &g->cal.drift_amp, &g->cal.drift_period_s, &g->cal.drift_seed) ||
+		    !(g->cal.drift_amp >= 0 && g->cal.drift_amp <= 0.05) ||
+		    !(g->cal.drift_period_s >= 1 && g->cal.drift_period_s <= 1e7)) {
+			fprintf(stderr, "acq-sim truth: --drift: expected AMP[,PERIOD_S[,SEED]] with AMP in [0, 0.05], "
+					"PERIOD_S in [1, 1e7], got '%s'\n", arg);
+			return 2;
+		}
+		break;
+	case 'P':
+		if (acq_num_parse(arg, 0, 1e6, &g->point_s)) {
+			fprintf(stderr, "acq-sim truth: --point-time: expected seconds in [0, 1e6], got '%s'\n", arg);
+			return 2;
+		}
+		break;
+	case 'h': truth_usage(stdout); return 0;
+	default: truth_usage(stderr); return 2;
+	}
+	return -1;
+}
+
+/* MATERIAL and the options into a (defaults first): -1 to go on, or the exit status (help, a usage error). */
+static int truth_parse(int argc, char **argv, struct truth_args *a)
+{
+	*a = (struct truth_args){ .thetas = "8,30,60", .wls = "450:1100:1", .level = 2,
+				  .g = { .rel = 0.01, .seed = 1, .point_s = 20 } };
+	refdrift_defaults(&a->g.cal);
 	static const struct option opts[] = {
 		{ "dhr", required_argument, NULL, 'd' },      { "eval", required_argument, NULL, 'e' },
 		{ "grid", required_argument, NULL, 'g' },     { "merl", required_argument, NULL, 'm' },
@@ -110,144 +189,105 @@ int simtruth_main(int argc, char **argv)
 		truth_usage(argc < 2 ? stderr : stdout);
 		return argc < 2 ? 2 : 0;
 	}
-	const char *material = argv[1], *merl_file = NULL;
-	int id = mat_from_name(material);
-	if (!strncmp(material, "merl:", 5) && material[5]) {
-		id = MAT_MERL;
-		merl_file = material + 5;
+	a->material = argv[1];
+	a->id = mat_from_name(a->material);
+	if (!strncmp(a->material, "merl:", 5) && a->material[5]) {
+		a->id = MAT_MERL;
+		a->merl_file = a->material + 5;
 	}
-	if (id < 0 || (id == MAT_MERL && !merl_file)) {
-		fprintf(stderr, "acq-sim truth: unknown material '%s' (expected %s, or merl:FILE)\n", material,
+	if (a->id < 0 || (a->id == MAT_MERL && !a->merl_file)) {
+		fprintf(stderr, "acq-sim truth: unknown material '%s' (expected %s, or merl:FILE)\n", a->material,
 			mat_names_list());
 		return 2;
 	}
 	/* options after MATERIAL: parse argv + 1 from its index 1; optind = 0 re-initialises getopt */
 	optind = 0;
-	int c, nact = 0, oargc = argc - 1;
+	int c, rc, oargc = argc - 1;
 	char **oargv = argv + 1;
-	while ((c = getopt_long(oargc, oargv, "o:h", opts, NULL)) != -1) {
-		char *end = NULL;
-		switch (c) {
-		case 'd': dhr = optarg; nact++; break;
-		case 'e': eval = optarg; nact++; break;
-		case 'g': grid = optarg; nact++; break;
-		case 'm': merl = optarg; nact++; break;
-		case 'S': sphere = true; nact++; break;
-		case 't': thetas = optarg; break;
-		case 'w': wls = optarg; break;
-		case 'o': out = optarg; break;
-		case 'k': g.keep_blind = true; break;
-		case 'n':
-		case 'f': {
-			double v;
-			if (acq_num_parse(optarg, 0, 10, &v)) {
-				fprintf(stderr, "acq-sim truth: --%s: expected a number in [0, 10], got '%s'\n",
-					c == 'n' ? "noise" : "noise-floor", optarg);
-				return 2;
-			}
-			*(c == 'n' ? &g.rel : &g.floor_) = v;
-			break;
-		}
-		case 's':
-			errno = 0;
-			g.seed = strtoull(optarg, &end, 10);
-			if (end == optarg || *end || errno || optarg[0] == '-') {
-				fprintf(stderr, "acq-sim truth: --seed: expected a non-negative integer, got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'L':
-			level = strtol(optarg, &end, 10);
-			if (end == optarg || *end || level < 0 || level > 5) {
-				fprintf(stderr, "acq-sim truth: --level: expected 0..5, got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'R':
-			if (parse_triple(optarg, &g.cal.ref_u, &g.cal.ref_corr_nm, &g.cal.ref_seed) ||
-			    !(g.cal.ref_u >= 0 && g.cal.ref_u <= 0.1) || !(g.cal.ref_corr_nm >= 5 && g.cal.ref_corr_nm <= 10000)) {
-				fprintf(stderr, "acq-sim truth: --reference: expected U[,CORR_NM[,SEED]] with U in [0, 0.1], "
-						"CORR_NM in [5, 10000], got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'D':
-			if (parse_triple(optarg, &g.cal.drift_amp, &g.cal.drift_period_s, &g.cal.drift_seed) ||
-			    !(g.cal.drift_amp >= 0 && g.cal.drift_amp <= 0.05) ||
-			    !(g.cal.drift_period_s >= 1 && g.cal.drift_period_s <= 1e7)) {
-				fprintf(stderr, "acq-sim truth: --drift: expected AMP[,PERIOD_S[,SEED]] with AMP in [0, 0.05], "
-						"PERIOD_S in [1, 1e7], got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'P':
-			if (acq_num_parse(optarg, 0, 1e6, &g.point_s)) {
-				fprintf(stderr, "acq-sim truth: --point-time: expected seconds in [0, 1e6], got '%s'\n", optarg);
-				return 2;
-			}
-			break;
-		case 'h': truth_usage(stdout); return 0;
-		default: truth_usage(stderr); return 2;
-		}
-	}
+	while ((c = getopt_long(oargc, oargv, "o:h", opts, NULL)) != -1)
+		if ((rc = truth_option(c, optarg, a)) >= 0)
+			return rc;
 	if (optind < oargc) {
 		fprintf(stderr, "acq-sim truth: unexpected argument '%s'\n", oargv[optind]);
 		return 2;
 	}
-	if (nact != 1) {
+	if (a->nact != 1) {
 		fprintf(stderr, "acq-sim truth: give exactly one of --dhr, --eval, --grid, --merl, --spectrophotometer\n");
 		return 2;
 	}
-	if (grid && !out) {
+	if (a->grid && !a->out) {
 		fprintf(stderr, "acq-sim truth: --grid needs -o SAMPLES.csv (or -o - for standard output)\n");
 		return 2;
 	}
+	return -1;
+}
+
+/* --merl: the table to a->merl, the colour decisions on stderr. The exit status. */
+static int truth_merl(const struct truth_args *a, const struct mat *m, const double *wl, int nwl)
+{
+	struct acq_err err = { 0 };
+	struct colour_opts o;
+	struct colour_stats st;
+	if (truth_write_merl(a->merl, m, wl, nwl, &o, &st, &err)) {
+		fprintf(stderr, "acq-sim truth: --merl: %s\n", err.msg);
+		return 1;
+	}
+	fprintf(stderr, "acq-sim truth: MERL table written to %s; colour decisions: ", a->merl);
+	colour_opts_write_json(stderr, &o, &st, NULL);
+	fputc('\n', stderr);
+	return 0;
+}
+
+/* --dhr, --eval, --grid or --spectrophotometer: the CSV to its file (or standard output), a summary on stderr.
+ * The exit status. */
+static int truth_table(const struct truth_args *a, const struct mat *m, const double *th, int nth, const double *wl,
+		       int nwl)
+{
+	const char *path = a->dhr ? a->dhr : a->out ? a->out : "-";
+	FILE *f = truth_open(path);
+	if (!f)
+		return 1;
+	struct acq_err err = { 0 };
+	int rc, rows = 0, dropped = 0;
+	if (a->dhr)
+		rc = truth_write_dhr(f, m, th, nth, (int)a->level, wl, nwl, &err);
+	else if (a->eval)
+		rc = truth_write_eval(f, m, a->eval, wl, nwl, &err);
+	else if (a->grid)
+		rc = truth_write_grid(f, m, &a->g, wl, nwl, &rows, &dropped, &err);
+	else
+		rc = truth_write_sphere(f, m, a->g.seed, wl, nwl, &err);
+	if (rc)
+		fprintf(stderr, "acq-sim truth: %s\n", err.msg);
+	else if (a->grid)
+		fprintf(stderr, "acq-sim truth: %d samples written, %d in blind zones dropped\n", rows, dropped);
+	else if (a->sphere)
+		fprintf(stderr, "acq-sim truth: spectrophotometer (d/8 sphere, seed %llu): DHR at %g deg, stated sigma "
+				"= calibration %.1f %% (correlated over %g nm) + noise (sim/sim_sphere.h)\n",
+			(unsigned long long)a->g.seed, SPHERE_THETA_DEG, 100 * SPHERE_U_CAL, SPHERE_CORR_NM);
+	return truth_close(f, path, rc ? 1 : 0);
+}
+
+int simtruth_main(int argc, char **argv)
+{
+	struct truth_args a;
+	int rc = truth_parse(argc, argv, &a);
+	if (rc >= 0)
+		return rc;
 	struct acq_err err = { 0 };
 	double th[TRUTH_MAX_THETAS], *wl = NULL;
 	int nth = 0, nwl = 0;
-	if (truth_wavelengths(wls, &wl, &nwl, &err) || (dhr && truth_thetas(thetas, th, &nth, &err)) ||
-	    (grid && truth_grid_size(grid, &g, &err))) {
+	if (truth_wavelengths(a.wls, &wl, &nwl, &err) || (a.dhr && truth_thetas(a.thetas, th, &nth, &err)) ||
+	    (a.grid && truth_grid_size(a.grid, &a.g, &err))) {
 		fprintf(stderr, "acq-sim truth: %s\n", err.msg);
 		free(wl);
 		return 2;
 	}
-	struct mat *m = merl_file ? mat_new_merl(merl_file, nwl, wl, &err) : mat_new((enum mat_id)id, nwl, wl, &err);
-	int rc = 1;
-	FILE *f = NULL;
-	const char *path = dhr ? dhr : out ? out : "-";
-	if (!m) {
+	struct mat *m = a.merl_file ? mat_new_merl(a.merl_file, nwl, wl, &err)
+				    : mat_new((enum mat_id)a.id, nwl, wl, &err);
+	if (!m)
 		fprintf(stderr, "acq-sim truth: %s\n", err.msg);
-	} else if (merl) {
-		struct colour_opts o;
-		struct colour_stats st;
-		if (truth_write_merl(merl, m, wl, nwl, &o, &st, &err)) {
-			fprintf(stderr, "acq-sim truth: --merl: %s\n", err.msg);
-		} else {
-			fprintf(stderr, "acq-sim truth: MERL table written to %s; colour decisions: ", merl);
-			colour_opts_write_json(stderr, &o, &st, NULL);
-			fputc('\n', stderr);
-			rc = 0;
-		}
-	} else if ((f = truth_open(path))) {
-		int rows = 0, dropped = 0;
-		if (dhr)
-			rc = truth_write_dhr(f, m, th, nth, (int)level, wl, nwl, &err);
-		else if (eval)
-			rc = truth_write_eval(f, m, eval, wl, nwl, &err);
-		else if (grid)
-			rc = truth_write_grid(f, m, &g, wl, nwl, &rows, &dropped, &err);
-		else
-			rc = truth_write_sphere(f, m, g.seed, wl, nwl, &err);
-		if (rc)
-			fprintf(stderr, "acq-sim truth: %s\n", err.msg);
-		else if (grid)
-			fprintf(stderr, "acq-sim truth: %d samples written, %d in blind zones dropped\n", rows, dropped);
-		else if (sphere)
-			fprintf(stderr, "acq-sim truth: spectrophotometer (d/8 sphere, seed %llu): DHR at %g deg, stated sigma "
-					"= calibration %.1f %% (correlated over %g nm) + noise (sim/sim_sphere.h)\n",
-				(unsigned long long)g.seed, SPHERE_THETA_DEG, 100 * SPHERE_U_CAL, SPHERE_CORR_NM);
-		rc = truth_close(f, path, rc ? 1 : 0);
-	}
+	rc = !m ? 1 : a.merl ? truth_merl(&a, m, wl, nwl) : truth_table(&a, m, th, nth, wl, nwl);
 	mat_free(m);
 	free(wl);
 	return rc;

@@ -125,10 +125,10 @@ static double open_len(const double *C, size_t n, const double *s, const size_t 
 
 /* Nearest neighbour from the start row, then 2-opt and Or-opt (segments of 1–3, either orientation) until
  * no move improves. C is symmetric; the start row s is not part of it. */
-void plan_order_group(const double *C, size_t n, const double *s, size_t *p, bool ils)
+/* The greedy start: from the cheapest first point (s), always the nearest unvisited one, into p (the identity
+ * order when out of memory). */
+static void nearest_start(const double *C, size_t n, const double *s, size_t *p)
 {
-	if (n == 0)
-		return;
 	char *used = calloc(n, 1);
 	size_t cur = 0;
 	for (size_t i = 0; i < n; i++) {
@@ -152,16 +152,11 @@ void plan_order_group(const double *C, size_t n, const double *s, size_t *p, boo
 		cur = bi;
 	}
 	free(used);
-	size_t kn = n - 1 < OR_K ? n - 1 : OR_K;
-	size_t *tmp = malloc(n * sizeof *tmp), *pos = malloc(n * sizeof *pos);
-	size_t *nbr = malloc((n * kn + 1) * sizeof *nbr);
-	if (!tmp || !pos || !nbr) {
-		free(tmp);
-		free(pos);
-		free(nbr);
-		return;
-	}
-	/* the kn nearest neighbours of every node, by insertion into a short sorted list */
+}
+
+/* The kn nearest neighbours of every node into nbr[u * kn ...], by insertion into a short sorted list. */
+static void nearest_lists(const double *C, size_t n, size_t *nbr, size_t kn)
+{
 	for (size_t u = 0; u < n; u++) {
 		size_t *nb = &nbr[u * kn], m = 0;
 		for (size_t v = 0; v < n; v++) {
@@ -178,47 +173,69 @@ void plan_order_group(const double *C, size_t n, const double *s, size_t *p, boo
 			nb[k] = v;
 		}
 	}
-	local_search(C, n, s, p, tmp, pos, nbr, kn);
-	/* Iterated local search: a double-bridge kick (three cut points, segments B and C swapped), local
-	 * search again, keep it if shorter. The tree's generator (config/acq_rng.h) seeded by n: deterministic, the
-	 * same order for the same group on every run. */
-	size_t *q = malloc(n * sizeof *q);
-	if (q && ils && n >= 8) {
-		double best = open_len(C, n, s, p);
-		struct acq_rng rng;
-		acq_rng_seed(&rng, (uint64_t)n);
-		int kicks = n <= 300 ? 60 : n <= 1000 ? 15 : 4;
-		for (int k = 0; k < kicks; k++) {
-			size_t cut[3];
-			for (int c = 0; c < 3; c++)
-				cut[c] = 1 + (size_t)(acq_rng_next(&rng) % (n - 1));
-			/* sort the cuts */
-			for (int a = 0; a < 3; a++)
-				for (int b = a + 1; b < 3; b++)
-					if (cut[b] < cut[a]) {
-						size_t t = cut[a];
-						cut[a] = cut[b];
-						cut[b] = t;
-					}
-			if (cut[0] == cut[1] || cut[1] == cut[2])
-				continue;
-			size_t w = 0;
-			for (size_t x = 0; x < cut[0]; x++)
-				q[w++] = p[x];
-			for (size_t x = cut[1]; x < cut[2]; x++)
-				q[w++] = p[x];
-			for (size_t x = cut[0]; x < cut[1]; x++)
-				q[w++] = p[x];
-			for (size_t x = cut[2]; x < n; x++)
-				q[w++] = p[x];
-			local_search(C, n, s, q, tmp, pos, nbr, kn);
-			double len = open_len(C, n, s, q);
-			if (len < best - 1e-9) {
-				best = len;
-				memcpy(p, q, n * sizeof *p);
-			}
+}
+
+/* Iterated local search: a double-bridge kick (three cut points, segments B and C swapped), local search again,
+ * keep it if shorter. The tree's generator (config/acq_rng.h) seeded by n: deterministic, the same order for the
+ * same group on every run. q: n scratch entries. */
+static void kick_search(const double *C, size_t n, const double *s, size_t *p, size_t *q, size_t *tmp, size_t *pos,
+			const size_t *nbr, size_t kn)
+{
+	double best = open_len(C, n, s, p);
+	struct acq_rng rng;
+	acq_rng_seed(&rng, (uint64_t)n);
+	int kicks = n <= 300 ? 60 : n <= 1000 ? 15 : 4;
+	for (int k = 0; k < kicks; k++) {
+		size_t cut[3];
+		for (int c = 0; c < 3; c++)
+			cut[c] = 1 + (size_t)(acq_rng_next(&rng) % (n - 1));
+		/* sort the cuts */
+		for (int a = 0; a < 3; a++)
+			for (int b = a + 1; b < 3; b++)
+				if (cut[b] < cut[a]) {
+					size_t t = cut[a];
+					cut[a] = cut[b];
+					cut[b] = t;
+				}
+		if (cut[0] == cut[1] || cut[1] == cut[2])
+			continue;
+		size_t w = 0;
+		for (size_t x = 0; x < cut[0]; x++)
+			q[w++] = p[x];
+		for (size_t x = cut[1]; x < cut[2]; x++)
+			q[w++] = p[x];
+		for (size_t x = cut[0]; x < cut[1]; x++)
+			q[w++] = p[x];
+		for (size_t x = cut[2]; x < n; x++)
+			q[w++] = p[x];
+		local_search(C, n, s, q, tmp, pos, nbr, kn);
+		double len = open_len(C, n, s, q);
+		if (len < best - 1e-9) {
+			best = len;
+			memcpy(p, q, n * sizeof *p);
 		}
 	}
+}
+
+void plan_order_group(const double *C, size_t n, const double *s, size_t *p, bool ils)
+{
+	if (n == 0)
+		return;
+	nearest_start(C, n, s, p);
+	size_t kn = n - 1 < OR_K ? n - 1 : OR_K;
+	size_t *tmp = malloc(n * sizeof *tmp), *pos = malloc(n * sizeof *pos);
+	size_t *nbr = malloc((n * kn + 1) * sizeof *nbr);
+	if (!tmp || !pos || !nbr) {
+		free(tmp);
+		free(pos);
+		free(nbr);
+		return;
+	}
+	nearest_lists(C, n, nbr, kn);
+	local_search(C, n, s, p, tmp, pos, nbr, kn);
+	size_t *q = malloc(n * sizeof *q);
+	if (q && ils && n >= 8)
+		kick_search(C, n, s, p, q, tmp, pos, nbr, kn);
 	free(q);
 	free(tmp);
 	free(pos);

@@ -10,6 +10,7 @@
 - `acqctl watch` (not a terminal) prints JSON lines and reconnects when the daemon restarts;
 - `acq-sim ctl` drives the simulator (sample, fault, truth) with its exit codes; --version of the five programs."""
 import json
+import math
 import os
 import signal
 import socket
@@ -153,6 +154,66 @@ def offline_checks(tmp):
     return plan, d
 
 
+PARK = {"laser.theta": 30.0, "detector.theta": 30.0, "detector.phi": 180.0}  # config/bench-sim.yaml home.park
+COLLISION_DEG = 6 + 5 + 1  # bench-sim.yaml: laser body + detector body half-widths + safety margin
+
+
+def separation_deg(lt, dt, dp):
+    """Angle between the laser's direction (zenith lt, azimuth 0) and the detector's (dt, dp), degrees."""
+    r = math.radians
+    c = math.cos(r(lt)) * math.cos(r(dt)) + math.sin(r(lt)) * math.sin(r(dt)) * math.cos(r(dp))
+    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+
+
+def home_all(b, c):
+    """acqctl home (all axes) from (10, 40, 90): rc 0, every axis homed (the controllers say so), the reply's
+    and the simulator's positions are the parks, no contact and no pose closer than the collision limit seen."""
+    c.json("move", "move", "laser.theta=10", "detector.theta=40", "detector.phi=90")
+    coll0 = int(b.sim_status()["collisions"])
+    seen, stop = [], threading.Event()
+
+    def sample():
+        while not stop.is_set():
+            st = b.sim_status()
+            seen.append(separation_deg(float(st["laser.theta"]), float(st["detector.theta"]),
+                                       float(st["detector.phi"])))
+            time.sleep(0.01)
+    t = threading.Thread(target=sample)
+    t.start()
+    try:
+        d = c.json("home", "home")
+    finally:
+        stop.set()
+        t.join(10)
+    check(sorted(d["homed"]) == sorted(PARK) and d["parked"] is True, "home of all axes %r" % d)
+    for k, v in PARK.items():
+        check(abs(d[k] - v) < 0.05, "home of all axes: %s at %r, its park %r" % (k, d[k], v))
+    sim = b.sim_status()
+    for k, v in PARK.items():
+        check(abs(float(sim[k]) - v) < 0.05, "the simulator's %s at %s, its park %r" % (k, sim[k], v))
+    check(int(sim["collisions"]) == coll0, "home of all axes: the simulator counted a contact %r" % sim)
+    check(len(seen) > 20 and min(seen) >= COLLISION_DEG - 0.05,
+          "home of all axes: %d samples, the arms %.2f° apart at the closest (limit %d)"
+          % (len(seen), min(seen or [0]), COLLISION_DEG))
+    print("# home of all axes: %d samples of the simulator, the arms %.2f° apart at the closest (limit %d)"
+          % (len(seen), min(seen), COLLISION_DEG))
+    devs = c.json("devices", "devices")
+    axes = [x for x in devs["devices"] if x["name"] in PARK]
+    check(len(axes) == 3 and all(x["status"]["homed"] for x in axes), "every axis referenced %r" % axes)
+    out = c.human("home")
+    check("homed laser.theta, detector.theta, detector.phi" in out and "30" in out, "home human %r" % out)
+    # from (10, 10, 90) every first step closes the arms in (each axis's home is within 12° of the other arm):
+    # no order exists, refused before anything moves
+    c.json("move", "move", "detector.theta=10", "detector.phi=90")
+    c.json("move", "move", "laser.theta=10")
+    p = c.run("home")
+    check(p.returncode == 1 and "no order of single-axis moves" in p.stderr and "move the arms apart" in p.stderr,
+          "home from (10, 10, 90): rc %d %r" % (p.returncode, p.stderr))
+    sim = b.sim_status()
+    check(abs(float(sim["laser.theta"]) - 10) < 0.05 and abs(float(sim["detector.theta"]) - 10) < 0.05 and
+          abs(float(sim["detector.phi"]) - 90) < 0.05, "a refused home moves nothing %r" % sim)
+
+
 def main():
     with L.Bench(scale=5.0) as b:  # slow enough for a move to be stopped midway
         tmp = b.dir
@@ -193,17 +254,17 @@ def main():
         # --- manual commands on the simulated bench
         d = c.json("home", "home", "detector.phi")
         check(d["homed"] == ["detector.phi"] and abs(d["detector.phi"]) < 0.05, "home %r" % d)
-        # home of every axis: detector.phi, laser.theta, then detector.theta, whose home (0°, the laser's place at
-        # 0°) is a collision: refused (rc 1), naming the axes homed before the refusal (the state after it)
-        c.json("move", "move", "laser.theta=10", "detector.theta=40", "detector.phi=90")
-        p = c.run("home")
-        check(p.returncode == 1 and "home detector.theta" in p.stderr and
-              "homed before: detector.phi, laser.theta" in p.stderr, "home of all axes: rc %d %r" % (p.returncode,
-                                                                                                p.stderr))
-        sim = b.sim_status()
-        check(abs(float(sim["laser.theta"])) < 0.05 and abs(float(sim["detector.phi"])) < 0.05 and
-              abs(float(sim["detector.theta"]) - 40) < 0.05,
-              "home of all axes: laser.theta and detector.phi at 0, detector.theta left at 40 %r" % sim)
+        # one axis whose way home is not free is refused and nothing moves: detector.theta's home (0°) is the
+        # laser's place while the laser is at 0°
+        c.json("move", "move", "laser.theta=0", "detector.theta=40", "detector.phi=90")
+        p = c.run("home", "detector.theta")
+        check(p.returncode == 1 and "home detector.theta" in p.stderr and "collision" in p.stderr,
+              "home detector.theta with the laser at 0: rc %d %r" % (p.returncode, p.stderr))
+        check(abs(float(b.sim_status()["detector.theta"]) - 40) < 0.05, "refused home left detector.theta at 40")
+        # home of every axis from (10, 40, 90): each referenced, then at its park (home.park of bench-sim.yaml),
+        # one axis at a time in a collision-free order; the simulator, sampled all along, never sees the arms
+        # closer than the daemon's collision limit and counts no contact
+        home_all(b, c)
         # one name per axis (laser.theta=); the old spelling (laser_theta=) still moves the same axis
         d = c.json("move", "move", "laser.theta=20", "detector.theta=40", "detector_phi=90")
         check(abs(d["laser.theta"] - 20) < 0.05 and abs(d["detector.theta"] - 40) < 0.05 and

@@ -109,6 +109,11 @@ try:
     r2 = run("green-paint", "--grid", "6x5x8", "--noise", "0.02", "--noise-floor", "1e-4", "--seed", str(SEED),
              "-o", "-", "--wavelengths", "450:1100:25")
     check(r2.stdout == open(out).read(), "grid: same seed, same samples")
+    r3 = run("green-paint", "--grid", "6x5x8", "--noise", "0.02", "--noise-floor", "1e-4", "--seed", str(SEED),
+             "-o", "-", "--wavelengths", "450:1100:25", "--keep-blind")
+    kept = [ln for ln in r3.stdout.splitlines() if ln and not ln.startswith("#")][1:]
+    check(r3.returncode == 0 and len(g) < len(kept) == 6 * 5 * 8 and "0 in blind zones dropped" in r3.stderr,
+          f"--keep-blind: {len(kept)} of 240 samples kept ({len(g)} without it)")
 
     # --- systematic errors: a white standard off its certificate (one smooth factor common to all samples) and
     # source drift (a factor that changes slowly from sample to sample); noise off to see them alone

@@ -99,6 +99,17 @@ static void test_located_errors(void **state)
 	expect_error("daemon: {}\nextra_section: 1\n", "2:1", "extra_section");
 	expect_error("sim: 3\n", "1:6", "sim");
 	expect_error("- a list\n", "1:1", "mapping");
+	/* home.park: each value within the soft limits, all three present, the pose clear of collision and blind zones */
+	expect_error("home:\n  park: {laser.theta: 95, detector.theta: 30, detector.phi: 180}\n", "2:23",
+		     "home.park.laser.theta (soft limits): 95 is outside [-5, 90]");
+	expect_error("home:\n  park: {laser.theta: 30, detector.theta: 30}\n", "2:9", "home.park: detector.phi missing");
+	expect_error("home:\n  park: {laser.theta: 30, detector.theta: 30, detector.phi: 0}\n", "2:9",
+		     "home.park: the pose (30°, 30°, 0°) is a collision");
+	/* (the shipped geometry's beam zone lies inside the collision cone: a wider beam puts one outside it) */
+	expect_error("bench:\n  beam_halfwidth_deg: 10\nhome:\n  park: {laser.theta: 30, detector.theta: 16, detector.phi: 0}\n",
+		     "4:9", "in a blind zone: beam-occluded");
+	expect_error("home:\n  park: {laser.theta: 30, detector.theta: 30, detector.phi: 180, x: 1}\n", "2:", "x");
+	expect_error("home:\n  parking: {}\n", "2:3", "parking");
 }
 
 static void test_sim_overrides(void **state)
@@ -166,6 +177,35 @@ static void test_examples_valid(void **state)
 	}
 }
 
+/* home.park against the controller's soft limits: bench-sim.yaml's bench allows laser.theta up to 90°, its
+ * laser_arm controller only to 88°: a park at 89° is refused naming the key, the file and the line. */
+static void test_park_soft_limits(void **state)
+{
+	(void)state;
+	const char *src = getenv("ACQ_SRC");
+	char p[1024];
+	snprintf(p, sizeof p, "%s/config/bench-sim.yaml", src ? src : ".");
+	FILE *f = fopen(p, "r");
+	assert_non_null(f);
+	static char text[1 << 16];
+	size_t n = fread(text, 1, sizeof text - 1, f);
+	fclose(f);
+	text[n] = 0;
+	char *at = strstr(text, "park: {laser.theta: 30,");
+	assert_non_null(at);
+	memcpy(at + strlen("park: {laser.theta: "), "89", 2);
+	int line = 1;
+	for (const char *q = text; q < at; q++)
+		line += *q == '\n';
+	struct conf *c;
+	struct acq_err err = { 0 };
+	assert_int_equal(load(text, NULL, &c, &err), -1);
+	char want[300];
+	snprintf(want, sizeof want, "%s:%d:", path, line);
+	if (!strstr(err.msg, want) || !strstr(err.msg, "home.park.laser.theta (soft limits): 89 is outside [-3, 88]"))
+		fail_msg("got \"%s\", expected \"%s\" and the soft limits [-3, 88]", err.msg, want);
+}
+
 static int cleanup(void **state)
 {
 	(void)state;
@@ -180,6 +220,7 @@ int main(void)
 		cmocka_unit_test(test_located_errors),
 		cmocka_unit_test(test_sim_overrides),
 		cmocka_unit_test(test_examples_valid),
+		cmocka_unit_test(test_park_soft_limits),
 	};
 	return cmocka_run_group_tests(tests, NULL, cleanup);
 }
