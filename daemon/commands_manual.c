@@ -15,7 +15,7 @@
 #include "daemon/plan/plan.h"
 #include "daemon/plan/plan_home.h"
 
-/* A manual move must not make the arms collide, on the way or at the target (straight
+/* A manual move must not make the arms collide, on the way or at the target (plan_home_move_verdict: straight
  * segment, all axes together — what devices_move() does). Blind zones for the beam or the view are allowed
  * (alignment needs them) and reported in the reply. 0, or -1 with ACQ_E_RANGE. */
 static int move_check(struct app *app, const double t[3], const char **warning, struct acq_err *err)
@@ -28,17 +28,15 @@ static int move_check(struct app *app, const double t[3], const char **warning, 
 			return 0; /* an axis is unavailable: devices_move() refuses the move anyway */
 	struct plan_pos a = { cur[0], cur[1], cur[2] };
 	struct plan_pos b = { isnan(t[0]) ? cur[0] : t[0], isnan(t[1]) ? cur[1] : t[1], isnan(t[2]) ? cur[2] : t[2] };
-	unsigned blind = plan_blind(&app->conf->bench, &b);
-	if (blind & (PLAN_R_COLLISION | PLAN_R_LIMITS))
+	unsigned verdict = plan_home_move_verdict(&app->conf->bench, &a, &b);
+	if (verdict & (PLAN_R_COLLISION | PLAN_R_LIMITS))
 		return acq_errf(err, ACQ_E_RANGE, "move to (%g°, %g°, %g°) refused: %s", b.laser_theta, b.det_theta,
-				b.det_phi, plan_reason_name(blind & (PLAN_R_COLLISION | PLAN_R_LIMITS)));
-	/* From a position that already violates the clearance (e.g. both arms parked at the zenith) any path
-	 * "collides" at its start: then only the target is checked, so the operator can move out. */
-	bool stuck = plan_blind(&app->conf->bench, &a) & PLAN_R_COLLISION;
-	if (!stuck && !plan_seg_safe(&app->conf->bench, &a, &b))
+				b.det_phi, plan_reason_name(verdict));
+	if (verdict)
 		return acq_errf(err, ACQ_E_RANGE, "move from (%g°, %g°, %g°) to (%g°, %g°, %g°) refused: the arms would "
 				"collide on the way; move one arm first", a.laser_theta, a.det_theta, a.det_phi,
 				b.laser_theta, b.det_theta, b.det_phi);
+	unsigned blind = plan_blind(&app->conf->bench, &b);
 	if (blind)
 		*warning = plan_reason_name(blind);
 	return 0;

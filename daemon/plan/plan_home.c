@@ -3,13 +3,19 @@
 
 #include <math.h>
 
+unsigned plan_home_move_verdict(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b)
+{
+	unsigned blind = plan_blind(g, b) & (PLAN_R_COLLISION | PLAN_R_LIMITS);
+	if (blind)
+		return blind;
+	if (plan_blind(g, a) & PLAN_R_COLLISION)
+		return 0; /* stuck inside the cone: only the target counts (the way out) */
+	return plan_seg_safe(g, a, b) ? 0 : PLAN_R_UNREACHABLE;
+}
+
 bool plan_home_move_ok(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b)
 {
-	if (plan_blind(g, b) & (PLAN_R_COLLISION | PLAN_R_LIMITS))
-		return false;
-	if (plan_blind(g, a) & PLAN_R_COLLISION)
-		return true; /* stuck inside the cone: only the target counts (the way out) */
-	return plan_seg_safe(g, a, b);
+	return plan_home_move_verdict(g, a, b) == 0;
 }
 
 static double *pos_axis(struct plan_pos *p, int axis)

@@ -16,9 +16,12 @@ struct plan_home_step {
 
 #define PLAN_HOME_MAX_STEPS 6
 
-/* True when a manual move from a to b is allowed: b within the axis limits and not a collision, and the straight
- * segment collision-free (only b is checked when a is already inside the collision cone, so the arms can move
- * out). */
+/* The rule of a manual move from a to b: 0 when allowed; else b's PLAN_R_COLLISION | PLAN_R_LIMITS bits, or
+ * PLAN_R_UNREACHABLE when b is allowed but the straight segment collides (only b is checked when a is already
+ * inside the collision cone, so the arms can move out). */
+unsigned plan_home_move_verdict(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b);
+
+/* True when plan_home_move_verdict allows the move. */
 bool plan_home_move_ok(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b);
 
 /* Steps homing every axis of mask (bits 1 << axis) from `from` and, when park is non-NULL, moving each to park[axis]
