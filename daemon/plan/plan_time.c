@@ -190,6 +190,37 @@ static struct inc_cost prior_cost(const struct plan_spec *s, const struct bench_
 	return c;
 }
 
+/* The band's costs of a plan whose radiance spread is `spread`: auto integration, the band around the estimate
+ * (est_ms: the first probe's time) and the HDR exposure a fraction h of the points needs, at hdr_ratio times a typical
+ * first time (paper plan on green paint: 76 HDR exposures of 326 ms on average, 8 x 40.96 ms, the rung of its 50 ms
+ * estimate); its darks are those of the longer base times the incidence has taken already (paper plan: 100 darks in
+ * all, 10 per incidence, what the base rungs alone give). Fixed integration: the spec's time, one rung. */
+static struct inc_cost band_cost(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
+				 double est_ms, double spread)
+{
+	bool aut = s->integ_mode == PLAN_INTEG_AUTO;
+	double ms = s->integ_ms, k = 1;
+	if (aut)
+		k = auto_band(t, est_ms, spread, s->max_integ_ms, &ms);
+	double h = aut && t->max_exposures > 1 && t->hdr_ratio > 1 ? (s->integ_hdr >= 0 ? s->integ_hdr : PLAN_AUTO_HDR) : 0;
+	return (struct inc_cost){
+		aut ? shot(g, t, 1, ms) : 0, shot(g, t, s->averages, ms), shot(g, t, t->dark_averages, ms),
+		h > 0 ? h * shot(g, t, s->averages, max_ms_of(s, t->hdr_ratio * ladder(t, est_ms, s->max_integ_ms))) : 0, k
+	};
+}
+
+/* The sample's exposure prior the timing uses (auto integration with a prior), or NULL. */
+static const struct plan_prior *used_prior(const struct plan_spec *s, const struct plan_timing *t)
+{
+	return s->integ_mode == PLAN_INTEG_AUTO && t->prior.sweep > 0 && t->prior.n_inc > 0 ? &t->prior : NULL;
+}
+
+/* The host's seconds per point: as the prior's sweep measured it on this host, else the default. */
+static double host_s(const struct plan_timing *t, const struct plan_prior *pr)
+{
+	return (pr && pr->host_points > 0 ? pr->host_per_point_s : t->point_overhead_s) * t->time_scale;
+}
+
 void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
 		     struct plan_result *r)
 {
@@ -197,24 +228,12 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 	/* the executor's first probe is at the plan's estimate when it gives one (sweep.c), else at probe_ms;
 	 * the next ones at the previous point's time */
 	double est_ms = s->integ_ms > 0 ? s->integ_ms : t->probe_ms;
-	double ms = s->integ_ms;
-	double k = 1;
-	if (aut)
-		k = auto_band(t, est_ms, plan_spread(s, r), s->max_integ_ms, &ms);
-	double first_probe = aut ? shot(g, t, 1, est_ms) : 0, probe = aut ? shot(g, t, 1, ms) : 0;
-	double meas = shot(g, t, s->averages, ms);
-	double dark = shot(g, t, t->dark_averages, ms);
-	/* the HDR exposure a fraction h of the points needs, at hdr_ratio times a typical first time, the estimate's
-	 * rung (paper plan on green paint: 76 HDR exposures of 326 ms on average, 8 x 40.96 ms, the rung of its 50 ms
-	 * estimate); its darks are those of the longer base times the incidence has taken already (paper plan: 100
-	 * darks in all, 10 per incidence, what the base rungs alone give) */
-	double h = aut && t->max_exposures > 1 && t->hdr_ratio > 1 ? (s->integ_hdr >= 0 ? s->integ_hdr : PLAN_AUTO_HDR) : 0;
-	double hdr = h > 0 ? h * shot(g, t, s->averages, max_ms_of(s, t->hdr_ratio * ladder(t, est_ms, s->max_integ_ms))) : 0;
+	struct inc_cost band = band_cost(s, g, t, est_ms, plan_spread(s, r)), c = band;
+	double first_probe = aut ? shot(g, t, 1, est_ms) : 0, meas = band.meas, dark = band.dark;
 	double clock = 0, dark_at = -INFINITY;
 	double since_clear = t->cont ? t->cont_since_clear : 0; /* points since the dark cache was last cleared */
-	const struct plan_prior *pr = aut && t->prior.sweep > 0 && t->prior.n_inc > 0 ? &t->prior : NULL;
-	/* the host's time per point: as the prior's sweep measured it on this host, else the default */
-	double host = (pr && pr->host_points > 0 ? pr->host_per_point_s : t->point_overhead_s) * t->time_scale;
+	const struct plan_prior *pr = used_prior(s, t);
+	double host = host_s(t, pr);
 	r->reference_s = r->darks_s = r->t_motion_s = r->t_settle_s = r->t_probe_s = r->t_first_s = r->t_hdr_s = 0;
 	r->host_s = host * (double)r->n_steps;
 	if (r->n_steps > 0) {
@@ -231,7 +250,6 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 	}
 	if (t->cont)
 		dark_at = 0; /* a continued sweep: its dark's age is counted from the batch's start (plan_timing_continue) */
-	struct inc_cost band = { probe, meas, dark, hdr, k }, c = band;
 	for (size_t i = 0; i < r->n_steps; i++) {
 		struct plan_step *st = &r->steps[i];
 		bool moves = st->move_s + st->settle_s > 0;
@@ -274,19 +292,13 @@ void plan_time_point(const struct plan_spec *s, const struct bench_geom *g, cons
 {
 	/* plan_time_apply's figures for one point of a plan whose band spread is the sample's times rho² */
 	bool aut = s->integ_mode == PLAN_INTEG_AUTO;
-	double est_ms = s->integ_ms > 0 ? s->integ_ms : t->probe_ms, ms = s->integ_ms, k = 1;
+	double est_ms = s->integ_ms > 0 ? s->integ_ms : t->probe_ms;
 	double sample = s->integ_spread > 0 ? s->integ_spread : PLAN_AUTO_SPREAD;
-	if (aut)
-		k = auto_band(t, est_ms, sample * fmax(rho, 1) * fmax(rho, 1), s->max_integ_ms, &ms);
-	double h = aut && t->max_exposures > 1 && t->hdr_ratio > 1 ? (s->integ_hdr >= 0 ? s->integ_hdr : PLAN_AUTO_HDR) : 0;
-	struct inc_cost c = { aut ? shot(g, t, 1, ms) : 0, shot(g, t, s->averages, ms), shot(g, t, t->dark_averages, ms),
-			      h > 0 ? h * shot(g, t, s->averages, max_ms_of(s, t->hdr_ratio * ladder(t, est_ms, s->max_integ_ms))) : 0,
-			      k };
-	const struct plan_prior *pr = aut && t->prior.sweep > 0 && t->prior.n_inc > 0 ? &t->prior : NULL;
+	struct inc_cost c = band_cost(s, g, t, est_ms, sample * fmax(rho, 1) * fmax(rho, 1));
+	const struct plan_prior *pr = used_prior(s, t);
 	if (pr)
 		c = prior_cost(s, g, t, prior_row(pr, fabs(theta_i)));
-	double host = (pr && pr->host_points > 0 ? pr->host_per_point_s : t->point_overhead_s) * t->time_scale;
-	out->point_s = c.probe + c.meas + c.hdr + host;
+	out->point_s = c.probe + c.meas + c.hdr + host_s(t, pr);
 	out->dark_s = c.dark;
 	out->rungs = aut ? c.k : 1; /* fixed integration: one dark per clearing */
 }
