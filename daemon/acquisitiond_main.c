@@ -22,6 +22,8 @@
 #include "daemon/job.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
+#include "daemon/plan_worker.h"
+#include "daemon/recon_select.h"
 #include "daemon/server.h"
 #include "daemon/store.h"
 #include "daemon/sweep.h"
@@ -216,8 +218,12 @@ static int mkdir_p(const char *path, mode_t mode)
 	return mkdir(buf, mode) < 0 && errno != EEXIST ? -1 : 0;
 }
 
+/* The children the job helper runs for the daemon (job_kinds_main: a request names one by its place here). */
+static const struct job_kind *const job_kinds[] = { &commands_plan_kind, &plan_worker_kind, &rsel_inputs_kind };
+
 int main(int argc, char **argv)
 {
+	job_kinds_main(argc, argv, job_kinds, sizeof job_kinds / sizeof job_kinds[0]);
 	static const struct option opts[] = { { "config", required_argument, NULL, 'c' },
 					      { "foreground", no_argument, NULL, 'f' },
 					      { "sim", required_argument, NULL, 's' },
@@ -294,8 +300,8 @@ int main(int argc, char **argv)
 		goto fail;
 	app.started_mono = loop_now(app.lp);
 	app.started_wall = app_wallclock();
-	/* The job helper now, while the daemon is small (no thread, no database): plans are forked from it, never
-	 * from the daemon (job.h, job_fork_msg). */
+	/* The job helper (this program run again in its helper mode): plans are forked from it, never from the
+	 * daemon (job.h, job_fork_msg). */
 	job_init(app.lp);
 	if (job_helper_start(&err))
 		goto fail;

@@ -7,6 +7,7 @@
 #include <stdint.h>
 
 #include "daemon/conf.h"
+#include "daemon/job.h"
 #include "daemon/server.h"
 #include "proto/proto.h"
 
@@ -39,6 +40,8 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
  * its last committed point (paused for the operator if it was), and the outcome is logged. *id: the sweep
  * being planned. 0 (planning, or nothing to resume) or -1 with err. */
 int commands_auto_resume(struct app *app, int64_t *id, struct acq_err *err);
+/* The `plan` command's child, run by the job helper (the program's table of job kinds, job_kinds_main). */
+extern const struct job_kind commands_plan_kind;
 /* Reload the configuration file: refused while a sweep or a manual operation runs. 0 or -1. */
 int app_reload(struct app *app, struct acq_err *err);
 /* Unix time now, seconds. */

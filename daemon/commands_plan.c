@@ -92,6 +92,8 @@ static int plan_child(const char *payload, size_t len, int fd)
 	return proto_write_all(fd, &tag, 1, &werr) || proto_write_all(fd, line, strlen(line), &werr) ? 4 : 0;
 }
 
+const struct job_kind commands_plan_kind = { "plan", plan_child };
+
 static void plan_done(struct job *j, int status, const char *output, size_t len, void *arg);
 
 /* Ask the helper (again) for pj's plan; 0 or -1 with err. */
@@ -102,7 +104,7 @@ static int plan_submit(struct plan_job *pj, struct acq_err *err)
 	/* with every step the reply grows with the plan (the paper's 866 points: about 0.3 MB): bounded by what a
 	 * client accepts as a reply */
 	size_t out_max = m->points ? PROTO_MAX_REPLY : JOB_FORK_OUTPUT_MAX;
-	if (job_fork_msg(plan_child, pj->msg, pj->msg_len, PLAN_MEM_BYTES, out_max, PLAN_DEADLINE_S * rate, plan_done,
+	if (job_fork_msg(&commands_plan_kind, pj->msg, pj->msg_len, PLAN_MEM_BYTES, out_max, PLAN_DEADLINE_S * rate, plan_done,
 			 pj, NULL, err))
 		return -1;
 	plan_children++;

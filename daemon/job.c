@@ -26,7 +26,7 @@ struct job {
 	int fd;                 /* read end of the output pipe, -1 once drained */
 	bool exited;
 	int status;
-	char *out;              /* the last cap bytes (job_start), or the first (job_fork: truncated then) */
+	char *out;              /* the last cap bytes (job_start), or the first (job_fork_msg: truncated then) */
 	size_t len, cap, alloc; /* alloc: the buffer's size (+ 1 for the NUL), cap: what it may grow to */
 	bool keep_head, truncated;
 	uint64_t timer;
@@ -43,6 +43,7 @@ static struct job *job_list;
 /* The helper (job_helper.c): its socket (-1: not running), process, the next child's id. */
 static int h_sock = -1;
 static pid_t h_pid;
+static pid_t h_shown; /* the latest helper's process id, for messages (h_pid is 0 once it is reaped) */
 static uint64_t h_next = 1;
 static unsigned h_starts;
 static pid_t h_dead[8]; /* helpers gone but not reaped yet (job_reap) */
@@ -109,7 +110,7 @@ static void on_output(struct loop *lp, int fd, short revents, void *arg)
 	_Static_assert(sizeof buf < JOB_OUTPUT_MAX, "one read fits in the kept output");
 	for (int turn = 0; turn < 4; turn++) {
 		if (j->keep_head && j->alloc - j->len < 65536 && j->alloc < j->cap) {
-			/* job_fork_out(): the buffer grows with the output, up to its cap */
+			/* job_fork_msg(): the buffer grows with the output, up to its cap */
 			size_t a = j->alloc;
 			while (a < j->len + 65536 && a < j->cap)
 				a = a * 2 < j->cap ? a * 2 : j->cap;
@@ -225,7 +226,7 @@ static void on_helper(struct loop *lp, int fd, short revents, void *arg)
 			return;
 		if (n <= 0) {
 			log_msg(LOG_WARNING, "job helper (pid %d) has gone: its running children end as killed; a new "
-				"one starts with the next job", (int)h_pid);
+				"one starts with the next job", (int)h_shown);
 			helper_lost(false);
 			return;
 		}
@@ -264,7 +265,7 @@ int job_helper_start(struct acq_err *err)
 	if (h_starts++)
 		log_msg(LOG_NOTICE, "job helper restarted (pid %d)", (int)pid);
 	h_sock = sock;
-	h_pid = pid;
+	h_pid = h_shown = pid;
 	return 0;
 }
 
@@ -361,11 +362,11 @@ static struct job *job_new(int fd, size_t cap, bool keep_head, double timeout_s,
 	return j;
 }
 
-/* Fork with the output pipe; in the child, run fn (exec) or child_fn; in the parent, register the job. */
-static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, void *child_arg, size_t mem_bytes,
-		 size_t cap, double timeout_s, job_done_fn done, void *arg, struct job **out, struct acq_err *err)
+/* Fork with the output pipe and run argv in the child; in the parent, register the job. */
+static int spawn(char *const argv[], const char *cwd, size_t cap, double timeout_s, job_done_fn done, void *arg,
+		 struct job **out, struct acq_err *err)
 {
-	if (!job_loop || (!child_fn && (!argv || !argv[0])))
+	if (!job_loop || !argv || !argv[0])
 		return acq_errf(err, ACQ_E_INVAL, "job: not initialised or no program");
 	int p[2];
 	if (pipe2(p, O_CLOEXEC) < 0)
@@ -386,14 +387,6 @@ static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, voi
 		dup2(p[1], 2);
 		if (cwd && chdir(cwd) < 0)
 			_exit(126);
-		if (child_fn) {
-			/* The daemon's descriptors (its listening sockets, the database) are not this child's: one
-			 * that outlived a killed daemon for a moment would keep its socket answering, and the
-			 * restarted daemon would find it "in use". (exec'd children lose them by O_CLOEXEC.) */
-			close_range(3, ~0U, 0);
-			job_child_limits(mem_bytes);
-			_exit(child_fn(child_arg, 1));
-		}
 		execvp(argv[0], argv);
 		static const char msg[] = "job: exec failed\n";
 		ssize_t w = write(2, msg, sizeof msg - 1);
@@ -401,7 +394,7 @@ static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, voi
 		_exit(127);
 	}
 	close(p[1]);
-	struct job *j = job_new(p[0], cap, child_fn != NULL, timeout_s, done, arg, err);
+	struct job *j = job_new(p[0], cap, false, timeout_s, done, arg, err);
 	if (!j) {
 		kill(pid, SIGKILL);
 		waitpid(pid, NULL, 0);
@@ -416,28 +409,16 @@ static int spawn(char *const argv[], const char *cwd, job_child_fn child_fn, voi
 int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
 	      struct job **out, struct acq_err *err)
 {
-	return spawn(argv, cwd, NULL, NULL, 0, JOB_OUTPUT_MAX, timeout_s, done, arg, out, err);
+	return spawn(argv, cwd, JOB_OUTPUT_MAX, timeout_s, done, arg, out, err);
 }
 
-int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, job_done_fn done, void *arg,
-	     struct job **out, struct acq_err *err)
+int job_fork_msg(const struct job_kind *kind, const void *payload, size_t len, size_t mem_bytes, size_t out_max,
+		 double timeout_s, job_done_fn done, void *arg, struct job **out, struct acq_err *err)
 {
-	return job_fork_out(fn, fn_arg, mem_bytes, JOB_FORK_OUTPUT_MAX, timeout_s, done, arg, out, err);
-}
-
-int job_fork_out(job_child_fn fn, void *fn_arg, size_t mem_bytes, size_t out_max, double timeout_s, job_done_fn done,
-		 void *arg, struct job **out, struct acq_err *err)
-{
-	if (!fn || out_max < 1)
-		return acq_errf(err, ACQ_E_INVAL, "job: no function or no output");
-	return spawn(NULL, NULL, fn, fn_arg, mem_bytes, out_max, timeout_s, done, arg, out, err);
-}
-
-int job_fork_msg(job_msg_fn fn, const void *payload, size_t len, size_t mem_bytes, size_t out_max, double timeout_s,
-		 job_done_fn done, void *arg, struct job **out, struct acq_err *err)
-{
-	if (!fn || out_max < 1)
-		return acq_errf(err, ACQ_E_INVAL, "job: no function or no output");
+	int k = kind ? jobh_kind_index(kind) : -1;
+	if (k < 0 || out_max < 1)
+		return acq_errf(err, ACQ_E_INVAL, "job: kind '%s' not in the program's table (job_kinds_main), or no output",
+				kind && kind->name ? kind->name : "?");
 	if (job_helper_start(err))
 		return -1;
 	int p[2] = { -1, -1 };
@@ -458,7 +439,7 @@ int job_fork_msg(job_msg_fn fn, const void *payload, size_t len, size_t mem_byte
 		acq_errf(err, ACQ_E_IO, "pipe: %s", strerror(errno));
 		goto fail;
 	}
-	struct jobh_msg m = { .type = JOBH_START, .id = h_next++, .mem_bytes = mem_bytes, .fn = fn };
+	struct jobh_msg m = { .type = JOBH_START, .id = h_next++, .mem_bytes = mem_bytes, .kind = (uint32_t)k };
 	int fds[2] = { mfd, p[1] };
 	if (helper_send(&m, fds, 2) < 0) {
 		acq_errf(err, ACQ_E_UNSUPPORTED, "the job helper (pid %d) does not take the request: %s; it is restarted: "

@@ -1,5 +1,7 @@
-/* job: slow work in child processes (the reconstruction) — spawn with stdout+stderr captured through a pipe
- * watched by the loop, reap on SIGCHLD, enforce a timeout; the loop never waits for a child. */
+/* job: slow work in child processes — programs run with stdout+stderr captured through a pipe watched by the loop
+ * (the reconstruction), and functions of the program run in children of the job helper (plans, an adaptive
+ * sweep's inputs); reap on SIGCHLD, enforce a timeout; the loop never waits for a child and never forks the
+ * daemon to run its code. */
 #ifndef JOB_H
 #define JOB_H
 
@@ -13,7 +15,7 @@ struct loop;
 struct job;
 
 #define JOB_OUTPUT_MAX (64 * 1024)  /* captured output kept (the last bytes when longer) */
-#define JOB_FORK_OUTPUT_MAX (64 * 1024)  /* job_fork(): the first bytes kept (one reply line), the rest dropped */
+#define JOB_FORK_OUTPUT_MAX (64 * 1024)  /* a one-line reply's bound for job_fork_msg(): the first bytes kept */
 
 /* Called once from the loop when the child has exited and its output is drained. status: exit code, or
  * 128 + signal number. output is NUL-terminated (len bytes), valid during the call only. */
@@ -27,31 +29,33 @@ void job_finish(void);
  * /dev/null, killed after timeout_s (0: never). 0 or -1 (exec failure is reported as status 127). */
 int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
 	      struct job **out, struct acq_err *err);
-/* In a job_fork() child: compute, write the result to fd, return the exit status (the child then _exits). */
-typedef int (*job_child_fn)(void *arg, int fd);
-/* Run fn(fn_arg, fd) in a forked child (no exec: it sees the daemon's memory as it was) with the output
- * captured as for job_start, at nice +10, its address space limited to mem_bytes (0: unlimited), killed after
- * timeout_s; the child keeps none of the daemon's descriptors but fd.
- * Children of both kinds die with the daemon (PR_SET_PDEATHSIG). 0 or -1. */
-int job_fork(job_child_fn fn, void *fn_arg, size_t mem_bytes, double timeout_s, job_done_fn done, void *arg,
-	     struct job **out, struct acq_err *err);
-/* job_fork() keeping up to out_max bytes of output (the buffer grows with it): a binary result. 0 or -1. */
-int job_fork_out(job_child_fn fn, void *fn_arg, size_t mem_bytes, size_t out_max, double timeout_s, job_done_fn done,
-		 void *arg, struct job **out, struct acq_err *err);
 /* In a job_fork_msg() child: payload is its own copy of the request's bytes (len of them, NUL after); compute,
  * write the result to fd, return the exit status. */
 typedef int (*job_msg_fn)(const char *payload, size_t len, int fd);
-/* Start the job helper (job_helper.c): a small process forking the job_fork_msg() children. Call it early, before
- * any thread and large allocation (the daemon: right after the loop); job_fork_msg() starts it again when it has
- * died. 0 or -1. */
+/* A kind of job_fork_msg() child: the helper runs fn on the request's payload (name: for messages). */
+struct job_kind {
+	const char *name;
+	job_msg_fn fn;
+};
+/* The argument that makes a program the job helper (argv[1]; job_kinds_main). */
+#define JOB_HELPER_ARG "--job-helper"
+/* The program's job kinds, kinds[n] (kept: static storage). Call it first in main: the helper is this program
+ * run again (/proc/self/exe, argv[1] JOB_HELPER_ARG), which then serves its daemon here and never returns; a
+ * request names its kind by its place in this table. Otherwise it returns. */
+void job_kinds_main(int argc, char **argv, const struct job_kind *const *kinds, size_t n);
+/* Start the job helper (job_helper.c): a small process forking the job_fork_msg() children, this program run
+ * again in its helper mode (job_kinds_main), so it holds none of the daemon's memory, threads or descriptors
+ * whenever it starts; job_fork_msg() starts it again when it has died. 0 or -1. */
 int job_helper_start(struct acq_err *err);
 /* The helper's process id (0: not running). */
 pid_t job_helper_pid(void);
-/* Run fn(copy of payload, len, fd) in a child forked by the helper (so the loop never forks the daemon: it
- * writes the payload to a memfd and one message), with the output captured up to out_max bytes as for
- * job_fork_out, at nice +10, its address space limited to mem_bytes, killed after timeout_s; a helper that
- * dies ends its running children as killed and job_lost(). 0 or -1 (the helper not answering: restarted). */
-int job_fork_msg(job_msg_fn fn, const void *payload, size_t len, size_t mem_bytes, size_t out_max, double timeout_s,
+/* Run kind's fn(copy of payload, len, fd) in a child forked by the helper (so the loop never forks the daemon: it
+ * writes the payload to a memfd and one message), with its output's first out_max bytes kept (the buffer grows
+ * with it: a binary result may be large), at nice +10, its address space limited to mem_bytes (0: unlimited),
+ * killed after timeout_s; children die with the helper, the helper with the daemon (PR_SET_PDEATHSIG); a helper
+ * that dies ends its running children as killed and job_lost(). kind must be in job_kinds_main's table. 0 or -1
+ * (the helper not answering: restarted). */
+int job_fork_msg(const struct job_kind *kind, const void *payload, size_t len, size_t mem_bytes, size_t out_max, double timeout_s,
 		 job_done_fn done, void *arg, struct job **out, struct acq_err *err);
 /* A job_fork_msg() payload: a fixed header (hdr_len bytes) and two strings, packed into a new buffer (free()) of
  * *len bytes; NULL when out of memory. */
@@ -63,8 +67,7 @@ int job_msg_unpack(const char *payload, size_t len, void *hdr, size_t hdr_len, c
 bool job_lost(const struct job *j);
 /* SIGKILL a running job; its done() is called as usual (status 128 + 9). */
 void job_kill(struct job *j);
-/* True when a job_fork() child wrote more than its output bound (JOB_FORK_OUTPUT_MAX or out_max; the rest was
- * discarded). */
+/* True when a job_fork_msg() child wrote more than its output bound (out_max; the rest was discarded). */
 bool job_output_truncated(const struct job *j);
 /* True when the job was killed because its timeout expired (valid in its done callback). */
 bool job_timed_out(const struct job *j);

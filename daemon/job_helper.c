@@ -1,12 +1,15 @@
-/* job_helper: the small process that forks the daemon's job_fork_msg() children (job.h). It is forked once,
- * early at start-up (no device thread, no database yet: a few MB), so each child is a fork of it, never of the
- * daemon with its threads and memory: the loop only writes a message. Messages: job_int.h. */
+/* job_helper: the small process that forks the daemon's job_fork_msg() children (job.h). It is the daemon's own
+ * program run again (posix_spawn of /proc/self/exe in its helper mode, job_kinds_main), at start-up and after a
+ * crash alike: it never holds the daemon's memory, threads, database or devices, and each child is a fork of it,
+ * never of the daemon; the loop only writes a message. Messages: job_int.h. */
 #include "daemon/job_int.h"
 
 #include <errno.h>
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
+#include <spawn.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/prctl.h>
@@ -25,6 +28,18 @@ struct hchild {
 
 static struct hchild kids[JOBH_MAX_CHILDREN];
 static int n_kids;
+
+/* The program's kinds (job_kinds_main): the same table in the daemon and in its helper. */
+static const struct job_kind *const *kinds;
+static size_t n_kinds;
+
+int jobh_kind_index(const struct job_kind *kind)
+{
+	for (size_t i = 0; i < n_kinds; i++)
+		if (kinds[i] == kind)
+			return (int)i;
+	return -1;
+}
 
 static void send_done(int sock, uint64_t id, int status)
 {
@@ -61,7 +76,7 @@ static void run_child(pid_t helper, const struct jobh_msg *m, int payload, int o
 	buf[len] = '\0';
 	close_range(3, ~0U, 0);
 	job_child_limits((size_t)m->mem_bytes);
-	_exit(m->fn(buf, len, 1));
+	_exit(kinds[m->kind]->fn(buf, len, 1));
 }
 
 static void start_child(int sock, const struct jobh_msg *m, int payload, int out)
@@ -105,10 +120,11 @@ static int on_message(int sock)
 					close(fd);
 			}
 		}
-	if ((size_t)n == sizeof m && m.type == JOBH_START && nfd == 2 && m.fn)
+	if ((size_t)n == sizeof m && m.type == JOBH_START && nfd == 2 && m.kind < n_kinds)
 		start_child(sock, &m, fds[0], fds[1]);
 	else if ((size_t)n == sizeof m && m.type == JOBH_START)
-		send_done(sock, m.id, 126); /* its descriptors did not arrive: the job fails, the helper goes on */
+		send_done(sock, m.id, 126); /* no such kind, or its descriptors did not arrive: the job fails, the helper
+					     * goes on */
 	else if ((size_t)n == sizeof m && m.type == JOBH_KILL)
 		for (int i = 0; i < n_kids; i++)
 			if (kids[i].id == m.id)
@@ -133,23 +149,14 @@ static void reap(int sock)
 }
 
 /* The helper's life: children started and reported until the daemon closes its end (then the children die
- * with the helper: PR_SET_PDEATHSIG). */
-static _Noreturn void helper_main(int sock, pid_t daemon)
+ * with the helper: PR_SET_PDEATHSIG). Its socket is descriptor 3 (jobh_spawn). */
+static _Noreturn void helper_main(pid_t daemon)
 {
+	int sock = 3;
 	job_child_setup(daemon);
 	signal(SIGHUP, SIG_IGN); /* a terminal's hang-up is the daemon's to handle (reload), not a reason to die */
 	prctl(PR_SET_NAME, "acq-helper");
-	if (sock != 3) {
-		dup2(sock, 3);
-		sock = 3;
-	}
 	close_range(4, ~0U, 0);
-	int nul = open("/dev/null", O_RDWR);
-	if (nul >= 0) {
-		dup2(nul, 0); /* the daemon's stdout/stderr (its log, a terminal) stay the children's only by the pipe */
-		if (nul > 3)
-			close(nul);
-	}
 	sigset_t chld;
 	sigemptyset(&chld);
 	sigaddset(&chld, SIGCHLD);
@@ -172,23 +179,59 @@ static _Noreturn void helper_main(int sock, pid_t daemon)
 	}
 }
 
+void job_kinds_main(int argc, char **argv, const struct job_kind *const *table, size_t n)
+{
+	kinds = table;
+	n_kinds = n;
+	if (argc < 3 || strcmp(argv[1], JOB_HELPER_ARG))
+		return;
+	/* the daemon's process id: a helper whose daemon has gone already (or run by hand) ends at once */
+	helper_main((pid_t)strtol(argv[2], NULL, 10));
+}
+
+extern char **environ;
+
 int jobh_spawn(int *sock, pid_t *pid, struct acq_err *err)
 {
 	int sv[2];
 	if (socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, sv) < 0)
 		return acq_errf(err, ACQ_E_IO, "job helper: socketpair: %s", strerror(errno));
-	pid_t daemon = getpid();
-	pid_t p = fork();
-	if (p < 0) {
-		close(sv[0]);
-		close(sv[1]);
-		return acq_errf(err, ACQ_E_IO, "job helper: fork: %s", strerror(errno));
-	}
-	if (p == 0) {
-		close(sv[0]);
-		helper_main(sv[1], daemon);
-	}
+	/* posix_spawn (vfork and exec): the loop neither copies the daemon's page tables nor leaves a copy of its
+	 * memory, threads' state or descriptors in the helper; the helper's socket becomes its descriptor 3, its
+	 * standard input /dev/null (its standard output and error stay the daemon's: its children write theirs into
+	 * their pipes). */
+	char dpid[24], name[] = "acq-helper", arg[] = JOB_HELPER_ARG;
+	snprintf(dpid, sizeof dpid, "%d", (int)getpid());
+	char *argv[] = { name, arg, dpid, NULL };
+	posix_spawn_file_actions_t fa;
+	posix_spawnattr_t at;
+	sigset_t none, all;
+	sigemptyset(&none);
+	sigfillset(&all);
+	posix_spawn_file_actions_init(&fa);
+	posix_spawnattr_init(&at);
+	int rc = posix_spawn_file_actions_adddup2(&fa, sv[1], 3); /* clears close-on-exec, also when sv[1] is 3 */
+	if (!rc)
+		rc = posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
+	if (!rc)
+		rc = posix_spawn_file_actions_addclosefrom_np(&fa, 4);
+	if (!rc)
+		rc = posix_spawnattr_setsigmask(&at, &none);
+	if (!rc)
+		rc = posix_spawnattr_setsigdefault(&at, &all); /* the daemon's ignored SIGPIPE is not the helper's */
+	if (!rc)
+		rc = posix_spawnattr_setflags(&at, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+	pid_t p = 0;
+	if (!rc)
+		rc = posix_spawn(&p, "/proc/self/exe", &fa, &at, argv, environ);
+	posix_spawn_file_actions_destroy(&fa);
+	posix_spawnattr_destroy(&at);
 	close(sv[1]);
+	if (rc) {
+		close(sv[0]);
+		return acq_errf(err, ACQ_E_IO, "job helper: cannot run /proc/self/exe %s: %s", JOB_HELPER_ARG,
+				strerror(rc));
+	}
 	*sock = sv[0];
 	*pid = p;
 	return 0;

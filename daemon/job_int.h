@@ -10,10 +10,10 @@
 #include "config/acq_err.h"
 #include "daemon/job.h"
 
-/* One message on the helper's socket (SOCK_SEQPACKET, both directions). The helper is a fork of this program,
- * so fn is a valid address on both ends. */
+/* One message on the helper's socket (SOCK_SEQPACKET, both directions). The helper is this program run again
+ * (job_kinds_main): a start names its kind by its index in the program's table of kinds, the same on both ends. */
 enum jobh_type {
-	JOBH_START = 1, /* daemon → helper: fork a child running fn (id, fn, mem_bytes); SCM_RIGHTS: the payload
+	JOBH_START = 1, /* daemon → helper: fork a child running kind (id, kind, mem_bytes); SCM_RIGHTS: the payload
 			 * (a memfd), the output pipe's write end */
 	JOBH_KILL,      /* daemon → helper: signal sig to child id (ignored once it has ended) */
 	JOBH_DONE,      /* helper → daemon: child id ended with status (exit code or 128 + signal) */
@@ -24,11 +24,16 @@ struct jobh_msg {
 	int32_t sig_or_status;
 	uint64_t id;
 	uint64_t mem_bytes;
-	job_msg_fn fn;
+	uint32_t kind;
+	uint32_t pad;
 };
 
-/* Fork the helper process: *sock is the daemon's end of its socket (close-on-exec), *pid its process. In the
- * helper, every descriptor but its end is closed. 0 or -1 with err. */
+/* The kinds' table given to job_kinds_main: kind's index in it, or -1 when it is not there. */
+int jobh_kind_index(const struct job_kind *kind);
+
+/* Start the helper process (this program run again in its helper mode, never a fork of the caller's memory):
+ * *sock is the caller's end of its socket (close-on-exec), *pid its process. The helper keeps no descriptor of
+ * the caller's but its end of the socket and the standard output and error. 0 or -1 with err. */
 int jobh_spawn(int *sock, pid_t *pid, struct acq_err *err);
 
 /* In a freshly forked child: default signals and mask, death with parent (PR_SET_PDEATHSIG; exits at once

@@ -158,6 +158,8 @@ static int child(const char *payload, size_t len, int fd)
 	return plan_worker_encode(r, fd) ? 4 : 0;
 }
 
+const struct job_kind plan_worker_kind = { "sweep-plan", child };
+
 static void on_done(struct job *j, int status, const char *output, size_t len, void *arg)
 {
 	struct plan_worker *w = arg;
@@ -199,7 +201,7 @@ int plan_worker_start(const char *name, const char *text, const struct bench_geo
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	}
 	*w = (struct plan_worker){ .real_deadline_s = real_deadline_s, .done = done, .ctx = ctx };
-	int rc = job_fork_msg(child, msg, len, mem_bytes, PW_OUT_MAX, deadline_s, on_done, w, &w->job, err);
+	int rc = job_fork_msg(&plan_worker_kind, msg, len, mem_bytes, PW_OUT_MAX, deadline_s, on_done, w, &w->job, err);
 	free(msg);
 	if (rc) {
 		free(w);

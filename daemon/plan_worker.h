@@ -8,6 +8,7 @@
 #include <stddef.h>
 
 #include "config/acq_err.h"
+#include "daemon/job.h"
 #include "daemon/plan/plan.h"
 
 struct plan_worker;
@@ -24,6 +25,8 @@ typedef void (*plan_worker_done_fn)(void *ctx, int rc, const struct acq_err *err
 int plan_worker_start(const char *name, const char *text, const struct bench_geom *g, const struct plan_timing *tm,
 		      size_t mem_bytes, double deadline_s, double real_deadline_s, plan_worker_done_fn done, void *ctx,
 		      struct plan_worker **out, struct acq_err *err);
+/* The worker's child, run by the job helper (it must be in the program's table of job kinds, job_kinds_main). */
+extern const struct job_kind plan_worker_kind;
 /* Stop a running worker: its done() gets -1 with ACQ_E_STATE "aborted". */
 void plan_worker_abort(struct plan_worker *w);
 

@@ -1,5 +1,5 @@
 /* recon_select: an adaptive sweep's decision between batches (see recon_select.h) — samples exported and candidates
- * (both written by a forked child), brdf-recon fit (warm when possible) and brdf-recon select in child processes, one
+ * (both written by one child of the job helper), brdf-recon fit (warm when possible) and brdf-recon select in child processes, one
  * after the other; the loop is only called back. */
 #include "daemon/recon_select.h"
 
@@ -18,7 +18,7 @@
 #include "daemon/recon_chain.h"
 #include "daemon/store.h"
 
-enum { RS_CAND, RS_SAMPLES, RS_PROBE, RS_FIT, RS_SELECT };
+enum { RS_INPUTS, RS_PROBE, RS_FIT, RS_SELECT };
 /* brdf-recon select --value-channels: the DHR target's value (and the σ parts the selection holds) on this many
  * evenly spread channels; all when the model has no more (the simulated bench's 651 wavelengths: 3.9 → 0.6 s CPU
  * per decision for three incidences, value within -5.5 %..+0.8 % of all channels', select's help) */
@@ -36,9 +36,6 @@ struct rsel {
 	char samples[4200], cand[4200], out[4200];
 	struct rsel_res res;
 	double t0;
-	/* the candidates child's input (its copy of memory at fork) */
-	const struct rsel_req *q;
-	int64_t sweep_id;
 };
 
 struct rsel *rsel_new(const struct sweep_env *env)
@@ -94,33 +91,73 @@ static const char *tail(const char *s)
 
 static void next(struct rsel *r);
 
-/* The samples child's request (job_fork_msg). */
-struct samples_msg {
+/* The inputs child's request (job_fork_msg): this, then the n_done positions measured or planned so far. */
+struct inputs_msg {
 	int64_t sweep_id;
-	char database[4096], samples[4200];
+	char database[4096], samples[4200], cand[4200];
+	struct bench_geom g;
+	struct plan_timing timing;
+	struct plan_pos from;
+	uint64_t n_done;
 };
 
-/* In a child of the job helper (forked before the daemon opened its database: SQLite's state of the daemon's
+/* In a child of the job helper (a process that never held the daemon's database: SQLite's state of the daemon's
  * connection is not inherited, which a read-only connection opened in a fork of the daemon trips over: "locking
- * protocol"): the sweep's samples so far exported through a read-only connection. */
-static int samples_child(const char *payload, size_t len, int fd)
+ * protocol"), through a read-only connection: the reachable candidates from the arms' position for the sweep's
+ * stored plan written to m.cand, the sweep's samples so far exported to m.samples; prints the candidates' count. */
+static int inputs_child(const char *payload, size_t len, int fd)
 {
-	struct samples_msg m;
-	if (len != sizeof m)
+	struct inputs_msg m;
+	if (len < sizeof m)
 		return 5;
 	memcpy(&m, payload, sizeof m);
+	if (m.n_done != (len - sizeof m) / sizeof(struct plan_pos) || len != sizeof m + m.n_done * sizeof(struct plan_pos))
+		return 5;
+	struct plan_pos *done = malloc(m.n_done * sizeof *done + 1);
+	if (!done)
+		return 3;
+	memcpy(done, payload + sizeof m, m.n_done * sizeof *done);
 	struct acq_err err = { 0 };
 	struct store *st = NULL;
-	int rows = 0;
-	if (store_open_reader(m.database, &st, &err) || store_export_csv_file(st, m.sweep_id, m.samples, &rows, &err)) {
-		store_close(st);
-		dprintf(fd, "exporting the samples: %s\n", err.msg);
-		return 1;
+	json_t *js = NULL;
+	struct plan_spec *spec = NULL;
+	struct plan_cand *c = NULL;
+	size_t n = 0;
+	int rows = 0, rc = 1;
+	const char *text;
+	if (store_open_reader(m.database, &st, &err) || !(js = store_sweep_show(st, m.sweep_id, false, &err)))
+		goto out;
+	if (!(text = json_string_value(json_object_get(js, "plan_text")))) {
+		acq_errf(&err, ACQ_E_NOTFOUND, "sweep %lld has no plan text", (long long)m.sweep_id);
+		goto out;
 	}
+	if (plan_load_string("plan", text, &spec, &err) || !spec->adaptive) {
+		if (spec && !spec->adaptive)
+			acq_errf(&err, ACQ_E_INVAL, "sweep %lld's plan is not adaptive", (long long)m.sweep_id);
+		goto out;
+	}
+	if (plan_adaptive_candidates(spec, &m.g, &m.timing, &m.from, done, (size_t)m.n_done, &c, &n, &err) ||
+	    rsel_write_candidates(m.cand, &m.g, c, n, &err))
+		goto out;
+	if (store_export_csv_file(st, m.sweep_id, m.samples, &rows, &err)) {
+		char why[sizeof err.msg];
+		snprintf(why, sizeof why, "%s", err.msg);
+		acq_errf(&err, err.code, "exporting the samples: %s", why);
+		goto out;
+	}
+	rc = dprintf(fd, "%zu\n", n) < 0;
+out:
+	if (rc)
+		dprintf(fd, "%s\n", err.msg);
+	free(c);
+	plan_spec_free(spec);
+	json_decref(js);
 	store_close(st);
-	return 0;
+	free(done);
+	return rc;
 }
 
+const struct job_kind rsel_inputs_kind = { "select-inputs", inputs_child };
 
 static void stage_done(struct job *j, int status, const char *output, size_t len, void *arg)
 {
@@ -128,25 +165,11 @@ static void stage_done(struct job *j, int status, const char *output, size_t len
 	r->job = NULL;
 	double dt = loop_now(r->env->loop) - r->t0;
 	switch (r->stage) {
-	case RS_CAND:
+	case RS_INPUTS:
 		if (status != 0)
-			return finish(r, false, "the samples and candidates child failed (status %d): %s", status, tail(output));
-		r->res.n_candidates = (size_t)strtoull(output, NULL, 10);
-		r->stage = RS_SAMPLES;
-		{
-			struct samples_msg m = { .sweep_id = r->sweep_id };
-			snprintf(m.database, sizeof m.database, "%s", r->env->conf->d.database);
-			snprintf(m.samples, sizeof m.samples, "%s", r->samples);
-			struct acq_err err = { 0 };
-			if (job_fork_msg(samples_child, (const char *)&m, sizeof m, 0, JOB_FORK_OUTPUT_MAX, 60 * rate_of(r),
-					 stage_done, r, &r->job, &err))
-				return finish(r, false, "the samples child could not start: %s", err.msg);
-		}
-		return;
-	case RS_SAMPLES:
-		if (status != 0)
-			return finish(r, false, "the samples child failed (status %d%s): %s", status,
+			return finish(r, false, "the samples and candidates child failed (status %d%s): %s", status,
 				      job_lost(j) ? ", its job helper lost" : "", tail(output));
+		r->res.n_candidates = (size_t)strtoull(output, NULL, 10);
 		r->stage = RS_PROBE;
 		break;
 	case RS_PROBE:
@@ -179,30 +202,6 @@ static void stage_done(struct job *j, int status, const char *output, size_t len
 	}
 	}
 	next(r);
-}
-
-/* In the forked child: the reachable candidates from the arms' position written to r->cand; prints their count. */
-static int cand_child(void *arg, int fd)
-{
-	struct rsel *r = arg;
-	const struct rsel_req *q = r->q;
-	const struct bench_geom *g = &r->env->conf->bench;
-	struct plan_cand *c = NULL;
-	size_t n = 0;
-	struct acq_err err = { 0 };
-	char line[128];
-	if (plan_adaptive_candidates(q->spec, g, &q->timing, &q->from, q->done, q->n_done, &c, &n, &err)) {
-		dprintf(fd, "%s\n", err.msg);
-		return 1;
-	}
-	int bad = rsel_write_candidates(r->cand, g, c, n, &err);
-	free(c);
-	if (bad) {
-		dprintf(fd, "%s\n", err.msg);
-		return 1;
-	}
-	snprintf(line, sizeof line, "%zu\n", n);
-	return write(fd, line, strlen(line)) < 0 ? 1 : 0;
 }
 
 int rsel_write_candidates(const char *path, const struct bench_geom *g, const struct plan_cand *c, size_t n,
@@ -314,15 +313,24 @@ int rsel_start(struct rsel *r, const struct rsel_req *q, rsel_done_fn done, void
 	plan_adaptive_route_spec(q->spec, &c->bench, &q->timing, &q->from, r->route, sizeof r->route);
 	unlink(r->out); /* a decision made again must not read the previous answer */
 	r->spec = q->spec;
-	r->q = q; /* read by the forked child only (its own copy of memory) */
-	r->sweep_id = q->sweep_id;
-	r->stage = RS_CAND;
+	r->stage = RS_INPUTS;
 	r->t0 = loop_now(r->env->loop);
-	if (job_fork(cand_child, r, 0, 60 * rate_of(r), stage_done, r, &r->job, err)) {
-		r->q = NULL;
+	size_t len = sizeof(struct inputs_msg) + q->n_done * sizeof *q->done;
+	struct inputs_msg *m = calloc(1, len);
+	if (!m)
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	*m = (struct inputs_msg){ .sweep_id = q->sweep_id, .g = c->bench, .timing = q->timing, .from = q->from,
+				  .n_done = q->n_done };
+	snprintf(m->database, sizeof m->database, "%s", c->d.database);
+	snprintf(m->samples, sizeof m->samples, "%s", r->samples);
+	snprintf(m->cand, sizeof m->cand, "%s", r->cand);
+	if (q->n_done)
+		memcpy(m + 1, q->done, q->n_done * sizeof *q->done);
+	int rc = job_fork_msg(&rsel_inputs_kind, m, len, 0, JOB_FORK_OUTPUT_MAX, 60 * rate_of(r), stage_done, r, &r->job,
+			      err);
+	free(m);
+	if (rc)
 		return -1;
-	}
-	r->q = NULL;
 	r->done = done;
 	r->ctx = ctx;
 	return 0;

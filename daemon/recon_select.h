@@ -1,6 +1,6 @@
 /* recon_select: the decision between two batches of an adaptive sweep, every slow step in a child process (the
- * loop never waits): in a forked child, the sweep's calibrated samples so far exported as CSV (through a read-only
- * connection of its own) and the reachable candidates (planner: blind zones, collisions, limits, safe paths; cost_s
+ * loop never waits): in a child of the job helper, the sweep's calibrated samples so far exported as CSV (through a
+ * read-only connection of its own) and the reachable candidates for its stored plan (planner: blind zones, collisions, limits, safe paths; cost_s
  * from plan_time.c); then `brdf-recon fit` (warm-started from the previous batch's model with --warm when this brdf-recon has it), then `brdf-recon select
  * MODEL --candidates CAND.csv --route ROUTE --target SPEC --batch N -o OUT.json` (each pick charged its increment to
  * the batch's route, plan_adaptive_route_spec) (the contract in /work/notes/OWNERS.md). */
@@ -13,6 +13,7 @@
 #include <stdint.h>
 
 #include "config/acq_err.h"
+#include "daemon/job.h"
 #include "daemon/plan/plan.h"
 #include "daemon/sweep.h"
 
@@ -52,6 +53,9 @@ struct rsel_res {
 
 typedef void (*rsel_done_fn)(void *ctx, const struct rsel_res *r);
 
+/* The child that writes a decision's samples and candidates, run by the job helper (it must be in the program's
+ * table of job kinds, job_kinds_main). */
+extern const struct job_kind rsel_inputs_kind;
 /* A decision maker over env (borrowed: the sweep's). NULL when out of memory. */
 struct rsel *rsel_new(const struct sweep_env *env);
 /* Free; a running child is left to job_finish() (its callback is not called). NULL is fine. */

@@ -4,7 +4,9 @@ the loop thread's CPU when the loop forked the whole daemon for it and parsed th
 1. While a huge `plan` is computed, its child (comm acq-job) is the helper's (comm acq-helper, the daemon's only
    child): the daemon forked nothing for the request. Before the change the child was the daemon's own.
 2. The helper SIGKILLed mid-request: that `plan` gets a clear error at once (the planner's process was lost,
-   retry), not the 10 s deadline; the next `plan` is answered by a new helper.
+   retry), not the 10 s deadline; the next `plan` is answered by a new helper, which holds no descriptor or
+   mapping of the database, no device, one thread: the daemon's program run again as the helper, not a fork of
+   the daemon (that one kept the database's -shm mapping).
 3. The same for `sweep.start`'s plan: the start fails with the message, the daemon is idle, not "planning".
 4. A flood of `plan` requests (8 clients back to back for 4 s, one of them huge plans) leaves `status` answering in
    < 0.5 s (the bound test_client_limits uses); every flood reply is a plan, "unavailable" (2 at once at most)
@@ -53,6 +55,46 @@ def helper(b, timeout=10):
             raise AssertionError("no single job helper among the daemon's children: %s" % [
                 (p, comm(p)) for p in children(b.daemon.pid)])
         time.sleep(0.02)
+
+
+def holdings(pid):
+    """What process pid holds: its descriptors' targets, the files it maps, its threads, its command line."""
+    fds = {}
+    for fd in os.listdir("/proc/%d/fd" % pid):
+        try:
+            fds[int(fd)] = os.readlink("/proc/%d/fd/%s" % (pid, fd))
+        except OSError:
+            pass
+    with open("/proc/%d/maps" % pid) as f:
+        maps = set(line.split(None, 5)[5].strip() for line in f if len(line.split(None, 5)) == 6)
+    with open("/proc/%d/status" % pid) as f:
+        threads = int([line.split()[1] for line in f if line.startswith("Threads:")][0])
+    with open("/proc/%d/cmdline" % pid, "rb") as f:
+        cmd = f.read().split(b"\0")
+    return fds, maps, threads, cmd
+
+
+def check_clean(b, h):
+    """The helper h holds neither the daemon's database (a descriptor or a mapping: SQLite maps the WAL's -shm
+    file) nor a device (any socket but its own to the daemon, any /dev node but /dev/null), runs one thread and
+    is the daemon's program run as the helper. The daemon itself holds the database: the check can see it."""
+    db = b.db_path()
+    dfds, dmaps, dthreads, _ = holdings(b.daemon.pid)
+    if not any(t.startswith(db) for t in dfds.values()):
+        raise AssertionError("the daemon holds no descriptor of %s: %s" % (db, dfds))
+    fds, maps, threads, cmd = holdings(h)
+    L.say("helper %d: descriptors %s, threads %d, command %s; %d mapped files; the daemon: %d threads, %d "
+          "descriptors, maps the database: %s" % (h, fds, threads, cmd[:2], len(maps), dthreads, len(dfds),
+                                                  any(m.startswith(db) for m in dmaps)))
+    bad = [t for t in fds.values() if t.startswith(db) or (t.startswith("/dev/") and t != "/dev/null")]
+    bad += [m for m in maps if m.startswith(db)]
+    if bad:
+        raise AssertionError("the helper %d holds the daemon's %s" % (h, bad))
+    socks = [fd for fd, t in fds.items() if t.startswith("socket:")]
+    if socks != [3]:
+        raise AssertionError("the helper %d holds sockets %s (its own is 3): %s" % (h, socks, fds))
+    if threads != 1 or cmd[:2] != [b"acq-helper", b"--job-helper"]:
+        raise AssertionError("the helper %d: %d threads, command %s" % (h, threads, cmd))
 
 
 def wait_job(h, timeout=10):
@@ -108,6 +150,7 @@ def run():
         if h2 == h1:
             raise AssertionError("the same helper after its SIGKILL")
         L.say("next plan answered by the new helper %d" % h2)
+        check_clean(b, h2)
 
         # 3. sweep.start's plan: the helper killed while it plans
         c.sock.sendall((json.dumps({"cmd": "sweep.start", "id": 5, "plan": HUGE, "name": "huge"}) + "\n").encode())

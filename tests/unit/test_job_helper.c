@@ -2,7 +2,8 @@
  * helper, not by the caller, get their own copy of the payload, run at nice +10 within their memory bound and
  * report their status, output, deadline and kill (a start beyond the helper's 64 children fails alone, 126); a
  * helper killed while a child runs ends that job as lost (status 128 + 9, the child dead with it) and the next
- * job starts a new helper; a helper that hangs is killed when a SIGKILLed child is not reported within 2 s; the
+ * job starts a new helper; a helper that hangs is killed when a SIGKILLed child is not reported within 2 s; a
+ * restarted helper is this program run again, holding none of the caller's descriptors, mappings or threads; the
  * payload's header-and-strings packing. */
 #include <setjmp.h>
 #include <stdarg.h>
@@ -13,9 +14,14 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <fcntl.h>
+#include <pthread.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 #include <unistd.h>
 #include <cmocka.h>
+
+#include "tests/unit/tmpdir.h"
 
 #include "daemon/job.h"
 #include "daemon/loop.h"
@@ -86,6 +92,17 @@ static int hungry_child(const char *payload, size_t len, int fd)
 }
 #endif
 
+static const struct job_kind echo_kind = { "echo", echo_child }, sleeping_kind = { "sleeping", sleeping_child };
+#if !defined(__SANITIZE_ADDRESS__)
+static const struct job_kind hungry_kind = { "hungry", hungry_child };
+#endif
+static const struct job_kind unlisted_kind = { "unlisted", echo_child };
+static const struct job_kind *const kinds[] = { &echo_kind, &sleeping_kind,
+#if !defined(__SANITIZE_ADDRESS__)
+						&hungry_kind,
+#endif
+};
+
 static void test_children_of_the_helper(void **state)
 {
 	(void)state;
@@ -97,7 +114,7 @@ static void test_children_of_the_helper(void **state)
 	static const char payload[] = "plan\0text";
 	calls = 0;
 	struct job *j = NULL;
-	assert_int_equal(job_fork_msg(echo_child, payload, sizeof payload - 1, 0, 1024, 10, done, NULL, &j, NULL), 0);
+	assert_int_equal(job_fork_msg(&echo_kind, payload, sizeof payload - 1, 0, 1024, 10, done, NULL, &j, NULL), 0);
 	assert_int_equal(job_pid(j), 0); /* not a child of this process */
 	assert_int_equal(job_count(), 1);
 	run_until(lp, 10);
@@ -115,25 +132,25 @@ static void test_children_of_the_helper(void **state)
 	assert_int_equal(job_count(), 0);
 #if !defined(__SANITIZE_ADDRESS__) /* job_child_limits sets no RLIMIT_AS under ASan (by design) */
 	calls = 0;
-	assert_int_equal(job_fork_msg(hungry_child, "", 0, 32u << 20, 1024, 10, done, NULL, NULL, NULL), 0);
+	assert_int_equal(job_fork_msg(&hungry_kind, "", 0, 32u << 20, 1024, 10, done, NULL, NULL, NULL), 0);
 	run_until(lp, 10);
 	assert_int_equal(got_status, 9);
 	calls = 0;
-	assert_int_equal(job_fork_msg(hungry_child, "", 0, 0, 1024, 10, done, NULL, NULL, NULL), 0);
+	assert_int_equal(job_fork_msg(&hungry_kind, "", 0, 0, 1024, 10, done, NULL, NULL, NULL), 0);
 	run_until(lp, 10);
 	assert_int_equal(got_status, 0);
 #endif
 	/* the deadline, then a kill, both through the helper */
 	calls = 0;
 	double t0 = loop_now(lp);
-	assert_int_equal(job_fork_msg(sleeping_child, "", 0, 0, 1024, 0.2, done, NULL, NULL, NULL), 0);
+	assert_int_equal(job_fork_msg(&sleeping_kind, "", 0, 0, 1024, 0.2, done, NULL, NULL, NULL), 0);
 	run_until(lp, 10);
 	assert_int_equal(calls, 1);
 	assert_int_equal(got_status, 128 + SIGTERM);
 	assert_true(got_timed_out);
 	assert_true(loop_now(lp) - t0 < 3);
 	calls = 0;
-	assert_int_equal(job_fork_msg(sleeping_child, "", 0, 0, 1024, 0, done, NULL, &j, NULL), 0);
+	assert_int_equal(job_fork_msg(&sleeping_kind, "", 0, 0, 1024, 0, done, NULL, &j, NULL), 0);
 	job_kill(j);
 	run_until(lp, 10);
 	assert_int_equal(calls, 1);
@@ -144,7 +161,7 @@ static void test_children_of_the_helper(void **state)
 	struct job *many[65];
 	calls = 0;
 	for (int i = 0; i < 65; i++)
-		assert_int_equal(job_fork_msg(sleeping_child, "", 0, 0, 1024, 0, done, NULL, &many[i], NULL), 0);
+		assert_int_equal(job_fork_msg(&sleeping_kind, "", 0, 0, 1024, 0, done, NULL, &many[i], NULL), 0);
 	run_until(lp, 10);
 	assert_int_equal(calls, 1);
 	assert_int_equal(got_status, 126);
@@ -179,7 +196,7 @@ static pid_t start_sleeper(struct loop *lp, double timeout_s)
 {
 	calls = 0;
 	struct job *j = NULL;
-	assert_int_equal(job_fork_msg(sleeping_child, "", 0, 0, 1024, timeout_s, done, NULL, &j, NULL), 0);
+	assert_int_equal(job_fork_msg(&sleeping_kind, "", 0, 0, 1024, timeout_s, done, NULL, &j, NULL), 0);
 	for (int i = 0; i < 500 && !calls; i++) { /* until its pid has been read */
 		loop_run_once(lp, 0.01);
 		job_reap();
@@ -219,7 +236,7 @@ static void test_helper_lost_and_restarted(void **state)
 	assert_int_equal(job_count(), 0);
 	/* the next job starts a new helper and runs */
 	calls = 0;
-	assert_int_equal(job_fork_msg(echo_child, "again", 5, 0, 1024, 10, done, NULL, NULL, NULL), 0);
+	assert_int_equal(job_fork_msg(&echo_kind, "again", 5, 0, 1024, 10, done, NULL, NULL, NULL), 0);
 	pid_t hp2 = job_helper_pid();
 	assert_true(hp2 > 0 && hp2 != hp);
 	run_until(lp, 10);
@@ -239,13 +256,125 @@ static void test_helper_lost_and_restarted(void **state)
 	assert_true(gone_within(kid, 5));
 	assert_true(gone_within(hp2, 5));
 	calls = 0;
-	assert_int_equal(job_fork_msg(echo_child, "third", 5, 0, 1024, 10, done, NULL, NULL, NULL), 0);
+	assert_int_equal(job_fork_msg(&echo_kind, "third", 5, 0, 1024, 10, done, NULL, NULL, NULL), 0);
 	run_until(lp, 10);
 	assert_int_equal(got_status, 7);
 	assert_true(job_helper_pid() != hp2);
 	job_finish();
 	assert_int_equal(job_helper_pid(), 0);
 	loop_free(lp);
+}
+
+/* Whether /proc/PID/FILE holds needle (a file read whole, its NULs as newlines). */
+static bool proc_has(pid_t pid, const char *file, const char *needle)
+{
+	char path[64], buf[65536];
+	snprintf(path, sizeof path, "/proc/%d/%s", (int)pid, file);
+	FILE *f = fopen(path, "r");
+	assert_non_null(f);
+	size_t n = fread(buf, 1, sizeof buf - 1, f);
+	fclose(f);
+	for (size_t i = 0; i < n; i++)
+		if (!buf[i])
+			buf[i] = '\n';
+	buf[n] = 0;
+	return strstr(buf, needle) != NULL;
+}
+
+/* The descriptors of process pid: their count, and whether one leads to path. */
+static int proc_fds(pid_t pid, const char *path, bool *found)
+{
+	int n = 0;
+	*found = false;
+	for (int fd = 0; fd < 1024; fd++) {
+		char link[64], to[4096];
+		snprintf(link, sizeof link, "/proc/%d/fd/%d", (int)pid, fd);
+		ssize_t k = readlink(link, to, sizeof to - 1);
+		if (k < 0)
+			continue;
+		to[k] = 0;
+		n++;
+		if (!strcmp(to, path))
+			*found = true;
+	}
+	return n;
+}
+
+static void *idle_thread(void *arg)
+{
+	int fd = *(int *)arg;
+	char c;
+	while (read(fd, &c, 1) < 0 && errno == EINTR)
+		;
+	return NULL;
+}
+
+/* A helper started again while the caller holds a database (an open file, not close-on-exec, and a shared mapping
+ * of it as SQLite maps a WAL's -shm) and a device thread: the new helper is this program run again in its helper
+ * mode (its command line, one thread), with none of them (a fork of the caller kept the mapping and the command
+ * line); a kind outside the program's table is refused before anything is sent. */
+static void test_restarted_helper_holds_nothing(void **state)
+{
+	(void)state;
+	char dir[256], db[300];
+	assert_int_equal(ut_tmpdir_make(dir, sizeof dir, "test_job_helper"), 0);
+	snprintf(db, sizeof db, "%s/state.db-shm", dir);
+	int dbfd = open(db, O_RDWR | O_CREAT, 0600); /* no O_CLOEXEC: as a careless library might */
+	assert_true(dbfd >= 0);
+	assert_int_equal(ftruncate(dbfd, 32768), 0);
+	void *map = mmap(NULL, 32768, PROT_READ | PROT_WRITE, MAP_SHARED, dbfd, 0);
+	assert_true(map != MAP_FAILED);
+	int wake[2];
+	assert_int_equal(pipe(wake), 0);
+	pthread_t th;
+	assert_int_equal(pthread_create(&th, NULL, idle_thread, &wake[0]), 0);
+
+	struct loop *lp = loop_new(NULL, NULL);
+	job_init(lp);
+	assert_int_equal(job_helper_start(NULL), 0);
+	pid_t hp = job_helper_pid();
+	assert_int_equal(kill(hp, SIGKILL), 0);
+	assert_true(gone_within(hp, 5));
+	calls = 0;
+	assert_int_equal(job_fork_msg(&echo_kind, "after", 5, 0, 1024, 10, done, NULL, NULL, NULL), 0);
+	pid_t hp2 = job_helper_pid();
+	assert_true(hp2 > 0 && hp2 != hp);
+	run_until(lp, 10);
+	assert_int_equal(got_status, 7);
+	assert_memory_equal(got_out, "after|", 6);
+	char want[64];
+	snprintf(want, sizeof want, "|ppid=%d|", (int)hp2);
+	assert_non_null(strstr(got_out, want));
+
+	bool found = false;
+	int nfd = proc_fds(hp2, db, &found);
+	print_message("restarted helper %d: %d descriptors, the database's among them: %s\n", (int)hp2, nfd,
+		      found ? "yes" : "no");
+	assert_false(found);
+	assert_true(nfd <= 5); /* 0-2, its socket, its signalfd */
+	assert_true(proc_has(getpid(), "maps", db)); /* the check sees a mapping where there is one */
+	assert_false(proc_has(hp2, "maps", db));
+	assert_true(proc_has(hp2, "cmdline", "acq-helper\n" JOB_HELPER_ARG "\n"));
+	assert_true(proc_has(hp2, "status", "\nThreads:\t1\n"));
+	char exe[2][4096];
+	snprintf(want, sizeof want, "/proc/%d/exe", (int)hp2);
+	ssize_t k0 = readlink("/proc/self/exe", exe[0], sizeof exe[0] - 1), k1 = readlink(want, exe[1], sizeof exe[1] - 1);
+	assert_true(k0 > 0 && k0 == k1 && !memcmp(exe[0], exe[1], (size_t)k0));
+
+	struct acq_err err = { 0 };
+	assert_int_equal(job_fork_msg(&unlisted_kind, "x", 1, 0, 1024, 10, done, NULL, NULL, &err), -1);
+	print_message("a kind not in the table: %s\n", err.msg);
+	assert_non_null(strstr(err.msg, "unlisted"));
+	assert_int_equal(job_count(), 0);
+
+	job_finish();
+	loop_free(lp);
+	close(wake[1]);
+	pthread_join(th, NULL);
+	close(wake[0]);
+	munmap(map, 32768);
+	close(dbfd);
+	ut_tmpdir_remove(dir);
 }
 
 /* job_msg_pack/unpack: header and strings back; a short or inconsistent payload refused. */
@@ -269,13 +398,15 @@ static void test_msg_pack(void **state)
 	free(m);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+	job_kinds_main(argc, argv, kinds, sizeof kinds / sizeof kinds[0]); /* the helper: this program run again */
 	signal(SIGPIPE, SIG_IGN);
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_msg_pack),
 		cmocka_unit_test(test_children_of_the_helper),
 		cmocka_unit_test(test_helper_lost_and_restarted),
+		cmocka_unit_test(test_restarted_helper_holds_nothing),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -1,5 +1,5 @@
 /* Unit tests for daemon/plan_worker.c and the job.c pieces it uses: a child's binary output of megabytes comes
- * back whole (job_fork_out) or flagged truncated past its bound; job_kill ends a child with status 128 + 9; a
+ * back whole (job_fork_msg) or flagged truncated past its bound; job_kill ends a child with status 128 + 9; a
  * sweep planned in the worker equals the same plan made in process (steps, waypoints, predicted times); the
  * deadline and abort end it with a message; a damaged reply is refused with a message, never used. */
 #include <setjmp.h>
@@ -53,9 +53,10 @@ static unsigned char pat(size_t i)
 	return (unsigned char)((i * 2654435761u) >> 13);
 }
 
-static int big_child(void *arg, int fd)
+static int big_child(const char *payload, size_t len, int fd)
 {
-	(void)arg;
+	(void)payload;
+	(void)len;
 	static unsigned char buf[BIG];
 	for (size_t i = 0; i < BIG; i++)
 		buf[i] = pat(i);
@@ -68,13 +69,16 @@ static int big_child(void *arg, int fd)
 	return 0;
 }
 
-static int sleeping_child(void *arg, int fd)
+static int sleeping_child(const char *payload, size_t len, int fd)
 {
-	(void)arg;
+	(void)payload;
+	(void)len;
 	(void)fd;
 	sleep(30);
 	return 0;
 }
+
+static const struct job_kind big_kind = { "big", big_child }, sleeping_kind = { "sleeping", sleeping_child };
 
 static void test_fork_out_big_and_kill(void **state)
 {
@@ -82,7 +86,7 @@ static void test_fork_out_big_and_kill(void **state)
 	struct loop *lp = loop_new(NULL, NULL);
 	job_init(lp);
 	calls = 0;
-	assert_int_equal(job_fork_out(big_child, NULL, 0, 8u << 20, 10, done, NULL, NULL, NULL), 0);
+	assert_int_equal(job_fork_msg(&big_kind, "", 0, 0, 8u << 20, 10, done, NULL, NULL, NULL), 0);
 	run_until(lp, &calls, 10);
 	assert_int_equal(calls, 1);
 	assert_int_equal(got_status, 0);
@@ -93,7 +97,7 @@ static void test_fork_out_big_and_kill(void **state)
 			fail_msg("byte %zu differs", i);
 	/* past its bound: the first out_max bytes, flagged */
 	calls = 0;
-	assert_int_equal(job_fork_out(big_child, NULL, 0, 1u << 20, 10, done, NULL, NULL, NULL), 0);
+	assert_int_equal(job_fork_msg(&big_kind, "", 0, 0, 1u << 20, 10, done, NULL, NULL, NULL), 0);
 	run_until(lp, &calls, 10);
 	assert_int_equal(calls, 1);
 	assert_true(got_trunc);
@@ -102,7 +106,7 @@ static void test_fork_out_big_and_kill(void **state)
 	/* job_kill */
 	calls = 0;
 	struct job *j = NULL;
-	assert_int_equal(job_fork_out(sleeping_child, NULL, 0, 1024, 0, done, NULL, &j, NULL), 0);
+	assert_int_equal(job_fork_msg(&sleeping_kind, "", 0, 0, 1024, 0, done, NULL, &j, NULL), 0);
 	job_kill(j);
 	run_until(lp, &calls, 5);
 	assert_int_equal(calls, 1);
@@ -252,8 +256,10 @@ static void test_worker_equals_in_process(void **state)
 	loop_free(lp);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+	static const struct job_kind *const kinds[] = { &plan_worker_kind, &big_kind, &sleeping_kind };
+	job_kinds_main(argc, argv, kinds, sizeof kinds / sizeof kinds[0]); /* the helper: this program run again */
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_fork_out_big_and_kill),
 		cmocka_unit_test(test_worker_equals_in_process),
