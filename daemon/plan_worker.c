@@ -11,7 +11,8 @@
 #include "daemon/plan/plan.h"
 
 /* The child's reply: this header, then on success the struct plan_result (its pointers meaningless) and its
- * three arrays; on failure the error message. Same binary on both ends (a fork), so raw structs are fine. */
+ * three arrays; on failure the error message. The same program on both ends (the helper is the daemon run again),
+ * so raw structs are fine. */
 #define PW_MAGIC "acqplan1"
 #define PW_MAX_ITEMS ((uint64_t)1 << 24)  /* far above the planner's 50,000 points: a sanity bound */
 #define PW_OUT_MAX ((size_t)256 << 20)    /* reply bound: 50,000 points are about 20 MB */
