@@ -1,4 +1,4 @@
-/* app: the daemon's one context — every module's instance, wired by acquisitiond_main.c and used by the
+/* app: the daemon's one context — every module's instance, wired by acquisitiond/acqd_start.c and used by the
  * command handlers (commands.c). Only the daemon's body sees it; the sweep executor gets sweep_env. */
 #ifndef APP_H
 #define APP_H
