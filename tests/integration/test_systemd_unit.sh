@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Integration: systemd/acquisitiond.service (with @BINDIR@ substituted as `make install` does) passes
 # `systemd-analyze verify`, carries the required directives, and its `systemd-analyze security` exposure
-# stays at or below 2.5 (printed). Skips (77) only when systemd-analyze is absent.
+# stays at or below 2.5 (printed); its system call filter lets setpriority through (job children at nice +10). Skips (77) only when systemd-analyze is absent.
 set -u
 : "${ACQ_BUILD:?}" "${ACQ_SRC:?}"
 command -v systemd-analyze >/dev/null || { echo "systemd-analyze absent"; exit 77; }
@@ -27,6 +27,9 @@ if sec=$(systemd-analyze security --offline=true "$unit" 2>/dev/null); then
   level=$(grep -o "Overall exposure level for acquisitiond.service: [0-9.]*" <<<"$sec" | awk '{print $NF}')
   echo "systemd-analyze security exposure: $level"
   [ -n "$level" ] && awk -v l="$level" 'BEGIN{exit !(l <= 2.5)}' || { echo "FAIL: exposure $level > 2.5"; exit 1; }
+  # the job helper's children lower their priority (nice +10, daemon/job.c): the filter must let setpriority through
+  grep -q "@resources is included (e.g. setpriority is allowed)" <<<"$sec" ||
+    { echo "FAIL: the system call filter denies setpriority: job children would run at the daemon's priority"; exit 1; }
 else
   echo "systemd-analyze security --offline unsupported here: exposure not measured"
 fi
