@@ -218,6 +218,22 @@ static pid_t start_sleeper(struct loop *lp, double timeout_s)
 	return 0;
 }
 
+/* An echo job of word, run by a new helper (not old): its pid. */
+static pid_t echo_on_new_helper(struct loop *lp, pid_t old, const char *word)
+{
+	calls = 0;
+	assert_int_equal(job_fork_msg(&echo_kind, word, strlen(word), 0, 1024, 10, done, NULL, NULL, NULL), 0);
+	pid_t hp = job_helper_pid();
+	assert_true(hp > 0 && hp != old);
+	run_until(lp, 10);
+	assert_int_equal(calls, 1);
+	assert_int_equal(got_status, 7);
+	assert_false(got_lost);
+	assert_memory_equal(got_out, word, strlen(word));
+	assert_int_equal(got_out[strlen(word)], '|');
+	return hp;
+}
+
 static void test_helper_lost_and_restarted(void **state)
 {
 	(void)state;
@@ -235,15 +251,7 @@ static void test_helper_lost_and_restarted(void **state)
 	assert_true(gone_within(kid, 5));
 	assert_int_equal(job_count(), 0);
 	/* the next job starts a new helper and runs */
-	calls = 0;
-	assert_int_equal(job_fork_msg(&echo_kind, "again", 5, 0, 1024, 10, done, NULL, NULL, NULL), 0);
-	pid_t hp2 = job_helper_pid();
-	assert_true(hp2 > 0 && hp2 != hp);
-	run_until(lp, 10);
-	assert_int_equal(calls, 1);
-	assert_int_equal(got_status, 7);
-	assert_false(got_lost);
-	assert_memory_equal(got_out, "again|", 6);
+	pid_t hp2 = echo_on_new_helper(lp, hp, "again");
 
 	/* a helper that hangs (stopped): the deadline's SIGTERM and SIGKILL go unanswered, 2 s later it is killed */
 	kid = start_sleeper(lp, 0.2);
@@ -335,13 +343,7 @@ static void test_restarted_helper_holds_nothing(void **state)
 	pid_t hp = job_helper_pid();
 	assert_int_equal(kill(hp, SIGKILL), 0);
 	assert_true(gone_within(hp, 5));
-	calls = 0;
-	assert_int_equal(job_fork_msg(&echo_kind, "after", 5, 0, 1024, 10, done, NULL, NULL, NULL), 0);
-	pid_t hp2 = job_helper_pid();
-	assert_true(hp2 > 0 && hp2 != hp);
-	run_until(lp, 10);
-	assert_int_equal(got_status, 7);
-	assert_memory_equal(got_out, "after|", 6);
+	pid_t hp2 = echo_on_new_helper(lp, hp, "after");
 	char want[64];
 	snprintf(want, sizeof want, "|ppid=%d|", (int)hp2);
 	assert_non_null(strstr(got_out, want));
