@@ -167,8 +167,9 @@ void cmd_manual_devices(struct app *app, const struct srv_peer *peer, struct pro
 
 /* home [axis]: one axis by its name (laser.theta or laser_theta, ...), only if its way to the home position (0°)
  * is collision-free; or all three: each referenced at 0° and then moved to its park (home.park in the
- * configuration), in an order (plan_home_order) where every single-axis move is collision-free. Every step goes
- * through move_check, as a manual move does; the first refusal or failure ends the homing, naming the axes homed. */
+ * configuration), in an order (plan_home_order) where every single-axis move is collision-free, after one or two
+ * moves that take the arms apart when every home from where they are would close them in. Every step goes through
+ * move_check, as a manual move does; the first refusal or failure ends the homing, naming the axes homed. */
 struct homing {
 	struct app *app;
 	uint64_t serial;
@@ -176,14 +177,21 @@ struct homing {
 	struct plan_home_step steps[PLAN_HOME_MAX_STEPS];
 	int nsteps, next;
 	json_t *homed;       /* names homed so far */
+	json_t *apart;       /* the apart moves done: {"axis": name, "to": degrees} */
 	bool parked;         /* the parks were part of the sequence */
 };
 
 static void home_next(struct homing *h);
 
+static const char *home_verb(const struct plan_home_step *s)
+{
+	return s->apart ? "move apart" : s->park ? "park" : "home";
+}
+
 static void home_free(struct homing *h)
 {
 	json_decref(h->homed);
+	json_decref(h->apart);
 	json_decref(h->id);
 	free(h);
 }
@@ -207,10 +215,13 @@ static void home_done(void *ctx, int rc, const struct acq_err *err, json_t *resu
 	const struct plan_home_step *s = &h->steps[h->next - 1];
 	if (rc) {
 		struct acq_err e = *err;
-		acq_err_prefix(&e, "%s %s: ", s->park ? "park" : "home", conf_dev_name((enum conf_dev)s->axis));
+		acq_err_prefix(&e, "%s %s: ", home_verb(s), conf_dev_name((enum conf_dev)s->axis));
 		return home_refused(h, &e);
 	}
-	if (!s->park)
+	if (s->apart)
+		json_array_append_new(h->apart, json_pack("{s:s, s:f}", "axis", conf_dev_name((enum conf_dev)s->axis),
+							  "to", s->target));
+	else if (!s->park)
 		json_array_append_new(h->homed, json_string(conf_dev_name((enum conf_dev)s->axis)));
 	home_next(h);
 }
@@ -220,7 +231,7 @@ static void home_next(struct homing *h)
 	struct acq_err err = { 0 };
 	if (h->next < h->nsteps) {
 		const struct plan_home_step *s = &h->steps[h->next++];
-		const char *verb = s->park ? "park" : "home";
+		const char *verb = home_verb(s);
 		double t[3] = { NAN, NAN, NAN };
 		t[s->axis] = s->target;
 		const char *warning;
@@ -228,7 +239,7 @@ static void home_next(struct homing *h)
 			acq_err_prefix(&err, "%s %s: ", verb, conf_dev_name((enum conf_dev)s->axis));
 			return home_refused(h, &err);
 		}
-		if (s->park ? devices_move(h->app->dev, t, home_done, h, &err)
+		if (s->park || s->apart ? devices_move(h->app->dev, t, home_done, h, &err)
 			    : devices_home(h->app->dev, 1u << s->axis, home_done, h, &err)) {
 			acq_err_prefix(&err, "%s %s: ", verb, conf_dev_name((enum conf_dev)s->axis));
 			return home_refused(h, &err);
@@ -238,6 +249,8 @@ static void home_next(struct homing *h)
 	double pos[3];
 	devices_positions(h->app->dev, pos);
 	json_t *o = json_pack("{s:O, s:b}", "homed", h->homed, "parked", h->parked);
+	if (json_array_size(h->apart))
+		json_object_set(o, "apart", h->apart);
 	for (int i = 0; i < 3; i++)
 		json_object_set_new(o, conf_dev_name((enum conf_dev)i), isnan(pos[i]) ? json_null() : json_real(pos[i]));
 	server_reply(h->app->srv, h->serial, h->id, o);
@@ -262,8 +275,9 @@ static int home_plan_all(struct homing *h, struct acq_err *err)
 	if (!c->have_park)
 		return acq_errf(err, ACQ_E_RANGE, "home: the arms cannot all be at their homes (0°, 0°, 0°) at once "
 				"(a collision): set home.park in %s (where each axis waits after its home)", c->path);
-	return acq_errf(err, ACQ_E_RANGE, "home: no order of single-axis moves from (%g°, %g°, %g°) homes every axis "
-			"and parks it at (%g°, %g°, %g°) without a collision; move the arms apart first",
+	return acq_errf(err, ACQ_E_RANGE, "home: no order of single-axis moves from (%g°, %g°, %g°), even with two "
+			"moves apart first, homes every axis and parks it at (%g°, %g°, %g°) without a collision; move the "
+			"arms apart by hand first",
 			cur[0], cur[1], cur[2], c->park[0], c->park[1], c->park[2]);
 }
 
@@ -294,12 +308,15 @@ void cmd_manual_home(struct app *app, const struct srv_peer *peer, struct proto_
 		return cmd_reply_err(app, peer, req->id, &err);
 	}
 	struct homing *h = calloc(1, sizeof *h);
-	if (!h || !(h->homed = json_array())) {
+	if (!h || !(h->homed = json_array()) || !(h->apart = json_array())) {
+		if (h)
+			json_decref(h->homed);
 		free(h);
 		acq_errf(&err, ACQ_E_NOMEM, "out of memory");
 		return cmd_reply_err(app, peer, req->id, &err);
 	}
-	*h = (struct homing){ .app = app, .serial = peer->serial, .id = json_incref(req->id), .homed = h->homed };
+	*h = (struct homing){ .app = app, .serial = peer->serial, .id = json_incref(req->id), .homed = h->homed,
+			      .apart = h->apart };
 	if (mask != 7) {
 		int a = mask == 1 ? 0 : mask == 2 ? 1 : 2;
 		h->steps[0] = (struct plan_home_step){ .axis = a, .park = false, .target = 0 };

@@ -11,6 +11,7 @@
 
 #include "config/acq_err.h"
 #include "config/yconf.h"
+#include "daemon/plan/plan.h"
 #include "drivers/spectro.h"
 
 struct exp_policy {
@@ -177,10 +178,30 @@ void exp_prior_rows_free(struct exp_prior_rows *R);
 /* Sweeps with fewer points measured between commits than this do not time the host (the quick plan's 15 points at
  * time scale 1 gave -27 to +5 ms per point: the bench's own jitter). */
 #define EXP_HOST_MIN_POINTS 50
-/* The host's real seconds per point as the latest completed sweep other than exclude measured it (any sample, any
- * integration; exp_prior_build's host figure with g and t): *host_s and *sweep (0, *host_s unchanged: none, or
- * fewer than EXP_HOST_MIN_POINTS measured). 0, or -1 with err. */
-int exp_host_load(struct store *st, long long exclude, const struct bench_geom *g, const struct plan_timing *t,
-		  double *host_s, long long *sweep, struct acq_err *err);
+/* The host's real seconds per point as the latest completed sweep other than exclude of plan kind `kind` (NULL: any
+ * kind; plan_kind_of) measured it (any sample; exp_prior_build's host figure with g and t): *host_s and *sweep (0,
+ * *host_s unchanged: none, or fewer than EXP_HOST_MIN_POINTS measured). 0, or -1 with err. */
+int exp_host_load(struct store *st, long long exclude, const char *kind, const struct bench_geom *g,
+		  const struct plan_timing *t, double *host_s, long long *sweep, struct acq_err *err);
+
+/* The host figures exp_host_load gives (of any kind and of each plan kind), read once and kept until a sweep
+ * completes in the store (store_completed_gen), exclude changes, or exp_host_cache_drop (a new configuration):
+ * reading one is ~0.75 ms of the loop for the paper plan's sweep, and every `plan` request asked for it. */
+struct exp_host_cache {
+	bool valid;
+	unsigned long gen;          /* store_completed_gen when read */
+	long long exclude;
+	double any_s;               /* the latest sweep's of any kind (when any_sweep > 0) */
+	long long any_sweep;
+	struct plan_host_kind kind[PLAN_HOST_KINDS];
+	int n_kind;
+	unsigned long reads;        /* times it read the database (tests) */
+};
+/* t's host figures (point_overhead_s and host_sweep when a sweep of any kind measured them, host_kind[]) from c,
+ * read again first when stale. 0, or -1 with err (t's figures then as they were). */
+int exp_host_cached(struct exp_host_cache *c, struct store *st, long long exclude, const struct bench_geom *g,
+		    struct plan_timing *t, struct acq_err *err);
+/* Forget what c holds (the next exp_host_cached reads again). */
+void exp_host_cache_drop(struct exp_host_cache *c);
 
 #endif

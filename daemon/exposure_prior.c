@@ -275,12 +275,12 @@ int exp_prior_load_sweep(struct store *st, long long sweep_id, const struct benc
 	return rc;
 }
 
-int exp_host_load(struct store *st, long long exclude, const struct bench_geom *g, const struct plan_timing *t,
-		  double *host_s, long long *sweep, struct acq_err *err)
+int exp_host_load(struct store *st, long long exclude, const char *kind, const struct bench_geom *g,
+		  const struct plan_timing *t, double *host_s, long long *sweep, struct acq_err *err)
 {
 	*sweep = 0;
 	int64_t id = 0;
-	if (store_latest_completed(st, exclude, &id, err))
+	if (store_latest_completed(st, exclude, kind, &id, err))
 		return -1;
 	if (id <= 0)
 		return 0;
@@ -291,5 +291,59 @@ int exp_host_load(struct store *st, long long exclude, const struct bench_geom *
 		*host_s = pr.host_per_point_s;
 		*sweep = id;
 	}
+	return 0;
+}
+
+void exp_host_cache_drop(struct exp_host_cache *c)
+{
+	c->valid = false;
+}
+
+/* Fill c from the store: the latest sweep of any kind, then of each kind (a sweep already read is not read again). */
+static int host_cache_read(struct exp_host_cache *c, struct store *st, long long exclude, const struct bench_geom *g,
+			   const struct plan_timing *t, struct acq_err *err)
+{
+	static const char *const layouts[] = { "grid", "fibonacci", "adaptive" }, *const modes[] = { "auto", "fixed" };
+	c->valid = false;
+	c->reads++;
+	c->n_kind = 0;
+	c->any_sweep = 0;
+	if (exp_host_load(st, exclude, NULL, g, t, &c->any_s, &c->any_sweep, err))
+		return -1;
+	for (int l = 0; l < 3; l++)
+		for (int m = 0; m < 2; m++) {
+			struct plan_host_kind *k = &c->kind[c->n_kind];
+			snprintf(k->kind, sizeof k->kind, "%s/%s", layouts[l], modes[m]);
+			int64_t id = 0;
+			if (store_latest_completed(st, exclude, k->kind, &id, err))
+				return -1;
+			k->sweep = 0;
+			if (id > 0 && id == c->any_sweep) {
+				k->sweep = id;
+				k->host_s = c->any_s;
+			} else if (id > 0 && exp_host_load(st, exclude, k->kind, g, t, &k->host_s, &k->sweep, err)) {
+				return -1;
+			}
+			if (k->sweep > 0)
+				c->n_kind++;
+		}
+	c->gen = store_completed_gen(st);
+	c->exclude = exclude;
+	c->valid = true;
+	return 0;
+}
+
+int exp_host_cached(struct exp_host_cache *c, struct store *st, long long exclude, const struct bench_geom *g,
+		    struct plan_timing *t, struct acq_err *err)
+{
+	if (!(c->valid && c->gen == store_completed_gen(st) && c->exclude == exclude) &&
+	    host_cache_read(c, st, exclude, g, t, err))
+		return -1;
+	if (c->any_sweep > 0) {
+		t->point_overhead_s = c->any_s;
+		t->host_sweep = c->any_sweep;
+	}
+	memcpy(t->host_kind, c->kind, sizeof t->host_kind);
+	t->n_host_kind = c->n_kind;
 	return 0;
 }

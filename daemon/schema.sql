@@ -1,8 +1,9 @@
--- schema.sql: the acquisitiond database, schema version 5 (PRAGMA user_version = 5,
+-- schema.sql: the acquisitiond database, schema version 6 (PRAGMA user_version = 6,
 -- PRAGMA application_id = 0x42524446 "BRDF"). A new database is created from this file as it is
 -- (daemon/store_migrate.c embeds it); an older one is migrated by the steps in daemon/store_migrate.c (1 → 2: the
 -- measured sample-frame angles and the calibrated_samples view; 2 → 3: the 'interrupted' state of recon_runs;
--- 3 → 4: the decisions of adaptive sweeps; 4 → 5: the sample a sweep measured, sweep_samples).
+-- 3 → 4: the decisions of adaptive sweeps; 4 → 5: the sample a sweep measured, sweep_samples; 5 → 6: the kind of
+-- a sweep's plan, sweeps.plan_kind).
 -- tests/integration/test_store_schema.py checks that a fresh database has exactly this schema, and
 -- tests/unit/test_store.c that a migrated one has it too. Only the store (daemon/store*.c) writes; readers of
 -- calibrated samples (the CSV export, the daemon's reconstruction, brdf-recon fit --db in recon/dbload.c) read
@@ -30,7 +31,10 @@ CREATE TABLE devices (
   UNIQUE (name, vendor, model, serial, firmware)
 );
 
--- A sweep: its plan and configuration as they were, its state and provenance.
+-- A sweep: its plan and configuration as they were, its state and provenance. plan_kind (schema 6; NULL for sweeps
+-- made before): the plan's kind as plan_kind_of() names it (grid, fibonacci or adaptive, then /auto or /fixed
+-- integration): a plan is timed with the host's time per point of the latest completed sweep of its own kind. It
+-- is written the way SQLite's ADD COLUMN writes it, so that a migrated database has this very text.
 CREATE TABLE sweeps (
   id INTEGER PRIMARY KEY,
   name TEXT NOT NULL,
@@ -43,7 +47,7 @@ CREATE TABLE sweeps (
   spectrometer_id INTEGER REFERENCES spectrometers(id),
   points_total INTEGER NOT NULL DEFAULT 0,
   wavelength_grid BLOB                    -- float32 nm: the grid of calibrated samples (NULL until calibrated)
-);
+, plan_kind TEXT);
 
 -- The sample a sweep measured, by the name its plan gave it (plan key sample:; sweeps without one have no row), and
 -- whether the auto exposure chose its exposures: a later auto sweep of the same sample takes its exposure prior (the

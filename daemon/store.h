@@ -15,7 +15,7 @@
 #include "drivers/spectro.h"
 
 #define STORE_APPLICATION_ID 0x42524446  /* "BRDF" */
-#define STORE_SCHEMA_VERSION 5
+#define STORE_SCHEMA_VERSION 6
 
 struct store;
 struct spectro_info;
@@ -30,6 +30,7 @@ struct store_sweep_new {
 	double created_at;               /* Unix seconds */
 	const char *sample;              /* the sample's name (the plan's sample:), NULL or "": not recorded */
 	bool auto_exposure;              /* its exposures are the auto exposure's choice (an exposure prior's source) */
+	const char *plan_kind;           /* the plan's kind (plan_kind_of), NULL: not recorded */
 };
 
 struct store_point_new {
@@ -173,8 +174,13 @@ typedef int (*store_prior_fn)(void *ctx, const struct store_prior_row *row);
  * nonzero stops). 0 or -1. */
 int store_prior_each(struct store *st, const char *sample, int64_t exclude, int64_t *sweep_id, store_prior_fn fn,
 		     void *ctx, struct acq_err *err);
-/* The latest completed sweep other than exclude (0: none), any sample and mode, in *sweep_id (0: none). 0 or -1. */
-int store_latest_completed(struct store *st, int64_t exclude, int64_t *sweep_id, struct acq_err *err);
+/* The latest completed sweep other than exclude (0: none), any sample and mode, of plan kind `kind` (NULL: any
+ * kind), in *sweep_id (0: none). 0 or -1. */
+int store_latest_completed(struct store *st, int64_t exclude, const char *kind, int64_t *sweep_id,
+			   struct acq_err *err);
+/* How many sweeps this store has set completed since it was opened (store_sweep_set_state): a cache of what the
+ * completed sweeps say is stale when it changes. */
+unsigned long store_completed_gen(const struct store *st);
 /* The done points' sample and dark exposures of sweep_id (any state: a running sweep's so far) whose order index is
  * from_order or more to fn, as store_prior_each gives them. 0 or -1. */
 int store_prior_rows(struct store *st, int64_t sweep_id, int64_t from_order, store_prior_fn fn, void *ctx,

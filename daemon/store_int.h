@@ -25,6 +25,7 @@ struct store {
 	uint64_t mark;           /* the latest commit's mark (store_commit_mark) */
 	char degraded[1200];     /* store_degraded(): what could not start ("" = nothing) */
 	bool group, group_failed; /* store_group_begin(): the writes join its transaction; one of them failed */
+	unsigned long completed_gen; /* sweeps set completed since the store was opened (store_completed_gen) */
 };
 
 /* err = "<path>: <what>: <SQLite's message>" (ACQ_E_IO); returns -1. */

@@ -98,6 +98,9 @@ static const char *const store_migrations[STORE_SCHEMA_VERSION] = {
 	      "  auto_exposure INTEGER NOT NULL CHECK (auto_exposure IN (0, 1))\n"
 	      ");\n"
 	      "CREATE INDEX sweep_samples_by_sample ON sweep_samples (sample, sweep_id);\n",
+	/* 5 → 6: the kind of a sweep's plan (the host's time per point is taken from a sweep of the same kind,
+	 * exposure_prior.c); older sweeps have none (NULL): they time plans of any kind, as before. */
+	[5] = "ALTER TABLE sweeps ADD COLUMN plan_kind TEXT;",
 };
 
 /* Whether the open transaction left a foreign key dangling (a step that rebuilt a table). 0, or -1 with err. */

@@ -76,14 +76,16 @@ int store_prior_rows(struct store *st, int64_t sweep_id, int64_t from_order, sto
 	return 0;
 }
 
-int store_latest_completed(struct store *st, int64_t exclude, int64_t *sweep_id, struct acq_err *err)
+int store_latest_completed(struct store *st, int64_t exclude, const char *kind, int64_t *sweep_id,
+			   struct acq_err *err)
 {
 	*sweep_id = 0;
-	sqlite3_stmt *s = store_prep(st, "SELECT id FROM sweeps WHERE state = 'completed' AND id <> ? "
-				         "ORDER BY id DESC LIMIT 1", err);
+	sqlite3_stmt *s = store_prep(st, "SELECT id FROM sweeps WHERE state = 'completed' AND id <> ?1 "
+				         "AND (?2 IS NULL OR plan_kind = ?2) ORDER BY id DESC LIMIT 1", err);
 	if (!s)
 		return -1;
 	sqlite3_bind_int64(s, 1, exclude);
+	store_bind_text(s, 2, kind);
 	int rc = sqlite3_step(s);
 	if (rc == SQLITE_ROW)
 		*sweep_id = sqlite3_column_int64(s, 0);

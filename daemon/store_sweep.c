@@ -48,8 +48,8 @@ int store_sweep_create(struct store *st, const struct store_sweep_new *sw, const
 	int rc = -1;
 	int64_t sid = 0;
 	sqlite3_stmt *s = store_prep(st, "INSERT INTO sweeps (name, plan_text, config_snapshot, state, created_at, "
-				         "software_version, calibration_method, spectrometer_id, points_total) "
-				         "VALUES (?,?,?,'planned',?,?,?,?,?)", err);
+				         "software_version, calibration_method, spectrometer_id, points_total, plan_kind) "
+				         "VALUES (?,?,?,'planned',?,?,?,?,?,?)", err);
 	if (!s)
 		goto end;
 	store_bind_text(s, 1, sw->name ? sw->name : "");
@@ -60,6 +60,7 @@ int store_sweep_create(struct store *st, const struct store_sweep_new *sw, const
 	store_bind_text(s, 6, sw->calibration_method);
 	store_bind_id(s, 7, sw->spectrometer_id);
 	sqlite3_bind_int(s, 8, npts);
+	store_bind_text(s, 9, sw->plan_kind && *sw->plan_kind ? sw->plan_kind : NULL);
 	if (store_run1(st, s, err, "creating sweep"))
 		goto end;
 	sid = sqlite3_last_insert_rowid(st->db);
@@ -89,7 +90,14 @@ int store_sweep_set_state(struct store *st, int64_t id, const char *state, doubl
 		return -1;
 	if (sqlite3_changes(st->db) != 1)
 		return acq_errf(err, ACQ_E_NOTFOUND, "no sweep %lld", (long long)id);
+	if (!strcmp(state, "completed"))
+		st->completed_gen++;
 	return 0;
+}
+
+unsigned long store_completed_gen(const struct store *st)
+{
+	return st->completed_gen;
 }
 
 int store_sweep_interrupted(struct store *st, int64_t *id, struct acq_err *err)

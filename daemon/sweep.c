@@ -33,6 +33,7 @@ struct sweep {
 	struct sweep_progress last;  /* kept after the executor is gone */
 	struct eta eta;              /* wall-clock ETA (eta.c), fed by the events and the progress below */
 	struct sweep_retime retime;  /* a first auto sweep re-times its plan at each incidence (sweep_retime.h) */
+	struct exp_host_cache host;  /* the host's time per point by plan kind, until a sweep completes (exposure.h) */
 	char point_text[128];
 	/* completion: export + reconstruction chain (recon_chain.c) */
 	int64_t done_id;
@@ -411,7 +412,7 @@ void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t)
 	}
 }
 
-void sweep_plan_prior(const struct sweep *sw, const struct plan_spec *spec, int64_t exclude, struct plan_timing *t)
+void sweep_plan_prior(struct sweep *sw, const struct plan_spec *spec, int64_t exclude, struct plan_timing *t)
 {
 	if (spec)
 		sweep_plan_prior_of(sw, spec->integ_mode == PLAN_INTEG_AUTO ? spec->sample : "", exclude, t);
@@ -419,10 +420,11 @@ void sweep_plan_prior(const struct sweep *sw, const struct plan_spec *spec, int6
 		sweep_plan_prior_of(sw, NULL, exclude, t);
 }
 
-void sweep_plan_prior_of(const struct sweep *sw, const char *sample, int64_t exclude, struct plan_timing *t)
+void sweep_plan_prior_of(struct sweep *sw, const char *sample, int64_t exclude, struct plan_timing *t)
 {
 	memset(&t->prior, 0, sizeof t->prior);
 	t->host_sweep = 0;
+	t->n_host_kind = 0;
 	if (!sample || !sw->env.store)
 		return;
 	struct acq_err err = { 0 };
@@ -430,9 +432,10 @@ void sweep_plan_prior_of(const struct sweep *sw, const char *sample, int64_t exc
 		log_msg(LOG_WARNING, "exposure prior of sample '%s': %s (timed from the plan's estimate)", sample, err.msg);
 		memset(&t->prior, 0, sizeof t->prior);
 	}
-	/* without the sample's own host figure, the host's time per point as this host's latest sweep measured it */
+	/* without the sample's own host figure, the host's time per point as this host's latest sweep of the plan's
+	 * kind (else of any kind) measured it; kept until a sweep completes */
 	if (!(t->prior.sweep > 0 && t->prior.host_points > 0) &&
-	    exp_host_load(sw->env.store, exclude, &sw->env.conf->bench, t, &t->point_overhead_s, &t->host_sweep, &err))
+	    exp_host_cached(&sw->host, sw->env.store, exclude, &sw->env.conf->bench, t, &err))
 		log_msg(LOG_WARNING, "the host's time per point from the latest sweep: %s (the default)", err.msg);
 }
 
@@ -561,6 +564,7 @@ static int start_planned(struct sweep *sw, const char *plan_text, const char *na
 	}
 	char method[128];
 	snprintf(method, sizeof method, "%s-v1", calib_method_name(cfg.cal.method));
+	char kind[PLAN_KIND_MAX];
 	struct store_sweep_new nw = {
 		.name = name && *name ? name : sw->spec->name,
 		.plan_text = plan_text,
@@ -571,6 +575,7 @@ static int start_planned(struct sweep *sw, const char *plan_text, const char *na
 		.created_at = sw->env.wallclock(),
 		.sample = sw->spec->sample,
 		.auto_exposure = sw->spec->integ_mode == PLAN_INTEG_AUTO,
+		.plan_kind = plan_kind_of(sw->spec, kind),
 	};
 	int rc = store_sweep_create(sw->env.store, &nw, pts, (int)n, &sw->id, err);
 	free(pts);
@@ -795,6 +800,7 @@ void sweep_conf_changed(struct sweep *sw, const struct conf *c)
 	struct ex_cfg cfg;
 	struct acq_err err = { 0 };
 	sw->env.conf = c;
+	exp_host_cache_drop(&sw->host); /* priced with the bench's figures: read again with the new ones */
 	if (load_cfg(c, &cfg, &err))
 		log_msg(LOG_ERR, "sweep configuration after reload: %s (keeping the previous one)", err.msg);
 	else

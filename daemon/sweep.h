@@ -111,11 +111,12 @@ struct plan_timing;
 void sweep_plan_timing(const struct sweep *sw, struct plan_timing *t);
 /* The exposure prior of spec into t->prior (plan.h): for an auto plan that names its sample, from the latest
  * completed auto sweep of that sample but exclude (0: none); none otherwise. Without the prior's host figure, the
- * host's time per point (t->point_overhead_s, t->host_sweep) from the latest completed sweep but exclude when it
- * measured it (exp_host_load). A database error is logged (the defaults then). */
-void sweep_plan_prior(const struct sweep *sw, const struct plan_spec *spec, int64_t exclude, struct plan_timing *t);
+ * host's time per point (t->point_overhead_s, t->host_sweep: the latest completed sweep but exclude when it
+ * measured it; t->host_kind: the latest of each plan kind), kept in sw until a sweep completes (exp_host_cached).
+ * A database error is logged (the defaults then). */
+void sweep_plan_prior(struct sweep *sw, const struct plan_spec *spec, int64_t exclude, struct plan_timing *t);
 /* The same from what it reads of the spec: the sample's name for an auto plan ("" for none), NULL for no spec. */
-void sweep_plan_prior_of(const struct sweep *sw, const char *sample, int64_t exclude, struct plan_timing *t);
+void sweep_plan_prior_of(struct sweep *sw, const char *sample, int64_t exclude, struct plan_timing *t);
 /* "idle", "running", "paused", "faulted", "stopping". */
 const char *sweep_state_name(enum sweep_state s);
 

@@ -512,13 +512,21 @@ static void print_positions(FILE *f, const char *cmd, json_t *r)
 	if (!strcmp(cmd, "stop"))
 		fprintf(f, "%s\n", json_is_true(json_object_get(r, "stopped")) ? "stopped the running operation"
 									: "nothing was running; the arms are stopped");
+	json_t *ap = json_object_get(r, "apart");
+	for (size_t i = 0; i < json_array_size(ap); i++) {
+		char a[32];
+		json_t *m = json_array_get(ap, i);
+		ctl_fmt_angle(num(m, "to"), a, sizeof a);
+		fprintf(f, "%s %s to %s (the arms apart before homing)\n", i ? "then moved" : "first moved", str(m, "axis"), a);
+	}
 	json_t *h = json_object_get(r, "homed");
 	if (json_array_size(h)) {
 		char list[160];
 		ctl_fmt_value("homed", h, list, sizeof list);
 		fprintf(f, "homed %s\n", list);
 	}
-	fprintf(f, "position");
+	/* after a home of every axis each waits at its park (home.park): the positions below say where */
+	fprintf(f, "%s", json_is_true(json_object_get(r, "parked")) ? "parked at" : "position");
 	for (int i = 0; i < 3; i++) {
 		char a[32];
 		ctl_fmt_angle(num(r, axes[i]), a, sizeof a);

@@ -10,7 +10,8 @@
 
 #define DB_APP_ID 0x42524446 /* "BRDF" */
 #define DB_VERSION 2     /* the first with calibrated_samples; acquisitiond migrates older files when it opens them */
-#define DB_VERSION_MAX 5 /* the newest this reader knows (3 changed only recon_runs, 4 added the adaptive tables, 5 sweep_samples) */
+#define DB_VERSION_MAX 6 /* the newest this reader knows (3 changed only recon_runs, 4 added the adaptive tables, 5 sweep_samples,
+			  * 6 sweeps.plan_kind) */
 
 static int pragma_int(sqlite3 *db, const char *sql, long long *out)
 {

@@ -209,6 +209,15 @@ struct plan_prior {
 	struct plan_prior_inc inc[PLAN_PRIOR_MAX_INC];
 };
 
+/* The host's time per point a completed sweep of one plan kind measured (plan_kind_of names the kinds). */
+#define PLAN_KIND_MAX 24
+#define PLAN_HOST_KINDS 6 /* grid, fibonacci, adaptive × auto, fixed */
+struct plan_host_kind {
+	char kind[PLAN_KIND_MAX];
+	double host_s;              /* real seconds per point (as point_overhead_s) */
+	long long sweep;            /* the sweep that measured it */
+};
+
 /* The executor's costs the ordering model leaves out; plan_timing_defaults() gives the executor's and the
  * arm driver's defaults, the daemon fills it from its configuration (sweep, acquisition, devices). */
 struct plan_timing {
@@ -230,6 +239,8 @@ struct plan_timing {
 				     * (calibration, storage with fsync, protocol round trips) ... */
 	double time_scale;          /* ... which cost time_scale times as much bench time on a simulated bench */
 	long long host_sweep;       /* point_overhead_s is what this completed sweep measured (0: the default) */
+	struct plan_host_kind host_kind[PLAN_HOST_KINDS]; /* by plan kind: used instead of point_overhead_s for a plan */
+	int n_host_kind;            /* of that kind (when no exposure prior carries its own) */
 	bool have_start;            /* the arms' position when the sweep starts is known (the daemon knows it) */
 	struct plan_pos start;      /* then the move from there to ref_pose (or the first point) is counted */
 	struct plan_prior prior;    /* auto integration: the exposure prior when prior.sweep > 0 (plan_time.c) */
@@ -268,6 +279,13 @@ double plan_move_time_s(const struct bench_geom *g, const struct plan_timing *t,
 int plan_pose_parse(const struct yc_node *n, const char *what, struct plan_pos *out, struct acq_err *err);
 /* The executor's and drivers' default timing (see struct plan_timing). */
 void plan_timing_defaults(struct plan_timing *t);
+/* The kind of spec's plan for the host's time per point: "grid", "fibonacci" or "adaptive", then "/auto" or
+ * "/fixed" (the integration); written into buf (PLAN_KIND_MAX bytes), returned. */
+const char *plan_kind_of(const struct plan_spec *spec, char *buf);
+/* The host's real seconds per point plan_time_apply uses for spec when no exposure prior carries its own: the
+ * figure of spec's kind in t->host_kind (*own_kind true), else t->point_overhead_s; *sweep = the sweep that
+ * measured it (0: the default). */
+double plan_time_host(const struct plan_spec *spec, const struct plan_timing *t, long long *sweep, bool *own_kind);
 /* Fill the predicted_* fields of r (made from spec against g) for an executor timed by t. */
 void plan_time_apply(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
 		     struct plan_result *r);

@@ -49,6 +49,37 @@ static bool search(const struct bench_geom *g, struct plan_pos p, const double *
 	return false;
 }
 
+static const struct bench_axis *axis_of(const struct bench_geom *g, int axis)
+{
+	return axis == 0 ? &g->laser_theta : axis == 1 ? &g->detector_theta : &g->detector_phi;
+}
+
+/* `depth` apart moves from p into steps[n..], then the homes' order: the first move tried by size (k steps of
+ * PLAN_HOME_APART_STEP_DEG, the axes of mask in order, up then down), each allowed by plan_home_move_ok. */
+static bool apart(const struct bench_geom *g, struct plan_pos p, const double *park, unsigned mask, unsigned need,
+		  int depth, struct plan_home_step *steps, int n, int *len)
+{
+	if (depth == 0)
+		return search(g, p, park, need, 0, steps, n, len);
+	double span = 0;
+	for (int a = 0; a < 3; a++)
+		span = fmax(span, axis_of(g, a)->max_deg - axis_of(g, a)->min_deg);
+	for (int k = 1; k * PLAN_HOME_APART_STEP_DEG <= span; k++)
+		for (int a = 0; a < 3; a++)
+			for (int sgn = 1; sgn >= -1 && (mask & (1u << a)); sgn -= 2) {
+				const struct bench_axis *ax = axis_of(g, a);
+				struct plan_pos q = p;
+				double *v = pos_axis(&q, a);
+				*v += sgn * k * PLAN_HOME_APART_STEP_DEG;
+				if (*v < ax->min_deg || *v > ax->max_deg || !plan_home_move_ok(g, &p, &q))
+					continue;
+				steps[n] = (struct plan_home_step){ .axis = a, .apart = true, .target = *v };
+				if (apart(g, q, park, mask, need, depth - 1, steps, n + 1, len))
+					return true;
+			}
+	return false;
+}
+
 int plan_home_order(const struct bench_geom *g, const struct plan_pos *from, const double *park, unsigned mask,
 		    struct plan_home_step steps[PLAN_HOME_MAX_STEPS])
 {
@@ -58,6 +89,16 @@ int plan_home_order(const struct bench_geom *g, const struct plan_pos *from, con
 	for (int a = 0; a < 3; a++)
 		if (mask & (1u << a))
 			need |= (1u << (2 * a)) | (park ? 1u << (2 * a + 1) : 0);
+	/* where the steps end: no order when that pose itself is a collision (all homes at 0° without parks) */
+	struct plan_pos end = *from;
+	for (int a = 0; a < 3; a++)
+		if (mask & (1u << a))
+			*pos_axis(&end, a) = park ? park[a] : 0;
+	if (plan_blind(g, &end) & (PLAN_R_COLLISION | PLAN_R_LIMITS))
+		return -1;
 	int len = 0;
-	return search(g, *from, park, need, 0, steps, 0, &len) ? len : -1;
+	for (int depth = 0; depth <= PLAN_HOME_MAX_APART; depth++)
+		if (apart(g, *from, park, mask, need, depth, steps, 0, &len))
+			return len;
+	return -1;
 }

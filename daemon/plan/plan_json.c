@@ -111,10 +111,16 @@ json_t *plan_dry_run_json(const struct plan_spec *s, const struct bench_geom *g,
 {
 	plan_time_apply(s, g, t, r);
 	json_t *o = plan_to_json(s, r, points);
-	if (o && t->host_sweep > 0 && !(t->prior.sweep > 0 && t->prior.host_points > 0)) {
-		/* the host's time per point as that sweep measured it, not the default (sweep_plan_prior) */
-		json_object_set_new(o, "host_sweep", json_integer(t->host_sweep));
-		json_object_set_new(o, "host_per_point_s", json_real(t->point_overhead_s));
+	long long host_sweep = 0;
+	bool own = false;
+	double host = plan_time_host(s, t, &host_sweep, &own);
+	if (o && host_sweep > 0 && !(t->prior.sweep > 0 && t->prior.host_points > 0)) {
+		/* the host's time per point as that sweep measured it, not the default (sweep_plan_prior): a sweep of
+		 * the plan's own kind when there is one (host_kind), else the latest of any kind */
+		char kind[PLAN_KIND_MAX];
+		json_object_set_new(o, "host_sweep", json_integer(host_sweep));
+		json_object_set_new(o, "host_per_point_s", json_real(host));
+		json_object_set_new(o, "host_kind", own ? json_string(plan_kind_of(s, kind)) : json_null());
 	}
 	if (o && s->integ_mode == PLAN_INTEG_AUTO) {
 		/* which exposure prior timed the auto exposures: the previous sweep of the same sample, or none (the

@@ -16,7 +16,7 @@ SRC = os.environ.get("ACQ_SRC") or os.path.abspath(".")
 GOLD = os.path.join(SRC, "tests", "golden", "acqctl")
 CASES = [("version", ["version"]), ("status", ["status"]), ("devices", ["devices"]), ("sweep.list", ["sweep", "list"]),
          ("sweep.show", ["sweep", "show", "2"]), ("plan", ["plan", "PLANFILE"]),
-         ("move", ["move", "laser.theta=20", "detector.theta=40", "detector.phi=90"]),
+         ("move", ["move", "laser.theta=20", "detector.theta=40", "detector.phi=90"]), ("home", ["home"]),
          ("sweep.abort", ["sweep", "abort"]), ("spectrum", ["spectrum", "7"]), ("spectrum", ["spectrum", "7", "--csv"]),
          ("recon.status", ["recon", "status", "2"])]
 

@@ -91,7 +91,7 @@ def main():
 
         # --- information commands
         r = c.req("version", _id="v-1")
-        check(r["ok"] and r["id"] == "v-1" and r["protocol"] == 1 and r["schema"] == 5 and r["role"] == "controller",
+        check(r["ok"] and r["id"] == "v-1" and r["protocol"] == 1 and r["schema"] == 6 and r["role"] == "controller",
               "version %r" % r)
         r = c.req("status", _id=2)
         check(r["ok"] and r["id"] == 2 and r["daemon"] == "running", "status %r" % r)

@@ -39,14 +39,14 @@ def main():
     with Daemon() as d:
         d.start()
         c = d.client()
-        check(c.req("version")["schema"] == 5, "schema version over the protocol")
+        check(c.req("version")["schema"] == 6, "schema version over the protocol")
         c.close()
         db = os.path.join(d.state, "acquisition.db")
         check(d.stop() == 0, "clean stop")
         if have_cli:
             out = subprocess.run(["sqlite3", db, "PRAGMA application_id; PRAGMA user_version; PRAGMA journal_mode; "
                                   "PRAGMA integrity_check;"], capture_output=True, text=True).stdout.split()
-            check(out == [str(0x42524446), "5", "wal", "ok"], "sqlite3 CLI: %r" % out)
+            check(out == [str(0x42524446), "6", "wal", "ok"], "sqlite3 CLI: %r" % out)
             tables = subprocess.run(["sqlite3", db, ".tables"], capture_output=True, text=True).stdout.split()
             for t in ("sweeps", "points", "spectra", "spectrometers", "devices", "calibrated", "recon_runs",
                       "recon_outputs", "events", "sweep_devices", "adaptive_batches", "adaptive_picks", "sweep_samples"):
@@ -55,10 +55,11 @@ def main():
             check(False, "the sqlite3 CLI is absent (a make deps package): its checks cannot run")
         con = sqlite3.connect(db)
         check(con.execute("PRAGMA application_id").fetchone()[0] == 0x42524446, "application_id")
-        check(con.execute("PRAGMA user_version").fetchone()[0] == 5, "user_version")
+        check(con.execute("PRAGMA user_version").fetchone()[0] == 6, "user_version")
         ref = sqlite3.connect(":memory:")
         ref.executescript(open(os.path.join(SRC, "daemon", "schema.sql")).read())
         check(schema_of(con) == schema_of(ref), "database schema differs from daemon/schema.sql")
+        check("plan_kind" in [r[1] for r in con.execute("PRAGMA table_info(sweeps)")], "sweeps.plan_kind (schema 6)")
         # The CHECK constraints hold: a spectrum whose blob does not match npix is rejected.
         try:
             con.execute("INSERT INTO spectra (kind, integration_ms, averages, npix, counts, taken_at) "

@@ -170,16 +170,16 @@ static void test_prior_host(void **state)
 	assert_int_equal(pr.host_points, 0);
 }
 
-/* A sweep of n points (no sample) that stay at one pose, one 10 ms exposure of 4 averages each, committed every
- * `every` seconds, then in state. */
-static int64_t mk_host_sweep(struct store *st, int n, double every, const char *state)
+/* A sweep of n points (no sample; plan kind `kind`, NULL: none recorded) that stay at one pose, one 10 ms exposure of
+ * 4 averages each, committed every `every` seconds, then in state. */
+static int64_t mk_host_sweep_kind(struct store *st, int n, double every, const char *state, const char *kind)
 {
 	struct store_point_new pts[64];
 	assert_true(n <= 64);
 	for (int i = 0; i < n; i++)
 		pts[i] = (struct store_point_new){ i, 10, 0, 30, 0 };
 	struct store_sweep_new nw = { .name = "h", .plan_text = "name: h", .config_snapshot = "{}",
-				      .software_version = "test", .created_at = 1000 };
+				      .software_version = "test", .created_at = 1000, .plan_kind = kind };
 	int64_t id = 0;
 	struct acq_err err = { 0 };
 	assert_int_equal(store_sweep_create(st, &nw, pts, n, &id, &err), 0);
@@ -197,6 +197,11 @@ static int64_t mk_host_sweep(struct store *st, int n, double every, const char *
 	}
 	assert_int_equal(store_sweep_set_state(st, id, state, 3000, &err), 0);
 	return id;
+}
+
+static int64_t mk_host_sweep(struct store *st, int n, double every, const char *state)
+{
+	return mk_host_sweep_kind(st, n, every, state, NULL);
 }
 
 /* The host's time per point from the latest completed sweep of any sample (a plan without its sample's prior): at
@@ -218,21 +223,117 @@ static void test_host_latest(void **state)
 	struct acq_err err = { 0 };
 	double host = -1;
 	long long sweep = -1;
-	assert_int_equal(exp_host_load(st, 0, &g, &t, &host, &sweep, &err), 0);
+	assert_int_equal(exp_host_load(st, 0, NULL, &g, &t, &host, &sweep, &err), 0);
 	assert_true(sweep == 0 && host == -1); /* no sweep yet */
 	int64_t a = mk_host_sweep(st, EXP_HOST_MIN_POINTS + 1, 0.5, "completed");
 	mk_host_sweep(st, EXP_HOST_MIN_POINTS + 1, 0.3, "aborted");
-	assert_int_equal(exp_host_load(st, 0, &g, &t, &host, &sweep, &err), 0);
+	assert_int_equal(exp_host_load(st, 0, NULL, &g, &t, &host, &sweep, &err), 0);
 	assert_int_equal(sweep, a);
 	assert_true(fabs(host - (0.5 - 0.08 / 10)) < 1e-9);
 	/* a newer completed sweep too short to time the host: none (the default stays) */
 	int64_t b = mk_host_sweep(st, EXP_HOST_MIN_POINTS, 0.4, "completed");
 	host = -1;
-	assert_int_equal(exp_host_load(st, 0, &g, &t, &host, &sweep, &err), 0);
+	assert_int_equal(exp_host_load(st, 0, NULL, &g, &t, &host, &sweep, &err), 0);
 	assert_true(sweep == 0 && host == -1);
 	/* excluded: the one before */
-	assert_int_equal(exp_host_load(st, b, &g, &t, &host, &sweep, &err), 0);
+	assert_int_equal(exp_host_load(st, b, NULL, &g, &t, &host, &sweep, &err), 0);
 	assert_int_equal(sweep, a);
+	store_close(st);
+}
+
+/* The timing of test_host_latest's sweeps (time scale 10, 10 ms read-out, 5 ms per exposure). */
+static void host_timing(struct bench_geom *g, struct plan_timing *t)
+{
+	bench_defaults(g);
+	g->readout_s = 0.01;
+	plan_timing_defaults(t);
+	t->exposure_overhead_s = 0.005;
+	t->time_scale = 10;
+}
+
+/* The host's figure by plan kind: a grid auto sweep (0.5 s per point) then a newer Fibonacci fixed one (0.3 s): a
+ * grid auto plan is timed by the first, a Fibonacci fixed one by the second, an adaptive plan (no sweep of its kind)
+ * by the latest of any kind; a sweep without a recorded kind (before schema 6) times only plans of any kind. */
+static void test_host_kind(void **state)
+{
+	(void)state;
+	char p[300];
+	struct store *st = ut_store_new(p, sizeof p, ut_dir, "k.db");
+	struct bench_geom g;
+	struct plan_timing t;
+	host_timing(&g, &t);
+	struct acq_err err = { 0 };
+	int64_t old = mk_host_sweep(st, EXP_HOST_MIN_POINTS + 1, 0.7, "completed");
+	int64_t a = mk_host_sweep_kind(st, EXP_HOST_MIN_POINTS + 1, 0.5, "completed", "grid/auto");
+	int64_t b = mk_host_sweep_kind(st, EXP_HOST_MIN_POINTS + 1, 0.3, "completed", "fibonacci/fixed");
+	double host = -1;
+	long long sweep = -1;
+	assert_int_equal(exp_host_load(st, 0, "grid/auto", &g, &t, &host, &sweep, &err), 0);
+	assert_int_equal(sweep, a);
+	assert_true(fabs(host - (0.5 - 0.08 / 10)) < 1e-9);
+	assert_int_equal(exp_host_load(st, 0, NULL, &g, &t, &host, &sweep, &err), 0);
+	assert_int_equal(sweep, b);
+	assert_int_equal(exp_host_load(st, 0, "adaptive/auto", &g, &t, &host, &sweep, &err), 0);
+	assert_int_equal(sweep, 0);
+	struct exp_host_cache c = { 0 };
+	assert_int_equal(exp_host_cached(&c, st, 0, &g, &t, &err), 0);
+	assert_int_equal(t.host_sweep, b);
+	assert_int_equal(t.n_host_kind, 2);
+	struct plan_spec grid = { .integ_mode = PLAN_INTEG_AUTO }, fib = { .fib_count = 10, .integ_mode = PLAN_INTEG_FIXED };
+	struct plan_adaptive ad = { 0 };
+	struct plan_spec adapt = { .integ_mode = PLAN_INTEG_AUTO, .adaptive = &ad };
+	char kind[PLAN_KIND_MAX];
+	assert_string_equal(plan_kind_of(&grid, kind), "grid/auto");
+	assert_string_equal(plan_kind_of(&fib, kind), "fibonacci/fixed");
+	assert_string_equal(plan_kind_of(&adapt, kind), "adaptive/auto");
+	bool own = false;
+	assert_true(fabs(plan_time_host(&grid, &t, &sweep, &own) - (0.5 - 0.08 / 10)) < 1e-9);
+	assert_true(sweep == a && own);
+	assert_true(fabs(plan_time_host(&fib, &t, &sweep, &own) - (0.3 - 0.08 / 10)) < 1e-9);
+	assert_true(sweep == b && own);
+	assert_true(fabs(plan_time_host(&adapt, &t, &sweep, &own) - (0.3 - 0.08 / 10)) < 1e-9);
+	assert_true(sweep == b && !own);
+	/* without b no Fibonacci sweep is left: the latest of any kind (a, a grid) times the Fibonacci plan; the old
+	 * sweep without a kind never times a plan of a kind */
+	assert_int_equal(exp_host_cached(&c, st, b, &g, &t, &err), 0);
+	assert_true(fabs(plan_time_host(&fib, &t, &sweep, &own) - (0.5 - 0.08 / 10)) < 1e-9);
+	assert_true(sweep == a && !own);
+	(void)old;
+	store_close(st);
+}
+
+/* exp_host_cached reads the database once, then not again until a sweep completes (or exclude changes, or the cache
+ * is dropped): a newer completed sweep's figure is seen at the next call; an aborted one changes nothing. */
+static void test_host_cache(void **state)
+{
+	(void)state;
+	char p[300];
+	struct store *st = ut_store_new(p, sizeof p, ut_dir, "c.db");
+	struct bench_geom g;
+	struct plan_timing t;
+	host_timing(&g, &t);
+	struct acq_err err = { 0 };
+	struct exp_host_cache c = { 0 };
+	assert_int_equal(exp_host_cached(&c, st, 0, &g, &t, &err), 0);
+	assert_true(c.reads == 1 && t.host_sweep == 0 && t.n_host_kind == 0);
+	int64_t a = mk_host_sweep_kind(st, EXP_HOST_MIN_POINTS + 1, 0.5, "completed", "grid/auto");
+	assert_int_equal(exp_host_cached(&c, st, 0, &g, &t, &err), 0); /* a sweep completed: read again */
+	assert_true(c.reads == 2 && t.host_sweep == a && t.n_host_kind == 1);
+	for (int i = 0; i < 3; i++) /* the `plan` requests after it: no read */
+		assert_int_equal(exp_host_cached(&c, st, 0, &g, &t, &err), 0);
+	assert_int_equal(c.reads, 2);
+	mk_host_sweep_kind(st, EXP_HOST_MIN_POINTS + 1, 0.3, "aborted", "grid/auto");
+	assert_int_equal(exp_host_cached(&c, st, 0, &g, &t, &err), 0);
+	assert_true(c.reads == 2 && t.host_sweep == a);
+	int64_t b = mk_host_sweep_kind(st, EXP_HOST_MIN_POINTS + 1, 0.4, "completed", "grid/auto");
+	assert_int_equal(exp_host_cached(&c, st, 0, &g, &t, &err), 0);
+	assert_true(c.reads == 3 && t.host_sweep == b && t.host_kind[0].sweep == b);
+	assert_true(fabs(t.host_kind[0].host_s - (0.4 - 0.08 / 10)) < 1e-9);
+	assert_int_equal(exp_host_cached(&c, st, b, &g, &t, &err), 0); /* another exclude: read again */
+	assert_true(c.reads == 4 && t.host_sweep == a);
+	exp_host_cache_drop(&c);
+	assert_int_equal(exp_host_cached(&c, st, b, &g, &t, &err), 0);
+	assert_int_equal(c.reads, 5);
 	store_close(st);
 }
 
@@ -267,6 +368,8 @@ int main(void)
 		cmocka_unit_test(test_prior_figures),
 		cmocka_unit_test(test_prior_host),
 		cmocka_unit_test(test_host_latest),
+		cmocka_unit_test(test_host_kind),
+		cmocka_unit_test(test_host_cache),
 		cmocka_unit_test(test_plan_sample_key),
 	};
 	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);

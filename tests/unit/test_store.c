@@ -299,6 +299,7 @@ static void downgrade_to_v2(const char *p)
 	sqlite3 *db;
 	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
 	assert_int_equal(sqlite3_exec(db, "PRAGMA foreign_keys = OFF; PRAGMA legacy_alter_table = ON; BEGIN;"
+					  "ALTER TABLE sweeps DROP COLUMN plan_kind;" /* version 6's */
 					  "DROP TABLE sweep_samples;" /* version 5's */
 					  "DROP TABLE adaptive_picks; DROP TABLE adaptive_batches;" /* version 4's */
 					  "ALTER TABLE recon_runs RENAME TO r3;"
@@ -465,7 +466,8 @@ static void test_migration_4_to_5(void **state)
 	store_close(st);
 	sqlite3 *db;
 	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
-	assert_int_equal(sqlite3_exec(db, "DROP TABLE sweep_samples; PRAGMA user_version = 4;", NULL, NULL, NULL),
+	assert_int_equal(sqlite3_exec(db, "ALTER TABLE sweeps DROP COLUMN plan_kind; DROP TABLE sweep_samples; "
+				      "PRAGMA user_version = 4;", NULL, NULL, NULL),
 			 SQLITE_OK);
 	sqlite3_close(db);
 	assert_int_equal(store_open(p, &st, &err), 0);
@@ -494,6 +496,55 @@ static void test_migration_4_to_5(void **state)
 	ut_sql_close(db, s);
 }
 
+/* Version 5 → 6: sweeps gains plan_kind. The sweeps of a version-5 database keep everything and have no kind (NULL:
+ * they time plans of any kind); a sweep created after the migration records its kind, and the latest completed
+ * sweep of a kind is found by it. */
+static void test_migration_5_to_6(void **state)
+{
+	(void)state;
+	char p[300];
+	path_of(p, sizeof p, "v5.db");
+	struct store *st = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(store_open(p, &st, &err), 0);
+	int64_t old = ut_sweep_create(st, 2, "t", "plan: 1");
+	assert_int_equal(store_sweep_set_state(st, old, "completed", 1100, &err), 0);
+	store_close(st);
+	sqlite3 *db;
+	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
+	assert_int_equal(sqlite3_exec(db, "ALTER TABLE sweeps DROP COLUMN plan_kind; PRAGMA user_version = 5;", NULL, NULL,
+				      NULL), SQLITE_OK);
+	sqlite3_close(db);
+	assert_int_equal(store_open(p, &st, &err), 0);
+	assert_int_equal(store_schema_version(st), STORE_SCHEMA_VERSION);
+	json_t *show = store_sweep_show(st, old, true, &err);
+	assert_non_null(show);
+	assert_int_equal(json_array_size(json_object_get(show, "points")), 2);
+	json_decref(show);
+	int64_t id = -1;
+	assert_int_equal(store_latest_completed(st, 0, NULL, &id, &err), 0);
+	assert_int_equal(id, old);
+	assert_int_equal(store_latest_completed(st, 0, "grid/auto", &id, &err), 0);
+	assert_int_equal(id, 0); /* the old sweep has no kind */
+	struct store_sweep_new nw = { .name = "n", .plan_text = "name: n", .config_snapshot = "{}",
+				      .software_version = "test", .created_at = 2000, .plan_kind = "grid/auto" };
+	int64_t now = 0;
+	assert_int_equal(store_sweep_create(st, &nw, NULL, 0, &now, &err), 0);
+	assert_int_equal(store_sweep_set_state(st, now, "completed", 2100, &err), 0);
+	assert_int_equal(store_latest_completed(st, 0, "grid/auto", &id, &err), 0);
+	assert_int_equal(id, now);
+	assert_int_equal(store_latest_completed(st, 0, "fibonacci/auto", &id, &err), 0);
+	assert_int_equal(id, 0);
+	store_close(st);
+	assert_schema_current(p);
+	sqlite3_stmt *s = ut_sql_open(p, "SELECT group_concat(id || ':' || ifnull(plan_kind, '-')) FROM sweeps", &db);
+	assert_int_equal(sqlite3_step(s), SQLITE_ROW);
+	char want[64];
+	snprintf(want, sizeof want, "%lld:-,%lld:grid/auto", (long long)old, (long long)now);
+	assert_string_equal((const char *)sqlite3_column_text(s, 0), want);
+	ut_sql_close(db, s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -503,6 +554,7 @@ int main(void)
 		cmocka_unit_test(test_migration_1_to_3),
 		cmocka_unit_test(test_migration_2_to_3),
 		cmocka_unit_test(test_migration_4_to_5),
+		cmocka_unit_test(test_migration_5_to_6),
 		cmocka_unit_test(test_foreign_and_corrupt_refused),
 	};
 	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);

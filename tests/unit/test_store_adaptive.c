@@ -98,9 +98,11 @@ static void test_migration_3_to_4(void **state)
 	store_close(st);
 	sqlite3 *db;
 	assert_int_equal(sqlite3_open(p, &db), SQLITE_OK);
-	/* version 3 had neither the adaptive tables nor version 5's sweep_samples; it migrates through 4 to the current */
-	assert_int_equal(sqlite3_exec(db, "DROP TABLE sweep_samples; DROP TABLE adaptive_picks; DROP TABLE adaptive_batches; "
-					  "PRAGMA user_version = 3;", NULL, NULL, NULL), SQLITE_OK);
+	/* version 3 had neither the adaptive tables nor version 5's sweep_samples nor version 6's sweeps.plan_kind; it
+	 * migrates through 4 to the current */
+	assert_int_equal(sqlite3_exec(db, "ALTER TABLE sweeps DROP COLUMN plan_kind; DROP TABLE sweep_samples; "
+					  "DROP TABLE adaptive_picks; DROP TABLE adaptive_batches; PRAGMA user_version = 3;",
+				      NULL, NULL, NULL), SQLITE_OK);
 	sqlite3_close(db);
 	assert_int_equal(store_open(p, &st, &err), 0);
 	assert_int_equal(store_schema_version(st), STORE_SCHEMA_VERSION);
