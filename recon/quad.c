@@ -148,6 +148,8 @@ void recon_albedo_ws_free(struct albedo_ws *ws)
 	free(ws->keep);
 	free(ws->step);
 	free(ws->alt);
+	for (int k = 0; k < 257; k++)
+		free(ws->gl[k]);
 	memset(ws, 0, sizeof *ws);
 }
 
@@ -331,6 +333,25 @@ static int albedo_boxes(const struct recon_model *m, double theta_i, int nmu, in
 	return ws->nbox;
 }
 
+/* Gauss-Legendre's n nodes on [0, 1] (*x) and weights (*w), from ws's cache (computed at the first use); -1 on a
+ * bad size or no memory. */
+static int ws_gl(struct albedo_ws *ws, int n, const double **x, const double **w)
+{
+	if (n < 1 || n > 256)
+		return -1;
+	if (!ws->gl[n]) {
+		double *g = malloc(2 * (size_t)n * sizeof *g);
+		if (!g || rbf_gauss_legendre01(n, g, g + n)) {
+			free(g);
+			return -1;
+		}
+		ws->gl[n] = g;
+	}
+	*x = ws->gl[n];
+	*w = ws->gl[n] + n;
+	return 0;
+}
+
 /* Nodes of the composite rule with boxes: the cells between the boxes' edges (and the energy factor's steps in x),
  * each with Gauss-Legendre in x (cosθo, or cos²θo for the square rule) and in azimuth over [0, π] (doubled by the
  * mirror); a cell inside a box
@@ -366,7 +387,7 @@ static size_t box_nodes(double theta_i, int nmu, int nphi, int square_rule, stru
 	qsort(xb, (size_t)nx, sizeof *xb, cmp_dbl);
 	qsort(pb, (size_t)np, sizeof *pb, cmp_dbl);
 	size_t Q = 0;
-	double gx[256], gwx[256], gp[256], gwp[256];
+	const double *gx, *gwx, *gp, *gwp;
 	for (int i = 0; i + 1 < nx; i++) {
 		double a = xb[i], bx = xb[i + 1];
 		if (!(bx - a > 1e-12))
@@ -387,10 +408,9 @@ static size_t box_nodes(double theta_i, int nmu, int nphi, int square_rule, stru
 				fx = nmu;
 				fp = nphi / M_PI;
 			}
-			int mx = (int)fmin(256, fmax(2, ceil(fx * (bx - a) - 1e-9)));
-			int mp = (int)fmin(256, fmax(2, ceil(fp * (d - c) - 1e-9)) + alt);
-			if (ws_reserve(ws, Q + (size_t)mx * (size_t)mp) || rbf_gauss_legendre01(mx, gx, gwx) ||
-			    rbf_gauss_legendre01(mp, gp, gwp)) {
+			int mx = (int)fmin(256, fmax(ws->cell_min, ceil(fx * (bx - a) - 1e-9)));
+			int mp = (int)fmin(256, fmax(ws->cell_min, ceil(fp * (d - c) - 1e-9)) + alt);
+			if (ws_reserve(ws, Q + (size_t)mx * (size_t)mp) || ws_gl(ws, mx, &gx, &gwx) || ws_gl(ws, mp, &gp, &gwp)) {
 				free(xb);
 				return 0;
 			}
@@ -617,6 +637,7 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 	 * missed, the starting rule again with boxes there (and every doubling after it) */
 	ws->nbox = 0;
 	ws->keep_n = 0;
+	ws->cell_min = 2;
 	ws->nstep = scaled && ws->part != RECON_PART_LOBE && ws->step ? energy_steps(m, theta_i, square_rule, ws) : 0;
 	ws->store = ws->nested; /* the starting rule keeps its values for the first doubling (nested rules) */
 	if (ws->nested && !square_rule && ws->part != RECON_PART_LOBE)
@@ -640,6 +661,7 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 		nmu *= 2;
 		nphi *= 2;
 		ws->boxn = ws->boxn * 2 <= 256 ? ws->boxn * 2 : 256;
+		ws->cell_min = ws->cell_min * 2 <= 128 ? ws->cell_min * 2 : 128;
 		if (albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, ws->fine, err))
 			return -1;
 		size_t keep = 0;

@@ -221,6 +221,12 @@ struct albedo_ws {
 	 * the square rule) refined by boxn nodes per dimension at the starting rule */
 	double *bright, *cand;
 	int nbox, boxn;
+	/* cell_min: nodes per side of every cell of a composite rule (boxes, steps; quad.c box_nodes), 2 at the starting
+	 * rule and doubled with it, so that a doubling refines every cell, however narrow */
+	int cell_min;
+	/* gl[n]: Gauss-Legendre's n nodes on [0, 1] then their weights (2n values), computed once per size (box_nodes
+	 * asks for one per cell and rule) */
+	double *gl[257];
 	double box[RECON_BOX_MAX][4];
 	/* nested: the hemisphere rules are Clenshaw-Curtis in cosθo × the trapezoid rule in azimuth, each doubling
 	 * holding the rule before it, whose values (keep[q·L + l], rule keep_n × keep_m; 0: none) it reuses (the
