@@ -17,6 +17,7 @@ void select_opts_default(struct select_opts *o)
 	o->seed = 1;
 	o->nchan = 24;
 	o->nvalue = 0;
+	o->reference = 0;
 }
 
 void select_result_free(struct select_result *r)
@@ -81,6 +82,77 @@ double sel_excess(const struct sel *s, size_t j, double *per)
 	return E;
 }
 
+/*
+ * sel_excess(s, j, NULL) for every candidate j not picked, into ex[j] (ex[j] of a picked one is left as it was; acc:
+ * scratch [J]). The same arithmetic in the same order per candidate, so the same bits, but with the candidates in the
+ * inner loop: Z and X are read along their rows (sel_excess(j) reads one column of each, J apart) and the loop
+ * vectorises. This is what the greedy pick calls (test_recon_select test_excess_all: equal bits to sel_excess).
+ */
+void sel_excess_all(const struct sel *s, double *ex, double *acc)
+{
+	size_t J = s->J;
+	const unsigned char *done = s->picked;
+	for (size_t j = 0; j < J; j++)
+		ex[j] = 0;
+	if (s->t->kind == SELECT_DHR) {
+		const struct sel_prior_view pv = sel_prior_view(s);
+		for (size_t t = 0; t < s->nth; t++) {
+			const unsigned char *match = s->match + t * J;
+			int res_open = !s->res_done[t];
+			for (size_t j = 0; j < J; j++)
+				acc[j] = 0;
+			for (size_t c = 0; c < s->Lc; c++) {
+				size_t f = t * s->Lc + c;
+				const double *Z = s->Z + f * J, *X = s->X ? s->X + f * J : NULL;
+				const double *pj = pv.pj ? pv.pj + t * J : NULL;
+				double v0 = s->v[f], q0 = s->qmin[f], qf = s->q[f], sn2 = s->sn2[f], rest = s->rest[f],
+				       res2 = s->res2[f], qq0 = s->q0[f], e2 = pv.e2 ? pv.e2[t * pv.Lc + c] : 0,
+				       pt = pv.p ? pv.p[t] : 0;
+				for (size_t j = 0; j < J; j++) {
+					if (done[j])
+						continue;
+					double S = s->Pjj[j] + s->noise, v = v0, q = q0;
+					if (S > 0) {
+						double z = Z[j], a = z / S;
+						v -= z * z / S;
+						if (X)
+							q = fmin(q, qf + a * (a * (s->Yn[j] + s->noise) - 2 * X[j]));
+					}
+					double floor2 = sn2 * (qq0 > 0 ? fmin(fmax(q / qq0, 0), 1) : 1);
+					double pe2 = !pj ? 0 : !(pt > 0) ? e2 : e2 * fmin(pj[j] / pt, 1.0);
+					acc[j] += fmax(floor2, fmax(fmax(v, 0), pe2)) + rest - (match[j] && res_open ? res2 : 0);
+				}
+			}
+			for (size_t j = 0; j < J; j++) {
+				double V = s->kappa[t] * fmax(acc[j], 0) / (double)s->Lc;
+				ex[j] += fmax(V - s->thr2, 0);
+			}
+		}
+		return;
+	}
+	for (size_t j = 0; j < J; j++)
+		acc[j] = 0; /* RGB: the sum of the point variances */
+	for (size_t x = 0; x < s->F; x++) {
+		const double *Z = s->Z + x * J;
+		double v0 = s->v[x], w = s->xw[x];
+		for (size_t j = 0; j < J; j++) {
+			if (done[j])
+				continue;
+			double S = s->Pjj[j] + s->noise, v = v0;
+			if (S > 0) {
+				double z = Z[j];
+				v -= z * z / S;
+			}
+			v = fmax(v, 0);
+			acc[j] += v;
+			ex[j] += w * fmax(v - s->thr2, 0);
+		}
+	}
+	if (s->t->kind == SELECT_RGB)
+		for (size_t j = 0; j < J; j++)
+			ex[j] = fmax(acc[j] - s->thr2, 0);
+}
+
 /* The noise variance's terms after candidate p's measurement (the k-th pick; S its posterior variance + noise):
  * with a_f = cov(f, p)/S and b_j = P(p, j)/S (in s->zp, s->row), the functional's weights become h − a w_p and
  * a on the new sample, candidate j's w_j − b_j w_p and b_j; q, X and Yn follow (M_j = Σ N w_p w_j). */
@@ -117,21 +189,24 @@ void sel_update_noise(struct sel *s, size_t p, size_t k, double S)
 		s->gn[k * J + j] = s->row[j] / S;
 }
 
-/* Add candidate p's measurement to the posterior: the rank-one (Schur complement) update of every tracked
- * covariance, with the k-th pick's scaled row stored in U[k]. */
-void sel_update(struct sel *s, size_t p, size_t k)
+double sel_update_row(struct sel *s, size_t p, size_t k)
 {
-	double *row = s->row, *zp = s->zp;
+	double *row = s->row;
 	const struct recon_model *m = s->m;
-	size_t J = s->J, n = s->n, F = s->F;
+	size_t J = s->J, n = s->n;
 	/* P(x_p, x_j) = K(p, j) − k_pᵀ A⁻¹ k_j − Σ_i U_i(p) U_i(j) */
 	rbf_krow(m->kernel, m->shape, s->cu + 6 * p, J, s->soaJ, row);
 	cblas_dgemv(CblasRowMajor, CblasNoTrans, (int)J, (int)n, -1.0, s->Kjn, (int)n, s->G + p * n, 1, 1.0, row, 1);
 	for (size_t i = 0; i < k; i++)
 		cblas_daxpy((int)J, -s->U[i * J + p], s->U + i * J, 1, row, 1);
 	double S = s->Pjj[p] + s->noise;
-	if (!(S > 0))
-		S = 1e-300;
+	return S > 0 ? S : 1e-300;
+}
+
+void sel_update_target(struct sel *s, size_t p, size_t k, double S)
+{
+	double *row = s->row, *zp = s->zp;
+	size_t J = s->J, F = s->F;
 	for (size_t f = 0; f < F; f++)
 		zp[f] = s->Z[f * J + p];
 	if (s->X)
@@ -139,16 +214,30 @@ void sel_update(struct sel *s, size_t p, size_t k)
 	for (size_t f = 0; f < F; f++)
 		s->v[f] = fmax(s->v[f] - zp[f] * zp[f] / S, 0);
 	cblas_dger(CblasRowMajor, (int)F, (int)J, -1.0 / S, zp, 1, row, 1, s->Z, (int)J);
-	for (size_t j = 0; j < J; j++) {
-		s->Pjj[j] = fmax(s->Pjj[j] - row[j] * row[j] / S, 0);
-		s->U[k * J + j] = row[j] / sqrt(S);
-	}
 	if (s->t->kind == SELECT_DHR)
 		for (size_t t = 0; t < s->nth; t++)
 			if (s->match[t * J + p])
 				s->res_done[t] = 1;
 	sel_prior_pick(s, p);
+}
+
+void sel_update_cands(struct sel *s, size_t p, size_t k, double S)
+{
+	const double *row = s->row;
+	for (size_t j = 0; j < s->J; j++) {
+		s->Pjj[j] = fmax(s->Pjj[j] - row[j] * row[j] / S, 0);
+		s->U[k * s->J + j] = row[j] / sqrt(S);
+	}
 	s->picked[p] = 1;
+}
+
+/* Add candidate p's measurement to the posterior: the rank-one (Schur complement) update of every tracked
+ * covariance, with the k-th pick's scaled row stored in U[k]. */
+void sel_update(struct sel *s, size_t p, size_t k)
+{
+	double S = sel_update_row(s, p, k);
+	sel_update_target(s, p, k, S);
+	sel_update_cands(s, p, k, S);
 }
 
 /* A combined target's value: the larger of each part's value over its threshold. */
@@ -182,10 +271,11 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 	struct sel s[2];
 	struct sel_route route = { 0 };
 	size_t np = both ? 2 : 1;
+	double *ex = NULL, *acc = NULL;
 	int rc = -1;
 	memset(s, 0, sizeof s);
 	if (sel_init(&s[0], m, nc, ang, cost, &tp[0], &o, r, err) ||
-	    (both && sel_init(&s[1], m, nc, ang, cost, &tp[1], &o, &r2, err)))
+	    (both && sel_init_part(&s[1], o.reference ? NULL : &s[0], m, nc, ang, cost, &tp[1], &o, &r2, err)))
 		goto out;
 	if (both) {
 		r->part[0] = r->value;
@@ -212,19 +302,28 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
+	/* each part's criterion with candidate j measured, for every j at once (o.reference: one sel_excess per j) */
+	ex = malloc(2 * (J ? J : 1) * sizeof *ex);
+	acc = malloc((J ? J : 1) * sizeof *acc);
+	if (!ex || !acc) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
 	double E[2], E0[2], value = r->value, thr = both ? 1.0 : t->threshold;
 	for (size_t k = 0; k < np; k++)
 		E[k] = E0[k] = sel_excess(&s[k], SIZE_MAX, NULL);
 	while (r->npicks < s[0].batch && !(isfinite(thr) && value <= thr)) {
 		size_t best = SIZE_MAX, bat = 0;
 		double bscore = 0, bgain = 0, bcost = 0;
+		for (size_t k = 0; k < np && !o.reference; k++)
+			sel_excess_all(&s[k], ex + k * J, acc);
 		for (size_t j = 0; j < J; j++) {
 			if (s[0].picked[j])
 				continue;
 			double gain = 0;
 			bool any = false;
 			for (size_t k = 0; k < np; k++) {
-				double g = E[k] - sel_excess(&s[k], j, NULL);
+				double g = E[k] - (o.reference ? sel_excess(&s[k], j, NULL) : ex[k * J + j]);
 				any |= g > 1e-12 * E0[k];
 				gain += both ? (E0[k] > 0 ? g / E0[k] : 0) : g;
 			}
@@ -243,8 +342,15 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 		if (best == SIZE_MAX)
 			break; /* nothing left reduces the target */
 		struct select_pick *pk = &r->picks[r->npicks];
-		for (size_t k = 0; k < np; k++)
-			sel_update(&s[k], best, r->npicks);
+		if (o.reference) {
+			for (size_t k = 0; k < np; k++)
+				sel_update(&s[k], best, r->npicks);
+		} else { /* the parts share the candidates' posterior: its row once, each part's target, then it */
+			double S = sel_update_row(&s[0], best, r->npicks);
+			for (size_t k = 0; k < np; k++)
+				sel_update_target(&s[k], best, r->npicks, S);
+			sel_update_cands(&s[0], best, r->npicks, S);
+		}
 		r->npicks++;
 		pk->index = s[0].rep[best];
 		pk->gain = bgain;
@@ -267,6 +373,8 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 	}
 	rc = 0;
 out:
+	free(ex);
+	free(acc);
 	sel_route_free(&route);
 	if (rc)
 		select_result_free(r);

@@ -69,6 +69,8 @@ struct select_opts {
 	size_t nchan;     /* channels on which the GP part is tracked (default 24, evenly spread) */
 	size_t nvalue;    /* SELECT_DHR: the value (and the σ parts the selection holds) on this many channels, evenly
 			   * spread, the tracked ones among them, when the model has more (0, the default: on all) */
+	int reference;    /* 1: the reference path (each candidate's criterion by its own call, each part of a combined
+			   * target its own candidates' set-up): the same picks, slower; for the tests (default 0) */
 };
 void select_opts_default(struct select_opts *o);
 

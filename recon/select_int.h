@@ -18,6 +18,8 @@
  * never rests on the subset (white at ACQ_SEED=3: the 1100 nm edge channel, σ 0.068, weighs 1/64 in the subset
  * against 1/651: 0.0087 on 64 channels, 0.0040 on all) */
 #define SEL_VALUE_CHECK 4.0
+/* The DHR functionals' covariances with the candidates are formed by blocks of this many candidates. */
+#define SEL_JB 128
 /* Canonical points this close (unit-vector coordinates) are the same measurement. */
 #define SEL_SAME 1e-9
 /* The ln f target's grid: θ up to 80° (beyond, no bench reaches and the prior alone speaks). */
@@ -70,6 +72,8 @@ struct sel {
 	double *gn;      /* [batch*J] w_j's part on pick i */
 	double *mrow, *gp; /* scratch: [J], [n] */
 	struct sel_prior *prior; /* SELECT_DHR: the energy prior's σ_E after picks (select_prior.c), or NULL */
+	int shared;      /* A, alpha, cu, soaJ, rep, cost, Kjn, G, Pjj, U, picked, row are another state's (sel_init_part:
+			  * a combined target's second part; they do not depend on the target) */
 };
 
 /* The batch's route while it is chosen (select_route.c): the arms, then the picks in route order; the incidences
@@ -104,6 +108,11 @@ double sel_route_move(const struct select_route *r, const double *p, const doubl
  * covariances with the candidates, the current value into r. 0, or -1 with err (sel_free in both cases). */
 int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const double *ang, const double *cost,
 	     const struct select_target *t, const struct select_opts *o, struct select_result *r, struct acq_err *err);
+/* sel_init for a further part of a combined target: own's factor and candidates' arrays borrowed (own != NULL; same
+ * model and candidates), not set up again; its picks then go through sel_update_row/_target/_cands. */
+int sel_init_part(struct sel *s, const struct sel *own, const struct recon_model *m, size_t nc, const double *ang,
+		  const double *cost, const struct select_target *t, const struct select_opts *o, struct select_result *r,
+		  struct acq_err *err);
 /* Release what sel_init allocated (idempotent on a zeroed state). */
 void sel_free(struct sel *s);
 
@@ -126,14 +135,30 @@ size_t sel_rgb_nodes(double *ang, double *w);
  * measured (SIZE_MAX: as it is; 0 without a prior). sel_prior_pick: candidate p measured. */
 int sel_prior_init(struct sel *s, const double *th, const double *se, size_t ldse, struct acq_err *err);
 double sel_prior_e2(const struct sel *s, size_t t, size_t c, size_t j);
+/* The prior's arrays as sel_prior_e2 reads them (all NULL without a prior): σ_E² e2[t*Lc + c], p[t], and p with
+ * candidate j added pj[t*J + j]; for sel_excess_all's loop over the candidates. */
+struct sel_prior_view {
+	const double *e2, *p, *pj;
+	size_t Lc;
+};
+struct sel_prior_view sel_prior_view(const struct sel *s);
 void sel_prior_pick(struct sel *s, size_t p);
 void sel_prior_free(struct sel *s);
 
 /* The criterion's value with candidate j measured (SIZE_MAX: as it is), predicted per-incidence values into per
  * (may be NULL). */
 double sel_excess(const struct sel *s, size_t j, double *per);
-/* Candidate p's measurement, the k-th pick, added to the posterior (rank-one update). */
+/* sel_excess(s, j, NULL) for every candidate not picked into ex[J] (the same bits; acc: scratch [J]). */
+void sel_excess_all(const struct sel *s, double *ex, double *acc);
+/* Candidate p's measurement, the k-th pick, added to the posterior (rank-one update): sel_update_row, then
+ * sel_update_target, then sel_update_cands. */
 void sel_update(struct sel *s, size_t p, size_t k);
+/* Its parts. _row: the posterior covariance of p with every candidate into s->row; returns S, p's posterior
+ * variance + noise. _target: the target's covariances (one call per part of a combined target). _cands: the
+ * candidates' own posterior (once, on the state owning them). */
+double sel_update_row(struct sel *s, size_t p, size_t k);
+void sel_update_target(struct sel *s, size_t p, size_t k, double S);
+void sel_update_cands(struct sel *s, size_t p, size_t k, double S);
 /* The noise variance's terms after candidate p's measurement (the k-th pick; S its posterior variance + noise). */
 void sel_update_noise(struct sel *s, size_t p, size_t k, double S);
 

@@ -119,6 +119,14 @@ double sel_prior_e2(const struct sel *s, size_t t, size_t c, size_t j)
 	return e2 * fmin(pr->pj[t * pr->J + j] / pr->p[t], 1.0);
 }
 
+struct sel_prior_view sel_prior_view(const struct sel *s)
+{
+	const struct sel_prior *pr = s->prior;
+	if (!pr)
+		return (struct sel_prior_view){ 0 };
+	return (struct sel_prior_view){ .e2 = pr->e2, .p = pr->p, .pj = pr->pj, .Lc = pr->Lc };
+}
+
 void sel_prior_pick(struct sel *s, size_t p)
 {
 	struct sel_prior *pr = s->prior;

@@ -12,9 +12,10 @@
 #include "recon/select_int.h"
 
 /* Z[f, j] = cov(φ_f, g(x_j)) − ... for functionals given by coefficients C[q*F' + f] over points c6[Q] (the
- * amplitude folded in): Z = Cᵀ K_QJ − (A⁻¹ K_nQ C)ᵀ K_nJ, rows f0..f0+F'-1 of s->Z. */
+ * amplitude folded in): Z = Cᵀ K_QJ − (A⁻¹ K_nQ C)ᵀ K_nJ, rows f0..f0+F'-1 of s->Z (scratch soaQ[6Q],
+ * KJQ[SEL_JB*Q]). */
 static int sel_functionals(struct sel *s, size_t Q, const double *c6, const double *KQn, const double *C, size_t Fp,
-			   size_t f0, double *KQJ, struct acq_err *err)
+			   size_t f0, double *soaQ, double *KJQ, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
 	size_t n = s->n, J = s->J;
@@ -47,9 +48,15 @@ static int sel_functionals(struct sel *s, size_t Q, const double *c6, const doub
 		free(BN);
 	}
 	double *Z = s->Z + f0 * J;
-	rbf_kmatrix_soa(m->kernel, m->shape, Q, c6, J, s->soaJ, KQJ);
-	cblas_dgemm(CblasRowMajor, CblasTrans, CblasNoTrans, (int)Fp, (int)J, (int)Q, 1.0, C, (int)Fp, KQJ, (int)J, 0.0,
-		    Z, (int)J);
+	/* Cᵀ K_QJ by blocks of SEL_JB candidates (their kernel rows against the nodes, K symmetric to the bit): a block
+	 * stays in cache and the whole Q × J matrix (25 MB at 2000 candidates) is never written */
+	rbf_soa(Q, c6, soaQ);
+	for (size_t j0 = 0; j0 < J; j0 += SEL_JB) {
+		size_t jb = J - j0 < SEL_JB ? J - j0 : SEL_JB;
+		rbf_kmatrix_soa(m->kernel, m->shape, jb, s->cu + 6 * j0, Q, soaQ, KJQ);
+		cblas_dgemm(CblasRowMajor, CblasTrans, CblasTrans, (int)Fp, (int)jb, (int)Q, 1.0, C, (int)Fp, KJQ, (int)Q,
+			    0.0, Z + j0, (int)J);
+	}
 	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Fp, (int)J, (int)n, -1.0, B, (int)n, s->Kjn, (int)n,
 		    1.0, Z, (int)J);
 	free(B);
@@ -197,9 +204,9 @@ int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_resu
 	double *sk = malloc(NL * sizeof *sk), *se = malloc(NL * sizeof *se);
 	double *c6 = malloc(Q * 6 * sizeof *c6), *wt = malloc(Q * sizeof *wt), *KQn = malloc(Q * n * sizeof *KQn);
 	double *Y = malloc(Q * Lc * sizeof *Y), *C = malloc(Q * Lc * sizeof *C), *Wc = malloc(Lc * n * sizeof *Wc);
-	double *KQJ = malloc(Q * (J ? J : 1) * sizeof *KQJ);
+	double *KJQ = malloc(Q * SEL_JB * sizeof *KJQ), *soaQ = malloc(Q * 6 * sizeof *soaQ);
 	int rc = -1;
-	if (!dhr || !sig || !sn || !sm || !sres || !sk || !se || !c6 || !wt || !KQn || !Y || !C || !Wc || !KQJ) {
+	if (!dhr || !sig || !sn || !sm || !sres || !sk || !se || !c6 || !wt || !KQn || !Y || !C || !Wc || !KJQ || !soaQ) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
@@ -233,7 +240,7 @@ int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_resu
 	for (size_t t = 0; t < nth; t++) {
 		if (sel_dhr_coef(s, th[t], c6, wt, KQn, Y, Wc, C, err))
 			goto out;
-		if (J && sel_functionals(s, Q, c6, KQn, C, Lc, t * Lc, KQJ, err))
+		if (J && sel_functionals(s, Q, c6, KQn, C, Lc, t * Lc, soaQ, KJQ, err))
 			goto out;
 	}
 	rc = 0;
@@ -252,7 +259,8 @@ out:
 	free(Y);
 	free(C);
 	free(Wc);
-	free(KQJ);
+	free(KJQ);
+	free(soaQ);
 	return rc;
 }
 

@@ -11,23 +11,26 @@
 
 void sel_free(struct sel *s)
 {
-	free(s->A);
-	free(s->alpha);
+	if (!s->shared) { /* the candidates' arrays (a shared state's are its owner's) */
+		free(s->A);
+		free(s->alpha);
+		free(s->cu);
+		free(s->soaJ);
+		free(s->rep);
+		free(s->cost);
+		free(s->Kjn);
+		free(s->G);
+		free(s->Pjj);
+		free(s->U);
+		free(s->picked);
+		free(s->row);
+	}
 	free(s->chan);
 	free(s->vchan);
 	free(s->cpos);
-	free(s->cu);
-	free(s->soaJ);
-	free(s->rep);
-	free(s->cost);
-	free(s->Kjn);
-	free(s->G);
-	free(s->Pjj);
 	free(s->Z);
 	free(s->v);
 	sel_prior_free(s);
-	free(s->U);
-	free(s->picked);
 	free(s->match);
 	free(s->sn2);
 	free(s->rest);
@@ -36,7 +39,6 @@ void sel_free(struct sel *s)
 	free(s->res_done);
 	free(s->xang);
 	free(s->xw);
-	free(s->row);
 	free(s->zp);
 	free(s->Nk);
 	free(s->q);
@@ -165,8 +167,35 @@ static int sel_candidates(struct sel *s, size_t nc, const double *ang, const dou
 	return 0;
 }
 
+/* Borrow own's factor and candidates' arrays (sel_free leaves them to own). */
+static void sel_share(struct sel *s, const struct sel *own)
+{
+	s->shared = 1;
+	s->A = own->A;
+	s->alpha = own->alpha;
+	s->noise = own->noise;
+	s->J = own->J;
+	s->cu = own->cu;
+	s->soaJ = own->soaJ;
+	s->rep = own->rep;
+	s->cost = own->cost;
+	s->Kjn = own->Kjn;
+	s->G = own->G;
+	s->Pjj = own->Pjj;
+	s->U = own->U;
+	s->picked = own->picked;
+	s->row = own->row;
+}
+
 int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const double *ang, const double *cost,
 		    const struct select_target *t, const struct select_opts *o, struct select_result *r, struct acq_err *err)
+{
+	return sel_init_part(s, NULL, m, nc, ang, cost, t, o, r, err);
+}
+
+int sel_init_part(struct sel *s, const struct sel *own, const struct recon_model *m, size_t nc, const double *ang,
+		  const double *cost, const struct select_target *t, const struct select_opts *o, struct select_result *r,
+		  struct acq_err *err)
 {
 	*s = (struct sel){ .m = m, .t = t, .n = m->n, .L = m->nwl, .nth = t->kind == SELECT_DHR ? t->nth : 0 };
 	s->thr2 = isfinite(t->threshold) ? t->threshold * t->threshold : 0;
@@ -187,7 +216,9 @@ int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const double
 		s->cpos[c] = s->Lc > 1 ? c * (s->LV - 1) / (s->Lc - 1) : s->LV / 2;
 		s->chan[c] = s->vchan ? s->vchan[s->cpos[c]] : s->cpos[c];
 	}
-	if (sel_factor(s, err) || sel_candidates(s, nc, ang, cost, err))
+	if (own)
+		sel_share(s, own);
+	else if (sel_factor(s, err) || sel_candidates(s, nc, ang, cost, err))
 		return -1;
 	r->nunique = s->J;
 	size_t J = s->J, Jp = J ? J : 1;
@@ -215,14 +246,16 @@ int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const double
 				J, F);
 	s->Z = malloc(F * Jp * sizeof *s->Z);
 	s->v = calloc(F, sizeof *s->v);
-	s->U = malloc((s->batch ? s->batch : 1) * Jp * sizeof *s->U);
+	if (!own) {
+		s->U = malloc((s->batch ? s->batch : 1) * Jp * sizeof *s->U);
+		s->row = malloc(Jp * sizeof *s->row);
+	}
 	s->match = calloc((s->nth ? s->nth : 1) * Jp, 1);
 	s->sn2 = calloc(F, sizeof *s->sn2);
 	s->rest = calloc(F, sizeof *s->rest);
 	s->res2 = calloc(F, sizeof *s->res2);
 	s->kappa = calloc(SELECT_MAX_THETA, sizeof *s->kappa);
 	s->res_done = calloc(SELECT_MAX_THETA, 1);
-	s->row = malloc(Jp * sizeof *s->row);
 	s->zp = malloc(F * sizeof *s->zp);
 	if (!s->Z || !s->v || !s->U || !s->match || !s->sn2 || !s->rest || !s->res2 || !s->kappa || !s->res_done ||
 	    !s->row || !s->zp)

@@ -1090,6 +1090,137 @@ static void test_prior_after_pick(void **state)
 	csvio_samples_free(&s);
 }
 
+/* The fast path against the reference (select_opts.reference), on 300 candidates (three blocks of SEL_JB):
+ * sel_excess_all gives every candidate's criterion with the same bits as sel_excess (DHR with its prior and resolution
+ * terms and half its functionals on their noise floor; ln f; RGB), after 0, 1 and 2 picks; the DHR functionals' covariances Z formed by blocks of
+ * candidates equal Cᵀ K_QJ − Bᵀ K_nJ with every kernel value computed afresh (rbf_kernel); select_batch picks the
+ * same candidates with the same gains, charges and predictions either way (a combined target, whose parts share the
+ * candidates' set-up on the fast path, with a route; the RGB target). */
+#define FAST_NC 300
+static void test_fast_path(void **state)
+{
+	(void)state;
+	struct toy ty;
+	struct recon_model *m = toy_start(&ty, 0);
+	double *ang = malloc(FAST_NC * 4 * sizeof *ang), *cost = malloc(FAST_NC * sizeof *cost);
+	random_cands(FAST_NC, ang, cost);
+	const char *specs[] = { "dhr:8,60:le=1e-9", "lnf:le=1e-9", "rgb:le=1e-9" };
+	for (size_t sp = 0; sp < 3; sp++) {
+		struct fix f;
+		fix_make(&f, m, FAST_NC, ang, cost, specs[sp], 3);
+		struct sel *s = &f.s;
+		size_t J = s->J, n = s->n, Lc = s->Lc, bad = 0;
+		assert_true(J > 2 * SEL_JB);
+		if (sp == 0) { /* Z's first incidence (8°) from fresh kernel values */
+			struct dcoef dc;
+			dcoef_make(&dc, s, 8, &f.e);
+			size_t Q = (size_t)SEL_NMU * SEL_NPHI;
+			double *B = calloc(Lc * n, sizeof *B), *kq = malloc(Q * sizeof *kq), *kn = malloc(n * sizeof *kn),
+			       worst = 0;
+			for (size_t c = 0; c < Lc; c++)
+				for (size_t k = 0; k < n; k++)
+					for (size_t q = 0; q < Q; q++)
+						B[c * n + k] += dc.KQn[q * n + k] * dc.C[q * Lc + c];
+			assert_int_equal(LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)Lc, s->A,
+							(lapack_int)n, B, (lapack_int)n), 0);
+			for (size_t j = 0; j < J; j++) {
+				for (size_t q = 0; q < Q; q++)
+					kq[q] = kern(m, dc.c6 + 6 * q, s->cu + 6 * j);
+				for (size_t k = 0; k < n; k++)
+					kn[k] = kern(m, m->ctr + 6 * k, s->cu + 6 * j);
+				for (size_t c = 0; c < Lc; c++) {
+					double z = 0, scale = 0;
+					for (size_t q = 0; q < Q; q++) {
+						z += dc.C[q * Lc + c] * kq[q];
+						scale += fabs(dc.C[q * Lc + c] * kq[q]);
+					}
+					for (size_t k = 0; k < n; k++) {
+						z -= B[c * n + k] * kn[k];
+						scale += fabs(B[c * n + k] * kn[k]);
+					}
+					worst = fmax(worst, fabs(s->Z[c * J + j] - z) / scale);
+				}
+			}
+			printf("fast path: DHR Z by blocks of %d candidates vs fresh kernel values: largest |Δ| / scale %.3g\n",
+			       SEL_JB, worst);
+			assert_true(worst <= 1e-12);
+			free(B);
+			free(kq);
+			free(kn);
+			dcoef_free(&dc);
+		}
+		if (sp == 0) /* half the functionals on their noise floor (its predicted fall then counts) */
+			for (size_t x = 0; x < s->F; x += 2)
+				s->sn2[x] = 100 * (s->v[x] + 1e-30);
+		double *ex = malloc(J * sizeof *ex), *acc = malloc(J * sizeof *acc);
+		for (size_t k = 0; k < 3; k++) {
+			sel_excess_all(s, ex, acc);
+			double E = sel_excess(s, SIZE_MAX, NULL), bg = -1;
+			size_t best = 0;
+			for (size_t j = 0; j < J; j++) {
+				if (s->picked[j])
+					continue;
+				double r = sel_excess(s, j, NULL);
+				bad += memcmp(&r, &ex[j], sizeof r) != 0;
+				if (E - r > bg) {
+					bg = E - r;
+					best = j;
+				}
+			}
+			if (k < 2)
+				sel_update(s, best, k);
+		}
+		printf("fast path: %s: %zu of 3 x %zu criteria differ from sel_excess in any bit\n", specs[sp], bad, J);
+		assert_int_equal(bad, 0);
+		free(ex);
+		free(acc);
+		fix_free(&f);
+	}
+	/* select_batch: fast and reference paths */
+	double *pos = malloc(FAST_NC * 3 * sizeof *pos), *base = malloc(FAST_NC * sizeof *base),
+	       *open = malloc(FAST_NC * sizeof *open);
+	for (size_t j = 0; j < FAST_NC; j++) {
+		pos[3 * j] = ang[4 * j] * 180 / M_PI;
+		pos[3 * j + 1] = ang[4 * j + 2] * 180 / M_PI;
+		pos[3 * j + 2] = ang[4 * j + 3] * 180 / M_PI;
+		base[j] = 0.2 * cost[j];
+		open[j] = 1;
+	}
+	struct select_route rt = { .pos = pos, .base = base, .open = open, .from = { 0, 40, 100 },
+				   .speed = { 10, 20, 30 }, .accel = { 20, 60, 90 }, .settle = { 0.3, 0.2, 0.2 },
+				   .move_s = 0.075 };
+	const char *bspecs[] = { "dhr:8,60:le=1e-9+lnf:le=1e-9", "rgb:le=1e-9" };
+	for (size_t sp = 0; sp < 2; sp++) {
+		struct fix f;
+		fix_spec(&f, bspecs[sp]);
+		f.o.batch = 6;
+		f.o.route = sp == 0 ? &rt : NULL;
+		struct select_result rf, rr;
+		assert_int_equal(select_batch(m, FAST_NC, ang, cost, &f.t, &f.o, &rf, &f.e), 0);
+		f.o.reference = 1;
+		assert_int_equal(select_batch(m, FAST_NC, ang, cost, &f.t, &f.o, &rr, &f.e), 0);
+		printf("fast path: %s: %zu picks (reference %zu), first %zu, last %zu\n", bspecs[sp], rf.npicks, rr.npicks,
+		       rf.picks[0].index, rf.picks[rf.npicks - 1].index);
+		assert_int_equal(rf.npicks, 6);
+		assert_int_equal(rf.npicks, rr.npicks);
+		assert_true(rf.value == rr.value && rf.nunique == rr.nunique);
+		for (size_t k = 0; k < rf.npicks; k++) {
+			const struct select_pick *a = &rf.picks[k], *b = &rr.picks[k];
+			assert_int_equal(a->index, b->index);
+			assert_true(a->gain == b->gain && a->cost == b->cost && a->predicted == b->predicted);
+			assert_memory_equal(a->predicted_per, b->predicted_per, sizeof a->predicted_per);
+		}
+		select_result_free(&rf);
+		select_result_free(&rr);
+	}
+	free(pos);
+	free(base);
+	free(open);
+	free(ang);
+	free(cost);
+	recon_model_free(m);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1100,7 +1231,7 @@ int main(void)
 		cmocka_unit_test(test_target_parse),     cmocka_unit_test(test_noise_fall),
 		cmocka_unit_test(test_combined_target), cmocka_unit_test(test_route_increment),
 		cmocka_unit_test(test_lnf_measure),
-		cmocka_unit_test(test_prior_after_pick),
+		cmocka_unit_test(test_prior_after_pick), cmocka_unit_test(test_fast_path),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
