@@ -17,100 +17,159 @@ static double pcost(const double *C, size_t n, size_t a, size_t b)
 }
 
 #define E(i, j) ((i) == SIZE_MAX ? s[(j)] : pcost(C, n, (i), (j)))
-/* 2-opt and Or-opt until no move improves (or 200 passes). */
+
+/* p[x..y] reversed in place. */
+static void reverse_run(size_t *p, size_t x, size_t y)
+{
+	for (; x < y; x++, y--) {
+		size_t t = p[x];
+		p[x] = p[y];
+		p[y] = t;
+	}
+}
+
+/* One 2-opt pass: reverse p[i..j] wherever that shortens the path; the edge into p[i] comes from p[i-1] (or
+ * the start), the edge out of p[j] goes to p[j+1] (or nothing at the end of the open path). Whether any did. */
+static bool two_opt_pass(const double *C, size_t n, const double *s, size_t *p)
+{
+	bool improved = false;
+	for (size_t i = 0; i + 1 < n; i++) {
+		size_t a = i ? p[i - 1] : SIZE_MAX;
+		for (size_t j = i + 1; j < n; j++) {
+			double before = E(a, p[i]) + (j + 1 < n ? pcost(C, n, p[j], p[j + 1]) : 0);
+			double after = E(a, p[j]) + (j + 1 < n ? pcost(C, n, p[i], p[j + 1]) : 0);
+			if (after < before - 1e-9) {
+				reverse_run(p, i, j);
+				improved = true;
+				a = i ? p[i - 1] : SIZE_MAX;
+			}
+		}
+	}
+	return improved;
+}
+
+/* Or-opt's view of the segment p[i..i+L) taken out of the path p: the path without it ("the rest", nr = n − L
+ * points, REST(k) its k-th) and what taking it out saves. */
+struct or_seg {
+	size_t i, L, f, l, nr;  /* place, length, first and last point, length of the rest */
+	double removed;         /* the path's length saved by taking the segment out (its edges in and out, less the
+				 * edge that closes the gap) */
+};
+
+#define REST(g, k) (p[(k) < (g)->i ? (k) : (k) + (g)->L])
+
+static struct or_seg or_seg_at(const double *C, size_t n, const double *s, const size_t *p, size_t i, size_t L)
+{
+	struct or_seg g = { .i = i, .L = L, .f = p[i], .l = p[i + L - 1], .nr = n - L };
+	size_t a = i ? p[i - 1] : SIZE_MAX;
+	bool has_next = i + L < n;
+	size_t nx = has_next ? p[i + L] : 0;
+	g.removed = E(a, g.f) + (has_next ? pcost(C, n, g.l, nx) : 0) - (has_next ? E(a, nx) : 0);
+	return g;
+}
+
+/* The insertion places to try for segment g (places k in the rest: before REST(k); nr is the end): both ends
+ * of the path, and each side of the K nearest neighbours of the segment's ends. Their count (≤ 4·OR_K + 2). */
+static size_t or_candidates(const struct or_seg *g, const size_t *pos, const size_t *nbr, size_t kn, size_t *cand)
+{
+	size_t ncand = 0;
+	cand[ncand++] = 0;
+	cand[ncand++] = g->nr;
+	for (int e = 0; e < 2; e++) {
+		const size_t *nb = &nbr[(e ? g->l : g->f) * kn];
+		for (size_t q = 0; q < kn; q++) {
+			size_t pj = pos[nb[q]];
+			if (pj >= g->i && pj < g->i + g->L)
+				continue;
+			size_t r = pj < g->i ? pj : pj - g->L;
+			cand[ncand++] = r;
+			cand[ncand++] = r + 1;
+		}
+	}
+	return ncand;
+}
+
+/* The best of the candidate places for segment g, either orientation: whether one gains more than 1e-9, and
+ * then its place *bk and orientation *brev. */
+static bool or_best_place(const double *C, size_t n, const double *s, const size_t *p, const struct or_seg *g,
+			  const size_t *cand, size_t ncand, size_t *bk, bool *brev)
+{
+	double bestg = 1e-9;
+	*bk = SIZE_MAX;
+	*brev = false;
+	for (size_t ci = 0; ci < ncand; ci++) {
+		size_t k = cand[ci];
+		if (k == g->i || k > g->nr)
+			continue; /* the same place */
+		size_t pa = k ? REST(g, k - 1) : SIZE_MAX;
+		for (int rev = 0; rev < 2; rev++) {
+			size_t s1 = rev ? g->l : g->f, s2 = rev ? g->f : g->l;
+			double add = E(pa, s1) + (k < g->nr ? pcost(C, n, s2, REST(g, k)) : 0) -
+				     (k < g->nr ? E(pa, REST(g, k)) : 0);
+			double gain = g->removed - add;
+			if (gain > bestg) {
+				bestg = gain;
+				*bk = k;
+				*brev = rev;
+			}
+		}
+	}
+	return *bk != SIZE_MAX;
+}
+#undef REST
+
+/* Move segment g of p to place bk of the rest (reversed if brev); pos kept the inverse of p. tmp: n entries. */
+static void or_move(size_t n, size_t *p, size_t *tmp, size_t *pos, const struct or_seg *g, size_t bk, bool brev)
+{
+	size_t seg[3];
+	for (size_t x = 0; x < g->L; x++)
+		seg[x] = p[g->i + (brev ? g->L - 1 - x : x)];
+	size_t w = 0;
+	for (size_t x = 0; x < n; x++)
+		if (x < g->i || x >= g->i + g->L)
+			tmp[w++] = p[x];
+	w = 0;
+	for (size_t x = 0; x < bk; x++)
+		p[w++] = tmp[x];
+	for (size_t x = 0; x < g->L; x++)
+		p[w++] = seg[x];
+	for (size_t x = bk; x < g->nr; x++)
+		p[w++] = tmp[x];
+	for (size_t x = 0; x < n; x++)
+		pos[p[x]] = x;
+}
+
+/* One Or-opt pass: move each p[i..i+L) (L = 1..3) elsewhere, possibly reversed, where that shortens the path.
+ * Insertion places are tried next to the K nearest neighbours of the segment's ends (and at both ends of the
+ * path): O(n·K) per pass. Whether any moved. */
+static bool or_opt_pass(const double *C, size_t n, const double *s, size_t *p, size_t *tmp, size_t *pos,
+			const size_t *nbr, size_t kn)
+{
+	bool improved = false;
+	for (size_t x = 0; x < n; x++)
+		pos[p[x]] = x;
+	for (size_t L = 1; L <= 3 && L < n; L++) {
+		for (size_t i = 0; i + L <= n; i++) {
+			struct or_seg g = or_seg_at(C, n, s, p, i, L);
+			size_t cand[4 * OR_K + 2], ncand = or_candidates(&g, pos, nbr, kn, cand), bk;
+			bool brev;
+			if (!or_best_place(C, n, s, p, &g, cand, ncand, &bk, &brev))
+				continue;
+			or_move(n, p, tmp, pos, &g, bk, brev);
+			improved = true;
+		}
+	}
+	return improved;
+}
+
+/* 2-opt and Or-opt passes until neither improves (or 200 rounds). */
 static void local_search(const double *C, size_t n, const double *s, size_t *p, size_t *tmp, size_t *pos,
 			 const size_t *nbr, size_t kn)
 {
 	bool improved = true;
 	for (int pass = 0; improved && pass < 200; pass++) {
-		improved = false;
-		/* 2-opt: reverse p[i..j]; the edge into p[i] comes from p[i-1] (or the start), the edge out of
-		 * p[j] goes to p[j+1] (or nothing at the end of the open path). */
-		for (size_t i = 0; i + 1 < n; i++) {
-			size_t a = i ? p[i - 1] : SIZE_MAX;
-			for (size_t j = i + 1; j < n; j++) {
-				double before = E(a, p[i]) + (j + 1 < n ? pcost(C, n, p[j], p[j + 1]) : 0);
-				double after = E(a, p[j]) + (j + 1 < n ? pcost(C, n, p[i], p[j + 1]) : 0);
-				if (after < before - 1e-9) {
-					for (size_t x = i, y = j; x < y; x++, y--) {
-						size_t t = p[x];
-						p[x] = p[y];
-						p[y] = t;
-					}
-					improved = true;
-					a = i ? p[i - 1] : SIZE_MAX;
-				}
-			}
-		}
-		/* Or-opt: move p[i..i+L) elsewhere, possibly reversed. Insertion places are tried next to the
-		 * K nearest neighbours of the segment's ends (and at both ends of the path): O(n·K) per pass. */
-		for (size_t x = 0; x < n; x++)
-			pos[p[x]] = x;
-		for (size_t L = 1; L <= 3 && L < n; L++) {
-			for (size_t i = 0; i + L <= n; i++) {
-				size_t a = i ? p[i - 1] : SIZE_MAX, f = p[i], l = p[i + L - 1];
-				bool has_next = i + L < n;
-				size_t nx = has_next ? p[i + L] : 0;
-				size_t nr = n - L;
-				double removed = E(a, f) + (has_next ? pcost(C, n, l, nx) : 0) -
-						 (has_next ? E(a, nx) : 0);
-#define REST(k) (p[(k) < i ? (k) : (k) + L])
-				size_t cand[4 * OR_K + 2], ncand = 0;
-				cand[ncand++] = 0;
-				cand[ncand++] = nr;
-				for (int e = 0; e < 2; e++) {
-					const size_t *nb = &nbr[(e ? l : f) * kn];
-					for (size_t q = 0; q < kn; q++) {
-						size_t pj = pos[nb[q]];
-						if (pj >= i && pj < i + L)
-							continue;
-						size_t r = pj < i ? pj : pj - L;
-						cand[ncand++] = r;
-						cand[ncand++] = r + 1;
-					}
-				}
-				double bestg = 1e-9;
-				size_t bk = SIZE_MAX;
-				bool brev = false;
-				for (size_t ci = 0; ci < ncand; ci++) {
-					size_t k = cand[ci];
-					if (k == i || k > nr)
-						continue; /* the same place */
-					size_t pa = k ? REST(k - 1) : SIZE_MAX;
-					for (int rev = 0; rev < 2; rev++) {
-						size_t s1 = rev ? l : f, s2 = rev ? f : l;
-						double add = E(pa, s1) + (k < nr ? pcost(C, n, s2, REST(k)) : 0) -
-							     (k < nr ? E(pa, REST(k)) : 0);
-						double gain = removed - add;
-						if (gain > bestg) {
-							bestg = gain;
-							bk = k;
-							brev = rev;
-						}
-					}
-				}
-#undef REST
-				if (bk == SIZE_MAX)
-					continue;
-				size_t seg[3];
-				for (size_t x = 0; x < L; x++)
-					seg[x] = p[i + (brev ? L - 1 - x : x)];
-				size_t w = 0;
-				for (size_t x = 0; x < n; x++)
-					if (x < i || x >= i + L)
-						tmp[w++] = p[x];
-				w = 0;
-				for (size_t x = 0; x < bk; x++)
-					p[w++] = tmp[x];
-				for (size_t x = 0; x < L; x++)
-					p[w++] = seg[x];
-				for (size_t x = bk; x < nr; x++)
-					p[w++] = tmp[x];
-				for (size_t x = 0; x < n; x++)
-					pos[p[x]] = x;
-				improved = true;
-			}
-		}
+		improved = two_opt_pass(C, n, s, p);
+		improved |= or_opt_pass(C, n, s, p, tmp, pos, nbr, kn);
 	}
 }
 
@@ -123,8 +182,6 @@ static double open_len(const double *C, size_t n, const double *s, const size_t 
 }
 #undef E
 
-/* Nearest neighbour from the start row, then 2-opt and Or-opt (segments of 1–3, either orientation) until
- * no move improves. C is symmetric; the start row s is not part of it. */
 /* The greedy start: from the cheapest first point (s), always the nearest unvisited one, into p (the identity
  * order when out of memory). */
 static void nearest_start(const double *C, size_t n, const double *s, size_t *p)
@@ -217,6 +274,8 @@ static void kick_search(const double *C, size_t n, const double *s, size_t *p, s
 	}
 }
 
+/* Nearest neighbour from the start row, then 2-opt and Or-opt (segments of 1–3, either orientation) until
+ * no move improves, then (ils) the kicks. C is symmetric; the start row s is not part of it. */
 void plan_order_group(const double *C, size_t n, const double *s, size_t *p, bool ils)
 {
 	if (n == 0)
