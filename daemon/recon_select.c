@@ -91,27 +91,32 @@ static const char *tail(const char *s)
 
 static void next(struct rsel *r);
 
-/* The inputs child's request (job_fork_msg): this, then the n_done positions measured or planned so far. */
+/* The inputs child's request (job_fork_msg): this, then the n_done positions measured or planned so far, then the
+ * plan's text (text_len bytes; the payload's NUL after it). */
 struct inputs_msg {
 	int64_t sweep_id;
 	char database[4096], samples[4200], cand[4200];
 	struct bench_geom g;
 	struct plan_timing timing;
 	struct plan_pos from;
-	uint64_t n_done;
+	uint64_t n_done, text_len;
 };
 
 /* In a child of the job helper (a process that never held the daemon's database: SQLite's state of the daemon's
  * connection is not inherited, which a read-only connection opened in a fork of the daemon trips over: "locking
- * protocol"), through a read-only connection: the reachable candidates from the arms' position for the sweep's
- * stored plan written to m.cand, the sweep's samples so far exported to m.samples; prints the candidates' count. */
+ * protocol"): the reachable candidates from the arms' position for the plan's text written to m.cand, the sweep's
+ * samples so far exported to m.samples through a read-only connection; prints the candidates' count. */
 static int inputs_child(const char *payload, size_t len, int fd)
 {
 	struct inputs_msg m;
 	if (len < sizeof m)
 		return 5;
 	memcpy(&m, payload, sizeof m);
-	if (m.n_done != (len - sizeof m) / sizeof(struct plan_pos) || len != sizeof m + m.n_done * sizeof(struct plan_pos))
+	if (m.n_done > (len - sizeof m) / sizeof(struct plan_pos) ||
+	    m.text_len != len - sizeof m - m.n_done * sizeof(struct plan_pos))
+		return 5;
+	const char *text = payload + sizeof m + m.n_done * sizeof(struct plan_pos); /* NUL-terminated (job_msg_fn) */
+	if (strlen(text) != m.text_len)
 		return 5;
 	struct plan_pos *done = malloc(m.n_done * sizeof *done + 1);
 	if (!done)
@@ -119,18 +124,10 @@ static int inputs_child(const char *payload, size_t len, int fd)
 	memcpy(done, payload + sizeof m, m.n_done * sizeof *done);
 	struct acq_err err = { 0 };
 	struct store *st = NULL;
-	json_t *js = NULL;
 	struct plan_spec *spec = NULL;
 	struct plan_cand *c = NULL;
 	size_t n = 0;
 	int rows = 0, rc = 1;
-	const char *text;
-	if (store_open_reader(m.database, &st, &err) || !(js = store_sweep_show(st, m.sweep_id, false, &err)))
-		goto out;
-	if (!(text = json_string_value(json_object_get(js, "plan_text")))) {
-		acq_errf(&err, ACQ_E_NOTFOUND, "sweep %lld has no plan text", (long long)m.sweep_id);
-		goto out;
-	}
 	if (plan_load_string("plan", text, &spec, &err) || !spec->adaptive) {
 		if (spec && !spec->adaptive)
 			acq_errf(&err, ACQ_E_INVAL, "sweep %lld's plan is not adaptive", (long long)m.sweep_id);
@@ -138,6 +135,8 @@ static int inputs_child(const char *payload, size_t len, int fd)
 	}
 	if (plan_adaptive_candidates(spec, &m.g, &m.timing, &m.from, done, (size_t)m.n_done, &c, &n, &err) ||
 	    rsel_write_candidates(m.cand, &m.g, c, n, &err))
+		goto out;
+	if (store_open_reader(m.database, &st, &err))
 		goto out;
 	if (store_export_csv_file(st, m.sweep_id, m.samples, &rows, &err)) {
 		char why[sizeof err.msg];
@@ -151,7 +150,6 @@ out:
 		dprintf(fd, "%s\n", err.msg);
 	free(c);
 	plan_spec_free(spec);
-	json_decref(js);
 	store_close(st);
 	free(done);
 	return rc;
@@ -294,7 +292,7 @@ int rsel_start(struct rsel *r, const struct rsel_req *q, rsel_done_fn done, void
 	const struct conf *c = r->env->conf;
 	if (rsel_busy(r))
 		return acq_errf(err, ACQ_E_STATE, "a batch is being chosen already");
-	if (!q->spec || !q->spec->adaptive)
+	if (!q->spec || !q->spec->adaptive || !q->plan_text)
 		return acq_errf(err, ACQ_E_INVAL, "not an adaptive plan");
 	if (recon_find_program(c->recon.program, r->prog, sizeof r->prog))
 		return acq_errf(err, ACQ_E_UNSUPPORTED, "reconstruction program '%s' not found", c->recon.program);
@@ -315,17 +313,18 @@ int rsel_start(struct rsel *r, const struct rsel_req *q, rsel_done_fn done, void
 	r->spec = q->spec;
 	r->stage = RS_INPUTS;
 	r->t0 = loop_now(r->env->loop);
-	size_t len = sizeof(struct inputs_msg) + q->n_done * sizeof *q->done;
+	size_t text_len = strlen(q->plan_text), len = sizeof(struct inputs_msg) + q->n_done * sizeof *q->done + text_len;
 	struct inputs_msg *m = calloc(1, len);
 	if (!m)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	*m = (struct inputs_msg){ .sweep_id = q->sweep_id, .g = c->bench, .timing = q->timing, .from = q->from,
-				  .n_done = q->n_done };
+				  .n_done = q->n_done, .text_len = text_len };
 	snprintf(m->database, sizeof m->database, "%s", c->d.database);
 	snprintf(m->samples, sizeof m->samples, "%s", r->samples);
 	snprintf(m->cand, sizeof m->cand, "%s", r->cand);
 	if (q->n_done)
 		memcpy(m + 1, q->done, q->n_done * sizeof *q->done);
+	memcpy((char *)(m + 1) + q->n_done * sizeof *q->done, q->plan_text, text_len);
 	int rc = job_fork_msg(&rsel_inputs_kind, m, len, 0, JOB_FORK_OUTPUT_MAX, 60 * rate_of(r), stage_done, r, &r->job,
 			      err);
 	free(m);

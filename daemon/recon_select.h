@@ -1,6 +1,6 @@
 /* recon_select: the decision between two batches of an adaptive sweep, every slow step in a child process (the
  * loop never waits): in a child of the job helper, the sweep's calibrated samples so far exported as CSV (through a
- * read-only connection of its own) and the reachable candidates for its stored plan (planner: blind zones, collisions, limits, safe paths; cost_s
+ * read-only connection of its own) and the reachable candidates for its plan (the text handed to it; planner: blind zones, collisions, limits, safe paths; cost_s
  * from plan_time.c); then `brdf-recon fit` (warm-started from the previous batch's model with --warm when this brdf-recon has it), then `brdf-recon select
  * MODEL --candidates CAND.csv --route ROUTE --target SPEC --batch N -o OUT.json` (each pick charged its increment to
  * the batch's route, plan_adaptive_route_spec) (the contract in /work/notes/OWNERS.md). */
@@ -31,6 +31,7 @@ struct rsel_req {
 	int64_t sweep_id;
 	int batch;                        /* the batch being chosen (1: the first after the seed) */
 	const struct plan_spec *spec;     /* adaptive */
+	const char *plan_text;            /* the text spec was parsed from (the candidates child parses it) */
 	struct plan_pos from;             /* where the arms are */
 	const struct plan_pos *done;      /* the positions measured or planned so far (no candidate repeats them) */
 	size_t n_done;

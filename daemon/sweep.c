@@ -581,7 +581,7 @@ static int start_planned(struct sweep *sw, const char *plan_text, const char *na
 	free(pts);
 	if (rc || record_devices(sw, sw->id, err))
 		goto fail;
-	if (sw->spec->adaptive && adapt_begin(sw->adapt, sw->id, sw->spec, sw->plan, err))
+	if (sw->spec->adaptive && adapt_begin(sw->adapt, sw->id, sw->spec, plan_text, sw->plan, err))
 		goto fail;
 	struct ex_sink sk = sink_of(sw);
 	sw->ex = ex_new(&cfg, devices_ex_ops(), sw->env.devices, &sk, sw->env.store, sw->id, nw.spectrometer_id, &sw->env.conf->bench,
@@ -658,7 +658,8 @@ static int recover_planned(struct sweep *sw, int64_t id, json_t *js, bool hold, 
 	if (plan_cfg(sw, &cfg, err))
 		goto out;
 	char stopped[1024] = "";
-	if (sw->spec->adaptive && adapt_resume(sw->adapt, id, sw->spec, sw->plan, stopped, sizeof stopped, err))
+	if (sw->spec->adaptive && adapt_resume(sw->adapt, id, sw->spec, json_string_value(json_object_get(js, "plan_text")),
+					      sw->plan, stopped, sizeof stopped, err))
 		goto out;
 	if ((json_int_t)sw->plan->n_steps != total) {
 		acq_errf(err, ACQ_E_STATE, "sweep %lld: its plan now gives %zu points, %lld were stored (bench changed?)",

@@ -25,6 +25,7 @@ struct adapt {
 	struct rsel *rs;
 	int64_t id;                 /* 0: no adaptive sweep loaded */
 	const struct plan_spec *spec;
+	char *plan_text;            /* the text spec was parsed from (the candidates child parses it again) */
 	struct plan_result *plan;   /* the sweep's: seed, then the batches appended */
 	int batch;                  /* the last batch decided (0: only the seed) */
 	double spent_s;             /* predicted bench seconds of the seed and the batches decided */
@@ -63,6 +64,7 @@ void adapt_free(struct adapt *a)
 	if (a->ahead_ready)
 		json_decref(a->ahead.out);
 	free(a->done);
+	free(a->plan_text);
 	free(a);
 }
 
@@ -80,6 +82,8 @@ void adapt_end(struct adapt *a)
 		json_decref(a->ahead.out);
 	a->ahead_ready = false;
 	a->spec = NULL;
+	free(a->plan_text);
+	a->plan_text = NULL;
 	a->plan = NULL;
 	a->batch = 0;
 	a->spent_s = a->waited_s = 0;
@@ -261,7 +265,7 @@ static int start_decision(struct adapt *a, bool ahead)
 		d[i] = a->plan->steps[i].pos;
 	a->arms = ahead && a->plan->n_steps ? a->plan->steps[a->plan->n_steps - 1].pos : arms_now(a);
 	struct rsel_req q = {
-		.sweep_id = a->id, .batch = a->batch + 1, .spec = a->spec, .from = a->arms, .done = d,
+		.sweep_id = a->id, .batch = a->batch + 1, .spec = a->spec, .plan_text = a->plan_text, .from = a->arms, .done = d,
 		.n_done = a->plan->n_steps, .prev_model = a->model, .batch_size = a->spec->adaptive->batch,
 	};
 	a->ops.timing(a->ops.ctx, &q.timing);
@@ -491,10 +495,22 @@ out:
 	free(keep);
 }
 
-int adapt_begin(struct adapt *a, int64_t id, const struct plan_spec *spec, struct plan_result *plan,
-		struct acq_err *err)
+/* Keep a copy of the plan's text for the decisions' candidates children. 0 or -1 with err. */
+static int keep_text(struct adapt *a, const char *plan_text, struct acq_err *err)
+{
+	if (!plan_text)
+		return acq_errf(err, ACQ_E_INVAL, "an adaptive sweep without its plan text");
+	if (!(a->plan_text = strdup(plan_text)))
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	return 0;
+}
+
+int adapt_begin(struct adapt *a, int64_t id, const struct plan_spec *spec, const char *plan_text,
+		struct plan_result *plan, struct acq_err *err)
 {
 	adapt_end(a);
+	if (keep_text(a, plan_text, err))
+		return -1;
 	char tspec[256];
 	plan_adaptive_target_spec(spec->adaptive, tspec, sizeof tspec);
 	struct store_batch b = {
@@ -511,11 +527,13 @@ int adapt_begin(struct adapt *a, int64_t id, const struct plan_spec *spec, struc
 	return 0;
 }
 
-int adapt_resume(struct adapt *a, int64_t id, const struct plan_spec *spec, struct plan_result *plan, char *stopr,
-		 size_t stop_len, struct acq_err *err)
+int adapt_resume(struct adapt *a, int64_t id, const struct plan_spec *spec, const char *plan_text,
+		 struct plan_result *plan, char *stopr, size_t stop_len, struct acq_err *err)
 {
 	adapt_end(a);
 	stopr[0] = '\0';
+	if (keep_text(a, plan_text, err))
+		return -1;
 	json_t *rows = store_adaptive_show(a->env->store, id, err);
 	if (!rows)
 		return -1;

@@ -32,13 +32,15 @@ struct adapt *adapt_new(const struct sweep_env *env, const struct adapt_ops *ops
 /* Free (a decision under way is abandoned: its child is job_finish()'s). NULL is fine. */
 void adapt_free(struct adapt *a);
 /* A new adaptive sweep id whose plan (the sweep's, extended in place by later batches; borrowed with spec until
- * adapt_end) holds the seed; the seed's decision row is recorded. 0 or -1. */
-int adapt_begin(struct adapt *a, int64_t id, const struct plan_spec *spec, struct plan_result *plan,
-		struct acq_err *err);
-/* Resume sweep id: plan holds the seed as planned again from the plan text; the stored batches are appended in
- * their stored order and their figures reloaded. *stop: the stored stop reason ("" when it goes on). 0 or -1. */
-int adapt_resume(struct adapt *a, int64_t id, const struct plan_spec *spec, struct plan_result *plan, char *stop,
-		 size_t stop_len, struct acq_err *err);
+ * adapt_end) holds the seed; spec was parsed from plan_text (copied: each decision's candidates child parses it);
+ * the seed's decision row is recorded. 0 or -1. */
+int adapt_begin(struct adapt *a, int64_t id, const struct plan_spec *spec, const char *plan_text,
+		struct plan_result *plan, struct acq_err *err);
+/* Resume sweep id: plan holds the seed as planned again from plan_text (spec, parsed from it); the stored batches
+ * are appended in their stored order and their figures reloaded. *stop: the stored stop reason ("" when it goes
+ * on). 0 or -1. */
+int adapt_resume(struct adapt *a, int64_t id, const struct plan_spec *spec, const char *plan_text,
+		 struct plan_result *plan, char *stop, size_t stop_len, struct acq_err *err);
 /* The executor has measured every planned point and waits (now: loop seconds): choose the next batch or stop. */
 void adapt_waiting(struct adapt *a, double now);
 /* The sweep is released: forget it (a decision under way is abandoned). */
