@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "recon/bigbuf.h"
 #include "recon/recon_int.h"
 #include "recon/rng.h"
 
@@ -430,12 +431,13 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	if ((double)nth * (double)Q * (double)n * 8.0 > 2e9)
 		return acq_errf(err, ACQ_E_RANGE, "dhr: %zu incidences × %zu centres need too much memory", nth, n);
 	int rc = -1;
-	double *Kq = malloc(nth * Q * n * sizeof *Kq), *wt = malloc(Q * sizeof *wt);
+	double *Kq = parts->kq ? NULL : recon_big_alloc(nth * Q * n * sizeof *Kq), *wt = malloc(Q * sizeof *wt);
+	const double *Kr = parts->kq ? parts->kq : Kq; /* the rows, given or built below */
 	double *c6 = malloc(nth * Q * 6 * sizeof *c6), *scale = malloc(nth * Q * L * sizeof *scale);
 	double *A = malloc(n * n * sizeof *A), *Wd = malloc(n * L * sizeof *Wd), *Y = malloc(Q * L * sizeof *Y);
 	double *mean = calloc(nth * L, sizeof *mean), *m2 = calloc(nth * L, sizeof *m2);
 	double *mud = malloc(L * sizeof *mud);
-	double *C = malloc(Q * L * sizeof *C), *KQQ = malloc(Q * Q * sizeof *KQQ), *soaQ = malloc(6 * Q * sizeof *soaQ);
+	double *C = malloc(Q * L * sizeof *C), *KQQ = recon_big_alloc(Q * Q * sizeof *KQQ), *soaQ = malloc(6 * Q * sizeof *soaQ);
 	double *U = malloc(Q * L * sizeof *U), *Bt = malloc(L * n * sizeof *Bt), *X = malloc(L * n * sizeof *X);
 	double *Ainv = malloc(n * n * sizeof *Ainv), *alpha = calloc(L, sizeof *alpha);
 	double *dfmis = malloc(n * L * sizeof *dfmis), *mratio = malloc(n * L * sizeof *mratio), *misacc = calloc(nth * L, sizeof *misacc);
@@ -445,7 +447,7 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	double *tb = malloc(nth * Q * TREND_NB * sizeof *tb);
 	double *Bs = NULL, *ylog = NULL, *fl = NULL, *cdraw = NULL;
 	struct dhr_quad dq = { 0 };
-	if (!Kq || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud || !C || !KQQ || !soaQ || !U ||
+	if (!Kr || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud || !C || !KQQ || !soaQ || !U ||
 	    !Bt || !X || !Ainv || !alpha || !dfmis || !mratio || !misacc || !sres || !vmod || !squad || !tb ||
 	    !senergy || !aseen) {
 		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
@@ -456,7 +458,8 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 			acq_errf(err, ACQ_E_INVAL, "dhr: quadrature");
 			goto out;
 		}
-		rbf_kmatrix_soa(m->kernel, m->shape, Q, c6 + t * Q * 6, n, m->soa, Kq + t * Q * n);
+		if (Kq)
+			rbf_kmatrix_soa(m->kernel, m->shape, Q, c6 + t * Q * 6, n, m->soa, Kq + t * Q * n);
 		for (size_t q = 0; q < Q; q++) {
 			const double *c = c6 + (t * Q + q) * 6;
 			trend_at(m, c, tb + (t * Q + q) * TREND_NB);
@@ -524,7 +527,7 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 			}
 		}
 		for (size_t t = 0; t < nth; t++) {
-			cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Q, (int)L, (int)n, 1.0, Kq + t * Q * n,
+			cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Q, (int)L, (int)n, 1.0, Kr + t * Q * n,
 				    (int)n, Wd, (int)n, 0.0, Y, (int)L);
 			for (size_t l = 0; l < L; l++) {
 				if (d == 0) { /* the nominal value itself comes from the adaptive rule below */
@@ -552,7 +555,7 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 				unseen_and_misfit(m, Q, c6 + t * Q * 6, scale + t * Q * L, alpha, dfmis, mratio, &ui, C,
 						  misacc + t * L, senergy + t * L);
 			}
-			if (d == 0 && model_variance(m, Q, c6 + t * Q * 6, Kq + t * Q * n, A, C, KQQ, soaQ, U, Bt, X,
+			if (d == 0 && model_variance(m, Q, c6 + t * Q * 6, Kr + t * Q * n, A, C, KQQ, soaQ, U, Bt, X,
 						     vmod + t * L, err))
 				goto out;
 		}

@@ -119,6 +119,10 @@ int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int 
 struct recon_dhr_parts {
 	double *noise, *model, *quad, *misfit, *res;
 	double *kriging, *energy;
+	/* in (NULL: built here): the kernel rows at the fixed rule, kq[(t*Q + q)*n + k] = kernel of node q of
+	 * recon_hemi_nodes(theta[t], 32, 48, 0) with centre k (rbf_kmatrix_soa on m->soa; Q = 32 · 48), from a caller
+	 * that builds them anyway (select) */
+	const double *kq;
 };
 /* recon_dhr with its uncertainty split into parts (may be NULL). */
 int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,

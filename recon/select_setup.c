@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "recon/bigbuf.h"
 #include "recon/colour.h"
 #include "recon/merl.h"
 #include "recon/recon_int.h"
@@ -63,19 +64,25 @@ static int sel_functionals(struct sel *s, size_t Q, const double *c6, const doub
 	return 0;
 }
 
-/* The DHR functional at incidence th on the tracked channels: the fixed rule's nodes c6[Q*6] and weights wt[Q],
- * the kernel rows KQn[Q*n], and C[q*Lc + c] = weight × energy factor × df̂/dg at the model × √(α_λ + unseen
- * prior), as dhr.c's σ_model (scratch Y[Q*Lc], Wc[Lc*n]). */
-int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, double *KQn, double *Y, double *Wc,
-			double *C, struct acq_err *err)
+/* The DHR's fixed rule at incidence th: its nodes c6[Q*6], weights wt[Q] and kernel rows KQn[Q*n] against the
+ * model's centres (what recon_dhr_parts takes as its parts.kq). 0, or -1 with err. */
+static int sel_dhr_rows(const struct recon_model *m, double th, double *c6, double *wt, double *KQn,
+			struct acq_err *err)
+{
+	if (recon_hemi_nodes(th, SEL_NMU, SEL_NPHI, 0, c6, wt))
+		return acq_errf(err, ACQ_E_INVAL, "select: quadrature");
+	rbf_kmatrix_soa(m->kernel, m->shape, (size_t)SEL_NMU * SEL_NPHI, c6, m->n, m->soa, KQn);
+	return 0;
+}
+
+/* sel_dhr_coef's coefficients C from the rule's nodes c6, weights wt and rows KQn (sel_dhr_rows). */
+static void sel_dhr_coef_rows(const struct sel *s, const double *c6, const double *wt, const double *KQn, double *Y,
+			      double *Wc, double *C)
 {
 	const struct recon_model *m = s->m;
 	size_t n = s->n, Lc = s->Lc, Q = (size_t)SEL_NMU * SEL_NPHI;
 	for (size_t c = 0; c < Lc; c++)
 		memcpy(Wc + c * n, m->w + s->chan[c] * n, n * sizeof *Wc);
-	if (recon_hemi_nodes(th, SEL_NMU, SEL_NPHI, 0, c6, wt))
-		return acq_errf(err, ACQ_E_INVAL, "select: quadrature");
-	rbf_kmatrix_soa(m->kernel, m->shape, Q, c6, n, m->soa, KQn);
 	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)Q, (int)Lc, (int)n, 1.0, KQn, (int)n, Wc, (int)n, 0.0,
 		    Y, (int)Lc);
 	for (size_t q = 0; q < Q; q++) {
@@ -90,6 +97,17 @@ int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, double 
 					sqrt(s->alpha[l] + u * RECON_PRIOR_ALPHA);
 		}
 	}
+}
+
+/* The DHR functional at incidence th on the tracked channels: the fixed rule's nodes c6[Q*6] and weights wt[Q],
+ * the kernel rows KQn[Q*n], and C[q*Lc + c] = weight × energy factor × df̂/dg at the model × √(α_λ + unseen
+ * prior), as dhr.c's σ_model (scratch Y[Q*Lc], Wc[Lc*n]). */
+int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, double *KQn, double *Y, double *Wc,
+		 double *C, struct acq_err *err)
+{
+	if (sel_dhr_rows(s->m, th, c6, wt, KQn, err))
+		return -1;
+	sel_dhr_coef_rows(s, c6, wt, KQn, Y, Wc, C);
 	return 0;
 }
 
@@ -151,10 +169,10 @@ static double mean_sq(const double *x, size_t n)
 	return a / (double)n;
 }
 
-/* The DHR value on all channels (the value channels' screening said it is near the threshold): r->per and the value
- * recomputed, each incidence's κ rescaled so predictions aim at the same value; r->value_checked set. 0 or -1. */
-static int sel_value_all(struct sel *s, const double *th, const struct select_opts *o, struct select_result *r,
-			 struct acq_err *err)
+/* The DHR value on all channels (the value channels' screening said it is near the threshold; kq: the fixed rule's
+ * kernel rows, or NULL): r->per and the value recomputed, each incidence's κ rescaled so predictions aim at the same value; r->value_checked set. 0 or -1. */
+static int sel_value_all(struct sel *s, const double *th, const double *kq, const struct select_opts *o,
+			 struct select_result *r, struct acq_err *err)
 {
 	size_t L = s->L, nth = s->nth, NL = nth * L;
 	double *dhr = malloc(NL * sizeof *dhr), *sig = malloc(NL * sizeof *sig);
@@ -163,7 +181,8 @@ static int sel_value_all(struct sel *s, const double *th, const struct select_op
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
-	if (recon_dhr_parts(s->m, nth, th, o->ndraws, o->seed, dhr, sig, NULL, NULL, NULL, err))
+	struct recon_dhr_parts parts = { .kq = kq };
+	if (recon_dhr_parts(s->m, nth, th, o->ndraws, o->seed, dhr, sig, &parts, NULL, NULL, err))
 		goto out;
 	r->value = 0;
 	for (size_t t = 0; t < nth; t++) {
@@ -185,7 +204,8 @@ out:
 /* The DHR target: the model's σ and its parts (recon_dhr_parts) at every channel, or on the value channels
  * s->vchan only (a sub-model of those channels: the same computation per channel, at LV/L of the cost, the noise
  * part's Monte-Carlo draws then other draws), and the GP functionals on the tracked channels: c_q = weight × energy
- * factor × df̂/dg × √(α_λ + unseen prior) at the DHR's fixed rule. */
+ * factor × df̂/dg × √(α_λ + unseen prior) at the DHR's fixed rule. The rule's kernel rows are built once, here, and
+ * lent to recon_dhr_parts (o->reference: it builds its own, as before). */
 int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_result *r, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
@@ -202,7 +222,8 @@ int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_resu
 	double *dhr = malloc(NL * sizeof *dhr), *sig = malloc(NL * sizeof *sig), *sn = malloc(NL * sizeof *sn);
 	double *sm = malloc(NL * sizeof *sm), *sres = malloc(NL * sizeof *sres);
 	double *sk = malloc(NL * sizeof *sk), *se = malloc(NL * sizeof *se);
-	double *c6 = malloc(Q * 6 * sizeof *c6), *wt = malloc(Q * sizeof *wt), *KQn = malloc(Q * n * sizeof *KQn);
+	double *c6 = malloc(nth * Q * 6 * sizeof *c6), *wt = malloc(Q * sizeof *wt);
+	double *KQn = recon_big_alloc(nth * Q * n * sizeof *KQn);
 	double *Y = malloc(Q * Lc * sizeof *Y), *C = malloc(Q * Lc * sizeof *C), *Wc = malloc(Lc * n * sizeof *Wc);
 	double *KJQ = malloc(Q * SEL_JB * sizeof *KJQ), *soaQ = malloc(Q * 6 * sizeof *soaQ);
 	int rc = -1;
@@ -210,7 +231,11 @@ int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_resu
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
-	struct recon_dhr_parts parts = { .noise = sn, .model = sm, .res = sres, .kriging = sk, .energy = se };
+	for (size_t t = 0; t < nth; t++) /* the rule's weights are the same at every incidence */
+		if (sel_dhr_rows(m, th[t], c6 + t * Q * 6, wt, KQn + t * Q * n, err))
+			goto out;
+	const double *kq = o->reference ? NULL : KQn;
+	struct recon_dhr_parts parts = { .noise = sn, .model = sm, .res = sres, .kriging = sk, .energy = se, .kq = kq };
 	if (recon_dhr_parts(s->vchan ? &sub : m, nth, th, o->ndraws, o->seed, dhr, sig, &parts, NULL, NULL, err))
 		goto out;
 	r->value = 0;
@@ -235,12 +260,11 @@ int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_resu
 	if (sel_prior_init(s, th, se, L, err))
 		goto out;
 	if (s->vchan && isfinite(s->t->threshold) && r->value <= SEL_VALUE_CHECK * s->t->threshold &&
-	    sel_value_all(s, th, o, r, err))
+	    sel_value_all(s, th, kq, o, r, err))
 		goto out;
 	for (size_t t = 0; t < nth; t++) {
-		if (sel_dhr_coef(s, th[t], c6, wt, KQn, Y, Wc, C, err))
-			goto out;
-		if (J && sel_functionals(s, Q, c6, KQn, C, Lc, t * Lc, soaQ, KJQ, err))
+		sel_dhr_coef_rows(s, c6 + t * Q * 6, wt, KQn + t * Q * n, Y, Wc, C);
+		if (J && sel_functionals(s, Q, c6 + t * Q * 6, KQn + t * Q * n, C, Lc, t * Lc, soaQ, KJQ, err))
 			goto out;
 	}
 	rc = 0;

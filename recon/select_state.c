@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "recon/bigbuf.h"
 #include "recon/recon_int.h"
 #include "recon/select_int.h"
 
@@ -57,8 +58,8 @@ static int sel_factor(struct sel *s, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
 	size_t n = s->n, L = s->L;
-	double *Ainv = malloc(n * n * sizeof *Ainv);
-	s->A = malloc(n * n * sizeof *s->A);
+	double *Ainv = recon_big_alloc(n * n * sizeof *Ainv);
+	s->A = recon_big_alloc(n * n * sizeof *s->A);
 	s->alpha = calloc(L, sizeof *s->alpha);
 	if (!Ainv || !s->A || !s->alpha) {
 		free(Ainv);
@@ -143,8 +144,8 @@ static int sel_candidates(struct sel *s, size_t nc, const double *ang, const dou
 	if ((double)J * (double)(SEL_NMU * SEL_NPHI + 2 * n + SELECT_MAX_THETA * s->Lc + 400) * 8.0 > 4e9)
 		return acq_errf(err, ACQ_E_RANGE, "select: %zu distinct candidates × %zu centres need too much memory", J, n);
 	s->soaJ = malloc(6 * Jp * sizeof *s->soaJ);
-	s->Kjn = malloc(Jp * n * sizeof *s->Kjn);
-	s->G = malloc(Jp * n * sizeof *s->G);
+	s->Kjn = recon_big_alloc(Jp * n * sizeof *s->Kjn); /* the candidates' rows on huge pages (bigbuf.c) */
+	s->G = recon_big_alloc(Jp * n * sizeof *s->G);
 	s->Pjj = malloc(Jp * sizeof *s->Pjj);
 	s->picked = calloc(Jp, 1);
 	if (!s->soaJ || !s->Kjn || !s->G || !s->Pjj || !s->picked)
@@ -270,7 +271,7 @@ int sel_init_part(struct sel *s, const struct sel *own, const struct recon_model
 		s->Nk = malloc(n * sizeof *s->Nk);
 		s->X = calloc(F * Jp, sizeof *s->X);
 		s->Yn = calloc(Jp, sizeof *s->Yn);
-		s->Gc = malloc(Jp * n * sizeof *s->Gc);
+		s->Gc = recon_big_alloc(Jp * n * sizeof *s->Gc);
 		s->gn = calloc((s->batch ? s->batch : 1) * Jp, sizeof *s->gn);
 		s->mrow = malloc(Jp * sizeof *s->mrow);
 		s->gp = malloc(n * sizeof *s->gp);

@@ -1095,7 +1095,9 @@ static void test_prior_after_pick(void **state)
  * terms and half its functionals on their noise floor; ln f; RGB), after 0, 1 and 2 picks; the DHR functionals' covariances Z formed by blocks of
  * candidates equal Cᵀ K_QJ − Bᵀ K_nJ with every kernel value computed afresh (rbf_kernel); select_batch picks the
  * same candidates with the same gains, charges and predictions either way (a combined target, whose parts share the
- * candidates' set-up on the fast path, with a route; the RGB target). */
+ * candidates' set-up on the fast path, with a route; the RGB target); the fast path lends its DHR rule's kernel rows
+ * to recon_dhr_parts (parts.kq), the reference path lets it build its own: the same value (seen failing with the
+ * lent rows misplaced per incidence, session 13). */
 #define FAST_NC 300
 static void test_fast_path(void **state)
 {
