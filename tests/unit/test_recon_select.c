@@ -27,6 +27,7 @@
 #include <string.h>
 
 #include "recon_test_util.h"
+#include "recon/bigbuf.h"
 #include "recon/colour.h"
 #include "recon/recon_int.h"
 #include "recon/select_int.h"
@@ -1223,6 +1224,25 @@ static void test_fast_path(void **state)
 	recon_model_free(m);
 }
 
+/* recon_big_alloc (select's rows and posterior arrays): any size usable to its last byte, an array of at least
+ * RECON_BIG_PAGE aligned to it (the huge page advice needs the alignment; whether the kernel then gives huge pages is
+ * its choice, not checked here). */
+static void test_big_alloc(void **state)
+{
+	(void)state;
+	size_t sizes[] = { 0, 1, 4096, RECON_BIG_PAGE - 1, RECON_BIG_PAGE, 3 * RECON_BIG_PAGE + 5 };
+	for (size_t i = 0; i < sizeof sizes / sizeof *sizes; i++) {
+		unsigned char *p = recon_big_alloc(sizes[i]);
+		assert_non_null(p);
+		if (sizes[i] >= RECON_BIG_PAGE)
+			assert_int_equal((uintptr_t)p % RECON_BIG_PAGE, 0);
+		memset(p, 0xa5, sizes[i]);
+		for (size_t k = 0; k < sizes[i]; k += 4093)
+			assert_int_equal(p[k], 0xa5);
+		free(p);
+	}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1234,6 +1254,7 @@ int main(void)
 		cmocka_unit_test(test_combined_target), cmocka_unit_test(test_route_increment),
 		cmocka_unit_test(test_lnf_measure),
 		cmocka_unit_test(test_prior_after_pick), cmocka_unit_test(test_fast_path),
+		cmocka_unit_test(test_big_alloc),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
