@@ -422,6 +422,34 @@ static void test_malformed_status_switches_emission_off(void **state)
 	}
 }
 
+/* The driver reads what arrives in blocks: a stray line after a reply (here in the same write as the reply, so
+ * one read takes both) must be dropped with the unread input before the next command, not taken for its reply. */
+static void test_stray_line_after_reply_dropped(void **state)
+{
+	(void)state;
+	char path[128];
+	int keep, m = open_pty(path, sizeof path, &keep);
+	const char *script[] = { "ID M S F\n", "OK\nPOWER 99.0\n", "STATUS emission=1 interlock=1 fault=0\n",
+				 "POWER 42.0\n", NULL };
+	pid_t pid = script_peer(m, script);
+	struct laser_cfg *cfg = make_cfg(path, PEER_PATIENCE_MS);
+	struct laser *l = NULL;
+	struct acq_err err = { 0 };
+	if (laser_open(cfg, &l, &err))
+		fail_msg("%s", err.msg);
+	assert_int_equal(laser_set_emission(l, true, &err), 0);
+	struct laser_status st;
+	if (laser_status(l, &st, &err))
+		fail_msg("%s", err.msg);
+	assert_true(st.emission);
+	assert_true(fabs(st.power_pct - 42.0) < 1e-9);
+	laser_close(l);
+	stop_child(pid);
+	close(m);
+	close(keep);
+	laser_cfg_free(cfg);
+}
+
 static void test_dead_line_times_out(void **state)
 {
 	(void)state;
@@ -569,6 +597,7 @@ int main(void)
 		cmocka_unit_test(test_sim_socket_link_and_keepalive),
 		cmocka_unit_test(test_malformed_identity),
 		cmocka_unit_test(test_malformed_status_switches_emission_off),
+		cmocka_unit_test(test_stray_line_after_reply_dropped),
 		cmocka_unit_test(test_dead_line_times_out),
 		cmocka_unit_test(test_keepalive),
 		cmocka_unit_test(test_config_errors),
