@@ -53,9 +53,11 @@ void devices_ex_done(struct devices *dv, struct req *r)
 		x->sticky_err = r->err;
 		kick = true;
 	}
-	if (r->op == R_LASER && r->seq == x->lcmd_seq) {
-		x->lcmd_seq = 0;
-		if (x->read == XW_RUNNING && r->seq == x->read_seq) { /* ex_read waits for this read-back */
+	if (r->op == R_LASER) {
+		if (r->seq == x->lcmd_seq)
+			x->lcmd_seq = 0;
+		/* ex_read waits for this read-back (also when a later command made it stale: ex_read then reads again) */
+		if (x->read == XW_RUNNING && r->seq == x->read_seq) {
 			x->read = XW_READY;
 			x->read_rc = r->have_lst ? 0 : -1; /* without one the switch failed: sticky says why */
 			x->read_err = r->err;

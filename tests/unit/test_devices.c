@@ -417,6 +417,16 @@ static void test_executor_ops_pending(void **state)
 		assert_true(emission == on && ready && laser_fake_state()->emission == on);
 		assert_int_equal(laser_fake_state()->status_reads, 1);
 	}
+	/* a read waiting for one switch's read-back when another switch follows (a halt switching off twice): the
+	 * first read-back is stale, the read goes on to the second's and ends */
+	assert_int_equal(ops->laser_set(fx->dv, false, &err), 0);
+	assert_int_equal(ops->laser_state(fx->dv, &emission, &ready, &err), EX_PENDING);
+	assert_int_equal(ops->laser_set(fx->dv, false, &err), 0);
+	kicks = 0;
+	while ((rc = ops->laser_state(fx->dv, &emission, &ready, &err)) == EX_PENDING)
+		assert_true(wait_for(fx, 0, kicked)), kicks = 0;
+	assert_int_equal(rc, 0);
+	assert_false(emission);
 	/* a command after the switch (power) makes it stale: a read of its own follows */
 	laser_fake_state()->status_reads = 0;
 	assert_int_equal(ops->laser_set(fx->dv, true, &err), 0);
