@@ -1,7 +1,8 @@
 /* devices_ex: the sweep executor's device operations (executor.h) over the devices' ports (devices.c).
  * Commands (move, home, stop, alarm reset, laser, power, spectrometer start/stop) are queued and return at once;
  * their outcome comes through the polls (move_step, spectro_fetch) or the next read. Reads (position, laser
- * state, reconnect) return EX_PENDING until their completion has kicked the executor, then the result. */
+ * state, reconnect) return EX_PENDING until their completion has kicked the executor, then the result; a laser
+ * state read right after a laser switch is the switch's own read-back (R_LASER reads the laser after switching). */
 #include "daemon/devices_int.h"
 
 #include <math.h>
@@ -52,6 +53,19 @@ void devices_ex_done(struct devices *dv, struct req *r)
 		x->sticky_err = r->err;
 		kick = true;
 	}
+	if (r->op == R_LASER) {
+		if (r->seq == x->lcmd_seq)
+			x->lcmd_seq = 0;
+		/* ex_read waits for this read-back (also when a later command made it stale: ex_read then reads again) */
+		if (x->read == XW_RUNNING && r->seq == x->read_seq) {
+			x->read = XW_READY;
+			x->read_rc = r->have_lst ? 0 : -1; /* without one the switch failed: sticky says why */
+			x->read_err = r->err;
+			x->lst = r->lst;
+			x->read_real = real_now();
+			kick = true;
+		}
+	}
 	if (kick && dv->kick)
 		dv->kick(dv->kick_ctx);
 }
@@ -77,6 +91,8 @@ static int ex_command(struct devices *dv, int d, enum rop op, double target, boo
 	if (!r)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	r->seq = s->x.cmd_seq = ++s->x.seq;
+	if (op == R_LASER)
+		s->x.lcmd_seq = r->seq;
 	r->target = target;
 	r->on = on;
 	r->pct = pct;
@@ -109,6 +125,10 @@ static int ex_read(struct devices *dv, int d, struct acq_err *err)
 		if (x->read_rc && err)
 			*err = x->read_err;
 		return x->read_rc ? -1 : 0;
+	}
+	if (x->read == XW_IDLE && x->lcmd_seq && x->lcmd_seq == x->cmd_seq) {
+		x->read_seq = x->lcmd_seq; /* the laser switch in flight reads the laser back after it: take that */
+		x->read = XW_RUNNING;
 	}
 	if (x->read == XW_IDLE) {
 		struct req *r = devices_req_new(dv, d, R_STATUS, OWN_EX);

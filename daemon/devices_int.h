@@ -27,6 +27,8 @@ struct xview {
 	enum xwait read;
 	unsigned read_seq;
 	unsigned cmd_seq;              /* the latest command queued (ex_command): a read queued before it is stale */
+	unsigned lcmd_seq;             /* a laser switch in flight (0: none): it reads the laser back, so a read asked
+					* while it is the latest command takes its read-back (one request, not two) */
 	double read_real;              /* real time the read completed */
 	int read_rc;
 	struct acq_err read_err;

@@ -428,13 +428,18 @@ static int put_spectrum(struct ex *x, const struct pending *p, int64_t point_id,
 	return store_spectrum_add(x->st, &sp, id, err);
 }
 
-static void progress(struct ex *x, double now)
+/* The point's cycle (from the previous point's going on to this one's), for the executor's own ETA. */
+static void point_timed(struct ex *x, double now)
 {
 	double dt = now - x->point_started;
 	x->point_avg_s = isfinite(x->point_avg_s) ? 0.9 * x->point_avg_s + 0.1 * dt : dt;
+}
+
+static void progress(struct ex *x, const char *text)
+{
 	double eta = x->point_avg_s * (x->nsteps - x->cur);
 	if (x->sink.progress)
-		x->sink.progress(x->sink.ctx, x->sweep_id, x->stats.points_done, x->nsteps, eta, x->phase_text);
+		x->sink.progress(x->sink.ctx, x->sweep_id, x->stats.points_done, x->nsteps, eta, text);
 }
 
 static void finish_sweep(struct ex *x)
@@ -566,9 +571,21 @@ static int store_point(struct ex *x, int64_t pid, bool calibrated, const char **
 	return 0;
 }
 
+static void go_on(struct ex *x, double now, bool deferred);
+
 /* The point's exposures are in: merge, check saturation, calibrate, commit, go on. */
 static void commit_point(struct ex *x, double now)
 {
+	if (x->ack_pending) { /* the previous point on disk first: a point is never committed before the one before */
+		x->commit_waits = true;
+		x->phase = PH_DURABLE;
+		char text[64];
+		snprintf(text, sizeof text, "storing point %d: waiting for the disk", x->ack_point);
+		ex_set_phase_text(x, text);
+		ex_run_durable(x, now);
+		return;
+	}
+	x->commit_waits = false;
 	struct acq_err err = { 0 };
 	const struct exp_rate *list[EX_MAX_TIMES];
 	for (int i = 0; i < x->ntimes; i++)
@@ -660,6 +677,17 @@ static void commit_point(struct ex *x, double now)
 	stall_store(stall_now() - t_store);
 	ex_clear_pending(x);
 	x->durable_mark = store_commit_mark(x->st);
+	if (x->cfg.durable_async && x->cur + 1 < x->nsteps && !x->pause_requested) {
+		/* Go on at once: the laser off and the next move overlap the fsync; the point is counted and
+		 * announced once on disk (ex_ack_step), and the next point's commit waits for that. A crash before
+		 * the fsync loses nothing (the commit is in the WAL); a power loss at most this point, measured again
+		 * at the resume (store_sweep_next_point). The last point and a pause wait for the disk as before. */
+		x->ack_pending = true;
+		x->ack_mark = x->durable_mark;
+		x->ack_point = x->cur;
+		go_on(x, now, true);
+		return;
+	}
 	x->phase = PH_DURABLE;
 	char text[64];
 	snprintf(text, sizeof text, "storing point %d: waiting for the disk", x->cur);
@@ -667,8 +695,47 @@ static void commit_point(struct ex *x, double now)
 	ex_run_durable(x, now);
 }
 
+int ex_ack_step(struct ex *x, double now)
+{
+	(void)now;
+	if (!x->ack_pending)
+		return 1;
+	struct acq_err err = { 0 };
+	int r = store_durable(x->st, x->ack_mark, &err);
+	if (r == 0)
+		return 0;
+	x->ack_pending = false;
+	bool live = x->state == EX_RUNNING || x->state == EX_SUSPENDED;
+	if (r < 0) {
+		if (live || x->state == EX_PAUSED)
+			ex_failed(x, "point %d is stored but not known to be on disk: %s", x->ack_point, err.msg);
+		return -1;
+	}
+	x->stats.points_done++;
+	/* announced while the sweep runs (a progress event says `running`); after a halt the count is the store's */
+	if (live) {
+		char text[64];
+		snprintf(text, sizeof text, "point %d stored", x->ack_point);
+		progress(x, text);
+	}
+	return 1;
+}
+
 void ex_run_durable(struct ex *x, double now)
 {
+	if (x->commit_waits) {
+		int r = ex_ack_step(x, now);
+		if (r < 0)
+			return;
+		if (r == 0) {
+			ex_io_wait(x, now); /* store_durable_fd's kick steps it sooner */
+			return;
+		}
+		x->commit_waits = false;
+		x->phase = PH_ACQ;
+		commit_point(x, now);
+		return;
+	}
 	struct acq_err err = { 0 };
 	int r = x->cfg.durable_async ? store_durable(x->st, x->durable_mark, &err)
 				     : store_durable_wait(x->st, x->durable_mark, &err);
@@ -680,22 +747,36 @@ void ex_run_durable(struct ex *x, double now)
 		ex_io_wait(x, now); /* store_durable_fd's kick steps it sooner */
 		return;
 	}
+	go_on(x, now, false);
+}
+
+/* The point x->cur is committed (deferred: not yet on disk, ex_ack_step counts and announces it later; else on
+ * disk: counted and announced now): on to the next point, or the end of the sweep or batch, or the pause. */
+static void go_on(struct ex *x, double now, bool deferred)
+{
+	struct acq_err err = { 0 };
 	char text[64];
-	snprintf(text, sizeof text, "point %d stored", x->cur);
+	snprintf(text, sizeof text, deferred ? "point %d committed" : "point %d stored", x->cur);
 	ex_set_phase_text(x, text);
 	ex_stall_report(x, x->cur);
 	x->point_faults = 0;
-	x->stats.points_done++;
+	if (!deferred)
+		x->stats.points_done++;
+	int done = x->stats.points_done + (deferred ? 1 : 0);
 	x->cur++;
 	/* Dark schedule (sweep.dark_every): every N points, or whenever the incidence changes. */
 	if (x->cur < x->nsteps) {
 		bool refresh = x->cfg.dark_every > 0
-				       ? x->stats.points_done % x->cfg.dark_every == 0
+				       ? done % x->cfg.dark_every == 0
 				       : fabs(x->plan->steps[x->cur].pos.laser_theta - x->plan->steps[x->cur - 1].pos.laser_theta) > 1e-6;
 		if (refresh)
 			exp_darks_clear(x->darks);
 	}
-	progress(x, now);
+	point_timed(x, now);
+	if (!deferred)
+		progress(x, x->phase_text);
+	else if (ex_ack_step(x, now) < 0)
+		return;
 	if (x->cur >= x->nsteps) {
 		if (x->cfg.hold_at_end)
 			ex_wait_batch(x);

@@ -103,6 +103,12 @@ struct ex {
 	struct exp_rate *rates[EX_MAX_TIMES];
 	struct exp_rate *merged, *ref_rate;
 	uint64_t durable_mark;       /* PH_DURABLE: the point's commit (store_commit_mark) */
+	/* A point committed but not yet on disk while the sweep goes on (durable_async: its laser off and the next
+	 * move overlap the fsync): counted and announced (progress) once durable, and the next point's commit waits
+	 * for that (PH_DURABLE with commit_waits). */
+	bool ack_pending, commit_waits;
+	uint64_t ack_mark;           /* its commit (store_commit_mark) */
+	int ack_point;               /* its step */
 	struct pending pend[EX_MAX_PENDING];
 	int npend;
 	int attempts;                /* acquisitions of this point spoiled by saturation */
@@ -203,7 +209,11 @@ int ex_load_reference(struct ex *x, struct acq_err *err);
 void ex_wait_batch(struct ex *x);
 /* Phase step: acquisition shots, then the point's commit. */
 void ex_run_acq(struct ex *x, double now);
-/* Phase step: the committed point on disk? Then the sweep goes on to the next (a failed fsync fails it). */
+/* Phase step: the committed point on disk? Then the sweep goes on to the next (a failed fsync fails it); with
+ * commit_waits: the previous point on disk? Then this point's commit. */
 void ex_run_durable(struct ex *x, double now);
+/* The point committed with the sweep going on (ack_pending): once on disk, count and announce it. 1 when none is
+ * pending any more, 0 still waiting, -1 the fsync failed (the sweep failed). */
+int ex_ack_step(struct ex *x, double now);
 
 #endif

@@ -183,6 +183,9 @@ void exp_prior_rows_free(struct exp_prior_rows *R);
  * *host_s unchanged: none, or fewer than EXP_HOST_MIN_POINTS measured). 0, or -1 with err. */
 int exp_host_load(struct store *st, long long exclude, const char *kind, const struct bench_geom *g,
 		  const struct plan_timing *t, double *host_s, long long *sweep, struct acq_err *err);
+/* exp_host_load's figure of sweep id (found by the caller; id <= 0: none, *sweep 0). 0, or -1 with err. */
+int exp_host_load_sweep(struct store *st, long long id, const struct bench_geom *g, const struct plan_timing *t,
+			double *host_s, long long *sweep, struct acq_err *err);
 
 /* The host figures exp_host_load gives (of any kind and of each plan kind), read once and kept until a sweep
  * completes in the store (store_completed_gen), exclude changes, or exp_host_cache_drop (a new configuration):

@@ -282,6 +282,13 @@ int exp_host_load(struct store *st, long long exclude, const char *kind, const s
 	int64_t id = 0;
 	if (store_latest_completed(st, exclude, kind, &id, err))
 		return -1;
+	return exp_host_load_sweep(st, id, g, t, host_s, sweep, err);
+}
+
+int exp_host_load_sweep(struct store *st, long long id, const struct bench_geom *g, const struct plan_timing *t,
+			double *host_s, long long *sweep, struct acq_err *err)
+{
+	*sweep = 0;
 	if (id <= 0)
 		return 0;
 	struct plan_prior pr;
@@ -303,30 +310,28 @@ void exp_host_cache_drop(struct exp_host_cache *c)
 static int host_cache_read(struct exp_host_cache *c, struct store *st, long long exclude, const struct bench_geom *g,
 			   const struct plan_timing *t, struct acq_err *err)
 {
-	static const char *const layouts[] = { "grid", "fibonacci", "adaptive" }, *const modes[] = { "auto", "fixed" };
 	c->valid = false;
 	c->reads++;
 	c->n_kind = 0;
 	c->any_sweep = 0;
 	if (exp_host_load(st, exclude, NULL, g, t, &c->any_s, &c->any_sweep, err))
 		return -1;
-	for (int l = 0; l < 3; l++)
-		for (int m = 0; m < 2; m++) {
-			struct plan_host_kind *k = &c->kind[c->n_kind];
-			snprintf(k->kind, sizeof k->kind, "%s/%s", layouts[l], modes[m]);
-			int64_t id = 0;
-			if (store_latest_completed(st, exclude, k->kind, &id, err))
-				return -1;
-			k->sweep = 0;
-			if (id > 0 && id == c->any_sweep) {
-				k->sweep = id;
-				k->host_s = c->any_s;
-			} else if (id > 0 && exp_host_load(st, exclude, k->kind, g, t, &k->host_s, &k->sweep, err)) {
-				return -1;
-			}
-			if (k->sweep > 0)
-				c->n_kind++;
+	for (int i = 0; i < PLAN_HOST_KINDS; i++) {
+		struct plan_host_kind *k = &c->kind[c->n_kind];
+		plan_kind_name(i, k->kind);
+		int64_t id = 0;
+		if (store_latest_completed(st, exclude, k->kind, &id, err))
+			return -1;
+		k->sweep = 0;
+		if (id > 0 && id == c->any_sweep) {
+			k->sweep = id;
+			k->host_s = c->any_s;
+		} else if (exp_host_load_sweep(st, id, g, t, &k->host_s, &k->sweep, err)) {
+			return -1;
 		}
+		if (k->sweep > 0)
+			c->n_kind++;
+	}
 	c->gen = store_completed_gen(st);
 	c->exclude = exclude;
 	c->valid = true;

@@ -98,6 +98,10 @@ struct laser_dev {
 	int fd;                 /* termios transport */
 	struct laser_identity id;
 	char line[LASER_LINE_MAX + 1];
+	/* termios and socket transports: what one read(2) brought beyond the bytes taken (a reply line is read in
+	 * one or a few calls, not a poll and a read per byte); emptied with the unread input before each command */
+	char rbuf[2 * LASER_LINE_MAX];
+	size_t rpos, rlen;
 };
 
 /* ---- configuration ------------------------------------------------------------------------------------ */
@@ -383,26 +387,46 @@ static int tio_write(struct laser_dev *l, const char *buf, size_t n, int timeout
 	return fd_write_all(l, buf, n, timeout_ms, false, err);
 }
 
+/* Fill l->rbuf with what is waiting (waiting up to timeout_ms for the first byte): 1, 0 (nothing), -1. */
+static int tio_fill(struct laser_dev *l, int timeout_ms, struct acq_err *err)
+{
+	for (int polled = 0;; polled = 1) {
+		ssize_t n = read(l->fd, l->rbuf, sizeof l->rbuf);
+		if (n > 0) {
+			l->rpos = 0;
+			l->rlen = (size_t)n;
+			return 1;
+		}
+		if (n == 0 || errno == EIO)
+			return acq_errf(err, ACQ_E_DISCONNECTED, "laser %s: the line was hung up", l->cfg->device);
+		if (errno != EAGAIN && errno != EINTR)
+			return acq_errf(err, ACQ_E_IO, "laser %s: read: %s", l->cfg->device, strerror(errno));
+		if (polled)
+			return 0;
+		struct pollfd p = { .fd = l->fd, .events = POLLIN };
+		int r = poll(&p, 1, timeout_ms > 0 ? timeout_ms : 1);
+		if (r < 0)
+			return errno == EINTR ? 0
+					      : acq_errf(err, ACQ_E_IO, "laser %s: poll: %s", l->cfg->device, strerror(errno));
+		if (r == 0)
+			return 0;
+	}
+}
+
 static int tio_read(struct laser_dev *l, char *c, int timeout_ms, struct acq_err *err)
 {
-	struct pollfd p = { .fd = l->fd, .events = POLLIN };
-	int r = poll(&p, 1, timeout_ms > 0 ? timeout_ms : 1);
-	if (r < 0)
-		return errno == EINTR ? 0 : acq_errf(err, ACQ_E_IO, "laser %s: poll: %s", l->cfg->device, strerror(errno));
-	if (r == 0)
-		return 0;
-	ssize_t n = read(l->fd, c, 1);
-	if (n == 1)
-		return 1;
-	if (n < 0 && (errno == EAGAIN || errno == EINTR))
-		return 0;
-	if (n == 0 || errno == EIO)
-		return acq_errf(err, ACQ_E_DISCONNECTED, "laser %s: the line was hung up", l->cfg->device);
-	return acq_errf(err, ACQ_E_IO, "laser %s: read: %s", l->cfg->device, strerror(errno));
+	if (l->rpos == l->rlen) {
+		int r = tio_fill(l, timeout_ms, err);
+		if (r <= 0)
+			return r;
+	}
+	*c = l->rbuf[l->rpos++];
+	return 1;
 }
 
 static void tio_flush(struct laser_dev *l)
 {
+	l->rpos = l->rlen = 0;
 	tcflush(l->fd, TCIFLUSH);
 }
 
@@ -444,6 +468,7 @@ static int sock_write(struct laser_dev *l, const char *buf, size_t n, int timeou
 
 static void sock_flush(struct laser_dev *l)
 {
+	l->rpos = l->rlen = 0;
 	char buf[256];
 	while (recv(l->fd, buf, sizeof buf, MSG_DONTWAIT) > 0)
 		;

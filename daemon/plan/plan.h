@@ -282,6 +282,11 @@ void plan_timing_defaults(struct plan_timing *t);
 /* The kind of spec's plan for the host's time per point: "grid", "fibonacci" or "adaptive", then "/auto" or
  * "/fixed" (the integration); written into buf (PLAN_KIND_MAX bytes), returned. */
 const char *plan_kind_of(const struct plan_spec *spec, char *buf);
+/* The index (0 .. PLAN_HOST_KINDS-1) of spec's plan kind: plan_kind_name(plan_kind_index(spec)) is plan_kind_of. */
+int plan_kind_index(const struct plan_spec *spec);
+/* The name of plan kind i (0 .. PLAN_HOST_KINDS-1) written into buf (PLAN_KIND_MAX bytes) and returned; NULL for
+ * any other i. Every kind plan_kind_of can name is one of these. */
+const char *plan_kind_name(int i, char *buf);
 /* The host's real seconds per point plan_time_apply uses for spec when no exposure prior carries its own: the
  * figure of spec's kind in t->host_kind (*own_kind true), else t->point_overhead_s; *sweep = the sweep that
  * measured it (0: the default). */

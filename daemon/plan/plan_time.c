@@ -217,11 +217,32 @@ static const struct plan_prior *used_prior(const struct plan_spec *s, const stru
 	return s->integ_mode == PLAN_INTEG_AUTO && t->prior.sweep > 0 && t->prior.n_inc > 0 ? &t->prior : NULL;
 }
 
+/* The plan kinds' one vocabulary: a kind's index is layout × KIND_MODES + mode. */
+static const char *const kind_layouts[] = { "grid", "fibonacci", "adaptive" };
+static const char *const kind_modes[] = { "auto", "fixed" };
+#define KIND_LAYOUTS (int)(sizeof kind_layouts / sizeof *kind_layouts)
+#define KIND_MODES (int)(sizeof kind_modes / sizeof *kind_modes)
+_Static_assert(sizeof kind_layouts / sizeof *kind_layouts * (sizeof kind_modes / sizeof *kind_modes) ==
+		       PLAN_HOST_KINDS,
+	       "PLAN_HOST_KINDS counts every plan kind");
+
+int plan_kind_index(const struct plan_spec *s)
+{
+	int layout = s->adaptive ? 2 : s->fib_count > 0 ? 1 : 0, mode = s->integ_mode == PLAN_INTEG_AUTO ? 0 : 1;
+	return layout * KIND_MODES + mode;
+}
+
+const char *plan_kind_name(int i, char *buf)
+{
+	if (i < 0 || i >= PLAN_HOST_KINDS)
+		return NULL;
+	snprintf(buf, PLAN_KIND_MAX, "%s/%s", kind_layouts[i / KIND_MODES], kind_modes[i % KIND_MODES]);
+	return buf;
+}
+
 const char *plan_kind_of(const struct plan_spec *s, char *buf)
 {
-	snprintf(buf, PLAN_KIND_MAX, "%s/%s", s->adaptive ? "adaptive" : s->fib_count > 0 ? "fibonacci" : "grid",
-		 s->integ_mode == PLAN_INTEG_AUTO ? "auto" : "fixed");
-	return buf;
+	return plan_kind_name(plan_kind_index(s), buf);
 }
 
 /* The host's time per point differs by kind (the quick fixed plan 5.1 ms at time scale 10, the paper's auto plan

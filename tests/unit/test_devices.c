@@ -404,6 +404,39 @@ static void test_executor_ops_pending(void **state)
 		assert_true(wait_for(fx, 0, kicked)), kicks = 0;
 	assert_int_equal(rc, -1);
 	assert_non_null(strstr(err.msg, "interlock"));
+	/* A state read right after a switch is the switch's own read-back: one status read per switch, not two
+	 * (each a round trip to the laser's thread), and it tells the state after the switch. */
+	laser_fake_state()->interlock_open = false;
+	for (int on = 1; on >= 0; on--) {
+		laser_fake_state()->status_reads = 0;
+		assert_int_equal(ops->laser_set(fx->dv, on, &err), 0);
+		kicks = 0;
+		while ((rc = ops->laser_state(fx->dv, &emission, &ready, &err)) == EX_PENDING)
+			assert_true(wait_for(fx, 0, kicked)), kicks = 0;
+		assert_int_equal(rc, 0);
+		assert_true(emission == on && ready && laser_fake_state()->emission == on);
+		assert_int_equal(laser_fake_state()->status_reads, 1);
+	}
+	/* a read waiting for one switch's read-back when another switch follows (a halt switching off twice): the
+	 * first read-back is stale, the read goes on to the second's and ends */
+	assert_int_equal(ops->laser_set(fx->dv, false, &err), 0);
+	assert_int_equal(ops->laser_state(fx->dv, &emission, &ready, &err), EX_PENDING);
+	assert_int_equal(ops->laser_set(fx->dv, false, &err), 0);
+	kicks = 0;
+	while ((rc = ops->laser_state(fx->dv, &emission, &ready, &err)) == EX_PENDING)
+		assert_true(wait_for(fx, 0, kicked)), kicks = 0;
+	assert_int_equal(rc, 0);
+	assert_false(emission);
+	/* a command after the switch (power) makes it stale: a read of its own follows */
+	laser_fake_state()->status_reads = 0;
+	assert_int_equal(ops->laser_set(fx->dv, true, &err), 0);
+	assert_int_equal(ops->laser_power(fx->dv, 50, &err), 0);
+	kicks = 0;
+	while ((rc = ops->laser_state(fx->dv, &emission, &ready, &err)) == EX_PENDING)
+		assert_true(wait_for(fx, 0, kicked)), kicks = 0;
+	assert_int_equal(rc, 0);
+	assert_true(emission && fabs(laser_fake_state()->power_pct - 50) < 1e-9);
+	assert_int_equal(laser_fake_state()->status_reads, 2);
 	/* An absent device is an immediate error, never pending. */
 	devices_lost(fx->dv, CONF_DEV_DETECTOR_PHI, "fake: gone");
 	assert_int_equal(ops->position(fx->dv, EX_DEV_DETECTOR_PHI, &deg, &homed, &alarm, &err), -1);

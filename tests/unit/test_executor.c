@@ -8,7 +8,9 @@
 #include <string.h>
 #include <cmocka.h>
 
+#include <poll.h>
 #include <sqlite3.h>
+#include <time.h>
 #include <stdlib.h>
 #include <unistd.h>
 
@@ -66,6 +68,9 @@ struct fake {
 	/* the laser as the daemon's laser thread runs it: a command takes effect when the next read completes */
 	bool laser_lag, lag_pending, lag_on;
 	bool laser_silent;        /* reads fail: the laser does not answer */
+	/* the store whose commits the moves are checked against (test_commit_overlaps_fsync; NULL: not checked) */
+	struct store *st;
+	int moves_undurable;      /* moves begun while a commit was not yet on disk */
 };
 
 static struct fake F;
@@ -114,6 +119,8 @@ static int f_move_begin(void *ctx, int a, double target, double now, struct acq_
 	}
 	if (F.emission)
 		F.laser_on_during_motion++;
+	if (F.st && store_durable(F.st, store_commit_mark(F.st), NULL) == 0)
+		F.moves_undurable++;
 	F.start[a] = F.pos[a];
 	F.target[a] = target;
 	F.t0[a] = now;
@@ -931,6 +938,123 @@ static void test_crash_resume(void **state)
 /* The sweep's state of a halt and its event are one transaction: the store refusing the event (a trigger standing
  * for a disk that takes the small row and not the other) keeps neither, and both are stored by the retry once it
  * takes them. With two transactions the row read 'failed' with no 'failed' event. */
+/* ---- a point's commit and its fsync ---------------------------------------------------------------- */
+
+static double mono_s(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+/* The store's fsync thread holds each fsync this many real ms (a slow disk). */
+static int slow_sync(void *ctx, char *why, size_t n)
+{
+	(void)why;
+	(void)n;
+	usleep((useconds_t)(*(const int *)ctx * 1000));
+	return 0;
+}
+
+static struct {
+	sqlite3 *db;              /* a reader of the store */
+	int64_t sweep;
+	int n, last;
+	bool out_of_order, not_durable, next_committed;
+} P;
+
+/* A point announced: every commit so far on disk (the announced point's too), and no later point committed. */
+static void sink_progress(void *ctx, int64_t sweep_id, int done, int total, double eta, const char *phase)
+{
+	(void)ctx;
+	(void)sweep_id;
+	(void)total;
+	(void)eta;
+	(void)phase;
+	P.n++;
+	P.out_of_order |= done != P.last + 1;
+	P.last = done;
+	P.not_durable |= store_durable(F.st, store_commit_mark(F.st), NULL) != 1;
+	P.next_committed |= q1(P.db, "SELECT count(*) FROM points WHERE sweep_id = ? AND state = 'done'", P.sweep) != done;
+}
+
+static const struct ex_sink sink_p = { .event = sink_event, .progress = sink_progress };
+
+/* drive() as the daemon's loop runs a durable_async executor: while it waits for the disk, wait for the store's
+ * durable_fd (real time), without advancing the clock. */
+static double drive_disk(struct ex *x, struct store *st, double now)
+{
+	struct acq_err err = { 0 };
+	double t_end = mono_s() + 60;
+	while (mono_s() < t_end) {
+		F.now = now;
+		double next = ex_step(x, now);
+		enum ex_state s = ex_state(x);
+		if (s == EX_PAUSED && F.sample == S_WHITE && strstr(ex_reason(x), "place the sample")) {
+			F.sample = S_PAINT;
+			assert_int_equal(ex_resume(x, now, &err), 0);
+			continue;
+		}
+		if (s != EX_RUNNING && s != EX_SUSPENDED)
+			break;
+		if (x->phase == PH_DURABLE) {
+			struct pollfd p = { .fd = store_durable_fd(st), .events = POLLIN };
+			poll(&p, 1, 100);
+			store_durable_drain(st);
+			continue;
+		}
+		if (!(next < INFINITY))
+			break;
+		now = next > now ? next : now + 1e-6;
+	}
+	return now;
+}
+
+/* With the fsync on the store's thread (durable_async) and a slow disk: the laser off and the next move start
+ * while a point's commit is being synced, yet a point is announced (counted, progress) only once on disk, the
+ * next point is committed only after that, and every point is stored once. */
+static void test_commit_overlaps_fsync(void **state)
+{
+	(void)state;
+	struct run r;
+	struct acq_err err = { 0 };
+	r.st = open_store();
+	assert_true(store_durable_fd(r.st) >= 0);
+	static int hold_ms = 5;
+	store_sync_set_hook(r.st, slow_sync, &hold_ms);
+	r.sweep = new_sweep(r.st);
+	cfg_for_test(&r.cfg);
+	r.cfg.pause_after_reference = true;
+	r.cfg.durable_async = true;
+	F.st = r.st;
+	memset(&P, 0, sizeof P);
+	P.sweep = r.sweep;
+	assert_int_equal(sqlite3_open_v2(dbpath, &P.db, SQLITE_OPEN_READONLY, NULL), SQLITE_OK);
+	struct ex *x = ex_new(&r.cfg, &fake_ops, NULL, &sink_p, r.st, r.sweep, 0, &geom, plan, &err);
+	assert_non_null(x);
+	assert_int_equal(ex_start(x, 0, false, 0, &err), 0);
+	double t = drive_disk(x, r.st, 0);
+	int n = (int)plan->n_steps;
+	print_message("  %s at t=%.1f s; %d progress events; %d axis moves begun while a commit was not on disk (%d points)\n",
+		      ex_state_name(ex_state(x)), t, P.n, F.moves_undurable, n);
+	assert_int_equal(ex_state(x), EX_COMPLETED);
+	assert_int_equal(ex_stats(x)->points_done, n);
+	assert_int_equal(P.n, n);
+	assert_int_equal(P.last, n);
+	assert_false(P.out_of_order);
+	assert_false(P.not_durable);
+	assert_false(P.next_committed);
+	/* the overlap: most points' laser off and next move ran during their fsync (5 ms real, the fake's steps
+	 * take microseconds); the points' own waits for the disk alone would give none */
+	assert_true(F.moves_undurable >= n / 2);
+	assert_int_equal(F.laser_on_during_motion, 0);
+	F.st = NULL;
+	sqlite3_close(P.db);
+	ex_free(x, t);
+	store_close(r.st);
+	check_db(r.sweep, true);
+}
+
 static void test_halt_state_and_event_together(void **state)
 {
 	(void)state;
@@ -1040,6 +1164,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(test_faults_deferred_reads, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_crash_resume, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_alarm_backs_off, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_commit_overlaps_fsync, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_halt_state_and_event_together, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_halt_waits_for_laser_off, setup, teardown),
 	};

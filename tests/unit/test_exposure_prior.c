@@ -286,6 +286,26 @@ static void test_host_kind(void **state)
 	assert_string_equal(plan_kind_of(&grid, kind), "grid/auto");
 	assert_string_equal(plan_kind_of(&fib, kind), "fibonacci/fixed");
 	assert_string_equal(plan_kind_of(&adapt, kind), "adaptive/auto");
+	/* every kind a plan can have is one the cache enumerates (plan_kind_name), and the six are distinct */
+	bool seen[PLAN_HOST_KINDS] = { false };
+	for (int c3 = 0; c3 < 8; c3++) {
+		struct plan_spec s = { .integ_mode = c3 & 1 ? PLAN_INTEG_FIXED : PLAN_INTEG_AUTO,
+				       .fib_count = c3 & 2 ? 10 : 0, .adaptive = c3 & 4 ? &ad : NULL };
+		int i = plan_kind_index(&s);
+		assert_true(i >= 0 && i < PLAN_HOST_KINDS);
+		char name[PLAN_KIND_MAX];
+		assert_non_null(plan_kind_name(i, name));
+		assert_string_equal(plan_kind_of(&s, kind), name);
+		seen[i] = true;
+	}
+	for (int i = 0; i < PLAN_HOST_KINDS; i++) {
+		assert_true(seen[i]);
+		char ni[PLAN_KIND_MAX], nj[PLAN_KIND_MAX];
+		for (int j = 0; j < i; j++)
+			assert_string_not_equal(plan_kind_name(i, ni), plan_kind_name(j, nj));
+	}
+	assert_null(plan_kind_name(PLAN_HOST_KINDS, kind));
+	assert_null(plan_kind_name(-1, kind));
 	bool own = false;
 	assert_true(fabs(plan_time_host(&grid, &t, &sweep, &own) - (0.5 - 0.08 / 10)) < 1e-9);
 	assert_true(sweep == a && own);

@@ -385,6 +385,37 @@ static void test_malformed_identity(void **state)
 	expect_open_error(s5, ACQ_E_DEVICE, "unknown command");
 }
 
+/* A scripted peer on a fresh pty with the driver opened on it and emission switched on ("ID M S F" and an "OK"
+ * first in its script). */
+struct scripted {
+	int m, keep;
+	pid_t pid;
+	struct laser_cfg *cfg;
+	struct laser *l;
+};
+
+static void scripted_on(struct scripted *p, const char *const *script)
+{
+	char path[128];
+	p->m = open_pty(path, sizeof path, &p->keep);
+	p->pid = script_peer(p->m, script);
+	p->cfg = make_cfg(path, PEER_PATIENCE_MS);
+	p->l = NULL;
+	struct acq_err err = { 0 };
+	if (laser_open(p->cfg, &p->l, &err))
+		fail_msg("%s", err.msg);
+	assert_int_equal(laser_set_emission(p->l, true, &err), 0);
+}
+
+static void scripted_close(struct scripted *p)
+{
+	laser_close(p->l);
+	stop_child(p->pid);
+	close(p->m);
+	close(p->keep);
+	laser_cfg_free(p->cfg);
+}
+
 static void test_malformed_status_switches_emission_off(void **state)
 {
 	(void)state;
@@ -397,29 +428,37 @@ static void test_malformed_status_switches_emission_off(void **state)
 		{ "STATUS emission=1 interlock=1 fault=0\n", "OK\n" },
 	};
 	for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
-		char path[128];
-		int keep, m = open_pty(path, sizeof path, &keep);
 		const char *script[] = { "ID M S F\n", "OK\n", bad[i][0], bad[i][1], NULL };
-		pid_t pid = script_peer(m, script);
-		struct laser_cfg *cfg = make_cfg(path, PEER_PATIENCE_MS);
-		struct laser *l = NULL;
+		struct scripted p;
+		scripted_on(&p, script);
 		struct acq_err err = { 0 };
-		if (laser_open(cfg, &l, &err))
-			fail_msg("%s", err.msg);
-		assert_int_equal(laser_set_emission(l, true, &err), 0);
 		struct laser_status st;
-		assert_int_equal(laser_status(l, &st, &err), -1);
+		assert_int_equal(laser_status(p.l, &st, &err), -1);
 		print_message("  -> %s\n", err.msg);
 		assert_int_equal(err.code, ACQ_E_PROTO);
 		/* the driver switched emission off after the bad reply */
 		assert_true(sh->nlines >= 4);
 		assert_string_equal(sh->lines[sh->nlines - 1], "EMISSION OFF");
-		laser_close(l);
-		stop_child(pid);
-		close(m);
-		close(keep);
-		laser_cfg_free(cfg);
+		scripted_close(&p);
 	}
+}
+
+/* The driver reads what arrives in blocks: a stray line after a reply (here in the same write as the reply, so
+ * one read takes both) must be dropped with the unread input before the next command, not taken for its reply. */
+static void test_stray_line_after_reply_dropped(void **state)
+{
+	(void)state;
+	const char *script[] = { "ID M S F\n", "OK\nPOWER 99.0\n", "STATUS emission=1 interlock=1 fault=0\n",
+				 "POWER 42.0\n", NULL };
+	struct scripted p;
+	scripted_on(&p, script);
+	struct acq_err err = { 0 };
+	struct laser_status st;
+	if (laser_status(p.l, &st, &err))
+		fail_msg("%s", err.msg);
+	assert_true(st.emission);
+	assert_true(fabs(st.power_pct - 42.0) < 1e-9);
+	scripted_close(&p);
 }
 
 static void test_dead_line_times_out(void **state)
@@ -569,6 +608,7 @@ int main(void)
 		cmocka_unit_test(test_sim_socket_link_and_keepalive),
 		cmocka_unit_test(test_malformed_identity),
 		cmocka_unit_test(test_malformed_status_switches_emission_off),
+		cmocka_unit_test(test_stray_line_after_reply_dropped),
 		cmocka_unit_test(test_dead_line_times_out),
 		cmocka_unit_test(test_keepalive),
 		cmocka_unit_test(test_config_errors),

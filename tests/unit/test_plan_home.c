@@ -144,6 +144,32 @@ static void test_apart_first(void **state)
 	assert_int_equal(plan_home_order(&g, &l0, NULL, 2, s), -1);
 }
 
+/* A bench with bulkier arms (half-widths 10° and 9°: the arms at least 20° apart): from (17.5, 22.5, 61) no order
+ * exists at once, and the smallest apart move that opens one by itself, the laser down to 12.5°, closes the arms in:
+ * the rule (plan_home_move_ok) refuses it, and detector.theta moves up to 27.5° first instead. An apart move that
+ * skipped the rule would be the laser's, and the independent model fails that order. */
+static void test_apart_move_checked(void **state)
+{
+	(void)state;
+	struct bench_geom g;
+	bench_defaults(&g);
+	g.laser_body_halfwidth_deg = 10;
+	g.detector_body_halfwidth_deg = 9;
+	double from[3] = { 17.5, 22.5, 61 }, park[3] = { 30, 30, 180 };
+	struct plan_pos f = { from[0], from[1], from[2] };
+	assert_false(plan_blind(&g, &f) & (PLAN_R_COLLISION | PLAN_R_LIMITS));
+	struct plan_home_step s[PLAN_HOME_MAX_STEPS], t[PLAN_HOME_MAX_STEPS];
+	int n = plan_home_order(&g, &f, park, 7, s);
+	assert_int_equal(n, 7);
+	assert_int_equal(check_sequence(&g, from, park, 7, s, n), 1);
+	assert_true(s[0].apart && s[0].axis == 1 && fabs(s[0].target - 27.5) < 1e-9);
+	/* the laser's move to 12.5° is refused by the rule, though from there the homes have an order */
+	struct plan_pos l = f;
+	l.laser_theta = 12.5;
+	assert_false(plan_home_move_ok(&g, &f, &l));
+	assert_true(plan_home_order(&g, &l, park, 7, t) >= 0);
+}
+
 /* Start poses over the bench (clear of collision): from every one an order exists (with apart moves first where
  * the arms are low and close), and the independent model agrees with each. */
 static void test_start_poses(void **state)
@@ -180,6 +206,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_shipped_bench),
 		cmocka_unit_test(test_apart_first),
+		cmocka_unit_test(test_apart_move_checked),
 		cmocka_unit_test(test_start_poses),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
