@@ -46,9 +46,10 @@
  * a bias of the trend's Fresnel shape). The Monte-Carlo σ_noise stays as a floor, for when the GP's noise
  * model (η Λ) is smaller than the measured noise. σ_quad (quadrature) is independent and added.
  * Beyond the plan's last observation zenith the model is an extrapolation of its form that no sample checks: where
- * the last ring of samples, held out, is not predicted by the rest (recon_edge_check), σ_X (the model's own change
- * from the edge to each node beyond it, × 1/√3, summed over the band: recon_int.h) joins the kriging σ in quadrature
- * (clear-coat 5 × 6 × 8 at 30°: z RMS 1.99 → 0.89 over 20 seeds; recon/reconstruction.md, session 12).
+ * the last ring of samples, held out, misses the rest's prediction by a good part of the kriging amplitude
+ * (recon_edge_size), σ_X (the model's own change from the edge to each node beyond it, × RECON_EXTRAP_K, summed over
+ * the band: recon_int.h) joins the kriging σ in quadrature and is reported in its part (so select's accounting keeps
+ * it); recon/reconstruction.md, sessions 12-13.
  */
 /* σ_model² of the DHR at one incidence (see recon_dhr_ex): vmod[l] = c_lᵀ K_QQ c_l − b_lᵀ A⁻¹ b_l with
  * c = C[q*L + l] (Q nodes c6, the amplitude √α already folded in), b = K_nQ c (Kq[q*n + k]), A the Cholesky
@@ -471,14 +472,14 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	/* the one factorisation of K + Λ, and the leave-one-out amplitude α_λ of every channel */
 	if (recon_gp_setup(m, "dhr", A, Ainv, alpha, err))
 		goto out;
-	/* the extrapolation beyond the last zenith, where the last ring's block leave-out says the form does not hold
-	 * (recon_int.h, recon_edge_check) */
-	double zedge = recon_edge_check(m, Ainv, alpha);
-	if (zedge < 0) {
+	/* the extrapolation beyond the last zenith, where the last ring's block leave-out says the form misses it by a
+	 * good part of the kriging amplitude (recon_int.h, recon_edge_size) */
+	double aedge = recon_edge_size(m, Ainv, alpha);
+	if (aedge < 0) {
 		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
 		goto out;
 	}
-	double gate = recon_ramp(zedge, RECON_EDGE_Z0, RECON_EDGE_Z1);
+	double gate = recon_ramp(aedge, RECON_EDGE_A0, RECON_EDGE_A1);
 	for (size_t t = 0; t < nth; t++)
 		if (recon_extrap_sd(m, Q, c6 + t * Q * 6, wt, gate, xsd + t * L, err))
 			goto out;

@@ -27,10 +27,10 @@ static void canon_clamp(const double *c, double te, double *out)
 	rbf_canon(fmin(ts, te), 0.0, fmin(tl, te), fmin(fabs(d), M_PI), out);
 }
 
-double recon_edge_check(const struct recon_model *m, const double *Ainv, const double *alpha)
+double recon_edge_size(const struct recon_model *m, const double *Ainv, const double *alpha)
 {
 	size_t n = m->n, L = m->nwl, nb = 0;
-	double te = recon_last_zenith(m), z2 = 0;
+	double te = recon_last_zenith(m), a2 = 0;
 	size_t *B = malloc(n * sizeof *B), used = 0;
 	double *S = NULL, *r = NULL, *one = NULL;
 	if (!B)
@@ -46,7 +46,7 @@ double recon_edge_check(const struct recon_model *m, const double *Ainv, const d
 	r = malloc(nb * L * sizeof *r);
 	one = malloc(nb * sizeof *one);
 	if (!S || !r || !one) {
-		z2 = -1;
+		a2 = -1;
 		goto out;
 	}
 	for (size_t i = 0; i < nb; i++) {
@@ -64,22 +64,24 @@ double recon_edge_check(const struct recon_model *m, const double *Ainv, const d
 	for (size_t i = 0; i < nb; i++)
 		s1 += one[i];
 	for (size_t l = 0; l < L; l++) {
+		/* the ring's mean held-out residual (ln f), its noise variance α·1ᵀS⁻¹1/nb² taken off (a size, not a
+		 * significance), in units of the kriging amplitude √α */
 		double mean = 0, var = alpha[l] * s1 / ((double)nb * (double)nb);
 		for (size_t i = 0; i < nb; i++)
 			mean += r[l * nb + i];
 		mean /= (double)nb;
-		if (var > 0 && isfinite(var) && isfinite(mean)) {
-			z2 += mean * mean / var;
+		if (alpha[l] > 0 && isfinite(var) && isfinite(mean)) {
+			a2 += fmax(mean * mean - var, 0) / alpha[l];
 			used++;
 		}
 	}
-	z2 = used ? z2 / (double)used : 0;
+	a2 = used ? a2 / (double)used : 0;
 out:
 	free(B);
 	free(S);
 	free(r);
 	free(one);
-	return z2 < 0 ? -1 : sqrt(z2);
+	return a2 < 0 ? -1 : sqrt(a2);
 }
 
 int recon_extrap_sd(const struct recon_model *m, size_t Q, const double *c6, const double *wt, double gate, double *xs,
