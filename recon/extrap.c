@@ -1,5 +1,5 @@
-/* extrap: the DHR's extrapolation term beyond the plan's last observation zenith (recon/reconstruction.md,
- * "Session 12: the extrapolation beyond the last zenith"). */
+/* extrap: the DHR's extrapolation term beyond the plan's last observation zenith and the size of the last ring's
+ * misfit that switches it on (recon/reconstruction.md, sessions 12 and 13). */
 #include <lapacke.h>
 #include <math.h>
 #include <stdlib.h>
