@@ -46,6 +46,11 @@
  * the white reference, whose error is pure noise), the larger of the two 0.62-1.02 (paint at 60°: 1.43,
  * a bias of the trend's Fresnel shape). The Monte-Carlo σ_noise stays as a floor, for when the GP's noise
  * model (η Λ) is smaller than the measured noise. σ_quad (quadrature) is independent and added.
+ * Beyond the plan's last observation zenith the model is an extrapolation of its form that no sample checks: where
+ * the last ring of samples, held out, misses the rest's prediction by a good part of the kriging amplitude
+ * (recon_edge_size), σ_X (the model's own change from the edge to each node beyond it, × RECON_EXTRAP_K, summed over
+ * the band: recon_int.h) joins the kriging σ in quadrature and is reported in its part (so select's accounting keeps
+ * it); recon/reconstruction.md, sessions 12-13.
  */
 /* σ_model² of the DHR at one incidence (see recon_dhr_ex): vmod[l] = c_lᵀ K_QQ c_l − b_lᵀ A⁻¹ b_l with
  * c = C[q*L + l] (Q nodes c6, the amplitude √α already folded in), b = K_nQ c (Kq[q*n + k]), A the Cholesky
@@ -444,12 +449,12 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	double *sres = calloc(nth * L, sizeof *sres);
 	double *vmod = calloc(nth * L, sizeof *vmod), *squad = calloc(nth * L, sizeof *squad);
 	double *senergy = calloc(nth * L, sizeof *senergy), *aseen = malloc(L * sizeof *aseen);
-	double *tb = malloc(nth * Q * TREND_NB * sizeof *tb);
+	double *tb = malloc(nth * Q * TREND_NB * sizeof *tb), *xsd = calloc(nth * L, sizeof *xsd);
 	double *Bs = NULL, *ylog = NULL, *fl = NULL, *cdraw = NULL;
 	struct dhr_quad dq = { 0 };
 	if (!Kr || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud || !C || !KQQ || !soaQ || !U ||
 	    !Bt || !X || !Ainv || !alpha || !dfmis || !mratio || !misacc || !sres || !vmod || !squad || !tb ||
-	    !senergy || !aseen) {
+	    !senergy || !aseen || !xsd) {
 		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
 		goto out;
 	}
@@ -470,6 +475,17 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	/* the one factorisation of K + Λ, and the leave-one-out amplitude α_λ of every channel */
 	if (recon_gp_setup(m, "dhr", A, Ainv, alpha, err))
 		goto out;
+	/* the extrapolation beyond the last zenith, where the last ring's block leave-out says the form misses it by a
+	 * good part of the kriging amplitude (recon_int.h, recon_edge_size) */
+	double aedge = recon_edge_size(m, Ainv, alpha);
+	if (aedge < 0) {
+		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
+		goto out;
+	}
+	double gate = recon_ramp(aedge, RECON_EDGE_A0, RECON_EDGE_A1);
+	for (size_t t = 0; t < nth; t++)
+		if (recon_extrap_sd(m, Q, c6 + t * Q * 6, wt, gate, xsd + t * L, err))
+			goto out;
 	if (recon_misfit(m, MISFIT_Z, MISFIT_MIN, dfmis, mratio, NULL, err) < 0)
 		goto out;
 	/* the trend's coefficients are refitted in every draw (refit_trend) */
@@ -579,7 +595,8 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 			goto out;
 	}
 	for (size_t i = 0; i < nth * L; i++) {
-		double sn = ndraws > 1 ? sqrt(m2[i] / (ndraws - 1)) : 0.0, sm = fmax(sqrt(vmod[i]), senergy[i]);
+		double sn = ndraws > 1 ? sqrt(m2[i] / (ndraws - 1)) : 0.0, sk = sqrt(vmod[i] + xsd[i] * xsd[i]);
+		double sm = fmax(sk, senergy[i]);
 		double sb = sn > sm ? sn : sm, smis = fmin(fabs(misacc[i]), 1.0);
 		sig[i] = sqrt(sb * sb + squad[i] * squad[i] + smis * smis + sres[i] * sres[i]);
 		if (parts->noise)
@@ -587,7 +604,7 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 		if (parts->model)
 			parts->model[i] = sm;
 		if (parts->kriging)
-			parts->kriging[i] = sqrt(vmod[i]);
+			parts->kriging[i] = sk;
 		if (parts->energy)
 			parts->energy[i] = senergy[i];
 		if (parts->quad)
@@ -630,6 +647,7 @@ out:
 	free(aseen);
 	free(squad);
 	free(tb);
+	free(xsd);
 	free(Bs);
 	free(ylog);
 	free(fl);

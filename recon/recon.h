@@ -110,7 +110,8 @@ int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int 
  *  noise  the samples' uncertainties propagated by Monte Carlo through the one factorisation;
  *  model  the interpolation error between samples (GP posterior variance, amplitude from the leave-one-out
  *         residuals) including the prior on the unseen part of the hemisphere: max(kriging, energy);
- *  kriging, energy  its two terms: the GP's posterior σ, and the energy-bounded prior σ_E (recon_int.h);
+ *  kriging, energy  its two terms: the GP's posterior σ (with the extrapolation term σ_X beyond the plan's last
+ *                   zenith in quadrature: recon_int.h, recon_edge_size), and the energy-bounded prior σ_E (recon_int.h);
  *  quad   the quadrature error (last refinement step plus any overshoot above 1);
  *  misfit the data the final model does not honour (nearest-neighbour quadrature of its significant
  *         differences from the samples: smoothing, energy scaling);

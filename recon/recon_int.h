@@ -246,6 +246,36 @@ struct albedo_ws {
 /* Allocate for rules of up to qmax nodes (-1 with err on failure); free (idempotent). */
 int recon_albedo_ws_init(struct albedo_ws *ws, const struct recon_model *m, size_t qmax, struct acq_err *err);
 void recon_albedo_ws_free(struct albedo_ws *ws);
+/*
+ * The extrapolation beyond the plan's last observation zenith (extrap.c; recon/reconstruction.md, sessions 12-13).
+ * DHR nodes whose larger zenith lies beyond te, the largest zenith of any sample (either direction, reciprocity),
+ * are an extrapolation of the model's form that no sample checks; the GP's σ there is the amplitude of its
+ * residuals inside the range. Whether the form extrapolates is measured on the data, as a SIZE: the ring of samples
+ * at the last zenith (within RECON_EDGE_RING of te) is held out as a block and predicted from the others (the GP's
+ * block leave-out, e_B = ((A⁻¹)_BB)⁻¹ (A⁻¹(g − μ))_B, covariance α (A⁻¹)_BB⁻¹); a is the RMS over channels of the
+ * ring's mean held-out residual in ln f, its noise variance subtracted, over the kriging amplitude √α_λ (session 12
+ * used its significance, which grows with the ring's size and fired on the paper plan's many-sample ring). Measured
+ * (20 seeds): clear-coat 0.37-0.52 on 5 × 6 × 8, 7 × 8 × 8 and 10 × 10 × 10; every other simulator material ≤ 0.22.
+ * The band beyond te carries σ_X = RECON_EXTRAP_K · Σ_q w_q |f̂(x_q) − f̂(x_q clamped to te)| · ramp(a; A0, A1):
+ * the model's own change from the edge to the node is the scale of what can be wrong there (measured: the clear
+ * coat's error beyond te is 0.45-0.53 of it on all three plans), the same sign over the band (summed).
+ * RECON_EXTRAP_K: see reconstruction.md, session 13 (the paper plan's coverage of the coat rests on an interior error
+ * of the opposite sign, so K is the largest value keeping it ≥ 0.7).
+ */
+#define RECON_EDGE_RING (1.0 * M_PI / 180) /* the last ring: samples within 1° of the last zenith */
+#define RECON_EDGE_MIN 3                   /* fewer samples in the ring, or outside it: no verdict (a = 0) */
+#define RECON_EDGE_A0 0.25
+#define RECON_EDGE_A1 0.35
+#define RECON_EXTRAP_K 0.17
+/* The largest zenith of any sample (radians). */
+double recon_last_zenith(const struct recon_model *m);
+/* a, the size of the last ring's held-out residual (above), from recon_gp_setup's Ainv (lower triangle) and α; 0
+ * when there is no ring to test, −1 when out of memory. */
+double recon_edge_size(const struct recon_model *m, const double *Ainv, const double *alpha);
+/* xs[L] = gate · σ_X at one incidence's Q nodes c6 (weights wt, Σ = π); 0 without nodes beyond te or gate 0. */
+int recon_extrap_sd(const struct recon_model *m, size_t Q, const double *c6, const double *wt, double gate, double *xs,
+		    struct acq_err *err);
+
 /* The Gaussian-process set-up shared by the DHR's and the slices' uncertainty: A[n*n] receives the lower
  * Cholesky factor of K + ηΛ (the fit's system, column-major), alpha[L] the leave-one-out amplitude of every
  * channel, α_λ = mean_k w_k²/(A⁻¹)_kk (Ainv[n*n] is scratch). Errors name the caller `who`. 0 ok, −1 error. */
