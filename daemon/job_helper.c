@@ -1,4 +1,5 @@
-/* job_helper: the small process that forks the daemon's job_fork_msg() children (job.h). It is the daemon's own
+/* job_helper: the small process that forks the daemon's job_fork_msg() children (job.h), and the program's exec
+ * mode that runs a job_start() program. It is the daemon's own
  * program run again (posix_spawn of /proc/self/exe in its helper mode, job_kinds_main), at start-up and after a
  * crash alike: it never holds the daemon's memory, threads, database or devices, and each child is a fork of it,
  * never of the daemon; the loop only writes a message. Messages: job_int.h. */
@@ -179,10 +180,30 @@ static _Noreturn void helper_main(pid_t daemon)
 	}
 }
 
+/* job_start's program (job.c spawn): a[0] the daemon's process id, a[1] the directory ("": unchanged), a + 2 the
+ * program's argv. Dies with the daemon (PR_SET_PDEATHSIG survives the exec; a daemon gone already: exit 137),
+ * exit 126 when the directory cannot be entered, 127 when the program cannot be run. */
+static _Noreturn void exec_main(char **a)
+{
+	job_child_setup((pid_t)strtol(a[0], NULL, 10));
+	if (a[1][0] && chdir(a[1]) < 0) {
+		fprintf(stderr, "job: cannot enter %s: %s\n", a[1], strerror(errno));
+		_exit(126);
+	}
+	/* one BLAS thread unless the daemon's environment says otherwise: a program's parallelism is its own option
+	 * (brdf-recon --threads, recon.threads), and OpenBLAS's threads wait for each other on a busy machine */
+	setenv("OPENBLAS_NUM_THREADS", "1", 0);
+	execvp(a[2], a + 2);
+	fprintf(stderr, "job: exec failed: %s: %s\n", a[2], strerror(errno));
+	_exit(127);
+}
+
 void job_kinds_main(int argc, char **argv, const struct job_kind *const *table, size_t n)
 {
 	kinds = table;
 	n_kinds = n;
+	if (argc >= 5 && !strcmp(argv[1], JOB_EXEC_ARG))
+		exec_main(argv + 2);
 	if (argc < 3 || strcmp(argv[1], JOB_HELPER_ARG))
 		return;
 	/* the daemon's process id: a helper whose daemon has gone already (or run by hand) ends at once */
