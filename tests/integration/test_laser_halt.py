@@ -108,11 +108,16 @@ def run():
         conf = open(b.conf).read()
         assert "take_reference: true" in conf
         assert "    timeout_ms: 500\n" in conf
+        assert "fault_backoff_max_s: 5\n" in conf
         with open(b.conf, "w") as f:  # no white reference and no sample swap: every point has the laser on
             # the laser's replies come 100 ms late by design: a loaded machine (make check) must not add a
-            # timeout on top (the silent laser of step 5 is silent for 60 s, far beyond this)
+            # timeout on top (the silent laser of step 5 is silent for 60 s, far beyond this). The sweep's
+            # reconnection attempts wait in bench time (the simulator's clock, 50 x real) while the driver's
+            # timeout is real time: 10 attempts up to 5 bench s apart were 0.6 s real, less than one timeout, so
+            # one late reply on a loaded machine paused the sweep; up to 250 bench s apart they span 4 s real.
             f.write(conf.replace("take_reference: true", "take_reference: false").replace(
-                "    timeout_ms: 500\n", "    timeout_ms: 1000\n"))
+                "    timeout_ms: 500\n", "    timeout_ms: 1000\n").replace(
+                "fault_backoff_max_s: 5\n", "fault_backoff_max_s: 250\n"))
         b.start_sim()
         b.start_daemon()
         b.ctl("sample green-paint")
