@@ -5,7 +5,6 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
-#include <spawn.h>
 #include <stdio.h>
 #include <stdbool.h>
 #include <stdlib.h>
@@ -364,8 +363,6 @@ static struct job *job_new(int fd, size_t cap, bool keep_head, double timeout_s,
 	return j;
 }
 
-extern char **environ;
-
 /* Run argv with the output pipe through the program's exec mode (job_kinds_main, JOB_EXEC_ARG): posix_spawn of
  * /proc/self/exe (vfork and exec: the loop never copies the daemon's page tables, and no copy of its memory,
  * threads or descriptors outlives the exec), which sets death with the daemon, enters cwd and execs argv; in
@@ -397,31 +394,10 @@ static int spawn(char *const argv[], const char *cwd, size_t cap, double timeout
 		free(dir);
 		return acq_errf(err, ACQ_E_IO, "pipe: %s", strerror(errno));
 	}
-	posix_spawn_file_actions_t fa;
-	posix_spawnattr_t at;
-	sigset_t none, all;
-	sigemptyset(&none);
-	sigfillset(&all);
-	posix_spawn_file_actions_init(&fa);
-	posix_spawnattr_init(&at);
-	int rc = posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
-	if (!rc)
-		rc = posix_spawn_file_actions_adddup2(&fa, p[1], 1);
-	if (!rc)
-		rc = posix_spawn_file_actions_adddup2(&fa, p[1], 2);
-	if (!rc) /* the daemon's descriptors without close-on-exec are not the program's */
-		rc = posix_spawn_file_actions_addclosefrom_np(&fa, 3);
-	if (!rc)
-		rc = posix_spawnattr_setsigmask(&at, &none);
-	if (!rc)
-		rc = posix_spawnattr_setsigdefault(&at, &all);
-	if (!rc)
-		rc = posix_spawnattr_setflags(&at, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+	/* its output into the pipe; the daemon's descriptors without close-on-exec are not the program's */
+	int ofd[2] = { p[1], p[1] };
 	pid_t pid = 0;
-	if (!rc)
-		rc = posix_spawn(&pid, "/proc/self/exe", &fa, &at, xargv, environ);
-	posix_spawn_file_actions_destroy(&fa);
-	posix_spawnattr_destroy(&at);
+	int rc = jobh_spawn_self(xargv, ofd, 2, 1, &pid);
 	free(xargv);
 	free(dir);
 	close(p[1]);

@@ -212,6 +212,35 @@ void job_kinds_main(int argc, char **argv, const struct job_kind *const *table, 
 
 extern char **environ;
 
+int jobh_spawn_self(char *const argv[], const int *fds, int n, int first, pid_t *pid)
+{
+	posix_spawn_file_actions_t fa;
+	posix_spawnattr_t at;
+	sigset_t none, all;
+	sigemptyset(&none);
+	sigfillset(&all);
+	posix_spawn_file_actions_init(&fa);
+	posix_spawnattr_init(&at);
+	int rc = 0;
+	for (int i = 0; i < n && !rc; i++) /* clears close-on-exec, also when fds[i] is first + i already */
+		rc = posix_spawn_file_actions_adddup2(&fa, fds[i], first + i);
+	if (!rc) /* after the dups: a descriptor 0 among fds is copied first */
+		rc = posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
+	if (!rc)
+		rc = posix_spawn_file_actions_addclosefrom_np(&fa, first + n);
+	if (!rc)
+		rc = posix_spawnattr_setsigmask(&at, &none);
+	if (!rc) /* the daemon's ignored SIGPIPE is not the child's */
+		rc = posix_spawnattr_setsigdefault(&at, &all);
+	if (!rc)
+		rc = posix_spawnattr_setflags(&at, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+	if (!rc)
+		rc = posix_spawn(pid, "/proc/self/exe", &fa, &at, argv, environ);
+	posix_spawn_file_actions_destroy(&fa);
+	posix_spawnattr_destroy(&at);
+	return rc;
+}
+
 int jobh_spawn(int *sock, pid_t *pid, struct acq_err *err)
 {
 	int sv[2];
@@ -224,29 +253,8 @@ int jobh_spawn(int *sock, pid_t *pid, struct acq_err *err)
 	char dpid[24], name[] = "acq-helper", arg[] = JOB_HELPER_ARG;
 	snprintf(dpid, sizeof dpid, "%d", (int)getpid());
 	char *argv[] = { name, arg, dpid, NULL };
-	posix_spawn_file_actions_t fa;
-	posix_spawnattr_t at;
-	sigset_t none, all;
-	sigemptyset(&none);
-	sigfillset(&all);
-	posix_spawn_file_actions_init(&fa);
-	posix_spawnattr_init(&at);
-	int rc = posix_spawn_file_actions_adddup2(&fa, sv[1], 3); /* clears close-on-exec, also when sv[1] is 3 */
-	if (!rc)
-		rc = posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
-	if (!rc)
-		rc = posix_spawn_file_actions_addclosefrom_np(&fa, 4);
-	if (!rc)
-		rc = posix_spawnattr_setsigmask(&at, &none);
-	if (!rc)
-		rc = posix_spawnattr_setsigdefault(&at, &all); /* the daemon's ignored SIGPIPE is not the helper's */
-	if (!rc)
-		rc = posix_spawnattr_setflags(&at, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
 	pid_t p = 0;
-	if (!rc)
-		rc = posix_spawn(&p, "/proc/self/exe", &fa, &at, argv, environ);
-	posix_spawn_file_actions_destroy(&fa);
-	posix_spawnattr_destroy(&at);
+	int rc = jobh_spawn_self(argv, &sv[1], 1, 3, &p);
 	close(sv[1]);
 	if (rc) {
 		close(sv[0]);
