@@ -5,6 +5,7 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
+#include <stdio.h>
 #include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
@@ -362,38 +363,49 @@ static struct job *job_new(int fd, size_t cap, bool keep_head, double timeout_s,
 	return j;
 }
 
-/* Fork with the output pipe and run argv in the child; in the parent, register the job. */
+/* Run argv with the output pipe through the program's exec mode (job_kinds_main, JOB_EXEC_ARG): posix_spawn of
+ * /proc/self/exe (vfork and exec: the loop never copies the daemon's page tables, and no copy of its memory,
+ * threads or descriptors outlives the exec), which sets death with the daemon, enters cwd and execs argv; in
+ * the parent, register the job (reaped by job_reap like any child). */
 static int spawn(char *const argv[], const char *cwd, size_t cap, double timeout_s, job_done_fn done, void *arg,
 		 struct job **out, struct acq_err *err)
 {
 	if (!job_loop || !argv || !argv[0])
 		return acq_errf(err, ACQ_E_INVAL, "job: not initialised or no program");
+	size_t n = 0;
+	while (argv[n])
+		n++;
+	char dpid[24], name[] = "acq-exec", arg1[] = JOB_EXEC_ARG, here[] = "";
+	snprintf(dpid, sizeof dpid, "%d", (int)getpid());
+	char **xargv = calloc(n + 5, sizeof *xargv), *dir = cwd ? strdup(cwd) : NULL;
+	if (!xargv || (cwd && !dir)) {
+		free(xargv);
+		free(dir);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	xargv[0] = name;
+	xargv[1] = arg1;
+	xargv[2] = dpid;
+	xargv[3] = dir ? dir : here;
+	memcpy(xargv + 4, argv, n * sizeof *argv);
 	int p[2];
-	if (pipe2(p, O_CLOEXEC) < 0)
+	if (pipe2(p, O_CLOEXEC) < 0) {
+		free(xargv);
+		free(dir);
 		return acq_errf(err, ACQ_E_IO, "pipe: %s", strerror(errno));
-	pid_t parent = getpid();
-	pid_t pid = fork();
-	if (pid < 0) {
-		close(p[0]);
-		close(p[1]);
-		return acq_errf(err, ACQ_E_IO, "fork: %s", strerror(errno));
 	}
-	if (pid == 0) {
-		job_child_setup(parent);
-		int nul = open("/dev/null", O_RDONLY);
-		if (nul >= 0)
-			dup2(nul, 0);
-		dup2(p[1], 1);
-		dup2(p[1], 2);
-		if (cwd && chdir(cwd) < 0)
-			_exit(126);
-		execvp(argv[0], argv);
-		static const char msg[] = "job: exec failed\n";
-		ssize_t w = write(2, msg, sizeof msg - 1);
-		(void)w;
-		_exit(127);
-	}
+	/* its output into the pipe; the daemon's descriptors without close-on-exec are not the program's */
+	int ofd[2] = { p[1], p[1] };
+	pid_t pid = 0;
+	int rc = jobh_spawn_self(xargv, ofd, 2, 1, &pid);
+	free(xargv);
+	free(dir);
 	close(p[1]);
+	if (rc) {
+		close(p[0]);
+		return acq_errf(err, ACQ_E_IO, "job: cannot run /proc/self/exe %s for %s: %s", JOB_EXEC_ARG, argv[0],
+				strerror(rc));
+	}
 	struct job *j = job_new(p[0], cap, false, timeout_s, done, arg, err);
 	if (!j) {
 		kill(pid, SIGKILL);

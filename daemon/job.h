@@ -1,7 +1,7 @@
 /* job: slow work in child processes — programs run with stdout+stderr captured through a pipe watched by the loop
- * (the reconstruction), and functions of the program run in children of the job helper (plans, an adaptive
- * sweep's inputs); reap on SIGCHLD, enforce a timeout; the loop never waits for a child and never forks the
- * daemon to run its code. */
+ * (the reconstruction; posix_spawn of the program's exec mode), and functions of the program run in children of
+ * the job helper (plans, an adaptive sweep's inputs); reap on SIGCHLD, enforce a timeout; the loop never waits
+ * for a child and never forks the daemon. */
 #ifndef JOB_H
 #define JOB_H
 
@@ -25,8 +25,11 @@ typedef void (*job_done_fn)(struct job *j, int status, const char *output, size_
 void job_init(struct loop *lp);
 /* Kill (SIGTERM, then SIGKILL after 2 s) and reap every running job; their callbacks are not called. */
 void job_finish(void);
-/* Spawn argv (argv[0] searched in PATH when it has no '/') in directory cwd (NULL: unchanged), stdin from
- * /dev/null, killed after timeout_s (0: never). 0 or -1 (exec failure is reported as status 127). */
+/* Run argv (argv[0] searched in PATH when it has no '/') in directory cwd (NULL: unchanged), stdin from
+ * /dev/null, descriptors 3 and up closed, OPENBLAS_NUM_THREADS=1 unless the environment sets it, dying with the
+ * daemon, killed after timeout_s (0: never); through the program's exec mode (job_kinds_main, JOB_EXEC_ARG):
+ * the daemon is never forked. 0 or -1 (exec failure is reported as status 127, a cwd that cannot be entered
+ * as 126). */
 int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn done, void *arg,
 	      struct job **out, struct acq_err *err);
 /* In a job_fork_msg() child: payload is its own copy of the request's bytes (len of them, NUL after); compute,
@@ -39,9 +42,12 @@ struct job_kind {
 };
 /* The argument that makes a program the job helper (argv[1]; job_kinds_main). */
 #define JOB_HELPER_ARG "--job-helper"
+/* The argument that makes a program run a job_start() program (argv[1]; job_kinds_main). */
+#define JOB_EXEC_ARG "--job-exec"
 /* The program's job kinds, kinds[n] (kept: static storage). Call it first in main: the helper is this program
  * run again (/proc/self/exe, argv[1] JOB_HELPER_ARG), which then serves its daemon here and never returns; a
- * request names its kind by its place in this table. Otherwise it returns. */
+ * request names its kind by its place in this table. job_start() runs its program through this program run
+ * again too (argv[1] JOB_EXEC_ARG: it execs the program here). Otherwise it returns. */
 void job_kinds_main(int argc, char **argv, const struct job_kind *const *kinds, size_t n);
 /* Start the job helper (job_helper.c): a small process forking the job_fork_msg() children, this program run
  * again in its helper mode (job_kinds_main), so it holds none of the daemon's memory, threads or descriptors

@@ -1,4 +1,5 @@
-/* job_helper: the small process that forks the daemon's job_fork_msg() children (job.h). It is the daemon's own
+/* job_helper: the small process that forks the daemon's job_fork_msg() children (job.h), and the program's exec
+ * mode that runs a job_start() program. It is the daemon's own
  * program run again (posix_spawn of /proc/self/exe in its helper mode, job_kinds_main), at start-up and after a
  * crash alike: it never holds the daemon's memory, threads, database or devices, and each child is a fork of it,
  * never of the daemon; the loop only writes a message. Messages: job_int.h. */
@@ -179,10 +180,30 @@ static _Noreturn void helper_main(pid_t daemon)
 	}
 }
 
+/* job_start's program (job.c spawn): a[0] the daemon's process id, a[1] the directory ("": unchanged), a + 2 the
+ * program's argv. Dies with the daemon (PR_SET_PDEATHSIG survives the exec; a daemon gone already: exit 137),
+ * exit 126 when the directory cannot be entered, 127 when the program cannot be run. */
+static _Noreturn void exec_main(char **a)
+{
+	job_child_setup((pid_t)strtol(a[0], NULL, 10));
+	if (a[1][0] && chdir(a[1]) < 0) {
+		fprintf(stderr, "job: cannot enter %s: %s\n", a[1], strerror(errno));
+		_exit(126);
+	}
+	/* one BLAS thread unless the daemon's environment says otherwise: a program's parallelism is its own option
+	 * (brdf-recon --threads, recon.threads), and OpenBLAS's threads wait for each other on a busy machine */
+	setenv("OPENBLAS_NUM_THREADS", "1", 0);
+	execvp(a[2], a + 2);
+	fprintf(stderr, "job: exec failed: %s: %s\n", a[2], strerror(errno));
+	_exit(127);
+}
+
 void job_kinds_main(int argc, char **argv, const struct job_kind *const *table, size_t n)
 {
 	kinds = table;
 	n_kinds = n;
+	if (argc >= 5 && !strcmp(argv[1], JOB_EXEC_ARG))
+		exec_main(argv + 2);
 	if (argc < 3 || strcmp(argv[1], JOB_HELPER_ARG))
 		return;
 	/* the daemon's process id: a helper whose daemon has gone already (or run by hand) ends at once */
@@ -190,6 +211,35 @@ void job_kinds_main(int argc, char **argv, const struct job_kind *const *table, 
 }
 
 extern char **environ;
+
+int jobh_spawn_self(char *const argv[], const int *fds, int n, int first, pid_t *pid)
+{
+	posix_spawn_file_actions_t fa;
+	posix_spawnattr_t at;
+	sigset_t none, all;
+	sigemptyset(&none);
+	sigfillset(&all);
+	posix_spawn_file_actions_init(&fa);
+	posix_spawnattr_init(&at);
+	int rc = 0;
+	for (int i = 0; i < n && !rc; i++) /* clears close-on-exec, also when fds[i] is first + i already */
+		rc = posix_spawn_file_actions_adddup2(&fa, fds[i], first + i);
+	if (!rc) /* after the dups: a descriptor 0 among fds is copied first */
+		rc = posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
+	if (!rc)
+		rc = posix_spawn_file_actions_addclosefrom_np(&fa, first + n);
+	if (!rc)
+		rc = posix_spawnattr_setsigmask(&at, &none);
+	if (!rc) /* the daemon's ignored SIGPIPE is not the child's */
+		rc = posix_spawnattr_setsigdefault(&at, &all);
+	if (!rc)
+		rc = posix_spawnattr_setflags(&at, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+	if (!rc)
+		rc = posix_spawn(pid, "/proc/self/exe", &fa, &at, argv, environ);
+	posix_spawn_file_actions_destroy(&fa);
+	posix_spawnattr_destroy(&at);
+	return rc;
+}
 
 int jobh_spawn(int *sock, pid_t *pid, struct acq_err *err)
 {
@@ -203,29 +253,8 @@ int jobh_spawn(int *sock, pid_t *pid, struct acq_err *err)
 	char dpid[24], name[] = "acq-helper", arg[] = JOB_HELPER_ARG;
 	snprintf(dpid, sizeof dpid, "%d", (int)getpid());
 	char *argv[] = { name, arg, dpid, NULL };
-	posix_spawn_file_actions_t fa;
-	posix_spawnattr_t at;
-	sigset_t none, all;
-	sigemptyset(&none);
-	sigfillset(&all);
-	posix_spawn_file_actions_init(&fa);
-	posix_spawnattr_init(&at);
-	int rc = posix_spawn_file_actions_adddup2(&fa, sv[1], 3); /* clears close-on-exec, also when sv[1] is 3 */
-	if (!rc)
-		rc = posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
-	if (!rc)
-		rc = posix_spawn_file_actions_addclosefrom_np(&fa, 4);
-	if (!rc)
-		rc = posix_spawnattr_setsigmask(&at, &none);
-	if (!rc)
-		rc = posix_spawnattr_setsigdefault(&at, &all); /* the daemon's ignored SIGPIPE is not the helper's */
-	if (!rc)
-		rc = posix_spawnattr_setflags(&at, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
 	pid_t p = 0;
-	if (!rc)
-		rc = posix_spawn(&p, "/proc/self/exe", &fa, &at, argv, environ);
-	posix_spawn_file_actions_destroy(&fa);
-	posix_spawnattr_destroy(&at);
+	int rc = jobh_spawn_self(argv, &sv[1], 1, 3, &p);
 	close(sv[1]);
 	if (rc) {
 		close(sv[0]);

@@ -36,6 +36,12 @@ int jobh_kind_index(const struct job_kind *kind);
  * the caller's but its end of the socket and the standard output and error. 0 or -1 with err. */
 int jobh_spawn(int *sock, pid_t *pid, struct acq_err *err);
 
+/* posix_spawn of this program (/proc/self/exe) with argv (vfork and exec: no copy of the caller's memory, threads
+ * or descriptors survives): descriptor fds[i] becomes first + i (i < n), then standard input is /dev/null and
+ * every descriptor from first + n on is closed; signals unmasked and at their defaults. 0 with *pid, or an errno
+ * value. */
+int jobh_spawn_self(char *const argv[], const int *fds, int n, int first, pid_t *pid);
+
 /* In a freshly forked child: default signals and mask, death with parent (PR_SET_PDEATHSIG; exits at once
  * when parent is gone already). Async-signal-safe. */
 void job_child_setup(pid_t parent);

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs the test suites and prints one closing line "N passed, N failed, N skipped".
 # Usage: tests/run-tests.sh [unit|integration|fuzz]...   (default: all three)
-# Environment (set by `make check`): ACQ_BUILD, ACQ_SRC, ACQ_SEED.
+# Environment (set by `make check`): ACQ_BUILD, ACQ_SRC, ACQ_SEED; OPENBLAS_NUM_THREADS (1 unless set: see below).
 #   ACQ_TEST_JOBS  tests run at once (default 2): unit tests, fuzz replays and the integration tests
 #                  that are not timing-sensitive (see SERIAL below). 1 runs everything one at a time.
 # Results are printed in a fixed order (unit, fuzz, integration; by name) whatever order the tests end
@@ -9,6 +9,10 @@
 # the slowest are listed before the closing line.
 set -uo pipefail
 : "${ACQ_BUILD:?}" "${ACQ_SRC:?}" "${ACQ_SEED:=1}"
+# One BLAS thread per test process (make check's TEST_ENV says so too; this covers a direct run): OpenBLAS's
+# pthread build waits for its other threads, which on a busy machine costs ten times the wall time
+# (`brdf-recon fit` of a 10x10x10 sharp lobe, two `yes` beside it: 8.6-9.7 s by default, 1.0 s with one thread).
+export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1}
 suites=("$@"); [ ${#suites[@]} -gt 0 ] || suites=(unit fuzz integration)
 logdir="$ACQ_BUILD/test-logs"; mkdir -p "$logdir"
 resdir=$(mktemp -d "$logdir/.results.XXXXXX") || exit 2
@@ -26,6 +30,24 @@ SERIAL=" test_acqctl.py test_adaptive_kill.py test_adaptive_seconds.py test_clie
  test_plan_helper.py test_sd_notify.py test_sim_bench.py test_sweep_crash.py test_sweep_start_offloop.py
  test_sweep_step_kill.py test_watchdog.py
  test_axis_modbus test_axis_modbus_sim test_laser test_spectro_sim "
+
+# The shared tests that use the most CPU (measured: build/test-logs/times.tsv), longest first: they start
+# first, so that the two lanes end together instead of one long test running alone at the end.
+FIRST=" test_recon_extremes test_dhr_trend_refit.py test_recon_honesty test_recon_honest_extremes test_recon_rgb
+ test_sweep_full.py test_adaptive_budget.py test_material test_recon_cli.py test_laser_halt.py test_recon_rgl.py
+ test_dhr_coat.py test_recon_render_hdr.py test_recon_trend test_recon_select test_recon_fit test_adaptive_target.py
+ test_sim_truth.py "
+# Shared tests that mostly wait (≤ 1 s of CPU in a make check; a file, a socket, a simulated device): they run
+# beside the SERIAL tests, one at a time, instead of in the CPU-bound lanes. A SERIAL test then shares the
+# machine with at most one such test. A new test is not LIGHT until measured so.
+LIGHT=" test_server test_devices test_job_helper test_store_ckpt test_plan_worker test_recon_sky test_sim_refdrift
+ test_recon_model test_executor test_sim_sphere test_avaspec_usb test_recon_render test_store_crash test_sim_arm
+ test_loop test_store test_store_sync test_exposure test_recon_plot
+ fuzz_plan fuzz_simarm fuzz_axisreply fuzz_proto
+ test_slow_disk.py test_avaspec_golden.sh test_sim_sockets.py test_sim_arms_spectro.py test_store_schema.py
+ test_systemd_unit.sh test_acqctl_golden.py test_sim_laser_spectro.py test_store_foreign.py "
+# one space between names (a name at a line's end was followed by a newline, and did not match " NAME ")
+SERIAL=" $(echo $SERIAL) " FIRST=" $(echo $FIRST) " LIGHT=" $(echo $LIGHT) "
 
 # ---- one test: run it, keep its log, its times and its result line (read back in order later) ------------
 # timed KEY LOG CMD...: runs CMD with stdout+stderr to LOG; writes "rc wall user sys" to $resdir/KEY.t.
@@ -85,11 +107,28 @@ run_in_src() { cd "$ACQ_SRC" && "$@"; }
 
 # ---- the pool: at most JOBS jobs at once; results read back in the order the tests were listed ----------
 queue=()    # "suite key test", in print order
-shared=()   # indices into queue of the tests that may run beside others
+first=()    # indices into queue of the shared tests that start first (FIRST, in its order)
+shared=()   # ... of the other tests that may run beside others
+light=()    # ... of the shared tests that run beside the SERIAL ones (LIGHT)
 alone=()    # ... and of those that run alone (SERIAL)
-enqueue() {   # enqueue SUITE TEST shared|alone
-  queue+=("$1 $(printf 'k%04d' "${#queue[@]}") $2")
-  if [ "$3" = alone ]; then alone+=($((${#queue[@]} - 1))); else shared+=($((${#queue[@]} - 1))); fi
+enqueue() {   # enqueue SUITE TEST: into queue, and into first, shared, light or alone by its name
+  local i=${#queue[@]} name; name=$(basename "$2")
+  queue+=("$1 $(printf 'k%04d' "$i") $2")
+  case " $SERIAL $LIGHT $FIRST " in
+    *" $name "*) ;;
+    *) shared+=("$i"); return;;
+  esac
+  case $SERIAL in *" $name "*) alone+=("$i"); return;; esac
+  case $LIGHT in *" $name "*) light+=("$i"); return;; esac
+  first+=("$i")
+}
+first_order() {   # the indices of first, in FIRST's order
+  local f i
+  for f in $FIRST; do
+    for i in "${first[@]}"; do
+      [ "$(basename "${queue[i]##* }")" = "$f" ] && echo "$i"
+    done
+  done
 }
 
 run_pool() {   # run_pool NJOBS INDEX...: runs those queue entries with at most NJOBS at once
@@ -123,22 +162,22 @@ print_results() {
 
 for s in "${suites[@]}"; do
   case $s in
-    unit)        for t in "$ACQ_BUILD"/tests/test_*; do
-                   [ -x "$t" ] || continue
-                   case $SERIAL in *" $(basename "$t") "*) enqueue unit "$t" alone;;
-                                   *) enqueue unit "$t" shared;; esac
-                 done;;
-    fuzz)        for t in "$ACQ_BUILD"/fuzz-replay/fuzz_*; do [ -x "$t" ] && enqueue fuzz "$t" shared; done;;
-    integration) for t in "$ACQ_SRC"/tests/integration/test_*; do
-                   [ -x "$t" ] || continue
-                   case $SERIAL in *" $(basename "$t") "*) enqueue integration "$t" alone;;
-                                   *) enqueue integration "$t" shared;; esac
-                 done;;
+    unit)        for t in "$ACQ_BUILD"/tests/test_*; do [ -x "$t" ] && enqueue unit "$t"; done;;
+    fuzz)        for t in "$ACQ_BUILD"/fuzz-replay/fuzz_*; do [ -x "$t" ] && enqueue fuzz "$t"; done;;
+    integration) for t in "$ACQ_SRC"/tests/integration/test_*; do [ -x "$t" ] && enqueue integration "$t"; done;;
     *) echo "run-tests.sh: unknown suite '$s' (unit, integration or fuzz)" >&2; exit 2;;
   esac
 done
-run_pool "$JOBS" "${shared[@]}"   # everything that may share the CPU with another test
-run_pool 1 "${alone[@]}"          # then the timing-sensitive integration tests, one at a time
+# everything that may share the CPU with another test, the heaviest first
+run_pool "$JOBS" $(first_order) "${shared[@]}"
+# then the timing-sensitive tests one at a time, each beside at most one test that mostly waits
+if [ "$JOBS" -gt 1 ]; then
+  run_pool 1 "${alone[@]}" &
+  run_pool 1 "${light[@]}" &
+  wait
+else
+  run_pool 1 "${light[@]}" "${alone[@]}"
+fi
 print_results
 
 # ---- times: one row per test, and the slowest listed ----------------------------------------------------

@@ -55,14 +55,23 @@ int acqd_options_parse(int argc, char **argv, struct acqd_options *o)
 	return -1;
 }
 
-int acqd_check_config(const char *path, const struct conf_sim *sim)
+/* The configuration at path, or NULL with its error printed to stderr after prefix. */
+static struct conf *load_or_say(const char *path, const struct conf_sim *sim, const char *prefix)
 {
 	struct conf *c = NULL;
 	struct acq_err err = { 0 };
 	if (conf_load(path, sim, &c, &err)) {
-		fprintf(stderr, "%s\n", err.msg);
-		return 1;
+		fprintf(stderr, "%s%s\n", prefix, err.msg);
+		return NULL;
 	}
+	return c;
+}
+
+int acqd_check_config(const char *path, const struct conf_sim *sim)
+{
+	struct conf *c = load_or_say(path, sim, "");
+	if (!c)
+		return 1;
 	for (int d = 0; d < CONF_DEV__COUNT; d++)
 		if (c->devnote[d][0])
 			printf("note: %s: %s\n", conf_dev_name((enum conf_dev)d), c->devnote[d]);
@@ -75,12 +84,10 @@ int acqd_check_config(const char *path, const struct conf_sim *sim)
 
 int acqd_laser_off(const char *path, const struct conf_sim *sim)
 {
-	struct conf *c = NULL;
-	struct acq_err err = { 0 };
-	if (conf_load(path, sim, &c, &err)) {
-		fprintf(stderr, "acquisitiond --laser-off: %s\n", err.msg);
+	struct conf *c = load_or_say(path, sim, "acquisitiond --laser-off: ");
+	if (!c)
 		return 1;
-	}
+	struct acq_err err = { 0 };
 	int rc = 0;
 	struct laser *l = NULL;
 	if (!c->laser) {

@@ -25,21 +25,45 @@ blind_points: drop
 """
 
 SCALE = 40.0
-# (control command, command that ends it or None, bench seconds it stays on at least)
+# The faults that stay on until ended stay on at least their bench seconds AND until the daemon has recorded a
+# fault of their device (the events' device column: NAME, or NAME.axis with a trailing dot here), at most
+# HOLD_MAX_S real seconds: a real-time window of 4 bench seconds (0.1 s) can pass on a loaded machine without one
+# read of the device, which tested the machine's load, not the daemon.
+HOLD_MAX_S = 30.0
+# (control command, command that ends it or None, bench seconds it stays on at least, its device)
 FAULTS = [
-    ("fault modbus-timeout laser on", "fault modbus-timeout laser off", 4),
-    ("fault modbus-timeout detector on", "fault modbus-timeout detector off", 4),
-    ("fault drop-connection laser", None, 0),
-    ("fault drop-connection detector", None, 0),
-    ("fault alarm-mid-move laser", None, 0),
-    ("fault alarm-mid-move detector", None, 0),
-    ("fault stall detector", None, 0),
-    ("fault stall laser", None, 0),
-    ("fault spectro-disconnect 20", None, 0),
-    ("fault saturation-burst 3", None, 0),
-    ("fault laser-interlock on", "fault laser-interlock off", 4),
-    ("fault laser-fault on", "fault laser-fault off", 4),
+    ("fault modbus-timeout laser on", "fault modbus-timeout laser off", 4, "laser."),
+    ("fault modbus-timeout detector on", "fault modbus-timeout detector off", 4, "detector."),
+    ("fault drop-connection laser", None, 0, None),
+    ("fault drop-connection detector", None, 0, None),
+    ("fault alarm-mid-move laser", None, 0, None),
+    ("fault alarm-mid-move detector", None, 0, None),
+    ("fault stall detector", None, 0, None),
+    ("fault stall laser", None, 0, None),
+    ("fault spectro-disconnect 20", None, 0, None),
+    ("fault saturation-burst 3", None, 0, None),
+    ("fault laser-interlock on", "fault laser-interlock off", 4, "laser"),
+    ("fault laser-fault on", "fault laser-fault off", 4, "laser"),
 ]
+
+
+def fault_events(b, sid, device, after_id):
+    """The fault events of device (NAME, or a prefix NAME. for its axes) with an id above after_id."""
+    db = b.db()
+    try:
+        rows = db.execute("SELECT id, device FROM events WHERE sweep_id = ? AND kind = 'fault' AND id > ?",
+                          (sid, after_id)).fetchall()
+    finally:
+        db.close()
+    return [r for r in rows if ((r[1] or "").startswith(device) if device.endswith(".") else r[1] == device)]
+
+
+def last_event_id(b):
+    db = b.db()
+    try:
+        return db.execute("SELECT COALESCE(MAX(id), 0) FROM events").fetchone()[0]
+    finally:
+        db.close()
 
 
 class LaserWatch(threading.Thread):
@@ -85,22 +109,25 @@ def run():
         injected, t0 = [], time.time()
         pending = list(FAULTS)
         last_done = -1
-        clear_at, clear_cmd = None, None
+        clear_at, clear_cmd, clear_dev, clear_after, clear_by = None, None, None, 0, None
 
         def tick(row):
-            nonlocal last_done, clear_at, clear_cmd
-            if clear_cmd and time.time() >= clear_at:
+            nonlocal last_done, clear_at, clear_cmd, clear_dev, clear_after, clear_by
+            now = time.time()
+            if clear_cmd and now >= clear_at and (now >= clear_by or fault_events(b, sid, clear_dev, clear_after)):
                 b.ctl(clear_cmd)
                 clear_cmd = None
             done = row.get("points_done") or 0
             # one fault per newly committed point, once the sample is on the stage
             if pending and not clear_cmd and row["state"] == "running" and done > last_done and done >= 1:
-                cmd, off, dur = pending.pop(0)
+                cmd, off, dur, dev = pending.pop(0)
+                after = last_event_id(b)
                 b.ctl(cmd)
                 injected.append((cmd, done))
                 last_done = done
                 if off:
-                    clear_cmd, clear_at = off, time.time() + dur / SCALE
+                    clear_cmd, clear_at, clear_by = off, time.time() + dur / SCALE, time.time() + HOLD_MAX_S
+                    clear_dev, clear_after = dev, after
 
         row = L.drive_to_end(b, sid, timeout=150, on_tick=tick, poll=0.03)
         watch.stop = True

@@ -3,7 +3,7 @@
 Fibonacci points took 31 s on the loop, longer than the unit's WatchdogSec=30), so the daemon plans a sweep in
 a forked child and stores and starts it when the plan comes back.
 1. A huge sweep.start (10 x 1000 Fibonacci points): while it is planned, a well-behaved client's `status`
-   answers in < 0.5 s (the bound test_client_limits uses for a huge `plan`), a second sweep.start and a manual move are refused ("being planned",
+   answers in < STATUS_MAX_S (below), a second sweep.start and a manual move are refused ("being planned",
    busy), and sweep.abort ends the planning: the first sweep.start gets "aborted while planning", nothing is
    stored. Before the change the status requests got no reply until the plan was made.
 2. A 10 x 60 sweep (about 600 points) planned off the loop is stored whole (the plan crosses the process
@@ -30,6 +30,33 @@ HUGE = ("name: huge\nincidence:\n  theta_deg: [0, 8, 16, 24, 32, 40, 48, 56, 64,
 MEDIUM = ("name: medium\nincidence:\n  theta_deg: [5, 12, 19, 26, 33, 40, 47, 54, 61, 68]\n"
           "observation:\n  fibonacci: {count: 60, max_theta_deg: 80}\nintegration: {mode: fixed, ms: 20}\n"
           "averages: 1\nblind_points: drop\n")
+
+
+# A status answered within this while the plan is made off the loop: the plan takes more than 5 s (asserted), so a
+# loop that made it, or a large part of it, would hold a status for seconds; on a loaded machine (two busy
+# processes on two cores beside make check) a served request can still wait a few hundred ms for a CPU.
+STATUS_MAX_S = 1.0
+
+
+def settled_row(b, sid, timeout=30):
+    """The sweep's row once it has left `stopping`: the transient of a sweep pausing (the laser off, the point in
+    hand finished: test_laser_halt.py), e.g. at the sample swap right after a resume."""
+    t0 = time.monotonic()
+    row = L.sweep_row(b, sid)
+    while row["state"] == "stopping" and time.monotonic() - t0 < timeout:
+        time.sleep(0.05)
+        row = L.sweep_row(b, sid)
+    return row
+
+
+def settled_status(c, timeout=30):
+    """status, once its sweep has left `stopping` (see settled_row)."""
+    t0 = time.monotonic()
+    st = c.req("status")
+    while (st.get("sweep") or {}).get("state") == "stopping" and time.monotonic() - t0 < timeout:
+        time.sleep(0.05)
+        st = c.req("status")
+    return st
 
 
 def run():
@@ -61,7 +88,7 @@ def run():
             len(lat), max(lat), sorted(lat)[len(lat) // 2]))
         assert "r" not in reply, ("the huge plan came back within %.1f s: the test's premise (planning takes "
                                   "longer) does not hold: %s" % (reply["t"], reply["r"]))
-        assert max(lat) < 0.5, "status took %.3f s while a sweep was planned" % max(lat)
+        assert max(lat) < STATUS_MAX_S, "status took %.3f s while a sweep was planned" % max(lat)
         r2 = c.req("sweep.start", plan=MEDIUM, name="second")
         L.say("second sweep.start while planning: %s" % r2.get("error", {}).get("message"))
         assert not r2.get("ok") and "being planned" in r2["error"]["message"], r2
@@ -93,7 +120,7 @@ def run():
                              capture_output=True, text=True, timeout=300)
         assert out.returncode == 0, out.stderr
         n_plan = json.loads(out.stdout)["plan"]["measured"]
-        row = L.sweep_row(b, sid)
+        row = settled_row(b, sid)
         L.say("stored sweep %d: %s, %d points (acqctl's local dry run of the same plan: %d)" % (
             sid, row["state"], row["points_total"], n_plan))
         assert row["points_total"] == n_plan and n_plan > 400, (row["points_total"], n_plan)
@@ -116,7 +143,7 @@ def run():
         assert not r2.get("ok") and "being planned" in r2["error"]["message"], r2
         st = c.req("status")
         L.say("status after the resume: %s" % json.dumps(st.get("sweep", st.get("progress")))[:200])
-        row = L.sweep_row(b, sid)
+        row = settled_row(b, sid)
         assert row["state"] in ("running", "paused") and row["points_total"] == n_plan, row
 
         # 4. the resume at start-up (daemon.auto_resume) plans off the loop too: the daemon is ready (serving
@@ -151,9 +178,9 @@ def run():
         assert i_plan is not None and i_ready is not None and i_res is not None, log[-3000:]
         # before the change the plan was made on the loop before the daemon said ready
         assert i_plan < i_ready < i_res, "the start-up resume was planned before the daemon was ready:\n" + log
-        row = L.sweep_row(b, sid)
+        row = settled_row(b, sid)
         assert row["state"] in ("running", "paused") and row["points_total"] == n_plan, row
-        st = c.req("status")
+        st = settled_status(c)
         L.say("status after the auto-resume: %s" % json.dumps(st.get("sweep"))[:200])
         assert st["sweep"]["id"] == sid and st["sweep"]["state"] in ("running", "paused"), st
         ab = c.req("sweep.abort")
