@@ -7,6 +7,7 @@
 
 #include "daemon/job.h"
 #include "daemon/log.h"
+#include "daemon/loop.h"
 #include "daemon/sweep.h"
 
 #include "daemon/plan/plan.h"
@@ -100,7 +101,7 @@ static void plan_done(struct job *j, int status, const char *output, size_t len,
 static int plan_submit(struct plan_job *pj, struct acq_err *err)
 {
 	const struct plan_msg *m = (const struct plan_msg *)pj->msg;
-	double rate = pj->app->have_sim && pj->app->sim.time_scale > 0 ? pj->app->sim.time_scale : 1; /* loop s/s */
+	double rate = loop_rate(pj->app->lp); /* loop s per real s */
 	/* with every step the reply grows with the plan (the paper's 866 points: about 0.3 MB): bounded by what a
 	 * client accepts as a reply */
 	size_t out_max = m->points ? PROTO_MAX_REPLY : JOB_FORK_OUTPUT_MAX;

@@ -169,7 +169,7 @@ static int start_job(struct app *app, uint64_t serial, json_t *id, int64_t resum
 	sweep_plan_prior(app->sweep, sj->spec, resume_id, &tm);
 	sj->app = app;
 	sj->serial = serial;
-	double rate = app->have_sim && app->sim.time_scale > 0 ? app->sim.time_scale : 1; /* loop seconds per s */
+	double rate = loop_rate(app->lp); /* loop seconds per real second */
 	if (plan_worker_start(name && *name ? name : "plan", text, &app->conf->bench, &tm, PLAN_MEM_BYTES, START_DEADLINE_S * rate,
 			      START_DEADLINE_S, start_planned, sj, &sj->worker, err))
 		goto fail;

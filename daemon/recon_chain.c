@@ -12,6 +12,7 @@
 
 #include "daemon/job.h"
 #include "daemon/log.h"
+#include "daemon/loop.h"
 #include "daemon/store.h"
 
 enum { RC_FIT, RC_MERL, RC_DHR, RC_RENDER, RC__COUNT };
@@ -190,7 +191,8 @@ static void recon_next(struct recon_chain *ch)
 			break;
 		}
 		argv[argc] = NULL;
-		if (job_start(argv, ch->outdir, ch->env->conf->recon.timeout_s, recon_stage_done, ch, &ch->job, &err) == 0) {
+		double timeout = ch->env->conf->recon.timeout_s * loop_rate(ch->env->loop); /* real s on the loop's clock */
+		if (job_start(argv, ch->outdir, timeout, recon_stage_done, ch, &ch->job, &err) == 0) {
 			recon_event(ch, "info", "brdf-recon %s started (pid %d)", rc_names[ch->rstage], (int)job_pid(ch->job));
 			return;
 		}

@@ -60,8 +60,7 @@ bool rsel_busy(const struct rsel *r)
 
 static double rate_of(const struct rsel *r)
 {
-	const struct conf *c = r->env->conf;
-	return c->have_sim && c->sim.time_scale > 0 ? c->sim.time_scale : 1; /* loop seconds per second */
+	return loop_rate(r->env->loop); /* loop seconds per real second */
 }
 
 static void finish(struct rsel *r, bool ok, const char *fmt, ...) __attribute__((format(printf, 3, 4)));

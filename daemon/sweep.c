@@ -209,8 +209,7 @@ static void tick(struct loop *lp, void *arg)
 			sw->last.state = SWEEP_FAULTED;
 			snprintf(sw->last.message, sizeof sw->last.message, "sweep %lld %s (%s); NOT recorded in the "
 				 "database yet: %s; retrying", (long long)sw->id, ex_state_name(s), ex_reason(sw->ex), err.msg);
-			const struct conf *c = sw->env.conf;
-			schedule(sw, now + 2.0 * (c->have_sim && c->sim.time_scale > 0 ? c->sim.time_scale : 1));
+			schedule(sw, now + 2.0 * loop_rate(sw->env.loop)); /* 2 real seconds */
 			return;
 		}
 		if (sw->unrecorded_logged)

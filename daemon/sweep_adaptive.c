@@ -109,9 +109,8 @@ static void target_spec(const struct adapt *a, char *buf, size_t len)
  * NaN with err. */
 static double measured_raw(const struct adapt *a, struct acq_err *err)
 {
-	const struct conf *c = a->env->conf;
-	double wall, rate = c->have_sim && c->sim.time_scale > 0 ? c->sim.time_scale : 1; /* bench s per wall s */
-	return store_adaptive_measured(a->env->store, a->id, &wall, NULL, err) ? NAN : wall * rate;
+	double wall;
+	return store_adaptive_measured(a->env->store, a->id, &wall, NULL, err) ? NAN : wall * loop_rate(a->env->loop);
 }
 
 /* The "sweep.adaptive" event for watchers (and the log). */
