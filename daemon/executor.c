@@ -639,7 +639,7 @@ double ex_step_run(struct ex *x, double now)
 {
 	/* A point committed while the sweep went on: announced as soon as it is on disk, whatever the state. */
 	if (x->ack_pending)
-		ex_ack_step(x, now);
+		ex_ack_step(x);
 	/* Bounded work per call: a few transitions, then hand back to the loop. */
 	for (int guard = 0; guard < 16; guard++) {
 		x->wake = INFINITY;

@@ -573,16 +573,22 @@ static int store_point(struct ex *x, int64_t pid, bool calibrated, const char **
 
 static void go_on(struct ex *x, double now, bool deferred);
 
+/* On to PH_DURABLE: wait until point's commit is on disk (commit_waits: the previous point's, before this one's). */
+static void wait_for_disk(struct ex *x, double now, int point, bool commit_waits)
+{
+	x->commit_waits = commit_waits;
+	x->phase = PH_DURABLE;
+	char text[64];
+	snprintf(text, sizeof text, "storing point %d: waiting for the disk", point);
+	ex_set_phase_text(x, text);
+	ex_run_durable(x, now);
+}
+
 /* The point's exposures are in: merge, check saturation, calibrate, commit, go on. */
 static void commit_point(struct ex *x, double now)
 {
 	if (x->ack_pending) { /* the previous point on disk first: a point is never committed before the one before */
-		x->commit_waits = true;
-		x->phase = PH_DURABLE;
-		char text[64];
-		snprintf(text, sizeof text, "storing point %d: waiting for the disk", x->ack_point);
-		ex_set_phase_text(x, text);
-		ex_run_durable(x, now);
+		wait_for_disk(x, now, x->ack_point, true);
 		return;
 	}
 	x->commit_waits = false;
@@ -688,16 +694,11 @@ static void commit_point(struct ex *x, double now)
 		go_on(x, now, true);
 		return;
 	}
-	x->phase = PH_DURABLE;
-	char text[64];
-	snprintf(text, sizeof text, "storing point %d: waiting for the disk", x->cur);
-	ex_set_phase_text(x, text);
-	ex_run_durable(x, now);
+	wait_for_disk(x, now, x->cur, false);
 }
 
-int ex_ack_step(struct ex *x, double now)
+int ex_ack_step(struct ex *x)
 {
-	(void)now;
 	if (!x->ack_pending)
 		return 1;
 	struct acq_err err = { 0 };
@@ -724,7 +725,7 @@ int ex_ack_step(struct ex *x, double now)
 void ex_run_durable(struct ex *x, double now)
 {
 	if (x->commit_waits) {
-		int r = ex_ack_step(x, now);
+		int r = ex_ack_step(x);
 		if (r < 0)
 			return;
 		if (r == 0) {
@@ -775,7 +776,7 @@ static void go_on(struct ex *x, double now, bool deferred)
 	point_timed(x, now);
 	if (!deferred)
 		progress(x, x->phase_text);
-	else if (ex_ack_step(x, now) < 0)
+	else if (ex_ack_step(x) < 0)
 		return;
 	if (x->cur >= x->nsteps) {
 		if (x->cfg.hold_at_end)

@@ -214,6 +214,6 @@ void ex_run_acq(struct ex *x, double now);
 void ex_run_durable(struct ex *x, double now);
 /* The point committed with the sweep going on (ack_pending): once on disk, count and announce it. 1 when none is
  * pending any more, 0 still waiting, -1 the fsync failed (the sweep failed). */
-int ex_ack_step(struct ex *x, double now);
+int ex_ack_step(struct ex *x);
 
 #endif

@@ -58,11 +58,6 @@ bool rsel_busy(const struct rsel *r)
 	return r->job != NULL || r->done != NULL;
 }
 
-static double rate_of(const struct rsel *r)
-{
-	return loop_rate(r->env->loop); /* loop seconds per real second */
-}
-
 static void finish(struct rsel *r, bool ok, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 static void finish(struct rsel *r, bool ok, const char *fmt, ...)
 {
@@ -225,7 +220,7 @@ int rsel_write_candidates(const char *path, const struct bench_geom *g, const st
 static void next(struct rsel *r)
 {
 	struct acq_err err = { 0 };
-	double timeout = r->env->conf->recon.timeout_s * rate_of(r);
+	double timeout = r->env->conf->recon.timeout_s * loop_rate(r->env->loop);
 	char *argv[20];
 	int argc = 0;
 	if (r->stage == RS_PROBE && r->warm_ok >= 0)
@@ -267,7 +262,9 @@ static void next(struct rsel *r)
 	}
 	argv[argc] = NULL;
 	r->t0 = loop_now(r->env->loop);
-	if (job_start(argv, r->res.dir, r->stage == RS_PROBE ? 60 * rate_of(r) : timeout, stage_done, r, &r->job, &err))
+	if (r->stage == RS_PROBE)
+		timeout = 60 * loop_rate(r->env->loop);
+	if (job_start(argv, r->res.dir, timeout, stage_done, r, &r->job, &err))
 		finish(r, false, "brdf-recon %s could not start: %s", argv[1], err.msg);
 }
 
@@ -324,7 +321,8 @@ int rsel_start(struct rsel *r, const struct rsel_req *q, rsel_done_fn done, void
 	if (q->n_done)
 		memcpy(m + 1, q->done, q->n_done * sizeof *q->done);
 	memcpy((char *)(m + 1) + q->n_done * sizeof *q->done, q->plan_text, text_len);
-	int rc = job_fork_msg(&rsel_inputs_kind, m, len, 0, JOB_FORK_OUTPUT_MAX, 60 * rate_of(r), stage_done, r, &r->job,
+	double timeout = 60 * loop_rate(r->env->loop); /* real seconds on the loop's clock */
+	int rc = job_fork_msg(&rsel_inputs_kind, m, len, 0, JOB_FORK_OUTPUT_MAX, timeout, stage_done, r, &r->job,
 			      err);
 	free(m);
 	if (rc)
