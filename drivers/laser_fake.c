@@ -150,6 +150,7 @@ static int lf_status(struct laser_dev *d, struct laser_status *st, struct acq_er
 	if (fake.interlock_open || fake.fault_code)
 		fake.emission = false;
 	fake.status_reads++;
+	fake.reads_since_keepalive++;
 	st->emission = fake.emission;
 	st->power_pct = fake.power_pct;
 	st->interlock_ok = !fake.interlock_open;
@@ -169,6 +170,9 @@ static int lf_keepalive(struct laser_dev *d, struct acq_err *err)
 	if (fake.last_keepalive > 0 && fake.last_refresh - fake.last_keepalive > fake.max_keepalive_gap)
 		fake.max_keepalive_gap = fake.last_refresh - fake.last_keepalive;
 	fake.last_keepalive = fake.last_refresh;
+	if (fake.reads_since_keepalive > fake.max_reads_between)
+		fake.max_reads_between = fake.reads_since_keepalive;
+	fake.reads_since_keepalive = 0;
 	pthread_mutex_unlock(&fake_lock);
 	return rc;
 }

@@ -20,6 +20,8 @@ struct laser_fake {
 	int keepalives;             /* laser_keepalive() calls */
 	double last_keepalive;      /* the last laser_keepalive() (0: none yet) */
 	double max_keepalive_gap;   /* the longest time between two laser_keepalive() calls since the reset */
+	int reads_since_keepalive;  /* status reads since the last laser_keepalive() */
+	int max_reads_between;      /* the most status reads between two laser_keepalive() calls since the reset */
 	double last_refresh;        /* the last command (0: none yet) */
 	double max_gap;             /* the longest time between two commands since the reset */
 	int expired;                /* emission on when a command came later than keepalive_ms: it went off */

@@ -525,7 +525,10 @@ static double fake_laser_get(const double *field)
  * ahead of queued requests: with 40 queries queued on a laser whose every command takes 50 ms (2 s of laser
  * work), the longest time between two keep-alive refreshes stays within half the keep-alive (1000 ms: the
  * driver's contract, laser.h) and emission stays on. Expected: the 250 ms period + one 50 ms read running;
- * queued behind the reads (FIFO, as before) it was about 2 s. */
+ * queued behind the reads (FIFO, as before) it was about 2 s. The ordering itself is asserted by counts, which a
+ * loaded machine cannot move: each read takes at least 50 ms, so at most 250/50 + 1 reads run between two
+ * refreshes (FIFO: all 40). The times are asserted only against the laser's own 1000 ms expiry (a keep-alive gap
+ * of 0.91 s was seen at load 13 with the refresh still ahead of the queue: the laser thread waited for a CPU). */
 static void test_keepalive_ahead_of_queued_reads(void **state)
 {
 	struct fixture *fx = *state;
@@ -538,6 +541,8 @@ static void test_keepalive_ahead_of_queued_reads(void **state)
 	int reads0 = lf->status_reads, ka0 = lf->keepalives;
 	lf->max_gap = 0;
 	lf->max_keepalive_gap = 0;
+	lf->reads_since_keepalive = 0;
+	lf->max_reads_between = 0;
 	n_queries = 0;
 	for (int i = 0; i < 40; i++)
 		assert_int_equal(devices_query(fx->dv, query_done, NULL, &err), 0);
@@ -545,12 +550,18 @@ static void test_keepalive_ahead_of_queued_reads(void **state)
 	assert_true(wait_for(fx, 0, forty_answered));
 	double took = real_s() - t0, gap = fake_laser_get(&lf->max_gap), kgap = fake_laser_get(&lf->max_keepalive_gap);
 	int reads = lf->status_reads - reads0, kas = lf->keepalives - ka0;
+	int between = __atomic_load_n(&lf->max_reads_between, __ATOMIC_SEQ_CST),
+	    since = __atomic_load_n(&lf->reads_since_keepalive, __ATOMIC_SEQ_CST);
+	if (since > between) /* the reads after the last refresh count too */
+		between = since;
 	print_message("40 queries: %.2f s, %d laser status reads, %d keep-alives, longest gap between keep-alives "
-		      "%.3f s, between any commands %.3f s\n", took, reads, kas, kgap, gap);
+		      "%.3f s (at most %d reads between two), between any commands %.3f s\n", took, reads, kas, kgap,
+		      between, gap);
 	assert_true(reads >= 40);
-	assert_true(took >= 1.9);       /* the premise: the laser's queue held 2 s of reads */
-	assert_true(kgap < 0.5);        /* keepalive_ms / 2 */
-	assert_true(gap < 0.5);
+	assert_true(took >= 1.9);                  /* the premise: the laser's queue held 2 s of reads */
+	assert_true(between <= (int)(0.25 / 0.05) + 1); /* ahead of the queue: period / read time + the one running */
+	assert_true(kgap < 1.0);                   /* keepalive_ms: the laser's own expiry */
+	assert_true(gap < 1.0);
 	assert_true(kas >= (int)(took / 0.25) - 2);
 	assert_true(lf->emission);
 	assert_int_equal(lf->expired, 0);
