@@ -221,8 +221,8 @@ struct plan_host_kind {
 /* The executor's costs the ordering model leaves out; plan_timing_defaults() gives the executor's and the
  * arm driver's defaults, the daemon fills it from its configuration (sweep, acquisition, devices). */
 struct plan_timing {
-	double axis_poll_s;         /* controllers' status polling: the end of a move is seen this late on average
-				     * (half a period), plus one confirmation read after settling */
+	double axis_poll_s;         /* controllers' status polling: a move costs PLAN_MOVE_POLLS periods beyond its
+				     * trapezoid and settling */
 	double extra_settle_s;      /* sweep.extra_settle_s after every move */
 	double probe_ms;            /* auto integration: one probe exposure per point */
 	double min_ms, ladder_ratio; /* auto integration: times rounded down to min_ms · ladder_ratio^k (executor) */
@@ -269,10 +269,18 @@ int plan_make(const struct plan_spec *spec, const struct bench_geom *g, struct p
  * start when given (else the sweep starts at the first point). 0, or -1 with err. */
 int plan_make_points(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_pos *pts, size_t n,
 		     const struct plan_pos *start, struct plan_result **out, struct acq_err *err);
+/* The polling periods (plan_timing.axis_poll_s) a move costs beyond its trapezoid and settling. The driver
+ * (drivers/axis_modbus.c poll_at) reads a leg's status first at its predicted end, then again when the distance left
+ * would be covered, and confirms the position after settling: one period. Before session 14 it polled every period
+ * from the start, seeing the end half a period late on average: 1.5. bench_duration on the paper plan at time scale
+ * 35 (load 3.6-3.7): the sweep 1907.6 -> 1889.9 s with the change, 20 bench ms per move, about the half period
+ * (25 ms) the price drops by. */
+#define PLAN_MOVE_POLLS 1.0
+
 /* Straight-move time plus the settling of the axes that move: a lower bound of any move between a and b. */
 double plan_straight_s(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b);
-/* A straight move between two poses as the executor sees it (bench s): plan_straight_s, then 1.5 polls and the extra
- * settling; 0 when nothing moves. */
+/* A straight move between two poses as the executor sees it (bench s): plan_straight_s, then PLAN_MOVE_POLLS polls and the
+ * extra settling; 0 when nothing moves. */
 double plan_move_time_s(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *a,
 			const struct plan_pos *b);
 /* A pose [laser_theta, detector_theta, detector_phi] from a YAML sequence (what names it in messages). 0 or -1. */
@@ -349,7 +357,7 @@ struct plan_cand {
 void plan_timing_continue(struct plan_timing *t, const struct plan_pos *done, size_t n, size_t stride);
 /* The batch's route model as `brdf-recon select --route` takes it (comma-separated: the arms' position from (laser
  * θ, detector θ, detector φ), then per axis in that order speed °/s, acceleration °/s², settle s, then the executor's
- * seconds per move beyond the trapezoids and settling: 1.5 polls + extra settle, plan_time.c; then spec's band nodes,
+ * seconds per move beyond the trapezoids and settling: PLAN_MOVE_POLLS polls + extra settle, plan_time.c; then spec's band nodes,
  * four numbers each: rho, then plan_time_point's point_s, dark_s, rungs at that band (rho 1 first, rising; one node
  * when the band does not change them: fixed integration, an exposure prior)) into buf (PLAN_ROUTE_SPEC_LEN). */
 #define PLAN_ROUTE_SPEC_LEN 2048

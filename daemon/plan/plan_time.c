@@ -3,8 +3,9 @@
  * The ordering model (plan.c) times each step as trapezoidal moves (each axis's acceleration and velocity
  * profile, the slowest axis wins) + settling + averages × (integration + read-out): that is what the order
  * optimises, and it stays as it is. The executor spends more per step, and this model adds it:
- *   - a move is seen finished by polling the controllers: on average half a poll period late, then one more
- *     read confirms the axis stayed in position after settling (1.5 periods), plus sweep.extra_settle_s;
+ *   - a move is seen finished by polling the controllers: first at its predicted end, then one more read
+ *     confirms the axis stayed in position after settling (PLAN_MOVE_POLLS periods, plan.h; 1.5 when the
+ *     driver polled every period from the start), plus sweep.extra_settle_s;
  *   - an exposure of n averages at t ms lasts n·t, then the spectrometer's read-out (once per exposure: the
  *     AvaSpec averages on board and reads out about 10 ms after the last scan, shared/docs/avaspec-usb.md;
  *     acq-sim does the same), then a start/poll/fetch round trip (exposure_overhead_s, half a poll period);
@@ -86,7 +87,7 @@ double plan_move_time_s(const struct bench_geom *g, const struct plan_timing *t,
 			const struct plan_pos *b)
 {
 	double mv = plan_straight_s(g, a, b);
-	return mv > 0 ? mv + 1.5 * t->axis_poll_s + t->extra_settle_s : 0;
+	return mv > 0 ? mv + PLAN_MOVE_POLLS * t->axis_poll_s + t->extra_settle_s : 0;
 }
 
 int plan_pose_parse(const struct yc_node *n, const char *what, struct plan_pos *out, struct acq_err *err)
@@ -323,7 +324,7 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 		/* expected darks: fixed, one per clearing; auto, one per rung first visited since the clearing (the
 		 * point's rung is new with probability (1 - 1/k)^j after j points) */
 		double p_dark = clear ? 1.0 : aut ? pow(1.0 - 1.0 / c.k, since_clear) : 0.0;
-		double settle = st->settle_s + (moves ? 1.5 * t->axis_poll_s + t->extra_settle_s : 0);
+		double settle = st->settle_s + (moves ? PLAN_MOVE_POLLS * t->axis_poll_s + t->extra_settle_s : 0);
 		double pr_s = i == 0 && !t->reference ? first_probe : c.probe;
 		double d = st->move_s + settle + pr_s + c.meas + p_dark * c.dark + c.hdr + host;
 		r->t_motion_s += st->move_s;
