@@ -30,7 +30,6 @@
 
 #include <math.h>
 #include <stdlib.h>
-#include <string.h>
 
 #define ETA_PLAN_WEIGHT 5.0   /* points of measurement worth as much as the plan's own estimate */
 #define ETA_MEMORY_FRACTION 0.125 /* the recent average's memory, as a fraction of the sweep's points */

@@ -269,13 +269,17 @@ int plan_make(const struct plan_spec *spec, const struct bench_geom *g, struct p
  * start when given (else the sweep starts at the first point). 0, or -1 with err. */
 int plan_make_points(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_pos *pts, size_t n,
 		     const struct plan_pos *start, struct plan_result **out, struct acq_err *err);
-/* The polling periods (plan_timing.axis_poll_s) a move costs beyond its trapezoid and settling. The driver
- * (drivers/axis_modbus.c poll_at) reads a leg's status first at its predicted end, then again when the distance left
- * would be covered, and confirms the position after settling: one period. Before session 14 it polled every period
- * from the start, seeing the end half a period late on average: 1.5. bench_duration on the paper plan at time scale
- * 35 (load 3.6-3.7): the sweep 1907.6 -> 1889.9 s with the change, 20 bench ms per move, about the half period
- * (25 ms) the price drops by. */
-#define PLAN_MOVE_POLLS 1.0
+/* The polling periods (plan_timing.axis_poll_s) a move costs beyond its trapezoid and settling (the settle's
+ * confirming read is at settle_s, in the settling). The driver (drivers/axis_modbus.c poll_at) reads a leg's status
+ * first at its predicted end, then, the controller a little behind, when the distance left would be covered, at
+ * least poll_s/10 later: 0.1. Before session 14 it polled every period from the start, seeing the end half a period
+ * late on average, and the price was 1.5: at time scale 1 a period more than the bench took, which at time scale
+ * 35 the host figure, measured against the price, hid. Measured with tests/bench/bench_duration.py (session 14,
+ * load 2-4): the driver change alone took the paper plan at time scale 35 from 1907.6 to 1889.9 s (20 bench ms per
+ * move, the half period); priced at 1.0 the quick plan at time scale 1 took 36.8-39.6 ms per point less than the
+ * model's bench part (three sweeps), the paper plan at 35 5.23 ms real per point more: per move about 5 ms of
+ * bench time (0.1 period) and 6.5 ms of real time (the host, plan_timing_defaults) solve both. */
+#define PLAN_MOVE_POLLS 0.1
 
 /* Straight-move time plus the settling of the axes that move: a lower bound of any move between a and b. */
 double plan_straight_s(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b);

@@ -3,9 +3,10 @@
  * The ordering model (plan.c) times each step as trapezoidal moves (each axis's acceleration and velocity
  * profile, the slowest axis wins) + settling + averages × (integration + read-out): that is what the order
  * optimises, and it stays as it is. The executor spends more per step, and this model adds it:
- *   - a move is seen finished by polling the controllers: first at its predicted end, then one more read
- *     confirms the axis stayed in position after settling (PLAN_MOVE_POLLS periods, plan.h; 1.5 when the
- *     driver polled every period from the start), plus sweep.extra_settle_s;
+ *   - a move is seen finished by polling the controllers: first at its predicted end, again a little later
+ *     when the controller is behind, then a read confirms the axis stayed in position after settling
+ *     (PLAN_MOVE_POLLS periods, plan.h: 0.1; 1.5 when the driver polled every period from the start), plus
+ *     sweep.extra_settle_s;
  *   - an exposure of n averages at t ms lasts n·t, then the spectrometer's read-out (once per exposure: the
  *     AvaSpec averages on board and reads out about 10 ms after the last scan, shared/docs/avaspec-usb.md;
  *     acq-sim does the same), then a start/poll/fetch round trip (exposure_overhead_s, half a poll period);
@@ -30,7 +31,7 @@
  *     beyond the bench's part) instead of the default: the host, not the sample, made the paper plan's repeat at
  *     time scale 35 run shorter than predicted (session 9, tests/bench/bench_duration.py's terms: each exposure
  *     term of the repeat within 0.4 s of what it took, the host 10.3-17.9 ms per point by the load against the
- *     default's 16; the default is now a quiet machine's figure, 6 ms, see plan_timing_defaults);
+ *     default's 16; the default is now a quiet machine's figure, 6.5 ms, see plan_timing_defaults);
  *   - the reference at the start: the move to ref_pose from where the arms are (when known: the daemon knows,
  *     a local dry run does not), probe, dark and the plan's averages there, then the move from ref_pose to
  *     the first point (the first step has no move in the ordering model).
@@ -65,20 +66,22 @@ void plan_timing_defaults(struct plan_timing *t)
 		.hdr_ratio = 8,               /* exposure.c hdr_ratio default */
 		.reference = true,
 		.ref_pose = { 0.0, 45.0, 180.0 }, /* executor.c reference_pose default */
-		/* the host's time per point (real seconds: calibration, storage, protocol round trips) when nothing
-		 * better is known (the daemon uses what its latest completed sweep measured, sweep_plan_prior), measured
-		 * with tests/bench/bench_duration.py as what a sweep took between commits beyond this model's bench part
-		 * (exp_prior_build's host figure), the paper plan at time scale 35 on a quiet machine (load 0.3-1.5,
-		 * nothing else running, session 14): first sweeps 5.09 and 5.87 ms, a repeat 6.23 ms: 6 ms. A bench PC
-		 * runs nothing else, so the default is the quiet figure. The same sweeps on the shared development machine
-		 * under load took 10.3-15.2 ms (sessions 9-10, load 9-20; 12.1-12.9 at load 8-13 in session 13) and up to
-		 * 25 ms in bursts: CPU contention, not work. The default of sessions 10-13, 13.5 ms (the loaded median),
-		 * made the quiet first sweep's prediction 9-10 % long (now 2-3 % short: the sample's exposures); a
-		 * loaded machine's first sweep is now predicted short (session 13's runs at 12.1-12.9 ms: about 12 %;
-		 * the live ETA measures its host), its later ones are timed by the latest sweep's own figure. At time scale 1
-		 * the host is about 1 % of a point. The small fixed plan took 5.1 ms at time scale 10 (fewer exposures
-		 * and requests per point). Reported apart as host_s. */
-		.point_overhead_s = 0.006,
+		/* the host's time per point (real seconds: calibration, storage, protocol round trips, the arms' command
+		 * delivery) when nothing better is known (the daemon uses what its latest completed sweep measured,
+		 * sweep_plan_prior), measured with tests/bench/bench_duration.py as what a sweep took between commits
+		 * beyond this model's bench part (exp_prior_build's host figure), the paper plan at time scale 35 on a
+		 * quiet machine (session 14, load 0.3-3.7, nothing else or little running), restated for this model's
+		 * price of a move (PLAN_MOVE_POLLS 0.1; each figure + (price it was measured at - 0.1) x 50 ms / 35):
+		 * the old driver and price 1.5 (load 0.3-1.5) 5.09, 5.87, 6.23 -> 6.4, 7.2, 7.5 ms; at 1.5 with load 3.6
+		 * 5.30 -> 6.6; the new driver at price 1.0 (load 2-3.7) 4.72, 5.23 -> 6.0, 6.5: the median, 6.5 ms.
+		 * A bench PC runs nothing else, so the default is the quiet figure. The same sweeps on the shared
+		 * development machine under load took 10.3-15.2 ms at price 1.5 (sessions 9-10, load 9-20; 12.1-12.9 at
+		 * load 8-13 in session 13) and up to 25 ms in bursts: CPU contention, not work. The default of sessions
+		 * 10-13, 13.5 ms (the loaded median at price 1.5), made the quiet first sweep's prediction 9-10 % long;
+		 * a loaded machine's first sweep is now predicted short (about 10 % at session 13's loads; the live ETA
+		 * measures its host, eta.c), its later ones are timed by the latest sweep's own figure. At time scale 1
+		 * the host is well under 1 % of a point. Reported apart as host_s. */
+		.point_overhead_s = 0.0065,
 		.time_scale = 1,
 	};
 }

@@ -213,7 +213,7 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
 
 
 # daemon/plan/plan.h PLAN_MOVE_POLLS: the axis polls a move costs beyond its trapezoid and settling (poll_s 0.05)
-MOVE_POLLS = 1.0
+MOVE_POLLS = 0.1
 TERMS = ("reference_s", "motion_s", "settle_s", "probes_s", "darks_s", "first_exposures_s", "hdr_s", "host_s")
 
 
