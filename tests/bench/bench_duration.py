@@ -391,7 +391,7 @@ def split_points(db, sid, steps, pj, steps_host, scale, price, auto):
 
 def eta_split(per_pt, done, total, left_real):
     """The ETA's error at `done` points (daemon/eta.c: the plan's rest plus, per point left, the recent excess per point
-    weighted n/(n + 5)) split into the model's part (the rest's exposures against the recent past's excess over the
+    weighted n/(n + 5), its host part the median of the host's time over the last m points) split into the model's part (the rest's exposures against the recent past's excess over the
     plan) and the host's (the rest's host time against the plan's host plus the recent past's excess): each as a
     fraction of the real time left. Returns (model, host, host per point of the rest, the recent past's)."""
     m = min(max(ETA_MEMORY[0] * total, ETA_MEMORY[1]), ETA_MEMORY[2])
@@ -400,10 +400,13 @@ def eta_split(per_pt, done, total, left_real):
     left = total - done
     if not past or not rest:
         return (float("nan"),) * 4
-    re = rh = None
+    re = None
     for e_b, h, hp in past:
         re = e_b if re is None else re + a * (e_b - re)
-        rh = (h - hp) if rh is None else rh + a * ((h - hp) - rh)
+    # the host's part as eta.c takes it since session 14: the median of its time per point over the last m points
+    hs = sorted(x[1] for x in past[-int(round(m)):])
+    med = hs[len(hs) // 2] if len(hs) % 2 else 0.5 * (hs[len(hs) // 2 - 1] + hs[len(hs) // 2])
+    rh = med - past[-1][2]
     w = len(past) / (len(past) + ETA_PLAN_WEIGHT)
     model = left * w * re - sum(x[0] for x in rest)
     host = sum(x[2] for x in rest) + left * w * rh - sum(x[1] for x in rest)
