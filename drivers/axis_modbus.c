@@ -140,8 +140,9 @@ static int fail_move(struct axis_dev *ax, struct acq_err *err)
 	return AXIS_MOVE_FAILED;
 }
 
-/* When to read a running leg's status next (session 14: the polls every poll_s from the start were most of the
- * detector threads' CPU, ~2.4 ms per point on the paper plan): at the leg's predicted end (the trapezoid from its
+/* When to read a running leg's status next (session 14: polled every poll_s from the start, the arms' threads
+ * spent 1.57 ms of CPU per point of the paper plan at time scale 35 on a quiet machine, 1.07-1.30 ms with this at
+ * load 3; tests/bench/bench_duration.py's debug stall lines): at the leg's predicted end (the trapezoid from its
  * start), but at least every watch_s before it, so an alarm or a stall mid-move, or a move that never ends
  * (the deadline), is seen within watch_s; after the predicted end (the controller behind: the command's delivery
  * on a loaded host, a slower profile) when the distance left would be covered at full speed then decelerating
