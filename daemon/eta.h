@@ -7,6 +7,7 @@
 #include <stdbool.h>
 
 #define ETA_HISTORY 1024
+#define ETA_HOST_WINDOW 120 /* the recent memory's largest span in points (eta.c ETA_MEMORY_MAX) */
 
 struct eta {
 	double t0_loop, t0_real;   /* first sample of the two clocks (the loop's may run time-scale faster) */
@@ -25,6 +26,14 @@ struct eta {
 	 * recent_plan is replayed over them (eta_replan); older ones weigh under exp(-ETA_HISTORY / 120) = 2e-4 */
 	struct { int from, to; } hist[ETA_HISTORY];
 	long hist_n;               /* intervals recorded since the reset */
+	/* the host's time per point is an interval's real seconds less its bench work (eta_work) at the scale:
+	 * the last ETA_HOST_WINDOW points' real and bench seconds, oldest first from host_n - ETA_HOST_WINDOW (kept
+	 * apart, compared at the current scale as recent_real and recent_plan are), and the recent average of the
+	 * bench work per point with recent_real's weights (recent_work; NAN: not measured) */
+	struct { float real, work; } host[ETA_HOST_WINDOW];
+	long host_n;
+	double recent_work, work_w;
+	double work_now, work_last; /* eta_work's cumulative bench work: now, at the last update (NAN: unknown) */
 	int total;                 /* the sweep's points at the last update */
 };
 
@@ -36,6 +45,10 @@ void eta_running(struct eta *e, bool running, double loop_now, double real_now);
  * the recent average is replayed over the remembered intervals in the new plan, so the excess measured so far is
  * kept, against the new plan; the interval under way (its two ends in different plans) is not measured. */
 void eta_replan(struct eta *e, double (*plan_at)(const void *ctx, int step), const void *ctx);
+/* The bench's own seconds (the counted points' exposures as the planner prices them, their planned moves and
+ * settling) of the points done so far, cumulative; given before the eta_update that counts them (NAN: unknown,
+ * the excess is then the plain recent average). */
+void eta_work(struct eta *e, double work_s);
 /* After a point: wall seconds left. plan_at_s: the plan's predicted time (bench s from the sweep's start) at
  * which step `done` starts; plan_total_s: the plan's whole predicted time (NAN: no plan). */
 double eta_update(struct eta *e, int done, int total, double plan_at_s, double plan_total_s, double loop_now,

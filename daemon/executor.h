@@ -125,6 +125,9 @@ struct ex_stats {
 	int spectra, darks, probes, exposures, merges;
 	int faults, recoveries, retries, saturated_redos; /* redos: saturated or misled (underexposed) */
 	int dark_rejects;            /* darks taken again because of saturated pixels */
+	double shots_s;              /* bench seconds of the counted points' shots as the planner prices them (n · t +
+				      * read-out + half a spectrometer poll, plan_time.c shot): the ETA's split of a
+				      * point's real time into the bench's and the host's (eta.h eta_work) */
 	bool laser_on;               /* what the executor last commanded */
 	int laser_on_while_moving;   /* violations seen (must stay 0) */
 };

@@ -252,6 +252,7 @@ static void after_shot(struct ex *x, double now)
 		f->meas.averages = x->meas.averages;
 	if (isfinite(f->temperature_c))
 		x->temperature = f->temperature_c;
+	x->shots_s += x->meas.averages * t / 1000.0 + x->geom.readout_s + x->cfg.poll_s / 2;
 	switch (x->shot) {
 	case SHOT_PROBE: {
 		x->stats.probes++;
@@ -691,6 +692,7 @@ static void commit_point(struct ex *x, double now)
 		x->ack_pending = true;
 		x->ack_mark = x->durable_mark;
 		x->ack_point = x->cur;
+		x->ack_shots_s = x->shots_s;
 		go_on(x, now, true);
 		return;
 	}
@@ -713,6 +715,7 @@ int ex_ack_step(struct ex *x)
 		return -1;
 	}
 	x->stats.points_done++;
+	x->stats.shots_s = x->ack_shots_s;
 	/* announced while the sweep runs (a progress event says `running`); after a halt the count is the store's */
 	if (live) {
 		char text[64];
@@ -761,8 +764,10 @@ static void go_on(struct ex *x, double now, bool deferred)
 	ex_set_phase_text(x, text);
 	ex_stall_report(x, x->cur);
 	x->point_faults = 0;
-	if (!deferred)
+	if (!deferred) {
 		x->stats.points_done++;
+		x->stats.shots_s = x->shots_s;
+	}
 	int done = x->stats.points_done + (deferred ? 1 : 0);
 	x->cur++;
 	/* Dark schedule (sweep.dark_every): every N points, or whenever the incidence changes. */

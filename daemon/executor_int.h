@@ -109,6 +109,8 @@ struct ex {
 	bool ack_pending, commit_waits;
 	uint64_t ack_mark;           /* its commit (store_commit_mark) */
 	int ack_point;               /* its step */
+	double shots_s;              /* bench seconds of every shot taken (priced as stats.shots_s) */
+	double ack_shots_s;          /* shots_s at that commit: stats.shots_s once it is counted */
 	struct pending pend[EX_MAX_PENDING];
 	int npend;
 	int attempts;                /* acquisitions of this point spoiled by saturation */

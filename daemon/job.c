@@ -314,8 +314,13 @@ void job_child_setup(pid_t parent)
 		_exit(137);
 }
 
-void job_child_limits(size_t mem_bytes)
+void job_child_limits(size_t mem_bytes, unsigned cpu_s)
 {
+	if (cpu_s) { /* SIGXCPU at cpu_s (its default action dumps core: none), SIGKILL 2 s of CPU later */
+		struct rlimit core = { 0, 0 }, cpu = { cpu_s, (rlim_t)cpu_s + 2 };
+		setrlimit(RLIMIT_CORE, &core);
+		setrlimit(RLIMIT_CPU, &cpu);
+	}
 	/* Work done for a client (a dry-run plan) yields the CPU to the daemon and the bench. */
 	if (nice(10) < 0) {
 		/* unchanged priority: still bounded by the deadline */
@@ -427,6 +432,12 @@ int job_start(char *const argv[], const char *cwd, double timeout_s, job_done_fn
 int job_fork_msg(const struct job_kind *kind, const void *payload, size_t len, size_t mem_bytes, size_t out_max,
 		 double timeout_s, job_done_fn done, void *arg, struct job **out, struct acq_err *err)
 {
+	return job_fork_msg_cpu(kind, payload, len, mem_bytes, 0, out_max, timeout_s, done, arg, out, err);
+}
+
+int job_fork_msg_cpu(const struct job_kind *kind, const void *payload, size_t len, size_t mem_bytes, unsigned cpu_s,
+		     size_t out_max, double timeout_s, job_done_fn done, void *arg, struct job **out, struct acq_err *err)
+{
 	int k = kind ? jobh_kind_index(kind) : -1;
 	if (k < 0 || out_max < 1)
 		return acq_errf(err, ACQ_E_INVAL, "job: kind '%s' not in the program's table (job_kinds_main), or no output",
@@ -451,7 +462,8 @@ int job_fork_msg(const struct job_kind *kind, const void *payload, size_t len, s
 		acq_errf(err, ACQ_E_IO, "pipe: %s", strerror(errno));
 		goto fail;
 	}
-	struct jobh_msg m = { .type = JOBH_START, .id = h_next++, .mem_bytes = mem_bytes, .kind = (uint32_t)k };
+	struct jobh_msg m = { .type = JOBH_START, .id = h_next++, .mem_bytes = mem_bytes, .kind = (uint32_t)k,
+			      .cpu_s = cpu_s };
 	int fds[2] = { mfd, p[1] };
 	if (helper_send(&m, fds, 2) < 0) {
 		acq_errf(err, ACQ_E_UNSUPPORTED, "the job helper (pid %d) does not take the request: %s; it is restarted: "

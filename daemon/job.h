@@ -63,6 +63,11 @@ pid_t job_helper_pid(void);
  * (the helper not answering: restarted). */
 int job_fork_msg(const struct job_kind *kind, const void *payload, size_t len, size_t mem_bytes, size_t out_max, double timeout_s,
 		 job_done_fn done, void *arg, struct job **out, struct acq_err *err);
+/* job_fork_msg with the child's CPU time also bounded to cpu_s seconds (0: unbounded; RLIMIT_CPU: it ends with
+ * status 128 + SIGXCPU, or SIGKILL 2 CPU seconds later, no core file): a bound on its work that a loaded machine
+ * does not shorten, where timeout_s (real time) bounds its wait. */
+int job_fork_msg_cpu(const struct job_kind *kind, const void *payload, size_t len, size_t mem_bytes, unsigned cpu_s,
+		     size_t out_max, double timeout_s, job_done_fn done, void *arg, struct job **out, struct acq_err *err);
 /* A job_fork_msg() payload: a fixed header (hdr_len bytes) and two strings, packed into a new buffer (free()) of
  * *len bytes; NULL when out of memory. */
 char *job_msg_pack(const void *hdr, size_t hdr_len, const char *a, const char *b, size_t *len);

@@ -76,7 +76,7 @@ static void run_child(pid_t helper, const struct jobh_msg *m, int payload, int o
 	}
 	buf[len] = '\0';
 	close_range(3, ~0U, 0);
-	job_child_limits((size_t)m->mem_bytes);
+	job_child_limits((size_t)m->mem_bytes, m->cpu_s);
 	_exit(kinds[m->kind]->fn(buf, len, 1));
 }
 

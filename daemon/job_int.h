@@ -25,7 +25,7 @@ struct jobh_msg {
 	uint64_t id;
 	uint64_t mem_bytes;
 	uint32_t kind;
-	uint32_t pad;
+	uint32_t cpu_s;          /* JOBH_START: the child's CPU seconds (0: unbounded) */
 };
 
 /* The kinds' table given to job_kinds_main: kind's index in it, or -1 when it is not there. */
@@ -45,7 +45,8 @@ int jobh_spawn_self(char *const argv[], const int *fds, int n, int first, pid_t 
 /* In a freshly forked child: default signals and mask, death with parent (PR_SET_PDEATHSIG; exits at once
  * when parent is gone already). Async-signal-safe. */
 void job_child_setup(pid_t parent);
-/* In a job child before its work: nice +10 and the address space bounded to mem_bytes (0: unbounded). */
-void job_child_limits(size_t mem_bytes);
+/* In a job child before its work: nice +10, the address space bounded to mem_bytes and the CPU time to cpu_s
+ * seconds (0: unbounded). */
+void job_child_limits(size_t mem_bytes, unsigned cpu_s);
 
 #endif

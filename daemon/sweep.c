@@ -88,6 +88,18 @@ static void on_event(void *ctx, int64_t sweep_id, const char *kind, const char *
 					  kind, "reason", message));
 }
 
+/* The bench's own seconds of the first `done` points (eta_work): the shots the executor took, as the planner
+ * prices them, and the plan's moves and settling of those steps. NAN without an executor or a plan. */
+static double bench_work(const struct sweep *sw, int done)
+{
+	if (!sw->ex || !sw->plan || done < 0)
+		return NAN;
+	double s = ex_stats(sw->ex)->shots_s;
+	for (size_t i = 0; i < (size_t)done && i < sw->plan->n_steps; i++)
+		s += sw->plan->steps[i].move_s + sw->plan->steps[i].settle_s;
+	return s;
+}
+
 static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double eta, const char *phase)
 {
 	struct sweep *sw = ctx;
@@ -111,6 +123,7 @@ static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double
 		plan_total = sw->plan->predicted_s;
 		plan_at = (size_t)done < sw->plan->n_steps ? sw->plan->steps[done].predicted_start_s : plan_total;
 	}
+	eta_work(&sw->eta, bench_work(sw, done));
 	eta = eta_update(&sw->eta, done, total, plan_at, plan_total, loop_now(sw->env.loop), loop_monotonic(NULL));
 	sw->last.eta_s = eta;
 	json_t *d = json_pack("{s:I,s:s,s:i,s:i,s:s}", "sweep", (json_int_t)sweep_id, "state", "running", "done", done,

@@ -82,6 +82,7 @@ static int cfg_parse(struct yc_node *node, struct yc_node *link, struct yc_node 
 	c->margin_s = 2;
 	c->timeout_factor = 1.5;
 	c->poll_s = 0.05;
+	c->watch_s = 0.5;
 	c->home_timeout_s = 120;
 	c->start_grace_s = 0.2;
 	if (yc_expect_map(node, name, err) || parse_link(link, &c->link, err))
@@ -105,10 +106,13 @@ static int cfg_parse(struct yc_node *node, struct yc_node *link, struct yc_node 
 	    yc_double(node, "timeout_margin_s", false, 0, 3600, &c->margin_s, err) ||
 	    yc_double(node, "timeout_factor", false, 1, 100, &c->timeout_factor, err) ||
 	    yc_double(node, "poll_s", false, 1e-3, 10, &c->poll_s, err) ||
+	    yc_double(node, "watch_s", false, 1e-3, 60, &c->watch_s, err) ||
 	    yc_double(node, "home_timeout_s", false, 0.1, 36000, &c->home_timeout_s, err) ||
 	    yc_double(node, "start_grace_s", false, 0, 60, &c->start_grace_s, err) ||
 	    yc_double(node, "wrap_deg", false, 0, 720, &c->wrap, err))
 		goto fail;
+	if (c->watch_s < c->poll_s)
+		c->watch_s = c->poll_s; /* never polled more often than poll_s asks */
 	if (c->soft_min >= c->soft_max) {
 		yc_errf(err, node, "%s: soft_min_deg (%g) must be below soft_max_deg (%g)", name, c->soft_min,
 			c->soft_max);

@@ -27,6 +27,7 @@ struct axis_cfg {
 	int retries;
 	double speed, accel, decel;
 	double settle_s, margin_s, timeout_factor, poll_s, home_timeout_s, start_grace_s;
+	double watch_s;            /* a leg's status read at least this often before its predicted end (axis_modbus.c) */
 	double response_timeout_s, byte_timeout_s;
 };
 
@@ -53,6 +54,7 @@ struct axis_dev {
 	int clear_cmd;         /* level command to clear at the next step, -1 if none */
 	bool seen_busy;        /* the controller reported busy since the current leg was sent */
 	double leg_start;      /* when the current leg was sent */
+	double leg_end;        /* its predicted end: leg_start + the trapezoid of the leg */
 	struct acq_err fail;   /* why the state machine failed */
 };
 

@@ -221,8 +221,8 @@ struct plan_host_kind {
 /* The executor's costs the ordering model leaves out; plan_timing_defaults() gives the executor's and the
  * arm driver's defaults, the daemon fills it from its configuration (sweep, acquisition, devices). */
 struct plan_timing {
-	double axis_poll_s;         /* controllers' status polling: the end of a move is seen this late on average
-				     * (half a period), plus one confirmation read after settling */
+	double axis_poll_s;         /* controllers' status polling: a move costs PLAN_MOVE_POLLS periods beyond its
+				     * trapezoid and settling */
 	double extra_settle_s;      /* sweep.extra_settle_s after every move */
 	double probe_ms;            /* auto integration: one probe exposure per point */
 	double min_ms, ladder_ratio; /* auto integration: times rounded down to min_ms · ladder_ratio^k (executor) */
@@ -269,10 +269,22 @@ int plan_make(const struct plan_spec *spec, const struct bench_geom *g, struct p
  * start when given (else the sweep starts at the first point). 0, or -1 with err. */
 int plan_make_points(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_pos *pts, size_t n,
 		     const struct plan_pos *start, struct plan_result **out, struct acq_err *err);
+/* The polling periods (plan_timing.axis_poll_s) a move costs beyond its trapezoid and settling (the settle's
+ * confirming read is at settle_s, in the settling). The driver (drivers/axis_modbus.c poll_at) reads a leg's status
+ * first at its predicted end, then, the controller a little behind, when the distance left would be covered, at
+ * least poll_s/10 later: 0.1. Before session 14 it polled every period from the start, seeing the end half a period
+ * late on average, and the price was 1.5: at time scale 1 a period more than the bench took, which at time scale
+ * 35 the host figure, measured against the price, hid. Measured with tests/bench/bench_duration.py (session 14,
+ * load 2-4): the driver change alone took the paper plan at time scale 35 from 1907.6 to 1889.9 s (20 bench ms per
+ * move, the half period); priced at 1.0 the quick plan at time scale 1 took 36.8-39.6 ms per point less than the
+ * model's bench part (three sweeps), the paper plan at 35 5.23 ms real per point more: per move about 5 ms of
+ * bench time (0.1 period) and 6.5 ms of real time (the host, plan_timing_defaults) solve both. */
+#define PLAN_MOVE_POLLS 0.1
+
 /* Straight-move time plus the settling of the axes that move: a lower bound of any move between a and b. */
 double plan_straight_s(const struct bench_geom *g, const struct plan_pos *a, const struct plan_pos *b);
-/* A straight move between two poses as the executor sees it (bench s): plan_straight_s, then 1.5 polls and the extra
- * settling; 0 when nothing moves. */
+/* A straight move between two poses as the executor sees it (bench s): plan_straight_s, then PLAN_MOVE_POLLS polls and the
+ * extra settling; 0 when nothing moves. */
 double plan_move_time_s(const struct bench_geom *g, const struct plan_timing *t, const struct plan_pos *a,
 			const struct plan_pos *b);
 /* A pose [laser_theta, detector_theta, detector_phi] from a YAML sequence (what names it in messages). 0 or -1. */
@@ -349,7 +361,7 @@ struct plan_cand {
 void plan_timing_continue(struct plan_timing *t, const struct plan_pos *done, size_t n, size_t stride);
 /* The batch's route model as `brdf-recon select --route` takes it (comma-separated: the arms' position from (laser
  * θ, detector θ, detector φ), then per axis in that order speed °/s, acceleration °/s², settle s, then the executor's
- * seconds per move beyond the trapezoids and settling: 1.5 polls + extra settle, plan_time.c; then spec's band nodes,
+ * seconds per move beyond the trapezoids and settling: PLAN_MOVE_POLLS polls + extra settle, plan_time.c; then spec's band nodes,
  * four numbers each: rho, then plan_time_point's point_s, dark_s, rungs at that band (rho 1 first, rising; one node
  * when the band does not change them: fixed integration, an exposure prior)) into buf (PLAN_ROUTE_SPEC_LEN). */
 #define PLAN_ROUTE_SPEC_LEN 2048

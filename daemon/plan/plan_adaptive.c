@@ -588,7 +588,7 @@ void plan_adaptive_route_spec(const struct plan_spec *s, const struct bench_geom
 		n += (size_t)snprintf(buf + n, len - n, ",%.9g,%.9g,%.9g", ax[k]->speed_dps, ax[k]->accel_dps2,
 				      ax[k]->settle_s);
 	if (n < len)
-		n += (size_t)snprintf(buf + n, len - n, ",%.9g", 1.5 * t->axis_poll_s + t->extra_settle_s);
+		n += (size_t)snprintf(buf + n, len - n, ",%.9g", PLAN_MOVE_POLLS * t->axis_poll_s + t->extra_settle_s);
 	/* the band's nodes, priced at the arms' incidence (the band itself is the same at every incidence; a prior's
 	 * per-incidence figures do not depend on it, and then one node says so) */
 	struct plan_point_cost lo, hi;

@@ -3,8 +3,10 @@
  * The ordering model (plan.c) times each step as trapezoidal moves (each axis's acceleration and velocity
  * profile, the slowest axis wins) + settling + averages × (integration + read-out): that is what the order
  * optimises, and it stays as it is. The executor spends more per step, and this model adds it:
- *   - a move is seen finished by polling the controllers: on average half a poll period late, then one more
- *     read confirms the axis stayed in position after settling (1.5 periods), plus sweep.extra_settle_s;
+ *   - a move is seen finished by polling the controllers: first at its predicted end, again a little later
+ *     when the controller is behind, then a read confirms the axis stayed in position after settling
+ *     (PLAN_MOVE_POLLS periods, plan.h: 0.1; 1.5 when the driver polled every period from the start), plus
+ *     sweep.extra_settle_s;
  *   - an exposure of n averages at t ms lasts n·t, then the spectrometer's read-out (once per exposure: the
  *     AvaSpec averages on board and reads out about 10 ms after the last scan, shared/docs/avaspec-usb.md;
  *     acq-sim does the same), then a start/poll/fetch round trip (exposure_overhead_s, half a poll period);
@@ -29,7 +31,7 @@
  *     beyond the bench's part) instead of the default: the host, not the sample, made the paper plan's repeat at
  *     time scale 35 run shorter than predicted (session 9, tests/bench/bench_duration.py's terms: each exposure
  *     term of the repeat within 0.4 s of what it took, the host 10.3-17.9 ms per point by the load against the
- *     default's 16);
+ *     default's 16; the default is now a quiet machine's figure, 6.5 ms, see plan_timing_defaults);
  *   - the reference at the start: the move to ref_pose from where the arms are (when known: the daemon knows,
  *     a local dry run does not), probe, dark and the plan's averages there, then the move from ref_pose to
  *     the first point (the first step has no move in the ordering model).
@@ -64,15 +66,22 @@ void plan_timing_defaults(struct plan_timing *t)
 		.hdr_ratio = 8,               /* exposure.c hdr_ratio default */
 		.reference = true,
 		.ref_pose = { 0.0, 45.0, 180.0 }, /* executor.c reference_pose default */
-		/* the host's time per point (real seconds: calibration, storage, protocol round trips) when nothing
-		 * better is known (the daemon uses what its latest completed sweep measured, sweep_plan_prior), measured
-		 * on the shared 2-core development machine with tests/bench/bench_duration.py as what a sweep took
-		 * between commits beyond this model's bench part (exp_prior_build's host figure): the paper plan's first
-		 * sweeps at time scale 35, 10.3, 13.6, 13.5, 13.1, 14.4 ms (session 9, load 11-20), 10.9 and 15.2 ms
-		 * (session 10, load 8.9 and 10.4): the median, 13.5 ms (sessions 5-6: 12.8 and 18.2 ms, the old default
-		 * 16). Its repeats took 11.5-19.2 ms (CPU contention: the stall lines, session 10's notes); the small
-		 * fixed plan 5.1 ms at time scale 10 (fewer exposures and requests per point). Reported apart as host_s. */
-		.point_overhead_s = 0.0135,
+		/* the host's time per point (real seconds: calibration, storage, protocol round trips, the arms' command
+		 * delivery) when nothing better is known (the daemon uses what its latest completed sweep measured,
+		 * sweep_plan_prior), measured with tests/bench/bench_duration.py as what a sweep took between commits
+		 * beyond this model's bench part (exp_prior_build's host figure), the paper plan at time scale 35 on a
+		 * quiet machine (session 14, load 0.3-3.7, nothing else or little running), restated for this model's
+		 * price of a move (PLAN_MOVE_POLLS 0.1; each figure + (price it was measured at - 0.1) x 50 ms / 35):
+		 * the old driver and price 1.5 (load 0.3-1.5) 5.09, 5.87, 6.23 -> 6.4, 7.2, 7.5 ms; at 1.5 with load 3.6
+		 * 5.30 -> 6.6; the new driver at price 1.0 (load 2-3.7) 4.72, 5.23 -> 6.0, 6.5: the median, 6.5 ms.
+		 * A bench PC runs nothing else, so the default is the quiet figure. The same sweeps on the shared
+		 * development machine under load took 10.3-15.2 ms at price 1.5 (sessions 9-10, load 9-20; 12.1-12.9 at
+		 * load 8-13 in session 13) and up to 25 ms in bursts: CPU contention, not work. The default of sessions
+		 * 10-13, 13.5 ms (the loaded median at price 1.5), made the quiet first sweep's prediction 9-10 % long;
+		 * a loaded machine's first sweep is now predicted short (about 10 % at session 13's loads; the live ETA
+		 * measures its host, eta.c), its later ones are timed by the latest sweep's own figure. At time scale 1
+		 * the host is well under 1 % of a point. Reported apart as host_s. */
+		.point_overhead_s = 0.0065,
 		.time_scale = 1,
 	};
 }
@@ -81,7 +90,7 @@ double plan_move_time_s(const struct bench_geom *g, const struct plan_timing *t,
 			const struct plan_pos *b)
 {
 	double mv = plan_straight_s(g, a, b);
-	return mv > 0 ? mv + 1.5 * t->axis_poll_s + t->extra_settle_s : 0;
+	return mv > 0 ? mv + PLAN_MOVE_POLLS * t->axis_poll_s + t->extra_settle_s : 0;
 }
 
 int plan_pose_parse(const struct yc_node *n, const char *what, struct plan_pos *out, struct acq_err *err)
@@ -318,7 +327,7 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 		/* expected darks: fixed, one per clearing; auto, one per rung first visited since the clearing (the
 		 * point's rung is new with probability (1 - 1/k)^j after j points) */
 		double p_dark = clear ? 1.0 : aut ? pow(1.0 - 1.0 / c.k, since_clear) : 0.0;
-		double settle = st->settle_s + (moves ? 1.5 * t->axis_poll_s + t->extra_settle_s : 0);
+		double settle = st->settle_s + (moves ? PLAN_MOVE_POLLS * t->axis_poll_s + t->extra_settle_s : 0);
 		double pr_s = i == 0 && !t->reference ? first_probe : c.probe;
 		double d = st->move_s + settle + pr_s + c.meas + p_dark * c.dark + c.hdr + host;
 		r->t_motion_s += st->move_s;

@@ -212,6 +212,8 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
             b.cleanup(keep=keep)
 
 
+# daemon/plan/plan.h PLAN_MOVE_POLLS: the axis polls a move costs beyond its trapezoid and settling (poll_s 0.05)
+MOVE_POLLS = 0.1
 TERMS = ("reference_s", "motion_s", "settle_s", "probes_s", "darks_s", "first_exposures_s", "hdr_s", "host_s")
 
 
@@ -233,8 +235,8 @@ def measured_terms(db, sid, scale, steps, conf, started, finished, ev, auto=True
       takes it, the first point's at the reference's; none with fixed integration), each priced as the model prices a shot (averages x time +
       read-out + round trip): the counts and times are measured, the price per shot is the model's (shot_check tests
       it against the wall clock);
-    - motion_s, settle_s: the plan's moves between the points (steps' move_s; settle_s with 1.5 polls per move as
-      the model counts): the record has no time stamp between a move's end and the probe, so these are the plan's;
+    - motion_s, settle_s: the plan's moves between the points (steps' move_s; settle_s with PLAN_MOVE_POLLS polls per move
+      as the model counts): the record has no time stamp between a move's end and the probe, so these are the plan's;
     - reference_s: from the start to the operator's pause, plus the first point's time after the resume less its
       exposures (the move from the reference pose; the first point's host time with it);
     - host_s: the rest, measured minus everything above: the host's time (calibration, storage, round trips, late
@@ -287,7 +289,7 @@ def measured_terms(db, sid, scale, steps, conf, started, finished, ev, auto=True
             continue  # the move from the reference pose: in reference_s, as the model has it
         mv, se = st.get("move_s", 0.0), st.get("settle_s", 0.0)
         t["motion_s"] += mv
-        t["settle_s"] += se + (1.5 * 0.05 if mv + se > 0 else 0.0)
+        t["settle_s"] += se + (MOVE_POLLS * 0.05 if mv + se > 0 else 0.0)
     pause, resume = ev.get("pause"), ev.get("resume")
     if pts and pause and resume:
         t["reference_s"] = ((pause - started) + (pts[0][2] - resume)) * scale - first_point_shots
@@ -375,7 +377,7 @@ def split_points(db, sid, steps, pj, steps_host, scale, price, auto):
         meas = sum(k * ms / 1000.0 + price for _, ms, k in s) + (prev / 1000.0 + price if auto and prev else 0.0)
         st = steps[oi]
         mv = st.get("move_s", 0.0) + st.get("settle_s", 0.0)
-        mv += 1.5 * 0.05 if mv > 0 else 0.0
+        mv += MOVE_POLLS * 0.05 if mv > 0 else 0.0
         nxt = steps[oi + 1]["predicted_start_s"] if oi + 1 < n else pj.get("predicted_s") if steps_host is None else None
         if nxt is None:  # the local run's total is not given here: the last point left out
             break
@@ -389,7 +391,7 @@ def split_points(db, sid, steps, pj, steps_host, scale, price, auto):
 
 def eta_split(per_pt, done, total, left_real):
     """The ETA's error at `done` points (daemon/eta.c: the plan's rest plus, per point left, the recent excess per point
-    weighted n/(n + 5)) split into the model's part (the rest's exposures against the recent past's excess over the
+    weighted n/(n + 5), its host part the median of the host's time over the last m points) split into the model's part (the rest's exposures against the recent past's excess over the
     plan) and the host's (the rest's host time against the plan's host plus the recent past's excess): each as a
     fraction of the real time left. Returns (model, host, host per point of the rest, the recent past's)."""
     m = min(max(ETA_MEMORY[0] * total, ETA_MEMORY[1]), ETA_MEMORY[2])
@@ -398,10 +400,13 @@ def eta_split(per_pt, done, total, left_real):
     left = total - done
     if not past or not rest:
         return (float("nan"),) * 4
-    re = rh = None
+    re = None
     for e_b, h, hp in past:
         re = e_b if re is None else re + a * (e_b - re)
-        rh = (h - hp) if rh is None else rh + a * ((h - hp) - rh)
+    # the host's part as eta.c takes it since session 14: the median of its time per point over the last m points
+    hs = sorted(x[1] for x in past[-int(round(m)):])
+    med = hs[len(hs) // 2] if len(hs) % 2 else 0.5 * (hs[len(hs) // 2 - 1] + hs[len(hs) // 2])
+    rh = med - past[-1][2]
     w = len(past) / (len(past) + ETA_PLAN_WEIGHT)
     model = left * w * re - sum(x[0] for x in rest)
     host = sum(x[2] for x in rest) + left * w * rh - sum(x[1] for x in rest)

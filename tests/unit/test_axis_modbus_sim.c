@@ -41,6 +41,40 @@ static void test_sim_stall_times_out(void **state)
 	axis_close(ax);
 }
 
+/* A move's status is read at its predicted end, not every poll_s from its start (session 14): a 28° move of the
+ * detector's zenith (60° to 88°, 1.73 s bench) reads the status at most ceil(T / watch_s) + 6 times (the watch
+ * reads, the end, the settle's confirmation, a backlash leg, a re-read if the controller is behind); measured 6.
+ * Polled every poll_s (0.02 s here) from the start it read 76 times: the test failed. At every step the next read
+ * is at most watch_s ahead: an alarm, a stall or a move that never ends is seen within watch_s of bench time
+ * (test_sim_alarm_mid_move, test_sim_stall_times_out). */
+static void test_sim_polls_at_end(void **state)
+{
+	struct peer *pp = new_peer(state);
+	start_sim(pp, false);
+	struct axis *ax = open_axis(pp, 0);
+	struct acq_err err = { 0 };
+	const double watch = 0.5; /* drivers/axis_modbus_cfg.c's watch_s default: the peers' configurations leave it */
+	double T = axis_trapezoid_s(28, 20, 60, 60);
+	EXPECT(axis_move_begin(ax, 88, peer_clock(pp), &err), 0);
+	int polls = 0, rc = AXIS_MOVE_RUNNING;
+	double limit = ah_mono() + 4 * peer_t();
+	while (rc == AXIS_MOVE_RUNNING && ah_mono() < limit) {
+		double now = peer_clock(pp);
+		if (now >= axis_next_poll(ax))
+			polls++; /* the driver reads the status at this step (axis.h: next_poll) */
+		rc = axis_move_step(ax, now, &err);
+		if (rc != AXIS_MOVE_RUNNING)
+			break;
+		assert_true(axis_next_poll(ax) - now <= watch + 1e-9);
+		double dt = (axis_next_poll(ax) - peer_clock(pp)) / peer_scale(pp);
+		ah_sleep(dt < 0.001 ? 0.001 : dt);
+	}
+	EXPECT(rc, AXIS_MOVE_DONE);
+	printf("a %.2f s move: %d status reads\n", T, polls);
+	assert_true(polls >= 1 && polls <= (int)ceil(T / watch) + 6);
+	axis_close(ax);
+}
+
 static void test_sim_alarm_mid_move(void **state)
 {
 	struct peer *pp = new_peer(state);
@@ -227,6 +261,7 @@ int main(void)
 	printf("test_axis_modbus_sim: seed %llu\n", ah_seed());
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test_teardown(test_sim_stall_times_out, peer_teardown),
+		cmocka_unit_test_teardown(test_sim_polls_at_end, peer_teardown),
 		cmocka_unit_test_teardown(test_sim_alarm_mid_move, peer_teardown),
 		cmocka_unit_test_teardown(test_sim_timeout_fault, peer_teardown),
 		cmocka_unit_test_teardown(test_sim_collision, peer_teardown),

@@ -157,7 +157,7 @@ static void test_prior_host(void **state)
 	struct plan_pos a = { 10, 20, 0 }, b = { 10, 30, 0 };
 	double ovh = 0.015, mv = plan_straight_s(&g, &a, &b);
 	assert_true(mv > 0.5);
-	double h1 = 1.0 - (mv + 0.075 + (8 * 0.040 + ovh) + (4 * 0.040 + ovh) + (0.040 + ovh)) / 10;
+	double h1 = 1.0 - (mv + PLAN_MOVE_POLLS * 0.05 + (8 * 0.040 + ovh) + (4 * 0.040 + ovh) + (0.040 + ovh)) / 10;
 	double h2 = 0.5 - ((4 * 0.020 + ovh) + (0.040 + ovh)) / 10;
 	assert_int_equal(pr.host_points, 2);
 	assert_true(fabs(pr.host_per_point_s - (h1 + h2) / 2) < 1e-12);

@@ -92,16 +92,58 @@ static int hungry_child(const char *payload, size_t len, int fd)
 }
 #endif
 
+/* Burns CPU until stopped. */
+static int spinning_child(const char *payload, size_t len, int fd)
+{
+	(void)payload;
+	(void)len;
+	(void)fd;
+	for (volatile unsigned long i = 0;; i++)
+		;
+	return 0;
+}
+
+static const struct job_kind spinning_kind = { "spinning", spinning_child };
 static const struct job_kind echo_kind = { "echo", echo_child }, sleeping_kind = { "sleeping", sleeping_child };
 #if !defined(__SANITIZE_ADDRESS__)
 static const struct job_kind hungry_kind = { "hungry", hungry_child };
 #endif
 static const struct job_kind unlisted_kind = { "unlisted", echo_child };
-static const struct job_kind *const kinds[] = { &echo_kind, &sleeping_kind,
+static const struct job_kind *const kinds[] = { &echo_kind, &sleeping_kind, &spinning_kind,
 #if !defined(__SANITIZE_ADDRESS__)
 						&hungry_kind,
 #endif
 };
+
+/* The CPU bound (job_fork_msg_cpu; the `plan` command's, commands_plan.c): a child burning CPU ends with SIGXCPU at
+ * its bound, long before its real-time deadline; a child that waits (a loaded machine gives it no CPU: here it
+ * sleeps) is not ended by it: only its work is bounded. */
+static void test_cpu_bound(void **state)
+{
+	(void)state;
+	struct loop *lp = loop_new(NULL, NULL);
+	job_init(lp);
+	calls = 0;
+	double t0 = loop_now(lp);
+	assert_int_equal(job_fork_msg_cpu(&spinning_kind, "", 0, 0, 1, 1024, 120, done, NULL, NULL, NULL), 0);
+	run_until(lp, 60);
+	assert_int_equal(calls, 1);
+	assert_int_equal(got_status, 128 + SIGXCPU);
+	assert_false(got_timed_out);
+	printf("a spinning child with 1 s of CPU ended after %.1f s real\n", loop_now(lp) - t0);
+	/* a child that waits (sleeping_child: 30 s) with 1 s of CPU allowed and a 3 s deadline: the deadline ends it
+	 * (128 + SIGTERM, after 3 s), not the CPU bound at 1 s */
+	calls = 0;
+	t0 = loop_now(lp);
+	assert_int_equal(job_fork_msg_cpu(&sleeping_kind, "", 0, 0, 1, 1024, 3, done, NULL, NULL, NULL), 0);
+	run_until(lp, 60);
+	assert_int_equal(calls, 1);
+	assert_int_equal(got_status, 128 + SIGTERM);
+	assert_true(got_timed_out);
+	assert_true(loop_now(lp) - t0 >= 3);
+	job_finish();
+	loop_free(lp);
+}
 
 static void test_children_of_the_helper(void **state)
 {
@@ -407,6 +449,7 @@ int main(int argc, char **argv)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_msg_pack),
 		cmocka_unit_test(test_children_of_the_helper),
+		cmocka_unit_test(test_cpu_bound),
 		cmocka_unit_test(test_helper_lost_and_restarted),
 		cmocka_unit_test(test_restarted_helper_holds_nothing),
 	};

@@ -454,7 +454,7 @@ static void test_continue_darks(void **state)
 	for (size_t i = 0; i < n; i++) {
 		struct plan_wp w[PLAN_MAX_WP];
 		size_t nw;
-		double mv = plan_move(&g, &done[2], &c[i].pos, w, &nw), poll = mv > 0 ? 1.5 * tm.axis_poll_s : 0;
+		double mv = plan_move(&g, &done[2], &c[i].pos, w, &nw), poll = mv > 0 ? PLAN_MOVE_POLLS * tm.axis_poll_s : 0;
 		bool at = c[i].pos.laser_theta == 40;
 		nsame += at;
 		nother += !at;

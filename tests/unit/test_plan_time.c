@@ -85,7 +85,7 @@ static double by_hand(const struct fx *f, const struct plan_timing *t, size_t i,
 	bool moves = st->move_s + st->settle_s > 0;
 	bool new_inc = i == 0 || st->pos.laser_theta != f->res->steps[i - 1].pos.laser_theta;
 	double shot_ovh = f->g.readout_s + t->exposure_overhead_s; /* one read-out per exposure, any averages */
-	double d = st->move_s + st->settle_s + (moves ? 1.5 * t->axis_poll_s + t->extra_settle_s : 0);
+	double d = st->move_s + st->settle_s + (moves ? PLAN_MOVE_POLLS * t->axis_poll_s + t->extra_settle_s : 0);
 	if (probe_ms > 0)
 		d += probe_ms / 1000 + shot_ovh;
 	d += f->spec->averages * ms / 1000 + shot_ovh;
@@ -177,7 +177,7 @@ static void test_auto_spread(void **state)
 		bool new_inc = i == 0 || st->pos.laser_theta != f.res->steps[i - 1].pos.laser_theta;
 		j = new_inc ? 0 : j + 1;
 		double p = pow(1 - 1 / k, (double)j);
-		double d = st->move_s + st->settle_s + (st->move_s + st->settle_s > 0 ? 1.5 * t.axis_poll_s : 0) +
+		double d = st->move_s + st->settle_s + (st->move_s + st->settle_s > 0 ? PLAN_MOVE_POLLS * t.axis_poll_s : 0) +
 			   (i == 0 ? 20.0 : mean) / 1000 + shot_ovh + 3 * mean / 1000 + shot_ovh + p * dark +
 			   t.point_overhead_s;
 		assert_true(fabs(st->predicted_s - d) < 1e-9);
@@ -299,7 +299,7 @@ static void test_prior(void **state)
 		const struct plan_prior_inc *q = &t.prior.inc[fabs(st->pos.laser_theta) < 30 ? 0 : 1];
 		double p = new_inc ? 1 : pow(1 - 1 / q->darks_per_clear, (double)j); /* k = 1: no second dark */
 		double dark = 8 * q->dark_ms / 1000 + shot_ovh;
-		double se = st->settle_s + (st->move_s + st->settle_s > 0 ? 1.5 * t.axis_poll_s : 0);
+		double se = st->settle_s + (st->move_s + st->settle_s > 0 ? PLAN_MOVE_POLLS * t.axis_poll_s : 0);
 		double pb = (i == 0 ? 20.0 : q->mean_ms) / 1000 + shot_ovh, fe = 3 * q->mean_ms / 1000 + shot_ovh;
 		double hd = q->extra_per_point * (3 * q->extra_ms / 1000 + shot_ovh);
 		double d = st->move_s + se + pb + fe + p * dark + hd + t.point_overhead_s;

@@ -50,7 +50,7 @@ struct sim {
 	bool dark[64];    /* step i took a dark (its rung new at its incidence) */
 };
 
-/* The simulated bench's time per step: the planned move and its settling with 1.5 polls, the probe at the previous
+/* The simulated bench's time per step: the planned move and its settling with PLAN_MOVE_POLLS polls, the probe at the previous
  * step's time (the first at the estimate), a dark when the step's rung is new at its incidence, the measurement, the
  * host. */
 static void simulate(const struct plan_result *r, const struct bench_geom *g, const struct plan_timing *t,
@@ -62,7 +62,7 @@ static void simulate(const struct plan_result *r, const struct bench_geom *g, co
 		const struct plan_step *st = &r->steps[i];
 		if (i > 0 && st->pos.laser_theta != r->steps[i - 1].pos.laser_theta)
 			seen[0] = seen[1] = false;
-		double move = st->move_s + st->settle_s > 0 ? st->move_s + st->settle_s + 1.5 * t->axis_poll_s : 0;
+		double move = st->move_s + st->settle_s > 0 ? st->move_s + st->settle_s + PLAN_MOVE_POLLS * t->axis_poll_s : 0;
 		double probe = bench_shot(g, t, 1, i ? sample_ms(i - 1) : 20);
 		s->dark[i] = !seen[i % 2];
 		seen[i % 2] = true;
