@@ -136,8 +136,11 @@ static void test_rejects_corrupt_files(void **state)
 	c[0] = 'X';
 	expect_reject(c, len, "bad magic");
 	memcpy(c, b, len);
-	c[8] = 4; /* version 3 exists since session 7 (two-lobe trends) */
-	expect_reject(c, len, "version 4");
+	c[8] = 5; /* version 4: two-lobe trends (session 14's coat basis) */
+	expect_reject(c, len, "version 5");
+	memcpy(c, b, len);
+	c[8] = 3; /* session 7's coat basis: its coefficients mean other terms */
+	expect_reject(c, len, "refit the samples");
 	memcpy(c, b, len);
 	c[12] = 9;
 	expect_reject(c, len, "unknown kernel");
@@ -300,14 +303,14 @@ static void test_two_lobe_trend_v3(void **state)
 		reseal(c, len);
 		expect_reject(c, len, "invalid trend second roughness");
 	}
-	/* the same bytes without α2, labelled version 2: a two-lobe trend needs version 3 */
+	/* the same bytes without α2, labelled version 2: a two-lobe trend needs version 4 */
 	memcpy(c, b, at + 12);
 	memcpy(c + at + 12, b + at + 20, len - at - 20);
 	v = 2;
 	memcpy(c + 8, &v, 4);
 	reseal(c, len - 8);
-	expect_reject(c, len - 8, "needs model file version 3");
-	/* a one-lobe trend (GGX) in the version-3 layout */
+	expect_reject(c, len - 8, "needs model file version 4");
+	/* a one-lobe trend (GGX) in the version-4 layout */
 	memcpy(c, b, len);
 	v = RECON_TREND_GGX;
 	memcpy(c + at, &v, 4);
