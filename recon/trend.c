@@ -130,9 +130,9 @@ void trend_eval_basis(int t, double alpha, const double c6[6], double b[TREND_NB
  *    −0.003 on 5 × 6 × 8 (reconstruction.md, session 14); test_recon_coat's truth is tS-like ((1 − F)²).
  */
 #define COAT_N 1.5   /* the coat's refractive index (clear lacquers 1.45–1.6: F0 0.034–0.053) */
-#define COAT_NT 32   /* T tabulated at μ = j/COAT_NT, linear in between */
-#define COAT_NS 4    /* quadrature of E_c: COAT_NS panels of 8 Gauss–Legendre nodes in s (tanθh = α tan s) ... */
-#define COAT_NPHI 48 /* ... × COAT_NPHI midpoints in φh over [0, π] (the integrand is even in φh) */
+#define COAT_NT 32   /* T tabulated at μ = j/COAT_NT, Catmull-Rom in between */
+#define COAT_NS 3    /* quadrature of E_c: COAT_NS panels of 8 Gauss–Legendre nodes in s (tanθh = α tan s) ... */
+#define COAT_NPHI 32 /* ... × COAT_NPHI midpoints in φh over [0, π] (the integrand is even in φh) */
 
 static const double gl8x[8] = { -0.9602898564975363, -0.7966664774136267, -0.5255324099163290, -0.1834346424956498,
 				0.1834346424956498,  0.5255324099163290,  0.7966664774136267,  0.9602898564975363 };
@@ -151,7 +151,15 @@ static double fresnel_diel(double c, double n)
  * ωi·h > 0 and μo > 0; θh = atan(α tan s) takes the GGX peak out of the integrand. */
 static double coat_albedo(double alpha, double mu)
 {
+	static _Thread_local double cphi[COAT_NPHI];
+	static _Thread_local int have_cphi;
+	if (!have_cphi) {
+		for (int k = 0; k < COAT_NPHI; k++)
+			cphi[k] = cos(M_PI * (k + 0.5) / COAT_NPHI);
+		have_cphi = 1;
+	}
 	double si = sqrt(fmax(0.0, 1.0 - mu * mu)), a2 = alpha * alpha, hs = 0.5 * M_PI / COAT_NS, e = 0;
+	double li = smith_lambda(alpha, mu);
 	for (int p = 0; p < COAT_NS; p++)
 		for (int q = 0; q < 8; q++) {
 			double s = hs * (p + 0.5 + 0.5 * gl8x[q]), cs = cos(s), ss = sin(s);
@@ -159,10 +167,10 @@ static double coat_albedo(double alpha, double mu)
 			double t = ch * ch * (a2 - 1.0) + 1.0, d = a2 / (M_PI * t * t);
 			double w = d * sh * alpha / (cs * cs + a2 * ss * ss) * 0.5 * hs * gl8w[q] * (M_PI / COAT_NPHI) * 2.0;
 			for (int k = 0; k < COAT_NPHI; k++) {
-				double c = si * sh * cos(M_PI * (k + 0.5) / COAT_NPHI) + mu * ch, mo = 2.0 * c * ch - mu;
+				double c = si * sh * cphi[k] + mu * ch, mo = 2.0 * c * ch - mu;
 				if (c <= 0 || mo <= 0)
 					continue;
-				double g2 = 1.0 / (1.0 + (smith_lambda(alpha, mu) + smith_lambda(alpha, mo)));
+				double g2 = 1.0 / (1.0 + (li + smith_lambda(alpha, mo)));
 				e += w * g2 * fresnel_diel(c, COAT_N) * c / mu;
 			}
 		}
@@ -170,7 +178,7 @@ static double coat_albedo(double alpha, double mu)
 }
 
 /* The coat's transmission T(μ) = 1 − E_c(μ; α), in [0, 1]: tabulated per roughness on first use (a per-thread cache
- * of the last α: the fit searches α in an outer loop, evaluation uses one α), linear in μ between nodes. The same
+ * of the last α: the fit searches α in an outer loop, evaluation uses one α), C¹ in μ between nodes. The same
  * μ gives the same value bit for bit, so T(μi)T(μo) keeps the basis reciprocal. */
 static double coat_trans(double alpha, double mu)
 {
@@ -186,7 +194,13 @@ static double coat_trans(double alpha, double mu)
 	int j = (int)x;
 	if (j >= COAT_NT)
 		return tab[COAT_NT];
-	return tab[j] + (x - j) * (tab[j + 1] - tab[j]);
+	/* Catmull-Rom (C¹: a kinked T slowed the energy table's nested rules), one-sided slopes at the ends */
+	double t = x - j, p0 = tab[j], p1 = tab[j + 1];
+	double m0 = j > 0 ? 0.5 * (p1 - tab[j - 1]) : p1 - p0;
+	double m1 = j + 2 <= COAT_NT ? 0.5 * (tab[j + 2] - p0) : p1 - p0;
+	double t2 = t * t, t3 = t2 * t;
+	double v = (2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * m0 + (-2 * t3 + 3 * t2) * p1 + (t3 - t2) * m1;
+	return v < 0 ? 0.0 : v > 1.0 ? 1.0 : v;
 }
 
 /* tr: which transmission the fit tries (COAT_TS: b2 = 0, COAT_TE: b1 = 0); COAT_BOTH evaluates both (a fitted
