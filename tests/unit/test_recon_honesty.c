@@ -253,6 +253,10 @@ static void coat_dhr30(struct mat *mt, int ni, int no, int np, uint64_t seed, do
 	double a = recon_edge_size(m, Ai, al);
 	printf("clear coat %dx%dx%d: the last ring's held-out size a %.3f\n", ni, no, np, a);
 	assert_true(a >= 0 && a < RECON_EDGE_A0); /* the form holds the edge: the extrapolation σ stays off */
+	/* acq-sim's coat is seen through 1 − E_coat: the fit takes that transmission (b2) and not Schlick's (b1) */
+	assert_int_equal(m->trend, RECON_TREND_COAT);
+	for (size_t l = 0; l < m->nwl; l++)
+		assert_true(m->tcoef[l * TREND_NB + 1] == 0 && m->tcoef[l * TREND_NB + 2] > 0);
 	free(A);
 	free(Ai);
 	assert_int_equal(recon_dhr(m, 1, &th, 32, seed + 1, d, sig, NULL, NULL, &e), 0);
