@@ -196,8 +196,9 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 		return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: model format version %u, this program reads 1 to %u", name,
 				version, VERSION_2LOBE);
 	if (version == 3)
-		return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: model format version 3 (a coat trend in session 7's basis, "
-				"replaced in session 14): refit the samples", name);
+		return acq_errf(err, ACQ_E_UNSUPPORTED,
+				"%s: model format version 3 (a coat trend in session 7's basis, replaced in session 14): "
+				"refit the samples", name);
 	if (kernel >= RBF_K__COUNT)
 		return acq_errf(err, ACQ_E_INVAL, "%s: unknown kernel %u", name, kernel);
 	if (transform >= RECON_T__COUNT)

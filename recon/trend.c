@@ -165,7 +165,8 @@ static double coat_albedo(double alpha, double mu)
 			double s = hs * (p + 0.5 + 0.5 * gl8x[q]), cs = cos(s), ss = sin(s);
 			double th = atan(alpha * tan(s)), ch = cos(th), sh = sin(th);
 			double t = ch * ch * (a2 - 1.0) + 1.0, d = a2 / (M_PI * t * t);
-			double w = d * sh * alpha / (cs * cs + a2 * ss * ss) * 0.5 * hs * gl8w[q] * (M_PI / COAT_NPHI) * 2.0;
+			double w = d * sh * alpha / (cs * cs + a2 * ss * ss) * 0.5 * hs * gl8w[q] *
+				   (2.0 * M_PI / COAT_NPHI);
 			for (int k = 0; k < COAT_NPHI; k++) {
 				double c = si * sh * cphi[k] + mu * ch, mo = 2.0 * c * ch - mu;
 				if (c <= 0 || mo <= 0)
