@@ -187,7 +187,7 @@ static int dhr_quad_init(struct dhr_quad *dq, const struct recon_model *m, struc
 	double lobe = 0; /* the lobe terms' albedo is ≤ the sum of their coefficients */
 	for (size_t l = 0; l < L && m->trend != RECON_TREND_NONE; l++) {
 		double sum = 0;
-		for (int j = TREND_LOBE; j < TREND_NB; j++)
+		for (int j = trend_lobe_first(m->trend); j < TREND_NB; j++)
 			sum += m->tcoef[l * TREND_NB + j];
 		lobe = fmax(lobe, sum);
 	}

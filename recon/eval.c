@@ -61,6 +61,7 @@ void recon_eval_block_part(const struct recon_model *m, size_t b, const double *
 			   const size_t *chan, const double *wsub, double *out, double *work)
 {
 	size_t n = m->n;
+	const int lf = trend_lobe_first(m->trend);
 	rbf_kmatrix_soa(m->kernel, m->shape, b, c6, n, m->soa, work);
 	/* out (b × nch) = K (b × n) · Wᵀ */
 	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)b, (int)nch, (int)n, 1.0, work, (int)n, wsub,
@@ -70,9 +71,9 @@ void recon_eval_block_part(const struct recon_model *m, size_t b, const double *
 		const double *ai = m->tab_alb, *ao = m->tab_alb;
 		double tb[TREND_NB];
 		trend_at(m, c, tb);
-		if (part == RECON_PART_LOBE || part == RECON_PART_NOLOBE) /* split at the lobe terms: [0, TREND_LOBE) and [TREND_LOBE, TREND_NB) */
+		if (part == RECON_PART_LOBE || part == RECON_PART_NOLOBE) /* split at the lobe terms: [0, lf) and [lf, TREND_NB) */
 			for (int j = 0; j < TREND_NB; j++)
-				if ((j >= TREND_LOBE) == (part == RECON_PART_NOLOBE))
+				if ((j >= lf) == (part == RECON_PART_NOLOBE))
 					tb[j] = 0;
 		if (scaled && m->ntab >= 2) {
 			ai += recon_tab_interval(m, theta_of(c)) * m->nwl;
@@ -87,7 +88,7 @@ void recon_eval_block_part(const struct recon_model *m, size_t b, const double *
 				f = f < 1e300 ? f : 1e300;
 			} else if (part == RECON_PART_REST) { /* f̂ − T_lobe·e^g, the lobe part as above */
 				double g = out[q * nch + k] + m->mu[l], tl = 0;
-				for (int j = TREND_LOBE; j < TREND_NB; j++)
+				for (int j = lf; j < TREND_NB; j++)
 					tl += m->tcoef[l * TREND_NB + j] * tb[j];
 				f = untransform(m->transform, g, m->eps[l], trend_factor(m, tb, l)) -
 				    fmin(tl * exp(g < G_MAX ? g : G_MAX), 1e300);

@@ -549,7 +549,7 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe
 		double lobe = 0;
 		for (size_t l = 0; l < m->nwl; l++) {
 			double sum = 0; /* the lobe terms' albedo is ≤ the sum of their coefficients */
-			for (int j = TREND_LOBE; j < TREND_NB; j++)
+			for (int j = trend_lobe_first(m->trend); j < TREND_NB; j++)
 				sum += m->tcoef[l * TREND_NB + j];
 			lobe = fmax(lobe, sum);
 		}
@@ -557,11 +557,11 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe
 			s = fmin(s, m->trend == RECON_TREND_GGX ? TREND_RULE_SPACING * m->trend_alpha
 							       : trend_rule_step(m->trend, m->trend_alpha));
 	}
-	/* a two-lobe trend's broad lobe (b1) is always on this rule, split or not (honest, session 7) */
+	/* a two-lobe trend's broad lobe (b1, b2) is always on this rule, split or not (honest, session 7) */
 	if (trend_two_lobes(m->trend)) {
 		double base = 0;
 		for (size_t l = 0; l < m->nwl; l++)
-			base = fmax(base, m->tcoef[l * TREND_NB + 1]);
+			base = fmax(base, m->tcoef[l * TREND_NB + 1] + m->tcoef[l * TREND_NB + 2]);
 		if (base >= 1e-4)
 			s = fmin(s, trend_base_step(m->trend, m->trend_alpha2));
 	}

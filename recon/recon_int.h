@@ -256,11 +256,15 @@ void recon_albedo_ws_free(struct albedo_ws *ws);
  * ring's mean held-out residual in ln f, its noise variance subtracted, over the kriging amplitude √α_λ (session 12
  * used its significance, which grows with the ring's size and fired on the paper plan's many-sample ring). Measured
  * (20 seeds): clear-coat 0.37-0.52 on 5 × 6 × 8, 7 × 8 × 8 and 10 × 10 × 10; every other simulator material ≤ 0.22.
+ * Session 14: that was the coat kind's base transmission (Schlick's, 0 at grazing); with the fitted transmission
+ * (trend.c coat_basis) the coat reads 0.03-0.08 and no simulator material fires the gate on those plans (3 × 4 × 6
+ * last rings still partly: cloth-sheen).
  * The band beyond te carries σ_X = RECON_EXTRAP_K · Σ_q w_q |f̂(x_q) − f̂(x_q clamped to te)| · ramp(a; A0, A1):
  * the model's own change from the edge to the node is the scale of what can be wrong there (measured: the clear
  * coat's error beyond te is 0.45-0.53 of it on all three plans), the same sign over the band (summed).
- * RECON_EXTRAP_K: see reconstruction.md, session 13 (the paper plan's coverage of the coat rests on an interior error
- * of the opposite sign, so K is the largest value keeping it ≥ 0.7).
+ * RECON_EXTRAP_K: see reconstruction.md, session 13 (the paper plan's coverage of the coat rested on an interior error
+ * of the opposite sign, so K is the largest value keeping it ≥ 0.7); kept in session 14, where the coat no longer
+ * switches the term on (reconstruction.md, session 14: no simulator cell that fires it to re-choose K on).
  */
 #define RECON_EDGE_RING (1.0 * M_PI / 180) /* the last ring: samples within 1° of the last zenith */
 #define RECON_EDGE_MIN 3                   /* fewer samples in the ring, or outside it: no verdict (a = 0) */

@@ -12,11 +12,12 @@
 #include "recon/csvio.h"
 
 /*
- * Model file, version 2, or 3 for a two-lobe trend (version 1 files, without the trend block, are still read: trend
- * none). All integers unsigned little-endian, all reals IEEE-754 binary64 little-endian, no padding:
+ * Model file, version 2, or 4 for a two-lobe trend (version 1 files, without the trend block, are still read: trend
+ * none; version 3, session 7's coat basis, is refused: its coefficients mean other terms, refit the samples). All
+ * integers unsigned little-endian, all reals IEEE-754 binary64 little-endian, no padding:
  *
  *   magic       8 bytes  "BRDFRBF\n"
- *   version     u32      2; 3 when the trend has two roughnesses (coat); a one-lobe model stays version 2
+ *   version     u32      2; 4 when the trend has two roughnesses (coat); a one-lobe model stays version 2
  *   kernel      u32      0 wendland, 1 exp, 2 gauss, 3 paper          (rbf.h)
  *   transform   u32      0 log, 1 sqrt                                 (recon.h)
  *   flags       u32      0 (reserved; bit 0 would mark an anisotropic model)
@@ -30,9 +31,9 @@
  *   w[nwl·n] g[nwl·n] gsig[nwl·n]              f64 channel-major: weights, data, uncertainties (≥ 0)
  *   tab_theta[ntab]                            f64 increasing, 0 to π/2
  *   tab_alb[(ntab−1)·nwl]                      f64 ≥ 0, albedo upper bounds
- *   trend       u32      0 none, 1 ggx, 2 phong, 3 sheen, 4 rough, 5 coat (trend.h; version ≥ 2; coat: 3 only)
+ *   trend       u32      0 none, 1 ggx, 2 phong, 3 sheen, 4 rough, 5 coat (trend.h; version ≥ 2; coat: 4 only)
  *   trend_alpha f64      the trend's roughness in [0.005, 1] (trend.h), 0 (none)
- *   trend_alpha2 f64     version 3 only: the coat's second (base) roughness, in [2·trend_alpha, 1]
+ *   trend_alpha2 f64     version 4 only: the coat's second (base) roughness, in [2·trend_alpha, 1]
  *   tcoef[nwl·5]                               f64 ≥ 0, trend coefficients (TREND_NB; all 0 for none)
  *   meta_len    u32      ≤ 65535, then meta_len bytes of UTF-8 "key=value\n" text (no NUL)
  *   checksum    u64      FNV-1a 64 of every preceding byte
@@ -42,7 +43,7 @@
  */
 #define MAGIC "BRDFRBF\n"
 #define VERSION 2u
-#define VERSION_2LOBE 3u /* written only for a trend with two roughnesses */
+#define VERSION_2LOBE 4u /* written only for a trend with two roughnesses (3: session 7's coat basis, refused) */
 
 static int little_endian(void)
 {
@@ -194,6 +195,10 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 	if (version < 1 || version > VERSION_2LOBE)
 		return acq_errf(err, ACQ_E_UNSUPPORTED, "%s: model format version %u, this program reads 1 to %u", name,
 				version, VERSION_2LOBE);
+	if (version == 3)
+		return acq_errf(err, ACQ_E_UNSUPPORTED,
+				"%s: model format version 3 (a coat trend in session 7's basis, replaced in session 14): "
+				"refit the samples", name);
 	if (kernel >= RBF_K__COUNT)
 		return acq_errf(err, ACQ_E_INVAL, "%s: unknown kernel %u", name, kernel);
 	if (transform >= RECON_T__COUNT)
@@ -293,10 +298,10 @@ int recon_model_load_mem(const char *name, const unsigned char *buf, size_t len,
 	if (!bad && trend != RECON_TREND_NONE &&
 	    !(m->trend_alpha >= TREND_ALPHA_MIN * 0.999 && m->trend_alpha <= TREND_ALPHA_MAX * 1.001))
 		bad = "trend roughness";
-	/* the second roughness: exactly the two-lobe kinds carry one (version 3), in [2α, TREND_ALPHA_MAX] */
+	/* the second roughness: exactly the two-lobe kinds carry one (version 4), in [2α, TREND_ALPHA_MAX] */
 	if (!bad && trend < RECON_TREND__COUNT && trend_two_lobes((int)trend) != (version >= 3))
-		bad = version >= 3 ? "trend (version 3 carries a second roughness for a two-lobe trend only)"
-				   : "trend (a two-lobe trend needs model file version 3)";
+		bad = version >= 3 ? "trend (version 4 carries a second roughness for a two-lobe trend only)"
+				   : "trend (a two-lobe trend needs model file version 4)";
 	if (!bad && version >= 3 &&
 	    !(isfinite(m->trend_alpha2) && m->trend_alpha2 >= 2.0 * m->trend_alpha * 0.999 &&
 	      m->trend_alpha2 <= TREND_ALPHA_MAX * 1.001))

@@ -19,13 +19,15 @@ enum recon_trend {
 	RECON_TREND_SHEEN = 3, /* c0/π + c1·AS diffuse + c2·Charlie sheen (r = α) + c3·sheen·(1 − ωi·h)⁵ + c4·ON */
 	RECON_TREND_ROUGH = 4, /* c0/π + c1·AS diffuse + c2·retro-reflection peak (width α rad) + c3·ON + c4·LS: a
 				* rough diffuse (Oren–Nayar's second term, Lommel–Seeliger) with an opposition peak */
-	RECON_TREND_COAT = 5,  /* c0/π + c1·GGX(α2) + GGX(α)·(c2 + c3(1 − ωi·h)² + c4(1 − ωi·h)⁵): two lobes of
-				* different widths, a narrow coat (α) over a broad base (α2 ≥ 2α); model file v3 */
+	RECON_TREND_COAT = 5,  /* c0/π + GGX(α2)·(c1·tS(μi)tS(μo) + c2·tE(μi)tE(μo)) + GGX(α)·(c3·F(ωi·h) +
+				* c4(1 − ωi·h)⁵): two lobes of different widths, a narrow coat (α, F a dielectric's
+				* Fresnel) over a broad base (α2 ≥ 2α) seen through it (tS: a smooth interface's
+				* transmission, tE = 1 − the coat's albedo); model file v4 (v3: session 7's form) */
 	RECON_TREND__COUNT
 };
 
 #define TREND_NB 5            /* basis functions (coefficients per wavelength) */
-#define TREND_LOBE 2          /* the lobe terms are b[TREND_LOBE .. TREND_NB) */
+#define TREND_LOBE 2          /* the lobe terms are b[TREND_LOBE .. TREND_NB) (coat: trend_lobe_first) */
 #define TREND_ALPHA_MIN 0.005 /* roughness range searched by the fit */
 #define TREND_ALPHA_MAX 1.0
 
@@ -34,6 +36,12 @@ enum recon_trend {
 void trend_eval_basis2(int t, double alpha, double alpha2, const double c6[6], double b[TREND_NB]);
 /* trend_eval_basis2 for the one-roughness kinds (the coat kind's base term is 0 here: use trend_eval_basis2). */
 void trend_eval_basis(int t, double alpha, const double c6[6], double b[TREND_NB]);
+/* The first of trend t's narrow-lobe terms b[first .. TREND_NB) (the terms a quadrature must resolve at the scale
+ * of its roughness α): TREND_LOBE, or 3 for the coat kind, whose b1 and b2 are its broad base lobe. */
+static inline int trend_lobe_first(int t)
+{
+	return t == RECON_TREND_COAT ? 3 : TREND_LOBE;
+}
 /* Does trend t have a second roughness (a second lobe: the coat kind)? */
 static inline int trend_two_lobes(int t)
 {

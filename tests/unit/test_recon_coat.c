@@ -229,6 +229,9 @@ static void test_coat_truth_recovered(void **state)
 		       m->trend_alpha2, COAT_A, BASE_A);
 		assert_int_equal(m->trend, RECON_TREND_COAT);
 		assert_true(fabs(m->trend_alpha / COAT_A - 1) < 0.25 && fabs(m->trend_alpha2 / BASE_A - 1) < 0.25);
+		/* one transmission shape (trend.c fit_coat), and this truth's base is seen through (1 − F)²: Schlick's */
+		for (size_t l = 0; l < m->nwl; l++)
+			assert_true(m->tcoef[l * TREND_NB + 2] == 0 && m->tcoef[l * TREND_NB + 1] > 0);
 		double d[3 * NCH], sg[3 * NCH];
 		assert_int_equal(recon_dhr(m, 3, th, 32, (uint64_t)sd + 1, d, sg, NULL, NULL, &err), 0);
 		for (int t = 0; t < 3; t++)

@@ -136,8 +136,11 @@ static void test_rejects_corrupt_files(void **state)
 	c[0] = 'X';
 	expect_reject(c, len, "bad magic");
 	memcpy(c, b, len);
-	c[8] = 4; /* version 3 exists since session 7 (two-lobe trends) */
-	expect_reject(c, len, "version 4");
+	c[8] = 5; /* version 4: two-lobe trends (session 14's coat basis) */
+	expect_reject(c, len, "version 5");
+	memcpy(c, b, len);
+	c[8] = 3; /* session 7's coat basis: its coefficients mean other terms */
+	expect_reject(c, len, "refit the samples");
 	memcpy(c, b, len);
 	c[12] = 9;
 	expect_reject(c, len, "unknown kernel");
@@ -256,11 +259,11 @@ static void test_trend_block(void **state)
 	free(d);
 }
 
-/* Version 3 (session 7): a two-lobe trend (coat) carries its second roughness after the first; the file round-trips
- * bit for bit; a second roughness out of [2α, 1] or not finite, a two-lobe trend in a version-2 layout, a one-lobe
- * trend in a version-3 layout and an unknown version are each rejected with a message naming what is wrong; a
- * one-lobe model is still written as version 2. */
-static void test_two_lobe_trend_v3(void **state)
+/* Version 4 (session 14; version 3 was session 7's coat basis and is refused): a two-lobe trend (coat) carries its
+ * second roughness after the first; the file round-trips bit for bit; a second roughness out of [2α, 1] or not
+ * finite, a two-lobe trend in a version-2 layout, a one-lobe trend in a version-4 layout and an unknown version are
+ * each rejected with a message naming what is wrong; a one-lobe model is still written as version 2. */
+static void test_two_lobe_trend_v4(void **state)
 {
 	(void)state;
 	struct acq_err err = { 0 };
@@ -285,7 +288,13 @@ static void test_two_lobe_trend_v3(void **state)
 	assert_non_null(b);
 	uint32_t v;
 	memcpy(&v, b + 8, 4);
-	assert_int_equal(v, 3);
+	assert_int_equal(v, 4);
+	/* the same bytes labelled version 3: session 7's basis, its coefficients mean other terms */
+	memcpy(c, b, len);
+	v = 3;
+	memcpy(c + 8, &v, 4);
+	reseal(c, len);
+	expect_reject(c, len, "refit the samples");
 	/* the trend block: u32 kind, f64 α, f64 α2, tcoef */
 	size_t at = len - 8 - strnlen(mc->meta, sizeof mc->meta) - 4 - (4 + 16 + mc->nwl * TREND_NB * 8);
 	memcpy(&v, b + at, 4);
@@ -300,14 +309,14 @@ static void test_two_lobe_trend_v3(void **state)
 		reseal(c, len);
 		expect_reject(c, len, "invalid trend second roughness");
 	}
-	/* the same bytes without α2, labelled version 2: a two-lobe trend needs version 3 */
+	/* the same bytes without α2, labelled version 2: a two-lobe trend needs version 4 */
 	memcpy(c, b, at + 12);
 	memcpy(c + at + 12, b + at + 20, len - at - 20);
 	v = 2;
 	memcpy(c + 8, &v, 4);
 	reseal(c, len - 8);
-	expect_reject(c, len - 8, "needs model file version 3");
-	/* a one-lobe trend (GGX) in the version-3 layout */
+	expect_reject(c, len - 8, "needs model file version 4");
+	/* a one-lobe trend (GGX) in the version-4 layout */
 	memcpy(c, b, len);
 	v = RECON_TREND_GGX;
 	memcpy(c + at, &v, 4);
@@ -315,10 +324,10 @@ static void test_two_lobe_trend_v3(void **state)
 	expect_reject(c, len, "for a two-lobe trend only");
 	/* a version this program does not know */
 	memcpy(c, b, len);
-	v = 4;
+	v = 5;
 	memcpy(c + 8, &v, 4);
 	reseal(c, len);
-	expect_reject(c, len, "this program reads 1 to 3");
+	expect_reject(c, len, "this program reads 1 to 4");
 	free(b);
 	/* a one-lobe model is still written as version 2 */
 	assert_int_equal(recon_model_save(MG, path, &err), 0);
@@ -353,7 +362,7 @@ int main(void)
 		cmocka_unit_test(test_round_trip),
 		cmocka_unit_test(test_rejects_corrupt_files),
 		cmocka_unit_test(test_trend_block),
-		cmocka_unit_test(test_two_lobe_trend_v3),
+		cmocka_unit_test(test_two_lobe_trend_v4),
 		cmocka_unit_test(test_save_refuses_nonfinite),
 	};
 	return cmocka_run_group_tests_name("recon_model", tests, setup, teardown);
