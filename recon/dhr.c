@@ -378,10 +378,22 @@ static void refit_trend(const struct recon_model *m, size_t l, const double *Bs,
 		g[k] = log(f[k] + eps) - log(trend_dot(c, Bs + k * TREND_NB) + eps);
 }
 
+/* The leave-one-out amplitude of every channel, α_λ = mean_k w_k²/(A⁻¹)_kk, from recon_gp_setup's Ainv. */
+static void gp_alpha(const struct recon_model *m, const double *Ainv, double *alpha)
+{
+	size_t n = m->n;
+	for (size_t l = 0; l < m->nwl; l++) {
+		double acc = 0;
+		for (size_t k = 0; k < n; k++)
+			acc += m->w[l * n + k] * m->w[l * n + k] / Ainv[k * n + k];
+		alpha[l] = acc / (double)n;
+	}
+}
+
 int recon_gp_setup(const struct recon_model *m, const char *who, double *A, double *Ainv, double *alpha,
 		   struct acq_err *err)
 {
-	size_t n = m->n, L = m->nwl;
+	size_t n = m->n;
 	for (size_t j = 0; j < n; j++)
 		for (size_t i = j; i < n; i++) {
 			double v = rbf_kernel(m->kernel, m->shape, m->ctr + 6 * i, m->ctr + 6 * j, m->tctr + 6 * j);
@@ -395,12 +407,7 @@ int recon_gp_setup(const struct recon_model *m, const char *who, double *A, doub
 	memcpy(Ainv, A, n * n * sizeof *Ainv);
 	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, Ainv, (lapack_int)n) != 0)
 		return acq_errf(err, ACQ_E_NUMERIC, "%s: inverse of the model's system failed", who);
-	for (size_t l = 0; l < L; l++) {
-		double acc = 0;
-		for (size_t k = 0; k < n; k++)
-			acc += m->w[l * n + k] * m->w[l * n + k] / Ainv[k * n + k];
-		alpha[l] = acc / (double)n;
-	}
+	gp_alpha(m, Ainv, alpha);
 	return 0;
 }
 
@@ -439,12 +446,16 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	double *Kq = parts->kq ? NULL : recon_big_alloc(nth * Q * n * sizeof *Kq), *wt = malloc(Q * sizeof *wt);
 	const double *Kr = parts->kq ? parts->kq : Kq; /* the rows, given or built below */
 	double *c6 = malloc(nth * Q * 6 * sizeof *c6), *scale = malloc(nth * Q * L * sizeof *scale);
-	double *A = malloc(n * n * sizeof *A), *Wd = malloc(n * L * sizeof *Wd), *Y = malloc(Q * L * sizeof *Y);
+	/* the factor and inverse of K + ηΛ, lent (parts.gp_A, gp_Ainv) or built below */
+	int lent = parts->gp_A && parts->gp_Ainv;
+	double *Aown = lent ? NULL : malloc(n * n * sizeof *Aown), *Aiown = lent ? NULL : malloc(n * n * sizeof *Aiown);
+	const double *A = lent ? parts->gp_A : Aown, *Ainv = lent ? parts->gp_Ainv : Aiown;
+	double *Wd = malloc(n * L * sizeof *Wd), *Y = malloc(Q * L * sizeof *Y);
 	double *mean = calloc(nth * L, sizeof *mean), *m2 = calloc(nth * L, sizeof *m2);
 	double *mud = malloc(L * sizeof *mud);
 	double *C = malloc(Q * L * sizeof *C), *KQQ = recon_big_alloc(Q * Q * sizeof *KQQ), *soaQ = malloc(6 * Q * sizeof *soaQ);
 	double *U = malloc(Q * L * sizeof *U), *Bt = malloc(L * n * sizeof *Bt), *X = malloc(L * n * sizeof *X);
-	double *Ainv = malloc(n * n * sizeof *Ainv), *alpha = calloc(L, sizeof *alpha);
+	double *alpha = calloc(L, sizeof *alpha);
 	double *dfmis = malloc(n * L * sizeof *dfmis), *mratio = malloc(n * L * sizeof *mratio), *misacc = calloc(nth * L, sizeof *misacc);
 	double *sres = calloc(nth * L, sizeof *sres);
 	double *vmod = calloc(nth * L, sizeof *vmod), *squad = calloc(nth * L, sizeof *squad);
@@ -473,7 +484,9 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 		}
 	}
 	/* the one factorisation of K + Λ, and the leave-one-out amplitude α_λ of every channel */
-	if (recon_gp_setup(m, "dhr", A, Ainv, alpha, err))
+	if (lent)
+		gp_alpha(m, Ainv, alpha);
+	else if (recon_gp_setup(m, "dhr", Aown, Aiown, alpha, err))
 		goto out;
 	/* the extrapolation beyond the last zenith, where the last ring's block leave-out says the form misses it by a
 	 * good part of the kriging amplitude (recon_int.h, recon_edge_size) */
@@ -624,7 +637,7 @@ out:
 	free(wt);
 	free(c6);
 	free(scale);
-	free(A);
+	free(Aown);
 	free(Wd);
 	free(Y);
 	free(mean);
@@ -636,7 +649,7 @@ out:
 	free(U);
 	free(Bt);
 	free(X);
-	free(Ainv);
+	free(Aiown);
 	free(alpha);
 	free(dfmis);
 	free(mratio);

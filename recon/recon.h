@@ -124,6 +124,10 @@ struct recon_dhr_parts {
 	 * recon_hemi_nodes(theta[t], 32, 48, 0) with centre k (rbf_kmatrix_soa on m->soa; Q = 32 · 48), from a caller
 	 * that builds them anyway (select) */
 	const double *kq;
+	/* in (both NULL: built here): recon_gp_setup's A (the Cholesky factor of K + ηΛ) and Ainv (the inverse's lower
+	 * triangle) for a model with m's centres, kernel, shape, η and λ (they do not depend on the channels), from a
+	 * caller that built them (select) */
+	const double *gp_A, *gp_Ainv;
 };
 /* recon_dhr with its uncertainty split into parts (may be NULL). */
 int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,

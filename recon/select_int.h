@@ -37,6 +37,7 @@ struct sel {
 	double noise;    /* η · median r: the noise of a new measurement relative to the kernel's amplitude */
 	double thr2;     /* threshold², 0 without one */
 	double *A;       /* [n*n] Cholesky factor of K + ηΛ (column-major, lower) */
+	double *Ainv;    /* [n*n] its inverse's lower triangle (recon_gp_setup; lent with A to recon_dhr_parts) */
 	double *alpha;   /* [L] the GP amplitude per channel (leave-one-out) */
 	size_t *chan;    /* [Lc] tracked channels */
 	size_t *vchan;   /* SELECT_DHR: [LV] the channels the value is computed on (NULL: all L) */
@@ -72,7 +73,7 @@ struct sel {
 	double *gn;      /* [batch*J] w_j's part on pick i */
 	double *mrow, *gp; /* scratch: [J], [n] */
 	struct sel_prior *prior; /* SELECT_DHR: the energy prior's σ_E after picks (select_prior.c), or NULL */
-	int shared;      /* A, alpha, cu, soaJ, rep, cost, Kjn, G, Pjj, U, picked, row are another state's (sel_init_part:
+	int shared;      /* A, Ainv, alpha, cu, soaJ, rep, cost, Kjn, G, Pjj, U, picked, row are another state's (sel_init_part:
 			  * a combined target's second part; they do not depend on the target) */
 };
 

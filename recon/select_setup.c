@@ -182,6 +182,10 @@ static int sel_value_all(struct sel *s, const double *th, const double *kq, cons
 		goto out;
 	}
 	struct recon_dhr_parts parts = { .kq = kq };
+	if (kq) { /* the fast path lends the factor too */
+		parts.gp_A = s->A;
+		parts.gp_Ainv = s->Ainv;
+	}
 	if (recon_dhr_parts(s->m, nth, th, o->ndraws, o->seed, dhr, sig, &parts, NULL, NULL, err))
 		goto out;
 	r->value = 0;
@@ -205,7 +209,8 @@ out:
  * s->vchan only (a sub-model of those channels: the same computation per channel, at LV/L of the cost, the noise
  * part's Monte-Carlo draws then other draws), and the GP functionals on the tracked channels: c_q = weight × energy
  * factor × df̂/dg × √(α_λ + unseen prior) at the DHR's fixed rule. The rule's kernel rows are built once, here, and
- * lent to recon_dhr_parts (o->reference: it builds its own, as before). */
+ * lent to recon_dhr_parts with the model's factor and inverse (sel_factor's: they do not depend on the channels, so
+ * they serve the sub-model too); o->reference: it builds its own, as before. */
 int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_result *r, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
@@ -235,7 +240,8 @@ int sel_setup_dhr(struct sel *s, const struct select_opts *o, struct select_resu
 		if (sel_dhr_rows(m, th[t], c6 + t * Q * 6, wt, KQn + t * Q * n, err))
 			goto out;
 	const double *kq = o->reference ? NULL : KQn;
-	struct recon_dhr_parts parts = { .noise = sn, .model = sm, .res = sres, .kriging = sk, .energy = se, .kq = kq };
+	struct recon_dhr_parts parts = { .noise = sn, .model = sm, .res = sres, .kriging = sk, .energy = se, .kq = kq,
+					 .gp_A = kq ? s->A : NULL, .gp_Ainv = kq ? s->Ainv : NULL };
 	if (recon_dhr_parts(s->vchan ? &sub : m, nth, th, o->ndraws, o->seed, dhr, sig, &parts, NULL, NULL, err))
 		goto out;
 	r->value = 0;

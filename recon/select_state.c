@@ -14,6 +14,7 @@ void sel_free(struct sel *s)
 {
 	if (!s->shared) { /* the candidates' arrays (a shared state's are its owner's) */
 		free(s->A);
+		free(s->Ainv);
 		free(s->alpha);
 		free(s->cu);
 		free(s->soaJ);
@@ -53,21 +54,18 @@ void sel_free(struct sel *s)
 	free(s->gp);
 }
 
-/* Factor K + ηΛ of the model and the leave-one-out amplitude α_λ of every channel (as dhr.c). */
+/* Factor K + ηΛ of the model, its inverse and the leave-one-out amplitude α_λ of every channel (as dhr.c, to which
+ * sel_setup_dhr lends the factor and the inverse). */
 static int sel_factor(struct sel *s, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
 	size_t n = s->n, L = s->L;
-	double *Ainv = recon_big_alloc(n * n * sizeof *Ainv);
+	s->Ainv = recon_big_alloc(n * n * sizeof *s->Ainv);
 	s->A = recon_big_alloc(n * n * sizeof *s->A);
 	s->alpha = calloc(L, sizeof *s->alpha);
-	if (!Ainv || !s->A || !s->alpha) {
-		free(Ainv);
+	if (!s->Ainv || !s->A || !s->alpha)
 		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
-	}
-	int rc = recon_gp_setup(m, "select", s->A, Ainv, s->alpha, err); /* dhr.c: the DHR's σ uses the same */
-	free(Ainv);
-	if (rc)
+	if (recon_gp_setup(m, "select", s->A, s->Ainv, s->alpha, err))
 		return -1;
 	double *r = malloc(n * sizeof *r);
 	if (!r)
@@ -173,6 +171,7 @@ static void sel_share(struct sel *s, const struct sel *own)
 {
 	s->shared = 1;
 	s->A = own->A;
+	s->Ainv = own->Ainv;
 	s->alpha = own->alpha;
 	s->noise = own->noise;
 	s->J = own->J;

@@ -14,7 +14,8 @@
  *  - the route increment: a candidate on the batch's route (at a pick's incidence, next to it) is chosen over an
  *    equally informative one the old rule (cost from the arms alone) prefers, and is charged exactly its increment;
  *  - the ln f criterion under the projected measure: the grid's weights, Σ w v, a mid-angle pick over a grazing one;
- *  - the energy prior's σ_E after a pick at an unseen mirror direction (test_prior_after_pick, prior's). */
+ *  - the energy prior's σ_E after a pick at an unseen mirror direction (test_prior_after_pick, prior's);
+ *  - the factor select lends recon_dhr_parts: the same σ as its own, a perturbed one seen (test_lent_factor). */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -1224,6 +1225,93 @@ static void test_fast_path(void **state)
 	recon_model_free(m);
 }
 
+/* The DHR's σ parts of recon_dhr_parts at th[2] with parts.gp_A/gp_Ainv = A, Ai (NULL: built there) into out[7][2L]
+ * (σ, noise, model, kriging, energy, quad, res); returns the largest |Δ| / |ref| over them against ref (NULL: 0). */
+#define LENT_NP 7
+static double lent_sigma(const struct recon_model *m, const double *th, const double *A, const double *Ai, double *out,
+			 const double *ref)
+{
+	size_t NL = 2 * m->nwl;
+	double *dhr = malloc(NL * sizeof *dhr);
+	struct recon_dhr_parts p = { .noise = out + NL, .model = out + 2 * NL, .kriging = out + 3 * NL,
+				     .energy = out + 4 * NL, .quad = out + 5 * NL, .res = out + 6 * NL, .gp_A = A,
+				     .gp_Ainv = Ai };
+	struct acq_err e = { 0 };
+	assert_int_equal(recon_dhr_parts(m, 2, th, 16, 7, dhr, out, &p, NULL, NULL, &e), 0);
+	double worst = 0;
+	for (size_t i = 0; ref && i < LENT_NP * NL; i++)
+		if (out[i] != ref[i])
+			worst = fmax(worst, fabs(out[i] - ref[i]) / fmax(fabs(ref[i]), 1e-300));
+	free(dhr);
+	return worst;
+}
+
+/* select lends its factor of K + ηΛ and the inverse (sel_factor, recon_gp_setup's) to recon_dhr_parts (parts.gp_A,
+ * gp_Ainv), which otherwise factors the same system again: (1) the DHR's σ and every part of it (16 noise draws, which
+ * solve with the factor; the kriging part, whose amplitude comes from the inverse's diagonal) equal the fresh path's
+ * to 1e-12 relative, and they move when the lent factor or the inverse is perturbed by 1e-3 on its diagonal (a wrong
+ * factor is seen); (2) select on a channel subset (the sub-model, which gets the whole model's factor) with noise
+ * draws and the value recomputed on all channels: the fast path (lent) gives the reference path's (built in
+ * recon_dhr_parts) value, per-incidence values and σ parts to the bit. Seen failing with select lending its factor
+ * as the inverse (test_value_channels then too), session 14. */
+static void test_lent_factor(void **state)
+{
+	(void)state;
+	rt_seed();
+	size_t L = 40, NL = 2 * L;
+	struct recon_model *m = rgb_model(4, 4, 6, L);
+	size_t n = m->n;
+	double th[2] = { 8 * M_PI / 180, 40 * M_PI / 180 };
+	double *A = malloc(n * n * sizeof *A), *Ai = malloc(n * n * sizeof *Ai), *alpha = malloc(L * sizeof *alpha);
+	double *ref = malloc(LENT_NP * NL * sizeof *ref), *out = malloc(LENT_NP * NL * sizeof *out);
+	struct acq_err e = { 0 };
+	assert_int_equal(recon_gp_setup(m, "test", A, Ai, alpha, &e), 0);
+	lent_sigma(m, th, NULL, NULL, ref, NULL);
+	double same = lent_sigma(m, th, A, Ai, out, ref);
+	for (size_t i = 0; i < NL; i++) /* every σ and its kriging part non-zero: the comparison compares something */
+		assert_true(ref[i] > 0 && ref[3 * NL + i] > 0 && isfinite(ref[i]));
+	for (size_t k = 0; k < n; k++)
+		A[k * n + k] *= 1 + 1e-3;
+	double badA = lent_sigma(m, th, A, Ai, out, ref);
+	for (size_t k = 0; k < n; k++) {
+		A[k * n + k] /= 1 + 1e-3;
+		Ai[k * n + k] *= 1 + 1e-3;
+	}
+	double badAi = lent_sigma(m, th, A, Ai, out, ref);
+	printf("lent factor: largest relative difference of the σ parts from the fresh path's %.3g; factor's diagonal "
+	       "+1e-3: %.3g; inverse's diagonal +1e-3: %.3g\n", same, badA, badAi);
+	assert_true(same <= 1e-12);
+	assert_true(badA > 1e-6 && badAi > 1e-6);
+	/* (2) select: fast (lent) vs reference path on a channel subset, noise draws on */
+	const char *spec = "dhr:8,40:le=1"; /* far below the value: recomputed on all channels (SEL_VALUE_CHECK) */
+	struct fix f[2];
+	for (int ref_path = 0; ref_path < 2; ref_path++) {
+		fix_spec(&f[ref_path], spec);
+		f[ref_path].o.batch = 0;
+		f[ref_path].o.nvalue = 30;
+		f[ref_path].o.reference = ref_path;
+		fix_sel(&f[ref_path], m, 0, NULL, NULL);
+	}
+	const struct sel *a = &f[0].s, *b = &f[1].s;
+	printf("lent factor: select on 30 of %zu channels, value %.9g (reference %.9g), checked on all %d\n", L,
+	       f[0].r.value, f[1].r.value, f[0].r.value_checked);
+	assert_int_equal(f[0].r.value_checked, 1);
+	assert_true(f[0].r.value == f[1].r.value);
+	assert_memory_equal(f[0].r.per, f[1].r.per, sizeof f[0].r.per);
+	assert_memory_equal(a->v, b->v, a->F * sizeof *a->v);
+	assert_memory_equal(a->sn2, b->sn2, a->F * sizeof *a->sn2);
+	assert_memory_equal(a->rest, b->rest, a->F * sizeof *a->rest);
+	assert_memory_equal(a->kappa, b->kappa, a->nth * sizeof *a->kappa);
+	fix_free(&f[0]);
+	fix_free(&f[1]);
+	free(A);
+	free(Ai);
+	free(alpha);
+	free(ref);
+	free(out);
+	recon_model_free(m);
+}
+
 /* recon_big_alloc (select's rows and posterior arrays): any size usable to its last byte, an array of at least
  * RECON_BIG_PAGE aligned to it (the huge page advice needs the alignment; whether the kernel then gives huge pages is
  * its choice, not checked here). */
@@ -1254,7 +1342,7 @@ int main(void)
 		cmocka_unit_test(test_combined_target), cmocka_unit_test(test_route_increment),
 		cmocka_unit_test(test_lnf_measure),
 		cmocka_unit_test(test_prior_after_pick), cmocka_unit_test(test_fast_path),
-		cmocka_unit_test(test_big_alloc),
+		cmocka_unit_test(test_lent_factor),     cmocka_unit_test(test_big_alloc),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
