@@ -6,7 +6,7 @@
 - Slots kept for controllers: with the observers' share of the table full, observers are refused, root
   (a controller) still gets `status`.
 - A huge plan (10 x 1000 Fibonacci points; 31 s on the loop before) leaves `status` answering in < 0.5 s and
-  is answered within the planner's bounds (10 s of CPU, 120 s real; test_plan_limits.py).
+  is answered within the planner's bounds (10 s of CPU, 30 s real; test_plan_limits.py).
 - Clients pipelining requests without reading their replies: the daemon's RSS stays < 64 MB and a
   well-behaved client is answered in < 0.5 s.
 - The TCP port is off by default; when configured it gives observers no configuration text."""
@@ -178,9 +178,10 @@ def main():
         dt = time.monotonic() - t_plan
         print("huge plan answered after %.1f s: %s" % (dt, r.get("error", {}).get("message", "planned")))
         # bounded by its 10 s of CPU (commands_plan.c PLAN_CPU_S; at nice +10 on a loaded machine that is more
-        # real seconds), at worst by the 120 s real-time bound (PLAN_DEADLINE_S)
+        # real seconds), at worst by the 30 s real-time bound (PLAN_DEADLINE_S; a 120 s bound outlived this
+        # read's 60 s at CI's load, session 14)
         msg = r.get("error", {}).get("message", "")
-        A.check(dt < 130, "the plan was not bounded: %.1f s" % dt)
+        A.check(dt < 40, "the plan was not bounded: %.1f s" % dt)
         A.check("error" not in r or "not planned within" in msg, "the huge plan failed otherwise: %s" % msg)
         for s in floods:
             s.close()

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """The `plan` command's bounds (daemon/commands_plan.c): its child's work is bounded in CPU time (PLAN_CPU_S, 10 s;
 test_client_limits.py's huge plan is stopped by it), its wait only by a generous real-time bound (PLAN_DEADLINE_S,
-120 s). A child that gets no CPU for a while is not killed early: at load 13 a nice +10 plan of 0.1 s of CPU
+30 s). A child that gets no CPU for a while is not killed early: at load 13 a nice +10 plan of 0.1 s of CPU
 waited more than the 10 real seconds that were its only bound until session 14 (test_acqctl.py failed). Here the
 job helper that forks the plan's child is stopped (SIGSTOP) for 12 s, as a loaded machine would starve it, then
 let go: the plan must be answered, planned. With the 10 s real-time bound it failed: "plan: not planned within
