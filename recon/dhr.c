@@ -184,13 +184,7 @@ struct dhr_quad {
 static int dhr_quad_init(struct dhr_quad *dq, const struct recon_model *m, struct acq_err *err)
 {
 	size_t L = m->nwl, qmax;
-	double lobe = 0; /* the lobe terms' albedo is ≤ the sum of their coefficients */
-	for (size_t l = 0; l < L && m->trend != RECON_TREND_NONE; l++) {
-		double sum = 0;
-		for (int j = trend_lobe_first(m->trend); j < TREND_NB; j++)
-			sum += m->tcoef[l * TREND_NB + j];
-		lobe = fmax(lobe, sum);
-	}
+	double lobe = recon_trend_lobe_coef(m);
 	/* as the energy table: not on spiky models (leave-one-out RMS > 1 in ln f), whose e^g is not smooth away from
 	 * the trend's lobe */
 	int can = m->transform == RECON_T_LOG && trend_hv_alpha(m->trend, m->trend_alpha) > 0 && lobe >= 1e-4 &&

@@ -224,7 +224,7 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 	size_t L = m->nwl;
 	struct albtab T = { .m = m, .L = L };
 	struct albgrid g = { 0 }, ng = { 0 };
-	double *amid = malloc(2 * L * sizeof *amid), *bnd = amid ? amid + L : NULL;
+	double *amid = malloc(3 * L * sizeof *amid), *bnd = amid ? amid + L : NULL, *wide = amid ? amid + 2 * L : NULL;
 	T.diff = malloc(L * sizeof *T.diff);
 	int rc = -1;
 	size_t qmax;
@@ -289,7 +289,8 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 				 * ≈ d of the exact value) can make of the second difference, where the interval is clearly
 				 * below 1; near 1 every bend counts (a loose bound there scales the BRDF down for nothing) */
 				double qn = 3.0 * (dlo[l] + 2.0 * T.diff[l] + dhi[l]);
-				room = room && mx + TAB_ROOM_K * d2 + qn <= 1.0;
+				wide[l] = mx + TAB_ROOM_K * d2 + qn;
+				room = room && wide[l] <= 1.0;
 				if (!(mx + d2 + qn <= TAB_BELOW))
 					qn = 0;
 				if (d2 > TAB_CURV_TOL * fmax(mx, 1.0) + qn)
@@ -301,10 +302,7 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 			 * the bound's digits; bisecting would only tighten a bound that scales nothing */
 			if (split && room && m->loo_rms <= 1.0) {
 				split = 0;
-				for (size_t l = 0; l < L; l++)
-					bnd[l] = fmax(alo[l], fmax(amid[l], ahi[l])) +
-						 TAB_ROOM_K * fabs(alo[l] - 2.0 * amid[l] + ahi[l]) +
-						 3.0 * (dlo[l] + 2.0 * T.diff[l] + dhi[l]);
+				memcpy(bnd, wide, L * sizeof *bnd);
 			}
 			int done = !split || depth == TAB_DEPTH || T.ws.evals > TAB_WORK_MAX;
 			albgrid_push(&ng, L, g.th[i], alo, dlo, bnd, done);

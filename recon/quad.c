@@ -531,6 +531,18 @@ static int albedo_rule_cc(const struct recon_model *m, double theta_i, int N, in
  * nmu, nphi are raised to it (at most nmu_max/2 so one doubling fits); *qmax is the size of the finest rule
  * the ladder can reach.
  */
+double recon_trend_lobe_coef(const struct recon_model *m)
+{
+	double lobe = 0;
+	for (size_t l = 0; l < m->nwl && m->trend != RECON_TREND_NONE; l++) {
+		double sum = 0; /* the lobe terms' albedo is ≤ the sum of their coefficients */
+		for (int j = trend_lobe_first(m->trend); j < TREND_NB; j++)
+			sum += m->tcoef[l * TREND_NB + j];
+		lobe = fmax(lobe, sum);
+	}
+	return lobe;
+}
+
 void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe, int *nmu, int *nphi, size_t *qmax)
 {
 	double H = 0;
@@ -546,14 +558,7 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe
 		}
 	double s = m->shape / sqrt(20.0 * (H + 1.0)); /* radians */
 	if (m->trend != RECON_TREND_NONE && !no_trend_lobe) {
-		double lobe = 0;
-		for (size_t l = 0; l < m->nwl; l++) {
-			double sum = 0; /* the lobe terms' albedo is ≤ the sum of their coefficients */
-			for (int j = trend_lobe_first(m->trend); j < TREND_NB; j++)
-				sum += m->tcoef[l * TREND_NB + j];
-			lobe = fmax(lobe, sum);
-		}
-		if (lobe >= 1e-4)
+		if (recon_trend_lobe_coef(m) >= 1e-4)
 			s = fmin(s, m->trend == RECON_TREND_GGX ? TREND_RULE_SPACING * m->trend_alpha
 							       : trend_rule_step(m->trend, m->trend_alpha));
 	}

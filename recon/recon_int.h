@@ -289,6 +289,9 @@ int recon_gp_setup(const struct recon_model *m, const char *who, double *A, doub
 /* Raise the starting rule nmu × nphi to the narrowest lobe the model can make (without the trend's own lobe when
  * no_trend_lobe: the energy table integrates that over half vectors); *qmax the finest rule reachable. */
 void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe, int *nmu, int *nphi, size_t *qmax);
+/* The largest sum over m's channels of its trend's narrow-lobe coefficients (trend_lobe_first on): a bound of the lobe
+ * terms' albedo; 0 without a trend (quad.c). */
+double recon_trend_lobe_coef(const struct recon_model *m);
 /* Half-vector nodes about the mirror of θi for a GGX lobe of roughness α (quad.c): nu nodes in u = tan²θh/(α² +
  * tan²θh) (Gauss-Legendre) × nphi azimuths of h over [0, π] (mirror doubled); canonical points c6 and weights wt
  * (dωo = 4(ωo·h) dωh, cosθo included, 0 below the horizon). */

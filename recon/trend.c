@@ -469,7 +469,7 @@ static double score(int t, size_t n, const double *val, const double *eps, const
 /*
  * Score of the coat kind at (α, α2), as score(): the coat lobe (b3, b4, roughness α) needs TREND_MIN_INLOBE samples
  * in its core (tanθh ≤ α) and on its flank (shape 0.01–0.9, where the width changes the value), the base lobe (b1, b2)
- * (b1, b2) TREND_MIN_INLOBE in its core; an unused lobe needs nothing. Without the flank rule the coat's width would be a
+ * TREND_MIN_INLOBE in its core; an unused lobe needs nothing. Without the flank rule the coat's width would be a
  * guess from the exact mirror samples alone, and with it the coat's albedo (∝ peak × α²) and the DHR.
  */
 static double score_coat(size_t n, const double *val, const double *eps, const double *c6, const size_t *chan,
