@@ -51,6 +51,7 @@
  * max + 2Δ + 3(d_lo + 2d_mid + d_hi) ≤ 1 (TAB_ROOM_K; smooth models only: leave-one-out RMS ≤ 1 in ln f), with
  * that widened bound: s is 1 there whatever the bound's digits (session 14: clear-coat's albedo climbs 0.63 → 0.95
  * from 75° to 90°; the bisection spent 6 of its 29 nodes, a third of the table's work, tightening bounds ≤ 0.98).
+ * test_recon_energy's room-rule tests build the table with and without it (recon_energy_table_room).
  * The work is bounded: intervals are bisected level by level (all of one level before the next) up to
  * TAB_MAX_NODES nodes; an interval left open keeps the bound of the probe that opened it.
  */
@@ -221,6 +222,12 @@ static size_t albtab_start_nodes(const struct recon_model *m, size_t npeaks, dou
 
 int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progress_fn pf, void *pctx)
 {
+	return recon_energy_table_room(m, 1, err, pf, pctx);
+}
+
+int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err *err, recon_progress_fn pf,
+			    void *pctx)
+{
 	size_t L = m->nwl;
 	struct albtab T = { .m = m, .L = L };
 	struct albgrid g = { 0 }, ng = { 0 };
@@ -300,7 +307,7 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 			/* a bend with room under 1 on a smooth model (leave-one-out RMS ≤ 1 in ln f, as the split):
 			 * the interval closes on the widened bound max + K·Δ + qn ≤ 1, where the factor s is 1 whatever
 			 * the bound's digits; bisecting would only tighten a bound that scales nothing */
-			if (split && room && m->loo_rms <= 1.0) {
+			if (split && room && room_rule && m->loo_rms <= 1.0) {
 				split = 0;
 				memcpy(bnd, wide, L * sizeof *bnd);
 			}
@@ -317,6 +324,10 @@ int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progres
 			break;
 	}
 	m->tab_capped = T.ws.evals + T.wl.evals > TAB_WORK_MAX;
+	free(m->tab_theta);
+	free(m->tab_alb);
+	m->tab_theta = NULL;
+	m->tab_alb = NULL;
 	m->ntab = g.n;
 	m->alb_margin = T.margin;
 	m->tab_theta = malloc(g.n * sizeof *m->tab_theta);

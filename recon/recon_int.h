@@ -313,5 +313,8 @@ int recon_albedo_cubature(const struct recon_model *m, double theta_i, int ncx, 
 /* Build m->tab_theta, m->tab_alb, m->ntab, m->alb_margin: the energy table of the unscaled interpolant
  * (energy.c). */
 int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progress_fn pf, void *pctx);
+/* The same with energy.c's room rule on (room_rule 1: recon_energy_table) or off (0: tests); replaces m's table. */
+int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err *err, recon_progress_fn pf,
+			    void *pctx);
 
 #endif
