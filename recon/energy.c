@@ -31,6 +31,10 @@
 #define TAB_HV_NU 16
 #define TAB_HV_NPHI 16
 #define TAB_HV_NU_MAX 64
+/* A coat's base lobe (GGX of α2 ≈ 0.3) over its own half vectors: TAB_HVB_NU × TAB_HVB_NU nodes to start, doubled
+ * up to TAB_HV_NU_MAX (session 15; 8 to start read the same clear-coat table 20 % faster but its bounds up to 0.05
+ * looser at 85-88°, d from the coarser pair) */
+#define TAB_HVB_NU 16
 #define TAB_ROOM_K 2.0   /* an interval bent past TAB_CURV_TOL is not bisected when max + K·Δ + qn ≤ 1 (below) */
 #define TAB_BELOW 0.9     /* a node's channel is also done once fine + 4·|fine − coarse| ≤ this: clearly below 1 */
 
@@ -57,10 +61,11 @@
  */
 struct albtab {
 	const struct recon_model *m;
-	struct albedo_ws ws, wl; /* whole (or smooth part), and the trend's lobe part (split) */
+	struct albedo_ws ws, wl, wb; /* whole (or smooth part), the trend's lobe part (split), a coat's base lobe */
 	int nmu, nphi;      /* starting rule (recon_lobe_rule) */
 	int split;          /* the trend's GGX lobe integrated apart, over half vectors */
-	double *diff, *al, *dl, *off;
+	int base;           /* the coat kind's base lobe (b1, b2; GGX of α2) too, over its own half vectors */
+	double *diff, *al, *dl, *off, *ab, *db;
 	size_t L;
 	double margin;
 };
@@ -75,7 +80,7 @@ static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err
 	 * holds (nested rules: the doubling from half the starting rule evaluates only the starting rule's nodes; d
 	 * is then larger, the bound more conservative, than with one doubling beyond: 4× the work on the random
 	 * 1000 × 651 input, whose nodes past the budget cost 60 % of its fit) */
-	double work = T->ws.evals + T->wl.evals;
+	double work = T->ws.evals + T->wl.evals + T->wb.evals;
 	int capped = work > TAB_WORK_MAX, nmu = T->nmu, nphi = T->nphi;
 	int nmax = capped ? (T->ws.nested ? nmu : 2 * nmu) : TAB_NMU_MAX;
 	if (capped && T->ws.nested) {
@@ -87,19 +92,35 @@ static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err
 		return recon_albedo_adaptive(T->m, theta, nmu, nphi, nmax, 0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->ws, a,
 					     T->diff, err) ? -1 : albtab_margin(T, a);
 	/* split: the smooth part on the hemisphere rule, refined to TAB_TOL absolute (a part being below 1 says nothing
-	 * of the whole), then the lobe over half vectors, which stops once the whole is clearly below 1 */
+	 * of the whole), then the lobe over half vectors, which stops once the whole is clearly below 1 (a coat: its
+	 * narrow lobe to TAB_TOL as well, then its base lobe, which stops so) */
 	if (recon_albedo_adaptive(T->m, theta, nmu, nphi, nmax, 0, 0, TAB_TOL, 1.0, -HUGE_VAL, &T->ws, a, T->diff,
 				  err))
 		return -1;
-	for (size_t l = 0; l < T->L; l++) /* the lobe part may stop once the whole is clearly below 1 */
+	for (size_t l = 0; l < T->L; l++)
 		T->off[l] = a[l] + 4.0 * T->diff[l];
 	T->wl.offset = T->off;
 	if (recon_albedo_adaptive(T->m, theta, TAB_HV_NU, TAB_HV_NPHI, work > TAB_WORK_MAX ? 2 * TAB_HV_NU : TAB_HV_NU_MAX,
-				  0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->wl, T->al, T->dl, err))
+				  0, 0, TAB_TOL, 1.0, T->base ? -HUGE_VAL : TAB_BELOW, &T->wl, T->al, T->dl, err))
 		return -1;
 	for (size_t l = 0; l < T->L; l++) {
 		a[l] += T->al[l];
 		T->diff[l] += T->dl[l];
+	}
+	/* a coat's base lobe (session 15): over its own half vectors (GGX of α2), last, so that it stops once the whole
+	 * is clearly below 1; on the hemisphere rule it held the smooth part at 88 × 192 nodes from 87.5° on (clear-coat,
+	 * its tE ≈ 0.5 there: 6.5e7 evaluations per node; now the smooth part stops at 20 × 24, 1.6e6) */
+	if (T->base) {
+		for (size_t l = 0; l < T->L; l++)
+			T->off[l] = a[l] + 4.0 * T->diff[l];
+		T->wb.offset = T->off;
+		if (recon_albedo_adaptive(T->m, theta, TAB_HVB_NU, TAB_HVB_NU, capped ? 2 * TAB_HVB_NU : TAB_HV_NU_MAX, 0,
+					  0, TAB_TOL, 1.0, TAB_BELOW, &T->wb, T->ab, T->db, err))
+			return -1;
+		for (size_t l = 0; l < T->L; l++) {
+			a[l] += T->ab[l];
+			T->diff[l] += T->db[l];
+		}
 	}
 	return albtab_margin(T, a);
 }
@@ -242,17 +263,21 @@ int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err
 	 * every lobe, as before the split (at seed 2155509500 of test_recon_extremes' dynamic range, LOO RMS 9.7, the
 	 * split left the bound 7 % low at 89.9°) */
 	T.split = trend_hv_alpha(m->trend, m->trend_alpha) > 0 && m->loo_rms <= 1.0; /* GGX, phong (trend.h) */
-	recon_lobe_rule(m, TAB_NMU_MAX, T.split, &T.nmu, &T.nphi, &qmax);
-	T.al = malloc(3 * L * sizeof *T.al);
+	T.base = T.split && trend_two_lobes(m->trend) && m->trend_alpha2 > 0;
+	recon_lobe_rule(m, TAB_NMU_MAX, T.base ? 2 : T.split, &T.nmu, &T.nphi, &qmax);
+	T.al = malloc(5 * L * sizeof *T.al);
 	T.dl = T.al ? T.al + L : NULL;
 	T.off = T.al ? T.al + 2 * L : NULL;
+	T.ab = T.al ? T.al + 3 * L : NULL;
+	T.db = T.al ? T.al + 4 * L : NULL;
+	size_t qhv = (size_t)TAB_HV_NU_MAX * (TAB_HV_NU_MAX / TAB_HV_NU * TAB_HV_NPHI);
 	if (!amid || !T.diff || !T.al || albgrid_alloc(&g, TAB_MAX_NODES, L) || recon_albedo_ws_init(&T.ws, m, qmax, err) ||
-	    (T.split && recon_albedo_ws_init(&T.wl, m, (size_t)TAB_HV_NU_MAX * (TAB_HV_NU_MAX / TAB_HV_NU * TAB_HV_NPHI),
-					     err))) {
+	    (T.split && recon_albedo_ws_init(&T.wl, m, qhv, err)) || (T.base && recon_albedo_ws_init(&T.wb, m, qhv, err))) {
 		acq_errf(err, ACQ_E_NOMEM, "albedo table: out of memory");
 		goto out;
 	}
-	T.ws.part = T.split ? RECON_PART_NOLOBE : RECON_PART_ALL;
+	T.ws.part = T.base ? RECON_PART_SMOOTH : T.split ? RECON_PART_NOLOBE : RECON_PART_ALL;
+	T.wb.part = RECON_PART_BASE;
 	T.ws.nested = 1; /* hemisphere rules that hold the rule before them (quad.c, cc_nodes) */
 	T.wl.part = RECON_PART_LOBE;
 	double start[TAB_N + 2 * TAB_PEAKS];
@@ -311,7 +336,7 @@ int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err
 				split = 0;
 				memcpy(bnd, wide, L * sizeof *bnd);
 			}
-			int done = !split || depth == TAB_DEPTH || T.ws.evals > TAB_WORK_MAX;
+			int done = !split || depth == TAB_DEPTH || T.ws.evals + T.wb.evals > TAB_WORK_MAX;
 			albgrid_push(&ng, L, g.th[i], alo, dlo, bnd, done);
 			albgrid_push(&ng, L, tmid, amid, T.diff, bnd, done);
 			again |= !done;
@@ -323,7 +348,7 @@ int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err
 		if (!again)
 			break;
 	}
-	m->tab_capped = T.ws.evals + T.wl.evals > TAB_WORK_MAX;
+	m->tab_capped = T.ws.evals + T.wl.evals + T.wb.evals > TAB_WORK_MAX;
 	free(m->tab_theta);
 	free(m->tab_alb);
 	m->tab_theta = NULL;
@@ -346,6 +371,7 @@ out:
 	albgrid_free(&ng);
 	recon_albedo_ws_free(&T.ws);
 	recon_albedo_ws_free(&T.wl);
+	recon_albedo_ws_free(&T.wb);
 	free(T.al);
 	return rc;
 }

@@ -75,6 +75,10 @@ void recon_eval_block_part(const struct recon_model *m, size_t b, const double *
 			for (int j = 0; j < TREND_NB; j++)
 				if ((j >= lf) == (part == RECON_PART_NOLOBE))
 					tb[j] = 0;
+		if (part == RECON_PART_SMOOTH || part == RECON_PART_BASE) /* [0, j0) and [j0, lf), j0 = 1 for two lobes */
+			for (int j = 0, j0 = trend_two_lobes(m->trend) ? 1 : lf; j < TREND_NB; j++)
+				if (j >= lf || (j >= j0) == (part == RECON_PART_SMOOTH))
+					tb[j] = 0;
 		if (scaled && m->ntab >= 2) {
 			ai += recon_tab_interval(m, theta_of(c)) * m->nwl;
 			ao += recon_tab_interval(m, theta_of(c + 3)) * m->nwl;
@@ -82,7 +86,7 @@ void recon_eval_block_part(const struct recon_model *m, size_t b, const double *
 		for (size_t k = 0; k < nch; k++) {
 			size_t l = chan ? chan[k] : k;
 			double f;
-			if (part == RECON_PART_LOBE) { /* T_lobe·e^g: ≥ 0, no offset */
+			if (recon_part_hv(part)) { /* T_lobe·e^g (T_base·e^g): ≥ 0, no offset */
 				double g = out[q * nch + k] + m->mu[l];
 				f = trend_val(m, tb, l) * exp(g < G_MAX ? g : G_MAX);
 				f = f < 1e300 ? f : 1e300;

@@ -241,7 +241,7 @@ static int albedo_boxes(const struct recon_model *m, double theta_i, int nmu, in
 {
 	ws->nbox = 0;
 	ws->boxn = RECON_BOX_N;
-	if (ws->part == RECON_PART_LOBE || !m->ang || !ws->bright)
+	if (recon_part_hv(ws->part) || !m->ang || !ws->bright)
 		return 0;
 	double h = fmax((M_PI / 2) / nmu, M_PI / nphi), hw = RECON_BOX_HW * h;
 	size_t nc = 0, L = m->nwl;
@@ -441,7 +441,7 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 	int composite = ws->nbox > 0 || ws->nstep > 0;
 	if (composite)
 		ws->keep_n = 0; /* the composite rules are not nested */
-	else if (ws->nested && !square_rule && ws->part != RECON_PART_LOBE && !ws->alt_rule)
+	else if (ws->nested && !square_rule && !recon_part_hv(ws->part) && !ws->alt_rule)
 		return albedo_rule_cc(m, theta_i, nmu, nphi, scaled, nch, ws, acc, err);
 	if (composite) {
 		if (!(Q = box_nodes(theta_i, nmu, nphi, square_rule, ws)))
@@ -451,8 +451,9 @@ static int albedo_rule(const struct recon_model *m, double theta_i, int nmu, int
 		if (ws_reserve(ws, Q) || hemi_nodes_alt(theta_i, nmu, nphi, ws->c6, ws->wt))
 			return acq_errf(err, ACQ_E_NOMEM, "albedo: no room for a %d × %d rule", nmu, nphi + 1);
 	} else if (Q > ws->qmax ||
-		   (ws->part == RECON_PART_LOBE ? recon_hv_nodes(theta_i, trend_hv_alpha(m->trend, m->trend_alpha), nmu, nphi,
-								 ws->c6, ws->wt)
+		   (recon_part_hv(ws->part) ? recon_hv_nodes(theta_i, ws->part == RECON_PART_BASE ? m->trend_alpha2
+											   : trend_hv_alpha(m->trend, m->trend_alpha),
+							      nmu, nphi, ws->c6, ws->wt)
 						: recon_hemi_nodes(theta_i, nmu, nphi, square_rule, ws->c6, ws->wt)))
 		return acq_errf(err, ACQ_E_INVAL, "albedo: quadrature size %d × %d out of range", nmu, nphi);
 	for (size_t k = 0; k < nch; k++)
@@ -562,8 +563,9 @@ void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe
 			s = fmin(s, m->trend == RECON_TREND_GGX ? TREND_RULE_SPACING * m->trend_alpha
 							       : trend_rule_step(m->trend, m->trend_alpha));
 	}
-	/* a two-lobe trend's broad lobe (b1, b2) is always on this rule, split or not (honest, session 7) */
-	if (trend_two_lobes(m->trend)) {
+	/* a two-lobe trend's broad lobe (b1, b2) is on this rule unless the caller integrates it apart (no_trend_lobe 2:
+	 * the energy table, session 15; the DHR keeps it here, honest session 7) */
+	if (trend_two_lobes(m->trend) && no_trend_lobe != 2) {
 		double base = 0;
 		for (size_t l = 0; l < m->nwl; l++)
 			base = fmax(base, m->tcoef[l * TREND_NB + 1] + m->tcoef[l * TREND_NB + 2]);
@@ -643,9 +645,9 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 	ws->nbox = 0;
 	ws->keep_n = 0;
 	ws->cell_min = 2;
-	ws->nstep = scaled && ws->part != RECON_PART_LOBE && ws->step ? energy_steps(m, theta_i, square_rule, ws) : 0;
+	ws->nstep = scaled && !recon_part_hv(ws->part) && ws->step ? energy_steps(m, theta_i, square_rule, ws) : 0;
 	ws->store = ws->nested; /* the starting rule keeps its values for the first doubling (nested rules) */
-	if (ws->nested && !square_rule && ws->part != RECON_PART_LOBE)
+	if (ws->nested && !square_rule && !recon_part_hv(ws->part))
 		nphi = (nphi + 3) / 4 * 4; /* fewer azimuths near the pole (cc_row_m) */
 	int rc = albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, out, err);
 	ws->store = 0;
@@ -654,7 +656,7 @@ int recon_albedo_adaptive(const struct recon_model *m, double theta_i, int nmu, 
 	int nb = albedo_boxes(m, theta_i, nmu, nphi, square_rule, scaled, tol, floor, ws, out, err);
 	if (nb < 0 || (nb > 0 && albedo_rule(m, theta_i, nmu, nphi, square_rule, scaled, nch, ws, out, err)))
 		return -1;
-	int indep = ws->indep && !square_rule && ws->part != RECON_PART_LOBE;
+	int indep = ws->indep && !square_rule && !recon_part_hv(ws->part);
 	while (nch > 0 && 2 * nmu <= nmu_max) {
 		if (indep) { /* the coarser rule's independent twin, for the channels still open */
 			ws->alt_rule = 1;

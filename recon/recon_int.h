@@ -89,7 +89,16 @@ void recon_eval_block(const struct recon_model *m, size_t b, const double *c6, i
  * coated-diffuse terms, and its GGX lobe terms): all of it; max(0, (T_smooth + ε)e^g − ε); T_lobe·e^g. The
  * two parts add up to at least f̂ (max(0, a + b) ≤ max(0, a) + b for b ≥ 0), so their albedos bound f̂'s. */
 /* RECON_PART_REST: the whole minus the lobe part, f̂ − T_lobe·e^g (so that REST + LOBE = ALL node by node; the DHR) */
-enum { RECON_PART_ALL = 0, RECON_PART_NOLOBE = 1, RECON_PART_LOBE = 2, RECON_PART_REST = 3 };
+/* RECON_PART_SMOOTH, RECON_PART_BASE: a two-lobe trend (coat) split three ways for the energy table: NOLOBE without
+ * the base lobe's terms too (b0 only), and T_base·e^g (b1, b2: GGX of α2); one-lobe kinds: SMOOTH = NOLOBE, BASE 0.
+ * SMOOTH + BASE + LOBE ≥ f̂ as above. LOBE and BASE are integrated over half vectors (recon_hv_nodes, α and α2). */
+enum { RECON_PART_ALL = 0, RECON_PART_NOLOBE = 1, RECON_PART_LOBE = 2, RECON_PART_REST = 3, RECON_PART_SMOOTH = 4,
+       RECON_PART_BASE = 5 };
+/* Is part one of the products T_part·e^g integrated over half vectors? */
+static inline int recon_part_hv(int part)
+{
+	return part == RECON_PART_LOBE || part == RECON_PART_BASE;
+}
 /* recon_eval_block for one part of the interpolant (eval.c). */
 void recon_eval_block_part(const struct recon_model *m, size_t b, const double *c6, int scaled, int part, size_t nch,
 			   const size_t *chan, const double *wsub, double *out, double *work);
@@ -287,7 +296,8 @@ int recon_gp_setup(const struct recon_model *m, const char *who, double *A, doub
 		   struct acq_err *err);
 
 /* Raise the starting rule nmu × nphi to the narrowest lobe the model can make (without the trend's own lobe when
- * no_trend_lobe: the energy table integrates that over half vectors); *qmax the finest rule reachable. */
+ * no_trend_lobe, and without a two-lobe trend's base lobe too when it is 2: the energy table integrates those over
+ * half vectors); *qmax the finest rule reachable. */
 void recon_lobe_rule(const struct recon_model *m, int nmu_max, int no_trend_lobe, int *nmu, int *nphi, size_t *qmax);
 /* The largest sum over m's channels of its trend's narrow-lobe coefficients (trend_lobe_first on): a bound of the lobe
  * terms' albedo; 0 without a trend (quad.c). */
