@@ -281,12 +281,9 @@ int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err
 	T.ws.nested = 1; /* hemisphere rules that hold the rule before them (quad.c, cc_nodes) */
 	T.wl.part = RECON_PART_LOBE;
 	double start[TAB_N + 2 * TAB_PEAKS];
-	/* peak nodes only as far as a quarter of the work budget pays for them at a node's cost past the budget (its
-	 * starting rule, with the boxes of recon_albedo_adaptive about the bright directions: 28 evaluations per
-	 * centre and node of the rule, measured on the log-uniform random 1000 × 651 input, 5.3e7 a node at 10 × 17;
-	 * session 15: the factor was 5, which admitted 8 peaks, 49 nodes, 2.95e9 evaluations, 11.5 s CPU; now 2
-	 * peaks, 27 nodes, 7.3 s, check clean). Smaller inputs keep their 8 (1000 × 4: the tests' spiky models). */
-	double node_cost = 28.0 * T.nmu * T.nphi * (double)m->n * (1.0 + (double)L / 64.0);
+	/* peak nodes only as far as a quarter of the work budget pays for them at the starting rule and one doubling
+	 * (a paper-size spiky model, 1000 × 651, gets none: its table already reaches the budget without them) */
+	double node_cost = 5.0 * T.nmu * T.nphi * (double)m->n * (1.0 + (double)L / 64.0);
 	size_t ns = albtab_start_nodes(m, (size_t)fmin(TAB_PEAKS, TAB_WORK_MAX / 4 / (2 * node_cost)), start);
 	for (size_t t = 0; t < ns; t++) {
 		if (pf)
