@@ -134,7 +134,8 @@ static inline double recon_unseen(double d)
  * of 0.015-0.024 at 30/60° against errors ≤ 0.004) and left a sharp-lobe fit of 11 samples at |z| 7.7 at 60°
  * (√p · s: 1.9): an error that has probability p must not read as 7σ. p = U (a missed lobe's direction uniform over the cosine-weighted
  * hemisphere), but 1 where the mirror direction itself is unseen (recon_mirror_unseen: where a specular lobe
- * would be); U is weighted by recon_prior_pockets (session 15: only where the data give a lobe reason to hide). The paper's plan has U = 0 and its mirror directions seen at 8-60° (nothing changes there). */
+ * would be); U is weighted by recon_prior_pockets (session 15: only where the data give a lobe a reason to hide).
+ * The paper's plan has U = 0 and its mirror directions seen at 8-60° (nothing changes there). */
 #define RECON_PRIOR_RE 0.40
 #define RECON_PRIOR_WIDTHS 2.0
 /* The mirror direction is seen by a sample within RECON_PRIOR_R0 of it (product metric) whose own offset ψ from
