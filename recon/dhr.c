@@ -99,6 +99,7 @@ struct unseen_in {
 	const double *Y;     /* [Q × L] the nominal g − μ at the nodes, mud[L] its μ, tb the nodes' trend bases */
 	const double *mud, *tb;
 	double *aseen;       /* [L] scratch */
+	double aedge;        /* recon_edge_size: the last ring's held-out misfit (recon_prior_pockets) */
 };
 static void unseen_and_misfit(const struct recon_model *m, size_t Q, const double *c6, const double *scale,
 			      const double *alpha, const double *dfmis, const double *ratio, const struct unseen_in *in,
@@ -132,7 +133,8 @@ static void unseen_and_misfit(const struct recon_model *m, size_t Q, const doubl
 	}
 	double mir[6]; /* the mirror direction, where a specular lobe the samples missed would sit */
 	rbf_canon(in->theta, 0.0, in->theta, M_PI, mir);
-	double ph = fmax(U / M_PI, recon_mirror_unseen(m, mir, recon_trend_width(m, 1)));
+	double ws = recon_trend_width(m, 1), wl = m->trend_alpha > 0 ? ws : INFINITY; /* no trend: no lobe shown */
+	double ph = fmax(U / M_PI * recon_prior_pockets(U / M_PI, in->aedge, wl), recon_mirror_unseen(m, mir, ws));
 	for (size_t l = 0; l < L; l++)
 		senergy[l] = recon_prior_energy_sd(ph, aseen[l], aunseen[l]);
 }
@@ -574,7 +576,7 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 			}
 			if (d == 0) {
 				struct unseen_in ui = { .theta = theta[t], .wt = wt, .Y = Y, .mud = mud, .tb = tb + t * Q * TREND_NB,
-							.aseen = aseen };
+							.aseen = aseen, .aedge = aedge };
 				unseen_and_misfit(m, Q, c6 + t * Q * 6, scale + t * Q * L, alpha, dfmis, mratio, &ui, C,
 						  misacc + t * L, senergy + t * L);
 			}

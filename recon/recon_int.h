@@ -143,7 +143,8 @@ static inline double recon_unseen(double d)
  * of 0.015-0.024 at 30/60° against errors ≤ 0.004) and left a sharp-lobe fit of 11 samples at |z| 7.7 at 60°
  * (√p · s: 1.9): an error that has probability p must not read as 7σ. p = U (a missed lobe's direction uniform over the cosine-weighted
  * hemisphere), but 1 where the mirror direction itself is unseen (recon_mirror_unseen: where a specular lobe
- * would be). The paper's plan has U = 0 and its mirror directions seen at 8-60° (nothing changes there). */
+ * would be); U is weighted by recon_prior_pockets (session 15: only where the data give a lobe a reason to hide).
+ * The paper's plan has U = 0 and its mirror directions seen at 8-60° (nothing changes there). */
 #define RECON_PRIOR_RE 0.40
 #define RECON_PRIOR_WIDTHS 2.0
 /* The mirror direction is seen by a sample within RECON_PRIOR_R0 of it (product metric) whose own offset ψ from
@@ -280,6 +281,29 @@ void recon_albedo_ws_free(struct albedo_ws *ws);
 #define RECON_EDGE_A0 0.25
 #define RECON_EDGE_A1 0.35
 #define RECON_EXTRAP_K 0.17
+/* The energy prior's pockets (recon/reconstruction.md, session 15): how far the unseen share U away from the mirror
+ * direction counts in σ_E's p = max(mirror unseen-ness, g · U). On a plan that sees most of the hemisphere the
+ * pockets (on 3 × 4 × 6 ≥ 95 % of U lies beyond the plan's last observation zenith, in the azimuth gaps at
+ * grazing) can hide a lobe only where the data give a reason: g = the largest of
+ *  - the edge gate ramp(a; RECON_EDGE_A0, A1): the last ring's held-out misfit says the trend's form misses the
+ *    band beyond the last zenith, where the pockets lie;
+ *  - 1 − ramp(2 w_s; RECON_PRIOR_RE, 2 R0), w_s the trend's specular lobe width (recon_trend_width(m, 1); none for
+ *    the sheen and rough kinds or without a trend): the trend holds a lobe narrow enough to hide in a hole 0.40
+ *    from every sample (the reach rule's e⁻⁴ argument), so the plan does not resolve its width and a lobe of its
+ *    kind can be missed;
+ *  - ramp(U; RECON_PRIOR_U0, U1): much of the hemisphere is unseen (few directions): the data have no say on what
+ *    it holds (the fit warns from 20 %).
+ * Otherwise the data show no lobe the holes could hide and the form holds at the edge: a missed lobe of an
+ * isotropic material would sit at the mirror direction, which p keeps. g = 1 is session 9's rule. */
+#define RECON_PRIOR_U0 0.05
+#define RECON_PRIOR_U1 0.20
+static inline double recon_prior_pockets(double U, double aedge, double wspec)
+{
+	double g = fmax(recon_ramp(aedge, RECON_EDGE_A0, RECON_EDGE_A1), recon_ramp(U, RECON_PRIOR_U0, RECON_PRIOR_U1));
+	if (wspec > 0 && isfinite(wspec))
+		g = fmax(g, 1.0 - recon_ramp(RECON_PRIOR_WIDTHS * wspec, RECON_PRIOR_RE, 2 * RECON_PRIOR_R0));
+	return g;
+}
 /* The largest zenith of any sample (radians). */
 double recon_last_zenith(const struct recon_model *m);
 /* a, the size of the last ring's held-out residual (above), from recon_gp_setup's Ainv (lower triangle) and α; 0
