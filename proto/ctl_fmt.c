@@ -446,8 +446,9 @@ void ctl_print_plan(FILE *f, json_t *r)
 		ctl_fmt_dur(num(es, "predicted_at_half_s"), a, sizeof a);
 		ctl_fmt_dur(num(es, "predicted_at_double_s"), b, sizeof b);
 		fprintf(f, "  the sample is not known before it is on the stage: this is the time for exposures as the "
-			   "estimate %.3g ms says; %s if it needs half, %s if twice (the sweep re-times the rest from its "
-			   "own exposures as it goes)\n", num(es, "ms"), a, b);
+			   "estimate %.3g ms says; %s if it needs half, %s if twice (%s)\n", num(es, "ms"), a, b,
+			json_is_object(ad) ? "each batch is timed as it is chosen"
+					   : "the sweep re-times the rest from its own exposures as it goes");
 	}
 	ctl_fmt_dur(num(r, "duration_s"), a, sizeof a);
 	ctl_fmt_dur(num(r, "raster_s"), b, sizeof b);
