@@ -207,8 +207,8 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                     eta25_host=eta_host.get(0.25), eta50_host=eta_host.get(0.5), eta75_host=eta_host.get(0.75),
                     redos=redos, estimate_ms=es.get("ms"), predicted_at_half_s=es.get("predicted_at_half_s"),
                     predicted_at_double_s=es.get("predicted_at_double_s"), predicted_at_median_s=at_median,
-                    error_at_median=(at_median / measured - 1 if at_median else None), prior_host_ms=(1000 * prior["host_per_point_s"] if "host_per_point_s" in prior
-                                                else None))
+                    error_at_median=(at_median / measured - 1 if at_median else None),
+                    prior_host_ms=(1000 * prior["host_per_point_s"] if "host_per_point_s" in prior else None))
         for k in TERMS:
             row["pred_" + k] = (pj.get("predicted_terms") or {}).get(k)
             row["meas_" + k] = meas_terms[k]
