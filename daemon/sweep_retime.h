@@ -8,7 +8,16 @@
  * (plan_time_apply: each incidence by the nearest one measured) and the ETA's measured excess is re-expressed
  * against it (eta_replan).
  * A sweep that has a prior from an earlier sweep of its sample keeps it (its exposures are the sample's already),
- * as do fixed integration and adaptive sweeps (their batches are timed as they are chosen). */
+ * as do fixed integration and adaptive sweeps (their batches are timed as they are chosen).
+ * Before the sweep nothing measures the sample: the plan's reply gives the estimate's prediction with the same
+ * model's times for half and twice the estimate (plan_json.c). Measured in session 15 (README, "How long a sweep
+ * takes") and not done: a probe when the plan is made (the white standard is on the stage then), a re-timing from
+ * the first sample point alone (one direction: the paper plan's first point needs 41 ms of the green paint's
+ * median 57.9, −9 %), a probe at the reference pose when the sample is placed (its unrounded time matched the
+ * paper plan's unrounded median on the green paint and the cloth-sheen, not on the metal: 163 against 299 ms).
+ * Even at the sample's median the band model errs −12.7…+8.4 % on those three, and this re-timing takes the nearest
+ * measured incidence's times for the next, which the metal's (quick plan: ETA +35 / +44 % at 50 / 75 %) and the
+ * cloth-sheen's towards grazing are not (README, "How long a sweep takes"). */
 #ifndef SWEEP_RETIME_H
 #define SWEEP_RETIME_H
 

@@ -396,7 +396,10 @@ int main(int argc, char **argv)
 	if (rc == CTL_EXIT_OK)
 		rc = !strcmp(cmd, "plan") && acqctl_o.bench ? local_plan(plan_file) : send_request(req, cmd, plan_file);
 	json_decref(req);
-	if (fflush(stdout) && !rc)
+	/* a write that failed earlier (out_json flushes as it goes) leaves the error flag, not a failing fflush */
+	if ((fflush(stdout) || ferror(stdout)) && !rc) {
+		fputs("acqctl: cannot write the output (standard output)\n", stderr);
 		rc = CTL_EXIT_CANTCREAT;
+	}
 	return rc;
 }

@@ -441,6 +441,15 @@ void ctl_print_plan(FILE *f, json_t *r)
 	else if (json_object_get(r, "exposure_prior"))
 		fputs("  auto exposure timed from the plan's estimate (name the sample, sample: NAME, and its next sweep is "
 		      "timed from this one)\n", f);
+	json_t *es = json_object_get(r, "estimate");
+	if (json_is_object(es)) { /* a first sweep: the sample decides; the same model at half and twice the estimate */
+		ctl_fmt_dur(num(es, "predicted_at_half_s"), a, sizeof a);
+		ctl_fmt_dur(num(es, "predicted_at_double_s"), b, sizeof b);
+		fprintf(f, "  the sample is not known before it is on the stage: this is the time for exposures as the "
+			   "estimate %.3g ms says; %s if it needs half, %s if twice (%s)\n", num(es, "ms"), a, b,
+			json_is_object(ad) ? "each batch is timed as it is chosen"
+					   : "the sweep re-times the rest from its own exposures as it goes");
+	}
 	ctl_fmt_dur(num(r, "duration_s"), a, sizeof a);
 	ctl_fmt_dur(num(r, "raster_s"), b, sizeof b);
 	ctl_fmt_dur(num(r, "lower_bound_s"), c, sizeof c);

@@ -1,5 +1,6 @@
 /* plan_json: a plan result as JSON (jansson), the shape of `acqctl plan --json` and of the daemon's reply. */
 #include <jansson.h>
+#include <math.h>
 #include <stdint.h>
 
 #include "daemon/plan/plan.h"
@@ -109,8 +110,23 @@ json_t *plan_to_json(const struct plan_spec *s, const struct plan_result *r, boo
 json_t *plan_dry_run_json(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
 			  struct plan_result *r, bool points)
 {
+	/* A first auto sweep of a sample (no exposure prior) is timed from the plan's estimate: nothing on the bench
+	 * knows the sample before it is on the stage (the white standard is there when the plan is made). The reply
+	 * says so and what the same model predicts for a sample needing half or twice the estimate (each integration
+	 * time scaled: the band, its darks, HDR exposures and probes), the plan itself timed last. */
+	bool guess = s->integ_mode == PLAN_INTEG_AUTO && !(t->prior.sweep > 0 && t->prior.n_inc > 0);
+	double est_ms = s->integ_ms > 0 ? s->integ_ms : t->probe_ms, at[2] = { NAN, NAN };
+	for (int k = 0; guess && k < 2; k++) {
+		struct plan_spec v = *s;
+		v.integ_ms = est_ms * (k ? 2.0 : 0.5);
+		plan_time_apply(&v, g, t, r);
+		at[k] = r->predicted_s;
+	}
 	plan_time_apply(s, g, t, r);
 	json_t *o = plan_to_json(s, r, points);
+	if (o && guess)
+		json_object_set_new(o, "estimate", json_pack("{s:f,s:f,s:f}", "ms", est_ms, "predicted_at_half_s", at[0],
+							     "predicted_at_double_s", at[1]));
 	long long host_sweep = 0;
 	bool own = false;
 	double host = plan_time_host(s, t, &host_sweep, &own);

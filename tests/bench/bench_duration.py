@@ -15,6 +15,7 @@ exposure prior; the repeat starts once the first sweep's automatic reconstructio
 paper's 10x10x10 (auto, estimate 50 ms) at the demo's time scale 35, and its repeat. BENCH_DURATION_QUICK=1: the
 small fixed one only;
 BENCH_DURATION_CASES=a,b: those cases (name@scale for one time scale; name a repeat with the case before it).
+BENCH_DURATION_SAMPLE=MATERIAL: that simulator material is placed after the reference (default green-paint).
 BENCH_DURATION_LOG=debug: the daemon logs at that level (debug: a stall line per point: where the host's time went).
 Also reported: the simulator's own lag (acq-sim ctl status lag_s: its 1 ms waits ending late, the host not keeping
 the time scale) over the sweep and its share of the measured time; the host's time per point (host_per_point: real
@@ -125,7 +126,7 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
         ls.start()
         time.sleep(0.3)
         sid = L.start_sweep(b, plan_text, name)
-        row = L.drive_to_end(b, sid, timeout=7200)
+        row = L.drive_to_end(b, sid, timeout=7200, sample=MATERIAL)
         time.sleep(0.3)
         stop.set()
         ls.join(10)
@@ -153,6 +154,17 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
         redos = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'info' AND message LIKE "
                            "'%measuring the point again%'", (sid,)).fetchone()[0]
         db.close()
+        # a first auto sweep is timed from the plan's estimate (acqctl plan's "estimate"): the same model's time
+        # had the estimate been the sample's median integration time, the pre-start prediction moved by what a
+        # local dry run on the same bench configuration gives for the two estimates (the estimate's part of the
+        # error; the rest is the model's)
+        es = pj.get("estimate") or {}
+        at_median = None
+        if es and first:
+            m = re.search(r"estimate_ms:\s*([0-9.]+)", plan_text)
+            if m:
+                at_median = pred + local_predicted(b, plan_text.replace(m.group(0), "estimate_ms: %.6g" % (
+                    first[len(first) // 2]))) - local_predicted(b, plan_text)
         prog = [(t, e) for t, e in events if e.get("event") == "sweep.progress" and e.get("sweep") == sid]
         total = row["points_total"]
         eta_err, eta_host, eta_parts = {}, {}, {}
@@ -193,8 +205,10 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                     sim_lag_s=sim_lag, sim_lag_share=(sim_lag * scale / measured if sim_lag is not None else None),
                     host_per_point_s=(sum(h for _, h in host_pts) / len(host_pts) if host_pts else None),
                     eta25_host=eta_host.get(0.25), eta50_host=eta_host.get(0.5), eta75_host=eta_host.get(0.75),
-                    redos=redos, prior_host_ms=(1000 * prior["host_per_point_s"] if "host_per_point_s" in prior
-                                                else None))
+                    redos=redos, estimate_ms=es.get("ms"), predicted_at_half_s=es.get("predicted_at_half_s"),
+                    predicted_at_double_s=es.get("predicted_at_double_s"), predicted_at_median_s=at_median,
+                    error_at_median=(at_median / measured - 1 if at_median else None),
+                    prior_host_ms=(1000 * prior["host_per_point_s"] if "host_per_point_s" in prior else None))
         for k in TERMS:
             row["pred_" + k] = (pj.get("predicted_terms") or {}).get(k)
             row["meas_" + k] = meas_terms[k]
@@ -210,6 +224,15 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
             if keep:
                 print("bench_duration: %s kept in %s" % (name, b.dir), flush=True)
             b.cleanup(keep=keep)
+
+
+def local_predicted(b, text):
+    """predicted_s of a local dry run (no daemon: no prior, the default host) of plan text on bench b's
+    configuration."""
+    f = os.path.join(b.dir, "estimate.yaml")
+    open(f, "w").write(text)
+    loc = subprocess.run([CTL, "--json", "plan", f, "--config", b.conf], capture_output=True, text=True, check=True)
+    return json.loads(loc.stdout)["plan"]["predicted_s"]
 
 
 # daemon/plan/plan.h PLAN_MOVE_POLLS: the axis polls a move costs beyond its trapezoid and settling (poll_s 0.05)
@@ -428,9 +451,13 @@ def host_known(host, t, eta_s, finished):
     return (eta_s + shift) / left - 1
 
 
+# the simulator material placed on the stage after the reference (BENCH_DURATION_SAMPLE; the demo's green paint)
+MATERIAL = os.environ.get("BENCH_DURATION_SAMPLE") or "green-paint"
+
+
 def SAMPLE(text):
-    """The plan naming its sample (the simulator's green paint): a later sweep of it gets the exposure prior."""
-    return text.rstrip("\n") + "\nsample: green-paint\n"
+    """The plan naming its sample (the simulator's material): a later sweep of it gets the exposure prior."""
+    return text.rstrip("\n") + "\nsample: %s\n" % MATERIAL
 
 
 def table(scale):
@@ -606,6 +633,12 @@ def main():
             r, b = r
             prev = (text, b)
         rows.append(r)
+        if r.get("estimate_ms"):
+            print("%-17s timed from the plan's estimate %.3g ms (no exposure prior): %.1f s if the sample needed half, "
+                  "%.1f s if twice; had the estimate been the sample's median (%.3g ms), %.1f s: error %+.1f %%"
+                  % (name, r["estimate_ms"], r["predicted_at_half_s"], r["predicted_at_double_s"], r["median_ms"],
+                     r["predicted_at_median_s"] or float("nan"), 100 * (r["error_at_median"] or float("nan"))),
+                  flush=True)
         f = lambda x: "   -  " if x is None else "%+5.1f%%" % (100 * x)  # noqa: E731
         print("%-17s scale %4g  %4d points  predicted %7.1f s (host %.1f s)  measured %7.1f s  error %s  ETA error at "
               "25/50/75 %%: %s %s %s  (had the host's time of the rest been known: %s %s %s)  (median integration %s "

@@ -109,6 +109,31 @@ def hanging_socket(path):
     return s
 
 
+def garbling_socket(path):
+    """A listener that greets as acquisitiond does, then answers every request with a line that is not JSON."""
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    s.bind(path)
+    s.listen(4)
+
+    def serve():
+        while True:
+            try:
+                conn, _ = s.accept()
+            except OSError:
+                return
+            with conn:
+                conn.sendall(b'{"version":"0","protocol":1,"server":"acquisitiond","max_line":65536}\n')
+                buf = b""
+                while b"\n" not in buf:
+                    chunk = conn.recv(65536)
+                    if not chunk:
+                        break
+                    buf += chunk
+                conn.sendall(b"this is not json\n")
+    threading.Thread(target=serve, daemon=True).start()
+    return s
+
+
 def offline_checks(tmp):
     hang = os.path.join(tmp, "hang.sock")
     hs = hanging_socket(hang)
@@ -137,7 +162,25 @@ def offline_checks(tmp):
         check(p.returncode == 66 and "none.yaml" in p.stderr, "unreadable plan: %d %r" % (p.returncode, p.stderr))
     finally:
         hs.close()
+    # a reply that is not the protocol's: 76 (EX_PROTOCOL), with the error document under --json
+    bad = os.path.join(tmp, "bad.sock")
+    bs = garbling_socket(bad)
+    try:
+        p = subprocess.run([CTL, "-s", bad, "--json", "status"], capture_output=True, text=True, timeout=10)
+        check(p.returncode == 76, "a reply that is not JSON: exit %d, wanted 76 (%r)" % (p.returncode, p.stderr))
+        validate(json.loads(p.stdout), "error")
+        check(json.loads(p.stdout)["error"]["code"] == "protocol", "protocol error %r" % p.stdout)
+    finally:
+        bs.close()
     nosock = os.path.join(tmp, "nosuch.sock")
+    # the output cannot be written (a full disk: /dev/full): 73 (EX_CANTCREAT), human and --json alike
+    plan_q = os.path.join(L.SRC, "config", "plan-quick.yaml")
+    for js in ([], ["--json"]):
+        with open("/dev/full", "w") as full:
+            p = subprocess.run([CTL, "-s", nosock] + js + ["plan", plan_q], stdout=full, stderr=subprocess.PIPE,
+                               text=True, timeout=30)
+        check(p.returncode == 73 and "cannot write" in p.stderr, "plan %s to a full disk: exit %d, wanted 73 (%r)" % (
+            " ".join(js), p.returncode, p.stderr))
     c = Ctl(nosock)
     d = c.json("error", "status", rc=69)
     check(d["error"]["code"] == "unavailable", "no daemon: %r" % d)
@@ -339,6 +382,15 @@ def main():
         if pr["state"] != "paused":
             p = c.run("wait", "paused", "--timeout-s", "60")
             check(p.returncode == 0, "pending pause took effect: %d %r" % (p.returncode, p.stderr))
+        # paused: no ETA (it does not count while paused), in the reply and in the human status
+        d = c.json("status", "status")
+        check(d["sweep"]["state"] == "paused" and d["sweep"]["eta_s"] is None, "paused status shows an ETA %r" %
+              d["sweep"])
+        out = c.human("status")
+        check("paused" in out and "ETA" not in out, "paused human status shows an ETA %r" % out)
+        # wait --json prints the status reply it waited for (the status schema)
+        d = c.json("status", "wait", "paused", "--timeout-s", "10")
+        check(d["sweep"]["state"] == "paused", "wait --json %r" % d["sweep"])
         p = c.run("wait", "running", "--timeout-s", "1")
         check(p.returncode == 75, "wait times out with 75: %d" % p.returncode)
         d = c.json("sweep.abort", "sweep", "abort")

@@ -52,6 +52,12 @@ def main():
         check(before["exposure_prior"] is None and before["sample"] == "green-paint", "no prior yet: %r" %
               {k: before.get(k) for k in ("exposure_prior", "sample")})
         check("no completed auto sweep of sample green-paint" in human(b, pf), "human: no prior")
+        # without a prior the reply says the estimate it timed the exposures with, and the same model's time for
+        # a sample needing half and twice it (daemon/plan/plan_json.c)
+        es = before.get("estimate") or {}
+        check(es.get("ms") == 20 and es["predicted_at_half_s"] < before["predicted_s"] < es["predicted_at_double_s"],
+              "estimate %r, predicted %r" % (es, before["predicted_s"]))
+        check("as the estimate 20 ms says" in human(b, pf), "human: the estimate")
         sid = L.start_sweep(b, PLAN, "first")
         row = L.drive_to_end(b, sid, timeout=600)
         check(row["state"] == "completed", "first sweep %s" % row["state"])
@@ -75,6 +81,8 @@ def main():
         check(abs(pr["hdr_fraction"] - hdr / len(firsts)) < 1e-9, "HDR fraction %r vs %d/%d" % (pr["hdr_fraction"],
                                                                                                  hdr, len(firsts)))
         check(after["predicted_s"] != before["predicted_s"], "the prior changes the prediction (%r)" % after["predicted_s"])
+        check("estimate" not in after, "timed by the prior: no estimate's range (%r)" % after.get("estimate"))
+        check("estimate" not in plan(b, fixed)["plan"], "a fixed plan has no estimate's range")
         out = human(b, pf)
         check("auto exposure timed from sweep %d of sample green-paint" % sid in out, "human output: %r" % out)
         check(plan(b, other)["plan"]["exposure_prior"] is None, "another sample has no prior")

@@ -192,6 +192,16 @@ try:
     p.terminate()
     p.wait(5)
 
+    # the shipped simulated configuration starts with the white standard on the stage, as the README says: a
+    # sweep measures its reference first, then pauses for the sample
+    p, ports = T.start(["-c", os.path.join(simlib.SRC, "config", "bench-sim.yaml"), "--disable",
+                        "laser_arm,detector_arm,laser", "--control", os.path.join(tmp, "shipped.ctl")],
+                       os.path.join(tmp, "shipped.ports.json"))
+    st = Ctl(ports["control"]["socket"])("status")
+    check(st.startswith("ok ") and "sample=white " in st + " ", f"bench-sim.yaml starts with the white standard: {st}")
+    p.terminate()
+    p.wait(5)
+
     # bad configurations and arguments: clear errors naming the place
     for name, section, want in [
         ("b1.yaml", "sim:\n  sample: velvet\n", "b1.yaml:4"),

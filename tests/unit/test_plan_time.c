@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <string.h>
 #include <cmocka.h>
+#include <jansson.h>
 
 #include "config/bench.h"
 #include "daemon/executor.h"
@@ -383,6 +384,65 @@ static void test_defaults_match(void **state)
 		    t.ref_pose.det_phi == ex.ref_pose.det_phi);
 }
 
+/* predicted_s of PLAN_AUTO with its estimate replaced by est_ms, planned from its own text (independent of the
+ * reply's way of varying the estimate) */
+static double auto_at(const struct plan_timing *t, const char *est)
+{
+	char text[1024];
+	const char *at = strstr(PLAN_AUTO, "estimate_ms: 20");
+	assert_non_null(at);
+	snprintf(text, sizeof text, "%.*sestimate_ms: %s%s", (int)(at - PLAN_AUTO), PLAN_AUTO, est,
+		 at + strlen("estimate_ms: 20"));
+	struct fx f;
+	load(&f, text);
+	plan_time_apply(f.spec, &f.g, t, f.res);
+	double s = f.res->predicted_s;
+	unload(&f);
+	return s;
+}
+
+/* A first auto sweep's dry run says the estimate it assumed and the same model's time for a sample needing half
+ * and twice it; the plan itself (its steps) stays timed at the estimate. With a prior, or fixed integration: no
+ * such figures (the times are known). */
+static void test_estimate_range(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_AUTO);
+	struct plan_timing t = timing();
+	json_t *o = plan_dry_run_json(f.spec, &f.g, &t, f.res, false);
+	assert_non_null(o);
+	json_t *es = json_object_get(o, "estimate");
+	assert_true(json_is_object(es));
+	double nominal = auto_at(&t, "20"), half = auto_at(&t, "10"), twice = auto_at(&t, "40");
+	assert_true(half < nominal && nominal < twice);
+	assert_true(fabs(json_real_value(json_object_get(es, "ms")) - 20) < TOL);
+	assert_true(fabs(json_real_value(json_object_get(es, "predicted_at_half_s")) - half) < TOL);
+	assert_true(fabs(json_real_value(json_object_get(es, "predicted_at_double_s")) - twice) < TOL);
+	/* the plan's own figures are the estimate's: the reply's and every step's */
+	assert_true(fabs(json_real_value(json_object_get(o, "predicted_s")) - nominal) < TOL);
+	double last = f.res->steps[f.res->n_steps - 1].predicted_start_s;
+	json_decref(o);
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(f.res->steps[f.res->n_steps - 1].predicted_start_s - last) < TOL);
+	/* with an exposure prior the sample's times are known */
+	t.prior = (struct plan_prior){ .sweep = 3, .n_inc = 1 };
+	t.prior.inc[0] = (struct plan_prior_inc){ .theta_i = 30, .points = 8, .median_ms = 50, .mean_ms = 55,
+						  .spread = 2, .darks_per_clear = 2, .dark_ms = 60 };
+	o = plan_dry_run_json(f.spec, &f.g, &t, f.res, false);
+	assert_non_null(o);
+	assert_null(json_object_get(o, "estimate"));
+	json_decref(o);
+	unload(&f);
+	load(&f, PLAN_FIXED);
+	t = timing();
+	o = plan_dry_run_json(f.spec, &f.g, &t, f.res, false);
+	assert_non_null(o);
+	assert_null(json_object_get(o, "estimate"));
+	json_decref(o);
+	unload(&f);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -395,6 +455,7 @@ int main(void)
 		cmocka_unit_test(test_dark_age),
 		cmocka_unit_test(test_prior),
 		cmocka_unit_test(test_defaults_match),
+		cmocka_unit_test(test_estimate_range),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
