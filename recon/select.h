@@ -29,10 +29,15 @@ struct select_target {
 	double lnf_threshold;                /* > 0: a combined target (kind SELECT_DHR): the DHR part ≤ threshold AND
 					      * the ln f part ≤ lnf_threshold; its value is the larger of each part's
 					      * value over its threshold (met at ≤ 1) */
+	int lnf_rad;                         /* the ln f criterion (SELECT_LNF, or a combined target's ln f part;
+					      * spec "lnf:rad"): each grid point's variance weighed by the expected
+					      * squared error of log(1 + f cosθi cosθo) under dωi dωo (the held-out
+					      * log-RMSE of the time-to-accuracy study) instead of the projected
+					      * measure cosθi cosθo dωi dωo (0, the default); the value is the same */
 };
 
-/* Parse "dhr:8,30,60", "lnf", "rgb", optionally followed by ":le=X" (X > 0), or the combined
- * "dhr:8,30,60:le=X+lnf:le=Y" (both thresholds required). 0, or -1 with err saying what is wrong. */
+/* Parse "dhr:8,30,60", "lnf", "lnf:rad", "rgb", optionally followed by ":le=X" (X > 0), or the combined
+ * "dhr:8,30,60:le=X+lnf[:rad]:le=Y" (both thresholds required). 0, or -1 with err saying what is wrong. */
 int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err);
 
 /* The batch's route, for charging each pick its increment to it (NULL in select_opts: each pick costs its cost[j],

@@ -1,5 +1,5 @@
 /* select_target: the target spec of brdf-recon select and the adaptive plan ("dhr:8,30,60:le=X", "lnf", "rgb",
- * combined "dhr:...:le=X+lnf:le=Y") parsed into struct select_target. */
+ * combined "dhr:...:le=X+lnf[:rad]:le=Y") parsed into struct select_target. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -41,6 +41,7 @@ int select_target_parse(const char *spec, struct select_target *t, struct acq_er
 		return acq_errf(err, ACQ_E_INVAL, "target '%s': a combined target is dhr:THETA[,...]:le=X+lnf:le=Y (both "
 				"thresholds given: both must be met)", spec);
 	t->lnf_threshold = t2.threshold;
+	t->lnf_rad = t2.lnf_rad;
 	return 0;
 }
 
@@ -59,6 +60,11 @@ static int target_parse_one(const char *spec, struct select_target *t, struct ac
 	}
 	if ((size_t)(body_end - p) == 3 && !strncmp(p, "lnf", 3)) {
 		t->kind = SELECT_LNF;
+		return 0;
+	}
+	if ((size_t)(body_end - p) == 7 && !strncmp(p, "lnf:rad", 7)) {
+		t->kind = SELECT_LNF;
+		t->lnf_rad = 1;
 		return 0;
 	}
 	if ((size_t)(body_end - p) == 3 && !strncmp(p, "rgb", 3)) {

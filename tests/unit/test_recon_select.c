@@ -14,6 +14,8 @@
  *  - the route increment: a candidate on the batch's route (at a pick's incidence, next to it) is chosen over an
  *    equally informative one the old rule (cost from the arms alone) prefers, and is charged exactly its increment;
  *  - the ln f criterion under the projected measure: the grid's weights, Σ w v, a mid-angle pick over a grazing one;
+ *  - "lnf:rad": the same value and posterior, weights = the expected squared error of log(1 + f̂ cosθi cosθo) under
+ *    dωi dωo (the study's held-out log-RMSE), equal to a direct computation through recon_eval;
  *  - the energy prior's σ_E after a pick at an unseen mirror direction (test_prior_after_pick, prior's);
  *  - the factor select lends recon_dhr_parts: the same σ as its own, a perturbed one seen (test_lent_factor). */
 #include <setjmp.h>
@@ -683,10 +685,16 @@ static void test_target_parse(void **state)
 	assert_true(t.nth == 1 && t.theta_deg[0] == 8 && t.threshold == 0.002);
 	assert_int_equal(select_target_parse("lnf:le=0.1", &t, &e), 0);
 	assert_true(t.kind == SELECT_LNF && t.threshold == 0.1);
+	assert_int_equal(select_target_parse("lnf:rad:le=0.1", &t, &e), 0);
+	assert_true(t.kind == SELECT_LNF && t.threshold == 0.1 && t.lnf_rad == 1);
+	assert_int_equal(select_target_parse("dhr:8:le=0.002+lnf:rad:le=0.1", &t, &e), 0);
+	assert_true(t.kind == SELECT_DHR && t.lnf_threshold == 0.1 && t.lnf_rad == 1);
+	assert_int_equal(select_target_parse("dhr:8:le=0.002+lnf:le=0.1", &t, &e), 0);
+	assert_true(t.lnf_rad == 0);
 	assert_int_equal(select_target_parse("rgb:le=0.01", &t, &e), 0);
 	assert_true(t.kind == SELECT_RGB && t.threshold == 0.01);
 	static const char *const bad[] = { "", "dhr", "dhr:", "dhr:8,", "dhr:91", "dhr:-1", "dhr:x", "lnf:le=0",
-					   "lnf:le=-1", "lnf:le=", "lnfx", "mse:8", "dhr:8:le=abc", "rgb:8", "rgbx", "rgb:le=0",
+					   "lnf:le=-1", "lnf:le=", "lnfx", "lnf:radx", "lnf:rad:", "lnf:", "rgb:rad", "mse:8", "dhr:8:le=abc", "rgb:8", "rgbx", "rgb:le=0",
 					   "dhr:1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16,17" };
 	for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
 		e.msg[0] = '\0';
@@ -1008,6 +1016,90 @@ static void test_lnf_measure(void **state)
 	fix_free(&f);
 	struct select_result r;
 	assert_int_equal(pick1(m, 2, ca, cost, "lnf", 1, &r), 0);
+	select_result_free(&r);
+	recon_model_free(m);
+}
+
+/* "lnf:rad" (session 15): the ln f target's value, grid and posterior are "lnf"'s (the same bits); only the criterion's
+ * weights change: w[x] ∝ ω_x · mean_λ (d_λ c / (1 + f̂_λ c))² / amp[x]², ω_x the grid cell's share of dωi dωo (a
+ * quadrature of that measure: cos²θi cos²θo's mean within 3 % of the exact one), c = cosθi cosθo, f̂ the model's own
+ * evaluation (recon_eval, energy-scaled), d_λ = (f̂_λ + s_λ ε_λ) √(α_λ + u·prior) (for the log transform df̂/dg =
+ * f̂ + ε; s the energy factor), amp² = mean α + u·prior: w v is then the expected squared error of log(1 + f̂ c), the
+ * study's held-out log-RMSE. Equal to 1e-9 relative (select computes f̂ through its own kernel rows and weights, not
+ * recon_eval); the near-normal pairs (θi, θo ≤ 30°) weigh more than under the projected measure (c² f̂² against c). */
+static double solid_mean_cos2(void)
+{
+	double c = cos(80 * M_PI / 180), one = (1 - c * c * c) / 3 / (1 - c);
+	return one * one;
+}
+
+static void test_lnf_rad(void **state)
+{
+	(void)state;
+	rt_seed();
+	size_t L = 16, nc = 40;
+	struct recon_model *m = rgb_model(4, 4, 6, L);
+	double ang[40 * 4], cost[40];
+	random_cands(nc, ang, cost);
+	struct fix fp, fr;
+	fix_make(&fp, m, nc, ang, cost, "lnf", 2);
+	fix_make(&fr, m, nc, ang, cost, "lnf:rad", 2);
+	struct sel *s = &fr.s;
+	size_t F = s->F;
+	assert_true(fr.t.lnf_rad == 1 && fp.t.lnf_rad == 0 && F == fp.s.F);
+	assert_true(fr.r.value == fp.r.value);
+	for (size_t x = 0; x < F; x++)
+		assert_true(s->v[x] == fp.s.v[x]);
+	double *f = malloc(F * L * sizeof *f), *want = malloc(F * sizeof *want), abar = 0, sw = 0, om = 0, omg = 0;
+	double h = 5 * M_PI / 180, tmax = 80 * M_PI / 180, dp = 20 * M_PI / 180, near_r = 0, near_p = 0;
+	assert_int_equal(recon_eval(m, F, s->xang, f, &fr.e), 0);
+	for (size_t l = 0; l < L; l++)
+		abar += s->alpha[l] / (double)L;
+	for (size_t x = 0; x < F; x++) {
+		const double *a = s->xang + 4 * x;
+		double c6[6];
+		rbf_canon(a[0], a[1], a[2], a[3], c6);
+		double wi = cos(fmax(a[0] - h, 0)) - cos(fmin(a[0] + h, tmax)), wo = cos(fmax(a[2] - h, 0)) - cos(fmin(a[2] + h, tmax));
+		double wp = a[0] == 0 ? M_PI : (fabs(a[3]) < 1e-12 || fabs(a[3] - M_PI) < 1e-12 ? 0.5 * dp : dp);
+		double omega = wi * wo * wp * (a[2] > a[0] + 1e-12 ? 2 : 1), c = cos(a[0]) * cos(a[2]);
+		double u = recon_unseen(recon_nearest_centre(m, c6, NULL)), acc = 0;
+		for (size_t l = 0; l < L; l++) {
+			double fl = f[x * L + l], sc = recon_energy_scale(m, a[0], a[2], l);
+			double e = (fl + sc * m->eps[l]) * sqrt(s->alpha[l] + u * RECON_PRIOR_ALPHA) * c / (1 + fl * c);
+			acc += e * e / (double)L;
+		}
+		want[x] = omega * acc / (abar + u * RECON_PRIOR_ALPHA);
+		sw += want[x];
+		om += omega;
+		omg += omega * c * c;
+	}
+	double worst = 0;
+	for (size_t x = 0; x < F; x++) {
+		const double *a = s->xang + 4 * x;
+		worst = fmax(worst, fabs(s->xw[x] - want[x] / sw) / (want[x] / sw));
+		if (a[0] <= 30 * M_PI / 180 + 1e-9 && a[2] <= 30 * M_PI / 180 + 1e-9) {
+			near_r += s->xw[x];
+			near_p += fp.s.xw[x];
+		}
+	}
+	printf("lnf:rad: weights vs the direct formula: largest relative difference %.3g; mean of cos²θi cos²θo under the "
+	       "cells' dωi dωo %.4f, exact %.4f; weight of θi, θo ≤ 30°: %.3f (projected measure %.3f)\n", worst, omg / om,
+	       solid_mean_cos2(), near_r, near_p);
+	assert_true(worst <= 1e-9);
+	assert_true(fabs(omg / om - solid_mean_cos2()) <= 0.03 * solid_mean_cos2());
+	assert_true(near_r > near_p);
+	/* the criterion is Σ w v, and a batch is chosen */
+	double E = sel_excess(s, SIZE_MAX, NULL), Ew = 0;
+	for (size_t x = 0; x < F; x++)
+		Ew += s->xw[x] * s->v[x];
+	assert_true(fabs(E - Ew) <= 1e-12 * Ew);
+	free(f);
+	free(want);
+	fix_free(&fp);
+	fix_free(&fr);
+	struct select_result r;
+	size_t p0 = pick1(m, nc, ang, cost, "lnf:rad", 2, &r);
+	assert_true(p0 < nc && r.npicks == 2);
 	select_result_free(&r);
 	recon_model_free(m);
 }
@@ -1340,7 +1432,7 @@ int main(void)
 		cmocka_unit_test(test_rgb_target),      cmocka_unit_test(test_value_channels),
 		cmocka_unit_test(test_target_parse),     cmocka_unit_test(test_noise_fall),
 		cmocka_unit_test(test_combined_target), cmocka_unit_test(test_route_increment),
-		cmocka_unit_test(test_lnf_measure),
+		cmocka_unit_test(test_lnf_measure),     cmocka_unit_test(test_lnf_rad),
 		cmocka_unit_test(test_prior_after_pick), cmocka_unit_test(test_fast_path),
 		cmocka_unit_test(test_lent_factor),     cmocka_unit_test(test_big_alloc),
 	};
