@@ -240,6 +240,21 @@ static double t_sharp(const double a[4], double wl)
 	return rho / M_PI + (c > 0 ? 0.30 * (n + 2) / (2 * M_PI) * pow(c, n) : 0);
 }
 
+/* acq-sim's 3 × 4 × 6 grid (θi 13.3/40/66.7°, θo 10-70° by 20°, φo by 60°): 72 direction pairs into a[]. */
+static size_t grid_3x4x6(double *a)
+{
+	size_t n = 0;
+	for (int i = 0; i < 3; i++)
+		for (int o = 0; o < 4; o++)
+			for (int p = 0; p < 6; p++, n++) {
+				a[4 * n] = (40.0 / 3 + 80.0 / 3 * i) * M_PI / 180;
+				a[4 * n + 1] = 0;
+				a[4 * n + 2] = (10 + 20.0 * o) * M_PI / 180;
+				a[4 * n + 3] = 60.0 * p * M_PI / 180;
+			}
+	return n;
+}
+
 /* Issue 13 item 3 on an intermediate plan (session 10): acq-sim's 3 × 4 × 6 grid (θi 13.3/40/66.7°, θo 10-70° by 20°,
  * φo by 60°) of t_sharp. At 30° the nearest sample to the mirror direction (30°, 30°, 180°) is (40°, 30°, 180°):
  * within RECON_PRIOR_R0 of it, so the distance rule alone counted the mirror as seen, but 10° off its own mirror
@@ -251,15 +266,7 @@ static void test_sharp_lobe_coarse_grid(void **state)
 	(void)state;
 	uint64_t seed = rt_seed();
 	double a[3 * 4 * 6 * 4], worst = 0;
-	size_t n = 0;
-	for (int i = 0; i < 3; i++)
-		for (int o = 0; o < 4; o++)
-			for (int p = 0; p < 6; p++, n++) {
-				a[4 * n] = (40.0 / 3 + 80.0 / 3 * i) * M_PI / 180;
-				a[4 * n + 1] = 0;
-				a[4 * n + 2] = (10 + 20.0 * o) * M_PI / 180;
-				a[4 * n + 3] = 60.0 * p * M_PI / 180;
-			}
+	size_t n = grid_3x4x6(a);
 	for (uint64_t r = 0; r < 2; r++) {
 		rt_seed_value(seed + r);
 		struct recon_samples s;
@@ -284,20 +291,6 @@ static double t_matte(const double a[4], double wl)
 	return rho / M_PI * (1 + 0.2 * cos(a[0]) * cos(a[2]));
 }
 
-/* acq-sim's 3 × 4 × 6 grid (θi 13.3/40/66.7°, θo 10-70° by 20°, φo by 60°): 72 direction pairs into a[]. */
-static size_t grid_3x4x6(double *a)
-{
-	size_t n = 0;
-	for (int i = 0; i < 3; i++)
-		for (int o = 0; o < 4; o++)
-			for (int p = 0; p < 6; p++, n++) {
-				a[4 * n] = (40.0 / 3 + 80.0 / 3 * i) * M_PI / 180;
-				a[4 * n + 1] = 0;
-				a[4 * n + 2] = (10 + 20.0 * o) * M_PI / 180;
-				a[4 * n + 3] = 60.0 * p * M_PI / 180;
-			}
-	return n;
-}
 
 /* Issue 13 item 3, the other side (session 15): on the 3 × 4 × 6 grid a material whose data show no lobe the plan's
  * holes could hide (t_matte) must not be charged for them. The holes
