@@ -354,19 +354,18 @@ size_t sel_lnf_grid(double *ang, double *w)
  * the projected measure alone (the default) a grazing pair weighs 1/c more than in that error, and a bright region
  * (the backscatter peak, the red half of a red material) no more than a dark one. Normalised to sum 1.
  */
-static int lnf_rad_weights(struct sel *s, const double *c6, const double *amp, struct acq_err *err)
+static int lnf_rad_weights(struct sel *s, const double *c6, const double *amp, const double *KXn, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
 	size_t n = s->n, L = s->L, F = s->F;
-	double *KXn = malloc(F * n * sizeof *KXn), *Y = malloc(F * L * sizeof *Y);
+	double *Y = malloc(F * L * sizeof *Y);
 	int rc = -1;
-	if (!KXn || !Y) {
+	if (!Y) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
 	lnf_grid(NULL, s->xw, 0);
-	/* the interpolant (without its mean) at the grid points, every channel */
-	rbf_kmatrix_soa(m->kernel, m->shape, F, c6, n, m->soa, KXn);
+	/* the interpolant (without its mean) at the grid points, every channel; KXn = K(c6, centres) */
 	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)F, (int)L, (int)n, 1.0, KXn, (int)n, m->w, (int)n, 0.0,
 		    Y, (int)L);
 	double sum = 0;
@@ -394,24 +393,26 @@ static int lnf_rad_weights(struct sel *s, const double *c6, const double *amp, s
 			s->xw[x] /= sum;
 	rc = 0;
 out:
-	free(KXn);
 	free(Y);
 	return rc;
 }
 
 /* Point targets (ln f, RGB): the posterior variance v[x] = amp[x]² P(x, x) of g at the F points c6 (unit-amplitude
- * posterior P) and their covariances Z[x, j] = amp[x] P(x, candidate j) with the candidates. */
-static int sel_point_cov(struct sel *s, const double *c6, const double *amp, struct acq_err *err)
+ * posterior P) and their covariances Z[x, j] = amp[x] P(x, candidate j) with the candidates. kxn: the kernel matrix
+ * K(c6, centres) [F × n] when the caller has built it already, else NULL. */
+static int sel_point_cov(struct sel *s, const double *c6, const double *amp, const double *kxn, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
 	size_t n = s->n, F = s->F, J = s->J;
-	double *KXn = malloc(F * n * sizeof *KXn), *GX = malloc(F * n * sizeof *GX);
+	double *own = kxn ? NULL : malloc(F * n * sizeof *own), *GX = malloc(F * n * sizeof *GX);
 	int rc = -1;
-	if (!KXn || !GX) {
+	if ((!kxn && !own) || !GX) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
-	rbf_kmatrix_soa(m->kernel, m->shape, F, c6, n, m->soa, KXn);
+	if (!kxn)
+		rbf_kmatrix_soa(m->kernel, m->shape, F, c6, n, m->soa, own);
+	const double *KXn = kxn ? kxn : own;
 	memcpy(GX, KXn, F * n * sizeof *GX);
 	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)F, s->A, (lapack_int)n, GX, (lapack_int)n)) {
 		acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
@@ -433,7 +434,7 @@ static int sel_point_cov(struct sel *s, const double *c6, const double *amp, str
 	}
 	rc = 0;
 out:
-	free(KXn);
+	free(own);
 	free(GX);
 	return rc;
 }
@@ -445,8 +446,9 @@ int sel_setup_lnf(struct sel *s, struct select_result *r, struct acq_err *err)
 	const struct recon_model *m = s->m;
 	size_t F = s->F;
 	double *c6 = calloc(F * 6, sizeof *c6), *amp = calloc(F, sizeof *amp); /* calloc: gcc's maybe-uninitialized */
+	double *KXn = s->t->lnf_rad ? malloc(F * s->n * sizeof *KXn) : NULL; /* lnf:rad and the covariances share it */
 	int rc = -1;
-	if (!c6 || !amp) {
+	if (!c6 || !amp || (s->t->lnf_rad && !KXn)) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
@@ -458,9 +460,12 @@ int sel_setup_lnf(struct sel *s, struct select_result *r, struct acq_err *err)
 		rbf_canon(a[0], a[1], a[2], a[3], c6 + 6 * x);
 		amp[x] = sqrt(abar + recon_unseen(recon_nearest_centre(m, c6 + 6 * x, NULL)) * RECON_PRIOR_ALPHA);
 	}
-	if (s->t->lnf_rad && lnf_rad_weights(s, c6, amp, err))
-		goto out;
-	if (sel_point_cov(s, c6, amp, err))
+	if (KXn) {
+		rbf_kmatrix_soa(m->kernel, m->shape, F, c6, s->n, m->soa, KXn);
+		if (lnf_rad_weights(s, c6, amp, KXn, err))
+			goto out;
+	}
+	if (sel_point_cov(s, c6, amp, KXn, err))
 		goto out;
 	r->value = 0;
 	for (size_t x = 0; x < F; x++)
@@ -474,6 +479,7 @@ int sel_setup_lnf(struct sel *s, struct select_result *r, struct acq_err *err)
 out:
 	free(c6);
 	free(amp);
+	free(KXn);
 	return rc;
 }
 
@@ -584,7 +590,7 @@ int sel_setup_rgb(struct sel *s, struct select_result *r, struct acq_err *err)
 			amp[x] = 0;
 		amp[x] *= sqrt(s->xw[x]); /* the measure folded in: v sums to the value² */
 	}
-	if (sel_point_cov(s, c6, amp, err))
+	if (sel_point_cov(s, c6, amp, V ? KXn : NULL, err))
 		goto out;
 	double sum = 0;
 	for (size_t x = 0; x < F; x++)
