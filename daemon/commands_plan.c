@@ -16,8 +16,8 @@
 /* ---- plan: dry run against the running configuration's bench, in a child with a deadline ----
  * The planner's cost grows fast with the points (1000 × 10 Fibonacci points took 31 s and 2000 × 10 320 MB on
  * the loop): it runs in a child of the job helper (job_fork_msg: the loop writes the request's bytes, never
- * forks the daemon nor parses the plan), at most PLAN_CHILDREN at once, stopped after PLAN_CPU_S seconds of CPU
- * (RLIMIT_CPU) or PLAN_DEADLINE_S real seconds, and limited to PLAN_MEM_BYTES of address space, so no request
+ * forks the daemon nor parses the plan), at most PLAN_CHILDREN at once, stopped after daemon.plan_cpu_s seconds of
+ * CPU (RLIMIT_CPU; default 10) or daemon.plan_deadline_s real seconds (default 30), and limited to PLAN_MEM_BYTES of address space, so no request
  * holds the loop or its memory. The work is bounded in CPU time, not real time: the child runs at nice +10, and
  * at load 13 a plan of 0.1 s of CPU waited more than the 10 real seconds that were its only bound until session
  * 14 (test_acqctl.py failed); the real-time bound (3× that) only ends a child that hardly gets the CPU at all. It
@@ -27,8 +27,6 @@
  * An auto plan naming its sample needs that sample's exposure prior from the database: the child answers
  * {"need_prior": sample} and the loop asks again with the prior read (a second child). */
 #define PLAN_CHILDREN 2
-#define PLAN_CPU_S 10
-#define PLAN_DEADLINE_S 30.0
 
 static int plan_children;
 
@@ -113,8 +111,9 @@ static int plan_submit(struct plan_job *pj, struct acq_err *err)
 	/* with every step the reply grows with the plan (the paper's 866 points: about 0.3 MB): bounded by what a
 	 * client accepts as a reply */
 	size_t out_max = m->points ? PROTO_MAX_REPLY : JOB_FORK_OUTPUT_MAX;
-	if (job_fork_msg_cpu(&commands_plan_kind, pj->msg, pj->msg_len, PLAN_MEM_BYTES, PLAN_CPU_S, out_max,
-			     PLAN_DEADLINE_S * rate, plan_done, pj, NULL, err))
+	const struct conf_daemon *d = &pj->app->conf->d;
+	if (job_fork_msg_cpu(&commands_plan_kind, pj->msg, pj->msg_len, PLAN_MEM_BYTES, (unsigned)d->plan_cpu_s, out_max,
+			     d->plan_deadline_s * rate, plan_done, pj, NULL, err))
 		return -1;
 	plan_children++;
 	return 0;
@@ -155,10 +154,10 @@ static void plan_done(struct job *j, int status, const char *output, size_t len,
 				 "restarted): retry");
 		else if (job_timed_out(j))
 			snprintf(msg, sizeof msg, "plan: not planned within %.0f s, the daemon's bound: use fewer points "
-				 "or plan it offline (acqctl plan FILE without the daemon)", PLAN_DEADLINE_S);
+				 "or plan it offline (acqctl plan FILE without the daemon)", app->conf->d.plan_deadline_s);
 		else if (status == 128 + SIGXCPU)
 			snprintf(msg, sizeof msg, "plan: not planned within %d s of CPU, the daemon's bound: use fewer "
-				 "points or plan it offline (acqctl plan FILE without the daemon)", PLAN_CPU_S);
+				 "points or plan it offline (acqctl plan FILE without the daemon)", app->conf->d.plan_cpu_s);
 		else if (job_output_truncated(j))
 			snprintf(msg, sizeof msg, "plan: the reply is longer than %zu bytes: ask without points=true or plan "
 				 "it offline (acqctl plan FILE without the daemon)",

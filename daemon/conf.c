@@ -227,6 +227,8 @@ static int parse_daemon(struct conf_priv *cp, struct yc_node *node, struct acq_e
 	d->device_retry_s = 5;
 	d->observer_rate = CONF_OBSERVER_RATE;
 	d->observer_burst = CONF_OBSERVER_BURST;
+	d->plan_cpu_s = CONF_PLAN_CPU_S;
+	d->plan_deadline_s = CONF_PLAN_DEADLINE_S;
 	const char *db = "acquisition.db";
 	if (!node)
 		goto paths;
@@ -255,7 +257,7 @@ static int parse_daemon(struct conf_priv *cp, struct yc_node *node, struct acq_e
 		if (yc_check_unknown(sock, "daemon.socket", err))
 			return -1;
 	}
-	long long port = 0;
+	long long port = 0, plan_cpu = d->plan_cpu_s;
 	if (yc_int(node, "tcp_port", false, 0, 65535, &port, err))
 		return -1;
 	d->tcp_port = (int)port;
@@ -273,8 +275,11 @@ static int parse_daemon(struct conf_priv *cp, struct yc_node *node, struct acq_e
 	    yc_double(node, "watchdog_s", false, 0, 3600, &d->watchdog_s, err) ||
 	    yc_double(node, "observer_rate", false, 0, 100000, &d->observer_rate, err) ||
 	    yc_double(node, "observer_burst", false, 1, 100000, &d->observer_burst, err) ||
+	    yc_int(node, "plan_cpu_s", false, 1, 3600, &plan_cpu, err) ||
+	    yc_double(node, "plan_deadline_s", false, 1, 3600, &d->plan_deadline_s, err) ||
 	    yc_check_unknown(node, "daemon", err))
 		return -1;
+	d->plan_cpu_s = (int)plan_cpu;
 paths:
 	if (strstr(db, "..") || !db[0])
 		return yc_errf(err, node ? yc_get(node, "database") : NULL,

@@ -24,6 +24,10 @@ enum conf_dev { CONF_DEV_LASER_THETA, CONF_DEV_DETECTOR_THETA, CONF_DEV_DETECTOR
  * stays far below them; a flood of one observer costs the loop at most this many requests a second. */
 #define CONF_OBSERVER_RATE 20.0
 #define CONF_OBSERVER_BURST 40.0
+/* Defaults of daemon.plan_cpu_s / plan_deadline_s: a `plan` request's child is stopped after this much CPU, or
+ * after this many real seconds when it hardly gets the CPU (daemon/commands_plan.c says why both). */
+#define CONF_PLAN_CPU_S 10
+#define CONF_PLAN_DEADLINE_S 30.0
 
 struct conf_daemon {
 	const char *state_dir;     /* absolute; requests' paths are confined to it */
@@ -42,6 +46,8 @@ struct conf_daemon {
 	double watchdog_s;         /* 0 = from WATCHDOG_USEC only */
 	double observer_rate;      /* requests per second of one observer (a uid; all TCP peers together); 0 = no limit */
 	double observer_burst;     /* requests an observer may send at once beyond the rate (the bucket's size) */
+	int plan_cpu_s;            /* CPU seconds a `plan` request may take (its child's RLIMIT_CPU) */
+	double plan_deadline_s;    /* real seconds a client waits for a `plan` reply at most */
 };
 
 struct conf_sweep {

@@ -37,15 +37,20 @@ FIRST=" test_recon_extremes test_dhr_trend_refit.py test_recon_honesty test_reco
  test_sweep_full.py test_adaptive_budget.py test_material test_recon_cli.py test_laser_halt.py test_recon_rgl.py
  test_dhr_coat.py test_recon_render_hdr.py test_recon_trend test_recon_select test_recon_fit test_adaptive_target.py
  test_sim_truth.py "
-# Shared tests that mostly wait (≤ 1 s of CPU in a make check; a file, a socket, a simulated device): they run
-# beside the SERIAL tests, one at a time, instead of in the CPU-bound lanes. A SERIAL test then shares the
-# machine with at most one such test. A new test is not LIGHT until measured so.
+# Shared tests that mostly wait (≤ 1 s of CPU in a make check, or ≤ a third of a core while they run: a file, a
+# socket, a simulated device): they run beside the SERIAL tests, one at a time, instead of in the CPU-bound lanes.
+# A SERIAL test then shares the machine with at most one such test (less than CI's two busy processes beside
+# make check). A new test is not LIGHT until measured so. The SERIAL lane is the longer one (d2245c5 with two
+# `yes`: 228 s of SERIAL tests, 74 s of LIGHT ones): the second row below (7 tests, 53 s of wall, 11 s of CPU)
+# moved here from the CPU-bound lanes, where they held a lane that a heavy test could use.
 LIGHT=" test_server test_devices test_job_helper test_store_ckpt test_plan_worker test_recon_sky test_sim_refdrift
  test_recon_model test_executor test_sim_sphere test_avaspec_usb test_recon_render test_store_crash test_sim_arm
  test_loop test_store test_store_sync test_exposure test_recon_plot
  fuzz_plan fuzz_simarm fuzz_axisreply fuzz_proto
  test_slow_disk.py test_avaspec_golden.sh test_sim_sockets.py test_sim_arms_spectro.py test_store_schema.py
- test_systemd_unit.sh test_acqctl_golden.py test_sim_laser_spectro.py test_store_foreign.py "
+ test_systemd_unit.sh test_acqctl_golden.py test_sim_laser_spectro.py test_store_foreign.py
+ test_plan_limits.py test_daemon_protocol.py test_recon_timeout_real.py test_sweep_faults.py
+ test_adaptive_combined.py test_exposure_prior.py test_export_nexus.py "
 # one space between names (a name at a line's end was followed by a newline, and did not match " NAME ")
 SERIAL=" $(echo $SERIAL) " FIRST=" $(echo $FIRST) " LIGHT=" $(echo $LIGHT) "
 

@@ -6,7 +6,7 @@
 - Slots kept for controllers: with the observers' share of the table full, observers are refused, root
   (a controller) still gets `status`.
 - A huge plan (10 x 1000 Fibonacci points; 31 s on the loop before) leaves `status` answering in < 0.5 s and
-  is answered within the planner's bounds (10 s of CPU, 30 s real; test_plan_limits.py).
+  is ended by the planner's bounds (daemon.plan_cpu_s, set to 1 s of CPU here; 30 s real; test_plan_limits.py).
 - Clients pipelining requests without reading their replies: the daemon's RSS stays < 64 MB and a
   well-behaved client is answered in < 0.5 s.
 - The TCP port is off by default; when configured it gives observers no configuration text."""
@@ -96,7 +96,9 @@ def main():
     # ever made instead of the live ones; a small quarantine keeps it meaningful under the sanitizer.
     env = dict(os.environ, ASAN_OPTIONS=os.environ.get("ASAN_OPTIONS", "") +
                ":quarantine_size_mb=1:thread_local_quarantine_size_kb=64")
-    d = A.Daemon(extra_daemon="  observers: [daemon, bin, sys, sync]\n").start(env=env)
+    # plan_cpu_s 1: the huge plan below is ended by its CPU bound (its RLIMIT_CPU) rather than by waiting out the
+    # default 10 s of CPU, which at nice +10 beside two busy processes takes the 30 s deadline instead
+    d = A.Daemon(extra_daemon="  observers: [daemon, bin, sys, sync]\n  plan_cpu_s: 1\n").start(env=env)
     helpers = []
     try:
         # 1. an unlisted user: the refusal, not a broken pipe
@@ -177,12 +179,12 @@ def main():
         r = pc.read()
         dt = time.monotonic() - t_plan
         print("huge plan answered after %.1f s: %s" % (dt, r.get("error", {}).get("message", "planned")))
-        # bounded by its 10 s of CPU (commands_plan.c PLAN_CPU_S; at nice +10 on a loaded machine that is more
-        # real seconds), at worst by the 30 s real-time bound (PLAN_DEADLINE_S; a 120 s bound outlived this
-        # read's 60 s at CI's load, session 14)
+        # bounded by its 1 s of CPU (daemon.plan_cpu_s above; at nice +10 on a loaded machine that is more real
+        # seconds), at worst by the 30 s real-time bound (daemon.plan_deadline_s; a 120 s bound outlived this
+        # read's 60 s at CI's load, session 14). The CPU bound is what ends it on a machine that is not starved.
         msg = r.get("error", {}).get("message", "")
         A.check(dt < 40, "the plan was not bounded: %.1f s" % dt)
-        A.check("error" not in r or "not planned within" in msg, "the huge plan failed otherwise: %s" % msg)
+        A.check("not planned within" in msg, "the huge plan was not stopped by a bound: %s" % (msg or "planned"))
         for s in floods:
             s.close()
         pc.close()

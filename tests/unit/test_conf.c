@@ -49,13 +49,14 @@ static void test_defaults_and_values(void **state)
 	assert_int_equal(c->d.socket_mode, 0660);
 	assert_int_equal(c->sweep.averages, 1);
 	assert_true(c->d.observer_rate == CONF_OBSERVER_RATE && c->d.observer_burst == CONF_OBSERVER_BURST);
+	assert_true(c->d.plan_cpu_s == CONF_PLAN_CPU_S && c->d.plan_deadline_s == CONF_PLAN_DEADLINE_S);
 	for (int d = 0; d < CONF_DEV__COUNT; d++)
 		assert_true(c->devnote[d][0] != 0);
 	conf_free(c);
 	assert_int_equal(load("daemon:\n  state_dir: /srv/acq\n  database: /data/a.db\n"
 			      "  socket: {path: /run/a.sock, mode: \"0600\"}\n  tcp_port: 4711\n"
 			      "  controllers: [alice, \"@ops\"]\n  observers: [bob]\n  log_level: debug\n"
-			      "  observer_rate: 0\n  observer_burst: 5\n"
+			      "  observer_rate: 0\n  observer_burst: 5\n  plan_cpu_s: 2\n  plan_deadline_s: 7.5\n"
 			      "sweep: {averages: 8, dark_every: 5, auto_recon: false}\n"
 			      "recon: {program: /opt/brdf-recon, threads: 4, output_dir: out, extra_args: [--fast]}\n"
 			      "sim: {anything: [goes, here]}\n",
@@ -68,6 +69,7 @@ static void test_defaults_and_values(void **state)
 	assert_string_equal(c->d.controllers[1], "@ops");
 	assert_int_equal(c->d.nobservers, 1);
 	assert_true(c->d.observer_rate == 0 && c->d.observer_burst == 5);
+	assert_true(c->d.plan_cpu_s == 2 && c->d.plan_deadline_s == 7.5);
 	assert_int_equal(c->sweep.averages, 8);
 	assert_false(c->sweep.auto_recon);
 	assert_string_equal(c->recon.output_dir, "/srv/acq/out");
@@ -87,6 +89,8 @@ static void test_located_errors(void **state)
 	expect_error("daemon:\n  log_level: loud\n", "2:14", "debug");
 	expect_error("daemon:\n  observer_rate: -1\n", "2:18", "observer_rate");
 	expect_error("daemon:\n  observer_burst: 0.5\n", "2:19", "observer_burst");
+	expect_error("daemon:\n  plan_cpu_s: 0\n", "2:15", "plan_cpu_s");
+	expect_error("daemon:\n  plan_deadline_s: 1.5e9\n", "2:20", "plan_deadline_s");
 	expect_error("daemon:\n  database: ../escape.db\n", "2:13", "database");
 	expect_error("sweep:\n  averages: 0\n", "2:13", "averages");
 	expect_error("sweep:\n  min_integration_ms: 50\n  max_integration_ms: 10\n", "2:23", "max_integration_ms");
