@@ -7,6 +7,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 BUILD = os.environ.get("ACQ_BUILD") or os.path.abspath("build")
@@ -154,3 +155,33 @@ class Daemon:
 def acqctl(sock, *args, timeout=20, env=None):
     return subprocess.run([ACQCTL, "-s", sock] + list(args), capture_output=True, text=True, timeout=timeout,
                           env=env)
+
+
+def fake_daemon(path, reply, version="0"):
+    """A listener at path that greets as acquisitiond does (protocol 1, the given version), reads one request line
+    per connection and sends reply(line) (bytes, or None to send nothing); serves until the socket is closed."""
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    s.bind(path)
+    s.listen(4)
+    hello = ('{"version":"%s","protocol":1,"server":"acquisitiond","max_line":65536}\n' % version).encode()
+
+    def serve():
+        while True:
+            try:
+                conn, _ = s.accept()
+            except OSError:
+                return
+            with conn:
+                conn.sendall(hello)
+                buf = b""
+                while b"\n" not in buf:
+                    chunk = conn.recv(65536)
+                    if not chunk:
+                        break
+                    buf += chunk
+                if b"\n" in buf:
+                    out = reply(buf.split(b"\n", 1)[0])
+                    if out:
+                        conn.sendall(out)
+    threading.Thread(target=serve, daemon=True).start()
+    return s

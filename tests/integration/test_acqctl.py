@@ -21,6 +21,7 @@ import threading
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import acqtest as A  # noqa: E402
 import sweeplib as L  # noqa: E402
 
 try:
@@ -111,27 +112,7 @@ def hanging_socket(path):
 
 def garbling_socket(path):
     """A listener that greets as acquisitiond does, then answers every request with a line that is not JSON."""
-    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    s.bind(path)
-    s.listen(4)
-
-    def serve():
-        while True:
-            try:
-                conn, _ = s.accept()
-            except OSError:
-                return
-            with conn:
-                conn.sendall(b'{"version":"0","protocol":1,"server":"acquisitiond","max_line":65536}\n')
-                buf = b""
-                while b"\n" not in buf:
-                    chunk = conn.recv(65536)
-                    if not chunk:
-                        break
-                    buf += chunk
-                conn.sendall(b"this is not json\n")
-    threading.Thread(target=serve, daemon=True).start()
-    return s
+    return A.fake_daemon(path, lambda line: b"this is not json\n")
 
 
 def offline_checks(tmp):

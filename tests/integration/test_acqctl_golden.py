@@ -5,11 +5,12 @@ tests/golden/acqctl/<command>.txt byte for byte (stable formatting: local ISO 86
 angles rounded with their unit, aligned tables). ACQ_GOLDEN_UPDATE=1 rewrites the .txt files (review the diff)."""
 import json
 import os
-import socket
 import subprocess
 import sys
 import tempfile
-import threading
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import acqtest as A  # noqa: E402
 
 BUILD = os.environ.get("ACQ_BUILD") or os.path.abspath("build")
 SRC = os.environ.get("ACQ_SRC") or os.path.abspath(".")
@@ -21,37 +22,21 @@ CASES = [("version", ["version"]), ("status", ["status"]), ("devices", ["devices
          ("recon.status", ["recon", "status", "2"])]
 
 
-def serve(lsock, replies, seen):
-    while True:
-        try:
-            conn, _ = lsock.accept()
-        except OSError:
-            return
-        with conn:
-            conn.sendall(b'{"version":"1.2.3","protocol":1,"server":"acquisitiond","max_line":65536}\n')
-            buf = b""
-            while b"\n" not in buf:
-                chunk = conn.recv(65536)
-                if not chunk:
-                    break
-                buf += chunk
-            if b"\n" not in buf:
-                continue
-            req = json.loads(buf.split(b"\n", 1)[0])
-            seen.append(req)
-            rep = dict(replies[req["cmd"]], id=req["id"])
-            conn.sendall((json.dumps(rep) + "\n").encode())
+def reply_from(replies, seen):
+    """The golden reply to one request line (its id copied), the request kept in seen."""
+    def reply(line):
+        req = json.loads(line)
+        seen.append(req)
+        return (json.dumps(dict(replies[req["cmd"]], id=req["id"])) + "\n").encode()
+    return reply
 
 
 def main():
     replies = json.load(open(os.path.join(GOLD, "replies.json")))
     tmp = tempfile.mkdtemp(prefix="acqgold.")
     path = os.path.join(tmp, "d.sock")
-    lsock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    lsock.bind(path)
-    lsock.listen(4)
     seen = []
-    threading.Thread(target=serve, args=(lsock, replies, seen), daemon=True).start()
+    lsock = A.fake_daemon(path, reply_from(replies, seen), version="1.2.3")
     plan = os.path.join(tmp, "plan.yaml")
     open(plan, "w").write("name: quick\n")
     env = dict(os.environ, TZ="Europe/Paris", LC_ALL="C.UTF-8")
