@@ -137,6 +137,35 @@ def reference_check(out, seed, conf=None):
             % (100 * np.mean(np.abs(z) < 2), len(z), float(np.sqrt(np.mean(z ** 2))), float(np.abs(z).max()), how))
 
 
+def budget_and_truth(out):
+    """Issue 13 item 1 in the summary: the DHR's uncertainty budget at 8 deg (`brdf-recon info`, median and largest
+    per component) and the DHR at 8 deg (dhr8.csv, written by reference_check) against the simulator's exact DHR
+    (`acq-sim truth SAMPLE --dhr`): the share of wavelengths with |z| < 2 and z RMS, z = (DHR - truth) / sigma.
+    Returns the lines to print."""
+    import numpy as np
+    lines = []
+    model, d8 = os.path.join(out, "model.brdf"), os.path.join(out, "dhr8.csv")
+    r = subprocess.run([RECON, "info", model], capture_output=True, text=True)
+    if r.returncode == 0:
+        txt = r.stdout.splitlines()
+        k = [i for i, x in enumerate(txt) if x.startswith("budget at theta_i=8")]
+        if k:
+            lines.append("budget:              %s" % txt[k[0]].strip())
+            lines += ["                     %s" % x.strip() for x in txt[k[0] + 1:] if x.startswith("  ")]
+    tr = os.path.join(out, "truth-dhr8.csv")
+    if os.path.exists(d8) and subprocess.run([L.SIM, "truth", SAMPLE, "--dhr", tr, "--theta-i", "8", "--wavelengths",
+                                              "450:1100:1"], capture_output=True).returncode == 0:
+        a = np.genfromtxt(d8, delimiter=",", names=True)
+        with open(tr) as f:  # '#' lines, then theta_i,wavelength_nm,dhr,sigma
+            t = np.array([ln.split(",") for ln in f if ln[:1].isdigit()], dtype=float)
+        truth = np.interp(a["wavelength_nm"], t[:, 1], t[:, 2])
+        z = (a["dhr"] - truth) / a["sigma"]
+        lines.append("DHR vs exact truth:  DHR at 8 deg vs `acq-sim truth %s --dhr`: %.1f %% of %d wavelengths within "
+                     "|z| < 2, RMS z %.2f (z = (DHR - truth) / sigma, the model's sigma alone)"
+                     % (SAMPLE, 100 * np.mean(np.abs(z) < 2), len(z), float(np.sqrt(np.mean(z ** 2)))))
+    return lines
+
+
 def main():
     demo = os.path.join(L.BUILD, "demo")
     shutil.rmtree(demo, ignore_errors=True)
@@ -199,6 +228,11 @@ def main():
         except (OSError, ValueError) as e:
             agree = "comparison failed: %s" % e
         print("spectrophotometer:   DHR at 8 deg vs the simulated d/8 sphere measurement of %s: %s" % (SAMPLE, agree))
+        try:
+            for line in budget_and_truth(out):
+                print(line)
+        except (OSError, ValueError) as e:
+            print("budget:              not shown: %s" % e)
         for label, name in (("model", "model.brdf"), ("MERL table", "merl.binary"), ("DHR table", "dhr.csv"),
                             ("DHR plot", "dhr.png"), ("preview image", "preview.png"),
                             ("spectrophotometer", "spectrophotometer.csv"), ("DHR vs reference", "dhr-reference.png"),

@@ -84,6 +84,11 @@ def main():
     print("DHR relative errors:", np.round(rel, 4))
     assert np.all(rel[:6] < 0.01) and np.all(rel < 0.10)
     assert os.path.getsize(os.path.join(d, "dhr.png")) > 1000
+    # with --reference the plot carries the residual panel (issue 13 item 7; drawn and located by test_recon_plot's
+    # test_reference_band_and_residual_panel): cmd_dhr makes the image 900 x 720 for it, 900 x 560 without
+    with open(os.path.join(d, "dhr.png"), "rb") as fh:
+        head = fh.read(24)
+    assert head[:8] == b"\x89PNG\r\n\x1a\n" and struct.unpack(">2I", head[16:24]) == (900, 720), head
     # the budget's systematic components: a reference 3 % above the truth (a certificate off by 3 %) disagrees
     # without them and agrees with a certificate of 2 % standard uncertainty (a correlated component: chi2/n with
     # it as one common factor stays small, where treating it as independent noise would not be tested at all)

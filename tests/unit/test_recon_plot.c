@@ -177,6 +177,112 @@ static void test_curves_at_data_locations(void **state)
 	unlink(p);
 }
 
+/* Is a pixel within ±rows rows of (x, y) dark (every channel < 90: the residual line, 0.1 grey 1.5 px wide with its
+ * antialiasing; the panel's 0 line is 0.4 grey = 102, its ±2 lines red)? */
+static int dark_near(const struct img *g, int x, int y, int rows)
+{
+	for (int yy = y - rows; yy <= y + rows; yy++) {
+		if (yy < 0 || yy >= (int)g->im.height)
+			continue;
+		const unsigned char *q = g->px + 3 * ((size_t)yy * g->im.width + (size_t)x);
+		if (q[0] < 90 && q[1] < 90 && q[2] < 90)
+			return 1;
+	}
+	return 0;
+}
+
+/*
+ * The paper's Fig. 4 as `brdf-recon dhr --reference --plot` draws it (issue 13 item 7): the reference's filled
+ * ±2σ band, and a residual panel below the axes with (model − reference)/σ, lines at 0 and ±2. Located from the
+ * image alone (the panel's own mapping is not exported): the ±2 lines (red) and the 0 line (grey) are found below
+ * the DHR axes, they must be evenly spaced (one σ scale), and the residual curve (dark grey) must sit where its
+ * value says on that scale (±2 rows), above the 0 line for positive residuals, and not 15 rows off.
+ */
+static void test_reference_band_and_residual_panel(void **state)
+{
+	(void)state;
+	enum { N = 651 };
+	static double wl[N], y[N], s[N], ry[N], rs[N], rz[N];
+	double ph = 6.28 * urand();
+	for (int k = 0; k < N; k++) {
+		wl[k] = 450 + k;
+		y[k] = 0.2 + 1e-4 * k; /* clear of the reference band */
+		s[k] = 0.005;
+		ry[k] = 0.45 + 0.01 * sin(wl[k] / 50);
+		rs[k] = 0.02;
+		rz[k] = 2.5 * sin(wl[k] / 40 + ph); /* within ±3: the panel's range stays ±3 */
+	}
+	struct plot_curve cv = { "\xce\xb8i = 8\xc2\xb0", wl, y, s, N }, ref = { "reference", wl, ry, rs, N };
+	struct plot_curve res = { "(model \xe2\x88\x92 ref) / \xcf\x83", wl, rz, NULL, N };
+	struct plot_dhr_opts o;
+	plot_dhr_opts_default(&o);
+	o.width = 800 + (int)(urand() * 100);
+	o.height = 700 + (int)(urand() * 60);
+	o.residual = &res;
+	char p[600];
+	snprintf(p, sizeof(p), "%s/dhr-ref.png", dir);
+	struct plot_frame f;
+	struct acq_err err = { 0 };
+	assert_int_equal(plot_dhr_png(p, &cv, 1, &ref, &o, &f, &err), 0);
+	struct img g;
+	load_png(p, &g);
+	assert_int_equal(g.im.height, o.height);
+
+	/* the reference's band: rows between its line and ±2σ are tinted (the filled green) */
+	int tinted = 0, cols = 0;
+	for (int k = 30; k < N / 2; k += 7) {
+		int px = (int)floor(plot_x_to_px(&f, wl[k]));
+		double py = plot_y_to_px(&f, ry[k]), half = plot_y_to_px(&f, 0) - plot_y_to_px(&f, 2 * rs[k]);
+		for (int side = -1; side <= 1; side += 2) {
+			const unsigned char *q = g.px + 3 * ((size_t)floor(py + side * 0.6 * half) * g.im.width + (size_t)px);
+			tinted += q[1] > q[0] + 8 && q[1] > q[2] + 8; /* green dominates */
+			cols++;
+		}
+	}
+	printf("reference band: %d of %d probes tinted green\n", tinted, cols);
+	assert_int_equal(tinted, cols);
+
+	/* the panel's lines at +2, 0, −2 below the DHR axes: the rows red (grey for 0) across most of the width */
+	const double red[3] = { 0.75, 0.3, 0.3 }, grey[3] = { 0.4, 0.4, 0.4 };
+	double r_plus = -1, r_minus = -1, r_zero = -1;
+	int x0 = (int)f.px_left + 5, x1 = (int)f.px_right - 5, best = 0;
+	for (int yy = (int)f.px_bottom + 2; yy < (int)g.im.height; yy++) {
+		int nr = 0, ng = 0;
+		for (int x = x0; x < x1; x++) {
+			nr += close_to(g.px + 3 * ((size_t)yy * g.im.width + (size_t)x), red, 10);
+			ng += close_to(g.px + 3 * ((size_t)yy * g.im.width + (size_t)x), grey, 10);
+		}
+		if (nr > (x1 - x0) / 2) {
+			if (r_plus < 0)
+				r_plus = yy;
+			r_minus = yy;
+		}
+		if (ng > (x1 - x0) / 2 && ng > best) {
+			best = ng;
+			r_zero = yy;
+		}
+	}
+	printf("residual panel: rows +2 %.1f, 0 %.1f, -2 %.1f (DHR axes end at %.0f)\n", r_plus, r_zero, r_minus,
+	       f.px_bottom);
+	assert_true(r_plus > f.px_bottom && r_zero > r_plus && r_minus > r_zero);
+	double step = (r_minus - r_plus) / 4; /* pixels per σ */
+	assert_true(fabs((r_zero - r_plus) - 2 * step) < 1.5 && step > 5);
+	int hits = 0, probes = 0;
+	for (int k = 25; k < N * 45 / 100; k += 13) {
+		int px = (int)floor(plot_x_to_px(&f, wl[k]));
+		int py = (int)floor(r_zero - rz[k] * step);
+		probes++;
+		hits += dark_near(&g, px, py, 2);
+		for (int off = -15; off <= 15; off += 30) /* not 15 rows off (inside the panel's frame, ±2.8σ) */
+			if (fabs(py + off - r_zero) < 2.8 * step)
+				assert_false(dark_near(&g, px, py + off, 1));
+	}
+	printf("residual curve found at %d of %d probes\n", hits, probes);
+	assert_int_equal(hits, probes);
+	free(g.px);
+	unlink(p);
+}
+
 static void test_bad_input_is_an_error(void **state)
 {
 	(void)state;
@@ -224,6 +330,7 @@ int main(void)
 	}
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_curves_at_data_locations),
+		cmocka_unit_test(test_reference_band_and_residual_panel),
 		cmocka_unit_test(test_bad_input_is_an_error),
 	};
 	int rc = cmocka_run_group_tests(tests, NULL, NULL);
