@@ -5,8 +5,6 @@
 #include <string.h>
 
 #include "recon/recon_int.h"
-#include <stdio.h>
-#include <time.h>
 
 /* Albedo table: nodes every 10°, bisected; node rules from Clenshaw-Curtis 10 in cosθo × 12 azimuth intervals,
  * nested (quad.c cc_nodes: each doubling reuses the rule before it). */
@@ -36,7 +34,7 @@
 #define TAB_WORK_MAX 1e9
 /* A spiky model's budget (leave-one-out RMS > 1 in ln f: held-out samples predicted only to a factor e; session 16):
  * its bound is only ever compared with 1 and its values cannot be trusted between the samples, so its table pays for
- * fewer nodes on the full rule (the random 1000 × 651 input: 4 of them instead of 10-12, 1.2 s less). The nodes past
+ * fewer nodes on the full rule (the random 1000 × 651 input: 4 of them instead of 10-12). The nodes past
  * a budget are bounds all the same (margin 2d + TAB_TOL; brdf-recon check verifies); only coarser. */
 #define TAB_WORK_SPIKY 4e8
 /* A node past the budget costs ≈ TAB_NODE_UNITS starting rules: its half rule and one doubling, with boxes at the
@@ -94,25 +92,7 @@ static int albtab_margin(struct albtab *T, double *a);
 
 /* a[L] = the node's albedo plus its quadrature margin 2d. A lobe narrower than the rules (a spiky model's) is
  * found by recon_albedo_adaptive's probes at the data's brightest directions, which refine the rules there. */
-static int albtab_node_(struct albtab *T, double theta, double *a, struct acq_err *err);
 static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err *err)
-{
-	double w0 = T->ws.evals + T->wl.evals + T->wb.evals;
-	struct timespec t0, t1;
-	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t0);
-	int rc = albtab_node_(T, theta, a, err);
-	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t1);
-	if (getenv("TABDBG")) {
-		double mx = 0, md = 0;
-		for (size_t l = 0; l < T->L; l++) { mx = fmax(mx, a[l]); md = fmax(md, T->diff[l]); }
-		fprintf(stderr, "TAB th %7.3f capped %d evals %.3g (tot %.3g) nbox %d cpu %.3f amax %.4g dmax %.3g\n",
-			theta * 180 / M_PI, w0 > T->budget, T->ws.evals + T->wl.evals + T->wb.evals - w0,
-			T->ws.evals + T->wl.evals + T->wb.evals, T->ws.nbox,
-			(t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec), mx, md);
-	}
-	return rc;
-}
-static int albtab_node_(struct albtab *T, double theta, double *a, struct acq_err *err)
 {
 	/* past the work budget every further node gets the starting rule only, its difference d from the half rule it
 	 * holds (nested rules: the doubling from half the starting rule evaluates only the starting rule's nodes; d
@@ -127,8 +107,8 @@ static int albtab_node_(struct albtab *T, double theta, double *a, struct acq_er
 		nmax = 2 * nmu;
 	}
 	/* and its boxes (quad.c albedo_boxes) those of the table's own starting rule, the rule it halved: boxes sized
-	 * from the half rule's spacing were twice as wide at the same density, 4× the nodes, 5.3e7 evaluations of a
-	 * node's 3e7 on the random 1000 × 651 input (session 16) */
+	 * from the half rule's spacing were twice as wide at the same density, 4× their nodes (session 16: the random
+	 * 1000 × 651 input's nodes past the budget took 5.3e7 kernel evaluations each, now 2.5e7-3.8e7) */
 	T->ws.box_fine = capped && T->ws.nested;
 	if (!T->split)
 		return recon_albedo_adaptive(T->m, theta, nmu, nphi, nmax, 0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->ws, a,
@@ -398,8 +378,6 @@ int recon_energy_table_room(struct recon_model *m, int room_rule, double budget,
 			break;
 	}
 	m->tab_capped = T.ws.evals + T.wl.evals + T.wb.evals > T.budget;
-	if (getenv("TABDBG"))
-		fprintf(stderr, "TABEND nodes %zu evals %.3g capped %d loo %.3g n %zu L %zu\n", g.n, T.ws.evals + T.wl.evals + T.wb.evals, m->tab_capped, m->loo_rms, m->n, L);
 	free(m->tab_theta);
 	free(m->tab_alb);
 	m->tab_theta = NULL;
