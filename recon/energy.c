@@ -217,7 +217,8 @@ static int cmp_dbl(const void *a, const void *b)
  * in ln f) also the zenith angles, θi and θo, of its npeaks (≤ TAB_PEAKS) samples highest above the trend. The
  * probes of recon_albedo_adaptive find a narrow lobe in ωo at a node's incidence; a lobe narrower than an interval
  * in θ is found only if a node lands on it, and the interpolant's narrow peaks sit on the data: by reciprocity a
- * sample's peak raises the albedo at both its θi and its θo. Returns the count (≤ TAB_N + 2 TAB_PEAKS). */
+ * sample's peak raises the albedo at both its θi and its θo. A spiky model also gets the graded nodes near the pole
+ * (TAB_POLE). Returns the count (≤ TAB_N + TAB_POLE + 2 TAB_PEAKS). */
 static size_t albtab_start_nodes(const struct recon_model *m, size_t npeaks, double *th)
 {
 	size_t n = 0;
