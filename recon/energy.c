@@ -15,6 +15,13 @@
 #define TAB_CURV_TOL 0.01 /* largest second difference over an interval (albedo units) before bisecting */
 #define TAB_DEPTH 7       /* finest interval 10°/2⁷ ≈ 0.08° */
 #define TAB_MAX_NODES 96  /* node budget of the bisection (breadth first) */
+/* A spiky model's table also starts at 10°/2^k, k = 1 … TAB_POLE (session 16): near the pole the canonical frame
+ * (rbf_canon) turns ωo's azimuths by Δ·sinθi/(sinθi + sinθo), so the path of the albedo's integral through the
+ * interpolant changes on the scale of θi itself, not of 10°: on the log-uniform random 1000 × 651 input (seed 2) one
+ * channel's albedo rose 0.5 % between θi = 0 and 1° and fell back by 2°, over a bound from the nodes 0, 5 and 10°
+ * (the bend test cannot see a bump between its nodes; the budget stops the bisection there). Graded nodes
+ * 5, 2.5, 1.25, 0.625° give every interval near the pole a width in proportion to its distance from it. */
+#define TAB_POLE 4
 #define TAB_PEAKS 8       /* a spiky model's brightest samples whose zenith angles start the table (θi and θo) */
 /* Work budget of the table in kernel evaluations (~3 s on one core): past it no interval is bisected and each
  * remaining node gets its starting rule only, its difference d from the half rule inside it (session 8; before, one
@@ -25,6 +32,16 @@
  * spent ~2.4e9 there with the nested rules (3.4e9 with Gauss-Legendre ones), 19 nodes; ~1.45e9 once the nodes past
  * the budget (12 of its 19) took the starting rule only. */
 #define TAB_WORK_MAX 1e9
+/* A spiky model's budget (leave-one-out RMS > 1 in ln f: held-out samples predicted only to a factor e; session 16):
+ * its bound is only ever compared with 1 and its values cannot be trusted between the samples, so its table pays for
+ * fewer nodes on the full rule (the random 1000 × 651 input: 4 of them instead of 10-12). The nodes past
+ * a budget are bounds all the same (margin 2d + TAB_TOL; brdf-recon check verifies); only coarser. */
+#define TAB_WORK_SPIKY 4e8
+/* A node past the budget costs ≈ TAB_NODE_UNITS starting rules: its half rule and one doubling, with boxes at the
+ * data's bright directions (quad.c; 2.5e7-3.8e7 kernel evaluations on the random 1000 × 651 input, whose starting
+ * rule is 10 × 20: 13-17 units; 28 before the boxes shrank with the rule, session 16). Peak nodes are admitted as
+ * far as a quarter of TAB_WORK_MAX pays for them and their midpoints at that cost. */
+#define TAB_NODE_UNITS 15.0
 /* The trend's GGX lobe over half vectors (recon_hv_nodes): 16 nodes in u × 16 azimuths on [0, π] to start,
  * doubled up to 64 × 64 (the largest difference from a 256 × 2048 hemisphere rule there: 9e-4, where the horizon
  * cuts a lobe of α = 0.03 at 85°; test_recon_trend). */
@@ -68,6 +85,7 @@ struct albtab {
 	double *diff, *al, *dl, *off, *ab, *db;
 	size_t L;
 	double margin;
+	double budget; /* work budget in kernel evaluations: TAB_WORK_MAX, TAB_WORK_SPIKY for a spiky model */
 };
 
 static int albtab_margin(struct albtab *T, double *a);
@@ -81,13 +99,17 @@ static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err
 	 * is then larger, the bound more conservative, than with one doubling beyond: 4× the work on the random
 	 * 1000 × 651 input, whose nodes past the budget cost 60 % of its fit) */
 	double work = T->ws.evals + T->wl.evals + T->wb.evals;
-	int capped = work > TAB_WORK_MAX, nmu = T->nmu, nphi = T->nphi;
+	int capped = work > T->budget, nmu = T->nmu, nphi = T->nphi;
 	int nmax = capped ? (T->ws.nested ? nmu : 2 * nmu) : TAB_NMU_MAX;
 	if (capped && T->ws.nested) {
 		nmu = (nmu + 1) / 2;
 		nphi = (nphi + 1) / 2;
 		nmax = 2 * nmu;
 	}
+	/* and its boxes (quad.c albedo_boxes) those of the table's own starting rule, the rule it halved: boxes sized
+	 * from the half rule's spacing were twice as wide at the same density, 4× their nodes (session 16: the random
+	 * 1000 × 651 input's nodes past the budget took 5.3e7 kernel evaluations each, now 2.5e7-3.8e7) */
+	T->ws.box_fine = capped && T->ws.nested;
 	if (!T->split)
 		return recon_albedo_adaptive(T->m, theta, nmu, nphi, nmax, 0, 0, TAB_TOL, 1.0, TAB_BELOW, &T->ws, a,
 					     T->diff, err) ? -1 : albtab_margin(T, a);
@@ -100,7 +122,7 @@ static int albtab_node(struct albtab *T, double theta, double *a, struct acq_err
 	for (size_t l = 0; l < T->L; l++)
 		T->off[l] = a[l] + 4.0 * T->diff[l];
 	T->wl.offset = T->off;
-	if (recon_albedo_adaptive(T->m, theta, TAB_HV_NU, TAB_HV_NPHI, work > TAB_WORK_MAX ? 2 * TAB_HV_NU : TAB_HV_NU_MAX,
+	if (recon_albedo_adaptive(T->m, theta, TAB_HV_NU, TAB_HV_NPHI, capped ? 2 * TAB_HV_NU : TAB_HV_NU_MAX,
 				  0, 0, TAB_TOL, 1.0, T->base ? -HUGE_VAL : TAB_BELOW, &T->wl, T->al, T->dl, err))
 		return -1;
 	for (size_t l = 0; l < T->L; l++) {
@@ -195,15 +217,22 @@ static int cmp_dbl(const void *a, const void *b)
  * in ln f) also the zenith angles, θi and θo, of its npeaks (≤ TAB_PEAKS) samples highest above the trend. The
  * probes of recon_albedo_adaptive find a narrow lobe in ωo at a node's incidence; a lobe narrower than an interval
  * in θ is found only if a node lands on it, and the interpolant's narrow peaks sit on the data: by reciprocity a
- * sample's peak raises the albedo at both its θi and its θo. Returns the count (≤ TAB_N + 2 TAB_PEAKS). */
+ * sample's peak raises the albedo at both its θi and its θo. A spiky model also gets the graded nodes near the pole
+ * (TAB_POLE). Returns the count (≤ TAB_N + TAB_POLE + 2 TAB_PEAKS). */
 static size_t albtab_start_nodes(const struct recon_model *m, size_t npeaks, double *th)
 {
 	size_t n = 0;
 	double h = (M_PI / 2) / (double)(TAB_N - 1);
 	for (size_t t = 0; t < TAB_N; t++)
 		th[n++] = t + 1 == TAB_N ? M_PI / 2 : h * (double)t;
-	if (!(m->loo_rms > 1.0) || !m->g || !m->ang || npeaks == 0)
+	if (!(m->loo_rms > 1.0) || !m->g || !m->ang)
 		return n;
+	for (int k = 1; k <= TAB_POLE; k++)
+		th[n++] = h / (double)(1 << k);
+	if (npeaks == 0) {
+		qsort(th, n, sizeof *th, cmp_dbl);
+		return n;
+	}
 	size_t top[TAB_PEAKS], ntop = 0;
 	if (npeaks > TAB_PEAKS)
 		npeaks = TAB_PEAKS;
@@ -243,11 +272,11 @@ static size_t albtab_start_nodes(const struct recon_model *m, size_t npeaks, dou
 
 int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progress_fn pf, void *pctx)
 {
-	return recon_energy_table_room(m, 1, err, pf, pctx);
+	return recon_energy_table_room(m, 1, -1, err, pf, pctx);
 }
 
-int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err *err, recon_progress_fn pf,
-			    void *pctx)
+int recon_energy_table_room(struct recon_model *m, int room_rule, double budget, struct acq_err *err,
+			    recon_progress_fn pf, void *pctx)
 {
 	size_t L = m->nwl;
 	struct albtab T = { .m = m, .L = L };
@@ -258,6 +287,7 @@ int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err
 	size_t qmax;
 	T.nmu = TAB_NMU;
 	T.nphi = TAB_NPHI;
+	T.budget = budget >= 0 ? budget : m->loo_rms > 1.0 ? TAB_WORK_SPIKY : TAB_WORK_MAX;
 	/* the split assumes e^g smooth at the kernel's scale away from the trend's lobe; a model whose held-out samples
 	 * miss by more than a factor e (leave-one-out RMS > 1 in ln f: spikes) gets the whole on one rule sized for
 	 * every lobe, as before the split (at seed 2155509500 of test_recon_extremes' dynamic range, LOO RMS 9.7, the
@@ -280,10 +310,10 @@ int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err
 	T.wb.part = RECON_PART_BASE;
 	T.ws.nested = 1; /* hemisphere rules that hold the rule before them (quad.c, cc_nodes) */
 	T.wl.part = RECON_PART_LOBE;
-	double start[TAB_N + 2 * TAB_PEAKS];
-	/* peak nodes only as far as a quarter of the work budget pays for them at the starting rule and one doubling
-	 * (a paper-size spiky model, 1000 × 651, gets none: its table already reaches the budget without them) */
-	double node_cost = 5.0 * T.nmu * T.nphi * (double)m->n * (1.0 + (double)L / 64.0);
+	double start[TAB_N + TAB_POLE + 2 * TAB_PEAKS];
+	/* peak nodes only as far as a quarter of TAB_WORK_MAX pays for them and their midpoints past the budget (the
+	 * random 1000 × 651 input: 3 peaks; 8 before session 16) */
+	double node_cost = TAB_NODE_UNITS * T.nmu * T.nphi * (double)m->n * (1.0 + (double)L / 64.0);
 	size_t ns = albtab_start_nodes(m, (size_t)fmin(TAB_PEAKS, TAB_WORK_MAX / 4 / (2 * node_cost)), start);
 	for (size_t t = 0; t < ns; t++) {
 		if (pf)
@@ -336,7 +366,7 @@ int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err
 				split = 0;
 				memcpy(bnd, wide, L * sizeof *bnd);
 			}
-			int done = !split || depth == TAB_DEPTH || T.ws.evals + T.wb.evals > TAB_WORK_MAX;
+			int done = !split || depth == TAB_DEPTH || T.ws.evals + T.wb.evals > T.budget;
 			albgrid_push(&ng, L, g.th[i], alo, dlo, bnd, done);
 			albgrid_push(&ng, L, tmid, amid, T.diff, bnd, done);
 			again |= !done;
@@ -348,7 +378,7 @@ int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err
 		if (!again)
 			break;
 	}
-	m->tab_capped = T.ws.evals + T.wl.evals + T.wb.evals > TAB_WORK_MAX;
+	m->tab_capped = T.ws.evals + T.wl.evals + T.wb.evals > T.budget;
 	free(m->tab_theta);
 	free(m->tab_alb);
 	m->tab_theta = NULL;

@@ -240,10 +240,10 @@ static int albedo_boxes(const struct recon_model *m, double theta_i, int nmu, in
 			double tol, double fl, struct albedo_ws *ws, const double *est, struct acq_err *err)
 {
 	ws->nbox = 0;
-	ws->boxn = RECON_BOX_N;
+	ws->boxn = RECON_BOX_N >> ws->box_fine;
 	if (recon_part_hv(ws->part) || !m->ang || !ws->bright)
 		return 0;
-	double h = fmax((M_PI / 2) / nmu, M_PI / nphi), hw = RECON_BOX_HW * h;
+	double h = fmax((M_PI / 2) / nmu, M_PI / nphi), hw = RECON_BOX_HW * h / (1 << ws->box_fine);
 	size_t nc = 0, L = m->nwl;
 	for (size_t k = 0; k < m->n; k++) {
 		const double *a = m->ang + 4 * k;

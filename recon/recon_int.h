@@ -231,6 +231,10 @@ struct albedo_ws {
 	 * the square rule) refined by boxn nodes per dimension at the starting rule */
 	double *bright, *cand;
 	int nbox, boxn;
+	/* box_fine: boxes sized for the rule 2^box_fine times finer than the starting rule (half-width RECON_BOX_HW·h and
+	 * RECON_BOX_N nodes a side divided by 2^box_fine: the same density on a quarter of the area per step; the energy
+	 * table's nodes past its work budget, whose starting rule is the half of the table's, set 1) */
+	int box_fine;
 	/* cell_min: nodes per side of every cell of a composite rule (boxes, steps; quad.c box_nodes), 2 at the starting
 	 * rule and doubled with it, so that a doubling refines every cell, however narrow */
 	int cell_min;
@@ -347,8 +351,9 @@ int recon_albedo_cubature(const struct recon_model *m, double theta_i, int ncx, 
 /* Build m->tab_theta, m->tab_alb, m->ntab, m->alb_margin: the energy table of the unscaled interpolant
  * (energy.c). */
 int recon_energy_table(struct recon_model *m, struct acq_err *err, recon_progress_fn pf, void *pctx);
-/* The same with energy.c's room rule on (room_rule 1: recon_energy_table) or off (0: tests); replaces m's table. */
-int recon_energy_table_room(struct recon_model *m, int room_rule, struct acq_err *err, recon_progress_fn pf,
-			    void *pctx);
+/* The same with energy.c's room rule on (room_rule 1: recon_energy_table) or off (0: tests) and a work budget in
+ * kernel evaluations (< 0: energy.c's own; 0: every node on the rule of the nodes past it: tests); replaces m's table. */
+int recon_energy_table_room(struct recon_model *m, int room_rule, double budget, struct acq_err *err,
+			    recon_progress_fn pf, void *pctx);
 
 #endif

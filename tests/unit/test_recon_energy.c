@@ -9,7 +9,8 @@
  * the check read 2.195 ± 0.26 for the unscaled 2.268, i.e. 0.997 for the broken model: it passed.
  * And the table's room rule (energy.c, TAB_ROOM_K; session 15): it closes a bent interval of a smooth model with
  * room under 1, not of a spiky one nor near 1, and its widened bound bounds (the table rebuilt without the rule by
- * recon_energy_table_room to count the nodes it saves). */
+ * recon_energy_table_room to count the nodes it saves). And a spiky model's table on the path of the nodes past the
+ * work budget (session 16: every node there, no bisection) still bounds its albedo, near the pole too. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -212,7 +213,7 @@ static void room_probe(double rho, double ks, double spike, struct room_probe *p
 	assert_int_equal(recon_check(m, 200, 8, 1, &r, NULL, NULL, &e), 0);
 	p->on = m->ntab;
 	p->on_8090 = nodes_inside(m, 80 * M_PI / 180, M_PI / 2);
-	assert_int_equal(recon_energy_table_room(m, 0, &e, NULL, NULL), 0);
+	assert_int_equal(recon_energy_table_room(m, 0, -1, &e, NULL, NULL), 0);
 	p->off = m->ntab;
 	p->off_8090 = nodes_inside(m, 80 * M_PI / 180, M_PI / 2);
 	printf("rho %g ks %g spike %g: trend %s, leave-one-out RMS %.3g; albedo max %.4f, largest bend over 10 deg "
@@ -247,7 +248,8 @@ static void test_room_rule_closes_smooth_bend(void **state)
 
 /* A spiky model (leave-one-out RMS > 1: every value times e^(1.5 N(0,1))) far below 1 (0.32) still bisects where
  * it bends past TAB_CURV_TOL: the rule is for smooth models only (the same node count with it as without; 31
- * instead of 33 without the guard). The data at the fixed seed 1, whatever ACQ_SEED: spikes are random, and at other
+ * instead of 33 without the guard, session 15; 41 = 41 since session 16's graded nodes near the pole, 39 without
+ * the guard). The data at the fixed seed 1, whatever ACQ_SEED: spikes are random, and at other
  * seeds one can lift the curve's top to 0.7-0.9 (seeds 7 and 23), where the guard-less rule need not fire. */
 static void test_room_rule_spiky_bisects(void **state)
 {
@@ -272,11 +274,71 @@ static void test_room_rule_near_one_bisects(void **state)
 	assert_int_equal(p.on_8090, p.off_8090);
 }
 
+/* The table of a spiky model on its cheapest path (session 16): rebuilt with a work budget of 0, every node takes the
+ * rule of the nodes past the budget (the table's starting rule halved, one doubling, boxes at the data's bright
+ * directions sized from the table's own starting rule: energy.c box_fine) and no interval is bisected, so only the
+ * nodes' margins and the starting nodes hold the bound. The model: 300 rows of log-uniform random values over 12
+ * decades (4 wavelengths, the fixed seed 3 whatever ACQ_SEED; leave-one-out RMS ≈ 6.5), whose albedo reaches ~10²
+ * near the pole. Asserts the graded starting nodes near the pole (10°/2^k, k = 1 … 4: energy.c TAB_POLE; at the
+ * paper size, log-uniform random seed 2, one channel's albedo rose 0.5 % over the bound of the nodes 0, 5 and 10°
+ * between θi = 0 and 1.5° without them), that the table bounds the cubature's albedo every 0.25° over 0-3° and every
+ * 2° beyond (its 2·error estimate + 1e-4 allowed), and `check` clean. */
+static void test_capped_table_bounds(void **state)
+{
+	(void)state;
+	struct recon_samples s;
+	rt_seed_value(3); /* the data, whatever ACQ_SEED */
+	rt_samples_log_uniform(&s, 300, NWL);
+	struct recon_model *m;
+	struct acq_err e = { 0 };
+	struct recon_fit_opts o;
+	recon_fit_opts_default(&o);
+	assert_int_equal(recon_fit(&s, &o, &m, &e), 0);
+	assert_true(m->loo_rms > 1.0);
+	assert_int_equal(recon_energy_table_room(m, 1, 0, &e, NULL, NULL), 0);
+	assert_true(m->tab_capped);
+	size_t pole = 0;
+	for (int k = 1; k <= 4; k++)
+		for (size_t t = 0; t < m->ntab; t++)
+			pole += fabs(m->tab_theta[t] - (M_PI / 18) / (1 << k)) < 1e-12;
+	struct albedo_ws ws = { 0 };
+	assert_int_equal(recon_albedo_ws_init(&ws, m, 4096, &e), 0);
+	double a[NWL], est[NWL], worst = -HUGE_VAL, wth = 0, amax = 0;
+	for (double td = 0; td <= 90.0 + 1e-9; td += td < 3.0 - 1e-9 ? 0.25 : 2.0) {
+		double th = fmin(td, 90.0) * M_PI / 180;
+		cub_albedo(m, &ws, th, a, est);
+		for (size_t i = 0; i + 1 < m->ntab; i++) {
+			if (th < m->tab_theta[i] - 1e-12 || th > m->tab_theta[i + 1] + 1e-12)
+				continue;
+			for (size_t l = 0; l < NWL; l++) {
+				double w = a[l] - 2 * fabs(est[l]) - 1e-4 - m->tab_alb[i * NWL + l];
+				if (w > worst) {
+					worst = w;
+					wth = td;
+				}
+				amax = fmax(amax, a[l]);
+			}
+		}
+	}
+	struct recon_check_report r;
+	assert_int_equal(recon_check(m, 200, 8, 1, &r, NULL, NULL, &e), 0);
+	printf("log-uniform 300 x %d, leave-one-out RMS %.3g, every node capped: %zu nodes (%zu of 4 graded near the "
+	       "pole), albedo max %.4g, bound - albedo >= %.4g (at %.2f deg), check max albedo %.4f excess %.4f\n", NWL,
+	       m->loo_rms, m->ntab, pole, amax, -worst, wth, r.max_albedo, r.energy_excess);
+	assert_int_equal(pole, 4);
+	assert_true(worst <= 0);
+	assert_true(r.energy_excess <= 0 && r.alb_unresolved == 0 && r.nonfinite == 0);
+	recon_albedo_ws_free(&ws);
+	recon_model_free(m);
+	csvio_samples_free(&s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = { cmocka_unit_test(test_check_sees_grazing_violation),
 					    cmocka_unit_test(test_room_rule_closes_smooth_bend),
 					    cmocka_unit_test(test_room_rule_spiky_bisects),
-					    cmocka_unit_test(test_room_rule_near_one_bisects) };
+					    cmocka_unit_test(test_room_rule_near_one_bisects),
+					    cmocka_unit_test(test_capped_table_bounds) };
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
