@@ -120,6 +120,13 @@ static double ladder(const struct plan_timing *t, double ms, double max_ms)
 	return t->min_ms * pow(r, k);
 }
 
+int plan_rung(const struct plan_timing *t, double ms)
+{
+	double r = t->ladder_ratio > 1.0001 ? t->ladder_ratio : M_SQRT2, lo = t->min_ms > 0 ? t->min_ms : 1;
+	double k = ms > lo ? round(log(ms / lo) / log(r)) : 0;
+	return k > 63 ? 63 : (int)k;
+}
+
 /* One exposure of n averages at ms: integration, one read-out, the round trip. */
 static double shot(const struct bench_geom *g, const struct plan_timing *t, double n, double ms)
 {
@@ -220,6 +227,28 @@ static struct inc_cost band_cost(const struct plan_spec *s, const struct bench_g
 	};
 }
 
+/* dark_every -1 with a prior: the darks of the rungs in `want` the cache has not visited since its last clearing
+ * (*visited, which takes them), each dark_averages exposures at its rung's time. */
+static double new_rung_darks(const struct bench_geom *g, const struct plan_timing *t, uint64_t want,
+			     uint64_t *visited)
+{
+	double r = t->ladder_ratio > 1.0001 ? t->ladder_ratio : M_SQRT2, lo = t->min_ms > 0 ? t->min_ms : 1, s = 0;
+	uint64_t nw = want & ~*visited;
+	*visited |= want;
+	for (int k = 0; k < 64; k++)
+		if (nw >> k & 1)
+			s += shot(g, t, t->dark_averages, lo * pow(r, k));
+	return s;
+}
+
+static int popcount64(uint64_t v)
+{
+	int n = 0;
+	for (; v; v &= v - 1)
+		n++;
+	return n;
+}
+
 /* The sample's exposure prior the timing uses (auto integration with a prior), or NULL. */
 static const struct plan_prior *used_prior(const struct plan_spec *s, const struct plan_timing *t)
 {
@@ -292,6 +321,14 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 	double clock = 0, dark_at = -INFINITY;
 	double since_clear = t->cont ? t->cont_since_clear : 0; /* points since the dark cache was last cleared */
 	const struct plan_prior *pr = used_prior(s, t);
+	/* dark_every -1 (darks kept across incidences, refreshed by age): with a prior, each incidence pays the darks of
+	 * the rungs its prior row used that no earlier incidence since the clearing did (spread over its points as
+	 * the j-th takes one with probability (1 - 1/k)^j, k its row's rungs); without, the band's rungs decay over
+	 * the whole sweep instead of restarting at each incidence */
+	bool keep = t->dark_every < 0;
+	const struct plan_prior_inc *row = NULL;
+	uint64_t visited = 0;
+	double inc_darks = 0, inc_k = 1, since_inc = 0;
 	double host = host_s(s, t, pr);
 	r->reference_s = r->darks_s = r->t_motion_s = r->t_settle_s = r->t_probe_s = r->t_first_s = r->t_hdr_s = 0;
 	r->host_s = host * (double)r->n_steps;
@@ -312,14 +349,18 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 	for (size_t i = 0; i < r->n_steps; i++) {
 		struct plan_step *st = &r->steps[i];
 		bool moves = st->move_s + st->settle_s > 0;
-		if (pr && (i == 0 || st->pos.laser_theta != r->steps[i - 1].pos.laser_theta))
-			c = prior_cost(s, g, t, prior_row(pr, fabs(st->pos.laser_theta)));
+		bool new_inc = i == 0 || st->pos.laser_theta != r->steps[i - 1].pos.laser_theta;
+		if (pr && new_inc) {
+			row = prior_row(pr, fabs(st->pos.laser_theta));
+			c = prior_cost(s, g, t, row);
+		}
 		/* the dark cache is cleared every dark_every points or at each new incidence, and a dark is due when
 		 * the last one has aged; the first point uses the reference's dark when it has the same (fixed) time */
 		double prev_laser = i ? r->steps[i - 1].pos.laser_theta : t->cont_laser;
 		bool clear = i == 0 && !t->cont ? aut || !t->reference
 			    : t->dark_every > 0 ? ((t->cont ? (size_t)t->cont_since_clear : 0) + i) % (size_t)t->dark_every == 0
-						: fabs(st->pos.laser_theta - prev_laser) > 1e-6;
+			    : t->dark_every == 0 ? fabs(st->pos.laser_theta - prev_laser) > 1e-6
+						 : false;
 		if (t->dark_max_age_s > 0 && clock - dark_at >= t->dark_max_age_s)
 			clear = true;
 		if (clear)
@@ -327,15 +368,26 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 		/* expected darks: fixed, one per clearing; auto, one per rung first visited since the clearing (the
 		 * point's rung is new with probability (1 - 1/k)^j after j points) */
 		double p_dark = clear ? 1.0 : aut ? pow(1.0 - 1.0 / c.k, since_clear) : 0.0;
+		double dark_s = p_dark * c.dark;
+		if (keep && aut && row && row->rungs) {
+			if (clear)
+				visited = 0;
+			if (clear || new_inc) {
+				inc_darks = new_rung_darks(g, t, row->rungs, &visited);
+				inc_k = popcount64(row->rungs);
+				since_inc = 0;
+			}
+			dark_s = inc_darks / inc_k * pow(1.0 - 1.0 / inc_k, since_inc++);
+		}
 		double settle = st->settle_s + (moves ? PLAN_MOVE_POLLS * t->axis_poll_s + t->extra_settle_s : 0);
 		double pr_s = i == 0 && !t->reference ? first_probe : c.probe;
-		double d = st->move_s + settle + pr_s + c.meas + p_dark * c.dark + c.hdr + host;
+		double d = st->move_s + settle + pr_s + c.meas + dark_s + c.hdr + host;
 		r->t_motion_s += st->move_s;
 		r->t_settle_s += settle;
 		r->t_probe_s += pr_s;
 		r->t_first_s += c.meas;
 		r->t_hdr_s += c.hdr;
-		r->darks_s += p_dark * c.dark;
+		r->darks_s += dark_s;
 		if (clear)
 			dark_at = clock + d - c.meas - host; /* taken before the exposure */
 		since_clear++;
