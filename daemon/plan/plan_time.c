@@ -241,7 +241,8 @@ static double new_rung_darks(const struct bench_geom *g, const struct plan_timin
 {
 	double r = t->ladder_ratio > 1.0001 ? t->ladder_ratio : M_SQRT2, lo = t->min_ms > 0 ? t->min_ms : 1, s = 0;
 	for (int k = 0; k < 64; k++)
-		if (want >> k & 1 && (!isfinite(taken[k]) || (t->dark_max_age_s > 0 && clock - taken[k] >= t->dark_max_age_s))) {
+		if (want >> k & 1 &&
+		    (!isfinite(taken[k]) || (t->dark_max_age_s > 0 && clock - taken[k] >= t->dark_max_age_s))) {
 			s += shot(g, t, t->dark_averages, lo * pow(r, k));
 			taken[k] = clock;
 		}
@@ -328,8 +329,8 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 	double clock = 0, dark_at = -INFINITY;
 	double since_clear = t->cont ? t->cont_since_clear : 0; /* points since the dark cache was last cleared */
 	const struct plan_prior *pr = used_prior(s, t);
-	/* dark_every -1 (darks kept across incidences, refreshed by age): with a prior, each incidence pays the darks of
-	 * the rungs its prior row used that have no dark yet or an aged one (new_rung_darks), spread over its points
+	/* dark_every -1 (darks kept across incidences, refreshed by age): with a prior, each incidence pays the darks
+	 * of the rungs its prior row used that have no dark yet or an aged one (new_rung_darks), spread over its points
 	 * as the j-th takes one with probability (1 - 1/k)^j, k its row's rungs; without, the band's rungs decay over
 	 * the whole sweep (restarting only when the last clearing has aged) instead of at each incidence */
 	bool keep = t->dark_every < 0;

@@ -730,10 +730,10 @@ static int sweep_darks(int dark_every, int *again)
 	store_close(r.st);
 	sqlite3 *db = NULL;
 	assert_int_equal(sqlite3_open_v2(dbpath, &db, SQLITE_OPEN_READONLY, NULL), SQLITE_OK);
-	*again = (int)q1(db, "SELECT count(*) FROM (SELECT integration_ms FROM spectra WHERE sweep_id = ? AND kind = 'dark' "
-			     "AND point_id IS NOT NULL GROUP BY integration_ms HAVING count(*) > 1)", r.sweep);
-	int stored = (int)q1(db, "SELECT count(*) FROM spectra WHERE sweep_id = ? AND kind = 'dark' AND point_id IS NOT NULL",
-			     r.sweep);
+	*again = (int)q1(db, "SELECT count(*) FROM (SELECT integration_ms FROM spectra WHERE sweep_id = ? AND "
+			     "kind = 'dark' AND point_id IS NOT NULL GROUP BY integration_ms HAVING count(*) > 1)", r.sweep);
+	int stored = (int)q1(db, "SELECT count(*) FROM spectra WHERE sweep_id = ? AND kind = 'dark' AND "
+				 "point_id IS NOT NULL", r.sweep);
 	sqlite3_close(db);
 	print_message("  dark_every %d: %d darks (%d stored with a point), %d times taken more than once\n", dark_every,
 		      darks, stored, *again);

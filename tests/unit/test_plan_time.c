@@ -300,7 +300,7 @@ static void test_dark_keep(void **state)
 	assert_true(fabs(f.res->predicted_s - total0 - (f.res->darks_s - per_incidence)) < TOL); /* only darks change */
 	assert_true(fabs(terms_sum(f.res) - f.res->predicted_s) < TOL);
 
-	/* with a prior: 20° used rungs 24-26 (41, 58, 82 ms: 3 darks), 45° rungs 25-28 (to 164 ms): 27 and 28 are new there */
+	/* with a prior: 20° used rungs 24-26 (41, 58, 82 ms: 3 darks), 45° rungs 25-28 (to 164 ms): 27, 28 new there */
 	t.prior = (struct plan_prior){ .sweep = 7, .n_inc = 2 };
 	t.prior.inc[0] = (struct plan_prior_inc){ .theta_i = 20, .points = 8, .median_ms = 40, .mean_ms = 60,
 						  .spread = 8, .darks_per_clear = 3, .dark_ms = 90,
