@@ -308,7 +308,7 @@ static int parse_sweep(struct conf_sweep *s, struct yc_node *node, struct acq_er
 	    yc_double(node, "min_integration_ms", false, 0.002, 600000, &s->min_integration_ms, err) ||
 	    yc_double(node, "max_integration_ms", false, 0.002, 600000, &s->max_integration_ms, err) ||
 	    yc_int(node, "averages", false, 1, 10000, &avg, err) ||
-	    yc_int(node, "dark_every", false, 0, 100000, &dark, err) ||
+	    yc_int(node, "dark_every", false, -1, 100000, &dark, err) ||
 	    yc_bool(node, "auto_resume_faults", false, &s->auto_resume_faults, err) ||
 	    yc_bool(node, "auto_recon", false, &s->auto_recon, err))
 		return -1;

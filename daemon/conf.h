@@ -57,7 +57,7 @@ struct conf_sweep {
 	double target_peak;        /* fraction of full scale aimed at by auto-exposure (0.1..0.95) */
 	double min_integration_ms, max_integration_ms;
 	int averages;              /* default averages per spectrum */
-	int dark_every;            /* a dark every N points (0 = once per incidence angle) */
+	int dark_every;            /* a dark every N points (0 = once per incidence angle; -1: by age/temperature) */
 	bool auto_resume_faults;   /* resume by itself when a faulted device comes back */
 	bool auto_recon;           /* start the reconstruction when a sweep completes */
 	struct yc_node *acquisition; /* sweep.acquisition mapping or NULL (parsed by daemon/executor.c) */

@@ -98,7 +98,8 @@ struct ex_cfg {
 	double laser_power_pct;      /* set before the first emission and after a laser fault */
 	bool fixed_integration;      /* the plan fixes the integration time: no probe, one exposure */
 	double fixed_ms;
-	int dark_every;              /* fresh darks every N points; 0: at every new incidence (plus age/temperature) */
+	int dark_every;              /* fresh darks every N points; 0: at every new incidence; -1: never by schedule
+				      * (each time's dark kept until it ages or the sensor temperature moves) */
 	double extra_settle_s;       /* wait after every move, on top of the controller's own settling */
 	double poll_s;               /* spectrometer polling period while an exposure runs */
 	double ladder_ratio;         /* integration times are rounded down to min_ms · ratio^k (dark reuse) */

@@ -478,8 +478,8 @@ int ex_extend(struct ex *x, const struct plan_result *plan, double now, struct a
 	x->stats.points_total = x->nsteps;
 	if (x->state == EX_PAUSED || x->cur >= x->nsteps)
 		return 0;
-	/* Darks at a new incidence, as between the points of one plan (dark_every keeps its own count). */
-	if (x->cfg.dark_every <= 0 && x->cur > 0 &&
+	/* Darks at a new incidence, as between the points of one plan (dark_every keeps its own count; -1: kept). */
+	if (x->cfg.dark_every == 0 && x->cur > 0 &&
 	    fabs(plan->steps[x->cur].pos.laser_theta - plan->steps[x->cur - 1].pos.laser_theta) > 1e-6)
 		exp_darks_clear(x->darks);
 	x->state = EX_RUNNING;
@@ -770,8 +770,10 @@ static void go_on(struct ex *x, double now, bool deferred)
 	}
 	int done = x->stats.points_done + (deferred ? 1 : 0);
 	x->cur++;
-	/* Dark schedule (sweep.dark_every): every N points, or whenever the incidence changes. */
-	if (x->cur < x->nsteps) {
+	/* Dark schedule (sweep.dark_every): every N points, or whenever the incidence changes; -1: none (each time's
+	 * dark is kept until it ages or the sensor's temperature moves, exp_dark_check: the laser is off for a dark,
+	 * so the incidence does not enter it) */
+	if (x->cur < x->nsteps && x->cfg.dark_every >= 0) {
 		bool refresh = x->cfg.dark_every > 0
 				       ? done % x->cfg.dark_every == 0
 				       : fabs(x->plan->steps[x->cur].pos.laser_theta - x->plan->steps[x->cur - 1].pos.laser_theta) > 1e-6;

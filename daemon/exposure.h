@@ -64,7 +64,9 @@ struct exp_dark {
 	float stddev[SPECTRO_MAX_PIXELS];
 };
 
-#define EXP_DARK_SLOTS 16
+/* Enough for every rung a sample uses (0.01 to 10000 ms on the √2 ladder is 41 rungs): with dark_every -1 the cache
+ * is kept across incidences, and an evicted dark would be taken again (the oldest goes when full). */
+#define EXP_DARK_SLOTS 48
 
 /* Darks by integration time; the oldest is evicted when full. */
 struct exp_darks {

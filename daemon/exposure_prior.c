@@ -22,10 +22,10 @@ static double median_of(double *v, size_t n)
 	return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
-/* One incidence's figures from its points' first exposures first[0..np), the further ones (nx, sum xms) and the
- * darks (nd, sum dms). */
+/* One incidence's figures from its points' first exposures first[0..np), the further ones (nx, sum xms), the
+ * darks (nd, sum dms) and the rungs its exposures used. */
 static void prior_inc(struct plan_prior_inc *q, double theta_i, double *first, size_t np, size_t nx, double xms,
-		      size_t nd, double dms)
+		      size_t nd, double dms, uint64_t rungs)
 {
 	double sum = 0, lo = INFINITY, hi = 0;
 	for (size_t i = 0; i < np; i++) {
@@ -36,7 +36,7 @@ static void prior_inc(struct plan_prior_inc *q, double theta_i, double *first, s
 	*q = (struct plan_prior_inc){ .theta_i = theta_i, .points = np, .mean_ms = sum / (double)np,
 				      .spread = lo > 0 ? hi / lo : 1, .darks_per_clear = (double)nd,
 				      .dark_ms = nd ? dms / (double)nd : 0, .extra_per_point = (double)nx / (double)np,
-				      .extra_ms = nx ? xms / (double)nx : 0 };
+				      .extra_ms = nx ? xms / (double)nx : 0, .rungs = rungs };
 	q->median_ms = median_of(first, np);
 }
 
@@ -127,6 +127,7 @@ int exp_prior_build(const struct store_prior_row *rows, size_t n, const struct b
 		double th = rows[i].theta_i;
 		size_t np = 0, nx = 0, nd = 0;
 		double xms = 0, dms = 0;
+		uint64_t rungs = 0; /* the sample exposures' rungs: the darks the executor needs there */
 		size_t j = i;
 		while (j < n && fabs(rows[j].theta_i - th) < 1e-6) {
 			/* one point: rows[j..k); its first exposure is its shortest (an HDR one is hdr_ratio times longer) */
@@ -142,6 +143,8 @@ int exp_prior_build(const struct store_prior_row *rows, size_t n, const struct b
 				} else {
 					ns++;
 					sum += rows[j].integration_ms;
+					if (t)
+						rungs |= (uint64_t)1 << plan_rung(t, rows[j].integration_ms);
 					lo = fmin(lo, rows[j].integration_ms);
 				}
 			}
@@ -155,7 +158,7 @@ int exp_prior_build(const struct store_prior_row *rows, size_t n, const struct b
 			n_hdr += ns > 1;
 		}
 		if (np > 0 && out->n_inc < PLAN_PRIOR_MAX_INC)
-			prior_inc(&out->inc[out->n_inc++], th, first, np, nx, xms, nd, dms);
+			prior_inc(&out->inc[out->n_inc++], th, first, np, nx, xms, nd, dms, rungs);
 		i = j;
 	}
 	if (na > 0) {

@@ -21,6 +21,7 @@
 
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
 
 #include "config/acq_err.h"
 #include "config/bench.h"
@@ -197,6 +198,7 @@ struct plan_prior_inc {
 	double dark_ms;             /* their mean integration time */
 	double extra_per_point;     /* further (HDR) exposures per point */
 	double extra_ms;            /* their mean integration time */
+	uint64_t rungs;             /* the ladder rungs (plan_rung) its sample exposures used: the darks they need */
 };
 struct plan_prior {
 	long long sweep;            /* the sweep it comes from (0: no prior) */
@@ -228,7 +230,7 @@ struct plan_timing {
 	double min_ms, ladder_ratio; /* auto integration: times rounded down to min_ms · ladder_ratio^k (executor) */
 	double exposure_overhead_s; /* per exposure beyond integration + read-out (start, polling, storage) */
 	int dark_averages;          /* exposures per dark */
-	int dark_every;             /* a dark every N points; 0: one per incidence */
+	int dark_every;             /* a dark every N points; 0: one per incidence; -1: none by schedule (age only) */
 	double dark_max_age_s;      /* and a new dark when the last one is older than this (0: never) */
 	int max_exposures;          /* auto: exposures per point at most (a second, HDR, one when the weak end is faint) */
 	double hdr_ratio;           /* auto: the HDR exposure's time / the first's */
@@ -303,6 +305,8 @@ const char *plan_kind_name(int i, char *buf);
  * figure of spec's kind in t->host_kind (*own_kind true), else t->point_overhead_s; *sweep = the sweep that
  * measured it (0: the default). */
 double plan_time_host(const struct plan_spec *spec, const struct plan_timing *t, long long *sweep, bool *own_kind);
+/* The ladder rung of integration time ms on t's ladder: round(log(ms / min_ms) / log ladder_ratio) in [0, 63]. */
+int plan_rung(const struct plan_timing *t, double ms);
 /* Fill the predicted_* fields of r (made from spec against g) for an executor timed by t. */
 void plan_time_apply(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
 		     struct plan_result *r);

@@ -73,7 +73,7 @@ static int load_timing(struct yc_node *root, struct plan_timing *t, struct acq_e
 	long long every = t->dark_every, davg = t->dark_averages, nexp = t->max_exposures;
 	double poll = 2 * t->exposure_overhead_s;
 	if (sw && (yc_double(sw, "extra_settle_s", false, 0, 60, &t->extra_settle_s, err) ||
-		   yc_int(sw, "dark_every", false, 0, 100000, &every, err) ||
+		   yc_int(sw, "dark_every", false, -1, 100000, &every, err) ||
 		   yc_double(sw, "min_integration_ms", false, 0.002, 600000, &t->min_ms, err)))
 		return -1;
 	if (acq && (yc_double(acq, "probe_ms", false, 1e-3, 1e6, &t->probe_ms, err) ||

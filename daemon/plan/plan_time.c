@@ -24,7 +24,13 @@
  *     integration (tests/bench/bench_duration.py, timeline per point);
  *   - darks (dark_averages exposures at the point's integration) at each new incidence, or every dark_every
  *     points, and when the last one is dark_max_age_s old; the first points reuse the reference's dark when
- *     the integration time is fixed (the executor's dark cache keeps it);
+ *     the integration time is fixed (the executor's dark cache keeps it). dark_every -1 (session 16; the
+ *     shipped configurations'): the executor keeps each time's dark across incidences until it ages (the laser
+ *     is off for a dark: the incidence does not enter it), so the band's rungs decay over the whole sweep, not
+ *     per incidence, and with a prior an incidence pays only the darks of the rungs its row used that have
+ *     no dark yet or an aged one (plan_prior_inc.rungs; each rung's dark aged alone, as the executor does, at
+ *     the incidence's start). Measured (tests/bench/bench_duration.py, seed 1): the
+ *     metal's paper plan 865.9 -> 337.5 bench s of darks, the cloth-sheen's 184.8 -> 77.9;
  *   - the host's own time per point (point_overhead_s real seconds: calibration, storage, round trips), which
  *     a simulated bench running time_scale times faster sees time_scale times longer in bench seconds; with an
  *     exposure prior, the host's time per point its sweep measured (exp_prior_build: the real time between commits
@@ -118,6 +124,13 @@ static double ladder(const struct plan_timing *t, double ms, double max_ms)
 		return max_ms;
 	double k = floor(log(ms / t->min_ms) / log(r) + 1e-9);
 	return t->min_ms * pow(r, k);
+}
+
+int plan_rung(const struct plan_timing *t, double ms)
+{
+	double r = t->ladder_ratio > 1.0001 ? t->ladder_ratio : M_SQRT2, lo = t->min_ms > 0 ? t->min_ms : 1;
+	double k = ms > lo ? round(log(ms / lo) / log(r)) : 0;
+	return k > 63 ? 63 : (int)k;
 }
 
 /* One exposure of n averages at ms: integration, one read-out, the round trip. */
@@ -220,6 +233,30 @@ static struct inc_cost band_cost(const struct plan_spec *s, const struct bench_g
 	};
 }
 
+/* dark_every -1 with a prior, an incidence starting at clock: the darks of the rungs in `want` that have none in the
+ * cache or one dark_max_age_s old (taken[k]: when rung k's was taken, -INFINITY never; those taken are set to
+ * clock, as the executor ages each time's dark alone), each dark_averages exposures at its rung's time. */
+static double new_rung_darks(const struct bench_geom *g, const struct plan_timing *t, uint64_t want, double clock,
+			     double *taken)
+{
+	double r = t->ladder_ratio > 1.0001 ? t->ladder_ratio : M_SQRT2, lo = t->min_ms > 0 ? t->min_ms : 1, s = 0;
+	for (int k = 0; k < 64; k++)
+		if (want >> k & 1 &&
+		    (!isfinite(taken[k]) || (t->dark_max_age_s > 0 && clock - taken[k] >= t->dark_max_age_s))) {
+			s += shot(g, t, t->dark_averages, lo * pow(r, k));
+			taken[k] = clock;
+		}
+	return s;
+}
+
+static int popcount64(uint64_t v)
+{
+	int n = 0;
+	for (; v; v &= v - 1)
+		n++;
+	return n;
+}
+
 /* The sample's exposure prior the timing uses (auto integration with a prior), or NULL. */
 static const struct plan_prior *used_prior(const struct plan_spec *s, const struct plan_timing *t)
 {
@@ -292,6 +329,16 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 	double clock = 0, dark_at = -INFINITY;
 	double since_clear = t->cont ? t->cont_since_clear : 0; /* points since the dark cache was last cleared */
 	const struct plan_prior *pr = used_prior(s, t);
+	/* dark_every -1 (darks kept across incidences, refreshed by age): with a prior, each incidence pays the darks
+	 * of the rungs its prior row used that have no dark yet or an aged one (new_rung_darks), spread over its points
+	 * as the j-th takes one with probability (1 - 1/k)^j, k its row's rungs; without, the band's rungs decay over
+	 * the whole sweep (restarting only when the last clearing has aged) instead of at each incidence */
+	bool keep = t->dark_every < 0;
+	const struct plan_prior_inc *row = NULL;
+	double taken[64];
+	for (int k = 0; k < 64; k++)
+		taken[k] = -INFINITY;
+	double inc_darks = 0, inc_k = 1, since_inc = 0;
 	double host = host_s(s, t, pr);
 	r->reference_s = r->darks_s = r->t_motion_s = r->t_settle_s = r->t_probe_s = r->t_first_s = r->t_hdr_s = 0;
 	r->host_s = host * (double)r->n_steps;
@@ -312,14 +359,18 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 	for (size_t i = 0; i < r->n_steps; i++) {
 		struct plan_step *st = &r->steps[i];
 		bool moves = st->move_s + st->settle_s > 0;
-		if (pr && (i == 0 || st->pos.laser_theta != r->steps[i - 1].pos.laser_theta))
-			c = prior_cost(s, g, t, prior_row(pr, fabs(st->pos.laser_theta)));
+		bool new_inc = i == 0 || st->pos.laser_theta != r->steps[i - 1].pos.laser_theta;
+		if (pr && new_inc) {
+			row = prior_row(pr, fabs(st->pos.laser_theta));
+			c = prior_cost(s, g, t, row);
+		}
 		/* the dark cache is cleared every dark_every points or at each new incidence, and a dark is due when
 		 * the last one has aged; the first point uses the reference's dark when it has the same (fixed) time */
 		double prev_laser = i ? r->steps[i - 1].pos.laser_theta : t->cont_laser;
 		bool clear = i == 0 && !t->cont ? aut || !t->reference
 			    : t->dark_every > 0 ? ((t->cont ? (size_t)t->cont_since_clear : 0) + i) % (size_t)t->dark_every == 0
-						: fabs(st->pos.laser_theta - prev_laser) > 1e-6;
+			    : t->dark_every == 0 ? fabs(st->pos.laser_theta - prev_laser) > 1e-6
+						 : false;
 		if (t->dark_max_age_s > 0 && clock - dark_at >= t->dark_max_age_s)
 			clear = true;
 		if (clear)
@@ -327,15 +378,24 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 		/* expected darks: fixed, one per clearing; auto, one per rung first visited since the clearing (the
 		 * point's rung is new with probability (1 - 1/k)^j after j points) */
 		double p_dark = clear ? 1.0 : aut ? pow(1.0 - 1.0 / c.k, since_clear) : 0.0;
+		double dark_s = p_dark * c.dark;
+		if (keep && aut && row && row->rungs) {
+			if (new_inc) {
+				inc_darks = new_rung_darks(g, t, row->rungs, clock, taken);
+				inc_k = popcount64(row->rungs);
+				since_inc = 0;
+			}
+			dark_s = inc_darks / inc_k * pow(1.0 - 1.0 / inc_k, since_inc++);
+		}
 		double settle = st->settle_s + (moves ? PLAN_MOVE_POLLS * t->axis_poll_s + t->extra_settle_s : 0);
 		double pr_s = i == 0 && !t->reference ? first_probe : c.probe;
-		double d = st->move_s + settle + pr_s + c.meas + p_dark * c.dark + c.hdr + host;
+		double d = st->move_s + settle + pr_s + c.meas + dark_s + c.hdr + host;
 		r->t_motion_s += st->move_s;
 		r->t_settle_s += settle;
 		r->t_probe_s += pr_s;
 		r->t_first_s += c.meas;
 		r->t_hdr_s += c.hdr;
-		r->darks_s += p_dark * c.dark;
+		r->darks_s += dark_s;
 		if (clear)
 			dark_at = clock + d - c.meas - host; /* taken before the exposure */
 		since_clear++;

@@ -78,6 +78,13 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
             # the daemon's log level (debug: a stall line per point, where the host's time went; kept with
             # ACQ_BENCH_KEEP=1 in the bench's acquisitiond.log)
             L.compose_config(b.conf, b.state, b.sock, scale, log_level=os.environ["BENCH_DURATION_LOG"])
+        if not bench and os.environ.get("BENCH_DURATION_DARK_EVERY"):
+            # the dark schedule (sweep.dark_every: 0 at each incidence, -1 by age only) against the config's
+            text = open(b.conf).read()
+            text, n = re.subn(r"(?m)^(  dark_every:)\s*-?\d+", r"\g<1> " + os.environ["BENCH_DURATION_DARK_EVERY"], text)
+            if n != 1:
+                raise AssertionError("BENCH_DURATION_DARK_EVERY: no sweep.dark_every line in %s" % b.conf)
+            open(b.conf, "w").write(text)
         if not bench:
             b.start_sim()
             b.start_daemon()

@@ -702,6 +702,55 @@ static void test_full_sweep_deferred_reads(void **state)
 	full_sweep(true);
 }
 
+/* The dark schedule, one whole sweep each: with dark_every 0 the cache is cleared at each new incidence, so some
+ * integration time's dark is taken again there; with -1 (darks by age and temperature only: the laser is off for a
+ * dark, the incidence does not enter it) each time's dark is taken once (ages beyond the sweep here) and serves the
+ * later incidences, fewer darks in all, and the calibrated samples stay within their uncertainty of the truth
+ * (check_db's z-scores) with darks taken at other incidences. Returns the darks taken; *again: the times that had
+ * more than one dark. */
+static int sweep_darks(int dark_every, int *again)
+{
+	fake_reset();
+	unlink(dbpath);
+	struct run r;
+	struct acq_err err = { 0 };
+	r.st = open_store();
+	r.sweep = new_sweep(r.st);
+	cfg_for_test(&r.cfg);
+	r.cfg.pause_after_reference = true;
+	r.cfg.dark_every = dark_every;
+	r.cfg.pol.dark_max_age_s = 1e6;
+	r.x = ex_new(&r.cfg, &fake_ops, NULL, &sink, r.st, r.sweep, 0, &geom, plan, &err);
+	assert_non_null(r.x);
+	assert_int_equal(ex_start(r.x, 0, false, 0, &err), 0);
+	double t = drive(r.x, 0, 1e5, true);
+	assert_int_equal(ex_state(r.x), EX_COMPLETED);
+	int darks = ex_stats(r.x)->darks;
+	ex_free(r.x, t);
+	store_close(r.st);
+	sqlite3 *db = NULL;
+	assert_int_equal(sqlite3_open_v2(dbpath, &db, SQLITE_OPEN_READONLY, NULL), SQLITE_OK);
+	*again = (int)q1(db, "SELECT count(*) FROM (SELECT integration_ms FROM spectra WHERE sweep_id = ? AND "
+			     "kind = 'dark' AND point_id IS NOT NULL GROUP BY integration_ms HAVING count(*) > 1)", r.sweep);
+	int stored = (int)q1(db, "SELECT count(*) FROM spectra WHERE sweep_id = ? AND kind = 'dark' AND "
+				 "point_id IS NOT NULL", r.sweep);
+	sqlite3_close(db);
+	print_message("  dark_every %d: %d darks (%d stored with a point), %d times taken more than once\n", dark_every,
+		      darks, stored, *again);
+	check_db(r.sweep, true);
+	return stored;
+}
+
+static void test_dark_schedule(void **state)
+{
+	(void)state;
+	int again0, again1;
+	int per_incidence = sweep_darks(0, &again0), kept = sweep_darks(-1, &again1);
+	assert_true(again0 > 0);
+	assert_int_equal(again1, 0);
+	assert_true(kept < per_incidence);
+}
+
 static void test_pause_resume_abort(void **state)
 {
 	(void)state;
@@ -1159,6 +1208,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test_setup_teardown(test_full_sweep, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_full_sweep_deferred_reads, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_dark_schedule, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_pause_resume_abort, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_faults, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_faults_deferred_reads, setup, teardown),

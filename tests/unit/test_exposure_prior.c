@@ -114,6 +114,17 @@ static void test_prior_figures(void **state)
 	assert_true(fabs(q->darks_per_clear - 2) < TOL && fabs(q->dark_ms - 250) < TOL);
 	assert_true(q->extra_per_point == 0 && q->extra_ms == 0);
 	assert_int_equal(pr.host_points, 0); /* no bench, no time scale: the host's time is not measured */
+	assert_true(pr.inc[0].rungs == 0 && pr.inc[1].rungs == 0); /* no timing: no ladder */
+	/* the sample exposures' rungs (the darks they need, plan_time.c with dark_every -1) on a ladder 10 ms · 2^k:
+	 * 20, 40, 160 ms at 10° (rungs 1, 2, 4; the 40 ms of two points is one rung), 100 ms (the nearest, 3) and
+	 * 400 ms (5) at 40° */
+	struct plan_timing t;
+	plan_timing_defaults(&t);
+	t.min_ms = 10;
+	t.ladder_ratio = 2;
+	assert_int_equal(exp_prior_load(st, "paint", running, NULL, &t, &pr, &err), 0);
+	assert_true(pr.inc[0].rungs == ((1u << 1) | (1u << 2) | (1u << 4)));
+	assert_true(pr.inc[1].rungs == ((1u << 3) | (1u << 5)));
 	/* a newer completed sweep of the sample is the prior; excluded, the older one again */
 	int64_t b = mk_sweep(st, "paint", true, "completed");
 	assert_int_equal(exp_prior_load(st, "paint", 0, NULL, NULL, &pr, &err), 0);

@@ -271,6 +271,70 @@ static void test_dark_age(void **state)
 	unload(&f);
 }
 
+/* dark_every -1: the executor keeps each integration time's dark across incidences (by age only). Without a prior
+ * the band's rungs decay over the whole sweep: the i-th point takes a dark with probability (1 - 1/k)^i, not
+ * restarting at the second incidence (fixed integration: one dark for the sweep). With a prior, an incidence pays
+ * the darks of the rungs its row used that no earlier incidence did, each at its rung's time, spread over its
+ * points as the j-th takes (new darks / k)·(1 - 1/k)^j of them, k its row's rungs; the rest of each step as with
+ * dark_every 0. */
+static void test_dark_keep(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_SPREAD); /* incidences 20° and 45°, 8 points each (or 7) */
+	struct plan_timing t = timing();
+	t.dark_max_age_s = 0;
+	t.dark_every = 0;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double per_incidence = f.res->darks_s, total0 = f.res->predicted_s;
+	t.dark_every = -1;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double shot_ovh = f.g.readout_s + t.exposure_overhead_s, mean, darks = 0;
+	double r2 = sqrt(2.0), ls = log(12.0);
+	mean = 20 * (sqrt(12.0) - 1 / sqrt(12.0)) / ls * (1 - 1 / r2) / log(r2);
+	double k = 1 + ls / log(r2), dark = 8 * mean / 1000 + shot_ovh;
+	for (size_t i = 0; i < f.res->n_steps; i++)
+		darks += (i == 0 ? 1 : pow(1 - 1 / k, (double)i)) * dark;
+	assert_true(fabs(f.res->darks_s - darks) < TOL);
+	assert_true(f.res->darks_s < per_incidence - 0.5 * dark); /* fewer than two incidences' worth */
+	assert_true(fabs(f.res->predicted_s - total0 - (f.res->darks_s - per_incidence)) < TOL); /* only darks change */
+	assert_true(fabs(terms_sum(f.res) - f.res->predicted_s) < TOL);
+
+	/* with a prior: 20° used rungs 24-26 (41, 58, 82 ms: 3 darks), 45° rungs 25-28 (to 164 ms): 27, 28 new there */
+	t.prior = (struct plan_prior){ .sweep = 7, .n_inc = 2 };
+	t.prior.inc[0] = (struct plan_prior_inc){ .theta_i = 20, .points = 8, .median_ms = 40, .mean_ms = 60,
+						  .spread = 8, .darks_per_clear = 3, .dark_ms = 90,
+						  .rungs = 7ull << 24 };
+	t.prior.inc[1] = (struct plan_prior_inc){ .theta_i = 45, .points = 8, .median_ms = 100, .mean_ms = 150,
+						  .spread = 4, .darks_per_clear = 4, .dark_ms = 150,
+						  .rungs = 15ull << 25 };
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double rung[64];
+	for (int b = 0; b < 64; b++)
+		rung[b] = 8 * 0.01 * pow(r2, b) / 1000 + shot_ovh; /* a dark at rung b: min_ms 0.01 */
+	double new20 = rung[24] + rung[25] + rung[26], new45 = rung[27] + rung[28];
+	darks = 0;
+	size_t j = 0;
+	double sum = 0;
+	for (size_t i = 0; i < f.res->n_steps; i++) {
+		const struct plan_step *st = &f.res->steps[i];
+		bool new_inc = i == 0 || st->pos.laser_theta != f.res->steps[i - 1].pos.laser_theta;
+		j = new_inc ? 0 : j + 1;
+		bool low = fabs(st->pos.laser_theta) < 30;
+		double kk = low ? 3 : 4, d = (low ? new20 : new45) / kk * pow(1 - 1 / kk, (double)j);
+		darks += d;
+		sum += st->predicted_s;
+	}
+	assert_true(fabs(f.res->darks_s - darks) < TOL);
+	assert_true(fabs(f.res->predicted_s - sum) < TOL);
+	/* the same prior with dark_every 0: each incidence's own darks_per_clear at dark_ms, more than the new rungs */
+	double kept = f.res->darks_s;
+	t.dark_every = 0;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(f.res->darks_s > kept + 2 * rung[24]);
+	unload(&f);
+}
+
 /* An exposure prior (plan.h) times each incidence with the nearest prior incidence's figures: the probe and the
  * measurement at its mean first exposure, one dark per clearing and then a new one with probability (1 - 1/k)^j for
  * its k darks at their mean time, its HDR exposures per point; the plan's estimate then only sets the first probe. */
@@ -454,6 +518,7 @@ int main(void)
 		cmocka_unit_test(test_reference),
 		cmocka_unit_test(test_dark_age),
 		cmocka_unit_test(test_prior),
+		cmocka_unit_test(test_dark_keep),
 		cmocka_unit_test(test_defaults_match),
 		cmocka_unit_test(test_estimate_range),
 	};
