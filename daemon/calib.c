@@ -337,8 +337,28 @@ int calib_ref_noise(const struct calib_cfg *c, const double *wl, const struct ex
 	}
 	if (calib_resample(c, wl, px, sp, err))
 		goto out;
-	for (int k = 0; k < sp->n; k++)
+	/* The per-pixel std is estimated from a few scans (4 in make demo: 3 degrees of freedom each), so one bin's
+	 * u_rel is itself noisy and z = e/u_rel too wide (E[u²/û²] = ν/(ν − 2) ≈ 1.3 for a bin of 2–3 pixels). The
+	 * relative noise of a white reference under a continuum source varies slowly in λ: a bin with pixels takes the
+	 * per-pixel variance pooled over the bins with pixels within ±CALIB_REFN_POOL_NM, divided by its own count. */
+	for (int k = 0; k < sp->n; k++) {
 		u_rel[k] = isfinite(sp->f[k]) ? sp->u_ref[k] : NAN;
+		if (!isfinite(u_rel[k]) || sp->npix[k] <= 0)
+			continue;
+		double v = 0;
+		int m = 0;
+		for (int j = k; j >= 0 && sp->wl[k] - sp->wl[j] <= CALIB_REFN_POOL_NM; j--)
+			if (sp->npix[j] > 0 && isfinite(sp->u_ref[j])) {
+				v += (double)sp->npix[j] * sp->npix[j] * sp->u_ref[j] * sp->u_ref[j];
+				m += sp->npix[j];
+			}
+		for (int j = k + 1; j < sp->n && sp->wl[j] - sp->wl[k] <= CALIB_REFN_POOL_NM; j++)
+			if (sp->npix[j] > 0 && isfinite(sp->u_ref[j])) {
+				v += (double)sp->npix[j] * sp->npix[j] * sp->u_ref[j] * sp->u_ref[j];
+				m += sp->npix[j];
+			}
+		u_rel[k] = sqrt(v / m / sp->npix[k]);
+	}
 	rc = 0;
 out:
 	free(px);
