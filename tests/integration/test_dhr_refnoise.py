@@ -74,6 +74,7 @@ def run():
         args = db.execute("SELECT args FROM recon_runs WHERE sweep_id = ?", (sid,)).fetchone()[0]
         db.close()
         assert any("reference-noise.csv for dhr --ref-noise" in m for m in msgs), msgs
+        L.say([m for m in msgs if "ref-noise" in m][0])
         assert "--ref-noise" in args, args
         u = table(rn)
         d = table(os.path.join(out, "dhr.csv"))
@@ -100,6 +101,8 @@ def run():
         assert np.allclose(srn, np.abs(d8["dhr"]) * np.interp(wl, u["wavelength_nm"], u["u_rel"]), rtol=1e-6)
         assert BAND[0] <= zrms <= BAND[1], "DHR σ not honest on the daemon's path: z RMS %.2f" % zrms
         assert not BAND[0] <= zrms3 <= BAND[1], "σ/3 within the band: the band does not test σ"
+        # the plan shows the defect: the DHR σ of the code before --ref-noise (this σ without the term) is outside
+        assert without > BAND[1], "without sigma_refnoise z RMS %.2f: this plan does not show the defect" % without
 
 
 L.main(run)
