@@ -272,6 +272,10 @@ static int write_ref_noise(struct recon_chain *ch, struct acq_err *err)
 	rc = ex_reference_rate(ch->env->store, ch->id, &cfg.pol, npix, fs, ref, NULL, err);
 	if (rc <= 0)
 		goto out;
+	/* the optically black pixels carry no light (the executor masks them; the store does not know them) */
+	for (int i = 0; live && live->npix == npix && i < live->ndark_pixels && i < 8; i++)
+		if (live->dark_pixels[i] >= 0 && live->dark_pixels[i] < npix)
+			ref->valid[live->dark_pixels[i]] = 0;
 	rc = -1;
 	if (calib_ref_noise(cal, wl, ref, u, err))
 		goto out;
