@@ -309,6 +309,63 @@ int calib_resample(const struct calib_cfg *c, const double *wl, const struct cal
 	return 0;
 }
 
+int calib_ref_noise(const struct calib_cfg *c, const double *wl, const struct exp_rate *ref, double *u_rel,
+		    struct acq_err *err)
+{
+	if (ref->npix <= 0 || ref->npix > SPECTRO_MAX_PIXELS)
+		return acq_errf(err, ACQ_E_INVAL, "calibration: reference has %d pixels", ref->npix);
+	struct calib_px *px = malloc(sizeof *px);
+	struct calib_spectrum *sp = malloc(sizeof *sp);
+	int rc = -1;
+	if (!px || !sp) {
+		acq_errf(err, ACQ_E_NOMEM, "calibration: out of memory");
+		goto out;
+	}
+	/* A flat unit "sample" on the reference's pixels: u_refn is then the reference's relative noise, with the
+	 * same pixel choice (calib_pixels' test) and the same binning as every sample's. */
+	px->npix = ref->npix;
+	for (int i = 0; i < ref->npix; i++) {
+		double ur = hypot(ref->u_noise[i], ref->u_dark[i]);
+		if (!ref->valid[i] || !(ref->rate[i] > 0) || !(ref->rate[i] > 3 * ur)) {
+			px_invalid(px, i);
+			continue;
+		}
+		px->valid[i] = 1;
+		px->f[i] = 1.0;
+		px->u_noise[i] = px->u_dark[i] = px->u_refs[i] = px->u_angle[i] = 0.0;
+		px->u_refn[i] = ur / ref->rate[i];
+	}
+	if (calib_resample(c, wl, px, sp, err))
+		goto out;
+	/* The per-pixel std is estimated from a few scans (4 in make demo: 3 degrees of freedom each), so one bin's
+	 * u_rel is itself noisy and z = e/u_rel too wide (E[u²/û²] = ν/(ν − 2) ≈ 1.3 for a bin of 2–3 pixels). The
+	 * relative noise of a white reference under a continuum source varies slowly in λ: a bin with pixels takes the
+	 * per-pixel variance pooled over the bins with pixels within ±CALIB_REFN_POOL_NM, divided by its own count. */
+	for (int k = 0; k < sp->n; k++) {
+		u_rel[k] = isfinite(sp->f[k]) ? sp->u_ref[k] : NAN;
+		if (!isfinite(u_rel[k]) || sp->npix[k] <= 0)
+			continue;
+		double v = 0;
+		int m = 0;
+		for (int j = k; j >= 0 && sp->wl[k] - sp->wl[j] <= CALIB_REFN_POOL_NM; j--)
+			if (sp->npix[j] > 0 && isfinite(sp->u_ref[j])) {
+				v += (double)sp->npix[j] * sp->npix[j] * sp->u_ref[j] * sp->u_ref[j];
+				m += sp->npix[j];
+			}
+		for (int j = k + 1; j < sp->n && sp->wl[j] - sp->wl[k] <= CALIB_REFN_POOL_NM; j++)
+			if (sp->npix[j] > 0 && isfinite(sp->u_ref[j])) {
+				v += (double)sp->npix[j] * sp->npix[j] * sp->u_ref[j] * sp->u_ref[j];
+				m += sp->npix[j];
+			}
+		u_rel[k] = sqrt(v / m / sp->npix[k]);
+	}
+	rc = 0;
+out:
+	free(px);
+	free(sp);
+	return rc;
+}
+
 int calib_spectrum(const struct calib_cfg *c, const double *wl, const struct exp_rate *sample,
 		   const struct exp_rate *ref, const struct calib_geom *g, struct calib_spectrum *out,
 		   struct acq_err *err)

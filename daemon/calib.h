@@ -91,6 +91,14 @@ void calib_table_eval(const struct calib_table *t, double wl, double *val, doubl
 /* Bin pixel values onto the configured grid (see the header comment). 0 or -1. */
 int calib_resample(const struct calib_cfg *c, const double *wl, const struct calib_px *px,
 		   struct calib_spectrum *out, struct acq_err *err);
+#define CALIB_REFN_POOL_NM 5.0 /* calib_ref_noise pools the per-pixel variance over ±this */
+
+/* The relative standard uncertainty u(R_ref)/R_ref of the reference's (or beam's) own noise and dark, per bin of
+ * c's grid into u_rel[calib_grid_size(c)], binned as calib_resample bins u_refn (NaN where no usable pixel),
+ * the per-pixel variance pooled over ±CALIB_REFN_POOL_NM: the part of every sample's u_ref that one reference
+ * spectrum shares with all samples of a sweep. 0 or -1. */
+int calib_ref_noise(const struct calib_cfg *c, const double *wl, const struct exp_rate *ref, double *u_rel,
+		    struct acq_err *err);
 /* calib_pixels then calib_resample. 0 or -1. */
 int calib_spectrum(const struct calib_cfg *c, const double *wl, const struct exp_rate *sample,
 		   const struct exp_rate *ref, const struct calib_geom *g, struct calib_spectrum *out,

@@ -151,6 +151,11 @@ void ex_free(struct ex *x, double now);
  * poll_s, max_point_attempts, max_invalid_frac, home_unhomed, home_deg, laser_power_pct) and `sweep.calibration` (calib_cfg_parse) onto c. Either node
  * may be NULL. 0 or -1 with file:line:col. */
 int ex_cfg_parse(struct yc_node *acq, struct yc_node *cal, struct ex_cfg *c, struct acq_err *err);
+/* A sweep's stored white reference (or direct beam) rebuilt as the executor's crash-resume reload does, into the
+ * caller's out, without an executor (npix pixels, policy pol, detector full scale; optically black pixels not
+ * masked); *detector_theta (may be NULL) as store_reference_each. 1 loaded, 0 none stored, -1 with err. */
+int ex_reference_rate(struct store *st, int64_t sweep_id, const struct exp_policy *pol, int npix, double full_scale,
+		      struct exp_rate *out, double *detector_theta, struct acq_err *err);
 /* Daemon shutdown with the sweep unfinished: stop, laser off, leave it 'paused' in the store with an event
  * so it can be resumed after its last committed point. */
 void ex_shutdown(struct ex *x, const char *why);

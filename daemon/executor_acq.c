@@ -83,55 +83,104 @@ bool ex_want_wl(struct ex *x)
 	return true;
 }
 
-/* ---- reference reload (crash-resume) ------------------------------------------------------------ */
+static double full_scale(const struct ex *x)
+{
+	return x->info && x->info->max_counts > 0 ? x->info->max_counts : 65535.0;
+}
+
+/* ---- reference reload (crash-resume; the reconstruction's reference noise) ------------------------- */
+
+/* The reload's working buffers: the executor's own (ex_load_reference) or a caller's (ex_reference_rate). */
+struct ref_load {
+	const struct exp_policy *pol;
+	int npix;
+	double full_scale;
+	struct exp_darks *darks;   /* cleared before and after */
+	struct exp_avg *avg;
+	struct exp_rate **rates;   /* [EX_MAX_TIMES] */
+	int n;                     /* exposures reloaded so far */
+};
 
 /* One stored reference spectrum: darks back into the dark cache (never reused for new spectra), exposures
  * into net rates, exactly as when they were taken. */
 static int reload_one(void *ctx, const struct store_ref_spectrum *sp)
 {
-	struct ex *x = ctx;
+	struct ref_load *L = ctx;
 	double t = sp->integration_ms;
 	unsigned av = sp->averages > 0 ? (unsigned)sp->averages : 0;
-	if (sp->npix != x->info->npix || av < 1 || x->nref >= EX_MAX_TIMES)
+	if (sp->npix != L->npix || av < 1 || L->n >= EX_MAX_TIMES)
 		return 0;
 	if (!strcmp(sp->kind, "dark")) {
-		exp_avg_init(x->avg, sp->npix, t);
-		exp_avg_add(x->avg, sp->counts, sp->stddev, av, NULL, t, NULL);
-		x->avg->temperature_c = sp->temperature_c;
-		exp_dark_store(x->darks, x->avg, -1e300); /* old: never reused for new spectra */
+		exp_avg_init(L->avg, sp->npix, t);
+		exp_avg_add(L->avg, sp->counts, sp->stddev, av, NULL, t, NULL);
+		L->avg->temperature_c = sp->temperature_c;
+		exp_dark_store(L->darks, L->avg, -1e300); /* old: never reused for new spectra */
 		return 0;
 	}
-	const struct exp_dark *dk = exp_dark_find(x->darks, t);
-	if (dk && !exp_net_rate(&x->cfg.pol, sp->counts, sp->stddev, av, sp->saturated, sp->npix, t, dk,
-				x->info->max_counts > 0 ? x->info->max_counts : 65535.0, x->rates[x->nref], NULL))
-		x->nref++;
+	const struct exp_dark *dk = exp_dark_find(L->darks, t);
+	if (dk && !exp_net_rate(L->pol, sp->counts, sp->stddev, av, sp->saturated, sp->npix, t, dk, L->full_scale,
+				L->rates[L->n], NULL))
+		L->n++;
 	return 0;
 }
 
-/* The reference of this sweep from the store: the spectra listed by the last "reference" event, darks and
- * exposures alike, turned into net rates and merged exactly as when they were taken. 1 loaded, 0 none. */
+/* The spectra listed by the sweep's last "reference" event, darks and exposures alike, turned into net rates
+ * and merged into out exactly as when they were taken; *dt as store_reference_each. 1 loaded, 0 none, -1. */
+static int ref_load_merge(struct store *st, int64_t sweep_id, struct ref_load *L, double *dt, struct exp_rate *out,
+			  struct acq_err *err)
+{
+	exp_darks_clear(L->darks);
+	L->n = 0;
+	int n = store_reference_each(st, sweep_id, dt, reload_one, L, err);
+	exp_darks_clear(L->darks);
+	if (n < 0)
+		return -1;
+	if (L->n == 0)
+		return 0;
+	const struct exp_rate *list[EX_MAX_TIMES];
+	for (int i = 0; i < L->n; i++)
+		list[i] = L->rates[i];
+	return exp_merge(list, L->n, out, err) ? 0 : 1;
+}
+
+/* The reference of this sweep from the store (ref_load_merge in the executor's buffers). 1 loaded, 0 none. */
 int ex_load_reference(struct ex *x, struct acq_err *err)
 {
 	if (!x->st || !ex_want_wl(x))
 		return 0;
 	double dt = NAN;
-	exp_darks_clear(x->darks);
-	x->nref = 0;
-	int n = store_reference_each(x->st, x->sweep_id, &dt, reload_one, x, err);
-	exp_darks_clear(x->darks);
-	if (n < 0)
+	struct ref_load L = { .pol = &x->cfg.pol, .npix = x->info->npix, .full_scale = full_scale(x), .darks = x->darks,
+			      .avg = x->avg, .rates = x->rates };
+	int r = ref_load_merge(x->st, x->sweep_id, &L, &dt, x->ref_rate, err);
+	x->nref = L.n;
+	if (r < 0)
 		return -1;
 	if (isfinite(dt))
 		x->cfg.cal.ref_theta_o_deg = fabs(dt);
-	if (x->nref == 0)
-		return 0;
-	const struct exp_rate *list[EX_MAX_TIMES];
-	for (int i = 0; i < x->nref; i++)
-		list[i] = x->rates[i];
-	if (exp_merge(list, x->nref, x->ref_rate, err))
+	if (r == 0)
 		return 0;
 	ex_mask_black(x, x->ref_rate);
 	return 1;
+}
+
+int ex_reference_rate(struct store *st, int64_t sweep_id, const struct exp_policy *pol, int npix, double full_scale,
+		      struct exp_rate *out, double *detector_theta, struct acq_err *err)
+{
+	if (npix <= 0 || npix > SPECTRO_MAX_PIXELS)
+		return acq_errf(err, ACQ_E_INVAL, "reference: %d pixels", npix);
+	struct exp_rate *rates[EX_MAX_TIMES] = { 0 };
+	struct ref_load L = { .pol = pol, .npix = npix, .full_scale = full_scale, .darks = malloc(sizeof *L.darks),
+			      .avg = malloc(sizeof *L.avg), .rates = rates };
+	bool ok = L.darks && L.avg;
+	for (int i = 0; ok && i < EX_MAX_TIMES; i++)
+		ok = (rates[i] = malloc(sizeof *rates[i])) != NULL;
+	int r = ok ? ref_load_merge(st, sweep_id, &L, detector_theta, out, err)
+		   : acq_errf(err, ACQ_E_NOMEM, "reference: out of memory");
+	for (int i = 0; i < EX_MAX_TIMES; i++)
+		free(rates[i]);
+	free(L.darks);
+	free(L.avg);
+	return r;
 }
 
 /* ---- acquisition ------------------------------------------------------------------------------ */
@@ -225,11 +274,6 @@ void ex_mask_black(const struct ex *x, struct exp_rate *r)
 			r->ninvalid++;
 		}
 	}
-}
-
-static double full_scale(const struct ex *x)
-{
-	return x->info && x->info->max_counts > 0 ? x->info->max_counts : 65535.0;
 }
 
 

@@ -3,13 +3,19 @@
  * child processes (job.h), each run and output recorded in the store (recon_runs), every step an event. */
 #include "daemon/recon_chain.h"
 
+#include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
+#include "config/acq_out.h"
+#include "daemon/calib.h"
+#include "daemon/devices.h"
+#include "daemon/executor.h"
 #include "daemon/job.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
@@ -24,6 +30,7 @@ struct recon_chain {
 	int rstage;
 	int64_t run_id;
 	char outdir[4096], csv[4096], prog[4096];
+	char refn[4096];             /* reference-noise.csv for dhr --ref-noise; "" without a stored reference */
 	char files[RC__COUNT][4096];
 	int recon_failed;
 	bool dhr_noplot;             /* dhr --plot failed: run dhr once more without the plot */
@@ -188,6 +195,10 @@ static void recon_next(struct recon_chain *ch)
 				argv[argc++] = "--plot";
 				argv[argc++] = dhrpng;
 			}
+			if (ch->refn[0]) {
+				argv[argc++] = "--ref-noise";
+				argv[argc++] = ch->refn;
+			}
 			break;
 		}
 		argv[argc] = NULL;
@@ -219,6 +230,81 @@ static void recon_next(struct recon_chain *ch)
 		    ch->recon_failed, RC__COUNT, summary);
 }
 
+/* reference-noise.csv beside the samples: the relative noise u(R_ref)/R_ref of the sweep's stored white reference
+ * (or direct beam) per wavelength of its grid, rebuilt from the store as the crash-resume reload does
+ * (ex_reference_rate) and binned as every sample's (calib_ref_noise): one spectrum shared by all samples, which
+ * dhr must not average away (--ref-noise). 1 written, 0 none (why in the event), -1 with err. */
+static int write_ref_noise(struct recon_chain *ch, struct acq_err *err)
+{
+	const struct conf *c = ch->env->conf;
+	struct ex_cfg cfg;
+	ex_cfg_defaults(&cfg);
+	if (ex_cfg_parse(c->sweep.acquisition, c->sweep.calibration, &cfg, err))
+		return -1;
+	float *grid = NULL;
+	int n = 0, npix = 0;
+	struct spectro_info info = { 0 };
+	if (store_sweep_pixels(ch->env->store, ch->id, &grid, &n, &npix, info.wl_coef, err))
+		return -1;
+	info.npix = npix;
+	/* the detector's full scale (saturation as at the measurement) from the spectrometer when it is open */
+	const struct spectro_info *live = ch->env->devices ? devices_ex_ops()->spectro_info(ch->env->devices) : NULL;
+	double fs = live && live->npix == npix && live->max_counts > 0 ? live->max_counts : 65535.0;
+	struct calib_cfg *cal = &cfg.cal;
+	cal->grid_min_nm = grid[0];
+	cal->grid_max_nm = grid[n - 1];
+	if (n > 1)
+		cal->grid_step_nm = (grid[n - 1] - grid[0]) / (n - 1);
+	double *wl = malloc((size_t)(npix > 0 ? npix : 1) * sizeof *wl), *u = malloc((size_t)n * sizeof *u);
+	struct exp_rate *ref = malloc(sizeof *ref);
+	int rc = -1;
+	if (!wl || !u || !ref) {
+		acq_errf(err, ACQ_E_NOMEM, "out of memory");
+		goto out;
+	}
+	if (calib_grid_size(cal) != n) {
+		acq_errf(err, ACQ_E_STATE, "sweep %lld: its stored grid (%d values) is not a regular grid",
+			 (long long)ch->id, n);
+		goto out;
+	}
+	for (int p = 0; p < npix; p++)
+		wl[p] = spectro_wavelength(&info, p);
+	rc = ex_reference_rate(ch->env->store, ch->id, &cfg.pol, npix, fs, ref, NULL, err);
+	if (rc <= 0)
+		goto out;
+	/* the optically black pixels carry no light (the executor masks them; the store does not know them) */
+	for (int i = 0; live && live->npix == npix && i < live->ndark_pixels && i < 8; i++)
+		if (live->dark_pixels[i] >= 0 && live->dark_pixels[i] < npix)
+			ref->valid[live->dark_pixels[i]] = 0;
+	rc = -1;
+	if (calib_ref_noise(cal, wl, ref, u, err))
+		goto out;
+	struct acq_out o;
+	if (acq_out_open(&o, ch->refn, ACQ_OUT_STDIO, err))
+		goto out;
+	fprintf(o.f, "# acquisitiond sweep %lld: relative standard uncertainty of its white reference's (or direct "
+		"beam's) own noise and dark per wavelength, common to every sample (brdf-recon dhr --ref-noise)\n"
+		"wavelength_nm,u_rel\n", (long long)ch->id);
+	int rows = 0;
+	for (int k = 0; k < n; k++)
+		if (isfinite(u[k]) && u[k] >= 0 && u[k] < 1) { /* bins without light: no row (dhr interpolates) */
+			fprintf(o.f, "%.7g,%.6g\n", (double)grid[k], u[k]);
+			rows++;
+		}
+	if (rows == 0) {
+		acq_out_abort(&o);
+		rc = 0;
+		goto out;
+	}
+	rc = acq_out_commit(&o, err) ? -1 : 1;
+out:
+	free(grid);
+	free(wl);
+	free(u);
+	free(ref);
+	return rc;
+}
+
 int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, int64_t *run_id, struct acq_err *err)
 {
 	const struct conf *c = ch->env->conf;
@@ -236,7 +322,24 @@ int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, int64_t 
 		recon_event(ch, "info", "exporting the calibrated samples failed: %s; no reconstruction ran", err->msg);
 		return -1;
 	}
-	recon_event(ch, "info", "%d calibrated samples exported to %s", rows, ch->csv);
+	snprintf(ch->refn, sizeof ch->refn, "%s/reference-noise.csv", ch->outdir);
+	unlink(ch->refn); /* a rerun must not use the previous run's file */
+	struct acq_err rerr = { 0 };
+	struct timespec t0, t1;
+	clock_gettime(CLOCK_MONOTONIC, &t0);
+	int rn = write_ref_noise(ch, &rerr);
+	clock_gettime(CLOCK_MONOTONIC, &t1);
+	double ms = (double)(t1.tv_sec - t0.tv_sec) * 1e3 + (double)(t1.tv_nsec - t0.tv_nsec) * 1e-6;
+	/* one event for both (the kill tests count the chain's events) */
+	if (rn == 1)
+		recon_event(ch, "info", "%d calibrated samples exported to %s; the white reference's own noise (one "
+			    "spectrum, common to all samples) to %s for dhr --ref-noise (%.1f ms)", rows, ch->csv, ch->refn, ms);
+	else
+		recon_event(ch, "info", "%d calibrated samples exported to %s; no reference noise for the DHR budget (%s): "
+			    "dhr runs without --ref-noise", rows, ch->csv,
+			    rn == 0 ? "no white reference or direct beam stored for this sweep" : rerr.msg);
+	if (rn != 1)
+		ch->refn[0] = 0;
 	if (automatic && !c->sweep.auto_recon) {
 		recon_event(ch, "info", "sweep.auto_recon is off: no reconstruction ran; the samples are in %s", ch->csv);
 		return 0;
@@ -253,13 +356,16 @@ int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, int64_t 
 	for (int i = 0; i < RC__COUNT; i++)
 		unlink(ch->files[i]); /* a rerun must not report the previous run's files */
 	char args[8192];
-	snprintf(args, sizeof args, "[\"fit %s\", \"merl\", \"dhr --plot\", \"render\"]", ch->csv);
+	snprintf(args, sizeof args, "[\"fit %s\", \"merl\", \"dhr --plot%s%s\", \"render\"]", ch->csv,
+		 ch->refn[0] ? " --ref-noise " : "", ch->refn);
 	if (store_recon_begin(ch->env->store, id, ch->prog, args, ch->env->wallclock(), &ch->run_id, err)) {
 		recon_event(ch, "info", "recording the reconstruction failed: %s; none ran", err->msg);
 		return -1;
 	}
 	if (run_id)
 		*run_id = ch->run_id;
+	if (ch->refn[0])
+		store_recon_output(ch->env->store, ch->run_id, "other", relpath(ch, ch->refn), ch->env->wallclock(), NULL);
 	ch->rstage = RC_FIT;
 	ch->recon_failed = 0;
 	ch->dhr_noplot = false;

@@ -120,3 +120,39 @@ int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, 
 	return acq_out_commit(&o, err);
 }
 
+
+int store_sweep_pixels(struct store *st, int64_t sweep_id, float **grid, int *n, int *npix, double coef[5],
+		       struct acq_err *err)
+{
+	*grid = NULL;
+	*n = *npix = 0;
+	sqlite3_stmt *s = store_prep(st, "SELECT w.wavelength_grid, p.npix, p.c0, p.c1, p.c2, p.c3, p.c4 FROM sweeps w "
+				         "LEFT JOIN spectrometers p ON p.id = w.spectrometer_id WHERE w.id = ?", err);
+	if (!s)
+		return -1;
+	sqlite3_bind_int64(s, 1, sweep_id);
+	int rc = sqlite3_step(s);
+	if (rc != SQLITE_ROW) {
+		sqlite3_finalize(s);
+		return rc == SQLITE_DONE ? acq_errf(err, ACQ_E_NOTFOUND, "no sweep %lld", (long long)sweep_id)
+					 : store_db_err(st, err, "reading the sweep's grid");
+	}
+	int nb = sqlite3_column_bytes(s, 0);
+	if (nb <= 0 || nb % 4 || sqlite3_column_type(s, 1) == SQLITE_NULL) {
+		sqlite3_finalize(s);
+		return acq_errf(err, ACQ_E_STATE, "sweep %lld has no %s", (long long)sweep_id,
+				nb <= 0 || nb % 4 ? "wavelength grid (no calibrated sample)" : "spectrometer recorded");
+	}
+	*grid = malloc((size_t)nb);
+	if (!*grid) {
+		sqlite3_finalize(s);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	memcpy(*grid, sqlite3_column_blob(s, 0), (size_t)nb);
+	*n = nb / 4;
+	*npix = sqlite3_column_int(s, 1);
+	for (int i = 0; i < 5; i++)
+		coef[i] = sqlite3_column_double(s, 2 + i);
+	sqlite3_finalize(s);
+	return 0;
+}

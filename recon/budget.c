@@ -19,9 +19,25 @@ static double cert_rel_at(const struct recon_budget_opts *o, double wl)
 	return (1 - u) * o->cert_u[j] / o->cert_rho[j] + u * o->cert_u[j + 1] / o->cert_rho[j + 1];
 }
 
+/* u_rel of the reference's noise at λ (linear between its points, the nearest end outside); 0 without a table. */
+static double refn_rel_at(const struct recon_budget_opts *o, double wl)
+{
+	size_t n = o->nrefn, j = 0;
+	if (n == 0)
+		return 0.0;
+	if (n == 1 || wl <= o->refn_wl[0])
+		return o->refn_u[0];
+	if (wl >= o->refn_wl[n - 1])
+		return o->refn_u[n - 1];
+	while (j + 2 < n && o->refn_wl[j + 1] < wl)
+		j++;
+	double u = (wl - o->refn_wl[j]) / (o->refn_wl[j + 1] - o->refn_wl[j]);
+	return (1 - u) * o->refn_u[j] + u * o->refn_u[j + 1];
+}
+
 int recon_budget(size_t nth, size_t L, const double *wl, const double *dhr, const double *sig,
 		 const struct recon_budget_opts *o, double *cert, double *drift, double *wlcal, double *nonlin,
-		 double *total, struct acq_err *err)
+		 double *refnoise, double *total, struct acq_err *err)
 {
 	if (!(o->cert_rel >= 0 && o->cert_rel < 1) || !(o->drift_rel >= 0 && o->drift_rel < 1) ||
 	    !(o->wl_cal_nm >= 0 && o->wl_cal_nm < 100) || !(o->nonlin_rel >= 0 && o->nonlin_rel < 1))
@@ -32,6 +48,11 @@ int recon_budget(size_t nth, size_t L, const double *wl, const double *dhr, cons
 		    (i && !(o->cert_wl[i] > o->cert_wl[i - 1])))
 			return acq_errf(err, ACQ_E_INVAL, "budget: certificate row %zu: wavelengths increasing, rho > 0, "
 					"u >= 0 needed", i + 1);
+	for (size_t i = 0; i < o->nrefn; i++)
+		if (!(o->refn_u[i] >= 0 && o->refn_u[i] < 1) || !isfinite(o->refn_wl[i]) ||
+		    (i && !(o->refn_wl[i] > o->refn_wl[i - 1])))
+			return acq_errf(err, ACQ_E_INVAL, "budget: reference noise row %zu: wavelengths increasing, "
+					"u_rel in [0, 1) needed", i + 1);
 	for (size_t t = 0; t < nth; t++)
 		for (size_t l = 0; l < L; l++) {
 			size_t i = t * L + l;
@@ -40,7 +61,7 @@ int recon_budget(size_t nth, size_t L, const double *wl, const double *dhr, cons
 			size_t a = l > 0 ? l - 1 : l, b = l + 1 < L ? l + 1 : l;
 			double slope = b > a ? (dhr[t * L + b] - dhr[t * L + a]) / (wl[b] - wl[a]) : 0.0;
 			double c = fabs(d) * rel, dr = fabs(d) * o->drift_rel, w = fabs(slope) * o->wl_cal_nm;
-			double nl = fabs(d) * o->nonlin_rel;
+			double nl = fabs(d) * o->nonlin_rel, rn = fabs(d) * refn_rel_at(o, wl[l]);
 			if (cert)
 				cert[i] = c;
 			if (drift)
@@ -49,7 +70,9 @@ int recon_budget(size_t nth, size_t L, const double *wl, const double *dhr, cons
 				wlcal[i] = w;
 			if (nonlin)
 				nonlin[i] = nl;
-			total[i] = sqrt(sig[i] * sig[i] + c * c + dr * dr + w * w + nl * nl);
+			if (refnoise)
+				refnoise[i] = rn;
+			total[i] = sqrt(sig[i] * sig[i] + c * c + dr * dr + w * w + nl * nl + rn * rn);
 		}
 	return 0;
 }

@@ -16,16 +16,22 @@ struct recon_budget_opts {
 	double drift_rel;  /* relative standard uncertainty of the source between reference and samples */
 	double wl_cal_nm;  /* standard uncertainty of the wavelength calibration (nm): |dDHR/dλ|·δλ */
 	double nonlin_rel; /* relative residual of the detector's nonlinearity correction */
+	/* the white reference's own measurement noise, relative, per wavelength: [nrefn] nm, u_rel (linear in λ,
+	 * the nearest end outside); one spectrum shared by every sample of the sweep, so common to all samples and
+	 * incidences but independent from one wavelength to the next */
+	const double *refn_wl, *refn_u;
+	size_t nrefn;
 };
 
 /* The budget of nth DHR curves dhr[t*L + l] over wavelengths wl[L] with the reconstruction's σ sig[...]: the
- * components cert, drift, wlcal, nonlin (each [nth*L], may be NULL) and the total
- * √(sig² + cert² + drift² + wlcal² + nonlin²). cert and drift are one common factor across wavelengths and
- * incidences (correlation 1: a scale error of the reference or the source); wlcal is correlated across
- * neighbouring wavelengths. Returns 0 or -1 with err (bad options). */
+ * components cert, drift, wlcal, nonlin, refnoise (= |DHR|·u_rel(λ) of the reference's noise; each [nth*L], may
+ * be NULL) and the total √(sig² + cert² + drift² + wlcal² + nonlin² + refnoise²). cert and drift are one common
+ * factor across wavelengths and incidences (correlation 1: a scale error of the reference or the source); wlcal is
+ * correlated across neighbouring wavelengths; refnoise is common to the incidences, independent across
+ * wavelengths. Returns 0 or -1 with err (bad options). */
 int recon_budget(size_t nth, size_t L, const double *wl, const double *dhr, const double *sig,
 		 const struct recon_budget_opts *o, double *cert, double *drift, double *wlcal, double *nonlin,
-		 double *total, struct acq_err *err);
+		 double *refnoise, double *total, struct acq_err *err);
 
 /* Agreement of a DHR curve (model: value md, total σ ms, its correlated part mc — cert and drift, fully correlated
  * across wavelengths — at each reference wavelength) with a reference (rv ± rs, independent per wavelength). */

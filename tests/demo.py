@@ -103,6 +103,8 @@ def reference_check(out, seed, conf=None):
         # options matching the simulator's systematic errors where they are on
         extra = ["--reference-corr", "0.003,150"] if "--reference-corr" in helptext.stdout else []
         extra += budget_args(conf, out) if conf else []
+        rn = os.path.join(out, "reference-noise.csv")  # the daemon's: its white reference's own noise
+        extra += ["--ref-noise", rn] if os.path.exists(rn) and "--ref-noise" in helptext.stdout else []
         r = subprocess.run([RECON, "dhr", model, "--theta-i", "8", "--reference", ref, "--z-out", zpath, "-o",
                             os.path.join(out, "dhr8.csv"), "--plot", os.path.join(out, "dhr-reference.png"), *extra],
                            capture_output=True, text=True)

@@ -37,7 +37,7 @@ int cli_out_open(struct cli_out *o, const char *path, struct acq_err *err);
 int cli_out_close(struct cli_out *o, int ok, struct acq_err *err);
 
 /* The DHR budget's components, in the order of dhr's CSV columns (cmd_dhr_db_names: the column names). */
-enum { DB_NOISE, DB_MODEL, DB_QUAD, DB_MISFIT, DB_RES, DB_CERT, DB_DRIFT, DB_WLCAL, DB_NONLIN, DB_N };
+enum { DB_NOISE, DB_MODEL, DB_QUAD, DB_MISFIT, DB_RES, DB_CERT, DB_DRIFT, DB_WLCAL, DB_NONLIN, DB_REFNOISE, DB_N };
 extern const char *const cmd_dhr_db_names[DB_N];
 /* DHR and budget of model m at nth (<= 64) incidences th (degrees) into dhr, sig (total) and part[DB_N][nth*L]. */
 int cmd_dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64_t draws, uint64_t seed,

@@ -30,14 +30,21 @@ static const char dhr_help[] =
 	"  sigma_res     resolution in theta_i (a lobe narrower than the incidence spacing);\n"
 	"  sigma_cert    the white standard's certificate (correlated: one factor for all wavelengths);\n"
 	"  sigma_drift   source drift between reference and samples (correlated likewise);\n"
-	"  sigma_wlcal   wavelength calibration, |dDHR/dlambda| x its uncertainty;  sigma_nonlin  nonlinearity.\n"
-	"  sigma = sqrt(max(noise, model)^2 + quad^2 + misfit^2 + res^2 + cert^2 + drift^2 + wlcal^2 + nonlin^2).\n"
+	"  sigma_wlcal   wavelength calibration, |dDHR/dlambda| x its uncertainty;  sigma_nonlin  nonlinearity;\n"
+	"  sigma_refnoise  the white reference's own measurement noise, |DHR| x u_rel(lambda) (--ref-noise): one\n"
+	"                reference spectrum serves every sample of a sweep, so this part does not average away over\n"
+	"                the samples as sigma_noise does (common to all incidences, independent across wavelengths).\n"
+	"  sigma = sqrt(max(noise, model)^2 + quad^2 + misfit^2 + res^2 + cert^2 + drift^2 + wlcal^2 + nonlin^2\n"
+	"               + refnoise^2).\n"
 	"Budget options (the sample file and database carry none of these: each is 0 unless given):\n"
 	"  --cert CERT.csv       the white standard's certificate, columns wavelength_nm,rho,u\n"
 	"  --cert-rel X          or its relative standard uncertainty at every wavelength\n"
 	"  --drift-rel X         relative standard uncertainty of the source between reference and samples\n"
 	"  --wl-cal-nm X         standard uncertainty of the wavelength calibration (nm)\n"
 	"  --nonlin-rel X        relative residual of the nonlinearity correction\n"
+	"  --ref-noise FILE.csv  the white reference's relative standard uncertainty per wavelength, columns\n"
+	"                        wavelength_nm,u_rel (linear in lambda, the nearest end outside); acquisitiond writes\n"
+	"                        it as reference-noise.csv beside a sweep's samples.csv\n"
 	"  --reference REF.csv   compare with a measured DHR (columns wavelength_nm,dhr,sigma, e.g. a\n"
 	"                        spectrophotometer at 8 degrees: acq-sim truth MATERIAL --spectrophotometer) at\n"
 	"                        --reference-theta (default 8, must be among --theta-i): prints the agreement (share\n"
@@ -74,7 +81,7 @@ static void at_reference(const struct recon_model *m, const double *y, const dou
 }
 
 const char *const cmd_dhr_db_names[DB_N] = { "sigma_noise", "sigma_model",  "sigma_quad",  "sigma_misfit", "sigma_res",
-					    "sigma_cert",  "sigma_drift", "sigma_wlcal", "sigma_nonlin" };
+					    "sigma_cert",  "sigma_drift", "sigma_wlcal", "sigma_nonlin", "sigma_refnoise" };
 
 /* DHR and budget of model m at nth incidences th (degrees) into dhr, sig (total) and part[DB_N][nth*L]. */
 int cmd_dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64_t draws, uint64_t seed,
@@ -89,7 +96,7 @@ int cmd_dhr_budget(const struct recon_model *m, size_t nth, const double *th, ui
 	int rc = !srec ? acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory")
 		 : recon_dhr_parts(m, nth, thr, (int)draws, seed, dhr, srec, &parts, cli_progress, NULL, err) ||
 			 recon_budget(nth, m->nwl, m->wl, dhr, srec, bo, part[DB_CERT], part[DB_DRIFT], part[DB_WLCAL],
-				      part[DB_NONLIN], sig, err)
+				      part[DB_NONLIN], part[DB_REFNOISE], sig, err)
 		 ? -1
 		 : 0;
 	free(srec);
@@ -98,7 +105,7 @@ int cmd_dhr_budget(const struct recon_model *m, size_t nth, const double *th, ui
 
 /* dhr's command line. */
 struct dhr_args {
-	const char *model, *outp, *refp, *zout, *plot, *certp;
+	const char *model, *outp, *refp, *zout, *plot, *certp, *refnp;
 	double th[64], ref_th, ref_u, ref_len;
 	size_t nth;
 	uint64_t draws, seed;
@@ -135,6 +142,7 @@ static int dhr_parse(int argc, char **argv, struct dhr_args *a)
 		{ "cert", required_argument, 0, 'C' }, { "cert-rel", required_argument, 0, 'c' },
 		{ "drift-rel", required_argument, 0, 'd' }, { "wl-cal-nm", required_argument, 0, 'w' },
 		{ "nonlin-rel", required_argument, 0, 'N' }, { "reference-corr", required_argument, 0, 'K' },
+		{ "ref-noise", required_argument, 0, 'F' },
 		{ "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
 	*a = (struct dhr_args){ .th = { 8, 30, 60 }, .nth = 3, .ref_th = 8, .ref_u = 0, .ref_len = 150, .draws = 64,
 				.seed = 1 };
@@ -163,6 +171,7 @@ static int dhr_parse(int argc, char **argv, struct dhr_args *a)
 		case 'z': a->zout = optarg; break;
 		case 'p': a->plot = optarg; break;
 		case 'C': a->certp = optarg; break;
+		case 'F': a->refnp = optarg; break;
 		case 'c':
 			if (cli_parse_double(optarg, &bo->cert_rel) || !(bo->cert_rel >= 0 && bo->cert_rel < 1))
 				return cli_usage_err("dhr", "--cert-rel needs a number in [0, 1)");
@@ -223,6 +232,40 @@ static int dhr_cert_load(const char *certp, struct recon_budget_opts *bo, double
 	bo->cert_rho = cw + ncert;
 	bo->cert_u = cw + 2 * ncert;
 	bo->ncert = ncert;
+	return 0;
+}
+
+/* The reference-noise file (wavelength_nm,u_rel rows: wavelengths increasing, u_rel in [0, 1)) into bo as columns,
+ * in *refn (caller frees); 0 or -1 with err naming the file and the data row. */
+static int dhr_refn_load(const char *path, struct recon_budget_opts *bo, double **refn, struct acq_err *err)
+{
+	static const char *const cn[2] = { "wavelength_nm", "u_rel" };
+	size_t n = 0;
+	double *rows = NULL;
+	if (csvio_read_columns(path, cn, 2, &n, &rows, err))
+		return -1;
+	double *cw = n ? malloc(2 * n * sizeof *cw) : NULL;
+	if (!cw) {
+		free(rows);
+		return acq_errf(err, n ? ACQ_E_NOMEM : ACQ_E_INVAL, "dhr: --ref-noise %s: %s", path,
+				n ? "out of memory" : "no rows");
+	}
+	for (size_t i = 0; i < n; i++) {
+		cw[i] = rows[2 * i];
+		cw[n + i] = rows[2 * i + 1];
+		if (!(cw[n + i] >= 0 && cw[n + i] < 1) || (i && !(cw[i] > cw[i - 1]))) {
+			acq_errf(err, ACQ_E_INVAL, "dhr: --ref-noise %s: data row %zu (%g nm, u_rel %g): wavelengths must "
+				 "increase and u_rel be in [0, 1)", path, i + 1, cw[i], cw[n + i]);
+			free(rows);
+			free(cw);
+			return -1;
+		}
+	}
+	free(rows);
+	*refn = cw;
+	bo->refn_wl = cw;
+	bo->refn_u = cw + n;
+	bo->nrefn = n;
 	return 0;
 }
 
@@ -414,12 +457,17 @@ int cmd_dhr(int argc, char **argv)
 	if (rc >= 0)
 		return rc;
 	struct acq_err err = { 0 };
-	double *cert = NULL;
+	double *cert = NULL, *refn = NULL;
 	if (a.certp && dhr_cert_load(a.certp, &a.bo, &cert, &err))
 		return cli_fail(&err);
+	if (a.refnp && dhr_refn_load(a.refnp, &a.bo, &refn, &err)) {
+		free(cert);
+		return cli_fail(&err);
+	}
 	struct recon_model *m;
 	if (recon_model_load(a.model, &m, &err)) {
 		free(cert);
+		free(refn);
 		return cli_fail(&err);
 	}
 	size_t L = m->nwl, NL = a.nth * L;
@@ -438,9 +486,10 @@ int cmd_dhr(int argc, char **argv)
 		corr[i] = hypot(part[DB_CERT][i], part[DB_DRIFT][i]);
 	if (ok && dhr_write(a.outp, m, &a, dhr, sig, part, &err))
 		ok = 0;
-	if (ok && !a.certp && a.bo.cert_rel == 0 && a.bo.drift_rel == 0 && a.bo.wl_cal_nm == 0 && a.bo.nonlin_rel == 0)
-		fprintf(stderr, "dhr: no --cert/--cert-rel, --drift-rel, --wl-cal-nm, --nonlin-rel given: those components "
-			"are 0 (the samples carry no input for them)\n");
+	if (ok && !a.certp && a.bo.cert_rel == 0 && a.bo.drift_rel == 0 && a.bo.wl_cal_nm == 0 && a.bo.nonlin_rel == 0 &&
+	    !a.refnp)
+		fprintf(stderr, "dhr: no --cert/--cert-rel, --drift-rel, --wl-cal-nm, --nonlin-rel, --ref-noise given: those "
+			"components are 0 (the samples carry no input for them)\n");
 	size_t tref = a.nth;
 	struct dhr_resid res = { 0 };
 	if (ok && a.refp && dhr_ref_read(&a, &tref, &ref, &nref, &err))
@@ -453,6 +502,7 @@ int cmd_dhr(int argc, char **argv)
 	free(res.wl);
 	free(ref);
 	free(cert);
+	free(refn);
 	free(dhr);
 	free(sig);
 	free(pbuf);

@@ -57,7 +57,7 @@ int cmd_info(int argc, char **argv)
 			for (int k = -2; k < DB_N; k++) {
 				memcpy(tmp, k == -2 ? buf + DB_N * L : k == -1 ? buf + (DB_N + 1) * L : part[k], L * sizeof *tmp);
 				qsort(tmp, L, sizeof *tmp, cmp_double);
-				printf("  %-13s %.3g  %.3g\n", k == -2 ? "dhr" : k == -1 ? "sigma" : cmd_dhr_db_names[k], tmp[L / 2],
+				printf("  %-14s %.3g  %.3g\n", k == -2 ? "dhr" : k == -1 ? "sigma" : cmd_dhr_db_names[k], tmp[L / 2],
 				       tmp[L - 1]);
 			}
 		}

@@ -71,8 +71,8 @@ def main():
             "--z-out", z, "-o", out, "--plot", os.path.join(d, "dhr.png"))
     assert "reference" in p.stderr and "agreement" in p.stderr and "chi2/n" in p.stderr
     dd = np.genfromtxt(out, delimiter=",", skip_header=1)
-    # theta_i,wavelength_nm,dhr,sigma, noise, model, quad, misfit, res, cert, drift, wlcal, nonlin
-    assert dd.shape == (18, 13) and np.all(np.isfinite(dd)) and np.all(dd[:, 3] > 0)
+    # theta_i,wavelength_nm,dhr,sigma, noise, model, quad, misfit, res, cert, drift, wlcal, nonlin, refnoise
+    assert dd.shape == (18, 14) and np.all(np.isfinite(dd)) and np.all(dd[:, 3] > 0)
     assert np.allclose(dd[:, 3] ** 2, np.maximum(dd[:, 4], dd[:, 5]) ** 2 + np.sum(dd[:, 6:] ** 2, axis=1), rtol=1e-6)
     assert np.all(dd[:, 6] >= 0) and np.all(dd[:, 6] <= 2e-3 * dd[:, 2])  # smooth lobe: rule converged
     assert np.all(dd[:, 9:] == 0)  # no systematic component given: 0 (and said on stderr)
@@ -127,6 +127,23 @@ def main():
     assert np.allclose(b1["sigma_drift"], 0.001 * b1["dhr"], rtol=1e-9)
     assert np.allclose(b1["sigma_nonlin"], 0.002 * b1["dhr"], rtol=1e-9)
     assert np.all(b1["sigma_wlcal"] >= 0) and np.any(b1["sigma_wlcal"] > 0)
+    # --ref-noise: the white reference's own noise, |DHR| x u_rel interpolated linearly in lambda (the nearest end
+    # outside), part of the total; a bad file is refused naming the file and its row
+    rn = os.path.join(d, "refnoise.csv")
+    with open(rn, "w") as fh:
+        fh.write("# u_rel of a reference\nwavelength_nm,u_rel\n500,0.002\n600,0.004\n")
+    _, _, b2 = agreement("--ref-noise", rn)
+    want = np.abs(b2["dhr"]) * np.interp(b2["wavelength_nm"], [500, 600], [0.002, 0.004])
+    assert np.allclose(b2["sigma_refnoise"], want, rtol=1e-9) and np.all(want > 0)
+    rest = b2["sigma"] ** 2 - b2["sigma_refnoise"] ** 2
+    _, _, b3 = agreement()
+    assert np.allclose(rest, b3["sigma"] ** 2, rtol=1e-6) and np.all(b3["sigma_refnoise"] == 0)
+    with open(rn, "w") as fh:
+        fh.write("wavelength_nm,u_rel\n500,0.002\n600,1.5\n")
+    p = run("dhr", m, "--theta-i", "8", "--draws", "4", "--ref-noise", rn, "-o", out, ok=False)
+    assert p.returncode != 0 and rn in p.stderr and "data row 2" in p.stderr, p.stderr
+    p = run("info", m)
+    assert "sigma_refnoise" in p.stdout
     p = run("info", m)
     assert "directions=" in p.stdout and "budget at theta_i=8" in p.stdout and "sigma_cert" in p.stdout
     # check: the three properties

@@ -57,7 +57,7 @@ def main():
         a = np.genfromtxt(o, delimiter=",", skip_header=1)
         b = np.array([[float(x) for x in line.split(",")] for line in open(t)
                       if line[:1].isdigit()])
-        assert a.shape[0] == b.shape[0] and a.shape[1] == 13 and np.allclose(a[:, :2], b[:, :2]), mat  # the budget
+        assert a.shape[0] == b.shape[0] and a.shape[1] == 14 and np.allclose(a[:, :2], b[:, :2]), mat  # the budget
         rel = np.abs(a[:, 2] - b[:, 2]) / b[:, 2]
         worst = [float(rel[a[:, 0] == th].max()) for th in (8, 30, 60)]
         print("%s: worst relative DHR error at 8/30/60 deg: %s (tolerances %s)" %

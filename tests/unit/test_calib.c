@@ -118,6 +118,70 @@ static void test_relative_zscores(void **state)
 	assert_string_equal(calib_method_name(sp.method), "relative");
 }
 
+/* calib_ref_noise: a noiseless sample against a noisy white reference carries only the reference's error, the
+ * error one reference spectrum shares with every sample of a sweep; relative to the truth, in units of the
+ * u_rel it states per bin, it must be standard normal over many reference draws (u_rel 0.8× as large: var 1.6).
+ * With 4 scans per spectrum (make demo's reference) the per-pixel std is a noisy estimate: unpooled, the
+ * variance read 1.235; pooled over ±CALIB_REFN_POOL_NM it must be 1 as with 30 scans. */
+static void ref_noise_case(unsigned scans)
+{
+	struct calib_cfg c;
+	calib_cfg_defaults(&c);
+	c.rho_ref.u[0] = 0; /* the scale term is another matter (the certificate) */
+	static double rr[NPIX];
+	static double u_rel[CALIB_MAX_GRID];
+	static struct exp_rate es, eref;
+	static struct calib_spectrum sp;
+	struct synth_rng r = { .s = seed + 7 };
+	const double K = 2500;
+	const struct calib_geom g = { 20, 30 };
+	es.npix = NPIX;
+	es.ninvalid = 0;
+	for (int p = 0; p < NPIX; p++) {
+		rr[p] = K * lamp(wl[p]) * c.rho_ref.val[0] / M_PI;
+		es.rate[p] = rr[p] * f_true(wl[p]) * M_PI / c.rho_ref.val[0]; /* exact: f = R_s/R_ref · ρ/π */
+		es.u_noise[p] = es.u_dark[p] = 0;
+		es.t_ms[p] = 40;
+		es.valid[p] = 1;
+	}
+	double s2 = 0, umin = INFINITY, umax = 0;
+	long n = 0;
+	for (int d = 0; d < 60; d++) {
+		measure(&r, rr, 10, scans, &eref);
+		assert_int_equal(calib_spectrum(&c, wl, &es, &eref, &g, &sp, NULL), 0);
+		assert_int_equal(calib_ref_noise(&c, wl, &eref, u_rel, NULL), 0);
+		for (int k = 0; k < sp.n; k++) {
+			double t = bin_truth(&c, &eref, k, 1.0);
+			if (!isfinite(sp.f[k]) || !isfinite(t))
+				continue;
+			assert_true(isfinite(u_rel[k]) && u_rel[k] > 0);
+			double z = (sp.f[k] / t - 1) / u_rel[k];
+			s2 += z * z;
+			n++;
+			umin = fmin(umin, u_rel[k]);
+			umax = fmax(umax, u_rel[k]);
+		}
+	}
+	double var = s2 / n;
+	print_message("reference noise, %u scans: %ld bins, u_rel %.2g..%.2g, var of the relative error / u_rel %.3f\n",
+		      scans, n, umin, umax, var);
+	assert_true(n > 60 * 600);
+	assert_true(umax > 1e-3); /* large enough to matter against the sample noise of this file's other tests */
+	assert_true(var > 0.85 && var < 1.15); /* 39k values: the variance's own scatter ~1 %; f's slope in a bin ~0.1 % */
+	/* no usable pixel: NaN */
+	for (int p = 0; p < NPIX; p++)
+		eref.valid[p] = 0;
+	assert_int_equal(calib_ref_noise(&c, wl, &eref, u_rel, NULL), 0);
+	assert_true(isnan(u_rel[0]) && isnan(u_rel[sp.n - 1]));
+}
+
+static void test_ref_noise(void **state)
+{
+	(void)state;
+	ref_noise_case(30);
+	ref_noise_case(4);
+}
+
 /* Absolute method: f = R_s / (R_beam Ω cos θo) with Ω's true value drawn around the nominal. */
 static void test_absolute_zscores(void **state)
 {
@@ -321,6 +385,7 @@ int main(void)
 		cmocka_unit_test(test_absolute_zscores),
 		cmocka_unit_test(test_angular_term),
 		cmocka_unit_test(test_resample),
+		cmocka_unit_test(test_ref_noise),
 		cmocka_unit_test(test_cfg_parse),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
