@@ -11,7 +11,8 @@
  *                                           # or dhr_sigma and lnf_sigma together: both must be met;
  *                                           # lnf_sigma: {le: X, weight: rad}: its picks reduce the expected error
  *                                           # of log(1 + f cosθi cosθo) over dωi dωo (select's lnf:rad) instead of
- *                                           # the variance of ln f under cosθi cosθo dωi dωo (weight: projected)
+ *                                           # the variance of ln f under cosθi cosθo dωi dωo (weight: projected);
+ *                                           # weight: mix, both (select's lnf:mix)
  *   budget: {seconds: 1400, points: 866}    # one or both; the whole sweep, seed included
  *   batch: 12                               # points per batch
  *   candidates: {incidence_deg: RANGE, per_incidence: 150, max_theta_deg: 85,
@@ -49,7 +50,7 @@ static int parse_list(struct yc_node *map, const char *key, const char *what, do
 	return 0;
 }
 
-/* target.lnf_sigma.weight: projected (the default) or rad (select's lnf:rad). */
+/* target.lnf_sigma.weight: projected (the default), rad or mix (select's lnf:rad, lnf:mix). */
 static int parse_lnf_weight(struct yc_node *l, struct plan_adaptive *a, struct acq_err *err)
 {
 	const char *v = NULL;
@@ -58,11 +59,13 @@ static int parse_lnf_weight(struct yc_node *l, struct plan_adaptive *a, struct a
 	if (!v)
 		return 0;
 	if (strcmp(v, "rad") == 0)
-		a->lnf_rad = true;
+		a->lnf_weight = 1;
+	else if (strcmp(v, "mix") == 0)
+		a->lnf_weight = 2;
 	else if (strcmp(v, "projected") != 0)
 		return yc_errf(err, yc_get(l, "weight"), "target.lnf_sigma.weight: 'projected' (the default: the variance "
-			       "of ln f under cos(theta_i) cos(theta_o) dwi dwo) or 'rad' (the error of log(1 + f cos(theta_i) "
-			       "cos(theta_o)) over dwi dwo)");
+			       "of ln f under cos(theta_i) cos(theta_o) dwi dwo), 'rad' (the error of log(1 + f cos(theta_i) "
+			       "cos(theta_o)) over dwi dwo) or 'mix' (both, each over its own criterion)");
 	return 0;
 }
 
@@ -240,6 +243,9 @@ fail:
 	return -1;
 }
 
+/* select's ln f spec per lnf_sigma's weight */
+static const char *const LNF_SPEC[] = { "lnf", "lnf:rad", "lnf:mix" };
+
 void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t len)
 {
 	size_t n = 0;
@@ -247,7 +253,7 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 		return;
 	buf[0] = '\0';
 	if (a->target != PLAN_TARGET_DHR_SIGMA) {
-		snprintf(buf, len, "%s:le=%.9g", a->target == PLAN_TARGET_LNF_SIGMA ? (a->lnf_rad ? "lnf:rad" : "lnf") : "rgb",
+		snprintf(buf, len, "%s:le=%.9g", a->target == PLAN_TARGET_LNF_SIGMA ? LNF_SPEC[a->lnf_weight] : "rgb",
 			 a->le);
 		return;
 	}
@@ -257,7 +263,7 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 	if (n < len)
 		n += (size_t)snprintf(buf + n, len - n, ":le=%.9g", a->le);
 	if (a->le_lnf > 0 && n < len)
-		snprintf(buf + n, len - n, "+lnf%s:le=%.9g", a->lnf_rad ? ":rad" : "", a->le_lnf);
+		snprintf(buf + n, len - n, "+%s:le=%.9g", LNF_SPEC[a->lnf_weight], a->le_lnf);
 }
 
 size_t plan_adaptive_fit_picks(const double *cost, size_t n, double left_s, size_t max_k, size_t *keep)
