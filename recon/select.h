@@ -33,11 +33,12 @@ struct select_target {
 					      * spec "lnf:rad"): each grid point's variance weighed by the expected
 					      * squared error of log(1 + f cosθi cosθo) under dωi dωo (the held-out
 					      * log-RMSE of the time-to-accuracy study) instead of the projected
-					      * measure cosθi cosθo dωi dωo (0, the default); the value is the same */
+					      * measure cosθi cosθo dωi dωo (0, the default); the value is the same;
+					      * 2 (spec "lnf:mix"): both weights, each over its own criterion */
 };
 
-/* Parse "dhr:8,30,60", "lnf", "lnf:rad", "rgb", optionally followed by ":le=X" (X > 0), or the combined
- * "dhr:8,30,60:le=X+lnf[:rad]:le=Y" (both thresholds required). 0, or -1 with err saying what is wrong. */
+/* Parse "dhr:8,30,60", "lnf", "lnf:rad", "lnf:mix", "rgb", optionally followed by ":le=X" (X > 0), or the combined
+ * "dhr:8,30,60:le=X+lnf[:rad|:mix]:le=Y" (both thresholds required). 0, or -1 with err saying what is wrong. */
 int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err);
 
 /* The batch's route, for charging each pick its increment to it (NULL in select_opts: each pick costs its cost[j],

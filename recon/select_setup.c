@@ -397,6 +397,36 @@ out:
 	return rc;
 }
 
+/*
+ * The "lnf:mix" criterion's weights (session 16): each measure's weights over its own criterion before the picks,
+ *   w[x] ∝ wp[x] / Ep + wr[x] / Er,   E = Σ w[x] max(v[x] − X², 0),
+ * wp the projected measure's shares, wr lnf:rad's (wr[F], normalised), so that a pick's gain is the sum of its
+ * relative reductions of both criteria (as a combined target's parts): the coat's grazing mirror band, bright, draws
+ * picks as under lnf:rad, while a dim material keeps the projected measure's spread. Either criterion 0: the other's.
+ * Normalised to sum 1. s->v must hold the variances.
+ */
+static void lnf_mix_weights(struct sel *s, const double *wr)
+{
+	size_t F = s->F;
+	double Ep = 0, Er = 0, sum = 0;
+	lnf_grid(NULL, s->xw, 1);
+	for (size_t x = 0; x < F; x++) {
+		double e = fmax(s->v[x] - s->thr2, 0);
+		Ep += s->xw[x] * e;
+		Er += wr[x] * e;
+	}
+	for (size_t x = 0; x < F; x++) {
+		double w = (Ep > 0 ? s->xw[x] / Ep : 0) + (Er > 0 ? wr[x] / Er : 0);
+		s->xw[x] = isfinite(w) ? w : 0;
+		sum += s->xw[x];
+	}
+	if (sum > 0)
+		for (size_t x = 0; x < F; x++)
+			s->xw[x] /= sum;
+	else
+		lnf_grid(NULL, s->xw, 1);
+}
+
 /* Point targets (ln f, RGB): the posterior variance v[x] = amp[x]² P(x, x) of g at the F points c6 (unit-amplitude
  * posterior P) and their covariances Z[x, j] = amp[x] P(x, candidate j) with the candidates. kxn: the kernel matrix
  * K(c6, centres) [F × n] when the caller has built it already, else NULL. */
@@ -447,6 +477,7 @@ int sel_setup_lnf(struct sel *s, struct select_result *r, struct acq_err *err)
 	size_t F = s->F;
 	double *c6 = calloc(F * 6, sizeof *c6), *amp = calloc(F, sizeof *amp); /* calloc: gcc's maybe-uninitialized */
 	double *KXn = s->t->lnf_rad ? malloc(F * s->n * sizeof *KXn) : NULL; /* lnf:rad and the covariances share it */
+	double *wr = NULL; /* lnf:mix: the rad weights */
 	int rc = -1;
 	if (!c6 || !amp || (s->t->lnf_rad && !KXn)) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
@@ -465,8 +496,16 @@ int sel_setup_lnf(struct sel *s, struct select_result *r, struct acq_err *err)
 		if (lnf_rad_weights(s, c6, amp, KXn, err))
 			goto out;
 	}
+	if (s->t->lnf_rad == 2 && !(wr = malloc(F * sizeof *wr))) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	if (wr)
+		memcpy(wr, s->xw, F * sizeof *wr);
 	if (sel_point_cov(s, c6, amp, KXn, err))
 		goto out;
+	if (wr)
+		lnf_mix_weights(s, wr);
 	r->value = 0;
 	for (size_t x = 0; x < F; x++)
 		if (sqrt(s->v[x]) > r->value) {
@@ -480,6 +519,7 @@ out:
 	free(c6);
 	free(amp);
 	free(KXn);
+	free(wr);
 	return rc;
 }
 

@@ -8,7 +8,11 @@
  *     incidence: {theta_deg: [0, 30, 60]}
  *     observation: {fibonacci: {count: 24}}
  *   target: {dhr_sigma: {incidence_deg: [8], le: 0.002}}   # or {lnf_sigma: {le: 0.05}} or {rgb_sigma: {le: 0.01}},
- *                                           # or dhr_sigma and lnf_sigma together: both must be met
+ *                                           # or dhr_sigma and lnf_sigma together: both must be met;
+ *                                           # lnf_sigma: {le: X, weight: rad}: its picks reduce the expected error
+ *                                           # of log(1 + f cosθi cosθo) over dωi dωo (select's lnf:rad) instead of
+ *                                           # the variance of ln f under cosθi cosθo dωi dωo (weight: projected);
+ *                                           # weight: mix, both (select's lnf:mix)
  *   budget: {seconds: 1400, points: 866}    # one or both; the whole sweep, seed included
  *   batch: 12                               # points per batch
  *   candidates: {incidence_deg: RANGE, per_incidence: 150, max_theta_deg: 85,
@@ -46,6 +50,25 @@ static int parse_list(struct yc_node *map, const char *key, const char *what, do
 	return 0;
 }
 
+/* target.lnf_sigma.weight: projected (the default), rad or mix (select's lnf:rad, lnf:mix). */
+static int parse_lnf_weight(struct yc_node *l, struct plan_adaptive *a, struct acq_err *err)
+{
+	const char *v = NULL;
+	if (yc_string(l, "weight", false, &v, err))
+		return -1;
+	if (!v)
+		return 0;
+	if (strcmp(v, "rad") == 0)
+		a->lnf_weight = 1;
+	else if (strcmp(v, "mix") == 0)
+		a->lnf_weight = 2;
+	else if (strcmp(v, "projected") != 0)
+		return yc_errf(err, yc_get(l, "weight"), "target.lnf_sigma.weight: 'projected' (the default: the variance "
+			       "of ln f under cos(theta_i) cos(theta_o) dwi dwo), 'rad' (the error of log(1 + f cos(theta_i) "
+			       "cos(theta_o)) over dwi dwo) or 'mix' (both, each over its own criterion)");
+	return 0;
+}
+
 static int parse_target(struct yc_node *root, struct plan_adaptive *a, struct acq_err *err)
 {
 	struct yc_node *t = yc_get(root, "target");
@@ -63,12 +86,13 @@ static int parse_target(struct yc_node *root, struct plan_adaptive *a, struct ac
 			       "'lnf_sigma' together (both must be met)");
 	if (both) {
 		if (yc_expect_map(l, "target.lnf_sigma", err) || yc_double(l, "le", true, 1e-12, 1e6, &a->le_lnf, err) ||
-		    yc_check_unknown(l, "target.lnf_sigma", err))
+		    parse_lnf_weight(l, a, err) || yc_check_unknown(l, "target.lnf_sigma", err))
 			return -1;
 	}
 	struct yc_node *n = d ? d : l ? l : g;
 	const char *what = d ? "target.dhr_sigma" : l ? "target.lnf_sigma" : "target.rgb_sigma";
-	if (yc_expect_map(n, what, err) || yc_double(n, "le", true, 1e-12, 1e6, &a->le, err))
+	if (yc_expect_map(n, what, err) || yc_double(n, "le", true, 1e-12, 1e6, &a->le, err) ||
+	    (l && !both && parse_lnf_weight(l, a, err)))
 		return -1;
 	a->target = d ? PLAN_TARGET_DHR_SIGMA : l ? PLAN_TARGET_LNF_SIGMA : PLAN_TARGET_RGB_SIGMA;
 	if (d && parse_list(n, "incidence_deg", "target.dhr_sigma.incidence_deg", 0, 89, a->target_inc,
@@ -219,6 +243,9 @@ fail:
 	return -1;
 }
 
+/* select's ln f spec per lnf_sigma's weight */
+static const char *const LNF_SPEC[] = { "lnf", "lnf:rad", "lnf:mix" };
+
 void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t len)
 {
 	size_t n = 0;
@@ -226,7 +253,8 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 		return;
 	buf[0] = '\0';
 	if (a->target != PLAN_TARGET_DHR_SIGMA) {
-		snprintf(buf, len, "%s:le=%.9g", a->target == PLAN_TARGET_LNF_SIGMA ? "lnf" : "rgb", a->le);
+		snprintf(buf, len, "%s:le=%.9g", a->target == PLAN_TARGET_LNF_SIGMA ? LNF_SPEC[a->lnf_weight] : "rgb",
+			 a->le);
 		return;
 	}
 	n += (size_t)snprintf(buf, len, "dhr:");
@@ -235,7 +263,7 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 	if (n < len)
 		n += (size_t)snprintf(buf + n, len - n, ":le=%.9g", a->le);
 	if (a->le_lnf > 0 && n < len)
-		snprintf(buf + n, len - n, "+lnf:le=%.9g", a->le_lnf);
+		snprintf(buf + n, len - n, "+%s:le=%.9g", LNF_SPEC[a->lnf_weight], a->le_lnf);
 }
 
 size_t plan_adaptive_fit_picks(const double *cost, size_t n, double left_s, size_t max_k, size_t *keep)

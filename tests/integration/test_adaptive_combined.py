@@ -3,7 +3,9 @@
 the simulated bench, white reference: the DHR part's threshold is met by the seed already (σ ~0.009 ≤ 1), the ln f
 part's never (≤ 1e-9). Checks: the daemon does not stop on the met DHR part (a DHR-only reading would stop at the seed)
 but measures batches until its budget of points; every decision stores the combined spec and a value that is the
-larger of each part's value over its threshold (select's JSON of the batch: target.parts), > 1 while unmet."""
+larger of each part's value over its threshold (select's JSON of the batch: target.parts), > 1 while unmet. The ln f
+part weighs its picks by the study's error (`lnf_sigma: {…, weight: rad}`, select's lnf:rad): the daemon passes the
+key through to every decision's spec and select's answer."""
 import json
 import os
 import sys
@@ -20,7 +22,7 @@ def run():
     try:
         b.start_sim()
         b.start_daemon()
-        sid = L.start_sweep(b, A.plan(target="dhr_sigma: {incidence_deg: [8], le: 1}, lnf_sigma: {le: 1.0e-9}",
+        sid = L.start_sweep(b, A.plan(target="dhr_sigma: {incidence_deg: [8], le: 1}, lnf_sigma: {le: 1.0e-9, weight: rad}",
                                       budget="points: %d" % BUDGET), "it-adaptive-combined")
         rows, why, n = A.completes(b, sid)
         chosen = rows[1:-1]
@@ -29,9 +31,10 @@ def run():
         assert why.startswith("budget spent"), "stopped: %s" % why
         assert n == BUDGET and len(chosen) >= 2, "%d points in %d batches" % (n, len(chosen))
         for r in chosen:
-            assert r["target_spec"] == "dhr:8:le=1+lnf:le=1e-09", r["target_spec"]
+            assert r["target_spec"] == "dhr:8:le=1+lnf:rad:le=1e-09", r["target_spec"]
             t = json.load(open(os.path.join(os.path.dirname(os.path.join(b.state, r["model"])), "select.json")))
             t = t["target"]
+            assert t["spec"] == r["target_spec"], t["spec"]
             parts = t["parts"]
             assert parts["dhr"]["value"] <= 1 < parts["lnf"]["value"] / 1e-9, parts
             ratio = max(parts["dhr"]["value"] / parts["dhr"]["threshold"], parts["lnf"]["value"] / 1e-9)

@@ -82,6 +82,30 @@ static void test_parse(void **state)
 	assert_int_equal(s->adaptive->n_cand_inc, 15); /* the default candidates: 0..70 every 5 */
 	assert_true(s->adaptive->budget_s == 0);
 	plan_spec_free(s);
+	/* lnf_sigma's weight: rad (select's lnf:rad), alone and in a combined target; projected is the default */
+	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
+		    "target: {lnf_sigma: {le: 0.05, weight: rad}}\nbudget: {points: 20}\nbatch: 4\n");
+	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
+	assert_string_equal(spec, "lnf:rad:le=0.05");
+	plan_spec_free(s);
+	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
+		    "target: {dhr_sigma: {incidence_deg: [8, 30], le: 0.002}, lnf_sigma: {le: 0.05, weight: rad}}\n"
+		    "budget: {points: 20}\nbatch: 4\n");
+	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
+	assert_string_equal(spec, "dhr:8,30:le=0.002+lnf:rad:le=0.05");
+	plan_spec_free(s);
+	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
+		    "target: {dhr_sigma: {incidence_deg: [8], le: 0.002}, lnf_sigma: {le: 0.05, weight: projected}}\n"
+		    "budget: {points: 20}\nbatch: 4\n");
+	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
+	assert_string_equal(spec, "dhr:8:le=0.002+lnf:le=0.05");
+	plan_spec_free(s);
+	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
+		    "target: {dhr_sigma: {incidence_deg: [8], le: 0.002}, lnf_sigma: {le: 0.05, weight: mix}}\n"
+		    "budget: {points: 20}\nbatch: 4\n");
+	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
+	assert_string_equal(spec, "dhr:8:le=0.002+lnf:mix:le=0.05");
+	plan_spec_free(s);
 	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
 		    "target: {rgb_sigma: {le: 0.004}}\nbudget: {points: 20}\nbatch: 4\n");
 	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
@@ -107,6 +131,12 @@ static void test_errors(void **state)
 	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}, dhr_sigma: {incidence_deg: 8, le: 1}, "
 		 "rgb_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n", seed);
 	load_bad(buf, "exactly one of");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1, weight: radx}}\nbudget: {points: 9}\n"
+		 "batch: 4\n", seed);
+	load_bad(buf, "target.lnf_sigma.weight: 'projected'");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1, weight: rad}, dhr_sigma: {incidence_deg: 8, "
+		 "le: 1, weight: rad}}\nbudget: {points: 9}\nbatch: 4\n", seed);
+	load_bad(buf, "unknown key 'weight' in target.dhr_sigma");
 	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {}, dhr_sigma: {incidence_deg: 8, le: 1}}\n"
 		 "budget: {points: 9}\nbatch: 4\n", seed);
 	load_bad(buf, "le");
