@@ -647,4 +647,6 @@ void plan_timing_continue(struct plan_timing *t, const struct plan_pos *done, si
 	}
 	if (t->dark_every > 0)
 		t->cont_since_clear = (double)(n % (size_t)t->dark_every);
+	else if (t->dark_every < 0) /* darks kept across incidences: none cleared since the sweep began */
+		t->cont_since_clear = (double)n;
 }

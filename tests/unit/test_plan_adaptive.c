@@ -474,6 +474,14 @@ static void test_continue_darks(void **state)
 		assert_true(fabs(r->darks_s - (k ? dark : 0)) < 1e-9);
 		plan_result_free(r);
 	}
+	/* darks kept across incidences (sweep.dark_every -1): every point measured so far is since the last clearing */
+	struct plan_timing tk = tm;
+	tk.dark_every = -1;
+	plan_timing_continue(&tk, done, 3, sizeof *done);
+	assert_true(tk.cont && tk.cont_since_clear == 3);
+	tk.dark_every = 2;
+	plan_timing_continue(&tk, done, 3, sizeof *done);
+	assert_true(tk.cont_since_clear == 1);
 	plan_timing_continue(&tm, done, 0, sizeof *done);
 	assert_false(tm.cont);
 	/* the candidates from the arms at done[2]: cost = base (+ open at another incidence) + the move */
