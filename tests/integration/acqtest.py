@@ -157,6 +157,17 @@ def acqctl(sock, *args, timeout=20, env=None):
                           env=env)
 
 
+def recv_line(sock, bufsize=65536):
+    """Bytes from sock up to and including the first newline (or all it sent before closing; the rest is dropped)."""
+    buf = b""
+    while b"\n" not in buf:
+        chunk = sock.recv(bufsize)
+        if not chunk:
+            break
+        buf += chunk
+    return buf
+
+
 def fake_daemon(path, reply, version="0"):
     """A listener at path that greets as acquisitiond does (protocol 1, the given version), reads one request line
     per connection and sends reply(line) (bytes, or None to send nothing); serves until the socket is closed."""
@@ -173,12 +184,7 @@ def fake_daemon(path, reply, version="0"):
                 return
             with conn:
                 conn.sendall(hello)
-                buf = b""
-                while b"\n" not in buf:
-                    chunk = conn.recv(65536)
-                    if not chunk:
-                        break
-                    buf += chunk
+                buf = recv_line(conn)
                 if b"\n" in buf:
                     out = reply(buf.split(b"\n", 1)[0])
                     if out:

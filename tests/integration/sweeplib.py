@@ -215,12 +215,7 @@ class Bench:
         s.settimeout(10)
         s.connect(self.ctl_path)
         s.sendall((line + "\n").encode())
-        buf = b""
-        while b"\n" not in buf:
-            chunk = s.recv(4096)
-            if not chunk:
-                break
-            buf += chunk
+        buf = acqtest.recv_line(s)
         s.close()
         reply = buf.decode(errors="replace").strip()
         if not reply.startswith("ok"):
