@@ -69,6 +69,8 @@ struct calib_spectrum {
 	double f[CALIB_MAX_GRID], u[CALIB_MAX_GRID];            /* value and combined standard uncertainty */
 	double u_noise[CALIB_MAX_GRID], u_dark[CALIB_MAX_GRID], u_ref[CALIB_MAX_GRID], u_angle[CALIB_MAX_GRID];
 	int npix[CALIB_MAX_GRID];                               /* pixels averaged (0: interpolated or none) */
+	double vfac[CALIB_MAX_GRID]; /* Σ w² of the bin's pixel weights: variance of the bin per unit independent
+				      * per-pixel variance (1/npix for a plain mean) */
 };
 
 /* Geometry of one sample, degrees. */

@@ -43,17 +43,16 @@ static void measure(struct synth_rng *r, const double *rate, double t, unsigned 
 	assert_int_equal(exp_net_rate(&pol, avg.mean, sd, avg.n, avg.saturated, NPIX, t, dk, det.full, out, NULL), 0);
 }
 
-/* Truth of grid bin k: the mean of f over the valid pixels the bin averages (what binning estimates). */
+/* Truth of grid bin k: f at the bin's wavelength when the bin has valid pixels (binning estimates f at λ_k, exact
+ * for a spectrum linear within the bin; f_true's curvature leaves < 1e-5 relative). */
 static double bin_truth(const struct calib_cfg *c, const struct exp_rate *s, int k, double theta_scale)
 {
-	double lam = c->grid_min_nm + k * c->grid_step_nm, h = c->grid_step_nm / 2, sum = 0;
+	double lam = c->grid_min_nm + k * c->grid_step_nm, h = c->grid_step_nm / 2;
 	int m = 0;
 	for (int p = 0; p < NPIX; p++)
-		if (wl[p] >= lam - h && wl[p] < lam + h && s->valid[p]) {
-			sum += f_true(wl[p]) * theta_scale;
+		if (wl[p] >= lam - h && wl[p] < lam + h && s->valid[p])
 			m++;
-		}
-	return m ? sum / m : NAN;
+	return m ? f_true(lam) * theta_scale : NAN;
 }
 
 struct zstat {
@@ -264,6 +263,40 @@ static void test_angular_term(void **state)
 	assert_true(s2n / n > 100); /* ignoring the term would be badly wrong */
 }
 
+
+/* The value of a bin is f at the bin's wavelength, not at its pixels' centroid: on the simulated spectrometer's
+ * pixel grid (450–1100 nm over pixels 4–2047 with grating curvature, 2.9–3.3 pixels per 1 nm bin) a plain mean sits
+ * up to ±0.17 nm off λ_k, a relative error (f'/f)·x̄ shared by every sample of a sweep (1.6e-3 rms at 450–600 nm on
+ * green paint; test_dhr_refnoise / make demo). Noiseless, on this test's green bump: every bin within 1e-4
+ * relative of f(λ_k) (the bump's curvature, |f''/f| ≤ 1e-3 nm⁻², times Σ w x² ≤ ~0.1 nm²: 5.3e-5 measured).
+ * Seen failing with the plain mean: max 4.55e-3 here, and test_ref_noise's variance 1.54 (30 scans). */
+static void test_bin_centre(void **state)
+{
+	(void)state;
+	struct calib_cfg c;
+	calib_cfg_defaults(&c);
+	static struct calib_px px;
+	static struct calib_spectrum sp;
+	static double wls[NPIX];
+	double p0 = 4, p1 = NPIX - 1, c2 = -1.5e-5, c1 = (650.0 - c2 * (p1 * p1 - p0 * p0)) / (p1 - p0),
+	       c0 = 450.0 - c1 * p0 - c2 * p0 * p0; /* sim/sim_physics.c default_coef */
+	px.npix = NPIX;
+	for (int p = 0; p < NPIX; p++) {
+		wls[p] = c0 + c1 * p + c2 * p * p;
+		px.valid[p] = p >= p0;
+		px.f[p] = f_true(wls[p]);
+		px.u_noise[p] = px.u_dark[p] = px.u_refn[p] = px.u_refs[p] = px.u_angle[p] = 0;
+	}
+	assert_int_equal(calib_resample(&c, wls, &px, &sp, NULL), 0);
+	double worst = 0;
+	for (int k = 0; k < sp.n; k++) {
+		assert_true(sp.npix[k] >= 2);
+		worst = fmax(worst, fabs(sp.f[k] / f_true(sp.wl[k]) - 1));
+	}
+	print_message("bin centre: max relative error %.2e over %d bins\n", worst, sp.n);
+	assert_true(worst < 1e-4);
+}
+
 /* Binning: pixels in each bin averaged with independent terms in quadrature and common terms linearly;
  * invalid (saturated) pixels never used; interpolation when pixels are coarser than the grid. */
 static void test_resample(void **state)
@@ -301,17 +334,21 @@ static void test_resample(void **state)
 			continue;
 		}
 		int m = 0;
-		double sum = 0;
+		double sx = 0, sxx = 0;
 		for (int p = 0; p < NPIX; p++)
 			if (wl[p] >= lam - 0.5 && wl[p] < lam + 0.5 && px.valid[p])
-				m++, sum += px.f[p];
+				m++, sx += wl[p] - lam, sxx += (wl[p] - lam) * (wl[p] - lam);
 		assert_int_equal(sp.npix[k], m);
 		assert_true(m >= 2);
-		assert_true(fabs(sp.f[k] - sum / m) < 1e-12);
-		assert_true(fabs(sp.u_noise[k] - 0.01 / sqrt(m)) < 1e-12);
+		/* a line through the bin's pixels at λ_k: exact for this linear f; the variance of independent terms is
+		 * 1/m + x̄²/Σ(x − x̄)² per unit (the plain mean's 1/m when the pixels' centroid x̄ sits on λ_k) */
+		double xm = sx / m, vfac = 1.0 / m + xm * xm / (sxx - m * xm * xm);
+		assert_true(fabs(sp.f[k] - (0.1 + 0.001 * lam)) < 1e-12);
+		assert_true(fabs(sp.vfac[k] - vfac) < 1e-12);
+		assert_true(fabs(sp.u_noise[k] - 0.01 * sqrt(vfac)) < 1e-12);
 		assert_true(fabs(sp.u_ref[k] - 0.02) < 1e-12);
 		assert_true(fabs(sp.u_angle[k] - 0.003) < 1e-12);
-		double u = sqrt(0.0001 / m + 0.000004 / m + 0.0004 + 0.000009);
+		double u = sqrt((0.0001 + 0.000004) * vfac + 0.0004 + 0.000009);
 		assert_true(fabs(sp.u[k] - u) < 1e-12);
 	}
 	/* coarse pixels (3 nm apart): grid points between pixels interpolate */
@@ -385,6 +422,7 @@ int main(void)
 		cmocka_unit_test(test_absolute_zscores),
 		cmocka_unit_test(test_angular_term),
 		cmocka_unit_test(test_resample),
+		cmocka_unit_test(test_bin_centre),
 		cmocka_unit_test(test_ref_noise),
 		cmocka_unit_test(test_cfg_parse),
 	};
