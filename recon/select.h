@@ -34,11 +34,13 @@ struct select_target {
 					      * squared error of log(1 + f cosθi cosθo) under dωi dωo (the held-out
 					      * log-RMSE of the time-to-accuracy study) instead of the projected
 					      * measure cosθi cosθo dωi dωo (0, the default); the value is the same;
-					      * 2 (spec "lnf:mix"): both weights, each over its own criterion */
+					      * 2 (spec "lnf:mix"): both weights, each over its own criterion;
+					      * 3 (spec "lnf:bright"): per grid cell the larger of the two weights
+					      * (lnf:rad's where the model is bright, the projected elsewhere) */
 };
 
-/* Parse "dhr:8,30,60", "lnf", "lnf:rad", "lnf:mix", "rgb", optionally followed by ":le=X" (X > 0), or the combined
- * "dhr:8,30,60:le=X+lnf[:rad|:mix]:le=Y" (both thresholds required). 0, or -1 with err saying what is wrong. */
+/* Parse "dhr:8,30,60", "lnf", "lnf:rad", "lnf:mix", "lnf:bright", "rgb", optionally followed by ":le=X" (X > 0), or the combined
+ * "dhr:8,30,60:le=X+lnf[:rad|:mix|:bright]:le=Y" (both thresholds required). 0, or -1 with err saying what is wrong. */
 int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err);
 
 /* The batch's route, for charging each pick its increment to it (NULL in select_opts: each pick costs its cost[j],

@@ -307,8 +307,9 @@ static double solid_band(double a, double b)
 	return cos(a) - cos(b);
 }
 
-/* sel_lnf_grid with the cells' shares of the projected measure (projected = 1) or of dωi dωo (0). */
-static size_t lnf_grid(double *ang, double *w, int projected)
+/* sel_lnf_grid with the cells' shares of the projected measure (projected = 1) or of dωi dωo (0); norm = 0: the
+ * cells' measures themselves (not divided by their sum). */
+static size_t lnf_grid(double *ang, double *w, int projected, int norm)
 {
 	size_t F = 0;
 	double sum = 0, h = 0.5 * LNF_TSTEP * M_PI / 180, tmax = LNF_TMAX * M_PI / 180, dp = LNF_PSTEP * M_PI / 180;
@@ -335,14 +336,14 @@ static size_t lnf_grid(double *ang, double *w, int projected)
 				sum += x;
 				F++;
 			}
-	for (size_t x = 0; w && x < F; x++)
+	for (size_t x = 0; w && norm && x < F; x++)
 		w[x] /= sum;
 	return F;
 }
 
 size_t sel_lnf_grid(double *ang, double *w)
 {
-	return lnf_grid(ang, w, 1);
+	return lnf_grid(ang, w, 1, 1);
 }
 
 /*
@@ -353,18 +354,32 @@ size_t sel_lnf_grid(double *ang, double *w)
  * the time-to-accuracy study (bench_tradeoff.log_rmse: directions uniform in solid angle, mean over wavelengths). Under
  * the projected measure alone (the default) a grazing pair weighs 1/c more than in that error, and a bright region
  * (the backscatter peak, the red half of a red material) no more than a dark one. Normalised to sum 1.
+ *
+ * "lnf:bright" (lnf_rad 3, session 16): per cell the larger of the two, in the same unit (a squared error of g per
+ * unit P, integrated over the cell's dωi dωo): w[x] = max(∫cell cosθi cosθo dωi dωo, ω_x r[x]), r[x] = the mean above
+ * over amp². With g = ln f (df̂/dg ≈ f̂) r ≈ (f̂c / (1 + f̂c))², which exceeds c only where f̂c/(1 + f̂c) > √c, i.e.
+ * f̂ ≳ 4–5 sr⁻¹ at any pair (c = 0.07 … 0.5; never at the normal, where r < 1 = c): the model's own lobe. There the
+ * study's error (the relative error of f̂, independent of c) replaces the projected weight c, which underweighs the
+ * grazing mirror band by 1/c (≈ 14 at 75°/75°); a dim material (f̂ ≲ 1, r/c = f̂² c) keeps the projected weights
+ * exactly. Normalised to sum 1.
  */
 static int lnf_rad_weights(struct sel *s, const double *c6, const double *amp, const double *KXn, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
 	size_t n = s->n, L = s->L, F = s->F;
-	double *Y = malloc(F * L * sizeof *Y);
+	double *Y = malloc(F * L * sizeof *Y), *pw = NULL;
 	int rc = -1;
 	if (!Y) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
-	lnf_grid(NULL, s->xw, 0);
+	lnf_grid(NULL, s->xw, 0, 0);
+	if (s->t->lnf_rad == 3 && !(pw = malloc(F * sizeof *pw))) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	if (pw)
+		lnf_grid(NULL, pw, 1, 0);
 	/* the interpolant (without its mean) at the grid points, every channel; KXn = K(c6, centres) */
 	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)F, (int)L, (int)n, 1.0, KXn, (int)n, m->w, (int)n, 0.0,
 		    Y, (int)L);
@@ -384,16 +399,19 @@ static int lnf_rad_weights(struct sel *s, const double *c6, const double *amp, c
 		}
 		double a2 = amp[x] * amp[x], wx = a2 > 0 ? s->xw[x] * (acc / (double)L) / a2 : 0;
 		s->xw[x] = isfinite(wx) ? wx : 0;
+		if (pw && pw[x] > s->xw[x]) /* lnf:bright: the larger of the two errors per unit dωi dωo */
+			s->xw[x] = pw[x];
 		sum += s->xw[x];
 	}
 	if (!(sum > 0))
-		lnf_grid(NULL, s->xw, 1); /* nothing to weigh: the projected measure */
+		lnf_grid(NULL, s->xw, 1, 1); /* nothing to weigh: the projected measure */
 	else
 		for (size_t x = 0; x < F; x++)
 			s->xw[x] /= sum;
 	rc = 0;
 out:
 	free(Y);
+	free(pw);
 	return rc;
 }
 
@@ -409,7 +427,7 @@ static void lnf_mix_weights(struct sel *s, const double *wr)
 {
 	size_t F = s->F;
 	double Ep = 0, Er = 0, sum = 0;
-	lnf_grid(NULL, s->xw, 1);
+	lnf_grid(NULL, s->xw, 1, 1);
 	for (size_t x = 0; x < F; x++) {
 		double e = fmax(s->v[x] - s->thr2, 0);
 		Ep += s->xw[x] * e;
@@ -424,7 +442,7 @@ static void lnf_mix_weights(struct sel *s, const double *wr)
 		for (size_t x = 0; x < F; x++)
 			s->xw[x] /= sum;
 	else
-		lnf_grid(NULL, s->xw, 1);
+		lnf_grid(NULL, s->xw, 1, 1);
 }
 
 /* Point targets (ln f, RGB): the posterior variance v[x] = amp[x]² P(x, x) of g at the F points c6 (unit-amplitude

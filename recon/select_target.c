@@ -1,5 +1,5 @@
 /* select_target: the target spec of brdf-recon select and the adaptive plan ("dhr:8,30,60:le=X", "lnf", "rgb",
- * combined "dhr:...:le=X+lnf[:rad|:mix]:le=Y") parsed into struct select_target. */
+ * combined "dhr:...:le=X+lnf[:rad|:mix|:bright]:le=Y") parsed into struct select_target. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -70,6 +70,11 @@ static int target_parse_one(const char *spec, struct select_target *t, struct ac
 	if ((size_t)(body_end - p) == 7 && !strncmp(p, "lnf:mix", 7)) {
 		t->kind = SELECT_LNF;
 		t->lnf_rad = 2;
+		return 0;
+	}
+	if ((size_t)(body_end - p) == 10 && !strncmp(p, "lnf:bright", 10)) {
+		t->kind = SELECT_LNF;
+		t->lnf_rad = 3;
 		return 0;
 	}
 	if ((size_t)(body_end - p) == 3 && !strncmp(p, "rgb", 3)) {

@@ -12,7 +12,8 @@
  *                                           # lnf_sigma: {le: X, weight: rad}: its picks reduce the expected error
  *                                           # of log(1 + f cosθi cosθo) over dωi dωo (select's lnf:rad) instead of
  *                                           # the variance of ln f under cosθi cosθo dωi dωo (weight: projected);
- *                                           # weight: mix, both (select's lnf:mix)
+ *                                           # weight: mix, both (select's lnf:mix); weight: bright,
+ *                                           # per point the larger of the two (select's lnf:bright)
  *   budget: {seconds: 1400, points: 866}    # one or both; the whole sweep, seed included
  *   batch: 12                               # points per batch
  *   candidates: {incidence_deg: RANGE, per_incidence: 150, max_theta_deg: 85,
@@ -50,7 +51,7 @@ static int parse_list(struct yc_node *map, const char *key, const char *what, do
 	return 0;
 }
 
-/* target.lnf_sigma.weight: projected (the default), rad or mix (select's lnf:rad, lnf:mix). */
+/* target.lnf_sigma.weight: projected (the default), rad, mix or bright (select's lnf:rad, lnf:mix, lnf:bright). */
 static int parse_lnf_weight(struct yc_node *l, struct plan_adaptive *a, struct acq_err *err)
 {
 	const char *v = NULL;
@@ -62,10 +63,13 @@ static int parse_lnf_weight(struct yc_node *l, struct plan_adaptive *a, struct a
 		a->lnf_weight = 1;
 	else if (strcmp(v, "mix") == 0)
 		a->lnf_weight = 2;
+	else if (strcmp(v, "bright") == 0)
+		a->lnf_weight = 3;
 	else if (strcmp(v, "projected") != 0)
 		return yc_errf(err, yc_get(l, "weight"), "target.lnf_sigma.weight: 'projected' (the default: the variance "
 			       "of ln f under cos(theta_i) cos(theta_o) dwi dwo), 'rad' (the error of log(1 + f cos(theta_i) "
-			       "cos(theta_o)) over dwi dwo) or 'mix' (both, each over its own criterion)");
+			       "cos(theta_o)) over dwi dwo), 'mix' (both, each over its own criterion) or 'bright' (per "
+			       "point the larger of the two: 'rad' where the model is bright)");
 	return 0;
 }
 
@@ -244,7 +248,7 @@ fail:
 }
 
 /* select's ln f spec per lnf_sigma's weight */
-static const char *const LNF_SPEC[] = { "lnf", "lnf:rad", "lnf:mix" };
+static const char *const LNF_SPEC[] = { "lnf", "lnf:rad", "lnf:mix", "lnf:bright" };
 
 void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t len)
 {

@@ -18,7 +18,7 @@ batch (single-threaded BLAS, this machine; with overlap only what exceeds the ba
 The adaptive plan: config/plan-adaptive.yaml (seed 4 incidences x 16 Fibonacci + its specular plane, batch 16, its
 candidates and integration) with the target ACQ_TTA_TARGET (default dhr:8,30,60:le=1e-09+lnf:le=1e-09: the DHR's
 sigma at 8, 30, 60 deg and the largest sigma of ln f together, never met, so it runs to its budget; lnf:rad or
-lnf:mix instead of lnf: the plan's lnf_sigma gets weight: rad or mix) and the
+lnf:mix or lnf:bright instead of lnf: the plan's lnf_sigma gets weight: rad, mix or bright) and the
 budget ACQ_TTA_BUDGET (1.5) x the paper plan's predicted time on the lobes (G2), ACQ_TTA_BUDGET_OTHER (1.0) x
 on the others (G1, G3 need no more; their time to accuracy beyond it shows as '-').
 Validation (ACQ_TTA_VALIDATE=1, default on): one adaptive sweep on the simulated bench (acq-sim + acquisitiond,
@@ -108,7 +108,7 @@ def adaptive_plan(paper_s, path, overlap=None, budget_s=None, target=None):
     """config/plan-adaptive.yaml with the study's target and budget written to path."""
     text = open(PLAN_SRC).read()
     tg = target or ("{dhr_sigma: {incidence_deg: [8, 30, 60], le: 1e-9}%s}"
-                    % ((", lnf_sigma: {le: 1e-9%s}" % next((", weight: " + w for w in ("rad", "mix")
+                    % ((", lnf_sigma: {le: 1e-9%s}" % next((", weight: " + w for w in ("rad", "mix", "bright")
                                                              if "+lnf:%s:" % w in TARGET), ""))
                        if "+lnf" in TARGET else ""))
     text = re.sub(r"\ntarget:\n  dhr_sigma: [^\n]*\n", "\ntarget: %s\n" % tg, text)

@@ -107,6 +107,11 @@ static void test_parse(void **state)
 	assert_string_equal(spec, "dhr:8:le=0.002+lnf:mix:le=0.05");
 	plan_spec_free(s);
 	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
+		    "target: {lnf_sigma: {le: 0.05, weight: bright}}\nbudget: {points: 20}\nbatch: 4\n");
+	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
+	assert_string_equal(spec, "lnf:bright:le=0.05");
+	plan_spec_free(s);
+	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
 		    "target: {rgb_sigma: {le: 0.004}}\nbudget: {points: 20}\nbatch: 4\n");
 	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
 	assert_string_equal(spec, "rgb:le=0.004");
