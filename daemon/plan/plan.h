@@ -52,7 +52,7 @@ struct plan_adaptive {
 	size_t n_target_inc;
 	double le;                  /* the threshold the target's value must reach */
 	double le_lnf;              /* > 0: a combined target, the DHR σ ≤ le AND the largest σ of ln f ≤ le_lnf */
-	int lnf_weight;             /* lnf_sigma's weight: 0 projected, 1 rad, 2 mix (select's lnf, lnf:rad, lnf:mix) */
+	int lnf_weight;             /* lnf_sigma's weight: 0 projected, 1 rad, 2 mix, 3 bright (select's lnf[:rad,:mix,:bright]) */
 	double budget_s;            /* bench seconds for the whole sweep, seed included (0: no limit) */
 	size_t budget_points;       /* points for the whole sweep, seed included (0: no limit) */
 	size_t batch;               /* points per batch */
