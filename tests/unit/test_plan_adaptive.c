@@ -82,40 +82,28 @@ static void test_parse(void **state)
 	assert_int_equal(s->adaptive->n_cand_inc, 15); /* the default candidates: 0..70 every 5 */
 	assert_true(s->adaptive->budget_s == 0);
 	plan_spec_free(s);
-	/* lnf_sigma's weight: rad (select's lnf:rad), alone and in a combined target; projected is the default */
-	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
-		    "target: {lnf_sigma: {le: 0.05, weight: rad}}\nbudget: {points: 20}\nbatch: 4\n");
-	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
-	assert_string_equal(spec, "lnf:rad:le=0.05");
-	plan_spec_free(s);
-	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
-		    "target: {dhr_sigma: {incidence_deg: [8, 30], le: 0.002}, lnf_sigma: {le: 0.05, weight: rad}}\n"
-		    "budget: {points: 20}\nbatch: 4\n");
-	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
-	assert_string_equal(spec, "dhr:8,30:le=0.002+lnf:rad:le=0.05");
-	plan_spec_free(s);
-	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
-		    "target: {dhr_sigma: {incidence_deg: [8], le: 0.002}, lnf_sigma: {le: 0.05, weight: projected}}\n"
-		    "budget: {points: 20}\nbatch: 4\n");
-	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
-	assert_string_equal(spec, "dhr:8:le=0.002+lnf:le=0.05");
-	plan_spec_free(s);
-	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
-		    "target: {dhr_sigma: {incidence_deg: [8], le: 0.002}, lnf_sigma: {le: 0.05, weight: mix}}\n"
-		    "budget: {points: 20}\nbatch: 4\n");
-	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
-	assert_string_equal(spec, "dhr:8:le=0.002+lnf:mix:le=0.05");
-	plan_spec_free(s);
-	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
-		    "target: {lnf_sigma: {le: 0.05, weight: bright}}\nbudget: {points: 20}\nbatch: 4\n");
-	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
-	assert_string_equal(spec, "lnf:bright:le=0.05");
-	plan_spec_free(s);
-	s = load_ok("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: [20, 50], phi_deg: [0, 180]}}\n"
-		    "target: {rgb_sigma: {le: 0.004}}\nbudget: {points: 20}\nbatch: 4\n");
-	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
-	assert_string_equal(spec, "rgb:le=0.004");
-	plan_spec_free(s);
+	/* lnf_sigma's weight (select's lnf, lnf:rad, lnf:mix, lnf:bright), alone and in a combined target; projected is
+	 * the default; and the rgb target */
+	static const char *const targets[][2] = {
+		{ "{lnf_sigma: {le: 0.05, weight: rad}}", "lnf:rad:le=0.05" },
+		{ "{dhr_sigma: {incidence_deg: [8, 30], le: 0.002}, lnf_sigma: {le: 0.05, weight: rad}}",
+		  "dhr:8,30:le=0.002+lnf:rad:le=0.05" },
+		{ "{dhr_sigma: {incidence_deg: [8], le: 0.002}, lnf_sigma: {le: 0.05, weight: projected}}",
+		  "dhr:8:le=0.002+lnf:le=0.05" },
+		{ "{dhr_sigma: {incidence_deg: [8], le: 0.002}, lnf_sigma: {le: 0.05, weight: mix}}",
+		  "dhr:8:le=0.002+lnf:mix:le=0.05" },
+		{ "{lnf_sigma: {le: 0.05, weight: bright}}", "lnf:bright:le=0.05" },
+		{ "{rgb_sigma: {le: 0.004}}", "rgb:le=0.004" },
+	};
+	for (size_t k = 0; k < sizeof targets / sizeof targets[0]; k++) {
+		char text[512];
+		snprintf(text, sizeof text, "kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: "
+			 "[20, 50], phi_deg: [0, 180]}}\ntarget: %s\nbudget: {points: 20}\nbatch: 4\n", targets[k][0]);
+		s = load_ok(text);
+		plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
+		assert_string_equal(spec, targets[k][1]);
+		plan_spec_free(s);
+	}
 	/* the other kinds, named */
 	s = load_ok("kind: grid\nincidence: {theta_deg: 30}\nobservation: {theta_deg: 40, phi_deg: 0}\n");
 	assert_null(s->adaptive);
