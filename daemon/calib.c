@@ -155,6 +155,12 @@ static void px_invalid(struct calib_px *o, int i)
 	o->f[i] = o->u_noise[i] = o->u_dark[i] = o->u_refn[i] = o->u_refs[i] = o->u_angle[i] = NAN;
 }
 
+/* A reference (or beam) pixel clearly above its noise: the only ones with light to compare with. */
+static bool ref_usable(const struct exp_rate *r, int i)
+{
+	return r->valid[i] && r->rate[i] > 0 && r->rate[i] > 3 * hypot(r->u_noise[i], r->u_dark[i]);
+}
+
 /* Per-pixel BRDF from the sample's net rate and the reference's (relative) or the direct beam's (absolute)
  * net rate measured on the same pixels; wl: pixel wavelengths. Pixels where either input is invalid or the
  * reference is not positive are invalid. 0 or -1 on bad input. */
@@ -185,9 +191,7 @@ static int calib_pixels(const struct calib_cfg *c, const double *wl, const struc
 	double sig_rad = c->sigma_pos_deg * DEG;
 	o->npix = s->npix;
 	for (int i = 0; i < s->npix; i++) {
-		/* A reference (or beam) not clearly above its noise has no light to compare with: unusable. */
-		double ur_i = hypot(r->u_noise[i], r->u_dark[i]);
-		if (!s->valid[i] || !r->valid[i] || !(r->rate[i] > 0) || !(r->rate[i] > 3 * ur_i) || !isfinite(s->rate[i])) {
+		if (!s->valid[i] || !ref_usable(r, i) || !isfinite(s->rate[i])) {
 			px_invalid(o, i);
 			continue;
 		}
@@ -354,11 +358,11 @@ int calib_ref_noise(const struct calib_cfg *c, const double *wl, const struct ex
 	 * same pixel choice (calib_pixels' test) and the same binning as every sample's. */
 	px->npix = ref->npix;
 	for (int i = 0; i < ref->npix; i++) {
-		double ur = hypot(ref->u_noise[i], ref->u_dark[i]);
-		if (!ref->valid[i] || !(ref->rate[i] > 0) || !(ref->rate[i] > 3 * ur)) {
+		if (!ref_usable(ref, i)) {
 			px_invalid(px, i);
 			continue;
 		}
+		double ur = hypot(ref->u_noise[i], ref->u_dark[i]);
 		px->valid[i] = 1;
 		px->f[i] = 1.0;
 		px->u_noise[i] = px->u_dark[i] = px->u_refs[i] = px->u_angle[i] = 0.0;
@@ -375,14 +379,13 @@ int calib_ref_noise(const struct calib_cfg *c, const double *wl, const struct ex
 		u_rel[k] = isfinite(sp->f[k]) ? sp->u_ref[k] : NAN;
 		if (!isfinite(u_rel[k]) || sp->npix[k] <= 0)
 			continue;
+		int j0 = k, j1 = k, m = 0; /* the bins within ±CALIB_REFN_POOL_NM */
+		while (j0 > 0 && sp->wl[k] - sp->wl[j0 - 1] <= CALIB_REFN_POOL_NM)
+			j0--;
+		while (j1 + 1 < sp->n && sp->wl[j1 + 1] - sp->wl[k] <= CALIB_REFN_POOL_NM)
+			j1++;
 		double v = 0;
-		int m = 0;
-		for (int j = k; j >= 0 && sp->wl[k] - sp->wl[j] <= CALIB_REFN_POOL_NM; j--)
-			if (sp->npix[j] > 0 && isfinite(sp->u_ref[j])) {
-				v += sp->npix[j] * sp->u_ref[j] * sp->u_ref[j] / sp->vfac[j];
-				m += sp->npix[j];
-			}
-		for (int j = k + 1; j < sp->n && sp->wl[j] - sp->wl[k] <= CALIB_REFN_POOL_NM; j++)
+		for (int j = j0; j <= j1; j++)
 			if (sp->npix[j] > 0 && isfinite(sp->u_ref[j])) {
 				v += sp->npix[j] * sp->u_ref[j] * sp->u_ref[j] / sp->vfac[j];
 				m += sp->npix[j];

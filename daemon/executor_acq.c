@@ -85,7 +85,7 @@ bool ex_want_wl(struct ex *x)
 
 static double full_scale(const struct ex *x)
 {
-	return x->info && x->info->max_counts > 0 ? x->info->max_counts : 65535.0;
+	return exp_full_scale(x->info);
 }
 
 /* ---- reference reload (crash-resume; the reconstruction's reference noise) ------------------------- */
@@ -159,7 +159,7 @@ int ex_load_reference(struct ex *x, struct acq_err *err)
 		x->cfg.cal.ref_theta_o_deg = fabs(dt);
 	if (r == 0)
 		return 0;
-	ex_mask_black(x, x->ref_rate);
+	exp_mask_black(x->info, x->ref_rate); /* no light: never used as data */
 	return 1;
 }
 
@@ -263,18 +263,6 @@ static int keep_frame(struct ex *x, const char *kind, double taken_at)
 	return 0;
 }
 
-/* The sensor's optically black pixels carry no light: never used as data. */
-void ex_mask_black(const struct ex *x, struct exp_rate *r)
-{
-	for (int i = 0; x->info && i < x->info->ndark_pixels && i < 8; i++) {
-		int p = x->info->dark_pixels[i];
-		if (p >= 0 && p < r->npix && r->valid[p]) {
-			r->valid[p] = 0;
-			r->rate[p] = r->u_noise[p] = r->u_dark[p] = NAN;
-			r->ninvalid++;
-		}
-	}
-}
 
 
 static void commit_point(struct ex *x, double now);
@@ -646,7 +634,7 @@ static void commit_point(struct ex *x, double now)
 		return;
 	}
 	x->stats.merges++;
-	ex_mask_black(x, x->merged);
+	exp_mask_black(x->info, x->merged);
 	int bad = 0;
 	for (int p = 0; p < x->merged->npix; p++)
 		bad += x->roi[p] && !x->merged->valid[p];

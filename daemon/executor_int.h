@@ -203,8 +203,6 @@ void ex_run_laser_off(struct ex *x, double now);
 /* ---- acquisition (executor_acq.c) ---- */
 /* The spectrometer's wavelengths and region of interest, once known; false while it is absent. */
 bool ex_want_wl(struct ex *x);
-/* Mask the sensor's optically black pixels of r (no light: never data). */
-void ex_mask_black(const struct ex *x, struct exp_rate *r);
 /* The sweep's reference from the database (crash-resume): 1 loaded, 0 none, -1 with err. */
 int ex_load_reference(struct ex *x, struct acq_err *err);
 /* hold_at_end: every step done; laser off, wait (EX_WAITING) for ex_extend or ex_finish. */

@@ -362,3 +362,20 @@ const char *exp_dark_need_name(enum exp_dark_need n)
 	}
 	return "unknown";
 }
+
+double exp_full_scale(const struct spectro_info *info)
+{
+	return info && info->max_counts > 0 ? info->max_counts : 65535.0;
+}
+
+void exp_mask_black(const struct spectro_info *info, struct exp_rate *r)
+{
+	for (int i = 0; info && i < info->ndark_pixels && i < 8; i++) {
+		int p = info->dark_pixels[i];
+		if (p >= 0 && p < r->npix && r->valid[p]) {
+			r->valid[p] = 0;
+			r->rate[p] = r->u_noise[p] = r->u_dark[p] = NAN;
+			r->ninvalid++;
+		}
+	}
+}

@@ -128,6 +128,10 @@ int exp_merge(const struct exp_rate *const *in, int n, struct exp_rate *out, str
 
 /* Empty the dark store. */
 void exp_darks_clear(struct exp_darks *d);
+/* The detector's full scale in counts: info's max_counts, 65535 when unknown (info NULL or no figure). */
+double exp_full_scale(const struct spectro_info *info);
+/* Mark info's optically black pixels (they carry no light) invalid in r; info NULL: none. */
+void exp_mask_black(const struct spectro_info *info, struct exp_rate *r);
 /* Whether a dark at t_ms can be used at time now with sensor temperature temp_c (NaN: unknown). */
 enum exp_dark_need exp_dark_check(const struct exp_darks *d, const struct exp_policy *p, double t_ms,
 				  double now, double temp_c);

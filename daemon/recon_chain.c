@@ -249,7 +249,9 @@ static int write_ref_noise(struct recon_chain *ch, struct acq_err *err)
 	info.npix = npix;
 	/* the detector's full scale (saturation as at the measurement) from the spectrometer when it is open */
 	const struct spectro_info *live = ch->env->devices ? devices_ex_ops()->spectro_info(ch->env->devices) : NULL;
-	double fs = live && live->npix == npix && live->max_counts > 0 ? live->max_counts : 65535.0;
+	if (live && live->npix != npix)
+		live = NULL; /* another spectrometer than the sweep's: its pixels say nothing of these */
+	double fs = exp_full_scale(live);
 	struct calib_cfg *cal = &cfg.cal;
 	cal->grid_min_nm = grid[0];
 	cal->grid_max_nm = grid[n - 1];
@@ -272,10 +274,7 @@ static int write_ref_noise(struct recon_chain *ch, struct acq_err *err)
 	rc = ex_reference_rate(ch->env->store, ch->id, &cfg.pol, npix, fs, ref, NULL, err);
 	if (rc <= 0)
 		goto out;
-	/* the optically black pixels carry no light (the executor masks them; the store does not know them) */
-	for (int i = 0; live && live->npix == npix && i < live->ndark_pixels && i < 8; i++)
-		if (live->dark_pixels[i] >= 0 && live->dark_pixels[i] < npix)
-			ref->valid[live->dark_pixels[i]] = 0;
+	exp_mask_black(live, ref); /* as the executor does (the store does not know them) */
 	rc = -1;
 	if (calib_ref_noise(cal, wl, ref, u, err))
 		goto out;

@@ -281,7 +281,7 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 	/* the parts: one state each (a combined target: the DHR part, then the ln f part; same candidates) */
 	struct select_target tp[2] = { *t, { .kind = SELECT_LNF, .threshold = t->lnf_threshold, .lnf_rad = t->lnf_rad } };
 	tp[0].lnf_threshold = 0;
-	tp[0].lnf_rad = t->kind == SELECT_LNF ? t->lnf_rad : 0; /* a combined target: its ln f part's (tp[1]) */
+	tp[0].lnf_rad = t->kind == SELECT_LNF ? t->lnf_rad : SELECT_LNF_PROJECTED; /* a combined target: tp[1]'s */
 	struct select_result r2 = { 0 };
 	struct sel s[2];
 	struct sel_route route = { 0 };

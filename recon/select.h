@@ -14,6 +14,14 @@
 
 #define SELECT_MAX_THETA 16
 
+/* The ln f criterion's weighting of its grid points (select_target.lnf_rad; the spec's suffix). */
+enum select_lnf_weight {
+	SELECT_LNF_PROJECTED = 0, /* "lnf": cosθi cosθo dωi dωo */
+	SELECT_LNF_RAD = 1,       /* "lnf:rad": the study's error measure */
+	SELECT_LNF_MIX = 2,       /* "lnf:mix": both, each over its own criterion */
+	SELECT_LNF_BRIGHT = 3,    /* "lnf:bright": per cell the larger of the two */
+};
+
 enum select_kind {
 	SELECT_DHR = 0, /* σ of DHR(θi, λ) at listed incidences, RMS over the model's wavelengths, largest incidence */
 	SELECT_LNF = 1, /* largest posterior σ of ln f (RMS over wavelengths) over a grid of the hemisphere pair */
@@ -29,7 +37,7 @@ struct select_target {
 	double lnf_threshold;                /* > 0: a combined target (kind SELECT_DHR): the DHR part ≤ threshold AND
 					      * the ln f part ≤ lnf_threshold; its value is the larger of each part's
 					      * value over its threshold (met at ≤ 1) */
-	int lnf_rad;                         /* the ln f criterion (SELECT_LNF, or a combined target's ln f part;
+	int lnf_rad;                         /* enum select_lnf_weight: the ln f criterion (SELECT_LNF, or a combined target's ln f part;
 					      * spec "lnf:rad"): each grid point's variance weighed by the expected
 					      * squared error of log(1 + f cosθi cosθo) under dωi dωo (the held-out
 					      * log-RMSE of the time-to-accuracy study) instead of the projected

@@ -355,7 +355,7 @@ size_t sel_lnf_grid(double *ang, double *w)
  * the projected measure alone (the default) a grazing pair weighs 1/c more than in that error, and a bright region
  * (the backscatter peak, the red half of a red material) no more than a dark one. Normalised to sum 1.
  *
- * "lnf:bright" (lnf_rad 3, session 16): per cell the larger of the two, in the same unit (a squared error of g per
+ * "lnf:bright" (SELECT_LNF_BRIGHT, session 16): per cell the larger of the two, in the same unit (a squared error of g per
  * unit P, integrated over the cell's dωi dωo): w[x] = max(∫cell cosθi cosθo dωi dωo, ω_x r[x]), r[x] = the mean above
  * over amp². With g = ln f (df̂/dg ≈ f̂) r ≈ (f̂c / (1 + f̂c))², which exceeds c only where f̂c/(1 + f̂c) > √c, i.e.
  * f̂ ≳ 4–5 sr⁻¹ at any pair (c = 0.07 … 0.5; never at the normal, where r < 1 = c): the model's own lobe. There the
@@ -374,7 +374,7 @@ static int lnf_rad_weights(struct sel *s, const double *c6, const double *amp, c
 		goto out;
 	}
 	lnf_grid(NULL, s->xw, 0, 0);
-	if (s->t->lnf_rad == 3 && !(pw = malloc(F * sizeof *pw))) {
+	if (s->t->lnf_rad == SELECT_LNF_BRIGHT && !(pw = malloc(F * sizeof *pw))) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}
@@ -514,7 +514,7 @@ int sel_setup_lnf(struct sel *s, struct select_result *r, struct acq_err *err)
 		if (lnf_rad_weights(s, c6, amp, KXn, err))
 			goto out;
 	}
-	if (s->t->lnf_rad == 2 && !(wr = malloc(F * sizeof *wr))) {
+	if (s->t->lnf_rad == SELECT_LNF_MIX && !(wr = malloc(F * sizeof *wr))) {
 		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
 		goto out;
 	}

@@ -58,25 +58,14 @@ static int target_parse_one(const char *spec, struct select_target *t, struct ac
 		if (parse_num(x, x + strlen(x), &t->threshold) || !(t->threshold > 0))
 			return acq_errf(err, ACQ_E_INVAL, "target '%s': le= needs a positive number", spec);
 	}
-	if ((size_t)(body_end - p) == 3 && !strncmp(p, "lnf", 3)) {
-		t->kind = SELECT_LNF;
-		return 0;
-	}
-	if ((size_t)(body_end - p) == 7 && !strncmp(p, "lnf:rad", 7)) {
-		t->kind = SELECT_LNF;
-		t->lnf_rad = 1;
-		return 0;
-	}
-	if ((size_t)(body_end - p) == 7 && !strncmp(p, "lnf:mix", 7)) {
-		t->kind = SELECT_LNF;
-		t->lnf_rad = 2;
-		return 0;
-	}
-	if ((size_t)(body_end - p) == 10 && !strncmp(p, "lnf:bright", 10)) {
-		t->kind = SELECT_LNF;
-		t->lnf_rad = 3;
-		return 0;
-	}
+	static const char *const lnf_names[] = { [SELECT_LNF_PROJECTED] = "lnf", [SELECT_LNF_RAD] = "lnf:rad",
+						 [SELECT_LNF_MIX] = "lnf:mix", [SELECT_LNF_BRIGHT] = "lnf:bright" };
+	for (int w = 0; w < (int)(sizeof lnf_names / sizeof lnf_names[0]); w++)
+		if ((size_t)(body_end - p) == strlen(lnf_names[w]) && !strncmp(p, lnf_names[w], strlen(lnf_names[w]))) {
+			t->kind = SELECT_LNF;
+			t->lnf_rad = w;
+			return 0;
+		}
 	if ((size_t)(body_end - p) == 3 && !strncmp(p, "rgb", 3)) {
 		t->kind = SELECT_RGB;
 		return 0;
