@@ -5,34 +5,38 @@
 #include <math.h>
 #include <stdlib.h>
 
+/* Where at falls among x[n] (increasing): the lower point *j and the weight of x[*j + 1] (linear between points;
+ * the nearest end outside, weight 0). */
+static double bracket(const double *x, size_t n, double at, size_t *j)
+{
+	*j = 0;
+	if (n == 1 || at <= x[0])
+		return 0.0;
+	if (at >= x[n - 1]) {
+		*j = n - 1;
+		return 0.0;
+	}
+	while (*j + 2 < n && x[*j + 1] < at)
+		(*j)++;
+	return (at - x[*j]) / (x[*j + 1] - x[*j]);
+}
+
 /* u(ρ)/ρ of the certificate at λ (linear between its points, the nearest end outside). */
 static double cert_rel_at(const struct recon_budget_opts *o, double wl)
 {
-	size_t n = o->ncert, j = 0;
-	if (n == 1 || wl <= o->cert_wl[0])
-		return o->cert_u[0] / o->cert_rho[0];
-	if (wl >= o->cert_wl[n - 1])
-		return o->cert_u[n - 1] / o->cert_rho[n - 1];
-	while (j + 2 < n && o->cert_wl[j + 1] < wl)
-		j++;
-	double u = (wl - o->cert_wl[j]) / (o->cert_wl[j + 1] - o->cert_wl[j]);
-	return (1 - u) * o->cert_u[j] / o->cert_rho[j] + u * o->cert_u[j + 1] / o->cert_rho[j + 1];
+	size_t j;
+	double u = bracket(o->cert_wl, o->ncert, wl, &j), r = o->cert_u[j] / o->cert_rho[j];
+	return u > 0 ? (1 - u) * r + u * o->cert_u[j + 1] / o->cert_rho[j + 1] : r;
 }
 
 /* u_rel of the reference's noise at λ (linear between its points, the nearest end outside); 0 without a table. */
 static double refn_rel_at(const struct recon_budget_opts *o, double wl)
 {
-	size_t n = o->nrefn, j = 0;
-	if (n == 0)
+	if (o->nrefn == 0)
 		return 0.0;
-	if (n == 1 || wl <= o->refn_wl[0])
-		return o->refn_u[0];
-	if (wl >= o->refn_wl[n - 1])
-		return o->refn_u[n - 1];
-	while (j + 2 < n && o->refn_wl[j + 1] < wl)
-		j++;
-	double u = (wl - o->refn_wl[j]) / (o->refn_wl[j + 1] - o->refn_wl[j]);
-	return (1 - u) * o->refn_u[j] + u * o->refn_u[j + 1];
+	size_t j;
+	double u = bracket(o->refn_wl, o->nrefn, wl, &j);
+	return u > 0 ? (1 - u) * o->refn_u[j] + u * o->refn_u[j + 1] : o->refn_u[j];
 }
 
 int recon_budget(size_t nth, size_t L, const double *wl, const double *dhr, const double *sig,
