@@ -291,21 +291,26 @@ void recon_albedo_ws_free(struct albedo_ws *ws);
  * grazing) can hide a lobe only where the data give a reason: g = the largest of
  *  - the edge gate ramp(a; RECON_EDGE_A0, A1): the last ring's held-out misfit says the trend's form misses the
  *    band beyond the last zenith, where the pockets lie;
- *  - 1 − ramp(2 w_s; RECON_PRIOR_RE, 2 R0), w_s the trend's specular lobe width (recon_trend_width(m, 1); none for
- *    the sheen and rough kinds or without a trend): the trend holds a lobe narrow enough to hide in a hole 0.40
- *    from every sample (the reach rule's e⁻⁴ argument), so the plan does not resolve its width and a lobe of its
- *    kind can be missed;
+ *  - 1 − ramp(2 w_s; RECON_PRIOR_RE, h), w_s the trend's specular lobe width (recon_trend_width(m, 1); none for
+ *    the sheen and rough kinds or without a trend), h the depth of this incidence's deepest hole (the largest
+ *    distance of a DHR node from every sample), at most 2 R0: the trend holds a lobe narrow enough to hide in a
+ *    hole of the plan (the reach rule's e⁻⁴ argument: a lobe of width w hides only 2w from every sample), so the
+ *    plan does not resolve its width and a lobe of its kind can be missed. Session 17: the ramp's end was the
+ *    constant 2 R0 (0.70), a hole no coarse plan has at 8-60° (acq-sim's 3 × 4 × 6: 0.40 / 0.47 / 0.52), so a
+ *    GGX lobe 2w = 0.48 wide, which no hole of that plan can hide at 8 and 30°, still weighed 0.84 (green paint:
+ *    σ 12-15× its error at 30 / 60°; recon/reconstruction.md, session 17);
  *  - ramp(U; RECON_PRIOR_U0, U1): much of the hemisphere is unseen (few directions): the data have no say on what
  *    it holds (the fit warns from 20 %).
  * Otherwise the data show no lobe the holes could hide and the form holds at the edge: a missed lobe of an
  * isotropic material would sit at the mirror direction, which p keeps. g = 1 is session 9's rule. */
 #define RECON_PRIOR_U0 0.05
 #define RECON_PRIOR_U1 0.20
-static inline double recon_prior_pockets(double U, double aedge, double wspec)
+static inline double recon_prior_pockets(double U, double aedge, double wspec, double hole)
 {
 	double g = fmax(recon_ramp(aedge, RECON_EDGE_A0, RECON_EDGE_A1), recon_ramp(U, RECON_PRIOR_U0, RECON_PRIOR_U1));
+	double h = fmin(hole, 2 * RECON_PRIOR_R0), w2 = RECON_PRIOR_WIDTHS * wspec;
 	if (wspec > 0 && isfinite(wspec))
-		g = fmax(g, 1.0 - recon_ramp(RECON_PRIOR_WIDTHS * wspec, RECON_PRIOR_RE, 2 * RECON_PRIOR_R0));
+		g = fmax(g, h > RECON_PRIOR_RE ? 1.0 - recon_ramp(w2, RECON_PRIOR_RE, h) : w2 < h ? 1.0 : 0.0);
 	return g;
 }
 /* The largest zenith of any sample (radians). */
