@@ -1,4 +1,5 @@
-/* csvio: reader of the CSV interchange format (samples and queries) with located errors. */
+/* csvio: CSV read with errors that name the line and the column: the interchange format's samples and queries, and
+ * tables of named numeric columns (certificates, references, candidates); the one format of a written number. */
 #include "recon/csvio.h"
 
 #include <ctype.h>
@@ -560,4 +561,26 @@ out:
 	free(d);
 	free(text);
 	return rc;
+}
+
+int csvio_read_columns_cm(const char *path, const char *const *names, size_t k, size_t *rows, double **data,
+			  struct acq_err *err)
+{
+	double *rm = NULL;
+	*data = NULL;
+	if (csvio_read_columns(path, names, k, rows, &rm, err))
+		return -1;
+	size_t n = *rows;
+	double *cm = malloc(n * k * sizeof *cm);
+	if (!cm) {
+		free(rm);
+		*rows = 0;
+		return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", path);
+	}
+	for (size_t i = 0; i < n; i++) /* rows → columns */
+		for (size_t c = 0; c < k; c++)
+			cm[c * n + i] = rm[i * k + c];
+	free(rm);
+	*data = cm;
+	return 0;
 }

@@ -211,27 +211,13 @@ static int dhr_parse(int argc, char **argv, struct dhr_args *a)
 static int dhr_cert_load(const char *certp, struct recon_budget_opts *bo, double **cert, struct acq_err *err)
 {
 	static const char *const cn[3] = { "wavelength_nm", "rho", "u" };
-	size_t ncert = 0;
-	double *rows = NULL;
-	if (csvio_read_columns(certp, cn, 3, &ncert, &rows, err))
+	size_t n = 0;
+	if (csvio_read_columns_cm(certp, cn, 3, &n, cert, err))
 		return -1;
-	double *cw = malloc(3 * ncert * sizeof *cw);
-	if (!cw || !ncert) {
-		free(rows);
-		free(cw);
-		return acq_errf(err, ACQ_E_INVAL, "dhr: --cert %s: no rows", certp);
-	}
-	for (size_t i = 0; i < ncert; i++) { /* rows → columns */
-		cw[i] = rows[3 * i];
-		cw[ncert + i] = rows[3 * i + 1];
-		cw[2 * ncert + i] = rows[3 * i + 2];
-	}
-	free(rows);
-	*cert = cw;
-	bo->cert_wl = cw;
-	bo->cert_rho = cw + ncert;
-	bo->cert_u = cw + 2 * ncert;
-	bo->ncert = ncert;
+	bo->cert_wl = *cert;
+	bo->cert_rho = *cert + n;
+	bo->cert_u = *cert + 2 * n;
+	bo->ncert = n;
 	return 0;
 }
 
@@ -241,27 +227,16 @@ static int dhr_refn_load(const char *path, struct recon_budget_opts *bo, double 
 {
 	static const char *const cn[2] = { "wavelength_nm", "u_rel" };
 	size_t n = 0;
-	double *rows = NULL;
-	if (csvio_read_columns(path, cn, 2, &n, &rows, err))
+	double *cw = NULL;
+	if (csvio_read_columns_cm(path, cn, 2, &n, &cw, err))
 		return -1;
-	double *cw = n ? malloc(2 * n * sizeof *cw) : NULL;
-	if (!cw) {
-		free(rows);
-		return acq_errf(err, n ? ACQ_E_NOMEM : ACQ_E_INVAL, "dhr: --ref-noise %s: %s", path,
-				n ? "out of memory" : "no rows");
-	}
-	for (size_t i = 0; i < n; i++) {
-		cw[i] = rows[2 * i];
-		cw[n + i] = rows[2 * i + 1];
+	for (size_t i = 0; i < n; i++)
 		if (!(cw[n + i] >= 0 && cw[n + i] < 1) || (i && !(cw[i] > cw[i - 1]))) {
 			acq_errf(err, ACQ_E_INVAL, "dhr: --ref-noise %s: data row %zu (%g nm, u_rel %g): wavelengths must "
 				 "increase and u_rel be in [0, 1)", path, i + 1, cw[i], cw[n + i]);
-			free(rows);
 			free(cw);
 			return -1;
 		}
-	}
-	free(rows);
 	*refn = cw;
 	bo->refn_wl = cw;
 	bo->refn_u = cw + n;
@@ -304,8 +279,8 @@ static int dhr_write(const char *outp, const struct recon_model *m, const struct
 	return ok ? 0 : -1;
 }
 
-/* The reference file for --reference: its rows (wavelength_nm,dhr,sigma) in *ref, *nref, and the index of
- * --reference-theta among --theta-i in *tref; 0 or -1 with err. */
+/* The reference file for --reference: its columns wavelength_nm, dhr, sigma (*nref values each, one after the other)
+ * in *ref, and the index of --reference-theta among --theta-i in *tref; 0 or -1 with err. */
 static int dhr_ref_read(const struct dhr_args *a, size_t *tref, double **ref, size_t *nref, struct acq_err *err)
 {
 	static const char *const names[3] = { "wavelength_nm", "dhr", "sigma" };
@@ -314,7 +289,7 @@ static int dhr_ref_read(const struct dhr_args *a, size_t *tref, double **ref, si
 			break;
 	if (*tref == a->nth)
 		return acq_errf(err, ACQ_E_INVAL, "dhr: --reference-theta %g is not among --theta-i", a->ref_th);
-	return csvio_read_columns(a->refp, names, 3, nref, ref, err) ? -1 : 0;
+	return csvio_read_columns_cm(a->refp, names, 3, nref, ref, err) ? -1 : 0;
 }
 
 /* The residual (model − reference) / σ per compared wavelength, kept for the plot. */
@@ -323,7 +298,7 @@ struct dhr_resid {
 	size_t n;
 };
 
-/* The model at incidence tref against the reference rows: per-wavelength z to --z-out (or stderr), the agreement and
+/* The model at incidence tref against the reference's columns (dhr_ref_read): per-wavelength z to --z-out (or stderr), the agreement and
  * χ² lines on stderr; the residual into *res when a plot is asked for. 0 or -1 with err. */
 static int dhr_compare(const struct dhr_args *a, const struct recon_model *m, const double *dhr, const double *sig,
 		       const double *corr, size_t tref, const double *ref, size_t nref, struct dhr_resid *res,
@@ -342,14 +317,14 @@ static int dhr_compare(const struct dhr_args *a, const struct recon_model *m, co
 	double *cw = cmp, *md = cmp + nref, *ms = cmp + 2 * nref, *mc = cmp + 3 * nref, *rv = cmp + 4 * nref,
 	       *rs = cmp + 5 * nref, *z = cmp + 6 * nref, *ui = cmp + 8 * nref, *ei = cmp + 9 * nref;
 	for (size_t i = 0; ok && i < nref; i++) {
-		double wl = ref[3 * i];
-		if (!(wl >= m->wl[0] && wl <= m->wl[L - 1]) || !isfinite(ref[3 * i + 1]) || !(ref[3 * i + 2] >= 0))
+		double wl = ref[i], rdhr = ref[nref + i], rsig = ref[2 * nref + i];
+		if (!(wl >= m->wl[0] && wl <= m->wl[L - 1]) || !isfinite(rdhr) || !(rsig >= 0))
 			continue;
 		cw[nc] = wl;
 		at_reference(m, dhr + tref * L, sig + tref * L, corr + tref * L, wl, &md[nc], &ms[nc], &mc[nc], &ji[nc],
 			     &ui[nc], &ei[nc]);
-		rv[nc] = ref[3 * i + 1];
-		rs[nc] = ref[3 * i + 2];
+		rv[nc] = rdhr;
+		rs[nc] = rsig;
 		nc++;
 	}
 	for (size_t l = 0; ok && l < L; l++) { /* the model's independent σ at its own wavelengths */
@@ -403,38 +378,20 @@ static int dhr_compare(const struct dhr_args *a, const struct recon_model *m, co
 	return ok ? 0 : -1;
 }
 
-/* --plot: the curves with their bands, the reference (read again from its file, when compared) and the residual
- * panel (when kept); 0 or -1 with err. */
+/* --plot: the curves with their bands, the reference (its columns from dhr_ref_read, nref rows; NULL: none) and
+ * the residual panel (when kept); 0 or -1 with err. */
 static int dhr_plot(const struct dhr_args *a, const struct recon_model *m, const double *dhr, const double *sig,
-		    int with_ref, const struct dhr_resid *res, struct acq_err *err)
+		    const double *ref, size_t nref, const struct dhr_resid *res, struct acq_err *err)
 {
 	size_t L = m->nwl;
 	struct plot_curve curves[64], refc, resc;
 	char labels[64][32];
-	double *refwl = NULL, *refy = NULL, *refs = NULL;
 	for (size_t t = 0; t < a->nth; t++) {
 		snprintf(labels[t], sizeof labels[t], "\u03b8i = %g\u00b0", a->th[t]);
 		curves[t] = (struct plot_curve){ labels[t], m->wl, dhr + t * L, sig + t * L, L };
 	}
-	if (with_ref) {
-		size_t nr = 0;
-		static const char *const names[3] = { "wavelength_nm", "dhr", "sigma" };
-		double *all = NULL;
-		if (csvio_read_columns(a->refp, names, 3, &nr, &all, err) == 0) {
-			refwl = malloc(nr * sizeof *refwl);
-			refy = malloc(nr * sizeof *refy);
-			refs = malloc(nr * sizeof *refs);
-			if (refwl && refy && refs) {
-				for (size_t i = 0; i < nr; i++) {
-					refwl[i] = all[3 * i];
-					refy[i] = all[3 * i + 1];
-					refs[i] = all[3 * i + 2];
-				}
-				refc = (struct plot_curve){ "reference", refwl, refy, refs, nr };
-			}
-		}
-		free(all);
-	}
+	if (ref)
+		refc = (struct plot_curve){ "reference", ref, ref + nref, ref + 2 * nref, nref };
 	struct plot_dhr_opts po;
 	plot_dhr_opts_default(&po);
 	po.title = "Directional-hemispherical reflectance (bands: \u00b12\u03c3)";
@@ -443,11 +400,7 @@ static int dhr_plot(const struct dhr_args *a, const struct recon_model *m, const
 		po.residual = &resc;
 		po.height = 720;
 	}
-	int rc = plot_dhr_png(a->plot, curves, a->nth, refwl && refy && refs ? &refc : NULL, &po, NULL, err) ? -1 : 0;
-	free(refwl);
-	free(refy);
-	free(refs);
-	return rc;
+	return plot_dhr_png(a->plot, curves, a->nth, ref ? &refc : NULL, &po, NULL, err) ? -1 : 0;
 }
 
 int cmd_dhr(int argc, char **argv)
@@ -496,7 +449,7 @@ int cmd_dhr(int argc, char **argv)
 		ok = 0;
 	if (ok && ref && dhr_compare(&a, m, dhr, sig, corr, tref, ref, nref, &res, &err))
 		ok = 0;
-	if (ok && a.plot && dhr_plot(&a, m, dhr, sig, ref != NULL, &res, &err))
+	if (ok && a.plot && dhr_plot(&a, m, dhr, sig, ref, nref, &res, &err))
 		ok = 0;
 	free(res.z);
 	free(res.wl);
