@@ -445,28 +445,27 @@ int csvio_slurp(const char *path, char **out, size_t *len, struct acq_err *err)
 	return acq_file_read(path, (size_t)1 << 30, 0, out, len, err);
 }
 
-int csvio_read_samples(const char *path, struct recon_samples *s, struct acq_err *err)
+/* A samples (want_values) or queries file read whole and parsed: 0, or -1 with err and *s zeroed. */
+static int read_file(const char *path, int want_values, struct recon_samples *s, struct acq_err *err)
 {
 	char *text;
 	size_t len;
 	memset(s, 0, sizeof *s);
 	if (csvio_slurp(path, &text, &len, err))
 		return -1;
-	int rc = csvio_parse_samples(path, text, len, s, err);
+	int rc = parse(path, text, len, want_values, s, err);
 	free(text);
 	return rc;
 }
 
+int csvio_read_samples(const char *path, struct recon_samples *s, struct acq_err *err)
+{
+	return read_file(path, 1, s, err);
+}
+
 int csvio_read_queries(const char *path, struct recon_samples *s, struct acq_err *err)
 {
-	char *text;
-	size_t len;
-	memset(s, 0, sizeof *s);
-	if (csvio_slurp(path, &text, &len, err))
-		return -1;
-	int rc = csvio_parse_queries(path, text, len, s, err);
-	free(text);
-	return rc;
+	return read_file(path, 0, s, err);
 }
 
 int csvio_fmt(char *buf, size_t size, double v)
