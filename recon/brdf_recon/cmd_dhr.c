@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "recon/brdf_recon/cli.h"
+#include "recon/brdf_recon/dhr_budget.h"
 #include "recon/budget.h"
 #include "recon/csvio.h"
 #include "recon/plot.h"
@@ -78,29 +79,6 @@ static void at_reference(const struct recon_model *m, const double *y, const dou
 	*so = hypot(*so, *eo);
 	*jo = j;
 	*uo = u;
-}
-
-const char *const cmd_dhr_db_names[DB_N] = { "sigma_noise", "sigma_model",  "sigma_quad",  "sigma_misfit", "sigma_res",
-					    "sigma_cert",  "sigma_drift", "sigma_wlcal", "sigma_nonlin", "sigma_refnoise" };
-
-/* DHR and budget of model m at nth incidences th (degrees) into dhr, sig (total) and part[DB_N][nth*L]. */
-int cmd_dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64_t draws, uint64_t seed,
-		   const struct recon_budget_opts *bo, double *dhr, double *sig, double **part, struct acq_err *err)
-{
-	double thr[64];
-	for (size_t t = 0; t < nth; t++)
-		thr[t] = th[t] * M_PI / 180.0;
-	struct recon_dhr_parts parts = { .noise = part[DB_NOISE], .model = part[DB_MODEL], .quad = part[DB_QUAD],
-					 .misfit = part[DB_MISFIT], .res = part[DB_RES] };
-	double *srec = malloc(nth * m->nwl * sizeof *srec);
-	int rc = !srec ? acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory")
-		 : recon_dhr_parts(m, nth, thr, (int)draws, seed, dhr, srec, &parts, cli_progress, NULL, err) ||
-			 recon_budget(nth, m->nwl, m->wl, dhr, srec, bo, part[DB_CERT], part[DB_DRIFT], part[DB_WLCAL],
-				      part[DB_NONLIN], part[DB_REFNOISE], sig, err)
-		 ? -1
-		 : 0;
-	free(srec);
-	return rc;
 }
 
 /* dhr's command line. */
@@ -256,7 +234,7 @@ static int dhr_write(const char *outp, const struct recon_model *m, const struct
 	int ok = 1;
 	fputs("theta_i,wavelength_nm,dhr,sigma", o.f);
 	for (int k = 0; k < DB_N; k++)
-		fprintf(o.f, ",%s", cmd_dhr_db_names[k]);
+		fprintf(o.f, ",%s", dhr_budget_names[k]);
 	fputc('\n', o.f);
 	char b[64];
 	for (size_t t = 0; ok && t < a->nth; t++)
@@ -432,7 +410,7 @@ int cmd_dhr(int argc, char **argv)
 		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
 	for (int k = 0; k < DB_N; k++)
 		part[k] = pbuf ? pbuf + (size_t)k * NL : NULL;
-	if (ok && cmd_dhr_budget(m, a.nth, a.th, a.draws, a.seed, &a.bo, dhr, sig, part, &err))
+	if (ok && dhr_budget(m, a.nth, a.th, a.draws, a.seed, &a.bo, dhr, sig, part, &err))
 		ok = 0;
 	cli_progress_end();
 	for (size_t i = 0; ok && i < NL; i++) /* the correlated part: one common factor (certificate, drift) */
