@@ -108,6 +108,12 @@ static int dhr_parse_theta(const char *arg, struct dhr_args *a)
 	return 0;
 }
 
+/* A budget option's number into *v: 0, or -1 unless it is a number in [0, hi). */
+static int dhr_parse_in(const char *arg, double *v, double hi)
+{
+	return cli_parse_double(arg, v) || !(*v >= 0 && *v < hi) ? -1 : 0;
+}
+
 /* The options and the model's path into a (defaults first); -1 to go on, or the exit status (help: 0, a usage
  * error: 2). */
 static int dhr_parse(int argc, char **argv, struct dhr_args *a)
@@ -151,19 +157,19 @@ static int dhr_parse(int argc, char **argv, struct dhr_args *a)
 		case 'C': a->certp = optarg; break;
 		case 'F': a->refnp = optarg; break;
 		case 'c':
-			if (cli_parse_double(optarg, &bo->cert_rel) || !(bo->cert_rel >= 0 && bo->cert_rel < 1))
+			if (dhr_parse_in(optarg, &bo->cert_rel, 1))
 				return cli_usage_err("dhr", "--cert-rel needs a number in [0, 1)");
 			break;
 		case 'd':
-			if (cli_parse_double(optarg, &bo->drift_rel) || !(bo->drift_rel >= 0 && bo->drift_rel < 1))
+			if (dhr_parse_in(optarg, &bo->drift_rel, 1))
 				return cli_usage_err("dhr", "--drift-rel needs a number in [0, 1)");
 			break;
 		case 'w':
-			if (cli_parse_double(optarg, &bo->wl_cal_nm) || !(bo->wl_cal_nm >= 0 && bo->wl_cal_nm < 100))
+			if (dhr_parse_in(optarg, &bo->wl_cal_nm, 100))
 				return cli_usage_err("dhr", "--wl-cal-nm needs a number in [0, 100)");
 			break;
 		case 'N':
-			if (cli_parse_double(optarg, &bo->nonlin_rel) || !(bo->nonlin_rel >= 0 && bo->nonlin_rel < 1))
+			if (dhr_parse_in(optarg, &bo->nonlin_rel, 1))
 				return cli_usage_err("dhr", "--nonlin-rel needs a number in [0, 1)");
 			break;
 		case 'K': {
