@@ -236,7 +236,9 @@ static int check_request(const struct sim_axis *a, const uint8_t *pdu)
 	}
 }
 
-void simarm_serve(struct sim_arm *s, uint8_t *req, int len, double now)
+/* Answer one complete request (ADU in req, length len) at bench time now, as the addressed unit (the link's
+ * s->serve). */
+static void serve(struct sim_arm *s, uint8_t *req, int len, double now)
 {
 	int hl = modbus_get_header_length(s->ctx);
 	if (len < hl + 1)
@@ -445,6 +447,7 @@ struct sim_service *sim_arm_new(struct sim_world *w, enum sim_arm_id arm, struct
 	for (int i = 0; i < n; i++)
 		if (setup_axis(s, &s->ax[i], cfgs[i], err))
 			goto fail;
+	s->serve = serve;
 	if (simarm_link_open(s, axis_cfg_link(cfgs[0]), err))
 		goto fail;
 	s->svc = (struct sim_service){ .name = key, .self = s, .pollfds = simarm_pollfds, .handle = simarm_handle,

@@ -54,12 +54,12 @@ struct sim_arm {
 	bool was_colliding;
 	double now;
 	double rtu_quiet_until;
+	void (*serve)(struct sim_arm *s, uint8_t *req, int len, double now); /* the link's requests go here */
 	struct sim_service svc;
 };
 
-/* Answer one complete request (ADU in req, length len) at bench time now, as the addressed unit (sim_arm.c). */
-void simarm_serve(struct sim_arm *s, uint8_t *req, int len, double now);
-/* Open the link l (TCP: listen on 127.0.0.1, the port chosen in s->port; RTU: the tty) into s; 0 or -1 with err. */
+/* Open the link l (TCP: listen on 127.0.0.1, the port chosen in s->port; RTU: the tty) into s, each complete request
+ * (ADU, its length) then handed to s->serve; 0 or -1 with err. */
 int simarm_link_open(struct sim_arm *s, const struct axis_link_cfg *l, struct acq_err *err);
 /* Close every TCP client (the dropped-connection fault); the listener stays. */
 void simarm_link_drop(struct sim_arm *s);

@@ -79,7 +79,7 @@ static void handle_rtu(struct sim_arm *s, double now)
 	uint16_t crc = crc16(req, len - 2);
 	if (req[len - 2] != (crc & 0xFF) || req[len - 1] != (crc >> 8))
 		return;
-	simarm_serve(s, req, len, now);
+	s->serve(s, req, len, now);
 }
 
 /* ---- TCP ---------------------------------------------------------------------------------------------- */
@@ -96,7 +96,7 @@ static void handle_tcp_client(struct sim_arm *s, int i, double now)
 	modbus_set_socket(s->ctx, s->clients[i]);
 	int rc = modbus_receive(s->ctx, req);
 	if (rc > 0)
-		simarm_serve(s, req, rc, now);
+		s->serve(s, req, rc, now);
 	else if (rc < 0 && errno != EMBBADDATA && errno != EMBMDATA)
 		close_client(s, i);
 }
