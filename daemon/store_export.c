@@ -156,8 +156,10 @@ int store_sweep_pixels(struct store *st, int64_t sweep_id, float **grid, int *n,
 		       struct acq_err *err)
 {
 	int g = grid_row(st, sweep_id, grid, n, npix, coef, err);
-	if (g < 0)
+	if (g < 0) {
+		*npix = 0;
 		return -1;
+	}
 	if (g == 0 && *npix >= 0)
 		return 0;
 	free(*grid);
