@@ -1,4 +1,5 @@
-/* job: child processes with captured output, reaped without blocking the loop (see job.h). */
+/* job: the daemon's side of its child processes — started through the helper or the exec mode (job_helper.c),
+ * their output captured, timed out and reaped without blocking the loop (see job.h). */
 #include "daemon/job.h"
 
 #include <errno.h>
@@ -9,9 +10,7 @@
 #include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/prctl.h>
 #include <sys/mman.h>
-#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -295,44 +294,6 @@ static void on_timeout(struct loop *lp, void *arg)
 		j->killed = true;
 		j->timer = loop_timer_add(job_loop, 2.0, 0, on_timeout, j);
 	}
-}
-
-/* In the child: default signal handling, and death with the daemon (a SIGKILLed daemon leaves no child
- * writing its files: PR_SET_PDEATHSIG survives exec). Only async-signal-safe calls. */
-void job_child_setup(pid_t parent)
-{
-	sigset_t all;
-	sigemptyset(&all);
-	sigprocmask(SIG_SETMASK, &all, NULL);
-	signal(SIGPIPE, SIG_DFL);
-	signal(SIGTERM, SIG_DFL);
-	signal(SIGINT, SIG_DFL);
-	signal(SIGHUP, SIG_DFL);
-	signal(SIGCHLD, SIG_DFL);
-	prctl(PR_SET_PDEATHSIG, SIGKILL);
-	if (getppid() != parent) /* the daemon died before prctl */
-		_exit(137);
-}
-
-void job_child_limits(size_t mem_bytes, unsigned cpu_s)
-{
-	if (cpu_s) { /* SIGXCPU at cpu_s (its default action dumps core: none), SIGKILL 2 s of CPU later */
-		struct rlimit core = { 0, 0 }, cpu = { cpu_s, (rlim_t)cpu_s + 2 };
-		setrlimit(RLIMIT_CORE, &core);
-		setrlimit(RLIMIT_CPU, &cpu);
-	}
-	/* Work done for a client (a dry-run plan) yields the CPU to the daemon and the bench. */
-	if (nice(10) < 0) {
-		/* unchanged priority: still bounded by the deadline */
-	}
-#if !defined(__SANITIZE_ADDRESS__) /* ASan reserves terabytes of address space: only the deadline then */
-	if (mem_bytes) {
-		struct rlimit rl = { mem_bytes, mem_bytes };
-		setrlimit(RLIMIT_AS, &rl);
-	}
-#else
-	(void)mem_bytes;
-#endif
 }
 
 /* A new job reading its output from fd (taken), kept up to cap bytes (the first ones for a function's child:

@@ -2,7 +2,8 @@
  * mode that runs a job_start() program. It is the daemon's own
  * program run again (posix_spawn of /proc/self/exe in its helper mode, job_kinds_main), at start-up and after a
  * crash alike: it never holds the daemon's memory, threads, database or devices, and each child is a fork of it,
- * never of the daemon; the loop only writes a message. Messages: job_int.h. */
+ * never of the daemon; the loop only writes a message. Each child's set-up (signals, death with its parent, limits)
+ * is here too. Messages: job_int.h. */
 #include "daemon/job_int.h"
 
 #include <errno.h>
@@ -14,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/signalfd.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
@@ -26,6 +28,46 @@ struct hchild {
 	uint64_t id;
 	pid_t pid;
 };
+
+/* In the child: default signal handling, and death with the daemon (a SIGKILLed daemon leaves no child
+ * writing its files: PR_SET_PDEATHSIG survives exec). Only async-signal-safe calls. */
+static void child_setup(pid_t parent)
+{
+	sigset_t all;
+	sigemptyset(&all);
+	sigprocmask(SIG_SETMASK, &all, NULL);
+	signal(SIGPIPE, SIG_DFL);
+	signal(SIGTERM, SIG_DFL);
+	signal(SIGINT, SIG_DFL);
+	signal(SIGHUP, SIG_DFL);
+	signal(SIGCHLD, SIG_DFL);
+	prctl(PR_SET_PDEATHSIG, SIGKILL);
+	if (getppid() != parent) /* the daemon died before prctl */
+		_exit(137);
+}
+
+/* In a job child before its work: nice +10, the address space bounded to mem_bytes and the CPU time to cpu_s
+ * seconds (0: unbounded). */
+static void child_limits(size_t mem_bytes, unsigned cpu_s)
+{
+	if (cpu_s) { /* SIGXCPU at cpu_s (its default action dumps core: none), SIGKILL 2 s of CPU later */
+		struct rlimit core = { 0, 0 }, cpu = { cpu_s, (rlim_t)cpu_s + 2 };
+		setrlimit(RLIMIT_CORE, &core);
+		setrlimit(RLIMIT_CPU, &cpu);
+	}
+	/* Work done for a client (a dry-run plan) yields the CPU to the daemon and the bench. */
+	if (nice(10) < 0) {
+		/* unchanged priority: still bounded by the deadline */
+	}
+#if !defined(__SANITIZE_ADDRESS__) /* ASan reserves terabytes of address space: only the deadline then */
+	if (mem_bytes) {
+		struct rlimit rl = { mem_bytes, mem_bytes };
+		setrlimit(RLIMIT_AS, &rl);
+	}
+#else
+	(void)mem_bytes;
+#endif
+}
 
 static struct hchild kids[JOBH_MAX_CHILDREN];
 static int n_kids;
@@ -52,7 +94,7 @@ static void send_done(int sock, uint64_t id, int status)
 /* In the job's child: read the payload from its memfd, run fn with the output on fd 1. Never returns. */
 static void run_child(pid_t helper, const struct jobh_msg *m, int payload, int out)
 {
-	job_child_setup(helper);
+	child_setup(helper);
 	prctl(PR_SET_NAME, "acq-job");
 	int nul = open("/dev/null", O_RDONLY);
 	if (nul >= 0)
@@ -76,7 +118,7 @@ static void run_child(pid_t helper, const struct jobh_msg *m, int payload, int o
 	}
 	buf[len] = '\0';
 	close_range(3, ~0U, 0);
-	job_child_limits((size_t)m->mem_bytes, m->cpu_s);
+	child_limits((size_t)m->mem_bytes, m->cpu_s);
 	_exit(kinds[m->kind]->fn(buf, len, 1));
 }
 
@@ -154,7 +196,7 @@ static void reap(int sock)
 static _Noreturn void helper_main(pid_t daemon)
 {
 	int sock = 3;
-	job_child_setup(daemon);
+	child_setup(daemon);
 	signal(SIGHUP, SIG_IGN); /* a terminal's hang-up is the daemon's to handle (reload), not a reason to die */
 	prctl(PR_SET_NAME, "acq-helper");
 	close_range(4, ~0U, 0);
@@ -185,7 +227,7 @@ static _Noreturn void helper_main(pid_t daemon)
  * exit 126 when the directory cannot be entered, 127 when the program cannot be run. */
 static _Noreturn void exec_main(char **a)
 {
-	job_child_setup((pid_t)strtol(a[0], NULL, 10));
+	child_setup((pid_t)strtol(a[0], NULL, 10));
 	if (a[1][0] && chdir(a[1]) < 0) {
 		fprintf(stderr, "job: cannot enter %s: %s\n", a[1], strerror(errno));
 		_exit(126);

@@ -1,5 +1,5 @@
 /* job_int: what job.c (the daemon's side) and job_helper.c (the helper process) share: the helper's messages
- * and the children's set-up. Not for other modules. */
+ * and its start. Not for other modules. */
 #ifndef DAEMON_JOB_INT_H
 #define DAEMON_JOB_INT_H
 
@@ -41,12 +41,5 @@ int jobh_spawn(int *sock, pid_t *pid, struct acq_err *err);
  * every descriptor from first + n on is closed; signals unmasked and at their defaults. 0 with *pid, or an errno
  * value. */
 int jobh_spawn_self(char *const argv[], const int *fds, int n, int first, pid_t *pid);
-
-/* In a freshly forked child: default signals and mask, death with parent (PR_SET_PDEATHSIG; exits at once
- * when parent is gone already). Async-signal-safe. */
-void job_child_setup(pid_t parent);
-/* In a job child before its work: nice +10, the address space bounded to mem_bytes and the CPU time to cpu_s
- * seconds (0: unbounded). */
-void job_child_limits(size_t mem_bytes, unsigned cpu_s);
 
 #endif

@@ -1,4 +1,5 @@
-/* nexus: NeXus/HDF5 export of a sweep through libhdf5 (streamed from the database, bounded memory). */
+/* nexus: NeXus/HDF5 export of a sweep through libhdf5 (streamed from the database, bounded memory): the sweep's
+ * layout; the HDF5 objects are made by nexus_h5.c. */
 #include "daemon/nexus.h"
 
 #include <hdf5.h>
@@ -11,128 +12,10 @@
 
 #include "acq_version.h"
 #include "config/acq_out.h"
+#include "daemon/nexus_h5.h"
 #include "daemon/store_nexus.h"
 
 static const char *const kinds[4] = { "sample", "dark", "reference", "beam" };
-
-/* ---- small HDF5 helpers: every object gets its NeXus class or its units ---- */
-/* n UTF-8 strings as an attribute (attr) or a dataset of obj; a scalar when scalar is set (n = 1). Attribute
- * scalars are fixed-length (what NeXus readers expect of NX_class and units), the rest variable-length. */
-static int put_strs(hid_t obj, const char *name, int attr, int scalar, size_t n, const char *const *vals)
-{
-	hsize_t dim = n;
-	const char *one = n && vals[0] ? vals[0] : "";
-	int fixed = attr && scalar;
-	hid_t t = H5Tcopy(H5T_C_S1), s = scalar ? H5Screate(H5S_SCALAR) : H5Screate_simple(1, &dim, NULL), o = -1;
-	int rc = -1;
-	if (t < 0 || s < 0 || H5Tset_size(t, fixed ? (strlen(one) ? strlen(one) : 1) : H5T_VARIABLE) < 0 ||
-	    H5Tset_cset(t, H5T_CSET_UTF8) < 0)
-		goto out;
-	const void *buf = fixed ? (const void *)one : scalar ? (const void *)&one : (const void *)vals;
-	if (attr) {
-		o = H5Acreate2(obj, name, t, s, H5P_DEFAULT, H5P_DEFAULT);
-		rc = o >= 0 && H5Awrite(o, t, buf) >= 0 ? 0 : -1;
-	} else {
-		o = H5Dcreate2(obj, name, t, s, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-		rc = o >= 0 && (n == 0 || H5Dwrite(o, t, H5S_ALL, H5S_ALL, H5P_DEFAULT, buf) >= 0) ? 0 : -1;
-	}
-out:
-	if (o >= 0)
-		(attr ? H5Aclose : H5Dclose)(o);
-	if (s >= 0)
-		H5Sclose(s);
-	if (t >= 0)
-		H5Tclose(t);
-	return rc;
-}
-
-static int attr_str(hid_t obj, const char *name, const char *val)
-{
-	return put_strs(obj, name, 1, 1, 1, &val);
-}
-
-/* An attribute holding n UTF-8 strings (NeXus `axes`). */
-static int attr_strs(hid_t obj, const char *name, size_t n, const char *const *vals)
-{
-	return put_strs(obj, name, 1, 0, n, vals);
-}
-
-static int attr_int(hid_t obj, const char *name, int v)
-{
-	hid_t s = H5Screate(H5S_SCALAR), a = s >= 0 ? H5Acreate2(obj, name, H5T_NATIVE_INT, s, H5P_DEFAULT, H5P_DEFAULT) : -1;
-	int rc = a >= 0 && H5Awrite(a, H5T_NATIVE_INT, &v) >= 0 ? 0 : -1;
-	if (a >= 0)
-		H5Aclose(a);
-	if (s >= 0)
-		H5Sclose(s);
-	return rc;
-}
-
-/* A scalar UTF-8 string dataset; NULL is written as "". */
-static int dset_str(hid_t g, const char *name, const char *val)
-{
-	return put_strs(g, name, 0, 1, 1, &val);
-}
-
-/* An array of n UTF-8 strings (n may be 0). */
-static int dset_strs(hid_t g, const char *name, size_t n, const char *const *vals)
-{
-	return put_strs(g, name, 0, 0, n, vals);
-}
-
-static hid_t group(hid_t parent, const char *name, const char *nx_class)
-{
-	hid_t g = H5Gcreate2(parent, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-	if (g >= 0 && attr_str(g, "NX_class", nx_class)) {
-		H5Gclose(g);
-		return -1;
-	}
-	return g;
-}
-
-/* A numeric dataset of rank 1 or 2 (dims), written whole from data (NULL: created only), with units. */
-static hid_t dset_num(hid_t g, const char *name, hid_t type, int rank, const hsize_t *dims, const void *data,
-		      const char *units)
-{
-	hid_t s = H5Screate_simple(rank, dims, NULL), p = H5Pcreate(H5P_DATASET_CREATE), d = -1;
-	if (s < 0 || p < 0)
-		goto out;
-	if (rank == 2 && dims[0] > 0 && dims[1] > 0) { /* rows written one by one: chunk by rows */
-		hsize_t ch[2] = { dims[0] < 16 ? dims[0] : 16, dims[1] };
-		H5Pset_chunk(p, 2, ch);
-	}
-	d = H5Dcreate2(g, name, type, s, H5P_DEFAULT, p, H5P_DEFAULT);
-	if (d >= 0 && ((data && dims[0] > 0 && H5Dwrite(d, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) < 0) ||
-		       (units && attr_str(d, "units", units)))) {
-		H5Dclose(d);
-		d = -1;
-	}
-out:
-	if (p >= 0)
-		H5Pclose(p);
-	if (s >= 0)
-		H5Sclose(s);
-	return d;
-}
-
-static int close_ok(hid_t d)
-{
-	return d >= 0 && H5Dclose(d) >= 0 ? 0 : -1;
-}
-
-/* Write one row of a 2-D dataset. */
-static int write_row(hid_t d, hid_t type, hsize_t row, hsize_t ncol, const void *data)
-{
-	hid_t fs = H5Dget_space(d), ms = H5Screate_simple(1, &ncol, NULL);
-	hsize_t start[2] = { row, 0 }, count[2] = { 1, ncol };
-	int rc = fs >= 0 && ms >= 0 && H5Sselect_hyperslab(fs, H5S_SELECT_SET, start, NULL, count, NULL) >= 0 &&
-			 H5Dwrite(d, type, ms, fs, H5P_DEFAULT, data) >= 0 ? 0 : -1;
-	if (ms >= 0)
-		H5Sclose(ms);
-	if (fs >= 0)
-		H5Sclose(fs);
-	return rc;
-}
 
 static void iso8601(double t, char *buf, size_t len)
 {
@@ -197,8 +80,8 @@ static int take_spectrum(void *c, const struct storenx_spectrum *s)
 		x->bad = 1;
 		return 1;
 	}
-	if (write_row(x->counts, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->npix, s->counts) ||
-	    write_row(x->stddev, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->npix, s->stddev ? s->stddev : x->nanrow))
+	if (nxh_write_row(x->counts, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->npix, s->counts) ||
+	    nxh_write_row(x->stddev, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->npix, s->stddev ? s->stddev : x->nanrow))
 		return 1;
 	x->id[x->k] = s->id;
 	x->point[x->k] = s->point_id;
@@ -220,7 +103,7 @@ static int write_spectra(struct storenx *h, int64_t sweep, hid_t entry, int kind
 	*count = n;
 	char name[32];
 	snprintf(name, sizeof name, "raw_%s", kinds[kind]);
-	hid_t g = group(entry, name, "NXdata");
+	hid_t g = nxh_group(entry, name, "NXdata");
 	if (g < 0)
 		return acq_errf(err, ACQ_E_IO, "nexus: cannot create /entry/%s", name);
 	int rc = -1;
@@ -241,8 +124,8 @@ static int write_spectra(struct storenx *h, int64_t sweep, hid_t entry, int kind
 	for (int i = 0; i < npix; i++)
 		x.nanrow[i] = NAN;
 	hsize_t d2[2] = { (hsize_t)n, (hsize_t)(npix > 0 ? npix : 0) }, d1 = (hsize_t)n, dp = d2[1];
-	x.counts = dset_num(g, "counts", H5T_NATIVE_FLOAT, 2, d2, NULL, "counts");
-	x.stddev = dset_num(g, "counts_errors", H5T_NATIVE_FLOAT, 2, d2, NULL, "counts");
+	x.counts = nxh_dset_num(g, "counts", H5T_NATIVE_FLOAT, 2, d2, NULL, "counts");
+	x.stddev = nxh_dset_num(g, "counts_errors", H5T_NATIVE_FLOAT, 2, d2, NULL, "counts");
 	if (x.counts < 0 || x.stddev < 0)
 		goto h5fail;
 	if (n && npix > 0) {
@@ -266,15 +149,15 @@ static int write_spectra(struct storenx *h, int64_t sweep, hid_t entry, int kind
 	}
 	for (int i = 0; i < npix; i++)
 		pix[i] = i;
-	int bad = close_ok(dset_num(g, "pixel", H5T_NATIVE_INT32, 1, &dp, pix, NULL)) ||
-		  close_ok(dset_num(g, "spectrum_id", H5T_NATIVE_INT64, 1, &d1, x.id, NULL)) ||
-		  close_ok(dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, x.point, NULL)) ||
-		  close_ok(dset_num(g, "integration_time", H5T_NATIVE_DOUBLE, 1, &d1, x.tint, "ms")) ||
-		  close_ok(dset_num(g, "averages", H5T_NATIVE_INT32, 1, &d1, x.avg, NULL)) ||
-		  close_ok(dset_num(g, "saturated_pixels", H5T_NATIVE_INT32, 1, &d1, x.sat, NULL)) ||
-		  close_ok(dset_num(g, "temperature", H5T_NATIVE_DOUBLE, 1, &d1, x.temp, "degC")) ||
-		  close_ok(dset_num(g, "time", H5T_NATIVE_DOUBLE, 1, &d1, x.taken, "s")) || attr_str(g, "signal", "counts") ||
-		  attr_strs(g, "axes", 2, (const char *const[]){ ".", "pixel" }) || attr_int(g, "pixel_indices", 1);
+	int bad = nxh_close_ok(nxh_dset_num(g, "pixel", H5T_NATIVE_INT32, 1, &dp, pix, NULL)) ||
+		  nxh_close_ok(nxh_dset_num(g, "spectrum_id", H5T_NATIVE_INT64, 1, &d1, x.id, NULL)) ||
+		  nxh_close_ok(nxh_dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, x.point, NULL)) ||
+		  nxh_close_ok(nxh_dset_num(g, "integration_time", H5T_NATIVE_DOUBLE, 1, &d1, x.tint, "ms")) ||
+		  nxh_close_ok(nxh_dset_num(g, "averages", H5T_NATIVE_INT32, 1, &d1, x.avg, NULL)) ||
+		  nxh_close_ok(nxh_dset_num(g, "saturated_pixels", H5T_NATIVE_INT32, 1, &d1, x.sat, NULL)) ||
+		  nxh_close_ok(nxh_dset_num(g, "temperature", H5T_NATIVE_DOUBLE, 1, &d1, x.temp, "degC")) ||
+		  nxh_close_ok(nxh_dset_num(g, "time", H5T_NATIVE_DOUBLE, 1, &d1, x.taken, "s")) || nxh_attr_str(g, "signal", "counts") ||
+		  nxh_attr_strs(g, "axes", 2, (const char *const[]){ ".", "pixel" }) || nxh_attr_int(g, "pixel_indices", 1);
 	free(pix);
 	if (bad)
 		goto h5fail;
@@ -313,8 +196,8 @@ static int take_cal(void *c, const struct storenx_calibrated *s)
 		x->bad = 1;
 		return 1;
 	}
-	if (write_row(x->brdf, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->nwl, s->brdf) ||
-	    write_row(x->sigma, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->nwl, s->sigma))
+	if (nxh_write_row(x->brdf, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->nwl, s->brdf) ||
+	    nxh_write_row(x->sigma, H5T_NATIVE_FLOAT, (hsize_t)x->k, (hsize_t)x->nwl, s->sigma))
 		return 1;
 	x->point[x->k++] = s->point_id;
 	return 0;
@@ -390,29 +273,29 @@ static int write_entry(hid_t file, int64_t sweep, const struct storenx_sweep *sw
 	iso8601(sw->finished_at, t1, sizeof t1);
 	iso8601(sw->created_at, tc, sizeof tc);
 	hid_t e = -1, g = -1;
-	if (attr_str(file, "NX_class", "NXroot") || attr_str(file, "creator", "acquisitiond acq-nexus " ACQ_VERSION) ||
-	    attr_str(file, "HDF5_Version", H5_VERS_INFO) || (e = *entry = group(file, "entry", "NXentry")) < 0 ||
-	    attr_str(file, "default", "entry") || attr_str(e, "default", "data") ||
-	    dset_str(e, "title", sw->name) || dset_str(e, "start_time", t0[0] ? t0 : tc) ||
-	    dset_str(e, "end_time", t1) || dset_str(e, "created_time", tc) || dset_str(e, "state", sw->state) ||
-	    dset_str(e, "program_name", sw->software_version) ||
-	    dset_str(e, "calibration_method", sw->calibration_method))
+	if (nxh_attr_str(file, "NX_class", "NXroot") || nxh_attr_str(file, "creator", "acquisitiond acq-nexus " ACQ_VERSION) ||
+	    nxh_attr_str(file, "HDF5_Version", H5_VERS_INFO) || (e = *entry = nxh_group(file, "entry", "NXentry")) < 0 ||
+	    nxh_attr_str(file, "default", "entry") || nxh_attr_str(e, "default", "data") ||
+	    nxh_dset_str(e, "title", sw->name) || nxh_dset_str(e, "start_time", t0[0] ? t0 : tc) ||
+	    nxh_dset_str(e, "end_time", t1) || nxh_dset_str(e, "created_time", tc) || nxh_dset_str(e, "state", sw->state) ||
+	    nxh_dset_str(e, "program_name", sw->software_version) ||
+	    nxh_dset_str(e, "calibration_method", sw->calibration_method))
 		return acq_errf(err, ACQ_E_IO, "nexus: writing /entry failed");
 	int64_t sid = sweep;
 	hsize_t one = 1;
-	if (close_ok(dset_num(e, "sweep_id", H5T_NATIVE_INT64, 1, &one, &sid, NULL)))
+	if (nxh_close_ok(nxh_dset_num(e, "sweep_id", H5T_NATIVE_INT64, 1, &one, &sid, NULL)))
 		return h5_failed(err);
 	/* sample, configuration and plan */
-	if ((g = group(e, "sample", "NXsample")) < 0 || dset_str(g, "name", sw->name) || H5Gclose(g) < 0)
+	if ((g = nxh_group(e, "sample", "NXsample")) < 0 || nxh_dset_str(g, "name", sw->name) || H5Gclose(g) < 0)
 		goto h5fail;
 	g = -1;
-	if ((g = group(e, "configuration", "NXnote")) < 0 || dset_str(g, "type", "text/yaml") ||
-	    dset_str(g, "description", "the daemon's configuration file when the sweep started") ||
-	    dset_str(g, "data", sw->config_snapshot) || H5Gclose(g) < 0)
+	if ((g = nxh_group(e, "configuration", "NXnote")) < 0 || nxh_dset_str(g, "type", "text/yaml") ||
+	    nxh_dset_str(g, "description", "the daemon's configuration file when the sweep started") ||
+	    nxh_dset_str(g, "data", sw->config_snapshot) || H5Gclose(g) < 0)
 		goto h5fail;
 	g = -1;
-	if ((g = group(e, "plan", "NXnote")) < 0 || dset_str(g, "type", "text/yaml") ||
-	    dset_str(g, "description", "the sampling plan as submitted") || dset_str(g, "data", sw->plan_text) ||
+	if ((g = nxh_group(e, "plan", "NXnote")) < 0 || nxh_dset_str(g, "type", "text/yaml") ||
+	    nxh_dset_str(g, "description", "the sampling plan as submitted") || nxh_dset_str(g, "data", sw->plan_text) ||
 	    H5Gclose(g) < 0)
 		goto h5fail;
 	return 0;
@@ -428,7 +311,7 @@ static int write_instrument(struct storenx *h, int64_t sweep, hid_t entry, const
 {
 	int rc = -1;
 	hid_t g = -1, sub = -1;
-	if ((g = group(entry, "instrument", "NXinstrument")) < 0 || (sub = group(g, "spectrometer", "NXdetector")) < 0)
+	if ((g = nxh_group(entry, "instrument", "NXinstrument")) < 0 || (sub = nxh_group(g, "spectrometer", "NXdetector")) < 0)
 		goto h5fail;
 	if (sw->has_spectrometer) {
 		hsize_t five = 5, np = (hsize_t)sw->npix, one = 1;
@@ -444,12 +327,12 @@ static int write_instrument(struct storenx *h, int64_t sweep, hid_t entry, const
 			lam[p] = v;
 		}
 		int32_t npix = sw->npix;
-		hid_t cd = dset_num(sub, "wavelength_calibration", H5T_NATIVE_DOUBLE, 1, &five, sw->sp_coef, NULL);
-		int bad = cd < 0 || attr_str(cd, "description", "lambda(p) = c0 + c1 p + c2 p^2 + c3 p^3 + c4 p^4 (nm)") ||
-			  close_ok(cd) || close_ok(dset_num(sub, "pixel_wavelength", H5T_NATIVE_DOUBLE, 1, &np, lam, "nm")) ||
-			  close_ok(dset_num(sub, "number_of_pixels", H5T_NATIVE_INT32, 1, &one, &npix, NULL)) ||
-			  dset_str(sub, "model", sw->sp_model) || dset_str(sub, "serial_number", sw->sp_serial) ||
-			  dset_str(sub, "firmware", sw->sp_firmware) || dset_str(sub, "nonlinearity", sw->sp_nonlinearity);
+		hid_t cd = nxh_dset_num(sub, "wavelength_calibration", H5T_NATIVE_DOUBLE, 1, &five, sw->sp_coef, NULL);
+		int bad = cd < 0 || nxh_attr_str(cd, "description", "lambda(p) = c0 + c1 p + c2 p^2 + c3 p^3 + c4 p^4 (nm)") ||
+			  nxh_close_ok(cd) || nxh_close_ok(nxh_dset_num(sub, "pixel_wavelength", H5T_NATIVE_DOUBLE, 1, &np, lam, "nm")) ||
+			  nxh_close_ok(nxh_dset_num(sub, "number_of_pixels", H5T_NATIVE_INT32, 1, &one, &npix, NULL)) ||
+			  nxh_dset_str(sub, "model", sw->sp_model) || nxh_dset_str(sub, "serial_number", sw->sp_serial) ||
+			  nxh_dset_str(sub, "firmware", sw->sp_firmware) || nxh_dset_str(sub, "nonlinearity", sw->sp_nonlinearity);
 		free(lam);
 		if (bad)
 			goto h5fail;
@@ -465,12 +348,12 @@ static int write_instrument(struct storenx *h, int64_t sweep, hid_t entry, const
 		}
 	if (storenx_devices(h, sweep, take_device, D, err) < 0)
 		goto out;
-	if ((sub = group(g, "devices", "NXcollection")) < 0 ||
-	    dset_strs(sub, "name", (size_t)D->k, (const char *const *)D->f[0]) ||
-	    dset_strs(sub, "vendor", (size_t)D->k, (const char *const *)D->f[1]) ||
-	    dset_strs(sub, "model", (size_t)D->k, (const char *const *)D->f[2]) ||
-	    dset_strs(sub, "serial_number", (size_t)D->k, (const char *const *)D->f[3]) ||
-	    dset_strs(sub, "firmware", (size_t)D->k, (const char *const *)D->f[4]))
+	if ((sub = nxh_group(g, "devices", "NXcollection")) < 0 ||
+	    nxh_dset_strs(sub, "name", (size_t)D->k, (const char *const *)D->f[0]) ||
+	    nxh_dset_strs(sub, "vendor", (size_t)D->k, (const char *const *)D->f[1]) ||
+	    nxh_dset_strs(sub, "model", (size_t)D->k, (const char *const *)D->f[2]) ||
+	    nxh_dset_strs(sub, "serial_number", (size_t)D->k, (const char *const *)D->f[3]) ||
+	    nxh_dset_strs(sub, "firmware", (size_t)D->k, (const char *const *)D->f[4]))
 		goto h5fail;
 	rc = 0;
 	goto out;
@@ -499,11 +382,11 @@ static int write_events(struct storenx *h, int64_t sweep, hid_t entry, struct ev
 	if (storenx_events(h, sweep, take_event, E, err) < 0)
 		return -1;
 	hsize_t d1 = (hsize_t)E->k;
-	hid_t g = group(entry, "events", "NXcollection");
-	int bad = g < 0 || close_ok(dset_num(g, "time", H5T_NATIVE_DOUBLE, 1, &d1, E->at, "s")) ||
-		  dset_strs(g, "kind", (size_t)E->k, (const char *const *)E->kind) ||
-		  dset_strs(g, "device", (size_t)E->k, (const char *const *)E->device) ||
-		  dset_strs(g, "message", (size_t)E->k, (const char *const *)E->msg);
+	hid_t g = nxh_group(entry, "events", "NXcollection");
+	int bad = g < 0 || nxh_close_ok(nxh_dset_num(g, "time", H5T_NATIVE_DOUBLE, 1, &d1, E->at, "s")) ||
+		  nxh_dset_strs(g, "kind", (size_t)E->k, (const char *const *)E->kind) ||
+		  nxh_dset_strs(g, "device", (size_t)E->k, (const char *const *)E->device) ||
+		  nxh_dset_strs(g, "message", (size_t)E->k, (const char *const *)E->msg);
 	return group_done(g, bad, err);
 }
 
@@ -529,22 +412,22 @@ static int write_points(struct storenx *h, int64_t sweep, hid_t entry, struct po
 	hsize_t d1 = (hsize_t)P->k;
 	static const char *const pn_[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
 	static const char *const an_[3] = { "laser_theta", "detector_theta", "detector_phi" };
-	hid_t g = group(entry, "points", "NXcollection");
-	int bad = g < 0 || close_ok(dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, P->id, NULL)) ||
-		  close_ok(dset_num(g, "order_index", H5T_NATIVE_INT32, 1, &d1, P->order, NULL)) ||
-		  close_ok(dset_num(g, "done_time", H5T_NATIVE_DOUBLE, 1, &d1, P->done, "s")) ||
-		  dset_strs(g, "state", (size_t)P->k, (const char *const *)P->state);
+	hid_t g = nxh_group(entry, "points", "NXcollection");
+	int bad = g < 0 || nxh_close_ok(nxh_dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, P->id, NULL)) ||
+		  nxh_close_ok(nxh_dset_num(g, "order_index", H5T_NATIVE_INT32, 1, &d1, P->order, NULL)) ||
+		  nxh_close_ok(nxh_dset_num(g, "done_time", H5T_NATIVE_DOUBLE, 1, &d1, P->done, "s")) ||
+		  nxh_dset_strs(g, "state", (size_t)P->k, (const char *const *)P->state);
 	for (int a = 0; a < 4 && !bad; a++) {
 		char nm[32];
 		snprintf(nm, sizeof nm, "planned_%s", pn_[a]);
-		bad = close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P->planned[a], "deg"));
+		bad = nxh_close_ok(nxh_dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P->planned[a], "deg"));
 		snprintf(nm, sizeof nm, "measured_%s", pn_[a]);
-		bad = bad || close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P->measured[a], "deg"));
+		bad = bad || nxh_close_ok(nxh_dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P->measured[a], "deg"));
 	}
 	for (int a = 0; a < 3 && !bad; a++) {
 		char nm[32];
 		snprintf(nm, sizeof nm, "actual_%s", an_[a]);
-		bad = close_ok(dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P->actual[a], "deg"));
+		bad = nxh_close_ok(nxh_dset_num(g, nm, H5T_NATIVE_DOUBLE, 1, &d1, P->actual[a], "deg"));
 	}
 	return group_done(g, bad, err);
 }
@@ -565,13 +448,13 @@ static int write_data(struct storenx *h, int64_t sweep, hid_t entry, const struc
 	int rc = -1;
 	double *ang[4] = { NULL };
 	hsize_t d2[2] = { (hsize_t)C->n, (hsize_t)C->nwl }, dw = (hsize_t)C->nwl, d1 = (hsize_t)C->n;
-	hid_t g = group(entry, "data", "NXdata");
-	if (g < 0 || attr_str(g, "signal", "brdf") || attr_strs(g, "axes", 2, (const char *const[]){ ".", "wavelength" }) ||
-	    attr_int(g, "wavelength_indices", 1))
+	hid_t g = nxh_group(entry, "data", "NXdata");
+	if (g < 0 || nxh_attr_str(g, "signal", "brdf") || nxh_attr_strs(g, "axes", 2, (const char *const[]){ ".", "wavelength" }) ||
+	    nxh_attr_int(g, "wavelength_indices", 1))
 		goto h5fail;
-	C->brdf = dset_num(g, "brdf", H5T_NATIVE_FLOAT, 2, d2, NULL, "1/sr");
-	C->sigma = dset_num(g, "brdf_errors", H5T_NATIVE_FLOAT, 2, d2, NULL, "1/sr");
-	if (C->brdf < 0 || C->sigma < 0 || attr_str(C->sigma, "description", "standard uncertainty (1 sigma)"))
+	C->brdf = nxh_dset_num(g, "brdf", H5T_NATIVE_FLOAT, 2, d2, NULL, "1/sr");
+	C->sigma = nxh_dset_num(g, "brdf_errors", H5T_NATIVE_FLOAT, 2, d2, NULL, "1/sr");
+	if (C->brdf < 0 || C->sigma < 0 || nxh_attr_str(C->sigma, "description", "standard uncertainty (1 sigma)"))
 		goto h5fail;
 	if (C->n) {
 		int r = storenx_calibrated(h, sweep, take_cal, C, err);
@@ -596,11 +479,11 @@ static int write_data(struct storenx *h, int64_t sweep, hid_t entry, const struc
 	}
 	static const char *const an[4] = { "theta_i", "phi_i", "theta_o", "phi_o" };
 	float dummy = 0;
-	int bad = close_ok(dset_num(g, "wavelength", H5T_NATIVE_FLOAT, 1, &dw,
+	int bad = nxh_close_ok(nxh_dset_num(g, "wavelength", H5T_NATIVE_FLOAT, 1, &dw,
 				    sw->grid ? (void *)sw->grid : (void *)&dummy, "nm")) ||
-		  close_ok(dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, C->point, NULL));
+		  nxh_close_ok(nxh_dset_num(g, "point_id", H5T_NATIVE_INT64, 1, &d1, C->point, NULL));
 	for (int a = 0; a < 4 && !bad; a++)
-		bad = close_ok(dset_num(g, an[a], H5T_NATIVE_DOUBLE, 1, &d1, ang[a], "deg"));
+		bad = nxh_close_ok(nxh_dset_num(g, an[a], H5T_NATIVE_DOUBLE, 1, &d1, ang[a], "deg"));
 	if (bad)
 		goto h5fail;
 	rc = 0;

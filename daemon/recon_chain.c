@@ -1,9 +1,9 @@
 /* recon_chain: the completion chain of a sweep — its calibrated samples exported as CSV into the state
- * directory (store_export_csv_file: the angles measured at commit, as every reader), then the reconstruction stages (brdf-recon fit, merl, dhr --plot, render) one after the other in
- * child processes (job.h), each run and output recorded in the store (recon_runs), every step an event. */
+ * directory (store_export_csv_file: the angles measured at commit, as every reader) with the reference's noise
+ * (recon_refnoise.c), then the reconstruction stages (brdf-recon fit, merl, dhr --plot, render) one after the
+ * other in child processes (job.h), each run and output recorded in the store (recon_runs), every step an event. */
 #include "daemon/recon_chain.h"
 
-#include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -12,13 +12,10 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "config/acq_out.h"
-#include "daemon/calib.h"
-#include "daemon/devices.h"
-#include "daemon/executor.h"
 #include "daemon/job.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
+#include "daemon/recon_refnoise.h"
 #include "daemon/store.h"
 
 enum { RC_FIT, RC_MERL, RC_DHR, RC_RENDER, RC__COUNT };
@@ -230,80 +227,6 @@ static void recon_next(struct recon_chain *ch)
 		    ch->recon_failed, RC__COUNT, summary);
 }
 
-/* reference-noise.csv beside the samples: the relative noise u(R_ref)/R_ref of the sweep's stored white reference
- * (or direct beam) per wavelength of its grid, rebuilt from the store as the crash-resume reload does
- * (ex_reference_rate) and binned as every sample's (calib_ref_noise): one spectrum shared by all samples, which
- * dhr must not average away (--ref-noise). 1 written, 0 none (why in the event), -1 with err. */
-static int write_ref_noise(struct recon_chain *ch, struct acq_err *err)
-{
-	const struct conf *c = ch->env->conf;
-	struct ex_cfg cfg;
-	ex_cfg_defaults(&cfg);
-	if (ex_cfg_parse(c->sweep.acquisition, c->sweep.calibration, &cfg, err))
-		return -1;
-	float *grid = NULL;
-	int n = 0, npix = 0;
-	struct spectro_info info = { 0 };
-	if (store_sweep_pixels(ch->env->store, ch->id, &grid, &n, &npix, info.wl_coef, err))
-		return -1;
-	info.npix = npix;
-	/* the detector's full scale (saturation as at the measurement) from the spectrometer when it is open */
-	const struct spectro_info *live = ch->env->devices ? devices_ex_ops()->spectro_info(ch->env->devices) : NULL;
-	if (live && live->npix != npix)
-		live = NULL; /* another spectrometer than the sweep's: its pixels say nothing of these */
-	double fs = exp_full_scale(live);
-	struct calib_cfg *cal = &cfg.cal;
-	cal->grid_min_nm = grid[0];
-	cal->grid_max_nm = grid[n - 1];
-	if (n > 1)
-		cal->grid_step_nm = (grid[n - 1] - grid[0]) / (n - 1);
-	double *wl = malloc((size_t)(npix > 0 ? npix : 1) * sizeof *wl), *u = malloc((size_t)n * sizeof *u);
-	struct exp_rate *ref = malloc(sizeof *ref);
-	int rc = -1;
-	if (!wl || !u || !ref) {
-		acq_errf(err, ACQ_E_NOMEM, "out of memory");
-		goto out;
-	}
-	if (calib_grid_size(cal) != n) {
-		acq_errf(err, ACQ_E_STATE, "sweep %lld: its stored grid (%d values) is not a regular grid",
-			 (long long)ch->id, n);
-		goto out;
-	}
-	for (int p = 0; p < npix; p++)
-		wl[p] = spectro_wavelength(&info, p);
-	rc = ex_reference_rate(ch->env->store, ch->id, &cfg.pol, npix, fs, ref, NULL, err);
-	if (rc <= 0)
-		goto out;
-	exp_mask_black(live, ref); /* as the executor does (the store does not know them) */
-	rc = -1;
-	if (calib_ref_noise(cal, wl, ref, u, err))
-		goto out;
-	struct acq_out o;
-	if (acq_out_open(&o, ch->refn, ACQ_OUT_STDIO, err))
-		goto out;
-	fprintf(o.f, "# acquisitiond sweep %lld: relative standard uncertainty of its white reference's (or direct "
-		"beam's) own noise and dark per wavelength, common to every sample (brdf-recon dhr --ref-noise)\n"
-		"wavelength_nm,u_rel\n", (long long)ch->id);
-	int rows = 0;
-	for (int k = 0; k < n; k++)
-		if (isfinite(u[k]) && u[k] >= 0 && u[k] < 1) { /* bins without light: no row (dhr interpolates) */
-			fprintf(o.f, "%.7g,%.6g\n", (double)grid[k], u[k]);
-			rows++;
-		}
-	if (rows == 0) {
-		acq_out_abort(&o);
-		rc = 0;
-		goto out;
-	}
-	rc = acq_out_commit(&o, err) ? -1 : 1;
-out:
-	free(grid);
-	free(wl);
-	free(u);
-	free(ref);
-	return rc;
-}
-
 int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, int64_t *run_id, struct acq_err *err)
 {
 	const struct conf *c = ch->env->conf;
@@ -326,7 +249,7 @@ int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, int64_t 
 	struct acq_err rerr = { 0 };
 	struct timespec t0, t1;
 	clock_gettime(CLOCK_MONOTONIC, &t0);
-	int rn = write_ref_noise(ch, &rerr);
+	int rn = recon_refnoise_write(ch->env, ch->id, ch->refn, &rerr);
 	clock_gettime(CLOCK_MONOTONIC, &t1);
 	double ms = (double)(t1.tv_sec - t0.tv_sec) * 1e3 + (double)(t1.tv_nsec - t0.tv_nsec) * 1e-6;
 	/* one event for both (the kill tests count the chain's events) */

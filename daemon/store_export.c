@@ -1,5 +1,6 @@
 /* store_export: a sweep's calibrated samples in the CSV interchange format (design.md), from the
- * calibrated_samples view (part of the store module, store.h). */
+ * calibrated_samples view, and the sweep's grid row they and the recon chain's reference noise are binned on
+ * (part of the store module, store.h). */
 #include "daemon/store.h"
 
 #include <errno.h>
@@ -11,9 +12,6 @@
 #include "config/acq_out.h"
 #include "daemon/store_int.h"
 #include "drivers/spectro.h"
-
-#include <stdio.h>
-#include <unistd.h>
 
 static void csv_num(FILE *out, double v)
 {
@@ -28,26 +26,60 @@ int store_export_csv(struct store *st, int64_t sweep_id, FILE *out, int *nrows, 
 	return store_export_csv_n(st, sweep_id, 0, out, nrows, err);
 }
 
-int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct acq_err *err)
+/* The sweep's grid row, read here alone: its wavelength grid (*n float32 nm as stored, *grid malloc'd) and its
+ * spectrometer's pixel count (*npix; -1: none recorded) and wavelength coefficients c0..c4. 0; 1 when the sweep
+ * has no grid (nothing allocated); -1 with err (ACQ_E_NOTFOUND: no sweep). */
+static int grid_row(struct store *st, int64_t sweep_id, float **grid, int *n, int *npix, double coef[5],
+		    struct acq_err *err)
 {
-	*nrows = 0;
-	sqlite3_stmt *s = store_prep(st, "SELECT wavelength_grid FROM sweeps WHERE id = ?", err);
+	*grid = NULL;
+	*n = 0;
+	*npix = -1;
+	sqlite3_stmt *s = store_prep(st, "SELECT w.wavelength_grid, p.npix, p.c0, p.c1, p.c2, p.c3, p.c4 FROM sweeps w "
+				         "LEFT JOIN spectrometers p ON p.id = w.spectrometer_id WHERE w.id = ?", err);
 	if (!s)
 		return -1;
 	sqlite3_bind_int64(s, 1, sweep_id);
-	if (sqlite3_step(s) != SQLITE_ROW) {
+	int rc = sqlite3_step(s);
+	if (rc != SQLITE_ROW) {
 		sqlite3_finalize(s);
-		return acq_errf(err, ACQ_E_NOTFOUND, "no sweep %lld", (long long)sweep_id);
+		return rc == SQLITE_DONE ? acq_errf(err, ACQ_E_NOTFOUND, "no sweep %lld", (long long)sweep_id)
+					 : store_db_err(st, err, "reading the sweep's grid");
 	}
 	int nb = sqlite3_column_bytes(s, 0);
-	int n = nb / 4;
-	float *grid = n > 0 && nb % 4 == 0 ? malloc((size_t)nb) : NULL;
-	if (grid)
-		memcpy(grid, sqlite3_column_blob(s, 0), (size_t)nb);
+	if (nb <= 0 || nb % 4) {
+		sqlite3_finalize(s);
+		return 1;
+	}
+	*grid = malloc((size_t)nb);
+	if (!*grid) {
+		sqlite3_finalize(s);
+		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
+	}
+	memcpy(*grid, sqlite3_column_blob(s, 0), (size_t)nb);
+	*n = nb / 4;
+	if (sqlite3_column_type(s, 1) != SQLITE_NULL)
+		*npix = sqlite3_column_int(s, 1);
+	for (int i = 0; i < 5; i++)
+		coef[i] = sqlite3_column_double(s, 2 + i);
 	sqlite3_finalize(s);
-	if (!grid)
+	return 0;
+}
+
+int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct acq_err *err)
+{
+	*nrows = 0;
+	float *grid;
+	int n, npix;
+	double coef[5];
+	int g = grid_row(st, sweep_id, &grid, &n, &npix, coef, err);
+	if (g < 0)
+		return -1;
+	if (g > 0)
 		return acq_errf(err, ACQ_E_STATE, "sweep %lld has no calibrated samples yet (no wavelength grid)",
 				(long long)sweep_id);
+	int nb = 4 * n;
+	sqlite3_stmt *s;
 	int rc = -1;
 	fprintf(out, "# acquisitiond sweep %lld: calibrated BRDF samples (sr^-1) with standard uncertainty\n",
 		(long long)sweep_id);
@@ -120,39 +152,19 @@ int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, 
 	return acq_out_commit(&o, err);
 }
 
-
 int store_sweep_pixels(struct store *st, int64_t sweep_id, float **grid, int *n, int *npix, double coef[5],
 		       struct acq_err *err)
 {
+	int g = grid_row(st, sweep_id, grid, n, npix, coef, err);
+	if (g < 0) {
+		*npix = 0;
+		return -1;
+	}
+	if (g == 0 && *npix >= 0)
+		return 0;
+	free(*grid);
 	*grid = NULL;
 	*n = *npix = 0;
-	sqlite3_stmt *s = store_prep(st, "SELECT w.wavelength_grid, p.npix, p.c0, p.c1, p.c2, p.c3, p.c4 FROM sweeps w "
-				         "LEFT JOIN spectrometers p ON p.id = w.spectrometer_id WHERE w.id = ?", err);
-	if (!s)
-		return -1;
-	sqlite3_bind_int64(s, 1, sweep_id);
-	int rc = sqlite3_step(s);
-	if (rc != SQLITE_ROW) {
-		sqlite3_finalize(s);
-		return rc == SQLITE_DONE ? acq_errf(err, ACQ_E_NOTFOUND, "no sweep %lld", (long long)sweep_id)
-					 : store_db_err(st, err, "reading the sweep's grid");
-	}
-	int nb = sqlite3_column_bytes(s, 0);
-	if (nb <= 0 || nb % 4 || sqlite3_column_type(s, 1) == SQLITE_NULL) {
-		sqlite3_finalize(s);
-		return acq_errf(err, ACQ_E_STATE, "sweep %lld has no %s", (long long)sweep_id,
-				nb <= 0 || nb % 4 ? "wavelength grid (no calibrated sample)" : "spectrometer recorded");
-	}
-	*grid = malloc((size_t)nb);
-	if (!*grid) {
-		sqlite3_finalize(s);
-		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
-	}
-	memcpy(*grid, sqlite3_column_blob(s, 0), (size_t)nb);
-	*n = nb / 4;
-	*npix = sqlite3_column_int(s, 1);
-	for (int i = 0; i < 5; i++)
-		coef[i] = sqlite3_column_double(s, 2 + i);
-	sqlite3_finalize(s);
-	return 0;
+	return acq_errf(err, ACQ_E_STATE, "sweep %lld has no %s", (long long)sweep_id,
+			g ? "wavelength grid (no calibrated sample)" : "spectrometer recorded");
 }

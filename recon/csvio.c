@@ -1,4 +1,5 @@
-/* csvio: reader of the CSV interchange format (samples and queries) with located errors. */
+/* csvio: CSV read with errors that name the line and the column: the interchange format's samples and queries, and
+ * tables of named numeric columns (certificates, references, candidates); the one format of a written number. */
 #include "recon/csvio.h"
 
 #include <ctype.h>
@@ -444,28 +445,27 @@ int csvio_slurp(const char *path, char **out, size_t *len, struct acq_err *err)
 	return acq_file_read(path, (size_t)1 << 30, 0, out, len, err);
 }
 
-int csvio_read_samples(const char *path, struct recon_samples *s, struct acq_err *err)
+/* A samples (want_values) or queries file read whole and parsed: 0, or -1 with err and *s zeroed. */
+static int read_file(const char *path, int want_values, struct recon_samples *s, struct acq_err *err)
 {
 	char *text;
 	size_t len;
 	memset(s, 0, sizeof *s);
 	if (csvio_slurp(path, &text, &len, err))
 		return -1;
-	int rc = csvio_parse_samples(path, text, len, s, err);
+	int rc = parse(path, text, len, want_values, s, err);
 	free(text);
 	return rc;
 }
 
+int csvio_read_samples(const char *path, struct recon_samples *s, struct acq_err *err)
+{
+	return read_file(path, 1, s, err);
+}
+
 int csvio_read_queries(const char *path, struct recon_samples *s, struct acq_err *err)
 {
-	char *text;
-	size_t len;
-	memset(s, 0, sizeof *s);
-	if (csvio_slurp(path, &text, &len, err))
-		return -1;
-	int rc = csvio_parse_queries(path, text, len, s, err);
-	free(text);
-	return rc;
+	return read_file(path, 0, s, err);
 }
 
 int csvio_fmt(char *buf, size_t size, double v)
@@ -560,4 +560,26 @@ out:
 	free(d);
 	free(text);
 	return rc;
+}
+
+int csvio_read_columns_cm(const char *path, const char *const *names, size_t k, size_t *rows, double **data,
+			  struct acq_err *err)
+{
+	double *rm = NULL;
+	*data = NULL;
+	if (csvio_read_columns(path, names, k, rows, &rm, err))
+		return -1;
+	size_t n = *rows;
+	double *cm = malloc(n * k * sizeof *cm);
+	if (!cm) {
+		free(rm);
+		*rows = 0;
+		return acq_errf(err, ACQ_E_NOMEM, "%s: out of memory", path);
+	}
+	for (size_t i = 0; i < n; i++) /* rows → columns */
+		for (size_t c = 0; c < k; c++)
+			cm[c * n + i] = rm[i * k + c];
+	free(rm);
+	*data = cm;
+	return 0;
 }

@@ -40,6 +40,9 @@ int csvio_slurp(const char *path, char **out, size_t *len, struct acq_err *err);
  * rows × k values row-major (free()); empty fields and nan are errors. */
 int csvio_read_columns(const char *path, const char *const *names, size_t k, size_t *rows, double **data,
 		       struct acq_err *err);
+/* csvio_read_columns() with *data column-major: column c is the *rows values at *data + c × *rows (free()). */
+int csvio_read_columns_cm(const char *path, const char *const *names, size_t k, size_t *rows, double **data,
+			  struct acq_err *err);
 /* Format a double with 10 significant digits; -1 (and nothing written) if it is not finite. */
 int csvio_fmt(char *buf, size_t size, double v);
 

@@ -1,4 +1,5 @@
-/* material: ground-truth spectral BRDFs of the simulated samples and their DHR quadrature (see material.h). */
+/* material: ground-truth spectral BRDFs of the simulated samples: the catalogue, their spectra and evaluation (see
+ * material.h; their DHR quadrature: material_dhr.c). */
 #include "sim/material.h"
 
 #include <math.h>
@@ -9,34 +10,7 @@
 #include "recon/colour.h"
 #include "recon/merl.h"
 #include "sim/mat_lobes.h"
-
-#define PAINT_ALPHA 0.12
-#define DIEL_N 1.5             /* paint binder, clear coat */
-#define METAL_ALPHA 0.15
-#define COAT_ALPHA 0.05
-#define COAT_BASE_ALPHA 0.30
-#define ON_SIGMA 0.5           /* Oren-Nayar roughness (radians) */
-#define BS_AMP 1.0             /* backscatter peak height relative to rho / pi */
-#define BS_WIDTH_DEG 8.0       /* its Gaussian width in the angle between wi and wo */
-#define SHEEN_R 0.3
-#define SHEEN_EMAX 0.9         /* the sheen lobe's largest albedo */
-#define PHONG_N 250.0
-#define PHONG_KS 0.30
-
-struct mat {
-	enum mat_id id;
-	int nwl;
-	double *wl;
-	double *rho;               /* diffuse albedo per wavelength (MAT_S_RHO) */
-	double *fix2;              /* second fixed spectrum: sheen colour, Phong k_s (MAT_S_FIX2) */
-	double *n, *k;             /* conductor index per wavelength (metal, clear coat base) */
-	struct lobe_hv lobe;       /* the main half-vector lobe (paint, metal, coat, sheen); alpha 0: none */
-	struct lobe_hv base;       /* clear coat: the base seen through the coat */
-	struct lobe_etab et;       /* albedo table of the main lobe (paint, clear coat, cloth) */
-	double on_a, on_b;         /* Oren-Nayar A, B */
-	struct merl_table merl;    /* MERL: the table */
-	double *basis[3];          /* MERL: the spectral basis B_r, B_g, B_b per wavelength */
-};
+#include "sim/material_int.h"
 
 static const char *const names[MAT__COUNT] = { "green-paint", "white", "metal", "clear-coat", "rough-backscatter",
 					       "cloth-sheen", "sharp-lobe", "narrow-lines", "merl" };
@@ -350,7 +324,7 @@ void mat_free(struct mat *m)
 	free(m);
 }
 
-static double dot3(const double a[3], const double b[3])
+double mat_dot3(const double a[3], const double b[3])
 {
 	return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
@@ -359,12 +333,12 @@ static double dot3(const double a[3], const double b[3])
 static double half_cos(const double wi[3], const double wo[3], double *ch)
 {
 	double h[3] = { wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2] };
-	double hl = sqrt(dot3(h, h));
+	double hl = sqrt(mat_dot3(h, h));
 	*ch = 0;
 	if (!(hl > 1e-12))
 		return 0;
 	*ch = h[2] / hl;
-	double c = dot3(wi, h) / hl;
+	double c = mat_dot3(wi, h) / hl;
 	return c > 0 ? c : 0;
 }
 
@@ -380,22 +354,19 @@ static double oren_nayar(const struct mat *m, const double wi[3], const double w
 	return m->on_a + m->on_b * fmax(0.0, cphi) * sa * tb;
 }
 
-/* The backscatter peak's shape exp(-gamma^2 / (2 w^2)), gamma the angle between wi and wo. */
-static double backscatter(const double wi[3], const double wo[3])
+double mat_backscatter(const double wi[3], const double wo[3])
 {
 	double x[3] = { wi[1] * wo[2] - wi[2] * wo[1], wi[2] * wo[0] - wi[0] * wo[2], wi[0] * wo[1] - wi[1] * wo[0] };
-	double g = atan2(sqrt(dot3(x, x)), dot3(wi, wo)) / (BS_WIDTH_DEG * M_PI / 180.0);
+	double g = atan2(sqrt(mat_dot3(x, x)), mat_dot3(wi, wo)) / (BS_WIDTH_DEG * M_PI / 180.0);
 	return BS_AMP * exp(-0.5 * g * g);
 }
 
-/* The normalised Phong lobe (n + 2) / (2 pi) max(0, wr.wo)^n with wr.wo = 2 mu_i mu_o - wi.wo. */
-static double phong(double wrwo)
+double mat_phong(double wrwo)
 {
 	return wrwo > 0 ? (PHONG_N + 2.0) / (2.0 * M_PI) * pow(wrwo, PHONG_N) : 0.0;
 }
 
-/* The table's linear sRGB at (wi, wo): its reference lookup, "no data" cells and directions below the horizon 0. */
-static void merl_rgb(const struct mat *m, const double wi[3], const double wo[3], double rgb[3])
+void mat_merl_rgb(const struct mat *m, const double wi[3], const double wo[3], double rgb[3])
 {
 	if (merl_lookup(&m->merl, wi, wo, rgb) != 0)
 		rgb[0] = rgb[1] = rgb[2] = 0;
@@ -410,7 +381,7 @@ int mat_terms(const struct mat *m, const double wi[3], const double wo[3], struc
 	switch (m->id) {
 	case MAT_MERL: {
 		double rgb[3];
-		merl_rgb(m, wi, wo, rgb);
+		mat_merl_rgb(m, wi, wo, rgb);
 		for (int k = 0; k < 3; k++)
 			t[k] = (struct mat_term){ up ? rgb[k] : 0, MAT_S_BASIS_R + k, 0 };
 		return 3;
@@ -441,11 +412,11 @@ int mat_terms(const struct mat *m, const double wi[3], const double wo[3], struc
 		t[1] = (struct mat_term){ c > 0 ? lobe_hv_geom(&m->base, mi, mo, ch) : 0, MAT_S_COND, c };
 		return 2;
 	case MAT_ROUGH_BACKSCATTER:
-		t[0].w = up ? (oren_nayar(m, wi, wo) + backscatter(wi, wo)) / M_PI : 0;
+		t[0].w = up ? (oren_nayar(m, wi, wo) + mat_backscatter(wi, wo)) / M_PI : 0;
 		return 1;
 	case MAT_SHARP_LOBE:
 		t[0].w = up ? 1.0 / M_PI : 0;
-		t[1].w = up ? phong(2.0 * mi * mo - dot3(wi, wo)) : 0;
+		t[1].w = up ? mat_phong(2.0 * mi * mo - mat_dot3(wi, wo)) : 0;
 		return 2;
 	default:
 		return 0;
@@ -500,163 +471,4 @@ void mat_eval(const struct mat *m, const double wi[3], const double wo[3], doubl
 			break;
 		}
 	}
-}
-
-struct cone_ctx {
-	const double *wi;
-};
-
-static double cone_backscatter(const void *ctx, const double wo[3])
-{
-	return backscatter(((const struct cone_ctx *)ctx)->wi, wo) / M_PI;
-}
-
-static double cone_phong(const void *ctx, const double wo[3])
-{
-	const double *wi = ((const struct cone_ctx *)ctx)->wi;
-	return phong(2.0 * wi[2] * wo[2] - dot3(wi, wo));
-}
-
-/* Achromatic quadrature part of the DHR at levels `level` (q[0]) and level + 1 (q[1]) for the materials whose
- * quadrature is achromatic; the factor it multiplies is applied by the caller. */
-static void achromatic_parts(const struct mat *m, double mu_i, int level, double q[2])
-{
-	double wi[3] = { sqrt(fmax(0.0, 1.0 - mu_i * mu_i)), 0, mu_i };
-	struct cone_ctx x = { wi };
-	for (int k = 0; k < 2; k++) {
-		int lv = level + k;
-		switch (m->id) {
-		case MAT_GREEN_PAINT:
-		case MAT_CLEAR_COAT:
-		case MAT_CLOTH_SHEEN:
-			q[k] = lobe_hv_albedo(&m->lobe, mu_i, lv, 0, NULL);
-			break;
-		case MAT_ROUGH_BACKSCATTER:
-			q[k] = lobe_cone_albedo(wi, 9.0 * BS_WIDTH_DEG * M_PI / 180.0, lv, cone_backscatter, &x);
-			break;
-		case MAT_SHARP_LOBE: {
-			double wr[3] = { -wi[0], 0, mu_i };
-			/* beyond gmax the lobe is below 1e-16 of its peak */
-			q[k] = lobe_cone_albedo(wr, acos(pow(1e-16, 1.0 / PHONG_N)), lv, cone_phong, &x);
-			break;
-		}
-		default:
-			q[k] = 0;
-		}
-	}
-}
-
-/* A conductor lobe's albedo per wavelength at level + 1 into dhr, and its bound (largest relative difference
- * against level, over the wavelengths, x4, plus 2e-7) into sigma. */
-static int conductor_part(const struct lobe_hv *L, double mu_i, int level, int nwl, double *dhr, double *sigma,
-			  struct acq_err *err)
-{
-	double *coarse = malloc(sizeof(double) * (size_t)nwl);
-	if (!coarse)
-		return acq_errf(err, ACQ_E_NOMEM, "material: out of memory");
-	lobe_hv_albedo(L, mu_i, level, 0, coarse);
-	lobe_hv_albedo(L, mu_i, level + 1, 0, dhr);
-	/* The error comes from the geometry, the Fresnel factor is smooth: use the largest relative difference
-	 * over all wavelengths for each (robust to an accidental agreement at one wavelength). */
-	double rel = 0;
-	for (int l = 0; l < nwl; l++)
-		if (dhr[l] > 0)
-			rel = fmax(rel, fabs(dhr[l] - coarse[l]) / dhr[l]);
-	for (int l = 0; l < nwl; l++)
-		sigma[l] = (4.0 * rel + 2e-7) * dhr[l] + 1e-15;
-	free(coarse);
-	return 0;
-}
-
-/* The MERL material's channel albedos at mu_i by the midpoint rule on (90 x 360) 2^level cells of
- * (theta_o, phi_o) (the table is piecewise constant: no higher-order rule helps). */
-static void merl_channels(const struct mat *m, double mu_i, int level, double a[3])
-{
-	int nt = 90 << level, np = 360 << level;
-	double wi[3] = { sqrt(fmax(0.0, 1.0 - mu_i * mu_i)), 0, mu_i }, ht = M_PI / 2 / nt, hp = 2 * M_PI / np;
-	a[0] = a[1] = a[2] = 0;
-	for (int i = 0; i < nt; i++) {
-		double to = (i + 0.5) * ht, w = sin(to) * cos(to) * ht * hp, row[3] = { 0, 0, 0 };
-		for (int j = 0; j < np; j++) {
-			double wo[3], rgb[3];
-			mat_dir(to, (j + 0.5) * hp, wo);
-			merl_rgb(m, wi, wo, rgb);
-			for (int k = 0; k < 3; k++)
-				row[k] += rgb[k];
-		}
-		for (int k = 0; k < 3; k++)
-			a[k] += w * row[k];
-	}
-}
-
-static int merl_dhr(const struct mat *m, double mu_i, int level, double *dhr, double *sigma)
-{
-	double a0[3], a1[3];
-	merl_channels(m, mu_i, level, a0);
-	merl_channels(m, mu_i, level + 1, a1);
-	for (int l = 0; l < m->nwl; l++) {
-		double v = 0, e = 0;
-		for (int k = 0; k < 3; k++) {
-			v += m->basis[k][l] * a1[k];
-			e += m->basis[k][l] * fabs(a1[k] - a0[k]);
-		}
-		dhr[l] = v;
-		sigma[l] = 4.0 * e + 1e-15;
-	}
-	return 0;
-}
-
-int mat_dhr(const struct mat *m, double theta_i, int level, double *dhr, double *sigma, struct acq_err *err)
-{
-	if (!(theta_i >= 0 && theta_i <= M_PI / 2 + 1e-12))
-		return acq_errf(err, ACQ_E_RANGE, "material: incidence zenith %g rad outside [0, pi/2]", theta_i);
-	if (level < 0 || level > 6)
-		return acq_errf(err, ACQ_E_RANGE, "material: quadrature level %d outside [0, 6]", level);
-	double mu_i = cos(theta_i);
-	int nwl = m->nwl;
-	memset(dhr, 0, sizeof(double) * (size_t)nwl);
-	memset(sigma, 0, sizeof(double) * (size_t)nwl);
-	if (!(mu_i > 1e-9))
-		return 0;
-	if (m->id == MAT_MERL)
-		return merl_dhr(m, mu_i, level, dhr, sigma);
-	if (m->id == MAT_METAL || m->id == MAT_CLEAR_COAT) {
-		/* the conductor lobe (metal; the coat's base through T(mu_i) T(mu_o)) */
-		if (conductor_part(m->id == MAT_METAL ? &m->lobe : &m->base, mu_i, level, nwl, dhr, sigma, err))
-			return -1;
-		if (m->id == MAT_METAL)
-			return 0;
-	}
-	/* diffuse factor: Lambertian 1 (2 int mu dmu, exact); Kelemen-coupled (1 - E_i) 2 int (1 - E) mu dmu /
-	 * (1 - E_avg) by the exact segment rule; Oren-Nayar A + B I(theta_i) (analytic, material.h) */
-	double dfac = 0;
-	switch (m->id) {
-	case MAT_WHITE:
-	case MAT_NARROW_LINES:
-	case MAT_SHARP_LOBE:
-		dfac = 2.0 * 0.5;
-		break;
-	case MAT_GREEN_PAINT:
-	case MAT_CLOTH_SHEEN:
-		dfac = (1.0 - lobe_etab_at(m->et.e, mu_i)) * 2.0 * lobe_etab_moment(m->et.e, 1) / (1.0 - m->et.eavg);
-		break;
-	case MAT_ROUGH_BACKSCATTER: {
-		double ti = theta_i, st = sin(ti);
-		dfac = m->on_a + m->on_b * (2.0 / M_PI) * (st * (ti / 2 - sin(2 * ti) / 4) + tan(ti) * (1 - st * st * st) / 3);
-		break;
-	}
-	default:
-		break;
-	}
-	double q[2];
-	achromatic_parts(m, mu_i, level, q);
-	for (int l = 0; l < nwl; l++) {
-		/* the quadrature part's spectral factor: Fresnel (inside q) or a fixed spectrum */
-		double spec = m->id == MAT_ROUGH_BACKSCATTER ? m->rho[l] : m->id == MAT_CLOTH_SHEEN || m->id == MAT_SHARP_LOBE ?
-			      m->fix2[l] : 1.0;
-		double val = spec * q[1], bound = 4.0 * spec * fabs(q[1] - q[0]) + 2e-7 * val;
-		dhr[l] += m->rho[l] * dfac + val;
-		sigma[l] += bound + 1e-15 * (1.0 + dhr[l]);
-	}
-	return 0;
 }

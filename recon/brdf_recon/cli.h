@@ -1,5 +1,5 @@
-/* brdf-recon's shared command-line helpers (cli_*, defined in cli.c; the DHR budget cmd_dhr_* in cmd_dhr.c) and
- * the commands, one per file (recon/brdf_recon/cmd_*.c). Only the program's own files include this. */
+/* brdf-recon's shared command-line helpers (cli_*, defined in cli.c) and the commands, one per file
+ * (recon/brdf_recon/cmd_*.c; the DHR budget dhr and info share: dhr_budget.h). Only the program's own files include this. */
 #ifndef RECON_BRDF_RECON_CLI_H
 #define RECON_BRDF_RECON_CLI_H
 
@@ -9,7 +9,6 @@
 
 #include "config/acq_err.h"
 #include "config/acq_out.h"
-#include "recon/budget.h"
 #include "recon/recon.h"
 
 /* Progress line on a terminal (stderr), and its erasure. */
@@ -35,13 +34,6 @@ struct cli_out {
 int cli_out_open(struct cli_out *o, const char *path, struct acq_err *err);
 /* Finish: on ok, flush and rename the temporary into place; else remove it. 0, or -1 (err set if a write failed). */
 int cli_out_close(struct cli_out *o, int ok, struct acq_err *err);
-
-/* The DHR budget's components, in the order of dhr's CSV columns (cmd_dhr_db_names: the column names). */
-enum { DB_NOISE, DB_MODEL, DB_QUAD, DB_MISFIT, DB_RES, DB_CERT, DB_DRIFT, DB_WLCAL, DB_NONLIN, DB_REFNOISE, DB_N };
-extern const char *const cmd_dhr_db_names[DB_N];
-/* DHR and budget of model m at nth (<= 64) incidences th (degrees) into dhr, sig (total) and part[DB_N][nth*L]. */
-int cmd_dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64_t draws, uint64_t seed,
-		   const struct recon_budget_opts *bo, double *dhr, double *sig, double **part, struct acq_err *err);
 
 /* The commands: argv[0] is the command's name; exit status. */
 int cmd_fit(int argc, char **argv);

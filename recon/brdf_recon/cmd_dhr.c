@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "recon/brdf_recon/cli.h"
+#include "recon/brdf_recon/dhr_budget.h"
 #include "recon/budget.h"
 #include "recon/csvio.h"
 #include "recon/plot.h"
@@ -80,29 +81,6 @@ static void at_reference(const struct recon_model *m, const double *y, const dou
 	*uo = u;
 }
 
-const char *const cmd_dhr_db_names[DB_N] = { "sigma_noise", "sigma_model",  "sigma_quad",  "sigma_misfit", "sigma_res",
-					    "sigma_cert",  "sigma_drift", "sigma_wlcal", "sigma_nonlin", "sigma_refnoise" };
-
-/* DHR and budget of model m at nth incidences th (degrees) into dhr, sig (total) and part[DB_N][nth*L]. */
-int cmd_dhr_budget(const struct recon_model *m, size_t nth, const double *th, uint64_t draws, uint64_t seed,
-		   const struct recon_budget_opts *bo, double *dhr, double *sig, double **part, struct acq_err *err)
-{
-	double thr[64];
-	for (size_t t = 0; t < nth; t++)
-		thr[t] = th[t] * M_PI / 180.0;
-	struct recon_dhr_parts parts = { .noise = part[DB_NOISE], .model = part[DB_MODEL], .quad = part[DB_QUAD],
-					 .misfit = part[DB_MISFIT], .res = part[DB_RES] };
-	double *srec = malloc(nth * m->nwl * sizeof *srec);
-	int rc = !srec ? acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory")
-		 : recon_dhr_parts(m, nth, thr, (int)draws, seed, dhr, srec, &parts, cli_progress, NULL, err) ||
-			 recon_budget(nth, m->nwl, m->wl, dhr, srec, bo, part[DB_CERT], part[DB_DRIFT], part[DB_WLCAL],
-				      part[DB_NONLIN], part[DB_REFNOISE], sig, err)
-		 ? -1
-		 : 0;
-	free(srec);
-	return rc;
-}
-
 /* dhr's command line. */
 struct dhr_args {
 	const char *model, *outp, *refp, *zout, *plot, *certp, *refnp;
@@ -128,6 +106,12 @@ static int dhr_parse_theta(const char *arg, struct dhr_args *a)
 	if (!a->nth)
 		return cli_usage_err("dhr", "--theta-i is empty");
 	return 0;
+}
+
+/* A budget option's number into *v: 0, or -1 unless it is a number in [0, hi). */
+static int dhr_parse_in(const char *arg, double *v, double hi)
+{
+	return cli_parse_double(arg, v) || !(*v >= 0 && *v < hi) ? -1 : 0;
 }
 
 /* The options and the model's path into a (defaults first); -1 to go on, or the exit status (help: 0, a usage
@@ -173,19 +157,19 @@ static int dhr_parse(int argc, char **argv, struct dhr_args *a)
 		case 'C': a->certp = optarg; break;
 		case 'F': a->refnp = optarg; break;
 		case 'c':
-			if (cli_parse_double(optarg, &bo->cert_rel) || !(bo->cert_rel >= 0 && bo->cert_rel < 1))
+			if (dhr_parse_in(optarg, &bo->cert_rel, 1))
 				return cli_usage_err("dhr", "--cert-rel needs a number in [0, 1)");
 			break;
 		case 'd':
-			if (cli_parse_double(optarg, &bo->drift_rel) || !(bo->drift_rel >= 0 && bo->drift_rel < 1))
+			if (dhr_parse_in(optarg, &bo->drift_rel, 1))
 				return cli_usage_err("dhr", "--drift-rel needs a number in [0, 1)");
 			break;
 		case 'w':
-			if (cli_parse_double(optarg, &bo->wl_cal_nm) || !(bo->wl_cal_nm >= 0 && bo->wl_cal_nm < 100))
+			if (dhr_parse_in(optarg, &bo->wl_cal_nm, 100))
 				return cli_usage_err("dhr", "--wl-cal-nm needs a number in [0, 100)");
 			break;
 		case 'N':
-			if (cli_parse_double(optarg, &bo->nonlin_rel) || !(bo->nonlin_rel >= 0 && bo->nonlin_rel < 1))
+			if (dhr_parse_in(optarg, &bo->nonlin_rel, 1))
 				return cli_usage_err("dhr", "--nonlin-rel needs a number in [0, 1)");
 			break;
 		case 'K': {
@@ -211,27 +195,13 @@ static int dhr_parse(int argc, char **argv, struct dhr_args *a)
 static int dhr_cert_load(const char *certp, struct recon_budget_opts *bo, double **cert, struct acq_err *err)
 {
 	static const char *const cn[3] = { "wavelength_nm", "rho", "u" };
-	size_t ncert = 0;
-	double *rows = NULL;
-	if (csvio_read_columns(certp, cn, 3, &ncert, &rows, err))
+	size_t n = 0;
+	if (csvio_read_columns_cm(certp, cn, 3, &n, cert, err))
 		return -1;
-	double *cw = malloc(3 * ncert * sizeof *cw);
-	if (!cw || !ncert) {
-		free(rows);
-		free(cw);
-		return acq_errf(err, ACQ_E_INVAL, "dhr: --cert %s: no rows", certp);
-	}
-	for (size_t i = 0; i < ncert; i++) { /* rows → columns */
-		cw[i] = rows[3 * i];
-		cw[ncert + i] = rows[3 * i + 1];
-		cw[2 * ncert + i] = rows[3 * i + 2];
-	}
-	free(rows);
-	*cert = cw;
-	bo->cert_wl = cw;
-	bo->cert_rho = cw + ncert;
-	bo->cert_u = cw + 2 * ncert;
-	bo->ncert = ncert;
+	bo->cert_wl = *cert;
+	bo->cert_rho = *cert + n;
+	bo->cert_u = *cert + 2 * n;
+	bo->ncert = n;
 	return 0;
 }
 
@@ -241,27 +211,16 @@ static int dhr_refn_load(const char *path, struct recon_budget_opts *bo, double 
 {
 	static const char *const cn[2] = { "wavelength_nm", "u_rel" };
 	size_t n = 0;
-	double *rows = NULL;
-	if (csvio_read_columns(path, cn, 2, &n, &rows, err))
+	double *cw = NULL;
+	if (csvio_read_columns_cm(path, cn, 2, &n, &cw, err))
 		return -1;
-	double *cw = n ? malloc(2 * n * sizeof *cw) : NULL;
-	if (!cw) {
-		free(rows);
-		return acq_errf(err, n ? ACQ_E_NOMEM : ACQ_E_INVAL, "dhr: --ref-noise %s: %s", path,
-				n ? "out of memory" : "no rows");
-	}
-	for (size_t i = 0; i < n; i++) {
-		cw[i] = rows[2 * i];
-		cw[n + i] = rows[2 * i + 1];
+	for (size_t i = 0; i < n; i++)
 		if (!(cw[n + i] >= 0 && cw[n + i] < 1) || (i && !(cw[i] > cw[i - 1]))) {
 			acq_errf(err, ACQ_E_INVAL, "dhr: --ref-noise %s: data row %zu (%g nm, u_rel %g): wavelengths must "
 				 "increase and u_rel be in [0, 1)", path, i + 1, cw[i], cw[n + i]);
-			free(rows);
 			free(cw);
 			return -1;
 		}
-	}
-	free(rows);
 	*refn = cw;
 	bo->refn_wl = cw;
 	bo->refn_u = cw + n;
@@ -281,7 +240,7 @@ static int dhr_write(const char *outp, const struct recon_model *m, const struct
 	int ok = 1;
 	fputs("theta_i,wavelength_nm,dhr,sigma", o.f);
 	for (int k = 0; k < DB_N; k++)
-		fprintf(o.f, ",%s", cmd_dhr_db_names[k]);
+		fprintf(o.f, ",%s", dhr_budget_names[k]);
 	fputc('\n', o.f);
 	char b[64];
 	for (size_t t = 0; ok && t < a->nth; t++)
@@ -304,8 +263,8 @@ static int dhr_write(const char *outp, const struct recon_model *m, const struct
 	return ok ? 0 : -1;
 }
 
-/* The reference file for --reference: its rows (wavelength_nm,dhr,sigma) in *ref, *nref, and the index of
- * --reference-theta among --theta-i in *tref; 0 or -1 with err. */
+/* The reference file for --reference: its columns wavelength_nm, dhr, sigma (*nref values each, one after the other)
+ * in *ref, and the index of --reference-theta among --theta-i in *tref; 0 or -1 with err. */
 static int dhr_ref_read(const struct dhr_args *a, size_t *tref, double **ref, size_t *nref, struct acq_err *err)
 {
 	static const char *const names[3] = { "wavelength_nm", "dhr", "sigma" };
@@ -314,7 +273,7 @@ static int dhr_ref_read(const struct dhr_args *a, size_t *tref, double **ref, si
 			break;
 	if (*tref == a->nth)
 		return acq_errf(err, ACQ_E_INVAL, "dhr: --reference-theta %g is not among --theta-i", a->ref_th);
-	return csvio_read_columns(a->refp, names, 3, nref, ref, err) ? -1 : 0;
+	return csvio_read_columns_cm(a->refp, names, 3, nref, ref, err) ? -1 : 0;
 }
 
 /* The residual (model − reference) / σ per compared wavelength, kept for the plot. */
@@ -323,7 +282,7 @@ struct dhr_resid {
 	size_t n;
 };
 
-/* The model at incidence tref against the reference rows: per-wavelength z to --z-out (or stderr), the agreement and
+/* The model at incidence tref against the reference's columns (dhr_ref_read): per-wavelength z to --z-out (or stderr), the agreement and
  * χ² lines on stderr; the residual into *res when a plot is asked for. 0 or -1 with err. */
 static int dhr_compare(const struct dhr_args *a, const struct recon_model *m, const double *dhr, const double *sig,
 		       const double *corr, size_t tref, const double *ref, size_t nref, struct dhr_resid *res,
@@ -342,14 +301,14 @@ static int dhr_compare(const struct dhr_args *a, const struct recon_model *m, co
 	double *cw = cmp, *md = cmp + nref, *ms = cmp + 2 * nref, *mc = cmp + 3 * nref, *rv = cmp + 4 * nref,
 	       *rs = cmp + 5 * nref, *z = cmp + 6 * nref, *ui = cmp + 8 * nref, *ei = cmp + 9 * nref;
 	for (size_t i = 0; ok && i < nref; i++) {
-		double wl = ref[3 * i];
-		if (!(wl >= m->wl[0] && wl <= m->wl[L - 1]) || !isfinite(ref[3 * i + 1]) || !(ref[3 * i + 2] >= 0))
+		double wl = ref[i], rdhr = ref[nref + i], rsig = ref[2 * nref + i];
+		if (!(wl >= m->wl[0] && wl <= m->wl[L - 1]) || !isfinite(rdhr) || !(rsig >= 0))
 			continue;
 		cw[nc] = wl;
 		at_reference(m, dhr + tref * L, sig + tref * L, corr + tref * L, wl, &md[nc], &ms[nc], &mc[nc], &ji[nc],
 			     &ui[nc], &ei[nc]);
-		rv[nc] = ref[3 * i + 1];
-		rs[nc] = ref[3 * i + 2];
+		rv[nc] = rdhr;
+		rs[nc] = rsig;
 		nc++;
 	}
 	for (size_t l = 0; ok && l < L; l++) { /* the model's independent σ at its own wavelengths */
@@ -403,38 +362,20 @@ static int dhr_compare(const struct dhr_args *a, const struct recon_model *m, co
 	return ok ? 0 : -1;
 }
 
-/* --plot: the curves with their bands, the reference (read again from its file, when compared) and the residual
- * panel (when kept); 0 or -1 with err. */
+/* --plot: the curves with their bands, the reference (its columns from dhr_ref_read, nref rows; NULL: none) and
+ * the residual panel (when kept); 0 or -1 with err. */
 static int dhr_plot(const struct dhr_args *a, const struct recon_model *m, const double *dhr, const double *sig,
-		    int with_ref, const struct dhr_resid *res, struct acq_err *err)
+		    const double *ref, size_t nref, const struct dhr_resid *res, struct acq_err *err)
 {
 	size_t L = m->nwl;
 	struct plot_curve curves[64], refc, resc;
 	char labels[64][32];
-	double *refwl = NULL, *refy = NULL, *refs = NULL;
 	for (size_t t = 0; t < a->nth; t++) {
 		snprintf(labels[t], sizeof labels[t], "\u03b8i = %g\u00b0", a->th[t]);
 		curves[t] = (struct plot_curve){ labels[t], m->wl, dhr + t * L, sig + t * L, L };
 	}
-	if (with_ref) {
-		size_t nr = 0;
-		static const char *const names[3] = { "wavelength_nm", "dhr", "sigma" };
-		double *all = NULL;
-		if (csvio_read_columns(a->refp, names, 3, &nr, &all, err) == 0) {
-			refwl = malloc(nr * sizeof *refwl);
-			refy = malloc(nr * sizeof *refy);
-			refs = malloc(nr * sizeof *refs);
-			if (refwl && refy && refs) {
-				for (size_t i = 0; i < nr; i++) {
-					refwl[i] = all[3 * i];
-					refy[i] = all[3 * i + 1];
-					refs[i] = all[3 * i + 2];
-				}
-				refc = (struct plot_curve){ "reference", refwl, refy, refs, nr };
-			}
-		}
-		free(all);
-	}
+	if (ref)
+		refc = (struct plot_curve){ "reference", ref, ref + nref, ref + 2 * nref, nref };
 	struct plot_dhr_opts po;
 	plot_dhr_opts_default(&po);
 	po.title = "Directional-hemispherical reflectance (bands: \u00b12\u03c3)";
@@ -443,11 +384,7 @@ static int dhr_plot(const struct dhr_args *a, const struct recon_model *m, const
 		po.residual = &resc;
 		po.height = 720;
 	}
-	int rc = plot_dhr_png(a->plot, curves, a->nth, refwl && refy && refs ? &refc : NULL, &po, NULL, err) ? -1 : 0;
-	free(refwl);
-	free(refy);
-	free(refs);
-	return rc;
+	return plot_dhr_png(a->plot, curves, a->nth, ref ? &refc : NULL, &po, NULL, err) ? -1 : 0;
 }
 
 int cmd_dhr(int argc, char **argv)
@@ -479,7 +416,7 @@ int cmd_dhr(int argc, char **argv)
 		acq_errf(&err, ACQ_E_NOMEM, "dhr: out of memory");
 	for (int k = 0; k < DB_N; k++)
 		part[k] = pbuf ? pbuf + (size_t)k * NL : NULL;
-	if (ok && cmd_dhr_budget(m, a.nth, a.th, a.draws, a.seed, &a.bo, dhr, sig, part, &err))
+	if (ok && dhr_budget(m, a.nth, a.th, a.draws, a.seed, &a.bo, dhr, sig, part, &err))
 		ok = 0;
 	cli_progress_end();
 	for (size_t i = 0; ok && i < NL; i++) /* the correlated part: one common factor (certificate, drift) */
@@ -496,7 +433,7 @@ int cmd_dhr(int argc, char **argv)
 		ok = 0;
 	if (ok && ref && dhr_compare(&a, m, dhr, sig, corr, tref, ref, nref, &res, &err))
 		ok = 0;
-	if (ok && a.plot && dhr_plot(&a, m, dhr, sig, ref != NULL, &res, &err))
+	if (ok && a.plot && dhr_plot(&a, m, dhr, sig, ref, nref, &res, &err))
 		ok = 0;
 	free(res.z);
 	free(res.wl);

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "recon/brdf_recon/cli.h"
+#include "recon/brdf_recon/dhr_budget.h"
 #include "recon/budget.h"
 #include "recon/recon.h"
 
@@ -48,7 +49,7 @@ int cmd_info(int argc, char **argv)
 			acq_errf(&err, ACQ_E_NOMEM, "info: out of memory");
 		for (int k = 0; ok && k < DB_N; k++)
 			part[k] = buf + (size_t)k * L;
-		if (ok && cmd_dhr_budget(m, 1, &th, 16, 1, &bo, buf + DB_N * L, buf + (DB_N + 1) * L, part, &err))
+		if (ok && dhr_budget(m, 1, &th, 16, 1, &bo, buf + DB_N * L, buf + (DB_N + 1) * L, part, &err))
 			ok = 0;
 		cli_progress_end();
 		if (ok) {
@@ -57,7 +58,7 @@ int cmd_info(int argc, char **argv)
 			for (int k = -2; k < DB_N; k++) {
 				memcpy(tmp, k == -2 ? buf + DB_N * L : k == -1 ? buf + (DB_N + 1) * L : part[k], L * sizeof *tmp);
 				qsort(tmp, L, sizeof *tmp, cmp_double);
-				printf("  %-14s %.3g  %.3g\n", k == -2 ? "dhr" : k == -1 ? "sigma" : cmd_dhr_db_names[k], tmp[L / 2],
+				printf("  %-14s %.3g  %.3g\n", k == -2 ? "dhr" : k == -1 ? "sigma" : dhr_budget_names[k], tmp[L / 2],
 				       tmp[L - 1]);
 			}
 		}

@@ -116,9 +116,18 @@ static void test_queries_and_columns(void **state)
 	assert_int_equal(rows, 2);
 	assert_true(d[3] == 500 && d[4] == 0.2 && d[5] == 0.02);
 	free(d);
+	/* column-major: the sigma column first in the request, each column's rows one after the other */
+	static const char *const perm[2] = { "sigma", "wavelength_nm" };
+	assert_int_equal(csvio_read_columns_cm(path, perm, 2, &rows, &d, &err), 0);
+	assert_int_equal(rows, 2);
+	assert_true(d[0] == 0.01 && d[1] == 0.02 && d[2] == 450 && d[3] == 500);
+	free(d);
 	static const char *const bad[1] = { "nope" };
 	assert_int_equal(csvio_read_columns(path, bad, 1, &rows, &d, &err), -1);
 	assert_non_null(strstr(err.msg, "missing column nope"));
+	d = (double *)1;
+	assert_int_equal(csvio_read_columns_cm(path, bad, 1, &rows, &d, &err), -1);
+	assert_null(d);
 	unlink(path);
 	assert_int_equal(csvio_read_samples("/nonexistent/x.csv", &q, &err), -1);
 	assert_int_equal(err.code, ACQ_E_NOTFOUND); /* no such file (config/acq_file.h) */
