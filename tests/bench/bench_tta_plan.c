@@ -12,7 +12,10 @@
  *   bench_tta_plan batch CONF PLAN STATE.json SELECT.json [--time-scale S] -> JSON {k, predicted_s, steps}
  * STATE.json: {"done": [[laser_theta, detector_theta, detector_phi], ...] (every planned point so far),
  * "from": [..3..] (the arms), "spent_s": S (predicted seconds so far)}. A step is [laser_theta, detector_theta,
- * detector_phi, theta_i, phi_i, theta_o, phi_o, pick rank (batch; -1 for the seed)]. Exit 2 on bad input. */
+ * detector_phi, theta_i, phi_i, theta_o, phi_o, pick rank (batch; -1 for the seed)]; "split": where predicted_s
+ * goes (split_json). With ACQ_TTA_SPLIT_LOG=FILE each seed and batch planned also appends its split to FILE, one
+ * JSON line (the study runs this program per decision; the breakdown of an adaptive point's seconds by term:
+ * README "Time to accuracy", session 17). Exit 2 on bad input. */
 #include <jansson.h>
 #include <math.h>
 #include <stdio.h>
@@ -70,16 +73,46 @@ static json_t *steps_json(const struct bench_geom *g, const struct plan_result *
 	return s;
 }
 
-/* Where a plan's predicted seconds go (plan.h: motion with settle, dwell, darks, reference, host; the rest of
- * predicted_s is the executor's per-point polling, probes and HDR exposures, plan_time.c) and the axes' travel. */
+/* Where a plan's predicted seconds go (plan.h: motion with settle, dwell, darks, reference, host: the ordering
+ * model's split; and plan_time.c's terms t_*_s, which with darks, host and reference make up predicted_s) and the
+ * axes' travel. */
 static json_t *split_json(const struct plan_result *r)
 {
 	if (!r)
 		return json_object();
-	return json_pack("{s:f, s:f, s:f, s:f, s:f, s:f, s:f, s:f, s:I}", "motion_s", r->motion_s, "dwell_s", r->dwell_s,
-			 "darks_s", r->darks_s, "reference_s", r->reference_s, "host_s", r->host_s, "laser_deg",
-			 r->travel_deg[0], "det_theta_deg", r->travel_deg[1], "det_phi_deg", r->travel_deg[2], "incidences",
-			 (json_int_t)r->n_groups);
+	json_t *o = json_pack("{s:f, s:f, s:f, s:f, s:f, s:f, s:f, s:f, s:I}", "motion_s", r->motion_s, "dwell_s",
+			      r->dwell_s, "darks_s", r->darks_s, "reference_s", r->reference_s, "host_s", r->host_s,
+			      "laser_deg", r->travel_deg[0], "det_theta_deg", r->travel_deg[1], "det_phi_deg",
+			      r->travel_deg[2], "incidences", (json_int_t)r->n_groups);
+	/* plan_time.c's own terms of predicted_s: with darks_s, host_s and reference_s they sum to it; rest_s is what
+	 * they miss (0 to rounding on this model: a term added to plan_time.c without its figure in plan_result shows) */
+	double rest = r->predicted_s - (r->t_motion_s + r->t_settle_s + r->t_probe_s + r->t_first_s + r->t_hdr_s +
+					r->darks_s + r->host_s + r->reference_s);
+	json_object_set_new(o, "rest_s", json_real(fabs(rest) > 1e-9 * fmax(1, r->predicted_s) ? rest : 0));
+	json_object_set_new(o, "t_move_s", json_real(r->t_motion_s));
+	json_object_set_new(o, "t_settle_s", json_real(r->t_settle_s));
+	json_object_set_new(o, "t_probe_s", json_real(r->t_probe_s));
+	json_object_set_new(o, "t_first_s", json_real(r->t_first_s));
+	json_object_set_new(o, "t_hdr_s", json_real(r->t_hdr_s));
+	json_object_set_new(o, "points", json_integer((json_int_t)r->n_steps));
+	return o;
+}
+
+/* With ACQ_TTA_SPLIT_LOG set, one JSON line per planned seed or batch appended to that file: the study's bench
+ * seconds by term (split_json), for a breakdown of where an adaptive point's seconds go. */
+static void split_log(const char *what, const struct plan_result *r)
+{
+	const char *path = getenv("ACQ_TTA_SPLIT_LOG");
+	FILE *f = path && *path && r ? fopen(path, "a") : NULL;
+	if (!f)
+		return;
+	json_t *o = split_json(r);
+	json_object_set_new(o, "what", json_string(what));
+	json_object_set_new(o, "predicted_s", json_real(r->predicted_s));
+	json_dumpf(o, f, JSON_COMPACT);
+	fputc('\n', f);
+	json_decref(o);
+	fclose(f);
 }
 
 static int print_json(json_t *o)
@@ -188,6 +221,7 @@ static int cmd_batch(const struct plan_spec *s, const struct bench_geom *g, stru
 		r = NULL;
 	}
 	free(pos);
+	split_log("batch", r);
 	for (size_t i = 0; r && i < r->n_steps; i++)
 		r->steps[i].req = keep[r->steps[i].req]; /* the pick's rank in select's order */
 	free(keep);
@@ -229,6 +263,7 @@ int main(int argc, char **argv)
 			rc = fail(argv[3], err.msg);
 		else {
 			plan_time_apply(s, g, &t, r);
+			split_log("seed", r);
 			rc = print_json(json_pack("{s:f, s:o, s:o}", "predicted_s", r->predicted_s, "steps",
 						  steps_json(g, r, false), "split", split_json(r)));
 		}
