@@ -247,6 +247,9 @@ struct plan_timing {
 	bool have_start;            /* the arms' position when the sweep starts is known (the daemon knows it) */
 	struct plan_pos start;      /* then the move from there to ref_pose (or the first point) is counted */
 	struct plan_prior prior;    /* auto integration: the exposure prior when prior.sweep > 0 (plan_time.c) */
+	bool prior_trend;           /* an incidence beyond the prior's zeniths follows the three end rows' monotone trend
+				     * at PLAN_TREND_WEIGHT (plan_time.c trend_row; default true, never for an adaptive
+				     * spec); false: the nearest row */
 	/* an adaptive batch appended to a running sweep (plan_timing_continue): the executor keeps its dark cache
 	 * unless the batch starts at another incidence (executor_acq.c), so the first step clears it only then, and
 	 * the rungs counted after cont_since_clear points there */
@@ -320,6 +323,7 @@ void plan_time_apply(const struct plan_spec *spec, const struct bench_geom *g, c
 #define PLAN_EXPO_SLOPE_ONE 0.0462 /* ln 2 / 15: per degree, fewer than two measured incidences */
 #define PLAN_EXPO_SLOPE_MIN 0.01   /* per degree: the least g with two or more */
 #define PLAN_PRIOR_SAME_DEG 0.5    /* a prior row within this (degrees) is the incidence itself */
+#define PLAN_TREND_WEIGHT 0.5      /* of a monotone trend's slope, beyond the measured zeniths (plan_time.c) */
 enum plan_interval {
 	PLAN_IV_NONE,         /* fixed integration, adaptive, or every incidence measured: low = high = predicted */
 	PLAN_IV_POLICY,       /* no exposure measured: the policy's reach */

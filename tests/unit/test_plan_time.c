@@ -609,6 +609,74 @@ static void test_interval(void **state)
 	unload(&f);
 }
 
+/* An incidence beyond the prior's zeniths follows the three end rows' trend at half its slope when they rise (or
+ * fall) monotonically: timed as by a row of its own with the end row's times scaled; not when they do not, nor with
+ * prior_trend off, nor for an incidence between measured rows. */
+static void test_prior_trend(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, "name: t\nincidence: {theta_deg: [20, 27.5, 35, 50]}\n"
+		 "observation: {theta_deg: [30], phi_deg: [0, 45, 90, 135, 180, 225, 270, 315]}\n"
+		 "integration: {mode: auto, estimate_ms: 20, max_ms: 2000, spread: 1, hdr_fraction: 0}\naverages: 3\n"
+		 "blind_points: drop\n");
+	struct plan_timing t = timing();
+	assert_true(t.prior_trend); /* the model's default */
+	t.prior = (struct plan_prior){ .sweep = 5, .n_inc = 3 };
+	double mean[3] = { 60, 80, 100 }, th[3] = { 35, 20, 27.5 }; /* the rows in any order */
+	for (int i = 0; i < 3; i++) {
+		double m = mean[th[i] == 20 ? 0 : th[i] == 27.5 ? 1 : 2];
+		t.prior.inc[i] = (struct plan_prior_inc){ .theta_i = th[i], .points = 8, .median_ms = m, .mean_ms = m,
+							  .spread = 2, .darks_per_clear = 2, .dark_ms = m,
+							  .extra_per_point = 0.5, .extra_ms = 4 * m };
+	}
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double trend = f.res->predicted_s;
+	/* by hand: a fourth row at 50° = the 35° row times exp(0.5 · ln(100/60)/15 · 15) = (5/3)^0.5 */
+	double fac = sqrt(100.0 / 60);
+	struct plan_timing u = t;
+	u.prior_trend = false;
+	plan_time_apply(f.spec, &f.g, &u, f.res);
+	double nearest = f.res->predicted_s;
+	u.prior.n_inc = 4;
+	u.prior.inc[3] = (struct plan_prior_inc){ .theta_i = 50, .points = 8, .median_ms = 100 * fac,
+						  .mean_ms = 100 * fac, .spread = 2, .darks_per_clear = 2,
+						  .dark_ms = 100 * fac, .extra_per_point = 0.5, .extra_ms = 400 * fac };
+	plan_time_apply(f.spec, &f.g, &u, f.res);
+	assert_true(fabs(trend - f.res->predicted_s) < TOL);
+	assert_true(trend > nearest + 0.5);
+	/* not monotone (60, 80, 70): the nearest row */
+	t.prior.inc[0].mean_ms = 70;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double bumpy = f.res->predicted_s;
+	t.prior_trend = false;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(bumpy - f.res->predicted_s) < TOL);
+	/* a falling trend lowers it: 100, 80, 60 */
+	t.prior_trend = true;
+	t.prior.inc[0].mean_ms = 60;  /* 35° */
+	t.prior.inc[1].mean_ms = 100; /* 20° */
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double fall = f.res->predicted_s;
+	t.prior_trend = false;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fall < f.res->predicted_s - 0.2);
+	/* rows at 20, 35 and 50° rising: the plan's 27.5° lies between them, no trend (the nearest row's times) */
+	t.prior.inc[0] = t.prior.inc[1] = t.prior.inc[2] = (struct plan_prior_inc){ .points = 8, .spread = 2,
+										     .darks_per_clear = 2 };
+	for (int i = 0; i < 3; i++) {
+		t.prior.inc[i].theta_i = 20 + 15 * i;
+		t.prior.inc[i].mean_ms = t.prior.inc[i].median_ms = t.prior.inc[i].dark_ms = 60 + 20 * i;
+	}
+	t.prior_trend = true;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double between = f.res->predicted_s;
+	t.prior_trend = false;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(between - f.res->predicted_s) < TOL);
+	unload(&f);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -625,6 +693,7 @@ int main(void)
 		cmocka_unit_test(test_estimate_range),
 		cmocka_unit_test(test_prior_slope),
 		cmocka_unit_test(test_interval),
+		cmocka_unit_test(test_prior_trend),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
