@@ -463,7 +463,7 @@ void ctl_print_plan(FILE *f, json_t *r)
 		ctl_fmt_dur(num(iv, "high_s"), b, sizeof b);
 		if (!strcmp(str(iv, "basis"), "policy"))
 			fprintf(f, "  interval %s to %s: no exposure of the sample known yet, every exposure between the "
-				   "policy's %.3g and %.3g ms\n", a, b, num(iv, "min_ms"), num(iv, "max_ms"));
+				   "policy's %g and %g ms\n", a, b, num(iv, "min_ms"), num(iv, "max_ms"));
 		else
 			fprintf(f, "  interval %s to %s: incidences the exposure prior has not measured, their exposures "
 				   "within a factor exp(%.3g/deg x the distance to the nearest measured one)\n", a, b,
