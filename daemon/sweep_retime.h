@@ -21,7 +21,9 @@
  * incidences (sweep.dark_every -1) the next incidence pays only the darks of rungs not taken yet (plan_time.c):
  * metal quick +4.2 / +12.1 %, cloth-sheen within ±2 %; what is left is the exposure times' change with the
  * incidence. Re-timing after every point instead (eta_replan re-expressing the interval under way) was measured
- * worse on the metal's quick plan (−8.1 / +39.8 / +17.4 % at 25 / 50 / 75 %) and not kept. */
+ * worse on the metal's quick plan (−8.1 / +39.8 / +17.4 % at 25 / 50 / 75 %) and not kept. Session 17: the plan's
+ * interval where the exposures are unknown (plan_time_interval) is kept per step and moves the ETA's two ends
+ * (sweep_retime_bounds, sweep_retime_eta; sweep.progress eta_low_s, eta_high_s). */
 #ifndef SWEEP_RETIME_H
 #define SWEEP_RETIME_H
 

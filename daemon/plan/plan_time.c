@@ -48,6 +48,9 @@
  *     the nearest prior incidence's figures instead of the band: its mean first exposure for the probe and the
  *     measurement, its darks (as many distinct times as it needed, at their mean time) and its HDR exposures per
  *     point. The repeat of a sweep is then timed by what the sample took, whatever estimate the plan gives;
+ *   - where the sample's exposures are unknown (no prior, or incidences the prior has not measured) the model
+ *     also gives an interval (plan_time_interval, below), and an incidence beyond the measured zeniths follows the
+ *     end rows' monotone trend at half its slope (trend_row; session 17, README "How long a sweep takes");
  * Not modelled: saturation redos, fault recovery, the operator's sample swap; the live ETA (daemon/eta.c) adds the time per
  * point the sweep has measured beyond this model. */
 #include "daemon/plan/plan.h"
