@@ -316,7 +316,8 @@ void plan_time_apply(const struct plan_spec *spec, const struct bench_geom *g, c
 		     struct plan_result *r);
 /* The interval of an auto sweep's duration where its exposures are unknown (plan_time.c): an incidence the exposure
  * prior has not measured (farther than PLAN_PRIOR_SAME_DEG from each of its rows) takes its nearest row's times
- * scaled by exp(-/+ g·Δθ), g = plan_prior_slope per degree; with no prior at all, every exposure at the policy's
+ * scaled by exp(-/+ g·Δθ), g = plan_prior_slope per degree, and its HDR share 0 at the low end, the measured
+ * rows' most at the high end; with no prior at all, every exposure at the policy's
  * reach (min_ms; the plan's max_ms with the HDR share). The constants are the steepest changes measured on the
  * simulated samples (plan_time.c): the metal's quick plan 2.6x in 25° with one incidence known (ln 2 / 15° per
  * degree), the cloth-sheen's slow fall (0.4 %/° over 60°) below what adjacent rows show. */
