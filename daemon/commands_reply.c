@@ -24,6 +24,11 @@ json_t *cmd_progress_json(struct app *app)
 			      "done", p.points_done, "total", p.points_total, "message", p.message);
 	/* wall-clock seconds, only while running: a paused sweep has no ETA that counts down */
 	json_object_set_new(o, "eta_s", p.state == SWEEP_RUNNING && isfinite(p.eta_s) ? json_real(p.eta_s) : json_null());
+	if (p.state == SWEEP_RUNNING && isfinite(p.eta_s) && isfinite(p.eta_low_s) && isfinite(p.eta_high_s)) {
+		/* where the rest's exposures are unknown (an auto sweep's unmeasured incidences) */
+		json_object_set_new(o, "eta_low_s", json_real(p.eta_low_s));
+		json_object_set_new(o, "eta_high_s", json_real(p.eta_high_s));
+	}
 	/* a pause asked while a point is measured takes effect after it (sweep.pause replies by then or after 10 s) */
 	json_object_set_new(o, "pause_pending", json_boolean(p.state == SWEEP_RUNNING && p.pause_pending));
 	return o;

@@ -100,6 +100,8 @@ static double bench_work(const struct sweep *sw, int done)
 	return s;
 }
 
+static void retime_bounds(struct sweep *sw);
+
 static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double eta, const char *phase)
 {
 	struct sweep *sw = ctx;
@@ -114,6 +116,7 @@ static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double
 			log_msg(LOG_WARNING, "sweep %lld: re-timing the plan: %s", (long long)sweep_id, err.msg);
 		else if (rc > 0) {
 			eta_replan(&sw->eta, sweep_retime_plan_at, sw->plan);
+			retime_bounds(sw);
 			log_msg(LOG_DEBUG, "sweep %lld: plan re-timed at point %d from its own exposures: %.1f s",
 				(long long)sweep_id, done, sw->plan->predicted_s);
 		}
@@ -126,10 +129,16 @@ static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double
 	eta_work(&sw->eta, bench_work(sw, done));
 	eta = eta_update(&sw->eta, done, total, plan_at, plan_total, loop_now(sw->env.loop), loop_monotonic(NULL));
 	sw->last.eta_s = eta;
+	/* where the exposures of the rest are unknown, the ETA's interval (sweep_retime_eta) */
+	sweep_retime_eta(&sw->retime, sw->plan, done, eta, sw->eta.scale, &sw->last.eta_low_s, &sw->last.eta_high_s);
 	json_t *d = json_pack("{s:I,s:s,s:i,s:i,s:s}", "sweep", (json_int_t)sweep_id, "state", "running", "done", done,
 			      "total", total, "point", phase);
 	if (d && isfinite(eta))
 		json_object_set_new(d, "eta_s", json_real(eta));
+	if (d && isfinite(sw->last.eta_low_s) && isfinite(sw->last.eta_high_s)) {
+		json_object_set_new(d, "eta_low_s", json_real(sw->last.eta_low_s));
+		json_object_set_new(d, "eta_high_s", json_real(sw->last.eta_high_s));
+	}
 	emit(sw, "sweep.progress", d);
 }
 
@@ -373,7 +382,7 @@ int sweep_init(const struct sweep_env *env, struct sweep **out, struct acq_err *
 		loop_fd_urgent(env->loop, dfd);
 		sw->cfg.durable_async = true;
 	}
-	sw->last.eta_s = NAN;
+	sw->last.eta_s = sw->last.eta_low_s = sw->last.eta_high_s = NAN;
 	*out = sw;
 	return 0;
 }
@@ -453,6 +462,14 @@ void sweep_plan_prior_of(struct sweep *sw, const char *sample, int64_t exclude, 
 
 static int plan_cfg(struct sweep *sw, struct ex_cfg *cfg, struct acq_err *err);
 
+/* The interval of the sweep's time where its exposures are unknown (sweep_retime_bounds), for the ETA's. */
+static void retime_bounds(struct sweep *sw)
+{
+	struct acq_err err = { 0 };
+	if (sweep_retime_bounds(&sw->retime, sw->spec, &sw->env.conf->bench, sw->plan, &err))
+		log_msg(LOG_WARNING, "sweep %lld: %s (no interval for the ETA)", (long long)sw->id, err.msg);
+}
+
 /* Whether the sweep in sw re-times its plan as it goes (sweep_retime.h): the timing its plan was made with. */
 static void retime_begin(struct sweep *sw)
 {
@@ -460,6 +477,7 @@ static void retime_begin(struct sweep *sw)
 	sweep_plan_timing(sw, &tm);
 	sweep_plan_prior(sw, sw->spec, sw->id, &tm);
 	sweep_retime_setup(&sw->retime, sw->spec, &tm);
+	retime_bounds(sw);
 }
 
 /* Plan the text against the bench; the spec's integration settings override the configuration's. */
@@ -825,7 +843,7 @@ void sweep_get_progress(const struct sweep *sw, struct sweep_progress *p)
 	*p = sw->last;
 	if (!sw->ex) {
 		p->state = SWEEP_IDLE;
-		p->eta_s = NAN;
+		p->eta_s = p->eta_low_s = p->eta_high_s = NAN;
 		p->pause_pending = false;
 	}
 }

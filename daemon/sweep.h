@@ -9,7 +9,8 @@
  *    (not now), ACQ_E_NOTFOUND, ACQ_E_INVAL (bad plan, message names line:col), ACQ_E_UNSUPPORTED (missing
  *    piece), ACQ_E_DEVICE/ACQ_E_DISCONNECTED (device fault) — the body maps them to wire codes.
  *  - Events the executor emits (env->emit(ctx, name, data), data consumed): "sweep.progress"
- *    {sweep, state, done, total, eta_s, point}, "sweep.state" {sweep, state, reason}, "sweep.fault"
+ *    {sweep, state, done, total, eta_s, point; eta_low_s, eta_high_s where the rest's exposures
+ *    are unknown}, "sweep.state" {sweep, state, reason}, "sweep.fault"
  *    {sweep, device, message}; the body forwards them to watchers and to systemd's STATUS=.
  *  - sweep_busy() true blocks configuration reloads and manual moves/measurements.
  *  - Device faults: the executor calls devices_lost() (devices.h); the body reconnects and calls
@@ -45,6 +46,7 @@ struct sweep_progress {
 	int64_t sweep_id;          /* 0 when idle */
 	int points_done, points_total;
 	double eta_s;              /* estimated seconds left, NaN if unknown */
+	double eta_low_s, eta_high_s; /* its interval where the rest's exposures are unknown (NaN: none) */
 	double started_at;         /* Unix seconds, 0 if idle */
 	char message[256];         /* what it is doing or why it is suspended */
 	bool pause_pending;        /* running, and pauses after the point in hand */

@@ -2,12 +2,24 @@
 #include "daemon/sweep_retime.h"
 
 #include <math.h>
+#include <stdlib.h>
+#include <string.h>
 
 #include "daemon/exposure.h"
+
+static void bounds_free(struct sweep_retime *r)
+{
+	free(r->lo_at);
+	free(r->hi_at);
+	r->lo_at = r->hi_at = NULL;
+	r->n_at = 0;
+	r->iv = PLAN_IV_NONE;
+}
 
 void sweep_retime_setup(struct sweep_retime *r, const struct plan_spec *spec, const struct plan_timing *tm)
 {
 	exp_prior_rows_free(&r->rows);
+	bounds_free(r);
 	r->tm = *tm;
 	r->retimed = 0;
 	r->at = -1;
@@ -17,6 +29,7 @@ void sweep_retime_setup(struct sweep_retime *r, const struct plan_spec *spec, co
 void sweep_retime_end(struct sweep_retime *r)
 {
 	exp_prior_rows_free(&r->rows);
+	bounds_free(r);
 	r->on = false;
 }
 
@@ -47,4 +60,43 @@ double sweep_retime_plan_at(const void *plan, int i)
 {
 	const struct plan_result *r = plan;
 	return i >= 0 && (size_t)i < r->n_steps ? r->steps[i].predicted_start_s : r->predicted_s;
+}
+
+int sweep_retime_bounds(struct sweep_retime *r, const struct plan_spec *spec, const struct bench_geom *g,
+			const struct plan_result *plan, struct acq_err *err)
+{
+	bounds_free(r);
+	if (!spec || !plan || spec->integ_mode != PLAN_INTEG_AUTO || spec->adaptive || plan->n_steps == 0)
+		return 0;
+	struct plan_result c = *plan; /* the steps timed on a copy: the sweep's plan keeps its own times */
+	c.steps = malloc(plan->n_steps * sizeof *c.steps);
+	r->lo_at = malloc((plan->n_steps + 1) * sizeof *r->lo_at);
+	r->hi_at = malloc((plan->n_steps + 1) * sizeof *r->hi_at);
+	if (!c.steps || !r->lo_at || !r->hi_at) {
+		free(c.steps);
+		bounds_free(r);
+		return acq_errf(err, ACQ_E_NOMEM, "the duration's interval: out of memory");
+	}
+	memcpy(c.steps, plan->steps, plan->n_steps * sizeof *c.steps);
+	double lo, hi;
+	r->iv = plan_time_interval(spec, g, &r->tm, &c, r->lo_at, r->hi_at, &lo, &hi);
+	r->n_at = plan->n_steps + 1;
+	free(c.steps);
+	if (r->iv == PLAN_IV_NONE)
+		bounds_free(r);
+	return 0;
+}
+
+void sweep_retime_eta(const struct sweep_retime *r, const struct plan_result *plan, int done, double eta,
+		      double scale, double *lo, double *hi)
+{
+	*lo = *hi = NAN;
+	if (r->iv == PLAN_IV_NONE || !plan || !r->lo_at || r->n_at != plan->n_steps + 1 || done < 0 ||
+	    (size_t)done >= r->n_at || !isfinite(eta) || !(scale > 0))
+		return;
+	double rest = sweep_retime_plan_at(plan, (int)plan->n_steps) - sweep_retime_plan_at(plan, done);
+	double l = eta + (r->lo_at[r->n_at - 1] - r->lo_at[done] - rest) / scale;
+	double h = eta + (r->hi_at[r->n_at - 1] - r->hi_at[done] - rest) / scale;
+	*lo = fmax(0, fmin(l, eta));
+	*hi = fmax(h, eta);
 }

@@ -21,7 +21,9 @@
  * incidences (sweep.dark_every -1) the next incidence pays only the darks of rungs not taken yet (plan_time.c):
  * metal quick +4.2 / +12.1 %, cloth-sheen within ±2 %; what is left is the exposure times' change with the
  * incidence. Re-timing after every point instead (eta_replan re-expressing the interval under way) was measured
- * worse on the metal's quick plan (−8.1 / +39.8 / +17.4 % at 25 / 50 / 75 %) and not kept. */
+ * worse on the metal's quick plan (−8.1 / +39.8 / +17.4 % at 25 / 50 / 75 %) and not kept. Session 17: the plan's
+ * interval where the exposures are unknown (plan_time_interval) is kept per step and moves the ETA's two ends
+ * (sweep_retime_bounds, sweep_retime_eta; sweep.progress eta_low_s, eta_high_s). */
 #ifndef SWEEP_RETIME_H
 #define SWEEP_RETIME_H
 
@@ -40,6 +42,11 @@ struct sweep_retime {
 	int retimed;                /* re-timings done */
 	int at;                     /* the step the last one was due at */
 	struct exp_prior_rows rows; /* the sweep's exposures read so far (each re-timing reads only the new points) */
+	/* the interval where the exposures are unknown (plan_time_interval): each step's predicted start at its low and
+	 * high end (n_at = the plan's steps + 1, the last the total), set by sweep_retime_bounds */
+	enum plan_interval iv;
+	double *lo_at, *hi_at;
+	size_t n_at;
 };
 
 /* Whether the sweep planned with spec and tm (its exposure prior in tm->prior) re-times its plan: auto
@@ -57,6 +64,15 @@ bool sweep_retime_due(const struct sweep_retime *r, const struct plan_result *pl
 int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long long sweep_id,
 		       const struct plan_spec *spec, const struct bench_geom *g, struct plan_result *plan,
 		       struct acq_err *err);
+/* The interval of plan's time (auto, not adaptive: plan_time_interval with r's timing, on a copy of plan) kept in
+ * r for sweep_retime_eta; at the start of a sweep and after each re-timing. -1 with err when out of memory (r then
+ * has none). */
+int sweep_retime_bounds(struct sweep_retime *r, const struct plan_spec *spec, const struct bench_geom *g,
+			const struct plan_result *plan, struct acq_err *err);
+/* The ETA's interval at step done: eta (wall s) moved by the rest's time at the interval's two ends less the plan's
+ * rest (bench s / scale, scale the bench seconds per wall second), *lo <= eta <= *hi; both NAN without an interval. */
+void sweep_retime_eta(const struct sweep_retime *r, const struct plan_result *plan, int done, double eta,
+		      double scale, double *lo, double *hi);
 /* For eta_replan: plan (a struct plan_result) predicted start of step i, bench s (its end for i = n_steps). */
 double sweep_retime_plan_at(const void *plan, int i);
 

@@ -202,8 +202,15 @@ static void print_progress(FILE *f, const char *label, json_t *p)
 	ctl_fmt_dur(num(p, "eta_s"), eta, sizeof eta);
 	fprintf(f, "%-10s %lld %s: %lld/%lld points (%.1f %%)", label, id, state, done, total,
 		total > 0 ? 100.0 * (double)done / (double)total : 0.0);
-	if (!strcmp(state, "running") && strcmp(eta, "-"))
+	if (!strcmp(state, "running") && strcmp(eta, "-")) {
 		fprintf(f, ", ETA %s", eta);
+		if (json_is_number(json_object_get(p, "eta_low_s")) && json_is_number(json_object_get(p, "eta_high_s"))) {
+			char lo[32], hi[32]; /* the rest's exposures not all known yet */
+			ctl_fmt_dur(num(p, "eta_low_s"), lo, sizeof lo);
+			ctl_fmt_dur(num(p, "eta_high_s"), hi, sizeof hi);
+			fprintf(f, " (%s to %s)", lo, hi);
+		}
+	}
 	if (json_is_true(json_object_get(p, "pause_pending")))
 		fprintf(f, ", pausing after this point");
 	const char *msg = str(p, "message");
@@ -449,6 +456,18 @@ void ctl_print_plan(FILE *f, json_t *r)
 			   "estimate %.3g ms says; %s if it needs half, %s if twice (%s)\n", num(es, "ms"), a, b,
 			json_is_object(ad) ? "each batch is timed as it is chosen"
 					   : "the sweep re-times the rest from its own exposures as it goes");
+	}
+	json_t *iv = json_object_get(r, "interval");
+	if (json_is_object(iv)) { /* where the exposures are unknown: the duration's interval (plan_time_interval) */
+		ctl_fmt_dur(num(iv, "low_s"), a, sizeof a);
+		ctl_fmt_dur(num(iv, "high_s"), b, sizeof b);
+		if (!strcmp(str(iv, "basis"), "policy"))
+			fprintf(f, "  interval %s to %s: no exposure of the sample known yet, every exposure between the "
+				   "policy's %g and %g ms\n", a, b, num(iv, "min_ms"), num(iv, "max_ms"));
+		else
+			fprintf(f, "  interval %s to %s: incidences the exposure prior has not measured, their exposures "
+				   "within a factor exp(%.3g/deg x the distance to the nearest measured one)\n", a, b,
+				num(iv, "slope_per_deg"));
 	}
 	ctl_fmt_dur(num(r, "duration_s"), a, sizeof a);
 	ctl_fmt_dur(num(r, "raster_s"), b, sizeof b);

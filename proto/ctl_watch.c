@@ -20,6 +20,7 @@ struct ctl_view {
 	char point[160];
 	char adaptive[240];    /* an adaptive sweep: the target's value and its trend per batch */
 	double eta_s, eta_at;  /* seconds left, and the wall time they were reported */
+	double eta_lo, eta_hi; /* its interval where the rest's exposures are unknown (NAN: none) */
 	struct {
 		char name[32], state[40];
 	} dev[VIEW_DEVICES];
@@ -36,7 +37,7 @@ struct ctl_view *ctl_view_new(FILE *f, const char *where)
 	v->f = f;
 	snprintf(v->where, sizeof v->where, "%s", where);
 	snprintf(v->state, sizeof v->state, "idle");
-	v->eta_s = NAN;
+	v->eta_s = v->eta_lo = v->eta_hi = NAN;
 	return v;
 }
 
@@ -84,6 +85,10 @@ static void set_progress(struct ctl_view *v, json_t *p, const char *idkey)
 		snprintf(v->state, sizeof v->state, "%s", s_of(p, "state"));
 	x = json_object_get(p, "eta_s");
 	v->eta_s = json_is_number(x) ? json_number_value(x) : NAN;
+	x = json_object_get(p, "eta_low_s");
+	v->eta_lo = json_is_number(x) ? json_number_value(x) : NAN;
+	x = json_object_get(p, "eta_high_s");
+	v->eta_hi = json_is_number(x) ? json_number_value(x) : NAN;
 	v->eta_at = wall_now();
 }
 
@@ -161,7 +166,7 @@ void ctl_view_event(struct ctl_view *v, json_t *ev)
 		v->sweep = json_integer_value(json_object_get(ev, "sweep"));
 		snprintf(v->state, sizeof v->state, "%s", s_of(ev, "state"));
 		if (strcmp(v->state, "running"))
-			v->eta_s = NAN;
+			v->eta_s = v->eta_lo = v->eta_hi = NAN;
 		snprintf(text, sizeof text, "sweep %lld %s: %s", v->sweep, s_of(ev, "kind"), s_of(ev, "reason"));
 	} else if (!strcmp(name, "sweep.fault")) {
 		snprintf(text, sizeof text, "sweep %lld fault on %s: %s",
@@ -212,7 +217,15 @@ void ctl_view_draw(struct ctl_view *v, double now)
 			double left = v->eta_s - (now - v->eta_at);
 			ctl_fmt_dur(left > 0 ? left : 0, eta, sizeof eta);
 			ctl_fmt_time(v->eta_at + v->eta_s, at, sizeof at);
-			fprintf(f, "ETA   %s (ends about %s)\n", eta, at);
+			if (isfinite(v->eta_lo) && isfinite(v->eta_hi)) {
+				char lo[32], hi[32];
+				double el = v->eta_lo - (now - v->eta_at), eh = v->eta_hi - (now - v->eta_at);
+				ctl_fmt_dur(el > 0 ? el : 0, lo, sizeof lo);
+				ctl_fmt_dur(eh > 0 ? eh : 0, hi, sizeof hi);
+				fprintf(f, "ETA   %s (ends about %s; %s to %s, exposures of the rest not known yet)\n", eta,
+					at, lo, hi);
+			} else
+				fprintf(f, "ETA   %s (ends about %s)\n", eta, at);
 		} else {
 			fprintf(f, "ETA   -\n");
 		}

@@ -247,6 +247,9 @@ struct plan_timing {
 	bool have_start;            /* the arms' position when the sweep starts is known (the daemon knows it) */
 	struct plan_pos start;      /* then the move from there to ref_pose (or the first point) is counted */
 	struct plan_prior prior;    /* auto integration: the exposure prior when prior.sweep > 0 (plan_time.c) */
+	bool prior_trend;           /* an incidence beyond the prior's zeniths follows the three end rows' monotone trend
+				     * at PLAN_TREND_WEIGHT (plan_time.c trend_row; default true, never for an adaptive
+				     * spec); false: the nearest row */
 	/* an adaptive batch appended to a running sweep (plan_timing_continue): the executor keeps its dark cache
 	 * unless the batch starts at another incidence (executor_acq.c), so the first step clears it only then, and
 	 * the rungs counted after cont_since_clear points there */
@@ -311,6 +314,31 @@ int plan_rung(const struct plan_timing *t, double ms);
 /* Fill the predicted_* fields of r (made from spec against g) for an executor timed by t. */
 void plan_time_apply(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
 		     struct plan_result *r);
+/* The interval of an auto sweep's duration where its exposures are unknown (plan_time.c): an incidence the exposure
+ * prior has not measured (farther than PLAN_PRIOR_SAME_DEG from each of its rows) takes its nearest row's times
+ * scaled by exp(-/+ g·Δθ), g = plan_prior_slope per degree, and its HDR share 0 at the low end, the measured
+ * rows' most at the high end; with no prior at all, every exposure at the policy's
+ * reach (min_ms; the plan's max_ms with the HDR share). The constants are the steepest changes measured on the
+ * simulated samples (plan_time.c): the metal's quick plan 2.6x in 25° with one incidence known (ln 2 / 15° per
+ * degree), the cloth-sheen's slow fall (0.4 %/° over 60°) below what adjacent rows show. */
+#define PLAN_EXPO_SLOPE_ONE 0.0462 /* ln 2 / 15: per degree, fewer than two measured incidences */
+#define PLAN_EXPO_SLOPE_MIN 0.01   /* per degree: the least g with two or more */
+#define PLAN_PRIOR_SAME_DEG 0.5    /* a prior row within this (degrees) is the incidence itself */
+#define PLAN_TREND_WEIGHT 0.5      /* of a monotone trend's slope, beyond the measured zeniths (plan_time.c) */
+enum plan_interval {
+	PLAN_IV_NONE,         /* fixed integration, adaptive, or every incidence measured: low = high = predicted */
+	PLAN_IV_POLICY,       /* no exposure measured: the policy's reach */
+	PLAN_IV_EXTRAPOLATED, /* some incidence extrapolated from the measured ones */
+};
+/* The steepest change of ln(mean first exposure) per degree of incidence between p's adjacent rows, at least
+ * PLAN_EXPO_SLOPE_MIN (PLAN_EXPO_SLOPE_ONE with fewer than two rows). */
+double plan_prior_slope(const struct plan_prior *p);
+/* plan_time_apply, and the interval of its predicted_s: *lo_s, *hi_s (bench s), with each step's predicted start at
+ * the two ends in lo_at, hi_at (n_steps + 1 each, the last the total; NULL: not wanted). r is left timed as
+ * plan_time_apply times it. Returns the interval's kind (PLAN_IV_NONE: lo = hi = predicted_s). */
+enum plan_interval plan_time_interval(const struct plan_spec *spec, const struct bench_geom *g,
+				      const struct plan_timing *t, struct plan_result *r, double *lo_at, double *hi_at,
+				      double *lo_s, double *hi_s);
 /* One point's exposure costs as plan_time_apply counts them (bench seconds, no move). */
 struct plan_point_cost {
 	double point_s;             /* probe, exposure, HDR share, the host's time */

@@ -122,8 +122,24 @@ json_t *plan_dry_run_json(const struct plan_spec *s, const struct bench_geom *g,
 		plan_time_apply(&v, g, t, r);
 		at[k] = r->predicted_s;
 	}
-	plan_time_apply(s, g, t, r);
+	double lo = NAN, hi = NAN;
+	enum plan_interval iv = plan_time_interval(s, g, t, r, NULL, NULL, &lo, &hi);
 	json_t *o = plan_to_json(s, r, points);
+	if (o && iv != PLAN_IV_NONE) {
+		/* the duration's interval where the exposures are unknown (plan_time_interval): the policy's reach
+		 * before any exposure of the sample is known, else the unmeasured incidences extrapolated from the
+		 * measured ones by up to exp(slope · Δθ) */
+		const struct plan_prior *p = &t->prior;
+		json_t *x = json_pack("{s:f,s:f,s:s}", "low_s", lo, "high_s", hi, "basis",
+				      iv == PLAN_IV_POLICY ? "policy" : "extrapolated");
+		if (x && iv == PLAN_IV_EXTRAPOLATED)
+			json_object_set_new(x, "slope_per_deg", json_real(plan_prior_slope(p)));
+		if (x && iv == PLAN_IV_POLICY) {
+			json_object_set_new(x, "min_ms", json_real(t->min_ms > 0 ? t->min_ms : 1));
+			json_object_set_new(x, "max_ms", json_real(s->max_integ_ms > 0 ? s->max_integ_ms : 5000));
+		}
+		json_object_set_new(o, "interval", x ? x : json_null());
+	}
 	if (o && guess)
 		json_object_set_new(o, "estimate", json_pack("{s:f,s:f,s:f}", "ms", est_ms, "predicted_at_half_s", at[0],
 							     "predicted_at_double_s", at[1]));

@@ -23,7 +23,10 @@ seconds its exposures and planned move do not account for) against the model's; 
 had the host's time per point of the rest been known (host_known): what is left is the model's, the difference the
 host's. Also: the host's part of the prediction (host_s: point_overhead_s x time scale per
 point, load-dependent),
-the residual per point (real seconds beyond the model's bench part), the load average, the faults the sweep
+the residual per point (real seconds beyond the model's bench part), the load average, the prediction's interval
+where the exposures are unknown (acqctl plan's interval: a first sweep's, or incidences its prior has not measured)
+and whether it covers the measured time, the ETA's interval at 25/50/75 % (eta_low_s, eta_high_s) against the time
+left, the faults the sweep
 recovered from (not in the model) and the exposure prior used. On a shared machine the
 script runs as its own session with a raised share (prioritize(); root only), else every figure at a high time scale
 measures the other sessions' load. BENCH_DURATION_TABLE=S instead: the README trade table's plans at time scale S (duration_table.csv; see table()); with BENCH_DURATION_REPEAT=1 each plan names its sample and runs twice on one bench, the second timed by the exposure prior. Writes duration.csv under
@@ -174,7 +177,7 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                     first[len(first) // 2]))) - local_predicted(b, plan_text)
         prog = [(t, e) for t, e in events if e.get("event") == "sweep.progress" and e.get("sweep") == sid]
         total = row["points_total"]
-        eta_err, eta_host, eta_parts = {}, {}, {}
+        eta_err, eta_host, eta_parts, eta_iv = {}, {}, {}, {}
         # the per-step prediction the ETA used: the daemon's steps, or a local dry run's (no prior, time scale 1),
         # which times the exposures as the daemon did only without a prior
         split_ok = steps and (steps_host is None or not prior)
@@ -185,6 +188,9 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                 if e["done"] >= frac * total and e.get("eta_s") is not None:
                     left = finished - t
                     eta_err[frac] = e["eta_s"] / left - 1 if left > 0 else float("nan")
+                    if left > 0 and e.get("eta_low_s") is not None and e.get("eta_high_s") is not None:
+                        # the ETA's interval where the rest's exposures are unknown, as errors of its two ends
+                        eta_iv[frac] = (e["eta_low_s"] / left - 1, e["eta_high_s"] / left - 1)
                     eta_host[frac] = host_known(host_pts, t, e["eta_s"], finished)
                     if per_pt and left > 0:
                         eta_parts[frac] = eta_split(per_pt, e["done"], total, left)
@@ -216,6 +222,15 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                     predicted_at_double_s=es.get("predicted_at_double_s"), predicted_at_median_s=at_median,
                     error_at_median=(at_median / measured - 1 if at_median else None),
                     prior_host_ms=(1000 * prior["host_per_point_s"] if "host_per_point_s" in prior else None))
+        # the prediction's interval (acqctl plan --json interval: where the exposures are unknown) and whether it
+        # covers the measured time; the ETA's interval at 25/50/75 % as errors of its ends against the time left
+        iv = pj.get("interval") or {}
+        row.update(interval_basis=iv.get("basis"), interval_low_s=iv.get("low_s"), interval_high_s=iv.get("high_s"),
+                   interval_covers=(iv["low_s"] <= measured <= iv["high_s"]) if iv else None)
+        for frac in (0.25, 0.5, 0.75):
+            lo_hi = eta_iv.get(frac)
+            row["eta%d_low" % (100 * frac)] = lo_hi[0] if lo_hi else None
+            row["eta%d_high" % (100 * frac)] = lo_hi[1] if lo_hi else None
         for k in TERMS:
             row["pred_" + k] = (pj.get("predicted_terms") or {}).get(k)
             row["meas_" + k] = meas_terms[k]
@@ -657,6 +672,18 @@ def main():
                  f(r["eta75_host"]), "-" if r["median_ms"] is None else "%.3g" % r["median_ms"],
                  r["darks"], r["exposures"], r["residual_per_point_s"], lag_text(r), r["load"], r["faults"],
                  "sweep %s" % r["prior_sweep"] if r["prior_sweep"] else "none", r["recon_wait_s"]), flush=True)
+        if r.get("interval_basis") or any(r.get("eta%d_low" % k) is not None for k in (25, 50, 75)):
+            g = lambda x: "-" if x is None else "%+.1f%%" % (100 * x)  # noqa: E731
+            print("%-17s interval (%s): %s to %s, measured %.1f s %s; ETA interval at 25/50/75 %%: %s (covers: %s)"
+                  % (name, r.get("interval_basis") or "none", "-" if r.get("interval_low_s") is None else
+                     "%.1f" % r["interval_low_s"], "-" if r.get("interval_high_s") is None else
+                     "%.1f" % r["interval_high_s"], r["measured_s"],
+                     "" if r.get("interval_covers") is None else "covered" if r["interval_covers"] else "NOT covered",
+                     " ".join("[%s, %s]" % (g(r.get("eta%d_low" % k)), g(r.get("eta%d_high" % k)))
+                              for k in (25, 50, 75)),
+                     " ".join("-" if r.get("eta%d_low" % k) is None else
+                              "yes" if r["eta%d_low" % k] <= 0 <= r["eta%d_high" % k] else "NO" for k in (25, 50, 75))),
+                  flush=True)
     if not rows:
         print("bench_duration: no case ran")
         return 1

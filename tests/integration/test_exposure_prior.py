@@ -58,6 +58,11 @@ def main():
         check(es.get("ms") == 20 and es["predicted_at_half_s"] < before["predicted_s"] < es["predicted_at_double_s"],
               "estimate %r, predicted %r" % (es, before["predicted_s"]))
         check("as the estimate 20 ms says" in human(b, pf), "human: the estimate")
+        # nothing of the sample known: the duration's interval from the policy's reach (plan_time_interval)
+        iv = before.get("interval") or {}
+        check(iv.get("basis") == "policy" and iv["low_s"] <= before["predicted_s"] < iv["high_s"] and
+              iv.get("max_ms") == 2000, "interval before the first sweep %r" % iv)
+        check("no exposure of the sample known yet" in human(b, pf), "human: the policy's interval")
         sid = L.start_sweep(b, PLAN, "first")
         row = L.drive_to_end(b, sid, timeout=600)
         check(row["state"] == "completed", "first sweep %s" % row["state"])
@@ -82,6 +87,16 @@ def main():
                                                                                                  hdr, len(firsts)))
         check(after["predicted_s"] != before["predicted_s"], "the prior changes the prediction (%r)" % after["predicted_s"])
         check("estimate" not in after, "timed by the prior: no estimate's range (%r)" % after.get("estimate"))
+        check("interval" not in after, "every incidence measured: no interval (%r)" % after.get("interval"))
+        # a plan with an incidence the prior has not measured (70°): that one extrapolated, the interval around it
+        wider = os.path.join(b.dir, "wider.yaml")
+        open(wider, "w").write(PLAN.replace("theta_deg: [10, 40]", "theta_deg: [10, 40, 70]"))
+        w = plan(b, wider)["plan"]
+        iv = w.get("interval") or {}
+        check(iv.get("basis") == "extrapolated" and iv["low_s"] < w["predicted_s"] < iv["high_s"] and
+              iv.get("slope_per_deg", 0) >= 0.01, "interval with 70° unmeasured %r (predicted %r)" % (
+                  iv, w["predicted_s"]))
+        check("incidences the exposure prior has not measured" in human(b, wider), "human: the extrapolated interval")
         check("estimate" not in plan(b, fixed)["plan"], "a fixed plan has no estimate's range")
         out = human(b, pf)
         check("auto exposure timed from sweep %d of sample green-paint" % sid in out, "human output: %r" % out)

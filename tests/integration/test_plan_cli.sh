@@ -29,6 +29,12 @@ assert all(axes <= set(s) and "theta_i" not in s for s in d["steps"]), d["steps"
 assert all(set(p["requested"]) == axes for p in d["dropped_points"] + d["moved_points"])
 # the prediction's parts: the host's time per point is reported apart (0 < host_s < predicted_s)
 assert 0 < d["host_s"] < d["predicted_s"] and 0 < d["darks_s"] < d["predicted_s"], d
+# auto exposure, no prior (a local dry run has no database): the duration's interval from the policy's reach
+if d["integration_mode"] == "auto":
+    iv = d["interval"]
+    assert iv["basis"] == "policy" and 0 < iv["low_s"] <= d["predicted_s"] < iv["high_s"], iv
+else:  # fixed integration: the times are known
+    assert "interval" not in d, d["interval"]
 # the step times add up to the estimate
 steps = d["steps"]
 end = steps[-1]["t_start_s"] + steps[-1]["move_s"] + steps[-1]["settle_s"] + d["point_dwell_s"]
@@ -43,6 +49,7 @@ python3 -c 'import json,sys; d=json.load(open(sys.argv[1]))["plan"]; assert d["r
 # text output and the default bench configuration (found through ACQ_SRC, then next to the executable)
 "$acqctl" plan "$ACQ_SRC/config/plan-paper-10x10x10.yaml" >"$tmp/out" || fail "text output"
 grep -q "estimated duration" "$tmp/out" || fail "no duration in text output"
+grep -q "^  interval .* no exposure of the sample known yet" "$tmp/out" || fail "no interval in text output"
 cp "$ACQ_SRC/config/plan-paper-10x10x10.yaml" "$tmp/p.yaml"
 (unset ACQ_SRC ACQ_BENCH_CONFIG; cd /; "$acqctl" plan "$tmp/p.yaml" --json >"$tmp/def.json") \
   || fail "default bench configuration not found relative to the executable"

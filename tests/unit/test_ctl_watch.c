@@ -62,6 +62,14 @@ static void test_sweep_view(void **state)
 	assert_non_null(strstr(s, "now   point 26/100: θi 20°, θo 40°, φo 90°\n"));
 	assert_non_null(strstr(s, "  spectrometer     connected\n"));
 	assert_non_null(strstr(s, "sweep 3 resume: resumed by the operator\n"));
+	assert_null(strstr(s, "not known yet"));
+	free(s);
+	/* the rest's exposures not all known: the ETA's interval, both ends counted down with it */
+	event(v, "{\"event\": \"sweep.progress\", \"sweep\": 3, \"state\": \"running\", \"done\": 25, \"total\": 100,"
+		 " \"point\": \"\", \"eta_s\": 300, \"eta_low_s\": 200, \"eta_high_s\": 900}");
+	s = draw(v, &buf, &len, f, real_now() + 60);
+	assert_non_null(strstr(s, "ETA   0:04:00 (ends about "));
+	assert_non_null(strstr(s, "; 0:02:20 to 0:14:00, exposures of the rest not known yet)\n"));
 	free(s);
 	/* paused: the ETA is not shown (not counting while paused); the event is listed */
 	event(v, "{\"event\": \"sweep.state\", \"sweep\": 3, \"state\": \"paused\", \"kind\": \"pause\","
@@ -79,6 +87,7 @@ static void test_sweep_view(void **state)
 	s = draw(v, &buf, &len, f, real_now());
 	assert_non_null(strstr(s, "[########################################] 100 %  100/100\n"));
 	assert_non_null(strstr(s, "ETA   0 s (ends about "));
+	assert_null(strstr(s, "not known yet")); /* a progress without the interval drops it */
 	assert_non_null(strstr(s, "  spectrometer     unavailable\n"));
 	assert_non_null(strstr(s, "spectrometer unavailable: gone\n"));
 	free(s);

@@ -507,6 +507,177 @@ static void test_estimate_range(void **state)
 	unload(&f);
 }
 
+/* The steepest change of ln(mean exposure) per degree between the prior's adjacent rows (in zenith order, whatever
+ * the rows' order), at least PLAN_EXPO_SLOPE_MIN; PLAN_EXPO_SLOPE_ONE with one row. */
+static void test_prior_slope(void **state)
+{
+	(void)state;
+	struct plan_prior p = { .sweep = 1, .n_inc = 3 };
+	p.inc[0] = (struct plan_prior_inc){ .theta_i = 20, .points = 5, .mean_ms = 160 };
+	p.inc[1] = (struct plan_prior_inc){ .theta_i = 0, .points = 5, .mean_ms = 100 };
+	p.inc[2] = (struct plan_prior_inc){ .theta_i = 10, .points = 5, .mean_ms = 150 };
+	/* 0 -> 10°: ln 1.5 / 10; 10 -> 20°: ln(160/150) / 10; not 0 -> 20° as the array's neighbours would give */
+	assert_true(fabs(plan_prior_slope(&p) - log(1.5) / 10) < TOL);
+	p.inc[0].mean_ms = 101; /* flat: the floor */
+	p.inc[2].mean_ms = 100.5;
+	assert_true(fabs(plan_prior_slope(&p) - PLAN_EXPO_SLOPE_MIN) < TOL);
+	p.inc[2].mean_ms = 30; /* a fall counts as a rise does: ln(101/30) / 10 */
+	assert_true(fabs(plan_prior_slope(&p) - log(101.0 / 30) / 10) < TOL);
+	p.n_inc = 1;
+	assert_true(fabs(plan_prior_slope(&p) - PLAN_EXPO_SLOPE_ONE) < TOL);
+}
+
+/* The interval of an auto plan's time where its exposures are unknown: with no prior every exposure at the policy's
+ * reach (min_ms, the plan's max_ms) by hand; with a prior row at 20° only, the 45° incidence timed as by a row of
+ * its own whose times are the 20° row's times exp(-/+ g · 25°); none when both incidences are measured. */
+static void test_interval(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, PLAN_AUTO); /* 20° and 45°, estimate 20 ms, max 2000 ms, no HDR */
+	struct plan_timing t = timing();
+	size_t n = f.res->n_steps;
+	double lo_at[64], hi_at[64], lo, hi;
+	assert_true(n + 1 <= 64);
+	assert_int_equal(plan_time_interval(f.spec, &f.g, &t, f.res, lo_at, hi_at, &lo, &hi), PLAN_IV_POLICY);
+	double pred = f.res->predicted_s, blo = 0, bhi = 0;
+	for (size_t i = 0; i < n; i++) { /* the first probe at the estimate, every other exposure and dark at the end */
+		assert_true(fabs(lo_at[i] - blo) < TOL && fabs(hi_at[i] - bhi) < TOL);
+		blo += by_hand(&f, &t, i, 0.01, i ? 0.01 : 20);
+		bhi += by_hand(&f, &t, i, 2000, i ? 2000 : 20);
+	}
+	assert_true(fabs(lo - blo) < TOL && fabs(hi - bhi) < TOL);
+	assert_true(fabs(lo_at[n] - lo) < TOL && fabs(hi_at[n] - hi) < TOL);
+	assert_true(lo < pred && pred < hi && hi > 2 * pred);
+	/* r is left timed at the point estimate */
+	double p0 = f.res->predicted_s;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(f.res->predicted_s - p0) < TOL);
+	/* the dry run's reply carries it */
+	json_t *o = plan_dry_run_json(f.spec, &f.g, &t, f.res, false);
+	json_t *iv = json_object_get(o, "interval");
+	assert_true(json_is_object(iv));
+	assert_string_equal(json_string_value(json_object_get(iv, "basis")), "policy");
+	assert_true(fabs(json_real_value(json_object_get(iv, "low_s")) - lo) < TOL);
+	assert_true(fabs(json_real_value(json_object_get(iv, "high_s")) - hi) < TOL);
+	json_decref(o);
+
+	/* one measured incidence (20°): 45° is 25° away, its times scaled by exp(-/+ PLAN_EXPO_SLOPE_ONE · 25) */
+	t.dark_every = -1;
+	t.prior = (struct plan_prior){ .sweep = 4, .n_inc = 1 };
+	struct plan_prior_inc q = { .theta_i = 20, .points = 8, .median_ms = 50, .mean_ms = 60, .spread = 2,
+				    .darks_per_clear = 2, .dark_ms = 70, .extra_per_point = 0.25, .extra_ms = 400,
+				    .rungs = (uint64_t)1 << plan_rung(&t, 60) | (uint64_t)1 << plan_rung(&t, 85) };
+	t.prior.inc[0] = q;
+	assert_int_equal(plan_time_interval(f.spec, &f.g, &t, f.res, lo_at, hi_at, &lo, &hi), PLAN_IV_EXTRAPOLATED);
+	pred = f.res->predicted_s;
+	double end[2];
+	for (int e = 0; e < 2; e++) {
+		double fac = exp((e ? 1 : -1) * PLAN_EXPO_SLOPE_ONE * 25);
+		int shift = (int)lround(log(fac) / log(sqrt(2.0)));
+		struct plan_timing u = t;
+		u.prior.n_inc = 2;
+		/* its HDR share: none at the low end, the measured rows' most (0.25) at the high end */
+		u.prior.inc[1] = (struct plan_prior_inc){ .theta_i = 45, .points = 8, .median_ms = 50 * fac,
+							  .mean_ms = 60 * fac, .spread = 2, .darks_per_clear = 2,
+							  .dark_ms = 70 * fac, .extra_per_point = e ? 0.25 : 0,
+							  .extra_ms = fmin(400 * fac, 2000),
+							  .rungs = (uint64_t)1 << (plan_rung(&t, 60) + shift) |
+								   (uint64_t)1 << (plan_rung(&t, 85) + shift) };
+		plan_time_apply(f.spec, &f.g, &u, f.res);
+		end[e] = f.res->predicted_s;
+		/* the 20° steps are the point estimate's at both ends */
+		for (size_t i = 0; i < n && f.res->steps[i].pos.laser_theta < 30; i++)
+			assert_true(fabs((e ? hi_at : lo_at)[i] - f.res->steps[i].predicted_start_s) < TOL);
+	}
+	assert_true(fabs(lo - end[0]) < TOL && fabs(hi - end[1]) < TOL);
+	assert_true(lo < pred - 0.1 && pred + 0.5 < hi);
+	/* both incidences measured: no interval, both ends the prediction */
+	t.prior.n_inc = 2;
+	t.prior.inc[1] = q;
+	t.prior.inc[1].theta_i = 45.2;
+	assert_int_equal(plan_time_interval(f.spec, &f.g, &t, f.res, lo_at, hi_at, &lo, &hi), PLAN_IV_NONE);
+	assert_true(lo == f.res->predicted_s && hi == f.res->predicted_s && lo_at[n] == hi);
+	o = plan_dry_run_json(f.spec, &f.g, &t, f.res, false);
+	assert_null(json_object_get(o, "interval"));
+	json_decref(o);
+	unload(&f);
+	/* fixed integration: none */
+	load(&f, PLAN_FIXED);
+	t = timing();
+	assert_int_equal(plan_time_interval(f.spec, &f.g, &t, f.res, NULL, NULL, &lo, &hi), PLAN_IV_NONE);
+	assert_true(lo == hi);
+	unload(&f);
+}
+
+/* An incidence beyond the prior's zeniths follows the three end rows' trend at half its slope when they rise (or
+ * fall) monotonically: timed as by a row of its own with the end row's times scaled; not when they do not, nor with
+ * prior_trend off, nor for an incidence between measured rows. */
+static void test_prior_trend(void **state)
+{
+	(void)state;
+	struct fx f;
+	load(&f, "name: t\nincidence: {theta_deg: [20, 27.5, 35, 50]}\n"
+		 "observation: {theta_deg: [30], phi_deg: [0, 45, 90, 135, 180, 225, 270, 315]}\n"
+		 "integration: {mode: auto, estimate_ms: 20, max_ms: 2000, spread: 1, hdr_fraction: 0}\naverages: 3\n"
+		 "blind_points: drop\n");
+	struct plan_timing t = timing();
+	assert_true(t.prior_trend); /* the model's default */
+	t.prior = (struct plan_prior){ .sweep = 5, .n_inc = 3 };
+	double mean[3] = { 60, 80, 100 }, th[3] = { 35, 20, 27.5 }; /* the rows in any order */
+	for (int i = 0; i < 3; i++) {
+		double m = mean[th[i] == 20 ? 0 : th[i] == 27.5 ? 1 : 2];
+		t.prior.inc[i] = (struct plan_prior_inc){ .theta_i = th[i], .points = 8, .median_ms = m, .mean_ms = m,
+							  .spread = 2, .darks_per_clear = 2, .dark_ms = m,
+							  .extra_per_point = 0.5, .extra_ms = 4 * m };
+	}
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double trend = f.res->predicted_s;
+	/* by hand: a fourth row at 50° = the 35° row times exp(0.5 · ln(100/60)/15 · 15) = (5/3)^0.5 */
+	double fac = sqrt(100.0 / 60);
+	struct plan_timing u = t;
+	u.prior_trend = false;
+	plan_time_apply(f.spec, &f.g, &u, f.res);
+	double nearest = f.res->predicted_s;
+	u.prior.n_inc = 4;
+	u.prior.inc[3] = (struct plan_prior_inc){ .theta_i = 50, .points = 8, .median_ms = 100 * fac,
+						  .mean_ms = 100 * fac, .spread = 2, .darks_per_clear = 2,
+						  .dark_ms = 100 * fac, .extra_per_point = 0.5, .extra_ms = 400 * fac };
+	plan_time_apply(f.spec, &f.g, &u, f.res);
+	assert_true(fabs(trend - f.res->predicted_s) < TOL);
+	assert_true(trend > nearest + 0.5);
+	/* not monotone (60, 80, 70): the nearest row */
+	t.prior.inc[0].mean_ms = 70;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double bumpy = f.res->predicted_s;
+	t.prior_trend = false;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(bumpy - f.res->predicted_s) < TOL);
+	/* a falling trend lowers it: 100, 80, 60 */
+	t.prior_trend = true;
+	t.prior.inc[0].mean_ms = 60;  /* 35° */
+	t.prior.inc[1].mean_ms = 100; /* 20° */
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double fall = f.res->predicted_s;
+	t.prior_trend = false;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fall < f.res->predicted_s - 0.2);
+	/* rows at 20, 35 and 50° rising: the plan's 27.5° lies between them, no trend (the nearest row's times) */
+	t.prior.inc[0] = t.prior.inc[1] = t.prior.inc[2] = (struct plan_prior_inc){ .points = 8, .spread = 2,
+										     .darks_per_clear = 2 };
+	for (int i = 0; i < 3; i++) {
+		t.prior.inc[i].theta_i = 20 + 15 * i;
+		t.prior.inc[i].mean_ms = t.prior.inc[i].median_ms = t.prior.inc[i].dark_ms = 60 + 20 * i;
+	}
+	t.prior_trend = true;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	double between = f.res->predicted_s;
+	t.prior_trend = false;
+	plan_time_apply(f.spec, &f.g, &t, f.res);
+	assert_true(fabs(between - f.res->predicted_s) < TOL);
+	unload(&f);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -521,6 +692,9 @@ int main(void)
 		cmocka_unit_test(test_dark_keep),
 		cmocka_unit_test(test_defaults_match),
 		cmocka_unit_test(test_estimate_range),
+		cmocka_unit_test(test_prior_slope),
+		cmocka_unit_test(test_interval),
+		cmocka_unit_test(test_prior_trend),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

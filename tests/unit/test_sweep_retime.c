@@ -99,6 +99,9 @@ static struct plan_result *load_plan(struct bench_geom *g, struct plan_spec **sp
 
 /* The ETA's relative error at the first point of the second incidence, the sweep run on the simulated bench with
  * the ETA fed at every point (real time injected); with retime the sweep re-times its plan there. */
+/* The ETA's interval at the incidence change (sweep_retime_eta), wall s: set by eta_error_at_change. */
+static double eta_lo, eta_hi;
+
 static double eta_error_at_change(bool retime, int *retimed)
 {
 	char path[300];
@@ -135,6 +138,9 @@ static double eta_error_at_change(bool retime, int *retimed)
 	assert_true(rt.on);
 	if (!retime)
 		rt.on = false;
+	assert_int_equal(sweep_retime_bounds(&rt, spec, &g, r, &err), 0); /* the policy's reach: nothing measured */
+	assert_int_equal(rt.iv, PLAN_IV_POLICY);
+	double first_lo = NAN, first_hi = NAN, first_left = 0;
 	struct eta e;
 	eta_reset(&e);
 	double real = 1000;
@@ -156,15 +162,33 @@ static double eta_error_at_change(bool retime, int *retimed)
 		if (sweep_retime_due(&rt, r, (int)done)) {
 			assert_int_equal(sweep_retime_apply(&rt, (int)done, st, sid, spec, &g, r, &err), 1);
 			eta_replan(&e, sweep_retime_plan_at, r);
+			assert_int_equal(sweep_retime_bounds(&rt, spec, &g, r, &err), 0);
+			assert_int_equal(rt.iv, PLAN_IV_EXTRAPOLATED); /* 45° from the 20° measured */
 			assert_false(sweep_retime_due(&rt, r, (int)done)); /* once per incidence */
 		}
 		eta = eta_update(&e, (int)done, (int)n, r->steps[done].predicted_start_s, r->predicted_s, real, real);
+		if (done == 1)
+			sweep_retime_eta(&rt, r, (int)done, eta, e.scale, &first_lo, &first_hi);
+		if (done == change)
+			sweep_retime_eta(&rt, r, (int)done, eta, e.scale, &eta_lo, &eta_hi);
 	}
 	double left = 0;
 	for (size_t i = change; i < n; i++)
 		left += s.d[i];
+	for (size_t i = 1; i < n; i++)
+		first_left += s.d[i];
+	/* after the first point nothing says what the sample needs: the policy's reach, which holds the bench's time
+	 * (the sample at 90 and 181 ms, the plan's estimate 20 ms) */
+	assert_true(first_lo <= first_left && first_left <= first_hi);
+	assert_true(first_hi > 2 * first_left);
 	*retimed = rt.retimed;
 	if (retime) {
+		/* the interval at the change: the second incidence's times extrapolated from the first's (times
+		 * exp(-/+ PLAN_EXPO_SLOPE_ONE · 25°)), around the ETA, holding the time left (the bench's sample has the
+		 * same times at both incidences), and narrower than the policy's */
+		assert_true(eta_lo < eta - 0.5 && eta + 0.5 < eta_hi);
+		assert_true(eta_lo <= left && left <= eta_hi);
+		assert_true(eta_hi - eta_lo < 0.5 * (first_hi - first_lo));
 		/* the sweep's own prior: its first incidence's points, the host's time per point measured from them */
 		assert_int_equal(rt.tm.prior.sweep, sid);
 		assert_int_equal(rt.tm.prior.n_inc, 1);
@@ -190,6 +214,7 @@ static void test_retime_eta(void **state)
 	print_message("ETA error at the incidence change: %+.2f %% re-timed, %+.2f %% not\n", 100 * with,
 		      100 * without);
 	assert_true(fabs(with) < 0.01);
+	print_message("ETA interval at the change: %.2f .. %.2f s\n", eta_lo, eta_hi);
 	assert_true(fabs(without) > 0.03); /* +4.6 %: the first incidence's darks, carried as an excess per point */
 }
 
