@@ -482,9 +482,17 @@ static void finish_sweep(struct ex *x)
 	x->state = EX_COMPLETED;
 	x->phase = PH_NONE;
 	ex_set_phase_text(x, "completed");
-	ex_state_event(x, "completed", "complete", NULL,
-		       "all %d points measured and calibrated (%s method); %d faults, %d recovered", x->nsteps,
-		       calib_method_name(x->cfg.cal.method), x->stats.faults, x->stats.recoveries);
+	/* The store's count, not this run's: points of an earlier run (before a crash) count too. */
+	int64_t ncal = store_calibrated_count(x->st, x->sweep_id, &err);
+	if (ncal == x->nsteps)
+		ex_state_event(x, "completed", "complete", NULL,
+			       "all %d points measured and calibrated (%s method); %d faults, %d recovered", x->nsteps,
+			       calib_method_name(x->cfg.cal.method), x->stats.faults, x->stats.recoveries);
+	else
+		ex_state_event(x, "completed", "complete", NULL,
+			       "all %d points measured, %lld of them calibrated (%s method%s); %d faults, %d recovered",
+			       x->nsteps, (long long)(ncal < 0 ? 0 : ncal), calib_method_name(x->cfg.cal.method),
+			       x->have_ref ? "" : ", no reference", x->stats.faults, x->stats.recoveries);
 }
 
 void ex_wait_batch(struct ex *x)

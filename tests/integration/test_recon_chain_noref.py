@@ -66,6 +66,10 @@ def run():
         db.close()
         assert any("no reference will be measured" in m for m in ex), ex
         assert ncal == 0, "%d points calibrated without a reference" % ncal
+        # The completion says how many were calibrated (it said "all N points measured and calibrated").
+        done = [m for m in ex if "points measured" in m]
+        assert done and "0 of them calibrated" in done[-1] and "no reference" in done[-1], done
+        assert not any("measured and calibrated" in m for m in ex), done
         runrow, msgs, kinds = wait_recon(b, sid)
         L.say("recon events: %s" % msgs)
         assert runrow is None, "a reconstruction run recorded for a sweep without calibrated samples: %s %s" % (
