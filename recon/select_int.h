@@ -128,6 +128,11 @@ int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, double 
 /* The ln f target's grid pairs into ang[F*4] and their cells' shares of the hemisphere pair's projected measure
  * cosθi cosθo dωi dωo into w[F] (sum 1; either NULL: count only); returns F. */
 size_t sel_lnf_grid(double *ang, double *w);
+/* The lobe gate (select_setup.c): keep[j] = 1 for candidates j (ang as select_batch's) of θi ≤ above (radians) and
+ * for those above it where lnf:bright's rule puts the model's own lobe at their pair; the count above the bound into
+ * *nbeyond, of them kept into *nadmit. 0, or -1 with err. */
+int sel_lobe_gate(const struct recon_model *m, double above, size_t nc, const double *ang, unsigned char *keep,
+		  size_t *nbeyond, size_t *nadmit, struct acq_err *err);
 /* The RGB target's node pairs into ang[F*4] and their measure shares into w[F] (either NULL); returns F. */
 size_t sel_rgb_nodes(double *ang, double *w);
 

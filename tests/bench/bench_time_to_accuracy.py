@@ -123,6 +123,13 @@ def adaptive_plan(paper_s, path, overlap=None, budget_s=None, target=None):
     return text
 
 
+def lobe_gate(plan_path):
+    """The plan's lobe gate as select's target suffix (':lobe_above=DEG', as the daemon's
+    plan_adaptive_target_spec writes it), or ''."""
+    g = re.search(r"\blobe_above_deg:\s*([0-9.]+)", open(plan_path).read())
+    return ":lobe_above=%s" % g.group(1) if g else ""
+
+
 class Truth:
     """Per material: held-out truth (bench_tradeoff's set) and the DHR truth."""
 
@@ -191,7 +198,8 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
     models = []  # model after batch k (index k)
     pending = sel_pending = None  # overlap: the batch decided ahead (and its selection), not measured yet
     rows, k, fits, stop = [], 0, [], None
-    target = TARGET
+    target = TARGET + lobe_gate(plan_path)
+    admits = []  # per decision, with a lobe gate: the candidates above its bound kept
 
     def fit(warm):
         mp = os.path.join(WORK, "%s.m%d.model" % (tag, len(models)))
@@ -214,6 +222,8 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         cpu = T.run([T.REC, "select", model, "--candidates", cc, "--route", route, "--target", target, "--batch", str(BATCH[0]),
                      "-o", sj])[0]
         sel = json.load(open(sj))
+        if "admitted" in sel["candidates"]:  # the lobe gate: candidates above its bound it kept
+            admits.append(sel["candidates"]["admitted"])
         if not sel["picks"]:
             return sel, None, "nothing reachable left worth measuring", cpu
         b = helper("batch", CONF, plan_path, st, sj)
@@ -225,7 +235,8 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         rel, ab, lr, s8 = truth.figures(m_, tag)
         return dict(material=mat, seed=seed, kind="adaptive", plan="adaptive", batch=batch, points=len(done),
                     bench_s=spent + waited, dhr_err=rel, dhr_abs=ab, logrmse=lr, sigma8=s8, measured_s=spent,
-                    waited_s=waited, motion_s=motion, darks_s=darks, charged_s=charged)
+                    waited_s=waited, motion_s=motion, darks_s=darks, charged_s=charged,
+                    admitted=sum(admits) if admits else "")
 
     m = fit(None)
     ahead_cpu = 0.0
@@ -276,8 +287,9 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
     assert all(b["waited_s"] >= a["waited_s"] for a, b in zip(rows, rows[1:]))
     assert overlap or all(b["waited_s"] > a["waited_s"] for a, b in zip(rows, rows[1:]) if b["points"] > a["points"])
     log("   %-17s seed %d adaptive: %d batches, %d points, %.0f s measured + %.0f s waited (%s); DHR err %.4f, "
-        "log-RMSE %.5f; fits %.2f s CPU mean" % (mat, seed, k, len(done), spent, waited, stop, rows[-1]["dhr_err"],
-                                                 rows[-1]["logrmse"], np.mean(fits)))
+        "log-RMSE %.5f; fits %.2f s CPU mean%s" % (mat, seed, k, len(done), spent, waited, stop, rows[-1]["dhr_err"],
+                                                   rows[-1]["logrmse"], np.mean(fits),
+                                                   "; lobe gate admitted %s" % admits if admits else ""))
     for mp in models:
         if os.path.exists(mp):
             os.unlink(mp)
@@ -623,7 +635,7 @@ def main():
                                  seed_plan, (BUDGET_X if lobe else BUDGET_OTHER) * PAPER_S[0])] = mat
                 jobs[pool.submit(fixed_run, mat, truths[mat], seed, plans)] = mat
         keys = ["material", "seed", "kind", "plan", "batch", "points", "bench_s", "dhr_err", "dhr_abs", "logrmse",
-                "sigma8", "measured_s", "waited_s", "motion_s", "darks_s", "charged_s", "stop"]
+                "sigma8", "measured_s", "waited_s", "motion_s", "darks_s", "charged_s", "admitted", "stop"]
         with open(os.path.join(OUT, "time_to_accuracy.csv"), "w") as fh:
             fh.write(",".join(keys) + "\n")
             for fu in cf.as_completed(jobs):
