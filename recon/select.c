@@ -294,6 +294,7 @@ static int select_set(const struct recon_model *m, size_t nc, const double *ang,
 	if (sel_init(&s[0], m, nc, ang, cost, &tp[0], &o, r, err) ||
 	    (both && sel_init_part(&s[1], o.reference ? NULL : &s[0], m, nc, ang, cost, &tp[1], &o, &r2, err)))
 		goto out;
+	r->nbright = s[np - 1].nbright;
 	if (both) {
 		r->part[0] = r->value;
 		r->part[1] = r2.value;

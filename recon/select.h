@@ -118,6 +118,8 @@ struct select_result {
 					     * recomputed on all channels (so met is decided on all) */
 	double part[2];                     /* a combined target: the DHR part's value and the ln f part's */
 	size_t nbeyond, nadmitted;          /* lobe_above_deg > 0: the candidates above the bound, of them kept */
+	size_t nbright;                     /* lnf:bright (alone or a combined target's part): the ln f grid's cells that
+					     * took lnf:rad's weight (0: the weights are lnf's, the picks too) */
 	size_t npicks;
 	struct select_pick *picks;          /* in choice order */
 };

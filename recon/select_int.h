@@ -72,6 +72,7 @@ struct sel {
 	double *Gc;      /* [J*n] w_j's part on the model's samples (the picks' parts in gn) */
 	double *gn;      /* [batch*J] w_j's part on pick i */
 	double *mrow, *gp; /* scratch: [J], [n] */
+	size_t nbright;  /* SELECT_LNF under lnf:bright: the grid cells that took lnf:rad's weight (the model's lobe) */
 	struct sel_prior *prior; /* SELECT_DHR: the energy prior's σ_E after picks (select_prior.c), or NULL */
 	int shared;      /* A, Ainv, alpha, cu, soaJ, rep, cost, Kjn, G, Pjj, U, picked, row are another state's (sel_init_part:
 			  * a combined target's second part; they do not depend on the target) */

@@ -407,6 +407,8 @@ static int lnf_rad_weights(struct sel *s, const double *c6, const double *amp, c
 		s->xw[x] = isfinite(wx) ? wx : 0;
 		if (pw && pw[x] > s->xw[x]) /* lnf:bright: the larger of the two errors per unit dωi dωo */
 			s->xw[x] = pw[x];
+		else if (pw)
+			s->nbright++;
 		sum += s->xw[x];
 	}
 	if (!(sum > 0))

@@ -200,6 +200,7 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
     rows, k, fits, stop = [], 0, [], None
     target = TARGET + lobe_gate(plan_path)
     admits = []  # per decision, with a lobe gate: the candidates above its bound kept
+    brights = []  # per decision, under lnf:bright: the grid cells that took lnf:rad's weight (none: lnf's picks)
 
     def fit(warm):
         mp = os.path.join(WORK, "%s.m%d.model" % (tag, len(models)))
@@ -224,6 +225,8 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         sel = json.load(open(sj))
         if "admitted" in sel["candidates"]:  # the lobe gate: candidates above its bound it kept
             admits.append(sel["candidates"]["admitted"])
+        if "bright_cells" in sel:  # lnf:bright: the ln f grid's cells that took lnf:rad's weight
+            brights.append(sel["bright_cells"])
         if not sel["picks"]:
             return sel, None, "nothing reachable left worth measuring", cpu
         b = helper("batch", CONF, plan_path, st, sj)
@@ -236,7 +239,7 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         return dict(material=mat, seed=seed, kind="adaptive", plan="adaptive", batch=batch, points=len(done),
                     bench_s=spent + waited, dhr_err=rel, dhr_abs=ab, logrmse=lr, sigma8=s8, measured_s=spent,
                     waited_s=waited, motion_s=motion, darks_s=darks, charged_s=charged,
-                    admitted=sum(admits) if admits else "")
+                    admitted=sum(admits) if admits else "", bright_cells=sum(brights) if brights else "")
 
     m = fit(None)
     ahead_cpu = 0.0
@@ -289,7 +292,8 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
     log("   %-17s seed %d adaptive: %d batches, %d points, %.0f s measured + %.0f s waited (%s); DHR err %.4f, "
         "log-RMSE %.5f; fits %.2f s CPU mean%s" % (mat, seed, k, len(done), spent, waited, stop, rows[-1]["dhr_err"],
                                                    rows[-1]["logrmse"], np.mean(fits),
-                                                   "; lobe gate admitted %s" % admits if admits else ""))
+                                                   ("; lobe gate admitted %s" % admits if admits else "") +
+                                                   ("; lnf:bright cells %s" % brights if brights else "")))
     for mp in models:
         if os.path.exists(mp):
             os.unlink(mp)
@@ -635,7 +639,7 @@ def main():
                                  seed_plan, (BUDGET_X if lobe else BUDGET_OTHER) * PAPER_S[0])] = mat
                 jobs[pool.submit(fixed_run, mat, truths[mat], seed, plans)] = mat
         keys = ["material", "seed", "kind", "plan", "batch", "points", "bench_s", "dhr_err", "dhr_abs", "logrmse",
-                "sigma8", "measured_s", "waited_s", "motion_s", "darks_s", "charged_s", "admitted", "stop"]
+                "sigma8", "measured_s", "waited_s", "motion_s", "darks_s", "charged_s", "admitted", "bright_cells", "stop"]
         with open(os.path.join(OUT, "time_to_accuracy.csv"), "w") as fh:
             fh.write(",".join(keys) + "\n")
             for fu in cf.as_completed(jobs):

@@ -1273,6 +1273,7 @@ static void test_lnf_bright(void **state)
 		struct select_result r;
 		size_t p0 = pick1(m, nc, ang, cost, "lnf:bright", 2, &r);
 		assert_true(p0 < nc && r.npicks == 2);
+		assert_int_equal(r.nbright, nrad); /* the count select reports (brdf-recon select's bright_cells) */
 		select_result_free(&r);
 		recon_model_free(m);
 	}
