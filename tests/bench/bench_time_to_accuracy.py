@@ -16,9 +16,10 @@ the model through batch k). The budget counts measured bench seconds (as the dae
 adds the arms' waits for the decisions, as on the bench: the CPU seconds of the fit and select runs behind each
 batch (single-threaded BLAS, this machine; with overlap only what exceeds the batch measured meanwhile).
 The adaptive plan: config/plan-adaptive.yaml (seed 4 incidences x 16 Fibonacci + its specular plane, batch 16, its
-candidates and integration) with the target ACQ_TTA_TARGET (default dhr:8,30,60:le=1e-09+lnf:le=1e-09: the DHR's
-sigma at 8, 30, 60 deg and the largest sigma of ln f together, never met, so it runs to its budget; lnf:rad or
-lnf:mix or lnf:bright instead of lnf: the plan's lnf_sigma gets weight: rad, mix or bright) and the
+candidates and integration; its lobe gate, candidates.lobe_above_deg, passed to select as the daemon does) with the
+target ACQ_TTA_TARGET (default dhr:8,30,60:le=1e-09+lnf:bright:le=1e-09, session 17: the DHR's sigma at 8, 30, 60 deg
+and the largest sigma of ln f together, never met, so it runs to its budget; lnf, lnf:rad or lnf:mix instead of
+lnf:bright: the plan's lnf_sigma gets weight: projected (no key), rad or mix) and the
 budget ACQ_TTA_BUDGET (1.5) x the paper plan's predicted time on the lobes (G2), ACQ_TTA_BUDGET_OTHER (1.0) x
 on the others (G1, G3 need no more; their time to accuracy beyond it shows as '-').
 Validation (ACQ_TTA_VALIDATE=1, default on): one adaptive sweep on the simulated bench (acq-sim + acquisitiond,
@@ -78,7 +79,7 @@ JOBS = int(os.environ.get("ACQ_TTA_JOBS", "2"))
 VALIDATE = os.environ.get("ACQ_TTA_VALIDATE", "1") == "1"
 # the adaptive plan's target as select takes it (never met: the run goes to its budget); the default is the study's
 # own criterion, the DHR and ln f together (dhr alone: ACQ_TTA_TARGET=dhr:8,30,60:le=1e-09)
-TARGET = os.environ.get("ACQ_TTA_TARGET", "dhr:8,30,60:le=1e-09+lnf:le=1e-09")
+TARGET = os.environ.get("ACQ_TTA_TARGET", "dhr:8,30,60:le=1e-09+lnf:bright:le=1e-09")
 DIFFUSE = ["white", "narrow-lines", "rough-backscatter", "green-paint"]
 LOBES = ["sharp-lobe", "clear-coat"]
 DHR_GOAL, LOBE_GOAL = 0.005, 0.01
