@@ -260,8 +260,10 @@ static double combined_value(const struct select_target *t, double dhr, double l
 	return fmax(dhr / t->threshold, lnf / t->lnf_threshold);
 }
 
-int select_batch(const struct recon_model *m, size_t nc, const double *ang, const double *cost,
-		 const struct select_target *t, const struct select_opts *opts, struct select_result *r, struct acq_err *err)
+/* select_batch on a candidate set the lobe gate has passed. */
+static int select_set(const struct recon_model *m, size_t nc, const double *ang, const double *cost,
+		      const struct select_target *t, const struct select_opts *opts, struct select_result *r,
+		      struct acq_err *err)
 {
 	struct select_opts o;
 	if (opts)
@@ -292,6 +294,7 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 	if (sel_init(&s[0], m, nc, ang, cost, &tp[0], &o, r, err) ||
 	    (both && sel_init_part(&s[1], o.reference ? NULL : &s[0], m, nc, ang, cost, &tp[1], &o, &r2, err)))
 		goto out;
+	r->nbright = s[np - 1].nbright;
 	if (both) {
 		r->part[0] = r->value;
 		r->part[1] = r2.value;
@@ -395,5 +398,90 @@ out:
 		select_result_free(r);
 	for (size_t k = 0; k < np; k++)
 		sel_free(&s[k]);
+	return rc;
+}
+
+/* The route's per-candidate arrays of the kept candidates idx[k] (k < nk) into one block b (laid out as the
+ * select_route's), out's pointers into it. */
+static void route_keep(const struct select_route *in, const size_t *idx, size_t nk, double *b, struct select_route *out)
+{
+	*out = *in;
+	const double *col[7] = { in->base, in->open, in->point, in->dark, in->rungs, in->since, in->band_cos };
+	const double **dst[7] = { &out->base, &out->open, &out->point, &out->dark, &out->rungs, &out->since,
+				  &out->band_cos };
+	for (size_t k = 0; k < nk; k++)
+		for (int a = 0; a < 3; a++)
+			b[3 * k + a] = in->pos[3 * idx[k] + a];
+	out->pos = b;
+	b += 3 * nk;
+	for (int c = 0; c < 7; c++) {
+		if (!col[c])
+			continue; /* without band nodes */
+		for (size_t k = 0; k < nk; k++)
+			b[k] = col[c][idx[k]];
+		*dst[c] = b;
+		b += nk;
+	}
+}
+
+int select_batch(const struct recon_model *m, size_t nc, const double *ang, const double *cost,
+		 const struct select_target *t, const struct select_opts *opts, struct select_result *r, struct acq_err *err)
+{
+	if (!t || !(t->lobe_above_deg > 0) || !m || !ang || !cost)
+		return select_set(m, nc, ang, cost, t, opts, r, err);
+	memset(r, 0, sizeof *r);
+	unsigned char *keep = malloc(nc ? nc : 1);
+	size_t nb = 0, na = 0, nk = 0;
+	if (!keep)
+		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+	if (sel_lobe_gate(m, t->lobe_above_deg * M_PI / 180, nc, ang, keep, &nb, &na, err)) {
+		free(keep);
+		return -1;
+	}
+	struct select_target tk = *t;
+	tk.lobe_above_deg = 0;
+	int rc;
+	if (nb == na) { /* nothing left out: the candidates as given */
+		free(keep);
+		rc = select_set(m, nc, ang, cost, &tk, opts, r, err);
+		r->nbeyond = nb;
+		r->nadmitted = na;
+		return rc;
+	}
+	const struct select_route *ro = opts ? opts->route : NULL;
+	size_t *idx = malloc((nc ? nc : 1) * sizeof *idx);
+	double *ak = malloc((nc ? nc : 1) * 4 * sizeof *ak), *ck = malloc((nc ? nc : 1) * sizeof *ck);
+	double *rb = ro && ro->pos && ro->base && ro->open ? malloc((nc ? nc : 1) * 10 * sizeof *rb) : NULL;
+	if (!idx || !ak || !ck || (ro && ro->pos && ro->base && ro->open && !rb)) {
+		rc = acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	for (size_t j = 0; j < nc; j++)
+		if (keep[j]) {
+			memcpy(ak + 4 * nk, ang + 4 * j, 4 * sizeof *ak);
+			ck[nk] = cost[j];
+			idx[nk++] = j;
+		}
+	struct select_opts ok;
+	if (opts)
+		ok = *opts;
+	else
+		select_opts_default(&ok);
+	struct select_route rk;
+	if (rb) {
+		route_keep(ro, idx, nk, rb, &rk);
+		ok.route = &rk;
+	}
+	rc = select_set(m, nk, ak, ck, &tk, &ok, r, err);
+	for (size_t i = 0; rc == 0 && i < r->npicks; i++) /* back to the caller's candidates */
+		r->picks[i].index = idx[r->picks[i].index];
+	r->nbeyond = nb;
+	r->nadmitted = na;
+out:
+	free(keep);
+	free(idx);
+	free(ak);
+	free(ck);
+	free(rb);
 	return rc;
 }

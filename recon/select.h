@@ -45,10 +45,15 @@ struct select_target {
 					      * 2 (spec "lnf:mix"): both weights, each over its own criterion;
 					      * 3 (spec "lnf:bright"): per grid cell the larger of the two weights
 					      * (lnf:rad's where the model is bright, the projected elsewhere) */
+	double lobe_above_deg;               /* > 0 (spec suffix ":lobe_above=DEG", any target): candidates of incidence
+					      * θi above it are kept only where the model has its own lobe at their pair
+					      * (lnf:bright's rule there: lnf:rad's weight above the projected one);
+					      * 0 (default): every candidate */
 };
 
 /* Parse "dhr:8,30,60", "lnf", "lnf:rad", "lnf:mix", "lnf:bright", "rgb", optionally followed by ":le=X" (X > 0), or the combined
- * "dhr:8,30,60:le=X+lnf[:rad|:mix|:bright]:le=Y" (both thresholds required). 0, or -1 with err saying what is wrong. */
+ * "dhr:8,30,60:le=X+lnf[:rad|:mix|:bright]:le=Y" (both thresholds required); either optionally ending in
+ * ":lobe_above=DEG" (0 < DEG < 90: the lobe gate). 0, or -1 with err saying what is wrong. */
 int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err);
 
 /* The batch's route, for charging each pick its increment to it (NULL in select_opts: each pick costs its cost[j],
@@ -112,12 +117,17 @@ struct select_result {
 	int value_checked;                  /* SELECT_DHR on value channels: the value, near the threshold, was
 					     * recomputed on all channels (so met is decided on all) */
 	double part[2];                     /* a combined target: the DHR part's value and the ln f part's */
+	size_t nbeyond, nadmitted;          /* lobe_above_deg > 0: the candidates above the bound, of them kept */
+	size_t nbright;                     /* lnf:bright (alone or a combined target's part): the ln f grid's cells that
+					     * took lnf:rad's weight (0: the weights are lnf's, the picks too) */
 	size_t npicks;
 	struct select_pick *picks;          /* in choice order */
 };
 
-/* Choose up to o->batch of nc candidates ang[j*4..] (θi, φi, θo, φo radians, θ in [0, π/2]) with costs cost[j] (> 0
- * seconds) for target t on model m. Candidates whose canonical points coincide (the same pair up to rotation,
+/* With t->lobe_above_deg > 0 the candidates above it the lobe gate leaves out are removed first (the rest in
+ * input order, so a gate that keeps none gives the picks of the candidates at or below the bound alone, bit for bit);
+ * picks' indices are the caller's. Choose up to o->batch of nc candidates ang[j*4..] (θi, φi, θo, φo radians, θ
+ * in [0, π/2]) with costs cost[j] (> 0 seconds) for target t on model m. Candidates whose canonical points coincide (the same pair up to rotation,
  * mirror or reciprocity) count once, at the cheapest cost. Picking stops at the batch size, when the predicted
  * value meets the threshold, or when no candidate reduces the criterion (an empty batch is a result). r is filled
  * (select_result_free); 0, or -1 with err. */

@@ -72,6 +72,7 @@ struct sel {
 	double *Gc;      /* [J*n] w_j's part on the model's samples (the picks' parts in gn) */
 	double *gn;      /* [batch*J] w_j's part on pick i */
 	double *mrow, *gp; /* scratch: [J], [n] */
+	size_t nbright;  /* SELECT_LNF under lnf:bright: the grid cells that took lnf:rad's weight (the model's lobe) */
 	struct sel_prior *prior; /* SELECT_DHR: the energy prior's σ_E after picks (select_prior.c), or NULL */
 	int shared;      /* A, Ainv, alpha, cu, soaJ, rep, cost, Kjn, G, Pjj, U, picked, row are another state's (sel_init_part:
 			  * a combined target's second part; they do not depend on the target) */
@@ -128,6 +129,11 @@ int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, double 
 /* The ln f target's grid pairs into ang[F*4] and their cells' shares of the hemisphere pair's projected measure
  * cosθi cosθo dωi dωo into w[F] (sum 1; either NULL: count only); returns F. */
 size_t sel_lnf_grid(double *ang, double *w);
+/* The lobe gate (select_setup.c): keep[j] = 1 for candidates j (ang as select_batch's) of θi ≤ above (radians) and
+ * for those above it where lnf:bright's rule puts the model's own lobe at their pair; the count above the bound into
+ * *nbeyond, of them kept into *nadmit. 0, or -1 with err. */
+int sel_lobe_gate(const struct recon_model *m, double above, size_t nc, const double *ang, unsigned char *keep,
+		  size_t *nbeyond, size_t *nadmit, struct acq_err *err);
 /* The RGB target's node pairs into ang[F*4] and their measure shares into w[F] (either NULL); returns F. */
 size_t sel_rgb_nodes(double *ang, double *w);
 

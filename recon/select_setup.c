@@ -363,6 +363,24 @@ size_t sel_lnf_grid(double *ang, double *w)
  * grazing mirror band by 1/c (≈ 14 at 75°/75°); a dim material (f̂ ≲ 1, r/c = f̂² c) keeps the projected weights
  * exactly. Normalised to sum 1.
  */
+/* lnf:rad's mean over the channels of (d_λ c / (1 + f̂_λ c))² at canonical point c (above; y[L] the interpolant
+ * without its mean there, alpha[L] the channels' GP amplitudes): its weight per unit dωi dωo times amp². */
+static double rad_unit(const struct recon_model *m, const double *alpha, const double *c, const double *y)
+{
+	size_t L = (size_t)m->nwl;
+	double b[TREND_NB], u = recon_unseen(recon_nearest_centre(m, c, NULL)), cc = c[2] * c[5], acc = 0;
+	trend_at(m, c, b);
+	for (size_t l = 0; l < L; l++) {
+		double g = y[l] + m->mu[l], tf = trend_factor(m, b, l);
+		double sc = recon_energy_scale(m, theta_of(c), theta_of(c + 3), l);
+		double f = sc * untransform(m->transform, g, m->eps[l], tf);
+		double d = sc * untransform_deriv(m->transform, g, m->eps[l], tf) * sqrt(alpha[l] + u * RECON_PRIOR_ALPHA);
+		double e = d * cc / (1 + f * cc);
+		acc += e * e;
+	}
+	return acc / (double)L;
+}
+
 static int lnf_rad_weights(struct sel *s, const double *c6, const double *amp, const double *KXn, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
@@ -385,22 +403,12 @@ static int lnf_rad_weights(struct sel *s, const double *c6, const double *amp, c
 		    Y, (int)L);
 	double sum = 0;
 	for (size_t x = 0; x < F; x++) {
-		const double *c = c6 + 6 * x;
-		double b[TREND_NB], u = recon_unseen(recon_nearest_centre(m, c, NULL)), cc = c[2] * c[5], acc = 0;
-		trend_at(m, c, b);
-		for (size_t l = 0; l < L; l++) {
-			double g = Y[x * L + l] + m->mu[l], tf = trend_factor(m, b, l);
-			double sc = recon_energy_scale(m, theta_of(c), theta_of(c + 3), l);
-			double f = sc * untransform(m->transform, g, m->eps[l], tf);
-			double d = sc * untransform_deriv(m->transform, g, m->eps[l], tf) *
-				   sqrt(s->alpha[l] + u * RECON_PRIOR_ALPHA);
-			double e = d * cc / (1 + f * cc);
-			acc += e * e;
-		}
-		double a2 = amp[x] * amp[x], wx = a2 > 0 ? s->xw[x] * (acc / (double)L) / a2 : 0;
+		double a2 = amp[x] * amp[x], wx = a2 > 0 ? s->xw[x] * rad_unit(m, s->alpha, c6 + 6 * x, Y + x * L) / a2 : 0;
 		s->xw[x] = isfinite(wx) ? wx : 0;
 		if (pw && pw[x] > s->xw[x]) /* lnf:bright: the larger of the two errors per unit dωi dωo */
 			s->xw[x] = pw[x];
+		else if (pw)
+			s->nbright++;
 		sum += s->xw[x];
 	}
 	if (!(sum > 0))
@@ -412,6 +420,69 @@ static int lnf_rad_weights(struct sel *s, const double *c6, const double *amp, c
 out:
 	free(Y);
 	free(pw);
+	return rc;
+}
+
+/*
+ * The lobe gate (select_target.lobe_above_deg, session 17): a candidate of incidence θi above the bound is kept only
+ * where lnf:bright's rule gives the model's own lobe at the candidate's pair itself, i.e. where lnf:rad's weight per
+ * unit dωi dωo, r = mean_λ (d_λ c/(1 + f̂_λ c))²/amp², exceeds the projected measure's, c = cosθi cosθo (the two
+ * weights lnf:bright compares per cell; amp as the ln f target's). No threshold of its own: for g = ln f r ≈
+ * (f̂c/(1 + f̂c))², above c only where f̂ ≳ 4–5 sr⁻¹ (c ≤ 0.07 at 75°/75°: f̂ ≳ 5). A dim model keeps none.
+ */
+int sel_lobe_gate(const struct recon_model *m, double above, size_t nc, const double *ang, unsigned char *keep,
+		  size_t *nbeyond, size_t *nadmit, struct acq_err *err)
+{
+	size_t n = m->n, L = m->nwl, nb = 0;
+	*nbeyond = *nadmit = 0;
+	for (size_t j = 0; j < nc; j++) {
+		keep[j] = !(ang[4 * j] > above);
+		nb += !keep[j];
+	}
+	if (!nb)
+		return 0;
+	size_t *idx = malloc(nb * sizeof *idx);
+	double *A = recon_big_alloc(n * n * sizeof *A), *Ainv = recon_big_alloc(n * n * sizeof *Ainv);
+	double *alpha = calloc(L, sizeof *alpha), *c6 = malloc(nb * 6 * sizeof *c6), *K = malloc(nb * n * sizeof *K);
+	double *Y = malloc(nb * L * sizeof *Y);
+	int rc = -1;
+	if (!idx || !A || !Ainv || !alpha || !c6 || !K || !Y) {
+		acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		goto out;
+	}
+	if (recon_gp_setup(m, "select", A, Ainv, alpha, err))
+		goto out;
+	double abar = 0;
+	for (size_t l = 0; l < L; l++)
+		abar += alpha[l] / (double)L;
+	for (size_t j = 0, k = 0; j < nc; j++)
+		if (!keep[j]) {
+			const double *a = ang + 4 * j;
+			rbf_canon(a[0], a[1], a[2], a[3], c6 + 6 * k);
+			idx[k++] = j;
+		}
+	rbf_kmatrix_soa(m->kernel, m->shape, nb, c6, n, m->soa, K);
+	cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)nb, (int)L, (int)n, 1.0, K, (int)n, m->w, (int)n, 0.0,
+		    Y, (int)L);
+	for (size_t k = 0; k < nb; k++) {
+		const double *c = c6 + 6 * k;
+		double a2 = abar + recon_unseen(recon_nearest_centre(m, c, NULL)) * RECON_PRIOR_ALPHA;
+		double r = a2 > 0 ? rad_unit(m, alpha, c, Y + k * L) / a2 : 0;
+		if (isfinite(r) && r > c[2] * c[5]) {
+			keep[idx[k]] = 1;
+			(*nadmit)++;
+		}
+	}
+	*nbeyond = nb;
+	rc = 0;
+out:
+	free(idx);
+	free(A);
+	free(Ainv);
+	free(alpha);
+	free(c6);
+	free(K);
+	free(Y);
 	return rc;
 }
 

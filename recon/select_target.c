@@ -1,5 +1,6 @@
 /* select_target: the target spec of brdf-recon select and the adaptive plan ("dhr:8,30,60:le=X", "lnf", "rgb",
- * combined "dhr:...:le=X+lnf[:rad|:mix|:bright]:le=Y") parsed into struct select_target. */
+ * combined "dhr:...:le=X+lnf[:rad|:mix|:bright]:le=Y", any of them ending in the lobe gate ":lobe_above=DEG") parsed
+ * into struct select_target. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -24,7 +25,32 @@ static int parse_num(const char *s, const char *end, double *out)
 
 static int target_parse_one(const char *spec, struct select_target *t, struct acq_err *err);
 
+static int target_parse_parts(const char *spec, struct select_target *t, struct acq_err *err);
+
 int select_target_parse(const char *spec, struct select_target *t, struct acq_err *err)
+{
+	static const char gate[] = ":lobe_above=";
+	const char *g = spec ? strstr(spec, gate) : NULL;
+	if (!g)
+		return target_parse_parts(spec, t, err);
+	char body[512];
+	double deg;
+	const char *x = g + strlen(gate);
+	if ((size_t)(g - spec) >= sizeof body)
+		return acq_errf(err, ACQ_E_INVAL, "target '%s': too long", spec);
+	if (parse_num(x, x + strlen(x), &deg) || !(deg > 0 && deg < 90))
+		return acq_errf(err, ACQ_E_INVAL, "target '%s': lobe_above= needs a number of degrees in (0, 90), last",
+				spec);
+	memcpy(body, spec, (size_t)(g - spec));
+	body[g - spec] = '\0';
+	if (target_parse_parts(body, t, err))
+		return -1;
+	t->lobe_above_deg = deg;
+	return 0;
+}
+
+/* select_target_parse without the lobe gate's suffix. */
+static int target_parse_parts(const char *spec, struct select_target *t, struct acq_err *err)
 {
 	const char *plus = spec ? strchr(spec, '+') : NULL;
 	if (!plus)

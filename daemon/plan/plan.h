@@ -60,6 +60,8 @@ struct plan_adaptive {
 	size_t n_cand_inc;
 	size_t cand_count;          /* candidate observation directions per incidence (Fibonacci set) */
 	double cand_max_theta_deg;  /* ... over the cap θ ≤ this */
+	double cand_lobe_above_deg; /* > 0: candidates of incidence above it only where the model has its lobe (select's
+				     * :lobe_above=; the lobe gate); 0: all */
 	bool overlap;               /* choose batch k+2 (from the model through batch k) while batch k+1 is measured */
 	bool cand_specular;         /* per candidate incidence also the mirror direction and rings around it */
 	double spec_rings_deg[PLAN_MAX_SPEC_RINGS]; /* ... the rings' angular radii around it, degrees */

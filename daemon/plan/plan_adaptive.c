@@ -17,7 +17,9 @@
  *   budget: {seconds: 1400, points: 866}    # one or both; the whole sweep, seed included
  *   batch: 12                               # points per batch
  *   candidates: {incidence_deg: RANGE, per_incidence: 150, max_theta_deg: 85,
- *                specular: {rings_deg: [2, 4, 7, 11], per_ring: 8}}   # or specular: false
+ *                specular: {rings_deg: [2, 4, 7, 11], per_ring: 8},  # or specular: false
+ *                lobe_above_deg: 70}        # the lobe gate: candidates of incidence above 70° only where the
+ *                                           # model has its own lobe at their pair (select's :lobe_above=70)
  *   seed_specular_deg: [-4, 0, 4]           # the seed also measures these in-plane offsets from the mirror direction
  *   overlap: false                          # true: batch k+2 is chosen (from the model through batch k) while
  *                                           # batch k+1 is measured, so the arms need not wait for the refit
@@ -166,7 +168,8 @@ static int parse_candidates(struct yc_node *root, struct plan_adaptive *a, struc
 	a->cand_max_theta_deg = 85;
 	if (c && (yc_expect_map(c, "candidates", err) ||
 		  yc_int(c, "per_incidence", false, 1, PLAN_MAX_PER_INCIDENCE, &per, err) ||
-		  yc_double(c, "max_theta_deg", false, 0.1, 90, &a->cand_max_theta_deg, err)))
+		  yc_double(c, "max_theta_deg", false, 0.1, 90, &a->cand_max_theta_deg, err) ||
+		  yc_double(c, "lobe_above_deg", false, 0.1, 89.9, &a->cand_lobe_above_deg, err)))
 		return -1;
 	if (parse_specular(c, a, err))
 		return -1;
@@ -257,17 +260,19 @@ void plan_adaptive_target_spec(const struct plan_adaptive *a, char *buf, size_t 
 		return;
 	buf[0] = '\0';
 	if (a->target != PLAN_TARGET_DHR_SIGMA) {
-		snprintf(buf, len, "%s:le=%.9g", a->target == PLAN_TARGET_LNF_SIGMA ? LNF_SPEC[a->lnf_weight] : "rgb",
-			 a->le);
-		return;
+		n += (size_t)snprintf(buf, len, "%s:le=%.9g",
+				      a->target == PLAN_TARGET_LNF_SIGMA ? LNF_SPEC[a->lnf_weight] : "rgb", a->le);
+	} else {
+		n += (size_t)snprintf(buf, len, "dhr:");
+		for (size_t i = 0; i < a->n_target_inc && n < len; i++)
+			n += (size_t)snprintf(buf + n, len - n, "%s%.9g", i ? "," : "", a->target_inc[i]);
+		if (n < len)
+			n += (size_t)snprintf(buf + n, len - n, ":le=%.9g", a->le);
+		if (a->le_lnf > 0 && n < len)
+			n += (size_t)snprintf(buf + n, len - n, "+%s:le=%.9g", LNF_SPEC[a->lnf_weight], a->le_lnf);
 	}
-	n += (size_t)snprintf(buf, len, "dhr:");
-	for (size_t i = 0; i < a->n_target_inc && n < len; i++)
-		n += (size_t)snprintf(buf + n, len - n, "%s%.9g", i ? "," : "", a->target_inc[i]);
-	if (n < len)
-		n += (size_t)snprintf(buf + n, len - n, ":le=%.9g", a->le);
-	if (a->le_lnf > 0 && n < len)
-		snprintf(buf + n, len - n, "+%s:le=%.9g", LNF_SPEC[a->lnf_weight], a->le_lnf);
+	if (a->cand_lobe_above_deg > 0 && n < len) /* select's lobe gate */
+		snprintf(buf + n, len - n, ":lobe_above=%.9g", a->cand_lobe_above_deg);
 }
 
 size_t plan_adaptive_fit_picks(const double *cost, size_t n, double left_s, size_t max_k, size_t *keep)

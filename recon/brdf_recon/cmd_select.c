@@ -45,6 +45,12 @@ static const char select_help[] =
 	"                                      of each part's value over its threshold (met at <= 1), each pick's gain\n"
 	"                                      the sum of the parts' reductions relative to their criterion before the\n"
 	"                                      batch; per = the DHR incidences' values, then the ln f part's\n"
+	"                         any of them ending in :lobe_above=DEG (0 < DEG < 90): the lobe gate, candidates of\n"
+	"                                      theta_i above DEG kept only where the model has its own lobe at their\n"
+	"                                      pair (lnf:bright's rule there: lnf:rad's weight above the projected\n"
+	"                                      one); the JSON's candidates then add \"beyond\" and \"admitted\"\n"
+	"                         (lnf:bright: the JSON adds \"bright_cells\", the grid cells that took lnf:rad's\n"
+	"                                      weight; 0: the weights and picks are lnf's)\n"
 	"  --route SPEC           charge each pick its increment to the batch's route instead of cost_s: SPEC is 13\n"
 	"                         numbers, comma-separated: the arms' bench position (laser theta, detector theta,\n"
 	"                         detector phi, degrees), per axis in that order speed (deg/s), acceleration (deg/s^2),\n"
@@ -496,8 +502,14 @@ static int write_result(const struct select_args *a, const struct select_target 
 		fputs(",\"route\":", f);
 		json_str(f, a->routep);
 	}
-	fprintf(f, ",\"criterion\":\"%s\",\"candidates\":{\"read\":%zu,\"distinct\":%zu}}\n",
+	fprintf(f, ",\"criterion\":\"%s\",\"candidates\":{\"read\":%zu,\"distinct\":%zu",
 		"gp-excess-variance-reduction-per-second", cd->nc, res->nunique);
+	if (tg->lobe_above_deg > 0)
+		fprintf(f, ",\"beyond\":%zu,\"admitted\":%zu", res->nbeyond, res->nadmitted);
+	fputc('}', f);
+	if (tg->lnf_rad == SELECT_LNF_BRIGHT && (tg->kind == SELECT_LNF || tg->lnf_threshold > 0))
+		fprintf(f, ",\"bright_cells\":%zu", res->nbright);
+	fputs("}\n", f);
 	return cli_out_close(&o, 1, err) ? -1 : 0;
 }
 

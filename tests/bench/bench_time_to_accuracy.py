@@ -16,9 +16,10 @@ the model through batch k). The budget counts measured bench seconds (as the dae
 adds the arms' waits for the decisions, as on the bench: the CPU seconds of the fit and select runs behind each
 batch (single-threaded BLAS, this machine; with overlap only what exceeds the batch measured meanwhile).
 The adaptive plan: config/plan-adaptive.yaml (seed 4 incidences x 16 Fibonacci + its specular plane, batch 16, its
-candidates and integration) with the target ACQ_TTA_TARGET (default dhr:8,30,60:le=1e-09+lnf:le=1e-09: the DHR's
-sigma at 8, 30, 60 deg and the largest sigma of ln f together, never met, so it runs to its budget; lnf:rad or
-lnf:mix or lnf:bright instead of lnf: the plan's lnf_sigma gets weight: rad, mix or bright) and the
+candidates and integration; its lobe gate, candidates.lobe_above_deg, passed to select as the daemon does) with the
+target ACQ_TTA_TARGET (default dhr:8,30,60:le=1e-09+lnf:bright:le=1e-09, session 17: the DHR's sigma at 8, 30, 60 deg
+and the largest sigma of ln f together, never met, so it runs to its budget; lnf, lnf:rad or lnf:mix instead of
+lnf:bright: the plan's lnf_sigma gets weight: projected (no key), rad or mix) and the
 budget ACQ_TTA_BUDGET (1.5) x the paper plan's predicted time on the lobes (G2), ACQ_TTA_BUDGET_OTHER (1.0) x
 on the others (G1, G3 need no more; their time to accuracy beyond it shows as '-').
 Validation (ACQ_TTA_VALIDATE=1, default on): one adaptive sweep on the simulated bench (acq-sim + acquisitiond,
@@ -78,7 +79,7 @@ JOBS = int(os.environ.get("ACQ_TTA_JOBS", "2"))
 VALIDATE = os.environ.get("ACQ_TTA_VALIDATE", "1") == "1"
 # the adaptive plan's target as select takes it (never met: the run goes to its budget); the default is the study's
 # own criterion, the DHR and ln f together (dhr alone: ACQ_TTA_TARGET=dhr:8,30,60:le=1e-09)
-TARGET = os.environ.get("ACQ_TTA_TARGET", "dhr:8,30,60:le=1e-09+lnf:le=1e-09")
+TARGET = os.environ.get("ACQ_TTA_TARGET", "dhr:8,30,60:le=1e-09+lnf:bright:le=1e-09")
 DIFFUSE = ["white", "narrow-lines", "rough-backscatter", "green-paint"]
 LOBES = ["sharp-lobe", "clear-coat"]
 DHR_GOAL, LOBE_GOAL = 0.005, 0.01
@@ -121,6 +122,13 @@ def adaptive_plan(paper_s, path, overlap=None, budget_s=None, target=None):
     with open(path, "w") as fh:
         fh.write(text)
     return text
+
+
+def lobe_gate(plan_path):
+    """The plan's lobe gate as select's target suffix (':lobe_above=DEG', as the daemon's
+    plan_adaptive_target_spec writes it), or ''."""
+    g = re.search(r"\blobe_above_deg:\s*([0-9.]+)", open(plan_path).read())
+    return ":lobe_above=%s" % g.group(1) if g else ""
 
 
 class Truth:
@@ -191,7 +199,9 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
     models = []  # model after batch k (index k)
     pending = sel_pending = None  # overlap: the batch decided ahead (and its selection), not measured yet
     rows, k, fits, stop = [], 0, [], None
-    target = TARGET
+    target = TARGET + lobe_gate(plan_path)
+    admits = []  # per decision, with a lobe gate: the candidates above its bound kept
+    brights = []  # per decision, under lnf:bright: the grid cells that took lnf:rad's weight (none: lnf's picks)
 
     def fit(warm):
         mp = os.path.join(WORK, "%s.m%d.model" % (tag, len(models)))
@@ -214,6 +224,10 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         cpu = T.run([T.REC, "select", model, "--candidates", cc, "--route", route, "--target", target, "--batch", str(BATCH[0]),
                      "-o", sj])[0]
         sel = json.load(open(sj))
+        if "admitted" in sel["candidates"]:  # the lobe gate: candidates above its bound it kept
+            admits.append(sel["candidates"]["admitted"])
+        if "bright_cells" in sel:  # lnf:bright: the ln f grid's cells that took lnf:rad's weight
+            brights.append(sel["bright_cells"])
         if not sel["picks"]:
             return sel, None, "nothing reachable left worth measuring", cpu
         b = helper("batch", CONF, plan_path, st, sj)
@@ -225,7 +239,8 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
         rel, ab, lr, s8 = truth.figures(m_, tag)
         return dict(material=mat, seed=seed, kind="adaptive", plan="adaptive", batch=batch, points=len(done),
                     bench_s=spent + waited, dhr_err=rel, dhr_abs=ab, logrmse=lr, sigma8=s8, measured_s=spent,
-                    waited_s=waited, motion_s=motion, darks_s=darks, charged_s=charged)
+                    waited_s=waited, motion_s=motion, darks_s=darks, charged_s=charged,
+                    admitted=sum(admits) if admits else "", bright_cells=sum(brights) if brights else "")
 
     m = fit(None)
     ahead_cpu = 0.0
@@ -276,8 +291,10 @@ def adaptive_run(mat, truth, seed, plan_path, overlap, seed_plan, budget):
     assert all(b["waited_s"] >= a["waited_s"] for a, b in zip(rows, rows[1:]))
     assert overlap or all(b["waited_s"] > a["waited_s"] for a, b in zip(rows, rows[1:]) if b["points"] > a["points"])
     log("   %-17s seed %d adaptive: %d batches, %d points, %.0f s measured + %.0f s waited (%s); DHR err %.4f, "
-        "log-RMSE %.5f; fits %.2f s CPU mean" % (mat, seed, k, len(done), spent, waited, stop, rows[-1]["dhr_err"],
-                                                 rows[-1]["logrmse"], np.mean(fits)))
+        "log-RMSE %.5f; fits %.2f s CPU mean%s" % (mat, seed, k, len(done), spent, waited, stop, rows[-1]["dhr_err"],
+                                                   rows[-1]["logrmse"], np.mean(fits),
+                                                   ("; lobe gate admitted %s" % admits if admits else "") +
+                                                   ("; lnf:bright cells %s" % brights if brights else "")))
     for mp in models:
         if os.path.exists(mp):
             os.unlink(mp)
@@ -623,7 +640,7 @@ def main():
                                  seed_plan, (BUDGET_X if lobe else BUDGET_OTHER) * PAPER_S[0])] = mat
                 jobs[pool.submit(fixed_run, mat, truths[mat], seed, plans)] = mat
         keys = ["material", "seed", "kind", "plan", "batch", "points", "bench_s", "dhr_err", "dhr_abs", "logrmse",
-                "sigma8", "measured_s", "waited_s", "motion_s", "darks_s", "charged_s", "stop"]
+                "sigma8", "measured_s", "waited_s", "motion_s", "darks_s", "charged_s", "admitted", "bright_cells", "stop"]
         with open(os.path.join(OUT, "time_to_accuracy.csv"), "w") as fh:
             fh.write(",".join(keys) + "\n")
             for fu in cf.as_completed(jobs):

@@ -7,7 +7,7 @@ one measurement, the cheaper copy's id; the predicted value never rises along th
 current value; the current value is the RMS over wavelengths of `brdf-recon dhr`'s sigma (same draws and seed,
 to 1e-9 relative) per incidence, the largest of them; a threshold above the value is met with no pick; the ln f
 target; --route's charges (base/open, and with band nodes the planner's exposure price: the picks' charges add up to
-their formula; a dark due, more rungs, a wider band cost more); a header-only candidate file; bad input of every kind exits 2 with a message naming what (and the row),
+their formula; a dark due, more rungs, a wider band cost more); the lobe gate's fields (and, keeping none, the picks of the candidates at or below its bound); a header-only candidate file; bad input of every kind exits 2 with a message naming what (and the row),
 never a crash. `fit --warm`: the previous trend kind kept, shape and smoothing searched, so the model (settings, DHR
 and σ) equals a cold fit's when that keeps the trend kind; a white model's settings refused on a sharp lobe (full
 search); a conflicting kernel exits 2, a missing model 1."""
@@ -105,6 +105,20 @@ def main():
     jl = json.loads(p.stdout)
     check(len(jl["target"]["per"]) == 1 and jl["target"]["value"] > 0 and len(jl["picks"]) == 3, "lnf target")
     check(set(jl["target"]["where"]) == {"theta_i", "phi_i", "theta_o", "phi_o"}, "lnf where")
+    # the lobe gate (:lobe_above=50): the candidates above 50 deg counted, kept only on the model's lobe; with none kept
+    # the picks are those of the file without them (ids, gains); lnf:bright reports its bright cells
+    p = run("select", model, "--candidates", cands, "--target", "lnf:bright:lobe_above=50", "--batch", "3")
+    jg = json.loads(p.stdout)
+    above = sum(1 for r in rows if r[1] > 50)
+    print("lobe gate:", json.dumps(jg["candidates"]), "bright_cells", jg.get("bright_cells"))
+    check(jg["candidates"]["beyond"] == above and 0 <= jg["candidates"]["admitted"] <= above and
+          isinstance(jg.get("bright_cells"), int) and "beyond" not in jl["candidates"], "lobe gate fields")
+    if jg["candidates"]["admitted"] == 0:
+        below = os.path.join(d, "below.csv")
+        write_cands(below, [r for r in rows if r[1] <= 50])
+        jb = json.loads(run("select", model, "--candidates", below, "--target", "lnf:bright", "--batch", "3").stdout)
+        check([(q["id"], q["gain"]) for q in jg["picks"]] == [(q["id"], q["gain"]) for q in jb["picks"]],
+              "lobe gate keeping none: the picks of the candidates at or below the bound")
     # dhr + lnf, both must be met: the parts are the single targets' values, the value their larger ratio
     spec = "dhr:8,30,60:le=%.9g+lnf:le=%.9g" % (2 * t["value"], 0.5 * jl["target"]["value"])
     p = run("select", model, "--candidates", cands, "--target", spec, "--batch", "3")

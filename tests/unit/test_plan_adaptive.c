@@ -104,6 +104,23 @@ static void test_parse(void **state)
 		assert_string_equal(spec, targets[k][1]);
 		plan_spec_free(s);
 	}
+	/* the lobe gate (candidates.lobe_above_deg): select's :lobe_above= suffix, after any target */
+	static const char *const gated[][2] = {
+		{ "{dhr_sigma: {incidence_deg: [8, 30], le: 0.002}, lnf_sigma: {le: 0.05, weight: bright}}",
+		  "dhr:8,30:le=0.002+lnf:bright:le=0.05:lobe_above=70" },
+		{ "{dhr_sigma: {incidence_deg: [8], le: 0.002}}", "dhr:8:le=0.002:lobe_above=70" },
+		{ "{lnf_sigma: {le: 0.05}}", "lnf:le=0.05:lobe_above=70" },
+	};
+	for (size_t k = 0; k < sizeof gated / sizeof gated[0]; k++) {
+		char text[512];
+		snprintf(text, sizeof text, "kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: "
+			 "[20, 50], phi_deg: [0, 180]}}\ntarget: %s\nbudget: {points: 20}\nbatch: 4\ncandidates: "
+			 "{incidence_deg: {from: 0, to: 80, step: 5}, lobe_above_deg: 70}\n", gated[k][0]);
+		s = load_ok(text);
+		plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
+		assert_string_equal(spec, gated[k][1]);
+		plan_spec_free(s);
+	}
 	/* the other kinds, named */
 	s = load_ok("kind: grid\nincidence: {theta_deg: 30}\nobservation: {theta_deg: 40, phi_deg: 0}\n");
 	assert_null(s->adaptive);
@@ -139,6 +156,9 @@ static void test_errors(void **state)
 	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
 		 "candidates: {specular: {rings: [2]}}\n", seed);
 	load_bad(buf, "unknown key 'rings' in candidates.specular");
+	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
+		 "candidates: {lobe_above_deg: 90}\n", seed);
+	load_bad(buf, "lobe_above_deg");
 	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
 		 "seed_specular_deg: [0, 60]\n", seed);
 	load_bad(buf, "seed_specular_deg");

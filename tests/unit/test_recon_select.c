@@ -697,10 +697,17 @@ static void test_target_parse(void **state)
 	assert_true(t.kind == SELECT_DHR && t.lnf_threshold == 0.1 && t.lnf_rad == 3);
 	assert_int_equal(select_target_parse("dhr:8:le=0.002+lnf:le=0.1", &t, &e), 0);
 	assert_true(t.lnf_rad == 0);
+	assert_int_equal(select_target_parse("dhr:8,30:le=0.002+lnf:bright:le=0.1:lobe_above=70", &t, &e), 0);
+	assert_true(t.kind == SELECT_DHR && t.nth == 2 && t.threshold == 0.002 && t.lnf_threshold == 0.1 && t.lnf_rad == 3 &&
+		    t.lobe_above_deg == 70);
+	assert_int_equal(select_target_parse("lnf:lobe_above=72.5", &t, &e), 0);
+	assert_true(t.kind == SELECT_LNF && t.lnf_rad == 0 && isnan(t.threshold) && t.lobe_above_deg == 72.5);
+	assert_true(select_target_parse("dhr:8", &t, &e) == 0 && t.lobe_above_deg == 0);
 	assert_int_equal(select_target_parse("rgb:le=0.01", &t, &e), 0);
 	assert_true(t.kind == SELECT_RGB && t.threshold == 0.01);
 	static const char *const bad[] = { "", "dhr", "dhr:", "dhr:8,", "dhr:91", "dhr:-1", "dhr:x", "lnf:le=0",
-					   "lnf:le=-1", "lnf:le=", "lnfx", "lnf:radx", "lnf:rad:", "lnf:mixx", "lnf:mix:", "lnf:brightx", "lnf:bright:", "lnf:", "rgb:rad", "mse:8", "dhr:8:le=abc", "rgb:8", "rgbx", "rgb:le=0",
+					   "lnf:le=-1", "lnf:le=", "lnfx", "lnf:radx", "lnf:rad:", "lnf:mixx", "lnf:mix:", "lnf:brightx", "lnf:bright:", "lnf:", "lnf:lobe_above=0", "lnf:lobe_above=90", "lnf:lobe_above=x",
+					   "lnf:lobe_above=", "lnf:lobe_above=70:le=1", ":lobe_above=70", "dhr:8:lobe_above=70+lnf:le=1", "rgb:rad", "mse:8", "dhr:8:le=abc", "rgb:8", "rgbx", "rgb:le=0",
 					   "dhr:1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16,17" };
 	for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
 		e.msg[0] = '\0';
@@ -1266,7 +1273,158 @@ static void test_lnf_bright(void **state)
 		struct select_result r;
 		size_t p0 = pick1(m, nc, ang, cost, "lnf:bright", 2, &r);
 		assert_true(p0 < nc && r.npicks == 2);
+		assert_int_equal(r.nbright, nrad); /* the count select reports (brdf-recon select's bright_cells) */
 		select_result_free(&r);
+		recon_model_free(m);
+	}
+}
+
+/* The lobe gate (select_target.lobe_above_deg, session 17): 40 random candidates (θ ≤ 60°) with 24 above the bound
+ * 70° interleaved (at incidences 75° and 80°: the mirror direction, 6 directions 2–7° around it, 5 far from it).
+ * sel_lobe_gate keeps exactly those of the direct rule (lnf:bright's at the pair: mean_λ (d_λ c/(1 + f̂_λ c))²/amp² >
+ * c, d and amp as test_lnf_bright's, through recon_eval); select_batch with the gate (lnf:bright, a route, batch 4)
+ * picks bit for bit what it picks without the gate on the candidates the gate keeps (the test's own compaction, the
+ * route's arrays too), indices mapped back. rt_truth (dim): none kept, so the gate gives the picks of the candidates
+ * at or below the bound alone (the session's default plan, candidates to 70°); glossy (lobe_samples, sampled at 75°):
+ * some kept near the mirror, none far from it. Seen failing with the rule's c halved (glossy: 3 candidates
+ * more than the direct rule) and with the route passed uncompacted (the picks differ). */
+static void test_lobe_gate(void **state)
+{
+	(void)state;
+	rt_seed();
+	enum { NB = 40, NG = 24, NC = NB + NG };
+	size_t L = 16;
+	for (int bright = 0; bright < 2; bright++) {
+		struct recon_samples smp;
+		if (bright)
+			lobe_samples(&smp, L);
+		else
+			rt_samples_grid(&smp, 4, 4, 6, L, 0.01, 1.0);
+		struct recon_fit_opts fo;
+		recon_fit_opts_default(&fo);
+		struct recon_model *m = NULL;
+		struct acq_err e = { 0 };
+		assert_int_equal(recon_fit(&smp, &fo, &m, &e), 0);
+		csvio_samples_free(&smp);
+		double ang[NC * 4], cost[NC], below[NB * 4], bcost[NB], pos[NC * 3], base[NC], open[NC];
+		unsigned char above[NC], far[NC];
+		random_cands(NB, below, bcost);
+		for (size_t j = 0; j < NB; j++) /* θ ≤ 60°: acos(0.5 + 0.5 u) */
+			for (int k = 0; k < 4; k += 2)
+				below[4 * j + k] = acos(0.5 + 0.5 * (cos(below[4 * j + k]) - 0.26) / 0.74);
+		size_t ib = 0, ig = 0;
+		for (size_t j = 0; j < NC; j++) {
+			double *a = ang + 4 * j;
+			above[j] = j % 8 >= 5 && ig < NG; /* 3 of every 8 above the bound */
+			far[j] = 0;
+			if (above[j]) {
+				size_t g = ig++, r = g % 12;
+				double ti = g < 12 ? 75 : 80, d = r == 0 ? 0 : r <= 6 ? 2 + (double)(r - 1) : 0;
+				a[0] = ti * M_PI / 180;
+				a[1] = 0;
+				if (r <= 6) { /* the mirror direction and 2–7° around it, in and across the plane */
+					a[2] = fmin(ti + (r % 2 ? d : -d * 0.5), 85) * M_PI / 180;
+					a[3] = (180 + (r % 2 ? 0 : 1.5 * d)) * M_PI / 180;
+				} else { /* far from it */
+					far[j] = 1;
+					a[2] = (10 + 12.0 * (double)(r - 7)) * M_PI / 180;
+					a[3] = 40.0 * (double)(r - 7) * M_PI / 180;
+				}
+				cost[j] = 3 + 0.1 * (double)r;
+			} else {
+				assert_true(ib < NB);
+				memcpy(a, below + 4 * ib, 4 * sizeof *a);
+				cost[j] = bcost[ib++];
+			}
+			pos[3 * j] = a[0] * 180 / M_PI;
+			pos[3 * j + 1] = a[2] * 180 / M_PI;
+			pos[3 * j + 2] = fmod(a[3] * 180 / M_PI + 100, 360);
+			base[j] = 2 + 0.01 * (double)(j % 7);
+			open[j] = 3;
+		}
+		assert_true(ib == NB && ig == NG);
+		/* the direct rule */
+		struct fix fa;
+		fix_make(&fa, m, NC, ang, cost, "lnf", 1);
+		double f[NC * 16], abar = 0;
+		assert_int_equal(recon_eval(m, NC, ang, f, &e), 0);
+		for (size_t l = 0; l < L; l++)
+			abar += fa.s.alpha[l] / (double)L;
+		unsigned char want[NC], keep[NC];
+		size_t nwant = 0, nnear = 0, nfar = 0;
+		for (size_t j = 0; j < NC; j++) {
+			want[j] = 1;
+			if (!above[j])
+				continue;
+			const double *a = ang + 4 * j;
+			double c6[6], c = cos(a[0]) * cos(a[2]), acc = 0;
+			rbf_canon(a[0], a[1], a[2], a[3], c6);
+			double u = recon_unseen(recon_nearest_centre(m, c6, NULL));
+			for (size_t l = 0; l < L; l++) {
+				double fl = f[j * L + l], sc = recon_energy_scale(m, a[0], a[2], l);
+				double x = (fl + sc * m->eps[l]) * sqrt(fa.s.alpha[l] + u * RECON_PRIOR_ALPHA) * c / (1 + fl * c);
+				acc += x * x / (double)L;
+			}
+			double r = acc / (abar + u * RECON_PRIOR_ALPHA);
+			assert_true(fabs(r / c - 1) > 1e-6); /* no tie the rounding could decide */
+			want[j] = r > c;
+			nwant += want[j];
+			nnear += want[j] && !far[j];
+			nfar += want[j] && far[j];
+		}
+		fix_free(&fa);
+		size_t nb = 0, na = 0;
+		assert_int_equal(sel_lobe_gate(m, 70 * M_PI / 180, NC, ang, keep, &nb, &na, &e), 0);
+		printf("lobe gate (%s): %zu of %zu above 70° kept (direct rule %zu: %zu near the mirror, %zu far)\n",
+		       bright ? "glossy" : "rt_truth", na, nb, nwant, nnear, nfar);
+		assert_true(nb == NG && na == nwant);
+		for (size_t j = 0; j < NC; j++)
+			assert_int_equal(keep[j], want[j]);
+		if (bright)
+			assert_true(nnear > 0 && nfar == 0);
+		else
+			assert_true(nwant == 0);
+		/* the gate's picks = the picks on the kept candidates alone (the test's compaction) */
+		double ak[NC * 4], ck[NC], pk[NC * 3], bk[NC], ok[NC];
+		size_t idx[NC], nk = 0;
+		for (size_t j = 0; j < NC; j++)
+			if (want[j]) {
+				memcpy(ak + 4 * nk, ang + 4 * j, 4 * sizeof *ak);
+				memcpy(pk + 3 * nk, pos + 3 * j, 3 * sizeof *pk);
+				ck[nk] = cost[j];
+				bk[nk] = base[j];
+				ok[nk] = open[j];
+				idx[nk++] = j;
+			}
+		struct select_route rt = { .pos = pos, .base = base, .open = open, .from = { 0, 40, 100 },
+					   .speed = { 10, 20, 30 }, .accel = { 20, 60, 90 }, .settle = { 0.3, 0.2, 0.2 },
+					   .move_s = 0.075 };
+		struct select_route rk = rt;
+		rk.pos = pk;
+		rk.base = bk;
+		rk.open = ok;
+		struct fix fg, fp;
+		fix_spec(&fg, "lnf:bright:le=1e-9:lobe_above=70");
+		fix_spec(&fp, "lnf:bright:le=1e-9");
+		assert_true(fg.t.lobe_above_deg == 70 && fp.t.lobe_above_deg == 0);
+		fg.o.batch = fp.o.batch = 4;
+		fg.o.route = &rt;
+		fp.o.route = &rk;
+		struct select_result rg, rp;
+		assert_int_equal(select_batch(m, NC, ang, cost, &fg.t, &fg.o, &rg, &fg.e), 0);
+		assert_int_equal(select_batch(m, nk, ak, ck, &fp.t, &fp.o, &rp, &fp.e), 0);
+		printf("lobe gate (%s): picks", bright ? "glossy" : "rt_truth");
+		assert_true(rg.npicks == 4 && rp.npicks == 4 && rg.nbeyond == NG && rg.nadmitted == nwant);
+		for (size_t k = 0; k < rg.npicks; k++) {
+			printf(" %zu", rg.picks[k].index);
+			assert_int_equal(rg.picks[k].index, idx[rp.picks[k].index]);
+			assert_true(rg.picks[k].gain == rp.picks[k].gain && rg.picks[k].cost == rp.picks[k].cost &&
+				    rg.picks[k].predicted == rp.picks[k].predicted);
+		}
+		printf("\n");
+		assert_true(rg.value == rp.value && rg.nunique == rp.nunique);
+		select_result_free(&rg);
+		select_result_free(&rp);
 		recon_model_free(m);
 	}
 }
@@ -1600,7 +1758,7 @@ int main(void)
 		cmocka_unit_test(test_target_parse),     cmocka_unit_test(test_noise_fall),
 		cmocka_unit_test(test_combined_target), cmocka_unit_test(test_route_increment),
 		cmocka_unit_test(test_lnf_measure),     cmocka_unit_test(test_lnf_rad), cmocka_unit_test(test_lnf_mix),
-		cmocka_unit_test(test_lnf_bright),
+		cmocka_unit_test(test_lnf_bright),      cmocka_unit_test(test_lobe_gate),
 		cmocka_unit_test(test_prior_after_pick), cmocka_unit_test(test_fast_path),
 		cmocka_unit_test(test_lent_factor),     cmocka_unit_test(test_big_alloc),
 	};
