@@ -6,9 +6,10 @@ table's RGB, unreachable, so the budget of points stops it; auto exposure, 4 ave
 daemon, as an operator would rehearse one (README "Adaptive sweeps"). Checks: the sweep completes on its budget
 with its decisions stored (adaptlib.check_decisions), every point measured once, no configuration twice; what the
 bench measured is the MERL material: the calibrated samples against `acq-sim truth merl:FILE` at the measured
-angles give z of mean ≈ 0 and spread ≈ 1 (measured: mean −0.013…0.032, std 0.76–0.79 at seeds 1–4; with green-paint itself on the stage instead,
-mean 208, std 152); and against the green paint the table was written from they do not (the upsampled spectrum
-keeps the table's RGB, not the paint's spectrum: z RMS ~4500), so the check tells the two apart."""
+angles give z of mean ≈ 0 and spread ≈ 1 (measured: mean −0.013…0.032, std 0.76–0.79 at seeds 1–4; with
+green-paint itself on the stage instead, mean 208, std 152); and against the green paint the table was written from
+they do not (the upsampled spectrum keeps the table's RGB, not the paint's spectrum: z RMS ~4500), so the check
+tells the two apart."""
 import os
 import statistics
 import subprocess

@@ -5,7 +5,8 @@ stops saying "target met" with the value at or below the threshold, after at lea
 within the budget; the values it stored are select's; and the stored decisions replay: brdf-recon select run again
 on a batch's recorded model and candidates picks the same candidates in the same order. Then a second sweep with an
 unreachable target (σ of the MERL table's RGB) and only 6 candidate directions at 40° (no specular set) measures
-every one of them the planner offers and stops on "nothing reachable left: no visible, reachable candidate is unmeasured" before its budget."""
+every one of them the planner offers and stops on "nothing reachable left: no visible, reachable candidate is
+unmeasured" before its budget."""
 import json
 import os
 import subprocess
