@@ -59,11 +59,11 @@ def run():
         assert abs(d["target"]["value"] - r1["target_value"]) <= 1e-9 * r1["target_value"], (d["target"], r1)
         L.say("batch 1 replayed: picks %s, value %.6g" % (got, d["target"]["value"]))
 
-        # a target every candidate has a gain on (the MERL table's σ), so the candidates run out: with a DHR target
-        # at 8° or at 40° select picked none of the 6 (white: no gain in excess of the noise; seed 1), the other
-        # "nothing reachable left" stop, and this one (no candidate left to offer) went untested
-        sid = L.start_sweep(b, A.plan(target="rgb_sigma: {le: 1.0e-9}",
-                                      budget="points: %d" % BUDGET,
+        # a target every candidate has a gain on (the MERL table's σ), so the candidates run out (one batch of 6, then
+        # a decision with none left: the least CPU that reaches this stop): with a DHR target at 8° or at 40° select
+        # picked none of the 6 (white: no gain in excess of the noise; seed 1), the other "nothing reachable left"
+        # stop, and this one (no candidate left to offer) went untested
+        sid = L.start_sweep(b, A.plan(target="rgb_sigma: {le: 1.0e-9}", budget="points: %d" % BUDGET, batch=6,
                                       cands="incidence_deg: [40], per_incidence: 6, specular: false"),
                             "it-adaptive-exhaust")
         rows, why, n = A.completes(b, sid)
