@@ -3,9 +3,9 @@
 `brdf-recon select` (an unreachable target on the σ of the MERL table's RGB values, rgb_sigma, so only the budget of
 points can stop it). Checks: it stops saying
 "budget spent" with exactly the budgeted points; every decision is stored (batch, picks in choice order with their
-points, target value, model, candidates, predicted time, the arms' wait); no blind-zone direction and no
-configuration twice; `acqctl watch` streams the target's value and its trend per batch; the finished sweep
-reconstructs from the database and from its CSV export like any other."""
+points, target value, model, candidates, predicted time, the arms' wait, the refit warm-started after batch 1);
+no blind-zone direction and no configuration twice; `acqctl watch` streams the target's value and its trend per
+batch; the finished sweep reconstructs from the database and from its CSV export like any other (the same model)."""
 import json
 import os
 import subprocess
@@ -92,6 +92,10 @@ def run():
         for r in chosen:
             assert r["criterion"] and r["predicted_s"] > 0 and r["waited_s"] is not None and r["waited_s"] >= 0, r
             assert [p["rank"] for p in r["picks"]] == list(range(len(r["picks"]))), r["picks"]
+        # refits between batches are warm-started from the batch before's model (brdf-recon fit --warm PREV; batch 1
+        # has none): the daemon records which (a brdf-recon whose fit --help has no --warm gives 0 everywhere)
+        assert [r["warm"] for r in chosen] == [0] + [1] * (len(chosen) - 1), \
+            "warm starts per batch %s" % [r["warm"] for r in chosen]
         waited = sum(r["waited_s"] for r in rows if r["waited_s"] is not None)
         L.say("stopped: %s; %d batches; values %s; arms waited %.1f bench s (%.2f s wall) for %d decisions" % (
             why, len(chosen), ["%.4g" % r["target_value"] for r in chosen], waited, waited / b.scale, len(chosen) + 1))

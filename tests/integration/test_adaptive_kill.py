@@ -87,6 +87,10 @@ def run():
         db.close()
         L.say("%d points, %d batches after %d kills (%d resume events): %s" % (n, len(rows) - 2, kills, resumes, why))
         assert resumes >= kills, "fewer resumes (%d) than kills (%d)" % (resumes, kills)
+        # overlap: some batch was chosen while the one before it was being measured (the daemon logs each such start)
+        ahead = b.daemon_text().count("overlapping the measurement of the batch before it")
+        L.say("%d decisions started while a batch was being measured" % ahead)
+        assert ahead >= 1, "overlap: true, but no decision started while a batch was measured"
     finally:
         b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
 

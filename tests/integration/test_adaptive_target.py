@@ -4,7 +4,9 @@ the σ of the DHR at 8° (0.006) that the seed alone does not reach and a budget
 stops saying "target met" with the value at or below the threshold, after at least one chosen batch and well
 within the budget; the values it stored are select's; and the stored decisions replay: brdf-recon select run again
 on a batch's recorded model and candidates picks the same candidates in the same order. Then a second sweep with an
-unreachable target and only 6 candidate directions (no specular set) stops on "nothing reachable left" before its budget."""
+unreachable target (σ of the MERL table's RGB) and only 6 candidate directions at 40° (no specular set) measures
+every one of them the planner offers and stops on "nothing reachable left: no visible, reachable candidate is
+unmeasured" before its budget."""
 import json
 import os
 import subprocess
@@ -57,13 +59,21 @@ def run():
         assert abs(d["target"]["value"] - r1["target_value"]) <= 1e-9 * r1["target_value"], (d["target"], r1)
         L.say("batch 1 replayed: picks %s, value %.6g" % (got, d["target"]["value"]))
 
-        sid = L.start_sweep(b, A.plan(budget="points: %d" % BUDGET,
+        # a target every candidate has a gain on (the MERL table's σ), so the candidates run out (one batch of 6, then
+        # a decision with none left: the least CPU that reaches this stop): with a DHR target at 8° or at 40° select
+        # picked none of the 6 (white: no gain in excess of the noise; seed 1), the other "nothing reachable left"
+        # stop, and this one (no candidate left to offer) went untested
+        sid = L.start_sweep(b, A.plan(target="rgb_sigma: {le: 1.0e-9}", budget="points: %d" % BUDGET, batch=6,
                                       cands="incidence_deg: [40], per_incidence: 6, specular: false"),
                             "it-adaptive-exhaust")
         rows, why, n = A.completes(b, sid)
-        L.say("second sweep: %d points, %d batches: %s" % (n, len(rows) - 2, why))
-        assert why.startswith("nothing reachable left"), "stopped: %s" % why
-        assert n <= rows[0]["n_points"] + 6 and n < BUDGET, "%d points from 6 candidates" % n
+        offered = rows[1]["candidates"] if len(rows) > 2 else None
+        L.say("second sweep: %d points, %d batches, %s candidates offered to the first: %s" % (
+            n, len(rows) - 2, offered, why))
+        assert why.startswith("nothing reachable left: no visible, reachable candidate is unmeasured"), \
+            "stopped: %s" % why
+        assert offered and n == rows[0]["n_points"] + offered <= rows[0]["n_points"] + 6 and n < BUDGET, \
+            "%d points after a seed of %d, %s of the 6 candidates offered" % (n, rows[0]["n_points"], offered)
     finally:
         b.cleanup(keep=os.environ.get("ACQ_KEEP") == "1")
 
