@@ -377,6 +377,7 @@ def main():
         d = c.json("status", "status")
         check(d["sweep"]["state"] == "paused" and d["sweep"]["eta_s"] is None, "paused status shows an ETA %r" %
               d["sweep"])
+        check("ETA" not in d["summary"], "paused status' summary (systemctl status) shows an ETA %r" % d["summary"])
         out = c.human("status")
         check("paused" in out and "ETA" not in out, "paused human status shows an ETA %r" % out)
         # wait --json prints the status reply it waited for (the status schema)
@@ -413,6 +414,11 @@ def main():
         for f in (keep, gone):
             c.json("error", "-o", f, "export", "999999", rc=1)
         check(open(keep).read() == "keep\n" and not os.path.exists(gone), "-o after a refused export")
+        # the next sweep starts without the previous one's ETA (none before its first point)
+        d = c.json("sweep.start", "sweep", "start", plan)
+        check(d["progress"]["state"] == "running" and d["progress"]["eta_s"] is None and
+              "eta_low_s" not in d["progress"], "a second sweep starts with an ETA %r" % d["progress"])
+        c.json("sweep.abort", "sweep", "abort")
         # --- watch: JSON lines, reconnects across a daemon restart
         watchers = lambda: c.json("status", "status").get("watchers", 0)
         before = watchers()
