@@ -384,8 +384,17 @@ int main(int argc, char **argv)
 	}
 	char cmd[64];
 	const struct proto_cmd *def = find_command(words, nw, &wi, cmd, sizeof cmd);
-	if (!def)
+	if (!def) { /* "sweep" alone (or "sweep frob"): the word of a group, so say its sub-commands */
+		char subs[256] = "";
+		size_t wl = strlen(words[help_cmd]);
+		for (const struct proto_cmd *c = proto_cmds; c->name; c++)
+			if (!strncmp(c->name, words[help_cmd], wl) && c->name[wl] == '.')
+				snprintf(subs + strlen(subs), sizeof subs - strlen(subs), "%s%s", subs[0] ? ", " : "",
+					 c->name + wl + 1);
+		if (subs[0])
+			return out_fail(CTL_EXIT_USAGE, "usage", "%s: expected one of %s (acqctl help)", words[help_cmd], subs);
 		return out_fail(CTL_EXIT_USAGE, "usage", "unknown command '%s' (acqctl help)", words[help_cmd]);
+	}
 	if (help || help_cmd) {
 		printf("usage: acqctl [options] ");
 		usage_cmd(stdout, def);

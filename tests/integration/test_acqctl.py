@@ -136,6 +136,10 @@ def offline_checks(tmp):
                      ["export", "1", "2"], ["wait", "sideways"], []):
             p = subprocess.run([CTL, "-s", hang] + args, capture_output=True, text=True, timeout=10)
             check(p.returncode == 64, "acqctl %s: exit %d, wanted 64 (%r)" % (" ".join(args), p.returncode, p.stderr))
+        # a group's word alone names its sub-commands
+        p = subprocess.run([CTL, "-s", hang, "sweep"], capture_output=True, text=True, timeout=10)
+        check(p.returncode == 64 and "sweep: expected one of start, pause, resume, abort, list, show" in p.stderr,
+              "acqctl sweep: %d %r" % (p.returncode, p.stderr))
         p = subprocess.run([CTL, "-s", hang, "--json", "bogus"], capture_output=True, text=True, timeout=10)
         validate(json.loads(p.stdout), "error")
         p = subprocess.run([CTL, "-s", hang, "sweep", "start", os.path.join(tmp, "none.yaml")], capture_output=True,
