@@ -71,9 +71,11 @@ void app_status_line(struct app *app, char *buf, size_t cap)
 	else if (p.state == SWEEP_FAULTED && p.message[0]) /* what is wrong matters more than the ETA */
 		snprintf(buf, cap, "sweep %lld %s: %d/%d points: %s", (long long)p.sweep_id, sweep_state_name(p.state),
 			 p.points_done, p.points_total, p.message);
-	else if (isfinite(p.eta_s))
-		snprintf(buf, cap, "sweep %lld %s: %d/%d points, ETA %.0f s", (long long)p.sweep_id,
-			 sweep_state_name(p.state), p.points_done, p.points_total, p.eta_s);
+	else if (p.state == SWEEP_RUNNING && isfinite(p.eta_s)) { /* a paused sweep's ETA does not count down */
+		long s = lround(p.eta_s);
+		snprintf(buf, cap, "sweep %lld %s: %d/%d points, ETA %ld:%02ld:%02ld", (long long)p.sweep_id,
+			 sweep_state_name(p.state), p.points_done, p.points_total, s / 3600, s / 60 % 60, s % 60);
+	}
 	else
 		snprintf(buf, cap, "sweep %lld %s: %d/%d points", (long long)p.sweep_id, sweep_state_name(p.state),
 			 p.points_done, p.points_total);

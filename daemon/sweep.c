@@ -78,8 +78,11 @@ static void on_event(void *ctx, int64_t sweep_id, const char *kind, const char *
 	}
 	/* The ETA counts running time only. */
 	bool run = !strcmp(kind, "start") || !strcmp(kind, "resume") || !strcmp(kind, "recovered");
-	if (!strcmp(kind, "start"))
+	if (!strcmp(kind, "start")) {
 		eta_reset(&sw->eta);
+		/* until its first point, not the previous sweep's last ETA (on_progress writes these) */
+		sw->last.eta_s = sw->last.eta_low_s = sw->last.eta_high_s = NAN;
+	}
 	if (run || !strcmp(kind, "pause") || !strcmp(kind, "abort") || !strcmp(kind, "failed") ||
 	    !strcmp(kind, "complete"))
 		eta_running(&sw->eta, run, loop_now(sw->env.loop), loop_monotonic(NULL));

@@ -49,8 +49,14 @@ static void usage_cmd(FILE *f, const struct proto_cmd *c)
 	cmd_words(c->name, name, sizeof name);
 	const char *pk = positional_key(c->name);
 	fprintf(f, "  %-13s", name);
-	if (pk)
-		fprintf(f, " %s", pk[0] == '@' ? "FILE" : !strcmp(pk, "axis") ? "[AXIS]" : "ID");
+	if (pk) { /* the positional argument, in brackets when it may be left out (sweep resume [ID], home [AXIS]) */
+		bool required = true;
+		for (int i = 0; i < c->nargs; i++)
+			if (!strcmp(c->args[i].name, pk + (pk[0] == '@')))
+				required = c->args[i].required;
+		const char *w = pk[0] == '@' ? "FILE" : !strcmp(pk, "axis") ? "AXIS" : "ID";
+		fprintf(f, required ? " %s" : " [%s]", w);
+	}
 	for (int i = 0; i < c->nargs; i++) {
 		if ((pk && !strcmp(pk + (pk[0] == '@'), c->args[i].name)) || c->args[i].alias_of)
 			continue;
@@ -284,7 +290,10 @@ static int show_reply(const char *cmd, json_t *rep, int passed)
 		char *hit = strstr(said, cmd);
 		if (hit && strchr(cmd, '.'))
 			hit[strchr(cmd, '.') - cmd] = ' ';
-		fprintf(stderr, "acqctl: %s: %s (%s)\n", words2, said, json_string_value(json_object_get(e, "code")));
+		/* a message that starts with the command ("move: \"laser.theta\": ...") is not prefixed twice */
+		size_t wl = strlen(words2);
+		const char *body = !strncmp(said, words2, wl) && !strncmp(said + wl, ": ", 2) ? said + wl + 2 : said;
+		fprintf(stderr, "acqctl: %s: %s (%s)\n", words2, body, json_string_value(json_object_get(e, "code")));
 		if (acqctl_o.json)
 			out_json(rep);
 		return CTL_EXIT_REFUSED;
@@ -375,8 +384,17 @@ int main(int argc, char **argv)
 	}
 	char cmd[64];
 	const struct proto_cmd *def = find_command(words, nw, &wi, cmd, sizeof cmd);
-	if (!def)
+	if (!def) { /* "sweep" alone (or "sweep frob"): the word of a group, so say its sub-commands */
+		char subs[256] = "";
+		size_t wl = strlen(words[help_cmd]);
+		for (const struct proto_cmd *c = proto_cmds; c->name; c++)
+			if (!strncmp(c->name, words[help_cmd], wl) && c->name[wl] == '.')
+				snprintf(subs + strlen(subs), sizeof subs - strlen(subs), "%s%s", subs[0] ? ", " : "",
+					 c->name + wl + 1);
+		if (subs[0])
+			return out_fail(CTL_EXIT_USAGE, "usage", "%s: expected one of %s (acqctl help)", words[help_cmd], subs);
 		return out_fail(CTL_EXIT_USAGE, "usage", "unknown command '%s' (acqctl help)", words[help_cmd]);
+	}
 	if (help || help_cmd) {
 		printf("usage: acqctl [options] ");
 		usage_cmd(stdout, def);
@@ -393,8 +411,11 @@ int main(int argc, char **argv)
 	rc = fill_args(req, def, cmd, words, wi, nw, &plan_file);
 	if (rc == CTL_EXIT_OK)
 		rc = check_request(req, def, cmd);
+	if (rc == CTL_EXIT_OK && !strcmp(cmd, "export")) /* -o checked before the daemon streams anything */
+		rc = out_prepare();
 	if (rc == CTL_EXIT_OK)
 		rc = !strcmp(cmd, "plan") && acqctl_o.bench ? local_plan(plan_file) : send_request(req, cmd, plan_file);
+	out_abandon();
 	json_decref(req);
 	/* a write that failed earlier (out_json flushes as it goes) leaves the error flag, not a failing fflush */
 	if ((fflush(stdout) || ferror(stdout)) && !rc) {

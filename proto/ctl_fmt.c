@@ -253,9 +253,9 @@ static void print_devices(FILE *f, json_t *arr)
 			snprintf(pos, sizeof pos, "%s %.0f %%", json_is_true(json_object_get(st, "emission")) ? "on" : "off",
 				 num(st, "power_pct"));
 		char ident[256] = "";
-		if (id)
-			snprintf(ident, sizeof ident, "%s %s, serial %s, firmware %s", str(id, "vendor"), str(id, "model"),
-				 str(id, "serial"), str(id, "firmware"));
+		if (id) /* a device that does not say its vendor (the simulated laser): the model alone */
+			snprintf(ident, sizeof ident, "%s%s%s, serial %s, firmware %s", str(id, "vendor"),
+				 str(id, "vendor")[0] ? " " : "", str(id, "model"), str(id, "serial"), str(id, "firmware"));
 		const char *note = str(d, "note");
 		char pp[64];
 		fprintf(f, "%-16s %-15s %s %s%s%s\n", str(d, "name"), str(d, "state"), pad(pos, 12, pp, sizeof pp), ident,

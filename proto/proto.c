@@ -182,6 +182,8 @@ static int check_arg(const struct proto_arg *a, json_t *v, const char **code, st
 			return acq_errf(err, ACQ_E_INVAL, "\"%s\": contains a NUL character", a->name);
 	} else if (a->type != PROTO_T_BOOL && (a->min != 0 || a->max != 0)) {
 		double d = json_number_value(v);
+		if (!(d >= a->min && d <= a->max) && a->max >= ID_MAX) /* an id: no upper bound worth saying (2^53) */
+			return acq_errf(err, ACQ_E_INVAL, "\"%s\": expected %s >= %g", a->name, type_name(a->type), a->min);
 		if (!(d >= a->min && d <= a->max))
 			return acq_errf(err, ACQ_E_INVAL, "\"%s\": expected %s in [%g, %g]", a->name, type_name(a->type),
 					a->min, a->max);

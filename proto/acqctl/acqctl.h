@@ -44,6 +44,12 @@ void out_json(json_t *o);
 /* An error of the client itself (no daemon, bad input): "acqctl: message" on stderr, and the error document with
  * --json; returns rc. */
 int out_fail(int rc, const char *code, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+/* An export's -o FILE opened (created if missing, not emptied) before the request is sent, so a file that cannot
+ * be written costs the daemon no export; 0, or the exit code (reported). Without -o: 0. */
+int out_prepare(void);
+/* The prepared -o file not used (the export refused or failed before its data): closed, removed if
+ * out_prepare created it. */
+void out_abandon(void);
 /* Copy the export stream src (its reply rep) to -o or stdout, checking it carried every row; the exit code. */
 int out_export(json_t *rep, int src);
 /* A small export sent inline (TCP) to -o or stdout; the exit code. */

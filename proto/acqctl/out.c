@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "proto/acqctl/acqctl.h"
@@ -36,10 +37,50 @@ int out_fail(int rc, const char *code, const char *fmt, ...)
 	return rc;
 }
 
+/* -o FILE of an export, opened before the request (out_prepare) and kept until the stream comes. */
+static int prep_fd = -1;
+static bool prep_created; /* out_prepare made the file: removed again if the export never starts */
+
+int out_prepare(void)
+{
+	if (!acqctl_o.out)
+		return 0;
+	struct stat st;
+	bool existed = stat(acqctl_o.out, &st) == 0;
+	/* no O_TRUNC yet: a refused export leaves an existing file as it was */
+	prep_fd = open(acqctl_o.out, O_WRONLY | O_CREAT | O_CLOEXEC, 0666);
+	if (prep_fd < 0)
+		return out_fail(CTL_EXIT_CANTCREAT, "io", "%s: %s", acqctl_o.out, strerror(errno));
+	prep_created = !existed;
+	return 0;
+}
+
+void out_abandon(void)
+{
+	if (prep_fd < 0)
+		return;
+	close(prep_fd);
+	prep_fd = -1;
+	if (prep_created)
+		unlink(acqctl_o.out);
+}
+
+/* The output: stdout (1), the prepared -o file emptied, else -o opened now; -1 with errno. */
 static int out_open(const char *path)
 {
 	if (!path)
 		return 1;
+	if (prep_fd >= 0) {
+		int fd = prep_fd;
+		prep_fd = -1;
+		if (ftruncate(fd, 0) && errno != EINVAL) { /* EINVAL: not a regular file (a FIFO, /dev/null) */
+			int e = errno;
+			close(fd);
+			errno = e;
+			return -1;
+		}
+		return fd;
+	}
 	return open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
 }
 

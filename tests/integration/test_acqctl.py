@@ -136,11 +136,21 @@ def offline_checks(tmp):
                      ["export", "1", "2"], ["wait", "sideways"], []):
             p = subprocess.run([CTL, "-s", hang] + args, capture_output=True, text=True, timeout=10)
             check(p.returncode == 64, "acqctl %s: exit %d, wanted 64 (%r)" % (" ".join(args), p.returncode, p.stderr))
+        # a group's word alone names its sub-commands
+        p = subprocess.run([CTL, "-s", hang, "sweep"], capture_output=True, text=True, timeout=10)
+        check(p.returncode == 64 and "sweep: expected one of start, pause, resume, abort, list, show" in p.stderr,
+              "acqctl sweep: %d %r" % (p.returncode, p.stderr))
         p = subprocess.run([CTL, "-s", hang, "--json", "bogus"], capture_output=True, text=True, timeout=10)
         validate(json.loads(p.stdout), "error")
         p = subprocess.run([CTL, "-s", hang, "sweep", "start", os.path.join(tmp, "none.yaml")], capture_output=True,
                            text=True, timeout=10)
         check(p.returncode == 66 and "none.yaml" in p.stderr, "unreadable plan: %d %r" % (p.returncode, p.stderr))
+        # export -o FILE that cannot be created: 73 before anything is sent (the daemon streams nothing for it)
+        t0 = time.time()
+        p = subprocess.run([CTL, "-s", hang, "export", "1", "-o", os.path.join(tmp, "nodir", "x.csv")],
+                           capture_output=True, text=True, timeout=10)
+        check(p.returncode == 73 and "nodir" in p.stderr and time.time() - t0 < 5,
+              "export -o into no folder: exit %d, wanted 73 at once (%r)" % (p.returncode, p.stderr))
     finally:
         hs.close()
     # a reply that is not the protocol's: 76 (EX_PROTOCOL), with the error document under --json
@@ -345,7 +355,11 @@ def main():
         d = c.json("reference", "reference", "integration_ms=20", "averages=1")
         check(d["spectrum_id"] > sid and c.json("spectrum", "spectrum", str(d["spectrum_id"]))["spectrum"]["kind"] ==
               "reference", "reference %r" % d)
-        c.human("move", "detector_theta=500", rc=1)  # refused by the daemon: 1
+        err = c.human("move", "detector_theta=500", rc=1)  # refused by the daemon: 1, said once with its command
+        check(err.startswith("acqctl: move: \"detector.theta\": expected a number in [") and "move: move" not in err,
+              "refused move: %r" % err)
+        err = c.human("spectrum", "0", rc=1)  # an id's range is not 2^53
+        check("expected an integer >= 1" in err and "spectrum: spectrum" not in err, "spectrum 0: %r" % err)
         # --- a sweep: replies show the state after the command
         b.ctl("sample white")
         d = c.json("sweep.start", "sweep", "start", plan)
@@ -367,6 +381,7 @@ def main():
         d = c.json("status", "status")
         check(d["sweep"]["state"] == "paused" and d["sweep"]["eta_s"] is None, "paused status shows an ETA %r" %
               d["sweep"])
+        check("ETA" not in d["summary"], "paused status' summary (systemctl status) shows an ETA %r" % d["summary"])
         out = c.human("status")
         check("paused" in out and "ETA" not in out, "paused human status shows an ETA %r" % out)
         # wait --json prints the status reply it waited for (the status schema)
@@ -394,8 +409,20 @@ def main():
         check(d["error"]["code"] == "not_found", "recon start of no sweep %r" % d)
         # export --json -o: the CSV in the file (written by acqctl), the summary on stdout
         xf = os.path.join(tmp, "aborted.csv")
+        open(xf, "w").write("x" * 4000000)  # an older, longer file: replaced, not written over in place
         d = c.json("export", "-o", xf, "export", str(swid))
         check(d["output"] == xf and os.path.getsize(xf) == d["bytes"], "export -o %r" % d)
+        # a refused export leaves -o as it was: an existing file untouched, none created
+        keep, gone = os.path.join(tmp, "keep.csv"), os.path.join(tmp, "gone.csv")
+        open(keep, "w").write("keep\n")
+        for f in (keep, gone):
+            c.json("error", "-o", f, "export", "999999", rc=1)
+        check(open(keep).read() == "keep\n" and not os.path.exists(gone), "-o after a refused export")
+        # the next sweep starts without the previous one's ETA (none before its first point)
+        d = c.json("sweep.start", "sweep", "start", plan)
+        check(d["progress"]["state"] == "running" and d["progress"]["eta_s"] is None and
+              "eta_low_s" not in d["progress"], "a second sweep starts with an ETA %r" % d["progress"])
+        c.json("sweep.abort", "sweep", "abort")
         # --- watch: JSON lines, reconnects across a daemon restart
         watchers = lambda: c.json("status", "status").get("watchers", 0)
         before = watchers()

@@ -47,6 +47,11 @@ done
 rules="$prefix/lib/udev/rules.d/60-avaspec.rules"
 grep -q 'GROUP="acquisitiond"' "$rules" || fail "udev rule not group-based"
 grep -v "^#" "$rules" | grep -q uaccess && fail "udev rule still tags uaccess"
+# the spectrometer's group is one the daemon runs with (Group= or SupplementaryGroups=), and no other device group
+ugrp=$(grep -v "^#" "$rules" | grep -o 'GROUP="[^"]*"' | cut -d'"' -f2)
+ugroups=" $(sed -n 's/^Group=//p; s/^SupplementaryGroups=//p' "$unit" | tr '\n' ' ') "
+[[ $ugroups == *" $ugrp "* ]] || fail "udev GROUP=$ugrp is not among the unit's groups:$ugroups"
+[[ $ugroups != *" plugdev "* ]] || fail "the unit asks for plugdev, which the udev rule does not use"
 sysusers="$prefix/lib/sysusers.d/acquisitiond.conf"
 for w in "u acquisitiond" "g acquisition " "g acquisition-view"; do grep -q "^$w" "$sysusers" || fail "sysusers: $w"; done
 if systemd-sysusers --help 2>&1 | grep -q -- "--dry-run"; then
