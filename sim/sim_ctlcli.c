@@ -26,7 +26,8 @@ static void usage(FILE *f)
 		"commands:\n"
 		"  truth | status           the simulator's true state: pose, emission, power, sample, temperature, faults\n"
 		"  reference                put the white standard on the stage (sample white)\n"
-		"  sample NAME              put NAME on the stage: green-paint | white | metal | none\n"
+		"  sample NAME              put NAME on the stage: green-paint | white | metal | clear-coat |\n"
+		"                           rough-backscatter | cloth-sheen | sharp-lobe | narrow-lines | none\n"
 		"  fault NAME [ARGS]        inject a fault (acq-sim ctl help lists them); fault clear ends all\n"
 		"  pose LT DT DP | laser on|off [PCT] | temperature C | time | help   (as the control socket has them)\n"
 		"exit status: 0 ok, 1 refused by the simulator, 64 usage, 69 no simulator answers\n");

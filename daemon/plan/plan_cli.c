@@ -3,9 +3,9 @@
  * Nothing touches hardware: the plan is classified, ordered and timed against the `bench:` section of a
  * configuration file. Without --config the bench file is found, in this order, at $ACQ_BENCH_CONFIG,
  * $ACQ_SRC/config/bench-sim.yaml, <dir of the executable>/../config/bench-sim.yaml or ../../config/...
- * (a build tree: build/acqctl, build/san/acqctl),
- * <dir of the executable>/../share/acquisitiond/config/bench-sim.yaml (an installed tree) and
- * /etc/acquisitiond/acquisitiond.yaml. acqctl renders the JSON (the same as the daemon's plan reply). */
+ * (a build tree: build/acqctl, build/san/acqctl), /etc/acquisitiond/acquisitiond.yaml (the bench's own file)
+ * and <dir of the executable>/../share/acquisitiond/config/bench-sim.yaml (an installed tree's example).
+ * acqctl renders the JSON (the same as the daemon's plan reply). */
 #include <jansson.h>
 #include <limits.h>
 #include <stdint.h>
@@ -40,11 +40,13 @@ static const char *find_bench(char *buf, size_t len)
 	}
 	char exe[PATH_MAX];
 	ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+	bool dir = false;
 	if (n > 0) {
 		exe[n] = '\0';
 		char *slash = strrchr(exe, '/');
 		if (slash) {
 			*slash = '\0';
+			dir = true;
 			/* build/acqctl, build/san/acqctl: the source tree is one or two levels up */
 			snprintf(buf, len, "%s/../config/bench-sim.yaml", exe);
 			if (readable(buf))
@@ -52,14 +54,18 @@ static const char *find_bench(char *buf, size_t len)
 			snprintf(buf, len, "%s/../../config/bench-sim.yaml", exe);
 			if (readable(buf))
 				return buf;
-			snprintf(buf, len, "%s/../share/acquisitiond/config/bench-sim.yaml", exe);
-			if (readable(buf))
-				return buf;
 		}
 	}
+	/* An installed tree: the bench's own configuration before the simulator's example (a real bench's dry run
+	 * must not be priced with the simulated geometry). */
 	snprintf(buf, len, "/etc/acquisitiond/acquisitiond.yaml");
 	if (readable(buf))
 		return buf;
+	if (dir) {
+		snprintf(buf, len, "%s/../share/acquisitiond/config/bench-sim.yaml", exe);
+		if (readable(buf))
+			return buf;
+	}
 	return NULL;
 }
 
