@@ -506,6 +506,20 @@ void ex_wait_batch(struct ex *x)
 	ex_set_phase_text(x, "waiting for the next batch");
 }
 
+/* The dark schedule (sweep.dark_every), its one owner: whether the dark cache is cleared before point x->cur, the
+ * next one, after `done` points. Every dark_every points, or whenever the incidence changes (0); -1: never (each
+ * time's dark is kept until it ages or the sensor's temperature moves, exp_dark_check: the laser is off for a dark,
+ * so the incidence does not enter it). At a batch's start (ex_extend: batch_start) the incidence rule as between the
+ * points of one plan; dark_every > 0 keeps its own count (the points' commits, go_on), none at the batch's start. */
+static bool darks_due(const struct ex *x, int done, bool batch_start)
+{
+	if (x->cur <= 0 || x->cur >= x->nsteps || x->cfg.dark_every < 0)
+		return false;
+	if (x->cfg.dark_every > 0)
+		return !batch_start && done % x->cfg.dark_every == 0;
+	return fabs(x->plan->steps[x->cur].pos.laser_theta - x->plan->steps[x->cur - 1].pos.laser_theta) > 1e-6;
+}
+
 int ex_extend(struct ex *x, const struct plan_result *plan, double now, struct acq_err *err)
 {
 	if (x->state != EX_WAITING && x->state != EX_PAUSED)
@@ -518,9 +532,7 @@ int ex_extend(struct ex *x, const struct plan_result *plan, double now, struct a
 	x->stats.points_total = x->nsteps;
 	if (x->state == EX_PAUSED || x->cur >= x->nsteps)
 		return 0;
-	/* Darks at a new incidence, as between the points of one plan (dark_every keeps its own count; -1: kept). */
-	if (x->cfg.dark_every == 0 && x->cur > 0 &&
-	    fabs(plan->steps[x->cur].pos.laser_theta - plan->steps[x->cur - 1].pos.laser_theta) > 1e-6)
+	if (darks_due(x, 0, true))
 		exp_darks_clear(x->darks);
 	x->state = EX_RUNNING;
 	x->point_started = now;
@@ -810,16 +822,8 @@ static void go_on(struct ex *x, double now, bool deferred)
 	}
 	int done = x->stats.points_done + (deferred ? 1 : 0);
 	x->cur++;
-	/* Dark schedule (sweep.dark_every): every N points, or whenever the incidence changes; -1: none (each time's
-	 * dark is kept until it ages or the sensor's temperature moves, exp_dark_check: the laser is off for a dark,
-	 * so the incidence does not enter it) */
-	if (x->cur < x->nsteps && x->cfg.dark_every >= 0) {
-		bool refresh = x->cfg.dark_every > 0
-				       ? done % x->cfg.dark_every == 0
-				       : fabs(x->plan->steps[x->cur].pos.laser_theta - x->plan->steps[x->cur - 1].pos.laser_theta) > 1e-6;
-		if (refresh)
-			exp_darks_clear(x->darks);
-	}
+	if (darks_due(x, done, false))
+		exp_darks_clear(x->darks);
 	point_timed(x, now);
 	if (!deferred)
 		progress(x, x->phase_text);
