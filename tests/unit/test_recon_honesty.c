@@ -337,7 +337,7 @@ static void test_coat_beyond_last_zenith(void **state)
  * 60° (session 17, honest4: the lobe criterion node by node): the plan's deepest hole there (0.517) is deeper than
  * the lobe's 2w, but only 4 % of the unseen share lies in holes that deep; the same band and σ × 3 / σ / 3 checks,
  * over the data sets whose edge gate is off (a < RECON_EDGE_A0: the gate's own charge of the pockets is honest3's
- * open question, and where it fires 60° reads 0.14-0.31 on either rule), drawing further data sets (up to GP_SMAX)
+ * open question, and where it fires 60° reads 0.14-0.31 with this rule), drawing further data sets (up to GP_SMAX)
  * until GP_N60 of them. Measured over the 12 ACQ_SEEDs above: 0.59-0.71 (12-27 data sets drawn; 2.3-5.1 s CPU for
  * this test, load 4); main 30a33f4 (the lobe weighed against the deepest hole, g 0.24-0.29 on all of U) reads
  * 0.21-0.25 on the same data sets: FAILS. Over all data sets, gate on or off, 60° read 0.34-0.58 over 24 seeds: too
