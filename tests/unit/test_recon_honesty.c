@@ -399,7 +399,8 @@ static void test_green_paint_coarse_not_overcovered(void **state)
 	}
 	double z60 = coat_zrms(err[2], sig[2], n60 * CC_NWL, 1), z60x3 = coat_zrms(err[2], sig[2], n60 * CC_NWL, 3);
 	printf("green paint 3x4x6, θi = 60°, the %d data sets with the edge gate off: RMS z %.2f "
-	       "(band [1/%.0f, %.2f]; σ×3: %.2f, σ/3: %.2f; %d data sets drawn)\n", n60, z60, GP_K, CC_ZHI, z60x3, 3 * z60, ns);
+	       "(band [1/%.0f, %.2f]; σ×3: %.2f, σ/3: %.2f; %d data sets drawn)\n",
+	       n60, z60, GP_K, CC_ZHI, z60x3, 3 * z60, ns);
 	assert_true(n60 >= GP_N60);
 	assert_true(z60 >= 1 / GP_K && z60 <= CC_ZHI);
 	assert_false(z60x3 >= 1 / GP_K && z60x3 <= CC_ZHI); /* σ × 3 */
