@@ -107,8 +107,9 @@ static void unseen_and_misfit(const struct recon_model *m, size_t Q, const doubl
 {
 	size_t L = m->nwl;
 	int rel = m->transform == RECON_T_LOG;
-	double U = 0, *aseen = in->aseen, *aunseen = senergy, hole = 0; /* hole: the deepest, max over nodes of d */
+	double U = 0, Uw = 0, *aseen = in->aseen, *aunseen = senergy; /* Uw: U of the nodes a lobe can hide in */
 	double reach = recon_energy_reach(recon_trend_width(m, 0));
+	double ws = recon_trend_width(m, 1), wl = m->trend_alpha > 0 ? ws : INFINITY; /* no trend: no lobe shown */
 	for (size_t l = 0; l < L; l++)
 		aseen[l] = aunseen[l] = 0;
 	for (size_t q = 0; q < Q; q++) {
@@ -120,10 +121,10 @@ static void unseen_and_misfit(const struct recon_model *m, size_t Q, const doubl
 				mis[l] += rel && r >= 1.0 / MISFIT_REL_MAX && r <= MISFIT_REL_MAX ? C[q * L + l] * (r - 1.0)
 												 : scale[q * L + l] * dfmis[k * L + l];
 			}
-		hole = fmax(hole, d);
 		double u = recon_unseen(d);
 		double ue = recon_unseen_energy(d, reach);
 		U += ue * in->wt[q];
+		Uw += ue * in->wt[q] * recon_prior_lobe_hides(d, wl);
 		for (size_t l = 0; l < L; l++) {
 			double fv = scale[q * L + l] * untransform(m->transform, in->Y[q * L + l] + in->mud[l], m->eps[l],
 								   trend_factor(m, in->tb + q * TREND_NB, l));
@@ -134,8 +135,7 @@ static void unseen_and_misfit(const struct recon_model *m, size_t Q, const doubl
 	}
 	double mir[6]; /* the mirror direction, where a specular lobe the samples missed would sit */
 	rbf_canon(in->theta, 0.0, in->theta, M_PI, mir);
-	double ws = recon_trend_width(m, 1), wl = m->trend_alpha > 0 ? ws : INFINITY; /* no trend: no lobe shown */
-	double ph = fmax(U / M_PI * recon_prior_pockets(U / M_PI, in->aedge, wl, hole), recon_mirror_unseen(m, mir, ws));
+	double ph = fmax(recon_prior_pockets(U / M_PI, in->aedge, Uw / M_PI), recon_mirror_unseen(m, mir, ws));
 	for (size_t l = 0; l < L; l++)
 		senergy[l] = recon_prior_energy_sd(ph, aseen[l], aunseen[l]);
 }

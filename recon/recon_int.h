@@ -286,32 +286,40 @@ void recon_albedo_ws_free(struct albedo_ws *ws);
 #define RECON_EDGE_A1 0.35
 #define RECON_EXTRAP_K 0.17
 /* The energy prior's pockets (recon/reconstruction.md, session 15): how far the unseen share U away from the mirror
- * direction counts in σ_E's p = max(mirror unseen-ness, g · U). On a plan that sees most of the hemisphere the
+ * direction counts in σ_E's p = max(mirror unseen-ness, pockets). On a plan that sees most of the hemisphere the
  * pockets (on 3 × 4 × 6 ≥ 95 % of U lies beyond the plan's last observation zenith, in the azimuth gaps at
- * grazing) can hide a lobe only where the data give a reason: g = the largest of
- *  - the edge gate ramp(a; RECON_EDGE_A0, A1): the last ring's held-out misfit says the trend's form misses the
- *    band beyond the last zenith, where the pockets lie;
- *  - 1 − ramp(2 w_s; RECON_PRIOR_RE, h), w_s the trend's specular lobe width (recon_trend_width(m, 1); none for
- *    the sheen and rough kinds or without a trend), h the depth of this incidence's deepest hole (the largest
- *    distance of a DHR node from every sample), at most 2 R0: the trend holds a lobe narrow enough to hide in a
- *    hole of the plan (the reach rule's e⁻⁴ argument: a lobe of width w hides only 2w from every sample), so the
- *    plan does not resolve its width and a lobe of its kind can be missed. Session 17: the ramp's end was the
- *    constant 2 R0 (0.70), a hole no coarse plan has at 8-60° (acq-sim's 3 × 4 × 6: 0.40 / 0.47 / 0.52), so a
- *    GGX lobe 2w = 0.48 wide, which no hole of that plan can hide at 8 and 30°, still weighed 0.84 (green paint:
- *    σ 12-15× its error at 30 / 60°; recon/reconstruction.md, session 17);
- *  - ramp(U; RECON_PRIOR_U0, U1): much of the hemisphere is unseen (few directions): the data have no say on what
+ * grazing) can hide a lobe only where the data give a reason; the pockets' share is the largest of
+ *  - U × the edge gate ramp(a; RECON_EDGE_A0, A1): the last ring's held-out misfit says the trend's form misses
+ *    the band beyond the last zenith, where the pockets lie;
+ *  - U_w, node by node, w_s the trend's specular lobe width (recon_trend_width(m, 1); none for the sheen and rough
+ *    kinds or without a trend): the unseen nodes whose hole d (distance from every sample) is deeper than 2 w_s
+ *    (recon_prior_lobe_hides), U_w = Σ_{q: d_q > 2 w_s} ue_q wt_q / π (dhr.c unseen_and_misfit): a lobe of width w
+ *    hides only 2w from every sample (the reach rule's e⁻⁴ argument), so only there can the plan miss a lobe of the
+ *    trend's kind — a lobe hides only in holes deeper than itself.
+ *    History (recon/reconstruction.md, session 17): session 15 weighed all of U by 1 − ramp(2 w_s; RE, 2 R0), a
+ *    ramp ending at a hole no coarse plan has at 8-60° (acq-sim's 3 × 4 × 6: deepest 0.40 / 0.47 / 0.52), so a GGX
+ *    lobe 2w = 0.48 wide still weighed 0.84 (green paint: σ 12-15× its error at 30 / 60°); honest3 ended the ramp
+ *    at the incidence's deepest hole h, which still charged all of U wherever one node was deeper than 2 w_s
+ *    (green paint at 60°: h 0.517, 2 w_s 0.476, g 0.27, z RMS 0.24, while 4 % of U lies deeper than 2 w_s);
+ *    the ramp per node (end d instead of h) left green paint's 60° bias at |z| up to 4 (share 0.952): not taken;
+ *  - U × ramp(U; RECON_PRIOR_U0, U1): much of the hemisphere is unseen (few directions): the data have no say on what
  *    it holds (the fit warns from 20 %).
  * Otherwise the data show no lobe the holes could hide and the form holds at the edge: a missed lobe of an
- * isotropic material would sit at the mirror direction, which p keeps. g = 1 is session 9's rule. */
+ * isotropic material would sit at the mirror direction, which p keeps. U itself is session 9's rule. */
 #define RECON_PRIOR_U0 0.05
 #define RECON_PRIOR_U1 0.20
-static inline double recon_prior_pockets(double U, double aedge, double wspec, double hole)
+/* Can a lobe of width w (rad) hide in a hole d deep (distance from every sample): 1 if 2w < d, else 0; 0 for w ≤ 0
+ * or not finite (the trend shows no specular lobe). */
+static inline double recon_prior_lobe_hides(double d, double w)
+{
+	return w > 0 && isfinite(w) && RECON_PRIOR_WIDTHS * w < d ? 1.0 : 0.0;
+}
+/* The pockets' share of σ_E's p: U (share of the hemisphere unseen), aedge the edge misfit, Uw the share of unseen
+ * nodes that can hide the trend's lobe (recon_prior_lobe_hides; U_w ≤ U). */
+static inline double recon_prior_pockets(double U, double aedge, double Uw)
 {
 	double g = fmax(recon_ramp(aedge, RECON_EDGE_A0, RECON_EDGE_A1), recon_ramp(U, RECON_PRIOR_U0, RECON_PRIOR_U1));
-	double h = fmin(hole, 2 * RECON_PRIOR_R0), w2 = RECON_PRIOR_WIDTHS * wspec;
-	if (wspec > 0 && isfinite(wspec))
-		g = fmax(g, h > RECON_PRIOR_RE ? 1.0 - recon_ramp(w2, RECON_PRIOR_RE, h) : w2 < h ? 1.0 : 0.0);
-	return g;
+	return fmax(U * g, Uw);
 }
 /* The largest zenith of any sample (radians). */
 double recon_last_zenith(const struct recon_model *m);
