@@ -1195,6 +1195,24 @@ static void lobe_samples(struct recon_samples *s, size_t nwl)
 			}
 }
 
+/* The fixtures of the lnf:bright and lobe-gate tests, fitted: the dim rt_truth on a 4×4×6 grid (bright 0) or the
+ * glossy lobe_samples (bright 1), L wavelengths. */
+static struct recon_model *dim_or_glossy_fit(int bright, size_t L)
+{
+	struct recon_samples smp;
+	if (bright)
+		lobe_samples(&smp, L);
+	else
+		rt_samples_grid(&smp, 4, 4, 6, L, 0.01, 1.0);
+	struct recon_fit_opts fo;
+	recon_fit_opts_default(&fo);
+	struct recon_model *m = NULL;
+	struct acq_err e = { 0 };
+	assert_int_equal(recon_fit(&smp, &fo, &m, &e), 0);
+	csvio_samples_free(&smp);
+	return m;
+}
+
 /* lnf:bright (session 16): per grid cell the larger of the projected measure ∫cell cosθi cosθo dωi dωo and lnf:rad's
  * unnormalised weight ω_x · mean_λ (d_λ c / (1 + f̂_λ c))² / amp[x]² (the formula of test_lnf_rad: both a squared error
  * of g per unit P over the cell), normalised; value and variances are lnf's. rt_truth (f̂ ≤ 1 sr⁻¹) is dim everywhere:
@@ -1208,17 +1226,7 @@ static void test_lnf_bright(void **state)
 	rt_seed();
 	size_t L = 16, nc = 40;
 	for (int bright = 0; bright < 2; bright++) {
-		struct recon_samples smp;
-		if (bright)
-			lobe_samples(&smp, L);
-		else
-			rt_samples_grid(&smp, 4, 4, 6, L, 0.01, 1.0);
-		struct recon_fit_opts o;
-		recon_fit_opts_default(&o);
-		struct recon_model *m = NULL;
-		struct acq_err fe = { 0 };
-		assert_int_equal(recon_fit(&smp, &o, &m, &fe), 0);
-		csvio_samples_free(&smp);
+		struct recon_model *m = dim_or_glossy_fit(bright, L);
 		double ang[40 * 4], cost[40];
 		random_cands(nc, ang, cost);
 		struct fix fp, fb;
@@ -1295,17 +1303,7 @@ static void test_lobe_gate(void **state)
 	enum { NB = 40, NG = 24, NC = NB + NG };
 	size_t L = 16;
 	for (int bright = 0; bright < 2; bright++) {
-		struct recon_samples smp;
-		if (bright)
-			lobe_samples(&smp, L);
-		else
-			rt_samples_grid(&smp, 4, 4, 6, L, 0.01, 1.0);
-		struct recon_fit_opts fo;
-		recon_fit_opts_default(&fo);
-		struct recon_model *m = NULL;
-		struct acq_err e = { 0 };
-		assert_int_equal(recon_fit(&smp, &fo, &m, &e), 0);
-		csvio_samples_free(&smp);
+		struct recon_model *m = dim_or_glossy_fit(bright, L);
 		double ang[NC * 4], cost[NC], below[NB * 4], bcost[NB], pos[NC * 3], base[NC], open[NC];
 		unsigned char above[NC], far[NC];
 		random_cands(NB, below, bcost);
@@ -1347,6 +1345,7 @@ static void test_lobe_gate(void **state)
 		struct fix fa;
 		fix_make(&fa, m, NC, ang, cost, "lnf", 1);
 		double f[NC * 16], abar = 0;
+		struct acq_err e = { 0 };
 		assert_int_equal(recon_eval(m, NC, ang, f, &e), 0);
 		for (size_t l = 0; l < L; l++)
 			abar += fa.s.alpha[l] / (double)L;
