@@ -262,8 +262,8 @@ static double combined_value(const struct select_target *t, double dhr, double l
 
 /* select_batch on a candidate set the lobe gate has passed. */
 static int select_set(const struct recon_model *m, size_t nc, const double *ang, const double *cost,
-		      const struct select_target *t, const struct select_opts *opts, struct select_result *r,
-		      struct acq_err *err)
+		      const struct select_target *t, const struct select_opts *opts, struct sel_gp *gp,
+		      struct select_result *r, struct acq_err *err)
 {
 	struct select_opts o;
 	if (opts)
@@ -291,8 +291,8 @@ static int select_set(const struct recon_model *m, size_t nc, const double *ang,
 	double *ex = NULL, *acc = NULL;
 	int rc = -1;
 	memset(s, 0, sizeof s);
-	if (sel_init(&s[0], m, nc, ang, cost, &tp[0], &o, r, err) ||
-	    (both && sel_init_part(&s[1], o.reference ? NULL : &s[0], m, nc, ang, cost, &tp[1], &o, &r2, err)))
+	if (sel_init_part(&s[0], NULL, gp, m, nc, ang, cost, &tp[0], &o, r, err) ||
+	    (both && sel_init_part(&s[1], o.reference ? NULL : &s[0], NULL, m, nc, ang, cost, &tp[1], &o, &r2, err)))
 		goto out;
 	r->nbright = s[np - 1].nbright;
 	if (both) {
@@ -428,13 +428,14 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 		 const struct select_target *t, const struct select_opts *opts, struct select_result *r, struct acq_err *err)
 {
 	if (!t || !(t->lobe_above_deg > 0) || !m || !ang || !cost)
-		return select_set(m, nc, ang, cost, t, opts, r, err);
+		return select_set(m, nc, ang, cost, t, opts, NULL, r, err);
 	memset(r, 0, sizeof *r);
 	unsigned char *keep = malloc(nc ? nc : 1);
 	size_t nb = 0, na = 0, nk = 0;
 	if (!keep)
 		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
-	if (sel_lobe_gate(m, t->lobe_above_deg * M_PI / 180, nc, ang, keep, &nb, &na, err)) {
+	struct sel_gp gp = { 0 }; /* the gate's factorisation, taken over by select_set's (one factorisation a call) */
+	if (sel_lobe_gate(m, t->lobe_above_deg * M_PI / 180, nc, ang, keep, &nb, &na, &gp, err)) {
 		free(keep);
 		return -1;
 	}
@@ -443,7 +444,8 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 	int rc;
 	if (nb == na) { /* nothing left out: the candidates as given */
 		free(keep);
-		rc = select_set(m, nc, ang, cost, &tk, opts, r, err);
+		rc = select_set(m, nc, ang, cost, &tk, opts, &gp, r, err);
+		sel_gp_free(&gp);
 		r->nbeyond = nb;
 		r->nadmitted = na;
 		return rc;
@@ -472,12 +474,13 @@ int select_batch(const struct recon_model *m, size_t nc, const double *ang, cons
 		route_keep(ro, idx, nk, rb, &rk);
 		ok.route = &rk;
 	}
-	rc = select_set(m, nk, ak, ck, &tk, &ok, r, err);
+	rc = select_set(m, nk, ak, ck, &tk, &ok, &gp, r, err);
 	for (size_t i = 0; rc == 0 && i < r->npicks; i++) /* back to the caller's candidates */
 		r->picks[i].index = idx[r->picks[i].index];
 	r->nbeyond = nb;
 	r->nadmitted = na;
 out:
+	sel_gp_free(&gp);
 	free(keep);
 	free(idx);
 	free(ak);

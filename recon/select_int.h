@@ -106,13 +106,23 @@ void sel_route_add(struct sel_route *w, size_t i, size_t at);
 /* The straight move's seconds from bench position p to q under r's axis model (0: no axis moves). */
 double sel_route_move(const struct select_route *r, const double *p, const double *q);
 
+/* A model's factorisation handed from the lobe gate to the selection that follows it (recon_gp_setup's A, Ainv,
+ * alpha; all NULL: none handed). Whoever holds non-NULL buffers frees them. */
+struct sel_gp {
+	double *A, *Ainv, *alpha;
+};
+/* Free what gp still holds (none taken over); its pointers NULL after. */
+void sel_gp_free(struct sel_gp *gp);
+
 /* Everything before the first pick: the factorisation, the candidates, the target's functionals and their
  * covariances with the candidates, the current value into r. 0, or -1 with err (sel_free in both cases). */
 int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const double *ang, const double *cost,
 	     const struct select_target *t, const struct select_opts *o, struct select_result *r, struct acq_err *err);
 /* sel_init for a further part of a combined target: own's factor and candidates' arrays borrowed (own != NULL; same
- * model and candidates), not set up again; its picks then go through sel_update_row/_target/_cands. */
-int sel_init_part(struct sel *s, const struct sel *own, const struct recon_model *m, size_t nc, const double *ang,
+ * model and candidates), not set up again; its picks then go through sel_update_row/_target/_cands. Without own, a
+ * factor in gp (non-NULL buffers) is taken over instead of computed again (gp's pointers then NULL). */
+int sel_init_part(struct sel *s, const struct sel *own, struct sel_gp *gp, const struct recon_model *m, size_t nc,
+		  const double *ang,
 		  const double *cost, const struct select_target *t, const struct select_opts *o, struct select_result *r,
 		  struct acq_err *err);
 /* Release what sel_init allocated (idempotent on a zeroed state). */
@@ -131,9 +141,10 @@ int sel_dhr_coef(const struct sel *s, double th, double *c6, double *wt, double 
 size_t sel_lnf_grid(double *ang, double *w);
 /* The lobe gate (select_setup.c): keep[j] = 1 for candidates j (ang as select_batch's) of θi ≤ above (radians) and
  * for those above it where lnf:bright's rule puts the model's own lobe at their pair; the count above the bound into
- * *nbeyond, of them kept into *nadmit. 0, or -1 with err. */
+ * *nbeyond, of them kept into *nadmit. The model's factorisation, when it made one, into gp (gp NULL: freed) for
+ * the selection that follows. 0, or -1 with err. */
 int sel_lobe_gate(const struct recon_model *m, double above, size_t nc, const double *ang, unsigned char *keep,
-		  size_t *nbeyond, size_t *nadmit, struct acq_err *err);
+		  size_t *nbeyond, size_t *nadmit, struct sel_gp *gp, struct acq_err *err);
 /* The RGB target's node pairs into ang[F*4] and their measure shares into w[F] (either NULL); returns F. */
 size_t sel_rgb_nodes(double *ang, double *w);
 

@@ -431,7 +431,7 @@ out:
  * (f̂c/(1 + f̂c))², above c only where f̂ ≳ 4–5 sr⁻¹ (c ≤ 0.07 at 75°/75°: f̂ ≳ 5). A dim model keeps none.
  */
 int sel_lobe_gate(const struct recon_model *m, double above, size_t nc, const double *ang, unsigned char *keep,
-		  size_t *nbeyond, size_t *nadmit, struct acq_err *err)
+		  size_t *nbeyond, size_t *nadmit, struct sel_gp *gp, struct acq_err *err)
 {
 	size_t n = m->n, L = m->nwl, nb = 0;
 	*nbeyond = *nadmit = 0;
@@ -475,6 +475,10 @@ int sel_lobe_gate(const struct recon_model *m, double above, size_t nc, const do
 	}
 	*nbeyond = nb;
 	rc = 0;
+	if (gp) { /* the selection that follows factors the same model: it takes this one */
+		*gp = (struct sel_gp){ A, Ainv, alpha };
+		A = Ainv = alpha = NULL;
+	}
 out:
 	free(idx);
 	free(A);

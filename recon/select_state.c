@@ -54,19 +54,34 @@ void sel_free(struct sel *s)
 	free(s->gp);
 }
 
+void sel_gp_free(struct sel_gp *gp)
+{
+	free(gp->A);
+	free(gp->Ainv);
+	free(gp->alpha);
+	*gp = (struct sel_gp){ 0 };
+}
+
 /* Factor K + ηΛ of the model, its inverse and the leave-one-out amplitude α_λ of every channel (as dhr.c, to which
  * sel_setup_dhr lends the factor and the inverse). */
-static int sel_factor(struct sel *s, struct acq_err *err)
+static int sel_factor(struct sel *s, struct sel_gp *gp, struct acq_err *err)
 {
 	const struct recon_model *m = s->m;
 	size_t n = s->n, L = s->L;
-	s->Ainv = recon_big_alloc(n * n * sizeof *s->Ainv);
-	s->A = recon_big_alloc(n * n * sizeof *s->A);
-	s->alpha = calloc(L, sizeof *s->alpha);
-	if (!s->Ainv || !s->A || !s->alpha)
-		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
-	if (recon_gp_setup(m, "select", s->A, s->Ainv, s->alpha, err))
-		return -1;
+	if (gp && gp->A && gp->Ainv && gp->alpha) { /* the lobe gate's, of the same model */
+		s->A = gp->A;
+		s->Ainv = gp->Ainv;
+		s->alpha = gp->alpha;
+		*gp = (struct sel_gp){ 0 };
+	} else {
+		s->Ainv = recon_big_alloc(n * n * sizeof *s->Ainv);
+		s->A = recon_big_alloc(n * n * sizeof *s->A);
+		s->alpha = calloc(L, sizeof *s->alpha);
+		if (!s->Ainv || !s->A || !s->alpha)
+			return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
+		if (recon_gp_setup(m, "select", s->A, s->Ainv, s->alpha, err))
+			return -1;
+	}
 	double *r = malloc(n * sizeof *r);
 	if (!r)
 		return acq_errf(err, ACQ_E_NOMEM, "select: out of memory");
@@ -190,10 +205,11 @@ static void sel_share(struct sel *s, const struct sel *own)
 int sel_init(struct sel *s, const struct recon_model *m, size_t nc, const double *ang, const double *cost,
 		    const struct select_target *t, const struct select_opts *o, struct select_result *r, struct acq_err *err)
 {
-	return sel_init_part(s, NULL, m, nc, ang, cost, t, o, r, err);
+	return sel_init_part(s, NULL, NULL, m, nc, ang, cost, t, o, r, err);
 }
 
-int sel_init_part(struct sel *s, const struct sel *own, const struct recon_model *m, size_t nc, const double *ang,
+int sel_init_part(struct sel *s, const struct sel *own, struct sel_gp *gp, const struct recon_model *m, size_t nc,
+		  const double *ang,
 		  const double *cost, const struct select_target *t, const struct select_opts *o, struct select_result *r,
 		  struct acq_err *err)
 {
@@ -218,7 +234,7 @@ int sel_init_part(struct sel *s, const struct sel *own, const struct recon_model
 	}
 	if (own)
 		sel_share(s, own);
-	else if (sel_factor(s, err) || sel_candidates(s, nc, ang, cost, err))
+	else if (sel_factor(s, gp, err) || sel_candidates(s, nc, ang, cost, err))
 		return -1;
 	r->nunique = s->J;
 	size_t J = s->J, Jp = J ? J : 1;

@@ -1373,7 +1373,7 @@ static void test_lobe_gate(void **state)
 		}
 		fix_free(&fa);
 		size_t nb = 0, na = 0;
-		assert_int_equal(sel_lobe_gate(m, 70 * M_PI / 180, NC, ang, keep, &nb, &na, &e), 0);
+		assert_int_equal(sel_lobe_gate(m, 70 * M_PI / 180, NC, ang, keep, &nb, &na, NULL, &e), 0);
 		printf("lobe gate (%s): %zu of %zu above 70° kept (direct rule %zu: %zu near the mirror, %zu far)\n",
 		       bright ? "glossy" : "rt_truth", na, nb, nwant, nnear, nfar);
 		assert_true(nb == NG && na == nwant);
