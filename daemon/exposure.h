@@ -164,7 +164,9 @@ struct store_prior_row;
 /* The exposure prior (plan.h) of one sweep from its exposures (store_prior_each's rows, in incidence, point and time
  * order): per incidence the points' first exposures (median, mean, longest/shortest), the darks taken there (count,
  * mean time) and the further (HDR) exposures per point (count, mean time); over the sweep the median, spread and
- * the fraction of points with an HDR exposure. Incidences past PLAN_PRIOR_MAX_INC are left out of the rows (counted
+ * the fraction of points with an HDR exposure; per incidence also the share of points whose first time was their
+ * predecessor's (pooled_per_point: their probe was one of its scans, exp_probe_reusable). Incidences past
+ * PLAN_PRIOR_MAX_INC are left out of the rows (counted
  * over the sweep); with g and t (the bench and the executor's timing, time scale included) also the host's real
  * seconds per point there (host_per_point_s, host_points: what the sweep took between commits beyond the bench's
  * part). sweep and sample are not set. 0, or -1 out of memory. */

@@ -81,7 +81,8 @@ static struct plan_timing timing(void)
 
 /* Step i by hand: move + settle + polling when it moves, [probe, less the scan a pooled probe spares the exposure in
  * a share `pool` of the points], exposure, [dark], host time. */
-static double by_hand(const struct fx *f, const struct plan_timing *t, size_t i, double ms, double probe_ms, double pool)
+static double by_hand(const struct fx *f, const struct plan_timing *t, size_t i, double ms, double probe_ms,
+		      double pool)
 {
 	const struct plan_step *st = &f->res->steps[i];
 	bool moves = st->move_s + st->settle_s > 0;
