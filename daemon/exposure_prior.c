@@ -62,21 +62,26 @@ static int cmp_hpt(const void *a, const void *b)
 /* Mark the points (h sorted by order) whose first exposure is at the previous point's first time: the executor's
  * probe was at that time and counted as one of the exposure's scans (executor_acq.c, exp_probe_reusable; a probe
  * that was saturated there is not told apart: rare, it would have led to a shorter time). Per incidence of out the
- * share of its points so marked (pooled_per_point). */
+ * share of its points so marked (pooled_per_point) and their mean first time (pooled_ms: on the green paint's paper
+ * plan the pooled points sit at shorter times than the mean, 31.0 s spared against 35.3 s at the mean). */
 static void prior_pooled(struct hpt *h, size_t n, struct plan_prior *out)
 {
 	size_t pooled[PLAN_PRIOR_MAX_INC] = { 0 };
+	double ms[PLAN_PRIOR_MAX_INC] = { 0 };
 	for (size_t i = 0; i < n; i++) {
 		h[i].pooled = i > 0 && h[i].order == h[i - 1].order + 1 &&
 			      fabs(h[i].first_ms - h[i - 1].first_ms) <= 1e-9 * fmax(1.0, h[i].first_ms);
 		for (size_t k = 0; h[i].pooled && k < out->n_inc; k++)
 			if (fabs(out->inc[k].theta_i - h[i].theta_i) < 1e-6) {
 				pooled[k]++;
+				ms[k] += h[i].first_ms;
 				break;
 			}
 	}
-	for (size_t k = 0; k < out->n_inc; k++)
+	for (size_t k = 0; k < out->n_inc; k++) {
 		out->inc[k].pooled_per_point = out->inc[k].points ? (double)pooled[k] / (double)out->inc[k].points : 0;
+		out->inc[k].pooled_ms = pooled[k] ? ms[k] / (double)pooled[k] : 0;
+	}
 }
 
 /* The host's real seconds per point in the prior's sweep (see exp_prior_build; h sorted by order, prior_pooled

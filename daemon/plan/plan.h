@@ -207,6 +207,7 @@ struct plan_prior_inc {
 	uint64_t rungs;             /* the ladder rungs (plan_rung) its sample exposures used: the darks they need */
 	double pooled_per_point;    /* points whose first exposure is at the previous point's first time: their probe
 				     * was one of its scans (exp_probe_reusable; the exposure took one scan fewer) */
+	double pooled_ms;           /* their mean first time (0: none; the scan each spared) */
 };
 struct plan_prior {
 	long long sweep;            /* the sweep it comes from (0: no prior) */

@@ -279,7 +279,9 @@ static struct inc_cost prior_cost(const struct plan_spec *s, const struct bench_
 	c.dark = shot(g, t, t->dark_averages, q->dark_ms > 0 ? q->dark_ms : q->mean_ms);
 	c.hdr = q->extra_per_point > 0 ? q->extra_per_point * shot(g, t, s->averages, q->extra_ms) : 0;
 	c.k = q->darks_per_clear >= 1 ? q->darks_per_clear : 1;
-	c.pool = q->pooled_per_point > 0 ? q->pooled_per_point * pooled_s(g, t, s->averages, q->mean_ms) : 0;
+	c.pool = q->pooled_per_point > 0
+			 ? q->pooled_per_point * pooled_s(g, t, s->averages, q->pooled_ms > 0 ? q->pooled_ms : q->mean_ms)
+			 : 0;
 	return c;
 }
 
@@ -554,6 +556,7 @@ static struct plan_prior_inc scaled_row(const struct plan_spec *s, const struct 
 	v.median_ms = scale_ms(q->median_ms, f, lo, hi);
 	v.dark_ms = q->dark_ms > 0 ? scale_ms(q->dark_ms, f, lo, hi) : 0;
 	v.extra_ms = q->extra_ms > 0 ? scale_ms(q->extra_ms, f, lo, hi) : 0;
+	v.pooled_ms = q->pooled_ms > 0 ? scale_ms(q->pooled_ms, f, lo, hi) : 0;
 	double r = t->ladder_ratio > 1.0001 ? t->ladder_ratio : M_SQRT2;
 	int shift = (int)lround(log(f) / log(r));
 	v.rungs = 0;

@@ -179,6 +179,7 @@ static void test_prior_host(void **state)
 	/* pooled: orders 1 (40 after 40) and 5 (20 after 20); not order 4 (its predecessor, order 3, is missing) */
 	assert_int_equal(pr.n_inc, 1);
 	assert_true(fabs(pr.inc[0].pooled_per_point - 2.0 / 5) < 1e-12);
+	assert_true(fabs(pr.inc[0].pooled_ms - 30) < 1e-12); /* (40 + 20) / 2 */
 	/* at time scale 1 the same commits leave the host less */
 	t.time_scale = 1;
 	assert_int_equal(exp_prior_build(rows, 6, &g, &t, &pr), 0);
