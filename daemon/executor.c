@@ -324,12 +324,13 @@ struct ex *ex_new(const struct ex_cfg *cfg, const struct ex_ops *ops, void *ops_
 	x->plan = plan;
 	x->nsteps = (int)plan->n_steps;
 	x->frame = malloc(sizeof *x->frame);
+	x->probe = malloc(sizeof *x->probe);
 	x->merged = malloc(sizeof *x->merged);
 	x->ref_rate = malloc(sizeof *x->ref_rate);
 	x->darks = calloc(1, sizeof *x->darks);
 	x->cal = malloc(sizeof *x->cal);
 	x->avg = malloc(sizeof *x->avg);
-	bool ok = x->frame && x->merged && x->ref_rate && x->darks && x->cal && x->avg;
+	bool ok = x->frame && x->probe && x->merged && x->ref_rate && x->darks && x->cal && x->avg;
 	for (int i = 0; i < EX_MAX_TIMES && ok; i++)
 		ok = (x->rates[i] = malloc(sizeof(struct exp_rate))) != NULL;
 	if (!ok) {
@@ -355,6 +356,7 @@ void ex_free(struct ex *x, double now)
 	for (int i = 0; i < EX_MAX_TIMES; i++)
 		free(x->rates[i]);
 	free(x->frame);
+	free(x->probe);
 	free(x->merged);
 	free(x->ref_rate);
 	free(x->darks);

@@ -124,6 +124,7 @@ struct ex_cfg {
 struct ex_stats {
 	int points_done, points_total;
 	int spectra, darks, probes, exposures, merges;
+	int probes_pooled;           /* probes counted as one scan of their point's first exposure (exp_probe_reusable) */
 	int faults, recoveries, retries, saturated_redos; /* redos: saturated or misled (underexposed) */
 	int dark_rejects;            /* darks taken again because of saturated pixels */
 	double shots_s;              /* bench seconds of the counted points' shots as the planner prices them (n · t +

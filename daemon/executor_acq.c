@@ -16,6 +16,7 @@ static void restart_point(struct ex *x)
 {
 	x->have_t0 = false;
 	x->probe_no = 0;
+	x->probe_pooled = false;
 	x->ntimes = 0;
 	x->e = 0;
 	x->shot_in_flight = false;
@@ -238,6 +239,8 @@ static int start_shot(struct ex *x, enum shot_kind k, double t, double now)
 	x->shot = k;
 	x->meas.integration_ms = t;
 	x->meas.averages = k == SHOT_PROBE ? 1 : k == SHOT_DARK ? x->cfg.pol.dark_averages : x->cfg.pol.averages;
+	if (k == SHOT_EXPOSE && x->e == 0 && x->probe_pooled)
+		x->meas.averages--; /* the probe is the first scan (ex_run_acq: none left to take when averages is 1) */
 	x->meas.saturation_detection = true;
 	if (x->ops.spectro_start(x->octx, &x->meas, now, &err)) {
 		ex_fault(x, EX_DEV_SPECTRO, &err);
@@ -284,7 +287,8 @@ static void after_shot(struct ex *x, double now)
 		f->meas.averages = x->meas.averages;
 	if (isfinite(f->temperature_c))
 		x->temperature = f->temperature_c;
-	x->shots_s += x->meas.averages * t / 1000.0 + x->geom.readout_s + x->cfg.poll_s / 2;
+	if (x->meas.averages > 0) /* 0: the pooled probe alone, no shot (ex_run_acq) */
+		x->shots_s += x->meas.averages * t / 1000.0 + x->geom.readout_s + x->cfg.poll_s / 2;
 	switch (x->shot) {
 	case SHOT_PROBE: {
 		x->stats.probes++;
@@ -303,6 +307,13 @@ static void after_shot(struct ex *x, double now)
 		x->times[0] = quantize(x, next);
 		x->ntimes = 1;
 		x->e = 0;
+		/* A probe at the time it leads to (the previous point's, most points) is a scan of the exposure there:
+		 * the laser on at the same power, the same dark subtracted later, unsaturated; it counts as the first
+		 * of the averages (exp_frame_pool), so the exposure takes one scan fewer (README "How long a sweep
+		 * takes", session 17). */
+		x->probe_pooled = exp_probe_reusable(&x->cfg.pol, f, full_scale(x), x->times[0]);
+		if (x->probe_pooled)
+			memcpy(x->probe, f, sizeof *f);
 		break;
 	}
 	case SHOT_DARK: {
@@ -341,6 +352,13 @@ static void after_shot(struct ex *x, double now)
 	}
 	case SHOT_EXPOSE: {
 		x->stats.exposures++;
+		if (x->e == 0 && x->probe_pooled) {
+			if (x->meas.averages > 0 && exp_frame_pool(x->avg, f, x->probe, &err)) {
+				ex_failed(x, "pooling the probe: %s", err.msg);
+				return;
+			}
+			x->stats.probes_pooled++;
+		}
 		const struct exp_dark *dk = exp_dark_find(x->darks, t);
 		unsigned n = f->meas.averages ? f->meas.averages : x->meas.averages;
 		if (exp_net_rate(&x->cfg.pol, f->counts, f->stddev, n, f->saturated, f->npix, t, dk, full_scale(x),
@@ -428,6 +446,15 @@ void ex_run_acq(struct ex *x, double now)
 	}
 	double t = x->times[x->e];
 	enum exp_dark_need need = exp_dark_check(x->darks, &x->cfg.pol, t, now, x->temperature);
+	if (need == EXP_DARK_FRESH && x->e == 0 && x->probe_pooled && x->cfg.pol.averages <= 1) {
+		/* one scan per exposure: the pooled probe is the exposure, no shot is taken */
+		memcpy(x->frame, x->probe, sizeof *x->frame);
+		x->shot = SHOT_EXPOSE;
+		x->meas.integration_ms = t;
+		x->meas.averages = 0;
+		after_shot(x, now);
+		return;
+	}
 	start_shot(x, need != EXP_DARK_FRESH ? SHOT_DARK : SHOT_EXPOSE, t, now);
 }
 

@@ -96,6 +96,8 @@ struct ex {
 	struct spectro_frame *frame; /* receive buffer */
 	int probe_no;
 	double t_probe, t_last;      /* t_last: previous point's base time, the first probe of the next */
+	struct spectro_frame *probe; /* the last probe, when it counts as one scan of the first exposure */
+	bool probe_pooled;           /* probe is at times[0] (exp_probe_reusable): that exposure takes one scan fewer */
 	bool have_t0;
 	double times[EX_MAX_TIMES];
 	int ntimes, e;

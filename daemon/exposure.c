@@ -140,6 +140,44 @@ int exp_probe_next(const struct exp_policy *p, const struct spectro_frame *probe
 	return EXP_PROBE_DONE;
 }
 
+bool exp_probe_reusable(const struct exp_policy *p, const struct spectro_frame *probe, double full_scale, double t_ms)
+{
+	double t = probe->meas.integration_ms;
+	if (!(t > 0) || fabs(t - t_ms) > 1e-9 * fmax(1.0, t_ms) || probe->meas.averages > 1 || probe->nsaturated > 0 ||
+	    probe->npix <= 0 || probe->npix > SPECTRO_MAX_PIXELS)
+		return false;
+	double sat = p->sat_frac * full_scale;
+	for (int i = 0; i < probe->npix; i++)
+		if (probe->saturated[i] || !(probe->counts[i] < sat))
+			return false;
+	return true;
+}
+
+int exp_frame_pool(struct exp_avg *a, struct spectro_frame *f, const struct spectro_frame *probe, struct acq_err *err)
+{
+	double t = f->meas.integration_ms;
+	unsigned n = f->meas.averages ? f->meas.averages : 1;
+	if (f->npix != probe->npix || f->npix <= 0 || f->npix > SPECTRO_MAX_PIXELS)
+		return acq_errf(err, ACQ_E_INVAL, "pool: probe of %d pixels into a frame of %d", probe->npix, f->npix);
+	bool std_known = n < 2;
+	for (int i = 0; i < f->npix && !std_known; i++)
+		std_known = f->stddev[i] > 0;
+	exp_avg_init(a, f->npix, t);
+	if (exp_avg_add(a, probe->counts, NULL, 1, probe->saturated, probe->meas.integration_ms, err) ||
+	    exp_avg_add(a, f->counts, f->stddev, n, f->saturated, t, err))
+		return -1;
+	f->nsaturated = 0;
+	for (int i = 0; i < f->npix; i++) {
+		f->counts[i] = a->mean[i];
+		f->stddev[i] = std_known ? (float)exp_avg_std(a, i) : 0.0f;
+		f->saturated[i] = a->saturated[i];
+		f->nsaturated += a->saturated[i];
+	}
+	f->dark_pixel_level = (f->dark_pixel_level * n + probe->dark_pixel_level) / (n + 1);
+	f->meas.averages = a->n;
+	return 0;
+}
+
 static int cmp_double(const void *a, const void *b)
 {
 	double x = *(const double *)a, y = *(const double *)b;

@@ -100,6 +100,17 @@ int exp_policy_check(const struct exp_policy *p, struct acq_err *err);
 int exp_probe_next(const struct exp_policy *p, const struct spectro_frame *probe, const double *dark,
 		   double full_scale, int probe_no, double *next_ms, struct acq_err *err);
 
+/* Whether a probe frame counts as one scan of the exposure at t_ms that follows it (the executor then takes one scan
+ * fewer, exp_frame_pool): taken at t_ms itself (the exposure's rung), one scan, no pixel saturated (flagged or raw
+ * ≥ sat_frac · full_scale: saturation is then decided by the exposure's scans alone, as without the probe). */
+bool exp_probe_reusable(const struct exp_policy *p, const struct spectro_frame *probe, double full_scale, double t_ms);
+
+/* Pool probe (one scan, exp_probe_reusable) into f, a mean of f->meas.averages scans at the same integration time
+ * and laser state: f becomes the mean and sample std of all the scans (Chan's update, exp_avg_add; a is scratch),
+ * its averages one more, its saturated flags either's. f's std unknown (all 0 with averages > 1) stays unknown.
+ * 0, or -1 if the pixel counts or times differ. */
+int exp_frame_pool(struct exp_avg *a, struct spectro_frame *f, const struct spectro_frame *probe, struct acq_err *err);
+
 /* Integration times of a multi-exposure set starting at base_ms (times[0] = base_ms, then × hdr_ratio) so the
  * weak end (low_quantile of the positive net rates in rate, over pixels where roi is nonzero or roi NULL)
  * reaches low_counts; at most max_exposures and max_ms. Returns the number of times (≥ 1). */
@@ -153,7 +164,9 @@ struct store_prior_row;
 /* The exposure prior (plan.h) of one sweep from its exposures (store_prior_each's rows, in incidence, point and time
  * order): per incidence the points' first exposures (median, mean, longest/shortest), the darks taken there (count,
  * mean time) and the further (HDR) exposures per point (count, mean time); over the sweep the median, spread and
- * the fraction of points with an HDR exposure. Incidences past PLAN_PRIOR_MAX_INC are left out of the rows (counted
+ * the fraction of points with an HDR exposure; per incidence also the share of points whose first time was their
+ * predecessor's (pooled_per_point: their probe was one of its scans, exp_probe_reusable). Incidences past
+ * PLAN_PRIOR_MAX_INC are left out of the rows (counted
  * over the sweep); with g and t (the bench and the executor's timing, time scale included) also the host's real
  * seconds per point there (host_per_point_s, host_points: what the sweep took between commits beyond the bench's
  * part). sweep and sample are not set. 0, or -1 out of memory. */

@@ -186,6 +186,11 @@ struct plan_result {
 /* The default integration.hdr_fraction of auto plans: the points that needed a second (HDR) exposure on the
  * simulated green paint (paper plan 76 of 866, quick plan 2 of 15). */
 #define PLAN_AUTO_HDR 0.09
+/* Auto integration without a prior: the share of points whose probe (at the previous point's time) is one of their
+ * first exposure's scans, as their time is the previous point's (executor_acq.c, exp_probe_reusable); measured on
+ * the simulated green paint's paper plan (README "How long a sweep takes", session 17, probe: 363 of 866 points,
+ * seed 1; its quick plan 3 of 15). */
+#define PLAN_PROBE_POOL 0.42
 
 /* An exposure prior: what the auto exposure chose in the previous completed auto sweep of the same sample (the
  * plan's sample: name), per incidence (exp_prior_build, daemon/exposure.c, from the database). With one, the
@@ -202,6 +207,9 @@ struct plan_prior_inc {
 	double extra_per_point;     /* further (HDR) exposures per point */
 	double extra_ms;            /* their mean integration time */
 	uint64_t rungs;             /* the ladder rungs (plan_rung) its sample exposures used: the darks they need */
+	double pooled_per_point;    /* points whose first exposure is at the previous point's first time: their probe
+				     * was one of its scans (exp_probe_reusable; the exposure took one scan fewer) */
+	double pooled_ms;           /* their mean first time (0: none; the scan each spared) */
 };
 struct plan_prior {
 	long long sweep;            /* the sweep it comes from (0: no prior) */

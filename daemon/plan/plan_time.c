@@ -44,6 +44,10 @@
  *   - auto integration, HDR: a fraction integration.hdr_fraction of the points (default PLAN_AUTO_HDR, 0.09 on the
  *     simulated green paint) takes a second exposure at hdr_ratio times the first's time when max_exposures > 1,
  *     its darks mostly those the longer base times took already (not counted again);
+ *   - auto integration, the pooled probe (session 17): a point whose probe (at the previous point's time) says that
+ *     time is its own counts the probe as one of its first exposure's scans (executor_acq.c, exp_probe_reusable)
+ *     and takes one scan fewer; a share PLAN_PROBE_POOL of the points without a prior, the prior row's
+ *     pooled_per_point with one (its points whose first time was the previous point's, exp_prior_build);
  *   - an exposure prior (t->prior, from the previous auto sweep of the same sample; plan.h): each incidence takes
  *     the nearest prior incidence's figures instead of the band: its mean first exposure for the probe and the
  *     measurement, its darks (as many distinct times as it needed, at their mean time) and its HDR exposures per
@@ -192,7 +196,15 @@ static double max_ms_of(const struct plan_spec *s, double ms)
  * the number of distinct times the dark cache needs there. */
 struct inc_cost {
 	double probe, meas, dark, hdr, k;
+	double pool; /* seconds the pooled probe saves a point on average (pooled_s × the share of points pooling) */
 };
+
+/* What a pooled probe saves its point (executor_acq.c: the probe at the exposure's own time is its first scan): one
+ * scan of n averages at ms, or the whole exposure when n is 1. */
+static double pooled_s(const struct bench_geom *g, const struct plan_timing *t, double n, double ms)
+{
+	return n > 1 ? ms / 1000.0 : shot(g, t, 1, ms);
+}
 
 /* The prior's row for incidence zenith theta_i (degrees): the nearest one. */
 static const struct plan_prior_inc *prior_row(const struct plan_prior *p, double theta_i)
@@ -267,6 +279,9 @@ static struct inc_cost prior_cost(const struct plan_spec *s, const struct bench_
 	c.dark = shot(g, t, t->dark_averages, q->dark_ms > 0 ? q->dark_ms : q->mean_ms);
 	c.hdr = q->extra_per_point > 0 ? q->extra_per_point * shot(g, t, s->averages, q->extra_ms) : 0;
 	c.k = q->darks_per_clear >= 1 ? q->darks_per_clear : 1;
+	c.pool = q->pooled_per_point > 0
+			 ? q->pooled_per_point * pooled_s(g, t, s->averages, q->pooled_ms > 0 ? q->pooled_ms : q->mean_ms)
+			 : 0;
 	return c;
 }
 
@@ -285,7 +300,8 @@ static struct inc_cost band_cost(const struct plan_spec *s, const struct bench_g
 	double h = aut && t->max_exposures > 1 && t->hdr_ratio > 1 ? (s->integ_hdr >= 0 ? s->integ_hdr : PLAN_AUTO_HDR) : 0;
 	return (struct inc_cost){
 		aut ? shot(g, t, 1, ms) : 0, shot(g, t, s->averages, ms), shot(g, t, t->dark_averages, ms),
-		h > 0 ? h * shot(g, t, s->averages, max_ms_of(s, t->hdr_ratio * ladder(t, est_ms, s->max_integ_ms))) : 0, k
+		h > 0 ? h * shot(g, t, s->averages, max_ms_of(s, t->hdr_ratio * ladder(t, est_ms, s->max_integ_ms))) : 0, k,
+		aut ? PLAN_PROBE_POOL * pooled_s(g, t, s->averages, ms) : 0
 	};
 }
 
@@ -446,16 +462,18 @@ void plan_time_apply(const struct plan_spec *s, const struct bench_geom *g, cons
 			dark_s = inc_darks / inc_k * pow(1.0 - 1.0 / inc_k, since_inc++);
 		}
 		double settle = st->settle_s + (moves ? PLAN_MOVE_POLLS * t->axis_poll_s + t->extra_settle_s : 0);
-		double pr_s = i == 0 && !t->reference ? first_probe : c.probe;
-		double d = st->move_s + settle + pr_s + c.meas + dark_s + c.hdr + host;
+		bool first = i == 0 && !t->reference;
+		double pr_s = first ? first_probe : c.probe;
+		double pool = first ? 0 : c.pool; /* the first probe, at the estimate, is at no rung of the exposure's */
+		double d = st->move_s + settle + pr_s + c.meas - pool + dark_s + c.hdr + host;
 		r->t_motion_s += st->move_s;
 		r->t_settle_s += settle;
 		r->t_probe_s += pr_s;
-		r->t_first_s += c.meas;
+		r->t_first_s += c.meas - pool;
 		r->t_hdr_s += c.hdr;
 		r->darks_s += dark_s;
 		if (clear)
-			dark_at = clock + d - c.meas - host; /* taken before the exposure */
+			dark_at = clock + d - (c.meas - pool) - host; /* taken before the exposure */
 		since_clear++;
 		st->predicted_start_s = clock;
 		st->predicted_s = d;
@@ -475,7 +493,7 @@ void plan_time_point(const struct plan_spec *s, const struct bench_geom *g, cons
 	const struct plan_prior *pr = used_prior(s, t);
 	if (pr)
 		c = prior_cost(s, g, t, prior_row(pr, fabs(theta_i)));
-	out->point_s = c.probe + c.meas + c.hdr + host_s(s, t, pr);
+	out->point_s = c.probe + c.meas - c.pool + c.hdr + host_s(s, t, pr);
 	out->dark_s = c.dark;
 	out->rungs = aut ? c.k : 1; /* fixed integration: one dark per clearing */
 }
@@ -538,6 +556,7 @@ static struct plan_prior_inc scaled_row(const struct plan_spec *s, const struct 
 	v.median_ms = scale_ms(q->median_ms, f, lo, hi);
 	v.dark_ms = q->dark_ms > 0 ? scale_ms(q->dark_ms, f, lo, hi) : 0;
 	v.extra_ms = q->extra_ms > 0 ? scale_ms(q->extra_ms, f, lo, hi) : 0;
+	v.pooled_ms = q->pooled_ms > 0 ? scale_ms(q->pooled_ms, f, lo, hi) : 0;
 	double r = t->ladder_ratio > 1.0001 ? t->ladder_ratio : M_SQRT2;
 	int shift = (int)lround(log(f) / log(r));
 	v.rungs = 0;
@@ -580,7 +599,8 @@ static void bound_prior(const struct plan_spec *s, const struct plan_timing *t, 
 					   ? (s->integ_hdr >= 0 ? s->integ_hdr : PLAN_AUTO_HDR) : 0;
 			*v = (struct plan_prior_inc){ .theta_i = th, .points = 1, .mean_ms = ms, .median_ms = ms, .spread = 1,
 						      .darks_per_clear = 1, .dark_ms = ms, .extra_per_point = h,
-						      .extra_ms = ms, .rungs = (uint64_t)1 << plan_rung(t, ms) };
+						      .extra_ms = ms, .rungs = (uint64_t)1 << plan_rung(t, ms),
+						      .pooled_per_point = end < 0 ? 1 : 0 };
 			continue;
 		}
 		const struct plan_prior_inc *q = prior_row(pr, th);

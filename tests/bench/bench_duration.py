@@ -277,7 +277,9 @@ def measured_terms(db, sid, scale, steps, conf, started, finished, ev, auto=True
     """The measured sweep split into the model's terms (acqctl plan --json predicted_terms), bench seconds:
     - probes_s, darks_s, first_exposures_s, hdr_s: what the bench took, from the stored spectra (every dark and
       exposure with its time and averages; the probe, not stored, at the previous point's first time, as the executor
-      takes it, the first point's at the reference's; none with fixed integration), each priced as the model prices a shot (averages x time +
+      takes it, the first point's at the reference's; none with fixed integration; a first exposure at the previous
+      point's first time took one scan fewer than it stores, its probe being one of them: executor_acq.c,
+      exp_probe_reusable, session 17), each priced as the model prices a shot (averages x time +
       read-out + round trip): the counts and times are measured, the price per shot is the model's (shot_check tests
       it against the wall clock);
     - motion_s, settle_s: the plan's moves between the points (steps' move_s; settle_s with PLAN_MOVE_POLLS polls per move
@@ -313,6 +315,8 @@ def measured_terms(db, sid, scale, steps, conf, started, finished, ev, auto=True
                 term = "darks_s"
             elif not seen_first and ms == first:
                 term, seen_first = "first_exposures_s", True
+                if auto and prev_first is not None and ms == prev_first:  # the probe pooled: one scan fewer
+                    c = (n - 1) * ms / 1000.0 + price if n > 1 else 0.0
             else:
                 term = "hdr_s"
             t[term] += c

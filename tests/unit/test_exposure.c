@@ -313,6 +313,107 @@ static void test_policy_parse(void **state)
 	yc_free(doc);
 }
 
+/* The probe pooled into the exposure (exp_probe_reusable, exp_frame_pool; executor_acq.c): a one-scan probe at the
+ * exposure's own time is one more scan of it. With the simulator's noise model (sim_physics.c phys_measure: each
+ * scan Gaussian about its mean with the shot and read noise, rounded; a device-averaged frame carries the mean and the
+ * sample std over its scans, as a float) the probe + a frame of N − 1 scans pooled is the N-scan frame itself (mean
+ * to 1e-9, std to float precision), and its net rates stand against the truth as an N-scan exposure's: z mean 0, std
+ * 1, and the pooled noise variance unbiased (tolerances: 5σ of those statistics over the values drawn). */
+static void test_probe_pooled_is_one_more_scan(void **state)
+{
+	(void)state;
+	struct synth_rng r = { .s = seed ^ 0x5eedu };
+	struct exp_policy pol;
+	exp_policy_defaults(&pol);
+	enum { N = 4, TRIALS = 24 };
+	const double t = 8.0, fs = det.full;
+	static double rate[SPECTRO_MAX_PIXELS];
+	peaked_rate(rate, det.npix, 3000.0); /* peak 24000 + offset: unsaturated at 8 ms */
+	static struct spectro_frame probe, frame;
+	static struct exp_avg a, dk;
+	static struct exp_darks darks;
+	static struct exp_rate out;
+	static double sc[N][SPECTRO_MAX_PIXELS];
+	exp_darks_clear(&darks);
+	double zs = 0, zs2 = 0, vr = 0;
+	long nz = 0;
+	for (int trial = 0; trial < TRIALS; trial++) {
+		synth_take(&r, &det, NULL, t, 8, &dk); /* a dark of 8 scans per trial: the values are independent */
+		const struct exp_dark *dark = exp_dark_store(&darks, &dk, 0);
+		for (int k = 0; k < N; k++)
+			for (int p = 0; p < det.npix; p++) {
+				double sig = rate[p] * t, mean = det.offset + det.dc_per_ms * t + sig;
+				double sd = sqrt(det.read_sigma * det.read_sigma + sig + det.dc_per_ms * t);
+				sc[k][p] = floor(mean + sd * synth_gauss(&r) + 0.5);
+			}
+		memset(&probe, 0, sizeof probe);
+		memset(&frame, 0, sizeof frame);
+		probe.npix = frame.npix = det.npix;
+		probe.meas = (struct spectro_meas){ t, 1, true };
+		frame.meas = (struct spectro_meas){ t, N - 1, true };
+		for (int p = 0; p < det.npix; p++) {
+			probe.counts[p] = sc[0][p];
+			double m = (sc[1][p] + sc[2][p] + sc[3][p]) / 3, ss = 0;
+			for (int k = 1; k < N; k++)
+				ss += (sc[k][p] - m) * (sc[k][p] - m);
+			frame.counts[p] = m;
+			frame.stddev[p] = (float)sqrt(ss / 2);
+		}
+		assert_true(exp_probe_reusable(&pol, &probe, fs, t));
+		assert_int_equal(exp_frame_pool(&a, &frame, &probe, NULL), 0);
+		assert_int_equal(frame.meas.averages, N);
+		for (int p = 0; p < det.npix; p++) {
+			double m = (sc[0][p] + sc[1][p] + sc[2][p] + sc[3][p]) / N, ss = 0;
+			for (int k = 0; k < N; k++)
+				ss += (sc[k][p] - m) * (sc[k][p] - m);
+			double sd = sqrt(ss / (N - 1));
+			assert_true(fabs(frame.counts[p] - m) < 1e-9 * m);
+			assert_true(fabs(frame.stddev[p] - sd) <= 1e-5 * sd + 1e-6);
+		}
+		assert_int_equal(exp_net_rate(&pol, frame.counts, frame.stddev, frame.meas.averages, frame.saturated,
+					      frame.npix, t, dark, fs, &out, NULL), 0);
+		for (int p = 0; p < det.npix; p++) {
+			double sig = rate[p] * t;
+			double s_scan = sqrt(det.read_sigma * det.read_sigma + sig + det.dc_per_ms * t) / sqrt(N) / t;
+			double s_dark = sqrt(det.read_sigma * det.read_sigma + det.dc_per_ms * t) / sqrt(8.0) / t;
+			double z = (out.rate[p] - rate[p]) / sqrt(s_scan * s_scan + s_dark * s_dark);
+			zs += z;
+			zs2 += z * z;
+			vr += out.u_noise[p] * out.u_noise[p] / (s_scan * s_scan);
+			nz++;
+		}
+	}
+	double zm = zs / nz, zsd = sqrt(zs2 / nz - zm * zm);
+	print_message("  pooled N=%d: %ld values, z mean %.4f std %.4f, u_noise^2 / truth %.4f\n", N, nz, zm, zsd, vr / nz);
+	assert_true(fabs(zm) < 5 / sqrt((double)nz));
+	assert_true(fabs(zsd - 1) < 5 / sqrt(2.0 * nz));
+	assert_true(fabs(vr / nz - 1) < 5 * sqrt(2.0 / (N - 1) / nz));
+	/* the rule: at the exposure's own time only, one unsaturated scan */
+	assert_false(exp_probe_reusable(&pol, &probe, fs, t * M_SQRT2)); /* the next rung */
+	assert_false(exp_probe_reusable(&pol, &probe, fs, t / M_SQRT2));
+	probe.saturated[17] = 1;
+	probe.nsaturated = 1;
+	assert_false(exp_probe_reusable(&pol, &probe, fs, t)); /* flagged saturated */
+	probe.saturated[17] = 0;
+	probe.nsaturated = 0;
+	probe.counts[17] = pol.sat_frac * fs; /* raw counts in the nonlinear region */
+	assert_false(exp_probe_reusable(&pol, &probe, fs, t));
+	probe.counts[17] = 1000;
+	probe.meas.averages = 2; /* not one scan */
+	assert_false(exp_probe_reusable(&pol, &probe, fs, t));
+	probe.meas.averages = 1;
+	assert_true(exp_probe_reusable(&pol, &probe, fs, t));
+	/* pooling needs the same time and pixels; a frame with no std (0: unknown) keeps it unknown */
+	struct acq_err err = { 0 };
+	frame.meas.integration_ms = 2 * t;
+	assert_int_equal(exp_frame_pool(&a, &frame, &probe, &err), -1);
+	assert_int_equal(err.code, ACQ_E_INVAL);
+	frame.meas = (struct spectro_meas){ t, N - 1, true };
+	memset(frame.stddev, 0, sizeof frame.stddev);
+	assert_int_equal(exp_frame_pool(&a, &frame, &probe, NULL), 0);
+	assert_true(frame.stddev[100] == 0 && frame.meas.averages == N);
+}
+
 int main(void)
 {
 	seed = synth_seed("test_exposure");
@@ -324,6 +425,7 @@ int main(void)
 		cmocka_unit_test(test_net_rate_rejects_saturation_and_mismatch),
 		cmocka_unit_test(test_dark_refresh_decisions),
 		cmocka_unit_test(test_policy_parse),
+		cmocka_unit_test(test_probe_pooled_is_one_more_scan),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -113,6 +113,8 @@ static void test_prior_figures(void **state)
 	assert_true(fabs(q->median_ms - 250) < TOL && fabs(q->mean_ms - 250) < TOL && fabs(q->spread - 4) < TOL);
 	assert_true(fabs(q->darks_per_clear - 2) < TOL && fabs(q->dark_ms - 250) < TOL);
 	assert_true(q->extra_per_point == 0 && q->extra_ms == 0);
+	/* no point's first time is its predecessor's (40, 20, 40, 100, 400): no probe was one of its scans */
+	assert_true(pr.inc[0].pooled_per_point == 0 && pr.inc[1].pooled_per_point == 0);
 	assert_int_equal(pr.host_points, 0); /* no bench, no time scale: the host's time is not measured */
 	assert_true(pr.inc[0].rungs == 0 && pr.inc[1].rungs == 0); /* no timing: no ladder */
 	/* the sample exposures' rungs (the darks they need, plan_time.c with dark_every -1) on a ladder 10 ms · 2^k:
@@ -142,7 +144,8 @@ static void test_prior_figures(void **state)
 /* The host's real seconds per point in the prior's sweep: the real time between two consecutive points' commits less
  * the bench's part at the time scale (the straight move between the reached angles with its polling, the probe at the
  * previous point's first time, the point's shots with read-out and round trip); arms' noise under 0.05° is no move; a
- * gap in the order or a pause (more than 1 s over the median) is left out. By hand at time scale 10. */
+ * gap in the order or a pause (more than 1 s over the median) is left out; a point whose first time is its
+ * predecessor's took one scan fewer (its probe was one, exp_probe_reusable). By hand at time scale 10. */
 static void test_prior_host(void **state)
 {
 	(void)state;
@@ -168,10 +171,15 @@ static void test_prior_host(void **state)
 	struct plan_pos a = { 10, 20, 0 }, b = { 10, 30, 0 };
 	double ovh = 0.015, mv = plan_straight_s(&g, &a, &b);
 	assert_true(mv > 0.5);
-	double h1 = 1.0 - (mv + PLAN_MOVE_POLLS * 0.05 + (8 * 0.040 + ovh) + (4 * 0.040 + ovh) + (0.040 + ovh)) / 10;
+	/* order 1's first time 40 ms is order 0's: its probe was the first of its 4 scans, 3 taken */
+	double h1 = 1.0 - (mv + PLAN_MOVE_POLLS * 0.05 + (8 * 0.040 + ovh) + (3 * 0.040 + ovh) + (0.040 + ovh)) / 10;
 	double h2 = 0.5 - ((4 * 0.020 + ovh) + (0.040 + ovh)) / 10;
 	assert_int_equal(pr.host_points, 2);
 	assert_true(fabs(pr.host_per_point_s - (h1 + h2) / 2) < 1e-12);
+	/* pooled: orders 1 (40 after 40) and 5 (20 after 20); not order 4 (its predecessor, order 3, is missing) */
+	assert_int_equal(pr.n_inc, 1);
+	assert_true(fabs(pr.inc[0].pooled_per_point - 2.0 / 5) < 1e-12);
+	assert_true(fabs(pr.inc[0].pooled_ms - 30) < 1e-12); /* (40 + 20) / 2 */
 	/* at time scale 1 the same commits leave the host less */
 	t.time_scale = 1;
 	assert_int_equal(exp_prior_build(rows, 6, &g, &t, &pr), 0);
@@ -217,7 +225,8 @@ static int64_t mk_host_sweep(struct store *st, int n, double every, const char *
 
 /* The host's time per point from the latest completed sweep of any sample (a plan without its sample's prior): at
  * time scale 10, points committed every 0.5 s, each the probe at 10 ms and an exposure of 4 x 10 ms with read-out
- * and round trip: 0.5 - (0.01 + 0.015 + 0.04 + 0.015) / 10 s. Not from a sweep with fewer than EXP_HOST_MIN_POINTS
+ * and round trip, of which the probe was one scan (at the previous point's time, exp_probe_reusable: 3 taken):
+ * 0.5 - (0.01 + 0.015 + 0.03 + 0.015) / 10 s. Not from a sweep with fewer than EXP_HOST_MIN_POINTS
  * points measured, an unfinished one, or the excluded one. */
 static void test_host_latest(void **state)
 {
@@ -240,7 +249,7 @@ static void test_host_latest(void **state)
 	mk_host_sweep(st, EXP_HOST_MIN_POINTS + 1, 0.3, "aborted");
 	assert_int_equal(exp_host_load(st, 0, NULL, &g, &t, &host, &sweep, &err), 0);
 	assert_int_equal(sweep, a);
-	assert_true(fabs(host - (0.5 - 0.08 / 10)) < 1e-9);
+	assert_true(fabs(host - (0.5 - 0.07 / 10)) < 1e-9);
 	/* a newer completed sweep too short to time the host: none (the default stays) */
 	int64_t b = mk_host_sweep(st, EXP_HOST_MIN_POINTS, 0.4, "completed");
 	host = -1;
@@ -281,7 +290,7 @@ static void test_host_kind(void **state)
 	long long sweep = -1;
 	assert_int_equal(exp_host_load(st, 0, "grid/auto", &g, &t, &host, &sweep, &err), 0);
 	assert_int_equal(sweep, a);
-	assert_true(fabs(host - (0.5 - 0.08 / 10)) < 1e-9);
+	assert_true(fabs(host - (0.5 - 0.07 / 10)) < 1e-9);
 	assert_int_equal(exp_host_load(st, 0, NULL, &g, &t, &host, &sweep, &err), 0);
 	assert_int_equal(sweep, b);
 	assert_int_equal(exp_host_load(st, 0, "adaptive/auto", &g, &t, &host, &sweep, &err), 0);
@@ -318,16 +327,16 @@ static void test_host_kind(void **state)
 	assert_null(plan_kind_name(PLAN_HOST_KINDS, kind));
 	assert_null(plan_kind_name(-1, kind));
 	bool own = false;
-	assert_true(fabs(plan_time_host(&grid, &t, &sweep, &own) - (0.5 - 0.08 / 10)) < 1e-9);
+	assert_true(fabs(plan_time_host(&grid, &t, &sweep, &own) - (0.5 - 0.07 / 10)) < 1e-9);
 	assert_true(sweep == a && own);
-	assert_true(fabs(plan_time_host(&fib, &t, &sweep, &own) - (0.3 - 0.08 / 10)) < 1e-9);
+	assert_true(fabs(plan_time_host(&fib, &t, &sweep, &own) - (0.3 - 0.07 / 10)) < 1e-9);
 	assert_true(sweep == b && own);
-	assert_true(fabs(plan_time_host(&adapt, &t, &sweep, &own) - (0.3 - 0.08 / 10)) < 1e-9);
+	assert_true(fabs(plan_time_host(&adapt, &t, &sweep, &own) - (0.3 - 0.07 / 10)) < 1e-9);
 	assert_true(sweep == b && !own);
 	/* without b no Fibonacci sweep is left: the latest of any kind (a, a grid) times the Fibonacci plan; the old
 	 * sweep without a kind never times a plan of a kind */
 	assert_int_equal(exp_host_cached(&c, st, b, &g, &t, &err), 0);
-	assert_true(fabs(plan_time_host(&fib, &t, &sweep, &own) - (0.5 - 0.08 / 10)) < 1e-9);
+	assert_true(fabs(plan_time_host(&fib, &t, &sweep, &own) - (0.5 - 0.07 / 10)) < 1e-9);
 	assert_true(sweep == a && !own);
 	(void)old;
 	store_close(st);
@@ -359,7 +368,7 @@ static void test_host_cache(void **state)
 	int64_t b = mk_host_sweep_kind(st, EXP_HOST_MIN_POINTS + 1, 0.4, "completed", "grid/auto");
 	assert_int_equal(exp_host_cached(&c, st, 0, &g, &t, &err), 0);
 	assert_true(c.reads == 3 && t.host_sweep == b && t.host_kind[0].sweep == b);
-	assert_true(fabs(t.host_kind[0].host_s - (0.4 - 0.08 / 10)) < 1e-9);
+	assert_true(fabs(t.host_kind[0].host_s - (0.4 - 0.07 / 10)) < 1e-9);
 	assert_int_equal(exp_host_cached(&c, st, b, &g, &t, &err), 0); /* another exclude: read again */
 	assert_true(c.reads == 4 && t.host_sweep == a);
 	exp_host_cache_drop(&c);

@@ -79,8 +79,10 @@ static struct plan_timing timing(void)
 	return t;
 }
 
-/* Step i by hand: move + settle + polling when it moves, [probe], exposure, [dark], host time. */
-static double by_hand(const struct fx *f, const struct plan_timing *t, size_t i, double ms, double probe_ms)
+/* Step i by hand: move + settle + polling when it moves, [probe, less the scan a pooled probe spares the exposure in
+ * a share `pool` of the points], exposure, [dark], host time. */
+static double by_hand(const struct fx *f, const struct plan_timing *t, size_t i, double ms, double probe_ms,
+		      double pool)
 {
 	const struct plan_step *st = &f->res->steps[i];
 	bool moves = st->move_s + st->settle_s > 0;
@@ -88,7 +90,7 @@ static double by_hand(const struct fx *f, const struct plan_timing *t, size_t i,
 	double shot_ovh = f->g.readout_s + t->exposure_overhead_s; /* one read-out per exposure, any averages */
 	double d = st->move_s + st->settle_s + (moves ? PLAN_MOVE_POLLS * t->axis_poll_s + t->extra_settle_s : 0);
 	if (probe_ms > 0)
-		d += probe_ms / 1000 + shot_ovh;
+		d += probe_ms / 1000 + shot_ovh - (probe_ms == ms ? pool * ms / 1000 : 0); /* the first: at the estimate */
 	d += f->spec->averages * ms / 1000 + shot_ovh;
 	if (new_inc)
 		d += t->dark_averages * ms / 1000 + shot_ovh;
@@ -104,7 +106,7 @@ static void test_fixed_steps(void **state)
 	plan_time_apply(f.spec, &f.g, &t, f.res);
 	double sum = 0, darks = 0;
 	for (size_t i = 0; i < f.res->n_steps; i++) {
-		double d = by_hand(&f, &t, i, 20, 0);
+		double d = by_hand(&f, &t, i, 20, 0, 0);
 		assert_true(fabs(f.res->steps[i].predicted_s - d) < TOL);
 		assert_true(fabs(f.res->steps[i].predicted_start_s - sum) < TOL);
 		sum += d;
@@ -150,7 +152,7 @@ static void test_auto_ladder(void **state)
 	double rung = 0.01 * pow(sqrt(2.0), 21);
 	assert_true(rung < 20 && rung * sqrt(2.0) > 20);
 	for (size_t i = 0; i < f.res->n_steps; i++) {
-		double d = by_hand(&f, &t, i, rung, i == 0 ? 20 : rung);
+		double d = by_hand(&f, &t, i, rung, i == 0 ? 20 : rung, PLAN_PROBE_POOL);
 		assert_true(fabs(f.res->steps[i].predicted_s - d) < 1e-6);
 	}
 	unload(&f);
@@ -180,7 +182,7 @@ static void test_auto_spread(void **state)
 		double p = pow(1 - 1 / k, (double)j);
 		double d = st->move_s + st->settle_s + (st->move_s + st->settle_s > 0 ? PLAN_MOVE_POLLS * t.axis_poll_s : 0) +
 			   (i == 0 ? 20.0 : mean) / 1000 + shot_ovh + 3 * mean / 1000 + shot_ovh + p * dark +
-			   t.point_overhead_s;
+			   t.point_overhead_s - (i ? PLAN_PROBE_POOL * mean / 1000 : 0);
 		assert_true(fabs(st->predicted_s - d) < 1e-9);
 		darks += p * dark;
 		sum += d;
@@ -543,8 +545,8 @@ static void test_interval(void **state)
 	double pred = f.res->predicted_s, blo = 0, bhi = 0;
 	for (size_t i = 0; i < n; i++) { /* the first probe at the estimate, every other exposure and dark at the end */
 		assert_true(fabs(lo_at[i] - blo) < TOL && fabs(hi_at[i] - bhi) < TOL);
-		blo += by_hand(&f, &t, i, 0.01, i ? 0.01 : 20);
-		bhi += by_hand(&f, &t, i, 2000, i ? 2000 : 20);
+		blo += by_hand(&f, &t, i, 0.01, i ? 0.01 : 20, 1); /* every point at min_ms: each probe pooled */
+		bhi += by_hand(&f, &t, i, 2000, i ? 2000 : 20, 0); /* none: the upper end */
 	}
 	assert_true(fabs(lo - blo) < TOL && fabs(hi - bhi) < TOL);
 	assert_true(fabs(lo_at[n] - lo) < TOL && fabs(hi_at[n] - hi) < TOL);

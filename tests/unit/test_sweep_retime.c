@@ -268,7 +268,8 @@ static void same_prior(const struct plan_prior *a, const struct plan_prior *b)
 		assert_true(x->theta_i == y->theta_i && x->points == y->points && x->median_ms == y->median_ms &&
 			    x->mean_ms == y->mean_ms && x->spread == y->spread &&
 			    x->darks_per_clear == y->darks_per_clear && x->dark_ms == y->dark_ms &&
-			    x->extra_per_point == y->extra_per_point && x->extra_ms == y->extra_ms);
+			    x->extra_per_point == y->extra_per_point && x->extra_ms == y->extra_ms &&
+			    x->pooled_per_point == y->pooled_per_point && x->pooled_ms == y->pooled_ms);
 	}
 }
 
