@@ -12,6 +12,7 @@
 
 #include "acq_version.h"
 #include "config/acq_file.h"
+#include "config/yconf.h"
 #include "daemon/plan/plan_cli.h"
 #include "proto/acqctl/acqctl.h"
 #include "proto/ctl.h"
@@ -221,11 +222,20 @@ static int fill_args(json_t *req, const struct proto_cmd *def, const char *cmd, 
 			if (pk[0] == '@') {
 				*plan_file = words[wi];
 				char *text;
-				if (acq_file_read(*plan_file, (size_t)2 << 20, ACQ_FILE_STDIN, &text, NULL, &err))
-					return out_fail(err.code == ACQ_E_IO || err.code == ACQ_E_NOTFOUND ? CTL_EXIT_NOINPUT
-						    : CTL_EXIT_DATAERR, "not_found", "%s", err.msg);
-				json_object_set_new(req, pk + 1, json_string(text));
+				size_t len;
+				if (acq_file_read(*plan_file, (size_t)2 << 20, ACQ_FILE_STDIN, &text, &len, &err)) {
+					bool unread = err.code == ACQ_E_IO || err.code == ACQ_E_NOTFOUND;
+					return out_fail(unread ? CTL_EXIT_NOINPUT : CTL_EXIT_DATAERR,
+							unread ? "not_found" : "invalid", "%s", err.msg);
+				}
+				/* a NUL byte or a byte that is not UTF-8 would cut the text short or drop it (JSON) */
+				int bad = yc_check_text(!strcmp(*plan_file, "-") ? "standard input" : *plan_file, text, len,
+							&err);
+				if (!bad)
+					json_object_set_new(req, pk + 1, json_stringn(text, len));
 				free(text);
+				if (bad)
+					return out_fail(CTL_EXIT_DATAERR, "invalid", "%s", err.msg);
 			} else if (set_arg(req, def, pk, words[wi], &err)) {
 				return out_fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
 			}
@@ -275,12 +285,25 @@ static int check_request(json_t *req, const struct proto_cmd *def, const char *c
 	return CTL_EXIT_OK;
 }
 
+/* A refusal of the plan sent from plan_file names it as the daemon read it, "plan:LINE:COL: ...": the message
+ * in e is made to name the file instead ("quick.yaml:9:11: averages: ..."), in the human and the --json output. */
+static void name_plan_file(json_t *e, const char *plan_file)
+{
+	const char *msg = json_string_value(json_object_get(e, "message"));
+	if (!plan_file || !msg || strncmp(msg, "plan:", 5) || msg[5] < '0' || msg[5] > '9')
+		return;
+	char buf[2048];
+	snprintf(buf, sizeof buf, "%s:%s", strcmp(plan_file, "-") ? plan_file : "standard input", msg + 5);
+	json_object_set_new(e, "message", json_string(buf));
+}
+
 /* The daemon's reply to cmd: a refusal on stderr (commands named as typed), an export's stream or inline CSV, a
  * spectrum's CSV, else JSON or the human view. Returns the exit status. */
-static int show_reply(const char *cmd, json_t *rep, int passed)
+static int show_reply(const char *cmd, json_t *rep, int passed, const char *plan_file)
 {
 	if (!json_is_true(json_object_get(rep, "ok"))) {
 		json_t *e = json_object_get(rep, "error");
+		name_plan_file(e, plan_file);
 		char words2[64];
 		cmd_words(cmd, words2, sizeof words2);
 		/* the daemon's message names commands as the protocol does ("sweep.abort"): say them as typed */
@@ -335,7 +358,7 @@ static int send_request(json_t *req, const char *cmd, const char *plan_file)
 		return out_fail(err.code == ACQ_E_PROTO ? CTL_EXIT_PROTOCOL : CTL_EXIT_UNAVAILABLE,
 			    err.code == ACQ_E_PROTO ? "protocol" : "unavailable", "%s: %s", acqctl_o.sock, err.msg);
 	json_object_del(rep, "id");
-	int rc = show_reply(cmd, rep, passed);
+	int rc = show_reply(cmd, rep, passed, plan_file);
 	if (passed >= 0)
 		close(passed);
 	json_decref(rep);

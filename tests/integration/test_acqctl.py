@@ -2,7 +2,8 @@
 """Integration: acqctl as the operator uses it, on the simulated bench.
 - every command's --json output validates against its schema in proto/schema/acqctl-replies.schema.json
   (and every refusal against the error schema), human output is produced for each;
-- exit codes: 0 ok, 1 refused, 64 usage, 66 unreadable input, 69 no daemon; --help and --version never connect
+- exit codes: 0 ok, 1 refused, 64 usage, 65 a plan that is not UTF-8 text (file:line:col), 66 unreadable input,
+  69 no daemon; --help and --version never connect
   (checked with a socket path that would hang: a listener that never answers);
 - home, stop (of a running move: the move's requester gets the refusal), laser off (the simulator's truth says
   emission off), spectrum ID (--json, --csv, -o);
@@ -145,6 +146,18 @@ def offline_checks(tmp):
         p = subprocess.run([CTL, "-s", hang, "sweep", "start", os.path.join(tmp, "none.yaml")], capture_output=True,
                            text=True, timeout=10)
         check(p.returncode == 66 and "none.yaml" in p.stderr, "unreadable plan: %d %r" % (p.returncode, p.stderr))
+        # a plan that is not UTF-8 text: 65 before anything is sent, where the byte is (a NUL cut the text short
+        # and sent the rest; a Latin-1 byte said "missing plan", 64)
+        for name, data, where in (("nul.yaml", PLAN.encode()[:60] + b"\0\0garbage: [", "nul.yaml:5:4: a NUL byte"),
+                                  ("latin1.yaml", b"# \xe9chantillon\n" + PLAN.encode(), "latin1.yaml:1:3: byte 0xe9")):
+            open(os.path.join(tmp, name), "wb").write(data)
+            try:
+                p = subprocess.run([CTL, "-s", hang, "sweep", "start", os.path.join(tmp, name)], capture_output=True,
+                                   text=True, timeout=10)
+            except subprocess.TimeoutExpired:
+                raise AssertionError("acqctl sweep start %s: sent to the daemon" % name)
+            check(p.returncode == 65 and where in p.stderr, "plan %s: exit %d, wanted 65 naming %r (%r)" % (
+                name, p.returncode, where, p.stderr))
         # export -o FILE that cannot be created: 73 before anything is sent (the daemon streams nothing for it)
         t0 = time.time()
         p = subprocess.run([CTL, "-s", hang, "export", "1", "-o", os.path.join(tmp, "nodir", "x.csv")],
@@ -358,6 +371,19 @@ def main():
         err = c.human("move", "detector_theta=500", rc=1)  # refused by the daemon: 1, said once with its command
         check(err.startswith("acqctl: move: \"detector.theta\": expected a number in [") and "move: move" not in err,
               "refused move: %r" % err)
+        # a move beyond the bench's range names the axis and the range; one into the other arm says so
+        err = c.human("move", "detector.phi=400", rc=1)
+        check("detector.phi: 400° is outside the bench's range [-179°, 359°]" in err, "move beyond the bench: %r" % err)
+        err = c.human("move", "laser.theta=60", "detector.theta=60", "detector.phi=0", rc=1)
+        check("collision: the arms would meet at laser.theta 60°, detector.theta 60°, detector.phi 0°" in err,
+              "move into a collision: %r" % err)
+        # the daemon's refusal of a plan names the file and its line (it reads the text as "plan")
+        badf = os.path.join(tmp, "bad-avg.yaml")
+        open(badf, "w").write(PLAN.replace("averages: 1", "averages: -2"))
+        err = c.human("plan", badf, rc=1)
+        check(err.startswith("acqctl: plan: %s:8:11: averages: -2" % badf), "plan refused: %r" % err)
+        d = c.json("error", "sweep", "start", badf, rc=1)
+        check(d["error"]["message"].startswith(badf + ":8:11: "), "sweep start refused, --json: %r" % d)
         err = c.human("spectrum", "0", rc=1)  # an id's range is not 2^53
         check("expected an integer >= 1" in err and "spectrum: spectrum" not in err, "spectrum 0: %r" % err)
         # --- a sweep: replies show the state after the command
