@@ -4,6 +4,7 @@
  * the daemon passes over the socket; `watch` is a live view on a terminal, JSON lines otherwise. This file is the
  * command line (options, the command and its arguments, the request, the reply's output); the connection, the
  * outputs and watch/wait are in proto/acqctl/ (acqctl.h). */
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -95,8 +96,9 @@ static int set_arg(json_t *req, const struct proto_cmd *def, const char *key, co
 		char *end = NULL;
 		switch (def->args[i].type) {
 		case PROTO_T_INT: {
+			errno = 0;
 			long long x = strtoll(v, &end, 10);
-			if (*v && !*end)
+			if (*v && !*end && errno != ERANGE) /* not a saturated 2^63 - 1 */
 				return json_object_set_new(req, key, json_integer(x));
 			return acq_errf(err, ACQ_E_INVAL, "%s=%s: expected an integer", key, v);
 		}
@@ -156,13 +158,16 @@ static int parse_options(int argc, char **argv, char **words, int *nw, double *w
 		else if (!strcmp(a, "--csv"))
 			acqctl_o.csv = true;
 		else if (TAKES("-s", "--socket")) {
-			if (!(acqctl_o.sock = val))
-				return out_fail(CTL_EXIT_USAGE, "usage", "%s needs a value (acqctl --help)", a);
+			if (!(acqctl_o.sock = val) || !*val)
+				return out_fail(CTL_EXIT_USAGE, "usage", "%s needs a socket path or tcp:PORT (acqctl --help)", a);
 		} else if (TAKES("-t", "--timeout")) {
-			char *end;
-			acqctl_o.timeout_ms = val ? (int)strtol(val, &end, 10) : 0;
-			if (!val || *end || acqctl_o.timeout_ms <= 0)
-				return out_fail(CTL_EXIT_USAGE, "usage", "-t: expected milliseconds > 0");
+			char *end = NULL;
+			errno = 0;
+			long ms = val ? strtol(val, &end, 10) : 0;
+			if (!val || !*val || *end || errno || ms <= 0 || ms > 86400000L)
+				return out_fail(CTL_EXIT_USAGE, "usage", "-t: expected milliseconds in [1, 86400000], got '%s'",
+						val ? val : "");
+			acqctl_o.timeout_ms = (int)ms;
 		} else if (TAKES("-w", "--wait") || TAKES("-T", "--timeout-s")) {
 			char *end;
 			double x = val ? strtod(val, &end) : -1;
@@ -176,15 +181,17 @@ static int parse_options(int argc, char **argv, char **words, int *nw, double *w
 			if (!(acqctl_o.format = val) || (strcmp(val, "csv") && strcmp(val, "nexus")))
 				return out_fail(CTL_EXIT_USAGE, "usage", "--format: expected csv or nexus");
 		} else if (TAKES("-o", "--output")) {
-			if (!(acqctl_o.out = val))
+			if (!(acqctl_o.out = val) || !*val)
 				return out_fail(CTL_EXIT_USAGE, "usage", "-o needs a file name");
 		} else if (TAKES("-c", "--config")) {
-			if (!(acqctl_o.bench = val))
+			if (!(acqctl_o.bench = val) || !*val)
 				return out_fail(CTL_EXIT_USAGE, "usage", "--config needs a file name");
 		} else if (a[0] == '-' && a[1] && strcmp(a, "-"))
 			return out_fail(CTL_EXIT_USAGE, "usage", "unknown option %s (acqctl --help)", a);
 		else if (*nw < 64)
 			words[(*nw)++] = argv[i];
+		else /* not dropped unsaid */
+			return out_fail(CTL_EXIT_USAGE, "usage", "more than 64 words: '%s' and after (acqctl --help)", a);
 #undef TAKES
 	}
 	return -1;

@@ -133,9 +133,15 @@ def offline_checks(tmp):
             check(p.returncode == 0 and p.stdout.startswith(prog + " "), "%s --version: %d %r" % (prog, p.returncode,
                                                                                               p.stdout + p.stderr))
         # usage errors: 64, before anything is sent (the hanging socket would time the call out)
+        # (and arguments that used to pass: an id beyond 2^63 sent as 2^63 - 1, -t wrapping around an int, an empty
+        # -o or -s named as ": No such file" after the request)
         for args in (["bogus"], ["move", "laser_theta=abc"], ["move", "nope=1"], ["sweep", "show"], ["--frob"],
-                     ["export", "1", "2"], ["wait", "sideways"], []):
-            p = subprocess.run([CTL, "-s", hang] + args, capture_output=True, text=True, timeout=10)
+                     ["export", "1", "2"], ["wait", "sideways"], [], ["sweep", "show", "99999999999999999999"],
+                     ["-t", "99999999999", "status"], ["export", "1", "-o", ""], ["-s", "", "status"]):
+            try:
+                p = subprocess.run([CTL, "-s", hang] + args, capture_output=True, text=True, timeout=10)
+            except subprocess.TimeoutExpired:
+                raise AssertionError("acqctl %r: sent to the daemon, wanted exit 64" % args)
             check(p.returncode == 64, "acqctl %s: exit %d, wanted 64 (%r)" % (" ".join(args), p.returncode, p.stderr))
         # a group's word alone names its sub-commands
         p = subprocess.run([CTL, "-s", hang, "sweep"], capture_output=True, text=True, timeout=10)
