@@ -533,6 +533,17 @@ static void print_spectrum(FILE *f, json_t *s)
 	fprintf(f, "  (acqctl spectrum %lld --csv prints the counts per wavelength)\n", num_i(s, "id"));
 }
 
+/* measure, dark, reference: the spectrum just taken and stored (its id for `acqctl spectrum`). */
+static void print_taken(FILE *f, json_t *r)
+{
+	char ms[32];
+	snprintf(ms, sizeof ms, "%.4g", num(r, "integration_ms"));
+	fprintf(f, "spectrum %lld: %s, %lld pixels, integration %s ms × %lld, peak %.6g counts, %lld saturated pixels\n",
+		num_i(r, "spectrum_id"), str(r, "kind"), num_i(r, "npix"), ms, num_i(r, "averages"), num(r, "peak"),
+		num_i(r, "saturated"));
+	fprintf(f, "  (acqctl spectrum %lld shows it, --csv its counts per wavelength)\n", num_i(r, "spectrum_id"));
+}
+
 /* move, home, stop: the axes where they are now. */
 static void print_positions(FILE *f, const char *cmd, json_t *r)
 {
@@ -611,6 +622,12 @@ void ctl_print_human(FILE *f, const char *cmd, json_t *rep)
 		print_positions(f, cmd, rep);
 	else if (!strcmp(cmd, "recon.status"))
 		print_recon_run(f, json_object_get(rep, "run"));
+	else if ((!strcmp(cmd, "measure") || !strcmp(cmd, "dark") || !strcmp(cmd, "reference")) &&
+		 json_is_integer(json_object_get(rep, "spectrum_id")))
+		print_taken(f, rep);
+	else if (!strcmp(cmd, "laser.off") && json_is_boolean(json_object_get(rep, "emission")))
+		fprintf(f, "%s\n", json_is_false(json_object_get(rep, "emission")) ? "laser emission off (confirmed by the laser)"
+			: "laser off requested, but the laser still reports emission: check it");
 	else if ((x = json_object_get(rep, "progress")) && json_is_object(x)) {
 		if (json_object_get(rep, "sweep"))
 			fprintf(f, "sweep %lld started\n", num_i(rep, "sweep"));
