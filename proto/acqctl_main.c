@@ -358,6 +358,20 @@ static int send_request(json_t *req, const char *cmd, const char *plan_file)
 		return out_fail(CTL_EXIT_UNAVAILABLE, "unavailable", "cannot connect to acquisitiond: %s (socket: -s or "
 			    "$ACQ_SOCKET)", err.msg);
 	}
+	/* a request longer than the daemon reads in one line would be refused as "too_long" without saying whose */
+	json_int_t max_line = json_integer_value(json_object_get(c.banner, "max_line"));
+	char *line = max_line > 0 ? json_dumps(req, JSON_COMPACT) : NULL;
+	size_t len = line ? strlen(line) + 1 : 0;
+	free(line);
+	if (max_line > 0 && len > (size_t)max_line) {
+		conn_close(&c);
+		char words2[64];
+		cmd_words(cmd, words2, sizeof words2);
+		return out_fail(CTL_EXIT_DATAERR, "too_long", "%s%s%s: the request is %zu bytes, more than the daemon reads "
+				"in one line (%lld bytes)%s", words2, plan_file ? " " : "", plan_file ? plan_file : "", len,
+				(long long)max_line, plan_file ? ": shorten the plan (a range {from, to, step} instead of a "
+				"long list)" : "");
+	}
 	int passed = -1;
 	json_t *rep = conn_call(&c, req, !strcmp(cmd, "export") ? &passed : NULL, &err);
 	conn_close(&c);

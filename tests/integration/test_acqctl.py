@@ -390,6 +390,15 @@ def main():
         check(err.startswith("acqctl: plan: %s:8:11: averages: -2" % badf), "plan refused: %r" % err)
         d = c.json("error", "sweep", "start", badf, rc=1)
         check(d["error"]["message"].startswith(badf + ":8:11: "), "sweep start refused, --json: %r" % d)
+        # a plan longer than a request line (64 KiB) is refused by acqctl, naming the file (65; the daemon's own
+        # refusal said "plan: line longer than 65536 bytes: ignored up to its newline", 1)
+        longf = os.path.join(tmp, "long.yaml")
+        open(longf, "w").write(PLAN.replace("phi_deg: [0, 180]", "phi_deg: [%s]" % ", ".join(
+            "%.3f" % (k * 0.01) for k in range(12000))))
+        p = c.run("sweep", "start", longf)
+        check(p.returncode == 65 and p.stderr.startswith("acqctl: sweep start %s: the request is " % longf) and
+              "more than the daemon reads in one line (65536 bytes)" in p.stderr, "a long plan: rc %d %r" % (
+                  p.returncode, p.stderr))
         err = c.human("spectrum", "0", rc=1)  # an id's range is not 2^53
         check("expected an integer >= 1" in err and "spectrum: spectrum" not in err, "spectrum 0: %r" % err)
         # --- a sweep: replies show the state after the command
