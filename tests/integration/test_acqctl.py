@@ -275,6 +275,8 @@ def main():
         check(out.startswith("daemon     running") and "(simulated bench)" in out, "status human %r" % out)
         out = c.human("devices")
         check("°" in out and "Oriental Motor" in out and "Avantes" in out, "devices human %r" % out)
+        serials = re.findall(r"^(?:laser|detector)\.\w+ .*serial (\d+)", out, re.M)  # one per controller unit
+        check(len(serials) == 3 and len(set(serials)) == 3, "the axes' serials %r (both arms said 1001)" % serials)
         # plan: the daemon's answer has the local one's shape and figures
         d = c.json("plan", "plan", plan)
         check(d["source"] == "daemon", "daemon plan %r" % d["source"])
@@ -536,6 +538,19 @@ def main():
         check(p.returncode == 69, "ctl without a simulator: %d" % p.returncode)
         p = subprocess.run([sim, "ctl"], capture_output=True, text=True)
         check(p.returncode == 64, "ctl usage: %d" % p.returncode)
+        # usage errors are 64 like acqctl's (were 1, "refused"): a missing argument (said before asking), an
+        # unknown command (the simulator's "unknown command")
+        for args, words in ((["sample"], "sample needs NAME"), (["pose", "1", "2"], "pose needs"),
+                            (["frob"], "unknown command 'frob'")):
+            p = subprocess.run([sim, "ctl"] + args, capture_output=True, text=True, env=env)
+            check(p.returncode == 64 and words in p.stderr, "ctl %s: %d %r" % (" ".join(args), p.returncode, p.stderr))
+        # --json: integers as integers, no float noise (74.325900000000004), time's value kept (was {"ok": true})
+        p = subprocess.run([sim, "ctl", "--json", "truth"], capture_output=True, text=True, env=env)
+        t = json.loads(p.stdout)
+        check(type(t["emission"]) is int and type(t["collisions"]) is int and
+              not re.search(r"\.\d*0000000\d", p.stdout), "ctl --json truth's numbers %r" % p.stdout)
+        p = subprocess.run([sim, "ctl", "--json", "time"], capture_output=True, text=True, env=env)
+        check(p.returncode == 0 and json.loads(p.stdout)["t"] > 0, "ctl --json time %r" % p.stdout)
         print("ok: acqctl commands, schemas, exit codes, watch reconnection, acq-sim ctl")
 
 
