@@ -625,6 +625,8 @@ void ctl_print_human(FILE *f, const char *cmd, json_t *rep)
 	else if ((!strcmp(cmd, "measure") || !strcmp(cmd, "dark") || !strcmp(cmd, "reference")) &&
 		 json_is_integer(json_object_get(rep, "spectrum_id")))
 		print_taken(f, rep);
+	else if (!strcmp(cmd, "reload") && json_is_string(json_object_get(rep, "config")))
+		fprintf(f, "configuration reloaded from %s\n", str(rep, "config"));
 	else if (!strcmp(cmd, "laser.off") && json_is_boolean(json_object_get(rep, "emission")))
 		fprintf(f, "%s\n", json_is_false(json_object_get(rep, "emission")) ? "laser emission off (confirmed by the laser)"
 			: "laser off requested, but the laser still reports emission: check it");
