@@ -48,6 +48,11 @@ grep -qF "$tmp/nul.yaml:$((line + 1)):" <<<"$out" && grep -qF "NUL byte" <<<"$ou
 : > "$tmp/empty.yaml"
 out=$("$D" --check-config "$tmp/empty.yaml" 2>&1) && fail "an empty file accepted"
 grep -qF "$tmp/empty.yaml: empty configuration" <<<"$out" || fail "the empty file is not named: $out"
+# the simulator reads the same file: the same two refusals ("devices: expected a mapping, found nothing" before)
+for f in nul empty; do
+  out=$(timeout 20 "$ACQ_BUILD/acq-sim" -c "$tmp/$f.yaml" --ports-file "$tmp/sim-ports.json" 2>&1); rc=$?
+  [ $rc -eq 1 ] && grep -qF "$tmp/$f.yaml:" <<<"$out" || fail "acq-sim -c $f.yaml: exit $rc: $out"
+done
 
 # a sim ports file that is not JSON, or has a bad port
 echo '{"laser_arm": {"port": 0}}' > "$tmp/ports.json"
