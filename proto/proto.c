@@ -180,6 +180,13 @@ static int check_arg(const struct proto_arg *a, json_t *v, const char **code, st
 			return acq_errf(err, ACQ_E_INVAL, "\"%s\": longer than %.0f bytes", a->name, a->max);
 		if (strlen(json_string_value(v)) != json_string_length(v))
 			return acq_errf(err, ACQ_E_INVAL, "\"%s\": contains a NUL character", a->name);
+		/* a one-line argument (a name, a path; not a plan's text) goes into replies, logs and tables as is: a
+		 * newline or a terminal escape there would forge a log line or reach an operator's terminal */
+		const unsigned char *t = (const unsigned char *)json_string_value(v);
+		for (size_t i = 0; a->max > 0 && a->max <= 4096 && t[i]; i++)
+			if (t[i] < 0x20 || t[i] == 0x7f)
+				return acq_errf(err, ACQ_E_INVAL, "\"%s\": a control character (0x%02x) at position %zu",
+						a->name, t[i], i + 1);
 	} else if (a->type != PROTO_T_BOOL && (a->min != 0 || a->max != 0)) {
 		double d = json_number_value(v);
 		if (!(d >= a->min && d <= a->max) && a->max >= ID_MAX) /* an id: no upper bound worth saying (2^53) */

@@ -195,6 +195,13 @@ def offline_checks(tmp):
     d = c.json("error", "status", rc=69)
     check(d["error"]["code"] == "unavailable", "no daemon: %r" % d)
     check("cannot connect" in c.human("status", rc=69), "no daemon, human")
+    # a plan's name with a control character (a terminal escape or a newline, into `sweep list`, the log) is
+    # refused where it is, as sample: is
+    escf = os.path.join(tmp, "esc.yaml")
+    open(escf, "w").write(PLAN.replace("name: t-acqctl", 'name: "evil\\e[2J\\nline2"'))
+    p = c.run("plan", escf, "--config", os.path.join(L.SRC, "config", "bench-sim.yaml"))
+    check(p.returncode == 1 and "esc.yaml:1:7: name: a control character at position 5" in p.stderr,
+          "a plan name with an escape: %d %r" % (p.returncode, p.stderr))
     # plan: one output whether or not a daemon answers (local dry run)
     plan = os.path.join(tmp, "p.yaml")
     open(plan, "w").write(PLAN)

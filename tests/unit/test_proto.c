@@ -91,6 +91,15 @@ static void test_validation(void **state)
 	assert_string_equal(parse_code("{\"cmd\":\"sweep.show\",\"sweep\":1.5}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"sweep.show\",\"sweep\":3,\"points\":true}", NULL), "ok");
 	assert_string_equal(parse_code("{\"cmd\":\"config\",\"text\":\"yes\"}", NULL), PROTO_E_INVALID);
+	/* a one-line argument with a control character (a newline forging a log line, a terminal escape) is
+	 * refused; a plan's text is many lines */
+	assert_string_equal(parse_code("{\"cmd\":\"sweep.start\",\"plan\":\"name: a\\nx: 1\",\"name\":\"a\\nb\"}",
+				       NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"sweep.start\",\"plan\":\"name: a\\nx: 1\",\"name\":\"a\\u001b[2J\"}",
+				       NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"home\",\"axis\":\"laser.theta\\t\"}", NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"sweep.start\",\"plan\":\"name: a\\nx: 1\",\"name\":\"\u00e9t\u00e9 A3\"}",
+				       NULL), "ok");
 	/* The id survives a validation error so the reply can carry it. */
 	json_t *id = NULL;
 	assert_string_equal(parse_code("{\"cmd\":\"nope\",\"id\":42}", &id), PROTO_E_UNKNOWN);
