@@ -205,8 +205,13 @@ int proto_req_parse(const char *line, size_t len, struct proto_req *req, const c
 	json_error_t je;
 	/* JSON_REJECT_DUPLICATES: {"cmd":"status","cmd":"move"} is ambiguous, so it is an error. */
 	req->root = json_loadb(line, len, JSON_REJECT_DUPLICATES | JSON_DECODE_ANY, &je);
-	if (!req->root)
+	if (!req->root) {
+		/* jansson names its own flag ("\\u0000 is not allowed without JSON_ALLOW_NUL"): say what was sent */
+		if (strstr(je.text, "JSON_ALLOW_NUL"))
+			return acq_errf(err, ACQ_E_PROTO, "a NUL character (\\u0000) is not allowed in a request, at "
+					"column %d", je.column);
 		return acq_errf(err, ACQ_E_PROTO, "not JSON: %s at column %d", je.text, je.column);
+	}
 	*code = PROTO_E_INVALID;
 	if (!json_is_object(req->root))
 		return acq_errf(err, ACQ_E_PROTO, "expected a JSON object {\"cmd\": ..., \"id\": ...}");

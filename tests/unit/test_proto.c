@@ -79,6 +79,15 @@ static void test_validation(void **state)
 	/* jansson refuses \\u0000 unless asked (JSON_ALLOW_NUL): a NUL never reaches a command. */
 	assert_string_equal(parse_code("{\"cmd\":\"status\\u0000x\"}", NULL), PROTO_E_PARSE);
 	assert_string_equal(parse_code("{\"cmd\":\"export\",\"sweep\":1,\"path\":\"a\\u0000b\"}", NULL), PROTO_E_PARSE);
+	{ /* said in the client's words, not jansson's flag name (JSON_ALLOW_NUL) */
+		struct proto_req req;
+		const char *code = NULL;
+		struct acq_err err = { 0 };
+		static const char nul[] = "{\"cmd\":\"status\\u0000x\"}";
+		assert_int_equal(proto_req_parse(nul, strlen(nul), &req, &code, &err), -1);
+		proto_req_free(&req);
+		assert_string_equal(err.msg, "a NUL character (\\u0000) is not allowed in a request, at column 22");
+	}
 	assert_string_equal(parse_code("{\"cmd\":\"status\",\"extra\":1}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":\"10\"}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":1e9}", NULL), PROTO_E_INVALID);
