@@ -601,10 +601,45 @@ static void print_recon_run(FILE *f, json_t *r)
 	}
 }
 
+void ctl_printable(char *text)
+{
+	for (unsigned char *c = (unsigned char *)text; *c; c++)
+		if ((*c < 0x20 && *c != '\n' && *c != '\t') || *c == 0x7f)
+			*c = '?';
+}
+
+/* Every string in v made printable (ctl_printable), in place. */
+static void printable_json(json_t *v)
+{
+	if (json_is_string(v)) {
+		const unsigned char *s = (const unsigned char *)json_string_value(v);
+		bool bad = false;
+		for (size_t i = 0; s[i] && !bad; i++)
+			bad = (s[i] < 0x20 && s[i] != '\n' && s[i] != '\t') || s[i] == 0x7f;
+		char *c = bad ? strdup((const char *)s) : NULL;
+		if (c) {
+			ctl_printable(c);
+			json_string_set(v, c);
+			free(c);
+		}
+		return;
+	}
+	const char *k;
+	json_t *x;
+	size_t i;
+	if (json_is_object(v))
+		json_object_foreach(v, k, x)
+			printable_json(x);
+	else if (json_is_array(v))
+		json_array_foreach(v, i, x)
+			printable_json(x);
+}
+
 void ctl_print_human(FILE *f, const char *cmd, json_t *rep)
 {
 	json_object_del(rep, "id");
 	json_object_del(rep, "ok");
+	printable_json(rep);
 	json_t *x;
 	if (!strcmp(cmd, "status"))
 		print_status(f, rep);
