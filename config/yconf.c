@@ -124,6 +124,62 @@ int yc_errf(struct acq_err *err, const struct yc_node *node, const char *fmt, ..
 	return acq_errf(err, ACQ_E_CONFIG, "%s", body);
 }
 
+/* Line and column (1-based, in characters as libyaml counts them) of byte offset off of text. */
+static void yc_text_pos(const char *text, size_t off, size_t *line, size_t *col)
+{
+	*line = 1;
+	*col = 1;
+	for (size_t i = 0; i < off; i++)
+		if (text[i] == '\n') {
+			(*line)++;
+			*col = 1;
+		} else if (((unsigned char)text[i] & 0xC0) != 0x80) {
+			(*col)++;
+		}
+}
+
+/* The length of the UTF-8 sequence at s (at most n bytes), 0 when it is not one (overlong, a surrogate, beyond
+ * U+10FFFF, cut short). */
+static size_t yc_utf8_len(const unsigned char *s, size_t n)
+{
+	unsigned c = s[0];
+	size_t k = c < 0x80 ? 1 : (c & 0xE0) == 0xC0 ? 2 : (c & 0xF0) == 0xE0 ? 3 : (c & 0xF8) == 0xF0 ? 4 : 0;
+	if (!k || k > n)
+		return 0;
+	unsigned long cp = k == 1 ? c : c & (0x7Fu >> k);
+	for (size_t i = 1; i < k; i++) {
+		if ((s[i] & 0xC0) != 0x80)
+			return 0;
+		cp = cp << 6 | (s[i] & 0x3F);
+	}
+	static const unsigned long min_cp[5] = { 0, 0, 0x80, 0x800, 0x10000 };
+	if (cp < min_cp[k] || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF))
+		return 0;
+	return k;
+}
+
+int yc_check_text(const char *name, const char *text, size_t len, struct acq_err *err)
+{
+	const unsigned char *u = (const unsigned char *)text;
+	if (len >= 2 && ((u[0] == 0xFF && u[1] == 0xFE) || (u[0] == 0xFE && u[1] == 0xFF)))
+		return acq_errf(err, ACQ_E_CONFIG, "%s: UTF-16 text: save the file as UTF-8", name);
+	for (size_t i = 0; i < len;) {
+		size_t k = u[i] ? yc_utf8_len(u + i, len - i) : 0;
+		if (k) {
+			i += k;
+			continue;
+		}
+		size_t line, col;
+		yc_text_pos(text, i, &line, &col);
+		if (!u[i])
+			return acq_errf(err, ACQ_E_CONFIG, "%s:%zu:%zu: a NUL byte: not a text file (binary, or damaged)",
+					name, line, col);
+		return acq_errf(err, ACQ_E_CONFIG, "%s:%zu:%zu: byte 0x%02x is not UTF-8: save the file as UTF-8", name,
+				line, col, u[i]);
+	}
+	return 0;
+}
+
 static int yc_parse(struct yc_doc *doc, yaml_parser_t *parser, struct acq_err *err)
 {
 	struct yc_node *stack[YC_MAX_DEPTH];
@@ -133,6 +189,14 @@ static int yc_parse(struct yc_doc *doc, yaml_parser_t *parser, struct acq_err *e
 
 	for (;;) {
 		if (!yaml_parser_parse(parser, &ev)) {
+			if (parser->error == YAML_READER_ERROR) { /* no mark: the reader counts bytes */
+				size_t line, col;
+				size_t n = (size_t)(parser->input.string.end - parser->input.string.start);
+				yc_text_pos((const char *)parser->input.string.start,
+					    parser->problem_offset < n ? parser->problem_offset : n, &line, &col);
+				return acq_errf(err, ACQ_E_CONFIG, "%s:%zu:%zu: %s", doc->file, line, col,
+						parser->problem ? parser->problem : "cannot read the text");
+			}
 			return acq_errf(err, ACQ_E_CONFIG, "%s:%zu:%zu: YAML syntax error: %s%s%s", doc->file,
 					parser->problem_mark.line + 1, parser->problem_mark.column + 1,
 					parser->problem ? parser->problem : "unknown",
@@ -229,6 +293,8 @@ static int yc_parse(struct yc_doc *doc, yaml_parser_t *parser, struct acq_err *e
 int yc_load_string(const char *name, const char *text, size_t len, struct yc_doc **out, struct acq_err *err)
 {
 	*out = NULL;
+	if (yc_check_text(name ? name : "<string>", text, len, err))
+		return -1;
 	struct yc_doc *doc = calloc(1, sizeof *doc);
 	if (!doc || !(doc->file = strdup(name ? name : "<string>"))) {
 		free(doc);

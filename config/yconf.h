@@ -32,6 +32,9 @@ struct yc_node {
 int yc_load_file(const char *path, struct yc_doc **out, struct acq_err *err);
 /* Parse YAML text; name is used as the file name in messages. 0 or -1 with err. */
 int yc_load_string(const char *name, const char *text, size_t len, struct yc_doc **out, struct acq_err *err);
+/* 0 when text[0, len) is UTF-8 without NUL bytes (what every YAML file here must be), else -1 with err
+ * "name:line:col: ..." (yc_load_string checks it first). */
+int yc_check_text(const char *name, const char *text, size_t len, struct acq_err *err);
 /* Free a document and all its nodes. */
 void yc_free(struct yc_doc *doc);
 /* The root node (NULL for an empty document). */

@@ -28,10 +28,19 @@ static int move_check(struct app *app, const double t[3], const char **warning, 
 			return 0; /* an axis is unavailable: devices_move() refuses the move anyway */
 	struct plan_pos a = { cur[0], cur[1], cur[2] };
 	struct plan_pos b = { isnan(t[0]) ? cur[0] : t[0], isnan(t[1]) ? cur[1] : t[1], isnan(t[2]) ? cur[2] : t[2] };
-	unsigned verdict = plan_home_move_verdict(&app->conf->bench, &a, &b);
+	const struct bench_geom *g = &app->conf->bench;
+	const struct bench_axis *ax[3] = { &g->laser_theta, &g->detector_theta, &g->detector_phi };
+	const double bt[3] = { b.laser_theta, b.det_theta, b.det_phi };
+	for (int i = 0; i < 3; i++) /* the axis and its range, as the soft limits' refusal says them */
+		if (!(bt[i] >= ax[i]->min_deg && bt[i] <= ax[i]->max_deg))
+			return acq_errf(err, ACQ_E_RANGE, "%s: %g° is outside the bench's range [%g°, %g°] (bench: %s)",
+					conf_dev_name((enum conf_dev)i), bt[i], ax[i]->min_deg, ax[i]->max_deg,
+					conf_dev_name((enum conf_dev)i));
+	unsigned verdict = plan_home_move_verdict(g, &a, &b);
 	if (verdict & (PLAN_R_COLLISION | PLAN_R_LIMITS))
-		return acq_errf(err, ACQ_E_RANGE, "move to (%g°, %g°, %g°) refused: %s", b.laser_theta, b.det_theta,
-				b.det_phi, plan_reason_name(verdict));
+		return acq_errf(err, ACQ_E_RANGE, "%s at laser.theta %g°, detector.theta %g°, detector.phi %g°",
+				verdict & PLAN_R_COLLISION ? "collision: the arms would meet" : plan_reason_name(verdict),
+				b.laser_theta, b.det_theta, b.det_phi);
 	if (verdict)
 		return acq_errf(err, ACQ_E_RANGE, "move from (%g°, %g°, %g°) to (%g°, %g°, %g°) refused: the arms would "
 				"collide on the way; move one arm first", a.laser_theta, a.det_theta, a.det_phi,

@@ -521,9 +521,10 @@ int conf_load(const char *path, const struct conf_sim *sim, struct conf **out, s
 {
 	*out = NULL;
 	char *text;
-	if (acq_file_read(path, CONF_MAX_BYTES, 0, &text, NULL, err))
+	size_t len;
+	if (acq_file_read(path, CONF_MAX_BYTES, 0, &text, &len, err))
 		return -1;
-	int rc = conf_load_text(path, text, strlen(text), sim, out, err);
+	int rc = conf_load_text(path, text, len, sim, out, err); /* len: a NUL byte in the file is an error */
 	free(text);
 	return rc;
 }
@@ -546,7 +547,7 @@ int conf_load_text(const char *name, const char *text, size_t len, const struct 
 		goto fail;
 	struct yc_node *root = yc_root(c->doc);
 	if (!root) {
-		yc_errf(err, NULL, "empty configuration: expected a mapping with bench, devices, daemon");
+		yc_errf(err, NULL, "%s: empty configuration: expected a mapping with bench, devices, daemon", name);
 		goto fail;
 	}
 	if (yc_expect_map(root, "the configuration", err))

@@ -4,6 +4,7 @@
  * the daemon passes over the socket; `watch` is a live view on a terminal, JSON lines otherwise. This file is the
  * command line (options, the command and its arguments, the request, the reply's output); the connection, the
  * outputs and watch/wait are in proto/acqctl/ (acqctl.h). */
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -12,6 +13,7 @@
 
 #include "acq_version.h"
 #include "config/acq_file.h"
+#include "config/yconf.h"
 #include "daemon/plan/plan_cli.h"
 #include "proto/acqctl/acqctl.h"
 #include "proto/ctl.h"
@@ -94,8 +96,9 @@ static int set_arg(json_t *req, const struct proto_cmd *def, const char *key, co
 		char *end = NULL;
 		switch (def->args[i].type) {
 		case PROTO_T_INT: {
+			errno = 0;
 			long long x = strtoll(v, &end, 10);
-			if (*v && !*end)
+			if (*v && !*end && errno != ERANGE) /* not a saturated 2^63 - 1 */
 				return json_object_set_new(req, key, json_integer(x));
 			return acq_errf(err, ACQ_E_INVAL, "%s=%s: expected an integer", key, v);
 		}
@@ -155,13 +158,16 @@ static int parse_options(int argc, char **argv, char **words, int *nw, double *w
 		else if (!strcmp(a, "--csv"))
 			acqctl_o.csv = true;
 		else if (TAKES("-s", "--socket")) {
-			if (!(acqctl_o.sock = val))
-				return out_fail(CTL_EXIT_USAGE, "usage", "%s needs a value (acqctl --help)", a);
+			if (!(acqctl_o.sock = val) || !*val)
+				return out_fail(CTL_EXIT_USAGE, "usage", "%s needs a socket path or tcp:PORT (acqctl --help)", a);
 		} else if (TAKES("-t", "--timeout")) {
-			char *end;
-			acqctl_o.timeout_ms = val ? (int)strtol(val, &end, 10) : 0;
-			if (!val || *end || acqctl_o.timeout_ms <= 0)
-				return out_fail(CTL_EXIT_USAGE, "usage", "-t: expected milliseconds > 0");
+			char *end = NULL;
+			errno = 0;
+			long ms = val ? strtol(val, &end, 10) : 0;
+			if (!val || !*val || *end || errno || ms <= 0 || ms > 86400000L)
+				return out_fail(CTL_EXIT_USAGE, "usage", "-t: expected milliseconds in [1, 86400000], got '%s'",
+						val ? val : "");
+			acqctl_o.timeout_ms = (int)ms;
 		} else if (TAKES("-w", "--wait") || TAKES("-T", "--timeout-s")) {
 			char *end;
 			double x = val ? strtod(val, &end) : -1;
@@ -175,15 +181,17 @@ static int parse_options(int argc, char **argv, char **words, int *nw, double *w
 			if (!(acqctl_o.format = val) || (strcmp(val, "csv") && strcmp(val, "nexus")))
 				return out_fail(CTL_EXIT_USAGE, "usage", "--format: expected csv or nexus");
 		} else if (TAKES("-o", "--output")) {
-			if (!(acqctl_o.out = val))
+			if (!(acqctl_o.out = val) || !*val)
 				return out_fail(CTL_EXIT_USAGE, "usage", "-o needs a file name");
 		} else if (TAKES("-c", "--config")) {
-			if (!(acqctl_o.bench = val))
+			if (!(acqctl_o.bench = val) || !*val)
 				return out_fail(CTL_EXIT_USAGE, "usage", "--config needs a file name");
 		} else if (a[0] == '-' && a[1] && strcmp(a, "-"))
 			return out_fail(CTL_EXIT_USAGE, "usage", "unknown option %s (acqctl --help)", a);
 		else if (*nw < 64)
 			words[(*nw)++] = argv[i];
+		else /* not dropped unsaid */
+			return out_fail(CTL_EXIT_USAGE, "usage", "more than 64 words: '%s' and after (acqctl --help)", a);
 #undef TAKES
 	}
 	return -1;
@@ -221,11 +229,20 @@ static int fill_args(json_t *req, const struct proto_cmd *def, const char *cmd, 
 			if (pk[0] == '@') {
 				*plan_file = words[wi];
 				char *text;
-				if (acq_file_read(*plan_file, (size_t)2 << 20, ACQ_FILE_STDIN, &text, NULL, &err))
-					return out_fail(err.code == ACQ_E_IO || err.code == ACQ_E_NOTFOUND ? CTL_EXIT_NOINPUT
-						    : CTL_EXIT_DATAERR, "not_found", "%s", err.msg);
-				json_object_set_new(req, pk + 1, json_string(text));
+				size_t len;
+				if (acq_file_read(*plan_file, (size_t)2 << 20, ACQ_FILE_STDIN, &text, &len, &err)) {
+					bool unread = err.code == ACQ_E_IO || err.code == ACQ_E_NOTFOUND;
+					return out_fail(unread ? CTL_EXIT_NOINPUT : CTL_EXIT_DATAERR,
+							unread ? "not_found" : "invalid", "%s", err.msg);
+				}
+				/* a NUL byte or a byte that is not UTF-8 would cut the text short or drop it (JSON) */
+				int bad = yc_check_text(!strcmp(*plan_file, "-") ? "standard input" : *plan_file, text, len,
+							&err);
+				if (!bad)
+					json_object_set_new(req, pk + 1, json_stringn(text, len));
 				free(text);
+				if (bad)
+					return out_fail(CTL_EXIT_DATAERR, "invalid", "%s", err.msg);
 			} else if (set_arg(req, def, pk, words[wi], &err)) {
 				return out_fail(CTL_EXIT_USAGE, "usage", "%s", err.msg);
 			}
@@ -275,12 +292,25 @@ static int check_request(json_t *req, const struct proto_cmd *def, const char *c
 	return CTL_EXIT_OK;
 }
 
+/* A refusal of the plan sent from plan_file names it as the daemon read it, "plan:LINE:COL: ...": the message
+ * in e is made to name the file instead ("quick.yaml:9:11: averages: ..."), in the human and the --json output. */
+static void name_plan_file(json_t *e, const char *plan_file)
+{
+	const char *msg = json_string_value(json_object_get(e, "message"));
+	if (!plan_file || !msg || strncmp(msg, "plan:", 5) || msg[5] < '0' || msg[5] > '9')
+		return;
+	char buf[2048];
+	snprintf(buf, sizeof buf, "%s:%s", strcmp(plan_file, "-") ? plan_file : "standard input", msg + 5);
+	json_object_set_new(e, "message", json_string(buf));
+}
+
 /* The daemon's reply to cmd: a refusal on stderr (commands named as typed), an export's stream or inline CSV, a
  * spectrum's CSV, else JSON or the human view. Returns the exit status. */
-static int show_reply(const char *cmd, json_t *rep, int passed)
+static int show_reply(const char *cmd, json_t *rep, int passed, const char *plan_file)
 {
 	if (!json_is_true(json_object_get(rep, "ok"))) {
 		json_t *e = json_object_get(rep, "error");
+		name_plan_file(e, plan_file);
 		char words2[64];
 		cmd_words(cmd, words2, sizeof words2);
 		/* the daemon's message names commands as the protocol does ("sweep.abort"): say them as typed */
@@ -328,6 +358,20 @@ static int send_request(json_t *req, const char *cmd, const char *plan_file)
 		return out_fail(CTL_EXIT_UNAVAILABLE, "unavailable", "cannot connect to acquisitiond: %s (socket: -s or "
 			    "$ACQ_SOCKET)", err.msg);
 	}
+	/* a request longer than the daemon reads in one line would be refused as "too_long" without saying whose */
+	json_int_t max_line = json_integer_value(json_object_get(c.banner, "max_line"));
+	char *line = max_line > 0 ? json_dumps(req, JSON_COMPACT) : NULL;
+	size_t len = line ? strlen(line) + 1 : 0;
+	free(line);
+	if (max_line > 0 && len > (size_t)max_line) {
+		conn_close(&c);
+		char words2[64];
+		cmd_words(cmd, words2, sizeof words2);
+		return out_fail(CTL_EXIT_DATAERR, "too_long", "%s%s%s: the request is %zu bytes, more than the daemon reads "
+				"in one line (%lld bytes)%s", words2, plan_file ? " " : "", plan_file ? plan_file : "", len,
+				(long long)max_line, plan_file ? ": shorten the plan (a range {from, to, step} instead of a "
+				"long list)" : "");
+	}
 	int passed = -1;
 	json_t *rep = conn_call(&c, req, !strcmp(cmd, "export") ? &passed : NULL, &err);
 	conn_close(&c);
@@ -335,7 +379,7 @@ static int send_request(json_t *req, const char *cmd, const char *plan_file)
 		return out_fail(err.code == ACQ_E_PROTO ? CTL_EXIT_PROTOCOL : CTL_EXIT_UNAVAILABLE,
 			    err.code == ACQ_E_PROTO ? "protocol" : "unavailable", "%s: %s", acqctl_o.sock, err.msg);
 	json_object_del(rep, "id");
-	int rc = show_reply(cmd, rep, passed);
+	int rc = show_reply(cmd, rep, passed, plan_file);
 	if (passed >= 0)
 		close(passed);
 	json_decref(rep);

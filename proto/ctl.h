@@ -30,7 +30,11 @@ void ctl_fmt_angle(double deg, char *buf, size_t cap);
  * and axis names (degrees); strings as is, reals rounded to 6 significant digits. */
 void ctl_fmt_value(const char *key, json_t *v, char *buf, size_t cap);
 
-/* Print the human form of a successful reply to command cmd (protocol name, e.g. "sweep.list") on f. */
+/* Make text printable in place: each control character but newline and tab (an escape sequence a sweep name, an
+ * event or a device could carry to the operator's terminal) becomes '?'. */
+void ctl_printable(char *text);
+/* Print the human form of a successful reply to command cmd (protocol name, e.g. "sweep.list") on f (the reply's
+ * strings are first made printable, ctl_printable). */
 void ctl_print_human(FILE *f, const char *cmd, json_t *rep);
 /* Print the human form of a plan dry run (the "plan" object of the plan reply); steps listed if present. */
 void ctl_print_plan(FILE *f, json_t *plan);

@@ -533,6 +533,17 @@ static void print_spectrum(FILE *f, json_t *s)
 	fprintf(f, "  (acqctl spectrum %lld --csv prints the counts per wavelength)\n", num_i(s, "id"));
 }
 
+/* measure, dark, reference: the spectrum just taken and stored (its id for `acqctl spectrum`). */
+static void print_taken(FILE *f, json_t *r)
+{
+	char ms[32];
+	snprintf(ms, sizeof ms, "%.4g", num(r, "integration_ms"));
+	fprintf(f, "spectrum %lld: %s, %lld pixels, integration %s ms × %lld, peak %.6g counts, %lld saturated pixels\n",
+		num_i(r, "spectrum_id"), str(r, "kind"), num_i(r, "npix"), ms, num_i(r, "averages"), num(r, "peak"),
+		num_i(r, "saturated"));
+	fprintf(f, "  (acqctl spectrum %lld shows it, --csv its counts per wavelength)\n", num_i(r, "spectrum_id"));
+}
+
 /* move, home, stop: the axes where they are now. */
 static void print_positions(FILE *f, const char *cmd, json_t *r)
 {
@@ -590,10 +601,45 @@ static void print_recon_run(FILE *f, json_t *r)
 	}
 }
 
+void ctl_printable(char *text)
+{
+	for (unsigned char *c = (unsigned char *)text; *c; c++)
+		if ((*c < 0x20 && *c != '\n' && *c != '\t') || *c == 0x7f)
+			*c = '?';
+}
+
+/* Every string in v made printable (ctl_printable), in place. */
+static void printable_json(json_t *v)
+{
+	if (json_is_string(v)) {
+		const unsigned char *s = (const unsigned char *)json_string_value(v);
+		bool bad = false;
+		for (size_t i = 0; s[i] && !bad; i++)
+			bad = (s[i] < 0x20 && s[i] != '\n' && s[i] != '\t') || s[i] == 0x7f;
+		char *c = bad ? strdup((const char *)s) : NULL;
+		if (c) {
+			ctl_printable(c);
+			json_string_set(v, c);
+			free(c);
+		}
+		return;
+	}
+	const char *k;
+	json_t *x;
+	size_t i;
+	if (json_is_object(v))
+		json_object_foreach(v, k, x)
+			printable_json(x);
+	else if (json_is_array(v))
+		json_array_foreach(v, i, x)
+			printable_json(x);
+}
+
 void ctl_print_human(FILE *f, const char *cmd, json_t *rep)
 {
 	json_object_del(rep, "id");
 	json_object_del(rep, "ok");
+	printable_json(rep);
 	json_t *x;
 	if (!strcmp(cmd, "status"))
 		print_status(f, rep);
@@ -611,6 +657,14 @@ void ctl_print_human(FILE *f, const char *cmd, json_t *rep)
 		print_positions(f, cmd, rep);
 	else if (!strcmp(cmd, "recon.status"))
 		print_recon_run(f, json_object_get(rep, "run"));
+	else if ((!strcmp(cmd, "measure") || !strcmp(cmd, "dark") || !strcmp(cmd, "reference")) &&
+		 json_is_integer(json_object_get(rep, "spectrum_id")))
+		print_taken(f, rep);
+	else if (!strcmp(cmd, "reload") && json_is_string(json_object_get(rep, "config")))
+		fprintf(f, "configuration reloaded from %s\n", str(rep, "config"));
+	else if (!strcmp(cmd, "laser.off") && json_is_boolean(json_object_get(rep, "emission")))
+		fprintf(f, "%s\n", json_is_false(json_object_get(rep, "emission")) ? "laser emission off (confirmed by the laser)"
+			: "laser off requested, but the laser still reports emission: check it");
 	else if ((x = json_object_get(rep, "progress")) && json_is_object(x)) {
 		if (json_object_get(rep, "sweep"))
 			fprintf(f, "sweep %lld started\n", num_i(rep, "sweep"));

@@ -160,6 +160,7 @@ void ctl_view_event(struct ctl_view *v, json_t *ev)
 	if (!strcmp(name, "sweep.progress")) {
 		set_progress(v, ev, "sweep");
 		snprintf(v->point, sizeof v->point, "%s", s_of(ev, "point"));
+		ctl_printable(v->point);
 		return;
 	}
 	if (!strcmp(name, "sweep.state")) {
@@ -188,6 +189,7 @@ void ctl_view_event(struct ctl_view *v, json_t *ev)
 		snprintf(text, sizeof text, "%s", s ? s : name);
 		free(s);
 	}
+	ctl_printable(text); /* a name or a message with an escape sequence does not reach the terminal */
 	add_event(v, text);
 }
 

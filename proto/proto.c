@@ -180,6 +180,13 @@ static int check_arg(const struct proto_arg *a, json_t *v, const char **code, st
 			return acq_errf(err, ACQ_E_INVAL, "\"%s\": longer than %.0f bytes", a->name, a->max);
 		if (strlen(json_string_value(v)) != json_string_length(v))
 			return acq_errf(err, ACQ_E_INVAL, "\"%s\": contains a NUL character", a->name);
+		/* a one-line argument (a name, a path; not a plan's text) goes into replies, logs and tables as is: a
+		 * newline or a terminal escape there would forge a log line or reach an operator's terminal */
+		const unsigned char *t = (const unsigned char *)json_string_value(v);
+		for (size_t i = 0; a->max > 0 && a->max <= 4096 && t[i]; i++)
+			if (t[i] < 0x20 || t[i] == 0x7f)
+				return acq_errf(err, ACQ_E_INVAL, "\"%s\": a control character (0x%02x) at position %zu",
+						a->name, t[i], i + 1);
 	} else if (a->type != PROTO_T_BOOL && (a->min != 0 || a->max != 0)) {
 		double d = json_number_value(v);
 		if (!(d >= a->min && d <= a->max) && a->max >= ID_MAX) /* an id: no upper bound worth saying (2^53) */
@@ -198,8 +205,13 @@ int proto_req_parse(const char *line, size_t len, struct proto_req *req, const c
 	json_error_t je;
 	/* JSON_REJECT_DUPLICATES: {"cmd":"status","cmd":"move"} is ambiguous, so it is an error. */
 	req->root = json_loadb(line, len, JSON_REJECT_DUPLICATES | JSON_DECODE_ANY, &je);
-	if (!req->root)
+	if (!req->root) {
+		/* jansson names its own flag ("\\u0000 is not allowed without JSON_ALLOW_NUL"): say what was sent */
+		if (strstr(je.text, "JSON_ALLOW_NUL"))
+			return acq_errf(err, ACQ_E_PROTO, "a NUL character (\\u0000) is not allowed in a request, at "
+					"column %d", je.column);
 		return acq_errf(err, ACQ_E_PROTO, "not JSON: %s at column %d", je.text, je.column);
+	}
 	*code = PROTO_E_INVALID;
 	if (!json_is_object(req->root))
 		return acq_errf(err, ACQ_E_PROTO, "expected a JSON object {\"cmd\": ..., \"id\": ...}");

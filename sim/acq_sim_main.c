@@ -272,6 +272,11 @@ int main(int argc, char **argv)
 		fprintf(stderr, "acq-sim: %s\n", err.msg);
 		return 1;
 	}
+	if (!yc_root(doc)) { /* its sections' errors could not say which file */
+		fprintf(stderr, "acq-sim: %s: empty configuration: expected a mapping with bench, devices, sim\n", o.config);
+		yc_free(doc);
+		return 1;
+	}
 	static struct sim_world world;
 	world.scale = o.scale;
 	world.seed = o.seed;

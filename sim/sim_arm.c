@@ -86,7 +86,7 @@ static void update_regs(struct sim_axis *a)
 	put_field(a, RM_ACTUAL, a->mot.motor, false);
 	put_field(a, RM_COMMAND_POS, a->mot.moving ? a->mot.p1 : a->mot.motor, false);
 	put_field(a, RM_ALARM_CODE, (double)a->alarm, true);
-	put_field(a, RM_SERIAL, 1000.0 + a->unit, true);
+	put_field(a, RM_SERIAL, 1000.0 * (a->arm->arm + 1) + a->unit, true); /* 1001 laser arm, 2001-2 detector arm */
 	put_field(a, RM_FIRMWARE, 102, true);
 }
 

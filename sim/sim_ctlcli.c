@@ -27,10 +27,12 @@ static void usage(FILE *f)
 		"  truth | status           the simulator's true state: pose, emission, power, sample, temperature, faults\n"
 		"  reference                put the white standard on the stage (sample white)\n"
 		"  sample NAME              put NAME on the stage: green-paint | white | metal | clear-coat |\n"
-		"                           rough-backscatter | cloth-sheen | sharp-lobe | narrow-lines | none\n"
+		"                           rough-backscatter | cloth-sheen | sharp-lobe | narrow-lines |\n"
+		"                           merl (the table of sim.merl_file) | none\n"
 		"  fault NAME [ARGS]        inject a fault (acq-sim ctl help lists them); fault clear ends all\n"
 		"  pose LT DT DP | laser on|off [PCT] | temperature C | time | help   (as the control socket has them)\n"
-		"exit status: 0 ok, 1 refused by the simulator, 64 usage, 69 no simulator answers\n");
+		"exit status: 0 ok, 1 refused by the simulator, 64 usage (an unknown command, a missing argument),\n"
+		"  69 no simulator answers\n");
 }
 
 /* The control socket from the ports file's {"control": {"socket": PATH}}. */
@@ -109,19 +111,32 @@ static int exchange(const char *path, const char *line, char *buf, size_t cap)
 	return 0;
 }
 
-/* "ok k=v k=v ..." as a JSON object (numbers where they parse), with "ok": true. */
-static json_t *kv_json(const char *text)
+/* "ok k=v k=v ..." as a JSON object (numbers where they parse), with "ok": true; a reply without k=v pairs
+ * (time, help) as "t" (time's number) or "reply". */
+static json_t *kv_json(const char *cmd, const char *text)
 {
 	json_t *o = json_pack("{s:b}", "ok", 1);
+	text += strspn(text, " ");
+	if (*text && !strchr(text, '=')) {
+		char *end;
+		double v = strtod(text, &end);
+		if (!strcmp(cmd, "time") && !*end)
+			json_object_set_new(o, "t", json_real(v));
+		else
+			json_object_set_new(o, "reply", json_string(text));
+		return o;
+	}
 	char *copy = strdup(text), *save = NULL;
 	for (char *t = copy ? strtok_r(copy, " ", &save) : NULL; t; t = strtok_r(NULL, " ", &save)) {
 		char *eq = strchr(t, '=');
 		if (!eq)
 			continue;
 		*eq = 0;
-		char *end;
+		char *end, *iend;
 		double v = strtod(eq + 1, &end);
-		json_object_set_new(o, t, *end || end == eq + 1 ? json_string(eq + 1) : json_real(v));
+		long long iv = strtoll(eq + 1, &iend, 10); /* "0", "252": integers, not 0.0 and 252.0 */
+		json_object_set_new(o, t, *end || end == eq + 1 ? json_string(eq + 1)
+					  : !*iend && !strchr(eq + 1, '.') ? json_integer(iv) : json_real(v));
 	}
 	free(copy);
 	return o;
@@ -161,6 +176,18 @@ int simctl_main(int argc, char **argv)
 			return EX_UNAVAILABLE_;
 		control = path;
 	}
+	/* the commands that take arguments, said before asking the simulator (a usage error, 64) */
+	static const struct {
+		const char *cmd, *args;
+		int min;
+	} need[] = { { "sample", "NAME", 1 }, { "fault", "NAME [ARGS] (acq-sim ctl help lists them)", 1 },
+		     { "pose", "LASER.THETA DETECTOR.THETA DETECTOR.PHI", 3 }, { "temperature", "C", 1 },
+		     { "laser", "on|off [PCT]", 1 } };
+	for (size_t k = 0; k < sizeof need / sizeof need[0]; k++)
+		if (!strcmp(argv[i], need[k].cmd) && argc - i - 1 < need[k].min) {
+			fprintf(stderr, "acq-sim ctl: %s needs %s (acq-sim ctl --help)\n", need[k].cmd, need[k].args);
+			return EX_USAGE_;
+		}
 	char line[1024];
 	size_t n = 0;
 	const char *cmd = argv[i];
@@ -188,8 +215,8 @@ int simctl_main(int argc, char **argv)
 		return EX_UNAVAILABLE_;
 	bool ok = !strncmp(reply, "ok", 2);
 	if (json) {
-		json_t *o = ok ? kv_json(reply + 2) : json_pack("{s:b,s:s}", "ok", 0, "error", reply);
-		char *s = json_dumps(o, JSON_COMPACT);
+		json_t *o = ok ? kv_json(cmd, reply + 2) : json_pack("{s:b,s:s}", "ok", 0, "error", reply);
+		char *s = json_dumps(o, JSON_COMPACT | JSON_REAL_PRECISION(12)); /* 74.3259, not 74.325900000000004 */
 		puts(s ? s : "{}");
 		free(s);
 		json_decref(o);
@@ -211,5 +238,6 @@ int simctl_main(int argc, char **argv)
 	} else {
 		fprintf(stderr, "acq-sim ctl: %s\n", reply);
 	}
-	return ok ? 0 : 1;
+	/* a command the simulator does not know is a usage error, like acqctl's */
+	return ok ? 0 : strstr(reply, "error: unknown command") == reply ? EX_USAGE_ : 1;
 }

@@ -194,6 +194,11 @@ int plan_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err
 		goto fail;
 	if (yc_string(root, "name", false, &name, err))
 		goto fail;
+	for (size_t i = 0; name && name[i]; i++) /* as sample: (a newline or an escape in logs and tables) */
+		if ((unsigned char)name[i] < 0x20 || name[i] == 0x7f) {
+			yc_errf(err, yc_get(root, "name"), "name: a control character at position %zu", i + 1);
+			goto fail;
+		}
 	snprintf(s->name, sizeof s->name, "%s", name);
 	if (plan_sample_parse(root, s->sample, err))
 		goto fail;

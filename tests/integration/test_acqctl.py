@@ -2,7 +2,8 @@
 """Integration: acqctl as the operator uses it, on the simulated bench.
 - every command's --json output validates against its schema in proto/schema/acqctl-replies.schema.json
   (and every refusal against the error schema), human output is produced for each;
-- exit codes: 0 ok, 1 refused, 64 usage, 66 unreadable input, 69 no daemon; --help and --version never connect
+- exit codes: 0 ok, 1 refused, 64 usage, 65 a plan that is not UTF-8 text (file:line:col), 66 unreadable input,
+  69 no daemon; --help and --version never connect
   (checked with a socket path that would hang: a listener that never answers);
 - home, stop (of a running move: the move's requester gets the refusal), laser off (the simulator's truth says
   emission off), spectrum ID (--json, --csv, -o);
@@ -132,9 +133,15 @@ def offline_checks(tmp):
             check(p.returncode == 0 and p.stdout.startswith(prog + " "), "%s --version: %d %r" % (prog, p.returncode,
                                                                                               p.stdout + p.stderr))
         # usage errors: 64, before anything is sent (the hanging socket would time the call out)
+        # (and arguments that used to pass: an id beyond 2^63 sent as 2^63 - 1, -t wrapping around an int, an empty
+        # -o or -s named as ": No such file" after the request)
         for args in (["bogus"], ["move", "laser_theta=abc"], ["move", "nope=1"], ["sweep", "show"], ["--frob"],
-                     ["export", "1", "2"], ["wait", "sideways"], []):
-            p = subprocess.run([CTL, "-s", hang] + args, capture_output=True, text=True, timeout=10)
+                     ["export", "1", "2"], ["wait", "sideways"], [], ["sweep", "show", "99999999999999999999"],
+                     ["-t", "99999999999", "status"], ["export", "1", "-o", ""], ["-s", "", "status"]):
+            try:
+                p = subprocess.run([CTL, "-s", hang] + args, capture_output=True, text=True, timeout=10)
+            except subprocess.TimeoutExpired:
+                raise AssertionError("acqctl %r: sent to the daemon, wanted exit 64" % args)
             check(p.returncode == 64, "acqctl %s: exit %d, wanted 64 (%r)" % (" ".join(args), p.returncode, p.stderr))
         # a group's word alone names its sub-commands
         p = subprocess.run([CTL, "-s", hang, "sweep"], capture_output=True, text=True, timeout=10)
@@ -145,6 +152,18 @@ def offline_checks(tmp):
         p = subprocess.run([CTL, "-s", hang, "sweep", "start", os.path.join(tmp, "none.yaml")], capture_output=True,
                            text=True, timeout=10)
         check(p.returncode == 66 and "none.yaml" in p.stderr, "unreadable plan: %d %r" % (p.returncode, p.stderr))
+        # a plan that is not UTF-8 text: 65 before anything is sent, where the byte is (a NUL cut the text short
+        # and sent the rest; a Latin-1 byte said "missing plan", 64)
+        for name, data, where in (("nul.yaml", PLAN.encode()[:60] + b"\0\0garbage: [", "nul.yaml:5:4: a NUL byte"),
+                                  ("latin1.yaml", b"# \xe9chantillon\n" + PLAN.encode(), "latin1.yaml:1:3: byte 0xe9")):
+            open(os.path.join(tmp, name), "wb").write(data)
+            try:
+                p = subprocess.run([CTL, "-s", hang, "sweep", "start", os.path.join(tmp, name)], capture_output=True,
+                                   text=True, timeout=10)
+            except subprocess.TimeoutExpired:
+                raise AssertionError("acqctl sweep start %s: sent to the daemon" % name)
+            check(p.returncode == 65 and where in p.stderr, "plan %s: exit %d, wanted 65 naming %r (%r)" % (
+                name, p.returncode, where, p.stderr))
         # export -o FILE that cannot be created: 73 before anything is sent (the daemon streams nothing for it)
         t0 = time.time()
         p = subprocess.run([CTL, "-s", hang, "export", "1", "-o", os.path.join(tmp, "nodir", "x.csv")],
@@ -176,6 +195,13 @@ def offline_checks(tmp):
     d = c.json("error", "status", rc=69)
     check(d["error"]["code"] == "unavailable", "no daemon: %r" % d)
     check("cannot connect" in c.human("status", rc=69), "no daemon, human")
+    # a plan's name with a control character (a terminal escape or a newline, into `sweep list`, the log) is
+    # refused where it is, as sample: is
+    escf = os.path.join(tmp, "esc.yaml")
+    open(escf, "w").write(PLAN.replace("name: t-acqctl", 'name: "evil\\e[2J\\nline2"'))
+    p = c.run("plan", escf, "--config", os.path.join(L.SRC, "config", "bench-sim.yaml"))
+    check(p.returncode == 1 and "esc.yaml:1:7: name: a control character at position 5" in p.stderr,
+          "a plan name with an escape: %d %r" % (p.returncode, p.stderr))
     # plan: one output whether or not a daemon answers (local dry run)
     plan = os.path.join(tmp, "p.yaml")
     open(plan, "w").write(PLAN)
@@ -256,6 +282,8 @@ def main():
         check(out.startswith("daemon     running") and "(simulated bench)" in out, "status human %r" % out)
         out = c.human("devices")
         check("°" in out and "Oriental Motor" in out and "Avantes" in out, "devices human %r" % out)
+        serials = re.findall(r"^(?:laser|detector)\.\w+ .*serial (\d+)", out, re.M)  # one per controller unit
+        check(len(serials) == 3 and len(set(serials)) == 3, "the axes' serials %r (both arms said 1001)" % serials)
         # plan: the daemon's answer has the local one's shape and figures
         d = c.json("plan", "plan", plan)
         check(d["source"] == "daemon", "daemon plan %r" % d["source"])
@@ -358,6 +386,28 @@ def main():
         err = c.human("move", "detector_theta=500", rc=1)  # refused by the daemon: 1, said once with its command
         check(err.startswith("acqctl: move: \"detector.theta\": expected a number in [") and "move: move" not in err,
               "refused move: %r" % err)
+        # a move beyond the bench's range names the axis and the range; one into the other arm says so
+        err = c.human("move", "detector.phi=400", rc=1)
+        check("detector.phi: 400° is outside the bench's range [-179°, 359°]" in err, "move beyond the bench: %r" % err)
+        err = c.human("move", "laser.theta=60", "detector.theta=60", "detector.phi=0", rc=1)
+        check("collision: the arms would meet at laser.theta 60°, detector.theta 60°, detector.phi 0°" in err,
+              "move into a collision: %r" % err)
+        # the daemon's refusal of a plan names the file and its line (it reads the text as "plan")
+        badf = os.path.join(tmp, "bad-avg.yaml")
+        open(badf, "w").write(PLAN.replace("averages: 1", "averages: -2"))
+        err = c.human("plan", badf, rc=1)
+        check(err.startswith("acqctl: plan: %s:8:11: averages: -2" % badf), "plan refused: %r" % err)
+        d = c.json("error", "sweep", "start", badf, rc=1)
+        check(d["error"]["message"].startswith(badf + ":8:11: "), "sweep start refused, --json: %r" % d)
+        # a plan longer than a request line (64 KiB) is refused by acqctl, naming the file (65; the daemon's own
+        # refusal said "plan: line longer than 65536 bytes: ignored up to its newline", 1)
+        longf = os.path.join(tmp, "long.yaml")
+        open(longf, "w").write(PLAN.replace("phi_deg: [0, 180]", "phi_deg: [%s]" % ", ".join(
+            "%.3f" % (k * 0.01) for k in range(12000))))
+        p = c.run("sweep", "start", longf)
+        check(p.returncode == 65 and p.stderr.startswith("acqctl: sweep start %s: the request is " % longf) and
+              "more than the daemon reads in one line (65536 bytes)" in p.stderr, "a long plan: rc %d %r" % (
+                  p.returncode, p.stderr))
         err = c.human("spectrum", "0", rc=1)  # an id's range is not 2^53
         check("expected an integer >= 1" in err and "spectrum: spectrum" not in err, "spectrum 0: %r" % err)
         # --- a sweep: replies show the state after the command
@@ -495,6 +545,19 @@ def main():
         check(p.returncode == 69, "ctl without a simulator: %d" % p.returncode)
         p = subprocess.run([sim, "ctl"], capture_output=True, text=True)
         check(p.returncode == 64, "ctl usage: %d" % p.returncode)
+        # usage errors are 64 like acqctl's (were 1, "refused"): a missing argument (said before asking), an
+        # unknown command (the simulator's "unknown command")
+        for args, words in ((["sample"], "sample needs NAME"), (["pose", "1", "2"], "pose needs"),
+                            (["frob"], "unknown command 'frob'")):
+            p = subprocess.run([sim, "ctl"] + args, capture_output=True, text=True, env=env)
+            check(p.returncode == 64 and words in p.stderr, "ctl %s: %d %r" % (" ".join(args), p.returncode, p.stderr))
+        # --json: integers as integers, no float noise (74.325900000000004), time's value kept (was {"ok": true})
+        p = subprocess.run([sim, "ctl", "--json", "truth"], capture_output=True, text=True, env=env)
+        t = json.loads(p.stdout)
+        check(type(t["emission"]) is int and type(t["collisions"]) is int and
+              not re.search(r"\.\d*0000000\d", p.stdout), "ctl --json truth's numbers %r" % p.stdout)
+        p = subprocess.run([sim, "ctl", "--json", "time"], capture_output=True, text=True, env=env)
+        check(p.returncode == 0 and json.loads(p.stdout)["t"] > 0, "ctl --json time %r" % p.stdout)
         print("ok: acqctl commands, schemas, exit codes, watch reconnection, acq-sim ctl")
 
 

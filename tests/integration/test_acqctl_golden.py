@@ -19,7 +19,8 @@ CASES = [("version", ["version"]), ("status", ["status"]), ("devices", ["devices
          ("sweep.show", ["sweep", "show", "2"]), ("plan", ["plan", "PLANFILE"]),
          ("move", ["move", "laser.theta=20", "detector.theta=40", "detector.phi=90"]), ("home", ["home"]),
          ("sweep.abort", ["sweep", "abort"]), ("spectrum", ["spectrum", "7"]), ("spectrum", ["spectrum", "7", "--csv"]),
-         ("recon.status", ["recon", "status", "2"])]
+         ("recon.status", ["recon", "status", "2"]), ("measure", ["measure"]), ("laser.off", ["laser", "off"]),
+         ("reload", ["reload"])]
 
 
 def reply_from(replies, seen):

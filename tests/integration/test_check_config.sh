@@ -38,6 +38,22 @@ check_bad top $'bench: {}\nbogus: 1\n' 2:1 "bogus"
 check_bad yaml $'daemon: [\n' 2:1 ""
 check_bad arm $'devices:\n  detector_arm: {axes: [1]}\n' 2:24 "mapping"
 
+# a damaged file (its tail NUL bytes, as a crash can leave it) is refused where the NULs start, not read up to
+# them (the rest of the file silently lost: "ok" before); an empty file is named
+head -c 2000 "$ACQ_SRC/config/bench-sim.yaml" > "$tmp/nul.yaml"; head -c 512 /dev/zero >> "$tmp/nul.yaml"
+out=$("$D" --check-config "$tmp/nul.yaml" 2>&1); rc=$?
+[ $rc -eq 1 ] || fail "a file with NUL bytes: exit $rc (want 1): $out"
+line=$(head -c 2000 "$ACQ_SRC/config/bench-sim.yaml" | wc -l)
+grep -qF "$tmp/nul.yaml:$((line + 1)):" <<<"$out" && grep -qF "NUL byte" <<<"$out" || fail "NUL bytes not located: $out"
+: > "$tmp/empty.yaml"
+out=$("$D" --check-config "$tmp/empty.yaml" 2>&1) && fail "an empty file accepted"
+grep -qF "$tmp/empty.yaml: empty configuration" <<<"$out" || fail "the empty file is not named: $out"
+# the simulator reads the same file: the same two refusals ("devices: expected a mapping, found nothing" before)
+for f in nul empty; do
+  out=$(timeout 20 "$ACQ_BUILD/acq-sim" -c "$tmp/$f.yaml" --ports-file "$tmp/sim-ports.json" 2>&1); rc=$?
+  [ $rc -eq 1 ] && grep -qF "$tmp/$f.yaml:" <<<"$out" || fail "acq-sim -c $f.yaml: exit $rc: $out"
+done
+
 # a sim ports file that is not JSON, or has a bad port
 echo '{"laser_arm": {"port": 0}}' > "$tmp/ports.json"
 out=$("$D" --check-config "$ACQ_SRC/config/bench-sim.yaml" --sim "$tmp/ports.json" 2>&1) && fail "bad port accepted"
@@ -49,4 +65,4 @@ echo '{"laser_arm": {"port": 1502}, "detector_arm": {"port": 1503}, "laser": {"d
 "$D" --check-config "$tmp/none.yaml" >/dev/null 2>&1; [ $? -eq 1 ] || fail "missing file must exit 1"
 "$D" >/dev/null 2>&1; [ $? -eq 2 ] || fail "no arguments must exit 2"
 "$D" --bogus >/dev/null 2>&1; [ $? -eq 2 ] || fail "unknown option must exit 2"
-echo "ok: examples valid, 8 broken files located, ports file checked"
+echo "ok: examples valid, 8 broken files and a damaged one located, an empty one named, ports file checked"

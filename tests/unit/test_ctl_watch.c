@@ -1,6 +1,6 @@
 /* Unit tests of ctl_watch.c, acqctl watch's terminal view during a sweep: the progress bar and counts, the ETA
  * counting down between events while running and not shown while paused, the current point, device states and the
- * last events. */
+ * last events; control characters in what it shows made printable. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -96,10 +96,48 @@ static void test_sweep_view(void **state)
 	free(buf);
 }
 
+/* An event's text (a message, a sweep's reason, the current point) with a control character (an escape sequence a
+ * name stored before the daemon refused them could carry) is shown with '?' for it, not sent to the terminal. */
+static void test_escapes_not_passed(void **state)
+{
+	(void)state;
+	char *buf = NULL;
+	size_t len = 0;
+	FILE *f = open_memstream(&buf, &len);
+	struct ctl_view *v = ctl_view_new(f, "/run/x.sock");
+	event(v, "{\"event\": \"sweep.fault\", \"sweep\": 4, \"device\": \"laser\", \"message\": \"bad\\u001b]0;x\\u0007"
+		 "\\u001b[2Jthing\"}");
+	event(v, "{\"event\": \"sweep.progress\", \"sweep\": 4, \"state\": \"running\", \"done\": 1, \"total\": 2,"
+		 " \"point\": \"p\\u001b[31m1\"}");
+	char *s = draw(v, &buf, &len, f, real_now());
+	assert_non_null(strstr(s, "sweep 4 fault on laser: bad?]0;x??[2Jthing\n"));
+	assert_non_null(strstr(s, "now   p?[31m1\n"));
+	assert_null(strstr(s, "\x1b[2Jthing"));
+	assert_null(strstr(s, "\x1b[31m"));
+	free(s);
+	ctl_view_free(v);
+	fclose(f);
+	free(buf);
+	/* acqctl's other outputs alike (a sweep listed by its name) */
+	json_error_t je;
+	json_t *rep = json_loads("{\"ok\": true, \"sweeps\": [{\"id\": 1, \"state\": \"completed\", \"name\": "
+				 "\"evil\\u001b[2Jname\", \"points_done\": 1, \"points_total\": 1}]}", 0, &je);
+	assert_non_null(rep);
+	buf = NULL;
+	f = open_memstream(&buf, &len);
+	ctl_print_human(f, "sweep.list", rep);
+	fclose(f);
+	assert_non_null(strstr(buf, "evil?[2Jname"));
+	assert_null(strchr(buf, 0x1b));
+	free(buf);
+	json_decref(rep);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_sweep_view),
+		cmocka_unit_test(test_escapes_not_passed),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

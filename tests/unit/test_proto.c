@@ -79,6 +79,15 @@ static void test_validation(void **state)
 	/* jansson refuses \\u0000 unless asked (JSON_ALLOW_NUL): a NUL never reaches a command. */
 	assert_string_equal(parse_code("{\"cmd\":\"status\\u0000x\"}", NULL), PROTO_E_PARSE);
 	assert_string_equal(parse_code("{\"cmd\":\"export\",\"sweep\":1,\"path\":\"a\\u0000b\"}", NULL), PROTO_E_PARSE);
+	{ /* said in the client's words, not jansson's flag name (JSON_ALLOW_NUL) */
+		struct proto_req req;
+		const char *code = NULL;
+		struct acq_err err = { 0 };
+		static const char nul[] = "{\"cmd\":\"status\\u0000x\"}";
+		assert_int_equal(proto_req_parse(nul, strlen(nul), &req, &code, &err), -1);
+		proto_req_free(&req);
+		assert_string_equal(err.msg, "a NUL character (\\u0000) is not allowed in a request, at column 22");
+	}
 	assert_string_equal(parse_code("{\"cmd\":\"status\",\"extra\":1}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":\"10\"}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"move\",\"laser_theta\":1e9}", NULL), PROTO_E_INVALID);
@@ -91,6 +100,15 @@ static void test_validation(void **state)
 	assert_string_equal(parse_code("{\"cmd\":\"sweep.show\",\"sweep\":1.5}", NULL), PROTO_E_INVALID);
 	assert_string_equal(parse_code("{\"cmd\":\"sweep.show\",\"sweep\":3,\"points\":true}", NULL), "ok");
 	assert_string_equal(parse_code("{\"cmd\":\"config\",\"text\":\"yes\"}", NULL), PROTO_E_INVALID);
+	/* a one-line argument with a control character (a newline forging a log line, a terminal escape) is
+	 * refused; a plan's text is many lines */
+	assert_string_equal(parse_code("{\"cmd\":\"sweep.start\",\"plan\":\"name: a\\nx: 1\",\"name\":\"a\\nb\"}",
+				       NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"sweep.start\",\"plan\":\"name: a\\nx: 1\",\"name\":\"a\\u001b[2J\"}",
+				       NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"home\",\"axis\":\"laser.theta\\t\"}", NULL), PROTO_E_INVALID);
+	assert_string_equal(parse_code("{\"cmd\":\"sweep.start\",\"plan\":\"name: a\\nx: 1\",\"name\":\"\u00e9t\u00e9 A3\"}",
+				       NULL), "ok");
 	/* The id survives a validation error so the reply can carry it. */
 	json_t *id = NULL;
 	assert_string_equal(parse_code("{\"cmd\":\"nope\",\"id\":42}", &id), PROTO_E_UNKNOWN);

@@ -116,6 +116,41 @@ static void test_syntax_duplicates_aliases(void **state)
 	yc_free(doc);
 }
 
+/* A file with a NUL byte (a damaged file, binary junk) or bytes that are not UTF-8 is refused where the byte is,
+ * not read up to the NUL (the rest silently lost) or reported at 1:1; a control character is located too. */
+static void test_not_text_located(void **state)
+{
+	(void)state;
+	struct acq_err err = { 0 };
+	struct yc_doc *doc = NULL;
+	static const char nul[] = "a: 1\nb: 2\0\0\0c: [\n";
+	assert_int_equal(yc_load_string("t.yaml", nul, sizeof nul - 1, &doc, &err), -1);
+	assert_null(doc);
+	assert_string_equal(err.msg, "t.yaml:2:5: a NUL byte: not a text file (binary, or damaged)");
+	static const char latin1[] = "# \xe9" "chantillon\na: 1\n";
+	assert_int_equal(yc_load_string("t.yaml", latin1, sizeof latin1 - 1, &doc, &err), -1);
+	assert_string_equal(err.msg, "t.yaml:1:3: byte 0xe9 is not UTF-8: save the file as UTF-8");
+	static const char utf16[] = "\xff\xfe" "a\0:\0";
+	assert_int_equal(yc_load_string("t.yaml", utf16, sizeof utf16 - 1, &doc, &err), -1);
+	assert_string_equal(err.msg, "t.yaml: UTF-16 text: save the file as UTF-8");
+	static const char overlong[] = "a: \xc0\xaf\n", surrogate[] = "a: \xed\xa0\x80\n", cut[] = "a: \xc3";
+	assert_int_equal(yc_load_string("t.yaml", overlong, sizeof overlong - 1, &doc, &err), -1);
+	assert_string_equal(err.msg, "t.yaml:1:4: byte 0xc0 is not UTF-8: save the file as UTF-8");
+	assert_int_equal(yc_load_string("t.yaml", surrogate, sizeof surrogate - 1, &doc, &err), -1);
+	assert_int_equal(yc_load_string("t.yaml", cut, sizeof cut - 1, &doc, &err), -1);
+	/* columns count characters: "é" is one */
+	static const char ctl[] = "n: \xc3\xa9t\xc3\xa9\nb: x\x01" "y\n";
+	assert_int_equal(yc_load_string("t.yaml", ctl, sizeof ctl - 1, &doc, &err), -1);
+	assert_string_equal(err.msg, "t.yaml:2:5: control characters are not allowed");
+	/* UTF-8 text (a BOM, accents, 4-byte characters) is fine */
+	static const char ok[] = "\xef\xbb\xbf" "name: \xc3\xa9t\xc3\xa9 \xf0\x9f\x99\x82\n";
+	assert_int_equal(yc_load_string("t.yaml", ok, sizeof ok - 1, &doc, &err), 0);
+	const char *name = NULL;
+	assert_int_equal(yc_string(yc_root(doc), "name", true, &name, &err), 0);
+	assert_string_equal(name, "\xc3\xa9t\xc3\xa9 \xf0\x9f\x99\x82");
+	yc_free(doc);
+}
+
 static void test_bench_parse(void **state)
 {
 	(void)state;
@@ -156,6 +191,7 @@ int main(void)
 		cmocka_unit_test(test_unknown_key_lists_expected),
 		cmocka_unit_test(test_syntax_duplicates_aliases),
 		cmocka_unit_test(test_bench_parse),
+		cmocka_unit_test(test_not_text_located),
 	};
 	return cmocka_run_group_tests_name("yconf", tests, NULL, NULL);
 }
