@@ -46,7 +46,7 @@ FIRST=" test_recon_extremes test_dhr_trend_refit.py test_recon_honesty test_reco
 LIGHT=" test_server test_devices test_job_helper test_store_ckpt test_plan_worker test_recon_sky test_sim_refdrift
  test_recon_model test_executor test_sim_sphere test_avaspec_usb test_recon_render test_store_crash test_sim_arm
  test_loop test_store test_store_sync test_exposure test_recon_plot
- fuzz_plan fuzz_simarm fuzz_axisreply fuzz_proto
+ fuzz_plan fuzz_simarm fuzz_axisreply fuzz_proto fuzz_laser
  test_slow_disk.py test_avaspec_golden.sh test_sim_sockets.py test_sim_arms_spectro.py test_store_schema.py
  test_systemd_unit.sh test_acqctl_golden.py test_sim_laser_spectro.py test_store_foreign.py
  test_plan_limits.py test_daemon_protocol.py test_recon_timeout_real.py test_sweep_faults.py
