@@ -65,7 +65,7 @@ DEB_PKGS   := build-essential pkg-config libusb-1.0-0-dev libmodbus-dev libseria
 .DEFAULT_GOAL := all
 .SECONDARY:
 .PHONY: all deps check check-unit check-integration check-fuzz demo bench fuzz soak install install-files man uninstall clean \
-        test-programs distclean
+        test-programs distclean FORCE
 
 -include $(wildcard */module.mk)
 
@@ -101,16 +101,18 @@ $(BUILD)/obj/%.o: %.c $(BUILD)/.cflags | $(BUILD)/gen/acq_version.h
 	@$(if $(Q),echo "  CC      $<")
 	$(Q)$(CC) $(ALL_CFLAGS) -c $< -o $@
 
-# The version string lives in a generated header, rewritten only when it changes (#include "acq_version.h").
+# The version string and the installed data directory (help texts name the installed schema) live in a generated
+# header, rewritten only when they change (#include "acq_version.h").
+ACQ_GEN_H = '\#define ACQ_VERSION "$(VERSION)"\n\#define ACQ_DATADIR "$(DATADIR)"\n'
 $(BUILD)/gen/acq_version.h: FORCE
 	@mkdir -p $(dir $@)
-	@echo '#define ACQ_VERSION "$(VERSION)"' | cmp -s - $@ || echo '#define ACQ_VERSION "$(VERSION)"' > $@
+	@printf $(ACQ_GEN_H) | cmp -s - $@ || printf $(ACQ_GEN_H) > $@
 
 # Rebuild everything when the flags change (e.g. SANITIZE or CFLAGS on the command line).
 $(BUILD)/.cflags: FORCE
 	@mkdir -p $(BUILD)
 	@echo '$(CC) $(ALL_CFLAGS) $(LDFLAGS)' | cmp -s - $@ || echo '$(CC) $(ALL_CFLAGS) $(LDFLAGS)' > $@
-FORCE:
+FORCE: # phony (.PHONY above): under .SECONDARY a missing prerequisite without a recipe never forced a rebuild, so the version header and the flags stamp went stale
 
 define lib_rule
 $(call lib_of,$(1)): $(call lib_objs,$(1))

@@ -84,7 +84,7 @@ static void usage(FILE *f)
 		   "  69 no daemon answers, 70 internal error, 73 cannot write the output, 75 wait timed out,\n"
 		   "  76 protocol error\n"
 		   "see acqctl(1); --json replies follow the schemas in\n"
-		   "  /usr/share/acquisitiond/acqctl-replies.schema.json\n");
+		   "  " ACQ_DATADIR "/acqctl-replies.schema.json\n");
 }
 
 /* key=value with the type the command table gives the key. 0, or -1 with a message in err. */
