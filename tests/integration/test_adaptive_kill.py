@@ -5,7 +5,9 @@ recorded decisions and end on its budget with nothing lost and nothing twice: ev
 still there afterwards with the same row, angles and spectra; every planned point is measured exactly once; no
 configuration is planned twice; the batches are contiguous and each batch's points are the ones its picks name.
 The plan overlaps each decision with the measurement of the batch before it (overlap: true), so kills also land
-while a decision is under way or chosen and not yet recorded."""
+while a decision is under way or chosen and not yet recorded. A restart that measured says so with a resume event
+(a daemon killed during its own start-up, before it got to resume, owes none: asserting one resume per kill failed
+under ASan at load 9, 5 resumes for 6 kills, session 18)."""
 import os
 import random
 import signal
@@ -39,6 +41,15 @@ def snapshot(b, sid):
         db.close()
 
 
+def resumes(b, sid):
+    """The sweep's resume events so far."""
+    db = b.db()
+    try:
+        return db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'resume'", (sid,)).fetchone()[0]
+    finally:
+        db.close()
+
+
 def run():
     rng = random.Random(L.SEED)
     b = A.bench()
@@ -48,6 +59,7 @@ def run():
         sid = L.start_sweep(b, A.plan(budget="points: %d" % BUDGET, overlap=True), "it-adaptive-kill")
         kills, t0, seen = 0, time.time(), []
         before, planned_before = {}, {}
+        dead = None  # (points done, resume events) left by the daemon killed last, read before its restart
         while kills < KILLS:
             deadline = time.time() + rng.uniform(0.2, 1.5)
             while time.time() < deadline:
@@ -59,11 +71,16 @@ def run():
             if L.sweep_row(b, sid)["state"] in ("completed", "aborted", "failed"):
                 break
             before, planned_before = snapshot(b, sid)
+            if dead is not None and len(before) > dead[0]:
+                # the restarted daemon measured: it must have resumed the sweep, and said so (a daemon killed
+                # before it got to resume -- a loaded machine's slow start -- measures nothing and owes no event)
+                assert resumes(b, sid) > dead[1], "points measured after restart %d without a resume event" % kills
             b.kill_daemon(signal.SIGKILL)
             kills += 1
             after, planned_after = snapshot(b, sid)  # what the dead daemon left
             assert after == before or set(before) <= set(after), "points lost at the kill"
             seen.append((len(after), len(planned_after)))
+            dead = (len(after), resumes(b, sid))
             b.start_daemon(wait_devices=False)
             now, planned_now = snapshot(b, sid)
             for pid, v in after.items():
@@ -82,11 +99,9 @@ def run():
         rows, why = A.check_decisions(b, sid)
         A.no_repeats(b, sid)
         assert why.startswith("budget spent") and n == BUDGET, "stopped after %d points: %s" % (n, why)
-        db = b.db()
-        resumes = db.execute("SELECT count(*) FROM events WHERE sweep_id = ? AND kind = 'resume'", (sid,)).fetchone()[0]
-        db.close()
-        L.say("%d points, %d batches after %d kills (%d resume events): %s" % (n, len(rows) - 2, kills, resumes, why))
-        assert resumes >= kills, "fewer resumes (%d) than kills (%d)" % (resumes, kills)
+        nres = resumes(b, sid)
+        L.say("%d points, %d batches after %d kills (%d resume events): %s" % (n, len(rows) - 2, kills, nres, why))
+        assert nres > dead[1], "the last restart finished the sweep without a resume event"
         # overlap: some batch was chosen while the one before it was being measured (the daemon logs each such start)
         ahead = b.daemon_text().count("overlapping the measurement of the batch before it")
         L.say("%d decisions started while a batch was being measured" % ahead)
