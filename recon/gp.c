@@ -8,7 +8,6 @@
 #include <string.h>
 
 #include "recon/rbf.h"
-#include "recon/recon_int.h"
 
 /* The leave-one-out amplitude of every channel, α_λ = mean_k w_k²/(A⁻¹)_kk, from recon_gp_setup's Ainv. */
 void recon_gp_alpha(const struct recon_model *m, const double *Ainv, double *alpha)
