@@ -1,5 +1,5 @@
-/* job: the daemon's side of its child processes — started through the helper or the exec mode (job_helper.c),
- * their output captured, timed out and reaped without blocking the loop (see job.h). */
+/* job: the daemon's side of its child processes — started through the helper (its socket's end: job_link.c) or the
+ * exec mode (job_helper.c), their output captured, timed out and reaped without blocking the loop (see job.h). */
 #include "daemon/job.h"
 
 #include <errno.h>
@@ -11,11 +11,11 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
-#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include "daemon/job_int.h"
+#include "daemon/job_link.h"
 #include "daemon/log.h"
 #include "daemon/loop.h"
 
@@ -39,39 +39,6 @@ struct job {
 
 static struct loop *job_loop;
 static struct job *job_list;
-
-/* The helper (job_helper.c): its socket (-1: not running), process, the next child's id. */
-static int h_sock = -1;
-static pid_t h_pid;
-static pid_t h_shown; /* the latest helper's process id, for messages (h_pid is 0 once it is reaped) */
-static uint64_t h_next = 1;
-static unsigned h_starts;
-static pid_t h_dead[8]; /* helpers gone but not reaped yet (job_reap) */
-
-/* Reap h_pid if it has exited, else keep it for job_reap; h_pid is 0 after. */
-static void helper_forget(void)
-{
-	if (h_pid <= 0)
-		return;
-	if (waitpid(h_pid, NULL, WNOHANG) != h_pid) {
-		size_t i = 0;
-		while (i < sizeof h_dead / sizeof h_dead[0] && h_dead[i])
-			i++;
-		if (i == sizeof h_dead / sizeof h_dead[0]) { /* full (unlikely): wait for the oldest, SIGKILLed */
-			kill(h_dead[0], SIGKILL);
-			waitpid(h_dead[0], NULL, 0);
-			i = 0;
-		}
-		h_dead[i] = h_pid;
-	}
-	h_pid = 0;
-}
-
-void job_init(struct loop *lp)
-{
-	job_loop = lp;
-	job_list = NULL;
-}
 
 static void job_free(struct job *j)
 {
@@ -97,6 +64,42 @@ static void maybe_done(struct job *j)
 	if (j->done)
 		j->done(j, j->status, j->out, j->len, j->arg);
 	job_free(j);
+}
+
+/* The helper's report that child hid ended with status (job_link.c). */
+static void on_hid_done(uint64_t hid, int status)
+{
+	for (struct job *j = job_list; j; j = j->next)
+		if (j->hid == hid && !j->exited) {
+			j->exited = true;
+			j->status = status;
+			loop_timer_cancel(job_loop, j->timer);
+			j->timer = 0;
+			maybe_done(j);
+			break;
+		}
+}
+
+/* The helper has gone (job_link.c): each running child of it ends as killed, lost. */
+static void on_hid_lost(void)
+{
+	for (struct job *j = job_list, *next; j; j = next) {
+		next = j->next;
+		if (!j->hid || j->exited)
+			continue;
+		j->exited = j->lost = true;
+		j->status = 128 + SIGKILL;
+		loop_timer_cancel(job_loop, j->timer);
+		j->timer = 0;
+		maybe_done(j); /* once its pipe has drained: the child died with the helper */
+	}
+}
+
+void job_init(struct loop *lp)
+{
+	job_loop = lp;
+	job_list = NULL;
+	jobl_init(lp, on_hid_done, on_hid_lost);
 }
 
 /* Append up to 4 reads (of at most 64 KiB) of the child's output: a large output (a plan with every step) costs
@@ -151,127 +154,13 @@ static void on_output(struct loop *lp, int fd, short revents, void *arg)
 	}
 }
 
-/* ---- the helper's side of the daemon (job_fork_msg) ---- */
-
-static int helper_send(struct jobh_msg *m, const int *fds, int nfd)
-{
-	union {
-		char buf[CMSG_SPACE(2 * sizeof(int))];
-		struct cmsghdr align;
-	} cb;
-	struct iovec iov = { m, sizeof *m };
-	struct msghdr mh = { .msg_iov = &iov, .msg_iovlen = 1 };
-	if (nfd) {
-		memset(&cb, 0, sizeof cb);
-		mh.msg_control = cb.buf;
-		mh.msg_controllen = CMSG_SPACE(nfd * sizeof(int));
-		struct cmsghdr *c = CMSG_FIRSTHDR(&mh);
-		c->cmsg_level = SOL_SOCKET;
-		c->cmsg_type = SCM_RIGHTS;
-		c->cmsg_len = CMSG_LEN(nfd * sizeof(int));
-		memcpy(CMSG_DATA(c), fds, nfd * sizeof(int));
-	}
-	ssize_t n;
-	do /* never waits: a helper that does not read its messages fails the request */
-		n = sendmsg(h_sock, &mh, MSG_DONTWAIT | MSG_NOSIGNAL);
-	while (n < 0 && errno == EINTR);
-	return n == (ssize_t)sizeof *m ? 0 : -1;
-}
-
 static void signal_job(struct job *j, int sig)
 {
 	if (!j->hid) {
 		kill(j->pid, sig);
 		return;
 	}
-	struct jobh_msg m = { .type = JOBH_KILL, .sig_or_status = sig, .id = j->hid };
-	if (h_sock >= 0 && helper_send(&m, NULL, 0) < 0)
-		log_msg(LOG_WARNING, "job helper: the kill of child %llu not sent: %s", (unsigned long long)j->hid,
-			strerror(errno));
-}
-
-/* The helper has gone (EOF, or kill: it hangs): its children die with it (PR_SET_PDEATHSIG); each running one
- * ends as killed, lost; the next job_fork_msg() starts a new helper. */
-static void helper_lost(bool kill_it)
-{
-	if (h_sock < 0)
-		return;
-	loop_fd_del(job_loop, h_sock);
-	close(h_sock);
-	h_sock = -1;
-	if (h_pid > 0 && kill_it)
-		kill(h_pid, SIGKILL);
-	helper_forget(); /* reaped now or by job_reap() */
-	for (struct job *j = job_list, *next; j; j = next) {
-		next = j->next;
-		if (!j->hid || j->exited)
-			continue;
-		j->exited = j->lost = true;
-		j->status = 128 + SIGKILL;
-		loop_timer_cancel(job_loop, j->timer);
-		j->timer = 0;
-		maybe_done(j); /* once its pipe has drained: the child died with the helper */
-	}
-}
-
-static void on_helper(struct loop *lp, int fd, short revents, void *arg)
-{
-	(void)lp;
-	(void)revents;
-	(void)arg;
-	for (int k = 0; k < 64; k++) {
-		struct jobh_msg m;
-		ssize_t n = recv(fd, &m, sizeof m, MSG_DONTWAIT);
-		if (n < 0 && (errno == EINTR || errno == EAGAIN))
-			return;
-		if (n <= 0) {
-			log_msg(LOG_WARNING, "job helper (pid %d) has gone: its running children end as killed; a new "
-				"one starts with the next job", (int)h_shown);
-			helper_lost(false);
-			return;
-		}
-		if ((size_t)n != sizeof m || m.type != JOBH_DONE)
-			continue;
-		for (struct job *j = job_list; j; j = j->next)
-			if (j->hid == m.id && !j->exited) {
-				j->exited = true;
-				j->status = m.sig_or_status;
-				loop_timer_cancel(job_loop, j->timer);
-				j->timer = 0;
-				maybe_done(j);
-				break;
-			}
-	}
-}
-
-int job_helper_start(struct acq_err *err)
-{
-	if (h_sock >= 0)
-		return 0;
-	if (!job_loop)
-		return acq_errf(err, ACQ_E_INVAL, "job: not initialised");
-	helper_forget();
-	int sock;
-	pid_t pid;
-	if (jobh_spawn(&sock, &pid, err))
-		return -1;
-	fcntl(sock, F_SETFL, O_NONBLOCK);
-	if (loop_fd_add(job_loop, sock, POLLIN, on_helper, NULL, err)) {
-		close(sock);
-		kill(pid, SIGKILL);
-		waitpid(pid, NULL, 0);
-		return -1;
-	}
-	if (h_starts++)
-		log_msg(LOG_NOTICE, "job helper restarted (pid %d)", (int)pid);
-	h_sock = sock;
-	h_pid = h_shown = pid;
-	return 0;
-}
-
-pid_t job_helper_pid(void)
-{
-	return h_sock >= 0 ? h_pid : 0;
+	jobl_kill(j->hid, sig);
 }
 
 static void on_timeout(struct loop *lp, void *arg)
@@ -284,7 +173,7 @@ static void on_timeout(struct loop *lp, void *arg)
 	j->timed_out = true;
 	if (j->hid && j->hkilled) { /* SIGKILL sent 2 s ago and the helper reported nothing: it hangs */
 		log_msg(LOG_WARNING, "job helper: no report of a killed child within 2 s: restarting the helper");
-		helper_lost(true);
+		jobl_lost(true);
 		return;
 	}
 	/* First SIGTERM, then SIGKILL two seconds later if it is still there. */
@@ -423,22 +312,17 @@ int job_fork_msg_cpu(const struct job_kind *kind, const void *payload, size_t le
 		acq_errf(err, ACQ_E_IO, "pipe: %s", strerror(errno));
 		goto fail;
 	}
-	struct jobh_msg m = { .type = JOBH_START, .id = h_next++, .mem_bytes = mem_bytes, .kind = (uint32_t)k,
-			      .cpu_s = cpu_s };
+	uint64_t hid;
 	int fds[2] = { mfd, p[1] };
-	if (helper_send(&m, fds, 2) < 0) {
-		acq_errf(err, ACQ_E_UNSUPPORTED, "the job helper (pid %d) does not take the request: %s; it is restarted: "
-			 "retry", (int)h_pid, strerror(errno));
-		helper_lost(true);
+	if (jobl_start((uint32_t)k, mem_bytes, cpu_s, fds, &hid, err))
 		goto fail;
-	}
 	close(mfd);
 	close(p[1]);
 	struct job *j = job_new(p[0], out_max, true, timeout_s, done, arg, err);
 	if (!j) { /* its child writes into a closed pipe and ends; the helper's report then matches no job */
 		return -1;
 	}
-	j->hid = m.id;
+	j->hid = hid;
 	if (out)
 		*out = j;
 	return 0;
@@ -517,14 +401,7 @@ int job_count(void)
 
 void job_reap(void)
 {
-	for (size_t i = 0; i < sizeof h_dead / sizeof h_dead[0]; i++)
-		if (h_dead[i] > 0 && waitpid(h_dead[i], NULL, WNOHANG) == h_dead[i])
-			h_dead[i] = 0;
-	if (h_pid > 0 && waitpid(h_pid, NULL, WNOHANG) == h_pid) { /* the helper: its socket's EOF tells the jobs */
-		h_pid = 0;
-		if (h_sock >= 0)
-			on_helper(job_loop, h_sock, POLLHUP, NULL);
-	}
+	jobl_reap();
 	for (struct job *j = job_list, *next; j; j = next) {
 		next = j->next;
 		if (j->exited || j->hid) /* a helper's child: the helper reports it */
@@ -543,28 +420,7 @@ void job_reap(void)
 
 void job_finish(void)
 {
-	if (h_sock >= 0) { /* the helper ends at its socket's EOF, its children with it (PR_SET_PDEATHSIG) */
-		loop_fd_del(job_loop, h_sock);
-		close(h_sock);
-		h_sock = -1;
-	}
-	if (h_pid > 0) {
-		bool gone = false;
-		for (int i = 0; i < 200 && !(gone = waitpid(h_pid, NULL, WNOHANG) == h_pid); i++)
-			usleep(10000);
-		if (!gone) {
-			kill(h_pid, SIGKILL);
-			waitpid(h_pid, NULL, 0);
-		}
-		h_pid = 0;
-	}
-	for (size_t i = 0; i < sizeof h_dead / sizeof h_dead[0]; i++)
-		if (h_dead[i] > 0) {
-			kill(h_dead[i], SIGKILL);
-			waitpid(h_dead[i], NULL, 0);
-			h_dead[i] = 0;
-		}
-	h_starts = 0;
+	jobl_finish();
 	for (struct job *j = job_list; j; j = j->next)
 		if (j->hid)
 			j->exited = true;

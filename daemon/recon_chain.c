@@ -1,5 +1,5 @@
 /* recon_chain: the completion chain of a sweep — its calibrated samples exported as CSV into the state
- * directory (store_export_csv_file: the angles measured at commit, as every reader) with the reference's noise
+ * directory (store_export_csv_grid: the angles measured at commit, as every reader) with the reference's noise
  * (recon_refnoise.c), then the reconstruction stages (brdf-recon fit, merl, dhr --plot, render) one after the
  * other in child processes (job.h), each run and output recorded in the store (recon_runs), every step an event. */
 #include "daemon/recon_chain.h"
@@ -240,7 +240,8 @@ int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, int64_t 
 	mkdir(ch->outdir, 0750);
 	snprintf(ch->csv, sizeof ch->csv, "%s/samples.csv", ch->outdir);
 	int rows = 0;
-	if (store_export_csv_file(ch->env->store, id, ch->csv, &rows, err)) {
+	struct store_grid grid; /* the row the export read, on which the reference noise is binned */
+	if (store_export_csv_grid(ch->env->store, id, ch->csv, &rows, &grid, err)) {
 		recon_event(ch, "info", "exporting the calibrated samples failed: %s; no reconstruction ran", err->msg);
 		return -1;
 	}
@@ -249,8 +250,9 @@ int recon_chain_run(struct recon_chain *ch, int64_t id, bool automatic, int64_t 
 	struct acq_err rerr = { 0 };
 	struct timespec t0, t1;
 	clock_gettime(CLOCK_MONOTONIC, &t0);
-	int rn = recon_refnoise_write(ch->env, ch->id, ch->refn, &rerr);
+	int rn = recon_refnoise_write(ch->env, ch->id, &grid, ch->refn, &rerr);
 	clock_gettime(CLOCK_MONOTONIC, &t1);
+	free(grid.nm);
 	double ms = (double)(t1.tv_sec - t0.tv_sec) * 1e3 + (double)(t1.tv_nsec - t0.tv_nsec) * 1e-6;
 	/* one event for both (the kill tests count the chain's events) */
 	if (rn == 1)

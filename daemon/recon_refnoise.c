@@ -1,12 +1,13 @@
 /* recon_refnoise: reference-noise.csv beside a sweep's samples: the relative noise u(R_ref)/R_ref of the sweep's
  * stored white reference (or direct beam) per wavelength of its grid, rebuilt from the store as the crash-resume
- * reload does (ex_reference_rate) and binned as every sample's (calib_ref_noise): one spectrum shared by all
+ * reload does (ex_reference_rate) and binned as every sample's (calib_ref_noise) on the grid row the export read: one spectrum shared by all
  * samples, which dhr must not average away (--ref-noise). The recon chain writes it before its stages. */
 #include "daemon/recon_refnoise.h"
 
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "config/acq_out.h"
 #include "daemon/calib.h"
@@ -14,18 +15,22 @@
 #include "daemon/executor.h"
 #include "daemon/store.h"
 
-int recon_refnoise_write(const struct sweep_env *env, int64_t id, const char *path, struct acq_err *err)
+int recon_refnoise_write(const struct sweep_env *env, int64_t id, const struct store_grid *g, const char *path,
+			 struct acq_err *err)
 {
 	const struct conf *c = env->conf;
 	struct ex_cfg cfg;
 	ex_cfg_defaults(&cfg);
 	if (ex_cfg_parse(c->sweep.acquisition, c->sweep.calibration, &cfg, err))
 		return -1;
-	float *grid = NULL;
-	int n = 0, npix = 0;
+	if (!g->nm || g->n <= 0)
+		return acq_errf(err, ACQ_E_STATE, "sweep %lld has no wavelength grid (no calibrated sample)", (long long)id);
+	if (g->npix < 0)
+		return acq_errf(err, ACQ_E_STATE, "sweep %lld has no spectrometer recorded", (long long)id);
+	const float *grid = g->nm;
+	int n = g->n, npix = g->npix;
 	struct spectro_info info = { 0 };
-	if (store_sweep_pixels(env->store, id, &grid, &n, &npix, info.wl_coef, err))
-		return -1;
+	memcpy(info.wl_coef, g->coef, sizeof info.wl_coef);
 	info.npix = npix;
 	/* the detector's full scale (saturation as at the measurement) from the spectrometer when it is open */
 	const struct spectro_info *live = env->devices ? devices_ex_ops()->spectro_info(env->devices) : NULL;
@@ -77,7 +82,6 @@ int recon_refnoise_write(const struct sweep_env *env, int64_t id, const char *pa
 	}
 	rc = acq_out_commit(&o, err) ? -1 : 1;
 out:
-	free(grid);
 	free(wl);
 	free(u);
 	free(ref);

@@ -150,11 +150,17 @@ int store_export_csv(struct store *st, int64_t sweep_id, FILE *out, int *nrows, 
 int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, int *nrows, struct acq_err *err);
 /* store_export_csv() of the first limit rows in sweep order (limit <= 0: all). */
 int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct acq_err *err);
-/* A sweep's wavelength grid (*n float32 nm as stored; *grid malloc'd, the caller frees) and its spectrometer's
- * pixel count and wavelength coefficients c0..c4. ACQ_E_NOTFOUND for no sweep, ACQ_E_STATE without grid or
- * spectrometer. 0 or -1. */
-int store_sweep_pixels(struct store *st, int64_t sweep_id, float **grid, int *n, int *npix, double coef[5],
-		       struct acq_err *err);
+/* A sweep's grid row: its wavelength grid (n float32 nm as stored; nm malloc'd, the caller frees it) and its
+ * spectrometer's pixel count (npix; -1: none recorded) and wavelength coefficients c0..c4. */
+struct store_grid {
+	float *nm;
+	int n, npix;
+	double coef[5];
+};
+/* store_export_csv_file() that also hands the sweep's grid row it read to *g (may be NULL; zeroed on failure), so that
+ * what is binned on it (the recon chain's reference noise) does not read it again. 0 or -1. */
+int store_export_csv_grid(struct store *st, int64_t sweep_id, const char *path, int *nrows, struct store_grid *g,
+			  struct acq_err *err);
 /* ---- exposure priors (store_prior.c) */
 /* Record the sample a sweep measures (in the caller's transaction: store_sweep_create does). 0 or -1. */
 int store_sweep_sample_put(struct store *st, int64_t sweep_id, const char *sample, bool auto_exposure,

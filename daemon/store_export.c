@@ -1,6 +1,6 @@
 /* store_export: a sweep's calibrated samples in the CSV interchange format (design.md), from the
- * calibrated_samples view, and the sweep's grid row they and the recon chain's reference noise are binned on
- * (part of the store module, store.h). */
+ * calibrated_samples view, and the sweep's grid row they are binned on, handed on to the recon chain's reference
+ * noise (store_export_csv_grid; part of the store module, store.h). */
 #include "daemon/store.h"
 
 #include <errno.h>
@@ -66,12 +66,16 @@ static int grid_row(struct store *st, int64_t sweep_id, float **grid, int *n, in
 	return 0;
 }
 
-int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct acq_err *err)
+/* store_export_csv_n(); keep (may be NULL) receives the grid row it read when it succeeds (zeroed otherwise). */
+static int export_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct store_grid *keep,
+		    struct acq_err *err)
 {
 	*nrows = 0;
 	float *grid;
 	int n, npix;
 	double coef[5];
+	if (keep)
+		*keep = (struct store_grid){ 0 };
 	int g = grid_row(st, sweep_id, &grid, &n, &npix, coef, err);
 	if (g < 0)
 		return -1;
@@ -135,36 +139,44 @@ int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out,
 		goto out;
 	}
 	rc = ferror(out) ? acq_errf(err, ACQ_E_IO, "writing the CSV: %s", strerror(errno)) : 0;
+	if (!rc && keep) {
+		*keep = (struct store_grid){ .nm = grid, .n = n, .npix = npix };
+		memcpy(keep->coef, coef, sizeof coef);
+		grid = NULL;
+	}
 out:
 	free(grid);
 	return rc;
 }
 
-int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, int *nrows, struct acq_err *err)
+int store_export_csv_n(struct store *st, int64_t sweep_id, int limit, FILE *out, int *nrows, struct acq_err *err)
+{
+	return export_n(st, sweep_id, limit, out, nrows, NULL, err);
+}
+
+int store_export_csv_grid(struct store *st, int64_t sweep_id, const char *path, int *nrows, struct store_grid *g,
+			  struct acq_err *err)
 {
 	struct acq_out o;
+	if (g)
+		*g = (struct store_grid){ 0 };
 	if (acq_out_open(&o, path, ACQ_OUT_STDIO, err))
 		return -1;
-	if (store_export_csv(st, sweep_id, o.f, nrows, err)) {
+	if (export_n(st, sweep_id, 0, o.f, nrows, g, err)) {
 		acq_out_abort(&o);
 		return -1;
 	}
-	return acq_out_commit(&o, err);
-}
-
-int store_sweep_pixels(struct store *st, int64_t sweep_id, float **grid, int *n, int *npix, double coef[5],
-		       struct acq_err *err)
-{
-	int g = grid_row(st, sweep_id, grid, n, npix, coef, err);
-	if (g < 0) {
-		*npix = 0;
+	if (acq_out_commit(&o, err)) {
+		if (g) {
+			free(g->nm);
+			*g = (struct store_grid){ 0 };
+		}
 		return -1;
 	}
-	if (g == 0 && *npix >= 0)
-		return 0;
-	free(*grid);
-	*grid = NULL;
-	*n = *npix = 0;
-	return acq_errf(err, ACQ_E_STATE, "sweep %lld has no %s", (long long)sweep_id,
-			g ? "wavelength grid (no calibrated sample)" : "spectrometer recorded");
+	return 0;
+}
+
+int store_export_csv_file(struct store *st, int64_t sweep_id, const char *path, int *nrows, struct acq_err *err)
+{
+	return store_export_csv_grid(st, sweep_id, path, nrows, NULL, err);
 }

@@ -479,6 +479,12 @@ int csvio_fmt(char *buf, size_t size, double v)
 int csvio_read_columns(const char *path, const char *const *names, size_t k, size_t *rows, double **data,
 		       struct acq_err *err)
 {
+	return csvio_read_columns_ex(path, names, k, 0, rows, data, err);
+}
+
+int csvio_read_columns_ex(const char *path, const char *const *names, size_t k, unsigned flags, size_t *rows,
+			  double **data, struct acq_err *err)
+{
 	char *text;
 	size_t len;
 	*rows = 0;
@@ -548,7 +554,7 @@ int csvio_read_columns(const char *path, const char *const *names, size_t k, siz
 		}
 		nr++;
 	}
-	if (nr == 0) {
+	if (nr == 0 && !(flags & CSVIO_EMPTY_OK)) {
 		acq_errf(err, ACQ_E_INVAL, "%s: no data rows", path);
 		goto out;
 	}

@@ -40,6 +40,11 @@ int csvio_slurp(const char *path, char **out, size_t *len, struct acq_err *err);
  * rows × k values row-major (free()); empty fields and nan are errors. */
 int csvio_read_columns(const char *path, const char *const *names, size_t k, size_t *rows, double **data,
 		       struct acq_err *err);
+/* csvio_read_columns_ex() flag: a table with its header and no data row is read as 0 rows (*data NULL), not refused. */
+#define CSVIO_EMPTY_OK 1u
+/* csvio_read_columns() with flags (CSVIO_EMPTY_OK). */
+int csvio_read_columns_ex(const char *path, const char *const *names, size_t k, unsigned flags, size_t *rows,
+			  double **data, struct acq_err *err);
 /* csvio_read_columns() with *data column-major: column c is the *rows values at *data + c × *rows (free()). */
 int csvio_read_columns_cm(const char *path, const char *const *names, size_t k, size_t *rows, double **data,
 			  struct acq_err *err);

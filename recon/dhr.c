@@ -375,39 +375,6 @@ static void refit_trend(const struct recon_model *m, size_t l, const double *Bs,
 		g[k] = log(f[k] + eps) - log(trend_dot(c, Bs + k * TREND_NB) + eps);
 }
 
-/* The leave-one-out amplitude of every channel, α_λ = mean_k w_k²/(A⁻¹)_kk, from recon_gp_setup's Ainv. */
-static void gp_alpha(const struct recon_model *m, const double *Ainv, double *alpha)
-{
-	size_t n = m->n;
-	for (size_t l = 0; l < m->nwl; l++) {
-		double acc = 0;
-		for (size_t k = 0; k < n; k++)
-			acc += m->w[l * n + k] * m->w[l * n + k] / Ainv[k * n + k];
-		alpha[l] = acc / (double)n;
-	}
-}
-
-int recon_gp_setup(const struct recon_model *m, const char *who, double *A, double *Ainv, double *alpha,
-		   struct acq_err *err)
-{
-	size_t n = m->n;
-	for (size_t j = 0; j < n; j++)
-		for (size_t i = j; i < n; i++) {
-			double v = rbf_kernel(m->kernel, m->shape, m->ctr + 6 * i, m->ctr + 6 * j, m->tctr + 6 * j);
-			A[j * n + i] = A[i * n + j] = v;
-		}
-	for (size_t k = 0; k < n; k++)
-		A[k * n + k] += m->eta * m->lam[k];
-	if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)n, A, (lapack_int)n) != 0)
-		return acq_errf(err, ACQ_E_NUMERIC, "%s: refactorisation of the model's system failed (not positive definite)",
-				who);
-	memcpy(Ainv, A, n * n * sizeof *Ainv);
-	if (LAPACKE_dpotri(LAPACK_COL_MAJOR, 'L', (lapack_int)n, Ainv, (lapack_int)n) != 0)
-		return acq_errf(err, ACQ_E_NUMERIC, "%s: inverse of the model's system failed", who);
-	gp_alpha(m, Ainv, alpha);
-	return 0;
-}
-
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err)
 {
@@ -482,7 +449,7 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	}
 	/* the one factorisation of K + Λ, and the leave-one-out amplitude α_λ of every channel */
 	if (lent)
-		gp_alpha(m, Ainv, alpha);
+		recon_gp_alpha(m, Ainv, alpha);
 	else if (recon_gp_setup(m, "dhr", Aown, Aiown, alpha, err))
 		goto out;
 	/* the extrapolation beyond the last zenith, where the last ring's block leave-out says the form misses it by a

@@ -6,6 +6,7 @@
 #include <math.h>
 #include <stddef.h>
 
+#include "recon/gp.h"
 #include "recon/rbf.h"
 #include "recon/recon.h"
 
@@ -329,12 +330,6 @@ double recon_edge_size(const struct recon_model *m, const double *Ainv, const do
 /* xs[L] = gate · σ_X at one incidence's Q nodes c6 (weights wt, Σ = π); 0 without nodes beyond te or gate 0. */
 int recon_extrap_sd(const struct recon_model *m, size_t Q, const double *c6, const double *wt, double gate, double *xs,
 		    struct acq_err *err);
-
-/* The Gaussian-process set-up shared by the DHR's and the slices' uncertainty: A[n*n] receives the lower
- * Cholesky factor of K + ηΛ (the fit's system, column-major), alpha[L] the leave-one-out amplitude of every
- * channel, α_λ = mean_k w_k²/(A⁻¹)_kk (Ainv[n*n] is scratch). Errors name the caller `who`. 0 ok, −1 error. */
-int recon_gp_setup(const struct recon_model *m, const char *who, double *A, double *Ainv, double *alpha,
-		   struct acq_err *err);
 
 /* Raise the starting rule nmu × nphi to the narrowest lobe the model can make (without the trend's own lobe when
  * no_trend_lobe, and without a two-lobe trend's base lobe too when it is 2: the energy table integrates those over

@@ -536,18 +536,10 @@ static int sel_point_cov(struct sel *s, const double *c6, const double *amp, con
 	if (!kxn)
 		rbf_kmatrix_soa(m->kernel, m->shape, F, c6, n, m->soa, own);
 	const double *KXn = kxn ? kxn : own;
-	memcpy(GX, KXn, F * n * sizeof *GX);
-	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)F, s->A, (lapack_int)n, GX, (lapack_int)n)) {
-		acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
+	if (recon_gp_postvar(m, s->A, F, c6, KXn, GX, s->v, "select", err))
 		goto out;
-	}
-	for (size_t x = 0; x < F; x++) {
-		double tc[6];
-		rbf_tau(c6 + 6 * x, tc);
-		double p = rbf_kernel(m->kernel, m->shape, c6 + 6 * x, c6 + 6 * x, tc) -
-			   cblas_ddot((int)n, KXn + x * n, 1, GX + x * n, 1);
-		s->v[x] = amp[x] * amp[x] * (p > 0 ? p : 0);
-	}
+	for (size_t x = 0; x < F; x++)
+		s->v[x] *= amp[x] * amp[x];
 	if (J) {
 		rbf_kmatrix_soa(m->kernel, m->shape, F, c6, J, s->soaJ, s->Z);
 		cblas_dgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)F, (int)J, (int)n, -1.0, GX, (int)n, s->Kjn,

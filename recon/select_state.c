@@ -1,7 +1,5 @@
 /* select_state: a selection's working state before the first pick: the model's factor, the distinct candidates
  * with their posterior rows, the target's points and functionals (select_setup.c), the noise-tracking arrays. */
-#include <cblas.h>
-#include <lapacke.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -167,18 +165,7 @@ static int sel_candidates(struct sel *s, size_t nc, const double *ang, const dou
 		return 0;
 	rbf_soa(J, s->cu, s->soaJ);
 	rbf_kmatrix_soa(m->kernel, m->shape, J, s->cu, n, m->soa, s->Kjn);
-	memcpy(s->G, s->Kjn, J * n * sizeof *s->G);
-	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)J, s->A, (lapack_int)n, s->G,
-			   (lapack_int)n) != 0)
-		return acq_errf(err, ACQ_E_NUMERIC, "select: solve failed");
-	for (size_t j = 0; j < J; j++) {
-		double tc[6];
-		rbf_tau(s->cu + 6 * j, tc);
-		double p = rbf_kernel(m->kernel, m->shape, s->cu + 6 * j, s->cu + 6 * j, tc) -
-			   cblas_ddot((int)n, s->Kjn + j * n, 1, s->G + j * n, 1);
-		s->Pjj[j] = p > 0 ? p : 0;
-	}
-	return 0;
+	return recon_gp_postvar(m, s->A, J, s->cu, s->Kjn, s->G, s->Pjj, "select", err);
 }
 
 /* Borrow own's factor and candidates' arrays (sel_free leaves them to own). */

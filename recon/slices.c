@@ -2,7 +2,6 @@
  * in-plane samples — and their CSV; drawn by slices_draw.c. */
 #include "recon/slices.h"
 
-#include <lapacke.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -77,8 +76,8 @@ static int slices_band(const struct recon_model *m, size_t nq, const double *ang
 	int rc = -1;
 	double *F = malloc(nq * L * sizeof *F), *A = malloc(n * n * sizeof *A), *Ai = malloc(n * n * sizeof *Ai);
 	double *c6 = malloc(nq * 6 * sizeof *c6), *Kq = malloc(nq * n * sizeof *Kq), *X = malloc(nq * n * sizeof *X);
-	double *alpha = calloc(L, sizeof *alpha);
-	if (!F || !A || !Ai || !c6 || !Kq || !X || !alpha) {
+	double *alpha = calloc(L, sizeof *alpha), *P = malloc(nq * sizeof *P);
+	if (!F || !A || !Ai || !c6 || !Kq || !X || !alpha || !P) {
 		acq_errf(err, ACQ_E_NOMEM, "slices: out of memory (%zu samples)", n);
 		goto out;
 	}
@@ -90,18 +89,10 @@ static int slices_band(const struct recon_model *m, size_t nq, const double *ang
 	for (size_t q = 0; q < nq; q++)
 		rbf_canon(ang[4 * q], ang[4 * q + 1], ang[4 * q + 2], ang[4 * q + 3], c6 + 6 * q);
 	rbf_kmatrix_soa(m->kernel, m->shape, nq, c6, n, m->soa, Kq);
-	memcpy(X, Kq, nq * n * sizeof *X);
-	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)nq, A, (lapack_int)n, X, (lapack_int)n)) {
-		acq_errf(err, ACQ_E_NUMERIC, "slices: solve failed");
+	if (recon_gp_postvar(m, A, nq, c6, Kq, X, P, "slices", err))
 		goto out;
-	}
 	for (size_t q = 0; q < nq; q++) {
-		double tc[6], v = 0;
-		rbf_tau(c6 + 6 * q, tc);
-		for (size_t j = 0; j < n; j++)
-			v += Kq[q * n + j] * X[q * n + j];
-		v = rbf_kernel(m->kernel, m->shape, c6 + 6 * q, c6 + 6 * q, tc) - v;
-		v = v > 0 ? v : 0;
+		double v = P[q];
 		f[q] = lo[q] = hi[q] = 0;
 		for (size_t l = 0; l < L; l++) {
 			if (wsel[l] == 0)
@@ -135,6 +126,7 @@ out:
 	free(Kq);
 	free(X);
 	free(alpha);
+	free(P);
 	return rc;
 }
 

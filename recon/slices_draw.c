@@ -36,6 +36,52 @@ static void set_dash(cairo_t *cr, size_t t)
 		cairo_set_dash(cr, dash, 2, 0);
 }
 
+/* Where a series' point (x, value) is drawn: in the in-plane frame fr, or (fr NULL) on a polar panel centred at cx, cy
+ * of radius R, log10 of the value on [y0, y1] (draw_polar). */
+struct slices_map {
+	const struct slices_frame *fr;
+	double cx, cy, R, y0, y1;
+};
+
+static void map_at(const struct slices_map *mp, double x, double v, double *X, double *Y)
+{
+	if (mp->fr) {
+		*X = px(mp->fr, x);
+		*Y = py(mp->fr, v);
+		return;
+	}
+	double r = mp->R * fmin(1, fmax(0, (log10(fmax(v, 1e-300)) - mp->y0) / (mp->y1 - mp->y0)));
+	*X = mp->cx + r * sin(x * M_PI / 180);
+	*Y = mp->cy - r * cos(x * M_PI / 180);
+}
+
+/* Series s's band (filled, translucent) and model curve (2 px, dashed as series t) in colour c, placed by mp. */
+static void band_and_model(cairo_t *cr, const struct slices_series *s, const struct slices_map *mp, const double c[3],
+			   size_t t)
+{
+	double X, Y;
+	cairo_set_source_rgba(cr, c[0], c[1], c[2], 0.22);
+	for (size_t i = 0; i < s->np; i++) {
+		map_at(mp, s->x[i], s->hi[i], &X, &Y);
+		(i ? cairo_line_to : cairo_move_to)(cr, X, Y);
+	}
+	for (size_t i = s->np; i-- > 0;) {
+		map_at(mp, s->x[i], s->lo[i], &X, &Y);
+		cairo_line_to(cr, X, Y);
+	}
+	cairo_close_path(cr);
+	cairo_fill(cr);
+	cairo_set_source_rgb(cr, c[0], c[1], c[2]);
+	cairo_set_line_width(cr, 2);
+	set_dash(cr, t);
+	for (size_t i = 0; i < s->np; i++) {
+		map_at(mp, s->x[i], s->f[i], &X, &Y);
+		(i ? cairo_line_to : cairo_move_to)(cr, X, Y);
+	}
+	cairo_stroke(cr);
+	cairo_set_dash(cr, NULL, 0, 0);
+}
+
 static void draw_inplane(cairo_t *cr, const struct slices_opts *o, const struct slices_series *S, size_t nth,
 			 const struct slices_frame *fr, const char *title)
 {
@@ -106,22 +152,8 @@ static void draw_inplane(cairo_t *cr, const struct slices_opts *o, const struct 
 		const struct slices_series *s = &S[t];
 		double c[3];
 		plot_curve_colour(t, c);
-		/* band */
-		cairo_set_source_rgba(cr, c[0], c[1], c[2], 0.22);
-		for (size_t i = 0; i < s->np; i++)
-			(i ? cairo_line_to : cairo_move_to)(cr, px(fr, s->x[i]), py(fr, s->hi[i]));
-		for (size_t i = s->np; i-- > 0;)
-			cairo_line_to(cr, px(fr, s->x[i]), py(fr, s->lo[i]));
-		cairo_close_path(cr);
-		cairo_fill(cr);
-		/* model (dashed once the palette repeats) */
-		cairo_set_source_rgb(cr, c[0], c[1], c[2]);
-		cairo_set_line_width(cr, 2);
-		set_dash(cr, t);
-		for (size_t i = 0; i < s->np; i++)
-			(i ? cairo_line_to : cairo_move_to)(cr, px(fr, s->x[i]), py(fr, s->f[i]));
-		cairo_stroke(cr);
-		cairo_set_dash(cr, NULL, 0, 0);
+		/* band, and the model (dashed once the palette repeats) */
+		band_and_model(cr, s, &(struct slices_map){ .fr = fr }, c, t);
 		/* samples with ± k σ bars */
 		cairo_set_line_width(cr, 1.2);
 		for (size_t i = 0; i < s->ns; i++) {
@@ -195,20 +227,7 @@ static void draw_polar(cairo_t *cr, const struct slices_opts *o, const struct sl
 	cairo_line_to(cr, PXY(-ti, R));
 	cairo_stroke(cr);
 	cairo_set_dash(cr, NULL, 0, 0);
-	cairo_set_source_rgba(cr, c[0], c[1], c[2], 0.22);
-	for (size_t i = 0; i < s->np; i++)
-		(i ? cairo_line_to : cairo_move_to)(cr, PXY(s->x[i], PR(s->hi[i])));
-	for (size_t i = s->np; i-- > 0;)
-		cairo_line_to(cr, PXY(s->x[i], PR(s->lo[i])));
-	cairo_close_path(cr);
-	cairo_fill(cr);
-	cairo_set_source_rgb(cr, c[0], c[1], c[2]);
-	cairo_set_line_width(cr, 2);
-	set_dash(cr, idx);
-	for (size_t i = 0; i < s->np; i++)
-		(i ? cairo_line_to : cairo_move_to)(cr, PXY(s->x[i], PR(s->f[i])));
-	cairo_stroke(cr);
-	cairo_set_dash(cr, NULL, 0, 0);
+	band_and_model(cr, s, &(struct slices_map){ .cx = cx, .cy = cy, .R = R, .y0 = y0, .y1 = y1 }, c, idx);
 	for (size_t i = 0; i < s->ns; i++) {
 		cairo_new_sub_path(cr);
 		cairo_arc(cr, PXY(s->sx[i], PR(s->sv[i])), 3, 0, 2 * M_PI);

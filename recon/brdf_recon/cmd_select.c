@@ -119,44 +119,6 @@ static int cmp_id(const void *a, const void *b)
 	return x < y ? -1 : x > y;
 }
 
-/* A candidate file holding the header with the six columns and no data row (zero candidates: a valid input). */
-static int header_only(const char *path, const char *const *names)
-{
-	char *buf;
-	size_t len;
-	struct acq_err e = { 0 };
-	if (csvio_slurp(path, &buf, &len, &e))
-		return 0;
-	int lines = 0, ok = 1;
-	for (char *p = buf, *nl; p && *p; p = nl ? nl + 1 : NULL) {
-		nl = strchr(p, '\n');
-		if (nl)
-			*nl = '\0';
-		size_t n = strlen(p);
-		if (n && p[n - 1] == '\r')
-			p[--n] = '\0';
-		if (!n || *p == '#')
-			continue;
-		if (++lines > 1)
-			break;
-		for (int c = 0; c < 6 && ok; c++) { /* each name a whole field of the header */
-			size_t k = strlen(names[c]);
-			const char *f = p;
-			int found = 0;
-			for (const char *q = p;; q++)
-				if (*q == ',' || !*q) {
-					found |= (size_t)(q - f) == k && !strncmp(f, names[c], k);
-					if (!*q)
-						break;
-					f = q + 1;
-				}
-			ok = found;
-		}
-	}
-	free(buf);
-	return lines == 1 && ok;
-}
-
 /* The most band nodes --route takes. */
 #define ROUTE_MAX_NODES 64
 
@@ -353,12 +315,9 @@ static int read_candidates(const struct select_args *a, struct select_route *rou
 	bool routed = a->routep != NULL;
 	size_t nc = 0, ncol = !routed ? 6 : route->nnodes ? 16 : 11, nper = ncol == 16 ? 11 : routed ? 6 : 1;
 	double *rows = NULL;
-	if (csvio_read_columns(candp, cand_names, ncol, &nc, &rows, &err)) {
-		if (!header_only(candp, cand_names))
-			return bad_input(&err);
-		nc = 0; /* no candidates: the target's value, no pick */
-		rows = NULL;
-	}
+	/* a header and no data row: no candidates (the target's value, no pick) */
+	if (csvio_read_columns_ex(candp, cand_names, ncol, CSVIO_EMPTY_OK, &nc, &rows, &err))
+		return bad_input(&err);
 	if (nc > SELECT_MAX_CANDIDATES) {
 		free(rows);
 		acq_errf(&err, ACQ_E_RANGE, "%s: %zu candidates, at most %d", candp, nc, SELECT_MAX_CANDIDATES);

@@ -53,6 +53,18 @@ static void load_bad(const char *text, const char *want)
 	assert_non_null(strstr(err.msg, "t.yaml:"));
 }
 
+/* An adaptive plan with target (YAML) and extra lines after its batch gives select's target spec want. */
+static void target_spec_is(const char *target, const char *extra, const char *want)
+{
+	char text[512], spec[128];
+	snprintf(text, sizeof text, "kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: "
+		 "[20, 50], phi_deg: [0, 180]}}\ntarget: %s\nbudget: {points: 20}\nbatch: 4\n%s", target, extra);
+	struct plan_spec *s = load_ok(text);
+	plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
+	assert_string_equal(spec, want);
+	plan_spec_free(s);
+}
+
 static void test_parse(void **state)
 {
 	(void)state;
@@ -95,15 +107,8 @@ static void test_parse(void **state)
 		{ "{lnf_sigma: {le: 0.05, weight: bright}}", "lnf:bright:le=0.05" },
 		{ "{rgb_sigma: {le: 0.004}}", "rgb:le=0.004" },
 	};
-	for (size_t k = 0; k < sizeof targets / sizeof targets[0]; k++) {
-		char text[512];
-		snprintf(text, sizeof text, "kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: "
-			 "[20, 50], phi_deg: [0, 180]}}\ntarget: %s\nbudget: {points: 20}\nbatch: 4\n", targets[k][0]);
-		s = load_ok(text);
-		plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
-		assert_string_equal(spec, targets[k][1]);
-		plan_spec_free(s);
-	}
+	for (size_t k = 0; k < sizeof targets / sizeof targets[0]; k++)
+		target_spec_is(targets[k][0], "", targets[k][1]);
 	/* the lobe gate (candidates.lobe_above_deg): select's :lobe_above= suffix, after any target */
 	static const char *const gated[][2] = {
 		{ "{dhr_sigma: {incidence_deg: [8, 30], le: 0.002}, lnf_sigma: {le: 0.05, weight: bright}}",
@@ -111,16 +116,9 @@ static void test_parse(void **state)
 		{ "{dhr_sigma: {incidence_deg: [8], le: 0.002}}", "dhr:8:le=0.002:lobe_above=70" },
 		{ "{lnf_sigma: {le: 0.05}}", "lnf:le=0.05:lobe_above=70" },
 	};
-	for (size_t k = 0; k < sizeof gated / sizeof gated[0]; k++) {
-		char text[512];
-		snprintf(text, sizeof text, "kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {theta_deg: "
-			 "[20, 50], phi_deg: [0, 180]}}\ntarget: %s\nbudget: {points: 20}\nbatch: 4\ncandidates: "
-			 "{incidence_deg: {from: 0, to: 80, step: 5}, lobe_above_deg: 70}\n", gated[k][0]);
-		s = load_ok(text);
-		plan_adaptive_target_spec(s->adaptive, spec, sizeof spec);
-		assert_string_equal(spec, gated[k][1]);
-		plan_spec_free(s);
-	}
+	for (size_t k = 0; k < sizeof gated / sizeof gated[0]; k++)
+		target_spec_is(gated[k][0], "candidates: {incidence_deg: {from: 0, to: 80, step: 5}, lobe_above_deg: 70}\n",
+			       gated[k][1]);
 	/* the other kinds, named */
 	s = load_ok("kind: grid\nincidence: {theta_deg: 30}\nobservation: {theta_deg: 40, phi_deg: 0}\n");
 	assert_null(s->adaptive);
@@ -130,53 +128,54 @@ static void test_parse(void **state)
 static void test_errors(void **state)
 {
 	(void)state;
+	/* after "kind: adaptive" and a seed: the rest of the plan, and what the refusal must say */
+	static const char *const bad[][2] = {
+		{ "budget: {points: 20}\nbatch: 4\n", "missing key 'target'" },
+		{ "target: {lnf_sigma: {le: 1}}\nbatch: 4\n", "missing key 'budget'" },
+		{ "target: {lnf_sigma: {le: 1}}\nbudget: {}\nbatch: 4\n", "give 'seconds'" },
+		{ "target: {lnf_sigma: {le: 1}, dhr_sigma: {incidence_deg: 8, le: 1}, rgb_sigma: {le: 1}}\n"
+		  "budget: {points: 9}\nbatch: 4\n",
+		  "exactly one of" },
+		{ "target: {lnf_sigma: {le: 1, weight: radx}}\n"
+		  "budget: {points: 9}\nbatch: 4\n",
+		  "target.lnf_sigma.weight: 'projected'" },
+		{ "target: {lnf_sigma: {le: 1, weight: rad}, dhr_sigma: {incidence_deg: 8, le: 1, weight: rad}}\n"
+		  "budget: {points: 9}\nbatch: 4\n",
+		  "unknown key 'weight' in target.dhr_sigma" },
+		{ "target: {lnf_sigma: {}, dhr_sigma: {incidence_deg: 8, le: 1}}\n"
+		  "budget: {points: 9}\nbatch: 4\n",
+		  "le" },
+		{ "target: {lnf_sigma: {le: 1}}\n"
+		  "budget: {points: 9}\nbatch: 4\ncandidates: {specular: {per_ring: 0}}\n",
+		  "per_ring" },
+		{ "target: {lnf_sigma: {le: 1}}\n"
+		  "budget: {points: 9}\nbatch: 4\ncandidates: {specular: {rings: [2]}}\n",
+		  "unknown key 'rings' in candidates.specular" },
+		{ "target: {lnf_sigma: {le: 1}}\n"
+		  "budget: {points: 9}\nbatch: 4\ncandidates: {lobe_above_deg: 90}\n",
+		  "lobe_above_deg" },
+		{ "target: {lnf_sigma: {le: 1}}\n"
+		  "budget: {points: 9}\nbatch: 4\nseed_specular_deg: [0, 60]\n",
+		  "seed_specular_deg" },
+		{ "target: {rgb_sigma: {le: 1}, lnf_sigma: {le: 1}}\n"
+		  "budget: {points: 9}\nbatch: 4\n",
+		  "exactly one of" },
+		{ "target: {rgb_sigma: {incidence_deg: 8, le: 1}}\n"
+		  "budget: {points: 9}\nbatch: 4\n",
+		  "unknown key 'incidence_deg' in target.rgb_sigma" },
+		{ "target: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\n", "batch" },
+		{ "target: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\nbogus: 1\n", "bogus" },
+	};
 	const char *seed = "seed: {incidence: {theta_deg: 30}, observation: {fibonacci: {count: 5}}}\n";
 	char buf[1024];
-	snprintf(buf, sizeof buf, "kind: adaptive\n%sbudget: {points: 20}\nbatch: 4\n", seed);
-	load_bad(buf, "missing key 'target'");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbatch: 4\n", seed);
-	load_bad(buf, "missing key 'budget'");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {}\nbatch: 4\n", seed);
-	load_bad(buf, "give 'seconds'");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}, dhr_sigma: {incidence_deg: 8, le: 1}, "
-		 "rgb_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n", seed);
-	load_bad(buf, "exactly one of");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1, weight: radx}}\nbudget: {points: 9}\n"
-		 "batch: 4\n", seed);
-	load_bad(buf, "target.lnf_sigma.weight: 'projected'");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1, weight: rad}, dhr_sigma: {incidence_deg: 8, "
-		 "le: 1, weight: rad}}\nbudget: {points: 9}\nbatch: 4\n", seed);
-	load_bad(buf, "unknown key 'weight' in target.dhr_sigma");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {}, dhr_sigma: {incidence_deg: 8, le: 1}}\n"
-		 "budget: {points: 9}\nbatch: 4\n", seed);
-	load_bad(buf, "le");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
-		 "candidates: {specular: {per_ring: 0}}\n", seed);
-	load_bad(buf, "per_ring");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
-		 "candidates: {specular: {rings: [2]}}\n", seed);
-	load_bad(buf, "unknown key 'rings' in candidates.specular");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
-		 "candidates: {lobe_above_deg: 90}\n", seed);
-	load_bad(buf, "lobe_above_deg");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
-		 "seed_specular_deg: [0, 60]\n", seed);
-	load_bad(buf, "seed_specular_deg");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {rgb_sigma: {le: 1}, lnf_sigma: {le: 1}}\n"
-		 "budget: {points: 9}\nbatch: 4\n", seed);
-	load_bad(buf, "exactly one of");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {rgb_sigma: {incidence_deg: 8, le: 1}}\n"
-		 "budget: {points: 9}\nbatch: 4\n", seed);
-	load_bad(buf, "unknown key 'incidence_deg' in target.rgb_sigma");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\n", seed);
-	load_bad(buf, "batch");
+	for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+		snprintf(buf, sizeof buf, "kind: adaptive\n%s%s", seed, bad[k][0]);
+		load_bad(buf, bad[k][1]);
+	}
 	load_bad("kind: adaptive\nseed: {incidence: {theta_deg: 30}, observation: {fibonacci: {count: 5}}, averages: 2}\n"
 		 "target: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n", "belongs at the top");
 	load_bad("kind: adaptive\nseed: {kind: adaptive}\ntarget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n",
 		 "cannot seed another");
-	snprintf(buf, sizeof buf, "kind: adaptive\n%starget: {lnf_sigma: {le: 1}}\nbudget: {points: 9}\nbatch: 4\n"
-		 "bogus: 1\n", seed);
-	load_bad(buf, "bogus");
 	load_bad("kind: fibonacci\nincidence: {theta_deg: 30}\nobservation: {theta_deg: 40, phi_deg: 0}\n",
 		 "kind fibonacci needs");
 	load_bad("kind: spiral\nincidence: {theta_deg: 30}\nobservation: {theta_deg: 40, phi_deg: 0}\n", "kind");

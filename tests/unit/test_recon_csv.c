@@ -5,6 +5,7 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <cmocka.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -127,6 +128,29 @@ static void test_queries_and_columns(void **state)
 	assert_non_null(strstr(err.msg, "missing column nope"));
 	d = (double *)1;
 	assert_int_equal(csvio_read_columns_cm(path, bad, 1, &rows, &d, &err), -1);
+	assert_null(d);
+	/* a header and no data row: refused, or 0 rows with CSVIO_EMPTY_OK (select's zero candidates); a missing
+	 * column or a bad row is refused either way */
+	fd = open(path, O_WRONLY | O_TRUNC);
+	assert_true(fd >= 0);
+	const char *hdr = "# none\nwavelength_nm,dhr,sigma\r\n\n";
+	assert_int_equal(write(fd, hdr, strlen(hdr)), (ssize_t)strlen(hdr));
+	close(fd);
+	assert_int_equal(csvio_read_columns(path, names, 3, &rows, &d, &err), -1);
+	assert_non_null(strstr(err.msg, "no data rows"));
+	rows = 7;
+	d = (double *)1;
+	assert_int_equal(csvio_read_columns_ex(path, names, 3, CSVIO_EMPTY_OK, &rows, &d, &err), 0);
+	assert_int_equal(rows, 0);
+	assert_null(d);
+	assert_int_equal(csvio_read_columns_ex(path, bad, 1, CSVIO_EMPTY_OK, &rows, &d, &err), -1);
+	assert_non_null(strstr(err.msg, "missing column nope"));
+	fd = open(path, O_WRONLY | O_APPEND);
+	assert_true(fd >= 0);
+	assert_int_equal(write(fd, "1,2\n", 4), 4);
+	close(fd);
+	assert_int_equal(csvio_read_columns_ex(path, names, 3, CSVIO_EMPTY_OK, &rows, &d, &err), -1);
+	assert_non_null(strstr(err.msg, "expected 3 fields"));
 	assert_null(d);
 	unlink(path);
 	assert_int_equal(csvio_read_samples("/nonexistent/x.csv", &q, &err), -1);

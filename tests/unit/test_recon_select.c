@@ -37,6 +37,21 @@
 
 #define NWL 4
 
+/* The model of smp fitted with o (NULL: the defaults); smp freed. */
+static struct recon_model *fit_free(struct recon_samples *smp, const struct recon_fit_opts *o)
+{
+	struct recon_fit_opts d;
+	if (!o) {
+		recon_fit_opts_default(&d);
+		o = &d;
+	}
+	struct recon_model *m = NULL;
+	struct acq_err e = { 0 };
+	assert_int_equal(recon_fit(smp, o, &m, &e), 0);
+	csvio_samples_free(smp);
+	return m;
+}
+
 static struct recon_model *toy_model(void)
 {
 	struct recon_samples s;
@@ -44,11 +59,7 @@ static struct recon_model *toy_model(void)
 	struct recon_fit_opts o;
 	recon_fit_opts_default(&o);
 	o.smoothing = 1e-3; /* a moderate condition number, so that the brute force is itself accurate to ~1e-12 */
-	struct recon_model *m = NULL;
-	struct acq_err e = { 0 };
-	assert_int_equal(recon_fit(&s, &o, &m, &e), 0);
-	csvio_samples_free(&s);
-	return m;
+	return fit_free(&s, &o);
 }
 
 /* Random candidate pairs (degrees → radians inside), θ ≤ 75°. */
@@ -172,15 +183,20 @@ static void fix_make(struct fix *f, const struct recon_model *m, size_t nc, cons
 	fix_sel(f, m, nc, ang, cost);
 }
 
+/* toy_start's model and nc candidates, and f the selection of spec on them (batch). */
+static struct recon_model *toy_fix(struct toy *ty, size_t nc, struct fix *f, const char *spec, size_t batch)
+{
+	struct recon_model *m = toy_start(ty, nc);
+	fix_make(f, m, ty->nc, ty->ang, ty->cost, spec, batch);
+	return m;
+}
+
 static void test_rank_one_lnf(void **state)
 {
 	(void)state;
 	struct toy ty;
-	struct recon_model *m = toy_start(&ty, 60);
-	size_t nc = ty.nc;
-	double *ang = ty.ang, *cost = ty.cost;
 	struct fix f;
-	fix_make(&f, m, nc, ang, cost, "lnf", 3);
+	struct recon_model *m = toy_fix(&ty, 60, &f, "lnf", 3);
 	struct sel *s = &f.s;
 	/* the amplitude² of each grid point: v / (prior posterior variance by brute force) */
 	size_t F = s->F, picks[3] = { 0, 0, 0 };
@@ -247,11 +263,8 @@ static void test_rank_one_dhr(void **state)
 {
 	(void)state;
 	struct toy ty;
-	struct recon_model *m = toy_start(&ty, 40);
-	size_t nc = ty.nc;
-	double *ang = ty.ang, *cost = ty.cost;
 	struct fix f;
-	fix_make(&f, m, nc, ang, cost, "dhr:30", 2);
+	struct recon_model *m = toy_fix(&ty, 40, &f, "dhr:30", 2);
 	struct sel *s = &f.s;
 	size_t Q = (size_t)SEL_NMU * SEL_NPHI, Lc = s->Lc, n = s->n;
 	struct dcoef dc;
@@ -502,13 +515,7 @@ static struct recon_model *rgb_model(int ni, int no, int np, size_t nwl)
 {
 	struct recon_samples smp;
 	rt_samples_grid(&smp, ni, no, np, nwl, 0.01, 1.0);
-	struct recon_fit_opts o;
-	recon_fit_opts_default(&o);
-	struct recon_model *m = NULL;
-	struct acq_err e = { 0 };
-	assert_int_equal(recon_fit(&smp, &o, &m, &e), 0);
-	csvio_samples_free(&smp);
-	return m;
+	return fit_free(&smp, NULL);
 }
 
 /* The RGB target on models of rt_truth: (1) its value equals a direct computation: per node the brute-force
@@ -724,11 +731,8 @@ static void test_noise_fall(void **state)
 {
 	(void)state;
 	struct toy ty;
-	struct recon_model *m = toy_start(&ty, 40);
-	size_t nc = ty.nc;
-	double *ang = ty.ang, *cost = ty.cost;
 	struct fix f;
-	fix_make(&f, m, nc, ang, cost, "dhr:30", 3);
+	struct recon_model *m = toy_fix(&ty, 40, &f, "dhr:30", 3);
 	struct sel s = f.s;
 	size_t Q = (size_t)SEL_NMU * SEL_NPHI, Lc = s.Lc, n = s.n;
 	struct dcoef dc;
@@ -777,7 +781,7 @@ static void test_noise_fall(void **state)
 
 	/* on the noise floor: the floor dominates every tracked channel, yet the best pick's gain is not ~0 and the
 	 * predicted value falls with it */
-	fix_make(&f, m, nc, ang, cost, "dhr:30", 3);
+	fix_make(&f, m, ty.nc, ty.ang, ty.cost, "dhr:30", 3);
 	s = f.s;
 	for (size_t x = 0; x < s.F; x++)
 		s.sn2[x] = 100 * (s.v[x] + 1e-30);
@@ -1046,6 +1050,15 @@ static double solid_mean_cos2(void)
 	return one * one;
 }
 
+/* The fixtures of the lnf weights' tests on m: nc random candidates, lnf's selection (fp) and spec's (fx), batch 2. */
+static void lnf_pair(const struct recon_model *m, size_t nc, double *ang, double *cost, struct fix *fp, struct fix *fx,
+		     const char *spec)
+{
+	random_cands(nc, ang, cost);
+	fix_make(fp, m, nc, ang, cost, "lnf", 2);
+	fix_make(fx, m, nc, ang, cost, spec, 2);
+}
+
 static void test_lnf_rad(void **state)
 {
 	(void)state;
@@ -1053,10 +1066,8 @@ static void test_lnf_rad(void **state)
 	size_t L = 16, nc = 40;
 	struct recon_model *m = rgb_model(4, 4, 6, L);
 	double ang[40 * 4], cost[40];
-	random_cands(nc, ang, cost);
 	struct fix fp, fr;
-	fix_make(&fp, m, nc, ang, cost, "lnf", 2);
-	fix_make(&fr, m, nc, ang, cost, "lnf:rad", 2);
+	lnf_pair(m, nc, ang, cost, &fp, &fr, "lnf:rad");
 	struct sel *s = &fr.s;
 	size_t F = s->F;
 	assert_true(fr.t.lnf_rad == 1 && fp.t.lnf_rad == 0 && F == fp.s.F);
@@ -1127,10 +1138,8 @@ static void test_lnf_mix(void **state)
 	size_t L = 16, nc = 40;
 	struct recon_model *m = rgb_model(4, 4, 6, L);
 	double ang[40 * 4], cost[40];
-	random_cands(nc, ang, cost);
 	struct fix fp, fr, fm;
-	fix_make(&fp, m, nc, ang, cost, "lnf", 2);
-	fix_make(&fr, m, nc, ang, cost, "lnf:rad", 2);
+	lnf_pair(m, nc, ang, cost, &fp, &fr, "lnf:rad");
 	fix_make(&fm, m, nc, ang, cost, "lnf:mix", 2);
 	size_t F = fm.s.F;
 	assert_true(fm.t.lnf_rad == 2 && F == fp.s.F && fm.r.value == fp.r.value);
@@ -1204,13 +1213,7 @@ static struct recon_model *dim_or_glossy_fit(int bright, size_t L)
 		lobe_samples(&smp, L);
 	else
 		rt_samples_grid(&smp, 4, 4, 6, L, 0.01, 1.0);
-	struct recon_fit_opts fo;
-	recon_fit_opts_default(&fo);
-	struct recon_model *m = NULL;
-	struct acq_err e = { 0 };
-	assert_int_equal(recon_fit(&smp, &fo, &m, &e), 0);
-	csvio_samples_free(&smp);
-	return m;
+	return fit_free(&smp, NULL);
 }
 
 /* lnf:bright (session 16): per grid cell the larger of the projected measure ∫cell cosθi cosθo dωi dωo and lnf:rad's
@@ -1228,10 +1231,8 @@ static void test_lnf_bright(void **state)
 	for (int bright = 0; bright < 2; bright++) {
 		struct recon_model *m = dim_or_glossy_fit(bright, L);
 		double ang[40 * 4], cost[40];
-		random_cands(nc, ang, cost);
 		struct fix fp, fb;
-		fix_make(&fp, m, nc, ang, cost, "lnf", 2);
-		fix_make(&fb, m, nc, ang, cost, "lnf:bright", 2);
+		lnf_pair(m, nc, ang, cost, &fp, &fb, "lnf:bright");
 		struct sel *s = &fb.s;
 		size_t F = s->F, nrad = 0;
 		assert_true(fb.t.lnf_rad == 3 && F == fp.s.F && fb.r.value == fp.r.value);
