@@ -51,8 +51,8 @@
  * (recon_edge_size), σ_X (the model's own change from the edge to each node beyond it, × RECON_EXTRAP_K, summed over
  * the band: recon_int.h) joins the kriging σ in quadrature and is reported in its part (so select's accounting keeps
  * it); recon/reconstruction.md, sessions 12-13. Where the fit's admissibility rule, not the data, set the trend lobe's
- * width, the DHR at the data's own width is a second reading (width_sd), and σ_model is the largest of the kriging σ,
- * σ_E and that distance (session 18).
+ * width, the DHR at the data's own width is a second reading (width_sd): that distance joins the kriging σ in
+ * quadrature, and σ_model = max(that, σ_E) (session 18).
  */
 /* σ_model² of the DHR at one incidence (see recon_dhr_ex): vmod[l] = c_lᵀ K_QQ c_l − b_lᵀ A⁻¹ b_l with
  * c = C[q*L + l] (Q nodes c6, the amplitude √α already folded in), b = K_nQ c (Kq[q*n + k]), A the Cholesky
@@ -383,17 +383,19 @@ static void refit_trend(const struct recon_model *m, size_t l, const double *Bs,
  * inadmissible), so on a coarse plan the fitted α can sit on that bound, not at the data's optimum: acq-sim's clear
  * coat on 4 × 4 × 6 (every mirror direction sampled exactly, the nearest off-mirror samples ≥ 10° away) fits
  * α = 0.0588, the narrowest width with three samples on its flank, against the truth's 0.05 and the data's
- * unrestricted optimum 0.053; the coat's albedo (∝ peak × α²) and the DHR then read +0.008 at 30° (σ 0.003: the
- * kriging σ holds the trend fixed, the Monte-Carlo draws its roughness). The profile of the fit's own score (mean
+ * unrestricted optimum 0.054; the coat's albedo (∝ peak × α²) and the DHR then read +0.008 at 30° (σ 0.003: the
+ * kriging σ holds the trend fixed, the Monte-Carlo draws keep its roughness). The profile of the fit's own score (mean
  * squared log residual on the fit's channels, coefficients refitted, the other roughness and the nominal's terms
  * kept) over α without the admissibility rule finds the data's width α*; where the data prefer it by more than one
  * unit of χ² (n·nc·(s(α) − s(α*))/s(α*) > 1: the profile likelihood's 68 % interval excludes the fitted α), the
  * reading at α* (coefficients and GP weights refitted with the one factor of K + ηΛ, the adaptive rule) is a second
  * estimate the plan cannot decide against, and sw[t·L + l] = |DHR(α*) − DHR(α)| the distance of the two (as σ_res).
  * 0 where the fitted α is the data's (every interior optimum: the paper plan) or without a lobe or a log transform.
- * It is an error of the model between the samples, as the kriging σ and σ_E are: σ_model = max of the three (added in
- * quadrature instead, it over-covered where those already held the same error: acq-sim's sharp lobe 3 × 4 × 6 at
- * 30°, whose phong width the rule also pins, z RMS 0.65 → 0.54; reconstruction.md, session 18).
+ * It is an error of the model between the samples independent of the GP's (the trend's form, not the residual field
+ * the kriging σ is about), so it joins the kriging σ in quadrature; σ_E, the energy prior's lobe the samples missed,
+ * holds the same error where it is larger, so σ_model = max(kriging ⊕ sw, σ_E) (σ_model ⊕ sw instead over-covered
+ * where σ_E already held it: acq-sim's sharp lobe 3 × 4 × 6 at 30°, whose phong width the rule also pins, z RMS
+ * 0.65 → 0.54; reconstruction.md, session 18).
  */
 #define WIDTH_NGRID 40  /* the fit's search: log grid over [TREND_ALPHA_MIN, top], golden section about its best */
 #define WIDTH_NGOLDEN 24
@@ -770,8 +772,7 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 		if (resolution(m, theta[t], &dq, dhr + t * L, sres + t * L, err))
 			goto out;
 	}
-	/* the lobe's width where the fit's admissibility rule, not the data, set it (width_sd): a third estimate of the
-	 * interpolation error between the samples, beside the kriging σ and σ_E (the largest stands) */
+	/* the lobe's width where the fit's admissibility rule, not the data, set it (width_sd): joins the kriging σ */
 	if (width_sd(m, A, nth, theta, dhr, swid, err))
 		goto out;
 	for (size_t i = 0; i < nth * L; i++) {
