@@ -50,7 +50,9 @@
  * the last ring of samples, held out, misses the rest's prediction by a good part of the kriging amplitude
  * (recon_edge_size), σ_X (the model's own change from the edge to each node beyond it, × RECON_EXTRAP_K, summed over
  * the band: recon_int.h) joins the kriging σ in quadrature and is reported in its part (so select's accounting keeps
- * it); recon/reconstruction.md, sessions 12-13.
+ * it); recon/reconstruction.md, sessions 12-13. Where the fit's admissibility rule, not the data, set the trend lobe's
+ * width, the DHR at the data's own width is a second reading (width_sd): that distance joins the kriging σ in
+ * quadrature, and σ_model = max(that, σ_E) (session 18).
  */
 /* σ_model² of the DHR at one incidence (see recon_dhr_ex): vmod[l] = c_lᵀ K_QQ c_l − b_lᵀ A⁻¹ b_l with
  * c = C[q*L + l] (Q nodes c6, the amplitude √α already folded in), b = K_nQ c (Kq[q*n + k]), A the Cholesky
@@ -375,6 +377,172 @@ static void refit_trend(const struct recon_model *m, size_t l, const double *Bs,
 		g[k] = log(f[k] + eps) - log(trend_dot(c, Bs + k * TREND_NB) + eps);
 }
 
+/*
+ * The trend's roughness where the data would have it elsewhere (session 18). The fit takes the lobe's width α only
+ * where the plan can measure it (trend.c score: samples in the lobe's core and on its flank, else the roughness is
+ * inadmissible), so on a coarse plan the fitted α can sit on that bound, not at the data's optimum: acq-sim's clear
+ * coat on 4 × 4 × 6 (every mirror direction sampled exactly, the nearest off-mirror samples ≥ 10° away) fits
+ * α = 0.0588, the narrowest width with three samples on its flank, against the truth's 0.05 and the data's
+ * unrestricted optimum 0.054; the coat's albedo (∝ peak × α²) and the DHR then read +0.008 at 30° (σ 0.003: the
+ * kriging σ holds the trend fixed, the Monte-Carlo draws keep its roughness). The profile of the fit's own score (mean
+ * squared log residual on the fit's channels, coefficients refitted, the other roughness and the nominal's terms
+ * kept) over α without the admissibility rule finds the data's width α*; where the data prefer it by more than one
+ * unit of χ² (n·nc·(s(α) − s(α*))/s(α*) > 1: the profile likelihood's 68 % interval excludes the fitted α), the
+ * reading at α* (coefficients and GP weights refitted with the one factor of K + ηΛ, the adaptive rule) is a second
+ * estimate the plan cannot decide against, and sw[t·L + l] = |DHR(α*) − DHR(α)| the distance of the two (as σ_res).
+ * 0 where the fitted α is the data's (every interior optimum: the paper plan) or without a lobe or a log transform.
+ * It is an error of the model between the samples independent of the GP's (the trend's form, not the residual field
+ * the kriging σ is about), so it joins the kriging σ in quadrature; σ_E, the energy prior's lobe the samples missed,
+ * holds the same error where it is larger, so σ_model = max(kriging ⊕ sw, σ_E) (σ_model ⊕ sw instead over-covered
+ * where σ_E already held it: acq-sim's sharp lobe 3 × 4 × 6 at 30°, whose phong width the rule also pins, z RMS
+ * 0.65 → 0.54; reconstruction.md, session 18).
+ */
+#define WIDTH_NGRID 40  /* the fit's search: log grid over [TREND_ALPHA_MIN, top], golden section about its best */
+#define WIDTH_NGOLDEN 24
+#define WIDTH_NCH 16    /* the fit's scored channels (fit.c): at most 16, evenly spread */
+struct width_ctx {
+	const struct recon_model *m;
+	size_t n, nc, chan[WIDTH_NCH];
+	const double *f;
+	double *B, c[TREND_NB];
+	int used[TREND_NB];
+};
+
+/* The fit's score at roughness a without its admissibility rule: mean squared log residual over the scored channels. */
+static double width_score(struct width_ctx *w, double a)
+{
+	const struct recon_model *m = w->m;
+	for (size_t k = 0; k < w->n; k++) {
+		trend_eval_basis2(m->trend, a, m->trend_alpha2, m->ctr + 6 * k, w->B + k * TREND_NB);
+		for (int j = 0; j < TREND_NB; j++)
+			if (!w->used[j])
+				w->B[k * TREND_NB + j] = 0.0;
+	}
+	double ss = 0;
+	for (size_t i = 0; i < w->nc; i++)
+		ss += trend_fit_coef(w->n, w->f + w->chan[i] * w->n, m->eps[w->chan[i]], w->B, w->c);
+	return ss / (double)(w->n * w->nc);
+}
+
+static int width_sd(const struct recon_model *m, const double *A, size_t nth, const double *theta, const double *dhr,
+		    double *sw, struct acq_err *err)
+{
+	size_t n = m->n, L = m->nwl;
+	if (m->trend == RECON_TREND_NONE || m->transform != RECON_T_LOG || !(m->trend_alpha > 0))
+		return 0;
+	struct width_ctx w = { .m = m, .n = n, .nc = L < WIDTH_NCH ? L : WIDTH_NCH };
+	for (size_t c = 0; c < w.nc; c++)
+		w.chan[c] = w.nc > 1 ? c * (L - 1) / (w.nc - 1) : 0;
+	int lobe = 0;
+	for (size_t l = 0; l < L; l++)
+		for (int j = 0; j < TREND_NB; j++)
+			w.used[j] |= m->tcoef[l * TREND_NB + j] > 0;
+	for (int j = trend_lobe_first(m->trend); j < TREND_NB; j++)
+		lobe |= w.used[j];
+	if (m->trend == RECON_TREND_SHEEN || m->trend == RECON_TREND_ROUGH)
+		lobe = w.used[2] || (m->trend == RECON_TREND_SHEEN && w.used[3]);
+	if (!lobe)
+		return 0; /* no lobe: the roughness is not used */
+	int rc = -1;
+	double *f = malloc(n * L * sizeof *f), *B = malloc(n * TREND_NB * sizeof *B);
+	double *tc = calloc(L * TREND_NB, sizeof *tc), *g = malloc(n * L * sizeof *g), *wv = malloc(n * L * sizeof *wv);
+	double *mu = malloc(L * sizeof *mu), *d2 = malloc(nth * L * sizeof *d2);
+	struct dhr_quad dq = { 0 };
+	if (!f || !B || !tc || !g || !wv || !mu || !d2) {
+		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
+		goto out;
+	}
+	for (size_t k = 0; k < n; k++) { /* the data at the centres (imputed values included), as refit_trend */
+		double b[TREND_NB];
+		trend_at(m, m->ctr + 6 * k, b);
+		for (size_t l = 0; l < L; l++)
+			f[l * n + k] = fmax(exp(fmin(m->g[l * n + k] + log(trend_factor(m, b, l)), G_MAX)) - m->eps[l], 0.0);
+	}
+	w.f = f;
+	w.B = B;
+	double s0 = width_score(&w, m->trend_alpha);
+	double la = log(TREND_ALPHA_MIN), lb = log(trend_two_lobes(m->trend) ? 0.5 * m->trend_alpha2 : TREND_ALPHA_MAX);
+	double h = (lb - la) / (WIDTH_NGRID - 1), best = log(m->trend_alpha), bs = s0;
+	for (int i = 0; i < WIDTH_NGRID && lb > la; i++) {
+		double s = width_score(&w, exp(la + h * i));
+		if (s < bs) {
+			bs = s;
+			best = la + h * i;
+		}
+	}
+	const double gr = 0.5 * (sqrt(5.0) - 1.0); /* golden section about the best, as trend.c */
+	double lo = fmax(la, best - h), hi = fmin(lb, best + h);
+	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo), s1 = width_score(&w, exp(x1)), s2 = width_score(&w, exp(x2));
+	for (int it = 0; it < WIDTH_NGOLDEN && hi > lo; it++) {
+		if (s1 < s2) {
+			hi = x2;
+			x2 = x1;
+			s2 = s1;
+			x1 = hi - gr * (hi - lo);
+			s1 = width_score(&w, exp(x1));
+		} else {
+			lo = x1;
+			x1 = x2;
+			s1 = s2;
+			x2 = lo + gr * (hi - lo);
+			s2 = width_score(&w, exp(x2));
+		}
+	}
+	if (s1 < bs) {
+		bs = s1;
+		best = x1;
+	}
+	if (s2 < bs) {
+		bs = s2;
+		best = x2;
+	}
+	if (!(bs > 0) || !((double)(n * w.nc) * (s0 - bs) / bs > 1.0)) {
+		rc = 0; /* the data's width is the fitted one */
+		goto out;
+	}
+	/* the model at α*: every channel's coefficients, the data relative to that trend, its GP weights (one factor) */
+	struct recon_model ma = *m;
+	ma.trend_alpha = exp(best);
+	width_score(&w, ma.trend_alpha);
+	for (size_t l = 0; l < L; l++) {
+		trend_fit_coef(n, f + l * n, m->eps[l], B, tc + l * TREND_NB);
+		double s = 0;
+		for (size_t k = 0; k < n; k++) {
+			g[l * n + k] = log(f[l * n + k] + m->eps[l]) - log(trend_dot(tc + l * TREND_NB, B + k * TREND_NB) + m->eps[l]);
+			s += g[l * n + k];
+		}
+		mu[l] = s / (double)n;
+		for (size_t k = 0; k < n; k++)
+			wv[l * n + k] = g[l * n + k] - mu[l];
+	}
+	if (LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)n, (lapack_int)L, A, (lapack_int)n, wv, (lapack_int)n) != 0) {
+		acq_errf(err, ACQ_E_NUMERIC, "dhr: solve failed");
+		goto out;
+	}
+	ma.tcoef = tc;
+	ma.g = g;
+	ma.w = wv;
+	ma.mu = mu;
+	if (dhr_quad_init(&dq, &ma, err))
+		goto out;
+	for (size_t t = 0; t < nth; t++)
+		if (dhr_quad(&ma, theta[t], &dq, d2 + t * L, NULL, err))
+			goto out;
+	for (size_t i = 0; i < nth * L; i++)
+		sw[i] = isfinite(d2[i]) ? fabs(fmin(d2[i], 1.0) - dhr[i]) : 0.0;
+	rc = 0;
+out:
+	dhr_quad_free(&dq);
+	free(f);
+	free(B);
+	free(tc);
+	free(g);
+	free(wv);
+	free(mu);
+	free(d2);
+	return rc;
+}
+
 int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int ndraws, uint64_t seed,
 	      double *dhr, double *sig, recon_progress_fn progress, void *pctx, struct acq_err *err)
 {
@@ -421,14 +589,14 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 	double *U = malloc(Q * L * sizeof *U), *Bt = malloc(L * n * sizeof *Bt), *X = malloc(L * n * sizeof *X);
 	double *alpha = calloc(L, sizeof *alpha);
 	double *dfmis = malloc(n * L * sizeof *dfmis), *mratio = malloc(n * L * sizeof *mratio), *misacc = calloc(nth * L, sizeof *misacc);
-	double *sres = calloc(nth * L, sizeof *sres);
+	double *sres = calloc(nth * L, sizeof *sres), *swid = calloc(nth * L, sizeof *swid);
 	double *vmod = calloc(nth * L, sizeof *vmod), *squad = calloc(nth * L, sizeof *squad);
 	double *senergy = calloc(nth * L, sizeof *senergy), *aseen = malloc(L * sizeof *aseen);
 	double *tb = malloc(nth * Q * TREND_NB * sizeof *tb), *xsd = calloc(nth * L, sizeof *xsd);
 	double *Bs = NULL, *ylog = NULL, *fl = NULL, *cdraw = NULL;
 	struct dhr_quad dq = { 0 };
 	if (!Kr || !wt || !c6 || !scale || !A || !Wd || !Y || !mean || !m2 || !mud || !C || !KQQ || !soaQ || !U ||
-	    !Bt || !X || !Ainv || !alpha || !dfmis || !mratio || !misacc || !sres || !vmod || !squad || !tb ||
+	    !Bt || !X || !Ainv || !alpha || !dfmis || !mratio || !misacc || !sres || !swid || !vmod || !squad || !tb ||
 	    !senergy || !aseen || !xsd) {
 		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
 		goto out;
@@ -571,9 +739,12 @@ int recon_dhr_parts(const struct recon_model *m, size_t nth, const double *theta
 		if (resolution(m, theta[t], &dq, dhr + t * L, sres + t * L, err))
 			goto out;
 	}
+	/* the lobe's width where the fit's admissibility rule, not the data, set it (width_sd): joins the kriging σ */
+	if (width_sd(m, A, nth, theta, dhr, swid, err))
+		goto out;
 	for (size_t i = 0; i < nth * L; i++) {
 		double sn = ndraws > 1 ? sqrt(m2[i] / (ndraws - 1)) : 0.0, sk = sqrt(vmod[i] + xsd[i] * xsd[i]);
-		double sm = fmax(sk, senergy[i]);
+		double sm = fmax(hypot(sk, swid[i]), senergy[i]);
 		double sb = sn > sm ? sn : sm, smis = fmin(fabs(misacc[i]), 1.0);
 		sig[i] = sqrt(sb * sb + squad[i] * squad[i] + smis * smis + sres[i] * sres[i]);
 		if (parts->noise)
@@ -619,6 +790,7 @@ out:
 	free(mratio);
 	free(misacc);
 	free(sres);
+	free(swid);
 	free(vmod);
 	free(senergy);
 	free(aseen);
