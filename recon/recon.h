@@ -109,8 +109,10 @@ int recon_dhr(const struct recon_model *m, size_t nth, const double *theta, int 
  * √(max(noise, model)² + quad² + misfit² + res²) (dhr.c, recon/reconstruction.md):
  *  noise  the samples' uncertainties propagated by Monte Carlo through the one factorisation;
  *  model  the interpolation error between samples (GP posterior variance, amplitude from the leave-one-out
- *         residuals) including the prior on the unseen part of the hemisphere: max(kriging, energy);
- *  kriging, energy  its two terms: the GP's posterior σ (with the extrapolation term σ_X beyond the plan's last
+ *         residuals) including the prior on the unseen part of the hemisphere: max(kriging ⊕ σ_w, energy), σ_w
+ *         the lobe's width where the fit's admissibility rule rather than the data set it (dhr.c width_sd; not a
+ *         part of its own);
+ *  kriging, energy  its terms: the GP's posterior σ (with the extrapolation term σ_X beyond the plan's last
  *                   zenith in quadrature: recon_int.h, recon_edge_size), and the energy-bounded prior σ_E (recon_int.h);
  *  quad   the quadrature error (last refinement step plus any overshoot above 1);
  *  misfit the data the final model does not honour (nearest-neighbour quadrature of its significant
