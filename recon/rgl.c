@@ -14,7 +14,7 @@
 #include "recon/pool.h"
 #include "recon/warp2d.h"
 
-#define NDF_FLOOR 1e-3   /* D += 1e-3·max D: positive everywhere, so spectra = f·4σ/D stays finite */
+#define NDF_FLOOR 1e-3   /* D += 1e-3·max D: positive everywhere, so spectra = f·cosθo·4σ/D stays finite */
 #define NDF_ITERS 4      /* fixed-point iterations D ← f(ω,ω)·cosθ·σ(ω) (converged to < 1e-3 in 3 on GGX) */
 #define RETRO_MAX (89.5 * M_PI / 180) /* retro-reflection evaluated no closer to the horizon than this */
 
@@ -169,7 +169,10 @@ static int do_node(struct job *j, size_t k, double *dens, double *ang, double *v
 	double usig[2] = { u_of_theta(ti), 0.5 };
 	double s4 = 4 * warp2d_bilerp(j->sig, j->nd, j->nd, usig);
 	size_t nq = 0;
-	double *scale = val + N * ML; /* [N] 4σ/D per node; val holds [N*ML] model values first */
+	/* [N] cosθo·4σ/D per node (val holds [N*ML] model values first). The renderers' rule is spectra·D/(4σ) =
+	 * f·cosθo, the cosine-weighted BRDF (powitacq's eval "f_r * cos", Mitsuba 3's BSDF::eval, pbrt-v4's Sample_f
+	 * dividing by the sampled direction's cosine), so the stored ratio carries cosθo. */
+	double *scale = val + N * ML;
 	for (size_t r = 0; r < R; r++)
 		for (size_t c = 0; c < R; c++) {
 			double s[2] = { (double)c * step, (double)r * step }, um[2];
@@ -187,7 +190,7 @@ static int do_node(struct job *j, size_t k, double *dens, double *ang, double *v
 			ang[nq * 4 + 1] = 0;
 			ang[nq * 4 + 2] = atan2(hypot(wo[0], wo[1]), wo[2]);
 			ang[nq * 4 + 3] = atan2(wo[1], wo[0]);
-			scale[q] = s4 / warp2d_bilerp(j->ndf, j->nd, j->nd, um);
+			scale[q] = s4 * wo[2] / warp2d_bilerp(j->ndf, j->nd, j->nd, um);
 			idx[q] = nq++;
 		}
 	warp2d_free(&wp);
@@ -315,8 +318,9 @@ static char *describe(const struct recon_model *m, const struct rgl_opts *o, con
 		 "wavelengths=%zu (%g..%g nm, the model's spectrum read piecewise linear between its channels)\n"
 		 "ndf: retro-reflection fixed point D <- f(w,w) cos(theta) sigma(w) (%d iterations, CIE Y weighted), "
 		 "+%g of its maximum, normalised so that the integral of D cos = 1; densities on the unit square "
-		 "include the sin(theta) Jacobian; luminance: CIE 1931 Y weights over the file's visible wavelengths "
-		 "(equal weights if none is visible)\n",
+		 "include the sin(theta) Jacobian; spectra = f cos(theta_o) 4 sigma(w_i) / D(w_m) (jacobian = 1: a "
+		 "renderer's spectra D / (4 sigma) is the cosine-weighted BRDF f cos(theta_o)); luminance: CIE 1931 Y "
+		 "weights over the file's visible wavelengths (equal weights if none is visible)\n",
 		 ACQ_VERSION, o->source ? o->source : "(unknown)", m->n, m->nwl, m->wl[0], m->wl[m->nwl - 1],
 		 rbf_kernel_name(m->kernel), m->shape, recon_transform_name(m->transform), m->eta, trend_name(m->trend),
 		 m->trend_alpha, m->loo_rms, m->meta, o->ntheta, o->ntheta, o->res, o->res, o->ndf_res, o->ndf_res, nwl,

@@ -32,8 +32,8 @@ void rgl_opts_default(struct rgl_opts *o);
 
 /* Tabulate model m and write the file atomically. The tables come from the model: the NDF by the retro-
  * reflection fixed point of Dupuy & Jakob (luminance-weighted), its projected area σ by quadrature, the VNDF
- * per incidence node, and at each node s of the warped grid f(ωi, ωo(s), λ)·4σ(ωi)/D(ωm(s)) (and its CIE Y
- * luminance) so that the renderer's rule f = spectra(s)·D(ωm)/(4σ(ωi)) returns the model at the nodes.
+ * per incidence node, and at each node s of the warped grid f(ωi, ωo(s), λ)·cosθo·4σ(ωi)/D(ωm(s)) (and its CIE
+ * Y luminance) so that the renderers' rule f·cosθo = spectra(s)·D(ωm)/(4σ(ωi)) returns the model at the nodes.
  * Deterministic (no time stamps; any thread count). 0, or -1 with err. */
 int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char *path, struct rgl_stats *st,
 	      struct acq_err *err);
