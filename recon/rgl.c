@@ -10,6 +10,7 @@
 
 #include "acq_version.h"
 #include "recon/cie_tables.h"
+#include "recon/colour.h"
 #include "recon/pngio.h"
 #include "recon/pool.h"
 #include "recon/warp2d.h"
@@ -310,7 +311,7 @@ static char *describe(const struct recon_model *m, const struct rgl_opts *o, con
 	if (!d)
 		return NULL;
 	snprintf(d, cap,
-		 "Spectral BRDF written by acquisitiond brdf-recon rgl %s from a reconstructed model (radial basis "
+		 "%s BRDF written by acquisitiond brdf-recon rgl %s from a reconstructed model (radial basis "
 		 "functions on S2+ x S2+, non-negative, reciprocal, energy conserving).\n"
 		 "model_file=%s\nmodel_directions=%zu\nmodel_wavelengths=%zu (%g..%g nm)\nkernel=%s shape=%.6g\n"
 		 "transform=%s smoothing=%.6g trend=%s trend_alpha=%.6g loo_rms=%.6g\n%s"
@@ -320,11 +321,14 @@ static char *describe(const struct recon_model *m, const struct rgl_opts *o, con
 		 "+%g of its maximum, normalised so that the integral of D cos = 1; densities on the unit square "
 		 "include the sin(theta) Jacobian; spectra = f cos(theta_o) 4 sigma(w_i) / D(w_m) (jacobian = 1: a "
 		 "renderer's spectra D / (4 sigma) is the cosine-weighted BRDF f cos(theta_o)); luminance: CIE 1931 Y "
-		 "weights over the file's visible wavelengths (equal weights if none is visible)\n",
-		 ACQ_VERSION, o->source ? o->source : "(unknown)", m->n, m->nwl, m->wl[0], m->wl[m->nwl - 1],
+		 "weights over the file's visible wavelengths (equal weights if none is visible)\n%s",
+		 o->rgb ? "RGB" : "Spectral", ACQ_VERSION, o->source ? o->source : "(unknown)", m->n, m->nwl, m->wl[0], m->wl[m->nwl - 1],
 		 rbf_kernel_name(m->kernel), m->shape, recon_transform_name(m->transform), m->eta, trend_name(m->trend),
 		 m->trend_alpha, m->loo_rms, m->meta, o->ntheta, o->ntheta, o->res, o->res, o->ndf_res, o->ndf_res, nwl,
-		 wl[0], wl[nwl - 1], NDF_ITERS, NDF_FLOOR);
+		 wl[0], wl[nwl - 1], NDF_ITERS, NDF_FLOOR,
+		 o->rgb ? "rgb: linear sRGB (Rec. 709 primaries, D65), 1/sr, from these spectra by CIE 1931 2 deg under "
+			  "D65 with Bradford adaptation (brdf-recon merl's chain); negatives (out of gamut) written as 0; "
+			  "no wavelengths field (an RGB file)\n" : "");
 	return d;
 }
 
@@ -357,7 +361,7 @@ static int check_opts(const struct recon_model *m, const struct rgl_opts *o, con
 struct tables {
 	struct chan *ch;
 	double *yw, *theta, *D1, *S1, *rho, *ndf, *sig, *rang, *rval;
-	float *fndf, *fsig, *fth, *fwl, *vndf, *lum, *spec;
+	float *fndf, *fsig, *fth, *fwl, *vndf, *lum, *spec, *rgb;
 	size_t *zero;
 	char *desc;
 	unsigned char *file;
@@ -393,7 +397,7 @@ static int tables_alloc(struct tables *t, size_t L, size_t ML, size_t nd, size_t
 static void tables_free(struct tables *t)
 {
 	void *all[] = { t->ch, t->yw, t->theta, t->D1, t->S1, t->rho, t->ndf, t->sig, t->rang, t->rval, t->fndf, t->fsig,
-			t->fth, t->fwl, t->vndf, t->lum, t->spec, t->zero, t->desc, t->file };
+			t->fth, t->fwl, t->vndf, t->lum, t->spec, t->rgb, t->zero, t->desc, t->file };
 	for (size_t i = 0; i < sizeof all / sizeof all[0]; i++)
 		free(all[i]);
 }
@@ -492,10 +496,43 @@ static void ndf_tables(size_t nd, size_t nth, struct tables *t)
 	}
 }
 
+/* RGB file: t->rgb [nth, 3, N] = the spectra table reduced to linear sRGB by colour_opts_brdf's weights (linear,
+ * so it commutes with the renderer's D/(4σ) factor), negatives set to 0 and counted in *clamped. 0, or -1. */
+static int rgb_tables(struct tables *t, const double *wl, size_t L, size_t N, size_t nth, size_t *clamped,
+		      struct acq_err *err)
+{
+	struct colour_opts co;
+	colour_opts_brdf(&co);
+	double *W = malloc(3 * L * sizeof *W);
+	t->rgb = calloc(nth * 3 * N, sizeof *t->rgb);
+	if (!W || !t->rgb) {
+		free(W);
+		return acq_errf(err, ACQ_E_NOMEM, "rgl: out of memory for the RGB table");
+	}
+	if (colour_weights(&co, wl, L, W, err)) {
+		free(W);
+		return acq_err_prefix(err, "rgl: ");
+	}
+	for (size_t k = 0; k < nth; k++)
+		for (size_t c = 0; c < 3; c++)
+			for (size_t q = 0; q < N; q++) {
+				double v = 0;
+				for (size_t l = 0; l < L; l++)
+					v += W[c * L + l] * (double)t->spec[(k * L + l) * N + q];
+				if (v < 0) {
+					v = 0;
+					(*clamped)++;
+				}
+				t->rgb[(k * 3 + c) * N + q] = to_f32(v);
+			}
+	free(W);
+	return 0;
+}
+
 /* The tensor file's fields serialised into t->file (*len bytes). 0, or -1 with err. */
 static int build_file(struct tables *t, size_t L, size_t R, size_t nd, size_t nth, size_t *len, struct acq_err *err)
 {
-	size_t N = R * R;
+	size_t N = R * R, nf = 10;
 	float phi0 = 0;
 	unsigned char jac = 1;
 	struct field f[] = {
@@ -510,7 +547,13 @@ static int build_file(struct tables *t, size_t L, size_t R, size_t nd, size_t nt
 		{ "luminance", T_F32, 4, { 1, nth, R, R }, t->lum, nth * N * 4, 0 },
 		{ "spectra", T_F32, 5, { 1, nth, L, R, R }, t->spec, nth * L * N * 4, 0 },
 	};
-	t->file = tensor_build(f, sizeof f / sizeof f[0], len, err);
+	if (t->rgb) { /* an RGB file: `rgb` in place of `spectra`, and no `wavelengths` (how readers tell them apart) */
+		f[6] = f[7];
+		f[7] = f[8];
+		f[8] = (struct field){ "rgb", T_F32, 5, { 1, nth, 3, R, R }, t->rgb, nth * 3 * N * 4, 0 };
+		nf = 9;
+	}
+	t->file = tensor_build(f, nf, len, err);
 	return t->file ? 0 : -1;
 }
 
@@ -551,6 +594,9 @@ int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char 
 	}
 	if (pool_run(o->threads, nth, node_job, &j, NULL, err))
 		goto out;
+	size_t clamped = 0;
+	if (o->rgb && rgb_tables(&t, wl, L, N, nth, &clamped, err))
+		goto out;
 	size_t len = 0;
 	if (build_file(&t, L, R, nd, nth, &len, err) || pngio_write_bytes(path, t.file, len, err))
 		goto out;
@@ -562,6 +608,7 @@ int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char 
 		st->res = R;
 		st->ndf_res = nd;
 		st->ndf_floor = NDF_FLOOR;
+		st->rgb_clamped = clamped;
 		for (size_t k = 0; k < nth; k++)
 			st->zero_nodes += t.zero[k];
 	}

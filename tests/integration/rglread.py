@@ -88,10 +88,15 @@ class RGL:
         self.description = bytes(f["description"]).decode("utf-8")
         self.theta_i = f["theta_i"].astype(float)
         self.phi_i = f["phi_i"].astype(float)
-        self.wl = f["wavelengths"].astype(float)
+        # an RGB file has `rgb` [Nphi, Ntheta, 3, H, W] instead of `spectra` and no `wavelengths`: its channels
+        # R, G, B stand where the wavelengths would (Mitsuba 3's RGB variants look them up as 0, 1, 2)
+        self.rgb = "wavelengths" not in f
+        if self.rgb and "rgb" not in f:
+            raise ValueError("%s: neither wavelengths + spectra nor rgb" % path)
+        self.wl = np.arange(3.0) if self.rgb else f["wavelengths"].astype(float)
         self.ndf = f["ndf"].astype(float)
         self.sigma = f["sigma"].astype(float)
-        self.spectra = f["spectra"].astype(float)
+        self.spectra = f["rgb" if self.rgb else "spectra"].astype(float)
         self.lum = f["luminance"].astype(float)
         v = f["vndf"].astype(float)
         H, W = v.shape[-2:]

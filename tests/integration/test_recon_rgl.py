@@ -25,7 +25,8 @@ Reciprocity: |f(i,o) - f(o,i)| within the sum of both pairs' tolerances (the mod
 Albedo: the file's albedo at 0/30/60/75 deg (Gauss-Legendre 48 in cos x 96 azimuths) <= 1 + its propagated
 tolerance, and within that tolerance of the model's (brdf-recon eval on the same quadrature).
 Determinism: 1 and 2 threads, run twice, give identical bytes. Wavelength sub-grids match the model's
-spectrum read linearly between channels; bad input is refused with a message."""
+spectrum read linearly between channels; the RGB file (--rgb) of a flat-spectrum model reads as its spectral
+file in every channel (check_rgb); bad input is refused with a message."""
 import hashlib
 import math
 import os
@@ -58,12 +59,58 @@ def albedo_grid(theta_i):
     return np.stack([np.full(n, theta_i), np.zeros(n), to, P.ravel()], 1), wt
 
 
+def check_rgb(d, samples, wi, wo):
+    """An RGB file (--rgb: field rgb, no wavelengths, as Mitsuba 3's RGB variants need) of a spectrally flat model:
+    a flat spectrum of value v is (v, v, v) in linear sRGB under D65 with absolute normalisation, so each channel
+    of the RGB file must read as the spectral file of the same model (tolerance 1e-3 relative: the chain's white
+    point, the D65 table at 1 nm against its 5 nm check, float32)."""
+    rows = [ln for ln in open(samples) if not ln.startswith("#")]
+    head = rows[0].strip().split(",")
+    fcols = [k for k, h in enumerate(head) if k >= 4 and not h.startswith("sigma_")]
+    scols = [k for k, h in enumerate(head) if h.startswith("sigma_")]
+    flat = os.path.join(d, "flat.csv")
+    with open(flat, "w") as fh:
+        fh.write(rows[0])
+        for ln in rows[1:]:
+            v = ln.strip().split(",")
+            for k in fcols:
+                v[k] = v[fcols[1]]
+            for k in scols:
+                v[k] = v[scols[1]]
+            fh.write(",".join(v) + "\n")
+    mf, fs, fc = (os.path.join(d, x) for x in ("flat.model", "flat.bsdf", "flat-rgb.bsdf"))
+    run("fit", flat, "-o", mf)
+    run("rgl", mf, "-o", fs)
+    p = run("rgl", mf, "-o", fc, "--rgb")
+    rs, rc = rglread.RGL(fs), rglread.RGL(fc)
+    assert rc.rgb and not rs.rgb and "wavelengths" not in rc.f and "spectra" not in rc.f
+    assert rc.spectra.shape == (1, 30, 3, 32, 32) and "rgb: linear sRGB" in rc.description
+    assert np.all(np.isfinite(rc.spectra)) and np.all(rc.spectra >= 0)
+    assert np.array_equal(rc.f["vndf"], rs.f["vndf"]) and np.array_equal(rc.f["ndf"], rs.f["ndf"])
+    vs = rs.eval(wi, wo)[:, 1]
+    vc = rc.eval(wi, wo)
+    dev = np.max(np.abs(vc - vs[:, None]) / vs[:, None])
+    print("RGB file of a flat-spectrum model: largest |channel - spectral value| / value %.3g (R, G, B means %s)" % (
+        dev, np.round(vc.mean(0), 5)))
+    assert dev < 1e-3, "an RGB channel differs from the flat spectrum's value"
+    return rc
+
+
+def check_rgb_order(d, m):
+    """The channels in R, G, B order: recon_synth's reflectance peaks at 550 nm (green), so G is the largest."""
+    g = os.path.join(d, "green-rgb.bsdf")
+    run("rgl", m, "-o", g, "--rgb")
+    mean = rglread.RGL(g).spectra[0].mean((0, 2, 3))
+    print("RGB file of the synthetic model: mean R, G, B of the table %s" % np.round(mean, 4))
+    assert mean[1] > 1.5 * max(mean[0], mean[2]), "G is not the largest channel"
+
+
 def main():
     if not os.access(B, os.X_OK):
         print("brdf-recon not built")
         return 77
     d = tempfile.mkdtemp(prefix="recon_rgl_")
-    m, _ = synth_model(d, 8, SEED)
+    m, samples = synth_model(d, 8, SEED)
     f1, f2, f3 = (os.path.join(d, x) for x in ("a.bsdf", "b.bsdf", "c.bsdf"))
     run("rgl", m, "-o", f1)
     run("rgl", m, "-o", f2, "--threads", "2")
@@ -162,6 +209,8 @@ def main():
         print("  over: pair %s (deg) %g nm: file %.6g, model %.6g, spread %.3g" % (
             np.round(np.degrees(ang[q[0]]), 2), rg.wl[q[1]], fs[q[0], q[1]], es[q[0], q[1]], sps[q[0], q[1]]))
     assert not bad.any()
+    check_rgb(d, samples, wi[:2000], wo[:2000])
+    check_rgb_order(d, m)
     # refusals
     p = run("rgl", m, "-o", g, "--wavelengths", "300:1000:10", ok=False)
     assert p.returncode != 0 and "outside the model's range" in p.stderr
