@@ -8,7 +8,7 @@ across the cell it reads. Per pair: |f_file - f_eval| <= spread + 1e-3 f_eval, w
 (max - min) of the tabulated values at the 8 corners used (4 per incidence node) plus 1/8 of the largest second
 difference there along the grid and the incidence (linear interpolation's curvature term h^2/8 |g''|, for a
 lobe peaking inside a cell), times D/(4 sigma cos theta_o); 1e-3 covers float32 storage and the sigma quadrature
-(seeds 1-7 since the table carries cos theta_o: largest error / tolerance 0.65 up to 70 deg, 0.87 for the
+(seeds 1-7 since the table carries cos theta_o, all pass: largest error / tolerance 0.85 up to 70 deg, 0.87 for the
 5-wavelength file; beyond 70 deg up to 1.68, there the forward lobe near grazing has its half vector close to the
 pole of the unit square, where the warp is singular and the curvature term under-reads, so the tolerance counts
 twice there, GRAZING_K). A renderer's value spectra D/(4 sigma) is f cos(theta_o) (rglread), so a file
@@ -30,6 +30,7 @@ file in every channel (check_rgb); bad input is refused with a message."""
 import hashlib
 import math
 import os
+import shutil
 import sys
 import tempfile
 
@@ -225,6 +226,7 @@ def main():
     assert p.returncode != 0 and p.stderr.strip()
     p = run("rgl", m, "-o", os.path.join(d, "no", "such", "dir.bsdf"), ok=False)
     assert p.returncode != 0 and "cannot create" in p.stderr
+    shutil.rmtree(d)  # 6 MB of files per run (kept when the test fails)
     print("PASS")
     return 0
 
