@@ -27,7 +27,7 @@ static int64_t mem_write(exr_const_context_t c, void *ud, const void *data, uint
 			 exr_stream_error_func_ptr_t error_cb)
 {
 	struct exr_msg *m = ud;
-	if (offset > SIZE_MAX / 2 || sz > SIZE_MAX / 2)
+	if (offset > SIZE_MAX / 4 || sz > SIZE_MAX / 4) /* end <= SIZE_MAX / 2: the doubling below cannot wrap */
 		return error_cb(c, EXR_ERR_OUT_OF_MEMORY, "exr: image too large"), -1;
 	size_t end = (size_t)offset + (size_t)sz;
 	if (end > m->cap) {

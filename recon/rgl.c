@@ -306,7 +306,7 @@ static unsigned char *tensor_build(struct field *f, size_t nf, size_t *len, stru
 /* Provenance text: the writer, the model's own metadata, and the decisions of this file. */
 static char *describe(const struct recon_model *m, const struct rgl_opts *o, const double *wl, size_t nwl)
 {
-	size_t cap = sizeof m->meta + 2048;
+	size_t cap = sizeof m->meta + 4096; /* the fixed text is ~1.7 KB with --rgb */
 	char *d = malloc(cap);
 	if (!d)
 		return NULL;
