@@ -8,8 +8,8 @@ across the cell it reads. Per pair: |f_file - f_eval| <= spread + 1e-3 f_eval, w
 (max - min) of the tabulated values at the 8 corners used (4 per incidence node) plus 1/8 of the largest second
 difference there along the grid and the incidence (linear interpolation's curvature term h^2/8 |g''|, for a
 lobe peaking inside a cell), times D/(4 sigma cos theta_o); 1e-3 covers float32 storage and the sigma quadrature
-(seeds 1-7 since the table carries cos theta_o, all pass: largest error / tolerance 0.85 up to 70 deg, 0.87 for the
-5-wavelength file; beyond 70 deg up to 1.68, there the forward lobe near grazing has its half vector close to the
+(seeds 1-74 since the table carries cos theta_o, all pass: largest error / tolerance 0.88 up to 70 deg, 0.93 for the
+5-wavelength file; beyond 70 deg up to 1.71, there the forward lobe near grazing has its half vector close to the
 pole of the unit square, where the warp is singular and the curvature term under-reads, so the tolerance counts
 twice there, GRAZING_K). A renderer's value spectra D/(4 sigma) is f cos(theta_o) (rglread), so a file
 written without that cosine fails here by the factor 1/cos(theta_o) (seen: 38.9 times the tolerance). In the grid's first
@@ -37,7 +37,7 @@ import tempfile
 import numpy as np
 
 SEED = int(os.environ.get("ACQ_SEED", "1")) % (2**31)
-GRAZING_K = 2.0  # tolerance factor where theta_i or theta_o > 70 deg (seeds 1-7: up to 1.68 of the plain one there)
+GRAZING_K = 2.0  # tolerance factor where theta_i or theta_o > 70 deg (seeds 1-74: up to 1.71 of the plain one there)
 sys.path.insert(0, os.path.join(os.environ.get("ACQ_SRC", "."), "tests", "integration"))
 import rglread  # noqa: E402
 from recon_tools import B, model_eval as _model_eval, run, synth_model, vec  # noqa: E402
@@ -204,8 +204,8 @@ def main():
     es = np.stack([np.interp(rg.wl, r.wl, row) for row in e[:2000]])
     srel = np.abs(fs - es) / es
     print("5 wavelengths (500:1000:125): max relative error %.3g, RMS %.3g; largest error / tolerance %.3g" % (
-        srel.max(), np.sqrt(np.mean(srel ** 2)), np.max(np.abs(fs - es) / (sps + 1e-3 * es))))
-    bad = np.abs(fs - es) > sps + 1e-3 * es
+        srel.max(), np.sqrt(np.mean(srel ** 2)), np.max(np.abs(fs - es) / ((sps + 1e-3 * es) * k_tol[:2000]))))
+    bad = np.abs(fs - es) > (sps + 1e-3 * es) * k_tol[:2000]  # the same grazing factor as above
     for q in np.argwhere(bad)[:5]:
         print("  over: pair %s (deg) %g nm: file %.6g, model %.6g, spread %.3g" % (
             np.round(np.degrees(ang[q[0]]), 2), rg.wl[q[1]], fs[q[0], q[1]], es[q[0], q[1]], sps[q[0], q[1]]))
