@@ -322,7 +322,8 @@ static char *describe(const struct recon_model *m, const struct rgl_opts *o, con
 		 "include the sin(theta) Jacobian; spectra = f cos(theta_o) 4 sigma(w_i) / D(w_m) (jacobian = 1: a "
 		 "renderer's spectra D / (4 sigma) is the cosine-weighted BRDF f cos(theta_o)); luminance: CIE 1931 Y "
 		 "weights over the file's visible wavelengths (equal weights if none is visible)\n%s",
-		 o->rgb ? "RGB" : "Spectral", ACQ_VERSION, o->source ? o->source : "(unknown)", m->n, m->nwl, m->wl[0], m->wl[m->nwl - 1],
+		 o->rgb ? "RGB" : "Spectral", ACQ_VERSION, o->source ? o->source : "(unknown)", m->n, m->nwl, m->wl[0],
+		 m->wl[m->nwl - 1],
 		 rbf_kernel_name(m->kernel), m->shape, recon_transform_name(m->transform), m->eta, trend_name(m->trend),
 		 m->trend_alpha, m->loo_rms, m->meta, o->ntheta, o->ntheta, o->res, o->res, o->ndf_res, o->ndf_res, nwl,
 		 wl[0], wl[nwl - 1], NDF_ITERS, NDF_FLOOR,
