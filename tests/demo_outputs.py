@@ -1,8 +1,8 @@
 #!/usr/bin/python3
 """demo_outputs: the researcher-facing outputs of `make demo` from the sweep's reconstruction (issue 18): the
 spectral RGL .bsdf and its RGB form (Mitsuba 3's RGB variants), the HDR preview (EXR + sRGB PNG + sidecar)
-under the procedural sky, the slice plots with the measured samples, and the sweep as NeXus/HDF5 (acq-nexus). Returns (label, path or reason) rows for
-the demo's summary."""
+under the procedural sky, the slice plots with the measured samples, and the sweep as NeXus/HDF5 (acq-nexus).
+Returns (label, path or reason) rows for the demo's summary."""
 import os
 import subprocess
 import time

@@ -13,8 +13,8 @@ lobe peaking inside a cell), times D/(4 sigma cos theta_o); 1e-3 covers float32 
 pole of the unit square, where the warp is singular and the curvature term under-reads, so the tolerance counts
 twice there, GRAZING_K). A renderer's value spectra D/(4 sigma) is f cos(theta_o) (rglread), so a file
 written without that cosine fails here by the factor 1/cos(theta_o) (seen: 38.9 times the tolerance). In the
-grid's first column (its nodes are all the normal) the half vector moves like the square root of the warped coordinate, so
-there the curvature term is that of a sqrt(t) profile fitted to the nodes (rglread._eval). The same table
+grid's first column (its nodes are all the normal) the half vector moves like the square root of the warped
+coordinate, so there the curvature term is that of a sqrt(t) profile fitted to the nodes (rglread._eval). The same table
 scaled by 1.02 must fail this check (the tolerance is not vacuous). It is checked at 10^4 random pairs with
 theta_i, theta_o <= 80 deg: closer to the horizon a cell of the 32x32 grid spans the horizon (nodes below it
 hold 0, as the format says) and incidences beyond the last node (87 deg) are clamped, so there the file errs
