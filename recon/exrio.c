@@ -2,16 +2,50 @@
 #include "recon/exrio.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include <openexr.h>
 
-/* The library reports details through a callback (its default prints): keep the last message instead. */
+#include "recon/pngio.h"
+
+/* The library reports details through a callback (its default prints): keep the last message instead. When
+ * writing, the file is encoded into memory (buf) and then written through pngio_write_bytes (config/acq_out):
+ * the library's own temporary-file-and-rename would replace a device or FIFO given as the path (as root,
+ * `--exr /dev/null` would turn /dev/null into a regular file). text must stay the first member: the error
+ * handler reads the user data as struct exr_msg. */
 struct exr_msg {
 	char text[256];
+	unsigned char *buf;
+	size_t len, cap;
 };
+
+/* The library's write callback: the bytes at offset (it seeks back to fill the chunk table) into m->buf. */
+static int64_t mem_write(exr_const_context_t c, void *ud, const void *data, uint64_t sz, uint64_t offset,
+			 exr_stream_error_func_ptr_t error_cb)
+{
+	struct exr_msg *m = ud;
+	if (offset > SIZE_MAX / 4 || sz > SIZE_MAX / 4) /* end <= SIZE_MAX / 2: the doubling below cannot wrap */
+		return error_cb(c, EXR_ERR_OUT_OF_MEMORY, "exr: image too large"), -1;
+	size_t end = (size_t)offset + (size_t)sz;
+	if (end > m->cap) {
+		size_t cap = m->cap ? m->cap : 65536;
+		while (cap < end)
+			cap *= 2;
+		unsigned char *q = realloc(m->buf, cap);
+		if (!q)
+			return error_cb(c, EXR_ERR_OUT_OF_MEMORY, "exr: out of memory for %zu bytes", cap), -1;
+		memset(q + m->cap, 0, cap - m->cap);
+		m->buf = q;
+		m->cap = cap;
+	}
+	memcpy(m->buf + offset, data, (size_t)sz);
+	if (end > m->len)
+		m->len = end;
+	return (int64_t)sz;
+}
 
 static void on_error(exr_const_context_t ctxt, exr_result_t code, const char *msg)
 {
@@ -35,14 +69,17 @@ int exrio_write_rgb(const char *path, const float *rgb, int w, int h, const char
 		if (!isfinite(rgb[k]))
 			return acq_errf(err, ACQ_E_NUMERIC, "exr: %s: pixel (%zu, %zu) is not finite", path,
 					(k / 3) % (size_t)w, (k / 3) / (size_t)w);
-	struct exr_msg m = { "" };
+	struct exr_msg m = { "", NULL, 0, 0 };
 	exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
 	init.error_handler_fn = on_error;
 	init.user_data = &m;
+	init.write_fn = mem_write;
 	exr_context_t c = NULL;
-	exr_result_t rc = exr_start_write(&c, path, EXR_INTERMEDIATE_TEMP_FILE, &init);
-	if (rc != EXR_ERR_SUCCESS)
+	exr_result_t rc = exr_start_write(&c, path, EXR_WRITE_FILE_DIRECTLY, &init);
+	if (rc != EXR_ERR_SUCCESS) {
+		free(m.buf);
 		return fail(err, "cannot create", path, rc, &m);
+	}
 	int part = 0;
 	exr_encode_pipeline_t enc;
 	int enc_ok = 0, ret = -1;
@@ -97,17 +134,20 @@ out:
 	if (ret == 0) {
 		rc = exr_finish(&c);
 		if (rc != EXR_ERR_SUCCESS)
-			return fail(err, "finishing", path, rc, &m);
+			ret = fail(err, "finishing", path, rc, &m);
+		else if (pngio_write_bytes(path, m.buf, m.len, err))
+			ret = acq_err_prefix(err, "exr: ");
 	} else {
-		exr_finish(&c); /* the temporary file is removed, path untouched */
+		exr_finish(&c); /* nothing was written to path */
 	}
+	free(m.buf);
 	return ret;
 }
 
 int exrio_read_rgb(const char *path, float **rgb, int *w, int *h, struct acq_err *err)
 {
 	*rgb = NULL;
-	struct exr_msg m = { "" };
+	struct exr_msg m = { "", NULL, 0, 0 };
 	exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
 	init.error_handler_fn = on_error;
 	init.user_data = &m;

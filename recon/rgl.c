@@ -10,11 +10,12 @@
 
 #include "acq_version.h"
 #include "recon/cie_tables.h"
+#include "recon/colour.h"
 #include "recon/pngio.h"
 #include "recon/pool.h"
 #include "recon/warp2d.h"
 
-#define NDF_FLOOR 1e-3   /* D += 1e-3·max D: positive everywhere, so spectra = f·4σ/D stays finite */
+#define NDF_FLOOR 1e-3   /* D += 1e-3·max D: positive everywhere, so spectra = f·cosθo·4σ/D stays finite */
 #define NDF_ITERS 4      /* fixed-point iterations D ← f(ω,ω)·cosθ·σ(ω) (converged to < 1e-3 in 3 on GGX) */
 #define RETRO_MAX (89.5 * M_PI / 180) /* retro-reflection evaluated no closer to the horizon than this */
 
@@ -169,7 +170,10 @@ static int do_node(struct job *j, size_t k, double *dens, double *ang, double *v
 	double usig[2] = { u_of_theta(ti), 0.5 };
 	double s4 = 4 * warp2d_bilerp(j->sig, j->nd, j->nd, usig);
 	size_t nq = 0;
-	double *scale = val + N * ML; /* [N] 4σ/D per node; val holds [N*ML] model values first */
+	/* [N] cosθo·4σ/D per node (val holds [N*ML] model values first). The renderers' rule is spectra·D/(4σ) =
+	 * f·cosθo, the cosine-weighted BRDF (powitacq's eval "f_r * cos", Mitsuba 3's BSDF::eval, pbrt-v4's Sample_f
+	 * dividing by the sampled direction's cosine), so the stored ratio carries cosθo. */
+	double *scale = val + N * ML;
 	for (size_t r = 0; r < R; r++)
 		for (size_t c = 0; c < R; c++) {
 			double s[2] = { (double)c * step, (double)r * step }, um[2];
@@ -187,7 +191,7 @@ static int do_node(struct job *j, size_t k, double *dens, double *ang, double *v
 			ang[nq * 4 + 1] = 0;
 			ang[nq * 4 + 2] = atan2(hypot(wo[0], wo[1]), wo[2]);
 			ang[nq * 4 + 3] = atan2(wo[1], wo[0]);
-			scale[q] = s4 / warp2d_bilerp(j->ndf, j->nd, j->nd, um);
+			scale[q] = s4 * wo[2] / warp2d_bilerp(j->ndf, j->nd, j->nd, um);
 			idx[q] = nq++;
 		}
 	warp2d_free(&wp);
@@ -302,12 +306,12 @@ static unsigned char *tensor_build(struct field *f, size_t nf, size_t *len, stru
 /* Provenance text: the writer, the model's own metadata, and the decisions of this file. */
 static char *describe(const struct recon_model *m, const struct rgl_opts *o, const double *wl, size_t nwl)
 {
-	size_t cap = sizeof m->meta + 2048;
+	size_t cap = sizeof m->meta + 4096; /* the fixed text is ~1.7 KB with --rgb */
 	char *d = malloc(cap);
 	if (!d)
 		return NULL;
 	snprintf(d, cap,
-		 "Spectral BRDF written by acquisitiond brdf-recon rgl %s from a reconstructed model (radial basis "
+		 "%s BRDF written by acquisitiond brdf-recon rgl %s from a reconstructed model (radial basis "
 		 "functions on S2+ x S2+, non-negative, reciprocal, energy conserving).\n"
 		 "model_file=%s\nmodel_directions=%zu\nmodel_wavelengths=%zu (%g..%g nm)\nkernel=%s shape=%.6g\n"
 		 "transform=%s smoothing=%.6g trend=%s trend_alpha=%.6g loo_rms=%.6g\n%s"
@@ -315,12 +319,17 @@ static char *describe(const struct recon_model *m, const struct rgl_opts *o, con
 		 "wavelengths=%zu (%g..%g nm, the model's spectrum read piecewise linear between its channels)\n"
 		 "ndf: retro-reflection fixed point D <- f(w,w) cos(theta) sigma(w) (%d iterations, CIE Y weighted), "
 		 "+%g of its maximum, normalised so that the integral of D cos = 1; densities on the unit square "
-		 "include the sin(theta) Jacobian; luminance: CIE 1931 Y weights over the file's visible wavelengths "
-		 "(equal weights if none is visible)\n",
-		 ACQ_VERSION, o->source ? o->source : "(unknown)", m->n, m->nwl, m->wl[0], m->wl[m->nwl - 1],
+		 "include the sin(theta) Jacobian; spectra = f cos(theta_o) 4 sigma(w_i) / D(w_m) (jacobian = 1: a "
+		 "renderer's spectra D / (4 sigma) is the cosine-weighted BRDF f cos(theta_o)); luminance: CIE 1931 Y "
+		 "weights over the file's visible wavelengths (equal weights if none is visible)\n%s",
+		 o->rgb ? "RGB" : "Spectral", ACQ_VERSION, o->source ? o->source : "(unknown)", m->n, m->nwl, m->wl[0],
+		 m->wl[m->nwl - 1],
 		 rbf_kernel_name(m->kernel), m->shape, recon_transform_name(m->transform), m->eta, trend_name(m->trend),
 		 m->trend_alpha, m->loo_rms, m->meta, o->ntheta, o->ntheta, o->res, o->res, o->ndf_res, o->ndf_res, nwl,
-		 wl[0], wl[nwl - 1], NDF_ITERS, NDF_FLOOR);
+		 wl[0], wl[nwl - 1], NDF_ITERS, NDF_FLOOR,
+		 o->rgb ? "rgb: linear sRGB (Rec. 709 primaries, D65), 1/sr, from these spectra by CIE 1931 2 deg under "
+			  "D65 with Bradford adaptation (brdf-recon merl's chain); negatives (out of gamut) written as 0; "
+			  "no wavelengths field (an RGB file)\n" : "");
 	return d;
 }
 
@@ -353,7 +362,7 @@ static int check_opts(const struct recon_model *m, const struct rgl_opts *o, con
 struct tables {
 	struct chan *ch;
 	double *yw, *theta, *D1, *S1, *rho, *ndf, *sig, *rang, *rval;
-	float *fndf, *fsig, *fth, *fwl, *vndf, *lum, *spec;
+	float *fndf, *fsig, *fth, *fwl, *vndf, *lum, *spec, *rgb;
 	size_t *zero;
 	char *desc;
 	unsigned char *file;
@@ -389,7 +398,7 @@ static int tables_alloc(struct tables *t, size_t L, size_t ML, size_t nd, size_t
 static void tables_free(struct tables *t)
 {
 	void *all[] = { t->ch, t->yw, t->theta, t->D1, t->S1, t->rho, t->ndf, t->sig, t->rang, t->rval, t->fndf, t->fsig,
-			t->fth, t->fwl, t->vndf, t->lum, t->spec, t->zero, t->desc, t->file };
+			t->fth, t->fwl, t->vndf, t->lum, t->spec, t->rgb, t->zero, t->desc, t->file };
 	for (size_t i = 0; i < sizeof all / sizeof all[0]; i++)
 		free(all[i]);
 }
@@ -488,10 +497,43 @@ static void ndf_tables(size_t nd, size_t nth, struct tables *t)
 	}
 }
 
+/* RGB file: t->rgb [nth, 3, N] = the spectra table reduced to linear sRGB by colour_opts_brdf's weights (linear,
+ * so it commutes with the renderer's D/(4σ) factor), negatives set to 0 and counted in *clamped. 0, or -1. */
+static int rgb_tables(struct tables *t, const double *wl, size_t L, size_t N, size_t nth, size_t *clamped,
+		      struct acq_err *err)
+{
+	struct colour_opts co;
+	colour_opts_brdf(&co);
+	double *W = malloc(3 * L * sizeof *W);
+	t->rgb = calloc(nth * 3 * N, sizeof *t->rgb);
+	if (!W || !t->rgb) {
+		free(W);
+		return acq_errf(err, ACQ_E_NOMEM, "rgl: out of memory for the RGB table");
+	}
+	if (colour_weights(&co, wl, L, W, err)) {
+		free(W);
+		return acq_err_prefix(err, "rgl: ");
+	}
+	for (size_t k = 0; k < nth; k++)
+		for (size_t c = 0; c < 3; c++)
+			for (size_t q = 0; q < N; q++) {
+				double v = 0;
+				for (size_t l = 0; l < L; l++)
+					v += W[c * L + l] * (double)t->spec[(k * L + l) * N + q];
+				if (v < 0) {
+					v = 0;
+					(*clamped)++;
+				}
+				t->rgb[(k * 3 + c) * N + q] = to_f32(v);
+			}
+	free(W);
+	return 0;
+}
+
 /* The tensor file's fields serialised into t->file (*len bytes). 0, or -1 with err. */
 static int build_file(struct tables *t, size_t L, size_t R, size_t nd, size_t nth, size_t *len, struct acq_err *err)
 {
-	size_t N = R * R;
+	size_t N = R * R, nf = 10;
 	float phi0 = 0;
 	unsigned char jac = 1;
 	struct field f[] = {
@@ -506,7 +548,13 @@ static int build_file(struct tables *t, size_t L, size_t R, size_t nd, size_t nt
 		{ "luminance", T_F32, 4, { 1, nth, R, R }, t->lum, nth * N * 4, 0 },
 		{ "spectra", T_F32, 5, { 1, nth, L, R, R }, t->spec, nth * L * N * 4, 0 },
 	};
-	t->file = tensor_build(f, sizeof f / sizeof f[0], len, err);
+	if (t->rgb) { /* an RGB file: `rgb` in place of `spectra`, and no `wavelengths` (how readers tell them apart) */
+		f[6] = f[7];
+		f[7] = f[8];
+		f[8] = (struct field){ "rgb", T_F32, 5, { 1, nth, 3, R, R }, t->rgb, nth * 3 * N * 4, 0 };
+		nf = 9;
+	}
+	t->file = tensor_build(f, nf, len, err);
 	return t->file ? 0 : -1;
 }
 
@@ -547,6 +595,9 @@ int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char 
 	}
 	if (pool_run(o->threads, nth, node_job, &j, NULL, err))
 		goto out;
+	size_t clamped = 0;
+	if (o->rgb && rgb_tables(&t, wl, L, N, nth, &clamped, err))
+		goto out;
 	size_t len = 0;
 	if (build_file(&t, L, R, nd, nth, &len, err) || pngio_write_bytes(path, t.file, len, err))
 		goto out;
@@ -558,6 +609,7 @@ int rgl_write(const struct recon_model *m, const struct rgl_opts *o, const char 
 		st->res = R;
 		st->ndf_res = nd;
 		st->ndf_floor = NDF_FLOOR;
+		st->rgb_clamped = clamped;
 		for (size_t k = 0; k < nth; k++)
 			st->zero_nodes += t.zero[k];
 	}

@@ -1,8 +1,8 @@
 #!/usr/bin/python3
 """demo_outputs: the researcher-facing outputs of `make demo` from the sweep's reconstruction (issue 18): the
-spectral RGL .bsdf, the HDR preview (EXR + sRGB PNG + sidecar) under the procedural sky, the slice plots
-with the measured samples, and the sweep as NeXus/HDF5 (acq-nexus). Returns (label, path or reason) rows for
-the demo's summary."""
+spectral RGL .bsdf and its RGB form (Mitsuba 3's RGB variants), the HDR preview (EXR + sRGB PNG + sidecar)
+under the procedural sky, the slice plots with the measured samples, and the sweep as NeXus/HDF5 (acq-nexus).
+Returns (label, path or reason) rows for the demo's summary."""
 import os
 import subprocess
 import time
@@ -15,6 +15,8 @@ def make(build, out):
     if not (os.path.exists(m) and os.access(B, os.X_OK)):
         return [("RGL .bsdf", "(not produced: no model)")]
     steps = (("RGL .bsdf", ["rgl", m, "-o", os.path.join(out, "model.bsdf"), "--threads", "2"], "model.bsdf"),
+             ("RGL .bsdf, RGB", ["rgl", m, "-o", os.path.join(out, "model-rgb.bsdf"), "--threads", "2", "--rgb"],
+              "model-rgb.bsdf"),
              ("HDR preview (EXR)", ["render", m, "-o", os.path.join(out, "preview-sky.png"), "--exr",
                                     os.path.join(out, "preview.exr"), "--threads", "2"], "preview.exr"),
              ("slice plot", ["slices", m, "-o", os.path.join(out, "slices.png"), "--samples", s, "--polar",

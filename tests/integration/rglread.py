@@ -2,7 +2,11 @@
 """rglread: an independent reader of RGL tabulated BRDF files (.bsdf), written from the format facts
 (shared/docs/rgl-bsdf.md, copied into recon/output.md) for the tests: it parses the tensor file, checks every
 block lies inside the file, and evaluates f(wi, wo, lambda) the way a renderer does (VNDF inversion, bilinear
-spectra, D/(4 sigma)). numpy only; shares no code with the C writer."""
+spectra, D/(4 sigma)). What a renderer gets from spectra D/(4 sigma) is the cosine-weighted BRDF f cos(theta_o):
+the reference loader's eval is "f_r * cos", Mitsuba 3's BSDF::eval includes the foreshortening of wo, and pbrt-v4's
+sampling divides by that cosine (rgl-bsdf.md's "f = spectra D/(4 sigma)" leaves it out; recon/output.md). So eval
+returns f = spectra D/(4 sigma)/cos(theta_o), and weighted=True the renderer's own value. numpy only; shares no
+code with the C writer."""
 import struct
 
 import numpy as np
@@ -84,10 +88,15 @@ class RGL:
         self.description = bytes(f["description"]).decode("utf-8")
         self.theta_i = f["theta_i"].astype(float)
         self.phi_i = f["phi_i"].astype(float)
-        self.wl = f["wavelengths"].astype(float)
+        # an RGB file has `rgb` [Nphi, Ntheta, 3, H, W] instead of `spectra` and no `wavelengths`: its channels
+        # R, G, B stand where the wavelengths would (Mitsuba 3's RGB variants look them up as 0, 1, 2)
+        self.rgb = "wavelengths" not in f
+        if self.rgb and "rgb" not in f:
+            raise ValueError("%s: neither wavelengths + spectra nor rgb" % path)
+        self.wl = np.arange(3.0) if self.rgb else f["wavelengths"].astype(float)
         self.ndf = f["ndf"].astype(float)
         self.sigma = f["sigma"].astype(float)
-        self.spectra = f["spectra"].astype(float)
+        self.spectra = f["rgb" if self.rgb else "spectra"].astype(float)
         self.lum = f["luminance"].astype(float)
         v = f["vndf"].astype(float)
         H, W = v.shape[-2:]
@@ -100,8 +109,9 @@ class RGL:
         nphi, nth, nl = self.spectra.shape[:3]
         assert self.vndf.shape[:2] == (nphi, nth) and nl == len(self.wl) and len(self.theta_i) == nth
 
-    def eval(self, wi, wo, table=None, chunk=2048, spread=False):
-        """f [n, nwl] (or the luminance [n] with table='luminance') at unit vectors wi, wo [n, 3] above the horizon.
+    def eval(self, wi, wo, table=None, chunk=2048, spread=False, weighted=False):
+        """f [n, nwl] (or the luminance [n] with table='luminance') at unit vectors wi, wo [n, 3] above the horizon;
+        weighted=True: f cos(theta_o), the value a renderer's eval returns (spectra D/(4 sigma)).
         spread=True also returns the interpolation tolerance of each value, in the same units: the range
         (max - min) of the table at the 8 corners used (4 per incidence node; the first-order change over one
         cell) plus 1/8 of the largest second difference there along the grid and the incidence (the curvature
@@ -109,11 +119,11 @@ class RGL:
         the half vector moves like the square root of the warped coordinate, and that term is |A|/4 of the
         sqrt(t) part instead (see _eval)."""
         wi, wo = np.atleast_2d(wi).astype(float), np.atleast_2d(wo).astype(float)
-        parts = [self._eval(wi[a:a + chunk], wo[a:a + chunk], table) for a in range(0, len(wi), chunk)]
+        parts = [self._eval(wi[a:a + chunk], wo[a:a + chunk], table, weighted) for a in range(0, len(wi), chunk)]
         val = np.concatenate([p[0] for p in parts])
         return (val, np.concatenate([p[1] for p in parts])) if spread else val
 
-    def _eval(self, wi, wo, table):
+    def _eval(self, wi, wo, table, weighted):
         wm = wi + wo
         wm /= np.linalg.norm(wm, axis=1, keepdims=True)
         ti, tm = elevation(wi), elevation(wm)
@@ -129,7 +139,7 @@ class RGL:
         sx, sy = invert(V, um[0], um[1])
         D = bilerp(self.ndf, um[0], um[1])
         S = bilerp(self.sigma, ui[0], ui[1])
-        fac = D / (4 * S)
+        fac = D / (4 * S) if weighted else D / (4 * S * wo[:, 2])
         tab = self.lum[0][:, None] if table == "luminance" else self.spectra[0]   # [nth, nl, H, W]
         H, W = tab.shape[-2:]
         fx, fy = sx * (W - 1), sy * (H - 1)

@@ -11,6 +11,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 #include <cmocka.h>
 
@@ -274,6 +276,58 @@ static void test_exr_roundtrip(void **state)
 	free(img);
 }
 
+/* An EXR written to a FIFO goes through it and leaves it a FIFO. The library's own temporary file + rename
+ * replaced the FIFO by a regular file (seen: S_ISFIFO false and no byte through the pipe before the fix) and
+ * would have replaced /dev/null as root. The read end is opened first (non-blocking), so the small image
+ * (< the pipe's 64 KiB) is written without a second process and the test cannot hang. */
+static void test_exr_to_fifo(void **state)
+{
+	(void)state;
+	char p[600];
+	snprintf(p, sizeof p, "%s/pipe.exr", dir);
+	unlink(p);
+	assert_int_equal(mkfifo(p, 0600), 0);
+	int rd = open(p, O_RDONLY | O_NONBLOCK);
+	assert_true(rd >= 0);
+	int w = 9, h = 5;
+	float img[9 * 5 * 3];
+	for (int k = 0; k < w * h * 3; k++)
+		img[k] = (float)(0.01 * k);
+	struct acq_err e = { 0 };
+	assert_int_equal(exrio_write_rgb(p, img, w, h, NULL, &e), 0);
+	struct stat sb;
+	assert_int_equal(stat(p, &sb), 0);
+	assert_true(S_ISFIFO(sb.st_mode));
+	unsigned char buf[65536];
+	size_t n = 0;
+	ssize_t r;
+	while (n < sizeof buf && (r = read(rd, buf + n, sizeof buf - n)) > 0)
+		n += (size_t)r;
+	close(rd);
+	unlink(p);
+	assert_true(n > 4 && buf[0] == 0x76 && buf[1] == 0x2f && buf[2] == 0x31 && buf[3] == 0x01); /* EXR magic */
+	/* the bytes through the pipe are the image */
+	char q[600];
+	snprintf(q, sizeof q, "%s/copy.exr", dir);
+	FILE *f = fopen(q, "wb");
+	assert_non_null(f);
+	assert_int_equal(fwrite(buf, 1, n, f), n);
+	assert_int_equal(fclose(f), 0);
+	float *back = NULL;
+	int w2, h2;
+	assert_int_equal(exrio_read_rgb(q, &back, &w2, &h2, &e), 0);
+	assert_true(w2 == w && h2 == h);
+	assert_memory_equal(img, back, sizeof img);
+	free(back);
+	unlink(q);
+	/* a directory is refused, a missing folder named */
+	assert_int_equal(exrio_write_rgb(dir, img, w, h, NULL, &e), -1);
+	assert_non_null(strstr(e.msg, "directory"));
+	snprintf(q, sizeof q, "%s/no/such/x.exr", dir);
+	assert_int_equal(exrio_write_rgb(q, img, w, h, NULL, &e), -1);
+	assert_non_null(strstr(e.msg, "no/such/x.exr"));
+}
+
 static void test_png_chunks(void **state)
 {
 	(void)state;
@@ -317,6 +371,7 @@ int main(void)
 		cmocka_unit_test(test_furnace_and_sun),
 		cmocka_unit_test(test_highlight_and_threads),
 		cmocka_unit_test(test_exr_roundtrip),
+		cmocka_unit_test(test_exr_to_fifo),
 		cmocka_unit_test(test_png_chunks),
 	};
 	int rc = cmocka_run_group_tests(tests, NULL, NULL);
