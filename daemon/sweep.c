@@ -480,6 +480,7 @@ static void retime_begin(struct sweep *sw)
 	sweep_plan_timing(sw, &tm);
 	sweep_plan_prior(sw, sw->spec, sw->id, &tm);
 	sweep_retime_setup(&sw->retime, sw->spec, &tm);
+	sweep_retime_survey(&sw->retime, sw->spec, sw->plan);
 	retime_bounds(sw);
 }
 
@@ -495,6 +496,9 @@ static int make_plan(struct sweep *sw, const char *text, const char *name, struc
 	struct plan_timing tm;
 	sweep_plan_timing(sw, &tm);
 	sweep_plan_prior(sw, sw->spec, sw->id, &tm);
+	/* a first auto sweep measures its survey first (plan_survey_apply; as the planning child does) */
+	if (plan_survey_apply(sw->spec, &sw->env.conf->bench, &tm, sw->plan, err))
+		return -1;
 	plan_time_apply(sw->spec, &sw->env.conf->bench, &tm, sw->plan); /* the ETA's plan figure */
 	return plan_cfg(sw, cfg, err);
 }

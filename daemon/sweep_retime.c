@@ -24,6 +24,36 @@ void sweep_retime_setup(struct sweep_retime *r, const struct plan_spec *spec, co
 	r->retimed = 0;
 	r->at = -1;
 	r->on = spec && spec->integ_mode == PLAN_INTEG_AUTO && !spec->adaptive && tm->prior.sweep == 0;
+	r->survey = 0;
+}
+
+void sweep_retime_survey(struct sweep_retime *r, const struct plan_spec *spec, const struct plan_result *plan)
+{
+	r->survey = spec && plan && spec->integ_mode == PLAN_INTEG_AUTO && !spec->adaptive ? plan->n_survey : 0;
+	if (r->survey > 0)
+		r->on = true;
+}
+
+/* The survey's points are not consecutive in the route, so their first exposures say nothing of the pooled probe
+ * (exp_prior_build counts a point pooled when its predecessor in the plan's order had its time): each row's share is
+ * taken over its route points only (the plan's steps from r->survey on), and PLAN_PROBE_POOL at the row's mean time
+ * while fewer than SURVEY_POOL_MIN of them are measured. */
+#define SURVEY_POOL_MIN 10
+static void survey_pooled(const struct sweep_retime *r, const struct plan_result *plan, struct plan_prior *pr)
+{
+	for (size_t i = 0; i < pr->n_inc && i < PLAN_PRIOR_MAX_INC; i++) {
+		struct plan_prior_inc *q = &pr->inc[i];
+		size_t sv = 0;
+		for (size_t k = 0; k < r->survey && k < plan->n_steps; k++)
+			sv += fabs(fabs(plan->steps[k].pos.laser_theta) - q->theta_i) <= PLAN_PRIOR_SAME_DEG;
+		size_t route = q->points > sv ? q->points - sv : 0;
+		if (route >= SURVEY_POOL_MIN) {
+			q->pooled_per_point = q->pooled_per_point * (double)q->points / (double)route;
+		} else {
+			q->pooled_per_point = PLAN_PROBE_POOL;
+			q->pooled_ms = 0;
+		}
+	}
 }
 
 void sweep_retime_end(struct sweep_retime *r)
@@ -37,6 +67,8 @@ bool sweep_retime_due(const struct sweep_retime *r, const struct plan_result *pl
 {
 	if (!r->on || !plan || done < 1 || done == r->at || (size_t)done >= plan->n_steps)
 		return false;
+	if (r->survey > 0 && (size_t)done == r->survey) /* the survey's end: every incidence measured */
+		return true;
 	return fabs(plan->steps[done].pos.laser_theta - plan->steps[done - 1].pos.laser_theta) > 1e-6;
 }
 
@@ -50,6 +82,8 @@ int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long 
 		return -1;
 	if (pr.sweep <= 0 || pr.n_inc == 0)
 		return 0;
+	if (r->survey > 0)
+		survey_pooled(r, plan, &pr);
 	r->tm.prior = pr;
 	plan_time_apply(spec, g, &r->tm, plan);
 	r->retimed++;
