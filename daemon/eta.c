@@ -205,3 +205,18 @@ double eta_update(struct eta *e, int done, int total, double plan_at_s, double p
 	double t = plan_left + w * excess * left;
 	return t > 0 ? t : 0;
 }
+
+void eta_forget(struct eta *e)
+{
+	e->recent_real = e->recent_plan = e->recent_work = NAN;
+	e->recent_w = e->work_w = 0;
+	e->hist_n = 0;
+	e->run_real = e->run_plan = 0;
+	e->measured = 0;
+	e->skip = true;
+}
+
+double eta_host(const struct eta *e)
+{
+	return host_median(e);
+}

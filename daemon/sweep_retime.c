@@ -25,6 +25,7 @@ void sweep_retime_setup(struct sweep_retime *r, const struct plan_spec *spec, co
 	r->at = -1;
 	r->on = spec && spec->integ_mode == PLAN_INTEG_AUTO && !spec->adaptive && tm->prior.sweep == 0;
 	r->survey = 0;
+	r->host_hint = NAN;
 }
 
 void sweep_retime_survey(struct sweep_retime *r, const struct plan_spec *spec, const struct plan_result *plan)
@@ -67,9 +68,34 @@ bool sweep_retime_due(const struct sweep_retime *r, const struct plan_result *pl
 {
 	if (!r->on || !plan || done < 1 || done == r->at || (size_t)done >= plan->n_steps)
 		return false;
-	if (r->survey > 0 && (size_t)done == r->survey) /* the survey's end: every incidence measured */
-		return true;
+	if (r->survey > 0 && (size_t)done <= r->survey) /* at the survey's end: every incidence measured */
+		return (size_t)done == r->survey;
 	return fabs(plan->steps[done].pos.laser_theta - plan->steps[done - 1].pos.laser_theta) > 1e-6;
+}
+
+/* The host's time per point of a sweep with a survey: over the route's points (order from r->survey on; the rows'
+ * host figure, exp_prior_build's prior_host, over them alone) once SURVEY_HOST_MIN are done, else r->host_hint (the
+ * live ETA's, whose bench work holds the probes the survey's points actually took), else none (the default). */
+#define SURVEY_HOST_MIN 10
+static void survey_host(const struct sweep_retime *r, const struct bench_geom *g, struct plan_prior *pr)
+{
+	size_t n = 0;
+	struct store_prior_row *v = malloc((r->rows.n ? r->rows.n : 1) * sizeof *v);
+	for (size_t i = 0; v && i < r->rows.n; i++)
+		if (r->rows.v[i].order_index >= (int64_t)r->survey)
+			v[n++] = r->rows.v[i];
+	struct plan_prior h;
+	memset(&h, 0, sizeof h);
+	if (v && n > 0 && exp_prior_build(v, n, g, &r->tm, &h) == 0 && h.host_points >= SURVEY_HOST_MIN) {
+		pr->host_per_point_s = h.host_per_point_s;
+		pr->host_points = h.host_points;
+	} else if (isfinite(r->host_hint) && r->host_hint >= 0) {
+		pr->host_per_point_s = r->host_hint;
+		pr->host_points = 1;
+	} else {
+		pr->host_points = 0;
+	}
+	free(v);
 }
 
 int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long long sweep_id,
@@ -82,8 +108,10 @@ int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long 
 		return -1;
 	if (pr.sweep <= 0 || pr.n_inc == 0)
 		return 0;
-	if (r->survey > 0)
+	if (r->survey > 0) {
 		survey_pooled(r, plan, &pr);
+		survey_host(r, g, &pr);
+	}
 	r->tm.prior = pr;
 	plan_time_apply(spec, g, &r->tm, plan);
 	r->retimed++;

@@ -50,6 +50,8 @@ struct sweep_retime {
 	double *lo_at, *hi_at;
 	size_t n_at;
 	size_t survey;              /* the plan's survey points (plan_survey_apply; 0: none): steps [0, survey) */
+	double host_hint;           /* the host's real s per point as the live ETA measured it (eta_host; NAN: none):
+				     * the re-timing at the survey's end takes it (sweep_retime_apply) */
 };
 
 /* Whether the sweep planned with spec and tm (its exposure prior in tm->prior) re-times its plan: auto
@@ -63,10 +65,13 @@ void sweep_retime_survey(struct sweep_retime *r, const struct plan_spec *spec, c
 /* The sweep has ended: r's rows freed (r is then set up for nothing). */
 void sweep_retime_end(struct sweep_retime *r);
 /* Whether step done (the next to be measured) of plan starts a new incidence after at least one measured point, or
- * ends the survey (done = r->survey), when r re-times and has not re-timed there yet. */
+ * ends the survey (done = r->survey; within the survey never: its points jump between incidences), when r re-times
+ * and has not re-timed there yet. */
 bool sweep_retime_due(const struct sweep_retime *r, const struct plan_result *plan, int done);
 /* At step done, time plan (sweep sweep_id's, from spec, on bench g) again with the sweep's own exposures so far
- * from st as its prior (exp_prior_update: only the points committed since the last re-timing are read). 1 when re-timed, 0 when there was nothing to time it with (no done point), -1 with err (the plan is then
+ * from st as its prior (exp_prior_update: only the points committed since the last re-timing are read). With a
+ * survey, the host's time per point is measured over the route's points only (the survey's long moves and probes at
+ * another point's time are not the route's), r->host_hint until ten of them are done. 1 when re-timed, 0 when there was nothing to time it with (no done point), -1 with err (the plan is then
  * unchanged). */
 int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long long sweep_id,
 		       const struct plan_spec *spec, const struct bench_geom *g, struct plan_result *plan,
