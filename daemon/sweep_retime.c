@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "daemon/exposure.h"
+#include "daemon/store.h"
 
 static void bounds_free(struct sweep_retime *r)
 {
