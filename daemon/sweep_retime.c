@@ -39,7 +39,8 @@ void sweep_retime_survey(struct sweep_retime *r, const struct plan_spec *spec, c
 /* The survey's points are not consecutive in the route, so their first exposures say nothing of the pooled probe
  * (exp_prior_build counts a point pooled when its predecessor in the plan's order had its time): each row's share is
  * taken over its route points only (the plan's steps from r->survey on), and PLAN_PROBE_POOL at the row's mean time
- * while fewer than SURVEY_POOL_MIN of them are measured. */
+ * while fewer than SURVEY_POOL_MIN of them are measured; the rungs of such a row filled between its shortest and
+ * longest (below). */
 #define SURVEY_POOL_MIN 10
 static void survey_pooled(const struct sweep_retime *r, const struct plan_result *plan, struct plan_prior *pr)
 {
@@ -54,6 +55,20 @@ static void survey_pooled(const struct sweep_retime *r, const struct plan_result
 		} else {
 			q->pooled_per_point = PLAN_PROBE_POOL;
 			q->pooled_ms = 0;
+			/* and its darks: the route's points at the incidence use every rung between the survey's shortest and
+			 * longest time (on the survey runs' databases, paper plan: the metal's survey rows 4-6 rungs, filled
+			 * 13-23, its route 13-21; the green paint's 4-6, 5-14, 8-12), and each of them is refreshed as it
+			 * ages (dark_max_age_s): priced by the survey's own rungs only, the metal's rest ran 96 darks short */
+			int lo = -1, hi = -1;
+			for (int b = 0; b < 64; b++)
+				if (q->rungs >> b & 1) {
+					lo = lo < 0 ? b : lo;
+					hi = b;
+				}
+			for (int b = lo; b >= 0 && b <= hi; b++)
+				q->rungs |= (uint64_t)1 << b;
+			if (lo >= 0)
+				q->darks_per_clear = fmax(q->darks_per_clear, (double)(hi - lo + 1));
 		}
 	}
 }
