@@ -96,8 +96,8 @@ struct plan_spec {
 	size_t reciprocal_pairs;    /* number of reciprocal partners to add (0: none) */
 	enum plan_blind_policy blind_policy;
 	struct plan_adaptive *adaptive; /* kind: adaptive (the fields above are then its seed plan's); else NULL */
-	int survey;                 /* points per incidence measured first (plan key survey:, plan_survey_apply); -1 (the
-				     * default): PLAN_SURVEY_DEFAULT where the exposure prior lacks an incidence, else 0 */
+	int survey;                 /* points per incidence measured first (plan key survey:, plan_survey_apply; 0, the
+				     * default: none); -1: PLAN_SURVEY_DEFAULT where the exposure prior lacks an incidence */
 };
 
 /* One bench configuration: axis positions in degrees. */
@@ -370,8 +370,8 @@ void plan_time_point(const struct plan_spec *spec, const struct bench_geom *g, c
  * viewing zeniths and azimuths, then the route without them (each point once), so that its re-timing (sweep_retime.c)
  * prices every incidence from the sample's own exposures after n_survey points (README "How long a sweep takes"). */
 #define PLAN_SURVEY_DEFAULT 6
-/* The survey's points per incidence for spec's plan r timed by t: spec->survey when given (≥ 0), else
- * PLAN_SURVEY_DEFAULT when t's exposure prior lacks one of r's incidences; 0 for fixed integration, adaptive plans
+/* The survey's points per incidence for spec's plan r timed by t: spec->survey when ≥ 0, for -1 PLAN_SURVEY_DEFAULT
+ * when t's exposure prior lacks one of r's incidences (else 0); 0 for fixed integration, adaptive plans
  * and a route whose first step has a move (a start position). */
 size_t plan_survey_k(const struct plan_spec *spec, const struct plan_timing *t, const struct plan_result *r);
 /* Reorder r (made by plan_make) for the survey (plan_survey_k points per incidence, at most an eighth of the

@@ -20,6 +20,7 @@ observation:
 integration: {mode: auto, target_peak: 0.8, estimate_ms: 20, max_ms: 2000}
 averages: 4
 blind_points: drop
+survey: 1
 """
 
 
@@ -49,8 +50,8 @@ def run():
         assert row["state"] == "completed", "sweep ended %s: %s" % (row["state"], row.get("events", [])[:3])
         n, cal = L.check_points(b, sid)
         L.say("points: %d planned, %d done with a calibrated sample" % (n, cal))
-        # a first auto sweep measures its survey first (plan_survey_apply): the plan's survey steps (acqctl plan, the
-        # same bench) are the sweep's first points, every incidence among them, and each direction is stored once
+        # the survey (plan key survey: 1, plan_survey_apply) is measured first: the plan's survey steps (acqctl plan,
+        # the same bench) are the sweep's first points, every incidence among them, and each direction is stored once
         f = os.path.join(b.dir, "it-full.yaml")
         open(f, "w").write(PLAN)
         pj = json.loads(subprocess.run([os.path.join(L.BUILD, "acqctl"), "--json", "plan", f, "--config", b.conf,

@@ -54,7 +54,6 @@ static void load(struct fx *f, const char *text)
 	bench_defaults(&f->g);
 	f->g.readout_s = 0.01;
 	assert_int_equal(plan_load_string("t.yaml", text, &f->spec, &err), 0);
-	f->spec->survey = 0; /* the route as planned: the survey's order is test_plan's test_survey (its cost below) */
 	assert_int_equal(plan_make(f->spec, &f->g, &f->res, &err), 0);
 	assert_true(f->res->n_steps > 4);
 }
@@ -492,8 +491,8 @@ static void test_estimate_range(void **state)
 	json_decref(o);
 	plan_time_apply(f.spec, &f.g, &t, f.res);
 	assert_true(fabs(f.res->steps[f.res->n_steps - 1].predicted_start_s - last) < TOL);
-	/* a first sweep's survey (the plan's default: one point of each incidence here, at most an eighth of its 8):
-	 * the dry run orders it first and says what it adds to the route's time */
+	/* a first sweep's survey (survey: -1, the prior lacks the incidences: one point of each here, at most an eighth
+	 * of its 8): the dry run orders it first and says what it adds to the route's time */
 	f.spec->survey = -1;
 	o = plan_dry_run_json(f.spec, &f.g, &t, f.res, false);
 	json_t *sv = json_object_get(o, "survey");
