@@ -1,6 +1,6 @@
 /* plan_order: the order of one incidence group's points as an open path from a start row (nearest neighbour,
- * then 2-opt and Or-opt under the true move cost, optionally iterated with double-bridge kicks). Internal to
- * the planner (plan_int.h). */
+ * then 2-opt and Or-opt under the true move cost, optionally iterated with double-bridge kicks; internal to the
+ * planner, plan_int.h), and the survey's order of a planned route (plan_survey_k, plan_survey_apply: plan.h). */
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>

@@ -16,8 +16,9 @@ paper's 10x10x10 (auto, estimate 50 ms) at the demo's time scale 35, and its rep
 small fixed one only;
 BENCH_DURATION_CASES=a,b: those cases (name@scale for one time scale; name a repeat with the case before it).
 BENCH_DURATION_SAMPLE=MATERIAL: that simulator material is placed after the reference (default green-paint).
-BENCH_DURATION_SURVEY=K: the auto plans measure K points per incidence first (plan key survey:; 0 none; default: the
-planner's, a first sweep's survey); the ETA right after the survey is reported with the 25/50/75 % checkpoints.
+BENCH_DURATION_SURVEY=K: the auto plans measure K points per incidence first (plan key survey:; -1: 6 where the
+prior lacks an incidence, so a first sweep's and not its repeat's; 0 or unset: none); the ETA right after the survey
+is reported with the 25/50/75 % checkpoints.
 BENCH_DURATION_LOG=debug: the daemon logs at that level (debug: a stall line per point: where the host's time went).
 Also reported: the simulator's own lag (acq-sim ctl status lag_s: its 1 ms waits ending late, the host not keeping
 the time scale) over the sweep and its share of the measured time; the host's time per point (host_per_point: real
