@@ -50,8 +50,8 @@ void eta_replan(struct eta *e, double (*plan_at)(const void *ctx, int step), con
  * moves and probes at another point's time the rest does not repeat); the ETA is the plan's until the next points
  * are measured. */
 void eta_forget(struct eta *e);
-/* The host's real seconds per point: the median over the recent memory of each point's real time less its bench work
- * at the scale (what eta_update counts as the host's); NAN before any point is measured with its work. */
+/* The host's real seconds per point: the mean over the recent memory of each point's real time less its bench work
+ * at the scale (eta_update takes their median for the excess); NAN before any point is measured with its work. */
 double eta_host(const struct eta *e);
 /* The bench's own seconds (the counted points' exposures as the planner prices them, their planned moves and
  * settling) of the points done so far, cumulative; given before the eta_update that counts them (NAN: unknown,

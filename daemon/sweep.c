@@ -114,7 +114,7 @@ static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double
 	if (sw->env.store && sweep_retime_due(&sw->retime, sw->plan, done)) {
 		struct acq_err err = { 0 };
 		bool survey_end = sw->retime.survey > 0 && (size_t)done == sw->retime.survey;
-		if (survey_end) /* the host's time as the ETA measured it over the survey's points (their work as taken) */
+		if (survey_end) /* the host's mean time as the ETA measured it over the survey's points (their work as taken) */
 			sw->retime.host_hint = eta_host(&sw->eta);
 		int rc = sweep_retime_apply(&sw->retime, done, sw->env.store, sweep_id, sw->spec, &sw->env.conf->bench,
 					    sw->plan, &err);
