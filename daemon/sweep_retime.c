@@ -36,13 +36,14 @@ void sweep_retime_survey(struct sweep_retime *r, const struct plan_spec *spec, c
 		r->on = true;
 }
 
-/* The survey's points are not consecutive in the route, so their first exposures say nothing of the pooled probe
+/* The rows of a sweep with a survey. The survey's points are not consecutive in the route, so their first exposures
+ * say nothing of the pooled probe
  * (exp_prior_build counts a point pooled when its predecessor in the plan's order had its time): each row's share is
  * taken over its route points only (the plan's steps from r->survey on), and PLAN_PROBE_POOL at the row's mean time
  * while fewer than SURVEY_POOL_MIN of them are measured; the rungs of such a row filled between its shortest and
  * longest (below). */
 #define SURVEY_POOL_MIN 10
-static void survey_pooled(const struct sweep_retime *r, const struct plan_result *plan, struct plan_prior *pr)
+static void survey_rows(const struct sweep_retime *r, const struct plan_result *plan, struct plan_prior *pr)
 {
 	for (size_t i = 0; i < pr->n_inc && i < PLAN_PRIOR_MAX_INC; i++) {
 		struct plan_prior_inc *q = &pr->inc[i];
@@ -125,7 +126,7 @@ int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long 
 	if (pr.sweep <= 0 || pr.n_inc == 0)
 		return 0;
 	if (r->survey > 0) {
-		survey_pooled(r, plan, &pr);
+		survey_rows(r, plan, &pr);
 		survey_host(r, g, &pr);
 	}
 	r->tm.prior = pr;
