@@ -37,11 +37,10 @@ void sweep_retime_survey(struct sweep_retime *r, const struct plan_spec *spec, c
 }
 
 /* The rows of a sweep with a survey. The survey's points are not consecutive in the route, so their first exposures
- * say nothing of the pooled probe
- * (exp_prior_build counts a point pooled when its predecessor in the plan's order had its time): each row's share is
- * taken over its route points only (the plan's steps from r->survey on), and PLAN_PROBE_POOL at the row's mean time
- * while fewer than SURVEY_POOL_MIN of them are measured; the rungs of such a row filled between its shortest and
- * longest (below). */
+ * say nothing of the pooled probe (exp_prior_build counts a point pooled when its predecessor in the plan's order had
+ * its time): each row's share is taken over its route points only (the plan's steps from r->survey on), and
+ * PLAN_PROBE_POOL at the row's mean time while fewer than SURVEY_POOL_MIN of them are measured; the rungs of such a
+ * row filled between its shortest and longest (below). */
 #define SURVEY_POOL_MIN 10
 static void survey_rows(const struct sweep_retime *r, const struct plan_result *plan, struct plan_prior *pr)
 {
