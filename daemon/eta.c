@@ -205,3 +205,33 @@ double eta_update(struct eta *e, int done, int total, double plan_at_s, double p
 	double t = plan_left + w * excess * left;
 	return t > 0 ? t : 0;
 }
+
+void eta_forget(struct eta *e)
+{
+	e->recent_real = e->recent_plan = e->recent_work = NAN;
+	e->recent_w = e->work_w = 0;
+	e->hist_n = 0;
+	e->run_real = e->run_plan = 0;
+	e->measured = 0;
+	e->skip = true;
+}
+
+double eta_host(const struct eta *e)
+{
+	/* the mean, not host_median: a plan's host figure is what the points take on average, bursts included (the
+	 * green paint's paper sweep at load 10: the median 6.6 ms per point, the mean 11.0; priced at the median the
+	 * ETA right after the survey was -10 %) */
+	long m = lround(memory(e->total));
+	if (m > ETA_HOST_WINDOW)
+		m = ETA_HOST_WINDOW;
+	if (m > e->host_n)
+		m = e->host_n;
+	if (m <= 0)
+		return NAN;
+	double s = 0;
+	for (long i = 0; i < m; i++) {
+		long j = (e->host_n - m + i) % ETA_HOST_WINDOW;
+		s += (double)e->host[j].real - (double)e->host[j].work / e->scale;
+	}
+	return s / (double)m;
+}

@@ -45,6 +45,14 @@ void eta_running(struct eta *e, bool running, double loop_now, double real_now);
  * the recent average is replayed over the remembered intervals in the new plan, so the excess measured so far is
  * kept, against the new plan; the interval under way (its two ends in different plans) is not measured. */
 void eta_replan(struct eta *e, double (*plan_at)(const void *ctx, int step), const void *ctx);
+/* Forget what the sweep has measured beyond the plan (the recent averages, their history; the clocks' scale and the
+ * host's window kept): the points measured so far are not like the rest (a survey's, plan_survey_apply, whose long
+ * moves and probes at another point's time the rest does not repeat); the ETA is the plan's until the next points
+ * are measured. */
+void eta_forget(struct eta *e);
+/* The host's real seconds per point: the mean over the recent memory of each point's real time less its bench work
+ * at the scale (eta_update takes their median for the excess); NAN before any point is measured with its work. */
+double eta_host(const struct eta *e);
 /* The bench's own seconds (the counted points' exposures as the planner prices them, their planned moves and
  * settling) of the points done so far, cumulative; given before the eta_update that counts them (NAN: unknown,
  * the excess is then the plain recent average). */

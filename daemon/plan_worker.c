@@ -155,6 +155,9 @@ static int child(const char *payload, size_t len, int fd)
 	struct plan_result *r = NULL;
 	if (plan_load_string(name, text, &spec, &err) || plan_make(spec, &m.g, &r, &err))
 		return encode_error(&err, fd) ? 4 : 0;
+	/* a first auto sweep measures its survey first (plan_survey_apply: the prior in m.tm decides) */
+	if (plan_survey_apply(spec, &m.g, &m.tm, r, &err))
+		return encode_error(&err, fd) ? 4 : 0;
 	plan_time_apply(spec, &m.g, &m.tm, r);
 	return plan_worker_encode(r, fd) ? 4 : 0;
 }

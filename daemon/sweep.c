@@ -113,12 +113,20 @@ static void on_progress(void *ctx, int64_t sweep_id, int done, int total, double
 	(void)eta;
 	if (sw->env.store && sweep_retime_due(&sw->retime, sw->plan, done)) {
 		struct acq_err err = { 0 };
+		bool survey_end = sw->retime.survey > 0 && (size_t)done == sw->retime.survey;
+		if (survey_end) /* the host's mean time as the ETA measured it over the survey's points (their work as taken) */
+			sw->retime.host_hint = eta_host(&sw->eta);
 		int rc = sweep_retime_apply(&sw->retime, done, sw->env.store, sweep_id, sw->spec, &sw->env.conf->bench,
 					    sw->plan, &err);
 		if (rc < 0)
 			log_msg(LOG_WARNING, "sweep %lld: re-timing the plan: %s", (long long)sweep_id, err.msg);
 		else if (rc > 0) {
-			eta_replan(&sw->eta, sweep_retime_plan_at, sw->plan);
+			/* the survey's points (long moves, probes at another point's time) say nothing of the route's
+			 * excess: the ETA is the re-timed plan's until the route's points are measured */
+			if (survey_end)
+				eta_forget(&sw->eta);
+			else
+				eta_replan(&sw->eta, sweep_retime_plan_at, sw->plan);
 			retime_bounds(sw);
 			log_msg(LOG_DEBUG, "sweep %lld: plan re-timed at point %d from its own exposures: %.1f s",
 				(long long)sweep_id, done, sw->plan->predicted_s);
@@ -480,6 +488,7 @@ static void retime_begin(struct sweep *sw)
 	sweep_plan_timing(sw, &tm);
 	sweep_plan_prior(sw, sw->spec, sw->id, &tm);
 	sweep_retime_setup(&sw->retime, sw->spec, &tm);
+	sweep_retime_survey(&sw->retime, sw->spec, sw->plan);
 	retime_bounds(sw);
 }
 
@@ -495,6 +504,9 @@ static int make_plan(struct sweep *sw, const char *text, const char *name, struc
 	struct plan_timing tm;
 	sweep_plan_timing(sw, &tm);
 	sweep_plan_prior(sw, sw->spec, sw->id, &tm);
+	/* a first auto sweep measures its survey first (plan_survey_apply; as the planning child does) */
+	if (plan_survey_apply(sw->spec, &sw->env.conf->bench, &tm, sw->plan, err))
+		return -1;
 	plan_time_apply(sw->spec, &sw->env.conf->bench, &tm, sw->plan); /* the ETA's plan figure */
 	return plan_cfg(sw, cfg, err);
 }

@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "daemon/exposure.h"
+#include "daemon/store.h"
 
 static void bounds_free(struct sweep_retime *r)
 {
@@ -24,6 +25,52 @@ void sweep_retime_setup(struct sweep_retime *r, const struct plan_spec *spec, co
 	r->retimed = 0;
 	r->at = -1;
 	r->on = spec && spec->integ_mode == PLAN_INTEG_AUTO && !spec->adaptive && tm->prior.sweep == 0;
+	r->survey = 0;
+	r->host_hint = NAN;
+}
+
+void sweep_retime_survey(struct sweep_retime *r, const struct plan_spec *spec, const struct plan_result *plan)
+{
+	r->survey = spec && plan && spec->integ_mode == PLAN_INTEG_AUTO && !spec->adaptive ? plan->n_survey : 0;
+	if (r->survey > 0)
+		r->on = true;
+}
+
+/* The rows of a sweep with a survey. The survey's points are not consecutive in the route, so their first exposures
+ * say nothing of the pooled probe (exp_prior_build counts a point pooled when its predecessor in the plan's order had
+ * its time): each row's share is taken over its route points only (the plan's steps from r->survey on), and
+ * PLAN_PROBE_POOL at the row's mean time while fewer than SURVEY_POOL_MIN of them are measured; the rungs of such a
+ * row filled between its shortest and longest (below). */
+#define SURVEY_POOL_MIN 10
+static void survey_rows(const struct sweep_retime *r, const struct plan_result *plan, struct plan_prior *pr)
+{
+	for (size_t i = 0; i < pr->n_inc && i < PLAN_PRIOR_MAX_INC; i++) {
+		struct plan_prior_inc *q = &pr->inc[i];
+		size_t sv = 0;
+		for (size_t k = 0; k < r->survey && k < plan->n_steps; k++)
+			sv += fabs(fabs(plan->steps[k].pos.laser_theta) - q->theta_i) <= PLAN_PRIOR_SAME_DEG;
+		size_t route = q->points > sv ? q->points - sv : 0;
+		if (route >= SURVEY_POOL_MIN) {
+			q->pooled_per_point = q->pooled_per_point * (double)q->points / (double)route;
+		} else {
+			q->pooled_per_point = PLAN_PROBE_POOL;
+			q->pooled_ms = 0;
+			/* and its darks: the route's points at the incidence use every rung between the survey's shortest and
+			 * longest time (on the survey runs' databases, paper plan: the metal's survey rows 4-6 rungs, filled
+			 * 13-23, its route 13-21; the green paint's 4-6, 5-14, 8-12), and each of them is refreshed as it
+			 * ages (dark_max_age_s): priced by the survey's own rungs only, the metal's rest ran 96 darks short */
+			int lo = -1, hi = -1;
+			for (int b = 0; b < 64; b++)
+				if (q->rungs >> b & 1) {
+					lo = lo < 0 ? b : lo;
+					hi = b;
+				}
+			for (int b = lo; b >= 0 && b <= hi; b++)
+				q->rungs |= (uint64_t)1 << b;
+			if (lo >= 0)
+				q->darks_per_clear = fmax(q->darks_per_clear, (double)(hi - lo + 1));
+		}
+	}
 }
 
 void sweep_retime_end(struct sweep_retime *r)
@@ -37,7 +84,34 @@ bool sweep_retime_due(const struct sweep_retime *r, const struct plan_result *pl
 {
 	if (!r->on || !plan || done < 1 || done == r->at || (size_t)done >= plan->n_steps)
 		return false;
+	if (r->survey > 0 && (size_t)done <= r->survey) /* at the survey's end: every incidence measured */
+		return (size_t)done == r->survey;
 	return fabs(plan->steps[done].pos.laser_theta - plan->steps[done - 1].pos.laser_theta) > 1e-6;
+}
+
+/* The host's time per point of a sweep with a survey: over the route's points (order from r->survey on; the rows'
+ * host figure, exp_prior_build's prior_host, over them alone) once SURVEY_HOST_MIN are done, else r->host_hint (the
+ * live ETA's, whose bench work holds the probes the survey's points actually took), else none (the default). */
+#define SURVEY_HOST_MIN 10
+static void survey_host(const struct sweep_retime *r, const struct bench_geom *g, struct plan_prior *pr)
+{
+	size_t n = 0;
+	struct store_prior_row *v = malloc((r->rows.n ? r->rows.n : 1) * sizeof *v);
+	for (size_t i = 0; v && i < r->rows.n; i++)
+		if (r->rows.v[i].order_index >= (int64_t)r->survey)
+			v[n++] = r->rows.v[i];
+	struct plan_prior h;
+	memset(&h, 0, sizeof h);
+	if (v && n > 0 && exp_prior_build(v, n, g, &r->tm, &h) == 0 && h.host_points >= SURVEY_HOST_MIN) {
+		pr->host_per_point_s = h.host_per_point_s;
+		pr->host_points = h.host_points;
+	} else if (isfinite(r->host_hint) && r->host_hint >= 0) {
+		pr->host_per_point_s = r->host_hint;
+		pr->host_points = 1;
+	} else {
+		pr->host_points = 0;
+	}
+	free(v);
 }
 
 int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long long sweep_id,
@@ -50,6 +124,10 @@ int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long 
 		return -1;
 	if (pr.sweep <= 0 || pr.n_inc == 0)
 		return 0;
+	if (r->survey > 0) {
+		survey_rows(r, plan, &pr);
+		survey_host(r, g, &pr);
+	}
 	r->tm.prior = pr;
 	plan_time_apply(spec, g, &r->tm, plan);
 	r->retimed++;

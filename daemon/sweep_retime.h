@@ -23,7 +23,9 @@
  * incidence. Re-timing after every point instead (eta_replan re-expressing the interval under way) was measured
  * worse on the metal's quick plan (−8.1 / +39.8 / +17.4 % at 25 / 50 / 75 %) and not kept. Session 17: the plan's
  * interval where the exposures are unknown (plan_time_interval) is kept per step and moves the ETA's two ends
- * (sweep_retime_bounds, sweep_retime_eta; sweep.progress eta_low_s, eta_high_s). */
+ * (sweep_retime_bounds, sweep_retime_eta; sweep.progress eta_low_s, eta_high_s). Session 18: the survey
+ * (plan_survey_apply) measures a few points of every incidence first, so that after it every incidence is re-timed
+ * from its own exposures (README "How long a sweep takes"). */
 #ifndef SWEEP_RETIME_H
 #define SWEEP_RETIME_H
 
@@ -47,19 +49,29 @@ struct sweep_retime {
 	enum plan_interval iv;
 	double *lo_at, *hi_at;
 	size_t n_at;
+	size_t survey;              /* the plan's survey points (plan_survey_apply; 0: none): steps [0, survey) */
+	double host_hint;           /* the host's real s per point as the live ETA measured it (eta_host; NAN: none):
+				     * the re-timing at the survey's end takes it (sweep_retime_apply) */
 };
 
 /* Whether the sweep planned with spec and tm (its exposure prior in tm->prior) re-times its plan: auto
  * integration, not adaptive, no prior from an earlier sweep. Keeps a copy of tm; r is zero-initialised or was set
  * up before (its rows are dropped: a recovered sweep reads its points again). */
 void sweep_retime_setup(struct sweep_retime *r, const struct plan_spec *spec, const struct plan_timing *tm);
+/* The sweep's plan measures a survey first (plan->n_survey > 0, an auto plan that is not adaptive): r re-times it
+ * (even with a prior from an earlier sweep that lacks some incidence: the survey's rows replace it), the survey's
+ * rows' pooled share taken as the route's (sweep_retime_apply). Call after sweep_retime_setup. */
+void sweep_retime_survey(struct sweep_retime *r, const struct plan_spec *spec, const struct plan_result *plan);
 /* The sweep has ended: r's rows freed (r is then set up for nothing). */
 void sweep_retime_end(struct sweep_retime *r);
-/* Whether step done (the next to be measured) of plan starts a new incidence after at least one measured point,
- * when r re-times and has not re-timed there yet. */
+/* Whether step done (the next to be measured) of plan starts a new incidence after at least one measured point, or
+ * ends the survey (done = r->survey; within the survey never: its points jump between incidences), when r re-times
+ * and has not re-timed there yet. */
 bool sweep_retime_due(const struct sweep_retime *r, const struct plan_result *plan, int done);
 /* At step done, time plan (sweep sweep_id's, from spec, on bench g) again with the sweep's own exposures so far
- * from st as its prior (exp_prior_update: only the points committed since the last re-timing are read). 1 when re-timed, 0 when there was nothing to time it with (no done point), -1 with err (the plan is then
+ * from st as its prior (exp_prior_update: only the points committed since the last re-timing are read). With a
+ * survey, the host's time per point is measured over the route's points only (the survey's long moves and probes at
+ * another point's time are not the route's), r->host_hint until ten of them are done. 1 when re-timed, 0 when there was nothing to time it with (no done point), -1 with err (the plan is then
  * unchanged). */
 int sweep_retime_apply(struct sweep_retime *r, int done, struct store *st, long long sweep_id,
 		       const struct plan_spec *spec, const struct bench_geom *g, struct plan_result *plan,

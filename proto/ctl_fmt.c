@@ -457,6 +457,14 @@ void ctl_print_plan(FILE *f, json_t *r)
 			json_is_object(ad) ? "each batch is timed as it is chosen"
 					   : "the sweep re-times the rest from its own exposures as it goes");
 	}
+	json_t *sv = json_object_get(r, "survey");
+	if (json_is_object(sv)) { /* the survey measured first (plan_survey_apply), its cost and what it is for */
+		json_t *sc = json_object_get(sv, "cost_s");
+		double cost = json_is_number(sc) ? json_number_value(sc) : num(sv, "motion_s");
+		fprintf(f, "  survey: %.0f points (up to %.0f per incidence) measured first, %s%.1f s of the time above; "
+			   "then the rest is re-timed from the sample's own exposures at every incidence\n",
+			num(sv, "points"), num(sv, "per_incidence"), cost >= 0 ? "+" : "", cost);
+	}
 	json_t *iv = json_object_get(r, "interval");
 	if (json_is_object(iv)) { /* where the exposures are unknown: the duration's interval (plan_time_interval) */
 		ctl_fmt_dur(num(iv, "low_s"), a, sizeof a);

@@ -96,6 +96,8 @@ struct plan_spec {
 	size_t reciprocal_pairs;    /* number of reciprocal partners to add (0: none) */
 	enum plan_blind_policy blind_policy;
 	struct plan_adaptive *adaptive; /* kind: adaptive (the fields above are then its seed plan's); else NULL */
+	int survey;                 /* points per incidence measured first (plan key survey:, plan_survey_apply; 0, the
+				     * default: none); -1: PLAN_SURVEY_DEFAULT where the exposure prior lacks an incidence */
 };
 
 /* One bench configuration: axis positions in degrees. */
@@ -177,6 +179,9 @@ struct plan_result {
 	double t_probe_s;           /* auto: the probe exposures (one per point) */
 	double t_first_s;           /* each point's first (base) exposure, the plan's averages */
 	double t_hdr_s;             /* auto: the further (HDR) exposures */
+	/* the survey (plan_survey_apply): steps[0 .. n_survey) are survey_k points of each incidence, then the route */
+	size_t n_survey, survey_k;
+	double survey_motion_s;     /* the motion (moves and settling) the survey adds to the route's */
 };
 
 /* The default integration.spread of auto plans: the range of times the bench chose at one viewing zenith on the
@@ -361,6 +366,21 @@ struct plan_point_cost {
  * integration does not), timed by t: plan_time_apply's per-point terms, for `brdf-recon select`'s price. */
 void plan_time_point(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
 		     double theta_i, double rho, struct plan_point_cost *out);
+/* The survey (plan_order.c): a first auto sweep measures survey_k points of every incidence first, spread over its
+ * viewing zeniths and azimuths, then the route without them (each point once), so that its re-timing (sweep_retime.c)
+ * prices every incidence from the sample's own exposures after n_survey points (README "How long a sweep takes"). */
+#define PLAN_SURVEY_DEFAULT 6
+/* The survey's points per incidence for spec's plan r timed by t: spec->survey when ≥ 0, for -1 PLAN_SURVEY_DEFAULT
+ * when t's exposure prior lacks one of r's incidences (else 0); 0 for fixed integration, adaptive plans
+ * and a route whose first step has a move (a start position). */
+size_t plan_survey_k(const struct plan_spec *spec, const struct plan_timing *t, const struct plan_result *r);
+/* Reorder r (made by plan_make) for the survey (plan_survey_k points per incidence, at most an eighth of the
+ * incidence's points, at least one): those points first, in their own shortest path (plan_order_group) walked from
+ * its end so that it ends next to the route's first point, then the route's other points in its order; moves planned again, the ordering model's times recomputed (call plan_time_apply after), n_survey,
+ * survey_k, survey_motion_s set. r unchanged when k is 0, when it has a survey already, or when a move of the new
+ * order has no clear path. 0, or -1 with err (out of memory). */
+int plan_survey_apply(const struct plan_spec *spec, const struct bench_geom *g, const struct plan_timing *t,
+		      struct plan_result *r, struct acq_err *err);
 /* Free a result (NULL is fine). */
 void plan_result_free(struct plan_result *res);
 

@@ -93,6 +93,8 @@ json_t *plan_to_json(const struct plan_spec *s, const struct plan_result *r, boo
 			}
 			json_t *x = pos_json(&p->pos);
 			json_object_set_new(x, "request", json_integer((json_int_t)p->req));
+			if (i < r->n_survey)
+				json_object_set_new(x, "survey", json_true());
 			json_object_set_new(x, "status", json_string(status_name(r->req[p->req].status)));
 			json_object_set_new(x, "t_start_s", json_real(p->t_start_s));
 			json_object_set_new(x, "predicted_start_s", json_real(p->predicted_start_s));
@@ -115,6 +117,16 @@ json_t *plan_dry_run_json(const struct plan_spec *s, const struct bench_geom *g,
 	 * says so and what the same model predicts for a sample needing half or twice the estimate (each integration
 	 * time scaled: the band, its darks, HDR exposures and probes), the plan itself timed last. */
 	bool guess = s->integ_mode == PLAN_INTEG_AUTO && !(t->prior.sweep > 0 && t->prior.n_inc > 0);
+	/* the survey (plan_survey_apply) where the sample's exposures of some incidence are unknown: its cost is the
+	 * timed model's difference from the route without it (the extra motion) */
+	double route_s = NAN;
+	struct acq_err err = { 0 };
+	if (plan_survey_k(s, t, r) > 0 && r->n_survey == 0) {
+		plan_time_apply(s, g, t, r);
+		route_s = r->predicted_s;
+		if (plan_survey_apply(s, g, t, r, &err))
+			return NULL;
+	}
 	double est_ms = s->integ_ms > 0 ? s->integ_ms : t->probe_ms, at[2] = { NAN, NAN };
 	for (int k = 0; guess && k < 2; k++) {
 		struct plan_spec v = *s;
@@ -140,6 +152,15 @@ json_t *plan_dry_run_json(const struct plan_spec *s, const struct bench_geom *g,
 		}
 		json_object_set_new(o, "interval", x ? x : json_null());
 	}
+	if (o && r->n_survey > 0)
+		/* the survey: its points (survey_k per incidence, measured first), the time it adds (bench s), and the
+		 * basis of the prediction after it (the ETA re-timed from the survey's own exposures, sweep_retime.c) */
+		json_object_set_new(o, "survey", json_pack("{s:I,s:I,s:f,s:o,s:s}", "points", (json_int_t)r->n_survey,
+							   "per_incidence", (json_int_t)r->survey_k, "motion_s",
+							   r->survey_motion_s, "cost_s",
+							   isfinite(route_s) ? json_real(r->predicted_s - route_s)
+									     : json_null(),
+							   "then", "re-timed from the survey's exposures"));
 	if (o && guess)
 		json_object_set_new(o, "estimate", json_pack("{s:f,s:f,s:f}", "ms", est_ms, "predicted_at_half_s", at[0],
 							     "predicted_at_double_s", at[1]));

@@ -1,6 +1,6 @@
 /* plan_order: the order of one incidence group's points as an open path from a start row (nearest neighbour,
- * then 2-opt and Or-opt under the true move cost, optionally iterated with double-bridge kicks). Internal to
- * the planner (plan_int.h). */
+ * then 2-opt and Or-opt under the true move cost, optionally iterated with double-bridge kicks; internal to the
+ * planner, plan_int.h), and the survey's order of a planned route (plan_survey_k, plan_survey_apply: plan.h). */
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -301,3 +301,229 @@ void plan_order_group(const double *C, size_t n, const double *s, size_t *p, boo
 	free(nbr);
 }
 
+
+/* ---- the survey (plan.h plan_survey_apply) ---- */
+
+/* The detector zenith of a step as the survey's strata see it (rounded to 0.01°). */
+static double survey_level(const struct plan_step *st)
+{
+	return round(fabs(st->pos.det_theta) * 100) / 100;
+}
+
+static int cmp_dbl(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return (x > y) - (x < y);
+}
+
+/* The survey's picks of one incidence group, steps[first .. first + n) in route order: k of them, stratified over
+ * the group's detector zeniths in proportion to their points (the j-th pick at the zenith of the point of rank
+ * floor((j + f) · n / k) by zenith, f = frac(gi · 0.618…): the groups take different zeniths, so that over the
+ * incidences all are seen), and at that zenith the point whose azimuth is nearest 360° · frac(0.3 · gi + 0.7 · j)
+ * (a different azimuth per pick and group). Stratified by points, not by distinct zeniths: a zenith with few points
+ * (θo 0°, one direction; near the blind zone) weighs little in the incidence's mean (offline on the paper plan's
+ * databases, by distinct zeniths the survey's estimate of the rest's first exposures ran 1-4 % of the sweep low).
+ * Marks pick[i - first] for the chosen ones; their count. */
+static size_t survey_group(const struct plan_step *steps, size_t first, size_t n, size_t gi, size_t k, char *pick)
+{
+	double *lev = malloc((n ? n : 1) * sizeof *lev);
+	if (!lev)
+		return 0;
+	for (size_t i = 0; i < n; i++)
+		lev[i] = survey_level(&steps[first + i]);
+	qsort(lev, n, sizeof *lev, cmp_dbl);
+	size_t got = 0;
+	double f = fmod((double)gi * 0.6180339887498949, 1.0);
+	for (size_t j = 0; j < k && got < n; j++) {
+		double want_lev = lev[(size_t)fmin((double)n - 1, floor(((double)j + f) * (double)n / (double)k))];
+		double want_phi = 360.0 * fmod(0.3 * (double)gi + 0.7 * (double)j, 1.0);
+		size_t best = SIZE_MAX;
+		double bl = INFINITY, bp = INFINITY;
+		for (size_t i = 0; i < n; i++) {
+			if (pick[i])
+				continue;
+			double dl = fabs(survey_level(&steps[first + i]) - want_lev);
+			double dp = fabs(fmod(fmod(steps[first + i].pos.det_phi - want_phi, 360.0) + 540.0, 360.0) - 180.0);
+			if (dl < bl - 1e-9 || (dl < bl + 1e-9 && dp < bp)) {
+				best = i;
+				bl = dl;
+				bp = dp;
+			}
+		}
+		if (best == SIZE_MAX)
+			break;
+		pick[best] = 1;
+		got++;
+	}
+	free(lev);
+	return got;
+}
+
+/* r's steps reached in the order ord[0..n) (indices into old): each move planned again from the previous step (the
+ * first keeps none), the ordering model's times, travel and detours recomputed. 0, or -1 (out of memory, or a move
+ * no clear path makes: r is then unchanged). */
+static int restep(const struct bench_geom *g, struct plan_result *r, const struct plan_step *old, const size_t *ord)
+{
+	size_t n = r->n_steps;
+	struct plan_step *st = calloc(n ? n : 1, sizeof *st);
+	struct plan_wp *wp = calloc((n ? n : 1) * PLAN_MAX_WP, sizeof *wp);
+	if (!st || !wp) {
+		free(st);
+		free(wp);
+		return -1;
+	}
+	size_t nw = 0, detours = 0;
+	double clock = 0, motion = 0, dwell = 0, travel[3] = { 0, 0, 0 };
+	for (size_t i = 0; i < n; i++) {
+		st[i] = old[ord[i]];
+		st[i].first_wp = nw;
+		st[i].n_wp = 0;
+		st[i].move_s = st[i].settle_s = 0;
+		st[i].detour = false;
+		if (i > 0) {
+			size_t k = 0;
+			const struct plan_pos cur = st[i - 1].pos;
+			double t = plan_move(g, &cur, &st[i].pos, &wp[nw], &k);
+			if (t < 0) {
+				free(st);
+				free(wp);
+				return -1;
+			}
+			double segs = 0;
+			for (size_t w = 0; w < k; w++) {
+				const struct plan_pos *a = w ? &wp[nw + w - 1].pos : &cur, *b = &wp[nw + w].pos;
+				segs += wp[nw + w].duration_s;
+				travel[0] += fabs(b->laser_theta - a->laser_theta);
+				travel[1] += fabs(b->det_theta - a->det_theta);
+				travel[2] += fabs(b->det_phi - a->det_phi);
+			}
+			st[i].n_wp = k;
+			st[i].move_s = segs;
+			st[i].settle_s = t - segs;
+			st[i].detour = k > 1;
+			detours += k > 1;
+			nw += k;
+		}
+		st[i].t_start_s = clock;
+		clock += st[i].move_s + st[i].settle_s + st[i].dwell_s;
+		motion += st[i].move_s + st[i].settle_s;
+		dwell += st[i].dwell_s;
+	}
+	free(r->steps);
+	free(r->wps);
+	r->steps = st;
+	r->wps = wp;
+	r->n_wps = nw;
+	r->n_detours = detours;
+	r->duration_s = clock;
+	r->motion_s = motion;
+	r->dwell_s = dwell;
+	memcpy(r->travel_deg, travel, sizeof travel);
+	return 0;
+}
+
+size_t plan_survey_k(const struct plan_spec *s, const struct plan_timing *t, const struct plan_result *r)
+{
+	if (s->integ_mode != PLAN_INTEG_AUTO || s->adaptive || !r || r->n_steps == 0 || r->steps[0].n_wp > 0 ||
+	    s->survey == 0)
+		return 0;
+	if (s->survey > 0)
+		return (size_t)s->survey;
+	/* the default: only where the exposure prior lacks one of the plan's incidences */
+	const struct plan_prior *p = t && t->prior.sweep > 0 ? &t->prior : NULL;
+	for (size_t i = 0; i < r->n_steps; i++) {
+		double th = fabs(r->steps[i].pos.laser_theta);
+		bool seen = false;
+		for (size_t j = 0; p && j < p->n_inc && j < PLAN_PRIOR_MAX_INC && !seen; j++)
+			seen = fabs(p->inc[j].theta_i - th) <= PLAN_PRIOR_SAME_DEG;
+		if (!seen)
+			return PLAN_SURVEY_DEFAULT;
+	}
+	return 0;
+}
+
+int plan_survey_apply(const struct plan_spec *s, const struct bench_geom *g, const struct plan_timing *t,
+		      struct plan_result *r, struct acq_err *err)
+{
+	size_t k = plan_survey_k(s, t, r), n = r ? r->n_steps : 0;
+	if (k == 0 || r->n_survey > 0)
+		return 0;
+	char *pick = calloc(n, 1);
+	size_t *ord = malloc(n * sizeof *ord);
+	struct plan_step *old = malloc(n * sizeof *old);
+	if (!pick || !ord || !old) {
+		free(pick);
+		free(ord);
+		free(old);
+		return acq_errf(err, ACQ_E_NOMEM, "the survey's order: out of memory");
+	}
+	memcpy(old, r->steps, n * sizeof *old);
+	/* the incidence groups: runs of one laser zenith in route order (start of group j in gs[j]) */
+	size_t ng = 0, ns = 0, w = 0;
+	size_t *gstart = malloc((n + 1) * sizeof *gstart);
+	if (!gstart) {
+		free(pick);
+		free(ord);
+		free(old);
+		return acq_errf(err, ACQ_E_NOMEM, "the survey's order: out of memory");
+	}
+	for (size_t a = 0; a < n;) {
+		size_t b = a;
+		while (b < n && fabs(old[b].pos.laser_theta - old[a].pos.laser_theta) <= 1e-6)
+			b++;
+		gstart[ng++] = a;
+		a = b;
+	}
+	gstart[ng] = n;
+	/* at most an eighth of a group (at least one point): a small plan's survey is not most of it */
+	for (size_t j = 0; j < ng; j++) {
+		size_t gn = gstart[j + 1] - gstart[j], kj = k < gn / 8 ? k : gn / 8 ? gn / 8 : 1;
+		ns += survey_group(old, gstart[j], gn, j, kj, pick + gstart[j]);
+	}
+	/* the survey's own path over its picks (all incidences together: the laser arm is the cheap axis to move
+	 * between two picks of different viewing directions), ordered from the route's first point and then walked
+	 * backwards, so that it ends next to where the route starts */
+	size_t *sp = malloc((ns ? ns : 1) * sizeof *sp), *p = malloc((ns ? ns : 1) * sizeof *p);
+	double *C = malloc((ns ? ns * ns : 1) * sizeof *C), *s0 = malloc((ns ? ns : 1) * sizeof *s0);
+	if (!sp || !p || !C || !s0) {
+		free(sp);
+		free(p);
+		free(C);
+		free(s0);
+		free(gstart);
+		free(pick);
+		free(ord);
+		free(old);
+		return acq_errf(err, ACQ_E_NOMEM, "the survey's order: out of memory");
+	}
+	size_t m = 0;
+	for (size_t i = 0; i < n; i++)
+		if (pick[i])
+			sp[m++] = i;
+	for (size_t a = 0; a < ns; a++) {
+		s0[a] = plan_straight_s(g, &old[0].pos, &old[sp[a]].pos);
+		for (size_t b = 0; b < ns; b++)
+			C[a * ns + b] = a == b ? 0 : plan_straight_s(g, &old[sp[a]].pos, &old[sp[b]].pos);
+	}
+	plan_order_group(C, ns, s0, p, true);
+	for (size_t a = ns; a-- > 0;)
+		ord[w++] = sp[p[a]];
+	free(sp);
+	free(p);
+	free(C);
+	free(s0);
+	for (size_t i = 0; i < n; i++)
+		if (!pick[i])
+			ord[w++] = i;
+	double before = r->motion_s;
+	if (ns > 0 && ns < n && restep(g, r, old, ord) == 0) {
+		r->n_survey = ns;
+		r->survey_k = k;
+		r->survey_motion_s = r->motion_s - before;
+	} /* else (no clear move between two of the new neighbours, out of memory) the route as it was: no survey */
+	free(gstart);
+	free(pick);
+	free(ord);
+	free(old);
+	return 0;
+}

@@ -14,6 +14,9 @@
  *   sample: green-paint-A3                  # the sample's name: a later sweep of the same name times its auto
  *                                           # exposures from this one's (the exposure prior, plan.h)
  *   kind: grid | fibonacci | adaptive       # optional; adaptive: see plan_adaptive.c
+ *   survey: 6                               # auto: points per incidence measured first (plan_survey_apply;
+ *                                           # -1: 6 where the sample's exposure prior lacks an incidence; 0, the
+ *                                           # default: none)
  * RANGE is a number, a list of numbers, {from, to, count} or {from, to, step}. */
 #include <math.h>
 #include <stdio.h>
@@ -174,12 +177,12 @@ int plan_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err
 	if (!s)
 		return acq_errf(err, ACQ_E_NOMEM, "out of memory");
 	const char *name = "plan";
-	long long averages = 1, recip = 0;
+	long long averages = 1, recip = 0, survey = 0;
 	int policy = 0;
 	static const char *const policies[] = { "drop", "move", NULL };
 	/* a misspelt key is reported as such, before any "missing key" it causes */
 	static const char *const keys[] = { "name", "incidence", "observation", "integration", "averages",
-					    "reciprocal_pairs", "blind_points", "kind", "sample", NULL };
+					    "reciprocal_pairs", "blind_points", "kind", "sample", "survey", NULL };
 	static const char *const kinds[] = { "grid", "fibonacci", "adaptive", NULL };
 	int kind = -1;
 	if (yc_get(root, "kind") && yc_enum(root, "kind", false, kinds, &kind, err))
@@ -250,8 +253,10 @@ int plan_parse(struct yc_node *root, struct plan_spec **out, struct acq_err *err
 
 	if (plan_integration_parse(root, s, err) || yc_int(root, "averages", false, 1, 100000, &averages, err) ||
 	    yc_int(root, "reciprocal_pairs", false, 0, PLAN_MAX_VALUES, &recip, err) ||
-	    yc_enum(root, "blind_points", false, policies, &policy, err))
+	    yc_enum(root, "blind_points", false, policies, &policy, err) ||
+	    yc_int(root, "survey", false, -1, PLAN_MAX_PER_INCIDENCE, &survey, err))
 		goto fail;
+	s->survey = (int)survey;
 	s->averages = (int)averages;
 	s->reciprocal_pairs = (size_t)recip;
 	s->blind_policy = policy == 1 ? PLAN_BLIND_MOVE : PLAN_BLIND_DROP;

@@ -16,6 +16,9 @@ paper's 10x10x10 (auto, estimate 50 ms) at the demo's time scale 35, and its rep
 small fixed one only;
 BENCH_DURATION_CASES=a,b: those cases (name@scale for one time scale; name a repeat with the case before it).
 BENCH_DURATION_SAMPLE=MATERIAL: that simulator material is placed after the reference (default green-paint).
+BENCH_DURATION_SURVEY=K: the auto plans measure K points per incidence first (plan key survey:; -1: 6 where the
+prior lacks an incidence, so a first sweep's and not its repeat's; 0 or unset: none); the ETA right after the survey
+is reported with the 25/50/75 % checkpoints.
 BENCH_DURATION_LOG=debug: the daemon logs at that level (debug: a stall line per point: where the host's time went).
 Also reported: the simulator's own lag (acq-sim ctl status lag_s: its 1 ms waits ending late, the host not keeping
 the time scale) over the sweep and its share of the measured time; the host's time per point (host_per_point: real
@@ -51,6 +54,10 @@ QUICK = open(os.path.join(L.SRC, "config", "plan-quick.yaml")).read()
 FIXED = QUICK.replace("mode: auto, target_peak: 0.8, estimate_ms: 20, max_ms: 2000", "mode: fixed, ms: 20") \
              .replace("name: quick-2x2x4", "name: quick-fixed")
 PAPER = open(os.path.join(L.SRC, "config", "plan-paper-10x10x10.yaml")).read()
+# BENCH_DURATION_SURVEY=K: the auto plans say survey: K (0: none, the route alone; plan_survey_apply)
+if os.environ.get("BENCH_DURATION_SURVEY"):
+    _sv = "survey: %d\n" % int(os.environ["BENCH_DURATION_SURVEY"])
+    QUICK, PAPER = QUICK + _sv, PAPER + _sv
 
 
 def wait_recon(b, sid, timeout=900):
@@ -195,6 +202,19 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                     if per_pt and left > 0:
                         eta_parts[frac] = eta_split(per_pt, e["done"], total, left)
                     break
+        # the ETA right after the survey (acqctl plan's survey: its points are measured first, then the sweep is
+        # re-timed from their exposures): the first progress event at or past the survey's points
+        n_survey = (pj.get("survey") or {}).get("points") or 0
+        eta_sv = eta_sv_iv = eta_sv_host = None
+        for t, e in prog if n_survey else []:
+            if e["done"] >= n_survey and e.get("eta_s") is not None:
+                left = finished - t
+                if left > 0:
+                    eta_sv = e["eta_s"] / left - 1
+                    eta_sv_host = host_known(host_pts, t, e["eta_s"], finished)
+                    if e.get("eta_low_s") is not None and e.get("eta_high_s") is not None:
+                        eta_sv_iv = (e["eta_low_s"] / left - 1, e["eta_high_s"] / left - 1)
+                break
         if eta_parts:
             print("%-17s ETA error split at 25/50/75 %%: %s" % (name, "; ".join(
                 "%d %%: model %+.1f %%, host %+.1f %% (the rest's host %.1f ms/point, the recent past's %.1f)" % (
@@ -221,7 +241,11 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
                     redos=redos, estimate_ms=es.get("ms"), predicted_at_half_s=es.get("predicted_at_half_s"),
                     predicted_at_double_s=es.get("predicted_at_double_s"), predicted_at_median_s=at_median,
                     error_at_median=(at_median / measured - 1 if at_median else None),
-                    prior_host_ms=(1000 * prior["host_per_point_s"] if "host_per_point_s" in prior else None))
+                    prior_host_ms=(1000 * prior["host_per_point_s"] if "host_per_point_s" in prior else None),
+                    survey_points=n_survey, survey_cost_s=(pj.get("survey") or {}).get("cost_s"), eta_survey=eta_sv,
+                    eta_survey_host=eta_sv_host,
+                    eta_survey_low=eta_sv_iv[0] if eta_sv_iv else None,
+                    eta_survey_high=eta_sv_iv[1] if eta_sv_iv else None)
         # the prediction's interval (acqctl plan --json interval: where the exposures are unknown) and whether it
         # covers the measured time; the ETA's interval at 25/50/75 % as errors of its ends against the time left
         iv = pj.get("interval") or {}
@@ -234,6 +258,15 @@ def run_case(name, plan_text, scale, bench=None, keep_open=False, after=None):
         for k in TERMS:
             row["pred_" + k] = (pj.get("predicted_terms") or {}).get(k)
             row["meas_" + k] = meas_terms[k]
+        if n_survey:
+            print("%-17s survey: %d points (%s per incidence) first, cost %s bench s predicted; ETA error right after "
+                  "it %s%s" % (name, n_survey, (pj.get("survey") or {}).get("per_incidence"),
+                              "-" if row["survey_cost_s"] is None else "%.1f" % row["survey_cost_s"],
+                              "-" if eta_sv is None else "%+.1f %%%s" % (100 * eta_sv, "" if eta_sv_host is None else
+                                                                         " (had the host's time of the rest been "
+                                                                         "known: %+.1f %%)" % (100 * eta_sv_host)),
+                              "" if not eta_sv_iv else " (interval [%+.1f %%, %+.1f %%])" % (
+                                  100 * eta_sv_iv[0], 100 * eta_sv_iv[1])), flush=True)
         print(terms_line(name, pj.get("predicted_terms") or {}, meas_terms, shot_check, total, scale)
               + "; %d saturation redos" % redos, flush=True)
         return (row, b) if keep_open else row

@@ -2,7 +2,9 @@
 """A full sweep on the simulated bench (acq-sim + acquisitiond): white reference, sample swap, every visible
 planned point measured once, calibrated values against the simulator's ground truth (acq-sim truth --eval at
 the measured angles) in z-scores over every sample and wavelength, CSV export and the recorded events."""
+import json
 import os
+import subprocess
 import sys
 import time
 
@@ -18,6 +20,7 @@ observation:
 integration: {mode: auto, target_peak: 0.8, estimate_ms: 20, max_ms: 2000}
 averages: 4
 blind_points: drop
+survey: 1
 """
 
 
@@ -47,6 +50,24 @@ def run():
         assert row["state"] == "completed", "sweep ended %s: %s" % (row["state"], row.get("events", [])[:3])
         n, cal = L.check_points(b, sid)
         L.say("points: %d planned, %d done with a calibrated sample" % (n, cal))
+        # the survey (plan key survey: 1, plan_survey_apply) is measured first: the plan's survey steps (acqctl plan,
+        # the same bench) are the sweep's first points, every incidence among them, and each direction is stored once
+        f = os.path.join(b.dir, "it-full.yaml")
+        open(f, "w").write(PLAN)
+        pj = json.loads(subprocess.run([os.path.join(L.BUILD, "acqctl"), "--json", "plan", f, "--config", b.conf,
+                                        "--points"], capture_output=True, text=True, check=True).stdout)["plan"]
+        ns = (pj.get("survey") or {}).get("points", 0)
+        want = [(round(abs(x["laser.theta"]), 2), round(abs(x["detector.theta"]), 2)) for x in pj["steps"][:ns]]
+        assert ns == 2 and all(x.get("survey") for x in pj["steps"][:ns]), "survey %s" % pj.get("survey")
+        db = b.db()
+        got = db.execute("SELECT round(theta_i, 2), round(theta_o, 2) FROM points WHERE sweep_id = ? AND "
+                         "order_index < ? ORDER BY order_index", (sid, ns)).fetchall()
+        dirs = db.execute("SELECT count(DISTINCT printf('%.2f %.2f %.2f', theta_i, theta_o, phi_o)) FROM points "
+                          "WHERE sweep_id = ? AND state = 'done'", (sid,)).fetchone()[0]
+        db.close()
+        assert [tuple(g) for g in got] == want and len({g[0] for g in got}) == 2, \
+            "survey points %s, the plan's %s" % (got, want)
+        assert dirs == n, "%d distinct directions stored for %d points" % (dirs, n)
         zs, nan = L.zscores(b, sid)
         z = np.array(zs)
         frac3 = float(np.mean(np.abs(z) < 3))

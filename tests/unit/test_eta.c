@@ -213,6 +213,41 @@ static void test_no_plan(void **state)
 	assert_true(fabs(eta_update(&e, 2, 5, NAN, NAN, 6, 6) - 9) < 1e-9);
 }
 
+/* eta_forget (a survey's end): the excess measured so far is dropped, the ETA is the plan's again (the scale kept),
+ * and the next points' own excess takes over; eta_host is the host's mean over the points measured with their work. */
+static void test_forget(void **state)
+{
+	(void)state;
+	struct eta e;
+	eta_reset(&e);
+	double real = 100, loop = 1000;
+	eta_running(&e, true, loop, real);
+	real += 2, loop += 20;
+	eta_update(&e, 1, 20, 20, 400, loop, real); /* the first interval: not measured */
+	assert_true(isnan(eta_host(&e)));
+	for (int d = 2; d <= 10; d++) { /* 5 real s a point for 20 bench s planned, of which 18 bench s of work; the
+					 * last one 0.9 s longer (a burst) */
+		real += d == 10 ? 5.9 : 5, loop += d == 10 ? 59 : 50; /* the clocks' ratio stays 10 */
+		eta_work(&e, 18.0 * d);
+		eta_update(&e, d, 20, 20.0 * d, 400, loop, real);
+	}
+	/* the host: 5 - 18 / 10 = 3.2 s per point, and the burst in the mean (8 points with their work: + 0.9 / 8), not
+	 * in a median */
+	assert_true(fabs(eta_host(&e) - (3.2 + 0.9 / 8)) < 1e-6); /* the window keeps floats */
+	double before = eta_update(&e, 10, 20, 200, 400, loop, real);
+	assert_true(before > 10 * 2 + 5); /* the plan's 2 s a point and most of the 3 s excess */
+	eta_forget(&e);
+	assert_true(fabs(e.scale - 10) < 1e-9);
+	double t = eta_update(&e, 10, 20, 200, 400, loop, real);
+	assert_true(fabs(t - 20) < 1e-9); /* the plan's rest at the scale, nothing more */
+	/* the route's points as planned: the ETA stays the plan's */
+	for (int d = 11; d <= 14; d++) {
+		real += 2, loop += 20;
+		t = eta_update(&e, d, 20, 20.0 * d, 400, loop, real);
+		assert_true(fabs(t - 2.0 * (20 - d)) < 1e-6);
+	}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -223,6 +258,7 @@ int main(void)
 		cmocka_unit_test(test_no_plan),
 		cmocka_unit_test(test_host_burst_robust),
 		cmocka_unit_test(test_host_split_unbiased),
+		cmocka_unit_test(test_forget),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

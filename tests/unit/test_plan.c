@@ -596,6 +596,137 @@ static void test_paper_plan(void **state)
 	plan_spec_free(s);
 }
 
+/* The survey (plan_survey_apply): every point still measured once, survey_k of each incidence first, stratified over
+ * the viewing zeniths and azimuths, the route's other points after them in the route's order; safe moves and times
+ * that add up (check_result). Decided by the spec and the prior (plan_survey_k). */
+static void test_survey(void **state)
+{
+	(void)state;
+	const char *src = getenv("ACQ_SRC");
+	char path[4096];
+	snprintf(path, sizeof path, "%s/config/plan-paper-10x10x10.yaml", src ? src : ".");
+	struct plan_spec *s = NULL;
+	struct acq_err err = { 0 };
+	if (plan_load(path, &s, &err))
+		fail_msg("%s", err.msg);
+	assert_int_equal(s->survey, 0); /* no key: none (opt-in, session 18's figures) */
+	s->survey = -1;                  /* survey: -1, where the prior lacks an incidence */
+	struct bench_geom g;
+	bench_defaults(&g);
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	struct plan_result *r0 = NULL, *r = NULL;
+	if (plan_make(s, &g, &r0, &err) || plan_make(s, &g, &r, &err))
+		fail_msg("%s", err.msg);
+	assert_int_equal(plan_survey_k(s, &tm, r), PLAN_SURVEY_DEFAULT); /* auto, no prior */
+	assert_int_equal(plan_survey_apply(s, &g, &tm, r, &err), 0);
+	size_t k = PLAN_SURVEY_DEFAULT, ns = r->n_survey;
+	assert_int_equal(r->survey_k, k);
+	assert_int_equal(ns, 10 * k); /* 86-87 points per incidence: an eighth is more than k */
+	assert_int_equal(r->n_steps, r0->n_steps);
+	check_result(&g, s, r); /* each kept point once, clear moves, times add up */
+	assert_int_equal(r->steps[0].n_wp, 0);
+	assert_true(fabs(r->survey_motion_s - (r->motion_s - r0->motion_s)) < 1e-9);
+	assert_true(r->survey_motion_s > 0);
+	/* the route's other points in the route's order */
+	char *in_survey = calloc(r->n_req, 1);
+	assert_non_null(in_survey);
+	for (size_t i = 0; i < ns; i++)
+		in_survey[r->steps[i].req] = 1;
+	size_t j = ns;
+	for (size_t i = 0; i < r0->n_steps; i++)
+		if (!in_survey[r0->steps[i].req])
+			assert_int_equal(r->steps[j++].req, r0->steps[i].req);
+	assert_int_equal(j, r->n_steps);
+	/* stratified: per incidence k points at k different viewing zeniths and azimuths spread around (no half-circle
+	 * holds them all); over the incidences every zenith with at least 5 % of the plan's points seen */
+	double lev[16];
+	size_t nlev = 0, cnt[16] = { 0 }, hit[16] = { 0 };
+	for (size_t i = 0; i < r->n_steps; i++) {
+		double th = round(fabs(r->steps[i].pos.det_theta) * 100) / 100;
+		size_t l = 0;
+		while (l < nlev && lev[l] != th)
+			l++;
+		if (l == nlev) {
+			assert_true(nlev < 16);
+			lev[nlev++] = th;
+		}
+		cnt[l]++;
+		if (i < ns)
+			hit[l]++;
+	}
+	for (size_t l = 0; l < nlev; l++)
+		if (cnt[l] >= r->n_steps / 20)
+			if (hit[l] == 0)
+				fail_msg("viewing zenith %g° (%zu points) not in the survey", lev[l], cnt[l]);
+	for (size_t a = 0; a < 10; a++) {
+		double th_i = s->incidence[a], zen[16], az[16];
+		size_t m = 0;
+		for (size_t i = 0; i < ns; i++)
+			if (fabs(fabs(r->steps[i].pos.laser_theta) - th_i) < 1e-6) {
+				assert_true(m < 16);
+				zen[m] = round(fabs(r->steps[i].pos.det_theta) * 100) / 100;
+				az[m++] = fmod(r->steps[i].pos.det_phi + 360, 360);
+			}
+		assert_int_equal(m, k);
+		size_t distinct = 0;
+		for (size_t x = 0; x < m; x++) {
+			bool first = true;
+			for (size_t y = 0; y < x; y++)
+				first &= zen[y] != zen[x];
+			distinct += first;
+		}
+		if (distinct < k - 1)
+			fail_msg("incidence %g°: %zu distinct viewing zeniths in %zu survey points", th_i, distinct, k);
+		double widest = 0; /* the widest arc without a survey azimuth, from each azimuth to the next one around */
+		for (size_t x = 0; x < m; x++) {
+			double gap = 360;
+			for (size_t y = 0; y < m; y++) {
+				double d = fmod(az[y] - az[x] + 360, 360);
+				if (d > 1e-6)
+					gap = fmin(gap, d);
+			}
+			widest = fmax(widest, gap);
+		}
+		if (!(widest < 180))
+			fail_msg("incidence %g°: the survey's azimuths leave %g° empty", th_i, widest);
+	}
+	/* once only; the decision: fixed integration, survey: 0, a prior with every incidence: none; an explicit k */
+	struct plan_step first = r->steps[0];
+	assert_int_equal(plan_survey_apply(s, &g, &tm, r, &err), 0);
+	assert_int_equal(r->n_survey, ns);
+	assert_int_equal(r->steps[0].req, first.req);
+	s->survey = 0;
+	assert_int_equal(plan_survey_k(s, &tm, r0), 0);
+	s->survey = 3;
+	assert_int_equal(plan_survey_k(s, &tm, r0), 3);
+	s->survey = -1;
+	tm.prior.sweep = 7;
+	tm.prior.n_inc = 10;
+	for (size_t a = 0; a < 10; a++)
+		tm.prior.inc[a] = (struct plan_prior_inc){ .theta_i = s->incidence[a], .points = 80, .mean_ms = 50 };
+	assert_int_equal(plan_survey_k(s, &tm, r0), 0); /* a repeat */
+	tm.prior.n_inc = 9;
+	assert_int_equal(plan_survey_k(s, &tm, r0), PLAN_SURVEY_DEFAULT); /* 67.5° not measured */
+	s->integ_mode = PLAN_INTEG_FIXED;
+	assert_int_equal(plan_survey_k(s, &tm, r0), 0);
+	free(in_survey);
+	plan_result_free(r0);
+	plan_result_free(r);
+	plan_spec_free(s);
+	/* the quick plan (two incidences of 7 and 8 points): one point of each, not most of the plan */
+	snprintf(path, sizeof path, "%s/config/plan-quick.yaml", src ? src : ".");
+	if (plan_load(path, &s, &err) || plan_make(s, &g, &r, &err))
+		fail_msg("%s", err.msg);
+	s->survey = -1;
+	plan_timing_defaults(&tm);
+	assert_int_equal(plan_survey_apply(s, &g, &tm, r, &err), 0);
+	assert_int_equal(r->n_survey, 2);
+	check_result(&g, s, r);
+	plan_result_free(r);
+	plan_spec_free(s);
+}
+
 static void test_plan_file_forms(void **state)
 {
 	(void)state;
@@ -939,6 +1070,7 @@ int main(void)
 		cmocka_unit_test(test_escape),
 		cmocka_unit_test(test_safe_vs_clear),
 		cmocka_unit_test(test_paper_plan),
+		cmocka_unit_test(test_survey),
 		cmocka_unit_test(test_random_plans),
 		cmocka_unit_test(test_bound_vs_exhaustive),
 		cmocka_unit_test(test_order_kicks),

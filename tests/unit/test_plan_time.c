@@ -491,6 +491,17 @@ static void test_estimate_range(void **state)
 	json_decref(o);
 	plan_time_apply(f.spec, &f.g, &t, f.res);
 	assert_true(fabs(f.res->steps[f.res->n_steps - 1].predicted_start_s - last) < TOL);
+	/* a first sweep's survey (survey: -1, the prior lacks the incidences: one point of each here, at most an eighth
+	 * of its 8): the dry run orders it first and says what it adds to the route's time */
+	f.spec->survey = -1;
+	o = plan_dry_run_json(f.spec, &f.g, &t, f.res, false);
+	json_t *sv = json_object_get(o, "survey");
+	assert_true(json_is_object(sv));
+	assert_int_equal(json_integer_value(json_object_get(sv, "points")), 2);
+	assert_int_equal(f.res->n_survey, 2);
+	assert_true(fabs(json_real_value(json_object_get(o, "predicted_s")) - nominal -
+			 json_real_value(json_object_get(sv, "cost_s"))) < TOL);
+	json_decref(o);
 	/* with an exposure prior the sample's times are known */
 	t.prior = (struct plan_prior){ .sweep = 3, .n_inc = 1 };
 	t.prior.inc[0] = (struct plan_prior_inc){ .theta_i = 30, .points = 8, .median_ms = 50, .mean_ms = 55,

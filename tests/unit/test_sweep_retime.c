@@ -372,12 +372,110 @@ static void test_retime_incremental(void **state)
 	store_close(st);
 }
 
+/* A plan with a survey (plan_survey_apply): re-timed once, at the survey's end (not at the incidence changes within
+ * it), from rows of the survey's points alone (every incidence), their pooled share the route's default (the survey's
+ * points are not consecutive in the route) and the host's time the live ETA's (sweep_retime.host_hint: no route point
+ * done yet); the re-timed plan is then the plan timed with those rows by hand, and its interval none (every incidence
+ * measured). The simulated sample needs one time per incidence (32, 64, 128 ms: the survey measures it exactly). */
+static void test_retime_survey(void **state)
+{
+	(void)state;
+	static const char *PS = "name: s\nsample: dark paint\nincidence: {theta_deg: [10, 30, 50]}\n"
+				"observation: {theta_deg: [20, 35, 50, 65], phi_deg: [0, 60, 120, 180, 240, 300]}\n"
+				"integration: {mode: auto, estimate_ms: 20, max_ms: 2000}\naverages: 2\nblind_points: drop\n"
+				"survey: 2\n";
+	static const double inc_ms[3] = { 32, 64, 128 }; /* rungs 10, 12, 14 of 1 ms · √2^k */
+	int seen50 = 0; /* 50°: its second point at 512 ms (rung 18): the row's rungs are then 14..18 */
+	char path[300];
+	struct store *st = ut_store_new(path, sizeof path, ut_dir, "survey.db");
+	struct bench_geom g;
+	bench_defaults(&g);
+	g.readout_s = 0.01;
+	struct plan_spec *spec = NULL;
+	struct plan_result *r = NULL, *r2 = NULL;
+	struct acq_err err = { 0 };
+	assert_int_equal(plan_load_string("s.yaml", PS, &spec, &err), 0);
+	assert_int_equal(spec->survey, 2);
+	struct plan_timing tm;
+	plan_timing_defaults(&tm);
+	tm.reference = false;
+	tm.dark_every = -1; /* the shipped configurations': darks by rung, kept across incidences */
+	assert_int_equal(plan_make(spec, &g, &r, &err), 0);
+	assert_int_equal(plan_survey_apply(spec, &g, &tm, r, &err), 0);
+	assert_int_equal(r->n_survey, 6);
+	plan_time_apply(spec, &g, &tm, r);
+	size_t n = r->n_steps;
+	struct store_point_new pts[72];
+	assert_true(n <= 72);
+	for (size_t i = 0; i < n; i++)
+		pts[i] = (struct store_point_new){ (int)i, fabs(r->steps[i].pos.laser_theta), 0,
+						   fabs(r->steps[i].pos.det_theta), 0 };
+	struct store_sweep_new nw = { .name = "s", .plan_text = PS, .config_snapshot = "{}", .software_version = "test",
+				      .created_at = 1000, .sample = "dark paint", .auto_exposure = true };
+	int64_t sid = 0;
+	assert_int_equal(store_sweep_create(st, &nw, pts, (int)n, &sid, &err), 0);
+	struct sweep_retime rt = { 0 };
+	sweep_retime_setup(&rt, spec, &tm);
+	sweep_retime_survey(&rt, spec, r);
+	assert_true(rt.on);
+	assert_int_equal(rt.survey, 6);
+	double real = 1000;
+	for (size_t done = 1; done <= 6; done++) {
+		size_t i = done - 1;
+		int order;
+		int64_t pt;
+		assert_int_equal(store_sweep_next_point(st, sid, &order, &pt, &err), 0);
+		assert_int_equal(order, (int)i);
+		double th = fabs(r->steps[i].pos.laser_theta);
+		real += 3; /* the survey's long moves */
+		double ms = th < 20 ? inc_ms[0] : th < 40 ? inc_ms[1] : seen50++ ? 512 : inc_ms[2];
+		put(st, sid, pt, "sample", ms, 2, true, real, &r->steps[i].pos);
+		/* never within the survey, though its points change incidence; at its end whatever the next incidence */
+		assert_int_equal(sweep_retime_due(&rt, r, (int)done), done == 6);
+	}
+	rt.host_hint = 0.003;
+	assert_int_equal(sweep_retime_apply(&rt, 6, st, sid, spec, &g, r, &err), 1);
+	assert_false(sweep_retime_due(&rt, r, 6));
+	const struct plan_prior *p = &rt.tm.prior;
+	assert_int_equal(p->n_inc, 3);
+	struct plan_timing th = tm; /* the same rows by hand */
+	th.prior = (struct plan_prior){ .sweep = sid, .host_per_point_s = 0.003, .host_points = 1, .n_inc = 3 };
+	for (size_t k = 0; k < 3; k++) {
+		double mean = k < 2 ? inc_ms[k] : (128 + 512) / 2.0;
+		assert_int_equal(p->inc[k].points, 2);
+		assert_true(p->inc[k].mean_ms == mean && p->inc[k].median_ms == mean);
+		assert_true(p->inc[k].pooled_per_point == PLAN_PROBE_POOL && p->inc[k].pooled_ms == 0);
+		/* the rungs between the survey's shortest and longest time (the route's points use them all) */
+		uint64_t rungs = k < 2 ? (uint64_t)1 << (10 + 2 * k) : (uint64_t)0x1f << 14;
+		assert_true(p->inc[k].rungs == rungs);
+		th.prior.inc[k] = (struct plan_prior_inc){ .theta_i = p->inc[k].theta_i, .points = 2, .mean_ms = mean,
+							    .median_ms = mean, .spread = k < 2 ? 1 : 4, .rungs = rungs,
+							    .darks_per_clear = k < 2 ? 1 : 5,
+							    .pooled_per_point = PLAN_PROBE_POOL };
+	}
+	assert_true(p->host_per_point_s == 0.003 && p->host_points == 1);
+	assert_int_equal(plan_make(spec, &g, &r2, &err), 0);
+	assert_int_equal(plan_survey_apply(spec, &g, &tm, r2, &err), 0);
+	plan_time_apply(spec, &g, &th, r2);
+	print_message("re-timed at the survey's end: %.6f s (its first %.6f s the survey's), by hand %.6f s\n",
+		      r->predicted_s, r->steps[6].predicted_start_s, r2->predicted_s);
+	assert_true(fabs(r->predicted_s - r2->predicted_s) < 1e-9 * r2->predicted_s);
+	assert_int_equal(sweep_retime_bounds(&rt, spec, &g, r, &err), 0);
+	assert_int_equal(rt.iv, PLAN_IV_NONE); /* every incidence measured: the interval is the point */
+	sweep_retime_end(&rt);
+	plan_result_free(r);
+	plan_result_free(r2);
+	plan_spec_free(spec);
+	store_close(st);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_retime_eta),
 		cmocka_unit_test(test_retime_who),
 		cmocka_unit_test(test_retime_incremental),
+		cmocka_unit_test(test_retime_survey),
 	};
 	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);
 }
