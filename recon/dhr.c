@@ -424,19 +424,35 @@ static double width_score(struct width_ctx *w, double a)
 	return ss / (double)(w->n * w->nc);
 }
 
+/* The data at the centres (imputed values included), as refit_trend: f[l*n + k] for every channel of m. */
+static void width_data(const struct recon_model *m, double *f)
+{
+	size_t n = m->n, L = m->nwl;
+	for (size_t k = 0; k < n; k++) {
+		double b[TREND_NB];
+		trend_at(m, m->ctr + 6 * k, b);
+		for (size_t l = 0; l < L; l++)
+			f[l * n + k] = fmax(exp(fmin(m->g[l * n + k] + log(trend_factor(m, b, l)), G_MAX)) - m->eps[l], 0.0);
+	}
+}
+
 static int width_sd(const struct recon_model *m, const double *A, size_t nth, const double *theta, const double *dhr,
 		    double *sw, struct acq_err *err)
 {
 	size_t n = m->n, L = m->nwl;
 	if (m->trend == RECON_TREND_NONE || m->transform != RECON_T_LOG || !(m->trend_alpha > 0))
 		return 0;
-	struct width_ctx w = { .m = m, .n = n, .nc = L < WIDTH_NCH ? L : WIDTH_NCH };
+	/* the width is searched on the whole model's channels even for a view of some of them (select's value
+	 * channels: their σ must be the whole model's σ on those channels, test_recon_select test_value_channels) */
+	const struct recon_model *mw = m->whole ? m->whole : m;
+	size_t Lw = mw->nwl;
+	struct width_ctx w = { .m = mw, .n = n, .nc = Lw < WIDTH_NCH ? Lw : WIDTH_NCH };
 	for (size_t c = 0; c < w.nc; c++)
-		w.chan[c] = w.nc > 1 ? c * (L - 1) / (w.nc - 1) : 0;
+		w.chan[c] = w.nc > 1 ? c * (Lw - 1) / (w.nc - 1) : 0;
 	int lobe = 0;
-	for (size_t l = 0; l < L; l++)
+	for (size_t l = 0; l < Lw; l++)
 		for (int j = 0; j < TREND_NB; j++)
-			w.used[j] |= m->tcoef[l * TREND_NB + j] > 0;
+			w.used[j] |= mw->tcoef[l * TREND_NB + j] > 0;
 	for (int j = trend_lobe_first(m->trend); j < TREND_NB; j++)
 		lobe |= w.used[j];
 	if (m->trend == RECON_TREND_SHEEN || m->trend == RECON_TREND_ROUGH)
@@ -447,18 +463,16 @@ static int width_sd(const struct recon_model *m, const double *A, size_t nth, co
 	double *f = malloc(n * L * sizeof *f), *B = malloc(n * TREND_NB * sizeof *B);
 	double *tc = calloc(L * TREND_NB, sizeof *tc), *g = malloc(n * L * sizeof *g), *wv = malloc(n * L * sizeof *wv);
 	double *mu = malloc(L * sizeof *mu), *d2 = malloc(nth * L * sizeof *d2);
+	double *fw = mw != m ? malloc(n * Lw * sizeof *fw) : f;
 	struct dhr_quad dq = { 0 };
-	if (!f || !B || !tc || !g || !wv || !mu || !d2) {
+	if (!f || !B || !tc || !g || !wv || !mu || !d2 || !fw) {
 		acq_errf(err, ACQ_E_NOMEM, "dhr: out of memory");
 		goto out;
 	}
-	for (size_t k = 0; k < n; k++) { /* the data at the centres (imputed values included), as refit_trend */
-		double b[TREND_NB];
-		trend_at(m, m->ctr + 6 * k, b);
-		for (size_t l = 0; l < L; l++)
-			f[l * n + k] = fmax(exp(fmin(m->g[l * n + k] + log(trend_factor(m, b, l)), G_MAX)) - m->eps[l], 0.0);
-	}
-	w.f = f;
+	width_data(m, f);
+	if (fw != f)
+		width_data(mw, fw);
+	w.f = fw;
 	w.B = B;
 	double s0 = width_score(&w, m->trend_alpha);
 	double la = log(TREND_ALPHA_MIN), lb = log(trend_two_lobes(m->trend) ? 0.5 * m->trend_alpha2 : TREND_ALPHA_MAX);
@@ -533,6 +547,8 @@ static int width_sd(const struct recon_model *m, const double *A, size_t nth, co
 	rc = 0;
 out:
 	dhr_quad_free(&dq);
+	if (fw != f)
+		free(fw);
 	free(f);
 	free(B);
 	free(tc);

@@ -64,6 +64,9 @@ struct recon_model {
 	int tab_capped;      /* the table reached its work budget (energy.c; fit only, not stored) */
 	double loo_rms;      /* leave-one-out RMS residual in the transformed space (all channels) */
 	double rcond;        /* reciprocal condition number estimate of K + Λ (dpocon) */
+	const struct recon_model *whole; /* a view of some of a model's channels (select's value channels): that
+					  * model, whose model-wide choices (dhr.c's width search) the view keeps;
+					  * NULL for a model of its own (not stored) */
 	char meta[2048];     /* key=value lines: source, sizes, merges, imputations, version, time */
 };
 

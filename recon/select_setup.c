@@ -118,6 +118,7 @@ static int sub_model(const struct recon_model *m, const size_t *ch, size_t k, st
 {
 	size_t n = m->n, nt = m->ntab > 1 ? m->ntab - 1 : 0;
 	*sub = *m;
+	sub->whole = m->whole ? m->whole : m;
 	sub->nwl = k;
 	sub->wl = malloc(k * sizeof *sub->wl);
 	sub->eps = malloc(k * sizeof *sub->eps);
