@@ -130,7 +130,13 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 		abort(); /* an error names the laser */
 	}
 	pthread_join(th, NULL);
-	if (accepted) { /* what the driver accepted is what the laser said (sscanf's %d wrapped 4294967297 to 1) */
+	if (accepted) {
+		/* the reply's numbers without leading zeros ("fault=007" is fault 7) */
+		char *w = r.status;
+		for (const char *q = r.status; *q; q++)
+			if (!(*q == '0' && w > r.status && w[-1] == '=' && q[1] >= '0' && q[1] <= '9'))
+				*w++ = *q;
+		*w = '\0'; /* what the driver accepted is what the laser said (sscanf's %d wrapped 4294967297 to 1) */
 		char back[160];
 		snprintf(back, sizeof back, "STATUS emission=%d interlock=%d fault=%d", st.emission, st.interlock_ok,
 			 st.fault_code);
