@@ -9,6 +9,7 @@
 #include <time.h>
 #include <systemd/sd-daemon.h>
 
+#include "daemon/conf_diff.h"
 #include "daemon/crashpoint.h"
 #include "daemon/devices.h"
 #include "daemon/log.h"
@@ -81,8 +82,38 @@ void app_status_line(struct app *app, char *buf, size_t cap)
 			 p.points_done, p.points_total);
 }
 
-int app_reload(struct app *app, struct acq_err *err)
+/* Settings changes listed in a reload's reply and log (the rest counted). */
+#define APP_RELOAD_MAX_CHANGES 40
+
+/* Compare the devices before and after a reload (devices_json() arrays): a device the new file drops or that no
+ * longer answers goes to warnings, one it adds to changes. */
+static void reload_devices(json_t *before, json_t *after, json_t *warnings, json_t *changes)
 {
+	for (size_t i = 0; i < json_array_size(after) && i < json_array_size(before); i++) {
+		json_t *b = json_array_get(before, i), *a = json_array_get(after, i);
+		const char *name = json_string_value(json_object_get(a, "name"));
+		const char *note = json_string_value(json_object_get(a, "note"));
+		bool bc = json_is_true(json_object_get(b, "configured")), ac = json_is_true(json_object_get(a, "configured"));
+		bool ba = json_is_true(json_object_get(b, "available")), aa = json_is_true(json_object_get(a, "available"));
+		char line[512];
+		if (bc && !ac)
+			snprintf(line, sizeof line, "%s: no longer configured (%s): closed%s", name,
+				 note ? note : "not configured", ba ? " (it was available)" : "");
+		else if (ba && ac && !aa)
+			snprintf(line, sizeof line, "%s: unavailable after the reload: %s", name, note ? note : "?");
+		else if (!bc && ac)
+			snprintf(line, sizeof line, "%s: now configured, %s%s%s", name, aa ? "available" : "unavailable",
+				 !aa && note ? ": " : "", !aa && note ? note : "");
+		else
+			continue;
+		json_array_append_new(!bc && ac ? changes : warnings, json_string(line));
+	}
+}
+
+int app_reload(struct app *app, json_t **report, struct acq_err *err)
+{
+	if (report)
+		*report = NULL;
 	if (sweep_busy(app->sweep))
 		return acq_errf(err, ACQ_E_STATE, "a sweep is loaded; reload after it ends or is aborted");
 	if (devices_busy(app->dev))
@@ -101,11 +132,27 @@ int app_reload(struct app *app, struct acq_err *err)
 		log_msg(LOG_WARNING, "reload: socket, database and tcp_port changes take effect at the next restart");
 	/* Devices are reopened from the new configuration (same object: the executor keeps its pointer);
 	 * socket and database stay. */
+	json_t *before = devices_json(app->dev);
 	if (devices_reconfigure(app->dev, nc, err)) {
+		json_decref(before);
 		conf_free(nc);
 		sd_notify(0, "READY=1");
 		return -1;
 	}
+	/* What the new file changed, said in the reply and the log: a wrong or damaged file that still parses (one
+	 * without its device sections: `bench: {}`) must not close the devices unsaid. */
+	json_t *after = devices_json(app->dev), *warnings = json_array(), *changes = json_array();
+	reload_devices(before, after, warnings, changes);
+	json_decref(before);
+	json_decref(after);
+	int ndev = (int)json_array_size(changes);
+	int total = conf_diff(yc_root(app->conf->doc), yc_root(nc->doc), APP_RELOAD_MAX_CHANGES, changes);
+	for (size_t i = 0; i < json_array_size(warnings); i++)
+		log_msg(LOG_WARNING, "reload: %s", json_string_value(json_array_get(warnings, i)));
+	for (size_t i = 0; i < json_array_size(changes); i++)
+		log_msg(LOG_NOTICE, "reload: %s", json_string_value(json_array_get(changes, i)));
+	if (total > APP_RELOAD_MAX_CHANGES)
+		log_msg(LOG_NOTICE, "reload: and %d more settings changed", total - APP_RELOAD_MAX_CHANGES);
 	/* The paths in use stay (app-owned copies made at start). */
 	nc->d.socket_path = app->sock_path;
 	nc->d.database = app->db_path;
@@ -115,8 +162,20 @@ int app_reload(struct app *app, struct acq_err *err)
 	sweep_conf_changed(app->sweep, nc);
 	log_set_level(nc->d.log_level);
 	conf_free(old);
-	log_msg(LOG_NOTICE, "configuration reloaded from %s", nc->path);
-	app_emit(app, "config", json_pack("{s:s}", "path", nc->path));
+	log_msg(LOG_NOTICE, "configuration reloaded from %s%s", nc->path,
+		json_array_size(warnings) ? " (see the warnings above)" : json_array_size(changes) ? "" : " (no setting changed)");
+	json_t *ev = json_pack("{s:s}", "path", nc->path);
+	if (ev && json_array_size(warnings)) /* a watcher sees the devices the reload closed */
+		json_object_set_new(ev, "warnings", json_deep_copy(warnings));
+	app_emit(app, "config", ev);
+	if (report) {
+		*report = json_pack("{s:o,s:o}", "warnings", warnings, "changes", changes);
+		if (*report && total > APP_RELOAD_MAX_CHANGES)
+			json_object_set_new(*report, "changes_total", json_integer(ndev + total));
+	} else {
+		json_decref(warnings);
+		json_decref(changes);
+	}
 	sd_notify(0, "READY=1");
 	return 0;
 }

@@ -42,8 +42,11 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
 int commands_auto_resume(struct app *app, int64_t *id, struct acq_err *err);
 /* The `plan` command's child, run by the job helper (the program's table of job kinds, job_kinds_main). */
 extern const struct job_kind commands_plan_kind;
-/* Reload the configuration file: refused while a sweep or a manual operation runs. 0 or -1. */
-int app_reload(struct app *app, struct acq_err *err);
+/* Reload the configuration file: refused while a sweep (loaded: running, paused or faulted) or a manual
+ * operation runs. What the new file changes is logged and, when report is not NULL, put in *report (a new
+ * object: "warnings", the devices it closes or that no longer answer; "changes", the settings it changes and
+ * the devices it adds; "changes_total" when more than listed). 0 or -1. */
+int app_reload(struct app *app, json_t **report, struct acq_err *err);
 /* Unix time now, seconds. */
 double app_wallclock(void);
 /* Emit an event to watchers (data consumed) — the sweep executor's env->emit. */

@@ -132,10 +132,13 @@ void commands_handle(void *ctx, const struct srv_peer *peer, struct proto_req *r
 	} else if (!strcmp(cmd, "export")) {
 		export_handle(app, peer, req);
 	} else if (!strcmp(cmd, "reload")) {
-		if (app_reload(app, &err))
+		json_t *report = NULL;
+		if (app_reload(app, &report, &err))
 			cmd_reply_err(app, peer, req->id, &err);
-		else
-			server_reply(app->srv, peer->serial, req->id, json_pack("{s:s}", "config", app->conf->path));
+		else { /* with what the new file changed: warnings (devices closed or lost) and changes */
+			json_object_set_new(report, "config", json_string(app->conf->path));
+			server_reply(app->srv, peer->serial, req->id, report);
+		}
 	} else {
 		server_reply_error(app->srv, peer->serial, req->id, PROTO_E_INTERNAL, "command in the table but not handled");
 	}

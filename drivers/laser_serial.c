@@ -53,6 +53,7 @@
 #include <limits.h>
 #include <math.h>
 #include <poll.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -82,7 +83,8 @@ struct laser_dev;
 struct laser_io {
 	const char *name;
 	int (*open)(struct laser_dev *l, struct acq_err *err);
-	/* Write all n bytes within timeout_ms. 0 or -1. */
+	/* Write all n bytes within timeout_ms. 0 or -1. The read and write errors say what happened only: exchange()
+	 * puts the laser and the command before it. */
 	int (*write)(struct laser_dev *l, const char *buf, size_t n, int timeout_ms, struct acq_err *err);
 	/* Read one byte: 1, 0 (nothing within timeout_ms), -1. */
 	int (*read)(struct laser_dev *l, char *c, int timeout_ms, struct acq_err *err);
@@ -179,15 +181,37 @@ static double mono_ms(void)
 	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
+/* libserialport's last error as "laser DEV: what: message"; dev NULL inside an exchange (which puts the laser and
+ * the command first). */
 static int sp_errf(struct acq_err *err, const char *dev, const char *what)
 {
 	char *m = sp_last_error_message();
-	acq_errf(err, ACQ_E_IO, "laser %s: %s: %s", dev, what, m ? m : "error");
+	if (dev)
+		acq_errf(err, ACQ_E_IO, "laser %s: %s: %s", dev, what, m ? m : "error");
+	else
+		acq_errf(err, ACQ_E_IO, "%s: %s", what, m ? m : "error");
 	sp_free_error_message(m);
 	return -1;
 }
 
-/* Send cmd and read one reply line into l->line (without the newline). 0 or -1. */
+/* A decimal integer in [0, max] at *p (digits only: no sign, space or base prefix), *p moved past it.
+ * 0, or -1 (not a number, or out of range: *p is left where it was). */
+static int dec_long(const char **p, long max, long *out)
+{
+	if (**p < '0' || **p > '9')
+		return -1;
+	char *end;
+	errno = 0;
+	long v = strtol(*p, &end, 10);
+	if (errno || v > max)
+		return -1;
+	*p = end;
+	*out = v;
+	return 0;
+}
+
+/* Send cmd and read one reply line into l->line (without the newline). 0 or -1; every error reads
+ * "laser DEV: 'CMD': what happened" (the transports' read/write errors say only what happened). */
 static int exchange(struct laser_dev *l, const char *cmd, struct acq_err *err)
 {
 	const char *dev = l->cfg->device;
@@ -198,7 +222,7 @@ static int exchange(struct laser_dev *l, const char *cmd, struct acq_err *err)
 	/* Whatever arrived unasked (a late reply to a timed-out command) must not be taken for this reply. */
 	l->io->flush(l);
 	if (l->io->write(l, out, (size_t)n, l->cfg->timeout_ms, err))
-		return acq_err_prefix(err, "'%s': ", cmd);
+		return acq_err_prefix(err, "laser %s: '%s': ", dev, cmd);
 	double deadline = mono_ms() + l->cfg->timeout_ms;
 	size_t len = 0;
 	for (;;) {
@@ -208,7 +232,7 @@ static int exchange(struct laser_dev *l, const char *cmd, struct acq_err *err)
 		char c;
 		int r = l->io->read(l, &c, left < 1 ? 0 : (int)left, err);
 		if (r < 0)
-			return acq_err_prefix(err, "'%s': ", cmd);
+			return acq_err_prefix(err, "laser %s: '%s': ", dev, cmd);
 		if (r == 0) {
 			if (left >= 1)
 				continue;
@@ -230,11 +254,11 @@ static int exchange(struct laser_dev *l, const char *cmd, struct acq_err *err)
 	}
 	l->line[len] = '\0';
 	if (!strncmp(l->line, "ERR", 3) && (l->line[3] == ' ' || !l->line[3])) {
-		char *end;
-		long code = strtol(l->line + 3, &end, 10);
+		long code;
 		acq_errf(err, ACQ_E_DEVICE, "laser %s: '%s' refused: %s", dev, cmd, l->line);
-		if (err && end != l->line + 3)
-			err->detail = (int)code;
+		const char *p = l->line + 3 + (l->line[3] == ' ');
+		if (err && !dec_long(&p, INT_MAX, &code) && (*p == ' ' || !*p))
+			err->detail = (int)code; /* "ERR n text": n when it is a number 0..INT_MAX, else 0 */
 		return -1;
 	}
 	return 0;
@@ -247,6 +271,20 @@ static int expect_ok(struct laser_dev *l, const char *cmd, struct acq_err *err)
 	if (strcmp(l->line, "OK"))
 		return acq_errf(err, ACQ_E_PROTO, "laser %s: '%s': expected 'OK', got '%s'", l->cfg->device, cmd, l->line);
 	return 0;
+}
+
+/* A reply that is not what cmd expects: "laser DEV: 'CMD': what (reply 'LINE'; expected 'FORM')". -1. */
+static int reply_errf(struct laser_dev *l, struct acq_err *err, const char *cmd, const char *form, const char *fmt, ...)
+	__attribute__((format(printf, 5, 6)));
+static int reply_errf(struct laser_dev *l, struct acq_err *err, const char *cmd, const char *form, const char *fmt, ...)
+{
+	char what[256];
+	va_list ap;
+	va_start(ap, fmt);
+	vsnprintf(what, sizeof what, fmt, ap);
+	va_end(ap);
+	return acq_errf(err, ACQ_E_PROTO, "laser %s: '%s': %s (reply '%s'; expected '%s')", l->cfg->device, cmd, what,
+			l->line, form);
 }
 
 /* Best-effort emission off after an error; err keeps the first error. */
@@ -285,9 +323,9 @@ static int sp_write_all(struct laser_dev *l, const char *buf, size_t n, int time
 {
 	int w = sp_blocking_write(l->port, buf, n, (unsigned)timeout_ms);
 	if (w < 0)
-		return sp_errf(err, l->cfg->device, "write");
+		return sp_errf(err, NULL, "write");
 	if ((size_t)w != n)
-		return acq_errf(err, ACQ_E_TIMEOUT, "laser %s: not sent within %d ms", l->cfg->device, timeout_ms);
+		return acq_errf(err, ACQ_E_TIMEOUT, "not sent within %d ms", timeout_ms);
 	return 0;
 }
 
@@ -295,7 +333,7 @@ static int sp_read_byte(struct laser_dev *l, char *c, int timeout_ms, struct acq
 {
 	int r = sp_blocking_read(l->port, c, 1, (unsigned)(timeout_ms > 0 ? timeout_ms : 1));
 	if (r < 0)
-		return sp_errf(err, l->cfg->device, "read");
+		return sp_errf(err, NULL, "read");
 	return r;
 }
 
@@ -372,10 +410,10 @@ static int fd_write_all(struct laser_dev *l, const char *buf, size_t n, int time
 		}
 		if (w < 0 && errno != EAGAIN && errno != EINTR)
 			return acq_errf(err, errno == EIO || errno == EPIPE || errno == ECONNRESET ? ACQ_E_DISCONNECTED : ACQ_E_IO,
-					"laser %s: write: %s", l->cfg->device, strerror(errno));
+					"write: %s", strerror(errno));
 		double left = deadline - mono_ms();
 		if (left < 1)
-			return acq_errf(err, ACQ_E_TIMEOUT, "laser %s: not sent within %d ms", l->cfg->device, timeout_ms);
+			return acq_errf(err, ACQ_E_TIMEOUT, "not sent within %d ms", timeout_ms);
 		struct pollfd p = { .fd = l->fd, .events = POLLOUT };
 		poll(&p, 1, (int)left);
 	}
@@ -398,16 +436,15 @@ static int tio_fill(struct laser_dev *l, int timeout_ms, struct acq_err *err)
 			return 1;
 		}
 		if (n == 0 || errno == EIO)
-			return acq_errf(err, ACQ_E_DISCONNECTED, "laser %s: the line was hung up", l->cfg->device);
+			return acq_errf(err, ACQ_E_DISCONNECTED, "the line was hung up");
 		if (errno != EAGAIN && errno != EINTR)
-			return acq_errf(err, ACQ_E_IO, "laser %s: read: %s", l->cfg->device, strerror(errno));
+			return acq_errf(err, ACQ_E_IO, "read: %s", strerror(errno));
 		if (polled)
 			return 0;
 		struct pollfd p = { .fd = l->fd, .events = POLLIN };
 		int r = poll(&p, 1, timeout_ms > 0 ? timeout_ms : 1);
 		if (r < 0)
-			return errno == EINTR ? 0
-					      : acq_errf(err, ACQ_E_IO, "laser %s: poll: %s", l->cfg->device, strerror(errno));
+			return errno == EINTR ? 0 : acq_errf(err, ACQ_E_IO, "poll: %s", strerror(errno));
 		if (r == 0)
 			return 0;
 	}
@@ -492,6 +529,36 @@ static const struct laser_io *pick_io(const struct laser_cfg *cfg)
 
 /* ---- API ------------------------------------------------------------------------------------------------- */
 
+/* "ID <model> <serial> <firmware>" in l->line into l->id: three words (no spaces, the reply is printable), each
+ * at most 63 characters. 0 or -1. */
+static int parse_id(struct laser_dev *l, struct acq_err *err)
+{
+	static const char form[] = "ID <model> <serial> <firmware>";
+	static const char *const names[] = { "model", "serial", "firmware" };
+	char *const dst[] = { l->id.model, l->id.serial, l->id.firmware };
+	if (strncmp(l->line, "ID ", 3))
+		return reply_errf(l, err, "ID?", form, "not an identity");
+	const char *p = l->line + 3;
+	for (int k = 0; k < 3; k++) {
+		while (*p == ' ')
+			p++;
+		size_t n = strcspn(p, " ");
+		if (!n)
+			return reply_errf(l, err, "ID?", form, "no %s", names[k]);
+		if (n >= sizeof l->id.model)
+			return reply_errf(l, err, "ID?", form, "the %s is %zu characters, more than %zu", names[k], n,
+					  sizeof l->id.model - 1);
+		memcpy(dst[k], p, n);
+		dst[k][n] = '\0';
+		p += n;
+	}
+	while (*p == ' ')
+		p++;
+	if (*p)
+		return reply_errf(l, err, "ID?", form, "more than three words");
+	return 0;
+}
+
 static int ls_open(const struct laser_cfg *cfg, struct laser_dev **out, struct acq_err *err)
 {
 	*out = NULL;
@@ -509,23 +576,17 @@ static int ls_open(const struct laser_cfg *cfg, struct laser_dev **out, struct a
 	opened = true;
 	if (exchange(l, "ID?", err))
 		goto fail;
-	char model[64], serial[64], fw[64], extra;
-	if (strncmp(l->line, "ID ", 3) ||
-	    sscanf(l->line, "ID %63s %63s %63s %c", model, serial, fw, &extra) != 3) {
-		acq_errf(err, ACQ_E_PROTO, "laser %s: 'ID?': expected 'ID <model> <serial> <firmware>', got '%s'",
-			 cfg->device, l->line);
+	if (parse_id(l, err))
 		goto fail;
-	}
-	snprintf(l->id.model, sizeof l->id.model, "%s", model);
-	snprintf(l->id.serial, sizeof l->id.serial, "%s", serial);
-	snprintf(l->id.firmware, sizeof l->id.firmware, "%s", fw);
 	if (expect_ok(l, "EMISSION OFF", err))
 		goto fail;
 	if (cfg->keepalive_ms) {
 		char cmd[32];
 		snprintf(cmd, sizeof cmd, "KEEPALIVE %d", cfg->keepalive_ms);
 		if (expect_ok(l, cmd, err)) {
-			acq_err_prefix(err, "arming the keep-alive (devices.laser.keepalive_ms: 0 runs without): ");
+			if (err) /* the laser and the command first, as every error of this driver */
+				snprintf(err->msg + strlen(err->msg), sizeof err->msg - strlen(err->msg),
+					 " (arming the keep-alive; devices.laser.keepalive_ms: 0 runs without it)");
 			goto fail;
 		}
 	}
@@ -569,29 +630,62 @@ static int ls_set_power(struct laser_dev *l, double pct, struct acq_err *err)
 	return 0;
 }
 
+/* "STATUS emission=<0|1> interlock=<0|1> fault=<N>" in l->line into st (each number decimal, in range: a
+ * number past int's range is refused, not wrapped). 0 or -1. */
+static int parse_status(struct laser_dev *l, struct laser_status *st, struct acq_err *err)
+{
+	static const char form[] = "STATUS emission=0|1 interlock=0|1 fault=N";
+	static const struct { const char *key; long max; } f[] = { { "emission", 1 }, { "interlock", 1 },
+								      { "fault", INT_MAX } };
+	long v[3];
+	if (strncmp(l->line, "STATUS ", 7))
+		return reply_errf(l, err, "STATUS?", form, "not a status");
+	const char *p = l->line + 7;
+	for (int k = 0; k < 3; k++) {
+		size_t kl = strlen(f[k].key);
+		if (strncmp(p, f[k].key, kl) || p[kl] != '=')
+			return reply_errf(l, err, "STATUS?", form, "'%s=' expected at column %d", f[k].key,
+					  (int)(p - l->line) + 1);
+		p += kl + 1;
+		const char *num = p;
+		if (dec_long(&p, f[k].max, &v[k]))
+			return reply_errf(l, err, "STATUS?", form, "%s='%.*s' is not %s", f[k].key,
+					  (int)strcspn(num, " "), num, f[k].max == 1 ? "0 or 1" : "a number 0..2147483647");
+		if (k < 2 && !*p)
+			return reply_errf(l, err, "STATUS?", form, "no '%s=' after %s=%ld", f[k + 1].key, f[k].key, v[k]);
+		if (*p != (k < 2 ? ' ' : '\0'))
+			return reply_errf(l, err, "STATUS?", form, "unexpected '%s' after %s=%ld", p, f[k].key, v[k]);
+		if (k < 2)
+			p++;
+	}
+	st->emission = v[0];
+	st->interlock_ok = v[1];
+	st->fault = v[2] != 0;
+	st->fault_code = (int)v[2];
+	return 0;
+}
+
+/* "POWER <pct>" in l->line: a decimal number (digits first: no sign, space, hex, inf or nan) in [0, 100]. 0 or -1. */
+static int parse_power(struct laser_dev *l, double *pct, struct acq_err *err)
+{
+	static const char form[] = "POWER <0..100>";
+	if (strncmp(l->line, "POWER ", 6))
+		return reply_errf(l, err, "POWER?", form, "not a power");
+	const char *num = l->line + 6;
+	if (*num < '0' || *num > '9' || strpbrk(num, "xX") || acq_num_parse(num, 0, 100, pct))
+		return reply_errf(l, err, "POWER?", form, "power '%s' is not a number in [0, 100]", num);
+	return 0;
+}
+
 static int ls_status(struct laser_dev *l, struct laser_status *st, struct acq_err *err)
 {
 	memset(st, 0, sizeof *st);
 	if (exchange(l, "STATUS?", err))
 		return fail_safe(l);
-	int em = -1, il = -1, fault = -1, pos = 0;
-	if (sscanf(l->line, "STATUS emission=%d interlock=%d fault=%d%n", &em, &il, &fault, &pos) != 3 ||
-	    l->line[pos] || (em != 0 && em != 1) || (il != 0 && il != 1) || fault < 0) {
-		acq_errf(err, ACQ_E_PROTO, "laser %s: 'STATUS?': expected 'STATUS emission=0|1 interlock=0|1 "
-			 "fault=N', got '%s'", l->cfg->device, l->line);
+	if (parse_status(l, st, err))
 		return fail_safe(l);
-	}
-	st->emission = em;
-	st->interlock_ok = il;
-	st->fault = fault != 0;
-	st->fault_code = fault;
-	if (exchange(l, "POWER?", err))
+	if (exchange(l, "POWER?", err) || parse_power(l, &st->power_pct, err))
 		return fail_safe(l);
-	if (strncmp(l->line, "POWER ", 6) || acq_num_parse(l->line + 6, 0, 100, &st->power_pct)) {
-		acq_errf(err, ACQ_E_PROTO, "laser %s: 'POWER?': expected 'POWER <0..100>', got '%s'", l->cfg->device,
-			 l->line);
-		return fail_safe(l);
-	}
 	return 0;
 }
 

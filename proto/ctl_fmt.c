@@ -542,6 +542,23 @@ static void print_spectrum(FILE *f, json_t *s)
 }
 
 /* measure, dark, reference: the spectrum just taken and stored (its id for `acqctl spectrum`). */
+/* A reload: the file, then what it changed (daemon/app.c app_reload: devices closed first). */
+static void print_reload(FILE *f, json_t *r)
+{
+	fprintf(f, "configuration reloaded from %s\n", str(r, "config"));
+	json_t *w = json_object_get(r, "warnings"), *c = json_object_get(r, "changes"), *x;
+	size_t i;
+	json_array_foreach(w, i, x)
+		fprintf(f, "warning: %s\n", json_string_value(x) ? json_string_value(x) : "?");
+	json_array_foreach(c, i, x)
+		fprintf(f, "  %s\n", json_string_value(x) ? json_string_value(x) : "?");
+	long long total = num_i(r, "changes_total");
+	if (total > (long long)json_array_size(c))
+		fprintf(f, "  and %lld more settings changed\n", total - (long long)json_array_size(c));
+	if (json_is_array(w) && json_is_array(c) && !json_array_size(w) && !json_array_size(c))
+		fprintf(f, "  no setting changed\n");
+}
+
 static void print_taken(FILE *f, json_t *r)
 {
 	char ms[32];
@@ -669,7 +686,7 @@ void ctl_print_human(FILE *f, const char *cmd, json_t *rep)
 		 json_is_integer(json_object_get(rep, "spectrum_id")))
 		print_taken(f, rep);
 	else if (!strcmp(cmd, "reload") && json_is_string(json_object_get(rep, "config")))
-		fprintf(f, "configuration reloaded from %s\n", str(rep, "config"));
+		print_reload(f, rep);
 	else if (!strcmp(cmd, "laser.off") && json_is_boolean(json_object_get(rep, "emission")))
 		fprintf(f, "%s\n", json_is_false(json_object_get(rep, "emission")) ? "laser emission off (confirmed by the laser)"
 			: "laser off requested, but the laser still reports emission: check it");

@@ -182,8 +182,15 @@ void ctl_view_event(struct ctl_view *v, json_t *ev)
 			 (long long)json_integer_value(json_object_get(ev, "sweep")), s_of(ev, "state"), s_of(ev, "message"));
 	} else if (!strcmp(name, "sweep.adaptive")) {
 		adaptive_line(v, ev, text, sizeof text);
-	} else if (!strcmp(name, "config")) {
-		snprintf(text, sizeof text, "configuration reloaded from %s", s_of(ev, "path"));
+	} else if (!strcmp(name, "config")) { /* with the first device it closed or lost, and how many more */
+		json_t *w = json_object_get(ev, "warnings");
+		size_t nw = json_array_size(w);
+		const char *w0 = nw ? json_string_value(json_array_get(w, 0)) : NULL;
+		char more[48] = "";
+		if (nw > 1)
+			snprintf(more, sizeof more, " (+%zu more warnings: acqctl devices)", nw - 1);
+		snprintf(text, sizeof text, "configuration reloaded from %s%s%s%s", s_of(ev, "path"), w0 ? "; warning: " : "",
+			 w0 ? w0 : "", more);
 	} else {
 		char *s = json_dumps(ev, JSON_COMPACT);
 		snprintf(text, sizeof text, "%s", s ? s : name);

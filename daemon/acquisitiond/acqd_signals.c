@@ -42,7 +42,7 @@ static void on_sigpipe(struct loop *lp, int fd, short revents, void *arg)
 				break;
 			case SIGHUP: {
 				struct acq_err err = { 0 };
-				if (app_reload(app, &err))
+				if (app_reload(app, NULL, &err))
 					log_msg(LOG_WARNING, "SIGHUP: %s", err.msg);
 				break;
 			}

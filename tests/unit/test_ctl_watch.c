@@ -109,7 +109,13 @@ static void test_escapes_not_passed(void **state)
 		 "\\u001b[2Jthing\"}");
 	event(v, "{\"event\": \"sweep.progress\", \"sweep\": 4, \"state\": \"running\", \"done\": 1, \"total\": 2,"
 		 " \"point\": \"p\\u001b[31m1\"}");
+	/* a reload that closed devices says so (daemon/app.c: the config event's warnings) */
+	event(v, "{\"event\": \"config\", \"path\": \"/e/a.yaml\", \"warnings\": [\"laser: no longer configured\", \"x\"]}");
+	event(v, "{\"event\": \"config\", \"path\": \"/e/b.yaml\"}");
 	char *s = draw(v, &buf, &len, f, real_now());
+	assert_non_null(strstr(s, "configuration reloaded from /e/a.yaml; warning: laser: no longer configured (+1 more "
+				  "warnings: acqctl devices)\n"));
+	assert_non_null(strstr(s, "configuration reloaded from /e/b.yaml\n"));
 	assert_non_null(strstr(s, "sweep 4 fault on laser: bad?]0;x??[2Jthing\n"));
 	assert_non_null(strstr(s, "now   p?[31m1\n"));
 	assert_null(strstr(s, "\x1b[2Jthing"));

@@ -373,7 +373,7 @@ static void test_malformed_identity(void **state)
 	static const char *const s1[] = { "HELLO\n", NULL };
 	expect_open_error(s1, ACQ_E_PROTO, "expected 'ID <model> <serial> <firmware>'");
 	static const char *const s2[] = { "ID a b c d\n", NULL };
-	expect_open_error(s2, ACQ_E_PROTO, "got 'ID a b c d'");
+	expect_open_error(s2, ACQ_E_PROTO, "more than three words (reply 'ID a b c d'");
 	char longline[300];
 	memset(longline, 'A', 250);
 	strcpy(longline + 250, "\n");
@@ -383,11 +383,20 @@ static void test_malformed_identity(void **state)
 	expect_open_error(s4, ACQ_E_PROTO, "non-printable byte 0x01");
 	static const char *const s5[] = { "ERR 1 unknown command\n", NULL };
 	expect_open_error(s5, ACQ_E_DEVICE, "unknown command");
+	/* a word longer than the identity's 63 characters: refused (sscanf's %63s split it into the next field) */
+	char longword[160];
+	snprintf(longword, sizeof longword, "ID %070d b c\n", 7);
+	const char *const s6[] = { longword, NULL };
+	expect_open_error(s6, ACQ_E_PROTO, "'ID?': the model is 70 characters, more than 63 (reply 'ID 0000");
+	snprintf(longword, sizeof longword, "ID %070d b\n", 7);
+	const char *const s7[] = { longword, NULL };
+	expect_open_error(s7, ACQ_E_PROTO, "the model is 70 characters");
 }
 
 /* A scripted peer on a fresh pty with the driver opened on it and emission switched on ("ID M S F" and an "OK"
  * first in its script). */
 struct scripted {
+	char path[128];
 	int m, keep;
 	pid_t pid;
 	struct laser_cfg *cfg;
@@ -396,10 +405,9 @@ struct scripted {
 
 static void scripted_on(struct scripted *p, const char *const *script)
 {
-	char path[128];
-	p->m = open_pty(path, sizeof path, &p->keep);
+	p->m = open_pty(p->path, sizeof p->path, &p->keep);
 	p->pid = script_peer(p->m, script);
-	p->cfg = make_cfg(path, PEER_PATIENCE_MS);
+	p->cfg = make_cfg(p->path, PEER_PATIENCE_MS);
 	p->l = NULL;
 	struct acq_err err = { 0 };
 	if (laser_open(p->cfg, &p->l, &err))
@@ -426,6 +434,15 @@ static void test_malformed_status_switches_emission_off(void **state)
 		{ "STATUS emission=1 interlock=1 fault=0\n", "POWER nan\n" },
 		{ "STATUS emission=1 interlock=1 fault=0\n", "POWER 120\n" },
 		{ "STATUS emission=1 interlock=1 fault=0\n", "OK\n" },
+		/* numbers past int's range: sscanf's %d wrapped them (2^32 + 1 read as 1, 2^32 as 0: no fault) */
+		{ "STATUS emission=4294967297 interlock=1 fault=0\n", NULL },
+		{ "STATUS emission=1 interlock=4294967297 fault=0\n", NULL },
+		{ "STATUS emission=1 interlock=1 fault=4294967296\n", NULL },
+		{ "STATUS emission=1 interlock=1 fault=99999999999999999999999\n", NULL },
+		{ "STATUS emission=+1 interlock=1 fault=0\n", NULL },
+		{ "STATUS emission= 1 interlock=1 fault=0\n", NULL },
+		{ "STATUS emission=1 interlock=1 fault=0\n", "POWER 0x2A\n" },
+		{ "STATUS emission=1 interlock=1 fault=0\n", "POWER  42\n" },
 	};
 	for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
 		const char *script[] = { "ID M S F\n", "OK\n", bad[i][0], bad[i][1], NULL };
@@ -436,11 +453,49 @@ static void test_malformed_status_switches_emission_off(void **state)
 		assert_int_equal(laser_status(p.l, &st, &err), -1);
 		print_message("  -> %s\n", err.msg);
 		assert_int_equal(err.code, ACQ_E_PROTO);
+		/* the laser first, then the command, then what is wrong, and the reply as it came */
+		char head[200], line[160];
+		const char *rl = bad[i][1] ? bad[i][1] : bad[i][0]; /* a second reply: the status was good */
+		snprintf(head, sizeof head, "laser %s: '%s': ", p.path, bad[i][1] ? "POWER?" : "STATUS?");
+		assert_true(!strncmp(err.msg, head, strlen(head)));
+		snprintf(line, sizeof line, "(reply '%.*s'", (int)strcspn(rl, "\n"), rl);
+		assert_non_null(strstr(err.msg, line));
 		/* the driver switched emission off after the bad reply */
 		assert_true(sh->nlines >= 4);
 		assert_string_equal(sh->lines[sh->nlines - 1], "EMISSION OFF");
 		scripted_close(&p);
 	}
+	/* what the refusal says about a wrapped number */
+	const char *script[] = { "ID M S F\n", "OK\n", "STATUS emission=4294967297 interlock=1 fault=0\n", NULL };
+	struct scripted p;
+	scripted_on(&p, script);
+	struct acq_err err = { 0 };
+	struct laser_status st;
+	assert_int_equal(laser_status(p.l, &st, &err), -1);
+	assert_non_null(strstr(err.msg, "'STATUS?': emission='4294967297' is not 0 or 1 (reply 'STATUS emission="));
+	scripted_close(&p);
+}
+
+/* A line that hangs up: the error names the laser, then the command, then what happened (it read
+ * "'POWER 10.00': laser /dev/pts/N: write: ..."). */
+static void test_hangup_error_order(void **state)
+{
+	(void)state;
+	const char *script[] = { "ID M S F\n", "OK\n", NULL };
+	struct scripted p;
+	scripted_on(&p, script);
+	stop_child(p.pid);
+	close(p.m); /* the pty's master gone: the line is hung up */
+	struct acq_err err = { 0 };
+	assert_int_equal(laser_set_power(p.l, 10, &err), -1);
+	print_message("  -> %s\n", err.msg);
+	char head[200];
+	snprintf(head, sizeof head, "laser %s: 'POWER 10.00': ", p.path);
+	assert_true(!strncmp(err.msg, head, strlen(head)));
+	assert_int_equal(err.code, ACQ_E_DISCONNECTED);
+	laser_close(p.l);
+	close(p.keep);
+	laser_cfg_free(p.cfg);
 }
 
 /* The driver reads what arrives in blocks: a stray line after a reply (here in the same write as the reply, so
@@ -609,6 +664,7 @@ int main(void)
 		cmocka_unit_test(test_malformed_identity),
 		cmocka_unit_test(test_malformed_status_switches_emission_off),
 		cmocka_unit_test(test_stray_line_after_reply_dropped),
+		cmocka_unit_test(test_hangup_error_order),
 		cmocka_unit_test(test_dead_line_times_out),
 		cmocka_unit_test(test_keepalive),
 		cmocka_unit_test(test_config_errors),
