@@ -55,12 +55,27 @@ int truth_thetas(const char *list, double *th, int *n, struct acq_err *err)
 	return *n ? 0 : acq_errf(err, ACQ_E_INVAL, "--theta-i: empty list");
 }
 
+/* One count of a grid spec at *p: decimal digits only (no sign, no space), 1..max; *p advanced past it. */
+static int grid_count(const char **p, long max, int *out)
+{
+	if (**p < '0' || **p > '9')
+		return -1;
+	char *end;
+	errno = 0;
+	long v = strtol(*p, &end, 10); /* strtol, not sscanf %d: a count past INT_MAX wrapped (4294967297 read as 1) */
+	if (errno || v < 1 || v > max)
+		return -1;
+	*p = end;
+	*out = (int)v;
+	return 0;
+}
+
 int truth_grid_size(const char *spec, struct truth_grid *g, struct acq_err *err)
 {
-	char tail;
+	const char *p = spec;
 	int ni, no, np;
-	if (sscanf(spec, "%dx%dx%d%c", &ni, &no, &np, &tail) != 3 || ni < 1 || no < 1 || np < 1 || ni > 90 || no > 90 ||
-	    np > 360)
+	if (grid_count(&p, 90, &ni) || *p++ != 'x' || grid_count(&p, 90, &no) || *p++ != 'x' || grid_count(&p, 360, &np) ||
+	    *p)
 		return acq_errf(err, ACQ_E_INVAL, "--grid: expected NIxNOxNP (e.g. 10x10x10; each 1..90, NP 1..360), got '%s'",
 				spec);
 	g->ni = ni, g->no = no, g->np = np;

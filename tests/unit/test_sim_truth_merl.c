@@ -79,10 +79,31 @@ static void test_merl_matches_truth(void **state)
 	check_material("sharp-lobe", seed + 5);
 }
 
+/* --grid NIxNOxNP: decimal counts in range, nothing else; a count past INT_MAX is refused, not wrapped (sscanf %d
+ * read 4294967297x1x1 as 1x1x1, session 18). */
+static void test_grid_size(void **state)
+{
+	(void)state;
+	struct truth_grid g = { 0 };
+	struct acq_err e = { 0 };
+	assert_int_equal(truth_grid_size("10x9x360", &g, &e), 0);
+	assert_int_equal(g.ni, 10);
+	assert_int_equal(g.no, 9);
+	assert_int_equal(g.np, 360);
+	const char *bad[] = { "4294967297x1x1", "1x4294967297x1", "1x1x4294967656", "0x1x1", "91x1x1", "1x1x361",
+			      " 1x1x1", "+1x1x1", "-1x1x1", "1x1x1x", "1x1", "1x1x1 ", "1X1X1", "", "x1x1" };
+	for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
+		e.msg[0] = 0;
+		assert_int_equal(truth_grid_size(bad[i], &g, &e), -1);
+		assert_non_null(strstr(e.msg, "--grid"));
+	}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_merl_matches_truth),
+		cmocka_unit_test(test_grid_size),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
