@@ -79,6 +79,10 @@ double trend_fit_coef(size_t n, const double *v, double eps, const double *B, do
 int trend_fit_kind2(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
 		    const size_t *chan, size_t nc, double *alpha, double *alpha2, double *coef, double *rms,
 		    struct acq_err *err);
+/* The fit's admissibility rule for the (narrow) lobe of the one-roughness kind t at roughness alpha (the coat kind: its
+ * coat lobe's core and flank): 1 if the samples c6[6n] measure its width — ≥ 3 in its core (GGX: tanθh ≤ α; the
+ * others: shape ≥ 1/4) and, but for GGX, ≥ 3 on its flank (shape 0.01-0.9) — else 0 (trend.c, score). */
+int trend_lobe_measured(int t, double alpha, size_t n, const double *c6);
 /* Node spacing (radians in ωo) a hemisphere rule needs for the terms of trend t that the energy table does NOT
  * integrate over half vectors (the coat kind's base lobe b1, GGX of α2: 0.5·α2); INFINITY for the other kinds. */
 double trend_base_step(int t, double alpha2);
