@@ -52,7 +52,8 @@
  * the band: recon_int.h) joins the kriging σ in quadrature and is reported in its part (so select's accounting keeps
  * it); recon/reconstruction.md, sessions 12-13. Where the fit's admissibility rule, not the data, set the trend lobe's
  * width, the DHR at the data's own width is a second reading (width_sd): that distance joins the kriging σ in
- * quadrature, and σ_model = max(that, σ_E) (session 18).
+ * quadrature, and σ_model = max(that, σ_E) (session 18); likewise where the rule rejected the kind that fits the data
+ * (the data's best reading over the fit's one-roughness kinds, width_sd).
  */
 /* σ_model² of the DHR at one incidence (see recon_dhr_ex): vmod[l] = c_lᵀ K_QQ c_l − b_lᵀ A⁻¹ b_l with
  * c = C[q*L + l] (Q nodes c6, the amplitude √α already folded in), b = K_nQ c (Kq[q*n + k]), A the Cholesky
@@ -396,13 +397,22 @@ static void refit_trend(const struct recon_model *m, size_t l, const double *Bs,
  * holds the same error where it is larger, so σ_model = max(kriging ⊕ sw, σ_E) (σ_model ⊕ sw instead over-covered
  * where σ_E already held it: acq-sim's sharp lobe 3 × 4 × 6 at 30°, whose phong width the rule also pins, z RMS
  * 0.65 → 0.54; reconstruction.md, session 18).
+ * The rule can reject a whole kind, not only a width: acq-sim's sharp lobe (phong n = 250) on 4 × 4 × 6 has two
+ * samples on the lobe's flank (10° off the mirror at θ 10°), so the phong kind is inadmissible at the data's width
+ * (α 0.089, score 4.3e-5: the noise) and the fit keeps a GGX lobe (α 0.034, score 0.22) that holds the peak and is
+ * too narrow beside it: the DHR read 0.17 / 0.11 / 0.12 low at 8 / 30 / 60° against σ 0.02-0.05 (z RMS 9.4 / 6.3 /
+ * 2.2), and the GGX profile is flat at its interior optimum (the form, not the width, is wrong). So the profile runs
+ * over the fit's other one-roughness kinds too (those it tried: the model's trend_loo; all their terms): one whose
+ * best width the rule rejects (trend_lobe_measured) and which fits the data better than the model's own kind at its
+ * best is the data's reading instead, with the same χ² test against the fitted model (sharp lobe 4 × 4 × 6: DHR at
+ * phong α 0.089 within 0.0005 of the truth; z RMS 1.00 / 0.99 / 0.97). An admissible kind that fits better lost on
+ * cross-validation (fit.c: the data, not the rule, decided) and is no second reading.
  */
-#define WIDTH_NGRID 40  /* the fit's search: log grid over [TREND_ALPHA_MIN, top], golden section about its best */
-#define WIDTH_NGOLDEN 24
-#define WIDTH_NCH 16    /* the fit's scored channels (fit.c): at most 16, evenly spread */
+#define WIDTH_NGRID TREND_NGRID /* the fit's search: log grid over [TREND_ALPHA_MIN, top], golden section about its best */
+#define WIDTH_NGOLDEN TREND_NGOLDEN
 struct width_ctx {
 	const struct recon_model *m;
-	size_t n, nc, chan[WIDTH_NCH];
+	size_t n, nc, chan[TREND_NCH];
 	const double *f;
 	double *B, c[TREND_NB];
 	int used[TREND_NB];
@@ -487,9 +497,8 @@ static int width_sd(const struct recon_model *m, const double *A, size_t nth, co
 	size_t n = m->n, L = m->nwl;
 	if (m->trend == RECON_TREND_NONE || m->transform != RECON_T_LOG || !(m->trend_alpha > 0))
 		return 0;
-	struct width_ctx w = { .m = m, .n = n, .nc = L < WIDTH_NCH ? L : WIDTH_NCH, .kind = m->trend };
-	for (size_t c = 0; c < w.nc; c++)
-		w.chan[c] = w.nc > 1 ? c * (L - 1) / (w.nc - 1) : 0;
+	struct width_ctx w = { .m = m, .n = n, .kind = m->trend };
+	w.nc = trend_score_channels(L, w.chan); /* the fit's scored channels (fit.c) */
 	int lobe = 0;
 	for (size_t l = 0; l < L; l++)
 		for (int j = 0; j < TREND_NB; j++)
@@ -534,7 +543,10 @@ static int width_sd(const struct recon_model *m, const double *A, size_t nth, co
 			wt.used[j] = 1;
 		double bt = log(TREND_ALPHA_MAX), st = INFINITY;
 		width_search(&wt, la, log(TREND_ALPHA_MAX), &bt, &st);
-		if (st < bs && (width_score(&wt, exp(bt)), wt.lobe) && !trend_lobe_measured(t, exp(bt), n, m->ctr)) {
+		if (!(st < bs))
+			continue;
+		width_score(&wt, exp(bt)); /* its coefficients at its best: a lobe the rule would judge? */
+		if (wt.lobe && !trend_lobe_measured(t, exp(bt), n, m->ctr)) {
 			bs = st;
 			best = bt;
 			kind = t;

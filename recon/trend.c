@@ -7,8 +7,8 @@
 #include <string.h>
 
 #define MU_MIN 1e-9
-#define NGRID 40      /* log-spaced roughness grid, then a golden-section refinement */
-#define NGOLDEN 24
+#define NGRID TREND_NGRID /* log-spaced roughness grid, then a golden-section refinement (trend.h) */
+#define NGOLDEN TREND_NGOLDEN
 
 const char *trend_name(int t)
 {

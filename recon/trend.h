@@ -30,6 +30,18 @@ enum recon_trend {
 #define TREND_LOBE 2          /* the lobe terms are b[TREND_LOBE .. TREND_NB) (coat: trend_lobe_first) */
 #define TREND_ALPHA_MIN 0.005 /* roughness range searched by the fit */
 #define TREND_ALPHA_MAX 1.0
+#define TREND_NGRID 40        /* the roughness search: a log grid over the range, then golden sections ... */
+#define TREND_NGOLDEN 24      /* ... of TREND_NGOLDEN steps about the grid's best (trend.c; dhr.c's width profile) */
+#define TREND_NCH 16          /* the channels the roughness and leave-one-out searches score: at most 16 ... */
+/* ... evenly spread over the L channels (chan[0..*nc) ascending, the first and the last included): fit.c's choice,
+ * which dhr.c's width profile repeats. */
+static inline size_t trend_score_channels(size_t L, size_t chan[TREND_NCH])
+{
+	size_t nc = L < TREND_NCH ? L : TREND_NCH;
+	for (size_t c = 0; c < nc; c++)
+		chan[c] = nc > 1 ? c * (L - 1) / (nc - 1) : 0;
+	return nc;
+}
 
 /* Basis values of trend t at c6 (zeros for none); finite and ≥ 0 on and above the horizon, symmetric in ωi ↔ ωo.
  * alpha2 is the second roughness of the two-lobe kind (coat: the base lobe; ignored by the others). */
