@@ -52,7 +52,8 @@
  * the band: recon_int.h) joins the kriging σ in quadrature and is reported in its part (so select's accounting keeps
  * it); recon/reconstruction.md, sessions 12-13. Where the fit's admissibility rule, not the data, set the trend lobe's
  * width, the DHR at the data's own width is a second reading (width_sd): that distance joins the kriging σ in
- * quadrature, and σ_model = max(that, σ_E) (session 18).
+ * quadrature, and σ_model = max(that, σ_E) (session 18); likewise where the rule rejected the kind that fits the data
+ * (the data's best reading over the fit's one-roughness kinds, width_sd).
  */
 /* σ_model² of the DHR at one incidence (see recon_dhr_ex): vmod[l] = c_lᵀ K_QQ c_l − b_lᵀ A⁻¹ b_l with
  * c = C[q*L + l] (Q nodes c6, the amplitude √α already folded in), b = K_nQ c (Kq[q*n + k]), A the Cholesky
@@ -396,16 +397,27 @@ static void refit_trend(const struct recon_model *m, size_t l, const double *Bs,
  * holds the same error where it is larger, so σ_model = max(kriging ⊕ sw, σ_E) (σ_model ⊕ sw instead over-covered
  * where σ_E already held it: acq-sim's sharp lobe 3 × 4 × 6 at 30°, whose phong width the rule also pins, z RMS
  * 0.65 → 0.54; reconstruction.md, session 18).
+ * The rule can reject a whole kind, not only a width: acq-sim's sharp lobe (phong n = 250) on 4 × 4 × 6 has two
+ * samples on the lobe's flank (10° off the mirror at θ 10°), so the phong kind is inadmissible at the data's width
+ * (α 0.089, score 4.3e-5: the noise) and the fit keeps a GGX lobe (α 0.034, score 0.22) that holds the peak and is
+ * too narrow beside it: the DHR read 0.17 / 0.11 / 0.12 low at 8 / 30 / 60° against σ 0.02-0.05 (z RMS 9.4 / 6.3 /
+ * 2.2), and the GGX profile is flat at its interior optimum (the form, not the width, is wrong). So the profile runs
+ * over the fit's other one-roughness kinds too (those it tried: the model's trend_loo; all their terms): one whose
+ * best width the rule rejects (trend_lobe_measured) and which fits the data better than the model's own kind at its
+ * best is the data's reading instead, with the same χ² test against the fitted model (sharp lobe 4 × 4 × 6: DHR at
+ * phong α 0.089 within 0.0005 of the truth; z RMS 1.00 / 0.99 / 0.97). An admissible kind that fits better lost on
+ * cross-validation (fit.c: the data, not the rule, decided) and is no second reading.
  */
-#define WIDTH_NGRID 40  /* the fit's search: log grid over [TREND_ALPHA_MIN, top], golden section about its best */
-#define WIDTH_NGOLDEN 24
-#define WIDTH_NCH 16    /* the fit's scored channels (fit.c): at most 16, evenly spread */
+#define WIDTH_NGRID TREND_NGRID /* the fit's search: log grid over [TREND_ALPHA_MIN, top], golden section about its best */
+#define WIDTH_NGOLDEN TREND_NGOLDEN
 struct width_ctx {
 	const struct recon_model *m;
-	size_t n, nc, chan[WIDTH_NCH];
+	size_t n, nc, chan[TREND_NCH];
 	const double *f;
 	double *B, c[TREND_NB];
 	int used[TREND_NB];
+	int kind;  /* the trend kind profiled (the model's, or another the fit tried) */
+	int lobe;  /* the last width_score's coefficients hold a lobe */
 };
 
 /* The fit's score at roughness a without its admissibility rule: mean squared log residual over the scored channels. */
@@ -413,14 +425,18 @@ static double width_score(struct width_ctx *w, double a)
 {
 	const struct recon_model *m = w->m;
 	for (size_t k = 0; k < w->n; k++) {
-		trend_eval_basis2(m->trend, a, m->trend_alpha2, m->ctr + 6 * k, w->B + k * TREND_NB);
+		trend_eval_basis2(w->kind, a, m->trend_alpha2, m->ctr + 6 * k, w->B + k * TREND_NB);
 		for (int j = 0; j < TREND_NB; j++)
 			if (!w->used[j])
 				w->B[k * TREND_NB + j] = 0.0;
 	}
 	double ss = 0;
-	for (size_t i = 0; i < w->nc; i++)
+	w->lobe = 0;
+	for (size_t i = 0; i < w->nc; i++) {
 		ss += trend_fit_coef(w->n, w->f + w->chan[i] * w->n, m->eps[w->chan[i]], w->B, w->c);
+		for (int j = trend_lobe_first(w->kind); j < TREND_NB; j++)
+			w->lobe |= w->c[j] > 0;
+	}
 	return ss / (double)(w->n * w->nc);
 }
 
@@ -436,6 +452,57 @@ static void width_data(const struct recon_model *m, double *f)
 	}
 }
 
+/* The fit's search without its rule: log grid of WIDTH_NGRID over [la, lb], golden section about the best; *best, *bs
+ * (ln α and its score) are kept where no point beats *bs. */
+static void width_search(struct width_ctx *w, double la, double lb, double *best, double *bs)
+{
+	double h = (lb - la) / (WIDTH_NGRID - 1);
+	for (int i = 0; i < WIDTH_NGRID && lb > la; i++) {
+		double s = width_score(w, exp(la + h * i));
+		if (s < *bs) {
+			*bs = s;
+			*best = la + h * i;
+		}
+	}
+	const double gr = 0.5 * (sqrt(5.0) - 1.0); /* golden section about the best, as trend.c */
+	double lo = fmax(la, *best - h), hi = fmin(lb, *best + h);
+	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo), s1 = width_score(w, exp(x1)), s2 = width_score(w, exp(x2));
+	for (int it = 0; it < WIDTH_NGOLDEN && hi > lo; it++) {
+		if (s1 < s2) {
+			hi = x2;
+			x2 = x1;
+			s2 = s1;
+			x1 = hi - gr * (hi - lo);
+			s1 = width_score(w, exp(x1));
+		} else {
+			lo = x1;
+			x1 = x2;
+			s1 = s2;
+			x2 = lo + gr * (hi - lo);
+			s2 = width_score(w, exp(x2));
+		}
+	}
+	if (s1 < *bs) {
+		*bs = s1;
+		*best = x1;
+	}
+	if (s2 < *bs) {
+		*bs = s2;
+		*best = x2;
+	}
+}
+
+/* Did the fit try trend kind t (its candidates' leave-one-out scores in the model's metadata: "trend_loo=none:…,ggx:…")? */
+static int fit_tried(const struct recon_model *m, int t)
+{
+	const char *p = strstr(m->meta, "trend_loo="), *name = trend_name(t);
+	size_t k = strlen(name);
+	for (p = p ? p + 10 : NULL; p && *p && *p != '\n'; p++)
+		if ((p[-1] == '=' || p[-1] == ',') && !strncmp(p, name, k) && p[k] == ':')
+			return 1;
+	return 0;
+}
+
 static int width_sd(const struct recon_model *m, const double *A, size_t nth, const double *theta, const double *dhr,
 		    double *sw, struct acq_err *err)
 {
@@ -446,9 +513,8 @@ static int width_sd(const struct recon_model *m, const double *A, size_t nth, co
 	 * channels: their σ must be the whole model's σ on those channels, test_recon_select test_value_channels) */
 	const struct recon_model *mw = m->whole ? m->whole : m;
 	size_t Lw = mw->nwl;
-	struct width_ctx w = { .m = mw, .n = n, .nc = Lw < WIDTH_NCH ? Lw : WIDTH_NCH };
-	for (size_t c = 0; c < w.nc; c++)
-		w.chan[c] = w.nc > 1 ? c * (Lw - 1) / (w.nc - 1) : 0;
+	struct width_ctx w = { .m = mw, .n = n, .kind = m->trend };
+	w.nc = trend_score_channels(Lw, w.chan); /* the fit's scored channels (fit.c) */
 	int lobe = 0;
 	for (size_t l = 0; l < Lw; l++)
 		for (int j = 0; j < TREND_NB; j++)
@@ -476,46 +542,42 @@ static int width_sd(const struct recon_model *m, const double *A, size_t nth, co
 	w.B = B;
 	double s0 = width_score(&w, m->trend_alpha);
 	double la = log(TREND_ALPHA_MIN), lb = log(trend_two_lobes(m->trend) ? 0.5 * m->trend_alpha2 : TREND_ALPHA_MAX);
-	double h = (lb - la) / (WIDTH_NGRID - 1), best = log(m->trend_alpha), bs = s0;
-	for (int i = 0; i < WIDTH_NGRID && lb > la; i++) {
-		double s = width_score(&w, exp(la + h * i));
-		if (s < bs) {
-			bs = s;
-			best = la + h * i;
+	double best = log(m->trend_alpha), bs = s0;
+	width_search(&w, la, lb, &best, &bs);
+	/* the other one-roughness kinds the fit tried, with all their terms: one whose best width the rule rejects (the
+	 * plan does not measure it) but which fits the data better is the data's reading (acq-sim's sharp lobe on
+	 * 4 × 4 × 6: phong α 0.089, score 4e-5, against the GGX the rule left, 0.22) */
+	int kind = m->trend;
+	for (int t = RECON_TREND_GGX; t <= RECON_TREND_ROUGH; t++) {
+		if (t == m->trend || !fit_tried(m, t))
+			continue;
+		struct width_ctx wt = w;
+		wt.kind = t;
+		for (int j = 0; j < TREND_NB; j++)
+			wt.used[j] = 1;
+		double bt = log(TREND_ALPHA_MAX), st = INFINITY;
+		width_search(&wt, la, log(TREND_ALPHA_MAX), &bt, &st);
+		if (!(st < bs))
+			continue;
+		width_score(&wt, exp(bt)); /* its coefficients at its best: a lobe the rule would judge? */
+		if (wt.lobe && !trend_lobe_measured(t, exp(bt), n, m->ctr)) {
+			bs = st;
+			best = bt;
+			kind = t;
 		}
-	}
-	const double gr = 0.5 * (sqrt(5.0) - 1.0); /* golden section about the best, as trend.c */
-	double lo = fmax(la, best - h), hi = fmin(lb, best + h);
-	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo), s1 = width_score(&w, exp(x1)), s2 = width_score(&w, exp(x2));
-	for (int it = 0; it < WIDTH_NGOLDEN && hi > lo; it++) {
-		if (s1 < s2) {
-			hi = x2;
-			x2 = x1;
-			s2 = s1;
-			x1 = hi - gr * (hi - lo);
-			s1 = width_score(&w, exp(x1));
-		} else {
-			lo = x1;
-			x1 = x2;
-			s1 = s2;
-			x2 = lo + gr * (hi - lo);
-			s2 = width_score(&w, exp(x2));
-		}
-	}
-	if (s1 < bs) {
-		bs = s1;
-		best = x1;
-	}
-	if (s2 < bs) {
-		bs = s2;
-		best = x2;
 	}
 	if (!(bs > 0) || !((double)(n * w.nc) * (s0 - bs) / bs > 1.0)) {
 		rc = 0; /* the data's width is the fitted one */
 		goto out;
 	}
+	if (kind != m->trend) {
+		w.kind = kind;
+		for (int j = 0; j < TREND_NB; j++)
+			w.used[j] = 1;
+	}
 	/* the model at α*: every channel's coefficients, the data relative to that trend, its GP weights (one factor) */
 	struct recon_model ma = *m;
+	ma.trend = kind;
 	ma.trend_alpha = exp(best);
 	width_score(&w, ma.trend_alpha);
 	for (size_t l = 0; l < L; l++) {

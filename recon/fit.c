@@ -184,7 +184,7 @@ struct fitwork {
 	/* leave-one-out candidates: kind[c] (RECON_TREND_*), c = 0 .. ncand − 1; with --trend auto candidate 0 is the
 	 * plain interpolant and the others the trend kinds; an explicit --trend is the only candidate */
 	int ncand, auto_trend, kind[RECON_TREND__COUNT];
-	size_t chan[16], nc;            /* channels scored by the trend's and the leave-one-out searches */
+	size_t chan[TREND_NCH], nc;     /* channels scored by the trend's and the leave-one-out searches */
 	double trend_rms, crms[RECON_TREND__COUNT], calpha[RECON_TREND__COUNT], cscore[RECON_TREND__COUNT];
 	double calpha2[RECON_TREND__COUNT]; /* the coat kind's second roughness (0 for the others) */
 	double *ccoef[RECON_TREND__COUNT]; /* [L*TREND_NB] coefficients per candidate */
@@ -441,9 +441,7 @@ static int fit_transform(struct fitwork *F, struct acq_err *err)
 		return -1;
 	}
 	/* the channels scored by the trend's roughness search and by the leave-one-out search */
-	size_t nc = F->nc = L < 16 ? L : 16, *chan = F->chan;
-	for (size_t c = 0; c < nc; c++)
-		chan[c] = nc > 1 ? c * (L - 1) / (nc - 1) : 0;
+	size_t nc = F->nc = trend_score_channels(L, F->chan), *chan = F->chan;
 	/* every candidate trend: its roughness and coefficients, ln(T + ε) at the samples */
 	for (int c = 0; c < F->ncand; c++) {
 		int t = F->kind[c];
@@ -544,7 +542,7 @@ static int fit_search(struct fitwork *F, struct acq_err *err)
 	fc->K = malloc(n * n * sizeof *fc->K);
 	fc->A = malloc(n * n * sizeof *fc->A);
 	fc->G = malloc(n * L * sizeof *fc->G);
-	size_t nrhs = 16 * (size_t)RECON_TREND__COUNT;
+	size_t nrhs = TREND_NCH * (size_t)RECON_TREND__COUNT;
 	double *rhs = F->rhs = malloc(n * (L > nrhs ? L : nrhs) * sizeof *rhs);
 	if (!fc->K || !fc->A || !fc->G || !rhs) {
 		acq_errf(err, ACQ_E_NOMEM, "fit: out of memory for the %zu × %zu system", n, n);

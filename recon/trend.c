@@ -7,8 +7,8 @@
 #include <string.h>
 
 #define MU_MIN 1e-9
-#define NGRID 40      /* log-spaced roughness grid, then a golden-section refinement */
-#define NGOLDEN 24
+#define NGRID TREND_NGRID /* log-spaced roughness grid, then a golden-section refinement (trend.h) */
+#define NGOLDEN TREND_NGOLDEN
 
 const char *trend_name(int t)
 {
@@ -449,8 +449,15 @@ static double score(int t, size_t n, const double *val, const double *eps, const
 	 * flank (shape 0.01–0.9), where the width changes the value: a plan samples the exact mirror direction at
 	 * every θi, and a lobe narrower than the nearest off-mirror sample fits the noise there at any width
 	 * (white's Lambertian took a phong lobe of n = 31000 without this rule). */
+	if (lobe && !trend_lobe_measured(t, alpha, n, c6))
+		return INFINITY;
+	return ss / (double)(n * nc);
+}
+
+int trend_lobe_measured(int t, double alpha, size_t n, const double *c6)
+{
 	size_t core = 0, flank = 0;
-	for (size_t k = 0; k < n && lobe; k++) {
+	for (size_t k = 0; k < n; k++) {
 		double sh = lobe_shape(t, alpha, c6 + 6 * k);
 		if (t == RECON_TREND_GGX) {
 			const double *p = c6 + 6 * k;
@@ -461,9 +468,7 @@ static double score(int t, size_t n, const double *val, const double *eps, const
 			flank += sh >= 0.01 && sh <= 0.9;
 		}
 	}
-	if (lobe && (core < TREND_MIN_INLOBE || (t != RECON_TREND_GGX && flank < TREND_MIN_INLOBE)))
-		return INFINITY;
-	return ss / (double)(n * nc);
+	return core >= TREND_MIN_INLOBE && (t == RECON_TREND_GGX || flank >= TREND_MIN_INLOBE);
 }
 
 /*

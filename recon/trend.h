@@ -30,6 +30,18 @@ enum recon_trend {
 #define TREND_LOBE 2          /* the lobe terms are b[TREND_LOBE .. TREND_NB) (coat: trend_lobe_first) */
 #define TREND_ALPHA_MIN 0.005 /* roughness range searched by the fit */
 #define TREND_ALPHA_MAX 1.0
+#define TREND_NGRID 40        /* the roughness search: a log grid over the range, then golden sections ... */
+#define TREND_NGOLDEN 24      /* ... of TREND_NGOLDEN steps about the grid's best (trend.c; dhr.c's width profile) */
+#define TREND_NCH 16          /* the channels the roughness and leave-one-out searches score: at most 16 ... */
+/* ... evenly spread over the L channels (chan[0..*nc) ascending, the first and the last included): fit.c's choice,
+ * which dhr.c's width profile repeats. */
+static inline size_t trend_score_channels(size_t L, size_t chan[TREND_NCH])
+{
+	size_t nc = L < TREND_NCH ? L : TREND_NCH;
+	for (size_t c = 0; c < nc; c++)
+		chan[c] = nc > 1 ? c * (L - 1) / (nc - 1) : 0;
+	return nc;
+}
 
 /* Basis values of trend t at c6 (zeros for none); finite and ≥ 0 on and above the horizon, symmetric in ωi ↔ ωo.
  * alpha2 is the second roughness of the two-lobe kind (coat: the base lobe; ignored by the others). */
@@ -79,6 +91,10 @@ double trend_fit_coef(size_t n, const double *v, double eps, const double *B, do
 int trend_fit_kind2(int t, size_t n, size_t L, const double *val, const double *eps, const double *c6,
 		    const size_t *chan, size_t nc, double *alpha, double *alpha2, double *coef, double *rms,
 		    struct acq_err *err);
+/* The fit's admissibility rule for the (narrow) lobe of the one-roughness kind t at roughness alpha (the coat kind: its
+ * coat lobe's core and flank): 1 if the samples c6[6n] measure its width — ≥ 3 in its core (GGX: tanθh ≤ α; the
+ * others: shape ≥ 1/4) and, but for GGX, ≥ 3 on its flank (shape 0.01-0.9) — else 0 (trend.c, score). */
+int trend_lobe_measured(int t, double alpha, size_t n, const double *c6);
 /* Node spacing (radians in ωo) a hemisphere rule needs for the terms of trend t that the energy table does NOT
  * integrate over half vectors (the coat kind's base lobe b1, GGX of α2: 0.5·α2); INFINITY for the other kinds. */
 double trend_base_step(int t, double alpha2);

@@ -466,6 +466,48 @@ static void test_coat_width_unmeasured(void **state)
 	mat_free(mt);
 }
 
+/*
+ * acq-sim's sharp lobe (phong n = 250, ψ-width 5°) on 4 × 4 × 6: θi = θo = 10, 30, 50, 70°, every mirror direction
+ * sampled exactly and only two samples on the lobe's flank (10° off the mirror at θ 10°), so the fit's admissibility
+ * rule rejects the phong kind at the data's width (α 0.089: score 4e-5, the noise) and leaves a GGX lobe (α 0.034,
+ * score 0.22) that holds the peak and is too narrow beside it: the DHR read 0.17 low at 8°, 0.11 at 30°, with σ 0.02
+ * (z RMS 9.4 / 6.3: session 18). dhr's second reading (width_sd: the data's best kind and width without the rule)
+ * holds it. The z RMS at 8° and 30° (2 data sets × 24 wavelengths) in [CC_ZLO, CC_ZHI]; σ × 3 and σ / 3 fail.
+ */
+#define SL_SEED 2
+static void test_sharp_lobe_form_unmeasured(void **state)
+{
+	(void)state;
+	uint64_t base = rt_seed();
+	double wl[CC_NWL], truth[2][CC_NWL], qs[CC_NWL], th[2] = { 8 * M_PI / 180, 30 * M_PI / 180 };
+	for (int l = 0; l < CC_NWL; l++)
+		wl[l] = 450 + 25.0 * l;
+	struct acq_err e = { 0 };
+	struct mat *mt = mat_new(MAT_SHARP_LOBE, CC_NWL, wl, &e);
+	assert_non_null(mt);
+	for (int t = 0; t < 2; t++)
+		assert_int_equal(mat_dhr(mt, th[t], 2, truth[t], qs, &e), 0);
+	double err[SL_SEED * 2 * CC_NWL], sig[SL_SEED * 2 * CC_NWL];
+	for (int s = 0; s < SL_SEED; s++) {
+		struct recon_model *m = sim_grid_fit(mt, 4, 4, 6, base * 16 + (uint64_t)s);
+		printf("sharp lobe 4x4x6, data set %d: trend %s α %.4f\n", s, trend_name(m->trend), m->trend_alpha);
+		double *d = err + s * 2 * CC_NWL;
+		assert_int_equal(recon_dhr(m, 2, th, 32, base * 16 + (uint64_t)s + 1, d, sig + s * 2 * CC_NWL, NULL, NULL, &e), 0);
+		for (int t = 0; t < 2; t++)
+			for (int l = 0; l < CC_NWL; l++)
+				d[t * CC_NWL + l] -= truth[t][l];
+		recon_model_free(m);
+	}
+	int n = SL_SEED * 2 * CC_NWL;
+	double z1 = coat_zrms(err, sig, n, 1), z3 = coat_zrms(err, sig, n, 3), z13 = coat_zrms(err, sig, n, 1.0 / 3);
+	printf("sharp lobe 4x4x6, θi = 8°, 30°: RMS z %.2f (band [%.2f, %.2f]; σ×3: %.2f, σ/3: %.2f)\n", z1, CC_ZLO, CC_ZHI,
+	       z3, z13);
+	assert_true(z1 >= CC_ZLO && z1 <= CC_ZHI);
+	assert_false(z3 >= CC_ZLO && z3 <= CC_ZHI); /* σ × 3 */
+	assert_false(z13 >= CC_ZLO && z13 <= CC_ZHI); /* σ / 3 */
+	mat_free(mt);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -475,6 +517,7 @@ int main(void)
 		cmocka_unit_test(test_coat_beyond_last_zenith),
 		cmocka_unit_test(test_green_paint_coarse_not_overcovered),
 		cmocka_unit_test(test_coat_width_unmeasured),
+		cmocka_unit_test(test_sharp_lobe_form_unmeasured),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
