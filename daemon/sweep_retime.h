@@ -25,7 +25,8 @@
  * interval where the exposures are unknown (plan_time_interval) is kept per step and moves the ETA's two ends
  * (sweep_retime_bounds, sweep_retime_eta; sweep.progress eta_low_s, eta_high_s). Session 18: the survey
  * (plan_survey_apply) measures a few points of every incidence first, so that after it every incidence is re-timed
- * from its own exposures (README "How long a sweep takes"). */
+ * from its own exposures (README "How long a sweep takes"); its rows, six points each, are smoothed across
+ * incidences (sweep_retime_smooth) until the route reaches them. */
 #ifndef SWEEP_RETIME_H
 #define SWEEP_RETIME_H
 
