@@ -38,6 +38,15 @@ static void prior_inc(struct plan_prior_inc *q, double theta_i, double *first, s
 				      .dark_ms = nd ? dms / (double)nd : 0, .extra_per_point = (double)nx / (double)np,
 				      .extra_ms = nx ? xms / (double)nx : 0, .rungs = rungs };
 	q->median_ms = median_of(first, np);
+	if (np > 1) {
+		double ls = 0, lv = 0;
+		for (size_t i = 0; i < np; i++)
+			ls += log(fmax(first[i], 1e-9));
+		ls /= (double)np;
+		for (size_t i = 0; i < np; i++)
+			lv += (log(fmax(first[i], 1e-9)) - ls) * (log(fmax(first[i], 1e-9)) - ls);
+		q->log_var = lv / (double)(np - 1);
+	}
 }
 
 /* One done point of the prior's sweep, for the host's time per point. */

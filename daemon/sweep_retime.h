@@ -25,7 +25,8 @@
  * interval where the exposures are unknown (plan_time_interval) is kept per step and moves the ETA's two ends
  * (sweep_retime_bounds, sweep_retime_eta; sweep.progress eta_low_s, eta_high_s). Session 18: the survey
  * (plan_survey_apply) measures a few points of every incidence first, so that after it every incidence is re-timed
- * from its own exposures (README "How long a sweep takes"). */
+ * from its own exposures (README "How long a sweep takes"); its rows, six points each, are smoothed across
+ * incidences (sweep_retime_smooth) until the route reaches them. */
 #ifndef SWEEP_RETIME_H
 #define SWEEP_RETIME_H
 
@@ -62,6 +63,10 @@ void sweep_retime_setup(struct sweep_retime *r, const struct plan_spec *spec, co
  * (even with a prior from an earlier sweep that lacks some incidence: the survey's rows replace it), the survey's
  * rows' pooled share taken as the route's (sweep_retime_apply). Call after sweep_retime_setup. */
 void sweep_retime_survey(struct sweep_retime *r, const struct plan_spec *spec, const struct plan_result *plan);
+/* The rows of pr flagged in only (pr->n_inc flags: the survey's rows without route points) smoothed across
+ * incidences: each one's mean and median first exposure scaled to the Gaussian-kernel mean (12° in zenith) of every
+ * row's mean, each row weighted by 1 / (its ln-times' variance / points + 0.4); the other rows unchanged. */
+void sweep_retime_smooth(struct plan_prior *pr, const bool *only);
 /* The sweep has ended: r's rows freed (r is then set up for nothing). */
 void sweep_retime_end(struct sweep_retime *r);
 /* Whether step done (the next to be measured) of plan starts a new incidence after at least one measured point, or

@@ -206,6 +206,7 @@ struct plan_prior_inc {
 	double theta_i;             /* the incidence zenith, degrees (sample frame) */
 	size_t points;              /* points done there */
 	double median_ms, mean_ms;  /* each point's first exposure: median and mean integration time */
+	double log_var;             /* the variance of ln(first exposure) over its points (n - 1 divisor; 0: one point) */
 	double spread;              /* longest / shortest first exposure */
 	double darks_per_clear;     /* darks taken at the incidence: the distinct times the cache needed */
 	double dark_ms;             /* their mean integration time */

@@ -105,12 +105,14 @@ static void test_prior_figures(void **state)
 	assert_true(fabs(q->theta_i - 10) < TOL);
 	assert_int_equal(q->points, 3);
 	assert_true(fabs(q->median_ms - 40) < TOL && fabs(q->mean_ms - 100.0 / 3) < TOL && fabs(q->spread - 2) < TOL);
+	assert_true(fabs(q->log_var - log(2) * log(2) / 3) < TOL); /* ln 40, ln 20, ln 40: n - 1 divisor */
 	assert_true(fabs(q->darks_per_clear - 3) < TOL && fabs(q->dark_ms - 220.0 / 3) < TOL);
 	assert_true(fabs(q->extra_per_point - 1.0 / 3) < TOL && fabs(q->extra_ms - 160) < TOL);
 	q = &pr.inc[1];
 	assert_true(fabs(q->theta_i - 40) < TOL);
 	assert_int_equal(q->points, 2);
 	assert_true(fabs(q->median_ms - 250) < TOL && fabs(q->mean_ms - 250) < TOL && fabs(q->spread - 4) < TOL);
+	assert_true(fabs(q->log_var - 2 * log(2) * log(2)) < TOL);
 	assert_true(fabs(q->darks_per_clear - 2) < TOL && fabs(q->dark_ms - 250) < TOL);
 	assert_true(q->extra_per_point == 0 && q->extra_ms == 0);
 	/* no point's first time is its predecessor's (40, 20, 40, 100, 400): no probe was one of its scans */

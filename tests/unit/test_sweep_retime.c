@@ -440,16 +440,27 @@ static void test_retime_survey(void **state)
 	assert_int_equal(p->n_inc, 3);
 	struct plan_timing th = tm; /* the same rows by hand */
 	th.prior = (struct plan_prior){ .sweep = sid, .host_per_point_s = 0.003, .host_points = 1, .n_inc = 3 };
+	/* the survey rows (10°: 32, 32 ms; 30°: 64, 64; 50°: 128, 512) smoothed across incidences (sweep_retime_smooth):
+	 * each the Gaussian-kernel mean (12°) of the three rows' means weighted by 1 / (ln-variance / 2 + 0.4), the
+	 * 50° row's ln-variance ln(4)^2 / 2 */
+	static const double raw[3] = { 32, 64, 320 };
+	double wv[3] = { 1 / 0.4, 1 / 0.4, 1 / (log(4) * log(4) / 2 / 2 + 0.4) };
 	for (size_t k = 0; k < 3; k++) {
-		double mean = k < 2 ? inc_ms[k] : (128 + 512) / 2.0;
+		double sw = 0, sm = 0;
+		for (size_t u = 0; u < 3; u++) {
+			double d = (20.0 * (double)u - 20.0 * (double)k) / 12;
+			sw += wv[u] * exp(-0.5 * d * d);
+			sm += wv[u] * exp(-0.5 * d * d) * raw[u];
+		}
+		double mean = sm / sw;
 		assert_int_equal(p->inc[k].points, 2);
-		assert_true(p->inc[k].mean_ms == mean && p->inc[k].median_ms == mean);
+		assert_true(fabs(p->inc[k].mean_ms - mean) < 1e-9 * mean && fabs(p->inc[k].median_ms - mean) < 1e-9 * mean);
 		assert_true(p->inc[k].pooled_per_point == PLAN_PROBE_POOL && p->inc[k].pooled_ms == 0);
 		/* the rungs between the survey's shortest and longest time (the route's points use them all) */
 		uint64_t rungs = k < 2 ? (uint64_t)1 << (10 + 2 * k) : (uint64_t)0x1f << 14;
 		assert_true(p->inc[k].rungs == rungs);
 		th.prior.inc[k] = (struct plan_prior_inc){ .theta_i = p->inc[k].theta_i, .points = 2, .mean_ms = mean,
-							    .median_ms = mean, .spread = k < 2 ? 1 : 4, .rungs = rungs,
+							    .median_ms = mean, .log_var = p->inc[k].log_var, .spread = k < 2 ? 1 : 4, .rungs = rungs,
 							    .darks_per_clear = k < 2 ? 1 : 5,
 							    .pooled_per_point = PLAN_PROBE_POOL };
 	}
@@ -469,6 +480,49 @@ static void test_retime_survey(void **state)
 	store_close(st);
 }
 
+/* sweep_retime_smooth: a survey row's mean pulled toward its neighbours by their certainty; completed rows kept. */
+static void test_retime_smooth(void **state)
+{
+	(void)state;
+	struct plan_prior pr = { .sweep = 1, .n_inc = 10 };
+	bool only[PLAN_PRIOR_MAX_INC] = { false }, none[PLAN_PRIOR_MAX_INC] = { false };
+	for (size_t i = 0; i < 10; i++) {
+		bool sv = i >= 5; /* the route has done 0-30°; 37.5-67.5° have the survey's 6 points each */
+		only[i] = sv;
+		pr.inc[i] = (struct plan_prior_inc){ .theta_i = 7.5 * (double)i, .points = sv ? 6 : 100,
+						     .mean_ms = 100, .median_ms = 90, .log_var = sv ? 1 : 0.2 };
+	}
+	struct plan_prior same = pr;
+	sweep_retime_smooth(&same, only); /* every row the same mean: nothing moves */
+	for (size_t i = 0; i < 10; i++)
+		assert_true(fabs(same.inc[i].mean_ms - 100) < 1e-9 && fabs(same.inc[i].median_ms - 90) < 1e-9);
+	pr.inc[8].mean_ms = 300; /* 60°: a survey row of a wide spread far above its neighbours (the metal's 843 ms) */
+	pr.inc[8].log_var = 3;
+	pr.inc[2].mean_ms = 50;  /* 15°: completed */
+	struct plan_prior kept = pr;
+	sweep_retime_smooth(&kept, none); /* no survey-only row: unchanged */
+	assert_memory_equal(&kept, &pr, sizeof pr);
+	sweep_retime_smooth(&pr, only);
+	for (size_t i = 0; i < 5; i++) /* completed rows as measured */
+		assert_true(pr.inc[i].mean_ms == kept.inc[i].mean_ms && pr.inc[i].median_ms == 90);
+	/* by hand: weights 1 / (log_var / points + 0.4) times exp(-(Δθ / 12°)² / 2), over the rows' own means */
+	for (size_t i = 5; i < 10; i++) {
+		double sw = 0, sm = 0;
+		for (size_t u = 0; u < 10; u++) {
+			double d = 7.5 * ((double)u - (double)i) / 12;
+			double w = exp(-0.5 * d * d) / (kept.inc[u].log_var / (double)kept.inc[u].points + 0.4);
+			sw += w;
+			sm += w * kept.inc[u].mean_ms;
+		}
+		double want = sm / sw;
+		print_message("%.1f°: %.1f ms -> %.2f ms\n", pr.inc[i].theta_i, kept.inc[i].mean_ms, pr.inc[i].mean_ms);
+		assert_true(fabs(pr.inc[i].mean_ms - want) < 1e-9 * want);
+		assert_true(fabs(pr.inc[i].median_ms / pr.inc[i].mean_ms - 0.9 * 100 / kept.inc[i].mean_ms) < 1e-12);
+	}
+	assert_true(pr.inc[8].mean_ms > 100 && pr.inc[8].mean_ms < 200); /* most of the outlier gone */
+	assert_true(pr.inc[7].mean_ms > 100 && pr.inc[9].mean_ms > pr.inc[5].mean_ms);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -476,6 +530,7 @@ int main(void)
 		cmocka_unit_test(test_retime_who),
 		cmocka_unit_test(test_retime_incremental),
 		cmocka_unit_test(test_retime_survey),
+		cmocka_unit_test(test_retime_smooth),
 	};
 	return cmocka_run_group_tests(tests, ut_dir_setup, ut_dir_teardown);
 }
