@@ -49,10 +49,14 @@ static int write_decisions(const char *out, const struct colour_opts *co, const 
 		fprintf(o.f, "\"colour\": ");
 	}
 	ok = ok && colour_opts_write_json(o.f, co, NULL, err) == 0;
+	double e[3];
+	recon_rgb_reduction_error_rgb(R, e);
 	fprintf(o.f, ", \"spectral_path\": \"%s\", \"bin_nm\": %g, \"channels\": %zu, \"rank\": %zu, "
-		"\"reduction_max_rel_error\": %.3g, \"batch_precision\": \"%s\", \"single_precision_max_abs_error_ln_f\": %.3g}\n",
-		full ? "full" : "reduced", bin_nm, nc, r, recon_rgb_reduction_error(R), recon_rgb_f32(R) ? "single" : "double",
-		recon_rgb_f32_error(R));
+		"\"reduction_max_rel_error\": %.3g, \"reduction_max_rel_error_rgb\": [%.3g, %.3g, %.3g], "
+		"\"reduction_error_definition\": \"" RECON_RGB_RED_DEFINITION "\", \"batch_precision\": \"%s\", "
+		"\"single_precision_max_abs_error_ln_f\": %.3g}\n",
+		full ? "full" : "reduced", bin_nm, nc, r, recon_rgb_reduction_error(R), e[0], e[1], e[2],
+		recon_rgb_f32(R) ? "single" : "double", recon_rgb_f32_error(R));
 	return cli_out_close(&o, ok, err);
 }
 
@@ -193,9 +197,11 @@ static int make_rgb(const struct output_args *a, const struct recon_model *m, st
 	if (a->dbl)
 		recon_rgb_set_f32(*R, 0);
 	recon_rgb_sizes(*R, &nc, &r);
-	fprintf(stderr, "%s: %s path, %zu of %zu channels (%g nm bins), spectral rank %zu, reduction error %.2g "
-		"(relative); batch GEMM in %s precision (single-precision error %.2g in ln f)\n", a->cmd,
-		a->full ? "full-spectrum" : "reduced", nc, m->nwl, a->bin_nm, r, recon_rgb_reduction_error(*R),
+	double e[3];
+	recon_rgb_reduction_error_rgb(*R, e);
+	fprintf(stderr, "%s: %s path, %zu of %zu channels (%g nm bins), spectral rank %zu, reduction error R %.2g "
+		"G %.2g B %.2g (relative, per channel); batch GEMM in %s precision (single-precision error %.2g in ln f)\n",
+		a->cmd, a->full ? "full-spectrum" : "reduced", nc, m->nwl, a->bin_nm, r, e[0], e[1], e[2],
 		recon_rgb_f32(*R) ? "single" : "double", recon_rgb_f32_error(*R));
 	return 0;
 }
