@@ -76,12 +76,14 @@ static const char merl_help[] =
 
 static const char render_help[] =
 	"usage: brdf-recon render MODEL -o OUT.png [--exr OUT.exr] [--size N] [--exposure X] [--spp N] [--seed S]\n"
-	"                         [--env MAP.exr [--env-scale X]] [--sun-elevation DEG] [--sun-azimuth DEG] [--no-sun]\n"
+	"                         [--env MAP.exr [--env-scale X] [--sun]] [--sun-elevation DEG] [--sun-azimuth DEG]\n"
+	"                         [--no-sun]\n"
 	"                         [--lights] [--colour key=value]... [--threads N] [--bin-nm X] [--direct | --full-spectrum]\n"
 	"Preview of the model on a sphere: tone-mapped sRGB PNG (sRGB/gAMA/cHRM chunks) and, with --exr, the linear\n"
 	"HDR radiance as OpenEXR (float RGB, Rec. 709 chromaticities). Lighting: a smooth procedural sky with a sun\n"
-	"(default; azimuth 0 = toward the camera, 90 = right), or a lat-long EXR environment map (--env; centre\n"
-	"column looks away from the camera), sampled by importance (sky luminance, sun cone, GGX lobe, cosine;\n"
+	"(default; azimuth 0 = toward the camera, 90 = right; --no-sun: the sky alone), or a lat-long EXR environment\n"
+	"map (--env; centre column looks away from the camera) as it is: a captured map holds its own sun; --sun adds\n"
+	"the procedural one to it. Sampled by importance (sky luminance, sun cone, GGX lobe, cosine;\n"
 	"--spp samples per pixel, default 64). --lights: the old two lights + 64-direction gradient sky.\n"
 	"OUT.png.colour.json records the image's colour decisions, its lighting and the BRDF-to-RGB chain.\n"
 	"By default the model is tabulated as a MERL table in memory (batched) and rendered through its nearest-cell\n"
@@ -95,7 +97,7 @@ struct output_args {
 	struct colour_opts co;
 	uint64_t threads, size, spp, rseed;
 	double bin_nm, exposure, env_scale, sun_el, sun_az;
-	int full, direct, dbl, no_sun, old_lights;
+	int full, direct, dbl, no_sun, sun, old_lights;
 };
 
 /* Read the options into a (defaults first): -1 to go on, or the exit status (help, a usage error, a bad --colour). */
@@ -110,7 +112,8 @@ static int parse_args(const char *cmd, int argc, char **argv, struct output_args
 		{ "spp", required_argument, 0, 'P' }, { "seed", required_argument, 0, 'S' },
 		{ "env", required_argument, 0, 'E' }, { "env-scale", required_argument, 0, 'K' },
 		{ "sun-elevation", required_argument, 0, 'A' }, { "sun-azimuth", required_argument, 0, 'Z' },
-		{ "no-sun", no_argument, 0, 'N' }, { "lights", no_argument, 0, 'L' }, { 0, 0, 0, 0 } };
+		{ "no-sun", no_argument, 0, 'N' }, { "sun", no_argument, 0, 'U' }, { "lights", no_argument, 0, 'L' },
+		{ 0, 0, 0, 0 } };
 	*a = (struct output_args){ .cmd = cmd, .is_merl = !strcmp(cmd, "merl"), .threads = 2, .size = 256, .spp = 64,
 				   .rseed = 1, .bin_nm = 5, .exposure = 1, .env_scale = 1, .sun_el = 40, .sun_az = -36 };
 	colour_opts_brdf(&a->co);
@@ -146,6 +149,7 @@ static int parse_args(const char *cmd, int argc, char **argv, struct output_args
 		case 'X': a->exr = optarg; break;
 		case 'E': a->env = optarg; break;
 		case 'N': a->no_sun = 1; break;
+		case 'U': a->sun = 1; break;
 		case 'L': a->old_lights = 1; break;
 		case 'P': case 'S':
 			if (cli_parse_u64(optarg, c == 'P' ? &a->spp : &a->rseed) || (c == 'P' && (a->spp < 8 || a->spp > 4096)))
@@ -163,14 +167,18 @@ static int parse_args(const char *cmd, int argc, char **argv, struct output_args
 	}
 	if (optind != argc - 1 || !a->outp)
 		return cli_usage_err(cmd, "MODEL and -o OUT expected");
-	if (a->is_merl && (a->exr || a->env || a->old_lights))
-		return cli_usage_err(cmd, "--exr, --env and --lights are render options");
+	if (a->is_merl && (a->exr || a->env || a->old_lights || a->sun || a->no_sun))
+		return cli_usage_err(cmd, "--exr, --env, --sun, --no-sun and --lights are render options");
+	if (a->sun && a->no_sun)
+		return cli_usage_err(cmd, "--sun and --no-sun exclude each other");
+	if (a->sun && !a->env)
+		return cli_usage_err(cmd, "--sun adds the procedural sun to an --env map (the procedural sky has it already)");
 	a->model = argv[optind];
 	return -1;
 }
 
-/* render's lighting into *sky: the procedural sky with its sun, or the --env map; NULL for merl and --lights.
- * 0, or -1 with err set. */
+/* render's lighting into *sky: the procedural sky with its sun (unless --no-sun), or the --env map as it is (a
+ * captured map holds its own sun; --sun adds the procedural one); NULL for merl and --lights. 0, or -1 with err. */
 static int make_sky(const struct output_args *a, struct sky **sky, struct acq_err *err)
 {
 	struct sky_opts so;
@@ -184,7 +192,7 @@ static int make_sky(const struct output_args *a, struct sky **sky, struct acq_er
 	*sky = NULL;
 	if (a->is_merl || a->old_lights)
 		return 0;
-	return a->env ? sky_envmap(a->env, a->env_scale, a->no_sun ? NULL : &so, sky, err) : sky_procedural(&so, sky, err);
+	return a->env ? sky_envmap(a->env, a->env_scale, a->sun ? &so : NULL, sky, err) : sky_procedural(&so, sky, err);
 }
 
 /* The model reduced to what RGB needs (*R), its sizes and errors reported on stderr. 0, or -1 with err set. */
