@@ -317,8 +317,9 @@ int slices_plot(const struct recon_model *m, const struct recon_samples *s, cons
 		free(wsel);
 		return acq_errf(err, ACQ_E_RANGE, "slices: %zu incidences (at most %d)", nth, SLICES_MAX_THETA);
 	}
-	memcpy(th, theta, nth * sizeof *th);
-	if (!nth) {
+	if (nth) {
+		memcpy(th, theta, nth * sizeof *th); /* theta may be NULL when nth is 0 (memcpy's argument must not be) */
+	} else {
 		if (measured_theta(s, stol, th, &nth, err)) {
 			free(wsel);
 			return -1;

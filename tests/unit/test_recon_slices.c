@@ -21,6 +21,14 @@
 #include "recon/slices_int.h"
 #include "recon_test_util.h"
 
+/* fontconfig (behind cairo's text) keeps process-lifetime caches that LeakSanitizer reports; they are not
+ * ours (as test_recon_plot). This hook is read by LSan only in sanitizer builds. */
+const char *__lsan_default_suppressions(void);
+const char *__lsan_default_suppressions(void)
+{
+	return "leak:libfontconfig.so\n";
+}
+
 /* A model holding only its wavelengths: five channels at 400, 500, …, 800 nm (in wl, 5 entries). */
 static void five_channels(struct recon_model *m, double *wl)
 {
