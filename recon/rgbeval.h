@@ -38,9 +38,15 @@ int recon_rgb_merl_table(const struct recon_rgb *r, struct merl_table *t, int al
  * for any count; the progress callback is called with a lock held). */
 int recon_rgb_merl_table_ex(const struct recon_rgb *r, struct merl_table *t, int all_cells, int threads,
 			    struct colour_stats *stats, recon_progress_fn progress, void *pctx, struct acq_err *err);
-/* Largest relative difference (linear RGB, relative to the largest component) between the reduced and
- * the full path found at construction. */
+/* Largest of recon_rgb_reduction_error_rgb's three figures. */
 double recon_rgb_reduction_error(const struct recon_rgb *r);
+/* Per channel (linear R, G, B) the stated bound of the reduction error: twice the largest relative difference
+ * |reduced − full| / max(|full|, 1 % of the pair's largest channel) found at construction at 1024 random pairs
+ * (cosθ = u², u uniform, both directions). RECON_RGB_RED_DEFINITION says so in words (for sidecars). */
+void recon_rgb_reduction_error_rgb(const struct recon_rgb *r, double e[3]);
+#define RECON_RGB_RED_DEFINITION                                                                                  \
+	"per linear sRGB channel: 2 x the largest |reduced - full| / max(|full|, 0.01 x largest channel) at 1024 "    \
+	"random direction pairs (cos theta = u^2, u uniform)"
 /* Largest |g_single − g_double| (g = ln f: a relative error in f) of the single-precision batch GEMM, measured
  * at construction at 2048 random pairs. */
 double recon_rgb_f32_error(const struct recon_rgb *r);

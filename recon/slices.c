@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "config/acq_out.h"
 #include "recon/rbf.h"
 #include "recon/recon_int.h"
 #include "recon/slices_int.h"
@@ -236,6 +237,18 @@ static int series_fill(struct slices_series *q, const struct recon_model *m, con
 			vr->min = fmin(vr->min, q->f[i]);
 		vr->max = fmax(vr->max, q->hi[i]);
 	}
+	/* the largest measured θo at this incidence (any azimuth; all samples' when none is at it): beyond it the model
+	 * extrapolates, and the figure says so */
+	q->xmax = NAN;
+	double all_max = NAN;
+	for (size_t i = 0; s && i < s->n; i++) {
+		double to = s->ang[4 * i + 2] * 180 / M_PI;
+		all_max = fmax(all_max, to); /* fmax ignores the NaN start */
+		if (fabs(s->ang[4 * i] - ti) <= 0.05 * M_PI / 180)
+			q->xmax = fmax(q->xmax, to);
+	}
+	if (q->xmax != q->xmax)
+		q->xmax = all_max;
 	/* in-plane samples at this incidence, reduced by the same weights (sample spectra read linearly) */
 	for (size_t i = 0; s && i < s->n; i++) {
 		const double *a = s->ang + 4 * i;
@@ -255,30 +268,32 @@ static int series_fill(struct slices_series *q, const struct recon_model *m, con
 	return 0;
 }
 
-/* The plotted numbers to csv (kind,theta_i,theta_o_signed,value,lo,hi: the model's band, then the samples ±k σ);
- * 0 or -1 with err. */
+/* The plotted numbers to csv (kind,theta_i,theta_o_signed,value,lo,hi,beyond_data: the model's band, beyond_data 1
+ * where |θo| exceeds the largest measured θo at that incidence; then the samples ± k σ, beyond_data 0), through
+ * config/acq_out (a failed write leaves the old file; a FIFO or device is written in place); 0 or -1 with err. */
 static int series_csv(const struct slices_series *S, size_t nth, const struct slices_opts *o, const char *csv,
 		      struct acq_err *err)
 {
-	FILE *cf = fopen(csv, "w");
-	if (!cf)
-		return acq_errf(err, ACQ_E_IO, "slices: cannot create %s", csv);
-	fprintf(cf, "kind,theta_i,theta_o_signed,value,lo,hi\n");
+	struct acq_out ao;
+	if (acq_out_open(&ao, csv, ACQ_OUT_STDIO, err))
+		return acq_err_prefix(err, "slices: ");
+	FILE *cf = ao.f;
+	fprintf(cf, "kind,theta_i,theta_o_signed,value,lo,hi,beyond_data\n");
 	for (size_t t = 0; t < nth; t++) {
 		for (size_t i = 0; i < S[t].np; i++)
-			fprintf(cf, "model,%.10g,%.10g,%.10g,%.10g,%.10g\n", S[t].theta * 180 / M_PI, S[t].x[i], S[t].f[i],
-				S[t].lo[i], S[t].hi[i]);
+			fprintf(cf, "model,%.10g,%.10g,%.10g,%.10g,%.10g,%d\n", S[t].theta * 180 / M_PI, S[t].x[i], S[t].f[i],
+				S[t].lo[i], S[t].hi[i], slices_beyond(&S[t], S[t].x[i]));
 		for (size_t i = 0; i < S[t].ns; i++) {
 			double sg = isfinite(S[t].ss[i]) ? o->band_k * S[t].ss[i] : 0;
-			fprintf(cf, "sample,%.10g,%.10g,%.10g,%.10g,%.10g\n", S[t].theta * 180 / M_PI, S[t].sx[i], S[t].sv[i],
-				S[t].sv[i] - sg, S[t].sv[i] + sg);
+			fprintf(cf, "sample,%.10g,%.10g,%.10g,%.10g,%.10g,0\n", S[t].theta * 180 / M_PI, S[t].sx[i],
+				S[t].sv[i], S[t].sv[i] - sg, S[t].sv[i] + sg);
 		}
 	}
-	int bad = ferror(cf);
-	bad |= fclose(cf) != 0;
-	if (bad)
+	if (ferror(cf)) {
+		acq_out_abort(&ao);
 		return acq_errf(err, ACQ_E_IO, "slices: writing %s failed", csv);
-	return 0;
+	}
+	return acq_out_commit(&ao, err) ? acq_err_prefix(err, "slices: ") : 0;
 }
 
 int slices_plot(const struct recon_model *m, const struct recon_samples *s, const double *theta, size_t nth,
@@ -302,8 +317,9 @@ int slices_plot(const struct recon_model *m, const struct recon_samples *s, cons
 		free(wsel);
 		return acq_errf(err, ACQ_E_RANGE, "slices: %zu incidences (at most %d)", nth, SLICES_MAX_THETA);
 	}
-	memcpy(th, theta, nth * sizeof *th);
-	if (!nth) {
+	if (nth) {
+		memcpy(th, theta, nth * sizeof *th); /* theta may be NULL when nth is 0 (memcpy's argument must not be) */
+	} else {
 		if (measured_theta(s, stol, th, &nth, err)) {
 			free(wsel);
 			return -1;
@@ -349,6 +365,11 @@ int slices_plot(const struct recon_model *m, const struct recon_samples *s, cons
 		res->nth = nth;
 		memcpy(res->theta, th, nth * sizeof *th);
 		res->nsamples = nsamp;
+		for (size_t t = 0; t < nth; t++) {
+			res->theta_o_max[t] = S[t].xmax;
+			for (size_t i = 0; i < S[t].np; i++)
+				res->beyond[t] += (size_t)slices_beyond(&S[t], S[t].x[i]);
+		}
 		for (size_t l = 0; l < L; l++)
 			res->nchannels += wsel[l] != 0;
 	}

@@ -25,6 +25,8 @@ struct slices_result {
 	double theta[SLICES_MAX_THETA];    /* their θi, radians */
 	size_t nsamples;                   /* measured in-plane samples drawn */
 	size_t nchannels;                  /* model channels in the selection */
+	double theta_o_max[SLICES_MAX_THETA]; /* largest measured θo per incidence (deg; NaN without samples) */
+	size_t beyond[SLICES_MAX_THETA];   /* model points drawn beyond it (dotted, pale band; beyond_data 1 in the CSV) */
 };
 
 /* Defaults above; the wavelength range is left NaN (the caller chooses). */
@@ -37,7 +39,8 @@ int slices_weights(const struct recon_model *m, double lo, double hi, double *ws
 
 
 /* Draw the in-plane figure to png (and the polar panels to polar_png if not NULL; curve data to csv if not
- * NULL: kind,theta_i,theta_o_signed,value,lo,hi with θo signed + on the forward side φo − φi = 180°) for the
+ * NULL: kind,theta_i,theta_o_signed,value,lo,hi,beyond_data with θo signed + on the forward side φo − φi = 180°;
+ * the model beyond the largest measured θo of an incidence drawn dotted over a paler band) for the
  * incidences theta[nth] (radians), or, with nth = 0, every incidence at which samples s has in-plane samples
  * (up to SLICES_MAX_THETA). s may be NULL (no samples drawn; then nth must be > 0). 0, or -1 with err. */
 int slices_plot(const struct recon_model *m, const struct recon_samples *s, const double *theta, size_t nth,

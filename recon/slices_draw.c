@@ -55,31 +55,44 @@ static void map_at(const struct slices_map *mp, double x, double v, double *X, d
 	*Y = mp->cy - r * cos(x * M_PI / 180);
 }
 
-/* Series s's band (filled, translucent) and model curve (2 px, dashed as series t) in colour c, placed by mp. */
+/* Series s's band (filled, translucent) and model curve (2 px, dashed as series t) in colour c, placed by mp. Beyond
+ * the measured range (slices_beyond; judged at each segment's midpoint) the band is paler and the curve dotted: there
+ * the model extrapolates. */
 static void band_and_model(cairo_t *cr, const struct slices_series *s, const struct slices_map *mp, const double c[3],
 			   size_t t)
 {
+	static const double dot[2] = { 1.5, 4 };
 	double X, Y;
-	cairo_set_source_rgba(cr, c[0], c[1], c[2], 0.22);
-	for (size_t i = 0; i < s->np; i++) {
-		map_at(mp, s->x[i], s->hi[i], &X, &Y);
-		(i ? cairo_line_to : cairo_move_to)(cr, X, Y);
+	for (size_t i0 = 0; i0 + 1 < s->np;) {
+		int out = slices_beyond(s, 0.5 * (s->x[i0] + s->x[i0 + 1]));
+		size_t i1 = i0 + 1; /* the run of segments [i0, i1] on the same side of the limit */
+		while (i1 + 1 < s->np && slices_beyond(s, 0.5 * (s->x[i1] + s->x[i1 + 1])) == out)
+			i1++;
+		cairo_set_source_rgba(cr, c[0], c[1], c[2], out ? 0.08 : 0.22);
+		for (size_t i = i0; i <= i1; i++) {
+			map_at(mp, s->x[i], s->hi[i], &X, &Y);
+			(i > i0 ? cairo_line_to : cairo_move_to)(cr, X, Y);
+		}
+		for (size_t i = i1 + 1; i-- > i0;) {
+			map_at(mp, s->x[i], s->lo[i], &X, &Y);
+			cairo_line_to(cr, X, Y);
+		}
+		cairo_close_path(cr);
+		cairo_fill(cr);
+		cairo_set_source_rgb(cr, c[0], c[1], c[2]);
+		cairo_set_line_width(cr, 2);
+		if (out)
+			cairo_set_dash(cr, dot, 2, 0);
+		else
+			set_dash(cr, t);
+		for (size_t i = i0; i <= i1; i++) {
+			map_at(mp, s->x[i], s->f[i], &X, &Y);
+			(i > i0 ? cairo_line_to : cairo_move_to)(cr, X, Y);
+		}
+		cairo_stroke(cr);
+		cairo_set_dash(cr, NULL, 0, 0);
+		i0 = i1;
 	}
-	for (size_t i = s->np; i-- > 0;) {
-		map_at(mp, s->x[i], s->lo[i], &X, &Y);
-		cairo_line_to(cr, X, Y);
-	}
-	cairo_close_path(cr);
-	cairo_fill(cr);
-	cairo_set_source_rgb(cr, c[0], c[1], c[2]);
-	cairo_set_line_width(cr, 2);
-	set_dash(cr, t);
-	for (size_t i = 0; i < s->np; i++) {
-		map_at(mp, s->x[i], s->f[i], &X, &Y);
-		(i ? cairo_line_to : cairo_move_to)(cr, X, Y);
-	}
-	cairo_stroke(cr);
-	cairo_set_dash(cr, NULL, 0, 0);
 }
 
 static void draw_inplane(cairo_t *cr, const struct slices_opts *o, const struct slices_series *S, size_t nth,
@@ -194,6 +207,26 @@ static void draw_inplane(cairo_t *cr, const struct slices_opts *o, const struct 
 	snprintf(b, sizeof b, "band, bars: \u00b1%g\u03c3", o->band_k);
 	text(cr, fr->r + 10, fr->t + 14 + 18 * (double)nth + 8, b, 0, 0.5);
 	text(cr, fr->r + 10, fr->t + 14 + 18 * (double)nth + 26, "(n) = in-plane samples", 0, 0.5);
+	int beyond = 0;
+	for (size_t t = 0; t < nth; t++)
+		for (size_t i = 0; i < S[t].np; i++)
+			beyond |= slices_beyond(&S[t], S[t].x[i]);
+	if (beyond) { /* the extrapolated part's key: a dotted line over a pale band */
+		double y = fr->t + 14 + 18 * (double)nth + 48;
+		static const double dot[2] = { 1.5, 4 };
+		cairo_set_source_rgba(cr, 0.3, 0.3, 0.3, 0.08);
+		cairo_rectangle(cr, fr->r + 10, y - 6, 24, 12);
+		cairo_fill(cr);
+		cairo_set_source_rgb(cr, 0.3, 0.3, 0.3);
+		cairo_set_dash(cr, dot, 2, 0);
+		cairo_move_to(cr, fr->r + 10, y);
+		cairo_line_to(cr, fr->r + 34, y);
+		cairo_stroke(cr);
+		cairo_set_dash(cr, NULL, 0, 0);
+		cairo_set_source_rgb(cr, 0, 0, 0);
+		text(cr, fr->r + 40, y, "beyond the largest", 0, 0.5);
+		text(cr, fr->r + 40, y + 16, "measured \u03b8o", 0, 0.5);
+	}
 }
 
 /* One polar panel: angle θo from the normal (up), forward to the right; radius log-scaled on [y0, y1]. */
@@ -274,7 +307,8 @@ int slices_draw_polar(const struct slices_series *S, size_t nth, const struct sl
 	/* radius: log f from a little below the smallest value, so the diffuse part is not squeezed */
 	double py0 = fmax(fr->y0, log10(vmin) - 0.25);
 	char pt[160];
-	snprintf(pt, sizeof pt, "polar: radius log10 f from %.3g to %.3g (rings at decades); dashed: incidence", py0,
+	snprintf(pt, sizeof pt, "polar: radius log10 f from %.3g to %.3g (rings at decades); dashed: incidence; dotted: "
+		 "beyond the largest measured \u03b8o", py0,
 		 fr->y1);
 	text(cr, cols * pw / 2.0, 8, pt, 0.5, 0);
 	for (size_t t = 0; t < nth; t++)

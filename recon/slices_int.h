@@ -15,7 +15,15 @@ struct slices_series {
 	double *x, *f, *lo, *hi; /* x: signed θo in degrees */
 	size_t ns;
 	double *sx, *sv, *ss;    /* in-plane samples: signed θo (deg), value, σ (NaN: none) */
+	double xmax;             /* largest measured θo (deg) at this incidence, any azimuth (all samples' when none is at
+				  * it); the model beyond |x| > xmax is drawn dotted over a paler band. NaN: no samples */
 };
+
+/* Whether point x (signed θo, deg) of series s lies beyond the measured range (never when it is unknown). */
+static inline int slices_beyond(const struct slices_series *s, double x)
+{
+	return s->xmax == s->xmax && (x > s->xmax + 1e-9 || x < -s->xmax - 1e-9);
+}
 
 /* The in-plane figure's plot area and ranges (the polar panels take its y range). */
 struct slices_frame {

@@ -49,10 +49,14 @@ static int write_decisions(const char *out, const struct colour_opts *co, const 
 		fprintf(o.f, "\"colour\": ");
 	}
 	ok = ok && colour_opts_write_json(o.f, co, NULL, err) == 0;
+	double e[3];
+	recon_rgb_reduction_error_rgb(R, e);
 	fprintf(o.f, ", \"spectral_path\": \"%s\", \"bin_nm\": %g, \"channels\": %zu, \"rank\": %zu, "
-		"\"reduction_max_rel_error\": %.3g, \"batch_precision\": \"%s\", \"single_precision_max_abs_error_ln_f\": %.3g}\n",
-		full ? "full" : "reduced", bin_nm, nc, r, recon_rgb_reduction_error(R), recon_rgb_f32(R) ? "single" : "double",
-		recon_rgb_f32_error(R));
+		"\"reduction_max_rel_error\": %.3g, \"reduction_max_rel_error_rgb\": [%.3g, %.3g, %.3g], "
+		"\"reduction_error_definition\": \"" RECON_RGB_RED_DEFINITION "\", \"batch_precision\": \"%s\", "
+		"\"single_precision_max_abs_error_ln_f\": %.3g}\n",
+		full ? "full" : "reduced", bin_nm, nc, r, recon_rgb_reduction_error(R), e[0], e[1], e[2],
+		recon_rgb_f32(R) ? "single" : "double", recon_rgb_f32_error(R));
 	return cli_out_close(&o, ok, err);
 }
 
@@ -62,22 +66,25 @@ static const char merl_help[] =
 	"Write the model as a MERL isotropic RGB table (90 x 90 x 180 cells, 34,992,012 bytes). Only cells whose\n"
 	"two directions are above the horizon are evaluated (the others hold -1, \"no data\"). Spectra go through\n"
 	"the colour chain (default: D65, CIE 1931 2 deg, Bradford, absolute sr^-1, clamp, keep, linear); the\n"
-	"model is reduced to what RGB needs (visible channels averaged in --bin-nm bins, default 5 nm, error\n"
-	"about bin^2/8 f''/f; low-rank weights), the error of the reduction measured and printed, and evaluated\n"
-	"in batches. --direct: one callback per cell (same values, slower); --full-spectrum: every model\n"
-	"channel per cell (reference path, slowest). The batches multiply in single precision when its error,\n"
+	"model is reduced to what RGB needs (visible channels averaged in --bin-nm bins, default 5 nm, each channel\n"
+	"read back as a local quadratic; low-rank weights), the error of the reduction measured per R, G, B channel\n"
+	"against the full path and printed (--bin-nm 1: exact for a 1 nm model), and evaluated in batches.\n"
+	"--direct: one callback per cell (same values, slower); --full-spectrum: every model channel per cell\n"
+	"(reference path, slowest). The batches multiply in single precision when its error,\n"
 	"measured at 2048 random pairs, is <= 1e-4 in ln f (a relative error in f); --double forces double.\n"
 	"The decisions are written to FILE.binary.colour.json. Colour keys: illum gap adapt norm white max_albedo\n"
 	"target exposure gamut range reinhard_white srgb_encode.\n";
 
 static const char render_help[] =
 	"usage: brdf-recon render MODEL -o OUT.png [--exr OUT.exr] [--size N] [--exposure X] [--spp N] [--seed S]\n"
-	"                         [--env MAP.exr [--env-scale X]] [--sun-elevation DEG] [--sun-azimuth DEG] [--no-sun]\n"
+	"                         [--env MAP.exr [--env-scale X] [--sun]] [--sun-elevation DEG] [--sun-azimuth DEG]\n"
+	"                         [--no-sun]\n"
 	"                         [--lights] [--colour key=value]... [--threads N] [--bin-nm X] [--direct | --full-spectrum]\n"
 	"Preview of the model on a sphere: tone-mapped sRGB PNG (sRGB/gAMA/cHRM chunks) and, with --exr, the linear\n"
 	"HDR radiance as OpenEXR (float RGB, Rec. 709 chromaticities). Lighting: a smooth procedural sky with a sun\n"
-	"(default; azimuth 0 = toward the camera, 90 = right), or a lat-long EXR environment map (--env; centre\n"
-	"column looks away from the camera), sampled by importance (sky luminance, sun cone, GGX lobe, cosine;\n"
+	"(default; azimuth 0 = toward the camera, 90 = right; --no-sun: the sky alone), or a lat-long EXR environment\n"
+	"map (--env; centre column looks away from the camera) as it is: a captured map holds its own sun; --sun adds\n"
+	"the procedural one to it. Sampled by importance (sky luminance, sun cone, GGX lobe, cosine;\n"
 	"--spp samples per pixel, default 64). --lights: the old two lights + 64-direction gradient sky.\n"
 	"OUT.png.colour.json records the image's colour decisions, its lighting and the BRDF-to-RGB chain.\n"
 	"By default the model is tabulated as a MERL table in memory (batched) and rendered through its nearest-cell\n"
@@ -91,7 +98,7 @@ struct output_args {
 	struct colour_opts co;
 	uint64_t threads, size, spp, rseed;
 	double bin_nm, exposure, env_scale, sun_el, sun_az;
-	int full, direct, dbl, no_sun, old_lights;
+	int full, direct, dbl, no_sun, sun, old_lights;
 };
 
 /* Read the options into a (defaults first): -1 to go on, or the exit status (help, a usage error, a bad --colour). */
@@ -106,7 +113,8 @@ static int parse_args(const char *cmd, int argc, char **argv, struct output_args
 		{ "spp", required_argument, 0, 'P' }, { "seed", required_argument, 0, 'S' },
 		{ "env", required_argument, 0, 'E' }, { "env-scale", required_argument, 0, 'K' },
 		{ "sun-elevation", required_argument, 0, 'A' }, { "sun-azimuth", required_argument, 0, 'Z' },
-		{ "no-sun", no_argument, 0, 'N' }, { "lights", no_argument, 0, 'L' }, { 0, 0, 0, 0 } };
+		{ "no-sun", no_argument, 0, 'N' }, { "sun", no_argument, 0, 'U' }, { "lights", no_argument, 0, 'L' },
+		{ 0, 0, 0, 0 } };
 	*a = (struct output_args){ .cmd = cmd, .is_merl = !strcmp(cmd, "merl"), .threads = 2, .size = 256, .spp = 64,
 				   .rseed = 1, .bin_nm = 5, .exposure = 1, .env_scale = 1, .sun_el = 40, .sun_az = -36 };
 	colour_opts_brdf(&a->co);
@@ -142,6 +150,7 @@ static int parse_args(const char *cmd, int argc, char **argv, struct output_args
 		case 'X': a->exr = optarg; break;
 		case 'E': a->env = optarg; break;
 		case 'N': a->no_sun = 1; break;
+		case 'U': a->sun = 1; break;
 		case 'L': a->old_lights = 1; break;
 		case 'P': case 'S':
 			if (cli_parse_u64(optarg, c == 'P' ? &a->spp : &a->rseed) || (c == 'P' && (a->spp < 8 || a->spp > 4096)))
@@ -159,14 +168,18 @@ static int parse_args(const char *cmd, int argc, char **argv, struct output_args
 	}
 	if (optind != argc - 1 || !a->outp)
 		return cli_usage_err(cmd, "MODEL and -o OUT expected");
-	if (a->is_merl && (a->exr || a->env || a->old_lights))
-		return cli_usage_err(cmd, "--exr, --env and --lights are render options");
+	if (a->is_merl && (a->exr || a->env || a->old_lights || a->sun || a->no_sun))
+		return cli_usage_err(cmd, "--exr, --env, --sun, --no-sun and --lights are render options");
+	if (a->sun && a->no_sun)
+		return cli_usage_err(cmd, "--sun and --no-sun exclude each other");
+	if (a->sun && !a->env)
+		return cli_usage_err(cmd, "--sun adds the procedural sun to an --env map (the procedural sky has it already)");
 	a->model = argv[optind];
 	return -1;
 }
 
-/* render's lighting into *sky: the procedural sky with its sun, or the --env map; NULL for merl and --lights.
- * 0, or -1 with err set. */
+/* render's lighting into *sky: the procedural sky with its sun (unless --no-sun), or the --env map as it is (a
+ * captured map holds its own sun; --sun adds the procedural one); NULL for merl and --lights. 0, or -1 with err. */
 static int make_sky(const struct output_args *a, struct sky **sky, struct acq_err *err)
 {
 	struct sky_opts so;
@@ -180,7 +193,7 @@ static int make_sky(const struct output_args *a, struct sky **sky, struct acq_er
 	*sky = NULL;
 	if (a->is_merl || a->old_lights)
 		return 0;
-	return a->env ? sky_envmap(a->env, a->env_scale, a->no_sun ? NULL : &so, sky, err) : sky_procedural(&so, sky, err);
+	return a->env ? sky_envmap(a->env, a->env_scale, a->sun ? &so : NULL, sky, err) : sky_procedural(&so, sky, err);
 }
 
 /* The model reduced to what RGB needs (*R), its sizes and errors reported on stderr. 0, or -1 with err set. */
@@ -193,9 +206,11 @@ static int make_rgb(const struct output_args *a, const struct recon_model *m, st
 	if (a->dbl)
 		recon_rgb_set_f32(*R, 0);
 	recon_rgb_sizes(*R, &nc, &r);
-	fprintf(stderr, "%s: %s path, %zu of %zu channels (%g nm bins), spectral rank %zu, reduction error %.2g "
-		"(relative); batch GEMM in %s precision (single-precision error %.2g in ln f)\n", a->cmd,
-		a->full ? "full-spectrum" : "reduced", nc, m->nwl, a->bin_nm, r, recon_rgb_reduction_error(*R),
+	double e[3];
+	recon_rgb_reduction_error_rgb(*R, e);
+	fprintf(stderr, "%s: %s path, %zu of %zu channels (%g nm bins), spectral rank %zu, reduction error R %.2g "
+		"G %.2g B %.2g (relative, per channel); batch GEMM in %s precision (single-precision error %.2g in ln f)\n",
+		a->cmd, a->full ? "full-spectrum" : "reduced", nc, m->nwl, a->bin_nm, r, e[0], e[1], e[2],
 		recon_rgb_f32(*R) ? "single" : "double", recon_rgb_f32_error(*R));
 	return 0;
 }

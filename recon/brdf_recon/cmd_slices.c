@@ -18,12 +18,14 @@ static const char slices_help[] =
 	"In-plane BRDF slices (phi_o - phi_i = 0 and 180 deg; theta_o signed, + on the forward side) at each\n"
 	"measured incidence, log scale: the model with its pointwise uncertainty band (Gaussian-process posterior\n"
 	"of the reconstruction, +-K sigma, default 2) and the measured in-plane samples with +-K sigma error bars.\n"
+	"Beyond the largest measured theta_o of an incidence the model extrapolates: drawn dotted, paler band.\n"
 	"  --samples/--db      the samples (the measured incidences are their distinct theta_i)\n"
 	"  --wavelength NM     one wavelength (default 550 nm, or the middle of the model's range)\n"
 	"  --band LO:HI        the mean over a band (channels weighted by their trapezoid widths)\n"
 	"  --theta-i A,B,...   incidences in degrees (instead of the measured ones)\n"
 	"  --polar OUT.png     also one polar plot per incidence (radius: log f)\n"
-	"  --csv OUT.csv       the plotted numbers (kind,theta_i,theta_o_signed,value,lo,hi)\n";
+	"  --csv OUT.csv       the plotted numbers (kind,theta_i,theta_o_signed,value,lo,hi,beyond_data; beyond_data\n"
+	"                      1: a model point beyond the largest measured theta_o)\n";
 
 int cmd_slices(int argc, char **argv)
 {

@@ -112,13 +112,22 @@ def main():
         "--seed", str(SEED))
     c2, _ = exrread.read(exr2)
     assert all(np.array_equal(ch[k], c2[k]) for k in "RGB")
-    # a user environment map: the first render's EXR as a lat-long map, no sun
+    # a user environment map (the first render's EXR as a lat-long map) is used as it is: no procedural sun unless
+    # --sun (since session 18: a captured HDR map holds its own sun; before, the sun was added unless --no-sun)
     pe, ee = os.path.join(d, "e.png"), os.path.join(d, "e.exr")
-    run("render", m, "-o", pe, "--exr", ee, "--size", "32", "--env", exr, "--env-scale", "4", "--no-sun")
+    run("render", m, "-o", pe, "--exr", ee, "--size", "32", "--env", exr, "--env-scale", "4")
     se = json.load(open(pe + ".colour.json"))["image"]["lighting"]
-    assert se["sun"] is None and "environment map" in se["kind"]
+    assert se["sun"] is None and "environment map" in se["kind"] and "sun" not in se["kind"], se
     ce, _ = exrread.read(ee)
     assert np.all(np.isfinite(ce["G"])) and ce["G"].max() > 0
+    ps, es = os.path.join(d, "s.png"), os.path.join(d, "s.exr")
+    run("render", m, "-o", ps, "--exr", es, "--size", "32", "--env", exr, "--env-scale", "4", "--sun", "--direct",
+        "--spp", "8")
+    ss = json.load(open(ps + ".colour.json"))["image"]["lighting"]
+    assert ss["sun"] is not None and "sun" in ss["kind"], ss
+    cs, _ = exrread.read(es)
+    assert np.all(np.isfinite(cs["G"])) and cs["G"].max() > ce["G"].max()  # the sun's highlight on top of the map
+    print("--env: no sun by default; --sun adds it (brightest pixel %.3g -> %.3g)" % (ce["G"].max(), cs["G"].max()))
     # the old fixed lights remain available
     run("render", m, "-o", os.path.join(d, "l.png"), "--size", "32", "--lights")
     # refusals
@@ -128,6 +137,10 @@ def main():
     assert p.returncode == 2 and "--spp" in p.stderr
     p = run("merl", m, "-o", os.path.join(d, "x.binary"), "--exr", ee, ok=False)
     assert p.returncode == 2
+    p = run("render", m, "-o", pe, "--env", exr, "--sun", "--no-sun", ok=False)
+    assert p.returncode == 2 and "--no-sun" in p.stderr
+    p = run("render", m, "-o", pe, "--sun", ok=False)
+    assert p.returncode == 2 and "--env" in p.stderr
     print("PASS")
     return 0
 

@@ -96,6 +96,66 @@ static void test_reduced_matches_full_and_batch(void **state)
 	}
 }
 
+static int cmp_dbl(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return x < y ? -1 : x > y;
+}
+
+/* The stated reduction error is a per-channel bound: at 3000 random MERL cells (the table's own pairs, through
+ * the batch path that fills it) every channel's error against an independent spectral → RGB evaluation (the
+ * model's full spectrum by recon_eval_dirs, then colour_spectrum_rgb: no code of rgbeval.c) stays within the
+ * figure stated for that channel, relative to the channel itself (or 1 % of the largest channel when smaller:
+ * the definition in rgbeval.h). The test material is green (a 60 nm Gaussian at 550 nm over a grey base), so
+ * linear R and B are small differences of the sRGB weights' positive and negative lobes. Before session 18
+ * the bins' colour weights read the spectrum as linear between bin centres and one figure was stated, relative
+ * to the largest channel: seen failing here (seed 1: B 0.92 % at the cells, 0.40 % stated). The medians must
+ * also stay at the G channel's level (≤ 1e-3; measured ≤ 2e-4 here, seeds 1-5; the demo's green paint, 5 nm
+ * bins of 1 nm channels: R / G / B 0.22 / 0.01 / 0.29 % at θ ≤ 70°). */
+static void test_reduction_bound_per_channel(void **state)
+{
+	(void)state;
+	enum { NQ = 3000 };
+	static double wi[3 * NQ], wo[3 * NQ], rb[3 * NQ], rel[3][NQ];
+	int q = 0;
+	while (q < NQ) {
+		int ith = (int)(rt_unif() * MERL_N_THETA_H), itd = (int)(rt_unif() * MERL_N_THETA_D);
+		int ipd = (int)(rt_unif() * MERL_N_PHI_D);
+		if (merl_cell_dirs(ith < MERL_N_THETA_H ? ith : 0, itd < MERL_N_THETA_D ? itd : 0,
+				   ipd < MERL_N_PHI_D ? ipd : 0, wi + 3 * q, wo + 3 * q) == 1)
+			q++;
+	}
+	struct acq_err err = { 0 };
+	assert_int_equal(recon_rgb_batch(R, NQ, wi, wo, rb, NULL, &err), 0);
+	struct colour_opts co;
+	colour_opts_brdf(&co);
+	double stated[3], worst[3] = { 0 }, *f = malloc(M->nwl * sizeof *f);
+	assert_non_null(f);
+	recon_rgb_reduction_error_rgb(R, stated);
+	for (q = 0; q < NQ; q++) {
+		double ind[3];
+		assert_int_equal(recon_eval_dirs(M, wi + 3 * q, wo + 3 * q, f, NULL), 0);
+		assert_int_equal(colour_spectrum_rgb(&co, M->wl, f, M->nwl, ind, NULL, &err), 0);
+		double mx = fmax(fabs(ind[0]), fmax(fabs(ind[1]), fabs(ind[2])));
+		for (int c = 0; c < 3; c++) {
+			double den = fmax(fabs(ind[c]), 1e-2 * mx);
+			rel[c][q] = den > 0 ? fabs(rb[3 * q + c] - ind[c]) / den : 0;
+			worst[c] = fmax(worst[c], rel[c][q]);
+		}
+	}
+	free(f);
+	for (int c = 0; c < 3; c++) {
+		qsort(rel[c], NQ, sizeof rel[c][0], cmp_dbl);
+		printf("channel %c: stated %.3g, largest at %d MERL cells %.3g, median %.3g\n", "RGB"[c], stated[c], NQ,
+		       worst[c], rel[c][NQ / 2]);
+	}
+	assert_true(recon_rgb_reduction_error(R) == fmax(stated[0], fmax(stated[1], stated[2])));
+	for (int c = 0; c < 3; c++) {
+		assert_true(worst[c] <= stated[c]);
+		assert_true(rel[c][NQ / 2] <= 1e-3);
+	}
+}
+
 /* Evaluating half of the φd cells and copying the mirror cells gives the table of every cell. */
 static void test_merl_half_table_exact(void **state)
 {
@@ -229,6 +289,7 @@ int main(void)
 	rt_seed();
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_reduced_matches_full_and_batch),
+		cmocka_unit_test(test_reduction_bound_per_channel),
 		cmocka_unit_test(test_merl_half_table_exact),
 		cmocka_unit_test(test_single_precision_table),
 	};
