@@ -148,22 +148,29 @@ static int cmp_double(const void *a, const void *b)
 	return (x > y) - (x < y);
 }
 
-/* The median of the host's time per point (real s) over the last M points (M the recent memory, fewer at the
- * start), at the current scale. */
-static double host_median(const struct eta *e)
+/* The host's time per point (real s) over the last M points (M the recent memory, fewer at the start), at the
+ * current scale, into v[0..M-1]; M (0: none yet). */
+static long host_recent(const struct eta *e, double v[ETA_HOST_WINDOW])
 {
-	double v[ETA_HOST_WINDOW];
 	long m = lround(memory(e->total));
 	if (m > ETA_HOST_WINDOW)
 		m = ETA_HOST_WINDOW;
 	if (m > e->host_n)
 		m = e->host_n;
-	if (m <= 0)
-		return NAN;
 	for (long i = 0; i < m; i++) {
 		long j = (e->host_n - m + i) % ETA_HOST_WINDOW;
 		v[i] = (double)e->host[j].real - (double)e->host[j].work / e->scale;
 	}
+	return m > 0 ? m : 0;
+}
+
+/* The median of host_recent's times. */
+static double host_median(const struct eta *e)
+{
+	double v[ETA_HOST_WINDOW];
+	long m = host_recent(e, v);
+	if (m <= 0)
+		return NAN;
 	qsort(v, (size_t)m, sizeof *v, cmp_double);
 	return m % 2 ? v[m / 2] : 0.5 * (v[m / 2 - 1] + v[m / 2]);
 }
@@ -221,17 +228,11 @@ double eta_host(const struct eta *e)
 	/* the mean, not host_median: a plan's host figure is what the points take on average, bursts included (the
 	 * green paint's paper sweep at load 10: the median 6.6 ms per point, the mean 11.0; priced at the median the
 	 * ETA right after the survey was -10 %) */
-	long m = lround(memory(e->total));
-	if (m > ETA_HOST_WINDOW)
-		m = ETA_HOST_WINDOW;
-	if (m > e->host_n)
-		m = e->host_n;
+	double v[ETA_HOST_WINDOW], s = 0;
+	long m = host_recent(e, v);
 	if (m <= 0)
 		return NAN;
-	double s = 0;
-	for (long i = 0; i < m; i++) {
-		long j = (e->host_n - m + i) % ETA_HOST_WINDOW;
-		s += (double)e->host[j].real - (double)e->host[j].work / e->scale;
-	}
+	for (long i = 0; i < m; i++)
+		s += v[i];
 	return s / (double)m;
 }
