@@ -409,7 +409,6 @@ static void refit_trend(const struct recon_model *m, size_t l, const double *Bs,
  * cross-validation (fit.c: the data, not the rule, decided) and is no second reading.
  */
 #define WIDTH_NGRID TREND_NGRID /* the fit's search: log grid over [TREND_ALPHA_MIN, top], golden section about its best */
-#define WIDTH_NGOLDEN TREND_NGOLDEN
 struct width_ctx {
 	const struct recon_model *m;
 	size_t n, nc, chan[TREND_NCH];
@@ -452,6 +451,11 @@ static void width_data(const struct recon_model *m, double *f)
 	}
 }
 
+static double width_fn(void *w, double x)
+{
+	return width_score(w, exp(x));
+}
+
 /* The fit's search without its rule: log grid of WIDTH_NGRID over [la, lb], golden section about the best; *best, *bs
  * (ln α and its score) are kept where no point beats *bs. */
 static void width_search(struct width_ctx *w, double la, double lb, double *best, double *bs)
@@ -464,32 +468,7 @@ static void width_search(struct width_ctx *w, double la, double lb, double *best
 			*best = la + h * i;
 		}
 	}
-	const double gr = 0.5 * (sqrt(5.0) - 1.0); /* golden section about the best, as trend.c */
-	double lo = fmax(la, *best - h), hi = fmin(lb, *best + h);
-	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo), s1 = width_score(w, exp(x1)), s2 = width_score(w, exp(x2));
-	for (int it = 0; it < WIDTH_NGOLDEN && hi > lo; it++) {
-		if (s1 < s2) {
-			hi = x2;
-			x2 = x1;
-			s2 = s1;
-			x1 = hi - gr * (hi - lo);
-			s1 = width_score(w, exp(x1));
-		} else {
-			lo = x1;
-			x1 = x2;
-			s1 = s2;
-			x2 = lo + gr * (hi - lo);
-			s2 = width_score(w, exp(x2));
-		}
-	}
-	if (s1 < *bs) {
-		*bs = s1;
-		*best = x1;
-	}
-	if (s2 < *bs) {
-		*bs = s2;
-		*best = x2;
-	}
+	trend_golden(width_fn, w, fmax(la, *best - h), fmin(lb, *best + h), best, bs); /* about the best, as trend.c */
 }
 
 /* Did the fit try trend kind t (its candidates' leave-one-out scores in the model's metadata: "trend_loo=none:…,ggx:…")? */

@@ -522,25 +522,25 @@ static double gs_at(const struct gs *g, double x)
 	return score_coat(g->n, g->val, g->eps, g->c6, g->chan, g->nc, a, a2, g->tr, g->B);
 }
 
-static void golden(const struct gs *g, double lo, double hi, double *x, double *fx)
+void trend_golden(double (*f)(void *ctx, double x), void *ctx, double lo, double hi, double *x, double *fx)
 {
 	if (!(hi > lo))
 		return;
 	const double gr = 0.5 * (sqrt(5.0) - 1.0);
-	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo), s1 = gs_at(g, x1), s2 = gs_at(g, x2);
+	double x1 = hi - gr * (hi - lo), x2 = lo + gr * (hi - lo), s1 = f(ctx, x1), s2 = f(ctx, x2);
 	for (int it = 0; it < NGOLDEN; it++) {
 		if (s1 < s2) {
 			hi = x2;
 			x2 = x1;
 			s2 = s1;
 			x1 = hi - gr * (hi - lo);
-			s1 = gs_at(g, x1);
+			s1 = f(ctx, x1);
 		} else {
 			lo = x1;
 			x1 = x2;
 			s1 = s2;
 			x2 = lo + gr * (hi - lo);
-			s2 = gs_at(g, x2);
+			s2 = f(ctx, x2);
 		}
 	}
 	if (s1 < *fx) {
@@ -551,6 +551,16 @@ static void golden(const struct gs *g, double lo, double hi, double *x, double *
 		*fx = s2;
 		*x = x2;
 	}
+}
+
+static double gs_fn(void *g, double x)
+{
+	return gs_at(g, x);
+}
+
+static void golden(struct gs *g, double lo, double hi, double *x, double *fx)
+{
+	trend_golden(gs_fn, g, lo, hi, x, fx);
 }
 
 /* The two roughnesses of the coat kind: a log grid of NGRID/2 values per roughness (pairs with α2 ≥ 2α), then rounds

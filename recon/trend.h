@@ -32,6 +32,9 @@ enum recon_trend {
 #define TREND_ALPHA_MAX 1.0
 #define TREND_NGRID 40        /* the roughness search: a log grid over the range, then golden sections ... */
 #define TREND_NGOLDEN 24      /* ... of TREND_NGOLDEN steps about the grid's best (trend.c; dhr.c's width profile) */
+/* Golden section of f(ctx, x) over [lo, hi] (TREND_NGOLDEN steps; nothing when hi <= lo): the best x and its value
+ * into *x, *fx, which are kept where no point beats *fx (the fit's roughness search; dhr.c's width profile). */
+void trend_golden(double (*f)(void *ctx, double x), void *ctx, double lo, double hi, double *x, double *fx);
 #define TREND_NCH 16          /* the channels the roughness and leave-one-out searches score: at most 16 ... */
 /* ... evenly spread over the L channels (chan[0..*nc) ascending, the first and the last included): fit.c's choice,
  * which dhr.c's width profile repeats. */

@@ -448,25 +448,21 @@ int plan_survey_apply(const struct plan_spec *s, const struct bench_geom *g, con
 	size_t k = plan_survey_k(s, t, r), n = r ? r->n_steps : 0;
 	if (k == 0 || r->n_survey > 0)
 		return 0;
+	/* the arrays at the plan's size (the survey picks at most all of its points); its cost matrix C once its size
+	 * is known */
 	char *pick = calloc(n, 1);
-	size_t *ord = malloc(n * sizeof *ord);
+	size_t *ord = malloc(n * sizeof *ord), *gstart = malloc((n + 1) * sizeof *gstart);
+	size_t *sp = malloc(n * sizeof *sp), *p = malloc(n * sizeof *p);
+	double *C = NULL, *s0 = malloc(n * sizeof *s0);
 	struct plan_step *old = malloc(n * sizeof *old);
-	if (!pick || !ord || !old) {
-		free(pick);
-		free(ord);
-		free(old);
-		return acq_errf(err, ACQ_E_NOMEM, "the survey's order: out of memory");
+	int rc = 0;
+	if (!pick || !ord || !gstart || !sp || !p || !s0 || !old) {
+		rc = acq_errf(err, ACQ_E_NOMEM, "the survey's order: out of memory");
+		goto out;
 	}
 	memcpy(old, r->steps, n * sizeof *old);
-	/* the incidence groups: runs of one laser zenith in route order (start of group j in gs[j]) */
+	/* the incidence groups: runs of one laser zenith in route order (start of group j in gstart[j]) */
 	size_t ng = 0, ns = 0, w = 0;
-	size_t *gstart = malloc((n + 1) * sizeof *gstart);
-	if (!gstart) {
-		free(pick);
-		free(ord);
-		free(old);
-		return acq_errf(err, ACQ_E_NOMEM, "the survey's order: out of memory");
-	}
 	for (size_t a = 0; a < n;) {
 		size_t b = a;
 		while (b < n && fabs(old[b].pos.laser_theta - old[a].pos.laser_theta) <= 1e-6)
@@ -483,18 +479,10 @@ int plan_survey_apply(const struct plan_spec *s, const struct bench_geom *g, con
 	/* the survey's own path over its picks (all incidences together: the laser arm is the cheap axis to move
 	 * between two picks of different viewing directions), ordered from the route's first point and then walked
 	 * backwards, so that it ends next to where the route starts */
-	size_t *sp = malloc((ns ? ns : 1) * sizeof *sp), *p = malloc((ns ? ns : 1) * sizeof *p);
-	double *C = malloc((ns ? ns * ns : 1) * sizeof *C), *s0 = malloc((ns ? ns : 1) * sizeof *s0);
-	if (!sp || !p || !C || !s0) {
-		free(sp);
-		free(p);
-		free(C);
-		free(s0);
-		free(gstart);
-		free(pick);
-		free(ord);
-		free(old);
-		return acq_errf(err, ACQ_E_NOMEM, "the survey's order: out of memory");
+	C = malloc((ns ? ns * ns : 1) * sizeof *C);
+	if (!C) {
+		rc = acq_errf(err, ACQ_E_NOMEM, "the survey's order: out of memory");
+		goto out;
 	}
 	size_t m = 0;
 	for (size_t i = 0; i < n; i++)
@@ -508,10 +496,6 @@ int plan_survey_apply(const struct plan_spec *s, const struct bench_geom *g, con
 	plan_order_group(C, ns, s0, p, true);
 	for (size_t a = ns; a-- > 0;)
 		ord[w++] = sp[p[a]];
-	free(sp);
-	free(p);
-	free(C);
-	free(s0);
 	for (size_t i = 0; i < n; i++)
 		if (!pick[i])
 			ord[w++] = i;
@@ -521,9 +505,14 @@ int plan_survey_apply(const struct plan_spec *s, const struct bench_geom *g, con
 		r->survey_k = k;
 		r->survey_motion_s = r->motion_s - before;
 	} /* else (no clear move between two of the new neighbours, out of memory) the route as it was: no survey */
+out:
+	free(sp);
+	free(p);
+	free(C);
+	free(s0);
 	free(gstart);
 	free(pick);
 	free(ord);
 	free(old);
-	return 0;
+	return rc;
 }
